@@ -1,0 +1,1 @@
+//! Classical algebraic tomography: voxel projectors, ART-family solvers, MLEM, TV.

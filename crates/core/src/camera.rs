@@ -1,0 +1,551 @@
+//! Pinhole cameras with OpenCV lens distortion, and the thin-lens description used for
+//! synthesis.
+//!
+//! Conventions (see the crate docs): OpenCV camera axes (x right, y down, z forward), pixel
+//! centres at integer image coordinates. The distortion model and its coefficient order are
+//! OpenCV's (`k1, k2, p1, p2, k3, k4, k5, k6`), with OpenCV's formulas:
+//!
+//! ```text
+//! r² = x² + y²
+//! a  = (1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶)
+//! x_d = x a + 2 p1 x y + p2 (r² + 2 x²)
+//! y_d = y a + p1 (r² + 2 y²) + 2 p2 x y
+//! u = fx x_d + skew y_d + cx,   v = fy y_d + cy
+//! ```
+//!
+//! (The dissertation's Eq. 8.6–8.7 print the tangential terms with typos; OpenCV is the
+//! reference.)
+
+use glam::{DAffine3, DMat3, DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+
+use crate::{Aabb, CoreError, Ray};
+
+/// Pinhole intrinsics in pixels (OpenCV convention: pixel centres at integer coordinates).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Intrinsics {
+    /// Image width in pixels (columns).
+    pub width: u32,
+    /// Image height in pixels (rows).
+    pub height: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// The K[0][1] entry (zero for square-pixel sensors).
+    #[serde(default)]
+    pub skew: f64,
+}
+
+impl Intrinsics {
+    /// Checks for positive size and focal lengths and finite values.
+    pub fn validate(&self) -> Result<(), CoreError> {
+        if self.width == 0 || self.height == 0 {
+            return Err(CoreError::invalid("intrinsics", "image size must be positive"));
+        }
+        let all = [self.fx, self.fy, self.cx, self.cy, self.skew];
+        if all.iter().any(|v| !v.is_finite()) {
+            return Err(CoreError::invalid("intrinsics", "values must be finite"));
+        }
+        if self.fx <= 0.0 || self.fy <= 0.0 {
+            return Err(CoreError::invalid(
+                "intrinsics",
+                format!("focal lengths must be positive (fx = {}, fy = {})", self.fx, self.fy),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The 3 × 3 matrix K, row-major as written on paper.
+    pub fn k_rows(&self) -> [[f64; 3]; 3] {
+        [[self.fx, self.skew, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]]
+    }
+}
+
+/// OpenCV distortion coefficients (rational radial + tangential). All zero means none.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Distortion {
+    pub k1: f64,
+    pub k2: f64,
+    pub p1: f64,
+    pub p2: f64,
+    pub k3: f64,
+    pub k4: f64,
+    pub k5: f64,
+    pub k6: f64,
+}
+
+impl Distortion {
+    /// From an OpenCV coefficient vector of length 4, 5, 8 (or more; thin-prism and tilt terms
+    /// beyond the eighth are rejected because they are not modelled).
+    pub fn from_opencv(coeffs: &[f64]) -> Result<Self, CoreError> {
+        let n = coeffs.len();
+        if !(n == 0 || n == 4 || n == 5 || n == 8 || n > 8) {
+            return Err(CoreError::invalid(
+                "distortion coefficients",
+                format!("OpenCV uses 4, 5, 8, 12 or 14 coefficients, got {n}"),
+            ));
+        }
+        if n > 8 && coeffs[8..].iter().any(|&c| c != 0.0) {
+            return Err(CoreError::invalid(
+                "distortion coefficients",
+                "thin-prism (s1..s4) and tilt (tauX, tauY) terms are not supported",
+            ));
+        }
+        if coeffs.iter().any(|c| !c.is_finite()) {
+            return Err(CoreError::invalid("distortion coefficients", "must be finite"));
+        }
+        let g = |i: usize| coeffs.get(i).copied().unwrap_or(0.0);
+        Ok(Distortion { k1: g(0), k2: g(1), p1: g(2), p2: g(3), k3: g(4), k4: g(5), k5: g(6), k6: g(7) })
+    }
+
+    /// The coefficients in OpenCV order; 5 of them unless k4..k6 are used, then 8.
+    pub fn to_opencv(&self) -> Vec<f64> {
+        let mut v = vec![self.k1, self.k2, self.p1, self.p2, self.k3];
+        if self.k4 != 0.0 || self.k5 != 0.0 || self.k6 != 0.0 {
+            v.extend([self.k4, self.k5, self.k6]);
+        }
+        v
+    }
+
+    pub fn is_identity(&self) -> bool {
+        *self == Distortion::default()
+    }
+
+    /// Distorts normalised image coordinates (OpenCV formulas).
+    pub fn apply(&self, p: DVec2) -> DVec2 {
+        self.apply_with_jacobian(p).0
+    }
+
+    /// Distorted coordinates and the Jacobian `d(x_d, y_d)/d(x, y)` as columns.
+    pub fn apply_with_jacobian(&self, p: DVec2) -> (DVec2, DMat2x2) {
+        let Distortion { k1, k2, p1, p2, k3, k4, k5, k6 } = *self;
+        let (x, y) = (p.x, p.y);
+        let r2 = x * x + y * y;
+        let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
+        let a = num / den;
+        let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+        let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
+        let da = (dnum * den - num * dden) / (den * den);
+        let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+        let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+        let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
+        let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
+        let dyx = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
+        let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
+        (DVec2::new(xd, yd), DMat2x2 { dxx, dxy, dyx, dyy })
+    }
+}
+
+/// A 2 × 2 Jacobian `[[dxx, dxy], [dyx, dyy]]` (row = output, column = input).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DMat2x2 {
+    pub dxx: f64,
+    pub dxy: f64,
+    pub dyx: f64,
+    pub dyy: f64,
+}
+
+/// A thin lens with a finite aperture, used to synthesise images with defocus blur
+/// (dissertation §6.2, Eq. 6.4–6.17). Lengths are in world units (the scene's `units`).
+///
+/// With magnification `M < 0` (a real, inverted image) the Gaussian lens equation
+/// `1/l_o + 1/l_i = 1/f` and `M = -l_i / l_o` give `l_i = f (1 - M)` and `l_o = f (1 - 1/M)`.
+/// The pinhole camera equivalent has focal length `l_i / pixel_pitch` pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ThinLens {
+    /// Focal length f of the main lens.
+    pub focal_length: f64,
+    /// Aperture diameter d_a = f / f#.
+    pub aperture_diameter: f64,
+    /// Lateral magnification M (negative for a real image; −0.2 in the dissertation).
+    pub magnification: f64,
+    /// Sensor pixel pitch.
+    pub pixel_pitch: f64,
+}
+
+impl ThinLens {
+    /// From the usual lens settings: focal length, f-number, magnification, pixel pitch.
+    pub fn from_f_number(focal_length: f64, f_number: f64, magnification: f64, pixel_pitch: f64) -> Self {
+        ThinLens { focal_length, aperture_diameter: focal_length / f_number, magnification, pixel_pitch }
+    }
+
+    pub fn validate(&self) -> Result<(), CoreError> {
+        let ok = self.focal_length > 0.0
+            && self.aperture_diameter >= 0.0
+            && self.pixel_pitch > 0.0
+            && self.magnification < 0.0
+            && [self.focal_length, self.aperture_diameter, self.magnification, self.pixel_pitch]
+                .iter()
+                .all(|v| v.is_finite());
+        if ok {
+            Ok(())
+        } else {
+            Err(CoreError::invalid(
+                "thin lens",
+                format!(
+                    "needs focal length > 0, aperture >= 0, pixel pitch > 0 and magnification < 0 \
+                     (got f = {}, d_a = {}, M = {}, pitch = {})",
+                    self.focal_length, self.aperture_diameter, self.magnification, self.pixel_pitch
+                ),
+            ))
+        }
+    }
+
+    pub fn f_number(&self) -> f64 {
+        self.focal_length / self.aperture_diameter
+    }
+
+    /// Image distance l_i (lens to sensor) = f (1 − M).
+    pub fn image_distance(&self) -> f64 {
+        self.focal_length * (1.0 - self.magnification)
+    }
+
+    /// Object distance l_o (lens to focal plane) = f (1 − 1/M).
+    pub fn object_distance(&self) -> f64 {
+        self.focal_length * (1.0 - 1.0 / self.magnification)
+    }
+
+    /// The equivalent pinhole focal length in pixels, l_i / pitch.
+    pub fn focal_length_px(&self) -> f64 {
+        self.image_distance() / self.pixel_pitch
+    }
+
+    /// Side of one pixel's footprint on the focal plane, pitch / |M|.
+    pub fn pixel_footprint(&self) -> f64 {
+        self.pixel_pitch / self.magnification.abs()
+    }
+
+    /// Diameter (on the sensor, world units) of the blur circle of a point on the optical axis
+    /// at object distance `s` (Gaussian optics): `d_a · l_i · |1/s' − 1/l_i|` with `s'` the
+    /// image distance of the point, `1/s' = 1/f − 1/s`.
+    pub fn blur_circle_diameter(&self, s: f64) -> f64 {
+        let inv_img = 1.0 / self.focal_length - 1.0 / s;
+        self.aperture_diameter * self.image_distance() * (inv_img - 1.0 / self.image_distance()).abs()
+    }
+
+    /// The emission weight Ω(s)·A(s) of Eq. 5.3–5.4 at distance `s` along a ray: the solid
+    /// angle normalised to the focal plane, Ω = (l_o / s)², times the pixel's footprint area in
+    /// object space, A = (pitch · s / l_i)². For a pinhole this is the constant
+    /// `(pitch / |M|)²`, the pixel footprint on the focal plane (tested), which is why the
+    /// rendering model reduces to a scaled line integral.
+    pub fn emission_weight(&self, s: f64) -> f64 {
+        let omega = (self.object_distance() / s).powi(2);
+        let area = (self.pixel_pitch * s / self.image_distance()).powi(2);
+        omega * area
+    }
+}
+
+/// How a camera sees the reconstruction box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Visibility {
+    /// Fraction of sample points spread through the box that project inside the image.
+    pub box_fraction_in_view: f64,
+    /// Fraction of the image's pixels whose rays cross the box.
+    pub pixel_fraction_on_box: f64,
+}
+
+/// A calibrated pinhole camera with lens distortion and an optional thin-lens description.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    pub intrinsics: Intrinsics,
+    pub distortion: Distortion,
+    /// Rigid transform from camera coordinates (OpenCV axes) to world coordinates. Its
+    /// translation is the camera centre (pinhole) in the world.
+    pub world_from_camera: DAffine3,
+    /// The thin lens behind the pinhole model, when known (synthetic scenes).
+    pub lens: Option<ThinLens>,
+}
+
+impl Camera {
+    /// A camera at `centre` looking at `target`, with `up` giving the image's upward direction
+    /// (image rows grow along −up). Panics if `up` is parallel to the viewing direction.
+    pub fn look_at(intrinsics: Intrinsics, centre: DVec3, target: DVec3, up: DVec3) -> Self {
+        let z = (target - centre).normalize();
+        let x = z.cross(up);
+        assert!(x.length() > 1e-9, "Camera::look_at: up is parallel to the viewing direction");
+        let x = x.normalize();
+        let y = z.cross(x);
+        Camera {
+            intrinsics,
+            distortion: Distortion::default(),
+            world_from_camera: DAffine3::from_mat3_translation(DMat3::from_cols(x, y, z), centre),
+            lens: None,
+        }
+    }
+
+    pub fn width(&self) -> usize {
+        self.intrinsics.width as usize
+    }
+
+    pub fn height(&self) -> usize {
+        self.intrinsics.height as usize
+    }
+
+    /// Camera centre in world coordinates.
+    pub fn centre(&self) -> DVec3 {
+        self.world_from_camera.translation
+    }
+
+    /// Viewing direction (camera +z) in world coordinates.
+    pub fn forward(&self) -> DVec3 {
+        self.world_from_camera.matrix3.z_axis
+    }
+
+    /// The inverse pose, mapping world to camera coordinates (`x_cam = R x_world + t`).
+    pub fn camera_from_world(&self) -> DAffine3 {
+        self.world_from_camera.inverse()
+    }
+
+    /// Checks intrinsics, lens and that the rotation is orthonormal and right-handed.
+    pub fn validate(&self) -> Result<(), CoreError> {
+        self.intrinsics.validate()?;
+        if let Some(lens) = &self.lens {
+            lens.validate()?;
+        }
+        let m = self.world_from_camera.matrix3;
+        let err = (m.transpose() * m - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        if !err.is_finite() || err > 1e-6 || m.determinant() < 0.0 {
+            return Err(CoreError::invalid(
+                "camera pose",
+                format!(
+                    "rotation is not a proper rotation (orthonormality error {err:.1e}, det {:.3})",
+                    m.determinant()
+                ),
+            ));
+        }
+        if !self.world_from_camera.translation.is_finite() {
+            return Err(CoreError::invalid("camera pose", "translation must be finite"));
+        }
+        Ok(())
+    }
+
+    /// Projects a world point to continuous pixel coordinates `(u, v)`, or `None` if the point is
+    /// not in front of the camera. Points outside the image still get coordinates.
+    pub fn project(&self, point_in_world: DVec3) -> Option<DVec2> {
+        let p = self.camera_from_world().transform_point3(point_in_world);
+        self.project_camera_point(p)
+    }
+
+    /// Like [`Camera::project`] for a point already in camera coordinates.
+    pub fn project_camera_point(&self, point_in_camera: DVec3) -> Option<DVec2> {
+        if point_in_camera.z <= 0.0 {
+            return None;
+        }
+        let n = DVec2::new(point_in_camera.x / point_in_camera.z, point_in_camera.y / point_in_camera.z);
+        let d = self.distortion.apply(n);
+        let k = &self.intrinsics;
+        Some(DVec2::new(k.fx * d.x + k.skew * d.y + k.cx, k.fy * d.y + k.cy))
+    }
+
+    /// Normalised, undistorted image coordinates `(x, y)` (a point `(x, y, 1)` in camera space)
+    /// of pixel coordinates `(u, v)`. Inverts the distortion by Newton's method until the
+    /// re-distorted point is within 1e-6 px of `(u, v)`.
+    pub fn unproject_normalised(&self, u: f64, v: f64) -> Result<DVec2, CoreError> {
+        let k = &self.intrinsics;
+        let yd = (v - k.cy) / k.fy;
+        let xd = (u - k.cx - k.skew * yd) / k.fx;
+        let target = DVec2::new(xd, yd);
+        if self.distortion.is_identity() {
+            return Ok(target);
+        }
+        // Tolerance in normalised units equivalent to 1e-6 px.
+        let tol = 1e-6 / k.fx.max(k.fy);
+        let mut p = target;
+        let mut residual = f64::INFINITY;
+        for _ in 0..100 {
+            let (d, j) = self.distortion.apply_with_jacobian(p);
+            let r = d - target;
+            residual = r.length();
+            if residual < tol {
+                return Ok(p);
+            }
+            let det = j.dxx * j.dyy - j.dxy * j.dyx;
+            if !det.is_finite() || det.abs() < 1e-12 {
+                break;
+            }
+            let step = DVec2::new((j.dyy * r.x - j.dxy * r.y) / det, (-j.dyx * r.x + j.dxx * r.y) / det);
+            // Damp steps that would leave the region where the model is monotone.
+            let max_step = 0.5 * (1.0 + p.length());
+            let step = if step.length() > max_step { step * (max_step / step.length()) } else { step };
+            p -= step;
+        }
+        Err(CoreError::UndistortionFailed { u, v, residual_px: residual * k.fx.max(k.fy) })
+    }
+
+    /// The ray through continuous pixel coordinates `(u, v)` (OpenCV: pixel centres at integers),
+    /// starting at the camera centre, with a unit direction in world coordinates.
+    pub fn pixel_ray(&self, u: f64, v: f64) -> Result<Ray, CoreError> {
+        let n = self.unproject_normalised(u, v)?;
+        let dir = self.world_from_camera.transform_vector3(DVec3::new(n.x, n.y, 1.0));
+        Ok(Ray::new(self.centre(), dir))
+    }
+
+    /// How much of the box this camera sees: the fraction of a 9³ lattice of points in the box
+    /// that project inside the image, and the fraction of a lattice of pixels (at most 64 × 64)
+    /// whose rays cross the box. Pixels whose undistortion fails count as not seeing the box.
+    pub fn visibility(&self, aabb: &Aabb) -> Visibility {
+        let (w, h) = (self.intrinsics.width as f64, self.intrinsics.height as f64);
+        let n = 9;
+        let mut inside = 0usize;
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let f = DVec3::new(i as f64, j as f64, k as f64) / (n - 1) as f64;
+                    let p = aabb.min + f * aabb.size();
+                    if let Some(uv) = self.project(p) {
+                        if uv.x >= -0.5 && uv.y >= -0.5 && uv.x < w - 0.5 && uv.y < h - 0.5 {
+                            inside += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let m = 64usize;
+        let (mw, mh) = (m.min(self.width()), m.min(self.height()));
+        let mut on_box = 0usize;
+        for j in 0..mh {
+            for i in 0..mw {
+                let u = (i as f64 + 0.5) / mw as f64 * w - 0.5;
+                let v = (j as f64 + 0.5) / mh as f64 * h - 0.5;
+                if let Ok(ray) = self.pixel_ray(u, v) {
+                    if aabb.intersect(&ray).is_some() {
+                        on_box += 1;
+                    }
+                }
+            }
+        }
+        Visibility {
+            box_fraction_in_view: inside as f64 / (n * n * n) as f64,
+            pixel_fraction_on_box: on_box as f64 / (mw * mh) as f64,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn test_camera(dist: Distortion) -> Camera {
+        let k = Intrinsics { width: 640, height: 480, fx: 500.0, fy: 510.0, cx: 319.5, cy: 241.0, skew: 0.7 };
+        let mut cam = Camera::look_at(k, DVec3::new(300.0, -40.0, 80.0), DVec3::ZERO, DVec3::Z);
+        cam.distortion = dist;
+        cam
+    }
+
+    fn strong_distortion() -> Distortion {
+        Distortion { k1: -0.28, k2: 0.09, p1: 1.2e-3, p2: -8e-4, k3: -0.012, k4: 0.01, k5: 0.0, k6: 0.002 }
+    }
+
+    #[test]
+    fn pixel_ray_pixel_round_trip_over_whole_image() {
+        for dist in [Distortion::default(), strong_distortion()] {
+            let cam = test_camera(dist);
+            let mut worst = 0.0f64;
+            for v in (0..480).step_by(7).chain([479]) {
+                for u in (0..640).step_by(7).chain([639]) {
+                    let ray = cam.pixel_ray(u as f64, v as f64).expect("undistorts");
+                    let back = cam.project(ray.at(250.0)).expect("in front");
+                    worst = worst.max((back - DVec2::new(u as f64, v as f64)).length());
+                }
+            }
+            assert!(worst < 1e-4, "worst round-trip error {worst} px");
+        }
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let d = strong_distortion();
+        let p = DVec2::new(0.31, -0.22);
+        let (_, j) = d.apply_with_jacobian(p);
+        let h = 1e-6;
+        let ddx = (d.apply(p + DVec2::X * h) - d.apply(p - DVec2::X * h)) / (2.0 * h);
+        let ddy = (d.apply(p + DVec2::Y * h) - d.apply(p - DVec2::Y * h)) / (2.0 * h);
+        assert_relative_eq!(j.dxx, ddx.x, epsilon = 1e-7);
+        assert_relative_eq!(j.dyx, ddx.y, epsilon = 1e-7);
+        assert_relative_eq!(j.dxy, ddy.x, epsilon = 1e-7);
+        assert_relative_eq!(j.dyy, ddy.y, epsilon = 1e-7);
+    }
+
+    #[test]
+    fn principal_point_ray_is_forward() {
+        let cam = test_camera(Distortion::default());
+        let k = cam.intrinsics;
+        let ray = cam.pixel_ray(k.cx, k.cy).expect("ray");
+        assert_relative_eq!(ray.dir.dot(cam.forward()), 1.0, epsilon = 1e-12);
+        // look_at aims the optical axis at the target.
+        let uv = cam.project(DVec3::ZERO).expect("in front");
+        assert_relative_eq!(uv.x, k.cx, epsilon = 1e-9);
+        assert_relative_eq!(uv.y, k.cy, epsilon = 1e-9);
+    }
+
+    #[test]
+    fn look_at_up_is_image_up() {
+        let cam = test_camera(Distortion::default());
+        let above = cam.project(DVec3::new(0.0, 0.0, 10.0)).expect("in front");
+        assert!(above.y < cam.intrinsics.cy, "a point above the target must be higher in the image");
+    }
+
+    #[test]
+    fn behind_camera_does_not_project() {
+        let cam = test_camera(Distortion::default());
+        assert!(cam.project(cam.centre() - cam.forward()).is_none());
+    }
+
+    #[test]
+    fn undistortion_failure_is_an_error() {
+        // Barrel distortion this strong folds over: far corners have no preimage.
+        let mut cam = test_camera(Distortion { k1: -2.0, ..Default::default() });
+        cam.intrinsics.fx = 100.0;
+        cam.intrinsics.fy = 100.0;
+        assert!(matches!(cam.pixel_ray(0.0, 0.0), Err(CoreError::UndistortionFailed { .. })));
+    }
+
+    #[test]
+    fn thin_lens_dissertation_settings() {
+        // Table 6.1: f = 60 mm, f/3.5, M = -0.2, pitch 0.01 mm, 800 px -> 40 mm field of view.
+        let lens = ThinLens::from_f_number(60.0, 3.5, -0.2, 0.01);
+        assert_relative_eq!(lens.image_distance(), 72.0, epsilon = 1e-12);
+        assert_relative_eq!(lens.object_distance(), 360.0, epsilon = 1e-12);
+        assert_relative_eq!(1.0 / lens.object_distance() + 1.0 / lens.image_distance(), 1.0 / 60.0, epsilon = 1e-15);
+        assert_relative_eq!(800.0 * lens.pixel_footprint(), 40.0, epsilon = 1e-12);
+        assert_relative_eq!(lens.aperture_diameter, 60.0 / 3.5, epsilon = 1e-12);
+        assert_eq!(lens.blur_circle_diameter(lens.object_distance()), 0.0);
+    }
+
+    #[test]
+    fn pinhole_emission_weight_is_constant() {
+        let lens = ThinLens::from_f_number(60.0, 3.5, -0.2, 0.01);
+        let expected = lens.pixel_footprint().powi(2);
+        for s in [300.0, 340.0, 360.0, 381.0, 420.0] {
+            assert_relative_eq!(lens.emission_weight(s), expected, max_relative = 1e-12);
+        }
+    }
+
+    #[test]
+    fn opencv_coefficient_order_round_trips() {
+        let c = [0.1, -0.2, 0.003, -0.004, 0.05];
+        let d = Distortion::from_opencv(&c).expect("valid");
+        assert_eq!(d.p1, 0.003);
+        assert_eq!(d.k3, 0.05);
+        assert_eq!(d.to_opencv(), c.to_vec());
+        assert!(Distortion::from_opencv(&[0.1, 0.2, 0.3]).is_err());
+        let mut c14 = [0.0; 14];
+        c14[9] = 0.1;
+        assert!(Distortion::from_opencv(&c14).is_err());
+    }
+
+    #[test]
+    fn visibility_of_centred_and_missed_boxes() {
+        let cam = test_camera(Distortion::default());
+        let seen = cam.visibility(&Aabb::cube(DVec3::ZERO, 40.0));
+        assert_eq!(seen.box_fraction_in_view, 1.0);
+        assert!(seen.pixel_fraction_on_box > 0.0 && seen.pixel_fraction_on_box < 1.0);
+        let missed = cam.visibility(&Aabb::cube(DVec3::new(3000.0, 0.0, 0.0), 10.0));
+        assert_eq!(missed.box_fraction_in_view, 0.0);
+        assert_eq!(missed.pixel_fraction_on_box, 0.0);
+    }
+}

@@ -1,0 +1,164 @@
+//! Axis-aligned boxes and rays.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+/// A ray `origin + s * dir`, with `dir` of unit length so that `s` is a distance in world units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: DVec3,
+    /// Unit direction.
+    pub dir: DVec3,
+}
+
+impl Ray {
+    /// Builds a ray, normalising `dir`.
+    pub fn new(origin: DVec3, dir: DVec3) -> Self {
+        Ray { origin, dir: dir.normalize() }
+    }
+
+    /// The point at distance `s` along the ray.
+    pub fn at(&self, s: f64) -> DVec3 {
+        self.origin + s * self.dir
+    }
+}
+
+/// An axis-aligned box `[min, max]` in world units (the reconstruction box).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    pub min: DVec3,
+    pub max: DVec3,
+}
+
+impl Aabb {
+    /// A box from its corners. Panics if any `min` component exceeds `max` (a programmer error;
+    /// input from files is validated with [`Aabb::validate`]).
+    pub fn new(min: DVec3, max: DVec3) -> Self {
+        assert!(min.cmple(max).all(), "Aabb::new: min {min} must not exceed max {max}");
+        Aabb { min, max }
+    }
+
+    /// A cube of side `side` centred on `centre`.
+    pub fn cube(centre: DVec3, side: f64) -> Self {
+        let h = DVec3::splat(0.5 * side);
+        Aabb::new(centre - h, centre + h)
+    }
+
+    /// Checks that the box is finite and has positive extent on every axis.
+    pub fn validate(&self) -> Result<(), crate::CoreError> {
+        if !(self.min.is_finite() && self.max.is_finite()) {
+            return Err(crate::CoreError::invalid("aabb", "corners must be finite"));
+        }
+        if !self.min.cmplt(self.max).all() {
+            return Err(crate::CoreError::invalid(
+                "aabb",
+                format!("min {} must be below max {} on every axis", self.min, self.max),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn size(&self) -> DVec3 {
+        self.max - self.min
+    }
+
+    pub fn centre(&self) -> DVec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    /// Whether `p` lies inside the closed box.
+    pub fn contains(&self, p: DVec3) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
+    /// The eight corners, x varying fastest.
+    pub fn corners(&self) -> [DVec3; 8] {
+        let (a, b) = (self.min, self.max);
+        std::array::from_fn(|i| {
+            DVec3::new(
+                if i & 1 == 0 { a.x } else { b.x },
+                if i & 2 == 0 { a.y } else { b.y },
+                if i & 4 == 0 { a.z } else { b.z },
+            )
+        })
+    }
+
+    /// Maps a world point to box-normalised coordinates, `min -> 0`, `max -> 1`.
+    pub fn to_unit(&self, p: DVec3) -> DVec3 {
+        (p - self.min) / self.size()
+    }
+
+    /// Entry and exit distances `(s_near, s_far)` of `ray` through the box, clipped to `s >= 0`
+    /// (the part in front of the ray origin), or `None` if the ray misses the box or the
+    /// segment has zero length. Slab method; rays parallel to a slab are handled exactly.
+    pub fn intersect(&self, ray: &Ray) -> Option<(f64, f64)> {
+        let mut near = 0.0f64;
+        let mut far = f64::INFINITY;
+        for axis in 0..3 {
+            let o = ray.origin[axis];
+            let d = ray.dir[axis];
+            let (lo, hi) = (self.min[axis], self.max[axis]);
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+                continue;
+            }
+            let inv = 1.0 / d;
+            let (mut t0, mut t1) = ((lo - o) * inv, (hi - o) * inv);
+            if t0 > t1 {
+                std::mem::swap(&mut t0, &mut t1);
+            }
+            near = near.max(t0);
+            far = far.min(t1);
+            if near >= far {
+                return None;
+            }
+        }
+        Some((near, far))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn ray_through_cube_diagonal() {
+        let b = Aabb::new(DVec3::ZERO, DVec3::ONE);
+        let r = Ray::new(DVec3::splat(-1.0), DVec3::ONE);
+        let (n, f) = b.intersect(&r).expect("hits");
+        assert_relative_eq!(n, 3f64.sqrt(), epsilon = 1e-12);
+        assert_relative_eq!(f - n, 3f64.sqrt(), epsilon = 1e-12);
+    }
+
+    #[test]
+    fn axis_parallel_rays() {
+        let b = Aabb::new(DVec3::new(-1.0, -2.0, -3.0), DVec3::new(1.0, 2.0, 3.0));
+        let r = Ray::new(DVec3::new(0.5, 1.5, -10.0), DVec3::Z);
+        let (n, f) = b.intersect(&r).expect("hits");
+        assert_relative_eq!(n, 7.0);
+        assert_relative_eq!(f, 13.0);
+        // Parallel to the z slabs but outside the x slab: a miss.
+        assert!(b.intersect(&Ray::new(DVec3::new(1.5, 0.0, -10.0), DVec3::Z)).is_none());
+        // Pointing away: a miss.
+        assert!(b.intersect(&Ray::new(DVec3::new(0.0, 0.0, -10.0), -DVec3::Z)).is_none());
+    }
+
+    #[test]
+    fn origin_inside_clips_at_zero() {
+        let b = Aabb::cube(DVec3::ZERO, 2.0);
+        let (n, f) = b.intersect(&Ray::new(DVec3::ZERO, DVec3::X)).expect("hits");
+        assert_eq!(n, 0.0);
+        assert_relative_eq!(f, 1.0);
+    }
+
+    #[test]
+    fn validate_rejects_degenerate() {
+        let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, 0.0, 1.0) };
+        assert!(b.validate().is_err());
+        let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, f64::NAN, 1.0) };
+        assert!(b.validate().is_err());
+    }
+}

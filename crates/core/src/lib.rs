@@ -1,0 +1,37 @@
+//! Geometry, cameras, images, volumes and scenes: the vocabulary every other fluidnerf crate
+//! speaks, plus the emission imaging model (line integrals of a scalar field along camera rays).
+//!
+//! # Conventions
+//! - **World frame**: right-handed, in the scene's length unit (`Scene::units`, usually mm).
+//!   Synthetic jets flow along +x.
+//! - **Camera frame** (OpenCV): x right, y down, z forward (viewing direction).
+//!   `Camera::world_from_camera` maps camera coordinates to world coordinates.
+//! - **Pixels** (OpenCV): pixel `(col, row)` has its centre at the continuous image coordinate
+//!   `(u, v) = (col, row)`; the top-left pixel covers `[-0.5, 0.5]²`. Importers of nerfstudio and
+//!   COLMAP data (whose pixel centres sit at `+0.5`) convert on the way in.
+//! - **Images**: [`Image`] is row-major f32, index `row * width + col`, linear intensity.
+//! - **Volumes**: [`Volume`] is a dense, cell-centred f32 grid filling an [`Aabb`], x varying
+//!   fastest: index `(k * ny + j) * nx + i` for voxel `(i, j, k)`; on disk as `.npy` of shape
+//!   `(nz, ny, nx)`.
+//! - **Precision**: camera geometry is f64 (distortion inversion needs it); hot loops over
+//!   samples and voxels use f32.
+//! - **Angles** are radians.
+
+pub mod camera;
+pub mod error;
+pub mod field;
+pub mod geometry;
+pub mod image;
+pub mod render;
+pub mod scene;
+pub mod volume;
+
+pub use camera::{Camera, Distortion, Intrinsics, ThinLens, Visibility};
+pub use error::CoreError;
+pub use field::ScalarField;
+pub use geometry::{Aabb, Ray};
+pub use glam;
+pub use image::Image;
+pub use render::{render_image, RenderSettings};
+pub use scene::{Frame, Scene, TruthRef};
+pub use volume::Volume;

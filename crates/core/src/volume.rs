@@ -1,0 +1,204 @@
+//! Dense, cell-centred voxel grids.
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+use crate::{Aabb, ScalarField};
+
+/// A dense f32 grid of `nx × ny × nz` cells filling `aabb`, x varying fastest
+/// (`data[(k * ny + j) * nx + i]`). Values live at cell centres:
+/// voxel `(i, j, k)` is centred at `aabb.min + (i + ½, j + ½, k + ½) * spacing`.
+///
+/// Sampling ([`Volume::sample`]) is trilinear between cell centres, clamped to the outermost
+/// centres inside the box (so a constant grid is constant up to the box faces and line
+/// integrals through it equal value × chord length) and zero outside the box.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Volume {
+    /// `[nx, ny, nz]`.
+    pub dims: [usize; 3],
+    pub aabb: Aabb,
+    pub data: Vec<f32>,
+}
+
+impl Volume {
+    /// A zero grid. Panics if a dimension is zero.
+    pub fn zeros(dims: [usize; 3], aabb: Aabb) -> Self {
+        assert!(dims.iter().all(|&n| n > 0), "Volume::zeros: dims {dims:?} must be positive");
+        Volume { dims, aabb, data: vec![0.0; dims[0] * dims[1] * dims[2]] }
+    }
+
+    /// Wraps `data`; panics if its length does not match `dims`.
+    pub fn from_vec(dims: [usize; 3], aabb: Aabb, data: Vec<f32>) -> Self {
+        assert_eq!(data.len(), dims[0] * dims[1] * dims[2], "Volume::from_vec: data does not match dims {dims:?}");
+        Volume { dims, aabb, data }
+    }
+
+    /// Samples `f` at every voxel centre, in parallel over z-slices.
+    pub fn from_fn(dims: [usize; 3], aabb: Aabb, f: impl Fn(DVec3) -> f32 + Sync) -> Self {
+        let mut v = Volume::zeros(dims, aabb);
+        let [nx, ny, _] = dims;
+        let sp = v.spacing();
+        v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let p = aabb.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * sp;
+                    slab[j * nx + i] = f(p);
+                }
+            }
+        });
+        v
+    }
+
+    /// Samples any [`ScalarField`] at every voxel centre at time `time`, one batch per z-slice.
+    pub fn from_field(dims: [usize; 3], aabb: Aabb, field: &dyn ScalarField, time: f64) -> Self {
+        let mut v = Volume::zeros(dims, aabb);
+        let [nx, ny, _] = dims;
+        let sp = v.spacing();
+        v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+            let mut pts = Vec::with_capacity(nx * ny);
+            for j in 0..ny {
+                for i in 0..nx {
+                    let p = aabb.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * sp;
+                    pts.push(p.as_vec3());
+                }
+            }
+            field.eval(&pts, time, slab);
+        });
+        v
+    }
+
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// Cell size along each axis.
+    pub fn spacing(&self) -> DVec3 {
+        self.aabb.size() / DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64)
+    }
+
+    /// Linear index of voxel `(i, j, k)`.
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        (k * self.dims[1] + j) * self.dims[0] + i
+    }
+
+    pub fn get(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.data[self.index(i, j, k)]
+    }
+
+    /// World position of the centre of voxel `(i, j, k)`.
+    pub fn voxel_centre(&self, i: usize, j: usize, k: usize) -> DVec3 {
+        self.aabb.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * self.spacing()
+    }
+
+    /// Trilinear value at a world point (see the type's docs for the boundary rule).
+    pub fn sample(&self, p: Vec3) -> f32 {
+        let min = self.aabb.min.as_vec3();
+        let max = self.aabb.max.as_vec3();
+        if p.cmplt(min).any() || p.cmpgt(max).any() || p.is_nan() {
+            return 0.0;
+        }
+        let n = [self.dims[0], self.dims[1], self.dims[2]];
+        let size = max - min;
+        let g = (p - min) / size * Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32) - 0.5;
+        let mut i0 = [0usize; 3];
+        let mut i1 = [0usize; 3];
+        let mut w = [0f32; 3];
+        for a in 0..3 {
+            let c = g[a].clamp(0.0, (n[a] - 1) as f32);
+            let f = c.floor();
+            i0[a] = f as usize;
+            i1[a] = (i0[a] + 1).min(n[a] - 1);
+            w[a] = c - f;
+        }
+        let (nx, ny) = (n[0], n[1]);
+        let at = |i: usize, j: usize, k: usize| self.data[(k * ny + j) * nx + i];
+        let c00 = at(i0[0], i0[1], i0[2]) * (1.0 - w[0]) + at(i1[0], i0[1], i0[2]) * w[0];
+        let c10 = at(i0[0], i1[1], i0[2]) * (1.0 - w[0]) + at(i1[0], i1[1], i0[2]) * w[0];
+        let c01 = at(i0[0], i0[1], i1[2]) * (1.0 - w[0]) + at(i1[0], i0[1], i1[2]) * w[0];
+        let c11 = at(i0[0], i1[1], i1[2]) * (1.0 - w[0]) + at(i1[0], i1[1], i1[2]) * w[0];
+        let c0 = c00 * (1.0 - w[1]) + c10 * w[1];
+        let c1 = c01 * (1.0 - w[1]) + c11 * w[1];
+        c0 * (1.0 - w[2]) + c1 * w[2]
+    }
+
+    /// Smallest and largest value (NaN if any value is NaN).
+    pub fn min_max(&self) -> (f32, f32) {
+        self.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            if v.is_nan() || lo.is_nan() {
+                (f32::NAN, f32::NAN)
+            } else {
+                (lo.min(v), hi.max(v))
+            }
+        })
+    }
+
+    /// Resamples onto another grid (trilinear, at the new voxel centres).
+    pub fn resample(&self, dims: [usize; 3], aabb: Aabb) -> Volume {
+        Volume::from_fn(dims, aabb, |p| self.sample(p.as_vec3()))
+    }
+}
+
+impl ScalarField for Volume {
+    fn eval(&self, points: &[Vec3], _time: f64, out: &mut [f32]) {
+        assert_eq!(points.len(), out.len(), "Volume::eval: points and out differ in length");
+        for (o, &p) in out.iter_mut().zip(points) {
+            *o = self.sample(p);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn unit_box() -> Aabb {
+        Aabb::new(DVec3::ZERO, DVec3::new(2.0, 1.0, 1.0))
+    }
+
+    #[test]
+    fn layout_is_x_fastest_and_cell_centred() {
+        let v = Volume::from_fn([4, 3, 2], unit_box(), |p| (p.x * 100.0 + p.y * 10.0 + p.z) as f32);
+        assert_eq!(v.index(1, 0, 0), 1);
+        assert_eq!(v.index(0, 1, 0), 4);
+        assert_eq!(v.index(0, 0, 1), 12);
+        let c = v.voxel_centre(0, 0, 0);
+        assert_relative_eq!(c.x, 0.25);
+        assert_relative_eq!(c.y, 1.0 / 6.0);
+        assert_relative_eq!(c.z, 0.25);
+        assert_relative_eq!(v.get(3, 2, 1), (1.75 * 100.0 + (5.0 / 6.0) * 10.0 + 0.75) as f32, epsilon = 1e-4);
+    }
+
+    #[test]
+    fn trilinear_reproduces_linear_fields_and_is_zero_outside() {
+        let f = |p: DVec3| (1.0 + 2.0 * p.x - 3.0 * p.y + 0.5 * p.z) as f32;
+        let v = Volume::from_fn([8, 7, 6], unit_box(), f);
+        // Inside the hull of the voxel centres a linear field is reproduced exactly.
+        for p in [DVec3::new(0.4, 0.2, 0.3), DVec3::new(1.7, 0.8, 0.6), DVec3::new(1.0, 0.5, 0.5)] {
+            assert_relative_eq!(v.sample(p.as_vec3()), f(p), epsilon = 1e-5);
+        }
+        assert_eq!(v.sample(Vec3::new(-0.01, 0.5, 0.5)), 0.0);
+        assert_eq!(v.sample(Vec3::new(1.0, 0.5, 1.01)), 0.0);
+        assert_eq!(v.sample(Vec3::NAN), 0.0);
+    }
+
+    #[test]
+    fn constant_grid_is_constant_up_to_faces() {
+        let v = Volume::from_fn([5, 5, 5], unit_box(), |_| 2.5);
+        assert_eq!(v.sample(Vec3::new(0.0, 0.0, 0.0)), 2.5);
+        assert_eq!(v.sample(Vec3::new(2.0, 1.0, 1.0)), 2.5);
+    }
+
+    #[test]
+    fn resample_identity_grid_is_exact() {
+        let v = Volume::from_fn([6, 5, 4], unit_box(), |p| (p.x * p.y + p.z) as f32);
+        let r = v.resample(v.dims, v.aabb);
+        for (a, b) in v.data.iter().zip(&r.data) {
+            assert_relative_eq!(a, b, epsilon = 1e-6);
+        }
+    }
+}

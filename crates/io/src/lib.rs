@@ -1,0 +1,1 @@
+//! Scene formats, images, volumes and meshes on disk.

@@ -1,0 +1,1 @@
+//! Reconstruction metrics: NRMSE, PSNR, SSIM, regions, reprojection.

@@ -1,0 +1,1 @@
+//! FluidNeRF: neural and grid fields, ray sampling, differentiable rendering and training.

@@ -1,0 +1,1 @@
+//! Synthetic benchmark generator: phantoms, camera rigs, image formation, noise.
