@@ -67,6 +67,15 @@ impl Volume {
         v
     }
 
+    /// Grid dimensions for `aabb` with `longest` cells along its longest side and (nearly)
+    /// cubic cells elsewhere (at least one cell per axis).
+    pub fn dims_for(aabb: &Aabb, longest: usize) -> [usize; 3] {
+        assert!(longest > 0, "Volume::dims_for: longest must be positive");
+        let size = aabb.size();
+        let cell = size.max_element() / longest as f64;
+        [0, 1, 2].map(|a| ((size[a] / cell).round() as usize).max(1))
+    }
+
     pub fn len(&self) -> usize {
         self.data.len()
     }
@@ -184,6 +193,12 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(-0.01, 0.5, 0.5)), 0.0);
         assert_eq!(v.sample(Vec3::new(1.0, 0.5, 1.01)), 0.0);
         assert_eq!(v.sample(Vec3::NAN), 0.0);
+    }
+
+    #[test]
+    fn dims_for_keeps_cells_cubic() {
+        assert_eq!(Volume::dims_for(&unit_box(), 64), [64, 32, 32]);
+        assert_eq!(Volume::dims_for(&Aabb::cube(DVec3::ZERO, 3.0), 17), [17, 17, 17]);
     }
 
     #[test]

@@ -2,11 +2,20 @@
 
 use clap::Subcommand;
 
+pub mod reconstruct;
+pub mod reconstruct_classical;
+pub mod reconstruct_neural;
+
 /// The subcommands of `fluidnerf`.
 #[derive(Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Reconstruct the field from a scene's images with a classical or a neural method.
+    Reconstruct(reconstruct::Args),
+}
 
 /// Runs a parsed subcommand.
 pub fn run(command: Command) -> anyhow::Result<()> {
-    match command {}
+    match command {
+        Command::Reconstruct(args) => reconstruct::run(args),
+    }
 }

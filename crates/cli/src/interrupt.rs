@@ -1,0 +1,22 @@
+//! Ctrl-C handling: the first Ctrl-C asks long runs to stop after the current iteration (they
+//! then write a usable result); a second one exits at once.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static REQUESTED: AtomicBool = AtomicBool::new(false);
+
+/// Installs the handler. Safe to call more than once.
+pub fn install() {
+    // An error means a handler is already installed, which is fine.
+    let _ = ctrlc::set_handler(|| {
+        if REQUESTED.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        log::warn!("interrupted: finishing the current iteration and writing results (Ctrl-C again to abort)");
+    });
+}
+
+/// Whether the user asked to stop.
+pub fn requested() -> bool {
+    REQUESTED.load(Ordering::SeqCst)
+}
