@@ -1,0 +1,53 @@
+//! The boundary between the method (ray sampling, rendering, loss, training loop) and the
+//! field representation (encoding + network). The method only ever talks to a
+//! [`TrainableField`]; a representation only ever sees batches of points. A GPU backend adds
+//! representations (and a batched driver) without touching the method code.
+//!
+//! # Contract
+//! - Inputs are row-major `n × input_dim()` f32: box-normalised coordinates in `[0, 1]³`
+//!   (`Aabb::to_unit`), followed for space–time fields by the frame time `t' = t / Δt`.
+//! - Outputs are `n` non-negative values of the field E.
+//! - Calls are single-threaded and take one chunk of rows (typically 256–8192); callers
+//!   parallelise over chunks with one `Tape` and one gradient buffer per thread and sum the
+//!   gradient buffers afterwards. This keeps each thread's activations in its own cache and
+//!   avoids any synchronisation inside the hot loop.
+//! - `backward` accumulates (`+=`) into `grads`, laid out like `params()`.
+
+use std::ops::Range;
+
+/// A differentiable scalar field with a flat parameter vector.
+pub trait TrainableField: Send + Sync {
+    /// Per-thread scratch space and the activations `forward` records for `backward`.
+    /// Allocated once with [`TrainableField::new_tape`] and reused across calls.
+    type Tape: Send;
+
+    /// 3 for E(x), 4 for E(x, t).
+    fn input_dim(&self) -> usize;
+
+    /// A fresh tape (buffers grow on first use to the chunk size they are given).
+    fn new_tape(&self) -> Self::Tape;
+
+    /// All trainable parameters, flat.
+    fn params(&self) -> &[f32];
+
+    fn params_mut(&mut self) -> &mut [f32];
+
+    fn num_params(&self) -> usize {
+        self.params().len()
+    }
+
+    /// Inference: writes E for each input row into `out`; records nothing for backward.
+    fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut Self::Tape);
+
+    /// Training forward pass: like [`TrainableField::eval`] but records what
+    /// [`TrainableField::backward`] needs in `tape`.
+    fn forward(&self, inputs: &[f32], out: &mut [f32], tape: &mut Self::Tape);
+
+    /// Given `d_out[i] = ∂L/∂out[i]` for the rows of the last `forward` on this tape, adds
+    /// `∂L/∂params` into `grads` (same length and layout as `params()`).
+    fn backward(&self, tape: &mut Self::Tape, d_out: &[f32], grads: &mut [f32]);
+
+    /// Named tensors as `(name, shape, range into params())`, for checkpoints
+    /// (safetensors) and inspection. The ranges partition `params()`.
+    fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)>;
+}
