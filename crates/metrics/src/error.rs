@@ -1,0 +1,26 @@
+//! The error type of the metrics crate.
+
+/// What can go wrong when computing metrics.
+#[derive(Debug, thiserror::Error)]
+pub enum MetricsError {
+    /// An array is smaller than the SSIM window along some axis.
+    #[error("array of dims {dims:?} is smaller than the {window}-wide SSIM window")]
+    TooSmall { dims: Vec<usize>, window: usize },
+    /// A parameter is out of its valid range.
+    #[error("invalid {what}: {why}")]
+    Invalid { what: String, why: String },
+    /// Rendering a reconstruction failed.
+    #[error("rendering frame {frame} failed: {source}")]
+    Render {
+        frame: usize,
+        #[source]
+        source: fluidnerf_core::CoreError,
+    },
+}
+
+impl MetricsError {
+    /// Shorthand for [`MetricsError::Invalid`].
+    pub fn invalid(what: impl Into<String>, why: impl Into<String>) -> Self {
+        MetricsError::Invalid { what: what.into(), why: why.into() }
+    }
+}

@@ -1,0 +1,105 @@
+//! Point-wise error measures: NRMSE (dissertation Eq. 6.18), MSE and PSNR.
+//!
+//! All functions take two equally long f32 slices, the estimate (the reconstruction, `E`) and
+//! the truth (`Ê`), in any layout (they compare element `i` with element `i`), and accumulate
+//! in f64.
+
+/// Normalised root-mean-square error, dissertation Eq. 6.18:
+///
+/// `ε₂(E, Ê) = sqrt( Σⱼ (Eⱼ − Êⱼ)² / Σⱼ Êⱼ² )`
+///
+/// with `E` the estimate and `Ê` the truth (so the normalisation is by the truth's energy and
+/// the measure is not symmetric). 0 is perfect; an all-zero estimate scores 1. Returns NaN when
+/// the truth is all zero (the ratio is undefined). Panics if the lengths differ.
+pub fn nrmse(estimate: &[f32], truth: &[f32]) -> f64 {
+    assert_eq!(estimate.len(), truth.len(), "nrmse: estimate and truth differ in length");
+    let (err, energy) = estimate.iter().zip(truth).fold((0f64, 0f64), |(err, energy), (&e, &t)| {
+        let d = e as f64 - t as f64;
+        (err + d * d, energy + t as f64 * t as f64)
+    });
+    if energy == 0.0 {
+        return f64::NAN;
+    }
+    (err / energy).sqrt()
+}
+
+/// Mean squared error `Σⱼ (Eⱼ − Êⱼ)² / N`. Returns NaN for empty slices; panics if the lengths
+/// differ.
+pub fn mse(estimate: &[f32], truth: &[f32]) -> f64 {
+    assert_eq!(estimate.len(), truth.len(), "mse: estimate and truth differ in length");
+    if truth.is_empty() {
+        return f64::NAN;
+    }
+    let sum: f64 = estimate
+        .iter()
+        .zip(truth)
+        .map(|(&e, &t)| {
+            let d = e as f64 - t as f64;
+            d * d
+        })
+        .sum();
+    sum / truth.len() as f64
+}
+
+/// Peak signal-to-noise ratio in decibels, `PSNR = 10 log₁₀(R² / MSE)` with `R` the data range
+/// (as `skimage.metrics.peak_signal_noise_ratio`). +∞ for identical inputs. Panics if the
+/// lengths differ or `data_range` is not positive.
+pub fn psnr(estimate: &[f32], truth: &[f32], data_range: f64) -> f64 {
+    assert!(data_range > 0.0, "psnr: data_range must be positive, got {data_range}");
+    let m = mse(estimate, truth);
+    10.0 * (data_range * data_range / m).log10()
+}
+
+/// The truth's value range `max − min` (the default data range of PSNR and SSIM), or 1 when the
+/// truth is constant or empty so that the metrics stay defined.
+pub fn data_range_of(truth: &[f32]) -> f64 {
+    let (lo, hi) = truth
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let r = hi as f64 - lo as f64;
+    if r > 0.0 && r.is_finite() {
+        r
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn nrmse_by_hand() {
+        // Σ(E−Ê)² = 0.25 + 0 + 1 + 0.25 = 1.5; ΣÊ² = 1 + 4 + 9 + 0 = 14.
+        let e = [1.5f32, 2.0, 2.0, 0.5];
+        let t = [1.0f32, 2.0, 3.0, 0.0];
+        assert_relative_eq!(nrmse(&e, &t), (1.5f64 / 14.0).sqrt(), epsilon = 1e-12);
+        assert_eq!(nrmse(&t, &t), 0.0);
+        assert_relative_eq!(nrmse(&[0.0; 4], &t), 1.0);
+        // Normalised by the truth, hence asymmetric.
+        assert!((nrmse(&t, &e) - nrmse(&e, &t)).abs() > 1e-3);
+        assert!(nrmse(&e, &[0.0; 4]).is_nan());
+    }
+
+    #[test]
+    fn psnr_by_hand() {
+        // MSE = 1.5 / 4 = 0.375; R = 3.
+        let e = [1.5f32, 2.0, 2.0, 0.5];
+        let t = [1.0f32, 2.0, 3.0, 0.0];
+        assert_relative_eq!(mse(&e, &t), 0.375, epsilon = 1e-12);
+        assert_relative_eq!(psnr(&e, &t, 3.0), 10.0 * (9.0f64 / 0.375).log10(), epsilon = 1e-12);
+        assert_relative_eq!(data_range_of(&t), 3.0);
+        assert_eq!(psnr(&t, &t, 1.0), f64::INFINITY);
+        // Halving the error gains 20 log10(2) dB.
+        let half: Vec<f32> = e.iter().zip(&t).map(|(&a, &b)| b + 0.5 * (a - b)).collect();
+        assert_relative_eq!(psnr(&half, &t, 3.0) - psnr(&e, &t, 3.0), 20.0 * 2f64.log10(), epsilon = 1e-9);
+    }
+
+    #[test]
+    fn constant_truth_has_unit_range() {
+        assert_eq!(data_range_of(&[2.0; 5]), 1.0);
+        assert_eq!(data_range_of(&[]), 1.0);
+    }
+}
