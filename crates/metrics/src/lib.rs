@@ -14,8 +14,14 @@
 
 mod error;
 pub mod pointwise;
+pub mod region;
+pub mod report;
+pub mod reprojection;
 pub mod ssim;
 
 pub use error::MetricsError;
 pub use pointwise::{data_range_of, mse, nrmse, psnr};
+pub use region::Region;
+pub use report::{evaluate_volume, MetricsReport, RegionMetrics, StepMetrics, VolumeMetricOptions, VolumeMetrics};
+pub use reprojection::{compare_images, reproject, ReprojectionMetrics, ReprojectionOptions};
 pub use ssim::{ssim_2d, ssim_3d, ssim_global, SsimParams, SsimWindow};

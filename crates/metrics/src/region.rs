@@ -1,0 +1,184 @@
+//! Regions of interest: boxes in the reconstruction box's normalised coordinates, for metrics
+//! per flow regime.
+//!
+//! The dissertation (Fig. 7.3a) scores the jet in three boxes along its axis (+x), left to
+//! right: the **laminar** potential core, the **transition** region of shear-layer roll-up and
+//! the **turbulent** far field. Its figure gives no coordinates, so the default
+//! ([`Region::jet_thirds`]) splits the box into equal thirds along x, each spanning the full
+//! y and z extent. Any other boxes can be given ([`Region::parse`]).
+//!
+//! A region is `[min, max)` in normalised coordinates (`0` = the box's `min` corner, `1` = its
+//! `max` corner; per axis). A voxel belongs to a region when its centre lies inside, so regions
+//! that tile `[0, 1]` partition the voxels.
+
+use std::ops::Range;
+
+use fluidnerf_core::{Aabb, Volume};
+use serde::{Deserialize, Serialize};
+
+use crate::MetricsError;
+
+/// A named box in box-normalised coordinates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Region {
+    pub name: String,
+    /// Lower corner, `[x, y, z]` in `[0, 1]`.
+    pub min: [f64; 3],
+    /// Upper corner, `[x, y, z]` in `[0, 1]`, above `min` on every axis.
+    pub max: [f64; 3],
+}
+
+impl Region {
+    /// The slab `x ∈ [x0, x1)` (normalised) across the full y and z extent.
+    pub fn along_x(name: impl Into<String>, x0: f64, x1: f64) -> Self {
+        Region { name: name.into(), min: [x0, 0.0, 0.0], max: [x1, 1.0, 1.0] }
+    }
+
+    /// The default regions: laminar, transition and turbulent thirds of the box along +x.
+    pub fn jet_thirds() -> Vec<Region> {
+        vec![
+            Region::along_x("laminar", 0.0, 1.0 / 3.0),
+            Region::along_x("transition", 1.0 / 3.0, 2.0 / 3.0),
+            Region::along_x("turbulent", 2.0 / 3.0, 1.0),
+        ]
+    }
+
+    /// Parses `NAME:X0:X1` (a slab along x) or `NAME:X0:X1:Y0:Y1:Z0:Z1` (a box), all in
+    /// normalised coordinates, e.g. `core:0:0.3:0.3:0.7:0.3:0.7`.
+    pub fn parse(spec: &str) -> Result<Region, MetricsError> {
+        let bad = |why: &str| MetricsError::invalid(format!("region '{spec}'"), why.to_string());
+        let mut parts = spec.split(':');
+        let name = parts.next().filter(|n| !n.trim().is_empty()).ok_or_else(|| bad("needs a name"))?;
+        let nums = parts
+            .map(|p| p.trim().parse::<f64>().map_err(|_| bad(&format!("'{p}' is not a number"))))
+            .collect::<Result<Vec<f64>, _>>()?;
+        let region = match nums.as_slice() {
+            [x0, x1] => Region::along_x(name.trim(), *x0, *x1),
+            [x0, x1, y0, y1, z0, z1] => {
+                Region { name: name.trim().to_string(), min: [*x0, *y0, *z0], max: [*x1, *y1, *z1] }
+            }
+            _ => return Err(bad("expected NAME:X0:X1 or NAME:X0:X1:Y0:Y1:Z0:Z1")),
+        };
+        region.validate()?;
+        Ok(region)
+    }
+
+    /// Checks that the corners are finite, inside `[0, 1]` and ordered.
+    pub fn validate(&self) -> Result<(), MetricsError> {
+        for a in 0..3 {
+            let (lo, hi) = (self.min[a], self.max[a]);
+            if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo >= hi {
+                return Err(MetricsError::invalid(
+                    format!("region '{}'", self.name),
+                    format!("axis {a}: need 0 <= min < max <= 1, got [{lo}, {hi})"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The region in world coordinates inside `aabb`.
+    pub fn world_box(&self, aabb: &Aabb) -> Aabb {
+        let size = aabb.size();
+        let corner = |u: [f64; 3]| aabb.min + glam::DVec3::from_array(u) * size;
+        Aabb::new(corner(self.min), corner(self.max))
+    }
+
+    /// The voxel index ranges `[i, j, k]` whose centres `(n + ½)/dims` lie in the region
+    /// (possibly empty).
+    pub fn voxel_ranges(&self, dims: [usize; 3]) -> [Range<usize>; 3] {
+        std::array::from_fn(|a| {
+            let n = dims[a] as f64;
+            // Centre (i + ½)/n >= lo  ⇔  i >= lo·n − ½.
+            let first = (self.min[a] * n - 0.5).ceil().max(0.0) as usize;
+            let end = ((self.max[a] * n - 0.5).ceil().max(0.0) as usize).min(dims[a]);
+            first.min(end)..end
+        })
+    }
+}
+
+/// Copies the block `ranges` (`[i, j, k]`) out of an x-fastest array of `dims`; returns the
+/// values (x fastest) and the block's dims.
+pub fn extract(data: &[f32], dims: [usize; 3], ranges: &[Range<usize>; 3]) -> (Vec<f32>, [usize; 3]) {
+    assert_eq!(data.len(), dims[0] * dims[1] * dims[2], "extract: data does not match dims {dims:?}");
+    assert!((0..3).all(|a| ranges[a].end <= dims[a]), "extract: ranges {ranges:?} exceed dims {dims:?}");
+    let sub = [ranges[0].len(), ranges[1].len(), ranges[2].len()];
+    let mut out = Vec::with_capacity(sub[0] * sub[1] * sub[2]);
+    for k in ranges[2].clone() {
+        for j in ranges[1].clone() {
+            let row = (k * dims[1] + j) * dims[0];
+            out.extend_from_slice(&data[row + ranges[0].start..row + ranges[0].end]);
+        }
+    }
+    (out, sub)
+}
+
+/// The part of `volume` inside `region`, as a volume of its own (its box is the block of the
+/// selected voxels). `None` if no voxel centre lies in the region.
+pub fn extract_volume(volume: &Volume, region: &Region) -> Option<Volume> {
+    let r = region.voxel_ranges(volume.dims);
+    if r.iter().any(|r| r.is_empty()) {
+        return None;
+    }
+    let (data, dims) = extract(&volume.data, volume.dims, &r);
+    let sp = volume.spacing();
+    let lo = glam::DVec3::new(r[0].start as f64, r[1].start as f64, r[2].start as f64);
+    let hi = glam::DVec3::new(r[0].end as f64, r[1].end as f64, r[2].end as f64);
+    let aabb = Aabb::new(volume.aabb.min + lo * sp, volume.aabb.min + hi * sp);
+    Some(Volume::from_vec(dims, aabb, data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thirds_partition_the_voxels() {
+        let dims = [10, 4, 3];
+        let thirds = Region::jet_thirds();
+        let counts: Vec<usize> = thirds.iter().map(|r| r.voxel_ranges(dims)[0].len()).collect();
+        // Centres at 0.05, 0.15, …: 3 below 1/3, 4 in [1/3, 2/3), 3 above.
+        assert_eq!(counts, vec![3, 4, 3]);
+        let starts: Vec<usize> = thirds.iter().map(|r| r.voxel_ranges(dims)[0].start).collect();
+        assert_eq!(starts, vec![0, 3, 7]);
+        for r in &thirds {
+            let rr = r.voxel_ranges(dims);
+            assert_eq!((rr[1].len(), rr[2].len()), (4, 3));
+        }
+    }
+
+    #[test]
+    fn extract_picks_the_block() {
+        let dims = [4, 3, 2];
+        let data: Vec<f32> = (0..24).map(|v| v as f32).collect();
+        let (sub, sd) = extract(&data, dims, &[1..3, 1..2, 1..2]);
+        assert_eq!(sd, [2, 1, 1]);
+        // Voxel (1, 1, 1) is index (1 * 3 + 1) * 4 + 1 = 17.
+        assert_eq!(sub, vec![17.0, 18.0]);
+    }
+
+    #[test]
+    fn parse_accepts_slabs_and_boxes() {
+        let r = Region::parse("core:0:0.25").expect("slab");
+        assert_eq!(r, Region::along_x("core", 0.0, 0.25));
+        let r = Region::parse("box:0.1:0.2:0.3:0.4:0.5:0.6").expect("box");
+        assert_eq!((r.min, r.max), ([0.1, 0.3, 0.5], [0.2, 0.4, 0.6]));
+        assert!(Region::parse("x:0.5:0.2").is_err());
+        assert!(Region::parse("x:0:2").is_err());
+        assert!(Region::parse(":0:1").is_err());
+        assert!(Region::parse("x:0:a").is_err());
+        assert!(Region::parse("x:0:1:0").is_err());
+    }
+
+    #[test]
+    fn extracted_volume_keeps_world_positions() {
+        let aabb = Aabb::new(glam::DVec3::ZERO, glam::DVec3::new(3.0, 1.0, 1.0));
+        let v = Volume::from_fn([9, 2, 2], aabb, |p| p.x as f32);
+        let mid = extract_volume(&v, &Region::jet_thirds()[1]).expect("non-empty");
+        assert_eq!(mid.dims, [3, 2, 2]);
+        assert_eq!(mid.aabb.min.x, 1.0);
+        assert_eq!(mid.aabb.max.x, 2.0);
+        assert_eq!(mid.voxel_centre(0, 0, 0).x as f32, mid.get(0, 0, 0));
+    }
+}

@@ -1,0 +1,315 @@
+//! Volume metrics of a reconstruction against ground truth, globally and per region, and the
+//! serialisable report (`MetricsReport`) that `fluidnerf eval` writes as JSON and CSV.
+//!
+//! Each set of [`VolumeMetrics`] holds NRMSE (Eq. 6.18), PSNR, the global SSIM (Eq. 6.19 over
+//! all voxels as one window) and the windowed 3D SSIM (skimage's form, see [`crate::ssim`]),
+//! all over the truth's voxel centres. Regions use the whole truth's data range, so their PSNR
+//! and SSIM are comparable with the global figures.
+
+use fluidnerf_core::Volume;
+use serde::{Deserialize, Serialize};
+
+use crate::reprojection::ReprojectionMetrics;
+use crate::{data_range_of, nrmse, psnr, region, ssim_3d, ssim_global, MetricsError, Region, SsimParams};
+
+/// The metrics of one array pair.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VolumeMetrics {
+    /// Number of voxels compared.
+    pub voxels: usize,
+    /// Eq. 6.18; lower is better, 0 perfect.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub nrmse: f64,
+    /// `10 log₁₀(R² / MSE)` in dB; higher is better.
+    #[serde(deserialize_with = "null_as_inf")]
+    pub psnr_db: f64,
+    /// Eq. 6.19 over the whole array as one window; 1 perfect.
+    #[serde(deserialize_with = "null_as_nan")]
+    pub ssim_global: f64,
+    /// Mean windowed SSIM; `None` when the array is smaller than the window.
+    pub ssim_windowed: Option<f64>,
+    /// The data range `R` used by PSNR and SSIM.
+    pub data_range: f64,
+}
+
+/// Settings of the volume metrics.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VolumeMetricOptions {
+    /// Regions scored separately. Default: [`Region::jet_thirds`].
+    pub regions: Vec<Region>,
+    /// Windowed SSIM settings (its `data_range` is ignored: see `data_range`). Default: skimage's.
+    pub ssim: SsimParams,
+    /// Data range of PSNR and SSIM. Default (`None`): the truth's `max − min`.
+    pub data_range: Option<f64>,
+}
+
+impl Default for VolumeMetricOptions {
+    fn default() -> Self {
+        VolumeMetricOptions { regions: Region::jet_thirds(), ssim: SsimParams::default(), data_range: None }
+    }
+}
+
+/// Metrics of one region.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RegionMetrics {
+    pub region: Region,
+    pub metrics: VolumeMetrics,
+}
+
+/// Volume metrics at one time step (or of a static reconstruction).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepMetrics {
+    /// Time in the scene's unit, `None` for static scenes.
+    pub time: Option<f64>,
+    /// Truth grid `[nx, ny, nz]` the metrics were computed on.
+    pub dims: [usize; 3],
+    pub global: VolumeMetrics,
+    pub regions: Vec<RegionMetrics>,
+}
+
+/// Everything `fluidnerf eval` measures.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MetricsReport {
+    /// Volume metrics per time step (empty without ground truth).
+    pub steps: Vec<StepMetrics>,
+    /// Reprojection metrics per held-out frame (empty without held-out frames).
+    pub reprojection: Vec<ReprojectionMetrics>,
+}
+
+/// Metrics of two equally shaped arrays (`estimate` against `truth`, x fastest, `dims`).
+pub fn array_metrics(
+    estimate: &[f32],
+    truth: &[f32],
+    dims: [usize; 3],
+    ssim: &SsimParams,
+    data_range: f64,
+) -> Result<VolumeMetrics, MetricsError> {
+    let windowed = match ssim_3d(estimate, truth, dims, &SsimParams { data_range: Some(data_range), ..*ssim }) {
+        Ok(v) => Some(v),
+        Err(MetricsError::TooSmall { .. }) => None,
+        Err(e) => return Err(e),
+    };
+    Ok(VolumeMetrics {
+        voxels: truth.len(),
+        nrmse: nrmse(estimate, truth),
+        psnr_db: psnr(estimate, truth, data_range),
+        ssim_global: ssim_global(estimate, truth, data_range),
+        ssim_windowed: windowed,
+        data_range,
+    })
+}
+
+/// Scores `estimate` against `truth` over the truth's voxel centres, globally and per region.
+/// An estimate on another grid or box is first resampled trilinearly at the truth's voxel
+/// centres ([`Volume::resample`]; zero outside the estimate's box).
+pub fn evaluate_volume(
+    estimate: &Volume,
+    truth: &Volume,
+    time: Option<f64>,
+    options: &VolumeMetricOptions,
+) -> Result<StepMetrics, MetricsError> {
+    for r in &options.regions {
+        r.validate()?;
+    }
+    if let Some(r) = options.data_range {
+        if !(r > 0.0 && r.is_finite()) {
+            return Err(MetricsError::invalid("data range", format!("must be positive, got {r}")));
+        }
+    }
+    let resampled;
+    let est = if estimate.dims == truth.dims && estimate.aabb == truth.aabb {
+        estimate
+    } else {
+        log::info!("resampling the reconstruction ({:?}) onto the truth grid ({:?})", estimate.dims, truth.dims);
+        resampled = estimate.resample(truth.dims, truth.aabb);
+        &resampled
+    };
+    let range = options.data_range.unwrap_or_else(|| data_range_of(&truth.data));
+    let global = array_metrics(&est.data, &truth.data, truth.dims, &options.ssim, range)?;
+    let mut regions = Vec::with_capacity(options.regions.len());
+    for r in &options.regions {
+        let ranges = r.voxel_ranges(truth.dims);
+        if ranges.iter().any(|r| r.is_empty()) {
+            log::warn!("region '{}' holds no voxel centre of the {:?} truth grid; skipped", r.name, truth.dims);
+            continue;
+        }
+        let (e, dims) = region::extract(&est.data, truth.dims, &ranges);
+        let (t, _) = region::extract(&truth.data, truth.dims, &ranges);
+        let metrics = array_metrics(&e, &t, dims, &options.ssim, range)?;
+        if metrics.ssim_windowed.is_none() {
+            log::warn!("region '{}' ({dims:?} voxels) is smaller than the SSIM window; no windowed SSIM", r.name);
+        }
+        regions.push(RegionMetrics { region: r.clone(), metrics });
+    }
+    Ok(StepMetrics { time, dims: truth.dims, global, regions })
+}
+
+/// JSON has no NaN: serde_json writes non-finite numbers as `null`; this reads `null` back as
+/// NaN (an undefined NRMSE or SSIM).
+pub(crate) fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// Reads `null` back as +∞ (the PSNR of a perfect estimate).
+pub(crate) fn null_as_inf<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+}
+
+/// One line of the flat table view of a report (terminal and CSV).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// `volume` or `reprojection`.
+    pub kind: &'static str,
+    pub time: Option<f64>,
+    /// `all`, a region name, or a frame label.
+    pub subset: String,
+    /// Voxels or pixels compared.
+    pub count: usize,
+    pub nrmse: f64,
+    pub psnr_db: f64,
+    pub ssim_global: f64,
+    /// Windowed SSIM (3D for volumes, 2D for images).
+    pub ssim_windowed: Option<f64>,
+}
+
+impl MetricsReport {
+    /// The report as flat rows: per time step the whole volume then each region, then each
+    /// held-out frame.
+    pub fn rows(&self) -> Vec<Row> {
+        let mut rows = Vec::new();
+        for s in &self.steps {
+            let mut push = |subset: &str, m: &VolumeMetrics| {
+                rows.push(Row {
+                    kind: "volume",
+                    time: s.time,
+                    subset: subset.to_string(),
+                    count: m.voxels,
+                    nrmse: m.nrmse,
+                    psnr_db: m.psnr_db,
+                    ssim_global: m.ssim_global,
+                    ssim_windowed: m.ssim_windowed,
+                });
+            };
+            push("all", &s.global);
+            for r in &s.regions {
+                push(&r.region.name, &r.metrics);
+            }
+        }
+        for p in &self.reprojection {
+            rows.push(Row {
+                kind: "reprojection",
+                time: p.time,
+                subset: p.label(),
+                count: p.pixels,
+                nrmse: p.nrmse,
+                psnr_db: p.psnr_db,
+                ssim_global: p.ssim_global,
+                ssim_windowed: Some(p.ssim_windowed),
+            });
+        }
+        rows
+    }
+
+    /// CSV with a header line: `kind,time,subset,count,nrmse,psnr_db,ssim_global,ssim_windowed`.
+    /// Missing values (static time, no windowed SSIM) are empty fields; infinities and NaN are
+    /// written as `inf` and `NaN`.
+    pub fn to_csv(&self) -> String {
+        let mut s = String::from("kind,time,subset,count,nrmse,psnr_db,ssim_global,ssim_windowed\n");
+        let opt = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
+        for r in self.rows() {
+            let subset = if r.subset.contains([',', '"', '\n']) {
+                format!("\"{}\"", r.subset.replace('"', "\"\""))
+            } else {
+                r.subset.clone()
+            };
+            s.push_str(&format!(
+                "{},{},{},{},{},{},{},{}\n",
+                r.kind,
+                opt(r.time),
+                subset,
+                r.count,
+                r.nrmse,
+                r.psnr_db,
+                r.ssim_global,
+                opt(r.ssim_windowed)
+            ));
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::Aabb;
+    use glam::DVec3;
+
+    fn aabb() -> Aabb {
+        Aabb::new(DVec3::ZERO, DVec3::new(3.0, 1.0, 1.0))
+    }
+
+    fn blob(p: DVec3) -> f32 {
+        (-(p - DVec3::new(1.5, 0.5, 0.5)).length_squared() * 4.0).exp() as f32
+    }
+
+    #[test]
+    fn perfect_reconstruction_scores_perfectly_everywhere() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let s = evaluate_volume(&t, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        assert_eq!(s.global.nrmse, 0.0);
+        assert_eq!(s.global.psnr_db, f64::INFINITY);
+        assert!((s.global.ssim_global - 1.0).abs() < 1e-12);
+        assert!((s.global.ssim_windowed.expect("fits") - 1.0).abs() < 1e-12);
+        assert_eq!(s.regions.len(), 3);
+        assert_eq!(s.regions.iter().map(|r| r.metrics.voxels).sum::<usize>(), 24 * 8 * 8);
+    }
+
+    #[test]
+    fn regional_errors_localise_and_sum_to_the_global_error() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        // Error only in the turbulent third.
+        let e = Volume::from_fn([24, 8, 8], aabb(), |p| blob(p) + if p.x > 2.0 { 0.1 } else { 0.0 });
+        let s = evaluate_volume(&e, &t, Some(2.0), &VolumeMetricOptions::default()).expect("evaluates");
+        assert_eq!(s.regions[0].metrics.nrmse, 0.0);
+        assert_eq!(s.regions[1].metrics.nrmse, 0.0);
+        assert!(s.regions[2].metrics.nrmse > 0.0);
+        // Squared errors and energies add up over a partition.
+        let energy = |v: &[f32]| v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>();
+        let total: f64 = Region::jet_thirds()
+            .iter()
+            .map(|r| {
+                let (tt, _) = region::extract(&t.data, t.dims, &r.voxel_ranges(t.dims));
+                s.regions.iter().find(|m| m.region.name == r.name).expect("scored").metrics.nrmse.powi(2) * energy(&tt)
+            })
+            .sum();
+        assert!((total / energy(&t.data) - s.global.nrmse.powi(2)).abs() < 1e-9);
+        assert_eq!(s.time, Some(2.0));
+    }
+
+    #[test]
+    fn other_grids_are_resampled_onto_the_truth() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let fine = Volume::from_fn([48, 16, 16], aabb(), blob);
+        let s = evaluate_volume(&fine, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        assert_eq!(s.global.voxels, t.len());
+        assert!(s.global.nrmse < 0.02, "NRMSE {}", s.global.nrmse);
+    }
+
+    #[test]
+    fn csv_lists_every_row() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let s = evaluate_volume(&t, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        let report = MetricsReport { steps: vec![s], reprojection: vec![] };
+        let csv = report.to_csv();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 5);
+        assert!(lines[1].starts_with("volume,,all,1536,0,inf,1,1"), "{}", lines[1]);
+        assert!(lines[2].starts_with("volume,,laminar,"));
+        let json = serde_json::to_string(&report).expect("serialises");
+        assert!(json.contains("\"psnr_db\":null"));
+        let back: MetricsReport = serde_json::from_str(&json).expect("reads back");
+        assert_eq!(back.steps[0].global.psnr_db, f64::INFINITY);
+        assert_eq!(back.steps[0].regions.len(), 3);
+    }
+}
