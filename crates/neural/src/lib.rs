@@ -2,6 +2,15 @@
 //! MLP as in the dissertation, or a multiresolution grid encoding with a tiny MLP), trained so
 //! that line integrals rendered along camera rays match the measured pixels.
 
+pub mod encoding;
+pub mod error;
 pub mod field;
+pub mod hashgrid;
+pub(crate) mod kernels;
+pub mod mlp;
+pub mod optim;
 
+pub use error::NeuralError;
 pub use field::TrainableField;
+pub use hashgrid::{HashGridConfig, HashGridField};
+pub use mlp::{Activation, MlpConfig, MlpField, OutputActivation};

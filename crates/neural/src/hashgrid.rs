@@ -1,0 +1,404 @@
+//! A fast field representation beyond the dissertation: the multiresolution hash encoding of
+//! instant-ngp (Müller et al. 2022, "Instant Neural Graphics Primitives with a
+//! Multiresolution Hash Encoding", Eq. 2–4) followed by a tiny MLP with a non-negative output,
+//! as a [`TrainableField`].
+//!
+//! # Encoding
+//! Level `l ∈ 0 … L−1` has resolution `N_l = ⌊N_min · b^l⌋`, `b = exp((ln N_max − ln N_min) /
+//! (L − 1))` (instant-ngp Eq. 2–3). A point `u ∈ [0, 1]³` (clamped) sits at `p = u N_l` in a
+//! grid of `(N_l + 1)³` vertices; its feature vector at that level is the trilinear blend of
+//! the `F` features stored at the 8 surrounding vertices. Levels whose vertex count fits the
+//! table (`≤ 2^T`) are **dense** (vertex index `x + (N+1)(y + (N+1) z)`, no collisions, the
+//! table sized exactly); finer levels are **hashed** into `2^T` entries with instant-ngp's
+//! spatial hash `⊕_i x_i π_i mod 2^T`, `π = (1, 2654435761, 805459861, 3674653429)`. The
+//! `L · F` features (level-major) feed the MLP.
+//!
+//! # Space–time (4D inputs)
+//! The frame time `t'` is mapped to `[0, 1]` by `t' / time_span` (clamped) and the grid is 4D:
+//! level `l` has `min(N_l, time_resolution)` cells along time, the 16 surrounding vertices are
+//! blended quadrilinearly, and hashing uses the 4th prime. Dense levels stay dense in 4D while
+//! they fit.
+//!
+//! # Parameter layout
+//! `grid.level.l` `[entries_l, F]` for each level (feature-fastest), then the MLP's tensors
+//! prefixed `mlp.` (see [`crate::mlp`]). Table entries start uniform in `±init_scale`
+//! (instant-ngp: 10⁻⁴), the MLP as in [`crate::mlp`].
+//!
+//! # Backward
+//! The gradient of a table entry is the sum over the points and corners that touched it. Each
+//! call works level by level over its chunk, so one level's table stays in cache, and scatters
+//! into the caller's per-thread gradient buffer, which needs no synchronisation (the
+//! threading contract of [`TrainableField`]); the caller's reduction sums the buffers.
+
+use std::ops::Range;
+
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+use crate::error::NeuralError;
+use crate::field::TrainableField;
+use crate::mlp::{Activation, Mlp, MlpTape, OutputActivation};
+
+const PRIMES: [u32; 4] = [1, 2_654_435_761, 805_459_861, 3_674_653_429];
+
+/// Configuration of [`HashGridField`]; defaults follow instant-ngp's NeRF setting, with the
+/// finest resolution matched to the volumes we reconstruct.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HashGridConfig {
+    /// Number of levels `L`. Default 16.
+    pub levels: usize,
+    /// Features per level `F`. Default 2.
+    pub features_per_level: usize,
+    /// log₂ of the entries per hashed level `T`. Default 19.
+    pub log2_table_size: u32,
+    /// Coarsest resolution `N_min` (cells per box side). Default 16.
+    pub base_resolution: usize,
+    /// Finest resolution `N_max`. Default 512.
+    pub max_resolution: usize,
+    /// 4D only: the most cells along time at any level. Default 16.
+    pub time_resolution: usize,
+    /// 4D only: the span of `t'` mapped onto `[0, 1]` (e.g. number of frames − 1). Default 1.
+    pub time_span: f32,
+    /// Hidden layers of the MLP. Default 2.
+    pub mlp_depth: usize,
+    /// Width of the MLP's hidden layers. Default 64.
+    pub mlp_width: usize,
+    /// Hidden activation of the MLP. Default ReLU.
+    pub activation: Activation,
+    /// Output activation. Default softplus.
+    pub output_activation: OutputActivation,
+    /// Table entries start uniform in `±init_scale`. Default 1e-4.
+    pub init_scale: f32,
+}
+
+impl Default for HashGridConfig {
+    fn default() -> Self {
+        Self {
+            levels: 16,
+            features_per_level: 2,
+            log2_table_size: 19,
+            base_resolution: 16,
+            max_resolution: 512,
+            time_resolution: 16,
+            time_span: 1.0,
+            mlp_depth: 2,
+            mlp_width: 64,
+            activation: Activation::Relu,
+            output_activation: OutputActivation::Softplus,
+            init_scale: 1e-4,
+        }
+    }
+}
+
+impl HashGridConfig {
+    pub fn validate(&self) -> Result<(), NeuralError> {
+        let bad = |what: &str, why: String| Err(NeuralError::invalid(what, why));
+        if self.levels == 0 || self.levels > 32 {
+            return bad("hash-grid levels", format!("{} not in 1..=32", self.levels));
+        }
+        if self.features_per_level == 0 || self.features_per_level > 8 {
+            return bad("hash-grid features per level", format!("{} not in 1..=8", self.features_per_level));
+        }
+        if !(4..=24).contains(&self.log2_table_size) {
+            return bad("hash-grid log2 table size", format!("{} not in 4..=24", self.log2_table_size));
+        }
+        if self.base_resolution == 0 || self.max_resolution < self.base_resolution || self.max_resolution > 1 << 16 {
+            return bad(
+                "hash-grid resolutions",
+                format!("need 1 ≤ base {} ≤ max {} ≤ 65536", self.base_resolution, self.max_resolution),
+            );
+        }
+        if self.time_resolution == 0 || !(self.time_span > 0.0 && self.time_span.is_finite()) {
+            return bad(
+                "hash-grid time axis",
+                format!("time_resolution {} and time_span {} must be positive", self.time_resolution, self.time_span),
+            );
+        }
+        if self.mlp_depth == 0 || self.mlp_width == 0 || self.mlp_width > 1024 {
+            return bad("hash-grid MLP", format!("depth {} width {}", self.mlp_depth, self.mlp_width));
+        }
+        if !(self.init_scale >= 0.0 && self.init_scale.is_finite()) {
+            return bad("hash-grid init scale", format!("{}", self.init_scale));
+        }
+        Ok(())
+    }
+}
+
+/// One level of the grid.
+#[derive(Clone, Debug)]
+struct Level {
+    /// Cells per spatial side.
+    res: u32,
+    /// Cells along time (4D).
+    res_t: u32,
+    /// Entries (vertices or hash slots).
+    entries: usize,
+    dense: bool,
+    /// Offset of the level's table in `params`.
+    offset: usize,
+}
+
+/// Multiresolution hash encoding + tiny MLP (module docs).
+#[derive(Clone, Debug)]
+pub struct HashGridField {
+    config: HashGridConfig,
+    input_dim: usize,
+    levels: Vec<Level>,
+    grid_params: usize,
+    mlp: Mlp,
+    params: Vec<f32>,
+}
+
+/// Per-thread scratch of [`HashGridField`].
+#[derive(Debug, Default)]
+pub struct HashGridTape {
+    rows: usize,
+    inputs: Vec<f32>,
+    features: Vec<f32>,
+    d_features: Vec<f32>,
+    mlp: MlpTape,
+}
+
+impl HashGridField {
+    /// A freshly initialised field for `input_dim` = 3 or 4 inputs.
+    pub fn new(config: &HashGridConfig, input_dim: usize, seed: u64) -> Result<Self, NeuralError> {
+        config.validate()?;
+        if input_dim != 3 && input_dim != 4 {
+            return Err(NeuralError::invalid("field input dimension", format!("{input_dim} (must be 3 or 4)")));
+        }
+        let f = config.features_per_level;
+        let table = 1usize << config.log2_table_size;
+        let growth = if config.levels > 1 {
+            ((config.max_resolution as f64).ln() - (config.base_resolution as f64).ln()) / (config.levels - 1) as f64
+        } else {
+            0.0
+        }
+        .exp();
+        let mut levels = Vec::with_capacity(config.levels);
+        let mut offset = 0;
+        for l in 0..config.levels {
+            let res = ((config.base_resolution as f64 * growth.powi(l as i32)) + 1e-9).floor().max(1.0) as u32;
+            let res_t = if input_dim == 4 { res.min(config.time_resolution as u32) } else { 0 };
+            let side = res as u128 + 1;
+            let vertices = side * side * side * (res_t as u128 + 1);
+            let dense = vertices <= table as u128;
+            let entries = if dense { vertices as usize } else { table };
+            levels.push(Level { res, res_t, entries, dense, offset });
+            offset += entries * f;
+        }
+        let mlp = Mlp::new(
+            config.levels * f,
+            config.mlp_width,
+            config.mlp_depth,
+            config.activation,
+            config.output_activation,
+            false,
+        );
+        let mut params = vec![0.0; offset + mlp.num_params()];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let s = config.init_scale;
+        if s > 0.0 {
+            for p in &mut params[..offset] {
+                *p = rng.random_range(-s..s);
+            }
+        }
+        mlp.init(&mut params[offset..], &mut rng);
+        Ok(Self { config: config.clone(), input_dim, levels, grid_params: offset, mlp, params })
+    }
+
+    pub fn config(&self) -> &HashGridConfig {
+        &self.config
+    }
+
+    /// `(resolution, entries, dense)` of each level, coarse to fine.
+    pub fn level_summary(&self) -> Vec<(u32, usize, bool)> {
+        self.levels.iter().map(|l| (l.res, l.entries, l.dense)).collect()
+    }
+
+    /// Number of grid-table parameters (the MLP's follow them).
+    pub fn grid_params(&self) -> usize {
+        self.grid_params
+    }
+
+    fn encode(&self, n: usize, tape: &mut HashGridTape) {
+        let lf = self.levels.len() * self.config.features_per_level;
+        if tape.features.len() < n * lf {
+            tape.features.resize(n * lf, 0.0);
+        }
+        let (inputs, feats) = (&tape.inputs[..n * self.input_dim], &mut tape.features[..n * lf]);
+        for (l, level) in self.levels.iter().enumerate() {
+            match self.input_dim {
+                3 => self.level_pass::<3, false>(l, level, inputs, feats, None),
+                _ => self.level_pass::<4, false>(l, level, inputs, feats, None),
+            }
+        }
+    }
+
+    /// One level over all rows: forward (gather into `feats`) or, with `BACKWARD`, the
+    /// scatter of `feats` (then ∂L/∂features) into `grads`.
+    #[inline(never)]
+    fn level_pass<const D: usize, const BACKWARD: bool>(
+        &self,
+        l: usize,
+        level: &Level,
+        inputs: &[f32],
+        feats: &mut [f32],
+        mut grads: Option<&mut [f32]>,
+    ) {
+        let f = self.config.features_per_level;
+        let lf = self.levels.len() * f;
+        let res = level.res;
+        let res_t = level.res_t;
+        let side = res as usize + 1;
+        let mask = level.entries - 1;
+        let inv_span = 1.0 / self.config.time_span;
+        let corners = 1usize << D;
+        let table_range = level.offset..level.offset + level.entries * f;
+        let table = &self.params[table_range.clone()];
+        let mut gtable = grads.as_deref_mut().map(|g| &mut g[table_range]);
+        for (x, row) in inputs.chunks_exact(D).zip(feats.chunks_exact_mut(lf)) {
+            let mut cell = [0u32; 4];
+            let mut frac = [0.0f32; 4];
+            for a in 0..D {
+                let (u, r) = if a < 3 { (x[a], res) } else { (x[a] * inv_span, res_t) };
+                let p = u.clamp(0.0, 1.0) * r as f32;
+                let c = (p as u32).min(r.saturating_sub(1));
+                cell[a] = c;
+                frac[a] = p - c as f32;
+            }
+            let out = &mut row[l * f..(l + 1) * f];
+            let mut acc = [0.0f32; 8];
+            for c in 0..corners {
+                let mut w = 1.0f32;
+                let mut v = [0u32; 4];
+                for a in 0..D {
+                    let bit = (c >> a) & 1;
+                    v[a] = cell[a] + bit as u32;
+                    w *= if bit == 1 { frac[a] } else { 1.0 - frac[a] };
+                }
+                let idx = if level.dense {
+                    let mut i = v[D - 1] as usize;
+                    for a in (0..D - 1).rev() {
+                        i = i * side + v[a] as usize;
+                    }
+                    i
+                } else {
+                    let mut h = 0u32;
+                    for a in 0..D {
+                        h ^= v[a].wrapping_mul(PRIMES[a]);
+                    }
+                    h as usize & mask
+                };
+                if BACKWARD {
+                    if let Some(g) = gtable.as_deref_mut() {
+                        for k in 0..f {
+                            g[idx * f + k] += w * out[k];
+                        }
+                    }
+                } else {
+                    for k in 0..f {
+                        acc[k] += w * table[idx * f + k];
+                    }
+                }
+            }
+            if !BACKWARD {
+                out.copy_from_slice(&acc[..f]);
+            }
+        }
+    }
+}
+
+impl TrainableField for HashGridField {
+    type Tape = HashGridTape;
+
+    fn input_dim(&self) -> usize {
+        self.input_dim
+    }
+
+    fn new_tape(&self) -> HashGridTape {
+        HashGridTape::default()
+    }
+
+    fn params(&self) -> &[f32] {
+        &self.params
+    }
+
+    fn params_mut(&mut self) -> &mut [f32] {
+        &mut self.params
+    }
+
+    fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut HashGridTape) {
+        self.forward(inputs, out, tape);
+    }
+
+    fn forward(&self, inputs: &[f32], out: &mut [f32], tape: &mut HashGridTape) {
+        let n = out.len();
+        let d = self.input_dim;
+        assert_eq!(inputs.len(), n * d, "HashGridField: inputs are not {n}×{d}");
+        if tape.inputs.len() < n * d {
+            tape.inputs.resize(n * d, 0.0);
+        }
+        tape.inputs[..n * d].copy_from_slice(inputs);
+        tape.rows = n;
+        self.encode(n, tape);
+        let lf = self.mlp.in_dim();
+        self.mlp.forward(&self.params[self.grid_params..], &tape.features[..n * lf], out, &mut tape.mlp);
+    }
+
+    fn backward(&self, tape: &mut HashGridTape, d_out: &[f32], grads: &mut [f32]) {
+        let n = tape.rows;
+        assert_eq!(grads.len(), self.params.len(), "HashGridField::backward: wrong gradient length");
+        let lf = self.mlp.in_dim();
+        if tape.d_features.len() < n * lf {
+            tape.d_features.resize(n * lf, 0.0);
+        }
+        let (grid_grads, mlp_grads) = grads.split_at_mut(self.grid_params);
+        self.mlp.backward(
+            &self.params[self.grid_params..],
+            &tape.features[..n * lf],
+            &mut tape.mlp,
+            d_out,
+            mlp_grads,
+            Some(&mut tape.d_features[..n * lf]),
+        );
+        let inputs = &tape.inputs[..n * self.input_dim];
+        let dfeat = &mut tape.d_features[..n * lf];
+        // The level tables come first in `params`, so `grid_grads` indexes like them.
+        for (l, level) in self.levels.iter().enumerate() {
+            match self.input_dim {
+                3 => self.level_pass::<3, true>(l, level, inputs, dfeat, Some(&mut *grid_grads)),
+                _ => self.level_pass::<4, true>(l, level, inputs, dfeat, Some(&mut *grid_grads)),
+            }
+        }
+    }
+
+    fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)> {
+        let f = self.config.features_per_level;
+        let mut t: Vec<_> = self
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(l, level)| {
+                (format!("grid.level.{l}"), vec![level.entries, f], level.offset..level.offset + level.entries * f)
+            })
+            .collect();
+        t.extend(self.mlp.tensors("mlp.", self.grid_params));
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coarse_levels_are_dense_and_fine_levels_hashed() {
+        let f = HashGridField::new(&HashGridConfig::default(), 3, 1).unwrap();
+        let s = f.level_summary();
+        assert_eq!(s[0], (16, 17 * 17 * 17, true));
+        assert_eq!(s.last().unwrap().0, 512);
+        assert!(!s.last().unwrap().2);
+        assert!(s.iter().all(|&(r, e, dense)| dense == ((r as usize + 1).pow(3) <= 1 << 19) && e <= 1 << 19));
+    }
+}

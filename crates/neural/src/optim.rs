@@ -1,0 +1,195 @@
+//! Optimiser and learning-rate schedule of section 5.1.5, on flat f32 parameter vectors.
+//!
+//! - [`Adam`] (Kingma & Ba 2015, Algorithm 1, with bias correction):
+//!   `m ← β₁ m + (1 − β₁) g`, `v ← β₂ v + (1 − β₂) g²`,
+//!   `θ ← θ − lr · m̂ / (√v̂ + ε)` with `m̂ = m / (1 − β₁ᵗ)`, `v̂ = v / (1 − β₂ᵗ)`.
+//!   Defaults are the "default" hyperparameters the dissertation keeps from NeRF:
+//!   β₁ = 0.9, β₂ = 0.999, ε = 10⁻⁷ (NeRF and TensorFlow's value; PyTorch uses 10⁻⁸).
+//! - [`LrSchedule`]: exponential decay `lr(i) = lr₀ (lr₁ / lr₀)^{i / N}`, 5·10⁻⁴ → 5·10⁻⁵ at
+//!   N = 25 000 iterations; like NeRF's schedule it keeps decaying past N.
+//! - [`sum_gradients`]: the reduction of per-thread gradient buffers (see
+//!   [`crate::TrainableField`]'s threading contract).
+//!
+//! Large vectors are updated in parallel over fixed 16 384-element blocks; every element's
+//! arithmetic is independent of the blocking, so results are bit-identical for any number of
+//! threads.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::NeuralError;
+use crate::kernels::multiversion;
+
+/// Elements per parallel block: large enough to amortise rayon, small enough to balance.
+const BLOCK: usize = 1 << 14;
+
+/// Adam hyperparameters (the learning rate comes from [`LrSchedule`] at each step).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdamConfig {
+    /// Decay of the first-moment average β₁. Default 0.9.
+    pub beta1: f32,
+    /// Decay of the second-moment average β₂. Default 0.999.
+    pub beta2: f32,
+    /// ε added to √v̂. Default 1e-7.
+    pub eps: f32,
+}
+
+impl Default for AdamConfig {
+    fn default() -> Self {
+        Self { beta1: 0.9, beta2: 0.999, eps: 1e-7 }
+    }
+}
+
+impl AdamConfig {
+    pub fn validate(&self) -> Result<(), NeuralError> {
+        let ok = |b: f32| (0.0..1.0).contains(&b);
+        if !ok(self.beta1) || !ok(self.beta2) {
+            return Err(NeuralError::invalid(
+                "Adam betas",
+                format!("β₁ = {}, β₂ = {} must lie in [0, 1)", self.beta1, self.beta2),
+            ));
+        }
+        if !(self.eps > 0.0 && self.eps.is_finite()) {
+            return Err(NeuralError::invalid("Adam epsilon", format!("{} must be positive", self.eps)));
+        }
+        Ok(())
+    }
+}
+
+/// Adam state: first and second moments and the step count, laid out like the parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Adam {
+    pub config: AdamConfig,
+    /// First-moment estimates m.
+    pub m: Vec<f32>,
+    /// Second-moment estimates v.
+    pub v: Vec<f32>,
+    /// Number of steps taken (t in the update; the next step uses t + 1).
+    pub step: u64,
+}
+
+impl Adam {
+    /// Zero moments for `num_params` parameters.
+    pub fn new(num_params: usize, config: AdamConfig) -> Self {
+        Self { config, m: vec![0.0; num_params], v: vec![0.0; num_params], step: 0 }
+    }
+
+    /// One update of `params` with gradient `grads` and learning rate `lr`.
+    pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: f32) {
+        assert_eq!(params.len(), self.m.len(), "Adam::step: {} params, state for {}", params.len(), self.m.len());
+        assert_eq!(grads.len(), params.len(), "Adam::step: gradient length differs from params");
+        self.step += 1;
+        let t = self.step as f64;
+        let c = self.config;
+        let coeffs = AdamCoeffs {
+            beta1: c.beta1,
+            beta2: c.beta2,
+            eps: c.eps,
+            lr,
+            bias1: (1.0 / (1.0 - (c.beta1 as f64).powf(t))) as f32,
+            bias2: (1.0 / (1.0 - (c.beta2 as f64).powf(t))) as f32,
+        };
+        if params.len() <= BLOCK {
+            adam_kernel(params, grads, &mut self.m, &mut self.v, coeffs);
+        } else {
+            params
+                .par_chunks_mut(BLOCK)
+                .zip(grads.par_chunks(BLOCK))
+                .zip(self.m.par_chunks_mut(BLOCK))
+                .zip(self.v.par_chunks_mut(BLOCK))
+                .for_each(|(((p, g), m), v)| adam_kernel(p, g, m, v, coeffs));
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct AdamCoeffs {
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    lr: f32,
+    bias1: f32,
+    bias2: f32,
+}
+
+multiversion! {
+    fn adam_kernel(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], c: AdamCoeffs) {
+        for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = c.beta1 * *m + (1.0 - c.beta1) * g;
+            *v = c.beta2 * *v + (1.0 - c.beta2) * (g * g);
+            let m_hat = *m * c.bias1;
+            let v_hat = *v * c.bias2;
+            *p -= c.lr * m_hat / (v_hat.sqrt() + c.eps);
+        }
+    }
+}
+
+/// Exponential learning-rate decay of section 5.1.5.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LrSchedule {
+    /// Learning rate at iteration 0. Default 5e-4.
+    pub initial: f32,
+    /// Learning rate reached at `decay_iters`. Default 5e-5.
+    pub at_decay_iters: f32,
+    /// Iterations over which the rate falls from `initial` to `at_decay_iters`. Default 25 000.
+    pub decay_iters: u64,
+}
+
+impl Default for LrSchedule {
+    fn default() -> Self {
+        Self { initial: 5e-4, at_decay_iters: 5e-5, decay_iters: 25_000 }
+    }
+}
+
+impl LrSchedule {
+    /// Learning rate of (0-based) iteration `iter`.
+    pub fn lr(&self, iter: u64) -> f32 {
+        let ratio = self.at_decay_iters as f64 / self.initial as f64;
+        (self.initial as f64 * ratio.powf(iter as f64 / self.decay_iters as f64)) as f32
+    }
+
+    pub fn validate(&self) -> Result<(), NeuralError> {
+        if !(self.initial > 0.0 && self.at_decay_iters > 0.0 && self.decay_iters > 0) {
+            return Err(NeuralError::invalid(
+                "learning-rate schedule",
+                format!(
+                    "initial {} and final {} must be positive, decay_iters {} non-zero",
+                    self.initial, self.at_decay_iters, self.decay_iters
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `total = Σ_k per_thread[k]`, then zeroes every `per_thread[k]` for the next step. Parallel
+/// over blocks; the sum over threads runs in a fixed order, so it is deterministic.
+pub fn sum_gradients(per_thread: &mut [Vec<f32>], total: &mut [f32]) {
+    for g in per_thread.iter() {
+        assert_eq!(g.len(), total.len(), "sum_gradients: buffer length differs from total");
+    }
+    let n = total.len();
+    total.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
+        let r = b * BLOCK..(b * BLOCK + out.len()).min(n);
+        out.fill(0.0);
+        for g in per_thread.iter() {
+            crate::kernels::add_assign(out, &g[r.clone()]);
+        }
+    });
+    per_thread.par_iter_mut().for_each(|g| g.fill(0.0));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schedule_hits_its_end_points() {
+        let s = LrSchedule::default();
+        assert!((s.lr(0) - 5e-4).abs() < 1e-9);
+        assert!((s.lr(25_000) - 5e-5).abs() < 1e-10);
+        assert!((s.lr(12_500) - 5e-4 * 0.1f32.sqrt()).abs() < 1e-9);
+    }
+}
