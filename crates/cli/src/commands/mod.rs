@@ -2,6 +2,7 @@
 
 use clap::Subcommand;
 
+pub mod eval;
 pub mod reconstruct;
 pub mod reconstruct_classical;
 pub mod reconstruct_neural;
@@ -11,11 +12,14 @@ pub mod reconstruct_neural;
 pub enum Command {
     /// Reconstruct the field from a scene's images with a classical or a neural method.
     Reconstruct(reconstruct::Args),
+    /// Score a reconstruction against ground truth and held-out camera images.
+    Eval(eval::Args),
 }
 
 /// Runs a parsed subcommand.
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Reconstruct(args) => reconstruct::run(args),
+        Command::Eval(args) => eval::run(args),
     }
 }

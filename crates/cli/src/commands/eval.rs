@@ -1,0 +1,325 @@
+//! `fluidnerf eval`: scores a reconstruction against the scene's ground truth (volume NRMSE,
+//! PSNR, global and windowed SSIM, globally and per region, per time step) and against the
+//! scene's held-out images (reprojection), prints a table and writes JSON and CSV.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::ValueEnum;
+use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
+use fluidnerf_metrics::{
+    evaluate_volume, reproject, MetricsReport, Region, ReprojectionOptions, SsimParams, SsimWindow, VolumeMetricOptions,
+};
+use serde::Serialize;
+
+/// The local window of the windowed SSIM.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Window {
+    /// Equal weights in a cube (square for images) of --ssim-size voxels per side
+    /// (skimage's default).
+    Uniform,
+    /// Gaussian weights, sigma 1.5 voxels, 11 taps (skimage's gaussian_weights=True).
+    Gaussian,
+}
+
+/// Score a reconstruction against ground truth and held-out camera images.
+///
+/// Volume metrics (over the truth's voxel centres; a reconstruction on another grid is
+/// resampled trilinearly): NRMSE (dissertation Eq. 6.18), PSNR, SSIM over the whole volume as
+/// one window (Eq. 6.19) and the windowed 3D SSIM (as skimage), for the whole box and for each
+/// region, at every time step of the truth. Reprojection: the reconstruction is rendered from
+/// every held-out camera and compared with its image (NRMSE, PSNR, global and windowed 2D SSIM).
+///
+/// Prints a table; writes JSON (with the settings) and CSV. When RECON is a run directory and
+/// neither --json nor --csv is given, writes `metrics.json` and `metrics.csv` into it.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw`
+    /// with its JSON sidecar) or a reconstruction run directory (holding `volume.npy`). For a
+    /// time-resolved scene give one volume per truth time step, in time order.
+    #[arg(required = true, num_args = 1..)]
+    pub recon: Vec<PathBuf>,
+    /// The scene: a folder holding `transforms.json`, or the file itself.
+    #[arg(short, long)]
+    pub scene: PathBuf,
+    /// Ground-truth volume to use instead of the scene's (`.npy` filling the scene's box, or
+    /// `.vti`).
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Regions scored separately, as NAME:X0:X1 (a slab along the jet axis x) or
+    /// NAME:X0:X1:Y0:Y1:Z0:Z1, in coordinates normalised to the box (0 = min corner,
+    /// 1 = max corner); comma-separated or repeated. Default: laminar, transition and turbulent
+    /// thirds of the box along +x.
+    #[arg(long, value_delimiter = ',', conflicts_with = "no_regions")]
+    pub regions: Vec<String>,
+    /// Score the whole volume only.
+    #[arg(long)]
+    pub no_regions: bool,
+    /// Window of the windowed SSIM.
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub ssim_window: Window,
+    /// Side of the uniform SSIM window in voxels (odd).
+    #[arg(long, default_value_t = 7)]
+    pub ssim_size: usize,
+    /// Data range R of PSNR and SSIM for the volume metrics. Default: the truth's max - min.
+    #[arg(long)]
+    pub data_range: Option<f64>,
+    /// Rays per pixel along each image axis when rendering held-out views.
+    #[arg(long, default_value_t = 2)]
+    pub supersample: usize,
+    /// Skip the reprojection onto held-out cameras.
+    #[arg(long)]
+    pub no_reprojection: bool,
+    /// Write the metrics and settings as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write the metrics table as CSV here.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Overwrite existing output files.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The settings written next to the metrics.
+#[derive(Serialize)]
+struct Settings<'a> {
+    version: &'static str,
+    reconstruction: &'a [PathBuf],
+    scene: PathBuf,
+    truth: Option<&'a Path>,
+    volume: &'a VolumeMetricOptions,
+    reprojection: Option<&'a ReprojectionOptions>,
+}
+
+/// The JSON output: the settings and the report (whose fields sit at the top level, so the file
+/// also reads as a `MetricsReport`).
+#[derive(Serialize)]
+struct Output<'a> {
+    settings: Settings<'a>,
+    #[serde(flatten)]
+    report: &'a MetricsReport,
+}
+
+/// A reconstruction, as the metrics need it.
+enum Recon {
+    /// One volume per truth time step (or one for all).
+    Volumes(Vec<(PathBuf, Volume)>),
+}
+
+impl Recon {
+    /// The field to compare with the truth (or render) at step `step` of `steps` at `time`.
+    fn volume_for_step(&self, step: usize) -> &Volume {
+        match self {
+            Recon::Volumes(v) => &v[step.min(v.len() - 1)].1,
+        }
+    }
+
+    /// The field to render for a frame at `time`, given the truth steps' times.
+    fn field_at(&self, time: Option<f64>, step_times: &[Option<f64>]) -> &dyn ScalarField {
+        match self {
+            Recon::Volumes(v) if v.len() == 1 => &v[0].1,
+            Recon::Volumes(v) => {
+                // The step whose time is nearest the frame's.
+                let t = time.unwrap_or(0.0);
+                let best = step_times
+                    .iter()
+                    .take(v.len())
+                    .enumerate()
+                    .min_by(|a, b| {
+                        let da = (a.1.unwrap_or(0.0) - t).abs();
+                        let db = (b.1.unwrap_or(0.0) - t).abs();
+                        da.total_cmp(&db)
+                    })
+                    .map_or(0, |(i, _)| i);
+                &v[best].1
+            }
+        }
+    }
+}
+
+#[allow(clippy::print_stdout)]
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // Validate everything before the work starts.
+    let regions: Vec<Region> = if args.no_regions {
+        Vec::new()
+    } else if args.regions.is_empty() {
+        Region::jet_thirds()
+    } else {
+        args.regions.iter().map(|s| Region::parse(s)).collect::<Result<_, _>>().context("--regions")?
+    };
+    let window = match args.ssim_window {
+        Window::Uniform => SsimWindow::Uniform { size: args.ssim_size },
+        Window::Gaussian => SsimWindow::Gaussian { sigma: 1.5 },
+    };
+    if args.ssim_size == 0 || args.ssim_size % 2 == 0 {
+        bail!("--ssim-size must be odd and positive, got {}", args.ssim_size);
+    }
+    if let Some(r) = args.data_range {
+        if !(r > 0.0 && r.is_finite()) {
+            bail!("--data-range must be positive, got {r}");
+        }
+    }
+    let ssim = SsimParams { window, ..Default::default() };
+    let volume_options = VolumeMetricOptions { regions, ssim, data_range: args.data_range };
+    let reprojection_options = ReprojectionOptions { supersample: args.supersample.max(1), step: None, ssim };
+
+    let scene = fluidnerf_io::scene::load_scene(&args.scene)
+        .with_context(|| format!("reading the scene {}", args.scene.display()))?;
+    let run_dir = (args.recon.len() == 1 && args.recon[0].is_dir()).then(|| args.recon[0].clone());
+    let (json_path, csv_path) = match (&args.json, &args.csv, &run_dir) {
+        (None, None, Some(dir)) => (Some(dir.join("metrics.json")), Some(dir.join("metrics.csv"))),
+        (j, c, _) => (j.clone(), c.clone()),
+    };
+    for p in json_path.iter().chain(csv_path.iter()) {
+        if p.exists() && !args.force {
+            bail!("{} exists; pass --force to overwrite it", p.display());
+        }
+    }
+
+    let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
+        Some(path) => vec![(None, read_volume(path, scene.aabb)?)],
+        None => fluidnerf_io::scene::load_truth(&scene)
+            .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
+    };
+    let recon = load_recon(&args.recon, &scene)?;
+    let Recon::Volumes(volumes) = &recon;
+    if volumes.len() > 1 && volumes.len() != truth.len().max(1) {
+        bail!(
+            "{} reconstruction volumes given but the truth has {} time steps; give one volume, or one per step",
+            volumes.len(),
+            truth.len()
+        );
+    }
+    if volumes.len() == 1 && truth.len() > 1 {
+        log::warn!(
+            "one reconstruction volume for {} truth time steps: the same volume is scored at every step",
+            truth.len()
+        );
+    }
+    let holdouts: Vec<usize> =
+        if args.no_reprojection { Vec::new() } else { scene.holdout_frames().map(|(i, _)| i).collect() };
+    if truth.is_empty() && holdouts.is_empty() {
+        bail!(
+            "nothing to evaluate: the scene {} has no ground truth and no held-out frames (give --truth)",
+            args.scene.display()
+        );
+    }
+
+    let mut report = MetricsReport::default();
+    for (step, (time, t)) in truth.iter().enumerate() {
+        let metrics = evaluate_volume(recon.volume_for_step(step), t, *time, &volume_options)
+            .with_context(|| format!("scoring time step {step}"))?;
+        report.steps.push(metrics);
+    }
+    if !holdouts.is_empty() {
+        let step_times: Vec<Option<f64>> = truth.iter().map(|(t, _)| *t).collect();
+        let bar = crate::progress::bar(holdouts.len() as u64, "reprojecting");
+        for &i in &holdouts {
+            let frame = &scene.frames[i];
+            let path = scene.resolve(&frame.file_path);
+            let measured = fluidnerf_io::image::read_image(&path)
+                .with_context(|| format!("reading held-out image {}", path.display()))?;
+            let field = recon.field_at(frame.time, &step_times);
+            let r = reproject(field, &scene, i, &measured, &reprojection_options)
+                .with_context(|| format!("reprojecting onto held-out frame {i} ({})", path.display()))?;
+            report.reprojection.push(r.metrics);
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+    }
+
+    print_table(&report);
+
+    let settings = Settings {
+        version: env!("CARGO_PKG_VERSION"),
+        reconstruction: &args.recon,
+        scene: args.scene.clone(),
+        truth: args.truth.as_deref(),
+        volume: &volume_options,
+        reprojection: (!args.no_reprojection).then_some(&reprojection_options),
+    };
+    if let Some(path) = &json_path {
+        let mut text = serde_json::to_string_pretty(&Output { settings, report: &report })?;
+        text.push('\n');
+        fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &csv_path {
+        let text = report.to_csv();
+        fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// Reads a volume file by extension; `.npy` fills `aabb`.
+fn read_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let v = match ext.as_str() {
+        "npy" => fluidnerf_io::volume::read_npy(path, aabb),
+        "vti" => fluidnerf_io::volume::read_vti(path),
+        "raw" => fluidnerf_io::volume::read_raw(path),
+        _ => bail!("{}: unknown volume format (expected .npy, .vti or .raw)", path.display()),
+    }
+    .with_context(|| format!("reading the volume {}", path.display()))?;
+    if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
+        bail!("{}: voxel {i} is {}; values must be finite", path.display(), v.data[i]);
+    }
+    Ok(v)
+}
+
+/// Loads the reconstruction arguments: volume files, or one run directory.
+fn load_recon(paths: &[PathBuf], scene: &Scene) -> anyhow::Result<Recon> {
+    let mut volumes = Vec::with_capacity(paths.len());
+    for p in paths {
+        let file = if p.is_dir() {
+            let f = p.join("volume.npy");
+            if !f.is_file() {
+                bail!("{}: a run directory must hold volume.npy", p.display());
+            }
+            f
+        } else {
+            p.clone()
+        };
+        let v = read_volume(&file, scene.aabb)?;
+        volumes.push((file, v));
+    }
+    Ok(Recon::Volumes(volumes))
+}
+
+/// Formats a metric for the table: fixed decimals, `inf`, or `-`.
+fn fmt(v: Option<f64>, decimals: usize) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{v:.decimals$}"),
+        Some(v) if v.is_nan() => "nan".into(),
+        Some(v) => format!("{}inf", if v < 0.0 { "-" } else { "" }),
+        None => "-".into(),
+    }
+}
+
+#[allow(clippy::print_stdout)]
+fn print_table(report: &MetricsReport) {
+    let rows = report.rows();
+    let subset_w = rows.iter().map(|r| r.subset.len()).max().unwrap_or(6).max(6);
+    println!(
+        "{:<12} {:>8} {:<subset_w$} {:>10} {:>8} {:>9} {:>11} {:>13}",
+        "kind", "time", "subset", "count", "NRMSE", "PSNR dB", "SSIM global", "SSIM windowed"
+    );
+    for r in &rows {
+        println!(
+            "{:<12} {:>8} {:<subset_w$} {:>10} {:>8} {:>9} {:>11} {:>13}",
+            r.kind,
+            r.time.map_or("-".to_string(), |t| format!("{t}")),
+            r.subset,
+            r.count,
+            fmt(Some(r.nrmse), 4),
+            fmt(Some(r.psnr_db), 2),
+            fmt(Some(r.ssim_global), 4),
+            fmt(r.ssim_windowed, 4),
+        );
+    }
+}

@@ -1,0 +1,157 @@
+//! End-to-end tests of `fluidnerf eval` on tiny scenes generated in a temporary directory.
+
+use std::path::Path;
+use std::process::Command;
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{render_image, Aabb, Camera, Frame, Intrinsics, RenderSettings, Scene, TruthRef, Volume};
+use serde_json::Value;
+
+const SCALE: f64 = 2.0;
+
+fn blob(p: DVec3, t: f64) -> f32 {
+    let c = DVec3::new(-0.3 + 0.2 * t, 0.1, 0.0);
+    (-(p - c).length_squared() * 3.0).exp() as f32
+}
+
+/// A static (`times` empty) or time-resolved scene of a Gaussian blob: 4 cameras on a ring,
+/// the last held out, 24 × 20 px, truth 18 × 12 × 12 voxels per time.
+fn make_scene(dir: &Path, times: &[f64]) -> Scene {
+    let aabb = Aabb::new(DVec3::new(-1.5, -1.0, -1.0), DVec3::new(1.5, 1.0, 1.0));
+    let k = Intrinsics { width: 24, height: 20, fx: 30.0, fy: 30.0, cx: 11.5, cy: 9.5, skew: 0.0 };
+    let steps: Vec<Option<f64>> = if times.is_empty() { vec![None] } else { times.iter().map(|&t| Some(t)).collect() };
+    let mut frames = Vec::new();
+    let mut truth = Vec::new();
+    for (s, &time) in steps.iter().enumerate() {
+        let vol = Volume::from_fn([18, 12, 12], aabb, |p| blob(p, time.unwrap_or(0.0)));
+        let name = format!("truth_{s}.npy");
+        fluidnerf_io::volume::write_npy(&dir.join(&name), &vol).expect("writes truth");
+        truth.push(TruthRef { time, file_path: name.into() });
+        for c in 0..4 {
+            let a = c as f64 / 4.0 * std::f64::consts::TAU + 0.3;
+            let camera = Camera::look_at(k, DVec3::new(0.0, 7.0 * a.cos(), 7.0 * a.sin()), DVec3::ZERO, DVec3::X);
+            let settings =
+                RenderSettings { scale: SCALE, time: time.unwrap_or(0.0), supersample: 2, ..Default::default() };
+            let img = render_image(&vol, &camera, &aabb, &settings).expect("renders");
+            let file = format!("images/t{s}_c{c}.tif");
+            fluidnerf_io::image::write_tiff_f32(&dir.join(&file), &img).expect("writes image");
+            frames.push(Frame {
+                camera,
+                file_path: file.into(),
+                time,
+                camera_name: Some(format!("cam{c}")),
+                holdout: c == 3,
+            });
+        }
+    }
+    let scene = Scene { root: dir.to_path_buf(), aabb, units: "mm".into(), intensity_scale: SCALE, frames, truth };
+    fluidnerf_io::scene::save_scene(&scene, dir).expect("writes scene");
+    scene
+}
+
+fn fluidnerf(args: &[&str], cwd: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).args(args).current_dir(cwd).output().expect("runs fluidnerf")
+}
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("reads json")).expect("valid json")
+}
+
+#[test]
+fn scores_a_dimmed_volume_against_truth_and_held_out_view() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    // A reconstruction at 90 % intensity on a finer grid, in a run directory.
+    let run = d.join("run");
+    let recon = Volume::from_fn([36, 24, 24], scene.aabb, |p| 0.9 * blob(p, 0.0));
+    fluidnerf_io::volume::write_npy(&run.join("volume.npy"), &recon).expect("writes recon");
+
+    let out = fluidnerf(&["eval", "run", "--scene", "."], d);
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for word in ["NRMSE", "laminar", "transition", "turbulent", "reprojection", "cam3"] {
+        assert!(stdout.contains(word), "table lacks {word}:\n{stdout}");
+    }
+
+    let json = read_json(&run.join("metrics.json"));
+    let steps = json["steps"].as_array().expect("steps");
+    assert_eq!(steps.len(), 1);
+    // Resampling the finer grid costs a little; the 10 % dimming dominates.
+    let nrmse = steps[0]["global"]["nrmse"].as_f64().expect("nrmse");
+    assert!((nrmse - 0.1).abs() < 0.02, "volume NRMSE {nrmse}");
+    assert_eq!(steps[0]["regions"].as_array().expect("regions").len(), 3);
+    let ssim = steps[0]["global"]["ssim_windowed"].as_f64().expect("ssim");
+    assert!(ssim > 0.8 && ssim < 1.0, "windowed SSIM {ssim}");
+    let rep = json["reprojection"].as_array().expect("reprojection");
+    assert_eq!(rep.len(), 1, "one held-out frame");
+    let rn = rep[0]["nrmse"].as_f64().expect("nrmse");
+    assert!((rn - 0.1).abs() < 0.03, "reprojection NRMSE {rn}");
+    assert_eq!(json["settings"]["version"].as_str(), Some(env!("CARGO_PKG_VERSION")));
+
+    let csv = std::fs::read_to_string(run.join("metrics.csv")).expect("csv");
+    assert_eq!(csv.lines().count(), 1 + 4 + 1, "header, all + 3 regions, 1 held-out view:\n{csv}");
+
+    // Results are not overwritten without --force.
+    let again = fluidnerf(&["eval", "run", "--scene", "."], d);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+    let forced = fluidnerf(&["eval", "run", "--scene", ".", "--force", "--no-reprojection", "--no-regions"], d);
+    assert!(forced.status.success(), "{}", String::from_utf8_lossy(&forced.stderr));
+    let json = read_json(&run.join("metrics.json"));
+    assert!(json["reprojection"].as_array().expect("reprojection").is_empty());
+    assert!(json["steps"][0]["regions"].as_array().expect("regions").is_empty());
+}
+
+#[test]
+fn scores_each_time_step_and_custom_regions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[0.0, 1.0]);
+    // Step 0 perfect, step 1 off by 20 %.
+    for (s, gain) in [(0, 1.0f32), (1, 0.8)] {
+        let v = Volume::from_fn([18, 12, 12], scene.aabb, |p| gain * blob(p, s as f64));
+        fluidnerf_io::volume::write_npy(&d.join(format!("r{s}.npy")), &v).expect("writes recon");
+    }
+    let out = fluidnerf(
+        &[
+            "eval",
+            "r0.npy",
+            "r1.npy",
+            "--scene",
+            ".",
+            "--regions",
+            "left:0:0.5,core:0.25:0.75:0.25:0.75:0.25:0.75",
+            "--json",
+            "m.json",
+            "--csv",
+            "m.csv",
+        ],
+        d,
+    );
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    let json = read_json(&d.join("m.json"));
+    let steps = json["steps"].as_array().expect("steps");
+    assert_eq!(steps.len(), 2);
+    assert_eq!(steps[0]["time"].as_f64(), Some(0.0));
+    assert_eq!(steps[0]["global"]["nrmse"].as_f64(), Some(0.0));
+    let n1 = steps[1]["global"]["nrmse"].as_f64().expect("nrmse");
+    assert!((n1 - 0.2).abs() < 1e-5, "step 1 NRMSE {n1}");
+    let names: Vec<&str> = steps[1]["regions"]
+        .as_array()
+        .expect("regions")
+        .iter()
+        .map(|r| r["region"]["name"].as_str().expect("name"))
+        .collect();
+    assert_eq!(names, ["left", "core"]);
+    // One held-out view per time step, each rendered from its own step's volume.
+    let rep = json["reprojection"].as_array().expect("reprojection");
+    assert_eq!(rep.len(), 2);
+    assert!(rep[0]["nrmse"].as_f64().expect("nrmse") < 1e-5);
+    assert!((rep[1]["nrmse"].as_f64().expect("nrmse") - 0.2).abs() < 1e-4);
+
+    // A bad region is rejected before any work.
+    let bad = fluidnerf(&["eval", "r0.npy", "r1.npy", "--scene", ".", "--regions", "x:0.7:0.2"], d);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("region"));
+}
