@@ -1,1 +1,85 @@
 //! Scene formats, images, volumes and meshes on disk.
+//!
+//! Everything here converts between files and the types of `fluidnerf-core`; no numerics
+//! beyond format conversions live here.
+//!
+//! - [`scene`]: nerfstudio-style `transforms.json` with fluidnerf's additions (the native
+//!   scene format), and loading a scene's images and ground-truth volumes.
+//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/JSON) and COLMAP text calibrations.
+//! - [`image`]: 8/16-bit PNG and 16/32-bit TIFF, read as linear f32.
+//! - [`volume`]: `.npy`, `.vti` (VTK XML ImageData) and raw + JSON sidecar volumes.
+//! - [`mesh`]: binary PLY and OBJ triangle meshes.
+//!
+//! # Conventions
+//! - Pixel centres: fluidnerf (OpenCV) puts pixel `(col, row)` at continuous image
+//!   coordinates `(col, row)`; nerfstudio and COLMAP put it at `(col + ½, row + ½)`. Readers and
+//!   writers of those formats convert principal points exactly: `cx_core = cx_file − ½`.
+//! - Camera axes: OpenCV (x right, y down, z forward) in memory; nerfstudio's
+//!   `transform_matrix` uses OpenGL axes (x right, y up, z backward) and is converted with
+//!   `R_cv = R_gl · diag(1, −1, −1)`.
+//! - Every writer goes through [`atomic_write`]: a reader never sees a half-written file.
+
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+pub mod calib;
+mod error;
+pub mod image;
+pub mod mesh;
+pub mod scene;
+pub mod volume;
+
+pub use error::IoError;
+
+/// Writes a file atomically: `write` fills a temporary file in the same folder, which is then
+/// renamed over `path`. Missing parent folders are created. On any error the temporary file is
+/// removed and `path` is left as it was.
+pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<(), IoError> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".fluidnerf-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        // tempfile's default 0600 would make results unreadable to others; the umask still applies.
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
+    let io_err = |e| IoError::Io { path: path.to_path_buf(), source: e };
+    {
+        let mut w = BufWriter::new(tmp.as_file());
+        write(&mut w).map_err(io_err)?;
+        w.flush().map_err(io_err)?;
+    }
+    tmp.persist(path).map_err(|e| io_err(e.error))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temporaries() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("sub/out.txt");
+        atomic_write(&path, |w| w.write_all(b"first")).expect("write");
+        atomic_write(&path, |w| w.write_all(b"second")).expect("write");
+        assert_eq!(std::fs::read(&path).expect("read"), b"second");
+        let failed = atomic_write(&path, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("encoder failed"))
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read(&path).expect("read"), b"second", "a failed write must not touch the file");
+        let names: Vec<_> = std::fs::read_dir(path.parent().expect("parent"))
+            .expect("list")
+            .map(|e| e.expect("entry").file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "temporary files left behind: {names:?}");
+    }
+}

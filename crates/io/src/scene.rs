@@ -1,0 +1,714 @@
+//! The native scene format: nerfstudio's `transforms.json` with fluidnerf's additions.
+//!
+//! # The file
+//! ```json
+//! {
+//!   "camera_model": "OPENCV",
+//!   "w": 64, "h": 48, "fl_x": 80.0, "fl_y": 80.0, "cx": 32.0, "cy": 24.0,
+//!   "k1": -0.05, "k2": 0.0, "k3": 0.0, "p1": 0.0, "p2": 0.0,
+//!   "aabb": [[-10, -10, -10], [10, 10, 10]],
+//!   "units": "mm",
+//!   "intensity_scale": 1.0,
+//!   "truth": [{"time": 0.0, "file_path": "truth/t0.npy"}],
+//!   "frames": [
+//!     {"file_path": "images/cam0_t0.png", "transform_matrix": [[...4...], ...],
+//!      "time": 0.0, "camera": "cam0", "holdout": false,
+//!      "thin_lens": {"focal_length": 60, "aperture_diameter": 17.1,
+//!                    "magnification": -0.2, "pixel_pitch": 0.01}}
+//!   ]
+//! }
+//! ```
+//!
+//! - **Intrinsics** (`camera_model w h fl_x fl_y cx cy k1 k2 k3 k4 p1 p2`) may sit at the top
+//!   level (shared) or in a frame; a key in a frame overrides the same key at the top level.
+//!   `camera_model` may be `PINHOLE`, `SIMPLE_PINHOLE`, `OPENCV`, `SIMPLE_RADIAL`, `RADIAL` or
+//!   `FULL_OPENCV` (all read through the same OpenCV model; missing coefficients are 0).
+//!   Fisheye and panoramic models are rejected.
+//! - **Pixel centres**: nerfstudio generates the ray of pixel `(col, row)` through image
+//!   coordinates `(col + 0.5, row + 0.5)` (`Cameras.get_image_coords(pixel_offset=0.5)`, then
+//!   `((x − cx) / fx, −(y − cy) / fy, −1)` in OpenGL camera axes), so its `cx, cy` are measured
+//!   from the top-left *corner* of the image. fluidnerf (OpenCV) puts pixel centres at integer
+//!   coordinates, so on reading `cx_core = cx − 0.5`, `cy_core = cy − 0.5`, and on writing the
+//!   reverse. The test `nerfstudio_rays_land_on_our_pixels` proves the two agree.
+//! - **k4**: nerfstudio's `k4` is an r⁸ term of a polynomial radial model, which OpenCV's model
+//!   does not have: a non-zero `k4` is rejected. OpenCV's rational coefficients (the
+//!   denominator `1 + k4 r² + k5 r⁴ + k6 r⁶`) are fluidnerf's keys `opencv_k4`, `opencv_k5`,
+//!   `opencv_k6`, and the pixel skew (`K[0][1]`) is the key `skew`; all default to 0.
+//! - **Pose**: `transform_matrix` is nerfstudio's 4 × 4 camera-to-world matrix (rows) in
+//!   OpenGL camera axes (x right, y up, z backward). fluidnerf's cameras use OpenCV axes, so
+//!   `R_cv = R_gl · diag(1, −1, −1)` (negate the second and third columns); the translation
+//!   (camera centre) is unchanged.
+//! - **fluidnerf's additions**: `aabb` (required; world units), `units` (default `"mm"`),
+//!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `truth` (optional
+//!   list of `{time, file_path}` `.npy` volumes filling the aabb); per frame `time`, `camera`
+//!   (a physical camera's name), `holdout` (default false) and `thin_lens`
+//!   ([`ThinLens`](fluidnerf_core::ThinLens) fields, world units).
+//! - Unknown keys are ignored with a warning naming the key and the file.
+//! - Paths are relative to the folder holding `transforms.json` unless absolute.
+//!
+//! # Writing
+//! [`save_scene`] writes the intrinsics once at the top level when every frame has the same
+//! intrinsics and distortion, and otherwise a full set in every frame (never a mix). Values are
+//! written with Rust's shortest round-trip float formatting, so reading a written file gives
+//! the same scene exactly, except `cx, cy`, which pass through `± 0.5` and may differ in the
+//! last bit.
+
+use std::path::{Path, PathBuf};
+
+use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
+use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::{atomic_write, IoError};
+
+/// The file name of a scene inside its folder.
+pub const SCENE_FILE: &str = "transforms.json";
+
+/// Default of `units` when a scene file has none.
+pub const DEFAULT_UNITS: &str = "mm";
+
+const MODELS: [&str; 6] = ["PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "SIMPLE_RADIAL", "RADIAL", "FULL_OPENCV"];
+
+const INTRINSIC_KEYS: [&str; 17] = [
+    "camera_model",
+    "w",
+    "h",
+    "fl_x",
+    "fl_y",
+    "cx",
+    "cy",
+    "skew",
+    "k1",
+    "k2",
+    "k3",
+    "k4",
+    "p1",
+    "p2",
+    "opencv_k4",
+    "opencv_k5",
+    "opencv_k6",
+];
+const TOP_KEYS: [&str; 5] = ["frames", "aabb", "units", "intensity_scale", "truth"];
+const FRAME_KEYS: [&str; 6] = ["file_path", "transform_matrix", "time", "camera", "holdout", "thin_lens"];
+const TRUTH_KEYS: [&str; 2] = ["time", "file_path"];
+
+/// The intrinsics keys, as they appear at the top level or in a frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+struct IntrinsicKeys {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    camera_model: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    w: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    h: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    fl_x: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    fl_y: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    cx: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    cy: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    skew: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    k1: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    k2: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    k3: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    k4: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    p1: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    p2: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    opencv_k4: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    opencv_k5: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    opencv_k6: Option<f64>,
+}
+
+impl IntrinsicKeys {
+    /// Per-key override: `self` (a frame) wins over `global`.
+    fn over(&self, global: &IntrinsicKeys) -> IntrinsicKeys {
+        IntrinsicKeys {
+            camera_model: self.camera_model.clone().or_else(|| global.camera_model.clone()),
+            w: self.w.or(global.w),
+            h: self.h.or(global.h),
+            fl_x: self.fl_x.or(global.fl_x),
+            fl_y: self.fl_y.or(global.fl_y),
+            cx: self.cx.or(global.cx),
+            cy: self.cy.or(global.cy),
+            skew: self.skew.or(global.skew),
+            k1: self.k1.or(global.k1),
+            k2: self.k2.or(global.k2),
+            k3: self.k3.or(global.k3),
+            k4: self.k4.or(global.k4),
+            p1: self.p1.or(global.p1),
+            p2: self.p2.or(global.p2),
+            opencv_k4: self.opencv_k4.or(global.opencv_k4),
+            opencv_k5: self.opencv_k5.or(global.opencv_k5),
+            opencv_k6: self.opencv_k6.or(global.opencv_k6),
+        }
+    }
+
+    /// The keys for a camera, converting the principal point to nerfstudio's convention.
+    fn from_camera(intrinsics: &Intrinsics, distortion: &Distortion) -> IntrinsicKeys {
+        let nz = |v: f64| (v != 0.0).then_some(v);
+        let distorted = !distortion.is_identity();
+        let some_if_distorted = |v: f64| distorted.then_some(v);
+        IntrinsicKeys {
+            camera_model: Some(if distorted { "OPENCV" } else { "PINHOLE" }.to_string()),
+            w: Some(intrinsics.width),
+            h: Some(intrinsics.height),
+            fl_x: Some(intrinsics.fx),
+            fl_y: Some(intrinsics.fy),
+            cx: Some(intrinsics.cx + 0.5),
+            cy: Some(intrinsics.cy + 0.5),
+            skew: nz(intrinsics.skew),
+            k1: some_if_distorted(distortion.k1),
+            k2: some_if_distorted(distortion.k2),
+            k3: some_if_distorted(distortion.k3),
+            k4: None,
+            p1: some_if_distorted(distortion.p1),
+            p2: some_if_distorted(distortion.p2),
+            opencv_k4: nz(distortion.k4),
+            opencv_k5: nz(distortion.k5),
+            opencv_k6: nz(distortion.k6),
+        }
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct TruthEntry {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    time: Option<f64>,
+    file_path: String,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct FrameEntry {
+    file_path: String,
+    transform_matrix: [[f64; 4]; 4],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    time: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    camera: Option<String>,
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    holdout: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    thin_lens: Option<ThinLens>,
+    #[serde(flatten)]
+    intrinsics: IntrinsicKeys,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct TransformsFile {
+    #[serde(flatten)]
+    intrinsics: IntrinsicKeys,
+    aabb: [[f64; 3]; 2],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    units: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    intensity_scale: Option<f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    truth: Vec<TruthEntry>,
+    frames: Vec<FrameEntry>,
+}
+
+/// The scene file for `path`: `path` itself if it ends in `.json`, else `path/transforms.json`.
+pub fn scene_file_path(path: &Path) -> PathBuf {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+        path.to_path_buf()
+    } else {
+        path.join(SCENE_FILE)
+    }
+}
+
+fn warn_unknown(value: &serde_json::Value, known: &[&[&str]], context: &str, file: &Path) {
+    if let Some(map) = value.as_object() {
+        for key in map.keys() {
+            if !known.iter().any(|set| set.contains(&key.as_str())) {
+                log::warn!("{}: ignoring unknown key \"{key}\"{context}", file.display());
+            }
+        }
+    }
+}
+
+/// OpenGL camera-to-world rows (nerfstudio `transform_matrix`) → pose with OpenCV camera axes:
+/// `R_cv = R_gl · diag(1, −1, −1)`, same translation.
+pub fn opengl_c2w_to_world_from_camera(rows: &[[f64; 4]; 4]) -> DAffine3 {
+    let col = |j: usize| DVec3::new(rows[0][j], rows[1][j], rows[2][j]);
+    DAffine3::from_mat3_translation(DMat3::from_cols(col(0), -col(1), -col(2)), col(3))
+}
+
+/// Pose with OpenCV camera axes → OpenGL camera-to-world rows (the inverse of
+/// [`opengl_c2w_to_world_from_camera`]).
+pub fn world_from_camera_to_opengl_c2w(pose: &DAffine3) -> [[f64; 4]; 4] {
+    let m = pose.matrix3;
+    let cols = [m.x_axis, -m.y_axis, -m.z_axis, pose.translation];
+    let mut rows = [[0.0; 4]; 4];
+    for (i, row) in rows.iter_mut().take(3).enumerate() {
+        for (j, c) in cols.iter().enumerate() {
+            row[j] = c[i];
+        }
+    }
+    rows[3] = [0.0, 0.0, 0.0, 1.0];
+    rows
+}
+
+fn frame_camera(file: &Path, index: usize, entry: &FrameEntry, global: &IntrinsicKeys) -> Result<Camera, IoError> {
+    let k = entry.intrinsics.over(global);
+    let name = &entry.file_path;
+    let bad = |problem: String| IoError::invalid(file, format!("frame {index} ({name}): {problem}"));
+    let need = |v: Option<f64>, key: &str| {
+        v.ok_or_else(|| bad(format!("`{key}` is given neither at the top level nor in the frame")))
+    };
+    let model = k.camera_model.as_deref().unwrap_or("OPENCV");
+    if !MODELS.contains(&model) {
+        return Err(bad(format!("camera_model {model} is not supported (supported: {})", MODELS.join(", "))));
+    }
+    let width = k.w.ok_or_else(|| bad("`w` is given neither at the top level nor in the frame".into()))?;
+    let height = k.h.ok_or_else(|| bad("`h` is given neither at the top level nor in the frame".into()))?;
+    let intrinsics = Intrinsics {
+        width,
+        height,
+        fx: need(k.fl_x, "fl_x")?,
+        fy: need(k.fl_y, "fl_y")?,
+        cx: need(k.cx, "cx")? - 0.5,
+        cy: need(k.cy, "cy")? - 0.5,
+        skew: k.skew.unwrap_or(0.0),
+    };
+    if k.k4.is_some_and(|v| v != 0.0) {
+        return Err(bad(
+            "k4 is nerfstudio's r⁸ radial term, which the OpenCV model does not have; use 0 (OpenCV's rational k4 is `opencv_k4`)"
+                .into(),
+        ));
+    }
+    let z = |v: Option<f64>| v.unwrap_or(0.0);
+    let distortion = Distortion {
+        k1: z(k.k1),
+        k2: z(k.k2),
+        p1: z(k.p1),
+        p2: z(k.p2),
+        k3: z(k.k3),
+        k4: z(k.opencv_k4),
+        k5: z(k.opencv_k5),
+        k6: z(k.opencv_k6),
+    };
+    if matches!(model, "PINHOLE" | "SIMPLE_PINHOLE") && !distortion.is_identity() {
+        log::warn!(
+            "{}: frame {index} ({name}): camera_model {model} with distortion coefficients; using them",
+            file.display()
+        );
+    }
+    let m = &entry.transform_matrix;
+    if m[3] != [0.0, 0.0, 0.0, 1.0] {
+        return Err(bad(format!("transform_matrix's last row must be [0, 0, 0, 1], got {:?}", m[3])));
+    }
+    let camera =
+        Camera { intrinsics, distortion, world_from_camera: opengl_c2w_to_world_from_camera(m), lens: entry.thin_lens };
+    camera.validate().map_err(|source| IoError::Camera {
+        path: file.to_path_buf(),
+        frame: index,
+        file_path: PathBuf::from(name),
+        source,
+    })?;
+    Ok(camera)
+}
+
+/// Reads a scene from a `transforms.json` or a folder holding one, and validates it: a valid
+/// aabb, at least one frame, every camera valid and seeing the box (at least one pixel's ray
+/// crosses it). Images are not read (see [`load_images`]). `Scene::root` is the folder of the
+/// file.
+pub fn load_scene(path: &Path) -> Result<Scene, IoError> {
+    let file = scene_file_path(path);
+    let text = std::fs::read_to_string(&file).map_err(|e| IoError::io(&file, "scene file", e))?;
+    let json_err = |source| IoError::Json { path: file.clone(), source };
+    let raw: serde_json::Value = serde_json::from_str(&text).map_err(json_err)?;
+    let parsed: TransformsFile = serde_json::from_str(&text).map_err(json_err)?;
+    warn_unknown(&raw, &[&TOP_KEYS, &INTRINSIC_KEYS], "", &file);
+    if let Some(frames) = raw.get("frames").and_then(|f| f.as_array()) {
+        for (i, f) in frames.iter().enumerate() {
+            warn_unknown(f, &[&FRAME_KEYS, &INTRINSIC_KEYS], &format!(" in frame {i}"), &file);
+        }
+    }
+    if let Some(truth) = raw.get("truth").and_then(|f| f.as_array()) {
+        for (i, t) in truth.iter().enumerate() {
+            warn_unknown(t, &[&TRUTH_KEYS], &format!(" in truth {i}"), &file);
+        }
+    }
+
+    let aabb = Aabb { min: DVec3::from_array(parsed.aabb[0]), max: DVec3::from_array(parsed.aabb[1]) };
+    aabb.validate().map_err(|e| IoError::invalid(&file, e.to_string()))?;
+    if parsed.frames.is_empty() {
+        return Err(IoError::invalid(&file, "the scene has no frames"));
+    }
+    let intensity_scale = parsed.intensity_scale.unwrap_or(1.0);
+    if !(intensity_scale.is_finite() && intensity_scale > 0.0) {
+        return Err(IoError::invalid(&file, format!("intensity_scale must be positive, got {intensity_scale}")));
+    }
+    let mut frames = Vec::with_capacity(parsed.frames.len());
+    for (i, entry) in parsed.frames.iter().enumerate() {
+        let camera = frame_camera(&file, i, entry, &parsed.intrinsics)?;
+        if entry.time.is_some_and(|t| !t.is_finite()) {
+            return Err(IoError::invalid(&file, format!("frame {i} ({}): time must be finite", entry.file_path)));
+        }
+        frames.push(Frame {
+            camera,
+            file_path: PathBuf::from(&entry.file_path),
+            time: entry.time,
+            camera_name: entry.camera.clone(),
+            holdout: entry.holdout,
+        });
+    }
+    let blind: Vec<usize> = frames
+        .par_iter()
+        .enumerate()
+        .filter(|(_, f)| f.camera.visibility(&aabb).pixel_fraction_on_box == 0.0)
+        .map(|(i, _)| i)
+        .collect();
+    if let Some(&i) = blind.first() {
+        return Err(IoError::CameraMissesBox { path: file, frame: i, file_path: frames[i].file_path.clone() });
+    }
+    let root = match file.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Ok(Scene {
+        root,
+        aabb,
+        units: parsed.units.unwrap_or_else(|| DEFAULT_UNITS.to_string()),
+        intensity_scale,
+        frames,
+        truth: parsed
+            .truth
+            .into_iter()
+            .map(|t| TruthRef { time: t.time, file_path: PathBuf::from(t.file_path) })
+            .collect(),
+    })
+}
+
+fn path_str(file: &Path, p: &Path) -> Result<String, IoError> {
+    p.to_str()
+        .map(str::to_string)
+        .ok_or_else(|| IoError::invalid(file, format!("path {} is not valid UTF-8", p.display())))
+}
+
+/// Writes `scene` as `transforms.json` (`path` is the file or its folder) atomically, in the
+/// layout described in the module docs. Frame and truth paths are written as they are in the
+/// scene (relative to the folder of the file unless absolute); `scene.root` is not stored.
+pub fn save_scene(scene: &Scene, path: &Path) -> Result<(), IoError> {
+    let file = scene_file_path(path);
+    let keys: Vec<IntrinsicKeys> =
+        scene.frames.iter().map(|f| IntrinsicKeys::from_camera(&f.camera.intrinsics, &f.camera.distortion)).collect();
+    let shared = keys.windows(2).all(|w| w[0] == w[1]);
+    let global = if shared { keys.first().cloned().unwrap_or_default() } else { IntrinsicKeys::default() };
+    let mut frames = Vec::with_capacity(scene.frames.len());
+    for (f, k) in scene.frames.iter().zip(keys) {
+        frames.push(FrameEntry {
+            file_path: path_str(&file, &f.file_path)?,
+            transform_matrix: world_from_camera_to_opengl_c2w(&f.camera.world_from_camera),
+            time: f.time,
+            camera: f.camera_name.clone(),
+            holdout: f.holdout,
+            thin_lens: f.camera.lens,
+            intrinsics: if shared { IntrinsicKeys::default() } else { k },
+        });
+    }
+    let truth = scene
+        .truth
+        .iter()
+        .map(|t| Ok(TruthEntry { time: t.time, file_path: path_str(&file, &t.file_path)? }))
+        .collect::<Result<Vec<_>, IoError>>()?;
+    let out = TransformsFile {
+        intrinsics: global,
+        aabb: [scene.aabb.min.to_array(), scene.aabb.max.to_array()],
+        units: Some(scene.units.clone()),
+        intensity_scale: Some(scene.intensity_scale),
+        truth,
+        frames,
+    };
+    let mut text = serde_json::to_string_pretty(&out).map_err(|source| IoError::Json { path: file.clone(), source })?;
+    text.push('\n');
+    atomic_write(&file, |w| w.write_all(text.as_bytes()))
+}
+
+/// Reads every frame's image, in frame order (in parallel), checking that it exists, is
+/// readable, has the size of its frame's intrinsics, and holds only finite values. The first
+/// failing frame (in frame order) gives the error.
+pub fn load_images(scene: &Scene) -> Result<Vec<Image>, IoError> {
+    let results: Vec<Result<Image, IoError>> = scene
+        .frames
+        .par_iter()
+        .enumerate()
+        .map(|(i, frame)| {
+            let path = scene.resolve(&frame.file_path);
+            let image = crate::image::read_image(&path)?;
+            let (w, h) = (frame.camera.width(), frame.camera.height());
+            if (image.width, image.height) != (w, h) {
+                return Err(IoError::ImageSize {
+                    path,
+                    frame: i,
+                    found_width: image.width,
+                    found_height: image.height,
+                    expected_width: w,
+                    expected_height: h,
+                });
+            }
+            if let Some((col, row)) = image.first_non_finite() {
+                return Err(IoError::NonFinite {
+                    path,
+                    location: format!("pixel (col {col}, row {row})"),
+                    value: image.get(col, row),
+                });
+            }
+            Ok(image)
+        })
+        .collect();
+    results.into_iter().collect()
+}
+
+/// Reads the scene's ground-truth volumes (`.npy`, filling the scene's aabb) with their times,
+/// in file order.
+pub fn load_truth(scene: &Scene) -> Result<Vec<(Option<f64>, Volume)>, IoError> {
+    scene
+        .truth
+        .iter()
+        .map(|t| {
+            let path = scene.resolve(&t.file_path);
+            let v = crate::volume::read_npy(&path, scene.aabb)?;
+            if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
+                let (nx, ny) = (v.dims[0], v.dims[1]);
+                return Err(IoError::NonFinite {
+                    path,
+                    location: format!("voxel (i {}, j {}, k {})", i % nx, (i / nx) % ny, i / (nx * ny)),
+                    value: v.data[i],
+                });
+            }
+            Ok((t.time, v))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::glam::DVec2;
+
+    fn ring_scene(root: &Path, n: usize, distortion: Distortion) -> Scene {
+        let aabb = Aabb::cube(DVec3::ZERO, 20.0);
+        let frames = (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                let k = Intrinsics { width: 32, height: 24, fx: 40.0, fy: 41.25, cx: 15.5, cy: 11.25, skew: 0.0 };
+                let mut camera =
+                    Camera::look_at(k, DVec3::new(80.0 * a.cos(), 80.0 * a.sin(), 15.0), DVec3::ZERO, DVec3::Z);
+                camera.distortion = distortion;
+                if i == 0 {
+                    camera.lens = Some(ThinLens::from_f_number(60.0, 3.5, -0.2, 0.01));
+                }
+                Frame {
+                    camera,
+                    file_path: PathBuf::from(format!("images/c{i}.tif")),
+                    time: Some(0.5 * i as f64),
+                    camera_name: Some(format!("cam{i}")),
+                    holdout: i == n - 1,
+                }
+            })
+            .collect();
+        Scene {
+            root: root.to_path_buf(),
+            aabb,
+            units: "mm".into(),
+            intensity_scale: 2.5,
+            frames,
+            truth: vec![TruthRef { time: Some(0.0), file_path: PathBuf::from("truth/t0.npy") }],
+        }
+    }
+
+    #[test]
+    fn write_read_round_trip_is_identical() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let dist = Distortion { k1: -0.1, k2: 0.02, p1: 1e-3, p2: -2e-3, k3: 0.001, k4: 0.01, k5: 0.0, k6: 0.0 };
+        let scene = ring_scene(dir.path(), 4, dist);
+        save_scene(&scene, dir.path()).expect("save");
+        let back = load_scene(dir.path()).expect("load");
+        assert_eq!(back, scene);
+        let text = std::fs::read_to_string(dir.path().join(SCENE_FILE)).expect("read");
+        assert!(text.contains("\"camera_model\": \"OPENCV\"") && text.contains("\"opencv_k4\": 0.01"), "{text}");
+
+        // Per-frame intrinsics when they differ, with principal points that are not exact in
+        // binary after ±0.5.
+        let mut scene = ring_scene(dir.path(), 3, Distortion::default());
+        scene.frames[1].camera.intrinsics.cx = 0.1;
+        scene.frames[2].camera.intrinsics.fx = 39.7;
+        let file = dir.path().join("other.json");
+        save_scene(&scene, &file).expect("save");
+        let back = load_scene(&file).expect("load");
+        for (a, b) in scene.frames.iter().zip(&back.frames) {
+            assert!((a.camera.intrinsics.cx - b.camera.intrinsics.cx).abs() < 1e-15);
+            let mut b = b.clone();
+            b.camera.intrinsics.cx = a.camera.intrinsics.cx;
+            b.camera.intrinsics.cy = a.camera.intrinsics.cy;
+            assert_eq!(&b, a);
+        }
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("read")).expect("json");
+        assert!(v.get("fl_x").is_none() && v["frames"][2]["fl_x"] == 39.7);
+    }
+
+    /// A 3D point on the ray nerfstudio generates for pixel (col, row) projects, with our
+    /// camera read from the same file, to exactly (col, row): the +0.5 shift is right.
+    #[test]
+    fn nerfstudio_rays_land_on_our_pixels() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (fx, fy, cx, cy) = (50.0, 52.0, 16.0, 12.0);
+        // An arbitrary rotation (OpenGL camera-to-world) and centre.
+        let r = DMat3::from_euler(fluidnerf_core::glam::EulerRot::ZYX, 0.3, -0.4, 1.1);
+        let t = DVec3::new(3.0, -60.0, 7.0);
+        let mut m = [[0.0; 4]; 4];
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] = r.col(j)[i];
+            }
+            m[i][3] = t[i];
+        }
+        m[3][3] = 1.0;
+        let json = serde_json::json!({
+            "camera_model": "PINHOLE", "w": 32, "h": 24, "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy,
+            "aabb": [[-1000, -1000, -1000], [1000, 1000, 1000]],
+            "frames": [{"file_path": "a.png", "transform_matrix": m}]
+        });
+        std::fs::write(dir.path().join(SCENE_FILE), json.to_string()).expect("write");
+        let scene = load_scene(dir.path()).expect("load");
+        let cam = &scene.frames[0].camera;
+        for (col, row) in [(0usize, 0usize), (31, 0), (7, 19), (31, 23)] {
+            // nerfstudio: coords = index + 0.5; dir_gl = ((x − cx)/fx, −(y − cy)/fy, −1).
+            let (x, y) = (col as f64 + 0.5, row as f64 + 0.5);
+            let dir = r * DVec3::new((x - cx) / fx, -(y - cy) / fy, -1.0);
+            let p = t + 37.0 * dir;
+            let uv = cam.project(p).expect("in front");
+            assert!((uv - DVec2::new(col as f64, row as f64)).length() < 1e-9, "pixel ({col}, {row}) -> {uv}");
+        }
+    }
+
+    #[test]
+    fn per_frame_keys_override_global_ones() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let scene = ring_scene(dir.path(), 2, Distortion::default());
+        save_scene(&scene, dir.path()).expect("save");
+        let file = dir.path().join(SCENE_FILE);
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&file).expect("read")).expect("json");
+        v["frames"][1]["fl_x"] = serde_json::json!(44.0);
+        v["frames"][1]["k1"] = serde_json::json!(-0.01);
+        v["frames"][0]["colmap_im_id"] = serde_json::json!(3);
+        std::fs::write(&file, v.to_string()).expect("write");
+        let back = load_scene(dir.path()).expect("load");
+        assert_eq!(back.frames[0].camera.intrinsics.fx, 40.0);
+        assert_eq!(back.frames[1].camera.intrinsics.fx, 44.0);
+        assert_eq!(back.frames[1].camera.intrinsics.fy, 41.25);
+        assert_eq!(back.frames[1].camera.distortion.k1, -0.01);
+        assert_eq!(back.units, "mm");
+    }
+
+    fn write_json(dir: &Path, v: &serde_json::Value) -> PathBuf {
+        let file = dir.join(SCENE_FILE);
+        std::fs::write(&file, serde_json::to_string_pretty(v).expect("json")).expect("write");
+        file
+    }
+
+    fn good_json(dir: &Path) -> serde_json::Value {
+        let scene = ring_scene(dir, 3, Distortion::default());
+        save_scene(&scene, dir).expect("save");
+        serde_json::from_str(&std::fs::read_to_string(dir.join(SCENE_FILE)).expect("read")).expect("json")
+    }
+
+    #[test]
+    fn clear_errors_for_bad_scene_files() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let msg = |v: &serde_json::Value| load_scene(&write_json(d, v)).expect_err("must fail").to_string();
+
+        // Camera that does not see the box.
+        let mut v = good_json(d);
+        v["aabb"] = serde_json::json!([[5000, 5000, 5000], [5010, 5010, 5010]]);
+        let m = msg(&v);
+        assert!(m.contains("frame 0") && m.contains("images/c0.tif") && m.contains("does not see"), "{m}");
+
+        let mut v = good_json(d);
+        v["frames"][1]["transform_matrix"][0][0] = serde_json::json!(3.0);
+        let m = msg(&v);
+        assert!(m.contains("frame 1") && m.contains("rotation"), "{m}");
+
+        let mut v = good_json(d);
+        v.as_object_mut().expect("object").remove("fl_y");
+        let m = msg(&v);
+        assert!(m.contains("fl_y") && m.contains("frame 0"), "{m}");
+
+        let mut v = good_json(d);
+        v.as_object_mut().expect("object").remove("aabb");
+        let m = msg(&v);
+        assert!(m.contains("aabb") && m.contains(SCENE_FILE), "{m}");
+
+        let mut v = good_json(d);
+        v["frames"] = serde_json::json!([]);
+        assert!(msg(&v).contains("no frames"));
+
+        let mut v = good_json(d);
+        v["camera_model"] = serde_json::json!("OPENCV_FISHEYE");
+        assert!(msg(&v).contains("OPENCV_FISHEYE"));
+
+        let mut v = good_json(d);
+        v["k4"] = serde_json::json!(0.1);
+        assert!(msg(&v).contains("k4"));
+
+        let mut v = good_json(d);
+        v["aabb"] = serde_json::json!([[0, 0, 0], [1, -1, 1]]);
+        assert!(msg(&v).contains("aabb"));
+
+        let file = d.join(SCENE_FILE);
+        std::fs::write(&file, "{\n  \"aabb\": [[0,0,0],[1,1,1]],\n  \"frames\": [,]\n}").expect("write");
+        let m = load_scene(d).expect_err("malformed").to_string();
+        assert!(m.contains(SCENE_FILE) && m.contains("malformed JSON") && m.contains("line 3"), "{m}");
+
+        let m = load_scene(&d.join("nowhere")).expect_err("missing").to_string();
+        assert!(m.contains("scene file not found") && m.contains("nowhere"), "{m}");
+    }
+
+    #[test]
+    fn images_and_truth_load_with_checks() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let scene = ring_scene(d, 3, Distortion::default());
+        for (i, f) in scene.frames.iter().enumerate() {
+            let img = Image::from_vec(32, 24, vec![i as f32; 32 * 24]);
+            crate::image::write_tiff_f32(&scene.resolve(&f.file_path), &img).expect("write");
+        }
+        let vol = Volume::from_fn([4, 4, 4], scene.aabb, |p| p.x as f32);
+        crate::volume::write_npy(&d.join("truth/t0.npy"), &vol).expect("npy");
+        let images = load_images(&scene).expect("images");
+        assert_eq!(images.len(), 3);
+        assert_eq!(images[2].data[0], 2.0);
+        let truth = load_truth(&scene).expect("truth");
+        assert_eq!(truth, vec![(Some(0.0), vol)]);
+
+        crate::image::write_tiff_f32(&d.join("images/c1.tif"), &Image::zeros(31, 24)).expect("write");
+        let m = load_images(&scene).expect_err("size").to_string();
+        assert!(m.contains("c1.tif") && m.contains("31x24") && m.contains("32x24"), "{m}");
+
+        let mut bad = Image::zeros(32, 24);
+        bad.set(5, 6, f32::INFINITY);
+        crate::image::write_tiff_f32(&d.join("images/c1.tif"), &bad).expect("write");
+        let m = load_images(&scene).expect_err("inf").to_string();
+        assert!(m.contains("c1.tif") && m.contains("col 5, row 6") && m.contains("inf"), "{m}");
+
+        std::fs::remove_file(d.join("images/c1.tif")).expect("rm");
+        let m = load_images(&scene).expect_err("missing").to_string();
+        assert!(m.contains("image file not found") && m.contains("c1.tif"), "{m}");
+    }
+}

@@ -1,0 +1,402 @@
+//! Volumes on disk: `.npy`, `.vti` (VTK XML ImageData) and raw f32 with a JSON sidecar.
+//!
+//! [`Volume`] is cell-centred, x fastest (`data[(k * ny + j) * nx + i]`), filling its
+//! [`Aabb`]. On disk:
+//! - `.npy`: shape `(nz, ny, nx)`, C order, little-endian f32 (`<f4`). The file holds no box,
+//!   so [`read_npy`] takes it. Reading also accepts f64, u8 and u16 (converted to f32).
+//! - `.vti`: VTK XML ImageData, one Float32 point-data array `value`, appended raw binary
+//!   (UInt64 headers, little-endian), which ParaView and the Python `vtk` package read.
+//!   `Origin = aabb.min + spacing / 2` because VTK puts point data at grid points, and our
+//!   values live at voxel centres; `Spacing` is the voxel size; `WholeExtent = 0 nx−1 0 ny−1
+//!   0 nz−1`. ParaView therefore shows every value at its voxel centre, in world units.
+//! - raw: little-endian f32 in the same order, plus a sidecar `<file>.json` holding `dims`
+//!   `[nx, ny, nz]`, `aabb`, `spacing`, `dtype` (`"<f4"`) and `order` (`"x fastest"`).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, Volume};
+use npyz::WriterBuilder;
+use serde::{Deserialize, Serialize};
+
+use crate::{atomic_write, IoError};
+
+/// Reads a `.npy` of shape `(nz, ny, nx)` in C order as a volume filling `aabb`.
+pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "volume file", e))?;
+    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| IoError::invalid(path, format!("not a .npy file: {e}")))?;
+    if npy.order() != npyz::Order::C {
+        return Err(IoError::invalid(path, "array is in Fortran order; save it in C order (numpy.ascontiguousarray)"));
+    }
+    let shape = npy.shape().to_vec();
+    if shape.len() != 3 || shape.contains(&0) {
+        return Err(IoError::invalid(path, format!("expected a 3-D array of shape (nz, ny, nx), got shape {shape:?}")));
+    }
+    let dims = [shape[2] as usize, shape[1] as usize, shape[0] as usize];
+    let dtype = npy.dtype();
+    let bad = |e: std::io::Error| IoError::invalid(path, format!("cannot read the array data: {e}"));
+    let data: Vec<f32> = match &dtype {
+        npyz::DType::Plain(ts) => match (ts.type_char(), ts.size_field()) {
+            (npyz::TypeChar::Float, 4) => npy.into_vec::<f32>().map_err(bad)?,
+            (npyz::TypeChar::Float, 8) => npy.into_vec::<f64>().map_err(bad)?.into_iter().map(|v| v as f32).collect(),
+            (npyz::TypeChar::Uint, 1) => npy.into_vec::<u8>().map_err(bad)?.into_iter().map(f32::from).collect(),
+            (npyz::TypeChar::Uint, 2) => npy.into_vec::<u16>().map_err(bad)?.into_iter().map(f32::from).collect(),
+            _ => {
+                return Err(IoError::invalid(
+                    path,
+                    format!("unsupported dtype {} (use f4, f8, u1 or u2)", dtype.descr()),
+                ))
+            }
+        },
+        _ => return Err(IoError::invalid(path, format!("unsupported dtype {} (use f4, f8, u1 or u2)", dtype.descr()))),
+    };
+    if data.len() != dims[0] * dims[1] * dims[2] {
+        return Err(IoError::invalid(path, format!("shape {shape:?} but {} values", data.len())));
+    }
+    Ok(Volume::from_vec(dims, aabb, data))
+}
+
+/// Writes a volume as a little-endian f32 `.npy` of shape `(nz, ny, nx)`, C order.
+pub fn write_npy(path: &Path, volume: &Volume) -> Result<(), IoError> {
+    let [nx, ny, nz] = volume.dims;
+    atomic_write(path, |w| {
+        let mut npy =
+            npyz::WriteOptions::new().default_dtype().shape(&[nz as u64, ny as u64, nx as u64]).writer(w).begin_nd()?;
+        npy.extend(volume.data.iter().copied())?;
+        npy.finish()
+    })
+}
+
+/// Writes a volume as VTK XML ImageData (`.vti`, appended raw binary; see the module docs).
+pub fn write_vti(path: &Path, volume: &Volume) -> Result<(), IoError> {
+    let [nx, ny, nz] = volume.dims;
+    let sp = volume.spacing();
+    let origin = volume.aabb.min + 0.5 * sp;
+    let extent = format!("0 {} 0 {} 0 {}", nx - 1, ny - 1, nz - 1);
+    let header = format!(
+        "<?xml version=\"1.0\"?>\n\
+         <VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n\
+         \x20 <ImageData WholeExtent=\"{extent}\" Origin=\"{} {} {}\" Spacing=\"{} {} {}\">\n\
+         \x20   <Piece Extent=\"{extent}\">\n\
+         \x20     <PointData Scalars=\"value\">\n\
+         \x20       <DataArray type=\"Float32\" Name=\"value\" NumberOfComponents=\"1\" format=\"appended\" offset=\"0\"/>\n\
+         \x20     </PointData>\n\
+         \x20     <CellData/>\n\
+         \x20   </Piece>\n\
+         \x20 </ImageData>\n\
+         \x20 <AppendedData encoding=\"raw\">\n_",
+        origin.x, origin.y, origin.z, sp.x, sp.y, sp.z
+    );
+    atomic_write(path, |w| {
+        w.write_all(header.as_bytes())?;
+        w.write_all(&((volume.data.len() * 4) as u64).to_le_bytes())?;
+        write_f32_le(w, &volume.data)?;
+        w.write_all(b"\n  </AppendedData>\n</VTKFile>\n")
+    })
+}
+
+fn write_f32_le(w: &mut dyn Write, data: &[f32]) -> std::io::Result<()> {
+    let mut buf = Vec::with_capacity(4 * 4096);
+    for chunk in data.chunks(4096) {
+        buf.clear();
+        buf.extend(chunk.iter().flat_map(|v| v.to_le_bytes()));
+        w.write_all(&buf)?;
+    }
+    Ok(())
+}
+
+/// The value of `name="..."` in an XML start tag.
+fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
+    let key = format!(" {name}=\"");
+    let start = tag.find(&key)? + key.len();
+    let len = tag[start..].find('"')?;
+    Some(&tag[start..start + len])
+}
+
+/// The start tag `<name ...>` (or `<name .../>`) in `text`.
+fn start_tag<'a>(text: &'a str, name: &str) -> Option<&'a str> {
+    let open = format!("<{name} ");
+    let start = text.find(&open)?;
+    let len = text[start..].find('>')?;
+    Some(&text[start..=start + len])
+}
+
+fn numbers<T: std::str::FromStr>(s: &str) -> Option<Vec<T>> {
+    s.split_whitespace().map(|t| t.parse().ok()).collect()
+}
+
+/// Reads a `.vti` with one scalar point-data array (Float32 or Float64, appended raw binary as
+/// [`write_vti`] writes it, or inline ASCII), little-endian, axis-aligned (identity
+/// `Direction`). The box is recovered as `Origin − Spacing / 2` to
+/// `Origin + (dims − ½) · Spacing`.
+pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "volume file", e))?;
+    let bad = |what: &str| IoError::invalid(path, format!("not a VTK ImageData file we can read: {what}"));
+    // The appended section is binary; only the XML before it is text.
+    let xml_end = find(&bytes, b"<AppendedData").unwrap_or(bytes.len());
+    let xml = std::str::from_utf8(&bytes[..xml_end]).map_err(|_| bad("header is not UTF-8"))?;
+    let file_tag = start_tag(xml, "VTKFile").ok_or_else(|| bad("no <VTKFile> element"))?;
+    if attribute(file_tag, "type") != Some("ImageData") {
+        return Err(bad("type is not ImageData"));
+    }
+    if attribute(file_tag, "byte_order").is_some_and(|b| b != "LittleEndian") {
+        return Err(bad("only LittleEndian is supported"));
+    }
+    if attribute(file_tag, "compressor").is_some() {
+        return Err(bad("compressed data is not supported"));
+    }
+    let header_u64 = match attribute(file_tag, "header_type") {
+        None | Some("UInt32") => false,
+        Some("UInt64") => true,
+        Some(other) => return Err(bad(&format!("header_type {other}"))),
+    };
+    let image_tag = start_tag(xml, "ImageData").ok_or_else(|| bad("no <ImageData> element"))?;
+    let extent: Vec<i64> = attribute(image_tag, "WholeExtent")
+        .and_then(numbers)
+        .filter(|e| e.len() == 6)
+        .ok_or_else(|| bad("WholeExtent"))?;
+    let origin: Vec<f64> =
+        attribute(image_tag, "Origin").and_then(numbers).filter(|e| e.len() == 3).ok_or_else(|| bad("Origin"))?;
+    let spacing: Vec<f64> =
+        attribute(image_tag, "Spacing").and_then(numbers).filter(|e| e.len() == 3).ok_or_else(|| bad("Spacing"))?;
+    if let Some(dir) = attribute(image_tag, "Direction").and_then(numbers::<f64>) {
+        if dir != [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0] {
+            return Err(bad("only the identity Direction is supported"));
+        }
+    }
+    let dims: Vec<usize> = (0..3).map(|a| (extent[2 * a + 1] - extent[2 * a] + 1).max(0) as usize).collect();
+    let dims = [dims[0], dims[1], dims[2]];
+    let n = dims[0] * dims[1] * dims[2];
+    if n == 0 {
+        return Err(bad("empty extent"));
+    }
+    let array_tag = start_tag(xml, "DataArray").ok_or_else(|| bad("no <DataArray> element"))?;
+    if attribute(array_tag, "NumberOfComponents").is_some_and(|c| c != "1") {
+        return Err(bad("only single-component arrays are supported"));
+    }
+    let width = match attribute(array_tag, "type") {
+        Some("Float32") => 4,
+        Some("Float64") => 8,
+        other => return Err(bad(&format!("DataArray type {other:?} (Float32 or Float64 expected)"))),
+    };
+    let data: Vec<f32> = match attribute(array_tag, "format") {
+        Some("appended") => {
+            let offset: usize =
+                attribute(array_tag, "offset").and_then(|o| o.parse().ok()).ok_or_else(|| bad("offset"))?;
+            if xml_end == bytes.len() {
+                return Err(bad("no <AppendedData> section"));
+            }
+            let tail = &bytes[xml_end..];
+            let tag_end = find(tail, b">").ok_or_else(|| bad("<AppendedData>"))?;
+            let tag = std::str::from_utf8(&tail[..=tag_end]).map_err(|_| bad("<AppendedData>"))?;
+            if attribute(tag, "encoding") != Some("raw") {
+                return Err(bad("only raw appended data is supported"));
+            }
+            let underscore = find(&tail[tag_end..], b"_").ok_or_else(|| bad("appended data marker '_'"))?;
+            let start = xml_end + tag_end + underscore + 1 + offset;
+            let hlen = if header_u64 { 8 } else { 4 };
+            let head = bytes.get(start..start + hlen).ok_or_else(|| bad("truncated appended data"))?;
+            let nbytes = if header_u64 {
+                u64::from_le_bytes(head.try_into().map_err(|_| bad("header"))?) as usize
+            } else {
+                u32::from_le_bytes(head.try_into().map_err(|_| bad("header"))?) as usize
+            };
+            if nbytes != n * width {
+                return Err(bad(&format!("array holds {nbytes} bytes, the extent needs {}", n * width)));
+            }
+            let raw = bytes.get(start + hlen..start + hlen + nbytes).ok_or_else(|| bad("truncated appended data"))?;
+            if width == 4 {
+                raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+            } else {
+                raw.chunks_exact(8)
+                    .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32)
+                    .collect()
+            }
+        }
+        Some("ascii") => {
+            let start = xml.find(array_tag).ok_or_else(|| bad("DataArray"))? + array_tag.len();
+            let len = xml[start..].find("</DataArray>").ok_or_else(|| bad("unterminated DataArray"))?;
+            let v: Vec<f32> = numbers(&xml[start..start + len]).ok_or_else(|| bad("non-numeric ASCII data"))?;
+            if v.len() != n {
+                return Err(bad(&format!("{} ASCII values, the extent needs {n}", v.len())));
+            }
+            v
+        }
+        other => return Err(bad(&format!("DataArray format {other:?} (appended raw or ascii expected)"))),
+    };
+    let spacing = DVec3::new(spacing[0], spacing[1], spacing[2]);
+    let origin = DVec3::new(origin[0], origin[1], origin[2]);
+    let min = origin - 0.5 * spacing;
+    let max = min + spacing * DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+    let aabb = Aabb { min, max };
+    aabb.validate().map_err(|e| IoError::invalid(path, format!("Origin/Spacing give an invalid box: {e}")))?;
+    Ok(Volume::from_vec(dims, aabb, data))
+}
+
+fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
+    haystack.windows(needle.len()).position(|w| w == needle)
+}
+
+/// The JSON sidecar of a raw volume.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSidecar {
+    /// `[nx, ny, nz]`.
+    dims: [usize; 3],
+    aabb: [[f64; 3]; 2],
+    spacing: [f64; 3],
+    dtype: String,
+    order: String,
+}
+
+/// The sidecar path of a raw volume: `<path>.json` (e.g. `field.raw.json`).
+pub fn raw_sidecar_path(path: &Path) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(".json");
+    PathBuf::from(s)
+}
+
+/// Writes little-endian f32 values, x fastest, to `path` and the sidecar
+/// [`raw_sidecar_path`]`(path)` describing them (see the module docs).
+pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
+    let sp = volume.spacing();
+    let sidecar = RawSidecar {
+        dims: volume.dims,
+        aabb: [volume.aabb.min.to_array(), volume.aabb.max.to_array()],
+        spacing: sp.to_array(),
+        dtype: "<f4".into(),
+        order: "x fastest: index (k * ny + j) * nx + i".into(),
+    };
+    atomic_write(path, |w| write_f32_le(w, &volume.data))?;
+    let json_path = raw_sidecar_path(path);
+    let json =
+        serde_json::to_string_pretty(&sidecar).map_err(|e| IoError::Json { path: json_path.clone(), source: e })?;
+    atomic_write(&json_path, |w| w.write_all(json.as_bytes()))
+}
+
+/// Reads a raw volume written by [`write_raw`] (its sidecar must sit next to it).
+pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
+    let json_path = raw_sidecar_path(path);
+    let text = std::fs::read_to_string(&json_path).map_err(|e| IoError::io(&json_path, "raw volume sidecar", e))?;
+    let meta: RawSidecar =
+        serde_json::from_str(&text).map_err(|e| IoError::Json { path: json_path.clone(), source: e })?;
+    if meta.dtype != "<f4" {
+        return Err(IoError::invalid(&json_path, format!("dtype {} is not supported (only <f4)", meta.dtype)));
+    }
+    let aabb = Aabb { min: DVec3::from_array(meta.aabb[0]), max: DVec3::from_array(meta.aabb[1]) };
+    aabb.validate().map_err(|e| IoError::invalid(&json_path, e.to_string()))?;
+    if meta.dims.contains(&0) {
+        return Err(IoError::invalid(&json_path, "dims must be positive"));
+    }
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "raw volume", e))?;
+    let n = meta.dims.iter().product::<usize>();
+    if bytes.len() != 4 * n {
+        return Err(IoError::invalid(path, format!("{} bytes, but dims {:?} need {}", bytes.len(), meta.dims, 4 * n)));
+    }
+    let data = bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    Ok(Volume::from_vec(meta.dims, aabb, data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test_volume() -> Volume {
+        let aabb = Aabb::new(DVec3::new(-1.0, 2.0, 0.5), DVec3::new(3.0, 4.5, 1.7));
+        Volume::from_fn([5, 4, 3], aabb, |p| (p.x * 10.0 + p.y * 3.0 - p.z) as f32)
+    }
+
+    #[test]
+    fn npy_round_trip_and_shape_order() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("v.npy");
+        let v = test_volume();
+        write_npy(&p, &v).expect("write");
+        let back = read_npy(&p, v.aabb).expect("read");
+        assert_eq!(back, v);
+        let bytes = std::fs::read(&p).expect("bytes");
+        let npy = npyz::NpyFile::new(&bytes[..]).expect("npy");
+        assert_eq!(npy.shape(), &[3, 4, 5], "(nz, ny, nx)");
+        assert_eq!(npy.dtype().descr(), "'<f4'");
+    }
+
+    fn write_npy_with<T: npyz::Serialize + npyz::AutoSerialize + Copy>(
+        p: &Path,
+        shape: &[u64],
+        data: &[T],
+        order: npyz::Order,
+    ) {
+        let mut f = std::fs::File::create(p).expect("create");
+        let mut w = npyz::WriteOptions::new()
+            .default_dtype()
+            .shape(shape)
+            .order(order)
+            .writer(&mut f)
+            .begin_nd()
+            .expect("begin");
+        w.extend(data.iter().copied()).expect("extend");
+        w.finish().expect("finish");
+    }
+
+    #[test]
+    fn npy_accepts_other_dtypes_and_rejects_bad_layouts() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let aabb = Aabb::cube(DVec3::ZERO, 1.0);
+        let p = dir.path().join("u16.npy");
+        write_npy_with(&p, &[1, 2, 3], &[0u16, 1, 2, 3, 4, 65535], npyz::Order::C);
+        let v = read_npy(&p, aabb).expect("u16");
+        assert_eq!(v.dims, [3, 2, 1]);
+        assert_eq!(v.data, vec![0.0, 1.0, 2.0, 3.0, 4.0, 65535.0]);
+        let p = dir.path().join("f64.npy");
+        write_npy_with(&p, &[1, 1, 2], &[0.25f64, -2.0], npyz::Order::C);
+        assert_eq!(read_npy(&p, aabb).expect("f64").data, vec![0.25, -2.0]);
+        let p = dir.path().join("u8.npy");
+        write_npy_with(&p, &[1, 1, 2], &[7u8, 255], npyz::Order::C);
+        assert_eq!(read_npy(&p, aabb).expect("u8").data, vec![7.0, 255.0]);
+        let p = dir.path().join("fortran.npy");
+        write_npy_with(&p, &[2, 2, 2], &[0f32; 8], npyz::Order::Fortran);
+        let err = read_npy(&p, aabb).expect_err("fortran");
+        assert!(err.to_string().contains("Fortran") && err.to_string().contains("fortran.npy"), "{err}");
+        let p = dir.path().join("flat.npy");
+        write_npy_with(&p, &[4, 2], &[0f32; 8], npyz::Order::C);
+        let err = read_npy(&p, aabb).expect_err("2-D");
+        assert!(err.to_string().contains("3-D") && err.to_string().contains("[4, 2]"), "{err}");
+        let p = dir.path().join("i32.npy");
+        write_npy_with(&p, &[1, 1, 2], &[1i32, 2], npyz::Order::C);
+        assert!(read_npy(&p, aabb).expect_err("i32").to_string().contains("dtype"));
+    }
+
+    #[test]
+    fn vti_round_trip_and_origin_at_first_voxel_centre() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("v.vti");
+        let v = test_volume();
+        write_vti(&p, &v).expect("write");
+        let back = read_vti(&p).expect("read");
+        assert_eq!(back.dims, v.dims);
+        assert_eq!(back.data, v.data);
+        for a in 0..3 {
+            assert!((back.aabb.min[a] - v.aabb.min[a]).abs() < 1e-12);
+            assert!((back.aabb.max[a] - v.aabb.max[a]).abs() < 1e-12);
+        }
+        let text = String::from_utf8_lossy(&std::fs::read(&p).expect("bytes")).into_owned();
+        let c = v.voxel_centre(0, 0, 0);
+        assert!(text.contains(&format!("Origin=\"{} {} {}\"", c.x, c.y, c.z)), "{}", &text[..400]);
+        assert!(text.contains("WholeExtent=\"0 4 0 3 0 2\""));
+    }
+
+    #[test]
+    fn raw_round_trip_with_sidecar() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("v.raw");
+        let v = test_volume();
+        write_raw(&p, &v).expect("write");
+        assert_eq!(std::fs::metadata(&p).expect("meta").len(), 4 * 60);
+        let side: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("v.raw.json")).expect("sidecar"))
+                .expect("json");
+        assert_eq!(side["dims"], serde_json::json!([5, 4, 3]));
+        assert_eq!(read_raw(&p).expect("read"), v);
+    }
+}
