@@ -2,13 +2,20 @@
 //! MLP as in the dissertation, or a multiresolution grid encoding with a tiny MLP), trained so
 //! that line integrals rendered along camera rays match the measured pixels.
 
+pub mod dense;
 pub mod encoding;
 pub mod error;
 pub mod field;
 pub mod hashgrid;
 pub(crate) mod kernels;
 pub mod mlp;
+pub mod occupancy;
 pub mod optim;
+pub mod render;
+pub mod sampling;
+pub mod train;
+pub mod trained;
+pub mod weights;
 
 pub use error::NeuralError;
 pub use field::TrainableField;

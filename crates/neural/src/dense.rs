@@ -1,0 +1,236 @@
+//! A dense trilinear voxel grid as a [`TrainableField`]: the simplest field representation
+//! with exact, cheap gradients. It is a legitimate reconstruction model of its own (a voxel
+//! grid trained through the differentiable renderer instead of by ART), and the reference the
+//! method code is tested against.
+//!
+//! # Conventions
+//! - Inputs: box-normalised coordinates `u ∈ [0, 1]³` (the field contract); a space–time grid
+//!   is not provided, so `input_dim() == 3`.
+//! - Values live at cell centres, x fastest (`params[(k·ny + j)·nx + i]`), exactly like
+//!   [`fluidnerf_core::Volume`]; sampling is trilinear between centres, clamped to the
+//!   outermost centres, zero outside `[0, 1]³`.
+//! - Output `E = softplus(v)` with `v` the trilinear value of the parameters, so E is
+//!   non-negative and every parameter keeps a gradient (a ReLU would freeze cells that go
+//!   negative).
+
+use std::ops::Range;
+
+use crate::TrainableField;
+
+/// A trainable `nx × ny × nz` grid of raw values behind a softplus.
+#[derive(Clone, Debug)]
+pub struct DenseGridField {
+    dims: [usize; 3],
+    params: Vec<f32>,
+}
+
+/// Per-row corner indices, trilinear weights and softplus slope, recorded by `forward`.
+#[derive(Debug, Default)]
+pub struct DenseTape {
+    idx: Vec<[u32; 8]>,
+    wts: Vec<[f32; 8]>,
+    slope: Vec<f32>,
+}
+
+/// `softplus(x) = ln(1 + eˣ)`, computed without overflow.
+fn softplus(x: f32) -> f32 {
+    if x > 20.0 {
+        x
+    } else {
+        x.exp().ln_1p()
+    }
+}
+
+/// `d softplus / dx = σ(x)`.
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// The raw value whose softplus is `e` (inverse softplus), for initialisation.
+pub fn inverse_softplus(e: f32) -> f32 {
+    assert!(e > 0.0, "inverse_softplus: {e} must be positive");
+    if e > 20.0 {
+        e
+    } else {
+        e.exp_m1().ln()
+    }
+}
+
+impl DenseGridField {
+    /// A grid whose every cell evaluates to `initial` (> 0).
+    pub fn new(dims: [usize; 3], initial: f32) -> Self {
+        assert!(dims.iter().all(|&n| n > 0), "DenseGridField::new: dims {dims:?} must be positive");
+        let n = dims[0] * dims[1] * dims[2];
+        assert!(n <= u32::MAX as usize, "DenseGridField::new: grid too large");
+        DenseGridField { dims, params: vec![inverse_softplus(initial); n] }
+    }
+
+    /// A grid with the given raw parameters (softplus is applied on evaluation).
+    pub fn from_raw(dims: [usize; 3], params: Vec<f32>) -> Self {
+        assert_eq!(params.len(), dims[0] * dims[1] * dims[2], "DenseGridField::from_raw: length mismatch");
+        DenseGridField { dims, params }
+    }
+
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Corner indices and weights of the trilinear stencil at `u`, or `None` outside `[0, 1]³`.
+    fn stencil(&self, u: [f32; 3]) -> Option<([u32; 8], [f32; 8])> {
+        if u.iter().any(|&c| !(0.0..=1.0).contains(&c)) {
+            return None;
+        }
+        let mut i0 = [0usize; 3];
+        let mut i1 = [0usize; 3];
+        let mut w = [0f32; 3];
+        for a in 0..3 {
+            let n = self.dims[a];
+            let g = (u[a] * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
+            let f = g.floor();
+            i0[a] = f as usize;
+            i1[a] = (i0[a] + 1).min(n - 1);
+            w[a] = g - f;
+        }
+        let (nx, ny) = (self.dims[0], self.dims[1]);
+        let mut idx = [0u32; 8];
+        let mut wts = [0f32; 8];
+        for c in 0..8 {
+            let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            let i = if bx == 0 { i0[0] } else { i1[0] };
+            let j = if by == 0 { i0[1] } else { i1[1] };
+            let k = if bz == 0 { i0[2] } else { i1[2] };
+            idx[c] = ((k * ny + j) * nx + i) as u32;
+            let wx = if bx == 0 { 1.0 - w[0] } else { w[0] };
+            let wy = if by == 0 { 1.0 - w[1] } else { w[1] };
+            let wz = if bz == 0 { 1.0 - w[2] } else { w[2] };
+            wts[c] = wx * wy * wz;
+        }
+        Some((idx, wts))
+    }
+
+    fn pre_activation(&self, idx: &[u32; 8], wts: &[f32; 8]) -> f32 {
+        idx.iter().zip(wts).map(|(&i, &w)| self.params[i as usize] * w).sum()
+    }
+}
+
+impl TrainableField for DenseGridField {
+    type Tape = DenseTape;
+
+    fn input_dim(&self) -> usize {
+        3
+    }
+
+    fn new_tape(&self) -> DenseTape {
+        DenseTape::default()
+    }
+
+    fn params(&self) -> &[f32] {
+        &self.params
+    }
+
+    fn params_mut(&mut self) -> &mut [f32] {
+        &mut self.params
+    }
+
+    fn eval(&self, inputs: &[f32], out: &mut [f32], _tape: &mut DenseTape) {
+        assert_eq!(inputs.len(), 3 * out.len(), "DenseGridField::eval: inputs must be n × 3");
+        for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
+            *o = match self.stencil([p[0], p[1], p[2]]) {
+                Some((idx, wts)) => softplus(self.pre_activation(&idx, &wts)),
+                None => 0.0,
+            };
+        }
+    }
+
+    fn forward(&self, inputs: &[f32], out: &mut [f32], tape: &mut DenseTape) {
+        assert_eq!(inputs.len(), 3 * out.len(), "DenseGridField::forward: inputs must be n × 3");
+        tape.idx.clear();
+        tape.wts.clear();
+        tape.slope.clear();
+        for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
+            match self.stencil([p[0], p[1], p[2]]) {
+                Some((idx, wts)) => {
+                    let v = self.pre_activation(&idx, &wts);
+                    *o = softplus(v);
+                    tape.idx.push(idx);
+                    tape.wts.push(wts);
+                    tape.slope.push(sigmoid(v));
+                }
+                None => {
+                    *o = 0.0;
+                    tape.idx.push([0; 8]);
+                    tape.wts.push([0.0; 8]);
+                    tape.slope.push(0.0);
+                }
+            }
+        }
+    }
+
+    fn backward(&self, tape: &mut DenseTape, d_out: &[f32], grads: &mut [f32]) {
+        assert_eq!(d_out.len(), tape.slope.len(), "DenseGridField::backward: d_out does not match the last forward");
+        assert_eq!(grads.len(), self.params.len(), "DenseGridField::backward: grads length");
+        for (((&d, idx), wts), &s) in d_out.iter().zip(&tape.idx).zip(&tape.wts).zip(&tape.slope) {
+            let g = d * s;
+            if g == 0.0 {
+                continue;
+            }
+            for c in 0..8 {
+                grads[idx[c] as usize] += g * wts[c];
+            }
+        }
+    }
+
+    fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)> {
+        let [nx, ny, nz] = self.dims;
+        vec![("grid".to_string(), vec![nz, ny, nx], 0..self.params.len())]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn constant_grid_is_constant_inside_and_zero_outside() {
+        let f = DenseGridField::new([4, 5, 6], 0.7);
+        let mut tape = f.new_tape();
+        let inputs = [0.0, 0.0, 0.0, 0.5, 0.3, 0.9, 1.0, 1.0, 1.0, 1.2, 0.5, 0.5];
+        let mut out = [0.0; 4];
+        f.eval(&inputs, &mut out, &mut tape);
+        for o in &out[..3] {
+            assert!((o - 0.7).abs() < 1e-6, "{o}");
+        }
+        assert_eq!(out[3], 0.0);
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        let dims = [3, 4, 2];
+        let n = 24;
+        let raw: Vec<f32> = (0..n).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
+        let f = DenseGridField::from_raw(dims, raw.clone());
+        let inputs = [0.1, 0.2, 0.3, 0.77, 0.41, 0.6, 0.5, 0.95, 0.05];
+        let d_out = [0.3, -1.1, 0.7];
+        let mut tape = f.new_tape();
+        let mut out = [0.0; 3];
+        f.forward(&inputs, &mut out, &mut tape);
+        let mut grads = vec![0.0; n];
+        f.backward(&mut tape, &d_out, &mut grads);
+        let loss = |p: &[f32]| -> f64 {
+            let g = DenseGridField::from_raw(dims, p.to_vec());
+            let mut o = [0.0; 3];
+            g.eval(&inputs, &mut o, &mut g.new_tape());
+            o.iter().zip(&d_out).map(|(a, b)| (*a as f64) * (*b as f64)).sum()
+        };
+        for i in 0..n {
+            let h = 1e-2;
+            let mut p = raw.clone();
+            p[i] += h;
+            let lp = loss(&p);
+            p[i] -= 2.0 * h;
+            let lm = loss(&p);
+            let fd = (lp - lm) / (2.0 * h as f64);
+            assert!((fd - grads[i] as f64).abs() < 2e-3, "param {i}: fd {fd} vs {}", grads[i]);
+        }
+    }
+}

@@ -1,0 +1,367 @@
+//! Empty-space skipping: an occupancy grid carved from the training images (a visual hull).
+//!
+//! The imaging model is emission only, with non-negative E: a pixel is the integral of E
+//! along its ray. A pixel that measured nothing (below a noise-aware threshold) therefore says
+//! that E vanishes on its whole ray, and a region of space every part of which one camera sees
+//! only through such dark pixels is empty — whatever the other cameras see. Carving those
+//! regions out gives the visual hull of the glowing field.
+//!
+//! # What is skipped and why it is safe
+//! - The grid has `dims` cells over the reconstruction box (box-normalised coordinates, x
+//!   fastest, `(k·ny + j)·nx + i`). A cell is declared empty when, for at least one camera, its
+//!   projection (the bounding box of its 8 projected corners, widened by
+//!   [`OccupancyConfig::margin_px`]) lies wholly inside the image and contains no bright pixel.
+//!   Cells partly outside a camera's image, or behind it, are never carved by that camera.
+//! - The occupied set is then dilated by [`OccupancyConfig::dilate`] cells, so a thin glowing
+//!   structure is never clipped by the coarse grid.
+//! - The model becomes `E(x) = occupied(x) · field(x)`: samples in empty cells are not
+//!   evaluated (E = 0 there), ray segments before the first and after the last occupied cell
+//!   are not sampled at all ([`OccupancyGrid::occupied_span`]), and rays that see no occupied
+//!   cell are dropped from training because they render to exactly 0 whatever the field is —
+//!   their (dark) targets are matched by construction, so they carry no gradient and only add
+//!   a constant to the loss. The trained field is exported through the same mask
+//!   (`crate::trained`), so what was skipped in training is zero in the result.
+//! - What can be lost: emission so faint that every pixel seeing it stays below the threshold
+//!   (`background + noise_sigmas · σ̂`, at least `floor` of the image's range). At that level the
+//!   images carry no usable signal about it anyway.
+//!
+//! Valid for views of one instant (a static scene, or the frames of one time step).
+
+use fluidnerf_core::{Aabb, Camera, Image};
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Settings of the visual-hull carving.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OccupancyConfig {
+    /// Cells along the longest box side (cubic cells). Default 64.
+    pub resolution: usize,
+    /// A pixel is bright above `background + noise_sigmas · σ̂`, with the background the image
+    /// median and σ̂ the robust noise estimate `1.4826 · median(background − p)` over the
+    /// pixels below the median. Default 4.
+    pub noise_sigmas: f32,
+    /// The threshold is at least `background + floor · (max − background)`, which decides for
+    /// noiseless images. Default 0.01.
+    pub floor: f32,
+    /// Widening of each cell's projected footprint, pixels (absorbs lens distortion and
+    /// rounding). Default 1.
+    pub margin_px: f64,
+    /// Cells of dilation of the occupied set after carving. Default 1.
+    pub dilate: usize,
+}
+
+impl Default for OccupancyConfig {
+    fn default() -> Self {
+        OccupancyConfig { resolution: 64, noise_sigmas: 4.0, floor: 0.01, margin_px: 1.0, dilate: 1 }
+    }
+}
+
+/// A boolean grid over the reconstruction box in box-normalised coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OccupancyGrid {
+    dims: [usize; 3],
+    occupied: Vec<bool>,
+}
+
+/// The on-disk form: dimensions and run lengths of alternating empty / occupied cells
+/// (starting with empty), x fastest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OccupancyRecord {
+    pub dims: [usize; 3],
+    pub runs: Vec<u32>,
+}
+
+/// The brightness threshold of one image (see [`OccupancyConfig::noise_sigmas`]).
+pub fn dark_threshold(image: &Image, cfg: &OccupancyConfig) -> f32 {
+    let mut v: Vec<f32> = image.data.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f32::INFINITY;
+    }
+    v.sort_by(f32::total_cmp);
+    let background = v[v.len() / 2];
+    let max = v[v.len() - 1];
+    let mut dev: Vec<f32> = v[..=v.len() / 2].iter().map(|&p| background - p).collect();
+    dev.sort_by(f32::total_cmp);
+    let sigma = 1.4826 * dev[dev.len() / 2];
+    (background + cfg.noise_sigmas * sigma).max(background + cfg.floor * (max - background))
+}
+
+impl OccupancyGrid {
+    /// Every cell occupied.
+    pub fn full(dims: [usize; 3]) -> Self {
+        assert!(dims.iter().all(|&n| n > 0), "OccupancyGrid::full: dims {dims:?} must be positive");
+        OccupancyGrid { dims, occupied: vec![true; dims[0] * dims[1] * dims[2]] }
+    }
+
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Carves the visual hull of `views` (camera and image of one instant) in `aabb`.
+    pub fn from_views(aabb: &Aabb, views: &[(&Camera, &Image)], cfg: &OccupancyConfig) -> Self {
+        let dims = fluidnerf_core::Volume::dims_for(aabb, cfg.resolution.max(1));
+        let [nx, ny, nz] = dims;
+        let mut empty = vec![false; nx * ny * nz];
+        for (camera, image) in views {
+            assert_eq!(
+                (camera.width(), camera.height()),
+                (image.width, image.height),
+                "OccupancyGrid::from_views: image size differs from its camera"
+            );
+            let threshold = dark_threshold(image, cfg);
+            let (w, h) = (image.width, image.height);
+            // Summed-area table of bright pixels, (w + 1) × (h + 1).
+            let mut sat = vec![0u32; (w + 1) * (h + 1)];
+            for row in 0..h {
+                let mut acc = 0u32;
+                for col in 0..w {
+                    acc += u32::from(image.data[row * w + col] > threshold);
+                    sat[(row + 1) * (w + 1) + col + 1] = sat[row * (w + 1) + col + 1] + acc;
+                }
+            }
+            let bright_in = |c0: usize, r0: usize, c1: usize, r1: usize| {
+                sat[(r1 + 1) * (w + 1) + c1 + 1] + sat[r0 * (w + 1) + c0]
+                    - sat[r0 * (w + 1) + c1 + 1]
+                    - sat[(r1 + 1) * (w + 1) + c0]
+            };
+            // Project the lattice of cell corners once.
+            let (lx, ly) = (nx + 1, ny + 1);
+            let size = aabb.size();
+            let corners: Vec<Option<[f64; 2]>> = (0..lx * ly * (nz + 1))
+                .into_par_iter()
+                .map(|q| {
+                    let (i, j, k) = (q % lx, (q / lx) % ly, q / (lx * ly));
+                    let f = DVec3::new(i as f64 / nx as f64, j as f64 / ny as f64, k as f64 / nz as f64);
+                    camera.project(aabb.min + f * size).map(|p| [p.x, p.y])
+                })
+                .collect();
+            empty.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let cell = &mut slab[j * nx + i];
+                        if *cell {
+                            continue;
+                        }
+                        let (mut u0, mut v0, mut u1, mut v1) =
+                            (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+                        let mut visible = true;
+                        for c in 0..8 {
+                            let q = ((k + (c >> 2 & 1)) * ly + j + (c >> 1 & 1)) * lx + i + (c & 1);
+                            match corners[q] {
+                                Some([u, v]) => {
+                                    u0 = u0.min(u);
+                                    v0 = v0.min(v);
+                                    u1 = u1.max(u);
+                                    v1 = v1.max(v);
+                                }
+                                None => visible = false,
+                            }
+                        }
+                        if !visible {
+                            continue;
+                        }
+                        let m = cfg.margin_px;
+                        let (c0, r0) = ((u0 - m + 0.5).floor(), (v0 - m + 0.5).floor());
+                        let (c1, r1) = ((u1 + m + 0.5).floor(), (v1 + m + 0.5).floor());
+                        if c0 < 0.0 || r0 < 0.0 || c1 > (w - 1) as f64 || r1 > (h - 1) as f64 {
+                            continue;
+                        }
+                        if bright_in(c0 as usize, r0 as usize, c1 as usize, r1 as usize) == 0 {
+                            *cell = true;
+                        }
+                    }
+                }
+            });
+        }
+        let mut grid = OccupancyGrid { dims, occupied: empty.iter().map(|&e| !e).collect() };
+        grid.dilate(cfg.dilate);
+        grid
+    }
+
+    /// Grows the occupied set by `cells` (26-neighbourhood, repeated).
+    pub fn dilate(&mut self, cells: usize) {
+        let [nx, ny, nz] = self.dims;
+        for _ in 0..cells {
+            let src = self.occupied.clone();
+            for k in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        if src[(k * ny + j) * nx + i] {
+                            continue;
+                        }
+                        let mut any = false;
+                        for dk in k.saturating_sub(1)..=(k + 1).min(nz - 1) {
+                            for dj in j.saturating_sub(1)..=(j + 1).min(ny - 1) {
+                                for di in i.saturating_sub(1)..=(i + 1).min(nx - 1) {
+                                    any |= src[(dk * ny + dj) * nx + di];
+                                }
+                            }
+                        }
+                        self.occupied[(k * ny + j) * nx + i] = any;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Fraction of occupied cells.
+    pub fn occupied_fraction(&self) -> f64 {
+        self.occupied.iter().filter(|&&o| o).count() as f64 / self.occupied.len() as f64
+    }
+
+    /// Whether the cell holding the box-normalised point `u` is occupied (false outside the box).
+    #[inline]
+    pub fn is_occupied(&self, u: [f32; 3]) -> bool {
+        let mut idx = [0usize; 3];
+        for a in 0..3 {
+            if !(0.0..=1.0).contains(&u[a]) {
+                return false;
+            }
+            idx[a] = ((u[a] * self.dims[a] as f32) as usize).min(self.dims[a] - 1);
+        }
+        self.occupied[(idx[2] * self.dims[1] + idx[1]) * self.dims[0] + idx[0]]
+    }
+
+    /// The part `[s0, s1] ⊆ [near, far]` of the ray `u(s) = origin + s · dir` (box-normalised,
+    /// see `crate::sampling`) from its first to its last occupied cell, or `None` if it sees
+    /// none. Marches at half a cell and widens the span by one step on each side.
+    pub fn occupied_span(&self, origin: [f32; 3], dir: [f32; 3], near: f32, far: f32) -> Option<(f32, f32)> {
+        let rate = (0..3).map(|a| dir[a].abs() * self.dims[a] as f32).fold(0.0f32, f32::max);
+        if rate.is_nan() || rate <= 0.0 || far.is_nan() || far <= near {
+            return None;
+        }
+        let step = 0.5 / rate;
+        let n = ((far - near) / step).ceil() as usize + 1;
+        let mut first = None;
+        let mut last = near;
+        for q in 0..n {
+            let s = (near + q as f32 * step).min(far);
+            let u = [origin[0] + s * dir[0], origin[1] + s * dir[1], origin[2] + s * dir[2]];
+            let u = u.map(|c| c.clamp(0.0, 1.0));
+            if self.is_occupied(u) {
+                first.get_or_insert(s);
+                last = s;
+            }
+        }
+        first.map(|f| ((f - step).max(near), (last + step).min(far)))
+    }
+
+    /// Run-length form for saving next to a trained field.
+    pub fn to_record(&self) -> OccupancyRecord {
+        let mut runs = Vec::new();
+        let mut current = false;
+        let mut len = 0u32;
+        for &o in &self.occupied {
+            if o == current {
+                len += 1;
+            } else {
+                runs.push(len);
+                current = o;
+                len = 1;
+            }
+        }
+        runs.push(len);
+        OccupancyRecord { dims: self.dims, runs }
+    }
+
+    /// Inverse of [`OccupancyGrid::to_record`]; `None` if the runs do not fill the grid.
+    pub fn from_record(record: &OccupancyRecord) -> Option<Self> {
+        let n = record.dims.iter().product::<usize>();
+        if n == 0 {
+            return None;
+        }
+        let mut occupied = Vec::with_capacity(n);
+        let mut current = false;
+        for &r in &record.runs {
+            if occupied.len() + r as usize > n {
+                return None;
+            }
+            occupied.extend(std::iter::repeat_n(current, r as usize));
+            current = !current;
+        }
+        (occupied.len() == n).then_some(OccupancyGrid { dims: record.dims, occupied })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::{render_image, Intrinsics, RenderSettings};
+    use glam::Vec3;
+
+    fn ring(n: usize, px: u32) -> Vec<Camera> {
+        let k = Intrinsics {
+            width: px,
+            height: px,
+            fx: px as f64 * 1.6,
+            fy: px as f64 * 1.6,
+            cx: (px as f64 - 1.0) / 2.0,
+            cy: (px as f64 - 1.0) / 2.0,
+            skew: 0.0,
+        };
+        (0..n)
+            .map(|c| {
+                let a = std::f64::consts::PI * c as f64 / n as f64;
+                Camera::look_at(k, DVec3::new(0.0, 5.0 * a.cos(), 5.0 * a.sin()), DVec3::ZERO, DVec3::X)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn hull_keeps_the_ball_and_carves_the_corners() {
+        let aabb = Aabb::cube(DVec3::ZERO, 2.0);
+        let ball = |p: Vec3, _t: f64| if (p - Vec3::new(0.2, 0.0, 0.1)).length() < 0.45 { 1.0f32 } else { 0.0 };
+        let cams = ring(6, 32);
+        let settings = RenderSettings { supersample: 2, ..Default::default() };
+        let imgs: Vec<Image> = cams.iter().map(|c| render_image(&ball, c, &aabb, &settings).expect("render")).collect();
+        let views: Vec<(&Camera, &Image)> = cams.iter().zip(&imgs).collect();
+        let cfg = OccupancyConfig { resolution: 16, ..Default::default() };
+        let grid = OccupancyGrid::from_views(&aabb, &views, &cfg);
+        // Every point of the ball is kept.
+        for q in 0..2000 {
+            let f = |m: usize| ((q * m) % 1000) as f32 / 1000.0 * 2.0 - 1.0;
+            let p = Vec3::new(f(7), f(13), f(31)) * 0.45;
+            if p.length() < 0.45 {
+                let x = p + Vec3::new(0.2, 0.0, 0.1);
+                let u = aabb.to_unit(x.as_dvec3()).as_vec3();
+                assert!(grid.is_occupied([u.x, u.y, u.z]), "ball point {x} carved away");
+            }
+        }
+        let frac = grid.occupied_fraction();
+        assert!(frac < 0.35, "the hull should be much smaller than the box, got {frac}");
+        // A corner of the box far from the ball is empty.
+        assert!(!grid.is_occupied([0.02, 0.02, 0.98]));
+        // Round trip through the record.
+        assert_eq!(OccupancyGrid::from_record(&grid.to_record()).as_ref(), Some(&grid));
+    }
+
+    #[test]
+    fn noise_threshold_tracks_noise() {
+        let mut img = Image::zeros(40, 40);
+        // Deterministic ±0.05 "noise" around 0 and a bright square.
+        for (i, v) in img.data.iter_mut().enumerate() {
+            *v = ((i * 7919 % 101) as f32 / 100.0 - 0.5) * 0.1;
+        }
+        for r in 10..20 {
+            for c in 10..20 {
+                img.set(c, r, 2.0);
+            }
+        }
+        let t = dark_threshold(&img, &OccupancyConfig::default());
+        assert!(t > 0.05 && t < 0.5, "threshold {t}");
+    }
+
+    #[test]
+    fn span_covers_occupied_cells_only() {
+        let mut grid = OccupancyGrid { dims: [10, 10, 10], occupied: vec![false; 1000] };
+        grid.occupied[(5 * 10 + 5) * 10 + 5] = true;
+        // A ray along x through the centre of cell (5, 5, 5).
+        let span = grid.occupied_span([-1.0, 0.55, 0.55], [1.0, 0.0, 0.0], 1.0, 2.0).expect("hit");
+        assert!(span.0 <= 1.5 && span.0 >= 1.4, "{span:?}");
+        assert!(span.1 >= 1.599 && span.1 <= 1.7, "{span:?}");
+        assert!(grid.occupied_span([-1.0, 0.15, 0.55], [1.0, 0.0, 0.0], 1.0, 2.0).is_none());
+    }
+}

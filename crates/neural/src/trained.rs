@@ -1,0 +1,260 @@
+//! Trained fields in world coordinates, and the named configurations of a reconstruction.
+//!
+//! A run directory written by `fluidnerf reconstruct --method fluidnerf|fast` holds
+//! - `model.json`: [`ModelRecord`] — the field's configuration, its input dimension and its
+//!   [`FieldMeta`] (box, value scale, time scale, empty-space mask);
+//! - `weights.safetensors`: the parameters, one tensor per [`TrainableField::tensors`] entry.
+//!
+//! [`load_trained`] turns such a directory into a thread-safe [`ScalarField`] that can be
+//! sampled at any resolution ([`fluidnerf_core::Volume::from_field`]) or rendered
+//! ([`fluidnerf_core::render_image`]).
+
+use std::path::Path;
+
+use fluidnerf_core::{Aabb, ScalarField};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::dense::DenseGridField;
+use crate::mlp::{Activation, MlpConfig, MlpField};
+use crate::occupancy::{OccupancyConfig, OccupancyGrid};
+use crate::train::{FieldMeta, TrainConfig};
+use crate::{NeuralError, TrainableField};
+
+/// Rows per batch handed to the field when sampling in world coordinates.
+const EVAL_CHUNK: usize = 4096;
+
+/// Settings of the dense voxel-grid field ([`DenseGridField`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DenseConfig {
+    /// Cells along the longest box side. Default 64.
+    pub resolution: usize,
+    /// Initial value of every cell (field units, see [`FieldMeta::value_scale`]). Default 0.05.
+    pub initial: f32,
+}
+
+impl Default for DenseConfig {
+    fn default() -> Self {
+        DenseConfig { resolution: 64, initial: 0.05 }
+    }
+}
+
+/// Which representation is trained.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub enum FieldConfig {
+    /// Positional encoding + MLP (the dissertation's field).
+    Mlp(MlpConfig),
+    /// A trilinear voxel grid trained through the renderer.
+    Dense(DenseConfig),
+}
+
+impl Default for FieldConfig {
+    fn default() -> Self {
+        FieldConfig::Mlp(MlpConfig::default())
+    }
+}
+
+/// Everything a neural reconstruction is configured by: a named preset, then overrides.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NeuralConfig {
+    pub field: FieldConfig,
+    pub train: TrainConfig,
+}
+
+impl Default for NeuralConfig {
+    fn default() -> Self {
+        NeuralConfig::preset("faithful").unwrap_or_else(|| unreachable!())
+    }
+}
+
+/// Names accepted by [`NeuralConfig::preset`].
+pub const PRESETS: [&str; 5] = ["faithful", "ch7", "experimental", "fast", "dense"];
+
+impl NeuralConfig {
+    /// A named configuration:
+    /// - `faithful`: Table 5.1 — D 8, H 256, L 8, ReLU, N_c = N_f = 128, 1024 px/img, Adam
+    ///   5e-4 → 5e-5 over 25 000 iterations, the §5.1.5 stopping rule;
+    /// - `ch7`: as `faithful` with the chapter-7 optimum N_c = N_f = 64;
+    /// - `experimental`: Table 8.3 — D 8, H 256, L 2, Swish, N_c = N_f = 64;
+    /// - `fast`: the multiresolution grid field with a tiny MLP and empty-space skipping
+    ///   (until the grid encoding is available: a dense grid with skipping);
+    /// - `dense`: a 64³ voxel grid trained through the renderer, with empty-space skipping.
+    pub fn preset(name: &str) -> Option<Self> {
+        let faithful = NeuralConfig { field: FieldConfig::Mlp(MlpConfig::table_5_1()), train: TrainConfig::default() };
+        match name {
+            "faithful" => Some(faithful),
+            "ch7" => Some(NeuralConfig {
+                train: TrainConfig { coarse_samples: 64, fine_samples: 64, ..faithful.train },
+                ..faithful
+            }),
+            "experimental" => Some(NeuralConfig {
+                field: FieldConfig::Mlp(MlpConfig {
+                    space_freqs: 2,
+                    activation: Activation::Swish,
+                    ..MlpConfig::table_5_1()
+                }),
+                train: TrainConfig { coarse_samples: 64, fine_samples: 64, ..faithful.train },
+            }),
+            "fast" | "dense" => Some(NeuralConfig {
+                field: FieldConfig::Dense(DenseConfig::default()),
+                train: TrainConfig {
+                    coarse_samples: 96,
+                    fine_samples: 0,
+                    rays_per_image: 1024,
+                    schedule: crate::optim::LrSchedule { initial: 2e-2, at_decay_iters: 2e-3, decay_iters: 2000 },
+                    max_iterations: 2000,
+                    stop: crate::train::StopRule { smoothing: 50, window: 300, tolerance: 0.01 },
+                    occupancy: Some(OccupancyConfig::default()),
+                    ..faithful.train
+                },
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// What `model.json` holds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelRecord {
+    pub field: FieldConfig,
+    /// 3 for E(x), 4 for E(x, t).
+    pub input_dim: usize,
+    pub meta: FieldMeta,
+}
+
+/// A trained field seen in world coordinates and physical units (borrowing the field).
+#[derive(Debug)]
+pub struct WorldField<'a, F> {
+    pub field: &'a F,
+    pub meta: &'a FieldMeta,
+    pub occupancy: Option<&'a OccupancyGrid>,
+}
+
+impl<F: TrainableField> ScalarField for WorldField<'_, F> {
+    fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        assert_eq!(points.len(), out.len(), "WorldField::eval: points and out differ in length");
+        let dim = self.field.input_dim();
+        let min = self.meta.aabb.min.as_vec3();
+        let inv = (1.0 / self.meta.aabb.size()).as_vec3();
+        let t = (time / self.meta.time_step) as f32;
+        let scale = self.meta.value_scale as f32;
+        let mut tape = self.field.new_tape();
+        let mut inputs = Vec::with_capacity(EVAL_CHUNK * dim);
+        let mut rows = Vec::with_capacity(EVAL_CHUNK);
+        let mut vals = vec![0.0f32; EVAL_CHUNK];
+        for (pts, outs) in points.chunks(EVAL_CHUNK).zip(out.chunks_mut(EVAL_CHUNK)) {
+            inputs.clear();
+            rows.clear();
+            outs.fill(0.0);
+            for (i, p) in pts.iter().enumerate() {
+                let u = (*p - min) * inv;
+                let u = [u.x, u.y, u.z];
+                if u.iter().any(|c| !(0.0..=1.0).contains(c)) || self.occupancy.is_some_and(|g| !g.is_occupied(u)) {
+                    continue;
+                }
+                inputs.extend_from_slice(&u);
+                if dim == 4 {
+                    inputs.push(t);
+                }
+                rows.push(i);
+            }
+            if rows.is_empty() {
+                continue;
+            }
+            self.field.eval(&inputs, &mut vals[..rows.len()], &mut tape);
+            for (&i, &v) in rows.iter().zip(&vals) {
+                outs[i] = v * scale;
+            }
+        }
+    }
+}
+
+/// An owned trained field in world coordinates (what [`load_trained`] returns).
+#[derive(Debug)]
+pub struct TrainedField<F> {
+    pub field: F,
+    pub meta: FieldMeta,
+    pub occupancy: Option<OccupancyGrid>,
+}
+
+impl<F: TrainableField> TrainedField<F> {
+    /// Wraps `field`, decoding the mask stored in `meta`.
+    pub fn new(field: F, meta: FieldMeta) -> Result<Self, NeuralError> {
+        let occupancy = match &meta.occupancy {
+            Some(rec) => Some(
+                OccupancyGrid::from_record(rec)
+                    .ok_or_else(|| NeuralError::invalid("occupancy record", "run lengths do not fill the grid"))?,
+            ),
+            None => None,
+        };
+        Ok(TrainedField { field, meta, occupancy })
+    }
+
+    pub fn view(&self) -> WorldField<'_, F> {
+        WorldField { field: &self.field, meta: &self.meta, occupancy: self.occupancy.as_ref() }
+    }
+}
+
+impl<F: TrainableField> ScalarField for TrainedField<F> {
+    fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.view().eval(points, time, out);
+    }
+}
+
+/// Builds the (untrained) field `config` describes, for `input_dim` inputs, seeded.
+pub fn build_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: u64) -> Result<AnyField, NeuralError> {
+    match config {
+        FieldConfig::Mlp(c) => Ok(AnyField::Mlp(MlpField::new(c, input_dim, seed)?)),
+        FieldConfig::Dense(c) => {
+            if input_dim != 3 {
+                return Err(NeuralError::invalid("dense field", "only E(x) (3 inputs) is supported"));
+            }
+            if c.resolution == 0 || c.initial.is_nan() || c.initial <= 0.0 {
+                return Err(NeuralError::invalid("dense field", "resolution and initial value must be positive"));
+            }
+            let dims = fluidnerf_core::Volume::dims_for(aabb, c.resolution);
+            Ok(AnyField::Dense(DenseGridField::new(dims, c.initial)))
+        }
+    }
+}
+
+/// One of the field types, chosen at run time from a [`FieldConfig`].
+#[derive(Debug)]
+pub enum AnyField {
+    Mlp(MlpField),
+    Dense(DenseGridField),
+}
+
+/// Calls `$body` with `$f` bound to the concrete field inside an [`AnyField`].
+#[macro_export]
+macro_rules! with_field {
+    ($any:expr, $f:ident => $body:expr) => {
+        match $any {
+            $crate::trained::AnyField::Mlp($f) => $body,
+            $crate::trained::AnyField::Dense($f) => $body,
+        }
+    };
+}
+
+/// Reads `run_dir/model.json` and `run_dir/weights.safetensors` and returns the trained
+/// field in world coordinates with its box.
+pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync>, Aabb), NeuralError> {
+    let model_path = run_dir.join("model.json");
+    let text =
+        std::fs::read_to_string(&model_path).map_err(|source| NeuralError::Io { path: model_path.clone(), source })?;
+    let record: ModelRecord = serde_json::from_str(&text)
+        .map_err(|e| NeuralError::checkpoint(&model_path, format!("malformed model description: {e}")))?;
+    let aabb = record.meta.aabb;
+    let mut field = build_field(&record.field, &aabb, record.input_dim, 0)?;
+    let weights = run_dir.join("weights.safetensors");
+    with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
+    let boxed: Box<dyn ScalarField + Send + Sync> = match field {
+        AnyField::Mlp(f) => Box::new(TrainedField::new(f, record.meta)?),
+        AnyField::Dense(f) => Box::new(TrainedField::new(f, record.meta)?),
+    };
+    Ok((boxed, aabb))
+}

@@ -1,0 +1,132 @@
+//! Weights and training checkpoints as safetensors (little-endian f32, one tensor per entry of
+//! [`TrainableField::tensors`]).
+//!
+//! - Weights: the field's tensors under their own names: the compact result of a run.
+//! - Checkpoint: the same, plus the Adam moments as `adam.m.<name>` / `adam.v.<name>`, with
+//!   the Adam step count, iteration, loss histories and training time in the safetensors
+//!   metadata (`"learner"`, JSON), so [`crate::train::train`] continues exactly where it
+//!   stopped.
+//!
+//! Functions return bytes / read paths; writing files atomically is the caller's business.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use safetensors::tensor::{Dtype, TensorView};
+use safetensors::SafeTensors;
+use serde::{Deserialize, Serialize};
+
+use crate::train::Learner;
+use crate::{NeuralError, TrainableField};
+
+fn as_bytes(v: &[f32]) -> &[u8] {
+    bytemuck::cast_slice(v)
+}
+
+fn serialise(
+    tensors: Vec<(String, Vec<usize>, &[f32])>,
+    metadata: Option<HashMap<String, String>>,
+) -> Result<Vec<u8>, NeuralError> {
+    let views = tensors
+        .into_iter()
+        .map(|(name, shape, data)| {
+            TensorView::new(Dtype::F32, shape, as_bytes(data))
+                .map(|v| (name, v))
+                .map_err(|e| NeuralError::invalid("tensor", e.to_string()))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    safetensors::serialize(views, metadata).map_err(|e| NeuralError::invalid("safetensors", e.to_string()))
+}
+
+/// The field's parameters as a safetensors file.
+pub fn weights_bytes<F: TrainableField>(field: &F) -> Result<Vec<u8>, NeuralError> {
+    let p = field.params();
+    let tensors = field.tensors().into_iter().map(|(n, s, r)| (n, s, &p[r])).collect();
+    serialise(tensors, None)
+}
+
+fn read(path: &Path) -> Result<Vec<u8>, NeuralError> {
+    std::fs::read(path).map_err(|source| NeuralError::Io { path: path.to_path_buf(), source })
+}
+
+fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: &mut [f32]) -> Result<(), NeuralError> {
+    let t = st.tensor(name).map_err(|e| NeuralError::checkpoint(path, format!("tensor {name}: {e}")))?;
+    if t.dtype() != Dtype::F32 || t.shape() != shape {
+        return Err(NeuralError::checkpoint(
+            path,
+            format!("tensor {name} is {:?} {:?}, the field expects F32 {shape:?}", t.dtype(), t.shape()),
+        ));
+    }
+    for (d, b) in dst.iter_mut().zip(t.data().chunks_exact(4)) {
+        *d = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+    }
+    Ok(())
+}
+
+/// Loads weights written by [`weights_bytes`] (or a checkpoint) into `field`, which must have
+/// the same architecture.
+pub fn load_weights<F: TrainableField>(path: &Path, field: &mut F) -> Result<(), NeuralError> {
+    let bytes = read(path)?;
+    let st = SafeTensors::deserialize(&bytes).map_err(|e| NeuralError::checkpoint(path, e.to_string()))?;
+    for (name, shape, range) in field.tensors() {
+        copy_tensor(&st, path, &name, &shape, &mut field.params_mut()[range])?;
+    }
+    Ok(())
+}
+
+#[derive(Serialize, Deserialize)]
+struct LearnerMeta {
+    iteration: usize,
+    adam_step: u64,
+    losses: Vec<f32>,
+    holdout_losses: Vec<(usize, f32)>,
+    train_time_s: f64,
+}
+
+/// A resumable checkpoint of `learner` (weights, Adam moments, histories).
+pub fn checkpoint_bytes<F: TrainableField>(learner: &Learner<F>) -> Result<Vec<u8>, NeuralError> {
+    let p = learner.field.params();
+    let mut tensors = Vec::new();
+    for (n, s, r) in learner.field.tensors() {
+        tensors.push((format!("adam.m.{n}"), s.clone(), &learner.adam.m[r.clone()]));
+        tensors.push((format!("adam.v.{n}"), s.clone(), &learner.adam.v[r.clone()]));
+        tensors.push((n, s, &p[r]));
+    }
+    let meta = LearnerMeta {
+        iteration: learner.iteration,
+        adam_step: learner.adam.step,
+        losses: learner.losses.clone(),
+        holdout_losses: learner.holdout_losses.clone(),
+        train_time_s: learner.train_time_s,
+    };
+    let json = serde_json::to_string(&meta).map_err(|e| NeuralError::invalid("checkpoint", e.to_string()))?;
+    serialise(tensors, Some(HashMap::from([("learner".to_string(), json)])))
+}
+
+/// Restores `learner` (whose field has the checkpoint's architecture) from `path`.
+pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>) -> Result<(), NeuralError> {
+    let bytes = read(path)?;
+    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| NeuralError::checkpoint(path, e.to_string()))?;
+    let st = SafeTensors::deserialize(&bytes).map_err(|e| NeuralError::checkpoint(path, e.to_string()))?;
+    let json = header
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get("learner"))
+        .ok_or_else(|| NeuralError::checkpoint(path, "no training state (weights only?)"))?;
+    let meta: LearnerMeta =
+        serde_json::from_str(json).map_err(|e| NeuralError::checkpoint(path, format!("training state: {e}")))?;
+    let n = learner.field.num_params();
+    learner.adam.m.resize(n, 0.0);
+    learner.adam.v.resize(n, 0.0);
+    for (name, shape, range) in learner.field.tensors() {
+        copy_tensor(&st, path, &name, &shape, &mut learner.field.params_mut()[range.clone()])?;
+        copy_tensor(&st, path, &format!("adam.m.{name}"), &shape, &mut learner.adam.m[range.clone()])?;
+        copy_tensor(&st, path, &format!("adam.v.{name}"), &shape, &mut learner.adam.v[range])?;
+    }
+    learner.adam.step = meta.adam_step;
+    learner.iteration = meta.iteration;
+    learner.losses = meta.losses;
+    learner.holdout_losses = meta.holdout_losses;
+    learner.train_time_s = meta.train_time_s;
+    Ok(())
+}
