@@ -1,0 +1,35 @@
+//! The error type of the synth crate.
+
+/// What can go wrong while generating a synthetic data set. Every variant is detected before
+/// the expensive work starts, except [`SynthError::Cancelled`] and errors from `fluidnerf-core`.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    /// A setting is out of its valid range.
+    #[error("invalid setting `{setting}`: {problem}")]
+    Invalid { setting: String, problem: String },
+    /// A camera of the rig does not see the reconstruction box at all.
+    #[error("camera {index} ({name}) does not see the reconstruction box: place the rig around the box or enlarge the field of view")]
+    CameraMissesBox { index: usize, name: String },
+    /// The data set would not fit in memory.
+    #[error(
+        "these settings need about {needed_mib} MiB of memory but only {available_mib} MiB are available; \
+         lower the resolution, the number of cameras or the number of time steps"
+    )]
+    OutOfMemory { needed_mib: u64, available_mib: u64 },
+    /// No preset of this name.
+    #[error("unknown preset `{0}`; see the list of presets")]
+    UnknownPreset(String),
+    /// The progress callback asked to stop.
+    #[error("cancelled")]
+    Cancelled,
+    /// Geometry or camera errors from `fluidnerf-core`.
+    #[error(transparent)]
+    Core(#[from] fluidnerf_core::CoreError),
+}
+
+impl SynthError {
+    /// Shorthand for [`SynthError::Invalid`].
+    pub fn invalid(setting: impl Into<String>, problem: impl Into<String>) -> Self {
+        SynthError::Invalid { setting: setting.into(), problem: problem.into() }
+    }
+}

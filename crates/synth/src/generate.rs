@@ -1,0 +1,340 @@
+//! The whole generator: settings → truth volumes, cameras, images, sensor counts.
+//!
+//! [`generate`] validates every setting and estimates the memory it needs before any work
+//! starts, then voxelises the phantom at each time, forms every camera's image with the chosen
+//! model (from the voxel grid, like the dissertation, or from the continuous phantom), and
+//! exposes the images on the sensor. It reports progress through a callback and never prints;
+//! writing files is the caller's business ([`Synthesis::scene`] gives the scene description
+//! with the file names it expects).
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, Frame, Image, Scene, TruthRef, Volume};
+use serde::{Deserialize, Serialize};
+
+use crate::image::{pinhole, thin_lens, Emitters, ImageModel};
+use crate::phantom::{Phantom, PhantomKind, PhantomSettings};
+use crate::rig::{LensSettings, RigCamera, RigSettings};
+use crate::sensor::SensorSettings;
+use crate::SynthError;
+
+/// Everything that defines a synthetic data set. Serialised next to the outputs, it reruns the
+/// generation exactly.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SynthSettings {
+    pub phantom: PhantomSettings,
+    /// Reconstruction box, mm. Default: the 40 mm cube centred at the origin.
+    pub aabb: Aabb,
+    /// Truth voxels along the box's longest side (cubic voxels). Default 128.
+    pub resolution: usize,
+    /// Frame times t* for time-resolved phantoms (`jet-tr`; default 14, 15, 16); must be empty
+    /// for static ones.
+    pub times: Vec<f64>,
+    pub rig: RigSettings,
+    pub lens: LensSettings,
+    pub image: ImageModel,
+    pub sensor: SensorSettings,
+    /// Seed of every random choice (phantom, jitter, rays, noise). Default 0.
+    pub seed: u64,
+}
+
+impl Default for SynthSettings {
+    fn default() -> Self {
+        SynthSettings {
+            phantom: PhantomSettings::default(),
+            aabb: Aabb::cube(DVec3::ZERO, 40.0),
+            resolution: 128,
+            times: Vec::new(),
+            rig: RigSettings::default(),
+            lens: LensSettings { resolution: [256, 256], ..Default::default() },
+            image: ImageModel::default(),
+            sensor: SensorSettings::default(),
+            seed: 0,
+        }
+    }
+}
+
+impl SynthSettings {
+    /// Checks every setting that needs no geometry (the rig's view of the box is checked by
+    /// [`generate`]).
+    pub fn validate(&self) -> Result<(), SynthError> {
+        self.phantom.validate()?;
+        self.aabb.validate()?;
+        if self.phantom.kind != PhantomKind::Volume && !(1..=4096).contains(&self.resolution) {
+            return Err(SynthError::invalid("resolution", format!("must be in 1..=4096, got {}", self.resolution)));
+        }
+        if self.phantom.kind.is_time_resolved() {
+            if self.times.is_empty() {
+                return Err(SynthError::invalid("times", "a time-resolved phantom needs at least one time"));
+            }
+        } else if !self.times.is_empty() {
+            return Err(SynthError::invalid(
+                "times",
+                format!("the {:?} phantom is static; give no times", self.phantom.kind),
+            ));
+        }
+        if let Some(t) = self.times.iter().find(|t| !t.is_finite()) {
+            return Err(SynthError::invalid("times", format!("must be finite, got {t}")));
+        }
+        self.rig.validate()?;
+        self.lens.validate()?;
+        self.image.validate()?;
+        self.sensor.validate()?;
+        Ok(())
+    }
+
+    /// Time steps: `[None]` for static phantoms.
+    pub fn time_steps(&self) -> Vec<Option<f64>> {
+        if self.times.is_empty() {
+            vec![None]
+        } else {
+            self.times.iter().map(|&t| Some(t)).collect()
+        }
+    }
+
+    /// Truth grid dimensions for a box.
+    pub fn truth_dims(&self, aabb: &Aabb) -> [usize; 3] {
+        Volume::dims_for(aabb, self.resolution)
+    }
+
+    /// Peak memory of [`generate`] in bytes (truth volumes, emitters, images and per-thread
+    /// accumulators), for a truth grid of `voxels` cells.
+    pub fn memory_bytes(&self, voxels: u64) -> u64 {
+        let times = self.time_steps().len() as u64;
+        let [w, h] = self.lens.resolution;
+        let px = w as u64 * h as u64;
+        let frames = self.rig.count() as u64 * times;
+        let threads = rayon::current_num_threads() as u64;
+        let mut bytes = times * voxels * 4 + 2 * frames * px * 4;
+        if let ImageModel::ThinLens(_) = self.image {
+            bytes += voxels * 16 + 4 * threads * px * 8;
+        }
+        bytes
+    }
+}
+
+/// Memory the system can still hand out, from `/proc/meminfo` (`None` where unknown).
+pub fn available_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// One image of the data set.
+#[derive(Clone, Debug)]
+pub struct SynthFrame {
+    /// Index into [`Synthesis::cameras`].
+    pub camera: usize,
+    /// Index into [`Synthesis::truth`] (the time step).
+    pub time_index: usize,
+    pub time: Option<f64>,
+    /// The noiseless image, `∫E ds` (field units × mm).
+    pub clean: Image,
+    /// Sensor counts (integers stored as f32): `≈ intensity_scale · clean + dark_offset`.
+    pub counts: Image,
+}
+
+/// Work counters of a run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SynthStats {
+    /// Rays traced (sub-pixel rays for the pinhole, voxel rays for the thin lens).
+    pub rays: u64,
+    /// Non-zero voxels cast by the thin lens, summed over time steps.
+    pub emitters: u64,
+    pub truth_seconds: f64,
+    pub image_seconds: f64,
+    pub sensor_seconds: f64,
+}
+
+/// A generated data set, in memory.
+#[derive(Clone, Debug)]
+pub struct Synthesis {
+    pub settings: SynthSettings,
+    pub aabb: Aabb,
+    pub cameras: Vec<RigCamera>,
+    /// Ground truth per time step.
+    pub truth: Vec<(Option<f64>, Volume)>,
+    pub frames: Vec<SynthFrame>,
+    /// Counts per unit of `∫E ds` (see [`crate::sensor`]).
+    pub intensity_scale: f64,
+    pub stats: SynthStats,
+}
+
+impl Synthesis {
+    /// Relative path of a frame's image: `images/<camera>.png`, or `images/<camera>_t<k>.png`
+    /// with `k` the time-step index for time-resolved data.
+    pub fn image_path(&self, frame: &SynthFrame) -> PathBuf {
+        let name = &self.cameras[frame.camera].name;
+        if frame.time.is_some() {
+            PathBuf::from(format!("images/{name}_t{:02}.png", frame.time_index))
+        } else {
+            PathBuf::from(format!("images/{name}.png"))
+        }
+    }
+
+    /// Relative path of a truth volume: `truth/truth.npy` or `truth/truth_t<k>.npy`.
+    pub fn truth_path(&self, time_index: usize) -> PathBuf {
+        if self.truth[time_index].0.is_some() {
+            PathBuf::from(format!("truth/truth_t{time_index:02}.npy"))
+        } else {
+            PathBuf::from("truth/truth.npy")
+        }
+    }
+
+    /// The scene description (mm, paths as from [`Synthesis::image_path`] and
+    /// [`Synthesis::truth_path`], relative to `root`).
+    pub fn scene(&self, root: PathBuf) -> Scene {
+        let frames = self
+            .frames
+            .iter()
+            .map(|f| {
+                let cam = &self.cameras[f.camera];
+                Frame {
+                    camera: cam.camera.clone(),
+                    file_path: self.image_path(f),
+                    time: f.time,
+                    camera_name: Some(cam.name.clone()),
+                    holdout: cam.holdout,
+                }
+            })
+            .collect();
+        let truth =
+            (0..self.truth.len()).map(|k| TruthRef { time: self.truth[k].0, file_path: self.truth_path(k) }).collect();
+        Scene { root, aabb: self.aabb, units: "mm".into(), intensity_scale: self.intensity_scale, frames, truth }
+    }
+}
+
+/// Progress of [`generate`]: `done` of `total` steps (one per truth volume and one per image).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Progress {
+    pub stage: &'static str,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// Generates a data set. `volume` is the ground truth for [`PhantomKind::Volume`] (its box
+/// replaces `settings.aabb`). `on_progress` may stop the run with `ControlFlow::Break`.
+pub fn generate(
+    settings: &SynthSettings,
+    volume: Option<Volume>,
+    mut on_progress: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<Synthesis, SynthError> {
+    settings.validate()?;
+    let aabb = match (&volume, settings.phantom.kind) {
+        (Some(v), PhantomKind::Volume) => v.aabb,
+        (None, PhantomKind::Volume) => {
+            return Err(SynthError::invalid("phantom.kind", "`volume` needs a ground-truth volume"))
+        }
+        _ => settings.aabb,
+    };
+    let dims = match (&volume, settings.phantom.kind) {
+        (Some(v), PhantomKind::Volume) => v.dims,
+        _ => settings.truth_dims(&aabb),
+    };
+    let voxels = dims.iter().map(|&n| n as u64).product::<u64>();
+    let needed = settings.memory_bytes(voxels);
+    if let Some(avail) = available_memory_bytes() {
+        if needed > avail {
+            return Err(SynthError::OutOfMemory { needed_mib: needed >> 20, available_mib: avail >> 20 });
+        }
+    }
+    let cameras = settings.rig.build(&settings.lens, &aabb, settings.seed)?;
+    let phantom = Phantom::build(&settings.phantom, &aabb, settings.seed, volume)?;
+    let steps = settings.time_steps();
+    let total = steps.len() * (1 + cameras.len());
+    let mut done = 0usize;
+    let mut tick = |stage: &'static str, done: &mut usize| -> Result<(), SynthError> {
+        *done += 1;
+        match on_progress(&Progress { stage, done: *done, total }) {
+            ControlFlow::Continue(()) => Ok(()),
+            ControlFlow::Break(()) => Err(SynthError::Cancelled),
+        }
+    };
+    let mut stats = SynthStats::default();
+    let mut truth = Vec::with_capacity(steps.len());
+    let mut frames = Vec::with_capacity(total);
+    for (ti, &time) in steps.iter().enumerate() {
+        let t0 = std::time::Instant::now();
+        let vol = match &phantom {
+            Phantom::Volume(v) => v.clone(),
+            p => Volume::from_field(dims, aabb, p, time.unwrap_or(0.0)),
+        };
+        stats.truth_seconds += t0.elapsed().as_secs_f64();
+        tick("truth", &mut done)?;
+        let t0 = std::time::Instant::now();
+        let emitters = match &settings.image {
+            ImageModel::ThinLens(s) => {
+                let e = Emitters::from_volume(&vol, s.threshold);
+                stats.emitters += e.len() as u64;
+                Some(e)
+            }
+            ImageModel::Pinhole(_) => None,
+        };
+        stats.image_seconds += t0.elapsed().as_secs_f64();
+        for (ci, cam) in cameras.iter().enumerate() {
+            let t0 = std::time::Instant::now();
+            let stream = (ti * cameras.len() + ci) as u64;
+            let clean = match &settings.image {
+                ImageModel::ThinLens(s) => {
+                    let e = emitters
+                        .as_ref()
+                        .ok_or_else(|| SynthError::invalid("image", "no emitters for the thin-lens model"))?;
+                    let (img, rays) =
+                        thin_lens::render(e, &cam.camera, s, 1.0, thin_lens::mix_seed(settings.seed, stream))?;
+                    stats.rays += rays;
+                    img
+                }
+                ImageModel::Pinhole(s) if s.analytic => {
+                    let step = s.step_fraction * vol.spacing().min_element();
+                    let img = pinhole::render_field(
+                        &phantom,
+                        &cam.camera,
+                        &aabb,
+                        s.supersample,
+                        step,
+                        time.unwrap_or(0.0),
+                        1.0,
+                    )?;
+                    stats.rays += (img.width * img.height * s.supersample * s.supersample) as u64;
+                    img
+                }
+                ImageModel::Pinhole(s) => {
+                    let (img, rays) = pinhole::render_volume_counting(&vol, &cam.camera, s, 1.0)?;
+                    stats.rays += rays;
+                    img
+                }
+            };
+            if let Some((c, r)) = clean.first_non_finite() {
+                return Err(SynthError::invalid(
+                    "phantom",
+                    format!("image of camera {} has a non-finite pixel at ({c}, {r})", cam.name),
+                ));
+            }
+            stats.image_seconds += t0.elapsed().as_secs_f64();
+            frames.push(SynthFrame { camera: ci, time_index: ti, time, counts: Image::zeros(0, 0), clean });
+            tick("images", &mut done)?;
+        }
+        truth.push((time, vol));
+    }
+    let t0 = std::time::Instant::now();
+    let peak = frames.iter().map(|f| f.clean.min_max().1 as f64).fold(0.0, f64::max);
+    if peak <= 0.0 {
+        log::warn!("every image is black: no camera sees any of the field");
+    }
+    let intensity_scale = settings.sensor.intensity_scale(peak);
+    let sensor_seed = settings.seed ^ 0x6e6f_6973_6521;
+    for (k, f) in frames.iter_mut().enumerate() {
+        f.counts = settings.sensor.expose(&f.clean, intensity_scale, sensor_seed, k as u64)?;
+    }
+    stats.sensor_seconds = t0.elapsed().as_secs_f64();
+    Ok(Synthesis { settings: settings.clone(), aabb, cameras, truth, frames, intensity_scale, stats })
+}
+
+/// Convenience for callers without a progress display.
+pub fn no_progress(_: &Progress) -> ControlFlow<()> {
+    ControlFlow::Continue(())
+}

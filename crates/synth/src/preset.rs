@@ -1,0 +1,122 @@
+//! Named presets: the dissertation's data sets (chapter 6, Fig. 6.6) at sizes that run on a
+//! workstation, plus a tiny demo. Every preset is a full [`SynthSettings`]; callers override
+//! any field afterwards.
+//!
+//! The planar sets are subsets of one 120-camera ring (every 30th, 15th, …), as in the
+//! dissertation, so a camera keeps its name across them; the 180° arc takes every 4th camera
+//! of the same ring (15 cameras, 12° apart).
+
+use crate::image::{ImageModel, PinholeSettings, ThinLensSettings};
+use crate::phantom::PhantomKind;
+use crate::rig::{Layout, LensSettings, Subset};
+use crate::{SynthError, SynthSettings};
+
+/// The preset `fluidnerf synth` uses when none is named.
+pub const DEFAULT_PRESET: &str = "planar15";
+
+/// Image side (pixels) and truth voxels per side of the planar presets.
+const PIXELS: u32 = 256;
+const VOXELS: usize = 256;
+
+/// Names and one-line descriptions of every preset.
+pub fn presets() -> Vec<(&'static str, &'static str)> {
+    vec![
+        ("demo", "tiny: jet, 15-camera ring, 96² px, 96³ truth, pinhole (seconds)"),
+        ("planar15", "the dissertation's 15-camera planar ring, jet, thin lens, 256² px, 256³ truth (default)"),
+        ("planar4", "4 cameras of the 120-camera ring, otherwise as planar15"),
+        ("planar8", "8 cameras of the 120-camera ring, otherwise as planar15"),
+        ("planar12", "12 cameras of the 120-camera ring, otherwise as planar15"),
+        ("planar20", "20 cameras of the 120-camera ring, otherwise as planar15"),
+        ("planar40", "40 cameras of the 120-camera ring, otherwise as planar15"),
+        ("planar60", "60 cameras of the 120-camera ring, otherwise as planar15"),
+        ("planar120", "the full 120-camera ring, otherwise as planar15"),
+        ("arc180", "15 cameras over a 180° arc (12° apart), otherwise as planar15"),
+        ("sphere15", "15 cameras on a Fibonacci sphere, otherwise as planar15"),
+        ("jet-tr60", "starting jet at t* = 14, 15, 16, 60-camera ring, thin lens, 256² px, 256³ truth"),
+        ("dissertation", "Table 6.1 at full size: 15 cameras, 800² px, 801³ truth, 500 rays per voxel (hours, ~10 GB)"),
+    ]
+}
+
+fn ring120(every: usize, first: Option<usize>) -> SynthSettings {
+    let mut s = SynthSettings {
+        resolution: VOXELS,
+        lens: LensSettings { resolution: [PIXELS, PIXELS], ..Default::default() },
+        image: ImageModel::ThinLens(ThinLensSettings::default()),
+        ..Default::default()
+    };
+    s.rig.layout = Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0 };
+    s.rig.subset = Subset { every, offset: 0, first };
+    s
+}
+
+/// The settings of preset `name`.
+pub fn preset(name: &str) -> Result<SynthSettings, SynthError> {
+    let planar = |cams: usize| ring120(120 / cams, None);
+    Ok(match name {
+        "demo" => {
+            let mut s = SynthSettings {
+                resolution: 96,
+                lens: LensSettings { resolution: [96, 96], ..Default::default() },
+                image: ImageModel::Pinhole(PinholeSettings::default()),
+                ..Default::default()
+            };
+            s.rig.layout = Layout::Ring { count: 15, arc_deg: 360.0, start_deg: 0.0 };
+            s
+        }
+        "planar15" => planar(15),
+        "planar4" => planar(4),
+        "planar8" => planar(8),
+        "planar12" => planar(12),
+        "planar20" => planar(20),
+        "planar40" => planar(40),
+        "planar60" => planar(60),
+        "planar120" => planar(120),
+        "arc180" => ring120(4, Some(15)),
+        "sphere15" => {
+            let mut s = planar(15);
+            s.rig.layout = Layout::Sphere { count: 15 };
+            s.rig.subset = Subset::default();
+            s
+        }
+        "jet-tr60" => {
+            let mut s = planar(60);
+            s.rig.layout = Layout::Ring { count: 60, arc_deg: 360.0, start_deg: 0.0 };
+            s.rig.subset = Subset::default();
+            s.phantom.kind = PhantomKind::JetTr;
+            s.times = vec![14.0, 15.0, 16.0];
+            s
+        }
+        "dissertation" => {
+            let mut s = planar(15);
+            s.resolution = 801;
+            s.lens.resolution = [800, 800];
+            s.image = ImageModel::ThinLens(ThinLensSettings { rays_per_voxel: 500.0, threshold: 0.0 });
+            s
+        }
+        other => return Err(SynthError::UnknownPreset(other.to_string())),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_preset_is_valid_and_round_trips() {
+        for (name, _) in presets() {
+            let s = preset(name).expect("preset");
+            s.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+            let json = serde_json::to_string(&s).expect("serialise");
+            let back: SynthSettings = serde_json::from_str(&json).expect("deserialise");
+            assert_eq!(back, s, "{name}");
+        }
+        assert_eq!(preset("planar15").expect("preset").rig.count(), 15);
+        assert_eq!(preset("planar4").expect("preset").rig.count(), 4);
+        assert_eq!(preset("arc180").expect("preset").rig.count(), 15);
+        assert!(matches!(preset("nope"), Err(SynthError::UnknownPreset(_))));
+        let bad = r#"{"resolution": 64, "typo": 1}"#;
+        assert!(serde_json::from_str::<SynthSettings>(bad).is_err());
+        let bad = r#"{"image": {"model": "pinhole", "supersampel": 2}}"#;
+        assert!(serde_json::from_str::<SynthSettings>(bad).is_err());
+    }
+}

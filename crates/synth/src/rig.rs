@@ -1,0 +1,449 @@
+//! Camera rigs: lens settings → intrinsics, and layouts of cameras around the box.
+//!
+//! # Conventions
+//! World units are mm; the jet flows along world **+x**. Every camera looks at the box centre
+//! from the lens's object distance `l_o` (so the focal plane passes through the centre), with
+//! its image x axis along world +x wherever possible (the jet runs left to right in the
+//! images). Cameras carry the [`ThinLens`] they were made with. Camera `name`s number the
+//! cameras of the whole layout (`cam000`, …) so that a subset keeps the names of its parent
+//! layout (the dissertation's 4…60-camera sets are subsets of its 120-camera ring).
+
+use fluidnerf_core::glam::{DAffine3, DMat3, DQuat, DVec3};
+use fluidnerf_core::{Aabb, Camera, Intrinsics, ThinLens};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal, UnitSphere};
+use serde::{Deserialize, Serialize};
+
+use crate::SynthError;
+
+/// Lens and sensor settings. Default: the dissertation's Table 6.1 (M = −0.2, f = 60 mm, f/3.5,
+/// 0.01 mm pixels at 800 × 800, a 40 mm field of view), with the pixel pitch scaled so the field
+/// of view stays 40 mm at other resolutions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LensSettings {
+    /// Lateral magnification M (negative: a real, inverted image). Default −0.2.
+    pub magnification: f64,
+    /// Focal length f in mm. Default 60.
+    pub focal_length_mm: f64,
+    /// f-number f/d_a. Default 3.5.
+    pub f_number: f64,
+    /// Image width and height in pixels. Default 800 × 800.
+    pub resolution: [u32; 2],
+    /// Pixel pitch in mm. Default `0.01 · 800 / width` (a 40 mm wide field of view).
+    pub pixel_pitch_mm: Option<f64>,
+}
+
+impl Default for LensSettings {
+    fn default() -> Self {
+        LensSettings {
+            magnification: -0.2,
+            focal_length_mm: 60.0,
+            f_number: 3.5,
+            resolution: [800, 800],
+            pixel_pitch_mm: None,
+        }
+    }
+}
+
+impl LensSettings {
+    pub fn validate(&self) -> Result<(), SynthError> {
+        if !(self.magnification < 0.0 && self.magnification.is_finite()) {
+            return Err(SynthError::invalid(
+                "lens.magnification",
+                format!("must be negative (a real image), got {}", self.magnification),
+            ));
+        }
+        if !(self.focal_length_mm > 0.0 && self.focal_length_mm.is_finite()) {
+            return Err(SynthError::invalid(
+                "lens.focal_length_mm",
+                format!("must be positive, got {}", self.focal_length_mm),
+            ));
+        }
+        if !(self.f_number > 0.0 && self.f_number.is_finite()) {
+            return Err(SynthError::invalid("lens.f_number", format!("must be positive, got {}", self.f_number)));
+        }
+        if self.resolution[0] == 0 || self.resolution[1] == 0 {
+            return Err(SynthError::invalid("lens.resolution", "width and height must be positive"));
+        }
+        if let Some(p) = self.pixel_pitch_mm {
+            if !(p > 0.0 && p.is_finite()) {
+                return Err(SynthError::invalid("lens.pixel_pitch_mm", format!("must be positive, got {p}")));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn pixel_pitch(&self) -> f64 {
+        self.pixel_pitch_mm.unwrap_or(0.01 * 800.0 / self.resolution[0] as f64)
+    }
+
+    pub fn thin_lens(&self) -> ThinLens {
+        ThinLens::from_f_number(self.focal_length_mm, self.f_number, self.magnification, self.pixel_pitch())
+    }
+
+    /// Pinhole intrinsics: focal length `l_i / pitch` pixels, principal point at the image
+    /// centre.
+    pub fn intrinsics(&self) -> Intrinsics {
+        let f = self.thin_lens().focal_length_px();
+        let [w, h] = self.resolution;
+        Intrinsics {
+            width: w,
+            height: h,
+            fx: f,
+            fy: f,
+            cx: (w as f64 - 1.0) / 2.0,
+            cy: (h as f64 - 1.0) / 2.0,
+            skew: 0.0,
+        }
+    }
+
+    /// Width and height of the field of view on the focal plane, mm.
+    pub fn field_of_view_mm(&self) -> [f64; 2] {
+        let fp = self.thin_lens().pixel_footprint();
+        [self.resolution[0] as f64 * fp, self.resolution[1] as f64 * fp]
+    }
+}
+
+/// Where the cameras are.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "layout", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Layout {
+    /// `count` cameras in the y–z plane through the box centre (perpendicular to the flow),
+    /// evenly spaced over `[start_deg, start_deg + arc_deg)`; angle 0 is world +y, 90° is +z.
+    Ring { count: usize, arc_deg: f64, start_deg: f64 },
+    /// `count` cameras on a Fibonacci lattice over the sphere around the box centre (pole along
+    /// world +z).
+    Sphere { count: usize },
+    /// Cameras at the given world positions (mm), each looking at its entry of `targets`
+    /// (default: the box centre).
+    Explicit {
+        positions: Vec<[f64; 3]>,
+        #[serde(default)]
+        targets: Vec<[f64; 3]>,
+    },
+}
+
+impl Default for Layout {
+    fn default() -> Self {
+        Layout::Ring { count: 15, arc_deg: 360.0, start_deg: 0.0 }
+    }
+}
+
+/// Keeps part of a layout: cameras `offset, offset + every, offset + 2 every, …`, at most
+/// `first` of them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Subset {
+    /// Default 1 (all).
+    pub every: usize,
+    /// Default 0.
+    pub offset: usize,
+    /// Default: no limit.
+    pub first: Option<usize>,
+}
+
+impl Default for Subset {
+    fn default() -> Self {
+        Subset { every: 1, offset: 0, first: None }
+    }
+}
+
+/// Random perturbation of the camera poses (seeded): Gaussian position noise per axis and a
+/// rotation about a random axis by a Gaussian angle. The scene records the perturbed poses.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Jitter {
+    /// Standard deviation of each position coordinate, mm. Default 0.
+    pub position_mm: f64,
+    /// Standard deviation of the rotation angle, degrees. Default 0.
+    pub rotation_deg: f64,
+}
+
+/// A camera rig.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RigSettings {
+    pub layout: Layout,
+    pub subset: Subset,
+    pub jitter: Jitter,
+    /// Cameras (indices into the rig after subsetting) held out for validation. Default none.
+    pub holdout: Vec<usize>,
+    /// Distance of every camera from the box centre, mm. Default: the lens's object distance.
+    pub distance_mm: Option<f64>,
+}
+
+/// One camera of a rig.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RigCamera {
+    pub name: String,
+    pub camera: Camera,
+    pub holdout: bool,
+}
+
+impl RigSettings {
+    /// Number of cameras after subsetting.
+    pub fn count(&self) -> usize {
+        let total = match &self.layout {
+            Layout::Ring { count, .. } | Layout::Sphere { count } => *count,
+            Layout::Explicit { positions, .. } => positions.len(),
+        };
+        let every = self.subset.every.max(1);
+        let n = if total > self.subset.offset { (total - self.subset.offset).div_ceil(every) } else { 0 };
+        self.subset.first.map_or(n, |f| n.min(f))
+    }
+
+    /// Checks the settings that need no geometry.
+    pub fn validate(&self) -> Result<(), SynthError> {
+        match &self.layout {
+            Layout::Ring { count, arc_deg, start_deg } => {
+                if *count == 0 {
+                    return Err(SynthError::invalid("rig.layout.count", "a rig needs at least one camera"));
+                }
+                if !(*arc_deg > 0.0 && *arc_deg <= 360.0) {
+                    return Err(SynthError::invalid(
+                        "rig.layout.arc_deg",
+                        format!("must be in (0, 360], got {arc_deg}"),
+                    ));
+                }
+                if !start_deg.is_finite() {
+                    return Err(SynthError::invalid("rig.layout.start_deg", "must be finite"));
+                }
+            }
+            Layout::Sphere { count } if *count == 0 => {
+                return Err(SynthError::invalid("rig.layout.count", "a rig needs at least one camera"));
+            }
+            Layout::Sphere { .. } => {}
+            Layout::Explicit { positions, targets } => {
+                if positions.is_empty() {
+                    return Err(SynthError::invalid("rig.layout.positions", "a rig needs at least one camera"));
+                }
+                if positions.iter().chain(targets).flatten().any(|v| !v.is_finite()) {
+                    return Err(SynthError::invalid("rig.layout.positions", "positions and targets must be finite"));
+                }
+                if !targets.is_empty() && targets.len() != positions.len() {
+                    return Err(SynthError::invalid(
+                        "rig.layout.targets",
+                        format!(
+                            "{} targets for {} positions; give one per camera or none",
+                            targets.len(),
+                            positions.len()
+                        ),
+                    ));
+                }
+            }
+        }
+        if self.subset.every == 0 {
+            return Err(SynthError::invalid("rig.subset.every", "must be at least 1"));
+        }
+        let n = self.count();
+        if n == 0 {
+            return Err(SynthError::invalid("rig.subset", "the subset keeps no camera"));
+        }
+        if let Some(&bad) = self.holdout.iter().find(|&&i| i >= n) {
+            return Err(SynthError::invalid("rig.holdout", format!("camera {bad} does not exist (the rig has {n})")));
+        }
+        if self.holdout.len() >= n && n > 0 && self.holdout.iter().collect::<std::collections::BTreeSet<_>>().len() >= n
+        {
+            return Err(SynthError::invalid(
+                "rig.holdout",
+                "every camera is held out; keep at least one for reconstruction",
+            ));
+        }
+        for (name, v) in
+            [("rig.jitter.position_mm", self.jitter.position_mm), ("rig.jitter.rotation_deg", self.jitter.rotation_deg)]
+        {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(SynthError::invalid(name, format!("must be zero or positive, got {v}")));
+            }
+        }
+        if let Some(d) = self.distance_mm {
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(SynthError::invalid("rig.distance_mm", format!("must be positive, got {d}")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds the cameras around `aabb` with `lens`, jittered with `seed`, and checks that every
+    /// camera sees the box (warning when one sees only part of it).
+    pub fn build(&self, lens: &LensSettings, aabb: &Aabb, seed: u64) -> Result<Vec<RigCamera>, SynthError> {
+        self.validate()?;
+        lens.validate()?;
+        aabb.validate()?;
+        let centre = aabb.centre();
+        let dist = self.distance_mm.unwrap_or_else(|| lens.thin_lens().object_distance());
+        let positions: Vec<DVec3> = match &self.layout {
+            Layout::Ring { count, arc_deg, start_deg } => (0..*count)
+                .map(|i| {
+                    let a = (start_deg + arc_deg * i as f64 / *count as f64).to_radians();
+                    centre + dist * DVec3::new(0.0, a.cos(), a.sin())
+                })
+                .collect(),
+            Layout::Sphere { count } => {
+                let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+                (0..*count)
+                    .map(|i| {
+                        let z = 1.0 - (2.0 * i as f64 + 1.0) / *count as f64;
+                        let r = (1.0 - z * z).max(0.0).sqrt();
+                        let phi = golden * i as f64;
+                        centre + dist * DVec3::new(r * phi.cos(), r * phi.sin(), z)
+                    })
+                    .collect()
+            }
+            Layout::Explicit { positions, .. } => positions.iter().map(|p| DVec3::from(*p)).collect(),
+        };
+        let target_of = |index: usize| match &self.layout {
+            Layout::Explicit { targets, .. } if !targets.is_empty() => DVec3::from(targets[index]),
+            _ => centre,
+        };
+        let intrinsics = lens.intrinsics();
+        let thin = lens.thin_lens();
+        let every = self.subset.every.max(1);
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x7269_6721);
+        let pos_noise = Normal::new(0.0, self.jitter.position_mm)
+            .map_err(|e| SynthError::invalid("rig.jitter.position_mm", e.to_string()))?;
+        let rot_noise = Normal::new(0.0, self.jitter.rotation_deg.to_radians())
+            .map_err(|e| SynthError::invalid("rig.jitter.rotation_deg", e.to_string()))?;
+        let mut cams = Vec::new();
+        for (index, &pos) in positions.iter().enumerate().skip(self.subset.offset).step_by(every) {
+            if self.subset.first.is_some_and(|f| cams.len() >= f) {
+                break;
+            }
+            let target = target_of(index);
+            if (pos - target).length() < 1e-9 {
+                return Err(SynthError::invalid("rig.layout", format!("camera {index} sits on the point it looks at")));
+            }
+            let forward = (target - pos).normalize();
+            let mut up = DVec3::X.cross(forward);
+            if up.length() < 1e-6 {
+                up = DVec3::Z.cross(forward);
+            }
+            let mut camera = Camera::look_at(intrinsics, pos, target, up);
+            camera.lens = Some(thin);
+            if self.jitter.position_mm > 0.0 || self.jitter.rotation_deg > 0.0 {
+                let dp = DVec3::new(pos_noise.sample(&mut rng), pos_noise.sample(&mut rng), pos_noise.sample(&mut rng));
+                let axis = DVec3::from(<UnitSphere as Distribution<[f64; 3]>>::sample(&UnitSphere, &mut rng));
+                let angle = rot_noise.sample(&mut rng);
+                let rot = DMat3::from_quat(DQuat::from_axis_angle(axis, angle));
+                let m = camera.world_from_camera.matrix3;
+                camera.world_from_camera = DAffine3::from_mat3_translation(rot * m, pos + dp);
+            }
+            let k = cams.len();
+            cams.push(RigCamera { name: format!("cam{index:03}"), camera, holdout: self.holdout.contains(&k) });
+        }
+        for (i, c) in cams.iter().enumerate() {
+            let vis = c.camera.visibility(aabb);
+            if vis.box_fraction_in_view == 0.0 && vis.pixel_fraction_on_box == 0.0 {
+                return Err(SynthError::CameraMissesBox { index: i, name: c.name.clone() });
+            }
+            if vis.box_fraction_in_view < 1.0 {
+                log::warn!(
+                    "camera {i} ({}) sees {:.0} % of the reconstruction box; the rest is outside its image",
+                    c.name,
+                    100.0 * vis.box_fraction_in_view
+                );
+            }
+        }
+        Ok(cams)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn box40() -> Aabb {
+        Aabb::cube(DVec3::ZERO, 40.0)
+    }
+
+    #[test]
+    fn default_lens_is_the_dissertations() {
+        let lens = LensSettings::default();
+        assert_relative_eq!(lens.field_of_view_mm()[0], 40.0, epsilon = 1e-9);
+        let small = LensSettings { resolution: [200, 200], ..Default::default() };
+        assert_relative_eq!(small.field_of_view_mm()[0], 40.0, epsilon = 1e-9);
+        assert_relative_eq!(small.pixel_pitch(), 0.04, epsilon = 1e-12);
+        assert_relative_eq!(lens.thin_lens().object_distance(), 360.0, epsilon = 1e-9);
+    }
+
+    #[test]
+    fn ring_is_perpendicular_to_the_flow_and_images_run_along_x() {
+        let rig =
+            RigSettings { layout: Layout::Ring { count: 12, arc_deg: 360.0, start_deg: 0.0 }, ..Default::default() };
+        let lens = LensSettings { resolution: [64, 64], ..Default::default() };
+        let cams = rig.build(&lens, &box40(), 0).expect("rig");
+        assert_eq!(cams.len(), 12);
+        for c in &cams {
+            let cam = &c.camera;
+            assert_relative_eq!(cam.centre().x, 0.0, epsilon = 1e-9);
+            assert_relative_eq!(cam.centre().length(), 360.0, epsilon = 1e-9);
+            // The box centre projects to the principal point; +x world goes right in the image.
+            let o = cam.project(DVec3::ZERO).expect("in front");
+            let right = cam.project(DVec3::new(5.0, 0.0, 0.0)).expect("in front");
+            assert_relative_eq!(o.x, 31.5, epsilon = 1e-9);
+            assert!(right.x > o.x + 1.0 && (right.y - o.y).abs() < 1e-9);
+        }
+        // Evenly spaced: neighbours 30° apart.
+        let a = cams[0].camera.centre().normalize();
+        let b = cams[1].camera.centre().normalize();
+        assert_relative_eq!(a.dot(b), 30f64.to_radians().cos(), epsilon = 1e-12);
+    }
+
+    #[test]
+    fn subsets_keep_names_and_sphere_is_even() {
+        let rig = RigSettings {
+            layout: Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0 },
+            subset: Subset { every: 8, ..Default::default() },
+            holdout: vec![3],
+            ..Default::default()
+        };
+        assert_eq!(rig.count(), 15);
+        let lens = LensSettings { resolution: [32, 32], ..Default::default() };
+        let cams = rig.build(&lens, &box40(), 0).expect("rig");
+        assert_eq!(cams.len(), 15);
+        assert_eq!(cams[1].name, "cam008");
+        assert!(cams[3].holdout && !cams[2].holdout);
+        let sphere = RigSettings { layout: Layout::Sphere { count: 40 }, ..Default::default() };
+        let cams = sphere.build(&lens, &box40(), 0).expect("rig");
+        let mean: DVec3 = cams.iter().map(|c| c.camera.centre()).sum::<DVec3>() / 40.0;
+        assert!(mean.length() < 0.05 * 360.0, "Fibonacci lattice is balanced, mean {mean}");
+    }
+
+    #[test]
+    fn bad_rigs_are_rejected() {
+        let lens = LensSettings { resolution: [32, 32], ..Default::default() };
+        let zero =
+            RigSettings { layout: Layout::Ring { count: 0, arc_deg: 360.0, start_deg: 0.0 }, ..Default::default() };
+        assert!(matches!(zero.build(&lens, &box40(), 0), Err(SynthError::Invalid { .. })));
+        let positions = vec![[0.0, 360.0, 0.0], [0.0, 0.0, 360.0]];
+        let seen = RigSettings {
+            layout: Layout::Explicit { positions: positions.clone(), targets: vec![] },
+            ..Default::default()
+        };
+        assert!(seen.build(&lens, &box40(), 0).is_ok());
+        let away = Layout::Explicit { positions, targets: vec![[0.0, 0.0, 0.0], [0.0, 0.0, 720.0]] };
+        let missed = RigSettings { layout: away, ..Default::default() };
+        assert!(matches!(missed.build(&lens, &box40(), 0), Err(SynthError::CameraMissesBox { index: 1, .. })));
+        let holdout = RigSettings { holdout: vec![15], ..Default::default() };
+        assert!(holdout.build(&lens, &box40(), 0).is_err());
+        let jitter = RigSettings { jitter: Jitter { position_mm: -1.0, rotation_deg: 0.0 }, ..Default::default() };
+        assert!(jitter.build(&lens, &box40(), 0).is_err());
+    }
+
+    #[test]
+    fn jitter_is_seeded_and_small() {
+        let rig = RigSettings { jitter: Jitter { position_mm: 1.0, rotation_deg: 0.5 }, ..Default::default() };
+        let lens = LensSettings { resolution: [32, 32], ..Default::default() };
+        let a = rig.build(&lens, &box40(), 1).expect("rig");
+        let b = rig.build(&lens, &box40(), 1).expect("rig");
+        let c = rig.build(&lens, &box40(), 2).expect("rig");
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        for cam in &a {
+            assert!(cam.camera.validate().is_ok());
+            assert!((cam.camera.centre().length() - 360.0).abs() < 6.0);
+        }
+    }
+}
