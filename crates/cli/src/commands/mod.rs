@@ -3,6 +3,7 @@
 use clap::Subcommand;
 
 pub mod eval;
+pub mod info;
 pub mod reconstruct;
 pub mod reconstruct_classical;
 pub mod reconstruct_neural;
@@ -10,6 +11,8 @@ pub mod reconstruct_neural;
 /// The subcommands of `fluidnerf`.
 #[derive(Subcommand)]
 pub enum Command {
+    /// Validate a scene and describe its cameras, images, box coverage, times and truth.
+    Info(info::Args),
     /// Reconstruct the field from a scene's images with a classical or a neural method.
     Reconstruct(reconstruct::Args),
     /// Score a reconstruction against ground truth and held-out camera images.
@@ -19,6 +22,7 @@ pub enum Command {
 /// Runs a parsed subcommand.
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
+        Command::Info(args) => info::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Eval(args) => eval::run(args),
     }

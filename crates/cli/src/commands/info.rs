@@ -1,0 +1,236 @@
+//! `fluidnerf info`: validates a scene and describes it (cameras, images, box coverage, time
+//! steps, held-out frames, ground truth), listing every problem found.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use fluidnerf_core::{Camera, Frame, Scene};
+use fluidnerf_io::image::read_image;
+use fluidnerf_io::scene::{load_scene, scene_file_path};
+use fluidnerf_io::volume::read_npy;
+
+/// Validate a scene and describe it.
+///
+/// Reads the scene file (nerfstudio `transforms.json` with fluidnerf's `aabb`, `units`,
+/// `truth`, ...), then every image and ground-truth volume, and prints: the reconstruction
+/// box; per frame the camera centre, viewing direction, intrinsics (OpenCV convention: pixel
+/// centres at integer coordinates, so cx, cy are 0.5 below the file's values), distortion and
+/// thin lens, how much of the box the camera sees, and the image's size and value range; the
+/// time steps, held-out frames and truth volumes. Problems (a camera that misses the box, an
+/// image that is missing, unreadable, of the wrong size or with NaN/Inf pixels, a broken truth
+/// volume) are listed at the end and make the command exit with status 1.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The scene: a folder holding `transforms.json`, or the file itself.
+    pub scene: PathBuf,
+    /// Check the scene file only; do not read images and truth volumes.
+    #[arg(long)]
+    pub no_images: bool,
+}
+
+fn v3(v: fluidnerf_core::glam::DVec3) -> String {
+    format!("({:.3}, {:.3}, {:.3})", v.x, v.y, v.z)
+}
+
+fn describe_camera(out: &mut String, cam: &Camera, scene: &Scene) {
+    let u = &scene.units;
+    let k = &cam.intrinsics;
+    let _ = writeln!(
+        out,
+        "  centre {} {u}, looking along {}, {:.3} {u} from the box centre",
+        v3(cam.centre()),
+        v3(cam.forward()),
+        (scene.aabb.centre() - cam.centre()).length()
+    );
+    let _ = writeln!(
+        out,
+        "  intrinsics {}x{} px, fx {} fy {}, cx {} cy {} (pixel centres at integers), skew {}",
+        k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.skew
+    );
+    let d = &cam.distortion;
+    if d.is_identity() {
+        let _ = writeln!(out, "  distortion: none");
+    } else {
+        let _ = writeln!(
+            out,
+            "  distortion (OpenCV): k1 {} k2 {} p1 {} p2 {} k3 {} k4 {} k5 {} k6 {}",
+            d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6
+        );
+    }
+    if let Some(lens) = &cam.lens {
+        let _ = writeln!(
+            out,
+            "  thin lens: f {} {u}, f/{:.3} (aperture {:.4} {u}), magnification {}, pixel pitch {} {u}, \
+             focused at {:.3} {u}",
+            lens.focal_length,
+            lens.f_number(),
+            lens.aperture_diameter,
+            lens.magnification,
+            lens.pixel_pitch,
+            lens.object_distance()
+        );
+    }
+}
+
+fn frame_title(i: usize, f: &Frame) -> String {
+    let mut s = format!("frame {i}: {}", f.file_path.display());
+    if let Some(name) = &f.camera_name {
+        let _ = write!(s, "  camera {name}");
+    }
+    if let Some(t) = f.time {
+        let _ = write!(s, "  time {t}");
+    }
+    if f.holdout {
+        s.push_str("  [held out]");
+    }
+    s
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let file = scene_file_path(&args.scene);
+    let scene = load_scene(&args.scene).context("the scene is invalid")?;
+    let mut out = String::new();
+    let mut problems: Vec<String> = Vec::new();
+    let mut warnings: Vec<String> = Vec::new();
+    let u = scene.units.clone();
+
+    let _ = writeln!(out, "scene {}", file.display());
+    let _ = writeln!(
+        out,
+        "box {} .. {} {u} (size {} {u}), intensity_scale {}",
+        v3(scene.aabb.min),
+        v3(scene.aabb.max),
+        v3(scene.aabb.size()),
+        scene.intensity_scale
+    );
+    let names: std::collections::BTreeSet<&str> =
+        scene.frames.iter().filter_map(|f| f.camera_name.as_deref()).collect();
+    let times = scene.times();
+    let held: Vec<usize> = scene.holdout_frames().map(|(i, _)| i).collect();
+    let _ = writeln!(
+        out,
+        "{} frames, {} named cameras, {} time steps, {} held out",
+        scene.frames.len(),
+        names.len(),
+        times.len(),
+        held.len()
+    );
+    let _ = writeln!(out);
+
+    let bar = crate::progress::bar(scene.frames.len() as u64, "checking");
+    for (i, f) in scene.frames.iter().enumerate() {
+        let _ = writeln!(out, "{}", frame_title(i, f));
+        describe_camera(&mut out, &f.camera, &scene);
+        let vis = f.camera.visibility(&scene.aabb);
+        let _ = writeln!(
+            out,
+            "  sees {:.1}% of the box; {:.1}% of its pixels look through the box",
+            100.0 * vis.box_fraction_in_view,
+            100.0 * vis.pixel_fraction_on_box
+        );
+        if vis.box_fraction_in_view < 1.0 {
+            warnings.push(format!(
+                "frame {i} ({}): the camera sees only {:.1}% of the box",
+                f.file_path.display(),
+                100.0 * vis.box_fraction_in_view
+            ));
+        }
+        if !args.no_images {
+            let path = scene.resolve(&f.file_path);
+            match read_image(&path) {
+                Err(e) => {
+                    let _ = writeln!(out, "  image: ERROR {e}");
+                    problems.push(format!("frame {i}: {e}"));
+                }
+                Ok(img) => {
+                    let (w, h) = (f.camera.width(), f.camera.height());
+                    let (lo, hi) = img.min_max();
+                    let mean = img.sum() / img.data.len().max(1) as f64;
+                    let _ = writeln!(out, "  image {}x{}, values {lo} .. {hi}, mean {mean:.4}", img.width, img.height);
+                    if (img.width, img.height) != (w, h) {
+                        problems.push(format!(
+                            "frame {i}: {}: image is {}x{} pixels but the frame's intrinsics say {w}x{h}",
+                            path.display(),
+                            img.width,
+                            img.height
+                        ));
+                    }
+                    if let Some((col, row)) = img.first_non_finite() {
+                        let n = img.data.iter().filter(|v| !v.is_finite()).count();
+                        problems.push(format!(
+                            "frame {i}: {}: {n} non-finite pixel(s), the first at (col {col}, row {row}) is {}",
+                            path.display(),
+                            img.get(col, row)
+                        ));
+                    }
+                }
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let _ = writeln!(out);
+
+    if times.is_empty() {
+        let _ = writeln!(out, "time steps: none (static scene)");
+    } else {
+        let list: Vec<String> = times.iter().map(|t| t.to_string()).collect();
+        let _ = writeln!(out, "time steps: {}", list.join(", "));
+    }
+    if held.is_empty() {
+        let _ = writeln!(out, "held-out frames: none");
+    } else {
+        let list: Vec<String> = held.iter().map(|i| i.to_string()).collect();
+        let _ = writeln!(out, "held-out frames: {}", list.join(", "));
+    }
+    if scene.truth.is_empty() {
+        let _ = writeln!(out, "truth volumes: none");
+    }
+    for t in &scene.truth {
+        let path = scene.resolve(&t.file_path);
+        let when = t.time.map_or(String::new(), |t| format!(" (time {t})"));
+        if args.no_images {
+            let _ = writeln!(out, "truth{when}: {}", path.display());
+            continue;
+        }
+        match read_npy(&path, scene.aabb) {
+            Ok(v) => {
+                let (lo, hi) = v.min_max();
+                let [nx, ny, nz] = v.dims;
+                let _ = writeln!(out, "truth{when}: {} {nx}x{ny}x{nz} voxels, values {lo} .. {hi}", path.display());
+                if !(lo.is_finite() && hi.is_finite()) {
+                    problems.push(format!("truth {}: has NaN or infinite values", path.display()));
+                }
+            }
+            Err(e) => {
+                let _ = writeln!(out, "truth{when}: ERROR {e}");
+                problems.push(format!("truth: {e}"));
+            }
+        }
+    }
+    if times.len() > 1 {
+        for &t in &times {
+            if !scene.training_frames().any(|(_, f)| f.time == Some(t)) {
+                warnings.push(format!("time {t} has no training frames (all held out)"));
+            }
+        }
+    }
+
+    let _ = writeln!(out);
+    for w in &warnings {
+        let _ = writeln!(out, "warning: {w}");
+    }
+    for p in &problems {
+        let _ = writeln!(out, "problem: {p}");
+    }
+    if problems.is_empty() {
+        let _ = writeln!(out, "no problems found");
+    }
+    std::io::stdout().lock().write_all(out.as_bytes()).context("cannot write to stdout")?;
+    if !problems.is_empty() {
+        bail!("{} problem(s) found in {}; the first: {}", problems.len(), file.display(), problems[0]);
+    }
+    Ok(())
+}

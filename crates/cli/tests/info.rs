@@ -1,0 +1,157 @@
+//! End-to-end tests of `fluidnerf info` on tiny scenes written in a temporary directory: a
+//! good scene is described, and each kind of broken scene gives a clear error naming the file
+//! and the problem, a non-zero exit and no panic.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, Camera, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume};
+use fluidnerf_io::image::{write_png16_counts, write_tiff_f32};
+
+/// Four cameras on a ring around a 20 mm cube, 32 × 24 px, two time steps, the last frame held
+/// out, 16-bit PNG images and one truth volume.
+fn good_scene(dir: &Path) -> Scene {
+    let aabb = Aabb::cube(DVec3::ZERO, 20.0);
+    let k = Intrinsics { width: 32, height: 24, fx: 40.0, fy: 40.0, cx: 15.5, cy: 11.5, skew: 0.0 };
+    let mut frames = Vec::new();
+    for c in 0..4 {
+        let a = c as f64 / 4.0 * std::f64::consts::TAU;
+        let mut camera = Camera::look_at(k, DVec3::new(80.0 * a.cos(), 80.0 * a.sin(), 10.0), DVec3::ZERO, DVec3::Z);
+        if c == 0 {
+            camera.lens = Some(ThinLens::from_f_number(60.0, 3.5, -0.2, 0.01));
+        }
+        let file = format!("images/c{c}.png");
+        let img = Image::from_vec(32, 24, (0..32 * 24).map(|i| (i % 97 + 100 * c) as f32).collect());
+        write_png16_counts(&dir.join(&file), &img).expect("writes image");
+        frames.push(Frame {
+            camera,
+            file_path: file.into(),
+            time: Some((c % 2) as f64 * 0.5),
+            camera_name: Some(format!("cam{}", c / 2)),
+            holdout: c == 3,
+        });
+    }
+    let vol = Volume::from_fn([8, 8, 8], aabb, |p| (p.x + 10.0) as f32);
+    fluidnerf_io::volume::write_npy(&dir.join("truth/t0.npy"), &vol).expect("writes truth");
+    let scene = Scene {
+        root: dir.to_path_buf(),
+        aabb,
+        units: "mm".into(),
+        intensity_scale: 1.0,
+        frames,
+        truth: vec![TruthRef { time: Some(0.0), file_path: "truth/t0.npy".into() }],
+    };
+    fluidnerf_io::scene::save_scene(&scene, dir).expect("writes scene");
+    scene
+}
+
+fn info(scene: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .arg("info")
+        .arg(scene)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("runs fluidnerf")
+}
+
+fn text(o: &Output) -> (String, String) {
+    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+/// A failed run: non-zero exit, no panic, and stderr naming every `needle`.
+fn assert_fails_with(o: &Output, needles: &[&str]) {
+    let (stdout, stderr) = text(o);
+    assert_eq!(o.status.code(), Some(1), "must exit with 1\nstdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(!stderr.contains("panicked"), "panic:\n{stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "stderr must mention {n:?}:\n{stderr}\nstdout:\n{stdout}");
+    }
+}
+
+#[test]
+fn good_scene_is_described() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    for needle in [
+        "4 frames, 2 named cameras, 2 time steps, 1 held out",
+        "frame 0: images/c0.png  camera cam0  time 0",
+        "frame 3: images/c3.png  camera cam1  time 0.5  [held out]",
+        "centre (80.000, 0.000, 10.000) mm",
+        "intrinsics 32x24 px, fx 40 fy 40, cx 15.5 cy 11.5",
+        "distortion: none",
+        "thin lens: f 60 mm, f/3.500",
+        "sees 100.0% of the box",
+        "image 32x24, values 300 .. 396",
+        "time steps: 0, 0.5",
+        "held-out frames: 3",
+        "8x8x8 voxels",
+        "no problems found",
+    ] {
+        assert!(stdout.contains(needle), "stdout must contain {needle:?}:\n{stdout}");
+    }
+}
+
+#[test]
+fn camera_missing_the_box_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    // Turn camera 2 around: it looks away from the box.
+    let cam = &mut scene.frames[2].camera;
+    let centre = cam.centre();
+    *cam = Camera::look_at(cam.intrinsics, centre, 2.0 * centre, DVec3::Z);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(
+        &info(dir.path()),
+        &["transforms.json", "frame 2", "images/c2.png", "does not see the reconstruction box"],
+    );
+}
+
+#[test]
+fn image_size_disagreeing_with_intrinsics_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    write_png16_counts(&dir.path().join("images/c1.png"), &Image::zeros(30, 24)).expect("writes image");
+    let o = info(dir.path());
+    assert_fails_with(&o, &["c1.png", "30x24", "32x24"]);
+}
+
+#[test]
+fn missing_image_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    std::fs::remove_file(dir.path().join("images/c3.png")).expect("removes");
+    assert_fails_with(&info(dir.path()), &["image file not found", "c3.png"]);
+}
+
+#[test]
+fn nan_pixel_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    let mut img = Image::zeros(32, 24);
+    img.set(7, 5, f32::NAN);
+    write_tiff_f32(&dir.path().join("images/c0.tif"), &img).expect("writes image");
+    scene.frames[0].file_path = "images/c0.tif".into();
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(&info(dir.path()), &["c0.tif", "(col 7, row 5)", "NaN"]);
+}
+
+#[test]
+fn malformed_json_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    let file = dir.path().join("transforms.json");
+    let mut s = std::fs::read_to_string(&file).expect("reads");
+    s.truncate(s.len() / 2);
+    std::fs::write(&file, s).expect("writes");
+    assert_fails_with(&info(&file), &["transforms.json", "malformed JSON", "line"]);
+}
+
+#[test]
+fn missing_scene_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    assert_fails_with(&info(&dir.path().join("nothing")), &["scene file not found", "nothing"]);
+}
