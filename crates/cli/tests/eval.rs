@@ -155,3 +155,34 @@ fn scores_each_time_step_and_custom_regions() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("region"));
 }
+
+#[test]
+fn scores_a_trained_field_run_directory_at_the_truth_voxel_centres() {
+    use fluidnerf_neural::trained::{build_field, AnyField, DenseConfig, FieldConfig, ModelRecord};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    // A dense-grid field holding 0.25 everywhere in the box, with a value scale of 2: E = 0.5.
+    let config = FieldConfig::Dense(DenseConfig { resolution: 8, initial: 0.25 });
+    let AnyField::Dense(field) = build_field(&config, &scene.aabb, 3, 0).expect("builds") else {
+        panic!("a dense config builds a dense field")
+    };
+    let run = d.join("nerf");
+    std::fs::create_dir_all(&run).expect("mkdir");
+    let weights = fluidnerf_neural::weights::weights_bytes(&field).expect("serialises");
+    std::fs::write(run.join("weights.safetensors"), weights).expect("writes weights");
+    let meta =
+        fluidnerf_neural::train::FieldMeta { aabb: scene.aabb, value_scale: 2.0, time_step: 1.0, occupancy: None };
+    let record = ModelRecord { field: config, input_dim: 3, meta };
+    std::fs::write(run.join("model.json"), serde_json::to_string(&record).expect("json")).expect("writes model");
+
+    let out = fluidnerf(&["eval", "nerf", "--scene", ".", "--no-regions"], d);
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    let json = read_json(&run.join("metrics.json"));
+    let got = json["steps"][0]["global"]["nrmse"].as_f64().expect("nrmse");
+    let truth = fluidnerf_io::volume::read_npy(&d.join("truth_0.npy"), scene.aabb).expect("truth");
+    let constant = vec![0.5f32; truth.len()];
+    let want = fluidnerf_metrics::nrmse(&constant, &truth.data);
+    assert!((got - want).abs() < 1e-4, "NRMSE {got}, a constant 0.5 scores {want}");
+    assert_eq!(json["reprojection"].as_array().expect("reprojection").len(), 1);
+}

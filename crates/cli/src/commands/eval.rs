@@ -2,6 +2,7 @@
 //! PSNR, global and windowed SSIM, globally and per region, per time step) and against the
 //! scene's held-out images (reprojection), prints a table and writes JSON and CSV.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
@@ -31,13 +32,18 @@ pub enum Window {
 /// region, at every time step of the truth. Reprojection: the reconstruction is rendered from
 /// every held-out camera and compared with its image (NRMSE, PSNR, global and windowed 2D SSIM).
 ///
+/// A run directory of a neural reconstruction (holding `model.json` and
+/// `weights.safetensors`) is scored through its trained field: sampled exactly at the truth's
+/// voxel centres (at each step's time) and rendered directly for the held-out views.
+///
 /// Prints a table; writes JSON (with the settings) and CSV. When RECON is a run directory and
 /// neither --json nor --csv is given, writes `metrics.json` and `metrics.csv` into it.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw`
-    /// with its JSON sidecar) or a reconstruction run directory (holding `volume.npy`). For a
-    /// time-resolved scene give one volume per truth time step, in time order.
+    /// with its JSON sidecar) or a reconstruction run directory (a trained field, or
+    /// `volume.npy`). For a time-resolved scene give one volume per truth time step, in time
+    /// order, or one run directory (a time-resolved field).
     #[arg(required = true, num_args = 1..)]
     pub recon: Vec<PathBuf>,
     /// The scene: a folder holding `transforms.json`, or the file itself.
@@ -53,6 +59,9 @@ pub struct Args {
     /// thirds of the box along +x.
     #[arg(long, value_delimiter = ',', conflicts_with = "no_regions")]
     pub regions: Vec<String>,
+    /// For a neural run directory, score its sampled `volume.npy` instead of the trained field.
+    #[arg(long)]
+    pub use_volume: bool,
     /// Score the whole volume only.
     #[arg(long)]
     pub no_regions: bool,
@@ -105,21 +114,26 @@ struct Output<'a> {
 /// A reconstruction, as the metrics need it.
 enum Recon {
     /// One volume per truth time step (or one for all).
-    Volumes(Vec<(PathBuf, Volume)>),
+    Volumes(Vec<Volume>),
+    /// A trained field (static or time-resolved) in world coordinates.
+    Field(Box<dyn ScalarField + Send + Sync>),
 }
 
 impl Recon {
-    /// The field to compare with the truth (or render) at step `step` of `steps` at `time`.
-    fn volume_for_step(&self, step: usize) -> &Volume {
+    /// The reconstruction to compare with `truth`, step `step` at `time`: a stored volume, or
+    /// the field sampled at the truth's voxel centres.
+    fn volume_for_step(&self, step: usize, truth: &Volume, time: Option<f64>) -> Cow<'_, Volume> {
         match self {
-            Recon::Volumes(v) => &v[step.min(v.len() - 1)].1,
+            Recon::Volumes(v) => Cow::Borrowed(&v[step.min(v.len() - 1)]),
+            Recon::Field(f) => Cow::Owned(Volume::from_field(truth.dims, truth.aabb, f.as_ref(), time.unwrap_or(0.0))),
         }
     }
 
     /// The field to render for a frame at `time`, given the truth steps' times.
     fn field_at(&self, time: Option<f64>, step_times: &[Option<f64>]) -> &dyn ScalarField {
         match self {
-            Recon::Volumes(v) if v.len() == 1 => &v[0].1,
+            Recon::Field(f) => f.as_ref(),
+            Recon::Volumes(v) if v.len() == 1 => &v[0],
             Recon::Volumes(v) => {
                 // The step whose time is nearest the frame's.
                 let t = time.unwrap_or(0.0);
@@ -133,7 +147,7 @@ impl Recon {
                         da.total_cmp(&db)
                     })
                     .map_or(0, |(i, _)| i);
-                &v[best].1
+                &v[best]
             }
         }
     }
@@ -183,20 +197,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
     };
-    let recon = load_recon(&args.recon, &scene)?;
-    let Recon::Volumes(volumes) = &recon;
-    if volumes.len() > 1 && volumes.len() != truth.len().max(1) {
-        bail!(
-            "{} reconstruction volumes given but the truth has {} time steps; give one volume, or one per step",
-            volumes.len(),
-            truth.len()
-        );
-    }
-    if volumes.len() == 1 && truth.len() > 1 {
-        log::warn!(
-            "one reconstruction volume for {} truth time steps: the same volume is scored at every step",
-            truth.len()
-        );
+    let recon = load_recon(&args.recon, &scene, args.use_volume)?;
+    if let Recon::Volumes(volumes) = &recon {
+        if volumes.len() > 1 && volumes.len() != truth.len().max(1) {
+            bail!(
+                "{} reconstruction volumes given but the truth has {} time steps; give one volume, or one per step",
+                volumes.len(),
+                truth.len()
+            );
+        }
+        if volumes.len() == 1 && truth.len() > 1 {
+            log::warn!(
+                "one reconstruction volume for {} truth time steps: the same volume is scored at every step",
+                truth.len()
+            );
+        }
     }
     let holdouts: Vec<usize> =
         if args.no_reprojection { Vec::new() } else { scene.holdout_frames().map(|(i, _)| i).collect() };
@@ -209,7 +224,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let mut report = MetricsReport::default();
     for (step, (time, t)) in truth.iter().enumerate() {
-        let metrics = evaluate_volume(recon.volume_for_step(step), t, *time, &volume_options)
+        let estimate = recon.volume_for_step(step, t, *time);
+        let metrics = evaluate_volume(&estimate, t, *time, &volume_options)
             .with_context(|| format!("scoring time step {step}"))?;
         report.steps.push(metrics);
     }
@@ -272,21 +288,35 @@ fn read_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
     Ok(v)
 }
 
-/// Loads the reconstruction arguments: volume files, or one run directory.
-fn load_recon(paths: &[PathBuf], scene: &Scene) -> anyhow::Result<Recon> {
+/// Loads the reconstruction arguments: volume files, or one run directory (its trained field
+/// unless `use_volume`, else its `volume.npy`).
+fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Result<Recon> {
+    if let [dir] = paths {
+        if dir.is_dir() && !use_volume && dir.join("model.json").is_file() {
+            let (field, aabb) = fluidnerf_neural::trained::load_trained(dir)
+                .with_context(|| format!("loading the trained field in {}", dir.display()))?;
+            if aabb != scene.aabb {
+                log::warn!(
+                    "the field's box {:?}..{:?} differs from the scene's; it is zero outside its own box",
+                    aabb.min,
+                    aabb.max
+                );
+            }
+            return Ok(Recon::Field(field));
+        }
+    }
     let mut volumes = Vec::with_capacity(paths.len());
     for p in paths {
         let file = if p.is_dir() {
             let f = p.join("volume.npy");
             if !f.is_file() {
-                bail!("{}: a run directory must hold volume.npy", p.display());
+                bail!("{}: a run directory must hold a trained field (model.json) or volume.npy", p.display());
             }
             f
         } else {
             p.clone()
         };
-        let v = read_volume(&file, scene.aabb)?;
-        volumes.push((file, v));
+        volumes.push(read_volume(&file, scene.aabb)?);
     }
     Ok(Recon::Volumes(volumes))
 }
