@@ -29,10 +29,7 @@ pub struct PositionalEncoding {
 impl PositionalEncoding {
     /// `input_dim` is 3 or 4; `space_freqs` is `L_x`, `time_freqs` is `L_t` (ignored for 3D).
     pub fn new(input_dim: usize, space_freqs: usize, time_freqs: usize) -> Self {
-        assert!(
-            input_dim == 3 || input_dim == 4,
-            "PositionalEncoding: input_dim must be 3 or 4, got {input_dim}"
-        );
+        assert!(input_dim == 3 || input_dim == 4, "PositionalEncoding: input_dim must be 3 or 4, got {input_dim}");
         Self { input_dim, space_freqs, time_freqs }
     }
 
@@ -60,11 +57,7 @@ impl PositionalEncoding {
         for (row, enc) in inputs.chunks_exact(d).zip(out.chunks_exact_mut(w)) {
             let mut o = 0;
             for (c, &u) in row.iter().enumerate() {
-                let (tau, freqs) = if c < 3 {
-                    (2.0 * u - 1.0, self.space_freqs)
-                } else {
-                    (u, self.time_freqs)
-                };
+                let (tau, freqs) = if c < 3 { (2.0 * u - 1.0, self.space_freqs) } else { (u, self.time_freqs) };
                 enc[o] = tau;
                 o += 1;
                 let mut p = tau;

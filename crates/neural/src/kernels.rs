@@ -134,10 +134,7 @@ pub(crate) fn fast_exp(x: f32) -> f32 {
     // ln 2 split in a part exact in f32 and a small correction (Cody–Waite).
     let r = x - k * 0.693_145_75 - k * 1.428_606_8e-6;
     let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (0.166_666_67
-                    + r * (0.041_666_668 + r * (0.008_333_334 + r * 0.001_388_889)))));
+        + r * (1.0 + r * (0.5 + r * (0.166_666_67 + r * (0.041_666_668 + r * (0.008_333_334 + r * 0.001_388_889)))));
     let bits = ((k as i32 + 127) as u32) << 23;
     p * f32::from_bits(bits)
 }

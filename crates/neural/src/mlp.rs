@@ -275,20 +275,15 @@ impl Mlp {
             };
             kernels::fill_rows(z, &params[layer.bias.clone()]);
             let w = &params[layer.weight.clone()];
-            let (inp, k) = if l == 0 {
-                (x, self.in_dim)
-            } else {
-                (&prev[(l - 1) * stride..(l - 1) * stride + n * h], h)
-            };
+            let (inp, k) =
+                if l == 0 { (x, self.in_dim) } else { (&prev[(l - 1) * stride..(l - 1) * stride + n * h], h) };
             matmul(z, n, h, k, inp, Op::N, &w[..k * h], Op::N, true);
             if Some(l) == self.skip {
                 matmul(z, n, h, self.in_dim, x, Op::N, &w[k * h..], Op::N, true);
             }
             match self.activation {
                 Activation::Relu => kernels::relu_inplace(&mut rest[..n * h]),
-                Activation::Swish => {
-                    kernels::swish(&tape.pre[l * stride..l * stride + n * h], &mut rest[..n * h])
-                }
+                Activation::Swish => kernels::swish(&tape.pre[l * stride..l * stride + n * h], &mut rest[..n * h]),
             }
         }
         let last = (self.layers.len() - 1) * stride;
@@ -369,11 +364,7 @@ impl Mlp {
             let dz: &[f32] = cur;
             let w = &params[layer.weight.clone()];
             let dw = &mut grads[layer.weight.clone()];
-            let (inp, k) = if l == 0 {
-                (x, self.in_dim)
-            } else {
-                (&tape.acts[off - stride..off - stride + n * h], h)
-            };
+            let (inp, k) = if l == 0 { (x, self.in_dim) } else { (&tape.acts[off - stride..off - stride + n * h], h) };
             // ∂L/∂W = inputᵀ · dz.
             matmul(&mut dw[..k * h], k, h, n, inp, Op::T, dz, Op::N, true);
             if Some(l) == self.skip {

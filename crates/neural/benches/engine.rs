@@ -1,0 +1,258 @@
+//! Training-engine benchmark: samples per second of one training step (forward + MSE +
+//! backward + gradient reduction + Adam) for the dissertation's 8 × 256 ReLU network and for
+//! the hash-grid field, the batch split over all threads in chunks as the trainer does, plus
+//! the same 8 × 256 step in PyTorch-CPU (benches/pytorch_step.py) in the same run, and the
+//! measured FP32 FMA peak of the machine.
+//!
+//! Build, then run the executable directly (the target dir is shared):
+//!   cargo bench --no-run -p fluidnerf-neural --bench engine
+//!   target/release/deps/engine-<hash> [--quick] [--no-pytorch]
+//! Environment: FLUIDNERF_BENCH_PYTHON (default python3).
+#![allow(clippy::print_stdout, clippy::print_stderr)]
+
+use std::time::Instant;
+
+use fluidnerf_neural::optim::{sum_gradients, Adam, AdamConfig};
+use fluidnerf_neural::{HashGridConfig, HashGridField, MlpConfig, MlpField, TrainableField};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+
+/// One thread's tape, gradient buffer and scratch.
+struct Worker<T> {
+    tape: T,
+    grads: Vec<f32>,
+    out: Vec<f32>,
+    d_out: Vec<f32>,
+}
+
+/// One training step over `batch` rows: every thread takes a contiguous share and runs it in
+/// chunks of `chunk` rows (forward, MSE gradient, backward into its own buffer); then the
+/// buffers are summed and Adam steps. Returns the loss.
+fn train_step<F: TrainableField>(
+    field: &mut F,
+    workers: &mut [Worker<F::Tape>],
+    inputs: &[f32],
+    targets: &[f32],
+    chunk: usize,
+    grads: &mut [f32],
+    adam: &mut Adam,
+) -> f64 {
+    let d = field.input_dim();
+    let batch = targets.len();
+    let per = batch.div_ceil(workers.len());
+    let f: &F = field;
+    let loss: f64 = workers
+        .par_iter_mut()
+        .enumerate()
+        .map(|(t, w)| {
+            let mut loss = 0.0f64;
+            let end = ((t + 1) * per).min(batch);
+            let mut i = t * per;
+            while i < end {
+                let n = chunk.min(end - i);
+                let (out, d_out) = (&mut w.out[..n], &mut w.d_out[..n]);
+                f.forward(&inputs[i * d..(i + n) * d], out, &mut w.tape);
+                for ((g, &o), &y) in d_out.iter_mut().zip(out.iter()).zip(&targets[i..i + n]) {
+                    let r = o - y;
+                    loss += (r * r) as f64;
+                    *g = 2.0 * r / batch as f32;
+                }
+                f.backward(&mut w.tape, d_out, &mut w.grads);
+                i += n;
+            }
+            loss
+        })
+        .sum();
+    let mut per_thread: Vec<Vec<f32>> = workers.iter_mut().map(|w| std::mem::take(&mut w.grads)).collect();
+    sum_gradients(&mut per_thread, grads);
+    for (w, g) in workers.iter_mut().zip(per_thread) {
+        w.grads = g;
+    }
+    adam.step(field.params_mut(), grads, 5e-4);
+    loss / batch as f64
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Median seconds per step over `steps` timed steps after `warmup`.
+fn time_steps<F: TrainableField>(field: &mut F, batch: usize, chunk: usize, warmup: usize, steps: usize) -> f64 {
+    let threads = rayon::current_num_threads();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let d = field.input_dim();
+    let inputs: Vec<f32> = (0..batch * d).map(|_| rng.random::<f32>()).collect();
+    let targets: Vec<f32> = (0..batch).map(|_| rng.random::<f32>()).collect();
+    let mut workers: Vec<Worker<F::Tape>> = (0..threads)
+        .map(|_| Worker {
+            tape: field.new_tape(),
+            grads: vec![0.0; field.num_params()],
+            out: vec![0.0; chunk],
+            d_out: vec![0.0; chunk],
+        })
+        .collect();
+    let mut grads = vec![0.0; field.num_params()];
+    let mut adam = Adam::new(field.num_params(), AdamConfig::default());
+    let mut times = Vec::new();
+    for s in 0..warmup + steps {
+        let t0 = Instant::now();
+        let loss = train_step(field, &mut workers, &inputs, &targets, chunk, &mut grads, &mut adam);
+        let dt = t0.elapsed().as_secs_f64();
+        assert!(loss.is_finite(), "training step diverged");
+        if s >= warmup {
+            times.push(dt);
+        }
+    }
+    median(times)
+}
+
+/// Measured FP32 peak (GFLOP/s) of all threads: independent chains of 512-bit (or 256-bit)
+/// FMAs, enough of them to cover the FMA latency.
+fn fma_peak_gflops() -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f")]
+        fn chains512(iters: usize) -> f32 {
+            use std::arch::x86_64::*;
+            let mut acc = [_mm512_set1_ps(0.0); 12];
+            let a = _mm512_set1_ps(0.999_999);
+            let b = _mm512_set1_ps(1e-7);
+            for _ in 0..iters {
+                for v in acc.iter_mut() {
+                    *v = _mm512_fmadd_ps(*v, a, b);
+                }
+            }
+            let mut s = 0.0;
+            for v in acc {
+                s += _mm512_reduce_add_ps(v);
+            }
+            s
+        }
+        #[target_feature(enable = "avx2,fma")]
+        fn chains256(iters: usize) -> f32 {
+            use std::arch::x86_64::*;
+            let mut acc = [_mm256_set1_ps(0.0); 12];
+            let a = _mm256_set1_ps(0.999_999);
+            let b = _mm256_set1_ps(1e-7);
+            for _ in 0..iters {
+                for v in acc.iter_mut() {
+                    *v = _mm256_fmadd_ps(*v, a, b);
+                }
+            }
+            let mut s = [0.0f32; 8];
+            for v in acc {
+                let mut t = [0.0f32; 8];
+                // SAFETY: `t` holds 8 f32.
+                unsafe { _mm256_storeu_ps(t.as_mut_ptr(), v) };
+                for (s, t) in s.iter_mut().zip(t) {
+                    *s += t;
+                }
+            }
+            s.iter().sum()
+        }
+        let (lanes, run): (usize, fn(usize) -> f32) = if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: feature detected above.
+            (16, |n| unsafe { chains512(n) })
+        } else if std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: feature detected above.
+            (8, |n| unsafe { chains256(n) })
+        } else {
+            return f64::NAN;
+        };
+        let iters = 20_000_000usize;
+        let threads = rayon::current_num_threads();
+        let mut best = 0.0f64;
+        for _ in 0..3 {
+            let t0 = Instant::now();
+            let s: f32 = (0..threads).into_par_iter().map(|_| run(iters)).sum();
+            let dt = t0.elapsed().as_secs_f64();
+            assert!(s.is_finite());
+            best = best.max((threads * iters * 12 * lanes * 2) as f64 / dt / 1e9);
+        }
+        best
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    f64::NAN
+}
+
+fn pytorch(batch: usize, steps: usize, threads: usize) -> Option<f64> {
+    let python = std::env::var("FLUIDNERF_BENCH_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/pytorch_step.py");
+    let out = std::process::Command::new(python)
+        .args([script, "--batch", &batch.to_string(), "--steps", &steps.to_string()])
+        .args(["--threads", &threads.to_string()])
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        eprintln!("pytorch reference failed: {}", String::from_utf8_lossy(&out.stderr).trim());
+        return None;
+    }
+    println!("  {}", text.trim());
+    text.split_whitespace().find_map(|w| w.strip_prefix("samples_per_s=")).and_then(|v| v.parse().ok())
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let no_torch = args.iter().any(|a| a == "--no-pytorch");
+    let threads = rayon::current_num_threads();
+    let steps = if quick { 3 } else { 8 };
+    let batch = 65_536;
+    println!("training-engine benchmark: {threads} threads, batch {batch}, median of {steps} steps");
+
+    let peak = fma_peak_gflops();
+    println!("FP32 FMA peak (measured, all threads): {peak:.0} GFLOP/s");
+
+    let mut mlp = MlpField::new(&MlpConfig::table_5_1(), 3, 0).expect("default config is valid");
+    let flops = mlp.flops_per_sample();
+    let mut rust_rates = Vec::new();
+    for chunk in [128, 256, 512] {
+        let t = time_steps(&mut mlp, batch, chunk, 1, steps);
+        let rate = batch as f64 / t;
+        println!(
+            "mlp 8x256 relu  chunk {chunk:4}: {:8.0} samples/s  step {:6.1} ms  {:5.0} GFLOP/s ({:3.0} % of peak)",
+            rate,
+            t * 1e3,
+            rate * flops / 1e9,
+            100.0 * rate * flops / 1e9 / peak
+        );
+        if chunk == 256 {
+            rust_rates.push(rate);
+        }
+    }
+    let torch = if no_torch { None } else { pytorch(batch, steps.min(5), threads) };
+    // Rust again after PyTorch, so both see the same machine state.
+    let t = time_steps(&mut mlp, batch, 256, 1, steps);
+    rust_rates.push(batch as f64 / t);
+    let rust = rust_rates.iter().sum::<f64>() / rust_rates.len() as f64;
+    println!("mlp 8x256 relu  chunk  256 (mean of before/after pytorch): {rust:.0} samples/s");
+    if let Some(py) = torch {
+        println!("ratio rust / pytorch: {:.2}x", rust / py);
+    }
+
+    let mut swish = MlpField::new(&MlpConfig::table_5_2(), 4, 0).expect("Table 5.2 config is valid");
+    let t = time_steps(&mut swish, batch, 256, 1, steps);
+    println!(
+        "mlp 10x200 swish (4D, Table 5.2) chunk 256: {:8.0} samples/s  {:5.0} GFLOP/s",
+        batch as f64 / t,
+        batch as f64 / t * swish.flops_per_sample() / 1e9
+    );
+
+    let grid_batch = 1 << 18;
+    let mut grid = HashGridField::new(&HashGridConfig::default(), 3, 0).expect("default config is valid");
+    println!(
+        "hash grid: 16 levels x 2 features, 2^19 entries, MLP 2x64, {} params ({} in tables)",
+        grid.num_params(),
+        grid.grid_params()
+    );
+    for chunk in [1024, 4096] {
+        let t = time_steps(&mut grid, grid_batch, chunk, 1, steps);
+        println!(
+            "hash grid step chunk {chunk:5}: {:8.2} M points/s  step {:6.1} ms",
+            grid_batch as f64 / t / 1e6,
+            t * 1e3
+        );
+    }
+}
