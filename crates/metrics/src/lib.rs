@@ -22,6 +22,10 @@ pub mod ssim;
 pub use error::MetricsError;
 pub use pointwise::{data_range_of, mse, nrmse, psnr};
 pub use region::Region;
-pub use report::{evaluate_volume, MetricsReport, RegionMetrics, StepMetrics, VolumeMetricOptions, VolumeMetrics};
-pub use reprojection::{compare_images, reproject, ReprojectionMetrics, ReprojectionOptions};
+pub use report::{
+    evaluate_field, evaluate_volume, MetricsReport, RegionMetrics, StepMetrics, VolumeMetricOptions, VolumeMetrics,
+};
+pub use reprojection::{
+    compare_images, reproject, reproject_all, Reprojection, ReprojectionMetrics, ReprojectionOptions,
+};
 pub use ssim::{ssim_2d, ssim_3d, ssim_global, SsimParams, SsimWindow};

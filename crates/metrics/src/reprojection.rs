@@ -99,6 +99,17 @@ pub fn reproject(
     })
 }
 
+/// Reprojects onto every frame in `measured` (`(frame index, its image)`, typically the
+/// scene's held-out frames), in order.
+pub fn reproject_all(
+    field: &dyn ScalarField,
+    scene: &Scene,
+    measured: &[(usize, Image)],
+    options: &ReprojectionOptions,
+) -> Result<Vec<Reprojection>, MetricsError> {
+    measured.iter().map(|(i, img)| reproject(field, scene, *i, img, options)).collect()
+}
+
 /// Compares a rendered image with a measured one (same size): NRMSE, PSNR, global and windowed
 /// SSIM, with the measured image's range as data range unless `ssim.data_range` is set. The
 /// frame fields of the result are left empty (frame 0, no name, no time).
