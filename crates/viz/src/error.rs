@@ -1,0 +1,46 @@
+//! The error type of the viz crate.
+
+use std::path::PathBuf;
+
+/// What can go wrong while drawing or writing pictures, meshes and reports.
+#[derive(Debug, thiserror::Error)]
+pub enum VizError {
+    /// Reading or writing a file failed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Reading an input file failed.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The drawing library failed (a font or backend problem).
+    #[error("drawing {what} failed: {message}")]
+    Draw { what: String, message: String },
+    /// Encoding a PNG or GIF failed.
+    #[error("cannot encode {what}: {source}")]
+    Encode {
+        what: String,
+        #[source]
+        source: image::ImageError,
+    },
+    /// An argument is out of its valid range.
+    #[error("invalid {what}: {why}")]
+    Invalid { what: String, why: String },
+}
+
+impl VizError {
+    /// Shorthand for [`VizError::Invalid`].
+    pub fn invalid(what: impl Into<String>, why: impl Into<String>) -> Self {
+        VizError::Invalid { what: what.into(), why: why.into() }
+    }
+
+    pub(crate) fn draw(what: &str, err: impl std::fmt::Display) -> Self {
+        VizError::Draw { what: what.to_string(), message: err.to_string() }
+    }
+}

@@ -1,0 +1,1 @@
+//! Line plots: convergence histories and parameter sweeps.
