@@ -1,1 +1,39 @@
-//! Classical algebraic tomography: voxel projectors, ART-family solvers, MLEM, TV.
+//! Classical algebraic tomography on a voxel grid: matrix-free projectors (forward and exact
+//! adjoint) and the ART family of solvers, MLEM and a total-variation method.
+//!
+//! # Conventions
+//! - Grid: [`Grid`] = dims `[nx, ny, nz]` + box, cell-centred voxels, x fastest (index
+//!   `(k * ny + j) * nx + i`), the layout of [`fluidnerf_core::Volume`]; all voxel buffers are
+//!   contiguous `f32` of [`Grid::len`] elements.
+//! - Views: [`fluidnerf_core::Camera`]s (OpenCV axes, pixel centres at integers, distortion),
+//!   images row-major `f32`, one per view, in the projector's view order.
+//! - Imaging law: `pixel = intensity_scale × ∫ E ds` (the scene's `intensity_scale`, world
+//!   units), the model of [`fluidnerf_core::render_image`], so reconstructions are in the units
+//!   of the emission field itself.
+//!
+//! # Layout
+//! - [`projector`]: the system matrix `A` of Eq. 2.20 applied per view ([`Projector`]):
+//!   [`SplatProjector`] (voxel-driven bilinear splat, the dissertation's) and [`RayProjector`]
+//!   (ray-driven trilinear).
+//! - [`solve`]: [`asart`], [`art`], [`sart`], [`mart`], [`smart`], [`mlem`], [`sart_tv`], all
+//!   `fn(problem, init, &params, on_iter) -> Result<Report, SolveError>`.
+//! - [`visual_hull`]: a support mask from dark pixels; [`estimate_memory`]: peak memory before
+//!   a run.
+//!
+//! Equations are numbered as in the dissertation ("On the development of a Neural Radiance
+//! Field technique for tomographic reconstruction applied to flow diagnostics", chapter 2.3).
+
+mod error;
+mod hull;
+mod memory;
+pub mod projector;
+pub mod solve;
+
+pub use error::{ClassicalError, SolveError};
+pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
+pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
+pub use projector::{Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector};
+pub use solve::{
+    art, asart, mart, mlem, multilevel_order, sart, sart_tv, smart, total_variation, ArtParams, AsartParams, IterState,
+    MartParams, MlemParams, Plateau, Problem, Report, SartParams, SmartParams, StopReason, Stopping, TvParams,
+};

@@ -1,0 +1,180 @@
+//! Matrix-free projectors: the system matrix `A` of Eq. 2.20 (`p = A g`), applied per view and
+//! never stored.
+//!
+//! # Conventions
+//! - The unknown `g` is a [`Grid`]: `dims = [nx, ny, nz]` cell-centred voxels filling an
+//!   axis-aligned box, x fastest (index `(k * ny + j) * nx + i`), exactly the layout of
+//!   [`fluidnerf_core::Volume`]. Values are the emission density E (intensity per unit length).
+//! - A view's data `p` is its image, row-major (`row * width + col`), pixel centres at integer
+//!   coordinates (OpenCV). Distortion and any pose are handled through [`Camera`].
+//! - Scale: both projectors model the scene's imaging law `pixel = intensity_scale × ∫ E ds`
+//!   (what [`fluidnerf_core::render_image`] computes), so `A g` of a smooth volume matches a
+//!   rendering of that volume to a few percent (tested), and solvers return E in the units of
+//!   the ground truth.
+//! - Every projector implements the forward map and its exact adjoint with the same f32
+//!   weights, so `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding (tested with distortion).
+//!
+//! Two projectors:
+//! - [`SplatProjector`], voxel-driven (the dissertation's, §6.4.1): each voxel's projected
+//!   centre is spread bilinearly over a 2 × 2 pixel block.
+//! - [`RayProjector`], ray-driven: the trilinear line integral along each pixel's ray.
+
+mod ray;
+mod splat;
+
+use fluidnerf_core::{Aabb, Camera, Volume};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+pub use ray::RayProjector;
+pub use splat::SplatProjector;
+
+/// The voxel grid of the unknown: dims and box, the layout of [`Volume`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
+    /// `[nx, ny, nz]`.
+    pub dims: [usize; 3],
+    pub aabb: Aabb,
+}
+
+impl Grid {
+    /// A grid over `aabb`; panics if a dimension is zero.
+    pub fn new(dims: [usize; 3], aabb: Aabb) -> Self {
+        assert!(dims.iter().all(|&n| n > 0), "Grid::new: dims {dims:?} must be positive");
+        Grid { dims, aabb }
+    }
+
+    /// `longest` voxels along the box's longest side, cubic cells ([`Volume::dims_for`]).
+    pub fn with_resolution(aabb: Aabb, longest: usize) -> Self {
+        Grid::new(Volume::dims_for(&aabb, longest), aabb)
+    }
+
+    /// Number of voxels.
+    pub fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Cell size along each axis.
+    pub fn spacing(&self) -> DVec3 {
+        self.aabb.size() / DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64)
+    }
+
+    /// Volume of one cell.
+    pub fn voxel_volume(&self) -> f64 {
+        let s = self.spacing();
+        s.x * s.y * s.z
+    }
+
+    /// Wraps voxel values (length [`Grid::len`]) as a [`Volume`].
+    pub fn volume(&self, data: Vec<f32>) -> Volume {
+        Volume::from_vec(self.dims, self.aabb, data)
+    }
+}
+
+/// Which projector to use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProjectorKind {
+    /// Voxel-driven bilinear splat (the dissertation's).
+    #[default]
+    Splat,
+    /// Ray-driven trilinear line integral.
+    Ray,
+}
+
+/// One view's rows of `A` in compressed sparse row form: row `i` (pixel `row * width + col`)
+/// holds `cols[ptr[i]..ptr[i + 1]]` (voxel indices, each at most once) with `vals` the weights.
+#[derive(Clone, Debug, Default)]
+pub struct SparseRows {
+    pub ptr: Vec<u64>,
+    pub cols: Vec<u32>,
+    pub vals: Vec<f32>,
+}
+
+impl SparseRows {
+    /// Number of rows (pixels).
+    pub fn n_rows(&self) -> usize {
+        self.ptr.len().saturating_sub(1)
+    }
+
+    /// The entries of row `i`.
+    pub fn row(&self, i: usize) -> (&[u32], &[f32]) {
+        let (a, b) = (self.ptr[i] as usize, self.ptr[i + 1] as usize);
+        (&self.cols[a..b], &self.vals[a..b])
+    }
+
+    /// Largest weight of each row (0 for empty rows): `A_{i,max}` of Eq. 2.24–2.28.
+    pub fn row_max(&self) -> Vec<f32> {
+        (0..self.n_rows()).map(|i| self.row(i).1.iter().fold(0f32, |m, &v| m.max(v))).collect()
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.ptr.len() * 8 + self.cols.len() * 4 + self.vals.len() * 4
+    }
+}
+
+/// A linear map from a voxel grid to every view's image, applied one view at a time.
+///
+/// Shapes: `x`, `out` of voxel maps have [`Grid::len`] elements; images of view `v` have
+/// `width × height` of `cameras()[v]`.
+pub trait Projector: Sync {
+    /// The grid of the unknown.
+    fn grid(&self) -> &Grid;
+
+    /// The views' cameras, in view order.
+    fn cameras(&self) -> &[Camera];
+
+    fn n_views(&self) -> usize {
+        self.cameras().len()
+    }
+
+    /// Pixels of view `view`.
+    fn view_len(&self, view: usize) -> usize {
+        let c = &self.cameras()[view];
+        c.width() * c.height()
+    }
+
+    /// `out = A_v x` (overwrites `out`).
+    fn forward(&self, view: usize, x: &[f32], out: &mut [f32]);
+
+    /// `out += A_vᵀ y`, and, if given, `col_sums += A_vᵀ 1` (the column sums `Σ_i w_ij` of
+    /// the view) in the same pass.
+    fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>);
+
+    /// The rows of `A_v`, for the row-action methods (ART, MART). Holds the view's part of the
+    /// matrix, so it costs memory ([`Projector::rows_bytes_estimate`]) while alive.
+    fn rows(&self, view: usize) -> SparseRows;
+
+    /// Rough size of [`Projector::rows`] for one view, in bytes.
+    fn rows_bytes_estimate(&self, view: usize) -> usize;
+
+    /// Extra memory the projector itself holds (cached rays and such), in bytes.
+    fn bytes(&self) -> usize;
+
+    /// Working memory of one `forward` or `back_add` call, in bytes.
+    fn scratch_bytes(&self, view: usize) -> usize;
+}
+
+/// Splits `0..n` into at most `parts` contiguous ranges of near-equal length.
+pub(crate) fn bands(n: usize, parts: usize) -> Vec<std::ops::Range<usize>> {
+    let parts = parts.clamp(1, n.max(1));
+    (0..parts).map(|p| (p * n / parts)..((p + 1) * n / parts)).filter(|r| !r.is_empty()).collect()
+}
+
+/// Number of independent accumulators used by the scatter passes: a few per thread so that
+/// rayon can balance uneven bands.
+pub(crate) fn scatter_parts() -> usize {
+    rayon::current_num_threads().max(1)
+}
+
+/// Checks the shapes of a projection call (programmer contract).
+pub(crate) fn check_shapes<P: Projector + ?Sized>(p: &P, view: usize, x_len: usize, img_len: usize) {
+    assert!(view < p.n_views(), "view {view} out of range ({} views)", p.n_views());
+    assert_eq!(x_len, p.grid().len(), "voxel buffer has the wrong length");
+    assert_eq!(img_len, p.view_len(view), "image buffer of view {view} has the wrong length");
+}

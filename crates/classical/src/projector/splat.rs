@@ -1,0 +1,395 @@
+//! The voxel-driven bilinear splat (dissertation §6.4.1).
+//!
+//! Voxel `j` with centre `c_j` projects to the continuous pixel position `(u, v)` through the
+//! camera (pose, pinhole, OpenCV distortion). Its weight on the four pixels around `(u, v)` is
+//! `w_ij = γ_j · b_ij` with `b_ij` the bilinear interpolation weights (summing to 1) and
+//!
+//! ```text
+//! γ_j = intensity_scale · V_vox · |∂(u, v)/∂(x_n, y_n)| · s / z³
+//! ```
+//!
+//! where `(x_n, y_n) = (X/Z, Y/Z)` are normalised image coordinates, `z` the voxel's depth and
+//! `s` its distance from the camera centre. `z³ / (s |∂(u,v)/∂(x_n,y_n)|)` is the volume swept
+//! per unit length along the ray by one pixel's viewing cone at that depth (the pixel footprint,
+//! `z² / (f_x f_y)` on the optical axis without distortion), so a voxel adds its emitted power
+//! `E_j V_vox` spread over the pixels it covers, and `Σ_j w_ij g_j ≈ intensity_scale ∫ E ds`,
+//! the scene's imaging law. Pixels outside the image are dropped; voxels behind the camera
+//! contribute nothing.
+//!
+//! The splat samples the image at voxel-centre positions only, so it needs voxels no larger than
+//! about two pixel footprints; coarser grids leave gaps in the projection.
+
+use fluidnerf_core::Camera;
+use rayon::prelude::*;
+
+use super::{bands, check_shapes, scatter_parts, Grid, Projector, SparseRows};
+use crate::ClassicalError;
+
+/// One view's camera in f32, ready for the voxel loop.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SplatView {
+    width: usize,
+    height: usize,
+    /// Rows of the camera-from-world rotation.
+    rot: [[f32; 3]; 3],
+    trans: [f32; 3],
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    skew: f32,
+    /// k1, k2, p1, p2, k3, k4, k5, k6.
+    dist: [f32; 8],
+    distorted: bool,
+    /// `intensity_scale · V_vox · f_x · f_y`.
+    gain: f32,
+}
+
+/// Where a voxel lands: the top-left pixel of its 2 × 2 block and the four weights
+/// (top-left, top-right, bottom-left, bottom-right).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Footprint {
+    pub col: i32,
+    pub row: i32,
+    pub w: [f32; 4],
+}
+
+impl SplatView {
+    fn new(camera: &Camera, gain_base: f64) -> Self {
+        let cfw = camera.camera_from_world();
+        let m = cfw.matrix3;
+        // glam stores columns; row r of R is (m.x_axis[r], m.y_axis[r], m.z_axis[r]).
+        let rot = [0, 1, 2].map(|r| [m.x_axis[r] as f32, m.y_axis[r] as f32, m.z_axis[r] as f32]);
+        let t = cfw.translation;
+        let k = camera.intrinsics;
+        let d = camera.distortion;
+        SplatView {
+            width: camera.width(),
+            height: camera.height(),
+            rot,
+            trans: [t.x as f32, t.y as f32, t.z as f32],
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            skew: k.skew as f32,
+            dist: [d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6].map(|v| v as f32),
+            distorted: !d.is_identity(),
+            gain: (gain_base * k.fx * k.fy) as f32,
+        }
+    }
+
+    /// Camera-frame position of the voxel row `(·, j, k)`'s first centre and the step per `i`.
+    #[inline(always)]
+    fn row_start(&self, grid: &GridF32, j: usize, k: usize) -> ([f32; 3], [f32; 3]) {
+        let y = grid.min[1] + (j as f32 + 0.5) * grid.sp[1];
+        let z = grid.min[2] + (k as f32 + 0.5) * grid.sp[2];
+        let x = grid.min[0] + 0.5 * grid.sp[0];
+        let r = &self.rot;
+        let base = [0, 1, 2].map(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
+        let step = [0, 1, 2].map(|a| r[a][0] * grid.sp[0]);
+        (base, step)
+    }
+
+    /// The footprint of a voxel at camera-frame position `p`, or `None` if it misses the image.
+    #[inline(always)]
+    fn footprint(&self, p: [f32; 3]) -> Option<Footprint> {
+        let [x, y, z] = p;
+        if z <= 1e-6 {
+            return None;
+        }
+        let inv_z = 1.0 / z;
+        let (xn, yn) = (x * inv_z, y * inv_z);
+        let (xd, yd, det) = if self.distorted { distort(&self.dist, xn, yn) } else { (xn, yn, 1.0) };
+        let u = self.fx * xd + self.skew * yd + self.cx;
+        let v = self.fy * yd + self.cy;
+        // Reject anything whose 2 × 2 block cannot touch the image (also NaN).
+        if !(u > -1.0 && v > -1.0 && u < self.width as f32 && v < self.height as f32) {
+            return None;
+        }
+        let u0 = u.floor();
+        let v0 = v.floor();
+        let (fu, fv) = (u - u0, v - v0);
+        let s = (x * x + y * y + z * z).sqrt();
+        let gamma = self.gain * det.abs() * s * inv_z * inv_z * inv_z;
+        let (a, b) = (gamma * (1.0 - fv), gamma * fv);
+        Some(Footprint { col: u0 as i32, row: v0 as i32, w: [a * (1.0 - fu), a * fu, b * (1.0 - fu), b * fu] })
+    }
+
+    /// The in-image pixels of a footprint as (pixel index, weight); out-of-image ones are
+    /// skipped.
+    #[inline(always)]
+    fn for_each_pixel(&self, f: &Footprint, mut visit: impl FnMut(usize, f32)) {
+        let (w, h) = (self.width as i32, self.height as i32);
+        for (q, (dc, dr)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+            let (c, r) = (f.col + dc, f.row + dr);
+            if c >= 0 && r >= 0 && c < w && r < h {
+                visit(r as usize * self.width + c as usize, f.w[q]);
+            }
+        }
+    }
+}
+
+/// OpenCV distortion of normalised coordinates in f32, with the determinant of its Jacobian
+/// (mirrors [`fluidnerf_core::Distortion::apply_with_jacobian`]).
+#[inline(always)]
+fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, f32) {
+    let [k1, k2, p1, p2, k3, k4, k5, k6] = *d;
+    let r2 = x * x + y * y;
+    let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+    let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
+    let a = num / den;
+    let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+    let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
+    let da = (dnum * den - num * dden) / (den * den);
+    let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
+    let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
+    let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
+    (xd, yd, dxx * dyy - dxy * dxy)
+}
+
+#[derive(Clone, Copy, Debug)]
+struct GridF32 {
+    min: [f32; 3],
+    sp: [f32; 3],
+}
+
+/// The voxel-driven bilinear splat projector; see the module docs.
+#[derive(Clone, Debug)]
+pub struct SplatProjector {
+    grid: Grid,
+    cameras: Vec<Camera>,
+    views: Vec<SplatView>,
+    gf: GridF32,
+}
+
+impl SplatProjector {
+    /// A projector from `grid` to the images of `cameras`, with the scene's
+    /// `intensity_scale` (pixel = scale × ∫ E ds).
+    pub fn new(grid: Grid, cameras: &[Camera], intensity_scale: f64) -> Result<Self, ClassicalError> {
+        validate(&grid, cameras, intensity_scale)?;
+        let gain_base = intensity_scale * grid.voxel_volume();
+        let views = cameras.iter().map(|c| SplatView::new(c, gain_base)).collect();
+        let sp = grid.spacing();
+        let gf = GridF32 {
+            min: [grid.aabb.min.x as f32, grid.aabb.min.y as f32, grid.aabb.min.z as f32],
+            sp: [sp.x as f32, sp.y as f32, sp.z as f32],
+        };
+        Ok(SplatProjector { grid, cameras: cameras.to_vec(), views, gf })
+    }
+
+    /// Visits every voxel of z-slices `ks` that lands on view `view`'s image:
+    /// `visit(voxel index, footprint)`.
+    #[inline(always)]
+    fn for_each_voxel(&self, view: usize, ks: std::ops::Range<usize>, mut visit: impl FnMut(usize, &Footprint)) {
+        let sv = &self.views[view];
+        let [nx, ny, _] = self.grid.dims;
+        for k in ks {
+            for j in 0..ny {
+                let (base, step) = sv.row_start(&self.gf, j, k);
+                let row0 = (k * ny + j) * nx;
+                for i in 0..nx {
+                    let fi = i as f32;
+                    let p = [base[0] + fi * step[0], base[1] + fi * step[1], base[2] + fi * step[2]];
+                    if let Some(f) = sv.footprint(p) {
+                        visit(row0 + i, &f);
+                    }
+                }
+            }
+        }
+    }
+
+    /// `out = A_v x` by a plain single-threaded loop over voxels in f64 through
+    /// [`Camera::project`] and [`fluidnerf_core::Distortion::apply_with_jacobian`]: the straightforward
+    /// implementation, kept as the reference the fast path is tested and benchmarked against.
+    pub fn forward_reference(&self, view: usize, x: &[f32], out: &mut [f32]) {
+        check_shapes(self, view, x.len(), out.len());
+        out.fill(0.0);
+        let cam = &self.cameras[view];
+        let (w, h) = (cam.width() as i64, cam.height() as i64);
+        let k = cam.intrinsics;
+        let cfw = cam.camera_from_world();
+        let gain = f64::from(self.views[view].gain) / (k.fx * k.fy);
+        let [nx, ny, nz] = self.grid.dims;
+        let sp = self.grid.spacing();
+        for kk in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let idx = (kk * ny + j) * nx + i;
+                    let c = self.grid.aabb.min + glam::DVec3::new(i as f64 + 0.5, j as f64 + 0.5, kk as f64 + 0.5) * sp;
+                    let p = cfw.transform_point3(c);
+                    let Some(uv) = cam.project_camera_point(p) else { continue };
+                    let n = glam::DVec2::new(p.x / p.z, p.y / p.z);
+                    let (_, jac) = cam.distortion.apply_with_jacobian(n);
+                    let det = k.fx * k.fy * (jac.dxx * jac.dyy - jac.dxy * jac.dyx);
+                    let gamma = gain * det.abs() * p.length() / (p.z * p.z * p.z);
+                    let (u0, v0) = (uv.x.floor(), uv.y.floor());
+                    let (fu, fv) = (uv.x - u0, uv.y - v0);
+                    for (dc, dr, wt) in [
+                        (0, 0, (1.0 - fu) * (1.0 - fv)),
+                        (1, 0, fu * (1.0 - fv)),
+                        (0, 1, (1.0 - fu) * fv),
+                        (1, 1, fu * fv),
+                    ] {
+                        let (c, r) = (u0 as i64 + dc, v0 as i64 + dr);
+                        if c >= 0 && r >= 0 && c < w && r < h {
+                            out[(r * w + c) as usize] += (gamma * wt) as f32 * x[idx];
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Shared input checks of the projectors.
+pub(crate) fn validate(grid: &Grid, cameras: &[Camera], intensity_scale: f64) -> Result<(), ClassicalError> {
+    grid.aabb.validate()?;
+    if cameras.is_empty() {
+        return Err(ClassicalError::invalid("cameras", "at least one view is needed"));
+    }
+    for c in cameras {
+        c.validate()?;
+    }
+    if !(intensity_scale > 0.0 && intensity_scale.is_finite()) {
+        return Err(ClassicalError::invalid("intensity scale", format!("must be positive, got {intensity_scale}")));
+    }
+    if u32::try_from(grid.len()).is_err() {
+        return Err(ClassicalError::invalid("grid", format!("{:?} has more than 2^32 voxels", grid.dims)));
+    }
+    Ok(())
+}
+
+impl Projector for SplatProjector {
+    fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    fn cameras(&self) -> &[Camera] {
+        &self.cameras
+    }
+
+    fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
+        check_shapes(self, view, x.len(), out.len());
+        let sv = &self.views[view];
+        let nz = self.grid.dims[2];
+        // Scatter: each band of z-slices accumulates into its own image, then the images are
+        // summed; images are small next to the volume.
+        let partials: Vec<Vec<f32>> = bands(nz, scatter_parts())
+            .into_par_iter()
+            .map(|ks| {
+                let mut img = vec![0f32; out.len()];
+                self.for_each_voxel(view, ks, |idx, f| {
+                    let g = x[idx];
+                    if g != 0.0 {
+                        sv.for_each_pixel(f, |pix, w| img[pix] += w * g);
+                    }
+                });
+                img
+            })
+            .collect();
+        out.par_chunks_mut(4096).enumerate().for_each(|(c, chunk)| {
+            let off = c * 4096;
+            for (q, o) in chunk.iter_mut().enumerate() {
+                *o = partials.iter().map(|p| p[off + q]).sum();
+            }
+        });
+    }
+
+    fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>) {
+        check_shapes(self, view, out.len(), y.len());
+        let sv = &self.views[view];
+        let [nx, ny, _] = self.grid.dims;
+        let slab = nx * ny;
+        // Gather: every voxel reads its own four pixels, so z-slices are independent.
+        match col_sums {
+            None => out.par_chunks_mut(slab).enumerate().for_each(|(k, o)| {
+                self.for_each_voxel(view, k..k + 1, |idx, f| {
+                    let mut acc = 0.0;
+                    sv.for_each_pixel(f, |pix, w| acc += w * y[pix]);
+                    o[idx - k * slab] += acc;
+                });
+            }),
+            Some(cs) => {
+                assert_eq!(cs.len(), out.len(), "column-sum buffer has the wrong length");
+                out.par_chunks_mut(slab).zip(cs.par_chunks_mut(slab)).enumerate().for_each(|(k, (o, c))| {
+                    self.for_each_voxel(view, k..k + 1, |idx, f| {
+                        let (mut acc, mut sum) = (0.0, 0.0);
+                        sv.for_each_pixel(f, |pix, w| {
+                            acc += w * y[pix];
+                            sum += w;
+                        });
+                        o[idx - k * slab] += acc;
+                        c[idx - k * slab] += sum;
+                    });
+                })
+            }
+        }
+    }
+
+    fn rows(&self, view: usize) -> SparseRows {
+        let sv = &self.views[view];
+        let n_pix = sv.width * sv.height;
+        let nz = self.grid.dims[2];
+        let mut ptr = vec![0u64; n_pix + 1];
+        self.for_each_voxel(view, 0..nz, |_, f| sv.for_each_pixel(f, |pix, _| ptr[pix + 1] += 1));
+        for i in 0..n_pix {
+            ptr[i + 1] += ptr[i];
+        }
+        let nnz = ptr[n_pix] as usize;
+        let mut cols = vec![0u32; nnz];
+        let mut vals = vec![0f32; nnz];
+        let mut fill: Vec<u64> = ptr[..n_pix].to_vec();
+        self.for_each_voxel(view, 0..nz, |idx, f| {
+            sv.for_each_pixel(f, |pix, w| {
+                let at = fill[pix] as usize;
+                cols[at] = idx as u32;
+                vals[at] = w;
+                fill[pix] += 1;
+            })
+        });
+        SparseRows { ptr, cols, vals }
+    }
+
+    fn rows_bytes_estimate(&self, view: usize) -> usize {
+        self.grid.len() * 4 * 8 + (self.view_len(view) + 1) * 16
+    }
+
+    fn bytes(&self) -> usize {
+        std::mem::size_of::<SplatView>() * self.views.len()
+    }
+
+    fn scratch_bytes(&self, view: usize) -> usize {
+        scatter_parts() * self.view_len(view) * 4
+    }
+}
+
+// Keep the f32 fast path honest against the f64 reference (the public test suite also checks
+// the imaging scale against the renderer).
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::{Aabb, Distortion, Intrinsics};
+    use glam::DVec3;
+
+    #[test]
+    fn fast_forward_matches_reference_loop() {
+        let grid = Grid::new([12, 10, 9], Aabb::cube(DVec3::ZERO, 2.0));
+        let k = Intrinsics { width: 30, height: 26, fx: 90.0, fy: 92.0, cx: 14.5, cy: 12.2, skew: 0.3 };
+        let mut cam = Camera::look_at(k, DVec3::new(0.4, -6.0, 1.0), DVec3::ZERO, DVec3::Z);
+        cam.distortion = Distortion { k1: -0.2, k2: 0.05, p1: 1e-3, p2: -2e-3, ..Default::default() };
+        let p = SplatProjector::new(grid, &[cam], 1.7).expect("valid");
+        let x: Vec<f32> = (0..grid.len()).map(|i| ((i * 37) % 11) as f32 * 0.1).collect();
+        let mut a = vec![0f32; p.view_len(0)];
+        let mut b = a.clone();
+        p.forward(0, &x, &mut a);
+        p.forward_reference(0, &x, &mut b);
+        let peak = b.iter().fold(0f32, |m, v| m.max(v.abs()));
+        assert!(peak > 0.0);
+        for (u, v) in a.iter().zip(&b) {
+            assert!((u - v).abs() <= 1e-4 * peak, "{u} vs {v}");
+        }
+    }
+}

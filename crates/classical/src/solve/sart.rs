@@ -1,0 +1,104 @@
+//! SART, simultaneous ART (Andersen & Kak 1984), view by view (Eq. 2.27):
+//!
+//! ```text
+//! g_j⁽ᵏ⁺¹⁾ = g_j⁽ᵏ⁾ + μ / (Σ_{i∈view} w_ij) · Σ_{i∈view} w_ij (p_i − Σ_j w_ij g_j⁽ᵏ⁾) / Σ_j w_ij
+//! ```
+//!
+//! Views in the multilevel access order ([`super::multilevel_order`]); non-negativity after
+//! every view; zero start. Defaults: μ = 1, at most 50 iterations, plateau rule on.
+
+use std::ops::ControlFlow;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::{drive, multilevel_order, IterState, Problem, Report, Stopping};
+use crate::SolveError;
+
+/// Parameters of [`sart`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SartParams {
+    /// Relaxation μ of Eq. 2.27. Default 1.
+    pub relaxation: f64,
+    /// Default: at most 50 iterations, plateau rule on.
+    pub stopping: Stopping,
+}
+
+impl Default for SartParams {
+    fn default() -> Self {
+        SartParams { relaxation: 1.0, stopping: Stopping::with_cap(50) }
+    }
+}
+
+/// Reusable state of a SART sweep (shared with SART-TV).
+pub(crate) struct SartSweep {
+    order: Vec<usize>,
+    row_sums: Vec<Vec<f32>>,
+    q: Vec<f32>,
+    back: Vec<f32>,
+    cols: Vec<f32>,
+    mu: f32,
+}
+
+impl SartSweep {
+    pub(crate) fn new(problem: &Problem, relaxation: f64) -> Self {
+        let p = problem.projector;
+        let n = p.grid().len();
+        let ones = vec![1f32; n];
+        let row_sums = (0..p.n_views())
+            .map(|v| {
+                let mut rs = vec![0f32; p.view_len(v)];
+                p.forward(v, &ones, &mut rs);
+                rs
+            })
+            .collect();
+        SartSweep {
+            order: multilevel_order(p.cameras(), p.grid().aabb.centre()),
+            row_sums,
+            q: vec![0f32; problem.max_view_len()],
+            back: vec![0f32; n],
+            cols: vec![0f32; n],
+            mu: relaxation as f32,
+        }
+    }
+
+    /// One sweep over all views; returns the sum of squared residuals.
+    pub(crate) fn run(&mut self, problem: &Problem, x: &mut [f32]) -> f64 {
+        let p = problem.projector;
+        let mut ss = 0f64;
+        for &v in &self.order {
+            let m = p.view_len(v);
+            let q = &mut self.q[..m];
+            p.forward(v, x, q);
+            for ((qi, &pi), &rs) in q.iter_mut().zip(&problem.images[v].data).zip(&self.row_sums[v]) {
+                let res = pi - *qi;
+                ss += res as f64 * res as f64;
+                *qi = if rs > 0.0 { res / rs } else { 0.0 };
+            }
+            self.back.par_iter_mut().for_each(|b| *b = 0.0);
+            self.cols.par_iter_mut().for_each(|c| *c = 0.0);
+            p.back_add(v, q, &mut self.back, Some(&mut self.cols));
+            let mu = self.mu;
+            x.par_iter_mut().zip(self.back.par_iter().zip(self.cols.par_iter())).for_each(|(g, (&b, &c))| {
+                if c > 0.0 {
+                    *g = (*g + mu * b / c).max(0.0);
+                }
+            });
+            problem.project_feasible(x);
+        }
+        ss
+    }
+}
+
+/// SART (Eq. 2.27); see the module docs. `init` replaces the zero start.
+pub fn sart(
+    problem: &Problem,
+    init: Option<&[f32]>,
+    params: &SartParams,
+    on_iter: impl FnMut(&IterState) -> ControlFlow<()>,
+) -> Result<Report, SolveError> {
+    let x = problem.start(init, || vec![0f32; problem.projector.grid().len()]);
+    let mut sweep = SartSweep::new(problem, params.relaxation);
+    drive("SART", problem, &params.stopping, x, |x, _| sweep.run(problem, x), on_iter)
+}
