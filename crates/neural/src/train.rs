@@ -343,6 +343,8 @@ impl<F: TrainableField> Learner<F> {
 #[derive(Debug)]
 pub struct TrainState<'a, F> {
     pub field: &'a F,
+    /// Everything a checkpoint needs (the field again, optimiser state, histories).
+    pub learner: &'a Learner<F>,
     pub meta: &'a FieldMeta,
     /// Iterations completed.
     pub iteration: usize,
@@ -713,6 +715,7 @@ pub fn train<F: TrainableField>(
         let smoothed = running_mean(&learner.losses, smoothing);
         let state = TrainState {
             field: &learner.field,
+            learner,
             meta: &prep.meta,
             iteration: learner.iteration,
             loss: loss as f32,

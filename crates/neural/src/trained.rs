@@ -16,6 +16,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::dense::DenseGridField;
+use crate::hashgrid::{HashGridConfig, HashGridField};
 use crate::mlp::{Activation, MlpConfig, MlpField};
 use crate::occupancy::{OccupancyConfig, OccupancyGrid};
 use crate::train::{FieldMeta, TrainConfig};
@@ -46,6 +47,8 @@ impl Default for DenseConfig {
 pub enum FieldConfig {
     /// Positional encoding + MLP (the dissertation's field).
     Mlp(MlpConfig),
+    /// A multiresolution hash-grid encoding with a tiny MLP (instant-ngp).
+    HashGrid(HashGridConfig),
     /// A trilinear voxel grid trained through the renderer.
     Dense(DenseConfig),
 }
@@ -79,8 +82,8 @@ impl NeuralConfig {
     ///   5e-4 → 5e-5 over 25 000 iterations, the §5.1.5 stopping rule;
     /// - `ch7`: as `faithful` with the chapter-7 optimum N_c = N_f = 64;
     /// - `experimental`: Table 8.3 — D 8, H 256, L 2, Swish, N_c = N_f = 64;
-    /// - `fast`: the multiresolution grid field with a tiny MLP and empty-space skipping
-    ///   (until the grid encoding is available: a dense grid with skipping);
+    /// - `fast`: the multiresolution hash-grid field with a tiny MLP, empty-space skipping,
+    ///   stratified samples only, a higher learning rate and a short schedule;
     /// - `dense`: a 64³ voxel grid trained through the renderer, with empty-space skipping.
     pub fn preset(name: &str) -> Option<Self> {
         let faithful = NeuralConfig { field: FieldConfig::Mlp(MlpConfig::table_5_1()), train: TrainConfig::default() };
@@ -98,7 +101,25 @@ impl NeuralConfig {
                 }),
                 train: TrainConfig { coarse_samples: 64, fine_samples: 64, ..faithful.train },
             }),
-            "fast" | "dense" => Some(NeuralConfig {
+            "fast" => Some(NeuralConfig {
+                field: FieldConfig::HashGrid(HashGridConfig {
+                    levels: 12,
+                    log2_table_size: 17,
+                    max_resolution: 256,
+                    ..HashGridConfig::default()
+                }),
+                train: TrainConfig {
+                    coarse_samples: 64,
+                    fine_samples: 0,
+                    rays_per_image: 1024,
+                    schedule: crate::optim::LrSchedule { initial: 1e-2, at_decay_iters: 1e-3, decay_iters: 2000 },
+                    max_iterations: 2000,
+                    stop: crate::train::StopRule { smoothing: 50, window: 300, tolerance: 0.01 },
+                    occupancy: Some(OccupancyConfig::default()),
+                    ..faithful.train
+                },
+            }),
+            "dense" => Some(NeuralConfig {
                 field: FieldConfig::Dense(DenseConfig::default()),
                 train: TrainConfig {
                     coarse_samples: 96,
@@ -209,6 +230,7 @@ impl<F: TrainableField> ScalarField for TrainedField<F> {
 pub fn build_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: u64) -> Result<AnyField, NeuralError> {
     match config {
         FieldConfig::Mlp(c) => Ok(AnyField::Mlp(MlpField::new(c, input_dim, seed)?)),
+        FieldConfig::HashGrid(c) => Ok(AnyField::HashGrid(HashGridField::new(c, input_dim, seed)?)),
         FieldConfig::Dense(c) => {
             if input_dim != 3 {
                 return Err(NeuralError::invalid("dense field", "only E(x) (3 inputs) is supported"));
@@ -226,6 +248,7 @@ pub fn build_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: u6
 #[derive(Debug)]
 pub enum AnyField {
     Mlp(MlpField),
+    HashGrid(HashGridField),
     Dense(DenseGridField),
 }
 
@@ -235,6 +258,7 @@ macro_rules! with_field {
     ($any:expr, $f:ident => $body:expr) => {
         match $any {
             $crate::trained::AnyField::Mlp($f) => $body,
+            $crate::trained::AnyField::HashGrid($f) => $body,
             $crate::trained::AnyField::Dense($f) => $body,
         }
     };
@@ -254,6 +278,7 @@ pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync
     with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
     let boxed: Box<dyn ScalarField + Send + Sync> = match field {
         AnyField::Mlp(f) => Box::new(TrainedField::new(f, record.meta)?),
+        AnyField::HashGrid(f) => Box::new(TrainedField::new(f, record.meta)?),
         AnyField::Dense(f) => Box::new(TrainedField::new(f, record.meta)?),
     };
     Ok((boxed, aabb))
