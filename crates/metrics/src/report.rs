@@ -5,8 +5,15 @@
 //! all voxels as one window) and the windowed 3D SSIM (skimage's form, see [`crate::ssim`]),
 //! all over the truth's voxel centres. Regions use the whole truth's data range, so their PSNR
 //! and SSIM are comparable with the global figures.
+//!
+//! Reading them: the windowed SSIM averages over every window, and windows in empty space
+//! (zero in both volumes) score 1, so in a mostly empty box it stays near 1 even for a blurred
+//! reconstruction (a 1.5-voxel Gaussian blur of the 96³ demo jet: NRMSE 0.33, windowed SSIM
+//! 0.986, global SSIM 0.944). NRMSE, normalised by the truth's energy, and the global SSIM are
+//! the more discriminating figures; the dissertation reports NRMSE.
 
-use fluidnerf_core::{ScalarField, Volume};
+use fluidnerf_core::{Aabb, ScalarField, Volume};
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::reprojection::ReprojectionMetrics;
@@ -54,6 +61,9 @@ impl Default for VolumeMetricOptions {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RegionMetrics {
     pub region: Region,
+    /// The box of the region's voxels in world units (whole voxels, so it may differ from the
+    /// region's nominal box by up to half a voxel).
+    pub bounds: Aabb,
     pub metrics: VolumeMetrics,
 }
 
@@ -140,7 +150,11 @@ pub fn evaluate_volume(
         if metrics.ssim_windowed.is_none() {
             log::warn!("region '{}' ({dims:?} voxels) is smaller than the SSIM window; no windowed SSIM", r.name);
         }
-        regions.push(RegionMetrics { region: r.clone(), metrics });
+        let sp = truth.spacing();
+        let lo = DVec3::new(ranges[0].start as f64, ranges[1].start as f64, ranges[2].start as f64);
+        let hi = DVec3::new(ranges[0].end as f64, ranges[1].end as f64, ranges[2].end as f64);
+        let bounds = Aabb::new(truth.aabb.min + lo * sp, truth.aabb.min + hi * sp);
+        regions.push(RegionMetrics { region: r.clone(), bounds, metrics });
     }
     Ok(StepMetrics { time, dims: truth.dims, global, regions })
 }
@@ -260,8 +274,6 @@ impl MetricsReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fluidnerf_core::Aabb;
-    use glam::DVec3;
 
     fn aabb() -> Aabb {
         Aabb::new(DVec3::ZERO, DVec3::new(3.0, 1.0, 1.0))
@@ -281,6 +293,7 @@ mod tests {
         assert!((s.global.ssim_windowed.expect("fits") - 1.0).abs() < 1e-12);
         assert_eq!(s.regions.len(), 3);
         assert_eq!(s.regions.iter().map(|r| r.metrics.voxels).sum::<usize>(), 24 * 8 * 8);
+        assert_eq!((s.regions[1].bounds.min.x, s.regions[1].bounds.max.x), (1.0, 2.0));
     }
 
     #[test]

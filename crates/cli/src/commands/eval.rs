@@ -42,8 +42,8 @@ pub enum Window {
 pub struct Args {
     /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw`
     /// with its JSON sidecar) or a reconstruction run directory (a trained field, or
-    /// `volume.npy`). For a time-resolved scene give one volume per truth time step, in time
-    /// order, or one run directory (a time-resolved field).
+    /// `volume.npy`). For a time-resolved scene give one volume per truth time step, in the
+    /// order the scene lists its truth, or one run directory (a time-resolved field).
     #[arg(required = true, num_args = 1..)]
     pub recon: Vec<PathBuf>,
     /// The scene: a folder holding `transforms.json`, or the file itself.
