@@ -5,7 +5,10 @@
 use std::path::PathBuf;
 
 use fluidnerf_core::{Aabb, Volume};
-use fluidnerf_viz::{slice, write_comparison_png, write_panels_png, Axis, Colormap, PanelStyle};
+use fluidnerf_viz::{
+    convergence_plots, slice, sweep_plot, write_comparison_png, write_panels_png, write_plots, Axis, Colormap,
+    PanelStyle, RunHistory, Series, Trace,
+};
 use glam::DVec3;
 
 fn jet(p: DVec3) -> f32 {
@@ -45,5 +48,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = slice(&truth, Axis::X, 20.0, "mm")?;
     let r = slice(&recon, Axis::X, 20.0, "mm")?;
     write_comparison_png(&out.join("compare_x.png"), &t, &r, &style)?;
+    let trace = |rate: f64, dt: f64, floor: f64| Trace {
+        iteration: (0..200).map(f64::from).collect(),
+        time_s: (0..200).map(|i| f64::from(i) * dt).collect(),
+        value: (0..200).map(|i| floor + (-rate * f64::from(i)).exp()).collect(),
+    };
+    let runs = [
+        RunHistory {
+            label: "ASART".into(),
+            loss_label: "residual".into(),
+            loss: trace(0.05, 0.1, 0.01),
+            nrmse: Some(trace(0.03, 0.1, 0.12)),
+            ssim: Some(Trace {
+                value: (0..200).map(|i| 0.9 - 0.6 * (-0.03 * f64::from(i)).exp()).collect(),
+                ..trace(0.0, 0.1, 0.0)
+            }),
+        },
+        RunHistory {
+            label: "FluidNeRF (fast)".into(),
+            loss_label: "loss".into(),
+            loss: trace(0.02, 0.4, 0.001),
+            nrmse: Some(trace(0.02, 0.4, 0.05)),
+            ssim: Some(Trace {
+                value: (0..200).map(|i| 0.97 - 0.8 * (-0.02 * f64::from(i)).exp()).collect(),
+                ..trace(0.0, 0.4, 0.0)
+            }),
+        },
+    ];
+    let plots = convergence_plots(&runs);
+    write_plots(&out.join("convergence.png"), &plots, 2)?;
+    write_plots(&out.join("convergence.svg"), &plots, 2)?;
+    let sweep = sweep_plot(
+        "number of cameras",
+        "NRMSE",
+        false,
+        vec![
+            Series { label: "ASART".into(), x: vec![2.0, 4.0, 6.0, 8.0], y: vec![0.45, 0.25, 0.18, 0.15] },
+            Series { label: "FluidNeRF".into(), x: vec![2.0, 4.0, 6.0, 8.0], y: vec![0.35, 0.15, 0.1, 0.08] },
+        ],
+    );
+    write_plots(&out.join("sweep.png"), &[sweep], 1)?;
     Ok(())
 }

@@ -29,8 +29,12 @@ pub mod report;
 
 pub use colormap::Colormap;
 pub use error::VizError;
+pub use isosurface::{marching_cubes, TriMesh};
 
 pub use panel::{
     comparison_groups, encode_panels_png, slice, write_comparison_png, write_panel_groups_png, write_panels_png, Axis,
     Panel, PanelGroup, PanelStyle, ValueRange,
+};
+pub use plot::{
+    convergence_plots, encode_plots_png, encode_plots_svg, sweep_plot, write_plots, LinePlot, RunHistory, Series, Trace,
 };

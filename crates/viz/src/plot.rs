@@ -1,1 +1,402 @@
-//! Line plots: convergence histories and parameter sweeps.
+//! Line plots: convergence histories (loss or residual, NRMSE, SSIM against iteration and wall
+//! time, several runs per plot) and metrics against a swept parameter; PNG or SVG.
+//!
+//! A figure is a grid of [`LinePlot`]s, filled row by row. Logarithmic axes drop non-positive
+//! values (with a `log` warning) since they have no place on them. Series colours follow the
+//! Tableau 10 palette, in order.
+
+use std::path::Path;
+
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::{font, output, VizError};
+
+/// One curve.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Series {
+    /// Legend entry (empty: no legend entry).
+    pub label: String,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+}
+
+/// One plot of a figure.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LinePlot {
+    pub title: String,
+    /// With the unit, e.g. `"wall time [s]"`.
+    pub x_label: String,
+    pub y_label: String,
+    pub log_x: bool,
+    pub log_y: bool,
+    /// Draw a marker at every point (for sweeps with few points).
+    pub markers: bool,
+    pub series: Vec<Series>,
+}
+
+/// A sampled history of one quantity during a run: value `value[i]` after iteration
+/// `iteration[i]`, `time_s[i]` seconds of wall time after the start.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Trace {
+    pub iteration: Vec<f64>,
+    pub time_s: Vec<f64>,
+    pub value: Vec<f64>,
+}
+
+/// The convergence history of one run, for [`convergence_plots`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunHistory {
+    /// Legend entry, e.g. `"ASART"` or `"FluidNeRF (fast)"`.
+    pub label: String,
+    /// What the loss trace measures, e.g. `"training loss"` or `"relative residual"`.
+    pub loss_label: String,
+    pub loss: Trace,
+    /// NRMSE against the ground truth, where known.
+    pub nrmse: Option<Trace>,
+    /// SSIM against the ground truth, where known.
+    pub ssim: Option<Trace>,
+}
+
+/// Plots of the runs' convergence, for a figure of two columns: one row per quantity (the loss
+/// or residual on a log scale; NRMSE on a log scale and SSIM, if any run has them), against
+/// iteration (left) and wall time (right).
+pub fn convergence_plots(runs: &[RunHistory]) -> Vec<LinePlot> {
+    let mut labels: Vec<&str> = runs.iter().map(|r| r.loss_label.as_str()).filter(|l| !l.is_empty()).collect();
+    labels.dedup();
+    let loss_label = if labels.len() == 1 { labels[0].to_string() } else { "loss or residual".to_string() };
+    let mut rows: Vec<(String, bool, Vec<(&str, &Trace)>)> =
+        vec![(loss_label, true, runs.iter().map(|r| (r.label.as_str(), &r.loss)).collect())];
+    let nrmse: Vec<_> = runs.iter().filter_map(|r| r.nrmse.as_ref().map(|t| (r.label.as_str(), t))).collect();
+    if !nrmse.is_empty() {
+        rows.push(("NRMSE".into(), true, nrmse));
+    }
+    let ssim: Vec<_> = runs.iter().filter_map(|r| r.ssim.as_ref().map(|t| (r.label.as_str(), t))).collect();
+    if !ssim.is_empty() {
+        rows.push(("SSIM".into(), false, ssim));
+    }
+    let mut plots = Vec::new();
+    for (quantity, log_y, traces) in rows {
+        for by_time in [false, true] {
+            let series = traces
+                .iter()
+                .map(|(label, t)| Series {
+                    label: label.to_string(),
+                    x: if by_time { t.time_s.clone() } else { t.iteration.clone() },
+                    y: t.value.clone(),
+                })
+                .collect();
+            plots.push(LinePlot {
+                title: format!("{quantity} vs {}", if by_time { "wall time" } else { "iteration" }),
+                x_label: if by_time { "wall time [s]".into() } else { "iteration".into() },
+                y_label: quantity.clone(),
+                log_x: false,
+                log_y,
+                markers: false,
+                series,
+            });
+        }
+    }
+    plots
+}
+
+/// A metric against a swept parameter, one series per method, with markers.
+pub fn sweep_plot(parameter_label: &str, metric_label: &str, log_x: bool, series: Vec<Series>) -> LinePlot {
+    LinePlot {
+        title: format!("{metric_label} vs {parameter_label}"),
+        x_label: parameter_label.to_string(),
+        y_label: metric_label.to_string(),
+        log_x,
+        log_y: false,
+        markers: true,
+        series,
+    }
+}
+
+/// Size of one plot of a figure, in pixels.
+const PLOT_W: u32 = 560;
+const PLOT_H: u32 = 380;
+
+fn grid(plots: &[LinePlot], columns: usize) -> Result<(usize, usize), VizError> {
+    if plots.is_empty() {
+        return Err(VizError::invalid("plot figure", "there are no plots to draw"));
+    }
+    let cols = columns.clamp(1, plots.len());
+    Ok((plots.len().div_ceil(cols), cols))
+}
+
+/// Writes the plots as a grid of `columns` columns: SVG if `path` ends in `.svg`, else PNG.
+pub fn write_plots(path: &Path, plots: &[LinePlot], columns: usize) -> Result<(), VizError> {
+    let is_svg = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    if is_svg {
+        output::write_atomic(path, encode_plots_svg(plots, columns)?.as_bytes())
+    } else {
+        output::write_atomic(path, &encode_plots_png(plots, columns)?)
+    }
+}
+
+/// The plots as PNG bytes.
+pub fn encode_plots_png(plots: &[LinePlot], columns: usize) -> Result<Vec<u8>, VizError> {
+    font::ensure_registered()?;
+    let (rows, cols) = grid(plots, columns)?;
+    let (w, h) = (PLOT_W * cols as u32, PLOT_H * rows as u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        draw_figure(&root, plots, rows, cols)?;
+        root.present().map_err(|e| VizError::draw("plot figure", e))?;
+    }
+    output::encode_rgb_png(&buf, w, h, "plot figure")
+}
+
+/// The plots as an SVG document (text as `<text>` elements in a sans-serif font).
+pub fn encode_plots_svg(plots: &[LinePlot], columns: usize) -> Result<String, VizError> {
+    font::ensure_registered()?;
+    let (rows, cols) = grid(plots, columns)?;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (PLOT_W * cols as u32, PLOT_H * rows as u32)).into_drawing_area();
+        draw_figure(&root, plots, rows, cols)?;
+        root.present().map_err(|e| VizError::draw("plot figure", e))?;
+    }
+    Ok(svg)
+}
+
+fn draw_figure<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    plots: &[LinePlot],
+    rows: usize,
+    cols: usize,
+) -> Result<(), VizError> {
+    root.fill(&WHITE).map_err(|e| VizError::draw("plot background", e))?;
+    let areas = root.split_evenly((rows, cols));
+    for (plot, area) in plots.iter().zip(&areas) {
+        draw_plot(area, plot)?;
+    }
+    Ok(())
+}
+
+/// The points of a series that can be drawn on the plot's axes.
+fn drawable(plot: &LinePlot, s: &Series) -> Vec<(f64, f64)> {
+    let pts: Vec<(f64, f64)> =
+        s.x.iter()
+            .zip(&s.y)
+            .map(|(&x, &y)| (x, y))
+            .filter(|&(x, y)| x.is_finite() && y.is_finite() && (!plot.log_x || x > 0.0) && (!plot.log_y || y > 0.0))
+            .collect();
+    let dropped = s.x.len().min(s.y.len()) - pts.len();
+    if dropped > 0 {
+        log::warn!(
+            "plot {:?}: {dropped} points of {:?} are not finite or not positive on a log axis",
+            plot.title,
+            s.label
+        );
+    }
+    pts
+}
+
+fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> std::ops::Range<f64> {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if !(lo.is_finite() && hi.is_finite()) {
+        return if log { 0.1..10.0 } else { 0.0..1.0 };
+    }
+    if log {
+        let (lo, hi) = if hi / lo < 1.01 { (lo / 1.5, hi * 1.5) } else { (lo, hi) };
+        lo / 1.15..hi * 1.15
+    } else {
+        let pad = if hi > lo { 0.04 * (hi - lo) } else { 0.5 * lo.abs().max(1e-9) };
+        lo - pad..hi + pad
+    }
+}
+
+fn draw_plot<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<(), VizError> {
+    let data: Vec<Vec<(f64, f64)>> = plot.series.iter().map(|s| drawable(plot, s)).collect();
+    let xr = axis_range(data.iter().flatten().map(|p| p.0), plot.log_x);
+    let yr = axis_range(data.iter().flatten().map(|p| p.1), plot.log_y);
+    match (plot.log_x, plot.log_y) {
+        (false, false) => draw_chart(area, plot, &data, xr.clone(), yr.clone(), &xr, &yr),
+        (true, false) => draw_chart(area, plot, &data, xr.clone().log_scale(), yr.clone(), &xr, &yr),
+        (false, true) => draw_chart(area, plot, &data, xr.clone(), yr.clone().log_scale(), &xr, &yr),
+        (true, true) => draw_chart(area, plot, &data, xr.clone().log_scale(), yr.clone().log_scale(), &xr, &yr),
+    }
+}
+
+fn draw_chart<DB, X, Y>(
+    area: &DrawingArea<DB, Shift>,
+    plot: &LinePlot,
+    data: &[Vec<(f64, f64)>],
+    x_spec: X,
+    y_spec: Y,
+    xr: &std::ops::Range<f64>,
+    yr: &std::ops::Range<f64>,
+) -> Result<(), VizError>
+where
+    DB: DrawingBackend,
+    X: AsRangedCoord<Value = f64>,
+    Y: AsRangedCoord<Value = f64>,
+    X::CoordDescType: ValueFormatter<f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| VizError::draw(&format!("plot {:?}", plot.title), e);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&plot.title, (font::FAMILY, 17.0, FontStyle::Bold))
+        .margin(12)
+        .x_label_area_size(46)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x_spec, y_spec)
+        .map_err(err)?;
+    let fx = axis_formatter(xr, plot.log_x);
+    let fy = axis_formatter(yr, plot.log_y);
+    chart
+        .configure_mesh()
+        .light_line_style(RGBColor(246, 246, 246))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .x_labels(7)
+        .y_labels(7)
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fy)
+        .x_desc(plot.x_label.as_str())
+        .y_desc(plot.y_label.as_str())
+        .label_style((font::FAMILY, 13.0))
+        .axis_desc_style((font::FAMILY, 15.0))
+        .draw()
+        .map_err(err)?;
+    let mut any_label = false;
+    for (k, (s, pts)) in plot.series.iter().zip(data).enumerate() {
+        let c = colorous::TABLEAU10[k % 10];
+        let color = RGBColor(c.r, c.g, c.b);
+        let line = chart.draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2))).map_err(err)?;
+        if !s.label.is_empty() {
+            any_label = true;
+            line.label(s.label.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        if plot.markers {
+            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled()))).map_err(err)?;
+        }
+    }
+    if any_label {
+        chart
+            .configure_series_labels()
+            .position(legend_corner(data, xr, yr, plot.log_x, plot.log_y))
+            .label_font((font::FAMILY, 13.0))
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(180, 180, 180))
+            .draw()
+            .map_err(err)?;
+    }
+    Ok(())
+}
+
+/// The plot corner with the fewest data points, so that the legend hides as little as possible.
+fn legend_corner(
+    data: &[Vec<(f64, f64)>],
+    xr: &std::ops::Range<f64>,
+    yr: &std::ops::Range<f64>,
+    log_x: bool,
+    log_y: bool,
+) -> SeriesLabelPosition {
+    let unit = |v: f64, r: &std::ops::Range<f64>, log: bool| {
+        if log {
+            (v.ln() - r.start.ln()) / (r.end.ln() - r.start.ln())
+        } else {
+            (v - r.start) / (r.end - r.start)
+        }
+    };
+    // Corners as (position, x region, y region): the legend covers about 40 % × 35 %.
+    let corners = [
+        (SeriesLabelPosition::UpperRight, 0.6..=1.0, 0.65..=1.0),
+        (SeriesLabelPosition::LowerRight, 0.6..=1.0, 0.0..=0.35),
+        (SeriesLabelPosition::UpperLeft, 0.0..=0.4, 0.65..=1.0),
+        (SeriesLabelPosition::LowerLeft, 0.0..=0.4, 0.0..=0.35),
+    ];
+    let mut best = (usize::MAX, SeriesLabelPosition::UpperRight);
+    for (pos, xs, ys) in corners {
+        let n = data
+            .iter()
+            .flatten()
+            .filter(|&&(x, y)| xs.contains(&unit(x, xr, log_x)) && ys.contains(&unit(y, yr, log_y)))
+            .count();
+        if n < best.0 {
+            best = (n, pos);
+        }
+    }
+    best.1
+}
+
+/// Tick labels: as many decimals as a linear range needs; compact scientific for log axes.
+fn axis_formatter(range: &std::ops::Range<f64>, log: bool) -> Box<dyn Fn(&f64) -> String> {
+    if log {
+        Box::new(|v: &f64| {
+            let e = v.abs().log10();
+            if (-3.0..4.0).contains(&e) {
+                crate::panel::format_number(*v)
+            } else {
+                format!("{v:.0e}")
+            }
+        })
+    } else {
+        Box::new(crate::panel::tick_formatter(range.start, range.end))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn runs() -> Vec<RunHistory> {
+        let trace = |rate: f64, dt: f64| Trace {
+            iteration: (0..50).map(f64::from).collect(),
+            time_s: (0..50).map(|i| f64::from(i) * dt).collect(),
+            value: (0..50).map(|i| (-rate * f64::from(i)).exp()).collect(),
+        };
+        vec![
+            RunHistory {
+                label: "ASART".into(),
+                loss_label: "residual".into(),
+                loss: trace(0.1, 0.2),
+                nrmse: Some(trace(0.05, 0.2)),
+                ssim: None,
+            },
+            RunHistory {
+                label: "FluidNeRF".into(),
+                loss_label: "loss".into(),
+                loss: trace(0.2, 0.5),
+                nrmse: Some(trace(0.08, 0.5)),
+                ssim: Some(Trace { value: vec![0.5; 50], ..trace(0.0, 0.5) }),
+            },
+        ]
+    }
+
+    #[test]
+    fn convergence_layout() {
+        let plots = convergence_plots(&runs());
+        assert_eq!(plots.len(), 6, "three quantities × (iteration, time)");
+        assert_eq!(plots[0].y_label, "loss or residual");
+        assert!(plots[0].log_y && !plots[4].log_y);
+        assert_eq!(plots[4].series.len(), 1, "only one run has SSIM");
+        assert_eq!(plots[1].series[1].x[2], 1.0, "second column is wall time");
+    }
+
+    #[test]
+    fn writes_png_and_svg() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut plots = convergence_plots(&runs());
+        plots[0].series[0].y[3] = -1.0; // dropped on the log axis, with a warning
+        write_plots(&dir.path().join("c.png"), &plots, 2).expect("png");
+        let img = image::open(dir.path().join("c.png")).expect("reads").to_rgb8();
+        assert_eq!((img.width(), img.height()), (2 * PLOT_W, 3 * PLOT_H));
+        write_plots(&dir.path().join("c.svg"), &plots, 2).expect("svg");
+        let svg = std::fs::read_to_string(dir.path().join("c.svg")).expect("reads");
+        assert!(svg.starts_with("<svg") && svg.contains("FluidNeRF") && svg.contains("wall time [s]"));
+        let sweep = sweep_plot(
+            "cameras",
+            "NRMSE",
+            false,
+            vec![Series { label: "ASART".into(), x: vec![2.0, 4.0, 8.0], y: vec![0.4, 0.2, 0.1] }],
+        );
+        write_plots(&dir.path().join("s.png"), &[sweep], 1).expect("png");
+    }
+}
