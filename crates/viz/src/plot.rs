@@ -60,6 +60,9 @@ pub struct RunHistory {
     pub ssim: Option<Trace>,
 }
 
+/// One row of the convergence figure: quantity, log scale, (run label, trace) pairs.
+type PlotRow<'a> = (String, bool, Vec<(&'a str, &'a Trace)>);
+
 /// Plots of the runs' convergence, for a figure of two columns: one row per quantity (the loss
 /// or residual on a log scale; NRMSE on a log scale and SSIM, if any run has them), against
 /// iteration (left) and wall time (right).
@@ -67,7 +70,7 @@ pub fn convergence_plots(runs: &[RunHistory]) -> Vec<LinePlot> {
     let mut labels: Vec<&str> = runs.iter().map(|r| r.loss_label.as_str()).filter(|l| !l.is_empty()).collect();
     labels.dedup();
     let loss_label = if labels.len() == 1 { labels[0].to_string() } else { "loss or residual".to_string() };
-    let mut rows: Vec<(String, bool, Vec<(&str, &Trace)>)> =
+    let mut rows: Vec<PlotRow<'_>> =
         vec![(loss_label, true, runs.iter().map(|r| (r.label.as_str(), &r.loss)).collect())];
     let nrmse: Vec<_> = runs.iter().filter_map(|r| r.nrmse.as_ref().map(|t| (r.label.as_str(), t))).collect();
     if !nrmse.is_empty() {
