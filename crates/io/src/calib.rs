@@ -1,1 +1,511 @@
-//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files and COLMAP text models.
+//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML or JSON) and
+//! COLMAP text models; and writing OpenCV files back.
+//!
+//! # OpenCV (`cv::FileStorage`, YAML `%YAML:1.0` with `!!opencv-matrix`, or JSON)
+//! Per camera:
+//! - `camera_matrix`: 3 × 3 K (`fx skew cx / 0 fy cy / 0 0 1`), pixel centres at integers
+//!   (OpenCV's convention is fluidnerf's: no shift).
+//! - `distortion_coefficients`: 0, 4, 5, 8 (or 12/14 with zero thin-prism/tilt terms) values in
+//!   OpenCV's order `k1 k2 p1 p2 [k3 [k4 k5 k6]]` (optional; none means no distortion).
+//! - the pose, world → camera (`x_cam = R x_world + t`): `rvec` (Rodrigues vector, 3 values)
+//!   and `tvec` (3), or `R` (3 × 3) and `T` (3). If both are given, `R`/`T` win (warning).
+//! - `image_width`, `image_height` (integers).
+//!
+//! Matrices are `!!opencv-matrix`/`opencv-matrix` nodes (`rows cols dt data`) or plain lists.
+//!
+//! **Several cameras in one file**: every key carries the suffix `_<name>`
+//! (`camera_matrix_cam0`, `distortion_coefficients_cam0`, `rvec_cam0`, `tvec_cam0`,
+//! `image_width_cam0`, ...). A file with unsuffixed keys holds one camera named after the file
+//! stem (`cam3.yml` → `cam3`); a file may not mix both. A folder is read as all its `.yml`,
+//! `.yaml` and `.json` files in name order; camera names must be unique. [`write_opencv`]
+//! writes unsuffixed keys when it writes a single camera whose name is the file stem, and
+//! suffixed keys otherwise, so reading gives back the same names.
+//!
+//! # COLMAP text models
+//! `cameras.txt` (`CAMERA_ID MODEL WIDTH HEIGHT PARAMS...` with models `SIMPLE_PINHOLE f cx cy`,
+//! `PINHOLE fx fy cx cy`, `SIMPLE_RADIAL f cx cy k`, `RADIAL f cx cy k1 k2`,
+//! `OPENCV fx fy cx cy k1 k2 p1 p2`, `FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6`) and
+//! `images.txt` (`IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`, then a line of 2D points),
+//! where the quaternion and translation map world to camera. COLMAP puts pixel centres at
+//! `+0.5` (the image's top-left corner is `(0, 0)`), so `cx_core = cx − 0.5` (same for cy).
+//! The radial models are OpenCV's with the missing coefficients zero.
+
+use std::path::{Path, PathBuf};
+
+use fluidnerf_core::glam::{DAffine3, DMat3, DQuat, DVec3};
+use fluidnerf_core::{Camera, Distortion, Intrinsics};
+use serde_json::{json, Map, Value};
+
+use crate::{atomic_write, IoError};
+
+/// Rotation matrix of a Rodrigues (axis × angle) vector, as `cv::Rodrigues`:
+/// `R = cos θ I + (1 − cos θ) k kᵀ + sin θ [k]×` with `θ = |r|`, `k = r / θ`.
+pub fn rodrigues_to_matrix(r: DVec3) -> DMat3 {
+    let theta = r.length();
+    if theta < 1e-300 {
+        return DMat3::IDENTITY;
+    }
+    let k = r / theta;
+    let (s, c) = theta.sin_cos();
+    let kx = DMat3::from_cols(DVec3::new(0.0, k.z, -k.y), DVec3::new(-k.z, 0.0, k.x), DVec3::new(k.y, -k.x, 0.0));
+    let kkt = DMat3::from_cols(k * k.x, k * k.y, k * k.z);
+    DMat3::IDENTITY * c + kkt * (1.0 - c) + kx * s
+}
+
+/// Rodrigues vector of a rotation matrix (the inverse of [`rodrigues_to_matrix`]; angle in
+/// `[0, π]`). Goes through a unit quaternion, which stays accurate near 0 and π.
+pub fn matrix_to_rodrigues(m: DMat3) -> DVec3 {
+    let mut q = DQuat::from_mat3(&m).normalize();
+    if q.w < 0.0 {
+        q = -q;
+    }
+    let v = DVec3::new(q.x, q.y, q.z);
+    let s = v.length();
+    if s < 1e-300 {
+        return 2.0 * v;
+    }
+    v * (2.0 * s.atan2(q.w) / s)
+}
+
+/// A pose from world → camera rotation and translation (`x_cam = R x_world + t`).
+pub fn world_from_camera_of(camera_from_world_rotation: DMat3, t: DVec3) -> DAffine3 {
+    DAffine3::from_mat3_translation(camera_from_world_rotation, t).inverse()
+}
+
+/// YAML (as `yaml-rust2` parses it) → JSON values, so both formats share one reader.
+fn yaml_to_json(y: &yaml_rust2::Yaml) -> Value {
+    use yaml_rust2::Yaml;
+    match y {
+        Yaml::Real(s) => {
+            s.parse::<f64>().ok().and_then(serde_json::Number::from_f64).map_or(Value::Null, Value::Number)
+        }
+        Yaml::Integer(i) => json!(i),
+        Yaml::String(s) => Value::String(s.clone()),
+        Yaml::Boolean(b) => Value::Bool(*b),
+        Yaml::Array(a) => Value::Array(a.iter().map(yaml_to_json).collect()),
+        Yaml::Hash(h) => {
+            let mut m = Map::new();
+            for (k, v) in h {
+                let key = match k {
+                    Yaml::String(s) => s.clone(),
+                    Yaml::Integer(i) => i.to_string(),
+                    _ => continue,
+                };
+                m.insert(key, yaml_to_json(v));
+            }
+            Value::Object(m)
+        }
+        _ => Value::Null,
+    }
+}
+
+/// The top-level nodes of a `cv::FileStorage` file, and its text.
+fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "calibration file", e))?;
+    let is_json =
+        path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) || text.trim_start().starts_with('{');
+    let value = if is_json {
+        serde_json::from_str::<Value>(&text).map_err(|source| IoError::Json { path: path.to_path_buf(), source })?
+    } else {
+        // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
+        let body: String = text.lines().filter(|l| !l.starts_with('%')).map(|l| format!("{l}\n")).collect();
+        let docs = yaml_rust2::YamlLoader::load_from_str(&body)
+            .map_err(|e| IoError::invalid(path, format!("malformed YAML: {e}")))?;
+        docs.first().map(yaml_to_json).unwrap_or(Value::Null)
+    };
+    match value {
+        Value::Object(m) => Ok((m, text)),
+        _ => Err(IoError::invalid(path, "expected a mapping of named nodes at the top level")),
+    }
+}
+
+/// A matrix node (`opencv-matrix` with rows/cols/data, or a plain, possibly nested, list) as
+/// its row-major values.
+fn matrix(path: &Path, key: &str, v: &Value) -> Result<Vec<f64>, IoError> {
+    let bad = |why: &str| IoError::invalid(path, format!("`{key}`: {why}"));
+    let numbers = |list: &Value| -> Result<Vec<f64>, IoError> {
+        let mut out = Vec::new();
+        let mut stack = vec![list];
+        while let Some(v) = stack.pop() {
+            match v {
+                Value::Array(a) => stack.extend(a.iter().rev()),
+                Value::Number(n) => out.push(n.as_f64().ok_or_else(|| bad("not a number"))?),
+                _ => return Err(bad("matrix data must be numbers (NaN and infinities are not allowed)")),
+            }
+        }
+        Ok(out)
+    };
+    match v {
+        Value::Object(m) => {
+            let data = numbers(m.get("data").ok_or_else(|| bad("matrix without `data`"))?)?;
+            let dim = |k: &str| m.get(k).and_then(Value::as_u64).map(|n| n as usize);
+            if let (Some(r), Some(c)) = (dim("rows"), dim("cols")) {
+                if r * c != data.len() {
+                    return Err(bad(&format!("rows × cols = {r} × {c} but {} values", data.len())));
+                }
+            }
+            Ok(data)
+        }
+        Value::Array(_) => numbers(v),
+        Value::Number(_) => numbers(&Value::Array(vec![v.clone()])),
+        _ => Err(bad("expected a matrix")),
+    }
+}
+
+fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value>) -> Result<Camera, IoError> {
+    let ctx = |key: &str| if name.is_empty() { key.to_string() } else { format!("{key} (camera {name})") };
+    let need = |key: &str| get(key).ok_or_else(|| IoError::invalid(path, format!("missing `{}`", ctx(key))));
+    let k = matrix(path, &ctx("camera_matrix"), &need("camera_matrix")?)?;
+    if k.len() != 9 {
+        return Err(IoError::invalid(
+            path,
+            format!("`{}` must be 3 × 3, has {} values", ctx("camera_matrix"), k.len()),
+        ));
+    }
+    if k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
+        return Err(IoError::invalid(path, format!("`{}`'s last rows must be [0 fy cy; 0 0 1]", ctx("camera_matrix"))));
+    }
+    let size = |key: &str| -> Result<u32, IoError> {
+        need(key)?
+            .as_u64()
+            .and_then(|v| u32::try_from(v).ok())
+            .ok_or_else(|| IoError::invalid(path, format!("`{}` must be a positive integer", ctx(key))))
+    };
+    let intrinsics = Intrinsics {
+        width: size("image_width")?,
+        height: size("image_height")?,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        skew: k[1],
+    };
+    let distortion = match get("distortion_coefficients") {
+        None => Distortion::default(),
+        Some(v) => Distortion::from_opencv(&matrix(path, &ctx("distortion_coefficients"), &v)?)
+            .map_err(|e| IoError::invalid(path, format!("`{}`: {e}", ctx("distortion_coefficients"))))?,
+    };
+    let vec3 = |key: &str| -> Result<DVec3, IoError> {
+        let v = matrix(path, &ctx(key), &need(key)?)?;
+        if v.len() != 3 {
+            return Err(IoError::invalid(path, format!("`{}` must have 3 values, has {}", ctx(key), v.len())));
+        }
+        Ok(DVec3::new(v[0], v[1], v[2]))
+    };
+    let rotation = if get("R").is_some() {
+        if get("rvec").is_some() {
+            log::warn!("{}: camera {name}: both R and rvec given; using R/T", path.display());
+        }
+        let r = matrix(path, &ctx("R"), &need("R")?)?;
+        if r.len() != 9 {
+            return Err(IoError::invalid(path, format!("`{}` must be 3 × 3, has {} values", ctx("R"), r.len())));
+        }
+        (DMat3::from_cols_array(&[r[0], r[3], r[6], r[1], r[4], r[7], r[2], r[5], r[8]]), vec3("T")?)
+    } else if get("rvec").is_some() {
+        (rodrigues_to_matrix(vec3("rvec")?), vec3("tvec")?)
+    } else {
+        return Err(IoError::invalid(
+            path,
+            format!("missing the pose of camera `{name}`: give rvec/tvec or R/T (world to camera)"),
+        ));
+    };
+    let camera =
+        Camera { intrinsics, distortion, world_from_camera: world_from_camera_of(rotation.0, rotation.1), lens: None };
+    camera.validate().map_err(|e| IoError::invalid(path, format!("camera `{name}`: {e}")))?;
+    Ok(camera)
+}
+
+const OPENCV_KEYS: [&str; 9] =
+    ["camera_matrix", "distortion_coefficients", "rvec", "tvec", "R", "T", "image_width", "image_height", ""];
+
+fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
+    let (nodes, text) = parse_storage(path)?;
+    let mut named: Vec<String> = nodes
+        .keys()
+        .filter_map(|k| k.strip_prefix("camera_matrix_"))
+        .filter(|s| !s.is_empty())
+        .map(str::to_string)
+        .collect();
+    let single = nodes.contains_key("camera_matrix");
+    if single && !named.is_empty() {
+        return Err(IoError::invalid(
+            path,
+            "mixes an unsuffixed `camera_matrix` with per-camera `camera_matrix_<name>` keys",
+        ));
+    }
+    for key in nodes.keys() {
+        let known = OPENCV_KEYS[..8].iter().any(|k| key == k || named.iter().any(|n| *key == format!("{k}_{n}")));
+        if !known {
+            log::warn!("{}: ignoring unknown key \"{key}\"", path.display());
+        }
+    }
+    if single {
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let cam = camera_from_nodes(path, "", &|k| nodes.get(k).cloned())?;
+        return Ok(vec![(stem, cam)]);
+    }
+    if named.is_empty() {
+        return Err(IoError::invalid(path, "no `camera_matrix` (or `camera_matrix_<name>`) node"));
+    }
+    // Keep the file's order of cameras (the parsed map is sorted by key).
+    named.sort_by_key(|n| {
+        let key = format!("camera_matrix_{n}");
+        text.match_indices(&key)
+            .find(|(i, _)| matches!(text[i + key.len()..].chars().next(), Some('"' | ':' | ' ')))
+            .map(|(i, _)| i)
+    });
+    named
+        .iter()
+        .map(|n| Ok((n.clone(), camera_from_nodes(path, n, &|k| nodes.get(&format!("{k}_{n}")).cloned())?)))
+        .collect()
+}
+
+/// Reads OpenCV calibration files: one file (one or several cameras) or a folder of them
+/// (see the module docs). Returns `(camera name, camera)` in file order.
+pub fn read_opencv(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
+    let files: Vec<PathBuf> = if path.is_dir() {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+            .map_err(|e| IoError::io(path, "calibration folder", e))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.is_file()
+                    && p.extension()
+                        .and_then(|e| e.to_str())
+                        .is_some_and(|e| ["yml", "yaml", "json"].contains(&e.to_ascii_lowercase().as_str()))
+            })
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            return Err(IoError::invalid(path, "no .yml, .yaml or .json calibration files in this folder"));
+        }
+        files
+    } else {
+        vec![path.to_path_buf()]
+    };
+    let mut out: Vec<(String, Camera)> = Vec::new();
+    for f in &files {
+        for (name, cam) in read_opencv_file(f)? {
+            if out.iter().any(|(n, _)| *n == name) {
+                return Err(IoError::invalid(f, format!("camera name `{name}` appears twice in {}", path.display())));
+            }
+            out.push((name, cam));
+        }
+    }
+    Ok(out)
+}
+
+fn fmt_f64(v: f64) -> String {
+    // serde_json's shortest round-trip form always has a `.` or an exponent, so OpenCV and
+    // YAML read it as a real.
+    serde_json::to_string(&v).unwrap_or_else(|_| format!("{v:e}"))
+}
+
+/// A matrix node to write: key, rows, cols, row-major values.
+type MatrixNode = (&'static str, usize, usize, Vec<f64>);
+
+/// Image size and the matrix nodes of one camera, world → camera pose as
+/// `rvec`/`tvec`.
+fn camera_nodes(cam: &Camera) -> (u32, u32, Vec<MatrixNode>) {
+    let k = cam.intrinsics.k_rows();
+    let camera_from_world = cam.camera_from_world();
+    let t = camera_from_world.translation;
+    let r = matrix_to_rodrigues(camera_from_world.matrix3);
+    let dist = cam.distortion.to_opencv();
+    let nodes = vec![
+        ("camera_matrix", 3, 3, k.iter().flatten().copied().collect()),
+        ("distortion_coefficients", 1, dist.len(), dist),
+        ("rvec", 3, 1, r.to_array().to_vec()),
+        ("tvec", 3, 1, t.to_array().to_vec()),
+    ];
+    (cam.intrinsics.width, cam.intrinsics.height, nodes)
+}
+
+/// Writes cameras as an OpenCV `cv::FileStorage` file: YAML for `.yml`/`.yaml`, JSON for
+/// `.json` (see the module docs for the key layout). Poses are written as `rvec`/`tvec`
+/// (world → camera), distortion as 5 coefficients (8 when k4..k6 are used). The thin lens, if
+/// any, is not part of the format and is dropped.
+pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoError> {
+    assert!(!cameras.is_empty(), "write_opencv: no cameras");
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let unsuffixed = cameras.len() == 1 && cameras[0].0 == stem;
+    for (name, _) in cameras {
+        if !unsuffixed && (name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-'))
+        {
+            return Err(IoError::invalid(path, format!("camera name `{name}` must be letters, digits, `_` or `-`")));
+        }
+    }
+    let key = |k: &str, name: &str| if unsuffixed { k.to_string() } else { format!("{k}_{name}") };
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let text = match ext.as_deref() {
+        Some("yml" | "yaml") => {
+            let mut s = String::from("%YAML:1.0\n---\n");
+            for (name, cam) in cameras {
+                let (w, h, nodes) = camera_nodes(cam);
+                s += &format!("{}: {w}\n{}: {h}\n", key("image_width", name), key("image_height", name));
+                for (k, rows, cols, data) in nodes {
+                    let data: Vec<String> = data.into_iter().map(fmt_f64).collect();
+                    s += &format!(
+                        "{}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n",
+                        key(k, name),
+                        data.join(", ")
+                    );
+                }
+            }
+            s
+        }
+        Some("json") => {
+            // Written by hand so the cameras keep their order (a JSON map would sort them).
+            let mut entries: Vec<(String, Value)> = Vec::new();
+            for (name, cam) in cameras {
+                let (w, h, nodes) = camera_nodes(cam);
+                entries.push((key("image_width", name), json!(w)));
+                entries.push((key("image_height", name), json!(h)));
+                for (k, rows, cols, data) in nodes {
+                    let node = json!({"type_id": "opencv-matrix", "rows": rows, "cols": cols, "dt": "d", "data": data});
+                    entries.push((key(k, name), node));
+                }
+            }
+            let mut parts = Vec::with_capacity(entries.len());
+            for (k, v) in entries {
+                let v = serde_json::to_string_pretty(&v)
+                    .map_err(|source| IoError::Json { path: path.to_path_buf(), source })?
+                    .replace('\n', "\n    ");
+                parts.push(format!("    {}: {v}", Value::String(k)));
+            }
+            format!("{{\n{}\n}}\n", parts.join(",\n"))
+        }
+        _ => return Err(IoError::invalid(path, "OpenCV calibration files must end in .yml, .yaml or .json")),
+    };
+    atomic_write(path, |w| w.write_all(text.as_bytes()))
+}
+
+/// Reads a COLMAP text model (`cameras.txt` and `images.txt` in `dir`) as
+/// `(image name, camera)` in the order of `images.txt` (see the module docs for the
+/// conventions).
+pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
+    let cam_path = dir.join("cameras.txt");
+    let img_path = dir.join("images.txt");
+    let cam_text = std::fs::read_to_string(&cam_path).map_err(|e| IoError::io(&cam_path, "COLMAP cameras.txt", e))?;
+    let img_text = std::fs::read_to_string(&img_path).map_err(|e| IoError::io(&img_path, "COLMAP images.txt", e))?;
+
+    let mut cameras: Vec<(u64, Intrinsics, Distortion)> = Vec::new();
+    for (n, line) in cam_text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let bad = |why: String| IoError::invalid(&cam_path, format!("line {}: {why}", n + 1));
+        let t: Vec<&str> = line.split_whitespace().collect();
+        if t.len() < 4 {
+            return Err(bad("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS...".into()));
+        }
+        let id: u64 = t[0].parse().map_err(|_| bad(format!("camera id `{}` is not an integer", t[0])))?;
+        let width: u32 = t[2].parse().map_err(|_| bad(format!("width `{}` is not an integer", t[2])))?;
+        let height: u32 = t[3].parse().map_err(|_| bad(format!("height `{}` is not an integer", t[3])))?;
+        let p: Vec<f64> = t[4..]
+            .iter()
+            .map(|s| s.parse::<f64>().map_err(|_| bad(format!("parameter `{s}` is not a number"))))
+            .collect::<Result<_, _>>()?;
+        let model = t[1];
+        let expected = match model {
+            "SIMPLE_PINHOLE" => 3,
+            "PINHOLE" => 4,
+            "SIMPLE_RADIAL" => 4,
+            "RADIAL" => 5,
+            "OPENCV" => 8,
+            "FULL_OPENCV" => 12,
+            other => {
+                return Err(bad(format!(
+                    "camera model {other} is not supported (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV)"
+                )))
+            }
+        };
+        if p.len() != expected {
+            return Err(bad(format!("{model} takes {expected} parameters, got {}", p.len())));
+        }
+        let (fx, fy, cx, cy, rest) = match model {
+            "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" => (p[0], p[0], p[1], p[2], &p[3..]),
+            _ => (p[0], p[1], p[2], p[3], &p[4..]),
+        };
+        let mut d = Distortion::default();
+        match model {
+            "SIMPLE_RADIAL" => d.k1 = rest[0],
+            "RADIAL" => (d.k1, d.k2) = (rest[0], rest[1]),
+            "OPENCV" | "FULL_OPENCV" => {
+                d = Distortion::from_opencv(rest).map_err(|e| bad(e.to_string()))?;
+            }
+            _ => {}
+        }
+        let k = Intrinsics { width, height, fx, fy, cx: cx - 0.5, cy: cy - 0.5, skew: 0.0 };
+        k.validate().map_err(|e| bad(e.to_string()))?;
+        if cameras.iter().any(|c| c.0 == id) {
+            return Err(bad(format!("camera id {id} appears twice")));
+        }
+        cameras.push((id, k, d));
+    }
+
+    let mut out = Vec::new();
+    let mut lines = img_text.lines().enumerate();
+    while let Some((n, line)) = lines.next() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let bad = |why: String| IoError::invalid(&img_path, format!("line {}: {why}", n + 1));
+        let t: Vec<&str> = line.split_whitespace().collect();
+        if t.len() < 10 {
+            return Err(bad("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME".into()));
+        }
+        let v: Vec<f64> = t[1..8]
+            .iter()
+            .map(|s| s.parse::<f64>().map_err(|_| bad(format!("`{s}` is not a number"))))
+            .collect::<Result<_, _>>()?;
+        let cam_id: u64 = t[8].parse().map_err(|_| bad(format!("camera id `{}` is not an integer", t[8])))?;
+        // As COLMAP's own reader: the name is the tenth field (names cannot hold spaces).
+        let name = t[9].to_string();
+        let q = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
+        if !q.is_finite() || (q.length() - 1.0).abs() > 1e-3 {
+            return Err(bad(format!("quaternion {:?} is not a unit quaternion", &v[..4])));
+        }
+        let rotation = DMat3::from_quat(q.normalize());
+        let (_, k, d) = cameras
+            .iter()
+            .find(|c| c.0 == cam_id)
+            .ok_or_else(|| bad(format!("image {name} uses camera id {cam_id}, which cameras.txt does not define")))?;
+        let camera = Camera {
+            intrinsics: *k,
+            distortion: *d,
+            world_from_camera: world_from_camera_of(rotation, DVec3::new(v[4], v[5], v[6])),
+            lens: None,
+        };
+        out.push((name, camera));
+        // The next line lists the image's 2D points; skip it.
+        lines.next();
+    }
+    if out.is_empty() {
+        return Err(IoError::invalid(&img_path, "no images"));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rodrigues_round_trips_including_near_zero_and_pi() {
+        for r in [
+            DVec3::new(0.1, -0.2, 0.3),
+            DVec3::new(1e-9, 2e-9, -1e-9),
+            DVec3::ZERO,
+            DVec3::new(0.0, 0.0, std::f64::consts::PI - 1e-7),
+            DVec3::new(2.0, 1.0, -0.5).normalize() * 3.0,
+        ] {
+            let m = rodrigues_to_matrix(r);
+            let back = matrix_to_rodrigues(m);
+            assert!((back - r).length() < 1e-12, "{r} -> {back}");
+            let q = DMat3::from_quat(DQuat::from_scaled_axis(r));
+            assert!((m - q).to_cols_array().iter().all(|e| e.abs() < 1e-15));
+        }
+    }
+}

@@ -1,0 +1,267 @@
+//! OpenCV and COLMAP calibrations: agreement with `cv2.projectPoints` (fixtures recorded by
+//! `fixtures/make_opencv_projections.py`), reading files written by `cv::FileStorage`, round
+//! trips OpenCV → scene → OpenCV, and a hand-made COLMAP model.
+
+use std::path::{Path, PathBuf};
+
+use fluidnerf_core::glam::{DMat3, DVec2, DVec3};
+use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Intrinsics, Scene};
+use fluidnerf_io::calib::{read_colmap, read_opencv, rodrigues_to_matrix, world_from_camera_of, write_opencv};
+use fluidnerf_io::scene::{load_scene, save_scene};
+use serde_json::Value;
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
+}
+
+fn cases() -> Vec<Value> {
+    let text = std::fs::read_to_string(fixtures().join("opencv_projections.json")).expect("fixture");
+    let v: Value = serde_json::from_str(&text).expect("json");
+    v["cases"].as_array().expect("cases").clone()
+}
+
+fn f64s(v: &Value) -> Vec<f64> {
+    let mut out = Vec::new();
+    match v {
+        Value::Array(a) => a.iter().for_each(|x| out.extend(f64s(x))),
+        Value::Number(n) => out.push(n.as_f64().expect("f64")),
+        _ => panic!("not numeric: {v}"),
+    }
+    out
+}
+
+fn v3(v: &[f64]) -> DVec3 {
+    DVec3::new(v[0], v[1], v[2])
+}
+
+/// The camera of a fixture case, built from K, the distortion vector and rvec/tvec.
+fn case_camera(c: &Value) -> Camera {
+    let k = f64s(&c["camera_matrix"]);
+    let intrinsics = Intrinsics {
+        width: c["width"].as_u64().expect("w") as u32,
+        height: c["height"].as_u64().expect("h") as u32,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        skew: k[1],
+    };
+    let distortion = Distortion::from_opencv(&f64s(&c["distortion_coefficients"])).expect("distortion");
+    let pose = world_from_camera_of(rodrigues_to_matrix(v3(&f64s(&c["rvec"]))), v3(&f64s(&c["tvec"])));
+    Camera { intrinsics, distortion, world_from_camera: pose, lens: None }
+}
+
+fn worst_projection_error(c: &Value, cam: &Camera) -> f64 {
+    let pts = f64s(&c["points_world"]);
+    let pix = f64s(&c["pixels"]);
+    let mut worst = 0.0f64;
+    for (p, uv) in pts.chunks(3).zip(pix.chunks(2)) {
+        let ours = cam.project(v3(p)).expect("in front");
+        worst = worst.max((ours - DVec2::new(uv[0], uv[1])).length());
+    }
+    worst
+}
+
+#[test]
+fn projections_agree_with_cv2_project_points() {
+    for c in cases() {
+        let cam = case_camera(&c);
+        let worst = worst_projection_error(&c, &cam);
+        assert!(worst < 1e-3, "case {}: worst error {worst:.2e} px", c["name"]);
+        // Our Rodrigues conversion matches cv2.Rodrigues.
+        let r = f64s(&c["R"]);
+        let ours = rodrigues_to_matrix(v3(&f64s(&c["rvec"])));
+        let cv = DMat3::from_cols_array(&[r[0], r[3], r[6], r[1], r[4], r[7], r[2], r[5], r[8]]);
+        assert!((ours - cv).to_cols_array().iter().all(|e| e.abs() < 1e-12), "case {}", c["name"]);
+    }
+}
+
+#[test]
+fn reads_files_written_by_cv_file_storage() {
+    let cases = cases();
+    for ext in ["yml", "json"] {
+        let cams = read_opencv(&fixtures().join(format!("opencv_two_cameras.{ext}"))).expect("reads");
+        let names: Vec<&str> = cams.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["four", "five"], "{ext}");
+        for ((_, cam), c) in cams.iter().zip(&cases[1..3]) {
+            let expected = case_camera(c);
+            assert_eq!(cam.intrinsics, expected.intrinsics);
+            assert_eq!(cam.distortion, expected.distortion);
+            assert!(worst_projection_error(c, cam) < 1e-3);
+        }
+    }
+    // One camera, unsuffixed keys, R/T pose: named after the file.
+    let cams = read_opencv(&fixtures().join("cam_single.yml")).expect("reads");
+    assert_eq!(cams.len(), 1);
+    assert_eq!(cams[0].0, "cam_single");
+    assert!(worst_projection_error(&cases[3], &cams[0].1) < 1e-3);
+}
+
+#[test]
+fn reads_a_folder_of_calibration_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::copy(fixtures().join("cam_single.yml"), dir.path().join("cam_single.yml")).expect("copy");
+    std::fs::copy(fixtures().join("opencv_two_cameras.json"), dir.path().join("pair.json")).expect("copy");
+    std::fs::write(dir.path().join("notes.txt"), "ignored").expect("write");
+    let names: Vec<String> = read_opencv(dir.path()).expect("reads").into_iter().map(|(n, _)| n).collect();
+    assert_eq!(names, ["cam_single", "four", "five"]);
+    // The same camera twice is an error naming it.
+    std::fs::copy(fixtures().join("cam_single.yml"), dir.path().join("pair.yml")).expect("copy");
+    std::fs::copy(fixtures().join("cam_single.yml"), dir.path().join("z.yml")).expect("copy");
+    std::fs::write(
+        dir.path().join("z.yml"),
+        std::fs::read_to_string(dir.path().join("pair.yml"))
+            .expect("read")
+            .replace("camera_matrix:", "camera_matrix_four:"),
+    )
+    .expect("write");
+    let err = read_opencv(dir.path()).expect_err("broken").to_string();
+    assert!(err.contains("z.yml"), "{err}");
+}
+
+fn assert_same_cameras(a: &[(String, Camera)], b: &[(String, Camera)]) {
+    assert_eq!(a.len(), b.len());
+    for ((na, ca), (nb, cb)) in a.iter().zip(b) {
+        assert_eq!(na, nb);
+        assert_eq!(ca.intrinsics, cb.intrinsics, "{na}");
+        assert_eq!(ca.distortion, cb.distortion, "{na}");
+        let (pa, pb) = (ca.camera_from_world(), cb.camera_from_world());
+        let dr = (pa.matrix3 - pb.matrix3).to_cols_array().iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        let dt = (pa.translation - pb.translation).length() / pa.translation.length().max(1.0);
+        assert!(dr < 1e-14 && dt < 1e-14, "{na}: rotation differs by {dr:.1e}, translation by {dt:.1e}");
+    }
+}
+
+/// OpenCV file → scene (transforms.json, written and read back) → OpenCV file: same cameras,
+/// and the files written before and after the trip are identical up to the last bit of the
+/// pose (the world ↔ camera inversions round).
+#[test]
+fn opencv_scene_opencv_round_trip() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for ext in ["yml", "json"] {
+        let original = read_opencv(&fixtures().join(format!("opencv_two_cameras.{ext}"))).expect("reads");
+        let first = dir.path().join(format!("first.{ext}"));
+        write_opencv(&first, &original).expect("writes");
+        let cams = read_opencv(&first).expect("reads ours");
+        assert_same_cameras(&original, &cams);
+
+        // Through a scene. The box: around the recorded points, which every camera sees.
+        let pts = f64s(&cases()[1]["points_world"]);
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for p in pts.chunks(3) {
+            lo = lo.min(v3(p));
+            hi = hi.max(v3(p));
+        }
+        let scene = Scene {
+            root: dir.path().to_path_buf(),
+            aabb: Aabb::new(lo, hi),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: cams
+                .iter()
+                .map(|(n, c)| Frame {
+                    camera: c.clone(),
+                    file_path: format!("{n}.png").into(),
+                    time: None,
+                    camera_name: Some(n.clone()),
+                    holdout: false,
+                })
+                .collect(),
+            truth: vec![],
+        };
+        let scene_dir = dir.path().join(format!("scene_{ext}"));
+        save_scene(&scene, &scene_dir).expect("saves scene");
+        let back = load_scene(&scene_dir).expect("loads scene");
+        let from_scene: Vec<(String, Camera)> =
+            back.frames.iter().map(|f| (f.camera_name.clone().expect("name"), f.camera.clone())).collect();
+        assert_same_cameras(&original, &from_scene);
+        let second = dir.path().join(format!("second.{ext}"));
+        write_opencv(&second, &from_scene).expect("writes");
+        let again = read_opencv(&second).expect("reads");
+        assert_same_cameras(&original, &again);
+        let (t1, t2) = (std::fs::read_to_string(&first).expect("r"), std::fs::read_to_string(&second).expect("r"));
+        assert_eq!(t1.lines().count(), t2.lines().count());
+        // Everything but the pose is bit-identical text.
+        let non_pose = |t: &str| -> Vec<String> {
+            t.lines().filter(|l| !l.contains("data") && !l.contains('.')).map(str::to_string).collect()
+        };
+        assert_eq!(non_pose(&t1), non_pose(&t2));
+    }
+}
+
+#[test]
+fn single_camera_named_after_the_file_uses_plain_keys() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cams = read_opencv(&fixtures().join("cam_single.yml")).expect("reads");
+    let out = dir.path().join("cam_single.yml");
+    write_opencv(&out, &cams).expect("writes");
+    let text = std::fs::read_to_string(&out).expect("read");
+    assert!(text.starts_with("%YAML:1.0\n---\n") && text.contains("\ncamera_matrix: !!opencv-matrix\n"), "{text}");
+    assert_same_cameras(&cams, &read_opencv(&out).expect("reads"));
+    // Under another name the keys get the camera's suffix.
+    let out = dir.path().join("rig.yml");
+    write_opencv(&out, &cams).expect("writes");
+    assert!(std::fs::read_to_string(&out).expect("read").contains("camera_matrix_cam_single:"));
+    assert_same_cameras(&cams, &read_opencv(&out).expect("reads"));
+}
+
+#[test]
+fn opencv_errors_name_the_file_and_key() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("bad.yml");
+    let base = std::fs::read_to_string(fixtures().join("cam_single.yml")).expect("read");
+    let check = |text: &str, needles: &[&str]| {
+        std::fs::write(&p, text).expect("write");
+        let err = read_opencv(&p).expect_err("must fail").to_string();
+        assert!(err.contains("bad.yml"), "{err}");
+        for n in needles {
+            assert!(err.contains(n), "{err} should mention {n}");
+        }
+    };
+    check(&base.replace("image_width: 640\n", ""), &["image_width"]);
+    check(&base.replace("R:", "Q:").replace("T:", "U:"), &["rvec/tvec or R/T"]);
+    check(&base.replace("rows: 1\n   cols: 8", "rows: 1\n   cols: 7"), &["distortion_coefficients", "1 × 7"]);
+    check("camera_matrix: [1, 2\n", &["malformed YAML"]);
+}
+
+#[test]
+fn colmap_model_centres_and_half_pixel_shift() {
+    let cams = read_colmap(&fixtures().join("colmap")).expect("reads");
+    let names: Vec<&str> = cams.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["front.png", "side.png", "radial.png"]);
+    let front = &cams[0].1;
+    assert!((front.centre() - DVec3::new(0.0, 0.0, -10.0)).length() < 1e-12);
+    // COLMAP's (37, 14) is our (36.5, 13.5): pixel centres at +0.5 there, at integers here.
+    let uv = front.project(DVec3::new(1.0, -2.0, 0.0)).expect("in front");
+    assert!((uv - DVec2::new(36.5, 13.5)).length() < 1e-12, "{uv}");
+    assert_eq!((front.intrinsics.cx, front.intrinsics.cy), (31.5, 23.5));
+
+    // side.png: the camera centre is −Rᵀt with R = R_y(90°), t = (1, 2, 3).
+    let side = &cams[1].1;
+    let r = DMat3::from_cols(DVec3::new(0.0, 0.0, -1.0), DVec3::Y, DVec3::X);
+    let t = DVec3::new(1.0, 2.0, 3.0);
+    let expected = -(r.transpose() * t);
+    assert!((expected - DVec3::new(3.0, -2.0, -1.0)).length() < 1e-12);
+    assert!((side.centre() - expected).length() < 1e-12, "{}", side.centre());
+    assert!((side.camera_from_world().matrix3 - r).to_cols_array().iter().all(|e| e.abs() < 1e-12));
+
+    let radial = &cams[2].1;
+    assert_eq!(radial.distortion.k1, -0.1);
+    assert_eq!((radial.intrinsics.fx, radial.intrinsics.fy, radial.intrinsics.cx), (60.0, 60.0, 31.0));
+}
+
+#[test]
+fn colmap_errors_name_the_file_and_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::copy(fixtures().join("colmap/images.txt"), dir.path().join("images.txt")).expect("copy");
+    std::fs::write(
+        dir.path().join("cameras.txt"),
+        "1 PINHOLE 64 48 50 50 32 24\n2 OPENCV_FISHEYE 64 48 1 1 1 1 0 0 0 0\n",
+    )
+    .expect("write");
+    let err = read_colmap(dir.path()).expect_err("fisheye").to_string();
+    assert!(err.contains("cameras.txt") && err.contains("line 2") && err.contains("OPENCV_FISHEYE"), "{err}");
+    std::fs::write(dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n").expect("write");
+    let err = read_colmap(dir.path()).expect_err("camera 2 missing").to_string();
+    assert!(err.contains("images.txt") && err.contains("radial.png") && err.contains("camera id 2"), "{err}");
+}
