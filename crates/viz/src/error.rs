@@ -5,13 +5,9 @@ use std::path::PathBuf;
 /// What can go wrong while drawing or writing pictures, meshes and reports.
 #[derive(Debug, thiserror::Error)]
 pub enum VizError {
-    /// Reading or writing a file failed.
-    #[error("cannot write {path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// Writing a file failed.
+    #[error(transparent)]
+    File(#[from] fluidnerf_io::IoError),
     /// Reading an input file failed.
     #[error("cannot read {path}: {source}")]
     Read {

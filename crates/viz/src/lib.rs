@@ -38,3 +38,4 @@ pub use panel::{
 pub use plot::{
     convergence_plots, encode_plots_png, encode_plots_svg, sweep_plot, write_plots, LinePlot, RunHistory, Series, Trace,
 };
+pub use report::{format_value, write_report_html, Figure, ImageData, Report, Table};

@@ -1,30 +1,13 @@
 //! Atomic file output and PNG encoding.
 
-use std::io::Write;
 use std::path::Path;
 
 use crate::VizError;
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, then a rename, so
-/// a reader never sees a half-written file.
+/// Writes `bytes` to `path` atomically (through [`fluidnerf_io::atomic_write`]), so a reader
+/// never sees a half-written file.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), VizError> {
-    let io = |source| VizError::Io { path: path.to_path_buf(), source };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".tmp-");
-    // Temporary files are private by default; the result should be readable like any output.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    let mut tmp = builder.tempfile_in(dir).map_err(io)?;
-    tmp.write_all(bytes).map_err(io)?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
+    fluidnerf_io::atomic_write(path, |w| w.write_all(bytes))?;
     Ok(())
 }
 
