@@ -91,29 +91,45 @@ impl SplatView {
         (base, step)
     }
 
-    /// The footprint of a voxel at camera-frame position `p`, or `None` if it misses the image.
+    /// Projects `len ≤ CHUNK` consecutive voxels of a row (`p = base + (i0 + q) · step`) into
+    /// `out`. Branch-free so that it vectorises; voxels whose 2 × 2 block misses the image (or
+    /// that lie behind the camera) get `col = MISS`.
     #[inline(always)]
-    fn footprint(&self, p: [f32; 3]) -> Option<Footprint> {
-        let [x, y, z] = p;
-        if z <= 1e-6 {
-            return None;
+    fn project_chunk<const DISTORTED: bool>(&self, base: [f32; 3], step: [f32; 3], i0: usize, out: &mut Chunk) {
+        let (w, h) = (self.width as f32, self.height as f32);
+        for q in 0..CHUNK {
+            let fi = (i0 + q) as f32;
+            let x = base[0] + fi * step[0];
+            let y = base[1] + fi * step[1];
+            let z = base[2] + fi * step[2];
+            let in_front = z > 1e-6;
+            let zs = if in_front { z } else { 1.0 };
+            let inv_z = 1.0 / zs;
+            let (xn, yn) = (x * inv_z, y * inv_z);
+            let (xd, yd, det) = if DISTORTED { distort(&self.dist, xn, yn) } else { (xn, yn, 1.0) };
+            let u = self.fx * xd + self.skew * yd + self.cx;
+            let v = self.fy * yd + self.cy;
+            // `u > -1` makes `u + 1` positive, so truncation is floor (and vectorises, unlike
+            // `floor` on baseline x86-64). The comparisons are false for NaN.
+            let hit = in_front & (u > -1.0) & (v > -1.0) & (u < w) & (v < h);
+            let s = (x * x + y * y + zs * zs).sqrt();
+            // Shifted by one so that every hit is positive and a miss is negative; the integer
+            // split happens in the (scalar) visiting loop, float-to-int casts do not vectorise.
+            out.u[q] = if hit { u + 1.0 } else { -1.0 };
+            out.v[q] = v + 1.0;
+            out.gamma[q] = self.gain * det.abs() * s * inv_z * inv_z * inv_z;
         }
-        let inv_z = 1.0 / z;
-        let (xn, yn) = (x * inv_z, y * inv_z);
-        let (xd, yd, det) = if self.distorted { distort(&self.dist, xn, yn) } else { (xn, yn, 1.0) };
-        let u = self.fx * xd + self.skew * yd + self.cx;
-        let v = self.fy * yd + self.cy;
-        // Reject anything whose 2 × 2 block cannot touch the image (also NaN).
-        if !(u > -1.0 && v > -1.0 && u < self.width as f32 && v < self.height as f32) {
-            return None;
-        }
-        let u0 = u.floor();
-        let v0 = v.floor();
-        let (fu, fv) = (u - u0, v - v0);
-        let s = (x * x + y * y + z * z).sqrt();
-        let gamma = self.gain * det.abs() * s * inv_z * inv_z * inv_z;
+    }
+
+    /// The footprint of entry `q` of a projected chunk.
+    #[inline(always)]
+    fn footprint(c: &Chunk, q: usize) -> Footprint {
+        let (us, vs, gamma) = (c.u[q], c.v[q], c.gamma[q]);
+        // Both positive, so truncation is floor.
+        let (cu, cv) = (us as i32, vs as i32);
+        let (fu, fv) = (us - cu as f32, vs - cv as f32);
         let (a, b) = (gamma * (1.0 - fv), gamma * fv);
-        Some(Footprint { col: u0 as i32, row: v0 as i32, w: [a * (1.0 - fu), a * fu, b * (1.0 - fu), b * fu] })
+        Footprint { col: cu - 1, row: cv - 1, w: [a * (1.0 - fu), a * fu, b * (1.0 - fu), b * fu] }
     }
 
     /// The in-image pixels of a footprint as (pixel index, weight); out-of-image ones are
@@ -121,6 +137,14 @@ impl SplatView {
     #[inline(always)]
     fn for_each_pixel(&self, f: &Footprint, mut visit: impl FnMut(usize, f32)) {
         let (w, h) = (self.width as i32, self.height as i32);
+        if f.col >= 0 && f.row >= 0 && f.col + 1 < w && f.row + 1 < h {
+            let at = f.row as usize * self.width + f.col as usize;
+            visit(at, f.w[0]);
+            visit(at + 1, f.w[1]);
+            visit(at + self.width, f.w[2]);
+            visit(at + self.width + 1, f.w[3]);
+            return;
+        }
         for (q, (dc, dr)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
             let (c, r) = (f.col + dc, f.row + dr);
             if c >= 0 && r >= 0 && c < w && r < h {
@@ -148,6 +172,24 @@ fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, f32) {
     let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
     let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
     (xd, yd, dxx * dyy - dxy * dxy)
+}
+
+/// Voxels projected per batch.
+const CHUNK: usize = 32;
+
+/// A batch of projected voxels, structure of arrays: pixel position plus one (negative for
+/// a miss) and the weight factor γ.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Chunk {
+    u: [f32; CHUNK],
+    v: [f32; CHUNK],
+    gamma: [f32; CHUNK],
+}
+
+impl Default for Chunk {
+    fn default() -> Self {
+        Chunk { u: [-1.0; CHUNK], v: [0.0; CHUNK], gamma: [0.0; CHUNK] }
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -183,18 +225,34 @@ impl SplatProjector {
     /// Visits every voxel of z-slices `ks` that lands on view `view`'s image:
     /// `visit(voxel index, footprint)`.
     #[inline(always)]
-    fn for_each_voxel(&self, view: usize, ks: std::ops::Range<usize>, mut visit: impl FnMut(usize, &Footprint)) {
+    fn for_each_voxel(&self, view: usize, ks: std::ops::Range<usize>, visit: impl FnMut(usize, &Footprint)) {
+        if self.views[view].distorted {
+            self.for_each_voxel_impl::<true>(view, ks, visit)
+        } else {
+            self.for_each_voxel_impl::<false>(view, ks, visit)
+        }
+    }
+
+    #[inline(always)]
+    fn for_each_voxel_impl<const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: std::ops::Range<usize>,
+        mut visit: impl FnMut(usize, &Footprint),
+    ) {
         let sv = &self.views[view];
         let [nx, ny, _] = self.grid.dims;
+        let mut chunk = Chunk::default();
         for k in ks {
             for j in 0..ny {
                 let (base, step) = sv.row_start(&self.gf, j, k);
                 let row0 = (k * ny + j) * nx;
-                for i in 0..nx {
-                    let fi = i as f32;
-                    let p = [base[0] + fi * step[0], base[1] + fi * step[1], base[2] + fi * step[2]];
-                    if let Some(f) = sv.footprint(p) {
-                        visit(row0 + i, &f);
+                for i0 in (0..nx).step_by(CHUNK) {
+                    sv.project_chunk::<DISTORTED>(base, step, i0, &mut chunk);
+                    for q in 0..CHUNK.min(nx - i0) {
+                        if chunk.u[q] >= 0.0 {
+                            visit(row0 + i0 + q, &SplatView::footprint(&chunk, q));
+                        }
                     }
                 }
             }
