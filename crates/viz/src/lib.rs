@@ -18,6 +18,7 @@
 //!
 //! The library never prints; problems come back as [`VizError`] and warnings go to `log`.
 
+pub mod animation;
 mod colormap;
 mod error;
 mod font;
@@ -27,6 +28,7 @@ pub mod panel;
 pub mod plot;
 pub mod report;
 
+pub use animation::{colorize, encode_image_png, write_turntable_gif};
 pub use colormap::Colormap;
 pub use error::VizError;
 pub use isosurface::{marching_cubes, TriMesh};
