@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use fluidnerf_core::{Aabb, Volume};
+use fluidnerf_core::{glam::Vec3, Aabb, ScalarField, Volume};
 use fluidnerf_neural::train::{train, Learner, Prepared, Problem, TrainConfig, TrainReport, View};
 use fluidnerf_neural::trained::{build_field, ModelRecord, NeuralConfig, WorldField, PRESETS};
 use fluidnerf_neural::TrainableField;
@@ -53,8 +53,8 @@ pub struct Args {
     /// Stop training after this many seconds (training time, evaluations excluded).
     #[arg(long)]
     pub time_budget: Option<f64>,
-    /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (on
-    /// the truth grid, at most 64 cells per side; 0: only at the end).
+    /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (over
+    /// every k-th voxel centre of the truth, at most 64 per side; 0: only at the end).
     #[arg(long, default_value_t = 100)]
     pub eval_every: usize,
 }
@@ -89,8 +89,11 @@ struct Report {
     rays_kept: usize,
     rays_on_box: usize,
     prepare_s: f64,
+    /// CPU seconds of the training call (evaluations included), to read timings on a busy
+    /// machine: on an idle one the training time would be about this divided by the cores.
+    cpu_s: Option<f64>,
     train: TrainReport,
-    /// Volume NRMSE and global SSIM at `--resolution`... evaluated on the truth's grid.
+    /// Volume NRMSE and global SSIM over all of the truth's voxel centres.
     final_nrmse: Option<f64>,
     final_ssim_global: Option<f64>,
     nrmse_history: Vec<NrmsePoint>,
@@ -148,14 +151,51 @@ fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
     write_bytes(path, text.as_bytes())
 }
 
-/// Evaluation grid for the NRMSE curve: the truth itself if small, else resampled to 64 cells
-/// along its longest side.
-fn curve_truth(truth: &Volume) -> Volume {
-    if truth.dims.iter().all(|&n| n <= 64) {
-        truth.clone()
-    } else {
-        truth.resample(Volume::dims_for(&truth.aabb, 64), truth.aabb)
+/// Every `stride`-th voxel centre of the truth along each axis (the middle one of each group)
+/// and the truth's values there: an unbiased subset for the NRMSE curve that stays cheap to
+/// evaluate (at most 64 points per side).
+struct TruthSample {
+    points: Vec<Vec3>,
+    values: Vec<f32>,
+}
+
+impl TruthSample {
+    fn new(truth: &Volume) -> Self {
+        let stride = truth.dims.iter().map(|&n| n.div_ceil(64)).max().unwrap_or(1).max(1);
+        let (mut points, mut values) = (Vec::new(), Vec::new());
+        let [nx, ny, nz] = truth.dims;
+        for k in (stride / 2..nz).step_by(stride) {
+            for j in (stride / 2..ny).step_by(stride) {
+                for i in (stride / 2..nx).step_by(stride) {
+                    points.push(truth.voxel_centre(i, j, k).as_vec3());
+                    values.push(truth.get(i, j, k));
+                }
+            }
+        }
+        TruthSample { points, values }
     }
+
+    fn nrmse(&self, field: &(dyn ScalarField + Sync)) -> f64 {
+        let mut est = vec![0.0f32; self.points.len()];
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let per = self.points.len().div_ceil(threads).max(1);
+        std::thread::scope(|scope| {
+            for (o, p) in est.chunks_mut(per).zip(self.points.chunks(per)) {
+                scope.spawn(move || field.eval(p, 0.0, o));
+            }
+        });
+        fluidnerf_metrics::nrmse(&est, &self.values)
+    }
+}
+
+/// CPU seconds (user + system) this process has used so far, from /proc (Linux), for
+/// judging timings on a shared machine.
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let after = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = after.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
@@ -259,12 +299,11 @@ impl Ctx<'_> {
                 .with_context(|| format!("resuming from {}", ckpt.display()))?;
             log::info!("resuming at iteration {}", learner.iteration);
         }
-        let curve = self.truth.map(curve_truth);
-        let nrmse_of = |field: &F, truth: &Volume| -> f64 {
-            let world = WorldField { field, meta: &prep.meta, occupancy: prep.occupancy() };
-            let v = Volume::from_field(truth.dims, truth.aabb, &world, 0.0);
-            fluidnerf_metrics::nrmse(&v.data, &truth.data)
+        let curve = self.truth.map(TruthSample::new);
+        let nrmse_of = |field: &F, truth: &TruthSample| -> f64 {
+            truth.nrmse(&WorldField { field, meta: &prep.meta, occupancy: prep.occupancy() })
         };
+        let cpu0 = cpu_seconds();
         let mut nrmse_history = Vec::new();
         let bar = crate::progress::bar(train_cfg.max_iterations as u64, "training");
         bar.set_position(learner.iteration as u64);
@@ -301,6 +340,7 @@ impl Ctx<'_> {
             ControlFlow::Continue(())
         })?;
         bar.finish_and_clear();
+        let cpu_s = cpu0.zip(cpu_seconds()).map(|(a, b)| b - a);
         if let Some(e) = ckpt_error {
             return Err(e.context("writing a checkpoint"));
         }
@@ -353,6 +393,7 @@ impl Ctx<'_> {
             rays_kept: self.rays_kept,
             rays_on_box: self.rays_on_box,
             prepare_s: self.prepare_s,
+            cpu_s,
             train: report.clone(),
             final_nrmse,
             final_ssim_global: final_ssim,
