@@ -31,7 +31,9 @@ pub struct Args {
 }
 
 fn v3(v: fluidnerf_core::glam::DVec3) -> String {
-    format!("({:.3}, {:.3}, {:.3})", v.x, v.y, v.z)
+    // Round-off below the printed precision must not print as "-0.000".
+    let c = |x: f64| if x.abs() < 5e-4 { 0.0 } else { x };
+    format!("({:.3}, {:.3}, {:.3})", c(v.x), c(v.y), c(v.z))
 }
 
 fn describe_camera(out: &mut String, cam: &Camera, scene: &Scene) {

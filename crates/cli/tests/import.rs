@@ -1,0 +1,186 @@
+//! End-to-end tests of `fluidnerf import` from OpenCV and COLMAP calibrations, in a temporary
+//! directory.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Camera, Distortion, Image, Intrinsics};
+use fluidnerf_io::calib::write_opencv;
+use fluidnerf_io::image::write_png16_counts;
+use fluidnerf_io::scene::load_scene;
+
+fn fluidnerf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).args(args).output().expect("runs fluidnerf")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Three cameras on a ring around the origin looking at a 20 mm box, with distortion.
+fn rig() -> Vec<(String, Camera)> {
+    let k = Intrinsics { width: 32, height: 24, fx: 40.0, fy: 40.5, cx: 15.25, cy: 11.5, skew: 0.0 };
+    (0..3)
+        .map(|c| {
+            let a = c as f64 / 3.0 * std::f64::consts::TAU;
+            let mut cam = Camera::look_at(k, DVec3::new(90.0 * a.cos(), 90.0 * a.sin(), 20.0), DVec3::ZERO, DVec3::Z);
+            cam.distortion = Distortion { k1: -0.05 * c as f64, p1: 1e-4, ..Default::default() };
+            (format!("cam{c}"), cam)
+        })
+        .collect()
+}
+
+fn image(dir: &Path, name: &str) {
+    write_png16_counts(&dir.join(name), &Image::from_vec(32, 24, vec![7.0; 32 * 24])).expect("writes image");
+}
+
+fn assert_same(a: &Camera, b: &Camera) {
+    assert_eq!(a.intrinsics, b.intrinsics);
+    assert_eq!(a.distortion, b.distortion);
+    let d = (a.world_from_camera.matrix3 - b.world_from_camera.matrix3).to_cols_array();
+    assert!(d.iter().all(|e| e.abs() < 1e-12));
+    assert!((a.centre() - b.centre()).length() < 1e-9);
+}
+
+#[test]
+fn opencv_calibration_and_images_become_a_scene() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    let cams = rig();
+    write_opencv(&calib, &cams).expect("writes calibration");
+    let images = dir.path().join("scene/images");
+    for (n, _) in &cams {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let args =
+        ["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-10,-10,-10,10,10,10", "-o", s(&out)];
+    let o = fluidnerf(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("imported 3 frames of 3 cameras"));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 3);
+    for (f, (n, c)) in scene.frames.iter().zip(&cams) {
+        assert_eq!(f.camera_name.as_deref(), Some(n.as_str()));
+        assert_eq!(f.file_path, PathBuf::from(format!("images/{n}.png")), "relative to the scene");
+        assert_same(&f.camera, c);
+    }
+    assert!(out.join("import.json").is_file());
+    let info = fluidnerf(&["info", s(&out)]);
+    assert!(info.status.success(), "{}", stderr(&info));
+
+    // A second import into the same folder needs --force.
+    let again = fluidnerf(&args);
+    assert_eq!(again.status.code(), Some(1));
+    assert!(stderr(&again).contains("--force"), "{}", stderr(&again));
+    let mut forced = args.to_vec();
+    forced.push("--force");
+    assert!(fluidnerf(&forced).status.success());
+}
+
+#[test]
+fn opencv_time_series_folders() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("calib");
+    let cams = rig();
+    for c in &cams {
+        write_opencv(&calib.join(format!("{}.json", c.0)), std::slice::from_ref(c)).expect("writes calibration");
+    }
+    let images = dir.path().join("images");
+    for (n, _) in &cams {
+        for t in 0..2 {
+            image(&images.join(n), &format!("t{t}.png"));
+        }
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 6);
+    assert_eq!(scene.times(), vec![0.0, 1.0]);
+    assert!(scene.frames[0].file_path.is_absolute(), "images outside the scene folder keep absolute paths");
+}
+
+#[test]
+fn unmatched_cameras_and_images_are_errors() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.json");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    image(&images, "cam0.png");
+    image(&images, "cam1.png");
+    let out = dir.path().join("scene");
+    let run = |extra: &[&str]| {
+        let mut a = vec!["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-10,-10,-10,10,10,10"];
+        a.extend_from_slice(&["-o", s(&out)]);
+        a.extend_from_slice(extra);
+        fluidnerf(&a)
+    };
+    let o = run(&[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("cam2") && stderr(&o).contains("no image found"), "{}", stderr(&o));
+    image(&images, "cam2.png");
+    image(&images, "stray.png");
+    let o = run(&[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("stray.png") && stderr(&o).contains("--skip-uncalibrated"), "{}", stderr(&o));
+    let o = run(&["--skip-uncalibrated"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // An image of the wrong size.
+    write_png16_counts(&images.join("cam1.png"), &Image::zeros(16, 24)).expect("writes");
+    let o = run(&["--skip-uncalibrated", "--force"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("cam1.png") && stderr(&o).contains("16x24"), "{}", stderr(&o));
+    // A box no camera sees.
+    let mut a = vec!["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "500,500,500,510,510,510"];
+    a.extend_from_slice(&["-o", s(&out), "--force", "--skip-uncalibrated"]);
+    let o = fluidnerf(&a);
+    assert!(stderr(&o).contains("does not see the reconstruction box"), "{}", stderr(&o));
+}
+
+#[test]
+fn colmap_model_becomes_a_scene() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/colmap");
+    let images = dir.path().join("images");
+    for n in ["front.png", "side.png", "radial.png"] {
+        write_png16_counts(&images.join(n), &Image::zeros(64, 48)).expect("writes");
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--colmap",
+        s(&model),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-1,-1,-1,1,1,1",
+        "--units",
+        "m",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.units, "m");
+    assert_eq!(scene.frames.len(), 3);
+    assert!((scene.frames[0].camera.centre() - DVec3::new(0.0, 0.0, -10.0)).length() < 1e-12);
+    assert_eq!(scene.frames[0].camera.intrinsics.cx, 31.5, "COLMAP's +0.5 pixel centres are converted");
+    let text = std::fs::read_to_string(out.join("transforms.json")).expect("reads");
+    assert!(text.contains("\"cx\": 32.0"), "transforms.json uses nerfstudio's (= COLMAP's) convention again");
+}
