@@ -21,6 +21,7 @@
 //! - [`generate()`]: all of it from one [`SynthSettings`]; [`preset`] names the standard sets.
 
 mod error;
+mod fastmath;
 pub mod generate;
 pub mod image;
 pub mod phantom;

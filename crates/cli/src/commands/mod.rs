@@ -7,6 +7,7 @@ pub mod info;
 pub mod reconstruct;
 pub mod reconstruct_classical;
 pub mod reconstruct_neural;
+pub mod synth;
 
 /// The subcommands of `fluidnerf`.
 #[derive(Subcommand)]
@@ -17,6 +18,9 @@ pub enum Command {
     Reconstruct(reconstruct::Args),
     /// Score a reconstruction against ground truth and held-out camera images.
     Eval(eval::Args),
+    /// Generate a synthetic data set with known ground truth: jet phantoms, camera rigs,
+    /// pinhole or thin-lens images, sensor noise.
+    Synth(synth::Args),
 }
 
 /// Runs a parsed subcommand.
@@ -25,5 +29,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Info(args) => info::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Synth(args) => synth::run(args),
     }
 }

@@ -77,8 +77,32 @@ fn trilinear(data: &[f32], n: [usize; 3], g: Vec3) -> f32 {
     c0 + wz * (c1 - c0)
 }
 
+/// The box (inside `volume.aabb`) outside which the trilinear interpolant of `volume` is zero,
+/// or `None` if the volume is all zero.
+pub fn support_box(volume: &Volume) -> Option<Aabb> {
+    let [nx, ny, _] = volume.dims;
+    let mut lo = [usize::MAX; 3];
+    let mut hi = [0usize; 3];
+    for (idx, &v) in volume.data.iter().enumerate() {
+        if v != 0.0 {
+            let ijk = [idx % nx, (idx / nx) % ny, idx / (nx * ny)];
+            for a in 0..3 {
+                lo[a] = lo[a].min(ijk[a]);
+                hi[a] = hi[a].max(ijk[a]);
+            }
+        }
+    }
+    if lo[0] == usize::MAX {
+        return None;
+    }
+    let sp = volume.spacing();
+    let (min, max) = (volume.aabb.min, volume.aabb.max);
+    let lo_w = fluidnerf_core::glam::DVec3::new(lo[0] as f64 - 0.5, lo[1] as f64 - 0.5, lo[2] as f64 - 0.5) * sp + min;
+    let hi_w = fluidnerf_core::glam::DVec3::new(hi[0] as f64 + 1.5, hi[1] as f64 + 1.5, hi[2] as f64 + 1.5) * sp + min;
+    Some(Aabb::new(lo_w.max(min), hi_w.min(max)))
+}
+
 /// The pinhole image of a voxel grid (see the module docs), `scale × ∫E ds` per pixel.
-/// Counts the rays it traced into `rays` (sub-pixel rays that hit the box).
 pub fn render_volume(
     volume: &Volume,
     camera: &Camera,
@@ -88,7 +112,8 @@ pub fn render_volume(
     render_volume_counting(volume, camera, settings, scale).map(|(img, _)| img)
 }
 
-/// [`render_volume`], also returning the number of sub-pixel rays that crossed the box.
+/// [`render_volume`], also returning the number of sub-pixel rays traced (those crossing the
+/// support of the field).
 pub fn render_volume_counting(
     volume: &Volume,
     camera: &Camera,
@@ -105,6 +130,11 @@ pub fn render_volume_counting(
     let dims = volume.dims;
     let data = &volume.data[..];
     let inv_sp = spacing.recip();
+    // Rays are clipped to the box around the non-zero voxels (grown by one voxel, the reach of
+    // the trilinear interpolant): the integrand is exactly zero elsewhere.
+    let Some(support) = support_box(volume) else {
+        return Ok((Image::zeros(w, h), 0));
+    };
     let mut img = Image::zeros(w, h);
     let norm = scale / (n * n) as f64;
     let rays = img
@@ -120,7 +150,7 @@ pub fn render_volume_counting(
                         let u = col as f64 + (si as f64 + 0.5) / n as f64 - 0.5;
                         let v = row as f64 + (sj as f64 + 0.5) / n as f64 - 0.5;
                         let ray = camera.pixel_ray(u, v)?;
-                        let Some((s0, s1)) = aabb.intersect(&ray) else { continue };
+                        let Some((s0, s1)) = support.intersect(&ray) else { continue };
                         rays += 1;
                         let segments = ((s1 - s0) / step).ceil().max(1.0) as usize;
                         let ds = (s1 - s0) / segments as f64;

@@ -33,10 +33,9 @@
 //! point (values quantised to 2⁻²⁴ of the largest voxel value), so that sums over threads are
 //! exact and the image is the same bytes for the same seed on any number of threads.
 
-use fluidnerf_core::glam::{DMat3, Vec3};
+use fluidnerf_core::glam::Vec3;
 use fluidnerf_core::{Camera, Image, Volume};
-use rand::{Rng, SeedableRng};
-use rand_distr::{Distribution, UnitDisc, UnitSphere};
+use rand::{Rng, RngCore, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -97,6 +96,8 @@ pub struct Emitters {
 const CHUNK: usize = 2048;
 /// Fixed-point resolution of voxel values relative to the largest.
 const FIXED_ONE: f64 = (1u64 << 24) as f64;
+/// 2⁻²⁴: 24 random bits to a uniform f32 in [0, 1).
+const BITS24: f32 = 1.0 / (1u32 << 24) as f32;
 
 impl Emitters {
     /// The voxels of `volume` above `threshold`. Negative values are not light sources and are
@@ -117,7 +118,7 @@ impl Emitters {
             sphere_radius: (0.5 * (sp.x * sp.y * sp.z).cbrt()) as f32,
         };
         for (idx, &v) in volume.data.iter().enumerate() {
-            if !(v > threshold) || !v.is_finite() {
+            if v <= threshold || v.is_nan() || !v.is_finite() {
                 continue;
             }
             let q = (v as f64 / unit).round();
@@ -172,7 +173,7 @@ pub fn render(
     let k = camera.intrinsics;
     let (w, h) = (camera.width(), camera.height());
     let pose = camera.camera_from_world();
-    let rot: [f32; 9] = DMat3::from(pose.matrix3).transpose().to_cols_array().map(|v| v as f32);
+    let rot: [f32; 9] = pose.matrix3.transpose().to_cols_array().map(|v| v as f32);
     let t = pose.translation.as_vec3();
     let lo = lens.object_distance();
     let da = lens.aperture_diameter;
@@ -219,8 +220,19 @@ pub fn render(
                     }
                     rays += count;
                     for _ in 0..count {
-                        let s: [f32; 3] = UnitSphere.sample(&mut rng);
-                        let a: [f32; 2] = UnitDisc.sample(&mut rng);
+                        // A uniform point on the unit sphere (z uniform, Archimedes) and one on
+                        // the unit disc (r = √u), each from 48 random bits.
+                        let b = rng.next_u64();
+                        let (u1, u2) = ((b >> 40) as f32 * BITS24, ((b >> 16) & 0xff_ffff) as f32 * BITS24);
+                        let sz = 2.0 * u1 - 1.0;
+                        let sr = (1.0 - sz * sz).max(0.0).sqrt();
+                        let (ss, sc) = crate::fastmath::sin_cos(std::f32::consts::TAU * u2);
+                        let s = [sr * sc, sr * ss, sz];
+                        let b = rng.next_u64();
+                        let (u3, u4) = ((b >> 40) as f32 * BITS24, ((b >> 16) & 0xff_ffff) as f32 * BITS24);
+                        let ar = u3.sqrt();
+                        let (as_, ac) = crate::fastmath::sin_cos(std::f32::consts::TAU * u4);
+                        let a = [ar * ac, ar * as_];
                         let p = c + Vec3::from(s) * radius;
                         let inv_z = 1.0 / p.z;
                         let defocus = inv_z - inv_lo;

@@ -93,7 +93,7 @@ impl KinematicModes {
         let (mut dx, mut dy, mut dz, mut s) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
         for n in 0..self.kx.len() {
             let arg = self.kx[n] * q.x + self.ky[n] * q.y + self.kz[n] * q.z + self.phase[n];
-            let (sn, cs) = arg.sin_cos();
+            let (sn, cs) = crate::fastmath::sin_cos(arg);
             dx += self.ax[n] * sn;
             dy += self.ay[n] * sn;
             dz += self.az[n] * sn;

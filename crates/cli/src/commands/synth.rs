@@ -1,0 +1,485 @@
+//! `fluidnerf synth`: generates a synthetic data set (phantom, cameras, images, ground truth)
+//! from a named preset with any setting overridden.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::ValueEnum;
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, Volume};
+use fluidnerf_synth::{
+    generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings, Synthesis,
+    ThinLensSettings, DEFAULT_PRESET,
+};
+
+/// Phantoms.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PhantomArg {
+    /// Static turbulent round jet: laminar core, shear-layer roll-up, turbulent far field.
+    Jet,
+    /// Starting jet whose leading vortex ring travels through the box (time-resolved).
+    JetTr,
+    /// Uniform ball (closed-form projections).
+    Ball,
+    /// Gaussian blobs (closed-form projections).
+    Blobs,
+    /// Half-value ball plus Gaussian blobs.
+    BallAndBlobs,
+}
+
+/// Camera layouts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LayoutArg {
+    /// A ring perpendicular to the flow (x) axis.
+    Ring,
+    /// A Fibonacci lattice on a sphere.
+    Sphere,
+}
+
+/// Image models.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// Ideal, anti-aliased pinhole line integrals.
+    Pinhole,
+    /// The dissertation's thin lens: rays from every voxel through a finite aperture.
+    ThinLens,
+}
+
+/// Generate a synthetic tomography data set with known ground truth.
+///
+/// Starts from a preset (see --list-presets; default planar15, the dissertation's 15-camera
+/// planar ring around a turbulent jet) and applies the options given. Writes into OUT:
+/// `transforms.json` (cameras, box, intensity scale), `images/*.png` (16-bit sensor counts:
+/// counts − dark offset ≈ intensity_scale × ∫E ds in mm), `truth/*.npy` (the ground truth on
+/// the voxel grid, shape (nz, ny, nx)), `preview.png` (a central slice of the truth and one
+/// camera image) and `synth.json` (the resolved settings; rerun with --config). The same seed
+/// gives the same bytes.
+#[derive(clap::Args, Debug)]
+#[command(args_override_self = true)]
+pub struct Args {
+    /// Output directory; created if missing. One that already holds a scene needs --force.
+    #[arg(short, long, required_unless_present = "list_presets")]
+    pub out: Option<PathBuf>,
+    /// Preset to start from (see --list-presets).
+    #[arg(short, long, default_value = DEFAULT_PRESET)]
+    pub preset: String,
+    /// List the presets and exit.
+    #[arg(long)]
+    pub list_presets: bool,
+    /// Start from a `synth.json` written by an earlier run instead of a preset (options given
+    /// here still override it).
+    #[arg(long, conflicts_with = "preset")]
+    pub config: Option<PathBuf>,
+    /// Overwrite a scene already in OUT.
+    #[arg(long)]
+    pub force: bool,
+    /// Seed for the phantom, pose jitter, thin-lens rays and noise [default: the preset's, 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+
+    /// Phantom [default: the preset's].
+    #[arg(long, value_enum, help_heading = "Phantom")]
+    pub phantom: Option<PhantomArg>,
+    /// Use this volume (.npy of shape (nz, ny, nx) filling --aabb, or .vti) as the ground truth.
+    #[arg(long, help_heading = "Phantom")]
+    pub truth_volume: Option<PathBuf>,
+    /// Truth voxels along the box's longest side [default: the preset's].
+    #[arg(long, help_heading = "Phantom")]
+    pub resolution: Option<usize>,
+    /// Reconstruction box in mm as minx,miny,minz,maxx,maxy,maxz [default: the 40 mm cube
+    /// centred at the origin].
+    #[arg(long, value_delimiter = ',', num_args = 6, help_heading = "Phantom")]
+    pub aabb: Option<Vec<f64>>,
+    /// Frame times t* = t U / D for jet-tr, comma separated [default: 14,15,16].
+    #[arg(long, value_delimiter = ',', help_heading = "Phantom")]
+    pub times: Option<Vec<f64>>,
+
+    /// Camera layout [default: the preset's].
+    #[arg(long, value_enum, help_heading = "Cameras")]
+    pub layout: Option<LayoutArg>,
+    /// Number of cameras of the layout (clears the preset's subset).
+    #[arg(long, help_heading = "Cameras")]
+    pub cameras: Option<usize>,
+    /// Arc of a ring in degrees, e.g. 180 [default: 360].
+    #[arg(long, help_heading = "Cameras")]
+    pub arc: Option<f64>,
+    /// Keep every k-th camera of the layout.
+    #[arg(long, help_heading = "Cameras")]
+    pub every: Option<usize>,
+    /// Keep at most the first n cameras (after --every).
+    #[arg(long, help_heading = "Cameras")]
+    pub first: Option<usize>,
+    /// Cameras held out for validation, comma-separated indices after subsetting.
+    #[arg(long, value_delimiter = ',', help_heading = "Cameras")]
+    pub holdout: Option<Vec<usize>>,
+    /// Standard deviation of random camera position errors, mm [default: 0].
+    #[arg(long, help_heading = "Cameras")]
+    pub jitter_position: Option<f64>,
+    /// Standard deviation of random camera rotation errors, degrees [default: 0].
+    #[arg(long, help_heading = "Cameras")]
+    pub jitter_rotation: Option<f64>,
+    /// Camera distance from the box centre, mm [default: the lens's object distance, 360].
+    #[arg(long, help_heading = "Cameras")]
+    pub distance: Option<f64>,
+    /// Image width and height in pixels (square images); the pixel pitch follows so the field
+    /// of view stays 40 mm unless --pixel-pitch is given [default: the preset's].
+    #[arg(long, help_heading = "Cameras")]
+    pub pixels: Option<u32>,
+    /// Lateral magnification [default: -0.2].
+    #[arg(long, allow_hyphen_values = true, help_heading = "Cameras")]
+    pub magnification: Option<f64>,
+    /// Focal length, mm [default: 60].
+    #[arg(long, help_heading = "Cameras")]
+    pub focal_length: Option<f64>,
+    /// f-number [default: 3.5].
+    #[arg(long, help_heading = "Cameras")]
+    pub f_number: Option<f64>,
+    /// Pixel pitch, mm [default: 0.01 × 800 / pixels].
+    #[arg(long, help_heading = "Cameras")]
+    pub pixel_pitch: Option<f64>,
+
+    /// Image model [default: the preset's].
+    #[arg(long, value_enum, help_heading = "Images")]
+    pub model: Option<ModelArg>,
+    /// Pinhole: rays per pixel along each axis [default: 2].
+    #[arg(long, help_heading = "Images")]
+    pub supersample: Option<usize>,
+    /// Pinhole: render the continuous phantom instead of its voxel grid (slow, exact).
+    #[arg(long, help_heading = "Images")]
+    pub analytic: bool,
+    /// Thin lens: rays cast per voxel on the focal plane (N_rays of Eq. 6.7) [default: 64].
+    #[arg(long, help_heading = "Images")]
+    pub rays_per_voxel: Option<f64>,
+
+    /// Gaussian noise σ as a fraction of each image's maximum, e.g. 0.05 [default: 0].
+    #[arg(long, allow_hyphen_values = true, help_heading = "Sensor")]
+    pub noise: Option<f64>,
+    /// Photo-electrons at full scale; enables photon (Poisson) noise [default: none].
+    #[arg(long, help_heading = "Sensor")]
+    pub full_well: Option<f64>,
+    /// Dark offset added to every pixel, counts [default: 0].
+    #[arg(long, help_heading = "Sensor")]
+    pub dark_offset: Option<f64>,
+    /// Sensor bit depth: 8, 10, 12 or 16 [default: 16].
+    #[arg(long, help_heading = "Sensor")]
+    pub bit_depth: Option<u32>,
+    /// Brightest noiseless pixel as a fraction of full scale [default: 0.8].
+    #[arg(long, help_heading = "Sensor")]
+    pub full_scale_fraction: Option<f64>,
+}
+
+/// Applies the command-line overrides to `s`.
+fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
+    if let Some(seed) = args.seed {
+        s.seed = seed;
+    }
+    if let Some(p) = args.phantom {
+        let kind = match p {
+            PhantomArg::Jet => PhantomKind::Jet,
+            PhantomArg::JetTr => PhantomKind::JetTr,
+            PhantomArg::Ball => PhantomKind::Ball,
+            PhantomArg::Blobs => PhantomKind::Blobs,
+            PhantomArg::BallAndBlobs => PhantomKind::BallAndBlobs,
+        };
+        if kind.is_time_resolved() && s.times.is_empty() {
+            s.times = vec![14.0, 15.0, 16.0];
+        }
+        if !kind.is_time_resolved() {
+            s.times.clear();
+        }
+        s.phantom.kind = kind;
+    }
+    if let Some(path) = &args.truth_volume {
+        s.phantom.kind = PhantomKind::Volume;
+        s.phantom.volume_path = Some(path.clone());
+        s.times.clear();
+    }
+    if let Some(r) = args.resolution {
+        s.resolution = r;
+    }
+    if let Some(b) = &args.aabb {
+        let min = DVec3::new(b[0], b[1], b[2]);
+        let max = DVec3::new(b[3], b[4], b[5]);
+        let aabb = Aabb { min, max };
+        aabb.validate().context("--aabb")?;
+        s.aabb = aabb;
+    }
+    if let Some(t) = &args.times {
+        s.times = t.clone();
+    }
+    let count = args.cameras;
+    let current = s.rig.count();
+    match (args.layout, &s.rig.layout) {
+        (Some(LayoutArg::Sphere), Layout::Sphere { .. }) | (Some(LayoutArg::Ring), Layout::Ring { .. }) | (None, _) => {
+        }
+        (Some(LayoutArg::Sphere), _) => {
+            s.rig.layout = Layout::Sphere { count: current };
+            s.rig.subset = Subset::default();
+        }
+        (Some(LayoutArg::Ring), _) => {
+            s.rig.layout = Layout::Ring { count: current, arc_deg: 360.0, start_deg: 0.0 };
+            s.rig.subset = Subset::default();
+        }
+    }
+    if let Some(n) = count {
+        match &mut s.rig.layout {
+            Layout::Ring { count, .. } | Layout::Sphere { count } => *count = n,
+            Layout::Explicit { .. } => bail!("--cameras needs a ring or sphere layout"),
+        }
+        s.rig.subset = Subset::default();
+    }
+    if let Some(arc) = args.arc {
+        match &mut s.rig.layout {
+            Layout::Ring { arc_deg, .. } => *arc_deg = arc,
+            _ => bail!("--arc needs a ring layout"),
+        }
+    }
+    if let Some(k) = args.every {
+        s.rig.subset.every = k;
+    }
+    if let Some(n) = args.first {
+        s.rig.subset.first = Some(n);
+    }
+    if let Some(h) = &args.holdout {
+        s.rig.holdout = h.clone();
+    }
+    if let Some(v) = args.jitter_position {
+        s.rig.jitter.position_mm = v;
+    }
+    if let Some(v) = args.jitter_rotation {
+        s.rig.jitter.rotation_deg = v;
+    }
+    if let Some(v) = args.distance {
+        s.rig.distance_mm = Some(v);
+    }
+    if let Some(px) = args.pixels {
+        s.lens.resolution = [px, px];
+    }
+    if let Some(v) = args.magnification {
+        s.lens.magnification = v;
+    }
+    if let Some(v) = args.focal_length {
+        s.lens.focal_length_mm = v;
+    }
+    if let Some(v) = args.f_number {
+        s.lens.f_number = v;
+    }
+    if let Some(v) = args.pixel_pitch {
+        s.lens.pixel_pitch_mm = Some(v);
+    }
+    match args.model {
+        Some(ModelArg::Pinhole) if !matches!(s.image, ImageModel::Pinhole(_)) => {
+            s.image = ImageModel::Pinhole(PinholeSettings::default());
+        }
+        Some(ModelArg::ThinLens) if !matches!(s.image, ImageModel::ThinLens(_)) => {
+            s.image = ImageModel::ThinLens(ThinLensSettings::default());
+        }
+        _ => {}
+    }
+    match &mut s.image {
+        ImageModel::Pinhole(p) => {
+            if let Some(n) = args.supersample {
+                p.supersample = n;
+            }
+            if args.analytic {
+                p.analytic = true;
+            }
+            if args.rays_per_voxel.is_some() {
+                bail!("--rays-per-voxel applies to the thin-lens model; add --model thin-lens");
+            }
+        }
+        ImageModel::ThinLens(t) => {
+            if let Some(n) = args.rays_per_voxel {
+                t.rays_per_voxel = n;
+            }
+            if args.supersample.is_some() || args.analytic {
+                bail!("--supersample and --analytic apply to the pinhole model; add --model pinhole");
+            }
+        }
+    }
+    if let Some(v) = args.noise {
+        s.sensor.gaussian_noise = v;
+    }
+    if let Some(v) = args.full_well {
+        s.sensor.full_well = Some(v);
+    }
+    if let Some(v) = args.dark_offset {
+        s.sensor.dark_offset = v;
+    }
+    if let Some(v) = args.bit_depth {
+        s.sensor.bit_depth = v;
+    }
+    if let Some(v) = args.full_scale_fraction {
+        s.sensor.full_scale_fraction = v;
+    }
+    Ok(())
+}
+
+fn read_truth_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "npy" => fluidnerf_io::volume::read_npy(path, aabb).with_context(|| format!("cannot read {}", path.display())),
+        "vti" => fluidnerf_io::volume::read_vti(path).with_context(|| format!("cannot read {}", path.display())),
+        _ => bail!("{}: the ground truth must be a .npy or .vti volume", path.display()),
+    }
+}
+
+fn write_preview(path: &Path, syn: &Synthesis) -> anyhow::Result<()> {
+    use fluidnerf_viz::{slice, write_panel_groups_png, Axis, Panel, PanelGroup, PanelStyle};
+    let (time, truth) = &syn.truth[syn.truth.len() / 2];
+    let z = Axis::Z.position_at(&truth.aabb, 0.5);
+    let mut truth_panel = slice(truth, Axis::Z, z, "mm")?;
+    if let Some(t) = time {
+        truth_panel.title = format!("truth, {}, t* = {t}", truth_panel.title);
+    } else {
+        truth_panel.title = format!("truth, {}", truth_panel.title);
+    }
+    let frame_index = syn.frames.iter().position(|f| f.time == *time).unwrap_or(0);
+    let frame = &syn.frames[frame_index];
+    let image_panel =
+        Panel::from_image(&frame.counts).with_title(format!("{} (counts)", syn.cameras[frame.camera].name));
+    let groups = [
+        PanelGroup {
+            panels: vec![truth_panel],
+            style: PanelStyle { colorbar_label: "E".into(), ..Default::default() },
+        },
+        PanelGroup {
+            panels: vec![image_panel],
+            style: PanelStyle {
+                colormap: fluidnerf_viz::Colormap::Gray,
+                colorbar_label: "counts".into(),
+                ..Default::default()
+            },
+        },
+    ];
+    write_panel_groups_png(path, &groups)?;
+    Ok(())
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut stdout = std::io::stdout().lock();
+    if args.list_presets {
+        let mut text = String::new();
+        for (name, what) in presets() {
+            let mark = if name == DEFAULT_PRESET { "*" } else { " " };
+            let _ = writeln!(text, "{mark} {name:<13} {what}");
+        }
+        stdout.write_all(text.as_bytes()).context("cannot write to stdout")?;
+        return Ok(());
+    }
+    let Some(out) = args.out.clone() else { bail!("--out is required") };
+    let mut settings = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+            let value: serde_json::Value =
+                serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", path.display()))?;
+            let inner = value.get("settings").cloned().unwrap_or(value);
+            serde_json::from_value::<SynthSettings>(inner)
+                .with_context(|| format!("{}: not a valid synth configuration", path.display()))?
+        }
+        None => preset(&args.preset)?,
+    };
+    apply_overrides(&args, &mut settings)?;
+    settings.validate()?;
+    let scene_file = out.join("transforms.json");
+    if scene_file.exists() && !args.force {
+        bail!("{} already holds a scene; pass --force to overwrite it", out.display());
+    }
+    let volume = match &settings.phantom.volume_path {
+        Some(path) if settings.phantom.kind == PhantomKind::Volume => Some(read_truth_volume(path, settings.aabb)?),
+        _ => None,
+    };
+    crate::interrupt::install();
+    let started = std::time::Instant::now();
+    let total = settings.time_steps().len() * (1 + settings.rig.count());
+    let bar = crate::progress::bar(total as u64, "synth");
+    let syn = generate(&settings, volume, |p| {
+        bar.set_position(p.done as u64);
+        bar.set_message(p.stage);
+        if crate::interrupt::requested() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })?;
+    bar.finish_and_clear();
+    let elapsed = started.elapsed().as_secs_f64();
+
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    for f in &syn.frames {
+        let path = out.join(syn.image_path(f));
+        fluidnerf_io::image::write_png16_counts(&path, &f.counts)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    for (k, (_, vol)) in syn.truth.iter().enumerate() {
+        let path = out.join(syn.truth_path(k));
+        fluidnerf_io::volume::write_npy(&path, vol).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    let scene = syn.scene(out.clone());
+    fluidnerf_io::scene::save_scene(&scene, &scene_file)
+        .with_context(|| format!("cannot write {}", scene_file.display()))?;
+    let preview = out.join("preview.png");
+    write_preview(&preview, &syn).with_context(|| format!("cannot write {}", preview.display()))?;
+    let record = serde_json::json!({
+        "fluidnerf_version": env!("CARGO_PKG_VERSION"),
+        "command": "synth",
+        "preset": if args.config.is_some() { None } else { Some(&args.preset) },
+        "seed": settings.seed,
+        "intensity_scale": syn.intensity_scale,
+        "counts": "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)",
+        "settings": settings,
+        "stats": syn.stats,
+        "seconds": elapsed,
+    });
+    let settings_file = out.join("synth.json");
+    let text = serde_json::to_string_pretty(&record)? + "\n";
+    fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(text.as_bytes()))
+        .with_context(|| format!("cannot write {}", settings_file.display()))?;
+
+    let [w, h] = settings.lens.resolution;
+    let dims = syn.truth[0].1.dims;
+    let held = syn.cameras.iter().filter(|c| c.holdout).count();
+    let mut text = String::new();
+    let _ = writeln!(text, "wrote {}", out.display());
+    let _ = writeln!(
+        text,
+        "  phantom   {:?}, truth {}×{}×{} voxels of {:.4} mm{}",
+        settings.phantom.kind,
+        dims[0],
+        dims[1],
+        dims[2],
+        syn.truth[0].1.spacing().x,
+        match syn.truth.len() {
+            1 if syn.truth[0].0.is_none() => String::new(),
+            n => format!(", {n} times t* = {:?}", settings.times),
+        }
+    );
+    let _ = writeln!(
+        text,
+        "  cameras   {} ({} held out), {w}×{h} px, field of view {:.1} mm, {} model",
+        syn.cameras.len(),
+        held,
+        settings.lens.field_of_view_mm()[0],
+        settings.image.name()
+    );
+    let _ = writeln!(
+        text,
+        "  images    {} × {}-bit PNG, intensity_scale {:.6e} counts per mm, noise σ {} of max{}",
+        syn.frames.len(),
+        settings.sensor.bit_depth,
+        syn.intensity_scale,
+        settings.sensor.gaussian_noise,
+        settings.sensor.full_well.map(|fw| format!(", photon noise at {fw} e⁻ full well")).unwrap_or_default()
+    );
+    let _ = writeln!(
+        text,
+        "  work      {:.3e} rays in {:.1} s (truth {:.1} s, images {:.1} s, sensor {:.1} s)",
+        syn.stats.rays as f64, elapsed, syn.stats.truth_seconds, syn.stats.image_seconds, syn.stats.sensor_seconds
+    );
+    let _ = writeln!(text, "  files     transforms.json, images/, truth/, preview.png, synth.json");
+    stdout.write_all(text.as_bytes()).context("cannot write to stdout")?;
+    Ok(())
+}
