@@ -186,3 +186,30 @@ fn scores_a_trained_field_run_directory_at_the_truth_voxel_centres() {
     assert!((got - want).abs() < 1e-4, "NRMSE {got}, a constant 0.5 scores {want}");
     assert_eq!(json["reprojection"].as_array().expect("reprojection").len(), 1);
 }
+
+#[test]
+fn without_truth_only_held_out_views_are_scored() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let mut scene = make_scene(d, &[0.0, 1.0]);
+    scene.truth.clear();
+    fluidnerf_io::scene::save_scene(&scene, d).expect("rewrites scene");
+    for s in 0..2 {
+        let v = Volume::from_fn([18, 12, 12], scene.aabb, |p| blob(p, s as f64));
+        fluidnerf_io::volume::write_npy(&d.join(format!("r{s}.npy")), &v).expect("writes recon");
+    }
+    let out = fluidnerf(&["eval", "r0.npy", "r1.npy", "--scene", ".", "--json", "m.json"], d);
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    let json = read_json(&d.join("m.json"));
+    assert!(json["steps"].as_array().expect("steps").is_empty());
+    let rep = json["reprojection"].as_array().expect("reprojection");
+    assert_eq!(rep.len(), 2);
+    // Each held-out view is rendered from the volume of its own time step.
+    for r in rep {
+        assert!(r["nrmse"].as_f64().expect("nrmse") < 1e-5, "{r}");
+    }
+    // Neither truth nor held-out views: nothing to do.
+    let none = fluidnerf(&["eval", "r0.npy", "r1.npy", "--scene", ".", "--no-reprojection"], d);
+    assert!(!none.status.success());
+    assert!(String::from_utf8_lossy(&none.stderr).contains("nothing to evaluate"));
+}

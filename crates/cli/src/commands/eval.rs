@@ -197,13 +197,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
     };
+    // The time steps the reconstruction volumes stand for: the truth's, else the frames'.
+    let step_times: Vec<Option<f64>> = if truth.is_empty() {
+        scene.times().into_iter().map(Some).collect()
+    } else {
+        truth.iter().map(|(t, _)| *t).collect()
+    };
     let recon = load_recon(&args.recon, &scene, args.use_volume)?;
     if let Recon::Volumes(volumes) = &recon {
-        if volumes.len() > 1 && volumes.len() != truth.len().max(1) {
+        if volumes.len() > 1 && volumes.len() != step_times.len() {
             bail!(
-                "{} reconstruction volumes given but the truth has {} time steps; give one volume, or one per step",
+                "{} reconstruction volumes given but the scene has {} time steps; give one volume, or one per step",
                 volumes.len(),
-                truth.len()
+                step_times.len()
             );
         }
         if volumes.len() == 1 && truth.len() > 1 {
@@ -230,7 +236,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.steps.push(metrics);
     }
     if !holdouts.is_empty() {
-        let step_times: Vec<Option<f64>> = truth.iter().map(|(t, _)| *t).collect();
         let bar = crate::progress::bar(holdouts.len() as u64, "reprojecting");
         for &i in &holdouts {
             let frame = &scene.frames[i];
