@@ -3,6 +3,7 @@
 use clap::Subcommand;
 
 pub mod eval;
+pub mod import;
 pub mod info;
 pub mod reconstruct;
 pub mod reconstruct_classical;
@@ -14,6 +15,8 @@ pub mod synth;
 pub enum Command {
     /// Validate a scene and describe its cameras, images, box coverage, times and truth.
     Info(info::Args),
+    /// Build a scene from an OpenCV or COLMAP calibration and a folder of images.
+    Import(import::Args),
     /// Reconstruct the field from a scene's images with a classical or a neural method.
     Reconstruct(reconstruct::Args),
     /// Score a reconstruction against ground truth and held-out camera images.
@@ -27,6 +30,7 @@ pub enum Command {
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Info(args) => info::run(args),
+        Command::Import(args) => import::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Synth(args) => synth::run(args),
