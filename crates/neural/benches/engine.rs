@@ -78,11 +78,39 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Median seconds per step over `steps` timed steps after `warmup`.
-fn time_steps<F: TrainableField>(field: &mut F, batch: usize, chunk: usize, warmup: usize, steps: usize) -> f64 {
+fn time_steps<F: TrainableField>(field: &mut F, batch: usize, chunk: usize, warmup: usize, steps: usize) -> Timing {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let inputs: Vec<f32> = (0..batch * field.input_dim()).map(|_| rng.random::<f32>()).collect();
+    time_steps_on(field, &inputs, chunk, warmup, steps)
+}
+
+/// `batch` 3D points along random chords of the unit box, `per_ray` consecutive samples per
+/// chord (stratified), the order in which the trainer evaluates them.
+fn ray_points(batch: usize, per_ray: usize) -> Vec<f32> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut pts = Vec::with_capacity(batch * 3);
+    while pts.len() < batch * 3 {
+        let a: [f32; 3] = std::array::from_fn(|_| rng.random());
+        let b: [f32; 3] = std::array::from_fn(|_| rng.random());
+        for j in 0..per_ray {
+            let s = (j as f32 + rng.random::<f32>()) / per_ray as f32;
+            pts.extend((0..3).map(|k| a[k] + s * (b[k] - a[k])));
+        }
+    }
+    pts.truncate(batch * 3);
+    pts
+}
+
+fn time_steps_on<F: TrainableField>(
+    field: &mut F,
+    inputs: &[f32],
+    chunk: usize,
+    warmup: usize,
+    steps: usize,
+) -> Timing {
     let threads = rayon::current_num_threads();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let d = field.input_dim();
-    let inputs: Vec<f32> = (0..batch * d).map(|_| rng.random::<f32>()).collect();
+    let batch = inputs.len() / field.input_dim();
     let targets: Vec<f32> = (0..batch).map(|_| rng.random::<f32>()).collect();
     let mut workers: Vec<Worker<F::Tape>> = (0..threads)
         .map(|_| Worker {
@@ -95,21 +123,43 @@ fn time_steps<F: TrainableField>(field: &mut F, batch: usize, chunk: usize, warm
     let mut grads = vec![0.0; field.num_params()];
     let mut adam = Adam::new(field.num_params(), AdamConfig::default());
     let mut times = Vec::new();
+    let mut cpu = Vec::new();
     for s in 0..warmup + steps {
-        let t0 = Instant::now();
-        let loss = train_step(field, &mut workers, &inputs, &targets, chunk, &mut grads, &mut adam);
-        let dt = t0.elapsed().as_secs_f64();
+        let (t0, c0) = (Instant::now(), process_cpu_s());
+        let loss = train_step(field, &mut workers, inputs, &targets, chunk, &mut grads, &mut adam);
+        let (dt, dc) = (t0.elapsed().as_secs_f64(), process_cpu_s() - c0);
         assert!(loss.is_finite(), "training step diverged");
         if s >= warmup {
             times.push(dt);
+            cpu.push(dc / threads as f64);
         }
     }
-    median(times)
+    Timing { wall_s: median(times), cpu_s: median(cpu) }
 }
 
-/// Measured FP32 peak (GFLOP/s) of all threads: independent chains of 512-bit (or 256-bit)
-/// FMAs, enough of them to cover the FMA latency.
-fn fma_peak_gflops() -> f64 {
+/// Seconds per step: wall clock, and process CPU time divided by the number of threads
+/// ("core-normalised": what the wall time would be if every thread had a core to itself —
+/// the honest figure on a machine shared with other jobs; spinning idle threads make it
+/// conservative).
+#[derive(Clone, Copy, Debug)]
+struct Timing {
+    wall_s: f64,
+    cpu_s: f64,
+}
+
+/// CPU time (user + system) of this process so far, from /proc/self/stat (clock ticks of
+/// 1/100 s); NaN where unavailable.
+fn process_cpu_s() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else { return f64::NAN };
+    let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r) else { return f64::NAN };
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN);
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// Measured FP32 peak (GFLOP/s) of all threads, (wall, core-normalised): independent chains
+/// of 512-bit (or 256-bit) FMAs, enough of them to cover the FMA latency.
+fn fma_peak_gflops() -> (f64, f64) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx512f")]
@@ -158,25 +208,27 @@ fn fma_peak_gflops() -> f64 {
             // SAFETY: feature detected above.
             (8, |n| unsafe { chains256(n) })
         } else {
-            return f64::NAN;
+            return (f64::NAN, f64::NAN);
         };
         let iters = 20_000_000usize;
         let threads = rayon::current_num_threads();
-        let mut best = 0.0f64;
+        let mut best = (0.0f64, 0.0f64);
         for _ in 0..3 {
-            let t0 = Instant::now();
+            let (t0, c0) = (Instant::now(), process_cpu_s());
             let s: f32 = (0..threads).into_par_iter().map(|_| run(iters)).sum();
-            let dt = t0.elapsed().as_secs_f64();
+            let (dt, dc) = (t0.elapsed().as_secs_f64(), (process_cpu_s() - c0) / threads as f64);
             assert!(s.is_finite());
-            best = best.max((threads * iters * 12 * lanes * 2) as f64 / dt / 1e9);
+            let flop = (threads * iters * 12 * lanes * 2) as f64 / 1e9;
+            best = (best.0.max(flop / dt), best.1.max(flop / dc));
         }
         best
     }
     #[cfg(not(target_arch = "x86_64"))]
-    f64::NAN
+    (f64::NAN, f64::NAN)
 }
 
-fn pytorch(batch: usize, steps: usize, threads: usize) -> Option<f64> {
+/// PyTorch's samples/s: (wall, core-normalised).
+fn pytorch(batch: usize, steps: usize, threads: usize) -> Option<(f64, f64)> {
     let python = std::env::var("FLUIDNERF_BENCH_PYTHON").unwrap_or_else(|_| "python3".into());
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/pytorch_step.py");
     let out = std::process::Command::new(python)
@@ -190,69 +242,101 @@ fn pytorch(batch: usize, steps: usize, threads: usize) -> Option<f64> {
         return None;
     }
     println!("  {}", text.trim());
-    text.split_whitespace().find_map(|w| w.strip_prefix("samples_per_s=")).and_then(|v| v.parse().ok())
+    let field =
+        |key: &str| text.split_whitespace().find_map(|w| w.strip_prefix(key)).and_then(|v| v.parse::<f64>().ok());
+    Some((field("samples_per_s=")?, field("samples_per_cpu_s=")?))
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
+    if args.iter().any(|a| a == "--peak-only") {
+        let (w, c) = fma_peak_gflops();
+        println!("FP32 FMA peak: {w:.0} | {c:.0} GFLOP/s");
+        return;
+    }
     let quick = args.iter().any(|a| a == "--quick");
     let no_torch = args.iter().any(|a| a == "--no-pytorch");
+    let grid_only = args.iter().any(|a| a == "--grid-only");
+    let mlp_only = args.iter().any(|a| a == "--mlp-only");
     let threads = rayon::current_num_threads();
     let steps = if quick { 3 } else { 8 };
-    let batch = 65_536;
-    println!("training-engine benchmark: {threads} threads, batch {batch}, median of {steps} steps");
+    println!("training-engine benchmark: {threads} threads, median of {steps} steps");
+    println!("rates: wall clock | core-normalised (process CPU time / threads)");
+    if !grid_only {
+        mlp_benches(65_536, steps, threads, no_torch);
+    }
+    if !mlp_only {
+        grid_benches(steps);
+    }
+}
 
-    let peak = fma_peak_gflops();
-    println!("FP32 FMA peak (measured, all threads): {peak:.0} GFLOP/s");
-
+fn mlp_benches(batch: usize, steps: usize, threads: usize, no_torch: bool) {
+    let (peak, peak_cpu) = fma_peak_gflops();
+    println!("FP32 FMA peak (measured, {threads} threads): {peak:.0} | {peak_cpu:.0} GFLOP/s");
     let mut mlp = MlpField::new(&MlpConfig::table_5_1(), 3, 0).expect("default config is valid");
     let flops = mlp.flops_per_sample();
-    let mut rust_rates = Vec::new();
+    println!("mlp 8x256 relu: batch {batch}, {:.2} MFLOP per sample (forward + backward)", flops / 1e6);
+    let mut rust = Vec::new();
     for chunk in [128, 256, 512] {
         let t = time_steps(&mut mlp, batch, chunk, 1, steps);
-        let rate = batch as f64 / t;
+        let (rw, rc) = (batch as f64 / t.wall_s, batch as f64 / t.cpu_s);
         println!(
-            "mlp 8x256 relu  chunk {chunk:4}: {:8.0} samples/s  step {:6.1} ms  {:5.0} GFLOP/s ({:3.0} % of peak)",
-            rate,
-            t * 1e3,
-            rate * flops / 1e9,
-            100.0 * rate * flops / 1e9 / peak
+            "mlp 8x256 relu  chunk {chunk:4}: {rw:8.0} | {rc:8.0} samples/s   {:5.0} | {:5.0} GFLOP/s",
+            rw * flops / 1e9,
+            rc * flops / 1e9,
         );
         if chunk == 256 {
-            rust_rates.push(rate);
+            rust.push((rw, rc));
         }
     }
     let torch = if no_torch { None } else { pytorch(batch, steps.min(5), threads) };
     // Rust again after PyTorch, so both see the same machine state.
     let t = time_steps(&mut mlp, batch, 256, 1, steps);
-    rust_rates.push(batch as f64 / t);
-    let rust = rust_rates.iter().sum::<f64>() / rust_rates.len() as f64;
-    println!("mlp 8x256 relu  chunk  256 (mean of before/after pytorch): {rust:.0} samples/s");
-    if let Some(py) = torch {
-        println!("ratio rust / pytorch: {:.2}x", rust / py);
+    rust.push((batch as f64 / t.wall_s, batch as f64 / t.cpu_s));
+    let rw = rust.iter().map(|r| r.0).sum::<f64>() / rust.len() as f64;
+    let rc = rust.iter().map(|r| r.1).sum::<f64>() / rust.len() as f64;
+    println!("mlp 8x256 relu  chunk  256, mean of before/after pytorch: {rw:.0} | {rc:.0} samples/s");
+    println!(
+        "  = {:.0} | {:.0} GFLOP/s = {:.0} | {:.0} % of the measured FMA peak",
+        rw * flops / 1e9,
+        rc * flops / 1e9,
+        100.0 * rw * flops / 1e9 / peak,
+        100.0 * rc * flops / 1e9 / peak_cpu
+    );
+    if let Some((pw, pc)) = torch {
+        println!("ratio rust / pytorch: {:.2}x wall | {:.2}x core-normalised", rw / pw, rc / pc);
     }
 
     let mut swish = MlpField::new(&MlpConfig::table_5_2(), 4, 0).expect("Table 5.2 config is valid");
     let t = time_steps(&mut swish, batch, 256, 1, steps);
     println!(
-        "mlp 10x200 swish (4D, Table 5.2) chunk 256: {:8.0} samples/s  {:5.0} GFLOP/s",
-        batch as f64 / t,
-        batch as f64 / t * swish.flops_per_sample() / 1e9
+        "mlp 10x200 swish (4D, Table 5.2) chunk 256: {:8.0} | {:8.0} samples/s",
+        batch as f64 / t.wall_s,
+        batch as f64 / t.cpu_s
     );
+}
 
+fn grid_benches(steps: usize) {
     let grid_batch = 1 << 18;
-    let mut grid = HashGridField::new(&HashGridConfig::default(), 3, 0).expect("default config is valid");
+    let log2: u32 = std::env::var("GRID_LOG2").ok().and_then(|v| v.parse().ok()).unwrap_or(19);
+    let cfg = HashGridConfig { log2_table_size: log2, ..HashGridConfig::default() };
+    let mut grid = HashGridField::new(&cfg, 3, 0).expect("default config is valid");
     println!(
-        "hash grid: 16 levels x 2 features, 2^19 entries, MLP 2x64, {} params ({} in tables)",
+        "hash grid: 16 levels x 2 features, 2^{log2} entries, MLP 2x64, {} params ({} in tables), batch {grid_batch}",
         grid.num_params(),
         grid.grid_params()
     );
-    for chunk in [1024, 4096] {
-        let t = time_steps(&mut grid, grid_batch, chunk, 1, steps);
-        println!(
-            "hash grid step chunk {chunk:5}: {:8.2} M points/s  step {:6.1} ms",
-            grid_batch as f64 / t / 1e6,
-            t * 1e3
-        );
+    let along_rays = ray_points(grid_batch, 128);
+    for chunk in [4096, 32_768] {
+        for (what, t) in [
+            ("random points", time_steps(&mut grid, grid_batch, chunk, 1, steps)),
+            ("along rays   ", time_steps_on(&mut grid, &along_rays, chunk, 1, steps)),
+        ] {
+            println!(
+                "hash grid chunk {chunk:6} {what}: {:5.2} | {:5.2} M points/s",
+                grid_batch as f64 / t.wall_s / 1e6,
+                grid_batch as f64 / t.cpu_s / 1e6
+            );
+        }
     }
 }

@@ -6,7 +6,9 @@ positional encoding with the identity term (Eq. 5.2, L = 8, tau = 2u - 1), 8 den
 256 with the encoding concatenated back in at layer 4, a softplus output, MSE against targets,
 backward, Adam (betas 0.9/0.999, eps 1e-7). Batch 65 536 random points in [0, 1]^3.
 
-Prints one line `pytorch samples_per_s=<median> step_ms=<median> threads=<n> torch=<version>`.
+Prints one line `pytorch samples_per_s=<median> samples_per_cpu_s=<median> step_ms=<median>
+threads=<n> torch=<version>`; samples_per_cpu_s divides the batch by the process CPU time per
+step over the threads (the rate if each thread had a core to itself).
 Usage: python3 pytorch_step.py [--batch 65536] [--steps 8] [--threads 2]
 """
 
@@ -68,19 +70,22 @@ def main() -> int:
 
     x = torch.rand(args.batch, 3)
     y = torch.rand(args.batch)
-    times = []
+    times, cpu = [], []
     for i in range(args.warmup + args.steps):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         opt.zero_grad(set_to_none=True)
         loss = torch.mean((net(x) - y) ** 2)
         loss.backward()
         opt.step()
-        dt = time.perf_counter() - t0
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         if i >= args.warmup:
             times.append(dt)
+            cpu.append(dc / torch.get_num_threads())
     med = statistics.median(times)
+    med_cpu = statistics.median(cpu)
     print(
-        f"pytorch samples_per_s={args.batch / med:.0f} step_ms={med * 1e3:.1f} "
+        f"pytorch samples_per_s={args.batch / med:.0f} samples_per_cpu_s={args.batch / med_cpu:.0f} "
+        f"step_ms={med * 1e3:.1f} "
         f"threads={torch.get_num_threads()} torch={torch.__version__}"
     )
     return 0

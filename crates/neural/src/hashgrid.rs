@@ -48,7 +48,7 @@ const PRIMES: [u32; 4] = [1, 2_654_435_761, 805_459_861, 3_674_653_429];
 pub struct HashGridConfig {
     /// Number of levels `L`. Default 16.
     pub levels: usize,
-    /// Features per level `F`. Default 2.
+    /// Features per level `F`: 1, 2, 4 or 8. Default 2.
     pub features_per_level: usize,
     /// log₂ of the entries per hashed level `T`. Default 19.
     pub log2_table_size: u32,
@@ -97,8 +97,8 @@ impl HashGridConfig {
         if self.levels == 0 || self.levels > 32 {
             return bad("hash-grid levels", format!("{} not in 1..=32", self.levels));
         }
-        if self.features_per_level == 0 || self.features_per_level > 8 {
-            return bad("hash-grid features per level", format!("{} not in 1..=8", self.features_per_level));
+        if ![1, 2, 4, 8].contains(&self.features_per_level) {
+            return bad("hash-grid features per level", format!("{} not 1, 2, 4 or 8", self.features_per_level));
         }
         if !(4..=24).contains(&self.log2_table_size) {
             return bad("hash-grid log2 table size", format!("{} not in 4..=24", self.log2_table_size));
@@ -227,83 +227,94 @@ impl HashGridField {
             tape.features.resize(n * lf, 0.0);
         }
         let (inputs, feats) = (&tape.inputs[..n * self.input_dim], &mut tape.features[..n * lf]);
-        for (l, level) in self.levels.iter().enumerate() {
-            match self.input_dim {
-                3 => self.level_pass::<3, false>(l, level, inputs, feats, None),
-                _ => self.level_pass::<4, false>(l, level, inputs, feats, None),
-            }
+        for l in 0..self.levels.len() {
+            self.dispatch::<false>(l, inputs, feats, &mut []);
         }
     }
 
-    /// One level over all rows: forward (gather into `feats`) or, with `BACKWARD`, the
-    /// scatter of `feats` (then ∂L/∂features) into `grads`.
+    /// Runs `level_pass` monomorphised for the input dimension and features per level.
+    fn dispatch<const BACKWARD: bool>(&self, l: usize, inputs: &[f32], feats: &mut [f32], grads: &mut [f32]) {
+        let level = &self.levels[l];
+        match (self.input_dim, self.config.features_per_level) {
+            (3, 1) => self.level_pass::<3, 1, BACKWARD>(l, level, inputs, feats, grads),
+            (3, 2) => self.level_pass::<3, 2, BACKWARD>(l, level, inputs, feats, grads),
+            (3, 4) => self.level_pass::<3, 4, BACKWARD>(l, level, inputs, feats, grads),
+            (3, _) => self.level_pass::<3, 8, BACKWARD>(l, level, inputs, feats, grads),
+            (_, 1) => self.level_pass::<4, 1, BACKWARD>(l, level, inputs, feats, grads),
+            (_, 2) => self.level_pass::<4, 2, BACKWARD>(l, level, inputs, feats, grads),
+            (_, 4) => self.level_pass::<4, 4, BACKWARD>(l, level, inputs, feats, grads),
+            (_, _) => self.level_pass::<4, 8, BACKWARD>(l, level, inputs, feats, grads),
+        }
+    }
+
+    /// One level over all rows. Forward: gathers the interpolated features into `feats`
+    /// (`n × L·F`). Backward (`BACKWARD`): `feats` holds ∂L/∂features and is scattered into the
+    /// level's slice of `grads` (the grid part of the gradient, laid out like the tables).
     #[inline(never)]
-    fn level_pass<const D: usize, const BACKWARD: bool>(
+    fn level_pass<const D: usize, const F: usize, const BACKWARD: bool>(
         &self,
         l: usize,
         level: &Level,
         inputs: &[f32],
         feats: &mut [f32],
-        mut grads: Option<&mut [f32]>,
+        grads: &mut [f32],
     ) {
-        let f = self.config.features_per_level;
-        let lf = self.levels.len() * f;
+        let lf = self.levels.len() * F;
         let res = level.res;
         let res_t = level.res_t;
         let side = res as usize + 1;
-        let mask = level.entries - 1;
+        // Vertex-index strides of a dense level (x fastest).
+        let mut stride = [0usize; 4];
+        let mut acc_stride = 1;
+        for a in 0..D {
+            stride[a] = acc_stride;
+            acc_stride *= side;
+        }
+        let mask = level.entries.wrapping_sub(1);
         let inv_span = 1.0 / self.config.time_span;
-        let corners = 1usize << D;
-        let table_range = level.offset..level.offset + level.entries * f;
+        let table_range = level.offset..level.offset + level.entries * F;
         let table = &self.params[table_range.clone()];
-        let mut gtable = grads.as_deref_mut().map(|g| &mut g[table_range]);
+        let gtable: &mut [f32] = if BACKWARD { &mut grads[table_range] } else { &mut [] };
         for (x, row) in inputs.chunks_exact(D).zip(feats.chunks_exact_mut(lf)) {
+            // Per axis: the lower vertex, and the weights of the lower and upper vertex.
             let mut cell = [0u32; 4];
-            let mut frac = [0.0f32; 4];
+            let mut wgt = [[0.0f32; 2]; 4];
             for a in 0..D {
                 let (u, r) = if a < 3 { (x[a], res) } else { (x[a] * inv_span, res_t) };
                 let p = u.clamp(0.0, 1.0) * r as f32;
                 let c = (p as u32).min(r.saturating_sub(1));
+                let t = p - c as f32;
                 cell[a] = c;
-                frac[a] = p - c as f32;
+                wgt[a] = [1.0 - t, t];
             }
-            let out = &mut row[l * f..(l + 1) * f];
-            let mut acc = [0.0f32; 8];
-            for c in 0..corners {
+            let out: &mut [f32; F] = (&mut row[l * F..(l + 1) * F]).try_into().expect("F features");
+            let mut acc = [0.0f32; F];
+            for c in 0..1usize << D {
                 let mut w = 1.0f32;
-                let mut v = [0u32; 4];
+                let mut idx = 0usize;
+                let mut h = 0u32;
                 for a in 0..D {
                     let bit = (c >> a) & 1;
-                    v[a] = cell[a] + bit as u32;
-                    w *= if bit == 1 { frac[a] } else { 1.0 - frac[a] };
+                    let v = cell[a] + bit as u32;
+                    w *= wgt[a][bit];
+                    idx += v as usize * stride[a];
+                    h ^= v.wrapping_mul(PRIMES[a]);
                 }
-                let idx = if level.dense {
-                    let mut i = v[D - 1] as usize;
-                    for a in (0..D - 1).rev() {
-                        i = i * side + v[a] as usize;
-                    }
-                    i
-                } else {
-                    let mut h = 0u32;
-                    for a in 0..D {
-                        h ^= v[a].wrapping_mul(PRIMES[a]);
-                    }
-                    h as usize & mask
-                };
+                let idx = if level.dense { idx } else { h as usize & mask };
                 if BACKWARD {
-                    if let Some(g) = gtable.as_deref_mut() {
-                        for k in 0..f {
-                            g[idx * f + k] += w * out[k];
-                        }
+                    let g = &mut gtable[idx * F..idx * F + F];
+                    for k in 0..F {
+                        g[k] += w * out[k];
                     }
                 } else {
-                    for k in 0..f {
-                        acc[k] += w * table[idx * f + k];
+                    let t = &table[idx * F..idx * F + F];
+                    for k in 0..F {
+                        acc[k] += w * t[k];
                     }
                 }
             }
             if !BACKWARD {
-                out.copy_from_slice(&acc[..f]);
+                *out = acc;
             }
         }
     }
@@ -365,11 +376,8 @@ impl TrainableField for HashGridField {
         let inputs = &tape.inputs[..n * self.input_dim];
         let dfeat = &mut tape.d_features[..n * lf];
         // The level tables come first in `params`, so `grid_grads` indexes like them.
-        for (l, level) in self.levels.iter().enumerate() {
-            match self.input_dim {
-                3 => self.level_pass::<3, true>(l, level, inputs, dfeat, Some(&mut *grid_grads)),
-                _ => self.level_pass::<4, true>(l, level, inputs, dfeat, Some(&mut *grid_grads)),
-            }
+        for l in 0..self.levels.len() {
+            self.dispatch::<true>(l, inputs, dfeat, grid_grads);
         }
     }
 

@@ -27,11 +27,11 @@ macro_rules! multiversion {
             #[cfg(target_arch = "x86_64")]
             {
                 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
-                fn v4($($arg: $ty),*) {
+                unsafe fn v4($($arg: $ty),*) {
                     body($($arg),*)
                 }
                 #[target_feature(enable = "avx2,fma")]
-                fn v3($($arg: $ty),*) {
+                unsafe fn v3($($arg: $ty),*) {
                     body($($arg),*)
                 }
                 if std::arch::is_x86_feature_detected!("avx512f")
