@@ -49,7 +49,7 @@ pub fn summarise(dir: &Path, label: &str, truth: Option<&Volume>, scene: &Scene)
     let report = read_json(&dir.join("report.json"))?;
     let volume_path = dir.join("volume.npy");
     let volume = fluidnerf_io::volume::read_npy(&volume_path, scene.aabb)?;
-    let compute_s = number(&report, &["train.train_time_s", "time_s", "solve_time_s", "elapsed_s", "wall_time_s"]);
+    let compute_s = number(&report, &["train.train_time_s", "solve_s"]);
     let iterations = number(&report, &["train.iterations", "iterations"]).map(|n| n as usize);
 
     let weights: u64 = std::fs::read_dir(dir)
