@@ -40,6 +40,14 @@ fn phantom(grid: &Grid) -> Vec<f32> {
     v.data
 }
 
+/// CPU seconds (user + system) of this process so far (Linux), to show how busy the cores were.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = stat.rsplit_once(')').map_or("", |p| p.1);
+    let f: Vec<f64> = after.split_whitespace().filter_map(|v| v.parse().ok()).collect();
+    (f.get(11).copied().unwrap_or(0.0) + f.get(12).copied().unwrap_or(0.0)) / 100.0
+}
+
 fn time<T>(f: impl FnOnce() -> T) -> (T, f64) {
     let t = Instant::now();
     let r = f();
@@ -63,11 +71,14 @@ fn main() {
         let views = cams.len() as f64;
         // Best of three: the machine is shared, the minimum is the least disturbed run.
         let best = |f: &mut dyn FnMut()| (0..3).map(|_| time(&mut *f).1).fold(f64::INFINITY, f64::min);
+        let cpu0 = cpu_seconds();
+        let wall0 = Instant::now();
         let t_fwd = best(&mut || {
             for (v, img) in imgs.iter_mut().enumerate() {
                 splat.forward(v, &x, img);
             }
         });
+        let busy = (cpu_seconds() - cpu0) / wall0.elapsed().as_secs_f64();
         let mut back = vec![0f32; grid.len()];
         let t_back = best(&mut || {
             for (v, img) in imgs.iter().enumerate() {
@@ -76,7 +87,11 @@ fn main() {
         });
         let fwd_rate = n * views / t_fwd;
         let back_rate = n * views / t_back;
-        println!("{res}^3 splat forward: {:.3} s for 15 views, {:.1} M voxel-views/s", t_fwd, fwd_rate / 1e6);
+        println!(
+            "{res}^3 splat forward: {:.3} s for 15 views, {:.1} M voxel-views/s (cores busy: {busy:.2} CPU-s per s)",
+            t_fwd,
+            fwd_rate / 1e6
+        );
         println!("{res}^3 splat back:    {:.3} s for 15 views, {:.1} M voxel-views/s", t_back, back_rate / 1e6);
         if res == 128 {
             let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("thread pool");
