@@ -349,37 +349,21 @@ pub fn load_scene(path: &Path) -> Result<Scene, IoError> {
         return Err(IoError::invalid(&file, "the scene has no frames"));
     }
     let intensity_scale = parsed.intensity_scale.unwrap_or(1.0);
-    if !(intensity_scale.is_finite() && intensity_scale > 0.0) {
-        return Err(IoError::invalid(&file, format!("intensity_scale must be positive, got {intensity_scale}")));
-    }
     let mut frames = Vec::with_capacity(parsed.frames.len());
     for (i, entry) in parsed.frames.iter().enumerate() {
-        let camera = frame_camera(&file, i, entry, &parsed.intrinsics)?;
-        if entry.time.is_some_and(|t| !t.is_finite()) {
-            return Err(IoError::invalid(&file, format!("frame {i} ({}): time must be finite", entry.file_path)));
-        }
         frames.push(Frame {
-            camera,
+            camera: frame_camera(&file, i, entry, &parsed.intrinsics)?,
             file_path: PathBuf::from(&entry.file_path),
             time: entry.time,
             camera_name: entry.camera.clone(),
             holdout: entry.holdout,
         });
     }
-    let blind: Vec<usize> = frames
-        .par_iter()
-        .enumerate()
-        .filter(|(_, f)| f.camera.visibility(&aabb).pixel_fraction_on_box == 0.0)
-        .map(|(i, _)| i)
-        .collect();
-    if let Some(&i) = blind.first() {
-        return Err(IoError::CameraMissesBox { path: file, frame: i, file_path: frames[i].file_path.clone() });
-    }
     let root = match file.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    Ok(Scene {
+    let scene = Scene {
         root,
         aabb,
         units: parsed.units.unwrap_or_else(|| DEFAULT_UNITS.to_string()),
@@ -390,7 +374,62 @@ pub fn load_scene(path: &Path) -> Result<Scene, IoError> {
             .into_iter()
             .map(|t| TruthRef { time: t.time, file_path: PathBuf::from(t.file_path) })
             .collect(),
-    })
+    };
+    validate_scene(&scene, &file)?;
+    Ok(scene)
+}
+
+/// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb, at least one
+/// frame, a positive intensity scale, finite times, every camera valid and seeing the box (at
+/// least one pixel's ray crosses it). `file` names the scene in error messages.
+pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
+    let aabb = scene.aabb;
+    aabb.validate().map_err(|e| IoError::invalid(file, e.to_string()))?;
+    if scene.frames.is_empty() {
+        return Err(IoError::invalid(file, "the scene has no frames"));
+    }
+    let s = scene.intensity_scale;
+    if !(s.is_finite() && s > 0.0) {
+        return Err(IoError::invalid(file, format!("intensity_scale must be positive, got {s}")));
+    }
+    for (i, f) in scene.frames.iter().enumerate() {
+        if f.time.is_some_and(|t| !t.is_finite()) {
+            return Err(IoError::invalid(file, format!("frame {i} ({}): time must be finite", f.file_path.display())));
+        }
+        f.camera.validate().map_err(|source| IoError::Camera {
+            path: file.to_path_buf(),
+            frame: i,
+            file_path: f.file_path.clone(),
+            source,
+        })?;
+    }
+    // Frames of one physical camera at many times share a camera: test each distinct one once.
+    let mut distinct: Vec<usize> = Vec::new();
+    let first_equal: Vec<usize> = scene
+        .frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| match distinct.iter().find(|&&j| scene.frames[j].camera == f.camera) {
+            Some(&j) => j,
+            None => {
+                distinct.push(i);
+                i
+            }
+        })
+        .collect();
+    let blind_cameras: Vec<usize> = distinct
+        .par_iter()
+        .copied()
+        .filter(|&i| scene.frames[i].camera.visibility(&aabb).pixel_fraction_on_box == 0.0)
+        .collect();
+    if let Some(i) = first_equal.iter().position(|j| blind_cameras.contains(j)) {
+        return Err(IoError::CameraMissesBox {
+            path: file.to_path_buf(),
+            frame: i,
+            file_path: scene.frames[i].file_path.clone(),
+        });
+    }
+    Ok(())
 }
 
 fn path_str(file: &Path, p: &Path) -> Result<String, IoError> {
