@@ -169,8 +169,8 @@ pub(crate) struct RollupTrain {
     pub distortion: [(f32, f32); 3],
     /// Smooth strength and radius modulation along the train.
     pub modulation: [f32; 2],
-    /// Fade-out of the strength between these two distances (to 40 %).
-    pub fade: (f32, f32),
+    /// Fade-out of the strength between these two distances (to 40 %), if any.
+    pub fade: Option<(f32, f32)>,
 }
 
 impl RollupTrain {
@@ -217,8 +217,10 @@ impl RollupTrain {
         if rho2 >= rho_s * rho_s {
             return (xi, r);
         }
-        let ramp = smoothstep(self.start - self.lambda0, self.start + 2.0 * self.lambda0, xc - advect)
-            * (1.0 - 0.6 * smoothstep(self.fade.0, self.fade.1, xc - advect));
+        // Roll-up sets in at a fixed place downstream of the nozzle, even when the vortices
+        // themselves are carried along (`advect`).
+        let fade = self.fade.map_or(1.0, |(a, b)| 1.0 - 0.6 * smoothstep(a, b, xc));
+        let ramp = smoothstep(self.start - self.lambda0, self.start + 2.0 * self.lambda0, xc) * fade;
         let wobble = 1.0 + 0.25 * (1.7 * xc / self.lambda0 + self.modulation[0]).sin();
         let w = 1.0 - rho2 / (rho_s * rho_s);
         let phi = self.twist * ramp * wobble * strength(xc) * w * w * w;
@@ -265,7 +267,7 @@ impl Jet {
                 (distort as f32 * 0.5, rng.random::<f32>() * tau),
             ],
             modulation: [rng.random::<f32>() * tau, rng.random::<f32>() * tau],
-            fade: (lt, lt + 0.5 * lc),
+            fade: Some((lt, lt + 0.5 * lc)),
         };
         let trains = [
             train(0.0, params.rollup_twist, params.asymmetry),

@@ -50,11 +50,11 @@ pub struct StartingJetParams {
     pub nozzle_diameter_mm: Option<f64>,
     /// Speed of the leading ring. Default 0.55.
     pub front_speed: f64,
-    /// Radius of the leading ring. Default 0.62.
+    /// Radius of the leading ring (measured rings of starting jets: 0.7–1 D). Default 0.9.
     pub ring_radius_d: f64,
-    /// Core radius of the leading ring. Default 0.16.
+    /// Core radius of the leading ring. Default 0.25.
     pub core_radius_d: f64,
-    /// Axial semi-axis of the head bulb. Default 0.7.
+    /// Axial semi-axis of the head bulb. Default 0.9.
     pub head_length_d: f64,
     /// Saturated winding of the ring core, radians. Default 10.
     pub winding: f64,
@@ -87,9 +87,9 @@ impl Default for StartingJetParams {
         StartingJetParams {
             nozzle_diameter_mm: None,
             front_speed: 0.55,
-            ring_radius_d: 0.62,
-            core_radius_d: 0.16,
-            head_length_d: 0.7,
+            ring_radius_d: 0.9,
+            core_radius_d: 0.25,
+            head_length_d: 0.9,
             winding: 10.0,
             winding_time: 5.0,
             mixing: 0.7,
@@ -181,7 +181,7 @@ impl StartingJet {
             phase0: rng.random::<f32>(),
             distortion: [(0.04, rng.random::<f32>() * tau), (0.06, rng.random::<f32>() * tau), (0.0, 0.0)],
             modulation: [rng.random::<f32>() * tau, rng.random::<f32>() * tau],
-            fade: (f32::INFINITY, f32::INFINITY),
+            fade: None,
         };
         let trains = [train(0.0, params.trailing_twist), train(1.0, 0.3 * params.trailing_twist)];
         let widnall_phase = rng.random::<f32>() * tau;
