@@ -260,6 +260,27 @@ fn filter_rows(src: &[f64], dst: &mut [f64], row_len: usize, taps: &Taps) {
     }
 }
 
+/// Filters one contiguous line with `taps`, keeping the `src.len() − taps + 1` outputs whose
+/// window fits.
+fn filter_line(src: &[f64], dst: &mut [f64], taps: &Taps) {
+    debug_assert_eq!(dst.len(), src.len() + 1 - taps.len());
+    match taps {
+        Taps::Box(n) => {
+            let mut acc: f64 = src[..*n].iter().sum();
+            dst[0] = acc;
+            for i in 1..dst.len() {
+                acc += src[i + n - 1] - src[i - 1];
+                dst[i] = acc;
+            }
+        }
+        Taps::Weights(w) => {
+            for (d, win) in dst.iter_mut().zip(src.windows(w.len())) {
+                *d = win.iter().zip(w).map(|(v, wt)| v * wt).sum();
+            }
+        }
+    }
+}
+
 /// Constants of the SSIM formula.
 #[derive(Clone, Copy)]
 struct Consts {
@@ -360,7 +381,7 @@ fn slab_sum(
         }
         for jo in 0..out[1] {
             for q in 0..5 {
-                filter_rows(&ysum.m[q][jo * nx..(jo + 1) * nx], &mut xrow.m[q], 1, &taps[0]);
+                filter_line(&ysum.m[q][jo * nx..(jo + 1) * nx], &mut xrow.m[q], &taps[0]);
             }
             let [m0, m1, m2, m3, m4] = &xrow.m;
             for i in 0..out[0] {
