@@ -3,6 +3,9 @@
 //!
 //! `cargo bench --no-run -p fluidnerf-io`, then run `target/release/deps/io-<hash> --bench`.
 
+// A benchmark reports on stdout.
+#![allow(clippy::print_stdout)]
+
 use std::time::Instant;
 
 use fluidnerf_core::glam::DVec3;
