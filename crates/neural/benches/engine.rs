@@ -277,7 +277,7 @@ fn mlp_benches(batch: usize, steps: usize, threads: usize, no_torch: bool) {
     let flops = mlp.flops_per_sample();
     println!("mlp 8x256 relu: batch {batch}, {:.2} MFLOP per sample (forward + backward)", flops / 1e6);
     let mut rust = Vec::new();
-    for chunk in [128, 256, 512] {
+    for chunk in [128, 256, 512, 8192] {
         let t = time_steps(&mut mlp, batch, chunk, 1, steps);
         let (rw, rc) = (batch as f64 / t.wall_s, batch as f64 / t.cpu_s);
         println!(
@@ -319,24 +319,38 @@ fn mlp_benches(batch: usize, steps: usize, threads: usize, no_torch: bool) {
 fn grid_benches(steps: usize) {
     let grid_batch = 1 << 18;
     let log2: u32 = std::env::var("GRID_LOG2").ok().and_then(|v| v.parse().ok()).unwrap_or(19);
-    let cfg = HashGridConfig { log2_table_size: log2, ..HashGridConfig::default() };
-    let mut grid = HashGridField::new(&cfg, 3, 0).expect("default config is valid");
-    println!(
-        "hash grid: 16 levels x 2 features, 2^{log2} entries, MLP 2x64, {} params ({} in tables), batch {grid_batch}",
-        grid.num_params(),
-        grid.grid_params()
-    );
     let along_rays = ray_points(grid_batch, 128);
-    for chunk in [4096, 32_768] {
-        for (what, t) in [
-            ("random points", time_steps(&mut grid, grid_batch, chunk, 1, steps)),
-            ("along rays   ", time_steps_on(&mut grid, &along_rays, chunk, 1, steps)),
-        ] {
-            println!(
-                "hash grid chunk {chunk:6} {what}: {:5.2} | {:5.2} M points/s",
-                grid_batch as f64 / t.wall_s / 1e6,
-                grid_batch as f64 / t.cpu_s / 1e6
-            );
+    let configs = [
+        ("instant-ngp defaults", HashGridConfig { log2_table_size: log2, ..HashGridConfig::default() }),
+        (
+            "small: 8 levels, max res 128, 2^16",
+            HashGridConfig { levels: 8, log2_table_size: 16, max_resolution: 128, ..HashGridConfig::default() },
+        ),
+    ];
+    for (name, cfg) in configs {
+        let mut grid = HashGridField::new(&cfg, 3, 0).expect("benchmark config is valid");
+        println!(
+            "hash grid ({name}): {} levels x {} features, 2^{} entries, max res {}, MLP {}x{}, {} params ({} in tables), batch {grid_batch}",
+            cfg.levels,
+            cfg.features_per_level,
+            cfg.log2_table_size,
+            cfg.max_resolution,
+            cfg.mlp_depth,
+            cfg.mlp_width,
+            grid.num_params(),
+            grid.grid_params()
+        );
+        for chunk in [4096, 32_768] {
+            for (what, t) in [
+                ("random points", time_steps(&mut grid, grid_batch, chunk, 1, steps)),
+                ("along rays   ", time_steps_on(&mut grid, &along_rays, chunk, 1, steps)),
+            ] {
+                println!(
+                    "  chunk {chunk:6} {what}: {:5.2} | {:5.2} M points/s",
+                    grid_batch as f64 / t.wall_s / 1e6,
+                    grid_batch as f64 / t.cpu_s / 1e6
+                );
+            }
         }
     }
 }

@@ -234,16 +234,23 @@ impl HashGridField {
 
     /// Runs `level_pass` monomorphised for the input dimension and features per level.
     fn dispatch<const BACKWARD: bool>(&self, l: usize, inputs: &[f32], feats: &mut [f32], grads: &mut [f32]) {
+        match self.input_dim {
+            3 => self.dispatch_f::<3, BACKWARD>(l, inputs, feats, grads),
+            _ => self.dispatch_f::<4, BACKWARD>(l, inputs, feats, grads),
+        }
+    }
+
+    fn dispatch_f<const D: usize, const B: bool>(&self, l: usize, x: &[f32], f: &mut [f32], g: &mut [f32]) {
         let level = &self.levels[l];
-        match (self.input_dim, self.config.features_per_level) {
-            (3, 1) => self.level_pass::<3, 1, BACKWARD>(l, level, inputs, feats, grads),
-            (3, 2) => self.level_pass::<3, 2, BACKWARD>(l, level, inputs, feats, grads),
-            (3, 4) => self.level_pass::<3, 4, BACKWARD>(l, level, inputs, feats, grads),
-            (3, _) => self.level_pass::<3, 8, BACKWARD>(l, level, inputs, feats, grads),
-            (_, 1) => self.level_pass::<4, 1, BACKWARD>(l, level, inputs, feats, grads),
-            (_, 2) => self.level_pass::<4, 2, BACKWARD>(l, level, inputs, feats, grads),
-            (_, 4) => self.level_pass::<4, 4, BACKWARD>(l, level, inputs, feats, grads),
-            (_, _) => self.level_pass::<4, 8, BACKWARD>(l, level, inputs, feats, grads),
+        match (self.config.features_per_level, level.dense) {
+            (1, true) => self.level_pass::<D, 1, B, true>(l, level, x, f, g),
+            (1, false) => self.level_pass::<D, 1, B, false>(l, level, x, f, g),
+            (2, true) => self.level_pass::<D, 2, B, true>(l, level, x, f, g),
+            (2, false) => self.level_pass::<D, 2, B, false>(l, level, x, f, g),
+            (4, true) => self.level_pass::<D, 4, B, true>(l, level, x, f, g),
+            (4, false) => self.level_pass::<D, 4, B, false>(l, level, x, f, g),
+            (_, true) => self.level_pass::<D, 8, B, true>(l, level, x, f, g),
+            (_, false) => self.level_pass::<D, 8, B, false>(l, level, x, f, g),
         }
     }
 
@@ -251,7 +258,7 @@ impl HashGridField {
     /// (`n × L·F`). Backward (`BACKWARD`): `feats` holds ∂L/∂features and is scattered into the
     /// level's slice of `grads` (the grid part of the gradient, laid out like the tables).
     #[inline(never)]
-    fn level_pass<const D: usize, const F: usize, const BACKWARD: bool>(
+    fn level_pass<const D: usize, const F: usize, const BACKWARD: bool, const DENSE: bool>(
         &self,
         l: usize,
         level: &Level,
@@ -260,6 +267,7 @@ impl HashGridField {
         grads: &mut [f32],
     ) {
         let lf = self.levels.len() * F;
+        debug_assert_eq!(DENSE, level.dense);
         let res = level.res;
         let res_t = level.res_t;
         let side = res as usize + 1;
@@ -276,31 +284,33 @@ impl HashGridField {
         let table = &self.params[table_range.clone()];
         let gtable: &mut [f32] = if BACKWARD { &mut grads[table_range] } else { &mut [] };
         for (x, row) in inputs.chunks_exact(D).zip(feats.chunks_exact_mut(lf)) {
-            // Per axis: the lower vertex, and the weights of the lower and upper vertex.
-            let mut cell = [0u32; 4];
+            // Per axis: the weights of the lower and upper vertex, and their contributions to the
+            // vertex index (dense: coordinate × stride, summed) or hash (coordinate × prime, xored).
             let mut wgt = [[0.0f32; 2]; 4];
+            let mut part = [[0u32; 2]; 4];
             for a in 0..D {
                 let (u, r) = if a < 3 { (x[a], res) } else { (x[a] * inv_span, res_t) };
                 let p = u.clamp(0.0, 1.0) * r as f32;
                 let c = (p as u32).min(r.saturating_sub(1));
                 let t = p - c as f32;
-                cell[a] = c;
                 wgt[a] = [1.0 - t, t];
+                part[a] = if DENSE {
+                    [c * stride[a] as u32, (c + 1) * stride[a] as u32]
+                } else {
+                    [c.wrapping_mul(PRIMES[a]), (c + 1).wrapping_mul(PRIMES[a])]
+                };
             }
             let out: &mut [f32; F] = (&mut row[l * F..(l + 1) * F]).try_into().expect("F features");
             let mut acc = [0.0f32; F];
             for c in 0..1usize << D {
                 let mut w = 1.0f32;
-                let mut idx = 0usize;
-                let mut h = 0u32;
+                let mut key = 0u32;
                 for a in 0..D {
                     let bit = (c >> a) & 1;
-                    let v = cell[a] + bit as u32;
                     w *= wgt[a][bit];
-                    idx += v as usize * stride[a];
-                    h ^= v.wrapping_mul(PRIMES[a]);
+                    key = if DENSE { key + part[a][bit] } else { key ^ part[a][bit] };
                 }
-                let idx = if level.dense { idx } else { h as usize & mask };
+                let idx = if DENSE { key as usize } else { key as usize & mask };
                 if BACKWARD {
                     let g = &mut gtable[idx * F..idx * F + F];
                     for k in 0..F {
@@ -408,5 +418,44 @@ mod tests {
         assert_eq!(s.last().unwrap().0, 512);
         assert!(!s.last().unwrap().2);
         assert!(s.iter().all(|&(r, e, dense)| dense == ((r as usize + 1).pow(3) <= 1 << 19) && e <= 1 << 19));
+    }
+
+    /// Trilinear (quadrilinear) interpolation on a dense level reproduces a field linear in the
+    /// vertex coordinates exactly; coordinates outside the box are clamped to it.
+    #[test]
+    fn interpolation_reproduces_linear_functions() {
+        for (d, log2) in [(3, 12), (4, 14)] {
+            let cfg = HashGridConfig {
+                levels: 1,
+                base_resolution: 7,
+                max_resolution: 7,
+                time_resolution: 5,
+                time_span: 2.0,
+                log2_table_size: log2,
+                ..HashGridConfig::default()
+            };
+            let mut f = HashGridField::new(&cfg, d, 3).unwrap();
+            let level = f.levels[0].clone();
+            let side = level.res as usize + 1;
+            let verts = side.pow(3) * (level.res_t as usize + 1);
+            for v in 0..verts {
+                let (x, z) = (v % side, (v / (side * side)) % side);
+                let t = v / side.pow(3);
+                assert!(level.dense);
+                let idx = v;
+                f.params[2 * idx] = x as f32 / 7.0 + if d == 4 { t as f32 / 5.0 } else { 0.0 };
+                f.params[2 * idx + 1] = z as f32 / 7.0;
+            }
+            let inputs = [0.1f32, 0.5, 0.93, 1.2, 0.77, 0.01, 0.4, 0.3, 1.0, 0.999, 0.0, 2.0];
+            let n = inputs.len() / d;
+            let mut tape = f.new_tape();
+            let mut out = vec![0.0; n];
+            f.forward(&inputs[..n * d], &mut out, &mut tape);
+            for (i, x) in inputs[..n * d].chunks(d).enumerate() {
+                let want0 = x[0].clamp(0.0, 1.0) + if d == 4 { (x[3] / 2.0).clamp(0.0, 1.0) } else { 0.0 };
+                assert!((tape.features[2 * i] - want0).abs() < 1e-5, "d {d} T {log2}: {x:?}");
+                assert!((tape.features[2 * i + 1] - x[2].clamp(0.0, 1.0)).abs() < 1e-5, "d {d} T {log2}: {x:?}");
+            }
+        }
     }
 }
