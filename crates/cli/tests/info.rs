@@ -155,3 +155,19 @@ fn missing_scene_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");
     assert_fails_with(&info(&dir.path().join("nothing")), &["scene file not found", "nothing"]);
 }
+
+#[test]
+fn unknown_keys_are_warned_about_and_ignored() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    let file = dir.path().join("transforms.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("reads")).expect("json");
+    v["ply_file_path"] = serde_json::json!("points.ply");
+    v["frames"][1]["colmap_im_id"] = serde_json::json!(7);
+    std::fs::write(&file, v.to_string()).expect("writes");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stderr.contains("transforms.json: ignoring unknown key \"ply_file_path\""), "{stderr}");
+    assert!(stderr.contains("ignoring unknown key \"colmap_im_id\" in frame 1"), "{stderr}");
+}
