@@ -3,11 +3,13 @@
 use clap::Subcommand;
 
 pub mod eval;
+pub mod export;
 pub mod import;
 pub mod info;
 pub mod reconstruct;
 pub mod reconstruct_classical;
 pub mod reconstruct_neural;
+pub mod render;
 pub mod synth;
 
 /// The subcommands of `fluidnerf`.
@@ -21,6 +23,12 @@ pub enum Command {
     Reconstruct(reconstruct::Args),
     /// Score a reconstruction against ground truth and held-out camera images.
     Eval(eval::Args),
+    /// Sample a reconstruction onto any grid and export volumes (.npy, .vti, raw), slice
+    /// pictures, truth | reconstruction | difference panels and isosurface meshes.
+    Export(export::Args),
+    /// Render a reconstruction from scene cameras or an orbit, to 16-bit PNG or float TIFF,
+    /// with a turntable GIF.
+    Render(render::Args),
     /// Generate a synthetic data set with known ground truth: jet phantoms, camera rigs,
     /// pinhole or thin-lens images, sensor noise.
     Synth(synth::Args),
@@ -33,6 +41,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Import(args) => import::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Export(args) => export::run(args),
+        Command::Render(args) => render::run(args),
         Command::Synth(args) => synth::run(args),
     }
 }

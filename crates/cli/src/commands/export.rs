@@ -1,0 +1,380 @@
+//! `fluidnerf export`: samples a reconstruction onto a grid of any resolution and box and writes
+//! it for other tools (`.npy`, `.vti`, raw), as slice pictures (optionally next to the truth and
+//! the difference) and as isosurface meshes. Also home of the reconstruction loader that
+//! `render` shares.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::ValueEnum;
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
+use fluidnerf_viz::{Axis, Colormap, PanelStyle};
+use serde::Serialize;
+
+/// Mesh file formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MeshFormat {
+    /// Binary little-endian PLY.
+    Ply,
+    /// Wavefront OBJ (text).
+    Obj,
+}
+
+/// Sample a reconstruction onto a grid and export it: volumes for NumPy, ParaView and MATLAB,
+/// slice pictures with a colour bar, truth | reconstruction | difference panels, isosurfaces.
+///
+/// With none of --npy, --vti, --raw, --slices or --isosurface, writes `volume.npy`,
+/// `volume.vti` and slices through the middle of the box along x, y and z. Always writes
+/// `export.json` (the resolved settings). Existing outputs in OUT need --force.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw` with
+    /// its JSON sidecar) or a reconstruction run directory (a trained neural field,
+    /// `model.json` + weights, sampled exactly; else its `volume.vti` or `volume.npy`).
+    pub recon: PathBuf,
+    /// The scene (folder holding `transforms.json`, or the file): gives the box of `.npy`
+    /// volumes and the length unit.
+    #[arg(short, long)]
+    pub scene: Option<PathBuf>,
+    /// Output directory; created if missing.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Voxels along the longest side of the export box (cubic cells). Default: a volume's own
+    /// grid when the box is unchanged, else 128.
+    #[arg(long)]
+    pub resolution: Option<usize>,
+    /// Export box in world units as `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX`. Default: the
+    /// reconstruction's box.
+    #[arg(long = "box", value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
+    pub bbox: Option<String>,
+    /// Time at which a time-resolved field is sampled.
+    #[arg(long, default_value_t = 0.0)]
+    pub time: f64,
+    /// Write `volume.npy` (shape `(nz, ny, nx)`, f32).
+    #[arg(long)]
+    pub npy: bool,
+    /// Write `volume.vti` (VTK ImageData for ParaView; values at voxel centres).
+    #[arg(long)]
+    pub vti: bool,
+    /// Write `volume.raw` (f32, x fastest) with its JSON sidecar.
+    #[arg(long)]
+    pub raw: bool,
+    /// Slice pictures as AXIS=FRACTION of the box (0 = min side, 1 = max side), e.g.
+    /// `x=0.5,z=0.25`; comma-separated or repeated. Each goes to `slice_<axis>_<fraction>.png`.
+    #[arg(long, value_delimiter = ',', value_name = "AXIS=FRACTION")]
+    pub slices: Vec<String>,
+    /// Ground-truth volume (`.npy` filling the scene's box, `.vti` or `.raw`): slices are also
+    /// drawn as truth | reconstruction | difference (`compare_<axis>_<fraction>.png`).
+    #[arg(long, value_name = "TRUTH")]
+    pub compare: Option<PathBuf>,
+    /// Extract the isosurface at this field value by marching cubes (`isosurface.ply`).
+    #[arg(long, value_name = "VALUE")]
+    pub isosurface: Option<f32>,
+    /// Mesh formats of the isosurface; comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "ply")]
+    pub mesh: Vec<MeshFormat>,
+    /// Colour map of the slices: viridis, magma, inferno, cividis, gray.
+    #[arg(long, default_value = "viridis")]
+    pub colormap: Colormap,
+    /// Colour-bar label of the slices, with the field's unit.
+    #[arg(long, default_value = "emission E [a.u.]")]
+    pub value_label: String,
+    /// Length unit for axis labels. Default: the scene's, else mm.
+    #[arg(long)]
+    pub units: Option<String>,
+    /// Overwrite existing outputs in OUT.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// A loaded reconstruction.
+pub(crate) enum Source {
+    Volume(Volume),
+    Field { field: Box<dyn ScalarField + Send + Sync>, aabb: Aabb },
+}
+
+impl Source {
+    pub(crate) fn aabb(&self) -> Aabb {
+        match self {
+            Source::Volume(v) => v.aabb,
+            Source::Field { aabb, .. } => *aabb,
+        }
+    }
+
+    pub(crate) fn field(&self) -> &dyn ScalarField {
+        match self {
+            Source::Volume(v) => v,
+            Source::Field { field, .. } => field.as_ref(),
+        }
+    }
+
+    pub(crate) fn describe(&self) -> String {
+        match self {
+            Source::Volume(v) => format!("a {}x{}x{} volume", v.dims[0], v.dims[1], v.dims[2]),
+            Source::Field { .. } => "a trained field".to_string(),
+        }
+    }
+}
+
+/// Reads a volume file by extension; `.npy` needs `aabb`.
+pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>) -> anyhow::Result<Volume> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let v = match ext.as_str() {
+        "npy" => {
+            let Some(aabb) = aabb else {
+                bail!("{}: a .npy volume holds no box; give the scene with --scene", path.display());
+            };
+            fluidnerf_io::volume::read_npy(path, aabb)
+        }
+        "vti" => fluidnerf_io::volume::read_vti(path),
+        "raw" => fluidnerf_io::volume::read_raw(path),
+        _ => bail!("{}: unknown volume format (expected .npy, .vti or .raw)", path.display()),
+    }
+    .with_context(|| format!("reading the volume {}", path.display()))?;
+    if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
+        bail!("{}: voxel {i} is {}; values must be finite", path.display(), v.data[i]);
+    }
+    Ok(v)
+}
+
+/// Loads RECON: a volume file, or a run directory (trained field first, then `volume.vti`,
+/// then `volume.npy` on the scene's box).
+pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<Source> {
+    let scene_box = scene.map(|s| s.aabb);
+    if path.is_dir() {
+        if path.join("model.json").is_file() {
+            let (field, aabb) = fluidnerf_neural::trained::load_trained(path)
+                .with_context(|| format!("loading the trained field in {}", path.display()))?;
+            return Ok(Source::Field { field, aabb });
+        }
+        for name in ["volume.vti", "volume.npy"] {
+            let f = path.join(name);
+            if f.is_file() {
+                return Ok(Source::Volume(read_volume(&f, scene_box)?));
+            }
+        }
+        bail!("{}: a run directory must hold a trained field (model.json), volume.vti or volume.npy", path.display());
+    }
+    if !path.exists() {
+        bail!("{}: no such file or directory", path.display());
+    }
+    Ok(Source::Volume(read_volume(path, scene_box)?))
+}
+
+/// Parses `AXIS=FRACTION`.
+fn parse_slice(s: &str) -> anyhow::Result<(Axis, f64)> {
+    let (a, f) = s.split_once('=').with_context(|| format!("--slices {s:?}: expected AXIS=FRACTION, e.g. z=0.5"))?;
+    let axis: Axis = a.parse().map_err(|e: String| anyhow::anyhow!("--slices {s:?}: {e}"))?;
+    let fraction: f64 = f.trim().parse().with_context(|| format!("--slices {s:?}: {f:?} is not a number"))?;
+    if !(0.0..=1.0).contains(&fraction) {
+        bail!("--slices {s:?}: the fraction must lie in [0, 1] (0 = min side of the box, 1 = max side)");
+    }
+    Ok((axis, fraction))
+}
+
+/// The settings written to `export.json`.
+#[derive(Serialize)]
+struct Settings<'a> {
+    version: &'static str,
+    reconstruction: &'a Path,
+    scene: Option<&'a Path>,
+    aabb: Aabb,
+    dims: [usize; 3],
+    time: f64,
+    units: &'a str,
+    colormap: Colormap,
+    value_label: &'a str,
+    slices: Vec<(Axis, f64)>,
+    compare: Option<&'a Path>,
+    isosurface: Option<f32>,
+    mesh: &'a [MeshFormat],
+    outputs: Vec<String>,
+}
+
+#[allow(clippy::print_stdout)]
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // Validate the arguments before any work.
+    let mut slices: Vec<(Axis, f64)> = args.slices.iter().map(|s| parse_slice(s)).collect::<anyhow::Result<_>>()?;
+    let nothing_chosen = !args.npy && !args.vti && !args.raw && slices.is_empty() && args.isosurface.is_none();
+    let (npy, vti, raw) = (args.npy || nothing_chosen, args.vti || nothing_chosen, args.raw);
+    if nothing_chosen {
+        slices = vec![(Axis::X, 0.5), (Axis::Y, 0.5), (Axis::Z, 0.5)];
+    }
+    if args.resolution == Some(0) {
+        bail!("--resolution must be positive");
+    }
+    if args.colormap.is_diverging() {
+        bail!("--colormap diverging is kept for differences; choose a sequential map for the field");
+    }
+    let export_box = match &args.bbox {
+        Some(text) => {
+            let b: Vec<f64> = text
+                .split(',')
+                .map(|x| x.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .with_context(|| format!("--box {text:?}: expected six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX"))?;
+            if b.len() != 6 {
+                bail!("--box {text:?}: expected six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX, got {}", b.len());
+            }
+            let aabb = Aabb { min: DVec3::new(b[0], b[1], b[2]), max: DVec3::new(b[3], b[4], b[5]) };
+            aabb.validate().context("--box")?;
+            Some(aabb)
+        }
+        None => None,
+    };
+    if let Some(v) = args.isosurface {
+        if !v.is_finite() {
+            bail!("--isosurface must be a finite value");
+        }
+    }
+
+    let scene = match &args.scene {
+        Some(p) => {
+            Some(fluidnerf_io::scene::load_scene(p).with_context(|| format!("reading the scene {}", p.display()))?)
+        }
+        None => None,
+    };
+    let units = args.units.clone().or_else(|| scene.as_ref().map(|s| s.units.clone())).unwrap_or_else(|| "mm".into());
+    let source = load_source(&args.recon, scene.as_ref())?;
+
+    // The export grid.
+    let aabb = export_box.unwrap_or_else(|| source.aabb());
+    let volume = match (&source, args.resolution, export_box) {
+        (Source::Volume(v), None, None) => v.clone(),
+        (Source::Volume(v), res, _) => {
+            let dims = Volume::dims_for(&aabb, res.unwrap_or(128));
+            v.resample(dims, aabb)
+        }
+        (Source::Field { field, .. }, res, _) => {
+            let dims = Volume::dims_for(&aabb, res.unwrap_or(128));
+            Volume::from_field(dims, aabb, field.as_ref(), args.time)
+        }
+    };
+    let truth = match &args.compare {
+        Some(p) => {
+            let t = read_volume(p, scene.as_ref().map(|s| s.aabb))?;
+            Some(if t.dims == volume.dims && t.aabb == volume.aabb { t } else { t.resample(volume.dims, volume.aabb) })
+        }
+        None => None,
+    };
+
+    // Outputs, refused if present unless --force.
+    let out = &args.out;
+    let mut outputs: Vec<PathBuf> = Vec::new();
+    if npy {
+        outputs.push(out.join("volume.npy"));
+    }
+    if vti {
+        outputs.push(out.join("volume.vti"));
+    }
+    if raw {
+        outputs.push(out.join("volume.raw"));
+        outputs.push(fluidnerf_io::volume::raw_sidecar_path(&out.join("volume.raw")));
+    }
+    let slice_name = |prefix: &str, (a, f): (Axis, f64)| out.join(format!("{prefix}_{a}_{f:.3}.png"));
+    for &s in &slices {
+        outputs.push(slice_name("slice", s));
+        if truth.is_some() {
+            outputs.push(slice_name("compare", s));
+        }
+    }
+    if args.isosurface.is_some() {
+        for m in &args.mesh {
+            outputs.push(out.join(match m {
+                MeshFormat::Ply => "isosurface.ply",
+                MeshFormat::Obj => "isosurface.obj",
+            }));
+        }
+    }
+    let settings_path = out.join("export.json");
+    if !args.force {
+        if let Some(p) = outputs.iter().chain([&settings_path]).find(|p| p.exists()) {
+            bail!("{} exists; pass --force to overwrite it", p.display());
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+
+    let [nx, ny, nz] = volume.dims;
+    println!("{}: {} sampled on {nx}x{ny}x{nz} voxels", args.recon.display(), source.describe());
+    if npy {
+        let p = out.join("volume.npy");
+        fluidnerf_io::volume::write_npy(&p, &volume).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if vti {
+        let p = out.join("volume.vti");
+        fluidnerf_io::volume::write_vti(&p, &volume).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if raw {
+        let p = out.join("volume.raw");
+        fluidnerf_io::volume::write_raw(&p, &volume).with_context(|| format!("writing {}", p.display()))?;
+    }
+    let style = PanelStyle { colormap: args.colormap, colorbar_label: args.value_label.clone(), ..Default::default() };
+    for &(axis, fraction) in &slices {
+        let position = axis.position_at(&volume.aabb, fraction);
+        let panel = fluidnerf_viz::slice(&volume, axis, position, &units)?;
+        let p = slice_name("slice", (axis, fraction));
+        fluidnerf_viz::write_panels_png(&p, std::slice::from_ref(&panel), &style)
+            .with_context(|| format!("writing {}", p.display()))?;
+        if let Some(t) = &truth {
+            let truth_panel = fluidnerf_viz::slice(t, axis, position, &units)?;
+            let p = slice_name("compare", (axis, fraction));
+            fluidnerf_viz::write_comparison_png(&p, &truth_panel, &panel, &style)
+                .with_context(|| format!("writing {}", p.display()))?;
+        }
+    }
+    if let Some(iso) = args.isosurface {
+        let mesh = fluidnerf_viz::marching_cubes(&volume, iso);
+        if mesh.triangles.is_empty() {
+            let (lo, hi) = volume.min_max();
+            log::warn!("the isosurface at {iso} is empty: the exported values range over [{lo}, {hi}]");
+        }
+        for m in &args.mesh {
+            let (p, r) = match m {
+                MeshFormat::Ply => {
+                    let p = out.join("isosurface.ply");
+                    let r = fluidnerf_io::mesh::write_ply(&p, &mesh.vertices, &mesh.triangles);
+                    (p, r)
+                }
+                MeshFormat::Obj => {
+                    let p = out.join("isosurface.obj");
+                    let r = fluidnerf_io::mesh::write_obj(&p, &mesh.vertices, &mesh.triangles);
+                    (p, r)
+                }
+            };
+            r.with_context(|| format!("writing {}", p.display()))?;
+        }
+        println!(
+            "isosurface at {iso}: {} vertices, {} triangles, area {:.4} {units}², enclosed volume {:.4} {units}³{}",
+            mesh.vertices.len(),
+            mesh.triangles.len(),
+            mesh.area(),
+            mesh.enclosed_volume(),
+            if mesh.is_watertight() { "" } else { " (open where it leaves the box)" }
+        );
+    }
+    let settings = Settings {
+        version: env!("CARGO_PKG_VERSION"),
+        reconstruction: &args.recon,
+        scene: args.scene.as_deref(),
+        aabb: volume.aabb,
+        dims: volume.dims,
+        time: args.time,
+        units: &units,
+        colormap: args.colormap,
+        value_label: &args.value_label,
+        slices: slices.clone(),
+        compare: args.compare.as_deref(),
+        isosurface: args.isosurface,
+        mesh: &args.mesh,
+        outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
+    };
+    let text = serde_json::to_string_pretty(&settings)?;
+    fluidnerf_io::atomic_write(&settings_path, |w| w.write_all(text.as_bytes()))
+        .with_context(|| format!("writing {}", settings_path.display()))?;
+    for p in &outputs {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,217 @@
+//! `fluidnerf render`: renders a reconstruction (line integrals along camera rays, the imaging
+//! model of the reconstruction) from the scene's cameras or from an orbit of virtual cameras,
+//! to 16-bit PNG or 32-bit float TIFF, and an orbit as a turntable GIF.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::ValueEnum;
+use fluidnerf_core::{render_image, Camera, Image, RenderSettings};
+use fluidnerf_viz::Colormap;
+use serde::Serialize;
+
+use super::export::load_source;
+
+/// Image file formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ImageFormat {
+    /// 16-bit grayscale PNG; counts scale so the brightest pixel of all views is 65535 (the
+    /// factor is recorded in `render.json`: value = count × full_scale / 65535).
+    Png16,
+    /// 32-bit float grayscale TIFF with the rendered values exactly.
+    Tiff,
+}
+
+/// Render a reconstruction from the scene's cameras or from an orbit of virtual cameras.
+///
+/// Pixel values are `intensity_scale × ∫E ds` along each pixel's ray through the box, the same
+/// model the reconstruction was fitted to, so a scene camera's rendering compares directly with
+/// its image. Views of scene cameras go to `view_<index>.<ext>`, orbit views to
+/// `orbit_<k>.<ext>` plus `turntable.gif`. Writes `render.json` with the resolved settings.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, `.raw`) or a
+    /// reconstruction run directory (trained field, else its volume).
+    pub recon: PathBuf,
+    /// The scene (folder holding `transforms.json`, or the file): cameras, box and intensity
+    /// scale.
+    #[arg(short, long)]
+    pub scene: PathBuf,
+    /// Output directory; created if missing.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Scene frames to render, by index in the scene (comma-separated or repeated). Default:
+    /// every frame, unless --orbit is given.
+    #[arg(long, value_delimiter = ',', value_name = "INDEX")]
+    pub camera: Vec<usize>,
+    /// Render N views on a circle about the flow axis (+x) through the box centre, flow
+    /// pointing right, and write them as a turntable GIF.
+    #[arg(long, value_name = "N")]
+    pub orbit: Option<usize>,
+    /// Width of orbit views in pixels (the height follows the box's cross-section).
+    #[arg(long, default_value_t = 320)]
+    pub width: u32,
+    /// Image format of the views.
+    #[arg(long, value_enum, default_value = "png16")]
+    pub format: ImageFormat,
+    /// Rays per pixel along each image axis (anti-aliasing).
+    #[arg(long, default_value_t = 2)]
+    pub supersample: usize,
+    /// Time at which a time-resolved field is rendered. Default: each frame's own time; 0 for
+    /// orbit views.
+    #[arg(long)]
+    pub time: Option<f64>,
+    /// Colour map of the turntable GIF.
+    #[arg(long, default_value = "magma")]
+    pub colormap: Colormap,
+    /// Display time of each turntable frame in milliseconds.
+    #[arg(long, default_value_t = 80)]
+    pub frame_ms: u32,
+    /// Overwrite existing outputs in OUT.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Serialize)]
+struct Settings<'a> {
+    version: &'static str,
+    reconstruction: &'a Path,
+    scene: &'a Path,
+    cameras: &'a [usize],
+    orbit: Option<usize>,
+    width: u32,
+    format: ImageFormat,
+    supersample: usize,
+    time: Option<f64>,
+    intensity_scale: f64,
+    /// For 16-bit PNG: value = count × full_scale / 65535.
+    full_scale: Option<f32>,
+    outputs: Vec<String>,
+}
+
+/// One view to render.
+struct View {
+    camera: Camera,
+    time: f64,
+    file_stem: String,
+}
+
+#[allow(clippy::print_stdout)]
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.orbit == Some(0) {
+        bail!("--orbit needs at least one view");
+    }
+    if args.orbit.is_some() && !args.camera.is_empty() {
+        bail!("give either --camera or --orbit, not both");
+    }
+    if args.width < 16 {
+        bail!("--width must be at least 16 px, got {}", args.width);
+    }
+    let scene = fluidnerf_io::scene::load_scene(&args.scene)
+        .with_context(|| format!("reading the scene {}", args.scene.display()))?;
+    let views: Vec<View> = match args.orbit {
+        Some(n) => fluidnerf_viz::orbit_cameras(&scene.aabb, n, args.width)
+            .into_iter()
+            .enumerate()
+            .map(|(k, camera)| View { camera, time: args.time.unwrap_or(0.0), file_stem: format!("orbit_{k:03}") })
+            .collect(),
+        None => {
+            let indices: Vec<usize> =
+                if args.camera.is_empty() { (0..scene.frames.len()).collect() } else { args.camera.clone() };
+            let mut views = Vec::new();
+            for i in indices {
+                let Some(frame) = scene.frames.get(i) else {
+                    bail!("--camera {i}: the scene has {} frames (0..{})", scene.frames.len(), scene.frames.len());
+                };
+                views.push(View {
+                    camera: frame.camera.clone(),
+                    time: args.time.or(frame.time).unwrap_or(0.0),
+                    file_stem: format!("view_{i:03}"),
+                });
+            }
+            views
+        }
+    };
+    if views.is_empty() {
+        bail!("{}: the scene has no frames to render", args.scene.display());
+    }
+    let ext = match args.format {
+        ImageFormat::Png16 => "png",
+        ImageFormat::Tiff => "tif",
+    };
+    let out = &args.out;
+    let mut outputs: Vec<PathBuf> = views.iter().map(|v| out.join(format!("{}.{ext}", v.file_stem))).collect();
+    if args.orbit.is_some() {
+        outputs.push(out.join("turntable.gif"));
+    }
+    let settings_path = out.join("render.json");
+    if !args.force {
+        if let Some(p) = outputs.iter().chain([&settings_path]).find(|p| p.exists()) {
+            bail!("{} exists; pass --force to overwrite it", p.display());
+        }
+    }
+    let source = load_source(&args.recon, Some(&scene))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+
+    let bar = crate::progress::bar(views.len() as u64, "render");
+    let mut images: Vec<Image> = Vec::with_capacity(views.len());
+    for v in &views {
+        if crate::interrupt::requested() {
+            bail!("interrupted");
+        }
+        let settings = RenderSettings {
+            supersample: args.supersample.max(1),
+            time: v.time,
+            scale: scene.intensity_scale,
+            ..Default::default()
+        };
+        let img = render_image(source.field(), &v.camera, &scene.aabb, &settings)
+            .with_context(|| format!("rendering {}", v.file_stem))?;
+        images.push(img);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let peak = images.iter().flat_map(|i| i.data.iter()).copied().filter(|v| v.is_finite()).fold(0f32, f32::max);
+    let full_scale = (args.format == ImageFormat::Png16).then_some(if peak > 0.0 { peak } else { 1.0 });
+    for (img, path) in images.iter().zip(&outputs) {
+        match full_scale {
+            Some(fs) => fluidnerf_io::image::write_png16(path, img, fs),
+            None => fluidnerf_io::image::write_tiff_f32(path, img),
+        }
+        .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if args.orbit.is_some() {
+        let p = out.join("turntable.gif");
+        fluidnerf_viz::write_turntable_gif(&p, &images, args.colormap, args.frame_ms)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    let settings = Settings {
+        version: env!("CARGO_PKG_VERSION"),
+        reconstruction: &args.recon,
+        scene: &args.scene,
+        cameras: &args.camera,
+        orbit: args.orbit,
+        width: args.width,
+        format: args.format,
+        supersample: args.supersample.max(1),
+        time: args.time,
+        intensity_scale: scene.intensity_scale,
+        full_scale,
+        outputs: outputs.iter().map(|p| p.display().to_string()).collect(),
+    };
+    let text = serde_json::to_string_pretty(&settings)?;
+    fluidnerf_io::atomic_write(&settings_path, |w| w.write_all(text.as_bytes()))
+        .with_context(|| format!("writing {}", settings_path.display()))?;
+    println!(
+        "rendered {} views of {} ({}); brightest pixel {peak:.4}",
+        views.len(),
+        args.recon.display(),
+        source.describe()
+    );
+    for p in &outputs {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,134 @@
+//! End-to-end tests of `fluidnerf export` on tiny volumes generated in a temporary directory.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, Volume};
+
+fn fluidnerf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).args(args).output().expect("runs the binary")
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn linear(p: DVec3) -> f32 {
+    (1.0 + 0.5 * p.x - 0.25 * p.y + 2.0 * p.z) as f32
+}
+
+/// A linear field on [0, 4]³ (16³ voxels) as `.vti`; trilinear resampling reproduces it exactly
+/// inside the hull of the voxel centres.
+fn source(dir: &Path) -> std::path::PathBuf {
+    let vol = Volume::from_fn([16, 16, 16], Aabb::new(DVec3::ZERO, DVec3::splat(4.0)), linear);
+    let path = dir.join("recon.vti");
+    fluidnerf_io::volume::write_vti(&path, &vol).expect("writes the source");
+    path
+}
+
+#[test]
+fn vti_export_has_the_right_origin_spacing_and_values() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let o = fluidnerf(&[
+        "export",
+        src.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--vti",
+        "--npy",
+        "--box",
+        "0.5,1,1,3.5,3,2",
+        "--resolution",
+        "12",
+    ]);
+    ok(&o);
+    // Box 3 × 2 × 1 at 12 cells along x: cubic cells of 0.25.
+    let v = fluidnerf_io::volume::read_vti(&out.join("volume.vti")).expect("reads back");
+    assert_eq!(v.dims, [12, 8, 4]);
+    assert!((v.aabb.min - DVec3::new(0.5, 1.0, 1.0)).abs().max_element() < 1e-6, "{:?}", v.aabb);
+    assert!((v.aabb.max - DVec3::new(3.5, 3.0, 2.0)).abs().max_element() < 1e-6, "{:?}", v.aabb);
+    assert!((v.spacing() - DVec3::splat(0.25)).abs().max_element() < 1e-9);
+    // VTK point data sit at grid points: the first one is the first voxel centre.
+    let text = std::fs::read(out.join("volume.vti")).expect("reads");
+    let header = String::from_utf8_lossy(&text[..text.len().min(2000)]).to_string();
+    let origin = header.split("Origin=\"").nth(1).and_then(|s| s.split('"').next()).expect("an Origin attribute");
+    let origin: Vec<f64> = origin.split_whitespace().map(|x| x.parse().expect("a number")).collect();
+    assert!(
+        (origin[0] - 0.625).abs() < 1e-9 && (origin[1] - 1.125).abs() < 1e-9 && (origin[2] - 1.125).abs() < 1e-9,
+        "{origin:?}"
+    );
+    let spacing = header.split("Spacing=\"").nth(1).and_then(|s| s.split('"').next()).expect("a Spacing attribute");
+    assert!(spacing.split_whitespace().all(|x| (x.parse::<f64>().expect("a number") - 0.25).abs() < 1e-9), "{spacing}");
+    for k in 0..4 {
+        for j in 0..8 {
+            for i in 0..12 {
+                let want = linear(v.voxel_centre(i, j, k));
+                assert!((v.get(i, j, k) - want).abs() < 1e-4, "voxel ({i},{j},{k}): {} vs {want}", v.get(i, j, k));
+            }
+        }
+    }
+    // The .npy holds the same values.
+    let n = fluidnerf_io::volume::read_npy(&out.join("volume.npy"), v.aabb).expect("reads");
+    assert_eq!(n.data, v.data);
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).expect("settings")).expect("JSON");
+    assert_eq!(settings["dims"], serde_json::json!([12, 8, 4]));
+    // Refuses to overwrite without --force.
+    let again = fluidnerf(&["export", src.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--vti"]);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+}
+
+#[test]
+fn slices_comparison_and_isosurface() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let aabb = Aabb::new(DVec3::ZERO, DVec3::new(4.0, 2.0, 2.0));
+    let c = aabb.centre();
+    let ball = |p: DVec3| (1.0 - ((p - c).length() / 0.8).powi(2) * 0.5) as f32;
+    let truth = Volume::from_fn([32, 16, 16], aabb, ball);
+    let recon = Volume::from_fn([32, 16, 16], aabb, |p| ball(p) + 0.01 * p.x as f32);
+    let (t, r) = (dir.path().join("truth.vti"), dir.path().join("recon.vti"));
+    fluidnerf_io::volume::write_vti(&t, &truth).expect("writes");
+    fluidnerf_io::volume::write_vti(&r, &recon).expect("writes");
+    let out = dir.path().join("out");
+    let o = fluidnerf(&[
+        "export",
+        r.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--slices",
+        "z=0.5,x=0.25",
+        "--compare",
+        t.to_str().expect("utf-8"),
+        "--isosurface",
+        "0.5",
+        "--mesh",
+        "ply,obj",
+    ]);
+    ok(&o);
+    for f in ["slice_z_0.500.png", "slice_x_0.250.png", "compare_z_0.500.png", "compare_x_0.250.png"] {
+        // Colour pictures read back as luminance: only their size matters here.
+        let img = fluidnerf_io::image::read_image(&out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(img.width > 200 && img.height > 150, "{f}: {}x{}", img.width, img.height);
+    }
+    assert!(!out.join("volume.npy").exists(), "volumes only when asked for");
+    let ply = std::fs::read(out.join("isosurface.ply")).expect("a mesh");
+    assert!(ply.starts_with(b"ply\n"));
+    let obj = std::fs::read_to_string(out.join("isosurface.obj")).expect("a mesh");
+    assert!(obj.lines().filter(|l| l.starts_with("f ")).count() > 100);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("isosurface at 0.5"), "{stdout}");
+    // Bad slice specifications are rejected before any work.
+    let bad =
+        fluidnerf(&["export", r.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--slices", "w=0.5"]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("axis"));
+}

@@ -1,0 +1,140 @@
+//! End-to-end tests of `fluidnerf render` on a tiny scene generated in a temporary directory.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{render_image, Aabb, Camera, Frame, Intrinsics, RenderSettings, Scene, Volume};
+
+const SCALE: f64 = 2.0;
+
+fn fluidnerf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).args(args).output().expect("runs the binary")
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A Gaussian blob in a 3 × 2 × 2 box, three cameras on a ring about x (images not needed).
+fn make_scene(dir: &Path) -> (Scene, Volume) {
+    let aabb = Aabb::new(DVec3::new(-1.5, -1.0, -1.0), DVec3::new(1.5, 1.0, 1.0));
+    let vol =
+        Volume::from_fn([24, 16, 16], aabb, |p| (-(p - DVec3::new(0.3, 0.1, 0.0)).length_squared() * 3.0).exp() as f32);
+    fluidnerf_io::volume::write_npy(&dir.join("recon.npy"), &vol).expect("writes");
+    let k = Intrinsics { width: 24, height: 20, fx: 30.0, fy: 30.0, cx: 11.5, cy: 9.5, skew: 0.0 };
+    let frames = (0..3)
+        .map(|c| {
+            let a = c as f64 / 3.0 * std::f64::consts::TAU + 0.3;
+            Frame {
+                camera: Camera::look_at(k, DVec3::new(0.0, 7.0 * a.cos(), 7.0 * a.sin()), DVec3::ZERO, DVec3::X),
+                file_path: format!("images/c{c}.tif").into(),
+                time: None,
+                camera_name: Some(format!("cam{c}")),
+                holdout: false,
+            }
+        })
+        .collect();
+    let scene =
+        Scene { root: dir.to_path_buf(), aabb, units: "mm".into(), intensity_scale: SCALE, frames, truth: vec![] };
+    fluidnerf_io::scene::save_scene(&scene, &dir.join("transforms.json")).expect("writes the scene");
+    (scene, vol)
+}
+
+#[test]
+fn scene_camera_renders_match_the_reference_renderer() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, vol) = make_scene(dir.path());
+    let out = dir.path().join("views");
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let o = fluidnerf(&[
+        "render",
+        &d(&dir.path().join("recon.npy")),
+        "--scene",
+        &d(dir.path()),
+        "--out",
+        &d(&out),
+        "--camera",
+        "1",
+        "--format",
+        "tiff",
+        "--supersample",
+        "1",
+    ]);
+    ok(&o);
+    let img = fluidnerf_io::image::read_image(&out.join("view_001.tif")).expect("reads");
+    let settings = RenderSettings { scale: SCALE, ..Default::default() };
+    let want = render_image(&vol, &scene.frames[1].camera, &scene.aabb, &settings).expect("renders");
+    assert_eq!((img.width, img.height), (24, 20));
+    let peak = want.min_max().1;
+    assert!(peak > 0.1);
+    for (a, b) in img.data.iter().zip(&want.data) {
+        assert!((a - b).abs() <= 1e-5 * peak, "{a} vs {b}");
+    }
+    // 16-bit PNG of every camera, with the scale in render.json.
+    let out16 = dir.path().join("views16");
+    ok(&fluidnerf(&[
+        "render",
+        &d(&dir.path().join("recon.npy")),
+        "--scene",
+        &d(dir.path()),
+        "--out",
+        &d(&out16),
+        "--supersample",
+        "1",
+    ]));
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out16.join("render.json")).expect("settings")).expect("JSON");
+    let full_scale = settings["full_scale"].as_f64().expect("full_scale");
+    let counts = fluidnerf_io::image::read_image(&out16.join("view_001.png")).expect("reads");
+    for (c, b) in counts.data.iter().zip(&want.data) {
+        let value = *c as f64 * full_scale / 65535.0;
+        assert!((value - *b as f64).abs() <= 1e-4 * full_scale + 1e-6, "{value} vs {b}");
+    }
+    assert!(out16.join("view_002.png").exists());
+}
+
+#[test]
+fn orbit_writes_views_and_a_turntable() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_scene(dir.path());
+    let out = dir.path().join("orbit");
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    ok(&fluidnerf(&[
+        "render",
+        &d(&dir.path().join("recon.npy")),
+        "--scene",
+        &d(dir.path()),
+        "--out",
+        &d(&out),
+        "--orbit",
+        "6",
+        "--width",
+        "48",
+        "--supersample",
+        "1",
+    ]));
+    for k in 0..6 {
+        assert!(out.join(format!("orbit_{k:03}.png")).exists());
+    }
+    let gif = std::fs::read(out.join("turntable.gif")).expect("a turntable");
+    assert!(gif.starts_with(b"GIF89a"));
+    let bad = fluidnerf(&[
+        "render",
+        &d(&dir.path().join("recon.npy")),
+        "--scene",
+        &d(dir.path()),
+        "--out",
+        &d(&out),
+        "--camera",
+        "7",
+        "--force",
+    ]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("3 frames"));
+}
