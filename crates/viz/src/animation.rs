@@ -1,8 +1,13 @@
-//! Colour-mapped camera images and animated turntables (GIF).
+//! Colour-mapped camera images, orbits of virtual cameras and animated turntables (GIF).
+//!
+//! Orbit cameras circle the flow axis (+x) through the box centre, looking at the centre, with
+//! world +x pointing right in every image: a turntable shows the jet flowing left to right while
+//! it turns about its own axis.
 
 use std::path::Path;
 
-use fluidnerf_core::Image;
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 
@@ -53,9 +58,66 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
     output::write_atomic(path, &bytes)
 }
 
+/// `n` pinhole cameras evenly spaced on a circle about the line through the box centre along
+/// +x, starting on the −z side (looking along +z) and turning right-handedly about +x. The
+/// radius is three times the box's larger half-extent plus its cross-section radius (a mild
+/// perspective), the focal length makes the box fill about 90 % of `width_px`, and the height
+/// follows from the box's cross-section (even, at least 16 px).
+pub fn orbit_cameras(aabb: &Aabb, n: usize, width_px: u32) -> Vec<Camera> {
+    assert!(width_px >= 16, "orbit_cameras: width {width_px} px is too small");
+    let size = aabb.size();
+    let centre = aabb.centre();
+    let half_x = 0.5 * size.x;
+    let r_yz = 0.5 * (size.y * size.y + size.z * size.z).sqrt();
+    let radius = 3.0 * half_x.max(r_yz) + r_yz;
+    let nearest = radius - r_yz;
+    let w = width_px as f64;
+    let f = 0.9 * 0.5 * w * nearest / half_x.max(1e-12);
+    let h = (2.0 * f * r_yz / nearest / 0.9).ceil().max(16.0) as u32;
+    let h = h + h % 2;
+    let k = Intrinsics {
+        width: width_px,
+        height: h,
+        fx: f,
+        fy: f,
+        cx: 0.5 * (w - 1.0),
+        cy: 0.5 * (h as f64 - 1.0),
+        skew: 0.0,
+    };
+    (0..n)
+        .map(|i| {
+            let theta = std::f64::consts::TAU * i as f64 / n as f64;
+            // Position on the circle: −z at θ = 0, then towards −y (right-handed about +x).
+            let offset = DVec3::new(0.0, theta.sin(), -theta.cos()) * radius;
+            let eye = centre + offset;
+            let forward = -offset.normalize();
+            // Camera x = forward × up must be world +x, hence up = x̂ × forward.
+            let up = DVec3::X.cross(forward);
+            Camera::look_at(k, eye, centre, up)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn orbit_sees_the_box_with_flow_to_the_right() {
+        let aabb = Aabb::new(DVec3::new(0.0, -5.0, -5.0), DVec3::new(40.0, 5.0, 5.0));
+        let cams = orbit_cameras(&aabb, 8, 200);
+        assert_eq!(cams.len(), 8);
+        for cam in &cams {
+            let upstream = cam.project(DVec3::new(0.0, 0.0, 0.0)).expect("in front");
+            let downstream = cam.project(DVec3::new(40.0, 0.0, 0.0)).expect("in front");
+            assert!(downstream.x > upstream.x + 100.0, "flow runs right: {upstream} → {downstream}");
+            for corner in aabb.corners() {
+                let p = cam.project(corner).expect("in front");
+                assert!(p.x > 0.0 && p.x < 199.0 && p.y > 0.0 && p.y < cam.height() as f64 - 1.0, "{corner} → {p}");
+            }
+        }
+        assert_eq!(cams[0].forward().z.signum(), 1.0, "first camera looks along +z");
+    }
 
     #[test]
     fn turntable_round_trips_frame_count() {
