@@ -215,8 +215,9 @@ fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value
     Ok(camera)
 }
 
-const OPENCV_KEYS: [&str; 9] =
-    ["camera_matrix", "distortion_coefficients", "rvec", "tvec", "R", "T", "image_width", "image_height", ""];
+/// The per-camera keys (suffixed `_<name>` in multi-camera files).
+const OPENCV_KEYS: [&str; 8] =
+    ["camera_matrix", "distortion_coefficients", "rvec", "tvec", "R", "T", "image_width", "image_height"];
 
 fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     let (nodes, text) = parse_storage(path)?;
@@ -234,7 +235,7 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         ));
     }
     for key in nodes.keys() {
-        let known = OPENCV_KEYS[..8].iter().any(|k| key == k || named.iter().any(|n| *key == format!("{k}_{n}")));
+        let known = OPENCV_KEYS.iter().any(|k| key == k || named.iter().any(|n| *key == format!("{k}_{n}")));
         if !known {
             log::warn!("{}: ignoring unknown key \"{key}\"", path.display());
         }
