@@ -23,7 +23,7 @@ use crate::train::{FieldMeta, TrainConfig};
 use crate::{NeuralError, TrainableField};
 
 /// Rows per batch handed to the field when sampling in world coordinates.
-const EVAL_CHUNK: usize = 4096;
+const EVAL_CHUNK: usize = 1024;
 
 /// Settings of the dense voxel-grid field ([`DenseGridField`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -117,6 +117,7 @@ impl NeuralConfig {
                     max_iterations: 2000,
                     stop: crate::train::StopRule { smoothing: 50, window: 300, tolerance: 0.01 },
                     occupancy: Some(OccupancyConfig::default()),
+                    chunk_samples: 8192,
                     ..faithful.train
                 },
             }),
@@ -130,6 +131,7 @@ impl NeuralConfig {
                     max_iterations: 2000,
                     stop: crate::train::StopRule { smoothing: 50, window: 300, tolerance: 0.01 },
                     occupancy: Some(OccupancyConfig::default()),
+                    chunk_samples: 8192,
                     ..faithful.train
                 },
             }),

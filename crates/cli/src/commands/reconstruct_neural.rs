@@ -366,7 +366,12 @@ impl Ctx<'_> {
 
         let (mut final_nrmse, mut final_ssim) = (None, None);
         if let Some(truth) = self.truth {
-            let v = Volume::from_field(truth.dims, truth.aabb, &world, 0.0);
+            // The written volume serves when it is on the truth's grid (--resolution = the truth's).
+            let v = if volume.dims == truth.dims && volume.aabb == truth.aabb {
+                volume
+            } else {
+                Volume::from_field(truth.dims, truth.aabb, &world, 0.0)
+            };
             final_nrmse = Some(fluidnerf_metrics::nrmse(&v.data, &truth.data));
             let range = fluidnerf_metrics::data_range_of(&truth.data);
             if range > 0.0 {
