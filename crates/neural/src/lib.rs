@@ -13,9 +13,11 @@ pub mod occupancy;
 pub mod optim;
 pub mod render;
 pub mod sampling;
+pub mod temporal;
 pub mod train;
 pub mod trained;
 pub mod weights;
+pub mod window;
 
 pub use error::NeuralError;
 pub use field::TrainableField;

@@ -1,0 +1,444 @@
+//! Time-resolved FluidNeRF (dissertation §5.2): one field E(x, t) trained on every frame of a
+//! recording, and its scaling to long recordings by sliding windows.
+//!
+//! # The method (§5.2, Table 5.2)
+//! - Inputs `(x, y, z, t')`: box-normalised space (the field contract, [`crate::field`]) and the
+//!   frame time `t' = (t − t₀) / Δt`, `Δt` the frame spacing and `t₀` the first frame of the
+//!   window being trained. The dissertation normalises by `Δt` so that the temporal encoding
+//!   (Eq. 5.2 with `L_t` frequencies) does not collapse for small time steps; the origin `t₀`
+//!   only shifts `t'` by an integer number of frames (an offset the network absorbs, and which
+//!   the grid field needs to map the window onto its time axis).
+//! - One iteration = `N_pix/img` pixels from every image of ONE time step, cycling through the
+//!   time steps ([`crate::train::Batching::OneTimeStep`]); everything else (sampling,
+//!   rendering, loss, Adam, stopping rule, checkpoints) is the static engine of
+//!   [`crate::train`].
+//! - Presets ([`temporal_preset`]): `tr-faithful` (Table 5.2, with `L_t = 1` as the results of
+//!   chapter 7.2 use), `tr-table-5.2` (literally `L_t = 0`), `tr-experimental` (Table 8.4),
+//!   `tr-fast` (a space–time hash grid with a tiny MLP), `tr-small` (a machine-sized MLP for
+//!   CPU studies), and the static comparison of §5.2 (`static-swish`: D 8, H 256, other settings
+//!   as TR) and `static-small` (as `tr-small` without time).
+//!
+//! # The fast field
+//! `tr-fast` is [`crate::hashgrid::HashGridField`] with 4D inputs: its time axis spans the
+//! window's frames (`time_span = W − 1`, one grid cell per frame interval at every level whose
+//! spatial resolution allows it), so between frames it interpolates linearly in the features.
+//! Every level holds at most `2^T` entries: memory is bounded whatever the number of frames, and
+//! only the coarse (dense) levels grow with them until they too reach `2^T`
+//! ([`fast_field_memory`]).
+//!
+//! # Windows
+//! Frames are split into overlapping windows of `W` frames ([`crate::window`]); each window is
+//! a separate training problem with its own time origin. With `warm_start`, a window starts
+//! from the previous window's trained weights (same shape: all windows have `W` frames), with
+//! a fresh optimiser. Outputs of overlapping windows are cross-faded linearly in time
+//! ([`crate::window::blend`], [`StitchedField`]).
+//!
+//! Per-frame static FluidNeRF is the special case `W = 1`, no overlap, a 3D field, no warm
+//! start; its stitched field interpolates linearly between neighbouring frames.
+
+use std::ops::{ControlFlow, Range};
+use std::path::Path;
+
+use fluidnerf_core::ScalarField;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::hashgrid::{HashGridConfig, HashGridField};
+use crate::mlp::{Activation, MlpConfig};
+use crate::occupancy::OccupancyConfig;
+use crate::optim::LrSchedule;
+use crate::train::{
+    train, Batching, FieldMeta, Learner, Prepared, Problem, StopRule, TrainConfig, TrainReport, TrainState,
+};
+use crate::trained::{build_field, AnyField, FieldConfig, NeuralConfig, TrainedField};
+use crate::window::{blend, frame_position, plan_windows, time_at};
+use crate::{NeuralError, TrainableField};
+
+/// How a recording is cut into windows.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WindowConfig {
+    /// Frames per window `W`; 0 trains one field on all frames. Default 0.
+    pub frames: usize,
+    /// Frames shared by consecutive windows `O` (< W). Default 2.
+    pub overlap: usize,
+    /// Start each window from the previous window's weights. Default true.
+    pub warm_start: bool,
+    /// Iteration cap of warm-started windows (None: the training config's). Default None.
+    pub warm_max_iterations: Option<usize>,
+}
+
+impl Default for WindowConfig {
+    fn default() -> Self {
+        WindowConfig { frames: 0, overlap: 2, warm_start: true, warm_max_iterations: None }
+    }
+}
+
+impl WindowConfig {
+    /// One window per frame, no overlap, independent training: per-frame static FluidNeRF.
+    pub fn per_frame() -> Self {
+        WindowConfig { frames: 1, overlap: 0, warm_start: false, warm_max_iterations: None }
+    }
+
+    pub fn validate(&self) -> Result<(), NeuralError> {
+        if self.frames > 0 && self.overlap >= self.frames {
+            return Err(NeuralError::invalid(
+                "window overlap",
+                format!("{} frames must be fewer than the window's {}", self.overlap, self.frames),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Everything a time-resolved reconstruction is configured by.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TemporalConfig {
+    pub field: FieldConfig,
+    pub train: TrainConfig,
+    pub windows: WindowConfig,
+}
+
+impl Default for TemporalConfig {
+    fn default() -> Self {
+        temporal_preset("tr-faithful").unwrap_or_else(|| unreachable!())
+    }
+}
+
+/// Names accepted by [`temporal_preset`].
+pub const TEMPORAL_PRESETS: [&str; 7] =
+    ["tr-faithful", "tr-table-5.2", "tr-experimental", "tr-fast", "tr-small", "static-swish", "static-small"];
+
+/// A named time-resolved configuration (module doc). The static ones (`static-*`) use
+/// per-frame windows and all-view batching; their field is built with 3 inputs.
+pub fn temporal_preset(name: &str) -> Option<TemporalConfig> {
+    let tr_train = TrainConfig {
+        coarse_samples: 64,
+        fine_samples: 64,
+        rays_per_image: 1024,
+        batching: Batching::OneTimeStep,
+        ..TrainConfig::default()
+    };
+    let tr = |field: MlpConfig| TemporalConfig {
+        field: FieldConfig::Mlp(field),
+        train: tr_train.clone(),
+        windows: WindowConfig::default(),
+    };
+    let small = MlpConfig {
+        depth: 6,
+        width: 64,
+        space_freqs: 8,
+        time_freqs: 1,
+        activation: Activation::Swish,
+        ..MlpConfig::default()
+    };
+    let small_train = TrainConfig {
+        coarse_samples: 32,
+        fine_samples: 32,
+        rays_per_image: 256,
+        schedule: LrSchedule { initial: 2e-3, at_decay_iters: 2e-4, decay_iters: 6000 },
+        max_iterations: 6000,
+        stop: StopRule { smoothing: 100, window: 1000, tolerance: 0.01 },
+        ..tr_train.clone()
+    };
+    let per_frame = |mut c: TemporalConfig| {
+        c.train.batching = Batching::AllViews;
+        c.windows = WindowConfig::per_frame();
+        c
+    };
+    match name {
+        "tr-faithful" => Some(tr(MlpConfig { time_freqs: 1, ..MlpConfig::table_5_2() })),
+        "tr-table-5.2" => Some(tr(MlpConfig::table_5_2())),
+        "tr-experimental" => Some(tr(MlpConfig {
+            depth: 10,
+            width: 256,
+            space_freqs: 2,
+            time_freqs: 1,
+            activation: Activation::Swish,
+            ..MlpConfig::default()
+        })),
+        "tr-small" => Some(TemporalConfig { train: small_train, ..tr(small.clone()) }),
+        "static-swish" => Some(per_frame(tr(MlpConfig {
+            depth: 8,
+            width: 256,
+            activation: Activation::Swish,
+            ..MlpConfig::default()
+        }))),
+        "static-small" => {
+            Some(per_frame(TemporalConfig { train: small_train, ..tr(MlpConfig { time_freqs: 0, ..small }) }))
+        }
+        "tr-fast" => {
+            let base = NeuralConfig::preset("fast")?;
+            let FieldConfig::HashGrid(grid) = base.field else { return None };
+            Some(TemporalConfig {
+                field: FieldConfig::HashGrid(HashGridConfig { log2_table_size: 18, ..grid }),
+                train: TrainConfig {
+                    batching: Batching::OneTimeStep,
+                    occupancy: Some(OccupancyConfig::default()),
+                    ..base.train
+                },
+                windows: WindowConfig { frames: 16, overlap: 4, warm_start: true, warm_max_iterations: None },
+            })
+        }
+        _ => None,
+    }
+}
+
+/// The distinct acquisition times of the training views, increasing.
+pub fn frame_times(problem: &Problem) -> Vec<f64> {
+    let mut times: Vec<f64> = problem.views.iter().map(|v| v.time).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    times
+}
+
+/// The frame spacing Δt: the smallest gap between consecutive frame times (1 for one frame).
+pub fn infer_time_step(times: &[f64]) -> f64 {
+    let gap = times.windows(2).map(|w| w[1] - w[0]).filter(|&d| d > 0.0).fold(f64::INFINITY, f64::min);
+    if gap.is_finite() {
+        gap
+    } else {
+        1.0
+    }
+}
+
+/// The field configuration for windows of `frames` frames: a 4D hash grid gets its time axis
+/// (`time_span = time_resolution = max(frames − 1, 1)`); other fields are unchanged.
+pub fn field_for_window(field: &FieldConfig, frames: usize) -> FieldConfig {
+    match field {
+        FieldConfig::HashGrid(c) => {
+            let span = frames.saturating_sub(1).max(1);
+            FieldConfig::HashGrid(HashGridConfig { time_span: span as f32, time_resolution: span, ..c.clone() })
+        }
+        other => other.clone(),
+    }
+}
+
+/// Parameters and training memory of the `tr-fast` field over `frames` frames in one window:
+/// `(parameters, weight bytes, training bytes)`, training = weights + two Adam moments + one
+/// gradient buffer per thread (`threads`).
+pub fn fast_field_memory(frames: usize, threads: usize) -> Result<(usize, usize, usize), NeuralError> {
+    let cfg = temporal_preset("tr-fast").ok_or_else(|| NeuralError::invalid("preset", "tr-fast missing"))?;
+    let FieldConfig::HashGrid(grid) = field_for_window(&cfg.field, frames) else {
+        return Err(NeuralError::invalid("preset", "tr-fast is not a hash grid"));
+    };
+    let params = HashGridField::new(&grid, 4, 0)?.num_params();
+    Ok((params, 4 * params, 4 * params * (3 + threads)))
+}
+
+/// The training problem of the frames `range` of a recording with frame times `times`: the
+/// views at those times (training and held out), their times shifted to the window's origin.
+pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>) -> Problem {
+    let (t_first, t_last) = (times[range.start], times[range.end - 1]);
+    let tol = 1e-9 * (1.0 + t_first.abs().max(t_last.abs()));
+    let keep = |v: &crate::train::View| {
+        (v.time >= t_first - tol && v.time <= t_last + tol)
+            .then(|| crate::train::View { time: v.time - t_first, ..v.clone() })
+    };
+    Problem {
+        aabb: problem.aabb,
+        intensity_scale: problem.intensity_scale,
+        views: problem.views.iter().filter_map(keep).collect(),
+        holdout: problem.holdout.iter().filter_map(keep).collect(),
+        time_step: problem.time_step,
+    }
+}
+
+/// Where training is: which window of how many.
+#[derive(Clone, Debug)]
+pub struct WindowInfo {
+    pub index: usize,
+    pub count: usize,
+    /// Frame indices of the window.
+    pub frames: Range<usize>,
+}
+
+/// One trained window.
+#[derive(Clone, Debug)]
+pub struct TrainedWindow<F> {
+    pub frames: Range<usize>,
+    /// Absolute time of the window's first frame (`t₀` of `t' = (t − t₀) / Δt`).
+    pub time_origin: f64,
+    pub learner: Learner<F>,
+    pub meta: FieldMeta,
+    pub report: TrainReport,
+    /// Fraction of the box occupied (1 without empty-space skipping).
+    pub occupied_fraction: f64,
+}
+
+/// The result of [`train_windows`].
+#[derive(Clone, Debug)]
+pub struct TemporalRun<F> {
+    pub frame_times: Vec<f64>,
+    pub plan: Vec<Range<usize>>,
+    pub windows: Vec<TrainedWindow<F>>,
+    /// True when the callback stopped training (later windows were not trained).
+    pub interrupted: bool,
+}
+
+/// Trains every window of `problem` (absolute view times; `problem.time_step` is Δt) in turn,
+/// starting the first window (and, without warm start, every window) from `init`, which must
+/// be built for [`plan_windows`]' window length (see [`field_for_window`]). `on_iter` sees the
+/// window and the engine's state after every iteration; breaking stops after that window's
+/// iteration. Seeds: window `k` trains with `seed + k`.
+pub fn train_windows<F: TrainableField + Clone>(
+    problem: &Problem,
+    train_cfg: &TrainConfig,
+    windows: &WindowConfig,
+    init: F,
+    seed: u64,
+    mut on_iter: impl FnMut(&WindowInfo, &TrainState<F>) -> ControlFlow<()>,
+) -> Result<TemporalRun<F>, NeuralError> {
+    windows.validate()?;
+    let times = frame_times(problem);
+    if times.is_empty() {
+        return Err(NeuralError::invalid("scene", "no training images"));
+    }
+    let plan = plan_windows(times.len(), windows.frames, windows.overlap);
+    let mut out: Vec<TrainedWindow<F>> = Vec::with_capacity(plan.len());
+    let mut interrupted = false;
+    for (k, range) in plan.iter().enumerate() {
+        let sub = window_problem(problem, &times, range.clone());
+        let prep = Prepared::new(&sub, train_cfg)?;
+        let warm = windows.warm_start && k > 0;
+        let start = match (warm, out.last()) {
+            (true, Some(prev)) if prev.learner.field.num_params() == init.num_params() => prev.learner.field.clone(),
+            _ => init.clone(),
+        };
+        let mut cfg = train_cfg.clone();
+        if warm {
+            if let Some(m) = windows.warm_max_iterations {
+                cfg.max_iterations = m;
+            }
+        }
+        let mut learner = Learner::new(start);
+        let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
+        let report = train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iter(&info, s))?;
+        out.push(TrainedWindow {
+            frames: range.clone(),
+            time_origin: times[range.start],
+            learner,
+            meta: prep.meta.clone(),
+            report: report.clone(),
+            occupied_fraction: prep.occupied_fraction(),
+        });
+        if report.stop_reason == crate::train::StopReason::Interrupted {
+            interrupted = true;
+            break;
+        }
+    }
+    Ok(TemporalRun { frame_times: times, plan, windows: out, interrupted })
+}
+
+/// Trained windows stitched into one field of space and time, in world units (module doc of
+/// [`crate::window`] for the blending).
+pub struct StitchedField {
+    pub frame_times: Vec<f64>,
+    pub plan: Vec<Range<usize>>,
+    pub origins: Vec<f64>,
+    /// Each window's field, queried with times relative to its origin.
+    pub fields: Vec<Box<dyn ScalarField + Send + Sync>>,
+}
+
+impl std::fmt::Debug for StitchedField {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StitchedField").field("frame_times", &self.frame_times).field("plan", &self.plan).finish()
+    }
+}
+
+impl StitchedField {
+    /// Stitches the windows of `run` (all trained windows; an interrupted run covers fewer
+    /// frames and is stitched over those).
+    pub fn from_run<F: TrainableField + Clone + 'static>(run: &TemporalRun<F>) -> Result<Self, NeuralError> {
+        let n = run.windows.len();
+        let mut fields: Vec<Box<dyn ScalarField + Send + Sync>> = Vec::with_capacity(n);
+        for w in &run.windows {
+            fields.push(Box::new(TrainedField::new(w.learner.field.clone(), w.meta.clone())?));
+        }
+        let covered = run.windows.last().map_or(0, |w| w.frames.end);
+        Ok(StitchedField {
+            frame_times: run.frame_times[..covered.max(1).min(run.frame_times.len())].to_vec(),
+            plan: run.plan[..n].to_vec(),
+            origins: run.windows.iter().map(|w| w.time_origin).collect(),
+            fields,
+        })
+    }
+}
+
+impl ScalarField for StitchedField {
+    fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        assert_eq!(points.len(), out.len(), "StitchedField::eval: points and out differ in length");
+        out.fill(0.0);
+        let f = frame_position(&self.frame_times, time);
+        let mut tmp = vec![0.0f32; out.len()];
+        for (i, w, pos) in blend(&self.plan, f) {
+            if w <= 0.0 {
+                continue;
+            }
+            let t = time_at(&self.frame_times, pos) - self.origins[i];
+            self.fields[i].eval(points, t, &mut tmp);
+            for (o, &v) in out.iter_mut().zip(&tmp) {
+                *o += w as f32 * v;
+            }
+        }
+    }
+}
+
+/// One window of `temporal.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindowRecord {
+    /// First and one-past-last frame index.
+    pub frames: [usize; 2],
+    pub time_origin: f64,
+    pub meta: FieldMeta,
+    /// Weights file, relative to the run directory.
+    pub weights: String,
+}
+
+/// `temporal.json`: how to rebuild the stitched field of a time-resolved run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemporalRecord {
+    /// The field of every window (after [`field_for_window`]).
+    pub field: FieldConfig,
+    /// 3 (per-frame static) or 4.
+    pub input_dim: usize,
+    pub frame_times: Vec<f64>,
+    pub windows: Vec<WindowRecord>,
+}
+
+/// Reads `run_dir/temporal.json` and the window weights it names; returns the stitched field.
+pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
+    let path = run_dir.join("temporal.json");
+    let text = std::fs::read_to_string(&path).map_err(|source| NeuralError::Io { path: path.clone(), source })?;
+    let rec: TemporalRecord = serde_json::from_str(&text)
+        .map_err(|e| NeuralError::checkpoint(&path, format!("malformed time-resolved run description: {e}")))?;
+    if rec.frame_times.is_empty() || rec.windows.is_empty() {
+        return Err(NeuralError::checkpoint(&path, "no frames or no windows"));
+    }
+    let mut fields: Vec<Box<dyn ScalarField + Send + Sync>> = Vec::new();
+    let mut plan = Vec::new();
+    for w in &rec.windows {
+        if w.frames[0] >= w.frames[1] || w.frames[1] > rec.frame_times.len() {
+            return Err(NeuralError::checkpoint(&path, format!("window frames {:?} out of range", w.frames)));
+        }
+        plan.push(w.frames[0]..w.frames[1]);
+        let mut field = build_field(&rec.field, &w.meta.aabb, rec.input_dim, 0)?;
+        let weights = run_dir.join(&w.weights);
+        crate::with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
+        let boxed: Box<dyn ScalarField + Send + Sync> = match field {
+            AnyField::Mlp(f) => Box::new(TrainedField::new(f, w.meta.clone())?),
+            AnyField::HashGrid(f) => Box::new(TrainedField::new(f, w.meta.clone())?),
+            AnyField::Dense(f) => Box::new(TrainedField::new(f, w.meta.clone())?),
+        };
+        fields.push(boxed);
+    }
+    Ok(StitchedField {
+        frame_times: rec.frame_times,
+        plan,
+        origins: rec.windows.iter().map(|w| w.time_origin).collect(),
+        fields,
+    })
+}
