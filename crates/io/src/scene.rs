@@ -42,7 +42,7 @@
 //!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `truth` (optional
 //!   list of `{time, file_path}` `.npy` volumes filling the aabb); per frame `time`, `camera`
 //!   (a physical camera's name), `holdout` (default false) and `thin_lens`
-//!   ([`ThinLens`](fluidnerf_core::ThinLens) fields, world units).
+//!   ([`ThinLens`] fields, world units).
 //! - Unknown keys are ignored with a warning naming the key and the file.
 //! - Paths are relative to the folder holding `transforms.json` unless absolute.
 //!
