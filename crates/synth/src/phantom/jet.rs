@@ -29,7 +29,8 @@
 //!    `max(R, b)`. Two trains are superposed: the axisymmetric mode (`m = 0`, twist
 //!    `rollup_twist`, its rings tilted and dented by `m = 1, 2, 3` azimuthal distortions of
 //!    relative size `asymmetry`) and the helical mode (`m = 1`, twist `helical_twist`). Their
-//!    strength fades by 60 % past `L_t` as the structures break down.
+//!    strength fades to zero over `L_t ± L_c/4` as the coherent structures break down into
+//!    turbulence.
 //! 3. **Turbulence.** From `L_c` to `L_t` a kinematic-simulation field (see `turbulence`) with a
 //!    −5/3 spectrum over `inertial_octaves` octaves, evaluated in self-similar coordinates
 //!    `(ln(ξ/D)/S, y/b, z/b)` so that eddies grow in proportion to the local width (the largest
@@ -169,7 +170,7 @@ pub(crate) struct RollupTrain {
     pub distortion: [(f32, f32); 3],
     /// Smooth strength and radius modulation along the train.
     pub modulation: [f32; 2],
-    /// Fade-out of the strength between these two distances (to 40 %), if any.
+    /// Fade-out of the strength between these two distances (to zero), if any.
     pub fade: Option<(f32, f32)>,
 }
 
@@ -219,7 +220,7 @@ impl RollupTrain {
         }
         // Roll-up sets in at a fixed place downstream of the nozzle, even when the vortices
         // themselves are carried along (`advect`).
-        let fade = self.fade.map_or(1.0, |(a, b)| 1.0 - 0.6 * smoothstep(a, b, xc));
+        let fade = self.fade.map_or(1.0, |(a, b)| 1.0 - smoothstep(a, b, xc));
         let ramp = smoothstep(self.start - self.lambda0, self.start + 2.0 * self.lambda0, xc) * fade;
         let wobble = 1.0 + 0.25 * (1.7 * xc / self.lambda0 + self.modulation[0]).sin();
         let w = 1.0 - rho2 / (rho_s * rho_s);
@@ -267,7 +268,7 @@ impl Jet {
                 (distort as f32 * 0.5, rng.random::<f32>() * tau),
             ],
             modulation: [rng.random::<f32>() * tau, rng.random::<f32>() * tau],
-            fade: Some((lt, lt + 0.5 * lc)),
+            fade: Some((lt - 0.25 * lc, lt + 0.25 * lc)),
         };
         let trains = [
             train(0.0, params.rollup_twist, params.asymmetry),

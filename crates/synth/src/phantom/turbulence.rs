@@ -108,6 +108,34 @@ mod tests {
     use super::*;
 
     #[test]
+    fn structure_function_follows_two_thirds_law() {
+        // κ from 2π/2.5 to 2⁵ times that: wavelengths 2.5 … 0.078. In the middle of that range
+        // S₂(ℓ) = <(m(q + ℓ e) − m(q))²> ∝ ℓ^{2/3} (the −5/3 spectrum).
+        let m = KinematicModes::new(64, std::f64::consts::TAU / 2.5, 5.0, 11);
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(4);
+        let starts: Vec<Vec3> = (0..4000)
+            .map(|_| Vec3::new(rng.random_range(0.0..50.0), rng.random_range(0.0..50.0), rng.random_range(0.0..50.0)))
+            .collect();
+        let lags = [0.12f32, 0.17, 0.24, 0.34, 0.48];
+        let pts: Vec<(f64, f64)> = lags
+            .iter()
+            .map(|&l| {
+                let s2 = starts
+                    .iter()
+                    .map(|&q| ((m.eval(q + Vec3::new(l, 0.0, 0.0)).1 - m.eval(q).1) as f64).powi(2))
+                    .sum::<f64>()
+                    / starts.len() as f64;
+                ((l as f64).ln(), s2.ln())
+            })
+            .collect();
+        let n = pts.len() as f64;
+        let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+        let slope = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>()
+            / pts.iter().map(|p| (p.0 - mx).powi(2)).sum::<f64>();
+        assert!((slope - 2.0 / 3.0).abs() < 0.15, "S₂ slope {slope}, expected 2/3");
+    }
+
+    #[test]
     fn normalised_and_divergence_free() {
         let m = KinematicModes::new(64, 2.0, 5.0, 3);
         let (mut d2, mut s2, mut n) = (0.0f64, 0.0f64, 0usize);
