@@ -338,3 +338,110 @@ pub fn generate(
 pub fn no_progress(_: &Progress) -> ControlFlow<()> {
     ControlFlow::Continue(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::{PinholeSettings, ThinLensSettings};
+    use crate::rig::{Jitter, Layout};
+
+    fn tiny() -> SynthSettings {
+        let mut s = SynthSettings { resolution: 20, ..Default::default() };
+        s.lens.resolution = [20, 20];
+        s.rig.layout = Layout::Ring { count: 4, arc_deg: 360.0, start_deg: 0.0 };
+        s.sensor.gaussian_noise = 0.02;
+        s
+    }
+
+    #[test]
+    fn same_seed_same_bytes_other_seed_other_noise() {
+        let mut s = tiny();
+        s.image = ImageModel::ThinLens(ThinLensSettings { rays_per_voxel: 4.0, threshold: 0.0 });
+        s.rig.jitter = Jitter { position_mm: 0.5, rotation_deg: 0.2 };
+        let a = generate(&s, None, no_progress).expect("generates");
+        let b = generate(&s, None, no_progress).expect("generates");
+        for (fa, fb) in a.frames.iter().zip(&b.frames) {
+            assert_eq!(fa.counts, fb.counts);
+        }
+        assert_eq!(a.intensity_scale, b.intensity_scale);
+        s.seed = 1;
+        let c = generate(&s, None, no_progress).expect("generates");
+        assert_ne!(a.frames[0].counts, c.frames[0].counts);
+        assert_ne!(a.truth[0].1, c.truth[0].1, "the phantom's turbulence is seeded too");
+    }
+
+    #[test]
+    fn counts_follow_the_recorded_intensity_scale() {
+        let mut s = tiny();
+        s.sensor.gaussian_noise = 0.0;
+        let syn = generate(&s, None, no_progress).expect("generates");
+        let full = s.sensor.full_scale();
+        let peak = syn.frames.iter().map(|f| f.counts.min_max().1).fold(0.0f32, f32::max) as f64;
+        assert!((peak - 0.8 * full).abs() <= 1.0, "brightest pixel {peak} counts");
+        for f in &syn.frames {
+            for (c, e) in f.counts.data.iter().zip(&f.clean.data) {
+                assert!((*c as f64 - syn.intensity_scale * *e as f64).abs() <= 0.5 + 1e-6 * full);
+            }
+        }
+        let scene = syn.scene(PathBuf::from("/tmp/x"));
+        assert_eq!(scene.frames.len(), 4);
+        assert_eq!(scene.intensity_scale, syn.intensity_scale);
+        assert_eq!(scene.truth[0].file_path, PathBuf::from("truth/truth.npy"));
+    }
+
+    #[test]
+    fn pinhole_and_thin_lens_agree_on_total_signal() {
+        let mut s = tiny();
+        s.sensor.gaussian_noise = 0.0;
+        s.resolution = 32;
+        s.lens.resolution = [32, 32];
+        s.image = ImageModel::Pinhole(PinholeSettings::default());
+        let pin = generate(&s, None, no_progress).expect("pinhole");
+        s.image = ImageModel::ThinLens(ThinLensSettings { rays_per_voxel: 32.0, threshold: 0.0 });
+        let thin = generate(&s, None, no_progress).expect("thin lens");
+        for (a, b) in pin.frames.iter().zip(&thin.frames) {
+            let ratio = b.clean.sum() / a.clean.sum();
+            assert!((ratio - 1.0).abs() < 0.03, "thin-lens / pinhole flux {ratio}");
+        }
+    }
+
+    #[test]
+    fn bad_settings_are_rejected_before_any_work() {
+        let mut calls = 0;
+        let mut count = |_: &Progress| {
+            calls += 1;
+            ControlFlow::Continue(())
+        };
+        let mut s = tiny();
+        s.rig.layout = Layout::Ring { count: 0, arc_deg: 360.0, start_deg: 0.0 };
+        assert!(matches!(generate(&s, None, &mut count), Err(SynthError::Invalid { .. })));
+        let mut s = tiny();
+        s.sensor.gaussian_noise = -0.01;
+        assert!(matches!(generate(&s, None, &mut count), Err(SynthError::Invalid { .. })));
+        let mut s = tiny();
+        s.rig.layout = Layout::Explicit { positions: vec![[0.0, 360.0, 0.0]], targets: vec![[0.0, 720.0, 0.0]] };
+        assert!(matches!(generate(&s, None, &mut count), Err(SynthError::CameraMissesBox { .. })));
+        let mut s = tiny();
+        s.resolution = 4096;
+        s.lens.resolution = [8192, 8192];
+        assert!(matches!(generate(&s, None, &mut count), Err(SynthError::OutOfMemory { .. })));
+        let mut s = tiny();
+        s.phantom.kind = PhantomKind::JetTr;
+        assert!(matches!(generate(&s, None, &mut count), Err(SynthError::Invalid { .. })), "jet-tr needs times");
+        assert_eq!(calls, 0, "no work may start");
+        // Cancelling stops the run.
+        let r = generate(&tiny(), None, |_| ControlFlow::Break(()));
+        assert!(matches!(r, Err(SynthError::Cancelled)));
+    }
+
+    #[test]
+    fn user_volume_is_the_truth() {
+        let aabb = Aabb::cube(DVec3::new(1.0, 0.0, 0.0), 30.0);
+        let vol = Volume::from_fn([10, 12, 14], aabb, |p| (1.0 - p.length() / 30.0).max(0.0) as f32);
+        let mut s = tiny();
+        s.phantom.kind = PhantomKind::Volume;
+        let syn = generate(&s, Some(vol.clone()), no_progress).expect("generates");
+        assert_eq!(syn.truth[0].1, vol);
+        assert_eq!(syn.aabb, aabb);
+    }
+}
