@@ -9,6 +9,7 @@ pub mod info;
 pub mod reconstruct;
 pub mod reconstruct_classical;
 pub mod reconstruct_neural;
+pub mod reconstruct_temporal;
 pub mod render;
 pub mod synth;
 

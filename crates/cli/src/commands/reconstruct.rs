@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use clap::ValueEnum;
 use serde::{Deserialize, Serialize};
 
-use super::{reconstruct_classical, reconstruct_neural};
+use super::{reconstruct_classical, reconstruct_neural, reconstruct_temporal};
 
 /// Reconstruction methods.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize, Deserialize)]
@@ -31,12 +31,23 @@ pub enum Method {
     Fluidnerf,
     /// A multiresolution grid encoding with a tiny MLP: the same method, much faster.
     Fast,
+    /// Time-resolved FluidNeRF (chapter 5.2): one MLP E(x, y, z, t') for all frames.
+    TrFluidnerf,
+    /// Time-resolved, with a space–time hash grid and a tiny MLP, in sliding windows.
+    TrFast,
+    /// Static FluidNeRF trained separately on each frame (the baseline of TR-FluidNeRF).
+    StaticPerFrame,
 }
 
 impl Method {
     /// Whether the method is one of the classical voxel methods.
     pub fn is_classical(self) -> bool {
-        !matches!(self, Method::Fluidnerf | Method::Fast)
+        !matches!(self, Method::Fluidnerf | Method::Fast) && !self.is_temporal()
+    }
+
+    /// Whether the method reconstructs every frame of a time-resolved scene.
+    pub fn is_temporal(self) -> bool {
+        matches!(self, Method::TrFluidnerf | Method::TrFast | Method::StaticPerFrame)
     }
 }
 
@@ -79,11 +90,15 @@ pub struct Args {
     pub classical: reconstruct_classical::Args,
     #[command(flatten)]
     pub neural: reconstruct_neural::Args,
+    #[command(flatten)]
+    pub temporal: reconstruct_temporal::Args,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     crate::interrupt::install();
-    if args.method.is_classical() {
+    if args.method.is_temporal() {
+        reconstruct_temporal::run(&args)
+    } else if args.method.is_classical() {
         reconstruct_classical::run(&args)
     } else {
         reconstruct_neural::run(&args)

@@ -1,0 +1,513 @@
+//! `fluidnerf reconstruct --method tr-fluidnerf|tr-fast|static-per-frame`: time-resolved
+//! reconstruction of a scene whose frames carry times (dissertation §5.2), and the per-frame
+//! static baseline it is compared with.
+//!
+//! Writes into OUT:
+//! - `frames/volume_NNN.npy` and `.vti`: the field sampled at `--resolution` at every training
+//!   frame time and every `--holdout-times` time, in increasing time (the order `fluidnerf eval`
+//!   expects when the scene's truth lists the same times), and `volumes.pvd`, the ParaView
+//!   collection that opens them as one time series;
+//! - `windows/wNNN.safetensors` (weights) and `windows/wNNN.checkpoint.safetensors` (weights,
+//!   Adam state, histories) of every window, and `temporal.json`, from which
+//!   `fluidnerf_neural::temporal::load_temporal` rebuilds the stitched field E(x, t);
+//! - `config.json` (resolved settings, seed, version: rerun with `--config`);
+//! - `report.json`: per window the training report and loss history, and per output time the
+//!   volume NRMSE (Eq. 6.18), global SSIM (Eq. 6.19, one window) and windowed 3D SSIM (7³
+//!   uniform window, skimage's definition) against the scene's truth when it has one.
+
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use fluidnerf_core::{ScalarField, Volume};
+use fluidnerf_neural::temporal::{
+    field_for_window, frame_times, infer_time_step, temporal_preset, train_windows, StitchedField, TemporalConfig,
+    TemporalRecord, TemporalRun, WindowConfig, WindowRecord, TEMPORAL_PRESETS,
+};
+use fluidnerf_neural::train::{Batching, Problem, TrainReport, View};
+use fluidnerf_neural::trained::{build_field, NeuralConfig, PRESETS};
+use fluidnerf_neural::TrainableField;
+use serde::{Deserialize, Serialize};
+
+use super::reconstruct::Method;
+
+/// Options of the time-resolved methods.
+#[derive(clap::Args, Debug)]
+#[command(next_help_heading = "Time-resolved methods (tr-fluidnerf, tr-fast, static-per-frame)")]
+pub struct Args {
+    /// Frames per sliding window (0: one field for all frames). Default: the preset's (all
+    /// frames for tr-fluidnerf, 16 for tr-fast; always 1 for static-per-frame).
+    #[arg(long)]
+    pub window: Option<usize>,
+    /// Frames shared by consecutive windows, cross-faded linearly in time. Default: the
+    /// preset's (2 for tr-fluidnerf, 4 for tr-fast).
+    #[arg(long)]
+    pub overlap: Option<usize>,
+    /// Train every window from scratch instead of from the previous window's weights.
+    #[arg(long)]
+    pub no_warm_start: bool,
+    /// Frame times whose images are NOT trained on (comma separated, the scene's time unit);
+    /// volumes and metrics are still produced there, from the continuous field (TR) or by
+    /// linear interpolation of the neighbouring frames (static-per-frame).
+    #[arg(long, value_delimiter = ',')]
+    pub holdout_times: Vec<f64>,
+    /// Frame spacing Δt of t' = (t − t₀)/Δt. Default: the smallest gap between training times.
+    #[arg(long)]
+    pub time_step: Option<f64>,
+}
+
+/// `config.json`.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RunConfig {
+    method: Method,
+    scene: PathBuf,
+    seed: u64,
+    resolution: usize,
+    version: String,
+    holdout_times: Vec<f64>,
+    time_step: f64,
+    temporal: TemporalConfig,
+}
+
+#[derive(Serialize)]
+struct WindowReport {
+    frames: [usize; 2],
+    time_origin: f64,
+    occupied_fraction: f64,
+    train: TrainReport,
+    loss_history: Vec<f32>,
+    holdout_loss_history: Vec<(usize, f32)>,
+}
+
+#[derive(Serialize)]
+struct FrameMetrics {
+    time: f64,
+    /// Whether the images of this time were trained on.
+    trained: bool,
+    file: String,
+    nrmse: Option<f64>,
+    ssim_global: Option<f64>,
+    ssim_windowed: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct Summary {
+    /// Over trained frames with truth.
+    mean_nrmse: Option<f64>,
+    /// max − min of NRMSE over trained frames: the (non-)uniformity in time.
+    nrmse_spread: Option<f64>,
+    mean_ssim_global: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct Report {
+    method: Method,
+    preset: Option<String>,
+    version: String,
+    frames: usize,
+    windows: usize,
+    time_step: f64,
+    num_params_per_window: usize,
+    weights_bytes_per_window: usize,
+    prepare_and_train_s: f64,
+    train_time_s: f64,
+    train_time_per_frame_s: f64,
+    interrupted: bool,
+    summary: Summary,
+    per_frame: Vec<FrameMetrics>,
+    per_window: Vec<WindowReport>,
+}
+
+fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    fluidnerf_io::atomic_write(path, |w| w.write_all(bytes)).with_context(|| format!("writing {}", path.display()))
+}
+
+fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(value).context("serialising JSON")?;
+    write_bytes(path, text.as_bytes())
+}
+
+/// The preset (or `--config`) with the command-line overrides applied.
+fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(TemporalConfig, Option<String>)> {
+    let n = &args.neural;
+    let t = &args.temporal;
+    let default_preset = match args.method {
+        Method::TrFast => "tr-fast",
+        Method::StaticPerFrame => "static-swish",
+        _ => "tr-faithful",
+    };
+    let mut cfg = match (&args.config, &n.preset) {
+        (Some(path), None) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let run: RunConfig = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a time-resolved run configuration", path.display()))?;
+            run.temporal
+        }
+        (_, preset) => {
+            let name = preset.as_deref().unwrap_or(default_preset);
+            match (temporal_preset(name), NeuralConfig::preset(name)) {
+                (Some(c), _) => c,
+                (None, Some(c)) => TemporalConfig { field: c.field, train: c.train, windows: WindowConfig::default() },
+                (None, None) => bail!(
+                    "unknown preset {name:?} (time-resolved: {}; static: {})",
+                    TEMPORAL_PRESETS.join(", "),
+                    PRESETS.join(", ")
+                ),
+            }
+        }
+    };
+    let tc = &mut cfg.train;
+    if let Some(v) = n.rays_per_image {
+        tc.rays_per_image = v;
+    }
+    if let Some(v) = n.coarse_samples {
+        tc.coarse_samples = v;
+    }
+    if let Some(v) = n.fine_samples {
+        tc.fine_samples = v;
+    }
+    if let Some(lr) = n.learning_rate {
+        let ratio = tc.schedule.at_decay_iters / tc.schedule.initial;
+        tc.schedule.initial = lr;
+        tc.schedule.at_decay_iters = lr * ratio;
+    }
+    if let Some(m) = args.max_iterations {
+        tc.max_iterations = m;
+    }
+    if let Some(b) = n.time_budget {
+        tc.time_budget_s = Some(b);
+    }
+    if let Some(w) = t.window {
+        cfg.windows.frames = w;
+    }
+    if let Some(o) = t.overlap {
+        cfg.windows.overlap = o;
+    }
+    if t.no_warm_start {
+        cfg.windows.warm_start = false;
+    }
+    if args.method == Method::StaticPerFrame {
+        cfg.windows = WindowConfig::per_frame();
+        cfg.train.batching = Batching::AllViews;
+    } else {
+        cfg.train.batching = Batching::OneTimeStep;
+    }
+    cfg.train.validate()?;
+    cfg.windows.validate()?;
+    Ok((cfg, n.preset.clone()))
+}
+
+/// The ParaView collection of a volume series.
+fn pvd(entries: &[(f64, String)]) -> String {
+    let mut s = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  <Collection>\n",
+    );
+    for (t, file) in entries {
+        s.push_str(&format!("    <DataSet timestep=\"{t}\" group=\"\" part=\"0\" file=\"{file}\"/>\n"));
+    }
+    s.push_str("  </Collection>\n</VTKFile>\n");
+    s
+}
+
+pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
+    let (cfg, preset) = resolve_config(args)?;
+    let out = &args.out;
+    if args.resume {
+        bail!("--resume is not supported for time-resolved methods yet; rerun with --force");
+    }
+    let has_results = out.join("temporal.json").exists() || out.join("volumes.pvd").exists();
+    if has_results && !args.force {
+        bail!("{} already holds results; use --force to overwrite", out.display());
+    }
+    let scene = fluidnerf_io::scene::load_scene(&args.scene)
+        .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    let images = fluidnerf_io::scene::load_images(&scene)
+        .with_context(|| format!("loading the images of {}", args.scene.display()))?;
+    let holdout_times = &args.temporal.holdout_times;
+    let is_held = |t: f64| holdout_times.iter().any(|&h| (h - t).abs() <= 1e-9 * (1.0 + t.abs()));
+    let mut problem = Problem {
+        aabb: scene.aabb,
+        intensity_scale: scene.intensity_scale,
+        views: Vec::new(),
+        holdout: Vec::new(),
+        time_step: 1.0,
+    };
+    for (frame, image) in scene.frames.iter().zip(images) {
+        let time = frame.time.unwrap_or(0.0);
+        if is_held(time) {
+            continue;
+        }
+        let view = View { camera: frame.camera.clone(), image, time };
+        if frame.holdout {
+            problem.holdout.push(view);
+        } else {
+            problem.views.push(view);
+        }
+    }
+    let times = frame_times(&problem);
+    if times.is_empty() {
+        bail!("{}: no training images left (all their times are in --holdout-times)", args.scene.display());
+    }
+    if times.len() < 2 && args.method != Method::StaticPerFrame {
+        log::warn!("the scene has a single training time; a time-resolved field reduces to a static one");
+    }
+    problem.time_step = match args.temporal.time_step {
+        Some(dt) if dt > 0.0 && dt.is_finite() => dt,
+        Some(dt) => bail!("--time-step must be positive, got {dt}"),
+        None => infer_time_step(&times),
+    };
+    for &h in holdout_times {
+        if h < times[0] || h > times[times.len() - 1] {
+            log::warn!("held-out time {h} lies outside the training times; the field is held at the nearest end");
+        }
+    }
+    let truth: Vec<(Option<f64>, Volume)> = match fluidnerf_io::scene::load_truth(&scene) {
+        Ok(t) => t,
+        Err(e) => {
+            log::warn!("ground truth not used: {e}");
+            Vec::new()
+        }
+    };
+
+    std::fs::create_dir_all(out.join("frames")).with_context(|| format!("creating {}/frames", out.display()))?;
+    std::fs::create_dir_all(out.join("windows")).with_context(|| format!("creating {}/windows", out.display()))?;
+    let run_config = RunConfig {
+        method: args.method,
+        scene: args.scene.clone(),
+        seed: args.seed,
+        resolution: args.resolution,
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        holdout_times: holdout_times.clone(),
+        time_step: problem.time_step,
+        temporal: cfg.clone(),
+    };
+    write_json(&out.join("config.json"), &run_config)?;
+
+    let window_len = fluidnerf_neural::window::plan_windows(times.len(), cfg.windows.frames, cfg.windows.overlap)
+        .first()
+        .map_or(1, |r| r.len());
+    let field_cfg = field_for_window(&cfg.field, window_len);
+    let input_dim = if args.method == Method::StaticPerFrame { 3 } else { 4 };
+    let field = build_field(&field_cfg, &scene.aabb, input_dim, args.seed)?;
+    log::info!(
+        "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
+        times.len(),
+        times,
+        problem.time_step,
+        problem.views.len(),
+        window_len
+    );
+    let ctx = Ctx { args, cfg: &cfg, field_cfg: &field_cfg, input_dim, preset, problem: &problem, truth: &truth };
+    fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f))
+}
+
+struct Ctx<'a> {
+    args: &'a super::reconstruct::Args,
+    cfg: &'a TemporalConfig,
+    field_cfg: &'a fluidnerf_neural::trained::FieldConfig,
+    input_dim: usize,
+    preset: Option<String>,
+    problem: &'a Problem,
+    truth: &'a [(Option<f64>, Volume)],
+}
+
+impl Ctx<'_> {
+    fn train_and_write<F: TrainableField + Clone + 'static>(&self, init: F) -> anyhow::Result<()> {
+        let (args, out, cfg) = (self.args, &self.args.out, self.cfg);
+        let n_frames = frame_times(self.problem).len();
+        let n_windows =
+            fluidnerf_neural::window::plan_windows(n_frames, cfg.windows.frames, cfg.windows.overlap).len().max(1);
+        let per_window = cfg.train.max_iterations as u64;
+        let bar = crate::progress::bar(per_window * n_windows as u64, "training");
+        let mut ckpt_error = None;
+        let mut last = (Instant::now(), 0usize, usize::MAX);
+        let mut rate = 0.0;
+        let t_start = Instant::now();
+        let run: TemporalRun<F> = train_windows(self.problem, &cfg.train, &cfg.windows, init, args.seed, |w, s| {
+            bar.set_position(w.index as u64 * per_window + s.iteration as u64);
+            if last.2 != w.index {
+                last = (Instant::now(), s.iteration, w.index);
+            } else if last.0.elapsed().as_secs_f64() > 1.0 {
+                rate = (s.iteration - last.1) as f64 / last.0.elapsed().as_secs_f64();
+                last = (Instant::now(), s.iteration, w.index);
+            }
+            bar.set_message(format!(
+                "window {}/{} (frames {}–{}) loss {:.3e} (avg {:.3e}) {rate:.1} it/s",
+                w.index + 1,
+                w.count,
+                w.frames.start,
+                w.frames.end - 1,
+                s.loss,
+                s.smoothed_loss
+            ));
+            if args.neural.checkpoint_every > 0 && s.iteration % args.neural.checkpoint_every == 0 {
+                let path = out.join(format!("windows/w{:03}.checkpoint.safetensors", w.index));
+                if let Err(e) = fluidnerf_neural::weights::checkpoint_bytes(s.learner)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|b| write_bytes(&path, &b))
+                {
+                    ckpt_error = Some(e);
+                    return ControlFlow::Break(());
+                }
+            }
+            if crate::interrupt::requested() {
+                return ControlFlow::Break(());
+            }
+            ControlFlow::Continue(())
+        })?;
+        bar.finish_and_clear();
+        let wall_s = t_start.elapsed().as_secs_f64();
+        if let Some(e) = ckpt_error {
+            return Err(e.context("writing a checkpoint"));
+        }
+
+        // Weights, checkpoints and the description of the stitched field.
+        let mut records = Vec::new();
+        let mut weights_bytes = 0;
+        for (k, w) in run.windows.iter().enumerate() {
+            let name = format!("windows/w{k:03}.safetensors");
+            let bytes = fluidnerf_neural::weights::weights_bytes(&w.learner.field)?;
+            weights_bytes = bytes.len();
+            write_bytes(&out.join(&name), &bytes)?;
+            write_bytes(
+                &out.join(format!("windows/w{k:03}.checkpoint.safetensors")),
+                &fluidnerf_neural::weights::checkpoint_bytes(&w.learner)?,
+            )?;
+            records.push(WindowRecord {
+                frames: [w.frames.start, w.frames.end],
+                time_origin: w.time_origin,
+                meta: w.meta.clone(),
+                weights: name,
+            });
+        }
+        write_json(
+            &out.join("temporal.json"),
+            &TemporalRecord {
+                field: self.field_cfg.clone(),
+                input_dim: self.input_dim,
+                frame_times: run.frame_times.clone(),
+                windows: records,
+            },
+        )?;
+        let stitched = StitchedField::from_run(&run)?;
+
+        // Volumes at every training and held-out time, and their metrics.
+        let mut out_times: Vec<(f64, bool)> = run.frame_times.iter().map(|&t| (t, true)).collect();
+        out_times.extend(args.temporal.holdout_times.iter().map(|&t| (t, false)));
+        out_times.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let dims = Volume::dims_for(&self.problem.aabb, args.resolution.max(1));
+        let mut per_frame = Vec::new();
+        let mut pvd_entries = Vec::new();
+        for (i, &(t, trained)) in out_times.iter().enumerate() {
+            let volume = Volume::from_field(dims, self.problem.aabb, &stitched, t);
+            let stem = format!("frames/volume_{i:03}");
+            let npy = out.join(format!("{stem}.npy"));
+            fluidnerf_io::volume::write_npy(&npy, &volume).with_context(|| format!("writing {}", npy.display()))?;
+            let vti = out.join(format!("{stem}.vti"));
+            fluidnerf_io::volume::write_vti(&vti, &volume).with_context(|| format!("writing {}", vti.display()))?;
+            pvd_entries.push((t, format!("{stem}.vti")));
+            let truth = self
+                .truth
+                .iter()
+                .find(|(tt, _)| tt.is_some_and(|tt| (tt - t).abs() <= 1e-9 * (1.0 + t.abs())))
+                .or(if self.truth.len() == 1 && self.truth[0].0.is_none() { self.truth.first() } else { None });
+            let (nrmse, ssim_global, ssim_windowed) = match truth {
+                Some((_, tv)) => {
+                    let v = Volume::from_field(tv.dims, tv.aabb, &stitched as &dyn ScalarField, t);
+                    let range = fluidnerf_metrics::data_range_of(&tv.data);
+                    let params = fluidnerf_metrics::SsimParams { data_range: Some(range), ..Default::default() };
+                    (
+                        Some(fluidnerf_metrics::nrmse(&v.data, &tv.data)),
+                        (range > 0.0).then(|| fluidnerf_metrics::ssim_global(&v.data, &tv.data, range)),
+                        fluidnerf_metrics::ssim_3d(&v.data, &tv.data, tv.dims, &params).ok(),
+                    )
+                }
+                None => (None, None, None),
+            };
+            per_frame.push(FrameMetrics {
+                time: t,
+                trained,
+                file: format!("{stem}.npy"),
+                nrmse,
+                ssim_global,
+                ssim_windowed,
+            });
+        }
+        write_bytes(&out.join("volumes.pvd"), pvd(&pvd_entries).as_bytes())?;
+
+        let trained_nrmse: Vec<f64> = per_frame.iter().filter(|f| f.trained).filter_map(|f| f.nrmse).collect();
+        let trained_ssim: Vec<f64> = per_frame.iter().filter(|f| f.trained).filter_map(|f| f.ssim_global).collect();
+        let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+        let summary = Summary {
+            mean_nrmse: mean(&trained_nrmse),
+            nrmse_spread: (!trained_nrmse.is_empty()).then(|| {
+                trained_nrmse.iter().copied().fold(f64::MIN, f64::max)
+                    - trained_nrmse.iter().copied().fold(f64::MAX, f64::min)
+            }),
+            mean_ssim_global: mean(&trained_ssim),
+        };
+        let train_time_s: f64 = run.windows.iter().map(|w| w.report.train_time_s).sum();
+        let report = Report {
+            method: args.method,
+            preset: self.preset.clone(),
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            frames: run.frame_times.len(),
+            windows: run.windows.len(),
+            time_step: self.problem.time_step,
+            num_params_per_window: run.windows.first().map_or(0, |w| w.learner.field.num_params()),
+            weights_bytes_per_window: weights_bytes,
+            prepare_and_train_s: wall_s,
+            train_time_s,
+            train_time_per_frame_s: train_time_s / run.frame_times.len().max(1) as f64,
+            interrupted: run.interrupted,
+            summary,
+            per_frame,
+            per_window: run
+                .windows
+                .iter()
+                .map(|w| WindowReport {
+                    frames: [w.frames.start, w.frames.end],
+                    time_origin: w.time_origin,
+                    occupied_fraction: w.occupied_fraction,
+                    train: w.report.clone(),
+                    loss_history: w.learner.losses.clone(),
+                    holdout_loss_history: w.learner.holdout_losses.clone(),
+                })
+                .collect(),
+        };
+        write_json(&out.join("report.json"), &report)?;
+        #[allow(clippy::print_stdout)]
+        {
+            println!(
+                "{:?}: {} frames in {} window(s), {:.1} s training ({:.2} s per frame){}",
+                args.method,
+                report.frames,
+                report.windows,
+                train_time_s,
+                report.train_time_per_frame_s,
+                if run.interrupted { ", interrupted" } else { "" }
+            );
+            if report.per_frame.iter().any(|f| f.nrmse.is_some()) {
+                println!(
+                    "{:>10} {:>8} {:>8} {:>12} {:>14}",
+                    "time", "trained", "NRMSE", "SSIM global", "SSIM windowed"
+                );
+                for f in &report.per_frame {
+                    let fmt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.4}"));
+                    println!(
+                        "{:>10} {:>8} {:>8} {:>12} {:>14}",
+                        f.time,
+                        if f.trained { "yes" } else { "held out" },
+                        fmt(f.nrmse),
+                        fmt(f.ssim_global),
+                        fmt(f.ssim_windowed)
+                    );
+                }
+            }
+            println!("wrote {}", out.display());
+        }
+        Ok(())
+    }
+}
