@@ -68,7 +68,8 @@ fn scene_camera_renders_match_the_reference_renderer() {
     ]);
     ok(&o);
     let img = fluidnerf_io::image::read_image(&out.join("view_001.tif")).expect("reads");
-    let settings = RenderSettings { scale: SCALE, ..Default::default() };
+    // The default step for a volume: half its voxel (0.125 mm here).
+    let settings = RenderSettings { scale: SCALE, step: Some(0.0625), ..Default::default() };
     let want = render_image(&vol, &scene.frames[1].camera, &scene.aabb, &settings).expect("renders");
     assert_eq!((img.width, img.height), (24, 20));
     let peak = want.min_max().1;

@@ -61,19 +61,37 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
 /// `n` pinhole cameras evenly spaced on a circle about the line through the box centre along
 /// +x, starting on the −z side (looking along +z) and turning right-handedly about +x. The
 /// radius is three times the box's larger half-extent plus its cross-section radius (a mild
-/// perspective), the focal length makes the box fill about 90 % of `width_px`, and the height
-/// follows from the box's cross-section (even, at least 16 px).
+/// perspective); the focal length makes the box's projection, over the whole orbit, span 90 %
+/// of `width_px`, and the height (even, at least 16 px) leaves the same margin vertically.
 pub fn orbit_cameras(aabb: &Aabb, n: usize, width_px: u32) -> Vec<Camera> {
     assert!(width_px >= 16, "orbit_cameras: width {width_px} px is too small");
     let size = aabb.size();
     let centre = aabb.centre();
-    let half_x = 0.5 * size.x;
     let r_yz = 0.5 * (size.y * size.y + size.z * size.z).sqrt();
-    let radius = 3.0 * half_x.max(r_yz) + r_yz;
-    let nearest = radius - r_yz;
+    let radius = 3.0 * (0.5 * size.x).max(r_yz) + r_yz;
+    let pose = |theta: f64| {
+        // Position on the circle: −z at θ = 0, then towards −y (right-handed about +x).
+        let offset = DVec3::new(0.0, theta.sin(), -theta.cos()) * radius;
+        let forward = -offset.normalize();
+        // Camera x = forward × up must be world +x, hence up = x̂ × forward.
+        (centre + offset, DVec3::X.cross(forward))
+    };
+    // The box's largest extent in normalised image coordinates over a dense set of angles.
+    let unit = Intrinsics { width: 2, height: 2, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0, skew: 0.0 };
+    let (mut max_u, mut max_v) = (1e-9f64, 1e-9f64);
+    for i in 0..72 {
+        let (eye, up) = pose(std::f64::consts::TAU * i as f64 / 72.0);
+        let cam = Camera::look_at(unit, eye, centre, up);
+        for corner in aabb.corners() {
+            if let Some(p) = cam.project(corner) {
+                max_u = max_u.max(p.x.abs());
+                max_v = max_v.max(p.y.abs());
+            }
+        }
+    }
     let w = width_px as f64;
-    let f = 0.9 * 0.5 * w * nearest / half_x.max(1e-12);
-    let h = (2.0 * f * r_yz / nearest / 0.9).ceil().max(16.0) as u32;
+    let f = 0.9 * 0.5 * w / max_u;
+    let h = (2.0 * f * max_v / 0.9).ceil().max(16.0) as u32;
     let h = h + h % 2;
     let k = Intrinsics {
         width: width_px,
@@ -86,13 +104,7 @@ pub fn orbit_cameras(aabb: &Aabb, n: usize, width_px: u32) -> Vec<Camera> {
     };
     (0..n)
         .map(|i| {
-            let theta = std::f64::consts::TAU * i as f64 / n as f64;
-            // Position on the circle: −z at θ = 0, then towards −y (right-handed about +x).
-            let offset = DVec3::new(0.0, theta.sin(), -theta.cos()) * radius;
-            let eye = centre + offset;
-            let forward = -offset.normalize();
-            // Camera x = forward × up must be world +x, hence up = x̂ × forward.
-            let up = DVec3::X.cross(forward);
+            let (eye, up) = pose(std::f64::consts::TAU * i as f64 / n as f64);
             Camera::look_at(k, eye, centre, up)
         })
         .collect()
@@ -115,6 +127,10 @@ mod tests {
                 let p = cam.project(corner).expect("in front");
                 assert!(p.x > 0.0 && p.x < 199.0 && p.y > 0.0 && p.y < cam.height() as f64 - 1.0, "{corner} → {p}");
             }
+            // The box spans most of the width.
+            let us: Vec<f64> = aabb.corners().iter().map(|&c| cam.project(c).expect("in front").x).collect();
+            let span = us.iter().fold(f64::MIN, |a, &b| a.max(b)) - us.iter().fold(f64::MAX, |a, &b| a.min(b));
+            assert!(span > 150.0, "box spans {span} px of 200");
         }
         assert_eq!(cams[0].forward().z.signum(), 1.0, "first camera looks along +z");
     }

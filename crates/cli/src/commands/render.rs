@@ -10,7 +10,7 @@ use fluidnerf_core::{render_image, Camera, Image, RenderSettings};
 use fluidnerf_viz::Colormap;
 use serde::Serialize;
 
-use super::export::load_source;
+use super::export::{load_source, Source};
 
 /// Image file formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
@@ -56,8 +56,13 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "png16")]
     pub format: ImageFormat,
     /// Rays per pixel along each image axis (anti-aliasing).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 1)]
     pub supersample: usize,
+    /// Quadrature step along each ray in world units. Default: half the voxel size for a
+    /// volume (enough for its trilinear interpolant), the box's smallest side / 256 for a
+    /// trained field.
+    #[arg(long)]
+    pub step: Option<f64>,
     /// Time at which a time-resolved field is rendered. Default: each frame's own time; 0 for
     /// orbit views.
     #[arg(long)]
@@ -83,6 +88,7 @@ struct Settings<'a> {
     width: u32,
     format: ImageFormat,
     supersample: usize,
+    step: Option<f64>,
     time: Option<f64>,
     intensity_scale: f64,
     /// For 16-bit PNG: value = count × full_scale / 65535.
@@ -104,6 +110,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.orbit.is_some() && !args.camera.is_empty() {
         bail!("give either --camera or --orbit, not both");
+    }
+    if let Some(step) = args.step {
+        if !(step > 0.0 && step.is_finite()) {
+            bail!("--step must be positive, got {step}");
+        }
     }
     if args.width < 16 {
         bail!("--width must be at least 16 px, got {}", args.width);
@@ -154,18 +165,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let source = load_source(&args.recon, Some(&scene))?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
 
+    let step = args.step.or(match &source {
+        Source::Volume(v) => Some(0.5 * v.spacing().min_element()),
+        Source::Field { .. } => None,
+    });
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
     for v in &views {
         if crate::interrupt::requested() {
             bail!("interrupted");
         }
-        let settings = RenderSettings {
-            supersample: args.supersample.max(1),
-            time: v.time,
-            scale: scene.intensity_scale,
-            ..Default::default()
-        };
+        let settings =
+            RenderSettings { supersample: args.supersample.max(1), time: v.time, scale: scene.intensity_scale, step };
         let img = render_image(source.field(), &v.camera, &scene.aabb, &settings)
             .with_context(|| format!("rendering {}", v.file_stem))?;
         images.push(img);
@@ -196,6 +207,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         width: args.width,
         format: args.format,
         supersample: args.supersample.max(1),
+        step,
         time: args.time,
         intensity_scale: scene.intensity_scale,
         full_scale,
