@@ -746,6 +746,13 @@ mod tests {
         let m = load_images(&scene).expect_err("inf").to_string();
         assert!(m.contains("c1.tif") && m.contains("col 5, row 6") && m.contains("inf"), "{m}");
 
+        let mut bad_truth = Volume::from_fn([4, 4, 4], scene.aabb, |_| 1.0);
+        let at = bad_truth.index(1, 2, 3);
+        bad_truth.data[at] = f32::NAN;
+        crate::volume::write_npy(&d.join("truth/t0.npy"), &bad_truth).expect("npy");
+        let m = load_truth(&scene).expect_err("nan").to_string();
+        assert!(m.contains("t0.npy") && m.contains("voxel (i 1, j 2, k 3)") && m.contains("NaN"), "{m}");
+
         std::fs::remove_file(d.join("images/c1.tif")).expect("rm");
         let m = load_images(&scene).expect_err("missing").to_string();
         assert!(m.contains("image file not found") && m.contains("c1.tif"), "{m}");

@@ -390,6 +390,28 @@ mod tests {
     }
 
     #[test]
+    fn vti_ascii_and_bad_files() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("a.vti");
+        std::fs::write(
+            &p,
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"0.1\" byte_order=\"LittleEndian\">\n\
+             <ImageData WholeExtent=\"0 1 0 0 0 0\" Origin=\"0.5 0 0\" Spacing=\"1 2 3\">\n<Piece Extent=\"0 1 0 0 0 0\">\n\
+             <PointData><DataArray type=\"Float64\" Name=\"v\" format=\"ascii\">1.5 -2</DataArray></PointData>\n\
+             </Piece></ImageData></VTKFile>\n",
+        )
+        .expect("write");
+        let v = read_vti(&p).expect("ascii");
+        assert_eq!(v.dims, [2, 1, 1]);
+        assert_eq!(v.data, vec![1.5, -2.0]);
+        assert_eq!(v.aabb.min, DVec3::new(0.0, -1.0, -1.5));
+        assert_eq!(v.aabb.max, DVec3::new(2.0, 1.0, 1.5));
+        std::fs::write(&p, "<VTKFile type=\"PolyData\">").expect("write");
+        let err = read_vti(&p).expect_err("polydata").to_string();
+        assert!(err.contains("a.vti") && err.contains("ImageData"), "{err}");
+    }
+
+    #[test]
     fn raw_round_trip_with_sidecar() {
         let dir = tempfile::tempdir().expect("tempdir");
         let p = dir.path().join("v.raw");
