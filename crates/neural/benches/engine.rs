@@ -162,6 +162,9 @@ fn process_cpu_s() -> f64 {
 fn fma_peak_gflops() -> (f64, f64) {
     #[cfg(target_arch = "x86_64")]
     {
+        // AVX-512 intrinsics are stable since Rust 1.89 (the library's MSRV is 1.85; this
+        // benchmark-only peak probe needs the newer toolchain).
+        #[allow(clippy::incompatible_msrv)]
         #[target_feature(enable = "avx512f")]
         fn chains512(iters: usize) -> f32 {
             use std::arch::x86_64::*;

@@ -29,11 +29,11 @@ fn loss<F: TrainableField>(field: &F, x: &[f32], c: &[f32]) -> f64 {
 }
 
 /// Returns the fraction of parameters (among `indices`) failing the tolerance.
-fn fd_check<F: TrainableField>(field: &mut F, x: &[f32], indices: &[usize], seed: u64) -> f64 {
+fn fd_check<F: TrainableField>(field: &mut F, x: &[f32], indices: &[usize], seed: u64) -> FdReport {
     fd_check_h(field, x, indices, seed, 1e-2)
 }
 
-fn fd_check_h<F: TrainableField>(field: &mut F, x: &[f32], indices: &[usize], seed: u64, h: f32) -> f64 {
+fn fd_check_h<F: TrainableField>(field: &mut F, x: &[f32], indices: &[usize], seed: u64, h: f32) -> FdReport {
     let n = x.len() / field.input_dim();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let c: Vec<f32> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
@@ -69,8 +69,15 @@ fn fd_check_h<F: TrainableField>(field: &mut F, x: &[f32], indices: &[usize], se
             worst = (err / tol, i, fd, an);
         }
     }
-    eprintln!("worst err/tol {:.2} at param {} (fd {:.6e}, analytic {:.6e})", worst.0, worst.1, worst.2, worst.3);
-    bad as f64 / indices.len() as f64
+    FdReport { bad: bad as f64 / indices.len() as f64, worst }
+}
+
+/// Fraction of parameters failing, and the worst (err/tol, index, fd, analytic).
+#[derive(Debug)]
+struct FdReport {
+    bad: f64,
+    #[allow(dead_code)] // shown in assertion messages
+    worst: (f64, usize, f64, f64),
 }
 
 fn all(field: &impl TrainableField) -> Vec<usize> {
@@ -86,7 +93,8 @@ fn mlp_swish_softplus_with_skip_3d() {
     let mut f = MlpField::new(&small(Activation::Swish, OutputActivation::Softplus), 3, 1).unwrap();
     let x = random_inputs(24, 3, 2);
     let idx = all(&f);
-    assert_eq!(fd_check(&mut f, &x, &idx, 3), 0.0);
+    let r = fd_check(&mut f, &x, &idx, 3);
+    assert_eq!(r.bad, 0.0, "{r:?}");
 }
 
 #[test]
@@ -94,7 +102,8 @@ fn mlp_swish_4d_with_time_encoding() {
     let mut f = MlpField::new(&small(Activation::Swish, OutputActivation::Softplus), 4, 4).unwrap();
     let x = random_inputs(24, 4, 5);
     let idx = all(&f);
-    assert_eq!(fd_check(&mut f, &x, &idx, 6), 0.0);
+    let r = fd_check(&mut f, &x, &idx, 6);
+    assert_eq!(r.bad, 0.0, "{r:?}");
 }
 
 #[test]
@@ -102,8 +111,8 @@ fn mlp_relu_softplus_with_skip() {
     let mut f = MlpField::new(&small(Activation::Relu, OutputActivation::Softplus), 3, 7).unwrap();
     let x = random_inputs(24, 3, 8);
     let idx = all(&f);
-    let bad = fd_check_h(&mut f, &x, &idx, 9, 1e-3);
-    assert!(bad <= 0.02, "{:.1} % of parameters fail", 100.0 * bad);
+    let r = fd_check_h(&mut f, &x, &idx, 9, 1e-3);
+    assert!(r.bad <= 0.02, "{r:?}");
 }
 
 #[test]
@@ -123,8 +132,8 @@ fn mlp_relu_output_passes_no_gradient_where_dead() {
     let alive = out.iter().filter(|&&o| o > 0.0).count();
     assert!((6..=18).contains(&alive), "{alive} alive rows");
     let idx = all(&f);
-    let bad = fd_check(&mut f, &x, &idx, 12);
-    assert!(bad <= 0.02, "{:.1} % of parameters fail", 100.0 * bad);
+    let r = fd_check_h(&mut f, &x, &idx, 12, 1e-3);
+    assert!(r.bad <= 0.02, "{r:?}");
     // Dead rows alone: zero gradient.
     let d: Vec<f32> = out.iter().map(|&o| if o > 0.0 { 0.0 } else { 1.0 }).collect();
     let mut g = vec![0.0; f.num_params()];
@@ -139,7 +148,8 @@ fn mlp_without_skip_and_deep_narrow() {
     let mut f = MlpField::new(&cfg, 3, 13).unwrap();
     let x = random_inputs(16, 3, 14);
     let idx = all(&f);
-    assert_eq!(fd_check(&mut f, &x, &idx, 15), 0.0);
+    let r = fd_check(&mut f, &x, &idx, 15);
+    assert_eq!(r.bad, 0.0, "{r:?}");
 }
 
 fn small_grid(d: usize, seed: u64) -> HashGridField {
@@ -168,7 +178,8 @@ fn hash_grid_3d_dense_and_hashed_levels() {
     assert!(s.iter().any(|l| l.2) && s.iter().any(|l| !l.2), "want dense and hashed levels: {s:?}");
     let x = random_inputs(40, 3, 17);
     let idx = all(&f);
-    assert_eq!(fd_check(&mut f, &x, &idx, 18), 0.0);
+    let r = fd_check(&mut f, &x, &idx, 18);
+    assert_eq!(r.bad, 0.0, "{r:?}");
 }
 
 #[test]
@@ -176,7 +187,8 @@ fn hash_grid_4d() {
     let mut f = small_grid(4, 19);
     let x = random_inputs(40, 4, 20);
     let idx = all(&f);
-    assert_eq!(fd_check(&mut f, &x, &idx, 21), 0.0);
+    let r = fd_check(&mut f, &x, &idx, 21);
+    assert_eq!(r.bad, 0.0, "{r:?}");
 }
 
 /// Naive f64 forward of the dissertation network from the named tensors: checks the fused
