@@ -70,7 +70,7 @@ pub fn estimate_memory(
     // Data, a per-view cache (SART row sums, SMART row maxima) and two view-sized buffers.
     let images = pixels * 4 * 2 + max_view * 4 * 2;
     let scratch = match projector {
-        ProjectorKind::Splat => threads * max_view * 4,
+        ProjectorKind::Splat => 2 * threads * max_view * 4,
         ProjectorKind::Ray => pixels * 32 + 2 * threads * n * 4,
     };
     let rows = if algorithm.holds_rows() {

@@ -335,14 +335,18 @@ impl Projector for SplatProjector {
         let nz = self.grid.dims[2];
         // Scatter: each band of z-slices accumulates into its own image, then the images are
         // summed; images are small next to the volume.
+        // Neighbouring voxels mostly land on the same pixels; alternating between two images
+        // by voxel parity breaks the read-modify-write chains through memory.
+        let m = out.len();
         let partials: Vec<Vec<f32>> = bands(nz, scatter_parts())
             .into_par_iter()
             .map(|ks| {
-                let mut img = vec![0f32; out.len()];
+                let mut img = vec![0f32; 2 * m];
                 self.for_each_voxel(view, ks, |idx, f| {
                     let g = x[idx];
                     if g != 0.0 {
-                        sv.for_each_pixel(f, |pix, w| img[pix] += w * g);
+                        let half = &mut img[(idx & 1) * m..][..m];
+                        sv.for_each_pixel(f, |pix, w| half[pix] += w * g);
                     }
                 });
                 img
@@ -351,7 +355,7 @@ impl Projector for SplatProjector {
         out.par_chunks_mut(4096).enumerate().for_each(|(c, chunk)| {
             let off = c * 4096;
             for (q, o) in chunk.iter_mut().enumerate() {
-                *o = partials.iter().map(|p| p[off + q]).sum();
+                *o = partials.iter().map(|p| p[off + q] + p[m + off + q]).sum();
             }
         });
     }
@@ -420,7 +424,7 @@ impl Projector for SplatProjector {
     }
 
     fn scratch_bytes(&self, view: usize) -> usize {
-        scatter_parts() * self.view_len(view) * 4
+        2 * scatter_parts() * self.view_len(view) * 4
     }
 }
 
