@@ -88,6 +88,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ],
     );
     write_plots(&out.join("sweep.png"), &[sweep], 1)?;
+    // A residual that falls by less than a decade: drawn on a linear axis.
+    let narrow = RunHistory {
+        label: "ASART".into(),
+        loss_label: "relative residual".into(),
+        loss: Trace { value: (0..25).map(|i| 0.16 + (-0.5 * f64::from(i)).exp()).collect(), ..trace(0.0, 0.1, 0.0) },
+        nrmse: None,
+        ssim: None,
+    };
+    let narrow = RunHistory {
+        loss: Trace {
+            iteration: narrow.loss.iteration[..25].to_vec(),
+            time_s: narrow.loss.time_s[..25].to_vec(),
+            ..narrow.loss
+        },
+        ..narrow
+    };
+    write_plots(&out.join("narrow.png"), &convergence_plots(&[narrow]), 2)?;
     let mut table = Table::new("Against the ground truth", &["method", "NRMSE", "PSNR [dB]", "SSIM", "time [s]"]);
     table.push_row(vec![
         "ASART".into(),

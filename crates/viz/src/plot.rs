@@ -2,7 +2,8 @@
 //! time, several runs per plot) and metrics against a swept parameter; PNG or SVG.
 //!
 //! A figure is a grid of [`LinePlot`]s, filled row by row. Logarithmic axes drop non-positive
-//! values (with a `log` warning) since they have no place on them. Series colours follow the
+//! values (with a `log` warning) since they have no place on them, and fall back to linear
+//! when the data span less than a decade (too little for labelled powers of ten). Series colours follow the
 //! Tableau 10 palette, in order.
 
 use std::path::Path;
@@ -214,7 +215,24 @@ fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> std::ops::Range<f
     }
 }
 
+/// Whether positive values spread over at least a decade: plotters labels a logarithmic axis
+/// only at powers of ten, so a narrower range would show no numbers at all.
+fn spans_a_decade(values: impl Iterator<Item = f64>) -> bool {
+    let (lo, hi) = values.filter(|v| *v > 0.0).fold((f64::INFINITY, 0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    hi / lo >= 10.0
+}
+
 fn draw_plot<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<(), VizError> {
+    // A log axis over less than a decade falls back to linear (see `spans_a_decade`).
+    let log_x = plot.log_x && spans_a_decade(plot.series.iter().flat_map(|s| s.x.iter().copied()));
+    let log_y = plot.log_y && spans_a_decade(plot.series.iter().flat_map(|s| s.y.iter().copied()));
+    let adjusted;
+    let plot = if (log_x, log_y) == (plot.log_x, plot.log_y) {
+        plot
+    } else {
+        adjusted = LinePlot { log_x, log_y, ..plot.clone() };
+        &adjusted
+    };
     let data: Vec<Vec<(f64, f64)>> = plot.series.iter().map(|s| drawable(plot, s)).collect();
     let xr = axis_range(data.iter().flatten().map(|p| p.0), plot.log_x);
     let yr = axis_range(data.iter().flatten().map(|p| p.1), plot.log_y);
@@ -401,5 +419,6 @@ mod tests {
             vec![Series { label: "ASART".into(), x: vec![2.0, 4.0, 8.0], y: vec![0.4, 0.2, 0.1] }],
         );
         write_plots(&dir.path().join("s.png"), &[sweep], 1).expect("png");
+        assert!(spans_a_decade([0.01, 0.5].into_iter()) && !spans_a_decade([0.15, 1.1, -3.0].into_iter()));
     }
 }
