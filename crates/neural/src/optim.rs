@@ -58,7 +58,9 @@ impl AdamConfig {
 }
 
 /// Adam state: first and second moments and the step count, laid out like the parameters.
-#[derive(Clone, Debug, PartialEq)]
+/// Serialisable as a whole (serde) or tensor by tensor (`m`, `v` sliced by
+/// [`crate::TrainableField::tensors`], as the safetensors checkpoints do).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Adam {
     pub config: AdamConfig,
     /// First-moment estimates m.
