@@ -16,6 +16,16 @@
 //!   so pictures look the same on every machine; no system font or fontconfig is used.
 //! - **Files** are written atomically (a temporary file in the same folder, then a rename).
 //!
+//! # What is where
+//! - [`panel`]: slices of volumes and heat-map figures ([`write_panels_png`],
+//!   [`write_comparison_png`] for truth | reconstruction | difference).
+//! - [`plot`]: convergence and sweep plots, PNG or SVG ([`convergence_plots`], [`write_plots`]).
+//! - [`isosurface`]: watertight marching cubes ([`marching_cubes`]); write the mesh with
+//!   `fluidnerf_io::mesh`.
+//! - [`animation`]: colour-mapped camera images, orbit cameras about the flow axis, turntable
+//!   GIFs.
+//! - [`report`]: the self-contained `report.html` ([`write_report_html`]).
+//!
 //! The library never prints; problems come back as [`VizError`] and warnings go to `log`.
 
 pub mod animation;
