@@ -44,6 +44,7 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
         out.to_str().expect("utf-8"),
         "--vti",
         "--npy",
+        "--raw",
         "--box",
         "0.5,1,1,3.5,3,2",
         "--resolution",
@@ -78,6 +79,9 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
     // The .npy holds the same values.
     let n = fluidnerf_io::volume::read_npy(&out.join("volume.npy"), v.aabb).expect("reads");
     assert_eq!(n.data, v.data);
+    let raw = fluidnerf_io::volume::read_raw(&out.join("volume.raw")).expect("reads with its sidecar");
+    assert_eq!((raw.dims, raw.aabb), (v.dims, v.aabb));
+    assert_eq!(raw.data, v.data);
     let settings: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).expect("settings")).expect("JSON");
     assert_eq!(settings["dims"], serde_json::json!([12, 8, 4]));

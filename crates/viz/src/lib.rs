@@ -7,7 +7,7 @@
 //!   extent's lower edge, as in a plot with `origin = "lower"`), so a slice of a volume reads
 //!   with world axes pointing right and up. Camera images (row 0 at the top) are flipped by
 //!   [`Panel::from_image`].
-//! - **Slices** ([`slice`]) through a [`Volume`](fluidnerf_core::Volume): normal to z shows
+//! - **Slices** ([`slice()`]) through a [`Volume`](fluidnerf_core::Volume): normal to z shows
 //!   (x → right, y → up); normal to y shows (x → right, z → up); normal to x shows
 //!   (y → right, z → up). Cells are drawn nearest-neighbour, so voxels stay visible.
 //! - **Colour maps** are perceptually uniform (viridis, magma, inferno, cividis) for fields and

@@ -238,6 +238,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let units = args.units.clone().or_else(|| scene.as_ref().map(|s| s.units.clone())).unwrap_or_else(|| "mm".into());
     let source = load_source(&args.recon, scene.as_ref())?;
+    if matches!(source, Source::Volume(_)) && args.time != 0.0 {
+        log::warn!("--time {} has no effect: {} is a volume, fixed in time", args.time, args.recon.display());
+    }
 
     // The export grid.
     let aabb = export_box.unwrap_or_else(|| source.aabb());
