@@ -179,3 +179,66 @@ fn every_method_and_option_runs_and_memory_is_checked() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("relaxation"));
 }
+
+/// Ctrl-C (SIGINT) stops after the current iteration and still writes a usable result.
+#[cfg(unix)]
+#[test]
+fn interrupt_writes_the_last_finished_iteration() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(
+        d,
+        &[
+            "synth",
+            "--preset",
+            "demo",
+            "--phantom",
+            "blobs",
+            "--cameras",
+            "4",
+            "--pixels",
+            "24",
+            "--resolution",
+            "12",
+            "-o",
+            "scene",
+            "-q",
+        ],
+    ));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args([
+            "reconstruct",
+            "scene",
+            "-o",
+            "run",
+            "--method",
+            "sart",
+            "--resolution",
+            "10",
+            "--max-iterations",
+            "10000000",
+            "--plateau-tolerance",
+            "0",
+            "-q",
+        ])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("starts");
+    // config.json is written after the handler is installed, just before iterating.
+    let start = std::time::Instant::now();
+    while !d.join("run/config.json").exists() {
+        assert!(start.elapsed().as_secs() < 60, "run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill runs");
+    assert!(killed.success());
+    let status = child.wait().expect("waits");
+    assert!(status.success(), "interrupted run must still succeed");
+    let r = report(&d.join("run"));
+    assert_eq!(r["stop_reason"], "interrupted");
+    let iterations = r["iterations"].as_u64().expect("iterations");
+    assert!(iterations >= 1 && iterations < 10_000_000);
+    assert!(d.join("run/volume.npy").is_file() && d.join("run/volume.vti").is_file());
+}
