@@ -672,6 +672,15 @@ mod tests {
     }
 
     #[test]
+    fn camera_images_keep_their_top_row_on_top() {
+        let img = Image::from_vec(3, 2, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        let p = Panel::from_image(&img);
+        // Panel row 0 is the bottom, so the image's top row (1, 2, 3) is the panel's last row.
+        assert_eq!(p.data, vec![4.0, 5.0, 6.0, 1.0, 2.0, 3.0]);
+        assert_eq!(p.extent, [0.0, 3.0, 0.0, 2.0]);
+    }
+
+    #[test]
     fn tick_labels_are_short() {
         let f = tick_formatter(0.0, 0.3);
         assert_eq!(f(&0.30000000000000004), "0.3");
