@@ -238,9 +238,14 @@ pub fn render(
                         let defocus = inv_z - inv_lo;
                         let u = cx + fx * (p.x * inv_z - ra * a[0] * defocus);
                         let v = cy + fy * (p.y * inv_z - ra * a[1] * defocus);
-                        let (col, row) = ((u + 0.5).floor(), (v + 0.5).floor());
-                        if col >= 0.0 && row >= 0.0 && (col as usize) < w && (row as usize) < h {
-                            acc[row as usize * w + col as usize] += q as u64;
+                        // Pixel (col, row) covers [col − ½, col + ½); truncation is the floor for
+                        // the non-negative values kept (NaN fails the test too).
+                        let (fu, fv) = (u + 0.5, v + 0.5);
+                        if fu >= 0.0 && fv >= 0.0 {
+                            let (col, row) = (fu as usize, fv as usize);
+                            if col < w && row < h {
+                                acc[row * w + col] += q as u64;
+                            }
                         }
                     }
                 }

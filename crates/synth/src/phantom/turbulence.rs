@@ -85,23 +85,44 @@ impl KinematicModes {
             m.c.push((c / nc) as f32);
             m.disp_bound += a.length() as f32;
         }
+        while m.kx.len() % LANES != 0 {
+            for v in [&mut m.kx, &mut m.ky, &mut m.kz, &mut m.phase, &mut m.ax, &mut m.ay, &mut m.az, &mut m.c] {
+                v.push(0.0);
+            }
+        }
         m
     }
 
     /// Displacement `d(q)` and scalar fluctuation `m(q)` (see the module docs).
     pub fn eval(&self, q: Vec3) -> (Vec3, f32) {
-        let (mut dx, mut dy, mut dz, mut s) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-        for n in 0..self.kx.len() {
-            let arg = self.kx[n] * q.x + self.ky[n] * q.y + self.kz[n] * q.z + self.phase[n];
-            let (sn, cs) = crate::fastmath::sin_cos(arg);
-            dx += self.ax[n] * sn;
-            dy += self.ay[n] * sn;
-            dz += self.az[n] * sn;
-            s += self.c[n] * cs;
+        // Lane-wise accumulation over blocks of LANES modes, so the compiler can vectorise the
+        // loop (a single running sum would serialise it); the tail is padded with zero modes.
+        let mut dx = [0.0f32; LANES];
+        let mut dy = [0.0f32; LANES];
+        let mut dz = [0.0f32; LANES];
+        let mut sc = [0.0f32; LANES];
+        let blocks = self.kx.len() / LANES;
+        for b in 0..blocks {
+            let r = b * LANES..(b + 1) * LANES;
+            let (kx, ky, kz, ph) =
+                (&self.kx[r.clone()], &self.ky[r.clone()], &self.kz[r.clone()], &self.phase[r.clone()]);
+            let (ax, ay, az, c) = (&self.ax[r.clone()], &self.ay[r.clone()], &self.az[r.clone()], &self.c[r]);
+            for l in 0..LANES {
+                let arg = kx[l] * q.x + ky[l] * q.y + kz[l] * q.z + ph[l];
+                let (sn, cs) = crate::fastmath::sin_cos(arg);
+                dx[l] += ax[l] * sn;
+                dy[l] += ay[l] * sn;
+                dz[l] += az[l] * sn;
+                sc[l] += c[l] * cs;
+            }
         }
-        (Vec3::new(dx, dy, dz), s)
+        let sum = |a: [f32; LANES]| a.iter().sum::<f32>();
+        (Vec3::new(sum(dx), sum(dy), sum(dz)), sum(sc))
     }
 }
+
+/// Modes per vectorised block.
+const LANES: usize = 8;
 
 #[cfg(test)]
 mod tests {
