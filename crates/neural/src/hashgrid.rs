@@ -157,6 +157,8 @@ pub struct HashGridTape {
     inputs: Vec<f32>,
     features: Vec<f32>,
     d_features: Vec<f32>,
+    /// Features of `eval`, kept apart from those `backward` needs.
+    eval_features: Vec<f32>,
     mlp: MlpTape,
 }
 
@@ -221,12 +223,14 @@ impl HashGridField {
         self.grid_params
     }
 
-    fn encode(&self, n: usize, tape: &mut HashGridTape) {
+    /// Encodes `inputs` (`n × input_dim`) into `features` (grown to `n × L·F` if needed).
+    fn encode(&self, inputs: &[f32], features: &mut Vec<f32>) {
         let lf = self.levels.len() * self.config.features_per_level;
-        if tape.features.len() < n * lf {
-            tape.features.resize(n * lf, 0.0);
+        let n = inputs.len() / self.input_dim;
+        if features.len() < n * lf {
+            features.resize(n * lf, 0.0);
         }
-        let (inputs, feats) = (&tape.inputs[..n * self.input_dim], &mut tape.features[..n * lf]);
+        let feats = &mut features[..n * lf];
         for l in 0..self.levels.len() {
             self.dispatch::<false>(l, inputs, feats, &mut []);
         }
@@ -350,7 +354,12 @@ impl TrainableField for HashGridField {
     }
 
     fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut HashGridTape) {
-        self.forward(inputs, out, tape);
+        let n = out.len();
+        let d = self.input_dim;
+        assert_eq!(inputs.len(), n * d, "HashGridField: inputs are not {n}×{d}");
+        self.encode(inputs, &mut tape.eval_features);
+        let lf = self.mlp.in_dim();
+        self.mlp.infer(&self.params[self.grid_params..], &tape.eval_features[..n * lf], out, &mut tape.mlp);
     }
 
     fn forward(&self, inputs: &[f32], out: &mut [f32], tape: &mut HashGridTape) {
@@ -362,7 +371,7 @@ impl TrainableField for HashGridField {
         }
         tape.inputs[..n * d].copy_from_slice(inputs);
         tape.rows = n;
-        self.encode(n, tape);
+        self.encode(&tape.inputs[..n * d], &mut tape.features);
         let lf = self.mlp.in_dim();
         self.mlp.forward(&self.params[self.grid_params..], &tape.features[..n * lf], out, &mut tape.mlp);
     }

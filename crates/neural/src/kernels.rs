@@ -179,6 +179,15 @@ multiversion! {
 }
 
 multiversion! {
+    /// Swish in place, `z ← z σ(z)`.
+    fn swish_inplace(z: &mut [f32]) {
+        for v in z.iter_mut() {
+            *v *= sigmoid(*v);
+        }
+    }
+}
+
+multiversion! {
     /// ReLU backward fused with the bias gradient: `dz = da · [a > 0]` in place over
     /// `da` (`rows × db.len()`), and `db += Σ_rows dz`.
     fn relu_backward(da: &mut [f32], a: &[f32], db: &mut [f32]) {

@@ -165,6 +165,9 @@ pub(crate) struct MlpTape {
     pre_out: Vec<f32>,
     /// Two `cap × H` ping-pong buffers for ∂L/∂h.
     da: [Vec<f32>; 2],
+    /// Two ping-pong buffers for inference, separate so that `infer` between a `forward` and
+    /// its `backward` leaves the recorded pass intact.
+    eval: [Vec<f32>; 2],
 }
 
 impl Mlp {
@@ -308,6 +311,41 @@ impl Mlp {
         }
     }
 
+    /// Inference: like [`Mlp::forward`] but keeps only two layers of activations (ping-pong,
+    /// cache-resident for large chunks) and records nothing.
+    pub(crate) fn infer(&self, params: &[f32], x: &[f32], out: &mut [f32], tape: &mut MlpTape) {
+        let n = out.len();
+        let h = self.width;
+        assert_eq!(x.len(), n * self.in_dim, "Mlp::infer: input is not {n}×{}", self.in_dim);
+        assert_eq!(params.len(), self.num_params, "Mlp::infer: wrong parameter count");
+        for b in &mut tape.eval {
+            if b.len() < n * h {
+                b.resize(n * h, 0.0);
+            }
+        }
+        let [b0, b1] = &mut tape.eval;
+        let (mut prev, mut cur) = (&mut b0[..n * h], &mut b1[..n * h]);
+        for (l, layer) in self.layers.iter().enumerate() {
+            kernels::fill_rows(cur, &params[layer.bias.clone()]);
+            let w = &params[layer.weight.clone()];
+            let (inp, k): (&[f32], usize) = if l == 0 { (x, self.in_dim) } else { (prev, h) };
+            matmul(cur, n, h, k, inp, Op::N, &w[..k * h], Op::N, true);
+            if Some(l) == self.skip {
+                matmul(cur, n, h, self.in_dim, x, Op::N, &w[k * h..], Op::N, true);
+            }
+            match self.activation {
+                Activation::Relu => kernels::relu_inplace(cur),
+                Activation::Swish => kernels::swish_inplace(cur),
+            }
+            std::mem::swap(&mut prev, &mut cur);
+        }
+        kernels::rows_dot(prev, &params[self.out_weight.clone()], params[self.out_bias], out);
+        match self.output_activation {
+            OutputActivation::Relu => out.iter_mut().for_each(|o| *o = o.max(0.0)),
+            OutputActivation::Softplus => out.iter_mut().for_each(|o| *o = kernels::softplus(*o)),
+        }
+    }
+
     /// Adds ∂L/∂params into `grads` (`num_params()` long) given `d_out = ∂L/∂out` of the last
     /// forward on `tape` with input `x`; writes ∂L/∂x into `d_x` (`n × in_dim`) if given.
     pub(crate) fn backward(
@@ -397,6 +435,8 @@ pub struct MlpField {
 #[derive(Debug, Default)]
 pub struct MlpFieldTape {
     encoded: Vec<f32>,
+    /// Encoded inputs of `eval`, kept apart from those `backward` needs.
+    eval_encoded: Vec<f32>,
     mlp: MlpTape,
 }
 
@@ -475,7 +515,14 @@ impl TrainableField for MlpField {
     }
 
     fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut MlpFieldTape) {
-        self.forward(inputs, out, tape);
+        let n = out.len();
+        assert_eq!(inputs.len(), n * self.input_dim(), "MlpField: inputs are not {n}×{}", self.input_dim());
+        let e = self.encoding.output_dim();
+        if tape.eval_encoded.len() < n * e {
+            tape.eval_encoded.resize(n * e, 0.0);
+        }
+        self.encoding.encode(inputs, &mut tape.eval_encoded[..n * e]);
+        self.mlp.infer(&self.params, &tape.eval_encoded[..n * e], out, &mut tape.mlp);
     }
 
     fn forward(&self, inputs: &[f32], out: &mut [f32], tape: &mut MlpFieldTape) {

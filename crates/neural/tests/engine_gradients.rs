@@ -294,3 +294,36 @@ fn chunked_evaluation_matches_one_call_and_tape_reuse() {
     }
     assert_eq!(whole, parts);
 }
+
+/// `eval` (ping-pong inference) agrees with `forward`, and an `eval` between a `forward` and
+/// its `backward` on the same tape leaves the recorded pass intact.
+fn eval_matches_forward_and_keeps_the_tape<F: TrainableField>(f: &F, seed: u64) {
+    let d = f.input_dim();
+    let (xa, xb) = (random_inputs(50, d, seed), random_inputs(30, d, seed + 1));
+    let c = vec![0.5f32; 50];
+    let mut tape = f.new_tape();
+    let (mut fa, mut ea, mut eb) = (vec![0.0; 50], vec![0.0; 50], vec![0.0; 30]);
+    f.forward(&xa, &mut fa, &mut tape);
+    let mut g_plain = vec![0.0; f.num_params()];
+    f.backward(&mut tape, &c, &mut g_plain);
+    f.forward(&xa, &mut fa, &mut tape);
+    f.eval(&xb, &mut eb, &mut tape);
+    f.eval(&xa, &mut ea, &mut tape);
+    let mut g_interleaved = vec![0.0; f.num_params()];
+    f.backward(&mut tape, &c, &mut g_interleaved);
+    assert_eq!(g_plain, g_interleaved, "eval disturbed the recorded forward pass");
+    for (a, b) in fa.iter().zip(&ea) {
+        assert!((a - b).abs() <= 1e-6 * (1.0 + a.abs()), "eval {b} vs forward {a}");
+    }
+}
+
+#[test]
+fn eval_matches_forward_for_every_field() {
+    for act in [Activation::Relu, Activation::Swish] {
+        let cfg = MlpConfig { depth: 5, width: 24, activation: act, ..MlpConfig::default() };
+        eval_matches_forward_and_keeps_the_tape(&MlpField::new(&cfg, 3, 40).unwrap(), 41);
+        eval_matches_forward_and_keeps_the_tape(&MlpField::new(&cfg, 4, 42).unwrap(), 43);
+    }
+    eval_matches_forward_and_keeps_the_tape(&small_grid(3, 44), 45);
+    eval_matches_forward_and_keeps_the_tape(&small_grid(4, 46), 47);
+}
