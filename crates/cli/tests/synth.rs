@@ -124,3 +124,23 @@ fn time_resolved_and_thin_lens() {
     assert_eq!(truth.len(), 2);
     assert_ne!(truth[0].1.data, truth[1].1.data, "the ring moves between t* = 14 and 16");
 }
+
+#[test]
+fn user_volume_becomes_the_truth() {
+    use fluidnerf_core::glam::DVec3;
+    use fluidnerf_core::{Aabb, Volume};
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let aabb = Aabb::cube(DVec3::ZERO, 40.0);
+    let vol = Volume::from_fn([16, 12, 20], aabb, |p| (1.0 - p.length() / 20.0).max(0.0) as f32);
+    let npy = tmp.path().join("mine.npy");
+    fluidnerf_io::volume::write_npy(&npy, &vol).expect("writes volume");
+    let dir = tmp.path().join("set");
+    let o = run_small(&dir, &["--truth-volume", npy.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let scene = fluidnerf_io::scene::load_scene(&dir).expect("scene");
+    let truth = fluidnerf_io::scene::load_truth(&scene).expect("truth");
+    assert_eq!(truth[0].1.data, vol.data);
+    let o = run_small(&tmp.path().join("missing"), &["--truth-volume", "/nonexistent/v.npy"]);
+    assert!(!o.status.success());
+    assert!(text(&o).1.contains("/nonexistent/v.npy"), "{:?}", text(&o));
+}
