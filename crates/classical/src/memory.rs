@@ -52,7 +52,8 @@ impl MemoryEstimate {
 }
 
 /// Estimates the peak memory of running `algorithm` with a `projector` on `grid` and views of
-/// `view_sizes` (width, height) with `threads` worker threads, before anything is allocated.
+/// `view_sizes` (width, height) with `threads` worker threads and, for the splat, `subdivisions`
+/// sub-voxels per axis ([`crate::SplatProjector::subdivisions`]), before anything is allocated.
 /// The estimate is within tens of percent; the row-holding methods (ART, MART, SMART's setup)
 /// are estimated for a ray step of half a voxel.
 pub fn estimate_memory(
@@ -61,6 +62,7 @@ pub fn estimate_memory(
     grid: &Grid,
     view_sizes: &[(usize, usize)],
     threads: usize,
+    subdivisions: usize,
 ) -> MemoryEstimate {
     let n = grid.len() as u64;
     let pixels: u64 = view_sizes.iter().map(|&(w, h)| (w * h) as u64).sum();
@@ -75,7 +77,7 @@ pub fn estimate_memory(
     };
     let rows = if algorithm.holds_rows() {
         match projector {
-            ProjectorKind::Splat => n * 4 * 8 + max_view * 16,
+            ProjectorKind::Splat => n * 4 * 8 * (subdivisions.max(1) as u64).pow(3) + max_view * 16,
             ProjectorKind::Ray => {
                 // Samples per ray ≈ 2 × the grid's diagonal in voxels, ~4 distinct voxels each.
                 let d = grid.dims.iter().map(|&v| (v * v) as f64).sum::<f64>().sqrt();

@@ -120,3 +120,32 @@ fn forward_matches_the_reference_renderer() {
     let (a, b) = (ax.iter().map(|&v| v as f64).sum::<f64>(), reference.sum());
     assert!((a / b - 1.0).abs() < 0.01, "total {a} vs {b}");
 }
+
+/// Voxels several pixels wide: one splat per voxel centre leaves gaps between the 2 × 2 blocks;
+/// the automatic sub-voxel splat closes them and matches the renderer of the same piecewise-
+/// constant voxels (the splat's basis) again.
+#[test]
+fn coarse_voxels_are_subdivided() {
+    let grid = Grid::new([10, 10, 10], aabb());
+    let cams = ring(2, 48);
+    let vol = truth(&grid, blobs);
+    let s = RenderSettings { step: Some(0.005), supersample: 2, ..Default::default() };
+    let boxes = |p: glam::Vec3, _t: f64| {
+        let g = (p.as_dvec3() - grid.aabb.min) / grid.spacing();
+        let [i, j, k] = [g.x, g.y, g.z].map(|c| (c.floor().max(0.0) as usize).min(9));
+        vol.data[(k * 10 + j) * 10 + i]
+    };
+    let auto = SplatProjector::new(grid, &cams, 1.0).expect("valid");
+    assert!(auto.subdivisions() >= 2, "voxels of ~3 px need sub-voxels, got {}", auto.subdivisions());
+    let single = auto.clone().with_subdivisions(1);
+    for v in 0..cams.len() {
+        let reference = render_image(&boxes, &cams[v], &grid.aabb, &s).expect("renders");
+        let mut a = vec![0f32; auto.view_len(v)];
+        auto.forward(v, &vol.data, &mut a);
+        let mut b = a.clone();
+        single.forward(v, &vol.data, &mut b);
+        let (ea, eb) = (nrmse(&a, &reference.data), nrmse(&b, &reference.data));
+        assert!(ea < 0.06, "view {v}: subdivided splat error {ea:.4}");
+        assert!(eb > 2.0 * ea, "view {v}: single splat {eb:.4} should be clearly worse than {ea:.4}");
+    }
+}

@@ -112,6 +112,34 @@ impl SparseRows {
         (0..self.n_rows()).map(|i| self.row(i).1.iter().fold(0f32, |m, &v| m.max(v))).collect()
     }
 
+    /// Sums repeated voxels within each row (and sorts each row by voxel index).
+    pub fn merge_duplicates(&mut self) {
+        let mut ptr = Vec::with_capacity(self.ptr.len());
+        ptr.push(0u64);
+        let mut write = 0usize;
+        let mut pairs: Vec<(u32, f32)> = Vec::new();
+        for i in 0..self.n_rows() {
+            let (a, b) = (self.ptr[i] as usize, self.ptr[i + 1] as usize);
+            pairs.clear();
+            pairs.extend(self.cols[a..b].iter().copied().zip(self.vals[a..b].iter().copied()));
+            pairs.sort_unstable_by_key(|p| p.0);
+            let start = write;
+            for &(j, w) in &pairs {
+                if write > start && self.cols[write - 1] == j {
+                    self.vals[write - 1] += w;
+                } else {
+                    self.cols[write] = j;
+                    self.vals[write] = w;
+                    write += 1;
+                }
+            }
+            ptr.push(write as u64);
+        }
+        self.cols.truncate(write);
+        self.vals.truncate(write);
+        self.ptr = ptr;
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         self.ptr.len() * 8 + self.cols.len() * 4 + self.vals.len() * 4

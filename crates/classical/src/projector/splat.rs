@@ -56,6 +56,7 @@ pub(crate) struct Footprint {
 
 impl SplatView {
     fn new(camera: &Camera, gain_base: f64) -> Self {
+        // `gain_base` already holds 1 / subdivisions³.
         let cfw = camera.camera_from_world();
         let m = cfw.matrix3;
         // glam stores columns; row r of R is (m.x_axis[r], m.y_axis[r], m.z_axis[r]).
@@ -79,12 +80,13 @@ impl SplatView {
         }
     }
 
-    /// Camera-frame position of the voxel row `(·, j, k)`'s first centre and the step per `i`.
+    /// Camera-frame position of the voxel row `(·, j, k)`'s first sample point (the centre
+    /// moved by `offset` voxel sides) and the step per `i`.
     #[inline(always)]
-    fn row_start(&self, grid: &GridF32, j: usize, k: usize) -> ([f32; 3], [f32; 3]) {
-        let y = grid.min[1] + (j as f32 + 0.5) * grid.sp[1];
-        let z = grid.min[2] + (k as f32 + 0.5) * grid.sp[2];
-        let x = grid.min[0] + 0.5 * grid.sp[0];
+    fn row_start(&self, grid: &GridF32, j: usize, k: usize, offset: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        let y = grid.min[1] + (j as f32 + 0.5 + offset[1]) * grid.sp[1];
+        let z = grid.min[2] + (k as f32 + 0.5 + offset[2]) * grid.sp[2];
+        let x = grid.min[0] + (0.5 + offset[0]) * grid.sp[0];
         let r = &self.rot;
         let base = [0, 1, 2].map(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
         let step = [0, 1, 2].map(|a| r[a][0] * grid.sp[0]);
@@ -205,21 +207,71 @@ pub struct SplatProjector {
     cameras: Vec<Camera>,
     views: Vec<SplatView>,
     gf: GridF32,
+    /// Sub-voxels per axis.
+    sub: usize,
+    intensity_scale: f64,
 }
 
 impl SplatProjector {
     /// A projector from `grid` to the images of `cameras`, with the scene's
     /// `intensity_scale` (pixel = scale × ∫ E ds).
+    ///
+    /// Voxels that image larger than 1.5 pixels are split into `s³` sub-voxels (`s` =
+    /// ⌈largest voxel image / 1.5 px⌉, at most 8), each splatted with `1/s³` of the weight, so the
+    /// projection has no gaps at any resolution; [`SplatProjector::auto_subdivisions`] gives
+    /// `s`, and [`SplatProjector::with_subdivisions`] sets it (1 is the dissertation's splat).
     pub fn new(grid: Grid, cameras: &[Camera], intensity_scale: f64) -> Result<Self, ClassicalError> {
         validate(&grid, cameras, intensity_scale)?;
-        let gain_base = intensity_scale * grid.voxel_volume();
-        let views = cameras.iter().map(|c| SplatView::new(c, gain_base)).collect();
+        let sub = Self::auto_subdivisions(&grid, cameras);
         let sp = grid.spacing();
         let gf = GridF32 {
             min: [grid.aabb.min.x as f32, grid.aabb.min.y as f32, grid.aabb.min.z as f32],
             sp: [sp.x as f32, sp.y as f32, sp.z as f32],
         };
-        Ok(SplatProjector { grid, cameras: cameras.to_vec(), views, gf })
+        let mut p = SplatProjector { grid, cameras: cameras.to_vec(), views: Vec::new(), gf, sub, intensity_scale };
+        p.set_views();
+        Ok(p)
+    }
+
+    /// Splits every voxel into `n³` sub-voxels (1 = one splat per voxel centre, the
+    /// dissertation's scheme). Panics unless `1 ≤ n ≤ 16`.
+    pub fn with_subdivisions(mut self, n: usize) -> Self {
+        assert!((1..=16).contains(&n), "SplatProjector: subdivisions must be in 1..=16, got {n}");
+        self.sub = n;
+        self.set_views();
+        self
+    }
+
+    /// Sub-voxels per axis in use.
+    pub fn subdivisions(&self) -> usize {
+        self.sub
+    }
+
+    /// The subdivision [`SplatProjector::new`] chooses: ⌈largest voxel image / 1.5 px⌉ (1..=8),
+    /// with the voxel's image measured at the box corner nearest to each camera.
+    pub fn auto_subdivisions(grid: &Grid, cameras: &[Camera]) -> usize {
+        let side = grid.spacing().max_element();
+        let px = cameras
+            .iter()
+            .map(|c| {
+                let cfw = c.camera_from_world();
+                let near = grid.aabb.corners().iter().map(|&p| cfw.transform_point3(p).z).fold(f64::INFINITY, f64::min);
+                let depth = near.max(0.25 * (grid.aabb.centre() - c.centre()).length());
+                side * c.intrinsics.fx.max(c.intrinsics.fy) / depth
+            })
+            .fold(0.0, f64::max);
+        ((px / 1.5).ceil() as usize).clamp(1, 8)
+    }
+
+    fn set_views(&mut self) {
+        let gain_base = self.intensity_scale * self.grid.voxel_volume() / (self.sub as f64).powi(3);
+        self.views = self.cameras.iter().map(|c| SplatView::new(c, gain_base)).collect();
+    }
+
+    /// Sub-voxel centre offsets, in voxel sides, along each axis.
+    fn offsets(&self) -> Vec<f32> {
+        let s = self.sub;
+        (0..s).map(|a| ((a as f64 + 0.5) / s as f64 - 0.5) as f32).collect()
     }
 
     /// Visits every voxel of z-slices `ks` that lands on view `view`'s image:
@@ -243,15 +295,22 @@ impl SplatProjector {
         let sv = &self.views[view];
         let [nx, ny, _] = self.grid.dims;
         let mut chunk = Chunk::default();
+        let offs = self.offsets();
         for k in ks {
-            for j in 0..ny {
-                let (base, step) = sv.row_start(&self.gf, j, k);
-                let row0 = (k * ny + j) * nx;
-                for i0 in (0..nx).step_by(CHUNK) {
-                    sv.project_chunk::<DISTORTED>(base, step, i0, &mut chunk);
-                    for q in 0..CHUNK.min(nx - i0) {
-                        if chunk.u[q] >= 0.0 {
-                            visit(row0 + i0 + q, &SplatView::footprint(&chunk, q));
+            for &oz in &offs {
+                for &oy in &offs {
+                    for &ox in &offs {
+                        for j in 0..ny {
+                            let (base, step) = sv.row_start(&self.gf, j, k, [ox, oy, oz]);
+                            let row0 = (k * ny + j) * nx;
+                            for i0 in (0..nx).step_by(CHUNK) {
+                                sv.project_chunk::<DISTORTED>(base, step, i0, &mut chunk);
+                                for q in 0..CHUNK.min(nx - i0) {
+                                    if chunk.u[q] >= 0.0 {
+                                        visit(row0 + i0 + q, &SplatView::footprint(&chunk, q));
+                                    }
+                                }
+                            }
                         }
                     }
                 }
@@ -272,28 +331,41 @@ impl SplatProjector {
         let gain = f64::from(self.views[view].gain) / (k.fx * k.fy);
         let [nx, ny, nz] = self.grid.dims;
         let sp = self.grid.spacing();
-        for kk in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let idx = (kk * ny + j) * nx + i;
-                    let c = self.grid.aabb.min + glam::DVec3::new(i as f64 + 0.5, j as f64 + 0.5, kk as f64 + 0.5) * sp;
-                    let p = cfw.transform_point3(c);
-                    let Some(uv) = cam.project_camera_point(p) else { continue };
-                    let n = glam::DVec2::new(p.x / p.z, p.y / p.z);
-                    let (_, jac) = cam.distortion.apply_with_jacobian(n);
-                    let det = k.fx * k.fy * (jac.dxx * jac.dyy - jac.dxy * jac.dyx);
-                    let gamma = gain * det.abs() * p.length() / (p.z * p.z * p.z);
-                    let (u0, v0) = (uv.x.floor(), uv.y.floor());
-                    let (fu, fv) = (uv.x - u0, uv.y - v0);
-                    for (dc, dr, wt) in [
-                        (0, 0, (1.0 - fu) * (1.0 - fv)),
-                        (1, 0, fu * (1.0 - fv)),
-                        (0, 1, (1.0 - fu) * fv),
-                        (1, 1, fu * fv),
-                    ] {
-                        let (c, r) = (u0 as i64 + dc, v0 as i64 + dr);
-                        if c >= 0 && r >= 0 && c < w && r < h {
-                            out[(r * w + c) as usize] += (gamma * wt) as f32 * x[idx];
+        let offs = self.offsets();
+        let mut sub_offsets = Vec::new();
+        for &c in &offs {
+            for &b in &offs {
+                for &a in &offs {
+                    sub_offsets.push([a, b, c]);
+                }
+            }
+        }
+        for o in sub_offsets {
+            let o = glam::DVec3::new(f64::from(o[0]), f64::from(o[1]), f64::from(o[2]));
+            for kk in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let idx = (kk * ny + j) * nx + i;
+                        let c = self.grid.aabb.min
+                            + (glam::DVec3::new(i as f64 + 0.5, j as f64 + 0.5, kk as f64 + 0.5) + o) * sp;
+                        let p = cfw.transform_point3(c);
+                        let Some(uv) = cam.project_camera_point(p) else { continue };
+                        let n = glam::DVec2::new(p.x / p.z, p.y / p.z);
+                        let (_, jac) = cam.distortion.apply_with_jacobian(n);
+                        let det = k.fx * k.fy * (jac.dxx * jac.dyy - jac.dxy * jac.dyx);
+                        let gamma = gain * det.abs() * p.length() / (p.z * p.z * p.z);
+                        let (u0, v0) = (uv.x.floor(), uv.y.floor());
+                        let (fu, fv) = (uv.x - u0, uv.y - v0);
+                        for (dc, dr, wt) in [
+                            (0, 0, (1.0 - fu) * (1.0 - fv)),
+                            (1, 0, fu * (1.0 - fv)),
+                            (0, 1, (1.0 - fu) * fv),
+                            (1, 1, fu * fv),
+                        ] {
+                            let (c, r) = (u0 as i64 + dc, v0 as i64 + dr);
+                            if c >= 0 && r >= 0 && c < w && r < h {
+                                out[(r * w + c) as usize] += (gamma * wt) as f32 * x[idx];
+                            }
                         }
                     }
                 }
@@ -412,11 +484,15 @@ impl Projector for SplatProjector {
                 fill[pix] += 1;
             })
         });
-        SparseRows { ptr, cols, vals }
+        let mut rows = SparseRows { ptr, cols, vals };
+        if self.sub > 1 {
+            rows.merge_duplicates();
+        }
+        rows
     }
 
     fn rows_bytes_estimate(&self, view: usize) -> usize {
-        self.grid.len() * 4 * 8 + (self.view_len(view) + 1) * 16
+        self.grid.len() * 4 * 8 * self.sub.pow(3) + (self.view_len(view) + 1) * 16
     }
 
     fn bytes(&self) -> usize {

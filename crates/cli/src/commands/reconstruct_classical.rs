@@ -41,6 +41,11 @@ pub struct Args {
     /// trilinear line integrals; closer to the imaging model, slower) [default: splat].
     #[arg(long, value_enum)]
     pub projector: Option<ProjectorArg>,
+    /// Splat projector only: split each voxel into N³ sub-voxels so that voxels imaging larger
+    /// than a pixel leave no gaps; 1 is the dissertation's splat, 0 chooses N from the voxel's
+    /// image size (⌈pixels / 1.5⌉) [default: 0].
+    #[arg(long, value_name = "N")]
+    pub splat_subdivisions: Option<usize>,
     /// Ray projector only: sampling step along each ray, in voxel sides [default: 0.5].
     #[arg(long, value_name = "VOXELS")]
     pub ray_step: Option<f64>,
@@ -78,6 +83,8 @@ pub enum ProjectorArg {
 #[serde(default, deny_unknown_fields)]
 pub struct ClassicalConfig {
     pub projector: ProjectorKind,
+    /// Sub-voxels per axis of the splat; 0 = automatic.
+    pub splat_subdivisions: usize,
     /// Ray step in voxel sides (ray projector).
     pub ray_step: f64,
     pub visual_hull: bool,
@@ -95,6 +102,7 @@ impl Default for ClassicalConfig {
     fn default() -> Self {
         ClassicalConfig {
             projector: ProjectorKind::Splat,
+            splat_subdivisions: 0,
             ray_step: 0.5,
             visual_hull: false,
             hull_threshold: DEFAULT_HULL_THRESHOLD,
@@ -127,6 +135,8 @@ struct RunReport {
     method: Method,
     version: String,
     projector: ProjectorKind,
+    /// Sub-voxels per axis of the splat (splat projector).
+    splat_subdivisions: Option<usize>,
     dims: [usize; 3],
     voxel_size: [f64; 3],
     views: usize,
@@ -212,6 +222,9 @@ fn resolve(args: &super::reconstruct::Args, alg: Algorithm) -> anyhow::Result<(C
             ProjectorArg::Ray => ProjectorKind::Ray,
         };
     }
+    if let Some(n) = c.splat_subdivisions {
+        cfg.splat_subdivisions = n;
+    }
     if let Some(s) = c.ray_step {
         cfg.ray_step = s;
     }
@@ -248,6 +261,9 @@ fn resolve(args: &super::reconstruct::Args, alg: Algorithm) -> anyhow::Result<(C
 fn validate(cfg: &ClassicalConfig, alg: Algorithm, resolution: usize) -> anyhow::Result<()> {
     if !(1..=4096).contains(&resolution) {
         bail!("--resolution must be between 1 and 4096, got {resolution}");
+    }
+    if cfg.splat_subdivisions > 16 {
+        bail!("--splat-subdivisions must be at most 16, got {}", cfg.splat_subdivisions);
     }
     if !(cfg.ray_step > 0.0 && cfg.ray_step <= 4.0) {
         bail!("--ray-step must be in (0, 4] voxel sides, got {}", cfg.ray_step);
@@ -331,7 +347,11 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         bail!("{}: every frame is held out; nothing to reconstruct from", args.scene.display());
     }
     let threads = rayon::current_num_threads();
-    let estimate = estimate_memory(alg, cfg.projector, &grid, &sizes, threads);
+    let subdivisions = match cfg.splat_subdivisions {
+        0 => SplatProjector::auto_subdivisions(&grid, &cameras),
+        n => n,
+    };
+    let estimate = estimate_memory(alg, cfg.projector, &grid, &sizes, threads, subdivisions);
     // Scoring against the truth holds it, a copy resampled to its grid and temporaries.
     let truth_bytes: u64 = scene
         .truth
@@ -373,15 +393,17 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
     let images: Vec<Image> =
         scene.frames.iter().zip(all_images).filter(|(f, _)| !f.holdout).map(|(_, im)| im).collect();
     let projector: Box<dyn Projector> = match cfg.projector {
-        ProjectorKind::Splat => Box::new(SplatProjector::new(grid, &cameras, scene.intensity_scale)?),
+        ProjectorKind::Splat => {
+            Box::new(SplatProjector::new(grid, &cameras, scene.intensity_scale)?.with_subdivisions(subdivisions))
+        }
         ProjectorKind::Ray => Box::new(RayProjector::new(grid, &cameras, scene.intensity_scale, cfg.ray_step)?),
     };
     let voxel = grid.spacing();
     let footprint_px = voxel_footprint_px(&cameras, &grid);
-    if cfg.projector == ProjectorKind::Splat && footprint_px > 2.0 {
+    if cfg.projector == ProjectorKind::Splat && footprint_px / subdivisions as f64 > 2.0 {
         log::warn!(
-            "voxels cover about {footprint_px:.1} pixels: the splat leaves gaps at this resolution; raise --resolution \
-             or use --projector ray"
+            "voxels cover about {footprint_px:.1} pixels and are split into only {subdivisions}³: the splat leaves \
+             gaps; raise --splat-subdivisions (0: automatic) or use --projector ray"
         );
     }
     let hull = cfg.visual_hull.then(|| visual_hull(&grid, &cameras, &images, cfg.hull_threshold));
@@ -455,6 +477,7 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         method: args.method,
         version: env!("CARGO_PKG_VERSION").to_string(),
         projector: cfg.projector,
+        splat_subdivisions: (cfg.projector == ProjectorKind::Splat).then_some(subdivisions),
         dims: grid.dims,
         voxel_size: [voxel.x, voxel.y, voxel.z],
         views: cameras.len(),
