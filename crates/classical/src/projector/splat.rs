@@ -16,8 +16,12 @@
 //! the scene's imaging law. Pixels outside the image are dropped; voxels behind the camera
 //! contribute nothing.
 //!
-//! The splat samples the image at voxel-centre positions only, so it needs voxels no larger than
-//! about two pixel footprints; coarser grids leave gaps in the projection.
+//! One splat per voxel centre (the dissertation's scheme) leaves gaps in the projection once a
+//! voxel images larger than about 1.5 pixels, so such voxels are split into `s³` sub-voxels
+//! (cell-centred within the voxel), each splatted the same way with `1/s³` of the weight; `s` is
+//! chosen from the geometry ([`SplatProjector::auto_subdivisions`]) or set
+//! ([`SplatProjector::with_subdivisions`]). Sub-voxels of one voxel share its unknown, so the
+//! map stays a linear function of the voxel values with an exact adjoint.
 
 use fluidnerf_core::Camera;
 use rayon::prelude::*;
