@@ -137,6 +137,33 @@ fn time_steps_on<F: TrainableField>(
     Timing { wall_s: median(times), cpu_s: median(cpu) }
 }
 
+/// Median time of `eval` over `batch` random rows, split over the threads in chunks.
+fn time_eval<F: TrainableField>(field: &F, batch: usize, chunk: usize, steps: usize) -> Timing {
+    let threads = rayon::current_num_threads();
+    let d = field.input_dim();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let inputs: Vec<f32> = (0..batch * d).map(|_| rng.random::<f32>()).collect();
+    let mut out = vec![0.0f32; batch];
+    let mut tapes: Vec<F::Tape> = (0..threads).map(|_| field.new_tape()).collect();
+    let per = batch.div_ceil(threads);
+    let (mut times, mut cpu) = (Vec::new(), Vec::new());
+    for s in 0..steps + 1 {
+        let (t0, c0) = (Instant::now(), process_cpu_s());
+        tapes.par_iter_mut().zip(out.par_chunks_mut(per)).enumerate().for_each(|(t, (tape, out))| {
+            for (k, o) in out.chunks_mut(chunk).enumerate() {
+                let i = t * per + k * chunk;
+                field.eval(&inputs[i * d..(i + o.len()) * d], o, tape);
+            }
+        });
+        let (dt, dc) = (t0.elapsed().as_secs_f64(), process_cpu_s() - c0);
+        if s > 0 {
+            times.push(dt);
+            cpu.push(dc / threads as f64);
+        }
+    }
+    Timing { wall_s: median(times), cpu_s: median(cpu) }
+}
+
 /// Seconds per step: wall clock, and process CPU time divided by the number of threads
 /// ("core-normalised": what the wall time would be if every thread had a core to itself —
 /// the honest figure on a machine shared with other jobs; spinning idle threads make it
@@ -308,6 +335,15 @@ fn mlp_benches(batch: usize, steps: usize, threads: usize, no_torch: bool) {
     );
     if let Some((pw, pc)) = torch {
         println!("ratio rust / pytorch: {:.2}x wall | {:.2}x core-normalised", rw / pw, rc / pc);
+    }
+
+    for chunk in [256, 8192] {
+        let t = time_eval(&mlp, batch, chunk, steps);
+        println!(
+            "mlp 8x256 relu  inference (eval) chunk {chunk:5}: {:8.0} | {:8.0} samples/s",
+            batch as f64 / t.wall_s,
+            batch as f64 / t.cpu_s
+        );
     }
 
     let mut swish = MlpField::new(&MlpConfig::table_5_2(), 4, 0).expect("Table 5.2 config is valid");
