@@ -15,6 +15,16 @@ use fluidnerf_synth::{
     ThinLensSettings, DEFAULT_PRESET,
 };
 
+/// What `--help` says about the outputs (the struct's doc comment is shadowed by the
+/// subcommand's).
+const OUTPUTS: &str = "Starts from a preset (--list-presets; default planar15, the dissertation's \
+15-camera planar ring around a turbulent jet) and applies the options given; later options \
+override earlier ones. Writes into OUT: transforms.json (cameras, box, intensity scale), \
+images/*.png (16-bit sensor counts: counts - dark offset = intensity_scale x line integral of E \
+in mm), truth/*.npy (the ground truth on the voxel grid, shape (nz, ny, nx)), preview.png (a \
+central slice of the truth and one camera image) and synth.json (the resolved settings; rerun \
+with --config). The same seed gives the same bytes.";
+
 /// Phantoms.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum PhantomArg {
@@ -48,17 +58,9 @@ pub enum ModelArg {
     ThinLens,
 }
 
-/// Generate a synthetic tomography data set with known ground truth.
-///
-/// Starts from a preset (see --list-presets; default planar15, the dissertation's 15-camera
-/// planar ring around a turbulent jet) and applies the options given. Writes into OUT:
-/// `transforms.json` (cameras, box, intensity scale), `images/*.png` (16-bit sensor counts:
-/// counts − dark offset ≈ intensity_scale × ∫E ds in mm), `truth/*.npy` (the ground truth on
-/// the voxel grid, shape (nz, ny, nx)), `preview.png` (a central slice of the truth and one
-/// camera image) and `synth.json` (the resolved settings; rerun with --config). The same seed
-/// gives the same bytes.
+/// Options of `fluidnerf synth`; `OUTPUTS` describes what it writes.
 #[derive(clap::Args, Debug)]
-#[command(args_override_self = true)]
+#[command(args_override_self = true, after_long_help = OUTPUTS)]
 pub struct Args {
     /// Output directory; created if missing. One that already holds a scene needs --force.
     #[arg(short, long, required_unless_present = "list_presets")]
