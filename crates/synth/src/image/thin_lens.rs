@@ -96,6 +96,8 @@ pub struct Emitters {
 const CHUNK: usize = 2048;
 /// Fixed-point resolution of voxel values relative to the largest.
 const FIXED_ONE: f64 = (1u64 << 24) as f64;
+/// Rays traced together (see the ray loop).
+const RAY_LANES: usize = 8;
 /// 2⁻²⁴: 24 random bits to a uniform f32 in [0, 1).
 const BITS24: f32 = 1.0 / (1u32 << 24) as f32;
 
@@ -219,32 +221,44 @@ pub fn render(
                         count += 1;
                     }
                     rays += count;
-                    for _ in 0..count {
-                        // A uniform point on the unit sphere (z uniform, Archimedes) and one on
-                        // the unit disc (r = √u), each from 48 random bits.
-                        let b = rng.next_u64();
-                        let (u1, u2) = ((b >> 40) as f32 * BITS24, ((b >> 16) & 0xff_ffff) as f32 * BITS24);
-                        let sz = 2.0 * u1 - 1.0;
-                        let sr = (1.0 - sz * sz).max(0.0).sqrt();
-                        let (ss, sc) = crate::fastmath::sin_cos(std::f32::consts::TAU * u2);
-                        let s = [sr * sc, sr * ss, sz];
-                        let b = rng.next_u64();
-                        let (u3, u4) = ((b >> 40) as f32 * BITS24, ((b >> 16) & 0xff_ffff) as f32 * BITS24);
-                        let ar = u3.sqrt();
-                        let (as_, ac) = crate::fastmath::sin_cos(std::f32::consts::TAU * u4);
-                        let a = [ar * ac, ar * as_];
-                        let p = c + Vec3::from(s) * radius;
-                        let inv_z = 1.0 / p.z;
-                        let defocus = inv_z - inv_lo;
-                        let u = cx + fx * (p.x * inv_z - ra * a[0] * defocus);
-                        let v = cy + fy * (p.y * inv_z - ra * a[1] * defocus);
-                        // Pixel (col, row) covers [col − ½, col + ½); truncation is the floor for
-                        // the non-negative values kept (NaN fails the test too).
-                        let (fu, fv) = (u + 0.5, v + 0.5);
-                        if fu >= 0.0 && fv >= 0.0 {
-                            let (col, row) = (fu as usize, fv as usize);
-                            if col < w && row < h {
-                                acc[row * w + col] += q as u64;
+                    // Rays in blocks of RAY_LANES: the random bits are drawn first, then the
+                    // arithmetic runs lane-wise (vectorisable), then the hits are binned.
+                    let mut left = count as usize;
+                    while left > 0 {
+                        let n = left.min(RAY_LANES);
+                        left -= n;
+                        let mut bits = [0u64; 2 * RAY_LANES];
+                        for b in bits.iter_mut().take(2 * n) {
+                            *b = rng.next_u64();
+                        }
+                        let mut fu = [0.0f32; RAY_LANES];
+                        let mut fv = [0.0f32; RAY_LANES];
+                        for l in 0..RAY_LANES {
+                            // A uniform point on the unit sphere (z uniform, Archimedes) and one
+                            // on the unit disc (r = √u), each from 48 random bits.
+                            let (b0, b1) = (bits[2 * l], bits[2 * l + 1]);
+                            let (u1, u2) = ((b0 >> 40) as f32 * BITS24, ((b0 >> 16) & 0xff_ffff) as f32 * BITS24);
+                            let sz = 2.0 * u1 - 1.0;
+                            let sr = (1.0 - sz * sz).max(0.0).sqrt();
+                            let (ss, sc) = crate::fastmath::sin_cos(std::f32::consts::TAU * u2);
+                            let (u3, u4) = ((b1 >> 40) as f32 * BITS24, ((b1 >> 16) & 0xff_ffff) as f32 * BITS24);
+                            let ar = u3.sqrt();
+                            let (as_, ac) = crate::fastmath::sin_cos(std::f32::consts::TAU * u4);
+                            let (px, py, pz) = (c.x + radius * sr * sc, c.y + radius * sr * ss, c.z + radius * sz);
+                            let inv_z = 1.0 / pz;
+                            let defocus = inv_z - inv_lo;
+                            // Pixel (col, row) covers [col − ½, col + ½).
+                            fu[l] = cx + fx * (px * inv_z - ra * ar * ac * defocus) + 0.5;
+                            fv[l] = cy + fy * (py * inv_z - ra * ar * as_ * defocus) + 0.5;
+                        }
+                        for l in 0..n {
+                            // Truncation is the floor for the non-negative values kept (NaN
+                            // fails the test too).
+                            if fu[l] >= 0.0 && fv[l] >= 0.0 {
+                                let (col, row) = (fu[l] as usize, fv[l] as usize);
+                                if col < w && row < h {
+                                    acc[row * w + col] += q as u64;
+                                }
                             }
                         }
                     }
