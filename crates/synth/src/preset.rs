@@ -4,8 +4,8 @@
 //!
 //! The default, `planar15`, is sized to run in about a minute on a two-core machine: a 256³
 //! truth (0.156 mm voxels), 256² px images (pixel footprint 0.156 mm, matching the voxels as
-//! in the dissertation's 0.05 mm / 0.05 mm), thin lens with 64 rays per focal-plane voxel
-//! (~1.4·10⁹ rays, about 64 CPU-seconds). The `dissertation` preset has Table 6.1's full size.
+//! in the dissertation's 0.05 mm / 0.05 mm), thin lens with 128 rays per focal-plane voxel
+//! (~2.8·10⁹ rays; about 60 CPU-seconds in all). The `dissertation` preset has Table 6.1's full size.
 //!
 //! The planar sets are subsets of one 120-camera ring (every 30th, 15th, …), as in the
 //! dissertation, so a camera keeps its name across them; the 180° arc takes every 4th camera

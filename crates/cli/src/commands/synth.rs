@@ -152,7 +152,7 @@ pub struct Args {
     /// Pinhole: render the continuous phantom instead of its voxel grid (slow, exact).
     #[arg(long, help_heading = "Images")]
     pub analytic: bool,
-    /// Thin lens: rays cast per voxel on the focal plane (N_rays of Eq. 6.7) [default: 64].
+    /// Thin lens: rays cast per voxel on the focal plane (N_rays of Eq. 6.7) [default: 128].
     #[arg(long, help_heading = "Images")]
     pub rays_per_voxel: Option<f64>,
 

@@ -47,7 +47,7 @@ use crate::SynthError;
 #[serde(default, deny_unknown_fields)]
 pub struct ThinLensSettings {
     /// Rays cast from a voxel on the focal plane, `N_rays` of Eq. 6.7. The dissertation used
-    /// 500 with 0.05 mm voxels; fewer rays give more shot noise. Default 64.
+    /// 500 with 0.05 mm voxels; fewer rays give more shot noise. Default 128.
     pub rays_per_voxel: f64,
     /// Voxels with values at or below this are not cast. Default 0 (every non-zero voxel).
     pub threshold: f32,
@@ -55,7 +55,7 @@ pub struct ThinLensSettings {
 
 impl Default for ThinLensSettings {
     fn default() -> Self {
-        ThinLensSettings { rays_per_voxel: 64.0, threshold: 0.0 }
+        ThinLensSettings { rays_per_voxel: 128.0, threshold: 0.0 }
     }
 }
 
