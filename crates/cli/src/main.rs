@@ -8,6 +8,7 @@ use clap::Parser;
 mod commands;
 mod interrupt;
 mod progress;
+mod run_report;
 
 /// Tomography of flows: reconstruct the 3D (or 4D) scalar field of glowing smoke, dye or
 /// flame from a handful of calibrated camera images.

@@ -55,10 +55,14 @@ pub fn summarise(dir: &Path, label: &str, truth: Option<&Volume>, scene: &Scene)
     let weights: u64 = std::fs::read_dir(dir)
         .with_context(|| format!("listing {}", dir.display()))?
         .filter_map(Result::ok)
-        .filter(|e| e.path().extension().is_some_and(|x| x == "safetensors") && !e.path().to_string_lossy().contains("checkpoint"))
+        .filter(|e| {
+            e.path().extension().is_some_and(|x| x == "safetensors")
+                && !e.path().to_string_lossy().contains("checkpoint")
+        })
         .filter_map(|e| e.metadata().ok().map(|m| m.len()))
         .sum();
-    let result_bytes = if weights > 0 { weights } else { std::fs::metadata(&volume_path).map(|m| m.len()).unwrap_or(0) };
+    let result_bytes =
+        if weights > 0 { weights } else { std::fs::metadata(&volume_path).map(|m| m.len()).unwrap_or(0) };
 
     let (loss, loss_label) = match (numbers(&report, "loss_history"), numbers(&report, "residual_history")) {
         (Some(l), _) => (l, "training loss (MSE)"),
@@ -117,14 +121,13 @@ pub fn bytes(n: u64) -> String {
 /// The metrics table of several runs: global figures, then NRMSE per region.
 pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
     let first = runs.iter().find_map(|r| r.metrics.as_ref())?;
-    let mut header: Vec<String> = ["method", "NRMSE", "SSIM (global)", "SSIM (windowed)", "PSNR [dB]"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
+    let mut header: Vec<String> =
+        ["method", "NRMSE", "SSIM (global)", "SSIM (windowed)", "PSNR [dB]"].iter().map(|s| s.to_string()).collect();
     header.extend(first.regions.iter().map(|r| format!("NRMSE {}", r.region.name)));
     header.extend(["time [s]".to_string(), "result size".to_string()]);
     let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    let mut table = Table::new("Volume metrics against the ground truth (lower NRMSE, higher SSIM/PSNR are better)", &header_refs);
+    let mut table =
+        Table::new("Volume metrics against the ground truth (lower NRMSE, higher SSIM/PSNR are better)", &header_refs);
     for r in runs {
         let Some(m) = &r.metrics else { continue };
         let f = fluidnerf_viz::report::format_value;
@@ -160,7 +163,11 @@ pub fn slice_figure(truth: Option<&Volume>, runs: &[&RunSummary], units: &str) -
         }
         for r in runs {
             // Resample onto the reference grid so panels and differences line up.
-            let v = if r.volume.dims == reference.dims { r.volume.clone() } else { r.volume.resample(reference.dims, reference.aabb) };
+            let v = if r.volume.dims == reference.dims {
+                r.volume.clone()
+            } else {
+                r.volume.resample(reference.dims, reference.aabb)
+            };
             let p = fluidnerf_viz::slice(&v, axis, pos, units)?;
             if let Some(tp) = &truth_panel {
                 let mut d = tp.difference(&p);
@@ -190,8 +197,7 @@ pub fn slice_figure(truth: Option<&Volume>, runs: &[&RunSummary], units: &str) -
     }
     // One row per plane: values then differences.
     let per_row = if truth.is_some() { 2 } else { 1 };
-    let rows: Vec<Vec<u8>> =
-        groups.chunks(per_row).map(fluidnerf_viz::encode_panels_png).collect::<Result<_, _>>()?;
+    let rows: Vec<Vec<u8>> = groups.chunks(per_row).map(fluidnerf_viz::encode_panels_png).collect::<Result<_, _>>()?;
     stack_pngs(&rows)
 }
 
@@ -213,7 +219,12 @@ fn stack_pngs(pngs: &[Vec<u8>]) -> anyhow::Result<Vec<u8>> {
 }
 
 /// The report of a set of runs on one scene.
-pub fn build_report(title: &str, scene: &Scene, truth: Option<&Volume>, runs: &[&RunSummary]) -> anyhow::Result<Report> {
+pub fn build_report(
+    title: &str,
+    scene: &Scene,
+    truth: Option<&Volume>,
+    runs: &[&RunSummary],
+) -> anyhow::Result<Report> {
     let mut report = Report {
         title: title.to_string(),
         subtitle: format!(
@@ -247,7 +258,8 @@ pub fn build_report(title: &str, scene: &Scene, truth: Option<&Volume>, runs: &[
         caption: "Slices of the reconstruction(s) and, where the truth is known, the differences.".into(),
         image: ImageData::Png(slices),
     });
-    let histories: Vec<RunHistory> = runs.iter().map(|r| r.history.clone()).filter(|h| !h.loss.value.is_empty()).collect();
+    let histories: Vec<RunHistory> =
+        runs.iter().map(|r| r.history.clone()).filter(|h| !h.loss.value.is_empty()).collect();
     if !histories.is_empty() {
         let plots = fluidnerf_viz::convergence_plots(&histories);
         let png = fluidnerf_viz::encode_plots_png(&plots, 2)?;

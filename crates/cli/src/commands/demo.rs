@@ -10,9 +10,11 @@ use clap::Parser;
 
 use crate::run_report::{self, RunSummary};
 
-/// Synthesise a small turbulent-jet scene, reconstruct it with FluidNeRF (the fast grid
-/// field) and with ASART (the classical baseline), score both against the known truth, and
-/// write pictures and a self-contained report.html.
+/// Run the whole pipeline on a built-in example and compare FluidNeRF with ASART.
+///
+/// Synthesises a small turbulent-jet scene, reconstructs it with FluidNeRF (the fast grid
+/// field) and with ASART (the classical baseline), scores both against the known truth, and
+/// writes pictures and a self-contained report.html.
 ///
 /// Everything lands in OUT: `scene/` (the synthetic data set), `fluidnerf/` and `asart/` (one
 /// run directory each, with volumes, settings and reports), `slices.png`, `convergence.png`,
@@ -86,7 +88,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (dir, _, _) in methods {
         let run_dir = out.join(dir);
         let mut line = vec!["eval".to_string(), path(&run_dir), "--scene".into(), path(&scene_dir)];
-        line.extend(["--json".into(), path(&run_dir.join("metrics.json")), "--csv".into(), path(&run_dir.join("metrics.csv"))]);
+        line.extend([
+            "--json".into(),
+            path(&run_dir.join("metrics.json")),
+            "--csv".into(),
+            path(&run_dir.join("metrics.csv")),
+        ]);
         fluidnerf(&line)?;
     }
 
@@ -98,7 +105,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect::<anyhow::Result<_>>()?;
     let refs: Vec<&RunSummary> = runs.iter().collect();
 
-    let report = run_report::build_report("fluidnerf demo: FluidNeRF and ASART on a synthetic jet", &scene, truth.as_ref(), &refs)?;
+    let report = run_report::build_report(
+        "fluidnerf demo: FluidNeRF and ASART on a synthetic jet",
+        &scene,
+        truth.as_ref(),
+        &refs,
+    )?;
     let slices = run_report::slice_figure(truth.as_ref(), &refs, &scene.units)?;
     fluidnerf_io::atomic_write(&out.join("slices.png"), |w| w.write_all(&slices))?;
     let histories: Vec<_> = runs.iter().map(|r| r.history.clone()).collect();
@@ -126,7 +138,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     print_table(&runs, &wall);
     #[allow(clippy::print_stdout)]
     {
-        println!("\ntotal {:.1} s; open {} in a browser", start.elapsed().as_secs_f64(), out.join("report.html").display());
+        println!(
+            "\ntotal {:.1} s; open {} in a browser",
+            start.elapsed().as_secs_f64(),
+            out.join("report.html").display()
+        );
     }
     Ok(())
 }

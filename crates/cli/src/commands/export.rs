@@ -22,8 +22,11 @@ pub enum MeshFormat {
     Obj,
 }
 
-/// Sample a reconstruction onto a grid and export it: volumes for NumPy, ParaView and MATLAB,
-/// slice pictures with a colour bar, truth | reconstruction | difference panels, isosurfaces.
+/// Export a reconstruction: volumes, slice pictures, comparisons and isosurfaces.
+///
+/// Samples the reconstruction onto a grid and writes volumes for NumPy, ParaView and MATLAB,
+/// slice pictures with a colour bar, truth | reconstruction | difference panels, and
+/// isosurfaces as meshes.
 ///
 /// With none of --npy, --vti, --raw, --slices or --isosurface, writes `volume.npy`,
 /// `volume.vti` and slices through the middle of the box along x, y and z. Always writes

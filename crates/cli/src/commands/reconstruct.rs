@@ -54,8 +54,9 @@ impl Method {
 /// Reconstruct a scalar field from a scene's images.
 ///
 /// Writes into OUT: the volume (`volume.npy`, `volume.vti`), the resolved settings
-/// (`config.json`, rerun with `--config`), and `report.json` (iterations, loss or residual
-/// history, time, memory). Neural methods also write their weights.
+/// (`config.json`, rerun with `--config`), `report.json` (iterations, loss or residual
+/// history, time, memory) and `report.html` (settings, metrics against the truth when the scene
+/// has one, slices and convergence plots). Neural methods also write their weights.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The scene: a folder holding `transforms.json`, or the file itself.
@@ -97,10 +98,28 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     crate::interrupt::install();
     if args.method.is_temporal() {
-        reconstruct_temporal::run(&args)
+        reconstruct_temporal::run(&args)?;
     } else if args.method.is_classical() {
-        reconstruct_classical::run(&args)
+        reconstruct_classical::run(&args)?;
     } else {
-        reconstruct_neural::run(&args)
+        reconstruct_neural::run(&args)?;
+    }
+    write_report(&args);
+    Ok(())
+}
+
+/// Adds `report.html` to a run directory holding a single volume. A failure here must not
+/// turn a finished reconstruction into an error, so it is a warning.
+fn write_report(args: &Args) {
+    if !args.out.join("volume.npy").exists() {
+        return;
+    }
+    let label = format!("{:?}", args.method);
+    let written = fluidnerf_io::scene::load_scene(&args.scene)
+        .map_err(anyhow::Error::from)
+        .and_then(|scene| crate::run_report::write_run_report(&args.out, &scene, &label));
+    match written {
+        Ok(path) => log::info!("wrote {}", path.display()),
+        Err(e) => log::warn!("could not write the run report in {}: {e:#}", args.out.display()),
     }
 }

@@ -58,7 +58,12 @@ pub enum ModelArg {
     ThinLens,
 }
 
-/// Options of `fluidnerf synth`; `OUTPUTS` describes what it writes.
+/// Generate a synthetic data set with known ground truth.
+///
+/// A phantom (a turbulent jet, a starting jet, simple shapes or your own volume) is imaged by a
+/// camera rig (planar ring, arc or sphere) through a pinhole or a thin lens with a finite
+/// aperture, with sensor noise, and written as a scene that every other command reads. Start
+/// from a preset and override any setting; the resolved settings are saved next to the scene.
 #[derive(clap::Args, Debug)]
 #[command(args_override_self = true, after_long_help = OUTPUTS)]
 pub struct Args {
