@@ -101,23 +101,10 @@ struct Report {
     holdout_loss_history: Vec<(usize, f32)>,
 }
 
-fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConfig, Option<String>)> {
+/// Applies the training options given on the command line (they override the preset or the
+/// rerun config). Shared by the static and the time-resolved neural methods.
+pub(crate) fn apply_train_options(t: &mut TrainConfig, args: &super::reconstruct::Args) {
     let n = &args.neural;
-    let default_preset = if args.method == Method::Fast { "fast" } else { "faithful" };
-    let mut cfg = match (&args.config, &n.preset) {
-        (Some(path), None) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let run: RunConfig = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a neural run configuration", path.display()))?;
-            run.neural
-        }
-        (_, preset) => {
-            let name = preset.as_deref().unwrap_or(default_preset);
-            NeuralConfig::preset(name)
-                .with_context(|| format!("unknown preset {name:?} (known: {})", PRESETS.join(", ")))?
-        }
-    };
-    let t = &mut cfg.train;
     if let Some(v) = n.rays_per_image {
         t.rays_per_image = v;
     }
@@ -138,7 +125,26 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConf
     if let Some(b) = n.time_budget {
         t.time_budget_s = Some(b);
     }
-    t.validate()?;
+}
+
+fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConfig, Option<String>)> {
+    let n = &args.neural;
+    let default_preset = if args.method == Method::Fast { "fast" } else { "faithful" };
+    let mut cfg = match (&args.config, &n.preset) {
+        (Some(path), None) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let run: RunConfig = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a neural run configuration", path.display()))?;
+            run.neural
+        }
+        (_, preset) => {
+            let name = preset.as_deref().unwrap_or(default_preset);
+            NeuralConfig::preset(name)
+                .with_context(|| format!("unknown preset {name:?} (known: {})", PRESETS.join(", ")))?
+        }
+    };
+    apply_train_options(&mut cfg.train, args);
+    cfg.train.validate()?;
     Ok((cfg, n.preset.clone()))
 }
 

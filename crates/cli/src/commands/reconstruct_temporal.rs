@@ -158,27 +158,7 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(TemporalCo
             }
         }
     };
-    let tc = &mut cfg.train;
-    if let Some(v) = n.rays_per_image {
-        tc.rays_per_image = v;
-    }
-    if let Some(v) = n.coarse_samples {
-        tc.coarse_samples = v;
-    }
-    if let Some(v) = n.fine_samples {
-        tc.fine_samples = v;
-    }
-    if let Some(lr) = n.learning_rate {
-        let ratio = tc.schedule.at_decay_iters / tc.schedule.initial;
-        tc.schedule.initial = lr;
-        tc.schedule.at_decay_iters = lr * ratio;
-    }
-    if let Some(m) = args.max_iterations {
-        tc.max_iterations = m;
-    }
-    if let Some(b) = n.time_budget {
-        tc.time_budget_s = Some(b);
-    }
+    super::reconstruct_neural::apply_train_options(&mut cfg.train, args);
     if let Some(w) = t.window {
         cfg.windows.frames = w;
     }
