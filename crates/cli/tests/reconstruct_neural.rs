@@ -148,3 +148,24 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     ));
     assert_eq!(report(&d.join("mlp2"))["train"]["iterations"], 2);
 }
+
+/// `--keep-best-holdout` writes the field of the evaluation with the lowest held-out loss.
+#[test]
+fn keep_best_holdout_writes_the_best_evaluated_field() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth = "synth --preset demo --phantom ball --cameras 6 --pixels 32 --resolution 24 --holdout 1 --noise 0.1 -o scene -q";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    let run = "reconstruct scene -o run --method fast --preset dense --max-iterations 200 --resolution 24 --keep-best-holdout -q";
+    ok(&fluidnerf(d, &run.split_whitespace().collect::<Vec<_>>()));
+    let r = report(&d.join("run"));
+    let history: Vec<(u64, f64)> = r["holdout_loss_history"]
+        .as_array()
+        .expect("held-out history")
+        .iter()
+        .map(|p| (p[0].as_u64().expect("iteration"), p[1].as_f64().expect("loss")))
+        .collect();
+    assert!(history.len() >= 2, "held-out loss evaluated several times: {history:?}");
+    let best = history.iter().copied().fold((0, f64::INFINITY), |b, p| if p.1 < b.1 { p } else { b });
+    assert_eq!(r["kept_iteration"].as_u64(), Some(best.0), "history {history:?}");
+}

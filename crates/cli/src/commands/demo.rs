@@ -38,7 +38,8 @@ pub struct Args {
     #[arg(long, default_value_t = 7)]
     pub holdout: usize,
     /// FluidNeRF training iterations. On noisy images a grid field starts to fit the noise
-    /// after a few hundred iterations (its held-out loss rises), so the demo stops early.
+    /// after a few hundred iterations; the demo keeps the field whose held-out camera loss was
+    /// lowest (`--keep-best-holdout`), which needs no ground truth.
     #[arg(long, default_value_t = 300)]
     pub iterations: usize,
     /// Seed of the synthetic noise and of training.
@@ -94,7 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let mut line = vec!["reconstruct".to_string(), path(&scene_dir), "-o".into(), path(&out.join(dir))];
         line.extend(words(&format!("--method {method} --resolution {} --seed {}", args.resolution, args.seed)));
         if method == "fast" {
-            line.extend(words(&format!("--max-iterations {}", args.iterations)));
+            line.extend(words(&format!("--max-iterations {} --keep-best-holdout", args.iterations)));
         }
         line.extend(force.clone());
         fluidnerf(&line)?;

@@ -57,6 +57,12 @@ pub struct Args {
     /// every k-th voxel centre of the truth, at most 64 per side; 0: only at the end).
     #[arg(long, default_value_t = 100)]
     pub eval_every: usize,
+    /// Keep the field of the iteration with the lowest held-out loss instead of the last one
+    /// (early stopping without ground truth; needs held-out frames in the scene). On noisy
+    /// images a field eventually starts to fit the noise: the held-out loss then rises while
+    /// the training loss still falls. The checkpoint keeps the last state for --resume.
+    #[arg(long)]
+    pub keep_best_holdout: bool,
 }
 
 /// `config.json`.
@@ -99,6 +105,8 @@ struct Report {
     nrmse_history: Vec<NrmsePoint>,
     loss_history: Vec<f32>,
     holdout_loss_history: Vec<(usize, f32)>,
+    /// With --keep-best-holdout: the iteration whose field was written (None: the last).
+    kept_iteration: Option<usize>,
 }
 
 /// Applies the training options given on the command line (they override the preset or the
@@ -316,7 +324,14 @@ impl Ctx<'_> {
         let mut last = (Instant::now(), learner.iteration);
         let mut rate = 0.0;
         let mut ckpt_error = None;
+        // (iteration, held-out loss, parameters) of the best held-out evaluation so far.
+        let mut best: Option<(usize, f32, Vec<f32>)> = None;
         let report = train(prep, &mut learner, train_cfg, args.seed, |s| {
+            if let (true, Some(h)) = (args.neural.keep_best_holdout, s.holdout_loss) {
+                if best.as_ref().is_none_or(|b| h < b.1) {
+                    best = Some((s.iteration, h, s.field.params().to_vec()));
+                }
+            }
             bar.set_position(s.iteration as u64);
             if last.0.elapsed().as_secs_f64() > 1.0 {
                 rate = (s.iteration - last.1) as f64 / last.0.elapsed().as_secs_f64();
@@ -350,9 +365,21 @@ impl Ctx<'_> {
         if let Some(e) = ckpt_error {
             return Err(e.context("writing a checkpoint"));
         }
+        // The checkpoint holds the last state, so --resume continues the run where it stopped.
+        write_bytes(&ckpt, &fluidnerf_neural::weights::checkpoint_bytes(&learner)?)?;
+        let mut kept_iteration = None;
+        if args.neural.keep_best_holdout {
+            match best {
+                Some((iteration, loss, params)) => {
+                    learner.field.params_mut().copy_from_slice(&params);
+                    kept_iteration = Some(iteration);
+                    log::info!("keeping the field of iteration {iteration} (held-out loss {loss:.3e})");
+                }
+                None => log::warn!("--keep-best-holdout: the scene has no held-out frames, so the last field is kept"),
+            }
+        }
         let weights = fluidnerf_neural::weights::weights_bytes(&learner.field)?;
         write_bytes(&out.join("weights.safetensors"), &weights)?;
-        write_bytes(&ckpt, &fluidnerf_neural::weights::checkpoint_bytes(&learner)?)?;
         write_json(
             &out.join("model.json"),
             &ModelRecord {
@@ -383,7 +410,7 @@ impl Ctx<'_> {
             if range > 0.0 {
                 final_ssim = Some(fluidnerf_metrics::ssim_global(&v.data, &truth.data, range));
             }
-            if nrmse_history.last().is_none_or(|p| p.iteration != learner.iteration) {
+            if kept_iteration.is_none() && nrmse_history.last().is_none_or(|p| p.iteration != learner.iteration) {
                 if let Some(c) = &curve {
                     nrmse_history.push(NrmsePoint {
                         iteration: learner.iteration,
@@ -411,6 +438,7 @@ impl Ctx<'_> {
             nrmse_history,
             loss_history: learner.losses.clone(),
             holdout_loss_history: learner.holdout_losses.clone(),
+            kept_iteration,
         };
         write_json(&out.join("report.json"), &report_json)?;
         #[allow(clippy::print_stdout)]
