@@ -2,25 +2,10 @@
 //! generated scene: the files it writes, accuracy against the truth, refusal to overwrite,
 //! rerunning from `config.json`, every method and option, and the memory refusal.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn fluidnerf(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).current_dir(dir).args(args).output().expect("runs fluidnerf")
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "failed: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn report(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).expect("report")).expect("json")
-}
+mod common;
+use common::*;
 
 #[test]
 fn classical_runs_write_results_refuse_overwrite_and_rerun_from_config() {

@@ -1,25 +1,8 @@
 //! `fluidnerf reconstruct --method fast|fluidnerf` end to end on a tiny generated scene: the
 //! files it writes, refusal to overwrite, resume, and a trained field loadable by the library.
 
-use std::path::Path;
-use std::process::Command;
-
-fn fluidnerf(dir: &Path, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).current_dir(dir).args(args).output().expect("runs fluidnerf")
-}
-
-fn ok(out: &std::process::Output) {
-    assert!(
-        out.status.success(),
-        "failed: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn report(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).expect("report")).expect("json")
-}
+mod common;
+use common::*;
 
 #[test]
 fn dense_and_mlp_runs_write_resume_and_load() {

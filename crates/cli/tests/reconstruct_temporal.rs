@@ -3,25 +3,8 @@
 //! metrics (held-out time included), the stitched field loadable by the library, overwrite
 //! refusal, and `fluidnerf eval` on the series.
 
-use std::path::Path;
-use std::process::Command;
-
-fn fluidnerf(dir: &Path, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).current_dir(dir).args(args).output().expect("runs fluidnerf")
-}
-
-fn ok(out: &std::process::Output) {
-    assert!(
-        out.status.success(),
-        "failed: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("readable")).expect("json")
-}
+mod common;
+use common::*;
 
 #[test]
 fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {

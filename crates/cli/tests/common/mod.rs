@@ -1,0 +1,30 @@
+//! Helpers shared by the end-to-end tests that run the real `fluidnerf` binary.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Runs `fluidnerf ARGS` with `dir` as the working directory.
+pub fn fluidnerf(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf")).current_dir(dir).args(args).output().expect("runs fluidnerf")
+}
+
+/// Asserts that a run succeeded, showing its output when it did not.
+pub fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "failed: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Parses a JSON file.
+pub fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("readable")).expect("json")
+}
+
+/// The `report.json` of a run directory.
+#[allow(dead_code)] // not every test file reads reports
+pub fn report(dir: &Path) -> serde_json::Value {
+    json(&dir.join("report.json"))
+}
