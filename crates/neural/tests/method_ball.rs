@@ -5,7 +5,7 @@
 use std::ops::ControlFlow;
 use std::ops::Range;
 
-use fluidnerf_core::{render_image, Aabb, Camera, Image, Intrinsics, RenderSettings, ScalarField, Volume};
+use fluidnerf_core::{render_image, Aabb, Image, RenderSettings, ScalarField, Volume};
 use fluidnerf_neural::dense::DenseGridField;
 use fluidnerf_neural::mlp::{MlpConfig, MlpField};
 use fluidnerf_neural::occupancy::OccupancyConfig;
@@ -14,25 +14,8 @@ use fluidnerf_neural::trained::{NeuralConfig, WorldField};
 use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
-/// `n` cameras on a ring around the x axis (like the jet rigs), `px²` pixels, 5 box
-/// half-sides away.
-fn ring(n: usize, px: u32) -> Vec<Camera> {
-    let k = Intrinsics {
-        width: px,
-        height: px,
-        fx: px as f64 * 1.9,
-        fy: px as f64 * 1.9,
-        cx: (px as f64 - 1.0) / 2.0,
-        cy: (px as f64 - 1.0) / 2.0,
-        skew: 0.0,
-    };
-    (0..n)
-        .map(|c| {
-            let a = std::f64::consts::PI * c as f64 / n as f64;
-            Camera::look_at(k, DVec3::new(0.0, 5.0 * a.cos(), 5.0 * a.sin()), DVec3::ZERO, DVec3::X)
-        })
-        .collect()
-}
+mod common;
+use common::ring;
 
 /// A ball of radius 0.5 at (0.15, −0.1, 0.05) with a smooth (cosine) edge of width 0.2.
 fn ball(p: DVec3) -> f32 {

@@ -5,7 +5,7 @@
 
 use std::ops::ControlFlow;
 
-use fluidnerf_core::{render_image, Aabb, Camera, Intrinsics, RenderSettings, ScalarField, Volume};
+use fluidnerf_core::{render_image, Aabb, RenderSettings, ScalarField, Volume};
 use fluidnerf_neural::hashgrid::{HashGridConfig, HashGridField};
 use fluidnerf_neural::mlp::{Activation, MlpConfig, MlpField};
 use fluidnerf_neural::temporal::{
@@ -16,6 +16,9 @@ use fluidnerf_neural::train::{Batching, Problem, StopRule, TrainConfig, View};
 use fluidnerf_neural::trained::FieldConfig;
 use glam::{DVec3, Vec3};
 
+mod common;
+use common::ring;
+
 const SIGMA: f64 = 0.2;
 
 /// Centre of the blob at time t: it moves 0.225 length units (≈ 1.1 σ) per time unit along +x.
@@ -25,24 +28,6 @@ fn centre(t: f64) -> DVec3 {
 
 fn blob(p: DVec3, t: f64) -> f32 {
     (-(p - centre(t)).length_squared() / (2.0 * SIGMA * SIGMA)).exp() as f32
-}
-
-fn ring(n: usize, px: u32) -> Vec<Camera> {
-    let k = Intrinsics {
-        width: px,
-        height: px,
-        fx: px as f64 * 1.9,
-        fy: px as f64 * 1.9,
-        cx: (px as f64 - 1.0) / 2.0,
-        cy: (px as f64 - 1.0) / 2.0,
-        skew: 0.0,
-    };
-    (0..n)
-        .map(|c| {
-            let a = std::f64::consts::PI * c as f64 / n as f64;
-            Camera::look_at(k, DVec3::new(0.0, 5.0 * a.cos(), 5.0 * a.sin()), DVec3::ZERO, DVec3::X)
-        })
-        .collect()
 }
 
 fn aabb() -> Aabb {
