@@ -7,6 +7,7 @@ use clap::Parser;
 
 mod commands;
 mod interrupt;
+mod output;
 mod progress;
 mod run_report;
 

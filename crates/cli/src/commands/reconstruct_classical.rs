@@ -16,7 +16,7 @@
 //! after the current iteration; the volume of that iteration is written as usual.
 
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
@@ -29,6 +29,7 @@ use fluidnerf_core::Image;
 use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
+use crate::output::write_json;
 
 /// Options of the classical methods.
 #[derive(clap::Args, Debug)]
@@ -291,13 +292,6 @@ fn validate(cfg: &ClassicalConfig, alg: Algorithm, resolution: usize) -> anyhow:
         }
     }
     Ok(())
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
-    let mut text = serde_json::to_string_pretty(value).context("serialising JSON")?;
-    text.push('\n');
-    fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
-        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// A `/proc/meminfo` or `/proc/self/status` entry in bytes (Linux).

@@ -13,7 +13,7 @@
 //!   NRMSE against iteration and training time (the time-to-accuracy curve).
 
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
@@ -24,6 +24,7 @@ use fluidnerf_neural::TrainableField;
 use serde::Serialize;
 
 use super::reconstruct::Method;
+use crate::output::{write_bytes, write_checkpoint, write_json};
 
 /// Options of the neural methods.
 #[derive(clap::Args, Debug)]
@@ -154,15 +155,6 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConf
     apply_train_options(&mut cfg.train, args);
     cfg.train.validate()?;
     Ok((cfg, n.preset.clone()))
-}
-
-fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    fluidnerf_io::atomic_write(path, |w| w.write_all(bytes)).with_context(|| format!("writing {}", path.display()))
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
-    let text = serde_json::to_string_pretty(value).context("serialising JSON")?;
-    write_bytes(path, text.as_bytes())
 }
 
 /// Every `stride`-th voxel centre of the truth along each axis (the middle one of each group)
@@ -347,10 +339,7 @@ impl Ctx<'_> {
                 });
             }
             if args.neural.checkpoint_every > 0 && s.iteration % args.neural.checkpoint_every == 0 {
-                if let Err(e) = fluidnerf_neural::weights::checkpoint_bytes(s.learner)
-                    .map_err(anyhow::Error::from)
-                    .and_then(|b| write_bytes(&ckpt, &b))
-                {
+                if let Err(e) = write_checkpoint(&ckpt, s.learner) {
                     ckpt_error = Some(e);
                     return ControlFlow::Break(());
                 }
@@ -366,7 +355,7 @@ impl Ctx<'_> {
             return Err(e.context("writing a checkpoint"));
         }
         // The checkpoint holds the last state, so --resume continues the run where it stopped.
-        write_bytes(&ckpt, &fluidnerf_neural::weights::checkpoint_bytes(&learner)?)?;
+        write_checkpoint(&ckpt, &learner)?;
         let mut kept_iteration = None;
         if args.neural.keep_best_holdout {
             match best {

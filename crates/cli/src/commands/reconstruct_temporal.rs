@@ -16,7 +16,7 @@
 //!   uniform window, skimage's definition) against the scene's truth when it has one.
 
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
@@ -31,6 +31,7 @@ use fluidnerf_neural::TrainableField;
 use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
+use crate::output::{write_bytes, write_checkpoint, write_json};
 
 /// Options of the time-resolved methods.
 #[derive(clap::Args, Debug)]
@@ -118,15 +119,6 @@ struct Report {
     summary: Summary,
     per_frame: Vec<FrameMetrics>,
     per_window: Vec<WindowReport>,
-}
-
-fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    fluidnerf_io::atomic_write(path, |w| w.write_all(bytes)).with_context(|| format!("writing {}", path.display()))
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
-    let text = serde_json::to_string_pretty(value).context("serialising JSON")?;
-    write_bytes(path, text.as_bytes())
 }
 
 /// The preset (or `--config`) with the command-line overrides applied.
@@ -324,10 +316,7 @@ impl Ctx<'_> {
             ));
             if args.neural.checkpoint_every > 0 && s.iteration % args.neural.checkpoint_every == 0 {
                 let path = out.join(format!("windows/w{:03}.checkpoint.safetensors", w.index));
-                if let Err(e) = fluidnerf_neural::weights::checkpoint_bytes(s.learner)
-                    .map_err(anyhow::Error::from)
-                    .and_then(|b| write_bytes(&path, &b))
-                {
+                if let Err(e) = write_checkpoint(&path, s.learner) {
                     ckpt_error = Some(e);
                     return ControlFlow::Break(());
                 }
@@ -351,10 +340,7 @@ impl Ctx<'_> {
             let bytes = fluidnerf_neural::weights::weights_bytes(&w.learner.field)?;
             weights_bytes = bytes.len();
             write_bytes(&out.join(&name), &bytes)?;
-            write_bytes(
-                &out.join(format!("windows/w{k:03}.checkpoint.safetensors")),
-                &fluidnerf_neural::weights::checkpoint_bytes(&w.learner)?,
-            )?;
+            write_checkpoint(&out.join(format!("windows/w{k:03}.checkpoint.safetensors")), &w.learner)?;
             records.push(WindowRecord {
                 frames: [w.frames.start, w.frames.end],
                 time_origin: w.time_origin,
