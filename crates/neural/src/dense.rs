@@ -15,6 +15,7 @@
 
 use std::ops::Range;
 
+use crate::kernels::{inverse_softplus, sigmoid, softplus};
 use crate::TrainableField;
 
 /// A trainable `nx × ny × nz` grid of raw values behind a softplus.
@@ -30,30 +31,6 @@ pub struct DenseTape {
     idx: Vec<[u32; 8]>,
     wts: Vec<[f32; 8]>,
     slope: Vec<f32>,
-}
-
-/// `softplus(x) = ln(1 + eˣ)`, computed without overflow.
-fn softplus(x: f32) -> f32 {
-    if x > 20.0 {
-        x
-    } else {
-        x.exp().ln_1p()
-    }
-}
-
-/// `d softplus / dx = σ(x)`.
-fn sigmoid(x: f32) -> f32 {
-    1.0 / (1.0 + (-x).exp())
-}
-
-/// The raw value whose softplus is `e` (inverse softplus), for initialisation.
-pub fn inverse_softplus(e: f32) -> f32 {
-    assert!(e > 0.0, "inverse_softplus: {e} must be positive");
-    if e > 20.0 {
-        e
-    } else {
-        e.exp_m1().ln()
-    }
 }
 
 impl DenseGridField {
@@ -130,6 +107,11 @@ impl TrainableField for DenseGridField {
 
     fn params_mut(&mut self) -> &mut [f32] {
         &mut self.params
+    }
+
+    fn start_uniform(&mut self, level: f32) {
+        assert!(level > 0.0 && level.is_finite(), "DenseGridField::start_uniform: level {level} must be positive");
+        self.params.fill(inverse_softplus(level));
     }
 
     fn eval(&self, inputs: &[f32], out: &mut [f32], _tape: &mut DenseTape) {

@@ -36,6 +36,16 @@ pub trait TrainableField: Send + Sync {
         self.params().len()
     }
 
+    /// Turns a freshly initialised field into one that evaluates to about `level` (> 0)
+    /// everywhere, keeping enough of its random initialisation to break symmetry.
+    ///
+    /// Training calls this before the first iteration with the uniform field that explains the
+    /// mean training pixel ([`crate::train::Learner::fresh`]). Emission images are mostly dark:
+    /// started far brighter than that, the first optimiser steps push every unit of a deep
+    /// ReLU network coherently down, and the network can end in the trivial field E = 0 with
+    /// its units dead.
+    fn start_uniform(&mut self, level: f32);
+
     /// Inference: writes E for each input row into `out`; records nothing for backward.
     fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut Self::Tape);
 

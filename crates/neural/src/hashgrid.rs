@@ -353,6 +353,10 @@ impl TrainableField for HashGridField {
         &mut self.params
     }
 
+    fn start_uniform(&mut self, level: f32) {
+        self.mlp.start_uniform(&mut self.params[self.grid_params..], level);
+    }
+
     fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut HashGridTape) {
         let n = out.len();
         let d = self.input_dim;

@@ -151,6 +151,15 @@ pub(crate) fn softplus(x: f32) -> f32 {
     x.max(0.0) + (-x.abs()).exp().ln_1p()
 }
 
+/// The `x` with `softplus(x) = e` (> 0), computed without overflow.
+pub(crate) fn inverse_softplus(e: f32) -> f32 {
+    if e > 20.0 {
+        e + (-(-e).exp()).ln_1p()
+    } else {
+        e.exp_m1().ln()
+    }
+}
+
 multiversion! {
     /// Each of the `rows` rows of `dst` (`rows × bias.len()`) is set to `bias`.
     fn fill_rows(dst: &mut [f32], bias: &[f32]) {

@@ -31,6 +31,11 @@ use crate::error::NeuralError;
 use crate::field::TrainableField;
 use crate::kernels::{self, matmul, Op};
 
+/// Factor on the initial output weights in [`TrainableField::start_uniform`]: small enough
+/// that the initial field is nearly uniform, large enough that every hidden unit receives a
+/// gradient from the first iteration on.
+pub const UNIFORM_START_WEIGHT_SCALE: f32 = 0.1;
+
 /// Hidden-layer activation σ.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -230,6 +235,21 @@ impl Mlp {
             *w = rng.random_range(-a..a);
         }
         params[self.out_bias] = 0.0;
+    }
+
+    /// Makes freshly initialised `params` evaluate to about `level` (> 0) everywhere: the
+    /// output bias becomes the pre-activation of `level` and the output weights shrink by
+    /// [`UNIFORM_START_WEIGHT_SCALE`], so the field starts nearly uniform (see
+    /// [`TrainableField::start_uniform`]).
+    pub(crate) fn start_uniform(&self, params: &mut [f32], level: f32) {
+        assert!(level > 0.0 && level.is_finite(), "Mlp::start_uniform: level {level} must be positive");
+        params[self.out_bias] = match self.output_activation {
+            OutputActivation::Relu => level,
+            OutputActivation::Softplus => kernels::inverse_softplus(level),
+        };
+        for w in &mut params[self.out_weight.clone()] {
+            *w *= UNIFORM_START_WEIGHT_SCALE;
+        }
     }
 
     /// Named tensors with ranges offset by `base`.
@@ -541,6 +561,10 @@ impl TrainableField for MlpField {
 
     fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)> {
         self.mlp.tensors("", 0)
+    }
+
+    fn start_uniform(&mut self, level: f32) {
+        self.mlp.start_uniform(&mut self.params, level);
     }
 }
 

@@ -302,17 +302,17 @@ pub fn train_windows<F: TrainableField + Clone>(
         let sub = window_problem(problem, &times, range.clone());
         let prep = Prepared::new(&sub, train_cfg)?;
         let warm = windows.warm_start && k > 0;
-        let start = match (warm, out.last()) {
-            (true, Some(prev)) if prev.learner.field.num_params() == init.num_params() => prev.learner.field.clone(),
-            _ => init.clone(),
-        };
+        let previous = out.last().filter(|prev| warm && prev.learner.field.num_params() == init.num_params());
         let mut cfg = train_cfg.clone();
         if warm {
             if let Some(m) = windows.warm_max_iterations {
                 cfg.max_iterations = m;
             }
         }
-        let mut learner = Learner::new(start);
+        let mut learner = match previous {
+            Some(prev) => Learner::new(prev.learner.field.clone()),
+            None => Learner::fresh(init.clone(), &prep, &cfg),
+        };
         let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
         let report = train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iter(&info, s))?;
         out.push(TrainedWindow {

@@ -115,6 +115,10 @@ pub struct TrainConfig {
     pub validate_pixels: usize,
     /// Views of one iteration. Default all views.
     pub batching: Batching,
+    /// Start a fresh field from the uniform value that explains the mean training pixel
+    /// ([`TrainableField::start_uniform`]) instead of the representation's own
+    /// initialisation. Default true.
+    pub uniform_start: bool,
 }
 
 impl Default for TrainConfig {
@@ -135,6 +139,7 @@ impl Default for TrainConfig {
             validate_every: 100,
             validate_pixels: 4096,
             batching: Batching::AllViews,
+            uniform_start: true,
         }
     }
 }
@@ -320,6 +325,17 @@ impl Prepared {
         self.meta.value_scale * self.intensity_length
     }
 
+    /// The uniform field (normalised units) whose renders match the training pixels on
+    /// average: Σ pixels / Σ normalised chord lengths over all kept training rays.
+    pub fn mean_level(&self) -> f32 {
+        let (mut sum_t, mut sum_l) = (0.0f64, 0.0f64);
+        for v in &self.train {
+            sum_t += v.targets.iter().map(|&t| t as f64).sum::<f64>();
+            sum_l += v.rays.near.iter().zip(&v.rays.far).map(|(&n, &f)| (f - n) as f64).sum::<f64>();
+        }
+        (sum_t / (sum_l * self.length_scale as f64)) as f32
+    }
+
     /// The empty-space mask, if any.
     pub fn occupancy(&self) -> Option<&OccupancyGrid> {
         self.occupancy.as_ref()
@@ -353,6 +369,19 @@ impl<F: TrainableField> Learner<F> {
             holdout_losses: Vec::new(),
             train_time_s: 0.0,
         }
+    }
+}
+
+impl<F: TrainableField> Learner<F> {
+    /// A learner for a field that has not been trained yet: with `cfg.uniform_start` the
+    /// field first starts from [`Prepared::mean_level`] ([`TrainableField::start_uniform`]).
+    /// Use [`Learner::new`] for warm starts and checkpoints.
+    pub fn fresh(mut field: F, prep: &Prepared, cfg: &TrainConfig) -> Self {
+        let level = prep.mean_level();
+        if cfg.uniform_start && level > 0.0 && level.is_finite() {
+            field.start_uniform(level);
+        }
+        Learner::new(field)
     }
 }
 

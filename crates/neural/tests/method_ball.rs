@@ -77,6 +77,8 @@ impl<G: Fn([f32; 3]) -> f32 + Send + Sync> TrainableField for Analytic<G> {
         self.eval(inputs, out, tape);
     }
     fn backward(&self, _: &mut (), _: &[f32], _: &mut [f32]) {}
+    /// A fixed function has nothing to start.
+    fn start_uniform(&mut self, _: f32) {}
     fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)> {
         Vec::new()
     }

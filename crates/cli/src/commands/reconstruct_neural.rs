@@ -298,7 +298,8 @@ impl Ctx<'_> {
     fn train_and_write<F: TrainableField>(&self, field: F) -> anyhow::Result<()> {
         let (args, out, prep) = (self.args, &self.args.out, self.prep);
         let train_cfg: &TrainConfig = &self.cfg.train;
-        let mut learner = Learner::new(field);
+        // A resumed run overwrites the fresh start with the checkpoint.
+        let mut learner = Learner::fresh(field, prep, train_cfg);
         let ckpt = out.join("checkpoint.safetensors");
         if args.resume {
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)
