@@ -144,3 +144,19 @@ fn user_volume_becomes_the_truth() {
     assert!(!o.status.success());
     assert!(text(&o).1.contains("/nonexistent/v.npy"), "{:?}", text(&o));
 }
+
+#[test]
+fn aabb_takes_negative_corners_and_exactly_six_numbers() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("box");
+    let o = run_small(&dir, &["--aabb", "-12,-10,-8,12,10,8"]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "stdout: {out}\nstderr: {err}");
+    let scene = fluidnerf_io::scene::load_scene(&dir).expect("scene reads back");
+    assert_eq!(scene.aabb.min.to_array(), [-12.0, -10.0, -8.0]);
+    assert_eq!(scene.aabb.max.to_array(), [12.0, 10.0, 8.0]);
+
+    let o = run_small(&tmp.path().join("five"), &["--aabb", "-12,-10,-8,12,10"]);
+    assert!(!o.status.success());
+    assert!(text(&o).1.contains("--aabb takes 6 numbers"), "{}", text(&o).1);
+}

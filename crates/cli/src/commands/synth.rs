@@ -98,7 +98,7 @@ pub struct Args {
     pub resolution: Option<usize>,
     /// Reconstruction box in mm as minx,miny,minz,maxx,maxy,maxz [default: the 40 mm cube
     /// centred at the origin].
-    #[arg(long, value_delimiter = ',', num_args = 6, help_heading = "Phantom")]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, help_heading = "Phantom")]
     pub aabb: Option<Vec<f64>>,
     /// Frame times t* = t U / D for jet-tr, comma separated [default: 14,15,16].
     #[arg(long, value_delimiter = ',', help_heading = "Phantom")]
@@ -208,6 +208,9 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
         s.resolution = r;
     }
     if let Some(b) = &args.aabb {
+        if b.len() != 6 {
+            bail!("--aabb takes 6 numbers (minx,miny,minz,maxx,maxy,maxz), got {}", b.len());
+        }
         let min = DVec3::new(b[0], b[1], b[2]);
         let max = DVec3::new(b[3], b[4], b[5]);
         let aabb = Aabb { min, max };
