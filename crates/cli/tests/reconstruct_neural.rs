@@ -87,7 +87,7 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     assert_eq!(again.data, vol.data);
 
     // The faithful network runs through the same command (a few iterations, tiny settings),
-    // and its config.json reruns.
+    // and its config.json reruns, here with empty-space skipping added.
     ok(&fluidnerf(
         d,
         &[
@@ -126,10 +126,16 @@ fn dense_and_mlp_runs_write_resume_and_load() {
             "mlp/config.json",
             "--resolution",
             "8",
+            "--skip-empty",
             "-q",
         ],
     ));
     assert_eq!(report(&d.join("mlp2"))["train"]["iterations"], 2);
+    // The dissertation's presets train on the whole box; --skip-empty carves it.
+    assert_eq!(report(&d.join("mlp"))["occupied_fraction"].as_f64(), Some(1.0));
+    let carved = report(&d.join("mlp2"))["occupied_fraction"].as_f64().expect("fraction");
+    assert!(carved < 0.8, "--skip-empty kept {carved} of the box");
+    assert!(json(&d.join("mlp2/config.json"))["neural"]["train"]["occupancy"].is_object());
 }
 
 /// `--keep-best-holdout` writes the field of the evaluation with the lowest held-out loss.
