@@ -1,5 +1,6 @@
 //! Classical algebraic tomography on a voxel grid: matrix-free projectors (forward and exact
-//! adjoint) and the ART family of solvers, MLEM and a total-variation method.
+//! adjoint) and the ART family of solvers, MLEM, and total-variation and Tikhonov regularised
+//! SART.
 //!
 //! # Conventions
 //! - Grid: [`Grid`] = dims `[nx, ny, nz]` + box, cell-centred voxels, x fastest (index
@@ -15,8 +16,8 @@
 //! - [`projector`]: the system matrix `A` of Eq. 2.20 applied per view ([`Projector`]):
 //!   [`SplatProjector`] (voxel-driven bilinear splat, the dissertation's) and [`RayProjector`]
 //!   (ray-driven trilinear).
-//! - [`solve`]: [`asart`], [`art`], [`sart`], [`mart`], [`smart`], [`mlem`], [`sart_tv`], all
-//!   `fn(problem, init, &params, on_iter) -> Result<Report, SolveError>`.
+//! - [`solve`]: [`asart`], [`art`], [`sart`], [`mart`], [`smart`], [`mlem`], [`sart_tv`],
+//!   [`sart_tikhonov`], all `fn(problem, init, &params, on_iter) -> Result<Report, SolveError>`.
 //! - [`visual_hull`]: a support mask from dark pixels; [`estimate_memory`]: peak memory before
 //!   a run.
 //!
@@ -34,6 +35,7 @@ pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
 pub use projector::{Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector};
 pub use solve::{
-    art, asart, mart, mlem, multilevel_order, sart, sart_tv, smart, total_variation, ArtParams, AsartParams, IterState,
-    MartParams, MlemParams, Plateau, Problem, Report, SartParams, SmartParams, StopReason, Stopping, TvParams,
+    art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,
+    total_variation, ArtParams, AsartParams, IterState, MartParams, MlemParams, Plateau, Problem, Report, SartParams,
+    SmartParams, StopReason, Stopping, TikhonovParams, TvParams,
 };

@@ -16,6 +16,8 @@ pub enum Algorithm {
     Mlem,
     /// SART with total-variation steps.
     Tv,
+    /// SART with second-order Tikhonov steps.
+    Tikhonov,
 }
 
 impl Algorithm {
@@ -24,6 +26,7 @@ impl Algorithm {
         match self {
             Algorithm::Art | Algorithm::Mart => 1,
             Algorithm::Asart | Algorithm::Sart | Algorithm::Mlem | Algorithm::Smart => 3,
+            Algorithm::Tikhonov => 4,
             Algorithm::Tv => 6,
         }
     }

@@ -21,13 +21,15 @@
 //!   ([`Problem::with_support`], e.g. a [`crate::visual_hull`]), zero outside it.
 //!
 //! Methods (dissertation chapter 2.3): [`asart`] (Eq. 2.29–2.30), [`art`] (2.21), [`sart`]
-//! (2.27), [`mart`] (2.25), [`smart`] (2.28), [`mlem`] (2.33) and [`sart_tv`] (SART with
-//! total-variation steps, ASD-POCS style).
+//! (2.27), [`mart`] (2.25), [`smart`] (2.28), [`mlem`] (2.33), [`sart_tv`] (SART with
+//! total-variation steps, ASD-POCS style) and [`sart_tikhonov`] (SART with second-order
+//! Tikhonov regularisation, Eq. 2.35).
 
 mod art;
 mod asart;
 mod mlem;
 mod sart;
+mod tikhonov;
 mod tv;
 
 use std::ops::ControlFlow;
@@ -41,6 +43,7 @@ pub use art::{art, mart, ArtParams, MartParams};
 pub use asart::{asart, AsartParams};
 pub use mlem::{mlem, smart, MlemParams, SmartParams};
 pub use sart::{sart, SartParams};
+pub use tikhonov::{laplacian, laplacian_norm2, sart_tikhonov, TikhonovParams};
 pub use tv::{sart_tv, total_variation, TvParams};
 
 use crate::{ClassicalError, Projector, SolveError};

@@ -1,0 +1,251 @@
+//! SART with second-order Tikhonov regularisation: a smoothness prior for noisy or few views
+//! (dissertation §2.4.1, Eq. 2.34–2.35; Tikhonov 1963; in flow tomography reviewed by Grauer
+//! et al. 2023, and compared for chemiluminescence tomography by Liu et al., the
+//! dissertation's ref. [180], line 951).
+//!
+//! The problem is Eq. 2.35 with `L_Tik` the discrete Laplacian ∇² ([`laplacian`]):
+//!
+//! ```text
+//! g_Tik = argmin_{g ≥ 0} ‖p − A g‖² + λ ‖∇² g‖²                                  (2.35)
+//! ```
+//!
+//! solved by forward–backward splitting in SART's metric. Each iteration is one SART sweep
+//! (Eq. 2.27, views in the multilevel order, non-negativity after every view), which handles
+//! the data term, followed by one gradient step on the penalty:
+//!
+//! ```text
+//! g ← max(0, g − μ λ Lᵀ L g)        (L = ∇² with unit voxel spacing, so Lᵀ L = L²)
+//! ```
+//!
+//! - **Units.** SART's update is normalised by row and column sums, so its step is in the
+//!   units of `g` whatever the imaging scale; with `L` taken in voxel units (spacing 1) the
+//!   weight λ is dimensionless and acts at the scale of voxels, where noise and the streaks
+//!   of few views live, for any box size.
+//! - **Boundaries.** `L` is the graph Laplacian of the voxel grid (reflecting, Neumann
+//!   faces): `(L g)_m = Σ_{n ∈ neighbours(m)} (g_n − g_m)` over the up to six face
+//!   neighbours. It is symmetric and negative semi-definite, and constants are its null space,
+//!   so the penalty smooths without pulling the field towards zero at the box faces (a jet
+//!   crosses its inflow face).
+//! - **Stability.** The eigenvalues of `Lᵀ L` lie in `[0, 144]` (twice the largest degree,
+//!   squared), so the explicit step is split into `⌈144 μ λ⌉` equal sub-steps of at most
+//!   `1/144`: every sub-step damps every mode without flipping its sign, for any λ.
+//! - **Balance.** One sweep is an incremental gradient pass over `Σ_v f_v + λ ‖L g‖²`, where
+//!   `f_v` is view `v`'s data misfit in SART's row- and column-normalised metric; so λ weighs
+//!   the penalty against the data of one iteration, and more views mean relatively less
+//!   smoothing, as more data should.
+//! - Defaults: λ = 0.05, μ = 1, zero start, at most 50 iterations, plateau rule on. With
+//!   λ = 0.05 an iteration removes the checkerboard mode entirely, damps a wavelength of four
+//!   voxels by about 18 % and one of eight by about 2 %: noise at the voxel scale goes, the
+//!   scales the data resolve stay with the data. Measured on 24³ voxels and 8 views of
+//!   48² px (`tests/tikhonov.rs`): two Gaussian blobs with 5 % image noise, NRMSE 0.22 against
+//!   plain SART's 0.57 (0.30 at its best iteration); λ between 0.1 and 0.2 is best there. On
+//!   a sharp-edged uniform ball without noise it costs accuracy (0.28 against 0.24), and it
+//!   wins again from about 2 % noise. An L-curve (Hansen 1992) picks λ for a given experiment.
+//!   `λ = 0` is plain SART.
+
+use std::ops::ControlFlow;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::{drive, sart::SartSweep, IterState, Problem, Report, Stopping};
+use crate::{Grid, SolveError};
+
+/// Upper bound of the spectrum of `Lᵀ L` for the graph Laplacian of a 3D grid: `(2 × 6)²`.
+const LTL_SPECTRAL_BOUND: f64 = 144.0;
+
+/// Parameters of [`sart_tikhonov`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TikhonovParams {
+    /// SART relaxation μ (Eq. 2.27). Default 1.
+    pub relaxation: f64,
+    /// Weight λ of the penalty `‖∇² g‖²` (Eq. 2.35), in voxel units. Default 0.05.
+    pub weight: f64,
+    /// Default: at most 50 iterations, plateau rule on.
+    pub stopping: Stopping,
+}
+
+impl Default for TikhonovParams {
+    fn default() -> Self {
+        TikhonovParams { relaxation: 1.0, weight: 0.05, stopping: Stopping::with_cap(50) }
+    }
+}
+
+/// The graph Laplacian of the grid with unit spacing (see the module docs):
+/// `out[m] = Σ_{n ∈ face neighbours of m} (g[n] − g[m])`. In the interior this is the
+/// 7-point stencil `g[m±x] + g[m±y] + g[m±z] − 6 g[m]`; at the faces missing neighbours count
+/// as equal to `g[m]` (zero flux). `g` and `out` have [`Grid::len`] elements, x fastest.
+pub fn laplacian(grid: &Grid, g: &[f32], out: &mut [f32]) {
+    let [nx, ny, nz] = grid.dims;
+    assert_eq!(g.len(), grid.len(), "laplacian: input has the wrong length");
+    assert_eq!(out.len(), grid.len(), "laplacian: output has the wrong length");
+    let slab = nx * ny;
+    out.par_chunks_mut(nx).enumerate().for_each(|(row, out_row)| {
+        let (j, k) = (row % ny, row / ny);
+        let base = row * nx;
+        let centre = &g[base..base + nx];
+        // Neighbouring rows in y and z; a missing one is the row itself (zero flux).
+        let ym = if j > 0 { &g[base - nx..base] } else { centre };
+        let yp = if j + 1 < ny { &g[base + nx..base + 2 * nx] } else { centre };
+        let zm = if k > 0 { &g[base - slab..base - slab + nx] } else { centre };
+        let zp = if k + 1 < nz { &g[base + slab..base + slab + nx] } else { centre };
+        for i in 0..nx {
+            let v = centre[i];
+            let xm = if i > 0 { centre[i - 1] } else { v };
+            let xp = if i + 1 < nx { centre[i + 1] } else { v };
+            out_row[i] = (xm + xp + ym[i] + yp[i] + zm[i] + zp[i]) - 6.0 * v;
+        }
+    });
+}
+
+/// `‖∇² g‖₂²` with the [`laplacian`] of the grid: the penalty of Eq. 2.35 without λ.
+pub fn laplacian_norm2(grid: &Grid, g: &[f32]) -> f64 {
+    let mut lg = vec![0f32; g.len()];
+    laplacian(grid, g, &mut lg);
+    lg.par_iter().map(|&v| (v as f64) * (v as f64)).sum()
+}
+
+/// One explicit step `g ← max(0, g − step · L² g)` (split into stable sub-steps), with `lg` as
+/// scratch ([`Grid::len`] values).
+fn penalty_step(problem: &Problem, grid: &Grid, step: f64, x: &mut [f32], lg: &mut [f32]) {
+    if step <= 0.0 {
+        return;
+    }
+    let substeps = (step * LTL_SPECTRAL_BOUND).ceil().max(1.0) as usize;
+    let h = (step / substeps as f64) as f32;
+    let [nx, ny, nz] = grid.dims;
+    let slab = nx * ny;
+    for _ in 0..substeps {
+        laplacian(grid, x, lg);
+        // g −= h · L (L g), fused: the second Laplacian is evaluated row by row from `lg`.
+        let lg = &*lg;
+        x.par_chunks_mut(nx).enumerate().for_each(|(row, x_row)| {
+            let (j, k) = (row % ny, row / ny);
+            let base = row * nx;
+            let centre = &lg[base..base + nx];
+            let ym = if j > 0 { &lg[base - nx..base] } else { centre };
+            let yp = if j + 1 < ny { &lg[base + nx..base + 2 * nx] } else { centre };
+            let zm = if k > 0 { &lg[base - slab..base - slab + nx] } else { centre };
+            let zp = if k + 1 < nz { &lg[base + slab..base + slab + nx] } else { centre };
+            for i in 0..nx {
+                let v = centre[i];
+                let xm = if i > 0 { centre[i - 1] } else { v };
+                let xp = if i + 1 < nx { centre[i + 1] } else { v };
+                let llg = (xm + xp + ym[i] + yp[i] + zm[i] + zp[i]) - 6.0 * v;
+                x_row[i] = (x_row[i] - h * llg).max(0.0);
+            }
+        });
+        problem.project_feasible(x);
+    }
+}
+
+/// SART with second-order Tikhonov regularisation (Eq. 2.35); see the module docs. `init`
+/// replaces the zero start.
+pub fn sart_tikhonov(
+    problem: &Problem,
+    init: Option<&[f32]>,
+    params: &TikhonovParams,
+    on_iter: impl FnMut(&IterState) -> ControlFlow<()>,
+) -> Result<Report, SolveError> {
+    if !(params.weight >= 0.0 && params.weight.is_finite()) {
+        return Err(crate::ClassicalError::invalid("Tikhonov weight", format!("must be ≥ 0, got {}", params.weight)));
+    }
+    let grid = *problem.projector.grid();
+    let n = grid.len();
+    let x = problem.start(init, || vec![0f32; n]);
+    let mut sweep = SartSweep::new(problem, params.relaxation);
+    let mut lg = vec![0f32; n];
+    let step = params.relaxation * params.weight;
+    drive(
+        "SART-Tikhonov",
+        problem,
+        &params.stopping,
+        x,
+        |x, _| {
+            let ss = sweep.run(problem, x);
+            penalty_step(problem, &grid, step, x, &mut lg);
+            ss
+        },
+        on_iter,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::Aabb;
+    use glam::DVec3;
+
+    fn grid(dims: [usize; 3]) -> Grid {
+        Grid::new(dims, Aabb::new(DVec3::ZERO, DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64)))
+    }
+
+    /// A quadratic `a i² + b j² + c k²` (plus linear terms) has the constant Laplacian
+    /// `2 (a + b + c)` at every interior voxel.
+    #[test]
+    fn laplacian_of_a_quadratic_is_constant_inside() {
+        let g = grid([9, 7, 6]);
+        let [nx, ny, nz] = g.dims;
+        let (a, b, c) = (0.5f32, -1.25f32, 2.0f32);
+        let f = |i: usize, j: usize, k: usize| {
+            let (x, y, z) = (i as f32, j as f32, k as f32);
+            a * x * x + b * y * y + c * z * z + 0.3 * x - 0.7 * y + 1.1 * z + 4.0
+        };
+        let mut values = vec![0f32; g.len()];
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    values[(k * ny + j) * nx + i] = f(i, j, k);
+                }
+            }
+        }
+        let mut lap = vec![0f32; g.len()];
+        laplacian(&g, &values, &mut lap);
+        let expected = 2.0 * (a + b + c);
+        for k in 1..nz - 1 {
+            for j in 1..ny - 1 {
+                for i in 1..nx - 1 {
+                    let got = lap[(k * ny + j) * nx + i];
+                    assert!((got - expected).abs() < 1e-3, "({i}, {j}, {k}): {got} vs {expected}");
+                }
+            }
+        }
+        // Constants are the null space, at the faces too.
+        laplacian(&g, &vec![3.5; g.len()], &mut lap);
+        assert!(lap.iter().all(|&v| v == 0.0));
+    }
+
+    /// ⟨L x, y⟩ = ⟨x, L y⟩ and ⟨L x, x⟩ ≤ 0 on random vectors, faces included.
+    #[test]
+    fn laplacian_is_self_adjoint_and_negative_semidefinite() {
+        let g = grid([6, 5, 4]);
+        let mut s = 12345u64;
+        let mut rand = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) - 0.5
+        };
+        let x: Vec<f32> = (0..g.len()).map(|_| rand()).collect();
+        let y: Vec<f32> = (0..g.len()).map(|_| rand()).collect();
+        let (mut lx, mut ly) = (vec![0f32; g.len()], vec![0f32; g.len()]);
+        laplacian(&g, &x, &mut lx);
+        laplacian(&g, &y, &mut ly);
+        let dot = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(&p, &q)| p as f64 * q as f64).sum::<f64>();
+        let (lxy, xly) = (dot(&lx, &y), dot(&x, &ly));
+        assert!((lxy - xly).abs() < 1e-9 * (1.0 + lxy.abs()) + 1e-5, "{lxy} vs {xly}");
+        assert!(dot(&lx, &x) <= 0.0);
+    }
+
+    /// The checkerboard is the top of the spectrum: L² of it is 144 times it, inside.
+    #[test]
+    fn checkerboard_reaches_the_spectral_bound() {
+        let g = grid([6, 6, 6]);
+        let n = g.len();
+        let x: Vec<f32> = (0..n).map(|m| if (m % 6 + (m / 6) % 6 + m / 36) % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        let (mut lx, mut llx) = (vec![0f32; n], vec![0f32; n]);
+        laplacian(&g, &x, &mut lx);
+        laplacian(&g, &lx, &mut llx);
+        let centre = (3 * 6 + 3) * 6 + 3;
+        assert_eq!(llx[centre], LTL_SPECTRAL_BOUND as f32 * x[centre]);
+    }
+}
