@@ -10,6 +10,7 @@ mod interrupt;
 mod output;
 mod progress;
 mod run_report;
+mod truth_sample;
 
 /// Tomography of flows: reconstruct the 3D (or 4D) scalar field of glowing smoke, dye or
 /// flame from a handful of calibrated camera images.

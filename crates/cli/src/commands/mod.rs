@@ -2,6 +2,7 @@
 
 use clap::Subcommand;
 
+pub mod compare;
 pub mod demo;
 pub mod eval;
 pub mod export;
@@ -22,6 +23,7 @@ pub enum Command {
     Import(import::Args),
     Reconstruct(reconstruct::Args),
     Eval(eval::Args),
+    Compare(compare::Args),
     Export(export::Args),
     Render(render::Args),
     Synth(synth::Args),
@@ -35,6 +37,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Import(args) => import::run(args),
         Command::Reconstruct(args) => reconstruct::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Compare(args) => compare::run(args),
         Command::Export(args) => export::run(args),
         Command::Render(args) => render::run(args),
         Command::Synth(args) => synth::run(args),

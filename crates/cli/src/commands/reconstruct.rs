@@ -27,6 +27,8 @@ pub enum Method {
     Mlem,
     /// SART with total-variation regularisation (edge preserving).
     Tv,
+    /// SART with second-order Tikhonov regularisation (smoothness, Eq. 2.35).
+    Tikhonov,
     /// FluidNeRF as in the dissertation: positional encoding + MLP (chapter 5.1).
     Fluidnerf,
     /// A multiresolution grid encoding with a tiny MLP: the same method, much faster.

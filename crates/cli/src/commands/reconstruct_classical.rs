@@ -1,5 +1,5 @@
-//! `fluidnerf reconstruct --method asart|art|sart|mart|smart|mlem|tv`: classical voxel
-//! tomography of a scene's training views (held-out frames are not used).
+//! `fluidnerf reconstruct --method asart|art|sart|mart|smart|mlem|tv|tikhonov`: classical
+//! voxel tomography of a scene's training views (held-out frames are not used).
 //!
 //! Writes into OUT:
 //! - `volume.npy` / `volume.vti`: the voxel grid (`--resolution` voxels along the box's longest
@@ -9,7 +9,16 @@
 //!   version): rerun with `--config`;
 //! - `report.json`: iterations, why it stopped, residual history, time, memory (estimated and
 //!   peak), and, when the scene has ground truth, volume NRMSE / PSNR / SSIM (global and per
-//!   region).
+//!   region) and `nrmse_history: [{iteration, train_time_s, nrmse}]`, the time-to-accuracy
+//!   curve in the same form as the neural methods' (`fluidnerf compare` draws them together).
+//!
+//! The NRMSE curve is evaluated over the same subset of the truth's voxel centres as the neural
+//! methods' ([`TruthSample`], the volume sampled trilinearly), after every iteration by default:
+//! a classical run has tens to hundreds of costly iterations, so `--eval-every` at its default
+//! (100, sized for neural runs of thousands of cheap iterations) means every iteration here;
+//! any other N evaluates every N-th iteration, and 0 only the last. `train_time_s` is the
+//! solver's time up to that iteration with the evaluations taken out (they are reported as
+//! `eval_s`), so `solve_s` is the solver's time alone.
 //!
 //! The memory a run needs is estimated before anything large is allocated, and a run that will
 //! not fit (default limit: the memory available now) is refused with the estimate. Ctrl-C stops
@@ -21,15 +30,17 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use fluidnerf_classical::{
-    art, asart, estimate_memory, mart, mlem, sart, sart_tv, smart, visual_hull, Algorithm, ArtParams, AsartParams,
-    Grid, IterState, MartParams, MemoryEstimate, MlemParams, Plateau, Problem, Projector, ProjectorKind, RayProjector,
-    Report, SartParams, SmartParams, SplatProjector, StopReason, Stopping, TvParams, DEFAULT_HULL_THRESHOLD,
+    art, asart, estimate_memory, mart, mlem, sart, sart_tikhonov, sart_tv, smart, visual_hull, Algorithm, ArtParams,
+    AsartParams, Grid, IterState, MartParams, MemoryEstimate, MlemParams, Plateau, Problem, Projector, ProjectorKind,
+    RayProjector, Report, SartParams, SmartParams, SplatProjector, StopReason, Stopping, TikhonovParams, TvParams,
+    DEFAULT_HULL_THRESHOLD,
 };
 use fluidnerf_core::Image;
 use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
 use crate::output::write_json;
+use crate::truth_sample::{NrmsePoint, TruthSample};
 
 /// Options of the classical methods.
 #[derive(clap::Args, Debug)]
@@ -62,6 +73,14 @@ pub struct Args {
     /// Method tv: total-variation descent steps per iteration [default: 20].
     #[arg(long, value_name = "N")]
     pub tv_steps: Option<usize>,
+    /// Method tikhonov: weight λ of the smoothness penalty λ‖∇²g‖² (Eq. 2.35, Laplacian in
+    /// voxel units, so λ is dimensionless): after each SART sweep the volume takes the step
+    /// −μλ∇⁴g. Larger is smoother; 0 is plain SART. The default suits images with a few
+    /// percent of noise: on small test phantoms with 5 % noise it cuts SART's NRMSE by more
+    /// than half, and the best λ there was 0.1–0.2; on noiseless images of sharp edges a
+    /// smaller λ does better [default: 0.05].
+    #[arg(long, value_name = "LAMBDA")]
+    pub tikhonov_weight: Option<f64>,
     /// Stop when the residual (sliding mean of 4) varies by less than this fraction over 20
     /// iterations; 0 runs to the iteration cap [default: 0.02].
     #[arg(long, value_name = "FRACTION")]
@@ -97,6 +116,7 @@ pub struct ClassicalConfig {
     pub smart: SmartParams,
     pub mlem: MlemParams,
     pub tv: TvParams,
+    pub tikhonov: TikhonovParams,
 }
 
 impl Default for ClassicalConfig {
@@ -114,6 +134,7 @@ impl Default for ClassicalConfig {
             smart: SmartParams::default(),
             mlem: MlemParams::default(),
             tv: TvParams::default(),
+            tikhonov: TikhonovParams::default(),
         }
     }
 }
@@ -161,6 +182,14 @@ struct RunReport {
     peak_rss_bytes: Option<u64>,
     /// Against the scene's ground truth (first step), when it has one.
     truth_metrics: Option<fluidnerf_metrics::StepMetrics>,
+    /// Volume NRMSE over all of the truth's voxel centres (`truth_metrics.global.nrmse`).
+    final_nrmse: Option<f64>,
+    /// NRMSE over a subset of the truth's voxel centres during the run (see the module docs).
+    nrmse_history: Vec<NrmsePoint>,
+    /// Iterations between points of `nrmse_history` (0: only the last).
+    eval_every: usize,
+    /// Seconds spent on the evaluations of `nrmse_history` (not part of `solve_s`).
+    eval_s: f64,
 }
 
 fn algorithm(method: Method) -> anyhow::Result<Algorithm> {
@@ -172,6 +201,7 @@ fn algorithm(method: Method) -> anyhow::Result<Algorithm> {
         Method::Smart => Algorithm::Smart,
         Method::Mlem => Algorithm::Mlem,
         Method::Tv => Algorithm::Tv,
+        Method::Tikhonov => Algorithm::Tikhonov,
         other => bail!("{other:?} is not a classical method"),
     })
 }
@@ -186,6 +216,7 @@ fn method_knobs(cfg: &mut ClassicalConfig, alg: Algorithm) -> (&mut Stopping, Op
         Algorithm::Smart => (&mut cfg.smart.stopping, Some(&mut cfg.smart.relaxation)),
         Algorithm::Mlem => (&mut cfg.mlem.stopping, None),
         Algorithm::Tv => (&mut cfg.tv.stopping, Some(&mut cfg.tv.relaxation)),
+        Algorithm::Tikhonov => (&mut cfg.tikhonov.stopping, Some(&mut cfg.tikhonov.relaxation)),
     }
 }
 
@@ -241,6 +272,12 @@ fn resolve(args: &super::reconstruct::Args, alg: Algorithm) -> anyhow::Result<(C
     if let Some(n) = c.tv_steps {
         cfg.tv.tv_steps = n;
     }
+    if let Some(w) = c.tikhonov_weight {
+        cfg.tikhonov.weight = w;
+        if alg != Algorithm::Tikhonov {
+            log::warn!("--tikhonov-weight has no effect on {alg:?}");
+        }
+    }
     cfg.art.seed = seed;
     cfg.mart.seed = seed;
     let (stopping, relaxation) = method_knobs(&mut cfg, alg);
@@ -274,6 +311,9 @@ fn validate(cfg: &ClassicalConfig, alg: Algorithm, resolution: usize) -> anyhow:
     }
     if !(cfg.tv.tv_weight >= 0.0 && cfg.tv.tv_weight.is_finite()) {
         bail!("--tv-weight must be non-negative, got {}", cfg.tv.tv_weight);
+    }
+    if !(cfg.tikhonov.weight >= 0.0 && cfg.tikhonov.weight.is_finite()) {
+        bail!("--tikhonov-weight must be non-negative, got {}", cfg.tikhonov.weight);
     }
     let mut c = cfg.clone();
     let (stopping, relaxation) = method_knobs(&mut c, alg);
@@ -346,12 +386,13 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         n => n,
     };
     let estimate = estimate_memory(alg, cfg.projector, &grid, &sizes, threads, subdivisions);
-    // Scoring against the truth holds it, a copy resampled to its grid and temporaries.
+    // Scoring against the truth holds it, a copy resampled to its grid and temporaries; the
+    // NRMSE curve adds a copy of the working volume to sample from.
     let truth_bytes: u64 = scene
         .truth
         .first()
         .and_then(|t| std::fs::metadata(scene.resolve(&t.file_path)).ok())
-        .map_or(0, |m| 3 * m.len());
+        .map_or(0, |m| 3 * m.len() + 4 * grid.len() as u64);
     let needed = estimate.total() + truth_bytes;
     let limit = match args.classical.memory_limit {
         Some(gib) => (gib * GIB) as u64,
@@ -421,19 +462,33 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
     write_json(&out.join("config.json"), &run_config)?;
     let setup_s = t_start.elapsed().as_secs_f64();
 
+    let truth = match fluidnerf_io::scene::load_truth(&scene) {
+        Ok(t) => t.into_iter().next(),
+        Err(e) => {
+            log::warn!("ground truth not used: {e}");
+            None
+        }
+    };
+    let eval_every = classical_eval_every(args.neural.eval_every);
+    let mut curve = truth.as_ref().map(|(_, t)| Curve::new(t, grid, eval_every));
+
     let mut knobs = cfg.clone();
     let cap = method_knobs(&mut knobs, alg).0.max_iterations;
     let bar = crate::progress::bar(cap as u64, &format!("{alg:?}").to_lowercase());
+    let t_solve = Instant::now();
     let on_iter = |s: &IterState| {
+        if let Some(c) = curve.as_mut() {
+            c.record(s, t_solve);
+        }
         bar.set_position(s.iteration as u64);
-        bar.set_message(format!("residual {:.4}", s.residual));
+        let nrmse = curve.as_ref().and_then(|c| c.points.last()).map(|p| format!(", NRMSE {:.4}", p.nrmse));
+        bar.set_message(format!("residual {:.4}{}", s.residual, nrmse.unwrap_or_default()));
         if crate::interrupt::requested() {
             ControlFlow::Break(())
         } else {
             ControlFlow::Continue(())
         }
     };
-    let t_solve = Instant::now();
     let report: Report = match alg {
         Algorithm::Asart => asart(&problem, None, &cfg.asart, on_iter),
         Algorithm::Art => art(&problem, None, &cfg.art, on_iter),
@@ -442,9 +497,11 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         Algorithm::Smart => smart(&problem, None, &cfg.smart, on_iter),
         Algorithm::Mlem => mlem(&problem, None, &cfg.mlem, on_iter),
         Algorithm::Tv => sart_tv(&problem, None, &cfg.tv, on_iter),
+        Algorithm::Tikhonov => sart_tikhonov(&problem, None, &cfg.tikhonov, on_iter),
     }
     .with_context(|| format!("reconstructing with {alg:?}"))?;
-    let solve_s = t_solve.elapsed().as_secs_f64();
+    let eval_s = curve.as_ref().map_or(0.0, |c| c.eval_s);
+    let solve_s = t_solve.elapsed().as_secs_f64() - eval_s;
     bar.finish_and_clear();
 
     let volume = grid.volume(report.volume);
@@ -453,20 +510,23 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
     let vti = out.join("volume.vti");
     fluidnerf_io::volume::write_vti(&vti, &volume).with_context(|| format!("writing {}", vti.display()))?;
 
-    let truth_metrics = match fluidnerf_io::scene::load_truth(&scene) {
-        Ok(t) => match t.into_iter().next() {
-            Some((time, truth)) => Some(
-                fluidnerf_metrics::report::evaluate_volume(&volume, &truth, time, &Default::default())
-                    .context("scoring against the ground truth")?,
-            ),
-            None => None,
-        },
-        Err(e) => {
-            log::warn!("ground truth not used: {e}");
-            None
-        }
+    let truth_metrics = match &truth {
+        Some((time, truth)) => Some(
+            fluidnerf_metrics::report::evaluate_volume(&volume, truth, *time, &Default::default())
+                .context("scoring against the ground truth")?,
+        ),
+        None => None,
     };
     let iterations = report.iterations;
+    let nrmse_history = match curve {
+        Some(mut c) => {
+            if c.points.last().is_none_or(|p| p.iteration != iterations) {
+                c.push(iterations, solve_s, &volume.data);
+            }
+            c.points
+        }
+        None => Vec::new(),
+    };
     let run_report = RunReport {
         method: args.method,
         version: env!("CARGO_PKG_VERSION").to_string(),
@@ -488,7 +548,11 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         memory_estimate: estimate,
         memory_estimate_bytes: needed,
         peak_rss_bytes: proc_kib("/proc/self/status", "VmHWM:"),
+        final_nrmse: truth_metrics.as_ref().map(|m| m.global.nrmse),
         truth_metrics,
+        nrmse_history,
+        eval_every,
+        eval_s,
     };
     write_json(&out.join("report.json"), &run_report)?;
 
@@ -511,6 +575,56 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         println!("wrote {} ({:?} voxels), {}, config.json, report.json", npy.display(), grid.dims, vti.display());
     }
     Ok(())
+}
+
+/// Iterations between NRMSE evaluations of a classical run: `--eval-every` at its default (100,
+/// sized for neural runs) means every iteration; any other value is taken as given.
+fn classical_eval_every(eval_every: usize) -> usize {
+    const NEURAL_DEFAULT: usize = 100;
+    if eval_every == NEURAL_DEFAULT {
+        1
+    } else {
+        eval_every
+    }
+}
+
+/// The NRMSE curve of a run: evaluations over a [`TruthSample`] every `every` iterations, their
+/// time kept apart from the solver's.
+struct Curve {
+    sample: TruthSample,
+    /// The solver's volume, copied for trilinear sampling at the truth's voxel centres.
+    scratch: fluidnerf_core::Volume,
+    every: usize,
+    points: Vec<NrmsePoint>,
+    eval_s: f64,
+}
+
+impl Curve {
+    fn new(truth: &fluidnerf_core::Volume, grid: Grid, every: usize) -> Self {
+        Curve {
+            sample: TruthSample::new(truth),
+            scratch: grid.volume(vec![0.0; grid.len()]),
+            every,
+            points: Vec::new(),
+            eval_s: 0.0,
+        }
+    }
+
+    /// Evaluates after an iteration when due; `t_solve` is when the solver started.
+    fn record(&mut self, s: &IterState, t_solve: Instant) {
+        if self.every > 0 && s.iteration % self.every == 0 {
+            let train_time_s = t_solve.elapsed().as_secs_f64() - self.eval_s;
+            self.push(s.iteration, train_time_s, s.volume);
+        }
+    }
+
+    fn push(&mut self, iteration: usize, train_time_s: f64, volume: &[f32]) {
+        let t0 = Instant::now();
+        self.scratch.data.copy_from_slice(volume);
+        let nrmse = self.sample.nrmse(&self.scratch);
+        self.points.push(NrmsePoint { iteration, train_time_s, nrmse });
+        self.eval_s += t0.elapsed().as_secs_f64();
+    }
 }
 
 /// Largest side of a voxel's image, in pixels, over the views (at the box centre).

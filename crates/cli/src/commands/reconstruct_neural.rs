@@ -17,7 +17,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use fluidnerf_core::{glam::Vec3, Aabb, ScalarField, Volume};
+use fluidnerf_core::{Aabb, Volume};
 use fluidnerf_neural::occupancy::OccupancyConfig;
 use fluidnerf_neural::train::{train, Learner, Prepared, Problem, TrainConfig, TrainReport, View};
 use fluidnerf_neural::trained::{build_field, ModelRecord, NeuralConfig, WorldField, PRESETS};
@@ -26,6 +26,7 @@ use serde::Serialize;
 
 use super::reconstruct::Method;
 use crate::output::{write_bytes, write_checkpoint, write_json};
+use crate::truth_sample::TruthSample;
 
 /// Options of the neural methods.
 #[derive(clap::Args, Debug)]
@@ -168,43 +169,6 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConf
     apply_train_options(&mut cfg.train, args);
     cfg.train.validate()?;
     Ok((cfg, n.preset.clone()))
-}
-
-/// Every `stride`-th voxel centre of the truth along each axis (the middle one of each group)
-/// and the truth's values there: an unbiased subset for the NRMSE curve that stays cheap to
-/// evaluate (at most 64 points per side).
-struct TruthSample {
-    points: Vec<Vec3>,
-    values: Vec<f32>,
-}
-
-impl TruthSample {
-    fn new(truth: &Volume) -> Self {
-        let stride = truth.dims.iter().map(|&n| n.div_ceil(64)).max().unwrap_or(1).max(1);
-        let (mut points, mut values) = (Vec::new(), Vec::new());
-        let [nx, ny, nz] = truth.dims;
-        for k in (stride / 2..nz).step_by(stride) {
-            for j in (stride / 2..ny).step_by(stride) {
-                for i in (stride / 2..nx).step_by(stride) {
-                    points.push(truth.voxel_centre(i, j, k).as_vec3());
-                    values.push(truth.get(i, j, k));
-                }
-            }
-        }
-        TruthSample { points, values }
-    }
-
-    fn nrmse(&self, field: &(dyn ScalarField + Sync)) -> f64 {
-        let mut est = vec![0.0f32; self.points.len()];
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let per = self.points.len().div_ceil(threads).max(1);
-        std::thread::scope(|scope| {
-            for (o, p) in est.chunks_mut(per).zip(self.points.chunks(per)) {
-                scope.spawn(move || field.eval(p, 0.0, o));
-            }
-        });
-        fluidnerf_metrics::nrmse(&est, &self.values)
-    }
 }
 
 /// CPU seconds (user + system) this process has used so far, from /proc (Linux), for

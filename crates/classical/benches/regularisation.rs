@@ -1,0 +1,102 @@
+//! The cost of regularisation: seconds per iteration of SART, SART-Tikhonov (default λ = 0.05,
+//! 8 sub-steps of the penalty) and SART-TV (20 TV steps), interleaved in one run so that the
+//! ratios hold on a busy machine, and the Laplacian's throughput.
+//!
+//! Geometry as `projection.rs`: 15 cameras of 256 × 256 px on a planar ring around a 40 mm cube,
+//! splat projector without subdivision, 128³ voxels, images projected from a smooth phantom.
+//!
+//! Run: `cargo bench --no-run -p fluidnerf-classical`, then the printed `regularisation-…`
+//! executable with `--bench`.
+
+#![allow(clippy::print_stdout)]
+
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use fluidnerf_classical::{
+    laplacian, sart, sart_tikhonov, sart_tv, Grid, Problem, Projector, SartParams, SplatProjector, Stopping,
+    TikhonovParams, TvParams,
+};
+use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
+use glam::DVec3;
+
+fn ring(n: usize, px: u32) -> Vec<Camera> {
+    let f = px as f64 * 360.0 / 48.0;
+    let c = (px as f64 - 1.0) / 2.0;
+    let k = Intrinsics { width: px, height: px, fx: f, fy: f, cx: c, cy: c, skew: 0.0 };
+    (0..n)
+        .map(|i| {
+            let a = i as f64 * 2.0 * std::f64::consts::PI / n as f64;
+            Camera::look_at(k, DVec3::new(0.0, 360.0 * a.cos(), 360.0 * a.sin()), DVec3::ZERO, DVec3::X)
+        })
+        .collect()
+}
+
+/// Mean seconds per iteration over iterations 2 and 3 (the first carries the setup).
+fn per_iteration(run: impl FnOnce(&mut dyn FnMut())) -> f64 {
+    let mut stamps = Vec::new();
+    run(&mut || stamps.push(Instant::now()));
+    let d: Vec<f64> = stamps.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
+    d.iter().sum::<f64>() / d.len().max(1) as f64
+}
+
+fn main() {
+    if !std::env::args().any(|a| a == "--bench") {
+        return;
+    }
+    let grid = Grid::with_resolution(Aabb::cube(DVec3::ZERO, 40.0), 128);
+    let cams = ring(15, 256);
+    let truth = fluidnerf_core::Volume::from_fn(grid.dims, grid.aabb, |p| {
+        ((-(p.y * p.y + p.z * p.z) / 60.0).exp() * (1.0 + 0.3 * (p.x / 3.0).sin())) as f32
+    });
+    let splat = SplatProjector::new(grid, &cams, 1.0).expect("valid").with_subdivisions(1);
+    let images: Vec<Image> = (0..cams.len())
+        .map(|v| {
+            let mut im = Image::zeros(256, 256);
+            splat.forward(v, &truth.data, &mut im.data);
+            im
+        })
+        .collect();
+    let problem = Problem::new(&splat, &images).expect("consistent");
+    let stopping = Stopping { max_iterations: 3, plateau: None };
+    println!("128^3 voxels, 15 views of 256^2 px, {} rayon threads", rayon::current_num_threads());
+
+    let mut lap = vec![0f32; grid.len()];
+    let t = Instant::now();
+    for _ in 0..10 {
+        laplacian(&grid, &truth.data, &mut lap);
+    }
+    let t_lap = t.elapsed().as_secs_f64() / 10.0;
+    println!("laplacian: {:.4} s per pass, {:.0} M voxels/s", t_lap, grid.len() as f64 / t_lap / 1e6);
+
+    let (mut s, mut k, mut v) = (Vec::new(), Vec::new(), Vec::new());
+    // Interleaved, twice: the machine is shared, so each ratio compares neighbours in time.
+    for _ in 0..2 {
+        s.push(per_iteration(|tick| {
+            sart(&problem, None, &SartParams { stopping, ..Default::default() }, |_| {
+                tick();
+                ControlFlow::Continue(())
+            })
+            .expect("runs");
+        }));
+        k.push(per_iteration(|tick| {
+            sart_tikhonov(&problem, None, &TikhonovParams { stopping, ..Default::default() }, |_| {
+                tick();
+                ControlFlow::Continue(())
+            })
+            .expect("runs");
+        }));
+        v.push(per_iteration(|tick| {
+            sart_tv(&problem, None, &TvParams { stopping, ..Default::default() }, |_| {
+                tick();
+                ControlFlow::Continue(())
+            })
+            .expect("runs");
+        }));
+    }
+    let min = |x: &[f64]| x.iter().cloned().fold(f64::INFINITY, f64::min);
+    let (s, k, v) = (min(&s), min(&k), min(&v));
+    println!("SART:           {s:.3} s per iteration");
+    println!("SART-Tikhonov:  {k:.3} s per iteration ({:.2}x SART)", k / s);
+    println!("SART-TV:        {v:.3} s per iteration ({:.2}x SART)", v / s);
+}

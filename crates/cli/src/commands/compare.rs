@@ -1,0 +1,429 @@
+//! `fluidnerf compare RUN... -o OUT`: time-to-accuracy of several runs on the same scene.
+//!
+//! Reads each run's `nrmse_history: [{iteration, train_time_s, nrmse}]` (written by classical
+//! and neural `fluidnerf reconstruct` runs on a scene with ground truth, and by any other tool
+//! that writes the same fields, e.g. a reference implementation), draws NRMSE against training
+//! wall time, and tabulates when each run first reached a few NRMSE thresholds and how much
+//! faster or slower it was than a reference run.
+//!
+//! Conventions:
+//! - Times are the runs' own `train_time_s`: the method's work with the NRMSE evaluations taken
+//!   out, setup (loading, projector or ray tables) excluded. Runs measured on a busy machine
+//!   compare only as well as their timings do.
+//! - "Reached" means at an evaluation point, so a time to a threshold is resolved to the run's
+//!   evaluation interval (`--eval-every`); nothing is interpolated.
+//! - The speed-up of a run is `t_ref(a) / t_run(a)`, with `a` the best NRMSE the run reached and
+//!   `t(a)` the first time a run's NRMSE was at or below `a`: above 1, the run got there
+//!   faster than the reference. If the reference never got as accurate, the speed-up is at
+//!   least its total time over the run's and is printed as `>X`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use fluidnerf_viz::{write_plots, LinePlot, Series};
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::output::{write_bytes, write_json};
+
+/// Compare runs by NRMSE against training wall time (time to accuracy).
+///
+/// Each RUN is a reconstruction run directory (its `report.json` is read) or a JSON file with
+/// the same fields: `method`, optionally `preset`, and `nrmse_history`, a list of
+/// `{iteration, train_time_s, nrmse}`. Runs record that history when their scene has ground
+/// truth (neural runs every `--eval-every` iterations, classical runs every iteration).
+///
+/// Writes into OUT: `time_to_accuracy.png` and `.svg` (NRMSE against wall time, one line per
+/// run, log axes where the data span a decade), `time_to_accuracy.csv` (every point of every
+/// curve) and `compare.json` (the settings and the table). Prints a table per run: final and
+/// best NRMSE, wall time, the time it first reached each threshold, and its speed-up over the
+/// reference run at the best accuracy it reached.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Run directories (holding `report.json`) or report JSON files.
+    #[arg(required = true, num_args = 1.., value_name = "RUN")]
+    pub runs: Vec<PathBuf>,
+    /// Output directory; created if missing. Existing results need --force.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// NRMSE thresholds for the time-to-accuracy columns, comma-separated; each must be in
+    /// (0, 10) [default: 0.5,0.3,0.2].
+    #[arg(long, value_delimiter = ',', default_value = "0.5,0.3,0.2", value_name = "NRMSE")]
+    pub thresholds: Vec<f64>,
+    /// The run the speed-ups are measured against (a directory or file, listed among the RUNs
+    /// or not; if not, it is added to the plot) [default: the first RUN].
+    #[arg(long, value_name = "RUN")]
+    pub reference: Option<PathBuf>,
+    /// Draw wall time on a linear axis instead of a logarithmic one.
+    #[arg(long)]
+    pub linear_time: bool,
+    /// Overwrite results already in OUT.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// One point of a curve.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+struct Point {
+    iteration: u64,
+    train_time_s: f64,
+    nrmse: f64,
+}
+
+/// One run read back.
+#[derive(Clone, Debug, Serialize)]
+struct Run {
+    /// The directory or file given.
+    path: PathBuf,
+    /// The JSON file read.
+    report: PathBuf,
+    label: String,
+    method: String,
+    preset: Option<String>,
+    #[serde(skip)]
+    curve: Vec<Point>,
+    /// `final_nrmse` (over all voxel centres) when the report has it, else the curve's last.
+    final_nrmse: f64,
+    best_nrmse: f64,
+    /// The run's training (or solver) time, evaluations excluded.
+    wall_time_s: f64,
+}
+
+/// The table row of one run.
+#[derive(Clone, Debug, Serialize)]
+struct Row {
+    #[serde(flatten)]
+    run: Run,
+    /// First time at or below each threshold, in the order of `thresholds` (None: never).
+    time_to_threshold_s: Vec<Option<f64>>,
+    /// Time the run first reached its best NRMSE.
+    time_to_best_s: f64,
+    /// Time the reference first reached this run's best NRMSE (None: never).
+    reference_time_s: Option<f64>,
+    /// `reference_time_s / time_to_best_s`; None when the reference never got there.
+    speedup: Option<f64>,
+    /// When the reference never got there: the speed-up is at least this.
+    speedup_at_least: Option<f64>,
+}
+
+/// `compare.json`.
+#[derive(Serialize)]
+struct CompareRecord<'a> {
+    version: &'static str,
+    thresholds: &'a [f64],
+    reference: &'a Path,
+    linear_time: bool,
+    runs: &'a [Row],
+}
+
+/// The file holding a run's report: `RUN/report.json` for a directory, RUN itself otherwise.
+fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
+    if run.is_dir() {
+        let p = run.join("report.json");
+        if !p.is_file() {
+            bail!("{}: no report.json (is it a run directory of `fluidnerf reconstruct`?)", run.display());
+        }
+        Ok(p)
+    } else if run.is_file() {
+        Ok(run.to_path_buf())
+    } else {
+        bail!("{}: no such run directory or report file", run.display())
+    }
+}
+
+fn number(v: &Value, path: &str) -> Option<f64> {
+    path.split('.').try_fold(v, |v, k| v.get(k)).and_then(Value::as_f64)
+}
+
+/// A label that tells runs apart: method, preset, and the folder (or file) name.
+fn label_of(path: &Path, report: &Path, method: &str, preset: Option<&str>) -> String {
+    let name = if path.is_dir() {
+        path.file_name()
+    } else if report.file_name().is_some_and(|n| n == "report.json") {
+        report.parent().and_then(Path::file_name)
+    } else {
+        report.file_stem()
+    };
+    let name = name.map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| path.display().to_string());
+    match preset {
+        Some(p) if !p.is_empty() => format!("{method}/{p} ({name})"),
+        _ => format!("{method} ({name})"),
+    }
+}
+
+fn read_run(path: &Path) -> anyhow::Result<Run> {
+    let report = report_path(path)?;
+    let text = std::fs::read_to_string(&report).with_context(|| format!("reading {}", report.display()))?;
+    let v: Value = serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", report.display()))?;
+    let method = match v.get("method") {
+        Some(Value::String(m)) => m.clone(),
+        _ => bail!("{}: no `method` field; not a run report", report.display()),
+    };
+    let preset = v.get("preset").and_then(Value::as_str).map(str::to_string);
+    let history = v.get("nrmse_history").and_then(Value::as_array).filter(|a| !a.is_empty());
+    let Some(history) = history else {
+        bail!("{}: no nrmse_history; run it with --eval-every and a scene with ground truth", report.display());
+    };
+    let mut curve = Vec::with_capacity(history.len());
+    for (k, p) in history.iter().enumerate() {
+        let (Some(iteration), Some(train_time_s), Some(nrmse)) =
+            (p.get("iteration").and_then(Value::as_u64), number(p, "train_time_s"), number(p, "nrmse"))
+        else {
+            bail!(
+                "{}: nrmse_history[{k}] needs numbers `iteration`, `train_time_s` and `nrmse`, got {p}",
+                report.display()
+            );
+        };
+        if !(train_time_s.is_finite() && train_time_s >= 0.0 && nrmse.is_finite() && nrmse >= 0.0) {
+            bail!("{}: nrmse_history[{k}] has a negative or non-finite value: {p}", report.display());
+        }
+        curve.push(Point { iteration, train_time_s, nrmse });
+    }
+    if curve.windows(2).any(|w| w[1].train_time_s < w[0].train_time_s) {
+        log::warn!("{}: nrmse_history goes back in time; points are taken in the order given", report.display());
+    }
+    let last = curve[curve.len() - 1];
+    let final_nrmse = number(&v, "final_nrmse").unwrap_or(last.nrmse);
+    let best_nrmse = curve.iter().map(|p| p.nrmse).fold(f64::INFINITY, f64::min);
+    let wall_time_s = ["train.train_time_s", "solve_s", "train_time_s"]
+        .iter()
+        .find_map(|k| number(&v, k))
+        .unwrap_or(last.train_time_s)
+        .max(last.train_time_s);
+    Ok(Run {
+        label: label_of(path, &report, &method, preset.as_deref()),
+        path: path.to_path_buf(),
+        report,
+        method,
+        preset,
+        curve,
+        final_nrmse,
+        best_nrmse,
+        wall_time_s,
+    })
+}
+
+/// The first time `curve` was at or below `nrmse`.
+fn time_to(curve: &[Point], nrmse: f64) -> Option<f64> {
+    curve.iter().find(|p| p.nrmse <= nrmse).map(|p| p.train_time_s)
+}
+
+/// The table rows: thresholds and speed-ups against `runs[reference]`.
+fn rows(runs: &[Run], reference: usize, thresholds: &[f64]) -> Vec<Row> {
+    let r = &runs[reference];
+    runs.iter()
+        .map(|run| {
+            let time_to_best_s = time_to(&run.curve, run.best_nrmse).unwrap_or(run.wall_time_s);
+            let reference_time_s = time_to(&r.curve, run.best_nrmse);
+            let speedup = reference_time_s.map(|t| t / time_to_best_s.max(1e-12));
+            let speedup_at_least = reference_time_s.is_none().then(|| r.wall_time_s / time_to_best_s.max(1e-12));
+            Row {
+                run: run.clone(),
+                time_to_threshold_s: thresholds.iter().map(|&t| time_to(&run.curve, t)).collect(),
+                time_to_best_s,
+                reference_time_s,
+                speedup,
+                speedup_at_least,
+            }
+        })
+        .collect()
+}
+
+/// A CSV field, quoted when it needs to be.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn curves_csv(runs: &[Run]) -> String {
+    let mut text = String::from("run,method,preset,iteration,train_time_s,nrmse\n");
+    for run in runs {
+        for p in &run.curve {
+            text += &format!(
+                "{},{},{},{},{},{}\n",
+                csv_field(&run.label),
+                csv_field(&run.method),
+                csv_field(run.preset.as_deref().unwrap_or("")),
+                p.iteration,
+                p.train_time_s,
+                p.nrmse
+            );
+        }
+    }
+    text
+}
+
+fn seconds(t: Option<f64>) -> String {
+    match t {
+        Some(t) if t < 10.0 => format!("{t:.2}"),
+        Some(t) => format!("{t:.1}"),
+        None => "never".into(),
+    }
+}
+
+/// The table printed to stdout, columns aligned.
+fn table(rows: &[Row], reference: usize, thresholds: &[f64]) -> String {
+    let mut header: Vec<String> =
+        ["run", "final NRMSE", "best NRMSE", "wall time [s]"].iter().map(|s| s.to_string()).collect();
+    header.extend(thresholds.iter().map(|t| format!("t(≤{t}) [s]")));
+    header.push("speed-up vs reference".into());
+    let mut cells: Vec<Vec<String>> = vec![header];
+    for (k, r) in rows.iter().enumerate() {
+        let mut line = vec![
+            if k == reference { format!("{} *", r.run.label) } else { r.run.label.clone() },
+            format!("{:.4}", r.run.final_nrmse),
+            format!("{:.4}", r.run.best_nrmse),
+            seconds(Some(r.run.wall_time_s)),
+        ];
+        line.extend(r.time_to_threshold_s.iter().map(|&t| seconds(t)));
+        line.push(match (r.speedup, r.speedup_at_least) {
+            (Some(s), _) => format!("{s:.2}x"),
+            (None, Some(s)) => format!(">{s:.2}x"),
+            (None, None) => "-".into(),
+        });
+        cells.push(line);
+    }
+    let widths: Vec<usize> =
+        (0..cells[0].len()).map(|c| cells.iter().map(|l| l[c].chars().count()).max().unwrap_or(0)).collect();
+    let mut text = String::new();
+    for line in &cells {
+        let padded: Vec<String> = line
+            .iter()
+            .zip(&widths)
+            .enumerate()
+            .map(|(c, (s, &w))| {
+                let pad = " ".repeat(w - s.chars().count());
+                if c == 0 {
+                    format!("{s}{pad}")
+                } else {
+                    format!("{pad}{s}")
+                }
+            })
+            .collect();
+        text += padded.join("  ").trim_end();
+        text.push('\n');
+    }
+    text
+}
+
+fn same_run(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.thresholds.is_empty() || args.thresholds.iter().any(|t| !(*t > 0.0 && *t < 10.0)) {
+        bail!("--thresholds must be NRMSE values in (0, 10), got {:?}", args.thresholds);
+    }
+    let out = &args.out;
+    let outputs = ["time_to_accuracy.png", "time_to_accuracy.svg", "time_to_accuracy.csv", "compare.json"];
+    if !args.force && outputs.iter().any(|f| out.join(f).exists()) {
+        bail!("{} already holds comparison results; use --force to overwrite", out.display());
+    }
+    let mut runs = args.runs.iter().map(|p| read_run(p)).collect::<anyhow::Result<Vec<Run>>>()?;
+    let reference = match &args.reference {
+        None => 0,
+        Some(r) => match runs.iter().position(|run| same_run(&run.path, r)) {
+            Some(k) => k,
+            None => {
+                runs.push(read_run(r).context("reading the --reference run")?);
+                runs.len() - 1
+            }
+        },
+    };
+    let reference_path = runs[reference].path.clone();
+
+    let plot = LinePlot {
+        title: "Volume NRMSE vs training time".into(),
+        x_label: "training wall time [s]".into(),
+        y_label: "volume NRMSE".into(),
+        log_x: !args.linear_time,
+        log_y: true,
+        markers: runs.iter().any(|r| r.curve.len() < 12),
+        series: runs
+            .iter()
+            .map(|r| Series {
+                label: r.label.clone(),
+                x: r.curve.iter().map(|p| p.train_time_s).collect(),
+                y: r.curve.iter().map(|p| p.nrmse).collect(),
+            })
+            .collect(),
+    };
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    for ext in ["png", "svg"] {
+        let path = out.join(format!("time_to_accuracy.{ext}"));
+        write_plots(&path, std::slice::from_ref(&plot), 1).with_context(|| format!("writing {}", path.display()))?;
+    }
+    write_bytes(&out.join("time_to_accuracy.csv"), curves_csv(&runs).as_bytes())?;
+    let rows = rows(&runs, reference, &args.thresholds);
+    write_json(
+        &out.join("compare.json"),
+        &CompareRecord {
+            version: env!("CARGO_PKG_VERSION"),
+            thresholds: &args.thresholds,
+            reference: &reference_path,
+            linear_time: args.linear_time,
+            runs: &rows,
+        },
+    )?;
+    #[allow(clippy::print_stdout)]
+    {
+        print!("{}", table(&rows, reference, &args.thresholds));
+        println!(
+            "* reference. Times exclude evaluations; speed-up = the reference's time to each run's best NRMSE over \
+             the run's own."
+        );
+        println!("wrote time_to_accuracy.png, .svg, .csv and compare.json in {}", out.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(label: &str, points: &[(f64, f64)]) -> Run {
+        let curve: Vec<Point> = points
+            .iter()
+            .enumerate()
+            .map(|(k, &(t, e))| Point { iteration: k as u64 + 1, train_time_s: t, nrmse: e })
+            .collect();
+        Run {
+            path: PathBuf::from(label),
+            report: PathBuf::from(label),
+            label: label.into(),
+            method: "m".into(),
+            preset: None,
+            final_nrmse: curve[curve.len() - 1].nrmse,
+            best_nrmse: curve.iter().map(|p| p.nrmse).fold(f64::INFINITY, f64::min),
+            wall_time_s: curve[curve.len() - 1].train_time_s,
+            curve,
+        }
+    }
+
+    /// Thresholds are read at evaluation points; the speed-up is the reference's time to the
+    /// run's best accuracy over the run's, or a lower bound when the reference never got there.
+    #[test]
+    fn time_to_accuracy_and_speedups() {
+        let reference = run("ref", &[(1.0, 0.6), (2.0, 0.4), (4.0, 0.25), (8.0, 0.22)]);
+        let fast = run("fast", &[(0.5, 0.45), (1.0, 0.3), (2.0, 0.25)]);
+        let better = run("better", &[(1.0, 0.3), (2.0, 0.18), (3.0, 0.2)]);
+        let rows = rows(&[reference, fast, better], 0, &[0.5, 0.3, 0.2]);
+        assert_eq!(rows[0].time_to_threshold_s, vec![Some(2.0), Some(4.0), None]);
+        assert_eq!(rows[0].speedup, Some(1.0));
+        assert_eq!(rows[1].time_to_threshold_s, vec![Some(0.5), Some(1.0), None]);
+        assert_eq!(rows[1].speedup, Some(2.0), "ref reached 0.25 at 4 s, fast at 2 s");
+        // Semi-convergent run: its best (0.18 at 2 s) counts, not its last point.
+        assert_eq!(rows[2].time_to_best_s, 2.0);
+        assert_eq!(rows[2].speedup, None);
+        assert_eq!(rows[2].speedup_at_least, Some(4.0));
+        let text = table(&rows, 0, &[0.5, 0.3, 0.2]);
+        assert!(text.contains("ref *") && text.contains(">4.00x") && text.contains("never"), "{text}");
+        assert_eq!(csv_field("a,b \"c\""), "\"a,b \"\"c\"\"\"");
+    }
+}

@@ -1,0 +1,174 @@
+//! `fluidnerf compare` end to end: a classical and a neural run on a tiny scene with ground
+//! truth, plus a report file from another tool, drawn and tabulated together; and the errors
+//! for runs that cannot be compared.
+
+mod common;
+use common::*;
+
+#[test]
+fn compares_classical_neural_and_external_runs() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(
+        d,
+        &[
+            "synth",
+            "--preset",
+            "demo",
+            "--phantom",
+            "ball",
+            "--cameras",
+            "6",
+            "--pixels",
+            "32",
+            "--resolution",
+            "16",
+            "-o",
+            "scene",
+            "-q",
+        ],
+    ));
+    ok(&fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "sart",
+            "--method",
+            "sart",
+            "--resolution",
+            "16",
+            "--max-iterations",
+            "8",
+            "--plateau-tolerance",
+            "0",
+            "-q",
+        ],
+    ));
+    ok(&fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "dense",
+            "--method",
+            "fast",
+            "--preset",
+            "dense",
+            "--max-iterations",
+            "100",
+            "--resolution",
+            "16",
+            "--eval-every",
+            "25",
+            "--rays-per-image",
+            "256",
+            "--checkpoint-every",
+            "0",
+            "-q",
+        ],
+    ));
+    // A report from another implementation: only the fields compare needs, and one more.
+    let external = serde_json::json!({
+        "method": "pytorch-fluidnerf",
+        "preset": "ch7",
+        "nrmse_history": [
+            {"iteration": 10, "train_time_s": 0.5, "nrmse": 0.9},
+            {"iteration": 20, "train_time_s": 5.0, "nrmse": 0.6},
+            {"iteration": 30, "train_time_s": 50.0, "nrmse": 0.45},
+        ],
+        "torch_version": "2.5",
+    });
+    std::fs::write(d.join("torch.json"), external.to_string()).expect("writes");
+
+    let out = fluidnerf(
+        d,
+        &[
+            "compare",
+            "sart",
+            "dense",
+            "torch.json",
+            "-o",
+            "cmp",
+            "--reference",
+            "dense",
+            "--thresholds",
+            "0.8,0.5",
+            "-q",
+        ],
+    );
+    ok(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for label in ["sart (sart)", "fast/dense (dense) *", "pytorch-fluidnerf/ch7 (torch)", "t(≤0.8)", "t(≤0.5)"] {
+        assert!(stdout.contains(label), "{label:?} missing from\n{stdout}");
+    }
+    assert!(stdout.contains("1.00x"), "the reference against itself:\n{stdout}");
+    for f in ["time_to_accuracy.png", "time_to_accuracy.svg", "time_to_accuracy.csv", "compare.json"] {
+        assert!(d.join("cmp").join(f).is_file(), "{f} missing");
+    }
+    let svg = std::fs::read_to_string(d.join("cmp/time_to_accuracy.svg")).expect("svg");
+    assert!(svg.contains("pytorch-fluidnerf/ch7 (torch)") && svg.contains("training wall time [s]"));
+
+    // The CSV holds every point of every curve.
+    let csv = std::fs::read_to_string(d.join("cmp/time_to_accuracy.csv")).expect("csv");
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "run,method,preset,iteration,train_time_s,nrmse");
+    let (sart_n, dense_n) = (
+        report(&d.join("sart"))["nrmse_history"].as_array().map(Vec::len).expect("sart history"),
+        report(&d.join("dense"))["nrmse_history"].as_array().map(Vec::len).expect("dense history"),
+    );
+    assert_eq!(sart_n, 8);
+    assert!(dense_n >= 4);
+    assert_eq!(lines.len(), 1 + sart_n + dense_n + 3);
+    assert!(lines.iter().any(|l| l.starts_with("pytorch-fluidnerf/ch7 (torch),pytorch-fluidnerf,ch7,20,5,0.6")));
+
+    // compare.json: settings and the table; the numbers follow from the curves.
+    let c = json(&d.join("cmp/compare.json"));
+    assert_eq!(c["thresholds"], serde_json::json!([0.8, 0.5]));
+    let runs = c["runs"].as_array().expect("runs");
+    assert_eq!(runs.len(), 3);
+    let torch = &runs[2];
+    assert_eq!(torch["best_nrmse"], 0.45);
+    assert_eq!(torch["wall_time_s"], 50.0);
+    assert_eq!(torch["time_to_threshold_s"], serde_json::json!([5.0, 50.0]));
+    assert_eq!(runs[1]["speedup"], 1.0);
+
+    // Existing results need --force.
+    let again = fluidnerf(d, &["compare", "sart", "dense", "-o", "cmp", "-q"]);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+    ok(&fluidnerf(d, &["compare", "sart", "dense", "-o", "cmp", "--force", "--linear-time", "-q"]));
+}
+
+#[test]
+fn runs_that_cannot_be_compared_are_named() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    std::fs::create_dir(d.join("empty")).expect("mkdir");
+    let out = fluidnerf(d, &["compare", "empty", "-o", "cmp", "-q"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("empty") && err.contains("no report.json"), "{err}");
+
+    std::fs::create_dir(d.join("notruth")).expect("mkdir");
+    std::fs::write(d.join("notruth/report.json"), r#"{"method": "sart", "nrmse_history": []}"#).expect("writes");
+    let out = fluidnerf(d, &["compare", "notruth", "-o", "cmp", "-q"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("notruth/report.json") && err.contains("--eval-every") && err.contains("ground truth"),
+        "{err}"
+    );
+
+    std::fs::write(d.join("broken.json"), "{").expect("writes");
+    let out = fluidnerf(d, &["compare", "broken.json", "-o", "cmp", "-q"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("broken.json"));
+    assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
+
+    let out = fluidnerf(d, &["compare", "missing", "-o", "cmp", "--thresholds", "0", "-q"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--thresholds"));
+}
