@@ -98,3 +98,94 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     assert_eq!(temporal["windows"].as_array().map(Vec::len), Some(1));
     assert!(d.join("tr/windows/w000.checkpoint.safetensors").exists());
 }
+
+/// The bytes of every file of `dir/sub` whose name ends with `suffix`, sorted by name
+/// (checkpoints left out: they also hold the training time).
+fn files(dir: &std::path::Path, sub: &str, suffix: &str) -> Vec<(String, Vec<u8>)> {
+    let mut out: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir.join(sub))
+        .expect("readable")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.to_string_lossy().ends_with(suffix) && !p.to_string_lossy().contains("checkpoint"))
+        .map(|p| (p.file_name().expect("name").to_string_lossy().into_owned(), std::fs::read(&p).expect("read")))
+        .collect();
+    out.sort();
+    out
+}
+
+/// A run stopped by Ctrl-C inside its second window and then resumed writes exactly what an
+/// uninterrupted run writes; a resume with another window plan is refused, naming the file.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_windowed_run_resumes_to_the_same_result() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth = "synth -q --preset jet-tr60 --cameras 6 --pixels 24 --resolution 16 --model pinhole --times 14,14.5,15,15.5,16 -o scene";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    let run = |out: &str| -> Vec<String> {
+        let args = "reconstruct scene --method tr-fluidnerf --preset tr-small --window 3 --overlap 1 -q \
+                    --max-iterations 60 --rays-per-image 32 --resolution 12 --checkpoint-every 1 -o";
+        args.split_whitespace().chain([out]).map(String::from).collect()
+    };
+    let as_str = |v: &[String]| v.iter().map(String::as_str).collect::<Vec<_>>().join(" ");
+    ok(&fluidnerf(d, &run("full").iter().map(String::as_str).collect::<Vec<_>>()));
+
+    // Ctrl-C as soon as the second window has written its first checkpoint.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args(run("cut"))
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("starts");
+    let second = d.join("cut/windows/w001.checkpoint.safetensors");
+    while !second.exists() {
+        assert!(
+            child.try_wait().expect("waits").is_none(),
+            "finished before its second window: {}",
+            as_str(&run("cut"))
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let kill = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    assert!(kill.success());
+    assert!(child.wait().expect("waits").success(), "an interrupted run still writes its results");
+    let cut = report(&d.join("cut"));
+    assert_eq!(cut["interrupted"], true);
+    assert_eq!(cut["windows"], 2);
+    let progress = json(&d.join("cut/windows/progress.json"));
+    assert_eq!(progress["finished"].as_array().map(Vec::len), Some(1));
+
+    // Without --resume or --force the results are kept.
+    let refused = fluidnerf(d, &run("cut").iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--resume"));
+
+    // Another window plan cannot continue this run.
+    let mut other = run("cut");
+    other[7] = "2".into(); // --window 2
+    other.push("--resume".into());
+    let refused = fluidnerf(d, &other.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!refused.status.success(), "resumed with another window plan");
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("progress.json") && err.contains("window plan"), "{err}");
+
+    let mut resume = run("cut");
+    resume.push("--resume".into());
+    ok(&fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>()));
+    let (full, cut) = (d.join("full"), d.join("cut"));
+    assert_eq!(report(&cut)["interrupted"], false);
+    let weights = files(&full, "windows", ".safetensors");
+    assert_eq!(weights.len(), 2);
+    assert!(weights == files(&cut, "windows", ".safetensors"), "the resumed run's weights differ");
+    let volumes = files(&full, "frames", ".npy");
+    assert_eq!(volumes.len(), 5);
+    assert!(volumes == files(&cut, "frames", ".npy"), "the resumed run's volumes differ");
+    let histories = |dir: &std::path::Path| {
+        report(dir)["per_window"]
+            .as_array()
+            .expect("windows")
+            .iter()
+            .map(|w| w["loss_history"].clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(histories(&full), histories(&cut));
+}

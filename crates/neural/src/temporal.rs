@@ -3,11 +3,10 @@
 //!
 //! # The method (§5.2, Table 5.2)
 //! - Inputs `(x, y, z, t')`: box-normalised space (the field contract, [`crate::field`]) and the
-//!   frame time `t' = (t − t₀) / Δt`, `Δt` the frame spacing and `t₀` the first frame of the
-//!   window being trained. The dissertation normalises by `Δt` so that the temporal encoding
-//!   (Eq. 5.2 with `L_t` frequencies) does not collapse for small time steps; the origin `t₀`
-//!   only shifts `t'` by an integer number of frames (an offset the network absorbs, and which
-//!   the grid field needs to map the window onto its time axis).
+//!   frame time `t' = (t − t₀) / Δt`, `Δt` the frame spacing and `t₀` the time origin (below).
+//!   The dissertation normalises by `Δt` so that the temporal encoding (Eq. 5.2 with `L_t`
+//!   frequencies) does not collapse for small time steps; the origin only shifts `t'` by an
+//!   integer number of frames.
 //! - One iteration = `N_pix/img` pixels from every image of ONE time step, cycling through the
 //!   time steps ([`crate::train::Batching::OneTimeStep`]); everything else (sampling,
 //!   rendering, loss, Adam, stopping rule, checkpoints) is the static engine of
@@ -28,10 +27,26 @@
 //!
 //! # Windows
 //! Frames are split into overlapping windows of `W` frames ([`crate::window`]); each window is
-//! a separate training problem with its own time origin. With `warm_start`, a window starts
-//! from the previous window's trained weights (same shape: all windows have `W` frames), with
-//! a fresh optimiser. Outputs of overlapping windows are cross-faded linearly in time
-//! ([`crate::window::blend`], [`StitchedField`]).
+//! a separate training problem. With `warm_start`, a window starts from the previous window's
+//! trained weights (same shape: all windows have `W` frames), with a fresh optimiser. Outputs
+//! of overlapping windows are cross-faded linearly in time ([`crate::window::blend`],
+//! [`StitchedField`]).
+//!
+//! # Time origin ([`TimeOrigin`])
+//! A warm start only helps if the copied field means the same thing in the new window. With
+//! the origin at each window's first frame, a frame shared by two windows has `t'` smaller by
+//! the stride `W − O` in the later one, so the copied field starts out shifted in time by
+//! `W − O` frames. The MLP takes any `t'`, so its windows share the recording's first frame as
+//! origin (`recording`, the default for it): shared frames keep their `t'` and the warm start
+//! continues the same function. The hash grid clamps `t'` to its time axis `[0, W − 1]`, so
+//! its windows keep their own origin (`window`); aligning it would need a time axis that
+//! wraps around (a ring of `≥ W` frames), which the grid does not have.
+//!
+//! # Resuming
+//! [`train_windows`] takes a [`ResumeState`] (finished windows, the running window's learner)
+//! and reports [`WindowEvent::Finished`] when a window is done, the moment a caller saves it.
+//! Training is deterministic per seed and thread count, so a resumed run ends with the same
+//! weights as an uninterrupted one.
 //!
 //! Per-frame static FluidNeRF is the special case `W = 1`, no overlap, a 3D field, no warm
 //! start; its stitched field interpolates linearly between neighbouring frames.
@@ -48,7 +63,8 @@ use crate::mlp::{Activation, MlpConfig};
 use crate::occupancy::OccupancyConfig;
 use crate::optim::LrSchedule;
 use crate::train::{
-    train, Batching, FieldMeta, Learner, Prepared, Problem, StopRule, TrainConfig, TrainReport, TrainState,
+    converged, running_mean, train, Batching, FieldMeta, Learner, Prepared, Problem, StopReason, StopRule, TrainConfig,
+    TrainReport, TrainState,
 };
 use crate::trained::{build_field, AnyField, FieldConfig, NeuralConfig, TrainedField};
 use crate::window::{blend, frame_position, plan_windows, time_at};
@@ -66,18 +82,48 @@ pub struct WindowConfig {
     pub warm_start: bool,
     /// Iteration cap of warm-started windows (None: the training config's). Default None.
     pub warm_max_iterations: Option<usize>,
+    /// Where each window's time axis starts (module doc, "Time origin"). Default auto.
+    pub time_origin: TimeOrigin,
 }
 
 impl Default for WindowConfig {
     fn default() -> Self {
-        WindowConfig { frames: 0, overlap: 2, warm_start: true, warm_max_iterations: None }
+        WindowConfig {
+            frames: 0,
+            overlap: 2,
+            warm_start: true,
+            warm_max_iterations: None,
+            time_origin: TimeOrigin::Auto,
+        }
     }
+}
+
+/// The origin `t₀` of a window's frame time `t' = (t − t₀) / Δt`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TimeOrigin {
+    /// The field's own choice, fixed by [`TemporalConfig::resolve`]: `recording` for the MLP,
+    /// `window` for the hash grid. [`train_windows`] takes an unresolved `auto` as `window`.
+    #[default]
+    Auto,
+    /// Each window's first frame: `t' ∈ [0, W − 1]`, the span of the grid field's time axis.
+    Window,
+    /// The recording's first frame, for every window: a frame shared by two windows keeps its
+    /// `t'`, so a warm-started window continues the previous window's function of time instead
+    /// of seeing it shifted by the stride. Needs a field without a bounded time axis (the MLP).
+    Recording,
 }
 
 impl WindowConfig {
     /// One window per frame, no overlap, independent training: per-frame static FluidNeRF.
     pub fn per_frame() -> Self {
-        WindowConfig { frames: 1, overlap: 0, warm_start: false, warm_max_iterations: None }
+        WindowConfig {
+            frames: 1,
+            overlap: 0,
+            warm_start: false,
+            warm_max_iterations: None,
+            time_origin: TimeOrigin::Window,
+        }
     }
 
     pub fn validate(&self) -> Result<(), NeuralError> {
@@ -103,6 +149,32 @@ pub struct TemporalConfig {
 impl Default for TemporalConfig {
     fn default() -> Self {
         temporal_preset("tr-faithful").unwrap_or_else(|| unreachable!())
+    }
+}
+
+impl TemporalConfig {
+    /// Fixes [`TimeOrigin::Auto`] for the field (`recording` for the MLP, `window` otherwise)
+    /// and validates the result: the hash grid clamps `t'` to its time axis `[0, W − 1]`, so
+    /// it cannot take a recording-wide origin once there is more than one window.
+    pub fn resolve(&mut self) -> Result<(), NeuralError> {
+        self.windows.validate()?;
+        self.train.validate()?;
+        if self.windows.time_origin == TimeOrigin::Auto {
+            self.windows.time_origin = match self.field {
+                FieldConfig::Mlp(_) => TimeOrigin::Recording,
+                _ => TimeOrigin::Window,
+            };
+        }
+        if self.windows.time_origin == TimeOrigin::Recording
+            && matches!(self.field, FieldConfig::HashGrid(_))
+            && self.windows.frames > 0
+        {
+            return Err(NeuralError::invalid(
+                "time origin",
+                "the hash grid's time axis spans one window; windows of a grid field need the window origin",
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -178,7 +250,13 @@ pub fn temporal_preset(name: &str) -> Option<TemporalConfig> {
                     occupancy: Some(OccupancyConfig::default()),
                     ..base.train
                 },
-                windows: WindowConfig { frames: 16, overlap: 4, warm_start: true, warm_max_iterations: None },
+                windows: WindowConfig {
+                    frames: 16,
+                    overlap: 4,
+                    warm_start: true,
+                    warm_max_iterations: None,
+                    time_origin: TimeOrigin::Window,
+                },
             })
         }
         _ => None,
@@ -228,13 +306,13 @@ pub fn fast_field_memory(frames: usize, threads: usize) -> Result<(usize, usize,
 }
 
 /// The training problem of the frames `range` of a recording with frame times `times`: the
-/// views at those times (training and held out), their times shifted to the window's origin.
-pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>) -> Problem {
+/// views at those times (training and held out), their times shifted by `origin` (`t − t₀`).
+pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>, origin: f64) -> Problem {
     let (t_first, t_last) = (times[range.start], times[range.end - 1]);
     let tol = 1e-9 * (1.0 + t_first.abs().max(t_last.abs()));
     let keep = |v: &crate::train::View| {
         (v.time >= t_first - tol && v.time <= t_last + tol)
-            .then(|| crate::train::View { time: v.time - t_first, ..v.clone() })
+            .then(|| crate::train::View { time: v.time - origin, ..v.clone() })
     };
     Problem {
         aabb: problem.aabb,
@@ -242,6 +320,14 @@ pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>) -> 
         views: problem.views.iter().filter_map(keep).collect(),
         holdout: problem.holdout.iter().filter_map(keep).collect(),
         time_step: problem.time_step,
+    }
+}
+
+/// The origin `t₀` of window `range` (`auto` taken as `window`, see [`TimeOrigin`]).
+pub fn window_origin(origin: TimeOrigin, times: &[f64], range: &Range<usize>) -> f64 {
+    match origin {
+        TimeOrigin::Recording => times[0],
+        TimeOrigin::Window | TimeOrigin::Auto => times[range.start],
     }
 }
 
@@ -258,7 +344,7 @@ pub struct WindowInfo {
 #[derive(Clone, Debug)]
 pub struct TrainedWindow<F> {
     pub frames: Range<usize>,
-    /// Absolute time of the window's first frame (`t₀` of `t' = (t − t₀) / Δt`).
+    /// Absolute time `t₀` of `t' = (t − t₀) / Δt` ([`TimeOrigin`]).
     pub time_origin: f64,
     pub learner: Learner<F>,
     pub meta: FieldMeta,
@@ -277,18 +363,57 @@ pub struct TemporalRun<F> {
     pub interrupted: bool,
 }
 
+/// What a stopped [`train_windows`] run left behind, to continue it: the learners of the
+/// windows it finished and the state of the window it was training.
+#[derive(Clone, Debug)]
+pub struct ResumeState<F> {
+    /// The first windows of the plan, in order, as they finished: learner (weights, optimiser
+    /// state, histories) and report. They are not trained again.
+    pub finished: Vec<(Learner<F>, TrainReport)>,
+    /// The next window's learner at its last checkpoint; it continues from there (None: the
+    /// window starts as usual, warm or fresh).
+    pub running: Option<Learner<F>>,
+}
+
+impl<F> Default for ResumeState<F> {
+    fn default() -> Self {
+        ResumeState { finished: Vec::new(), running: None }
+    }
+}
+
+/// What [`train_windows`] reports to its callback.
+#[derive(Debug)]
+pub enum WindowEvent<'a, F> {
+    /// After every training iteration of the window.
+    Iteration(&'a WindowInfo, &'a TrainState<'a, F>),
+    /// The window has finished training (converged, iteration cap or time budget; not when the
+    /// callback stopped it): the moment to save it as finished. Not sent for windows taken
+    /// from a [`ResumeState`].
+    Finished(&'a WindowInfo, &'a TrainedWindow<F>),
+}
+
 /// Trains every window of `problem` (absolute view times; `problem.time_step` is Δt) in turn,
 /// starting the first window (and, without warm start, every window) from `init`, which must
-/// be built for [`plan_windows`]' window length (see [`field_for_window`]). `on_iter` sees the
-/// window and the engine's state after every iteration; breaking stops after that window's
-/// iteration. Seeds: window `k` trains with `seed + k`.
+/// be built for [`plan_windows`]' window length (see [`field_for_window`]). Window times are
+/// relative to `windows.time_origin` ([`window_origin`]).
+///
+/// `on_event` sees every iteration and every finished window; breaking stops after that
+/// iteration (the window is returned as it is, `interrupted` set) or before the next window.
+/// Seeds: window `k` trains with `seed + k`.
+///
+/// `resume` continues a stopped run with the same settings: its finished windows are taken as
+/// they are (their data prepared again for the metadata, not trained), the running one
+/// continues from its learner, later ones train as usual. Since every random choice is keyed
+/// by (seed, iteration), the result equals that of an uninterrupted run (time budgets aside:
+/// they count from the resume).
 pub fn train_windows<F: TrainableField + Clone>(
     problem: &Problem,
     train_cfg: &TrainConfig,
     windows: &WindowConfig,
     init: F,
     seed: u64,
-    mut on_iter: impl FnMut(&WindowInfo, &TrainState<F>) -> ControlFlow<()>,
+    resume: ResumeState<F>,
+    mut on_event: impl FnMut(WindowEvent<'_, F>) -> ControlFlow<()>,
 ) -> Result<TemporalRun<F>, NeuralError> {
     windows.validate()?;
     let times = frame_times(problem);
@@ -296,39 +421,81 @@ pub fn train_windows<F: TrainableField + Clone>(
         return Err(NeuralError::invalid("scene", "no training images"));
     }
     let plan = plan_windows(times.len(), windows.frames, windows.overlap);
+    if resume.finished.len() > plan.len() {
+        return Err(NeuralError::invalid(
+            "resume",
+            format!("{} finished windows but the plan has {}", resume.finished.len(), plan.len()),
+        ));
+    }
+    let n_params = init.num_params();
+    let mut saved = resume.finished.iter().map(|(l, _)| l).chain(resume.running.as_ref());
+    if saved.any(|l| l.field.num_params() != n_params || l.adam.m.len() != n_params) {
+        return Err(NeuralError::invalid("resume", "a saved window does not have the field's parameter count"));
+    }
+    let mut finished = resume.finished.into_iter();
+    let mut running = resume.running;
     let mut out: Vec<TrainedWindow<F>> = Vec::with_capacity(plan.len());
     let mut interrupted = false;
     for (k, range) in plan.iter().enumerate() {
-        let sub = window_problem(problem, &times, range.clone());
+        let origin = window_origin(windows.time_origin, &times, range);
+        let sub = window_problem(problem, &times, range.clone(), origin);
         let prep = Prepared::new(&sub, train_cfg)?;
+        let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
+        let trained = |learner: Learner<F>, report: TrainReport| TrainedWindow {
+            frames: range.clone(),
+            time_origin: origin,
+            learner,
+            meta: prep.meta.clone(),
+            report,
+            occupied_fraction: prep.occupied_fraction(),
+        };
+        if let Some((learner, report)) = finished.next() {
+            out.push(trained(learner, report));
+            continue;
+        }
         let warm = windows.warm_start && k > 0;
-        let previous = out.last().filter(|prev| warm && prev.learner.field.num_params() == init.num_params());
         let mut cfg = train_cfg.clone();
         if warm {
             if let Some(m) = windows.warm_max_iterations {
                 cfg.max_iterations = m;
             }
         }
-        let mut learner = match previous {
-            Some(prev) => Learner::new(prev.learner.field.clone()),
-            None => Learner::fresh(init.clone(), &prep, &cfg),
+        let previous = out.last().filter(|_| warm);
+        let mut learner = match (running.take(), previous) {
+            (Some(saved), _) => saved,
+            (None, Some(prev)) => Learner::new(prev.learner.field.clone()),
+            (None, None) => Learner::fresh(init.clone(), &prep, &cfg),
         };
-        let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
-        let report = train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iter(&info, s))?;
-        out.push(TrainedWindow {
-            frames: range.clone(),
-            time_origin: times[range.start],
-            learner,
-            meta: prep.meta.clone(),
-            report: report.clone(),
-            occupied_fraction: prep.occupied_fraction(),
-        });
-        if report.stop_reason == crate::train::StopReason::Interrupted {
-            interrupted = true;
+        // A window saved at the iteration at which it converged stops there, as it did then.
+        let report = if learner.iteration > 0 && converged(&learner.losses, &cfg.stop) {
+            finished_report(&learner, &cfg)
+        } else {
+            train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| {
+                on_event(WindowEvent::Iteration(&info, s))
+            })?
+        };
+        out.push(trained(learner, report));
+        let stopped = out.last().is_some_and(|w| w.report.stop_reason == StopReason::Interrupted);
+        if stopped || out.last().is_some_and(|w| on_event(WindowEvent::Finished(&info, w)).is_break()) {
+            interrupted = stopped || k + 1 < plan.len();
             break;
         }
     }
     Ok(TemporalRun { frame_times: times, plan, windows: out, interrupted })
+}
+
+/// The report of a window that had already converged when it was saved.
+fn finished_report<F>(learner: &Learner<F>, cfg: &TrainConfig) -> TrainReport {
+    let smoothing = cfg.stop.smoothing.max(1);
+    TrainReport {
+        stop_reason: StopReason::Converged,
+        iterations: learner.iteration,
+        final_loss: learner.losses.last().copied().unwrap_or(f32::NAN),
+        smoothed_loss: running_mean(&learner.losses, smoothing),
+        train_time_s: learner.train_time_s,
+        seconds_per_iteration: 0.0,
+        samples_per_second: 0.0,
+    }
 }
 
 /// Trained windows stitched into one field of space and time, in world units (module doc of

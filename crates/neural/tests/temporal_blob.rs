@@ -9,11 +9,13 @@ use fluidnerf_core::{render_image, Aabb, RenderSettings, ScalarField, Volume};
 use fluidnerf_neural::hashgrid::{HashGridConfig, HashGridField};
 use fluidnerf_neural::mlp::{Activation, MlpConfig, MlpField};
 use fluidnerf_neural::temporal::{
-    field_for_window, frame_times, load_temporal, train_windows, StitchedField, TemporalRecord, WindowConfig,
-    WindowRecord,
+    field_for_window, frame_times, load_temporal, train_windows, ResumeState, StitchedField, TemporalRecord,
+    TemporalRun, TimeOrigin, WindowConfig, WindowEvent, WindowRecord,
 };
-use fluidnerf_neural::train::{Batching, Problem, StopRule, TrainConfig, View};
+use fluidnerf_neural::train::{Batching, Learner, Problem, StopRule, TrainConfig, View};
 use fluidnerf_neural::trained::FieldConfig;
+use fluidnerf_neural::weights::{checkpoint_bytes, load_checkpoint};
+use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
 mod common;
@@ -121,8 +123,10 @@ fn tr_fluidnerf_reconstructs_frames_and_a_held_out_time() {
     let p = Problem { time_step: 2.0, ..p };
     let cfg = quick(600, 5e-3);
     let init = MlpField::new(&MlpConfig { time_freqs: 0, ..small_tr_mlp() }, 4, 7).expect("field");
-    let run =
-        train_windows(&p, &cfg, &WindowConfig::default(), init, 3, |_, _| ControlFlow::Continue(())).expect("trains");
+    let run = train_windows(&p, &cfg, &WindowConfig::default(), init, 3, ResumeState::default(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("trains");
     assert_eq!(run.windows.len(), 1);
     let field = StitchedField::from_run(&run).expect("stitches");
     let at = |t: f64| Volume::from_field([24, 24, 24], aabb(), &field, t);
@@ -157,7 +161,7 @@ fn small_grid() -> HashGridConfig {
 fn windows_warm_start_stitch_continuously_and_round_trip() {
     let times = [0.0, 1.0, 2.0, 3.0];
     let p = problem(&times);
-    let windows = WindowConfig { frames: 3, overlap: 2, warm_start: true, warm_max_iterations: None };
+    let windows = WindowConfig { frames: 3, overlap: 2, time_origin: TimeOrigin::Window, ..WindowConfig::default() };
     let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), 3);
     let FieldConfig::HashGrid(grid) = &field_cfg else { unreachable!() };
     let init = HashGridField::new(grid, 4, 2).expect("field");
@@ -168,12 +172,15 @@ fn windows_warm_start_stitch_continuously_and_round_trip() {
         fine_samples: 0,
         ..quick(300, 1e-2)
     };
-    let warm = train_windows(&p, &cfg, &windows, init.clone(), 5, |_, _| ControlFlow::Continue(())).expect("trains");
+    let warm =
+        train_windows(&p, &cfg, &windows, init.clone(), 5, ResumeState::default(), |_| ControlFlow::Continue(()))
+            .expect("trains");
     assert_eq!(warm.plan, vec![0..3, 1..4]);
     let cold_cfg = WindowConfig { warm_start: false, ..windows.clone() };
-    let cold = train_windows(&p, &cfg, &cold_cfg, init, 5, |_, _| ControlFlow::Continue(())).expect("trains");
+    let cold = train_windows(&p, &cfg, &cold_cfg, init, 5, ResumeState::default(), |_| ControlFlow::Continue(()))
+        .expect("trains");
     // The second window starts from a field that already knows its first frame.
-    let first = |r: &fluidnerf_neural::temporal::TemporalRun<HashGridField>| r.windows[1].learner.losses[0];
+    let first = |r: &TemporalRun<HashGridField>| r.windows[1].learner.losses[0];
     // (Both start from the mean level; the warm one also knows where the blob is.)
     assert!(first(&warm) < 0.7 * first(&cold), "warm start {} vs cold {}", first(&warm), first(&cold));
 
@@ -237,8 +244,10 @@ fn per_frame_windows_interpolate_linearly_between_frames() {
     let p = problem(&[0.0, 1.0]);
     let cfg = TrainConfig { batching: Batching::AllViews, ..quick(30, 5e-3) };
     let init = MlpField::new(&MlpConfig { time_freqs: 0, ..small_tr_mlp() }, 3, 1).expect("field");
-    let run =
-        train_windows(&p, &cfg, &WindowConfig::per_frame(), init, 0, |_, _| ControlFlow::Continue(())).expect("trains");
+    let run = train_windows(&p, &cfg, &WindowConfig::per_frame(), init, 0, ResumeState::default(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("trains");
     assert_eq!(run.windows.len(), 2);
     let field = StitchedField::from_run(&run).expect("stitches");
     let pts: Vec<Vec3> = (0..50).map(|i| Vec3::new(-0.5 + 0.02 * i as f32, 0.0, 0.0)).collect();
@@ -252,4 +261,94 @@ fn per_frame_windows_interpolate_linearly_between_frames() {
         let expect = 0.75 * a[i] + 0.25 * b[i];
         assert!((m[i] - expect).abs() <= 1e-5 * (1.0 + expect.abs()), "point {i}: {} vs {expect}", m[i]);
     }
+}
+
+/// Four frames in windows of 3 overlapping by 2 (0..3, 1..4), the small TR MLP, warm starts.
+fn windowed_mlp(origin: TimeOrigin) -> (Problem, TrainConfig, WindowConfig, MlpField) {
+    let p = problem(&[0.0, 1.0, 2.0, 3.0]);
+    let windows = WindowConfig { frames: 3, overlap: 2, time_origin: origin, ..WindowConfig::default() };
+    let init = MlpField::new(&MlpConfig { time_freqs: 0, ..small_tr_mlp() }, 4, 4).expect("field");
+    (p, quick(90, 5e-3), windows, init)
+}
+
+/// A learner through the checkpoint format and back (what a resumed run reads).
+fn through_checkpoint(learner: &Learner<MlpField>, init: &MlpField) -> Learner<MlpField> {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("w.checkpoint.safetensors");
+    std::fs::write(&path, checkpoint_bytes(learner).expect("bytes")).expect("writes");
+    let mut back = Learner::new(init.clone());
+    load_checkpoint(&path, &mut back).expect("loads");
+    back
+}
+
+#[test]
+fn an_interrupted_windowed_run_resumes_to_the_uninterrupted_result() {
+    let (p, cfg, windows, init) = windowed_mlp(TimeOrigin::Recording);
+    let go = |_: WindowEvent<'_, MlpField>| ControlFlow::Continue(());
+    let full = train_windows(&p, &cfg, &windows, init.clone(), 9, ResumeState::default(), go).expect("trains");
+    assert_eq!(full.plan, vec![0..3, 1..4]);
+    assert!(!full.interrupted);
+
+    // Stopped inside the second window (after its 37th iteration), or right after the first.
+    let inside = |e: WindowEvent<'_, MlpField>| match e {
+        WindowEvent::Iteration(w, s) if w.index == 1 && s.iteration == 37 => ControlFlow::Break(()),
+        _ => ControlFlow::Continue(()),
+    };
+    let between = |e: WindowEvent<'_, MlpField>| match e {
+        WindowEvent::Finished(w, _) if w.index == 0 => ControlFlow::Break(()),
+        _ => ControlFlow::Continue(()),
+    };
+    let stopped_inside =
+        train_windows(&p, &cfg, &windows, init.clone(), 9, ResumeState::default(), inside).expect("trains");
+    let stopped_between =
+        train_windows(&p, &cfg, &windows, init.clone(), 9, ResumeState::default(), between).expect("trains");
+    assert!(stopped_inside.interrupted && stopped_between.interrupted);
+    assert_eq!(stopped_inside.windows.len(), 2);
+    assert_eq!(stopped_inside.windows[1].learner.iteration, 37);
+    assert_eq!(stopped_between.windows.len(), 1);
+
+    for (stopped, running) in [(&stopped_inside, true), (&stopped_between, false)] {
+        let n_done = if running { stopped.windows.len() - 1 } else { stopped.windows.len() };
+        let resume = ResumeState {
+            finished: stopped.windows[..n_done]
+                .iter()
+                .map(|w| (through_checkpoint(&w.learner, &init), w.report.clone()))
+                .collect(),
+            running: running.then(|| through_checkpoint(&stopped.windows[n_done].learner, &init)),
+        };
+        let mut trained_windows = Vec::new();
+        let resumed = train_windows(&p, &cfg, &windows, init.clone(), 9, resume, |e| {
+            if let WindowEvent::Finished(w, _) = e {
+                trained_windows.push(w.index);
+            }
+            ControlFlow::Continue(())
+        })
+        .expect("resumes");
+        assert_eq!(trained_windows, [1], "only the unfinished window trains");
+        assert!(!resumed.interrupted);
+        for (a, b) in full.windows.iter().zip(&resumed.windows) {
+            assert_eq!(a.learner.field.params(), b.learner.field.params(), "window {:?} differs", a.frames);
+            assert_eq!(a.learner.losses, b.learner.losses);
+            assert_eq!(a.learner.adam.m, b.learner.adam.m);
+            assert_eq!((a.time_origin, &a.meta), (b.time_origin, &b.meta));
+        }
+    }
+}
+
+#[test]
+fn a_shared_time_origin_lets_warm_starts_continue_the_previous_window() {
+    // With each window's own origin the warm-started MLP sees its predecessor shifted by the
+    // stride (here one frame); with the recording's origin, the shared frames keep their t'.
+    let go = |_: WindowEvent<'_, MlpField>| ControlFlow::Continue(());
+    let mut first_losses = Vec::new();
+    for origin in [TimeOrigin::Window, TimeOrigin::Recording] {
+        let (p, cfg, windows, init) = windowed_mlp(origin);
+        let run = train_windows(&p, &cfg, &windows, init, 9, ResumeState::default(), go).expect("trains");
+        let origins: Vec<f64> = run.windows.iter().map(|w| w.time_origin).collect();
+        assert_eq!(origins, if origin == TimeOrigin::Window { [0.0, 1.0] } else { [0.0, 0.0] });
+        first_losses.push((run.windows[1].learner.losses[0], run.windows[0].report.smoothed_loss));
+    }
+    let [(shifted, _), (aligned, end_of_first)] = first_losses[..] else { unreachable!() };
+    assert!(aligned < 0.5 * shifted, "first loss of the warm window: aligned {aligned} vs shifted {shifted}");
+    assert!(aligned < 3.0 * end_of_first, "aligned {aligned} vs the first window's end {end_of_first}");
 }

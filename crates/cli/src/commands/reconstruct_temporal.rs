@@ -10,6 +10,11 @@
 //! - `windows/wNNN.safetensors` (weights) and `windows/wNNN.checkpoint.safetensors` (weights,
 //!   Adam state, histories) of every window, and `temporal.json`, from which
 //!   `fluidnerf_neural::temporal::load_temporal` rebuilds the stitched field E(x, t);
+//! - `windows/progress.json`: the window plan, field and seed of the run and the windows it has
+//!   finished, written when a window finishes (its checkpoint first). With `--resume` finished
+//!   windows are loaded from their checkpoints, the next one continues from its last checkpoint
+//!   (every `--checkpoint-every` iterations and on Ctrl-C), later ones train as usual: the
+//!   result equals an uninterrupted run's (same seed and thread count);
 //! - `config.json` (resolved settings, seed, version: rerun with `--config`);
 //! - `report.json`: per window the training report and loss history, and per output time the
 //!   volume NRMSE (Eq. 6.18), global SSIM (Eq. 6.19, one window) and windowed 3D SSIM (7³
@@ -22,11 +27,12 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use fluidnerf_core::{ScalarField, Volume};
 use fluidnerf_neural::temporal::{
-    field_for_window, frame_times, infer_time_step, temporal_preset, train_windows, StitchedField, TemporalConfig,
-    TemporalRecord, TemporalRun, WindowConfig, WindowRecord, TEMPORAL_PRESETS,
+    field_for_window, frame_times, infer_time_step, temporal_preset, train_windows, ResumeState, StitchedField,
+    TemporalConfig, TemporalRecord, TemporalRun, TimeOrigin, WindowConfig, WindowEvent, WindowRecord, TEMPORAL_PRESETS,
 };
-use fluidnerf_neural::train::{Batching, Problem, TrainReport, View};
-use fluidnerf_neural::trained::{build_field, NeuralConfig, PRESETS};
+use fluidnerf_neural::train::{Batching, Learner, Problem, TrainConfig, TrainReport, View};
+use fluidnerf_neural::trained::{build_field, FieldConfig, NeuralConfig, PRESETS};
+use fluidnerf_neural::window::plan_windows;
 use fluidnerf_neural::TrainableField;
 use serde::{Deserialize, Serialize};
 
@@ -56,6 +62,72 @@ pub struct Args {
     /// Frame spacing Δt of t' = (t − t₀)/Δt. Default: the smallest gap between training times.
     #[arg(long)]
     pub time_step: Option<f64>,
+    /// Origin t₀ of each window's time t' = (t − t₀)/Δt: `recording` (the first frame of the
+    /// recording, for every window: a warm-started window continues the previous window's
+    /// function of time) or `window` (each window's first frame; the hash grid needs it, its
+    /// time axis spans one window). Default: recording for the MLP, window for the hash grid.
+    #[arg(long, value_enum)]
+    pub time_origin: Option<TimeOriginArg>,
+}
+
+/// `--time-origin` values.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TimeOriginArg {
+    Recording,
+    Window,
+}
+
+/// `windows/progress.json`: what a run is and how far it got, for `--resume`.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Progress {
+    /// The field of every window (after `field_for_window`).
+    field: FieldConfig,
+    input_dim: usize,
+    frame_times: Vec<f64>,
+    /// First and one-past-last frame of every window.
+    plan: Vec<[usize; 2]>,
+    time_origin: TimeOrigin,
+    warm_start: bool,
+    seed: u64,
+    train: TrainConfig,
+    /// The first windows of the plan, finished, in order.
+    finished: Vec<FinishedWindow>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FinishedWindow {
+    /// Checkpoint of the window as it finished, relative to the run directory.
+    checkpoint: String,
+    report: TrainReport,
+}
+
+impl Progress {
+    /// Why a run with the settings of `self` cannot continue the run recorded in `saved`, if it
+    /// cannot; a changed training configuration only warns (finished windows keep theirs).
+    fn mismatch(&self, saved: &Progress) -> Option<String> {
+        let differs = |what: &str| Some(format!("the run being resumed has a different {what}"));
+        if saved.frame_times != self.frame_times {
+            return differs(&format!("set of training frame times ({:?})", saved.frame_times));
+        }
+        if saved.plan != self.plan {
+            return differs(&format!("window plan ({:?}, now {:?})", saved.plan, self.plan));
+        }
+        if saved.field != self.field || saved.input_dim != self.input_dim {
+            return differs("field (preset, configuration or method)");
+        }
+        if saved.time_origin != self.time_origin || saved.warm_start != self.warm_start {
+            return differs("time origin or warm start");
+        }
+        if saved.seed != self.seed {
+            return differs(&format!("seed ({}, now {})", saved.seed, self.seed));
+        }
+        if saved.train != self.train {
+            log::warn!("the training settings differ from the run being resumed; its finished windows keep theirs");
+        }
+        None
+    }
 }
 
 /// `config.json`.
@@ -113,6 +185,9 @@ struct Report {
     num_params_per_window: usize,
     weights_bytes_per_window: usize,
     prepare_and_train_s: f64,
+    /// CPU seconds (user + system) of preparing and training in this invocation (a resumed
+    /// run counts only its own part), to read timings on a shared machine.
+    cpu_s: Option<f64>,
     train_time_s: f64,
     train_time_per_frame_s: f64,
     interrupted: bool,
@@ -160,14 +235,19 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(TemporalCo
     if t.no_warm_start {
         cfg.windows.warm_start = false;
     }
+    if let Some(o) = t.time_origin {
+        cfg.windows.time_origin = match o {
+            TimeOriginArg::Recording => TimeOrigin::Recording,
+            TimeOriginArg::Window => TimeOrigin::Window,
+        };
+    }
     if args.method == Method::StaticPerFrame {
         cfg.windows = WindowConfig::per_frame();
         cfg.train.batching = Batching::AllViews;
     } else {
         cfg.train.batching = Batching::OneTimeStep;
     }
-    cfg.train.validate()?;
-    cfg.windows.validate()?;
+    cfg.resolve()?;
     Ok((cfg, n.preset.clone()))
 }
 
@@ -186,12 +266,13 @@ fn pvd(entries: &[(f64, String)]) -> String {
 pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
     let (cfg, preset) = resolve_config(args)?;
     let out = &args.out;
-    if args.resume {
-        bail!("--resume is not supported for time-resolved methods yet; rerun with --force");
+    let progress_path = out.join("windows/progress.json");
+    let has_results = out.join("temporal.json").exists() || out.join("volumes.pvd").exists() || progress_path.exists();
+    if has_results && !args.force && !args.resume {
+        bail!("{} already holds results; use --force to overwrite or --resume to continue", out.display());
     }
-    let has_results = out.join("temporal.json").exists() || out.join("volumes.pvd").exists();
-    if has_results && !args.force {
-        bail!("{} already holds results; use --force to overwrite", out.display());
+    if args.resume && !progress_path.exists() {
+        bail!("--resume: no windows/progress.json in {} (nothing to continue)", out.display());
     }
     let scene = fluidnerf_io::scene::load_scene(&args.scene)
         .with_context(|| format!("loading scene {}", args.scene.display()))?;
@@ -243,6 +324,11 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         }
     };
 
+    if !args.resume && out.join("windows").exists() {
+        // Checkpoints of an earlier run must not be taken for this run's by a later --resume.
+        std::fs::remove_dir_all(out.join("windows"))
+            .with_context(|| format!("removing the earlier run's {}/windows", out.display()))?;
+    }
     std::fs::create_dir_all(out.join("frames")).with_context(|| format!("creating {}/frames", out.display()))?;
     std::fs::create_dir_all(out.join("windows")).with_context(|| format!("creating {}/windows", out.display()))?;
     let run_config = RunConfig {
@@ -257,11 +343,36 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
     };
     write_json(&out.join("config.json"), &run_config)?;
 
-    let window_len = fluidnerf_neural::window::plan_windows(times.len(), cfg.windows.frames, cfg.windows.overlap)
-        .first()
-        .map_or(1, |r| r.len());
+    let plan = plan_windows(times.len(), cfg.windows.frames, cfg.windows.overlap);
+    let window_len = plan.first().map_or(1, |r| r.len());
     let field_cfg = field_for_window(&cfg.field, window_len);
     let input_dim = if args.method == Method::StaticPerFrame { 3 } else { 4 };
+    let mut progress = Progress {
+        field: field_cfg.clone(),
+        input_dim,
+        frame_times: times.clone(),
+        plan: plan.iter().map(|r| [r.start, r.end]).collect(),
+        time_origin: cfg.windows.time_origin,
+        warm_start: cfg.windows.warm_start,
+        seed: args.seed,
+        train: cfg.train.clone(),
+        finished: Vec::new(),
+    };
+    if args.resume {
+        let text =
+            std::fs::read_to_string(&progress_path).with_context(|| format!("reading {}", progress_path.display()))?;
+        let saved: Progress = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not the progress record of a time-resolved run", progress_path.display()))?;
+        if let Some(why) = progress.mismatch(&saved) {
+            bail!(
+                "cannot resume from {}: {why}; rerun with its settings, or use --force to start over",
+                progress_path.display()
+            );
+        }
+        progress.finished = saved.finished;
+    } else {
+        write_json(&progress_path, &progress)?;
+    }
     let field = build_field(&field_cfg, &scene.aabb, input_dim, args.seed)?;
     log::info!(
         "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
@@ -272,7 +383,7 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         window_len
     );
     let ctx = Ctx { args, cfg: &cfg, field_cfg: &field_cfg, input_dim, preset, problem: &problem, truth: &truth };
-    fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f))
+    fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, progress))
 }
 
 struct Ctx<'a> {
@@ -285,49 +396,112 @@ struct Ctx<'a> {
     truth: &'a [(Option<f64>, Volume)],
 }
 
+/// CPU seconds (user + system) this process has used so far, from /proc (Linux).
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    Some((fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?) / 100.0)
+}
+
+/// The checkpoint of window `k`, relative to the run directory.
+fn checkpoint_name(k: usize) -> String {
+    format!("windows/w{k:03}.checkpoint.safetensors")
+}
+
 impl Ctx<'_> {
-    fn train_and_write<F: TrainableField + Clone + 'static>(&self, init: F) -> anyhow::Result<()> {
+    /// The saved state of an interrupted run (`progress.finished` and the next window's
+    /// checkpoint, if any), as learners of the field `init`.
+    fn resume_state<F: TrainableField + Clone>(&self, init: &F, progress: &Progress) -> anyhow::Result<ResumeState<F>> {
+        let out = &self.args.out;
+        let load = |path: &std::path::Path| -> anyhow::Result<Learner<F>> {
+            let mut learner = Learner::new(init.clone());
+            fluidnerf_neural::weights::load_checkpoint(path, &mut learner)
+                .with_context(|| format!("resuming from {}", path.display()))?;
+            Ok(learner)
+        };
+        let mut state = ResumeState::default();
+        for w in &progress.finished {
+            state.finished.push((load(&out.join(&w.checkpoint))?, w.report.clone()));
+        }
+        let next = out.join(checkpoint_name(progress.finished.len()));
+        if progress.finished.len() < progress.plan.len() && next.exists() {
+            state.running = Some(load(&next)?);
+        }
+        log::info!(
+            "resuming: {} of {} windows finished{}",
+            state.finished.len(),
+            progress.plan.len(),
+            state.running.as_ref().map(|l| format!(", the next at iteration {}", l.iteration)).unwrap_or_default()
+        );
+        Ok(state)
+    }
+
+    fn train_and_write<F: TrainableField + Clone + 'static>(
+        &self,
+        init: F,
+        mut progress: Progress,
+    ) -> anyhow::Result<()> {
         let (args, out, cfg) = (self.args, &self.args.out, self.cfg);
-        let n_frames = frame_times(self.problem).len();
-        let n_windows =
-            fluidnerf_neural::window::plan_windows(n_frames, cfg.windows.frames, cfg.windows.overlap).len().max(1);
+        let n_windows = progress.plan.len().max(1);
+        let resume = if args.resume { self.resume_state(&init, &progress)? } else { ResumeState::default() };
         let per_window = cfg.train.max_iterations as u64;
         let bar = crate::progress::bar(per_window * n_windows as u64, "training");
         let mut ckpt_error = None;
         let mut last = (Instant::now(), 0usize, usize::MAX);
         let mut rate = 0.0;
         let t_start = Instant::now();
-        let run: TemporalRun<F> = train_windows(self.problem, &cfg.train, &cfg.windows, init, args.seed, |w, s| {
-            bar.set_position(w.index as u64 * per_window + s.iteration as u64);
-            if last.2 != w.index {
-                last = (Instant::now(), s.iteration, w.index);
-            } else if last.0.elapsed().as_secs_f64() > 1.0 {
-                rate = (s.iteration - last.1) as f64 / last.0.elapsed().as_secs_f64();
-                last = (Instant::now(), s.iteration, w.index);
-            }
-            bar.set_message(format!(
-                "window {}/{} (frames {}–{}) loss {:.3e} (avg {:.3e}) {rate:.1} it/s",
-                w.index + 1,
-                w.count,
-                w.frames.start,
-                w.frames.end - 1,
-                s.loss,
-                s.smoothed_loss
-            ));
-            if args.neural.checkpoint_every > 0 && s.iteration % args.neural.checkpoint_every == 0 {
-                let path = out.join(format!("windows/w{:03}.checkpoint.safetensors", w.index));
-                if let Err(e) = write_checkpoint(&path, s.learner) {
-                    ckpt_error = Some(e);
+        let cpu0 = cpu_seconds();
+        let progress_path = out.join("windows/progress.json");
+        let run: TemporalRun<F> =
+            train_windows(self.problem, &cfg.train, &cfg.windows, init, args.seed, resume, |e| {
+                let (w, s) = match e {
+                    WindowEvent::Iteration(w, s) => (w, s),
+                    WindowEvent::Finished(_, done) => {
+                        // The checkpoint first: a window listed as finished always has its final one.
+                        let name = checkpoint_name(progress.finished.len());
+                        let saved = write_checkpoint(&out.join(&name), &done.learner).and_then(|()| {
+                            progress.finished.push(FinishedWindow { checkpoint: name, report: done.report.clone() });
+                            write_json(&progress_path, &progress)
+                        });
+                        return match saved {
+                            Ok(()) => ControlFlow::Continue(()),
+                            Err(e) => {
+                                ckpt_error = Some(e);
+                                ControlFlow::Break(())
+                            }
+                        };
+                    }
+                };
+                bar.set_position(w.index as u64 * per_window + s.iteration as u64);
+                if last.2 != w.index {
+                    last = (Instant::now(), s.iteration, w.index);
+                } else if last.0.elapsed().as_secs_f64() > 1.0 {
+                    rate = (s.iteration - last.1) as f64 / last.0.elapsed().as_secs_f64();
+                    last = (Instant::now(), s.iteration, w.index);
+                }
+                bar.set_message(format!(
+                    "window {}/{} (frames {}–{}) loss {:.3e} (avg {:.3e}) {rate:.1} it/s",
+                    w.index + 1,
+                    w.count,
+                    w.frames.start,
+                    w.frames.end - 1,
+                    s.loss,
+                    s.smoothed_loss
+                ));
+                if args.neural.checkpoint_every > 0 && s.iteration % args.neural.checkpoint_every == 0 {
+                    if let Err(e) = write_checkpoint(&out.join(checkpoint_name(w.index)), s.learner) {
+                        ckpt_error = Some(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+                if crate::interrupt::requested() {
                     return ControlFlow::Break(());
                 }
-            }
-            if crate::interrupt::requested() {
-                return ControlFlow::Break(());
-            }
-            ControlFlow::Continue(())
-        })?;
+                ControlFlow::Continue(())
+            })?;
         bar.finish_and_clear();
         let wall_s = t_start.elapsed().as_secs_f64();
+        let cpu_s = cpu0.zip(cpu_seconds()).map(|(a, b)| b - a);
         if let Some(e) = ckpt_error {
             return Err(e.context("writing a checkpoint"));
         }
@@ -340,7 +514,7 @@ impl Ctx<'_> {
             let bytes = fluidnerf_neural::weights::weights_bytes(&w.learner.field)?;
             weights_bytes = bytes.len();
             write_bytes(&out.join(&name), &bytes)?;
-            write_checkpoint(&out.join(format!("windows/w{k:03}.checkpoint.safetensors")), &w.learner)?;
+            write_checkpoint(&out.join(checkpoint_name(k)), &w.learner)?;
             records.push(WindowRecord {
                 frames: [w.frames.start, w.frames.end],
                 time_origin: w.time_origin,
@@ -425,6 +599,7 @@ impl Ctx<'_> {
             num_params_per_window: run.windows.first().map_or(0, |w| w.learner.field.num_params()),
             weights_bytes_per_window: weights_bytes,
             prepare_and_train_s: wall_s,
+            cpu_s,
             train_time_s,
             train_time_per_frame_s: train_time_s / run.frame_times.len().max(1) as f64,
             interrupted: run.interrupted,
