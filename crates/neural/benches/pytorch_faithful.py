@@ -11,9 +11,11 @@ does not. What is replicated (crates/neural/src, see docs/training-engine.md):
   subtracting 0.5), OpenGL camera-to-world poses (`R_cv = R_gl diag(1, -1, -1)`), our keys
   `aabb`, `intensity_scale`, `truth`, `holdout`, `thin_lens`. Images: 8/16-bit PNG or TIFF,
   raw counts as float (Pillow). Truth: `.npy` of shape (nz, ny, nx) filling the aabb.
-  Pinhole cameras only: lens distortion is refused. A `thin_lens` is accepted because the
-  emission weight of Eq. 5.3 relative to the focal plane, (l_o/s)^2 (p s/l_i)^2 / (p l_o/l_i)^2,
-  is identically 1 (crates/neural/src/render.rs).
+  OpenCV distortion (k1 k2 k3 p1 p2 and the rational opencv_k4..k6) is inverted per pixel by
+  Newton's method to 1e-6 px, as `Camera::unproject_normalised`; nerfstudio's k4 (an r^8 term)
+  is refused, as ours does. A `thin_lens` is accepted because the emission weight of Eq. 5.3
+  relative to the focal plane, (l_o/s)^2 (p s/l_i)^2 / (p l_o/l_i)^2, is identically 1
+  (crates/neural/src/render.rs).
 - Rays (sampling.rs): one per pixel centre, clipped to the box (slab method, s >= 0, in float64,
   then float32); rays missing the box are dropped. Points handed to the field are box-unit
   `u = (o - min)/size + s d/size`.
@@ -51,7 +53,7 @@ need ~16 GB of activations), torch.optim.Adam with fused=True (the fastest CPU A
 Usage:
   python3 pytorch_faithful.py SCENE_DIR --out report.json [--preset ch7] [--rays-per-image 1024]
       [--coarse-samples 64] [--fine-samples 64] [--time-budget S] [--max-iterations N]
-      [--eval-every N] [--threads 2] [--seed 0] [--chunk-rays 512]
+      [--eval-every N] [--threads 2] [--seed 0] [--chunk-rays 1024]
   python3 pytorch_faithful.py --self-test [SCENE_DIR]
 
 The report holds the field names of `fluidnerf reconstruct`'s report.json (method, preset,
@@ -81,7 +83,6 @@ INTRINSIC_KEYS = (
     "camera_model", "w", "h", "fl_x", "fl_y", "cx", "cy", "k1", "k2", "k3", "k4", "p1", "p2",
     "skew", "opencv_k4", "opencv_k5", "opencv_k6",
 )
-DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2", "opencv_k4", "opencv_k5", "opencv_k6")
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "SIMPLE_RADIAL", "RADIAL", "FULL_OPENCV")
 
 
@@ -109,6 +110,48 @@ def read_image(path):
         raise SceneError(f"{path}: unreadable image ({e})") from e
 
 
+def distort(x, y, dist):
+    """OpenCV's model (`Distortion::apply_with_jacobian`): distorted normalised coordinates and
+    the Jacobian (dxx, dxy, dyx, dyy) of undistorted (x, y), arrays of any shape."""
+    k1, k2, p1, p2, k3, k4, k5, k6 = (dist[k] for k in ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"))
+    r2 = x * x + y * y
+    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    a = num / den
+    da = ((k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)) * den - num * (k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2))) / (den * den)
+    xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    cross = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y
+    jac = (a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x, cross, cross,
+           a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x)
+    return xd, yd, jac
+
+
+def undistort(xd, yd, dist, tol):
+    """Inverts `distort` by damped Newton steps (`Camera::unproject_normalised`): each point stops
+    once it re-distorts to within `tol` (normalised units); None if some point does not."""
+    x, y = xd.copy(), yd.copy()
+    active = np.ones(x.shape, dtype=bool)
+    for _ in range(100):
+        ex, ey, (dxx, dxy, dyx, dyy) = distort(x, y, dist)
+        rx, ry = ex - xd, ey - yd
+        active &= np.hypot(rx, ry) >= tol
+        if not active.any():
+            return x, y
+        det = dxx * dyy - dxy * dyx
+        if not np.all(np.isfinite(det[active]) & (np.abs(det[active]) >= 1e-12)):
+            return None
+        sx = (dyy * rx - dxy * ry) / det
+        sy = (-dyx * rx + dxx * ry) / det
+        # Damp steps that would leave the region where the model is monotone.
+        length = np.hypot(sx, sy)
+        limit = 0.5 * (1.0 + np.hypot(x, y))
+        damp = np.where(length > limit, limit / np.where(length > 0, length, 1.0), 1.0)
+        x = np.where(active, x - sx * damp, x)
+        y = np.where(active, y - sy * damp, y)
+    return None
+
+
 def pixel_rays(cam, aabb_min, aabb_max):
     """Rays of every pixel centre of `cam` clipped to the box, as in `ImageRays::new`.
 
@@ -119,9 +162,14 @@ def pixel_rays(cam, aabb_min, aabb_max):
     w, h = cam["w"], cam["h"]
     col, row = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     col, row = col.ravel(), row.ravel()
-    # Camera::unproject_normalised without distortion (skew acts on x).
+    # Camera::unproject_normalised (skew acts on x).
     yn = (row - cam["cy"]) / cam["fy"]
     xn = (col - cam["cx"] - cam["skew"] * yn) / cam["fx"]
+    if any(v != 0.0 for v in cam["dist"].values()):
+        xy = undistort(xn, yn, cam["dist"], 1e-6 / max(cam["fx"], cam["fy"]))
+        if xy is None:
+            raise SceneError(f"{cam['name']}: undistortion of the pixel grid did not converge")
+        xn, yn = xy
     d_cam = np.stack([xn, yn, np.ones_like(xn)], axis=1)
     d = d_cam @ cam["R"].T
     d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -180,11 +228,10 @@ def load_scene(scene_dir):
         missing = [key for key in ("w", "h", "fl_x", "fl_y", "cx", "cy") if k[key] is None]
         if missing:
             raise SceneError(f"{where}: {', '.join(missing)} given neither at the top level nor in the frame")
-        bad = [key for key in DISTORTION_KEYS if k[key] not in (None, 0, 0.0)]
-        if bad:
+        if k["k4"] not in (None, 0, 0.0):
             raise SceneError(
-                f"{where}: lens distortion ({', '.join(bad)}) is not supported by this reference; "
-                "undistort the images (fluidnerf import) or use an ideal pinhole scene"
+                f"{where}: k4 is nerfstudio's r^8 radial term, which the OpenCV model does not have; "
+                "use 0 (OpenCV's rational k4 is `opencv_k4`)"
             )
         m = np.asarray(fr["transform_matrix"], dtype=np.float64)
         if m.shape != (4, 4) or not np.allclose(m[3], [0, 0, 0, 1]):
@@ -198,6 +245,12 @@ def load_scene(scene_dir):
             "cx": float(k["cx"]) - 0.5,
             "cy": float(k["cy"]) - 0.5,
             "skew": float(k["skew"] or 0.0),
+            "dist": {
+                "k1": float(k["k1"] or 0.0), "k2": float(k["k2"] or 0.0), "k3": float(k["k3"] or 0.0),
+                "p1": float(k["p1"] or 0.0), "p2": float(k["p2"] or 0.0), "k4": float(k["opencv_k4"] or 0.0),
+                "k5": float(k["opencv_k5"] or 0.0), "k6": float(k["opencv_k6"] or 0.0),
+            },
+            "name": where,
             # OpenGL camera axes -> OpenCV: negate the second and third columns.
             "R": m[:3, :3] * np.array([1.0, -1.0, -1.0]),
             "t": m[:3, 3].copy(),
@@ -259,7 +312,8 @@ def build_field(torch, depth, width, freqs, seed):
             for l, lin in enumerate(self.layers):
                 if l == skip:
                     h = torch.cat([h, g], dim=-1)
-                h = torch.relu(lin(h))
+                # In place: addmm's backward needs its inputs, not its output.
+                h = torch.relu_(lin(h))
             return torch.nn.functional.softplus(self.output(h)).squeeze(-1)
 
     field = FaithfulField()
@@ -475,7 +529,7 @@ def render_loss(torch, field, rays, idx, args, scale, gen, n_pix, with_grad):
             with torch.inference_mode():
                 pixel = (w * field(points(o, d, s))).sum(-1)
                 loss = ((pixel - target) ** 2).sum() / n_pix
-        total += float(loss)
+        total += loss.item()
     return total
 
 
@@ -679,6 +733,20 @@ def self_test(torch, scene_dir):
     vals = field_values(torch, field, torch.rand(4096, 3, generator=gen))
     check("uniform start sits near the level", abs(float(vals.mean()) - 0.37) < 0.1, f"mean {float(vals.mean()):.3f}")
 
+    # Distorted camera: every pixel's ray, re-projected through the OpenCV model, lands on its
+    # pixel centre (OpenCV convention: integer coordinates).
+    dist = {"k1": -0.2, "k2": 0.05, "k3": 0.0, "p1": 1e-3, "p2": -5e-4, "k4": 0.01, "k5": 0.0, "k6": 0.0}
+    cam = {"w": 40, "h": 30, "fx": 50.0, "fy": 52.0, "cx": 19.3, "cy": 14.6, "skew": 0.2, "dist": dist,
+           "R": np.eye(3), "t": np.array([0.0, 0.0, -10.0]), "name": "self-test camera"}
+    ou, du, near_d, far_d, px = pixel_rays(cam, np.array([-100.0, -100.0, -1.0]), np.array([100.0, 100.0, 1.0]))
+    p = du.astype(np.float64) * np.array([200.0, 200.0, 2.0])  # world = camera directions (R = I)
+    xd, yd, _ = distort(p[:, 0] / p[:, 2], p[:, 1] / p[:, 2], dist)
+    pu = cam["fx"] * xd + cam["skew"] * yd + cam["cx"]
+    pv = cam["fy"] * yd + cam["cy"]
+    perr = float(np.max(np.hypot(pu - px % 40, pv - px // 40)))
+    check("distorted rays re-project onto their pixel centres", len(px) == 1200 and perr < 1e-3,
+          f"{len(px)} rays, max error {perr:.1e} px (float32 directions)")
+
     if scene_dir:
         # Camera and box conventions: rendering the truth through this script's rays and
         # quadrature must reproduce the measured pixels (trilinear truth, cell-centred).
@@ -730,8 +798,8 @@ def main():
     ap.add_argument("--eval-every", type=int, default=100, help="NRMSE every N iterations (0: only at the end)")
     ap.add_argument("--threads", type=int, default=2, help="torch.set_num_threads (default 2)")
     ap.add_argument("--seed", type=int, default=0, help="seed of initialisation and sampling (default 0)")
-    ap.add_argument("--chunk-rays", type=int, default=512,
-                    help="rays per forward/backward chunk, gradients accumulated (default 512)")
+    ap.add_argument("--chunk-rays", type=int, default=1024,
+                    help="rays per forward/backward chunk, gradients accumulated (default 1024)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     ap.add_argument("--self-test", action="store_true", help="check the conventions (with SCENE: against its truth)")
     args = ap.parse_args()
