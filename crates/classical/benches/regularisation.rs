@@ -1,5 +1,5 @@
-//! The cost of regularisation: seconds per iteration of SART, SART-Tikhonov (default λ = 0.05,
-//! 8 sub-steps of the penalty) and SART-TV (20 TV steps), interleaved in one run so that the
+//! The cost of regularisation: seconds per iteration of SART, SART-Tikhonov (default λ, one
+//! penalty step of two Laplacians) and SART-TV (20 TV steps), interleaved in one run so that the
 //! ratios hold on a busy machine, and the Laplacian's throughput.
 //!
 //! Geometry as `projection.rs`: 15 cameras of 256 × 256 px on a planar ring around a 40 mm cube,

@@ -1,5 +1,5 @@
-//! SART with second-order Tikhonov regularisation on noisy images: the default weight beats
-//! plain SART, weight 0 is plain SART, and the penalty is what falls.
+//! SART with second-order Tikhonov regularisation on noisy images: the default and a tuned
+//! weight beat plain SART, the penalty is what falls, and weight 0 is plain SART.
 
 mod common;
 
@@ -40,15 +40,16 @@ fn with_curve(
 }
 
 /// 24³ voxels, 8 views of 48² px, images with 5 % Gaussian noise, default stopping rules.
-/// Measured NRMSE (blobs / ball): SART 0.575 / 0.473 at the end, 0.301 / 0.357 at its best
-/// iteration; SART-Tikhonov with the default λ = 0.05: 0.219 / 0.323. The regularised result
-/// must beat SART's end by far and even SART's best iteration (which needs the truth to find).
+/// Measured NRMSE (blobs / ball): SART 0.575 / 0.473 at the end (0.301 / 0.357 at its best
+/// iteration, which only the truth can find); SART-Tikhonov with the default λ = 0.003:
+/// 0.437 / 0.386, with ‖∇²g‖² 0.38 / 0.41 times SART's. λ = 0.1 suits the smooth blobs: 0.185,
+/// better than SART's best iteration.
 #[test]
-fn default_weight_beats_sart_on_noisy_images() {
+fn tikhonov_beats_sart_on_noisy_images() {
     let grid = Grid::new([24, 24, 24], aabb());
     let cams = ring(8, 48);
     let projector = SplatProjector::new(grid, &cams, SCALE).expect("valid");
-    for (name, phantom, bound) in [("blobs", blobs as Phantom, 0.25), ("ball", ball as Phantom, 0.36)] {
+    for (name, phantom) in [("blobs", blobs as Phantom), ("ball", ball as Phantom)] {
         let t = truth(&grid, phantom).data;
         let images = noisy(phantom, &cams, 0.05, 7);
         let problem = Problem::new(&projector, &images).expect("consistent");
@@ -62,13 +63,18 @@ fn default_weight_beats_sart_on_noisy_images() {
             .expect("runs")
         });
         let (e_plain, e_reg) = (nrmse(&plain.volume, &t), nrmse(&reg.volume, &t));
-        let best_plain = plain_curve.iter().cloned().fold(f64::INFINITY, f64::min);
         assert!(min >= 0.0, "{name}: negative voxel {min}");
-        assert!(e_reg < bound, "{name}: Tikhonov NRMSE {e_reg:.4} above {bound}");
-        assert!(e_reg < 0.75 * e_plain, "{name}: Tikhonov {e_reg:.4} vs SART {e_plain:.4}");
-        assert!(e_reg < best_plain, "{name}: Tikhonov {e_reg:.4} vs SART's best iteration {best_plain:.4}");
+        assert!(e_reg < 0.9 * e_plain, "{name}: Tikhonov {e_reg:.4} vs SART {e_plain:.4}");
         let (p_plain, p_reg) = (laplacian_norm2(&grid, &plain.volume), laplacian_norm2(&grid, &reg.volume));
-        assert!(p_reg < 0.2 * p_plain, "{name}: penalty ‖∇²g‖² {p_reg:.3e} vs SART's {p_plain:.3e}");
+        assert!(p_reg < 0.5 * p_plain, "{name}: penalty ‖∇²g‖² {p_reg:.3e} vs SART's {p_plain:.3e}");
+        if name == "blobs" {
+            let tuned = TikhonovParams { weight: 0.1, ..Default::default() };
+            let r = sart_tikhonov(&problem, None, &tuned, |_| ControlFlow::Continue(())).expect("runs");
+            let e = nrmse(&r.volume, &t);
+            let best_plain = plain_curve.iter().cloned().fold(f64::INFINITY, f64::min);
+            assert!(e < 0.21, "blobs, λ = 0.1: NRMSE {e:.4}");
+            assert!(e < best_plain, "blobs, λ = 0.1: {e:.4} vs SART's best iteration {best_plain:.4}");
+        }
     }
 }
 

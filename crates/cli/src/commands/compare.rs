@@ -47,7 +47,7 @@ pub struct Args {
     #[arg(short, long)]
     pub out: PathBuf,
     /// NRMSE thresholds for the time-to-accuracy columns, comma-separated; each must be in
-    /// (0, 10) [default: 0.5,0.3,0.2].
+    /// (0, 10).
     #[arg(long, value_delimiter = ',', default_value = "0.5,0.3,0.2", value_name = "NRMSE")]
     pub thresholds: Vec<f64>,
     /// The run the speed-ups are measured against (a directory or file, listed among the RUNs
@@ -264,6 +264,15 @@ fn seconds(t: Option<f64>) -> String {
     }
 }
 
+/// A ratio with three significant digits (0.00452, 1.21, 38.5, 1250).
+fn ratio(r: f64) -> String {
+    if !(r.is_finite() && r > 0.0) {
+        return format!("{r}");
+    }
+    let decimals = (2 - r.log10().floor() as i32).max(0) as usize;
+    format!("{r:.decimals$}")
+}
+
 /// The table printed to stdout, columns aligned.
 fn table(rows: &[Row], reference: usize, thresholds: &[f64]) -> String {
     let mut header: Vec<String> =
@@ -280,8 +289,8 @@ fn table(rows: &[Row], reference: usize, thresholds: &[f64]) -> String {
         ];
         line.extend(r.time_to_threshold_s.iter().map(|&t| seconds(t)));
         line.push(match (r.speedup, r.speedup_at_least) {
-            (Some(s), _) => format!("{s:.2}x"),
-            (None, Some(s)) => format!(">{s:.2}x"),
+            (Some(s), _) => format!("{}x", ratio(s)),
+            (None, Some(s)) => format!(">{}x", ratio(s)),
             (None, None) => "-".into(),
         });
         cells.push(line);
@@ -425,5 +434,6 @@ mod tests {
         let text = table(&rows, 0, &[0.5, 0.3, 0.2]);
         assert!(text.contains("ref *") && text.contains(">4.00x") && text.contains("never"), "{text}");
         assert_eq!(csv_field("a,b \"c\""), "\"a,b \"\"c\"\"\"");
+        assert_eq!([ratio(0.004517), ratio(1.0), ratio(38.46), ratio(1250.2)], ["0.00452", "1.00", "38.5", "1250"]);
     }
 }

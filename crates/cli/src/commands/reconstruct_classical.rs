@@ -75,10 +75,10 @@ pub struct Args {
     pub tv_steps: Option<usize>,
     /// Method tikhonov: weight λ of the smoothness penalty λ‖∇²g‖² (Eq. 2.35, Laplacian in
     /// voxel units, so λ is dimensionless): after each SART sweep the volume takes the step
-    /// −μλ∇⁴g. Larger is smoother; 0 is plain SART. The default suits images with a few
-    /// percent of noise: on small test phantoms with 5 % noise it cuts SART's NRMSE by more
-    /// than half, and the best λ there was 0.1–0.2; on noiseless images of sharp edges a
-    /// smaller λ does better [default: 0.05].
+    /// −μλ∇⁴g. Larger is smoother; 0 is plain SART. It pays off with noisy images: on the demo
+    /// jet (15 views, 64³ voxels) the default lowered SART's NRMSE from 0.381 to 0.326 with 10 %
+    /// noise (λ 0.01: 0.310) and from 0.256 to 0.247 with 5 %, but raised it from 0.177 to 0.204
+    /// without noise. Smooth fields take larger λ (0.1 for Gaussian blobs) [default: 0.003].
     #[arg(long, value_name = "LAMBDA")]
     pub tikhonov_weight: Option<f64>,
     /// Stop when the residual (sliding mean of 4) varies by less than this fraction over 20
