@@ -139,7 +139,25 @@ fn compares_classical_neural_and_external_runs() {
     let again = fluidnerf(d, &["compare", "sart", "dense", "-o", "cmp", "-q"]);
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
-    ok(&fluidnerf(d, &["compare", "sart", "dense", "-o", "cmp", "--force", "--linear-time", "-q"]));
+    // The reference given as a report file of a listed run directory is that run, not a new one.
+    ok(&fluidnerf(
+        d,
+        &[
+            "compare",
+            "sart",
+            "dense",
+            "-o",
+            "cmp",
+            "--force",
+            "--linear-time",
+            "--reference",
+            "dense/report.json",
+            "-q",
+        ],
+    ));
+    let c = json(&d.join("cmp/compare.json"));
+    assert_eq!(c["runs"].as_array().map(Vec::len), Some(2));
+    assert_eq!(c["runs"][1]["speedup"], 1.0);
 }
 
 #[test]

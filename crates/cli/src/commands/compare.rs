@@ -318,7 +318,7 @@ fn table(rows: &[Row], reference: usize, thresholds: &[f64]) -> String {
     text
 }
 
-fn same_run(a: &Path, b: &Path) -> bool {
+fn same_file(a: &Path, b: &Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(x), Ok(y)) => x == y,
         _ => a == b,
@@ -337,7 +337,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut runs = args.runs.iter().map(|p| read_run(p)).collect::<anyhow::Result<Vec<Run>>>()?;
     let reference = match &args.reference {
         None => 0,
-        Some(r) => match runs.iter().position(|run| same_run(&run.path, r)) {
+        // A run given as its directory and as its report file is the same run.
+        Some(r) => match runs.iter().position(|run| report_path(r).is_ok_and(|p| same_file(&run.report, &p))) {
             Some(k) => k,
             None => {
                 runs.push(read_run(r).context("reading the --reference run")?);
