@@ -123,7 +123,7 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
     ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
     let run = |out: &str| -> Vec<String> {
         let args = "reconstruct scene --method tr-fluidnerf --preset tr-small --window 3 --overlap 1 -q \
-                    --max-iterations 60 --rays-per-image 32 --resolution 12 --checkpoint-every 1 -o";
+                    --max-iterations 40 --rays-per-image 32 --resolution 12 --checkpoint-every 1 -o";
         args.split_whitespace().chain([out]).map(String::from).collect()
     };
     let as_str = |v: &[String]| v.iter().map(String::as_str).collect::<Vec<_>>().join(" ");

@@ -324,25 +324,6 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         }
     };
 
-    if !args.resume && out.join("windows").exists() {
-        // Checkpoints of an earlier run must not be taken for this run's by a later --resume.
-        std::fs::remove_dir_all(out.join("windows"))
-            .with_context(|| format!("removing the earlier run's {}/windows", out.display()))?;
-    }
-    std::fs::create_dir_all(out.join("frames")).with_context(|| format!("creating {}/frames", out.display()))?;
-    std::fs::create_dir_all(out.join("windows")).with_context(|| format!("creating {}/windows", out.display()))?;
-    let run_config = RunConfig {
-        method: args.method,
-        scene: args.scene.clone(),
-        seed: args.seed,
-        resolution: args.resolution,
-        version: env!("CARGO_PKG_VERSION").to_string(),
-        holdout_times: holdout_times.clone(),
-        time_step: problem.time_step,
-        temporal: cfg.clone(),
-    };
-    write_json(&out.join("config.json"), &run_config)?;
-
     let plan = plan_windows(times.len(), cfg.windows.frames, cfg.windows.overlap);
     let window_len = plan.first().map_or(1, |r| r.len());
     let field_cfg = field_for_window(&cfg.field, window_len);
@@ -370,7 +351,26 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
             );
         }
         progress.finished = saved.finished;
-    } else {
+    }
+    if !args.resume && out.join("windows").exists() {
+        // Checkpoints of an earlier run must not be taken for this run's by a later --resume.
+        std::fs::remove_dir_all(out.join("windows"))
+            .with_context(|| format!("removing the earlier run's {}/windows", out.display()))?;
+    }
+    std::fs::create_dir_all(out.join("frames")).with_context(|| format!("creating {}/frames", out.display()))?;
+    std::fs::create_dir_all(out.join("windows")).with_context(|| format!("creating {}/windows", out.display()))?;
+    let run_config = RunConfig {
+        method: args.method,
+        scene: args.scene.clone(),
+        seed: args.seed,
+        resolution: args.resolution,
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        holdout_times: holdout_times.clone(),
+        time_step: problem.time_step,
+        temporal: cfg.clone(),
+    };
+    write_json(&out.join("config.json"), &run_config)?;
+    if !args.resume {
         write_json(&progress_path, &progress)?;
     }
     let field = build_field(&field_cfg, &scene.aabb, input_dim, args.seed)?;
