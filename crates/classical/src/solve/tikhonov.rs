@@ -1,7 +1,7 @@
 //! SART with second-order Tikhonov regularisation: a smoothness prior for noisy or few views
-//! (dissertation §2.4.1, Eq. 2.34–2.35; Tikhonov 1963; in flow tomography reviewed by Grauer
-//! et al. 2023, and compared for chemiluminescence tomography by Liu et al., the
-//! dissertation's ref. [180], line 951).
+//! (dissertation §2.4.1, Eq. 2.34–2.35, after Tikhonov 1963 and the review of emission
+//! tomography by Grauer et al., its ref. [1]; §4.1 cites Liu et al., ref. [180], who compared
+//! Tikhonov with ART, Landweber and truncated SVD for chemiluminescence tomography).
 //!
 //! The problem is Eq. 2.35 with `L_Tik` the discrete Laplacian ∇² ([`laplacian`]):
 //!
