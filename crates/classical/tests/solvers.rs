@@ -66,6 +66,10 @@ fn solvers() -> Vec<(&'static str, Solver)> {
             let d = TvParams::default();
             sart_tv(p, None, &TvParams { stopping: stop(d.stopping, cap), ..d }, f).expect("runs")
         }),
+        ("tikhonov", |p, cap, f| {
+            let d = TikhonovParams::default();
+            sart_tikhonov(p, None, &TikhonovParams { stopping: stop(d.stopping, cap), ..d }, f).expect("runs")
+        }),
     ]
 }
 
@@ -78,7 +82,7 @@ fn solvers() -> Vec<(&'static str, Solver)> {
 /// every voxel non-negative at every iteration (MART, SMART and MLEM by construction).
 #[test]
 fn every_method_recovers_a_ball_and_two_blobs() {
-    let bounds: [(&str, f64, f64); 7] = [
+    let bounds: [(&str, f64, f64); 8] = [
         // (method, ball after 10 iterations, blobs at convergence)
         ("asart", 0.30, 0.075),
         ("art", 0.26, 0.095),
@@ -89,6 +93,7 @@ fn every_method_recovers_a_ball_and_two_blobs() {
         ("smart", 0.29, 0.065),
         ("mlem", 0.30, 0.075),
         ("tv", 0.24, 0.075),
+        ("tikhonov", 0.26, 0.07),
     ];
     for (pname, phantom, cap) in [("ball", ball as Phantom, 10), ("blobs", blobs as Phantom, 0)] {
         let c = case(phantom);
