@@ -469,7 +469,7 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
             None
         }
     };
-    let eval_every = classical_eval_every(args.neural.eval_every);
+    let eval_every = args.neural.eval_every.unwrap_or(1);
     let mut curve = truth.as_ref().map(|(_, t)| Curve::new(t, grid, eval_every));
 
     let mut knobs = cfg.clone();
@@ -575,17 +575,6 @@ pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
         println!("wrote {} ({:?} voxels), {}, config.json, report.json", npy.display(), grid.dims, vti.display());
     }
     Ok(())
-}
-
-/// Iterations between NRMSE evaluations of a classical run: `--eval-every` at its default (100,
-/// sized for neural runs) means every iteration; any other value is taken as given.
-fn classical_eval_every(eval_every: usize) -> usize {
-    const NEURAL_DEFAULT: usize = 100;
-    if eval_every == NEURAL_DEFAULT {
-        1
-    } else {
-        eval_every
-    }
 }
 
 /// The NRMSE curve of a run: evaluations over a [`TruthSample`] every `every` iterations, their

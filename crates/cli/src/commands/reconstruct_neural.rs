@@ -26,7 +26,7 @@ use serde::Serialize;
 
 use super::reconstruct::Method;
 use crate::output::{write_bytes, write_checkpoint, write_json};
-use crate::truth_sample::TruthSample;
+use crate::truth_sample::{NrmsePoint, TruthSample};
 
 /// Options of the neural methods.
 #[derive(clap::Args, Debug)]
@@ -64,9 +64,11 @@ pub struct Args {
     #[arg(long)]
     pub time_budget: Option<f64>,
     /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (over
-    /// every k-th voxel centre of the truth, at most 64 per side; 0: only at the end).
-    #[arg(long, default_value_t = 100)]
-    pub eval_every: usize,
+    /// every k-th voxel centre of the truth, at most 64 per side; 0: only at the end; the time
+    /// it takes is not counted as training time). Default: 100 for neural methods, every
+    /// iteration for classical ones.
+    #[arg(long)]
+    pub eval_every: Option<usize>,
     /// Keep the field of the iteration with the lowest held-out loss instead of the last one
     /// (early stopping without ground truth; needs held-out frames in the scene). On noisy
     /// images a field eventually starts to fit the noise: the held-out loss then rises while
@@ -84,13 +86,6 @@ struct RunConfig {
     resolution: usize,
     version: String,
     neural: NeuralConfig,
-}
-
-#[derive(Serialize)]
-struct NrmsePoint {
-    iteration: usize,
-    train_time_s: f64,
-    nrmse: f64,
 }
 
 #[derive(Serialize)]
@@ -284,6 +279,7 @@ impl Ctx<'_> {
             log::info!("resuming at iteration {}", learner.iteration);
         }
         let curve = self.truth.map(TruthSample::new);
+        let eval_every = args.neural.eval_every.unwrap_or(100);
         let nrmse_of = |field: &F, truth: &TruthSample| -> f64 {
             truth.nrmse(&WorldField { field, meta: &prep.meta, occupancy: prep.occupancy() })
         };
@@ -309,7 +305,7 @@ impl Ctx<'_> {
             }
             let holdout = s.holdout_loss.map(|h| format!(" holdout {h:.3e}")).unwrap_or_default();
             bar.set_message(format!("loss {:.3e} (avg {:.3e}){holdout} {rate:.1} it/s", s.loss, s.smoothed_loss));
-            if let (Some(t), true) = (&curve, args.neural.eval_every > 0 && s.iteration % args.neural.eval_every == 0) {
+            if let (Some(t), true) = (&curve, eval_every > 0 && s.iteration % eval_every == 0) {
                 nrmse_history.push(NrmsePoint {
                     iteration: s.iteration,
                     train_time_s: s.train_time_s,
