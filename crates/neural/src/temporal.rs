@@ -36,10 +36,13 @@
 //! A warm start only helps if the copied field means the same thing in the new window. With
 //! the origin at each window's first frame, a frame shared by two windows has `t'` smaller by
 //! the stride `W − O` in the later one, so the copied field starts out shifted in time by
-//! `W − O` frames. The MLP takes any `t'`, so its windows share the recording's first frame as
-//! origin (`recording`, the default for it): shared frames keep their `t'` and the warm start
-//! continues the same function. The hash grid clamps `t'` to its time axis `[0, W − 1]`, so
-//! its windows keep their own origin (`window`); aligning it would need a time axis that
+//! `W − O` frames. The MLP takes any `t'`, so its windows can share the recording's first frame
+//! as origin (`recording`): shared frames keep their `t'` and the warm start continues the same
+//! function there, but the new frames then lie beyond the copied field's time range (an
+//! extrapolation), where the shifted copy offers them an earlier frame's field instead. On the
+//! starting jet both end equal (docs/time-resolved.md), so the default stays `window`, which
+//! also keeps `t'` within `[0, W − 1]` however long the recording. The hash grid clamps `t'` to
+//! its time axis `[0, W − 1]` and needs `window`; aligning it would need a time axis that
 //! wraps around (a ring of `≥ W` frames), which the grid does not have.
 //!
 //! # Resuming
@@ -82,7 +85,7 @@ pub struct WindowConfig {
     pub warm_start: bool,
     /// Iteration cap of warm-started windows (None: the training config's). Default None.
     pub warm_max_iterations: Option<usize>,
-    /// Where each window's time axis starts (module doc, "Time origin"). Default auto.
+    /// Where each window's time axis starts (module doc, "Time origin"). Default window.
     pub time_origin: TimeOrigin,
 }
 
@@ -93,7 +96,7 @@ impl Default for WindowConfig {
             overlap: 2,
             warm_start: true,
             warm_max_iterations: None,
-            time_origin: TimeOrigin::Auto,
+            time_origin: TimeOrigin::Window,
         }
     }
 }
@@ -102,11 +105,8 @@ impl Default for WindowConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum TimeOrigin {
-    /// The field's own choice, fixed by [`TemporalConfig::resolve`]: `recording` for the MLP,
-    /// `window` for the hash grid. [`train_windows`] takes an unresolved `auto` as `window`.
-    #[default]
-    Auto,
     /// Each window's first frame: `t' ∈ [0, W − 1]`, the span of the grid field's time axis.
+    #[default]
     Window,
     /// The recording's first frame, for every window: a frame shared by two windows keeps its
     /// `t'`, so a warm-started window continues the previous window's function of time instead
@@ -153,18 +153,11 @@ impl Default for TemporalConfig {
 }
 
 impl TemporalConfig {
-    /// Fixes [`TimeOrigin::Auto`] for the field (`recording` for the MLP, `window` otherwise)
-    /// and validates the result: the hash grid clamps `t'` to its time axis `[0, W − 1]`, so
-    /// it cannot take a recording-wide origin once there is more than one window.
-    pub fn resolve(&mut self) -> Result<(), NeuralError> {
+    /// Rejects settings no run can use; in particular the hash grid clamps `t'` to its time
+    /// axis `[0, W − 1]`, so it cannot take the recording's origin once there are windows.
+    pub fn validate(&self) -> Result<(), NeuralError> {
         self.windows.validate()?;
         self.train.validate()?;
-        if self.windows.time_origin == TimeOrigin::Auto {
-            self.windows.time_origin = match self.field {
-                FieldConfig::Mlp(_) => TimeOrigin::Recording,
-                _ => TimeOrigin::Window,
-            };
-        }
         if self.windows.time_origin == TimeOrigin::Recording
             && matches!(self.field, FieldConfig::HashGrid(_))
             && self.windows.frames > 0
@@ -323,11 +316,11 @@ pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>, ori
     }
 }
 
-/// The origin `t₀` of window `range` (`auto` taken as `window`, see [`TimeOrigin`]).
+/// The origin `t₀` of window `range` ([`TimeOrigin`]).
 pub fn window_origin(origin: TimeOrigin, times: &[f64], range: &Range<usize>) -> f64 {
     match origin {
         TimeOrigin::Recording => times[0],
-        TimeOrigin::Window | TimeOrigin::Auto => times[range.start],
+        TimeOrigin::Window => times[range.start],
     }
 }
 

@@ -340,6 +340,7 @@ fn an_interrupted_windowed_run_resumes_to_the_uninterrupted_result() {
 fn a_shared_time_origin_lets_warm_starts_continue_the_previous_window() {
     // With each window's own origin the warm-started MLP sees its predecessor shifted by the
     // stride (here one frame); with the recording's origin, the shared frames keep their t'.
+    // A window's first iteration trains its first frame, one the previous window trained too.
     let go = |_: WindowEvent<'_, MlpField>| ControlFlow::Continue(());
     let mut first_losses = Vec::new();
     for origin in [TimeOrigin::Window, TimeOrigin::Recording] {

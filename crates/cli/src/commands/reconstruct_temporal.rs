@@ -62,10 +62,10 @@ pub struct Args {
     /// Frame spacing Δt of t' = (t − t₀)/Δt. Default: the smallest gap between training times.
     #[arg(long)]
     pub time_step: Option<f64>,
-    /// Origin t₀ of each window's time t' = (t − t₀)/Δt: `recording` (the first frame of the
-    /// recording, for every window: a warm-started window continues the previous window's
-    /// function of time) or `window` (each window's first frame; the hash grid needs it, its
-    /// time axis spans one window). Default: recording for the MLP, window for the hash grid.
+    /// Origin t₀ of each window's time t' = (t − t₀)/Δt: `window` (each window's first frame;
+    /// the hash grid needs it, its time axis spans one window) or `recording` (the recording's
+    /// first frame for every window, MLP only: a warm-started window then continues the
+    /// previous one's function of time at the shared frames). Default: the preset's (window).
     #[arg(long, value_enum)]
     pub time_origin: Option<TimeOriginArg>,
 }
@@ -247,7 +247,7 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(TemporalCo
     } else {
         cfg.train.batching = Batching::OneTimeStep;
     }
-    cfg.resolve()?;
+    cfg.validate()?;
     Ok((cfg, n.preset.clone()))
 }
 
