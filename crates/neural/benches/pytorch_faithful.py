@@ -694,8 +694,8 @@ def self_test(torch, scene_dir):
     pix = (w * 0.7).sum(-1)
     err = float(((pix - 0.7 * (far - near) / 40.0).abs() / (0.7 * (far - near) / 40.0)).max())
     check("constant field renders to value x chord / L", err < 1e-4, f"max relative error {err:.2e}")
-    check("merged samples sorted and on [near, far]",
-          bool((s[:, 1:] >= s[:, :-1]).all() and (s >= near[:, None] - 1e-3).all() and (s <= far[:, None] + 1e-3).all()),
+    on_chord = (s >= near[:, None] - 1e-3).all() and (s <= far[:, None] + 1e-3).all()
+    check("merged samples sorted and on [near, far]", bool((s[:, 1:] >= s[:, :-1]).all() and on_chord),
           f"{s.shape[1]} samples per ray")
     # Without the end pieces only [s_1, s_N] is covered (render.rs test).
     s5 = torch.tensor([[1.3, 1.9, 2.2, 3.7, 4.1]])
@@ -738,7 +738,7 @@ def self_test(torch, scene_dir):
     dist = {"k1": -0.2, "k2": 0.05, "k3": 0.0, "p1": 1e-3, "p2": -5e-4, "k4": 0.01, "k5": 0.0, "k6": 0.0}
     cam = {"w": 40, "h": 30, "fx": 50.0, "fy": 52.0, "cx": 19.3, "cy": 14.6, "skew": 0.2, "dist": dist,
            "R": np.eye(3), "t": np.array([0.0, 0.0, -10.0]), "name": "self-test camera"}
-    ou, du, near_d, far_d, px = pixel_rays(cam, np.array([-100.0, -100.0, -1.0]), np.array([100.0, 100.0, 1.0]))
+    _, du, _, _, px = pixel_rays(cam, np.array([-100.0, -100.0, -1.0]), np.array([100.0, 100.0, 1.0]))
     p = du.astype(np.float64) * np.array([200.0, 200.0, 2.0])  # world = camera directions (R = I)
     xd, yd, _ = distort(p[:, 0] / p[:, 2], p[:, 1] / p[:, 2], dist)
     pu = cam["fx"] * xd + cam["skew"] * yd + cam["cx"]
@@ -765,8 +765,7 @@ def self_test(torch, scene_dir):
                 return v.reshape(uu.shape[:-1])
 
             rays = prep.train
-            idx = torch.randperm(rays["n"], generator=gen)[:4096]
-            ci = idx
+            ci = torch.randperm(rays["n"], generator=gen)[:4096]
             s, w = sample_ray_batch(torch, truth_field, rays["o"][ci], rays["d"][ci], rays["near"][ci],
                                     rays["far"][ci], 256, 0, 1.0 / prep.length, gen)
             pix = (w * truth_field(points(rays["o"][ci], rays["d"][ci], s))).sum(-1)
