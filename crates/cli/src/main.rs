@@ -8,6 +8,7 @@ use clap::Parser;
 mod commands;
 mod interrupt;
 mod output;
+mod process;
 mod progress;
 mod run_report;
 mod truth_sample;

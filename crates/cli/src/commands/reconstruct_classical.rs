@@ -40,6 +40,7 @@ use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
 use crate::output::write_json;
+use crate::process::{cpu_seconds, proc_kib};
 use crate::truth_sample::{NrmsePoint, TruthSample};
 
 /// Options of the classical methods.
@@ -332,23 +333,6 @@ fn validate(cfg: &ClassicalConfig, alg: Algorithm, resolution: usize) -> anyhow:
         }
     }
     Ok(())
-}
-
-/// A `/proc/meminfo` or `/proc/self/status` entry in bytes (Linux).
-fn proc_kib(file: &str, key: &str) -> Option<u64> {
-    let text = std::fs::read_to_string(file).ok()?;
-    let line = text.lines().find(|l| l.starts_with(key))?;
-    let kib: u64 = line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
-    Some(kib * 1024)
-}
-
-/// CPU seconds (user + system) this process has used so far (Linux).
-fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let after = stat.rsplit_once(')')?.1;
-    let fields: Vec<&str> = after.split_whitespace().collect();
-    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
 }
 
 const GIB: f64 = (1u64 << 30) as f64;

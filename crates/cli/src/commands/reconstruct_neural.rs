@@ -26,6 +26,7 @@ use serde::Serialize;
 
 use super::reconstruct::Method;
 use crate::output::{write_bytes, write_checkpoint, write_json};
+use crate::process::cpu_seconds;
 use crate::truth_sample::{NrmsePoint, TruthSample};
 
 /// Options of the neural methods.
@@ -164,16 +165,6 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConf
     apply_train_options(&mut cfg.train, args);
     cfg.train.validate()?;
     Ok((cfg, n.preset.clone()))
-}
-
-/// CPU seconds (user + system) this process has used so far, from /proc (Linux), for
-/// judging timings on a shared machine.
-fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let after = stat.rsplit_once(')')?.1;
-    let fields: Vec<&str> = after.split_whitespace().collect();
-    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
 }
 
 pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {

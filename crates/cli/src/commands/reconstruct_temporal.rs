@@ -38,6 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
 use crate::output::{write_bytes, write_checkpoint, write_json};
+use crate::process::cpu_seconds;
 
 /// Options of the time-resolved methods.
 #[derive(clap::Args, Debug)]
@@ -394,13 +395,6 @@ struct Ctx<'a> {
     preset: Option<String>,
     problem: &'a Problem,
     truth: &'a [(Option<f64>, Volume)],
-}
-
-/// CPU seconds (user + system) this process has used so far, from /proc (Linux).
-fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    Some((fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?) / 100.0)
 }
 
 /// The checkpoint of window `k`, relative to the run directory.
