@@ -79,6 +79,9 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     let l1 = r["loss_history"].as_array().expect("history");
     let l2 = r2["loss_history"].as_array().expect("history");
     assert_eq!(l1[..], l2[..150], "resume rewrote the history");
+    let (c1, c2) = (r["nrmse_history"].as_array().expect("curve"), r2["nrmse_history"].as_array().expect("curve"));
+    assert_eq!(c1[..], c2[..c1.len()], "the resumed curve continues the first");
+    assert_eq!(c2.last().map(|p| &p["iteration"]), Some(&serde_json::json!(200)));
 
     // The trained field reads back through the library and matches the written volume.
     let (field, aabb) = fluidnerf_neural::trained::load_trained(&dir).expect("loads");

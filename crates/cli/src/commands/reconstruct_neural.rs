@@ -61,7 +61,8 @@ pub struct Args {
     /// Write a resumable checkpoint every N iterations (0: only at the end and on Ctrl-C).
     #[arg(long, default_value_t = 500)]
     pub checkpoint_every: usize,
-    /// Stop training after this many seconds (training time, evaluations excluded).
+    /// Stop training after this many seconds (training time, evaluations excluded), counted
+    /// from the start of this command: a resumed run gets the whole budget again.
     #[arg(long)]
     pub time_budget: Option<f64>,
     /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (over
@@ -165,6 +166,24 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConf
     apply_train_options(&mut cfg.train, args);
     cfg.train.validate()?;
     Ok((cfg, n.preset.clone()))
+}
+
+/// The NRMSE curve of an earlier run's `report.json` up to `iteration` (empty when there is
+/// none, e.g. after a crash before the report was written).
+fn earlier_curve(report: &std::path::Path, iteration: usize) -> Vec<NrmsePoint> {
+    #[derive(serde::Deserialize)]
+    struct Curve {
+        #[serde(default)]
+        nrmse_history: Vec<NrmsePoint>,
+    }
+    let Ok(text) = std::fs::read_to_string(report) else { return Vec::new() };
+    match serde_json::from_str::<Curve>(&text) {
+        Ok(c) => c.nrmse_history.into_iter().filter(|p| p.iteration <= iteration).collect(),
+        Err(e) => {
+            log::warn!("{}: earlier NRMSE curve not read ({e})", report.display());
+            Vec::new()
+        }
+    }
 }
 
 pub fn run(args: &super::reconstruct::Args) -> anyhow::Result<()> {
@@ -275,7 +294,9 @@ impl Ctx<'_> {
             truth.nrmse(&WorldField { field, meta: &prep.meta, occupancy: prep.occupancy() })
         };
         let cpu0 = cpu_seconds();
-        let mut nrmse_history = Vec::new();
+        // A resumed run continues the curve of the run it resumes (up to the checkpoint).
+        let mut nrmse_history =
+            if args.resume { earlier_curve(&out.join("report.json"), learner.iteration) } else { Vec::new() };
         let bar = crate::progress::bar(train_cfg.max_iterations as u64, "training");
         bar.set_position(learner.iteration as u64);
         let mut last = (Instant::now(), learner.iteration);
