@@ -9,25 +9,7 @@ use common::*;
 fn compares_classical_neural_and_external_runs() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    ok(&fluidnerf(
-        d,
-        &[
-            "synth",
-            "--preset",
-            "demo",
-            "--phantom",
-            "ball",
-            "--cameras",
-            "6",
-            "--pixels",
-            "32",
-            "--resolution",
-            "16",
-            "-o",
-            "scene",
-            "-q",
-        ],
-    ));
+    demo_scene(d, "ball", 6, 32, 16, &[]);
     ok(&fluidnerf(
         d,
         &[

@@ -12,27 +12,7 @@ use common::*;
 fn classical_runs_write_results_refuse_overwrite_and_rerun_from_config() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    ok(&fluidnerf(
-        d,
-        &[
-            "synth",
-            "--preset",
-            "demo",
-            "--phantom",
-            "blobs",
-            "--cameras",
-            "7",
-            "--pixels",
-            "40",
-            "--resolution",
-            "24",
-            "--holdout",
-            "1",
-            "-o",
-            "scene",
-            "-q",
-        ],
-    ));
+    demo_scene(d, "blobs", 7, 40, 24, &["--holdout", "1"]);
     let asart = ["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "20", "-q"];
     let out = fluidnerf(d, &asart);
     ok(&out);
@@ -78,25 +58,7 @@ fn classical_runs_write_results_refuse_overwrite_and_rerun_from_config() {
 fn every_method_and_option_runs_and_memory_is_checked() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    ok(&fluidnerf(
-        d,
-        &[
-            "synth",
-            "--preset",
-            "demo",
-            "--phantom",
-            "ball",
-            "--cameras",
-            "5",
-            "--pixels",
-            "32",
-            "--resolution",
-            "16",
-            "-o",
-            "scene",
-            "-q",
-        ],
-    ));
+    demo_scene(d, "ball", 5, 32, 16, &[]);
     for method in ["art", "sart", "mart", "smart", "mlem", "tv", "tikhonov"] {
         let out = format!("run-{method}");
         ok(&fluidnerf(
@@ -172,25 +134,7 @@ fn every_method_and_option_runs_and_memory_is_checked() {
 fn interrupt_writes_the_last_finished_iteration() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    ok(&fluidnerf(
-        d,
-        &[
-            "synth",
-            "--preset",
-            "demo",
-            "--phantom",
-            "blobs",
-            "--cameras",
-            "4",
-            "--pixels",
-            "24",
-            "--resolution",
-            "12",
-            "-o",
-            "scene",
-            "-q",
-        ],
-    ));
+    demo_scene(d, "blobs", 4, 24, 12, &[]);
     let mut child = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
         .current_dir(d)
         .args([
@@ -236,27 +180,7 @@ fn interrupt_writes_the_last_finished_iteration() {
 fn nrmse_history_and_tikhonov_weight() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    ok(&fluidnerf(
-        d,
-        &[
-            "synth",
-            "--preset",
-            "demo",
-            "--phantom",
-            "blobs",
-            "--cameras",
-            "6",
-            "--pixels",
-            "32",
-            "--resolution",
-            "16",
-            "--noise",
-            "0.05",
-            "-o",
-            "scene",
-            "-q",
-        ],
-    ));
+    demo_scene(d, "blobs", 6, 32, 16, &["--noise", "0.05"]);
     let base =
         ["reconstruct", "scene", "--resolution", "16", "--max-iterations", "20", "--plateau-tolerance", "0", "-q"];
     let mut tik = base.to_vec();

@@ -8,27 +8,7 @@ use common::*;
 fn dense_and_mlp_runs_write_resume_and_load() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    ok(&fluidnerf(
-        d,
-        &[
-            "synth",
-            "--preset",
-            "demo",
-            "--phantom",
-            "ball",
-            "--cameras",
-            "6",
-            "--pixels",
-            "32",
-            "--resolution",
-            "24",
-            "--holdout",
-            "1",
-            "-o",
-            "scene",
-            "-q",
-        ],
-    ));
+    demo_scene(d, "ball", 6, 32, 24, &["--holdout", "1"]);
     // Dense voxel grid with empty-space skipping: fast enough for a real convergence check.
     let run = [
         "reconstruct",

@@ -28,3 +28,14 @@ pub fn json(path: &Path) -> serde_json::Value {
 pub fn report(dir: &Path) -> serde_json::Value {
     json(&dir.join("report.json"))
 }
+
+/// Writes `dir/scene`: `synth --preset demo` with a `phantom` (ball, blobs, …) seen by
+/// `cameras` cameras of `pixels`² px, its truth at `resolution`³, and `extra` options.
+#[allow(dead_code)] // not every test file synthesises this way
+pub fn demo_scene(dir: &Path, phantom: &str, cameras: u32, pixels: u32, resolution: u32, extra: &[&str]) {
+    let (c, p, r) = (cameras.to_string(), pixels.to_string(), resolution.to_string());
+    let mut args = vec!["synth", "--preset", "demo", "--phantom", phantom, "--cameras", &c, "--pixels", &p];
+    args.extend(["--resolution", &r, "-o", "scene", "-q"]);
+    args.extend_from_slice(extra);
+    ok(&fluidnerf(dir, &args));
+}
