@@ -16,21 +16,11 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use fluidnerf_classical::{asart, AsartParams, Grid, Problem, Projector, RayProjector, SplatProjector, Stopping};
-use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
+use fluidnerf_core::{Aabb, Image};
 use glam::DVec3;
 
-fn ring(n: usize, px: u32) -> Vec<Camera> {
-    // 40 mm field of view at 360 mm plus a margin for the cube's depth.
-    let f = px as f64 * 360.0 / 48.0;
-    let c = (px as f64 - 1.0) / 2.0;
-    let k = Intrinsics { width: px, height: px, fx: f, fy: f, cx: c, cy: c, skew: 0.0 };
-    (0..n)
-        .map(|i| {
-            let a = i as f64 * 2.0 * std::f64::consts::PI / n as f64;
-            Camera::look_at(k, DVec3::new(0.0, 360.0 * a.cos(), 360.0 * a.sin()), DVec3::ZERO, DVec3::X)
-        })
-        .collect()
-}
+mod common;
+use common::ring;
 
 /// A dense, smooth test volume (every voxel non-zero, so no work is skipped).
 fn phantom(grid: &Grid) -> Vec<f32> {

@@ -17,20 +17,11 @@ use fluidnerf_classical::{
     laplacian, sart, sart_tikhonov, sart_tv, Grid, Problem, Projector, SartParams, SplatProjector, Stopping,
     TikhonovParams, TvParams,
 };
-use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
+use fluidnerf_core::{Aabb, Image};
 use glam::DVec3;
 
-fn ring(n: usize, px: u32) -> Vec<Camera> {
-    let f = px as f64 * 360.0 / 48.0;
-    let c = (px as f64 - 1.0) / 2.0;
-    let k = Intrinsics { width: px, height: px, fx: f, fy: f, cx: c, cy: c, skew: 0.0 };
-    (0..n)
-        .map(|i| {
-            let a = i as f64 * 2.0 * std::f64::consts::PI / n as f64;
-            Camera::look_at(k, DVec3::new(0.0, 360.0 * a.cos(), 360.0 * a.sin()), DVec3::ZERO, DVec3::X)
-        })
-        .collect()
-}
+mod common;
+use common::ring;
 
 /// Mean seconds per iteration over iterations 2 and 3 (the first carries the setup).
 fn per_iteration(run: impl FnOnce(&mut dyn FnMut())) -> f64 {
