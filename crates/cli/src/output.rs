@@ -1,4 +1,4 @@
-//! Writing run outputs: every file goes through `fluidnerf_io::atomic_write`, so an
+//! Reading and writing run files: every file goes through `fluidnerf_io::atomic_write`, so an
 //! interrupted run never leaves a half-written result, and errors name the file.
 
 use std::path::Path;
@@ -6,11 +6,19 @@ use std::path::Path;
 use anyhow::Context;
 use fluidnerf_neural::train::Learner;
 use fluidnerf_neural::TrainableField;
+use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 /// Writes `bytes` to `path` atomically.
 pub fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     fluidnerf_io::atomic_write(path, |w| w.write_all(bytes)).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Reads the JSON file `path` as a `T`; `what` names what it should be ("a neural run
+/// configuration") in the error.
+pub fn read_json<T: DeserializeOwned>(path: &Path, what: &str) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: not {what}", path.display()))
 }
 
 /// Writes `value` as pretty JSON, with a final newline, atomically.

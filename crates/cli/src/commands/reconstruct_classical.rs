@@ -39,7 +39,7 @@ use fluidnerf_core::Image;
 use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
-use crate::output::write_json;
+use crate::output::{read_json, write_json};
 use crate::process::{cpu_seconds, proc_kib};
 use crate::truth_sample::{NrmsePoint, TruthSample};
 
@@ -228,9 +228,7 @@ fn resolve(args: &super::reconstruct::Args, alg: Algorithm) -> anyhow::Result<(C
     let c = &args.classical;
     let (mut cfg, mut resolution, mut seed) = match &args.config {
         Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let run: RunConfig = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a classical run configuration", path.display()))?;
+            let run: RunConfig = read_json(path, "a classical run configuration")?;
             if run.method != args.method {
                 bail!(
                     "{} was written by --method {:?}; pass --method {:?} to rerun it",

@@ -25,7 +25,7 @@ use fluidnerf_neural::TrainableField;
 use serde::Serialize;
 
 use super::reconstruct::Method;
-use crate::output::{write_bytes, write_checkpoint, write_json};
+use crate::output::{read_json, write_bytes, write_checkpoint, write_json};
 use crate::process::cpu_seconds;
 use crate::truth_sample::{NrmsePoint, TruthSample};
 
@@ -152,9 +152,7 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(NeuralConf
     let default_preset = if args.method == Method::Fast { "fast" } else { "faithful" };
     let mut cfg = match (&args.config, &n.preset) {
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let run: RunConfig = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a neural run configuration", path.display()))?;
+            let run: RunConfig = read_json(path, "a neural run configuration")?;
             run.neural
         }
         (_, preset) => {

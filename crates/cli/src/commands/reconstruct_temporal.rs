@@ -37,7 +37,7 @@ use fluidnerf_neural::TrainableField;
 use serde::{Deserialize, Serialize};
 
 use super::reconstruct::Method;
-use crate::output::{write_bytes, write_checkpoint, write_json};
+use crate::output::{read_json, write_bytes, write_checkpoint, write_json};
 use crate::process::cpu_seconds;
 
 /// Options of the time-resolved methods.
@@ -208,9 +208,7 @@ fn resolve_config(args: &super::reconstruct::Args) -> anyhow::Result<(TemporalCo
     };
     let mut cfg = match (&args.config, &n.preset) {
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let run: RunConfig = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a time-resolved run configuration", path.display()))?;
+            let run: RunConfig = read_json(path, "a time-resolved run configuration")?;
             run.temporal
         }
         (_, preset) => {
