@@ -18,6 +18,8 @@
 //!   (ray-driven trilinear).
 //! - [`solve`]: [`asart`], [`art`], [`sart`], [`mart`], [`smart`], [`mlem`], [`sart_tv`],
 //!   [`sart_tikhonov`], all `fn(problem, init, &params, on_iter) -> Result<Report, SolveError>`.
+//! - [`ClassicalMethod`]: the registry of methods (validate, memory, solve) and
+//!   [`ProjectorConfig`], the projector settings every method shares.
 //! - [`visual_hull`]: a support mask from dark pixels; [`estimate_memory`]: peak memory before
 //!   a run.
 //!
@@ -27,12 +29,14 @@
 mod error;
 mod hull;
 mod memory;
+mod method;
 pub mod projector;
 pub mod solve;
 
 pub use error::{ClassicalError, SolveError};
 pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
+pub use method::{voxel_footprint_px, ClassicalMethod, ProjectorConfig};
 pub use projector::{Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector};
 pub use solve::{
     art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,

@@ -12,6 +12,7 @@
 //! - Non-finite results are meaningful: NRMSE is NaN for an all-zero truth, PSNR is +∞ for a
 //!   perfect estimate. In JSON both become `null`.
 
+pub mod curve;
 mod error;
 pub mod pointwise;
 pub mod region;
@@ -19,6 +20,7 @@ pub mod report;
 pub mod reprojection;
 pub mod ssim;
 
+pub use curve::{NrmsePoint, TruthSample};
 pub use error::MetricsError;
 pub use pointwise::{data_range_of, mse, nrmse, psnr};
 pub use region::Region;

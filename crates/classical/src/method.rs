@@ -1,0 +1,311 @@
+//! The registry of classical methods: one enum holding each method's parameters, with the
+//! operations every caller needs — validate, estimate memory, solve — so that front ends
+//! (the run pipeline, benchmarks, scripts) never match on methods themselves.
+//!
+//! [`ProjectorConfig`] holds what all voxel methods share: the projector, its sampling, and the
+//! optional visual-hull support mask.
+
+use std::ops::ControlFlow;
+
+use fluidnerf_core::{Camera, Image};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    art, asart, estimate_memory, mart, mlem, sart, sart_tikhonov, sart_tv, smart, visual_hull, Algorithm, ArtParams,
+    AsartParams, ClassicalError, Grid, IterState, MartParams, MemoryEstimate, MlemParams, Problem, Projector,
+    ProjectorKind, RayProjector, Report, SartParams, SmartParams, SplatProjector, Stopping, TikhonovParams, TvParams,
+    DEFAULT_HULL_THRESHOLD,
+};
+
+/// A classical method and its parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ClassicalMethod {
+    Asart(AsartParams),
+    Art(ArtParams),
+    Sart(SartParams),
+    Mart(MartParams),
+    Smart(SmartParams),
+    Mlem(MlemParams),
+    Tv(TvParams),
+    Tikhonov(TikhonovParams),
+}
+
+impl ClassicalMethod {
+    /// The method's defaults.
+    pub fn default_for(algorithm: Algorithm) -> Self {
+        match algorithm {
+            Algorithm::Asart => ClassicalMethod::Asart(AsartParams::default()),
+            Algorithm::Art => ClassicalMethod::Art(ArtParams::default()),
+            Algorithm::Sart => ClassicalMethod::Sart(SartParams::default()),
+            Algorithm::Mart => ClassicalMethod::Mart(MartParams::default()),
+            Algorithm::Smart => ClassicalMethod::Smart(SmartParams::default()),
+            Algorithm::Mlem => ClassicalMethod::Mlem(MlemParams::default()),
+            Algorithm::Tv => ClassicalMethod::Tv(TvParams::default()),
+            Algorithm::Tikhonov => ClassicalMethod::Tikhonov(TikhonovParams::default()),
+        }
+    }
+
+    pub fn algorithm(&self) -> Algorithm {
+        match self {
+            ClassicalMethod::Asart(_) => Algorithm::Asart,
+            ClassicalMethod::Art(_) => Algorithm::Art,
+            ClassicalMethod::Sart(_) => Algorithm::Sart,
+            ClassicalMethod::Mart(_) => Algorithm::Mart,
+            ClassicalMethod::Smart(_) => Algorithm::Smart,
+            ClassicalMethod::Mlem(_) => Algorithm::Mlem,
+            ClassicalMethod::Tv(_) => Algorithm::Tv,
+            ClassicalMethod::Tikhonov(_) => Algorithm::Tikhonov,
+        }
+    }
+
+    /// The stopping rule.
+    pub fn stopping(&self) -> &Stopping {
+        match self {
+            ClassicalMethod::Asart(p) => &p.stopping,
+            ClassicalMethod::Art(p) => &p.stopping,
+            ClassicalMethod::Sart(p) => &p.stopping,
+            ClassicalMethod::Mart(p) => &p.stopping,
+            ClassicalMethod::Smart(p) => &p.stopping,
+            ClassicalMethod::Mlem(p) => &p.stopping,
+            ClassicalMethod::Tv(p) => &p.stopping,
+            ClassicalMethod::Tikhonov(p) => &p.stopping,
+        }
+    }
+
+    pub fn stopping_mut(&mut self) -> &mut Stopping {
+        match self {
+            ClassicalMethod::Asart(p) => &mut p.stopping,
+            ClassicalMethod::Art(p) => &mut p.stopping,
+            ClassicalMethod::Sart(p) => &mut p.stopping,
+            ClassicalMethod::Mart(p) => &mut p.stopping,
+            ClassicalMethod::Smart(p) => &mut p.stopping,
+            ClassicalMethod::Mlem(p) => &mut p.stopping,
+            ClassicalMethod::Tv(p) => &mut p.stopping,
+            ClassicalMethod::Tikhonov(p) => &mut p.stopping,
+        }
+    }
+
+    /// The relaxation factor μ, for the methods that have one (MLEM has none).
+    pub fn relaxation_mut(&mut self) -> Option<&mut f64> {
+        match self {
+            ClassicalMethod::Asart(p) => Some(&mut p.relaxation),
+            ClassicalMethod::Art(p) => Some(&mut p.relaxation),
+            ClassicalMethod::Sart(p) => Some(&mut p.relaxation),
+            ClassicalMethod::Mart(p) => Some(&mut p.relaxation),
+            ClassicalMethod::Smart(p) => Some(&mut p.relaxation),
+            ClassicalMethod::Mlem(_) => None,
+            ClassicalMethod::Tv(p) => Some(&mut p.relaxation),
+            ClassicalMethod::Tikhonov(p) => Some(&mut p.relaxation),
+        }
+    }
+
+    /// Sets the seed of the methods that draw a random row order (ART, MART).
+    pub fn set_seed(&mut self, seed: u64) {
+        match self {
+            ClassicalMethod::Art(p) => p.seed = seed,
+            ClassicalMethod::Mart(p) => p.seed = seed,
+            _ => {}
+        }
+    }
+
+    /// Rejects parameters no run can use. `what` names are the configuration keys.
+    pub fn validate(&self) -> Result<(), ClassicalError> {
+        let stopping = self.stopping();
+        if stopping.max_iterations == 0 {
+            return Err(ClassicalError::invalid("max_iterations", "must be at least 1"));
+        }
+        if let Some(p) = stopping.plateau {
+            if !(p.tolerance > 0.0 && p.tolerance.is_finite() && p.window > 0 && p.smoothing > 0) {
+                return Err(ClassicalError::invalid(
+                    "plateau",
+                    format!("needs window > 0, smoothing > 0 and a positive tolerance, got {p:?}"),
+                ));
+            }
+        }
+        let mut copy = self.clone();
+        let algorithm = self.algorithm();
+        if let Some(&mut mu) = copy.relaxation_mut() {
+            let upper = if matches!(algorithm, Algorithm::Mart | Algorithm::Smart) { 1.0 } else { 2.0 };
+            if !(mu > 0.0 && mu <= upper) {
+                return Err(ClassicalError::invalid(
+                    "relaxation",
+                    format!("for {algorithm:?} must be in (0, {upper}], got {mu}"),
+                ));
+            }
+        }
+        let non_negative = |what: &str, v: f64| {
+            if v >= 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                Err(ClassicalError::invalid(what, format!("must be non-negative, got {v}")))
+            }
+        };
+        match self {
+            ClassicalMethod::Tv(p) => non_negative("tv_weight", p.tv_weight),
+            ClassicalMethod::Tikhonov(p) => non_negative("tikhonov weight", p.weight),
+            _ => Ok(()),
+        }
+    }
+
+    /// Runs the method on `problem` from `init` (the method's own start if `None`).
+    pub fn solve(
+        &self,
+        problem: &Problem,
+        init: Option<&[f32]>,
+        on_iter: impl FnMut(&IterState) -> ControlFlow<()>,
+    ) -> Result<Report, ClassicalError> {
+        match self {
+            ClassicalMethod::Asart(p) => asart(problem, init, p, on_iter),
+            ClassicalMethod::Art(p) => art(problem, init, p, on_iter),
+            ClassicalMethod::Sart(p) => sart(problem, init, p, on_iter),
+            ClassicalMethod::Mart(p) => mart(problem, init, p, on_iter),
+            ClassicalMethod::Smart(p) => smart(problem, init, p, on_iter),
+            ClassicalMethod::Mlem(p) => mlem(problem, init, p, on_iter),
+            ClassicalMethod::Tv(p) => sart_tv(problem, init, p, on_iter),
+            ClassicalMethod::Tikhonov(p) => sart_tikhonov(problem, init, p, on_iter),
+        }
+    }
+
+    /// Estimated peak memory of solving on `grid` with `projector` and views of `view_sizes`.
+    pub fn memory(
+        &self,
+        projector: &ProjectorConfig,
+        grid: &Grid,
+        cameras: &[Camera],
+        threads: usize,
+    ) -> MemoryEstimate {
+        let sizes: Vec<(usize, usize)> = cameras.iter().map(|c| (c.width(), c.height())).collect();
+        estimate_memory(self.algorithm(), projector.kind, grid, &sizes, threads, projector.subdivisions(grid, cameras))
+    }
+}
+
+/// What every voxel method shares: the projector and the optional visual-hull support.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ProjectorConfig {
+    /// Default splat (the dissertation's).
+    pub kind: ProjectorKind,
+    /// Sub-voxels per axis of the splat; 0 chooses from the voxel's image size
+    /// ([`SplatProjector::auto_subdivisions`]). Default 0.
+    pub splat_subdivisions: usize,
+    /// Sampling step of the ray projector, in voxel sides. Default 0.5.
+    pub ray_step: f64,
+    /// Hold voxels at zero whose centre projects onto a dark pixel in any view. Default false.
+    pub visual_hull: bool,
+    /// Dark threshold of the hull, a fraction of each image's maximum. Default 0.02.
+    pub hull_threshold: f64,
+}
+
+impl Default for ProjectorConfig {
+    fn default() -> Self {
+        ProjectorConfig {
+            kind: ProjectorKind::Splat,
+            splat_subdivisions: 0,
+            ray_step: 0.5,
+            visual_hull: false,
+            hull_threshold: DEFAULT_HULL_THRESHOLD,
+        }
+    }
+}
+
+impl ProjectorConfig {
+    pub fn validate(&self) -> Result<(), ClassicalError> {
+        if self.splat_subdivisions > 16 {
+            return Err(ClassicalError::invalid(
+                "splat_subdivisions",
+                format!("must be at most 16, got {}", self.splat_subdivisions),
+            ));
+        }
+        if !(self.ray_step > 0.0 && self.ray_step <= 4.0) {
+            return Err(ClassicalError::invalid(
+                "ray_step",
+                format!("must be in (0, 4] voxel sides, got {}", self.ray_step),
+            ));
+        }
+        if !(self.hull_threshold >= 0.0 && self.hull_threshold < 1.0) {
+            return Err(ClassicalError::invalid(
+                "hull_threshold",
+                format!("must be in [0, 1), got {}", self.hull_threshold),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Sub-voxels per axis the splat will use on `grid` seen by `cameras`.
+    pub fn subdivisions(&self, grid: &Grid, cameras: &[Camera]) -> usize {
+        match self.splat_subdivisions {
+            0 => SplatProjector::auto_subdivisions(grid, cameras),
+            n => n,
+        }
+    }
+
+    /// The projector of `grid` seen by `cameras`.
+    pub fn build(
+        &self,
+        grid: Grid,
+        cameras: &[Camera],
+        intensity_scale: f64,
+    ) -> Result<Box<dyn Projector>, ClassicalError> {
+        Ok(match self.kind {
+            ProjectorKind::Splat => Box::new(
+                SplatProjector::new(grid, cameras, intensity_scale)?
+                    .with_subdivisions(self.subdivisions(&grid, cameras)),
+            ),
+            ProjectorKind::Ray => Box::new(RayProjector::new(grid, cameras, intensity_scale, self.ray_step)?),
+        })
+    }
+
+    /// The support mask, when the visual hull is on.
+    pub fn support(&self, grid: &Grid, cameras: &[Camera], images: &[Image]) -> Option<Vec<bool>> {
+        self.visual_hull.then(|| visual_hull(grid, cameras, images, self.hull_threshold))
+    }
+}
+
+/// Largest side of a voxel's image, in pixels, over the views (at the box centre).
+pub fn voxel_footprint_px(cameras: &[Camera], grid: &Grid) -> f64 {
+    let side = grid.spacing().max_element();
+    cameras
+        .iter()
+        .map(|c| {
+            let depth = (grid.aabb.centre() - c.centre()).dot(c.forward()).max(1e-9);
+            side * c.intrinsics.fx.max(c.intrinsics.fy) / depth
+        })
+        .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validation_names_the_key() {
+        let mut m = ClassicalMethod::default_for(Algorithm::Mart);
+        *m.relaxation_mut().unwrap() = 1.5;
+        let e = m.validate().unwrap_err().to_string();
+        assert!(e.contains("relaxation") && e.contains("(0, 1]"), "{e}");
+        let mut m = ClassicalMethod::default_for(Algorithm::Asart);
+        m.stopping_mut().max_iterations = 0;
+        assert!(m.validate().unwrap_err().to_string().contains("max_iterations"));
+        assert!(ClassicalMethod::default_for(Algorithm::Mlem).validate().is_ok());
+        let p = ProjectorConfig { ray_step: 0.0, ..Default::default() };
+        assert!(p.validate().unwrap_err().to_string().contains("ray_step"));
+    }
+
+    #[test]
+    fn every_algorithm_round_trips() {
+        for a in [
+            Algorithm::Asart,
+            Algorithm::Art,
+            Algorithm::Sart,
+            Algorithm::Mart,
+            Algorithm::Smart,
+            Algorithm::Mlem,
+            Algorithm::Tv,
+            Algorithm::Tikhonov,
+        ] {
+            let m = ClassicalMethod::default_for(a);
+            assert_eq!(m.algorithm(), a);
+            m.validate().unwrap();
+        }
+    }
+}

@@ -1,0 +1,83 @@
+//! Volume NRMSE against a scene's ground truth during a run, for time-to-accuracy curves: a
+//! fixed subset of the truth's voxel centres ([`TruthSample`]) and one point of the curve
+//! ([`NrmsePoint`]), the same for neural and classical methods so their curves compare.
+
+use fluidnerf_core::{glam::Vec3, ScalarField, Volume};
+use serde::{Deserialize, Serialize};
+
+/// One point of a run's NRMSE curve: after `iteration`, `train_time_s` seconds of the
+/// method's own work (evaluations excluded), NRMSE `nrmse` (Eq. 6.18) over a [`TruthSample`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NrmsePoint {
+    pub iteration: usize,
+    pub train_time_s: f64,
+    #[serde(deserialize_with = "crate::report::null_as_nan")]
+    pub nrmse: f64,
+}
+
+/// Every `stride`-th voxel centre of the truth along each axis (the middle one of each group)
+/// and the truth's values there: an unbiased subset for the NRMSE curve that stays cheap to
+/// evaluate (at most 64 points per side).
+#[derive(Clone, Debug)]
+pub struct TruthSample {
+    points: Vec<Vec3>,
+    values: Vec<f32>,
+}
+
+impl TruthSample {
+    pub fn new(truth: &Volume) -> Self {
+        let stride = truth.dims.iter().map(|&n| n.div_ceil(64)).max().unwrap_or(1).max(1);
+        let (mut points, mut values) = (Vec::new(), Vec::new());
+        let [nx, ny, nz] = truth.dims;
+        for k in (stride / 2..nz).step_by(stride) {
+            for j in (stride / 2..ny).step_by(stride) {
+                for i in (stride / 2..nx).step_by(stride) {
+                    points.push(truth.voxel_centre(i, j, k).as_vec3());
+                    values.push(truth.get(i, j, k));
+                }
+            }
+        }
+        TruthSample { points, values }
+    }
+
+    /// Points in the sample.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// NRMSE of `field` (at time 0) over the sample, evaluated on all cores.
+    pub fn nrmse(&self, field: &(dyn ScalarField + Sync)) -> f64 {
+        let mut est = vec![0.0f32; self.points.len()];
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let per = self.points.len().div_ceil(threads).max(1);
+        std::thread::scope(|scope| {
+            for (o, p) in est.chunks_mut(per).zip(self.points.chunks(per)) {
+                scope.spawn(move || field.eval(p, 0.0, o));
+            }
+        });
+        crate::nrmse(&est, &self.values)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::{glam::DVec3, Aabb};
+
+    #[test]
+    fn a_volume_scores_zero_against_itself_and_one_against_zero() {
+        let aabb = Aabb::new(DVec3::ZERO, DVec3::ONE);
+        let dims = [10, 10, 10];
+        let data: Vec<f32> = (0..1000).map(|i| (i % 7) as f32).collect();
+        let truth = Volume::from_vec(dims, aabb, data);
+        let sample = TruthSample::new(&truth);
+        assert_eq!(sample.len(), 1000);
+        assert!(sample.nrmse(&truth) < 1e-6);
+        let zero = Volume::zeros(dims, aabb);
+        assert!((sample.nrmse(&zero) - 1.0).abs() < 1e-6);
+    }
+}

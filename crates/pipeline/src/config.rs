@@ -1,0 +1,748 @@
+//! [`RunConfig`]: everything a run is configured by, the one source of its defaults, written
+//! to `config.json` and read back for a faithful rerun.
+//!
+//! On disk (`config.json`, [`CONFIG_FORMAT`] 1):
+//!
+//! ```json
+//! {
+//!   "format": 1,
+//!   "fluidnerf_version": "0.1.0",
+//!   "scene": "/data/jet15",
+//!   "method": { "name": "asart", "projector": { "kind": "splat", … }, "params": { "relaxation": 0.5, … } },
+//!   "seed": 0,
+//!   "resolution": 128,
+//!   "stopping": { "rule": "own", "max_iterations": null, "time_budget_s": null, … },
+//!   "checkpoint_every": 500,
+//!   "eval_every": null,
+//!   "memory_limit_gib": null
+//! }
+//! ```
+//!
+//! `method` is tagged by `name`; its other keys are that method's parameters: for the voxel
+//! methods `projector` ([`ProjectorConfig`]) and `params` (the solver's parameters); for the
+//! static neural methods `preset`, `field` and `train`; for the time-resolved ones also
+//! `windows`, `holdout_times` and `time_step`. Unknown keys are refused with their path.
+//!
+//! The [`StoppingPolicy`] is applied on top of every method's own parameters, so one policy
+//! stops classical and neural methods alike ([`RunConfig::effective_method`]).
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use fluidnerf_classical::{
+    Algorithm, ArtParams, AsartParams, ClassicalMethod, MartParams, MlemParams, ProjectorConfig, SartParams,
+    SmartParams, TikhonovParams, TvParams,
+};
+use fluidnerf_neural::temporal::{temporal_preset, TemporalConfig, WindowConfig, TEMPORAL_PRESETS};
+use fluidnerf_neural::train::{Batching, TrainConfig};
+use fluidnerf_neural::trained::{FieldConfig, NeuralConfig, PRESETS};
+use serde::{Deserialize, Serialize};
+
+use crate::PipelineError;
+
+/// The version of the `config.json` layout this build writes and reads.
+pub const CONFIG_FORMAT: u32 = 1;
+
+/// Reconstruction methods.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    Asart,
+    Art,
+    Sart,
+    Mart,
+    Smart,
+    Mlem,
+    Tv,
+    Tikhonov,
+    Fluidnerf,
+    Fast,
+    TrFluidnerf,
+    TrFast,
+    StaticPerFrame,
+}
+
+/// The three kinds of run, which write different run folders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// A voxel grid solved algebraically: `volume.npy`.
+    Classical,
+    /// A static neural field: weights, `model.json` and `volume.npy`.
+    Neural,
+    /// A field of space and time: windows, `temporal.json` and a volume per frame.
+    Temporal,
+}
+
+impl Method {
+    pub const ALL: [Method; 13] = [
+        Method::Asart,
+        Method::Art,
+        Method::Sart,
+        Method::Mart,
+        Method::Smart,
+        Method::Mlem,
+        Method::Tv,
+        Method::Tikhonov,
+        Method::Fluidnerf,
+        Method::Fast,
+        Method::TrFluidnerf,
+        Method::TrFast,
+        Method::StaticPerFrame,
+    ];
+
+    /// The name used on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Asart => "asart",
+            Method::Art => "art",
+            Method::Sart => "sart",
+            Method::Mart => "mart",
+            Method::Smart => "smart",
+            Method::Mlem => "mlem",
+            Method::Tv => "tv",
+            Method::Tikhonov => "tikhonov",
+            Method::Fluidnerf => "fluidnerf",
+            Method::Fast => "fast",
+            Method::TrFluidnerf => "tr-fluidnerf",
+            Method::TrFast => "tr-fast",
+            Method::StaticPerFrame => "static-per-frame",
+        }
+    }
+
+    /// A label for tables and legends.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Asart => "ASART",
+            Method::Art => "ART",
+            Method::Sart => "SART",
+            Method::Mart => "MART",
+            Method::Smart => "SMART",
+            Method::Mlem => "MLEM",
+            Method::Tv => "SART-TV",
+            Method::Tikhonov => "SART-Tikhonov",
+            Method::Fluidnerf => "FluidNeRF",
+            Method::Fast => "FluidNeRF (fast field)",
+            Method::TrFluidnerf => "TR-FluidNeRF",
+            Method::TrFast => "TR-FluidNeRF (fast field)",
+            Method::StaticPerFrame => "FluidNeRF per frame",
+        }
+    }
+
+    /// One line for `--help`.
+    pub fn summary(self) -> &'static str {
+        match self {
+            Method::Asart => "adaptive simultaneous ART, the dissertation's baseline (Eq. 2.29–2.30)",
+            Method::Art => "algebraic reconstruction technique, row by row (Kaczmarz, Eq. 2.21)",
+            Method::Sart => "simultaneous ART, view by view (Eq. 2.27)",
+            Method::Mart => "multiplicative ART (Eq. 2.25)",
+            Method::Smart => "simultaneous multiplicative ART (Eq. 2.28)",
+            Method::Mlem => "maximum-likelihood expectation maximisation (Eq. 2.33)",
+            Method::Tv => "SART with total-variation regularisation (edge preserving)",
+            Method::Tikhonov => "SART with second-order Tikhonov regularisation (Eq. 2.35)",
+            Method::Fluidnerf => "FluidNeRF as published: positional encoding + MLP (chapter 5.1)",
+            Method::Fast => "FluidNeRF with a multiresolution grid and a tiny MLP: much faster",
+            Method::TrFluidnerf => "time-resolved FluidNeRF (chapter 5.2): one MLP E(x, t) for all frames",
+            Method::TrFast => "time-resolved, with a space–time hash grid, in sliding windows",
+            Method::StaticPerFrame => "static FluidNeRF trained on each frame separately (TR baseline)",
+        }
+    }
+
+    pub fn family(self) -> Family {
+        match self {
+            Method::Fluidnerf | Method::Fast => Family::Neural,
+            Method::TrFluidnerf | Method::TrFast | Method::StaticPerFrame => Family::Temporal,
+            _ => Family::Classical,
+        }
+    }
+
+    fn algorithm(self) -> Option<Algorithm> {
+        Some(match self {
+            Method::Asart => Algorithm::Asart,
+            Method::Art => Algorithm::Art,
+            Method::Sart => Algorithm::Sart,
+            Method::Mart => Algorithm::Mart,
+            Method::Smart => Algorithm::Smart,
+            Method::Mlem => Algorithm::Mlem,
+            Method::Tv => Algorithm::Tv,
+            Method::Tikhonov => Algorithm::Tikhonov,
+            _ => return None,
+        })
+    }
+
+    /// The preset a neural or time-resolved method starts from.
+    pub fn default_preset(self) -> Option<&'static str> {
+        match self {
+            Method::Fluidnerf => Some("faithful"),
+            Method::Fast => Some("fast"),
+            Method::TrFluidnerf => Some("tr-faithful"),
+            Method::TrFast => Some("tr-fast"),
+            Method::StaticPerFrame => Some("static-swish"),
+            _ => None,
+        }
+    }
+
+    /// The method's default parameters.
+    pub fn default_config(self) -> MethodConfig {
+        match (self.algorithm(), self.default_preset()) {
+            (Some(a), _) => MethodConfig::Classical(ClassicalSpec {
+                projector: ProjectorConfig::default(),
+                method: ClassicalMethod::default_for(a),
+            }),
+            (None, Some(preset)) => {
+                MethodConfig::with_preset(self, preset).unwrap_or_else(|_| unreachable!("built-in preset {preset}"))
+            }
+            (None, None) => unreachable!("every non-classical method has a preset"),
+        }
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = PipelineError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+            PipelineError::invalid("method", format!("unknown method {s:?} (known: {})", names.join(", ")))
+        })
+    }
+}
+
+/// A voxel method: the shared projector settings and the solver's parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClassicalSpec {
+    pub projector: ProjectorConfig,
+    pub method: ClassicalMethod,
+}
+
+/// A static neural method: the field and its training (from `preset`, then overridden).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NeuralSpec {
+    /// The named configuration the field and training started from (information only).
+    #[serde(default)]
+    pub preset: Option<String>,
+    pub field: FieldConfig,
+    pub train: TrainConfig,
+}
+
+/// A time-resolved method: field, training, windows, and which times are held out.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemporalSpec {
+    #[serde(default)]
+    pub preset: Option<String>,
+    pub field: FieldConfig,
+    pub train: TrainConfig,
+    pub windows: WindowConfig,
+    /// Frame times whose images are not trained on; volumes and metrics are still produced
+    /// there. Default none.
+    #[serde(default)]
+    pub holdout_times: Vec<f64>,
+    /// Frame spacing Δt of `t' = (t − t₀)/Δt`; None: the smallest gap between training times.
+    #[serde(default)]
+    pub time_step: Option<f64>,
+}
+
+impl TemporalSpec {
+    /// The neural crate's configuration.
+    pub fn temporal_config(&self) -> TemporalConfig {
+        TemporalConfig { field: self.field.clone(), train: self.train.clone(), windows: self.windows.clone() }
+    }
+}
+
+/// A method with its parameters. Serialised tagged by `name` (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "WireMethod", into = "WireMethod")]
+pub enum MethodConfig {
+    Classical(ClassicalSpec),
+    /// `fluidnerf` or `fast`.
+    Neural(Method, NeuralSpec),
+    /// `tr-fluidnerf`, `tr-fast` or `static-per-frame`.
+    Temporal(Method, TemporalSpec),
+}
+
+impl MethodConfig {
+    pub fn method(&self) -> Method {
+        match self {
+            MethodConfig::Classical(c) => match c.method.algorithm() {
+                Algorithm::Asart => Method::Asart,
+                Algorithm::Art => Method::Art,
+                Algorithm::Sart => Method::Sart,
+                Algorithm::Mart => Method::Mart,
+                Algorithm::Smart => Method::Smart,
+                Algorithm::Mlem => Method::Mlem,
+                Algorithm::Tv => Method::Tv,
+                Algorithm::Tikhonov => Method::Tikhonov,
+            },
+            MethodConfig::Neural(m, _) | MethodConfig::Temporal(m, _) => *m,
+        }
+    }
+
+    /// The neural or time-resolved `method` configured from the named preset: any name of
+    /// [`PRESETS`] for the static neural methods; any of [`TEMPORAL_PRESETS`] or [`PRESETS`]
+    /// for the time-resolved ones.
+    pub fn with_preset(method: Method, preset: &str) -> Result<Self, PipelineError> {
+        let unknown = |known: String| {
+            PipelineError::invalid("preset", format!("unknown preset {preset:?} for {method} (known: {known})"))
+        };
+        match method.family() {
+            Family::Classical => {
+                Err(PipelineError::invalid("preset", format!("{method} is a voxel method and has no presets")))
+            }
+            Family::Neural => {
+                let c = NeuralConfig::preset(preset).ok_or_else(|| unknown(PRESETS.join(", ")))?;
+                Ok(MethodConfig::Neural(
+                    method,
+                    NeuralSpec { preset: Some(preset.into()), field: c.field, train: c.train },
+                ))
+            }
+            Family::Temporal => {
+                let c = match (temporal_preset(preset), NeuralConfig::preset(preset)) {
+                    (Some(c), _) => c,
+                    (None, Some(c)) => {
+                        TemporalConfig { field: c.field, train: c.train, windows: WindowConfig::default() }
+                    }
+                    (None, None) => {
+                        return Err(unknown(format!("{}; static: {}", TEMPORAL_PRESETS.join(", "), PRESETS.join(", "))))
+                    }
+                };
+                let mut spec = TemporalSpec {
+                    preset: Some(preset.into()),
+                    field: c.field,
+                    train: c.train,
+                    windows: c.windows,
+                    holdout_times: Vec::new(),
+                    time_step: None,
+                };
+                if method == Method::StaticPerFrame {
+                    spec.windows = WindowConfig::per_frame();
+                    spec.train.batching = Batching::AllViews;
+                } else {
+                    spec.train.batching = Batching::OneTimeStep;
+                }
+                Ok(MethodConfig::Temporal(method, spec))
+            }
+        }
+    }
+
+    /// The training configuration of a neural or time-resolved method.
+    pub fn train_mut(&mut self) -> Option<&mut TrainConfig> {
+        match self {
+            MethodConfig::Classical(_) => None,
+            MethodConfig::Neural(_, n) => Some(&mut n.train),
+            MethodConfig::Temporal(_, t) => Some(&mut t.train),
+        }
+    }
+
+    pub fn train(&self) -> Option<&TrainConfig> {
+        match self {
+            MethodConfig::Classical(_) => None,
+            MethodConfig::Neural(_, n) => Some(&n.train),
+            MethodConfig::Temporal(_, t) => Some(&t.train),
+        }
+    }
+
+    /// Rejects parameters no run can use.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let key = |e: &dyn std::fmt::Display| PipelineError::invalid("method", e.to_string());
+        match self {
+            MethodConfig::Classical(c) => {
+                c.projector.validate().map_err(|e| key(&e))?;
+                c.method.validate().map_err(|e| key(&e))
+            }
+            MethodConfig::Neural(_, n) => n.train.validate().map_err(|e| key(&e)),
+            MethodConfig::Temporal(m, t) => {
+                t.temporal_config().validate().map_err(|e| key(&e))?;
+                if let Some(dt) = t.time_step {
+                    if !(dt > 0.0 && dt.is_finite()) {
+                        return Err(PipelineError::invalid("method.time_step", format!("must be positive, got {dt}")));
+                    }
+                }
+                if let Some(h) = t.holdout_times.iter().find(|h| !h.is_finite()) {
+                    return Err(PipelineError::invalid("method.holdout_times", format!("{h} is not a time")));
+                }
+                if *m == Method::StaticPerFrame && t.windows != WindowConfig::per_frame() {
+                    return Err(PipelineError::invalid(
+                        "method.windows",
+                        "static-per-frame trains one frame per window without warm starts",
+                    ));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// The rule that ends a run, besides the iteration cap and the time budget.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StopRule {
+    /// The method's own convergence rule: the residual plateau of the voxel methods (§6.4.1),
+    /// the smoothed-loss rule of the neural ones (§5.1.5).
+    #[default]
+    Own,
+    /// No convergence rule: run to the iteration cap or the time budget.
+    Budget,
+    /// Held-out early stopping: evaluate the loss on the scene's held-out views every
+    /// `holdout_every` iterations and keep the iterate where it was lowest; stop after
+    /// `patience` evaluations without improvement. Uses no ground truth; needs held-out views.
+    HeldOut,
+}
+
+/// When every method of a run stops, applied on top of the method's own parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StoppingPolicy {
+    pub rule: StopRule,
+    /// Iteration cap (per window for time-resolved runs); None: the method's own.
+    pub max_iterations: Option<usize>,
+    /// Seconds of the method's own work (evaluations excluded); None: unlimited.
+    pub time_budget_s: Option<f64>,
+    /// Held-out rule: iterations between evaluations; None: 1 for voxel methods (each
+    /// iteration is a full sweep), 25 for neural ones.
+    pub holdout_every: Option<usize>,
+    /// Held-out rule: evaluations without a new best before stopping; 0 never stops early.
+    /// Default 10.
+    pub patience: usize,
+}
+
+impl Default for StoppingPolicy {
+    fn default() -> Self {
+        StoppingPolicy {
+            rule: StopRule::Own,
+            max_iterations: None,
+            time_budget_s: None,
+            holdout_every: None,
+            patience: 10,
+        }
+    }
+}
+
+impl StoppingPolicy {
+    /// Iterations between held-out evaluations for a method of `family`.
+    pub fn holdout_interval(&self, family: Family) -> usize {
+        self.holdout_every.unwrap_or(if family == Family::Classical { 1 } else { 25 })
+    }
+
+    fn validate(&self) -> Result<(), PipelineError> {
+        if self.max_iterations == Some(0) {
+            return Err(PipelineError::invalid("stopping.max_iterations", "must be at least 1"));
+        }
+        if let Some(t) = self.time_budget_s {
+            if !(t > 0.0 && t.is_finite()) {
+                return Err(PipelineError::invalid("stopping.time_budget_s", format!("must be positive, got {t}")));
+            }
+        }
+        if self.holdout_every == Some(0) {
+            return Err(PipelineError::invalid("stopping.holdout_every", "must be at least 1"));
+        }
+        Ok(())
+    }
+
+    /// A short description for reports: "held-out early stopping (every 25 iterations,
+    /// patience 10), at most 300 iterations".
+    pub fn describe(&self, family: Family) -> String {
+        let mut s = match self.rule {
+            StopRule::Own => "the method's own convergence rule".to_string(),
+            StopRule::Budget => "iteration cap or time budget only".to_string(),
+            StopRule::HeldOut => format!(
+                "held-out early stopping (every {} iterations, patience {})",
+                self.holdout_interval(family),
+                self.patience
+            ),
+        };
+        if let Some(n) = self.max_iterations {
+            s += &format!(", at most {n} iterations");
+        }
+        if let Some(t) = self.time_budget_s {
+            s += &format!(", at most {t} s");
+        }
+        s
+    }
+}
+
+fn default_resolution() -> usize {
+    128
+}
+
+fn default_checkpoint_every() -> usize {
+    500
+}
+
+fn default_format() -> u32 {
+    CONFIG_FORMAT
+}
+
+/// Everything a run is configured by (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunConfig {
+    /// Layout version of this file ([`CONFIG_FORMAT`]).
+    #[serde(default = "default_format")]
+    pub format: u32,
+    /// The version that wrote the file (information only).
+    #[serde(default)]
+    pub fluidnerf_version: String,
+    /// The scene: a folder holding `transforms.json`, or the file itself.
+    pub scene: PathBuf,
+    pub method: MethodConfig,
+    /// Seed of every random choice. Default 0.
+    #[serde(default)]
+    pub seed: u64,
+    /// Voxels along the box's longest side of the output volume (and of the working grid of
+    /// the voxel methods); cells are cubic. Default 128.
+    #[serde(default = "default_resolution")]
+    pub resolution: usize,
+    #[serde(default)]
+    pub stopping: StoppingPolicy,
+    /// Neural methods: a resumable checkpoint every N iterations (0: only at the end and when
+    /// stopped). Default 500.
+    #[serde(default = "default_checkpoint_every")]
+    pub checkpoint_every: usize,
+    /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (0:
+    /// only at the end); None: 100 for neural methods, every iteration for voxel ones.
+    #[serde(default)]
+    pub eval_every: Option<usize>,
+    /// Refuse runs whose estimated memory exceeds this many GiB; None: the memory available
+    /// when the run starts.
+    #[serde(default)]
+    pub memory_limit_gib: Option<f64>,
+}
+
+impl RunConfig {
+    /// The defaults of `method` on `scene`.
+    pub fn new(scene: impl Into<PathBuf>, method: Method) -> Self {
+        RunConfig {
+            format: CONFIG_FORMAT,
+            fluidnerf_version: env!("CARGO_PKG_VERSION").to_string(),
+            scene: scene.into(),
+            method: method.default_config(),
+            seed: 0,
+            resolution: default_resolution(),
+            stopping: StoppingPolicy::default(),
+            checkpoint_every: default_checkpoint_every(),
+            eval_every: None,
+            memory_limit_gib: None,
+        }
+    }
+
+    /// Reads a `config.json`; errors name the file and the key path.
+    pub fn read(path: &Path) -> Result<Self, PipelineError> {
+        let config: RunConfig = crate::rundir::read_json(path)?;
+        if config.format != CONFIG_FORMAT {
+            return Err(PipelineError::File {
+                path: path.to_path_buf(),
+                why: format!(
+                    "configuration format {} is not the format {CONFIG_FORMAT} this version reads",
+                    config.format
+                ),
+            });
+        }
+        Ok(config)
+    }
+
+    pub fn method(&self) -> Method {
+        self.method.method()
+    }
+
+    /// Iterations between NRMSE evaluations.
+    pub fn eval_interval(&self) -> usize {
+        self.eval_every.unwrap_or(if self.method().family() == Family::Classical { 1 } else { 100 })
+    }
+
+    /// Rejects settings no run can use, before any work starts.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        if !(2..=4096).contains(&self.resolution) {
+            return Err(PipelineError::invalid(
+                "resolution",
+                format!("must be between 2 and 4096 voxels along the longest side, got {}", self.resolution),
+            ));
+        }
+        if let Some(g) = self.memory_limit_gib {
+            if !(g > 0.0 && g.is_finite()) {
+                return Err(PipelineError::invalid("memory_limit_gib", format!("must be positive, got {g}")));
+            }
+        }
+        self.stopping.validate()?;
+        if self.stopping.rule == StopRule::HeldOut && self.method().family() == Family::Temporal {
+            return Err(PipelineError::invalid(
+                "stopping.rule",
+                "held-out early stopping is available for static methods only; time-resolved runs hold out \
+                 whole times with holdout_times",
+            ));
+        }
+        self.effective_method().validate()
+    }
+
+    /// The method's parameters with the stopping policy applied: the iteration cap and time
+    /// budget replace the method's own, the convergence rule is kept only under
+    /// [`StopRule::Own`], and the held-out rule sets the neural evaluation interval.
+    pub fn effective_method(&self) -> MethodConfig {
+        let mut m = self.method.clone();
+        let policy = &self.stopping;
+        let family = self.method().family();
+        match &mut m {
+            MethodConfig::Classical(c) => {
+                let s = c.method.stopping_mut();
+                if let Some(n) = policy.max_iterations {
+                    s.max_iterations = n;
+                }
+                if policy.rule != StopRule::Own {
+                    s.plateau = None;
+                }
+                c.method.set_seed(self.seed);
+            }
+            MethodConfig::Neural(_, NeuralSpec { train, .. })
+            | MethodConfig::Temporal(_, TemporalSpec { train, .. }) => {
+                if let Some(n) = policy.max_iterations {
+                    train.max_iterations = n;
+                }
+                if policy.time_budget_s.is_some() {
+                    train.time_budget_s = policy.time_budget_s;
+                }
+                if policy.rule != StopRule::Own {
+                    train.stop.window = 0;
+                }
+                if policy.rule == StopRule::HeldOut {
+                    train.validate_every = policy.holdout_interval(family);
+                }
+            }
+        }
+        m
+    }
+}
+
+/// The on-disk form of [`MethodConfig`]: tagged by `name`, one variant per method.
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "name", rename_all = "kebab-case")]
+enum WireMethod {
+    Asart(Voxel<AsartParams>),
+    Art(Voxel<ArtParams>),
+    Sart(Voxel<SartParams>),
+    Mart(Voxel<MartParams>),
+    Smart(Voxel<SmartParams>),
+    Mlem(Voxel<MlemParams>),
+    Tv(Voxel<TvParams>),
+    Tikhonov(Voxel<TikhonovParams>),
+    Fluidnerf(NeuralSpec),
+    Fast(NeuralSpec),
+    TrFluidnerf(TemporalSpec),
+    TrFast(TemporalSpec),
+    StaticPerFrame(TemporalSpec),
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Voxel<P> {
+    #[serde(default)]
+    projector: ProjectorConfig,
+    #[serde(default)]
+    params: P,
+}
+
+impl From<MethodConfig> for WireMethod {
+    fn from(m: MethodConfig) -> Self {
+        match m {
+            MethodConfig::Classical(ClassicalSpec { projector, method }) => match method {
+                ClassicalMethod::Asart(params) => WireMethod::Asart(Voxel { projector, params }),
+                ClassicalMethod::Art(params) => WireMethod::Art(Voxel { projector, params }),
+                ClassicalMethod::Sart(params) => WireMethod::Sart(Voxel { projector, params }),
+                ClassicalMethod::Mart(params) => WireMethod::Mart(Voxel { projector, params }),
+                ClassicalMethod::Smart(params) => WireMethod::Smart(Voxel { projector, params }),
+                ClassicalMethod::Mlem(params) => WireMethod::Mlem(Voxel { projector, params }),
+                ClassicalMethod::Tv(params) => WireMethod::Tv(Voxel { projector, params }),
+                ClassicalMethod::Tikhonov(params) => WireMethod::Tikhonov(Voxel { projector, params }),
+            },
+            MethodConfig::Neural(Method::Fluidnerf, n) => WireMethod::Fluidnerf(n),
+            MethodConfig::Neural(_, n) => WireMethod::Fast(n),
+            MethodConfig::Temporal(Method::TrFluidnerf, t) => WireMethod::TrFluidnerf(t),
+            MethodConfig::Temporal(Method::TrFast, t) => WireMethod::TrFast(t),
+            MethodConfig::Temporal(_, t) => WireMethod::StaticPerFrame(t),
+        }
+    }
+}
+
+impl From<WireMethod> for MethodConfig {
+    fn from(w: WireMethod) -> Self {
+        let c = |projector, method| MethodConfig::Classical(ClassicalSpec { projector, method });
+        match w {
+            WireMethod::Asart(v) => c(v.projector, ClassicalMethod::Asart(v.params)),
+            WireMethod::Art(v) => c(v.projector, ClassicalMethod::Art(v.params)),
+            WireMethod::Sart(v) => c(v.projector, ClassicalMethod::Sart(v.params)),
+            WireMethod::Mart(v) => c(v.projector, ClassicalMethod::Mart(v.params)),
+            WireMethod::Smart(v) => c(v.projector, ClassicalMethod::Smart(v.params)),
+            WireMethod::Mlem(v) => c(v.projector, ClassicalMethod::Mlem(v.params)),
+            WireMethod::Tv(v) => c(v.projector, ClassicalMethod::Tv(v.params)),
+            WireMethod::Tikhonov(v) => c(v.projector, ClassicalMethod::Tikhonov(v.params)),
+            WireMethod::Fluidnerf(n) => MethodConfig::Neural(Method::Fluidnerf, n),
+            WireMethod::Fast(n) => MethodConfig::Neural(Method::Fast, n),
+            WireMethod::TrFluidnerf(t) => MethodConfig::Temporal(Method::TrFluidnerf, t),
+            WireMethod::TrFast(t) => MethodConfig::Temporal(Method::TrFast, t),
+            WireMethod::StaticPerFrame(t) => MethodConfig::Temporal(Method::StaticPerFrame, t),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_method_round_trips_through_json() {
+        for m in Method::ALL {
+            let mut c = RunConfig::new("scene", m);
+            c.seed = 7;
+            c.validate().unwrap_or_else(|e| panic!("{m}: {e}"));
+            let text = serde_json::to_string_pretty(&c).unwrap();
+            assert!(text.contains(&format!("\"name\": \"{}\"", m.name())), "{text}");
+            let back: RunConfig = serde_json::from_str(&text).unwrap();
+            assert_eq!(back, c, "{m}");
+            assert_eq!(back.method(), m);
+            assert_eq!(m.name().parse::<Method>().unwrap(), m);
+        }
+    }
+
+    #[test]
+    fn unknown_keys_are_refused_with_their_path() {
+        let mut v = serde_json::to_value(RunConfig::new("scene", Method::Asart)).unwrap();
+        v["method"]["params"]["relaxaton"] = 0.3.into();
+        let e = crate::rundir::from_json_value::<RunConfig>(v).unwrap_err().to_string();
+        assert!(e.contains("method") && e.contains("relaxaton"), "{e}");
+        let mut v = serde_json::to_value(RunConfig::new("scene", Method::Fast)).unwrap();
+        v["sed"] = 1.into();
+        let e = crate::rundir::from_json_value::<RunConfig>(v).unwrap_err().to_string();
+        assert!(e.contains("sed"), "{e}");
+    }
+
+    #[test]
+    fn the_policy_overrides_every_family() {
+        let mut c = RunConfig::new("scene", Method::Asart);
+        c.stopping = StoppingPolicy { rule: StopRule::HeldOut, max_iterations: Some(7), ..Default::default() };
+        let MethodConfig::Classical(spec) = c.effective_method() else { panic!() };
+        assert_eq!(spec.method.stopping().max_iterations, 7);
+        assert!(spec.method.stopping().plateau.is_none());
+        let mut c = RunConfig::new("scene", Method::Fast);
+        c.stopping = StoppingPolicy { rule: StopRule::HeldOut, time_budget_s: Some(3.0), ..Default::default() };
+        let train = c.effective_method().train().unwrap().clone();
+        assert_eq!((train.stop.window, train.validate_every, train.time_budget_s), (0, 25, Some(3.0)));
+        let mut c = RunConfig::new("scene", Method::TrFast);
+        c.stopping.rule = StopRule::HeldOut;
+        assert!(c.validate().unwrap_err().to_string().contains("stopping.rule"));
+    }
+
+    #[test]
+    fn out_of_range_settings_are_refused() {
+        let mut c = RunConfig::new("scene", Method::Fast);
+        c.resolution = 1;
+        assert!(c.validate().unwrap_err().to_string().contains("resolution"));
+        let mut c = RunConfig::new("scene", Method::Fast);
+        c.stopping.max_iterations = Some(0);
+        assert!(c.validate().unwrap_err().to_string().contains("max_iterations"));
+    }
+}

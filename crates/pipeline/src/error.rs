@@ -1,0 +1,43 @@
+//! The crate's error type.
+
+use std::path::PathBuf;
+
+/// Everything that can stop a run before or while it works. Each message names the file, the
+/// configuration key or the camera it is about.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// A setting out of range or inconsistent with the others; `key` is its configuration path.
+    #[error("{key}: {why}")]
+    Invalid { key: String, why: String },
+    /// A file that cannot be read, parsed or written.
+    #[error("{}: {why}", path.display())]
+    File { path: PathBuf, why: String },
+    /// The run folder cannot be used as asked (results present, locked, the scene folder).
+    #[error("{}: {why}", path.display())]
+    RunDir { path: PathBuf, why: String },
+    /// The run would need more memory than allowed.
+    #[error("{0}")]
+    Memory(String),
+    #[error(transparent)]
+    Io(#[from] fluidnerf_io::IoError),
+    #[error(transparent)]
+    Classical(#[from] fluidnerf_classical::ClassicalError),
+    #[error(transparent)]
+    Neural(#[from] fluidnerf_neural::NeuralError),
+    #[error(transparent)]
+    Metrics(#[from] fluidnerf_metrics::MetricsError),
+    #[error(transparent)]
+    Core(#[from] fluidnerf_core::CoreError),
+    #[error("drawing the report: {0}")]
+    Viz(#[from] fluidnerf_viz::VizError),
+}
+
+impl PipelineError {
+    pub fn invalid(key: impl Into<String>, why: impl Into<String>) -> Self {
+        PipelineError::Invalid { key: key.into(), why: why.into() }
+    }
+
+    pub(crate) fn file(path: &std::path::Path, why: impl std::fmt::Display) -> Self {
+        PipelineError::File { path: path.to_path_buf(), why: why.to_string() }
+    }
+}

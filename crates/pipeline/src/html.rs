@@ -1,0 +1,277 @@
+//! The `report.html` of a run and the comparison of several runs (the demo's): tables, slice
+//! panels and convergence plots drawn from the typed [`RunReport`]s, so a figure in the HTML
+//! is the figure in `report.json` and in the terminal.
+
+use std::path::{Path, PathBuf};
+
+use fluidnerf_core::{Scene, Volume};
+use fluidnerf_metrics::{MetricsReport, StepMetrics};
+use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
+use fluidnerf_viz::{Axis, PanelGroup, PanelStyle, RunHistory, Trace};
+
+use crate::load::LoadedRun;
+use crate::{bytes, LossKind, PipelineError, RunReport, RunStatus};
+
+/// What a run produced, as the HTML report and the demo show it.
+pub struct RunSummary {
+    pub dir: PathBuf,
+    /// Legend and table label, e.g. "ASART".
+    pub label: String,
+    pub settings: Option<serde_json::Value>,
+    pub report: RunReport,
+    /// The (first) volume written.
+    pub volume: Volume,
+    pub history: RunHistory,
+    /// Mean reprojection NRMSE over the held-out frames, from `metrics.json` when
+    /// `fluidnerf eval` has scored the run.
+    pub holdout_nrmse: Option<f64>,
+}
+
+impl RunSummary {
+    /// Metrics of the first volume against the truth, as recorded in the report.
+    pub fn metrics(&self) -> Option<&StepMetrics> {
+        self.report.volumes.first().and_then(|v| v.metrics.as_ref())
+    }
+}
+
+/// The convergence traces of a report.
+pub fn history(report: &RunReport, label: &str) -> RunHistory {
+    let n = report.history.loss.len();
+    let per_iter = if n > 0 { report.train_time_s / n as f64 } else { 0.0 };
+    let loss = Trace {
+        iteration: (1..=n).map(|i| i as f64).collect(),
+        time_s: (1..=n).map(|i| i as f64 * per_iter).collect(),
+        value: report.history.loss.clone(),
+    };
+    let points = &report.history.nrmse;
+    let nrmse = (!points.is_empty()).then(|| Trace {
+        iteration: points.iter().map(|p| p.iteration as f64).collect(),
+        time_s: points.iter().map(|p| p.train_time_s).collect(),
+        value: points.iter().map(|p| p.nrmse).collect(),
+    });
+    let loss_label = match report.history.loss_kind {
+        Some(LossKind::TrainingMse) => "training loss (MSE)",
+        Some(LossKind::RelativeResidual) => "relative residual",
+        None => "loss",
+    };
+    RunHistory { label: label.to_string(), loss_label: loss_label.to_string(), loss, nrmse, ssim: None }
+}
+
+/// Reads a finished run folder.
+pub fn summarise(dir: &Path, label: &str) -> Result<RunSummary, PipelineError> {
+    let run = LoadedRun::open(dir)?;
+    let volume = run.first_volume()?;
+    let holdout_nrmse = holdout_nrmse(&dir.join("metrics.json"));
+    let settings = serde_json::to_value(&run.config).ok();
+    Ok(RunSummary {
+        dir: dir.to_path_buf(),
+        label: label.to_string(),
+        settings,
+        history: history(&run.report, label),
+        report: run.report,
+        volume,
+        holdout_nrmse,
+    })
+}
+
+/// The mean held-out reprojection NRMSE of an `eval` result, if there is one.
+fn holdout_nrmse(path: &Path) -> Option<f64> {
+    let m: MetricsReport = crate::rundir::read_json(path).ok()?;
+    crate::mean(m.reprojection.iter().map(|r| r.nrmse))
+}
+
+/// The metrics table of several runs: global figures, then NRMSE per region.
+pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
+    let first = runs.iter().find_map(|r| r.metrics())?;
+    let mut header: Vec<String> =
+        ["method", "NRMSE", "SSIM (global)", "SSIM (windowed)", "PSNR [dB]"].iter().map(|s| s.to_string()).collect();
+    header.extend(first.regions.iter().map(|r| format!("NRMSE {}", r.region.name)));
+    header
+        .extend(["held-out view NRMSE", "stopping", "kept / iterations", "time [s]", "result size"].map(String::from));
+    let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    let mut table =
+        Table::new("Volume metrics against the ground truth (lower NRMSE, higher SSIM/PSNR are better)", &header_refs);
+    for r in runs {
+        let Some(m) = r.metrics() else { continue };
+        let f = fluidnerf_viz::report::format_value;
+        let mut row = vec![
+            r.label.clone(),
+            f(m.global.nrmse),
+            f(m.global.ssim_global),
+            m.global.ssim_windowed.map_or("–".into(), f),
+            f(m.global.psnr_db),
+        ];
+        row.extend(m.regions.iter().map(|g| f(g.metrics.nrmse)));
+        row.extend([
+            r.holdout_nrmse.map_or("–".into(), f),
+            r.report.stopping_rule.clone(),
+            format!("{} / {}", r.report.kept_iteration, r.report.iterations),
+            format!("{:.1}", r.report.train_time_s),
+            bytes(r.report.result_bytes),
+        ]);
+        table.push_row(row);
+    }
+    Some(table)
+}
+
+/// Slice panels: for each plane, truth (if any) and every run side by side on one colour
+/// scale, then each run's difference from the truth on a diverging scale. PNG bytes.
+pub fn slice_figure(truth: Option<&Volume>, runs: &[&RunSummary], units: &str) -> Result<Vec<u8>, PipelineError> {
+    let reference = truth.unwrap_or(&runs[0].volume);
+    let mut groups = Vec::new();
+    for (axis, what) in [(Axis::Z, "central plane z = 0 (along the flow)"), (Axis::X, "cross-section at mid-box")] {
+        let pos = axis.position_at(&reference.aabb, 0.5);
+        let mut panels = Vec::new();
+        let mut diffs = Vec::new();
+        let truth_panel = match truth {
+            Some(t) => Some(fluidnerf_viz::slice(t, axis, pos, units)?),
+            None => None,
+        };
+        if let Some(tp) = &truth_panel {
+            panels.push(fluidnerf_viz::Panel { title: format!("truth, {}", tp.title), ..tp.clone() });
+        }
+        for r in runs {
+            // Resampled onto the reference grid so panels and differences line up.
+            let v = if r.volume.dims == reference.dims {
+                r.volume.clone()
+            } else {
+                r.volume.resample(reference.dims, reference.aabb)
+            };
+            let p = fluidnerf_viz::slice(&v, axis, pos, units)?;
+            if let Some(tp) = &truth_panel {
+                let mut d = tp.difference(&p);
+                d.title = format!("{} − truth", r.label);
+                diffs.push(d);
+            }
+            panels.push(fluidnerf_viz::Panel { title: format!("{}, {}", r.label, p.title), ..p });
+        }
+        groups.push(PanelGroup {
+            panels,
+            style: PanelStyle {
+                colorbar_label: "E".into(),
+                figure_title: if groups.is_empty() { Some(format!("Slices: {what}")) } else { None },
+                ..PanelStyle::default()
+            },
+        });
+        if !diffs.is_empty() {
+            groups.push(PanelGroup {
+                panels: diffs,
+                style: PanelStyle {
+                    colormap: fluidnerf_viz::Colormap::Diverging,
+                    colorbar_label: "Δ E".into(),
+                    ..PanelStyle::default()
+                },
+            });
+        }
+    }
+    let per_row = if truth.is_some() { 2 } else { 1 };
+    let rows: Vec<Vec<u8>> = groups.chunks(per_row).map(fluidnerf_viz::encode_panels_png).collect::<Result<_, _>>()?;
+    stack_pngs(&rows)
+}
+
+/// Stacks PNG pictures vertically on a white background.
+fn stack_pngs(pngs: &[Vec<u8>]) -> Result<Vec<u8>, PipelineError> {
+    let err = |e: image::ImageError| PipelineError::invalid("figure", e.to_string());
+    let imgs: Vec<image::RgbImage> = pngs
+        .iter()
+        .map(|b| Ok(image::load_from_memory(b).map_err(err)?.to_rgb8()))
+        .collect::<Result<_, PipelineError>>()?;
+    let w = imgs.iter().map(|i| i.width()).max().unwrap_or(1);
+    let h = imgs.iter().map(|i| i.height()).sum::<u32>().max(1);
+    let mut out = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let mut y = 0;
+    for i in &imgs {
+        image::imageops::replace(&mut out, i, 0, y as i64);
+        y += i.height();
+    }
+    let mut buf = Vec::new();
+    out.write_to(&mut std::io::Cursor::new(&mut buf), image::ImageFormat::Png).map_err(err)?;
+    Ok(buf)
+}
+
+/// The HTML report of a set of runs on one scene.
+pub fn build_report(
+    title: &str,
+    scene: &Scene,
+    truth: Option<&Volume>,
+    runs: &[&RunSummary],
+) -> Result<Report, PipelineError> {
+    let mut report = Report {
+        title: title.to_string(),
+        subtitle: format!(
+            "scene {} · {} frames · box {:?}–{:?} {} · fluidnerf {}",
+            scene.root.display(),
+            scene.frames.len(),
+            scene.aabb.min.to_array(),
+            scene.aabb.max.to_array(),
+            scene.units,
+            env!("CARGO_PKG_VERSION")
+        ),
+        ..Report::default()
+    };
+    for r in runs {
+        let rep = &r.report;
+        let mut facts = format!("method {}, {} iterations", rep.method, rep.iterations);
+        if rep.kept_iteration != rep.iterations {
+            facts += &format!(" (field of iteration {} kept)", rep.kept_iteration);
+        }
+        facts += &format!(", {:.1} s, stopped by {}", rep.train_time_s, rep.stopping_rule);
+        if rep.status == RunStatus::Interrupted {
+            facts += ", INTERRUPTED";
+        }
+        facts += &format!(", grid {:?}, result {}", r.volume.dims, bytes(rep.result_bytes));
+        report.summary.push((r.label.clone(), facts));
+    }
+    if let Some(t) = metrics_table(runs) {
+        report.tables.push(t);
+    }
+    let slices = slice_figure(truth, runs, &scene.units)?;
+    report.figures.push(Figure {
+        caption: "Slices of the reconstruction(s) and, where the truth is known, the differences.".into(),
+        image: ImageData::Png(slices),
+    });
+    let histories: Vec<RunHistory> =
+        runs.iter().map(|r| r.history.clone()).filter(|h| !h.loss.value.is_empty()).collect();
+    if !histories.is_empty() {
+        let plots = fluidnerf_viz::convergence_plots(&histories);
+        let png = fluidnerf_viz::encode_plots_png(&plots, 2)?;
+        report.figures.push(Figure { caption: "Convergence.".into(), image: ImageData::Png(png) });
+    }
+    if runs.iter().any(|r| r.report.status == RunStatus::Interrupted) {
+        report.notes.push("Interrupted runs show the results and curves up to where they were stopped.".into());
+    }
+    if runs.len() == 1 {
+        report.settings = runs[0].settings.clone();
+    }
+    Ok(report)
+}
+
+/// Writes `report.html` of a run whose results are in `dir` and whose report is `report`
+/// (about to be written as `report.json`).
+pub(crate) fn write_run_html(
+    dir: &crate::RunDir,
+    scene: &Scene,
+    report: &RunReport,
+    truth: &[(Option<f64>, Volume)],
+) -> Result<(), PipelineError> {
+    let Some(first) = report.volumes.first() else { return Ok(()) };
+    let volume = fluidnerf_io::volume::read_npy(&dir.path(&first.file), scene.aabb)?;
+    let label = report.method.label();
+    let config = crate::RunConfig::read(&dir.config()).ok();
+    let run = RunSummary {
+        dir: dir.root().to_path_buf(),
+        label: label.to_string(),
+        settings: config.and_then(|c| serde_json::to_value(c).ok()),
+        report: report.clone(),
+        volume,
+        history: history(report, label),
+        holdout_nrmse: None,
+    };
+    let truth_volume = match first.time {
+        Some(t) => truth.iter().find(|(tt, _)| tt.is_some_and(|tt| (tt - t).abs() < 1e-9)).or(truth.first()),
+        None => truth.first(),
+    };
+    let html = build_report(&format!("{label} reconstruction"), scene, truth_volume.map(|(_, v)| v), &[&run])?;
+    fluidnerf_viz::report::write_report_html(&dir.report_html(), &html)?;
+    Ok(())
+}

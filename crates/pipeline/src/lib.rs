@@ -1,0 +1,245 @@
+//! A fluidnerf reconstruction run as a library call: one [`RunConfig`] (the one source of
+//! defaults, written to `config.json` and read back for faithful reruns), one [`RunDir`]
+//! (paths, atomic writes, lock, the rules for replacing or resuming), a stream of
+//! [`RunEvent`]s to a callback that can stop the run, and one typed [`RunReport`] for every
+//! method — voxel, static neural and time-resolved alike.
+//!
+//! Every front end (the `fluidnerf` command line, its demo, scripts, a cluster scheduler)
+//! builds a `RunConfig` and calls [`reconstruct`]; none of them writes run files itself.
+//!
+//! ```
+//! use std::ops::ControlFlow;
+//! use fluidnerf_pipeline::{reconstruct, Method, Overwrite, RunConfig, RunDir, RunEvent, StopRule};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # let tmp = tempfile::tempdir()?;
+//! # let scene_dir = tmp.path().join("scene");
+//! # fluidnerf_pipeline::testing::small_scene(&scene_dir)?;
+//! let scene = fluidnerf_io::scene::load_scene(&scene_dir)?;
+//! let mut config = RunConfig::new(&scene_dir, Method::Asart);
+//! config.resolution = 24;
+//! config.stopping.rule = StopRule::Budget;
+//! config.stopping.max_iterations = Some(5);
+//! let dir = RunDir::create(tmp.path().join("run"), Overwrite::Refuse, Some(&scene.root))?;
+//! let report = reconstruct(&scene, &config, &dir, |event| {
+//!     if let RunEvent::Iteration { iteration, loss, .. } = event {
+//!         println!("iteration {iteration}: residual {loss:.4}");
+//!     }
+//!     ControlFlow::Continue(())
+//! })?;
+//! assert_eq!(report.iterations, 5);
+//! println!("volume NRMSE {:.3}", report.final_nrmse.unwrap());
+//! # Ok(())
+//! # }
+//! ```
+
+mod classical;
+pub mod config;
+mod error;
+pub mod event;
+pub mod html;
+pub mod load;
+mod neural;
+pub mod report;
+pub mod rundir;
+mod temporal;
+#[doc(hidden)]
+pub mod testing;
+
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use fluidnerf_core::{Scene, Volume};
+
+pub use config::{
+    ClassicalSpec, Family, Method, MethodConfig, NeuralSpec, RunConfig, StopRule, StoppingPolicy, TemporalSpec,
+    CONFIG_FORMAT,
+};
+pub use error::PipelineError;
+pub use event::{RunEvent, WindowPos};
+pub use report::{
+    ClassicalDetails, History, HoldoutPoint, LossKind, NeuralDetails, RunReport, RunStatus, StopReason, VolumeRecord,
+    WindowDetails, REPORT_FORMAT,
+};
+pub use rundir::{DirState, Overwrite, RunDir, RunKind};
+
+/// Runs the reconstruction `config` of `scene` into `dir`: validates everything first, writes
+/// `config.json`, works (reporting through `on_event`, which may stop the run), then writes
+/// the results, `report.html`, and `report.json` last. A run stopped by `on_event` still writes
+/// its results and returns a report with [`RunStatus::Interrupted`].
+pub fn reconstruct(
+    scene: &Scene,
+    config: &RunConfig,
+    dir: &RunDir,
+    mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
+) -> Result<RunReport, PipelineError> {
+    config.validate()?;
+    let mut session = Session { on_event: &mut on_event, stopped: false, started: Instant::now(), cpu0: cpu_seconds() };
+    let truth = load_truth(scene)?;
+    match config.method().family() {
+        Family::Classical => classical::run(scene, config, dir, &truth, &mut session),
+        Family::Neural => neural::run(scene, config, dir, &truth, &mut session),
+        Family::Temporal => temporal::run(scene, config, dir, &truth, &mut session),
+    }
+}
+
+/// The scene's ground truth; one that is listed but unreadable is refused, naming the file.
+fn load_truth(scene: &Scene) -> Result<Vec<(Option<f64>, Volume)>, PipelineError> {
+    let truth = fluidnerf_io::scene::load_truth(scene)?;
+    for ((time, volume), r) in truth.iter().zip(&scene.truth) {
+        if let Some(i) = volume.data.iter().position(|v| !v.is_finite()) {
+            return Err(PipelineError::file(
+                &scene.resolve(&r.file_path),
+                format!(
+                    "ground truth{} has a non-finite value at voxel {i}",
+                    time.map(|t| format!(" at t = {t}")).unwrap_or_default()
+                ),
+            ));
+        }
+    }
+    Ok(truth)
+}
+
+/// The caller's callback and what the run measures of itself.
+pub(crate) struct Session<'a> {
+    on_event: &'a mut dyn FnMut(&RunEvent) -> ControlFlow<()>,
+    /// The callback asked to stop.
+    stopped: bool,
+    started: Instant,
+    cpu0: Option<f64>,
+}
+
+impl Session<'_> {
+    /// Delivers `event`; remembers a request to stop.
+    pub(crate) fn emit(&mut self, event: RunEvent) -> ControlFlow<()> {
+        let flow = (self.on_event)(&event);
+        if flow.is_break() {
+            self.stopped = true;
+        }
+        flow
+    }
+
+    pub(crate) fn warn(&mut self, message: &str) {
+        let _ = self.emit(RunEvent::Warning(message));
+    }
+
+    pub(crate) fn cpu_s(&self) -> Option<f64> {
+        self.cpu0.zip(cpu_seconds()).map(|(a, b)| b - a)
+    }
+
+    pub(crate) fn elapsed_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+}
+
+/// Refuses a run whose estimated memory exceeds the limit (default: the memory available now).
+pub(crate) fn check_memory(
+    config: &RunConfig,
+    needed: u64,
+    what: impl FnOnce() -> String,
+) -> Result<(), PipelineError> {
+    const GIB: f64 = (1u64 << 30) as f64;
+    let limit = match config.memory_limit_gib {
+        Some(g) => (g * GIB) as u64,
+        None => proc_bytes("/proc/meminfo", "MemAvailable:").unwrap_or(u64::MAX),
+    };
+    log::info!("estimated memory {:.3} GiB of {:.3} GiB allowed", needed as f64 / GIB, limit as f64 / GIB);
+    if needed > limit {
+        return Err(PipelineError::Memory(format!(
+            "{} needs about {} but only {} {}; lower the resolution or the image count, or raise \
+             --memory-limit",
+            what(),
+            bytes(needed),
+            bytes(limit),
+            if config.memory_limit_gib.is_some() { "are allowed (--memory-limit)" } else { "are available" }
+        )));
+    }
+    Ok(())
+}
+
+/// A byte count for people: "3.41 MiB".
+pub fn bytes(n: u64) -> String {
+    match n {
+        n if n >= 1 << 30 => format!("{:.2} GiB", n as f64 / (1u64 << 30) as f64),
+        n if n >= 1 << 20 => format!("{:.2} MiB", n as f64 / (1u64 << 20) as f64),
+        n if n >= 1 << 10 => format!("{:.1} KiB", n as f64 / 1024.0),
+        n => format!("{n} B"),
+    }
+}
+
+/// CPU seconds (user + system) this process has used so far (Linux; None elsewhere).
+pub fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may contain spaces) closed by ')': utime and stime
+    // are the 12th and 13th, in clock ticks of 1/100 s (USER_HZ).
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    Some((fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?) / 100.0)
+}
+
+/// A `/proc/meminfo` or `/proc/self/status` entry (`key` with its colon), in bytes.
+pub fn proc_bytes(file: &str, key: &str) -> Option<u64> {
+    let text = std::fs::read_to_string(file).ok()?;
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    let kib: u64 = line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Peak resident memory of this process (Linux).
+pub(crate) fn peak_rss() -> Option<u64> {
+    proc_bytes("/proc/self/status", "VmHWM:")
+}
+
+/// Writes a volume as `.npy` and `.vti` under `stem` (relative to the run folder).
+pub(crate) fn write_volume(dir: &RunDir, stem: &str, volume: &Volume) -> Result<(), PipelineError> {
+    fluidnerf_io::volume::write_npy(&dir.path(&format!("{stem}.npy")), volume)?;
+    fluidnerf_io::volume::write_vti(&dir.path(&format!("{stem}.vti")), volume)?;
+    Ok(())
+}
+
+/// The held-out early-stopping bookkeeping shared by every method: the best evaluation so far
+/// and the evaluations since.
+#[derive(Debug)]
+pub(crate) struct BestHoldout<T> {
+    pub best: Option<(usize, f64, T)>,
+    since: usize,
+    patience: usize,
+}
+
+impl<T> BestHoldout<T> {
+    pub(crate) fn new(patience: usize) -> Self {
+        BestHoldout { best: None, since: 0, patience }
+    }
+
+    /// Records an evaluation; `keep` makes the state to keep when it is the best. Returns true
+    /// when patience has run out.
+    pub(crate) fn record(&mut self, iteration: usize, loss: f64, keep: impl FnOnce() -> T) -> bool {
+        if self.best.as_ref().is_none_or(|b| loss < b.1) {
+            self.best = Some((iteration, loss, keep()));
+            self.since = 0;
+        } else {
+            self.since += 1;
+        }
+        self.patience > 0 && self.since >= self.patience
+    }
+}
+
+/// Finishes a run: `report.html` (a failure there is a warning), then `report.json`, the
+/// completion marker.
+pub(crate) fn finish(
+    scene: &Scene,
+    dir: &RunDir,
+    report: RunReport,
+    truth: &[(Option<f64>, Volume)],
+    session: &mut Session,
+) -> Result<RunReport, PipelineError> {
+    if let Err(e) = html::write_run_html(dir, scene, &report, truth) {
+        session.warn(&format!("could not write {}: {e}", dir.report_html().display()));
+    }
+    dir.write_json("report.json", &report)?;
+    Ok(report)
+}
+
+/// The mean of the finite values, if any.
+pub(crate) fn mean(values: impl IntoIterator<Item = f64>) -> Option<f64> {
+    let v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}

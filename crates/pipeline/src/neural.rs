@@ -1,0 +1,361 @@
+//! Static neural methods (`fluidnerf`, `fast`): a field trained on the scene's images.
+//!
+//! Writes `weights.safetensors` and `model.json` (what `fluidnerf_neural::trained::
+//! load_trained` reads), `checkpoint.safetensors` (weights, Adam state and histories, every
+//! `checkpoint_every` iterations and at the end, for resuming), and `volume.npy`/`.vti`, the
+//! field sampled at the output resolution. Under held-out early stopping the field of the
+//! evaluation with the lowest held-out loss is written; the checkpoint keeps the last state.
+
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use fluidnerf_core::{Scene, Volume};
+use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
+use fluidnerf_neural::train::{train, Learner, Prepared, Problem, TrainConfig, View};
+use fluidnerf_neural::trained::{build_field, ModelRecord, WorldField};
+use fluidnerf_neural::TrainableField;
+
+use crate::{
+    check_memory, finish, peak_rss, write_volume, BestHoldout, Family, History, HoldoutPoint, LossKind, MethodConfig,
+    NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason,
+    StopRule, VolumeRecord, REPORT_FORMAT,
+};
+
+/// A rough peak-memory estimate of a neural run: images and their ray tables, parameters with
+/// optimiser state and per-thread gradients, the output volume and the truth.
+pub(crate) fn estimate_memory(
+    pixels: u64,
+    params: u64,
+    out_voxels: u64,
+    truth_voxels: u64,
+    threads: u64,
+    train: &TrainConfig,
+) -> u64 {
+    let images = pixels * (4 + 4 + 32);
+    let optimiser = params * 4 * (3 + threads);
+    let samples = (train.coarse_samples + train.fine_samples) as u64;
+    let scratch = threads * (train.chunk_samples as u64 * 4 * 16 + samples * 64);
+    images + optimiser + scratch + out_voxels * 4 * 2 + truth_voxels * 4 * 3
+}
+
+/// The training problem of a scene: its training and held-out views.
+pub(crate) fn problem(scene: &Scene) -> Result<Problem, PipelineError> {
+    let images = fluidnerf_io::scene::load_images(scene)?;
+    let mut problem = Problem {
+        aabb: scene.aabb,
+        intensity_scale: scene.intensity_scale,
+        views: Vec::new(),
+        holdout: Vec::new(),
+        time_step: 1.0,
+    };
+    for (frame, image) in scene.frames.iter().zip(images) {
+        let view = View { camera: frame.camera.clone(), image, time: frame.time.unwrap_or(0.0) };
+        if frame.holdout {
+            problem.holdout.push(view);
+        } else {
+            problem.views.push(view);
+        }
+    }
+    Ok(problem)
+}
+
+pub(crate) fn run(
+    scene: &Scene,
+    config: &RunConfig,
+    dir: &RunDir,
+    truth: &[(Option<f64>, Volume)],
+    session: &mut Session,
+) -> Result<RunReport, PipelineError> {
+    let MethodConfig::Neural(method, spec) = config.effective_method() else { unreachable!("a neural method") };
+    if dir.resuming() && !dir.checkpoint().is_file() {
+        return Err(PipelineError::RunDir {
+            path: dir.root().to_path_buf(),
+            why: "--resume: no checkpoint.safetensors to continue from".into(),
+        });
+    }
+    if scene.times().len() > 1 {
+        session.warn(&format!(
+            "the scene has {} time steps; static training mixes them into one field",
+            scene.times().len()
+        ));
+    }
+    if config.stopping.rule == StopRule::HeldOut && scene.holdout_frames().next().is_none() {
+        return Err(PipelineError::invalid(
+            "stopping.rule",
+            "held-out early stopping needs held-out views in the scene (frames with \"holdout\": true)",
+        ));
+    }
+    let field = build_field(&spec.field, &scene.aabb, 3, config.seed)?;
+    let num_params = fluidnerf_neural::with_field!(&field, f => f.num_params());
+    let pixels: u64 = scene.frames.iter().map(|f| (f.camera.width() * f.camera.height()) as u64).sum();
+    let out_dims = Volume::dims_for(&scene.aabb, config.resolution);
+    let needed = estimate_memory(
+        pixels,
+        num_params as u64,
+        out_dims.iter().map(|&n| n as u64).product(),
+        truth.first().map_or(0, |(_, t)| t.len() as u64),
+        rayon::current_num_threads() as u64,
+        &spec.train,
+    );
+    check_memory(config, needed, || {
+        format!("{method} with {num_params} parameters, {pixels} pixels and a {out_dims:?} output volume")
+    })?;
+    // An earlier curve is read before the report that holds it is removed.
+    let earlier = if dir.resuming() { earlier_report(dir) } else { None };
+    if dir.resuming() {
+        let _ = std::fs::remove_file(dir.report());
+    }
+    dir.write_json("config.json", config)?;
+
+    let t0 = Instant::now();
+    let problem = problem(scene)?;
+    let prep = Prepared::new(&problem, &spec.train)?;
+    let setup_s = t0.elapsed().as_secs_f64();
+    let (rays_kept, rays_on_box) = prep.ray_counts();
+    log::info!(
+        "{} training views, {} held out; {rays_kept} of {rays_on_box} rays kept, {:.1} % of the box occupied",
+        problem.views.len(),
+        problem.holdout.len(),
+        100.0 * prep.occupied_fraction()
+    );
+    let ctx = Ctx { scene, config, dir, truth, spec: &spec, prep: &prep, setup_s, needed, earlier, method };
+    fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, session))
+}
+
+/// What a resumed run keeps of the report of the run it continues.
+fn earlier_report(dir: &RunDir) -> Option<RunReport> {
+    let path = dir.report();
+    if !path.is_file() {
+        return None;
+    }
+    match RunReport::read(&path) {
+        Ok(r) => Some(r),
+        Err(e) => {
+            log::warn!("the earlier NRMSE curve is not continued: {e}");
+            None
+        }
+    }
+}
+
+struct Ctx<'a> {
+    scene: &'a Scene,
+    config: &'a RunConfig,
+    dir: &'a RunDir,
+    truth: &'a [(Option<f64>, Volume)],
+    spec: &'a NeuralSpec,
+    prep: &'a Prepared,
+    setup_s: f64,
+    needed: u64,
+    earlier: Option<RunReport>,
+    method: crate::Method,
+}
+
+impl Ctx<'_> {
+    fn train_and_write<F: TrainableField>(self, field: F, session: &mut Session) -> Result<RunReport, PipelineError> {
+        let (config, dir, prep) = (self.config, self.dir, self.prep);
+        let train_cfg = &self.spec.train;
+        let mut learner = Learner::fresh(field, prep, train_cfg);
+        let ckpt = dir.checkpoint();
+        if dir.resuming() {
+            fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
+            log::info!("resuming at iteration {}", learner.iteration);
+        }
+        let sample = self.truth.first().map(|(_, t)| TruthSample::new(t));
+        let eval_every = config.eval_interval();
+        let nrmse_of =
+            |field: &F, s: &TruthSample| s.nrmse(&WorldField { field, meta: &prep.meta, occupancy: prep.occupancy() });
+        // A resumed run continues the curves of the run it resumes, up to the checkpoint.
+        let (mut nrmse_history, mut holdout_history) = match &self.earlier {
+            Some(r) => (
+                r.history.nrmse.iter().filter(|p| p.iteration <= learner.iteration).copied().collect(),
+                r.history.holdout.iter().filter(|p| p.iteration <= learner.iteration).copied().collect(),
+            ),
+            None => (Vec::new(), Vec::new()),
+        };
+        let held_out_rule = config.stopping.rule == StopRule::HeldOut;
+        let mut best = BestHoldout::<Vec<f32>>::new(config.stopping.patience);
+        let mut cause = None;
+        let mut ckpt_error = None;
+        let mut eval_s = 0.0;
+        let _ = session.emit(RunEvent::Started {
+            method: self.method,
+            max_iterations: train_cfg.max_iterations,
+            windows: 1,
+            start_iteration: learner.iteration,
+        });
+        let report = train(prep, &mut learner, train_cfg, config.seed, |s| {
+            let t_eval = Instant::now();
+            let mut out_of_patience = false;
+            if let Some(h) = s.holdout_loss {
+                holdout_history.push(HoldoutPoint { iteration: s.iteration, loss: h as f64 });
+                if held_out_rule {
+                    out_of_patience = best.record(s.iteration, h as f64, || s.field.params().to_vec());
+                }
+            }
+            let nrmse = match &sample {
+                Some(t) if eval_every > 0 && s.iteration % eval_every == 0 => {
+                    let n = nrmse_of(s.field, t);
+                    nrmse_history.push(NrmsePoint { iteration: s.iteration, train_time_s: s.train_time_s, nrmse: n });
+                    Some(n)
+                }
+                _ => None,
+            };
+            eval_s += t_eval.elapsed().as_secs_f64();
+            let mut flow = session.emit(RunEvent::Iteration {
+                window: None,
+                iteration: s.iteration,
+                loss: s.loss as f64,
+                smoothed: Some(s.smoothed_loss as f64),
+                train_time_s: s.train_time_s,
+            });
+            if nrmse.is_some() || s.holdout_loss.is_some() {
+                let evaluation = RunEvent::Evaluation {
+                    window: None,
+                    iteration: s.iteration,
+                    nrmse,
+                    holdout: s.holdout_loss.map(f64::from),
+                };
+                if session.emit(evaluation).is_break() {
+                    flow = ControlFlow::Break(());
+                }
+            }
+            if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
+                match write_checkpoint(dir, s.learner) {
+                    Ok(path) => {
+                        let _ = session.emit(RunEvent::Checkpoint { path: &path });
+                    }
+                    Err(e) => {
+                        ckpt_error = Some(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+            }
+            if flow.is_break() {
+                cause = Some(StopReason::Interrupted);
+            } else if out_of_patience {
+                cause = Some(StopReason::HeldOutPatience);
+            }
+            if cause.is_some() {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        })?;
+        if let Some(e) = ckpt_error {
+            return Err(e);
+        }
+        let _ = session.emit(RunEvent::Writing);
+        // The checkpoint holds the last state, so a resumed run continues where this one stopped.
+        write_checkpoint(dir, &learner)?;
+        let stop_reason = cause.unwrap_or(match report.stop_reason {
+            fluidnerf_neural::train::StopReason::Converged => StopReason::Converged,
+            fluidnerf_neural::train::StopReason::MaxIterations => StopReason::IterationCap,
+            fluidnerf_neural::train::StopReason::TimeBudget => StopReason::TimeBudget,
+            fluidnerf_neural::train::StopReason::Interrupted => StopReason::Interrupted,
+        });
+        let mut kept_iteration = learner.iteration;
+        if let Some((iteration, loss, params)) = best.best.take() {
+            learner.field.params_mut().copy_from_slice(&params);
+            kept_iteration = iteration;
+            log::info!("keeping the field of iteration {iteration} (held-out loss {loss:.3e})");
+        }
+        let weights = fluidnerf_neural::weights::weights_bytes(&learner.field)?;
+        dir.write_bytes("weights.safetensors", &weights)?;
+        dir.write_json(
+            "model.json",
+            &ModelRecord {
+                field: self.spec.field.clone(),
+                input_dim: learner.field.input_dim(),
+                meta: prep.meta.clone(),
+            },
+        )?;
+
+        let t_eval = Instant::now();
+        let world = WorldField { field: &learner.field, meta: &prep.meta, occupancy: prep.occupancy() };
+        let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
+        let volume = Volume::from_field(dims, self.scene.aabb, &world, 0.0);
+        write_volume(dir, "volume", &volume)?;
+        let metrics = match self.truth.first() {
+            Some((time, t)) => {
+                // The field at the truth's voxel centres, as the dissertation interrogates it.
+                let v = if volume.dims == t.dims && volume.aabb == t.aabb {
+                    volume.clone()
+                } else {
+                    Volume::from_field(t.dims, t.aabb, &world, 0.0)
+                };
+                Some(fluidnerf_metrics::evaluate_volume(&v, t, *time, &VolumeMetricOptions::default())?)
+            }
+            None => None,
+        };
+        if let Some(s) = &sample {
+            if kept_iteration == learner.iteration && nrmse_history.last().is_none_or(|p| p.iteration != kept_iteration)
+            {
+                nrmse_history.push(NrmsePoint {
+                    iteration: learner.iteration,
+                    train_time_s: learner.train_time_s,
+                    nrmse: nrmse_of(&learner.field, s),
+                });
+            }
+        }
+        eval_s += t_eval.elapsed().as_secs_f64();
+        let report = RunReport {
+            format: REPORT_FORMAT,
+            fluidnerf_version: env!("CARGO_PKG_VERSION").to_string(),
+            method: self.method,
+            aabb: self.scene.aabb,
+            units: self.scene.units.clone(),
+            status: if stop_reason == StopReason::Interrupted { RunStatus::Interrupted } else { RunStatus::Finished },
+            stop_reason,
+            stopping: config.stopping,
+            stopping_rule: config.stopping.describe(Family::Neural),
+            iterations: learner.iteration,
+            kept_iteration,
+            setup_s: self.setup_s,
+            train_time_s: learner.train_time_s,
+            eval_s,
+            cpu_s: session.cpu_s(),
+            peak_rss_bytes: peak_rss(),
+            memory_estimate_bytes: self.needed,
+            result_bytes: weights.len() as u64,
+            history: History {
+                loss_kind: Some(LossKind::TrainingMse),
+                loss: learner.losses.iter().map(|&l| l as f64).collect(),
+                holdout: holdout_history,
+                nrmse: nrmse_history,
+                eval_every,
+            },
+            final_nrmse: metrics.as_ref().map(|m| m.global.nrmse),
+            final_ssim_global: metrics.as_ref().map(|m| m.global.ssim_global),
+            volumes: vec![VolumeRecord { file: "volume.npy".into(), time: None, trained: true, dims, metrics }],
+            classical: None,
+            neural: Some(NeuralDetails {
+                preset: self.spec.preset.clone(),
+                num_params: learner.field.num_params(),
+                weights_bytes: weights.len(),
+                image_scale: prep.image_scale(),
+                occupied_fraction: prep.occupied_fraction(),
+                rays_kept: prep.ray_counts().0,
+                rays_on_box: prep.ray_counts().1,
+                train: report,
+            }),
+            windows: Vec::new(),
+        };
+        finish(self.scene, dir, report, self.truth, session)
+    }
+}
+
+/// Writes a training checkpoint (weights, optimiser state, histories) atomically.
+pub(crate) fn write_checkpoint<F: TrainableField>(
+    dir: &RunDir,
+    learner: &Learner<F>,
+) -> Result<std::path::PathBuf, PipelineError> {
+    write_checkpoint_to(dir, "checkpoint.safetensors", learner)
+}
+
+pub(crate) fn write_checkpoint_to<F: TrainableField>(
+    dir: &RunDir,
+    name: &str,
+    learner: &Learner<F>,
+) -> Result<std::path::PathBuf, PipelineError> {
+    dir.write_bytes(name, &fluidnerf_neural::weights::checkpoint_bytes(learner)?)
+}

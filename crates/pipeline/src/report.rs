@@ -1,0 +1,214 @@
+//! [`RunReport`]: what a run did and how well, the same type for every method, written to
+//! `report.json` ([`REPORT_FORMAT`]) and read back by `compare`, `eval` and the HTML report.
+
+use std::path::Path;
+
+use fluidnerf_classical::{MemoryEstimate, ProjectorKind};
+use fluidnerf_core::Aabb;
+use fluidnerf_metrics::{NrmsePoint, StepMetrics};
+use fluidnerf_neural::train::TrainReport;
+use serde::{Deserialize, Serialize};
+
+use crate::{Method, PipelineError, StoppingPolicy};
+
+/// The version of the `report.json` layout this build writes and reads.
+pub const REPORT_FORMAT: u32 = 1;
+
+/// How a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RunStatus {
+    /// A stopping rule ended it.
+    Finished,
+    /// The caller stopped it (Ctrl-C); the results of the last iteration were written.
+    Interrupted,
+}
+
+/// Which rule ended the run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StopReason {
+    /// The method's own convergence rule.
+    Converged,
+    /// The iteration cap.
+    IterationCap,
+    /// The time budget.
+    TimeBudget,
+    /// The held-out loss stopped improving (patience ran out).
+    HeldOutPatience,
+    /// The caller stopped the run.
+    Interrupted,
+}
+
+/// What the loss history measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LossKind {
+    /// The neural training loss: MSE in normalised pixel units (Eq. 5.5).
+    TrainingMse,
+    /// The voxel methods' relative residual `‖p − A g‖ / ‖p‖`.
+    RelativeResidual,
+}
+
+/// One held-out evaluation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HoldoutPoint {
+    pub iteration: usize,
+    /// Mean squared pixel error on the held-out views (neural methods: on a fixed subset of
+    /// their pixels, normalised by the image scale as the training loss is; voxel methods:
+    /// every held-out pixel, relative to the held-out images' mean square).
+    pub loss: f64,
+}
+
+/// The histories every method records.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct History {
+    pub loss_kind: Option<LossKind>,
+    /// The loss (or residual) after every iteration (of every window, in order).
+    pub loss: Vec<f64>,
+    pub holdout: Vec<HoldoutPoint>,
+    /// Volume NRMSE over the truth sample against iterations and training time.
+    pub nrmse: Vec<NrmsePoint>,
+    /// Iterations between NRMSE points (0: only the last).
+    pub eval_every: usize,
+}
+
+/// One written volume: the result of a static run, or one frame of a time-resolved one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VolumeRecord {
+    /// Relative to the run folder.
+    pub file: String,
+    /// Time in the scene's unit (None for a static run).
+    pub time: Option<f64>,
+    /// Whether images of this time were trained on.
+    pub trained: bool,
+    /// `[nx, ny, nz]`.
+    pub dims: [usize; 3],
+    /// Against the scene's ground truth at this time, when it has one: the field sampled at
+    /// the truth's voxel centres (voxel methods: their volume resampled there).
+    pub metrics: Option<StepMetrics>,
+}
+
+/// Details of a voxel method's run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClassicalDetails {
+    pub projector: ProjectorKind,
+    /// Sub-voxels per axis of the splat.
+    pub splat_subdivisions: Option<usize>,
+    pub voxel_size: [f64; 3],
+    pub views: usize,
+    pub pixels: usize,
+    /// Voxels the visual hull kept, when used.
+    pub hull_voxels: Option<usize>,
+    pub memory_estimate: MemoryEstimate,
+}
+
+/// Details of a static neural run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct NeuralDetails {
+    pub preset: Option<String>,
+    pub num_params: usize,
+    pub weights_bytes: usize,
+    pub image_scale: f64,
+    pub occupied_fraction: f64,
+    pub rays_kept: usize,
+    pub rays_on_box: usize,
+    pub train: TrainReport,
+}
+
+/// One window of a time-resolved run.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct WindowDetails {
+    pub frames: [usize; 2],
+    pub time_origin: f64,
+    pub occupied_fraction: f64,
+    pub train: TrainReport,
+}
+
+/// The report of a run (module docs).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunReport {
+    /// Layout version ([`REPORT_FORMAT`]).
+    pub format: u32,
+    pub fluidnerf_version: String,
+    pub method: Method,
+    /// The reconstruction box of the scene (the box every volume of the run fills).
+    pub aabb: Aabb,
+    /// The scene's world length unit.
+    pub units: String,
+    pub status: RunStatus,
+    pub stop_reason: StopReason,
+    /// The policy the run was stopped by, and its description.
+    pub stopping: StoppingPolicy,
+    pub stopping_rule: String,
+    /// Iterations done (summed over windows).
+    pub iterations: usize,
+    /// The iteration whose field or volume was written (held-out early stopping keeps an
+    /// earlier one; otherwise the last).
+    pub kept_iteration: usize,
+    /// Seconds of loading, ray casting, projector set-up.
+    pub setup_s: f64,
+    /// Seconds of the method's own work, evaluations excluded.
+    pub train_time_s: f64,
+    /// Seconds spent on NRMSE and held-out evaluations.
+    pub eval_s: f64,
+    /// CPU seconds of the process (user + system), to read timings on a busy machine.
+    pub cpu_s: Option<f64>,
+    /// Peak resident memory of the process (Linux).
+    pub peak_rss_bytes: Option<u64>,
+    /// The memory estimate checked before the run.
+    pub memory_estimate_bytes: u64,
+    /// Bytes of the compact result: the weights of a neural field, the volume otherwise.
+    pub result_bytes: u64,
+    pub history: History,
+    pub volumes: Vec<VolumeRecord>,
+    /// Mean volume NRMSE over the trained times with truth (the static result's NRMSE).
+    pub final_nrmse: Option<f64>,
+    pub final_ssim_global: Option<f64>,
+    pub classical: Option<ClassicalDetails>,
+    pub neural: Option<NeuralDetails>,
+    pub windows: Vec<WindowDetails>,
+}
+
+impl RunReport {
+    /// Reads `report.json`; errors name the file, the key path, or a format this version
+    /// does not read.
+    pub fn read(path: &Path) -> Result<Self, PipelineError> {
+        #[derive(Deserialize)]
+        struct Version {
+            format: Option<u32>,
+        }
+        let v: Version = crate::rundir::read_json(path)?;
+        match v.format {
+            Some(REPORT_FORMAT) => crate::rundir::read_json(path),
+            Some(f) => Err(PipelineError::file(
+                path,
+                format!("report format {f} is not the format {REPORT_FORMAT} this version reads"),
+            )),
+            None => Err(PipelineError::file(path, "not a run report (no `format`): written by an older version?")),
+        }
+    }
+
+    /// The terminal summary line of the run, the figures of `report.json` at the precision
+    /// the HTML report shows.
+    pub fn summary_line(&self) -> String {
+        let reason = match self.stop_reason {
+            StopReason::Converged => "converged",
+            StopReason::IterationCap => "iteration cap",
+            StopReason::TimeBudget => "time budget",
+            StopReason::HeldOutPatience => "held-out loss stopped improving",
+            StopReason::Interrupted => "interrupted",
+        };
+        let mut s = format!("{}: {} iterations ({reason}), {:.1} s", self.method, self.iterations, self.train_time_s);
+        if self.kept_iteration != self.iterations {
+            s += &format!(", kept iteration {}", self.kept_iteration);
+        }
+        if let Some(n) = self.final_nrmse {
+            s += &format!(", volume NRMSE {}", fluidnerf_viz::report::format_value(n));
+        }
+        if let Some(g) = self.final_ssim_global {
+            s += &format!(", global SSIM {}", fluidnerf_viz::report::format_value(g));
+        }
+        s
+    }
+}

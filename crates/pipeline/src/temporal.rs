@@ -1,0 +1,446 @@
+//! Time-resolved methods (`tr-fluidnerf`, `tr-fast`, `static-per-frame`): a field of space and
+//! time trained on a scene whose frames carry times (dissertation §5.2), in windows.
+//!
+//! Writes `frames/volume_NNN.npy|.vti` at every training time and every held-out time, in
+//! increasing time, `volumes.pvd` (the ParaView collection of the series), the weights and
+//! checkpoints of every window under `windows/`, and `temporal.json`, from which
+//! `fluidnerf_neural::temporal::load_temporal` rebuilds the stitched field E(x, t).
+//! `windows/progress.json` records the window plan and the finished windows when each
+//! finishes (its checkpoint first), so a resumed run loads finished windows, continues the
+//! running one from its last checkpoint, and equals an uninterrupted run (same seed and
+//! thread count).
+
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use fluidnerf_core::{ScalarField, Scene, Volume};
+use fluidnerf_metrics::VolumeMetricOptions;
+use fluidnerf_neural::temporal::{
+    field_for_window, frame_times, infer_time_step, train_windows, ResumeState, StitchedField, TemporalRecord,
+    TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
+};
+use fluidnerf_neural::train::{Learner, TrainConfig, TrainReport};
+use fluidnerf_neural::trained::{build_field, FieldConfig};
+use fluidnerf_neural::window::plan_windows;
+use fluidnerf_neural::TrainableField;
+use serde::{Deserialize, Serialize};
+
+use crate::neural::{estimate_memory, write_checkpoint_to};
+use crate::{
+    check_memory, finish, mean, peak_rss, write_volume, Family, History, LossKind, Method, MethodConfig, PipelineError,
+    RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails,
+    WindowPos, REPORT_FORMAT,
+};
+
+/// `windows/progress.json`: what a run is and how far it got, for resuming.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Progress {
+    /// The field of every window (after `field_for_window`).
+    field: FieldConfig,
+    input_dim: usize,
+    frame_times: Vec<f64>,
+    /// First and one-past-last frame of every window.
+    plan: Vec<[usize; 2]>,
+    time_origin: TimeOrigin,
+    warm_start: bool,
+    seed: u64,
+    train: TrainConfig,
+    /// The first windows of the plan, finished, in order.
+    finished: Vec<FinishedWindow>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FinishedWindow {
+    /// Checkpoint of the window as it finished, relative to the run folder.
+    checkpoint: String,
+    report: TrainReport,
+}
+
+impl Progress {
+    /// Why a run with the settings of `self` cannot continue the run recorded in `saved`.
+    fn mismatch(&self, saved: &Progress) -> Option<String> {
+        let differs = |what: &str| Some(format!("the run being resumed has a different {what}"));
+        if saved.frame_times != self.frame_times {
+            return differs(&format!("set of training frame times ({:?})", saved.frame_times));
+        }
+        if saved.plan != self.plan {
+            return differs(&format!("window plan ({:?}, now {:?})", saved.plan, self.plan));
+        }
+        if saved.field != self.field || saved.input_dim != self.input_dim {
+            return differs("field (preset, configuration or method)");
+        }
+        if saved.time_origin != self.time_origin || saved.warm_start != self.warm_start {
+            return differs("time origin or warm start");
+        }
+        if saved.seed != self.seed {
+            return differs(&format!("seed ({}, now {})", saved.seed, self.seed));
+        }
+        None
+    }
+}
+
+/// The ParaView collection of a volume series.
+fn pvd(entries: &[(f64, String)]) -> String {
+    let mut s = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  <Collection>\n",
+    );
+    for (t, file) in entries {
+        s.push_str(&format!("    <DataSet timestep=\"{t}\" group=\"\" part=\"0\" file=\"{file}\"/>\n"));
+    }
+    s.push_str("  </Collection>\n</VTKFile>\n");
+    s
+}
+
+/// The checkpoint of window `k`, relative to the run folder.
+fn checkpoint_name(k: usize) -> String {
+    format!("windows/w{k:03}.checkpoint.safetensors")
+}
+
+fn same_time(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * (1.0 + a.abs())
+}
+
+pub(crate) fn run(
+    scene: &Scene,
+    config: &RunConfig,
+    dir: &RunDir,
+    truth: &[(Option<f64>, Volume)],
+    session: &mut Session,
+) -> Result<RunReport, PipelineError> {
+    let MethodConfig::Temporal(method, spec) = config.effective_method() else { unreachable!("a temporal method") };
+    let progress_path = dir.progress();
+    if dir.resuming() && !progress_path.is_file() {
+        return Err(PipelineError::RunDir {
+            path: dir.root().to_path_buf(),
+            why: "--resume: no windows/progress.json (nothing to continue)".into(),
+        });
+    }
+    let mut problem = crate::neural::problem(scene)?;
+    problem.views.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
+    problem.holdout.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
+    let times = frame_times(&problem);
+    if times.is_empty() {
+        return Err(PipelineError::invalid(
+            "method.holdout_times",
+            format!("{}: no training images left (all their times are held out)", scene.root.display()),
+        ));
+    }
+    if times.len() < 2 && method != Method::StaticPerFrame {
+        session.warn("the scene has a single training time; a time-resolved field reduces to a static one");
+    }
+    problem.time_step = spec.time_step.unwrap_or_else(|| infer_time_step(&times));
+    for &h in &spec.holdout_times {
+        if h < times[0] || h > times[times.len() - 1] {
+            session.warn(&format!(
+                "held-out time {h} lies outside the training times; the field is held at the nearest end"
+            ));
+        }
+    }
+    let plan = plan_windows(times.len(), spec.windows.frames, spec.windows.overlap);
+    let window_len = plan.first().map_or(1, |r| r.len());
+    let field_cfg = field_for_window(&spec.field, window_len);
+    let input_dim = if method == Method::StaticPerFrame { 3 } else { 4 };
+    let field = build_field(&field_cfg, &scene.aabb, input_dim, config.seed)?;
+    let num_params = fluidnerf_neural::with_field!(&field, f => f.num_params());
+    let pixels: u64 = scene.frames.iter().map(|f| (f.camera.width() * f.camera.height()) as u64).sum();
+    let out_dims = Volume::dims_for(&scene.aabb, config.resolution);
+    // Finished windows stay in memory until the field is stitched.
+    let needed = estimate_memory(
+        pixels,
+        (num_params * plan.len().max(1)) as u64,
+        out_dims.iter().map(|&n| n as u64).product(),
+        truth.first().map_or(0, |(_, t)| t.len() as u64),
+        rayon::current_num_threads() as u64,
+        &spec.train,
+    );
+    check_memory(config, needed, || {
+        format!("{method} with {} windows of {num_params} parameters and {pixels} pixels", plan.len())
+    })?;
+    let mut progress = Progress {
+        field: field_cfg.clone(),
+        input_dim,
+        frame_times: times.clone(),
+        plan: plan.iter().map(|r| [r.start, r.end]).collect(),
+        time_origin: spec.windows.time_origin,
+        warm_start: spec.windows.warm_start,
+        seed: config.seed,
+        train: spec.train.clone(),
+        finished: Vec::new(),
+    };
+    if dir.resuming() {
+        let saved: Progress = crate::rundir::read_json(&progress_path)?;
+        if let Some(why) = progress.mismatch(&saved) {
+            return Err(PipelineError::RunDir {
+                path: progress_path,
+                why: format!("cannot resume: {why}; rerun with its settings, or use --force to start over"),
+            });
+        }
+        if saved.train != progress.train {
+            session.warn("the training settings differ from the run being resumed; its finished windows keep theirs");
+        }
+        progress.finished = saved.finished;
+        let _ = std::fs::remove_file(dir.report());
+    }
+    dir.write_json("config.json", config)?;
+    if !dir.resuming() {
+        dir.write_json("windows/progress.json", &progress)?;
+    }
+    log::info!(
+        "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
+        times.len(),
+        times,
+        problem.time_step,
+        problem.views.len(),
+        window_len
+    );
+    let ctx = Ctx {
+        scene,
+        config,
+        dir,
+        truth,
+        spec: &spec,
+        field_cfg: &field_cfg,
+        input_dim,
+        method,
+        needed,
+        problem: &problem,
+    };
+    fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, progress, session))
+}
+
+struct Ctx<'a> {
+    scene: &'a Scene,
+    config: &'a RunConfig,
+    dir: &'a RunDir,
+    truth: &'a [(Option<f64>, Volume)],
+    spec: &'a TemporalSpec,
+    field_cfg: &'a FieldConfig,
+    input_dim: usize,
+    method: Method,
+    needed: u64,
+    problem: &'a fluidnerf_neural::train::Problem,
+}
+
+impl Ctx<'_> {
+    /// The saved state of an interrupted run, as learners of the field `init`.
+    fn resume_state<F: TrainableField + Clone>(
+        &self,
+        init: &F,
+        progress: &Progress,
+    ) -> Result<ResumeState<F>, PipelineError> {
+        let load = |name: &str| -> Result<Learner<F>, PipelineError> {
+            let mut learner = Learner::new(init.clone());
+            fluidnerf_neural::weights::load_checkpoint(&self.dir.path(name), &mut learner)?;
+            Ok(learner)
+        };
+        let mut state = ResumeState::default();
+        for w in &progress.finished {
+            state.finished.push((load(&w.checkpoint)?, w.report.clone()));
+        }
+        let next = checkpoint_name(progress.finished.len());
+        if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() {
+            state.running = Some(load(&next)?);
+        }
+        log::info!(
+            "resuming: {} of {} windows finished{}",
+            state.finished.len(),
+            progress.plan.len(),
+            state.running.as_ref().map(|l| format!(", the next at iteration {}", l.iteration)).unwrap_or_default()
+        );
+        Ok(state)
+    }
+
+    fn train_and_write<F: TrainableField + Clone + 'static>(
+        &self,
+        init: F,
+        mut progress: Progress,
+        session: &mut Session,
+    ) -> Result<RunReport, PipelineError> {
+        let (config, dir, spec) = (self.config, self.dir, self.spec);
+        let resume = if dir.resuming() { self.resume_state(&init, &progress)? } else { ResumeState::default() };
+        let windows = progress.plan.len().max(1);
+        let _ = session.emit(RunEvent::Started {
+            method: self.method,
+            max_iterations: spec.train.max_iterations,
+            windows,
+            start_iteration: 0,
+        });
+        let mut io_error = None;
+        let mut interrupted = false;
+        let t_start = Instant::now();
+        let run: TemporalRun<F> =
+            train_windows(self.problem, &spec.train, &spec.windows, init, config.seed, resume, |e| {
+                let (w, s) = match e {
+                    WindowEvent::Iteration(w, s) => (w, s),
+                    WindowEvent::Finished(w, done) => {
+                        // The checkpoint first: a window listed as finished always has its final one.
+                        let name = checkpoint_name(progress.finished.len());
+                        let saved = write_checkpoint_to(dir, &name, &done.learner).and_then(|_| {
+                            progress.finished.push(FinishedWindow { checkpoint: name, report: done.report.clone() });
+                            dir.write_json("windows/progress.json", &progress)
+                        });
+                        if let Err(e) = saved {
+                            io_error = Some(e);
+                            return ControlFlow::Break(());
+                        }
+                        let pos = WindowPos { index: w.index, count: w.count, frames: [w.frames.start, w.frames.end] };
+                        if session.emit(RunEvent::WindowFinished(pos)).is_break() {
+                            interrupted = true;
+                            return ControlFlow::Break(());
+                        }
+                        return ControlFlow::Continue(());
+                    }
+                };
+                let pos = WindowPos { index: w.index, count: w.count, frames: [w.frames.start, w.frames.end] };
+                let event = RunEvent::Iteration {
+                    window: Some(pos),
+                    iteration: s.iteration,
+                    loss: s.loss as f64,
+                    smoothed: Some(s.smoothed_loss as f64),
+                    train_time_s: s.train_time_s,
+                };
+                if session.emit(event).is_break() {
+                    interrupted = true;
+                }
+                if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
+                    match write_checkpoint_to(dir, &checkpoint_name(w.index), s.learner) {
+                        Ok(path) => {
+                            let _ = session.emit(RunEvent::Checkpoint { path: &path });
+                        }
+                        Err(e) => {
+                            io_error = Some(e);
+                            return ControlFlow::Break(());
+                        }
+                    }
+                }
+                if interrupted {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            })?;
+        if let Some(e) = io_error {
+            return Err(e);
+        }
+        let _ = session.emit(RunEvent::Writing);
+        let wall_s = t_start.elapsed().as_secs_f64();
+
+        // Weights, checkpoints and the description of the stitched field.
+        let mut records = Vec::new();
+        let mut result_bytes = 0u64;
+        for (k, w) in run.windows.iter().enumerate() {
+            let name = format!("windows/w{k:03}.safetensors");
+            let bytes = fluidnerf_neural::weights::weights_bytes(&w.learner.field)?;
+            result_bytes += bytes.len() as u64;
+            dir.write_bytes(&name, &bytes)?;
+            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner)?;
+            records.push(WindowRecord {
+                frames: [w.frames.start, w.frames.end],
+                time_origin: w.time_origin,
+                meta: w.meta.clone(),
+                weights: name,
+            });
+        }
+        dir.write_json(
+            "temporal.json",
+            &TemporalRecord {
+                field: self.field_cfg.clone(),
+                input_dim: self.input_dim,
+                frame_times: run.frame_times.clone(),
+                windows: records,
+            },
+        )?;
+        let stitched = StitchedField::from_run(&run)?;
+
+        // Volumes at every training and held-out time, and their metrics.
+        let t_eval = Instant::now();
+        let mut out_times: Vec<(f64, bool)> = run.frame_times.iter().map(|&t| (t, true)).collect();
+        out_times.extend(spec.holdout_times.iter().map(|&t| (t, false)));
+        out_times.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
+        let mut volumes = Vec::new();
+        let mut pvd_entries = Vec::new();
+        for (i, &(t, trained)) in out_times.iter().enumerate() {
+            let volume = Volume::from_field(dims, self.scene.aabb, &stitched, t);
+            let stem = format!("frames/volume_{i:03}");
+            write_volume(dir, &stem, &volume)?;
+            pvd_entries.push((t, format!("{stem}.vti")));
+            let truth = self
+                .truth
+                .iter()
+                .find(|(tt, _)| tt.is_some_and(|tt| same_time(tt, t)))
+                .or(if self.truth.len() == 1 && self.truth[0].0.is_none() { self.truth.first() } else { None });
+            let metrics = match truth {
+                Some((_, tv)) => {
+                    let v = Volume::from_field(tv.dims, tv.aabb, &stitched as &dyn ScalarField, t);
+                    Some(fluidnerf_metrics::evaluate_volume(&v, tv, Some(t), &VolumeMetricOptions::default())?)
+                }
+                None => None,
+            };
+            volumes.push(VolumeRecord { file: format!("{stem}.npy"), time: Some(t), trained, dims, metrics });
+        }
+        dir.write_bytes("volumes.pvd", pvd(&pvd_entries).as_bytes())?;
+        let eval_s = t_eval.elapsed().as_secs_f64();
+
+        let trained = || volumes.iter().filter(|v| v.trained).filter_map(|v| v.metrics.as_ref());
+        let train_time_s: f64 = run.windows.iter().map(|w| w.report.train_time_s).sum();
+        let iterations: usize = run.windows.iter().map(|w| w.learner.iteration).sum();
+        let last_reason = run.windows.last().map(|w| w.report.stop_reason);
+        let stop_reason = if run.interrupted || interrupted {
+            StopReason::Interrupted
+        } else {
+            match last_reason {
+                Some(fluidnerf_neural::train::StopReason::Converged) => StopReason::Converged,
+                Some(fluidnerf_neural::train::StopReason::TimeBudget) => StopReason::TimeBudget,
+                Some(fluidnerf_neural::train::StopReason::Interrupted) => StopReason::Interrupted,
+                _ => StopReason::IterationCap,
+            }
+        };
+        log::debug!("{}: prepare and train {wall_s:.1} s", self.method);
+        let report = RunReport {
+            format: REPORT_FORMAT,
+            fluidnerf_version: env!("CARGO_PKG_VERSION").to_string(),
+            method: self.method,
+            aabb: self.scene.aabb,
+            units: self.scene.units.clone(),
+            status: if stop_reason == StopReason::Interrupted { RunStatus::Interrupted } else { RunStatus::Finished },
+            stop_reason,
+            stopping: config.stopping,
+            stopping_rule: config.stopping.describe(Family::Temporal),
+            iterations,
+            kept_iteration: iterations,
+            setup_s: 0.0,
+            train_time_s,
+            eval_s,
+            cpu_s: session.cpu_s(),
+            peak_rss_bytes: peak_rss(),
+            memory_estimate_bytes: self.needed,
+            result_bytes,
+            history: History {
+                loss_kind: Some(LossKind::TrainingMse),
+                loss: run.windows.iter().flat_map(|w| w.learner.losses.iter().map(|&l| l as f64)).collect(),
+                holdout: Vec::new(),
+                nrmse: Vec::new(),
+                eval_every: 0,
+            },
+            final_nrmse: mean(trained().map(|m| m.global.nrmse)),
+            final_ssim_global: mean(trained().map(|m| m.global.ssim_global)),
+            volumes,
+            classical: None,
+            neural: None,
+            windows: run
+                .windows
+                .iter()
+                .map(|w| WindowDetails {
+                    frames: [w.frames.start, w.frames.end],
+                    time_origin: w.time_origin,
+                    occupied_fraction: w.occupied_fraction,
+                    train: w.report.clone(),
+                })
+                .collect(),
+        };
+        finish(self.scene, dir, report, self.truth, session)
+    }
+}
