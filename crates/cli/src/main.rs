@@ -7,11 +7,7 @@ use clap::Parser;
 
 mod commands;
 mod interrupt;
-mod output;
-mod process;
 mod progress;
-mod run_report;
-mod truth_sample;
 
 /// Tomography of flows: reconstruct the 3D (or 4D) scalar field of glowing smoke, dye or
 /// flame from a handful of calibrated camera images.
@@ -48,7 +44,7 @@ fn main() -> ExitCode {
         .init();
     progress::set_quiet(cli.quiet);
     match commands::run(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(err) => {
             #[allow(clippy::print_stderr)]
             {

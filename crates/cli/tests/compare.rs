@@ -98,8 +98,8 @@ fn compares_classical_neural_and_external_runs() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines[0], "run,method,preset,iteration,train_time_s,nrmse");
     let (sart_n, dense_n) = (
-        report(&d.join("sart"))["nrmse_history"].as_array().map(Vec::len).expect("sart history"),
-        report(&d.join("dense"))["nrmse_history"].as_array().map(Vec::len).expect("dense history"),
+        report(&d.join("sart"))["history"]["nrmse"].as_array().map(Vec::len).expect("sart history"),
+        report(&d.join("dense"))["history"]["nrmse"].as_array().map(Vec::len).expect("dense history"),
     );
     assert_eq!(sart_n, 8);
     assert!(dense_n >= 4);

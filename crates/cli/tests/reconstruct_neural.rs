@@ -38,13 +38,13 @@ fn dense_and_mlp_runs_write_resume_and_load() {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
     let r = report(&dir);
-    assert_eq!(r["train"]["iterations"], 150);
-    assert_eq!(r["loss_history"].as_array().map(Vec::len), Some(150));
-    assert_eq!(r["nrmse_history"].as_array().map(Vec::len), Some(3));
+    assert_eq!(r["iterations"], 150);
+    assert_eq!(r["history"]["loss"].as_array().map(Vec::len), Some(150));
+    assert_eq!(r["history"]["nrmse"].as_array().map(Vec::len), Some(3));
     let nrmse = r["final_nrmse"].as_f64().expect("truth was used");
     assert!(nrmse < 0.9, "NRMSE {nrmse}");
-    assert!(r["occupied_fraction"].as_f64().expect("fraction") < 0.8);
-    assert!(!r["holdout_loss_history"].as_array().expect("holdout").is_empty(), "held-out camera not evaluated");
+    assert!(r["neural"]["occupied_fraction"].as_f64().expect("fraction") < 0.8);
+    assert!(!r["history"]["holdout"].as_array().expect("holdout").is_empty(), "held-out camera not evaluated");
 
     // Refuses to overwrite; resumes to a higher cap.
     let again = fluidnerf(d, &run);
@@ -54,12 +54,13 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     resume.push("--resume");
     ok(&fluidnerf(d, &resume));
     let r2 = report(&dir);
-    assert_eq!(r2["train"]["iterations"], 200);
-    assert_eq!(r2["loss_history"].as_array().map(Vec::len), Some(200));
-    let l1 = r["loss_history"].as_array().expect("history");
-    let l2 = r2["loss_history"].as_array().expect("history");
+    assert_eq!(r2["iterations"], 200);
+    assert_eq!(r2["history"]["loss"].as_array().map(Vec::len), Some(200));
+    let l1 = r["history"]["loss"].as_array().expect("history");
+    let l2 = r2["history"]["loss"].as_array().expect("history");
     assert_eq!(l1[..], l2[..150], "resume rewrote the history");
-    let (c1, c2) = (r["nrmse_history"].as_array().expect("curve"), r2["nrmse_history"].as_array().expect("curve"));
+    let (c1, c2) =
+        (r["history"]["nrmse"].as_array().expect("curve"), r2["history"]["nrmse"].as_array().expect("curve"));
     assert_eq!(c1[..], c2[..c1.len()], "the resumed curve continues the first");
     assert_eq!(c2.last().map(|p| &p["iteration"]), Some(&serde_json::json!(200)));
 
@@ -95,7 +96,7 @@ fn dense_and_mlp_runs_write_resume_and_load() {
             "-q",
         ],
     ));
-    assert_eq!(report(&d.join("mlp"))["train"]["iterations"], 2);
+    assert_eq!(report(&d.join("mlp"))["iterations"], 2);
     ok(&fluidnerf(
         d,
         &[
@@ -113,12 +114,12 @@ fn dense_and_mlp_runs_write_resume_and_load() {
             "-q",
         ],
     ));
-    assert_eq!(report(&d.join("mlp2"))["train"]["iterations"], 2);
+    assert_eq!(report(&d.join("mlp2"))["iterations"], 2);
     // The dissertation's presets train on the whole box; --skip-empty carves it.
-    assert_eq!(report(&d.join("mlp"))["occupied_fraction"].as_f64(), Some(1.0));
-    let carved = report(&d.join("mlp2"))["occupied_fraction"].as_f64().expect("fraction");
+    assert_eq!(report(&d.join("mlp"))["neural"]["occupied_fraction"].as_f64(), Some(1.0));
+    let carved = report(&d.join("mlp2"))["neural"]["occupied_fraction"].as_f64().expect("fraction");
     assert!(carved < 0.8, "--skip-empty kept {carved} of the box");
-    assert!(json(&d.join("mlp2/config.json"))["neural"]["train"]["occupancy"].is_object());
+    assert!(json(&d.join("mlp2/config.json"))["method"]["train"]["occupancy"].is_object());
 }
 
 /// `--keep-best-holdout` writes the field of the evaluation with the lowest held-out loss.
@@ -128,14 +129,14 @@ fn keep_best_holdout_writes_the_best_evaluated_field() {
     let d = tmp.path();
     let synth = "synth --preset demo --phantom ball --cameras 6 --pixels 32 --resolution 24 --holdout 1 --noise 0.1 -o scene -q";
     ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
-    let run = "reconstruct scene -o run --method fast --preset dense --max-iterations 200 --resolution 24 --keep-best-holdout -q";
+    let run = "reconstruct scene -o run --method fast --preset dense --max-iterations 200 --resolution 24 --keep-best-holdout --patience 0 -q";
     ok(&fluidnerf(d, &run.split_whitespace().collect::<Vec<_>>()));
     let r = report(&d.join("run"));
-    let history: Vec<(u64, f64)> = r["holdout_loss_history"]
+    let history: Vec<(u64, f64)> = r["history"]["holdout"]
         .as_array()
         .expect("held-out history")
         .iter()
-        .map(|p| (p[0].as_u64().expect("iteration"), p[1].as_f64().expect("loss")))
+        .map(|p| (p["iteration"].as_u64().expect("iteration"), p["loss"].as_f64().expect("loss")))
         .collect();
     assert!(history.len() >= 2, "held-out loss evaluated several times: {history:?}");
     let best = history.iter().copied().fold((0, f64::INFINITY), |b, p| if p.1 < b.1 { p } else { b });

@@ -41,13 +41,13 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     ok(&fluidnerf(d, &args));
     let run = d.join("fast");
     let report = json(&run.join("report.json"));
-    assert_eq!(report["frames"], 3);
-    assert_eq!(report["windows"], 2);
-    let per_frame = report["per_frame"].as_array().expect("per-frame metrics");
+    assert_eq!(report["windows"].as_array().map(Vec::len), Some(2));
+    let per_frame = report["volumes"].as_array().expect("per-frame metrics");
+    assert_eq!(per_frame.iter().filter(|f| f["trained"] == true).count(), 3);
     let times: Vec<f64> = per_frame.iter().map(|f| f["time"].as_f64().expect("time")).collect();
     assert_eq!(times, [14.0, 14.5, 15.0, 16.0]);
     assert_eq!(per_frame[1]["trained"], false);
-    assert!(per_frame.iter().all(|f| f["nrmse"].as_f64().is_some_and(|e| e.is_finite())));
+    assert!(per_frame.iter().all(|f| f["metrics"]["global"]["nrmse"].as_f64().is_some_and(|e| e.is_finite())));
     for i in 0..4 {
         assert!(run.join(format!("frames/volume_{i:03}.npy")).exists());
         assert!(run.join(format!("frames/volume_{i:03}.vti")).exists());
@@ -56,8 +56,8 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     assert_eq!(pvd.matches("<DataSet").count(), 4);
     assert!(pvd.contains("timestep=\"14.5\"") && pvd.contains("file=\"frames/volume_001.vti\""));
     let config = json(&run.join("config.json"));
-    assert_eq!(config["temporal"]["windows"]["frames"], 2);
-    assert!(config["version"].is_string() && config["seed"].is_u64());
+    assert_eq!(config["method"]["windows"]["frames"], 2);
+    assert!(config["fluidnerf_version"].is_string() && config["seed"].is_u64() && config["format"] == 1);
 
     // The stitched field rebuilt from the run directory gives the written volumes.
     let field = fluidnerf_neural::temporal::load_temporal(&run).expect("loads");
@@ -76,6 +76,31 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     let mut eval = vec!["eval", "--scene", "scene", "--no-reprojection", "--json", "eval.json"];
     eval.extend(vols.iter().map(String::as_str));
     ok(&fluidnerf(d, &eval));
+    // ... and the run folder itself, through its field of space and time: the same truth
+    // steps, scored at each step's time.
+    ok(&fluidnerf(d, &["eval", "fast", "--scene", "scene", "--no-reprojection", "--json", "eval-run.json"]));
+    let by_run = json(&d.join("eval-run.json"));
+    let steps = by_run["steps"].as_array().expect("steps");
+    assert_eq!(steps.len(), 4, "one per truth time");
+    let written = json(&run.join("report.json"));
+    for (step, v) in steps.iter().zip(written["volumes"].as_array().expect("volumes")) {
+        assert_eq!(step["time"], v["time"]);
+        let (a, b) = (
+            step["global"]["nrmse"].as_f64().expect("nrmse"),
+            v["metrics"]["global"]["nrmse"].as_f64().expect("nrmse"),
+        );
+        assert!((a - b).abs() < 1e-9, "eval {a} vs the run's own report {b}");
+    }
+    // export and render take the run folder too, at a chosen time.
+    ok(&fluidnerf(
+        d,
+        &["export", "fast", "--scene", "scene", "--out", "exp", "--npy", "--time", "15", "--resolution", "12", "-q"],
+    ));
+    let exported = fluidnerf_io::volume::read_npy(&d.join("exp/volume.npy"), vol_box(d)).expect("npy");
+    let written = fluidnerf_io::volume::read_npy(&run.join("frames/volume_002.npy"), vol_box(d)).expect("npy");
+    assert_eq!(exported.data, written.data, "export at t = 15 is the run's frame at 15");
+    ok(&fluidnerf(d, &["render", "fast", "--scene", "scene", "--out", "ren", "--time", "15", "-q"]));
+    assert!(std::fs::read_dir(d.join("ren")).expect("rendered").count() > 0);
 
     // The per-frame static baseline: one 3D field per training frame, the held-out time
     // interpolated linearly between its neighbours.
@@ -84,7 +109,7 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     args.extend(common);
     ok(&fluidnerf(d, &args));
     let report = json(&d.join("static/report.json"));
-    assert_eq!(report["windows"], 3);
+    assert_eq!(report["windows"].as_array().map(Vec::len), Some(3));
     let temporal = json(&d.join("static/temporal.json"));
     assert_eq!(temporal["input_dim"], 3);
 
@@ -147,10 +172,10 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
     }
     let kill = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
     assert!(kill.success());
-    assert!(child.wait().expect("waits").success(), "an interrupted run still writes its results");
+    assert_eq!(child.wait().expect("waits").code(), Some(130), "an interrupted run writes its results, exits 130");
     let cut = report(&d.join("cut"));
-    assert_eq!(cut["interrupted"], true);
-    assert_eq!(cut["windows"], 2);
+    assert_eq!(cut["status"], "interrupted");
+    assert_eq!(cut["windows"].as_array().map(Vec::len), Some(2));
     let progress = json(&d.join("cut/windows/progress.json"));
     assert_eq!(progress["finished"].as_array().map(Vec::len), Some(1));
 
@@ -172,20 +197,18 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
     resume.push("--resume".into());
     ok(&fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>()));
     let (full, cut) = (d.join("full"), d.join("cut"));
-    assert_eq!(report(&cut)["interrupted"], false);
+    assert_eq!(report(&cut)["status"], "finished");
     let weights = files(&full, "windows", ".safetensors");
     assert_eq!(weights.len(), 2);
     assert!(weights == files(&cut, "windows", ".safetensors"), "the resumed run's weights differ");
     let volumes = files(&full, "frames", ".npy");
     assert_eq!(volumes.len(), 5);
     assert!(volumes == files(&cut, "frames", ".npy"), "the resumed run's volumes differ");
-    let histories = |dir: &std::path::Path| {
-        report(dir)["per_window"]
-            .as_array()
-            .expect("windows")
-            .iter()
-            .map(|w| w["loss_history"].clone())
-            .collect::<Vec<_>>()
-    };
+    let histories = |dir: &std::path::Path| report(dir)["history"]["loss"].clone();
     assert_eq!(histories(&full), histories(&cut));
+}
+
+/// The box of the generated scene.
+fn vol_box(d: &std::path::Path) -> fluidnerf_core::Aabb {
+    fluidnerf_io::scene::load_scene(&d.join("scene")).expect("scene").aabb
 }

@@ -445,6 +445,23 @@ impl StoppingPolicy {
         Ok(())
     }
 
+    /// The policy in words without the method-specific evaluation interval, for a comparison
+    /// of methods: "held-out early stopping (patience 10)".
+    pub fn describe_rule(&self) -> String {
+        let mut s = match self.rule {
+            StopRule::Own => "each method's own convergence rule".to_string(),
+            StopRule::Budget => "iteration cap or time budget only".to_string(),
+            StopRule::HeldOut => format!("held-out early stopping (patience {})", self.patience),
+        };
+        if let Some(n) = self.max_iterations {
+            s += &format!(", at most {n} iterations");
+        }
+        if let Some(t) = self.time_budget_s {
+            s += &format!(", at most {t} s");
+        }
+        s
+    }
+
     /// A short description for reports: "held-out early stopping (every 25 iterations,
     /// patience 10), at most 300 iterations".
     pub fn describe(&self, family: Family) -> String {

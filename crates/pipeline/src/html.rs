@@ -59,16 +59,20 @@ pub fn history(report: &RunReport, label: &str) -> RunHistory {
 
 /// Reads a finished run folder.
 pub fn summarise(dir: &Path, label: &str) -> Result<RunSummary, PipelineError> {
-    let run = LoadedRun::open(dir)?;
+    let run = LoadedRun::open(dir, None)?;
     let volume = run.first_volume()?;
     let holdout_nrmse = holdout_nrmse(&dir.join("metrics.json"));
-    let settings = serde_json::to_value(&run.config).ok();
+    let settings = run.config.as_ref().and_then(|c| serde_json::to_value(c).ok());
+    let report = run.report.ok_or_else(|| PipelineError::RunDir {
+        path: dir.to_path_buf(),
+        why: "holds no report.json (not a run of `fluidnerf reconstruct`)".into(),
+    })?;
     Ok(RunSummary {
         dir: dir.to_path_buf(),
         label: label.to_string(),
         settings,
-        history: history(&run.report, label),
-        report: run.report,
+        history: history(&report, label),
+        report,
         volume,
         holdout_nrmse,
     })

@@ -1,18 +1,26 @@
-//! Reading a finished run folder of any kind — voxel, static neural, time-resolved — for the
-//! commands that use runs (`eval`, `export`, `render`, `compare`) and for scripts.
+//! Reading a run folder of any kind — voxel, static neural, time-resolved — for the commands
+//! that use runs (`eval`, `export`, `render`, `compare`) and for scripts.
+//!
+//! A folder written by `reconstruct` is read through its typed report and configuration, and
+//! refused while unfinished (a `config.json` without `report.json`). A folder assembled by
+//! hand or by another tool (no `config.json`) is read by what it holds: `model.json` with its
+//! weights, or `volume.npy` on a box given by the caller.
 
 use std::path::{Path, PathBuf};
 
 use fluidnerf_core::{Aabb, ScalarField, Volume};
+use fluidnerf_neural::trained::ModelRecord;
 
 use crate::{PipelineError, RunConfig, RunDir, RunKind, RunReport};
 
-/// A finished run: its configuration, its report, and access to its results.
+/// A run folder's results and, for runs of `reconstruct`, their configuration and report.
 pub struct LoadedRun {
     pub dir: PathBuf,
     pub kind: RunKind,
-    pub config: RunConfig,
-    pub report: RunReport,
+    pub config: Option<RunConfig>,
+    pub report: Option<RunReport>,
+    /// The box the results fill.
+    pub aabb: Aabb,
 }
 
 impl std::fmt::Debug for LoadedRun {
@@ -22,29 +30,34 @@ impl std::fmt::Debug for LoadedRun {
 }
 
 impl LoadedRun {
-    /// Opens the run in `dir`; refuses a folder without a finished run, saying why.
-    pub fn open(dir: &Path) -> Result<Self, PipelineError> {
+    /// Opens the run in `dir`. `box_hint` (the scene's box) places a bare `.npy` volume, which
+    /// holds no box of its own.
+    pub fn open(dir: &Path, box_hint: Option<Aabb>) -> Result<Self, PipelineError> {
         let rd = RunDir::open(dir)?;
+        let refuse = |why: &str| PipelineError::RunDir { path: dir.to_path_buf(), why: why.into() };
         let Some(kind) = rd.kind() else {
-            return Err(PipelineError::RunDir {
-                path: dir.to_path_buf(),
-                why: "holds no reconstruction (no volume.npy, model.json or temporal.json)".into(),
-            });
+            return Err(refuse("holds no reconstruction (no volume.npy, model.json or temporal.json)"));
         };
-        if !rd.report().is_file() {
-            return Err(PipelineError::RunDir {
-                path: dir.to_path_buf(),
-                why: "holds an unfinished run (no report.json); resume it with `reconstruct --resume` or rerun it"
-                    .into(),
-            });
+        if rd.report().is_file() {
+            let report = RunReport::read(&rd.report())?;
+            let config = RunConfig::read(&rd.config())?;
+            let aabb = report.aabb;
+            return Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: Some(config), report: Some(report), aabb });
         }
-        let report = RunReport::read(&rd.report())?;
-        let config = RunConfig::read(&rd.config())?;
-        Ok(LoadedRun { dir: dir.to_path_buf(), kind, config, report })
-    }
-
-    pub fn aabb(&self) -> Aabb {
-        self.report.aabb
+        if rd.config().is_file() {
+            return Err(refuse(
+                "holds an unfinished run (config.json but no report.json); continue it with `reconstruct --resume` \
+                 or rerun it",
+            ));
+        }
+        let aabb = match kind {
+            RunKind::Field => {
+                let record: ModelRecord = crate::rundir::read_json(&rd.path("model.json"))?;
+                record.meta.aabb
+            }
+            _ => box_hint.ok_or_else(|| refuse("holds no report.json to give its box; give the scene"))?,
+        };
+        Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: None, report: None, aabb })
     }
 
     /// The result as a continuous field: the trained network (static or of space and time),
@@ -59,25 +72,29 @@ impl LoadedRun {
 
     /// Every volume written, with its time (None for static runs).
     pub fn volumes(&self) -> Result<Vec<(Option<f64>, Volume)>, PipelineError> {
-        self.report
-            .volumes
-            .iter()
-            .map(|v| Ok((v.time, fluidnerf_io::volume::read_npy(&self.dir.join(&v.file), self.aabb())?)))
-            .collect()
+        let files: Vec<(Option<f64>, String)> = match &self.report {
+            Some(r) => r.volumes.iter().map(|v| (v.time, v.file.clone())).collect(),
+            None if self.kind == RunKind::Temporal => {
+                return Err(PipelineError::RunDir {
+                    path: self.dir.clone(),
+                    why: "a time-resolved run without report.json: its volumes' times are unknown".into(),
+                })
+            }
+            None => vec![(None, "volume.npy".into())],
+        };
+        files.into_iter().map(|(t, f)| Ok((t, fluidnerf_io::volume::read_npy(&self.dir.join(f), self.aabb)?))).collect()
     }
 
     /// The first (for static runs: the only) volume.
     pub fn first_volume(&self) -> Result<Volume, PipelineError> {
-        let first = self
-            .report
-            .volumes
-            .first()
-            .ok_or_else(|| PipelineError::file(&self.dir.join("report.json"), "lists no volume"))?;
-        Ok(fluidnerf_io::volume::read_npy(&self.dir.join(&first.file), self.aabb())?)
-    }
-
-    /// The times of a time-resolved run's volumes (empty for static runs).
-    pub fn times(&self) -> Vec<f64> {
-        self.report.volumes.iter().filter_map(|v| v.time).collect()
+        let file = match &self.report {
+            Some(r) => r
+                .volumes
+                .first()
+                .map(|v| v.file.clone())
+                .ok_or_else(|| PipelineError::file(&self.dir.join("report.json"), "lists no volume"))?,
+            None => "volume.npy".into(),
+        };
+        Ok(fluidnerf_io::volume::read_npy(&self.dir.join(file), self.aabb)?)
     }
 }

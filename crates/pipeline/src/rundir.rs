@@ -79,12 +79,18 @@ pub struct RunDir {
     root: PathBuf,
     lock: Option<PathBuf>,
     resume: bool,
+    /// The folder did not exist before: if the run is refused before writing anything, it goes.
+    created: bool,
 }
 
 impl Drop for RunDir {
     fn drop(&mut self) {
         if let Some(lock) = &self.lock {
             let _ = std::fs::remove_file(lock);
+            if self.created {
+                // Removes the folder only when nothing was written into it.
+                let _ = std::fs::remove_dir(&self.root);
+            }
         }
     }
 }
@@ -96,7 +102,7 @@ impl RunDir {
         if !root.is_dir() {
             return Err(PipelineError::RunDir { path: root, why: "is not a folder".into() });
         }
-        Ok(RunDir { root, lock: None, resume: false })
+        Ok(RunDir { root, lock: None, resume: false, created: false })
     }
 
     /// Creates (or reuses, as `overwrite` allows) the folder of a new run, refusing the scene's
@@ -120,8 +126,9 @@ impl RunDir {
         if root.exists() && !root.is_dir() {
             return Err(refuse("exists and is not a folder".into()));
         }
+        let created = !root.exists();
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
-        let mut dir = RunDir { root: root.clone(), lock: None, resume: overwrite == Overwrite::Resume };
+        let mut dir = RunDir { root: root.clone(), lock: None, resume: overwrite == Overwrite::Resume, created };
         dir.take_lock()?;
         match (dir.state(), overwrite) {
             (DirState::Empty, Overwrite::Resume) => {
@@ -340,6 +347,9 @@ mod tests {
             assert!(e.contains("in use by another run") && e.contains(&std::process::id().to_string()), "{e}");
         }
         assert!(!out.join(".lock").exists(), "the lock goes with the run");
+        // A run refused before writing anything leaves no folder behind.
+        drop(RunDir::create(tmp.path().join("refused"), Overwrite::Refuse, None).unwrap());
+        assert!(!tmp.path().join("refused").exists());
         // Killed before the report: unfinished, refused without --force or --resume.
         let e = RunDir::create(&out, Overwrite::Refuse, None).unwrap_err().to_string();
         assert!(e.contains("unfinished"), "{e}");

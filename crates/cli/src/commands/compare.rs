@@ -20,11 +20,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use fluidnerf_metrics::NrmsePoint;
+use fluidnerf_pipeline::RunReport;
 use fluidnerf_viz::{write_plots, LinePlot, Series};
-use serde::Serialize;
-use serde_json::Value;
-
-use crate::output::{write_bytes, write_json};
+use serde::{Deserialize, Serialize};
 
 /// Compare runs by NRMSE against training wall time (time to accuracy).
 ///
@@ -131,10 +130,6 @@ fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
     }
 }
 
-fn number(v: &Value, path: &str) -> Option<f64> {
-    path.split('.').try_fold(v, |v, k| v.get(k)).and_then(Value::as_f64)
-}
-
 /// A label that tells runs apart: method, preset, and the folder (or file) name.
 fn label_of(path: &Path, report: &Path, method: &str, preset: Option<&str>) -> String {
     let name = if path.is_dir() {
@@ -151,45 +146,58 @@ fn label_of(path: &Path, report: &Path, method: &str, preset: Option<&str>) -> S
     }
 }
 
+/// A curve written by another tool (e.g. a reference implementation): the fields `compare`
+/// needs, in the layout of the command's help.
+#[derive(Deserialize)]
+struct CurveFile {
+    method: String,
+    #[serde(default)]
+    preset: Option<String>,
+    nrmse_history: Vec<NrmsePoint>,
+    #[serde(default)]
+    final_nrmse: Option<f64>,
+    #[serde(default)]
+    train: Option<CurveTrain>,
+}
+
+#[derive(Deserialize)]
+struct CurveTrain {
+    train_time_s: f64,
+}
+
 fn read_run(path: &Path) -> anyhow::Result<Run> {
     let report = report_path(path)?;
-    let text = std::fs::read_to_string(&report).with_context(|| format!("reading {}", report.display()))?;
-    let v: Value = serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", report.display()))?;
-    let method = match v.get("method") {
-        Some(Value::String(m)) => m.clone(),
-        _ => bail!("{}: no `method` field; not a run report", report.display()),
+    #[derive(Deserialize)]
+    struct Probe {
+        format: Option<u32>,
+    }
+    let probe: Probe = fluidnerf_pipeline::rundir::read_json(&report)?;
+    let (method, preset, history, final_nrmse, wall_time_s) = if probe.format.is_some() {
+        let r = RunReport::read(&report)?;
+        let preset = r.neural.as_ref().and_then(|n| n.preset.clone());
+        (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s))
+    } else {
+        let c: CurveFile = fluidnerf_pipeline::rundir::read_json(&report)
+            .with_context(|| "neither a run report nor a curve file with `method` and `nrmse_history`")?;
+        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s))
     };
-    let preset = v.get("preset").and_then(Value::as_str).map(str::to_string);
-    let history = v.get("nrmse_history").and_then(Value::as_array).filter(|a| !a.is_empty());
-    let Some(history) = history else {
-        bail!("{}: no nrmse_history; run it with --eval-every and a scene with ground truth", report.display());
-    };
+    if history.is_empty() {
+        bail!("{}: no NRMSE history; run it with --eval-every and a scene with ground truth", report.display());
+    }
     let mut curve = Vec::with_capacity(history.len());
     for (k, p) in history.iter().enumerate() {
-        let (Some(iteration), Some(train_time_s), Some(nrmse)) =
-            (p.get("iteration").and_then(Value::as_u64), number(p, "train_time_s"), number(p, "nrmse"))
-        else {
-            bail!(
-                "{}: nrmse_history[{k}] needs numbers `iteration`, `train_time_s` and `nrmse`, got {p}",
-                report.display()
-            );
-        };
-        if !(train_time_s.is_finite() && train_time_s >= 0.0 && nrmse.is_finite() && nrmse >= 0.0) {
-            bail!("{}: nrmse_history[{k}] has a negative or non-finite value: {p}", report.display());
+        if !(p.train_time_s.is_finite() && p.train_time_s >= 0.0 && p.nrmse.is_finite() && p.nrmse >= 0.0) {
+            bail!("{}: NRMSE history point {k} has a negative or non-finite value: {p:?}", report.display());
         }
-        curve.push(Point { iteration, train_time_s, nrmse });
+        curve.push(Point { iteration: p.iteration as u64, train_time_s: p.train_time_s, nrmse: p.nrmse });
     }
     if curve.windows(2).any(|w| w[1].train_time_s < w[0].train_time_s) {
-        log::warn!("{}: nrmse_history goes back in time; points are taken in the order given", report.display());
+        log::warn!("{}: the NRMSE history goes back in time; points are taken in the order given", report.display());
     }
     let last = curve[curve.len() - 1];
-    let final_nrmse = number(&v, "final_nrmse").unwrap_or(last.nrmse);
+    let final_nrmse = final_nrmse.unwrap_or(last.nrmse);
     let best_nrmse = curve.iter().map(|p| p.nrmse).fold(f64::INFINITY, f64::min);
-    let wall_time_s = ["train.train_time_s", "solve_s", "train_time_s"]
-        .iter()
-        .find_map(|k| number(&v, k))
-        .unwrap_or(last.train_time_s)
-        .max(last.train_time_s);
+    let wall_time_s = wall_time_s.unwrap_or(last.train_time_s).max(last.train_time_s);
     Ok(Run {
         label: label_of(path, &report, &method, preset.as_deref()),
         path: path.to_path_buf(),
@@ -369,9 +377,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let path = out.join(format!("time_to_accuracy.{ext}"));
         write_plots(&path, std::slice::from_ref(&plot), 1).with_context(|| format!("writing {}", path.display()))?;
     }
-    write_bytes(&out.join("time_to_accuracy.csv"), curves_csv(&runs).as_bytes())?;
+    let csv = out.join("time_to_accuracy.csv");
+    fluidnerf_io::atomic_write(&csv, |w| w.write_all(curves_csv(&runs).as_bytes()))?;
     let rows = rows(&runs, reference, &args.thresholds);
-    write_json(
+    fluidnerf_pipeline::rundir::write_json(
         &out.join("compare.json"),
         &CompareRecord {
             version: env!("CARGO_PKG_VERSION"),

@@ -1,6 +1,6 @@
-//! `fluidnerf demo`: the whole pipeline on a small built-in example. It runs the same
-//! subcommands a user would (synth → reconstruct × 2 → eval), then compares the two
-//! reconstructions in one table, one slice figure, one convergence plot and one HTML report.
+//! `fluidnerf demo`: the whole pipeline on a small built-in example: synth, two
+//! reconstructions through the run pipeline under one stopping policy, eval, then one table,
+//! one slice figure, one convergence plot and one HTML report comparing them.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -8,17 +8,22 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Parser;
 
-use crate::run_report::{self, RunSummary};
+use fluidnerf_pipeline::html::{self, RunSummary};
+use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
+
+use super::reconstruct::StopArg;
 
 /// Run the whole pipeline on a built-in example and compare FluidNeRF with ASART.
 ///
 /// Synthesises a small turbulent-jet scene, reconstructs it with FluidNeRF (the fast grid
-/// field) and with ASART (the classical baseline), scores both against the known truth, and
-/// writes pictures and a self-contained report.html.
+/// field) and with ASART (the classical baseline) under the same stopping policy — held-out
+/// early stopping: each keeps the iterate whose loss on the held-out camera was lowest, and
+/// stops after 10 evaluations without improvement; no ground truth is used — scores both
+/// against the known truth, and writes pictures and a self-contained report.html.
 ///
 /// Everything lands in OUT: `scene/` (the synthetic data set), `fluidnerf/` and `asart/` (one
-/// run directory each, with volumes, settings and reports), `slices.png`, `convergence.png`,
-/// `comparison.json` and `report.html`. Takes a minute or two on a 2-core machine.
+/// run folder each, with volumes, settings and reports), `slices.png`, `convergence.png`,
+/// `comparison.json` and `report.html`. Takes about a minute on a 2-core machine.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Output directory.
@@ -30,18 +35,19 @@ pub struct Args {
     /// Voxels along the longest side of the reconstructed volumes.
     #[arg(long, default_value_t = 96)]
     pub resolution: usize,
-    /// Gaussian image noise, as a fraction of each image's maximum. FluidNeRF's advantage over
-    /// ASART grows with noise (dissertation §7.1); 0 gives noiseless images.
+    /// Gaussian image noise, as a fraction of each image's maximum; 0 gives noiseless images.
     #[arg(long, default_value_t = 0.025)]
     pub noise: f64,
-    /// Camera held out of both reconstructions and used to score their reprojections.
+    /// Camera held out of both reconstructions: it drives the early stopping and scores the
+    /// reprojections.
     #[arg(long, default_value_t = 7)]
     pub holdout: usize,
-    /// FluidNeRF training iterations. On noisy images a grid field starts to fit the noise
-    /// after a few hundred iterations; the demo keeps the field whose held-out camera loss was
-    /// lowest (`--keep-best-holdout`), which needs no ground truth.
-    #[arg(long, default_value_t = 300)]
-    pub iterations: usize,
+    /// The stopping rule of both methods.
+    #[arg(long, value_enum, default_value = "held-out")]
+    pub stop: StopArg,
+    /// Iteration cap of both methods [default: each method's own].
+    #[arg(long)]
+    pub max_iterations: Option<usize>,
     /// Seed of the synthetic noise and of training.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -55,7 +61,7 @@ fn fluidnerf(line: &[String]) -> anyhow::Result<()> {
     let mut argv = vec!["fluidnerf".to_string()];
     argv.extend(line.iter().cloned());
     let cli = crate::Cli::try_parse_from(&argv).map_err(|e| anyhow::anyhow!("{e}"))?;
-    super::run(cli.command)
+    super::run(cli.command).map(|_| ())
 }
 
 fn words(s: &str) -> Vec<String> {
@@ -72,7 +78,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("{} already holds a demo; pass --force to replace it", out.display());
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let force = if args.force { vec!["--force".to_string()] } else { Vec::new() };
     let start = Instant::now();
     let scene_dir = out.join("scene");
     #[allow(clippy::print_stdout)]
@@ -84,26 +89,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.preset, args.seed, args.noise, args.holdout
     ));
     line.push(path(&scene_dir));
-    line.extend(force.clone());
+    if args.force {
+        line.push("--force".into());
+    }
     fluidnerf(&line)?;
 
-    let methods = [("fluidnerf", "fast", "FluidNeRF (fast field)"), ("asart", "asart", "ASART")];
+    let stopping = StoppingPolicy {
+        rule: match args.stop {
+            StopArg::Own => StopRule::Own,
+            StopArg::Budget => StopRule::Budget,
+            StopArg::HeldOut => StopRule::HeldOut,
+        },
+        max_iterations: args.max_iterations,
+        ..StoppingPolicy::default()
+    };
+    let methods = [("fluidnerf", Method::Fast), ("asart", Method::Asart)];
     let mut wall = Vec::new();
-    for (dir, method, label) in methods {
-        say(&format!("reconstructing with {label}"));
+    for (dir, method) in methods {
+        say(&format!("reconstructing with {} ({})", method.label(), stopping.describe(method.family())));
         let t = Instant::now();
-        let mut line = vec!["reconstruct".to_string(), path(&scene_dir), "-o".into(), path(&out.join(dir))];
-        line.extend(words(&format!("--method {method} --resolution {} --seed {}", args.resolution, args.seed)));
-        if method == "fast" {
-            line.extend(words(&format!("--max-iterations {} --keep-best-holdout", args.iterations)));
+        let mut config = RunConfig::new(std::path::absolute(&scene_dir)?, method);
+        config.resolution = args.resolution;
+        config.seed = args.seed;
+        config.stopping = stopping;
+        let overwrite = if args.force { Overwrite::Force } else { Overwrite::Refuse };
+        let report = super::reconstruct::run_config(&config, &out.join(dir), overwrite)?;
+        #[allow(clippy::print_stdout)]
+        {
+            println!("{}", report.summary_line());
         }
-        line.extend(force.clone());
-        fluidnerf(&line)?;
+        if report.status == RunStatus::Interrupted {
+            anyhow::bail!("interrupted; the runs so far are in {}", out.display());
+        }
         wall.push(t.elapsed().as_secs_f64());
     }
 
     say("evaluating");
-    for (dir, _, _) in methods {
+    for (dir, _) in methods {
         let run_dir = out.join(dir);
         let mut line = vec!["eval".to_string(), path(&run_dir), "--scene".into(), path(&scene_dir)];
         line.extend([
@@ -111,25 +133,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             path(&run_dir.join("metrics.json")),
             "--csv".into(),
             path(&run_dir.join("metrics.csv")),
+            "--force".into(),
         ]);
         fluidnerf(&line)?;
     }
 
     let scene = fluidnerf_io::scene::load_scene(&scene_dir)?;
     let truth = fluidnerf_io::scene::load_truth(&scene)?.into_iter().next().map(|(_, v)| v);
-    let runs: Vec<RunSummary> = methods
-        .iter()
-        .map(|(dir, _, label)| run_report::summarise(&out.join(dir), label, truth.as_ref(), &scene))
-        .collect::<anyhow::Result<_>>()?;
+    let runs: Vec<RunSummary> =
+        methods.iter().map(|(dir, m)| html::summarise(&out.join(dir), m.label())).collect::<Result<_, _>>()?;
     let refs: Vec<&RunSummary> = runs.iter().collect();
 
-    let report = run_report::build_report(
-        "fluidnerf demo: FluidNeRF and ASART on a synthetic jet",
+    let report = html::build_report(
+        &format!(
+            "fluidnerf demo: FluidNeRF and ASART on a synthetic jet, both stopped by {}",
+            stopping.describe_rule()
+        ),
         &scene,
         truth.as_ref(),
         &refs,
     )?;
-    let slices = run_report::slice_figure(truth.as_ref(), &refs, &scene.units)?;
+    let slices = html::slice_figure(truth.as_ref(), &refs, &scene.units)?;
     fluidnerf_io::atomic_write(&out.join("slices.png"), |w| w.write_all(&slices))?;
     let histories: Vec<_> = runs.iter().map(|r| r.history.clone()).collect();
     fluidnerf_viz::write_plots(&out.join("convergence.png"), &fluidnerf_viz::convergence_plots(&histories), 2)?;
@@ -143,17 +167,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "method": r.label,
                 "run_dir": r.dir,
                 "wall_s": w,
-                "compute_s": r.compute_s,
-                "iterations": r.iterations,
-                "result_bytes": r.result_bytes,
-                "metrics": r.metrics,
+                "train_time_s": r.report.train_time_s,
+                "iterations": r.report.iterations,
+                "kept_iteration": r.report.kept_iteration,
+                "stopping": r.report.stopping_rule,
+                "result_bytes": r.report.result_bytes,
+                "holdout_nrmse": r.holdout_nrmse,
+                "metrics": r.metrics(),
             })
         })
         .collect();
     let text = serde_json::to_string_pretty(&comparison)?;
     fluidnerf_io::atomic_write(&out.join("comparison.json"), |w| w.write_all(text.as_bytes()))?;
 
-    print_table(&runs, &wall);
+    print_table(&runs, &wall, &stopping);
     #[allow(clippy::print_stdout)]
     {
         println!(
@@ -166,16 +193,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn print_table(runs: &[RunSummary], wall: &[f64]) {
-    let Some(first) = runs.iter().find_map(|r| r.metrics.as_ref()) else { return };
+fn print_table(runs: &[RunSummary], wall: &[f64], stopping: &StoppingPolicy) {
+    let Some(first) = runs.iter().find_map(|r| r.metrics()) else { return };
     println!("\nvolume metrics against the truth; held-out = reprojection NRMSE of the held-out camera");
+    println!("both methods stopped by {}", stopping.describe_rule());
     print!("\n{:<24} {:>7} {:>8} {:>8} {:>8}", "method", "NRMSE", "SSIM", "SSIM-w", "PSNR");
     for r in &first.regions {
         print!(" {:>11}", format!("NRMSE-{}", &r.region.name[..r.region.name.len().min(5)]));
     }
-    println!(" {:>9} {:>8} {:>11}", "held-out", "wall [s]", "result");
+    println!(" {:>9} {:>11} {:>8} {:>11}", "held-out", "kept/iters", "wall [s]", "result");
     for (r, w) in runs.iter().zip(wall) {
-        let Some(m) = &r.metrics else { continue };
+        let Some(m) = r.metrics() else { continue };
         print!(
             "{:<24} {:>7.4} {:>8.4} {:>8} {:>8.2}",
             r.label,
@@ -188,6 +216,7 @@ fn print_table(runs: &[RunSummary], wall: &[f64]) {
             print!(" {:>11.4}", g.metrics.nrmse);
         }
         let held_out = r.holdout_nrmse.map_or("–".into(), |v| format!("{v:.4}"));
-        println!(" {:>9} {:>8.1} {:>11}", held_out, w, run_report::bytes(r.result_bytes));
+        let kept = format!("{}/{}", r.report.kept_iteration, r.report.iterations);
+        println!(" {:>9} {:>11} {:>8.1} {:>11}", held_out, kept, w, fluidnerf_pipeline::bytes(r.report.result_bytes));
     }
 }

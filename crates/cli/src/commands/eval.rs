@@ -32,9 +32,9 @@ pub enum Window {
 /// region, at every time step of the truth. Reprojection: the reconstruction is rendered from
 /// every held-out camera and compared with its image (NRMSE, PSNR, global and windowed 2D SSIM).
 ///
-/// A run directory of a neural reconstruction (holding `model.json` and
-/// `weights.safetensors`) is scored through its trained field: sampled exactly at the truth's
-/// voxel centres (at each step's time) and rendered directly for the held-out views.
+/// A run folder of a neural reconstruction (static or time-resolved) is scored through its
+/// trained field: sampled exactly at the truth's voxel centres (at each step's time) and
+/// rendered directly for the held-out views; a voxel run through its volume.
 ///
 /// Prints a table; writes JSON (with the settings) and CSV. When RECON is a run directory and
 /// neither --json nor --csv is given, writes `metrics.json` and `metrics.csv` into it.
@@ -293,35 +293,31 @@ fn read_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
     Ok(v)
 }
 
-/// Loads the reconstruction arguments: volume files, or one run directory (its trained field
-/// unless `use_volume`, else its `volume.npy`).
+/// Loads the reconstruction arguments: volume files, or one run folder of any kind (its
+/// trained field, static or of space and time, unless `use_volume`; else its volumes).
 fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Result<Recon> {
     if let [dir] = paths {
-        if dir.is_dir() && !use_volume && dir.join("model.json").is_file() {
-            let (field, aabb) = fluidnerf_neural::trained::load_trained(dir)
-                .with_context(|| format!("loading the trained field in {}", dir.display()))?;
-            if aabb != scene.aabb {
+        if dir.is_dir() {
+            let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
+            if run.aabb != scene.aabb {
                 log::warn!(
-                    "the field's box {:?}..{:?} differs from the scene's; it is zero outside its own box",
-                    aabb.min,
-                    aabb.max
+                    "the run's box {:?}..{:?} differs from the scene's; it is zero outside its own box",
+                    run.aabb.min,
+                    run.aabb.max
                 );
             }
-            return Ok(Recon::Field(field));
+            if use_volume || run.kind == fluidnerf_pipeline::RunKind::Volume {
+                return Ok(Recon::Volumes(run.volumes()?.into_iter().map(|(_, v)| v).collect()));
+            }
+            return Ok(Recon::Field(run.field()?));
         }
     }
     let mut volumes = Vec::with_capacity(paths.len());
     for p in paths {
-        let file = if p.is_dir() {
-            let f = p.join("volume.npy");
-            if !f.is_file() {
-                bail!("{}: a run directory must hold a trained field (model.json) or volume.npy", p.display());
-            }
-            f
-        } else {
-            p.clone()
-        };
-        volumes.push(read_volume(&file, scene.aabb)?);
+        if p.is_dir() {
+            bail!("{}: give one run folder, or volume files", p.display());
+        }
+        volumes.push(read_volume(p, scene.aabb)?);
     }
     Ok(Recon::Volumes(volumes))
 }

@@ -34,8 +34,8 @@ pub enum MeshFormat {
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw` with
-    /// its JSON sidecar) or a reconstruction run directory (a trained neural field,
-    /// `model.json` + weights, sampled exactly; else its `volume.vti` or `volume.npy`).
+    /// its JSON sidecar) or a run folder of any kind (a trained neural field, static or
+    /// time-resolved, is sampled exactly; a voxel run gives its volume).
     pub recon: PathBuf,
     /// The scene (folder holding `transforms.json`, or the file): gives the box of `.npy`
     /// volumes and the length unit.
@@ -142,28 +142,20 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>) -> anyhow::Result<Vol
     Ok(v)
 }
 
-/// Loads RECON: a volume file, or a run directory (trained field first, then `volume.vti`,
-/// then `volume.npy` on the scene's box).
+/// Loads RECON: a volume file, or a run folder of any kind (a trained field, static or of
+/// space and time, sampled exactly; a voxel run's volume).
 pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<Source> {
-    let scene_box = scene.map(|s| s.aabb);
     if path.is_dir() {
-        if path.join("model.json").is_file() {
-            let (field, aabb) = fluidnerf_neural::trained::load_trained(path)
-                .with_context(|| format!("loading the trained field in {}", path.display()))?;
-            return Ok(Source::Field { field, aabb });
-        }
-        for name in ["volume.vti", "volume.npy"] {
-            let f = path.join(name);
-            if f.is_file() {
-                return Ok(Source::Volume(read_volume(&f, scene_box)?));
-            }
-        }
-        bail!("{}: a run directory must hold a trained field (model.json), volume.vti or volume.npy", path.display());
+        let run = fluidnerf_pipeline::load::LoadedRun::open(path, scene.map(|s| s.aabb))?;
+        return Ok(match run.kind {
+            fluidnerf_pipeline::RunKind::Volume => Source::Volume(run.first_volume()?),
+            _ => Source::Field { field: run.field()?, aabb: run.aabb },
+        });
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
     }
-    Ok(Source::Volume(read_volume(path, scene_box)?))
+    Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb))?))
 }
 
 /// Parses `AXIS=FRACTION`.

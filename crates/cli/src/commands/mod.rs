@@ -1,5 +1,7 @@
 //! Subcommands. Each module holds a clap `Args` struct and a `run` function.
 
+use std::process::ExitCode;
+
 use clap::Subcommand;
 
 pub mod compare;
@@ -9,9 +11,6 @@ pub mod export;
 pub mod import;
 pub mod info;
 pub mod reconstruct;
-pub mod reconstruct_classical;
-pub mod reconstruct_neural;
-pub mod reconstruct_temporal;
 pub mod render;
 pub mod synth;
 
@@ -29,17 +28,19 @@ pub enum Command {
     Synth(synth::Args),
 }
 
-/// Runs a parsed subcommand.
-pub fn run(command: Command) -> anyhow::Result<()> {
+/// Runs a parsed subcommand; the exit code is 0, or 130 for a run stopped by Ctrl-C after
+/// writing its results.
+pub fn run(command: Command) -> anyhow::Result<ExitCode> {
+    let done = |r: anyhow::Result<()>| r.map(|()| ExitCode::SUCCESS);
     match command {
-        Command::Demo(args) => demo::run(args),
-        Command::Info(args) => info::run(args),
-        Command::Import(args) => import::run(args),
+        Command::Demo(args) => done(demo::run(args)),
+        Command::Info(args) => done(info::run(args)),
+        Command::Import(args) => done(import::run(args)),
         Command::Reconstruct(args) => reconstruct::run(args),
-        Command::Eval(args) => eval::run(args),
-        Command::Compare(args) => compare::run(args),
-        Command::Export(args) => export::run(args),
-        Command::Render(args) => render::run(args),
-        Command::Synth(args) => synth::run(args),
+        Command::Eval(args) => done(eval::run(args)),
+        Command::Compare(args) => done(compare::run(args)),
+        Command::Export(args) => done(export::run(args)),
+        Command::Render(args) => done(render::run(args)),
+        Command::Synth(args) => done(synth::run(args)),
     }
 }
