@@ -12,6 +12,7 @@ pub mod import;
 pub mod info;
 pub mod reconstruct;
 pub mod render;
+pub mod study;
 pub mod synth;
 
 /// The subcommands of `fluidnerf`. Each one's help text is the doc comment of its `Args`.
@@ -25,6 +26,7 @@ pub enum Command {
     Compare(compare::Args),
     Export(export::Args),
     Render(render::Args),
+    Study(study::Args),
     Synth(synth::Args),
 }
 
@@ -41,6 +43,7 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Compare(args) => done(compare::run(args)),
         Command::Export(args) => done(export::run(args)),
         Command::Render(args) => done(render::run(args)),
+        Command::Study(args) => study::run(args),
         Command::Synth(args) => done(synth::run(args)),
     }
 }

@@ -1,0 +1,513 @@
+//! `fluidnerf study`: a grid of reconstructions — methods × camera counts × noise levels ×
+//! camera layouts — on a synthetic phantom, every method under the same stopping policy, with
+//! a table, plots and a report. Resumable: a cell whose run folder holds a finished run is
+//! read back, not run again.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use clap::Parser;
+use fluidnerf_pipeline::html::{self, RunSummary};
+use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
+use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
+use fluidnerf_viz::{LinePlot, Series};
+use serde::{Deserialize, Serialize};
+
+use super::reconstruct::{MethodArg, StopArg};
+
+/// Named grids.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StudyPreset {
+    /// Training cameras 4, 8, 15 and 30 on a 360° ring, noiseless (dissertation Fig. 7.7).
+    Cameras,
+    /// 15 cameras, image noise 0, 2.5, 5 and 10 % of each image's maximum (Fig. 7.10).
+    Noise,
+    /// 8 cameras on a 360° ring, a 180° arc and a sphere, noiseless (Figs. 7.8–7.9).
+    Layout,
+    /// A tiny grid that runs in seconds (4 and 6 cameras, 24² px, at most 20 iterations): a
+    /// check that the command works, not a comparison.
+    Smoke,
+}
+
+/// Camera layouts of the grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LayoutChoice {
+    /// A ring around the flow axis over 360°.
+    Ring360,
+    /// A ring over a 180° arc (no camera faces another).
+    Arc180,
+    /// A Fibonacci lattice on a sphere.
+    Sphere,
+}
+
+impl LayoutChoice {
+    fn name(self) -> &'static str {
+        match self {
+            LayoutChoice::Ring360 => "ring360",
+            LayoutChoice::Arc180 => "arc180",
+            LayoutChoice::Sphere => "sphere",
+        }
+    }
+
+    fn synth_args(self) -> &'static [&'static str] {
+        match self {
+            LayoutChoice::Ring360 => &["--layout", "ring", "--arc", "360"],
+            LayoutChoice::Arc180 => &["--layout", "ring", "--arc", "180"],
+            LayoutChoice::Sphere => &["--layout", "sphere"],
+        }
+    }
+}
+
+/// Run a grid of reconstructions on a synthetic phantom and compare the methods.
+///
+/// Each cell synthesises a scene (the --scene-preset with the cell's camera count, layout and
+/// noise; one more camera than the count is made and held out: it drives held-out early
+/// stopping and scores reprojections) and reconstructs it with every method under one
+/// stopping policy. Writes into OUT: `scenes/`, `runs/SCENE/METHOD/` (each with its
+/// config.json), `study.json` and `study.csv` (one row per run), plots of volume NRMSE and
+/// SSIM against the camera count and against noise, and `report.html`.
+///
+/// Rerunning the same command continues an interrupted study; --force starts it over.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Output directory.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// The grid.
+    #[arg(long, value_enum, default_value = "cameras")]
+    pub preset: StudyPreset,
+    /// Synthetic scene preset the cells start from (`fluidnerf synth --list-presets`).
+    #[arg(long, default_value = "demo")]
+    pub scene_preset: String,
+    /// Methods, comma-separated [default: fast,asart].
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub methods: Option<Vec<MethodArg>>,
+    /// Training camera counts, comma-separated [default: the preset's].
+    #[arg(long, value_delimiter = ',')]
+    pub cameras: Option<Vec<usize>>,
+    /// Image noise levels (fraction of each image's maximum), comma-separated [default: the
+    /// preset's].
+    #[arg(long, value_delimiter = ',')]
+    pub noise: Option<Vec<f64>>,
+    /// Camera layouts, comma-separated [default: the preset's].
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub layouts: Option<Vec<LayoutChoice>>,
+    /// Image side in pixels [default: 64, smoke 24].
+    #[arg(long)]
+    pub pixels: Option<u32>,
+    /// Truth voxels along the longest side, also the output resolution [default: 64,
+    /// smoke 16].
+    #[arg(long)]
+    pub resolution: Option<usize>,
+    /// Stopping rule of every method (see `reconstruct --help`).
+    #[arg(long, value_enum, default_value = "held-out")]
+    pub stop: StopArg,
+    /// Iteration cap of every method [default: each method's own].
+    #[arg(long)]
+    pub max_iterations: Option<usize>,
+    /// Seconds of work per run [default: none].
+    #[arg(long)]
+    pub time_budget: Option<f64>,
+    /// Seed of the scenes and the runs.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Start over, replacing the scenes and runs of an earlier study in OUT.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The resolved grid, written to `study.json` and checked when a study is continued.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Grid {
+    preset: StudyPreset,
+    scene_preset: String,
+    methods: Vec<Method>,
+    cameras: Vec<usize>,
+    noise: Vec<f64>,
+    layouts: Vec<LayoutChoice>,
+    pixels: u32,
+    resolution: usize,
+    stopping: StoppingPolicy,
+    seed: u64,
+}
+
+/// One run of the grid.
+#[derive(Clone, Debug, Serialize)]
+struct Row {
+    layout: String,
+    cameras: usize,
+    noise: f64,
+    method: String,
+    nrmse: Option<f64>,
+    ssim_global: Option<f64>,
+    /// Lowest held-out loss seen (each method's own measure; compare within a method).
+    best_holdout_loss: Option<f64>,
+    kept_iteration: usize,
+    iterations: usize,
+    stop_reason: String,
+    train_time_s: f64,
+    result_bytes: u64,
+    run: String,
+}
+
+#[derive(Serialize)]
+struct StudyRecord<'a> {
+    version: &'static str,
+    grid: &'a Grid,
+    stopping_rule: String,
+    rows: &'a [Row],
+}
+
+fn grid(args: &Args) -> anyhow::Result<Grid> {
+    let (cameras, noise, layouts): (Vec<usize>, Vec<f64>, Vec<LayoutChoice>) = match args.preset {
+        StudyPreset::Cameras => (vec![4, 8, 15, 30], vec![0.0], vec![LayoutChoice::Ring360]),
+        StudyPreset::Noise => (vec![15], vec![0.0, 0.025, 0.05, 0.1], vec![LayoutChoice::Ring360]),
+        StudyPreset::Layout => {
+            (vec![8], vec![0.0], vec![LayoutChoice::Ring360, LayoutChoice::Arc180, LayoutChoice::Sphere])
+        }
+        StudyPreset::Smoke => (vec![4, 6], vec![0.0], vec![LayoutChoice::Ring360]),
+    };
+    let smoke = args.preset == StudyPreset::Smoke;
+    let g = Grid {
+        preset: args.preset,
+        scene_preset: args.scene_preset.clone(),
+        methods: args
+            .methods
+            .as_ref()
+            .map_or_else(|| vec![Method::Fast, Method::Asart], |m| m.iter().map(|m| m.0).collect()),
+        cameras: args.cameras.clone().unwrap_or(cameras),
+        noise: args.noise.clone().unwrap_or(noise),
+        layouts: args.layouts.clone().unwrap_or(layouts),
+        pixels: args.pixels.unwrap_or(if smoke { 24 } else { 64 }),
+        resolution: args.resolution.unwrap_or(if smoke { 16 } else { 64 }),
+        stopping: StoppingPolicy {
+            rule: match args.stop {
+                StopArg::Own => StopRule::Own,
+                StopArg::Budget => StopRule::Budget,
+                StopArg::HeldOut => StopRule::HeldOut,
+            },
+            max_iterations: args.max_iterations.or(smoke.then_some(20)),
+            time_budget_s: args.time_budget,
+            ..StoppingPolicy::default()
+        },
+        seed: args.seed,
+    };
+    if g.methods.is_empty() || g.cameras.is_empty() || g.noise.is_empty() || g.layouts.is_empty() {
+        bail!("the grid is empty: give at least one method, camera count, noise level and layout");
+    }
+    if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
+        bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
+    }
+    if let Some(&c) = g.cameras.iter().find(|&&c| c < 2) {
+        bail!("--cameras: {c} is too few; give at least 2 training cameras");
+    }
+    if let Some(n) = g.noise.iter().find(|n| !(**n >= 0.0 && **n < 1.0)) {
+        bail!("--noise: {n} is not a fraction in [0, 1)");
+    }
+    if !(8..=1024).contains(&g.pixels) {
+        bail!("--pixels must be between 8 and 1024, got {}", g.pixels);
+    }
+    if !(4..=512).contains(&g.resolution) {
+        bail!("--resolution must be between 4 and 512, got {}", g.resolution);
+    }
+    Ok(g)
+}
+
+/// Runs one subcommand line in-process, exactly as the user would type it.
+fn fluidnerf(line: &[String]) -> anyhow::Result<()> {
+    let mut argv = vec!["fluidnerf".to_string()];
+    argv.extend(line.iter().cloned());
+    let cli = crate::Cli::try_parse_from(&argv).map_err(|e| anyhow::anyhow!("{e}"))?;
+    super::run(cli.command).map(|_| ())
+}
+
+fn scene_name(layout: LayoutChoice, cameras: usize, noise: f64) -> String {
+    format!("{}-c{cameras:02}-n{:03}", layout.name(), (noise * 1000.0).round() as u64)
+}
+
+/// Synthesises the scene of a cell unless a finished one is there.
+fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise: f64) -> anyhow::Result<()> {
+    if dir.join("transforms.json").is_file() && dir.join("synth.json").is_file() {
+        return Ok(());
+    }
+    let mut line: Vec<String> =
+        vec!["synth".into(), "-q".into(), "--force".into(), "--preset".into(), g.scene_preset.clone()];
+    for (k, v) in [
+        ("--cameras", (cameras + 1).to_string()),
+        ("--holdout", "1".to_string()),
+        ("--noise", noise.to_string()),
+        ("--pixels", g.pixels.to_string()),
+        ("--resolution", g.resolution.to_string()),
+        ("--seed", g.seed.to_string()),
+    ] {
+        line.extend([k.to_string(), v]);
+    }
+    line.extend(layout.synth_args().iter().map(|s| s.to_string()));
+    line.extend(["-o".into(), dir.to_string_lossy().into_owned()]);
+    fluidnerf(&line).with_context(|| format!("synthesising {}", dir.display()))
+}
+
+pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
+    let g = grid(&args)?;
+    let out = &args.out;
+    let record = out.join("study.json");
+    if args.force {
+        for sub in ["scenes", "runs"] {
+            let p = out.join(sub);
+            if p.exists() {
+                std::fs::remove_dir_all(&p).with_context(|| format!("removing {}", p.display()))?;
+            }
+        }
+    } else if record.is_file() {
+        #[derive(Deserialize)]
+        struct Earlier {
+            grid: Grid,
+        }
+        let earlier: Earlier = fluidnerf_pipeline::rundir::read_json(&record)?;
+        if earlier.grid != g {
+            bail!(
+                "{} holds a study with other settings ({}); use --force to start over or another folder",
+                out.display(),
+                record.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let start = Instant::now();
+    let total = g.layouts.len() * g.cameras.len() * g.noise.len() * g.methods.len();
+    let mut rows = Vec::with_capacity(total);
+    let mut summaries: Vec<(Row, RunSummary)> = Vec::new();
+    let mut k = 0;
+    for &layout in &g.layouts {
+        for &cameras in &g.cameras {
+            for &noise in &g.noise {
+                let scene_dir = out.join("scenes").join(scene_name(layout, cameras, noise));
+                ensure_scene(&g, &scene_dir, layout, cameras, noise)?;
+                for &method in &g.methods {
+                    k += 1;
+                    let run_dir = out.join("runs").join(scene_name(layout, cameras, noise)).join(method.name());
+                    let finished = run_dir.join("report.json").is_file();
+                    #[allow(clippy::print_stdout)]
+                    {
+                        println!(
+                            "[{k}/{total}] {} · {cameras} cameras · noise {noise} · {}{}",
+                            layout.name(),
+                            method.label(),
+                            if finished { " (done earlier)" } else { "" }
+                        );
+                    }
+                    if !finished {
+                        let mut config = RunConfig::new(std::path::absolute(&scene_dir)?, method);
+                        config.resolution = g.resolution;
+                        config.seed = g.seed;
+                        config.stopping = g.stopping;
+                        let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
+                        if report.status == RunStatus::Interrupted {
+                            write_outputs(out, &g, &rows, &summaries)?;
+                            #[allow(clippy::print_stdout)]
+                            {
+                                println!("interrupted; rerun the same command to continue the study");
+                            }
+                            return Ok(std::process::ExitCode::from(130));
+                        }
+                    }
+                    let summary = html::summarise(&run_dir, method.label())?;
+                    let r = &summary.report;
+                    let row = Row {
+                        layout: layout.name().into(),
+                        cameras,
+                        noise,
+                        method: method.name().into(),
+                        nrmse: r.final_nrmse,
+                        ssim_global: r.final_ssim_global,
+                        best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
+                        kept_iteration: r.kept_iteration,
+                        iterations: r.iterations,
+                        stop_reason: format!("{:?}", r.stop_reason),
+                        train_time_s: r.train_time_s,
+                        result_bytes: r.result_bytes,
+                        run: run_dir.strip_prefix(out).unwrap_or(&run_dir).display().to_string(),
+                    };
+                    rows.push(row.clone());
+                    summaries.push((row, summary));
+                }
+            }
+        }
+    }
+    write_outputs(out, &g, &rows, &summaries)?;
+    #[allow(clippy::print_stdout)]
+    {
+        println!("\n{}", text_table(&rows));
+        println!(
+            "every method stopped by {}; {:.1} s; open {}",
+            g.stopping.describe_rule(),
+            start.elapsed().as_secs_f64(),
+            out.join("report.html").display()
+        );
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+fn text_table(rows: &[Row]) -> String {
+    let mut s = format!(
+        "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>10} {:>8}\n",
+        "layout", "cameras", "noise", "method", "NRMSE", "SSIM", "kept/iter", "time [s]"
+    );
+    for r in rows {
+        let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.4}"));
+        s += &format!(
+            "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>10} {:>8.1}\n",
+            r.layout,
+            r.cameras,
+            r.noise,
+            r.method,
+            f(r.nrmse),
+            f(r.ssim_global),
+            format!("{}/{}", r.kept_iteration, r.iterations),
+            r.train_time_s
+        );
+    }
+    s
+}
+
+/// One line per (method, other axes) of `metric` against `axis`.
+fn sweep_plot(rows: &[Row], title: &str, axis: &str, metric: &str) -> Option<LinePlot> {
+    let x_of = |r: &Row| if axis == "cameras" { r.cameras as f64 } else { 100.0 * r.noise };
+    let y_of = |r: &Row| if metric == "NRMSE" { r.nrmse } else { r.ssim_global };
+    let distinct: std::collections::BTreeSet<u64> = rows.iter().map(|r| x_of(r).to_bits()).collect();
+    if distinct.len() < 2 {
+        return None;
+    }
+    let mut keys: Vec<String> = Vec::new();
+    let key = |r: &Row| {
+        let fixed = if axis == "cameras" { format!("noise {}", r.noise) } else { format!("{} cameras", r.cameras) };
+        format!("{} ({}, {fixed})", r.method, r.layout)
+    };
+    for r in rows {
+        if !keys.contains(&key(r)) {
+            keys.push(key(r));
+        }
+    }
+    let series = keys
+        .iter()
+        .map(|k| {
+            let pts: Vec<(f64, f64)> =
+                rows.iter().filter(|r| &key(r) == k).filter_map(|r| y_of(r).map(|y| (x_of(r), y))).collect();
+            Series { label: k.clone(), x: pts.iter().map(|p| p.0).collect(), y: pts.iter().map(|p| p.1).collect() }
+        })
+        .collect();
+    Some(LinePlot {
+        title: title.to_string(),
+        x_label: if axis == "cameras" { "training cameras".into() } else { "image noise [% of max]".into() },
+        y_label: format!("volume {metric}"),
+        log_x: false,
+        log_y: false,
+        markers: true,
+        series,
+    })
+}
+
+fn csv(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "layout,cameras,noise,method,nrmse,ssim_global,best_holdout_loss,kept_iteration,iterations,stop_reason,train_time_s,result_bytes,run\n",
+    );
+    let f = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
+    for r in rows {
+        s += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            r.layout,
+            r.cameras,
+            r.noise,
+            r.method,
+            f(r.nrmse),
+            f(r.ssim_global),
+            f(r.best_holdout_loss),
+            r.kept_iteration,
+            r.iterations,
+            r.stop_reason,
+            r.train_time_s,
+            r.result_bytes,
+            r.run
+        );
+    }
+    s
+}
+
+fn write_outputs(out: &Path, g: &Grid, rows: &[Row], summaries: &[(Row, RunSummary)]) -> anyhow::Result<()> {
+    fluidnerf_pipeline::rundir::write_json(
+        &out.join("study.json"),
+        &StudyRecord { version: env!("CARGO_PKG_VERSION"), grid: g, stopping_rule: g.stopping.describe_rule(), rows },
+    )?;
+    fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
+    let mut figures = Vec::new();
+    for (axis, name) in [("cameras", "cameras"), ("noise", "noise")] {
+        let plots: Vec<LinePlot> = ["NRMSE", "SSIM"]
+            .iter()
+            .filter_map(|m| sweep_plot(rows, &format!("{m} against {name}"), axis, m))
+            .collect();
+        if plots.is_empty() {
+            continue;
+        }
+        let png = fluidnerf_viz::encode_plots_png(&plots, 2)?;
+        fluidnerf_io::atomic_write(&out.join(format!("against_{name}.png")), |w| w.write_all(&png))?;
+        figures.push(Figure {
+            caption: format!("Volume NRMSE and global SSIM against {name}."),
+            image: ImageData::Png(png),
+        });
+    }
+    let mut table = Table::new(
+        format!("Every run, stopped by {}", g.stopping.describe_rule()),
+        &["layout", "cameras", "noise", "method", "NRMSE", "SSIM (global)", "kept / iterations", "time [s]", "result"],
+    );
+    let f = |v: Option<f64>| v.map_or("–".into(), fluidnerf_viz::report::format_value);
+    for r in rows {
+        table.push_row(vec![
+            r.layout.clone(),
+            r.cameras.to_string(),
+            r.noise.to_string(),
+            r.method.clone(),
+            f(r.nrmse),
+            f(r.ssim_global),
+            format!("{} / {}", r.kept_iteration, r.iterations),
+            format!("{:.1}", r.train_time_s),
+            fluidnerf_pipeline::bytes(r.result_bytes),
+        ]);
+    }
+    let histories: Vec<_> = summaries
+        .iter()
+        .filter(|(r, _)| r.cameras == *g.cameras.iter().max().unwrap_or(&0))
+        .map(|(r, s)| fluidnerf_viz::RunHistory {
+            label: format!("{} ({} cameras, noise {})", r.method, r.cameras, r.noise),
+            ..s.history.clone()
+        })
+        .collect();
+    if !histories.is_empty() {
+        let png = fluidnerf_viz::encode_plots_png(&fluidnerf_viz::convergence_plots(&histories), 2)?;
+        figures.push(Figure { caption: "Convergence at the largest camera count.".into(), image: ImageData::Png(png) });
+    }
+    let report = Report {
+        title: format!("fluidnerf study: {:?} on {}", g.preset, g.scene_preset),
+        subtitle: format!(
+            "{} px images, {}³ truth and output, methods {}, every method stopped by {} · fluidnerf {}",
+            g.pixels,
+            g.resolution,
+            g.methods.iter().map(|m| m.name()).collect::<Vec<_>>().join(", "),
+            g.stopping.describe_rule(),
+            env!("CARGO_PKG_VERSION")
+        ),
+        tables: vec![table],
+        figures,
+        settings: serde_json::to_value(g).ok(),
+        notes: vec![
+            "Each cell's scene has one more camera than its count, held out of every reconstruction: it drives \
+             held-out early stopping and uses no ground truth."
+                .into(),
+        ],
+        ..Report::default()
+    };
+    fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
+    Ok(())
+}

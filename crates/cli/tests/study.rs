@@ -1,0 +1,50 @@
+//! `fluidnerf study` end to end on its tiny grid: the table, plots and report it writes, every
+//! run under the same stopping policy, and resuming without rerunning finished cells.
+
+mod common;
+use common::*;
+
+#[test]
+fn a_study_runs_every_cell_under_one_policy_and_resumes() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "fast,sart", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    let st = d.join("st");
+    for f in ["study.json", "study.csv", "report.html", "against_cameras.png"] {
+        assert!(st.join(f).is_file(), "{f} missing");
+    }
+    let record = json(&st.join("study.json"));
+    let rows = record["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 4, "2 camera counts × 2 methods");
+    for r in rows {
+        let run = st.join(r["run"].as_str().expect("run folder"));
+        let cfg = json(&run.join("config.json"));
+        assert_eq!(cfg["stopping"]["rule"], "held-out", "{run:?}");
+        assert_eq!(cfg["stopping"]["max_iterations"], 20);
+        let rep = report(&run);
+        assert!(rep["classical"].is_object() || rep["neural"].is_object());
+        // Each scene has one more camera than its count, held out of training.
+        let views = rep["classical"]["views"].as_u64();
+        if let Some(v) = views {
+            assert_eq!(v, r["cameras"].as_u64().expect("cameras"));
+        }
+        assert!(r["nrmse"].as_f64().is_some_and(|n| n > 0.0 && n < 1.5));
+    }
+    let csv = std::fs::read_to_string(st.join("study.csv")).expect("csv");
+    assert_eq!(csv.lines().count(), 5);
+
+    // Rerunning the same command reads the finished cells back instead of running them.
+    let stamp =
+        |p: &std::path::Path| std::fs::metadata(p.join("report.json")).and_then(|m| m.modified()).expect("mtime");
+    let first_run = st.join(rows[0]["run"].as_str().expect("run"));
+    let before = stamp(&first_run);
+    let out = fluidnerf(d, &args);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("done earlier"));
+    assert_eq!(stamp(&first_run), before, "a finished cell was run again");
+    // Other settings in the same folder are refused.
+    let other = fluidnerf(d, &["study", "--preset", "smoke", "--methods", "asart", "-o", "st", "-q"]);
+    assert!(!other.status.success());
+    assert!(String::from_utf8_lossy(&other.stderr).contains("--force"));
+}
