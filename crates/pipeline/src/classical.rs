@@ -60,8 +60,6 @@ pub(crate) fn run(
     let truth_bytes: u64 = truth.first().map_or(0, |(_, t)| 3 * 4 * t.len() as u64 + 4 * grid.len() as u64);
     let needed = estimate.total() + truth_bytes;
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
-    dir.write_json("config.json", config)?;
-
     let t_setup = Instant::now();
     let all_images = fluidnerf_io::scene::load_images(scene)?;
     let (mut images, mut holdout_images) = (Vec::new(), Vec::new());
@@ -94,6 +92,8 @@ pub(crate) fn run(
         None
     };
     let setup_s = t_setup.elapsed().as_secs_f64();
+    // Written once everything has been read and checked: a refused run leaves nothing.
+    dir.write_json("config.json", config)?;
 
     let eval_every = config.eval_interval();
     let holdout_every = config.stopping.holdout_interval(Family::Classical);

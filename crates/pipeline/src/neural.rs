@@ -102,15 +102,15 @@ pub(crate) fn run(
     })?;
     // An earlier curve is read before the report that holds it is removed.
     let earlier = if dir.resuming() { earlier_report(dir) } else { None };
-    if dir.resuming() {
-        let _ = std::fs::remove_file(dir.report());
-    }
-    dir.write_json("config.json", config)?;
-
     let t0 = Instant::now();
     let problem = problem(scene)?;
     let prep = Prepared::new(&problem, &spec.train)?;
     let setup_s = t0.elapsed().as_secs_f64();
+    // Written once everything has been read and checked: a refused run leaves nothing.
+    if dir.resuming() {
+        let _ = std::fs::remove_file(dir.report());
+    }
+    dir.write_json("config.json", config)?;
     let (rays_kept, rays_on_box) = prep.ray_counts();
     log::info!(
         "{} training views, {} held out; {rays_kept} of {rays_on_box} rays kept, {:.1} % of the box occupied",
