@@ -12,7 +12,7 @@ leave through the open top face (y = NY); the other faces are closed walls.
   marker is both the temperature excess and the smoke: with equal source and equal (numerical)
   diffusivity the two fields are the same (Lewis number 1).
 - jet: a forced round jet. Inside a short cylinder on the bottom face (the nozzle) the
-  velocity is held at U_JET along +y, with a seeded random perturbation of a few per cent, and
+  velocity is held at U_JET along +y, with a seeded random perturbation of 10 per cent, and
   the marker at 1; the surrounding fluid starts at rest and the marker is passive.
 
 Several instants of each are written as float32 `.npy` of shape (nz, ny, nx) (x fastest,
