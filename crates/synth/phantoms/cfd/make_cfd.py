@@ -4,16 +4,18 @@ Both flows are solved with PhiFlow (incompressible Navier-Stokes without explici
 a staggered grid: MacCormack advection of the marker, semi-Lagrangian advection of the
 velocity, a conjugate-gradient pressure projection) on a grid of NX x NY x NZ cells of unit
 width, with a time step of DT. The flows rise along +y from near the bottom face (y = 0) and
-leave through the open top face (y = NY); the other faces are closed walls.
+leave through the open top face (y = NY); the other faces are closed walls. The fluid starts
+at rest up to a weak, smooth, seeded random velocity field (AMBIENT_RMS) that breaks the
+symmetry of the sources.
 
 - plume: a buoyant plume (Boussinesq). A hot spot near the bottom holds the marker c at 1 (its
-  rim is modulated by a seeded random azimuthal pattern that changes each step, to break the
+  rim is modulated by a seeded random azimuthal pattern that drifts from step to step, to break the
   symmetry); the marker pushes the fluid up with the body force (0, G_PRIME * c, 0). The
   marker is both the temperature excess and the smoke: with equal source and equal (numerical)
   diffusivity the two fields are the same (Lewis number 1).
 - jet: a forced round jet. Inside a short cylinder on the bottom face (the nozzle) the
   velocity is held at U_JET along +y, with a seeded random perturbation of 10 per cent, and
-  the marker at 1; the surrounding fluid starts at rest and the marker is passive.
+  the marker at 1; the marker is passive.
 
 Several instants of each are written as float32 `.npy` of shape (nz, ny, nx) (x fastest,
 cell-centred, the project's volume convention), clipped to >= 0, with `provenance.json`
