@@ -468,7 +468,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "seed": settings.seed,
         "intensity_scale": syn.intensity_scale,
         "counts": "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)",
-        "phantom_note": settings.phantom.kind.cfd_case().map(|case| fluidnerf_synth::phantom::cfd::note(case)),
+        "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
         "settings": settings,
         "stats": syn.stats,
         "seconds": elapsed,
