@@ -160,3 +160,75 @@ fn aabb_takes_negative_corners_and_exactly_six_numbers() {
     assert!(!o.status.success());
     assert!(text(&o).1.contains("--aabb takes 6 numbers"), "{}", text(&o).1);
 }
+
+/// Fraction of pixels above 5 % of the image's peak, and the lit region's height / width (rows
+/// and columns holding a lit pixel).
+fn lit_shape(img: &fluidnerf_core::Image) -> (f64, f64) {
+    let peak = img.min_max().1;
+    let lit = |c: usize, r: usize| img.data[r * img.width + c] > 0.05 * peak;
+    let count = (0..img.height).flat_map(|r| (0..img.width).map(move |c| (c, r))).filter(|&(c, r)| lit(c, r)).count();
+    let rows = (0..img.height).filter(|&r| (0..img.width).any(|c| lit(c, r))).count();
+    let cols = (0..img.width).filter(|&c| (0..img.height).any(|r| lit(c, r))).count();
+    (count as f64 / (img.width * img.height) as f64, rows as f64 / cols.max(1) as f64)
+}
+
+#[test]
+fn cfd_plume_preset_is_time_resolved_and_rises_in_the_images() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("plume-tr");
+    let o = synth(&["-q", "-o", dir.to_str().expect("utf-8"), "--preset", "plume-tr"]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "stdout: {out}\nstderr: {err}");
+    assert!(out.contains("3 solver steps [50.0, 52.0, 60.0]"), "{out}");
+    let scene = fluidnerf_io::scene::load_scene(&dir).expect("scene");
+    assert_eq!(scene.units, "mm");
+    assert_eq!(scene.aabb.min.to_array(), [-12.0, -18.0, -12.0], "the box is the simulation domain");
+    assert_eq!(scene.aabb.max.to_array(), [12.0, 18.0, 12.0]);
+    assert_eq!(scene.times(), vec![50.0, 52.0, 60.0]);
+    assert_eq!(scene.frames.len(), 36);
+    let truth = fluidnerf_io::scene::load_truth(&scene).expect("truth");
+    assert_eq!(truth.len(), 3);
+    assert_eq!(truth[0].1.dims, [48, 72, 48], "truth on the solver's grid");
+    assert_ne!(truth[0].1.data, truth[1].1.data, "2 solver steps apart");
+    assert_ne!(truth[1].1.data, truth[2].1.data, "8 solver steps apart");
+    let images = fluidnerf_io::scene::load_images(&scene).expect("images");
+    for (frame, img) in scene.frames.iter().zip(&images) {
+        let (lit, tall) = lit_shape(img);
+        let name = frame.file_path.display();
+        assert!(lit > 0.03 && lit < 0.6, "{name}: {:.1} % of the pixels lit", 100.0 * lit);
+        assert!(tall > 1.2, "{name}: the plume rises along the image's vertical, height/width {tall:.2}");
+    }
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("synth.json")).expect("synth.json")).expect("json");
+    let note = record["phantom_note"].as_str().expect("a CFD data set records a note");
+    assert!(note.contains("+y") && note.contains("solver steps"), "{note}");
+}
+
+#[test]
+fn cfd_phantoms_from_any_preset_and_their_steps() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    // Switching the phantom to a CFD one moves the box to the domain and the ring about y.
+    let dir = tmp.path().join("jet");
+    let o = run_small(&dir, &["--phantom", "cfd-jet", "--cfd-step", "40"]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let scene = fluidnerf_io::scene::load_scene(&dir).expect("scene");
+    assert_eq!(scene.aabb.max.to_array(), [12.0, 18.0, 12.0]);
+    assert!(scene.frames.iter().all(|f| f.camera.centre().y.abs() < 1e-9), "ring about the y axis");
+    let images = fluidnerf_io::scene::load_images(&scene).expect("images");
+    assert!(images.iter().all(|i| lit_shape(i).0 > 0.02), "every camera sees the jet");
+    let truth = fluidnerf_io::scene::load_truth(&scene).expect("truth");
+    assert_eq!(truth[0].1.dims, [16, 24, 16], "--resolution 24 resamples the solver's grid");
+    for (extra, needle) in [
+        (&["--phantom", "plume", "--times", "51"][..], "solver steps"),
+        (&["--phantom", "plume", "--cfd-step", "7"][..], "cfd_step"),
+    ] {
+        let o = run_small(&tmp.path().join("bad"), extra);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(text(&o).1.contains(needle), "{extra:?}: expected `{needle}` in {}", text(&o).1);
+    }
+    let o = synth(&["--list-presets"]);
+    let (out, _) = text(&o);
+    for name in ["plume15", "plume4", "plume8", "cfdjet15", "plume-tr"] {
+        assert!(out.lines().any(|l| l.split_whitespace().next() == Some(name)), "{name} missing from {out}");
+    }
+}

@@ -19,6 +19,9 @@ pub enum SynthError {
     /// No preset of this name.
     #[error("unknown preset `{0}`; see the list of presets")]
     UnknownPreset(String),
+    /// A volume embedded in the crate does not decode (a broken build, not a user error).
+    #[error("embedded phantom {name}: {problem}")]
+    Embedded { name: String, problem: String },
     /// The progress callback asked to stop.
     #[error("cancelled")]
     Cancelled,

@@ -26,12 +26,13 @@ use crate::SynthError;
 #[serde(default, deny_unknown_fields)]
 pub struct SynthSettings {
     pub phantom: PhantomSettings,
-    /// Reconstruction box, mm. Default: the 40 mm cube centred at the origin.
+    /// Reconstruction box, mm. Default: the 40 mm cube centred at the origin. The procedural
+    /// phantoms fill it; the CFD ones stay in their simulation domain (`phantom::cfd::domain`).
     pub aabb: Aabb,
     /// Truth voxels along the box's longest side (cubic voxels). Default 128.
     pub resolution: usize,
-    /// Frame times t* for time-resolved phantoms (`jet-tr`; default 14, 15, 16); must be empty
-    /// for static ones.
+    /// Frame times: t* for `jet-tr` (default 14, 15, 16), solver steps for `plume` and
+    /// `cfd-jet` (empty: static at `phantom.cfd_step`); must be empty for the other phantoms.
     pub times: Vec<f64>,
     pub rig: RigSettings,
     pub lens: LensSettings,
@@ -70,7 +71,7 @@ impl SynthSettings {
             if self.times.is_empty() {
                 return Err(SynthError::invalid("times", "a time-resolved phantom needs at least one time"));
             }
-        } else if !self.times.is_empty() {
+        } else if !self.phantom.kind.takes_times() && !self.times.is_empty() {
             return Err(SynthError::invalid(
                 "times",
                 format!("the {:?} phantom is static; give no times", self.phantom.kind),
@@ -78,6 +79,17 @@ impl SynthSettings {
         }
         if let Some(t) = self.times.iter().find(|t| !t.is_finite()) {
             return Err(SynthError::invalid("times", format!("must be finite, got {t}")));
+        }
+        if self.phantom.kind.cfd_case().is_some() {
+            if let Some(t) = self.times.iter().find(|&&t| crate::phantom::cfd::step_of(t).is_none()) {
+                return Err(SynthError::invalid(
+                    "times",
+                    format!(
+                        "the CFD phantoms' times are stored solver steps, one of {:?}; got {t}",
+                        crate::phantom::cfd::STEPS
+                    ),
+                ));
+            }
         }
         self.rig.validate()?;
         self.lens.validate()?;
@@ -261,6 +273,7 @@ pub fn generate(
         let t0 = std::time::Instant::now();
         let vol = match &phantom {
             Phantom::Volume(v) => v.clone(),
+            Phantom::Cfd(c) => c.truth(time, dims, &aabb),
             p => Volume::from_field(dims, aabb, p, time.unwrap_or(0.0)),
         };
         stats.truth_seconds += t0.elapsed().as_secs_f64();
@@ -343,12 +356,12 @@ pub fn no_progress(_: &Progress) -> ControlFlow<()> {
 mod tests {
     use super::*;
     use crate::image::{PinholeSettings, ThinLensSettings};
-    use crate::rig::{Jitter, Layout};
+    use crate::rig::{Jitter, Layout, RingAxis};
 
     fn tiny() -> SynthSettings {
         let mut s = SynthSettings { resolution: 20, ..Default::default() };
         s.lens.resolution = [20, 20];
-        s.rig.layout = Layout::Ring { count: 4, arc_deg: 360.0, start_deg: 0.0 };
+        s.rig.layout = Layout::Ring { count: 4, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
         s.sensor.gaussian_noise = 0.02;
         s
     }
@@ -413,7 +426,7 @@ mod tests {
             ControlFlow::Continue(())
         };
         let mut s = tiny();
-        s.rig.layout = Layout::Ring { count: 0, arc_deg: 360.0, start_deg: 0.0 };
+        s.rig.layout = Layout::Ring { count: 0, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
         assert!(matches!(generate(&s, None, &mut count), Err(SynthError::Invalid { .. })));
         let mut s = tiny();
         s.sensor.gaussian_noise = -0.01;
@@ -432,6 +445,37 @@ mod tests {
         // Cancelling stops the run.
         let r = generate(&tiny(), None, |_| ControlFlow::Break(()));
         assert!(matches!(r, Err(SynthError::Cancelled)));
+    }
+
+    #[test]
+    fn cfd_truth_is_the_solvers_grid_at_the_asked_steps() {
+        use crate::phantom::cfd::{self, CfdCase};
+        let mut s = tiny();
+        s.sensor.gaussian_noise = 0.0;
+        s.phantom.kind = PhantomKind::Plume;
+        s.aabb = cfd::domain();
+        s.resolution = 72;
+        s.rig.layout = Layout::Ring { count: 3, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::Y };
+        s.phantom.cfd_step = Some(50);
+        let syn = generate(&s, None, no_progress).expect("static plume");
+        assert_eq!(syn.truth.len(), 1);
+        assert_eq!(syn.truth[0].1, CfdCase::Plume.instant(50).expect("decodes"));
+        assert!(syn.frames.iter().all(|f| f.clean.min_max().1 > 0.0), "every camera sees the plume");
+        s.times = vec![50.0, 60.0];
+        s.resolution = 24;
+        s.phantom.kind = PhantomKind::CfdJet;
+        let syn = generate(&s, None, no_progress).expect("time-resolved jet");
+        assert_eq!(syn.truth.len(), 2);
+        assert_eq!(syn.truth[1].1.dims, [16, 24, 16]);
+        assert_ne!(syn.truth[0].1, syn.truth[1].1);
+        assert_eq!(syn.scene(PathBuf::from("/tmp/x")).times(), vec![50.0, 60.0]);
+        // Only stored steps are times; the procedural jet's t* are not.
+        s.times = vec![51.0];
+        let err = generate(&s, None, no_progress).expect_err("step 51 is not stored");
+        assert!(err.to_string().contains("solver steps"), "{err}");
+        s.times.clear();
+        s.phantom.cfd_step = Some(7);
+        assert!(matches!(generate(&s, None, no_progress), Err(SynthError::Invalid { .. })));
     }
 
     #[test]

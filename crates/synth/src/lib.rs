@@ -5,15 +5,19 @@
 //! - **Units**: world lengths in mm; the default box is the 40 mm cube centred at the origin.
 //!   Field values are dimensionless (a mixture fraction in `[0, 1]` for the jets); images are
 //!   line integrals `∫E ds` (value × mm) until the sensor turns them into counts.
-//! - **Axes**: the jets flow along world **+x** from the box's `min.x` face; ring rigs lie in
-//!   the y–z plane around the box centre. Cameras use `fluidnerf-core`'s OpenCV conventions.
-//! - **Time**: `jet-tr` uses the dimensionless `t* = t U / D` (Eq. 6.1).
+//! - **Axes**: the procedural jets flow along world **+x** from the box's `min.x` face; the CFD
+//!   phantoms rise along world **+y** in their simulation domain. Ring rigs go around the flow
+//!   axis through the box centre (the y–z plane by default, the x–z plane for the CFD
+//!   presets). Cameras use `fluidnerf-core`'s OpenCV conventions.
+//! - **Time**: `jet-tr` uses the dimensionless `t* = t U / D` (Eq. 6.1); the CFD phantoms use
+//!   solver steps.
 //! - **Determinism**: every random choice derives from one `seed`; results are the same bytes
 //!   on any number of threads.
 //!
 //! # Pieces
-//! - [`phantom`]: the ground-truth fields ([`phantom::Jet`], [`phantom::StartingJet`], analytic
-//!   shapes with closed-form line integrals for tests, user volumes).
+//! - [`phantom`]: the ground-truth fields: procedural ([`phantom::Jet`],
+//!   [`phantom::StartingJet`]), CFD ([`phantom::CfdPhantom`], embedded solver output), analytic
+//!   shapes with closed-form line integrals for tests, user volumes.
 //! - [`rig`]: lens settings and camera layouts (ring, arc, Fibonacci sphere, explicit,
 //!   subsets, jitter, held-out cameras).
 //! - [`image`]: the pinhole and thin-lens image models.
@@ -35,9 +39,9 @@ pub use generate::{
 };
 pub use image::{Emitters, ImageModel, PinholeSettings, ThinLensSettings};
 pub use phantom::{
-    analytic_image, GaussianBlob, Jet, JetParams, LineIntegral, Phantom, PhantomKind, PhantomSettings, Shape, ShapeSum,
-    StartingJet, StartingJetParams, UniformBall,
+    analytic_image, CfdCase, CfdPhantom, GaussianBlob, Jet, JetParams, LineIntegral, Phantom, PhantomKind,
+    PhantomSettings, Shape, ShapeSum, StartingJet, StartingJetParams, UniformBall,
 };
 pub use preset::{preset, presets, DEFAULT_PRESET};
-pub use rig::{Jitter, Layout, LensSettings, RigCamera, RigSettings, Subset};
+pub use rig::{Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset};
 pub use sensor::SensorSettings;

@@ -10,10 +10,16 @@
 //! The planar sets are subsets of one 120-camera ring (every 30th, 15th, …), as in the
 //! dissertation, so a camera keeps its name across them; the 180° arc takes every 4th camera
 //! of the same ring (15 cameras, 12° apart).
+//!
+//! The CFD sets (`plume*`, `cfdjet15`) image the solver's phantoms ([`crate::phantom::cfd`]):
+//! the box is the simulation domain (24 × 36 × 24 mm, 0.5 mm cells, truth on the solver's own
+//! 48 × 72 × 48 grid), the flow rises along world +y, and the cameras are subsets of a
+//! 120-camera ring about y (image up = +y), pinhole, noiseless, 128² px over the 40 mm field of
+//! view. They are a second phantom class for judging methods tuned on the procedural jets.
 
 use crate::image::{ImageModel, PinholeSettings, ThinLensSettings};
 use crate::phantom::PhantomKind;
-use crate::rig::{Layout, LensSettings, Subset};
+use crate::rig::{Layout, LensSettings, RingAxis, Subset};
 use crate::{SynthError, SynthSettings};
 
 /// The preset `fluidnerf synth` uses when none is named.
@@ -38,6 +44,11 @@ pub fn presets() -> Vec<(&'static str, &'static str)> {
         ("arc180", "15 cameras over a 180° arc (12° apart), otherwise as planar15"),
         ("sphere15", "15 cameras on a Fibonacci sphere, otherwise as planar15"),
         ("jet-tr60", "starting jet at t* = 14, 15, 16, 60-camera ring, thin lens, 256² px, 256³ truth"),
+        ("plume15", "CFD buoyant plume (PhiFlow) rising along +y, 15-camera ring about y, 128² px, pinhole, noiseless"),
+        ("plume4", "4 cameras of the 120-camera ring about y, otherwise as plume15"),
+        ("plume8", "8 cameras of the 120-camera ring about y, otherwise as plume15"),
+        ("cfdjet15", "CFD forced round jet (PhiFlow) along +y, otherwise as plume15"),
+        ("plume-tr", "CFD plume at solver steps 50, 52, 60, 12-camera ring about y, 64² px, pinhole"),
         ("dissertation", "Table 6.1 at full size: 15 cameras, 800² px, 801³ truth, 500 rays per voxel (hours, ~10 GB)"),
     ]
 }
@@ -49,8 +60,24 @@ fn ring120(every: usize, first: Option<usize>) -> SynthSettings {
         image: ImageModel::ThinLens(ThinLensSettings::default()),
         ..Default::default()
     };
-    s.rig.layout = Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0 };
+    s.rig.layout = Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
     s.rig.subset = Subset { every, offset: 0, first };
+    s
+}
+
+/// A CFD data set: the solver's phantom `kind` on its own grid and domain, `every`-th camera of
+/// a 120-camera ring about y, pinhole, noiseless, 128² px.
+fn cfd(kind: PhantomKind, every: usize) -> SynthSettings {
+    let mut s = SynthSettings {
+        aabb: crate::phantom::cfd::domain(),
+        resolution: crate::phantom::cfd::CELLS.into_iter().max().unwrap_or(1),
+        lens: LensSettings { resolution: [128, 128], ..Default::default() },
+        image: ImageModel::Pinhole(PinholeSettings::default()),
+        ..Default::default()
+    };
+    s.phantom.kind = kind;
+    s.rig.layout = Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::Y };
+    s.rig.subset = Subset { every, offset: 0, first: None };
     s
 }
 
@@ -65,7 +92,7 @@ pub fn preset(name: &str) -> Result<SynthSettings, SynthError> {
                 image: ImageModel::Pinhole(PinholeSettings::default()),
                 ..Default::default()
             };
-            s.rig.layout = Layout::Ring { count: 15, arc_deg: 360.0, start_deg: 0.0 };
+            s.rig.layout = Layout::Ring { count: 15, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
             s
         }
         "planar15" => planar(15),
@@ -85,10 +112,20 @@ pub fn preset(name: &str) -> Result<SynthSettings, SynthError> {
         }
         "jet-tr60" => {
             let mut s = planar(60);
-            s.rig.layout = Layout::Ring { count: 60, arc_deg: 360.0, start_deg: 0.0 };
+            s.rig.layout = Layout::Ring { count: 60, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
             s.rig.subset = Subset::default();
             s.phantom.kind = PhantomKind::JetTr;
             s.times = vec![14.0, 15.0, 16.0];
+            s
+        }
+        "plume15" => cfd(PhantomKind::Plume, 8),
+        "plume4" => cfd(PhantomKind::Plume, 30),
+        "plume8" => cfd(PhantomKind::Plume, 15),
+        "cfdjet15" => cfd(PhantomKind::CfdJet, 8),
+        "plume-tr" => {
+            let mut s = cfd(PhantomKind::Plume, 10);
+            s.lens.resolution = [64, 64];
+            s.times = vec![50.0, 52.0, 60.0];
             s
         }
         "dissertation" => {
@@ -118,6 +155,14 @@ mod tests {
         assert_eq!(preset("planar15").expect("preset").rig.count(), 15);
         assert_eq!(preset("planar4").expect("preset").rig.count(), 4);
         assert_eq!(preset("arc180").expect("preset").rig.count(), 15);
+        assert_eq!(preset("plume15").expect("preset").rig.count(), 15);
+        assert_eq!(preset("plume-tr").expect("preset").rig.count(), 12);
+        for name in ["plume15", "plume4", "plume8", "cfdjet15", "plume-tr"] {
+            let s = preset(name).expect("preset");
+            assert_eq!(s.aabb, crate::phantom::cfd::domain(), "{name}: the box is the simulation domain");
+            assert_eq!(s.truth_dims(&s.aabb), crate::phantom::cfd::CELLS, "{name}: truth on the solver's grid");
+            assert!(matches!(s.rig.layout, Layout::Ring { axis: RingAxis::Y, .. }), "{name}: ring about +y");
+        }
         assert!(matches!(preset("nope"), Err(SynthError::UnknownPreset(_))));
         let bad = r#"{"resolution": 64, "typo": 1}"#;
         assert!(serde_json::from_str::<SynthSettings>(bad).is_err());

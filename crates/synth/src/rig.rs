@@ -1,10 +1,11 @@
 //! Camera rigs: lens settings → intrinsics, and layouts of cameras around the box.
 //!
 //! # Conventions
-//! World units are mm; the jet flows along world **+x**. Every camera looks at the box centre
-//! from the lens's object distance `l_o` (so the focal plane passes through the centre), with
-//! its image x axis along world +x wherever possible (the jet runs left to right in the
-//! images). Cameras carry the [`ThinLens`] they were made with. Camera `name`s number the
+//! World units are mm; the procedural jets flow along world **+x**, the CFD phantoms rise
+//! along **+y**. Every camera looks at the box centre from the lens's object distance `l_o` (so
+//! the focal plane passes through the centre). Around x, its image x axis runs along world +x
+//! wherever possible (the jet runs left to right in the images); on a ring about y, its image
+//! up is world +y (the plume rises in the images). Cameras carry the [`ThinLens`] they were made with. Camera `name`s number the
 //! cameras of the whole layout (`cam000`, …) so that a subset keeps the names of its parent
 //! layout (the dissertation's 4…60-camera sets are subsets of its 120-camera ring).
 
@@ -109,9 +110,16 @@ impl LensSettings {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "layout", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Layout {
-    /// `count` cameras in the y–z plane through the box centre (perpendicular to the flow),
-    /// evenly spaced over `[start_deg, start_deg + arc_deg)`; angle 0 is world +y, 90° is +z.
-    Ring { count: usize, arc_deg: f64, start_deg: f64 },
+    /// `count` cameras in the plane through the box centre perpendicular to `axis` (the flow
+    /// axis), evenly spaced over `[start_deg, start_deg + arc_deg)`. About x (the default):
+    /// angle 0 is world +y, 90° is +z; about y: angle 0 is +z, 90° is +x.
+    Ring {
+        count: usize,
+        arc_deg: f64,
+        start_deg: f64,
+        #[serde(default)]
+        axis: RingAxis,
+    },
     /// `count` cameras on a Fibonacci lattice over the sphere around the box centre (pole along
     /// world +z).
     Sphere { count: usize },
@@ -126,8 +134,20 @@ pub enum Layout {
 
 impl Default for Layout {
     fn default() -> Self {
-        Layout::Ring { count: 15, arc_deg: 360.0, start_deg: 0.0 }
+        Layout::Ring { count: 15, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X }
     }
+}
+
+/// The world axis a ring goes around: the flow axis of the phantom.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RingAxis {
+    /// The procedural jets' axis. Image x runs along world +x (the jet runs left to right).
+    #[default]
+    X,
+    /// The CFD phantoms' axis (they rise along +y). Image up is world +y (the flow rises in
+    /// the images).
+    Y,
 }
 
 /// Keeps part of a layout: cameras `offset, offset + every, offset + 2 every, …`, at most
@@ -196,7 +216,7 @@ impl RigSettings {
     /// Checks the settings that need no geometry.
     pub fn validate(&self) -> Result<(), SynthError> {
         match &self.layout {
-            Layout::Ring { count, arc_deg, start_deg } => {
+            Layout::Ring { count, arc_deg, start_deg, .. } => {
                 if *count == 0 {
                     return Err(SynthError::invalid("rig.layout.count", "a rig needs at least one camera"));
                 }
@@ -274,10 +294,14 @@ impl RigSettings {
         let centre = aabb.centre();
         let dist = self.distance_mm.unwrap_or_else(|| lens.thin_lens().object_distance());
         let positions: Vec<DVec3> = match &self.layout {
-            Layout::Ring { count, arc_deg, start_deg } => (0..*count)
+            Layout::Ring { count, arc_deg, start_deg, axis } => (0..*count)
                 .map(|i| {
                     let a = (start_deg + arc_deg * i as f64 / *count as f64).to_radians();
-                    centre + dist * DVec3::new(0.0, a.cos(), a.sin())
+                    let dir = match axis {
+                        RingAxis::X => DVec3::new(0.0, a.cos(), a.sin()),
+                        RingAxis::Y => DVec3::new(a.sin(), 0.0, a.cos()),
+                    };
+                    centre + dist * dir
                 })
                 .collect(),
             Layout::Sphere { count } => {
@@ -315,7 +339,10 @@ impl RigSettings {
                 return Err(SynthError::invalid("rig.layout", format!("camera {index} sits on the point it looks at")));
             }
             let forward = (target - pos).normalize();
-            let mut up = DVec3::X.cross(forward);
+            let mut up = match self.layout {
+                Layout::Ring { axis: RingAxis::Y, .. } => DVec3::Y - forward * forward.y,
+                _ => DVec3::X.cross(forward),
+            };
             if up.length() < 1e-6 {
                 up = DVec3::Z.cross(forward);
             }
@@ -382,8 +409,10 @@ mod tests {
 
     #[test]
     fn ring_is_perpendicular_to_the_flow_and_images_run_along_x() {
-        let rig =
-            RigSettings { layout: Layout::Ring { count: 12, arc_deg: 360.0, start_deg: 0.0 }, ..Default::default() };
+        let rig = RigSettings {
+            layout: Layout::Ring { count: 12, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X },
+            ..Default::default()
+        };
         let lens = LensSettings { resolution: [64, 64], ..Default::default() };
         let cams = rig.build(&lens, &box40(), 0).expect("rig");
         assert_eq!(cams.len(), 12);
@@ -404,9 +433,30 @@ mod tests {
     }
 
     #[test]
+    fn ring_about_y_circles_the_plume_and_images_rise_along_y() {
+        let layout = Layout::Ring { count: 12, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::Y };
+        let rig = RigSettings { layout, ..Default::default() };
+        let lens = LensSettings { resolution: [64, 64], ..Default::default() };
+        let cams = rig.build(&lens, &box40(), 0).expect("rig");
+        assert_eq!(cams.len(), 12);
+        // Angle 0 is +z, 90° is +x.
+        assert_relative_eq!(cams[0].camera.centre().z, 360.0, epsilon = 1e-9);
+        assert_relative_eq!(cams[3].camera.centre().x, 360.0, epsilon = 1e-9);
+        for c in &cams {
+            let cam = &c.camera;
+            assert_relative_eq!(cam.centre().y, 0.0, epsilon = 1e-9);
+            assert_relative_eq!(cam.centre().length(), 360.0, epsilon = 1e-9);
+            // +y world goes up in every image (smaller row), straight up.
+            let o = cam.project(DVec3::ZERO).expect("in front");
+            let above = cam.project(DVec3::new(0.0, 5.0, 0.0)).expect("in front");
+            assert!(above.y < o.y - 1.0 && (above.x - o.x).abs() < 1e-9, "{}: {o} → {above}", c.name);
+        }
+    }
+
+    #[test]
     fn subsets_keep_names_and_sphere_is_even() {
         let rig = RigSettings {
-            layout: Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0 },
+            layout: Layout::Ring { count: 120, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X },
             subset: Subset { every: 8, ..Default::default() },
             holdout: vec![3],
             ..Default::default()
@@ -426,8 +476,10 @@ mod tests {
     #[test]
     fn bad_rigs_are_rejected() {
         let lens = LensSettings { resolution: [32, 32], ..Default::default() };
-        let zero =
-            RigSettings { layout: Layout::Ring { count: 0, arc_deg: 360.0, start_deg: 0.0 }, ..Default::default() };
+        let zero = RigSettings {
+            layout: Layout::Ring { count: 0, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X },
+            ..Default::default()
+        };
         assert!(matches!(zero.build(&lens, &box40(), 0), Err(SynthError::Invalid { .. })));
         let positions = vec![[0.0, 360.0, 0.0], [0.0, 0.0, 360.0]];
         let seen = RigSettings {

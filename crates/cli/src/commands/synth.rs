@@ -38,12 +38,18 @@ pub enum PhantomArg {
     Blobs,
     /// Half-value ball plus Gaussian blobs.
     BallAndBlobs,
+    /// CFD buoyant plume (PhiFlow), rising along +y in its own 24 × 36 × 24 mm domain; static,
+    /// or at the solver steps given with --times.
+    Plume,
+    /// CFD forced round jet (PhiFlow), along +y in the same domain; static or at --times.
+    CfdJet,
 }
 
 /// Camera layouts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum LayoutArg {
-    /// A ring perpendicular to the flow (x) axis.
+    /// A ring perpendicular to the flow axis (x for the procedural jets, y for the CFD
+    /// phantoms).
     Ring,
     /// A Fibonacci lattice on a sphere.
     Sphere,
@@ -60,7 +66,8 @@ pub enum ModelArg {
 
 /// Generate a synthetic data set with known ground truth.
 ///
-/// A phantom (a turbulent jet, a starting jet, simple shapes or your own volume) is imaged by a
+/// A phantom (a turbulent jet, a starting jet, a CFD plume or jet, simple shapes or your own
+/// volume) is imaged by a
 /// camera rig (planar ring, arc or sphere) through a pinhole or a thin lens with a finite
 /// aperture, with sensor noise, and written as a scene that every other command reads. Start
 /// from a preset and override any setting; the resolved settings are saved next to the scene.
@@ -97,12 +104,16 @@ pub struct Args {
     #[arg(long, help_heading = "Phantom")]
     pub resolution: Option<usize>,
     /// Reconstruction box in mm as minx,miny,minz,maxx,maxy,maxz [default: the 40 mm cube
-    /// centred at the origin].
+    /// centred at the origin; the simulation domain for the CFD phantoms, which stay in it].
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, help_heading = "Phantom")]
     pub aabb: Option<Vec<f64>>,
-    /// Frame times t* = t U / D for jet-tr, comma separated [default: 14,15,16].
+    /// Frame times, comma separated: t* = t U / D for jet-tr [default: 14,15,16]; stored
+    /// solver steps (40, 50, 52, 60) for plume and cfd-jet [default: none, static].
     #[arg(long, value_delimiter = ',', help_heading = "Phantom")]
     pub times: Option<Vec<f64>>,
+    /// Solver step of a static plume or cfd-jet: 40, 50, 52 or 60 [default: 60].
+    #[arg(long, help_heading = "Phantom")]
+    pub cfd_step: Option<u32>,
 
     /// Camera layout [default: the preset's].
     #[arg(long, value_enum, help_heading = "Cameras")]
@@ -190,12 +201,24 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
             PhantomArg::Ball => PhantomKind::Ball,
             PhantomArg::Blobs => PhantomKind::Blobs,
             PhantomArg::BallAndBlobs => PhantomKind::BallAndBlobs,
+            PhantomArg::Plume => PhantomKind::Plume,
+            PhantomArg::CfdJet => PhantomKind::CfdJet,
         };
+        let was_cfd = s.phantom.kind.cfd_case().is_some();
+        let is_cfd = kind.cfd_case().is_some();
+        // t* and solver steps do not translate into each other.
+        if was_cfd != is_cfd || !kind.takes_times() {
+            s.times.clear();
+        }
         if kind.is_time_resolved() && s.times.is_empty() {
             s.times = vec![14.0, 15.0, 16.0];
         }
-        if !kind.is_time_resolved() {
-            s.times.clear();
+        if is_cfd && !was_cfd {
+            s.aabb = fluidnerf_synth::phantom::cfd::domain();
+            s.resolution = fluidnerf_synth::phantom::cfd::CELLS.into_iter().max().unwrap_or(1);
+        }
+        if let Layout::Ring { axis, .. } = &mut s.rig.layout {
+            *axis = kind.flow_axis();
         }
         s.phantom.kind = kind;
     }
@@ -220,6 +243,9 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
     if let Some(t) = &args.times {
         s.times = t.clone();
     }
+    if let Some(step) = args.cfd_step {
+        s.phantom.cfd_step = Some(step);
+    }
     let count = args.cameras;
     let current = s.rig.count();
     match (args.layout, &s.rig.layout) {
@@ -230,7 +256,8 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
             s.rig.subset = Subset::default();
         }
         (Some(LayoutArg::Ring), _) => {
-            s.rig.layout = Layout::Ring { count: current, arc_deg: 360.0, start_deg: 0.0 };
+            s.rig.layout =
+                Layout::Ring { count: current, arc_deg: 360.0, start_deg: 0.0, axis: s.phantom.kind.flow_axis() };
             s.rig.subset = Subset::default();
         }
     }
@@ -343,7 +370,8 @@ fn write_preview(path: &Path, syn: &Synthesis) -> anyhow::Result<()> {
     let z = Axis::Z.position_at(&truth.aabb, 0.5);
     let mut truth_panel = slice(truth, Axis::Z, z, "mm")?;
     if let Some(t) = time {
-        truth_panel.title = format!("truth, {}, t* = {t}", truth_panel.title);
+        let label = if syn.settings.phantom.kind.cfd_case().is_some() { "step" } else { "t*" };
+        truth_panel.title = format!("truth, {}, {label} = {t}", truth_panel.title);
     } else {
         truth_panel.title = format!("truth, {}", truth_panel.title);
     }
@@ -440,6 +468,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "seed": settings.seed,
         "intensity_scale": syn.intensity_scale,
         "counts": "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)",
+        "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
         "settings": settings,
         "stats": syn.stats,
         "seconds": elapsed,
@@ -463,7 +492,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dims[2],
         syn.truth[0].1.spacing().x,
         match syn.truth.len() {
+            1 if syn.truth[0].0.is_none() && settings.phantom.kind.cfd_case().is_some() => format!(
+                ", solver step {}",
+                settings.phantom.cfd_step.unwrap_or(fluidnerf_synth::phantom::cfd::DEFAULT_STEP)
+            ),
             1 if syn.truth[0].0.is_none() => String::new(),
+            n if settings.phantom.kind.cfd_case().is_some() => format!(", {n} solver steps {:?}", settings.times),
             n => format!(", {n} times t* = {:?}", settings.times),
         }
     );

@@ -192,12 +192,14 @@ pub fn render_field(
 mod tests {
     use super::*;
     use crate::phantom::{analytic_image, GaussianBlob, ShapeSum, UniformBall};
-    use crate::rig::{Layout, LensSettings, RigSettings};
+    use crate::rig::{Layout, LensSettings, RigSettings, RingAxis};
     use fluidnerf_core::glam::DVec3;
 
     fn cameras(px: u32) -> Vec<Camera> {
-        let rig =
-            RigSettings { layout: Layout::Ring { count: 5, arc_deg: 360.0, start_deg: 7.0 }, ..Default::default() };
+        let rig = RigSettings {
+            layout: Layout::Ring { count: 5, arc_deg: 360.0, start_deg: 7.0, axis: RingAxis::X },
+            ..Default::default()
+        };
         let lens = LensSettings { resolution: [px, px], ..Default::default() };
         rig.build(&lens, &Aabb::cube(DVec3::ZERO, 40.0), 0).expect("rig").into_iter().map(|c| c.camera).collect()
     }

@@ -284,13 +284,15 @@ mod tests {
     use super::*;
     use crate::image::pinhole::{render_volume, PinholeSettings};
     use crate::phantom::{GaussianBlob, Shape, ShapeSum};
-    use crate::rig::{Layout, LensSettings, RigSettings};
+    use crate::rig::{Layout, LensSettings, RigSettings, RingAxis};
     use fluidnerf_core::glam::DVec3;
     use fluidnerf_core::{Aabb, ThinLens};
 
     fn camera(px: u32, f_number: f64) -> Camera {
-        let rig =
-            RigSettings { layout: Layout::Ring { count: 3, arc_deg: 360.0, start_deg: 20.0 }, ..Default::default() };
+        let rig = RigSettings {
+            layout: Layout::Ring { count: 3, arc_deg: 360.0, start_deg: 20.0, axis: RingAxis::X },
+            ..Default::default()
+        };
         let lens = LensSettings { resolution: [px, px], f_number, ..Default::default() };
         rig.build(&lens, &Aabb::cube(DVec3::ZERO, 40.0), 0).expect("rig").swap_remove(1).camera
     }
@@ -336,8 +338,10 @@ mod tests {
         let aabb = Aabb::new(DVec3::new(-1.0, -40.0, -1.0), DVec3::new(1.0, 40.0, 1.0));
         let mut vol = Volume::zeros([21, 801, 21], aabb);
         let cam = {
-            let rig =
-                RigSettings { layout: Layout::Ring { count: 1, arc_deg: 360.0, start_deg: 0.0 }, ..Default::default() };
+            let rig = RigSettings {
+                layout: Layout::Ring { count: 1, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X },
+                ..Default::default()
+            };
             let lens =
                 LensSettings { resolution: [96, 96], pixel_pitch_mm: Some(0.02), f_number: 2.0, ..Default::default() };
             rig.build(&lens, &aabb, 0).expect("rig").swap_remove(0).camera

@@ -1,11 +1,16 @@
-//! Ground-truth fields: the turbulent [`Jet`], the starting jet [`StartingJet`] (`jet-tr`),
-//! analytic shapes with closed-form projections ([`UniformBall`], [`GaussianBlob`],
-//! [`ShapeSum`]) and any user volume.
+//! Ground-truth fields in two independent classes, plus test shapes and user volumes:
+//! - procedural: the turbulent [`Jet`] and the starting jet [`StartingJet`] (`jet-tr`), flowing
+//!   along +x and fitted to the box;
+//! - CFD: a buoyant plume and a forced round jet from an incompressible-flow solver
+//!   ([`CfdPhantom`], module [`cfd`]), rising along +y in their own simulation domain;
+//! - analytic shapes with closed-form projections ([`UniformBall`], [`GaussianBlob`],
+//!   [`ShapeSum`]) and any user volume.
 //!
 //! Every phantom implements [`fluidnerf_core::ScalarField`] in world coordinates (mm), so it
 //! feeds the reference renderer, voxelisation ([`fluidnerf_core::Volume::from_field`]) and tests
 //! alike. Phantoms are deterministic functions of their parameters and seed.
 
+pub mod cfd;
 mod jet;
 mod simple;
 mod starting_jet;
@@ -15,10 +20,12 @@ use fluidnerf_core::glam::Vec3;
 use fluidnerf_core::{Aabb, ScalarField, Volume};
 use serde::{Deserialize, Serialize};
 
+pub use cfd::{CfdCase, CfdPhantom};
 pub use jet::{Jet, JetParams};
 pub use simple::{analytic_image, GaussianBlob, LineIntegral, Shape, ShapeSum, UniformBall};
 pub use starting_jet::{StartingJet, StartingJetParams};
 
+use crate::rig::RingAxis;
 use crate::SynthError;
 
 /// Which phantom to generate.
@@ -35,14 +42,45 @@ pub enum PhantomKind {
     Blobs,
     /// A half-value ball plus Gaussian blobs ([`ShapeSum::ball_and_blobs`]).
     BallAndBlobs,
+    /// The CFD buoyant plume ([`CfdCase::Plume`]), rising along +y; static, or at the solver
+    /// steps given as times.
+    Plume,
+    /// The CFD forced round jet ([`CfdCase::Jet`]), along +y; static, or at the solver steps
+    /// given as times.
+    CfdJet,
     /// A user volume (`.npy`/`.vti`), loaded by the caller.
     Volume,
 }
 
 impl PhantomKind {
-    /// Whether the phantom changes with time (frames at several times).
+    /// Whether the phantom needs frame times (it has no static form).
     pub fn is_time_resolved(self) -> bool {
         matches!(self, PhantomKind::JetTr)
+    }
+
+    /// Whether the phantom accepts frame times: the time-resolved ones, and the CFD ones, whose
+    /// times are solver steps (without times they are static at `phantom.cfd_step`).
+    pub fn takes_times(self) -> bool {
+        self.is_time_resolved() || self.cfd_case().is_some()
+    }
+
+    /// The CFD flow of a CFD phantom.
+    pub fn cfd_case(self) -> Option<CfdCase> {
+        match self {
+            PhantomKind::Plume => Some(CfdCase::Plume),
+            PhantomKind::CfdJet => Some(CfdCase::Jet),
+            _ => None,
+        }
+    }
+
+    /// The world axis the flow runs along, which ring rigs go around: x for the procedural
+    /// phantoms, y for the CFD ones.
+    pub fn flow_axis(self) -> RingAxis {
+        if self.cfd_case().is_some() {
+            RingAxis::Y
+        } else {
+            RingAxis::X
+        }
     }
 }
 
@@ -58,6 +96,9 @@ pub struct PhantomSettings {
     pub blob_count: usize,
     /// The user volume for `volume` (recorded for reruns; the caller loads it).
     pub volume_path: Option<std::path::PathBuf>,
+    /// Solver step of a static `plume` or `cfd-jet` (one of [`cfd::STEPS`]). Default: the last
+    /// stored step, [`cfd::DEFAULT_STEP`].
+    pub cfd_step: Option<u32>,
 }
 
 impl Default for PhantomSettings {
@@ -68,6 +109,7 @@ impl Default for PhantomSettings {
             jet_tr: StartingJetParams::default(),
             blob_count: 5,
             volume_path: None,
+            cfd_step: None,
         }
     }
 }
@@ -80,6 +122,13 @@ impl PhantomSettings {
             PhantomKind::Blobs | PhantomKind::BallAndBlobs if self.blob_count == 0 => {
                 Err(SynthError::invalid("phantom.blob_count", "must be at least 1"))
             }
+            PhantomKind::Plume | PhantomKind::CfdJet => match self.cfd_step {
+                Some(s) if !cfd::STEPS.contains(&s) => Err(SynthError::invalid(
+                    "phantom.cfd_step",
+                    format!("no instant at solver step {s}; stored: {:?}", cfd::STEPS),
+                )),
+                _ => Ok(()),
+            },
             _ => Ok(()),
         }
     }
@@ -91,6 +140,7 @@ pub enum Phantom {
     Jet(Jet),
     StartingJet(StartingJet),
     Shapes(ShapeSum),
+    Cfd(CfdPhantom),
     Volume(Volume),
 }
 
@@ -110,14 +160,17 @@ impl Phantom {
             PhantomKind::Ball => Phantom::Shapes(ShapeSum::ball(aabb)),
             PhantomKind::Blobs => Phantom::Shapes(ShapeSum::blobs(aabb, settings.blob_count, seed)),
             PhantomKind::BallAndBlobs => Phantom::Shapes(ShapeSum::ball_and_blobs(aabb, settings.blob_count, seed)),
+            PhantomKind::Plume => Phantom::Cfd(CfdPhantom::new(CfdCase::Plume, settings.cfd_step)?),
+            PhantomKind::CfdJet => Phantom::Cfd(CfdPhantom::new(CfdCase::Jet, settings.cfd_step)?),
             PhantomKind::Volume => Phantom::Volume(
                 volume.ok_or_else(|| SynthError::invalid("phantom.kind", "`volume` needs a ground-truth volume"))?,
             ),
         })
     }
 
+    /// Whether the phantom changes with time.
     pub fn is_time_resolved(&self) -> bool {
-        matches!(self, Phantom::StartingJet(_))
+        matches!(self, Phantom::StartingJet(_) | Phantom::Cfd(_))
     }
 
     /// The closed-form projector, for analytic shapes.
@@ -135,6 +188,7 @@ impl ScalarField for Phantom {
             Phantom::Jet(f) => f.eval(points, time, out),
             Phantom::StartingJet(f) => f.eval(points, time, out),
             Phantom::Shapes(f) => f.eval(points, time, out),
+            Phantom::Cfd(f) => f.eval(points, time, out),
             Phantom::Volume(f) => f.eval(points, time, out),
         }
     }
