@@ -2,8 +2,10 @@
 //! MLP as in the dissertation, or a multiresolution grid encoding with a tiny MLP), trained so
 //! that line integrals rendered along camera rays match the measured pixels.
 
+pub mod batch;
 pub mod dense;
 pub mod encoding;
+pub mod engine;
 pub mod error;
 pub mod field;
 pub mod hashgrid;
@@ -19,6 +21,8 @@ pub mod trained;
 pub mod weights;
 pub mod window;
 
+pub use engine::cpu::CpuEngine;
+pub use engine::Engine;
 pub use error::NeuralError;
 pub use field::TrainableField;
 pub use hashgrid::{HashGridConfig, HashGridField};
