@@ -4,16 +4,25 @@
 //! the same 8 × 256 step in PyTorch-CPU (benches/pytorch_step.py) in the same run, and the
 //! measured FP32 FMA peak of the machine.
 //!
+//! `--method-only` times whole training iterations through `train::train` instead (ray
+//! batch, sampling, coarse pass, field, quadrature, loss, backward, Adam: the method driving
+//! the CPU engine) on a ball seen by 8 cameras, for the faithful network and the `fast` grid.
+//!
 //! Build, then run the executable directly (the target dir is shared):
 //!   cargo bench --no-run -p fluidnerf-neural --bench engine
-//!   target/release/deps/engine-<hash> [--quick] [--no-pytorch]
+//!   target/release/deps/engine-<hash> [--quick] [--no-pytorch] [--mlp-only | --grid-only | --method-only]
 //! Environment: FLUIDNERF_BENCH_PYTHON (default python3).
 #![allow(clippy::print_stdout, clippy::print_stderr)]
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
+use fluidnerf_core::{render_image, Aabb, Camera, Intrinsics, RenderSettings};
 use fluidnerf_neural::optim::{sum_gradients, Adam, AdamConfig};
+use fluidnerf_neural::train::{train, Learner, Prepared, Problem, StopRule, TrainConfig, View};
+use fluidnerf_neural::trained::NeuralConfig;
 use fluidnerf_neural::{HashGridConfig, HashGridField, MlpConfig, MlpField, TrainableField};
+use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
@@ -292,6 +301,10 @@ fn main() {
     let steps = if quick { 3 } else { 8 };
     println!("training-engine benchmark: {threads} threads, median of {steps} steps");
     println!("rates: wall clock | core-normalised (process CPU time / threads)");
+    if args.iter().any(|a| a == "--method-only") {
+        method_benches(steps);
+        return;
+    }
     if !grid_only {
         mlp_benches(65_536, steps, threads, no_torch);
     }
@@ -392,4 +405,97 @@ fn grid_benches(steps: usize) {
             }
         }
     }
+}
+
+/// 8 cameras on a half ring, 64² pixels each, looking at a ball of radius 0.6 (smooth edge) in
+/// a box of side 2: the images the method benchmarks train on.
+fn ball_problem() -> Problem {
+    let aabb = Aabb::cube(DVec3::ZERO, 2.0);
+    let ball = |p: Vec3, _t: f64| {
+        let r = (p.as_dvec3() - DVec3::new(0.1, -0.1, 0.05)).length();
+        (0.5 + 0.5 * (std::f64::consts::PI * ((r - 0.4) / 0.4).clamp(0.0, 1.0)).cos()) as f32
+    };
+    let px = 64u32;
+    let k = Intrinsics {
+        width: px,
+        height: px,
+        fx: px as f64 * 1.9,
+        fy: px as f64 * 1.9,
+        cx: (px as f64 - 1.0) / 2.0,
+        cy: (px as f64 - 1.0) / 2.0,
+        skew: 0.0,
+    };
+    let settings = RenderSettings { scale: 3.0, ..Default::default() };
+    let views = (0..8)
+        .map(|c| {
+            let a = std::f64::consts::PI * c as f64 / 8.0;
+            let camera = Camera::look_at(k, DVec3::new(0.0, 5.0 * a.cos(), 5.0 * a.sin()), DVec3::ZERO, DVec3::X);
+            let image = render_image(&ball, &camera, &aabb, &settings).expect("renders");
+            View { camera, image, time: 0.0 }
+        })
+        .collect();
+    Problem { aabb, intensity_scale: 3.0, views, holdout: Vec::new(), time_step: 1.0 }
+}
+
+/// Seconds per iteration of `train` over `iterations` iterations after one warm-up iteration:
+/// the median wall time and the mean core-normalised CPU time (the CPU clock ticks at 10 ms, too
+/// coarse for a median of short iterations); returns the timing and the field rows per iteration.
+fn time_iterations<F: TrainableField>(
+    prep: &Prepared,
+    field: F,
+    cfg: &TrainConfig,
+    iterations: usize,
+) -> (Timing, usize) {
+    let threads = rayon::current_num_threads();
+    let cfg = TrainConfig {
+        max_iterations: iterations + 1,
+        validate_every: 0,
+        stop: StopRule { window: 0, ..StopRule::default() },
+        ..cfg.clone()
+    };
+    let mut learner = Learner::fresh(field, prep, &cfg);
+    let (mut times, mut cpu, mut rows) = (Vec::new(), Vec::new(), 0);
+    let mut last = (Instant::now(), process_cpu_s());
+    train(prep, &mut learner, &cfg, 0, |s| {
+        let now = (Instant::now(), process_cpu_s());
+        if s.iteration > 1 {
+            times.push((now.0 - last.0).as_secs_f64());
+            cpu.push((now.1 - last.1) / threads as f64);
+        }
+        rows = s.samples;
+        last = now;
+        ControlFlow::Continue(())
+    })
+    .expect("trains");
+    let cpu_s = cpu.iter().sum::<f64>() / cpu.len() as f64;
+    (Timing { wall_s: median(times), cpu_s }, rows)
+}
+
+fn method_benches(steps: usize) {
+    let problem = ball_problem();
+    let faithful = NeuralConfig::preset("ch7").expect("preset").train;
+    let faithful = TrainConfig { rays_per_image: 64, ..faithful };
+    let prep = Prepared::new(&problem, &faithful).expect("prepares");
+    let mlp = MlpField::new(&MlpConfig::table_5_1(), 3, 0).expect("default config is valid");
+    let (t, rows) = time_iterations(&prep, mlp, &faithful, steps);
+    println!(
+        "method, 8 x 256 relu (ch7: 64 + 64 samples, 8 x 64 rays, chunk 256): {:.3} | {:.3} s/iteration, {:.0} | {:.0} rows/s",
+        t.wall_s,
+        t.cpu_s,
+        rows as f64 / t.wall_s,
+        rows as f64 / t.cpu_s
+    );
+    let fast = NeuralConfig::preset("fast").expect("preset");
+    let fast_train = TrainConfig { rays_per_image: 2048, ..fast.train };
+    let prep = Prepared::new(&problem, &fast_train).expect("prepares");
+    let fluidnerf_neural::trained::FieldConfig::HashGrid(grid) = fast.field else { unreachable!("fast is a grid") };
+    let field = HashGridField::new(&grid, 3, 0).expect("preset is valid");
+    let (t, rows) = time_iterations(&prep, field, &fast_train, 4 * steps);
+    println!(
+        "method, fast grid (48 samples, skipping, 8 x 2048 rays, chunk 8192): {:.4} | {:.4} s/iteration, {:.2} | {:.2} M rows/s",
+        t.wall_s,
+        t.cpu_s,
+        rows as f64 / t.wall_s / 1e6,
+        rows as f64 / t.cpu_s / 1e6
+    );
 }

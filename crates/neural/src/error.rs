@@ -18,6 +18,13 @@ pub enum NeuralError {
     /// A checkpoint file is malformed or does not match the field it is loaded into.
     #[error("checkpoint {}: {why}", path.display())]
     Checkpoint { path: PathBuf, why: String },
+    /// Training produced a non-finite loss. It is caught before the optimiser step, so the
+    /// parameters and optimiser state are those after the previous iteration.
+    #[error(
+        "training diverged: the loss of iteration {iteration} is {loss}; the parameters and optimiser state \
+         are kept as they were before that iteration (a lower learning rate may help)"
+    )]
+    Diverged { iteration: usize, loss: f64 },
 }
 
 impl NeuralError {

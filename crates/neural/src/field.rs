@@ -1,7 +1,9 @@
-//! The boundary between the method (ray sampling, rendering, loss, training loop) and the
-//! field representation (encoding + network). The method only ever talks to a
-//! [`TrainableField`]; a representation only ever sees batches of points. A GPU backend adds
-//! representations (and a batched driver) without touching the method code.
+//! The boundary between the CPU engine (ray sampling, rendering, loss, backward; see
+//! [`crate::engine::cpu`]) and the field representation (encoding + network). The engine only
+//! ever talks to a [`TrainableField`]; a representation only ever sees batches of points. A
+//! new representation implements this trait; a GPU backend implements
+//! [`crate::engine::Engine`] for existing representations (their configuration and their
+//! parameters as [`TrainableField::tensors`] lays them out), running kernels of its own.
 //!
 //! # Contract
 //! - Inputs are row-major `n × input_dim()` f32: box-normalised coordinates in `[0, 1]³`

@@ -9,8 +9,8 @@
 //!   integer number of frames.
 //! - One iteration = `N_pix/img` pixels from every image of ONE time step, cycling through the
 //!   time steps ([`crate::train::Batching::OneTimeStep`]); everything else (sampling,
-//!   rendering, loss, Adam, stopping rule, checkpoints) is the static engine of
-//!   [`crate::train`].
+//!   rendering, loss, Adam, stopping rule, checkpoints) is the static method of
+//!   [`crate::train`] on the CPU engine ([`crate::engine::cpu`]).
 //! - Presets ([`temporal_preset`]): `tr-faithful` (Table 5.2, with `L_t = 1` as the results of
 //!   chapter 7.2 use), `tr-table-5.2` (literally `L_t = 0`), `tr-experimental` (Table 8.4),
 //!   `tr-fast` (a space–time hash grid with a tiny MLP), `tr-small` (a machine-sized MLP for

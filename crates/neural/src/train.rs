@@ -1,21 +1,17 @@
 //! The FluidNeRF training loop (dissertation §5.1.4–5.1.5), generic over the field
 //! representation.
 //!
-//! # One iteration
-//! `N_pix/img` random pixels (with replacement) from **every** training image (§5.1.5), split
-//! into chunks of rays. Each thread takes a fixed share of the chunks (chunk `c` goes to thread
-//! `c mod T`, so results do not depend on scheduling) and, fused per chunk without
-//! materialising per-step tensors:
-//! 1. stratified samples on each ray (Eq. 5.1);
-//! 2. with `N_f > 0`, the field evaluated at them without gradients, and `N_f` feature samples
-//!    from `|dE/ds|` (see [`crate::sampling`]), merged;
-//! 3. `field.forward` at all samples (skipping empty cells, see [`crate::occupancy`]);
-//! 4. quadrature (Eq. 5.4), MSE against the measured pixels (Eq. 5.5), and the exact backward
-//!    `∂L/∂E_j` ([`crate::render`]);
-//! 5. `field.backward` into the thread's own gradient buffer.
-//!
-//! The gradient buffers are summed and one Adam step is taken with the learning rate of the
-//! schedule `lr(i) = lr₀ (lr₁ / lr₀)^{i / N_decay}` (5e-4 → 5e-5 at 25 000 iterations).
+//! # Method and engine
+//! This module is the method: settings ([`TrainConfig`]), the prepared problem ([`Prepared`]:
+//! cached rays, normalised targets, occupancy), the training state ([`Learner`]), and the loop
+//! ([`train_with_engine`]) that, per iteration, draws the ray batch
+//! ([`crate::batch::training_batch`]: `N_pix/img` random pixels with replacement from every
+//! training image, §5.1.5), asks an [`Engine`] for its loss and gradient, checks that the loss
+//! is finite, has the engine take one Adam step with the learning rate of the schedule
+//! `lr(i) = lr₀ (lr₁ / lr₀)^{i / N_decay}` (5e-4 → 5e-5 at 25 000 iterations), evaluates the
+//! held-out views, reports and applies the stopping rule. Sampling, field evaluation,
+//! quadrature, loss and backward are the engine's ([`crate::engine`]; [`train`] uses the fused
+//! CPU engine [`CpuEngine`]).
 //!
 //! # Normalisation
 //! Pixels are divided by `image_scale` (the largest training pixel unless set), so targets are
@@ -30,23 +26,25 @@
 //! [`StopRule::window`] iterations, at `max_iterations`, at the wall-time budget, or when the
 //! callback breaks.
 //!
-//! Determinism: all randomness comes from ChaCha8 streams keyed by (seed, iteration, chunk), so
-//! a run is reproducible for a given thread count, and resuming at iteration `k` continues
-//! exactly as an uninterrupted run would (given the optimiser state).
+//! Determinism: all randomness comes from ChaCha8 streams keyed by (seed, iteration, chunk)
+//! ([`crate::batch`]), so a run is reproducible for a given engine and thread count, and
+//! resuming at iteration `k` continues exactly as an uninterrupted run would (given the
+//! optimiser state).
 
 use std::ops::ControlFlow;
 use std::time::Instant;
 
 use fluidnerf_core::{Aabb, Camera, Image};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::batch::{holdout_batch, training_batch, view_batch, RayBatch};
+use crate::engine::cpu::CpuEngine;
+use crate::engine::{BatchLoss, Engine};
 use crate::occupancy::{OccupancyConfig, OccupancyGrid, OccupancyRecord};
-use crate::optim::{sum_gradients, Adam, AdamConfig, LrSchedule};
-use crate::render::{mse_term, quadrature_weights, render, Quadrature};
-use crate::sampling::{feature_samples, merge_sorted, stratified, ImageRays};
+use crate::optim::{Adam, AdamConfig, LrSchedule};
+use crate::render::Quadrature;
+use crate::sampling::ImageRays;
 use crate::{NeuralError, TrainableField};
 
 /// The stopping rule of §5.1.5.
@@ -226,11 +224,29 @@ pub struct Prepared {
     intensity_length: f64,
 }
 
+/// One prepared view: its cached rays, their normalised target pixels and its frame time.
 #[derive(Debug)]
-struct PreparedView {
-    rays: ImageRays,
-    targets: Vec<f32>,
-    time: f32,
+pub struct PreparedView {
+    pub(crate) rays: ImageRays,
+    pub(crate) targets: Vec<f32>,
+    pub(crate) time: f32,
+}
+
+impl PreparedView {
+    /// The kept rays (geometry in box-normalised and world units, see [`ImageRays`]).
+    pub fn rays(&self) -> &ImageRays {
+        &self.rays
+    }
+
+    /// Per kept ray, the measured pixel divided by [`Prepared::image_scale`].
+    pub fn targets(&self) -> &[f32] {
+        &self.targets
+    }
+
+    /// Frame time `t' = t / Δt`.
+    pub fn time(&self) -> f32 {
+        self.time
+    }
 }
 
 impl Prepared {
@@ -340,6 +356,33 @@ impl Prepared {
     pub fn occupancy(&self) -> Option<&OccupancyGrid> {
         self.occupancy.as_ref()
     }
+
+    /// The training or held-out views, as [`crate::batch::RayBatch`]es index them.
+    pub fn views(&self, split: Split) -> &[PreparedView] {
+        match split {
+            Split::Train => &self.train,
+            Split::Holdout => &self.holdout,
+        }
+    }
+
+    /// `1 / L`, `L` the longest box side: the quadrature's distances are `s / L`.
+    pub fn length_scale(&self) -> f32 {
+        self.length_scale
+    }
+
+    /// The quadrature options (end pieces).
+    pub fn quadrature(&self) -> Quadrature {
+        self.quad
+    }
+
+    /// The distinct frame times `t'` of the training views that see the box, increasing:
+    /// [`Batching::OneTimeStep`] cycles through them.
+    pub fn time_steps(&self) -> Vec<f32> {
+        let mut steps: Vec<f32> = self.train.iter().filter(|v| !v.rays.is_empty()).map(|v| v.time).collect();
+        steps.sort_by(f32::total_cmp);
+        steps.dedup();
+        steps
+    }
 }
 
 /// A field being trained and everything needed to continue: optimiser state, iteration count,
@@ -430,220 +473,6 @@ pub struct TrainReport {
     pub samples_per_second: f64,
 }
 
-/// Per-thread scratch, reused across chunks and iterations.
-struct Worker<T> {
-    tape: T,
-    grads: Vec<f32>,
-    inputs: Vec<f32>,
-    active: Vec<u32>,
-    e_active: Vec<f32>,
-    d_active: Vec<f32>,
-    s_coarse: Vec<f32>,
-    e_coarse: Vec<f32>,
-    s_fine: Vec<f32>,
-    s_all: Vec<f32>,
-    e_all: Vec<f32>,
-    w: Vec<f32>,
-    loss: f64,
-    samples: usize,
-}
-
-fn stream_seed(seed: u64, iteration: usize, chunk: usize) -> u64 {
-    // SplitMix64 finaliser over the three keys.
-    let mut z = seed
-        ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ (chunk as u64).wrapping_mul(0xD1B5_4A32_D192_ED03);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// Renders the rays `batch` (view, ray) of `views` and, when `targets` is true, accumulates
-/// the loss over `n_pix` pixels and its parameter gradient into the worker.
-fn process_chunk<F: TrainableField>(
-    field: &F,
-    prep: &Prepared,
-    views: &[PreparedView],
-    cfg: &TrainConfig,
-    batch: &[(u32, u32)],
-    n_pix: usize,
-    rng: &mut ChaCha8Rng,
-    wk: &mut Worker<F::Tape>,
-    with_grad: bool,
-) -> Vec<f32> {
-    let (nc, nf) = (cfg.coarse_samples, cfg.fine_samples);
-    let nt = nc + nf;
-    let dim = field.input_dim();
-    let nr = batch.len();
-    wk.s_coarse.resize(nr * nc, 0.0);
-    wk.s_all.resize(nr * nt, 0.0);
-    wk.e_all.resize(nr * nt, 0.0);
-    wk.w.resize(nt, 0.0);
-    let occ = prep.occupancy.as_ref();
-    // Gathers the active samples of `s` (n per ray) into `inputs`, remembering their index.
-    let gather = |s: &[f32], n: usize, inputs: &mut Vec<f32>, active: &mut Vec<u32>| {
-        inputs.clear();
-        active.clear();
-        for (r, &(v, ray)) in batch.iter().enumerate() {
-            let pv = &views[v as usize];
-            for q in 0..n {
-                let u = pv.rays.point_unit(ray as usize, s[r * n + q]);
-                if occ.is_some_and(|g| !g.is_occupied(u)) {
-                    continue;
-                }
-                inputs.extend_from_slice(&u);
-                if dim == 4 {
-                    inputs.push(pv.time);
-                }
-                active.push((r * n + q) as u32);
-            }
-        }
-    };
-    for (r, &(v, ray)) in batch.iter().enumerate() {
-        let rays = &views[v as usize].rays;
-        let (near, far) = (rays.near[ray as usize], rays.far[ray as usize]);
-        stratified(near, far, rng, &mut wk.s_coarse[r * nc..(r + 1) * nc]);
-    }
-    if nf > 0 {
-        gather(&wk.s_coarse, nc, &mut wk.inputs, &mut wk.active);
-        wk.e_active.resize(wk.active.len(), 0.0);
-        if !wk.active.is_empty() {
-            field.eval(&wk.inputs, &mut wk.e_active, &mut wk.tape);
-        }
-        wk.e_coarse.clear();
-        wk.e_coarse.resize(nr * nc, 0.0);
-        for (&a, &e) in wk.active.iter().zip(&wk.e_active) {
-            wk.e_coarse[a as usize] = e;
-        }
-        wk.s_fine.resize(nf, 0.0);
-        for r in 0..nr {
-            let sc = &wk.s_coarse[r * nc..(r + 1) * nc];
-            feature_samples(sc, &wk.e_coarse[r * nc..(r + 1) * nc], rng, &mut wk.s_fine);
-            merge_sorted(sc, &wk.s_fine, &mut wk.s_all[r * nt..(r + 1) * nt]);
-        }
-    } else {
-        wk.s_all.copy_from_slice(&wk.s_coarse);
-    }
-    gather(&wk.s_all, nt, &mut wk.inputs, &mut wk.active);
-    wk.e_active.resize(wk.active.len(), 0.0);
-    if !wk.active.is_empty() {
-        if with_grad {
-            field.forward(&wk.inputs, &mut wk.e_active, &mut wk.tape);
-        } else {
-            field.eval(&wk.inputs, &mut wk.e_active, &mut wk.tape);
-        }
-    }
-    wk.samples += wk.active.len();
-    wk.e_all.fill(0.0);
-    for (&a, &e) in wk.active.iter().zip(&wk.e_active) {
-        wk.e_all[a as usize] = e;
-    }
-    // Render, loss, and ∂L/∂E per sample (stored in e_all's place once a ray is rendered).
-    let mut rendered = Vec::with_capacity(if with_grad { 0 } else { nr });
-    for (r, &(v, ray)) in batch.iter().enumerate() {
-        let pv = &views[v as usize];
-        let ray = ray as usize;
-        let s = &wk.s_all[r * nt..(r + 1) * nt];
-        quadrature_weights(
-            s,
-            pv.rays.near[ray],
-            pv.rays.far[ray],
-            &pv.rays.emission,
-            &prep.quad,
-            prep.length_scale,
-            &mut wk.w,
-        );
-        let e = &mut wk.e_all[r * nt..(r + 1) * nt];
-        let pixel = render(&wk.w, e);
-        let (l, d_pixel) = mse_term(pixel, pv.targets[ray], n_pix);
-        wk.loss += l as f64;
-        if with_grad {
-            for (ej, &wj) in e.iter_mut().zip(&wk.w) {
-                *ej = d_pixel * wj;
-            }
-        } else {
-            rendered.push(pixel);
-        }
-    }
-    if with_grad && !wk.active.is_empty() {
-        wk.d_active.clear();
-        wk.d_active.extend(wk.active.iter().map(|&a| wk.e_all[a as usize]));
-        field.backward(&mut wk.tape, &wk.d_active, &mut wk.grads);
-    }
-    rendered
-}
-
-fn new_worker<F: TrainableField>(field: &F, with_grads: bool) -> Worker<F::Tape> {
-    Worker {
-        tape: field.new_tape(),
-        grads: if with_grads { vec![0.0; field.num_params()] } else { Vec::new() },
-        inputs: Vec::new(),
-        active: Vec::new(),
-        e_active: Vec::new(),
-        d_active: Vec::new(),
-        s_coarse: Vec::new(),
-        e_coarse: Vec::new(),
-        s_fine: Vec::new(),
-        s_all: Vec::new(),
-        e_all: Vec::new(),
-        w: Vec::new(),
-        loss: 0.0,
-        samples: 0,
-    }
-}
-
-/// Runs `batch` over the workers (chunk `c` on worker `c mod T`); returns (loss, samples).
-fn run_batch<F: TrainableField>(
-    field: &F,
-    prep: &Prepared,
-    views: &[PreparedView],
-    cfg: &TrainConfig,
-    workers: &mut [Worker<F::Tape>],
-    batch: &[(u32, u32)],
-    seed: u64,
-    iteration: usize,
-    with_grad: bool,
-) -> (f64, usize) {
-    let rays_per_chunk = (cfg.chunk_samples / (cfg.coarse_samples + cfg.fine_samples)).max(1);
-    let chunks: Vec<&[(u32, u32)]> = batch.chunks(rays_per_chunk).collect();
-    let nw = workers.len();
-    let n_pix = batch.len();
-    workers.par_iter_mut().enumerate().for_each(|(t, wk)| {
-        wk.loss = 0.0;
-        wk.samples = 0;
-        for c in (t..chunks.len()).step_by(nw) {
-            let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed, iteration, c));
-            process_chunk(field, prep, views, cfg, chunks[c], n_pix, &mut rng, wk, with_grad);
-        }
-    });
-    (workers.iter().map(|w| w.loss).sum(), workers.iter().map(|w| w.samples).sum())
-}
-
-/// Mean squared error over a fixed subset of the held-out pixels (normalised units), or None
-/// without held-out views.
-fn holdout_mse<F: TrainableField>(
-    field: &F,
-    prep: &Prepared,
-    cfg: &TrainConfig,
-    workers: &mut [Worker<F::Tape>],
-    seed: u64,
-) -> Option<f32> {
-    let total: usize = prep.holdout.iter().map(|v| v.rays.len()).sum();
-    if total == 0 || cfg.validate_pixels == 0 {
-        return None;
-    }
-    let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed ^ 0x5EED, usize::MAX, 0));
-    let per_view = cfg.validate_pixels.div_ceil(prep.holdout.len());
-    let mut batch = Vec::new();
-    for (v, pv) in prep.holdout.iter().enumerate() {
-        for _ in 0..per_view.min(pv.rays.len()) {
-            batch.push((v as u32, rng.random_range(0..pv.rays.len()) as u32));
-        }
-    }
-    let (loss, _) = run_batch(field, prep, &prep.holdout, cfg, workers, &batch, seed ^ 0x5EED, usize::MAX, false);
-    Some(loss as f32)
-}
-
 /// Which views of a [`Prepared`] problem.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Split {
@@ -662,105 +491,89 @@ pub fn render_view<F: TrainableField>(
     index: usize,
     seed: u64,
 ) -> Vec<(u32, f32, f32)> {
-    let views = match split {
-        Split::Train => &prep.train,
-        Split::Holdout => &prep.holdout,
-    };
-    let pv = &views[index];
-    let batch: Vec<(u32, u32)> = (0..pv.rays.len() as u32).map(|r| (index as u32, r)).collect();
-    let rays_per_chunk = (cfg.chunk_samples / (cfg.coarse_samples + cfg.fine_samples)).max(1);
-    let out: Vec<Vec<f32>> = batch
-        .par_chunks(rays_per_chunk)
-        .enumerate()
-        .map_init(
-            || new_worker(field, false),
-            |wk, (c, chunk)| {
-                let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed, usize::MAX - 1, c));
-                process_chunk(field, prep, views, cfg, chunk, 1, &mut rng, wk, false)
-            },
-        )
-        .collect();
-    out.into_iter()
-        .flatten()
-        .zip(&batch)
+    let batch = view_batch(prep, split, index, seed);
+    let mut engine = CpuEngine::new(field, rayon::current_num_threads());
+    let mut pixels = Vec::new();
+    engine.render(field, prep, cfg, &batch, &mut pixels);
+    let pv = &prep.views(split)[index];
+    pixels
+        .into_iter()
+        .zip(&batch.rays)
         .map(|(i, &(_, r))| (pv.rays.pixel[r as usize], i, pv.targets[r as usize]))
         .collect()
 }
 
-/// Trains `learner.field` on `prep` from `learner.iteration` on (Eq. 5.1–5.5, §5.1.5), calling
+/// Trains `learner.field` on `prep` from `learner.iteration` on (Eq. 5.1–5.5, §5.1.5) with the
+/// CPU engine ([`CpuEngine`], one worker per thread of the current rayon pool), calling
 /// `on_iter` after every iteration; breaking from it stops training with
-/// [`StopReason::Interrupted`]. `seed` keys every random choice.
+/// [`StopReason::Interrupted`]. `seed` keys every random choice. See [`train_with_engine`].
 pub fn train<F: TrainableField>(
     prep: &Prepared,
     learner: &mut Learner<F>,
     cfg: &TrainConfig,
     seed: u64,
+    on_iter: impl FnMut(&TrainState<F>) -> ControlFlow<()>,
+) -> Result<TrainReport, NeuralError> {
+    let mut engine = CpuEngine::new(&learner.field, rayon::current_num_threads());
+    train_with_engine(prep, learner, cfg, seed, &mut engine, on_iter)
+}
+
+/// The training loop of [`train`] over any [`Engine`]: per iteration the batch
+/// ([`training_batch`]), the engine's loss and gradient, the check that the loss is finite,
+/// the engine's Adam step at `cfg.schedule.lr(i)`, the held-out MSE every `validate_every`
+/// iterations ([`holdout_batch`], [`Engine::render`]), the callback and the stopping rule.
+///
+/// A non-finite loss stops training with [`NeuralError::Diverged`] before the optimiser step:
+/// `learner` (parameters, moments, iteration, histories) is left as it was after the last
+/// finite iteration.
+pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
+    prep: &Prepared,
+    learner: &mut Learner<F>,
+    cfg: &TrainConfig,
+    seed: u64,
+    engine: &mut E,
     mut on_iter: impl FnMut(&TrainState<F>) -> ControlFlow<()>,
 ) -> Result<TrainReport, NeuralError> {
     cfg.validate()?;
-    let input_dim = learner.field.input_dim();
-    if input_dim != 3 && input_dim != 4 {
-        return Err(NeuralError::invalid("field", format!("input dimension must be 3 or 4, got {input_dim}")));
-    }
-    if learner.adam.m.len() != learner.field.num_params() {
-        return Err(NeuralError::invalid("optimiser state", "does not match the field's parameter count"));
-    }
-    let nthreads = rayon::current_num_threads().max(1);
-    let mut workers: Vec<Worker<F::Tape>> = (0..nthreads).map(|_| new_worker(&learner.field, true)).collect();
-    let mut eval_workers: Vec<Worker<F::Tape>> = Vec::new();
+    engine.load_state(&learner.field, &learner.adam)?;
     let start_iteration = learner.iteration;
     let mut total_samples = 0usize;
     let mut loop_time = 0.0f64;
-    let mut batch: Vec<(u32, u32)> = Vec::with_capacity(prep.train.len() * cfg.rays_per_image);
+    let mut batch = RayBatch::new(Split::Train, seed, 0);
+    batch.rays.reserve(prep.train.len() * cfg.rays_per_image);
+    let holdout = holdout_batch(prep, cfg, seed);
+    let mut holdout_pixels = Vec::new();
     let smoothing = cfg.stop.smoothing.max(1);
-    let mut grads = vec![0.0f32; learner.field.num_params()];
     let mut stop_reason = StopReason::MaxIterations;
-    let steps = time_steps(prep);
+    let steps = prep.time_steps();
     while learner.iteration < cfg.max_iterations {
         let t0 = Instant::now();
         let it = learner.iteration;
-        let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed, it, usize::MAX));
-        let step = (cfg.batching == Batching::OneTimeStep).then(|| steps[it % steps.len()]);
-        batch.clear();
-        for (v, pv) in prep.train.iter().enumerate() {
-            if pv.rays.is_empty() || step.is_some_and(|t| pv.time != t) {
-                continue;
-            }
-            for _ in 0..cfg.rays_per_image {
-                batch.push((v as u32, rng.random_range(0..pv.rays.len()) as u32));
-            }
+        training_batch(prep, cfg, seed, it, &steps, &mut batch);
+        let BatchLoss { loss, samples } = engine.loss_and_gradient(&learner.field, prep, cfg, &batch);
+        if !loss.is_finite() {
+            engine.save_state(&mut learner.field, &mut learner.adam);
+            return Err(NeuralError::Diverged { iteration: it, loss });
         }
-        let (loss, samples) = run_batch(&learner.field, prep, &prep.train, cfg, &mut workers, &batch, seed, it, true);
         total_samples += samples;
-        let mut per_thread: Vec<Vec<f32>> = workers.iter_mut().map(|w| std::mem::take(&mut w.grads)).collect();
-        sum_gradients(&mut per_thread, &mut grads);
-        for (w, g) in workers.iter_mut().zip(per_thread) {
-            w.grads = g;
-        }
         let lr = cfg.schedule.lr(it as u64);
         learner.adam.config = cfg.adam;
-        learner.adam.step(learner.field.params_mut(), &grads, lr);
-        if !loss.is_finite() {
-            return Err(NeuralError::invalid("training", format!("the loss became {loss} at iteration {it}")));
-        }
+        engine.apply_gradient(&mut learner.field, &mut learner.adam, lr);
         learner.losses.push(loss as f32);
         learner.iteration += 1;
-        let holdout = if cfg.validate_every > 0 && learner.iteration % cfg.validate_every == 0 {
-            if eval_workers.is_empty() {
-                eval_workers = (0..nthreads).map(|_| new_worker(&learner.field, false)).collect();
+        let holdout = match &holdout {
+            Some(h) if cfg.validate_every > 0 && learner.iteration % cfg.validate_every == 0 => {
+                let mse = engine.render(&learner.field, prep, cfg, h, &mut holdout_pixels).loss as f32;
+                learner.holdout_losses.push((learner.iteration, mse));
+                Some(mse)
             }
-            let h = holdout_mse(&learner.field, prep, cfg, &mut eval_workers, seed);
-            if let Some(h) = h {
-                learner.holdout_losses.push((learner.iteration, h));
-            }
-            h
-        } else {
-            None
+            _ => None,
         };
         let dt = t0.elapsed().as_secs_f64();
         loop_time += dt;
         learner.train_time_s += dt;
         let smoothed = running_mean(&learner.losses, smoothing);
+        engine.save_state(&mut learner.field, &mut learner.adam);
         let state = TrainState {
             field: &learner.field,
             learner,
@@ -786,6 +599,7 @@ pub fn train<F: TrainableField>(
             break;
         }
     }
+    engine.save_state(&mut learner.field, &mut learner.adam);
     let done = learner.iteration - start_iteration;
     Ok(TrainReport {
         stop_reason,
@@ -796,14 +610,6 @@ pub fn train<F: TrainableField>(
         seconds_per_iteration: if done > 0 { loop_time / done as f64 } else { 0.0 },
         samples_per_second: if loop_time > 0.0 { total_samples as f64 / loop_time } else { 0.0 },
     })
-}
-
-/// The distinct frame times `t'` of the training views that see the box, increasing.
-fn time_steps(prep: &Prepared) -> Vec<f32> {
-    let mut steps: Vec<f32> = prep.train.iter().filter(|v| !v.rays.is_empty()).map(|v| v.time).collect();
-    steps.sort_by(f32::total_cmp);
-    steps.dedup();
-    steps
 }
 
 /// Mean of the last `n` values (of all, if fewer).
