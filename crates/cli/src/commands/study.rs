@@ -108,9 +108,9 @@ pub struct Args {
     /// Iteration cap of every method [default: each method's own].
     #[arg(long)]
     pub max_iterations: Option<usize>,
-    /// Seconds of work per run [default: none].
-    #[arg(long)]
-    pub time_budget: Option<f64>,
+    /// Seconds of work per run, the same for every method [default: 60].
+    #[arg(long, default_value_t = 60.0)]
+    pub time_budget: f64,
     /// Seed of the scenes and the runs.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -190,7 +190,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
                 StopArg::HeldOut => StopRule::HeldOut,
             },
             max_iterations: args.max_iterations.or(smoke.then_some(20)),
-            time_budget_s: args.time_budget,
+            time_budget_s: Some(args.time_budget),
             ..StoppingPolicy::default()
         },
         seed: args.seed,
