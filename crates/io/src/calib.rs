@@ -105,7 +105,7 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let is_json =
         path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) || text.trim_start().starts_with('{');
     let value = if is_json {
-        serde_json::from_str::<Value>(&text).map_err(|source| IoError::Json { path: path.to_path_buf(), source })?
+        serde_json::from_str::<Value>(&text).map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
     } else {
         // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
         let body: String = text.lines().filter(|l| !l.starts_with('%')).map(|l| format!("{l}\n")).collect();
@@ -369,7 +369,7 @@ pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoE
             let mut parts = Vec::with_capacity(entries.len());
             for (k, v) in entries {
                 let v = serde_json::to_string_pretty(&v)
-                    .map_err(|source| IoError::Json { path: path.to_path_buf(), source })?
+                    .map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
                     .replace('\n', "\n    ");
                 parts.push(format!("    {}: {v}", Value::String(k)));
             }

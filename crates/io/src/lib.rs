@@ -49,7 +49,7 @@ pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
         builder.permissions(std::fs::Permissions::from_mode(0o644));
     }
     let tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
-    let io_err = |e| IoError::Io { path: path.to_path_buf(), source: e };
+    let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
     {
         let mut w = BufWriter::new(tmp.as_file());
         write(&mut w).map_err(io_err)?;
