@@ -252,3 +252,53 @@ fn transforms_json_without_a_box_gets_an_estimated_one() {
     assert_eq!(load_scene(&out).expect("loads").aabb.max, DVec3::splat(3.0));
     assert!(stderr(&o).contains("--linearisation srgb"), "8-bit images without a choice are warned about");
 }
+
+/// A binary COLMAP model whose image names say `.jpg` while the folder holds `.png` files.
+#[test]
+fn colmap_binary_model_with_other_extensions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model = dir.path().join("sparse/0");
+    let cams: Vec<(String, Camera)> = rig().into_iter().map(|(n, c)| (format!("{n}.jpg"), c)).collect();
+    std::fs::create_dir_all(&model).expect("mkdir");
+    fluidnerf_io::calib::write_colmap_bin(&model, &cams).expect("writes model");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--colmap",
+        s(&model),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 3);
+    for (f, (_, c)) in scene.frames.iter().zip(&cams) {
+        assert!(f.file_path.to_string_lossy().ends_with(".png"), "{}", f.file_path.display());
+        assert_eq!(f.camera.intrinsics, c.intrinsics);
+        assert!((f.camera.centre() - c.centre()).length() < 1e-9);
+    }
+    // An image missing under every extension is named.
+    std::fs::remove_file(images.join("cam1.png")).expect("removes");
+    let o = fluidnerf(&[
+        "import",
+        "--colmap",
+        s(&model),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+        "--force",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("cam1.jpg") && stderr(&o).contains("other extensions"), "{}", stderr(&o));
+}
