@@ -1,5 +1,5 @@
 //! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML or JSON) and
-//! COLMAP text models; and writing OpenCV files back.
+//! COLMAP models (text or binary); and writing both back.
 //!
 //! # OpenCV (`cv::FileStorage`, YAML `%YAML:1.0` with `!!opencv-matrix`, or JSON)
 //! Per camera:
@@ -12,11 +12,18 @@
 //! - `image_width`, `image_height` (integers).
 //!
 //! Matrices are `!!opencv-matrix`/`opencv-matrix` nodes (`rows cols dt data`) or plain lists.
+//! Key names are matched ignoring letter case, so the files of OpenCV's calibration sample
+//! (`Camera_Matrix`, `Distortion_Coefficients`, `image_Width`, `image_Height`, with
+//! `Avg_Reprojection_Error`, `Extrinsic_Parameters` (the board's poses) and the like, which are
+//! listed once at info level and not used) read as they are; such a file has no camera pose, and
+//! the error says so, naming the camera and the nodes it looked for.
 //!
 //! **Several cameras in one file**: every key carries the suffix `_<name>`
 //! (`camera_matrix_cam0`, `distortion_coefficients_cam0`, `rvec_cam0`, `tvec_cam0`,
-//! `image_width_cam0`, ...). A file with unsuffixed keys holds one camera named after the file
-//! stem (`cam3.yml` → `cam3`); a file may not mix both. A folder is read as all its `.yml`,
+//! `image_width_cam0`, ...), or each camera is a mapping named after it
+//! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`). A file with unsuffixed keys
+//! holds one camera named after the file stem (`cam3.yml` → `cam3`); a file may not mix
+//! unsuffixed and suffixed keys. A folder is read as all its `.yml`,
 //! `.yaml` and `.json` files in name order; camera names must be unique. [`write_opencv`]
 //! writes unsuffixed keys when it writes a single camera whose name is the file stem, and
 //! suffixed keys otherwise, so reading gives back the same names.
@@ -156,8 +163,10 @@ fn matrix(path: &Path, key: &str, v: &Value) -> Result<Vec<f64>, IoError> {
 }
 
 fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value>) -> Result<Camera, IoError> {
-    let ctx = |key: &str| if name.is_empty() { key.to_string() } else { format!("{key} (camera {name})") };
-    let need = |key: &str| get(key).ok_or_else(|| IoError::invalid(path, format!("missing `{}`", ctx(key))));
+    let ctx = |key: &str| format!("{key} (camera {name})");
+    let need = |key: &str| {
+        get(key).ok_or_else(|| IoError::invalid(path, format!("camera `{name}`: missing the node `{key}`")))
+    };
     let k = matrix(path, &ctx("camera_matrix"), &need("camera_matrix")?)?;
     if k.len() != 9 {
         return Err(IoError::invalid(
@@ -209,7 +218,11 @@ fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value
     } else {
         return Err(IoError::invalid(
             path,
-            format!("missing the pose of camera `{name}`: give rvec/tvec or R/T (world to camera)"),
+            format!(
+                "camera `{name}`: no pose: expected the nodes `rvec` and `tvec` or `R` and `T` (world to \
+                 camera); an intrinsics-only calibration (as OpenCV's calibration sample writes) needs a pose \
+                 from a separate extrinsic calibration"
+            ),
         ));
     };
     let camera =
@@ -218,12 +231,34 @@ fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value
     Ok(camera)
 }
 
-/// The per-camera keys (suffixed `_<name>` in multi-camera files).
+/// The per-camera keys (suffixed `_<name>` in multi-camera files), longest first so that
+/// `rvec` is not taken for `R`.
 const OPENCV_KEYS: [&str; 8] =
-    ["camera_matrix", "distortion_coefficients", "rvec", "tvec", "R", "T", "image_width", "image_height"];
+    ["distortion_coefficients", "camera_matrix", "image_height", "image_width", "rvec", "tvec", "R", "T"];
+
+/// The map with every key that starts with a per-camera key in another letter case
+/// (`Camera_Matrix`, `image_Width`, as OpenCV's calibration sample writes them) renamed to the
+/// spelling of [`OPENCV_KEYS`], its `_<name>` suffix kept.
+fn canonical_keys(nodes: &Map<String, Value>) -> Map<String, Value> {
+    let mut out = Map::new();
+    for (key, value) in nodes {
+        let canonical = OPENCV_KEYS
+            .iter()
+            .find(|base| {
+                key.len() >= base.len()
+                    && key.is_char_boundary(base.len())
+                    && key[..base.len()].eq_ignore_ascii_case(base)
+                    && (key.len() == base.len() || key[base.len()..].starts_with('_'))
+            })
+            .map_or_else(|| key.clone(), |base| format!("{base}{}", &key[base.len()..]));
+        out.insert(canonical, value.clone());
+    }
+    out
+}
 
 fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
-    let (nodes, text) = parse_storage(path)?;
+    let (raw_nodes, text) = parse_storage(path)?;
+    let nodes = canonical_keys(&raw_nodes);
     let mut named: Vec<String> = nodes
         .keys()
         .filter_map(|k| k.strip_prefix("camera_matrix_"))
@@ -237,24 +272,53 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             "mixes an unsuffixed `camera_matrix` with per-camera `camera_matrix_<name>` keys",
         ));
     }
-    for key in nodes.keys() {
-        let known = OPENCV_KEYS.iter().any(|k| key == k || named.iter().any(|n| *key == format!("{k}_{n}")));
-        if !known {
-            log::warn!("{}: ignoring unknown key \"{key}\"", path.display());
-        }
+    // One mapping per camera: `cam0: {camera_matrix: ..., R: ..., T: ...}`.
+    let nested: Vec<(String, Map<String, Value>)> = if single || !named.is_empty() {
+        Vec::new()
+    } else {
+        raw_nodes
+            .iter()
+            .filter_map(|(k, v)| v.as_object().map(|m| (k.clone(), canonical_keys(m))))
+            .filter(|(_, m)| m.contains_key("camera_matrix"))
+            .collect()
+    };
+    let unused: Vec<&String> = nodes
+        .keys()
+        .filter(|key| {
+            let known = OPENCV_KEYS.iter().any(|k| *key == k || named.iter().any(|n| **key == format!("{k}_{n}")));
+            !known && !nested.iter().any(|(n, _)| n == *key)
+        })
+        .collect();
+    if !unused.is_empty() {
+        let list: Vec<&str> = unused.iter().map(|k| k.as_str()).collect();
+        log::info!("{}: nodes not used for the cameras: {}", path.display(), list.join(", "));
     }
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     if single {
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let cam = camera_from_nodes(path, "", &|k| nodes.get(k).cloned())?;
+        let cam = camera_from_nodes(path, &stem, &|k| nodes.get(k).cloned())?;
         return Ok(vec![(stem, cam)]);
     }
+    if !nested.is_empty() {
+        // Keep the file's order of cameras (the parsed map is sorted by key).
+        let mut nested = nested;
+        nested.sort_by_key(|(n, _)| text.find(&format!("{n}:")).or_else(|| text.find(&format!("\"{n}\""))));
+        return nested
+            .iter()
+            .map(|(n, m)| Ok((n.clone(), camera_from_nodes(path, n, &|k| m.get(k).cloned())?)))
+            .collect();
+    }
     if named.is_empty() {
-        return Err(IoError::invalid(path, "no `camera_matrix` (or `camera_matrix_<name>`) node"));
+        return Err(IoError::invalid(
+            path,
+            "no camera matrix: expected a `camera_matrix` (or `Camera_Matrix`) node, per-camera \
+             `camera_matrix_<name>` nodes, or one mapping per camera holding a `camera_matrix`",
+        ));
     }
     // Keep the file's order of cameras (the parsed map is sorted by key).
     named.sort_by_key(|n| {
         let key = format!("camera_matrix_{n}");
-        text.match_indices(&key)
+        text.to_ascii_lowercase()
+            .match_indices(&key.to_ascii_lowercase())
             .find(|(i, _)| matches!(text[i + key.len()..].chars().next(), Some('"' | ':' | ' ')))
             .map(|(i, _)| i)
     });

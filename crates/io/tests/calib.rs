@@ -219,7 +219,10 @@ fn opencv_errors_name_the_file_and_key() {
         }
     };
     check(&base.replace("image_width: 640\n", ""), &["image_width"]);
-    check(&base.replace("R:", "Q:").replace("T:", "U:"), &["rvec/tvec or R/T"]);
+    check(
+        &base.replace("R:", "Q:").replace("T:", "U:"),
+        &["camera `bad`", "no pose", "`rvec` and `tvec` or `R` and `T`"],
+    );
     check(&base.replace("rows: 1\n   cols: 8", "rows: 1\n   cols: 7"), &["distortion_coefficients", "1 × 7"]);
     check("camera_matrix: [1, 2\n", &["malformed YAML"]);
 }
@@ -355,4 +358,134 @@ fn colmap_binary_errors_name_the_file() {
     std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
     let err = read_colmap(dir.path()).expect_err("fisheye").to_string();
     assert!(err.contains("cameras.bin") && err.contains("camera id 7") && err.contains("OPENCV_FISHEYE"), "{err}");
+}
+
+/// The file OpenCV's calibration sample writes (`out_camera_data.yml`, as in the tutorial
+/// "Camera calibration With OpenCV"), intrinsics only.
+const OPENCV_SAMPLE: &str = "%YAML:1.0
+calibration_Time: \"08/19/11 20:44:38\"
+nrOfFrames: 8
+image_Width: 640
+image_Height: 480
+board_Width: 9
+board_Height: 6
+square_Size: 50.
+FixAspectRatio: 1.
+# flags:  +fix_aspectRatio +fix_principal_point +zero_tangent_dist
+flagValue: 14
+Camera_Matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 6.5746697810243404e+002, 0., 3.1950000000000000e+002, 0.,
+       6.5746697810243404e+002, 2.3950000000000000e+002, 0., 0., 1. ]
+Distortion_Coefficients: !!opencv-matrix
+   rows: 5
+   cols: 1
+   dt: d
+   data: [ -4.1802327018241026e-001, 5.0715243805833121e-001, 0., 0.,
+       -5.7843596847939704e-001 ]
+Avg_Reprojection_Error: 3.8441346462381665e-001
+Per_View_Reprojection_Errors: !!opencv-matrix
+   rows: 2
+   cols: 1
+   dt: f
+   data: [ 5.04999518e-001, 4.22946453e-001 ]
+";
+
+/// OpenCV: `x = K (R X + t)`, then `(x/z, y/z)` through the distortion, pixel centres at
+/// integers; here with k1, k2, k3 only (p1 = p2 = 0).
+fn opencv_by_hand(k: [f64; 4], d: [f64; 3], r: DMat3, t: DVec3, p: DVec3) -> DVec2 {
+    let q = r * p + t;
+    let (x, y) = (q.x / q.z, q.y / q.z);
+    let r2 = x * x + y * y;
+    let s = 1.0 + d[0] * r2 + d[1] * r2 * r2 + d[2] * r2 * r2 * r2;
+    DVec2::new(k[0] * x * s + k[2], k[1] * y * s + k[3])
+}
+
+#[test]
+fn opencv_calibration_sample_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("out_camera_data.yml");
+    std::fs::write(&file, OPENCV_SAMPLE).expect("write");
+    let err = read_opencv(&file).expect_err("no pose").to_string();
+    assert!(err.contains("out_camera_data.yml") && err.contains("camera `out_camera_data`"), "{err}");
+    assert!(err.contains("no pose") && err.contains("`rvec` and `tvec` or `R` and `T`"), "{err}");
+
+    // With a pose appended (as one would from an extrinsic calibration).
+    let mut text = OPENCV_SAMPLE.to_string();
+    text += "rvec: [0.1, -0.2, 0.05]\ntvec: [10.0, -20.0, 900.0]\n";
+    std::fs::write(&file, text).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_eq!(cams.len(), 1);
+    let (name, cam) = &cams[0];
+    assert_eq!(name, "out_camera_data");
+    assert_eq!((cam.intrinsics.width, cam.intrinsics.height), (640, 480));
+    let k = [6.5746697810243404e2, 6.5746697810243404e2, 319.5, 239.5];
+    let d = [-4.1802327018241026e-1, 5.0715243805833121e-1, -5.7843596847939704e-1];
+    let r = rodrigues_to_matrix(DVec3::new(0.1, -0.2, 0.05));
+    for p in [DVec3::ZERO, DVec3::new(30.0, -40.0, 10.0), DVec3::new(-100.0, 80.0, -50.0)] {
+        let by_hand = opencv_by_hand(k, d, r, DVec3::new(10.0, -20.0, 900.0), p);
+        let ours = cam.project(p).expect("in front");
+        assert!((ours - by_hand).length() < 1e-9, "{p}: {ours} vs {by_hand}");
+    }
+}
+
+/// Several cameras as one mapping each, with `R`/`T`; a missing node is named with its camera.
+#[test]
+fn opencv_multi_camera_mappings_with_r_and_t() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("rig.yml");
+    let text = "%YAML:1.0
+left:
+   image_width: 64
+   image_height: 48
+   camera_matrix: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 80., 0., 31.5, 0., 82., 23.5, 0., 0., 1. ]
+   R: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]
+   T: [ 0., 0., 100. ]
+right:
+   image_width: 64
+   image_height: 48
+   Camera_Matrix: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 70., 0., 30., 0., 71., 22., 0., 0., 1. ]
+   Distortion_Coefficients: [ -0.05, 0.01, 0., 0., 0. ]
+   R: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 0., 0., -1., 0., 1., 0., 1., 0., 0. ]
+   T: [ 5., -3., 120. ]
+";
+    std::fs::write(&file, text).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["left", "right"]);
+    // R rows [0 0 −1; 0 1 0; 1 0 0].
+    let r_right = DMat3::from_cols(DVec3::new(0.0, 0.0, 1.0), DVec3::Y, DVec3::new(-1.0, 0.0, 0.0));
+    for p in [DVec3::ZERO, DVec3::new(3.0, -4.0, 5.0)] {
+        let ours = cams[0].1.project(p).expect("in front");
+        let by_hand =
+            opencv_by_hand([80.0, 82.0, 31.5, 23.5], [0.0; 3], DMat3::IDENTITY, DVec3::new(0.0, 0.0, 100.0), p);
+        assert!((ours - by_hand).length() < 1e-9, "left {p}: {ours} vs {by_hand}");
+        let ours = cams[1].1.project(p).expect("in front");
+        let by_hand =
+            opencv_by_hand([70.0, 71.0, 30.0, 22.0], [-0.05, 0.01, 0.0], r_right, DVec3::new(5.0, -3.0, 120.0), p);
+        assert!((ours - by_hand).length() < 1e-9, "right {p}: {ours} vs {by_hand}");
+    }
+    std::fs::write(&file, text.replace("   T: [ 5., -3., 120. ]\n", "")).expect("write");
+    let err = read_opencv(&file).expect_err("no T").to_string();
+    assert!(err.contains("rig.yml") && err.contains("camera `right`") && err.contains("missing the node `T`"), "{err}");
+    std::fs::write(&file, text.replace("   T: [ 0., 0., 100. ]\n", "   Tx: [ 0., 0., 100. ]\n")).expect("write");
+    let err = read_opencv(&file).expect_err("no T").to_string();
+    assert!(err.contains("camera `left`") && err.contains("missing the node `T`"), "{err}");
 }
