@@ -123,6 +123,16 @@ pub enum SampleKind {
     Float,
 }
 
+impl SampleKind {
+    /// "an 8-bit", "a 16-bit", "a floating-point": for messages.
+    pub fn with_article(self) -> String {
+        match self {
+            SampleKind::Integer(8 | 11 | 18) => format!("an {self}"),
+            _ => format!("a {self}"),
+        }
+    }
+}
+
 impl std::fmt::Display for SampleKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -470,5 +480,49 @@ mod tests {
         let err = read_image(&dir.path().join("none.png")).expect_err("missing");
         assert!(matches!(err, IoError::NotFound { .. }), "{err}");
         assert!(err.to_string().contains("none.png"), "{err}");
+    }
+
+    #[test]
+    fn jpeg_reads_with_the_chosen_linearisation() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("flat.jpg");
+        let mut bytes = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 100)
+            .write_image(&[128u8; 16 * 8], 16, 8, image::ExtendedColorType::L8)
+            .expect("encodes");
+        std::fs::write(&p, &bytes).expect("write");
+        // The sRGB curve of IEC 61966-2-1 and a plain gamma, by hand, on the 0..=255 scale.
+        let c: f64 = 128.0 / 255.0;
+        let srgb = 255.0 * ((c + 0.055) / 1.055).powf(2.4);
+        let gamma = 255.0 * c.powf(2.2);
+        for (lin, expected) in
+            [(Linearisation::Linear, 128.0), (Linearisation::Srgb, srgb), (Linearisation::Gamma(2.2), gamma)]
+        {
+            let (img, kind) = read_image_with(&p, lin).expect("reads");
+            assert_eq!(kind, SampleKind::Integer(8));
+            assert_eq!((img.width, img.height), (16, 8));
+            // JPEG is lossy; a flat block may move by one count (about 0.5 after sRGB decoding).
+            assert!(img.data.iter().all(|&v| (f64::from(v) - expected).abs() < 1.01), "{lin}: {:?}", &img.data[..4]);
+        }
+        assert!((srgb - 55.0).abs() < 0.1 && (gamma - 55.98).abs() < 0.1, "{srgb} {gamma}");
+        assert_eq!(read_dimensions(&p).expect("size"), (16, 8));
+        // 16-bit images are never linearised.
+        let p16 = dir.path().join("a.png");
+        write_png16_counts(&p16, &Image::from_vec(1, 1, vec![1000.0])).expect("write");
+        assert_eq!(read_image_with(&p16, Linearisation::Srgb).expect("reads").0.data, vec![1000.0]);
+    }
+
+    #[test]
+    fn linearisation_parses_and_round_trips() {
+        assert_eq!("sRGB".parse::<Linearisation>(), Ok(Linearisation::Srgb));
+        assert_eq!("2.2".parse::<Linearisation>(), Ok(Linearisation::Gamma(2.2)));
+        assert_eq!("linear".parse::<Linearisation>(), Ok(Linearisation::Linear));
+        assert!("-1".parse::<Linearisation>().is_err() && "log".parse::<Linearisation>().is_err());
+        for l in [Linearisation::Linear, Linearisation::Srgb, Linearisation::Gamma(1.8)] {
+            let text = serde_json::to_string(&l).expect("json");
+            assert_eq!(serde_json::from_str::<Linearisation>(&text).expect("back"), l, "{text}");
+        }
+        assert_eq!(Linearisation::Srgb.apply(255), 255.0);
+        assert_eq!(Linearisation::Srgb.apply(0), 0.0);
     }
 }

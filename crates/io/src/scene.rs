@@ -908,9 +908,10 @@ pub fn load_images_with(scene: &Scene, linearisation: Linearisation) -> Result<V
         return Err(IoError::invalid(
             scene.resolve(&scene.frames[i].file_path),
             format!(
-                "frame {i} is a {kind} image but the other images of the scene are {usual}; their values \
+                "frame {i} is {} image but the other images of the scene are {usual}; their values \
                  are not on one scale (an 8-bit image among 16-bit ones reads about 257 times too dark): \
-                 convert the images to one bit depth"
+                 convert the images to one bit depth",
+                kind.with_article()
             ),
         ));
     }
@@ -1210,5 +1211,50 @@ mod tests {
         std::fs::remove_file(d.join("images/c1.tif")).expect("rm");
         let m = load_images(&scene).expect_err("missing").to_string();
         assert!(m.contains("image file not found") && m.contains("c1.tif"), "{m}");
+    }
+
+    #[test]
+    fn load_images_refuses_mixed_depths_and_negative_pixels() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let mut scene = ring_scene(d, 3, Distortion::default());
+        for (i, f) in scene.frames.iter_mut().enumerate() {
+            f.file_path = PathBuf::from(format!("images/c{i}.png"));
+            crate::image::write_png16_counts(&d.join(&f.file_path), &Image::from_vec(32, 24, vec![300.0; 32 * 24]))
+                .expect("write");
+        }
+        assert_eq!(load_images(&scene).expect("images").len(), 3);
+        image::GrayImage::from_raw(32, 24, vec![1; 32 * 24]).expect("buf").save(d.join("images/c1.png")).expect("save");
+        let m = load_images(&scene).expect_err("mixed").to_string();
+        assert!(m.contains("c1.png") && m.contains("frame 1 is an 8-bit image") && m.contains("16-bit"), "{m}");
+
+        let mut bad = Image::from_vec(32, 24, vec![1.0; 32 * 24]);
+        bad.set(4, 7, -2.0);
+        scene.frames[1].file_path = PathBuf::from("images/c1.tif");
+        crate::image::write_tiff_f32(&d.join("images/c1.tif"), &bad).expect("write");
+        let m = load_images(&scene).expect_err("negative").to_string();
+        assert!(m.contains("c1.tif") && m.contains("pixel (col 4, row 7) is -2"), "{m}");
+    }
+
+    #[test]
+    fn the_recorded_linearisation_is_applied() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let mut scene = ring_scene(d, 2, Distortion::default());
+        scene.truth.clear();
+        for (i, f) in scene.frames.iter_mut().enumerate() {
+            f.file_path = PathBuf::from(format!("images/c{i}.png"));
+            std::fs::create_dir_all(d.join("images")).expect("mkdir");
+            image::GrayImage::from_raw(32, 24, vec![128; 32 * 24])
+                .expect("buf")
+                .save(d.join(&f.file_path))
+                .expect("save");
+        }
+        save_scene_with(&scene, d, Some(Linearisation::Gamma(2.0))).expect("save");
+        let loaded = load_scene(d).expect("load");
+        let v = load_images(&loaded).expect("images")[0].data[0];
+        assert!((f64::from(v) - 255.0 * (128.0f64 / 255.0).powi(2)).abs() < 1e-3, "{v}");
+        save_scene(&scene, d).expect("save");
+        assert_eq!(load_images(&scene).expect("images")[0].data[0], 128.0, "no key: linear");
     }
 }

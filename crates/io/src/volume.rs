@@ -35,6 +35,18 @@ pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
     }
     let dims = [shape[2] as usize, shape[1] as usize, shape[0] as usize];
     let dtype = npy.dtype();
+    // A corrupt header can claim any shape: refuse one the file cannot hold before allocating.
+    let item = match &dtype {
+        npyz::DType::Plain(ts) => ts.size_field().max(1) as u64,
+        _ => 1,
+    };
+    let claimed = shape.iter().try_fold(item, |acc, &d| acc.checked_mul(d));
+    if claimed.is_none_or(|b| b > bytes.len() as u64) {
+        return Err(IoError::invalid(
+            path,
+            format!("shape {shape:?} needs more data than the file's {} bytes hold", bytes.len()),
+        ));
+    }
     let bad = |e: std::io::Error| IoError::invalid(path, format!("cannot read the array data: {e}"));
     let data: Vec<f32> = match &dtype {
         npyz::DType::Plain(ts) => match (ts.type_char(), ts.size_field()) {

@@ -198,9 +198,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some((at, kind, usual)) = odd_sample_kind(&only_kinds) {
         let i = kinds[at].0;
         problems.push(format!(
-            "frame {i}: {}: a {kind} image among {usual} ones; their values are not on one scale (an 8-bit \
+            "frame {i}: {}: {} image among {usual} ones; their values are not on one scale (an 8-bit \
              image among 16-bit ones reads about 257 times too dark)",
-            scene.resolve(&scene.frames[i].file_path).display()
+            scene.resolve(&scene.frames[i].file_path).display(),
+            kind.with_article()
         ));
     }
     let _ = writeln!(out);
