@@ -12,8 +12,8 @@
 //!   that write JPEG almost always store sRGB-encoded values; scientific cameras store linear
 //!   counts. 16-bit, 32-bit and float images are always read as linear.
 //! - Colour images are reduced to luminance `Y = 0.2126 R + 0.7152 G + 0.0722 B` (Rec. 709
-//!   weights applied to the stored values, which are taken as linear) with a warning; an alpha
-//!   channel is dropped.
+//!   weights applied to the linearised values) with one warning per run; an alpha channel is
+//!   dropped.
 //!
 //! # Writing
 //! - [`write_png16`]: 16-bit grayscale PNG with the explicit mapping
@@ -317,14 +317,19 @@ fn to_gray(path: &Path, w: usize, h: usize, channels: usize, data: Vec<f32>) -> 
     match channels {
         1 => Image::from_vec(w, h, data),
         2 => {
-            log::warn!("{}: dropping the alpha channel", path.display());
+            log::debug!("{}: dropping the alpha channel", path.display());
             Image::from_vec(w, h, data.chunks_exact(2).map(|p| p[0]).collect())
         }
         _ => {
-            log::warn!(
-                "{}: colour image reduced to luminance (0.2126 R + 0.7152 G + 0.0722 B of the stored values)",
-                path.display()
-            );
+            // Datasets hold hundreds of colour images: say it once per run, not once per file.
+            static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+            if !WARNED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                log::warn!(
+                    "{}: colour images are reduced to luminance (0.2126 R + 0.7152 G + 0.0722 B of the \
+                     linearised values; alpha dropped); further colour images are not reported",
+                    path.display()
+                );
+            }
             let lum = data.chunks_exact(channels).map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).collect();
             Image::from_vec(w, h, lum)
         }
