@@ -21,6 +21,11 @@
 //!
 //! - **Intrinsics** (`camera_model w h fl_x fl_y cx cy k1 k2 k3 k4 p1 p2`) may sit at the top
 //!   level (shared) or in a frame; a key in a frame overrides the same key at the top level.
+//!   As instant-ngp and Blender's NeRF exporters write them: `camera_angle_x`/`camera_angle_y`
+//!   (field of view in radians) stand in for a missing `fl_x`/`fl_y`
+//!   (`fl = size / (2 tan(angle / 2))`; with `camera_angle_x` alone the pixels are square);
+//!   `w`/`h` may be whole floats (`605.0`) or absent (then read from the image's header);
+//!   a missing `cx`/`cy` is the image centre (`w/2`, `h/2` in the file's convention).
 //!   `camera_model` may be `PINHOLE`, `SIMPLE_PINHOLE`, `OPENCV`, `SIMPLE_RADIAL`, `RADIAL` or
 //!   `FULL_OPENCV` (all read through the same OpenCV model; missing coefficients are 0).
 //!   Fisheye and panoramic models are rejected.
@@ -38,13 +43,20 @@
 //!   OpenGL camera axes (x right, y up, z backward). fluidnerf's cameras use OpenCV axes, so
 //!   `R_cv = R_gl · diag(1, −1, −1)` (negate the second and third columns); the translation
 //!   (camera centre) is unchanged.
-//! - **fluidnerf's additions**: `aabb` (required; world units), `units` (default `"mm"`),
-//!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `truth` (optional
-//!   list of `{time, file_path}` `.npy` volumes filling the aabb); per frame `time`, `camera`
-//!   (a physical camera's name), `holdout` (default false) and `thin_lens`
-//!   ([`ThinLens`] fields, world units).
-//! - Unknown keys are ignored with a warning naming the key and the file.
-//! - Paths are relative to the folder holding `transforms.json` unless absolute.
+//! - **fluidnerf's additions**: `aabb` (world units; required by [`load_scene`], which says how
+//!   to supply it; [`read_scene_draft`] reads files without one), `units` (default `"mm"`),
+//!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `linearisation`
+//!   (how 8-bit images become linear: `"linear"` (default), `"srgb"` or a gamma; see
+//!   [`crate::image`]), `truth` (optional list of `{time, file_path}` `.npy` volumes filling the
+//!   aabb); per frame `time`, `camera` (a physical camera's name), `holdout` (default false)
+//!   and `thin_lens` ([`ThinLens`] fields, world units).
+//! - Keys fluidnerf does not read are reported in at most two log lines per file, however many
+//!   frames hold them: the ones NeRF tools write routinely (`aabb_scale`, `colmap_im_id`,
+//!   `applied_transform`, ...) at info level, others as a warning.
+//! - Errors name the key path (`frames[3].transform_matrix[1]`) and the frame and its image.
+//! - Paths are relative to the folder holding `transforms.json` unless absolute. A path that
+//!   names no file, next to exactly one image with the same stem (`train/r_0` →
+//!   `train/r_0.png`), reads that image.
 //!
 //! # Writing
 //! [`save_scene`] writes the intrinsics once at the top level when every frame has the same

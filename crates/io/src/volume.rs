@@ -37,7 +37,7 @@ pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
     let dtype = npy.dtype();
     // A corrupt header can claim any shape: refuse one the file cannot hold before allocating.
     let item = match &dtype {
-        npyz::DType::Plain(ts) => ts.size_field().max(1) as u64,
+        npyz::DType::Plain(ts) => ts.size_field().max(1),
         _ => 1,
     };
     let claimed = shape.iter().try_fold(item, |acc, &d| acc.checked_mul(d));

@@ -404,6 +404,7 @@ fn opencv_by_hand(k: [f64; 4], d: [f64; 3], r: DMat3, t: DVec3, p: DVec3) -> DVe
 }
 
 #[test]
+#[allow(clippy::excessive_precision)] // The sample file's digits, verbatim.
 fn opencv_calibration_sample_file() {
     let dir = tempfile::tempdir().expect("tempdir");
     let file = dir.path().join("out_camera_data.yml");

@@ -145,7 +145,7 @@ fn transforms_json_never_panics() {
         "frames": [{"file_path": "./train/r_0", "rotation": 0.1,
         "transform_matrix": [[1,0,0,0],[0,0,-1,-50],[0,1,0,0],[0,0,0,1]]}]}"#
         .to_vec();
-    fuzz("transforms", &[valid, nerf], 400, |bytes| {
+    fuzz("transforms", &[valid, nerf], 300, |bytes| {
         write_and(&file, bytes);
         let _ = fluidnerf_io::scene::load_scene(d);
     });
@@ -167,7 +167,7 @@ fn opencv_files_never_panic() {
     );
     for ext in ["yml", "json"] {
         let p = dir.path().join(format!("f.{ext}"));
-        fuzz(ext, &seeds, 500, |bytes| {
+        fuzz(ext, &seeds, 300, |bytes| {
             write_and(&p, bytes);
             let _ = fluidnerf_io::calib::read_opencv(&p);
         });
@@ -186,23 +186,23 @@ fn colmap_models_never_panic() {
     let cams_txt = std::fs::read(fixtures.join("cameras.txt")).expect("reads");
     let imgs_txt = std::fs::read(fixtures.join("images.txt")).expect("reads");
 
-    fuzz("cameras.bin", std::slice::from_ref(&cams_bin), 400, |bytes| {
+    fuzz("cameras.bin", std::slice::from_ref(&cams_bin), 250, |bytes| {
         write_and(&d.join("cameras.bin"), bytes);
         let _ = fluidnerf_io::calib::read_colmap(d);
     });
     write_and(&d.join("cameras.bin"), &cams_bin);
-    fuzz("images.bin", std::slice::from_ref(&imgs_bin), 400, |bytes| {
+    fuzz("images.bin", std::slice::from_ref(&imgs_bin), 250, |bytes| {
         write_and(&d.join("images.bin"), bytes);
         let _ = fluidnerf_io::calib::read_colmap(d);
     });
     let t = tempfile::tempdir().expect("tempdir");
     write_and(&t.path().join("images.txt"), &imgs_txt);
-    fuzz("cameras.txt", std::slice::from_ref(&cams_txt), 400, |bytes| {
+    fuzz("cameras.txt", std::slice::from_ref(&cams_txt), 250, |bytes| {
         write_and(&t.path().join("cameras.txt"), bytes);
         let _ = fluidnerf_io::calib::read_colmap(t.path());
     });
     write_and(&t.path().join("cameras.txt"), &cams_txt);
-    fuzz("images.txt", std::slice::from_ref(&imgs_txt), 400, |bytes| {
+    fuzz("images.txt", std::slice::from_ref(&imgs_txt), 250, |bytes| {
         write_and(&t.path().join("images.txt"), bytes);
         let _ = fluidnerf_io::calib::read_colmap(t.path());
     });
@@ -234,7 +234,7 @@ fn images_never_panic() {
         tiff16.into_inner(),
     ];
     let p = d.join("x.img");
-    fuzz("images", &seeds, 1500, |bytes| {
+    fuzz("images", &seeds, 1000, |bytes| {
         let _ = decode_image(&p, bytes, Linearisation::Srgb);
     });
     fuzz("image headers", &seeds, 300, |bytes| {
@@ -250,7 +250,7 @@ fn npy_never_panics() {
     let aabb = Aabb::cube(DVec3::ZERO, 1.0);
     fluidnerf_io::volume::write_npy(&p, &Volume::from_fn([3, 2, 2], aabb, |q| q.x as f32)).expect("writes");
     let seed = std::fs::read(&p).expect("reads");
-    fuzz("npy", &[seed], 800, |bytes| {
+    fuzz("npy", &[seed], 500, |bytes| {
         write_and(&p, bytes);
         let _ = fluidnerf_io::volume::read_npy(&p, aabb);
     });
