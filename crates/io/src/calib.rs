@@ -697,6 +697,9 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         (read_cameras_bin(&bin_cams)?, read_images_bin(&bin_imgs)?, bin_imgs)
     } else {
         let (cams, imgs) = (dir.join("cameras.txt"), dir.join("images.txt"));
+        if !cams.exists() && !bin_cams.exists() {
+            return Err(IoError::NotFound { what: "COLMAP cameras.txt or cameras.bin", path: cams });
+        }
         (read_cameras_txt(&cams)?, read_images_txt(&imgs)?, imgs)
     };
     let mut out = Vec::with_capacity(images.len());
