@@ -184,3 +184,121 @@ fn colmap_model_becomes_a_scene() {
     let text = std::fs::read_to_string(out.join("transforms.json")).expect("reads");
     assert!(text.contains("\"cx\": 32.0"), "transforms.json uses nerfstudio's (= COLMAP's) convention again");
 }
+
+/// A NeRF-style `transforms.json` (field of view, no size, no extension, no box) of six
+/// cameras around a glowing ball in 8-bit PNGs: import estimates a box holding the ball, prints
+/// it, writes it, and records the linearisation.
+#[test]
+fn transforms_json_without_a_box_gets_an_estimated_one() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("nerf");
+    let (ball, radius) = (DVec3::new(1.0, -0.5, 0.5), 1.5);
+    let angle: f64 = 0.8;
+    let (w, h) = (40usize, 30usize);
+    let focal = 0.5 * w as f64 / (0.5 * angle).tan();
+    let k = Intrinsics { width: 40, height: 30, fx: focal, fy: focal, cx: 19.5, cy: 14.5, skew: 0.0 };
+    let mut frames = Vec::new();
+    for c in 0..6 {
+        let a = c as f64 / 6.0 * std::f64::consts::TAU;
+        let eye = DVec3::new(25.0 * a.cos(), 25.0 * a.sin(), if c % 2 == 0 { 8.0 } else { -6.0 });
+        let cam = Camera::look_at(k, eye, DVec3::ZERO, DVec3::Z);
+        let mut pixels = vec![3u8; w * h];
+        for row in 0..h {
+            for col in 0..w {
+                let ray = cam.pixel_ray(col as f64, row as f64).expect("ray");
+                if (ray.at((ball - ray.origin).dot(ray.dir)) - ball).length() < radius {
+                    pixels[row * w + col] = 200;
+                }
+            }
+        }
+        std::fs::create_dir_all(src.join("train")).expect("mkdir");
+        image::GrayImage::from_raw(w as u32, h as u32, pixels)
+            .expect("buffer")
+            .save(src.join(format!("train/r_{c}.png")))
+            .expect("saves");
+        let m = fluidnerf_io::scene::world_from_camera_to_opengl_c2w(&cam.world_from_camera);
+        frames.push(serde_json::json!({"file_path": format!("./train/r_{c}"), "rotation": 0.1, "transform_matrix": m}));
+    }
+    let file = src.join("transforms.json");
+    let v = serde_json::json!({"camera_angle_x": angle, "frames": frames});
+    std::fs::write(&file, v.to_string()).expect("writes");
+
+    // Loading it as a scene says how to get a box.
+    let info = fluidnerf(&["info", s(&src)]);
+    assert_eq!(info.status.code(), Some(1));
+    assert!(stderr(&info).contains("no `aabb`") && stderr(&info).contains("--transforms"), "{}", stderr(&info));
+
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&["import", "--transforms", s(&file), "--linearisation", "srgb", "-o", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(stdout.contains("estimated the box from the bright pixels seen by every camera: --aabb "), "{stdout}");
+    assert!(stdout.contains("imported 6 frames"), "{stdout}");
+    let scene = load_scene(&out).expect("loads");
+    for a in 0..3 {
+        let (lo, hi) = (scene.aabb.min[a], scene.aabb.max[a]);
+        assert!(lo <= ball[a] - radius && hi >= ball[a] + radius, "axis {a}: {lo} .. {hi} must hold the ball");
+        assert!(hi - lo < 4.0 * radius, "axis {a}: {lo} .. {hi} is far larger than the ball");
+    }
+    assert_eq!(scene.frames[0].file_path, PathBuf::from(s(&src.join("train/r_0.png"))));
+    assert_eq!(scene.frames[0].camera.intrinsics.width, 40);
+    let text = std::fs::read_to_string(out.join("transforms.json")).expect("reads");
+    assert!(text.contains("\"linearisation\": \"srgb\""), "{text}");
+    assert!(fluidnerf(&["info", s(&out)]).status.success());
+
+    // A given box wins.
+    let o = fluidnerf(&["import", "--transforms", s(&file), "--aabb", "-3,-3,-3,3,3,3", "-o", s(&out), "--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").aabb.max, DVec3::splat(3.0));
+    assert!(stderr(&o).contains("--linearisation srgb"), "8-bit images without a choice are warned about");
+}
+
+/// A binary COLMAP model whose image names say `.jpg` while the folder holds `.png` files.
+#[test]
+fn colmap_binary_model_with_other_extensions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model = dir.path().join("sparse/0");
+    let cams: Vec<(String, Camera)> = rig().into_iter().map(|(n, c)| (format!("{n}.jpg"), c)).collect();
+    std::fs::create_dir_all(&model).expect("mkdir");
+    fluidnerf_io::calib::write_colmap_bin(&model, &cams).expect("writes model");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--colmap",
+        s(&model),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 3);
+    for (f, (_, c)) in scene.frames.iter().zip(&cams) {
+        assert!(f.file_path.to_string_lossy().ends_with(".png"), "{}", f.file_path.display());
+        assert_eq!(f.camera.intrinsics, c.intrinsics);
+        assert!((f.camera.centre() - c.centre()).length() < 1e-9);
+    }
+    // An image missing under every extension is named.
+    std::fs::remove_file(images.join("cam1.png")).expect("removes");
+    let o = fluidnerf(&[
+        "import",
+        "--colmap",
+        s(&model),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+        "--force",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("cam1.jpg") && stderr(&o).contains("other extensions"), "{}", stderr(&o));
+}

@@ -85,7 +85,8 @@ fn good_scene_is_described() {
         "distortion: none",
         "thin lens: f 60 mm, f/3.500",
         "sees 100.0% of the box",
-        "image 32x24, values 300 .. 396",
+        "image 32x24 16-bit, values 300 .. 396",
+        "8-bit images: linear",
         "time steps: 0, 0.5",
         "held-out frames: 3",
         "8x8x8 voxels",
@@ -156,18 +157,106 @@ fn missing_scene_is_an_error() {
     assert_fails_with(&info(&dir.path().join("nothing")), &["scene file not found", "nothing"]);
 }
 
+fn info_with_log(scene: &Path, level: &str) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .arg("info")
+        .arg(scene)
+        .env("RUST_LOG", level)
+        .output()
+        .expect("runs fluidnerf")
+}
+
+/// Keys NeRF tools write in every frame give one summary line each for the routine and the
+/// unknown ones, never one line per frame.
 #[test]
-fn unknown_keys_are_warned_about_and_ignored() {
+fn unknown_keys_are_summarised_in_one_line() {
     let dir = tempfile::tempdir().expect("tempdir");
     good_scene(dir.path());
     let file = dir.path().join("transforms.json");
     let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("reads")).expect("json");
     v["ply_file_path"] = serde_json::json!("points.ply");
-    v["frames"][1]["colmap_im_id"] = serde_json::json!(7);
+    v["my_setting"] = serde_json::json!(1);
+    for i in 0..4 {
+        v["frames"][i]["colmap_im_id"] = serde_json::json!(i);
+        v["frames"][i]["exposure_note"] = serde_json::json!("f/8");
+    }
     std::fs::write(&file, v.to_string()).expect("writes");
+    let o = info_with_log(dir.path(), "info");
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    let lines = |needle: &str| stderr.lines().filter(|l| l.contains(needle)).count();
+    assert_eq!(lines("exposure_note"), 1, "{stderr}");
+    assert_eq!(lines("colmap_im_id"), 1, "{stderr}");
+    assert!(
+        stderr.contains("ignoring unknown key(s) \"exposure_note\" (in 4 frames), \"my_setting\" (top level)"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("not used by fluidnerf: \"colmap_im_id\" (in 4 frames)"), "{stderr}");
+    // Routine keys are not worth a warning.
+    let o = info_with_log(dir.path(), "warn");
+    assert!(!text(&o).1.contains("colmap_im_id"), "{}", text(&o).1);
+}
+
+#[test]
+fn an_8_bit_image_among_16_bit_ones_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    image::GrayImage::from_raw(32, 24, vec![9; 32 * 24])
+        .expect("buffer")
+        .save(dir.path().join("images/c2.png"))
+        .expect("saves");
+    assert_fails_with(&info(dir.path()), &["frame 2", "c2.png", "8-bit image among 16-bit ones", "257"]);
+}
+
+#[test]
+fn negative_pixel_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    for (c, f) in scene.frames.iter_mut().enumerate() {
+        let mut img = Image::from_vec(32, 24, vec![1.0; 32 * 24]);
+        if c == 1 {
+            img.set(3, 2, -0.25);
+        }
+        f.file_path = format!("images/c{c}.tif").into();
+        write_tiff_f32(&dir.path().join(&f.file_path), &img).expect("writes image");
+    }
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(&info(dir.path()), &["frame 1", "c1.tif", "pixel (col 3, row 2) is -0.25", "negative"]);
+}
+
+#[test]
+fn two_frames_on_one_image_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.frames[2].file_path = "./images/c0.png".into();
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(&info(dir.path()), &["frames 0 and 2 both use the image", "c0.png"]);
+}
+
+#[test]
+fn cameras_inside_or_near_the_box() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    // 0.5 mm outside the box face x = 10, still looking at its centre.
+    let k = scene.frames[1].camera.intrinsics;
+    scene.frames[1].camera = Camera::look_at(k, DVec3::new(10.5, 0.0, 0.0), DVec3::new(-1.0, 0.0, 0.0), DVec3::Z);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
     let o = info(dir.path());
     let (stdout, stderr) = text(&o);
     assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
-    assert!(stderr.contains("transforms.json: ignoring unknown key \"ply_file_path\""), "{stderr}");
-    assert!(stderr.contains("ignoring unknown key \"colmap_im_id\" in frame 1"), "{stderr}");
+    assert!(stdout.contains("warning: frame 1 (images/c1.png): the camera is only 0.500 mm from the box"), "{stdout}");
+    scene.frames[1].camera = Camera::look_at(k, DVec3::new(9.5, 0.0, 0.0), DVec3::new(-1.0, 0.0, 0.0), DVec3::Z);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(&info(dir.path()), &["frame 1", "c1.png", "inside the reconstruction box"]);
+}
+
+#[test]
+fn truth_of_another_grid_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    let other = Volume::from_fn([8, 8, 4], scene.aabb, |_| 1.0);
+    fluidnerf_io::volume::write_npy(&dir.path().join("truth/t1.npy"), &other).expect("writes truth");
+    scene.truth.push(TruthRef { time: Some(0.5), file_path: "truth/t1.npy".into() });
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(&info(dir.path()), &["t1.npy", "8x8x4 voxels", "8x8x8"]);
 }

@@ -72,3 +72,195 @@ impl Scene {
         t
     }
 }
+
+/// Settings of [`estimate_box`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxEstimateParams {
+    /// Lattice points per axis of the search cube. Default 64.
+    pub grid: usize,
+    /// A pixel is bright when its value is at least `background + bright_fraction · (peak −
+    /// background)`, with the background the image's median and the peak its maximum.
+    /// Default 0.1.
+    pub bright_fraction: f64,
+    /// The hull's bounding box grows by this fraction of its size on every side (plus one
+    /// lattice step). Default 0.1.
+    pub margin_fraction: f64,
+}
+
+impl Default for BoxEstimateParams {
+    fn default() -> Self {
+        BoxEstimateParams { grid: 64, bright_fraction: 0.1, margin_fraction: 0.1 }
+    }
+}
+
+/// A box found by [`estimate_box`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxEstimate {
+    pub aabb: Aabb,
+    /// Lattice points kept (inside the hull).
+    pub points: usize,
+    /// `true` when the box bounds the bright pixels' visual hull; `false` when no point was
+    /// bright in every view and the box bounds the cameras' common view only.
+    pub from_bright_pixels: bool,
+}
+
+/// Estimates a reconstruction box from calibrated views and their images: the bounding box of
+/// a coarse visual hull, with a margin.
+///
+/// 1. Frames with the same camera (a time series) are merged into one view, their images by
+///    the pixelwise maximum.
+/// 2. The search region is a cube centred on the point closest, in least squares, to every
+///    camera's optical axis, with half-side the largest distance from it to a camera centre
+///    (the mean of the camera centres when the axes are parallel).
+/// 3. A `grid`³ lattice of points fills the cube; a point is kept when it lies in front of
+///    every camera, inside every image (the common view) and on a bright pixel (nearest pixel;
+///    see [`BoxEstimateParams`]) in every image.
+/// 4. The box bounds the kept points, grown by one lattice step and `margin_fraction` of its
+///    size on each side.
+///
+/// When no point is bright in every view, the common view alone is used. `None` when no
+/// point is in the common view at all. `frames` and `images` pair up one to one.
+pub fn estimate_box(frames: &[Frame], images: &[crate::Image], params: &BoxEstimateParams) -> Option<BoxEstimate> {
+    use crate::glam::{DMat3, DVec3};
+    assert_eq!(frames.len(), images.len(), "estimate_box: one image per frame");
+    assert!(params.grid >= 2, "estimate_box: grid must be at least 2");
+    // One view per distinct camera, its images merged by the maximum.
+    let mut views: Vec<(&Camera, crate::Image)> = Vec::new();
+    for (f, img) in frames.iter().zip(images) {
+        assert_eq!((img.width, img.height), (f.camera.width(), f.camera.height()), "estimate_box: image size");
+        match views.iter_mut().find(|(c, _)| **c == f.camera) {
+            Some((_, merged)) => merged.data.iter_mut().zip(&img.data).for_each(|(m, v)| *m = m.max(*v)),
+            None => views.push((&f.camera, img.clone())),
+        }
+    }
+    if views.is_empty() {
+        return None;
+    }
+    let thresholds: Vec<f32> = views
+        .iter()
+        .map(|(_, img)| {
+            let mut sorted = img.data.clone();
+            let mid = sorted.len() / 2;
+            let (_, median, _) = sorted.select_nth_unstable_by(mid, f32::total_cmp);
+            let median = *median;
+            let peak = img.data.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            if peak > median {
+                median + params.bright_fraction as f32 * (peak - median)
+            } else {
+                f32::INFINITY
+            }
+        })
+        .collect();
+
+    let mut a = DMat3::ZERO;
+    let mut b = DVec3::ZERO;
+    for (cam, _) in &views {
+        let d = cam.forward().normalize();
+        let p = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += p;
+        b += p * cam.centre();
+    }
+    let mean_centre = views.iter().map(|(c, _)| c.centre()).sum::<DVec3>() / views.len() as f64;
+    let centre = if a.determinant().abs() > 1e-9 * views.len().pow(3) as f64 { a.inverse() * b } else { mean_centre };
+    let half = views.iter().map(|(c, _)| (c.centre() - centre).length()).fold(0.0, f64::max);
+    if !(centre.is_finite() && half.is_finite() && half > 0.0) {
+        return None;
+    }
+    let n = params.grid;
+    let step = 2.0 * half / (n - 1) as f64;
+    let lattice =
+        |i: usize, j: usize, k: usize| centre - DVec3::splat(half) + step * DVec3::new(i as f64, j as f64, k as f64);
+
+    // For each lattice point: in the common view, and bright in every view.
+    let mut common = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY), 0usize);
+    let mut bright = common;
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let p = lattice(i, j, k);
+                let mut in_all = true;
+                let mut bright_all = true;
+                for ((cam, img), &t) in views.iter().zip(&thresholds) {
+                    let Some(uv) = cam.project(p) else {
+                        in_all = false;
+                        break;
+                    };
+                    let (col, row) = (uv.x.round(), uv.y.round());
+                    if !(col >= 0.0 && row >= 0.0 && col < img.width as f64 && row < img.height as f64) {
+                        in_all = false;
+                        break;
+                    }
+                    if img.get(col as usize, row as usize) < t {
+                        bright_all = false;
+                    }
+                }
+                if in_all {
+                    common = (common.0.min(p), common.1.max(p), common.2 + 1);
+                    if bright_all {
+                        bright = (bright.0.min(p), bright.1.max(p), bright.2 + 1);
+                    }
+                }
+            }
+        }
+    }
+    let (lo, hi, points, from_bright_pixels) = if bright.2 > 0 {
+        (bright.0, bright.1, bright.2, true)
+    } else if common.2 > 0 {
+        (common.0, common.1, common.2, false)
+    } else {
+        return None;
+    };
+    let grow = (hi - lo) * params.margin_fraction + DVec3::splat(step);
+    Some(BoxEstimate { aabb: Aabb::new(lo - grow, hi + grow), points, from_bright_pixels })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::glam::DVec3;
+    use crate::{Image, Intrinsics};
+
+    /// Six cameras at two heights around a bright ball: the estimated box holds the ball and
+    /// is not much larger; with black images the common view is used instead.
+    #[test]
+    fn estimated_box_bounds_a_bright_ball() {
+        let (ball, radius) = (DVec3::new(3.0, -2.0, 1.0), 4.0);
+        let k = Intrinsics { width: 48, height: 40, fx: 50.0, fy: 50.0, cx: 23.5, cy: 19.5, skew: 0.0 };
+        let mut frames = Vec::new();
+        let mut images = Vec::new();
+        for c in 0..6 {
+            let a = c as f64 / 6.0 * std::f64::consts::TAU;
+            let centre = DVec3::new(60.0 * a.cos(), 60.0 * a.sin(), if c % 2 == 0 { 25.0 } else { -20.0 });
+            let camera = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
+            let mut img = Image::from_vec(48, 40, vec![5.0; 48 * 40]);
+            for row in 0..40 {
+                for col in 0..48 {
+                    let ray = camera.pixel_ray(col as f64, row as f64).expect("ray");
+                    let along = (ball - ray.origin).dot(ray.dir);
+                    if (ray.at(along) - ball).length() < radius {
+                        img.set(col, row, 1000.0);
+                    }
+                }
+            }
+            frames.push(Frame {
+                camera,
+                file_path: format!("c{c}.png").into(),
+                time: None,
+                camera_name: None,
+                holdout: false,
+            });
+            images.push(img);
+        }
+        let est = estimate_box(&frames, &images, &BoxEstimateParams::default()).expect("a box");
+        assert!(est.from_bright_pixels);
+        for axis in 0..3 {
+            let (lo, hi) = (est.aabb.min[axis], est.aabb.max[axis]);
+            assert!(lo <= ball[axis] - radius && hi >= ball[axis] + radius, "axis {axis}: {lo} .. {hi}");
+            assert!(hi - lo < 2.0 * 2.0 * radius, "axis {axis}: {lo} .. {hi} is far larger than the ball");
+        }
+        let dark: Vec<Image> = images.iter().map(|i| Image::zeros(i.width, i.height)).collect();
+        let est = estimate_box(&frames, &dark, &BoxEstimateParams::default()).expect("common view");
+        assert!(!est.from_bright_pixels);
+        assert!(est.aabb.contains(DVec3::ZERO) && est.aabb.size().max_element() < 120.0, "{est:?}");
+    }
+}

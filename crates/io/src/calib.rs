@@ -1,5 +1,5 @@
 //! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML or JSON) and
-//! COLMAP text models; and writing OpenCV files back.
+//! COLMAP models (text or binary); and writing both back.
 //!
 //! # OpenCV (`cv::FileStorage`, YAML `%YAML:1.0` with `!!opencv-matrix`, or JSON)
 //! Per camera:
@@ -12,23 +12,33 @@
 //! - `image_width`, `image_height` (integers).
 //!
 //! Matrices are `!!opencv-matrix`/`opencv-matrix` nodes (`rows cols dt data`) or plain lists.
+//! Key names are matched ignoring letter case, so the files of OpenCV's calibration sample
+//! (`Camera_Matrix`, `Distortion_Coefficients`, `image_Width`, `image_Height`, with
+//! `Avg_Reprojection_Error`, `Extrinsic_Parameters` (the board's poses) and the like, which are
+//! listed once at info level and not used) read as they are; such a file has no camera pose, and
+//! the error says so, naming the camera and the nodes it looked for.
 //!
 //! **Several cameras in one file**: every key carries the suffix `_<name>`
 //! (`camera_matrix_cam0`, `distortion_coefficients_cam0`, `rvec_cam0`, `tvec_cam0`,
-//! `image_width_cam0`, ...). A file with unsuffixed keys holds one camera named after the file
-//! stem (`cam3.yml` → `cam3`); a file may not mix both. A folder is read as all its `.yml`,
+//! `image_width_cam0`, ...), or each camera is a mapping named after it
+//! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`). A file with unsuffixed keys
+//! holds one camera named after the file stem (`cam3.yml` → `cam3`); a file may not mix
+//! unsuffixed and suffixed keys. A folder is read as all its `.yml`,
 //! `.yaml` and `.json` files in name order; camera names must be unique. [`write_opencv`]
 //! writes unsuffixed keys when it writes a single camera whose name is the file stem, and
 //! suffixed keys otherwise, so reading gives back the same names.
 //!
-//! # COLMAP text models
+//! # COLMAP models (text or binary)
 //! `cameras.txt` (`CAMERA_ID MODEL WIDTH HEIGHT PARAMS...` with models `SIMPLE_PINHOLE f cx cy`,
 //! `PINHOLE fx fy cx cy`, `SIMPLE_RADIAL f cx cy k`, `RADIAL f cx cy k1 k2`,
 //! `OPENCV fx fy cx cy k1 k2 p1 p2`, `FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6`) and
 //! `images.txt` (`IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME`, then a line of 2D points),
 //! where the quaternion and translation map world to camera. COLMAP puts pixel centres at
 //! `+0.5` (the image's top-left corner is `(0, 0)`), so `cx_core = cx − 0.5` (same for cy).
-//! The radial models are OpenCV's with the missing coefficients zero.
+//! The radial models are OpenCV's with the missing coefficients zero. The binary files
+//! `cameras.bin` and `images.bin` hold the same records, little-endian, as COLMAP's
+//! `WriteCamerasBinary`/`WriteImagesBinary` write them (model ids instead of names, 2D points
+//! skipped); when both kinds are present the binary files are read.
 
 use std::path::{Path, PathBuf};
 
@@ -105,7 +115,7 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let is_json =
         path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) || text.trim_start().starts_with('{');
     let value = if is_json {
-        serde_json::from_str::<Value>(&text).map_err(|source| IoError::Json { path: path.to_path_buf(), source })?
+        serde_json::from_str::<Value>(&text).map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
     } else {
         // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
         let body: String = text.lines().filter(|l| !l.starts_with('%')).map(|l| format!("{l}\n")).collect();
@@ -153,8 +163,10 @@ fn matrix(path: &Path, key: &str, v: &Value) -> Result<Vec<f64>, IoError> {
 }
 
 fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value>) -> Result<Camera, IoError> {
-    let ctx = |key: &str| if name.is_empty() { key.to_string() } else { format!("{key} (camera {name})") };
-    let need = |key: &str| get(key).ok_or_else(|| IoError::invalid(path, format!("missing `{}`", ctx(key))));
+    let ctx = |key: &str| format!("{key} (camera {name})");
+    let need = |key: &str| {
+        get(key).ok_or_else(|| IoError::invalid(path, format!("camera `{name}`: missing the node `{key}`")))
+    };
     let k = matrix(path, &ctx("camera_matrix"), &need("camera_matrix")?)?;
     if k.len() != 9 {
         return Err(IoError::invalid(
@@ -206,7 +218,11 @@ fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value
     } else {
         return Err(IoError::invalid(
             path,
-            format!("missing the pose of camera `{name}`: give rvec/tvec or R/T (world to camera)"),
+            format!(
+                "camera `{name}`: no pose: expected the nodes `rvec` and `tvec` or `R` and `T` (world to \
+                 camera); an intrinsics-only calibration (as OpenCV's calibration sample writes) needs a pose \
+                 from a separate extrinsic calibration"
+            ),
         ));
     };
     let camera =
@@ -215,12 +231,34 @@ fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value
     Ok(camera)
 }
 
-/// The per-camera keys (suffixed `_<name>` in multi-camera files).
+/// The per-camera keys (suffixed `_<name>` in multi-camera files), longest first so that
+/// `rvec` is not taken for `R`.
 const OPENCV_KEYS: [&str; 8] =
-    ["camera_matrix", "distortion_coefficients", "rvec", "tvec", "R", "T", "image_width", "image_height"];
+    ["distortion_coefficients", "camera_matrix", "image_height", "image_width", "rvec", "tvec", "R", "T"];
+
+/// The map with every key that starts with a per-camera key in another letter case
+/// (`Camera_Matrix`, `image_Width`, as OpenCV's calibration sample writes them) renamed to the
+/// spelling of [`OPENCV_KEYS`], its `_<name>` suffix kept.
+fn canonical_keys(nodes: &Map<String, Value>) -> Map<String, Value> {
+    let mut out = Map::new();
+    for (key, value) in nodes {
+        let canonical = OPENCV_KEYS
+            .iter()
+            .find(|base| {
+                key.len() >= base.len()
+                    && key.is_char_boundary(base.len())
+                    && key[..base.len()].eq_ignore_ascii_case(base)
+                    && (key.len() == base.len() || key[base.len()..].starts_with('_'))
+            })
+            .map_or_else(|| key.clone(), |base| format!("{base}{}", &key[base.len()..]));
+        out.insert(canonical, value.clone());
+    }
+    out
+}
 
 fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
-    let (nodes, text) = parse_storage(path)?;
+    let (raw_nodes, text) = parse_storage(path)?;
+    let nodes = canonical_keys(&raw_nodes);
     let mut named: Vec<String> = nodes
         .keys()
         .filter_map(|k| k.strip_prefix("camera_matrix_"))
@@ -234,24 +272,53 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             "mixes an unsuffixed `camera_matrix` with per-camera `camera_matrix_<name>` keys",
         ));
     }
-    for key in nodes.keys() {
-        let known = OPENCV_KEYS.iter().any(|k| key == k || named.iter().any(|n| *key == format!("{k}_{n}")));
-        if !known {
-            log::warn!("{}: ignoring unknown key \"{key}\"", path.display());
-        }
+    // One mapping per camera: `cam0: {camera_matrix: ..., R: ..., T: ...}`.
+    let nested: Vec<(String, Map<String, Value>)> = if single || !named.is_empty() {
+        Vec::new()
+    } else {
+        raw_nodes
+            .iter()
+            .filter_map(|(k, v)| v.as_object().map(|m| (k.clone(), canonical_keys(m))))
+            .filter(|(_, m)| m.contains_key("camera_matrix"))
+            .collect()
+    };
+    let unused: Vec<&String> = nodes
+        .keys()
+        .filter(|key| {
+            let known = OPENCV_KEYS.iter().any(|k| *key == k || named.iter().any(|n| **key == format!("{k}_{n}")));
+            !known && !nested.iter().any(|(n, _)| n == *key)
+        })
+        .collect();
+    if !unused.is_empty() {
+        let list: Vec<&str> = unused.iter().map(|k| k.as_str()).collect();
+        log::info!("{}: nodes not used for the cameras: {}", path.display(), list.join(", "));
     }
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     if single {
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let cam = camera_from_nodes(path, "", &|k| nodes.get(k).cloned())?;
+        let cam = camera_from_nodes(path, &stem, &|k| nodes.get(k).cloned())?;
         return Ok(vec![(stem, cam)]);
     }
+    if !nested.is_empty() {
+        // Keep the file's order of cameras (the parsed map is sorted by key).
+        let mut nested = nested;
+        nested.sort_by_key(|(n, _)| text.find(&format!("{n}:")).or_else(|| text.find(&format!("\"{n}\""))));
+        return nested
+            .iter()
+            .map(|(n, m)| Ok((n.clone(), camera_from_nodes(path, n, &|k| m.get(k).cloned())?)))
+            .collect();
+    }
     if named.is_empty() {
-        return Err(IoError::invalid(path, "no `camera_matrix` (or `camera_matrix_<name>`) node"));
+        return Err(IoError::invalid(
+            path,
+            "no camera matrix: expected a `camera_matrix` (or `Camera_Matrix`) node, per-camera \
+             `camera_matrix_<name>` nodes, or one mapping per camera holding a `camera_matrix`",
+        ));
     }
     // Keep the file's order of cameras (the parsed map is sorted by key).
     named.sort_by_key(|n| {
         let key = format!("camera_matrix_{n}");
-        text.match_indices(&key)
+        text.to_ascii_lowercase()
+            .match_indices(&key.to_ascii_lowercase())
             .find(|(i, _)| matches!(text[i + key.len()..].chars().next(), Some('"' | ':' | ' ')))
             .map(|(i, _)| i)
     });
@@ -369,7 +436,7 @@ pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoE
             let mut parts = Vec::with_capacity(entries.len());
             for (k, v) in entries {
                 let v = serde_json::to_string_pretty(&v)
-                    .map_err(|source| IoError::Json { path: path.to_path_buf(), source })?
+                    .map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
                     .replace('\n', "\n    ");
                 parts.push(format!("    {}: {v}", Value::String(k)));
             }
@@ -380,22 +447,91 @@ pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoE
     atomic_write(path, |w| w.write_all(text.as_bytes()))
 }
 
-/// Reads a COLMAP text model (`cameras.txt` and `images.txt` in `dir`) as
-/// `(image name, camera)` in the order of `images.txt` (see the module docs for the
-/// conventions).
-pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
-    let cam_path = dir.join("cameras.txt");
-    let img_path = dir.join("images.txt");
-    let cam_text = std::fs::read_to_string(&cam_path).map_err(|e| IoError::io(&cam_path, "COLMAP cameras.txt", e))?;
-    let img_text = std::fs::read_to_string(&img_path).map_err(|e| IoError::io(&img_path, "COLMAP images.txt", e))?;
+/// COLMAP's camera models by id (`colmap/src/colmap/sensor/models.h`) with their parameter
+/// counts; only the first six are read, the others are named in the error.
+const COLMAP_MODELS: [(&str, usize); 12] = [
+    ("SIMPLE_PINHOLE", 3),
+    ("PINHOLE", 4),
+    ("SIMPLE_RADIAL", 4),
+    ("RADIAL", 5),
+    ("OPENCV", 8),
+    ("OPENCV_FISHEYE", 8),
+    ("FULL_OPENCV", 12),
+    ("FOV", 5),
+    ("SIMPLE_RADIAL_FISHEYE", 4),
+    ("RADIAL_FISHEYE", 5),
+    ("THIN_PRISM_FISHEYE", 12),
+    ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
+];
 
-    let mut cameras: Vec<(u64, Intrinsics, Distortion)> = Vec::new();
-    for (n, line) in cam_text.lines().enumerate() {
+/// Intrinsics and distortion of a COLMAP camera (`params` in COLMAP's order, principal point
+/// measured from the image corner).
+fn colmap_camera(model: &str, width: u32, height: u32, p: &[f64]) -> Result<(Intrinsics, Distortion), String> {
+    let expected = match model {
+        "SIMPLE_PINHOLE" => 3,
+        "PINHOLE" | "SIMPLE_RADIAL" => 4,
+        "RADIAL" => 5,
+        "OPENCV" => 8,
+        "FULL_OPENCV" => 12,
+        other => {
+            return Err(format!(
+                "camera model {other} is not supported (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV)"
+            ))
+        }
+    };
+    if p.len() != expected {
+        return Err(format!("{model} takes {expected} parameters, got {}", p.len()));
+    }
+    let (fx, fy, cx, cy, rest) = match model {
+        "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" => (p[0], p[0], p[1], p[2], &p[3..]),
+        _ => (p[0], p[1], p[2], p[3], &p[4..]),
+    };
+    let mut d = Distortion::default();
+    match model {
+        "SIMPLE_RADIAL" => d.k1 = rest[0],
+        "RADIAL" => (d.k1, d.k2) = (rest[0], rest[1]),
+        "OPENCV" | "FULL_OPENCV" => d = Distortion::from_opencv(rest).map_err(|e| e.to_string())?,
+        _ => {}
+    }
+    let k = Intrinsics { width, height, fx, fy, cx: cx - 0.5, cy: cy - 0.5, skew: 0.0 };
+    k.validate().map_err(|e| e.to_string())?;
+    Ok((k, d))
+}
+
+/// The pose of a COLMAP image: world → camera quaternion `(qw, qx, qy, qz)` and translation.
+fn colmap_pose(q: [f64; 4], t: [f64; 3]) -> Result<DAffine3, String> {
+    let q = DQuat::from_xyzw(q[1], q[2], q[3], q[0]);
+    if !q.is_finite() || (q.length() - 1.0).abs() > 1e-3 {
+        return Err(format!("quaternion (w, x, y, z) = ({}, {}, {}, {}) is not a unit quaternion", q.w, q.x, q.y, q.z));
+    }
+    let t = DVec3::from_array(t);
+    if !t.is_finite() {
+        return Err("translation must be finite".into());
+    }
+    Ok(world_from_camera_of(DMat3::from_quat(q.normalize()), t))
+}
+
+/// One image of a model: name, quaternion, translation, camera id, and where it was read (for
+/// messages).
+struct ColmapImage {
+    name: String,
+    q: [f64; 4],
+    t: [f64; 3],
+    camera_id: u64,
+    place: String,
+}
+
+type ColmapCameras = Vec<(u64, Intrinsics, Distortion)>;
+
+fn read_cameras_txt(path: &Path) -> Result<ColmapCameras, IoError> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "COLMAP cameras.txt", e))?;
+    let mut cameras: ColmapCameras = Vec::new();
+    for (n, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let bad = |why: String| IoError::invalid(&cam_path, format!("line {}: {why}", n + 1));
+        let bad = |why: String| IoError::invalid(path, format!("line {}: {why}", n + 1));
         let t: Vec<&str> = line.split_whitespace().collect();
         if t.len() < 4 {
             return Err(bad("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS...".into()));
@@ -407,52 +543,25 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             .iter()
             .map(|s| s.parse::<f64>().map_err(|_| bad(format!("parameter `{s}` is not a number"))))
             .collect::<Result<_, _>>()?;
-        let model = t[1];
-        let expected = match model {
-            "SIMPLE_PINHOLE" => 3,
-            "PINHOLE" => 4,
-            "SIMPLE_RADIAL" => 4,
-            "RADIAL" => 5,
-            "OPENCV" => 8,
-            "FULL_OPENCV" => 12,
-            other => {
-                return Err(bad(format!(
-                    "camera model {other} is not supported (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV)"
-                )))
-            }
-        };
-        if p.len() != expected {
-            return Err(bad(format!("{model} takes {expected} parameters, got {}", p.len())));
-        }
-        let (fx, fy, cx, cy, rest) = match model {
-            "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" => (p[0], p[0], p[1], p[2], &p[3..]),
-            _ => (p[0], p[1], p[2], p[3], &p[4..]),
-        };
-        let mut d = Distortion::default();
-        match model {
-            "SIMPLE_RADIAL" => d.k1 = rest[0],
-            "RADIAL" => (d.k1, d.k2) = (rest[0], rest[1]),
-            "OPENCV" | "FULL_OPENCV" => {
-                d = Distortion::from_opencv(rest).map_err(|e| bad(e.to_string()))?;
-            }
-            _ => {}
-        }
-        let k = Intrinsics { width, height, fx, fy, cx: cx - 0.5, cy: cy - 0.5, skew: 0.0 };
-        k.validate().map_err(|e| bad(e.to_string()))?;
+        let (k, d) = colmap_camera(t[1], width, height, &p).map_err(bad)?;
         if cameras.iter().any(|c| c.0 == id) {
             return Err(bad(format!("camera id {id} appears twice")));
         }
         cameras.push((id, k, d));
     }
+    Ok(cameras)
+}
 
+fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "COLMAP images.txt", e))?;
     let mut out = Vec::new();
-    let mut lines = img_text.lines().enumerate();
+    let mut lines = text.lines().enumerate();
     while let Some((n, line)) = lines.next() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let bad = |why: String| IoError::invalid(&img_path, format!("line {}: {why}", n + 1));
+        let bad = |why: String| IoError::invalid(path, format!("line {}: {why}", n + 1));
         let t: Vec<&str> = line.split_whitespace().collect();
         if t.len() < 10 {
             return Err(bad("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME".into()));
@@ -461,32 +570,191 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             .iter()
             .map(|s| s.parse::<f64>().map_err(|_| bad(format!("`{s}` is not a number"))))
             .collect::<Result<_, _>>()?;
-        let cam_id: u64 = t[8].parse().map_err(|_| bad(format!("camera id `{}` is not an integer", t[8])))?;
+        let camera_id: u64 = t[8].parse().map_err(|_| bad(format!("camera id `{}` is not an integer", t[8])))?;
         // As COLMAP's own reader: the name is the tenth field (names cannot hold spaces).
-        let name = t[9].to_string();
-        let q = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
-        if !q.is_finite() || (q.length() - 1.0).abs() > 1e-3 {
-            return Err(bad(format!("quaternion {:?} is not a unit quaternion", &v[..4])));
-        }
-        let rotation = DMat3::from_quat(q.normalize());
-        let (_, k, d) = cameras
-            .iter()
-            .find(|c| c.0 == cam_id)
-            .ok_or_else(|| bad(format!("image {name} uses camera id {cam_id}, which cameras.txt does not define")))?;
-        let camera = Camera {
-            intrinsics: *k,
-            distortion: *d,
-            world_from_camera: world_from_camera_of(rotation, DVec3::new(v[4], v[5], v[6])),
-            lens: None,
-        };
-        out.push((name, camera));
+        out.push(ColmapImage {
+            name: t[9].to_string(),
+            q: [v[0], v[1], v[2], v[3]],
+            t: [v[4], v[5], v[6]],
+            camera_id,
+            place: format!("line {}", n + 1),
+        });
         // The next line lists the image's 2D points; skip it.
         lines.next();
+    }
+    Ok(out)
+}
+
+/// Little-endian reads from a byte slice that fail, rather than panic, past its end.
+struct Bytes<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Bytes<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.data.len());
+        let Some(end) = end else {
+            return Err(format!("truncated: needs {n} more byte(s) at byte {} of {}", self.at, self.data.len()));
+        };
+        let s = &self.data[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
+        let mut a = [0u8; N];
+        a.copy_from_slice(self.take(N)?);
+        Ok(a)
+    }
+
+    fn u64(&mut self) -> Result<u64, String> {
+        Ok(u64::from_le_bytes(self.array()?))
+    }
+
+    fn i32(&mut self) -> Result<i32, String> {
+        Ok(i32::from_le_bytes(self.array()?))
+    }
+
+    fn f64(&mut self) -> Result<f64, String> {
+        Ok(f64::from_le_bytes(self.array()?))
+    }
+
+    /// A NUL-terminated UTF-8 string.
+    fn c_string(&mut self) -> Result<String, String> {
+        let len = self.data[self.at..].iter().position(|&b| b == 0).ok_or("unterminated image name")?;
+        let s = self.take(len)?;
+        self.at += 1;
+        String::from_utf8(s.to_vec()).map_err(|_| "image name is not UTF-8".to_string())
+    }
+}
+
+/// `cameras.bin`: `u64` count, then per camera `i32` id, `i32` model id, `u64` width, `u64`
+/// height and the model's parameters as `f64` (COLMAP `WriteCamerasBinary`).
+fn read_cameras_bin(path: &Path) -> Result<ColmapCameras, IoError> {
+    let data = std::fs::read(path).map_err(|e| IoError::io(path, "COLMAP cameras.bin", e))?;
+    let mut b = Bytes { data: &data, at: 0 };
+    let mut run = || -> Result<ColmapCameras, String> {
+        let n = b.u64()?;
+        let mut cameras: ColmapCameras = Vec::new();
+        for i in 0..n {
+            let id = b.i32()?;
+            let model_id = b.i32()?;
+            let (model, count) = usize::try_from(model_id)
+                .ok()
+                .and_then(|m| COLMAP_MODELS.get(m))
+                .copied()
+                .ok_or_else(|| format!("camera {i}: unknown model id {model_id}"))?;
+            let (width, height) = (b.u64()?, b.u64()?);
+            let params = (0..count).map(|_| b.f64()).collect::<Result<Vec<_>, _>>()?;
+            let size = |v: u64| u32::try_from(v).map_err(|_| format!("camera id {id}: size {v} is too large"));
+            let (k, d) = colmap_camera(model, size(width)?, size(height)?, &params)
+                .map_err(|e| format!("camera id {id}: {e}"))?;
+            let id = u64::try_from(id).map_err(|_| format!("camera id {id} is negative"))?;
+            if cameras.iter().any(|c| c.0 == id) {
+                return Err(format!("camera id {id} appears twice"));
+            }
+            cameras.push((id, k, d));
+        }
+        Ok(cameras)
+    };
+    run().map_err(|e| IoError::invalid(path, e))
+}
+
+/// `images.bin`: `u64` count, then per image `i32` id, quaternion `qw qx qy qz` and translation
+/// as `f64`, `i32` camera id, the NUL-terminated name, a `u64` count of 2D points and 24 bytes
+/// per point (COLMAP `WriteImagesBinary`).
+fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
+    let data = std::fs::read(path).map_err(|e| IoError::io(path, "COLMAP images.bin", e))?;
+    let mut b = Bytes { data: &data, at: 0 };
+    let mut run = || -> Result<Vec<ColmapImage>, String> {
+        let n = b.u64()?;
+        let mut out = Vec::new();
+        for _ in 0..n {
+            let image_id = b.i32()?;
+            let q = [b.f64()?, b.f64()?, b.f64()?, b.f64()?];
+            let t = [b.f64()?, b.f64()?, b.f64()?];
+            let camera_id = b.i32()?;
+            let name = b.c_string()?;
+            let points = b.u64()?;
+            let skip = usize::try_from(points).ok().and_then(|p| p.checked_mul(24)).ok_or("too many 2D points")?;
+            b.take(skip)?;
+            let camera_id =
+                u64::try_from(camera_id).map_err(|_| format!("image {name}: camera id {camera_id} is negative"))?;
+            out.push(ColmapImage { name, q, t, camera_id, place: format!("image id {image_id}") });
+        }
+        Ok(out)
+    };
+    run().map_err(|e| IoError::invalid(path, e))
+}
+
+/// Reads a COLMAP model in `dir` (`sparse/0` of a COLMAP project): `cameras.bin` and
+/// `images.bin` when both exist, else `cameras.txt` and `images.txt`, as `(image name, camera)`
+/// in the order of the images file (see the module docs for the conventions).
+pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
+    let (bin_cams, bin_imgs) = (dir.join("cameras.bin"), dir.join("images.bin"));
+    let (cameras, images, img_path) = if bin_cams.is_file() && bin_imgs.is_file() {
+        (read_cameras_bin(&bin_cams)?, read_images_bin(&bin_imgs)?, bin_imgs)
+    } else {
+        let (cams, imgs) = (dir.join("cameras.txt"), dir.join("images.txt"));
+        if !cams.exists() && !bin_cams.exists() {
+            return Err(IoError::NotFound { what: "COLMAP cameras.txt or cameras.bin", path: cams });
+        }
+        (read_cameras_txt(&cams)?, read_images_txt(&imgs)?, imgs)
+    };
+    let mut out = Vec::with_capacity(images.len());
+    for im in images {
+        let bad = |why: String| IoError::invalid(&img_path, format!("{}: {why}", im.place));
+        let (_, k, d) = cameras.iter().find(|c| c.0 == im.camera_id).ok_or_else(|| {
+            bad(format!("image {} uses camera id {}, which the cameras file does not define", im.name, im.camera_id))
+        })?;
+        let pose = colmap_pose(im.q, im.t).map_err(bad)?;
+        out.push((im.name, Camera { intrinsics: *k, distortion: *d, world_from_camera: pose, lens: None }));
     }
     if out.is_empty() {
         return Err(IoError::invalid(&img_path, "no images"));
     }
     Ok(out)
+}
+
+/// Writes a COLMAP binary model (`cameras.bin`, `images.bin`) in `dir`, one camera per image,
+/// with models `PINHOLE` or `FULL_OPENCV` and no 2D points. Pixel centres are shifted to
+/// COLMAP's convention (`cx_file = cx + ½`); poses are written world → camera.
+pub fn write_colmap_bin(dir: &Path, images: &[(String, Camera)]) -> Result<(), IoError> {
+    let mut cams = Vec::new();
+    let mut imgs = Vec::new();
+    cams.extend((images.len() as u64).to_le_bytes());
+    imgs.extend((images.len() as u64).to_le_bytes());
+    for (i, (name, cam)) in images.iter().enumerate() {
+        let k = &cam.intrinsics;
+        assert!(k.skew == 0.0, "write_colmap_bin: COLMAP cameras have no skew");
+        let id = i as i32 + 1;
+        let mut params = vec![k.fx, k.fy, k.cx + 0.5, k.cy + 0.5];
+        let model: i32 = if cam.distortion.is_identity() {
+            1
+        } else {
+            let d = &cam.distortion;
+            params.extend([d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6]);
+            6
+        };
+        cams.extend(id.to_le_bytes());
+        cams.extend(model.to_le_bytes());
+        cams.extend(u64::from(k.width).to_le_bytes());
+        cams.extend(u64::from(k.height).to_le_bytes());
+        params.iter().for_each(|p| cams.extend(p.to_le_bytes()));
+        let camera_from_world = cam.camera_from_world();
+        let q = DQuat::from_mat3(&camera_from_world.matrix3).normalize();
+        imgs.extend(id.to_le_bytes());
+        [q.w, q.x, q.y, q.z].iter().chain(camera_from_world.translation.to_array().iter()).for_each(|v| {
+            imgs.extend(v.to_le_bytes());
+        });
+        imgs.extend(id.to_le_bytes());
+        imgs.extend(name.as_bytes());
+        imgs.push(0);
+        imgs.extend(0u64.to_le_bytes());
+    }
+    atomic_write(&dir.join("cameras.bin"), |w| w.write_all(&cams))?;
+    atomic_write(&dir.join("images.bin"), |w| w.write_all(&imgs))
 }
 
 #[cfg(test)]

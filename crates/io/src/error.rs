@@ -5,37 +5,30 @@ use std::path::PathBuf;
 use fluidnerf_core::CoreError;
 
 /// What can go wrong reading or writing fluidnerf's files.
+///
+/// Each message is complete on its own: the underlying error is part of the message and is
+/// not also exposed as `source()`, so a chain printer (`{:#}`) never shows a cause twice.
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// The operating system refused a read, write or rename.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     /// A file the scene (or the caller) refers to does not exist.
     #[error("{what} not found: {path}")]
     NotFound { what: &'static str, path: PathBuf },
-    /// Not JSON, or JSON of the wrong shape (the message carries line and column).
-    #[error("{path}: malformed JSON: {source}")]
-    Json {
-        path: PathBuf,
-        #[source]
-        source: serde_json::Error,
-    },
+    /// Not JSON (the message carries line and column).
+    #[error("{path}: malformed JSON: {error}")]
+    Json { path: PathBuf, error: serde_json::Error },
+    /// A key of a structured file is missing or has the wrong type or value. `location` names
+    /// the key path (`frames[3].fl_x`) and, for scene frames, the frame and its image.
+    #[error("{path}: {location}: {problem}")]
+    Key { path: PathBuf, location: String, problem: String },
     /// The file is readable but its content is wrong or unsupported.
     #[error("{path}: {problem}")]
     Invalid { path: PathBuf, problem: String },
     /// A frame's camera is invalid (bad intrinsics, not a rotation, ...).
-    #[error("{path}: frame {frame} ({file_path}): {source}")]
-    Camera {
-        path: PathBuf,
-        frame: usize,
-        file_path: PathBuf,
-        #[source]
-        source: CoreError,
-    },
+    #[error("{path}: frame {frame} ({file_path}): {error}")]
+    Camera { path: PathBuf, frame: usize, file_path: PathBuf, error: CoreError },
     /// A frame's camera has no pixel whose ray crosses the reconstruction box.
     #[error(
         "{path}: frame {frame} ({file_path}): the camera does not see the reconstruction box \
@@ -72,7 +65,7 @@ impl IoError {
         if source.kind() == std::io::ErrorKind::NotFound {
             IoError::NotFound { what, path }
         } else {
-            IoError::Io { path, source }
+            IoError::Io { path, error: source }
         }
     }
 }

@@ -1,13 +1,19 @@
 //! Camera images as linear f32.
 //!
 //! # Reading
-//! - 8- and 16-bit PNG, 8/16/32-bit integer and 32/64-bit float TIFF.
-//! - Values stay linear and unscaled: integer images give their raw sensor counts as f32
-//!   (a 16-bit PNG pixel stored as 40000 reads as 40000.0, never normalised to [0, 1] and never
-//!   sRGB-decoded); float TIFF values are returned as stored.
+//! - 8- and 16-bit PNG, 8-bit JPEG (baseline and progressive), 8/16/32-bit integer and
+//!   32/64-bit float TIFF. The format is chosen by content, not by extension.
+//! - Values stay unscaled: integer images give their sensor counts as f32 (a 16-bit PNG pixel
+//!   stored as 40000 reads as 40000.0, never normalised to [0, 1]); float TIFF values are
+//!   returned as stored.
+//! - 8-bit images (PNG, TIFF, JPEG) go through an explicit [`Linearisation`]: `linear` (the
+//!   default: counts as stored), `srgb` (the sRGB transfer curve of IEC 61966-2-1 undone) or a
+//!   gamma `g` (`count^g`), each keeping 255 at 255: `value = 255 · f(count / 255)`. Cameras
+//!   that write JPEG almost always store sRGB-encoded values; scientific cameras store linear
+//!   counts. 16-bit, 32-bit and float images are always read as linear.
 //! - Colour images are reduced to luminance `Y = 0.2126 R + 0.7152 G + 0.0722 B` (Rec. 709
-//!   weights applied to the stored values, which are taken as linear) with a warning; an alpha
-//!   channel is dropped.
+//!   weights applied to the linearised values) with one warning per run; an alpha channel is
+//!   dropped.
 //!
 //! # Writing
 //! - [`write_png16`]: 16-bit grayscale PNG with the explicit mapping
@@ -19,65 +25,279 @@
 //! Layout: [`Image`] is row-major, `data[row * width + col]`, row 0 at the top.
 
 use std::io::Cursor;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use fluidnerf_core::Image;
 use image::{DynamicImage, ImageEncoder};
 
 use crate::{atomic_write, IoError};
 
-/// Reads a PNG or TIFF image (chosen by content, not extension) as linear f32.
+/// How 8-bit pixel values become linear intensities (see the module docs). Written in scene
+/// files and given on the command line as `"linear"`, `"srgb"` or a gamma such as `2.2`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Linearisation {
+    /// Counts as stored.
+    #[default]
+    Linear,
+    /// The sRGB transfer curve undone: `c ≤ 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055)^2.4`.
+    Srgb,
+    /// `c^gamma`, with `gamma` positive and finite.
+    Gamma(f64),
+}
+
+impl Linearisation {
+    /// The linear value of an 8-bit count, on the same 0..=255 scale.
+    pub fn apply(self, count: u8) -> f32 {
+        let c = f64::from(count) / 255.0;
+        let linear = match self {
+            Linearisation::Linear => return f32::from(count),
+            Linearisation::Srgb if c <= 0.04045 => c / 12.92,
+            Linearisation::Srgb => ((c + 0.055) / 1.055).powf(2.4),
+            Linearisation::Gamma(g) => c.powf(g),
+        };
+        (255.0 * linear) as f32
+    }
+
+    fn table(self) -> [f32; 256] {
+        std::array::from_fn(|i| self.apply(i as u8))
+    }
+}
+
+impl std::fmt::Display for Linearisation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Linearisation::Linear => f.write_str("linear"),
+            Linearisation::Srgb => f.write_str("srgb"),
+            Linearisation::Gamma(g) => write!(f, "gamma {g}"),
+        }
+    }
+}
+
+impl std::str::FromStr for Linearisation {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "linear" => Ok(Linearisation::Linear),
+            "srgb" => Ok(Linearisation::Srgb),
+            other => match other.strip_prefix("gamma").unwrap_or(other).trim().parse::<f64>() {
+                Ok(g) if g.is_finite() && g > 0.0 => Ok(Linearisation::Gamma(g)),
+                _ => Err(format!("`{s}` is not a linearisation: use linear, srgb or a positive gamma such as 2.2")),
+            },
+        }
+    }
+}
+
+impl serde::Serialize for Linearisation {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Linearisation::Gamma(g) => s.serialize_f64(*g),
+            other => s.serialize_str(&other.to_string()),
+        }
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Linearisation {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Name(String),
+            Gamma(f64),
+        }
+        let text = match Raw::deserialize(d)? {
+            Raw::Name(s) => s,
+            Raw::Gamma(g) => g.to_string(),
+        };
+        text.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// How the samples of an image file are stored: mixing kinds in one scene is refused (an 8-bit
+/// image among 16-bit ones would read about 257 times too dark).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum SampleKind {
+    /// Integers of this many bits (signed or not).
+    Integer(u8),
+    /// 32- or 64-bit floats.
+    Float,
+}
+
+impl SampleKind {
+    /// "an 8-bit", "a 16-bit", "a floating-point": for messages.
+    pub fn with_article(self) -> String {
+        match self {
+            SampleKind::Integer(8 | 11 | 18) => format!("an {self}"),
+            _ => format!("a {self}"),
+        }
+    }
+}
+
+impl std::fmt::Display for SampleKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SampleKind::Integer(bits) => write!(f, "{bits}-bit"),
+            SampleKind::Float => f.write_str("floating-point"),
+        }
+    }
+}
+
+/// Reads a PNG, JPEG or TIFF image (chosen by content, not extension) as f32; 8-bit values
+/// are taken as linear counts. See [`read_image_with`].
 pub fn read_image(path: &Path) -> Result<Image, IoError> {
+    read_image_with(path, Linearisation::Linear).map(|(image, _)| image)
+}
+
+/// Reads a PNG, JPEG or TIFF image (chosen by content, not extension) as f32, applying
+/// `linearisation` to 8-bit samples, and says how its samples were stored.
+pub fn read_image_with(path: &Path, linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "image file", e))?;
-    if bytes.starts_with(b"II*\0")
-        || bytes.starts_with(b"MM\0*")
-        || bytes.starts_with(b"II+\0")
-        || bytes.starts_with(b"MM\0+")
-    {
-        read_tiff(path, &bytes)
-    } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        read_png(path, &bytes)
+    decode_image(path, &bytes, linearisation)
+}
+
+/// [`read_image_with`] on bytes already in memory; `path` names them in errors.
+pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
+    if is_tiff(bytes) {
+        read_tiff(path, bytes, linearisation)
+    } else if bytes.starts_with(PNG_MAGIC) {
+        read_with_image_crate(path, bytes, image::ImageFormat::Png, linearisation)
+    } else if bytes.starts_with(JPEG_MAGIC) {
+        read_with_image_crate(path, bytes, image::ImageFormat::Jpeg, linearisation)
     } else {
         Err(IoError::invalid(
             path,
-            "unreadable image: not a PNG or TIFF file (supported: 8/16-bit PNG, 16-bit and float TIFF)",
+            "unreadable image: not a PNG, JPEG or TIFF file (supported: 8/16-bit PNG, 8-bit JPEG, \
+             8/16/32-bit and float TIFF)",
         ))
     }
 }
 
-fn read_png(path: &Path, bytes: &[u8]) -> Result<Image, IoError> {
-    let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
-        .map_err(|e| IoError::invalid(path, format!("unreadable PNG: {e}")))?;
+const PNG_MAGIC: &[u8] = b"\x89PNG\r\n\x1a\n";
+const JPEG_MAGIC: &[u8] = b"\xff\xd8\xff";
+
+fn is_tiff(bytes: &[u8]) -> bool {
+    bytes.starts_with(b"II*\0")
+        || bytes.starts_with(b"MM\0*")
+        || bytes.starts_with(b"II+\0")
+        || bytes.starts_with(b"MM\0+")
+}
+
+/// The size `(width, height)` of a PNG, JPEG or TIFF image, read from its header only.
+pub fn read_dimensions(path: &Path) -> Result<(u32, u32), IoError> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| IoError::io(path, "image file", e))?;
+    let mut head = [0u8; 8];
+    let n = file.read(&mut head).map_err(|e| IoError::io(path, "image file", e))?;
+    let head = &head[..n];
+    let reader = std::io::BufReader::new(std::fs::File::open(path).map_err(|e| IoError::io(path, "image file", e))?);
+    if is_tiff(head) {
+        let mut dec =
+            tiff::decoder::Decoder::new(reader).map_err(|e| IoError::invalid(path, format!("unreadable TIFF: {e}")))?;
+        dec.dimensions().map_err(|e| IoError::invalid(path, format!("unreadable TIFF: {e}")))
+    } else if head.starts_with(PNG_MAGIC) || head.starts_with(JPEG_MAGIC) {
+        image::ImageReader::new(reader)
+            .with_guessed_format()
+            .map_err(|e| IoError::io(path, "image file", e))?
+            .into_dimensions()
+            .map_err(|e| IoError::invalid(path, format!("unreadable image header: {e}")))
+    } else {
+        Err(IoError::invalid(path, "unreadable image: not a PNG, JPEG or TIFF file"))
+    }
+}
+
+/// Extensions of the image files fluidnerf reads (lower case).
+pub const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "tif", "tiff"];
+
+fn has_image_extension(p: &Path) -> bool {
+    p.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// For an image path that names no file, the one image file in the same folder with the same
+/// name stem and another (or no) extension: `r_0` or `r_0.jpg` finds `r_0.png`. `Ok(None)` when
+/// there is none or the folder cannot be listed; an error naming the candidates when there are
+/// several.
+pub fn find_image_by_stem(path: &Path) -> Result<Option<PathBuf>, String> {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else { return Ok(None) };
+    // `frame.0001` has no image extension: its whole name is the stem.
+    let stem = if has_image_extension(path) { path.file_stem().unwrap_or(name) } else { name };
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    let Ok(entries) = std::fs::read_dir(dir) else { return Ok(None) };
+    let mut found: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| has_image_extension(p) && p.file_stem() == Some(stem) && p.is_file())
+        .collect();
+    found.sort();
+    match found.len() {
+        0 => Ok(None),
+        1 => Ok(found.pop()),
+        _ => Err(format!(
+            "{} names no file, and several images share its stem: {}",
+            path.display(),
+            found.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+        )),
+    }
+}
+
+fn read_with_image_crate(
+    path: &Path,
+    bytes: &[u8],
+    format: image::ImageFormat,
+    linearisation: Linearisation,
+) -> Result<(Image, SampleKind), IoError> {
+    let name = if format == image::ImageFormat::Png { "PNG" } else { "JPEG" };
+    let img = image::load_from_memory_with_format(bytes, format)
+        .map_err(|e| IoError::invalid(path, format!("unreadable {name}: {e}")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
+    let lut = linearisation.table();
+    let lin = |v: Vec<u8>| -> Vec<f32> { v.into_iter().map(|c| lut[usize::from(c)]).collect() };
+    let kind = if matches!(
+        img,
+        DynamicImage::ImageLuma8(_)
+            | DynamicImage::ImageLumaA8(_)
+            | DynamicImage::ImageRgb8(_)
+            | DynamicImage::ImageRgba8(_)
+    ) {
+        SampleKind::Integer(8)
+    } else {
+        SampleKind::Integer(16)
+    };
     let (channels, data): (usize, Vec<f32>) = match img {
-        DynamicImage::ImageLuma8(b) => (1, b.into_raw().into_iter().map(f32::from).collect()),
-        DynamicImage::ImageLumaA8(b) => (2, b.into_raw().into_iter().map(f32::from).collect()),
-        DynamicImage::ImageRgb8(b) => (3, b.into_raw().into_iter().map(f32::from).collect()),
-        DynamicImage::ImageRgba8(b) => (4, b.into_raw().into_iter().map(f32::from).collect()),
+        DynamicImage::ImageLuma8(b) => (1, lin(b.into_raw())),
+        DynamicImage::ImageLumaA8(b) => (2, lin(b.into_raw())),
+        DynamicImage::ImageRgb8(b) => (3, lin(b.into_raw())),
+        DynamicImage::ImageRgba8(b) => (4, lin(b.into_raw())),
         DynamicImage::ImageLuma16(b) => (1, b.into_raw().into_iter().map(f32::from).collect()),
         DynamicImage::ImageLumaA16(b) => (2, b.into_raw().into_iter().map(f32::from).collect()),
         DynamicImage::ImageRgb16(b) => (3, b.into_raw().into_iter().map(f32::from).collect()),
         DynamicImage::ImageRgba16(b) => (4, b.into_raw().into_iter().map(f32::from).collect()),
-        other => return Err(IoError::invalid(path, format!("unsupported PNG pixel type {:?}", other.color()))),
+        other => return Err(IoError::invalid(path, format!("unsupported {name} pixel type {:?}", other.color()))),
     };
-    Ok(to_gray(path, w, h, channels, data))
+    if w * h == 0 {
+        return Err(IoError::invalid(path, format!("{name} of {w}x{h} pixels is empty")));
+    }
+    Ok((to_gray(path, w, h, channels, data), kind))
 }
 
-fn read_tiff(path: &Path, bytes: &[u8]) -> Result<Image, IoError> {
+fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
     use tiff::decoder::{Decoder, DecodingResult};
     let bad = |e: tiff::TiffError| IoError::invalid(path, format!("unreadable TIFF: {e}"));
     let mut dec = Decoder::new(Cursor::new(bytes)).map_err(bad)?;
     let (w, h) = dec.dimensions().map_err(bad)?;
     let (w, h) = (w as usize, h as usize);
-    let data: Vec<f32> = match dec.read_image().map_err(bad)? {
-        DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::U32(v) => v.into_iter().map(|x| x as f32).collect(),
-        DecodingResult::F32(v) => v,
-        DecodingResult::F64(v) => v.into_iter().map(|x| x as f32).collect(),
-        DecodingResult::I8(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::I16(v) => v.into_iter().map(f32::from).collect(),
-        DecodingResult::I32(v) => v.into_iter().map(|x| x as f32).collect(),
+    // Refuse before decoding: a corrupt header can claim an absurd size.
+    if w.checked_mul(h).is_none_or(|n| n == 0 || n > 1 << 30) {
+        return Err(IoError::invalid(path, format!("TIFF claims {w}x{h} pixels")));
+    }
+    let lut = linearisation.table();
+    let (data, kind): (Vec<f32>, SampleKind) = match dec.read_image().map_err(bad)? {
+        DecodingResult::U8(v) => (v.into_iter().map(|c| lut[usize::from(c)]).collect(), SampleKind::Integer(8)),
+        DecodingResult::U16(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(16)),
+        DecodingResult::U32(v) => (v.into_iter().map(|x| x as f32).collect(), SampleKind::Integer(32)),
+        DecodingResult::F32(v) => (v, SampleKind::Float),
+        DecodingResult::F64(v) => (v.into_iter().map(|x| x as f32).collect(), SampleKind::Float),
+        DecodingResult::I8(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(8)),
+        DecodingResult::I16(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(16)),
+        DecodingResult::I32(v) => (v.into_iter().map(|x| x as f32).collect(), SampleKind::Integer(32)),
         _ => {
             return Err(IoError::invalid(
                 path,
@@ -89,7 +309,7 @@ fn read_tiff(path: &Path, bytes: &[u8]) -> Result<Image, IoError> {
     if pixels == 0 || data.len() % pixels != 0 || data.len() / pixels > 4 {
         return Err(IoError::invalid(path, format!("TIFF of {w}x{h} pixels holds {} samples", data.len())));
     }
-    Ok(to_gray(path, w, h, data.len() / pixels, data))
+    Ok((to_gray(path, w, h, data.len() / pixels, data), kind))
 }
 
 /// Interleaved samples with `channels` per pixel (1 gray, 2 gray+alpha, 3 RGB, 4 RGBA) to gray.
@@ -97,14 +317,19 @@ fn to_gray(path: &Path, w: usize, h: usize, channels: usize, data: Vec<f32>) -> 
     match channels {
         1 => Image::from_vec(w, h, data),
         2 => {
-            log::warn!("{}: dropping the alpha channel", path.display());
+            log::debug!("{}: dropping the alpha channel", path.display());
             Image::from_vec(w, h, data.chunks_exact(2).map(|p| p[0]).collect())
         }
         _ => {
-            log::warn!(
-                "{}: colour image reduced to luminance (0.2126 R + 0.7152 G + 0.0722 B of the stored values)",
-                path.display()
-            );
+            // Datasets hold hundreds of colour images: say it once per run, not once per file.
+            static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+            if !WARNED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                log::warn!(
+                    "{}: colour images are reduced to luminance (0.2126 R + 0.7152 G + 0.0722 B of the \
+                     linearised values; alpha dropped); further colour images are not reported",
+                    path.display()
+                );
+            }
             let lum = data.chunks_exact(channels).map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).collect();
             Image::from_vec(w, h, lum)
         }
@@ -256,9 +481,53 @@ mod tests {
         let p = dir.path().join("junk.png");
         std::fs::write(&p, b"not an image").expect("write");
         let err = read_image(&p).expect_err("junk");
-        assert!(err.to_string().contains("junk.png") && err.to_string().contains("not a PNG or TIFF"), "{err}");
+        assert!(err.to_string().contains("junk.png") && err.to_string().contains("not a PNG, JPEG or TIFF"), "{err}");
         let err = read_image(&dir.path().join("none.png")).expect_err("missing");
         assert!(matches!(err, IoError::NotFound { .. }), "{err}");
         assert!(err.to_string().contains("none.png"), "{err}");
+    }
+
+    #[test]
+    fn jpeg_reads_with_the_chosen_linearisation() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("flat.jpg");
+        let mut bytes = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 100)
+            .write_image(&[128u8; 16 * 8], 16, 8, image::ExtendedColorType::L8)
+            .expect("encodes");
+        std::fs::write(&p, &bytes).expect("write");
+        // The sRGB curve of IEC 61966-2-1 and a plain gamma, by hand, on the 0..=255 scale.
+        let c: f64 = 128.0 / 255.0;
+        let srgb = 255.0 * ((c + 0.055) / 1.055).powf(2.4);
+        let gamma = 255.0 * c.powf(2.2);
+        for (lin, expected) in
+            [(Linearisation::Linear, 128.0), (Linearisation::Srgb, srgb), (Linearisation::Gamma(2.2), gamma)]
+        {
+            let (img, kind) = read_image_with(&p, lin).expect("reads");
+            assert_eq!(kind, SampleKind::Integer(8));
+            assert_eq!((img.width, img.height), (16, 8));
+            // JPEG is lossy; a flat block may move by one count (about 0.5 after sRGB decoding).
+            assert!(img.data.iter().all(|&v| (f64::from(v) - expected).abs() < 1.01), "{lin}: {:?}", &img.data[..4]);
+        }
+        assert!((srgb - 55.0).abs() < 0.1 && (gamma - 55.98).abs() < 0.1, "{srgb} {gamma}");
+        assert_eq!(read_dimensions(&p).expect("size"), (16, 8));
+        // 16-bit images are never linearised.
+        let p16 = dir.path().join("a.png");
+        write_png16_counts(&p16, &Image::from_vec(1, 1, vec![1000.0])).expect("write");
+        assert_eq!(read_image_with(&p16, Linearisation::Srgb).expect("reads").0.data, vec![1000.0]);
+    }
+
+    #[test]
+    fn linearisation_parses_and_round_trips() {
+        assert_eq!("sRGB".parse::<Linearisation>(), Ok(Linearisation::Srgb));
+        assert_eq!("2.2".parse::<Linearisation>(), Ok(Linearisation::Gamma(2.2)));
+        assert_eq!("linear".parse::<Linearisation>(), Ok(Linearisation::Linear));
+        assert!("-1".parse::<Linearisation>().is_err() && "log".parse::<Linearisation>().is_err());
+        for l in [Linearisation::Linear, Linearisation::Srgb, Linearisation::Gamma(1.8)] {
+            let text = serde_json::to_string(&l).expect("json");
+            assert_eq!(serde_json::from_str::<Linearisation>(&text).expect("back"), l, "{text}");
+        }
+        assert_eq!(Linearisation::Srgb.apply(255), 255.0);
+        assert_eq!(Linearisation::Srgb.apply(0), 0.0);
     }
 }

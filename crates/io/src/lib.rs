@@ -4,10 +4,13 @@
 //! beyond format conversions live here.
 //!
 //! - [`scene`]: nerfstudio-style `transforms.json` with fluidnerf's additions (the native
-//!   scene format), and loading a scene's images and ground-truth volumes.
-//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/JSON) and COLMAP text calibrations.
-//! - [`image`]: 8/16-bit PNG and 16/32-bit TIFF, read as linear f32.
-//! - [`volume`]: `.npy`, `.vti` (VTK XML ImageData) and raw + JSON sidecar volumes.
+//!   scene format; files from nerfstudio, instant-ngp and Blender/NeRF exporters read too),
+//!   and loading a scene's images and ground-truth volumes with their checks.
+//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/JSON) and COLMAP (text or binary) calibrations.
+//! - [`image`]: 8/16-bit PNG, 8-bit JPEG and 8/16/32-bit and float TIFF, read as f32 with an
+//!   explicit linearisation of 8-bit values.
+//! - [`volume`]: `.npy` (C or Fortran order), `.vti` (VTK XML ImageData) and raw + JSON
+//!   sidecar volumes.
 //! - [`mesh`]: binary PLY and OBJ triangle meshes.
 //!
 //! # Conventions
@@ -49,7 +52,7 @@ pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
         builder.permissions(std::fs::Permissions::from_mode(0o644));
     }
     let tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
-    let io_err = |e| IoError::Io { path: path.to_path_buf(), source: e };
+    let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
     {
         let mut w = BufWriter::new(tmp.as_file());
         write(&mut w).map_err(io_err)?;

@@ -21,6 +21,11 @@
 //!
 //! - **Intrinsics** (`camera_model w h fl_x fl_y cx cy k1 k2 k3 k4 p1 p2`) may sit at the top
 //!   level (shared) or in a frame; a key in a frame overrides the same key at the top level.
+//!   As instant-ngp and Blender's NeRF exporters write them: `camera_angle_x`/`camera_angle_y`
+//!   (field of view in radians) stand in for a missing `fl_x`/`fl_y`
+//!   (`fl = size / (2 tan(angle / 2))`; with `camera_angle_x` alone the pixels are square);
+//!   `w`/`h` may be whole floats (`605.0`) or absent (then read from the image's header);
+//!   a missing `cx`/`cy` is the image centre (`w/2`, `h/2` in the file's convention).
 //!   `camera_model` may be `PINHOLE`, `SIMPLE_PINHOLE`, `OPENCV`, `SIMPLE_RADIAL`, `RADIAL` or
 //!   `FULL_OPENCV` (all read through the same OpenCV model; missing coefficients are 0).
 //!   Fisheye and panoramic models are rejected.
@@ -38,13 +43,20 @@
 //!   OpenGL camera axes (x right, y up, z backward). fluidnerf's cameras use OpenCV axes, so
 //!   `R_cv = R_gl · diag(1, −1, −1)` (negate the second and third columns); the translation
 //!   (camera centre) is unchanged.
-//! - **fluidnerf's additions**: `aabb` (required; world units), `units` (default `"mm"`),
-//!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `truth` (optional
-//!   list of `{time, file_path}` `.npy` volumes filling the aabb); per frame `time`, `camera`
-//!   (a physical camera's name), `holdout` (default false) and `thin_lens`
-//!   ([`ThinLens`] fields, world units).
-//! - Unknown keys are ignored with a warning naming the key and the file.
-//! - Paths are relative to the folder holding `transforms.json` unless absolute.
+//! - **fluidnerf's additions**: `aabb` (world units; required by [`load_scene`], which says how
+//!   to supply it; [`read_scene_draft`] reads files without one), `units` (default `"mm"`),
+//!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `linearisation`
+//!   (how 8-bit images become linear: `"linear"` (default), `"srgb"` or a gamma; see
+//!   [`crate::image`]), `truth` (optional list of `{time, file_path}` `.npy` volumes filling the
+//!   aabb); per frame `time`, `camera` (a physical camera's name), `holdout` (default false)
+//!   and `thin_lens` ([`ThinLens`] fields, world units).
+//! - Keys fluidnerf does not read are reported in at most two log lines per file, however many
+//!   frames hold them: the ones NeRF tools write routinely (`aabb_scale`, `colmap_im_id`,
+//!   `applied_transform`, ...) at info level, others as a warning.
+//! - Errors name the key path (`frames[3].transform_matrix[1]`) and the frame and its image.
+//! - Paths are relative to the folder holding `transforms.json` unless absolute. A path that
+//!   names no file, next to exactly one image with the same stem (`train/r_0` →
+//!   `train/r_0.png`), reads that image.
 //!
 //! # Writing
 //! [`save_scene`] writes the intrinsics once at the top level when every frame has the same
@@ -58,8 +70,11 @@ use std::path::{Path, PathBuf};
 use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
 use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume};
 use rayon::prelude::*;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
+use crate::image::{Linearisation, SampleKind};
 use crate::{atomic_write, IoError};
 
 /// The file name of a scene inside its folder.
@@ -70,12 +85,14 @@ pub const DEFAULT_UNITS: &str = "mm";
 
 const MODELS: [&str; 6] = ["PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "SIMPLE_RADIAL", "RADIAL", "FULL_OPENCV"];
 
-const INTRINSIC_KEYS: [&str; 17] = [
+const INTRINSIC_KEYS: [&str; 19] = [
     "camera_model",
     "w",
     "h",
     "fl_x",
     "fl_y",
+    "camera_angle_x",
+    "camera_angle_y",
     "cx",
     "cy",
     "skew",
@@ -89,23 +106,52 @@ const INTRINSIC_KEYS: [&str; 17] = [
     "opencv_k5",
     "opencv_k6",
 ];
-const TOP_KEYS: [&str; 5] = ["frames", "aabb", "units", "intensity_scale", "truth"];
+const TOP_KEYS: [&str; 6] = ["frames", "aabb", "units", "intensity_scale", "truth", "linearisation"];
 const FRAME_KEYS: [&str; 6] = ["file_path", "transform_matrix", "time", "camera", "holdout", "thin_lens"];
 const TRUTH_KEYS: [&str; 2] = ["time", "file_path"];
+
+/// Keys that nerfstudio (`ns-process-data`), instant-ngp and the Blender/NeRF-synthetic
+/// exporters write routinely and fluidnerf does not use: reported in one line at info level.
+const ROUTINE_KEYS: [&str; 17] = [
+    "aabb_scale",
+    "scale",
+    "offset",
+    "ply_file_path",
+    "applied_transform",
+    "applied_scale",
+    "orientation_override",
+    "integer_depth_scale",
+    "enable_depth_loading",
+    "is_fisheye",
+    "colmap_im_id",
+    "mask_path",
+    "depth_file_path",
+    "depth_path",
+    "sharpness",
+    "rotation",
+    "original_file_path",
+];
 
 /// The intrinsics keys, as they appear at the top level or in a frame.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 struct IntrinsicKeys {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     camera_model: Option<String>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Pixels; tools write `605.0` as readily as `605`.
+    #[serde(default, deserialize_with = "pixel_count", skip_serializing_if = "Option::is_none")]
     w: Option<u32>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default, deserialize_with = "pixel_count", skip_serializing_if = "Option::is_none")]
     h: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     fl_x: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     fl_y: Option<f64>,
+    /// Horizontal field of view in radians (Blender, instant-ngp): `fl_x = w / (2 tan(a / 2))`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    camera_angle_x: Option<f64>,
+    /// Vertical field of view in radians: `fl_y = h / (2 tan(a / 2))`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    camera_angle_y: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cx: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -141,6 +187,8 @@ impl IntrinsicKeys {
             h: self.h.or(global.h),
             fl_x: self.fl_x.or(global.fl_x),
             fl_y: self.fl_y.or(global.fl_y),
+            camera_angle_x: self.camera_angle_x.or(global.camera_angle_x),
+            camera_angle_y: self.camera_angle_y.or(global.camera_angle_y),
             cx: self.cx.or(global.cx),
             cy: self.cy.or(global.cy),
             skew: self.skew.or(global.skew),
@@ -167,6 +215,8 @@ impl IntrinsicKeys {
             h: Some(intrinsics.height),
             fl_x: Some(intrinsics.fx),
             fl_y: Some(intrinsics.fy),
+            camera_angle_x: None,
+            camera_angle_y: None,
             cx: Some(intrinsics.cx + 0.5),
             cy: Some(intrinsics.cy + 0.5),
             skew: nz(intrinsics.skew),
@@ -183,6 +233,15 @@ impl IntrinsicKeys {
     }
 }
 
+/// `w`/`h`: a positive whole number, written as an integer or a float (`605.0`).
+fn pixel_count<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u32>, D::Error> {
+    match Option::<f64>::deserialize(d)? {
+        None => Ok(None),
+        Some(v) if v.fract() == 0.0 && (1.0..=f64::from(u32::MAX)).contains(&v) => Ok(Some(v as u32)),
+        Some(v) => Err(serde::de::Error::custom(format!("expected a positive whole number of pixels, got {v}"))),
+    }
+}
+
 #[derive(Debug, Serialize, Deserialize)]
 struct TruthEntry {
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -190,34 +249,70 @@ struct TruthEntry {
     file_path: String,
 }
 
-#[derive(Debug, Serialize, Deserialize)]
+/// A frame as written.
+#[derive(Debug, Serialize)]
 struct FrameEntry {
     file_path: String,
     transform_matrix: [[f64; 4]; 4],
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     time: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     camera: Option<String>,
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
     holdout: bool,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     thin_lens: Option<ThinLens>,
     #[serde(flatten)]
     intrinsics: IntrinsicKeys,
 }
 
-#[derive(Debug, Serialize, Deserialize)]
+/// The file as written.
+#[derive(Debug, Serialize)]
 struct TransformsFile {
     #[serde(flatten)]
     intrinsics: IntrinsicKeys,
     aabb: [[f64; 3]; 2],
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     units: Option<String>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(skip_serializing_if = "Option::is_none")]
     intensity_scale: Option<f64>,
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    linearisation: Option<Linearisation>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     truth: Vec<TruthEntry>,
     frames: Vec<FrameEntry>,
+}
+
+/// A frame as read, without its intrinsics (read separately from the same object, so that
+/// every key keeps its path in error messages; serde's `flatten` loses it).
+#[derive(Debug, Deserialize)]
+struct FrameIn {
+    file_path: String,
+    transform_matrix: [[f64; 4]; 4],
+    #[serde(default)]
+    time: Option<f64>,
+    #[serde(default)]
+    camera: Option<String>,
+    #[serde(default)]
+    holdout: bool,
+    #[serde(default)]
+    thin_lens: Option<ThinLens>,
+}
+
+/// The top level as read, without its intrinsics.
+#[derive(Debug, Deserialize)]
+struct TopIn {
+    #[serde(default)]
+    aabb: Option<[[f64; 3]; 2]>,
+    #[serde(default)]
+    units: Option<String>,
+    #[serde(default)]
+    intensity_scale: Option<f64>,
+    #[serde(default)]
+    linearisation: Option<Linearisation>,
+    #[serde(default)]
+    truth: Vec<TruthEntry>,
+    frames: Vec<Value>,
 }
 
 /// The scene file for `path`: `path` itself if it ends in `.json`, else `path/transforms.json`.
@@ -229,12 +324,77 @@ pub fn scene_file_path(path: &Path) -> PathBuf {
     }
 }
 
-fn warn_unknown(value: &serde_json::Value, known: &[&[&str]], context: &str, file: &Path) {
-    if let Some(map) = value.as_object() {
+/// Deserialises `value` (found at key path `prefix`) into `T`; an error names the full key path
+/// (`frames[3].transform_matrix[1]`) and, inside a frame, the frame and its image.
+fn typed<T: DeserializeOwned>(file: &Path, value: &Value, prefix: &str, frame: Option<usize>) -> Result<T, IoError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let inner = e.path().to_string();
+        let key = match (prefix, inner.as_str()) {
+            (p, ".") => p.to_string(),
+            ("", i) => i.to_string(),
+            (p, i) if i.starts_with('[') => format!("{p}{i}"),
+            (p, i) => format!("{p}.{i}"),
+        };
+        let key = if key.is_empty() { "the top level".to_string() } else { format!("key `{key}`") };
+        let location = match frame {
+            Some(i) => match value.get("file_path").and_then(Value::as_str) {
+                Some(name) => format!("frame {i} ({name}), {key}"),
+                None => format!("frame {i}, {key}"),
+            },
+            None => key,
+        };
+        IoError::Key { path: file.to_path_buf(), location, problem: e.into_inner().to_string() }
+    })
+}
+
+/// JSON's name for the kind of a value, for messages.
+fn kind_of(v: &Value) -> String {
+    match v {
+        Value::Null => "null".into(),
+        Value::Bool(_) => "a boolean".into(),
+        Value::Number(_) => "a number".into(),
+        Value::String(_) => "a string".into(),
+        Value::Array(a) => format!("an array of {} element(s)", a.len()),
+        Value::Object(_) => "an object".into(),
+    }
+}
+
+/// Keys a file holds that fluidnerf does not read, by key, with where they occur.
+#[derive(Default)]
+struct KeyReport {
+    routine: std::collections::BTreeMap<String, Vec<String>>,
+    unknown: std::collections::BTreeMap<String, Vec<String>>,
+}
+
+impl KeyReport {
+    fn scan(&mut self, value: &Value, known: &[&[&str]], place: &str) {
+        let Some(map) = value.as_object() else { return };
         for key in map.keys() {
-            if !known.iter().any(|set| set.contains(&key.as_str())) {
-                log::warn!("{}: ignoring unknown key \"{key}\"{context}", file.display());
+            if known.iter().any(|set| set.contains(&key.as_str())) {
+                continue;
             }
+            let bucket = if ROUTINE_KEYS.contains(&key.as_str()) { &mut self.routine } else { &mut self.unknown };
+            bucket.entry(key.clone()).or_default().push(place.to_string());
+        }
+    }
+
+    /// One phrase per key: `"colmap_im_id" (in 120 frames)`, `"ply_file_path" (top level)`.
+    fn summary(keys: &std::collections::BTreeMap<String, Vec<String>>) -> String {
+        let phrase = |key: &String, places: &Vec<String>| match places.as_slice() {
+            [one] => format!("\"{key}\" ({one})"),
+            many if many.iter().all(|p| p.starts_with("frame ")) => format!("\"{key}\" (in {} frames)", many.len()),
+            many => format!("\"{key}\" ({} places, first {})", many.len(), many[0]),
+        };
+        keys.iter().map(|(k, p)| phrase(k, p)).collect::<Vec<_>>().join(", ")
+    }
+
+    /// Logs at most two lines, however many frames there are.
+    fn log(&self, file: &Path) {
+        if !self.routine.is_empty() {
+            log::info!("{}: not used by fluidnerf: {}", file.display(), Self::summary(&self.routine));
+        }
+        if !self.unknown.is_empty() {
+            log::warn!("{}: ignoring unknown key(s) {}", file.display(), Self::summary(&self.unknown));
         }
     }
 }
@@ -261,8 +421,24 @@ pub fn world_from_camera_to_opengl_c2w(pose: &DAffine3) -> [[f64; 4]; 4] {
     rows
 }
 
-fn frame_camera(file: &Path, index: usize, entry: &FrameEntry, global: &IntrinsicKeys) -> Result<Camera, IoError> {
-    let k = entry.intrinsics.over(global);
+fn resolve_in(root: &Path, p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        root.join(p)
+    }
+}
+
+/// The camera of frame `index`. `image` is the frame's image file (resolved), read for its size
+/// only when `w` or `h` is missing.
+fn frame_camera(
+    file: &Path,
+    index: usize,
+    entry: &FrameIn,
+    keys: &IntrinsicKeys,
+    image: &Path,
+) -> Result<Camera, IoError> {
+    let k = keys;
     let name = &entry.file_path;
     let bad = |problem: String| IoError::invalid(file, format!("frame {index} ({name}): {problem}"));
     let need = |v: Option<f64>, key: &str| {
@@ -272,15 +448,43 @@ fn frame_camera(file: &Path, index: usize, entry: &FrameEntry, global: &Intrinsi
     if !MODELS.contains(&model) {
         return Err(bad(format!("camera_model {model} is not supported (supported: {})", MODELS.join(", "))));
     }
-    let width = k.w.ok_or_else(|| bad("`w` is given neither at the top level nor in the frame".into()))?;
-    let height = k.h.ok_or_else(|| bad("`h` is given neither at the top level nor in the frame".into()))?;
+    let (width, height) = match (k.w, k.h) {
+        (Some(w), Some(h)) => (w, h),
+        (w, h) => {
+            let (iw, ih) = crate::image::read_dimensions(image).map_err(|e| {
+                bad(format!(
+                    "`w`/`h` are given neither at the top level nor in the frame, and the image's size \
+                     cannot be read instead: {e}"
+                ))
+            })?;
+            (w.unwrap_or(iw), h.unwrap_or(ih))
+        }
+    };
+    let from_angle = |angle: Option<f64>, key: &str, size: u32| match angle {
+        None => Ok(None),
+        Some(a) if a > 0.0 && a < std::f64::consts::PI => Ok(Some(0.5 * f64::from(size) / (0.5 * a).tan())),
+        Some(a) => Err(bad(format!("`{key}` must be a field of view in (0, π) radians, got {a}"))),
+    };
+    let fx = match k.fl_x {
+        Some(f) => f,
+        None => from_angle(k.camera_angle_x, "camera_angle_x", width)?.ok_or_else(|| {
+            bad("neither `fl_x` nor `camera_angle_x` is given at the top level or in the frame".into())
+        })?,
+    };
+    let fy = match (k.fl_y, from_angle(k.camera_angle_y, "camera_angle_y", height)?) {
+        (Some(f), _) | (None, Some(f)) => f,
+        // Blender and NeRF-synthetic files give only the horizontal angle: square pixels.
+        (None, None) if k.fl_x.is_none() => fx,
+        (None, None) => need(None, "fl_y")?,
+    };
+    // Without a principal point, tools (instant-ngp, Blender) put it at the image centre.
     let intrinsics = Intrinsics {
         width,
         height,
-        fx: need(k.fl_x, "fl_x")?,
-        fy: need(k.fl_y, "fl_y")?,
-        cx: need(k.cx, "cx")? - 0.5,
-        cy: need(k.cy, "cy")? - 0.5,
+        fx,
+        fy,
+        cx: k.cx.unwrap_or(0.5 * f64::from(width)) - 0.5,
+        cy: k.cy.unwrap_or(0.5 * f64::from(height)) - 0.5,
         skew: k.skew.unwrap_or(0.0),
     };
     if k.k4.is_some_and(|v| v != 0.0) {
@@ -312,79 +516,233 @@ fn frame_camera(file: &Path, index: usize, entry: &FrameEntry, global: &Intrinsi
     }
     let camera =
         Camera { intrinsics, distortion, world_from_camera: opengl_c2w_to_world_from_camera(m), lens: entry.thin_lens };
-    camera.validate().map_err(|source| IoError::Camera {
+    camera.validate().map_err(|error| IoError::Camera {
         path: file.to_path_buf(),
         frame: index,
         file_path: PathBuf::from(name),
-        source,
+        error,
     })?;
     Ok(camera)
 }
 
-/// Reads a scene from a `transforms.json` or a folder holding one, and validates it: a valid
-/// aabb, at least one frame, every camera valid and seeing the box (at least one pixel's ray
-/// crosses it). Images are not read (see [`load_images`]). `Scene::root` is the folder of the
-/// file.
-pub fn load_scene(path: &Path) -> Result<Scene, IoError> {
+/// A scene file as read, before the checks of [`load_scene`]; its box may be missing (the
+/// tools that write `transforms.json` for NeRFs do not write one).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneDraft {
+    /// The scene file.
+    pub file: PathBuf,
+    /// Folder against which relative paths resolve.
+    pub root: PathBuf,
+    pub aabb: Option<Aabb>,
+    pub units: String,
+    pub intensity_scale: f64,
+    /// How 8-bit images become linear (key `linearisation`, default `linear`).
+    pub linearisation: Linearisation,
+    pub frames: Vec<Frame>,
+    pub truth: Vec<TruthRef>,
+}
+
+impl SceneDraft {
+    /// The scene with box `aabb` (unchecked; see [`validate_scene`]).
+    pub fn into_scene(self, aabb: Aabb) -> Scene {
+        Scene {
+            root: self.root,
+            aabb,
+            units: self.units,
+            intensity_scale: self.intensity_scale,
+            frames: self.frames,
+            truth: self.truth,
+        }
+    }
+}
+
+/// The error of a scene without a box: it says how to supply one.
+fn missing_aabb(file: &Path) -> IoError {
+    IoError::invalid(
+        file,
+        "no `aabb` (the reconstruction box, which NeRF tools do not write): add \
+         `\"aabb\": [[xmin, ymin, zmin], [xmax, ymax, zmax]]` in world units at the top level, or run \
+         `fluidnerf import --transforms <this file> -o <folder>` to write a scene with a box given by \
+         --aabb or estimated from the images",
+    )
+}
+
+/// Reads a scene file (or the `transforms.json` in a folder) without the checks of
+/// [`load_scene`] beyond each key's type and each camera's validity. Images are opened only
+/// when a frame's `w`/`h` are missing (for their size) or its `file_path` names no file (an
+/// image with the same stem and another extension is then used: `train/r_0` →
+/// `train/r_0.png`).
+pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     let file = scene_file_path(path);
     let text = std::fs::read_to_string(&file).map_err(|e| IoError::io(&file, "scene file", e))?;
-    let json_err = |source| IoError::Json { path: file.clone(), source };
-    let raw: serde_json::Value = serde_json::from_str(&text).map_err(json_err)?;
-    let parsed: TransformsFile = serde_json::from_str(&text).map_err(json_err)?;
-    warn_unknown(&raw, &[&TOP_KEYS, &INTRINSIC_KEYS], "", &file);
-    if let Some(frames) = raw.get("frames").and_then(|f| f.as_array()) {
-        for (i, f) in frames.iter().enumerate() {
-            warn_unknown(f, &[&FRAME_KEYS, &INTRINSIC_KEYS], &format!(" in frame {i}"), &file);
-        }
+    let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;
+    if !raw.is_object() {
+        return Err(IoError::invalid(
+            &file,
+            format!(
+                "expected a JSON object with `frames` (a list of {{file_path, transform_matrix}}) and the camera \
+                 keys, as nerfstudio and instant-ngp write it; found {}",
+                kind_of(&raw)
+            ),
+        ));
     }
-    if let Some(truth) = raw.get("truth").and_then(|f| f.as_array()) {
+    let top: TopIn = typed(&file, &raw, "", None)?;
+    let global: IntrinsicKeys = typed(&file, &raw, "", None)?;
+    if raw.get("is_fisheye") == Some(&Value::Bool(true)) {
+        return Err(IoError::invalid(&file, "is_fisheye is true: fisheye cameras are not supported"));
+    }
+    let mut report = KeyReport::default();
+    report.scan(&raw, &[&TOP_KEYS, &INTRINSIC_KEYS], "top level");
+    if let Some(truth) = raw.get("truth").and_then(Value::as_array) {
         for (i, t) in truth.iter().enumerate() {
-            warn_unknown(t, &[&TRUTH_KEYS], &format!(" in truth {i}"), &file);
+            report.scan(t, &[&TRUTH_KEYS], &format!("truth {i}"));
         }
-    }
-
-    let aabb = Aabb { min: DVec3::from_array(parsed.aabb[0]), max: DVec3::from_array(parsed.aabb[1]) };
-    aabb.validate().map_err(|e| IoError::invalid(&file, e.to_string()))?;
-    if parsed.frames.is_empty() {
-        return Err(IoError::invalid(&file, "the scene has no frames"));
-    }
-    let intensity_scale = parsed.intensity_scale.unwrap_or(1.0);
-    let mut frames = Vec::with_capacity(parsed.frames.len());
-    for (i, entry) in parsed.frames.iter().enumerate() {
-        frames.push(Frame {
-            camera: frame_camera(&file, i, entry, &parsed.intrinsics)?,
-            file_path: PathBuf::from(&entry.file_path),
-            time: entry.time,
-            camera_name: entry.camera.clone(),
-            holdout: entry.holdout,
-        });
     }
     let root = match file.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let scene = Scene {
+    let mut frames = Vec::with_capacity(top.frames.len());
+    let mut renamed: Vec<(String, PathBuf)> = Vec::new();
+    for (i, value) in top.frames.iter().enumerate() {
+        let prefix = format!("frames[{i}]");
+        if !value.is_object() {
+            return Err(IoError::Key {
+                path: file.clone(),
+                location: format!("frame {i}, key `{prefix}`"),
+                problem: format!("expected an object with file_path and transform_matrix, found {}", kind_of(value)),
+            });
+        }
+        let entry: FrameIn = typed(&file, value, &prefix, Some(i))?;
+        let keys: IntrinsicKeys = typed(&file, value, &prefix, Some(i))?;
+        report.scan(value, &[&FRAME_KEYS, &INTRINSIC_KEYS], &format!("frame {i}"));
+        let mut file_path = PathBuf::from(&entry.file_path);
+        let mut image = resolve_in(&root, &file_path);
+        if !image.exists() {
+            let found = crate::image::find_image_by_stem(&image)
+                .map_err(|e| IoError::invalid(&file, format!("frame {i} ({}): {e}", entry.file_path)))?;
+            if let Some(found) = found {
+                if let Some(name) = found.file_name() {
+                    file_path.set_file_name(name);
+                    renamed.push((entry.file_path.clone(), file_path.clone()));
+                    image = found;
+                }
+            }
+        }
+        if value.get("is_fisheye") == Some(&Value::Bool(true)) {
+            return Err(IoError::invalid(
+                &file,
+                format!("frame {i}: is_fisheye is true: fisheye cameras are not supported"),
+            ));
+        }
+        frames.push(Frame {
+            camera: frame_camera(&file, i, &entry, &keys.over(&global), &image)?,
+            file_path,
+            time: entry.time,
+            camera_name: entry.camera.clone(),
+            holdout: entry.holdout,
+        });
+    }
+    report.log(&file);
+    if let Some((from, to)) = renamed.first() {
+        log::info!(
+            "{}: {} frame(s) name an image by another extension or none; matched by name stem (e.g. {from} → {})",
+            file.display(),
+            renamed.len(),
+            to.display()
+        );
+    }
+    let aabb = match top.aabb {
+        None => None,
+        Some(a) => {
+            let aabb = Aabb { min: DVec3::from_array(a[0]), max: DVec3::from_array(a[1]) };
+            aabb.validate().map_err(|e| IoError::invalid(&file, format!("`aabb`: {e}")))?;
+            Some(aabb)
+        }
+    };
+    Ok(SceneDraft {
         root,
         aabb,
-        units: parsed.units.unwrap_or_else(|| DEFAULT_UNITS.to_string()),
-        intensity_scale,
+        units: top.units.unwrap_or_else(|| DEFAULT_UNITS.to_string()),
+        intensity_scale: top.intensity_scale.unwrap_or(1.0),
+        linearisation: top.linearisation.unwrap_or_default(),
         frames,
-        truth: parsed
+        truth: top
             .truth
             .into_iter()
             .map(|t| TruthRef { time: t.time, file_path: PathBuf::from(t.file_path) })
             .collect(),
-    };
+        file,
+    })
+}
+
+/// Reads a scene from a `transforms.json` or a folder holding one, and validates it (see
+/// [`validate_scene`]); the file must give an `aabb`. Images are not read (see
+/// [`load_images`]) except for their size when `w`/`h` are missing. `Scene::root` is the
+/// folder of the file.
+pub fn load_scene(path: &Path) -> Result<Scene, IoError> {
+    let draft = read_scene_draft(path)?;
+    let file = draft.file.clone();
+    let Some(aabb) = draft.aabb else { return Err(missing_aabb(&file)) };
+    let scene = draft.into_scene(aabb);
     validate_scene(&scene, &file)?;
+    for (i, clearance) in cameras_near_box(&scene) {
+        log::warn!(
+            "{}: frame {i} ({}): the camera is only {clearance:.3} {} from the reconstruction box; rays \
+             through the box are nearly as long as the box and the view is far from a projection",
+            file.display(),
+            scene.frames[i].file_path.display(),
+            scene.units
+        );
+    }
     Ok(scene)
 }
 
+/// How close (as a fraction of the box's diagonal) a camera centre may come to the box before
+/// [`cameras_near_box`] reports it.
+pub const NEAR_BOX_FRACTION: f64 = 0.05;
+
+/// Distance from `point` to the box (0 inside it).
+pub fn distance_to_box(aabb: &Aabb, point: DVec3) -> f64 {
+    (aabb.min - point).max(point - aabb.max).max(DVec3::ZERO).length()
+}
+
+/// Frames whose camera centre lies outside the box but closer to it than
+/// [`NEAR_BOX_FRACTION`] of its diagonal, with that distance.
+pub fn cameras_near_box(scene: &Scene) -> Vec<(usize, f64)> {
+    let limit = NEAR_BOX_FRACTION * scene.aabb.size().length();
+    scene
+        .frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| (i, distance_to_box(&scene.aabb, f.camera.centre())))
+        .filter(|&(_, d)| d > 0.0 && d < limit)
+        .collect()
+}
+
+/// `path` with `.` removed and `x/..` folded, without touching the file system.
+fn normalise(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
 /// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb, at least one
-/// frame, a positive intensity scale, finite times, every camera valid and seeing the box (at
-/// least one pixel's ray crosses it). `file` names the scene in error messages.
+/// frame, a positive intensity scale, finite times, no two frames on the same image file, every
+/// camera valid, outside the box, and seeing the box (at least one pixel's ray crosses it).
+/// `file` names the scene in error messages.
 pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     let aabb = scene.aabb;
-    aabb.validate().map_err(|e| IoError::invalid(file, e.to_string()))?;
+    aabb.validate().map_err(|e| IoError::invalid(file, format!("`aabb`: {e}")))?;
     if scene.frames.is_empty() {
         return Err(IoError::invalid(file, "the scene has no frames"));
     }
@@ -392,16 +750,37 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     if !(s.is_finite() && s > 0.0) {
         return Err(IoError::invalid(file, format!("intensity_scale must be positive, got {s}")));
     }
+    let mut seen: std::collections::HashMap<PathBuf, usize> = std::collections::HashMap::new();
     for (i, f) in scene.frames.iter().enumerate() {
         if f.time.is_some_and(|t| !t.is_finite()) {
             return Err(IoError::invalid(file, format!("frame {i} ({}): time must be finite", f.file_path.display())));
         }
-        f.camera.validate().map_err(|source| IoError::Camera {
+        f.camera.validate().map_err(|error| IoError::Camera {
             path: file.to_path_buf(),
             frame: i,
             file_path: f.file_path.clone(),
-            source,
+            error,
         })?;
+        if let Some(j) = seen.insert(normalise(&scene.resolve(&f.file_path)), i) {
+            return Err(IoError::invalid(
+                file,
+                format!(
+                    "frames {j} and {i} both use the image {}; every frame needs its own image",
+                    f.file_path.display()
+                ),
+            ));
+        }
+        if aabb.contains(f.camera.centre()) {
+            return Err(IoError::invalid(
+                file,
+                format!(
+                    "frame {i} ({}): the camera centre {:?} is inside the reconstruction box; shrink the aabb \
+                     or check the pose",
+                    f.file_path.display(),
+                    f.camera.centre().to_array()
+                ),
+            ));
+        }
     }
     // Frames of one physical camera at many times share a camera: test each distinct one once.
     let mut distinct: Vec<usize> = Vec::new();
@@ -442,6 +821,12 @@ fn path_str(file: &Path, p: &Path) -> Result<String, IoError> {
 /// layout described in the module docs. Frame and truth paths are written as they are in the
 /// scene (relative to the folder of the file unless absolute); `scene.root` is not stored.
 pub fn save_scene(scene: &Scene, path: &Path) -> Result<(), IoError> {
+    save_scene_with(scene, path, None)
+}
+
+/// [`save_scene`], also recording how the scene's 8-bit images are to be linearised (the key
+/// `linearisation`, omitted when `None`).
+pub fn save_scene_with(scene: &Scene, path: &Path, linearisation: Option<Linearisation>) -> Result<(), IoError> {
     let file = scene_file_path(path);
     let keys: Vec<IntrinsicKeys> =
         scene.frames.iter().map(|f| IntrinsicKeys::from_camera(&f.camera.intrinsics, &f.camera.distortion)).collect();
@@ -469,25 +854,51 @@ pub fn save_scene(scene: &Scene, path: &Path) -> Result<(), IoError> {
         aabb: [scene.aabb.min.to_array(), scene.aabb.max.to_array()],
         units: Some(scene.units.clone()),
         intensity_scale: Some(scene.intensity_scale),
+        linearisation,
         truth,
         frames,
     };
-    let mut text = serde_json::to_string_pretty(&out).map_err(|source| IoError::Json { path: file.clone(), source })?;
+    let mut text = serde_json::to_string_pretty(&out).map_err(|error| IoError::Json { path: file.clone(), error })?;
     text.push('\n');
     atomic_write(&file, |w| w.write_all(text.as_bytes()))
 }
 
-/// Reads every frame's image, in frame order (in parallel), checking that it exists, is
-/// readable, has the size of its frame's intrinsics, and holds only finite values. The first
-/// failing frame (in frame order) gives the error.
+/// The `linearisation` recorded in the scene file `scene.root/transforms.json`, or `linear`
+/// when there is no such file or key. ([`Scene`] has no field for it; a scene written under
+/// another file name is read as `linear` by [`load_images`]: use [`load_images_with`].)
+pub fn recorded_linearisation(scene: &Scene) -> Result<Linearisation, IoError> {
+    let file = scene.root.join(SCENE_FILE);
+    let text = match std::fs::read_to_string(&file) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Linearisation::Linear),
+        Err(e) => return Err(IoError::io(&file, "scene file", e)),
+    };
+    let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;
+    match raw.get("linearisation") {
+        None => Ok(Linearisation::Linear),
+        Some(v) => typed(&file, v, "linearisation", None),
+    }
+}
+
+/// Reads every frame's image with the linearisation recorded in the scene file (see
+/// [`recorded_linearisation`] and [`load_images_with`]).
 pub fn load_images(scene: &Scene) -> Result<Vec<Image>, IoError> {
-    let results: Vec<Result<Image, IoError>> = scene
+    load_images_with(scene, recorded_linearisation(scene)?)
+}
+
+/// Reads every frame's image, in frame order (in parallel), 8-bit images through
+/// `linearisation`, checking that each exists, is readable, has the size of its frame's
+/// intrinsics, and holds only finite, non-negative values, and that all images store their
+/// samples alike (an 8-bit image among 16-bit ones would read about 257 times too dark). The
+/// first failing frame (in frame order) gives the error.
+pub fn load_images_with(scene: &Scene, linearisation: Linearisation) -> Result<Vec<Image>, IoError> {
+    let results: Vec<Result<(Image, SampleKind), IoError>> = scene
         .frames
         .par_iter()
         .enumerate()
         .map(|(i, frame)| {
             let path = scene.resolve(&frame.file_path);
-            let image = crate::image::read_image(&path)?;
+            let (image, kind) = crate::image::read_image_with(&path, linearisation)?;
             let (w, h) = (frame.camera.width(), frame.camera.height());
             if (image.width, image.height) != (w, h) {
                 return Err(IoError::ImageSize {
@@ -499,39 +910,92 @@ pub fn load_images(scene: &Scene) -> Result<Vec<Image>, IoError> {
                     expected_height: h,
                 });
             }
-            if let Some((col, row)) = image.first_non_finite() {
-                return Err(IoError::NonFinite {
-                    path,
-                    location: format!("pixel (col {col}, row {row})"),
-                    value: image.get(col, row),
-                });
-            }
-            Ok(image)
+            check_pixels(&path, &image)?;
+            Ok((image, kind))
         })
         .collect();
-    results.into_iter().collect()
+    let read: Vec<(Image, SampleKind)> = results.into_iter().collect::<Result<_, _>>()?;
+    let kinds: Vec<SampleKind> = read.iter().map(|r| r.1).collect();
+    if let Some((i, kind, usual)) = odd_sample_kind(&kinds) {
+        return Err(IoError::invalid(
+            scene.resolve(&scene.frames[i].file_path),
+            format!(
+                "frame {i} is {} image but the other images of the scene are {usual}; their values \
+                 are not on one scale (an 8-bit image among 16-bit ones reads about 257 times too dark): \
+                 convert the images to one bit depth",
+                kind.with_article()
+            ),
+        ));
+    }
+    Ok(read.into_iter().map(|r| r.0).collect())
+}
+
+/// Refuses NaN, infinite and negative pixels, naming the first.
+pub fn check_pixels(path: &Path, image: &Image) -> Result<(), IoError> {
+    if let Some((col, row)) = image.first_non_finite() {
+        return Err(IoError::NonFinite {
+            path: path.to_path_buf(),
+            location: format!("pixel (col {col}, row {row})"),
+            value: image.get(col, row),
+        });
+    }
+    if let Some(i) = image.data.iter().position(|&v| v < 0.0) {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "pixel (col {}, row {}) is {}; pixel values are emitted light and must not be negative \
+                 (clip background-subtracted images at 0)",
+                i % image.width,
+                i / image.width,
+                image.data[i]
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The first image whose sample kind differs from the most common one, with both kinds.
+pub fn odd_sample_kind(kinds: &[SampleKind]) -> Option<(usize, SampleKind, SampleKind)> {
+    let mut counts: std::collections::BTreeMap<SampleKind, usize> = std::collections::BTreeMap::new();
+    for k in kinds {
+        *counts.entry(*k).or_default() += 1;
+    }
+    let usual = counts.iter().max_by_key(|(_, n)| **n).map(|(k, _)| *k)?;
+    kinds.iter().position(|k| *k != usual).map(|i| (i, kinds[i], usual))
 }
 
 /// Reads the scene's ground-truth volumes (`.npy`, filling the scene's aabb) with their times,
-/// in file order.
+/// in file order. Refuses, naming the file, a volume that is unreadable, not 3-D, holds NaN or
+/// infinite values, or whose shape differs from the first volume's.
 pub fn load_truth(scene: &Scene) -> Result<Vec<(Option<f64>, Volume)>, IoError> {
-    scene
-        .truth
-        .iter()
-        .map(|t| {
-            let path = scene.resolve(&t.file_path);
-            let v = crate::volume::read_npy(&path, scene.aabb)?;
-            if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
-                let (nx, ny) = (v.dims[0], v.dims[1]);
-                return Err(IoError::NonFinite {
+    let mut out: Vec<(Option<f64>, Volume)> = Vec::with_capacity(scene.truth.len());
+    for t in &scene.truth {
+        let path = scene.resolve(&t.file_path);
+        let v = crate::volume::read_npy(&path, scene.aabb)?;
+        if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
+            let (nx, ny) = (v.dims[0], v.dims[1]);
+            return Err(IoError::NonFinite {
+                path,
+                location: format!("voxel (i {}, j {}, k {})", i % nx, (i / nx) % ny, i / (nx * ny)),
+                value: v.data[i],
+            });
+        }
+        if let Some((_, first)) = out.first() {
+            if first.dims != v.dims {
+                let [a, b, c] = first.dims;
+                let [x, y, z] = v.dims;
+                return Err(IoError::invalid(
                     path,
-                    location: format!("voxel (i {}, j {}, k {})", i % nx, (i / nx) % ny, i / (nx * ny)),
-                    value: v.data[i],
-                });
+                    format!(
+                        "{x}x{y}x{z} voxels (nx x ny x nz), but the scene's first truth volume has {a}x{b}x{c}; \
+                         all truth volumes must share one grid"
+                    ),
+                ));
             }
-            Ok((t.time, v))
-        })
-        .collect()
+        }
+        out.push((t.time, v));
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -617,9 +1081,12 @@ mod tests {
             m[i][3] = t[i];
         }
         m[3][3] = 1.0;
+        // A box 37 units in front of the camera (OpenGL cameras look along −z).
+        let ahead = t + 37.0 * (r * DVec3::new(0.0, 0.0, -1.0));
+        let (lo, hi) = ((ahead - 5.0).to_array(), (ahead + 5.0).to_array());
         let json = serde_json::json!({
             "camera_model": "PINHOLE", "w": 32, "h": 24, "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy,
-            "aabb": [[-1000, -1000, -1000], [1000, 1000, 1000]],
+            "aabb": [lo, hi],
             "frames": [{"file_path": "a.png", "transform_matrix": m}]
         });
         std::fs::write(dir.path().join(SCENE_FILE), json.to_string()).expect("write");
@@ -756,5 +1223,50 @@ mod tests {
         std::fs::remove_file(d.join("images/c1.tif")).expect("rm");
         let m = load_images(&scene).expect_err("missing").to_string();
         assert!(m.contains("image file not found") && m.contains("c1.tif"), "{m}");
+    }
+
+    #[test]
+    fn load_images_refuses_mixed_depths_and_negative_pixels() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let mut scene = ring_scene(d, 3, Distortion::default());
+        for (i, f) in scene.frames.iter_mut().enumerate() {
+            f.file_path = PathBuf::from(format!("images/c{i}.png"));
+            crate::image::write_png16_counts(&d.join(&f.file_path), &Image::from_vec(32, 24, vec![300.0; 32 * 24]))
+                .expect("write");
+        }
+        assert_eq!(load_images(&scene).expect("images").len(), 3);
+        image::GrayImage::from_raw(32, 24, vec![1; 32 * 24]).expect("buf").save(d.join("images/c1.png")).expect("save");
+        let m = load_images(&scene).expect_err("mixed").to_string();
+        assert!(m.contains("c1.png") && m.contains("frame 1 is an 8-bit image") && m.contains("16-bit"), "{m}");
+
+        let mut bad = Image::from_vec(32, 24, vec![1.0; 32 * 24]);
+        bad.set(4, 7, -2.0);
+        scene.frames[1].file_path = PathBuf::from("images/c1.tif");
+        crate::image::write_tiff_f32(&d.join("images/c1.tif"), &bad).expect("write");
+        let m = load_images(&scene).expect_err("negative").to_string();
+        assert!(m.contains("c1.tif") && m.contains("pixel (col 4, row 7) is -2"), "{m}");
+    }
+
+    #[test]
+    fn the_recorded_linearisation_is_applied() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let mut scene = ring_scene(d, 2, Distortion::default());
+        scene.truth.clear();
+        for (i, f) in scene.frames.iter_mut().enumerate() {
+            f.file_path = PathBuf::from(format!("images/c{i}.png"));
+            std::fs::create_dir_all(d.join("images")).expect("mkdir");
+            image::GrayImage::from_raw(32, 24, vec![128; 32 * 24])
+                .expect("buf")
+                .save(d.join(&f.file_path))
+                .expect("save");
+        }
+        save_scene_with(&scene, d, Some(Linearisation::Gamma(2.0))).expect("save");
+        let loaded = load_scene(d).expect("load");
+        let v = load_images(&loaded).expect("images")[0].data[0];
+        assert!((f64::from(v) - 255.0 * (128.0f64 / 255.0).powi(2)).abs() < 1e-3, "{v}");
+        save_scene(&scene, d).expect("save");
+        assert_eq!(load_images(&scene).expect("images")[0].data[0], 128.0, "no key: linear");
     }
 }

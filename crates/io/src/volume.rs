@@ -22,19 +22,31 @@ use serde::{Deserialize, Serialize};
 
 use crate::{atomic_write, IoError};
 
-/// Reads a `.npy` of shape `(nz, ny, nx)` in C order as a volume filling `aabb`.
+/// Reads a `.npy` of shape `(nz, ny, nx)` as a volume filling `aabb`. Fortran-order files
+/// (NumPy writes them for transposed arrays, `fortran_order: True`) are reordered on read, so
+/// the element at index `[k, j, i]` is voxel `(i, j, k)` either way.
 pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "volume file", e))?;
     let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| IoError::invalid(path, format!("not a .npy file: {e}")))?;
-    if npy.order() != npyz::Order::C {
-        return Err(IoError::invalid(path, "array is in Fortran order; save it in C order (numpy.ascontiguousarray)"));
-    }
+    let fortran = npy.order() == npyz::Order::Fortran;
     let shape = npy.shape().to_vec();
     if shape.len() != 3 || shape.contains(&0) {
         return Err(IoError::invalid(path, format!("expected a 3-D array of shape (nz, ny, nx), got shape {shape:?}")));
     }
     let dims = [shape[2] as usize, shape[1] as usize, shape[0] as usize];
     let dtype = npy.dtype();
+    // A corrupt header can claim any shape: refuse one the file cannot hold before allocating.
+    let item = match &dtype {
+        npyz::DType::Plain(ts) => ts.size_field().max(1),
+        _ => 1,
+    };
+    let claimed = shape.iter().try_fold(item, |acc, &d| acc.checked_mul(d));
+    if claimed.is_none_or(|b| b > bytes.len() as u64) {
+        return Err(IoError::invalid(
+            path,
+            format!("shape {shape:?} needs more data than the file's {} bytes hold", bytes.len()),
+        ));
+    }
     let bad = |e: std::io::Error| IoError::invalid(path, format!("cannot read the array data: {e}"));
     let data: Vec<f32> = match &dtype {
         npyz::DType::Plain(ts) => match (ts.type_char(), ts.size_field()) {
@@ -51,10 +63,28 @@ pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
         },
         _ => return Err(IoError::invalid(path, format!("unsupported dtype {} (use f4, f8, u1 or u2)", dtype.descr()))),
     };
-    if data.len() != dims[0] * dims[1] * dims[2] {
+    let n = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
+    if n != Some(data.len()) {
         return Err(IoError::invalid(path, format!("shape {shape:?} but {} values", data.len())));
     }
+    let data = if fortran { fortran_to_x_fastest(dims, &data) } else { data };
     Ok(Volume::from_vec(dims, aabb, data))
+}
+
+/// Values of an array of shape `(nz, ny, nx)` stored in Fortran order (first index fastest:
+/// element `(k, j, i)` at `k + nz (j + ny i)`), reordered x fastest (`(k ny + j) nx + i`), the
+/// order of a C-order `(nz, ny, nx)` array.
+fn fortran_to_x_fastest(dims: [usize; 3], data: &[f32]) -> Vec<f32> {
+    let [nx, ny, nz] = dims;
+    let mut out = Vec::with_capacity(data.len());
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                out.push(data[k + nz * (j + ny * i)]);
+            }
+        }
+    }
+    out
 }
 
 /// Writes a volume as a little-endian f32 `.npy` of shape `(nz, ny, nx)`, C order.
@@ -274,7 +304,7 @@ pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
     atomic_write(path, |w| write_f32_le(w, &volume.data))?;
     let json_path = raw_sidecar_path(path);
     let json =
-        serde_json::to_string_pretty(&sidecar).map_err(|e| IoError::Json { path: json_path.clone(), source: e })?;
+        serde_json::to_string_pretty(&sidecar).map_err(|e| IoError::Json { path: json_path.clone(), error: e })?;
     atomic_write(&json_path, |w| w.write_all(json.as_bytes()))
 }
 
@@ -283,7 +313,7 @@ pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     let json_path = raw_sidecar_path(path);
     let text = std::fs::read_to_string(&json_path).map_err(|e| IoError::io(&json_path, "raw volume sidecar", e))?;
     let meta: RawSidecar =
-        serde_json::from_str(&text).map_err(|e| IoError::Json { path: json_path.clone(), source: e })?;
+        serde_json::from_str(&text).map_err(|e| IoError::Json { path: json_path.clone(), error: e })?;
     if meta.dtype != "<f4" {
         return Err(IoError::invalid(&json_path, format!("dtype {} is not supported (only <f4)", meta.dtype)));
     }
@@ -357,10 +387,27 @@ mod tests {
         let p = dir.path().join("u8.npy");
         write_npy_with(&p, &[1, 1, 2], &[7u8, 255], npyz::Order::C);
         assert_eq!(read_npy(&p, aabb).expect("u8").data, vec![7.0, 255.0]);
+        // Fortran order: element [k, j, i] of shape (2, 3, 4) stored at k + 2 (j + 3 i), with the
+        // value 100 k + 10 j + i, must read as voxel (i, j, k) = 100 k + 10 j + i.
         let p = dir.path().join("fortran.npy");
-        write_npy_with(&p, &[2, 2, 2], &[0f32; 8], npyz::Order::Fortran);
-        let err = read_npy(&p, aabb).expect_err("fortran");
-        assert!(err.to_string().contains("Fortran") && err.to_string().contains("fortran.npy"), "{err}");
+        let mut stored = vec![0f32; 24];
+        for k in 0..2 {
+            for j in 0..3 {
+                for i in 0..4 {
+                    stored[k + 2 * (j + 3 * i)] = (100 * k + 10 * j + i) as f32;
+                }
+            }
+        }
+        write_npy_with(&p, &[2, 3, 4], &stored, npyz::Order::Fortran);
+        let v = read_npy(&p, aabb).expect("fortran");
+        assert_eq!(v.dims, [4, 3, 2]);
+        for k in 0..2 {
+            for j in 0..3 {
+                for i in 0..4 {
+                    assert_eq!(v.data[v.index(i, j, k)], (100 * k + 10 * j + i) as f32, "voxel ({i}, {j}, {k})");
+                }
+            }
+        }
         let p = dir.path().join("flat.npy");
         write_npy_with(&p, &[4, 2], &[0f32; 8], npyz::Order::C);
         let err = read_npy(&p, aabb).expect_err("2-D");

@@ -219,7 +219,10 @@ fn opencv_errors_name_the_file_and_key() {
         }
     };
     check(&base.replace("image_width: 640\n", ""), &["image_width"]);
-    check(&base.replace("R:", "Q:").replace("T:", "U:"), &["rvec/tvec or R/T"]);
+    check(
+        &base.replace("R:", "Q:").replace("T:", "U:"),
+        &["camera `bad`", "no pose", "`rvec` and `tvec` or `R` and `T`"],
+    );
     check(&base.replace("rows: 1\n   cols: 8", "rows: 1\n   cols: 7"), &["distortion_coefficients", "1 × 7"]);
     check("camera_matrix: [1, 2\n", &["malformed YAML"]);
 }
@@ -264,4 +267,226 @@ fn colmap_errors_name_the_file_and_line() {
     std::fs::write(dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n").expect("write");
     let err = read_colmap(dir.path()).expect_err("camera 2 missing").to_string();
     assert!(err.contains("images.txt") && err.contains("radial.png") && err.contains("camera id 2"), "{err}");
+}
+
+/// Bytes of a COLMAP binary model built by hand from the documented layout
+/// (`read_write_model.py`: cameras `<iiQQ` + params `<d`, images `<idddddddi` + name + NUL +
+/// `<Q` points + 24 bytes per point).
+fn colmap_bin_by_hand(dir: &Path) {
+    let mut cams = Vec::new();
+    cams.extend(2u64.to_le_bytes());
+    // Camera 7: PINHOLE (model 1), 64 x 48, fx 50 fy 52 cx 32 cy 24.
+    cams.extend(7i32.to_le_bytes());
+    cams.extend(1i32.to_le_bytes());
+    cams.extend(64u64.to_le_bytes());
+    cams.extend(48u64.to_le_bytes());
+    [50.0f64, 52.0, 32.0, 24.0].iter().for_each(|v| cams.extend(v.to_le_bytes()));
+    // Camera 9: SIMPLE_RADIAL (model 2), f 60, cx 31.5, cy 23.5, k -0.1.
+    cams.extend(9i32.to_le_bytes());
+    cams.extend(2i32.to_le_bytes());
+    cams.extend(64u64.to_le_bytes());
+    cams.extend(48u64.to_le_bytes());
+    [60.0f64, 31.5, 23.5, -0.1].iter().for_each(|v| cams.extend(v.to_le_bytes()));
+    std::fs::write(dir.join("cameras.bin"), cams).expect("write");
+
+    let mut imgs = Vec::new();
+    imgs.extend(2u64.to_le_bytes());
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    for (id, q, t, cam, name, points) in [
+        (1i32, [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 10.0], 7i32, "front.jpg", 2u64),
+        (2, [h, 0.0, h, 0.0], [1.0, 2.0, 3.0], 9, "side.jpg", 0),
+    ] {
+        imgs.extend(id.to_le_bytes());
+        q.iter().chain(t.iter()).for_each(|v: &f64| imgs.extend(v.to_le_bytes()));
+        imgs.extend(cam.to_le_bytes());
+        imgs.extend(name.as_bytes());
+        imgs.push(0);
+        imgs.extend(points.to_le_bytes());
+        for p in 0..points {
+            imgs.extend((p as f64).to_le_bytes());
+            imgs.extend(1.5f64.to_le_bytes());
+            imgs.extend((p as i64 - 1).to_le_bytes());
+        }
+    }
+    std::fs::write(dir.join("images.bin"), imgs).expect("write");
+}
+
+#[test]
+fn colmap_binary_model_projects_as_colmap_documents() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    colmap_bin_by_hand(dir.path());
+    let cams = read_colmap(dir.path()).expect("reads");
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["front.jpg", "side.jpg"]);
+    // COLMAP: X_cam = R(q) X + t; x = f X/Z + c with the image corner at (0, 0), so a pixel
+    // centre at index + ½; fluidnerf's coordinate is x − ½.
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let r_side = DMat3::from_quat(fluidnerf_core::glam::DQuat::from_xyzw(0.0, h, 0.0, h));
+    for p in [DVec3::new(1.0, -2.0, 0.0), DVec3::new(-0.5, 0.7, 1.2)] {
+        let q = p + DVec3::new(0.0, 0.0, 10.0);
+        let by_hand = DVec2::new(50.0 * q.x / q.z + 32.0 - 0.5, 52.0 * q.y / q.z + 24.0 - 0.5);
+        let ours = cams[0].1.project(p).expect("in front");
+        assert!((ours - by_hand).length() < 1e-12, "front {p}: {ours} vs {by_hand}");
+
+        let q = r_side * p + DVec3::new(1.0, 2.0, 3.0);
+        let (x, y) = (q.x / q.z, q.y / q.z);
+        let radial = 1.0 - 0.1 * (x * x + y * y);
+        let by_hand = DVec2::new(60.0 * x * radial + 31.5 - 0.5, 60.0 * y * radial + 23.5 - 0.5);
+        let ours = cams[1].1.project(p).expect("in front");
+        assert!((ours - by_hand).length() < 1e-12, "side {p}: {ours} vs {by_hand}");
+    }
+    // The same model written by the library reads back identically.
+    let again = tempfile::tempdir().expect("tempdir");
+    fluidnerf_io::calib::write_colmap_bin(again.path(), &cams).expect("writes");
+    for ((na, a), (nb, b)) in cams.iter().zip(read_colmap(again.path()).expect("reads back")) {
+        assert_eq!(na, &nb);
+        assert_eq!(a.intrinsics, b.intrinsics);
+        assert_eq!(a.distortion, b.distortion);
+        assert!((a.centre() - b.centre()).length() < 1e-12);
+    }
+}
+
+#[test]
+fn colmap_binary_errors_name_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    colmap_bin_by_hand(dir.path());
+    let bytes = std::fs::read(dir.path().join("images.bin")).expect("read");
+    std::fs::write(dir.path().join("images.bin"), &bytes[..bytes.len() - 30]).expect("write");
+    let err = read_colmap(dir.path()).expect_err("truncated").to_string();
+    assert!(err.contains("images.bin") && err.contains("truncated"), "{err}");
+    let mut cams = std::fs::read(dir.path().join("cameras.bin")).expect("read");
+    cams[12..16].copy_from_slice(&5i32.to_le_bytes());
+    std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
+    let err = read_colmap(dir.path()).expect_err("fisheye").to_string();
+    assert!(err.contains("cameras.bin") && err.contains("camera id 7") && err.contains("OPENCV_FISHEYE"), "{err}");
+}
+
+/// The file OpenCV's calibration sample writes (`out_camera_data.yml`, as in the tutorial
+/// "Camera calibration With OpenCV"), intrinsics only.
+const OPENCV_SAMPLE: &str = "%YAML:1.0
+calibration_Time: \"08/19/11 20:44:38\"
+nrOfFrames: 8
+image_Width: 640
+image_Height: 480
+board_Width: 9
+board_Height: 6
+square_Size: 50.
+FixAspectRatio: 1.
+# flags:  +fix_aspectRatio +fix_principal_point +zero_tangent_dist
+flagValue: 14
+Camera_Matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 6.5746697810243404e+002, 0., 3.1950000000000000e+002, 0.,
+       6.5746697810243404e+002, 2.3950000000000000e+002, 0., 0., 1. ]
+Distortion_Coefficients: !!opencv-matrix
+   rows: 5
+   cols: 1
+   dt: d
+   data: [ -4.1802327018241026e-001, 5.0715243805833121e-001, 0., 0.,
+       -5.7843596847939704e-001 ]
+Avg_Reprojection_Error: 3.8441346462381665e-001
+Per_View_Reprojection_Errors: !!opencv-matrix
+   rows: 2
+   cols: 1
+   dt: f
+   data: [ 5.04999518e-001, 4.22946453e-001 ]
+";
+
+/// OpenCV: `x = K (R X + t)`, then `(x/z, y/z)` through the distortion, pixel centres at
+/// integers; here with k1, k2, k3 only (p1 = p2 = 0).
+fn opencv_by_hand(k: [f64; 4], d: [f64; 3], r: DMat3, t: DVec3, p: DVec3) -> DVec2 {
+    let q = r * p + t;
+    let (x, y) = (q.x / q.z, q.y / q.z);
+    let r2 = x * x + y * y;
+    let s = 1.0 + d[0] * r2 + d[1] * r2 * r2 + d[2] * r2 * r2 * r2;
+    DVec2::new(k[0] * x * s + k[2], k[1] * y * s + k[3])
+}
+
+#[test]
+#[allow(clippy::excessive_precision)] // The sample file's digits, verbatim.
+fn opencv_calibration_sample_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("out_camera_data.yml");
+    std::fs::write(&file, OPENCV_SAMPLE).expect("write");
+    let err = read_opencv(&file).expect_err("no pose").to_string();
+    assert!(err.contains("out_camera_data.yml") && err.contains("camera `out_camera_data`"), "{err}");
+    assert!(err.contains("no pose") && err.contains("`rvec` and `tvec` or `R` and `T`"), "{err}");
+
+    // With a pose appended (as one would from an extrinsic calibration).
+    let mut text = OPENCV_SAMPLE.to_string();
+    text += "rvec: [0.1, -0.2, 0.05]\ntvec: [10.0, -20.0, 900.0]\n";
+    std::fs::write(&file, text).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_eq!(cams.len(), 1);
+    let (name, cam) = &cams[0];
+    assert_eq!(name, "out_camera_data");
+    assert_eq!((cam.intrinsics.width, cam.intrinsics.height), (640, 480));
+    let k = [6.5746697810243404e2, 6.5746697810243404e2, 319.5, 239.5];
+    let d = [-4.1802327018241026e-1, 5.0715243805833121e-1, -5.7843596847939704e-1];
+    let r = rodrigues_to_matrix(DVec3::new(0.1, -0.2, 0.05));
+    for p in [DVec3::ZERO, DVec3::new(30.0, -40.0, 10.0), DVec3::new(-100.0, 80.0, -50.0)] {
+        let by_hand = opencv_by_hand(k, d, r, DVec3::new(10.0, -20.0, 900.0), p);
+        let ours = cam.project(p).expect("in front");
+        assert!((ours - by_hand).length() < 1e-9, "{p}: {ours} vs {by_hand}");
+    }
+}
+
+/// Several cameras as one mapping each, with `R`/`T`; a missing node is named with its camera.
+#[test]
+fn opencv_multi_camera_mappings_with_r_and_t() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("rig.yml");
+    let text = "%YAML:1.0
+left:
+   image_width: 64
+   image_height: 48
+   camera_matrix: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 80., 0., 31.5, 0., 82., 23.5, 0., 0., 1. ]
+   R: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]
+   T: [ 0., 0., 100. ]
+right:
+   image_width: 64
+   image_height: 48
+   Camera_Matrix: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 70., 0., 30., 0., 71., 22., 0., 0., 1. ]
+   Distortion_Coefficients: [ -0.05, 0.01, 0., 0., 0. ]
+   R: !!opencv-matrix
+      rows: 3
+      cols: 3
+      dt: d
+      data: [ 0., 0., -1., 0., 1., 0., 1., 0., 0. ]
+   T: [ 5., -3., 120. ]
+";
+    std::fs::write(&file, text).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["left", "right"]);
+    // R rows [0 0 −1; 0 1 0; 1 0 0].
+    let r_right = DMat3::from_cols(DVec3::new(0.0, 0.0, 1.0), DVec3::Y, DVec3::new(-1.0, 0.0, 0.0));
+    for p in [DVec3::ZERO, DVec3::new(3.0, -4.0, 5.0)] {
+        let ours = cams[0].1.project(p).expect("in front");
+        let by_hand =
+            opencv_by_hand([80.0, 82.0, 31.5, 23.5], [0.0; 3], DMat3::IDENTITY, DVec3::new(0.0, 0.0, 100.0), p);
+        assert!((ours - by_hand).length() < 1e-9, "left {p}: {ours} vs {by_hand}");
+        let ours = cams[1].1.project(p).expect("in front");
+        let by_hand =
+            opencv_by_hand([70.0, 71.0, 30.0, 22.0], [-0.05, 0.01, 0.0], r_right, DVec3::new(5.0, -3.0, 120.0), p);
+        assert!((ours - by_hand).length() < 1e-9, "right {p}: {ours} vs {by_hand}");
+    }
+    std::fs::write(&file, text.replace("   T: [ 5., -3., 120. ]\n", "")).expect("write");
+    let err = read_opencv(&file).expect_err("no T").to_string();
+    assert!(err.contains("rig.yml") && err.contains("camera `right`") && err.contains("missing the node `T`"), "{err}");
+    std::fs::write(&file, text.replace("   T: [ 0., 0., 100. ]\n", "   Tx: [ 0., 0., 100. ]\n")).expect("write");
+    let err = read_opencv(&file).expect_err("no T").to_string();
+    assert!(err.contains("camera `left`") && err.contains("missing the node `T`"), "{err}");
 }

@@ -1,16 +1,25 @@
 //! `fluidnerf import`: builds a scene (`transforms.json`) from an OpenCV or COLMAP calibration
-//! and a folder of images.
+//! and a folder of images, or from a `transforms.json` written by another tool.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context};
 use fluidnerf_core::glam::DVec3;
-use fluidnerf_core::{Aabb, Camera, Frame, Scene};
-use fluidnerf_io::scene::{load_images, save_scene, validate_scene, SCENE_FILE};
+use fluidnerf_core::scene::{estimate_box, BoxEstimateParams};
+use fluidnerf_core::{Aabb, Camera, Frame, Scene, TruthRef};
+use fluidnerf_io::image::{read_image_with, Linearisation, SampleKind};
+use fluidnerf_io::scene::{load_images_with, read_scene_draft, save_scene_with, validate_scene, SCENE_FILE};
 use serde::Serialize;
+use std::io::Write as _;
 
-/// Build a scene from an OpenCV or COLMAP calibration and a folder of images.
+/// Build a scene from an OpenCV or COLMAP calibration and a folder of images, or from a
+/// `transforms.json` written by nerfstudio, instant-ngp or a Blender/NeRF exporter.
+///
+/// transforms.json (`--transforms`): read as `load_scene` reads scene files (`fl_x`/`fl_y` or
+/// `camera_angle_x`/`camera_angle_y`, sizes from the images when `w`/`h` are missing), its
+/// images where its `file_path`s point. Its `aabb`, `units`, `intensity_scale` and
+/// `linearisation`, when present, are kept unless given on the command line.
 ///
 /// OpenCV (`--opencv`): a `cv::FileStorage` YAML/JSON file or a folder of them, with
 /// `camera_matrix`, `distortion_coefficients`, `rvec`/`tvec` or `R`/`T` (world to camera) and
@@ -20,8 +29,15 @@ use serde::Serialize;
 /// `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
 /// `transforms.json` if they are physical).
 ///
-/// COLMAP (`--colmap`): a text model (`cameras.txt`, `images.txt`); each image of
-/// `images.txt` is looked up as `IMAGES/NAME`. COLMAP's pixel centres (+0.5) are converted.
+/// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
+/// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
+/// its name stem when the extension differs (`a.jpg` finds `a.png`). COLMAP's pixel centres
+/// (+0.5) are converted.
+///
+/// The box: `--aabb`, else the file's (`--transforms`), else estimated from the images: the
+/// bounding box of the points seen bright by every camera (a coarse visual hull), grown by a
+/// tenth of its size on every side; it is printed and written into the scene. Check it with
+/// `fluidnerf info`.
 ///
 /// Every calibrated camera must find its image(s), and every image in IMAGES must belong to a
 /// camera (unless --skip-uncalibrated). The scene is validated (each camera must see the box,
@@ -29,26 +45,35 @@ use serde::Serialize;
 /// written, together with `OUT/import.json` (the settings of this run). Image paths are
 /// written relative to OUT when IMAGES is inside OUT, absolute otherwise.
 #[derive(clap::Args, Debug, Serialize)]
+#[command(group(clap::ArgGroup::new("source").required(true)))]
 pub struct Args {
     /// OpenCV calibration: a `.yml`/`.yaml`/`.json` file or a folder of them.
-    #[arg(long, conflicts_with = "colmap", required_unless_present = "colmap")]
+    #[arg(long, group = "source", requires = "images")]
     pub opencv: Option<PathBuf>,
-    /// COLMAP text model folder (holding `cameras.txt` and `images.txt`).
-    #[arg(long)]
+    /// COLMAP model folder (holding `cameras.txt` and `images.txt`, or `.bin`).
+    #[arg(long, group = "source", requires = "images")]
     pub colmap: Option<PathBuf>,
-    /// Folder with the images.
+    /// A `transforms.json` (nerfstudio, instant-ngp, Blender/NeRF synthetic), or its folder.
+    #[arg(long, group = "source")]
+    pub transforms: Option<PathBuf>,
+    /// Folder with the images (for --opencv and --colmap).
     #[arg(long)]
-    pub images: PathBuf,
+    pub images: Option<PathBuf>,
     /// Reconstruction box in world units: xmin,ymin,zmin,xmax,ymax,zmax (e.g.
-    /// `-10,-10,-10,10,10,10`).
+    /// `-10,-10,-10,10,10,10`). Without it, the box is estimated from the images.
     #[arg(long, allow_hyphen_values = true)]
-    pub aabb: String,
-    /// Length unit of the calibration's world frame.
-    #[arg(long, default_value = "mm")]
-    pub units: String,
-    /// Pixel value = intensity_scale × ∫E ds (world units).
-    #[arg(long, default_value_t = 1.0)]
-    pub intensity_scale: f64,
+    pub aabb: Option<String>,
+    /// Length unit of the calibration's world frame [default: mm, or the file's].
+    #[arg(long)]
+    pub units: Option<String>,
+    /// Pixel value = intensity_scale × ∫E ds (world units) [default: 1, or the file's].
+    #[arg(long)]
+    pub intensity_scale: Option<f64>,
+    /// How 8-bit images (PNG, JPEG, TIFF) become linear: `linear` (counts as stored), `srgb`
+    /// (undo the sRGB curve, right for camera JPEGs) or a gamma such as `2.2`; written into the
+    /// scene [default: linear, or the file's].
+    #[arg(long, value_parser = parse_linearisation)]
+    pub linearisation: Option<Linearisation>,
     /// Output scene folder (created if missing).
     #[arg(short, long)]
     pub out: PathBuf,
@@ -60,11 +85,15 @@ pub struct Args {
     pub skip_uncalibrated: bool,
 }
 
+fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
+    s.parse()
+}
+
 fn is_image(p: &Path) -> bool {
     p.is_file()
         && p.extension()
             .and_then(|e| e.to_str())
-            .is_some_and(|e| ["png", "tif", "tiff"].contains(&e.to_ascii_lowercase().as_str()))
+            .is_some_and(|e| fluidnerf_io::image::IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
 fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
@@ -101,7 +130,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             continue;
         }
         let candidates: Vec<PathBuf> =
-            ["png", "tif", "tiff"].iter().map(|e| images.join(format!("{name}.{e}"))).collect();
+            fluidnerf_io::image::IMAGE_EXTENSIONS.iter().map(|e| images.join(format!("{name}.{e}"))).collect();
         let found: Vec<&PathBuf> = candidates.iter().filter(|p| p.is_file()).collect();
         match found.as_slice() {
             [one] => {
@@ -133,16 +162,26 @@ fn match_colmap(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     let mut used = BTreeSet::new();
     let mut missing = Vec::new();
     for (name, cam) in cameras {
-        let p = images.join(name);
+        let mut p = images.join(name);
         if !p.is_file() {
-            missing.push(name.clone());
-            continue;
+            match fluidnerf_io::image::find_image_by_stem(&p) {
+                Ok(Some(found)) => p = found,
+                Ok(None) => {
+                    missing.push(name.clone());
+                    continue;
+                }
+                Err(e) => bail!("image {name} of the COLMAP model: {e}"),
+            }
         }
         used.insert(p.clone());
         frames.push(Frame { camera: cam.clone(), file_path: p, time: None, camera_name: None, holdout: false });
     }
     if !missing.is_empty() {
-        bail!("images.txt lists image(s) missing from {}: {}", images.display(), missing.join(", "));
+        bail!(
+            "the COLMAP model lists image(s) missing from {} (also looked for other extensions): {}",
+            images.display(),
+            missing.join(", ")
+        );
     }
     Ok((frames, used))
 }
@@ -155,66 +194,161 @@ struct Settings<'a> {
     args: &'a Args,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let a: Vec<f64> = args
-        .aabb
+/// The box given as `xmin,ymin,zmin,xmax,ymax,zmax`.
+fn parse_aabb(text: &str) -> anyhow::Result<Aabb> {
+    let a: Vec<f64> = text
         .split(',')
         .map(|v| v.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .with_context(|| format!("--aabb {}: not a list of numbers", args.aabb))?;
+        .with_context(|| format!("--aabb {text}: not a list of numbers"))?;
     ensure!(a.len() == 6, "--aabb takes 6 numbers xmin,ymin,zmin,xmax,ymax,zmax, got {}", a.len());
     let aabb = Aabb { min: DVec3::new(a[0], a[1], a[2]), max: DVec3::new(a[3], a[4], a[5]) };
     aabb.validate().context("--aabb")?;
-    ensure!(args.images.is_dir(), "the image folder {} does not exist", args.images.display());
+    Ok(aabb)
+}
+
+/// What a source gives besides frames: settings found in a scene file.
+#[derive(Default)]
+struct FromFile {
+    aabb: Option<Aabb>,
+    units: Option<String>,
+    intensity_scale: Option<f64>,
+    linearisation: Option<Linearisation>,
+    truth: Vec<TruthRef>,
+}
+
+fn aabb_text(a: &Aabb) -> String {
+    let v = |p: DVec3| format!("{:.4},{:.4},{:.4}", p.x, p.y, p.z);
+    format!("{},{}", v(a.min), v(a.max))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
+    if let Some(images) = &args.images {
+        ensure!(images.is_dir(), "the image folder {} does not exist", images.display());
+    }
     let out_file = args.out.join(SCENE_FILE);
     if out_file.exists() && !args.force {
         bail!("{} already exists; pass --force to overwrite it", out_file.display());
     }
 
-    let (frames, used) = if let Some(path) = &args.opencv {
-        let cams = fluidnerf_io::calib::read_opencv(path).context("cannot read the OpenCV calibration")?;
-        match_opencv(&cams, &args.images)?
-    } else if let Some(dir) = &args.colmap {
-        let cams = fluidnerf_io::calib::read_colmap(dir).context("cannot read the COLMAP model")?;
-        match_colmap(&cams, &args.images)?
+    let (frames, from_file) = if let Some(path) = &args.transforms {
+        let draft = read_scene_draft(path).context("cannot read the transforms.json")?;
+        let root = draft.root.clone();
+        let frames = draft
+            .frames
+            .into_iter()
+            .map(|mut f| {
+                f.file_path = if f.file_path.is_absolute() { f.file_path } else { root.join(&f.file_path) };
+                f
+            })
+            .collect();
+        let truth =
+            draft.truth.into_iter().map(|t| TruthRef { time: t.time, file_path: root.join(&t.file_path) }).collect();
+        let file = FromFile {
+            aabb: draft.aabb,
+            units: Some(draft.units),
+            intensity_scale: Some(draft.intensity_scale),
+            linearisation: Some(draft.linearisation),
+            truth,
+        };
+        (frames, file)
     } else {
-        bail!("give --opencv or --colmap");
-    };
-    let extra: Vec<String> = list_dir(&args.images)?
-        .into_iter()
-        .filter(|p| (is_image(p) || p.is_dir()) && !used.contains(p))
-        .map(|p| p.display().to_string())
-        .collect();
-    if !extra.is_empty() {
-        if args.skip_uncalibrated {
-            log::warn!("left out {} image(s) without a calibrated camera: {}", extra.len(), extra.join(", "));
+        let Some(images) = &args.images else { bail!("--opencv and --colmap need --images") };
+        let (frames, used) = if let Some(path) = &args.opencv {
+            let cams = fluidnerf_io::calib::read_opencv(path).context("cannot read the OpenCV calibration")?;
+            match_opencv(&cams, images)?
+        } else if let Some(dir) = &args.colmap {
+            let cams = fluidnerf_io::calib::read_colmap(dir).context("cannot read the COLMAP model")?;
+            match_colmap(&cams, images)?
         } else {
-            bail!(
-                "no calibrated camera for {} entr(ies) of {}: {} (pass --skip-uncalibrated to leave them out)",
-                extra.len(),
-                args.images.display(),
-                extra.join(", ")
-            );
+            bail!("give --transforms, --opencv or --colmap");
+        };
+        let extra: Vec<String> = list_dir(images)?
+            .into_iter()
+            .filter(|p| (is_image(p) || p.is_dir()) && !used.contains(p))
+            .map(|p| p.display().to_string())
+            .collect();
+        if !extra.is_empty() {
+            if args.skip_uncalibrated {
+                log::warn!("left out {} image(s) without a calibrated camera: {}", extra.len(), extra.join(", "));
+            } else {
+                bail!(
+                    "no calibrated camera for {} entr(ies) of {}: {} (pass --skip-uncalibrated to leave them out)",
+                    extra.len(),
+                    images.display(),
+                    extra.join(", ")
+                );
+            }
         }
-    }
+        (frames, FromFile::default())
+    };
+    ensure!(!frames.is_empty(), "no frames to import");
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
+    let relative = |p: &Path| -> anyhow::Result<PathBuf> {
+        let abs = p.canonicalize().with_context(|| format!("cannot resolve {}", p.display()))?;
+        Ok(abs.strip_prefix(&out_abs).map(Path::to_path_buf).unwrap_or(abs))
+    };
     let mut scene = Scene {
         root: out_abs.clone(),
-        aabb,
-        units: args.units.clone(),
-        intensity_scale: args.intensity_scale,
+        // Replaced below; reading the images does not use the box.
+        aabb: Aabb::cube(DVec3::ZERO, 1.0),
+        units: args.units.clone().or(from_file.units).unwrap_or_else(|| "mm".into()),
+        intensity_scale: args.intensity_scale.or(from_file.intensity_scale).unwrap_or(1.0),
         frames,
-        truth: vec![],
+        truth: from_file.truth,
     };
     for f in &mut scene.frames {
-        let abs = f.file_path.canonicalize().with_context(|| format!("cannot resolve {}", f.file_path.display()))?;
-        f.file_path = abs.strip_prefix(&out_abs).map(Path::to_path_buf).unwrap_or(abs);
+        f.file_path = relative(&f.file_path)?;
     }
-    validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
-    load_images(&scene).context("the images do not fit the calibration")?;
-    save_scene(&scene, &args.out)?;
+    for t in &mut scene.truth {
+        if t.file_path.exists() {
+            t.file_path = relative(&t.file_path)?;
+        }
+    }
+    let known_aabb = given_aabb.or(from_file.aabb);
+    if let Some(aabb) = known_aabb {
+        // Geometry first: a box no camera sees is the likelier mistake than an image.
+        scene.aabb = aabb;
+        validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
+    }
+    let linearisation = args.linearisation.or(from_file.linearisation).unwrap_or_default();
+    let images = load_images_with(&scene, linearisation).context("the images do not fit the calibration")?;
+    let first = scene.resolve(&scene.frames[0].file_path);
+    if args.linearisation.is_none() && linearisation == Linearisation::Linear {
+        if let Ok((_, SampleKind::Integer(8))) = read_image_with(&first, linearisation) {
+            log::warn!(
+                "8-bit images are read as linear counts; if they are ordinary camera images (JPEG, sRGB PNG) \
+                 pass --linearisation srgb"
+            );
+        }
+    }
+    if known_aabb.is_none() {
+        scene.aabb = {
+            let est = estimate_box(&scene.frames, &images, &BoxEstimateParams::default())
+                .context("cannot estimate a box: no point is seen by every camera; give --aabb")?;
+            let how = if est.from_bright_pixels {
+                "the bright pixels seen by every camera"
+            } else {
+                log::warn!("no point is bright in every image; the box bounds the cameras' common view");
+                "the cameras' common view"
+            };
+            let line = format!(
+                "estimated the box from {how}: --aabb {} (size {:.4} x {:.4} x {:.4} {})\n",
+                aabb_text(&est.aabb),
+                est.aabb.size().x,
+                est.aabb.size().y,
+                est.aabb.size().z,
+                scene.units
+            );
+            std::io::stdout().lock().write_all(line.as_bytes())?;
+            est.aabb
+        };
+        validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
+    }
+    save_scene_with(&scene, &args.out, Some(linearisation))?;
     let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args: &args };
     let json = serde_json::to_string_pretty(&settings)?;
     fluidnerf_io::atomic_write(&args.out.join("import.json"), |w| w.write_all(json.as_bytes()))?;
@@ -231,7 +365,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out_file.display(),
         args.out.display()
     );
-    use std::io::Write as _;
     std::io::stdout().lock().write_all(line.as_bytes())?;
     Ok(())
 }

@@ -7,8 +7,10 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use fluidnerf_core::{Camera, Frame, Scene};
-use fluidnerf_io::image::read_image;
-use fluidnerf_io::scene::{load_scene, scene_file_path};
+use fluidnerf_io::image::read_image_with;
+use fluidnerf_io::scene::{
+    cameras_near_box, check_pixels, load_scene, odd_sample_kind, recorded_linearisation, scene_file_path,
+};
 use fluidnerf_io::volume::read_npy;
 
 /// Validate a scene and describe it.
@@ -19,8 +21,10 @@ use fluidnerf_io::volume::read_npy;
 /// centres at integer coordinates, so cx, cy are 0.5 below the file's values), distortion and
 /// thin lens, how much of the box the camera sees, and the image's size and value range; the
 /// time steps, held-out frames and truth volumes. Problems (a camera that misses the box, an
-/// image that is missing, unreadable, of the wrong size or with NaN/Inf pixels, a broken truth
-/// volume) are listed at the end and make the command exit with status 1.
+/// image that is missing, unreadable, of the wrong size, with NaN/Inf or negative pixels, or of
+/// another bit depth than the others, a broken truth volume or one whose grid differs from the
+/// others) are listed at the end and make the command exit with status 1; cameras close to the
+/// box are warned about. 8-bit images are shown after the scene's `linearisation`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The scene: a folder holding `transforms.json`, or the file itself.
@@ -97,6 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut problems: Vec<String> = Vec::new();
     let mut warnings: Vec<String> = Vec::new();
     let u = scene.units.clone();
+    let linearisation = recorded_linearisation(&scene).context("the scene's linearisation")?;
 
     let _ = writeln!(out, "scene {}", file.display());
     let _ = writeln!(
@@ -107,6 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         v3(scene.aabb.size()),
         scene.intensity_scale
     );
+    let _ = writeln!(out, "8-bit images: {linearisation}");
     let names: std::collections::BTreeSet<&str> =
         scene.frames.iter().filter_map(|f| f.camera_name.as_deref()).collect();
     let times = scene.times();
@@ -121,6 +127,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let _ = writeln!(out);
 
+    for (i, d) in cameras_near_box(&scene) {
+        warnings.push(format!(
+            "frame {i} ({}): the camera is only {d:.3} {u} from the box; its rays through the box are \
+             nearly as long as the box",
+            scene.frames[i].file_path.display()
+        ));
+    }
+    let mut kinds = Vec::new();
     let bar = crate::progress::bar(scene.frames.len() as u64, "checking");
     for (i, f) in scene.frames.iter().enumerate() {
         let _ = writeln!(out, "{}", frame_title(i, f));
@@ -141,16 +155,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         if !args.no_images {
             let path = scene.resolve(&f.file_path);
-            match read_image(&path) {
+            match read_image_with(&path, linearisation) {
                 Err(e) => {
                     let _ = writeln!(out, "  image: ERROR {e}");
                     problems.push(format!("frame {i}: {e}"));
                 }
-                Ok(img) => {
+                Ok((img, kind)) => {
+                    kinds.push((i, kind));
                     let (w, h) = (f.camera.width(), f.camera.height());
                     let (lo, hi) = img.min_max();
                     let mean = img.sum() / img.data.len().max(1) as f64;
-                    let _ = writeln!(out, "  image {}x{}, values {lo} .. {hi}, mean {mean:.4}", img.width, img.height);
+                    let _ = writeln!(
+                        out,
+                        "  image {}x{} {kind}, values {lo} .. {hi}, mean {mean:.4}",
+                        img.width, img.height
+                    );
                     if (img.width, img.height) != (w, h) {
                         problems.push(format!(
                             "frame {i}: {}: image is {}x{} pixels but the frame's intrinsics say {w}x{h}",
@@ -166,6 +185,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                             path.display(),
                             img.get(col, row)
                         ));
+                    } else if let Err(e) = check_pixels(&path, &img) {
+                        problems.push(format!("frame {i}: {e}"));
                     }
                 }
             }
@@ -173,6 +194,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    let only_kinds: Vec<_> = kinds.iter().map(|k| k.1).collect();
+    if let Some((at, kind, usual)) = odd_sample_kind(&only_kinds) {
+        let i = kinds[at].0;
+        problems.push(format!(
+            "frame {i}: {}: {} image among {usual} ones; their values are not on one scale (an 8-bit \
+             image among 16-bit ones reads about 257 times too dark)",
+            scene.resolve(&scene.frames[i].file_path).display(),
+            kind.with_article()
+        ));
+    }
     let _ = writeln!(out);
 
     if times.is_empty() {
@@ -190,6 +221,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if scene.truth.is_empty() {
         let _ = writeln!(out, "truth volumes: none");
     }
+    let mut truth_dims: Option<[usize; 3]> = None;
     for t in &scene.truth {
         let path = scene.resolve(&t.file_path);
         let when = t.time.map_or(String::new(), |t| format!(" (time {t})"));
@@ -204,6 +236,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let _ = writeln!(out, "truth{when}: {} {nx}x{ny}x{nz} voxels, values {lo} .. {hi}", path.display());
                 if !(lo.is_finite() && hi.is_finite()) {
                     problems.push(format!("truth {}: has NaN or infinite values", path.display()));
+                }
+                match truth_dims {
+                    Some([a, b, c]) if [a, b, c] != v.dims => problems.push(format!(
+                        "truth {}: {nx}x{ny}x{nz} voxels, but the first truth volume has {a}x{b}x{c}",
+                        path.display()
+                    )),
+                    _ => truth_dims = Some(v.dims),
                 }
             }
             Err(e) => {
