@@ -62,4 +62,39 @@ pub trait TrainableField: Send + Sync {
     /// Named tensors as `(name, shape, range into params())`, for checkpoints
     /// (safetensors) and inspection. The ranges partition `params()`.
     fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)>;
+
+    /// Whether the field implements the priors of [`Prior`] ([`TrainableField::add_prior`]).
+    fn supports_prior(&self) -> bool {
+        false
+    }
+
+    /// Adds the gradient of the prior term `prior` to `grads` and returns its value, which
+    /// the training loss includes. Fields without priors return 0 (training refuses a
+    /// non-zero prior for them, see [`TrainableField::supports_prior`]).
+    fn add_prior(&self, prior: &Prior, grads: &mut [f32]) -> f32 {
+        let _ = (prior, grads);
+        0.0
+    }
+}
+
+/// Priors on the field, added to the training loss (Eq. 5.5) by the fields that implement
+/// them (today the dense voxel grid): `tv · TV(E) + smooth · S(E)`, each the mean over the
+/// grid's cells of
+/// - `TV`: the isotropic total variation `√(|∇E|² + ε²)` with forward differences
+///   (edge preserving; ε = 1e-3 keeps it differentiable),
+/// - `S`: the squared gradient `|∇E|²` (second-order Tikhonov in its first-order form:
+///   smoothness),
+///
+/// in the field's normalised units. Both default to 0 (no prior).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Prior {
+    pub tv: f32,
+    pub smooth: f32,
+}
+
+impl Prior {
+    pub fn is_zero(&self) -> bool {
+        self.tv == 0.0 && self.smooth == 0.0
+    }
 }

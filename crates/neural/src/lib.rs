@@ -62,6 +62,6 @@ pub mod window;
 pub use engine::cpu::CpuEngine;
 pub use engine::Engine;
 pub use error::NeuralError;
-pub use field::TrainableField;
+pub use field::{Prior, TrainableField};
 pub use hashgrid::{HashGridConfig, HashGridField};
 pub use mlp::{Activation, MlpConfig, MlpField, OutputActivation};

@@ -45,7 +45,7 @@ use crate::occupancy::{OccupancyConfig, OccupancyGrid, OccupancyRecord};
 use crate::optim::{Adam, AdamConfig, LrSchedule};
 use crate::render::Quadrature;
 use crate::sampling::ImageRays;
-use crate::{NeuralError, TrainableField};
+use crate::{NeuralError, Prior, TrainableField};
 
 /// The stopping rule of §5.1.5.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -117,6 +117,9 @@ pub struct TrainConfig {
     /// ([`TrainableField::start_uniform`]) instead of the representation's own
     /// initialisation. Default true.
     pub uniform_start: bool,
+    /// Priors on the field added to the loss ([`Prior`]; the dense grid implements them).
+    /// Default none.
+    pub prior: Prior,
 }
 
 impl Default for TrainConfig {
@@ -138,6 +141,7 @@ impl Default for TrainConfig {
             validate_pixels: 4096,
             batching: Batching::AllViews,
             uniform_start: true,
+            prior: Prior::default(),
         }
     }
 }
@@ -146,6 +150,11 @@ impl TrainConfig {
     /// Rejects settings no run can use.
     pub fn validate(&self) -> Result<(), NeuralError> {
         let bad = |what: &str, why: String| Err(NeuralError::invalid(what, why));
+        for (what, w) in [("prior.tv", self.prior.tv), ("prior.smooth", self.prior.smooth)] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return bad(what, format!("must be a non-negative weight, got {w}"));
+            }
+        }
         if self.coarse_samples < 2 {
             return bad("coarse_samples", format!("needs at least 2, got {}", self.coarse_samples));
         }
@@ -535,6 +544,9 @@ pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
     mut on_iter: impl FnMut(&TrainState<F>) -> ControlFlow<()>,
 ) -> Result<TrainReport, NeuralError> {
     cfg.validate()?;
+    if !cfg.prior.is_zero() && !learner.field.supports_prior() {
+        return Err(NeuralError::invalid("prior", "this field representation has no priors; use the dense grid"));
+    }
     engine.load_state(&learner.field, &learner.adam)?;
     let start_iteration = learner.iteration;
     let mut total_samples = 0usize;

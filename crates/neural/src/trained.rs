@@ -73,8 +73,11 @@ impl Default for NeuralConfig {
     }
 }
 
+/// Total-variation weight of the `voxel` preset, chosen on the procedural jet (docs/claims.md).
+pub const VOXEL_TV: f32 = 1e-3;
+
 /// Names accepted by [`NeuralConfig::preset`].
-pub const PRESETS: [&str; 5] = ["faithful", "ch7", "experimental", "fast", "dense"];
+pub const PRESETS: [&str; 6] = ["faithful", "ch7", "experimental", "fast", "dense", "voxel"];
 
 impl NeuralConfig {
     /// A named configuration:
@@ -85,7 +88,9 @@ impl NeuralConfig {
     /// - `fast`: the multiresolution hash-grid field (8 levels 16–128, 2¹⁶ entries, 2 features)
     ///   with a 2 × 64 MLP, empty-space skipping, 48 stratified samples per ray (no coarse
     ///   pass), 256 px/img, lr 2e-2 → 2e-3 over 2000 iterations (tuned on the 15-camera jet);
-    /// - `dense`: a 64³ voxel grid trained through the renderer, with empty-space skipping.
+    /// - `dense`: a 64³ voxel grid trained through the renderer, with empty-space skipping;
+    /// - `voxel`: the voxel baseline: `dense` with a total-variation prior
+    ///   ([`crate::Prior`], weight [`VOXEL_TV`]).
     pub fn preset(name: &str) -> Option<Self> {
         let faithful = NeuralConfig { field: FieldConfig::Mlp(MlpConfig::table_5_1()), train: TrainConfig::default() };
         match name {
@@ -135,6 +140,11 @@ impl NeuralConfig {
                     ..faithful.train
                 },
             }),
+            "voxel" => {
+                let mut c = NeuralConfig::preset("dense")?;
+                c.train.prior = crate::Prior { tv: VOXEL_TV, smooth: 0.0 };
+                Some(c)
+            }
             _ => None,
         }
     }

@@ -57,6 +57,7 @@ pub enum Method {
     Tikhonov,
     Fluidnerf,
     Fast,
+    Voxel,
     TrFluidnerf,
     TrFast,
     StaticPerFrame,
@@ -74,7 +75,7 @@ pub enum Family {
 }
 
 impl Method {
-    pub const ALL: [Method; 13] = [
+    pub const ALL: [Method; 14] = [
         Method::Asart,
         Method::Art,
         Method::Sart,
@@ -85,6 +86,7 @@ impl Method {
         Method::Tikhonov,
         Method::Fluidnerf,
         Method::Fast,
+        Method::Voxel,
         Method::TrFluidnerf,
         Method::TrFast,
         Method::StaticPerFrame,
@@ -103,6 +105,7 @@ impl Method {
             Method::Tikhonov => "tikhonov",
             Method::Fluidnerf => "fluidnerf",
             Method::Fast => "fast",
+            Method::Voxel => "voxel",
             Method::TrFluidnerf => "tr-fluidnerf",
             Method::TrFast => "tr-fast",
             Method::StaticPerFrame => "static-per-frame",
@@ -122,6 +125,7 @@ impl Method {
             Method::Tikhonov => "SART-Tikhonov",
             Method::Fluidnerf => "FluidNeRF",
             Method::Fast => "FluidNeRF (fast field)",
+            Method::Voxel => "voxel grid + TV",
             Method::TrFluidnerf => "TR-FluidNeRF",
             Method::TrFast => "TR-FluidNeRF (fast field)",
             Method::StaticPerFrame => "FluidNeRF per frame",
@@ -141,6 +145,7 @@ impl Method {
             Method::Tikhonov => "SART with second-order Tikhonov regularisation (Eq. 2.35)",
             Method::Fluidnerf => "FluidNeRF as published: positional encoding + MLP (chapter 5.1)",
             Method::Fast => "FluidNeRF with a multiresolution grid and a tiny MLP: much faster",
+            Method::Voxel => "voxel baseline: a grid at the output resolution trained like the fields, with TV",
             Method::TrFluidnerf => "time-resolved FluidNeRF (chapter 5.2): one MLP E(x, t) for all frames",
             Method::TrFast => "time-resolved, with a space–time hash grid, in sliding windows",
             Method::StaticPerFrame => "static FluidNeRF trained on each frame separately (TR baseline)",
@@ -149,7 +154,7 @@ impl Method {
 
     pub fn family(self) -> Family {
         match self {
-            Method::Fluidnerf | Method::Fast => Family::Neural,
+            Method::Fluidnerf | Method::Fast | Method::Voxel => Family::Neural,
             Method::TrFluidnerf | Method::TrFast | Method::StaticPerFrame => Family::Temporal,
             _ => Family::Classical,
         }
@@ -174,6 +179,7 @@ impl Method {
         match self {
             Method::Fluidnerf => Some("faithful"),
             Method::Fast => Some("fast"),
+            Method::Voxel => Some("voxel"),
             Method::TrFluidnerf => Some("tr-faithful"),
             Method::TrFast => Some("tr-fast"),
             Method::StaticPerFrame => Some("static-swish"),
@@ -649,6 +655,7 @@ enum WireMethod {
     Tikhonov(Voxel<TikhonovParams>),
     Fluidnerf(NeuralSpec),
     Fast(NeuralSpec),
+    Voxel(NeuralSpec),
     TrFluidnerf(TemporalSpec),
     TrFast(TemporalSpec),
     StaticPerFrame(TemporalSpec),
@@ -677,6 +684,7 @@ impl From<MethodConfig> for WireMethod {
                 ClassicalMethod::Tikhonov(params) => WireMethod::Tikhonov(Voxel { projector, params }),
             },
             MethodConfig::Neural(Method::Fluidnerf, n) => WireMethod::Fluidnerf(n),
+            MethodConfig::Neural(Method::Voxel, n) => WireMethod::Voxel(n),
             MethodConfig::Neural(_, n) => WireMethod::Fast(n),
             MethodConfig::Temporal(Method::TrFluidnerf, t) => WireMethod::TrFluidnerf(t),
             MethodConfig::Temporal(Method::TrFast, t) => WireMethod::TrFast(t),
@@ -699,6 +707,7 @@ impl From<WireMethod> for MethodConfig {
             WireMethod::Tikhonov(v) => c(v.projector, ClassicalMethod::Tikhonov(v.params)),
             WireMethod::Fluidnerf(n) => MethodConfig::Neural(Method::Fluidnerf, n),
             WireMethod::Fast(n) => MethodConfig::Neural(Method::Fast, n),
+            WireMethod::Voxel(n) => MethodConfig::Neural(Method::Voxel, n),
             WireMethod::TrFluidnerf(t) => MethodConfig::Temporal(Method::TrFluidnerf, t),
             WireMethod::TrFast(t) => MethodConfig::Temporal(Method::TrFast, t),
             WireMethod::StaticPerFrame(t) => MethodConfig::Temporal(Method::StaticPerFrame, t),

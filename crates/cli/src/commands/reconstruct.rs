@@ -21,7 +21,7 @@ pub struct MethodArg(pub Method);
 
 impl clap::ValueEnum for MethodArg {
     fn value_variants<'a>() -> &'a [Self] {
-        const ALL: [MethodArg; 13] = [
+        const ALL: [MethodArg; 14] = [
             MethodArg(Method::Asart),
             MethodArg(Method::Art),
             MethodArg(Method::Sart),
@@ -32,6 +32,7 @@ impl clap::ValueEnum for MethodArg {
             MethodArg(Method::Tikhonov),
             MethodArg(Method::Fluidnerf),
             MethodArg(Method::Fast),
+            MethodArg(Method::Voxel),
             MethodArg(Method::TrFluidnerf),
             MethodArg(Method::TrFast),
             MethodArg(Method::StaticPerFrame),
@@ -234,6 +235,13 @@ pub struct NeuralArgs {
     /// [default: the preset's: on for fast and dense, off for the dissertation's].
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub skip_empty: Option<bool>,
+    /// Weight of the total-variation prior on the field (voxel grids only: --method voxel, or
+    /// --preset dense) [default: voxel 0.001, otherwise 0].
+    #[arg(long, value_name = "WEIGHT")]
+    pub tv_prior: Option<f32>,
+    /// Weight of the smoothness prior |∇E|² on the field (voxel grids only) [default: 0].
+    #[arg(long, value_name = "WEIGHT")]
+    pub smooth_prior: Option<f32>,
 }
 
 /// Options of the time-resolved methods.
@@ -303,6 +311,8 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
             ("--fine-samples", n.fine_samples.is_some()),
             ("--learning-rate", n.learning_rate.is_some()),
             ("--skip-empty", n.skip_empty.is_some()),
+            ("--tv-prior", n.tv_prior.is_some()),
+            ("--smooth-prior", n.smooth_prior.is_some()),
             ("--checkpoint-every", args.checkpoint_every.is_some()),
             ("--resume", args.resume),
         ]));
@@ -483,6 +493,12 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
             Some(true) if train.occupancy.is_none() => train.occupancy = Some(OccupancyConfig::default()),
             Some(false) => train.occupancy = None,
             _ => {}
+        }
+        if let Some(w) = n.tv_prior {
+            train.prior.tv = w;
+        }
+        if let Some(w) = n.smooth_prior {
+            train.prior.smooth = w;
         }
     }
     let t = &args.temporal;

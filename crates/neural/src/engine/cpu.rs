@@ -161,7 +161,8 @@ impl<F: TrainableField> Engine<F> for CpuEngine<F> {
         for (w, g) in self.workers.iter_mut().zip(per_thread) {
             w.grads = g;
         }
-        BatchLoss { loss, samples }
+        let prior = field.add_prior(&cfg.prior, &mut self.grads) as f64;
+        BatchLoss { loss: loss + prior, samples }
     }
 
     fn apply_gradient(&mut self, field: &mut F, adam: &mut Adam, lr: f32) {

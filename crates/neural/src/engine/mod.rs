@@ -31,7 +31,8 @@
 //!   stratified samples (Eq. 5.1), with `N_f > 0` the coarse pass without gradients and the
 //!   feature samples ([`crate::sampling`]), the field at all samples (skipping empty cells,
 //!   [`crate::occupancy`]), the quadrature (Eq. 5.4) and the MSE (Eq. 5.5) over `batch.len()`
-//!   pixels; it keeps `∂L/∂θ` (laid out like `params()`) and returns the loss. The method
+//!   pixels, plus the field's prior `cfg.prior` ([`TrainableField::add_prior`]) when set;
+//!   it keeps `∂L/∂θ` (laid out like `params()`) and returns the loss. The method
 //!   checks the loss before [`Engine::apply_gradient`] takes the Adam step with that gradient,
 //!   so a non-finite loss never reaches the parameters. A gradient not applied is discarded by
 //!   the next `loss_and_gradient`.
@@ -63,7 +64,8 @@ use crate::{NeuralError, TrainableField};
 /// Loss of one batch and the work it took.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BatchLoss {
-    /// MSE over the batch's pixels (Eq. 5.5), normalised pixels².
+    /// MSE over the batch's pixels (Eq. 5.5), normalised pixels², plus the prior term in
+    /// training.
     pub loss: f64,
     /// Field rows evaluated at the rendered samples (the coarse pass of hierarchical sampling
     /// not counted).

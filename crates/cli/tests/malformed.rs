@@ -1,0 +1,357 @@
+//! Bad input, as a hostile user would bring it: malformed scenes and options, built from one
+//! valid scene. Every case must exit non-zero, name the file, key or option at fault, never
+//! panic, and leave nothing behind in the output folder.
+
+use std::path::Path;
+
+mod common;
+use common::*;
+
+/// How a case breaks the scene (in its own copy) before the command runs.
+enum Break {
+    None,
+    /// Replaces `transforms.json` with this text.
+    Transforms(&'static str),
+    /// Edits the parsed `transforms.json`.
+    Json(fn(&mut serde_json::Value)),
+    /// Writes these bytes over a file of the scene.
+    File(&'static str, &'static [u8]),
+    /// Removes a file of the scene.
+    Remove(&'static str),
+    /// Writes a ground-truth volume built by the function.
+    Truth(fn(&Path)),
+}
+
+struct Case {
+    name: &'static str,
+    brk: Break,
+    /// The command, with `SCENE` and `OUT` placeholders.
+    args: &'static [&'static str],
+    /// Text the error must contain (a file, key or option name).
+    says: &'static str,
+}
+
+const RUN: &[&str] =
+    &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--resolution", "8", "--max-iterations", "1"];
+const FAST: &[&str] =
+    &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--resolution", "8", "--max-iterations", "2"];
+
+fn cases() -> Vec<Case> {
+    use Break::*;
+    let c = |name, brk, args, says| Case { name, brk, args, says };
+    vec![
+        c("no transforms.json", Remove("transforms.json"), RUN, "transforms.json"),
+        c("transforms.json not JSON", Transforms("{"), RUN, "transforms.json"),
+        c("transforms.json an array", Transforms("[]"), RUN, "transforms.json"),
+        c("transforms.json empty", Transforms(""), RUN, "transforms.json"),
+        c("no frames", Json(|v| v["frames"] = serde_json::json!([])), RUN, "transforms.json"),
+        c(
+            "frame without a file",
+            Json(|v| v["frames"][0].as_object_mut().unwrap().remove("file_path").map(drop).unwrap_or(())),
+            RUN,
+            "file_path",
+        ),
+        c("image missing", Remove("images/cam000.png"), RUN, "cam000.png"),
+        c("image garbage", File("images/cam000.png", b"not a png"), RUN, "cam000.png"),
+        c("truth missing", Remove("truth/truth.npy"), RUN, "truth.npy"),
+        c("truth garbage", File("truth/truth.npy", b"\x93NUMPY garbage"), RUN, "truth.npy"),
+        c(
+            "truth with NaN",
+            Truth(|p| {
+                let mut v =
+                    fluidnerf_io::volume::read_npy(p, fluidnerf_core::Aabb::cube(Default::default(), 1.0)).unwrap();
+                v.data[5] = f32::NAN;
+                fluidnerf_io::volume::write_npy(p, &v).unwrap();
+            }),
+            RUN,
+            "truth.npy",
+        ),
+        c("aabb inverted", Json(|v| v["aabb"] = serde_json::json!([[1, 1, 1], [-1, -1, -1]])), RUN, "aabb"),
+        c("aabb missing", Json(|v| drop(v.as_object_mut().unwrap().remove("aabb"))), RUN, "aabb"),
+        c("aabb wrong type", Json(|v| v["aabb"] = serde_json::json!("box")), RUN, "aabb"),
+        c("negative intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(-1.0)), RUN, "intensity_scale"),
+        c("negative focal length", Json(|v| v["fl_x"] = serde_json::json!(-5.0)), RUN, "focal"),
+        c(
+            "transform matrix too short",
+            Json(|v| v["frames"][0]["transform_matrix"] = serde_json::json!([[1, 0, 0, 0]])),
+            RUN,
+            "transform_matrix",
+        ),
+        c("resolution 0", None, &["reconstruct", "SCENE", "-o", "OUT", "--resolution", "0"], "resolution"),
+        c(
+            "resolution 1",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--resolution", "1"],
+            "resolution",
+        ),
+        c(
+            "resolution 5000",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--resolution", "5000"],
+            "resolution",
+        ),
+        c(
+            "max-iterations 0 neural",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--max-iterations", "0"],
+            "max_iterations",
+        ),
+        c(
+            "max-iterations 0 voxel",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--max-iterations", "0"],
+            "max_iterations",
+        ),
+        c("negative time budget", None, &["reconstruct", "SCENE", "-o", "OUT", "--time-budget=-1"], "time_budget"),
+        c("NaN time budget", None, &["reconstruct", "SCENE", "-o", "OUT", "--time-budget", "NaN"], "time_budget"),
+        c(
+            "relaxation 3 asart",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--relaxation", "3"],
+            "relaxation",
+        ),
+        c(
+            "relaxation 1.5 mart",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "mart", "--relaxation", "1.5"],
+            "relaxation",
+        ),
+        c(
+            "negative Tikhonov weight",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tikhonov", "--tikhonov-weight=-1"],
+            "weight",
+        ),
+        c(
+            "negative TV weight",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tv", "--tv-weight=-1"],
+            "tv_weight",
+        ),
+        c(
+            "unknown preset",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--preset", "turbo"],
+            "preset",
+        ),
+        c(
+            "no rays per image",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--rays-per-image", "0"],
+            "rays_per_image",
+        ),
+        c(
+            "one sample per ray",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--coarse-samples", "1"],
+            "coarse_samples",
+        ),
+        c(
+            "negative learning rate",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--learning-rate=-1"],
+            "learning",
+        ),
+        c(
+            "held-out every 0",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--stop", "held-out", "--holdout-every", "0"],
+            "holdout_every",
+        ),
+        c("memory limit 0", None, &["reconstruct", "SCENE", "-o", "OUT", "--memory-limit", "0"], "memory_limit"),
+        c(
+            "memory limit too small",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--memory-limit", "0.000001"],
+            "needs about",
+        ),
+        c(
+            "splat subdivisions 17",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--splat-subdivisions", "17"],
+            "splat_subdivisions",
+        ),
+        c(
+            "ray step 0",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--projector", "ray", "--ray-step", "0"],
+            "ray_step",
+        ),
+        c(
+            "hull threshold 1.5",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--hull-threshold", "1.5"],
+            "hull_threshold",
+        ),
+        c(
+            "TV option on ASART",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--tv-weight", "0.1"],
+            "--tv-weight",
+        ),
+        c(
+            "window on a static method",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--window", "2"],
+            "--window",
+        ),
+        c(
+            "voxel option on a neural method",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--projector", "ray"],
+            "--projector",
+        ),
+        c(
+            "overlap not below the window",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--window", "2", "--overlap", "2"],
+            "overlap",
+        ),
+        c(
+            "negative time step",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--time-step=-1"],
+            "time_step",
+        ),
+        c(
+            "held-out rule without held-out views",
+            Json(|v| {
+                for f in v["frames"].as_array_mut().unwrap() {
+                    f.as_object_mut().unwrap().remove("holdout");
+                }
+            }),
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--stop", "held-out"],
+            "held-out views",
+        ),
+        c(
+            "resume with nothing to resume",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--resume"],
+            "--resume",
+        ),
+        c(
+            "output is the scene folder",
+            None,
+            &["reconstruct", "SCENE", "-o", "SCENE", "--method", "asart", "--force"],
+            "scene's own folder",
+        ),
+        c("config missing", None, &["reconstruct", "--config", "SCENE/none.json", "-o", "OUT"], "none.json"),
+        c(
+            "config not JSON",
+            File("run.json", b"{"),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],
+            "run.json",
+        ),
+        c(
+            "config unknown key",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart"},"seeed":1}"#),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],
+            "seeed",
+        ),
+        c(
+            "config unknown method",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"fbp"}}"#),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],
+            "fbp",
+        ),
+        c(
+            "config of a later format",
+            File("run.json", br#"{"format":7,"scene":"x","method":{"name":"asart"}}"#),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],
+            "format 7",
+        ),
+        c(
+            "config of another method",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart"}}"#),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT", "--method", "fast"],
+            "--method",
+        ),
+        c("eval of a folder without a run", None, &["eval", "SCENE/images", "--scene", "SCENE"], "images"),
+        c("fast run of an unreadable image", File("images/cam001.png", b""), FAST, "cam001.png"),
+    ]
+}
+
+#[test]
+fn malformed_scenes_and_options_are_refused_cleanly() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 5, 20, 12, &["--holdout", "1"]);
+    let cases = cases();
+    assert!(cases.len() >= 40, "{} cases", cases.len());
+    let mut failures = Vec::new();
+    for (k, case) in cases.iter().enumerate() {
+        let scene = d.join(format!("s{k:02}"));
+        copy_dir(&d.join("scene"), &scene);
+        let transforms = scene.join("transforms.json");
+        match &case.brk {
+            Break::None => {}
+            Break::Transforms(text) => std::fs::write(&transforms, text).expect("writes"),
+            Break::Json(edit) => {
+                let mut v: serde_json::Value =
+                    serde_json::from_str(&std::fs::read_to_string(&transforms).expect("reads")).expect("json");
+                edit(&mut v);
+                std::fs::write(&transforms, v.to_string()).expect("writes");
+            }
+            Break::File(name, bytes) => std::fs::write(scene.join(name), bytes).expect("writes"),
+            Break::Remove(name) => std::fs::remove_file(scene.join(name)).expect("removes"),
+            Break::Truth(edit) => edit(&scene.join("truth/truth.npy")),
+        }
+        let out = d.join(format!("o{k:02}"));
+        let args: Vec<String> = case
+            .args
+            .iter()
+            .map(|a| a.replace("SCENE", &scene.to_string_lossy()).replace("OUT", &out.to_string_lossy()))
+            .collect();
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let before: Vec<_> = list(&scene);
+        let o = fluidnerf(d, &refs);
+        let err = String::from_utf8_lossy(&o.stderr);
+        let mut why = Vec::new();
+        if o.status.success() {
+            why.push("exited 0".to_string());
+        }
+        if o.status.code() == Some(101) || err.contains("panicked") {
+            why.push("panicked".into());
+        }
+        if !err.contains(case.says) {
+            why.push(format!("does not say {:?}", case.says));
+        }
+        if out.exists() {
+            why.push("left an output folder".into());
+        }
+        if list(&scene) != before {
+            why.push("changed the scene folder".into());
+        }
+        if !why.is_empty() {
+            failures.push(format!("{}: {} — stderr: {}", case.name, why.join(", "), err.trim()));
+        }
+    }
+    assert!(failures.is_empty(), "{} of {} cases:\n{}", failures.len(), cases.len(), failures.join("\n"));
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for e in std::fs::read_dir(from).expect("lists") {
+        let e = e.expect("entry");
+        let target = to.join(e.file_name());
+        if e.path().is_dir() {
+            copy_dir(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).expect("copies");
+        }
+    }
+}
+
+/// Names and sizes of the files under `dir`.
+fn list(dir: &Path) -> Vec<(String, u64)> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(dir).expect("lists").flatten() {
+        if e.path().is_dir() {
+            v.extend(list(&e.path()));
+        } else {
+            v.push((e.path().to_string_lossy().into_owned(), e.metadata().map(|m| m.len()).unwrap_or(0)));
+        }
+    }
+    v.sort();
+    v
+}
