@@ -74,7 +74,7 @@ impl Default for NeuralConfig {
 }
 
 /// Total-variation weight of the `voxel` preset, chosen on the procedural jet (docs/claims.md).
-pub const VOXEL_TV: f32 = 1e-3;
+pub const VOXEL_TV: f32 = 1e-4;
 
 /// Names accepted by [`NeuralConfig::preset`].
 pub const PRESETS: [&str; 6] = ["faithful", "ch7", "experimental", "fast", "dense", "voxel"];

@@ -236,7 +236,7 @@ pub struct NeuralArgs {
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub skip_empty: Option<bool>,
     /// Weight of the total-variation prior on the field (voxel grids only: --method voxel, or
-    /// --preset dense) [default: voxel 0.001, otherwise 0].
+    /// --preset dense) [default: voxel 0.0001, otherwise 0].
     #[arg(long, value_name = "WEIGHT")]
     pub tv_prior: Option<f32>,
     /// Weight of the smoothness prior |∇E|² on the field (voxel grids only) [default: 0].
