@@ -20,7 +20,7 @@ use super::reconstruct::{MethodArg, StopArg};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum StudyPreset {
-    /// Training cameras 4, 8, 15 and 30 on a 360° ring, noiseless (dissertation Fig. 7.7).
+    /// Training cameras 4, 8, 15, 30 and 40 on a 360° ring, noiseless (dissertation Fig. 7.7).
     Cameras,
     /// 15 cameras, image noise 0, 2.5, 5 and 10 % of each image's maximum (Fig. 7.10).
     Noise,
@@ -163,7 +163,7 @@ struct StudyRecord<'a> {
 
 fn grid(args: &Args) -> anyhow::Result<Grid> {
     let (cameras, noise, layouts): (Vec<usize>, Vec<f64>, Vec<LayoutChoice>) = match args.preset {
-        StudyPreset::Cameras => (vec![4, 8, 15, 30], vec![0.0], vec![LayoutChoice::Ring360]),
+        StudyPreset::Cameras => (vec![4, 8, 15, 30, 40], vec![0.0], vec![LayoutChoice::Ring360]),
         StudyPreset::Noise => (vec![15], vec![0.0, 0.025, 0.05, 0.1], vec![LayoutChoice::Ring360]),
         StudyPreset::Layout => {
             (vec![8], vec![0.0], vec![LayoutChoice::Ring360, LayoutChoice::Arc180, LayoutChoice::Sphere])
