@@ -162,6 +162,11 @@ fn interrupt_writes_the_last_finished_iteration() {
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
     std::thread::sleep(std::time::Duration::from_millis(300));
+    // A second run into the same folder is refused while the first holds it, even with --force.
+    let second = fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "asart", "--force", "-q"]);
+    assert!(!second.status.success());
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(err.contains("in use by another run") && err.contains(&child.id().to_string()), "{err}");
     let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill runs");
     assert!(killed.success());
     let status = child.wait().expect("waits");
