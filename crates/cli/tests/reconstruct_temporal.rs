@@ -100,6 +100,10 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     let written = fluidnerf_io::volume::read_npy(&run.join("frames/volume_002.npy"), vol_box(d)).expect("npy");
     assert_eq!(exported.data, written.data, "export at t = 15 is the run's frame at 15");
     ok(&fluidnerf(d, &["render", "fast", "--scene", "scene", "--out", "ren", "--time", "15", "-q"]));
+    // compare takes it too: its curve is one point, the mean NRMSE over the trained times.
+    ok(&fluidnerf(d, &["compare", "fast", "-o", "cmp", "-q"]));
+    let c = json(&d.join("cmp/compare.json"));
+    assert_eq!(c["runs"][0]["final_nrmse"], json(&run.join("report.json"))["final_nrmse"]);
     assert!(std::fs::read_dir(d.join("ren")).expect("rendered").count() > 0);
 
     // The per-frame static baseline: one 3D field per training frame, the held-out time

@@ -388,6 +388,7 @@ impl Ctx<'_> {
         let train_time_s: f64 = run.windows.iter().map(|w| w.report.train_time_s).sum();
         let iterations: usize = run.windows.iter().map(|w| w.learner.iteration).sum();
         let last_reason = run.windows.last().map(|w| w.report.stop_reason);
+        let final_nrmse = mean(trained().map(|m| m.global.nrmse));
         let stop_reason = if run.interrupted || interrupted {
             StopReason::Interrupted
         } else {
@@ -422,10 +423,13 @@ impl Ctx<'_> {
                 loss_kind: Some(LossKind::TrainingMse),
                 loss: run.windows.iter().flat_map(|w| w.learner.losses.iter().map(|&l| l as f64)).collect(),
                 holdout: Vec::new(),
-                nrmse: Vec::new(),
+                // One point, at the end: the mean over the trained times (no curve during training).
+                nrmse: final_nrmse
+                    .map(|nrmse| vec![fluidnerf_metrics::NrmsePoint { iteration: iterations, train_time_s, nrmse }])
+                    .unwrap_or_default(),
                 eval_every: 0,
             },
-            final_nrmse: mean(trained().map(|m| m.global.nrmse)),
+            final_nrmse,
             final_ssim_global: mean(trained().map(|m| m.global.ssim_global)),
             volumes,
             classical: None,
