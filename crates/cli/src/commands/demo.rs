@@ -6,7 +6,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use clap::Parser;
 
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
@@ -56,14 +55,6 @@ pub struct Args {
     pub force: bool,
 }
 
-/// Runs one subcommand line in-process, exactly as the user would type it.
-fn fluidnerf(line: &[String]) -> anyhow::Result<()> {
-    let mut argv = vec!["fluidnerf".to_string()];
-    argv.extend(line.iter().cloned());
-    let cli = crate::Cli::try_parse_from(&argv).map_err(|e| anyhow::anyhow!("{e}"))?;
-    super::run(cli.command).map(|_| ())
-}
-
 fn words(s: &str) -> Vec<String> {
     s.split_whitespace().map(str::to_string).collect()
 }
@@ -92,7 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.force {
         line.push("--force".into());
     }
-    fluidnerf(&line)?;
+    super::run_line(&line)?;
 
     let stopping = StoppingPolicy {
         rule: match args.stop {
@@ -135,7 +126,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             path(&run_dir.join("metrics.csv")),
             "--force".into(),
         ]);
-        fluidnerf(&line)?;
+        super::run_line(&line)?;
     }
 
     let scene = fluidnerf_io::scene::load_scene(&scene_dir)?;

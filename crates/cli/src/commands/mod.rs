@@ -47,3 +47,13 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Synth(args) => done(synth::run(args)),
     }
 }
+
+/// Runs one subcommand line in-process, exactly as a user would type it (without the program
+/// name): the demo and studies synthesise their scenes and score their runs this way.
+pub(crate) fn run_line(line: &[String]) -> anyhow::Result<()> {
+    use clap::Parser;
+    let mut argv = vec!["fluidnerf".to_string()];
+    argv.extend(line.iter().cloned());
+    let cli = crate::Cli::try_parse_from(&argv).map_err(|e| anyhow::anyhow!("{e}"))?;
+    run(cli.command).map(|_| ())
+}

@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use clap::Parser;
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
@@ -216,14 +215,6 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     Ok(g)
 }
 
-/// Runs one subcommand line in-process, exactly as the user would type it.
-fn fluidnerf(line: &[String]) -> anyhow::Result<()> {
-    let mut argv = vec!["fluidnerf".to_string()];
-    argv.extend(line.iter().cloned());
-    let cli = crate::Cli::try_parse_from(&argv).map_err(|e| anyhow::anyhow!("{e}"))?;
-    super::run(cli.command).map(|_| ())
-}
-
 fn scene_name(layout: LayoutChoice, cameras: usize, noise: f64) -> String {
     format!("{}-c{cameras:02}-n{:03}", layout.name(), (noise * 1000.0).round() as u64)
 }
@@ -247,7 +238,7 @@ fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, nois
     }
     line.extend(layout.synth_args().iter().map(|s| s.to_string()));
     line.extend(["-o".into(), dir.to_string_lossy().into_owned()]);
-    fluidnerf(&line).with_context(|| format!("synthesising {}", dir.display()))
+    super::run_line(&line).with_context(|| format!("synthesising {}", dir.display()))
 }
 
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
