@@ -16,8 +16,8 @@ use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
 
 use crate::{
     check_memory, finish, peak_rss, write_volume, BestHoldout, ClassicalDetails, Family, History, HoldoutPoint,
-    LossKind, MethodConfig, PipelineError, RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason,
-    StopRule, VolumeRecord, REPORT_FORMAT,
+    LossKind, MethodConfig, PipelineError, RunConfig, RunDir, RunEvent, RunReport, Session, StopReason, StopRule,
+    VolumeRecord, REPORT_FORMAT,
 };
 
 pub(crate) fn run(
@@ -155,11 +155,7 @@ pub(crate) fn run(
     })?;
     let train_time_s = t_solve.elapsed().as_secs_f64() - eval_s;
     let _ = session.emit(RunEvent::Writing);
-    let stop_reason = cause.unwrap_or(match result.stop_reason {
-        fluidnerf_classical::StopReason::Converged => StopReason::Converged,
-        fluidnerf_classical::StopReason::MaxIterations => StopReason::IterationCap,
-        fluidnerf_classical::StopReason::Interrupted => StopReason::Interrupted,
-    });
+    let stop_reason = cause.unwrap_or(result.stop_reason.into());
     let iterations = result.iterations;
     let (kept_iteration, data) = match best.best.take() {
         Some((it, _, v)) => (it, v),
@@ -189,7 +185,7 @@ pub(crate) fn run(
         method,
         aabb: scene.aabb,
         units: scene.units.clone(),
-        status: if stop_reason == StopReason::Interrupted { RunStatus::Interrupted } else { RunStatus::Finished },
+        status: stop_reason.status(),
         stop_reason,
         stopping: config.stopping,
         stopping_rule: config.stopping.describe(Family::Classical),

@@ -17,8 +17,8 @@ use fluidnerf_neural::TrainableField;
 
 use crate::{
     check_memory, finish, peak_rss, write_volume, BestHoldout, Family, History, HoldoutPoint, LossKind, MethodConfig,
-    NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason,
-    StopRule, VolumeRecord, REPORT_FORMAT,
+    NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent, RunReport, Session, StopReason, StopRule,
+    VolumeRecord, REPORT_FORMAT,
 };
 
 /// A rough peak-memory estimate of a neural run: images and their ray tables, parameters with
@@ -247,12 +247,7 @@ impl Ctx<'_> {
         let _ = session.emit(RunEvent::Writing);
         // The checkpoint holds the last state, so a resumed run continues where this one stopped.
         write_checkpoint(dir, &learner)?;
-        let stop_reason = cause.unwrap_or(match report.stop_reason {
-            fluidnerf_neural::train::StopReason::Converged => StopReason::Converged,
-            fluidnerf_neural::train::StopReason::MaxIterations => StopReason::IterationCap,
-            fluidnerf_neural::train::StopReason::TimeBudget => StopReason::TimeBudget,
-            fluidnerf_neural::train::StopReason::Interrupted => StopReason::Interrupted,
-        });
+        let stop_reason = cause.unwrap_or(report.stop_reason.into());
         let mut kept_iteration = learner.iteration;
         if let Some((iteration, loss, params)) = best.best.take() {
             learner.field.params_mut().copy_from_slice(&params);
@@ -304,7 +299,7 @@ impl Ctx<'_> {
             method: self.method,
             aabb: self.scene.aabb,
             units: self.scene.units.clone(),
-            status: if stop_reason == StopReason::Interrupted { RunStatus::Interrupted } else { RunStatus::Finished },
+            status: stop_reason.status(),
             stop_reason,
             stopping: config.stopping,
             stopping_rule: config.stopping.describe(Family::Neural),

@@ -40,6 +40,40 @@ pub enum StopReason {
     Interrupted,
 }
 
+impl StopReason {
+    /// How a run that stopped for this reason ended.
+    pub fn status(self) -> RunStatus {
+        if self == StopReason::Interrupted {
+            RunStatus::Interrupted
+        } else {
+            RunStatus::Finished
+        }
+    }
+}
+
+impl From<fluidnerf_neural::train::StopReason> for StopReason {
+    fn from(r: fluidnerf_neural::train::StopReason) -> Self {
+        use fluidnerf_neural::train::StopReason as N;
+        match r {
+            N::Converged => StopReason::Converged,
+            N::MaxIterations => StopReason::IterationCap,
+            N::TimeBudget => StopReason::TimeBudget,
+            N::Interrupted => StopReason::Interrupted,
+        }
+    }
+}
+
+impl From<fluidnerf_classical::StopReason> for StopReason {
+    fn from(r: fluidnerf_classical::StopReason) -> Self {
+        use fluidnerf_classical::StopReason as C;
+        match r {
+            C::Converged => StopReason::Converged,
+            C::MaxIterations => StopReason::IterationCap,
+            C::Interrupted => StopReason::Interrupted,
+        }
+    }
+}
+
 /// What the loss history measures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

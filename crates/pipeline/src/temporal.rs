@@ -28,8 +28,8 @@ use serde::{Deserialize, Serialize};
 use crate::neural::{estimate_memory, write_checkpoint_to};
 use crate::{
     check_memory, finish, mean, peak_rss, write_volume, Family, History, LossKind, Method, MethodConfig, PipelineError,
-    RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails,
-    WindowPos, REPORT_FORMAT,
+    RunConfig, RunDir, RunEvent, RunReport, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails, WindowPos,
+    REPORT_FORMAT,
 };
 
 /// `windows/progress.json`: what a run is and how far it got, for resuming.
@@ -392,12 +392,7 @@ impl Ctx<'_> {
         let stop_reason = if run.interrupted || interrupted {
             StopReason::Interrupted
         } else {
-            match last_reason {
-                Some(fluidnerf_neural::train::StopReason::Converged) => StopReason::Converged,
-                Some(fluidnerf_neural::train::StopReason::TimeBudget) => StopReason::TimeBudget,
-                Some(fluidnerf_neural::train::StopReason::Interrupted) => StopReason::Interrupted,
-                _ => StopReason::IterationCap,
-            }
+            last_reason.map_or(StopReason::IterationCap, StopReason::from)
         };
         log::debug!("{}: prepare and train {wall_s:.1} s", self.method);
         let report = RunReport {
@@ -406,7 +401,7 @@ impl Ctx<'_> {
             method: self.method,
             aabb: self.scene.aabb,
             units: self.scene.units.clone(),
-            status: if stop_reason == StopReason::Interrupted { RunStatus::Interrupted } else { RunStatus::Finished },
+            status: stop_reason.status(),
             stop_reason,
             stopping: config.stopping,
             stopping_rule: config.stopping.describe(Family::Temporal),
