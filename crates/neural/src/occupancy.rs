@@ -100,7 +100,10 @@ impl OccupancyGrid {
         self.dims
     }
 
-    /// Carves the visual hull of `views` (camera and image of one instant) in `aabb`.
+    /// Carves the visual hull of `views` (camera and image of one instant) in `aabb`: a cell is
+    /// empty when some view sees only dark pixels over its whole footprint. Views of different
+    /// instants must not be mixed (a cell dark at one instant may be bright at another); carve
+    /// each instant and combine with [`OccupancyGrid::union_with`].
     pub fn from_views(aabb: &Aabb, views: &[(&Camera, &Image)], cfg: &OccupancyConfig) -> Self {
         let dims = fluidnerf_core::Volume::dims_for(aabb, cfg.resolution.max(1));
         let [nx, ny, nz] = dims;
@@ -179,6 +182,15 @@ impl OccupancyGrid {
         let mut grid = OccupancyGrid { dims, occupied: empty.iter().map(|&e| !e).collect() };
         grid.dilate(cfg.dilate);
         grid
+    }
+
+    /// Marks occupied every cell occupied in `other` (the union of two hulls, for example of
+    /// two instants). Both grids must have the same dimensions.
+    pub fn union_with(&mut self, other: &OccupancyGrid) {
+        assert_eq!(self.dims, other.dims, "OccupancyGrid::union_with: grids differ in size");
+        for (a, &b) in self.occupied.iter_mut().zip(&other.occupied) {
+            *a |= b;
+        }
     }
 
     /// Grows the occupied set by `cells` (26-neighbourhood, repeated).

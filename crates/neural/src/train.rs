@@ -301,9 +301,25 @@ impl Prepared {
             return Err(NeuralError::invalid("images", "all training images are black"));
         }
         let length = problem.aabb.size().max_element();
+        // A hull holds for one instant: carve each training time's views on their own and take
+        // the union, so a flow that moves between instants is never carved away by the views
+        // of another instant.
         let occupancy = cfg.occupancy.as_ref().map(|oc| {
-            let views: Vec<(&Camera, &Image)> = problem.views.iter().map(|v| (&v.camera, &v.image)).collect();
-            OccupancyGrid::from_views(&problem.aabb, &views, oc)
+            let mut times: Vec<f64> = problem.views.iter().map(|v| v.time).collect();
+            times.sort_by(f64::total_cmp);
+            times.dedup();
+            times
+                .iter()
+                .map(|&t| {
+                    let views: Vec<(&Camera, &Image)> =
+                        problem.views.iter().filter(|v| v.time == t).map(|v| (&v.camera, &v.image)).collect();
+                    OccupancyGrid::from_views(&problem.aabb, &views, oc)
+                })
+                .reduce(|mut a, b| {
+                    a.union_with(&b);
+                    a
+                })
+                .expect("at least one training view")
         });
         let prep = |v: &View, occ: Option<&OccupancyGrid>| -> Result<PreparedView, NeuralError> {
             let rays = ImageRays::new(&v.camera, &problem.aabb, occ)

@@ -354,3 +354,50 @@ fn a_shared_time_origin_lets_warm_starts_continue_the_previous_window() {
     assert!(aligned < 0.5 * shifted, "first loss of the warm window: aligned {aligned} vs shifted {shifted}");
     assert!(aligned < 3.0 * end_of_first, "aligned {aligned} vs the first window's end {end_of_first}");
 }
+
+/// A blob that travels 0.9 box units between the first and the last instant, so that at the
+/// last instant it lies where the first instant's cameras see only dark pixels.
+fn far_blob(p: DVec3, t: f64) -> f32 {
+    let c = DVec3::new(-0.45 + 0.45 * t, 0.05, -0.05);
+    (-(p - c).length_squared() / (2.0 * 0.15 * 0.15)).exp() as f32
+}
+
+#[test]
+fn the_empty_space_hull_follows_a_flow_that_leaves_the_first_instant() {
+    let settings = RenderSettings { supersample: 2, scale: 3.0, ..Default::default() };
+    let times = [0.0, 1.0, 2.0];
+    let mut views = Vec::new();
+    for &t in &times {
+        let field = move |p: Vec3, _: f64| far_blob(p.as_dvec3(), t);
+        for camera in ring(6, 24) {
+            let image = render_image(&field, &camera, &aabb(), &settings).expect("renders");
+            views.push(View { camera, image, time: t });
+        }
+    }
+    let p = Problem { aabb: aabb(), intensity_scale: 3.0, views, holdout: Vec::new(), time_step: 1.0 };
+    let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), 3);
+    let FieldConfig::HashGrid(grid) = &field_cfg else { unreachable!() };
+    let init = HashGridField::new(grid, 4, 2).expect("field");
+    let last_error = |skip_empty: bool| {
+        let cfg = TrainConfig {
+            occupancy: skip_empty.then(fluidnerf_neural::occupancy::OccupancyConfig::default),
+            rays_per_image: 128,
+            coarse_samples: 32,
+            fine_samples: 0,
+            ..quick(300, 1e-2)
+        };
+        let run = train_windows(&p, &cfg, &WindowConfig::default(), init.clone(), 3, ResumeState::default(), |_| {
+            ControlFlow::Continue(())
+        })
+        .expect("trains");
+        let field = StitchedField::from_run(&run).expect("stitches");
+        let truth = Volume::from_fn([24, 24, 24], aabb(), |q| far_blob(q, 2.0));
+        nrmse(&Volume::from_field([24, 24, 24], aabb(), &field, 2.0).data, &truth.data)
+    };
+    let (with_hull, without) = (last_error(true), last_error(false));
+    assert!(without < 0.5, "without skipping the last instant is not reconstructed: NRMSE {without:.3}");
+    assert!(
+        with_hull <= without * 1.1 + 0.02,
+        "the last instant with the hull (NRMSE {with_hull:.3}) is worse than without it ({without:.3})"
+    );
+}
