@@ -28,6 +28,12 @@ pub enum RunEvent<'a> {
     /// An evaluation: NRMSE against the ground truth over the truth sample, and/or the loss on
     /// the held-out views.
     Evaluation { window: Option<WindowPos>, iteration: usize, nrmse: Option<f64>, holdout: Option<f64> },
+    /// How long the run will take, measured on its first iterations (emitted once, after at
+    /// least three iterations and a second of training, or after ten seconds): the seconds per
+    /// iteration so far, the iterations left under the iteration cap (every window counted),
+    /// and the time they take, shortened to the time budget when one is set. The stopping rule
+    /// may end the run sooner, so this is an upper bound.
+    Estimate { seconds_per_iteration: f64, iterations_left: usize, seconds_left: f64, budget_limited: bool },
     /// A checkpoint was written.
     Checkpoint { path: &'a Path },
     /// A window of a time-resolved run finished.
@@ -36,4 +42,32 @@ pub enum RunEvent<'a> {
     Warning(&'a str),
     /// Training is over; volumes, metrics and reports are being written.
     Writing,
+}
+
+impl RunEvent<'_> {
+    /// A one-line account of an [`RunEvent::Estimate`] for people ("about 0.05 s per iteration,
+    /// at most 1950 more iterations: at most 1 min 38 s"), `None` for other events.
+    pub fn describe_estimate(&self) -> Option<String> {
+        let RunEvent::Estimate { seconds_per_iteration, iterations_left, seconds_left, budget_limited } = self else {
+            return None;
+        };
+        let limit = if *budget_limited { " (the time budget)" } else { "" };
+        Some(format!(
+            "about {} per iteration, at most {iterations_left} more iterations: at most {}{limit}",
+            duration(*seconds_per_iteration),
+            duration(*seconds_left)
+        ))
+    }
+}
+
+/// A duration for people: "0.052 s", "4.2 s", "38 s", "4 min 12 s", "3 h 05 min".
+pub fn duration(seconds: f64) -> String {
+    match seconds {
+        s if !s.is_finite() => "unknown".into(),
+        s if s < 1.0 => format!("{s:.3} s"),
+        s if s < 10.0 => format!("{s:.1} s"),
+        s if s < 60.0 => format!("{s:.0} s"),
+        s if s < 3600.0 => format!("{} min {:02} s", (s / 60.0) as u64, (s % 60.0) as u64),
+        s => format!("{} h {:02} min", (s / 3600.0) as u64, ((s % 3600.0) / 60.0) as u64),
+    }
 }

@@ -55,7 +55,7 @@ pub use config::{
     CONFIG_FORMAT,
 };
 pub use error::PipelineError;
-pub use event::{RunEvent, WindowPos};
+pub use event::{duration, RunEvent, WindowPos};
 pub use report::{
     ClassicalDetails, History, HoldoutPoint, LossKind, NeuralDetails, RunReport, RunStatus, StopReason, VolumeRecord,
     WindowDetails, REPORT_FORMAT,
@@ -73,7 +73,14 @@ pub fn reconstruct(
     mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<RunReport, PipelineError> {
     config.validate()?;
-    let mut session = Session { on_event: &mut on_event, stopped: false, started: Instant::now(), cpu0: cpu_seconds() };
+    let mut session = Session {
+        on_event: &mut on_event,
+        stopped: false,
+        started: Instant::now(),
+        cpu0: cpu_seconds(),
+        budget_s: config.stopping.time_budget_s,
+        estimate: Estimator::default(),
+    };
     let truth = load_truth(scene)?;
     match config.method().family() {
         Family::Classical => classical::run(scene, config, dir, &truth, &mut session),
@@ -106,12 +113,78 @@ pub(crate) struct Session<'a> {
     stopped: bool,
     started: Instant,
     cpu0: Option<f64>,
+    /// The run's time budget (`stopping.time_budget_s`), which bounds the estimate.
+    budget_s: Option<f64>,
+    estimate: Estimator,
+}
+
+/// Measures the first iterations of a run to tell how long the rest will take
+/// ([`RunEvent::Estimate`]).
+#[derive(Debug, Default)]
+struct Estimator {
+    /// When iterations started, and the first iteration counted.
+    started: Option<(Instant, usize)>,
+    /// Iteration cap per window and windows.
+    cap: usize,
+    windows: usize,
+    /// Iterations done since `started` (every window).
+    done: usize,
+    sent: bool,
+}
+
+impl Estimator {
+    /// Tracks `event`; returns the estimate once enough is measured.
+    fn observe(&mut self, event: &RunEvent, budget_s: Option<f64>, now: Instant) -> Option<(f64, usize, f64, bool)> {
+        match event {
+            RunEvent::Started { max_iterations, windows, start_iteration, .. } => {
+                *self = Estimator {
+                    started: Some((now, *start_iteration)),
+                    cap: *max_iterations,
+                    windows: (*windows).max(1),
+                    ..Estimator::default()
+                };
+                None
+            }
+            RunEvent::Iteration { .. } if !self.sent => {
+                let (t0, first) = self.started?;
+                self.done += 1;
+                let elapsed = now.duration_since(t0).as_secs_f64();
+                if !((self.done >= 3 && elapsed >= 1.0) || elapsed >= 10.0) {
+                    return None;
+                }
+                self.sent = true;
+                let per_iteration = elapsed / self.done as f64;
+                let left = (self.cap * self.windows).saturating_sub(first + self.done);
+                let mut seconds = per_iteration * left as f64;
+                let mut limited = false;
+                if let Some(b) = budget_s {
+                    // The budget counts training time from the start of the run (every window).
+                    let rest = (b - elapsed).max(0.0);
+                    if rest < seconds {
+                        seconds = rest;
+                        limited = true;
+                    }
+                }
+                Some((per_iteration, left, seconds, limited))
+            }
+            _ => None,
+        }
+    }
 }
 
 impl Session<'_> {
-    /// Delivers `event`; remembers a request to stop.
+    /// Delivers `event`; remembers a request to stop. After the first iterations, also
+    /// delivers the run's [`RunEvent::Estimate`].
     pub(crate) fn emit(&mut self, event: RunEvent) -> ControlFlow<()> {
-        let flow = (self.on_event)(&event);
+        let mut flow = (self.on_event)(&event);
+        if let Some((seconds_per_iteration, iterations_left, seconds_left, budget_limited)) =
+            self.estimate.observe(&event, self.budget_s, Instant::now())
+        {
+            let estimate = RunEvent::Estimate { seconds_per_iteration, iterations_left, seconds_left, budget_limited };
+            if (self.on_event)(&estimate).is_break() {
+                flow = ControlFlow::Break(());
+            }
+        }
         if flow.is_break() {
             self.stopped = true;
         }
@@ -242,4 +315,44 @@ pub(crate) fn finish(
 pub(crate) fn mean(values: impl IntoIterator<Item = f64>) -> Option<f64> {
     let v: Vec<f64> = values.into_iter().filter(|x| x.is_finite()).collect();
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn the_estimate_comes_once_from_the_measured_rate_and_respects_the_budget() {
+        let t0 = Instant::now();
+        let at = |s: f64| t0 + Duration::from_secs_f64(s);
+        let started = RunEvent::Started { method: Method::Fast, max_iterations: 100, windows: 2, start_iteration: 0 };
+        let iteration =
+            RunEvent::Iteration { window: None, iteration: 1, loss: 1.0, smoothed: None, train_time_s: 0.0 };
+        let run = |budget: Option<f64>| {
+            let mut e = Estimator::default();
+            assert_eq!(e.observe(&started, budget, t0), None);
+            (1..=6).map(|i| e.observe(&iteration, budget, at(0.5 * i as f64))).collect::<Vec<_>>()
+        };
+        // Three iterations in 1.5 s: 0.5 s each, 200 - 3 left (two windows of 100).
+        let free = run(None);
+        assert_eq!(&free[..2], &[None, None]);
+        assert_eq!(free[2], Some((0.5, 197, 98.5, false)));
+        assert!(free[3..].iter().all(Option::is_none), "the estimate is sent once: {free:?}");
+        // A 30 s budget, 1.5 s of it spent, bounds the rest.
+        assert_eq!(run(Some(30.0))[2], Some((0.5, 197, 28.5, true)));
+        // A slow first iteration (20 s) is enough on its own.
+        let mut e = Estimator::default();
+        e.observe(&started, None, t0);
+        assert_eq!(e.observe(&iteration, None, at(20.0)), Some((20.0, 199, 3980.0, false)));
+        let text = RunEvent::Estimate {
+            seconds_per_iteration: 20.0,
+            iterations_left: 199,
+            seconds_left: 3980.0,
+            budget_limited: false,
+        }
+        .describe_estimate()
+        .expect("an estimate");
+        assert_eq!(text, "about 20 s per iteration, at most 199 more iterations: at most 1 h 06 min");
+    }
 }

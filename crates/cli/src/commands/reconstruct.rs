@@ -579,6 +579,27 @@ impl ProgressView {
                 }
                 self.evaluation = s;
             }
+            RunEvent::Estimate { seconds_left, .. } => {
+                if let Some(text) = event.describe_estimate() {
+                    let long = *seconds_left > 1800.0;
+                    let show = || {
+                        if long {
+                            log::warn!(
+                                "{text}; stop it with Ctrl-C (the results so far are written), or set \
+                                 --time-budget, or choose a faster method (--method fast)"
+                            );
+                        }
+                    };
+                    match &self.bar {
+                        Some(bar) if !bar.is_hidden() => {
+                            bar.suspend(show);
+                            bar.println(format!("estimate: {text}"));
+                        }
+                        _ if long => show(),
+                        _ => log::info!("estimate: {text}"),
+                    }
+                }
+            }
             RunEvent::Checkpoint { path } => log::debug!("wrote {}", path.display()),
             RunEvent::WindowFinished(w) => log::info!("window {}/{} finished", w.index + 1, w.count),
             RunEvent::Warning(message) => {
