@@ -224,7 +224,7 @@ mod tests {
         let n = 60;
         let params: Vec<f32> = (0..n).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
         let field = DenseGridField::from_raw(dims, params.clone());
-        let prior = Prior { tv: 0.7, smooth: 0.4 };
+        let prior = Prior { tv: 0.7, smooth: 0.4, ..Prior::default() };
         let mut grads = vec![0f32; n];
         let r0 = field.add_prior(&prior, &mut grads);
         assert!(r0 > 0.0);

@@ -77,20 +77,31 @@ pub trait TrainableField: Send + Sync {
     }
 }
 
-/// Priors on the field, added to the training loss (Eq. 5.5) by the fields that implement
-/// them (today the dense voxel grid): `tv · TV(E) + smooth · S(E)`, each the mean over the
-/// grid's cells of
+/// Priors on the field, added to the training loss (Eq. 5.5): `tv · TV(E) + smooth · S(E)`,
+/// each the mean over the dense grid's cells (fields that implement
+/// [`TrainableField::add_prior`]), or its Monte Carlo estimate on `points` random points with
+/// cell size `step` for every other field ([`crate::prior`]), of
 /// - `TV`: the isotropic total variation `√(|∇E|² + ε²)` with forward differences
 ///   (edge preserving; ε = 1e-3 keeps it differentiable),
 /// - `S`: the squared gradient `|∇E|²` (second-order Tikhonov in its first-order form:
 ///   smoothness),
 ///
 /// in the field's normalised units. Both default to 0 (no prior).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Prior {
     pub tv: f32,
     pub smooth: f32,
+    /// Random points per iteration for fields without a grid prior. Default 2048.
+    pub points: usize,
+    /// Their finite-difference step in box-normalised units. Default 1/128.
+    pub step: f32,
+}
+
+impl Default for Prior {
+    fn default() -> Self {
+        Prior { tv: 0.0, smooth: 0.0, points: 2048, step: 1.0 / 128.0 }
+    }
 }
 
 impl Prior {

@@ -51,6 +51,7 @@ pub(crate) mod kernels;
 pub mod mlp;
 pub mod occupancy;
 pub mod optim;
+pub mod prior;
 pub mod render;
 pub mod sampling;
 pub mod temporal;

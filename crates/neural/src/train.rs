@@ -117,7 +117,8 @@ pub struct TrainConfig {
     /// ([`TrainableField::start_uniform`]) instead of the representation's own
     /// initialisation. Default true.
     pub uniform_start: bool,
-    /// Priors on the field added to the loss ([`Prior`]; the dense grid implements them).
+    /// Priors on the field added to the loss ([`Prior`]: on the dense grid's cells, on random
+    /// points for other fields).
     /// Default none.
     pub prior: Prior,
 }
@@ -154,6 +155,12 @@ impl TrainConfig {
             if !(w >= 0.0 && w.is_finite()) {
                 return bad(what, format!("must be a non-negative weight, got {w}"));
             }
+        }
+        if self.prior.points == 0 {
+            return bad("prior.points", "needs at least 1".into());
+        }
+        if !(self.prior.step > 0.0 && self.prior.step < 0.5) {
+            return bad("prior.step", format!("must be in (0, 0.5) box units, got {}", self.prior.step));
         }
         if self.coarse_samples < 2 {
             return bad("coarse_samples", format!("needs at least 2, got {}", self.coarse_samples));
@@ -560,9 +567,6 @@ pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
     mut on_iter: impl FnMut(&TrainState<F>) -> ControlFlow<()>,
 ) -> Result<TrainReport, NeuralError> {
     cfg.validate()?;
-    if !cfg.prior.is_zero() && !learner.field.supports_prior() {
-        return Err(NeuralError::invalid("prior", "this field representation has no priors; use the dense grid"));
-    }
     engine.load_state(&learner.field, &learner.adam)?;
     let start_iteration = learner.iteration;
     let mut total_samples = 0usize;

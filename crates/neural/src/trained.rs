@@ -142,7 +142,7 @@ impl NeuralConfig {
             }),
             "voxel" => {
                 let mut c = NeuralConfig::preset("dense")?;
-                c.train.prior = crate::Prior { tv: VOXEL_TV, smooth: 0.0 };
+                c.train.prior = crate::Prior { tv: VOXEL_TV, ..crate::Prior::default() };
                 Some(c)
             }
             _ => None,

@@ -235,11 +235,12 @@ pub struct NeuralArgs {
     /// [default: the preset's: on for fast and dense, off for the dissertation's].
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub skip_empty: Option<bool>,
-    /// Weight of the total-variation prior on the field (voxel grids only: --method voxel, or
-    /// --preset dense) [default: voxel 0.0001, otherwise 0].
+    /// Weight of the total-variation prior on the field: on the grid's cells for voxel grids
+    /// (--method voxel, --preset dense), on 2048 random points per iteration with the step
+    /// of a 128-cell grid for the other fields [default: voxel 0.0001, otherwise 0].
     #[arg(long, value_name = "WEIGHT")]
     pub tv_prior: Option<f32>,
-    /// Weight of the smoothness prior |∇E|² on the field (voxel grids only) [default: 0].
+    /// Weight of the smoothness prior |∇E|² on the field (as --tv-prior) [default: 0].
     #[arg(long, value_name = "WEIGHT")]
     pub smooth_prior: Option<f32>,
 }

@@ -22,6 +22,7 @@ use rayon::prelude::*;
 use crate::batch::RayBatch;
 use crate::engine::{BatchLoss, Engine};
 use crate::optim::{sum_gradients, Adam};
+use crate::prior::{add_point_prior, PriorScratch};
 use crate::render::{mse_term, quadrature_weights, render};
 use crate::sampling::{feature_samples, merge_sorted, stratified};
 use crate::train::{Prepared, PreparedView, TrainConfig};
@@ -51,6 +52,9 @@ pub struct CpuEngine<F: TrainableField> {
     workers: Vec<Worker<F::Tape>>,
     /// The reduced gradient of the last [`Engine::loss_and_gradient`].
     grads: Vec<f32>,
+    /// The point-sampled prior's tape and buffers ([`crate::prior`]).
+    prior_tape: F::Tape,
+    prior_scratch: PriorScratch,
 }
 
 impl<F: TrainableField> std::fmt::Debug for CpuEngine<F> {
@@ -83,7 +87,7 @@ impl<F: TrainableField> CpuEngine<F> {
                 samples: 0,
             })
             .collect();
-        CpuEngine { workers, grads: Vec::new() }
+        CpuEngine { workers, grads: Vec::new(), prior_tape: field.new_tape(), prior_scratch: PriorScratch::default() }
     }
 
     /// The gradient of the last [`Engine::loss_and_gradient`], laid out like `params()`.
@@ -161,7 +165,19 @@ impl<F: TrainableField> Engine<F> for CpuEngine<F> {
         for (w, g) in self.workers.iter_mut().zip(per_thread) {
             w.grads = g;
         }
-        let prior = field.add_prior(&cfg.prior, &mut self.grads) as f64;
+        let prior = if field.supports_prior() {
+            field.add_prior(&cfg.prior, &mut self.grads)
+        } else {
+            add_point_prior(
+                field,
+                prep,
+                &cfg.prior,
+                batch,
+                &mut self.prior_tape,
+                &mut self.prior_scratch,
+                &mut self.grads,
+            )
+        } as f64;
         BatchLoss { loss: loss + prior, samples }
     }
 
