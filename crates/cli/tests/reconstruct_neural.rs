@@ -161,11 +161,15 @@ fn voxel_baseline_recovers_blobs() {
     let nrmse = r["final_nrmse"].as_f64().expect("truth was used");
     // Measured 0.234 (a uniform field scores about 0.7 here; ASART 0.096, fast 0.152).
     assert!(nrmse < 0.3, "voxel baseline NRMSE {nrmse}");
-    // The prior is refused on a field without one.
+    // The grid field takes the prior on random points, recorded in its config; a negative
+    // weight is refused, naming the key.
+    let args = ["reconstruct", "scene", "-o", "f", "--method", "fast", "--tv-prior", "0.01", "--max-iterations", "2"];
+    ok(&fluidnerf(d, &args));
+    assert_eq!(json(&d.join("f/config.json"))["method"]["train"]["prior"]["tv"], serde_json::json!(0.01));
     let bad = fluidnerf(
         d,
-        &["reconstruct", "scene", "-o", "x", "--method", "fast", "--tv-prior", "0.1", "--max-iterations", "2"],
+        &["reconstruct", "scene", "-o", "x", "--method", "fast", "--tv-prior=-1", "--max-iterations", "2"],
     );
     assert!(!bad.status.success());
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("prior"));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("prior.tv"), "{}", String::from_utf8_lossy(&bad.stderr));
 }

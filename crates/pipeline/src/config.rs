@@ -389,9 +389,13 @@ impl MethodConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum StopRule {
+    /// [`StopRule::HeldOut`] when the scene has held-out views and the method is static,
+    /// otherwise [`StopRule::Own`]; decided when the run starts ([`RunConfig::resolved`]), and
+    /// `config.json` records the rule decided.
+    #[default]
+    Auto,
     /// The method's own convergence rule: the residual plateau of the voxel methods (§6.4.1),
     /// the smoothed-loss rule of the neural ones (§5.1.5).
-    #[default]
     Own,
     /// No convergence rule: run to the iteration cap or the time budget.
     Budget,
@@ -421,7 +425,7 @@ pub struct StoppingPolicy {
 impl Default for StoppingPolicy {
     fn default() -> Self {
         StoppingPolicy {
-            rule: StopRule::Own,
+            rule: StopRule::Auto,
             max_iterations: None,
             time_budget_s: None,
             holdout_every: None,
@@ -455,6 +459,9 @@ impl StoppingPolicy {
     /// of methods: "held-out early stopping (patience 10)".
     pub fn describe_rule(&self) -> String {
         let mut s = match self.rule {
+            StopRule::Auto => {
+                "held-out early stopping where there are held-out views, else each method's own rule".to_string()
+            }
             StopRule::Own => "each method's own convergence rule".to_string(),
             StopRule::Budget => "iteration cap or time budget only".to_string(),
             StopRule::HeldOut => format!("held-out early stopping (patience {})", self.patience),
@@ -472,6 +479,9 @@ impl StoppingPolicy {
     /// patience 10), at most 300 iterations".
     pub fn describe(&self, family: Family) -> String {
         let mut s = match self.rule {
+            StopRule::Auto => {
+                "held-out early stopping where there are held-out views, else the method's own rule".to_string()
+            }
             StopRule::Own => "the method's own convergence rule".to_string(),
             StopRule::Budget => "iteration cap or time budget only".to_string(),
             StopRule::HeldOut => format!(
@@ -603,9 +613,23 @@ impl RunConfig {
         self.effective_method().validate()
     }
 
+    /// This configuration for `scene`: [`StopRule::Auto`] decided (held-out early stopping when
+    /// the scene has held-out views and the method is static, the method's own rule
+    /// otherwise); every other setting as it is.
+    pub fn resolved(&self, scene: &fluidnerf_core::Scene) -> RunConfig {
+        let mut c = self.clone();
+        if c.stopping.rule == StopRule::Auto {
+            let held_out = scene.holdout_frames().next().is_some();
+            c.stopping.rule =
+                if held_out && self.method().family() != Family::Temporal { StopRule::HeldOut } else { StopRule::Own };
+        }
+        c
+    }
+
     /// The method's parameters with the stopping policy applied: the iteration cap and time
     /// budget replace the method's own, the convergence rule is kept only under
-    /// [`StopRule::Own`], and the held-out rule sets the neural evaluation interval.
+    /// [`StopRule::Own`] (and [`StopRule::Auto`] before it is decided), and the held-out rule
+    /// sets the neural evaluation interval.
     pub fn effective_method(&self) -> MethodConfig {
         let mut m = self.method.clone();
         let policy = &self.stopping;
@@ -616,7 +640,7 @@ impl RunConfig {
                 if let Some(n) = policy.max_iterations {
                     s.max_iterations = n;
                 }
-                if policy.rule != StopRule::Own {
+                if !matches!(policy.rule, StopRule::Own | StopRule::Auto) {
                     s.plateau = None;
                 }
                 c.method.set_seed(self.seed);
@@ -629,7 +653,7 @@ impl RunConfig {
                 if policy.time_budget_s.is_some() {
                     train.time_budget_s = policy.time_budget_s;
                 }
-                if policy.rule != StopRule::Own {
+                if !matches!(policy.rule, StopRule::Own | StopRule::Auto) {
                     train.stop.window = 0;
                 }
                 if policy.rule == StopRule::HeldOut {
@@ -770,5 +794,39 @@ mod tests {
         let mut c = RunConfig::new("scene", Method::Fast);
         c.stopping.max_iterations = Some(0);
         assert!(c.validate().unwrap_err().to_string().contains("max_iterations"));
+    }
+
+    #[test]
+    fn the_automatic_rule_holds_out_where_it_can() {
+        use fluidnerf_core::glam::DVec3;
+        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics, Scene};
+        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let scene = |holdout: bool| Scene {
+            root: "scene".into(),
+            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: (0..3)
+                .map(|i| Frame {
+                    file_path: format!("c{i}.tiff").into(),
+                    camera: Camera::look_at(k, DVec3::new(5.0, i as f64, 0.0), DVec3::ZERO, DVec3::Y),
+                    time: None,
+                    camera_name: None,
+                    holdout: holdout && i == 2,
+                })
+                .collect(),
+            truth: Vec::new(),
+        };
+        let rule = |m: Method, holdout: bool| RunConfig::new("scene", m).resolved(&scene(holdout)).stopping.rule;
+        assert_eq!(RunConfig::new("scene", Method::Fast).stopping.rule, StopRule::Auto);
+        for m in [Method::Fast, Method::Asart, Method::Voxel] {
+            assert_eq!(rule(m, true), StopRule::HeldOut, "{m}");
+            assert_eq!(rule(m, false), StopRule::Own, "{m}");
+        }
+        assert_eq!(rule(Method::TrFast, true), StopRule::Own);
+        // A rule given explicitly is kept.
+        let mut c = RunConfig::new("scene", Method::Fast);
+        c.stopping.rule = StopRule::Budget;
+        assert_eq!(c.resolved(&scene(true)).stopping.rule, StopRule::Budget);
     }
 }

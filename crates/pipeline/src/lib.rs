@@ -62,8 +62,8 @@ pub use report::{
 };
 pub use rundir::{DirState, Overwrite, RunDir, RunKind};
 
-/// Runs the reconstruction `config` of `scene` into `dir`: validates everything first, writes
-/// `config.json`, works (reporting through `on_event`, which may stop the run), then writes
+/// Runs the reconstruction `config` of `scene` into `dir`: decides the stopping rule
+/// ([`RunConfig::resolved`]), validates everything first, writes `config.json`, works (reporting through `on_event`, which may stop the run), then writes
 /// the results, `report.html`, and `report.json` last. A run stopped by `on_event` still writes
 /// its results and returns a report with [`RunStatus::Interrupted`].
 pub fn reconstruct(
@@ -72,6 +72,7 @@ pub fn reconstruct(
     dir: &RunDir,
     mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<RunReport, PipelineError> {
+    let config = &config.resolved(scene);
     config.validate()?;
     let mut session = Session {
         on_event: &mut on_event,

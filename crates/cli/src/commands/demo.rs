@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::Context;
 
 use fluidnerf_pipeline::html::{self, RunSummary};
-use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
+use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StoppingPolicy};
 
 use super::reconstruct::StopArg;
 
@@ -85,15 +85,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     super::run_line(&line)?;
 
-    let stopping = StoppingPolicy {
-        rule: match args.stop {
-            StopArg::Own => StopRule::Own,
-            StopArg::Budget => StopRule::Budget,
-            StopArg::HeldOut => StopRule::HeldOut,
-        },
-        max_iterations: args.max_iterations,
-        ..StoppingPolicy::default()
-    };
+    let stopping =
+        StoppingPolicy { rule: args.stop.into(), max_iterations: args.max_iterations, ..StoppingPolicy::default() };
     let methods = [("fluidnerf", Method::Fast), ("asart", Method::Asart)];
     let mut wall = Vec::new();
     for (dir, method) in methods {

@@ -48,12 +48,26 @@ impl clap::ValueEnum for MethodArg {
 /// `--stop` values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum StopArg {
+    /// Held-out early stopping when the scene has held-out views and the method is static,
+    /// otherwise the method's own rule.
+    Auto,
     /// The method's own convergence rule (residual plateau, smoothed-loss rule).
     Own,
     /// Only the iteration cap and the time budget.
     Budget,
     /// Keep the iterate with the lowest loss on the held-out views (no ground truth used).
     HeldOut,
+}
+
+impl From<StopArg> for StopRule {
+    fn from(a: StopArg) -> Self {
+        match a {
+            StopArg::Auto => StopRule::Auto,
+            StopArg::Own => StopRule::Own,
+            StopArg::Budget => StopRule::Budget,
+            StopArg::HeldOut => StopRule::HeldOut,
+        }
+    }
 }
 
 /// `--projector` values.
@@ -139,8 +153,10 @@ pub struct Args {
 #[command(next_help_heading = "Stopping (every method)")]
 pub struct StopArgs {
     /// What ends the run besides the caps: `own` (the method's convergence rule), `budget`
-    /// (only --max-iterations and --time-budget) or `held-out` (keep the iterate with the
-    /// lowest loss on the scene's held-out views; needs held-out frames) [default: own].
+    /// (only --max-iterations and --time-budget), `held-out` (keep the iterate with the
+    /// lowest loss on the scene's held-out views; needs held-out frames) or `auto` (`held-out`
+    /// when the scene has held-out views and the method is static, else `own`; config.json
+    /// records the rule decided) [default: auto].
     #[arg(long, value_enum, value_name = "RULE")]
     pub stop: Option<StopArg>,
     /// Iteration cap (per window for time-resolved methods) [default: the method's own].
@@ -401,11 +417,7 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     }
     let s = &args.stop;
     if let Some(rule) = s.stop {
-        cfg.stopping.rule = match rule {
-            StopArg::Own => StopRule::Own,
-            StopArg::Budget => StopRule::Budget,
-            StopArg::HeldOut => StopRule::HeldOut,
-        };
+        cfg.stopping.rule = rule.into();
     }
     if s.keep_best_holdout {
         cfg.stopping.rule = StopRule::HeldOut;

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use fluidnerf_pipeline::html::{self, RunSummary};
-use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
+use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StoppingPolicy};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{LinePlot, Series};
 use serde::{Deserialize, Serialize};
@@ -183,11 +183,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         pixels: args.pixels.unwrap_or(if smoke { 24 } else { 64 }),
         resolution: args.resolution.unwrap_or(if smoke { 16 } else { 64 }),
         stopping: StoppingPolicy {
-            rule: match args.stop {
-                StopArg::Own => StopRule::Own,
-                StopArg::Budget => StopRule::Budget,
-                StopArg::HeldOut => StopRule::HeldOut,
-            },
+            rule: args.stop.into(),
             max_iterations: args.max_iterations.or(smoke.then_some(20)),
             time_budget_s: Some(args.time_budget),
             ..StoppingPolicy::default()
