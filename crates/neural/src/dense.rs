@@ -195,7 +195,8 @@ impl TrainableField for DenseGridField {
                     let d = nbr.map(|m| m.map_or(0.0, |m| e[m] - e[c]));
                     let g2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
                     let t = (g2 + EPS2).sqrt();
-                    value += (prior.tv * t + prior.smooth * g2) as f64;
+                    value += (prior.tv * t + prior.smooth * g2 + prior.sparsity * e[c]) as f64;
+                    d_e[c] += prior.sparsity * inv_n;
                     // d/dd_a of (tv·t + smooth·g2) = (tv / t + 2 smooth) · d_a
                     let s = (prior.tv / t + 2.0 * prior.smooth) * inv_n;
                     for (a, m) in nbr.iter().enumerate() {
@@ -224,7 +225,7 @@ mod tests {
         let n = 60;
         let params: Vec<f32> = (0..n).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
         let field = DenseGridField::from_raw(dims, params.clone());
-        let prior = Prior { tv: 0.7, smooth: 0.4, ..Prior::default() };
+        let prior = Prior { tv: 0.7, smooth: 0.4, sparsity: 0.3, ..Prior::default() };
         let mut grads = vec![0f32; n];
         let r0 = field.add_prior(&prior, &mut grads);
         assert!(r0 > 0.0);
@@ -240,11 +241,17 @@ mod tests {
             let fd = (value(&a) - value(&b)) / (2.0 * h as f64);
             assert!((fd - grads[i] as f64).abs() < 2e-3 * (1.0 + fd.abs()), "param {i}: {fd} vs {}", grads[i]);
         }
-        // A constant grid has no variation: value ε-level, gradient zero.
+        // A constant grid has no variation: value ε-level, gradient zero, but for the sparsity
+        // term, which is the level itself with the same gradient in every cell.
         let flat = DenseGridField::new(dims, 0.3);
         let mut g = vec![0f32; n];
-        assert!(flat.add_prior(&prior, &mut g) < 1e-2);
+        let without_sparsity = Prior { sparsity: 0.0, ..prior };
+        assert!(flat.add_prior(&without_sparsity, &mut g) < 1e-2);
         assert!(g.iter().all(|&x| x.abs() < 1e-9));
+        let mut g = vec![0f32; n];
+        let level = Prior { tv: 0.0, smooth: 0.0, ..prior };
+        assert!((flat.add_prior(&level, &mut g) - 0.3 * 0.3).abs() < 1e-5);
+        assert!(g.iter().all(|&x| x > 0.0 && (x - g[0]).abs() < 1e-9));
     }
 
     #[test]

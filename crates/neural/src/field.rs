@@ -77,7 +77,8 @@ pub trait TrainableField: Send + Sync {
     }
 }
 
-/// Priors on the field, added to the training loss (Eq. 5.5): `tv · TV(E) + smooth · S(E)`,
+/// Priors on the field, added to the training loss (Eq. 5.5):
+/// `tv · TV(E) + smooth · S(E) + sparsity · E`,
 /// each the mean over the dense grid's cells (fields that implement
 /// [`TrainableField::add_prior`]), or its Monte Carlo estimate on `points` random points with
 /// cell size `step` for every other field ([`crate::prior`]), of
@@ -85,6 +86,7 @@ pub trait TrainableField: Send + Sync {
 ///   (edge preserving; ε = 1e-3 keeps it differentiable),
 /// - `S`: the squared gradient `|∇E|²` (second-order Tikhonov in its first-order form:
 ///   smoothness),
+/// - `E` itself, an L1 norm since E ≥ 0 (sparsity: dark space stays dark),
 ///
 /// in the field's normalised units. Both default to 0 (no prior).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -92,6 +94,7 @@ pub trait TrainableField: Send + Sync {
 pub struct Prior {
     pub tv: f32,
     pub smooth: f32,
+    pub sparsity: f32,
     /// Random points per iteration for fields without a grid prior. Default 2048.
     pub points: usize,
     /// Their finite-difference step in box-normalised units. Default 1/128.
@@ -100,12 +103,12 @@ pub struct Prior {
 
 impl Default for Prior {
     fn default() -> Self {
-        Prior { tv: 0.0, smooth: 0.0, points: 2048, step: 1.0 / 128.0 }
+        Prior { tv: 0.0, smooth: 0.0, sparsity: 0.0, points: 2048, step: 1.0 / 128.0 }
     }
 }
 
 impl Prior {
     pub fn is_zero(&self) -> bool {
-        self.tv == 0.0 && self.smooth == 0.0
+        self.tv == 0.0 && self.smooth == 0.0 && self.sparsity == 0.0
     }
 }

@@ -8,7 +8,7 @@
 //! `fast` grid). With `d_a = E(x + h·e_a) − E(x)` and `g² = Σ_a d_a²` the term is
 //!
 //! ```text
-//! tv · mean √(g² + ε²) + smooth · mean g²,        ε = 1e-3,
+//! tv · mean √(g² + ε²) + smooth · mean g² + sparsity · mean E(x),        ε = 1e-3,
 //! ```
 //!
 //! the same forward differences and weights as the dense grid's prior with cell size `h`, so
@@ -101,7 +101,8 @@ pub fn add_point_prior<F: TrainableField>(
         let d = [e[4 * q + 1] - c, e[4 * q + 2] - c, e[4 * q + 3] - c];
         let g2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
         let t = (g2 + EPS2).sqrt();
-        value += (prior.tv * t + prior.smooth * g2) as f64;
+        value += (prior.tv * t + prior.smooth * g2 + prior.sparsity * c) as f64;
+        scratch.d_out[4 * q] += prior.sparsity * inv_n;
         let s = (prior.tv / t + 2.0 * prior.smooth) * inv_n;
         for a in 0..3 {
             scratch.d_out[4 * q + 1 + a] += s * d[a];

@@ -151,7 +151,9 @@ impl TrainConfig {
     /// Rejects settings no run can use.
     pub fn validate(&self) -> Result<(), NeuralError> {
         let bad = |what: &str, why: String| Err(NeuralError::invalid(what, why));
-        for (what, w) in [("prior.tv", self.prior.tv), ("prior.smooth", self.prior.smooth)] {
+        for (what, w) in
+            [("prior.tv", self.prior.tv), ("prior.smooth", self.prior.smooth), ("prior.sparsity", self.prior.sparsity)]
+        {
             if !(w >= 0.0 && w.is_finite()) {
                 return bad(what, format!("must be a non-negative weight, got {w}"));
             }

@@ -72,7 +72,7 @@ fn the_point_prior_gradient_matches_finite_differences() {
     };
     let mut field = MlpField::new(&cfg, 3, 5).expect("field");
     // Large enough steps that the differences are well above f32 rounding.
-    let prior = Prior { tv: 0.5, smooth: 0.3, points: 64, step: 0.2 };
+    let prior = Prior { tv: 0.5, smooth: 0.3, sparsity: 0.2, points: 64, step: 0.2 };
     let (v0, grads) = prior_value(&field, &prep, &prior, 4);
     assert!(v0 > 0.0);
     // The same keys draw the same points; another iteration draws others.
@@ -114,12 +114,12 @@ fn the_point_prior_estimates_the_dense_grid_prior() {
     let prep = Prepared::new(&problem(3, 12, 0.0, 1), &TrainConfig::default()).expect("prepares");
     let exact = {
         let mut g = vec![0.0; field.num_params()];
-        field.add_prior(&Prior { tv: 1.0, smooth: 2.0, ..Prior::default() }, &mut g)
+        field.add_prior(&Prior { tv: 1.0, smooth: 2.0, sparsity: 0.1, ..Prior::default() }, &mut g)
     };
     let estimate = {
         // Through the generic path: the dense grid interpolates trilinearly, so points one cell
         // apart see differences of cell values (plus interpolation), a close estimate.
-        let prior = Prior { tv: 1.0, smooth: 2.0, points: 20_000, step: 1.0 / 16.0 };
+        let prior = Prior { tv: 1.0, smooth: 2.0, sparsity: 0.1, points: 20_000, step: 1.0 / 16.0 };
         (0..4).map(|s| prior_value(&field, &prep, &prior, s).0 as f64).sum::<f64>() / 4.0
     };
     let rel = (estimate - exact as f64).abs() / exact as f64;

@@ -259,6 +259,10 @@ pub struct NeuralArgs {
     /// Weight of the smoothness prior |∇E|² on the field (as --tv-prior) [default: 0].
     #[arg(long, value_name = "WEIGHT")]
     pub smooth_prior: Option<f32>,
+    /// Weight of the sparsity prior (the mean of E, an L1 norm: dark space stays dark; as
+    /// --tv-prior) [default: 0].
+    #[arg(long, value_name = "WEIGHT")]
+    pub sparsity_prior: Option<f32>,
 }
 
 /// Options of the time-resolved methods.
@@ -330,6 +334,7 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
             ("--skip-empty", n.skip_empty.is_some()),
             ("--tv-prior", n.tv_prior.is_some()),
             ("--smooth-prior", n.smooth_prior.is_some()),
+            ("--sparsity-prior", n.sparsity_prior.is_some()),
             ("--checkpoint-every", args.checkpoint_every.is_some()),
             ("--resume", args.resume),
         ]));
@@ -512,6 +517,9 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         }
         if let Some(w) = n.smooth_prior {
             train.prior.smooth = w;
+        }
+        if let Some(w) = n.sparsity_prior {
+            train.prior.sparsity = w;
         }
     }
     let t = &args.temporal;
