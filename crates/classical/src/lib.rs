@@ -37,7 +37,7 @@ pub use error::{ClassicalError, SolveError};
 pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
 pub use method::{voxel_footprint_px, ClassicalMethod, ProjectorConfig};
-pub use projector::{Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector};
+pub use projector::{FootprintProjector, Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector};
 pub use solve::{
     art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,
     total_variation, ArtParams, AsartParams, IterState, MartParams, MlemParams, Plateau, Problem, Report, SartParams,

@@ -3,7 +3,7 @@
 mod common;
 
 use common::*;
-use fluidnerf_classical::{Grid, Projector, RayProjector, SplatProjector};
+use fluidnerf_classical::{FootprintProjector, Grid, Projector, RayProjector, SplatProjector};
 use fluidnerf_core::{render_image, RenderSettings, Volume};
 
 fn dot(a: &[f32], b: &[f32]) -> f64 {
@@ -14,6 +14,7 @@ fn projectors(grid: Grid, cams: &[fluidnerf_core::Camera], scale: f64) -> Vec<(&
     vec![
         ("splat", Box::new(SplatProjector::new(grid, cams, scale).expect("valid")) as Box<dyn Projector>),
         ("ray", Box::new(RayProjector::new(grid, cams, scale, 0.5).expect("valid"))),
+        ("footprint", Box::new(FootprintProjector::new(grid, cams, scale).expect("valid"))),
     ]
 }
 
@@ -93,7 +94,11 @@ fn forward_matches_the_reference_renderer() {
         let cams = if distorted { distorted_ring(3, 48) } else { ring(3, 48) };
         let s = RenderSettings { scale, step: Some(0.005), ..Default::default() };
         for (name, p) in projectors(grid, &cams, scale) {
-            let bound = if name == "splat" { 0.05 } else { 0.005 };
+            let bound = match name {
+                "splat" => 0.05,
+                "footprint" => 0.015,
+                _ => 0.005,
+            };
             for (v, cam) in cams.iter().enumerate() {
                 let reference = render_image(&vol, cam, &grid.aabb, &s).expect("renders");
                 let mut ax = vec![0f32; p.view_len(v)];

@@ -19,6 +19,7 @@
 //!   centre is spread bilinearly over a 2 × 2 pixel block.
 //! - [`RayProjector`], ray-driven: the trilinear line integral along each pixel's ray.
 
+mod footprint;
 mod ray;
 mod splat;
 
@@ -26,6 +27,7 @@ use fluidnerf_core::{Aabb, Camera, Volume};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
+pub use footprint::{FootprintProjector, MAX_FOOTPRINT_SIDE};
 pub use ray::RayProjector;
 pub use splat::SplatProjector;
 
