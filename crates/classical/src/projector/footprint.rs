@@ -99,78 +99,80 @@ struct FootView {
     rows: usize,
 }
 
-/// A voxel's footprint in one view: where its `N × N` square starts in the padded image, the
-/// footprint centre relative to the square's first pixel edge, the trapezoid widths and the
-/// amplitude.
-#[derive(Clone, Copy, Debug)]
-struct Foot {
-    /// Padded column and row of the square's first pixel (column `c0 + N`).
-    col: usize,
-    row: usize,
-    /// `u − (c0 − ½)`, `v − (r0 − ½)`.
-    off_u: f32,
-    off_v: f32,
-    /// Trapezoid widths: the wider box `p` and the narrower `l`, per axis.
-    pu: f32,
-    lu: f32,
-    pv: f32,
-    lv: f32,
-    /// `1 / (2 l)` per axis.
-    iu: f32,
-    iv: f32,
-    /// `γ_j / (p_u p_v)`: the footprint's height per unit voxel value.
-    amp: f32,
-}
-
 /// Voxels projected per batch.
 const CHUNK: usize = 16;
 
-/// A batch of footprints, structure of arrays (see [`FootView::chunk`]).
+/// A batch of footprints of side `N`, structure of arrays (see [`FootView::chunk`]): the
+/// padded first column and row (−1: the voxel misses), the amplitude, and the pixel weights
+/// along each axis, `wu[q][k]` for pixel `k` of voxel `q` (written once per chunk, read as one
+/// vector per voxel).
 #[derive(Clone, Copy, Debug)]
-struct Chunk {
-    tc: [f32; CHUNK],
-    tr: [f32; CHUNK],
-    us: [f32; CHUNK],
-    vs: [f32; CHUNK],
-    pu: [f32; CHUNK],
-    lu: [f32; CHUNK],
-    pv: [f32; CHUNK],
-    lv: [f32; CHUNK],
-    /// `1 / (2 l)` per axis.
-    iu: [f32; CHUNK],
-    iv: [f32; CHUNK],
+struct Chunk<const N: usize> {
+    col: [f32; CHUNK],
+    row: [f32; CHUNK],
     amp: [f32; CHUNK],
+    wu: [[f32; N]; CHUNK],
+    wv: [[f32; N]; CHUNK],
 }
 
-impl Default for Chunk {
+impl<const N: usize> Default for Chunk<N> {
     fn default() -> Self {
         let z = [0f32; CHUNK];
-        Chunk { tc: [-1.0; CHUNK], tr: z, us: z, vs: z, pu: z, lu: z, pv: z, lv: z, iu: z, iv: z, amp: z }
+        Chunk { col: [-1.0; CHUNK], row: z, amp: z, wu: [[0.0; N]; CHUNK], wv: [[0.0; N]; CHUNK] }
     }
 }
 
-impl Chunk {
-    /// The footprint of entry `q`, if it hits.
+impl<const N: usize> Chunk<N> {
+    /// The padded first column and row and the amplitude of entry `q`, if it hits.
     #[inline(always)]
-    fn get(&self, q: usize) -> Option<Foot> {
-        if self.tc[q] < 0.0 {
-            return None;
+    fn get(&self, q: usize) -> Option<(usize, usize, f32)> {
+        // Whole non-negative numbers when the voxel hits.
+        (self.col[q] >= 0.0).then(|| (self.col[q] as usize, self.row[q] as usize, self.amp[q]))
+    }
+
+    /// The weights of entry `q` along `u` and `v`.
+    #[inline(always)]
+    fn weights(&self, q: usize) -> ([f32; N], [f32; N]) {
+        (self.wu[q], self.wv[q])
+    }
+}
+
+/// `⌊t⌋` for `0 ≤ t < 2²²`, branch-free and vectorisable without SSE4.1 (whose `round` the
+/// x86-64 baseline lacks; `f32::floor` would be a library call per element there).
+#[inline(always)]
+fn floor_small(t: f32) -> f32 {
+    const MAGIC: f32 = 8_388_608.0; // 2²³: adding it rounds to an integer.
+    let r = (t + MAGIC) - MAGIC;
+    if r > t {
+        r - 1.0
+    } else {
+        r
+    }
+}
+
+/// The pixel integrals of `CHUNK` trapezoids (unit height, boxes `p ≥ l`, centred at `off`) on
+/// pixels `[k, k + 1)`, `k < N`, vectorised across the voxels: `w[q][k]` for pixel `k` of voxel
+/// `q`, summing to `p` when the support lies inside.
+#[inline(always)]
+fn axis_weights_chunk<const N: usize>(
+    off: &[f32; CHUNK],
+    p: &[f32; CHUNK],
+    l: &[f32; CHUNK],
+    w: &mut [[f32; N]; CHUNK],
+) {
+    let mut prev = [0f32; CHUNK];
+    for k in 0..N {
+        for q in 0..CHUNK {
+            let (h1, h2) = (0.5 * (p[q] + l[q]), 0.5 * (p[q] - l[q]));
+            let inv = 0.5 / l[q];
+            let t = (k + 1) as f32 - off[q];
+            let a = fmin(fmax(t, -h1), -h2) + h1;
+            let b = fmin(fmax(t, -h2), h2) + h2;
+            let c = fmin(fmax(t, h2), h1) - h2;
+            let cdf = a * a * inv + b + c - c * c * inv;
+            w[q][k] = cdf - prev[q];
+            prev[q] = cdf;
         }
-        // Both non-negative here, so truncation is floor.
-        let (col, row) = (self.tc[q] as usize, self.tr[q] as usize);
-        Some(Foot {
-            col,
-            row,
-            off_u: self.us[q] - col as f32,
-            off_v: self.vs[q] - row as f32,
-            pu: self.pu[q],
-            lu: self.lu[q],
-            pv: self.pv[q],
-            lv: self.lv[q],
-            iu: self.iu[q],
-            iv: self.iv[q],
-            amp: self.amp[q],
-        })
     }
 }
 
@@ -224,28 +226,6 @@ fn trapezoid(w: [f32; 3], n: usize) -> (f32, f32) {
     // A positive floor keeps the ramps' 1/l finite; a box of width p is the limit.
     let l = fmax(l * fit, 1e-6);
     (fmax(p * fit, l), l)
-}
-
-/// The pixel integrals of a trapezoid (unit height, boxes `p ≥ l`) centred at `off` on pixels
-/// `[k, k + 1)`, `k < N`: `∫` over each pixel, summing to `p` when the support lies inside;
-/// `inv = 1 / (2 l)`.
-#[inline(always)]
-fn axis_weights<const N: usize>(off: f32, p: f32, l: f32, inv: f32) -> [f32; N] {
-    let (h1, h2) = (0.5 * (p + l), 0.5 * (p - l));
-    let mut cdf = [0f32; N];
-    for (k, f) in cdf.iter_mut().enumerate() {
-        let t = (k + 1) as f32 - off;
-        let a = fmin(fmax(t, -h1), -h2) + h1;
-        let b = fmin(fmax(t, -h2), h2) + h2;
-        let c = fmin(fmax(t, h2), h1) - h2;
-        *f = a * a * inv + b + c - c * c * inv;
-    }
-    let mut w = [0f32; N];
-    w[0] = cdf[0];
-    for k in 1..N {
-        w[k] = cdf[k] - cdf[k - 1];
-    }
-    w
 }
 
 impl FootView {
@@ -333,35 +313,39 @@ impl FootView {
     /// side `N`, structure of arrays. Branch-free so that it vectorises across voxels; voxels
     /// whose square misses the padded image or that lie behind the camera get `tc = −1`.
     #[inline(always)]
-    fn chunk<const N: usize, const DISTORTED: bool>(&self, base: [f32; 3], step: [f32; 3], i0: usize, out: &mut Chunk) {
+    fn chunk<const N: usize, const DISTORTED: bool>(
+        &self,
+        base: [f32; 3],
+        step: [f32; 3],
+        i0: usize,
+        out: &mut Chunk<N>,
+    ) {
         let n = N as f32;
         let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
+        let z = [0f32; CHUNK];
+        let (mut off_u, mut off_v, mut pu, mut lu, mut pv, mut lv) = (z, z, z, z, z, z);
         for q in 0..CHUNK {
             let fi = (i0 + q) as f32;
             let p = [base[0] + fi * step[0], base[1] + fi * step[1], base[2] + fi * step[2]];
             let (in_front, u, v, wu, wv, gamma) = self.project::<DISTORTED>(p);
-            let (pu, lu) = trapezoid(wu, N);
-            let (pv, lv) = trapezoid(wv, self.rows);
+            (pu[q], lu[q]) = trapezoid(wu, N);
+            (pv[q], lv[q]) = trapezoid(wv, self.rows);
             // First pixel c0 = ⌊u − (p + l)/2 + ½⌋, shifted by the margin N so that every
-            // square that can touch the image starts at a non-negative padded column; the
-            // truncating cast (in the visiting loop) is then a floor. Comparisons are false for
-            // NaN.
-            let tc = u - 0.5 * (pu + lu) + 0.5 + n;
-            let tr = v - 0.5 * (pv + lv) + 0.5 + n;
+            // square that can touch the image starts at a non-negative padded column.
+            // Comparisons are false for NaN.
+            let tc = u - 0.5 * (pu[q] + lu[q]) + 0.5 + n;
+            let tr = v - 0.5 * (pv[q] + lv[q]) + 0.5 + n;
             let hit = in_front & (tc >= 0.0) & (tr >= 0.0) & (tc < wmax) & (tr < hmax);
-            out.tc[q] = if hit { tc } else { -1.0 };
-            out.tr[q] = tr;
-            // Minus the padded first pixel, these are u − (c0 − ½) and v − (r0 − ½).
-            out.us[q] = u + n + 0.5;
-            out.vs[q] = v + n + 0.5;
-            out.pu[q] = pu;
-            out.lu[q] = lu;
-            out.pv[q] = pv;
-            out.lv[q] = lv;
-            out.iu[q] = 0.5 / lu;
-            out.iv[q] = 0.5 / lv;
-            out.amp[q] = gamma / (pu * pv);
+            let (col, row) = if hit { (floor_small(tc), floor_small(tr)) } else { (-1.0, 0.0) };
+            out.col[q] = col;
+            out.row[q] = row;
+            // u − (c0 − ½) and v − (r0 − ½).
+            off_u[q] = (u + n + 0.5) - col;
+            off_v[q] = (v + n + 0.5) - row;
+            out.amp[q] = gamma / (pu[q] * pv[q]);
         }
+        axis_weights_chunk::<N>(&off_u, &pu, &lu, &mut out.wu);
+        axis_weights_chunk::<N>(&off_v, &pv, &lv, &mut out.wv);
     }
 
     /// Largest footprint support `p + l` along `u` and along `v` over a 9³ lattice spanning the
@@ -463,17 +447,17 @@ impl FootprintProjector {
     }
 
     /// Visits every voxel of z-slices `ks` whose footprint square touches the padded image of
-    /// view `view`: `visit(voxel index, footprint)`.
+    /// view `view`: `visit(voxel index, chunk, entry)`.
     #[inline(always)]
     fn for_each_voxel<const N: usize, const DISTORTED: bool>(
         &self,
         view: usize,
         ks: Range<usize>,
-        mut visit: impl FnMut(usize, &Foot),
+        mut visit: impl FnMut(usize, &Chunk<N>, usize),
     ) {
         let fv = &self.views[view];
         let [nx, ny, _] = self.grid.dims;
-        let mut ch = Chunk::default();
+        let mut ch = Chunk::<N>::default();
         for k in ks {
             for j in 0..ny {
                 let (base, step) = fv.row_start(&self.gf, j, k);
@@ -481,8 +465,8 @@ impl FootprintProjector {
                 for i0 in (0..nx).step_by(CHUNK) {
                     fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
-                        if let Some(f) = ch.get(q) {
-                            visit(row0 + i0 + q, &f);
+                        if ch.col[q] >= 0.0 {
+                            visit(row0 + i0 + q, &ch, q);
                         }
                     }
                 }
@@ -506,7 +490,7 @@ impl FootprintProjector {
         let (even, odd) = img.split_at_mut(pw * ph);
         let nr = fv.rows;
         let [nx, ny, _] = self.grid.dims;
-        let mut ch = Chunk::default();
+        let mut ch = Chunk::<N>::default();
         for k in ks {
             for j in 0..ny {
                 let (base, step) = fv.row_start(&self.gf, j, k);
@@ -515,20 +499,19 @@ impl FootprintProjector {
                     fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
                         let g = x[row0 + i0 + q];
+                        let Some((col, row, amp)) = ch.get(q) else { continue };
                         if g == 0.0 {
                             continue;
                         }
-                        let Some(f) = ch.get(q) else { continue };
-                        let wu = axis_weights::<N>(f.off_u, f.pu, f.lu, f.iu);
-                        let wv = axis_weights::<N>(f.off_v, f.pv, f.lv, f.iv);
-                        let a = g * f.amp;
-                        let at = f.row * pw + f.col;
+                        let (wu, wv) = ch.weights(q);
+                        let a = g * amp;
+                        let at = row * pw + col;
                         let dst = if q & 1 == 0 { &mut *even } else { &mut *odd };
                         for (r, &wr) in wv[..nr].iter().enumerate() {
                             let s = a * wr;
-                            let row: &mut [f32; N] = (&mut dst[at + r * pw..][..N]).try_into().expect("N pixels");
+                            let line: &mut [f32; N] = (&mut dst[at + r * pw..][..N]).try_into().expect("N pixels");
                             for c in 0..N {
-                                row[c] += s * wu[c];
+                                line[c] += s * wu[c];
                             }
                         }
                     }
@@ -554,7 +537,7 @@ impl FootprintProjector {
         let nr = fv.rows;
         let [nx, ny, _] = self.grid.dims;
         let (col_mask, row_mask) = masks;
-        let mut ch = Chunk::default();
+        let mut ch = Chunk::<N>::default();
         for (kk, k) in ks.enumerate() {
             for j in 0..ny {
                 let (base, step) = fv.row_start(&self.gf, j, k);
@@ -562,15 +545,14 @@ impl FootprintProjector {
                 for i0 in (0..nx).step_by(CHUNK) {
                     fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
-                        let Some(f) = ch.get(q) else { continue };
-                        let wu = axis_weights::<N>(f.off_u, f.pu, f.lu, f.iu);
-                        let wv = axis_weights::<N>(f.off_v, f.pv, f.lv, f.iv);
-                        let at = f.row * pw + f.col;
+                        let Some((col, row, amp)) = ch.get(q) else { continue };
+                        let (wu, wv) = ch.weights(q);
+                        let at = row * pw + col;
                         let mut acc = [0f32; N];
                         for (r, &wr) in wv[..nr].iter().enumerate() {
-                            let row: &[f32; N] = (&y[at + r * pw..][..N]).try_into().expect("N pixels");
+                            let line: &[f32; N] = (&y[at + r * pw..][..N]).try_into().expect("N pixels");
                             for c in 0..N {
-                                acc[c] += wr * row[c];
+                                acc[c] += wr * line[c];
                             }
                         }
                         let mut sum = 0f32;
@@ -578,21 +560,64 @@ impl FootprintProjector {
                             sum += acc[c] * wu[c];
                         }
                         let idx = row0 + i0 + q;
-                        out[idx] += f.amp * sum;
+                        out[idx] += amp * sum;
                         if let Some(cs) = col_sums.as_deref_mut() {
-                            let cm: &[f32; N] = (&col_mask[f.col..][..N]).try_into().expect("N columns");
-                            let rm: &[f32; N] = (&row_mask[f.row..][..N]).try_into().expect("N rows");
+                            let cm: &[f32; N] = (&col_mask[col..][..N]).try_into().expect("N columns");
+                            let rm: &[f32; N] = (&row_mask[row..][..N]).try_into().expect("N rows");
                             let (mut su, mut sv) = (0f32, 0f32);
                             for c in 0..N {
                                 su += wu[c] * cm[c];
-                                sv += wv[c] * rm[c];
                             }
-                            cs[idx] += f.amp * su * sv;
+                            for r in 0..nr {
+                                sv += wv[r] * rm[r];
+                            }
+                            cs[idx] += amp * su * sv;
                         }
                     }
                 }
             }
         }
+    }
+
+    /// The rows of `A_v` (see [`Projector::rows`]).
+    fn rows_impl<const N: usize, const DISTORTED: bool>(&self, view: usize) -> SparseRows {
+        let fv = &self.views[view];
+        let (w, h) = (fv.width, fv.height);
+        let nz = self.grid.dims[2];
+        // (pixel, weight) of every in-image footprint pixel with a positive weight.
+        let visit_pixels = |ch: &Chunk<N>, q: usize, emit: &mut dyn FnMut(usize, f32)| {
+            let Some((col, row, amp)) = ch.get(q) else { return };
+            let (wu, wv) = ch.weights(q);
+            for (r, &wr) in wv[..fv.rows].iter().enumerate() {
+                let Some(pr) = (row + r).checked_sub(N).filter(|&pr| pr < h) else { continue };
+                for (c, &wc) in wu.iter().enumerate() {
+                    let wgt = amp * wr * wc;
+                    if let Some(pc) = (col + c).checked_sub(N).filter(|&pc| pc < w && wgt > 0.0) {
+                        emit(pr * w + pc, wgt);
+                    }
+                }
+            }
+        };
+        let mut ptr = vec![0u64; w * h + 1];
+        self.for_each_voxel::<N, DISTORTED>(view, 0..nz, |_, ch, q| {
+            visit_pixels(ch, q, &mut |pix, _| ptr[pix + 1] += 1)
+        });
+        for i in 0..w * h {
+            ptr[i + 1] += ptr[i];
+        }
+        let nnz = ptr[w * h] as usize;
+        let mut cols = vec![0u32; nnz];
+        let mut vals = vec![0f32; nnz];
+        let mut fill: Vec<u64> = ptr[..w * h].to_vec();
+        self.for_each_voxel::<N, DISTORTED>(view, 0..nz, |idx, ch, q| {
+            visit_pixels(ch, q, &mut |pix, wgt| {
+                let at = fill[pix] as usize;
+                cols[at] = idx as u32;
+                vals[at] = wgt;
+                fill[pix] += 1;
+            })
+        });
+        SparseRows { ptr, cols, vals }
     }
 }
 
@@ -820,50 +845,7 @@ impl Projector for FootprintProjector {
 
     fn rows(&self, view: usize) -> SparseRows {
         let fv = &self.views[view];
-        let (w, h, n) = (fv.width, fv.height, fv.side);
-        let nz = self.grid.dims[2];
-        // (pixel, weight) of every in-image footprint pixel with a positive weight.
-        let visit_pixels = |f: &Foot, emit: &mut dyn FnMut(usize, f32)| {
-            let mut wu = [0f32; MAX_FOOTPRINT_SIDE];
-            let mut wv = [0f32; MAX_FOOTPRINT_SIDE];
-            dispatch!(n, false, |N, D| {
-                let _ = D;
-                wu[..N].copy_from_slice(&axis_weights::<N>(f.off_u, f.pu, f.lu, f.iu));
-                wv[..N].copy_from_slice(&axis_weights::<N>(f.off_v, f.pv, f.lv, f.iv));
-            });
-            for r in 0..n {
-                let row = f.row + r;
-                if row < n || row >= n + h {
-                    continue;
-                }
-                for c in 0..n {
-                    let col = f.col + c;
-                    let wgt = f.amp * wv[r] * wu[c];
-                    if col >= n && col < n + w && wgt > 0.0 {
-                        emit((row - n) * w + (col - n), wgt);
-                    }
-                }
-            }
-        };
-        let mut ptr = vec![0u64; w * h + 1];
-        dispatch!(n, fv.distorted, |N, D| self
-            .for_each_voxel::<N, D>(view, 0..nz, |_, f| { visit_pixels(f, &mut |pix, _| ptr[pix + 1] += 1) }));
-        for i in 0..w * h {
-            ptr[i + 1] += ptr[i];
-        }
-        let nnz = ptr[w * h] as usize;
-        let mut cols = vec![0u32; nnz];
-        let mut vals = vec![0f32; nnz];
-        let mut fill: Vec<u64> = ptr[..w * h].to_vec();
-        dispatch!(n, fv.distorted, |N, D| self.for_each_voxel::<N, D>(view, 0..nz, |idx, f| {
-            visit_pixels(f, &mut |pix, wgt| {
-                let at = fill[pix] as usize;
-                cols[at] = idx as u32;
-                vals[at] = wgt;
-                fill[pix] += 1;
-            })
-        }));
-        SparseRows { ptr, cols, vals }
+        dispatch!(fv.side, fv.distorted, |N, D| self.rows_impl::<N, D>(view))
     }
 
     fn rows_bytes_estimate(&self, view: usize) -> usize {
