@@ -72,6 +72,11 @@ pub const FOOTPRINT_SIDES: [usize; 6] = [2, 4, 8, 16, 32, 64];
 /// Largest footprint side, in pixels.
 pub const MAX_FOOTPRINT_SIDE: usize = 64;
 
+/// Widest footprint (pixels) the automatic choice ([`super::ProjectorKind::Auto`]) gives to
+/// this projector: what a side of [`MAX_FOOTPRINT_SIDE`] holds with the margin
+/// [`FootprintProjector::new`] asks for.
+pub const AUTO_FOOTPRINT_MAX_PX: f64 = (MAX_FOOTPRINT_SIDE as f64 - 1.0) / 1.02;
+
 /// One view's camera in f32, ready for the voxel loop.
 #[derive(Clone, Copy, Debug)]
 struct FootView {
@@ -409,7 +414,7 @@ impl FootprintProjector {
         for (v, view) in views.iter().enumerate() {
             let (su, sv) = view.support_px(&grid);
             let px = su.max(sv);
-            if px * 1.02 + 1.0 > MAX_FOOTPRINT_SIDE as f64 {
+            if px > AUTO_FOOTPRINT_MAX_PX {
                 return Err(ClassicalError::invalid(
                     "projector",
                     format!(
