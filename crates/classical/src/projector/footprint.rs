@@ -165,11 +165,17 @@ fn axis_weights_chunk<const N: usize>(
     l: &[f32; CHUNK],
     w: &mut [[f32; N]; CHUNK],
 ) {
+    // Per voxel once (a division is dear next to the rest), then per pixel.
+    let (mut h1, mut h2, mut inv) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
+    for q in 0..CHUNK {
+        h1[q] = 0.5 * (p[q] + l[q]);
+        h2[q] = 0.5 * (p[q] - l[q]);
+        inv[q] = 0.5 / l[q];
+    }
     let mut prev = [0f32; CHUNK];
     for k in 0..N {
         for q in 0..CHUNK {
-            let (h1, h2) = (0.5 * (p[q] + l[q]), 0.5 * (p[q] - l[q]));
-            let inv = 0.5 / l[q];
+            let (h1, h2, inv) = (h1[q], h2[q], inv[q]);
             let t = (k + 1) as f32 - off[q];
             let a = fmin(fmax(t, -h1), -h2) + h1;
             let b = fmin(fmax(t, -h2), h2) + h2;
