@@ -41,22 +41,27 @@
 //!
 //! # Cost
 //! Each voxel touches the `N × N` pixels of a square that holds its largest footprint in the
-//! view (`N` ∈ {2, 4, 8, 16, 32, 64}, chosen per view from the geometry; a voxel whose
-//! footprint would exceed it — only possible with a camera inside or next to the box — is
-//! narrowed to fit, keeping its total). So one projection costs voxels × views × `N²` simple
-//! multiply–adds plus one footprint evaluation per voxel and view, whatever the voxel's image
-//! size — unlike the sub-voxel splat, whose cost grows as the cube of the voxel's image size.
+//! view (`N` ∈ {2, 4, 8, 16, 32, 64} columns, chosen per view from the geometry, and as many
+//! rows as the widest footprint along `v` needs; a voxel whose footprint would exceed them —
+//! only possible with a camera inside or next to the box — is narrowed to fit, keeping its
+//! total). So one projection costs voxels × views × `N × rows` simple multiply–adds plus one
+//! footprint evaluation per voxel and view, whatever the voxel's image size — unlike the
+//! sub-voxel splat, whose cost grows as the cube of the voxel's image size.
 //!
 //! # Parallelism and exactness
-//! Forward projection scatters: each thread takes a band of z-slices and accumulates into its
-//! own padded image (a margin of `N` pixels on every side, so the inner loop has no bounds
-//! tests), and the images are summed. Back projection gathers: every voxel computes its
-//! footprint again and reads its pixels from a zero-padded copy of the image, so z-slices are
-//! independent and no atomics or per-thread volumes are needed; the back projector does the
-//! same arithmetic as the forward one. Both evaluate the very same f32 weights (same code,
-//! no fused multiply–add), so `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding. The kernels are plain loops
-//! over fixed-size arrays; they are compiled twice, for the x86-64 baseline and for AVX2, and
-//! the variant is chosen at run time (both give identical results).
+//! Footprints are evaluated 16 voxels of a grid row at a time, vectorised across the voxels
+//! (projection, trapezoids and pixel weights), and stored voxel-major so that each voxel then
+//! reads its weights as one vector per axis. Forward projection scatters: each thread takes a
+//! band of z-slices and accumulates into its own two padded images (voxels alternate between
+//! them by parity, so neighbouring voxels writing the same pixels do not chain through memory;
+//! a margin of `N` pixels on every side, so the inner loop has no bounds tests), and the images
+//! are summed. Back projection gathers: every voxel computes its footprint again and reads its
+//! pixels from a zero-padded copy of the image, so z-slices are independent and no atomics or
+//! per-thread volumes are needed; the back projector does the same arithmetic as the forward
+//! one. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
+//! `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding. The kernels are plain loops over fixed-size arrays; they
+//! are compiled twice, for the x86-64 baseline and for AVX2, and the variant is chosen at run
+//! time (both give identical results).
 
 use std::ops::Range;
 
