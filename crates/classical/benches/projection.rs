@@ -1,22 +1,30 @@
-//! Projection and ASART speed on the dissertation's geometry, scaled down: 15 cameras on a
-//! planar ring (y–z plane, perpendicular to the jet axis) around a 40 mm cube at 360 mm
-//! (magnification −0.2 with f = 60 mm), 256 × 256 pixels each.
+//! Projection and ASART speed: the separable-footprint projector against the sub-voxel splat
+//! (what `SplatProjector::new` chooses on its own, the projector in use before the footprint),
+//! measured in one run so that the ratios hold on a busy machine.
 //!
-//! Prints voxel–view updates per second for the splat's forward and back projection (both
-//! cores) and for a straightforward single-threaded loop over voxels and views
-//! (`SplatProjector::forward_reference`) in the same run, the speed-up, the ray projector's
-//! rates, and seconds per ASART iteration at 128³ and 200³.
+//! Geometries (40 mm cube; cameras on a ring of radius 360 mm around the x axis, a 48 mm field of
+//! view at the centre, as the dissertation's planar ring scaled down):
+//! - `15 x 256^2`: 15 cameras of 256 × 256 px (voxels image at 3.3 px at 64³, 1.7 px at 128³);
+//! - `90 x 128^2`: a 90-view ring (every 4°) of 128 × 128 px (1.7 px at 64³, 0.8 px at 128³),
+//!   the geometry of `scripts/bench/mbirjax_compare.py`.
 //!
-//! Run: `cargo bench --no-run -p fluidnerf-classical`, then the printed executable with
-//! `--bench`.
+//! For each geometry and 64³, 128³: M voxel-views per second forward and back (`back_add`
+//! without column sums) for both projectors and the ratio new/old (of CPU time, which the
+//! machine's other work disturbs least), best of three; the splat
+//! is timed on a subset of the views when all of them would take long (the rate is per voxel and
+//! view either way). Then seconds per ASART iteration at 64³ with 15 views of 256² px for both.
+//!
+//! Run: `cargo bench -p fluidnerf-classical --bench projection` (about two minutes). With
+//! `--json` only one JSON line is printed, the figures of the footprint projector on the 90-view
+//! ring, for the comparison script.
 
 #![allow(clippy::print_stdout)]
 
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use fluidnerf_classical::{asart, AsartParams, Grid, Problem, Projector, RayProjector, SplatProjector, Stopping};
-use fluidnerf_core::{Aabb, Image};
+use fluidnerf_classical::{asart, AsartParams, FootprintProjector, Grid, Problem, Projector, SplatProjector, Stopping};
+use fluidnerf_core::{Aabb, Camera, Image};
 use glam::DVec3;
 
 mod common;
@@ -30,7 +38,7 @@ fn phantom(grid: &Grid) -> Vec<f32> {
     v.data
 }
 
-/// CPU seconds (user + system) of this process so far (Linux), to show how busy the cores were.
+/// CPU seconds (user + system, all threads) of this process so far (Linux; 10 ms ticks).
 fn cpu_seconds() -> f64 {
     let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
     let after = stat.rsplit_once(')').map_or("", |p| p.1);
@@ -40,128 +48,149 @@ fn cpu_seconds() -> f64 {
     (ticks(11) + ticks(12)) / 100.0
 }
 
-fn time<T>(f: impl FnOnce() -> T) -> (T, f64) {
-    let t = Instant::now();
-    let r = f();
-    (r, t.elapsed().as_secs_f64())
+/// Wall and CPU seconds of one run.
+#[derive(Clone, Copy)]
+struct Cost {
+    wall: f64,
+    cpu: f64,
+}
+
+/// Best of `reps` runs (wall and CPU time each at their minimum): the machine may be shared,
+/// the minimum is the least disturbed run. CPU time is what other processes disturb least, so
+/// the ratios are taken from it.
+fn best(reps: usize, f: &mut dyn FnMut()) -> Cost {
+    let mut c = Cost { wall: f64::INFINITY, cpu: f64::INFINITY };
+    for _ in 0..reps {
+        let (t, cpu0) = (Instant::now(), cpu_seconds());
+        f();
+        c.wall = c.wall.min(t.elapsed().as_secs_f64());
+        c.cpu = c.cpu.min((cpu_seconds() - cpu0).max(0.01));
+    }
+    c
+}
+
+/// Forward and back costs of `p` over its first `views` views, per voxel-view.
+fn rates(p: &dyn Projector, x: &[f32], views: usize, reps: usize) -> (Cost, Cost) {
+    let mut imgs: Vec<Vec<f32>> = (0..views).map(|v| vec![0f32; p.view_len(v)]).collect();
+    let fwd = best(reps, &mut || {
+        for (v, img) in imgs.iter_mut().enumerate() {
+            p.forward(v, x, img);
+        }
+    });
+    let mut back = vec![0f32; x.len()];
+    let bwd = best(reps, &mut || {
+        for (v, img) in imgs.iter().enumerate() {
+            p.back_add(v, img, &mut back, None);
+        }
+    });
+    let work = x.len() as f64 * views as f64;
+    let per = |c: Cost| Cost { wall: c.wall / work, cpu: c.cpu / work };
+    (per(fwd), per(bwd))
+}
+
+/// Mean wall and CPU seconds per ASART iteration (iterations 2..=3; the first carries the
+/// start, Eq. 2.29).
+fn asart_iteration(p: &dyn Projector, x: &[f32]) -> Cost {
+    let images: Vec<Image> = p
+        .cameras()
+        .iter()
+        .enumerate()
+        .map(|(v, c)| {
+            let mut im = Image::zeros(c.width(), c.height());
+            p.forward(v, x, &mut im.data);
+            im
+        })
+        .collect();
+    let problem = Problem::new(p, &images).expect("consistent");
+    let params = AsartParams { stopping: Stopping { max_iterations: 3, plateau: None }, ..Default::default() };
+    let mut stamps = vec![];
+    asart(&problem, None, &params, |_| {
+        stamps.push((Instant::now(), cpu_seconds()));
+        ControlFlow::Continue(())
+    })
+    .expect("runs");
+    let (first, last) = (stamps[0], stamps[stamps.len() - 1]);
+    let n = (stamps.len() - 1).max(1) as f64;
+    Cost { wall: (last.0 - first.0).as_secs_f64() / n, cpu: (last.1 - first.1) / n }
 }
 
 fn main() {
-    if !std::env::args().any(|a| a == "--bench") {
+    let args: Vec<String> = std::env::args().collect();
+    if !args.iter().any(|a| a == "--bench") {
+        return;
+    }
+    let aabb = Aabb::cube(DVec3::ZERO, 40.0);
+    let ring90 = ring(90, 128);
+    if args.iter().any(|a| a == "--json") {
+        let mut fields = vec![format!("\"threads\": {}", rayon::current_num_threads())];
+        for res in [64usize, 128] {
+            let grid = Grid::with_resolution(aabb, res);
+            let x = phantom(&grid);
+            let p = FootprintProjector::new(grid, &ring90, 1.0).expect("valid");
+            let mut img = vec![0f32; p.view_len(0)];
+            let mut back = vec![0f32; grid.len()];
+            let t_fwd = best(3, &mut || {
+                for v in 0..p.n_views() {
+                    p.forward(v, &x, &mut img);
+                }
+            })
+            .wall;
+            let t_back = best(3, &mut || {
+                for v in 0..p.n_views() {
+                    p.back_add(v, &img, &mut back, None);
+                }
+            })
+            .wall;
+            fields.push(format!("\"forward_s_{res}\": {t_fwd:.6}, \"back_s_{res}\": {t_back:.6}"));
+        }
+        println!("{{\"views\": 90, \"pixels\": 128, {}}}", fields.join(", "));
         return;
     }
     let threads = rayon::current_num_threads();
-    let aabb = Aabb::cube(DVec3::ZERO, 40.0);
-    let cams = ring(15, 256);
-    println!("15 cameras, 256 x 256 px, 40 mm cube, {threads} rayon threads");
-    for res in [128usize, 200] {
-        let grid = Grid::with_resolution(aabb, res);
-        let n = grid.len() as f64;
-        let x = phantom(&grid);
-        // One splat per voxel centre, the dissertation's scheme (at 128³ the automatic choice
-        // would split each voxel into 2³).
-        let splat = SplatProjector::new(grid, &cams, 1.0).expect("valid").with_subdivisions(1);
-        let mut imgs: Vec<Vec<f32>> = (0..cams.len()).map(|v| vec![0f32; splat.view_len(v)]).collect();
-        let views = cams.len() as f64;
-        // Best of three: the machine is shared, the minimum is the least disturbed run.
-        let best = |f: &mut dyn FnMut()| (0..3).map(|_| time(&mut *f).1).fold(f64::INFINITY, f64::min);
-        let cpu0 = cpu_seconds();
-        let wall0 = Instant::now();
-        let t_fwd = best(&mut || {
-            for (v, img) in imgs.iter_mut().enumerate() {
-                splat.forward(v, &x, img);
-            }
-        });
-        let busy = (cpu_seconds() - cpu0) / wall0.elapsed().as_secs_f64();
-        let mut back = vec![0f32; grid.len()];
-        let t_back = best(&mut || {
-            for (v, img) in imgs.iter().enumerate() {
-                splat.back_add(v, img, &mut back, None);
-            }
-        });
-        let fwd_rate = n * views / t_fwd;
-        let back_rate = n * views / t_back;
-        println!(
-            "{res}^3 splat forward: {:.3} s for 15 views, {:.1} M voxel-views/s (cores busy: {busy:.2} CPU-s per s)",
-            t_fwd,
-            fwd_rate / 1e6
-        );
-        println!("{res}^3 splat back:    {:.3} s for 15 views, {:.1} M voxel-views/s", t_back, back_rate / 1e6);
-        if res == 128 {
-            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("thread pool");
-            let mut out = vec![0f32; splat.view_len(0)];
-            let t_one = one.install(|| {
-                best(&mut || {
-                    for v in 0..3 {
-                        splat.forward(v, &x, &mut out);
-                    }
-                })
-            });
-            // The straightforward loop is slow: 3 views.
-            let t_ref = best(&mut || {
-                for v in 0..3 {
-                    splat.forward_reference(v, &x, &mut out);
-                }
-            });
-            let ref_rate = n * 3.0 / t_ref;
-            let one_rate = n * 3.0 / t_one;
+    println!(
+        "40 mm cube, {threads} rayon threads; old = sub-voxel splat, new = footprint; M voxel-views per wall-clock \
+         second (best of 3); new/old from CPU time (robust on a shared machine)"
+    );
+    let ring15 = ring(15, 256);
+    let setups: [(&str, &[Camera]); 2] = [("15 x 256^2", &ring15), ("90 x 128^2", &ring90)];
+    println!(
+        "{:<11} {:>5} {:>4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
+        "views", "grid", "sub", "old fwd", "new fwd", "new/old", "old back", "new back", "new/old"
+    );
+    for (name, cams) in setups {
+        for res in [64usize, 128] {
+            let grid = Grid::with_resolution(aabb, res);
+            let x = phantom(&grid);
+            let old = SplatProjector::new(grid, cams, 1.0).expect("valid");
+            let new = FootprintProjector::new(grid, cams, 1.0).expect("valid");
+            // About 0.1–0.4 s per pass for the splat.
+            let sub_views =
+                (4e8 / (grid.len() as f64 * old.subdivisions().pow(3) as f64)).clamp(1.0, cams.len() as f64);
+            let (of, ob) = rates(&old, &x, sub_views as usize, 2);
+            let (nf, nb) = rates(&new, &x, cams.len(), 3);
             println!(
-                "{res}^3 splat forward on one thread: {:.1} M voxel-views/s; straightforward single-threaded loop: {:.1} M voxel-views/s",
-                one_rate / 1e6,
-                ref_rate / 1e6
-            );
-            println!(
-                "{res}^3 forward speed-up over the straightforward loop: {:.1}x ({:.1}x from the inner loop, {:.2}x from {threads} threads)",
-                fwd_rate / ref_rate,
-                one_rate / ref_rate,
-                fwd_rate / one_rate
-            );
-            let ray = RayProjector::new(grid, &cams, 1.0, 0.5).expect("valid");
-            let t_rf = best(&mut || {
-                for (v, img) in imgs.iter_mut().enumerate() {
-                    ray.forward(v, &x, img);
-                }
-            });
-            back.fill(0.0);
-            let t_rb = best(&mut || {
-                for (v, img) in imgs.iter().enumerate() {
-                    ray.back_add(v, img, &mut back, None);
-                }
-            });
-            println!(
-                "{res}^3 ray forward: {:.3} s ({:.1} M voxel-views/s), back: {:.3} s ({:.1} M voxel-views/s)",
-                t_rf,
-                n * views / t_rf / 1e6,
-                t_rb,
-                n * views / t_rb / 1e6
+                "{name:<11} {:>4}^3 {:>4} {:>9.1} {:>9.1} {:>8.1}x {:>9.1} {:>9.1} {:>8.1}x",
+                res,
+                old.subdivisions(),
+                1e-6 / of.wall,
+                1e-6 / nf.wall,
+                of.cpu / nf.cpu,
+                1e-6 / ob.wall,
+                1e-6 / nb.wall,
+                ob.cpu / nb.cpu
             );
         }
-        // ASART on the splat's own projections of the phantom.
-        let images: Vec<Image> = imgs
-            .iter()
-            .enumerate()
-            .map(|(v, _)| {
-                let mut im = Image::zeros(256, 256);
-                splat.forward(v, &x, &mut im.data);
-                im
-            })
-            .collect();
-        let problem = Problem::new(&splat, &images).expect("consistent");
-        let params = AsartParams { stopping: Stopping { max_iterations: 3, plateau: None }, ..Default::default() };
-        let mut stamps = vec![Instant::now()];
-        let (_, t_all) = time(|| {
-            asart(&problem, None, &params, |_| {
-                stamps.push(Instant::now());
-                ControlFlow::Continue(())
-            })
-            .expect("runs")
-        });
-        let per_iter: Vec<f64> = stamps.windows(2).skip(1).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
-        let mean = per_iter.iter().sum::<f64>() / per_iter.len().max(1) as f64;
-        println!(
-            "{res}^3 ASART: {:.2} s per iteration (iterations 2-3: {per_iter:.2?}; setup + first {:.2} s; total {t_all:.2} s)",
-            mean,
-            (stamps[1] - stamps[0]).as_secs_f64()
-        );
     }
+    let grid = Grid::with_resolution(aabb, 64);
+    let x = phantom(&grid);
+    let old = SplatProjector::new(grid, &ring15, 1.0).expect("valid");
+    let new = FootprintProjector::new(grid, &ring15, 1.0).expect("valid");
+    let t_new = asart_iteration(&new, &x);
+    let t_old = asart_iteration(&old, &x);
+    println!(
+        "ASART, 64^3, 15 x 256^2: old {:.3} s per iteration, new {:.3} s per iteration; old/new {:.1}x (CPU time)",
+        t_old.wall,
+        t_new.wall,
+        t_old.cpu / t_new.cpu
+    );
 }

@@ -14,8 +14,9 @@
 //!
 //! # Layout
 //! - [`projector`]: the system matrix `A` of Eq. 2.20 applied per view ([`Projector`]):
+//!   [`FootprintProjector`] (voxel-driven separable footprint, the default where it fits),
 //!   [`SplatProjector`] (voxel-driven bilinear splat, the dissertation's) and [`RayProjector`]
-//!   (ray-driven trilinear).
+//!   (ray-driven trilinear); the automatic choice is documented in [`projector`].
 //! - [`solve`]: [`asart`], [`art`], [`sart`], [`mart`], [`smart`], [`mlem`], [`sart_tv`],
 //!   [`sart_tikhonov`], all `fn(problem, init, &params, on_iter) -> Result<Report, SolveError>`.
 //! - [`ClassicalMethod`]: the registry of methods (validate, memory, solve) and
@@ -37,7 +38,9 @@ pub use error::{ClassicalError, SolveError};
 pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
 pub use method::{voxel_footprint_px, ClassicalMethod, ProjectorConfig};
-pub use projector::{Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector};
+pub use projector::{
+    FootprintProjector, Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector, AUTO_FOOTPRINT_MAX_PX,
+};
 pub use solve::{
     art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,
     total_variation, ArtParams, AsartParams, IterState, MartParams, MlemParams, Plateau, Problem, Report, SartParams,

@@ -55,7 +55,9 @@ impl MemoryEstimate {
 }
 
 /// Estimates the peak memory of running `algorithm` with a `projector` on `grid` and views of
-/// `view_sizes` (width, height) with `threads` worker threads and, for the splat, `subdivisions`
+/// `view_sizes` (width, height) with `threads` worker threads (`Auto` is estimated as the
+/// footprint projector; [`crate::ProjectorConfig::resolve`] first for the exact choice) and,
+/// for the splat, `subdivisions`
 /// sub-voxels per axis ([`crate::SplatProjector::subdivisions`]), before anything is allocated.
 /// The estimate is within tens of percent; the row-holding methods (ART, MART, SMART's setup)
 /// are estimated for a ray step of half a voxel.
@@ -75,11 +77,16 @@ pub fn estimate_memory(
     // Data, a per-view cache (SART row sums, SMART row maxima) and two view-sized buffers.
     let images = pixels * 4 * 2 + max_view * 4 * 2;
     let scratch = match projector {
+        // Two padded images per thread and a padded copy for the back projection; the margins
+        // are small next to the image at the voxel sizes the footprint is chosen for.
+        ProjectorKind::Auto | ProjectorKind::Footprint => (2 * threads + 1) * max_view * 4 * 5 / 4,
         ProjectorKind::Splat => 2 * threads * max_view * 4,
         ProjectorKind::Ray => pixels * 32 + 2 * threads * n * 4,
     };
     let rows = if algorithm.holds_rows() {
         match projector {
+            // About 3 × 3 pixels with a positive weight per voxel (voxels of 1–2 px).
+            ProjectorKind::Auto | ProjectorKind::Footprint => n * 8 * 9 + max_view * 8,
             ProjectorKind::Splat => n * 4 * 8 * (subdivisions.max(1) as u64).pow(3) + max_view * 16,
             ProjectorKind::Ray => {
                 // Samples per ray ≈ 2 × the grid's diagonal in voxels, ~4 distinct voxels each.

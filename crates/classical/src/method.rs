@@ -12,9 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{
     art, asart, estimate_memory, mart, mlem, sart, sart_tikhonov, sart_tv, smart, visual_hull, Algorithm, ArtParams,
-    AsartParams, ClassicalError, Grid, IterState, MartParams, MemoryEstimate, MlemParams, Problem, Projector,
-    ProjectorKind, RayProjector, Report, SartParams, SmartParams, SplatProjector, Stopping, TikhonovParams, TvParams,
-    DEFAULT_HULL_THRESHOLD,
+    AsartParams, ClassicalError, FootprintProjector, Grid, IterState, MartParams, MemoryEstimate, MlemParams, Problem,
+    Projector, ProjectorKind, RayProjector, Report, SartParams, SmartParams, SplatProjector, Stopping, TikhonovParams,
+    TvParams, DEFAULT_HULL_THRESHOLD,
 };
 
 /// A classical method and its parameters.
@@ -175,7 +175,8 @@ impl ClassicalMethod {
         threads: usize,
     ) -> MemoryEstimate {
         let sizes: Vec<(usize, usize)> = cameras.iter().map(|c| (c.width(), c.height())).collect();
-        estimate_memory(self.algorithm(), projector.kind, grid, &sizes, threads, projector.subdivisions(grid, cameras))
+        let kind = projector.resolve(grid, cameras);
+        estimate_memory(self.algorithm(), kind, grid, &sizes, threads, projector.subdivisions(grid, cameras))
     }
 }
 
@@ -183,7 +184,9 @@ impl ClassicalMethod {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ProjectorConfig {
-    /// Default splat (the dissertation's).
+    /// Default `auto`: the footprint projector unless voxels image wider than it holds, then the
+    /// ray projector ([`ProjectorConfig::resolve`]); `footprint`, `splat` (the dissertation's)
+    /// and `ray` force one.
     pub kind: ProjectorKind,
     /// Sub-voxels per axis of the splat; 0 chooses from the voxel's image size
     /// ([`SplatProjector::auto_subdivisions`]). Default 0.
@@ -199,7 +202,7 @@ pub struct ProjectorConfig {
 impl Default for ProjectorConfig {
     fn default() -> Self {
         ProjectorConfig {
-            kind: ProjectorKind::Splat,
+            kind: ProjectorKind::Auto,
             splat_subdivisions: 0,
             ray_step: 0.5,
             visual_hull: false,
@@ -239,14 +242,35 @@ impl ProjectorConfig {
         }
     }
 
-    /// The projector of `grid` seen by `cameras`.
+    /// The projector `kind` stands for on `grid` seen by `cameras`: `auto` becomes the
+    /// footprint projector when the widest voxel footprint in any view
+    /// ([`FootprintProjector::largest_footprint_px`]) is at most
+    /// [`crate::AUTO_FOOTPRINT_MAX_PX`] pixels, else the ray projector (see the
+    /// [`crate::projector`] docs for the measurements behind the rule); the others stay.
+    pub fn resolve(&self, grid: &Grid, cameras: &[Camera]) -> ProjectorKind {
+        match self.kind {
+            ProjectorKind::Auto => {
+                if FootprintProjector::largest_footprint_px(grid, cameras) <= crate::AUTO_FOOTPRINT_MAX_PX {
+                    ProjectorKind::Footprint
+                } else {
+                    ProjectorKind::Ray
+                }
+            }
+            kind => kind,
+        }
+    }
+
+    /// The projector of `grid` seen by `cameras` ([`ProjectorConfig::resolve`] picks it).
     pub fn build(
         &self,
         grid: Grid,
         cameras: &[Camera],
         intensity_scale: f64,
     ) -> Result<Box<dyn Projector>, ClassicalError> {
-        Ok(match self.kind {
+        Ok(match self.resolve(&grid, cameras) {
+            ProjectorKind::Auto | ProjectorKind::Footprint => {
+                Box::new(FootprintProjector::new(grid, cameras, intensity_scale)?)
+            }
             ProjectorKind::Splat => Box::new(
                 SplatProjector::new(grid, cameras, intensity_scale)?
                     .with_subdivisions(self.subdivisions(&grid, cameras)),

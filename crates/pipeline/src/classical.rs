@@ -71,9 +71,12 @@ pub(crate) fn run(
         }
     }
     let subdivisions = spec.projector.subdivisions(&grid, &cameras);
-    let projector = spec.projector.build(grid, &cameras, scene.intensity_scale)?;
+    // `auto` resolved once, so the held-out views and the report use the same projector.
+    let kind = spec.projector.resolve(&grid, &cameras);
+    let resolved = ProjectorConfig { kind, ..spec.projector.clone() };
+    let projector = resolved.build(grid, &cameras, scene.intensity_scale)?;
     let footprint_px = voxel_footprint_px(&cameras, &grid);
-    if spec.projector.kind == ProjectorKind::Splat && footprint_px / subdivisions as f64 > 2.0 {
+    if kind == ProjectorKind::Splat && footprint_px / subdivisions as f64 > 2.0 {
         session.warn(&format!(
             "voxels cover about {footprint_px:.1} pixels and are split into only {subdivisions}³: the splat leaves \
              gaps; raise splat_subdivisions (0: automatic) or use the ray projector"
@@ -86,7 +89,7 @@ pub(crate) fn run(
         problem = problem.with_support(h);
     }
     let holdout = if held_out_rule {
-        let fixed = ProjectorConfig { splat_subdivisions: subdivisions, ..spec.projector.clone() };
+        let fixed = ProjectorConfig { splat_subdivisions: subdivisions, ..resolved.clone() };
         Some(HoldoutScorer::new(fixed.build(grid, &holdout_cameras, scene.intensity_scale)?, holdout_images))
     } else {
         None
@@ -209,8 +212,8 @@ pub(crate) fn run(
         final_ssim_global: metrics.as_ref().map(|m| m.global.ssim_global),
         volumes: vec![VolumeRecord { file: "volume.npy".into(), time: None, trained: true, dims: grid.dims, metrics }],
         classical: Some(ClassicalDetails {
-            projector: spec.projector.kind,
-            splat_subdivisions: (spec.projector.kind == ProjectorKind::Splat).then_some(subdivisions),
+            projector: kind,
+            splat_subdivisions: (kind == ProjectorKind::Splat).then_some(subdivisions),
             voxel_size: [spacing.x, spacing.y, spacing.z],
             views: cameras.len(),
             pixels: cameras.iter().map(|c| c.width() * c.height()).sum(),

@@ -8,7 +8,7 @@
 //!   "format": 1,
 //!   "fluidnerf_version": "0.1.0",
 //!   "scene": "/data/jet15",
-//!   "method": { "name": "asart", "projector": { "kind": "splat", … }, "params": { "relaxation": 0.5, … } },
+//!   "method": { "name": "asart", "projector": { "kind": "auto", … }, "params": { "relaxation": 0.5, … } },
 //!   "seed": 0,
 //!   "resolution": 128,
 //!   "stopping": { "rule": "own", "max_iterations": null, "time_budget_s": null, … },

@@ -126,6 +126,7 @@ pub struct VolumeRecord {
 /// Details of a voxel method's run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ClassicalDetails {
+    /// The projector used (`auto` resolved).
     pub projector: ProjectorKind,
     /// Sub-voxels per axis of the splat.
     pub splat_subdivisions: Option<usize>,

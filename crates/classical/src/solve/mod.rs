@@ -6,7 +6,7 @@
 //!           on_iter: impl FnMut(&IterState) -> ControlFlow<()>) -> Result<Report, SolveError>
 //! ```
 //!
-//! - `init`: a starting volume ([`Grid::len`] values); `None` uses the method's own start.
+//! - `init`: a starting volume ([`crate::Grid::len`] values); `None` uses the method's own start.
 //! - `on_iter` is called after every full iteration (every view visited once) with the
 //!   residual and the current volume; returning `ControlFlow::Break(())` stops the solver,
 //!   which returns the volume of that finished iteration.

@@ -73,6 +73,8 @@ impl From<StopArg> for StopRule {
 /// `--projector` values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ProjectorArg {
+    Auto,
+    Footprint,
     Splat,
     Ray,
 }
@@ -185,8 +187,9 @@ pub struct ClassicalArgs {
     /// Relaxation factor μ [default: asart 0.5, art/sart/mart/smart/tv/tikhonov 1].
     #[arg(long, value_name = "MU")]
     pub relaxation: Option<f64>,
-    /// Projector: `splat` (voxel-driven bilinear splat, the dissertation's) or `ray` (ray-driven
-    /// trilinear line integrals; closer to the imaging model, slower) [default: splat].
+    /// Projector: `auto` (the footprint projector unless voxels image wider than ~60 px, then
+    /// `ray`), `footprint` (voxel-driven separable footprint), `splat` (voxel-driven bilinear
+    /// splat, the dissertation's) or `ray` (ray-driven trilinear line integrals) [default: auto].
     #[arg(long, value_enum)]
     pub projector: Option<ProjectorArg>,
     /// Splat only: split each voxel into N³ sub-voxels so voxels imaging larger than a pixel
@@ -449,6 +452,8 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     if let MethodConfig::Classical(spec) = method {
         if let Some(p) = c.projector {
             spec.projector.kind = match p {
+                ProjectorArg::Auto => ProjectorKind::Auto,
+                ProjectorArg::Footprint => ProjectorKind::Footprint,
                 ProjectorArg::Splat => ProjectorKind::Splat,
                 ProjectorArg::Ray => ProjectorKind::Ray,
             };

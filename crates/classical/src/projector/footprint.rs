@@ -1,0 +1,881 @@
+//! The separable-footprint voxel projector (after the SF-TT projector of Long, Fessler & Balter,
+//! "3D forward and back-projection for X-ray CT using separable footprints", IEEE TMI 2010),
+//! for calibrated pinhole cameras in any pose.
+//!
+//! # Model
+//! Voxel `j` (a uniform cube of side `Δ = (Δx, Δy, Δz)`, the unknown `g_j` inside) is seen by
+//! view `v` as its *footprint*: the line integral through the cube as a function of the image
+//! position. Around the voxel centre the projection is replaced by its first-order expansion,
+//! so the footprint is the push-forward of the cube through the 2 × 3 Jacobian `J` of the
+//! projection `(u, v)(p)` at the centre (pose, pinhole, skew and, for distorted cameras, the
+//! OpenCV distortion's own Jacobian at the projected centre — see *Lens distortion* below).
+//! Each cube edge `a` images to the pixel-space vector `J (Δ_a e_a)`; along the image axis `u`
+//! the footprint's profile is the sum of three uniform variables of widths `|J_u Δ_a e_a|`,
+//! which is approximated by a trapezoid: the convolution of two boxes, the widest edge `P`
+//! and `L = sqrt(Σ w_a² − P²)` (the same variance; exact when one edge images to zero width,
+//! which is the planar-ring case: the voxel edge parallel to the ring's axis has no extent
+//! across it). The same holds along `v`. The footprint is the separable product of the two
+//! trapezoids (SF's separability; it drops only the shear between `u` and `v`).
+//!
+//! The weight of pixel `(c, r)` is the footprint averaged over the pixel's area (pixels are
+//! unit boxes around integer centres):
+//!
+//! ```text
+//! w_ij = γ_j · T_u(c) · T_v(r),   T_u(c) = ∫_{c−½}^{c+½} trapezoid_u / ∫ trapezoid_u
+//! γ_j  = intensity_scale · V_vox · f_x f_y |det ∂(x_d, y_d)/∂(x_n, y_n)| · s / z³
+//! ```
+//!
+//! `γ_j` is the same total as the splat's ([`super::SplatProjector`]): the voxel's emitted
+//! power per pixel area, so `Σ_i w_ij = γ_j` when the footprint lies inside the image, and a
+//! smooth field projects to `intensity_scale ∫ E ds` (tested against the renderer). For a ray
+//! through the footprint's flat top the weight equals `intensity_scale ×` the ray's path length
+//! through the voxel (the trapezoid's height is `γ_j / (P_u P_v)`; `P` is the flat-top-plus-
+//! ramp width, which is what makes the amplitude a path length), which is why a uniform ball
+//! projects to its analytic chord lengths (tested).
+//!
+//! # Lens distortion
+//! The voxel centre is projected exactly (distortion included); the footprint's widths come
+//! from the local Jacobian of the distorted projection at that centre, and `γ_j` carries the
+//! distortion's Jacobian determinant. The distortion's curvature across one voxel (a few
+//! pixels) is neglected — far below the model's other approximations for calibrated lenses.
+//!
+//! # Cost
+//! Each voxel touches the `N × N` pixels of a square that holds its largest footprint in the
+//! view (`N` ∈ {2, 4, 8, 16, 32, 64} columns, chosen per view from the geometry, and as many
+//! rows as the widest footprint along `v` needs; a voxel whose footprint would exceed them —
+//! only possible with a camera inside or next to the box — is narrowed to fit, keeping its
+//! total). So one projection costs voxels × views × `N × rows` simple multiply–adds plus one
+//! footprint evaluation per voxel and view, whatever the voxel's image size — unlike the
+//! sub-voxel splat, whose cost grows as the cube of the voxel's image size.
+//!
+//! # Parallelism and exactness
+//! Footprints are evaluated 16 voxels of a grid row at a time, vectorised across the voxels
+//! (projection, trapezoids and pixel weights), and stored voxel-major so that each voxel then
+//! reads its weights as one vector per axis. Forward projection scatters: each thread takes a
+//! band of z-slices and accumulates into its own two padded images (voxels alternate between
+//! them by parity, so neighbouring voxels writing the same pixels do not chain through memory;
+//! a margin of `N` pixels on every side, so the inner loop has no bounds tests), and the images
+//! are summed. Back projection gathers: every voxel computes its footprint again and reads its
+//! pixels from a zero-padded copy of the image, so z-slices are independent and no atomics or
+//! per-thread volumes are needed; the back projector does the same arithmetic as the forward
+//! one. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
+//! `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding. The kernels are plain loops over fixed-size arrays; they
+//! are compiled twice, for the x86-64 baseline and for AVX2, and the variant is chosen at run
+//! time (both give identical results).
+
+use std::ops::Range;
+
+use fluidnerf_core::Camera;
+use rayon::prelude::*;
+
+use super::{bands, check_shapes, scatter_parts, splat::validate, Grid, Projector, SparseRows};
+use crate::ClassicalError;
+
+/// Footprint sides (pixels per axis) the kernels are compiled for.
+pub const FOOTPRINT_SIDES: [usize; 6] = [2, 4, 8, 16, 32, 64];
+
+/// Largest footprint side, in pixels.
+pub const MAX_FOOTPRINT_SIDE: usize = 64;
+
+/// Widest footprint (pixels) the automatic choice ([`super::ProjectorKind::Auto`]) gives to
+/// this projector: what a side of [`MAX_FOOTPRINT_SIDE`] holds with the margin
+/// [`FootprintProjector::new`] asks for.
+pub const AUTO_FOOTPRINT_MAX_PX: f64 = (MAX_FOOTPRINT_SIDE as f64 - 1.0) / 1.02;
+
+/// One view's camera in f32, ready for the voxel loop.
+#[derive(Clone, Copy, Debug)]
+struct FootView {
+    width: usize,
+    height: usize,
+    /// Rows of the camera-from-world rotation.
+    rot: [[f32; 3]; 3],
+    trans: [f32; 3],
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    skew: f32,
+    /// k1, k2, p1, p2, k3, k4, k5, k6.
+    dist: [f32; 8],
+    distorted: bool,
+    /// `intensity_scale · V_vox · f_x · f_y`.
+    gain: f32,
+    /// The voxel's edges in camera axes: `edges[a] = R (Δ_a e_a)`.
+    edges: [[f32; 3]; 3],
+    /// Footprint side `N` in pixels (columns; a power of two, the kernels' vector width).
+    side: usize,
+    /// Rows each footprint spans (at most `side`): constant per view, so the row loop has a
+    /// fixed trip count.
+    rows: usize,
+}
+
+/// Voxels projected per batch.
+const CHUNK: usize = 16;
+
+/// A batch of footprints of side `N`, structure of arrays (see [`FootView::chunk`]): the
+/// padded first column and row (−1: the voxel misses), the amplitude, and the pixel weights
+/// along each axis, `wu[q][k]` for pixel `k` of voxel `q` (written once per chunk, read as one
+/// vector per voxel).
+#[derive(Clone, Copy, Debug)]
+struct Chunk<const N: usize> {
+    col: [f32; CHUNK],
+    row: [f32; CHUNK],
+    amp: [f32; CHUNK],
+    wu: [[f32; N]; CHUNK],
+    wv: [[f32; N]; CHUNK],
+}
+
+impl<const N: usize> Default for Chunk<N> {
+    fn default() -> Self {
+        let z = [0f32; CHUNK];
+        Chunk { col: [-1.0; CHUNK], row: z, amp: z, wu: [[0.0; N]; CHUNK], wv: [[0.0; N]; CHUNK] }
+    }
+}
+
+impl<const N: usize> Chunk<N> {
+    /// The padded first column and row and the amplitude of entry `q`, if it hits.
+    #[inline(always)]
+    fn get(&self, q: usize) -> Option<(usize, usize, f32)> {
+        // Whole non-negative numbers when the voxel hits.
+        (self.col[q] >= 0.0).then(|| (self.col[q] as usize, self.row[q] as usize, self.amp[q]))
+    }
+
+    /// The weights of entry `q` along `u` and `v`.
+    #[inline(always)]
+    fn weights(&self, q: usize) -> ([f32; N], [f32; N]) {
+        (self.wu[q], self.wv[q])
+    }
+}
+
+/// `⌊t⌋` for `0 ≤ t < 2²²`, branch-free and vectorisable without SSE4.1 (whose `round` the
+/// x86-64 baseline lacks; `f32::floor` would be a library call per element there).
+#[inline(always)]
+fn floor_small(t: f32) -> f32 {
+    const MAGIC: f32 = 8_388_608.0; // 2²³: adding it rounds to an integer.
+    let r = (t + MAGIC) - MAGIC;
+    if r > t {
+        r - 1.0
+    } else {
+        r
+    }
+}
+
+/// The pixel integrals of `CHUNK` trapezoids (unit height, boxes `p ≥ l`, centred at `off`) on
+/// pixels `[k, k + 1)`, `k < N`, vectorised across the voxels: `w[q][k]` for pixel `k` of voxel
+/// `q`, summing to `p` when the support lies inside.
+#[inline(always)]
+fn axis_weights_chunk<const N: usize>(
+    off: &[f32; CHUNK],
+    p: &[f32; CHUNK],
+    l: &[f32; CHUNK],
+    w: &mut [[f32; N]; CHUNK],
+) {
+    // Per voxel once (a division is dear next to the rest), then per pixel.
+    let (mut h1, mut h2, mut inv) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
+    for q in 0..CHUNK {
+        h1[q] = 0.5 * (p[q] + l[q]);
+        h2[q] = 0.5 * (p[q] - l[q]);
+        inv[q] = 0.5 / l[q];
+    }
+    let mut prev = [0f32; CHUNK];
+    for k in 0..N {
+        for q in 0..CHUNK {
+            let (h1, h2, inv) = (h1[q], h2[q], inv[q]);
+            let t = (k + 1) as f32 - off[q];
+            let a = fmin(fmax(t, -h1), -h2) + h1;
+            let b = fmin(fmax(t, -h2), h2) + h2;
+            let c = fmin(fmax(t, h2), h1) - h2;
+            let cdf = a * a * inv + b + c - c * c * inv;
+            w[q][k] = cdf - prev[q];
+            prev[q] = cdf;
+        }
+    }
+}
+
+#[inline(always)]
+fn fmax(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+#[inline(always)]
+fn fmin(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// OpenCV distortion of normalised coordinates in f32, with its Jacobian `[dxx, dxy, dyx, dyy]`
+/// (mirrors [`fluidnerf_core::Distortion::apply_with_jacobian`]).
+#[inline(always)]
+fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, [f32; 4]) {
+    let [k1, k2, p1, p2, k3, k4, k5, k6] = *d;
+    let r2 = x * x + y * y;
+    let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+    let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
+    let a = num / den;
+    let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+    let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
+    let da = (dnum * den - num * dden) / (den * den);
+    let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
+    let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
+    let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
+    (xd, yd, [dxx, dxy, dxy, dyy])
+}
+
+/// The trapezoid `(p, l)` approximating the sum of three uniform variables of widths `w`
+/// (same variance, exact when one width is zero), narrowed if needed so that its support
+/// `p + l` leaves a footprint of `n` pixels (`p + l ≤ n − 1`).
+#[inline(always)]
+fn trapezoid(w: [f32; 3], n: usize) -> (f32, f32) {
+    let m = fmax(fmax(w[0], w[1]), w[2]);
+    let rest = fmax(w[0] * w[0] + w[1] * w[1] + w[2] * w[2] - m * m, 0.0).sqrt();
+    let (p, l) = (fmax(m, rest), fmin(m, rest));
+    let fit = fmin(1.0, (n as f32 - 1.0) / (p + l));
+    // A positive floor keeps the ramps' 1/l finite; a box of width p is the limit.
+    let l = fmax(l * fit, 1e-6);
+    (fmax(p * fit, l), l)
+}
+
+impl FootView {
+    fn new(camera: &Camera, grid: &Grid, intensity_scale: f64) -> Self {
+        let cfw = camera.camera_from_world();
+        let m = cfw.matrix3;
+        // glam stores columns; row r of R is (m.x_axis[r], m.y_axis[r], m.z_axis[r]).
+        let rot = [0, 1, 2].map(|r| [m.x_axis[r] as f32, m.y_axis[r] as f32, m.z_axis[r] as f32]);
+        let t = cfw.translation;
+        let k = camera.intrinsics;
+        let d = camera.distortion;
+        let sp = grid.spacing();
+        let sides = [sp.x, sp.y, sp.z];
+        let cols = [m.x_axis, m.y_axis, m.z_axis];
+        let edges = [0, 1, 2].map(|a| {
+            let e = cols[a] * sides[a];
+            [e.x as f32, e.y as f32, e.z as f32]
+        });
+        let mut view = FootView {
+            width: camera.width(),
+            height: camera.height(),
+            rot,
+            trans: [t.x as f32, t.y as f32, t.z as f32],
+            fx: k.fx as f32,
+            fy: k.fy as f32,
+            cx: k.cx as f32,
+            cy: k.cy as f32,
+            skew: k.skew as f32,
+            dist: [d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6].map(|v| v as f32),
+            distorted: !d.is_identity(),
+            gain: (intensity_scale * grid.voxel_volume() * k.fx * k.fy) as f32,
+            edges,
+            side: MAX_FOOTPRINT_SIDE,
+            rows: MAX_FOOTPRINT_SIDE,
+        };
+        let (su, sv) = view.support_px(grid);
+        // Pixels a support of s can touch: ⌈s⌉ + 1, with a margin for the lattice's sampling.
+        let need = |s: f64| ((s * 1.02 + 1.0).ceil() as usize).clamp(2, MAX_FOOTPRINT_SIDE);
+        view.side = FOOTPRINT_SIDES.into_iter().find(|&n| n >= need(su.max(sv))).unwrap_or(MAX_FOOTPRINT_SIDE);
+        view.rows = need(sv);
+        view
+    }
+
+    /// Camera-frame centre of voxel `(0, j, k)` and the step per `i`.
+    #[inline(always)]
+    fn row_start(&self, grid: &GridF32, j: usize, k: usize) -> ([f32; 3], [f32; 3]) {
+        let x = grid.min[0] + 0.5 * grid.sp[0];
+        let y = grid.min[1] + (j as f32 + 0.5) * grid.sp[1];
+        let z = grid.min[2] + (k as f32 + 0.5) * grid.sp[2];
+        let r = &self.rot;
+        let base = [0, 1, 2].map(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
+        let step = [0, 1, 2].map(|a| r[a][0] * grid.sp[0]);
+        (base, step)
+    }
+
+    /// Projected centre, the three edge widths along `u` and along `v`, and `γ` of a voxel
+    /// centred at camera-frame `p`; `None` behind the camera.
+    #[inline(always)]
+    fn project<const DISTORTED: bool>(&self, p: [f32; 3]) -> (bool, f32, f32, [f32; 3], [f32; 3], f32) {
+        let [x, y, z] = p;
+        let in_front = z > 1e-6;
+        let zs = if in_front { z } else { 1.0 };
+        let iz = 1.0 / zs;
+        let (xn, yn) = (x * iz, y * iz);
+        let (xd, yd, jac) = if DISTORTED { distort(&self.dist, xn, yn) } else { (xn, yn, [1.0, 0.0, 0.0, 1.0]) };
+        let u = self.fx * xd + self.skew * yd + self.cx;
+        let v = self.fy * yd + self.cy;
+        let mut wu = [0f32; 3];
+        let mut wv = [0f32; 3];
+        for a in 0..3 {
+            let e = self.edges[a];
+            let dx = iz * (e[0] - xn * e[2]);
+            let dy = iz * (e[1] - yn * e[2]);
+            let (dxd, dyd) = if DISTORTED { (jac[0] * dx + jac[1] * dy, jac[2] * dx + jac[3] * dy) } else { (dx, dy) };
+            wu[a] = (self.fx * dxd + self.skew * dyd).abs();
+            wv[a] = (self.fy * dyd).abs();
+        }
+        let det = if DISTORTED { (jac[0] * jac[3] - jac[1] * jac[2]).abs() } else { 1.0 };
+        let s = (x * x + y * y + zs * zs).sqrt();
+        let gamma = self.gain * det * s * iz * iz * iz;
+        (in_front, u, v, wu, wv, gamma)
+    }
+
+    /// The footprints of `CHUNK` consecutive voxels of a row (`p = base + (i0 + q) · step`),
+    /// side `N`, structure of arrays. Branch-free so that it vectorises across voxels; voxels
+    /// whose square misses the padded image or that lie behind the camera get `tc = −1`.
+    #[inline(always)]
+    fn chunk<const N: usize, const DISTORTED: bool>(
+        &self,
+        base: [f32; 3],
+        step: [f32; 3],
+        i0: usize,
+        out: &mut Chunk<N>,
+    ) {
+        let n = N as f32;
+        let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
+        let z = [0f32; CHUNK];
+        let (mut off_u, mut off_v, mut pu, mut lu, mut pv, mut lv) = (z, z, z, z, z, z);
+        for q in 0..CHUNK {
+            let fi = (i0 + q) as f32;
+            let p = [base[0] + fi * step[0], base[1] + fi * step[1], base[2] + fi * step[2]];
+            let (in_front, u, v, wu, wv, gamma) = self.project::<DISTORTED>(p);
+            (pu[q], lu[q]) = trapezoid(wu, N);
+            (pv[q], lv[q]) = trapezoid(wv, self.rows);
+            // First pixel c0 = ⌊u − (p + l)/2 + ½⌋, shifted by the margin N so that every
+            // square that can touch the image starts at a non-negative padded column.
+            // Comparisons are false for NaN.
+            let tc = u - 0.5 * (pu[q] + lu[q]) + 0.5 + n;
+            let tr = v - 0.5 * (pv[q] + lv[q]) + 0.5 + n;
+            let hit = in_front & (tc >= 0.0) & (tr >= 0.0) & (tc < wmax) & (tr < hmax);
+            let (col, row) = if hit { (floor_small(tc), floor_small(tr)) } else { (-1.0, 0.0) };
+            out.col[q] = col;
+            out.row[q] = row;
+            // u − (c0 − ½) and v − (r0 − ½).
+            off_u[q] = (u + n + 0.5) - col;
+            off_v[q] = (v + n + 0.5) - row;
+            out.amp[q] = gamma / (pu[q] * pv[q]);
+        }
+        axis_weights_chunk::<N>(&off_u, &pu, &lu, &mut out.wu);
+        axis_weights_chunk::<N>(&off_v, &pv, &lv, &mut out.wv);
+    }
+
+    /// Largest footprint support `p + l` along `u` and along `v` over a 9³ lattice spanning the
+    /// voxel centres, in pixels (not narrowed to any side).
+    fn support_px(&self, grid: &Grid) -> (f64, f64) {
+        let sp = grid.spacing();
+        let lo = grid.aabb.min + 0.5 * sp;
+        let span = grid.aabb.size() - sp;
+        let (mut largest_u, mut largest_v) = (0f32, 0f32);
+        let n = 9;
+        for a in 0..n {
+            for b in 0..n {
+                for c in 0..n {
+                    let f = glam::DVec3::new(a as f64, b as f64, c as f64) / (n - 1) as f64;
+                    let w = lo + f * span;
+                    let w = [w.x as f32, w.y as f32, w.z as f32];
+                    let r = &self.rot;
+                    let p = [0, 1, 2].map(|i| r[i][0] * w[0] + r[i][1] * w[1] + r[i][2] * w[2] + self.trans[i]);
+                    let (in_front, _, _, wu, wv, _) =
+                        if self.distorted { self.project::<true>(p) } else { self.project::<false>(p) };
+                    if in_front {
+                        let (pu, lu) = trapezoid(wu, usize::MAX);
+                        let (pv, lv) = trapezoid(wv, usize::MAX);
+                        largest_u = largest_u.max(pu + lu);
+                        largest_v = largest_v.max(pv + lv);
+                    }
+                }
+            }
+        }
+        (largest_u as f64, largest_v as f64)
+    }
+
+    /// Padded image size for footprints of side `N`: `(width + 2N) × (height + 2N)`.
+    fn padded(&self) -> (usize, usize) {
+        (self.width + 2 * self.side, self.height + 2 * self.side)
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct GridF32 {
+    min: [f32; 3],
+    sp: [f32; 3],
+}
+
+/// The separable-footprint projector; see the module docs.
+#[derive(Clone, Debug)]
+pub struct FootprintProjector {
+    grid: Grid,
+    cameras: Vec<Camera>,
+    views: Vec<FootView>,
+    gf: GridF32,
+}
+
+impl FootprintProjector {
+    /// A projector from `grid` to the images of `cameras`, with the scene's
+    /// `intensity_scale` (pixel = scale × ∫ E ds). Fails if a voxel images larger than the
+    /// largest footprint (63 pixels; use more voxels or the ray projector).
+    pub fn new(grid: Grid, cameras: &[Camera], intensity_scale: f64) -> Result<Self, ClassicalError> {
+        validate(&grid, cameras, intensity_scale)?;
+        let views: Vec<FootView> = cameras.iter().map(|c| FootView::new(c, &grid, intensity_scale)).collect();
+        for (v, view) in views.iter().enumerate() {
+            let (su, sv) = view.support_px(&grid);
+            let px = su.max(sv);
+            if px > AUTO_FOOTPRINT_MAX_PX {
+                return Err(ClassicalError::invalid(
+                    "projector",
+                    format!(
+                        "voxels image up to {px:.0} pixels wide in view {v}, more than the footprint projector's \
+                         {} pixels; use more voxels or the ray projector",
+                        MAX_FOOTPRINT_SIDE - 1
+                    ),
+                ));
+            }
+        }
+        let sp = grid.spacing();
+        let gf = GridF32 {
+            min: [grid.aabb.min.x as f32, grid.aabb.min.y as f32, grid.aabb.min.z as f32],
+            sp: [sp.x as f32, sp.y as f32, sp.z as f32],
+        };
+        Ok(FootprintProjector { grid, cameras: cameras.to_vec(), views, gf })
+    }
+
+    /// Largest width of a voxel's footprint over all views, in pixels (the support of the
+    /// trapezoids, measured over a lattice spanning the box): what [`crate::ProjectorConfig`]'s
+    /// automatic choice looks at.
+    pub fn largest_footprint_px(grid: &Grid, cameras: &[Camera]) -> f64 {
+        cameras
+            .iter()
+            .map(|c| {
+                let (su, sv) = FootView::new(c, grid, 1.0).support_px(grid);
+                su.max(sv)
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Side `N` of the pixel square each voxel touches in view `view`.
+    pub fn footprint_side(&self, view: usize) -> usize {
+        self.views[view].side
+    }
+
+    /// Visits every voxel of z-slices `ks` whose footprint square touches the padded image of
+    /// view `view`: `visit(voxel index, chunk, entry)`.
+    #[inline(always)]
+    fn for_each_voxel<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        mut visit: impl FnMut(usize, &Chunk<N>, usize),
+    ) {
+        let fv = &self.views[view];
+        let [nx, ny, _] = self.grid.dims;
+        let mut ch = Chunk::<N>::default();
+        for k in ks {
+            for j in 0..ny {
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                let row0 = (k * ny + j) * nx;
+                for i0 in (0..nx).step_by(CHUNK) {
+                    fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
+                    for q in 0..CHUNK.min(nx - i0) {
+                        if ch.col[q] >= 0.0 {
+                            visit(row0 + i0 + q, &ch, q);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Forward kernel: accumulates `A_v x` of slices `ks` into the two padded images `img`
+    /// (voxels alternate between them by parity: neighbouring voxels mostly hit the same pixels,
+    /// and alternating breaks the read-modify-write chains through memory).
+    #[inline(always)]
+    fn scatter<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        x: &[f32],
+        img: &mut [f32],
+    ) {
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let (even, odd) = img.split_at_mut(pw * ph);
+        let nr = fv.rows;
+        let [nx, ny, _] = self.grid.dims;
+        let mut ch = Chunk::<N>::default();
+        for k in ks {
+            for j in 0..ny {
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                let row0 = (k * ny + j) * nx;
+                for i0 in (0..nx).step_by(CHUNK) {
+                    fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
+                    for q in 0..CHUNK.min(nx - i0) {
+                        let g = x[row0 + i0 + q];
+                        let Some((col, row, amp)) = ch.get(q) else { continue };
+                        if g == 0.0 {
+                            continue;
+                        }
+                        let (wu, wv) = ch.weights(q);
+                        let a = g * amp;
+                        let at = row * pw + col;
+                        let dst = if q & 1 == 0 { &mut *even } else { &mut *odd };
+                        for (r, &wr) in wv[..nr].iter().enumerate() {
+                            let s = a * wr;
+                            let line: &mut [f32; N] = (&mut dst[at + r * pw..][..N]).try_into().expect("N pixels");
+                            for c in 0..N {
+                                line[c] += s * wu[c];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Back kernel: `out += A_vᵀ y` on slices `ks` (`out` holds those slices only) from the
+    /// zero-padded image `y`, and the column sums if asked.
+    #[inline(always)]
+    fn gather<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        y: &[f32],
+        masks: (&[f32], &[f32]),
+        out: &mut [f32],
+        mut col_sums: Option<&mut [f32]>,
+    ) {
+        let fv = &self.views[view];
+        let pw = fv.padded().0;
+        let nr = fv.rows;
+        let [nx, ny, _] = self.grid.dims;
+        let (col_mask, row_mask) = masks;
+        let mut ch = Chunk::<N>::default();
+        for (kk, k) in ks.enumerate() {
+            for j in 0..ny {
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                let row0 = (kk * ny + j) * nx;
+                for i0 in (0..nx).step_by(CHUNK) {
+                    fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
+                    for q in 0..CHUNK.min(nx - i0) {
+                        let Some((col, row, amp)) = ch.get(q) else { continue };
+                        let (wu, wv) = ch.weights(q);
+                        let at = row * pw + col;
+                        let mut acc = [0f32; N];
+                        for (r, &wr) in wv[..nr].iter().enumerate() {
+                            let line: &[f32; N] = (&y[at + r * pw..][..N]).try_into().expect("N pixels");
+                            for c in 0..N {
+                                acc[c] += wr * line[c];
+                            }
+                        }
+                        let mut sum = 0f32;
+                        for c in 0..N {
+                            sum += acc[c] * wu[c];
+                        }
+                        let idx = row0 + i0 + q;
+                        out[idx] += amp * sum;
+                        if let Some(cs) = col_sums.as_deref_mut() {
+                            let cm: &[f32; N] = (&col_mask[col..][..N]).try_into().expect("N columns");
+                            let rm: &[f32; N] = (&row_mask[row..][..N]).try_into().expect("N rows");
+                            let (mut su, mut sv) = (0f32, 0f32);
+                            for c in 0..N {
+                                su += wu[c] * cm[c];
+                            }
+                            for r in 0..nr {
+                                sv += wv[r] * rm[r];
+                            }
+                            cs[idx] += amp * su * sv;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The rows of `A_v` (see [`Projector::rows`]).
+    fn rows_impl<const N: usize, const DISTORTED: bool>(&self, view: usize) -> SparseRows {
+        let fv = &self.views[view];
+        let (w, h) = (fv.width, fv.height);
+        let nz = self.grid.dims[2];
+        // (pixel, weight) of every in-image footprint pixel with a positive weight.
+        let visit_pixels = |ch: &Chunk<N>, q: usize, emit: &mut dyn FnMut(usize, f32)| {
+            let Some((col, row, amp)) = ch.get(q) else { return };
+            let (wu, wv) = ch.weights(q);
+            for (r, &wr) in wv[..fv.rows].iter().enumerate() {
+                let Some(pr) = (row + r).checked_sub(N).filter(|&pr| pr < h) else { continue };
+                for (c, &wc) in wu.iter().enumerate() {
+                    let wgt = amp * wr * wc;
+                    if let Some(pc) = (col + c).checked_sub(N).filter(|&pc| pc < w && wgt > 0.0) {
+                        emit(pr * w + pc, wgt);
+                    }
+                }
+            }
+        };
+        let mut ptr = vec![0u64; w * h + 1];
+        self.for_each_voxel::<N, DISTORTED>(view, 0..nz, |_, ch, q| {
+            visit_pixels(ch, q, &mut |pix, _| ptr[pix + 1] += 1)
+        });
+        for i in 0..w * h {
+            ptr[i + 1] += ptr[i];
+        }
+        let nnz = ptr[w * h] as usize;
+        let mut cols = vec![0u32; nnz];
+        let mut vals = vec![0f32; nnz];
+        let mut fill: Vec<u64> = ptr[..w * h].to_vec();
+        self.for_each_voxel::<N, DISTORTED>(view, 0..nz, |idx, ch, q| {
+            visit_pixels(ch, q, &mut |pix, wgt| {
+                let at = fill[pix] as usize;
+                cols[at] = idx as u32;
+                vals[at] = wgt;
+                fill[pix] += 1;
+            })
+        });
+        SparseRows { ptr, cols, vals }
+    }
+}
+
+/// Runs `$body` with `N` bound to the view's footprint side and `D` to its distortion flag,
+/// one monomorphised kernel per side (the kernels choose baseline or AVX2 code themselves).
+macro_rules! dispatch {
+    ($side:expr, $distorted:expr, |$n:ident, $d:ident| $call:expr) => {
+        match ($side, $distorted) {
+            (2, false) => {
+                const $n: usize = 2;
+                const $d: bool = false;
+                $call
+            }
+            (4, false) => {
+                const $n: usize = 4;
+                const $d: bool = false;
+                $call
+            }
+            (8, false) => {
+                const $n: usize = 8;
+                const $d: bool = false;
+                $call
+            }
+            (16, false) => {
+                const $n: usize = 16;
+                const $d: bool = false;
+                $call
+            }
+            (32, false) => {
+                const $n: usize = 32;
+                const $d: bool = false;
+                $call
+            }
+            (_, false) => {
+                const $n: usize = 64;
+                const $d: bool = false;
+                $call
+            }
+            (2, true) => {
+                const $n: usize = 2;
+                const $d: bool = true;
+                $call
+            }
+            (4, true) => {
+                const $n: usize = 4;
+                const $d: bool = true;
+                $call
+            }
+            (8, true) => {
+                const $n: usize = 8;
+                const $d: bool = true;
+                $call
+            }
+            (16, true) => {
+                const $n: usize = 16;
+                const $d: bool = true;
+                $call
+            }
+            (32, true) => {
+                const $n: usize = 32;
+                const $d: bool = true;
+                $call
+            }
+            (_, true) => {
+                const $n: usize = 64;
+                const $d: bool = true;
+                $call
+            }
+        }
+    };
+}
+
+/// Whether the AVX2 variants of the kernels can run (cached by the standard library).
+#[inline]
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// The two kernels behind the runtime CPU dispatch: the same code compiled for the baseline and
+/// for AVX2 (wider vectors, identical results: no fused multiply–adds are formed).
+mod kernels {
+    use super::*;
+
+    pub(super) fn scatter<const N: usize, const D: bool>(
+        p: &FootprintProjector,
+        view: usize,
+        ks: Range<usize>,
+        x: &[f32],
+        img: &mut [f32],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2<const N: usize, const D: bool>(
+                p: &FootprintProjector,
+                view: usize,
+                ks: Range<usize>,
+                x: &[f32],
+                img: &mut [f32],
+            ) {
+                p.scatter::<N, D>(view, ks, x, img)
+            }
+            if has_avx2() {
+                // SAFETY: AVX2 was detected on this CPU just above.
+                return unsafe { avx2::<N, D>(p, view, ks, x, img) };
+            }
+        }
+        p.scatter::<N, D>(view, ks, x, img)
+    }
+
+    pub(super) fn gather<const N: usize, const D: bool>(
+        p: &FootprintProjector,
+        view: usize,
+        ks: Range<usize>,
+        y: &[f32],
+        masks: (&[f32], &[f32]),
+        out: &mut [f32],
+        col_sums: Option<&mut [f32]>,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2<const N: usize, const D: bool>(
+                p: &FootprintProjector,
+                view: usize,
+                ks: Range<usize>,
+                y: &[f32],
+                masks: (&[f32], &[f32]),
+                out: &mut [f32],
+                col_sums: Option<&mut [f32]>,
+            ) {
+                p.gather::<N, D>(view, ks, y, masks, out, col_sums)
+            }
+            if has_avx2() {
+                // SAFETY: AVX2 was detected on this CPU just above.
+                return unsafe { avx2::<N, D>(p, view, ks, y, masks, out, col_sums) };
+            }
+        }
+        p.gather::<N, D>(view, ks, y, masks, out, col_sums)
+    }
+}
+
+impl Projector for FootprintProjector {
+    fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    fn cameras(&self) -> &[Camera] {
+        &self.cameras
+    }
+
+    fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
+        check_shapes(self, view, x.len(), out.len());
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let (w, n) = (fv.width, fv.side);
+        let nz = self.grid.dims[2];
+        let partials: Vec<Vec<f32>> = bands(nz, scatter_parts())
+            .into_par_iter()
+            .map(|ks| {
+                let mut img = vec![0f32; 2 * pw * ph];
+                dispatch!(fv.side, fv.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, &mut img));
+                img
+            })
+            .collect();
+        out.par_chunks_mut(w).enumerate().for_each(|(r, row)| {
+            let at = (r + n) * pw + n;
+            row.fill(0.0);
+            for p in &partials {
+                for (o, (&a, &b)) in row.iter_mut().zip(p[at..at + w].iter().zip(&p[pw * ph + at..][..w])) {
+                    *o += a + b;
+                }
+            }
+        });
+    }
+
+    fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>) {
+        check_shapes(self, view, out.len(), y.len());
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let (w, h, n) = (fv.width, fv.height, fv.side);
+        let mut padded = vec![0f32; pw * ph];
+        for (r, row) in y.chunks_exact(w).enumerate() {
+            padded[(r + n) * pw + n..][..w].copy_from_slice(row);
+        }
+        let col_mask: Vec<f32> = (0..pw).map(|c| if (n..n + w).contains(&c) { 1.0 } else { 0.0 }).collect();
+        let row_mask: Vec<f32> = (0..ph).map(|r| if (n..n + h).contains(&r) { 1.0 } else { 0.0 }).collect();
+        let masks = (col_mask.as_slice(), row_mask.as_slice());
+        let [nx, ny, nz] = self.grid.dims;
+        let slab = nx * ny;
+        // A few slices per task: enough to balance, few enough to keep the overhead small.
+        let per = nz.div_ceil(8 * scatter_parts()).max(1);
+        let padded = &padded;
+        match col_sums {
+            None => out.par_chunks_mut(per * slab).enumerate().for_each(|(t, o)| {
+                let ks = t * per..(t * per + o.len() / slab);
+                dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
+                    self, view, ks, padded, masks, o, None
+                ));
+            }),
+            Some(cs) => {
+                assert_eq!(cs.len(), out.len(), "column-sum buffer has the wrong length");
+                out.par_chunks_mut(per * slab).zip(cs.par_chunks_mut(per * slab)).enumerate().for_each(|(t, (o, c))| {
+                    let ks = t * per..(t * per + o.len() / slab);
+                    dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
+                        self,
+                        view,
+                        ks,
+                        padded,
+                        masks,
+                        o,
+                        Some(c)
+                    ));
+                })
+            }
+        }
+    }
+
+    fn rows(&self, view: usize) -> SparseRows {
+        let fv = &self.views[view];
+        dispatch!(fv.side, fv.distorted, |N, D| self.rows_impl::<N, D>(view))
+    }
+
+    fn rows_bytes_estimate(&self, view: usize) -> usize {
+        // A footprint of side N covers about (N/2 + 1)² pixels with a positive weight.
+        let n = self.views[view].side / 2 + 1;
+        self.grid.len() * 8 * n * n + (self.view_len(view) + 1) * 8
+    }
+
+    fn bytes(&self) -> usize {
+        std::mem::size_of::<FootView>() * self.views.len()
+    }
+
+    fn scratch_bytes(&self, view: usize) -> usize {
+        let (pw, ph) = self.views[view].padded();
+        (2 * scatter_parts() + 1) * pw * ph * 4
+    }
+}
