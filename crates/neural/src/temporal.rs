@@ -429,45 +429,24 @@ pub fn train_windows<F: TrainableField + Clone>(
     let mut running = resume.running;
     let mut out: Vec<TrainedWindow<F>> = Vec::with_capacity(plan.len());
     let mut interrupted = false;
-    for (k, range) in plan.iter().enumerate() {
-        let origin = window_origin(windows.time_origin, &times, range);
-        let sub = window_problem(problem, &times, range.clone(), origin);
-        let prep = Prepared::new(&sub, train_cfg)?;
-        let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
-        let trained = |learner: Learner<F>, report: TrainReport| TrainedWindow {
-            frames: range.clone(),
-            time_origin: origin,
-            learner,
-            meta: prep.meta.clone(),
-            report,
-            occupied_fraction: prep.occupied_fraction(),
-        };
+    for k in 0..plan.len() {
         if let Some((learner, report)) = finished.next() {
-            out.push(trained(learner, report));
+            // A finished window is taken as it is: no events, not trained.
+            let start = WindowStart::Finished(learner, report);
+            let no_events = |_: &WindowInfo, _: &TrainState<'_, F>| ControlFlow::Continue(());
+            out.push(train_window(problem, &times, &plan, k, train_cfg, windows, seed, start, no_events)?);
             continue;
         }
-        let warm = windows.warm_start && k > 0;
-        let mut cfg = train_cfg.clone();
-        if warm {
-            if let Some(m) = windows.warm_max_iterations {
-                cfg.max_iterations = m;
-            }
-        }
-        let previous = out.last().filter(|_| warm);
-        let mut learner = match (running.take(), previous) {
-            (Some(saved), _) => saved,
-            (None, Some(prev)) => Learner::new(prev.learner.field.clone()),
-            (None, None) => Learner::fresh(init.clone(), &prep, &cfg),
+        let start = match (running.take(), out.last().filter(|_| windows.warm_start && k > 0)) {
+            (Some(saved), _) => WindowStart::Resume(saved),
+            (None, Some(prev)) => WindowStart::Warm(prev.learner.field.clone()),
+            (None, None) => WindowStart::Fresh(init.clone()),
         };
-        // A window saved at the iteration at which it converged stops there, as it did then.
-        let report = if learner.iteration > 0 && converged(&learner.losses, &cfg.stop) {
-            finished_report(&learner, &cfg)
-        } else {
-            train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| {
-                on_event(WindowEvent::Iteration(&info, s))
-            })?
-        };
-        out.push(trained(learner, report));
+        let w = train_window(problem, &times, &plan, k, train_cfg, windows, seed, start, |info, s| {
+            on_event(WindowEvent::Iteration(info, s))
+        })?;
+        out.push(w);
+        let info = WindowInfo { index: k, count: plan.len(), frames: plan[k].clone() };
         let stopped = out.last().is_some_and(|w| w.report.stop_reason == StopReason::Interrupted);
         if stopped || out.last().is_some_and(|w| on_event(WindowEvent::Finished(&info, w)).is_break()) {
             interrupted = stopped || k + 1 < plan.len();
@@ -475,6 +454,75 @@ pub fn train_windows<F: TrainableField + Clone>(
         }
     }
     Ok(TemporalRun { frame_times: times, plan, windows: out, interrupted })
+}
+
+/// Where the learner of one window starts ([`train_window`]).
+#[derive(Clone, Debug)]
+pub enum WindowStart<F> {
+    /// A field never trained: the run's initial field (first window, or no warm start).
+    Fresh(F),
+    /// The previous window's trained field, with a fresh optimiser (warm start).
+    Warm(F),
+    /// The window's own learner at its last checkpoint; training continues from there.
+    Resume(Learner<F>),
+    /// The window finished earlier: taken as it is, not trained (its data are prepared again
+    /// for the metadata).
+    Finished(Learner<F>, TrainReport),
+}
+
+/// Trains window `k` of `plan` (from [`plan_windows`] over the frame times `times` of
+/// `problem`) alone, as [`train_windows`] trains it in turn: the same window problem, seed
+/// `seed + k`, and, for warm-started windows, `windows.warm_max_iterations`. Because a window
+/// depends on the others only through its start ([`WindowStart::Warm`] takes the previous
+/// window's final field), windows can be trained in separate processes and give the windows of
+/// a serial run. `on_iteration` sees every iteration; breaking stops after it (the report
+/// says [`StopReason::Interrupted`]).
+pub fn train_window<F: TrainableField + Clone>(
+    problem: &Problem,
+    times: &[f64],
+    plan: &[Range<usize>],
+    k: usize,
+    train_cfg: &TrainConfig,
+    windows: &WindowConfig,
+    seed: u64,
+    start: WindowStart<F>,
+    mut on_iteration: impl FnMut(&WindowInfo, &TrainState<'_, F>) -> ControlFlow<()>,
+) -> Result<TrainedWindow<F>, NeuralError> {
+    let Some(range) = plan.get(k) else {
+        return Err(NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len())));
+    };
+    let origin = window_origin(windows.time_origin, times, range);
+    let sub = window_problem(problem, times, range.clone(), origin);
+    let prep = Prepared::new(&sub, train_cfg)?;
+    let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
+    let trained = |learner: Learner<F>, report: TrainReport| TrainedWindow {
+        frames: range.clone(),
+        time_origin: origin,
+        learner,
+        meta: prep.meta.clone(),
+        report,
+        occupied_fraction: prep.occupied_fraction(),
+    };
+    let warm = windows.warm_start && k > 0;
+    let mut cfg = train_cfg.clone();
+    if warm {
+        if let Some(m) = windows.warm_max_iterations {
+            cfg.max_iterations = m;
+        }
+    }
+    let mut learner = match start {
+        WindowStart::Finished(learner, report) => return Ok(trained(learner, report)),
+        WindowStart::Resume(saved) => saved,
+        WindowStart::Warm(previous) => Learner::new(previous),
+        WindowStart::Fresh(init) => Learner::fresh(init, &prep, &cfg),
+    };
+    // A window saved at the iteration at which it converged stops there, as it did then.
+    let report = if learner.iteration > 0 && converged(&learner.losses, &cfg.stop) {
+        finished_report(&learner, &cfg)
+    } else {
+        train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iteration(&info, s))?
+    };
+    Ok(trained(learner, report))
 }
 
 /// The report of a window that had already converged when it was saved.
