@@ -61,6 +61,7 @@ pub use report::{
     WindowDetails, REPORT_FORMAT,
 };
 pub use rundir::{DirState, Overwrite, RunDir, RunKind};
+pub use temporal::{finish_windows, reconstruct_windows, window_plan, WindowOutcome, WindowPlan};
 
 /// Runs the reconstruction `config` of `scene` into `dir`: decides the stopping rule
 /// ([`RunConfig::resolved`]), validates everything first, writes `config.json`, works (reporting through `on_event`, which may stop the run), then writes
@@ -86,7 +87,7 @@ pub fn reconstruct(
     match config.method().family() {
         Family::Classical => classical::run(scene, config, dir, &truth, &mut session),
         Family::Neural => neural::run(scene, config, dir, &truth, &mut session),
-        Family::Temporal => temporal::run(scene, config, dir, &truth, &mut session),
+        Family::Temporal => temporal::run(scene, config, dir, &truth, &mut session, false),
     }
 }
 

@@ -156,41 +156,50 @@ impl RunDir {
     }
 
     fn take_lock(&mut self) -> Result<(), PipelineError> {
-        let path = self.root.join(".lock");
-        let me = format!("{}\n", std::process::id());
-        for _ in 0..2 {
-            match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
-                Ok(mut f) => {
-                    use std::io::Write;
-                    f.write_all(me.as_bytes()).map_err(|e| PipelineError::file(&path, e))?;
-                    self.lock = Some(path);
-                    return Ok(());
+        self.lock = Some(acquire_lock(&self.root, &self.root.join(".lock"))?);
+        Ok(())
+    }
+
+    /// A run folder in which windows of a time-resolved run are trained one at a time, by
+    /// this process and possibly others at once
+    /// ([`crate::reconstruct_windows`]): created if missing, refused when it is the scene's
+    /// folder, holds a finished run, or is locked by a whole run. It takes no lock itself;
+    /// each window is locked while it trains ([`RunDir::lock_file`]).
+    pub fn for_windows(root: impl Into<PathBuf>, scene_root: Option<&Path>) -> Result<Self, PipelineError> {
+        let root: PathBuf = root.into();
+        let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
+        if let Some(scene) = scene_root {
+            if let (Ok(a), Ok(b)) = (root.canonicalize(), scene.canonicalize()) {
+                if a == b {
+                    return Err(refuse("is the scene's own folder; choose another output folder".into()));
                 }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = std::fs::read_to_string(&path).unwrap_or_default();
-                    let pid: Option<u32> = holder.trim().parse().ok();
-                    if pid.is_some_and(process_alive) {
-                        return Err(PipelineError::RunDir {
-                            path: self.root.clone(),
-                            why: format!(
-                                "is in use by another run (process {}, lock file {}); wait for it to finish or use \
-                                 another output folder",
-                                holder.trim(),
-                                path.display()
-                            ),
-                        });
-                    }
-                    log::warn!(
-                        "{}: removing the stale lock of process {} (no longer running)",
-                        self.root.display(),
-                        holder.trim()
-                    );
-                    std::fs::remove_file(&path).map_err(|e| PipelineError::file(&path, e))?;
-                }
-                Err(e) => return Err(PipelineError::file(&path, format!("cannot take the run lock: {e}"))),
             }
         }
-        Err(PipelineError::file(&path, "cannot take the run lock"))
+        std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
+        let dir = RunDir { root: root.clone(), lock: None, resume: false, created: false };
+        if dir.report().is_file() {
+            return Err(refuse(
+                "already holds a finished run; training windows into it would mix two runs (remove it, or use \
+                 another folder)"
+                    .into(),
+            ));
+        }
+        let lock = root.join(".lock");
+        if let Some(pid) = std::fs::read_to_string(&lock).ok().and_then(|h| h.trim().parse::<u32>().ok()) {
+            if pid != std::process::id() && process_alive(pid) {
+                return Err(refuse(format!(
+                    "is in use by a whole run (process {pid}, lock file {}); wait for it to finish",
+                    lock.display()
+                )));
+            }
+        }
+        Ok(dir)
+    }
+
+    /// Takes the lock file `name` (relative to the folder) until the guard is dropped; refused
+    /// while a live process holds it, a stale one (its process gone) is replaced.
+    pub fn lock_file(&self, name: &str) -> Result<FileLock, PipelineError> {
+        Ok(FileLock { path: acquire_lock(&self.root, &self.path(name))? })
     }
 
     /// Removes the files of an earlier run (only those a run writes).
@@ -283,6 +292,59 @@ impl RunDir {
     pub fn write_json(&self, name: &str, value: &impl Serialize) -> Result<PathBuf, PipelineError> {
         write_json(&self.path(name), value)
     }
+}
+
+/// A lock file held until dropped ([`RunDir::lock_file`]).
+#[derive(Debug)]
+pub struct FileLock {
+    path: PathBuf,
+}
+
+impl Drop for FileLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Creates the lock file `path` of the run folder `root` holding this process's id; refused
+/// while a live process holds it, a stale one (its process gone) is replaced.
+fn acquire_lock(root: &Path, path: &Path) -> Result<PathBuf, PipelineError> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| PipelineError::file(parent, e))?;
+    }
+    let me = format!("{}\n", std::process::id());
+    for _ in 0..2 {
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(path) {
+            Ok(mut f) => {
+                use std::io::Write;
+                f.write_all(me.as_bytes()).map_err(|e| PipelineError::file(path, e))?;
+                return Ok(path.to_path_buf());
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                let holder = std::fs::read_to_string(path).unwrap_or_default();
+                let pid: Option<u32> = holder.trim().parse().ok();
+                if pid.is_some_and(process_alive) {
+                    return Err(PipelineError::RunDir {
+                        path: root.to_path_buf(),
+                        why: format!(
+                            "is in use by another run (process {}, lock file {}); wait for it to finish or use \
+                             another output folder",
+                            holder.trim(),
+                            path.display()
+                        ),
+                    });
+                }
+                log::warn!(
+                    "{}: removing the stale lock of process {} (no longer running)",
+                    root.display(),
+                    holder.trim()
+                );
+                std::fs::remove_file(path).map_err(|e| PipelineError::file(path, e))?;
+            }
+            Err(e) => return Err(PipelineError::file(path, format!("cannot take the run lock: {e}"))),
+        }
+    }
+    Err(PipelineError::file(path, "cannot take the run lock"))
 }
 
 fn process_alive(pid: u32) -> bool {

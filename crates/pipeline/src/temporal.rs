@@ -28,8 +28,8 @@ use serde::{Deserialize, Serialize};
 use crate::neural::{estimate_memory, write_checkpoint_to};
 use crate::{
     check_memory, finish, mean, peak_rss, write_volume, Family, History, LossKind, Method, MethodConfig, PipelineError,
-    RunConfig, RunDir, RunEvent, RunReport, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails, WindowPos,
-    REPORT_FORMAT,
+    RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails,
+    WindowPos, REPORT_FORMAT,
 };
 
 /// `windows/progress.json`: what a run is and how far it got, for resuming.
@@ -98,25 +98,53 @@ fn checkpoint_name(k: usize) -> String {
     format!("windows/w{k:03}.checkpoint.safetensors")
 }
 
+/// The file that marks window `k` as finished when windows run one at a time (written after
+/// its final checkpoint), relative to the run folder.
+fn done_name(k: usize) -> String {
+    format!("windows/w{k:03}.done.json")
+}
+
+/// Window `k`'s done file, if it has finished.
+fn read_done(root: &std::path::Path, k: usize) -> Result<Option<FinishedWindow>, PipelineError> {
+    let path = root.join(done_name(k));
+    if path.is_file() {
+        Ok(Some(crate::rundir::read_json(&path)?))
+    } else {
+        Ok(None)
+    }
+}
+
 fn same_time(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * (1.0 + a.abs())
 }
 
-pub(crate) fn run(
+/// A time-resolved run set up: its training problem, window plan, initial field and the
+/// progress record it starts from.
+struct Setup {
+    spec: TemporalSpec,
+    method: Method,
+    problem: fluidnerf_neural::train::Problem,
+    field_cfg: FieldConfig,
+    input_dim: usize,
+    field: fluidnerf_neural::trained::AnyField,
+    needed: u64,
+    progress: Progress,
+}
+
+/// Validates a time-resolved run and prepares it (images read, plan made, field built, memory
+/// checked); writes nothing.
+fn setup(
     scene: &Scene,
     config: &RunConfig,
-    dir: &RunDir,
     truth: &[(Option<f64>, Volume)],
     session: &mut Session,
-) -> Result<RunReport, PipelineError> {
-    let MethodConfig::Temporal(method, spec) = config.effective_method() else { unreachable!("a temporal method") };
-    let progress_path = dir.progress();
-    if dir.resuming() && !progress_path.is_file() {
-        return Err(PipelineError::RunDir {
-            path: dir.root().to_path_buf(),
-            why: "--resume: no windows/progress.json (nothing to continue)".into(),
-        });
-    }
+) -> Result<Setup, PipelineError> {
+    let MethodConfig::Temporal(method, spec) = config.effective_method() else {
+        return Err(PipelineError::invalid(
+            "method",
+            format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
+        ));
+    };
     let mut problem = crate::neural::problem(scene)?;
     problem.views.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
     problem.holdout.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
@@ -158,7 +186,7 @@ pub(crate) fn run(
     check_memory(config, needed, || {
         format!("{method} with {} windows of {num_params} parameters and {pixels} pixels", plan.len())
     })?;
-    let mut progress = Progress {
+    let progress = Progress {
         field: field_cfg.clone(),
         input_dim,
         frame_times: times.clone(),
@@ -169,6 +197,36 @@ pub(crate) fn run(
         train: spec.train.clone(),
         finished: Vec::new(),
     };
+    log::info!(
+        "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
+        times.len(),
+        times,
+        problem.time_step,
+        problem.views.len(),
+        window_len
+    );
+    Ok(Setup { spec, method, problem, field_cfg, input_dim, field, needed, progress })
+}
+
+/// Runs (or, resuming, continues) a whole time-resolved run. With `require_all`, the run must
+/// be one whose windows have all finished (it only stitches and writes the results).
+pub(crate) fn run(
+    scene: &Scene,
+    config: &RunConfig,
+    dir: &RunDir,
+    truth: &[(Option<f64>, Volume)],
+    session: &mut Session,
+    require_all: bool,
+) -> Result<RunReport, PipelineError> {
+    let progress_path = dir.progress();
+    if dir.resuming() && !progress_path.is_file() {
+        return Err(PipelineError::RunDir {
+            path: dir.root().to_path_buf(),
+            why: "--resume: no windows/progress.json (nothing to continue)".into(),
+        });
+    }
+    let Setup { spec, method, problem, field_cfg, input_dim, field, needed, mut progress } =
+        setup(scene, config, truth, session)?;
     if dir.resuming() {
         let saved: Progress = crate::rundir::read_json(&progress_path)?;
         if let Some(why) = progress.mismatch(&saved) {
@@ -181,20 +239,35 @@ pub(crate) fn run(
             session.warn("the training settings differ from the run being resumed; its finished windows keep theirs");
         }
         progress.finished = saved.finished;
+        // Windows run one at a time (`reconstruct_windows`) record themselves in done files.
+        while progress.finished.len() < progress.plan.len() {
+            match read_done(dir.root(), progress.finished.len())? {
+                Some(done) => progress.finished.push(done),
+                None => break,
+            }
+        }
+        if require_all && progress.finished.len() < progress.plan.len() {
+            let missing: Vec<String> = (progress.finished.len()..progress.plan.len())
+                .filter(|&k| !dir.path(&done_name(k)).is_file())
+                .map(|k| k.to_string())
+                .collect();
+            return Err(PipelineError::RunDir {
+                path: dir.root().to_path_buf(),
+                why: format!(
+                    "cannot finish: window(s) {} of {} have not finished (no {}); run them first (--window K), or \
+                     --resume to train what is left here",
+                    missing.join(", "),
+                    progress.plan.len(),
+                    done_name(progress.finished.len())
+                ),
+            });
+        }
         let _ = std::fs::remove_file(dir.report());
     }
     dir.write_json("config.json", config)?;
     if !dir.resuming() {
         dir.write_json("windows/progress.json", &progress)?;
     }
-    log::info!(
-        "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
-        times.len(),
-        times,
-        problem.time_step,
-        problem.views.len(),
-        window_len
-    );
     let ctx = Ctx {
         scene,
         config,
@@ -442,4 +515,297 @@ impl Ctx<'_> {
         };
         finish(self.scene, dir, report, self.truth, session)
     }
+}
+
+/// The windows a time-resolved run trains: what a scheduler splits the work by.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WindowPlan {
+    /// The distinct training frame times, increasing (held-out times removed).
+    pub frame_times: Vec<f64>,
+    /// First and one-past-last frame index of every window, in training order.
+    pub windows: Vec<[usize; 2]>,
+    /// Each window after the first starts from the previous window's trained field, so window
+    /// `k` can only start once window `k − 1` has finished.
+    pub warm_start: bool,
+}
+
+impl WindowPlan {
+    /// The window that window `k` starts from, if any.
+    pub fn depends_on(&self, k: usize) -> Option<usize> {
+        (self.warm_start && k > 0).then(|| k - 1)
+    }
+
+    /// The windows whose frames all lie in `frames` (frame indices into
+    /// [`WindowPlan::frame_times`]); refused when there is none.
+    pub fn windows_in(&self, frames: std::ops::Range<usize>) -> Result<std::ops::Range<usize>, PipelineError> {
+        let inside: Vec<usize> = (0..self.windows.len())
+            .filter(|&k| self.windows[k][0] >= frames.start && self.windows[k][1] <= frames.end)
+            .collect();
+        match (inside.first(), inside.last()) {
+            (Some(&a), Some(&b)) => Ok(a..b + 1),
+            _ => Err(PipelineError::invalid(
+                "frames",
+                format!(
+                    "no window lies inside frames {}..{} (the run has {} frames in {} windows: {:?})",
+                    frames.start,
+                    frames.end,
+                    self.frame_times.len(),
+                    self.windows.len(),
+                    self.windows
+                ),
+            )),
+        }
+    }
+}
+
+/// The window plan of the time-resolved run `config` of `scene`, from the scene file alone
+/// (no image is read).
+pub fn window_plan(scene: &Scene, config: &RunConfig) -> Result<WindowPlan, PipelineError> {
+    config.validate()?;
+    let MethodConfig::Temporal(_, spec) = config.effective_method() else {
+        return Err(PipelineError::invalid(
+            "method",
+            format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
+        ));
+    };
+    let mut times: Vec<f64> = scene
+        .frames
+        .iter()
+        .filter(|f| !f.holdout)
+        .map(|f| f.time.unwrap_or(0.0))
+        .filter(|&t| !spec.holdout_times.iter().any(|&h| same_time(h, t)))
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let plan = plan_windows(times.len(), spec.windows.frames, spec.windows.overlap);
+    Ok(WindowPlan {
+        frame_times: times,
+        windows: plan.iter().map(|r| [r.start, r.end]).collect(),
+        warm_start: spec.windows.warm_start,
+    })
+}
+
+/// What [`reconstruct_windows`] did with one window.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WindowOutcome {
+    pub index: usize,
+    /// First and one-past-last frame of the window.
+    pub frames: [usize; 2],
+    /// The window had finished before (its done file was read back; nothing was trained).
+    pub reused: bool,
+    /// Whether the window finished; an interrupted window has its checkpoint written and
+    /// continues from it when run again.
+    pub status: RunStatus,
+    /// Training iterations of the window.
+    pub iterations: usize,
+    /// Its last training loss.
+    pub final_loss: f64,
+}
+
+/// Trains the windows `windows` of the time-resolved run `config` of `scene` into the run
+/// folder `out`, one after the other, as the serial run trains them: each window's final
+/// checkpoint `windows/wNNN.checkpoint.safetensors` and then its done file
+/// `windows/wNNN.done.json` are written atomically when it finishes. `config.json` and
+/// `windows/progress.json` are written by the first call and must match in every later one.
+///
+/// A window whose done file exists is read back, not trained again, so calls are idempotent
+/// (a scheduler may repeat them). A window whose checkpoint exists without a done file (its
+/// process died) continues from that checkpoint. A warm-started window (`k > 0` with
+/// `windows.warm_start`) starts from window `k − 1`'s final checkpoint, which must exist
+/// (finished earlier or in this call); several processes may run different windows at once
+/// (each window is locked while it trains). [`finish_windows`] then writes the results.
+/// `on_event` may stop the run after any iteration.
+pub fn reconstruct_windows(
+    scene: &Scene,
+    config: &RunConfig,
+    out: &std::path::Path,
+    windows: std::ops::Range<usize>,
+    mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
+) -> Result<Vec<WindowOutcome>, PipelineError> {
+    config.validate()?;
+    let mut session = Session { on_event: &mut on_event, stopped: false, started: Instant::now(), cpu0: None };
+    let Setup { spec, method, problem, field, progress, .. } = setup(scene, config, &[], &mut session)?;
+    let count = progress.plan.len();
+    if windows.start >= windows.end || windows.end > count {
+        return Err(PipelineError::invalid(
+            "window",
+            format!(
+                "windows {}..{} are not in the plan: the run has {count} window(s), 0..{count} (frames {:?})",
+                windows.start, windows.end, progress.plan
+            ),
+        ));
+    }
+    let dir = RunDir::for_windows(out, Some(&scene.root))?;
+    prepare_folder(&dir, config, &progress)?;
+    let _ = session.emit(RunEvent::Started {
+        method,
+        max_iterations: spec.train.max_iterations,
+        windows: windows.len(),
+        start_iteration: 0,
+    });
+    fluidnerf_neural::with_field!(field, f => {
+        train_some(&dir, config, &spec, &problem, &progress, f, windows, &mut session)
+    })
+}
+
+/// Writes `config.json` and `windows/progress.json` of a run trained window by window, or
+/// checks that the folder's are those of this run.
+fn prepare_folder(dir: &RunDir, config: &RunConfig, progress: &Progress) -> Result<(), PipelineError> {
+    let config_path = dir.config();
+    if config_path.is_file() {
+        let saved = RunConfig::read(&config_path)?;
+        let mut ours = config.clone();
+        ours.fluidnerf_version.clone_from(&saved.fluidnerf_version);
+        if saved != ours {
+            return Err(PipelineError::RunDir {
+                path: config_path,
+                why: "holds a run with other settings; run every window with the same settings (or use another \
+                      folder)"
+                    .into(),
+            });
+        }
+    } else {
+        dir.write_json("config.json", config)?;
+    }
+    let progress_path = dir.progress();
+    if progress_path.is_file() {
+        let saved: Progress = crate::rundir::read_json(&progress_path)?;
+        let why = progress.mismatch(&saved).or_else(|| {
+            (saved.train != progress.train).then(|| "the run in this folder has other training settings".to_string())
+        });
+        if let Some(why) = why {
+            return Err(PipelineError::RunDir { path: progress_path, why: format!("{why}; use another folder") });
+        }
+    } else {
+        dir.write_json("windows/progress.json", progress)?;
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn train_some<F: TrainableField + Clone>(
+    dir: &RunDir,
+    config: &RunConfig,
+    spec: &TemporalSpec,
+    problem: &fluidnerf_neural::train::Problem,
+    progress: &Progress,
+    init: F,
+    windows: std::ops::Range<usize>,
+    session: &mut Session,
+) -> Result<Vec<WindowOutcome>, PipelineError> {
+    use fluidnerf_neural::temporal::{train_window, WindowStart};
+    let times = &progress.frame_times;
+    let plan: Vec<std::ops::Range<usize>> = progress.plan.iter().map(|&[a, b]| a..b).collect();
+    let load = |name: &str| -> Result<Learner<F>, PipelineError> {
+        let mut learner = Learner::new(init.clone());
+        fluidnerf_neural::weights::load_checkpoint(&dir.path(name), &mut learner)?;
+        Ok(learner)
+    };
+    let mut outcomes = Vec::new();
+    for k in windows {
+        let _lock = dir.lock_file(&format!("windows/w{k:03}.lock"))?;
+        let frames = [plan[k].start, plan[k].end];
+        if let Some(done) = read_done(dir.root(), k)? {
+            log::info!("window {k}: finished earlier ({}); read back", done_name(k));
+            outcomes.push(WindowOutcome {
+                index: k,
+                frames,
+                reused: true,
+                status: RunStatus::Finished,
+                iterations: done.report.iterations,
+                final_loss: done.report.final_loss as f64,
+            });
+            continue;
+        }
+        let start = if dir.path(&checkpoint_name(k)).is_file() {
+            log::info!("window {k}: continuing from {}", checkpoint_name(k));
+            WindowStart::Resume(load(&checkpoint_name(k))?)
+        } else if progress.warm_start && k > 0 {
+            if read_done(dir.root(), k - 1)?.is_none() {
+                return Err(PipelineError::RunDir {
+                    path: dir.path(&checkpoint_name(k - 1)),
+                    why: format!(
+                        "window {k} starts from the field of window {} (warm start), whose final checkpoint is missing \
+                         (window {} has not finished: no {}); run window {} first, or train without warm start",
+                        k - 1,
+                        k - 1,
+                        done_name(k - 1),
+                        k - 1
+                    ),
+                });
+            }
+            WindowStart::Warm(load(&checkpoint_name(k - 1))?.field)
+        } else {
+            WindowStart::Fresh(init.clone())
+        };
+        let pos = WindowPos { index: k, count: plan.len(), frames };
+        let mut io_error = None;
+        let trained =
+            train_window(problem, times, &plan, k, &spec.train, &spec.windows, config.seed, start, |_, s| {
+                let event = RunEvent::Iteration {
+                    window: Some(pos),
+                    iteration: s.iteration,
+                    loss: s.loss as f64,
+                    smoothed: Some(s.smoothed_loss as f64),
+                    train_time_s: s.train_time_s,
+                };
+                let flow = session.emit(event);
+                if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
+                    if let Err(e) = write_checkpoint_to(dir, &checkpoint_name(k), s.learner) {
+                        io_error = Some(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+                flow
+            })?;
+        if let Some(e) = io_error {
+            return Err(e);
+        }
+        // The checkpoint first: a window with a done file always has its final checkpoint.
+        write_checkpoint_to(dir, &checkpoint_name(k), &trained.learner)?;
+        let interrupted = trained.report.stop_reason == fluidnerf_neural::train::StopReason::Interrupted;
+        outcomes.push(WindowOutcome {
+            index: k,
+            frames,
+            reused: false,
+            status: if interrupted { RunStatus::Interrupted } else { RunStatus::Finished },
+            iterations: trained.learner.iteration,
+            final_loss: trained.report.final_loss as f64,
+        });
+        if interrupted {
+            break;
+        }
+        dir.write_json(
+            &done_name(k),
+            &FinishedWindow { checkpoint: checkpoint_name(k), report: trained.report.clone() },
+        )?;
+        if session.emit(RunEvent::WindowFinished(pos)).is_break() {
+            break;
+        }
+    }
+    Ok(outcomes)
+}
+
+/// Finishes a time-resolved run whose windows were trained by [`reconstruct_windows`]: reads
+/// every window back, stitches the field and writes what the serial run writes (volumes,
+/// `temporal.json`, `report.json`, …), identical to it for the same settings. Refused, naming
+/// them, while windows have not finished.
+pub fn finish_windows(
+    scene: &Scene,
+    config: &RunConfig,
+    out: &std::path::Path,
+    mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
+) -> Result<RunReport, PipelineError> {
+    config.validate()?;
+    if config.method().family() != Family::Temporal {
+        return Err(PipelineError::invalid(
+            "method",
+            format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
+        ));
+    }
+    let dir = RunDir::create(out, crate::Overwrite::Resume, Some(&scene.root))?;
+    let mut session =
+        Session { on_event: &mut on_event, stopped: false, started: Instant::now(), cpu0: crate::cpu_seconds() };
+    let truth = crate::load_truth(scene)?;
+    run(scene, config, &dir, &truth, &mut session, true)
 }
