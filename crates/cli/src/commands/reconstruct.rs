@@ -103,7 +103,7 @@ pub enum TimeOriginArg {
 pub struct Args {
     /// The scene: a folder holding `transforms.json`, or the file itself [default with
     /// --config: the scene it names].
-    #[arg(required_unless_present = "config")]
+    #[arg(required_unless_present_any = ["config", "finish"])]
     pub scene: Option<PathBuf>,
     /// Output directory; created if missing. One that holds a run needs --force (or --resume).
     #[arg(short, long)]
@@ -141,6 +141,8 @@ pub struct Args {
     #[arg(long)]
     pub checkpoint_every: Option<usize>,
     #[command(flatten)]
+    pub split: SplitArgs,
+    #[command(flatten)]
     pub stop: StopArgs,
     #[command(flatten)]
     pub classical: ClassicalArgs,
@@ -148,6 +150,40 @@ pub struct Args {
     pub neural: NeuralArgs,
     #[command(flatten)]
     pub temporal: TemporalArgs,
+}
+
+/// Splitting a time-resolved run over processes (a Slurm job array, a Dask cluster).
+#[derive(clap::Args, Debug)]
+#[command(next_help_heading = "Splitting a time-resolved run (tr-fluidnerf, tr-fast, static-per-frame)")]
+pub struct SplitArgs {
+    /// Train only window K (0-based) of the run's window plan into OUT, and stop. A window
+    /// already finished in OUT is left as it is; one that died continues from its checkpoint;
+    /// with warm starts, window K starts from window K−1's final checkpoint, which must be
+    /// in OUT. Finish the run with --finish once every window is done. (`--window` is the
+    /// window length.)
+    #[arg(long, value_name = "K", conflicts_with_all = ["force", "resume", "finish", "frames"])]
+    pub window_index: Option<usize>,
+    /// Train only the windows whose frames lie in A..B (frame indices, B exclusive; for
+    /// static-per-frame one window per frame), in order, as --window-index does each.
+    #[arg(long, value_name = "A..B", value_parser = parse_frames, conflicts_with_all = ["force", "resume", "finish"])]
+    pub frames: Option<std::ops::Range<usize>>,
+    /// Finish a run whose windows were trained with --window-index or --frames: stitch the
+    /// windows and write the volumes and reports, as the run in one piece would. Without a
+    /// scene or --config, the settings come from OUT/config.json. Refused, naming them, while
+    /// windows are missing (--resume trains them here instead).
+    #[arg(long, conflicts_with_all = ["force", "resume"])]
+    pub finish: bool,
+}
+
+/// `A..B` as a frame range.
+fn parse_frames(s: &str) -> Result<std::ops::Range<usize>, String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("expected A..B (e.g. 0..8), got {s:?}"))?;
+    let a: usize = a.trim().parse().map_err(|_| format!("{a:?} is not a frame index"))?;
+    let b: usize = b.trim().parse().map_err(|_| format!("{b:?} is not a frame index"))?;
+    if a >= b {
+        return Err(format!("{s}: the range is empty (A must be less than B)"));
+    }
+    Ok(a..b)
 }
 
 /// The stopping policy, one for every method.
@@ -352,6 +388,14 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
             ("--time-origin", t.time_origin.is_some()),
         ]));
     }
+    if family != Family::Temporal {
+        let sp = &args.split;
+        wrong.extend(given(&[
+            ("--window-index", sp.window_index.is_some()),
+            ("--frames", sp.frames.is_some()),
+            ("--finish", sp.finish),
+        ]));
+    }
     if method == Method::StaticPerFrame {
         wrong.extend(given(&[
             ("--window", t.window.is_some()),
@@ -368,7 +412,11 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
 
 /// The run's configuration: `--config` (or the method's defaults), then every option given.
 pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
-    let mut cfg = match &args.config {
+    let finish_config = match (&args.config, &args.scene) {
+        (None, None) if args.split.finish => Some(args.out.join("config.json")),
+        _ => None,
+    };
+    let mut cfg = match args.config.as_ref().or(finish_config.as_ref()) {
         Some(path) => {
             let cfg = RunConfig::read(path)?;
             if let Some(MethodArg(m)) = args.method {
@@ -665,6 +713,9 @@ pub fn run_config(
 
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let config = resolve(&args)?;
+    if args.split.window_index.is_some() || args.split.frames.is_some() || args.split.finish {
+        return run_split(&args, &config);
+    }
     let overwrite = match (args.force, args.resume) {
         (true, _) => Overwrite::Force,
         (_, true) => Overwrite::Resume,
@@ -680,4 +731,52 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         RunStatus::Finished => std::process::ExitCode::SUCCESS,
         RunStatus::Interrupted => std::process::ExitCode::from(130),
     })
+}
+
+/// `--window-index`, `--frames` and `--finish`: part of a time-resolved run, or its end.
+fn run_split(args: &Args, config: &RunConfig) -> anyhow::Result<std::process::ExitCode> {
+    crate::interrupt::install();
+    let scene = fluidnerf_io::scene::load_scene(&config.scene)?;
+    let mut view = ProgressView::default();
+    if args.split.finish {
+        let report = fluidnerf_pipeline::finish_windows(&scene, config, &args.out, |e| view.on_event(e))?;
+        #[allow(clippy::print_stdout)]
+        {
+            println!("{}", report.summary_line());
+            println!("wrote {} (config.json, report.json, report.html)", args.out.display());
+        }
+        return Ok(match report.status {
+            RunStatus::Finished => std::process::ExitCode::SUCCESS,
+            RunStatus::Interrupted => std::process::ExitCode::from(130),
+        });
+    }
+    let plan = fluidnerf_pipeline::window_plan(&scene, config)?;
+    let windows = match (args.split.window_index, &args.split.frames) {
+        (Some(k), _) => k..k + 1,
+        (None, Some(frames)) => plan.windows_in(frames.clone())?,
+        (None, None) => unreachable!("run_split is called with --window-index or --frames"),
+    };
+    let outcomes = fluidnerf_pipeline::reconstruct_windows(&scene, config, &args.out, windows, |e| view.on_event(e))?;
+    let mut interrupted = false;
+    #[allow(clippy::print_stdout)]
+    for o in &outcomes {
+        let what = match (o.reused, o.status) {
+            (true, _) => "finished earlier, left as it is".to_string(),
+            (false, RunStatus::Finished) => format!("trained, {} iterations, loss {:.3e}", o.iterations, o.final_loss),
+            (false, RunStatus::Interrupted) => {
+                interrupted = true;
+                format!("interrupted at iteration {} (rerun to continue)", o.iterations)
+            }
+        };
+        println!("window {} of {} (frames {}..{}): {what}", o.index, plan.windows.len(), o.frames[0], o.frames[1]);
+    }
+    #[allow(clippy::print_stdout)]
+    {
+        println!(
+            "wrote {}; when every window is done: fluidnerf reconstruct --finish -o {}",
+            args.out.display(),
+            args.out.display()
+        );
+    }
+    Ok(if interrupted { std::process::ExitCode::from(130) } else { std::process::ExitCode::SUCCESS })
 }
