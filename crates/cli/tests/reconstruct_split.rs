@@ -1,0 +1,192 @@
+//! `fluidnerf reconstruct --window-index K | --frames A..B | --finish`: a time-resolved run
+//! split over separate processes (as a job array would) ends with exactly the run in one
+//! piece; windows are idempotent, warm starts wait for their window, and misuse is refused
+//! with the file or setting named.
+
+mod common;
+use common::*;
+
+fn split_scene(d: &std::path::Path) {
+    ok(&fluidnerf(
+        d,
+        &[
+            "synth",
+            "-q",
+            "--preset",
+            "jet-tr60",
+            "--cameras",
+            "5",
+            "--pixels",
+            "16",
+            "--resolution",
+            "12",
+            "--model",
+            "pinhole",
+            "--times",
+            "14,14.5,15,15.5,16",
+            "-o",
+            "scene",
+        ],
+    ));
+}
+
+/// Settings of every run below: tr-fast in windows of 2 frames overlapping by 1 (4 windows over
+/// 5 frames), warm-started.
+const RUN: [&str; 15] = [
+    "--method",
+    "tr-fast",
+    "--resolution",
+    "10",
+    "--max-iterations",
+    "8",
+    "--window",
+    "2",
+    "--overlap",
+    "1",
+    "--rays-per-image",
+    "48",
+    "--coarse-samples",
+    "12",
+    "-q",
+];
+
+fn reconstruct(d: &std::path::Path, out: &str, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["reconstruct", "scene", "-o", out];
+    args.extend(RUN);
+    args.extend(extra);
+    fluidnerf(d, &args)
+}
+
+fn stderr(out: &std::process::Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn windows_run_separately_and_finished_equal_the_run_in_one_piece() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    split_scene(d);
+    ok(&reconstruct(d, "serial", &[]));
+
+    // Window 1 warm-starts from window 0, which has not run: refused, naming the checkpoint.
+    let out = reconstruct(d, "split", &["--window-index", "1"]);
+    assert!(!out.status.success());
+    let e = stderr(&out);
+    assert!(
+        e.contains("w000.checkpoint.safetensors") && e.contains("window 1 starts from the field of window 0"),
+        "{e}"
+    );
+
+    // Finishing before every window is done names the missing ones.
+    ok(&reconstruct(d, "split", &["--window-index", "0"]));
+    let out = fluidnerf(d, &["reconstruct", "--finish", "-o", "split", "-q"]);
+    assert!(!out.status.success());
+    let e = stderr(&out);
+    assert!(e.contains("window(s) 1, 2, 3 of 4 have not finished") && e.contains("w001.done.json"), "{e}");
+
+    // Frames 1..5 hold windows 1, 2 and 3; window 0 is done, so they run in order.
+    let out = reconstruct(d, "split", &["--frames", "1..5"]);
+    ok(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(text.matches(": trained,").count(), 3, "{text}");
+    // Run again, a window is read back, not trained.
+    let out = reconstruct(d, "split", &["--window-index", "2"]);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("finished earlier"));
+    for k in 0..4 {
+        assert!(d.join(format!("split/windows/w{k:03}.done.json")).is_file());
+    }
+
+    // --finish takes the settings from the run folder and writes what the serial run wrote.
+    ok(&fluidnerf(d, &["reconstruct", "--finish", "-o", "split", "-q"]));
+    for i in 0..5 {
+        let name = format!("frames/volume_{i:03}.npy");
+        let (a, b) = (std::fs::read(d.join("serial").join(&name)), std::fs::read(d.join("split").join(&name)));
+        assert_eq!(a.expect("serial volume"), b.expect("split volume"), "{name} differs");
+    }
+    let (a, b) = (report(&d.join("serial")), report(&d.join("split")));
+    assert_eq!(a["history"]["loss"], b["history"]["loss"]);
+    assert_eq!(a["windows"].as_array().map(Vec::len), Some(4));
+    assert_eq!(a["final_nrmse"], b["final_nrmse"]);
+    assert_eq!(
+        std::fs::read_to_string(d.join("serial/volumes.pvd")).expect("pvd"),
+        std::fs::read_to_string(d.join("split/volumes.pvd")).expect("pvd")
+    );
+    // A finished run takes no more windows.
+    let out = reconstruct(d, "split", &["--window-index", "0"]);
+    assert!(!out.status.success() && stderr(&out).contains("already holds a finished run"), "{}", stderr(&out));
+}
+
+#[test]
+fn independent_windows_run_in_any_order_and_misuse_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    split_scene(d);
+    // Without warm starts every window stands alone: the last one first is fine.
+    ok(&reconstruct(d, "serial", &["--no-warm-start"]));
+    for k in ["3", "1", "0", "2"] {
+        ok(&reconstruct(d, "split", &["--no-warm-start", "--window-index", k]));
+    }
+    ok(&fluidnerf(d, &["reconstruct", "--finish", "-o", "split", "-q"]));
+    for i in 0..5 {
+        let name = format!("frames/volume_{i:03}.npy");
+        assert_eq!(std::fs::read(d.join("serial").join(&name)).ok(), std::fs::read(d.join("split").join(&name)).ok());
+    }
+
+    // Other settings in the same folder would mix two runs.
+    let out = fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "other",
+            "--method",
+            "tr-fast",
+            "--window",
+            "2",
+            "--overlap",
+            "1",
+            "--max-iterations",
+            "2",
+            "--resolution",
+            "10",
+            "--window-index",
+            "0",
+            "-q",
+        ],
+    );
+    ok(&out);
+    let out = fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "other",
+            "--method",
+            "tr-fast",
+            "--window",
+            "2",
+            "--overlap",
+            "1",
+            "--max-iterations",
+            "3",
+            "--resolution",
+            "10",
+            "--window-index",
+            "1",
+            "-q",
+        ],
+    );
+    assert!(!out.status.success() && stderr(&out).contains("other settings"), "{}", stderr(&out));
+    // An index beyond the plan, a frame range holding no window, a static method.
+    let out = reconstruct(d, "x", &["--window-index", "4"]);
+    assert!(!out.status.success() && stderr(&out).contains("the run has 4 window(s)"), "{}", stderr(&out));
+    let out = reconstruct(d, "x", &["--frames", "0..1"]);
+    assert!(!out.status.success() && stderr(&out).contains("no window lies inside frames 0..1"), "{}", stderr(&out));
+    let out = reconstruct(d, "x", &["--frames", "3..2"]);
+    assert!(!out.status.success() && stderr(&out).contains("the range is empty"), "{}", stderr(&out));
+    let out = fluidnerf(d, &["reconstruct", "scene", "-o", "y", "--method", "asart", "--window-index", "0"]);
+    assert!(!out.status.success() && stderr(&out).contains("--window-index do(es) not apply to --method asart"));
+}
