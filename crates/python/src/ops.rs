@@ -1,0 +1,275 @@
+//! Operators on NumPy arrays: the classical projectors (forward and adjoint), the reference
+//! renderer, the metrics, and synthetic scenes.
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+
+use fluidnerf_classical::{Grid, ProjectorConfig};
+use fluidnerf_core::{Image, RenderSettings};
+use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArrayDyn};
+use pyo3::prelude::*;
+
+use crate::scene::{images_to_py, PyScene};
+use crate::{err, guard, volume_from_py};
+
+/// The projector settings from JSON text (`fluidnerf_classical::ProjectorConfig`; unknown keys
+/// are refused), validated.
+fn projector_config(text: &str) -> PyResult<ProjectorConfig> {
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("projector: {e}")))?;
+    let config: ProjectorConfig = serde_json::from_value(value).map_err(|e| err(format!("projector: {e}")))?;
+    config.validate().map_err(|e| err(format!("projector: {e}")))?;
+    Ok(config)
+}
+
+/// `A x`: the images the scene's cameras record of the volume `(nz, ny, nx)` filling the
+/// scene's box, through the classical projector (`projector` JSON: `kind` "splat" or "ray",
+/// `splat_subdivisions`, `ray_step`), scaled by the scene's `intensity_scale`. Every frame,
+/// in frame order.
+#[pyfunction]
+#[pyo3(signature = (scene, volume, projector="{}"))]
+pub fn forward_project(
+    py: Python<'_>,
+    scene: &PyScene,
+    volume: PyReadonlyArray3<'_, f32>,
+    projector: &str,
+) -> PyResult<PyObject> {
+    let config = projector_config(projector)?;
+    let volume = volume_from_py(&volume, scene.inner.aabb)?;
+    let cameras = scene.cameras();
+    let scale = scene.inner.intensity_scale;
+    let images = py.allow_threads(|| {
+        guard(|| {
+            let grid = Grid::new(volume.dims, volume.aabb);
+            let p = config.build(grid, &cameras, scale).map_err(|e| err(e.to_string()))?;
+            let mut images = Vec::with_capacity(cameras.len());
+            for (v, c) in cameras.iter().enumerate() {
+                let mut out = vec![0f32; c.width() * c.height()];
+                p.forward(v, &volume.data, &mut out);
+                images.push(Image::from_vec(c.width(), c.height(), out));
+            }
+            Ok(images)
+        })
+    })?;
+    images_to_py(py, images)
+}
+
+/// `Aᵀ y`: the adjoint of [`forward_project`], images (one per frame: an `(N, H, W)` array or
+/// a list of `(H, W)` arrays) smeared back into a volume of `shape` `(nz, ny, nx)` filling the
+/// scene's box.
+#[pyfunction]
+#[pyo3(signature = (scene, images, shape, projector="{}"))]
+pub fn back_project<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    images: Vec<PyReadonlyArrayDyn<'py, f32>>,
+    shape: (usize, usize, usize),
+    projector: &str,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let config = projector_config(projector)?;
+    let cameras = scene.cameras();
+    if images.len() != cameras.len() {
+        return Err(err(format!("images: expected {} images (one per frame), got {}", cameras.len(), images.len())));
+    }
+    let mut data = Vec::with_capacity(images.len());
+    for (i, (img, c)) in images.iter().zip(&cameras).enumerate() {
+        let a = img.as_array();
+        if a.shape() != [c.height(), c.width()] {
+            return Err(err(format!(
+                "images[{i}]: expected shape ({}, {}) for frame {i}'s camera, got {:?}",
+                c.height(),
+                c.width(),
+                a.shape()
+            )));
+        }
+        data.push(a.iter().copied().collect::<Vec<f32>>());
+    }
+    let (nz, ny, nx) = shape;
+    if nx == 0 || ny == 0 || nz == 0 {
+        return Err(err(format!("shape: every side must be positive, got {shape:?}")));
+    }
+    let scale = scene.inner.intensity_scale;
+    let aabb = scene.inner.aabb;
+    let out = py.allow_threads(|| {
+        guard(|| {
+            let grid = Grid::new([nx, ny, nz], aabb);
+            let p = config.build(grid, &cameras, scale).map_err(|e| err(e.to_string()))?;
+            let mut out = vec![0f32; grid.len()];
+            for (v, y) in data.iter().enumerate() {
+                p.back_add(v, y, &mut out, None);
+            }
+            Ok(out)
+        })
+    })?;
+    PyArray1::from_vec(py, out).reshape([nz, ny, nx])
+}
+
+/// Line integrals of the volume `(nz, ny, nx)` (trilinear, filling the scene's box) through
+/// every pixel centre of the scene's cameras, times `intensity_scale`: the reference renderer
+/// (`fluidnerf_core::render_image`). `step` is the quadrature step in world units (None: the
+/// box's smallest side / 256), `supersample` rays per pixel per axis.
+#[pyfunction]
+#[pyo3(signature = (scene, volume, step=None, supersample=1))]
+pub fn render(
+    py: Python<'_>,
+    scene: &PyScene,
+    volume: PyReadonlyArray3<'_, f32>,
+    step: Option<f64>,
+    supersample: usize,
+) -> PyResult<PyObject> {
+    let volume = volume_from_py(&volume, scene.inner.aabb)?;
+    let cameras = scene.cameras();
+    let settings = RenderSettings { step, supersample, time: 0.0, scale: scene.inner.intensity_scale };
+    let aabb = scene.inner.aabb;
+    let images = py.allow_threads(|| {
+        guard(|| {
+            cameras
+                .iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    fluidnerf_core::render_image(&volume, c, &aabb, &settings)
+                        .map_err(|e| err(format!("camera {i}: {e}")))
+                })
+                .collect::<PyResult<Vec<Image>>>()
+        })
+    })?;
+    images_to_py(py, images)
+}
+
+/// Two arrays of one shape as flat f32 vectors.
+fn pair(
+    a: &PyReadonlyArrayDyn<'_, f32>,
+    b: &PyReadonlyArrayDyn<'_, f32>,
+) -> PyResult<(Vec<f32>, Vec<f32>, Vec<usize>)> {
+    let (x, y) = (a.as_array(), b.as_array());
+    if x.shape() != y.shape() {
+        return Err(err(format!("estimate and truth differ in shape: {:?} and {:?}", x.shape(), y.shape())));
+    }
+    if x.is_empty() {
+        return Err(err("empty arrays"));
+    }
+    Ok((x.iter().copied().collect(), y.iter().copied().collect(), x.shape().to_vec()))
+}
+
+/// NRMSE of `estimate` against `truth` (dissertation Eq. 6.18: RMS error over the truth's RMS).
+#[pyfunction]
+pub fn nrmse(estimate: PyReadonlyArrayDyn<'_, f32>, truth: PyReadonlyArrayDyn<'_, f32>) -> PyResult<f64> {
+    let (a, b, _) = pair(&estimate, &truth)?;
+    guard(|| Ok(fluidnerf_metrics::nrmse(&a, &b)))
+}
+
+/// PSNR in dB with peak `data_range` (None: the truth's max − min).
+#[pyfunction]
+#[pyo3(signature = (estimate, truth, data_range=None))]
+pub fn psnr(
+    estimate: PyReadonlyArrayDyn<'_, f32>,
+    truth: PyReadonlyArrayDyn<'_, f32>,
+    data_range: Option<f64>,
+) -> PyResult<f64> {
+    let (a, b, _) = pair(&estimate, &truth)?;
+    let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(&b));
+    if !(range > 0.0 && range.is_finite()) {
+        return Err(err(format!("data_range: must be positive, got {range}")));
+    }
+    guard(|| Ok(fluidnerf_metrics::psnr(&a, &b, range)))
+}
+
+/// SSIM of `estimate` against `truth`: `window` "global" (one window over the whole array),
+/// "uniform" (7-wide, skimage's default) or "gaussian" (σ 1.5), for 2D `(H, W)` and 3D
+/// `(nz, ny, nx)` arrays. `data_range` None: the truth's max − min.
+#[pyfunction]
+#[pyo3(signature = (estimate, truth, data_range=None, window="uniform"))]
+pub fn ssim(
+    estimate: PyReadonlyArrayDyn<'_, f32>,
+    truth: PyReadonlyArrayDyn<'_, f32>,
+    data_range: Option<f64>,
+    window: &str,
+) -> PyResult<f64> {
+    let (a, b, shape) = pair(&estimate, &truth)?;
+    let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(&b));
+    if !(range > 0.0 && range.is_finite()) {
+        return Err(err(format!("data_range: must be positive, got {range}")));
+    }
+    let params = match window {
+        "global" => return guard(|| Ok(fluidnerf_metrics::ssim_global(&a, &b, range))),
+        "uniform" => fluidnerf_metrics::SsimParams { data_range: Some(range), ..Default::default() },
+        "gaussian" => {
+            fluidnerf_metrics::SsimParams { data_range: Some(range), ..fluidnerf_metrics::SsimParams::gaussian() }
+        }
+        other => return Err(err(format!("window: expected 'global', 'uniform' or 'gaussian', got {other:?}"))),
+    };
+    guard(|| {
+        let r = match shape.as_slice() {
+            [h, w] => fluidnerf_metrics::ssim_2d(&a, &b, *w, *h, &params),
+            [nz, ny, nx] => fluidnerf_metrics::ssim_3d(&a, &b, [*nx, *ny, *nz], &params),
+            s => return Err(err(format!("ssim: expected a 2D or 3D array, got shape {s:?}"))),
+        };
+        r.map_err(|e| err(e.to_string()))
+    })
+}
+
+/// Synthesises the scene of preset `preset` (settings overridden by the JSON object
+/// `overrides`, merged key by key into the preset's settings) into `folder`: images (16-bit
+/// PNG counts), ground truth (`truth/*.npy`), `transforms.json` and `synth.json`. Returns the
+/// scene.
+#[pyfunction]
+#[pyo3(signature = (folder, preset, overrides="{}", force=false))]
+pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, force: bool) -> PyResult<PyScene> {
+    let mut settings = guard(|| fluidnerf_synth::preset(preset).map_err(|e| err(e.to_string())))?;
+    let patch: serde_json::Value = serde_json::from_str(overrides).map_err(|e| err(format!("settings: {e}")))?;
+    if patch.as_object().is_some_and(|o| !o.is_empty()) {
+        let mut value = serde_json::to_value(&settings).map_err(|e| err(e.to_string()))?;
+        merge(&mut value, patch);
+        settings = fluidnerf_pipeline::rundir::from_json_value(value)
+            .map_err(|e| err(e.to_string().replacen("configuration", "synth settings", 1)))?;
+    }
+    guard(|| settings.validate().map_err(|e| err(e.to_string())))?;
+    let scene_file = folder.join("transforms.json");
+    if scene_file.exists() && !force {
+        return Err(err(format!("{} already holds a scene; pass force=True to overwrite it", folder.display())));
+    }
+    let scene = py.allow_threads(|| {
+        guard(|| {
+            let syn = fluidnerf_synth::generate(&settings, None, |_| ControlFlow::Continue(()))
+                .map_err(|e| err(e.to_string()))?;
+            let io = |e: fluidnerf_io::IoError| err(e.to_string());
+            for f in &syn.frames {
+                fluidnerf_io::image::write_png16_counts(&folder.join(syn.image_path(f)), &f.counts).map_err(io)?;
+            }
+            for (k, (_, vol)) in syn.truth.iter().enumerate() {
+                fluidnerf_io::volume::write_npy(&folder.join(syn.truth_path(k)), vol).map_err(io)?;
+            }
+            let scene = syn.scene(folder.clone());
+            fluidnerf_io::scene::save_scene(&scene, &scene_file).map_err(io)?;
+            let record = serde_json::json!({
+                "fluidnerf_version": env!("CARGO_PKG_VERSION"),
+                "command": "synth",
+                "preset": preset,
+                "seed": settings.seed,
+                "intensity_scale": syn.intensity_scale,
+                "settings": settings,
+                "stats": syn.stats,
+            });
+            let text = serde_json::to_string_pretty(&record).map_err(|e| err(e.to_string()))? + "\n";
+            fluidnerf_io::atomic_write(&folder.join("synth.json"), |w| w.write_all(text.as_bytes())).map_err(io)?;
+            fluidnerf_io::scene::load_scene(&folder).map_err(io)
+        })
+    })?;
+    Ok(PyScene { inner: scene, images: None, saved: true })
+}
+
+/// Merges `patch` into `base` key by key (objects recursively; anything else replaces).
+fn merge(base: &mut serde_json::Value, patch: serde_json::Value) {
+    match (base, patch) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
+            for (k, v) in p {
+                match b.get_mut(&k) {
+                    Some(slot) => merge(slot, v),
+                    None => {
+                        b.insert(k, v);
+                    }
+                }
+            }
+        }
+        (slot, v) => *slot = v,
+    }
+}

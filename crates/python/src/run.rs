@@ -1,0 +1,317 @@
+//! Runs: configuration (JSON text of `RunConfig`), `reconstruct` through the library
+//! pipeline, the window-by-window path of time-resolved runs, and reading run folders.
+
+use std::path::PathBuf;
+
+use fluidnerf_core::glam::Vec3;
+use fluidnerf_core::ScalarField;
+use fluidnerf_pipeline::load::LoadedRun;
+use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunKind};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::scene::PyScene;
+use crate::{err, guard, volume_to_py, Callback};
+
+fn to_json<T: serde::Serialize>(value: &T) -> PyResult<String> {
+    serde_json::to_string(value).map_err(|e| err(format!("cannot write JSON: {e}")))
+}
+
+/// Parses and validates a `RunConfig` from JSON text, with the messages of `config.json`.
+fn parse_config(text: &str) -> PyResult<RunConfig> {
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("configuration: {e}")))?;
+    let config: RunConfig = fluidnerf_pipeline::rundir::from_json_value(value).map_err(|e| err(e.to_string()))?;
+    if config.format != fluidnerf_pipeline::CONFIG_FORMAT {
+        return Err(err(format!(
+            "format: configuration format {} is not the format {} this version reads",
+            config.format,
+            fluidnerf_pipeline::CONFIG_FORMAT
+        )));
+    }
+    config.validate().map_err(|e| err(e.to_string()))?;
+    Ok(config)
+}
+
+/// The default configuration (JSON text) of `method` on the scene `scene`, from `preset` for
+/// neural methods when given.
+#[pyfunction]
+#[pyo3(signature = (scene, method, preset=None))]
+pub fn default_config(scene: PathBuf, method: &str, preset: Option<&str>) -> PyResult<String> {
+    guard(|| {
+        let method: Method = method.parse().map_err(|e: fluidnerf_pipeline::PipelineError| err(e.to_string()))?;
+        let mut config = RunConfig::new(scene, method);
+        if let Some(p) = preset {
+            config.method = MethodConfig::with_preset(method, p).map_err(|e| err(e.to_string()))?;
+        }
+        to_json(&config)
+    })
+}
+
+/// Checks a configuration (JSON text) as `config.json` is checked; returns it normalised.
+#[pyfunction]
+pub fn check_config(config: &str) -> PyResult<String> {
+    guard(|| to_json(&parse_config(config)?))
+}
+
+/// An event as a dict: `{"kind": ..., ...}`.
+pub(crate) fn event_dict<'py>(py: Python<'py>, event: &RunEvent) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let window = |d: &Bound<'py, PyDict>, w: &Option<fluidnerf_pipeline::WindowPos>| -> PyResult<()> {
+        match w {
+            Some(w) => {
+                d.set_item("window", w.index)?;
+                d.set_item("windows", w.count)
+            }
+            None => d.set_item("window", py.None()),
+        }
+    };
+    match event {
+        RunEvent::Started { method, max_iterations, windows, start_iteration } => {
+            d.set_item("kind", "started")?;
+            d.set_item("method", method.name())?;
+            d.set_item("max_iterations", max_iterations)?;
+            d.set_item("windows", windows)?;
+            d.set_item("start_iteration", start_iteration)?;
+        }
+        RunEvent::Iteration { window: w, iteration, loss, smoothed, train_time_s } => {
+            d.set_item("kind", "iteration")?;
+            window(&d, w)?;
+            d.set_item("iteration", iteration)?;
+            d.set_item("loss", loss)?;
+            d.set_item("smoothed", smoothed)?;
+            d.set_item("train_time_s", train_time_s)?;
+        }
+        RunEvent::Evaluation { window: w, iteration, nrmse, holdout } => {
+            d.set_item("kind", "evaluation")?;
+            window(&d, w)?;
+            d.set_item("iteration", iteration)?;
+            d.set_item("nrmse", nrmse)?;
+            d.set_item("holdout", holdout)?;
+        }
+        RunEvent::Checkpoint { path } => {
+            d.set_item("kind", "checkpoint")?;
+            d.set_item("path", path.to_path_buf())?;
+        }
+        RunEvent::WindowFinished(w) => {
+            d.set_item("kind", "window_finished")?;
+            window(&d, &Some(*w))?;
+        }
+        RunEvent::Warning(message) => {
+            d.set_item("kind", "warning")?;
+            d.set_item("message", *message)?;
+        }
+        RunEvent::Writing => d.set_item("kind", "writing")?,
+    }
+    Ok(d)
+}
+
+fn overwrite_of(s: &str) -> PyResult<Overwrite> {
+    match s {
+        "refuse" => Ok(Overwrite::Refuse),
+        "force" => Ok(Overwrite::Force),
+        "resume" => Ok(Overwrite::Resume),
+        other => Err(err(format!("overwrite: expected 'refuse', 'force' or 'resume', got {other:?}"))),
+    }
+}
+
+/// Runs the configuration (JSON text) on the saved `scene` into `out` with the GIL released;
+/// returns `report.json`'s text. `callback(event: dict)` sees every event; Ctrl-C (and an
+/// exception in the callback) stops the run, which writes its results, and is raised after.
+#[pyfunction]
+#[pyo3(signature = (scene, config, out, overwrite="refuse", callback=None))]
+pub fn reconstruct(
+    py: Python<'_>,
+    scene: &PyScene,
+    config: &str,
+    out: PathBuf,
+    overwrite: &str,
+    callback: Option<PyObject>,
+) -> PyResult<String> {
+    let config = guard(|| parse_config(config))?;
+    let overwrite = overwrite_of(overwrite)?;
+    let scene = scene.require_saved("reconstruct")?.clone();
+    let mut cb = Callback { callback, error: None };
+    let result = py.allow_threads(|| {
+        guard(|| {
+            let dir = RunDir::create(&out, overwrite, Some(&scene.root)).map_err(|e| err(e.to_string()))?;
+            let report = fluidnerf_pipeline::reconstruct(&scene, &config, &dir, |e| cb.on_event(e))
+                .map_err(|e| err(e.to_string()))?;
+            to_json(&report)
+        })
+    });
+    if let Some(e) = cb.error {
+        return Err(e);
+    }
+    result
+}
+
+/// The window plan of a time-resolved configuration on `scene`, as JSON text
+/// (`{"frame_times": [...], "windows": [[a, b], ...], "warm_start": bool}`).
+#[pyfunction]
+pub fn window_plan(scene: &PyScene, config: &str) -> PyResult<String> {
+    guard(|| {
+        let config = parse_config(config)?;
+        let plan = fluidnerf_pipeline::window_plan(&scene.inner, &config).map_err(|e| err(e.to_string()))?;
+        to_json(&plan)
+    })
+}
+
+/// Trains windows `start..end` of a time-resolved run into `out`
+/// (`fluidnerf_pipeline::reconstruct_windows`); returns the outcomes as JSON text.
+#[pyfunction]
+#[pyo3(signature = (scene, config, out, start, end, callback=None))]
+pub fn reconstruct_windows(
+    py: Python<'_>,
+    scene: &PyScene,
+    config: &str,
+    out: PathBuf,
+    start: usize,
+    end: usize,
+    callback: Option<PyObject>,
+) -> PyResult<String> {
+    let config = guard(|| parse_config(config))?;
+    let scene = scene.require_saved("reconstruct_windows")?.clone();
+    let mut cb = Callback { callback, error: None };
+    let result = py.allow_threads(|| {
+        guard(|| {
+            let outcomes =
+                fluidnerf_pipeline::reconstruct_windows(&scene, &config, &out, start..end, |e| cb.on_event(e))
+                    .map_err(|e| err(e.to_string()))?;
+            to_json(&outcomes)
+        })
+    });
+    if let Some(e) = cb.error {
+        return Err(e);
+    }
+    result
+}
+
+/// Stitches a run whose windows have all finished and writes its results
+/// (`fluidnerf_pipeline::finish_windows`); returns `report.json`'s text.
+#[pyfunction]
+#[pyo3(signature = (scene, config, out, callback=None))]
+pub fn finish_windows(
+    py: Python<'_>,
+    scene: &PyScene,
+    config: &str,
+    out: PathBuf,
+    callback: Option<PyObject>,
+) -> PyResult<String> {
+    let config = guard(|| parse_config(config))?;
+    let scene = scene.require_saved("finish_windows")?.clone();
+    let mut cb = Callback { callback, error: None };
+    let result = py.allow_threads(|| {
+        guard(|| {
+            let report = fluidnerf_pipeline::finish_windows(&scene, &config, &out, |e| cb.on_event(e))
+                .map_err(|e| err(e.to_string()))?;
+            to_json(&report)
+        })
+    });
+    if let Some(e) = cb.error {
+        return Err(e);
+    }
+    result
+}
+
+/// A finished run folder, read back (`fluidnerf_pipeline::load::LoadedRun`).
+#[pyclass(module = "fluidnerf._fluidnerf", name = "RunFolder")]
+pub struct PyRun {
+    run: LoadedRun,
+    /// The trained field, loaded on first use.
+    field: Option<Box<dyn ScalarField + Send + Sync>>,
+}
+
+/// Opens the run in `folder`; `aabb` `(2, 3)` places a bare `volume.npy` that has no report.
+#[pyfunction]
+#[pyo3(signature = (folder, aabb=None))]
+pub fn open_run(folder: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<PyRun> {
+    let hint = aabb.map(|a| crate::aabb_arg(&a)).transpose()?;
+    guard(|| {
+        let run = LoadedRun::open(&folder, hint).map_err(|e| err(e.to_string()))?;
+        Ok(PyRun { run, field: None })
+    })
+}
+
+#[pymethods]
+impl PyRun {
+    /// The run folder.
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.run.dir.clone()
+    }
+
+    /// `"volume"` (a voxel method), `"field"` (a static neural field) or `"temporal"`.
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match self.run.kind {
+            RunKind::Volume => "volume",
+            RunKind::Field => "field",
+            RunKind::Temporal => "temporal",
+        }
+    }
+
+    /// `report.json` as JSON text (None for folders not written by `reconstruct`).
+    #[getter]
+    fn report_json(&self) -> PyResult<Option<String>> {
+        self.run.report.as_ref().map(to_json).transpose()
+    }
+
+    /// `config.json` as JSON text (None for folders not written by `reconstruct`).
+    #[getter]
+    fn config_json(&self) -> PyResult<Option<String>> {
+        self.run.config.as_ref().map(to_json).transpose()
+    }
+
+    /// The box the results fill, `(2, 3)`.
+    #[getter]
+    fn aabb<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+        let a = self.run.aabb;
+        PyArray1::from_vec(py, vec![a.min.x, a.min.y, a.min.z, a.max.x, a.max.y, a.max.z]).reshape([2, 3])
+    }
+
+    /// The first (for static runs the only) volume, `(nz, ny, nx)` float32.
+    fn volume<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let v = py.allow_threads(|| guard(|| self.run.first_volume().map_err(|e| err(e.to_string()))))?;
+        volume_to_py(py, v)
+    }
+
+    /// Every volume with its time: `[(time or None, (nz, ny, nx) array)]`.
+    fn volumes(&self, py: Python<'_>) -> PyResult<Vec<(Option<f64>, PyObject)>> {
+        let vs = py.allow_threads(|| guard(|| self.run.volumes().map_err(|e| err(e.to_string()))))?;
+        vs.into_iter().map(|(t, v)| Ok((t, volume_to_py(py, v)?.into_any().unbind()))).collect()
+    }
+
+    /// The result evaluated at world points `(N, 3)` (x, y, z) at `time`: the trained field
+    /// of neural runs, the volume sampled trilinearly for voxel runs. Returns `(N,)` float32.
+    #[pyo3(signature = (points, time=0.0))]
+    fn field<'py>(
+        &mut self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        time: f64,
+    ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let p = points.as_array();
+        if p.ncols() != 3 {
+            return Err(err(format!("points: expected shape (N, 3), got {:?}", p.shape())));
+        }
+        let pts: Vec<Vec3> = p.rows().into_iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect();
+        if let Some(i) = pts.iter().position(|v| !v.is_finite()) {
+            return Err(err(format!("points: point {i} is not finite")));
+        }
+        if self.field.is_none() {
+            let f = py.allow_threads(|| guard(|| self.run.field().map_err(|e| err(e.to_string()))))?;
+            self.field = Some(f);
+        }
+        let field = self.field.as_deref().ok_or_else(|| err("the field could not be loaded"))?;
+        let out = py.allow_threads(|| {
+            guard(|| {
+                use rayon::prelude::*;
+                let mut out = vec![0f32; pts.len()];
+                out.par_chunks_mut(16_384).zip(pts.par_chunks(16_384)).for_each(|(o, p)| field.eval(p, time, o));
+                Ok(out)
+            })
+        })?;
+        Ok(PyArray1::from_vec(py, out))
+    }
+}

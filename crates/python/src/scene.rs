@@ -1,0 +1,449 @@
+//! `Scene`: a calibrated recording, loaded from a folder or built from NumPy arrays.
+//!
+//! Conventions (those of `fluidnerf-core`): intrinsics `K` with pixel centres at integer
+//! coordinates (OpenCV), poses `world_from_camera` (camera to world, 4 × 4) with OpenCV camera
+//! axes (x right, y down, z forward), distortion in OpenCV order `(k1, k2, p1, p2, k3, k4, k5,
+//! k6)`, images `(N, H, W)` float32 linear values, the box `[[xmin, ymin, zmin], [xmax, ymax,
+//! zmax]]` in world units.
+
+use std::path::{Path, PathBuf};
+
+use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
+use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, TruthRef};
+use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+
+use crate::{err, guard};
+
+/// A calibrated recording: frames (camera, image, time), a reconstruction box, and optional
+/// ground truth. `root` is the folder it lives in, or None for a scene built from arrays and
+/// not saved yet.
+#[pyclass(module = "fluidnerf._fluidnerf", name = "Scene")]
+#[derive(Clone)]
+pub struct PyScene {
+    pub inner: fluidnerf_core::Scene,
+    /// Images held in memory (scenes built from arrays); None: read from the files.
+    pub images: Option<Vec<Image>>,
+    /// The scene is on disk at `inner.root`.
+    pub saved: bool,
+}
+
+impl PyScene {
+    /// The scene's folder, or an error for a scene that has none.
+    pub fn require_saved(&self, what: &str) -> PyResult<&fluidnerf_core::Scene> {
+        if self.saved {
+            Ok(&self.inner)
+        } else {
+            Err(err(format!("{what} needs a scene on disk: call scene.save(folder) first")))
+        }
+    }
+
+    /// Every frame's image, in frame order.
+    pub fn images_vec(&self) -> PyResult<Vec<Image>> {
+        match &self.images {
+            Some(v) => Ok(v.clone()),
+            None => fluidnerf_io::scene::load_images(&self.inner).map_err(|e| err(e.to_string())),
+        }
+    }
+
+    pub fn cameras(&self) -> Vec<Camera> {
+        self.inner.frames.iter().map(|f| f.camera.clone()).collect()
+    }
+}
+
+pub fn aabb_from(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Aabb> {
+    let v = a.as_array();
+    if v.shape() != [2, 3] {
+        return Err(err(format!(
+            "aabb: expected shape (2, 3) [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {:?}",
+            v.shape()
+        )));
+    }
+    let aabb = Aabb::new(DVec3::new(v[[0, 0]], v[[0, 1]], v[[0, 2]]), DVec3::new(v[[1, 0]], v[[1, 1]], v[[1, 2]]));
+    aabb.validate().map_err(|e| err(format!("aabb: {e}")))?;
+    Ok(aabb)
+}
+
+fn aabb_array<'py>(py: Python<'py>, aabb: &Aabb) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let v = vec![aabb.min.x, aabb.min.y, aabb.min.z, aabb.max.x, aabb.max.y, aabb.max.z];
+    PyArray1::from_vec(py, v).reshape([2, 3])
+}
+
+/// A `(rows, cols)` matrix as nested rows.
+fn affine_from_rows(m: &[[f64; 4]; 4]) -> DAffine3 {
+    DAffine3 {
+        matrix3: DMat3::from_cols(
+            DVec3::new(m[0][0], m[1][0], m[2][0]),
+            DVec3::new(m[0][1], m[1][1], m[2][1]),
+            DVec3::new(m[0][2], m[1][2], m[2][2]),
+        ),
+        translation: DVec3::new(m[0][3], m[1][3], m[2][3]),
+    }
+}
+
+fn affine_rows(a: &DAffine3) -> [f64; 16] {
+    let (m, t) = (a.matrix3, a.translation);
+    [
+        m.x_axis.x, m.y_axis.x, m.z_axis.x, t.x, m.x_axis.y, m.y_axis.y, m.z_axis.y, t.y, m.x_axis.z, m.y_axis.z,
+        m.z_axis.z, t.z, 0.0, 0.0, 0.0, 1.0,
+    ]
+}
+
+/// The camera arrays of a list of cameras: K `(N, 3, 3)`, world_from_camera `(N, 4, 4)`,
+/// distortion `(N, 8)`, sizes `(N, 2)` as (width, height).
+pub type CameraArrays<'py> =
+    (Bound<'py, PyArray3<f64>>, Bound<'py, PyArray3<f64>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u32>>);
+
+pub fn camera_arrays<'py>(py: Python<'py>, cameras: &[&Camera]) -> PyResult<CameraArrays<'py>> {
+    let n = cameras.len();
+    let mut k = Vec::with_capacity(n * 9);
+    let mut pose = Vec::with_capacity(n * 16);
+    let mut dist = Vec::with_capacity(n * 8);
+    let mut sizes = Vec::with_capacity(n * 2);
+    for c in cameras {
+        k.extend(c.intrinsics.k_rows().iter().flatten());
+        pose.extend(affine_rows(&c.world_from_camera));
+        let d = c.distortion;
+        dist.extend([d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6]);
+        sizes.extend([c.intrinsics.width, c.intrinsics.height]);
+    }
+    Ok((
+        PyArray1::from_vec(py, k).reshape([n, 3, 3])?,
+        PyArray1::from_vec(py, pose).reshape([n, 4, 4])?,
+        PyArray1::from_vec(py, dist).reshape([n, 8])?,
+        PyArray1::from_vec(py, sizes).reshape([n, 2])?,
+    ))
+}
+
+/// Images `(N, H, W)` as one array (all of one size) or a list of `(H, W)` arrays.
+pub fn images_to_py(py: Python<'_>, images: Vec<Image>) -> PyResult<PyObject> {
+    let same = images.windows(2).all(|w| (w[0].width, w[0].height) == (w[1].width, w[1].height));
+    if same && !images.is_empty() {
+        let (w, h, n) = (images[0].width, images[0].height, images.len());
+        let mut data = Vec::with_capacity(n * w * h);
+        for img in images {
+            data.extend_from_slice(&img.data);
+        }
+        return Ok(PyArray1::from_vec(py, data).reshape([n, h, w])?.into_any().unbind());
+    }
+    let list: Vec<PyObject> = images
+        .into_iter()
+        .map(|img| Ok(PyArray1::from_vec(py, img.data).reshape([img.height, img.width])?.into_any().unbind()))
+        .collect::<PyResult<_>>()?;
+    Ok(pyo3::types::PyList::new(py, list)?.into_any().unbind())
+}
+
+#[pymethods]
+impl PyScene {
+    /// Reads the scene in `folder` (a folder holding `transforms.json`, or the file itself)
+    /// and validates it.
+    #[staticmethod]
+    fn load(folder: PathBuf) -> PyResult<Self> {
+        guard(|| {
+            let inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
+            Ok(PyScene { inner, images: None, saved: true })
+        })
+    }
+
+    /// Builds a scene from arrays (see the module docs for conventions). `K` `(N, 3, 3)`,
+    /// `world_from_camera` `(N, 4, 4)`, `images` `(N, H, W)`, `aabb` `(2, 3)`, `times` `(N,)`
+    /// or None, `distortion` `(N, 4|5|8)` or None, `holdout` `(N,)` bools or None, `names` a
+    /// list of N camera names or None.
+    #[staticmethod]
+    #[pyo3(signature = (k, world_from_camera, images, aabb, times=None, distortion=None, holdout=None, names=None, units="mm".to_string(), intensity_scale=1.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_arrays(
+        k: PyReadonlyArray3<'_, f64>,
+        world_from_camera: PyReadonlyArray3<'_, f64>,
+        images: PyReadonlyArray3<'_, f32>,
+        aabb: PyReadonlyArray2<'_, f64>,
+        times: Option<PyReadonlyArray1<'_, f64>>,
+        distortion: Option<PyReadonlyArray2<'_, f64>>,
+        holdout: Option<Vec<bool>>,
+        names: Option<Vec<Option<String>>>,
+        units: String,
+        intensity_scale: f64,
+    ) -> PyResult<Self> {
+        guard(|| {
+            let (k, pose, imgs) = (k.as_array(), world_from_camera.as_array(), images.as_array());
+            let n = imgs.shape()[0];
+            let (h, w) = (imgs.shape()[1], imgs.shape()[2]);
+            if k.shape() != [n, 3, 3] {
+                return Err(err(format!("K: expected shape ({n}, 3, 3) for {n} images, got {:?}", k.shape())));
+            }
+            if pose.shape() != [n, 4, 4] {
+                return Err(err(format!(
+                    "world_from_camera: expected shape ({n}, 4, 4) for {n} images, got {:?}",
+                    pose.shape()
+                )));
+            }
+            let aabb = aabb_from(&aabb)?;
+            let times: Option<Vec<f64>> = times.map(|t| t.as_array().to_vec());
+            if let Some(t) = &times {
+                if t.len() != n {
+                    return Err(err(format!("times: expected {n} values, got {}", t.len())));
+                }
+                if let Some(i) = t.iter().position(|v| !v.is_finite()) {
+                    return Err(err(format!("times: frame {i} has the time {}", t[i])));
+                }
+            }
+            let dist = distortion.map(|d| d.as_array().to_owned());
+            if let Some(d) = &dist {
+                if d.shape()[0] != n {
+                    return Err(err(format!("distortion: expected {n} rows, got {}", d.shape()[0])));
+                }
+            }
+            for (what, len) in [("holdout", holdout.as_ref().map(Vec::len)), ("names", names.as_ref().map(Vec::len))] {
+                if let Some(len) = len.filter(|&l| l != n) {
+                    return Err(err(format!("{what}: expected {n} entries, got {len}")));
+                }
+            }
+            if !(intensity_scale > 0.0 && intensity_scale.is_finite()) {
+                return Err(err(format!("intensity_scale: must be positive, got {intensity_scale}")));
+            }
+            let mut frames = Vec::with_capacity(n);
+            let mut images_out = Vec::with_capacity(n);
+            for i in 0..n {
+                let kk = |r: usize, c: usize| k[[i, r, c]];
+                if kk(1, 0) != 0.0 || kk(2, 0) != 0.0 || kk(2, 1) != 0.0 || kk(2, 2) != 1.0 {
+                    return Err(err(format!("K[{i}]: the last row must be [0, 0, 1] and K[1][0] zero")));
+                }
+                let intrinsics = Intrinsics {
+                    width: w as u32,
+                    height: h as u32,
+                    fx: kk(0, 0),
+                    fy: kk(1, 1),
+                    cx: kk(0, 2),
+                    cy: kk(1, 2),
+                    skew: kk(0, 1),
+                };
+                let mut rows = [[0.0; 4]; 4];
+                for (r, row) in rows.iter_mut().enumerate() {
+                    for (c, v) in row.iter_mut().enumerate() {
+                        *v = pose[[i, r, c]];
+                    }
+                }
+                if rows[3] != [0.0, 0.0, 0.0, 1.0] {
+                    return Err(err(format!("world_from_camera[{i}]: the last row must be [0, 0, 0, 1]")));
+                }
+                let distortion = match &dist {
+                    Some(d) => {
+                        Distortion::from_opencv(&d.row(i).to_vec()).map_err(|e| err(format!("distortion[{i}]: {e}")))?
+                    }
+                    None => Distortion::default(),
+                };
+                let camera = Camera { intrinsics, distortion, world_from_camera: affine_from_rows(&rows), lens: None };
+                camera.validate().map_err(|e| err(format!("camera {i}: {e}")))?;
+                let data: Vec<f32> = imgs.index_axis(numpy::ndarray::Axis(0), i).iter().copied().collect();
+                let image = Image::from_vec(w, h, data);
+                if let Some((c, r)) = image.first_non_finite() {
+                    return Err(err(format!("images[{i}]: pixel (row {r}, column {c}) is not finite")));
+                }
+                if let Some(p) = image.data.iter().position(|&v| v < 0.0) {
+                    return Err(err(format!(
+                        "images[{i}]: pixel (row {}, column {}) is negative ({}); images are emitted light",
+                        p / w,
+                        p % w,
+                        image.data[p]
+                    )));
+                }
+                images_out.push(image);
+                frames.push(Frame {
+                    camera,
+                    file_path: PathBuf::from(format!("images/frame_{i:04}.tiff")),
+                    time: times.as_ref().map(|t| t[i]),
+                    camera_name: names.as_ref().and_then(|v| v[i].clone()),
+                    holdout: holdout.as_ref().is_some_and(|v| v[i]),
+                });
+            }
+            let inner = fluidnerf_core::Scene {
+                root: PathBuf::new(),
+                aabb,
+                units,
+                intensity_scale,
+                frames,
+                truth: Vec::<TruthRef>::new(),
+            };
+            Ok(PyScene { inner, images: Some(images_out), saved: false })
+        })
+    }
+
+    /// Writes the scene into `folder`: `transforms.json`, every image as a float32 TIFF under
+    /// `images/` and the ground-truth volumes under `truth/`. Afterwards the scene lives there.
+    #[pyo3(signature = (folder, force=false))]
+    fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
+        guard(|| {
+            let file = fluidnerf_io::scene::scene_file_path(&folder);
+            if file.exists() && !force {
+                return Err(err(format!(
+                    "{} already holds a scene; pass force=True to overwrite it",
+                    folder.display()
+                )));
+            }
+            let images = self.images_vec()?;
+            let truth = if self.saved {
+                fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?
+            } else {
+                Vec::new()
+            };
+            let mut scene = self.inner.clone();
+            scene.root = folder.clone();
+            for (i, (frame, image)) in scene.frames.iter_mut().zip(&images).enumerate() {
+                frame.file_path = PathBuf::from(format!("images/frame_{i:04}.tiff"));
+                fluidnerf_io::image::write_tiff_f32(&folder.join(&frame.file_path), image)
+                    .map_err(|e| err(e.to_string()))?;
+            }
+            scene.truth = Vec::new();
+            for (k, (time, volume)) in truth.iter().enumerate() {
+                let path = PathBuf::from(format!("truth/truth_{k:02}.npy"));
+                fluidnerf_io::volume::write_npy(&folder.join(&path), volume).map_err(|e| err(e.to_string()))?;
+                scene.truth.push(TruthRef { time: *time, file_path: path });
+            }
+            fluidnerf_io::scene::save_scene(&scene, &folder).map_err(|e| err(e.to_string()))?;
+            self.inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
+            self.images = None;
+            self.saved = true;
+            Ok(())
+        })
+    }
+
+    /// The folder the scene lives in, or None before it is saved.
+    #[getter]
+    fn root(&self) -> Option<PathBuf> {
+        self.saved.then(|| absolute(&self.inner.root))
+    }
+
+    /// The reconstruction box `[[xmin, ymin, zmin], [xmax, ymax, zmax]]`, world units.
+    #[getter]
+    fn aabb<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        aabb_array(py, &self.inner.aabb)
+    }
+
+    #[getter]
+    fn units(&self) -> String {
+        self.inner.units.clone()
+    }
+
+    /// Pixel value = intensity_scale × ∫E ds (world units).
+    #[getter]
+    fn intensity_scale(&self) -> f64 {
+        self.inner.intensity_scale
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.frames.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene({} frames, {} times, box {:?}..{:?} {}, {})",
+            self.inner.frames.len(),
+            self.inner.times().len(),
+            self.inner.aabb.min.to_array(),
+            self.inner.aabb.max.to_array(),
+            self.inner.units,
+            if self.saved { format!("in {}", self.inner.root.display()) } else { "in memory".to_string() }
+        )
+    }
+
+    /// Every frame's time (None for static frames).
+    #[getter]
+    fn times(&self) -> Vec<Option<f64>> {
+        self.inner.frames.iter().map(|f| f.time).collect()
+    }
+
+    /// Whether each frame is held out of training.
+    #[getter]
+    fn holdout(&self) -> Vec<bool> {
+        self.inner.frames.iter().map(|f| f.holdout).collect()
+    }
+
+    /// Each frame's camera name (None when not given).
+    #[getter]
+    fn names(&self) -> Vec<Option<String>> {
+        self.inner.frames.iter().map(|f| f.camera_name.clone()).collect()
+    }
+
+    /// The cameras as arrays: `(K (N, 3, 3), world_from_camera (N, 4, 4), distortion (N, 8),
+    /// sizes (N, 2) as (width, height))`.
+    fn camera_arrays<'py>(&self, py: Python<'py>) -> PyResult<CameraArrays<'py>> {
+        let cams: Vec<&Camera> = self.inner.frames.iter().map(|f| &f.camera).collect();
+        camera_arrays(py, &cams)
+    }
+
+    /// Every frame's image, linear float32: one `(N, H, W)` array when all have one size,
+    /// else a list of `(H, W)` arrays.
+    fn images(&self, py: Python<'_>) -> PyResult<PyObject> {
+        let images = py.allow_threads(|| guard(|| self.images_vec()))?;
+        images_to_py(py, images)
+    }
+
+    /// The ground-truth volumes `(time or None, (nz, ny, nx) array)` of a scene on disk.
+    fn truth(&self, py: Python<'_>) -> PyResult<Vec<(Option<f64>, PyObject)>> {
+        if !self.saved {
+            return Ok(Vec::new());
+        }
+        let truth = guard(|| fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string())))?;
+        truth.into_iter().map(|(t, v)| Ok((t, crate::volume_to_py(py, v)?.into_any().unbind()))).collect()
+    }
+}
+
+fn absolute(p: &Path) -> PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+/// Reads a `transforms.json` written by any NeRF tool (or its folder) as a scene, with the
+/// box `aabb` `(2, 3)` when the file has none.
+#[pyfunction]
+#[pyo3(signature = (path, aabb=None))]
+pub fn read_transforms(path: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<PyScene> {
+    guard(|| {
+        let draft = fluidnerf_io::scene::read_scene_draft(&path).map_err(|e| err(e.to_string()))?;
+        let file = draft.file.clone();
+        let aabb = match (aabb, draft.aabb) {
+            (Some(a), _) => aabb_from(&a)?,
+            (None, Some(a)) => a,
+            (None, None) => {
+                return Err(err(format!(
+                    "{}: no `aabb` in the file; pass aabb=[[xmin, ymin, zmin], [xmax, ymax, zmax]]",
+                    file.display()
+                )))
+            }
+        };
+        let inner = draft.into_scene(aabb);
+        fluidnerf_io::scene::validate_scene(&inner, &file).map_err(|e| err(e.to_string()))?;
+        Ok(PyScene { inner, images: None, saved: true })
+    })
+}
+
+/// Named cameras `(name, K, world_from_camera, distortion, (width, height))` of a calibration.
+type NamedCamera<'py> = (String, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>, Vec<f64>, (u32, u32));
+
+fn named_cameras<'py>(py: Python<'py>, cams: Vec<(String, Camera)>) -> PyResult<Vec<NamedCamera<'py>>> {
+    cams.into_iter()
+        .map(|(name, c)| {
+            let k: Vec<f64> = c.intrinsics.k_rows().iter().flatten().copied().collect();
+            Ok((
+                name,
+                PyArray1::from_vec(py, k).reshape([3, 3])?,
+                PyArray1::from_vec(py, affine_rows(&c.world_from_camera).to_vec()).reshape([4, 4])?,
+                c.distortion.to_opencv(),
+                (c.intrinsics.width, c.intrinsics.height),
+            ))
+        })
+        .collect()
+}
+
+/// The cameras of an OpenCV calibration (`cv::FileStorage` YAML/JSON file or a folder of them).
+#[pyfunction]
+pub fn read_opencv(py: Python<'_>, path: PathBuf) -> PyResult<Vec<NamedCamera<'_>>> {
+    let cams = guard(|| fluidnerf_io::calib::read_opencv(&path).map_err(|e| err(e.to_string())))?;
+    named_cameras(py, cams)
+}
+
+/// The images of a COLMAP model (text or binary) as cameras, named by image file name.
+#[pyfunction]
+pub fn read_colmap(py: Python<'_>, folder: PathBuf) -> PyResult<Vec<NamedCamera<'_>>> {
+    let cams = guard(|| fluidnerf_io::calib::read_colmap(&folder).map_err(|e| err(e.to_string())))?;
+    named_cameras(py, cams)
+}

@@ -1,0 +1,479 @@
+"""The documented Python API over the extension module ``fluidnerf._fluidnerf``."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Optional, Union
+
+import numpy as np
+
+from . import _fluidnerf as _ext
+from ._fluidnerf import FluidNerfError, Scene
+
+PathLike = Union[str, "os.PathLike[str]"]
+Callback = Callable[[dict], Optional[bool]]
+
+__all__ = [
+    "Camera",
+    "FluidNerfError",
+    "Run",
+    "Scene",
+    "back_project",
+    "build_config",
+    "forward_project",
+    "load_scene",
+    "methods",
+    "nrmse",
+    "open_run",
+    "plan_windows",
+    "psnr",
+    "read_colmap",
+    "read_opencv",
+    "read_transforms",
+    "reconstruct",
+    "render",
+    "scene_from_arrays",
+    "ssim",
+    "synth",
+    "synth_presets",
+    "window_plan",
+]
+
+
+# ---------------------------------------------------------------------------------------------
+# Scenes
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A calibrated camera read from a calibration file.
+
+    ``K`` is the 3 × 3 intrinsic matrix with pixel centres at integer coordinates (OpenCV),
+    ``world_from_camera`` the 4 × 4 camera-to-world pose with OpenCV camera axes (x right,
+    y down, z forward), ``distortion`` OpenCV's coefficients ``(k1, k2, p1, p2, k3[, k4, k5,
+    k6])`` and ``size`` the image ``(width, height)`` in pixels.
+    """
+
+    name: str
+    K: np.ndarray
+    world_from_camera: np.ndarray
+    distortion: tuple[float, ...]
+    size: tuple[int, int]
+
+
+def load_scene(folder: PathLike) -> Scene:
+    """Reads and validates the scene in ``folder`` (a folder with ``transforms.json``, or the file)."""
+    return Scene.load(os.fspath(folder))
+
+
+def scene_from_arrays(
+    K: np.ndarray,
+    world_from_camera: np.ndarray,
+    images: np.ndarray,
+    aabb: np.ndarray,
+    *,
+    times: np.ndarray | None = None,
+    distortion: np.ndarray | None = None,
+    holdout: list[bool] | None = None,
+    names: list[str | None] | None = None,
+    units: str = "mm",
+    intensity_scale: float = 1.0,
+) -> Scene:
+    """Builds a scene from arrays; it lives in memory until ``scene.save(folder)``.
+
+    Shapes and conventions (those of the Rust core):
+
+    - ``K``: ``(N, 3, 3)`` intrinsics, pixel centres at integer coordinates (OpenCV; a
+      centred principal point of a ``W``-wide image is ``cx = (W - 1) / 2``).
+    - ``world_from_camera``: ``(N, 4, 4)`` camera-to-world poses, OpenCV camera axes
+      (x right, y down, z forward). Invert a world-to-camera ``[R | t]`` first.
+    - ``images``: ``(N, H, W)`` linear pixel values, ``pixel = intensity_scale × ∫E ds``.
+    - ``aabb``: ``(2, 3)``, ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` in world units.
+    - ``times``: ``(N,)`` frame times for time-resolved recordings; ``distortion``:
+      ``(N, 4|5|8)`` OpenCV coefficients; ``holdout``: frames kept out of training.
+    """
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    return Scene.from_arrays(
+        f64(K),
+        f64(world_from_camera),
+        np.ascontiguousarray(images, dtype=np.float32),
+        f64(aabb),
+        times=None if times is None else f64(times),
+        distortion=None if distortion is None else f64(np.atleast_2d(distortion)),
+        holdout=None if holdout is None else [bool(h) for h in holdout],
+        names=names,
+        units=units,
+        intensity_scale=float(intensity_scale),
+    )
+
+
+def read_transforms(path: PathLike, aabb: np.ndarray | None = None) -> Scene:
+    """Reads a ``transforms.json`` of nerfstudio, instant-ngp or a Blender/NeRF exporter as a
+    scene; ``aabb`` ``(2, 3)`` gives the box when the file has none."""
+    box = None if aabb is None else np.ascontiguousarray(aabb, dtype=np.float64)
+    return _ext.read_transforms(os.fspath(path), box)
+
+
+def _cameras(raw: list) -> list[Camera]:
+    return [Camera(n, k, p, tuple(d), (int(s[0]), int(s[1]))) for n, k, p, d, s in raw]
+
+
+def read_opencv(path: PathLike) -> list[Camera]:
+    """The cameras of an OpenCV calibration (``cv::FileStorage`` YAML/JSON file or a folder
+    of them), as ``fluidnerf import --opencv`` reads it."""
+    return _cameras(_ext.read_opencv(os.fspath(path)))
+
+
+def read_colmap(folder: PathLike) -> list[Camera]:
+    """The images of a COLMAP model (text or binary) as cameras named by image file, with
+    COLMAP's pixel centres converted."""
+    return _cameras(_ext.read_colmap(os.fspath(folder)))
+
+
+def _as_scene(scene: Scene | PathLike) -> Scene:
+    return scene if isinstance(scene, Scene) else load_scene(scene)
+
+
+# ---------------------------------------------------------------------------------------------
+# Configuration
+
+
+def _merge(base: dict, patch: dict) -> dict:
+    for key, value in patch.items():
+        if isinstance(value, dict) and isinstance(base.get(key), dict):
+            _merge(base[key], value)
+        else:
+            base[key] = copy.deepcopy(value)
+    return base
+
+
+def build_config(
+    scene: Scene | PathLike,
+    method: str | dict | None = None,
+    *,
+    config: dict | PathLike | None = None,
+    preset: str | None = None,
+    **options: Any,
+) -> dict:
+    """The run configuration (``config.json``'s content, a ``RunConfig``) of a run.
+
+    It starts from ``config`` (a dict or a ``config.json`` path, as ``--config``) or from the
+    defaults of ``method`` (with ``preset`` for neural methods); ``method`` may also be a dict
+    such as ``{"name": "asart", "params": {"relaxation": 0.3}}``, merged into the method's
+    defaults. Every other keyword is a ``RunConfig`` key (``resolution``, ``seed``,
+    ``stopping``, ``checkpoint_every``, ``eval_every``, ``memory_limit_gib``); dicts are merged
+    key by key, e.g. ``stopping={"max_iterations": 50}``. The result is validated by the
+    library: an unknown key or a value out of range raises :class:`FluidNerfError` with the
+    message ``config.json`` would give.
+    """
+    root = scene.root if isinstance(scene, Scene) else Path(os.fspath(scene))
+    method_patch: dict = {}
+    name: str | None = None
+    if isinstance(method, dict):
+        method_patch = dict(method)
+        name = method_patch.get("name")
+    elif method is not None:
+        name = method
+    if config is not None:
+        if isinstance(config, dict):
+            base = copy.deepcopy(config)
+        else:
+            path = Path(os.fspath(config))
+            try:
+                base = json.loads(path.read_text())
+            except (OSError, ValueError) as e:
+                raise FluidNerfError(f"{path}: cannot read the configuration: {e}") from None
+        written = (base.get("method") or {}).get("name")
+        if name is not None and written is not None and name != written:
+            raise FluidNerfError(
+                f"the configuration was written for method {written}; to run method {name}, leave out config"
+            )
+        if preset is not None:
+            fresh = json.loads(_ext.default_config(str(root or ""), written or name or "fast", preset))
+            kept = {k: v for k, v in base["method"].items() if k in ("holdout_times", "time_step")}
+            base["method"] = _merge(fresh["method"], kept)
+    else:
+        base = json.loads(_ext.default_config(str(root or ""), name or "fast", preset))
+    if root is not None:
+        base["scene"] = str(Path(root).absolute())
+    if method_patch:
+        _merge(base["method"], method_patch)
+    _merge(base, options)
+    return json.loads(_ext.check_config(json.dumps(base)))
+
+
+def window_plan(scene: Scene | PathLike, method: str | dict = "tr-fast", **options: Any) -> dict:
+    """The windows a time-resolved run trains, ``{"frame_times", "windows": [[a, b], ...],
+    "warm_start"}`` (frames ``a..b``, ``b`` exclusive); options as :func:`build_config`."""
+    scene = _as_scene(scene)
+    cfg = build_config(scene, method, **options)
+    return json.loads(_ext.window_plan(scene, json.dumps(cfg)))
+
+
+def plan_windows(n_frames: int, window: int, overlap: int) -> list[tuple[int, int]]:
+    """Windows of ``window`` frames overlapping by ``overlap`` over ``n_frames`` frames, as
+    ``tr-fast`` plans them: ``(first, end)`` frame ranges, ``end`` exclusive."""
+    return _ext.plan_windows(n_frames, window, overlap)
+
+
+def methods() -> list[tuple[str, str]]:
+    """The reconstruction methods ``(name, description)``."""
+    return _ext.methods()
+
+
+def synth_presets() -> list[tuple[str, str]]:
+    """The synthetic scene presets ``(name, description)``."""
+    return _ext.synth_presets()
+
+
+# ---------------------------------------------------------------------------------------------
+# Runs
+
+
+class Run:
+    """A finished run folder: its volume(s), its trained field, its report and settings."""
+
+    def __init__(self, handle: Any) -> None:
+        self._h = handle
+        self._volume: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        r = self.report or {}
+        return f"Run({str(self.path)!r}, kind={self.kind!r}, method={r.get('method')!r}, status={r.get('status')!r})"
+
+    @property
+    def path(self) -> Path:
+        """The run folder."""
+        return Path(self._h.path)
+
+    @property
+    def kind(self) -> str:
+        """``"volume"`` (voxel method), ``"field"`` (static neural) or ``"temporal"``."""
+        return self._h.kind
+
+    @property
+    def report(self) -> dict | None:
+        """``report.json`` (the typed ``RunReport``) as a dict; None for folders assembled by hand."""
+        text = self._h.report_json
+        return None if text is None else json.loads(text)
+
+    @property
+    def config(self) -> dict | None:
+        """``config.json`` (the ``RunConfig``) as a dict: ``reconstruct(..., config=run.config)``
+        reruns it."""
+        text = self._h.config_json
+        return None if text is None else json.loads(text)
+
+    @property
+    def status(self) -> str | None:
+        """``"finished"`` or ``"interrupted"``."""
+        r = self.report
+        return None if r is None else r.get("status")
+
+    @property
+    def aabb(self) -> np.ndarray:
+        """The box the results fill, ``(2, 3)``."""
+        return self._h.aabb
+
+    @property
+    def volume(self) -> np.ndarray:
+        """The (first) volume, ``(nz, ny, nx)`` float32, cell-centred, filling :attr:`aabb`."""
+        if self._volume is None:
+            self._volume = self._h.volume()
+        return self._volume
+
+    def volumes(self) -> list[tuple[float | None, np.ndarray]]:
+        """Every volume with its time (time-resolved runs: one per frame)."""
+        return self._h.volumes()
+
+    def field(self, points: np.ndarray, time: float = 0.0) -> np.ndarray:
+        """The result at world points ``(N, 3)`` (x, y, z) at ``time``: the trained network of
+        neural runs (static or of space and time), the volume sampled trilinearly otherwise.
+        Returns ``(N,)`` float32; points outside the box give 0."""
+        pts = np.ascontiguousarray(points, dtype=np.float32)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
+        return self._h.field(pts, float(time))
+
+    def voxel_centres(self) -> np.ndarray:
+        """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""
+        nz, ny, nx = self.volume.shape
+        lo, hi = self.aabb
+        axes = [lo[i] + (np.arange(n) + 0.5) * (hi[i] - lo[i]) / n for i, n in enumerate((nx, ny, nz))]
+        z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+        return np.stack([x, y, z], axis=-1)
+
+    def save(self, folder: PathLike) -> Run:
+        """Copies the run folder to ``folder`` (which must not exist) and returns that copy."""
+        dest = Path(os.fspath(folder))
+        if dest.exists():
+            raise FluidNerfError(f"{dest}: already exists; choose a new folder")
+        shutil.copytree(self.path, dest, ignore=shutil.ignore_patterns(".lock", "*.lock"))
+        return open_run(dest)
+
+
+def open_run(folder: PathLike, aabb: np.ndarray | None = None) -> Run:
+    """Reads any finished run folder (voxel, static neural or time-resolved). ``aabb``
+    ``(2, 3)`` places a bare ``volume.npy`` that has no report."""
+    box = None if aabb is None else np.ascontiguousarray(aabb, dtype=np.float64)
+    return Run(_ext.open_run(os.fspath(folder), box))
+
+
+def _progress_callback(callback: Callback | None, progress: bool | None) -> tuple[Callback | None, Any]:
+    """The callback given, combined with a tqdm bar when asked (None: when tqdm is installed)."""
+    bar_holder: dict = {}
+    if progress is None or progress:
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:
+            if progress:
+                raise FluidNerfError("progress=True needs tqdm: pip install tqdm") from None
+            tqdm = None
+    else:
+        tqdm = None
+    if tqdm is None:
+        return callback, None
+
+    def on_event(event: dict) -> bool | None:
+        kind = event["kind"]
+        if kind == "started":
+            total = event["max_iterations"] * max(event["windows"], 1)
+            bar_holder["per_window"] = event["max_iterations"]
+            bar_holder["bar"] = tqdm(total=total, desc=event["method"], initial=event["start_iteration"])
+        elif kind == "iteration" and "bar" in bar_holder:
+            bar = bar_holder["bar"]
+            pos = (event["window"] or 0) * bar_holder["per_window"] + event["iteration"]
+            bar.update(max(pos - bar.n, 0))
+            bar.set_postfix(loss=f"{event['loss']:.3e}", refresh=False)
+        elif kind == "writing" and "bar" in bar_holder:
+            bar_holder.pop("bar").close()
+        return callback(event) if callback is not None else None
+
+    return on_event, bar_holder
+
+
+def reconstruct(
+    scene: Scene | PathLike,
+    method: str | dict | None = "fast",
+    out: PathLike | None = None,
+    *,
+    config: dict | PathLike | None = None,
+    preset: str | None = None,
+    overwrite: str = "refuse",
+    callback: Callback | None = None,
+    progress: bool | None = None,
+    **options: Any,
+) -> Run:
+    """Reconstructs ``scene`` with ``method`` into the run folder ``out`` through the library
+    pipeline (``fluidnerf_pipeline::reconstruct``), exactly as ``fluidnerf reconstruct`` does.
+
+    ``options`` are ``RunConfig`` keys (see :func:`build_config`), e.g.
+    ``reconstruct(scene, "asart", "run", resolution=64, stopping={"rule": "held-out"})``.
+    ``out`` None writes into a new temporary folder (kept; see ``run.path``). A scene built
+    from arrays is first saved into ``out/scene``. ``overwrite`` is ``"refuse"``, ``"force"``
+    or ``"resume"`` (``--force``, ``--resume``).
+
+    ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
+    ``evaluation``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
+    ``False`` stops the run. ``progress`` shows a tqdm bar (None: when tqdm is installed).
+    The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
+    written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.
+    """
+    scene = _as_scene(scene)
+    out_path = Path(os.fspath(out)) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
+    if scene.root is None:
+        scene.save(out_path / "scene")
+    cfg = build_config(scene, method, config=config, preset=preset, **options)
+    cb, bars = _progress_callback(callback, progress)
+    try:
+        _ext.reconstruct(scene, json.dumps(cfg), os.fspath(out_path), overwrite, cb)
+    finally:
+        if bars and "bar" in bars:
+            bars.pop("bar").close()
+    return open_run(out_path)
+
+
+# ---------------------------------------------------------------------------------------------
+# Operators
+
+
+def _projector(projector: str | dict | None) -> str:
+    if projector is None:
+        return "{}"
+    if isinstance(projector, str):
+        return json.dumps({"kind": projector})
+    return json.dumps(projector)
+
+
+def forward_project(
+    scene: Scene | PathLike, volume: np.ndarray, projector: str | dict | None = None
+) -> np.ndarray | list[np.ndarray]:
+    """``A x``: the images every camera of ``scene`` records of ``volume`` ``(nz, ny, nx)``
+    (cell-centred, filling the scene's box) through the classical projector of the voxel
+    methods, times ``intensity_scale``. ``projector``: ``"splat"`` (default), ``"ray"``, or a
+    dict ``{"kind", "splat_subdivisions", "ray_step"}``. Returns ``(N, H, W)`` float32 (a list
+    when image sizes differ)."""
+    vol = np.ascontiguousarray(volume, dtype=np.float32)
+    return _ext.forward_project(_as_scene(scene), vol, _projector(projector))
+
+
+def back_project(
+    scene: Scene | PathLike,
+    images: np.ndarray | list[np.ndarray],
+    shape: tuple[int, int, int],
+    projector: str | dict | None = None,
+) -> np.ndarray:
+    """``Aᵀ y``: the exact adjoint of :func:`forward_project`, images (one per frame) back into
+    a volume of ``shape`` ``(nz, ny, nx)``."""
+    imgs = [np.ascontiguousarray(i, dtype=np.float32) for i in images]
+    nz, ny, nx = (int(s) for s in shape)
+    return _ext.back_project(_as_scene(scene), imgs, (nz, ny, nx), _projector(projector))
+
+
+def render(
+    scene: Scene | PathLike, volume: np.ndarray, step: float | None = None, supersample: int = 1
+) -> np.ndarray | list[np.ndarray]:
+    """Line integrals of ``volume`` ``(nz, ny, nx)`` (trilinear) through every pixel of the
+    scene's cameras, times ``intensity_scale`` (the reference renderer). ``step``: quadrature
+    step in world units (None: the box's smallest side / 256)."""
+    vol = np.ascontiguousarray(volume, dtype=np.float32)
+    return _ext.render(_as_scene(scene), vol, step, int(supersample))
+
+
+def _f32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
+    """Normalised RMS error: ``‖estimate − truth‖₂ / ‖truth‖₂`` (dissertation Eq. 6.18)."""
+    return _ext.nrmse(_f32(estimate), _f32(truth))
+
+
+def psnr(estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None) -> float:
+    """PSNR in dB with peak ``data_range`` (None: the truth's max − min)."""
+    return _ext.psnr(_f32(estimate), _f32(truth), data_range)
+
+
+def ssim(
+    estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None, window: str = "uniform"
+) -> float:
+    """SSIM of 2D or 3D arrays: ``window`` ``"uniform"`` (7 wide, as skimage), ``"gaussian"``
+    (σ 1.5) or ``"global"`` (one window over everything)."""
+    return _ext.ssim(_f32(estimate), _f32(truth), data_range, window)
+
+
+def synth(
+    folder: PathLike, preset: str = "demo", *, seed: int | None = None, force: bool = False, **settings: Any
+) -> Scene:
+    """Synthesises the scene of ``preset`` (see :func:`synth_presets`) into ``folder`` and
+    returns it. ``settings`` override the preset's ``SynthSettings`` key by key, e.g.
+    ``synth("jet", "jet-tr60", resolution=24, lens={"resolution": [24, 24]})``."""
+    if seed is not None:
+        settings["seed"] = int(seed)
+    return _ext.synth(os.fspath(folder), preset, json.dumps(settings), force)
