@@ -208,7 +208,7 @@ pub fn ssim(
 }
 
 /// Synthesises the scene of preset `preset` (settings overridden by the JSON object
-/// `overrides`, merged key by key into the preset's settings) into `folder`: images (16-bit
+/// `overrides`, merged key by key into the preset's settings; see `merge`) into `folder`: images (16-bit
 /// PNG counts), ground truth (`truth/*.npy`), `transforms.json` and `synth.json`. Returns the
 /// scene.
 #[pyfunction]
@@ -257,9 +257,18 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
     Ok(PyScene { inner: scene, images: None, saved: true })
 }
 
-/// Merges `patch` into `base` key by key (objects recursively; anything else replaces).
+/// Merges `patch` into `base` key by key (objects recursively; anything else replaces). An
+/// object that changes the value of a string key of `base` (the tag of a settings variant such
+/// as `"model": "pinhole"`) replaces the object whole, since the other variant has other keys.
 fn merge(base: &mut serde_json::Value, patch: serde_json::Value) {
+    let retagged = match (&*base, &patch) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
+            p.iter().any(|(k, v)| v.is_string() && b.get(k).is_some_and(|old| old.is_string() && old != v))
+        }
+        _ => false,
+    };
     match (base, patch) {
+        (slot, v) if retagged => *slot = v,
         (serde_json::Value::Object(b), serde_json::Value::Object(p)) => {
             for (k, v) in p {
                 match b.get_mut(&k) {

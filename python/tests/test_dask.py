@@ -1,0 +1,120 @@
+"""Scale-out on Dask: a 4-window time-resolved run on a LocalCluster of 2 single-threaded
+worker processes equals the serial run, warm-start chains and all; a worker killed while it
+trains a window loses no window and duplicates none."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fluidnerf
+from conftest import TR_METHOD, TR_OPTIONS
+
+distributed = pytest.importorskip("distributed")
+import fluidnerf.dask  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+    )
+    with distributed.Client(cluster) as c:
+        yield c
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def serial(tr_scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial") / "run"
+    return fluidnerf.reconstruct(tr_scene, TR_METHOD, out, progress=False, **TR_OPTIONS)
+
+
+def assert_same_run(a: fluidnerf.Run, b: fluidnerf.Run) -> None:
+    va, vb = a.volumes(), b.volumes()
+    assert [t for t, _ in va] == [t for t, _ in vb] == [14.0, 14.5, 15.0, 15.5, 16.0]
+    for (_, x), (_, y) in zip(va, vb):
+        np.testing.assert_array_equal(x, y)
+    ra, rb = a.report, b.report
+    assert len(ra["windows"]) == len(rb["windows"]) == 4
+    assert ra["history"]["loss"] == rb["history"]["loss"]
+    assert [w["frames"] for w in rb["windows"]] == [[0, 2], [1, 3], [2, 4], [3, 5]]
+    assert (a.path / "volumes.pvd").read_text() == (b.path / "volumes.pvd").read_text()
+
+
+def test_the_plan_is_the_one_tr_fast_uses(tr_scene):
+    plan = fluidnerf.window_plan(tr_scene, TR_METHOD, **TR_OPTIONS)
+    assert (
+        plan["windows"]
+        == [list(w) for w in fluidnerf.plan_windows(5, 2, 1)]
+        == [[0, 2], [1, 3], [2, 4], [3, 5]]
+    )
+    assert plan["warm_start"] is True and plan["frame_times"] == [14.0, 14.5, 15.0, 15.5, 16.0]
+
+
+def test_a_dask_run_equals_the_serial_run(client, tr_scene, serial, tmp_path):
+    seen = []
+    run = fluidnerf.dask.reconstruct(
+        client, tr_scene, TR_METHOD, tmp_path / "run", callback=seen.append, **TR_OPTIONS
+    )
+    assert_same_run(serial, run)
+    assert sorted(e["window"] for e in seen) == [0, 1, 2, 3] and not any(e["reused"] for e in seen)
+    # Independent windows (no warm start) run in parallel and still equal their serial run.
+    cold = {**TR_METHOD, "windows": {**TR_METHOD["windows"], "warm_start": False}}
+    serial_cold = fluidnerf.reconstruct(
+        tr_scene, cold, tmp_path / "serial-cold", progress=False, **TR_OPTIONS
+    )
+    assert_same_run(
+        serial_cold, fluidnerf.dask.reconstruct(client, tr_scene, cold, tmp_path / "cold", **TR_OPTIONS)
+    )
+
+
+def kill_when_training(lock: Path, marker: Path, stop: threading.Event) -> None:
+    """Kills the worker process that holds `lock` (a window's lock file holds its process id),
+    once, and records it in `marker`."""
+    while not stop.is_set():
+        try:
+            pid = int(lock.read_text().strip())
+        except (OSError, ValueError):
+            time.sleep(0.002)
+            continue
+        marker.write_text(f"{pid}\n")
+        os.kill(pid, signal.SIGKILL)
+        return
+
+
+def test_a_killed_worker_loses_and_duplicates_no_window(client, tr_scene, serial, tmp_path):
+    out = tmp_path / "run"
+    marker = tmp_path / "killed"
+    stop = threading.Event()
+    killer = threading.Thread(target=kill_when_training, args=(out / "windows" / "w002.lock", marker, stop))
+    killer.start()
+    seen = []
+    try:
+        run = fluidnerf.dask.reconstruct(client, tr_scene, TR_METHOD, out, callback=seen.append, **TR_OPTIONS)
+    finally:
+        stop.set()
+        killer.join()
+    assert marker.is_file(), "the worker training window 2 was killed"
+    assert_same_run(serial, run)
+    # Every window reported once; each has one done file and one checkpoint.
+    assert sorted(e["window"] for e in seen) == [0, 1, 2, 3]
+    files = sorted(p.name for p in (out / "windows").iterdir())
+    assert [f for f in files if f.endswith(".done.json")] == [f"w{k:03d}.done.json" for k in range(4)]
+    assert [f for f in files if f.endswith(".checkpoint.safetensors")] == [
+        f"w{k:03d}.checkpoint.safetensors" for k in range(4)
+    ]
+    assert not [f for f in files if f.endswith(".lock") or f.endswith(".tmp")]
+    assert json.loads((out / "windows" / "w002.done.json").read_text())["report"]["iterations"] == 8
+
+    # Run again on the finished windows: every window is read back, and the results written again equal.
+    again = fluidnerf.dask.reconstruct(client, tr_scene, TR_METHOD, tmp_path / "again", **TR_OPTIONS)
+    assert_same_run(run, again)

@@ -1,0 +1,127 @@
+"""Runs from Python: the same pipeline and settings as the command line, bit for bit; the
+trained field against the exported volume; settings refused with the library's messages;
+callbacks that watch and stop a run."""
+
+from __future__ import annotations
+
+import subprocess
+
+import numpy as np
+import pytest
+
+import fluidnerf
+
+# The grid field with few rays and samples: a run of a second or two.
+FAST_METHOD = {"name": "fast", "train": {"rays_per_image": 64, "coarse_samples": 16}}
+FAST = {
+    "resolution": 16,
+    "seed": 3,
+    "stopping": {"rule": "budget", "max_iterations": 20},
+    "checkpoint_every": 0,
+}
+
+
+def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(static_scene, cli, tmp_path):
+    events = []
+    run = fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "py", callback=events.append, **FAST)
+    assert run.kind == "field" and run.status == "finished"
+    assert run.volume.shape == (16, 16, 16) and run.volume.dtype == np.float32
+    report = run.report
+    assert report["method"] == "fast" and report["iterations"] == 20
+    assert run.config["seed"] == 3 and run.config["method"]["train"]["rays_per_image"] == 64
+    kinds = [e["kind"] for e in events]
+    assert kinds[0] == "started" and kinds.count("iteration") == 20 and "writing" in kinds
+    assert [e["iteration"] for e in events if e["kind"] == "iteration"] == list(range(1, 21))
+
+    # The command line, rerunning the saved settings, writes the same volume bit for bit.
+    out = subprocess.run(
+        [cli, "reconstruct", "--config", str(run.path / "config.json"), "-o", str(tmp_path / "cli"), "-q"],
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    cli_run = fluidnerf.open_run(tmp_path / "cli")
+    np.testing.assert_array_equal(cli_run.volume, run.volume)
+    assert cli_run.report["history"]["loss"] == report["history"]["loss"]
+
+    # The trained field at the voxel centres is the exported volume.
+    centres = run.voxel_centres().reshape(-1, 3)
+    values = run.field(centres).reshape(run.volume.shape)
+    np.testing.assert_allclose(values, run.volume, rtol=1e-5, atol=1e-6 * float(np.abs(run.volume).max()))
+    # Outside the box the field is zero.
+    assert (run.field(np.array([[1e3, 0.0, 0.0], [0.0, -1e3, 0.0]])) == 0).all()
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"points: expected shape \(N, 3\)"):
+        run.field(np.zeros((4, 2)))
+
+    copy = run.save(tmp_path / "copy")
+    np.testing.assert_array_equal(copy.volume, run.volume)
+
+
+def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
+    run = fluidnerf.reconstruct(
+        static_scene,
+        "asart",
+        tmp_path / "asart",
+        resolution=20,
+        stopping={"max_iterations": 8},
+        progress=False,
+    )
+    assert run.kind == "volume" and run.report["iterations"] <= 8
+    ((_, truth),) = static_scene.truth()
+    # The report's NRMSE is the package's on the same arrays.
+    assert fluidnerf.nrmse(run.volume, truth) == pytest.approx(run.report["final_nrmse"], rel=1e-9)
+    # A voxel run's field samples its volume: at voxel centres it is the volume.
+    c = run.voxel_centres().reshape(-1, 3)
+    np.testing.assert_allclose(run.field(c).reshape(run.volume.shape), run.volume, rtol=1e-5, atol=1e-7)
+
+
+def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene, cli, tmp_path):
+    with pytest.raises(fluidnerf.FluidNerfError) as e:
+        fluidnerf.reconstruct(static_scene, "asart", tmp_path / "a", resolution=1)
+    out = subprocess.run(
+        [
+            cli,
+            "reconstruct",
+            str(static_scene.root),
+            "-o",
+            str(tmp_path / "b"),
+            "--method",
+            "asart",
+            "--resolution",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode != 0 and str(e.value) in out.stderr
+    assert str(e.value) == "resolution: must be between 2 and 4096 voxels along the longest side, got 1"
+    with pytest.raises(fluidnerf.FluidNerfError, match="at `sed`: unknown field `sed`"):
+        fluidnerf.reconstruct(static_scene, "asart", tmp_path / "c", sed=1)
+    with pytest.raises(fluidnerf.FluidNerfError, match="relaxaton"):
+        fluidnerf.reconstruct(static_scene, {"name": "asart", "params": {"relaxaton": 0.3}}, tmp_path / "c")
+    with pytest.raises(fluidnerf.FluidNerfError, match='unknown method "nerf"'):
+        fluidnerf.reconstruct(static_scene, "nerf", tmp_path / "c")
+    with pytest.raises(fluidnerf.FluidNerfError, match="stopping.max_iterations: must be at least 1"):
+        fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "c", stopping={"max_iterations": 0})
+    # A folder holding a finished run is not overwritten without being asked.
+    fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, stopping={"max_iterations": 1})
+    with pytest.raises(fluidnerf.FluidNerfError, match="already holds a finished run"):
+        fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8)
+    fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, overwrite="force")
+
+
+def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_path):
+    def stop_at_5(event):
+        return not (event["kind"] == "iteration" and event["iteration"] >= 5)
+
+    run = fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "stopped", callback=stop_at_5, **FAST)
+    assert run.status == "interrupted" and run.report["iterations"] == 5
+
+    def boom(event):
+        if event["kind"] == "iteration":
+            raise RuntimeError("from the callback")
+
+    with pytest.raises(RuntimeError, match="from the callback"):
+        fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "boom", callback=boom, **FAST)
+    # The run stopped cleanly and wrote its results.
+    assert fluidnerf.open_run(tmp_path / "boom").status == "interrupted"

@@ -1,0 +1,97 @@
+"""Scenes: built from arrays, saved, loaded back unchanged; bad arrays refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import fluidnerf
+from conftest import ring
+
+
+def test_a_scene_from_arrays_round_trips_through_a_folder(tmp_path):
+    n, size = 6, 16
+    K, poses = ring(n, size=size)
+    K[2, 0, 0] = 31.5  # per-frame intrinsics
+    rng = np.random.default_rng(0)
+    images = rng.uniform(0.0, 2.0, (n, size, size)).astype(np.float32)
+    aabb = np.array([[-10.0, -8.0, -10.0], [10.0, 8.0, 10.0]])
+    times = np.array([0.0, 0.0, 0.0, 0.5, 0.5, 0.5])
+    distortion = np.zeros((n, 5))
+    distortion[1] = [0.01, -0.002, 0.0005, -0.0003, 0.0001]
+    holdout = [False, False, True, False, False, False]
+    names = ["a", "b", "c", "a", "b", "c"]
+    scene = fluidnerf.scene_from_arrays(
+        K,
+        poses,
+        images,
+        aabb,
+        times=times,
+        distortion=distortion,
+        holdout=holdout,
+        names=names,
+        units="cm",
+        intensity_scale=2.5,
+    )
+    assert scene.root is None and len(scene) == n
+    np.testing.assert_array_equal(scene.images(), images)
+
+    scene.save(tmp_path / "s")
+    back = fluidnerf.load_scene(tmp_path / "s")
+    assert back.root == (tmp_path / "s").absolute()
+    k2, p2, d2, sizes = back.camera_arrays()
+    np.testing.assert_allclose(k2, K, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(p2, poses, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d2[:, :5], distortion, rtol=0, atol=1e-15)
+    assert (sizes == [size, size]).all()
+    np.testing.assert_array_equal(back.images(), images)  # float32 TIFF: exact
+    np.testing.assert_array_equal(back.aabb, aabb)
+    assert back.times == list(times) and back.holdout == holdout and back.names == names
+    assert back.units == "cm" and back.intensity_scale == 2.5
+    # The same file through the transforms.json importer.
+    again = fluidnerf.read_transforms(tmp_path / "s" / "transforms.json")
+    np.testing.assert_allclose(again.camera_arrays()[1], poses, atol=1e-12)
+    with pytest.raises(fluidnerf.FluidNerfError, match="already holds a scene"):
+        scene.save(tmp_path / "s")
+
+
+def test_bad_arrays_are_refused_naming_the_array_and_frame():
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"K: expected shape \(3, 3, 3\)"):
+        fluidnerf.scene_from_arrays(K[:2], poses, images, aabb)
+    bad = images.copy()
+    bad[1, 4, 7] = -1.0
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"images\[1\]: pixel \(row 4, column 7\) is negative"):
+        fluidnerf.scene_from_arrays(K, poses, bad, aabb)
+    bad[1, 4, 7] = np.nan
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"images\[1\].*not finite"):
+        fluidnerf.scene_from_arrays(K, poses, bad, aabb)
+    with pytest.raises(fluidnerf.FluidNerfError, match="aabb"):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb[::-1])
+    p = poses.copy()
+    p[2, 3, 0] = 1.0
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"world_from_camera\[2\]"):
+        fluidnerf.scene_from_arrays(K, p, images, aabb)
+    with pytest.raises(ValueError, match="times: expected 3 values"):  # FluidNerfError is a ValueError
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, times=np.zeros(2))
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"distortion\[0\].*4, 5, 8"):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, distortion=np.zeros((3, 3)))
+    with pytest.raises(fluidnerf.FluidNerfError, match="transforms.json"):
+        fluidnerf.load_scene("/nonexistent/scene")
+
+
+def test_calibration_importers_read_the_library_fixtures():
+    from conftest import REPO
+
+    fixtures = REPO / "crates" / "io" / "tests" / "fixtures"
+    cams = fluidnerf.read_opencv(fixtures / "opencv_two_cameras.yml")
+    assert len(cams) == 2 and all(c.K.shape == (3, 3) and c.world_from_camera.shape == (4, 4) for c in cams)
+    # A camera-to-world rotation is orthonormal with the last row [0, 0, 0, 1].
+    for c in cams:
+        r = c.world_from_camera[:3, :3]
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)
+        np.testing.assert_array_equal(c.world_from_camera[3], [0, 0, 0, 1])
+    colmap = fluidnerf.read_colmap(fixtures / "colmap")
+    assert len(colmap) >= 1 and all(c.size[0] > 0 for c in colmap)
