@@ -388,7 +388,7 @@ def reconstruct(
     scene = _as_scene(scene)
     out_path = Path(os.fspath(out)) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
     if scene.root is None:
-        scene.save(out_path / "scene")
+        scene.save(out_path / "scene", force=overwrite == "force")
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     cb, bars = _progress_callback(callback, progress)
     try:

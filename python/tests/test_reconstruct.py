@@ -4,7 +4,11 @@ callbacks that watch and stop a run."""
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -125,3 +129,25 @@ def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_p
         fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "boom", callback=boom, **FAST)
     # The run stopped cleanly and wrote its results.
     assert fluidnerf.open_run(tmp_path / "boom").status == "interrupted"
+
+
+def test_ctrl_c_stops_a_run_cleanly(static_scene, tmp_path):
+    """SIGINT while the run works (GIL released) stops it at the next iteration: the results are
+    written, the report says interrupted, and KeyboardInterrupt reaches the caller."""
+    timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+    started = time.monotonic()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        fluidnerf.reconstruct(
+            static_scene,
+            FAST_METHOD,
+            tmp_path / "ctrl-c",
+            resolution=16,
+            stopping={"rule": "budget", "max_iterations": 1_000_000, "time_budget_s": 60},
+            checkpoint_every=0,
+        )
+    timer.join()
+    assert time.monotonic() - started < 30
+    run = fluidnerf.open_run(tmp_path / "ctrl-c")
+    assert run.status == "interrupted" and 0 < run.report["iterations"] < 1_000_000
+    assert run.volume.shape == (16, 16, 16)
