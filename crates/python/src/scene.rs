@@ -60,7 +60,8 @@ pub fn aabb_from(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Aabb> {
         )));
     }
     // Not `Aabb::new`, which asserts: an inverted box from the caller is an error, not a panic.
-    let aabb = Aabb { min: DVec3::new(v[[0, 0]], v[[0, 1]], v[[0, 2]]), max: DVec3::new(v[[1, 0]], v[[1, 1]], v[[1, 2]]) };
+    let aabb =
+        Aabb { min: DVec3::new(v[[0, 0]], v[[0, 1]], v[[0, 2]]), max: DVec3::new(v[[1, 0]], v[[1, 1]], v[[1, 2]]) };
     aabb.validate().map_err(|e| err(format!("aabb: {e}")))?;
     Ok(aabb)
 }
