@@ -380,7 +380,7 @@ def reconstruct(
     or ``"resume"`` (``--force``, ``--resume``).
 
     ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
-    ``evaluation``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
+    ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
     ``False`` stops the run. ``progress`` shows a tqdm bar (None: when tqdm is installed).
     The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
     written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.

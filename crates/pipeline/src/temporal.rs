@@ -561,6 +561,7 @@ impl WindowPlan {
 /// The window plan of the time-resolved run `config` of `scene`, from the scene file alone
 /// (no image is read).
 pub fn window_plan(scene: &Scene, config: &RunConfig) -> Result<WindowPlan, PipelineError> {
+    let config = &config.resolved(scene);
     config.validate()?;
     let MethodConfig::Temporal(_, spec) = config.effective_method() else {
         return Err(PipelineError::invalid(
@@ -622,8 +623,16 @@ pub fn reconstruct_windows(
     windows: std::ops::Range<usize>,
     mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<Vec<WindowOutcome>, PipelineError> {
+    let config = &config.resolved(scene);
     config.validate()?;
-    let mut session = Session { on_event: &mut on_event, stopped: false, started: Instant::now(), cpu0: None };
+    let mut session = Session {
+        on_event: &mut on_event,
+        stopped: false,
+        started: Instant::now(),
+        cpu0: None,
+        budget_s: config.stopping.time_budget_s,
+        estimate: crate::Estimator::default(),
+    };
     let Setup { spec, method, problem, field, progress, .. } = setup(scene, config, &[], &mut session)?;
     let count = progress.plan.len();
     if windows.start >= windows.end || windows.end > count {
@@ -796,6 +805,7 @@ pub fn finish_windows(
     out: &std::path::Path,
     mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<RunReport, PipelineError> {
+    let config = &config.resolved(scene);
     config.validate()?;
     if config.method().family() != Family::Temporal {
         return Err(PipelineError::invalid(
@@ -804,8 +814,14 @@ pub fn finish_windows(
         ));
     }
     let dir = RunDir::create(out, crate::Overwrite::Resume, Some(&scene.root))?;
-    let mut session =
-        Session { on_event: &mut on_event, stopped: false, started: Instant::now(), cpu0: crate::cpu_seconds() };
+    let mut session = Session {
+        on_event: &mut on_event,
+        stopped: false,
+        started: Instant::now(),
+        cpu0: crate::cpu_seconds(),
+        budget_s: config.stopping.time_budget_s,
+        estimate: crate::Estimator::default(),
+    };
     let truth = crate::load_truth(scene)?;
     run(scene, config, &dir, &truth, &mut session, true)
 }

@@ -89,6 +89,14 @@ pub(crate) fn event_dict<'py>(py: Python<'py>, event: &RunEvent) -> PyResult<Bou
             d.set_item("nrmse", nrmse)?;
             d.set_item("holdout", holdout)?;
         }
+        RunEvent::Estimate { seconds_per_iteration, iterations_left, seconds_left, budget_limited } => {
+            d.set_item("kind", "estimate")?;
+            d.set_item("seconds_per_iteration", seconds_per_iteration)?;
+            d.set_item("iterations_left", iterations_left)?;
+            d.set_item("seconds_left", seconds_left)?;
+            d.set_item("budget_limited", budget_limited)?;
+            d.set_item("message", event.describe_estimate())?;
+        }
         RunEvent::Checkpoint { path } => {
             d.set_item("kind", "checkpoint")?;
             d.set_item("path", path.to_path_buf())?;
