@@ -416,8 +416,9 @@ def forward_project(
 ) -> np.ndarray | list[np.ndarray]:
     """``A x``: the images every camera of ``scene`` records of ``volume`` ``(nz, ny, nx)``
     (cell-centred, filling the scene's box) through the classical projector of the voxel
-    methods, times ``intensity_scale``. ``projector``: ``"splat"`` (default), ``"ray"``, or a
-    dict ``{"kind", "splat_subdivisions", "ray_step"}``. Returns ``(N, H, W)`` float32 (a list
+    methods, times ``intensity_scale``. ``projector``: ``"auto"`` (default: the voxel methods'
+    choice from the voxels' image size), ``"footprint"``, ``"splat"``, ``"ray"``, or a dict of
+    the projector settings (``{"kind", "splat_subdivisions", "ray_step"}``). Returns ``(N, H, W)`` float32 (a list
     when image sizes differ)."""
     vol = np.ascontiguousarray(volume, dtype=np.float32)
     return _ext.forward_project(_as_scene(scene), vol, _projector(projector))

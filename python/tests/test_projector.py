@@ -86,6 +86,8 @@ def test_forward_projection_matches_a_numpy_ray_marcher_and_the_analytic_blob(sc
     vol = blob_volume()
     ray = fluidnerf.forward_project(s, vol, "ray")
     splat = fluidnerf.forward_project(s, vol, {"kind": "splat", "splat_subdivisions": 2})
+    footprint = fluidnerf.forward_project(s, vol, "footprint")
+    chosen = fluidnerf.forward_project(s, vol)  # the voxel methods' automatic choice
     rendered = fluidnerf.render(s, vol)
     assert ray.shape == (4, size, size) and ray.dtype == np.float32
     for v in range(len(poses)):
@@ -99,6 +101,10 @@ def test_forward_projection_matches_a_numpy_ray_marcher_and_the_analytic_blob(sc
         # the same projection): pixels within 15 % of the peak, the total within 1 %.
         assert np.abs(splat[v] - ref).max() < 0.15 * peak
         assert splat[v].sum() == pytest.approx(ref.sum(), rel=0.01)
+        # The separable footprint: within 6 % of the peak, the total within 1 %.
+        assert np.abs(footprint[v] - ref).max() < 0.06 * peak
+        assert footprint[v].sum() == pytest.approx(ref.sum(), rel=0.01)
+        assert np.abs(chosen[v] - ref).max() < 0.15 * peak
 
 
 def test_back_projection_is_the_exact_adjoint(scene):
@@ -106,7 +112,7 @@ def test_back_projection_is_the_exact_adjoint(scene):
     rng = np.random.default_rng(1)
     x = rng.uniform(0, 1, (N, N, N)).astype(np.float32)
     y = rng.uniform(0, 1, (4, 16, 16)).astype(np.float32)
-    for projector in ("splat", "ray"):
+    for projector in ("footprint", "splat", "ray"):
         ax = fluidnerf.forward_project(s, x, projector)
         aty = fluidnerf.back_project(s, y, (N, N, N), projector)
         assert aty.shape == (N, N, N)

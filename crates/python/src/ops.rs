@@ -22,8 +22,9 @@ fn projector_config(text: &str) -> PyResult<ProjectorConfig> {
 }
 
 /// `A x`: the images the scene's cameras record of the volume `(nz, ny, nx)` filling the
-/// scene's box, through the classical projector (`projector` JSON: `kind` "splat" or "ray",
-/// `splat_subdivisions`, `ray_step`), scaled by the scene's `intensity_scale`. Every frame,
+/// scene's box, through the classical projector (`projector` JSON: `kind` "auto",
+/// "footprint", "splat" or "ray", `splat_subdivisions`, `ray_step`), scaled by the scene's
+/// `intensity_scale`. Every frame,
 /// in frame order.
 #[pyfunction]
 #[pyo3(signature = (scene, volume, projector="{}"))]
