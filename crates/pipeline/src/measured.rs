@@ -30,8 +30,8 @@ pub(crate) struct Measured {
 }
 
 /// Reads and preprocesses the scene's images ([`fluidnerf_io::scene::load_preprocessed`]) and,
-/// with `balance` or `fit`, scales every image to the mean total intensity of the images of
-/// its time (masked pixels left out).
+/// with `balance` or `fit`, scales every image to the mean total intensity of the training
+/// images of its time (masked pixels left out).
 pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, PipelineError> {
     let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
     let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
@@ -41,7 +41,11 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, Pipeli
         let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
         let time_key = |i: usize| scene.frames[i].time.map(f64::to_bits);
         for i in 0..images.len() {
-            let group: Vec<usize> = (0..images.len()).filter(|&j| time_key(j) == time_key(i)).collect();
+            // The mean over the training images of the time (all of them when every one is
+            // held out), so that training gains average 1 like fitted ones.
+            let same: Vec<usize> = (0..images.len()).filter(|&j| time_key(j) == time_key(i)).collect();
+            let train: Vec<usize> = same.iter().copied().filter(|&j| !scene.frames[j].holdout).collect();
+            let group = if train.is_empty() { same } else { train };
             let mean = group.iter().map(|&j| totals[j]).sum::<f64>() / group.len() as f64;
             if totals[i] > 0.0 && mean > 0.0 {
                 factors[i] = totals[i] / mean;
