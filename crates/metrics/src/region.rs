@@ -156,7 +156,7 @@ pub fn estimate_flow_axis(volume: &Volume) -> Option<fluidnerf_core::glam::DVec3
         total += w;
         first += w * p;
     });
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return None;
     }
     let mean = first / total;
@@ -170,14 +170,14 @@ pub fn estimate_flow_axis(volume: &Volume) -> Option<fluidnerf_core::glam::DVec3
     for _ in 0..200 {
         let next = m * v;
         let len = next.length();
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             return None;
         }
         v = next / len;
     }
     let lambda = v.dot(m * v);
     let trace = m.x_axis.x + m.y_axis.y + m.z_axis.z;
-    if !(lambda > 1.05 * 0.5 * (trace - lambda)) {
+    if lambda.is_nan() || lambda <= 1.05 * 0.5 * (trace - lambda) {
         return None;
     }
     let (mut spread, mut weight) = ([0.0f64; 2], [0.0f64; 2]);

@@ -646,7 +646,7 @@ fn refit_gains<F: TrainableField, E: Engine<F>>(
         }
         let (g, b) = if fit.offset {
             let det = sn * srr - sr * sr;
-            if !(det > 1e-12 * sn * srr) {
+            if det.is_nan() || det <= 1e-12 * sn * srr {
                 continue;
             }
             ((sn * srp - sr * sp) / det, (srr * sp - sr * srp) / det)

@@ -278,7 +278,7 @@ pub(crate) fn write_run_html(
     let mut html = build_report(&format!("{label} reconstruction"), scene, truth_volume.map(|(_, v)| v), &[&run])?;
     if let Some(p) = &report.preprocessing {
         let mut table = Table::new(
-            &format!(
+            format!(
                 "Preprocessing: {}; {} pixels clipped at 0, {} masked; gains {}",
                 p.scene, p.clipped_pixels, p.masked_pixels, p.gains.mode
             ),

@@ -142,12 +142,12 @@ pub(crate) fn fit_gain(p: &[f32], r: &[f32], mask: Option<&[bool]>, offset: bool
     }
     let (g, b) = if offset {
         let det = n * srr - sr * sr;
-        if !(det > 1e-12 * n * srr) {
+        if det.is_nan() || det <= 1e-12 * n * srr {
             return None;
         }
         ((n * srp - sr * sp) / det, (srr * sp - sr * srp) / det)
     } else {
-        if !(srr > 0.0) {
+        if srr.is_nan() || srr <= 0.0 {
             return None;
         }
         (srp / srr, 0.0)
@@ -267,7 +267,7 @@ mod tests {
         q.iter_mut().zip(&mask).filter(|(_, &k)| !k).for_each(|(v, _)| *v = 1e6);
         let (gm, _) = fit_gain(&q, &r, Some(&mask), false).expect("fit");
         assert!((gm - 0.7).abs() < 1e-6);
-        assert!(fit_gain(&p, &vec![0.0; 50], None, false).is_none());
+        assert!(fit_gain(&p, &[0.0; 50], None, false).is_none());
         let s = holdout_score(&p, &r, None);
         assert!(s.nrmse_raw > 0.3 && s.nrmse_fitted < 1e-6 && (s.fitted_gain - 0.7).abs() < 1e-6, "{s:?}");
         let mut gains = vec![(2.0, 0.0), (4.0, 1.0)];
