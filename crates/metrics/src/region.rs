@@ -65,7 +65,7 @@ impl Region {
                 let (t0, t1) = if forward {
                     (k as f64 / 3.0, (k + 1) as f64 / 3.0)
                 } else {
-                    (1.0 - (k + 1) as f64 / 3.0, 1.0 - k as f64 / 3.0)
+                    ((2 - k) as f64 / 3.0, (3 - k) as f64 / 3.0)
                 };
                 let (mut min, mut max) = ([0.0; 3], [1.0; 3]);
                 min[axis] = t0;
