@@ -251,6 +251,25 @@ fn transforms_json_without_a_box_gets_an_estimated_one() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(load_scene(&out).expect("loads").aabb.max, DVec3::splat(3.0));
     assert!(stderr(&o).contains("--linearisation srgb"), "8-bit images without a choice are warned about");
+
+    // nerfstudio's mask_path and a background are carried over (paths from the new scene);
+    // --holdout takes image names (these frames name no camera); an unknown name is refused.
+    let mask = image::GrayImage::from_pixel(w as u32, h as u32, image::Luma([255u8]));
+    mask.save(src.join("mask_0.png")).expect("saves");
+    let mut v = v;
+    v["frames"][0]["mask_path"] = serde_json::json!("mask_0.png");
+    v["background"] = serde_json::json!(2.0);
+    std::fs::write(&file, v.to_string()).expect("writes");
+    let o = fluidnerf(&["import", "--transforms", s(&file), "--holdout", "r_3", "-o", s(&out), "--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert!(scene.frames[3].holdout && !scene.frames[2].holdout);
+    let rec = fluidnerf_io::scene::recorded(&scene).expect("recorded");
+    assert_eq!(rec.frames[0].mask_path.as_deref(), Some(src.join("mask_0.png").as_path()));
+    assert_eq!(rec.frames[5].background, fluidnerf_io::scene::Background::Constant(2.0));
+    assert!(fluidnerf_io::scene::load_preprocessed(&scene).expect("preprocesses").masks[0].is_some());
+    let o = fluidnerf(&["import", "--transforms", s(&file), "--holdout", "r_9", "-o", s(&out), "--force"]);
+    assert!(!o.status.success() && stderr(&o).contains("no camera or image named `r_9`"), "{}", stderr(&o));
 }
 
 /// A binary COLMAP model whose image names say `.jpg` while the folder holds `.png` files.

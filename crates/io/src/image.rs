@@ -356,6 +356,26 @@ fn encode_png16(path: &Path, image: &Image, counts: &[u16]) -> Result<(), IoErro
     })
 }
 
+/// Writes an 8-bit grayscale JPEG of `value / full_scale` through the sRGB transfer curve
+/// (what a camera's JPEG holds), clamped to `[0, 255]`: reading it back with
+/// [`Linearisation::Srgb`] gives `value × 255 / full_scale` up to quantisation and compression.
+/// `quality` is 1..=100. Non-finite values are an error.
+pub fn write_jpeg_srgb(path: &Path, image: &Image, full_scale: f32, quality: u8) -> Result<(), IoError> {
+    assert!(full_scale.is_finite() && full_scale > 0.0, "write_jpeg_srgb: full_scale must be positive");
+    check_finite(path, image)?;
+    let encode = |x: f64| if x <= 0.0031308 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+    let counts: Vec<u8> = image
+        .data
+        .iter()
+        .map(|&v| (255.0 * encode((f64::from(v) / f64::from(full_scale)).clamp(0.0, 1.0))).round() as u8)
+        .collect();
+    atomic_write(path, |w| {
+        image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality.clamp(1, 100))
+            .write_image(&counts, image.width as u32, image.height as u32, image::ExtendedColorType::L8)
+            .map_err(std::io::Error::other)
+    })
+}
+
 /// Writes a 16-bit grayscale PNG storing `round(value / full_scale × 65535)` clamped to
 /// `[0, 65535]`, so `full_scale` maps to the largest count. Reading it back gives counts, i.e.
 /// `value ≈ count × full_scale / 65535`. Non-finite values are an error.

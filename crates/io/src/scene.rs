@@ -106,13 +106,15 @@ const INTRINSIC_KEYS: [&str; 19] = [
     "opencv_k5",
     "opencv_k6",
 ];
-const TOP_KEYS: [&str; 6] = ["frames", "aabb", "units", "intensity_scale", "truth", "linearisation"];
-const FRAME_KEYS: [&str; 6] = ["file_path", "transform_matrix", "time", "camera", "holdout", "thin_lens"];
+const TOP_KEYS: [&str; 8] =
+    ["frames", "aabb", "units", "intensity_scale", "truth", "linearisation", "background", "flow_axis"];
+const FRAME_KEYS: [&str; 8] =
+    ["file_path", "transform_matrix", "time", "camera", "holdout", "thin_lens", "background", "mask_path"];
 const TRUTH_KEYS: [&str; 2] = ["time", "file_path"];
 
 /// Keys that nerfstudio (`ns-process-data`), instant-ngp and the Blender/NeRF-synthetic
 /// exporters write routinely and fluidnerf does not use: reported in one line at info level.
-const ROUTINE_KEYS: [&str; 17] = [
+const ROUTINE_KEYS: [&str; 16] = [
     "aabb_scale",
     "scale",
     "offset",
@@ -124,7 +126,6 @@ const ROUTINE_KEYS: [&str; 17] = [
     "enable_depth_loading",
     "is_fisheye",
     "colmap_im_id",
-    "mask_path",
     "depth_file_path",
     "depth_path",
     "sharpness",
@@ -262,6 +263,10 @@ struct FrameEntry {
     holdout: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     thin_lens: Option<ThinLens>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    background: Option<BackgroundKey>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mask_path: Option<String>,
     #[serde(flatten)]
     intrinsics: IntrinsicKeys,
 }
@@ -278,6 +283,8 @@ struct TransformsFile {
     intensity_scale: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     linearisation: Option<Linearisation>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    flow_axis: Option<[f64; 3]>,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     truth: Vec<TruthEntry>,
     frames: Vec<FrameEntry>,
@@ -297,6 +304,10 @@ struct FrameIn {
     holdout: bool,
     #[serde(default)]
     thin_lens: Option<ThinLens>,
+    #[serde(default)]
+    background: Option<BackgroundKey>,
+    #[serde(default)]
+    mask_path: Option<String>,
 }
 
 /// The top level as read, without its intrinsics.
@@ -312,7 +323,141 @@ struct TopIn {
     linearisation: Option<Linearisation>,
     #[serde(default)]
     truth: Vec<TruthEntry>,
+    #[serde(default)]
+    background: Option<BackgroundKey>,
+    #[serde(default)]
+    flow_axis: Option<[f64; 3]>,
     frames: Vec<Value>,
+}
+
+/// `background` as written: a constant or the images whose pixelwise median is subtracted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+enum BackgroundKey {
+    Constant(f64),
+    Frames(Vec<String>),
+}
+
+/// What is subtracted from a frame's image before reconstruction (key `background`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum Background {
+    /// Nothing.
+    #[default]
+    None,
+    /// A constant (linear units, after the linearisation), e.g. a camera's dark level.
+    Constant(f64),
+    /// The pixelwise median of these images (background or dark frames of the frame's camera,
+    /// relative to the scene folder unless absolute), read like the frame's image.
+    Frames(Vec<PathBuf>),
+}
+
+impl std::fmt::Display for Background {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Background::None => f.write_str("none"),
+            Background::Constant(c) => write!(f, "constant {c}"),
+            Background::Frames(v) if v.len() == 1 => f.write_str("one background frame"),
+            Background::Frames(v) => write!(f, "median of {} background frames", v.len()),
+        }
+    }
+}
+
+/// How a recording's images are to be read and preprocessed, as its scene file records it:
+/// the keys [`Scene`] has no field for.
+///
+/// - `linearisation` (top level): 8-bit images to linear values ([`Linearisation`]).
+/// - `background` (top level or per frame; the frame's wins): a number subtracted from every
+///   pixel, or a list of images whose pixelwise median is subtracted. Negative results are
+///   clipped to 0 and counted.
+/// - `mask_path` (per frame, nerfstudio's key): an image of the frame's size; pixels with a
+///   non-zero value are used, the others are left out of every method's data.
+/// - `flow_axis` (top level): the mean flow direction, a vector in world coordinates
+///   (normalised on reading).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Recording {
+    pub linearisation: Linearisation,
+    /// Per frame of the scene, in frame order.
+    pub frames: Vec<FrameRecording>,
+    pub flow_axis: Option<DVec3>,
+}
+
+/// The preprocessing keys of one frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameRecording {
+    pub background: Background,
+    /// Relative to the scene folder unless absolute.
+    pub mask_path: Option<PathBuf>,
+}
+
+impl Recording {
+    /// A recording of `frames` frames with nothing to preprocess.
+    pub fn plain(frames: usize) -> Self {
+        Recording { frames: vec![FrameRecording::default(); frames], ..Default::default() }
+    }
+
+    /// One line on what preprocessing the recording asks for, e.g. "background: median of 3
+    /// background frames (12 frames); masks: 12 frames".
+    pub fn describe(&self) -> String {
+        let mut kinds: Vec<(String, usize)> = Vec::new();
+        for f in &self.frames {
+            let k = f.background.to_string();
+            match kinds.iter_mut().find(|(d, _)| *d == k) {
+                Some((_, n)) => *n += 1,
+                None => kinds.push((k, 1)),
+            }
+        }
+        let background = if kinds.iter().all(|(k, _)| k == "none") {
+            "none".to_string()
+        } else {
+            kinds.iter().map(|(k, n)| format!("{k} ({n} frames)")).collect::<Vec<_>>().join(", ")
+        };
+        let masks = self.frames.iter().filter(|f| f.mask_path.is_some()).count();
+        format!("background: {background}; masks: {masks} frame(s); 8-bit images: {}", self.linearisation)
+    }
+}
+
+fn background_from_key(key: Option<&BackgroundKey>) -> Background {
+    match key {
+        None => Background::None,
+        Some(BackgroundKey::Constant(c)) => Background::Constant(*c),
+        Some(BackgroundKey::Frames(v)) => Background::Frames(v.iter().map(PathBuf::from).collect()),
+    }
+}
+
+fn background_to_key(file: &Path, b: &Background) -> Result<Option<BackgroundKey>, IoError> {
+    Ok(match b {
+        Background::None => None,
+        Background::Constant(c) => Some(BackgroundKey::Constant(*c)),
+        Background::Frames(v) => {
+            Some(BackgroundKey::Frames(v.iter().map(|p| path_str(file, p)).collect::<Result<_, _>>()?))
+        }
+    })
+}
+
+/// Checks the preprocessing keys of a file: finite constants, non-empty background lists, a
+/// non-zero flow axis. Errors name the key and the frame.
+fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Result<(), IoError> {
+    let check_bg = |b: &Option<BackgroundKey>, place: &str| match b {
+        Some(BackgroundKey::Constant(c)) if !c.is_finite() => {
+            Err(IoError::invalid(file, format!("{place}: `background` must be a finite number, got {c}")))
+        }
+        Some(BackgroundKey::Frames(v)) if v.is_empty() => Err(IoError::invalid(
+            file,
+            format!("{place}: `background` is an empty list; give at least one background image or a number"),
+        )),
+        _ => Ok(()),
+    };
+    check_bg(&top.background, "top level")?;
+    for (i, f) in frames {
+        check_bg(&f.background, &format!("frame {i} ({})", f.file_path))?;
+    }
+    if let Some(a) = top.flow_axis {
+        let v = DVec3::from_array(a);
+        if !(v.is_finite() && v.length() > 0.0) {
+            return Err(IoError::invalid(file, format!("`flow_axis` must be a non-zero finite vector, got {a:?}")));
+        }
+    }
+    Ok(())
 }
 
 /// The scene file for `path`: `path` itself if it ends in `.json`, else `path/transforms.json`.
@@ -540,6 +685,8 @@ pub struct SceneDraft {
     pub linearisation: Linearisation,
     pub frames: Vec<Frame>,
     pub truth: Vec<TruthRef>,
+    /// The preprocessing keys (`linearisation` again, `background`, `mask_path`, `flow_axis`).
+    pub recording: Recording,
 }
 
 impl SceneDraft {
@@ -603,6 +750,7 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
         _ => PathBuf::from("."),
     };
     let mut frames = Vec::with_capacity(top.frames.len());
+    let mut frame_recordings = Vec::with_capacity(top.frames.len());
     let mut renamed: Vec<(String, PathBuf)> = Vec::new();
     for (i, value) in top.frames.iter().enumerate() {
         let prefix = format!("frames[{i}]");
@@ -614,6 +762,11 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
             });
         }
         let entry: FrameIn = typed(&file, value, &prefix, Some(i))?;
+        check_recording(&file, &top, &[(i, &entry)])?;
+        frame_recordings.push(FrameRecording {
+            background: background_from_key(entry.background.as_ref().or(top.background.as_ref())),
+            mask_path: entry.mask_path.as_ref().map(PathBuf::from),
+        });
         let keys: IntrinsicKeys = typed(&file, value, &prefix, Some(i))?;
         report.scan(value, &[&FRAME_KEYS, &INTRINSIC_KEYS], &format!("frame {i}"));
         let mut file_path = PathBuf::from(&entry.file_path);
@@ -660,7 +813,14 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
             Some(aabb)
         }
     };
+    check_recording(&file, &top, &[])?;
+    let recording = Recording {
+        linearisation: top.linearisation.unwrap_or_default(),
+        frames: frame_recordings,
+        flow_axis: top.flow_axis.map(|a| DVec3::from_array(a).normalize()),
+    };
     Ok(SceneDraft {
+        recording,
         root,
         aabb,
         units: top.units.unwrap_or_else(|| DEFAULT_UNITS.to_string()),
@@ -827,14 +987,32 @@ pub fn save_scene(scene: &Scene, path: &Path) -> Result<(), IoError> {
 /// [`save_scene`], also recording how the scene's 8-bit images are to be linearised (the key
 /// `linearisation`, omitted when `None`).
 pub fn save_scene_with(scene: &Scene, path: &Path, linearisation: Option<Linearisation>) -> Result<(), IoError> {
+    let recording =
+        Recording { linearisation: linearisation.unwrap_or_default(), ..Recording::plain(scene.frames.len()) };
+    save_scene_recording(scene, path, &recording, linearisation.is_some())
+}
+
+/// [`save_scene`] with the preprocessing keys of `recording` (one entry per frame);
+/// `linearisation` is written when `write_linearisation` or when it is not `linear`.
+pub fn save_scene_recording(
+    scene: &Scene,
+    path: &Path,
+    recording: &Recording,
+    write_linearisation: bool,
+) -> Result<(), IoError> {
     let file = scene_file_path(path);
+    assert_eq!(recording.frames.len(), scene.frames.len(), "save_scene_recording: one recording entry per frame");
+    let linearisation =
+        (write_linearisation || recording.linearisation != Linearisation::Linear).then_some(recording.linearisation);
     let keys: Vec<IntrinsicKeys> =
         scene.frames.iter().map(|f| IntrinsicKeys::from_camera(&f.camera.intrinsics, &f.camera.distortion)).collect();
     let shared = keys.windows(2).all(|w| w[0] == w[1]);
     let global = if shared { keys.first().cloned().unwrap_or_default() } else { IntrinsicKeys::default() };
     let mut frames = Vec::with_capacity(scene.frames.len());
-    for (f, k) in scene.frames.iter().zip(keys) {
+    for ((f, k), r) in scene.frames.iter().zip(keys).zip(&recording.frames) {
         frames.push(FrameEntry {
+            background: background_to_key(&file, &r.background)?,
+            mask_path: r.mask_path.as_deref().map(|p| path_str(&file, p)).transpose()?,
             file_path: path_str(&file, &f.file_path)?,
             transform_matrix: world_from_camera_to_opengl_c2w(&f.camera.world_from_camera),
             time: f.time,
@@ -855,6 +1033,7 @@ pub fn save_scene_with(scene: &Scene, path: &Path, linearisation: Option<Lineari
         units: Some(scene.units.clone()),
         intensity_scale: Some(scene.intensity_scale),
         linearisation,
+        flow_axis: recording.flow_axis.map(|a| a.to_array()),
         truth,
         frames,
     };
@@ -867,23 +1046,234 @@ pub fn save_scene_with(scene: &Scene, path: &Path, linearisation: Option<Lineari
 /// when there is no such file or key. ([`Scene`] has no field for it; a scene written under
 /// another file name is read as `linear` by [`load_images`]: use [`load_images_with`].)
 pub fn recorded_linearisation(scene: &Scene) -> Result<Linearisation, IoError> {
+    Ok(recorded(scene)?.linearisation)
+}
+
+/// The preprocessing keys recorded in the scene file `scene.root/transforms.json`
+/// ([`Recording`]), one entry per frame of `scene`: the file's frames in order when the counts
+/// agree, else matched by `file_path`. Without a file, nothing to preprocess.
+pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
     let file = scene.root.join(SCENE_FILE);
     let text = match std::fs::read_to_string(&file) {
         Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Linearisation::Linear),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Recording::plain(scene.frames.len())),
         Err(e) => return Err(IoError::io(&file, "scene file", e)),
     };
     let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;
-    match raw.get("linearisation") {
-        None => Ok(Linearisation::Linear),
-        Some(v) => typed(&file, v, "linearisation", None),
+    let linearisation = match raw.get("linearisation") {
+        None => Linearisation::Linear,
+        Some(v) => typed(&file, v, "linearisation", None)?,
+    };
+    let top_background: Option<BackgroundKey> = match raw.get("background") {
+        None => None,
+        Some(v) => Some(typed(&file, v, "background", None)?),
+    };
+    let flow_axis: Option<[f64; 3]> = match raw.get("flow_axis") {
+        None => None,
+        Some(v) => Some(typed(&file, v, "flow_axis", None)?),
+    };
+    #[derive(Deserialize)]
+    struct Keys {
+        #[serde(default)]
+        file_path: Option<String>,
+        #[serde(default)]
+        background: Option<BackgroundKey>,
+        #[serde(default)]
+        mask_path: Option<String>,
     }
+    let listed: Vec<Value> = raw.get("frames").and_then(Value::as_array).cloned().unwrap_or_default();
+    let mut entries = Vec::with_capacity(listed.len());
+    for (i, v) in listed.iter().enumerate() {
+        let k: Keys = typed(&file, v, &format!("frames[{i}]"), Some(i))?;
+        entries.push(k);
+    }
+    let record = |k: &Keys| FrameRecording {
+        background: background_from_key(k.background.as_ref().or(top_background.as_ref())),
+        mask_path: k.mask_path.as_ref().map(PathBuf::from),
+    };
+    let frames = if entries.len() == scene.frames.len() {
+        entries.iter().map(record).collect()
+    } else {
+        scene
+            .frames
+            .iter()
+            .map(|f| {
+                entries
+                    .iter()
+                    .find(|k| k.file_path.as_deref().map(Path::new) == Some(f.file_path.as_path()))
+                    .map(record)
+                    .unwrap_or_else(|| FrameRecording {
+                        background: background_from_key(top_background.as_ref()),
+                        mask_path: None,
+                    })
+            })
+            .collect()
+    };
+    let flow_axis = match flow_axis.map(DVec3::from_array) {
+        Some(v) if v.is_finite() && v.length() > 0.0 => Some(v.normalize()),
+        Some(v) => {
+            return Err(IoError::invalid(
+                &file,
+                format!("`flow_axis` must be a non-zero finite vector, got {:?}", v.to_array()),
+            ))
+        }
+        None => None,
+    };
+    Ok(Recording { linearisation, frames, flow_axis })
 }
 
-/// Reads every frame's image with the linearisation recorded in the scene file (see
-/// [`recorded_linearisation`] and [`load_images_with`]).
+/// Reads every frame's image as the scene file records it ([`recorded`]): linearised, with
+/// its `background` subtracted and negative results clipped to 0 (logged with their count).
+/// See [`load_preprocessed`] for the masks and the counts.
 pub fn load_images(scene: &Scene) -> Result<Vec<Image>, IoError> {
-    load_images_with(scene, recorded_linearisation(scene)?)
+    Ok(load_preprocessed(scene)?.images)
+}
+
+/// The images of a scene ready for reconstruction, with what was done to them.
+#[derive(Clone, Debug)]
+pub struct Preprocessed {
+    /// Per frame: linearised, background subtracted, clipped at 0.
+    pub images: Vec<Image>,
+    /// Per frame: `true` for pixels to use, when the frame has a mask.
+    pub masks: Vec<Option<Vec<bool>>>,
+    /// Pixels that were negative after background subtraction and were set to 0.
+    pub clipped: usize,
+    /// What was asked for ([`Recording::describe`]).
+    pub recording: Recording,
+}
+
+/// Reads a scene's images and masks and preprocesses the images as its file records
+/// ([`Recording`]). Background images are read with the scene's linearisation and must have
+/// the size of their frame; the median of several is taken pixel by pixel and computed once per
+/// distinct list. Errors name the background or mask file, the frame and its camera.
+pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
+    let recording = recorded(scene)?;
+    let mut images = load_images_with(scene, recording.linearisation)?;
+    let file = scene.root.join(SCENE_FILE);
+    let frame_label = |i: usize| {
+        let f = &scene.frames[i];
+        match &f.camera_name {
+            Some(c) => format!("frame {i} ({}, camera {c})", f.file_path.display()),
+            None => format!("frame {i} ({})", f.file_path.display()),
+        }
+    };
+    let mut medians: std::collections::HashMap<Vec<PathBuf>, Image> = std::collections::HashMap::new();
+    let mut clipped = 0usize;
+    for (i, (image, rec)) in images.iter_mut().zip(&recording.frames).enumerate() {
+        let (w, h) = (image.width, image.height);
+        match &rec.background {
+            Background::None => continue,
+            Background::Constant(c) => {
+                let c = *c as f32;
+                image.data.iter_mut().for_each(|v| *v -= c);
+            }
+            Background::Frames(list) => {
+                if !medians.contains_key(list) {
+                    let mut stack = Vec::with_capacity(list.len());
+                    for p in list {
+                        let path = scene.resolve(p);
+                        let (bg, _) = crate::image::read_image_with(&path, recording.linearisation).map_err(|e| {
+                            IoError::invalid(
+                                &file,
+                                format!("{}: background image {}: {e}", frame_label(i), path.display()),
+                            )
+                        })?;
+                        if (bg.width, bg.height) != (w, h) {
+                            return Err(IoError::invalid(
+                                &path,
+                                format!(
+                                    "background image is {}x{} pixels but {} is {w}x{h}",
+                                    bg.width,
+                                    bg.height,
+                                    frame_label(i)
+                                ),
+                            ));
+                        }
+                        check_pixels(&path, &bg)?;
+                        stack.push(bg);
+                    }
+                    medians.insert(list.clone(), median_image(&stack));
+                }
+                let bg = &medians[list];
+                image.data.iter_mut().zip(&bg.data).for_each(|(v, b)| *v -= b);
+            }
+        }
+        for v in &mut image.data {
+            if *v < 0.0 {
+                *v = 0.0;
+                clipped += 1;
+            }
+        }
+    }
+    let masks = load_masks(scene, &recording)?;
+    if clipped > 0 {
+        let total: usize = images.iter().map(|im| im.data.len()).sum();
+        log::info!(
+            "background subtraction left {clipped} of {total} pixels ({:.2} %) negative; clipped to 0",
+            100.0 * clipped as f64 / total.max(1) as f64
+        );
+    }
+    Ok(Preprocessed { images, masks, clipped, recording })
+}
+
+/// The pixelwise median of images of one size (the mean of the middle two for an even count).
+pub fn median_image(images: &[Image]) -> Image {
+    assert!(!images.is_empty(), "median_image: no images");
+    let (w, h) = (images[0].width, images[0].height);
+    let n = images.len();
+    let mut out = Image::zeros(w, h);
+    let mut column = vec![0f32; n];
+    for (p, o) in out.data.iter_mut().enumerate() {
+        for (c, im) in column.iter_mut().zip(images) {
+            *c = im.data[p];
+        }
+        column.sort_by(f32::total_cmp);
+        *o = if n % 2 == 1 { column[n / 2] } else { 0.5 * (column[n / 2 - 1] + column[n / 2]) };
+    }
+    out
+}
+
+/// Reads the frames' masks (`mask_path`): an image of the frame's size, non-zero = use.
+fn load_masks(scene: &Scene, recording: &Recording) -> Result<Vec<Option<Vec<bool>>>, IoError> {
+    recording
+        .frames
+        .par_iter()
+        .enumerate()
+        .map(|(i, rec)| {
+            let Some(p) = &rec.mask_path else { return Ok(None) };
+            let frame = &scene.frames[i];
+            let path = scene.resolve(p);
+            let mask = crate::image::read_image(&path).map_err(|e| {
+                IoError::invalid(
+                    scene.root.join(SCENE_FILE),
+                    format!("frame {i} ({}): `mask_path`: {e}", frame.file_path.display()),
+                )
+            })?;
+            let (w, h) = (frame.camera.width(), frame.camera.height());
+            if (mask.width, mask.height) != (w, h) {
+                return Err(IoError::invalid(
+                    &path,
+                    format!(
+                        "mask is {}x{} pixels but frame {i} ({}) is {w}x{h}",
+                        mask.width,
+                        mask.height,
+                        frame.file_path.display()
+                    ),
+                ));
+            }
+            let keep: Vec<bool> = mask.data.iter().map(|&v| v > 0.0).collect();
+            if !keep.iter().any(|&k| k) {
+                return Err(IoError::invalid(
+                    &path,
+                    format!(
+                        "the mask of frame {i} ({}) is all zero: no pixel would be used",
+                        frame.file_path.display()
+                    ),
+                ));
+            }
+            Ok(Some(keep))
+        })
+        .collect()
 }
 
 /// Reads every frame's image, in frame order (in parallel), 8-bit images through

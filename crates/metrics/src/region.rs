@@ -44,6 +44,37 @@ impl Region {
         ]
     }
 
+    /// The laminar, transition and turbulent thirds along the box axis closest to `flow`
+    /// (a direction in world coordinates), numbered from where the flow enters: for a flow
+    /// along −y the laminar third is the one at the top of the box. Regions are boxes of the
+    /// reconstruction box, so an oblique flow is scored along its dominant axis.
+    pub fn jet_thirds_along(flow: fluidnerf_core::glam::DVec3) -> Vec<Region> {
+        let a = flow.abs();
+        let axis = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let forward = flow[axis] >= 0.0;
+        ["laminar", "transition", "turbulent"]
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let (t0, t1) = if forward {
+                    (k as f64 / 3.0, (k + 1) as f64 / 3.0)
+                } else {
+                    ((2 - k) as f64 / 3.0, (3 - k) as f64 / 3.0)
+                };
+                let (mut min, mut max) = ([0.0; 3], [1.0; 3]);
+                min[axis] = t0;
+                max[axis] = t1;
+                Region { name: name.to_string(), min, max }
+            })
+            .collect()
+    }
+
     /// Parses `NAME:X0:X1` (a slab along x) or `NAME:X0:X1:Y0:Y1:Z0:Z1` (a box), all in
     /// normalised coordinates, e.g. `core:0:0.3:0.3:0.7:0.3:0.7`.
     pub fn parse(spec: &str) -> Result<Region, MetricsError> {
@@ -98,6 +129,69 @@ impl Region {
     }
 }
 
+/// The flow direction of a jet or plume estimated from its field: the principal axis of the
+/// intensity-weighted second moment of the voxel centres (the direction along which the field
+/// is most elongated), pointing towards the end where the field is wider (a jet spreads as it
+/// goes; the spread is the weighted mean squared distance from the axis, compared between the
+/// two halves on either side of the centroid). None for an empty or nearly isotropic field.
+pub fn estimate_flow_axis(volume: &Volume) -> Option<fluidnerf_core::glam::DVec3> {
+    use fluidnerf_core::glam::{DMat3, DVec3};
+    let [nx, ny, nz] = volume.dims;
+    let spacing = volume.spacing();
+    let each = |f: &mut dyn FnMut(DVec3, f64)| {
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let w = volume.data[(k * ny + j) * nx + i].max(0.0) as f64;
+                    if w > 0.0 {
+                        let p = volume.aabb.min + spacing * DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
+                        f(p, w);
+                    }
+                }
+            }
+        }
+    };
+    let (mut total, mut first) = (0.0, DVec3::ZERO);
+    each(&mut |p, w| {
+        total += w;
+        first += w * p;
+    });
+    if total.is_nan() || total <= 0.0 {
+        return None;
+    }
+    let mean = first / total;
+    let mut m = DMat3::ZERO;
+    each(&mut |p, w| {
+        let d = p - mean;
+        m += DMat3::from_cols(d * d.x, d * d.y, d * d.z) * w;
+    });
+    // The principal eigenvector by power iteration.
+    let mut v = DVec3::new(1.0, 0.7, 0.4).normalize();
+    for _ in 0..200 {
+        let next = m * v;
+        let len = next.length();
+        if len.is_nan() || len <= 0.0 {
+            return None;
+        }
+        v = next / len;
+    }
+    let lambda = v.dot(m * v);
+    let trace = m.x_axis.x + m.y_axis.y + m.z_axis.z;
+    if lambda.is_nan() || lambda <= 1.05 * 0.5 * (trace - lambda) {
+        return None;
+    }
+    let (mut spread, mut weight) = ([0.0f64; 2], [0.0f64; 2]);
+    each(&mut |p, w| {
+        let d = p - mean;
+        let along = d.dot(v);
+        let side = usize::from(along >= 0.0);
+        spread[side] += w * (d - along * v).length_squared();
+        weight[side] += w;
+    });
+    let width = |s: usize| if weight[s] > 0.0 { spread[s] / weight[s] } else { 0.0 };
+    Some(if width(1) >= width(0) { v } else { -v })
+}
+
 /// Copies the block `ranges` (`[i, j, k]`) out of an x-fastest array of `dims`; returns the
 /// values (x fastest) and the block's dims.
 pub fn extract(data: &[f32], dims: [usize; 3], ranges: &[Range<usize>; 3]) -> (Vec<f32>, [usize; 3]) {
@@ -132,6 +226,40 @@ pub fn extract_volume(volume: &Volume, region: &Region) -> Option<Volume> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A cone widening along −y: the estimate points along −y, and the regions start at the
+    /// top (high y) of the box.
+    #[test]
+    fn the_flow_axis_is_the_cone_axis_towards_its_wide_end() {
+        use fluidnerf_core::glam::DVec3;
+        let aabb = Aabb::cube(DVec3::ZERO, 2.0);
+        let cone = |p: DVec3| {
+            let t = 0.5 * (1.0 - p.y); // 0 at the top, 1 at the bottom
+            let r = 0.1 + 0.5 * t;
+            if p.x * p.x + p.z * p.z < r * r {
+                1.0f32
+            } else {
+                0.0
+            }
+        };
+        let mut v = Volume::from_vec([24, 24, 24], aabb, vec![0.0; 24 * 24 * 24]);
+        let s = v.spacing();
+        for k in 0..24 {
+            for j in 0..24 {
+                for i in 0..24 {
+                    let p = aabb.min + s * DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
+                    v.data[(k * 24 + j) * 24 + i] = cone(p);
+                }
+            }
+        }
+        let axis = estimate_flow_axis(&v).expect("an axis");
+        assert!(axis.dot(DVec3::NEG_Y) > 0.95, "{axis}");
+        let regions = Region::jet_thirds_along(axis);
+        assert_eq!(regions[0].name, "laminar");
+        assert_eq!((regions[0].min[1], regions[0].max[1]), (2.0 / 3.0, 1.0));
+        assert_eq!(Region::jet_thirds_along(DVec3::X), Region::jet_thirds());
+        assert!(estimate_flow_axis(&Volume::from_vec([4, 4, 4], aabb, vec![0.0; 64])).is_none());
+    }
 
     #[test]
     fn thirds_partition_the_voxels() {

@@ -36,6 +36,8 @@ use crate::train::{Batching, Prepared, PreparedView, Split, TrainConfig};
 pub const HOLDOUT_STREAM: usize = usize::MAX;
 /// Stream key of [`view_batch`].
 pub const VIEW_STREAM: usize = usize::MAX - 1;
+/// Stream key of the renders that refit per-view gains ([`crate::train::train_fitting_gains`]).
+pub const GAIN_STREAM: usize = usize::MAX - 2;
 /// Mixed into the seed of the held-out batch, so that it differs from training draws.
 pub const HOLDOUT_SEED: u64 = 0x5EED;
 

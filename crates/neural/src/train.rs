@@ -248,6 +248,8 @@ pub struct PreparedView {
     pub(crate) rays: ImageRays,
     pub(crate) targets: Vec<f32>,
     pub(crate) time: f32,
+    /// The targets as measured, kept once a gain is set ([`Prepared::set_gains`]).
+    pub(crate) measured: Option<Vec<f32>>,
 }
 
 impl PreparedView {
@@ -271,6 +273,31 @@ impl Prepared {
     /// Casts and clips every training ray, carves the occupancy grid (when configured) and
     /// normalises the images.
     pub fn new(problem: &Problem, cfg: &TrainConfig) -> Result<Self, NeuralError> {
+        Prepared::with_masks(problem, cfg, &ViewMasks::default())
+    }
+
+    /// [`Prepared::new`] leaving out the rays of masked pixels: they are never sampled, do not
+    /// count towards `image_scale`, and count as unknown (not dark) when the occupancy grid is
+    /// carved.
+    pub fn with_masks(problem: &Problem, cfg: &TrainConfig, masks: &ViewMasks) -> Result<Self, NeuralError> {
+        for (what, list, views) in
+            [("train", &masks.train, &problem.views), ("holdout", &masks.holdout, &problem.holdout)]
+        {
+            if !list.is_empty() && list.len() != views.len() {
+                return Err(NeuralError::invalid(
+                    format!("masks.{what}"),
+                    format!("{} masks for {} views", list.len(), views.len()),
+                ));
+            }
+            for (i, (m, v)) in list.iter().zip(views.iter()).enumerate() {
+                if m.as_ref().is_some_and(|m| m.len() != v.image.data.len()) {
+                    return Err(NeuralError::invalid(format!("masks.{what}[{i}]"), "does not have the image's size"));
+                }
+            }
+        }
+        fn mask_of(list: &[Option<Vec<bool>>], i: usize) -> Option<&[bool]> {
+            list.get(i).and_then(Option::as_deref)
+        }
         cfg.validate()?;
         problem.aabb.validate().map_err(|e| NeuralError::invalid("reconstruction box", e.to_string()))?;
         if problem.views.is_empty() {
@@ -304,7 +331,15 @@ impl Prepared {
         }
         let image_scale = match cfg.image_scale {
             Some(s) => s,
-            None => problem.views.iter().map(|v| v.image.min_max().1).fold(0.0f32, f32::max),
+            None => problem
+                .views
+                .iter()
+                .enumerate()
+                .map(|(i, v)| match mask_of(&masks.train, i) {
+                    Some(m) => v.image.data.iter().zip(m).filter(|(_, &k)| k).fold(0.0f32, |a, (&p, _)| a.max(p)),
+                    None => v.image.min_max().1,
+                })
+                .fold(0.0f32, f32::max),
         };
         if image_scale.is_nan() || image_scale <= 0.0 {
             return Err(NeuralError::invalid("images", "all training images are black"));
@@ -314,14 +349,33 @@ impl Prepared {
         // the union, so a flow that moves between instants is never carved away by the views
         // of another instant.
         let occupancy = cfg.occupancy.as_ref().map(|oc| {
+            // A masked pixel says nothing about the cells behind it: carve as if it were bright.
+            let unmasked: Vec<Option<Image>> = problem
+                .views
+                .iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    mask_of(&masks.train, i).map(|m| {
+                        let mut im = v.image.clone();
+                        let top = im.min_max().1;
+                        im.data.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(p, _)| *p = top);
+                        im
+                    })
+                })
+                .collect();
             let mut times: Vec<f64> = problem.views.iter().map(|v| v.time).collect();
             times.sort_by(f64::total_cmp);
             times.dedup();
             times
                 .iter()
                 .map(|&t| {
-                    let views: Vec<(&Camera, &Image)> =
-                        problem.views.iter().filter(|v| v.time == t).map(|v| (&v.camera, &v.image)).collect();
+                    let views: Vec<(&Camera, &Image)> = problem
+                        .views
+                        .iter()
+                        .zip(&unmasked)
+                        .filter(|(v, _)| v.time == t)
+                        .map(|(v, u)| (&v.camera, u.as_ref().unwrap_or(&v.image)))
+                        .collect();
                     OccupancyGrid::from_views(&problem.aabb, &views, oc)
                 })
                 .reduce(|mut a, b| {
@@ -330,18 +384,32 @@ impl Prepared {
                 })
                 .expect("at least one training view")
         });
-        let prep = |v: &View, occ: Option<&OccupancyGrid>| -> Result<PreparedView, NeuralError> {
-            let rays = ImageRays::new(&v.camera, &problem.aabb, occ)
-                .map_err(|e| NeuralError::invalid("camera", e.to_string()))?;
-            let targets = rays.targets(&v.image, image_scale);
-            Ok(PreparedView { rays, targets, time: (v.time / problem.time_step) as f32 })
-        };
-        let train = problem.views.par_iter().map(|v| prep(v, occupancy.as_ref())).collect::<Result<Vec<_>, _>>()?;
+        let prep =
+            |v: &View, mask: Option<&[bool]>, occ: Option<&OccupancyGrid>| -> Result<PreparedView, NeuralError> {
+                let mut rays = ImageRays::new(&v.camera, &problem.aabb, occ)
+                    .map_err(|e| NeuralError::invalid("camera", e.to_string()))?;
+                if let Some(m) = mask {
+                    drop_masked_rays(&mut rays, m);
+                }
+                let targets = rays.targets(&v.image, image_scale);
+                Ok(PreparedView { rays, targets, time: (v.time / problem.time_step) as f32, measured: None })
+            };
+        let train = problem
+            .views
+            .par_iter()
+            .enumerate()
+            .map(|(i, v)| prep(v, mask_of(&masks.train, i), occupancy.as_ref()))
+            .collect::<Result<Vec<_>, _>>()?;
         if train.iter().all(|v| v.rays.is_empty()) {
             return Err(NeuralError::invalid("scene", "no camera sees the reconstruction box"));
         }
         // Held-out views are rendered through the same model (mask included) as the result.
-        let holdout = problem.holdout.par_iter().map(|v| prep(v, occupancy.as_ref())).collect::<Result<Vec<_>, _>>()?;
+        let holdout = problem
+            .holdout
+            .par_iter()
+            .enumerate()
+            .map(|(i, v)| prep(v, mask_of(&masks.holdout, i), occupancy.as_ref()))
+            .collect::<Result<Vec<_>, _>>()?;
         let meta = FieldMeta {
             aabb: problem.aabb,
             value_scale: image_scale as f64 / (problem.intensity_scale * length),
@@ -357,6 +425,19 @@ impl Prepared {
             quad: Quadrature { close_ends: cfg.close_ends },
             intensity_length: problem.intensity_scale * length,
         })
+    }
+
+    /// Sets the gain and offset of every training view: training then fits the field to
+    /// `(measured − offset) / gain` (the measured targets, normalised like them), i.e. models
+    /// a view's pixels as `gain × rendered + offset`. `gains` has one `(gain, offset)` per
+    /// training view, offsets in normalised pixel units; results below 0 are clipped.
+    pub fn set_gains(&mut self, gains: &[(f32, f32)]) {
+        assert_eq!(gains.len(), self.train.len(), "set_gains: one gain per training view");
+        for (v, &(g, b)) in self.train.iter_mut().zip(gains) {
+            let measured = v.measured.get_or_insert_with(|| v.targets.clone());
+            let inv = 1.0 / g;
+            v.targets.iter_mut().zip(measured.iter()).for_each(|(t, &m)| *t = ((m - b) * inv).max(0.0));
+        }
     }
 
     /// Rays kept for training, and rays whose pixel sees the box at all (their difference is
@@ -460,6 +541,158 @@ impl<F: TrainableField> Learner<F> {
         }
         Learner::new(field)
     }
+}
+
+/// Per-view pixel masks for [`Prepared::with_masks`]: `true` = use the pixel. Empty lists
+/// mean no masks; otherwise one entry per view of [`Problem::views`] / [`Problem::holdout`],
+/// each `None` or `width × height` values, row-major.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewMasks {
+    pub train: Vec<Option<Vec<bool>>>,
+    pub holdout: Vec<Option<Vec<bool>>>,
+}
+
+/// Keeps the rays whose pixel the mask uses.
+fn drop_masked_rays(rays: &mut ImageRays, mask: &[bool]) {
+    let keep: Vec<bool> = rays.pixel.iter().map(|&p| mask[p as usize]).collect();
+    let filter = |v: &mut Vec<f32>| {
+        let mut k = keep.iter();
+        v.retain(|_| *k.next().unwrap_or(&false));
+    };
+    for d in &mut rays.dir_unit {
+        filter(d);
+    }
+    filter(&mut rays.near);
+    filter(&mut rays.far);
+    let mut k = keep.iter();
+    rays.pixel.retain(|_| *k.next().unwrap_or(&false));
+}
+
+/// Per-view gains fitted with the field ([`train_fitting_gains`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GainFit {
+    /// Iterations between refits. Must be positive.
+    pub every: usize,
+    /// Rays per training view rendered for a refit (a fixed, evenly spread subset).
+    pub rays_per_view: usize,
+    /// Also fit an offset per view.
+    pub offset: bool,
+}
+
+/// [`train`] with a gain (and optionally an offset) per training view fitted jointly with the
+/// field: the model of view `v`'s pixels is `g_v × rendered + b_v`. Training alternates
+/// blocks: `fit.every` field iterations on the targets `(measured − b_v) / g_v`, then for
+/// every view the exact least-squares `(g_v, b_v)` of its measured pixels against the field's
+/// renders of a fixed subset of `fit.rays_per_view` rays (no gradients; stream
+/// [`crate::batch::GAIN_STREAM`]), gains normalised to mean 1 (the absolute scale stays with
+/// the field). A run with gains already trained (a resumed one) refits first. Returns the
+/// report and the final `(gain, offset)` per training view, offsets in normalised pixel
+/// units ([`Prepared::image_scale`]).
+pub fn train_fitting_gains<F: TrainableField>(
+    prep: &mut Prepared,
+    learner: &mut Learner<F>,
+    cfg: &TrainConfig,
+    seed: u64,
+    fit: &GainFit,
+    mut on_iter: impl FnMut(&TrainState<F>) -> ControlFlow<()>,
+) -> Result<(TrainReport, Vec<(f32, f32)>), NeuralError> {
+    if fit.every == 0 || fit.rays_per_view == 0 {
+        return Err(NeuralError::invalid("gains", "refit interval and rays per view must be positive"));
+    }
+    let mut engine = CpuEngine::new(&learner.field, rayon::current_num_threads());
+    let mut gains = vec![(1.0f32, 0.0f32); prep.train.len()];
+    let start_time = learner.train_time_s;
+    let start_iteration = learner.iteration;
+    let mut samples = 0.0f64;
+    if learner.iteration > 0 {
+        refit_gains(prep, &learner.field, cfg, seed, fit, &mut engine, &mut gains);
+    }
+    let report = loop {
+        let next = ((learner.iteration / fit.every + 1) * fit.every).min(cfg.max_iterations);
+        let mut segment = TrainConfig { max_iterations: next, ..cfg.clone() };
+        if let Some(b) = cfg.time_budget_s {
+            let left = b - (learner.train_time_s - start_time);
+            if left <= 0.0 {
+                break None;
+            }
+            segment.time_budget_s = Some(left);
+        }
+        let before = learner.iteration;
+        let r = train_with_engine(prep, learner, &segment, seed, &mut engine, &mut on_iter)?;
+        samples += r.samples_per_second * r.seconds_per_iteration * (learner.iteration - before) as f64;
+        if r.stop_reason != StopReason::MaxIterations || learner.iteration >= cfg.max_iterations {
+            break Some(r);
+        }
+        refit_gains(prep, &learner.field, cfg, seed, fit, &mut engine, &mut gains);
+    };
+    let loop_time = learner.train_time_s - start_time;
+    let done = learner.iteration - start_iteration;
+    let smoothing = cfg.stop.smoothing.max(1);
+    let report = TrainReport {
+        stop_reason: report.map_or(StopReason::TimeBudget, |r| r.stop_reason),
+        iterations: learner.iteration,
+        final_loss: learner.losses.last().copied().unwrap_or(f32::NAN),
+        smoothed_loss: running_mean(&learner.losses, smoothing),
+        train_time_s: learner.train_time_s,
+        seconds_per_iteration: if done > 0 { loop_time / done as f64 } else { 0.0 },
+        samples_per_second: if loop_time > 0.0 { samples / loop_time } else { 0.0 },
+    };
+    Ok((report, gains))
+}
+
+/// One gain refit of [`train_fitting_gains`]: renders the fixed ray subset of every training
+/// view, fits `(g, b)` against the measured targets, normalises to mean gain 1 and sets the
+/// targets. A view whose fit fails (dark render) keeps its gain.
+fn refit_gains<F: TrainableField, E: Engine<F>>(
+    prep: &mut Prepared,
+    field: &F,
+    cfg: &TrainConfig,
+    seed: u64,
+    fit: &GainFit,
+    engine: &mut E,
+    gains: &mut [(f32, f32)],
+) {
+    let mut rendered = Vec::new();
+    for v in 0..prep.train.len() {
+        let n = prep.train[v].rays.len();
+        if n == 0 {
+            continue;
+        }
+        let take = fit.rays_per_view.min(n);
+        let rays: Vec<(u32, u32)> = (0..take).map(|k| (v as u32, (k * n / take) as u32)).collect();
+        let batch = RayBatch { split: Split::Train, rays, seed, stream: crate::batch::GAIN_STREAM };
+        engine.render(field, prep, cfg, &batch, &mut rendered);
+        let pv = &prep.train[v];
+        let measured = pv.measured.as_deref().unwrap_or(&pv.targets);
+        let (mut sn, mut sr, mut sp, mut srr, mut srp) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for (&r, &(_, ray)) in rendered.iter().zip(&batch.rays) {
+            let (r, p) = (r as f64, measured[ray as usize] as f64);
+            sn += 1.0;
+            sr += r;
+            sp += p;
+            srr += r * r;
+            srp += r * p;
+        }
+        let (g, b) = if fit.offset {
+            let det = sn * srr - sr * sr;
+            if det.is_nan() || det <= 1e-12 * sn * srr {
+                continue;
+            }
+            ((sn * srp - sr * sp) / det, (srr * sp - sr * srp) / det)
+        } else if srr > 0.0 {
+            (srp / srr, 0.0)
+        } else {
+            continue;
+        };
+        if g.is_finite() && g > 0.0 && b.is_finite() {
+            gains[v] = (g as f32, b as f32);
+        }
+    }
+    let mean = gains.iter().map(|g| g.0 as f64).sum::<f64>() / gains.len().max(1) as f64;
+    if mean > 0.0 && mean.is_finite() {
+        gains.iter_mut().for_each(|g| g.0 /= mean as f32);
+    }
+    prep.set_gains(gains);
 }
 
 /// What the callback sees after each iteration.

@@ -14,10 +14,11 @@ use fluidnerf_classical::{voxel_footprint_px, Grid, Problem, Projector, Projecto
 use fluidnerf_core::{Image, Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
 
+use crate::measured::{fit_gain, normalise, MaskedProjector};
 use crate::{
-    check_memory, finish, peak_rss, write_volume, BestHoldout, ClassicalDetails, Family, History, HoldoutPoint,
-    LossKind, MethodConfig, PipelineError, RunConfig, RunDir, RunEvent, RunReport, Session, StopReason, StopRule,
-    VolumeRecord, REPORT_FORMAT,
+    check_memory, finish, peak_rss, write_volume, BestHoldout, ClassicalDetails, Family, GainMode, History,
+    HoldoutPoint, HoldoutScore, LossKind, MethodConfig, PipelineError, RunConfig, RunDir, RunEvent, RunReport, Session,
+    StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
 };
 
 pub(crate) fn run(
@@ -61,20 +62,28 @@ pub(crate) fn run(
     let needed = estimate.total() + truth_bytes;
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
-    let all_images = fluidnerf_io::scene::load_images(scene)?;
-    let (mut images, mut holdout_images) = (Vec::new(), Vec::new());
-    for (f, im) in scene.frames.iter().zip(all_images) {
-        if f.holdout {
-            holdout_images.push(im);
-        } else {
-            images.push(im);
+    let measured = crate::measured::load(scene, &config.gains)?;
+    let (train_idx, held_idx) = measured.split(scene);
+    // Masked pixels are rows of zeros ([`MaskedProjector`]): zero data, no weight.
+    let masked_image = |i: usize| {
+        let mut im = measured.images[i].clone();
+        if let Some(m) = &measured.masks[i] {
+            im.data.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(v, _)| *v = 0.0);
         }
-    }
+        im
+    };
+    let measured_images: Vec<Image> = train_idx.iter().map(|&i| masked_image(i)).collect();
+    let train_masks: Vec<Option<Vec<bool>>> = train_idx.iter().map(|&i| measured.masks[i].clone()).collect();
+    let holdout_images: Vec<Image> = held_idx.iter().map(|&i| masked_image(i)).collect();
+    let holdout_masks: Vec<Option<Vec<bool>>> = held_idx.iter().map(|&i| measured.masks[i].clone()).collect();
     let subdivisions = spec.projector.subdivisions(&grid, &cameras);
     // `auto` resolved once, so the held-out views and the report use the same projector.
     let kind = spec.projector.resolve(&grid, &cameras);
     let resolved = ProjectorConfig { kind, ..spec.projector.clone() };
-    let projector = resolved.build(grid, &cameras, scene.intensity_scale)?;
+    let base_projector = resolved.build(grid, &cameras, scene.intensity_scale)?;
+    let masked_projector = MaskedProjector { inner: base_projector.as_ref(), masks: train_masks.clone() };
+    let projector: &dyn Projector =
+        if train_masks.iter().any(Option::is_some) { &masked_projector } else { base_projector.as_ref() };
     let footprint_px = voxel_footprint_px(&cameras, &grid);
     if kind == ProjectorKind::Splat && footprint_px / subdivisions as f64 > 2.0 {
         session.warn(&format!(
@@ -82,17 +91,33 @@ pub(crate) fn run(
              gaps; raise splat_subdivisions (0: automatic) or use the ray projector"
         ));
     }
-    let support = spec.projector.support(&grid, &cameras, &images);
+    // The visual hull sees masked pixels as unknown (bright), never as empty.
+    let hull_images: Vec<Image> = measured_images
+        .iter()
+        .zip(&train_masks)
+        .map(|(im, m)| {
+            let mut im = im.clone();
+            if let Some(m) = m {
+                let top = im.min_max().1;
+                im.data.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(v, _)| *v = top);
+            }
+            im
+        })
+        .collect();
+    let support = spec.projector.support(&grid, &cameras, &hull_images);
+    drop(hull_images);
     let hull_voxels = support.as_ref().map(|h| h.iter().filter(|&&b| b).count());
-    let mut problem = Problem::new(projector.as_ref(), &images)?;
-    if let Some(h) = &support {
-        problem = problem.with_support(h);
-    }
-    let holdout = if held_out_rule {
-        let fixed = ProjectorConfig { splat_subdivisions: subdivisions, ..resolved.clone() };
-        Some(HoldoutScorer::new(fixed.build(grid, &holdout_cameras, scene.intensity_scale)?, holdout_images))
-    } else {
+    let fit = config.gains.mode == GainMode::Fit;
+    let fixed = ProjectorConfig { splat_subdivisions: subdivisions, ..resolved.clone() };
+    let holdout = if holdout_cameras.is_empty() {
         None
+    } else {
+        Some(HoldoutScorer::new(
+            fixed.build(grid, &holdout_cameras, scene.intensity_scale)?,
+            holdout_images,
+            holdout_masks,
+            config.gains.mode != GainMode::None,
+        ))
     };
     let setup_s = t_setup.elapsed().as_secs_f64();
     // Written once everything has been read and checked: a refused run leaves nothing.
@@ -109,61 +134,119 @@ pub(crate) fn run(
     let _ = session.emit(RunEvent::Started { method, max_iterations: cap, windows: 1, start_iteration: 0 });
     let budget = config.stopping.time_budget_s;
     let t_solve = Instant::now();
-    let result = spec.method.solve(&problem, None, |s| {
-        let train_time_s = t_solve.elapsed().as_secs_f64() - eval_s;
-        let t_eval = Instant::now();
-        let nrmse = match curve.as_mut() {
-            Some(c) if eval_every > 0 && s.iteration % eval_every == 0 => {
-                Some(c.push(s.iteration, train_time_s, s.volume))
-            }
-            _ => None,
-        };
-        let mut out_of_patience = false;
-        let held = match &holdout {
-            Some(h) if s.iteration % holdout_every == 0 => {
-                let loss = h.loss(s.volume);
-                holdout_history.push(HoldoutPoint { iteration: s.iteration, loss });
-                out_of_patience = best.record(s.iteration, loss, || s.volume.to_vec());
-                Some(loss)
-            }
-            _ => None,
-        };
-        eval_s += t_eval.elapsed().as_secs_f64();
-        let iteration = RunEvent::Iteration {
-            window: None,
-            iteration: s.iteration,
-            loss: s.residual,
-            smoothed: None,
-            train_time_s,
-        };
-        let mut flow = session.emit(iteration);
-        if nrmse.is_some() || held.is_some() {
-            let evaluation = RunEvent::Evaluation { window: None, iteration: s.iteration, nrmse, holdout: held };
-            if session.emit(evaluation).is_break() {
-                flow = ControlFlow::Break(());
-            }
+    // With fitted gains the solve runs in segments: `rounds` of `every` iterations, each
+    // followed by a gain fit of every view to its reprojection, then the rest under the run's
+    // stopping rule. Iterations are numbered across segments.
+    let every = config.gains.interval(Family::Classical);
+    let mut gains: Vec<(f64, f64)> = vec![(1.0, 0.0); cameras.len()];
+    let mut corrected = measured_images.clone();
+    let mut volume: Option<Vec<f32>> = None;
+    let mut residual_history = Vec::new();
+    let mut done = 0usize;
+    let mut last_reason = fluidnerf_classical::solve::StopReason::MaxIterations;
+    let segments = if fit { config.gains.rounds + 1 } else { 1 };
+    for segment in 0..segments {
+        let last = segment + 1 == segments;
+        let mut seg_method = spec.method.clone();
+        let remaining = cap.saturating_sub(done);
+        if remaining == 0 {
+            break;
         }
-        if flow.is_break() {
-            cause = Some(StopReason::Interrupted);
-        } else if out_of_patience {
-            cause = Some(StopReason::HeldOutPatience);
-        } else if budget.is_some_and(|b| train_time_s >= b) {
-            cause = Some(StopReason::TimeBudget);
-        }
-        if cause.is_some() {
-            ControlFlow::Break(())
+        if !last {
+            let s = seg_method.stopping_mut();
+            s.max_iterations = every.min(remaining);
+            s.plateau = None;
         } else {
-            ControlFlow::Continue(())
+            seg_method.stopping_mut().max_iterations = remaining;
         }
-    })?;
+        let mut problem = Problem::new(projector, &corrected)?;
+        if let Some(h) = &support {
+            problem = problem.with_support(h);
+        }
+        let offset_iter = done;
+        let result = seg_method.solve(&problem, volume.as_deref(), |s| {
+            let iteration = offset_iter + s.iteration;
+            let train_time_s = t_solve.elapsed().as_secs_f64() - eval_s;
+            let t_eval = Instant::now();
+            let nrmse = match curve.as_mut() {
+                Some(c) if eval_every > 0 && iteration % eval_every == 0 => {
+                    Some(c.push(iteration, train_time_s, s.volume))
+                }
+                _ => None,
+            };
+            let mut out_of_patience = false;
+            let held = match &holdout {
+                Some(h) if held_out_rule && iteration % holdout_every == 0 => {
+                    let loss = h.loss(s.volume);
+                    holdout_history.push(HoldoutPoint { iteration, loss });
+                    out_of_patience = best.record(iteration, loss, || s.volume.to_vec());
+                    Some(loss)
+                }
+                _ => None,
+            };
+            eval_s += t_eval.elapsed().as_secs_f64();
+            let event = RunEvent::Iteration { window: None, iteration, loss: s.residual, smoothed: None, train_time_s };
+            let mut flow = session.emit(event);
+            if nrmse.is_some() || held.is_some() {
+                let evaluation = RunEvent::Evaluation { window: None, iteration, nrmse, holdout: held };
+                if session.emit(evaluation).is_break() {
+                    flow = ControlFlow::Break(());
+                }
+            }
+            if flow.is_break() {
+                cause = Some(StopReason::Interrupted);
+            } else if out_of_patience {
+                cause = Some(StopReason::HeldOutPatience);
+            } else if budget.is_some_and(|b| train_time_s >= b) {
+                cause = Some(StopReason::TimeBudget);
+            }
+            if cause.is_some() {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        })?;
+        done += result.iterations;
+        residual_history.extend(result.residual_history);
+        last_reason = result.stop_reason;
+        volume = Some(result.volume);
+        if cause.is_some() || last {
+            break;
+        }
+        // Each view against its reprojection: p ≈ g · A x + b.
+        let x = volume.as_deref().unwrap_or_default();
+        let mut buf = Vec::new();
+        for (v, p) in measured_images.iter().enumerate() {
+            buf.clear();
+            buf.resize(projector.view_len(v), 0.0);
+            projector.forward(v, x, &mut buf);
+            if let Some(g) = fit_gain(&p.data, &buf, train_masks[v].as_deref(), config.gains.offset) {
+                gains[v] = g;
+            }
+        }
+        normalise(&mut gains);
+        for ((c, p), &(g, b)) in corrected.iter_mut().zip(&measured_images).zip(&gains) {
+            let (inv, b) = ((1.0 / g) as f32, b as f32);
+            c.data.iter_mut().zip(&p.data).for_each(|(c, &p)| *c = ((p - b) * inv).max(0.0));
+        }
+        log::info!(
+            "gains after {done} iterations: {}",
+            gains.iter().map(|(g, _)| format!("{g:.3}")).collect::<Vec<_>>().join(", ")
+        );
+    }
     let train_time_s = t_solve.elapsed().as_secs_f64() - eval_s;
     let _ = session.emit(RunEvent::Writing);
-    let stop_reason = cause.unwrap_or(result.stop_reason.into());
-    let iterations = result.iterations;
+    let stop_reason = cause.unwrap_or(last_reason.into());
+    let iterations = done;
     let (kept_iteration, data) = match best.best.take() {
         Some((it, _, v)) => (it, v),
-        None => (iterations, result.volume),
+        None => (iterations, volume.unwrap_or_else(|| vec![0.0; grid.len()])),
     };
+    let scores: Vec<(usize, HoldoutScore)> = match &holdout {
+        Some(h) => held_idx.iter().copied().zip(h.scores(&data)).collect(),
+        None => Vec::new(),
+    };
+    let preprocessing = measured.report(scene, fit.then_some(gains.as_slice()), &scores);
     let volume = grid.volume(data);
     write_volume(dir, "volume", &volume)?;
 
@@ -203,7 +286,7 @@ pub(crate) fn run(
         result_bytes: std::fs::metadata(dir.volume()).map(|m| m.len()).unwrap_or(0),
         history: History {
             loss_kind: Some(LossKind::RelativeResidual),
-            loss: result.residual_history,
+            loss: residual_history,
             holdout: holdout_history,
             nrmse: nrmse_history,
             eval_every,
@@ -222,6 +305,7 @@ pub(crate) fn run(
         }),
         neural: None,
         windows: Vec::new(),
+        preprocessing: Some(preprocessing),
     };
     log::debug!("{method}: {:.1} s in all", session.elapsed_s());
     finish(scene, dir, report, truth, session)
@@ -248,28 +332,52 @@ impl Curve {
     }
 }
 
-/// The relative misfit of a volume on the held-out views.
+/// The relative misfit of a volume on the held-out views (masked pixels left out), after the
+/// best-fit gain per view when the run calibrates gains (a held-out camera's gain is unknown).
 struct HoldoutScorer {
     projector: Box<dyn Projector>,
     images: Vec<Image>,
+    masks: Vec<Option<Vec<bool>>>,
+    fit_gains: bool,
     norm2: f64,
 }
 
 impl HoldoutScorer {
-    fn new(projector: Box<dyn Projector>, images: Vec<Image>) -> Self {
+    fn new(projector: Box<dyn Projector>, images: Vec<Image>, masks: Vec<Option<Vec<bool>>>, fit_gains: bool) -> Self {
         let norm2: f64 = images.iter().flat_map(|im| &im.data).map(|&p| p as f64 * p as f64).sum();
-        HoldoutScorer { projector, images, norm2: norm2.max(f64::MIN_POSITIVE) }
+        HoldoutScorer { projector, images, masks, fit_gains, norm2: norm2.max(f64::MIN_POSITIVE) }
+    }
+
+    /// Each view's reprojection, masked pixels zeroed.
+    fn reprojections(&self, volume: &[f32]) -> Vec<Vec<f32>> {
+        (0..self.images.len())
+            .map(|v| {
+                let mut buf = vec![0.0; self.projector.view_len(v)];
+                self.projector.forward(v, volume, &mut buf);
+                if let Some(m) = &self.masks[v] {
+                    buf.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(b, _)| *b = 0.0);
+                }
+                buf
+            })
+            .collect()
     }
 
     fn loss(&self, volume: &[f32]) -> f64 {
         let mut sum = 0.0;
-        let mut buf = Vec::new();
-        for (v, im) in self.images.iter().enumerate() {
-            buf.clear();
-            buf.resize(self.projector.view_len(v), 0.0);
-            self.projector.forward(v, volume, &mut buf);
-            sum += buf.iter().zip(&im.data).map(|(&a, &b)| (a as f64 - b as f64).powi(2)).sum::<f64>();
+        for ((buf, im), m) in self.reprojections(volume).iter().zip(&self.images).zip(&self.masks) {
+            let g =
+                if self.fit_gains { fit_gain(&im.data, buf, m.as_deref(), false).map_or(1.0, |f| f.0) } else { 1.0 };
+            sum += buf.iter().zip(&im.data).map(|(&a, &b)| (g * a as f64 - b as f64).powi(2)).sum::<f64>();
         }
         sum / self.norm2
+    }
+
+    fn scores(&self, volume: &[f32]) -> Vec<HoldoutScore> {
+        self.reprojections(volume)
+            .iter()
+            .zip(&self.images)
+            .zip(&self.masks)
+            .map(|((r, im), m)| crate::measured::holdout_score(&im.data, r, m.as_deref()))
+            .collect()
     }
 }

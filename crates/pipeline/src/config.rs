@@ -14,7 +14,8 @@
 //!   "stopping": { "rule": "own", "max_iterations": null, "time_budget_s": null, … },
 //!   "checkpoint_every": 500,
 //!   "eval_every": null,
-//!   "memory_limit_gib": null
+//!   "memory_limit_gib": null,
+//!   "gains": { "mode": "none", "offset": false, "every": null, "rounds": 4 }
 //! }
 //! ```
 //!
@@ -546,6 +547,91 @@ pub struct RunConfig {
     /// when the run starts.
     #[serde(default)]
     pub memory_limit_gib: Option<f64>,
+    /// Per-camera intensity calibration ([`GainConfig`]). Default none.
+    #[serde(default)]
+    pub gains: GainConfig,
+}
+
+/// How the cameras' relative sensitivities are handled.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GainMode {
+    /// Images are taken as they are.
+    #[default]
+    None,
+    /// Every image is scaled to the same total intensity as the others of its time (masked
+    /// pixels left out), as in the dissertation's experiments (§8.5).
+    Balance,
+    /// Balanced first, then a gain per training image (and an offset with
+    /// [`GainConfig::offset`]) is fitted with the field: for the neural methods refitted by
+    /// least squares against the field's renders every [`GainConfig::every`] iterations; for
+    /// the voxel methods in [`GainConfig::rounds`] rounds of `every` iterations, each followed
+    /// by a least-squares fit of every view to its reprojection. Gains are normalised to mean 1
+    /// over the training images (the absolute scale is the field's).
+    Fit,
+}
+
+impl FromStr for GainMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "none" => Ok(GainMode::None),
+            "balance" => Ok(GainMode::Balance),
+            "fit" => Ok(GainMode::Fit),
+            other => Err(format!("`{other}` is not a gain mode: use none, balance or fit")),
+        }
+    }
+}
+
+impl std::fmt::Display for GainMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            GainMode::None => "none",
+            GainMode::Balance => "balance",
+            GainMode::Fit => "fit",
+        })
+    }
+}
+
+/// Per-camera gains (key `gains` of [`RunConfig`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GainConfig {
+    pub mode: GainMode,
+    /// With `fit`: also fit a per-image offset (`pixel = gain × model + offset`). Default false.
+    pub offset: bool,
+    /// With `fit`: iterations between refits; None: 25 for the neural methods, 5 for the voxel
+    /// methods.
+    pub every: Option<usize>,
+    /// With `fit`, voxel methods: refits before the final solve. Default 4.
+    pub rounds: usize,
+}
+
+impl Default for GainConfig {
+    fn default() -> Self {
+        GainConfig { mode: GainMode::None, offset: false, every: None, rounds: 4 }
+    }
+}
+
+impl GainConfig {
+    /// Iterations between refits for `family`.
+    pub fn interval(&self, family: Family) -> usize {
+        self.every.unwrap_or(if family == Family::Classical { 5 } else { 25 })
+    }
+
+    fn validate(&self) -> Result<(), PipelineError> {
+        if self.every == Some(0) {
+            return Err(PipelineError::invalid("gains.every", "must be at least 1"));
+        }
+        if self.mode == GainMode::Fit && self.rounds == 0 {
+            return Err(PipelineError::invalid("gains.rounds", "must be at least 1 with gains.mode fit"));
+        }
+        if self.offset && self.mode != GainMode::Fit {
+            return Err(PipelineError::invalid("gains.offset", "is fitted only with gains.mode fit"));
+        }
+        Ok(())
+    }
 }
 
 impl RunConfig {
@@ -562,6 +648,7 @@ impl RunConfig {
             checkpoint_every: default_checkpoint_every(),
             eval_every: None,
             memory_limit_gib: None,
+            gains: GainConfig::default(),
         }
     }
 
@@ -603,6 +690,13 @@ impl RunConfig {
             }
         }
         self.stopping.validate()?;
+        self.gains.validate()?;
+        if self.gains.mode == GainMode::Fit && self.method().family() == Family::Temporal {
+            return Err(PipelineError::invalid(
+                "gains.mode",
+                "gain fitting is available for static methods; use balance for time-resolved runs",
+            ));
+        }
         if self.stopping.rule == StopRule::HeldOut && self.method().family() == Family::Temporal {
             return Err(PipelineError::invalid(
                 "stopping.rule",

@@ -275,7 +275,99 @@ pub(crate) fn write_run_html(
         Some(t) => truth.iter().find(|(tt, _)| tt.is_some_and(|tt| (tt - t).abs() < 1e-9)).or(truth.first()),
         None => truth.first(),
     };
-    let html = build_report(&format!("{label} reconstruction"), scene, truth_volume.map(|(_, v)| v), &[&run])?;
+    let mut html = build_report(&format!("{label} reconstruction"), scene, truth_volume.map(|(_, v)| v), &[&run])?;
+    if let Some(p) = &report.preprocessing {
+        let mut table = Table::new(
+            format!(
+                "Preprocessing: {}; {} pixels clipped at 0, {} masked; gains {}",
+                p.scene, p.clipped_pixels, p.masked_pixels, p.gains.mode
+            ),
+            &[
+                "frame",
+                "camera",
+                "held out",
+                "gain",
+                "offset",
+                "reprojection NRMSE (raw)",
+                "after best-fit gain",
+                "best-fit gain",
+            ],
+        );
+        let f = fluidnerf_viz::report::format_value;
+        for g in &p.frames {
+            let s = g.holdout_scores.as_ref();
+            table.push_row(vec![
+                g.frame.to_string(),
+                g.camera.clone(),
+                if g.holdout { "yes".into() } else { String::new() },
+                f(g.gain),
+                f(g.offset),
+                s.map_or("–".into(), |s| f(s.nrmse_raw)),
+                s.map_or("–".into(), |s| f(s.nrmse_fitted)),
+                s.map_or("–".into(), |s| f(s.fitted_gain)),
+            ]);
+        }
+        html.tables.push(table);
+    }
+    if report.volumes.len() == 1 {
+        match camera_figure(scene, report, &run.volume) {
+            Ok(png) => html.figures.push(Figure {
+                caption: format!(
+                    "Every camera (at most {CAMERA_FIGURE_FRAMES}): the image as preprocessed, the reconstruction's \
+                     reprojection (× the camera's gain, + its offset) and their difference. Held-out cameras are \
+                     marked."
+                ),
+                image: ImageData::Png(png),
+            }),
+            Err(e) => log::warn!("report.html: no camera figure: {e}"),
+        }
+    }
     fluidnerf_viz::report::write_report_html(&dir.report_html(), &html)?;
     Ok(())
+}
+
+/// Frames shown in the camera figure of `report.html`.
+const CAMERA_FIGURE_FRAMES: usize = 24;
+
+/// One row per camera: measured image, reprojection, difference (thumbnails).
+fn camera_figure(scene: &Scene, report: &RunReport, volume: &Volume) -> Result<Vec<u8>, PipelineError> {
+    let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
+    let spacing = volume.spacing().min_element();
+    let mut rows = Vec::new();
+    for (i, (frame, measured)) in scene.frames.iter().zip(&pre.images).enumerate().take(CAMERA_FIGURE_FRAMES) {
+        let (gain, offset) = report
+            .preprocessing
+            .as_ref()
+            .and_then(|p| p.frames.iter().find(|g| g.frame == i))
+            .map_or((1.0, 0.0), |g| (g.gain, g.offset));
+        let settings = fluidnerf_core::RenderSettings {
+            step: Some(spacing),
+            supersample: 1,
+            time: frame.time.unwrap_or(0.0),
+            scale: scene.intensity_scale * gain,
+        };
+        let mut model = fluidnerf_core::render_image(volume, &frame.camera, &scene.aabb, &settings)
+            .map_err(|e| PipelineError::invalid("camera figure", e.to_string()))?;
+        model.data.iter_mut().for_each(|v| *v += offset as f32);
+        let name = crate::measured::frame_label(scene, i);
+        let held = if frame.holdout { " (held out)" } else { "" };
+        let measured_panel = fluidnerf_viz::Panel::from_image(measured).with_title(format!("{name}{held}: image"));
+        let model_panel = fluidnerf_viz::Panel::from_image(&model).with_title("reprojection");
+        let mut diff = measured_panel.difference(&model_panel);
+        diff.title = "reprojection − image".into();
+        let style = PanelStyle { plot_size_px: 140, colorbar_label: "pixel".into(), ..PanelStyle::default() };
+        let groups = [
+            PanelGroup { panels: vec![measured_panel, model_panel], style: style.clone() },
+            PanelGroup {
+                panels: vec![diff],
+                style: PanelStyle {
+                    colormap: fluidnerf_viz::Colormap::Diverging,
+                    colorbar_label: "Δ pixel".into(),
+                    ..style
+                },
+            },
+        ];
+        rows.push(fluidnerf_viz::encode_panels_png(&groups)?);
+    }
+    stack_pngs(&rows)
 }

@@ -38,6 +38,7 @@ mod error;
 pub mod event;
 pub mod html;
 pub mod load;
+mod measured;
 mod neural;
 pub mod report;
 pub mod rundir;
@@ -51,14 +52,14 @@ use std::time::Instant;
 use fluidnerf_core::{Scene, Volume};
 
 pub use config::{
-    ClassicalSpec, Family, Method, MethodConfig, NeuralSpec, RunConfig, StopRule, StoppingPolicy, TemporalSpec,
-    CONFIG_FORMAT,
+    ClassicalSpec, Family, GainConfig, GainMode, Method, MethodConfig, NeuralSpec, RunConfig, StopRule, StoppingPolicy,
+    TemporalSpec, CONFIG_FORMAT,
 };
 pub use error::PipelineError;
 pub use event::{duration, RunEvent, WindowPos};
 pub use report::{
-    ClassicalDetails, History, HoldoutPoint, LossKind, NeuralDetails, RunReport, RunStatus, StopReason, VolumeRecord,
-    WindowDetails, REPORT_FORMAT,
+    ClassicalDetails, FrameGain, History, HoldoutPoint, HoldoutScore, LossKind, NeuralDetails, Preprocessing,
+    RunReport, RunStatus, StopReason, VolumeRecord, WindowDetails, REPORT_FORMAT,
 };
 pub use rundir::{DirState, Overwrite, RunDir, RunKind};
 pub use temporal::{finish_windows, reconstruct_windows, window_plan, WindowOutcome, WindowPlan};

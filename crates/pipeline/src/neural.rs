@@ -11,14 +11,17 @@ use std::time::Instant;
 
 use fluidnerf_core::{Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
-use fluidnerf_neural::train::{train, Learner, Prepared, Problem, TrainConfig, View};
+use fluidnerf_neural::train::{
+    render_view, train, train_fitting_gains, GainFit, Learner, Prepared, Problem, Split, TrainConfig, View, ViewMasks,
+};
 use fluidnerf_neural::trained::{build_field, ModelRecord, WorldField};
 use fluidnerf_neural::TrainableField;
 
+use crate::measured::Measured;
 use crate::{
-    check_memory, finish, peak_rss, write_volume, BestHoldout, Family, History, HoldoutPoint, LossKind, MethodConfig,
-    NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent, RunReport, Session, StopReason, StopRule,
-    VolumeRecord, REPORT_FORMAT,
+    check_memory, finish, peak_rss, write_volume, BestHoldout, Family, GainConfig, GainMode, History, HoldoutPoint,
+    HoldoutScore, LossKind, MethodConfig, NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent,
+    RunReport, Session, StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
 };
 
 /// A rough peak-memory estimate of a neural run: images and their ray tables, parameters with
@@ -38,9 +41,21 @@ pub(crate) fn estimate_memory(
     images + optimiser + scratch + out_voxels * 4 * 2 + truth_voxels * 4 * 3
 }
 
-/// The training problem of a scene: its training and held-out views.
-pub(crate) fn problem(scene: &Scene) -> Result<Problem, PipelineError> {
-    let images = fluidnerf_io::scene::load_images(scene)?;
+/// The training problem of a scene: its training and held-out views, their images
+/// preprocessed and balanced as `gains` asks ([`crate::measured`]), and the masks.
+pub(crate) fn problem(scene: &Scene, gains: &GainConfig) -> Result<(Problem, ViewMasks, Measured), PipelineError> {
+    let measured = crate::measured::load(scene, gains)?;
+    let images = measured.images.clone();
+    let mut masks = ViewMasks::default();
+    if measured.masks.iter().any(Option::is_some) {
+        for (frame, m) in scene.frames.iter().zip(&measured.masks) {
+            if frame.holdout {
+                masks.holdout.push(m.clone());
+            } else {
+                masks.train.push(m.clone());
+            }
+        }
+    }
     let mut problem = Problem {
         aabb: scene.aabb,
         intensity_scale: scene.intensity_scale,
@@ -56,7 +71,7 @@ pub(crate) fn problem(scene: &Scene) -> Result<Problem, PipelineError> {
             problem.views.push(view);
         }
     }
-    Ok(problem)
+    Ok((problem, masks, measured))
 }
 
 pub(crate) fn run(
@@ -103,8 +118,8 @@ pub(crate) fn run(
     // An earlier curve is read before the report that holds it is removed.
     let earlier = if dir.resuming() { earlier_report(dir) } else { None };
     let t0 = Instant::now();
-    let problem = problem(scene)?;
-    let prep = Prepared::new(&problem, &spec.train)?;
+    let (problem, masks, measured) = problem(scene, &config.gains)?;
+    let prep = Prepared::with_masks(&problem, &spec.train, &masks)?;
     let setup_s = t0.elapsed().as_secs_f64();
     // Written once everything has been read and checked: a refused run leaves nothing.
     if dir.resuming() {
@@ -118,7 +133,20 @@ pub(crate) fn run(
         problem.holdout.len(),
         100.0 * prep.occupied_fraction()
     );
-    let ctx = Ctx { scene, config, dir, truth, spec: &spec, prep: &prep, setup_s, needed, earlier, method };
+    let ctx = Ctx {
+        scene,
+        config,
+        dir,
+        truth,
+        spec: &spec,
+        prep,
+        setup_s,
+        needed,
+        earlier,
+        method,
+        problem: &problem,
+        measured: &measured,
+    };
     fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, session))
 }
 
@@ -143,7 +171,9 @@ struct Ctx<'a> {
     dir: &'a RunDir,
     truth: &'a [(Option<f64>, Volume)],
     spec: &'a NeuralSpec,
-    prep: &'a Prepared,
+    prep: Prepared,
+    problem: &'a Problem,
+    measured: &'a Measured,
     setup_s: f64,
     needed: u64,
     earlier: Option<RunReport>,
@@ -152,9 +182,10 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     fn train_and_write<F: TrainableField>(self, field: F, session: &mut Session) -> Result<RunReport, PipelineError> {
-        let (config, dir, prep) = (self.config, self.dir, self.prep);
+        let (config, dir) = (self.config, self.dir);
+        let mut prep = self.prep;
         let train_cfg = &self.spec.train;
-        let mut learner = Learner::fresh(field, prep, train_cfg);
+        let mut learner = Learner::fresh(field, &prep, train_cfg);
         let ckpt = dir.checkpoint();
         if dir.resuming() {
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
@@ -162,8 +193,10 @@ impl Ctx<'_> {
         }
         let sample = self.truth.first().map(|(_, t)| TruthSample::new(t));
         let eval_every = config.eval_interval();
+        // Copies, so that gain fitting may change the prepared targets while these are held.
+        let (meta, occupancy) = (prep.meta.clone(), prep.occupancy().cloned());
         let nrmse_of =
-            |field: &F, s: &TruthSample| s.nrmse(&WorldField { field, meta: &prep.meta, occupancy: prep.occupancy() });
+            |field: &F, s: &TruthSample| s.nrmse(&WorldField { field, meta: &meta, occupancy: occupancy.as_ref() });
         // A resumed run continues the curves of the run it resumes, up to the checkpoint.
         let (mut nrmse_history, mut holdout_history) = match &self.earlier {
             Some(r) => (
@@ -183,7 +216,7 @@ impl Ctx<'_> {
             windows: 1,
             start_iteration: learner.iteration,
         });
-        let report = train(prep, &mut learner, train_cfg, config.seed, |s| {
+        let on_iter = |s: &fluidnerf_neural::train::TrainState<F>| {
             let t_eval = Instant::now();
             let mut out_of_patience = false;
             if let Some(h) = s.holdout_loss {
@@ -240,7 +273,21 @@ impl Ctx<'_> {
             } else {
                 ControlFlow::Continue(())
             }
-        })?;
+        };
+        let (report, fitted) = if config.gains.mode == GainMode::Fit {
+            let fit = GainFit {
+                every: config.gains.interval(Family::Neural),
+                rays_per_view: 2048,
+                offset: config.gains.offset,
+            };
+            let (r, g) = train_fitting_gains(&mut prep, &mut learner, train_cfg, config.seed, &fit, on_iter)?;
+            let scale = prep.image_scale();
+            log::info!("fitted gains: {}", g.iter().map(|(g, _)| format!("{g:.3}")).collect::<Vec<_>>().join(", "));
+            (r, Some(g.iter().map(|&(g, b)| (g as f64, b as f64 * scale)).collect::<Vec<_>>()))
+        } else {
+            (train(&prep, &mut learner, train_cfg, config.seed, on_iter)?, None)
+        };
+        let prep = &prep;
         if let Some(e) = ckpt_error {
             return Err(e);
         }
@@ -266,6 +313,8 @@ impl Ctx<'_> {
         )?;
 
         let t_eval = Instant::now();
+        let holdout_scores =
+            holdout_scores(self.scene, self.problem, self.measured, prep, &learner.field, train_cfg, config.seed);
         let world = WorldField { field: &learner.field, meta: &prep.meta, occupancy: prep.occupancy() };
         let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
         let volume = Volume::from_field(dims, self.scene.aabb, &world, 0.0);
@@ -334,9 +383,39 @@ impl Ctx<'_> {
                 train: report,
             }),
             windows: Vec::new(),
+            preprocessing: Some(self.measured.report(self.scene, fitted.as_deref(), &holdout_scores)),
         };
         finish(self.scene, dir, report, self.truth, session)
     }
+}
+
+/// Every held-out frame (frame index, in order) scored against the field's rendering of its
+/// kept rays, as measured and after the best-fit gain.
+fn holdout_scores<F: TrainableField>(
+    scene: &Scene,
+    problem: &Problem,
+    measured: &Measured,
+    prep: &Prepared,
+    field: &F,
+    cfg: &TrainConfig,
+    seed: u64,
+) -> Vec<(usize, HoldoutScore)> {
+    let held: Vec<usize> = scene.holdout_frames().map(|(i, _)| i).collect();
+    let scale = prep.image_scale() as f32;
+    held.iter()
+        .enumerate()
+        .filter(|(v, _)| !prep.views(Split::Holdout)[*v].rays().is_empty())
+        .map(|(v, &frame)| {
+            let pixels = render_view(field, prep, cfg, Split::Holdout, v, seed);
+            // Pixels whose ray misses the box render as 0 and are measured as they are.
+            let image = &problem.holdout[v].image;
+            let mut rendered = vec![0f32; image.data.len()];
+            for (p, r, _) in pixels {
+                rendered[p as usize] = r * scale;
+            }
+            (frame, crate::measured::holdout_score(&image.data, &rendered, measured.masks[frame].as_deref()))
+        })
+        .collect()
 }
 
 /// Writes a training checkpoint (weights, optimiser state, histories) atomically.

@@ -203,6 +203,89 @@ pub struct RunReport {
     pub classical: Option<ClassicalDetails>,
     pub neural: Option<NeuralDetails>,
     pub windows: Vec<WindowDetails>,
+    /// What was done to the images before and during the reconstruction.
+    #[serde(default)]
+    pub preprocessing: Option<Preprocessing>,
+}
+
+/// The preprocessing of a run's images: what the scene records (background, masks), what the
+/// run did (gains), and what came of it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Preprocessing {
+    /// The scene's preprocessing keys in words (`fluidnerf_io::scene::Recording::describe`).
+    pub scene: String,
+    /// Pixels negative after background subtraction, set to 0.
+    pub clipped_pixels: usize,
+    /// Pixels left out by the frames' masks.
+    pub masked_pixels: usize,
+    pub gains: crate::GainConfig,
+    /// Per frame of the scene, in order.
+    pub frames: Vec<FrameGain>,
+}
+
+impl Preprocessing {
+    /// Lines for a terminal: what was done, each camera's gain, the held-out scores.
+    pub fn summary_lines(&self) -> Vec<String> {
+        let mut out = vec![format!(
+            "preprocessing: {}; {} pixel(s) clipped at 0, {} masked; gains: {}{}",
+            self.scene,
+            self.clipped_pixels,
+            self.masked_pixels,
+            self.gains.mode,
+            if self.gains.offset { " with offsets" } else { "" }
+        )];
+        if self.gains.mode != crate::GainMode::None {
+            let gains: Vec<String> = self
+                .frames
+                .iter()
+                .filter(|f| !f.holdout)
+                .map(|f| {
+                    if f.offset != 0.0 {
+                        format!("{} {:.3} ({:+.3})", f.camera, f.gain, f.offset)
+                    } else {
+                        format!("{} {:.3}", f.camera, f.gain)
+                    }
+                })
+                .collect();
+            out.push(format!("camera gains: {}", gains.join(", ")));
+        }
+        for f in &self.frames {
+            if let Some(s) = &f.holdout_scores {
+                out.push(format!(
+                    "held-out {}: reprojection NRMSE {:.4} as measured, {:.4} after its best-fit gain {:.3}",
+                    f.camera, s.nrmse_raw, s.nrmse_fitted, s.fitted_gain
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// The gain of one image: `pixel = gain × model + offset`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameGain {
+    pub frame: usize,
+    /// The camera's name, or the image file when the frame names no camera.
+    pub camera: String,
+    pub holdout: bool,
+    /// Training images: the gain the run used (1 without gains; the balancing factor with
+    /// `balance`; the fitted gain with `fit`). Held-out images: the balancing factor; their
+    /// best-fit gain against the reconstruction is in `holdout_scores`.
+    pub gain: f64,
+    pub offset: f64,
+    /// Held-out images: NRMSE of the reprojection as measured, and after the best-fit gain.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout_scores: Option<HoldoutScore>,
+}
+
+/// A held-out image against the reconstruction's rendering of it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HoldoutScore {
+    /// `‖p − r‖ / ‖p‖` over the used pixels.
+    pub nrmse_raw: f64,
+    /// The same after scaling the rendering by the best-fit gain `Σ p r / Σ r²`.
+    pub nrmse_fitted: f64,
+    pub fitted_gain: f64,
 }
 
 impl RunReport {

@@ -145,7 +145,17 @@ fn setup(
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
         ));
     };
-    let mut problem = crate::neural::problem(scene)?;
+    let (mut problem, masks, _) = crate::neural::problem(scene, &config.gains)?;
+    if masks != fluidnerf_neural::train::ViewMasks::default() {
+        return Err(PipelineError::invalid(
+            "scene",
+            format!(
+                "{}: frames have masks (`mask_path`), which the time-resolved methods do not apply yet; \
+                 reconstruct the times with a static method or remove the masks",
+                scene.root.display()
+            ),
+        ));
+    }
     problem.views.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
     problem.holdout.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
     let times = frame_times(&problem);
@@ -469,6 +479,7 @@ impl Ctx<'_> {
         };
         log::debug!("{}: prepare and train {wall_s:.1} s", self.method);
         let report = RunReport {
+            preprocessing: None,
             format: REPORT_FORMAT,
             fluidnerf_version: env!("CARGO_PKG_VERSION").to_string(),
             method: self.method,

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::image::{pinhole, thin_lens, Emitters, ImageModel};
 use crate::phantom::{Phantom, PhantomKind, PhantomSettings};
+use crate::real::{self, RealLike, RealRecording};
 use crate::rig::{LensSettings, RigCamera, RigSettings};
 use crate::sensor::SensorSettings;
 use crate::SynthError;
@@ -38,6 +39,9 @@ pub struct SynthSettings {
     pub lens: LensSettings,
     pub image: ImageModel,
     pub sensor: SensorSettings,
+    /// Record a real-like recording instead of sensor counts (gains, background, dark noise,
+    /// 8-bit sRGB JPEG images; [`crate::real`]). Default none.
+    pub real: Option<RealLike>,
     /// Seed of every random choice (phantom, jitter, rays, noise). Default 0.
     pub seed: u64,
 }
@@ -53,6 +57,7 @@ impl Default for SynthSettings {
             lens: LensSettings { resolution: [256, 256], ..Default::default() },
             image: ImageModel::default(),
             sensor: SensorSettings::default(),
+            real: None,
             seed: 0,
         }
     }
@@ -95,6 +100,9 @@ impl SynthSettings {
         self.lens.validate()?;
         self.image.validate()?;
         self.sensor.validate()?;
+        if let Some(r) = &self.real {
+            r.validate()?;
+        }
         Ok(())
     }
 
@@ -174,6 +182,9 @@ pub struct Synthesis {
     /// Counts per unit of `∫E ds` (see [`crate::sensor`]).
     pub intensity_scale: f64,
     pub stats: SynthStats,
+    /// With [`SynthSettings::real`]: gains and background frames; the frames' `counts` are then
+    /// the recorded linear images on the 0..=255 scale.
+    pub real: Option<RealRecording>,
 }
 
 impl Synthesis {
@@ -181,11 +192,19 @@ impl Synthesis {
     /// with `k` the time-step index for time-resolved data.
     pub fn image_path(&self, frame: &SynthFrame) -> PathBuf {
         let name = &self.cameras[frame.camera].name;
+        let ext = if self.real.is_some() { "jpg" } else { "png" };
         if frame.time.is_some() {
-            PathBuf::from(format!("images/{name}_t{:02}.png", frame.time_index))
+            PathBuf::from(format!("images/{name}_t{:02}.{ext}", frame.time_index))
         } else {
-            PathBuf::from(format!("images/{name}.png"))
+            PathBuf::from(format!("images/{name}.{ext}"))
         }
+    }
+
+    /// Relative paths of camera `camera`'s background frames (real-like recordings):
+    /// `background/<camera>_b<k>.jpg`.
+    pub fn background_paths(&self, camera: usize) -> Vec<PathBuf> {
+        let n = self.real.as_ref().map_or(0, |r| r.backgrounds[camera].len());
+        (0..n).map(|k| PathBuf::from(format!("background/{}_b{k}.jpg", self.cameras[camera].name))).collect()
     }
 
     /// Relative path of a truth volume: `truth/truth.npy` or `truth/truth_t<k>.npy`.
@@ -338,13 +357,55 @@ pub fn generate(
     if peak <= 0.0 {
         log::warn!("every image is black: no camera sees any of the field");
     }
-    let intensity_scale = settings.sensor.intensity_scale(peak);
     let sensor_seed = settings.seed ^ 0x6e6f_6973_6521;
-    for (k, f) in frames.iter_mut().enumerate() {
-        f.counts = settings.sensor.expose(&f.clean, intensity_scale, sensor_seed, k as u64)?;
-    }
+    let (intensity_scale, real) = match &settings.real {
+        None => {
+            let intensity_scale = settings.sensor.intensity_scale(peak);
+            for (k, f) in frames.iter_mut().enumerate() {
+                f.counts = settings.sensor.expose(&f.clean, intensity_scale, sensor_seed, k as u64)?;
+            }
+            (intensity_scale, None)
+        }
+        Some(r) => {
+            let held: Vec<bool> = cameras.iter().map(|c| c.holdout).collect();
+            let gains = real::draw_gains(r, &held, settings.seed);
+            let gained_peak = frames.iter().map(|f| gains[f.camera] * f.clean.min_max().1 as f64).fold(0.0, f64::max);
+            let top = settings.sensor.full_scale_fraction * 255.0;
+            let k = if gained_peak > 0.0 { top / gained_peak } else { 1.0 };
+            let sigma = r.dark_noise * top;
+            let patterns: Vec<Image> = cameras
+                .iter()
+                .enumerate()
+                .map(|(c, cam)| {
+                    real::background_pattern(
+                        cam.camera.width(),
+                        cam.camera.height(),
+                        r.background * top,
+                        c,
+                        settings.seed,
+                    )
+                })
+                .collect();
+            for (n, f) in frames.iter_mut().enumerate() {
+                let g = (gains[f.camera] * k) as f32;
+                let mut signal = patterns[f.camera].clone();
+                signal.data.iter_mut().zip(&f.clean.data).for_each(|(s, &c)| *s += g * c);
+                f.counts = real::add_noise(&signal, sigma, sensor_seed, n as u64)?;
+            }
+            let backgrounds = patterns
+                .iter()
+                .enumerate()
+                .map(|(c, p)| {
+                    (0..r.background_frames)
+                        .map(|b| real::add_noise(p, sigma, sensor_seed ^ 0x6267, (c * 1000 + b) as u64))
+                        .collect::<Result<Vec<_>, _>>()
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            (k, Some(RealRecording { gains, backgrounds, jpeg_quality: r.jpeg_quality }))
+        }
+    };
     stats.sensor_seconds = t0.elapsed().as_secs_f64();
-    Ok(Synthesis { settings: settings.clone(), aabb, cameras, truth, frames, intensity_scale, stats })
+    Ok(Synthesis { settings: settings.clone(), aabb, cameras, truth, frames, intensity_scale, stats, real })
 }
 
 /// Convenience for callers without a progress display.

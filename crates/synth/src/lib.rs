@@ -30,6 +30,7 @@ pub mod generate;
 pub mod image;
 pub mod phantom;
 pub mod preset;
+pub mod real;
 pub mod rig;
 pub mod sensor;
 
@@ -43,5 +44,6 @@ pub use phantom::{
     PhantomSettings, Shape, ShapeSum, StartingJet, StartingJetParams, UniformBall,
 };
 pub use preset::{preset, presets, DEFAULT_PRESET};
+pub use real::{RealLike, RealRecording};
 pub use rig::{Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset};
 pub use sensor::SensorSettings;

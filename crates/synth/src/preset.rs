@@ -49,6 +49,12 @@ pub fn presets() -> Vec<(&'static str, &'static str)> {
         ("plume8", "8 cameras of the 120-camera ring about y, otherwise as plume15"),
         ("cfdjet15", "CFD forced round jet (PhiFlow) along +y, otherwise as plume15"),
         ("plume-tr", "CFD plume at solver steps 50, 52, 60, 12-camera ring about y, 64² px, pinhole"),
+        (
+            "real-like",
+            "planar15 recorded like a laboratory rig: camera gains ±30 %, 5 % background, dark noise, one \
+             background frame per camera, 8-bit sRGB JPEG; camera 7 held out",
+        ),
+        ("real-like-small", "real-like at demo size: 12 cameras, 64² px, 64³ truth, pinhole; camera 5 held out"),
         ("dissertation", "Table 6.1 at full size: 15 cameras, 800² px, 801³ truth, 500 rays per voxel (hours, ~10 GB)"),
     ]
 }
@@ -126,6 +132,24 @@ pub fn preset(name: &str) -> Result<SynthSettings, SynthError> {
             let mut s = cfd(PhantomKind::Plume, 10);
             s.lens.resolution = [64, 64];
             s.times = vec![50.0, 52.0, 60.0];
+            s
+        }
+        "real-like" => {
+            let mut s = planar(15);
+            s.real = Some(crate::RealLike::default());
+            s.rig.holdout = vec![7];
+            s
+        }
+        "real-like-small" => {
+            let mut s = SynthSettings {
+                resolution: 64,
+                lens: LensSettings { resolution: [64, 64], ..Default::default() },
+                image: ImageModel::Pinhole(PinholeSettings::default()),
+                real: Some(crate::RealLike::default()),
+                ..Default::default()
+            };
+            s.rig.layout = Layout::Ring { count: 12, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
+            s.rig.holdout = vec![5];
             s
         }
         "dissertation" => {

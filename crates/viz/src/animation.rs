@@ -64,17 +64,35 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
 /// perspective); the focal length makes the box's projection, over the whole orbit, span 90 %
 /// of `width_px`, and the height (even, at least 16 px) leaves the same margin vertically.
 pub fn orbit_cameras(aabb: &Aabb, n: usize, width_px: u32) -> Vec<Camera> {
+    orbit_cameras_about(aabb, n, width_px, DVec3::X)
+}
+
+/// [`orbit_cameras`] about the flow direction `flow` (world coordinates, any length) through the
+/// box centre, the flow pointing right in every view. `flow = +x` gives [`orbit_cameras`].
+pub fn orbit_cameras_about(aabb: &Aabb, n: usize, width_px: u32, flow: DVec3) -> Vec<Camera> {
     assert!(width_px >= 16, "orbit_cameras: width {width_px} px is too small");
-    let size = aabb.size();
+    assert!(flow.is_finite() && flow.length() > 0.0, "orbit_cameras: the flow direction must be non-zero");
+    let axis = flow.normalize();
     let centre = aabb.centre();
-    let r_yz = 0.5 * (size.y * size.y + size.z * size.z).sqrt();
-    let radius = 3.0 * (0.5 * size.x).max(r_yz) + r_yz;
+    // The box's half-length along the axis and its radius about it.
+    let (mut half_axis, mut r_yz) = (0.0f64, 0.0f64);
+    for c in aabb.corners() {
+        let d = c - centre;
+        let along = d.dot(axis);
+        half_axis = half_axis.max(along.abs());
+        r_yz = r_yz.max((d - along * axis).length());
+    }
+    let radius = 3.0 * half_axis.max(r_yz) + r_yz;
+    // A basis (u, w) across the axis; for the x axis u = y, w = z.
+    let w0 = if axis.dot(DVec3::Z).abs() < 0.9 { DVec3::Z } else { DVec3::Y };
+    let w_dir = (w0 - w0.dot(axis) * axis).normalize();
+    let u_dir = w_dir.cross(axis);
     let pose = |theta: f64| {
-        // Position on the circle: −z at θ = 0, then towards −y (right-handed about +x).
-        let offset = DVec3::new(0.0, theta.sin(), -theta.cos()) * radius;
+        // Position on the circle: −w at θ = 0, then towards −u (right-handed about the axis).
+        let offset = (u_dir * theta.sin() - w_dir * theta.cos()) * radius;
         let forward = -offset.normalize();
-        // Camera x = forward × up must be world +x, hence up = x̂ × forward.
-        (centre + offset, DVec3::X.cross(forward))
+        // Camera x = forward × up must be the flow axis, hence up = axis × forward.
+        (centre + offset, axis.cross(forward))
     };
     // The box's largest extent in normalised image coordinates over a dense set of angles.
     let unit = Intrinsics { width: 2, height: 2, fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0, skew: 0.0 };
@@ -113,6 +131,24 @@ pub fn orbit_cameras(aabb: &Aabb, n: usize, width_px: u32) -> Vec<Camera> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// About −y, the flow runs right in every view and the box stays in the picture.
+    #[test]
+    fn orbit_about_another_axis_keeps_the_flow_to_the_right() {
+        let aabb = Aabb::new(DVec3::new(-5.0, 0.0, -5.0), DVec3::new(5.0, 40.0, 5.0));
+        let cams = orbit_cameras_about(&aabb, 6, 160, DVec3::NEG_Y);
+        for cam in &cams {
+            let upstream = cam.project(DVec3::new(0.0, 40.0, 0.0)).expect("in front");
+            let downstream = cam.project(DVec3::new(0.0, 0.0, 0.0)).expect("in front");
+            assert!(downstream.x > upstream.x + 60.0, "flow runs right: {upstream} → {downstream}");
+            for corner in aabb.corners() {
+                let p = cam.project(corner).expect("in front");
+                assert!(p.x > 0.0 && p.x < 159.0 && p.y > 0.0 && p.y < cam.height() as f64 - 1.0, "{corner} → {p}");
+            }
+        }
+        let x = orbit_cameras(&aabb, 3, 64);
+        assert_eq!(x, orbit_cameras_about(&aabb, 3, 64, DVec3::new(2.0, 0.0, 0.0)));
+    }
 
     #[test]
     fn orbit_sees_the_box_with_flow_to_the_right() {

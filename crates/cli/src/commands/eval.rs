@@ -7,9 +7,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::ValueEnum;
+use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
-    evaluate_volume, reproject, MetricsReport, Region, ReprojectionOptions, SsimParams, SsimWindow, VolumeMetricOptions,
+    estimate_flow_axis, evaluate_volume, reproject, MetricsReport, Region, ReprojectionOptions, SsimParams, SsimWindow,
+    VolumeMetricOptions,
 };
 use serde::Serialize;
 
@@ -59,6 +61,12 @@ pub struct Args {
     /// thirds of the box along +x.
     #[arg(long, value_delimiter = ',', conflicts_with = "no_regions")]
     pub regions: Vec<String>,
+    /// The flow direction x,y,z (world) for the default regions: the laminar, transition and
+    /// turbulent thirds along the box axis nearest to it, from where the flow enters
+    /// [default: the scene's `flow_axis`, else estimated from the truth (the principal axis of
+    /// the field, towards where it widens), else +x].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, conflicts_with_all = ["no_regions", "regions"])]
+    pub flow_axis: Option<Vec<f64>>,
     /// For a neural run directory, score its sampled `volume.npy` instead of the trained field.
     #[arg(long)]
     pub use_volume: bool,
@@ -156,7 +164,8 @@ impl Recon {
 #[allow(clippy::print_stdout)]
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Validate everything before the work starts.
-    let regions: Vec<Region> = if args.no_regions {
+    let default_regions = args.regions.is_empty() && !args.no_regions;
+    let mut regions: Vec<Region> = if args.no_regions {
         Vec::new()
     } else if args.regions.is_empty() {
         Region::jet_thirds()
@@ -175,8 +184,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("--data-range must be positive, got {r}");
         }
     }
+    if let Some(a) = &args.flow_axis {
+        if a.len() != 3 || a.iter().any(|v| !v.is_finite()) || a.iter().all(|&v| v == 0.0) {
+            bail!("--flow-axis needs a non-zero direction x,y,z, got {a:?}");
+        }
+    }
     let ssim = SsimParams { window, ..Default::default() };
-    let volume_options = VolumeMetricOptions { regions, ssim, data_range: args.data_range };
     let reprojection_options = ReprojectionOptions { supersample: args.supersample.max(1), step: None, ssim };
 
     let scene = fluidnerf_io::scene::load_scene(&args.scene)
@@ -197,6 +210,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
     };
+    // The regions follow the flow: given, recorded in the scene, or estimated from the truth.
+    if default_regions {
+        let recorded = fluidnerf_io::scene::recorded(&scene).context("the scene's flow_axis")?.flow_axis;
+        let flow = match (&args.flow_axis, recorded) {
+            (Some(a), _) => Some((DVec3::new(a[0], a[1], a[2]), "--flow-axis")),
+            (None, Some(a)) => Some((a, "the scene's flow_axis")),
+            (None, None) => {
+                truth.first().and_then(|(_, t)| estimate_flow_axis(t)).map(|a| (a, "estimated from the truth"))
+            }
+        };
+        match flow {
+            Some((axis, from)) => {
+                log::info!("flow axis {:?} ({from}): laminar, transition, turbulent thirds along it", axis.to_array());
+                regions = Region::jet_thirds_along(axis);
+            }
+            None => log::info!("no flow axis given, recorded or estimable: regions are thirds along +x"),
+        }
+    }
+    let volume_options = VolumeMetricOptions { regions, ssim, data_range: args.data_range };
     // The time steps the reconstruction volumes stand for: the truth's, else the frames'.
     let step_times: Vec<Option<f64>> = if truth.is_empty() {
         scene.times().into_iter().map(Some).collect()

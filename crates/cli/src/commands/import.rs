@@ -9,7 +9,7 @@ use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::scene::{estimate_box, BoxEstimateParams};
 use fluidnerf_core::{Aabb, Camera, Frame, Scene, TruthRef};
 use fluidnerf_io::image::{read_image_with, Linearisation, SampleKind};
-use fluidnerf_io::scene::{load_images_with, read_scene_draft, save_scene_with, validate_scene, SCENE_FILE};
+use fluidnerf_io::scene::{load_images_with, read_scene_draft, save_scene_recording, validate_scene, SCENE_FILE};
 use serde::Serialize;
 use std::io::Write as _;
 
@@ -83,6 +83,11 @@ pub struct Args {
     /// Leave out images that no camera is calibrated for (with a warning) instead of failing.
     #[arg(long)]
     pub skip_uncalibrated: bool,
+    /// Cameras to hold out for validation, comma separated: camera names, or image names
+    /// without extension for frames that name no camera. Every frame of such a camera is held
+    /// out.
+    #[arg(long, value_delimiter = ',')]
+    pub holdout: Vec<String>,
 }
 
 fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
@@ -215,6 +220,8 @@ struct FromFile {
     intensity_scale: Option<f64>,
     linearisation: Option<Linearisation>,
     truth: Vec<TruthRef>,
+    /// The preprocessing keys, paths absolute (resolved against the file's folder).
+    recording: Option<fluidnerf_io::scene::Recording>,
 }
 
 fn aabb_text(a: &Aabb) -> String {
@@ -232,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("{} already exists; pass --force to overwrite it", out_file.display());
     }
 
-    let (frames, from_file) = if let Some(path) = &args.transforms {
+    let (frames, mut from_file) = if let Some(path) = &args.transforms {
         let draft = read_scene_draft(path).context("cannot read the transforms.json")?;
         let root = draft.root.clone();
         let frames = draft
@@ -245,7 +252,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .collect();
         let truth =
             draft.truth.into_iter().map(|t| TruthRef { time: t.time, file_path: root.join(&t.file_path) }).collect();
+        let mut recording = draft.recording.clone();
+        for r in &mut recording.frames {
+            if let fluidnerf_io::scene::Background::Frames(list) = &mut r.background {
+                list.iter_mut().filter(|p| !p.is_absolute()).for_each(|p| *p = root.join(&*p));
+            }
+            if let Some(m) = &mut r.mask_path {
+                if !m.is_absolute() {
+                    *m = root.join(&*m);
+                }
+            }
+        }
         let file = FromFile {
+            recording: Some(recording),
             aabb: draft.aabb,
             units: Some(draft.units),
             intensity_scale: Some(draft.intensity_scale),
@@ -303,6 +322,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for f in &mut scene.frames {
         f.file_path = relative(&f.file_path)?;
     }
+    let mut unmatched: Vec<&String> = args.holdout.iter().collect();
+    for f in &mut scene.frames {
+        let stem = f.file_path.file_stem().map(|s| s.to_string_lossy().to_string());
+        let name = f.camera_name.clone().or(stem);
+        if let Some(n) = name.filter(|n| args.holdout.contains(n)) {
+            f.holdout = true;
+            unmatched.retain(|h| **h != n);
+        }
+    }
+    if let Some(h) = unmatched.first() {
+        let names: BTreeSet<String> = scene
+            .frames
+            .iter()
+            .filter_map(|f| {
+                f.camera_name.clone().or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().to_string()))
+            })
+            .collect();
+        bail!(
+            "--holdout: no camera or image named `{h}` (cameras: {})",
+            names.into_iter().collect::<Vec<_>>().join(", ")
+        );
+    }
+    let mut recording = match from_file.recording.take() {
+        Some(mut r) if r.frames.len() == scene.frames.len() => {
+            for fr in &mut r.frames {
+                if let fluidnerf_io::scene::Background::Frames(list) = &mut fr.background {
+                    for p in list.iter_mut() {
+                        *p = relative(p)?;
+                    }
+                }
+                if let Some(m) = &mut fr.mask_path {
+                    *m = relative(m)?;
+                }
+            }
+            r
+        }
+        _ => fluidnerf_io::scene::Recording::plain(scene.frames.len()),
+    };
     for t in &mut scene.truth {
         if t.file_path.exists() {
             t.file_path = relative(&t.file_path)?;
@@ -348,7 +405,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
     }
-    save_scene_with(&scene, &args.out, Some(linearisation))?;
+    recording.linearisation = linearisation;
+    save_scene_recording(&scene, &args.out, &recording, true)?;
     let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args: &args };
     let json = serde_json::to_string_pretty(&settings)?;
     fluidnerf_io::atomic_write(&args.out.join("import.json"), |w| w.write_all(json.as_bytes()))?;

@@ -150,6 +150,29 @@ pub struct Args {
     pub neural: NeuralArgs,
     #[command(flatten)]
     pub temporal: TemporalArgs,
+    #[command(flatten)]
+    pub gains: GainArgs,
+}
+
+/// Per-camera intensity calibration (real recordings).
+#[derive(clap::Args, Debug)]
+#[command(next_help_heading = "Camera gains (every static method)")]
+pub struct GainArgs {
+    /// `none`: images as they are; `balance`: every image scaled to the same total intensity
+    /// as the others of its time; `fit`: balanced, then a gain per camera fitted with the
+    /// field (neural) or between rounds of iterations (voxel methods), normalised to mean 1
+    /// [default: none].
+    #[arg(long, value_name = "MODE", value_parser = ["none", "balance", "fit"])]
+    pub gains: Option<String>,
+    /// With --gains fit: also fit an offset per camera (a background level left in the images).
+    #[arg(long)]
+    pub gain_offset: bool,
+    /// With --gains fit: iterations between gain refits [default: 25 neural, 5 voxel methods].
+    #[arg(long, value_name = "N")]
+    pub gain_every: Option<usize>,
+    /// With --gains fit, voxel methods: gain refits before the final solve [default: 4].
+    #[arg(long, value_name = "N")]
+    pub gain_rounds: Option<usize>,
 }
 
 /// Splitting a time-resolved run over processes (a Slurm job array, a Dask cluster).
@@ -490,6 +513,19 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     if let Some(v) = s.patience {
         cfg.stopping.patience = v;
     }
+    let g = &args.gains;
+    if let Some(mode) = &g.gains {
+        cfg.gains.mode = mode.parse().map_err(anyhow::Error::msg)?;
+    }
+    if g.gain_offset {
+        cfg.gains.offset = true;
+    }
+    if let Some(v) = g.gain_every {
+        cfg.gains.every = Some(v);
+    }
+    if let Some(v) = g.gain_rounds {
+        cfg.gains.rounds = v;
+    }
     apply_method_options(args, &mut cfg.method)?;
     cfg.validate()?;
     Ok(cfg)
@@ -725,6 +761,11 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     #[allow(clippy::print_stdout)]
     {
         println!("{}", report.summary_line());
+        if let Some(p) = &report.preprocessing {
+            for line in p.summary_lines() {
+                println!("{line}");
+            }
+        }
         println!("wrote {} (config.json, report.json, report.html)", args.out.display());
     }
     Ok(match report.status {

@@ -45,10 +45,15 @@ pub struct Args {
     /// every frame, unless --orbit is given.
     #[arg(long, value_delimiter = ',', value_name = "INDEX")]
     pub camera: Vec<usize>,
-    /// Render N views on a circle about the flow axis (+x) through the box centre, flow
-    /// pointing right, and write them as a turntable GIF.
+    /// Render N views on a circle about the flow axis through the box centre, flow pointing
+    /// right, and write them as a turntable GIF. The axis is --flow-axis, else the scene's
+    /// `flow_axis`, else +x.
     #[arg(long, value_name = "N")]
     pub orbit: Option<usize>,
+    /// The flow direction x,y,z (world) the orbit circles [default: the scene's `flow_axis`,
+    /// else +x].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, requires = "orbit")]
+    pub flow_axis: Option<Vec<f64>>,
     /// Width of orbit views in pixels (the height follows the box's cross-section).
     #[arg(long, default_value_t = 320)]
     pub width: u32,
@@ -121,8 +126,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let scene = fluidnerf_io::scene::load_scene(&args.scene)
         .with_context(|| format!("reading the scene {}", args.scene.display()))?;
+    let flow = match &args.flow_axis {
+        Some(a) if a.len() == 3 && a.iter().all(|v| v.is_finite()) && a.iter().any(|&v| v != 0.0) => {
+            fluidnerf_core::glam::DVec3::new(a[0], a[1], a[2])
+        }
+        Some(a) => bail!("--flow-axis needs a non-zero direction x,y,z, got {a:?}"),
+        None => fluidnerf_io::scene::recorded(&scene)
+            .context("the scene's flow_axis")?
+            .flow_axis
+            .unwrap_or(fluidnerf_core::glam::DVec3::X),
+    };
     let views: Vec<View> = match args.orbit {
-        Some(n) => fluidnerf_viz::orbit_cameras(&scene.aabb, n, args.width)
+        Some(n) => fluidnerf_viz::orbit_cameras_about(&scene.aabb, n, args.width, flow)
             .into_iter()
             .enumerate()
             .map(|(k, camera)| View { camera, time: args.time.unwrap_or(0.0), file_stem: format!("orbit_{k:03}") })

@@ -10,6 +10,8 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::{Aabb, Volume};
+use fluidnerf_io::image::Linearisation;
+use fluidnerf_io::scene::{Background, FrameRecording, Recording};
 use fluidnerf_synth::{
     generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings, Synthesis,
     ThinLensSettings, DEFAULT_PRESET,
@@ -130,9 +132,10 @@ pub struct Args {
     /// Keep at most the first n cameras (after --every).
     #[arg(long, help_heading = "Cameras")]
     pub first: Option<usize>,
-    /// Cameras held out for validation, comma-separated indices after subsetting.
+    /// Cameras held out for validation, comma separated: names (`cam007`) or indices after
+    /// subsetting.
     #[arg(long, value_delimiter = ',', help_heading = "Cameras")]
-    pub holdout: Option<Vec<usize>>,
+    pub holdout: Option<Vec<String>>,
     /// Standard deviation of random camera position errors, mm [default: 0].
     #[arg(long, help_heading = "Cameras")]
     pub jitter_position: Option<f64>,
@@ -187,6 +190,48 @@ pub struct Args {
     /// Brightest noiseless pixel as a fraction of full scale [default: 0.8].
     #[arg(long, help_heading = "Sensor")]
     pub full_scale_fraction: Option<f64>,
+
+    /// Record like a laboratory rig: per-camera gains, a background, dark noise, background
+    /// frames and 8-bit sRGB JPEG images (the `real-like` presets turn it on; `false` turns it
+    /// off, giving the same data set as linear 16-bit PNG counts).
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL", help_heading = "Real-like recording")]
+    pub real_like: Option<bool>,
+    /// Camera gains drawn uniformly in 1 ± this, then scaled to mean 1 over the training
+    /// cameras [default: 0.3].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub gain_spread: Option<f64>,
+    /// Mean background level as a fraction of the brightest signal pixel [default: 0.05].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub background_level: Option<f64>,
+    /// σ of the dark noise as a fraction of the brightest signal pixel [default: 0.005].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub dark_noise: Option<f64>,
+    /// Background frames recorded per camera [default: 1].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub background_frames: Option<usize>,
+    /// JPEG quality, 1..=100 [default: 95].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub jpeg_quality: Option<u8>,
+}
+
+/// `--holdout` entries as indices after subsetting: an index, or a camera's name (`cam007`).
+fn holdout_indices(given: &[String], s: &SynthSettings) -> anyhow::Result<Vec<usize>> {
+    let names: Option<Vec<String>> = if given.iter().all(|g| g.parse::<usize>().is_ok()) {
+        None
+    } else {
+        let cams = s.rig.build(&s.lens, &s.aabb, s.seed).context("--holdout: the camera rig")?;
+        Some(cams.into_iter().map(|c| c.name).collect())
+    };
+    given
+        .iter()
+        .map(|g| match (g.parse::<usize>(), &names) {
+            (Ok(i), _) => Ok(i),
+            (Err(_), Some(names)) => names.iter().position(|n| n == g).ok_or_else(|| {
+                anyhow::anyhow!("--holdout: no camera named `{g}` in the rig (cameras: {})", names.join(", "))
+            }),
+            (Err(_), None) => bail!("--holdout: `{g}` is neither an index nor a camera name"),
+        })
+        .collect()
 }
 
 /// Applies the command-line overrides to `s`.
@@ -281,7 +326,36 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
         s.rig.subset.first = Some(n);
     }
     if let Some(h) = &args.holdout {
-        s.rig.holdout = h.clone();
+        s.rig.holdout = holdout_indices(h, s)?;
+    }
+    let real_given = args.gain_spread.is_some()
+        || args.background_level.is_some()
+        || args.dark_noise.is_some()
+        || args.background_frames.is_some()
+        || args.jpeg_quality.is_some();
+    if args.real_like == Some(false) {
+        if real_given {
+            bail!("--real-like false: the real-like options (--gain-spread, ...) do not apply");
+        }
+        s.real = None;
+    }
+    if args.real_like == Some(true) || real_given {
+        let r = s.real.get_or_insert_with(Default::default);
+        if let Some(v) = args.gain_spread {
+            r.gain_spread = v;
+        }
+        if let Some(v) = args.background_level {
+            r.background = v;
+        }
+        if let Some(v) = args.dark_noise {
+            r.dark_noise = v;
+        }
+        if let Some(v) = args.background_frames {
+            r.background_frames = v;
+        }
+        if let Some(v) = args.jpeg_quality {
+            r.jpeg_quality = v;
+        }
     }
     if let Some(v) = args.jitter_position {
         s.rig.jitter.position_mm = v;
@@ -449,15 +523,42 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     for f in &syn.frames {
         let path = out.join(syn.image_path(f));
-        fluidnerf_io::image::write_png16_counts(&path, &f.counts)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        match &syn.real {
+            None => fluidnerf_io::image::write_png16_counts(&path, &f.counts),
+            Some(r) => fluidnerf_io::image::write_jpeg_srgb(&path, &f.counts, 255.0, r.jpeg_quality),
+        }
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if let Some(r) = &syn.real {
+        for (c, frames) in r.backgrounds.iter().enumerate() {
+            for (img, rel) in frames.iter().zip(syn.background_paths(c)) {
+                let path = out.join(rel);
+                fluidnerf_io::image::write_jpeg_srgb(&path, img, 255.0, r.jpeg_quality)
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+            }
+        }
     }
     for (k, (_, vol)) in syn.truth.iter().enumerate() {
         let path = out.join(syn.truth_path(k));
         fluidnerf_io::volume::write_npy(&path, vol).with_context(|| format!("cannot write {}", path.display()))?;
     }
     let scene = syn.scene(out.clone());
-    fluidnerf_io::scene::save_scene(&scene, &scene_file)
+    let recording = match &syn.real {
+        None => Recording::plain(scene.frames.len()),
+        Some(_) => Recording {
+            linearisation: Linearisation::Srgb,
+            frames: syn
+                .frames
+                .iter()
+                .map(|f| FrameRecording {
+                    background: Background::Frames(syn.background_paths(f.camera)),
+                    mask_path: None,
+                })
+                .collect(),
+            flow_axis: None,
+        },
+    };
+    fluidnerf_io::scene::save_scene_recording(&scene, &scene_file, &recording, false)
         .with_context(|| format!("cannot write {}", scene_file.display()))?;
     let preview = out.join("preview.png");
     write_preview(&preview, &syn).with_context(|| format!("cannot write {}", preview.display()))?;
@@ -467,7 +568,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "preset": if args.config.is_some() { None } else { Some(&args.preset) },
         "seed": settings.seed,
         "intensity_scale": syn.intensity_scale,
-        "counts": "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)",
+        "counts": if syn.real.is_some() {
+            "linear pixel (srgb-decoded, 0..255) - background ≈ camera_gains[c] × intensity_scale × ∫E ds (mm)"
+        } else {
+            "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)"
+        },
+        "camera_gains": syn.real.as_ref().map(|r| {
+            syn.cameras.iter().zip(&r.gains).map(|(c, g)| (c.name.clone(), *g)).collect::<std::collections::BTreeMap<_, _>>()
+        }),
         "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
         "settings": settings,
         "stats": syn.stats,
@@ -509,6 +617,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         settings.lens.field_of_view_mm()[0],
         settings.image.name()
     );
+    if let Some(r) = &syn.real {
+        let _ = writeln!(
+            text,
+            "  real-like gains {} (training mean 1), {} background frame(s) per camera, 8-bit sRGB JPEG",
+            r.gains.iter().map(|g| format!("{g:.3}")).collect::<Vec<_>>().join(", "),
+            r.backgrounds.first().map_or(0, Vec::len)
+        );
+    }
     let _ = writeln!(
         text,
         "  images    {} × {}-bit PNG, intensity_scale {:.6e} counts per mm, noise σ {} of max{}",

@@ -1,0 +1,277 @@
+//! The measured images of a run: preprocessed as the scene records it (background subtraction,
+//! clipping, masks: [`fluidnerf_io::scene::load_preprocessed`]), balanced as the run asks
+//! ([`GainMode`]), and the least-squares gain fits both method families share.
+//!
+//! # Gains
+//! The imaging model of a real camera `c` is `pixel = g_c × intensity_scale × ∫E ds + b_c`: a
+//! sensitivity `g_c` (gain, aperture, filter, vignetting averaged over the image) and, with
+//! [`crate::GainConfig::offset`], a residual offset `b_c` left by the background subtraction.
+//! Only ratios of gains are observable (a brighter field and dimmer cameras give the same
+//! images), so gains are normalised to mean 1 over the training images and the field carries
+//! the absolute scale. Given a model image `r` (a rendering or reprojection) and the measured
+//! `p`, the gain minimising `Σ (p − g r − b)²` over the used pixels is the ordinary
+//! least-squares line through the points `(r, p)` ([`fit_gain`]).
+
+use fluidnerf_classical::{Grid, Projector, SparseRows};
+use fluidnerf_core::{Camera, Image, Scene};
+
+use crate::{FrameGain, GainConfig, GainMode, HoldoutScore, PipelineError, Preprocessing};
+
+/// A scene's images ready for a method.
+pub(crate) struct Measured {
+    /// Per frame: preprocessed, then divided by `gains`.
+    pub images: Vec<Image>,
+    /// Per frame: `true` for the pixels to use.
+    pub masks: Vec<Option<Vec<bool>>>,
+    /// Per frame: the balancing gain the image was divided by (1 without balancing).
+    pub gains: Vec<f64>,
+    /// What was done, for the report; gains are filled in by [`Measured::report`].
+    preprocessing: Preprocessing,
+}
+
+/// Reads and preprocesses the scene's images ([`fluidnerf_io::scene::load_preprocessed`]) and,
+/// with `balance` or `fit`, scales every image to the mean total intensity of the training
+/// images of its time (masked pixels left out).
+pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, PipelineError> {
+    let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
+    let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
+    let mut images = pre.images;
+    let mut factors = vec![1.0; images.len()];
+    if gains.mode != GainMode::None {
+        let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
+        let time_key = |i: usize| scene.frames[i].time.map(f64::to_bits);
+        for i in 0..images.len() {
+            // The mean over the training images of the time (all of them when every one is
+            // held out), so that training gains average 1 like fitted ones.
+            let same: Vec<usize> = (0..images.len()).filter(|&j| time_key(j) == time_key(i)).collect();
+            let train: Vec<usize> = same.iter().copied().filter(|&j| !scene.frames[j].holdout).collect();
+            let group = if train.is_empty() { same } else { train };
+            let mean = group.iter().map(|&j| totals[j]).sum::<f64>() / group.len() as f64;
+            if totals[i] > 0.0 && mean > 0.0 {
+                factors[i] = totals[i] / mean;
+            } else {
+                log::warn!("frame {i} ({}): no light in the image; not balanced", scene.frames[i].file_path.display());
+            }
+        }
+        for (im, &g) in images.iter_mut().zip(&factors) {
+            let inv = (1.0 / g) as f32;
+            im.data.iter_mut().for_each(|v| *v *= inv);
+        }
+        log::info!(
+            "balanced every image to the mean total intensity of its time: gains {}",
+            factors.iter().map(|g| format!("{g:.3}")).collect::<Vec<_>>().join(", ")
+        );
+    }
+    let preprocessing = Preprocessing {
+        scene: pre.recording.describe(),
+        clipped_pixels: pre.clipped,
+        masked_pixels,
+        gains: *gains,
+        frames: Vec::new(),
+    };
+    Ok(Measured { images, masks: pre.masks, gains: factors, preprocessing })
+}
+
+impl Measured {
+    /// Splits images and masks into training and held-out frames, in frame order.
+    pub(crate) fn split(&self, scene: &Scene) -> (Vec<usize>, Vec<usize>) {
+        let train = scene.training_frames().map(|(i, _)| i).collect();
+        let held = scene.holdout_frames().map(|(i, _)| i).collect();
+        (train, held)
+    }
+
+    /// The report's preprocessing record. `fitted` holds, per training frame (in frame order),
+    /// the gain and offset fitted on top of the balancing; `scores` the held-out frames'
+    /// scores, in frame order.
+    pub(crate) fn report(
+        &self,
+        scene: &Scene,
+        fitted: Option<&[(f64, f64)]>,
+        scores: &[(usize, HoldoutScore)],
+    ) -> Preprocessing {
+        let mut out = self.preprocessing.clone();
+        let mut fitted = fitted.map(|f| f.iter());
+        for (i, f) in scene.frames.iter().enumerate() {
+            let (mut gain, mut offset) = (self.gains[i], 0.0);
+            if !f.holdout {
+                if let Some((g, b)) = fitted.as_mut().and_then(|it| it.next()) {
+                    gain *= g;
+                    offset = b * self.gains[i];
+                }
+            }
+            out.frames.push(FrameGain {
+                frame: i,
+                camera: frame_label(scene, i),
+                holdout: f.holdout,
+                gain,
+                offset,
+                holdout_scores: scores.iter().find(|(j, _)| *j == i).map(|(_, s)| *s),
+            });
+        }
+        out
+    }
+}
+
+/// A frame's camera name, or its image file.
+pub(crate) fn frame_label(scene: &Scene, i: usize) -> String {
+    let f = &scene.frames[i];
+    f.camera_name.clone().unwrap_or_else(|| f.file_path.display().to_string())
+}
+
+fn used_sum(data: &[f32], mask: Option<&[bool]>) -> f64 {
+    match mask {
+        Some(m) => data.iter().zip(m).filter(|(_, &k)| k).map(|(&v, _)| v as f64).sum(),
+        None => data.iter().map(|&v| v as f64).sum(),
+    }
+}
+
+/// The gain (and, with `offset`, the offset) minimising `Σ (p − g r − b)²` over the used
+/// pixels; None when the model image is (nearly) dark or the fit is not a positive gain.
+pub(crate) fn fit_gain(p: &[f32], r: &[f32], mask: Option<&[bool]>, offset: bool) -> Option<(f64, f64)> {
+    let (mut n, mut sr, mut sp, mut srr, mut srp) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+    for (k, (&pv, &rv)) in p.iter().zip(r).enumerate() {
+        if mask.is_some_and(|m| !m[k]) {
+            continue;
+        }
+        let (pv, rv) = (pv as f64, rv as f64);
+        n += 1.0;
+        sr += rv;
+        sp += pv;
+        srr += rv * rv;
+        srp += rv * pv;
+    }
+    let (g, b) = if offset {
+        let det = n * srr - sr * sr;
+        if det.is_nan() || det <= 1e-12 * n * srr {
+            return None;
+        }
+        ((n * srp - sr * sp) / det, (srr * sp - sr * srp) / det)
+    } else {
+        if srr.is_nan() || srr <= 0.0 {
+            return None;
+        }
+        (srp / srr, 0.0)
+    };
+    (g.is_finite() && g > 0.0 && b.is_finite()).then_some((g, b))
+}
+
+/// Scales gains to mean 1 (offsets are in pixel units and stay).
+pub(crate) fn normalise(gains: &mut [(f64, f64)]) {
+    let mean = gains.iter().map(|g| g.0).sum::<f64>() / gains.len().max(1) as f64;
+    if mean > 0.0 && mean.is_finite() {
+        gains.iter_mut().for_each(|g| g.0 /= mean);
+    }
+}
+
+/// How well `r` reproduces `p` over the used pixels, as measured and after the best-fit gain.
+pub(crate) fn holdout_score(p: &[f32], r: &[f32], mask: Option<&[bool]>) -> HoldoutScore {
+    let g = fit_gain(p, r, mask, false).map_or(1.0, |(g, _)| g);
+    let (mut num_raw, mut num_fit, mut den) = (0.0f64, 0.0f64, 0.0f64);
+    for (k, (&pv, &rv)) in p.iter().zip(r).enumerate() {
+        if mask.is_some_and(|m| !m[k]) {
+            continue;
+        }
+        let (pv, rv) = (pv as f64, rv as f64);
+        num_raw += (pv - rv).powi(2);
+        num_fit += (pv - g * rv).powi(2);
+        den += pv * pv;
+    }
+    let den = den.max(f64::MIN_POSITIVE);
+    HoldoutScore { nrmse_raw: (num_raw / den).sqrt(), nrmse_fitted: (num_fit / den).sqrt(), fitted_gain: g }
+}
+
+/// A projector whose masked pixels are rows of zeros: the forward map writes 0 there and the
+/// adjoint ignores them, so the voxel methods' residuals, row and column sums leave them out
+/// (the system is `M A g = M p` with `M` the diagonal of the masks).
+pub(crate) struct MaskedProjector<'a> {
+    pub inner: &'a dyn Projector,
+    /// Per view (the projector's order).
+    pub masks: Vec<Option<Vec<bool>>>,
+}
+
+impl Projector for MaskedProjector<'_> {
+    fn grid(&self) -> &Grid {
+        self.inner.grid()
+    }
+
+    fn cameras(&self) -> &[Camera] {
+        self.inner.cameras()
+    }
+
+    fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
+        self.inner.forward(view, x, out);
+        if let Some(m) = &self.masks[view] {
+            out.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(o, _)| *o = 0.0);
+        }
+    }
+
+    fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>) {
+        match &self.masks[view] {
+            None => self.inner.back_add(view, y, out, col_sums),
+            Some(m) => {
+                let masked: Vec<f32> = y.iter().zip(m).map(|(&v, &k)| if k { v } else { 0.0 }).collect();
+                self.inner.back_add(view, &masked, out, None);
+                if let Some(cs) = col_sums {
+                    let ones: Vec<f32> = m.iter().map(|&k| if k { 1.0 } else { 0.0 }).collect();
+                    self.inner.back_add(view, &ones, cs, None);
+                }
+            }
+        }
+    }
+
+    fn rows(&self, view: usize) -> SparseRows {
+        let rows = self.inner.rows(view);
+        let Some(m) = &self.masks[view] else { return rows };
+        let mut out = SparseRows { ptr: Vec::with_capacity(rows.ptr.len()), cols: Vec::new(), vals: Vec::new() };
+        out.ptr.push(0);
+        for i in 0..rows.n_rows() {
+            if m[i] {
+                let (c, v) = rows.row(i);
+                out.cols.extend_from_slice(c);
+                out.vals.extend_from_slice(v);
+            }
+            out.ptr.push(out.cols.len() as u64);
+        }
+        out
+    }
+
+    fn rows_bytes_estimate(&self, view: usize) -> usize {
+        self.inner.rows_bytes_estimate(view)
+    }
+
+    fn bytes(&self) -> usize {
+        self.inner.bytes()
+    }
+
+    fn scratch_bytes(&self, view: usize) -> usize {
+        self.inner.scratch_bytes(view) + 2 * 4 * self.view_len(view)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gain_fits_recover_gain_and_offset() {
+        let r: Vec<f32> = (0..50).map(|i| (i as f32 * 0.37).sin().abs() * 10.0).collect();
+        let p: Vec<f32> = r.iter().map(|&v| 1.3 * v + 2.0).collect();
+        let (g, b) = fit_gain(&p, &r, None, true).expect("fit");
+        assert!((g - 1.3).abs() < 1e-4 && (b - 2.0).abs() < 1e-3, "{g} {b}");
+        let p: Vec<f32> = r.iter().map(|&v| 0.7 * v).collect();
+        let (g, b) = fit_gain(&p, &r, None, false).expect("fit");
+        assert!((g - 0.7).abs() < 1e-6 && b == 0.0);
+        // Masked pixels do not count: corrupt them and the fit is unchanged.
+        let mut q = p.clone();
+        let mask: Vec<bool> = (0..50).map(|i| i % 3 != 0).collect();
+        q.iter_mut().zip(&mask).filter(|(_, &k)| !k).for_each(|(v, _)| *v = 1e6);
+        let (gm, _) = fit_gain(&q, &r, Some(&mask), false).expect("fit");
+        assert!((gm - 0.7).abs() < 1e-6);
+        assert!(fit_gain(&p, &[0.0; 50], None, false).is_none());
+        let s = holdout_score(&p, &r, None);
+        assert!(s.nrmse_raw > 0.3 && s.nrmse_fitted < 1e-6 && (s.fitted_gain - 0.7).abs() < 1e-6, "{s:?}");
+        let mut gains = vec![(2.0, 0.0), (4.0, 1.0)];
+        normalise(&mut gains);
+        assert_eq!(gains, vec![(2.0 / 3.0, 0.0), (4.0 / 3.0, 1.0)]);
+    }
+}
