@@ -100,6 +100,22 @@ impl OccupancyGrid {
         self.dims
     }
 
+    /// A grid of the given cells (x fastest); `None` if their number is not `dims`' product.
+    pub fn from_cells(dims: [usize; 3], cells: Vec<bool>) -> Option<Self> {
+        (dims.iter().all(|&n| n > 0) && cells.len() == dims.iter().product::<usize>())
+            .then_some(OccupancyGrid { dims, occupied: cells })
+    }
+
+    /// The cells, x fastest.
+    pub fn cells(&self) -> &[bool] {
+        &self.occupied
+    }
+
+    /// The grid as a field's [`fluidnerf_core::Support`] over `aabb`.
+    pub fn support(&self, aabb: Aabb) -> fluidnerf_core::Support<'_> {
+        fluidnerf_core::Support { aabb, dims: self.dims, cells: &self.occupied }
+    }
+
     /// Carves the visual hull of `views` (camera and image of one instant) in `aabb`: a cell is
     /// empty when some view sees only dark pixels over its whole footprint. Views of different
     /// instants must not be mixed (a cell dark at one instant may be bright at another); carve

@@ -169,6 +169,10 @@ pub struct WorldField<'a, F> {
 }
 
 impl<F: TrainableField> ScalarField for WorldField<'_, F> {
+    fn support(&self) -> Option<fluidnerf_core::Support<'_>> {
+        self.occupancy.map(|g| g.support(self.meta.aabb))
+    }
+
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
         assert_eq!(points.len(), out.len(), "WorldField::eval: points and out differ in length");
         let dim = self.field.input_dim();
@@ -236,6 +240,10 @@ impl<F: TrainableField> TrainedField<F> {
 impl<F: TrainableField> ScalarField for TrainedField<F> {
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
         self.view().eval(points, time, out);
+    }
+
+    fn support(&self) -> Option<fluidnerf_core::Support<'_>> {
+        self.occupancy.as_ref().map(|g| g.support(self.meta.aabb))
     }
 }
 
