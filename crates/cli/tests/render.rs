@@ -139,3 +139,79 @@ fn orbit_writes_views_and_a_turntable() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("3 frames"));
 }
+
+/// A hash-grid field written as a run folder (model.json and weights), with smooth random
+/// tables and an occupancy hull that leaves one corner of the box empty.
+fn write_trained(dir: &Path, aabb: Aabb) {
+    use fluidnerf_neural::occupancy::OccupancyGrid;
+    use fluidnerf_neural::train::FieldMeta;
+    use fluidnerf_neural::trained::{FieldConfig, ModelRecord};
+    use fluidnerf_neural::{HashGridConfig, HashGridField, TrainableField};
+    let cfg = HashGridConfig {
+        levels: 4,
+        log2_table_size: 12,
+        base_resolution: 4,
+        max_resolution: 16,
+        init_scale: 0.0,
+        ..HashGridConfig::default()
+    };
+    let mut field = HashGridField::new(&cfg, 3, 1).expect("valid config");
+    let grid = field.grid_params();
+    for (i, p) in field.params_mut()[..grid].iter_mut().enumerate() {
+        *p = 0.4 * ((i as f32 * 0.37).sin() + (i as f32 * 0.011).cos());
+    }
+    let cells = (0..8 * 8 * 8).map(|i| !(i % 8 < 3 && (i / 8) % 8 < 3)).collect();
+    let hull = OccupancyGrid::from_cells([8, 8, 8], cells).expect("8³ cells");
+    let meta = FieldMeta { aabb, value_scale: 1.0, time_step: 1.0, occupancy: Some(hull.to_record()) };
+    let record = ModelRecord { field: FieldConfig::HashGrid(cfg), input_dim: 3, meta };
+    std::fs::create_dir_all(dir).expect("mkdir");
+    std::fs::write(dir.join("model.json"), serde_json::to_string(&record).expect("json")).expect("writes");
+    let bytes = fluidnerf_neural::weights::weights_bytes(&field).expect("weights");
+    std::fs::write(dir.join("weights.safetensors"), bytes).expect("writes");
+}
+
+/// `--bake off` renders a trained field exactly (the reference renderer on the loaded field);
+/// `auto` bakes it on twice its finest level when the views are many enough, and the baked
+/// images stay within 2 % NRMSE of the exact ones; `render.json` records which was done.
+#[test]
+fn trained_fields_render_exactly_or_baked() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, _) = make_scene(dir.path());
+    let run = dir.path().join("run");
+    write_trained(&run, scene.aabb);
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let render = |bake: &str| {
+        let out = dir.path().join(format!("views-{bake}"));
+        let o = fluidnerf(
+            &["render", &d(&run), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff", "-q"]
+                .into_iter()
+                .chain(["--bake", bake])
+                .collect::<Vec<_>>(),
+        );
+        ok(&o);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("render.json"))
+                .expect("json");
+        let images: Vec<Vec<f32>> = (0..3)
+            .map(|c| fluidnerf_io::image::read_image(&out.join(format!("view_{c:03}.tif"))).expect("reads").data)
+            .collect();
+        (json["baked"].clone(), images)
+    };
+    let (exact_json, exact) = render("off");
+    assert!(exact_json.is_null());
+    let (field, _) = fluidnerf_neural::trained::load_trained(&run).expect("loads");
+    for (c, img) in exact.iter().enumerate() {
+        let s = RenderSettings { scale: SCALE, ..Default::default() };
+        let want = render_image(field.as_ref(), &scene.frames[c].camera, &scene.aabb, &s).expect("renders");
+        assert!(img.iter().zip(&want.data).all(|(a, b)| (a - b).abs() <= 1e-5 * b.abs().max(1.0)));
+    }
+    let (auto_json, baked) = render("auto");
+    assert_eq!(auto_json, serde_json::json!([32, 32, 32]), "twice the finest level (16)");
+    let (mut se, mut ss) = (0.0f64, 0.0f64);
+    for (a, b) in baked.iter().flatten().zip(exact.iter().flatten()) {
+        se += ((a - b) as f64).powi(2);
+        ss += (*b as f64).powi(2);
+    }
+    let nrmse = (se / ss).sqrt();
+    assert!(ss > 0.0 && nrmse < 0.02, "baked vs exact NRMSE {nrmse}");
+}

@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::{Aabb, Ray};
+use crate::{Aabb, Ray, Volume};
 
 /// A scalar field E(x, t) in world coordinates, evaluated in batches so that expensive
 /// fields (neural networks) can amortise their cost. Implementations must be thread-safe:
@@ -16,6 +16,56 @@ pub trait ScalarField: Sync {
     /// the empty cells (the field must evaluate to zero there). Default: unknown.
     fn support(&self) -> Option<Support<'_>> {
         None
+    }
+
+    /// The field as a voxel grid read trilinearly, if it is one: renderers then read it in
+    /// place instead of calling [`ScalarField::eval`] on batches. Default: not a grid.
+    fn as_volume(&self) -> Option<&Volume> {
+        None
+    }
+
+    /// Grid dimensions that resolve the field's finest detail (a trained grid's finest level),
+    /// if it has one: the grid to bake it on ([`Baked`]). Default: none.
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        None
+    }
+}
+
+/// A field sampled once at the cell centres of a grid and read back trilinearly, keeping the
+/// source's support: the fast way to render many views of an expensive field (a trained
+/// network), at the cost of the interpolation error between the samples.
+#[derive(Clone, Debug)]
+pub struct Baked {
+    pub volume: Volume,
+    support: Option<(Aabb, [usize; 3], Vec<bool>)>,
+}
+
+impl Baked {
+    /// Samples `field` at `time` on the vertices of a partition of `aabb` into `dims` cells:
+    /// the grid read back has `dims + 1` cells per axis, centred on those vertices (its box
+    /// reaches half a cell beyond `aabb`), so a field that is trilinear on the partition's
+    /// cells — a trained grid's finest level — is read back exactly.
+    pub fn on_vertices(field: &dyn ScalarField, dims: [usize; 3], aabb: Aabb, time: f64) -> Self {
+        let n = glam::DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let half = 0.5 * aabb.size() / n;
+        let grid = Aabb::new(aabb.min - half, aabb.max + half);
+        let volume = Volume::from_field(dims.map(|d| d + 1), grid, field, time);
+        let support = field.support().map(|s| (s.aabb, s.dims, s.cells.to_vec()));
+        Baked { volume, support }
+    }
+}
+
+impl ScalarField for Baked {
+    fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.volume.eval(points, time, out);
+    }
+
+    fn support(&self) -> Option<Support<'_>> {
+        self.support.as_ref().map(|(aabb, dims, cells)| Support { aabb: *aabb, dims: *dims, cells })
+    }
+
+    fn as_volume(&self) -> Option<&Volume> {
+        Some(&self.volume)
     }
 }
 

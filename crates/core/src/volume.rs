@@ -103,6 +103,14 @@ impl Volume {
         self.aabb.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * self.spacing()
     }
 
+    /// A reader of many points ([`Sampler::sample`]).
+    pub fn sampler(&self) -> Sampler<'_> {
+        let min = self.aabb.min.as_vec3();
+        let max = self.aabb.max.as_vec3();
+        let n = Vec3::new(self.dims[0] as f32, self.dims[1] as f32, self.dims[2] as f32);
+        Sampler { data: &self.data, min, max, scale: n / (max - min), n: self.dims, top: n - 1.0 }
+    }
+
     /// Trilinear value at a world point (see the type's docs for the boundary rule).
     pub fn sample(&self, p: Vec3) -> f32 {
         let min = self.aabb.min.as_vec3();
@@ -154,9 +162,52 @@ impl Volume {
 impl ScalarField for Volume {
     fn eval(&self, points: &[Vec3], _time: f64, out: &mut [f32]) {
         assert_eq!(points.len(), out.len(), "Volume::eval: points and out differ in length");
+        let sampler = self.sampler();
         for (o, &p) in out.iter_mut().zip(points) {
-            *o = self.sample(p);
+            *o = sampler.sample(p);
         }
+    }
+
+    fn as_volume(&self) -> Option<&Volume> {
+        Some(self)
+    }
+}
+
+/// [`Volume::sample`] with the grid's constants computed once, for reading many points.
+#[derive(Clone, Copy, Debug)]
+pub struct Sampler<'a> {
+    data: &'a [f32],
+    min: Vec3,
+    max: Vec3,
+    /// Cells per world unit along each axis.
+    scale: Vec3,
+    n: [usize; 3],
+    top: Vec3,
+}
+
+impl Sampler<'_> {
+    /// The trilinear value at a world point, as [`Volume::sample`] (up to rounding).
+    #[inline]
+    pub fn sample(&self, p: Vec3) -> f32 {
+        if p.cmplt(self.min).any() || p.cmpgt(self.max).any() || p.is_nan() {
+            return 0.0;
+        }
+        let g = ((p - self.min) * self.scale - 0.5).clamp(Vec3::ZERO, self.top);
+        let f = g.floor();
+        let w = g - f;
+        let [nx, ny, _] = self.n;
+        let (i, j, k) = (f.x as usize, f.y as usize, f.z as usize);
+        let dx = usize::from(i + 1 < nx);
+        let dy = if j + 1 < ny { nx } else { 0 };
+        let dz = if k + 1 < self.n[2] { nx * ny } else { 0 };
+        let at = (k * ny + j) * nx + i;
+        let d = self.data;
+        let lerp = |a: f32, b: f32, t: f32| a * (1.0 - t) + b * t;
+        let c00 = lerp(d[at], d[at + dx], w.x);
+        let c10 = lerp(d[at + dy], d[at + dy + dx], w.x);
+        let c01 = lerp(d[at + dz], d[at + dz + dx], w.x);
+        let c11 = lerp(d[at + dz + dy], d[at + dz + dy + dx], w.x);
+        lerp(lerp(c00, c10, w.y), lerp(c01, c11, w.y), w.z)
     }
 }
 
@@ -193,6 +244,17 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(-0.01, 0.5, 0.5)), 0.0);
         assert_eq!(v.sample(Vec3::new(1.0, 0.5, 1.01)), 0.0);
         assert_eq!(v.sample(Vec3::NAN), 0.0);
+    }
+
+    #[test]
+    fn sampler_reads_like_sample() {
+        let v = Volume::from_fn([9, 4, 1], unit_box(), |p| (p.x * 3.0).sin() as f32 + (p.y * p.z) as f32);
+        let s = v.sampler();
+        for i in 0..2000 {
+            let p =
+                Vec3::new((i % 23) as f32 * 0.1 - 0.1, (i % 17) as f32 * 0.07 - 0.05, (i % 13) as f32 * 0.09 - 0.03);
+            assert!((s.sample(p) - v.sample(p)).abs() < 1e-5, "{p}: {} vs {}", s.sample(p), v.sample(p));
+        }
     }
 
     #[test]

@@ -392,16 +392,21 @@ fn grid_benches(steps: usize) {
             grid.num_params(),
             grid.grid_params()
         );
+        // The encoding's forward pass scalar and vectorised (where the CPU has AVX2 and FMA).
         for chunk in [4096, 32_768] {
-            for (what, t) in [
-                ("random points", time_steps(&mut grid, grid_batch, chunk, 1, steps)),
-                ("along rays   ", time_steps_on(&mut grid, &along_rays, chunk, 1, steps)),
-            ] {
-                println!(
-                    "  chunk {chunk:6} {what}: {:5.2} | {:5.2} M points/s",
-                    grid_batch as f64 / t.wall_s / 1e6,
-                    grid_batch as f64 / t.cpu_s / 1e6
-                );
+            for vectorised in [false, true] {
+                fluidnerf_neural::hashgrid::set_vectorised(vectorised);
+                let encode = if vectorised { "vector" } else { "scalar" };
+                for (what, t) in [
+                    ("random points", time_steps(&mut grid, grid_batch, chunk, 1, steps)),
+                    ("along rays   ", time_steps_on(&mut grid, &along_rays, chunk, 1, steps)),
+                ] {
+                    println!(
+                        "  chunk {chunk:6} {encode} encoding, {what}: {:5.2} | {:5.2} M points/s",
+                        grid_batch as f64 / t.wall_s / 1e6,
+                        grid_batch as f64 / t.cpu_s / 1e6
+                    );
+                }
             }
         }
     }

@@ -98,6 +98,10 @@ impl TrainableField for DenseGridField {
         3
     }
 
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        Some(self.dims)
+    }
+
     fn new_tape(&self) -> DenseTape {
         DenseTape::default()
     }

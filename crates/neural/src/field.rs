@@ -63,6 +63,12 @@ pub trait TrainableField: Send + Sync {
     /// (safetensors) and inspection. The ranges partition `params()`.
     fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)>;
 
+    /// Cells along each box-normalised axis that resolve the field's finest detail, if it is
+    /// a grid (see [`fluidnerf_core::ScalarField::detail_dims`]). Default: none.
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        None
+    }
+
     /// Whether the field implements the priors of [`Prior`] ([`TrainableField::add_prior`]).
     fn supports_prior(&self) -> bool {
         false

@@ -47,6 +47,8 @@ pub mod engine;
 pub mod error;
 pub mod field;
 pub mod hashgrid;
+#[cfg(target_arch = "x86_64")]
+mod hashgrid_simd;
 pub(crate) mod kernels;
 pub mod mlp;
 pub mod occupancy;

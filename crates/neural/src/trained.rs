@@ -173,6 +173,10 @@ impl<F: TrainableField> ScalarField for WorldField<'_, F> {
         self.occupancy.map(|g| g.support(self.meta.aabb))
     }
 
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        self.field.detail_dims()
+    }
+
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
         assert_eq!(points.len(), out.len(), "WorldField::eval: points and out differ in length");
         let dim = self.field.input_dim();
@@ -244,6 +248,10 @@ impl<F: TrainableField> ScalarField for TrainedField<F> {
 
     fn support(&self) -> Option<fluidnerf_core::Support<'_>> {
         self.occupancy.as_ref().map(|g| g.support(self.meta.aabb))
+    }
+
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        self.field.detail_dims()
     }
 }
 

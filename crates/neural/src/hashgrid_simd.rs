@@ -1,0 +1,156 @@
+//! The hash-grid encoding's forward pass eight points at a time with AVX2 and FMA (selected at
+//! run time; [`crate::hashgrid`] falls back to its scalar loop elsewhere and for the last rows).
+//!
+//! Per point and level it computes what the scalar loop does — clamp, cell, trilinear weights
+//! multiplied in axis order, the dense vertex index or the spatial hash — in eight lanes, and
+//! gathers the `F` features of each corner with `vgatherdps`. The features are accumulated with
+//! fused multiply–adds, so results differ from the scalar loop by rounding only (tested), and a
+//! NaN coordinate reads as 0 instead of propagating.
+
+use std::arch::x86_64::*;
+
+use super::hashgrid::PRIMES;
+
+/// What one level's forward pass needs.
+pub(crate) struct LevelArgs<'a> {
+    pub res: u32,
+    pub res_t: u32,
+    pub inv_span: f32,
+    /// Vertex-index strides of a dense level.
+    pub stride: [usize; 4],
+    /// `entries − 1` of a hashed level.
+    pub mask: usize,
+    /// The level's table, `entries × F`.
+    pub table: &'a [f32],
+    /// The level's first feature column in a row of `feats`.
+    pub column: usize,
+    /// Features per row (`L · F`).
+    pub row_len: usize,
+}
+
+/// Whether the kernel runs: the CPU has AVX2 and FMA (cached by the standard library) and
+/// [`crate::hashgrid::set_vectorised`] has not turned it off.
+#[inline]
+pub(crate) fn available() -> bool {
+    super::hashgrid::VECTORISED.load(std::sync::atomic::Ordering::Relaxed)
+        && is_x86_feature_detected!("avx2")
+        && is_x86_feature_detected!("fma")
+}
+
+/// Writes the level's features of the first `8 ⌊n / 8⌋` rows of `inputs` (`n × D`) into
+/// `feats` and returns how many rows it did.
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA ([`available`]). `args.table` must hold every entry a vertex
+/// of the level can index: `(res + 1)^D'` vertices (D' = 3 spatial axes, plus `res_t + 1` time
+/// vertices for D = 4) for a dense level, `mask + 1` for a hashed one, `F` values each.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: bool>(
+    args: &LevelArgs<'_>,
+    inputs: &[f32],
+    feats: &mut [f32],
+) -> usize {
+    let n = inputs.len() / D;
+    let full = n / 8 * 8;
+    assert!(feats.len() >= n * args.row_len && args.column + F <= args.row_len);
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let table = args.table.as_ptr();
+    let mut lanes = [[0.0f32; 8]; 4];
+    let mut out = [[0.0f32; 8]; F];
+    for base in (0..full).step_by(8) {
+        for (j, x) in inputs[base * D..(base + 8) * D].chunks_exact(D).enumerate() {
+            for a in 0..D {
+                lanes[a][j] = x[a];
+            }
+        }
+        let mut w = [[zero; 2]; 4];
+        let mut part = [[_mm256_setzero_si256(); 2]; 4];
+        for a in 0..D {
+            let (scale, r) = if a < 3 { (1.0, args.res) } else { (args.inv_span, args.res_t) };
+            // SAFETY: `lanes[a]` holds eight floats.
+            let u = unsafe { _mm256_loadu_ps(lanes[a].as_ptr()) };
+            let u = _mm256_mul_ps(u, _mm256_set1_ps(scale));
+            // max(u, 0) returns 0 for a NaN u; then min(·, 1).
+            let u = _mm256_min_ps(_mm256_max_ps(u, zero), one);
+            let p = _mm256_mul_ps(u, _mm256_set1_ps(r as f32));
+            let c = _mm256_min_epi32(_mm256_cvttps_epi32(p), _mm256_set1_epi32(r.saturating_sub(1) as i32));
+            let t = _mm256_sub_ps(p, _mm256_cvtepi32_ps(c));
+            w[a] = [_mm256_sub_ps(one, t), t];
+            let c1 = _mm256_add_epi32(c, _mm256_set1_epi32(1));
+            let k = if DENSE { args.stride[a] as u32 } else { PRIMES[a] };
+            let k = _mm256_set1_epi32(k as i32);
+            part[a] = [_mm256_mullo_epi32(c, k), _mm256_mullo_epi32(c1, k)];
+        }
+        let mask = _mm256_set1_epi32(args.mask as i32);
+        if F == 2 {
+            // Both features of a vertex in one 64-bit element: four points per gather, with
+            // their weights duplicated to match, accumulated in the rows' own layout.
+            let (mut lo, mut hi) = (zero, zero);
+            let dup_lo = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
+            let dup_hi = _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7);
+            for corner in 0..1usize << D {
+                let mut wc = one;
+                let mut key = _mm256_setzero_si256();
+                for a in 0..D {
+                    let bit = (corner >> a) & 1;
+                    wc = _mm256_mul_ps(wc, w[a][bit]);
+                    key = if DENSE { _mm256_add_epi32(key, part[a][bit]) } else { _mm256_xor_si256(key, part[a][bit]) };
+                }
+                let idx = if DENSE { key } else { _mm256_and_si256(key, mask) };
+                let pairs = table as *const i64;
+                // SAFETY: `idx` is a vertex index or masked hash below the level's entries, and
+                // entry `idx` is the pair of floats at `2 · idx` (the caller's contract).
+                let (v_lo, v_hi) = unsafe {
+                    (
+                        _mm256_i32gather_epi64::<8>(pairs, _mm256_castsi256_si128(idx)),
+                        _mm256_i32gather_epi64::<8>(pairs, _mm256_extracti128_si256::<1>(idx)),
+                    )
+                };
+                lo = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_lo), _mm256_castsi256_ps(v_lo), lo);
+                hi = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_hi), _mm256_castsi256_ps(v_hi), hi);
+            }
+            let mut pair = [[0.0f32; 8]; 2];
+            // SAFETY: each array holds eight floats.
+            unsafe {
+                _mm256_storeu_ps(pair[0].as_mut_ptr(), lo);
+                _mm256_storeu_ps(pair[1].as_mut_ptr(), hi);
+            }
+            for j in 0..8 {
+                let row = (base + j) * args.row_len + args.column;
+                let src = &pair[j / 4][2 * (j % 4)..2 * (j % 4) + 2];
+                feats[row..row + 2].copy_from_slice(src);
+            }
+            continue;
+        }
+        let mut acc = [zero; F];
+        for corner in 0..1usize << D {
+            let mut wc = one;
+            let mut key = _mm256_setzero_si256();
+            for a in 0..D {
+                let bit = (corner >> a) & 1;
+                wc = _mm256_mul_ps(wc, w[a][bit]);
+                key = if DENSE { _mm256_add_epi32(key, part[a][bit]) } else { _mm256_xor_si256(key, part[a][bit]) };
+            }
+            let idx = if DENSE { key } else { _mm256_and_si256(key, mask) };
+            let at = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
+            for (k, acc) in acc.iter_mut().enumerate() {
+                // SAFETY: `idx` is a vertex index or masked hash below the level's entries, so
+                // `idx · F + k` is inside the table (the caller's contract).
+                let v = unsafe { _mm256_i32gather_ps::<4>(table.add(k), at) };
+                *acc = _mm256_fmadd_ps(wc, v, *acc);
+            }
+        }
+        for k in 0..F {
+            // SAFETY: `out[k]` holds eight floats.
+            unsafe { _mm256_storeu_ps(out[k].as_mut_ptr(), acc[k]) };
+        }
+        for j in 0..8 {
+            let row = (base + j) * args.row_len + args.column;
+            for k in 0..F {
+                feats[row + k] = out[k][j];
+            }
+        }
+    }
+    full
+}
