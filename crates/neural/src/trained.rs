@@ -160,6 +160,9 @@ pub struct ModelRecord {
     pub meta: FieldMeta,
 }
 
+/// How far outside the unit box (relative to its size) a point still counts as on its face.
+const FACE_TOLERANCE: f32 = 1e-5;
+
 /// A trained field seen in world coordinates and physical units (borrowing the field).
 #[derive(Debug)]
 pub struct WorldField<'a, F> {
@@ -194,8 +197,14 @@ impl<F: TrainableField> ScalarField for WorldField<'_, F> {
             outs.fill(0.0);
             for (i, p) in pts.iter().enumerate() {
                 let u = (*p - min) * inv;
+                // Points on the box's faces count as inside despite rounding (a grid of the
+                // box's vertices computes them from another origin).
+                if !(u.cmpge(Vec3::splat(-FACE_TOLERANCE)) & u.cmple(Vec3::splat(1.0 + FACE_TOLERANCE))).all() {
+                    continue;
+                }
+                let u = u.clamp(Vec3::ZERO, Vec3::ONE);
                 let u = [u.x, u.y, u.z];
-                if u.iter().any(|c| !(0.0..=1.0).contains(c)) || self.occupancy.is_some_and(|g| !g.is_occupied(u)) {
+                if self.occupancy.is_some_and(|g| !g.is_occupied(u)) {
                     continue;
                 }
                 inputs.extend_from_slice(&u);
