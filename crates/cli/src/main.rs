@@ -29,6 +29,14 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
+    // Exit quietly when the reader of stdout goes away (`fluidnerf eval … | head`), as Unix
+    // tools do, instead of failing on the next print. Files are written atomically, so none is
+    // left half-written.
+    #[cfg(unix)]
+    // SAFETY: restoring a signal's default disposition at start-up, before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let level = match (cli.quiet, cli.verbose) {
         (true, _) => log::LevelFilter::Error,

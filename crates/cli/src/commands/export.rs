@@ -55,6 +55,11 @@ pub struct Args {
     /// Time at which a time-resolved field is sampled.
     #[arg(long, default_value_t = 0.0)]
     pub time: f64,
+    /// A trained field's voxel is the mean of N³ points spread evenly over it (its cell
+    /// average, a box filter against aliasing when the field holds detail finer than a voxel);
+    /// 1 samples the voxel's centre.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=8))]
+    pub average: u16,
     /// Write `volume.npy` (shape `(nz, ny, nx)`, f32).
     #[arg(long)]
     pub npy: bool,
@@ -247,7 +252,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         (Source::Field { field, .. }, res, _) => {
             let dims = Volume::dims_for(&aabb, res.unwrap_or(128));
-            Volume::from_field(dims, aabb, field.as_ref(), args.time)
+            Volume::from_field_averaged(dims, aabb, field.as_ref(), args.time, args.average as usize)
         }
     };
     let truth = match &args.compare {
