@@ -208,6 +208,12 @@ fn cases() -> Vec<Case> {
             "overlap",
         ),
         c(
+            "gain fit on a time-resolved method",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--gains", "fit"],
+            "gain fitting is available for static methods",
+        ),
+        c(
             "negative time step",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--time-step=-1"],
