@@ -625,11 +625,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r.backgrounds.first().map_or(0, Vec::len)
         );
     }
+    let kind = match &syn.real {
+        Some(r) => format!("8-bit sRGB JPEG (quality {}), before the gains:", r.jpeg_quality),
+        None => format!("{}-bit PNG,", settings.sensor.bit_depth),
+    };
     let _ = writeln!(
         text,
-        "  images    {} × {}-bit PNG, intensity_scale {:.6e} counts per mm, noise σ {} of max{}",
+        "  images    {} × {kind} intensity_scale {:.6e} counts per mm, noise σ {} of max{}",
         syn.frames.len(),
-        settings.sensor.bit_depth,
         syn.intensity_scale,
         settings.sensor.gaussian_noise,
         settings.sensor.full_well.map(|fw| format!(", photon noise at {fw} e⁻ full well")).unwrap_or_default()
