@@ -1,7 +1,7 @@
 //! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML or JSON) and
 //! COLMAP models (text or binary); and writing both back.
 //!
-//! # OpenCV (`cv::FileStorage`, YAML `%YAML:1.0` with `!!opencv-matrix`, or JSON)
+//! # OpenCV (`cv::FileStorage`: YAML `%YAML:1.0` with `!!opencv-matrix`, XML or JSON)
 //! Per camera:
 //! - `camera_matrix`: 3 × 3 K (`fx skew cx / 0 fy cy / 0 0 1`), pixel centres at integers
 //!   (OpenCV's convention is fluidnerf's: no shift).
@@ -27,6 +27,17 @@
 //! `.yaml` and `.json` files in name order; camera names must be unique. [`write_opencv`]
 //! writes unsuffixed keys when it writes a single camera whose name is the file stem, and
 //! suffixed keys otherwise, so reading gives back the same names.
+//!
+//! **XML** (`<opencv_storage>`, the calibration sample's default) reads into the same tree as
+//! YAML: an element with `type_id="opencv-matrix"` is a matrix (`rows cols dt data`), elements
+//! with children are mappings (sequences when the children are `<_>`), and text is a quoted
+//! string, a number or a whitespace-separated list of numbers.
+//!
+//! **Stereo calibrations** (`cv::stereoCalibrate`): `M1 D1 M2 D2` and `R T` (camera 2 from
+//! camera 1, `x₂ = R x₁ + T`) in one file, or as `intrinsics.*` with `extrinsics.*` beside it
+//! (read together; a folder skips the extrinsics file on its own). The cameras are `cam1`, the
+//! world frame, and `cam2`; the image size is `image_width`/`image_height` or `imageSize`;
+//! `R1 R2 P1 P2 Q` are not used.
 //!
 //! # COLMAP models (text or binary)
 //! `cameras.txt` (`CAMERA_ID MODEL WIDTH HEIGHT PARAMS...` with models `SIMPLE_PINHOLE f cx cy`,
@@ -114,7 +125,13 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "calibration file", e))?;
     let is_json =
         path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) || text.trim_start().starts_with('{');
-    let value = if is_json {
+    let trimmed = text.trim_start_matches('\u{feff}').trim_start();
+    let is_xml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml"))
+        || trimmed.starts_with("<?xml")
+        || trimmed.starts_with("<opencv_storage");
+    let value = if is_xml {
+        xml_storage(path, &text)?
+    } else if is_json {
         serde_json::from_str::<Value>(&text).map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
     } else {
         // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
@@ -126,6 +143,78 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     match value {
         Value::Object(m) => Ok((m, text)),
         _ => Err(IoError::invalid(path, "expected a mapping of named nodes at the top level")),
+    }
+}
+
+/// An OpenCV FileStorage XML document as the tree its YAML form parses to: elements with
+/// element children are mappings (sequences when every child is `<_>`), an `opencv-matrix` is a
+/// mapping of `rows`, `cols`, `dt` and `data`, and text is a quoted string, one number, a list
+/// of numbers (whitespace-separated) or a string.
+fn xml_storage(path: &Path, text: &str) -> Result<Value, IoError> {
+    let doc = roxmltree::Document::parse(text).map_err(|e| IoError::invalid(path, format!("malformed XML: {e}")))?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "opencv_storage" {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "the root element is `<{}>`; OpenCV FileStorage XML has `<opencv_storage>`",
+                root.tag_name().name()
+            ),
+        ));
+    }
+    xml_node(path, root)
+}
+
+fn xml_node(path: &Path, node: roxmltree::Node<'_, '_>) -> Result<Value, IoError> {
+    let children: Vec<roxmltree::Node<'_, '_>> = node.children().filter(roxmltree::Node::is_element).collect();
+    if children.is_empty() {
+        let text: String = node.children().filter(|n| n.is_text()).filter_map(|n| n.text()).collect();
+        return Ok(xml_text(&text));
+    }
+    if children.iter().all(|c| c.tag_name().name() == "_") {
+        return children.into_iter().map(|c| xml_node(path, c)).collect::<Result<Vec<_>, _>>().map(Value::Array);
+    }
+    let mut map = Map::new();
+    if let Some(t) = node.attribute("type_id") {
+        map.insert("type_id".into(), Value::String(t.into()));
+    }
+    for c in children {
+        let name = c.tag_name().name().to_string();
+        if map.contains_key(&name) {
+            return Err(IoError::invalid(
+                path,
+                format!("`<{name}>` appears twice in `<{}>` (line {})", node.tag_name().name(), doc_line(c)),
+            ));
+        }
+        map.insert(name, xml_node(path, c)?);
+    }
+    Ok(Value::Object(map))
+}
+
+fn doc_line(node: roxmltree::Node<'_, '_>) -> u32 {
+    node.document().text_pos_at(node.range().start).row
+}
+
+fn xml_text(text: &str) -> Value {
+    let t = text.trim();
+    if t.len() >= 2 && t.starts_with('"') && t.ends_with('"') {
+        return Value::String(t[1..t.len() - 1].to_string());
+    }
+    let number = |s: &str| -> Option<Value> {
+        if let Ok(i) = s.parse::<i64>() {
+            return Some(Value::from(i));
+        }
+        s.parse::<f64>().ok().and_then(serde_json::Number::from_f64).map(Value::Number)
+    };
+    let tokens: Vec<&str> = t.split_whitespace().collect();
+    match tokens.as_slice() {
+        [] => Value::String(String::new()),
+        [one] => number(one).unwrap_or_else(|| Value::String(t.to_string())),
+        many => many
+            .iter()
+            .map(|s| number(s))
+            .collect::<Option<Vec<_>>>()
+            .map_or_else(|| Value::String(t.to_string()), Value::Array),
     }
 }
 
@@ -258,6 +347,9 @@ fn canonical_keys(nodes: &Map<String, Value>) -> Map<String, Value> {
 
 fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     let (raw_nodes, text) = parse_storage(path)?;
+    if let Some(cams) = read_stereo(path, &raw_nodes)? {
+        return Ok(cams);
+    }
     let nodes = canonical_keys(&raw_nodes);
     let mut named: Vec<String> = nodes
         .keys()
@@ -328,6 +420,118 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         .collect()
 }
 
+/// The node `key` of `nodes`, matched ignoring letter case.
+fn node_ci(nodes: &Map<String, Value>, key: &str) -> Option<Value> {
+    nodes.iter().find(|(k, _)| k.eq_ignore_ascii_case(key)).map(|(_, v)| v.clone())
+}
+
+/// The file holding a stereo calibration's `R` and `T` beside `path`: `extrinsics` with any of
+/// the storage extensions.
+fn sibling_extrinsics(path: &Path) -> Option<PathBuf> {
+    let dir = path.parent()?;
+    ["yml", "yaml", "xml", "json"]
+        .iter()
+        .map(|e| dir.join(format!("extrinsics.{e}")))
+        .find(|p| p.is_file() && p != path)
+}
+
+/// A stereo calibration as `cv::stereoCalibrate` and its samples write it: `M1 D1 M2 D2` with
+/// `R T` (camera 2 from camera 1, `x₂ = R x₁ + T`), in one file or as `intrinsics` +
+/// `extrinsics` files side by side; `R1 R2 P1 P2 Q` (rectification) are not used. Camera 1
+/// (`cam1`) is the world frame. `None` when the file holds no `M1`/`M2`.
+fn read_stereo(path: &Path, nodes: &Map<String, Value>) -> Result<Option<Vec<(String, Camera)>>, IoError> {
+    if node_ci(nodes, "M1").is_none() && node_ci(nodes, "M2").is_none() {
+        return Ok(None);
+    }
+    let mut all = nodes.clone();
+    let mut source = path.display().to_string();
+    if node_ci(&all, "R").is_none() || node_ci(&all, "T").is_none() {
+        let Some(ext) = sibling_extrinsics(path) else {
+            return Err(IoError::invalid(
+                path,
+                "a stereo calibration (`M1`, `M2`) without `R` and `T`: give them in this file or in an \
+                 `extrinsics.yml` (or .yaml, .xml, .json) beside it",
+            ));
+        };
+        let (more, _) = parse_storage(&ext)?;
+        for (k, v) in more {
+            all.entry(k).or_insert(v);
+        }
+        source = format!("{source} and {}", ext.display());
+    }
+    let used = ["M1", "D1", "M2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"];
+    log::info!("{source}: a stereo calibration (R1, R2, P1, P2 and Q, if present, are not used)");
+    let size = match (node_ci(&all, "image_width"), node_ci(&all, "image_height")) {
+        (Some(w), Some(h)) => (w, h),
+        _ => match node_ci(&all, "imageSize").or_else(|| node_ci(&all, "image_size")) {
+            Some(v) => {
+                let wh = matrix(path, "imageSize", &v)?;
+                if wh.len() != 2 {
+                    return Err(IoError::invalid(
+                        path,
+                        format!("`imageSize` must be [width, height], has {} values", wh.len()),
+                    ));
+                }
+                (Value::from(wh[0] as u64), Value::from(wh[1] as u64))
+            }
+            None => {
+                return Err(IoError::invalid(
+                    path,
+                    "a stereo calibration without the image size: expected `image_width` and `image_height`, or \
+                     `imageSize` ([width, height])",
+                ))
+            }
+        },
+    };
+    let mut cams = Vec::new();
+    for (i, name) in [(1, "cam1"), (2, "cam2")] {
+        let m = format!("M{i}");
+        let d = format!("D{i}");
+        let k = node_ci(&all, &m)
+            .ok_or_else(|| IoError::invalid(path, format!("camera `{name}`: missing the node `{m}` ({source})")))?;
+        let dist = node_ci(&all, &d);
+        if let Some(v) = &dist {
+            let coeffs = matrix(path, &format!("{d} (camera {name})"), v)?;
+            Distortion::from_opencv(&coeffs)
+                .map_err(|e| IoError::invalid(path, format!("camera `{name}`: `{d}`: {e}")))?;
+        }
+        let (r, t) = if i == 1 {
+            (json!([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]), json!([0.0, 0.0, 0.0]))
+        } else {
+            let need = |key: &str| {
+                node_ci(&all, key).ok_or_else(|| {
+                    IoError::invalid(path, format!("camera `{name}`: missing the node `{key}` ({source})"))
+                })
+            };
+            (need("R")?, need("T")?)
+        };
+        let get = |key: &str| -> Option<Value> {
+            match key {
+                "camera_matrix" => Some(k.clone()),
+                "distortion_coefficients" => dist.clone(),
+                "R" => Some(r.clone()),
+                "T" => Some(t.clone()),
+                "image_width" => Some(size.0.clone()),
+                "image_height" => Some(size.1.clone()),
+                _ => None,
+            }
+        };
+        cams.push((name.to_string(), camera_from_nodes(path, name, &get)?));
+    }
+    let unused: Vec<&String> = all
+        .keys()
+        .filter(|k| {
+            !used.iter().any(|u| k.eq_ignore_ascii_case(u))
+                && !["image_width", "image_height", "imageSize", "image_size"].iter().any(|u| k.eq_ignore_ascii_case(u))
+        })
+        .collect();
+    if !unused.is_empty() {
+        let list: Vec<&str> = unused.iter().map(|k| k.as_str()).collect();
+        log::info!("{source}: nodes not used for the cameras: {}", list.join(", "));
+    }
+    Ok(Some(cams))
+}
+
 /// Reads OpenCV calibration files: one file (one or several cameras) or a folder of them
 /// (see the module docs). Returns `(camera name, camera)` in file order.
 pub fn read_opencv(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
@@ -339,12 +543,14 @@ pub fn read_opencv(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
                 p.is_file()
                     && p.extension()
                         .and_then(|e| e.to_str())
-                        .is_some_and(|e| ["yml", "yaml", "json"].contains(&e.to_ascii_lowercase().as_str()))
+                        .is_some_and(|e| ["yml", "yaml", "json", "xml"].contains(&e.to_ascii_lowercase().as_str()))
+                    // A stereo calibration's extrinsics are read with its intrinsics.
+                    && !p.file_stem().is_some_and(|s| s.eq_ignore_ascii_case("extrinsics"))
             })
             .collect();
         files.sort();
         if files.is_empty() {
-            return Err(IoError::invalid(path, "no .yml, .yaml or .json calibration files in this folder"));
+            return Err(IoError::invalid(path, "no .yml, .yaml, .xml or .json calibration files in this folder"));
         }
         files
     } else {

@@ -490,3 +490,215 @@ right:
     let err = read_opencv(&file).expect_err("no T").to_string();
     assert!(err.contains("camera `left`") && err.contains("missing the node `T`"), "{err}");
 }
+
+/// OpenCV's calibration sample written as XML (`out_camera_data.xml`, its default), the same
+/// values as the YAML sample above.
+const OPENCV_SAMPLE_XML: &str = r#"<?xml version="1.0"?>
+<opencv_storage>
+<calibration_Time>"Thu 26 Nov 2026 10:00:00 AM CET"</calibration_Time>
+<nrOfFrames>2</nrOfFrames>
+<image_Width>640</image_Width>
+<image_Height>480</image_Height>
+<board_Width>9</board_Width>
+<board_Height>6</board_Height>
+<square_Size>50.</square_Size>
+<flags>6158</flags>
+<Camera_Matrix type_id="opencv-matrix">
+  <rows>3</rows>
+  <cols>3</cols>
+  <dt>d</dt>
+  <data>
+    6.5746697810243404e+02 0. 3.1950000000000000e+02 0.
+    6.5746697810243404e+02 2.3950000000000000e+02 0. 0. 1.</data></Camera_Matrix>
+<Distortion_Coefficients type_id="opencv-matrix">
+  <rows>5</rows>
+  <cols>1</cols>
+  <dt>d</dt>
+  <data>
+    -4.1802327018241026e-01 5.0715243805833121e-01 0. 0.
+    -5.7843596847939704e-01</data></Distortion_Coefficients>
+<Avg_Reprojection_Error>3.9259109564281437e-01</Avg_Reprojection_Error>
+<Per_View_Reprojection_Errors type_id="opencv-matrix">
+  <rows>2</rows>
+  <cols>1</cols>
+  <dt>f</dt>
+  <data>
+    5.04999518e-01 4.22946453e-01</data></Per_View_Reprojection_Errors>
+</opencv_storage>
+"#;
+
+#[test]
+#[allow(clippy::excessive_precision)] // The sample file's digits, verbatim.
+fn opencv_calibration_sample_xml() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("out_camera_data.xml");
+    std::fs::write(&file, OPENCV_SAMPLE_XML).expect("write");
+    let err = read_opencv(&file).expect_err("no pose").to_string();
+    assert!(err.contains("out_camera_data.xml") && err.contains("camera `out_camera_data`"), "{err}");
+    assert!(err.contains("no pose"), "{err}");
+
+    let posed = OPENCV_SAMPLE_XML.replace(
+        "</opencv_storage>",
+        "<rvec>0.1 -0.2 0.05</rvec>\n<tvec>\n  <_>10.</_><_>-20.</_><_>900.</_></tvec>\n</opencv_storage>",
+    );
+    std::fs::write(&file, posed).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    let (name, cam) = &cams[0];
+    assert_eq!(name, "out_camera_data");
+    assert_eq!((cam.intrinsics.width, cam.intrinsics.height), (640, 480));
+    let k = [6.5746697810243404e2, 6.5746697810243404e2, 319.5, 239.5];
+    let d = [-4.1802327018241026e-1, 5.0715243805833121e-1, -5.7843596847939704e-1];
+    let r = rodrigues_to_matrix(DVec3::new(0.1, -0.2, 0.05));
+    for p in [DVec3::ZERO, DVec3::new(30.0, -40.0, 10.0), DVec3::new(-100.0, 80.0, -50.0)] {
+        let by_hand = opencv_by_hand(k, d, r, DVec3::new(10.0, -20.0, 900.0), p);
+        let ours = cam.project(p).expect("in front");
+        assert!((ours - by_hand).length() < 1e-9, "{p}: {ours} vs {by_hand}");
+    }
+}
+
+/// Several cameras in one XML file, one element each with `R`/`T`.
+#[test]
+fn opencv_multi_camera_xml() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("rig.xml");
+    let cam = |k: &str, r: &str, t: &str| {
+        format!(
+            "<image_width>64</image_width><image_height>48</image_height>\
+             <camera_matrix type_id=\"opencv-matrix\"><rows>3</rows><cols>3</cols><dt>d</dt><data>{k}</data></camera_matrix>\
+             <R type_id=\"opencv-matrix\"><rows>3</rows><cols>3</cols><dt>d</dt><data>{r}</data></R>\
+             <T type_id=\"opencv-matrix\"><rows>3</rows><cols>1</cols><dt>d</dt><data>{t}</data></T>"
+        )
+    };
+    let text = format!(
+        "<?xml version=\"1.0\"?>\n<opencv_storage>\n<left>{}</left>\n<right>{}</right>\n</opencv_storage>\n",
+        cam("80. 0. 31.5 0. 82. 23.5 0. 0. 1.", "1. 0. 0. 0. 1. 0. 0. 0. 1.", "0. 0. 100."),
+        cam("70. 0. 30. 0. 71. 22. 0. 0. 1.", "0. 0. -1. 0. 1. 0. 1. 0. 0.", "5. -3. 120.")
+    );
+    std::fs::write(&file, text).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["left", "right"]);
+    let r_right = DMat3::from_cols(DVec3::new(0.0, 0.0, 1.0), DVec3::Y, DVec3::new(-1.0, 0.0, 0.0));
+    for p in [DVec3::ZERO, DVec3::new(3.0, -4.0, 5.0)] {
+        let by_hand =
+            opencv_by_hand([80.0, 82.0, 31.5, 23.5], [0.0; 3], DMat3::IDENTITY, DVec3::new(0.0, 0.0, 100.0), p);
+        assert!((cams[0].1.project(p).expect("in front") - by_hand).length() < 1e-9);
+        let by_hand = opencv_by_hand([70.0, 71.0, 30.0, 22.0], [0.0; 3], r_right, DVec3::new(5.0, -3.0, 120.0), p);
+        assert!((cams[1].1.project(p).expect("in front") - by_hand).length() < 1e-9);
+    }
+}
+
+const STEREO_INTRINSICS: &str = "%YAML:1.0
+M1: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 500., 0., 319.5, 0., 502., 239.5, 0., 0., 1. ]
+D1: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ -0.1, 0.02, 0., 0., 0.003 ]
+M2: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 510., 0., 320., 0., 511., 240., 0., 0., 1. ]
+D2: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ -0.12, 0.03, 0., 0., 0. ]
+";
+
+const STEREO_EXTRINSICS_XML: &str = r#"<?xml version="1.0"?>
+<opencv_storage>
+<R type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt>
+  <data>0.9950041652780258 0. -0.09983341664682815 0. 1. 0. 0.09983341664682815 0. 0.9950041652780258</data></R>
+<T type_id="opencv-matrix"><rows>3</rows><cols>1</cols><dt>d</dt><data>-120. 1.5 4.</data></T>
+<R1 type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt><data>1. 0. 0. 0. 1. 0. 0. 0. 1.</data></R1>
+<Q type_id="opencv-matrix"><rows>4</rows><cols>4</cols><dt>d</dt><data>1. 0. 0. 0. 0. 1. 0. 0. 0. 0. 0. 1. 0. 0. 1. 0.</data></Q>
+</opencv_storage>
+"#;
+
+/// Checks a stereo pair against OpenCV's projection by hand: camera 1 is the world frame,
+/// camera 2 sees `R x + T`.
+fn check_stereo(cams: &[(String, fluidnerf_core::Camera)]) {
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["cam1", "cam2"]);
+    assert_eq!((cams[1].1.intrinsics.width, cams[1].1.intrinsics.height), (640, 480));
+    // R is a rotation of 0.1 rad about y: rows [c 0 −s; 0 1 0; s 0 c].
+    let (s, c) = 0.1f64.sin_cos();
+    let r = DMat3::from_cols(DVec3::new(c, 0.0, s), DVec3::Y, DVec3::new(-s, 0.0, c));
+    for p in [DVec3::new(0.0, 0.0, 800.0), DVec3::new(60.0, -40.0, 1000.0)] {
+        let one = opencv_by_hand([500.0, 502.0, 319.5, 239.5], [-0.1, 0.02, 0.003], DMat3::IDENTITY, DVec3::ZERO, p);
+        assert!((cams[0].1.project(p).expect("in front") - one).length() < 1e-9, "cam1 {p}");
+        let two = opencv_by_hand([510.0, 511.0, 320.0, 240.0], [-0.12, 0.03, 0.0], r, DVec3::new(-120.0, 1.5, 4.0), p);
+        assert!((cams[1].1.project(p).expect("in front") - two).length() < 1e-9, "cam2 {p}");
+    }
+}
+
+/// A stereo calibration (`M1 D1 M2 D2 R T`) in one file, and as intrinsics + extrinsics files
+/// side by side (here YAML + XML), given as the intrinsics file or as the folder.
+#[test]
+fn opencv_stereo_calibrations() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let one = dir.path().join("stereo.yml");
+    let extr_yaml = "R: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 0.9950041652780258, 0., -0.09983341664682815, 0., 1., 0., 0.09983341664682815, 0., 0.9950041652780258 ]\nT: [ -120., 1.5, 4. ]\n";
+    std::fs::write(&one, format!("{STEREO_INTRINSICS}imageSize: [ 640, 480 ]\n{extr_yaml}")).expect("write");
+    check_stereo(&read_opencv(&one).expect("reads one file"));
+
+    let pair = dir.path().join("pair");
+    std::fs::create_dir(&pair).expect("mkdir");
+    let intr = pair.join("intrinsics.yml");
+    std::fs::write(&intr, format!("{STEREO_INTRINSICS}image_width: 640\nimage_height: 480\n")).expect("write");
+    let err = read_opencv(&intr).expect_err("no extrinsics yet").to_string();
+    assert!(err.contains("intrinsics.yml") && err.contains("`R` and `T`") && err.contains("extrinsics.yml"), "{err}");
+    std::fs::write(pair.join("extrinsics.xml"), STEREO_EXTRINSICS_XML).expect("write");
+    check_stereo(&read_opencv(&intr).expect("reads the pair"));
+    check_stereo(&read_opencv(&pair).expect("reads the folder"));
+
+    // Without an image size; with a distortion of a count OpenCV never writes.
+    std::fs::write(&intr, STEREO_INTRINSICS).expect("write");
+    let err = read_opencv(&intr).expect_err("no size").to_string();
+    assert!(err.contains("image size") && err.contains("imageSize"), "{err}");
+    let bad = STEREO_INTRINSICS.replace(
+        "cols: 5\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0. ]",
+        "cols: 3\n   dt: d\n   data: [ -0.12, 0.03, 0. ]",
+    );
+    assert_ne!(bad, STEREO_INTRINSICS);
+    std::fs::write(&intr, format!("{bad}imageSize: [ 640, 480 ]\n")).expect("write");
+    let err = read_opencv(&intr).expect_err("3 coefficients").to_string();
+    assert!(err.contains("intrinsics.yml") && err.contains("camera `cam2`") && err.contains("`D2`"), "{err}");
+}
+
+/// Malformed XML is refused with the file and the problem.
+#[test]
+fn opencv_xml_errors_name_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cases = [
+        ("broken.xml", "<?xml version=\"1.0\"?>\n<opencv_storage><camera_matrix>1 2</opencv_storage>", "malformed XML"),
+        ("root.xml", "<?xml version=\"1.0\"?>\n<calibration><a>1</a></calibration>", "<opencv_storage>"),
+        (
+            "dup.xml",
+            "<?xml version=\"1.0\"?>\n<opencv_storage><cam><R>1</R><R>2</R></cam></opencv_storage>",
+            "appears twice",
+        ),
+        (
+            "size.xml",
+            "<?xml version=\"1.0\"?>\n<opencv_storage><camera_matrix type_id=\"opencv-matrix\"><rows>3</rows><cols>3</cols>\
+             <dt>d</dt><data>1 0 0 0 1 0 0 0</data></camera_matrix></opencv_storage>",
+            "rows × cols = 3 × 3 but 8 values",
+        ),
+        (
+            "text.xml",
+            "<?xml version=\"1.0\"?>\n<opencv_storage><camera_matrix>one two</camera_matrix><image_width>4</image_width>\
+             <image_height>4</image_height><rvec>0 0 0</rvec><tvec>0 0 1</tvec></opencv_storage>",
+            "camera_matrix",
+        ),
+    ];
+    for (name, text, want) in cases {
+        let file = dir.path().join(name);
+        std::fs::write(&file, text).expect("write");
+        let err = read_opencv(&file).expect_err(name).to_string();
+        assert!(err.contains(name) && err.contains(want), "{name}: {err}");
+    }
+}
