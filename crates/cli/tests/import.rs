@@ -321,3 +321,60 @@ fn colmap_binary_model_with_other_extensions() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("cam1.jpg") && stderr(&o).contains("other extensions"), "{}", stderr(&o));
 }
+
+/// One MJPEG AVI per camera (the io fixture: four frames at 10 frames/s): each decoded frame
+/// becomes a float TIFF in `frames/<camera>/` with its time; `--video-frames` selects.
+#[test]
+fn opencv_cameras_with_videos() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    let cams = rig();
+    write_opencv(&calib, &cams).expect("writes calibration");
+    let images = dir.path().join("videos");
+    std::fs::create_dir_all(&images).expect("mkdir");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    for (n, _) in &cams {
+        std::fs::copy(&fixture, images.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "--video-frames",
+        "1..",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 9);
+    assert_eq!(scene.times(), vec![0.1, 0.2, 0.3]);
+    let first = scene
+        .frames
+        .iter()
+        .find(|f| f.camera_name.as_deref() == Some("cam1") && f.time == Some(0.1))
+        .expect("cam1 at 0.1 s");
+    assert_eq!(first.file_path, PathBuf::from("frames/cam1/000000.tif"));
+    let img = fluidnerf_io::image::read_image(&out.join(&first.file_path)).expect("reads the frame");
+    // Pixel (x, y) of frame 1 is 20 + 4x + 3y + 10, within JPEG error.
+    assert!((img.get(5, 7) - (20.0 + 20.0 + 21.0 + 10.0)).abs() <= 3.0, "{}", img.get(5, 7));
+
+    let bad = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--video-frames",
+        "3..2",
+        "-o",
+        s(&dir.path().join("x")),
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(stderr(&bad).contains("--video-frames 3..2"), "{}", stderr(&bad));
+}

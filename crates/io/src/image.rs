@@ -58,6 +58,18 @@ impl Linearisation {
         (255.0 * linear) as f32
     }
 
+    /// The linear value of a code value `x` in `[0, 1]` (a video's range-mapped luma), on the
+    /// 0..=255 scale of 8-bit counts.
+    pub fn apply_unit(self, x: f64) -> f32 {
+        let linear = match self {
+            Linearisation::Linear => x,
+            Linearisation::Srgb if x <= 0.04045 => x / 12.92,
+            Linearisation::Srgb => ((x + 0.055) / 1.055).powf(2.4),
+            Linearisation::Gamma(g) => x.powf(g),
+        };
+        (255.0 * linear) as f32
+    }
+
     fn table(self) -> [f32; 256] {
         std::array::from_fn(|i| self.apply(i as u8))
     }

@@ -6,12 +6,15 @@
 //! - [`scene`]: nerfstudio-style `transforms.json` with fluidnerf's additions (the native
 //!   scene format; files from nerfstudio, instant-ngp and Blender/NeRF exporters read too),
 //!   and loading a scene's images and ground-truth volumes with their checks.
-//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/JSON) and COLMAP (text or binary) calibrations.
+//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/XML/JSON, stereo pairs) and COLMAP (text or
+//!   binary) calibrations.
 //! - [`image`]: 8/16-bit PNG, 8-bit JPEG and 8/16/32-bit and float TIFF, read as f32 with an
 //!   explicit linearisation of 8-bit values.
 //! - [`volume`]: `.npy` (C or Fortran order), `.vti` (VTK XML ImageData) and raw + JSON
 //!   sidecar volumes.
 //! - [`mesh`]: binary PLY and OBJ triangle meshes.
+//! - [`video`]: recordings as frames with times (MJPEG AVI natively, other formats through
+//!   ffmpeg), limited-range luma handled.
 //!
 //! # Conventions
 //! - Pixel centres: fluidnerf (OpenCV) puts pixel `(col, row)` at continuous image
@@ -30,6 +33,7 @@ mod error;
 pub mod image;
 pub mod mesh;
 pub mod scene;
+pub mod video;
 pub mod volume;
 
 pub use error::IoError;

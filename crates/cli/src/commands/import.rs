@@ -25,9 +25,12 @@ use std::io::Write as _;
 /// `camera_matrix`, `distortion_coefficients`, `rvec`/`tvec` or `R`/`T` (world to camera) and
 /// `image_width`/`image_height`; several cameras in one file use keys suffixed `_<name>`, a
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
-/// `IMAGES/NAME.png` (or `.tif`/`.tiff`), or, for a time series, every image in the folder
-/// `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
-/// `transforms.json` if they are physical).
+/// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`), or, for a time series, every image in the
+/// folder `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
+/// `transforms.json` if they are physical), or the video `IMAGES/NAME.avi` (`.mp4`, `.mov`,
+/// `.mkv`): its frames are decoded (MJPEG AVI directly, other formats with ffmpeg), range-mapped
+/// and linearised, and written as float TIFFs to `OUT/frames/NAME/` with their times in seconds
+/// (see --video-range, --video-frames, --video-every).
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
 /// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
@@ -47,7 +50,8 @@ use std::io::Write as _;
 #[derive(clap::Args, Debug, Serialize)]
 #[command(group(clap::ArgGroup::new("source").required(true)))]
 pub struct Args {
-    /// OpenCV calibration: a `.yml`/`.yaml`/`.json` file or a folder of them.
+    /// OpenCV calibration: a `.yml`/`.yaml`/`.xml`/`.json` file or a folder of them (one or
+    /// several cameras per file, or a stereo pair's `M1 D1 M2 D2 R T`).
     #[arg(long, group = "source", requires = "images")]
     pub opencv: Option<PathBuf>,
     /// COLMAP model folder (holding `cameras.txt` and `images.txt`, or `.bin`).
@@ -88,6 +92,94 @@ pub struct Args {
     /// out.
     #[arg(long, value_delimiter = ',')]
     pub holdout: Vec<String>,
+    /// Luma range of video recordings: `auto` (what the file states; MJPEG is full range,
+    /// other video limited unless it says otherwise), `full` (0–255) or `limited` (16–235,
+    /// mapped to 0–255 with clipped pixels counted).
+    #[arg(long, default_value = "auto")]
+    pub video_range: fluidnerf_io::video::VideoRange,
+    /// Frames of video recordings to import, as `A..B` (0-based, B excluded; `A..` to the end).
+    #[arg(long, value_name = "A..B")]
+    pub video_frames: Option<String>,
+    /// Import every N-th frame of video recordings (from the first of --video-frames).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub video_every: u32,
+}
+
+/// `A..B` or `A..` as (start, end).
+fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
+    let bad = || anyhow::anyhow!("--video-frames: expected A..B or A.. (frame indices from 0), got `{s}`");
+    let (a, b) = s.split_once("..").ok_or_else(bad)?;
+    let a: usize = if a.is_empty() { 0 } else { a.trim().parse().map_err(|_| bad())? };
+    let b: Option<usize> = if b.is_empty() { None } else { Some(b.trim().parse().map_err(|_| bad())?) };
+    if b.is_some_and(|b| b <= a) {
+        bail!("--video-frames {s}: the range is empty");
+    }
+    Ok((a, b))
+}
+
+/// Replaces every frame whose file is a video by its decoded frames, written as float TIFFs
+/// (linearised, range-mapped values) into `out/frames/<camera>/`, each with its time. All
+/// videos must give the same number of frames (a synchronised recording).
+fn expand_videos(
+    frames: Vec<Frame>,
+    out: &Path,
+    opts: &fluidnerf_io::video::VideoOptions,
+    force: bool,
+) -> anyhow::Result<Vec<Frame>> {
+    let mut expanded = Vec::new();
+    let mut counts: Vec<(String, usize)> = Vec::new();
+    for f in frames {
+        if !fluidnerf_io::video::is_video(&f.file_path) {
+            expanded.push(f);
+            continue;
+        }
+        let name = f
+            .camera_name
+            .clone()
+            .unwrap_or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
+        let video = fluidnerf_io::video::read_video(&f.file_path, opts)
+            .with_context(|| format!("camera {name}: reading its video"))?;
+        if counts.is_empty() && opts.linearisation == Linearisation::Linear {
+            log::warn!(
+                "video frames are read as linear; most cameras store gamma-encoded video (pass --linearisation \
+                 srgb or a gamma) unless they record raw or linear luma"
+            );
+        }
+        if video.clipped > 0 {
+            log::warn!(
+                "{}: {} pixel(s) outside the limited range 16–235 were clipped",
+                f.file_path.display(),
+                video.clipped
+            );
+        }
+        log::info!(
+            "{}: {} frame(s) decoded ({}, {} range)",
+            f.file_path.display(),
+            video.frames.len(),
+            video.decoder,
+            if video.range == fluidnerf_io::video::VideoRange::Limited { "limited" } else { "full" }
+        );
+        let dir = out.join("frames").join(&name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        counts.push((name.clone(), video.frames.len()));
+        for (k, (img, t)) in video.frames.iter().zip(&video.times).enumerate() {
+            let path = dir.join(format!("{k:06}.tif"));
+            if path.exists() && !force {
+                bail!("{} exists (from an earlier import); pass --force to overwrite it", path.display());
+            }
+            fluidnerf_io::image::write_tiff_f32(&path, img).with_context(|| format!("writing {}", path.display()))?;
+            expanded.push(Frame { file_path: path, time: Some(*t), ..f.clone() });
+        }
+    }
+    if let Some((first, n)) = counts.first() {
+        if let Some((other, m)) = counts.iter().find(|(_, m)| m != n) {
+            bail!(
+                "the videos are not synchronised: camera {first} gives {n} frame(s), camera {other} {m}; select \
+                 the common frames with --video-frames"
+            );
+        }
+    }
+    Ok(expanded)
 }
 
 fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
@@ -134,8 +226,11 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             used.insert(folder);
             continue;
         }
-        let candidates: Vec<PathBuf> =
-            fluidnerf_io::image::IMAGE_EXTENSIONS.iter().map(|e| images.join(format!("{name}.{e}"))).collect();
+        let candidates: Vec<PathBuf> = fluidnerf_io::image::IMAGE_EXTENSIONS
+            .iter()
+            .chain(fluidnerf_io::video::VIDEO_EXTENSIONS.iter())
+            .map(|e| images.join(format!("{name}.{e}")))
+            .collect();
         let found: Vec<&PathBuf> = candidates.iter().filter(|p| p.is_file()).collect();
         match found.as_slice() {
             [one] => {
@@ -148,7 +243,8 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
                     holdout: false,
                 });
             }
-            [] => unmatched.push(format!("{name} (no {name}.png, {name}.tif, {name}.tiff or folder {name}/)")),
+            [] => unmatched
+                .push(format!("{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov or folder {name}/)")),
             several => bail!(
                 "camera {name} matches several images: {}",
                 several.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
@@ -306,6 +402,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
+    let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
+    let video_opts = fluidnerf_io::video::VideoOptions {
+        range: args.video_range,
+        start,
+        end,
+        every: args.video_every as usize,
+        linearisation: args.linearisation.or(from_file.linearisation).unwrap_or_default(),
+    };
+    let frames = expand_videos(frames, &out_abs, &video_opts, args.force)?;
     let relative = |p: &Path| -> anyhow::Result<PathBuf> {
         let abs = p.canonicalize().with_context(|| format!("cannot resolve {}", p.display()))?;
         Ok(abs.strip_prefix(&out_abs).map(Path::to_path_buf).unwrap_or(abs))
