@@ -67,7 +67,7 @@ use crate::occupancy::OccupancyConfig;
 use crate::optim::LrSchedule;
 use crate::train::{
     converged, running_mean, train, Batching, FieldMeta, Learner, Prepared, Problem, StopReason, StopRule, TrainConfig,
-    TrainReport, TrainState,
+    TrainReport, TrainState, ViewMasks,
 };
 use crate::trained::{build_field, AnyField, FieldConfig, NeuralConfig, TrainedField};
 use crate::window::{blend, frame_position, plan_windows, time_at};
@@ -301,12 +301,8 @@ pub fn fast_field_memory(frames: usize, threads: usize) -> Result<(usize, usize,
 /// The training problem of the frames `range` of a recording with frame times `times`: the
 /// views at those times (training and held out), their times shifted by `origin` (`t − t₀`).
 pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>, origin: f64) -> Problem {
-    let (t_first, t_last) = (times[range.start], times[range.end - 1]);
-    let tol = 1e-9 * (1.0 + t_first.abs().max(t_last.abs()));
-    let keep = |v: &crate::train::View| {
-        (v.time >= t_first - tol && v.time <= t_last + tol)
-            .then(|| crate::train::View { time: v.time - origin, ..v.clone() })
-    };
+    let inside = in_window(times, range);
+    let keep = |v: &crate::train::View| inside(v).then(|| crate::train::View { time: v.time - origin, ..v.clone() });
     Problem {
         aabb: problem.aabb,
         intensity_scale: problem.intensity_scale,
@@ -314,6 +310,25 @@ pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>, ori
         holdout: problem.holdout.iter().filter_map(keep).collect(),
         time_step: problem.time_step,
     }
+}
+
+/// The masks of the views [`window_problem`] keeps, in its order (no masks stay no masks).
+pub fn window_masks(problem: &Problem, masks: &ViewMasks, times: &[f64], range: Range<usize>) -> ViewMasks {
+    let inside = in_window(times, range);
+    let pick = |views: &[crate::train::View], list: &[Option<Vec<bool>>]| -> Vec<Option<Vec<bool>>> {
+        if list.is_empty() {
+            return Vec::new();
+        }
+        views.iter().zip(list).filter(|(v, _)| inside(v)).map(|(_, m)| m.clone()).collect()
+    };
+    ViewMasks { train: pick(&problem.views, &masks.train), holdout: pick(&problem.holdout, &masks.holdout) }
+}
+
+/// Whether a view's time lies in the frames `range` of `times` (up to rounding).
+fn in_window(times: &[f64], range: Range<usize>) -> impl Fn(&crate::train::View) -> bool {
+    let (t_first, t_last) = (times[range.start], times[range.end - 1]);
+    let tol = 1e-9 * (1.0 + t_first.abs().max(t_last.abs()));
+    move |v| v.time >= t_first - tol && v.time <= t_last + tol
 }
 
 /// The origin `t₀` of window `range` ([`TimeOrigin`]).
@@ -401,6 +416,7 @@ pub enum WindowEvent<'a, F> {
 /// they count from the resume).
 pub fn train_windows<F: TrainableField + Clone>(
     problem: &Problem,
+    masks: &ViewMasks,
     train_cfg: &TrainConfig,
     windows: &WindowConfig,
     init: F,
@@ -434,7 +450,7 @@ pub fn train_windows<F: TrainableField + Clone>(
             // A finished window is taken as it is: no events, not trained.
             let start = WindowStart::Finished(learner, report);
             let no_events = |_: &WindowInfo, _: &TrainState<'_, F>| ControlFlow::Continue(());
-            out.push(train_window(problem, &times, &plan, k, train_cfg, windows, seed, start, no_events)?);
+            out.push(train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, start, no_events)?);
             continue;
         }
         let start = match (running.take(), out.last().filter(|_| windows.warm_start && k > 0)) {
@@ -442,7 +458,7 @@ pub fn train_windows<F: TrainableField + Clone>(
             (None, Some(prev)) => WindowStart::Warm(prev.learner.field.clone()),
             (None, None) => WindowStart::Fresh(init.clone()),
         };
-        let w = train_window(problem, &times, &plan, k, train_cfg, windows, seed, start, |info, s| {
+        let w = train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, start, |info, s| {
             on_event(WindowEvent::Iteration(info, s))
         })?;
         out.push(w);
@@ -477,8 +493,10 @@ pub enum WindowStart<F> {
 /// window's final field), windows can be trained in separate processes and give the windows of
 /// a serial run. `on_iteration` sees every iteration; breaking stops after it (the report
 /// says [`StopReason::Interrupted`]).
+#[allow(clippy::too_many_arguments)]
 pub fn train_window<F: TrainableField + Clone>(
     problem: &Problem,
+    masks: &ViewMasks,
     times: &[f64],
     plan: &[Range<usize>],
     k: usize,
@@ -493,7 +511,7 @@ pub fn train_window<F: TrainableField + Clone>(
     };
     let origin = window_origin(windows.time_origin, times, range);
     let sub = window_problem(problem, times, range.clone(), origin);
-    let prep = Prepared::new(&sub, train_cfg)?;
+    let prep = Prepared::with_masks(&sub, train_cfg, &window_masks(problem, masks, times, range.clone()))?;
     let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
     let trained = |learner: Learner<F>, report: TrainReport| TrainedWindow {
         frames: range.clone(),

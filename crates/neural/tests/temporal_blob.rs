@@ -12,7 +12,7 @@ use fluidnerf_neural::temporal::{
     field_for_window, frame_times, load_temporal, train_windows, ResumeState, StitchedField, TemporalRecord,
     TemporalRun, TimeOrigin, WindowConfig, WindowEvent, WindowRecord,
 };
-use fluidnerf_neural::train::{Batching, Learner, Problem, StopRule, TrainConfig, View};
+use fluidnerf_neural::train::{Batching, Learner, Problem, StopRule, TrainConfig, View, ViewMasks};
 use fluidnerf_neural::trained::FieldConfig;
 use fluidnerf_neural::weights::{checkpoint_bytes, load_checkpoint};
 use fluidnerf_neural::TrainableField;
@@ -123,9 +123,16 @@ fn tr_fluidnerf_reconstructs_frames_and_a_held_out_time() {
     let p = Problem { time_step: 2.0, ..p };
     let cfg = quick(600, 5e-3);
     let init = MlpField::new(&MlpConfig { time_freqs: 0, ..small_tr_mlp() }, 4, 7).expect("field");
-    let run = train_windows(&p, &cfg, &WindowConfig::default(), init, 3, ResumeState::default(), |_| {
-        ControlFlow::Continue(())
-    })
+    let run = train_windows(
+        &p,
+        &ViewMasks::default(),
+        &cfg,
+        &WindowConfig::default(),
+        init,
+        3,
+        ResumeState::default(),
+        |_| ControlFlow::Continue(()),
+    )
     .expect("trains");
     assert_eq!(run.windows.len(), 1);
     let field = StitchedField::from_run(&run).expect("stitches");
@@ -173,12 +180,16 @@ fn windows_warm_start_stitch_continuously_and_round_trip() {
         ..quick(300, 1e-2)
     };
     let warm =
-        train_windows(&p, &cfg, &windows, init.clone(), 5, ResumeState::default(), |_| ControlFlow::Continue(()))
-            .expect("trains");
+        train_windows(&p, &ViewMasks::default(), &cfg, &windows, init.clone(), 5, ResumeState::default(), |_| {
+            ControlFlow::Continue(())
+        })
+        .expect("trains");
     assert_eq!(warm.plan, vec![0..3, 1..4]);
     let cold_cfg = WindowConfig { warm_start: false, ..windows.clone() };
-    let cold = train_windows(&p, &cfg, &cold_cfg, init, 5, ResumeState::default(), |_| ControlFlow::Continue(()))
-        .expect("trains");
+    let cold = train_windows(&p, &ViewMasks::default(), &cfg, &cold_cfg, init, 5, ResumeState::default(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("trains");
     // The second window starts from a field that already knows its first frame.
     let first = |r: &TemporalRun<HashGridField>| r.windows[1].learner.losses[0];
     // (Both start from the mean level; the warm one also knows where the blob is.)
@@ -244,9 +255,16 @@ fn per_frame_windows_interpolate_linearly_between_frames() {
     let p = problem(&[0.0, 1.0]);
     let cfg = TrainConfig { batching: Batching::AllViews, ..quick(30, 5e-3) };
     let init = MlpField::new(&MlpConfig { time_freqs: 0, ..small_tr_mlp() }, 3, 1).expect("field");
-    let run = train_windows(&p, &cfg, &WindowConfig::per_frame(), init, 0, ResumeState::default(), |_| {
-        ControlFlow::Continue(())
-    })
+    let run = train_windows(
+        &p,
+        &ViewMasks::default(),
+        &cfg,
+        &WindowConfig::per_frame(),
+        init,
+        0,
+        ResumeState::default(),
+        |_| ControlFlow::Continue(()),
+    )
     .expect("trains");
     assert_eq!(run.windows.len(), 2);
     let field = StitchedField::from_run(&run).expect("stitches");
@@ -286,7 +304,8 @@ fn an_interrupted_windowed_run_resumes_to_the_uninterrupted_result() {
     let (p, cfg, windows, init) = windowed_mlp(TimeOrigin::Recording);
     let cfg = TrainConfig { max_iterations: 40, ..cfg };
     let go = |_: WindowEvent<'_, MlpField>| ControlFlow::Continue(());
-    let full = train_windows(&p, &cfg, &windows, init.clone(), 9, ResumeState::default(), go).expect("trains");
+    let full = train_windows(&p, &ViewMasks::default(), &cfg, &windows, init.clone(), 9, ResumeState::default(), go)
+        .expect("trains");
     assert_eq!(full.plan, vec![0..3, 1..4]);
     assert!(!full.interrupted);
 
@@ -300,9 +319,11 @@ fn an_interrupted_windowed_run_resumes_to_the_uninterrupted_result() {
         _ => ControlFlow::Continue(()),
     };
     let stopped_inside =
-        train_windows(&p, &cfg, &windows, init.clone(), 9, ResumeState::default(), inside).expect("trains");
+        train_windows(&p, &ViewMasks::default(), &cfg, &windows, init.clone(), 9, ResumeState::default(), inside)
+            .expect("trains");
     let stopped_between =
-        train_windows(&p, &cfg, &windows, init.clone(), 9, ResumeState::default(), between).expect("trains");
+        train_windows(&p, &ViewMasks::default(), &cfg, &windows, init.clone(), 9, ResumeState::default(), between)
+            .expect("trains");
     assert!(stopped_inside.interrupted && stopped_between.interrupted);
     assert_eq!(stopped_inside.windows.len(), 2);
     assert_eq!(stopped_inside.windows[1].learner.iteration, 17);
@@ -318,7 +339,7 @@ fn an_interrupted_windowed_run_resumes_to_the_uninterrupted_result() {
             running: running.then(|| through_checkpoint(&stopped.windows[n_done].learner, &init)),
         };
         let mut trained_windows = Vec::new();
-        let resumed = train_windows(&p, &cfg, &windows, init.clone(), 9, resume, |e| {
+        let resumed = train_windows(&p, &ViewMasks::default(), &cfg, &windows, init.clone(), 9, resume, |e| {
             if let WindowEvent::Finished(w, _) = e {
                 trained_windows.push(w.index);
             }
@@ -345,7 +366,8 @@ fn a_shared_time_origin_lets_warm_starts_continue_the_previous_window() {
     let mut first_losses = Vec::new();
     for origin in [TimeOrigin::Window, TimeOrigin::Recording] {
         let (p, cfg, windows, init) = windowed_mlp(origin);
-        let run = train_windows(&p, &cfg, &windows, init, 9, ResumeState::default(), go).expect("trains");
+        let run = train_windows(&p, &ViewMasks::default(), &cfg, &windows, init, 9, ResumeState::default(), go)
+            .expect("trains");
         let origins: Vec<f64> = run.windows.iter().map(|w| w.time_origin).collect();
         assert_eq!(origins, if origin == TimeOrigin::Window { [0.0, 1.0] } else { [0.0, 0.0] });
         first_losses.push((run.windows[1].learner.losses[0], run.windows[0].report.smoothed_loss));
@@ -386,9 +408,16 @@ fn the_empty_space_hull_follows_a_flow_that_leaves_the_first_instant() {
             fine_samples: 0,
             ..quick(300, 1e-2)
         };
-        let run = train_windows(&p, &cfg, &WindowConfig::default(), init.clone(), 3, ResumeState::default(), |_| {
-            ControlFlow::Continue(())
-        })
+        let run = train_windows(
+            &p,
+            &ViewMasks::default(),
+            &cfg,
+            &WindowConfig::default(),
+            init.clone(),
+            3,
+            ResumeState::default(),
+            |_| ControlFlow::Continue(()),
+        )
         .expect("trains");
         let field = StitchedField::from_run(&run).expect("stitches");
         let truth = Volume::from_fn([24, 24, 24], aabb(), |q| far_blob(q, 2.0));
@@ -400,4 +429,50 @@ fn the_empty_space_hull_follows_a_flow_that_leaves_the_first_instant() {
         with_hull <= without * 1.1 + 0.02,
         "the last instant with the hull (NRMSE {with_hull:.3}) is worse than without it ({without:.3})"
     );
+}
+
+/// Masks reach every window: a bright blotch (a reflection) in one camera at the last
+/// instant ruins that instant unless its pixels are masked out.
+#[test]
+fn windows_leave_masked_pixels_out() {
+    let settings = RenderSettings { supersample: 2, scale: 3.0, ..Default::default() };
+    let times = [0.0, 1.0, 2.0];
+    let mut views = Vec::new();
+    let mut masks = Vec::new();
+    for &t in &times {
+        let field = move |p: Vec3, _: f64| far_blob(p.as_dvec3(), t);
+        for (c, camera) in ring(6, 24).into_iter().enumerate() {
+            let mut image = render_image(&field, &camera, &aabb(), &settings).expect("renders");
+            let peak = image.min_max().1;
+            let mut mask = None;
+            if c == 0 && t == 2.0 {
+                let mut m = vec![true; 24 * 24];
+                for y in 6..18 {
+                    for x in 6..18 {
+                        image.data[y * 24 + x] = 4.0 * peak;
+                        m[y * 24 + x] = false;
+                    }
+                }
+                mask = Some(m);
+            }
+            views.push(View { camera, image, time: t });
+            masks.push(mask);
+        }
+    }
+    let p = Problem { aabb: aabb(), intensity_scale: 3.0, views, holdout: Vec::new(), time_step: 1.0 };
+    let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), 3);
+    let FieldConfig::HashGrid(grid) = &field_cfg else { unreachable!() };
+    let init = HashGridField::new(grid, 4, 2).expect("field");
+    let cfg = TrainConfig { rays_per_image: 128, coarse_samples: 32, fine_samples: 0, ..quick(250, 1e-2) };
+    let last_error = |masks: &ViewMasks| {
+        let go = |_: WindowEvent<'_, HashGridField>| ControlFlow::Continue(());
+        let run = train_windows(&p, masks, &cfg, &WindowConfig::default(), init.clone(), 3, ResumeState::default(), go)
+            .expect("trains");
+        let field = StitchedField::from_run(&run).expect("stitches");
+        let truth = Volume::from_fn([24, 24, 24], aabb(), |q| far_blob(q, 2.0));
+        nrmse(&Volume::from_field([24, 24, 24], aabb(), &field, 2.0).data, &truth.data)
+    };
+    let masked = last_error(&ViewMasks { train: masks, holdout: Vec::new() });
+    let unmasked = last_error(&ViewMasks::default());
+    assert!(masked < 0.5 && masked < 0.6 * unmasked, "masked NRMSE {masked:.3}, unmasked {unmasked:.3}");
 }

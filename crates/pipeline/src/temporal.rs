@@ -19,6 +19,7 @@ use fluidnerf_neural::temporal::{
     field_for_window, frame_times, infer_time_step, train_windows, ResumeState, StitchedField, TemporalRecord,
     TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
 };
+use fluidnerf_neural::train::ViewMasks;
 use fluidnerf_neural::train::{Learner, TrainConfig, TrainReport};
 use fluidnerf_neural::trained::{build_field, FieldConfig};
 use fluidnerf_neural::window::plan_windows;
@@ -124,6 +125,8 @@ struct Setup {
     spec: TemporalSpec,
     method: Method,
     problem: fluidnerf_neural::train::Problem,
+    /// Pixel masks of the problem's views (`mask_path`), in its order.
+    masks: ViewMasks,
     field_cfg: FieldConfig,
     input_dim: usize,
     field: fluidnerf_neural::trained::AnyField,
@@ -145,19 +148,19 @@ fn setup(
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
         ));
     };
-    let (mut problem, masks, _) = crate::neural::problem(scene, &config.gains)?;
-    if masks != fluidnerf_neural::train::ViewMasks::default() {
-        return Err(PipelineError::invalid(
-            "scene",
-            format!(
-                "{}: frames have masks (`mask_path`), which the time-resolved methods do not apply yet; \
-                 reconstruct the times with a static method or remove the masks",
-                scene.root.display()
-            ),
-        ));
-    }
-    problem.views.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
-    problem.holdout.retain(|v| !spec.holdout_times.iter().any(|&h| same_time(h, v.time)));
+    let (mut problem, mut masks, _) = crate::neural::problem(scene, &config.gains)?;
+    // Held-out times leave training with their masks.
+    let held = |t: f64| spec.holdout_times.iter().any(|&h| same_time(h, t));
+    let keep = |views: &[fluidnerf_neural::train::View], list: Vec<Option<Vec<bool>>>| -> Vec<Option<Vec<bool>>> {
+        if list.is_empty() {
+            return list;
+        }
+        views.iter().zip(list).filter(|(v, _)| !held(v.time)).map(|(_, m)| m).collect()
+    };
+    masks.train = keep(&problem.views, std::mem::take(&mut masks.train));
+    masks.holdout = keep(&problem.holdout, std::mem::take(&mut masks.holdout));
+    problem.views.retain(|v| !held(v.time));
+    problem.holdout.retain(|v| !held(v.time));
     let times = frame_times(&problem);
     if times.is_empty() {
         return Err(PipelineError::invalid(
@@ -215,7 +218,7 @@ fn setup(
         problem.views.len(),
         window_len
     );
-    Ok(Setup { spec, method, problem, field_cfg, input_dim, field, needed, progress })
+    Ok(Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, progress })
 }
 
 /// Runs (or, resuming, continues) a whole time-resolved run. With `require_all`, the run must
@@ -235,7 +238,7 @@ pub(crate) fn run(
             why: "--resume: no windows/progress.json (nothing to continue)".into(),
         });
     }
-    let Setup { spec, method, problem, field_cfg, input_dim, field, needed, mut progress } =
+    let Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, mut progress } =
         setup(scene, config, truth, session)?;
     if dir.resuming() {
         let saved: Progress = crate::rundir::read_json(&progress_path)?;
@@ -289,6 +292,7 @@ pub(crate) fn run(
         method,
         needed,
         problem: &problem,
+        masks: &masks,
     };
     fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, progress, session))
 }
@@ -304,6 +308,7 @@ struct Ctx<'a> {
     method: Method,
     needed: u64,
     problem: &'a fluidnerf_neural::train::Problem,
+    masks: &'a ViewMasks,
 }
 
 impl Ctx<'_> {
@@ -354,7 +359,7 @@ impl Ctx<'_> {
         let mut interrupted = false;
         let t_start = Instant::now();
         let run: TemporalRun<F> =
-            train_windows(self.problem, &spec.train, &spec.windows, init, config.seed, resume, |e| {
+            train_windows(self.problem, self.masks, &spec.train, &spec.windows, init, config.seed, resume, |e| {
                 let (w, s) = match e {
                     WindowEvent::Iteration(w, s) => (w, s),
                     WindowEvent::Finished(w, done) => {
@@ -644,7 +649,7 @@ pub fn reconstruct_windows(
         budget_s: config.stopping.time_budget_s,
         estimate: crate::Estimator::default(),
     };
-    let Setup { spec, method, problem, field, progress, .. } = setup(scene, config, &[], &mut session)?;
+    let Setup { spec, method, problem, masks, field, progress, .. } = setup(scene, config, &[], &mut session)?;
     let count = progress.plan.len();
     if windows.start >= windows.end || windows.end > count {
         return Err(PipelineError::invalid(
@@ -664,7 +669,7 @@ pub fn reconstruct_windows(
         start_iteration: 0,
     });
     fluidnerf_neural::with_field!(field, f => {
-        train_some(&dir, config, &spec, &problem, &progress, f, windows, &mut session)
+        train_some(&dir, config, &spec, (&problem, &masks), &progress, f, windows, &mut session)
     })
 }
 
@@ -707,7 +712,7 @@ fn train_some<F: TrainableField + Clone>(
     dir: &RunDir,
     config: &RunConfig,
     spec: &TemporalSpec,
-    problem: &fluidnerf_neural::train::Problem,
+    (problem, masks): (&fluidnerf_neural::train::Problem, &ViewMasks),
     progress: &Progress,
     init: F,
     windows: std::ops::Range<usize>,
@@ -761,7 +766,7 @@ fn train_some<F: TrainableField + Clone>(
         let pos = WindowPos { index: k, count: plan.len(), frames };
         let mut io_error = None;
         let trained =
-            train_window(problem, times, &plan, k, &spec.train, &spec.windows, config.seed, start, |_, s| {
+            train_window(problem, masks, times, &plan, k, &spec.train, &spec.windows, config.seed, start, |_, s| {
                 let event = RunEvent::Iteration {
                     window: Some(pos),
                     iteration: s.iteration,
