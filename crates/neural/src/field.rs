@@ -63,6 +63,11 @@ pub trait TrainableField: Send + Sync {
     /// (safetensors) and inspection. The ranges partition `params()`.
     fn tensors(&self) -> Vec<(String, Vec<usize>, Range<usize>)>;
 
+    /// Called with the number of optimiser steps taken so far before each step: a field may
+    /// zero parts of the summed gradient `grads` it does not want trained yet (coarse-to-fine
+    /// schedules). Those parameters then keep their values. Default: nothing.
+    fn restrict_gradient(&self, _steps_taken: u64, _grads: &mut [f32]) {}
+
     /// Cells along each box-normalised axis that resolve the field's finest detail, if it is
     /// a grid (see [`fluidnerf_core::ScalarField::detail_dims`]). Default: none.
     fn detail_dims(&self) -> Option<[usize; 3]> {

@@ -80,6 +80,10 @@ pub struct HashGridConfig {
     pub output_activation: OutputActivation,
     /// Table entries start uniform in `±init_scale`. Default 1e-4.
     pub init_scale: f32,
+    /// Coarse-to-fine training: the finer half of the levels (`⌊L/2⌋` finest) are not trained
+    /// at first, one more joins every `coarse_to_fine` optimiser steps (their tables keep their
+    /// near-zero start until then). 0 trains every level from the start. Default 0.
+    pub coarse_to_fine: usize,
 }
 
 impl Default for HashGridConfig {
@@ -97,6 +101,7 @@ impl Default for HashGridConfig {
             activation: Activation::Relu,
             output_activation: OutputActivation::Softplus,
             init_scale: 1e-4,
+            coarse_to_fine: 0,
         }
     }
 }
@@ -369,6 +374,19 @@ impl TrainableField for HashGridField {
         self.input_dim
     }
 
+    fn restrict_gradient(&self, steps_taken: u64, grads: &mut [f32]) {
+        let every = self.config.coarse_to_fine as u64;
+        let levels = self.levels.len();
+        if every == 0 {
+            return;
+        }
+        let active = (levels.div_ceil(2) as u64 + steps_taken / every).min(levels as u64) as usize;
+        if let (Some(first), Some(last)) = (self.levels.get(active), self.levels.last()) {
+            let f = self.config.features_per_level;
+            grads[first.offset..last.offset + last.entries * f].fill(0.0);
+        }
+    }
+
     fn detail_dims(&self) -> Option<[usize; 3]> {
         let finest = self.levels.last().map_or(1, |l| l.res as usize);
         Some([finest; 3])
@@ -541,5 +559,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Coarse-to-fine: the finer half of the levels gets no gradient at first, one level joins
+    /// every `coarse_to_fine` steps, and the MLP always trains.
+    #[test]
+    fn coarse_to_fine_opens_the_levels_in_turn() {
+        let cfg = HashGridConfig {
+            levels: 6,
+            log2_table_size: 12,
+            max_resolution: 64,
+            coarse_to_fine: 10,
+            ..HashGridConfig::default()
+        };
+        let f = HashGridField::new(&cfg, 3, 1).unwrap();
+        let trained = |steps: u64| -> Vec<bool> {
+            let mut g = vec![1.0f32; f.num_params()];
+            f.restrict_gradient(steps, &mut g);
+            assert!(g[f.grid_params()..].iter().all(|&v| v == 1.0), "the MLP always trains");
+            f.levels.iter().map(|l| g[l.offset..l.offset + l.entries * 2].iter().all(|&v| v == 1.0)).collect()
+        };
+        assert_eq!(trained(0), [true, true, true, false, false, false]);
+        assert_eq!(trained(9), [true, true, true, false, false, false]);
+        assert_eq!(trained(10), [true, true, true, true, false, false]);
+        assert_eq!(trained(30), [true; 6]);
+        assert_eq!(trained(1000), [true; 6]);
     }
 }

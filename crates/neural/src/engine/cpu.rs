@@ -182,6 +182,7 @@ impl<F: TrainableField> Engine<F> for CpuEngine<F> {
     }
 
     fn apply_gradient(&mut self, field: &mut F, adam: &mut Adam, lr: f32) {
+        field.restrict_gradient(adam.step, &mut self.grads);
         adam.step(field.params_mut(), &self.grads, lr);
     }
 
