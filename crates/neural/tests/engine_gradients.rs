@@ -167,6 +167,7 @@ fn small_grid(d: usize, seed: u64) -> HashGridField {
         output_activation: OutputActivation::Softplus,
         // Large enough that the MLP sees features of order one.
         init_scale: 0.5,
+        coarse_to_fine: 0,
     };
     HashGridField::new(&cfg, d, seed).unwrap()
 }
