@@ -151,6 +151,10 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
 /// mapping of `rows`, `cols`, `dt` and `data`, and text is a quoted string, one number, a list
 /// of numbers (whitespace-separated) or a string.
 fn xml_storage(path: &Path, text: &str) -> Result<Value, IoError> {
+    // The XML parser recurses per element: refuse absurd nesting before it sees it.
+    if xml_nesting(text) > 64 {
+        return Err(IoError::invalid(path, "elements nested more than 64 deep; not a calibration file"));
+    }
     let doc = roxmltree::Document::parse(text).map_err(|e| IoError::invalid(path, format!("malformed XML: {e}")))?;
     let root = doc.root_element();
     if root.tag_name().name() != "opencv_storage" {
@@ -162,17 +166,51 @@ fn xml_storage(path: &Path, text: &str) -> Result<Value, IoError> {
             ),
         ));
     }
-    xml_node(path, root)
+    xml_node(path, root, 0)
 }
 
-fn xml_node(path: &Path, node: roxmltree::Node<'_, '_>) -> Result<Value, IoError> {
+/// The deepest element nesting of `text`, from its tags alone (comments and declarations
+/// skipped; enough to bound the parser's recursion).
+fn xml_nesting(text: &str) -> usize {
+    let b = text.as_bytes();
+    let (mut depth, mut deepest) = (0usize, 0usize);
+    let mut i = 0;
+    while let Some(off) = b[i..].iter().position(|&c| c == b'<') {
+        let start = i + off;
+        let end = b[start..].iter().position(|&c| c == b'>').map_or(b.len(), |e| start + e);
+        match b.get(start + 1) {
+            Some(b'/') => depth = depth.saturating_sub(1),
+            Some(b'?' | b'!') => {}
+            _ if end > start && b[end - 1] == b'/' => {}
+            _ => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+        }
+        i = end.min(b.len() - 1) + 1;
+        if i >= b.len() {
+            break;
+        }
+    }
+    deepest
+}
+
+fn xml_node(path: &Path, node: roxmltree::Node<'_, '_>, depth: usize) -> Result<Value, IoError> {
+    // Calibrations nest a few levels (camera › matrix › data); far deeper is not a calibration.
+    if depth > 32 {
+        return Err(IoError::invalid(path, format!("elements nested more than 32 deep (line {})", doc_line(node))));
+    }
     let children: Vec<roxmltree::Node<'_, '_>> = node.children().filter(roxmltree::Node::is_element).collect();
     if children.is_empty() {
         let text: String = node.children().filter(|n| n.is_text()).filter_map(|n| n.text()).collect();
         return Ok(xml_text(&text));
     }
     if children.iter().all(|c| c.tag_name().name() == "_") {
-        return children.into_iter().map(|c| xml_node(path, c)).collect::<Result<Vec<_>, _>>().map(Value::Array);
+        return children
+            .into_iter()
+            .map(|c| xml_node(path, c, depth + 1))
+            .collect::<Result<Vec<_>, _>>()
+            .map(Value::Array);
     }
     let mut map = Map::new();
     if let Some(t) = node.attribute("type_id") {
@@ -186,7 +224,7 @@ fn xml_node(path: &Path, node: roxmltree::Node<'_, '_>) -> Result<Value, IoError
                 format!("`<{name}>` appears twice in `<{}>` (line {})", node.tag_name().name(), doc_line(c)),
             ));
         }
-        map.insert(name, xml_node(path, c)?);
+        map.insert(name, xml_node(path, c, depth + 1)?);
     }
     Ok(Value::Object(map))
 }

@@ -175,7 +175,7 @@ fn read_mjpeg_avi(path: &Path, bytes: &[u8], opts: &VideoOptions) -> Result<Opti
         let end = (at + 8).checked_add(size).filter(|&e| e <= bytes.len()).ok_or_else(|| {
             bad(format!("the RIFF chunk at byte {at} claims {size} bytes; the file ends at {}", bytes.len()))
         })?;
-        walk(bytes, at + 12, end, &mut scan, &bad)?;
+        walk(bytes, at + 12, end, 0, &mut scan, &bad)?;
         at = end + (end & 1);
     }
     let Some(_) = scan.video_stream else {
@@ -238,9 +238,14 @@ fn walk<'a>(
     bytes: &'a [u8],
     from: usize,
     to: usize,
+    depth: usize,
     scan: &mut AviScan<'a>,
     bad: &dyn Fn(String) -> IoError,
 ) -> Result<(), IoError> {
+    // AVI nests lists three deep (`hdrl` › `strl`, `movi` › `rec `); far deeper is corrupt.
+    if depth > 16 {
+        return Err(bad(format!("lists nested more than 16 deep at byte {from}")));
+    }
     let mut at = from;
     while at + 8 <= to {
         let id: [u8; 4] = bytes[at..at + 4].try_into().expect("4 bytes");
@@ -254,7 +259,7 @@ fn walk<'a>(
         })?;
         let data = &bytes[body..end];
         match &id {
-            b"LIST" if size >= 4 => walk(bytes, body + 4, end, scan, bad)?,
+            b"LIST" if size >= 4 => walk(bytes, body + 4, end, depth + 1, scan, bad)?,
             b"avih" => scan.micro_per_frame = u32_at(data, 0).unwrap_or(0),
             b"strh" => {
                 let is_video = data.get(0..4) == Some(b"vids");

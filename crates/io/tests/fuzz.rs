@@ -1,5 +1,5 @@
 //! Mutated and random inputs never panic the readers: `transforms.json`, OpenCV
-//! `cv::FileStorage` (YAML and JSON), COLMAP (text and binary), images (PNG 8/16-bit, JPEG,
+//! `cv::FileStorage` (YAML, XML and JSON), MJPEG AVI video, COLMAP (text and binary), images (PNG 8/16-bit, JPEG,
 //! TIFF 16-bit and float) and `.npy` volumes. Each reader gets valid files written in code,
 //! then seeded byte mutations of them (flips, insertions of structural characters, deletions,
 //! truncations, duplicated runs) and plain random bytes; it may refuse them, but must return.
@@ -165,13 +165,60 @@ fn opencv_files_never_panic() {
         b"%YAML:1.0\nCamera_Matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 1., 0., 1., 0., 1., 1., 0., 0., 1. ]\nimage_Width: 4\nimage_Height: 4\nleft: {R: [1,0,0,0,1,0,0,0,1], T: [0,0,1]}\n"
             .to_vec(),
     );
-    for ext in ["yml", "json"] {
+    seeds.push(
+        b"<?xml version=\"1.0\"?>\n<opencv_storage>\n<M1 type_id=\"opencv-matrix\"><rows>3</rows><cols>3</cols><dt>d</dt>\
+          <data>1. 0. 1. 0. 1. 1. 0. 0. 1.</data></M1>\n<M2>1 0 1 0 1 1 0 0 1</M2><D2><_>0.1</_><_>0</_><_>0</_><_>0</_></D2>\
+          <R>1 0 0 0 1 0 0 0 1</R><T>1 0 0</T><imageSize>4 4</imageSize>\n<cam><camera_matrix>1 0 1 0 1 1 0 0 1\
+          </camera_matrix><rvec>0 0 0</rvec><tvec>0 0 1</tvec><image_width>4</image_width></cam></opencv_storage>\n"
+            .to_vec(),
+    );
+    // Deeply nested XML must not exhaust the stack.
+    let deep = format!(
+        "<?xml version=\"1.0\"?><opencv_storage>{}{}</opencv_storage>",
+        "<a>".repeat(100_000),
+        "</a>".repeat(100_000)
+    );
+    let p = dir.path().join("deep.xml");
+    write_and(&p, deep.as_bytes());
+    assert!(fluidnerf_io::calib::read_opencv(&p).is_err());
+    let p = dir.path().join("deep.yml");
+    write_and(&p, format!("%YAML:1.0\na: {}{}\n", "[".repeat(100_000), "]".repeat(100_000)).as_bytes());
+    assert!(fluidnerf_io::calib::read_opencv(&p).is_err());
+    for ext in ["yml", "json", "xml"] {
         let p = dir.path().join(format!("f.{ext}"));
         fuzz(ext, &seeds, 300, |bytes| {
             write_and(&p, bytes);
             let _ = fluidnerf_io::calib::read_opencv(&p);
         });
     }
+}
+
+#[test]
+fn avi_files_never_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let seed = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/video/ramp_mjpeg.avi"))
+        .expect("fixture");
+    // Deeply nested lists must not exhaust the stack.
+    let levels = 100_000u32;
+    let mut nested = b"RIFF".to_vec();
+    nested.extend_from_slice(&(4 + 12 * levels).to_le_bytes());
+    nested.extend_from_slice(b"AVI ");
+    for i in 0..levels {
+        nested.extend_from_slice(b"LIST");
+        nested.extend_from_slice(&(4 + 12 * (levels - 1 - i)).to_le_bytes());
+        nested.extend_from_slice(b"movi");
+    }
+    let p = dir.path().join("f.avi");
+    write_and(&p, &nested);
+    assert!(fluidnerf_io::video::read_video(&p, &Default::default()).is_err());
+    fuzz("avi", std::slice::from_ref(&seed), 300, |bytes| {
+        write_and(&p, bytes);
+        // An MJPEG AVI is read without ffmpeg; a mutated one may fall through to ffmpeg, which
+        // is kept out of reach here.
+        if bytes.starts_with(b"RIFF") && bytes.get(8..12) == Some(b"AVI ") {
+            let _ = fluidnerf_io::video::read_video(&p, &Default::default());
+        }
+    });
 }
 
 #[test]
