@@ -1,8 +1,9 @@
 //! Mutated and random inputs never panic the readers: `transforms.json`, OpenCV
-//! `cv::FileStorage` (YAML, XML and JSON), MJPEG AVI video, COLMAP (text and binary), images (PNG 8/16-bit, JPEG,
-//! TIFF 16-bit and float) and `.npy` volumes. Each reader gets valid files written in code,
-//! then seeded byte mutations of them (flips, insertions of structural characters, deletions,
-//! truncations, duplicated runs) and plain random bytes; it may refuse them, but must return.
+//! `cv::FileStorage` (YAML, XML and JSON), MJPEG AVI video, COLMAP (text and binary), images
+//! (PNG 8/16-bit, JPEG, TIFF 16-bit and float) and `.npy` volumes. Each reader gets valid files
+//! written in code, then seeded byte mutations of them (flips, insertions of structural
+//! characters, deletions, truncations, duplicated runs) and plain random bytes; it may refuse
+//! them, but must return.
 
 use std::path::{Path, PathBuf};
 
