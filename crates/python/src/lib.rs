@@ -102,13 +102,31 @@ fn synth_presets() -> Vec<(&'static str, &'static str)> {
 pub(crate) struct Callback {
     pub callback: Option<PyObject>,
     pub error: Option<PyErr>,
+    /// When the GIL was last taken to look for signals (without a callback).
+    last_check: Option<std::time::Instant>,
 }
 
+/// How often a run without a callback takes the GIL to look for Ctrl-C. Taking it at every
+/// event (thousands per second for small problems) can starve Python threads waiting for it,
+/// a timer that would send the very signal among them.
+const SIGNAL_CHECK_INTERVAL: std::time::Duration = std::time::Duration::from_millis(50);
+
 impl Callback {
+    pub fn new(callback: Option<PyObject>) -> Self {
+        Callback { callback, error: None, last_check: None }
+    }
+
     /// Delivers a run event to Python; stops the run on Ctrl-C or an exception in the callback.
     pub fn on_event(&mut self, event: &fluidnerf_pipeline::RunEvent) -> ControlFlow<()> {
         if self.error.is_some() {
             return ControlFlow::Break(());
+        }
+        if self.callback.is_none() {
+            let now = std::time::Instant::now();
+            if self.last_check.is_some_and(|t| now.duration_since(t) < SIGNAL_CHECK_INTERVAL) {
+                return ControlFlow::Continue(());
+            }
+            self.last_check = Some(now);
         }
         Python::with_gil(|py| {
             if let Err(e) = py.check_signals() {

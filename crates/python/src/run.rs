@@ -139,7 +139,7 @@ pub fn reconstruct(
     let config = guard(|| parse_config(config))?;
     let overwrite = overwrite_of(overwrite)?;
     let scene = scene.require_saved("reconstruct")?.clone();
-    let mut cb = Callback { callback, error: None };
+    let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
             let dir = RunDir::create(&out, overwrite, Some(&scene.root)).map_err(|e| err(e.to_string()))?;
@@ -180,7 +180,7 @@ pub fn reconstruct_windows(
 ) -> PyResult<String> {
     let config = guard(|| parse_config(config))?;
     let scene = scene.require_saved("reconstruct_windows")?.clone();
-    let mut cb = Callback { callback, error: None };
+    let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
             let outcomes =
@@ -208,7 +208,7 @@ pub fn finish_windows(
 ) -> PyResult<String> {
     let config = guard(|| parse_config(config))?;
     let scene = scene.require_saved("finish_windows")?.clone();
-    let mut cb = Callback { callback, error: None };
+    let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
             let report = fluidnerf_pipeline::finish_windows(&scene, &config, &out, |e| cb.on_event(e))
