@@ -134,6 +134,16 @@ def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_p
 def test_ctrl_c_stops_a_run_cleanly(static_scene, tmp_path):
     """SIGINT while the run works (GIL released) stops it at the next iteration: the results are
     written, the report says interrupted, and KeyboardInterrupt reaches the caller."""
+    # A process started in the background inherits SIGINT as ignored, and Python then installs
+    # no handler: install Python's own for this test.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupt_a_run(static_scene, tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _interrupt_a_run(static_scene, tmp_path):
     timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
     started = time.monotonic()
     timer.start()
