@@ -3,7 +3,8 @@
 //! - **MJPEG in AVI** (RIFF `AVI `, the usual format of high-speed and machine-vision cameras)
 //!   is read here: the stream header's `dwRate / dwScale` (else the main header's
 //!   microseconds per frame) gives the frame rate, the `movi` list's `##dc`/`##db` chunks
-//!   (including OpenDML `AVIX` extensions) the frames, each decoded as a JPEG. The file is
+//!   (including OpenDML `AVIX` extensions) the frames, each decoded as a JPEG. An empty chunk
+//!   (a frame the camera dropped) gives no frame but keeps its time slot, as in ffmpeg. The file is
 //!   walked chunk by chunk and only the kept frames are read, so a long recording never sits
 //!   in memory whole.
 //! - **Everything else** (MP4, MOV, MKV, WebM, H.264/H.265, AVI with other codecs) is decoded
@@ -386,7 +387,7 @@ fn read_mjpeg_avi(
                 .into(),
         ));
     };
-    if scan.frames.is_empty() {
+    if scan.frames.iter().all(|&(_, n)| n == 0) {
         return Err(bad("the `movi` list holds no video frames".into()));
     }
     let mut range = None;
@@ -397,7 +398,7 @@ fn read_mjpeg_avi(
         if opts.done(i) {
             break;
         }
-        if !opts.keeps(i) {
+        if !opts.keeps(i) || n == 0 {
             continue;
         }
         let data = riff.read_at(offset, n).map_err(io)?;
@@ -517,7 +518,8 @@ fn walk(
                 // Stream data: `##dc` (compressed) or `##db` (uncompressed) of the video stream.
                 if let Some(v) = scan.video_stream {
                     let tag = format!("{v:02}");
-                    if id[..2] == *tag.as_bytes() && (&id[2..] == b"dc" || &id[2..] == b"db") && size > 0 {
+                    // An empty chunk is a dropped frame: no image, but it takes its time slot.
+                    if id[..2] == *tag.as_bytes() && (&id[2..] == b"dc" || &id[2..] == b"db") {
                         scan.frames.push((body, size as usize));
                     }
                 }

@@ -173,6 +173,27 @@ fn broken_video_files_are_refused_with_their_name() {
     assert!(err.contains("not found") && err.contains("missing.avi"), "{err}");
 }
 
+/// A frame the camera dropped (an empty `00dc` chunk) gives no image but keeps its time slot.
+#[test]
+fn a_dropped_frame_keeps_its_time_slot() {
+    let mut bytes = std::fs::read(fixture("ramp_mjpeg.avi")).expect("fixture");
+    // Frame 1's chunk becomes an empty `00dc` and a `JUNK` chunk of the same total size, so
+    // no list around it changes size.
+    let movi = find(&bytes, b"movi", 0);
+    let chunk = movi + find(&bytes[movi..], b"00dc", 1);
+    let size = u32::from_le_bytes(bytes[chunk + 4..chunk + 8].try_into().expect("4 bytes"));
+    put_u32(&mut bytes, chunk + 4, 0);
+    bytes[chunk + 8..chunk + 12].copy_from_slice(b"JUNK");
+    put_u32(&mut bytes, chunk + 12, size - 8);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("dropped.avi");
+    std::fs::write(&p, bytes).expect("write");
+    let v = read_video(&p, &VideoOptions::default()).expect("reads");
+    assert_eq!(v.times, [0.0, 0.2, 0.3]);
+    assert_eq!((v.info.frames_in_file, v.info.frames_kept), (4, 3));
+    assert!(worst(&v, &[0, 2, 3], |c| c) <= 3.0);
+}
+
 /// H.264 in MP4 through ffmpeg: limited-range luma (the MP4 states no range, so the video
 /// default applies) mapped back to the ramp, times from the stamps. Needs ffmpeg on the PATH; reported and skipped without it.
 #[test]
