@@ -322,8 +322,10 @@ fn colmap_binary_model_with_other_extensions() {
     assert!(stderr(&o).contains("cam1.jpg") && stderr(&o).contains("other extensions"), "{}", stderr(&o));
 }
 
-/// One MJPEG AVI per camera (the io fixture: four frames at 10 frames/s): each decoded frame
-/// becomes a float TIFF in `frames/<camera>/` with its time; `--video-frames` selects.
+/// One video per camera (two full-range MJPEG AVIs, one limited-range): each kept frame
+/// becomes a float TIFF in `frames/<camera>/` with its time; `--video-frames`,
+/// `--video-every` and `--video-time-offset` select and shift; `import.json` records how each
+/// video was read.
 #[test]
 fn opencv_cameras_with_videos() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -332,9 +334,10 @@ fn opencv_cameras_with_videos() {
     write_opencv(&calib, &cams).expect("writes calibration");
     let images = dir.path().join("videos");
     std::fs::create_dir_all(&images).expect("mkdir");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video");
     for (n, _) in &cams {
-        std::fs::copy(&fixture, images.join(format!("{n}.avi"))).expect("copies the fixture");
+        let video = if n == "cam2" { "ramp_mjpeg_limited.avi" } else { "ramp_mjpeg.avi" };
+        std::fs::copy(fixtures.join(video), images.join(format!("{n}.avi"))).expect("copies the fixture");
     }
     let out = dir.path().join("scene");
     let o = fluidnerf(&[
@@ -347,23 +350,48 @@ fn opencv_cameras_with_videos() {
         "-10,-10,-10,10,10,10",
         "--video-frames",
         "1..",
+        "--video-every",
+        "2",
+        "--video-time-offset",
+        "-0.1",
         "-o",
         s(&out),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let scene = load_scene(&out).expect("loads");
-    assert_eq!(scene.frames.len(), 9);
-    assert_eq!(scene.times(), vec![0.1, 0.2, 0.3]);
-    let first = scene
-        .frames
-        .iter()
-        .find(|f| f.camera_name.as_deref() == Some("cam1") && f.time == Some(0.1))
-        .expect("cam1 at 0.1 s");
-    assert_eq!(first.file_path, PathBuf::from("frames/cam1/000000.tif"));
-    let img = fluidnerf_io::image::read_image(&out.join(&first.file_path)).expect("reads the frame");
-    // Pixel (x, y) of frame 1 is 20 + 4x + 3y + 10, within JPEG error.
-    assert!((img.get(5, 7) - (20.0 + 20.0 + 21.0 + 10.0)).abs() <= 3.0, "{}", img.get(5, 7));
+    assert_eq!(scene.frames.len(), 6, "frames 1 and 3 of three cameras");
+    let times = scene.times();
+    assert_eq!(times.len(), 2, "{times:?}");
+    assert!((times[0] - 0.0).abs() < 1e-9 && (times[1] - 0.2).abs() < 1e-9, "{times:?}");
+    for cam in ["cam1", "cam2"] {
+        let f = scene
+            .frames
+            .iter()
+            .find(|f| f.camera_name.as_deref() == Some(cam) && f.time.is_some_and(|t| (t - 0.2).abs() < 1e-9))
+            .expect("the camera's second kept frame");
+        assert_eq!(f.file_path, PathBuf::from(format!("frames/{cam}/000001.tif")));
+        let img = fluidnerf_io::image::read_image(&out.join(&f.file_path)).expect("reads the frame");
+        // Pixel (x, y) of frame 3 is 20 + 4x + 3y + 30, within JPEG error (and, for the
+        // limited-range video, its 255/219 stretch).
+        let want = 20.0 + 4.0 * 5.0 + 3.0 * 7.0 + 30.0;
+        assert!((img.get(5, 7) - want).abs() <= 4.0, "{cam}: {} for {want}", img.get(5, 7));
+    }
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("import.json")).expect("import.json"))
+            .expect("import.json is JSON");
+    let videos = record["videos"].as_array().expect("videos recorded");
+    assert_eq!(videos.len(), 3);
+    for v in videos {
+        let limited = v["camera"] == "cam2";
+        assert_eq!(v["decoder"], "mjpeg-avi");
+        assert_eq!(v["range"], if limited { "limited" } else { "full" }, "{v}");
+        assert_eq!(v["range_source"], if limited { "file" } else { "jpeg-default" }, "{v}");
+        assert_eq!((v["frames_in_file"].as_u64(), v["frames_kept"].as_u64()), (Some(4), Some(2)), "{v}");
+        assert_eq!(v["clipped_pixels"], 0, "{v}");
+    }
+    assert_eq!(record["video_time_offset"], -0.1);
 
+    // Flags are checked before any work; a broken video names its camera and file.
     let bad = fluidnerf(&[
         "import",
         "--opencv",
@@ -377,4 +405,22 @@ fn opencv_cameras_with_videos() {
     ]);
     assert_eq!(bad.status.code(), Some(1));
     assert!(stderr(&bad).contains("--video-frames 3..2"), "{}", stderr(&bad));
+    let bad =
+        fluidnerf(&["import", "--opencv", s(&calib), "--images", s(&images), "--video-range", "tv-ish", "-o", "x"]);
+    assert!(!bad.status.success() && stderr(&bad).contains("expected auto, full or limited"), "{}", stderr(&bad));
+    std::fs::write(images.join("cam1.avi"), "not a video").expect("write");
+    let bad = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&dir.path().join("y")),
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    let err = stderr(&bad);
+    assert!(err.contains("camera cam1") && err.contains("cam1.avi") && err.contains("not a video file"), "{err}");
 }

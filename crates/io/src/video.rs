@@ -3,21 +3,36 @@
 //! - **MJPEG in AVI** (RIFF `AVI `, the usual format of high-speed and machine-vision cameras)
 //!   is read here: the stream header's `dwRate / dwScale` (else the main header's
 //!   microseconds per frame) gives the frame rate, the `movi` list's `##dc`/`##db` chunks
-//!   (including OpenDML `AVIX` extensions) the frames, each decoded as a JPEG.
-//! - **Everything else** (MP4, MOV, MKV, H.264/H.265, AVI with other codecs) is decoded by an
-//!   external `ffmpeg` (frames as 16-bit grey on a pipe) after `ffprobe` reports the size, the
-//!   frames' time stamps and the colour range. When they are missing, the error says how to
-//!   install them. [`FFMPEG_ENV`] and [`FFPROBE_ENV`] name other binaries.
+//!   (including OpenDML `AVIX` extensions) the frames, each decoded as a JPEG. An empty chunk
+//!   (a frame the camera dropped) gives no frame but keeps its time slot, as in ffmpeg. The file is
+//!   walked chunk by chunk and only the kept frames are read, so a long recording never sits
+//!   in memory whole.
+//! - **Everything else** (MP4, MOV, MKV, WebM, H.264/H.265, AVI with other codecs) is decoded
+//!   by an external `ffmpeg` (frames as 16-bit grey on a pipe, read one at a time) after
+//!   `ffprobe` reports the size, the frames' time stamps and the colour range. When they are
+//!   missing, the error names the file and says how to install them. [`FFMPEG_ENV`] and
+//!   [`FFPROBE_ENV`] name other binaries.
+//! - A file with a video extension whose first bytes are none of AVI (RIFF), MP4/MOV (ISO
+//!   boxes) or Matroska/WebM (EBML) is refused before any decoder runs.
 //!
 //! **Range.** Video luma is often limited range ("TV", 16–235 for black–white). With
-//! [`VideoRange::Auto`] the range is what the file states (`ffprobe`'s `color_range`; JPEG
-//! frames are full range), or it is forced with `Full`/`Limited`. Limited-range values map
-//! `16 → 0` and `235 → 255`; values outside are clipped and counted.
+//! [`VideoRange::Auto`] the range is what the file states (`ffprobe`'s `color_range`: `tv` is
+//! limited, `pc`/`jpeg` full, unstated limited, the video codecs' default; JPEG frames in an
+//! AVI are full range, the JFIF default, unless marked `CS=ITU601` as libavcodec marks
+//! limited-range JPEGs), or it is forced with `Full`/`Limited`. Limited-range
+//! values map `16 → 0` and `235 → 255` (unit `0 → 1` on the 8-bit scale); values outside are
+//! clipped and counted. [`VideoInfo`] records the range used and where it came from.
 //!
-//! Frame values are on the 0..=255 scale of 8-bit images, linearised as the scene's
-//! [`Linearisation`] says (applied to the range-mapped value), as `f32`.
+//! **Values.** Frame values are on the 0..=255 scale of 8-bit images, linearised as the
+//! scene's [`Linearisation`] says (applied to the range-mapped value), as `f32`. Colour video
+//! is reduced to its luma.
+//!
+//! **Times.** A frame's time in seconds is its index times the frame period (AVI) or its
+//! presentation time stamp (ffmpeg; the frame rate when a frame has none), plus
+//! [`VideoOptions::time_offset_s`].
 
-use std::io::Read as _;
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -59,29 +74,83 @@ impl std::str::FromStr for VideoRange {
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
             "auto" => Ok(VideoRange::Auto),
-            "full" => Ok(VideoRange::Full),
+            "full" | "pc" => Ok(VideoRange::Full),
             "limited" | "tv" => Ok(VideoRange::Limited),
             _ => Err(format!("expected auto, full or limited, got `{s}`")),
         }
     }
 }
 
-/// Which frames to keep and how to read them.
+impl std::fmt::Display for VideoRange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            VideoRange::Auto => "auto",
+            VideoRange::Full => "full",
+            VideoRange::Limited => "limited",
+        })
+    }
+}
+
+/// Where the range a video was read with came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RangeSource {
+    /// [`VideoOptions::range`] forced it.
+    Option,
+    /// The file states it (`ffprobe`'s `color_range`, or a JPEG's `CS=ITU601` comment).
+    File,
+    /// JPEG frames, full range unless stated otherwise (JFIF).
+    JpegDefault,
+    /// The stream states no range; video codecs default to limited.
+    VideoDefault,
+}
+
+/// Which decoder read a video.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Decoder {
+    /// fluidnerf's own RIFF walk and JPEG decoder.
+    MjpegAvi,
+    /// An external `ffmpeg`.
+    Ffmpeg,
+}
+
+impl std::fmt::Display for Decoder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Decoder::MjpegAvi => "mjpeg-avi",
+            Decoder::Ffmpeg => "ffmpeg",
+        })
+    }
+}
+
+/// Which frames to keep and how to read them. The default keeps every frame, range as the
+/// file states, no time offset, values linear.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VideoOptions {
     pub range: VideoRange,
-    /// First frame kept (0-based).
+    /// First frame kept (0-based). Default 0.
     pub start: usize,
-    /// One past the last frame kept (None: to the end).
+    /// One past the last frame kept (None, the default: to the end).
     pub end: Option<usize>,
-    /// Keep every n-th frame from `start` (≥ 1).
+    /// Keep every n-th frame from `start` (≥ 1; 0 is taken as 1). Default 1.
     pub every: usize,
+    /// Seconds added to every frame's time (to align cameras or a trigger). Default 0.
+    pub time_offset_s: f64,
+    /// Applied to the range-mapped value. Default linear.
     pub linearisation: Linearisation,
 }
 
 impl Default for VideoOptions {
     fn default() -> Self {
-        VideoOptions { range: VideoRange::Auto, start: 0, end: None, every: 1, linearisation: Linearisation::Linear }
+        VideoOptions {
+            range: VideoRange::Auto,
+            start: 0,
+            end: None,
+            every: 1,
+            time_offset_s: 0.0,
+            linearisation: Linearisation::Linear,
+        }
     }
 }
 
@@ -89,35 +158,126 @@ impl VideoOptions {
     fn keeps(&self, index: usize) -> bool {
         index >= self.start && self.end.is_none_or(|e| index < e) && (index - self.start) % self.every.max(1) == 0
     }
+
+    /// Whether no frame at or after `index` is kept.
+    fn done(&self, index: usize) -> bool {
+        self.end.is_some_and(|e| index >= e)
+    }
+}
+
+/// One decoded frame.
+#[derive(Clone, Debug)]
+pub struct VideoFrame {
+    /// Index of the frame in the file (0-based, before the selection).
+    pub index: usize,
+    /// Seconds, including [`VideoOptions::time_offset_s`].
+    pub time_s: f64,
+    pub image: Image,
+}
+
+/// What reading a video did.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct VideoInfo {
+    pub decoder: Decoder,
+    pub width: u32,
+    pub height: u32,
+    /// Frames per second as the file states it, if it does.
+    pub frame_rate: Option<f64>,
+    /// Frames in the file (for ffmpeg: as `ffprobe` counted them, else as decoded).
+    pub frames_in_file: usize,
+    /// Frames passed on after the selection.
+    pub frames_kept: usize,
+    /// The range the frames were read with (never `Auto`).
+    pub range: VideoRange,
+    pub range_source: RangeSource,
+    /// Pixels clipped by the limited-range mapping, over the kept frames.
+    pub clipped_pixels: u64,
 }
 
 /// Decoded frames.
 #[derive(Clone, Debug)]
 pub struct Video {
     pub frames: Vec<Image>,
-    /// Each kept frame's time in seconds from the start of the recording.
+    /// Each kept frame's time in seconds (see the module docs).
     pub times: Vec<f64>,
-    /// The range the frames were read with (never `Auto`).
-    pub range: VideoRange,
-    /// Pixels clipped by the limited-range mapping.
-    pub clipped: u64,
-    /// How the frames were decoded: `"mjpeg-avi"` or `"ffmpeg"`.
-    pub decoder: &'static str,
+    pub info: VideoInfo,
 }
 
-/// Reads the frames of a video file (see the module docs).
+/// Reads the kept frames of a video file into memory (see the module docs and
+/// [`read_video_frames`]).
 pub fn read_video(path: &Path, opts: &VideoOptions) -> Result<Video, IoError> {
-    let mut head = [0u8; 12];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| f.read(&mut head))
-        .map_err(|e| IoError::io(path, "video file", e))?;
-    if n == 12 && &head[0..4] == b"RIFF" && &head[8..12] == b"AVI " {
-        let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "video file", e))?;
-        if let Some(video) = read_mjpeg_avi(path, &bytes, opts)? {
-            return Ok(video);
-        }
+    let mut frames = Vec::new();
+    let mut times = Vec::new();
+    let info = read_video_frames(path, opts, |f| {
+        frames.push(f.image);
+        times.push(f.time_s);
+        Ok(())
+    })?;
+    Ok(Video { frames, times, info })
+}
+
+/// Decodes the kept frames of a video file one at a time, in order, passing each to
+/// `on_frame` (which may stop the reading by returning an error). At least one frame is kept,
+/// else it is an error.
+pub fn read_video_frames(
+    path: &Path,
+    opts: &VideoOptions,
+    mut on_frame: impl FnMut(VideoFrame) -> Result<(), IoError>,
+) -> Result<VideoInfo, IoError> {
+    if !opts.time_offset_s.is_finite() {
+        return Err(IoError::invalid(path, format!("time offset {} s is not finite", opts.time_offset_s)));
     }
-    read_with_ffmpeg(path, opts)
+    let mut head = Vec::with_capacity(12);
+    File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).map_err(|e| IoError::io(path, "video file", e))?;
+    let info = match sniff(&head) {
+        Container::Avi => match read_mjpeg_avi(path, opts, &mut on_frame)? {
+            Some(info) => info,
+            None => read_with_ffmpeg(path, opts, &mut on_frame)?,
+        },
+        Container::Unknown if is_video(path) || head.len() < 12 => {
+            return Err(IoError::invalid(
+                path,
+                "not a video file: it begins with neither a RIFF `AVI ` header, an MP4/MOV box nor a \
+                 Matroska/WebM header (damaged, or not what its extension says)",
+            ))
+        }
+        Container::IsoBmff | Container::Matroska | Container::Unknown => read_with_ffmpeg(path, opts, &mut on_frame)?,
+    };
+    if info.frames_kept == 0 {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "no frame kept: the video has {} frame(s) and the selection starts at frame {}",
+                info.frames_in_file, opts.start
+            ),
+        ));
+    }
+    Ok(info)
+}
+
+/// The container a file's first 12 bytes announce.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Container {
+    Avi,
+    /// MP4, MOV, M4V (ISO base media file format / QuickTime atoms).
+    IsoBmff,
+    /// MKV, WebM.
+    Matroska,
+    Unknown,
+}
+
+fn sniff(head: &[u8]) -> Container {
+    if head.len() >= 12 && &head[0..4] == b"RIFF" && &head[8..12] == b"AVI " {
+        Container::Avi
+    } else if head.starts_with(&[0x1A, 0x45, 0xDF, 0xA3]) {
+        Container::Matroska
+    } else if head.len() >= 8
+        && [b"ftyp", b"moov", b"mdat", b"free", b"skip", b"wide", b"pnot"].iter().any(|b| head[4..8] == b[..])
+    {
+        Container::IsoBmff
+    } else {
+        Container::Unknown
+    }
 }
 
 /// Maps one 8-bit-scale luma value (possibly fractional, for 16-bit sources) to the frame's
@@ -147,140 +307,220 @@ fn u32_at(b: &[u8], at: usize) -> Option<u32> {
     b.get(at..at + 4).map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
 }
 
+/// An AVI file read chunk by chunk.
+struct Riff {
+    file: BufReader<File>,
+}
+
+impl Riff {
+    /// `n` bytes at `at`; the caller keeps `at + n` within the file.
+    fn read_at(&mut self, at: u64, n: usize) -> std::io::Result<Vec<u8>> {
+        self.file.seek(SeekFrom::Start(at))?;
+        let mut buf = vec![0; n];
+        self.file.read_exact(&mut buf)?;
+        Ok(buf)
+    }
+}
+
 /// What the walk through the RIFF chunks found.
 #[derive(Default)]
-struct AviScan<'a> {
+struct AviScan {
     micro_per_frame: u32,
     scale: u32,
     rate: u32,
     start: u32,
+    width: u32,
+    height: u32,
     handler: [u8; 4],
     compression: [u8; 4],
     video_stream: Option<usize>,
     streams: usize,
-    frames: Vec<&'a [u8]>,
+    /// Offset and length of each video frame's data.
+    frames: Vec<(u64, usize)>,
 }
 
 /// Reads an AVI whose video stream is MJPEG; `None` for other codecs (left to ffmpeg).
-fn read_mjpeg_avi(path: &Path, bytes: &[u8], opts: &VideoOptions) -> Result<Option<Video>, IoError> {
+fn read_mjpeg_avi(
+    path: &Path,
+    opts: &VideoOptions,
+    on_frame: &mut dyn FnMut(VideoFrame) -> Result<(), IoError>,
+) -> Result<Option<VideoInfo>, IoError> {
     let bad = |why: String| IoError::invalid(path, format!("malformed AVI: {why}"));
+    let io = |e| IoError::io(path, "video file", e);
+    let file = File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    let mut riff = Riff { file: BufReader::new(file) };
     let mut scan = AviScan::default();
     // The file is one or more RIFF chunks (`AVI `, then OpenDML `AVIX` extensions).
-    let mut at = 0;
-    while at + 12 <= bytes.len() {
-        let size = u32_at(bytes, at + 4).expect("bounds checked") as usize;
-        if &bytes[at..at + 4] != b"RIFF" {
+    let mut at = 0u64;
+    while at + 12 <= len {
+        let head = riff.read_at(at, 12).map_err(io)?;
+        if &head[0..4] != b"RIFF" {
             break;
         }
-        let end = (at + 8).checked_add(size).filter(|&e| e <= bytes.len()).ok_or_else(|| {
-            bad(format!("the RIFF chunk at byte {at} claims {size} bytes; the file ends at {}", bytes.len()))
-        })?;
-        walk(bytes, at + 12, end, 0, &mut scan, &bad)?;
+        let size = u64::from(u32_at(&head, 4).unwrap_or(0));
+        let end = at + 8 + size;
+        if end > len {
+            return Err(bad(format!(
+                "the RIFF chunk at byte {at} claims {size} bytes but the file ends at byte {len} (a truncated file?)"
+            )));
+        }
+        walk(&mut riff, at + 12, end, 0, &mut scan, &bad)?;
         at = end + (end & 1);
     }
-    let Some(_) = scan.video_stream else {
-        return Err(bad("no video stream (`strh` of type `vids`)".into()));
-    };
+    if scan.video_stream.is_none() {
+        return Err(bad("no video stream (no `strh` header of type `vids`)".into()));
+    }
     let mjpeg = |c: &[u8; 4]| c.eq_ignore_ascii_case(b"MJPG") || c.eq_ignore_ascii_case(b"AVRn") || c == b"jpeg";
     if !mjpeg(&scan.compression) && !mjpeg(&scan.handler) {
         return Ok(None);
     }
     // A frame's time is `n · num / den` seconds.
     let (num, den) = if scan.scale > 0 && scan.rate > 0 {
-        (scan.scale as f64, scan.rate as f64)
+        (f64::from(scan.scale), f64::from(scan.rate))
     } else if scan.micro_per_frame > 0 {
-        (scan.micro_per_frame as f64, 1e6)
+        (f64::from(scan.micro_per_frame), 1e6)
     } else {
-        return Err(bad("no frame rate: the stream's dwRate/dwScale and the main header's period are zero".into()));
+        return Err(bad(
+            "zero frame rate: the video stream's dwRate/dwScale and the main header's microseconds per frame are \
+             all zero"
+                .into(),
+        ));
     };
-    if scan.frames.is_empty() {
+    if scan.frames.iter().all(|&(_, n)| n == 0) {
         return Err(bad("the `movi` list holds no video frames".into()));
     }
-    let mut mapper =
-        Mapper { limited: opts.range == VideoRange::Limited, linearisation: opts.linearisation, clipped: 0 };
-    let mut frames = Vec::new();
-    let mut times = Vec::new();
+    let mut range = None;
+    let mut mapper = Mapper { limited: false, linearisation: opts.linearisation, clipped: 0 };
     let mut size: Option<(u32, u32)> = None;
-    for (i, data) in scan.frames.iter().enumerate() {
-        if !opts.keeps(i) {
+    let mut kept = 0;
+    for (i, &(offset, n)) in scan.frames.iter().enumerate() {
+        if opts.done(i) {
+            break;
+        }
+        if !opts.keeps(i) || n == 0 {
             continue;
         }
-        let img = image::load_from_memory_with_format(data, image::ImageFormat::Jpeg)
+        let data = riff.read_at(offset, n).map_err(io)?;
+        // The first kept frame decides the range for all.
+        let (range, _) = *range.get_or_insert_with(|| match opts.range {
+            VideoRange::Auto if jpeg_says_limited(&data) => (VideoRange::Limited, RangeSource::File),
+            VideoRange::Auto => (VideoRange::Full, RangeSource::JpegDefault),
+            forced => (forced, RangeSource::Option),
+        });
+        mapper.limited = range == VideoRange::Limited;
+        let img = image::load_from_memory_with_format(&data, image::ImageFormat::Jpeg)
             .map_err(|e| IoError::invalid(path, format!("frame {i}: not a decodable JPEG: {e}")))?
             .into_luma8();
         let (w, h) = img.dimensions();
-        if *size.get_or_insert((w, h)) != (w, h) {
-            return Err(IoError::invalid(path, format!("frame {i} is {w}×{h}; the first frame kept is {:?}", size)));
+        let first = *size.get_or_insert((w, h));
+        if first != (w, h) {
+            return Err(IoError::invalid(
+                path,
+                format!("frame {i} is {w}×{h} pixels; the first frame kept is {}×{}", first.0, first.1),
+            ));
         }
-        let mut out = Image::zeros(w as usize, h as usize);
-        for (o, &v) in out.data.iter_mut().zip(img.as_raw()) {
+        let mut image = Image::zeros(w as usize, h as usize);
+        for (o, &v) in image.data.iter_mut().zip(img.as_raw()) {
             *o = mapper.map(f64::from(v));
         }
-        frames.push(out);
-        times.push((scan.start as f64 + i as f64) * num / den);
+        let time_s = (f64::from(scan.start) + i as f64) * num / den + opts.time_offset_s;
+        on_frame(VideoFrame { index: i, time_s, image })?;
+        kept += 1;
     }
-    if frames.is_empty() {
-        return Err(IoError::invalid(
-            path,
-            format!(
-                "no frame kept: the video has {} frames and the selection starts at {}",
-                scan.frames.len(),
-                opts.start
-            ),
-        ));
-    }
-    let range = if mapper.limited { VideoRange::Limited } else { VideoRange::Full };
-    Ok(Some(Video { frames, times, range, clipped: mapper.clipped, decoder: "mjpeg-avi" }))
+    let (width, height) = size.unwrap_or((scan.width, scan.height));
+    let (range, range_source) = range.unwrap_or((VideoRange::Full, RangeSource::JpegDefault));
+    Ok(Some(VideoInfo {
+        decoder: Decoder::MjpegAvi,
+        width,
+        height,
+        frame_rate: Some(den / num),
+        frames_in_file: scan.frames.len(),
+        frames_kept: kept,
+        range,
+        range_source,
+        clipped_pixels: mapper.clipped,
+    }))
 }
 
-/// Walks the chunks in `bytes[from..to]`, descending into lists.
-fn walk<'a>(
-    bytes: &'a [u8],
-    from: usize,
-    to: usize,
+/// Whether a JPEG's comments mark it limited range: libavcodec writes `CS=ITU601` into
+/// JPEGs with 16–235 luma and reads it back the same way; JFIF itself is full range.
+fn jpeg_says_limited(jpeg: &[u8]) -> bool {
+    if !jpeg.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut at = 2;
+    // Segments up to the start of scan: marker, big-endian length (counting itself), payload.
+    while let Some(&[0xFF, marker, hi, lo]) = jpeg.get(at..at + 4) {
+        let len = usize::from(u16::from_be_bytes([hi, lo]));
+        match marker {
+            0xDA | 0xD9 => return false,
+            0xFE if jpeg.get(at + 4..at + 2 + len).is_some_and(|c| c.starts_with(b"CS=ITU601")) => return true,
+            _ if len < 2 => return false,
+            _ => at += 2 + len,
+        }
+    }
+    false
+}
+
+/// Walks the chunks in `from..to` of the file, descending into lists.
+fn walk(
+    riff: &mut Riff,
+    from: u64,
+    to: u64,
     depth: usize,
-    scan: &mut AviScan<'a>,
+    scan: &mut AviScan,
     bad: &dyn Fn(String) -> IoError,
 ) -> Result<(), IoError> {
     // AVI nests lists three deep (`hdrl` › `strl`, `movi` › `rec `); far deeper is corrupt.
     if depth > 16 {
         return Err(bad(format!("lists nested more than 16 deep at byte {from}")));
     }
+    let read = |riff: &mut Riff, at: u64, n: usize| riff.read_at(at, n).map_err(|e| bad(format!("byte {at}: {e}")));
     let mut at = from;
     while at + 8 <= to {
-        let id: [u8; 4] = bytes[at..at + 4].try_into().expect("4 bytes");
-        let size = u32_at(bytes, at + 4).expect("bounds checked") as usize;
+        let head = read(riff, at, 8)?;
+        let id: [u8; 4] = [head[0], head[1], head[2], head[3]];
+        let size = u64::from(u32_at(&head, 4).unwrap_or(0));
         let body = at + 8;
-        let end = body.checked_add(size).filter(|&e| e <= to).ok_or_else(|| {
-            bad(format!(
-                "the chunk `{}` at byte {at} claims {size} bytes; its parent ends at byte {to} (a truncated file?)",
+        let end = body + size;
+        if end > to {
+            return Err(bad(format!(
+                "the chunk `{}` at byte {at} claims {size} bytes but its parent ends at byte {to} (a truncated \
+                 file?)",
                 String::from_utf8_lossy(&id)
-            ))
-        })?;
-        let data = &bytes[body..end];
+            )));
+        }
+        // Header chunks are small; only their first fields are used.
+        let header = |riff: &mut Riff| read(riff, body, size.min(64) as usize);
         match &id {
-            b"LIST" if size >= 4 => walk(bytes, body + 4, end, depth + 1, scan, bad)?,
-            b"avih" => scan.micro_per_frame = u32_at(data, 0).unwrap_or(0),
+            b"LIST" if size >= 4 => walk(riff, body + 4, end, depth + 1, scan, bad)?,
+            b"avih" => scan.micro_per_frame = u32_at(&header(riff)?, 0).unwrap_or(0),
             b"strh" => {
-                let is_video = data.get(0..4) == Some(b"vids");
-                if is_video && scan.video_stream.is_none() {
+                let data = header(riff)?;
+                if data.get(0..4) == Some(b"vids") && scan.video_stream.is_none() {
                     scan.video_stream = Some(scan.streams);
                     scan.handler = data.get(4..8).and_then(|s| s.try_into().ok()).unwrap_or_default();
-                    scan.scale = u32_at(data, 20).unwrap_or(0);
-                    scan.rate = u32_at(data, 24).unwrap_or(0);
-                    scan.start = u32_at(data, 28).unwrap_or(0);
+                    scan.scale = u32_at(&data, 20).unwrap_or(0);
+                    scan.rate = u32_at(&data, 24).unwrap_or(0);
+                    scan.start = u32_at(&data, 28).unwrap_or(0);
                 }
                 scan.streams += 1;
             }
-            b"strf" if scan.video_stream == Some(scan.streams.saturating_sub(1)) => {
+            b"strf" if scan.video_stream.is_some_and(|v| v + 1 == scan.streams) => {
+                // BITMAPINFOHEADER: biWidth at 4, biHeight at 8 (negative: top-down), biCompression at 16.
+                let data = header(riff)?;
+                scan.width = u32_at(&data, 4).unwrap_or(0);
+                scan.height = u32_at(&data, 8).map_or(0, |h| (h as i32).unsigned_abs());
                 scan.compression = data.get(16..20).and_then(|s| s.try_into().ok()).unwrap_or_default();
             }
             _ => {
                 // Stream data: `##dc` (compressed) or `##db` (uncompressed) of the video stream.
                 if let Some(v) = scan.video_stream {
                     let tag = format!("{v:02}");
-                    if id[..2] == *tag.as_bytes() && (&id[2..] == b"dc" || &id[2..] == b"db") && !data.is_empty() {
-                        scan.frames.push(data);
+                    // An empty chunk is a dropped frame: no image, but it takes its time slot.
+                    if id[..2] == *tag.as_bytes() && (&id[2..] == b"dc" || &id[2..] == b"db") {
+                        scan.frames.push((body, size as usize));
                     }
                 }
             }
@@ -291,17 +531,17 @@ fn walk<'a>(
 }
 
 fn program(env: &str, default: &str) -> PathBuf {
-    std::env::var_os(env).map_or_else(|| PathBuf::from(default), PathBuf::from)
+    std::env::var_os(env).filter(|p| !p.is_empty()).map_or_else(|| PathBuf::from(default), PathBuf::from)
 }
 
 fn missing_program(path: &Path, program: &Path, error: &std::io::Error) -> IoError {
     IoError::invalid(
         path,
         format!(
-            "decoding this video needs ffmpeg, and `{}` could not be run ({error}). Install it \
-             (`apt install ffmpeg`, `dnf install ffmpeg`, `brew install ffmpeg` or `conda install -c \
-             conda-forge ffmpeg`), point {FFMPEG_ENV} and {FFPROBE_ENV} at the binaries, or convert the \
-             recording to an MJPEG AVI (read without ffmpeg) or to an image sequence",
+            "decoding this video (a codec or container other than MJPEG in AVI) needs ffmpeg, and `{}` could not \
+             be run ({error}). Install it (`apt install ffmpeg`, `dnf install ffmpeg`, `brew install ffmpeg` or \
+             `conda install -c conda-forge ffmpeg`), point {FFMPEG_ENV} and {FFPROBE_ENV} at the binaries, or \
+             convert the recording to an MJPEG AVI (read without ffmpeg) or to an image sequence",
             program.display()
         ),
     )
@@ -329,7 +569,41 @@ struct ProbeFrame {
     pts_time: Option<String>,
 }
 
-fn read_with_ffmpeg(path: &Path, opts: &VideoOptions) -> Result<Video, IoError> {
+/// `num/den` as frames per second, if both are positive.
+fn parse_rate(r: &str) -> Option<f64> {
+    let (a, b) = r.split_once('/')?;
+    let (a, b): (f64, f64) = (a.parse().ok()?, b.parse().ok()?);
+    (a > 0.0 && b > 0.0 && (a / b).is_finite()).then_some(a / b)
+}
+
+/// Fills `buf` from `r`; returns how many bytes arrived before the end of the stream.
+fn read_full(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match r.read(&mut buf[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(filled)
+}
+
+/// The last few kB of a program's error output, for a message.
+fn tail(text: &[u8]) -> String {
+    let text = String::from_utf8_lossy(text);
+    let text = text.trim();
+    let cut = text.len().saturating_sub(2000);
+    let cut = (cut..text.len()).find(|&i| text.is_char_boundary(i)).unwrap_or(text.len());
+    text[cut..].to_string()
+}
+
+fn read_with_ffmpeg(
+    path: &Path,
+    opts: &VideoOptions,
+    on_frame: &mut dyn FnMut(VideoFrame) -> Result<(), IoError>,
+) -> Result<VideoInfo, IoError> {
     let ffprobe = program(FFPROBE_ENV, "ffprobe");
     let out = Command::new(&ffprobe)
         .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
@@ -340,10 +614,7 @@ fn read_with_ffmpeg(path: &Path, opts: &VideoOptions) -> Result<Video, IoError> 
         .output()
         .map_err(|e| missing_program(path, &ffprobe, &e))?;
     if !out.status.success() {
-        return Err(IoError::invalid(
-            path,
-            format!("ffprobe cannot read this file: {}", String::from_utf8_lossy(&out.stderr).trim()),
-        ));
+        return Err(IoError::invalid(path, format!("ffprobe cannot read this file: {}", tail(&out.stderr))));
     }
     let probe: Probe = serde_json::from_slice(&out.stdout)
         .map_err(|e| IoError::invalid(path, format!("unexpected ffprobe output: {e}")))?;
@@ -351,88 +622,177 @@ fn read_with_ffmpeg(path: &Path, opts: &VideoOptions) -> Result<Video, IoError> 
         return Err(IoError::invalid(path, "no video stream"));
     };
     let (Some(w), Some(h)) = (stream.width, stream.height) else {
-        return Err(IoError::invalid(path, "ffprobe reports no frame size"));
+        return Err(IoError::invalid(path, "ffprobe reports no frame size for the video stream"));
     };
     if w == 0 || h == 0 {
-        return Err(IoError::invalid(path, format!("frame size {w}×{h}")));
+        return Err(IoError::invalid(path, format!("the video stream's frame size is {w}×{h} pixels")));
     }
-    let rate = stream.avg_frame_rate.as_deref().and_then(|r| {
-        let (a, b) = r.split_once('/')?;
-        let (a, b): (f64, f64) = (a.parse().ok()?, b.parse().ok()?);
-        (a > 0.0 && b > 0.0).then_some(a / b)
-    });
+    let rate = stream.avg_frame_rate.as_deref().and_then(parse_rate);
     let stamps: Vec<Option<f64>> = probe
         .frames
         .iter()
         .map(|f| f.best_effort_timestamp_time.as_deref().or(f.pts_time.as_deref()).and_then(|t| t.parse().ok()))
+        .map(|t: Option<f64>| t.filter(|t| t.is_finite()))
         .collect();
-    let limited = match opts.range {
-        VideoRange::Full => false,
-        VideoRange::Limited => true,
-        // ffmpeg's "tv" is limited range; JPEG-based ("pc"/"jpeg") and unstated are taken as
-        // stated or full only when the decoder says so, else limited (what video codecs default to).
-        VideoRange::Auto => !matches!(stream.color_range.as_deref(), Some("pc" | "jpeg")),
+    let (range, range_source) = match (opts.range, stream.color_range.as_deref()) {
+        (VideoRange::Auto, Some("pc" | "jpeg")) => (VideoRange::Full, RangeSource::File),
+        (VideoRange::Auto, Some("tv" | "mpeg")) => (VideoRange::Limited, RangeSource::File),
+        (VideoRange::Auto, _) => (VideoRange::Limited, RangeSource::VideoDefault),
+        (forced, _) => (forced, RangeSource::Option),
     };
-    let ffmpeg = program(FFMPEG_ENV, "ffmpeg");
-    let mut child = Command::new(&ffmpeg)
-        .args(["-v", "error", "-nostdin", "-i"])
-        .arg(path)
-        .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray16le"])
-        // Keep the stored code values: no range conversion inside ffmpeg.
-        .args(["-vf", "scale=in_range=full:out_range=full", "-fps_mode", "passthrough", "-"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| missing_program(path, &ffmpeg, &e))?;
-    let mut raw = Vec::new();
-    child
-        .stdout
-        .take()
-        .expect("stdout is piped")
-        .read_to_end(&mut raw)
-        .map_err(|e| IoError::io(path, "ffmpeg output", e))?;
-    let status = child.wait_with_output().map_err(|e| IoError::io(path, "ffmpeg", e))?;
-    if !status.status.success() {
-        return Err(IoError::invalid(
-            path,
-            format!("ffmpeg failed to decode it: {}", String::from_utf8_lossy(&status.stderr).trim()),
-        ));
-    }
+    let mut mapper = Mapper { limited: range == VideoRange::Limited, linearisation: opts.linearisation, clipped: 0 };
     let frame_bytes = w as usize * h as usize * 2;
-    let count = raw.len() / frame_bytes;
-    if count == 0 {
+    let mut decode = |sync: &[&str], mapper: &mut Mapper| -> Result<(usize, usize, Vec<u8>), IoError> {
+        let ffmpeg = program(FFMPEG_ENV, "ffmpeg");
+        let mut cmd = Command::new(&ffmpeg);
+        cmd.args(["-v", "error", "-nostdin", "-i"])
+            .arg(path)
+            .args(["-map", "0:v:0", "-an", "-sn", "-f", "rawvideo", "-pix_fmt", "gray16le"])
+            // Keep the stored code values: no range conversion inside ffmpeg.
+            .args(["-vf", "scale=in_range=full:out_range=full"])
+            // One output frame per decoded frame, none dropped or repeated.
+            .args(sync);
+        if let Some(end) = opts.end {
+            cmd.args(["-frames:v", &end.to_string()]);
+        }
+        let mut child = cmd
+            .arg("-")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| missing_program(path, &ffmpeg, &e))?;
+        // Drained on its own thread: a full stderr pipe would stall ffmpeg and with it stdout.
+        let mut stderr = child.stderr.take().expect("stderr is piped");
+        let errors = std::thread::spawn(move || {
+            let mut text = Vec::new();
+            let _ = stderr.read_to_end(&mut text);
+            text
+        });
+        let mut stdout = child.stdout.take().expect("stdout is piped");
+        let mut buf = vec![0u8; frame_bytes];
+        let mut decoded = 0;
+        let mut kept = 0;
+        let result = loop {
+            let n = match read_full(&mut stdout, &mut buf) {
+                Ok(n) => n,
+                Err(e) => break Err(IoError::io(path, "ffmpeg output", e)),
+            };
+            if n == 0 {
+                break Ok(());
+            }
+            if n < frame_bytes {
+                break Err(IoError::invalid(path, format!("ffmpeg's output ends inside frame {decoded}")));
+            }
+            let i = decoded;
+            decoded += 1;
+            if !opts.keeps(i) {
+                continue;
+            }
+            let time_s = match (stamps.get(i).copied().flatten(), rate) {
+                (Some(t), _) => t,
+                (None, Some(r)) => i as f64 / r,
+                (None, None) => {
+                    break Err(IoError::invalid(
+                        path,
+                        format!("frame {i} has no time stamp and the stream states no frame rate"),
+                    ))
+                }
+            } + opts.time_offset_s;
+            let mut image = Image::zeros(w as usize, h as usize);
+            for (o, px) in image.data.iter_mut().zip(buf.chunks_exact(2)) {
+                // 16-bit code values, 8-bit scale: 65535 ↔ 255 (ffmpeg widens n-bit samples to 16
+                // bits by replicating the high bits, so 8-bit 235 arrives as 235 · 257).
+                *o = mapper.map(f64::from(u16::from_le_bytes([px[0], px[1]])) / 257.0);
+            }
+            if let Err(e) = on_frame(VideoFrame { index: i, time_s, image }) {
+                break Err(e);
+            }
+            kept += 1;
+        };
+        if result.is_err() {
+            // Stop a decoder whose frames are no longer wanted; it is this process's own child.
+            let _ = child.kill();
+        }
+        drop(stdout);
+        let status = child.wait().map_err(|e| IoError::io(path, "ffmpeg", e))?;
+        let errors = errors.join().unwrap_or_default();
+        result?;
+        if !status.success() {
+            return Err(IoError::invalid(path, format!("ffmpeg failed to decode it: {}", tail(&errors))));
+        }
+        Ok((decoded, kept, errors))
+    };
+    // `-fps_mode` arrived in ffmpeg 5.1; older releases know only `-vsync`, which newer ones
+    // still accept but deprecate.
+    let (decoded, kept) = match decode(&["-fps_mode", "passthrough"], &mut mapper) {
+        Ok((decoded, kept, _)) => (decoded, kept),
+        Err(IoError::Invalid { problem, .. }) if problem.contains("fps_mode") => {
+            let (decoded, kept, _) = decode(&["-vsync", "passthrough"], &mut mapper)?;
+            (decoded, kept)
+        }
+        Err(e) => return Err(e),
+    };
+    if decoded == 0 {
         return Err(IoError::invalid(path, "ffmpeg decoded no frames"));
     }
-    let mut mapper = Mapper { limited, linearisation: opts.linearisation, clipped: 0 };
-    let mut frames = Vec::new();
-    let mut times = Vec::new();
-    for (i, chunk) in raw.chunks_exact(frame_bytes).enumerate() {
-        if !opts.keeps(i) {
-            continue;
-        }
-        let time = match (stamps.get(i).copied().flatten(), rate) {
-            (Some(t), _) => t,
-            (None, Some(r)) => i as f64 / r,
-            (None, None) => {
-                return Err(IoError::invalid(path, format!("frame {i} has no time stamp and the stream no frame rate")))
-            }
-        };
-        let mut out = Image::zeros(w as usize, h as usize);
-        for (o, px) in out.data.iter_mut().zip(chunk.chunks_exact(2)) {
-            // 16-bit code values, 8-bit scale: 65535 ↔ 255 (ffmpeg scales n-bit to 16 bits by
-            // shifting, so 8-bit 235 arrives as 235 · 257).
-            *o = mapper.map(f64::from(u16::from_le_bytes([px[0], px[1]])) / 257.0);
-        }
-        frames.push(out);
-        times.push(time);
+    Ok(VideoInfo {
+        decoder: Decoder::Ffmpeg,
+        width: w,
+        height: h,
+        frame_rate: rate,
+        // ffprobe counts every frame; ffmpeg stops at the selection's end.
+        frames_in_file: probe.frames.len().max(decoded),
+        frames_kept: kept,
+        range,
+        range_source,
+        clipped_pixels: mapper.clipped,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn containers_are_told_apart_by_their_first_bytes() {
+        assert_eq!(sniff(b"RIFF\x10\0\0\0AVI LIST"), Container::Avi);
+        assert_eq!(sniff(b"RIFF\x10\0\0\0WAVEfmt "), Container::Unknown);
+        assert_eq!(sniff(b"\0\0\0\x20ftypisom\0\0"), Container::IsoBmff);
+        assert_eq!(sniff(b"\0\0\0\x08wide\0\0\0\0"), Container::IsoBmff);
+        assert_eq!(sniff(&[0x1A, 0x45, 0xDF, 0xA3, 0x9F, 0x42, 0x86, 0x81, 1, 0, 0, 0]), Container::Matroska);
+        assert_eq!(sniff(b"hello"), Container::Unknown);
+        assert_eq!(sniff(b""), Container::Unknown);
     }
-    if frames.is_empty() {
-        return Err(IoError::invalid(
-            path,
-            format!("no frame kept: the video has {count} frames and the selection starts at {}", opts.start),
-        ));
+
+    #[test]
+    fn selection_keeps_every_nth_frame_between_start_and_end() {
+        let opts = VideoOptions { start: 2, end: Some(9), every: 3, ..VideoOptions::default() };
+        let kept: Vec<usize> = (0..12).filter(|&i| opts.keeps(i)).collect();
+        assert_eq!(kept, [2, 5, 8]);
+        assert!(!opts.done(8) && opts.done(9));
+        let all = VideoOptions { every: 0, ..VideoOptions::default() };
+        assert!((0..5).all(|i| all.keeps(i)) && !all.done(usize::MAX));
     }
-    let range = if limited { VideoRange::Limited } else { VideoRange::Full };
-    Ok(Video { frames, times, range, clipped: mapper.clipped, decoder: "ffmpeg" })
+
+    #[test]
+    fn limited_range_maps_16_to_0_and_235_to_255_and_counts_clipping() {
+        let mut m = Mapper { limited: true, linearisation: Linearisation::Linear, clipped: 0 };
+        assert_eq!(m.map(16.0), 0.0);
+        assert_eq!(m.map(235.0), 255.0);
+        assert!((m.map(125.5) - 127.5).abs() < 1e-4);
+        assert_eq!(m.clipped, 0);
+        assert_eq!((m.map(5.0), m.map(250.0)), (0.0, 255.0));
+        assert_eq!(m.clipped, 2);
+        let mut full = Mapper { limited: false, linearisation: Linearisation::Linear, clipped: 0 };
+        assert_eq!((full.map(0.0), full.map(255.0), full.clipped), (0.0, 255.0, 0));
+    }
+
+    #[test]
+    fn rates_parse_only_when_positive() {
+        assert_eq!(parse_rate("30000/1001"), Some(30000.0 / 1001.0));
+        assert_eq!(parse_rate("0/0"), None);
+        assert_eq!(parse_rate("25/0"), None);
+        assert_eq!(parse_rate("x"), None);
+    }
 }

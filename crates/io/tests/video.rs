@@ -1,10 +1,11 @@
 //! Video reading against fixtures written by ffmpeg (see fixtures/video/make_fixtures.py):
-//! four grey 32 × 24 frames at 10 frames/s, pixel (x, y) of frame k = 20 + 4x + 3y + 10k.
+//! four grey 32 × 24 frames at 10 frames/s, pixel (x, y) of frame k = 20 + 4x + 3y + 10k, as
+//! full-range MJPEG AVI, limited-range MJPEG AVI and limited-range H.264 MP4.
 
 use std::path::{Path, PathBuf};
 
 use fluidnerf_io::image::Linearisation;
-use fluidnerf_io::video::{read_video, VideoOptions, VideoRange};
+use fluidnerf_io::video::{read_video, Decoder, RangeSource, Video, VideoOptions, VideoRange};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/video").join(name)
@@ -14,12 +15,19 @@ fn ramp(x: usize, y: usize, k: usize) -> f32 {
     (20 + 4 * x + 3 * y + 10 * k) as f32
 }
 
+/// The ramp as limited-range code values.
+fn limited(c: f32) -> f32 {
+    16.0 + 219.0 * c / 255.0
+}
+
 fn has_ffmpeg() -> bool {
-    std::process::Command::new("ffmpeg").arg("-version").output().is_ok_and(|o| o.status.success())
+    let works = |p: &str| std::process::Command::new(p).arg("-version").output().is_ok_and(|o| o.status.success());
+    works("ffmpeg") && works("ffprobe")
 }
 
 /// The largest difference from the ramp over every pixel of the kept frames.
-fn worst(video: &fluidnerf_io::video::Video, ks: &[usize], map: impl Fn(f32) -> f32) -> f32 {
+fn worst(video: &Video, ks: &[usize], map: impl Fn(f32) -> f32) -> f32 {
+    assert_eq!(video.frames.len(), ks.len());
     let mut worst = 0.0f32;
     for (img, &k) in video.frames.iter().zip(ks) {
         assert_eq!((img.width, img.height), (32, 24));
@@ -32,11 +40,20 @@ fn worst(video: &fluidnerf_io::video::Video, ks: &[usize], map: impl Fn(f32) -> 
     worst
 }
 
+fn assert_times(got: &[f64], want: &[f64]) {
+    assert_eq!(got.len(), want.len(), "{got:?}");
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() < 1e-9, "times {got:?}, expected {want:?}");
+    }
+}
+
 #[test]
 fn mjpeg_avi_reads_without_ffmpeg() {
     let v = read_video(&fixture("ramp_mjpeg.avi"), &VideoOptions::default()).expect("reads");
-    assert_eq!(v.decoder, "mjpeg-avi");
-    assert_eq!(v.range, VideoRange::Full);
+    assert_eq!(v.info.decoder, Decoder::MjpegAvi);
+    assert_eq!((v.info.range, v.info.range_source), (VideoRange::Full, RangeSource::JpegDefault));
+    assert_eq!((v.info.width, v.info.height, v.info.frame_rate), (32, 24, Some(10.0)));
+    assert_eq!((v.info.frames_in_file, v.info.frames_kept, v.info.clipped_pixels), (4, 4, 0));
     assert_eq!(v.times, [0.0, 0.1, 0.2, 0.3]);
     let w = worst(&v, &[0, 1, 2, 3], |c| c);
     assert!(w <= 3.0, "JPEG error {w} counts");
@@ -45,7 +62,7 @@ fn mjpeg_avi_reads_without_ffmpeg() {
     let opts = VideoOptions { start: 1, every: 2, range: VideoRange::Limited, ..VideoOptions::default() };
     let v = read_video(&fixture("ramp_mjpeg.avi"), &opts).expect("reads");
     assert_eq!(v.times, [0.1, 0.3]);
-    assert_eq!(v.range, VideoRange::Limited);
+    assert_eq!((v.info.range, v.info.range_source), (VideoRange::Limited, RangeSource::Option));
     let w = worst(&v, &[1, 3], |c| ((c - 16.0) / 219.0).clamp(0.0, 1.0) * 255.0);
     assert!(w <= 4.0, "limited-range error {w}");
     let above: u64 = [1, 3]
@@ -54,50 +71,166 @@ fn mjpeg_avi_reads_without_ffmpeg() {
             (0..24).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| ramp(x, y, k) > 237.0).count() as u64
         })
         .sum();
-    assert!(v.clipped >= above && above > 0, "clipped {} of at least {above}", v.clipped);
+    assert!(v.info.clipped_pixels >= above && above > 0, "clipped {} of at least {above}", v.info.clipped_pixels);
 
     // sRGB linearisation applies to the decoded value.
     let opts = VideoOptions { end: Some(1), linearisation: Linearisation::Srgb, ..VideoOptions::default() };
     let v = read_video(&fixture("ramp_mjpeg.avi"), &opts).expect("reads");
-    assert_eq!(v.frames.len(), 1);
     let w = worst(&v, &[0], |c| Linearisation::Srgb.apply_unit(f64::from(c) / 255.0));
     assert!(w <= 3.0, "sRGB error {w}");
 }
 
+/// The limited-range MJPEG says so in its JPEG comments: `auto` maps 16–235 back to 0–255;
+/// `full` keeps the stored codes.
 #[test]
-fn broken_avi_files_are_refused_with_their_name() {
+fn limited_range_mjpeg_is_detected_and_mapped_back() {
+    let path = fixture("ramp_mjpeg_limited.avi");
+    let v = read_video(&path, &VideoOptions::default()).expect("reads");
+    assert_eq!(v.info.decoder, Decoder::MjpegAvi);
+    assert_eq!((v.info.range, v.info.range_source), (VideoRange::Limited, RangeSource::File));
+    assert_eq!(v.times, [0.0, 0.1, 0.2, 0.3]);
+    // JPEG error of up to 3 codes grows by 255/219 in the mapping.
+    let w = worst(&v, &[0, 1, 2, 3], |c| c);
+    assert!(w <= 4.0, "error {w} counts after the range mapping");
+    assert_eq!(v.info.clipped_pixels, 0, "the ramp lies inside 16–235");
+
+    let v = read_video(&path, &VideoOptions { range: VideoRange::Full, ..VideoOptions::default() }).expect("reads");
+    assert_eq!((v.info.range, v.info.range_source), (VideoRange::Full, RangeSource::Option));
+    let w = worst(&v, &[0, 1, 2, 3], limited);
+    assert!(w <= 3.0, "stored codes differ by {w} from 16 + 219 v / 255");
+}
+
+#[test]
+fn selection_and_time_offset() {
+    let opts = VideoOptions { start: 1, end: Some(3), every: 1, time_offset_s: 2.5, ..VideoOptions::default() };
+    let v = read_video(&fixture("ramp_mjpeg.avi"), &opts).expect("reads");
+    assert_times(&v.times, &[2.6, 2.7]);
+    assert!(worst(&v, &[1, 2], |c| c) <= 3.0);
+    assert_eq!((v.info.frames_in_file, v.info.frames_kept), (4, 2));
+
+    let past = VideoOptions { start: 4, ..VideoOptions::default() };
+    let err = read_video(&fixture("ramp_mjpeg.avi"), &past).expect_err("nothing kept").to_string();
+    assert!(err.contains("ramp_mjpeg.avi") && err.contains("no frame kept"), "{err}");
+    let nan = VideoOptions { time_offset_s: f64::NAN, ..VideoOptions::default() };
+    let err = read_video(&fixture("ramp_mjpeg.avi"), &nan).expect_err("NaN offset").to_string();
+    assert!(err.contains("not finite"), "{err}");
+}
+
+/// The offset of the `n`-th occurrence of `tag` in `bytes`.
+fn find(bytes: &[u8], tag: &[u8], n: usize) -> usize {
+    bytes.windows(tag.len()).enumerate().filter(|(_, w)| *w == tag).nth(n).map(|(i, _)| i).expect("tag in fixture")
+}
+
+fn put_u32(bytes: &mut [u8], at: usize, v: u32) {
+    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+}
+
+/// Every broken file is refused with its name and what is wrong, without ffmpeg.
+#[test]
+fn broken_video_files_are_refused_with_their_name() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let bytes = std::fs::read(fixture("ramp_mjpeg.avi")).expect("fixture");
-    let cases: [(&str, Vec<u8>, &str); 3] = [
-        ("truncated.avi", bytes[..bytes.len() / 2].to_vec(), "truncated"),
-        ("noframes.avi", bytes[..400.min(bytes.len())].to_vec(), "AVI"),
-        ("notriff.avi", b"this is not a video at all, just text".to_vec(), "notriff.avi"),
+    let good = std::fs::read(fixture("ramp_mjpeg.avi")).expect("fixture");
+
+    let mut zero_rate = good.clone();
+    let strh = find(&good, b"strh", 0) + 8;
+    put_u32(&mut zero_rate, strh + 20, 0); // dwScale
+    put_u32(&mut zero_rate, strh + 24, 0); // dwRate
+    put_u32(&mut zero_rate, find(&good, b"avih", 0) + 8, 0); // dwMicroSecPerFrame
+
+    let mut no_video = good.clone();
+    no_video[strh..strh + 4].copy_from_slice(b"auds");
+
+    // Frame 2's JPEG data overwritten with zeros (its chunk size kept); the index in the
+    // headers names `00dc` too, so the frames are counted from the `movi` list.
+    let mut bad_jpeg = good.clone();
+    let movi = find(&good, b"movi", 0);
+    let chunk = movi + find(&good[movi..], b"00dc", 2);
+    let size = u32::from_le_bytes(good[chunk + 4..chunk + 8].try_into().expect("4 bytes")) as usize;
+    bad_jpeg[chunk + 8..chunk + 8 + size].fill(0);
+
+    let cases: [(&str, Vec<u8>, &str); 7] = [
+        ("truncated.avi", good[..good.len() / 2].to_vec(), "truncated"),
+        ("headers_only.avi", good[..400].to_vec(), "malformed AVI"),
+        ("notriff.avi", b"this is not a video at all, just some text".to_vec(), "not a video file"),
+        ("empty.mp4", Vec::new(), "not a video file"),
+        ("zero_rate.avi", zero_rate, "zero frame rate"),
+        ("no_video.avi", no_video, "no video stream"),
+        ("bad_jpeg.avi", bad_jpeg, "frame 2: not a decodable JPEG"),
     ];
     for (name, data, want) in cases {
         let p = dir.path().join(name);
         std::fs::write(&p, data).expect("write");
         let err = read_video(&p, &VideoOptions::default()).expect_err(name).to_string();
-        assert!(err.contains(name) && err.contains(want), "{name}: {err}");
+        assert!(err.contains(&p.display().to_string()) && err.contains(want), "{name}: {err}");
     }
+    // Frames before the broken one read when the selection stops short of it.
+    let p = dir.path().join("bad_jpeg.avi");
+    let v = read_video(&p, &VideoOptions { end: Some(2), ..VideoOptions::default() }).expect("frames 0 and 1");
+    assert_eq!(v.times, [0.0, 0.1]);
+
+    let missing = dir.path().join("missing.avi");
+    let err = read_video(&missing, &VideoOptions::default()).expect_err("missing").to_string();
+    assert!(err.contains("not found") && err.contains("missing.avi"), "{err}");
 }
 
-/// H.264 in MP4 through ffmpeg: limited-range luma (the stream states no range, so the video
-/// default applies) mapped back to the ramp, times from the stamps. Needs ffmpeg on the PATH;
-/// reported and skipped without it.
+/// A frame the camera dropped (an empty `00dc` chunk) gives no image but keeps its time slot.
+#[test]
+fn a_dropped_frame_keeps_its_time_slot() {
+    let mut bytes = std::fs::read(fixture("ramp_mjpeg.avi")).expect("fixture");
+    // Frame 1's chunk becomes an empty `00dc` and a `JUNK` chunk of the same total size, so
+    // no list around it changes size.
+    let movi = find(&bytes, b"movi", 0);
+    let chunk = movi + find(&bytes[movi..], b"00dc", 1);
+    let size = u32::from_le_bytes(bytes[chunk + 4..chunk + 8].try_into().expect("4 bytes"));
+    put_u32(&mut bytes, chunk + 4, 0);
+    bytes[chunk + 8..chunk + 12].copy_from_slice(b"JUNK");
+    put_u32(&mut bytes, chunk + 12, size - 8);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("dropped.avi");
+    std::fs::write(&p, bytes).expect("write");
+    let v = read_video(&p, &VideoOptions::default()).expect("reads");
+    assert_eq!(v.times, [0.0, 0.2, 0.3]);
+    assert_eq!((v.info.frames_in_file, v.info.frames_kept), (4, 3));
+    assert!(worst(&v, &[0, 2, 3], |c| c) <= 3.0);
+}
+
+/// H.264 in MP4 through ffmpeg: limited-range luma (the MP4 states no range, so the video
+/// default applies) mapped back to the ramp, times from the stamps. Needs ffmpeg on the PATH; reported and skipped without it.
 #[test]
 #[allow(clippy::print_stdout)] // The skip is reported.
 fn h264_mp4_reads_through_ffmpeg() {
     if !has_ffmpeg() {
-        println!("skipped: ffmpeg is not on the PATH");
+        println!("skipped: ffmpeg/ffprobe are not on the PATH");
         return;
     }
     let v = read_video(&fixture("ramp_h264.mp4"), &VideoOptions::default()).expect("reads");
-    assert_eq!(v.decoder, "ffmpeg");
-    assert_eq!(v.range, VideoRange::Limited);
-    assert_eq!(v.frames.len(), 4);
-    for (t, want) in v.times.iter().zip([0.0, 0.1, 0.2, 0.3]) {
-        assert!((t - want).abs() < 1e-6, "{:?}", v.times);
-    }
+    assert_eq!(v.info.decoder, Decoder::Ffmpeg);
+    assert_eq!((v.info.range, v.info.range_source), (VideoRange::Limited, RangeSource::VideoDefault));
+    assert_eq!((v.info.width, v.info.height, v.info.frame_rate), (32, 24, Some(10.0)));
+    assert_eq!((v.info.frames_in_file, v.info.frames_kept), (4, 4));
+    assert_times(&v.times, &[0.0, 0.1, 0.2, 0.3]);
     let w = worst(&v, &[0, 1, 2, 3], |c| c);
     assert!(w <= 1.5, "error {w} counts");
+
+    // Forced full range keeps the stored codes; a selection stops ffmpeg early.
+    let opts = VideoOptions {
+        range: VideoRange::Full,
+        start: 1,
+        end: Some(3),
+        time_offset_s: -0.1,
+        ..VideoOptions::default()
+    };
+    let v = read_video(&fixture("ramp_h264.mp4"), &opts).expect("reads");
+    assert_times(&v.times, &[0.0, 0.1]);
+    let w = worst(&v, &[1, 2], limited);
+    assert!(w <= 1.0, "stored codes differ by {w} from 16 + 219 v / 255");
+
+    // The MJPEG AVI read by ffmpeg agrees with the native reader.
+    let native = read_video(&fixture("ramp_mjpeg_limited.avi"), &VideoOptions::default()).expect("native");
+    let mp4 = read_video(&fixture("ramp_h264.mp4"), &VideoOptions::default()).expect("ffmpeg");
+    assert_eq!(native.times.len(), mp4.times.len());
+    for (a, b) in native.frames.iter().zip(&mp4.frames) {
+        let d = a.data.iter().zip(&b.data).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(d <= 5.0, "native MJPEG and ffmpeg H.264 frames differ by {d}");
+    }
 }

@@ -28,9 +28,11 @@ use std::io::Write as _;
 /// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`), or, for a time series, every image in the
 /// folder `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
 /// `transforms.json` if they are physical), or the video `IMAGES/NAME.avi` (`.mp4`, `.mov`,
-/// `.mkv`): its frames are decoded (MJPEG AVI directly, other formats with ffmpeg), range-mapped
-/// and linearised, and written as float TIFFs to `OUT/frames/NAME/` with their times in seconds
-/// (see --video-range, --video-frames, --video-every).
+/// `.mkv`, `.m4v`, `.webm`): its frames are decoded (MJPEG AVI directly, other formats with
+/// ffmpeg), range-mapped and linearised, and written as float TIFFs to `OUT/frames/NAME/` with
+/// their times in seconds (see --video-range, --video-frames, --video-every,
+/// --video-time-offset). How each video was read (decoder, range and why, clipped pixels) is
+/// recorded in `OUT/import.json`.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
 /// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
@@ -92,17 +94,41 @@ pub struct Args {
     /// out.
     #[arg(long, value_delimiter = ',')]
     pub holdout: Vec<String>,
-    /// Luma range of video recordings: `auto` (what the file states; MJPEG is full range,
-    /// other video limited unless it says otherwise), `full` (0–255) or `limited` (16–235,
-    /// mapped to 0–255 with clipped pixels counted).
-    #[arg(long, default_value = "auto")]
+    /// Luma range of video recordings: `auto` (what the file states: MJPEG is full range
+    /// unless its JPEGs are marked limited, other video is limited unless its stream says
+    /// `pc`), `full` (0–255 kept) or `limited` (16–235 mapped to 0–255, pixels outside
+    /// clipped and counted).
+    #[arg(long, value_name = "auto|full|limited", default_value = "auto")]
     pub video_range: fluidnerf_io::video::VideoRange,
-    /// Frames of video recordings to import, as `A..B` (0-based, B excluded; `A..` to the end).
+    /// Frames of video recordings to import, as `A..B`: 0-based indices in the file, B
+    /// excluded; `A..` runs to the end, `..B` starts at 0. Times stay those of the recording
+    /// (plus --video-time-offset).
     #[arg(long, value_name = "A..B")]
     pub video_frames: Option<String>,
-    /// Import every N-th frame of video recordings (from the first of --video-frames).
+    /// Import every N-th frame of video recordings, counted from the first of --video-frames.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub video_every: u32,
+    /// Seconds added to the time of every video frame (e.g. to put the trigger at 0).
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.0, allow_hyphen_values = true, value_parser = parse_time_offset)]
+    pub video_time_offset: f64,
+}
+
+fn parse_time_offset(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(t) if t.is_finite() => Ok(t),
+        _ => Err(format!("`{s}` is not a time in seconds")),
+    }
+}
+
+/// How one camera's video was read, for `import.json`.
+#[derive(Serialize)]
+struct VideoRecord {
+    camera: String,
+    file: PathBuf,
+    #[serde(flatten)]
+    info: fluidnerf_io::video::VideoInfo,
+    first_time_s: f64,
+    last_time_s: f64,
 }
 
 /// `A..B` or `A..` as (start, end).
@@ -117,17 +143,17 @@ fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
     Ok((a, b))
 }
 
-/// Replaces every frame whose file is a video by its decoded frames, written as float TIFFs
-/// (linearised, range-mapped values) into `out/frames/<camera>/`, each with its time. All
-/// videos must give the same number of frames (a synchronised recording).
+/// Replaces every frame whose file is a video by its decoded frames, each written as a float
+/// TIFF (linearised, range-mapped values) into `out/frames/<camera>/` as it is decoded, with
+/// its time. All videos must give the same number of frames (a synchronised recording).
 fn expand_videos(
     frames: Vec<Frame>,
     out: &Path,
     opts: &fluidnerf_io::video::VideoOptions,
     force: bool,
-) -> anyhow::Result<Vec<Frame>> {
+) -> anyhow::Result<(Vec<Frame>, Vec<VideoRecord>)> {
     let mut expanded = Vec::new();
-    let mut counts: Vec<(String, usize)> = Vec::new();
+    let mut records: Vec<VideoRecord> = Vec::new();
     for f in frames {
         if !fluidnerf_io::video::is_video(&f.file_path) {
             expanded.push(f);
@@ -137,49 +163,71 @@ fn expand_videos(
             .camera_name
             .clone()
             .unwrap_or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
-        let video = fluidnerf_io::video::read_video(&f.file_path, opts)
-            .with_context(|| format!("camera {name}: reading its video"))?;
-        if counts.is_empty() && opts.linearisation == Linearisation::Linear {
+        if records.is_empty() && opts.linearisation == Linearisation::Linear {
             log::warn!(
                 "video frames are read as linear; most cameras store gamma-encoded video (pass --linearisation \
                  srgb or a gamma) unless they record raw or linear luma"
             );
         }
-        if video.clipped > 0 {
+        let dir = out.join("frames").join(&name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let mut times = Vec::new();
+        let info = fluidnerf_io::video::read_video_frames(&f.file_path, opts, |frame| {
+            let path = dir.join(format!("{:06}.tif", times.len()));
+            if path.exists() && !force {
+                return Err(fluidnerf_io::IoError::invalid(
+                    &path,
+                    "exists (from an earlier import); pass --force to overwrite it",
+                ));
+            }
+            fluidnerf_io::image::write_tiff_f32(&path, &frame.image)?;
+            times.push(frame.time_s);
+            expanded.push(Frame { file_path: path, time: Some(frame.time_s), ..f.clone() });
+            Ok(())
+        })
+        .with_context(|| format!("camera {name}: reading its video"))?;
+        if info.clipped_pixels > 0 {
             log::warn!(
                 "{}: {} pixel(s) outside the limited range 16–235 were clipped",
                 f.file_path.display(),
-                video.clipped
+                info.clipped_pixels
             );
         }
         log::info!(
-            "{}: {} frame(s) decoded ({}, {} range)",
+            "{}: {} of {} frame(s) decoded ({}, {} range, {})",
             f.file_path.display(),
-            video.frames.len(),
-            video.decoder,
-            if video.range == fluidnerf_io::video::VideoRange::Limited { "limited" } else { "full" }
-        );
-        let dir = out.join("frames").join(&name);
-        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        counts.push((name.clone(), video.frames.len()));
-        for (k, (img, t)) in video.frames.iter().zip(&video.times).enumerate() {
-            let path = dir.join(format!("{k:06}.tif"));
-            if path.exists() && !force {
-                bail!("{} exists (from an earlier import); pass --force to overwrite it", path.display());
+            info.frames_kept,
+            info.frames_in_file,
+            info.decoder,
+            info.range,
+            match info.range_source {
+                fluidnerf_io::video::RangeSource::Option => "as --video-range says",
+                fluidnerf_io::video::RangeSource::File => "as the file states",
+                fluidnerf_io::video::RangeSource::JpegDefault => "the JPEG default",
+                fluidnerf_io::video::RangeSource::VideoDefault => "the video default; the file states none",
             }
-            fluidnerf_io::image::write_tiff_f32(&path, img).with_context(|| format!("writing {}", path.display()))?;
-            expanded.push(Frame { file_path: path, time: Some(*t), ..f.clone() });
-        }
+        );
+        records.push(VideoRecord {
+            camera: name,
+            file: f.file_path.clone(),
+            info,
+            first_time_s: times.first().copied().unwrap_or(0.0),
+            last_time_s: times.last().copied().unwrap_or(0.0),
+        });
     }
-    if let Some((first, n)) = counts.first() {
-        if let Some((other, m)) = counts.iter().find(|(_, m)| m != n) {
+    if let Some(first) = records.first() {
+        if let Some(other) = records.iter().find(|r| r.info.frames_kept != first.info.frames_kept) {
             bail!(
-                "the videos are not synchronised: camera {first} gives {n} frame(s), camera {other} {m}; select \
-                 the common frames with --video-frames"
+                "the videos are not synchronised: camera {} gives {} frame(s), camera {} {}; select the common \
+                 frames with --video-frames",
+                first.camera,
+                first.info.frames_kept,
+                other.camera,
+                other.info.frames_kept
             );
         }
     }
-    Ok(expanded)
+    Ok((expanded, records))
 }
 
 fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
@@ -293,6 +341,9 @@ struct Settings<'a> {
     version: &'static str,
     #[serde(flatten)]
     args: &'a Args,
+    /// How each video was read.
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    videos: &'a [VideoRecord],
 }
 
 /// The box given as `xmin,ymin,zmin,xmax,ymax,zmax`.
@@ -327,6 +378,7 @@ fn aabb_text(a: &Aabb) -> String {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
+    let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
     if let Some(images) = &args.images {
         ensure!(images.is_dir(), "the image folder {} does not exist", images.display());
     }
@@ -381,7 +433,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         let extra: Vec<String> = list_dir(images)?
             .into_iter()
-            .filter(|p| (is_image(p) || p.is_dir()) && !used.contains(p))
+            .filter(|p| {
+                (is_image(p) || p.is_dir() || (p.is_file() && fluidnerf_io::video::is_video(p))) && !used.contains(p)
+            })
             .map(|p| p.display().to_string())
             .collect();
         if !extra.is_empty() {
@@ -402,15 +456,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
-    let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
     let video_opts = fluidnerf_io::video::VideoOptions {
         range: args.video_range,
         start,
         end,
         every: args.video_every as usize,
+        time_offset_s: args.video_time_offset,
         linearisation: args.linearisation.or(from_file.linearisation).unwrap_or_default(),
     };
-    let frames = expand_videos(frames, &out_abs, &video_opts, args.force)?;
+    let (frames, videos) = expand_videos(frames, &out_abs, &video_opts, args.force)?;
+    let video_flags = args.video_frames.is_some()
+        || args.video_every != 1
+        || args.video_time_offset != 0.0
+        || args.video_range != fluidnerf_io::video::VideoRange::Auto;
+    if videos.is_empty() && video_flags {
+        log::warn!("the --video-* options have no effect: no camera's recording is a video file");
+    }
     let relative = |p: &Path| -> anyhow::Result<PathBuf> {
         let abs = p.canonicalize().with_context(|| format!("cannot resolve {}", p.display()))?;
         Ok(abs.strip_prefix(&out_abs).map(Path::to_path_buf).unwrap_or(abs))
@@ -512,7 +573,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     recording.linearisation = linearisation;
     save_scene_recording(&scene, &args.out, &recording, true)?;
-    let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args: &args };
+    let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args: &args, videos: &videos };
     let json = serde_json::to_string_pretty(&settings)?;
     fluidnerf_io::atomic_write(&args.out.join("import.json"), |w| w.write_all(json.as_bytes()))?;
 
