@@ -173,6 +173,14 @@ fn opencv_files_never_panic() {
           </camera_matrix><rvec>0 0 0</rvec><tvec>0 0 1</tvec><image_width>4</image_width></cam></opencv_storage>\n"
             .to_vec(),
     );
+    seeds.push(
+        b"%YAML:1.0\ncameras:\n  - name: a\n    image_width: 4\n    image_height: 4\n    camera_matrix: [1, 0, 1, 0, 1, 1, 0, 0, 1]\n    rvec: [0, 0.1, 0]\n    tvec: [0, 0, 1]\n  - {image_width: 4, image_height: 4, camera_matrix: [1, 0, 1, 0, 1, 1, 0, 0, 1], R: [1, 0, 0, 0, 1, 0, 0, 0, 1], T: [0, 0, 1]}\n"
+            .to_vec(),
+    );
+    seeds.push(
+        b"%YAML:1.0\nM1: [1, 0, 1, 0, 1, 1, 0, 0, 1]\nM2: [1, 0, 1, 0, 1, 1, 0, 0, 1]\nD1: [0.1, 0, 0, 0, 0]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nT: [1, 0, 0]\nimageSize1: [4, 4]\nimage_width2: 4\nimage_height2: 4\nrvec1: [0, 0, 0.2]\ntvec1: [0, 0, 5]\n"
+            .to_vec(),
+    );
     // Deeply nested XML must not exhaust the stack.
     let deep = format!(
         "<?xml version=\"1.0\"?><opencv_storage>{}{}</opencv_storage>",
