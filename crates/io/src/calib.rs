@@ -1,5 +1,5 @@
-//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML or JSON) and
-//! COLMAP models (text or binary); and writing both back.
+//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML, XML or JSON)
+//! and COLMAP models (text or binary); and writing both back.
 //!
 //! # OpenCV (`cv::FileStorage`: YAML `%YAML:1.0` with `!!opencv-matrix`, XML or JSON)
 //! Per camera:
@@ -21,12 +21,14 @@
 //! **Several cameras in one file**: every key carries the suffix `_<name>`
 //! (`camera_matrix_cam0`, `distortion_coefficients_cam0`, `rvec_cam0`, `tvec_cam0`,
 //! `image_width_cam0`, ...), or each camera is a mapping named after it
-//! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`). A file with unsuffixed keys
-//! holds one camera named after the file stem (`cam3.yml` → `cam3`); a file may not mix
-//! unsuffixed and suffixed keys. A folder is read as all its `.yml`,
-//! `.yaml` and `.json` files in name order; camera names must be unique. [`write_opencv`]
-//! writes unsuffixed keys when it writes a single camera whose name is the file stem, and
-//! suffixed keys otherwise, so reading gives back the same names.
+//! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`), or the cameras are a list
+//! of such mappings (`cameras: [{name: left, camera_matrix: ...}, ...]`; an entry without a
+//! `name` is `cam<index>`, counting from 0). A file with unsuffixed keys holds one camera named
+//! after the file stem (`cam3.yml` → `cam3`); a file may not mix unsuffixed and suffixed keys.
+//! A folder is read as all its `.yml`, `.yaml`, `.xml` and `.json` files in name order; camera
+//! names must be unique. [`write_opencv`] writes unsuffixed keys when it writes a single camera
+//! whose name is the file stem, and suffixed keys otherwise, so reading gives back the same
+//! names.
 //!
 //! **XML** (`<opencv_storage>`, the calibration sample's default) reads into the same tree as
 //! YAML: an element with `type_id="opencv-matrix"` is a matrix (`rows cols dt data`), elements
@@ -35,9 +37,18 @@
 //!
 //! **Stereo calibrations** (`cv::stereoCalibrate`): `M1 D1 M2 D2` and `R T` (camera 2 from
 //! camera 1, `x₂ = R x₁ + T`) in one file, or as `intrinsics.*` with `extrinsics.*` beside it
-//! (read together; a folder skips the extrinsics file on its own). The cameras are `cam1`, the
-//! world frame, and `cam2`; the image size is `image_width`/`image_height` or `imageSize`;
-//! `R1 R2 P1 P2 Q` are not used.
+//! (read together, given either file or the folder; a folder skips the extrinsics file on its
+//! own). The cameras are `cam1` and `cam2`. Camera 1 is the world frame (identity pose) unless
+//! the file gives its world → camera pose as `rvec1`/`tvec1` (or `rvec`/`tvec`); camera 2's
+//! pose is then `R R₁`, `R t₁ + T`. The image size of camera `i` is `image_width<i>`/
+//! `image_height<i>` or `imageSize<i>`, else the shared `image_width`/`image_height` or
+//! `imageSize`/`image_size` (`[width, height]`); OpenCV's stereo sample writes none, and the
+//! error names the keys looked for. `R1 R2 P1 P2 Q` (rectification) are not used (info line).
+//!
+//! **Errors** name the file, the camera and the node as the file spells it
+//! (``calib.xml: camera `cam2`: `D2` has 3 values; expected 4, 5, 8, 12 or 14``); malformed
+//! XML/YAML/JSON, matrices whose `rows × cols` is not their data's length, non-numeric data and
+//! wrong sizes are errors, never panics.
 //!
 //! # COLMAP models (text or binary)
 //! `cameras.txt` (`CAMERA_ID MODEL WIDTH HEIGHT PARAMS...` with models `SIMPLE_PINHOLE f cx cy`,
@@ -830,8 +841,8 @@ fn camera_nodes(cam: &Camera) -> (u32, u32, Vec<MatrixNode>) {
     (cam.intrinsics.width, cam.intrinsics.height, nodes)
 }
 
-/// Writes cameras as an OpenCV `cv::FileStorage` file: YAML for `.yml`/`.yaml`, JSON for
-/// `.json` (see the module docs for the key layout). Poses are written as `rvec`/`tvec`
+/// Writes cameras as an OpenCV `cv::FileStorage` file: YAML for `.yml`/`.yaml`, XML for `.xml`,
+/// JSON for `.json` (see the module docs for the key layout). Poses are written as `rvec`/`tvec`
 /// (world → camera), distortion as 5 coefficients (8 when k4..k6 are used). The thin lens, if
 /// any, is not part of the format and is dropped.
 pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoError> {
@@ -884,7 +895,25 @@ pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoE
             }
             format!("{{\n{}\n}}\n", parts.join(",\n"))
         }
-        _ => return Err(IoError::invalid(path, "OpenCV calibration files must end in .yml, .yaml or .json")),
+        Some("xml") => {
+            let mut s = String::from("<?xml version=\"1.0\"?>\n<opencv_storage>\n");
+            for (name, cam) in cameras {
+                let (w, h, nodes) = camera_nodes(cam);
+                let (kw, kh) = (key("image_width", name), key("image_height", name));
+                s += &format!("<{kw}>{w}</{kw}>\n<{kh}>{h}</{kh}>\n");
+                for (k, rows, cols, data) in nodes {
+                    let data: Vec<String> = data.into_iter().map(fmt_f64).collect();
+                    let k = key(k, name);
+                    s += &format!(
+                        "<{k} type_id=\"opencv-matrix\">\n  <rows>{rows}</rows>\n  <cols>{cols}</cols>\n  \
+                         <dt>d</dt>\n  <data>\n    {}</data></{k}>\n",
+                        data.join(" ")
+                    );
+                }
+            }
+            s + "</opencv_storage>\n"
+        }
+        _ => return Err(IoError::invalid(path, "OpenCV calibration files must end in .yml, .yaml, .xml or .json")),
     };
     atomic_write(path, |w| w.write_all(text.as_bytes()))
 }

@@ -157,7 +157,7 @@ fn opencv_files_never_panic() {
     let dir = tempfile::tempdir().expect("tempdir");
     let cams: Vec<(String, Camera)> = ring(2).into_iter().enumerate().map(|(i, c)| (format!("c{i}"), c)).collect();
     let mut seeds = Vec::new();
-    for ext in ["yml", "json"] {
+    for ext in ["yml", "json", "xml"] {
         let p = dir.path().join(format!("rig.{ext}"));
         fluidnerf_io::calib::write_opencv(&p, &cams).expect("writes");
         seeds.push(std::fs::read(&p).expect("reads"));
