@@ -125,8 +125,8 @@ def _cameras(raw: list) -> list[Camera]:
 
 
 def read_opencv(path: PathLike) -> list[Camera]:
-    """The cameras of an OpenCV calibration (``cv::FileStorage`` YAML/JSON file or a folder
-    of them), as ``fluidnerf import --opencv`` reads it."""
+    """The cameras of an OpenCV calibration (``cv::FileStorage`` YAML/XML/JSON file, a
+    stereo pair's files, or a folder of them), as ``fluidnerf import --opencv`` reads it."""
     return _cameras(_ext.read_opencv(os.fspath(path)))
 
 

@@ -1,5 +1,5 @@
-//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML or JSON) and
-//! COLMAP models (text or binary); and writing both back.
+//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML, XML or JSON)
+//! and COLMAP models (text or binary); and writing both back.
 //!
 //! # OpenCV (`cv::FileStorage`: YAML `%YAML:1.0` with `!!opencv-matrix`, XML or JSON)
 //! Per camera:
@@ -21,12 +21,14 @@
 //! **Several cameras in one file**: every key carries the suffix `_<name>`
 //! (`camera_matrix_cam0`, `distortion_coefficients_cam0`, `rvec_cam0`, `tvec_cam0`,
 //! `image_width_cam0`, ...), or each camera is a mapping named after it
-//! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`). A file with unsuffixed keys
-//! holds one camera named after the file stem (`cam3.yml` → `cam3`); a file may not mix
-//! unsuffixed and suffixed keys. A folder is read as all its `.yml`,
-//! `.yaml` and `.json` files in name order; camera names must be unique. [`write_opencv`]
-//! writes unsuffixed keys when it writes a single camera whose name is the file stem, and
-//! suffixed keys otherwise, so reading gives back the same names.
+//! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`), or the cameras are a list
+//! of such mappings (`cameras: [{name: left, camera_matrix: ...}, ...]`; an entry without a
+//! `name` is `cam<index>`, counting from 0). A file with unsuffixed keys holds one camera named
+//! after the file stem (`cam3.yml` → `cam3`); a file may not mix unsuffixed and suffixed keys.
+//! A folder is read as all its `.yml`, `.yaml`, `.xml` and `.json` files in name order; camera
+//! names must be unique. [`write_opencv`] writes unsuffixed keys when it writes a single camera
+//! whose name is the file stem, and suffixed keys otherwise, so reading gives back the same
+//! names.
 //!
 //! **XML** (`<opencv_storage>`, the calibration sample's default) reads into the same tree as
 //! YAML: an element with `type_id="opencv-matrix"` is a matrix (`rows cols dt data`), elements
@@ -35,9 +37,18 @@
 //!
 //! **Stereo calibrations** (`cv::stereoCalibrate`): `M1 D1 M2 D2` and `R T` (camera 2 from
 //! camera 1, `x₂ = R x₁ + T`) in one file, or as `intrinsics.*` with `extrinsics.*` beside it
-//! (read together; a folder skips the extrinsics file on its own). The cameras are `cam1`, the
-//! world frame, and `cam2`; the image size is `image_width`/`image_height` or `imageSize`;
-//! `R1 R2 P1 P2 Q` are not used.
+//! (read together, given either file or the folder; a folder skips the extrinsics file on its
+//! own). The cameras are `cam1` and `cam2`. Camera 1 is the world frame (identity pose) unless
+//! the file gives its world → camera pose as `rvec1`/`tvec1` (or `rvec`/`tvec`); camera 2's
+//! pose is then `R R₁`, `R t₁ + T`. The image size of camera `i` is `image_width<i>`/
+//! `image_height<i>` or `imageSize<i>`, else the shared `image_width`/`image_height` or
+//! `imageSize`/`image_size` (`[width, height]`); OpenCV's stereo sample writes none, and the
+//! error names the keys looked for. `R1 R2 P1 P2 Q` (rectification) are not used (info line).
+//!
+//! **Errors** name the file, the camera and the node as the file spells it
+//! (``calib.xml: camera `cam2`: `D2` has 3 values; expected 4, 5, 8, 12 or 14``); malformed
+//! XML/YAML/JSON, matrices whose `rows × cols` is not their data's length, non-numeric data and
+//! wrong sizes are errors, never panics.
 //!
 //! # COLMAP models (text or binary)
 //! `cameras.txt` (`CAMERA_ID MODEL WIDTH HEIGHT PARAMS...` with models `SIMPLE_PINHOLE f cx cy`,
@@ -166,6 +177,10 @@ fn xml_storage(path: &Path, text: &str) -> Result<Value, IoError> {
             ),
         ));
     }
+    if !root.children().any(|n| n.is_element()) {
+        // An empty storage is an empty mapping, not an empty string.
+        return Ok(Value::Object(Map::new()));
+    }
     xml_node(path, root, 0)
 }
 
@@ -257,9 +272,9 @@ fn xml_text(text: &str) -> Value {
 }
 
 /// A matrix node (`opencv-matrix` with rows/cols/data, or a plain, possibly nested, list) as
-/// its row-major values.
-fn matrix(path: &Path, key: &str, v: &Value) -> Result<Vec<f64>, IoError> {
-    let bad = |why: &str| IoError::invalid(path, format!("`{key}`: {why}"));
+/// its row-major values. `what` names the node in messages (``camera `left`: `R` ``).
+fn matrix(path: &Path, what: &str, v: &Value) -> Result<Vec<f64>, IoError> {
+    let bad = |why: &str| IoError::invalid(path, format!("{what}: {why}"));
     let numbers = |list: &Value| -> Result<Vec<f64>, IoError> {
         let mut out = Vec::new();
         let mut stack = vec![list];
@@ -275,9 +290,16 @@ fn matrix(path: &Path, key: &str, v: &Value) -> Result<Vec<f64>, IoError> {
     match v {
         Value::Object(m) => {
             let data = numbers(m.get("data").ok_or_else(|| bad("matrix without `data`"))?)?;
-            let dim = |k: &str| m.get(k).and_then(Value::as_u64).map(|n| n as usize);
-            if let (Some(r), Some(c)) = (dim("rows"), dim("cols")) {
-                if r * c != data.len() {
+            let dim = |k: &str| -> Result<Option<u64>, IoError> {
+                match m.get(k) {
+                    None => Ok(None),
+                    Some(v) => {
+                        v.as_u64().map(Some).ok_or_else(|| bad(&format!("`{k}` must be a non-negative integer")))
+                    }
+                }
+            };
+            if let (Some(r), Some(c)) = (dim("rows")?, dim("cols")?) {
+                if r.checked_mul(c) != Some(data.len() as u64) {
                     return Err(bad(&format!("rows × cols = {r} × {c} but {} values", data.len())));
                 }
             }
@@ -289,26 +311,47 @@ fn matrix(path: &Path, key: &str, v: &Value) -> Result<Vec<f64>, IoError> {
     }
 }
 
-fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value>) -> Result<Camera, IoError> {
-    let ctx = |key: &str| format!("{key} (camera {name})");
+/// Where the nodes of one camera come from, looked up by their keys in [`OPENCV_KEYS`].
+struct CameraNodes<'a> {
+    /// The node, if the file has it.
+    get: &'a dyn Fn(&str) -> Option<Value>,
+    /// The node's name as the file spells it (`Camera_Matrix`, `camera_matrix_left`, `M1`).
+    label: &'a dyn Fn(&str) -> String,
+    /// The file the node is in (a stereo pair's `R` and `T` may be in a second file).
+    file: &'a dyn Fn(&str) -> PathBuf,
+}
+
+/// The counts of distortion coefficients OpenCV writes.
+const DISTORTION_COUNTS: [usize; 6] = [0, 4, 5, 8, 12, 14];
+
+fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoError> {
+    let what = |key: &str| format!("camera `{name}`: `{}`", (nodes.label)(key));
+    let bad = |key: &str, why: String| IoError::invalid((nodes.file)(key), format!("{}: {why}", what(key)));
+    // "`D2` has 3 values; ...", "`image_width` must be ...".
+    let says = |key: &str, why: String| IoError::invalid((nodes.file)(key), format!("{} {why}", what(key)));
     let need = |key: &str| {
-        get(key).ok_or_else(|| IoError::invalid(path, format!("camera `{name}`: missing the node `{key}`")))
+        (nodes.get)(key).ok_or_else(|| {
+            IoError::invalid((nodes.file)(key), format!("camera `{name}`: missing the node `{}`", (nodes.label)(key)))
+        })
     };
-    let k = matrix(path, &ctx("camera_matrix"), &need("camera_matrix")?)?;
-    if k.len() != 9 {
-        return Err(IoError::invalid(
-            path,
-            format!("`{}` must be 3 × 3, has {} values", ctx("camera_matrix"), k.len()),
-        ));
-    }
+    let read = |key: &str| -> Result<Vec<f64>, IoError> { matrix(&(nodes.file)(key), &what(key), &need(key)?) };
+    let sized = |key: &str, n: usize, shape: &str| -> Result<Vec<f64>, IoError> {
+        let v = read(key)?;
+        if v.len() != n {
+            return Err(says(key, format!("has {} values; expected {n} ({shape})", v.len())));
+        }
+        Ok(v)
+    };
+    let k = sized("camera_matrix", 9, "3 × 3")?;
     if k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
-        return Err(IoError::invalid(path, format!("`{}`'s last rows must be [0 fy cy; 0 0 1]", ctx("camera_matrix"))));
+        return Err(bad("camera_matrix", "the last rows must be [0 fy cy; 0 0 1]".into()));
     }
     let size = |key: &str| -> Result<u32, IoError> {
         need(key)?
             .as_u64()
             .and_then(|v| u32::try_from(v).ok())
-            .ok_or_else(|| IoError::invalid(path, format!("`{}` must be a positive integer", ctx(key))))
+            .filter(|&v| v > 0)
+            .ok_or_else(|| says(key, "must be a positive integer".into()))
     };
     let intrinsics = Intrinsics {
         width: size("image_width")?,
@@ -319,42 +362,58 @@ fn camera_from_nodes(path: &Path, name: &str, get: &dyn Fn(&str) -> Option<Value
         cy: k[5],
         skew: k[1],
     };
-    let distortion = match get("distortion_coefficients") {
+    intrinsics.validate().map_err(|e| bad("camera_matrix", e.to_string()))?;
+    let distortion = match (nodes.get)("distortion_coefficients") {
         None => Distortion::default(),
-        Some(v) => Distortion::from_opencv(&matrix(path, &ctx("distortion_coefficients"), &v)?)
-            .map_err(|e| IoError::invalid(path, format!("`{}`: {e}", ctx("distortion_coefficients"))))?,
+        Some(_) => {
+            let key = "distortion_coefficients";
+            let c = read(key)?;
+            if !DISTORTION_COUNTS.contains(&c.len()) {
+                return Err(says(key, format!("has {} values; expected 4, 5, 8, 12 or 14", c.len())));
+            }
+            Distortion::from_opencv(&c).map_err(|e| bad(key, e.to_string()))?
+        }
     };
     let vec3 = |key: &str| -> Result<DVec3, IoError> {
-        let v = matrix(path, &ctx(key), &need(key)?)?;
-        if v.len() != 3 {
-            return Err(IoError::invalid(path, format!("`{}` must have 3 values, has {}", ctx(key), v.len())));
-        }
+        let v = sized(key, 3, "a 3-vector")?;
         Ok(DVec3::new(v[0], v[1], v[2]))
     };
-    let rotation = if get("R").is_some() {
-        if get("rvec").is_some() {
-            log::warn!("{}: camera {name}: both R and rvec given; using R/T", path.display());
+    let (rotation, translation, pose_key) = if (nodes.get)("R").is_some() {
+        if (nodes.get)("rvec").is_some() {
+            log::warn!(
+                "{}: camera {name}: both {} and {} given; using R/T",
+                (nodes.file)("R").display(),
+                (nodes.label)("R"),
+                (nodes.label)("rvec")
+            );
         }
-        let r = matrix(path, &ctx("R"), &need("R")?)?;
-        if r.len() != 9 {
-            return Err(IoError::invalid(path, format!("`{}` must be 3 × 3, has {} values", ctx("R"), r.len())));
-        }
-        (DMat3::from_cols_array(&[r[0], r[3], r[6], r[1], r[4], r[7], r[2], r[5], r[8]]), vec3("T")?)
-    } else if get("rvec").is_some() {
-        (rodrigues_to_matrix(vec3("rvec")?), vec3("tvec")?)
+        let r = sized("R", 9, "3 × 3")?;
+        (DMat3::from_cols_array(&[r[0], r[3], r[6], r[1], r[4], r[7], r[2], r[5], r[8]]), vec3("T")?, "R")
+    } else if (nodes.get)("rvec").is_some() {
+        (rodrigues_to_matrix(vec3("rvec")?), vec3("tvec")?, "rvec")
     } else {
+        let board = if (nodes.get)("Extrinsic_Parameters").is_some() {
+            " (its `Extrinsic_Parameters` are the calibration board's poses, one per view, not the camera's)"
+        } else {
+            ""
+        };
         return Err(IoError::invalid(
-            path,
+            (nodes.file)("camera_matrix"),
             format!(
-                "camera `{name}`: no pose: expected the nodes `rvec` and `tvec` or `R` and `T` (world to \
+                "camera `{name}`: no pose: expected the nodes `{}` and `{}` or `{}` and `{}` (world to \
                  camera); an intrinsics-only calibration (as OpenCV's calibration sample writes) needs a pose \
-                 from a separate extrinsic calibration"
+                 from a separate extrinsic calibration{board}",
+                (nodes.label)("rvec"),
+                (nodes.label)("tvec"),
+                (nodes.label)("R"),
+                (nodes.label)("T"),
             ),
         ));
     };
     let camera =
-        Camera { intrinsics, distortion, world_from_camera: world_from_camera_of(rotation.0, rotation.1), lens: None };
-    camera.validate().map_err(|e| IoError::invalid(path, format!("camera `{name}`: {e}")))?;
+        Camera { intrinsics, distortion, world_from_camera: world_from_camera_of(rotation, translation), lens: None };
+    // The intrinsics passed above, so what is left to fail is the pose.
+    camera.validate().map_err(|e| bad(pose_key, e.to_string()))?;
     Ok(camera)
 }
 
@@ -367,25 +426,72 @@ const OPENCV_KEYS: [&str; 8] =
 /// (`Camera_Matrix`, `image_Width`, as OpenCV's calibration sample writes them) renamed to the
 /// spelling of [`OPENCV_KEYS`], its `_<name>` suffix kept.
 fn canonical_keys(nodes: &Map<String, Value>) -> Map<String, Value> {
-    let mut out = Map::new();
-    for (key, value) in nodes {
-        let canonical = OPENCV_KEYS
-            .iter()
-            .find(|base| {
-                key.len() >= base.len()
-                    && key.is_char_boundary(base.len())
-                    && key[..base.len()].eq_ignore_ascii_case(base)
-                    && (key.len() == base.len() || key[base.len()..].starts_with('_'))
-            })
-            .map_or_else(|| key.clone(), |base| format!("{base}{}", &key[base.len()..]));
-        out.insert(canonical, value.clone());
+    nodes.iter().map(|(key, value)| (canonical_key(key), value.clone())).collect()
+}
+
+/// `key` with a leading per-camera key spelled as in [`OPENCV_KEYS`] (see [`canonical_keys`]).
+fn canonical_key(key: &str) -> String {
+    OPENCV_KEYS
+        .iter()
+        .find(|base| {
+            key.len() >= base.len()
+                && key.is_char_boundary(base.len())
+                && key[..base.len()].eq_ignore_ascii_case(base)
+                && (key.len() == base.len() || key[base.len()..].starts_with('_'))
+        })
+        .map_or_else(|| key.to_string(), |base| format!("{base}{}", &key[base.len()..]))
+}
+
+/// `key` as `nodes` spells it (keys match ignoring letter case), or `key` when it is absent.
+fn spelled(nodes: &Map<String, Value>, key: &str) -> String {
+    nodes.keys().find(|k| k.eq_ignore_ascii_case(key)).cloned().unwrap_or_else(|| key.to_string())
+}
+
+/// A camera whose nodes are one mapping (a whole file, a named mapping or a list entry).
+fn camera_from_map(path: &Path, name: &str, raw: &Map<String, Value>) -> Result<Camera, IoError> {
+    let nodes = canonical_keys(raw);
+    camera_from_nodes(
+        name,
+        &CameraNodes { get: &|k| nodes.get(k).cloned(), label: &|k| spelled(raw, k), file: &|_| path.to_path_buf() },
+    )
+}
+
+/// The cameras of a list of mappings (`cameras: [{name: left, camera_matrix: ...}, ...]`),
+/// named by their `name` node or `cam<index>` (from 0); `None` when `value` is no such list.
+fn camera_list(path: &Path, key: &str, value: &Value) -> Result<Option<Vec<(String, Camera)>>, IoError> {
+    let Value::Array(items) = value else { return Ok(None) };
+    let is_camera = |v: &Value| v.as_object().is_some_and(|m| canonical_keys(m).contains_key("camera_matrix"));
+    if !items.iter().any(is_camera) {
+        return Ok(None);
     }
-    out
+    let mut out: Vec<(String, Camera)> = Vec::with_capacity(items.len());
+    for (i, item) in items.iter().enumerate() {
+        let Some(m) = item.as_object().filter(|_| is_camera(item)) else {
+            return Err(IoError::invalid(
+                path,
+                format!("`{key}[{i}]`: not a camera (expected a mapping with a `camera_matrix`)"),
+            ));
+        };
+        let name = match node_ci(m, "name") {
+            None => format!("cam{i}"),
+            Some(Value::String(s)) if !s.trim().is_empty() => s.trim().to_string(),
+            Some(Value::Number(n)) => n.to_string(),
+            Some(other) => {
+                return Err(IoError::invalid(path, format!("`{key}[{i}]`: `name` must be a string, got {other}")))
+            }
+        };
+        if out.iter().any(|(n, _)| *n == name) {
+            return Err(IoError::invalid(path, format!("`{key}[{i}]`: camera name `{name}` appears twice")));
+        }
+        let camera = camera_from_map(path, &name, m)?;
+        out.push((name, camera));
+    }
+    Ok(Some(out))
 }
 
 fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     let (raw_nodes, text) = parse_storage(path)?;
-    if let Some(cams) = read_stereo(path, &raw_nodes)? {
+    if let Some(cams) = read_stereo(path, &raw_nodes, None)? {
         return Ok(cams);
     }
     let nodes = canonical_keys(&raw_nodes);
@@ -402,21 +508,39 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             "mixes an unsuffixed `camera_matrix` with per-camera `camera_matrix_<name>` keys",
         ));
     }
-    // One mapping per camera: `cam0: {camera_matrix: ..., R: ..., T: ...}`.
-    let nested: Vec<(String, Map<String, Value>)> = if single || !named.is_empty() {
-        Vec::new()
-    } else {
+    if !single && named.is_empty() {
+        if let Some(intrinsics) = stereo_intrinsics_of(path, &raw_nodes) {
+            let (intrinsic_nodes, _) = parse_storage(&intrinsics)?;
+            if let Some(cams) = read_stereo(&intrinsics, &intrinsic_nodes, Some(path))? {
+                return Ok(cams);
+            }
+        }
+    }
+    // One mapping per camera (`cam0: {camera_matrix: ..., R: ..., T: ...}`), or lists of them.
+    let grouped = !single && named.is_empty();
+    let nested: Vec<(&String, &Map<String, Value>)> = if grouped {
         raw_nodes
             .iter()
-            .filter_map(|(k, v)| v.as_object().map(|m| (k.clone(), canonical_keys(m))))
-            .filter(|(_, m)| m.contains_key("camera_matrix"))
+            .filter_map(|(k, v)| v.as_object().map(|m| (k, m)))
+            .filter(|(_, m)| canonical_keys(m).contains_key("camera_matrix"))
             .collect()
+    } else {
+        Vec::new()
     };
-    let unused: Vec<&String> = nodes
+    let mut listed: Vec<(&String, Vec<(String, Camera)>)> = Vec::new();
+    if grouped {
+        for (k, v) in &raw_nodes {
+            if let Some(cams) = camera_list(path, k, v)? {
+                listed.push((k, cams));
+            }
+        }
+    }
+    let unused: Vec<&String> = raw_nodes
         .keys()
-        .filter(|key| {
-            let known = OPENCV_KEYS.iter().any(|k| *key == k || named.iter().any(|n| **key == format!("{k}_{n}")));
-            !known && !nested.iter().any(|(n, _)| n == *key)
+        .filter(|raw| {
+            let key = canonical_key(raw);
+            let known = OPENCV_KEYS.iter().any(|k| key == *k || named.iter().any(|n| key == format!("{k}_{n}")));
+            !known && !nested.iter().any(|(n, _)| n == raw) && !listed.iter().any(|(n, _)| n == raw)
         })
         .collect();
     if !unused.is_empty() {
@@ -425,23 +549,37 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     }
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     if single {
-        let cam = camera_from_nodes(path, &stem, &|k| nodes.get(k).cloned())?;
+        let cam = camera_from_map(path, &stem, &raw_nodes)?;
         return Ok(vec![(stem, cam)]);
     }
-    if !nested.is_empty() {
+    if !nested.is_empty() || !listed.is_empty() {
         // Keep the file's order of cameras (the parsed map is sorted by key).
         let mut nested = nested;
-        nested.sort_by_key(|(n, _)| text.find(&format!("{n}:")).or_else(|| text.find(&format!("\"{n}\""))));
-        return nested
-            .iter()
-            .map(|(n, m)| Ok((n.clone(), camera_from_nodes(path, n, &|k| m.get(k).cloned())?)))
-            .collect();
+        nested.sort_by_key(|(n, _)| {
+            text.find(&format!("{n}:"))
+                .or_else(|| text.find(&format!("\"{n}\"")))
+                .or_else(|| text.find(&format!("<{n}>")))
+        });
+        let mut out: Vec<(String, Camera)> = Vec::new();
+        for (n, m) in nested {
+            out.push((n.clone(), camera_from_map(path, n, m)?));
+        }
+        for (_, cams) in listed {
+            out.extend(cams);
+        }
+        for (i, (n, _)) in out.iter().enumerate() {
+            if out[..i].iter().any(|(m, _)| m == n) {
+                return Err(IoError::invalid(path, format!("camera name `{n}` appears twice")));
+            }
+        }
+        return Ok(out);
     }
     if named.is_empty() {
         return Err(IoError::invalid(
             path,
             "no camera matrix: expected a `camera_matrix` (or `Camera_Matrix`) node, per-camera \
-             `camera_matrix_<name>` nodes, or one mapping per camera holding a `camera_matrix`",
+             `camera_matrix_<name>` nodes, one mapping per camera holding a `camera_matrix`, a list of \
+             such mappings, or a stereo calibration's `M1` and `M2`",
         ));
     }
     // Keep the file's order of cameras (the parsed map is sorted by key).
@@ -449,12 +587,22 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         let key = format!("camera_matrix_{n}");
         text.to_ascii_lowercase()
             .match_indices(&key.to_ascii_lowercase())
-            .find(|(i, _)| matches!(text[i + key.len()..].chars().next(), Some('"' | ':' | ' ')))
+            .find(|(i, _)| matches!(text[i + key.len()..].chars().next(), Some('"' | ':' | ' ' | '>')))
             .map(|(i, _)| i)
     });
     named
         .iter()
-        .map(|n| Ok((n.clone(), camera_from_nodes(path, n, &|k| nodes.get(&format!("{k}_{n}")).cloned())?)))
+        .map(|n| {
+            let camera = camera_from_nodes(
+                n,
+                &CameraNodes {
+                    get: &|k| nodes.get(&format!("{k}_{n}")).cloned(),
+                    label: &|k| spelled(&raw_nodes, &format!("{k}_{n}")),
+                    file: &|_| path.to_path_buf(),
+                },
+            )?;
+            Ok((n.clone(), camera))
+        })
         .collect()
 }
 
@@ -463,28 +611,41 @@ fn node_ci(nodes: &Map<String, Value>, key: &str) -> Option<Value> {
     nodes.iter().find(|(k, _)| k.eq_ignore_ascii_case(key)).map(|(_, v)| v.clone())
 }
 
-/// The file holding a stereo calibration's `R` and `T` beside `path`: `extrinsics` with any of
-/// the storage extensions.
-fn sibling_extrinsics(path: &Path) -> Option<PathBuf> {
+/// The file `stem` with any of the storage extensions beside `path`, other than `path`.
+fn sibling(path: &Path, stem: &str) -> Option<PathBuf> {
     let dir = path.parent()?;
-    ["yml", "yaml", "xml", "json"]
-        .iter()
-        .map(|e| dir.join(format!("extrinsics.{e}")))
-        .find(|p| p.is_file() && p != path)
+    ["yml", "yaml", "xml", "json"].iter().map(|e| dir.join(format!("{stem}.{e}"))).find(|p| p.is_file() && p != path)
+}
+
+/// The intrinsics file of a stereo calibration whose extrinsics are `path`: an
+/// `intrinsics.*` beside a file that holds `R` and `T` and no camera matrix.
+fn stereo_intrinsics_of(path: &Path, nodes: &Map<String, Value>) -> Option<PathBuf> {
+    if node_ci(nodes, "R").is_none() || node_ci(nodes, "T").is_none() {
+        return None;
+    }
+    sibling(path, "intrinsics")
 }
 
 /// A stereo calibration as `cv::stereoCalibrate` and its samples write it: `M1 D1 M2 D2` with
 /// `R T` (camera 2 from camera 1, `x₂ = R x₁ + T`), in one file or as `intrinsics` +
-/// `extrinsics` files side by side; `R1 R2 P1 P2 Q` (rectification) are not used. Camera 1
-/// (`cam1`) is the world frame. `None` when the file holds no `M1`/`M2`.
-fn read_stereo(path: &Path, nodes: &Map<String, Value>) -> Result<Option<Vec<(String, Camera)>>, IoError> {
+/// `extrinsics` files side by side (`extrinsics` given, or found beside `path`); `R1 R2 P1 P2
+/// Q` (rectification) are not used. Camera 1 (`cam1`) is the world frame unless the files give
+/// its world → camera pose as `rvec1`/`tvec1` (or `rvec`/`tvec`). `None` when `path` holds no
+/// `M1`/`M2`.
+fn read_stereo(
+    path: &Path,
+    nodes: &Map<String, Value>,
+    extrinsics: Option<&Path>,
+) -> Result<Option<Vec<(String, Camera)>>, IoError> {
     if node_ci(nodes, "M1").is_none() && node_ci(nodes, "M2").is_none() {
         return Ok(None);
     }
     let mut all = nodes.clone();
-    let mut source = path.display().to_string();
+    // The keys that came from the extrinsics file, matched ignoring case.
+    let mut from_extrinsics: Vec<String> = Vec::new();
+    let mut ext_path: Option<PathBuf> = None;
     if node_ci(&all, "R").is_none() || node_ci(&all, "T").is_none() {
-        let Some(ext) = sibling_extrinsics(path) else {
+        let Some(ext) = extrinsics.map(Path::to_path_buf).or_else(|| sibling(path, "extrinsics")) else {
             return Err(IoError::invalid(
                 path,
                 "a stereo calibration (`M1`, `M2`) without `R` and `T`: give them in this file or in an \
@@ -493,74 +654,122 @@ fn read_stereo(path: &Path, nodes: &Map<String, Value>) -> Result<Option<Vec<(St
         };
         let (more, _) = parse_storage(&ext)?;
         for (k, v) in more {
-            all.entry(k).or_insert(v);
+            if node_ci(&all, &k).is_none() {
+                from_extrinsics.push(k.to_ascii_lowercase());
+                all.insert(k, v);
+            }
         }
-        source = format!("{source} and {}", ext.display());
+        ext_path = Some(ext);
     }
-    let used = ["M1", "D1", "M2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"];
-    log::info!("{source}: a stereo calibration (R1, R2, P1, P2 and Q, if present, are not used)");
-    let size = match (node_ci(&all, "image_width"), node_ci(&all, "image_height")) {
-        (Some(w), Some(h)) => (w, h),
-        _ => match node_ci(&all, "imageSize").or_else(|| node_ci(&all, "image_size")) {
-            Some(v) => {
-                let wh = matrix(path, "imageSize", &v)?;
-                if wh.len() != 2 {
-                    return Err(IoError::invalid(
-                        path,
-                        format!("`imageSize` must be [width, height], has {} values", wh.len()),
-                    ));
-                }
-                (Value::from(wh[0] as u64), Value::from(wh[1] as u64))
-            }
-            None => {
-                return Err(IoError::invalid(
-                    path,
-                    "a stereo calibration without the image size: expected `image_width` and `image_height`, or \
-                     `imageSize` ([width, height])",
-                ))
-            }
-        },
+    let source = match &ext_path {
+        Some(e) => format!("{} with {}", path.display(), e.display()),
+        None => path.display().to_string(),
     };
-    let mut cams = Vec::new();
-    for (i, name) in [(1, "cam1"), (2, "cam2")] {
-        let m = format!("M{i}");
-        let d = format!("D{i}");
-        let k = node_ci(&all, &m)
-            .ok_or_else(|| IoError::invalid(path, format!("camera `{name}`: missing the node `{m}` ({source})")))?;
-        let dist = node_ci(&all, &d);
-        if let Some(v) = &dist {
-            let coeffs = matrix(path, &format!("{d} (camera {name})"), v)?;
-            Distortion::from_opencv(&coeffs)
-                .map_err(|e| IoError::invalid(path, format!("camera `{name}`: `{d}`: {e}")))?;
+    let file_of = |key: &str| -> PathBuf {
+        match &ext_path {
+            Some(e) if from_extrinsics.contains(&key.to_ascii_lowercase()) => e.clone(),
+            _ => path.to_path_buf(),
         }
-        let (r, t) = if i == 1 {
-            (json!([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]), json!([0.0, 0.0, 0.0]))
-        } else {
-            let need = |key: &str| {
-                node_ci(&all, key).ok_or_else(|| {
-                    IoError::invalid(path, format!("camera `{name}`: missing the node `{key}` ({source})"))
-                })
-            };
-            (need("R")?, need("T")?)
-        };
+    };
+    log::info!("{source}: a stereo calibration (R1, R2, P1, P2 and Q, if present, are not used)");
+
+    // The image size of camera `i`: its own nodes first, then the shared ones.
+    let image_size = |i: usize| -> Result<(u32, u32, String), IoError> {
+        for suffix in [i.to_string(), String::new()] {
+            let (w, h) = (format!("image_width{suffix}"), format!("image_height{suffix}"));
+            if let (Some(wv), Some(hv)) = (node_ci(&all, &w), node_ci(&all, &h)) {
+                let int = |key: &str, v: &Value| {
+                    v.as_u64().and_then(|v| u32::try_from(v).ok()).filter(|&v| v > 0).ok_or_else(|| {
+                        IoError::invalid(
+                            file_of(key),
+                            format!("camera `cam{i}`: `{}` must be a positive integer", spelled(&all, key)),
+                        )
+                    })
+                };
+                return Ok((int(&w, &wv)?, int(&h, &hv)?, format!("{}/{}", spelled(&all, &w), spelled(&all, &h))));
+            }
+            for key in [format!("imageSize{suffix}"), format!("image_size{suffix}")] {
+                if let Some(v) = node_ci(&all, &key) {
+                    let label = spelled(&all, &key);
+                    let what = format!("camera `cam{i}`: `{label}`");
+                    let wh = matrix(&file_of(&key), &what, &v)?;
+                    let ok = |x: f64| x.fract() == 0.0 && x >= 1.0 && x <= f64::from(u32::MAX);
+                    if wh.len() != 2 || !ok(wh[0]) || !ok(wh[1]) {
+                        return Err(IoError::invalid(
+                            file_of(&key),
+                            format!("{what}: expected [width, height] as two positive integers, got {wh:?}"),
+                        ));
+                    }
+                    return Ok((wh[0] as u32, wh[1] as u32, label));
+                }
+            }
+        }
+        Err(IoError::invalid(
+            path,
+            format!(
+                "camera `cam{i}`: no image size: expected `image_width{i}` and `image_height{i}`, \
+                 `imageSize{i}`, `image_width` and `image_height`, or `imageSize` ([width, height]); \
+                 the stereo sample writes none, so add it"
+            ),
+        ))
+    };
+
+    // Camera 1's world → camera pose, if given.
+    let world_pose = ["rvec1", "rvec"].into_iter().find(|k| node_ci(&all, k).is_some());
+    let mut cams: Vec<(String, Camera)> = Vec::new();
+    for i in [1usize, 2] {
+        let name = format!("cam{i}");
+        let (w, h, size_label) = image_size(i)?;
+        let (m, d) = (format!("M{i}"), format!("D{i}"));
+        let identity = (json!([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]), json!([0.0, 0.0, 0.0]));
         let get = |key: &str| -> Option<Value> {
             match key {
-                "camera_matrix" => Some(k.clone()),
-                "distortion_coefficients" => dist.clone(),
-                "R" => Some(r.clone()),
-                "T" => Some(t.clone()),
-                "image_width" => Some(size.0.clone()),
-                "image_height" => Some(size.1.clone()),
+                "camera_matrix" => node_ci(&all, &m),
+                "distortion_coefficients" => node_ci(&all, &d),
+                "image_width" => Some(json!(w)),
+                "image_height" => Some(json!(h)),
+                "R" if i == 2 => node_ci(&all, "R"),
+                "T" if i == 2 => node_ci(&all, "T"),
+                "R" if world_pose.is_none() => Some(identity.0.clone()),
+                "T" if world_pose.is_none() => Some(identity.1.clone()),
+                "rvec" if i == 1 => world_pose.and_then(|r| node_ci(&all, r)),
+                "tvec" if i == 1 => world_pose.and_then(|r| node_ci(&all, &r.replace('r', "t"))),
                 _ => None,
             }
         };
-        cams.push((name.to_string(), camera_from_nodes(path, name, &get)?));
+        let key_of = |key: &str| -> String {
+            match key {
+                "camera_matrix" => m.clone(),
+                "distortion_coefficients" => d.clone(),
+                "image_width" | "image_height" => size_label.clone(),
+                "rvec" | "tvec" => world_pose.map_or_else(|| key.to_string(), |r| r.replace('r', &key[..1])),
+                other => other.to_string(),
+            }
+        };
+        let camera = camera_from_nodes(
+            &name,
+            &CameraNodes { get: &get, label: &|k| spelled(&all, &key_of(k)), file: &|k| file_of(&key_of(k)) },
+        )?;
+        cams.push((name, camera));
     }
+    if world_pose.is_some() {
+        // cam2's pose was read relative to cam1: world ← cam1 ← cam2.
+        let world_from_cam1 = cams[0].1.world_from_camera;
+        let cam2 = &mut cams[1].1;
+        cam2.world_from_camera = world_from_cam1 * cam2.world_from_camera;
+    }
+    let used = ["M1", "D1", "M2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q", "rvec1", "tvec1", "rvec", "tvec"];
+    let sizes = ["image_width", "image_height", "imageSize", "image_size"];
     let unused: Vec<&String> = all
         .keys()
         .filter(|k| {
             !used.iter().any(|u| k.eq_ignore_ascii_case(u))
-                && !["image_width", "image_height", "imageSize", "image_size"].iter().any(|u| k.eq_ignore_ascii_case(u))
+                && !sizes.iter().any(|s| {
+                    k.len() >= s.len()
+                        && k.is_char_boundary(s.len())
+                        && k[..s.len()].eq_ignore_ascii_case(s)
+                        && ["", "1", "2"].contains(&&k[s.len()..])
+                })
         })
         .collect();
     if !unused.is_empty() {
@@ -632,8 +841,8 @@ fn camera_nodes(cam: &Camera) -> (u32, u32, Vec<MatrixNode>) {
     (cam.intrinsics.width, cam.intrinsics.height, nodes)
 }
 
-/// Writes cameras as an OpenCV `cv::FileStorage` file: YAML for `.yml`/`.yaml`, JSON for
-/// `.json` (see the module docs for the key layout). Poses are written as `rvec`/`tvec`
+/// Writes cameras as an OpenCV `cv::FileStorage` file: YAML for `.yml`/`.yaml`, XML for `.xml`,
+/// JSON for `.json` (see the module docs for the key layout). Poses are written as `rvec`/`tvec`
 /// (world → camera), distortion as 5 coefficients (8 when k4..k6 are used). The thin lens, if
 /// any, is not part of the format and is dropped.
 pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoError> {
@@ -686,7 +895,25 @@ pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoE
             }
             format!("{{\n{}\n}}\n", parts.join(",\n"))
         }
-        _ => return Err(IoError::invalid(path, "OpenCV calibration files must end in .yml, .yaml or .json")),
+        Some("xml") => {
+            let mut s = String::from("<?xml version=\"1.0\"?>\n<opencv_storage>\n");
+            for (name, cam) in cameras {
+                let (w, h, nodes) = camera_nodes(cam);
+                let (kw, kh) = (key("image_width", name), key("image_height", name));
+                s += &format!("<{kw}>{w}</{kw}>\n<{kh}>{h}</{kh}>\n");
+                for (k, rows, cols, data) in nodes {
+                    let data: Vec<String> = data.into_iter().map(fmt_f64).collect();
+                    let k = key(k, name);
+                    s += &format!(
+                        "<{k} type_id=\"opencv-matrix\">\n  <rows>{rows}</rows>\n  <cols>{cols}</cols>\n  \
+                         <dt>d</dt>\n  <data>\n    {}</data></{k}>\n",
+                        data.join(" ")
+                    );
+                }
+            }
+            s + "</opencv_storage>\n"
+        }
+        _ => return Err(IoError::invalid(path, "OpenCV calibration files must end in .yml, .yaml, .xml or .json")),
     };
     atomic_write(path, |w| w.write_all(text.as_bytes()))
 }

@@ -518,6 +518,13 @@ const OPENCV_SAMPLE_XML: &str = r#"<?xml version="1.0"?>
     -4.1802327018241026e-01 5.0715243805833121e-01 0. 0.
     -5.7843596847939704e-01</data></Distortion_Coefficients>
 <Avg_Reprojection_Error>3.9259109564281437e-01</Avg_Reprojection_Error>
+<Extrinsic_Parameters type_id="opencv-matrix">
+  <rows>2</rows>
+  <cols>6</cols>
+  <dt>d</dt>
+  <data>
+    1.2e-01 -3.1e-02 1.5e+00 -1.1e+02 -8.4e+01 5.1e+02 9.8e-02 4.4e-02 1.4e+00
+    -9.7e+01 -7.9e+01 4.8e+02</data></Extrinsic_Parameters>
 <Per_View_Reprojection_Errors type_id="opencv-matrix">
   <rows>2</rows>
   <cols>1</cols>
@@ -536,6 +543,7 @@ fn opencv_calibration_sample_xml() {
     let err = read_opencv(&file).expect_err("no pose").to_string();
     assert!(err.contains("out_camera_data.xml") && err.contains("camera `out_camera_data`"), "{err}");
     assert!(err.contains("no pose"), "{err}");
+    assert!(err.contains("`Extrinsic_Parameters` are the calibration board's poses"), "{err}");
 
     let posed = OPENCV_SAMPLE_XML.replace(
         "</opencv_storage>",
@@ -701,4 +709,288 @@ fn opencv_xml_errors_name_the_file() {
         let err = read_opencv(&file).expect_err(name).to_string();
         assert!(err.contains(name) && err.contains(want), "{name}: {err}");
     }
+}
+
+/// OpenCV's `projectPoints` written out, on plain arrays (row-major K and R):
+/// `(x, y, z) = R X + t`, `(x', y') = (x/z, y/z)`, `r² = x'² + y'²`,
+/// `radial = (1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶)`,
+/// `x'' = x' radial + 2 p1 x'y' + p2 (r² + 2x'²)`, `y'' = y' radial + p1 (r² + 2y'²) + 2 p2 x'y'`,
+/// `u = fx x'' + s y'' + cx`, `v = fy y'' + cy`. `d` is in OpenCV's order, missing terms zero.
+fn project_by_hand(k: [f64; 9], d: &[f64], r: [f64; 9], t: [f64; 3], p: [f64; 3]) -> [f64; 2] {
+    let q: Vec<f64> = (0..3).map(|i| r[3 * i] * p[0] + r[3 * i + 1] * p[1] + r[3 * i + 2] * p[2] + t[i]).collect();
+    let (x, y) = (q[0] / q[2], q[1] / q[2]);
+    let c = |i: usize| d.get(i).copied().unwrap_or(0.0);
+    let (k1, k2, p1, p2, k3, k4, k5, k6) = (c(0), c(1), c(2), c(3), c(4), c(5), c(6), c(7));
+    let r2 = x * x + y * y;
+    let radial =
+        (1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2) / (1.0 + k4 * r2 + k5 * r2 * r2 + k6 * r2 * r2 * r2);
+    let xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    let yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    [k[0] * xd + k[1] * yd + k[2], k[4] * yd + k[5]]
+}
+
+/// `a b` for row-major 3 × 3 matrices.
+fn mat_mul(a: [f64; 9], b: [f64; 9]) -> [f64; 9] {
+    let mut out = [0.0; 9];
+    for i in 0..3 {
+        for j in 0..3 {
+            out[3 * i + j] = (0..3).map(|l| a[3 * i + l] * b[3 * l + j]).sum();
+        }
+    }
+    out
+}
+
+fn assert_projects_as(cam: &Camera, k: [f64; 9], d: &[f64], r: [f64; 9], t: [f64; 3], what: &str) {
+    for p in [[1.0, 2.0, 300.0], [40.0, -30.0, 320.0], [-60.0, 45.0, 280.0]] {
+        let by_hand = project_by_hand(k, d, r, t, p);
+        let ours = cam.project(DVec3::from_array(p)).expect("in front");
+        let err = (ours - DVec2::from_array(by_hand)).length();
+        assert!(err < 1e-9, "{what} {p:?}: ours {ours}, by hand {by_hand:?}");
+    }
+}
+
+/// Rows of the rotation about y by 90° (the Rodrigues vector `(0, π/2, 0)`), and about z by
+/// 90°, written out.
+const R_Y90: [f64; 9] = [0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0];
+const R_Z90: [f64; 9] = [0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+
+/// A list of cameras (`cameras: [{name: ..., camera_matrix: ..., rvec: ..., tvec: ...}]`), in
+/// YAML and in XML (`<_>` entries); an entry without `name` is `cam<index>`.
+#[test]
+fn opencv_camera_list() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let k_a = [400.0, 0.5, 63.5, 0.0, 410.0, 47.5, 0.0, 0.0, 1.0];
+    let d_a = [-0.2, 0.05, 0.001, -0.002, 0.01, 0.003, -0.001, 0.0005];
+    let k_b = [380.0, 0.0, 60.0, 0.0, 380.0, 50.0, 0.0, 0.0, 1.0];
+    let d_b = [0.1, -0.02, 0.0005, 0.0007];
+    let yaml = "%YAML:1.0
+cameras:
+   - name: top
+     image_width: 128
+     image_height: 96
+     camera_matrix: !!opencv-matrix
+        rows: 3
+        cols: 3
+        dt: d
+        data: [ 400., 0.5, 63.5, 0., 410., 47.5, 0., 0., 1. ]
+     distortion_coefficients: [ -0.2, 0.05, 0.001, -0.002, 0.01, 0.003, -0.001, 0.0005 ]
+     rvec: [ 0., 1.5707963267948966, 0. ]
+     tvec: [ 1., 2., 200. ]
+   - image_width: 128
+     image_height: 96
+     Camera_Matrix: [ 380., 0., 60., 0., 380., 50., 0., 0., 1. ]
+     Distortion_Coefficients: [ 0.1, -0.02, 0.0005, 0.0007 ]
+     R: !!opencv-matrix
+        rows: 3
+        cols: 3
+        dt: d
+        data: [ 0., -1., 0., 1., 0., 0., 0., 0., 1. ]
+     T: [ -3., 0.5, 150. ]
+";
+    let file = dir.path().join("rig.yml");
+    std::fs::write(&file, yaml).expect("write");
+    let check = |cams: &[(String, Camera)], what: &str| {
+        assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["top", "cam1"], "{what}");
+        assert_projects_as(&cams[0].1, k_a, &d_a, R_Y90, [1.0, 2.0, 200.0], what);
+        assert_projects_as(&cams[1].1, k_b, &d_b, R_Z90, [-3.0, 0.5, 150.0], what);
+    };
+    check(&read_opencv(&file).expect("reads YAML"), "YAML");
+
+    let xml = r#"<?xml version="1.0"?>
+<opencv_storage>
+<cameras>
+  <_>
+    <name>"top"</name>
+    <image_width>128</image_width>
+    <image_height>96</image_height>
+    <camera_matrix type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt>
+      <data>400. 0.5 63.5 0. 410. 47.5 0. 0. 1.</data></camera_matrix>
+    <distortion_coefficients type_id="opencv-matrix"><rows>8</rows><cols>1</cols><dt>d</dt>
+      <data>-0.2 0.05 0.001 -0.002 0.01 0.003 -0.001 0.0005</data></distortion_coefficients>
+    <rvec>0. 1.5707963267948966 0.</rvec>
+    <tvec><_>1.</_><_>2.</_><_>200.</_></tvec></_>
+  <_>
+    <image_width>128</image_width>
+    <image_height>96</image_height>
+    <camera_matrix>380. 0. 60. 0. 380. 50. 0. 0. 1.</camera_matrix>
+    <distortion_coefficients>0.1 -0.02 0.0005 0.0007</distortion_coefficients>
+    <R type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt><data>0. -1. 0. 1. 0. 0. 0. 0. 1.</data></R>
+    <T>-3. 0.5 150.</T></_>
+</cameras>
+</opencv_storage>
+"#;
+    let file = dir.path().join("rig.xml");
+    std::fs::write(&file, xml).expect("write");
+    check(&read_opencv(&file).expect("reads XML"), "XML");
+
+    // An entry that is not a camera, and a name given twice.
+    std::fs::write(
+        &file,
+        xml.replace("<camera_matrix>380.", "<camera_matrices>380.").replace(
+            "1.</camera_matrix>\n    <distortion_coefficients>0.1",
+            "1.</camera_matrices>\n    <distortion_coefficients>0.1",
+        ),
+    )
+    .expect("write");
+    let err = read_opencv(&file).expect_err("not a camera").to_string();
+    assert!(err.contains("rig.xml") && err.contains("`cameras[1]`: not a camera"), "{err}");
+    std::fs::write(&file, xml.replace("<_>\n    <image_width>", "<_>\n    <name>top</name><image_width>"))
+        .expect("write");
+    let err = read_opencv(&file).expect_err("twice").to_string();
+    assert!(err.contains("rig.xml") && err.contains("camera name `top` appears twice"), "{err}");
+}
+
+/// A stereo calibration in one XML file with camera 1's world pose (`rvec1`/`tvec1`) and an
+/// image size per camera: camera 2's pose is `R R₁`, `R t₁ + T`, composed here by hand.
+#[test]
+fn opencv_stereo_with_a_world_pose_and_sizes_per_camera() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("stereo.xml");
+    let m1 = [500.0, 0.0, 159.5, 0.0, 505.0, 119.5, 0.0, 0.0, 1.0];
+    let d1 = [-0.1, 0.02, 0.001, 0.002, 0.003];
+    let m2 = [520.0, 0.0, 200.0, 0.0, 521.0, 150.0, 0.0, 0.0, 1.0];
+    let d2 = [-0.12, 0.03, -0.001, 0.0, 0.0, 0.01, 0.0, 0.0];
+    let (r1, t1) = (R_Y90, [5.0, -10.0, 400.0]);
+    let (r, t) = (R_Z90, [-100.0, 2.0, 8.0]);
+    let xml = r#"<?xml version="1.0"?>
+<opencv_storage>
+<imageSize1>320 240</imageSize1>
+<image_width2>400</image_width2>
+<image_height2>300</image_height2>
+<M1 type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt>
+  <data>500. 0. 159.5 0. 505. 119.5 0. 0. 1.</data></M1>
+<D1 type_id="opencv-matrix"><rows>1</rows><cols>5</cols><dt>d</dt>
+  <data>-0.1 0.02 0.001 0.002 0.003</data></D1>
+<M2 type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt>
+  <data>520. 0. 200. 0. 521. 150. 0. 0. 1.</data></M2>
+<D2 type_id="opencv-matrix"><rows>1</rows><cols>8</cols><dt>d</dt>
+  <data>-0.12 0.03 -0.001 0. 0. 0.01 0. 0.</data></D2>
+<R type_id="opencv-matrix"><rows>3</rows><cols>3</cols><dt>d</dt>
+  <data>0. -1. 0. 1. 0. 0. 0. 0. 1.</data></R>
+<T type_id="opencv-matrix"><rows>3</rows><cols>1</cols><dt>d</dt>
+  <data>-100. 2. 8.</data></T>
+<rvec1>0. 1.5707963267948966 0.</rvec1>
+<tvec1>5. -10. 400.</tvec1>
+<P1 type_id="opencv-matrix"><rows>3</rows><cols>4</cols><dt>d</dt>
+  <data>1. 0. 0. 0. 0. 1. 0. 0. 0. 0. 1. 0.</data></P1>
+</opencv_storage>
+"#;
+    std::fs::write(&file, xml).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["cam1", "cam2"]);
+    let sizes: Vec<(u32, u32)> = cams.iter().map(|c| (c.1.intrinsics.width, c.1.intrinsics.height)).collect();
+    assert_eq!(sizes, [(320, 240), (400, 300)]);
+    assert_projects_as(&cams[0].1, m1, &d1, r1, t1, "cam1");
+    let rt1: Vec<f64> = (0..3).map(|i| r[3 * i] * t1[0] + r[3 * i + 1] * t1[1] + r[3 * i + 2] * t1[2] + t[i]).collect();
+    assert_projects_as(&cams[1].1, m2, &d2, mat_mul(r, r1), [rt1[0], rt1[1], rt1[2]], "cam2");
+
+    // Without the world pose camera 1 is the world frame.
+    let plain = xml.replace("<rvec1>0. 1.5707963267948966 0.</rvec1>\n<tvec1>5. -10. 400.</tvec1>\n", "");
+    assert_ne!(plain, xml);
+    std::fs::write(&file, &plain).expect("write");
+    let cams = read_opencv(&file).expect("reads");
+    assert_projects_as(&cams[0].1, m1, &d1, [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], [0.0; 3], "cam1");
+    assert_projects_as(&cams[1].1, m2, &d2, r, t, "cam2");
+
+    // A world rotation without its translation.
+    std::fs::write(&file, xml.replace("<tvec1>5. -10. 400.</tvec1>\n", "")).expect("write");
+    let err = read_opencv(&file).expect_err("no tvec1").to_string();
+    assert!(err.contains("stereo.xml: camera `cam1`: missing the node `tvec1`"), "{err}");
+    // Camera 2 without an image size of its own or a shared one.
+    std::fs::write(&file, xml.replace("<image_width2>400</image_width2>\n", "")).expect("write");
+    let err = read_opencv(&file).expect_err("no size").to_string();
+    assert!(
+        err.contains("stereo.xml: camera `cam2`: no image size")
+            && err.contains("`image_width2` and `image_height2`")
+            && err.contains("`imageSize`"),
+        "{err}"
+    );
+}
+
+/// The two-file form given as its extrinsics file finds the intrinsics beside it; a bad node
+/// of the extrinsics is reported with that file.
+#[test]
+fn opencv_stereo_from_the_extrinsics_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let intr = dir.path().join("intrinsics.yml");
+    let extr = dir.path().join("extrinsics.xml");
+    std::fs::write(&intr, format!("{STEREO_INTRINSICS}imageSize: [ 640, 480 ]\n")).expect("write");
+    std::fs::write(&extr, STEREO_EXTRINSICS_XML).expect("write");
+    check_stereo(&read_opencv(&extr).expect("reads the pair from the extrinsics"));
+    std::fs::write(
+        &extr,
+        STEREO_EXTRINSICS_XML.replace(
+            "<rows>3</rows><cols>1</cols><dt>d</dt><data>-120. 1.5 4.",
+            "<rows>2</rows><cols>1</cols><dt>d</dt><data>-120. 1.5",
+        ),
+    )
+    .expect("write");
+    let err = read_opencv(&intr).expect_err("T has 2 values").to_string();
+    assert!(err.contains("extrinsics.xml: camera `cam2`: `T` has 2 values; expected 3"), "{err}");
+    // Alone, the extrinsics say what they lack.
+    std::fs::remove_file(&intr).expect("rm");
+    std::fs::write(&extr, STEREO_EXTRINSICS_XML).expect("write");
+    let err = read_opencv(&extr).expect_err("no intrinsics").to_string();
+    assert!(err.contains("extrinsics.xml: no camera matrix") && err.contains("`M1` and `M2`"), "{err}");
+}
+
+/// Malformed nodes: each message names the file, the camera and the node as the file spells it.
+#[test]
+fn opencv_malformed_nodes_are_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let stereo = format!(
+        "{STEREO_INTRINSICS}imageSize: [ 640, 480 ]\nR: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]\nT: [ -120., 0., 0. ]\n"
+    );
+    let d2 = "cols: 5\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0. ]";
+    let m1 = "data: [ 500., 0., 319.5, 0., 502., 239.5, 0., 0., 1. ]";
+    let sample_k = "6.5746697810243404e+02 0. 3.1950000000000000e+02 0.\n    6.5746697810243404e+02 2.3950000000000000e+02 0. 0. 1.";
+    let cases: [(&str, String, &str); 17] = [
+        ("calib.yml", stereo.replace(d2, "cols: 3\n   dt: d\n   data: [ -0.12, 0.03, 0. ]"), "calib.yml: camera `cam2`: `D2` has 3 values; expected 4, 5, 8, 12 or 14"),
+        ("calib.yml", stereo.replace(d2, "cols: 9\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0., 0., 0., 0., 0. ]"), "`D2` has 9 values"),
+        ("calib.yml", stereo.replace(m1, "data: [ 500., 0., 319.5, 0., 502., 239.5 ]").replace("rows: 3\n   cols: 3\n   dt: d\n   data: [ 500.,", "rows: 2\n   cols: 3\n   dt: d\n   data: [ 500.,"), "camera `cam1`: `M1` has 6 values; expected 9 (3 × 3)"),
+        ("calib.yml", stereo.replace(m1, "data: [ 500., 0., 319.5, 0., abc, 239.5, 0., 0., 1. ]"), "camera `cam1`: `M1`: matrix data must be numbers"),
+        ("calib.yml", stereo.replace(m1, "data: [ -500., 0., 319.5, 0., 502., 239.5, 0., 0., 1. ]"), "camera `cam1`: `M1`: invalid intrinsics: focal lengths must be positive"),
+        ("calib.yml", stereo.replace("R: [ 1., 0., 0.,", "R: [ 2., 0., 0.,"), "camera `cam2`: `R`: invalid camera pose: rotation is not a proper rotation"),
+        ("calib.yml", stereo.replace("imageSize: [ 640, 480 ]", "imageSize: [ 640.5, 480 ]"), "camera `cam1`: `imageSize`: expected [width, height] as two positive integers"),
+        ("calib.yml", stereo.replace("imageSize: [ 640, 480 ]", "imageSize: [ 640, 480, 3 ]"), "`imageSize`: expected [width, height]"),
+        ("calib.yml", stereo.replace("   rows: 3\n   cols: 3\n   dt: d\n   data: [ 510.", "   rows: 4294967296\n   cols: 4294967296\n   dt: d\n   data: [ 510."), "camera `cam2`: `M2`: rows × cols = 4294967296 × 4294967296 but 9 values"),
+        ("calib.yml", stereo.replace("   rows: 3\n   cols: 3\n   dt: d\n   data: [ 510.", "   rows: -3\n   cols: 3\n   dt: d\n   data: [ 510."), "camera `cam2`: `M2`: `rows` must be a non-negative integer"),
+        ("out_camera_data.xml", OPENCV_SAMPLE_XML.replace(sample_k, "1 0 3 0 1 2 0 0"), "out_camera_data.xml: camera `out_camera_data`: `Camera_Matrix`: rows × cols = 3 × 3 but 8 values"),
+        ("out_camera_data.xml", OPENCV_SAMPLE_XML.replace("<image_Width>640</image_Width>", "<image_Width>wide</image_Width>"), "camera `out_camera_data`: `image_Width` must be a positive integer"),
+        ("out_camera_data.xml", OPENCV_SAMPLE_XML.replace("<rows>5</rows>\n  <cols>1</cols>", "<rows>3</rows>\n  <cols>1</cols>").replace("0. 0.\n    -5.7843596847939704e-01</data>", "0.</data>"),
+            "`Distortion_Coefficients` has 3 values; expected 4, 5, 8, 12 or 14"),
+        ("rig.xml", "<?xml version=\"1.0\"?>\n<opencv_storage><cam><camera_matrix>1 0 1 0 1 1 0 0 1</camera_matrix></cam>".into(), "rig.xml: malformed XML"),
+        ("rig.xml", "<?xml version=\"1.0\"?>\n<opencv_storage>\n</opencv_storage>\n".into(), "rig.xml: no camera matrix"),
+        ("rig.xml", "<?xml version=\"1.0\"?>\n<opencv_storage><left><camera_matrix>1 0 1 0 1 1 0 0 1</camera_matrix><image_width>8</image_width><image_height>8</image_height><R>1 0 0 0 1 0 0 0 1</R></left></opencv_storage>".into(), "rig.xml: camera `left`: missing the node `T`"),
+        ("rig.yml", "%YAML:1.0\nimage_width_a: 8\nimage_height_a: 8\nCamera_Matrix_a: [ 1, 0, 1, 0, 1, 1, 0, 0, 1 ]\nrvec_a: [ 0, 0 ]\ntvec_a: [ 0, 0, 1 ]\n".into(), "rig.yml: camera `a`: `rvec_a` has 2 values; expected 3"),
+    ];
+    for (name, text, want) in cases {
+        let file = dir.path().join(name);
+        std::fs::write(&file, &text).expect("write");
+        let err = read_opencv(&file).expect_err(want).to_string();
+        assert!(err.contains(want), "{err}\nshould contain\n{want}");
+    }
+}
+
+/// `write_opencv` writes FileStorage XML for `.xml`: the cameras read back the same, with
+/// suffixed keys for a rig and plain keys for one camera named after the file.
+#[test]
+fn opencv_xml_is_written_and_read_back() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let original = read_opencv(&fixtures().join("opencv_two_cameras.yml")).expect("reads");
+    let file = dir.path().join("rig.xml");
+    write_opencv(&file, &original).expect("writes");
+    let text = std::fs::read_to_string(&file).expect("read");
+    assert!(text.starts_with("<?xml version=\"1.0\"?>\n<opencv_storage>\n"), "{text}");
+    assert!(text.contains("<camera_matrix_four type_id=\"opencv-matrix\">"), "{text}");
+    let back = read_opencv(&file).expect("reads ours");
+    assert_same_cameras(&original, &back);
+    for ((_, cam), c) in back.iter().zip(&cases()[1..3]) {
+        assert!(worst_projection_error(c, cam) < 1e-3);
+    }
+    let single = read_opencv(&fixtures().join("cam_single.yml")).expect("reads");
+    let file = dir.path().join("cam_single.xml");
+    write_opencv(&file, &single).expect("writes");
+    assert!(std::fs::read_to_string(&file).expect("read").contains("\n<camera_matrix type_id="));
+    assert_same_cameras(&single, &read_opencv(&file).expect("reads"));
 }

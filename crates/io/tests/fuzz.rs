@@ -157,7 +157,7 @@ fn opencv_files_never_panic() {
     let dir = tempfile::tempdir().expect("tempdir");
     let cams: Vec<(String, Camera)> = ring(2).into_iter().enumerate().map(|(i, c)| (format!("c{i}"), c)).collect();
     let mut seeds = Vec::new();
-    for ext in ["yml", "json"] {
+    for ext in ["yml", "json", "xml"] {
         let p = dir.path().join(format!("rig.{ext}"));
         fluidnerf_io::calib::write_opencv(&p, &cams).expect("writes");
         seeds.push(std::fs::read(&p).expect("reads"));
@@ -171,6 +171,14 @@ fn opencv_files_never_panic() {
           <data>1. 0. 1. 0. 1. 1. 0. 0. 1.</data></M1>\n<M2>1 0 1 0 1 1 0 0 1</M2><D2><_>0.1</_><_>0</_><_>0</_><_>0</_></D2>\
           <R>1 0 0 0 1 0 0 0 1</R><T>1 0 0</T><imageSize>4 4</imageSize>\n<cam><camera_matrix>1 0 1 0 1 1 0 0 1\
           </camera_matrix><rvec>0 0 0</rvec><tvec>0 0 1</tvec><image_width>4</image_width></cam></opencv_storage>\n"
+            .to_vec(),
+    );
+    seeds.push(
+        b"%YAML:1.0\ncameras:\n  - name: a\n    image_width: 4\n    image_height: 4\n    camera_matrix: [1, 0, 1, 0, 1, 1, 0, 0, 1]\n    rvec: [0, 0.1, 0]\n    tvec: [0, 0, 1]\n  - {image_width: 4, image_height: 4, camera_matrix: [1, 0, 1, 0, 1, 1, 0, 0, 1], R: [1, 0, 0, 0, 1, 0, 0, 0, 1], T: [0, 0, 1]}\n"
+            .to_vec(),
+    );
+    seeds.push(
+        b"%YAML:1.0\nM1: [1, 0, 1, 0, 1, 1, 0, 0, 1]\nM2: [1, 0, 1, 0, 1, 1, 0, 0, 1]\nD1: [0.1, 0, 0, 0, 0]\nR: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nT: [1, 0, 0]\nimageSize1: [4, 4]\nimage_width2: 4\nimage_height2: 4\nrvec1: [0, 0, 0.2]\ntvec1: [0, 0, 5]\n"
             .to_vec(),
     );
     // Deeply nested XML must not exhaust the stack.
