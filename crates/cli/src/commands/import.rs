@@ -21,7 +21,8 @@ use std::io::Write as _;
 /// images where its `file_path`s point. Its `aabb`, `units`, `intensity_scale` and
 /// `linearisation`, when present, are kept unless given on the command line.
 ///
-/// OpenCV (`--opencv`): a `cv::FileStorage` YAML/JSON file or a folder of them, with
+/// OpenCV (`--opencv`): a `cv::FileStorage` YAML/XML/JSON file or a folder of them (a stereo
+/// pair's `M1 D1 M2 D2 R T` too, see docs/real-data.md), with
 /// `camera_matrix`, `distortion_coefficients`, `rvec`/`tvec` or `R`/`T` (world to camera) and
 /// `image_width`/`image_height`; several cameras in one file use keys suffixed `_<name>`, a
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
