@@ -90,14 +90,7 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
             let dup_lo = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
             let dup_hi = _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7);
             for corner in 0..1usize << D {
-                let mut wc = one;
-                let mut key = _mm256_setzero_si256();
-                for a in 0..D {
-                    let bit = (corner >> a) & 1;
-                    wc = _mm256_mul_ps(wc, w[a][bit]);
-                    key = if DENSE { _mm256_add_epi32(key, part[a][bit]) } else { _mm256_xor_si256(key, part[a][bit]) };
-                }
-                let idx = if DENSE { key } else { _mm256_and_si256(key, mask) };
+                let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
                 let pairs = table as *const i64;
                 // SAFETY: `idx` is a vertex index or masked hash below the level's entries, and
                 // entry `idx` is the pair of floats at `2 · idx` (the caller's contract).
@@ -125,14 +118,7 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
         }
         let mut acc = [zero; F];
         for corner in 0..1usize << D {
-            let mut wc = one;
-            let mut key = _mm256_setzero_si256();
-            for a in 0..D {
-                let bit = (corner >> a) & 1;
-                wc = _mm256_mul_ps(wc, w[a][bit]);
-                key = if DENSE { _mm256_add_epi32(key, part[a][bit]) } else { _mm256_xor_si256(key, part[a][bit]) };
-            }
-            let idx = if DENSE { key } else { _mm256_and_si256(key, mask) };
+            let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
             let at = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
             for (k, acc) in acc.iter_mut().enumerate() {
                 // SAFETY: `idx` is a vertex index or masked hash below the level's entries, so
@@ -153,4 +139,24 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
         }
     }
     full
+}
+
+/// The trilinear weight and the table entry of vertex `corner` (bit `a` = upper along axis `a`)
+/// for eight points: weights multiplied in axis order, indices summed (dense) or hashed.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn corner_of<const D: usize, const DENSE: bool>(
+    w: &[[__m256; 2]; 4],
+    part: &[[__m256i; 2]; 4],
+    corner: usize,
+    mask: __m256i,
+) -> (__m256, __m256i) {
+    let mut wc = _mm256_set1_ps(1.0);
+    let mut key = _mm256_setzero_si256();
+    for a in 0..D {
+        let bit = (corner >> a) & 1;
+        wc = _mm256_mul_ps(wc, w[a][bit]);
+        key = if DENSE { _mm256_add_epi32(key, part[a][bit]) } else { _mm256_xor_si256(key, part[a][bit]) };
+    }
+    (wc, if DENSE { key } else { _mm256_and_si256(key, mask) })
 }
