@@ -39,11 +39,12 @@ use crate::error::NeuralError;
 use crate::field::TrainableField;
 use crate::mlp::{Activation, Mlp, MlpTape, OutputActivation};
 
-/// Whether the encoding's forward pass may use the vectorised kernel (see [`set_vectorised`]).
+/// Whether the encoding may use the vectorised kernels (see [`set_vectorised`]).
 pub(crate) static VECTORISED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
 
-/// Turns the vectorised forward pass of the encoding on (the default, where the CPU has AVX2
-/// and FMA) or off (the scalar loop everywhere), for every field in the process: for
+/// Turns the vectorised passes of the encoding (forward, and the backward's weights and
+/// indices) on (the default, where the CPU has AVX2 and FMA) or off (the scalar loop
+/// everywhere), for every field in the process: for
 /// benchmarks that compare the two in one run, and as a fallback.
 pub fn set_vectorised(enabled: bool) {
     VECTORISED.store(enabled, std::sync::atomic::Ordering::Relaxed);
@@ -302,10 +303,10 @@ impl HashGridField {
         let table_range = level.offset..level.offset + level.entries * F;
         let table = &self.params[table_range.clone()];
         let gtable: &mut [f32] = if BACKWARD { &mut grads[table_range] } else { &mut [] };
-        // The forward pass of whole groups of eight rows runs vectorised where the CPU can.
+        // Whole groups of eight rows run vectorised where the CPU can.
         let mut done = 0;
         #[cfg(target_arch = "x86_64")]
-        if !BACKWARD && crate::hashgrid_simd::available() {
+        if crate::hashgrid_simd::available() {
             let args = crate::hashgrid_simd::LevelArgs {
                 res,
                 res_t,
@@ -316,9 +317,16 @@ impl HashGridField {
                 column: l * F,
                 row_len: lf,
             };
-            // SAFETY: AVX2 and FMA were detected just above; `table` is this level's whole table
-            // (`entries × F`: every dense vertex, or `mask + 1` hash slots).
-            done = unsafe { crate::hashgrid_simd::level_forward::<D, F, DENSE>(&args, inputs, feats) };
+            // SAFETY: AVX2 and FMA were detected just above; `table` and `gtable` are this
+            // level's whole table and its gradient (`entries × F`: every dense vertex, or
+            // `mask + 1` hash slots).
+            done = unsafe {
+                if BACKWARD {
+                    crate::hashgrid_simd::level_backward::<D, F, DENSE>(&args, inputs, feats, gtable)
+                } else {
+                    crate::hashgrid_simd::level_forward::<D, F, DENSE>(&args, inputs, feats)
+                }
+            };
         }
         for (x, row) in inputs.chunks_exact(D).zip(feats.chunks_exact_mut(lf)).skip(done) {
             // Per axis: the weights of the lower and upper vertex, and their contributions to the
@@ -557,6 +565,50 @@ mod tests {
                     let (a, b) = (batch[r * lf + k], single[k]);
                     assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "d {d} F {f}: row {r} feature {k}: {a} vs {b}");
                 }
+            }
+        }
+    }
+
+    /// The encoding's gradient scattered for a batch (weights and indices eight rows at a time,
+    /// vectorised where the CPU can) is bit-identical to the scalar loop run row by row: the
+    /// same products added in the same order, also where the rows share vertices.
+    #[test]
+    fn batched_encoding_gradient_matches_row_by_row_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        for (d, f, log2) in [(3, 2, 14), (3, 1, 12), (3, 4, 15), (4, 2, 15), (4, 8, 12)] {
+            let cfg = HashGridConfig {
+                levels: 6,
+                features_per_level: f,
+                base_resolution: 5,
+                max_resolution: 90,
+                time_resolution: 6,
+                time_span: 3.0,
+                log2_table_size: log2,
+                ..HashGridConfig::default()
+            };
+            let field = HashGridField::new(&cfg, d, 5).unwrap();
+            let n = 45;
+            // Points along a short segment share cells at every level; a few fall outside.
+            let start: Vec<f32> = (0..d).map(|_| rng.random_range(-0.05..1.0)).collect();
+            let inputs: Vec<f32> =
+                (0..n * d).map(|i| start[i % d] + (i / d) as f32 * 0.004 + rng.random_range(0.0..0.002)).collect();
+            let lf = cfg.levels * f;
+            let dfeat: Vec<f32> = (0..n * lf).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut batch = vec![0.0f32; field.num_params()];
+            let mut df = dfeat.clone();
+            for l in 0..cfg.levels {
+                field.dispatch::<true>(l, &inputs, &mut df, &mut batch);
+            }
+            let mut single = vec![0.0f32; field.num_params()];
+            for (r, x) in inputs.chunks(d).enumerate() {
+                let mut df = dfeat[r * lf..(r + 1) * lf].to_vec();
+                for l in 0..cfg.levels {
+                    field.dispatch::<true>(l, x, &mut df, &mut single);
+                }
+            }
+            assert!(batch.iter().filter(|&&g| g != 0.0).count() > n, "d {d} F {f}: too few entries touched");
+            for (i, (a, b)) in batch.iter().zip(&single).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "d {d} F {f}: gradient entry {i}: {a} vs {b}");
             }
         }
     }

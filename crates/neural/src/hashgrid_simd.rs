@@ -1,5 +1,6 @@
-//! The hash-grid encoding's forward pass eight points at a time with AVX2 and FMA (selected at
-//! run time; [`crate::hashgrid`] falls back to its scalar loop elsewhere and for the last rows).
+//! The hash-grid encoding eight points at a time with AVX2 and FMA (selected at run time;
+//! [`crate::hashgrid`] falls back to its scalar loop elsewhere and for the last rows): the
+//! forward pass, and the backward pass's weights and indices ([`level_backward`]).
 //!
 //! Per point and level it computes what the scalar loop does — clamp, cell, trilinear weights
 //! multiplied in axis order, the dense vertex index or the spatial hash — in eight lanes, and
@@ -54,7 +55,6 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
     let full = n / 8 * 8;
     assert!(feats.len() >= n * args.row_len && args.column + F <= args.row_len);
     let zero = _mm256_setzero_ps();
-    let one = _mm256_set1_ps(1.0);
     let table = args.table.as_ptr();
     let mut lanes = [[0.0f32; 8]; 4];
     let mut out = [[0.0f32; 8]; F];
@@ -64,24 +64,7 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
                 lanes[a][j] = x[a];
             }
         }
-        let mut w = [[zero; 2]; 4];
-        let mut part = [[_mm256_setzero_si256(); 2]; 4];
-        for a in 0..D {
-            let (scale, r) = if a < 3 { (1.0, args.res) } else { (args.inv_span, args.res_t) };
-            // SAFETY: `lanes[a]` holds eight floats.
-            let u = unsafe { _mm256_loadu_ps(lanes[a].as_ptr()) };
-            let u = _mm256_mul_ps(u, _mm256_set1_ps(scale));
-            // max(u, 0) returns 0 for a NaN u; then min(·, 1).
-            let u = _mm256_min_ps(_mm256_max_ps(u, zero), one);
-            let p = _mm256_mul_ps(u, _mm256_set1_ps(r as f32));
-            let c = _mm256_min_epi32(_mm256_cvttps_epi32(p), _mm256_set1_epi32(r.saturating_sub(1) as i32));
-            let t = _mm256_sub_ps(p, _mm256_cvtepi32_ps(c));
-            w[a] = [_mm256_sub_ps(one, t), t];
-            let c1 = _mm256_add_epi32(c, _mm256_set1_epi32(1));
-            let k = if DENSE { args.stride[a] as u32 } else { PRIMES[a] };
-            let k = _mm256_set1_epi32(k as i32);
-            part[a] = [_mm256_mullo_epi32(c, k), _mm256_mullo_epi32(c1, k)];
-        }
+        let (w, part) = axes::<D, DENSE>(args, &lanes);
         let mask = _mm256_set1_epi32(args.mask as i32);
         if F == 2 {
             // Both features of a vertex in one 64-bit element: four points per gather, with
@@ -135,6 +118,108 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
             let row = (base + j) * args.row_len + args.column;
             for k in 0..F {
                 feats[row + k] = out[k][j];
+            }
+        }
+    }
+    full
+}
+
+/// Per axis, for the eight points in `lanes` (`lanes[a][j]` = coordinate `a` of point `j`): the
+/// weights of the lower and upper vertex, and their contributions to the vertex index (dense:
+/// coordinate × stride) or hash (coordinate × prime) — what the scalar loop computes per point.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn axes<const D: usize, const DENSE: bool>(
+    args: &LevelArgs<'_>,
+    lanes: &[[f32; 8]; 4],
+) -> ([[__m256; 2]; 4], [[__m256i; 2]; 4]) {
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let mut w = [[zero; 2]; 4];
+    let mut part = [[_mm256_setzero_si256(); 2]; 4];
+    for a in 0..D {
+        let (scale, r) = if a < 3 { (1.0, args.res) } else { (args.inv_span, args.res_t) };
+        // SAFETY: `lanes[a]` holds eight floats.
+        let u = unsafe { _mm256_loadu_ps(lanes[a].as_ptr()) };
+        let u = _mm256_mul_ps(u, _mm256_set1_ps(scale));
+        // max(u, 0) returns 0 for a NaN u; then min(·, 1).
+        let u = _mm256_min_ps(_mm256_max_ps(u, zero), one);
+        let p = _mm256_mul_ps(u, _mm256_set1_ps(r as f32));
+        let c = _mm256_min_epi32(_mm256_cvttps_epi32(p), _mm256_set1_epi32(r.saturating_sub(1) as i32));
+        let t = _mm256_sub_ps(p, _mm256_cvtepi32_ps(c));
+        w[a] = [_mm256_sub_ps(one, t), t];
+        let c1 = _mm256_add_epi32(c, _mm256_set1_epi32(1));
+        let k = if DENSE { args.stride[a] as u32 } else { PRIMES[a] };
+        let k = _mm256_set1_epi32(k as i32);
+        part[a] = [_mm256_mullo_epi32(c, k), _mm256_mullo_epi32(c1, k)];
+    }
+    (w, part)
+}
+
+/// Scatters the level's gradient of the first `8 ⌊n / 8⌋` rows: `dfeats` (`n × row_len`) holds
+/// ∂L/∂features, and each corner's `F` entries of `gtable` (the level's slice of the gradient,
+/// laid out like its table) receive weight × ∂L/∂feature. Returns how many rows it did.
+///
+/// The weights and indices are computed eight points at a time; the additions run point by
+/// point, corner by corner, each a product rounded once and then added — the scalar loop's
+/// order and arithmetic, so the gradient is bit-identical to it (tested).
+///
+/// # Safety
+/// As [`level_forward`], with `gtable` in place of the table: it must hold every entry a vertex
+/// of the level can index, `F` values each.
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE: bool>(
+    args: &LevelArgs<'_>,
+    inputs: &[f32],
+    dfeats: &[f32],
+    gtable: &mut [f32],
+) -> usize {
+    let n = inputs.len() / D;
+    let full = n / 8 * 8;
+    assert!(dfeats.len() >= n * args.row_len && args.column + F <= args.row_len);
+    let corners = 1usize << D;
+    let g = gtable.as_mut_ptr();
+    let mut lanes = [[0.0f32; 8]; 4];
+    let mut d = [[0.0f32; 8]; F];
+    // Per corner: the eight points' entries, and their F products weight × ∂L/∂feature.
+    let mut at = [[0u32; 8]; 16];
+    let mut prod = [[[0.0f32; 8]; F]; 16];
+    let mask = _mm256_set1_epi32(args.mask as i32);
+    for base in (0..full).step_by(8) {
+        for (j, x) in inputs[base * D..(base + 8) * D].chunks_exact(D).enumerate() {
+            for a in 0..D {
+                lanes[a][j] = x[a];
+            }
+            let row = (base + j) * args.row_len + args.column;
+            for k in 0..F {
+                d[k][j] = dfeats[row + k];
+            }
+        }
+        let (w, part) = axes::<D, DENSE>(args, &lanes);
+        let mut dv = [_mm256_setzero_ps(); F];
+        for k in 0..F {
+            // SAFETY: `d[k]` holds eight floats.
+            dv[k] = unsafe { _mm256_loadu_ps(d[k].as_ptr()) };
+        }
+        for corner in 0..corners {
+            let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
+            let idx = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
+            // SAFETY: each array holds eight values.
+            unsafe {
+                _mm256_storeu_si256(at[corner].as_mut_ptr() as *mut __m256i, idx);
+                for k in 0..F {
+                    _mm256_storeu_ps(prod[corner][k].as_mut_ptr(), _mm256_mul_ps(wc, dv[k]));
+                }
+            }
+        }
+        for j in 0..8 {
+            for corner in 0..corners {
+                let e = at[corner][j] as usize;
+                for k in 0..F {
+                    // SAFETY: `e / F` is a vertex index or masked hash below the level's
+                    // entries, so `e + k` is inside `gtable` (the caller's contract).
+                    unsafe { *g.add(e + k) += prod[corner][k][j] };
+                }
             }
         }
     }
