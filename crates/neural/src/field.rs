@@ -74,6 +74,15 @@ pub trait TrainableField: Send + Sync {
         None
     }
 
+    /// Whether a space–time field reads time on the frame axis of its window (0 at the
+    /// window's first frame, 1 at the next, linear in time between frames) rather than as
+    /// `t' = (t − t₀) / Δt`: true for a grid with one time vertex per frame, which would
+    /// otherwise misplace frames that are not evenly spaced (see
+    /// [`crate::temporal::TimeAxis`]). Default: false.
+    fn time_on_frame_axis(&self) -> bool {
+        false
+    }
+
     /// Whether the field implements the priors of [`Prior`] ([`TrainableField::add_prior`]).
     fn supports_prior(&self) -> bool {
         false

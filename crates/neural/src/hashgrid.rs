@@ -382,6 +382,11 @@ impl TrainableField for HashGridField {
         self.input_dim
     }
 
+    fn time_on_frame_axis(&self) -> bool {
+        // The time axis has one vertex per frame of the window (`field_for_window`).
+        self.input_dim == 4
+    }
+
     fn restrict_gradient(&self, steps_taken: u64, grads: &mut [f32]) {
         let every = self.config.coarse_to_fine as u64;
         let levels = self.levels.len();

@@ -299,16 +299,26 @@ pub fn fast_field_memory(frames: usize, threads: usize) -> Result<(usize, usize,
 }
 
 /// The training problem of the frames `range` of a recording with frame times `times`: the
-/// views at those times (training and held out), their times shifted by `origin` (`t − t₀`).
-pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>, origin: f64) -> Problem {
+/// views at those times (training and held out), their times shifted by `origin` (`t − t₀`,
+/// [`TimeAxis::Time`]) or placed on the window's frame axis with a time step of 1
+/// ([`TimeAxis::Frames`]: `origin` is then not used).
+pub fn window_problem(problem: &Problem, times: &[f64], range: Range<usize>, origin: f64, axis: TimeAxis) -> Problem {
+    let first = range.start as f64;
     let inside = in_window(times, range);
-    let keep = |v: &crate::train::View| inside(v).then(|| crate::train::View { time: v.time - origin, ..v.clone() });
+    let at = |t: f64| match axis {
+        TimeAxis::Time => t - origin,
+        TimeAxis::Frames => frame_position(times, t) - first,
+    };
+    let keep = |v: &crate::train::View| inside(v).then(|| crate::train::View { time: at(v.time), ..v.clone() });
     Problem {
         aabb: problem.aabb,
         intensity_scale: problem.intensity_scale,
         views: problem.views.iter().filter_map(keep).collect(),
         holdout: problem.holdout.iter().filter_map(keep).collect(),
-        time_step: problem.time_step,
+        time_step: match axis {
+            TimeAxis::Time => problem.time_step,
+            TimeAxis::Frames => 1.0,
+        },
     }
 }
 
@@ -339,6 +349,21 @@ pub fn window_origin(origin: TimeOrigin, times: &[f64], range: &Range<usize>) ->
     }
 }
 
+/// How a window's field reads time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TimeAxis {
+    /// `t' = (t − t₀) / Δt`, the dissertation's normalisation: a network reads any `t'`.
+    #[default]
+    Time,
+    /// `t'` is the position on the window's frame axis: 0 at its first frame, `k` at its
+    /// `k`-th, linear in time between two frames ([`frame_position`]). For a grid with one
+    /// time vertex per frame (the 4D hash grid, [`field_for_window`]): with `t / Δt` a
+    /// recording whose frames are not evenly spaced (steps 50, 52, 60) would put its frames
+    /// off the vertices, and clamp the times past `W − 1` gaps onto the last one.
+    Frames,
+}
+
 /// Where training is: which window of how many.
 #[derive(Clone, Debug)]
 pub struct WindowInfo {
@@ -352,8 +377,11 @@ pub struct WindowInfo {
 #[derive(Clone, Debug)]
 pub struct TrainedWindow<F> {
     pub frames: Range<usize>,
-    /// Absolute time `t₀` of `t' = (t − t₀) / Δt` ([`TimeOrigin`]).
+    /// Absolute time `t₀` of `t' = (t − t₀) / Δt` ([`TimeOrigin`]; the time of the window's
+    /// first frame on [`TimeAxis::Frames`]).
     pub time_origin: f64,
+    /// How the window's field reads time (its `meta.time_step` is 1 on the frame axis).
+    pub time_axis: TimeAxis,
     pub learner: Learner<F>,
     pub meta: FieldMeta,
     pub report: TrainReport,
@@ -510,12 +538,18 @@ pub fn train_window<F: TrainableField + Clone>(
         return Err(NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len())));
     };
     let origin = window_origin(windows.time_origin, times, range);
-    let sub = window_problem(problem, times, range.clone(), origin);
+    let axis = match &start {
+        WindowStart::Finished(l, _) | WindowStart::Resume(l) => l.field.time_on_frame_axis(),
+        WindowStart::Warm(f) | WindowStart::Fresh(f) => f.time_on_frame_axis(),
+    };
+    let time_axis = if axis { TimeAxis::Frames } else { TimeAxis::Time };
+    let sub = window_problem(problem, times, range.clone(), origin, time_axis);
     let prep = Prepared::with_masks(&sub, train_cfg, &window_masks(problem, masks, times, range.clone()))?;
     let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
     let trained = |learner: Learner<F>, report: TrainReport| TrainedWindow {
         frames: range.clone(),
         time_origin: origin,
+        time_axis,
         learner,
         meta: prep.meta.clone(),
         report,
@@ -563,7 +597,10 @@ pub struct StitchedField {
     pub frame_times: Vec<f64>,
     pub plan: Vec<Range<usize>>,
     pub origins: Vec<f64>,
-    /// Each window's field, queried with times relative to its origin.
+    /// How each window reads time.
+    pub axes: Vec<TimeAxis>,
+    /// Each window's field, queried with times relative to its origin (on [`TimeAxis::Time`])
+    /// or with its frame position (on [`TimeAxis::Frames`]).
     pub fields: Vec<Box<dyn ScalarField + Send + Sync>>,
 }
 
@@ -587,6 +624,7 @@ impl StitchedField {
             frame_times: run.frame_times[..covered.max(1).min(run.frame_times.len())].to_vec(),
             plan: run.plan[..n].to_vec(),
             origins: run.windows.iter().map(|w| w.time_origin).collect(),
+            axes: run.windows.iter().map(|w| w.time_axis).collect(),
             fields,
         })
     }
@@ -602,7 +640,10 @@ impl ScalarField for StitchedField {
             if w <= 0.0 {
                 continue;
             }
-            let t = time_at(&self.frame_times, pos) - self.origins[i];
+            let t = match self.axes[i] {
+                TimeAxis::Time => time_at(&self.frame_times, pos) - self.origins[i],
+                TimeAxis::Frames => pos - self.plan[i].start as f64,
+            };
             self.fields[i].eval(points, t, &mut tmp);
             for (o, &v) in out.iter_mut().zip(&tmp) {
                 *o += w as f32 * v;
@@ -618,6 +659,9 @@ pub struct WindowRecord {
     /// First and one-past-last frame index.
     pub frames: [usize; 2],
     pub time_origin: f64,
+    /// How the window's field reads time (runs written before it existed read `time`).
+    #[serde(default)]
+    pub time_axis: TimeAxis,
     pub meta: FieldMeta,
     /// Weights file, relative to the run directory.
     pub weights: String,
@@ -665,6 +709,7 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         frame_times: rec.frame_times,
         plan,
         origins: rec.windows.iter().map(|w| w.time_origin).collect(),
+        axes: rec.windows.iter().map(|w| w.time_axis).collect(),
         fields,
     })
 }

@@ -10,7 +10,7 @@ use fluidnerf_neural::hashgrid::{HashGridConfig, HashGridField};
 use fluidnerf_neural::mlp::{Activation, MlpConfig, MlpField};
 use fluidnerf_neural::temporal::{
     field_for_window, frame_times, load_temporal, train_windows, ResumeState, StitchedField, TemporalRecord,
-    TemporalRun, TimeOrigin, WindowConfig, WindowEvent, WindowRecord,
+    TemporalRun, TimeAxis, TimeOrigin, WindowConfig, WindowEvent, WindowRecord,
 };
 use fluidnerf_neural::train::{Batching, Learner, Problem, StopRule, TrainConfig, View, ViewMasks};
 use fluidnerf_neural::trained::FieldConfig;
@@ -231,6 +231,7 @@ fn windows_warm_start_stitch_continuously_and_round_trip() {
         records.push(WindowRecord {
             frames: [w.frames.start, w.frames.end],
             time_origin: w.time_origin,
+            time_axis: w.time_axis,
             meta: w.meta.clone(),
             weights: name,
         });
@@ -246,6 +247,46 @@ fn windows_warm_start_stitch_continuously_and_round_trip() {
         field.eval(&pts, t, &mut b);
         assert_eq!(a, b, "loaded field differs at t = {t}");
     }
+}
+
+/// Frames that are not evenly spaced (times 0, 1, 3): the space–time grid has one time vertex
+/// per frame, so a time between the last two frames lies between their reconstructions (with
+/// `t / Δt` the grid put time 2 onto the last frame's vertex, clamping every time past it).
+#[test]
+fn grid_windows_place_unevenly_spaced_frames_on_their_own_vertices() {
+    let times = [0.0, 1.0, 3.0];
+    let p = problem(&times);
+    let windows = WindowConfig { frames: 3, overlap: 0, ..WindowConfig::default() };
+    let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), 3);
+    let FieldConfig::HashGrid(grid) = &field_cfg else { unreachable!() };
+    let init = HashGridField::new(grid, 4, 2).expect("field");
+    let cfg = TrainConfig {
+        occupancy: Some(fluidnerf_neural::occupancy::OccupancyConfig::default()),
+        rays_per_image: 128,
+        coarse_samples: 32,
+        fine_samples: 0,
+        ..quick(300, 1e-2)
+    };
+    let run = train_windows(&p, &ViewMasks::default(), &cfg, &windows, init, 5, ResumeState::default(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("trains");
+    assert_eq!(run.windows[0].time_axis, TimeAxis::Frames);
+    let field = StitchedField::from_run(&run).expect("stitches");
+    let at = |t: f64| Volume::from_field([24, 24, 24], aabb(), &field, t).data;
+    for t in times {
+        let e = nrmse(&at(t), &truth(t).data);
+        assert!(e < 0.35, "frame at t = {t}: NRMSE {e:.3}");
+    }
+    // Where the field at t = 2 lies on the way from frame 1 to frame 3 (0 at 1, 1 at 3).
+    let (a, b, m) = (at(1.0), at(3.0), at(2.0));
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for ((&a, &b), &m) in a.iter().zip(&b).zip(&m) {
+        num += ((m - a) as f64) * ((b - a) as f64);
+        den += ((b - a) as f64).powi(2);
+    }
+    let fraction = num / den;
+    assert!((0.25..0.75).contains(&fraction), "t = 2 is {fraction:.2} of the way from frame 1 to frame 3");
 }
 
 #[test]

@@ -427,6 +427,7 @@ impl Ctx<'_> {
             records.push(WindowRecord {
                 frames: [w.frames.start, w.frames.end],
                 time_origin: w.time_origin,
+                time_axis: w.time_axis,
                 meta: w.meta.clone(),
                 weights: name,
             });
