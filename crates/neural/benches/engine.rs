@@ -310,6 +310,7 @@ fn main() {
     }
     if !mlp_only {
         grid_benches(steps);
+        space_time_benches(steps);
     }
 }
 
@@ -409,6 +410,37 @@ fn grid_benches(steps: usize) {
                 }
             }
         }
+    }
+}
+
+/// The space–time grid of a three-frame `tr-fast` window: a step over points along rays at one
+/// frame's time (as every training chunk is: the corners of the other time vertex are
+/// skipped) and at a time between frames (all 16 corners).
+fn space_time_benches(steps: usize) {
+    let batch = 1 << 18;
+    let preset = fluidnerf_neural::temporal::temporal_preset("tr-fast").expect("tr-fast exists");
+    let fluidnerf_neural::trained::FieldConfig::HashGrid(cfg) =
+        fluidnerf_neural::temporal::field_for_window(&preset.field, 3)
+    else {
+        unreachable!("tr-fast is a hash grid")
+    };
+    let mut grid = HashGridField::new(&cfg, 4, 0).expect("benchmark config is valid");
+    println!(
+        "space-time grid (tr-fast, 3 frames): {} levels x {} features, 2^{} entries, {} params, batch {batch}",
+        cfg.levels,
+        cfg.features_per_level,
+        cfg.log2_table_size,
+        grid.num_params()
+    );
+    let along = ray_points(batch, 128);
+    for (what, t) in [("at a frame's time  ", 1.0f32), ("between two frames ", 1.5)] {
+        let inputs: Vec<f32> = along.chunks(3).flat_map(|p| [p[0], p[1], p[2], t]).collect();
+        let timing = time_steps_on(&mut grid, &inputs, 8192, 1, steps);
+        println!(
+            "  chunk   8192 points along rays {what}: {:5.2} | {:5.2} M points/s",
+            batch as f64 / timing.wall_s / 1e6,
+            batch as f64 / timing.cpu_s / 1e6
+        );
     }
 }
 

@@ -300,6 +300,7 @@ impl HashGridField {
         }
         let mask = level.entries.wrapping_sub(1);
         let inv_span = 1.0 / self.config.time_span;
+        let time_exact = D == 4 && res_t as f32 == self.config.time_span;
         let table_range = level.offset..level.offset + level.entries * F;
         let table = &self.params[table_range.clone()];
         let gtable: &mut [f32] = if BACKWARD { &mut grads[table_range] } else { &mut [] };
@@ -311,6 +312,7 @@ impl HashGridField {
                 res,
                 res_t,
                 inv_span,
+                time_exact,
                 stride,
                 mask,
                 table,
@@ -335,7 +337,7 @@ impl HashGridField {
             let mut part = [[0u32; 2]; 4];
             for a in 0..D {
                 let (u, r) = if a < 3 { (x[a], res) } else { (x[a] * inv_span, res_t) };
-                let p = u.clamp(0.0, 1.0) * r as f32;
+                let p = if a == 3 && time_exact { x[a].clamp(0.0, r as f32) } else { u.clamp(0.0, 1.0) * r as f32 };
                 let c = (p as u32).min(r.saturating_sub(1));
                 let t = p - c as f32;
                 wgt[a] = [1.0 - t, t];
@@ -348,6 +350,10 @@ impl HashGridField {
             let out: &mut [f32; F] = (&mut row[l * F..(l + 1) * F]).try_into().expect("F features");
             let mut acc = [0.0f32; F];
             for c in 0..1usize << D {
+                if D == 4 && wgt[3][(c >> 3) & 1] == 0.0 {
+                    // A zero time weight adds exactly nothing (points on a frame's vertex).
+                    continue;
+                }
                 let mut w = 1.0f32;
                 let mut key = 0u32;
                 for a in 0..D {
@@ -615,6 +621,69 @@ mod tests {
             for (i, (a, b)) in batch.iter().zip(&single).enumerate() {
                 assert_eq!(a.to_bits(), b.to_bits(), "d {d} F {f}: gradient entry {i}: {a} vs {b}");
             }
+        }
+    }
+
+    /// A space–time grid with one time cell per time unit (as `tr-fast` windows have): points at
+    /// whole times (every training sample) skip the corners of the other time vertex. Their
+    /// features are continuous with those just before and after, in the vectorised and the
+    /// scalar pass alike, and the gradient is bit-identical between the two.
+    #[test]
+    fn whole_times_on_an_exact_time_axis_use_one_time_vertex() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(13);
+        let cfg = HashGridConfig {
+            levels: 5,
+            features_per_level: 2,
+            base_resolution: 4,
+            max_resolution: 40,
+            time_resolution: 3,
+            time_span: 3.0,
+            log2_table_size: 14,
+            init_scale: 1.0,
+            ..HashGridConfig::default()
+        };
+        let field = HashGridField::new(&cfg, 4, 3).unwrap();
+        let n = 40;
+        let lf = cfg.levels * 2;
+        let mut inputs = Vec::new();
+        for i in 0..n {
+            inputs.extend((0..3).map(|_| rng.random_range(0.0..1.0f32)));
+            // Groups of eight points share a whole time, as a training chunk does.
+            inputs.push(((i / 8) % 4) as f32);
+        }
+        let shifted = |dt: f32| -> Vec<f32> {
+            inputs.iter().enumerate().map(|(i, &x)| if i % 4 == 3 { (x + dt).clamp(0.0, 3.0) } else { x }).collect()
+        };
+        let (mut at, mut before, mut after) = (Vec::new(), Vec::new(), Vec::new());
+        field.encode(&inputs, &mut at);
+        field.encode(&shifted(-1e-3), &mut before);
+        field.encode(&shifted(1e-3), &mut after);
+        for k in 0..n * lf {
+            let near = (at[k] - before[k]).abs().min((at[k] - after[k]).abs());
+            assert!(near < 1e-2, "feature {k}: {} at a whole time, {} / {} around it", at[k], before[k], after[k]);
+        }
+        let mut single = Vec::new();
+        for (r, x) in inputs.chunks(4).enumerate() {
+            field.encode(x, &mut single);
+            for k in 0..lf {
+                assert!((at[r * lf + k] - single[k]).abs() <= 1e-5 * (1.0 + single[k].abs()), "row {r} feature {k}");
+            }
+        }
+        let dfeat: Vec<f32> = (0..n * lf).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let mut batch = vec![0.0f32; field.num_params()];
+        let mut df = dfeat.clone();
+        for l in 0..cfg.levels {
+            field.dispatch::<true>(l, &inputs, &mut df, &mut batch);
+        }
+        let mut rows = vec![0.0f32; field.num_params()];
+        for (r, x) in inputs.chunks(4).enumerate() {
+            let mut df = dfeat[r * lf..(r + 1) * lf].to_vec();
+            for l in 0..cfg.levels {
+                field.dispatch::<true>(l, x, &mut df, &mut rows);
+            }
+        }
+        for (i, (a, b)) in batch.iter().zip(&rows).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "gradient entry {i}: {a} vs {b}");
         }
     }
 

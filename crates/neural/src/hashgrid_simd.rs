@@ -17,6 +17,10 @@ pub(crate) struct LevelArgs<'a> {
     pub res: u32,
     pub res_t: u32,
     pub inv_span: f32,
+    /// The time axis has one cell per time unit (`res_t = time_span`): the time coordinate is
+    /// then clamped to `[0, res_t]` and used as it is, so a whole `t'` lands exactly on a
+    /// vertex (the scalar loop does the same).
+    pub time_exact: bool,
     /// Vertex-index strides of a dense level.
     pub stride: [usize; 4],
     /// `entries − 1` of a hashed level.
@@ -65,6 +69,7 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
             }
         }
         let (w, part) = axes::<D, DENSE>(args, &lanes);
+        let idle = idle_time_corners::<D>(&w);
         let mask = _mm256_set1_epi32(args.mask as i32);
         if F == 2 {
             // Both features of a vertex in one 64-bit element: four points per gather, with
@@ -73,6 +78,9 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
             let dup_lo = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
             let dup_hi = _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7);
             for corner in 0..1usize << D {
+                if skipped::<D>(corner, idle) {
+                    continue;
+                }
                 let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
                 let pairs = table as *const i64;
                 // SAFETY: `idx` is a vertex index or masked hash below the level's entries, and
@@ -101,6 +109,9 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
         }
         let mut acc = [zero; F];
         for corner in 0..1usize << D {
+            if skipped::<D>(corner, idle) {
+                continue;
+            }
             let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
             let at = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
             for (k, acc) in acc.iter_mut().enumerate() {
@@ -141,10 +152,14 @@ fn axes<const D: usize, const DENSE: bool>(
         let (scale, r) = if a < 3 { (1.0, args.res) } else { (args.inv_span, args.res_t) };
         // SAFETY: `lanes[a]` holds eight floats.
         let u = unsafe { _mm256_loadu_ps(lanes[a].as_ptr()) };
-        let u = _mm256_mul_ps(u, _mm256_set1_ps(scale));
-        // max(u, 0) returns 0 for a NaN u; then min(·, 1).
-        let u = _mm256_min_ps(_mm256_max_ps(u, zero), one);
-        let p = _mm256_mul_ps(u, _mm256_set1_ps(r as f32));
+        // max(u, 0) returns 0 for a NaN u; then min(·, 1) (or min(·, r) on an exact time axis).
+        let p = if a == 3 && args.time_exact {
+            _mm256_min_ps(_mm256_max_ps(u, zero), _mm256_set1_ps(r as f32))
+        } else {
+            let u = _mm256_mul_ps(u, _mm256_set1_ps(scale));
+            let u = _mm256_min_ps(_mm256_max_ps(u, zero), one);
+            _mm256_mul_ps(u, _mm256_set1_ps(r as f32))
+        };
         let c = _mm256_min_epi32(_mm256_cvttps_epi32(p), _mm256_set1_epi32(r.saturating_sub(1) as i32));
         let t = _mm256_sub_ps(p, _mm256_cvtepi32_ps(c));
         w[a] = [_mm256_sub_ps(one, t), t];
@@ -196,12 +211,16 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
             }
         }
         let (w, part) = axes::<D, DENSE>(args, &lanes);
+        let idle = idle_time_corners::<D>(&w);
         let mut dv = [_mm256_setzero_ps(); F];
         for k in 0..F {
             // SAFETY: `d[k]` holds eight floats.
             dv[k] = unsafe { _mm256_loadu_ps(d[k].as_ptr()) };
         }
         for corner in 0..corners {
+            if skipped::<D>(corner, idle) {
+                continue;
+            }
             let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
             let idx = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
             // SAFETY: each array holds eight values.
@@ -214,6 +233,9 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
         }
         for j in 0..8 {
             for corner in 0..corners {
+                if skipped::<D>(corner, idle) {
+                    continue;
+                }
                 let e = at[corner][j] as usize;
                 for k in 0..F {
                     // SAFETY: `e / F` is a vertex index or masked hash below the level's
@@ -224,6 +246,27 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
         }
     }
     full
+}
+
+/// For a 4D level: whether every one of the eight points has time weight exactly 0 at the
+/// upper time vertex (`.0`: the corners with bit 3 set contribute nothing) or at the lower one
+/// (`.1`). Points on a frame's time vertex — every training sample of a space–time grid — skip
+/// half the corners; a zero weight adds exactly nothing, so skipping changes no result.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn idle_time_corners<const D: usize>(w: &[[__m256; 2]; 4]) -> (bool, bool) {
+    if D < 4 {
+        return (false, false);
+    }
+    let zero = _mm256_setzero_ps();
+    let all_zero = |v: __m256| _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)) == 0xFF;
+    (all_zero(w[3][1]), all_zero(w[3][0]))
+}
+
+/// Whether `corner` is one [`idle_time_corners`] found idle.
+#[inline(always)]
+fn skipped<const D: usize>(corner: usize, idle: (bool, bool)) -> bool {
+    D == 4 && if (corner >> 3) & 1 == 1 { idle.0 } else { idle.1 }
 }
 
 /// The trilinear weight and the table entry of vertex `corner` (bit `a` = upper along axis `a`)
