@@ -15,9 +15,10 @@
 //!
 //! # Space–time (4D inputs)
 //! The frame time `t'` is mapped to `[0, 1]` by `t' / time_span` (clamped) and the grid is 4D:
-//! level `l` has `min(N_l, time_resolution)` cells along time, the 16 surrounding vertices are
-//! blended quadrilinearly, and hashing uses the 4th prime. Dense levels stay dense in 4D while
-//! they fit.
+//! level `l` has `min(N_l, time_resolution)` cells along time (or, with
+//! `time_base_resolution`, from that many at the coarsest level growing geometrically to
+//! `time_resolution` at the finest), the 16 surrounding vertices are blended quadrilinearly,
+//! and hashing uses the 4th prime. Dense levels stay dense in 4D while they fit.
 //!
 //! # Parameter layout
 //! `grid.level.l` `[entries_l, F]` for each level (feature-fastest), then the MLP's tensors
@@ -69,6 +70,11 @@ pub struct HashGridConfig {
     pub max_resolution: usize,
     /// 4D only: the most cells along time at any level. Default 16.
     pub time_resolution: usize,
+    /// 4D only: cells along time at the coarsest level. The levels between grow geometrically
+    /// to `time_resolution` at the finest (rounded, at most `N_l`), so coarse levels blend
+    /// neighbouring frames and fine ones keep each frame apart. 0: every level has
+    /// `min(N_l, time_resolution)` cells. Default 0.
+    pub time_base_resolution: usize,
     /// 4D only: the span of `t'` mapped onto `[0, 1]` (e.g. number of frames − 1). Default 1.
     pub time_span: f32,
     /// Hidden layers of the MLP. Default 2.
@@ -96,6 +102,7 @@ impl Default for HashGridConfig {
             base_resolution: 16,
             max_resolution: 512,
             time_resolution: 16,
+            time_base_resolution: 0,
             time_span: 1.0,
             mlp_depth: 2,
             mlp_width: 64,
@@ -155,6 +162,19 @@ struct Level {
     offset: usize,
 }
 
+/// Cells along time at level `l` before the cap by `N_l` (see
+/// [`HashGridConfig::time_base_resolution`]).
+fn time_cells(config: &HashGridConfig, l: usize) -> u32 {
+    let top = config.time_resolution.max(1) as f64;
+    let base = config.time_base_resolution;
+    if base == 0 || config.levels < 2 {
+        return top as u32;
+    }
+    let base = (base as f64).min(top);
+    let f = l as f64 / (config.levels - 1) as f64;
+    (base * (top / base).powf(f)).round().clamp(1.0, top) as u32
+}
+
 /// Multiresolution hash encoding + tiny MLP (module docs).
 #[derive(Clone, Debug)]
 pub struct HashGridField {
@@ -197,7 +217,7 @@ impl HashGridField {
         let mut offset = 0;
         for l in 0..config.levels {
             let res = ((config.base_resolution as f64 * growth.powi(l as i32)) + 1e-9).floor().max(1.0) as u32;
-            let res_t = if input_dim == 4 { res.min(config.time_resolution as u32) } else { 0 };
+            let res_t = if input_dim == 4 { res.min(time_cells(config, l)) } else { 0 };
             let side = res as u128 + 1;
             let vertices = side * side * side * (res_t as u128 + 1);
             let dense = vertices <= table as u128;
@@ -685,6 +705,31 @@ mod tests {
         for (i, (a, b)) in batch.iter().zip(&rows).enumerate() {
             assert_eq!(a.to_bits(), b.to_bits(), "gradient entry {i}: {a} vs {b}");
         }
+    }
+
+    /// With a base time resolution the cells along time grow geometrically from the coarsest
+    /// level to the finest (capped by the spatial cells); without it every level has the most.
+    #[test]
+    fn time_cells_grow_from_the_base_to_the_top_resolution() {
+        let cells = |base: usize, top: usize| -> Vec<u32> {
+            let cfg = HashGridConfig {
+                levels: 8,
+                base_resolution: 16,
+                max_resolution: 128,
+                time_resolution: top,
+                time_base_resolution: base,
+                time_span: top as f32,
+                log2_table_size: 14,
+                ..HashGridConfig::default()
+            };
+            HashGridField::new(&cfg, 4, 0).unwrap().levels.iter().map(|l| l.res_t).collect()
+        };
+        assert_eq!(cells(0, 2), [2; 8]);
+        assert_eq!(cells(1, 2), [1, 1, 1, 1, 1, 2, 2, 2]);
+        assert_eq!(cells(1, 15), [1, 1, 2, 3, 5, 7, 10, 15]);
+        assert_eq!(cells(4, 4), [4; 8]);
+        // More cells along time than in space are capped by the spatial cells.
+        assert_eq!(cells(0, 40), [16, 21, 28, 39, 40, 40, 40, 40]);
     }
 
     /// Coarse-to-fine: the finer half of the levels gets no gradient at first, one level joins

@@ -160,6 +160,7 @@ fn small_grid(d: usize, seed: u64) -> HashGridField {
         base_resolution: 2,
         max_resolution: 12,
         time_resolution: 3,
+        time_base_resolution: 0,
         time_span: 3.0,
         mlp_depth: 2,
         mlp_width: 8,
