@@ -216,3 +216,27 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
 fn vol_box(d: &std::path::Path) -> fluidnerf_core::Aabb {
     fluidnerf_io::scene::load_scene(&d.join("scene")).expect("scene").aabb
 }
+
+/// A time step given to the space–time grid is reported as unused: the grid reads time on each
+/// window's frame axis.
+#[test]
+fn a_time_step_given_to_the_grid_field_is_reported_unused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth =
+        "synth -q --preset jet-tr60 --cameras 4 --pixels 16 --resolution 12 --model pinhole --times 14,15,17 -o scene";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    let run = |name: &str, extra: &[&str]| {
+        let mut args = vec!["reconstruct", "scene", "-o", name, "--method", "tr-fast", "--max-iterations", "2"];
+        args.extend(["--resolution", "8", "--checkpoint-every", "0", "--rays-per-image", "16"]);
+        args.extend(extra);
+        let out = fluidnerf(d, &args);
+        ok(&out);
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let warning = "the time step is not used by a hash-grid field";
+    assert!(run("given", &["--time-step", "0.5"]).contains(warning));
+    assert!(!run("inferred", &[]).contains(warning));
+    let temporal = json(&d.join("given/temporal.json"));
+    assert_eq!(temporal["windows"][0]["time_axis"], "frames");
+}

@@ -172,6 +172,12 @@ fn setup(
         session.warn("the scene has a single training time; a time-resolved field reduces to a static one");
     }
     problem.time_step = spec.time_step.unwrap_or_else(|| infer_time_step(&times));
+    if spec.time_step.is_some() && input_dim_of(method) == 4 && matches!(spec.field, FieldConfig::HashGrid(_)) {
+        session.warn(
+            "the time step is not used by a hash-grid field: it reads time on each window's frame axis \
+             (one time vertex per frame, whatever their spacing)",
+        );
+    }
     for &h in &spec.holdout_times {
         if h < times[0] || h > times[times.len() - 1] {
             session.warn(&format!(
@@ -182,7 +188,7 @@ fn setup(
     let plan = plan_windows(times.len(), spec.windows.frames, spec.windows.overlap);
     let window_len = plan.first().map_or(1, |r| r.len());
     let field_cfg = field_for_window(&spec.field, window_len);
-    let input_dim = if method == Method::StaticPerFrame { 3 } else { 4 };
+    let input_dim = input_dim_of(method);
     let field = build_field(&field_cfg, &scene.aabb, input_dim, config.seed)?;
     let num_params = fluidnerf_neural::with_field!(&field, f => f.num_params());
     let pixels: u64 = scene.frames.iter().map(|f| (f.camera.width() * f.camera.height()) as u64).sum();
@@ -841,4 +847,14 @@ pub fn finish_windows(
     };
     let truth = crate::load_truth(scene)?;
     run(scene, config, &dir, &truth, &mut session, true)
+}
+
+/// The field's input dimension for a time-resolved method: 3 for per-frame static fields, 4
+/// for space–time ones.
+fn input_dim_of(method: Method) -> usize {
+    if method == Method::StaticPerFrame {
+        3
+    } else {
+        4
+    }
 }
