@@ -345,7 +345,9 @@ pub struct TemporalArgs {
     /// volumes and metrics are still produced there.
     #[arg(long, value_delimiter = ',')]
     pub holdout_times: Option<Vec<f64>>,
-    /// Frame spacing Δt of t' = (t − t₀)/Δt [default: the smallest gap between training times].
+    /// Frame spacing Δt of the networks' t' = (t − t₀)/Δt [default: the smallest gap between
+    /// training times]. tr-fast does not use it: its grid reads time as the frame position in
+    /// each window, one time vertex per frame however the frames are spaced.
     #[arg(long)]
     pub time_step: Option<f64>,
     /// Origin t₀ of each window's time: `window` (each window's first frame; the hash grid
