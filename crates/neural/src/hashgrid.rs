@@ -562,6 +562,55 @@ mod tests {
         }
     }
 
+    /// Checks that `batch` (the encoding of all of `inputs`, `n × d`) equals the encoding of
+    /// each row alone (the scalar loop) to rounding.
+    fn assert_encoding_matches_rows(field: &HashGridField, inputs: &[f32], batch: &[f32], what: &str) {
+        let (d, lf) = (field.input_dim, field.levels.len() * field.config.features_per_level);
+        let mut single = Vec::new();
+        for (r, x) in inputs.chunks(d).enumerate() {
+            field.encode(x, &mut single);
+            for k in 0..lf {
+                let (a, b) = (batch[r * lf + k], single[k]);
+                assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{what}: row {r} feature {k}: {a} vs {b}");
+            }
+        }
+    }
+
+    /// The gradient of every level's table given ∂L/∂features `dfeat`, scattered for the whole
+    /// batch `inputs` at once and row by row (the scalar loop): `(batch, rows)`.
+    fn gradients_batched_and_by_row(field: &HashGridField, inputs: &[f32], dfeat: &[f32]) -> (Vec<f32>, Vec<f32>) {
+        let (d, levels) = (field.input_dim, field.levels.len());
+        let lf = levels * field.config.features_per_level;
+        let mut batch = vec![0.0f32; field.num_params()];
+        let mut df = dfeat.to_vec();
+        for l in 0..levels {
+            field.dispatch::<true>(l, inputs, &mut df, &mut batch);
+        }
+        let mut rows = vec![0.0f32; field.num_params()];
+        for (r, x) in inputs.chunks(d).enumerate() {
+            let mut df = dfeat[r * lf..(r + 1) * lf].to_vec();
+            for l in 0..levels {
+                field.dispatch::<true>(l, x, &mut df, &mut rows);
+            }
+        }
+        (batch, rows)
+    }
+
+    /// The small grid of the batch tests: dense and hashed levels, a time axis for 4D inputs.
+    fn mixed_grid(f: usize, log2: u32, init_scale: f32) -> HashGridConfig {
+        HashGridConfig {
+            levels: 6,
+            features_per_level: f,
+            base_resolution: 5,
+            max_resolution: 90,
+            time_resolution: 6,
+            time_span: 3.0,
+            log2_table_size: log2,
+            init_scale,
+            ..HashGridConfig::default()
+        }
+    }
+
     /// The encoding of a batch (eight rows at a time vectorised where the CPU can) equals the
     /// row-by-row scalar encoding, for dense and hashed levels, 3D and 4D inputs and every
     /// feature count, with coordinates outside the box clamped alike.
@@ -569,18 +618,7 @@ mod tests {
     fn batched_encoding_matches_row_by_row() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         for (d, f, log2) in [(3, 2, 14), (3, 1, 12), (3, 4, 15), (4, 2, 15), (4, 8, 12)] {
-            let cfg = HashGridConfig {
-                levels: 6,
-                features_per_level: f,
-                base_resolution: 5,
-                max_resolution: 90,
-                time_resolution: 6,
-                time_span: 3.0,
-                log2_table_size: log2,
-                init_scale: 1.0,
-                ..HashGridConfig::default()
-            };
-            let field = HashGridField::new(&cfg, d, 5).unwrap();
+            let field = HashGridField::new(&mixed_grid(f, log2, 1.0), d, 5).unwrap();
             assert!(field.levels.iter().any(|l| l.dense) && field.levels.iter().any(|l| !l.dense));
             let n = 43;
             let inputs: Vec<f32> = (0..n * d)
@@ -588,15 +626,7 @@ mod tests {
                 .collect();
             let mut batch = Vec::new();
             field.encode(&inputs, &mut batch);
-            let lf = cfg.levels * f;
-            let mut single = Vec::new();
-            for (r, x) in inputs.chunks(d).enumerate() {
-                field.encode(x, &mut single);
-                for k in 0..lf {
-                    let (a, b) = (batch[r * lf + k], single[k]);
-                    assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "d {d} F {f}: row {r} feature {k}: {a} vs {b}");
-                }
-            }
+            assert_encoding_matches_rows(&field, &inputs, &batch, &format!("d {d} F {f}"));
         }
     }
 
@@ -607,16 +637,7 @@ mod tests {
     fn batched_encoding_gradient_matches_row_by_row_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
         for (d, f, log2) in [(3, 2, 14), (3, 1, 12), (3, 4, 15), (4, 2, 15), (4, 8, 12)] {
-            let cfg = HashGridConfig {
-                levels: 6,
-                features_per_level: f,
-                base_resolution: 5,
-                max_resolution: 90,
-                time_resolution: 6,
-                time_span: 3.0,
-                log2_table_size: log2,
-                ..HashGridConfig::default()
-            };
+            let cfg = mixed_grid(f, log2, HashGridConfig::default().init_scale);
             let field = HashGridField::new(&cfg, d, 5).unwrap();
             let n = 45;
             // Points along a short segment share cells at every level; a few fall outside.
@@ -625,18 +646,7 @@ mod tests {
                 (0..n * d).map(|i| start[i % d] + (i / d) as f32 * 0.004 + rng.random_range(0.0..0.002)).collect();
             let lf = cfg.levels * f;
             let dfeat: Vec<f32> = (0..n * lf).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let mut batch = vec![0.0f32; field.num_params()];
-            let mut df = dfeat.clone();
-            for l in 0..cfg.levels {
-                field.dispatch::<true>(l, &inputs, &mut df, &mut batch);
-            }
-            let mut single = vec![0.0f32; field.num_params()];
-            for (r, x) in inputs.chunks(d).enumerate() {
-                let mut df = dfeat[r * lf..(r + 1) * lf].to_vec();
-                for l in 0..cfg.levels {
-                    field.dispatch::<true>(l, x, &mut df, &mut single);
-                }
-            }
+            let (batch, single) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
             assert!(batch.iter().filter(|&&g| g != 0.0).count() > n, "d {d} F {f}: too few entries touched");
             for (i, (a, b)) in batch.iter().zip(&single).enumerate() {
                 assert_eq!(a.to_bits(), b.to_bits(), "d {d} F {f}: gradient entry {i}: {a} vs {b}");
@@ -682,26 +692,9 @@ mod tests {
             let near = (at[k] - before[k]).abs().min((at[k] - after[k]).abs());
             assert!(near < 1e-2, "feature {k}: {} at a whole time, {} / {} around it", at[k], before[k], after[k]);
         }
-        let mut single = Vec::new();
-        for (r, x) in inputs.chunks(4).enumerate() {
-            field.encode(x, &mut single);
-            for k in 0..lf {
-                assert!((at[r * lf + k] - single[k]).abs() <= 1e-5 * (1.0 + single[k].abs()), "row {r} feature {k}");
-            }
-        }
+        assert_encoding_matches_rows(&field, &inputs, &at, "whole times");
         let dfeat: Vec<f32> = (0..n * lf).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let mut batch = vec![0.0f32; field.num_params()];
-        let mut df = dfeat.clone();
-        for l in 0..cfg.levels {
-            field.dispatch::<true>(l, &inputs, &mut df, &mut batch);
-        }
-        let mut rows = vec![0.0f32; field.num_params()];
-        for (r, x) in inputs.chunks(4).enumerate() {
-            let mut df = dfeat[r * lf..(r + 1) * lf].to_vec();
-            for l in 0..cfg.levels {
-                field.dispatch::<true>(l, x, &mut df, &mut rows);
-            }
-        }
+        let (batch, rows) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
         for (i, (a, b)) in batch.iter().zip(&rows).enumerate() {
             assert_eq!(a.to_bits(), b.to_bits(), "gradient entry {i}: {a} vs {b}");
         }

@@ -60,15 +60,9 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
     assert!(feats.len() >= n * args.row_len && args.column + F <= args.row_len);
     let zero = _mm256_setzero_ps();
     let table = args.table.as_ptr();
-    let mut lanes = [[0.0f32; 8]; 4];
     let mut out = [[0.0f32; 8]; F];
     for base in (0..full).step_by(8) {
-        for (j, x) in inputs[base * D..(base + 8) * D].chunks_exact(D).enumerate() {
-            for a in 0..D {
-                lanes[a][j] = x[a];
-            }
-        }
-        let (w, part) = axes::<D, DENSE>(args, &lanes);
+        let (w, part) = axes::<D, DENSE>(args, &inputs[base * D..(base + 8) * D]);
         let idle = idle_time_corners::<D>(&w);
         let mask = _mm256_set1_epi32(args.mask as i32);
         if F == 2 {
@@ -135,15 +129,22 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
     full
 }
 
-/// Per axis, for the eight points in `lanes` (`lanes[a][j]` = coordinate `a` of point `j`): the
-/// weights of the lower and upper vertex, and their contributions to the vertex index (dense:
-/// coordinate × stride) or hash (coordinate × prime) — what the scalar loop computes per point.
+/// Per axis, for the eight points in `points` (`8 × D`, row by row): the weights of the lower
+/// and upper vertex, and their contributions to the vertex index (dense: coordinate × stride)
+/// or hash (coordinate × prime) — what the scalar loop computes per point.
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 fn axes<const D: usize, const DENSE: bool>(
     args: &LevelArgs<'_>,
-    lanes: &[[f32; 8]; 4],
+    points: &[f32],
 ) -> ([[__m256; 2]; 4], [[__m256i; 2]; 4]) {
+    // Coordinate `a` of point `j` at `lanes[a][j]`.
+    let mut lanes = [[0.0f32; 8]; 4];
+    for (j, x) in points.chunks_exact(D).take(8).enumerate() {
+        for a in 0..D {
+            lanes[a][j] = x[a];
+        }
+    }
     let zero = _mm256_setzero_ps();
     let one = _mm256_set1_ps(1.0);
     let mut w = [[zero; 2]; 4];
@@ -194,23 +195,19 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
     assert!(dfeats.len() >= n * args.row_len && args.column + F <= args.row_len);
     let corners = 1usize << D;
     let g = gtable.as_mut_ptr();
-    let mut lanes = [[0.0f32; 8]; 4];
     let mut d = [[0.0f32; 8]; F];
     // Per corner: the eight points' entries, and their F products weight × ∂L/∂feature.
     let mut at = [[0u32; 8]; 16];
     let mut prod = [[[0.0f32; 8]; F]; 16];
     let mask = _mm256_set1_epi32(args.mask as i32);
     for base in (0..full).step_by(8) {
-        for (j, x) in inputs[base * D..(base + 8) * D].chunks_exact(D).enumerate() {
-            for a in 0..D {
-                lanes[a][j] = x[a];
-            }
+        for j in 0..8 {
             let row = (base + j) * args.row_len + args.column;
             for k in 0..F {
                 d[k][j] = dfeats[row + k];
             }
         }
-        let (w, part) = axes::<D, DENSE>(args, &lanes);
+        let (w, part) = axes::<D, DENSE>(args, &inputs[base * D..(base + 8) * D]);
         let idle = idle_time_corners::<D>(&w);
         let mut dv = [_mm256_setzero_ps(); F];
         for k in 0..F {

@@ -164,12 +164,10 @@ fn small_grid() -> HashGridConfig {
     }
 }
 
-#[test]
-fn windows_warm_start_stitch_continuously_and_round_trip() {
-    let times = [0.0, 1.0, 2.0, 3.0];
-    let p = problem(&times);
-    let windows = WindowConfig { frames: 3, overlap: 2, time_origin: TimeOrigin::Window, ..WindowConfig::default() };
-    let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), 3);
+/// The small space–time grid for windows of `frames` frames (its configuration and a fresh
+/// field), and the training settings the window tests share.
+fn grid_windows_setup(frames: usize) -> (FieldConfig, HashGridField, TrainConfig) {
+    let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), frames);
     let FieldConfig::HashGrid(grid) = &field_cfg else { unreachable!() };
     let init = HashGridField::new(grid, 4, 2).expect("field");
     let cfg = TrainConfig {
@@ -179,6 +177,15 @@ fn windows_warm_start_stitch_continuously_and_round_trip() {
         fine_samples: 0,
         ..quick(300, 1e-2)
     };
+    (field_cfg, init, cfg)
+}
+
+#[test]
+fn windows_warm_start_stitch_continuously_and_round_trip() {
+    let times = [0.0, 1.0, 2.0, 3.0];
+    let p = problem(&times);
+    let windows = WindowConfig { frames: 3, overlap: 2, time_origin: TimeOrigin::Window, ..WindowConfig::default() };
+    let (field_cfg, init, cfg) = grid_windows_setup(3);
     let warm =
         train_windows(&p, &ViewMasks::default(), &cfg, &windows, init.clone(), 5, ResumeState::default(), |_| {
             ControlFlow::Continue(())
@@ -257,16 +264,7 @@ fn grid_windows_place_unevenly_spaced_frames_on_their_own_vertices() {
     let times = [0.0, 1.0, 3.0];
     let p = problem(&times);
     let windows = WindowConfig { frames: 3, overlap: 0, ..WindowConfig::default() };
-    let field_cfg = field_for_window(&FieldConfig::HashGrid(small_grid()), 3);
-    let FieldConfig::HashGrid(grid) = &field_cfg else { unreachable!() };
-    let init = HashGridField::new(grid, 4, 2).expect("field");
-    let cfg = TrainConfig {
-        occupancy: Some(fluidnerf_neural::occupancy::OccupancyConfig::default()),
-        rays_per_image: 128,
-        coarse_samples: 32,
-        fine_samples: 0,
-        ..quick(300, 1e-2)
-    };
+    let (_, init, cfg) = grid_windows_setup(3);
     let run = train_windows(&p, &ViewMasks::default(), &cfg, &windows, init, 5, ResumeState::default(), |_| {
         ControlFlow::Continue(())
     })
