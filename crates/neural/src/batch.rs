@@ -154,6 +154,16 @@ pub fn training_batch(
     }
 }
 
+/// The learning rate of training iteration `iteration`: `cfg.schedule` at the iteration, or,
+/// with [`TrainConfig::schedule_per_frame`] and [`Batching::OneTimeStep`] over `n_steps` frame
+/// times, at the number of updates the iteration's frame has had before it (the frame of
+/// iteration `i` is `i mod n_steps`, so that is `⌊i / n_steps⌋`).
+pub fn learning_rate(cfg: &TrainConfig, iteration: usize, n_steps: usize) -> f32 {
+    let per_frame = cfg.schedule_per_frame && cfg.batching == Batching::OneTimeStep && n_steps > 1;
+    let n = if per_frame { iteration / n_steps } else { iteration };
+    cfg.schedule.lr(n as u64)
+}
+
 /// The fixed subset of held-out rays evaluated during training (module doc), or None without
 /// held-out rays or with `validate_pixels = 0`.
 pub fn holdout_batch(prep: &Prepared, cfg: &TrainConfig, seed: u64) -> Option<RayBatch> {
@@ -192,6 +202,23 @@ mod tests {
         assert_eq!(stream_seed(5, 3, 2), 0xa05b_155f_1d82_5eee);
         assert_ne!(stream_seed(3, 7, 0), stream_seed(3, 8, 0));
         assert_ne!(stream_seed(3, 7, 0), stream_seed(3, 7, 1));
+    }
+
+    #[test]
+    fn a_per_frame_schedule_gives_each_frame_the_rate_of_its_own_updates() {
+        let mut cfg = TrainConfig { batching: Batching::OneTimeStep, ..Default::default() };
+        // The dissertation's schedule counts iterations.
+        assert_eq!(learning_rate(&cfg, 7, 3), cfg.schedule.lr(7));
+        cfg.schedule_per_frame = true;
+        // Iterations 6, 7, 8 are the third update (n = 2) of frames 0, 1, 2.
+        for it in 6..9 {
+            assert_eq!(learning_rate(&cfg, it, 3), cfg.schedule.lr(2));
+        }
+        assert_eq!(learning_rate(&cfg, 9, 3), cfg.schedule.lr(3));
+        // One frame, or every view in each iteration: iterations are the frame's updates.
+        assert_eq!(learning_rate(&cfg, 7, 1), cfg.schedule.lr(7));
+        cfg.batching = Batching::AllViews;
+        assert_eq!(learning_rate(&cfg, 7, 3), cfg.schedule.lr(7));
     }
 
     #[test]

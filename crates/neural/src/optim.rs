@@ -5,6 +5,11 @@
 //!   `θ ← θ − lr · m̂ / (√v̂ + ε)` with `m̂ = m / (1 − β₁ᵗ)`, `v̂ = v / (1 − β₂ᵗ)`.
 //!   Defaults are the "default" hyperparameters the dissertation keeps from NeRF:
 //!   β₁ = 0.9, β₂ = 0.999, ε = 10⁻⁷ (NeRF and TensorFlow's value; PyTorch uses 10⁻⁸).
+//!   With [`AdamConfig::lazy`] an element whose gradient is exactly zero is left as it is
+//!   (parameter and both moments), as instant-ngp does for its hash-table entries: a table entry
+//!   that no sample of the batch touched is not moved by momentum from earlier batches. Every
+//!   element with a non-zero gradient gets the dense update above, bias correction included
+//!   (`t` counts the optimiser's steps, not the element's).
 //! - [`LrSchedule`]: exponential decay `lr(i) = lr₀ (lr₁ / lr₀)^{i / N}`, 5·10⁻⁴ → 5·10⁻⁵ at
 //!   N = 25 000 iterations; like NeRF's schedule it keeps decaying past N.
 //! - [`sum_gradients`]: the reduction of per-thread gradient buffers (see
@@ -33,11 +38,13 @@ pub struct AdamConfig {
     pub beta2: f32,
     /// ε added to √v̂. Default 1e-7.
     pub eps: f32,
+    /// Skip elements whose gradient is exactly zero (see the module docs). Default false.
+    pub lazy: bool,
 }
 
 impl Default for AdamConfig {
     fn default() -> Self {
-        Self { beta1: 0.9, beta2: 0.999, eps: 1e-7 }
+        Self { beta1: 0.9, beta2: 0.999, eps: 1e-7, lazy: false }
     }
 }
 
@@ -92,15 +99,22 @@ impl Adam {
             bias1: (1.0 / (1.0 - (c.beta1 as f64).powf(t))) as f32,
             bias2: (1.0 / (1.0 - (c.beta2 as f64).powf(t))) as f32,
         };
+        let kernel = |p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32]| {
+            if !c.lazy {
+                adam_kernel(p, g, m, v, coeffs);
+            } else if g.iter().any(|&g| g != 0.0) {
+                lazy_adam_kernel(p, g, m, v, coeffs);
+            }
+        };
         if params.len() <= BLOCK {
-            adam_kernel(params, grads, &mut self.m, &mut self.v, coeffs);
+            kernel(params, grads, &mut self.m, &mut self.v);
         } else {
             params
                 .par_chunks_mut(BLOCK)
                 .zip(grads.par_chunks(BLOCK))
                 .zip(self.m.par_chunks_mut(BLOCK))
                 .zip(self.v.par_chunks_mut(BLOCK))
-                .for_each(|(((p, g), m), v)| adam_kernel(p, g, m, v, coeffs));
+                .for_each(|(((p, g), m), v)| kernel(p, g, m, v));
         }
     }
 }
@@ -123,6 +137,22 @@ multiversion! {
             let m_hat = *m * c.bias1;
             let v_hat = *v * c.bias2;
             *p -= c.lr * m_hat / (v_hat.sqrt() + c.eps);
+        }
+    }
+}
+
+multiversion! {
+    /// [`adam_kernel`] on the elements whose gradient is non-zero; the others keep their
+    /// values. Branch-free (selects), so it vectorises like the dense kernel.
+    fn lazy_adam_kernel(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], c: AdamCoeffs) {
+        for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+            let live = g != 0.0;
+            let m_new = c.beta1 * *m + (1.0 - c.beta1) * g;
+            let v_new = c.beta2 * *v + (1.0 - c.beta2) * (g * g);
+            let p_new = *p - c.lr * (m_new * c.bias1) / ((v_new * c.bias2).sqrt() + c.eps);
+            *m = if live { m_new } else { *m };
+            *v = if live { v_new } else { *v };
+            *p = if live { p_new } else { *p };
         }
     }
 }
@@ -193,5 +223,42 @@ mod tests {
         assert!((s.lr(0) - 5e-4).abs() < 1e-9);
         assert!((s.lr(25_000) - 5e-5).abs() < 1e-10);
         assert!((s.lr(12_500) - 5e-4 * 0.1f32.sqrt()).abs() < 1e-9);
+    }
+
+    /// Lazy Adam leaves elements without a gradient exactly as they were, and updates the others
+    /// exactly as dense Adam does: over several blocks (one of them without any gradient), from
+    /// moments that are not zero, for several steps.
+    #[test]
+    fn lazy_adam_skips_elements_without_gradient_and_matches_dense_elsewhere() {
+        let n = 3 * BLOCK + 5;
+        let live = |i: usize| i % 3 != 0 && !(BLOCK..2 * BLOCK).contains(&i);
+        let start: Vec<f32> = (0..n).map(|i| ((i * 37 % 101) as f32 - 50.0) * 1e-3).collect();
+        let mut dense = Adam::new(n, AdamConfig::default());
+        dense.m.iter_mut().enumerate().for_each(|(i, m)| *m = ((i % 7) as f32 - 3.0) * 1e-4);
+        dense.v.iter_mut().enumerate().for_each(|(i, v)| *v = (1 + i % 5) as f32 * 1e-6);
+        dense.step = 4;
+        let mut lazy = dense.clone();
+        lazy.config.lazy = true;
+        let (m0, v0) = (dense.m.clone(), dense.v.clone());
+        let (mut p_dense, mut p_lazy) = (start.clone(), start.clone());
+        for step in 0..4 {
+            let g: Vec<f32> =
+                (0..n).map(|i| if live(i) { ((i + step) % 11) as f32 * 1e-2 - 0.05 + 1e-3 } else { 0.0 }).collect();
+            dense.step(&mut p_dense, &g, 0.01);
+            lazy.step(&mut p_lazy, &g, 0.01);
+        }
+        let mut coasted = 0;
+        for i in 0..n {
+            if live(i) {
+                assert_eq!(p_lazy[i].to_bits(), p_dense[i].to_bits(), "element {i}");
+                assert_eq!(lazy.m[i].to_bits(), dense.m[i].to_bits(), "m of element {i}");
+                assert_eq!(lazy.v[i].to_bits(), dense.v[i].to_bits(), "v of element {i}");
+            } else {
+                assert_eq!((p_lazy[i], lazy.m[i], lazy.v[i]), (start[i], m0[i], v0[i]), "element {i}");
+                coasted += usize::from(p_dense[i] != start[i]);
+            }
+        }
+        // Dense Adam moves elements without a gradient by their momentum: the two differ.
+        assert!(coasted > n / 4, "dense Adam moved {coasted} elements without a gradient");
     }
 }

@@ -113,6 +113,11 @@ pub struct TrainConfig {
     pub validate_pixels: usize,
     /// Views of one iteration. Default all views.
     pub batching: Batching,
+    /// With [`Batching::OneTimeStep`], advance the learning-rate schedule once per cycle
+    /// through the frames instead of once per iteration: a frame's `n`-th update then uses
+    /// `schedule.lr(n)`, as a run on that frame alone would. Default false (the dissertation's
+    /// schedule counts iterations).
+    pub schedule_per_frame: bool,
     /// Start a fresh field from the uniform value that explains the mean training pixel
     /// ([`TrainableField::start_uniform`]) instead of the representation's own
     /// initialisation. Default true.
@@ -141,6 +146,7 @@ impl Default for TrainConfig {
             validate_every: 100,
             validate_pixels: 4096,
             batching: Batching::AllViews,
+            schedule_per_frame: false,
             uniform_start: true,
             prior: Prior::default(),
         }
@@ -823,7 +829,7 @@ pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
             return Err(NeuralError::Diverged { iteration: it, loss });
         }
         total_samples += samples;
-        let lr = cfg.schedule.lr(it as u64);
+        let lr = crate::batch::learning_rate(cfg, it, steps.len());
         learner.adam.config = cfg.adam;
         engine.apply_gradient(&mut learner.field, &mut learner.adam, lr);
         learner.losses.push(loss as f32);
