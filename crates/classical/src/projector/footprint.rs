@@ -58,7 +58,10 @@
 //! are summed. Back projection gathers: every voxel computes its footprint again and reads its
 //! pixels from a zero-padded copy of the image, so z-slices are independent and no atomics or
 //! per-thread volumes are needed; the back projector does the same arithmetic as the forward
-//! one. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
+//! one. With AVX2 and footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's
+//! row of pixels is too short for a vector) the back projector works across voxels instead:
+//! one gather reads a footprint pixel of eight voxels, weighted from the footprints' own
+//! pixel-major layout, in the same order of operations as the voxel-by-voxel loop. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
 //! `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding. The kernels are plain loops over fixed-size arrays; they
 //! are compiled twice, for the x86-64 baseline and for AVX2, and the variant is chosen at run
 //! time (both give identical results).
@@ -123,12 +126,24 @@ struct Chunk<const N: usize> {
     amp: [f32; CHUNK],
     wu: [[f32; N]; CHUNK],
     wv: [[f32; N]; CHUNK],
+    /// The same weights pixel-major, `wu_lanes[k][q]`, for kernels that work across voxels
+    /// (written instead of `wu`, `wv` by [`FootView::chunk`] with `LANES`).
+    wu_lanes: [[f32; CHUNK]; N],
+    wv_lanes: [[f32; CHUNK]; N],
 }
 
 impl<const N: usize> Default for Chunk<N> {
     fn default() -> Self {
         let z = [0f32; CHUNK];
-        Chunk { col: [-1.0; CHUNK], row: z, amp: z, wu: [[0.0; N]; CHUNK], wv: [[0.0; N]; CHUNK] }
+        Chunk {
+            col: [-1.0; CHUNK],
+            row: z,
+            amp: z,
+            wu: [[0.0; N]; CHUNK],
+            wv: [[0.0; N]; CHUNK],
+            wu_lanes: [z; N],
+            wv_lanes: [z; N],
+        }
     }
 }
 
@@ -161,14 +176,14 @@ fn floor_small(t: f32) -> f32 {
 }
 
 /// The pixel integrals of `CHUNK` trapezoids (unit height, boxes `p ≥ l`, centred at `off`) on
-/// pixels `[k, k + 1)`, `k < N`, vectorised across the voxels: `w[q][k]` for pixel `k` of voxel
-/// `q`, summing to `p` when the support lies inside.
+/// pixels `[k, k + 1)`, `k < N`, vectorised across the voxels: `store(q, k, w)` for pixel `k` of
+/// voxel `q`, the weights of a voxel summing to `p` when the support lies inside.
 #[inline(always)]
 fn axis_weights_chunk<const N: usize>(
     off: &[f32; CHUNK],
     p: &[f32; CHUNK],
     l: &[f32; CHUNK],
-    w: &mut [[f32; N]; CHUNK],
+    mut store: impl FnMut(usize, usize, f32),
 ) {
     // Per voxel once (a division is dear next to the rest), then per pixel.
     let (mut h1, mut h2, mut inv) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
@@ -186,7 +201,7 @@ fn axis_weights_chunk<const N: usize>(
             let b = fmin(fmax(t, -h2), h2) + h2;
             let c = fmin(fmax(t, h2), h1) - h2;
             let cdf = a * a * inv + b + c - c * c * inv;
-            w[q][k] = cdf - prev[q];
+            store(q, k, cdf - prev[q]);
             prev[q] = cdf;
         }
     }
@@ -326,10 +341,11 @@ impl FootView {
     }
 
     /// The footprints of `CHUNK` consecutive voxels of a row (`p = base + (i0 + q) · step`),
-    /// side `N`, structure of arrays. Branch-free so that it vectorises across voxels; voxels
-    /// whose square misses the padded image or that lie behind the camera get `tc = −1`.
+    /// side `N`, structure of arrays, the weights voxel-major (`wu`, `wv`) or with `LANES`
+    /// pixel-major (`wu_lanes`, `wv_lanes`). Branch-free so that it vectorises across voxels;
+    /// voxels whose square misses the padded image or that lie behind the camera get `tc = −1`.
     #[inline(always)]
-    fn chunk<const N: usize, const DISTORTED: bool>(
+    fn chunk<const N: usize, const DISTORTED: bool, const LANES: bool>(
         &self,
         base: [f32; 3],
         step: [f32; 3],
@@ -360,8 +376,13 @@ impl FootView {
             off_v[q] = (v + n + 0.5) - row;
             out.amp[q] = gamma / (pu[q] * pv[q]);
         }
-        axis_weights_chunk::<N>(&off_u, &pu, &lu, &mut out.wu);
-        axis_weights_chunk::<N>(&off_v, &pv, &lv, &mut out.wv);
+        if LANES {
+            axis_weights_chunk::<N>(&off_u, &pu, &lu, |q, k, w| out.wu_lanes[k][q] = w);
+            axis_weights_chunk::<N>(&off_v, &pv, &lv, |q, k, w| out.wv_lanes[k][q] = w);
+        } else {
+            axis_weights_chunk::<N>(&off_u, &pu, &lu, |q, k, w| out.wu[q][k] = w);
+            axis_weights_chunk::<N>(&off_v, &pv, &lv, |q, k, w| out.wv[q][k] = w);
+        }
     }
 
     /// Largest footprint support `p + l` along `u` and along `v` over a 9³ lattice spanning the
@@ -479,7 +500,7 @@ impl FootprintProjector {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (k * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
+                    fv.chunk::<N, DISTORTED, false>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
                         if ch.col[q] >= 0.0 {
                             visit(row0 + i0 + q, &ch, q);
@@ -512,7 +533,7 @@ impl FootprintProjector {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (k * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
+                    fv.chunk::<N, DISTORTED, false>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
                         let g = x[row0 + i0 + q];
                         let Some((col, row, amp)) = ch.get(q) else { continue };
@@ -559,7 +580,7 @@ impl FootprintProjector {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (kk * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED>(base, step, i0, &mut ch);
+                    fv.chunk::<N, DISTORTED, false>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
                         let Some((col, row, amp)) = ch.get(q) else { continue };
                         let (wu, wv) = ch.weights(q);
@@ -588,6 +609,77 @@ impl FootprintProjector {
                                 sv += wv[r] * rm[r];
                             }
                             cs[idx] += amp * su * sv;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Self::gather`] without column sums, eight voxels at a time in the AVX2 lanes: each
+    /// footprint pixel of eight voxels is read with one gather, and the weights stay in the
+    /// pixel-major layout the footprints are computed in. Every voxel's arithmetic is that of
+    /// [`Self::gather`] in the same order (rows summed per column, then columns), so the results
+    /// are identical. For small sides, where a voxel's row is too short for a vector of its own.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, and the padded image must hold fewer than 2³¹ pixels.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn gather_lanes<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        y: &[f32],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        const LANES: usize = 8;
+        let fv = &self.views[view];
+        let pw = fv.padded().0;
+        debug_assert!(y.len() == pw * fv.padded().1 && y.len() < i32::MAX as usize);
+        let nr = fv.rows;
+        let [nx, ny, _] = self.grid.dims;
+        let mut ch = Chunk::<N>::default();
+        let mut sums = [0f32; CHUNK];
+        let pw_v = _mm256_set1_epi32(pw as i32);
+        for (kk, k) in ks.enumerate() {
+            for j in 0..ny {
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                let row0 = (kk * ny + j) * nx;
+                for i0 in (0..nx).step_by(CHUNK) {
+                    fv.chunk::<N, DISTORTED, true>(base, step, i0, &mut ch);
+                    for h in (0..CHUNK).step_by(LANES) {
+                        // SAFETY: every pointer below is in bounds: `h + 8 ≤ CHUNK` for the chunk's
+                        // arrays; a voxel that hits has its N × rows square inside the padded
+                        // image (see `chunk`: c0 < width + N, r0 < height + N, rows ≤ N), and
+                        // one that misses reads from pixel 0 onwards, inside the image too.
+                        unsafe {
+                            let col = _mm256_loadu_ps(ch.col.as_ptr().add(h));
+                            let hit = _mm256_cmp_ps::<_CMP_GE_OQ>(col, _mm256_setzero_ps());
+                            let at = _mm256_add_epi32(
+                                _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))), pw_v),
+                                _mm256_cvttps_epi32(col),
+                            );
+                            let at = _mm256_and_si256(at, _mm256_castps_si256(hit));
+                            let mut sum = _mm256_setzero_ps();
+                            for c in 0..N {
+                                let mut acc = _mm256_setzero_ps();
+                                for r in 0..nr {
+                                    let idx = _mm256_add_epi32(at, _mm256_set1_epi32((r * pw + c) as i32));
+                                    let px = _mm256_i32gather_ps::<4>(y.as_ptr(), idx);
+                                    let wr = _mm256_loadu_ps(ch.wv_lanes[r].as_ptr().add(h));
+                                    acc = _mm256_add_ps(acc, _mm256_mul_ps(wr, px));
+                                }
+                                let wc = _mm256_loadu_ps(ch.wu_lanes[c].as_ptr().add(h));
+                                sum = _mm256_add_ps(sum, _mm256_mul_ps(acc, wc));
+                            }
+                            _mm256_storeu_ps(sums.as_mut_ptr().add(h), sum);
+                        }
+                    }
+                    for q in 0..CHUNK.min(nx - i0) {
+                        if ch.col[q] >= 0.0 {
+                            out[row0 + i0 + q] += ch.amp[q] * sums[q];
                         }
                     }
                 }
@@ -706,6 +798,10 @@ macro_rules! dispatch {
     };
 }
 
+/// Largest footprint side back-projected with [`FootprintProjector::gather_lanes`]: wider
+/// footprints read each voxel's rows as vectors of their own, which is cheaper than gathers.
+const LANE_GATHER_MAX_SIDE: usize = 4;
+
 /// Whether the AVX2 variants of the kernels can run (cached by the standard library).
 #[inline]
 fn has_avx2() -> bool {
@@ -775,6 +871,10 @@ mod kernels {
                 p.gather::<N, D>(view, ks, y, masks, out, col_sums)
             }
             if has_avx2() {
+                if N <= LANE_GATHER_MAX_SIDE && col_sums.is_none() && y.len() < i32::MAX as usize {
+                    // SAFETY: AVX2 was detected on this CPU, and the image is small enough.
+                    return unsafe { p.gather_lanes::<N, D>(view, ks, y, out) };
+                }
                 // SAFETY: AVX2 was detected on this CPU just above.
                 return unsafe { avx2::<N, D>(p, view, ks, y, masks, out, col_sums) };
             }
