@@ -61,7 +61,8 @@
 //! one. With AVX2 and footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's
 //! row of pixels is too short for a vector) the back projector works across voxels instead:
 //! one gather reads a footprint pixel of eight voxels, weighted from the footprints' own
-//! pixel-major layout, in the same order of operations as the voxel-by-voxel loop. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
+//! pixel-major layout, in the same order of operations as the voxel-by-voxel loop; the forward
+//! projector then reads each voxel's weights from that layout too, without transposing them. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
 //! `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding. The kernels are plain loops over fixed-size arrays; they
 //! are compiled twice, for the x86-64 baseline and for AVX2, and the variant is chosen at run
 //! time (both give identical results).
@@ -515,7 +516,7 @@ impl FootprintProjector {
     /// (voxels alternate between them by parity: neighbouring voxels mostly hit the same pixels,
     /// and alternating breaks the read-modify-write chains through memory).
     #[inline(always)]
-    fn scatter<const N: usize, const DISTORTED: bool>(
+    fn scatter<const N: usize, const DISTORTED: bool, const LANES: bool>(
         &self,
         view: usize,
         ks: Range<usize>,
@@ -533,17 +534,27 @@ impl FootprintProjector {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (k * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED, false>(base, step, i0, &mut ch);
+                    fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
                     for q in 0..CHUNK.min(nx - i0) {
                         let g = x[row0 + i0 + q];
                         let Some((col, row, amp)) = ch.get(q) else { continue };
                         if g == 0.0 {
                             continue;
                         }
-                        let (wu, wv) = ch.weights(q);
                         let a = g * amp;
                         let at = row * pw + col;
                         let dst = if q & 1 == 0 { &mut *even } else { &mut *odd };
+                        if LANES {
+                            for r in 0..nr {
+                                let s = a * ch.wv_lanes[r][q];
+                                let line: &mut [f32; N] = (&mut dst[at + r * pw..][..N]).try_into().expect("N pixels");
+                                for c in 0..N {
+                                    line[c] += s * ch.wu_lanes[c][q];
+                                }
+                            }
+                            continue;
+                        }
+                        let (wu, wv) = ch.weights(q);
                         for (r, &wr) in wv[..nr].iter().enumerate() {
                             let s = a * wr;
                             let line: &mut [f32; N] = (&mut dst[at + r * pw..][..N]).try_into().expect("N pixels");
@@ -798,8 +809,11 @@ macro_rules! dispatch {
     };
 }
 
-/// Largest footprint side back-projected with [`FootprintProjector::gather_lanes`]: wider
-/// footprints read each voxel's rows as vectors of their own, which is cheaper than gathers.
+/// Largest footprint side for which the AVX2 kernels keep the weights pixel-major, as the
+/// footprints are computed: back projection reads eight voxels per gather
+/// ([`FootprintProjector::gather_lanes`]) and forward projection reads each voxel's weights from
+/// the lanes, saving the transposition. Wider footprints read each voxel's rows as vectors of
+/// their own, which is cheaper than gathers.
 const LANE_GATHER_MAX_SIDE: usize = 4;
 
 /// Whether the AVX2 variants of the kernels can run (cached by the standard library).
@@ -837,14 +851,18 @@ mod kernels {
                 x: &[f32],
                 img: &mut [f32],
             ) {
-                p.scatter::<N, D>(view, ks, x, img)
+                if N <= LANE_GATHER_MAX_SIDE {
+                    p.scatter::<N, D, true>(view, ks, x, img)
+                } else {
+                    p.scatter::<N, D, false>(view, ks, x, img)
+                }
             }
             if has_avx2() {
                 // SAFETY: AVX2 was detected on this CPU just above.
                 return unsafe { avx2::<N, D>(p, view, ks, x, img) };
             }
         }
-        p.scatter::<N, D>(view, ks, x, img)
+        p.scatter::<N, D, false>(view, ks, x, img)
     }
 
     pub(super) fn gather<const N: usize, const D: bool>(
