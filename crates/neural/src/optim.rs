@@ -92,6 +92,7 @@ impl Adam {
         let t = self.step as f64;
         let c = self.config;
         let coeffs = AdamCoeffs {
+            lazy: c.lazy,
             beta1: c.beta1,
             beta2: c.beta2,
             eps: c.eps,
@@ -100,10 +101,9 @@ impl Adam {
             bias2: (1.0 / (1.0 - (c.beta2 as f64).powf(t))) as f32,
         };
         let kernel = |p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32]| {
-            if !c.lazy {
+            // A lazy block without any gradient is left as it is.
+            if !c.lazy || g.iter().any(|&g| g != 0.0) {
                 adam_kernel(p, g, m, v, coeffs);
-            } else if g.iter().any(|&g| g != 0.0) {
-                lazy_adam_kernel(p, g, m, v, coeffs);
             }
         };
         if params.len() <= BLOCK {
@@ -121,6 +121,7 @@ impl Adam {
 
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct AdamCoeffs {
+    lazy: bool,
     beta1: f32,
     beta2: f32,
     eps: f32,
@@ -130,23 +131,11 @@ pub(crate) struct AdamCoeffs {
 }
 
 multiversion! {
+    /// One Adam step per element; with `c.lazy`, elements whose gradient is zero keep their
+    /// values. Branch-free (selects), so it vectorises either way.
     fn adam_kernel(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], c: AdamCoeffs) {
         for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
-            *m = c.beta1 * *m + (1.0 - c.beta1) * g;
-            *v = c.beta2 * *v + (1.0 - c.beta2) * (g * g);
-            let m_hat = *m * c.bias1;
-            let v_hat = *v * c.bias2;
-            *p -= c.lr * m_hat / (v_hat.sqrt() + c.eps);
-        }
-    }
-}
-
-multiversion! {
-    /// [`adam_kernel`] on the elements whose gradient is non-zero; the others keep their
-    /// values. Branch-free (selects), so it vectorises like the dense kernel.
-    fn lazy_adam_kernel(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], c: AdamCoeffs) {
-        for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
-            let live = g != 0.0;
+            let live = !c.lazy || g != 0.0;
             let m_new = c.beta1 * *m + (1.0 - c.beta1) * g;
             let v_new = c.beta2 * *v + (1.0 - c.beta2) * (g * g);
             let p_new = *p - c.lr * (m_new * c.bias1) / ((v_new * c.bias2).sqrt() + c.eps);
