@@ -156,7 +156,9 @@ impl Default for VideoOptions {
 
 impl VideoOptions {
     fn keeps(&self, index: usize) -> bool {
-        index >= self.start && self.end.is_none_or(|e| index < e) && (index - self.start) % self.every.max(1) == 0
+        index >= self.start
+            && self.end.is_none_or(|e| index < e)
+            && (index - self.start).is_multiple_of(self.every.max(1))
     }
 
     /// Whether no frame at or after `index` is kept.

@@ -220,7 +220,7 @@ mod tests {
     #[test]
     fn lazy_adam_skips_elements_without_gradient_and_matches_dense_elsewhere() {
         let n = 3 * BLOCK + 5;
-        let live = |i: usize| i % 3 != 0 && !(BLOCK..2 * BLOCK).contains(&i);
+        let live = |i: usize| !i.is_multiple_of(3) && !(BLOCK..2 * BLOCK).contains(&i);
         let start: Vec<f32> = (0..n).map(|i| ((i * 37 % 101) as f32 - 50.0) * 1e-3).collect();
         let mut dense = Adam::new(n, AdamConfig::default());
         dense.m.iter_mut().enumerate().for_each(|(i, m)| *m = ((i % 7) as f32 - 3.0) * 1e-4);

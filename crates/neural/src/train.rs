@@ -835,7 +835,7 @@ pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
         learner.losses.push(loss as f32);
         learner.iteration += 1;
         let holdout = match &holdout {
-            Some(h) if cfg.validate_every > 0 && learner.iteration % cfg.validate_every == 0 => {
+            Some(h) if cfg.validate_every > 0 && learner.iteration.is_multiple_of(cfg.validate_every) => {
                 let mse = engine.render(&learner.field, prep, cfg, h, &mut holdout_pixels).loss as f32;
                 learner.holdout_losses.push((learner.iteration, mse));
                 Some(mse)

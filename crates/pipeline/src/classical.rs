@@ -169,14 +169,14 @@ pub(crate) fn run(
             let train_time_s = t_solve.elapsed().as_secs_f64() - eval_s;
             let t_eval = Instant::now();
             let nrmse = match curve.as_mut() {
-                Some(c) if eval_every > 0 && iteration % eval_every == 0 => {
+                Some(c) if eval_every > 0 && iteration.is_multiple_of(eval_every) => {
                     Some(c.push(iteration, train_time_s, s.volume))
                 }
                 _ => None,
             };
             let mut out_of_patience = false;
             let held = match &holdout {
-                Some(h) if held_out_rule && iteration % holdout_every == 0 => {
+                Some(h) if held_out_rule && iteration.is_multiple_of(holdout_every) => {
                     let loss = h.loss(s.volume);
                     holdout_history.push(HoldoutPoint { iteration, loss });
                     out_of_patience = best.record(iteration, loss, || s.volume.to_vec());

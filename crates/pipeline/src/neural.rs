@@ -226,7 +226,7 @@ impl Ctx<'_> {
                 }
             }
             let nrmse = match &sample {
-                Some(t) if eval_every > 0 && s.iteration % eval_every == 0 => {
+                Some(t) if eval_every > 0 && s.iteration.is_multiple_of(eval_every) => {
                     let n = nrmse_of(s.field, t);
                     nrmse_history.push(NrmsePoint { iteration: s.iteration, train_time_s: s.train_time_s, nrmse: n });
                     Some(n)
@@ -252,7 +252,7 @@ impl Ctx<'_> {
                     flow = ControlFlow::Break(());
                 }
             }
-            if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
+            if config.checkpoint_every > 0 && s.iteration.is_multiple_of(config.checkpoint_every) {
                 match write_checkpoint(dir, s.learner) {
                     Ok(path) => {
                         let _ = session.emit(RunEvent::Checkpoint { path: &path });

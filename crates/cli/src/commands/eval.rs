@@ -176,7 +176,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Window::Uniform => SsimWindow::Uniform { size: args.ssim_size },
         Window::Gaussian => SsimWindow::Gaussian { sigma: 1.5 },
     };
-    if args.ssim_size == 0 || args.ssim_size % 2 == 0 {
+    if args.ssim_size == 0 || args.ssim_size.is_multiple_of(2) {
         bail!("--ssim-size must be odd and positive, got {}", args.ssim_size);
     }
     if let Some(r) = args.data_range {

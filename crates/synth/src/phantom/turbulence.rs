@@ -85,7 +85,7 @@ impl KinematicModes {
             m.c.push((c / nc) as f32);
             m.disp_bound += a.length() as f32;
         }
-        while m.kx.len() % LANES != 0 {
+        while !m.kx.len().is_multiple_of(LANES) {
             for v in [&mut m.kx, &mut m.ky, &mut m.kz, &mut m.phase, &mut m.ax, &mut m.ay, &mut m.az, &mut m.c] {
                 v.push(0.0);
             }
