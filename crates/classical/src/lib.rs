@@ -39,7 +39,8 @@ pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
 pub use method::{voxel_footprint_px, ClassicalMethod, ProjectorConfig};
 pub use projector::{
-    FootprintProjector, Grid, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector, AUTO_FOOTPRINT_MAX_PX,
+    FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector,
+    AUTO_FOOTPRINT_MAX_PX,
 };
 pub use solve::{
     art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,

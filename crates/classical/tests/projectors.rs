@@ -3,7 +3,7 @@
 mod common;
 
 use common::*;
-use fluidnerf_classical::{FootprintProjector, Grid, Projector, RayProjector, SplatProjector};
+use fluidnerf_classical::{FootprintProjector, Grid, Isa, Projector, RayProjector, SplatProjector};
 use fluidnerf_core::{render_image, RenderSettings, Volume};
 
 fn dot(a: &[f32], b: &[f32]) -> f64 {
@@ -58,9 +58,11 @@ fn back_add_accumulates_and_column_sums_are_adjoint_of_ones() {
     }
 }
 
-/// The footprint back projector has two paths: without column sums small footprints are read
-/// eight voxels at a time (AVX2 gathers), with them voxel by voxel. Both must give the same
-/// f32 result bit for bit, for every footprint side, with and without lens distortion.
+/// The footprint back projector has several paths: without column sums small footprints are
+/// read eight or sixteen voxels at a time (AVX2 or AVX-512 gathers), with them voxel by voxel;
+/// each compiled for the baseline, AVX2 and AVX-512. All must give the baseline's f32 result
+/// bit for bit, for every footprint side, with and without lens distortion; the forward
+/// projections agree up to the order of summation.
 #[test]
 fn footprint_back_projection_paths_agree_bit_for_bit() {
     let mut sides = Vec::new();
@@ -72,18 +74,34 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
         ([6, 6, 5], ring(2, 64)),
     ] {
         let grid = Grid::new(dims, aabb());
-        let p = FootprintProjector::new(grid, &cams, 0.9).expect("valid");
-        for v in 0..p.n_views() {
-            sides.push(p.footprint_side(v));
-            let y = uniform(20 + v as u64, p.view_len(v));
-            let mut lanes = vec![0f32; grid.len()];
-            p.back_add(v, &y, &mut lanes, None);
-            let mut by_voxel = vec![0f32; grid.len()];
-            let mut cols = vec![0f32; grid.len()];
-            p.back_add(v, &y, &mut by_voxel, Some(&mut cols));
-            assert!(lanes.iter().any(|&b| b > 0.0), "view {v} of {dims:?} sees nothing");
-            for (j, (a, b)) in lanes.iter().zip(&by_voxel).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "voxel {j} of {dims:?}, view {v}, side {}", p.footprint_side(v));
+        let base = FootprintProjector::new(grid, &cams, 0.9).expect("valid").with_isa(Isa::Baseline);
+        assert_eq!(base.isa(), Isa::Baseline);
+        let x = uniform(7, grid.len());
+        for v in 0..base.n_views() {
+            sides.push(base.footprint_side(v));
+            let y = uniform(20 + v as u64, base.view_len(v));
+            let mut reference = vec![0f32; grid.len()];
+            base.back_add(v, &y, &mut reference, None);
+            assert!(reference.iter().any(|&b| b > 0.0), "view {v} of {dims:?} sees nothing");
+            let mut fwd_ref = vec![0f32; base.view_len(v)];
+            base.forward(v, &x, &mut fwd_ref);
+            for isa in Isa::available() {
+                let p = base.clone().with_isa(isa);
+                let side = p.footprint_side(v);
+                let mut lanes = vec![0f32; grid.len()];
+                p.back_add(v, &y, &mut lanes, None);
+                let mut by_voxel = vec![0f32; grid.len()];
+                let mut cols = vec![0f32; grid.len()];
+                p.back_add(v, &y, &mut by_voxel, Some(&mut cols));
+                for (j, ((a, b), r)) in lanes.iter().zip(&by_voxel).zip(&reference).enumerate() {
+                    assert_eq!(a.to_bits(), r.to_bits(), "{isa:?} voxel {j} of {dims:?}, view {v}, side {side}");
+                    assert_eq!(b.to_bits(), r.to_bits(), "{isa:?} voxel {j} of {dims:?}, view {v}, side {side}");
+                }
+                let mut fwd = vec![0f32; p.view_len(v)];
+                p.forward(v, &x, &mut fwd);
+                for (i, (a, r)) in fwd.iter().zip(&fwd_ref).enumerate() {
+                    assert!((a - r).abs() <= 1e-5 * r.abs().max(1e-3), "{isa:?} pixel {i} of view {v}: {a} vs {r}");
+                }
             }
         }
     }

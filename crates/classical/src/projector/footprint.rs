@@ -50,22 +50,30 @@
 //!
 //! # Parallelism and exactness
 //! Footprints are evaluated 16 voxels of a grid row at a time, vectorised across the voxels
-//! (projection, trapezoids and pixel weights), and stored voxel-major so that each voxel then
-//! reads its weights as one vector per axis. Forward projection scatters: each thread takes a
-//! band of z-slices and accumulates into its own two padded images (voxels alternate between
-//! them by parity, so neighbouring voxels writing the same pixels do not chain through memory;
-//! a margin of `N` pixels on every side, so the inner loop has no bounds tests), and the images
-//! are summed. Back projection gathers: every voxel computes its footprint again and reads its
-//! pixels from a zero-padded copy of the image, so z-slices are independent and no atomics or
-//! per-thread volumes are needed; the back projector does the same arithmetic as the forward
-//! one. With AVX2 and footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's
-//! row of pixels is too short for a vector) the back projector works across voxels instead:
-//! one gather reads a footprint pixel of eight voxels, weighted from the footprints' own
-//! pixel-major layout, in the same order of operations as the voxel-by-voxel loop; the forward
-//! projector then reads each voxel's weights from that layout too, without transposing them. Both evaluate the very same f32 weights (same code, no fused multiply–add), so
-//! `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding. The kernels are plain loops over fixed-size arrays; they
-//! are compiled twice, for the x86-64 baseline and for AVX2, and the variant is chosen at run
-//! time (both give identical results).
+//! (projection, trapezoids and pixel weights; one division for `1/z` and one for the ramps'
+//! `1/(2l)` and the amplitude together; the narrowing's division only in chunks that need it).
+//! Forward projection scatters: each thread takes a band of z-slices and accumulates into its
+//! own padded images (neighbouring voxels go to different images, so that voxels writing the
+//! same pixels do not chain through memory; a margin of `N` pixels on every side, so the inner
+//! loop has no bounds tests), and the images are summed. Back projection gathers: every voxel
+//! computes its footprint again and reads its pixels from a zero-padded copy of the image, so
+//! z-slices are independent and no atomics or per-thread volumes are needed; the back
+//! projector does the same arithmetic as the forward one.
+//!
+//! Wider footprints are stored voxel-major, so that each voxel reads its weights as one vector
+//! per axis. With footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's row
+//! of pixels is too short for a vector) the vector kernels work across voxels instead: the back
+//! projector reads a footprint pixel of eight (AVX2) or sixteen (AVX-512) voxels with one
+//! gather, weighted from the footprints' own pixel-major layout, in the same order of
+//! operations as the voxel-by-voxel loop, and the forward projector reads each voxel's weights
+//! from that layout too, without transposing them. Both evaluate the very same f32 weights
+//! (same code, no fused multiply–add), so `⟨A x, y⟩ = ⟨x, Aᵀ y⟩` to rounding.
+//!
+//! The kernels are plain loops over fixed-size arrays plus the gathers; they are compiled for
+//! the x86-64 baseline, AVX2 and AVX-512, and the variant is chosen at run time ([`Isa`];
+//! [`FootprintProjector::with_isa`] caps it for comparisons). The back projection is the same
+//! bit for bit with every variant, the forward projection up to the order in which overlapping
+//! footprints are summed (both tested).
 
 use std::ops::Range;
 
@@ -115,6 +123,12 @@ struct FootView {
 
 /// Voxels projected per batch.
 const CHUNK: usize = 16;
+
+/// Padded images each forward-projection task accumulates into: the voxel-by-voxel kernel
+/// alternates between the first two by parity, the lane kernel cycles through all four.
+/// Neighbouring voxels mostly hit the same pixels, and spreading them over separate images
+/// breaks the read-modify-write chains through memory.
+const SCATTER_IMAGES: usize = 4;
 
 /// A batch of footprints of side `N`, structure of arrays (see [`FootView::chunk`]): the
 /// padded first column and row (−1: the voxel misses), the amplitude, and the pixel weights
@@ -177,21 +191,21 @@ fn floor_small(t: f32) -> f32 {
 }
 
 /// The pixel integrals of `CHUNK` trapezoids (unit height, boxes `p ≥ l`, centred at `off`) on
-/// pixels `[k, k + 1)`, `k < N`, vectorised across the voxels: `store(q, k, w)` for pixel `k` of
-/// voxel `q`, the weights of a voxel summing to `p` when the support lies inside.
+/// pixels `[k, k + 1)`, `k < N`, vectorised across the voxels, given `inv = 1 / (2 l)`:
+/// `store(q, k, w)` for pixel `k` of voxel `q`, the weights of a voxel summing to `p` when the
+/// support lies inside.
 #[inline(always)]
 fn axis_weights_chunk<const N: usize>(
     off: &[f32; CHUNK],
     p: &[f32; CHUNK],
     l: &[f32; CHUNK],
+    inv: &[f32; CHUNK],
     mut store: impl FnMut(usize, usize, f32),
 ) {
-    // Per voxel once (a division is dear next to the rest), then per pixel.
-    let (mut h1, mut h2, mut inv) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
+    let (mut h1, mut h2) = ([0f32; CHUNK], [0f32; CHUNK]);
     for q in 0..CHUNK {
         h1[q] = 0.5 * (p[q] + l[q]);
         h2[q] = 0.5 * (p[q] - l[q]);
-        inv[q] = 0.5 / l[q];
     }
     let mut prev = [0f32; CHUNK];
     for k in 0..N {
@@ -247,14 +261,19 @@ fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, [f32; 4]) {
 }
 
 /// The trapezoid `(p, l)` approximating the sum of three uniform variables of widths `w`
-/// (same variance, exact when one width is zero), narrowed if needed so that its support
-/// `p + l` leaves a footprint of `n` pixels (`p + l ≤ n − 1`).
+/// (same variance, exact when one width is zero), `p ≥ l`.
 #[inline(always)]
-fn trapezoid(w: [f32; 3], n: usize) -> (f32, f32) {
+fn trapezoid(w: [f32; 3]) -> (f32, f32) {
     let m = fmax(fmax(w[0], w[1]), w[2]);
     let rest = fmax(w[0] * w[0] + w[1] * w[1] + w[2] * w[2] - m * m, 0.0).sqrt();
-    let (p, l) = (fmax(m, rest), fmin(m, rest));
-    let fit = fmin(1.0, (n as f32 - 1.0) / (p + l));
+    (fmax(m, rest), fmin(m, rest))
+}
+
+/// The trapezoid `(p, l)` narrowed if needed so that its support `p + l` leaves a footprint of
+/// `n` pixels (`p + l ≤ n − 1`), and `l` kept above a positive floor.
+#[inline(always)]
+fn fit_trapezoid(p: f32, l: f32, n: usize, narrow: bool) -> (f32, f32) {
+    let fit = if narrow { fmin(1.0, (n as f32 - 1.0) / (p + l)) } else { 1.0 };
     // A positive floor keeps the ramps' 1/l finite; a box of width p is the limit.
     let l = fmax(l * fit, 1e-6);
     (fmax(p * fit, l), l)
@@ -356,33 +375,62 @@ impl FootView {
         let n = N as f32;
         let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
         let z = [0f32; CHUNK];
-        let (mut off_u, mut off_v, mut pu, mut lu, mut pv, mut lv) = (z, z, z, z, z, z);
+        let (mut u, mut v, mut gamma, mut front) = (z, z, z, z);
+        let (mut pu, mut lu, mut pv, mut lv) = (z, z, z, z);
+        // (i0 + q) as f32 without a conversion per lane (exact: grids are far below 2²⁴).
+        const Q: [f32; CHUNK] = {
+            let mut q = [0f32; CHUNK];
+            let mut i = 0;
+            while i < CHUNK {
+                q[i] = i as f32;
+                i += 1;
+            }
+            q
+        };
+        let f0 = i0 as f32;
         for q in 0..CHUNK {
-            let fi = (i0 + q) as f32;
+            let fi = f0 + Q[q];
             let p = [base[0] + fi * step[0], base[1] + fi * step[1], base[2] + fi * step[2]];
-            let (in_front, u, v, wu, wv, gamma) = self.project::<DISTORTED>(p);
-            (pu[q], lu[q]) = trapezoid(wu, N);
-            (pv[q], lv[q]) = trapezoid(wv, self.rows);
+            let (in_front, uq, vq, wu, wv, g) = self.project::<DISTORTED>(p);
+            (u[q], v[q], gamma[q]) = (uq, vq, g);
+            front[q] = if in_front { 1.0 } else { 0.0 };
+            (pu[q], lu[q]) = trapezoid(wu);
+            (pv[q], lv[q]) = trapezoid(wv);
+        }
+        // Narrowing (a division per axis) is needed only next to the camera: test the chunk.
+        let (lim_u, lim_v) = (n - 1.0, self.rows as f32 - 1.0);
+        let wide = (0..CHUNK).fold(0u32, |any, q| any | u32::from((pu[q] + lu[q] > lim_u) | (pv[q] + lv[q] > lim_v)));
+        let (mut off_u, mut off_v, mut inv_u, mut inv_v) = (z, z, z, z);
+        for q in 0..CHUNK {
+            (pu[q], lu[q]) = fit_trapezoid(pu[q], lu[q], N, wide != 0);
+            (pv[q], lv[q]) = fit_trapezoid(pv[q], lv[q], self.rows, wide != 0);
             // First pixel c0 = ⌊u − (p + l)/2 + ½⌋, shifted by the margin N so that every
             // square that can touch the image starts at a non-negative padded column.
             // Comparisons are false for NaN.
-            let tc = u - 0.5 * (pu[q] + lu[q]) + 0.5 + n;
-            let tr = v - 0.5 * (pv[q] + lv[q]) + 0.5 + n;
-            let hit = in_front & (tc >= 0.0) & (tr >= 0.0) & (tc < wmax) & (tr < hmax);
+            let tc = u[q] - 0.5 * (pu[q] + lu[q]) + 0.5 + n;
+            let tr = v[q] - 0.5 * (pv[q] + lv[q]) + 0.5 + n;
+            let hit = (front[q] > 0.0) & (tc >= 0.0) & (tr >= 0.0) & (tc < wmax) & (tr < hmax);
             let (col, row) = if hit { (floor_small(tc), floor_small(tr)) } else { (-1.0, 0.0) };
             out.col[q] = col;
             out.row[q] = row;
             // u − (c0 − ½) and v − (r0 − ½).
-            off_u[q] = (u + n + 0.5) - col;
-            off_v[q] = (v + n + 0.5) - row;
-            out.amp[q] = gamma / (pu[q] * pv[q]);
+            off_u[q] = (u[q] + n + 0.5) - col;
+            off_v[q] = (v[q] + n + 0.5) - row;
+            // The ramps' 1/(2l) and the amplitude γ/(p_u p_v) from one division (dear next to
+            // the rest): all four factors lie in [1e-6, 64], so the product cannot under- or
+            // overflow.
+            let (puv, luv) = (pu[q] * pv[q], lu[q] * lv[q]);
+            let r = 1.0 / (puv * luv);
+            inv_u[q] = 0.5 * (puv * lv[q]) * r;
+            inv_v[q] = 0.5 * (puv * lu[q]) * r;
+            out.amp[q] = gamma[q] * luv * r;
         }
         if LANES {
-            axis_weights_chunk::<N>(&off_u, &pu, &lu, |q, k, w| out.wu_lanes[k][q] = w);
-            axis_weights_chunk::<N>(&off_v, &pv, &lv, |q, k, w| out.wv_lanes[k][q] = w);
+            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, |q, k, w| out.wu_lanes[k][q] = w);
+            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, |q, k, w| out.wv_lanes[k][q] = w);
         } else {
-            axis_weights_chunk::<N>(&off_u, &pu, &lu, |q, k, w| out.wu[q][k] = w);
-            axis_weights_chunk::<N>(&off_v, &pv, &lv, |q, k, w| out.wv[q][k] = w);
+            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, |q, k, w| out.wu[q][k] = w);
+            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, |q, k, w| out.wv[q][k] = w);
         }
     }
 
@@ -405,8 +453,8 @@ impl FootView {
                     let (in_front, _, _, wu, wv, _) =
                         if self.distorted { self.project::<true>(p) } else { self.project::<false>(p) };
                     if in_front {
-                        let (pu, lu) = trapezoid(wu, usize::MAX);
-                        let (pv, lv) = trapezoid(wv, usize::MAX);
+                        let (pu, lu) = trapezoid(wu);
+                        let (pv, lv) = trapezoid(wv);
                         largest_u = largest_u.max(pu + lu);
                         largest_v = largest_v.max(pv + lv);
                     }
@@ -435,6 +483,42 @@ pub struct FootprintProjector {
     cameras: Vec<Camera>,
     views: Vec<FootView>,
     gf: GridF32,
+    isa: Isa,
+}
+
+/// Instruction sets the footprint kernels are compiled for, in increasing order. All give the
+/// same weights; the back projection is identical bit for bit, the forward projection up to
+/// the order in which overlapping footprints are summed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Isa {
+    /// The x86-64 baseline (SSE2), or portable code elsewhere.
+    Baseline,
+    /// AVX2: footprints eight voxels per instruction; small footprints read by gathers.
+    Avx2,
+    /// AVX-512F: a whole chunk of sixteen footprints per instruction.
+    Avx512,
+}
+
+impl Isa {
+    /// The widest instruction set this CPU supports (cached by the standard library).
+    pub fn detected() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx512f") && has!("avx2") {
+                return Isa::Avx512;
+            }
+            if has!("avx2") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Baseline
+    }
+
+    /// Every instruction set this CPU runs, from the baseline up.
+    pub fn available() -> Vec<Isa> {
+        [Isa::Baseline, Isa::Avx2, Isa::Avx512].into_iter().filter(|&i| i <= Isa::detected()).collect()
+    }
 }
 
 impl FootprintProjector {
@@ -463,7 +547,19 @@ impl FootprintProjector {
             min: [grid.aabb.min.x as f32, grid.aabb.min.y as f32, grid.aabb.min.z as f32],
             sp: [sp.x as f32, sp.y as f32, sp.z as f32],
         };
-        Ok(FootprintProjector { grid, cameras: cameras.to_vec(), views, gf })
+        Ok(FootprintProjector { grid, cameras: cameras.to_vec(), views, gf, isa: Isa::detected() })
+    }
+
+    /// The same projector running the kernels of at most `isa` (never more than this CPU
+    /// supports), for comparing the variants in tests and benchmarks.
+    pub fn with_isa(mut self, isa: Isa) -> Self {
+        self.isa = isa.min(Isa::detected());
+        self
+    }
+
+    /// The instruction set the kernels run with.
+    pub fn isa(&self) -> Isa {
+        self.isa
     }
 
     /// Largest width of a voxel's footprint over all views, in pixels (the support of the
@@ -525,7 +621,6 @@ impl FootprintProjector {
     ) {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
-        let (even, odd) = img.split_at_mut(pw * ph);
         let nr = fv.rows;
         let [nx, ny, _] = self.grid.dims;
         let mut ch = Chunk::<N>::default();
@@ -535,7 +630,44 @@ impl FootprintProjector {
                 let row0 = (k * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
                     fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
-                    for q in 0..CHUNK.min(nx - i0) {
+                    let valid = CHUNK.min(nx - i0);
+                    if LANES {
+                        // Each voxel's start pixel and weighted value, vectorised across the chunk;
+                        // misses and empty voxels get a zero value and are skipped.
+                        let mut g = [0f32; CHUNK];
+                        g[..valid].copy_from_slice(&x[row0 + i0..][..valid]);
+                        let (mut at, mut a) = ([0u32; CHUNK], [0f32; CHUNK]);
+                        for q in 0..CHUNK {
+                            let hit = ch.col[q] >= 0.0;
+                            let (row, col) = if hit { (ch.row[q], ch.col[q]) } else { (0.0, 0.0) };
+                            // SAFETY: whole numbers in [0, 2³²) (`chunk`; the caller checks that the
+                            // padded image has fewer than 2³² pixels), so the conversions are exact.
+                            let (row, col) = unsafe { (row.to_int_unchecked::<u32>(), col.to_int_unchecked::<u32>()) };
+                            at[q] = row * pw as u32 + col;
+                            a[q] = if hit && g[q] != 0.0 { g[q] * ch.amp[q] } else { 0.0 };
+                        }
+                        let images = img.as_mut_ptr();
+                        for q in 0..valid {
+                            if a[q] == 0.0 {
+                                continue;
+                            }
+                            // SAFETY: `img` holds SCATTER_IMAGES padded images.
+                            let dst = unsafe { images.add((q % SCATTER_IMAGES) * pw * ph) };
+                            let wu: [f32; N] = std::array::from_fn(|c| ch.wu_lanes[c][q]);
+                            for r in 0..nr {
+                                let s = a[q] * ch.wv_lanes[r][q];
+                                // SAFETY: a voxel that hits has its N × rows square inside the
+                                // padded image (`chunk`: c0 < width + N, r0 < height + N, rows ≤ N,
+                                // and the padded image is (width + 2N) × (height + 2N)).
+                                let line = unsafe { &mut *dst.add(at[q] as usize + r * pw).cast::<[f32; N]>() };
+                                for c in 0..N {
+                                    line[c] += s * wu[c];
+                                }
+                            }
+                        }
+                        continue;
+                    }
+                    for q in 0..valid {
                         let g = x[row0 + i0 + q];
                         let Some((col, row, amp)) = ch.get(q) else { continue };
                         if g == 0.0 {
@@ -543,17 +675,7 @@ impl FootprintProjector {
                         }
                         let a = g * amp;
                         let at = row * pw + col;
-                        let dst = if q & 1 == 0 { &mut *even } else { &mut *odd };
-                        if LANES {
-                            for r in 0..nr {
-                                let s = a * ch.wv_lanes[r][q];
-                                let line: &mut [f32; N] = (&mut dst[at + r * pw..][..N]).try_into().expect("N pixels");
-                                for c in 0..N {
-                                    line[c] += s * ch.wu_lanes[c][q];
-                                }
-                            }
-                            continue;
-                        }
+                        let dst = &mut img[(q & 1) * pw * ph..][..pw * ph];
                         let (wu, wv) = ch.weights(q);
                         for (r, &wr) in wv[..nr].iter().enumerate() {
                             let s = a * wr;
@@ -652,19 +774,21 @@ impl FootprintProjector {
         let nr = fv.rows;
         let [nx, ny, _] = self.grid.dims;
         let mut ch = Chunk::<N>::default();
-        let mut sums = [0f32; CHUNK];
         let pw_v = _mm256_set1_epi32(pw as i32);
+        let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
         for (kk, k) in ks.enumerate() {
             for j in 0..ny {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (kk * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
                     fv.chunk::<N, DISTORTED, true>(base, step, i0, &mut ch);
-                    for h in (0..CHUNK).step_by(LANES) {
+                    let valid = CHUNK.min(nx - i0);
+                    for h in (0..valid).step_by(LANES) {
                         // SAFETY: every pointer below is in bounds: `h + 8 ≤ CHUNK` for the chunk's
                         // arrays; a voxel that hits has its N × rows square inside the padded
                         // image (see `chunk`: c0 < width + N, r0 < height + N, rows ≤ N), and
-                        // one that misses reads from pixel 0 onwards, inside the image too.
+                        // one that misses reads from pixel 0 onwards, inside the image too; the
+                        // masked load and store of `out` touch only voxels of this row.
                         unsafe {
                             let col = _mm256_loadu_ps(ch.col.as_ptr().add(h));
                             let hit = _mm256_cmp_ps::<_CMP_GE_OQ>(col, _mm256_setzero_ps());
@@ -685,13 +809,78 @@ impl FootprintProjector {
                                 let wc = _mm256_loadu_ps(ch.wu_lanes[c].as_ptr().add(h));
                                 sum = _mm256_add_ps(sum, _mm256_mul_ps(acc, wc));
                             }
-                            _mm256_storeu_ps(sums.as_mut_ptr().add(h), sum);
+                            // out += amp · sum for the voxels that hit, inside the row.
+                            let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - h) as i32), iota);
+                            let keep = _mm256_and_si256(inside, _mm256_castps_si256(hit));
+                            let dst = out[row0 + i0 + h..].as_mut_ptr();
+                            let prev = _mm256_maskload_ps(dst, keep);
+                            let amp = _mm256_loadu_ps(ch.amp.as_ptr().add(h));
+                            _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, sum)));
                         }
                     }
-                    for q in 0..CHUNK.min(nx - i0) {
-                        if ch.col[q] >= 0.0 {
-                            out[row0 + i0 + q] += ch.amp[q] * sums[q];
+                }
+            }
+        }
+    }
+
+    /// [`Self::gather_lanes`] with AVX-512: one chunk of sixteen voxels per gather, the same
+    /// arithmetic in the same order.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F, and the padded image must hold fewer than 2³¹ pixels.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2")]
+    unsafe fn gather_lanes16<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        y: &[f32],
+        out: &mut [f32],
+    ) {
+        use std::arch::x86_64::*;
+        const { assert!(CHUNK == 16) };
+        let fv = &self.views[view];
+        let pw = fv.padded().0;
+        debug_assert!(y.len() == pw * fv.padded().1 && y.len() < i32::MAX as usize);
+        let nr = fv.rows;
+        let [nx, ny, _] = self.grid.dims;
+        let mut ch = Chunk::<N>::default();
+        let pw_v = _mm512_set1_epi32(pw as i32);
+        for (kk, k) in ks.enumerate() {
+            for j in 0..ny {
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                let row0 = (kk * ny + j) * nx;
+                for i0 in (0..nx).step_by(CHUNK) {
+                    fv.chunk::<N, DISTORTED, true>(base, step, i0, &mut ch);
+                    // SAFETY: as in `gather_lanes`: the chunk's arrays hold 16 entries, and every
+                    // gathered index lies inside the padded image (a voxel that misses reads
+                    // from pixel 0 onwards).
+                    unsafe {
+                        let col = _mm512_loadu_ps(ch.col.as_ptr());
+                        let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
+                        let at = _mm512_add_epi32(
+                            _mm512_mullo_epi32(_mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())), pw_v),
+                            _mm512_cvttps_epi32(col),
+                        );
+                        let at = _mm512_maskz_mov_epi32(hit, at);
+                        let mut sum = _mm512_setzero_ps();
+                        for c in 0..N {
+                            let mut acc = _mm512_setzero_ps();
+                            for r in 0..nr {
+                                let idx = _mm512_add_epi32(at, _mm512_set1_epi32((r * pw + c) as i32));
+                                let px = _mm512_i32gather_ps::<4>(idx, y.as_ptr());
+                                let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
+                                acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
+                            }
+                            let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
+                            sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
                         }
+                        // out += amp · sum for the voxels that hit, inside the row.
+                        let keep = hit & ((1u32 << CHUNK.min(nx - i0)) - 1) as u16;
+                        let dst = out[row0 + i0..][..CHUNK.min(nx - i0)].as_mut_ptr();
+                        let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+                        let add = _mm512_add_ps(prev, _mm512_mul_ps(_mm512_loadu_ps(ch.amp.as_ptr()), sum));
+                        _mm512_mask_storeu_ps(dst, keep, add);
                     }
                 }
             }
@@ -816,21 +1005,9 @@ macro_rules! dispatch {
 /// their own, which is cheaper than gathers.
 const LANE_GATHER_MAX_SIDE: usize = 4;
 
-/// Whether the AVX2 variants of the kernels can run (cached by the standard library).
-#[inline]
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-/// The two kernels behind the runtime CPU dispatch: the same code compiled for the baseline and
-/// for AVX2 (wider vectors, identical results: no fused multiply–adds are formed).
+/// The two kernels behind the runtime CPU dispatch: the same code compiled for the baseline,
+/// for AVX2 and for AVX-512 (wider vectors, identical results: no fused multiply–adds are
+/// formed). AVX-512 evaluates a whole chunk of sixteen footprints per instruction.
 mod kernels {
     use super::*;
 
@@ -843,6 +1020,20 @@ mod kernels {
     ) {
         #[cfg(target_arch = "x86_64")]
         {
+            #[target_feature(enable = "avx512f,avx2")]
+            unsafe fn avx512<const N: usize, const D: bool>(
+                p: &FootprintProjector,
+                view: usize,
+                ks: Range<usize>,
+                x: &[f32],
+                img: &mut [f32],
+            ) {
+                if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
+                    p.scatter::<N, D, true>(view, ks, x, img)
+                } else {
+                    p.scatter::<N, D, false>(view, ks, x, img)
+                }
+            }
             #[target_feature(enable = "avx2")]
             unsafe fn avx2<const N: usize, const D: bool>(
                 p: &FootprintProjector,
@@ -851,15 +1042,18 @@ mod kernels {
                 x: &[f32],
                 img: &mut [f32],
             ) {
-                if N <= LANE_GATHER_MAX_SIDE {
+                if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
                     p.scatter::<N, D, true>(view, ks, x, img)
                 } else {
                     p.scatter::<N, D, false>(view, ks, x, img)
                 }
             }
-            if has_avx2() {
-                // SAFETY: AVX2 was detected on this CPU just above.
-                return unsafe { avx2::<N, D>(p, view, ks, x, img) };
+            match p.isa {
+                // SAFETY: `p.isa` never exceeds what `Isa::detected` found on this CPU.
+                Isa::Avx512 => return unsafe { avx512::<N, D>(p, view, ks, x, img) },
+                // SAFETY: as above.
+                Isa::Avx2 => return unsafe { avx2::<N, D>(p, view, ks, x, img) },
+                Isa::Baseline => {}
             }
         }
         p.scatter::<N, D, false>(view, ks, x, img)
@@ -876,6 +1070,18 @@ mod kernels {
     ) {
         #[cfg(target_arch = "x86_64")]
         {
+            #[target_feature(enable = "avx512f,avx2")]
+            unsafe fn avx512<const N: usize, const D: bool>(
+                p: &FootprintProjector,
+                view: usize,
+                ks: Range<usize>,
+                y: &[f32],
+                masks: (&[f32], &[f32]),
+                out: &mut [f32],
+                col_sums: Option<&mut [f32]>,
+            ) {
+                p.gather::<N, D>(view, ks, y, masks, out, col_sums)
+            }
             #[target_feature(enable = "avx2")]
             unsafe fn avx2<const N: usize, const D: bool>(
                 p: &FootprintProjector,
@@ -888,13 +1094,15 @@ mod kernels {
             ) {
                 p.gather::<N, D>(view, ks, y, masks, out, col_sums)
             }
-            if has_avx2() {
-                if N <= LANE_GATHER_MAX_SIDE && col_sums.is_none() && y.len() < i32::MAX as usize {
-                    // SAFETY: AVX2 was detected on this CPU, and the image is small enough.
-                    return unsafe { p.gather_lanes::<N, D>(view, ks, y, out) };
-                }
-                // SAFETY: AVX2 was detected on this CPU just above.
-                return unsafe { avx2::<N, D>(p, view, ks, y, masks, out, col_sums) };
+            let lanes = N <= LANE_GATHER_MAX_SIDE && col_sums.is_none() && y.len() < i32::MAX as usize;
+            // SAFETY (all four calls): `p.isa` never exceeds what `Isa::detected` found on this
+            // CPU, and the lane kernels get images of fewer than 2³¹ pixels.
+            match (p.isa, lanes) {
+                (Isa::Avx512, true) => return unsafe { p.gather_lanes16::<N, D>(view, ks, y, out) },
+                (Isa::Avx512, false) => return unsafe { avx512::<N, D>(p, view, ks, y, masks, out, col_sums) },
+                (Isa::Avx2, true) => return unsafe { p.gather_lanes::<N, D>(view, ks, y, out) },
+                (Isa::Avx2, false) => return unsafe { avx2::<N, D>(p, view, ks, y, masks, out, col_sums) },
+                (Isa::Baseline, _) => {}
             }
         }
         p.gather::<N, D>(view, ks, y, masks, out, col_sums)
@@ -919,7 +1127,7 @@ impl Projector for FootprintProjector {
         let partials: Vec<Vec<f32>> = bands(nz, scatter_parts())
             .into_par_iter()
             .map(|ks| {
-                let mut img = vec![0f32; 2 * pw * ph];
+                let mut img = vec![0f32; SCATTER_IMAGES * pw * ph];
                 dispatch!(fv.side, fv.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, &mut img));
                 img
             })
@@ -929,6 +1137,11 @@ impl Projector for FootprintProjector {
             row.fill(0.0);
             for p in &partials {
                 for (o, (&a, &b)) in row.iter_mut().zip(p[at..at + w].iter().zip(&p[pw * ph + at..][..w])) {
+                    *o += a + b;
+                }
+                for (o, (&a, &b)) in
+                    row.iter_mut().zip(p[2 * pw * ph + at..][..w].iter().zip(&p[3 * pw * ph + at..][..w]))
+                {
                     *o += a + b;
                 }
             }
@@ -994,6 +1207,6 @@ impl Projector for FootprintProjector {
 
     fn scratch_bytes(&self, view: usize) -> usize {
         let (pw, ph) = self.views[view].padded();
-        (2 * scatter_parts() + 1) * pw * ph * 4
+        (SCATTER_IMAGES * scatter_parts() + 1) * pw * ph * 4
     }
 }

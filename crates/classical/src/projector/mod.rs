@@ -46,7 +46,7 @@ use fluidnerf_core::{Aabb, Camera, Volume};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-pub use footprint::{FootprintProjector, AUTO_FOOTPRINT_MAX_PX, MAX_FOOTPRINT_SIDE};
+pub use footprint::{FootprintProjector, Isa, AUTO_FOOTPRINT_MAX_PX, MAX_FOOTPRINT_SIDE};
 pub use ray::RayProjector;
 pub use splat::SplatProjector;
 
