@@ -130,11 +130,14 @@ fn main() {
         _ => Isa::Avx512,
     };
     if args.iter().any(|a| a == "--json") {
+        // `--ring15`: the 15 views of 256² px instead of the 90-view ring.
+        let (cams, views, pixels) =
+            if args.iter().any(|a| a == "--ring15") { (ring(15, 256), 15, 256) } else { (ring90.clone(), 90, 128) };
         let mut fields = vec![format!("\"threads\": {}", rayon::current_num_threads())];
         for res in [64usize, 128] {
             let grid = Grid::with_resolution(aabb, res);
             let x = phantom(&grid);
-            let p = FootprintProjector::new(grid, &ring90, 1.0).expect("valid").with_isa(isa);
+            let p = FootprintProjector::new(grid, &cams, 1.0).expect("valid").with_isa(isa);
             if res == 64 {
                 fields.push(format!("\"isa\": \"{:?}\"", p.isa()));
             }
@@ -154,7 +157,7 @@ fn main() {
             .wall;
             fields.push(format!("\"forward_s_{res}\": {t_fwd:.6}, \"back_s_{res}\": {t_back:.6}"));
         }
-        println!("{{\"views\": 90, \"pixels\": 128, {}}}", fields.join(", "));
+        println!("{{\"views\": {views}, \"pixels\": {pixels}, {}}}", fields.join(", "));
         return;
     }
     let threads = rayon::current_num_threads();

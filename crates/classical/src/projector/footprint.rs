@@ -222,6 +222,32 @@ fn axis_weights_chunk<const N: usize>(
     }
 }
 
+/// `Σ_c acc[c] · wu[c]`: in column order for sides up to 4 (the order of the lane kernels,
+/// which must match), as a pairwise tree from side 8 on, whose additions vectorise (a serial
+/// chain of eight or more dependent additions per voxel was the wide footprints' bottleneck).
+#[inline(always)]
+fn dot_columns<const N: usize>(acc: &[f32; N], wu: &[f32; N]) -> f32 {
+    let mut p = [0f32; N];
+    for c in 0..N {
+        p[c] = acc[c] * wu[c];
+    }
+    if N <= 4 {
+        let mut sum = 0f32;
+        for c in 0..N {
+            sum += p[c];
+        }
+        return sum;
+    }
+    let mut width = N;
+    while width > 1 {
+        width /= 2;
+        for c in 0..width {
+            p[c] += p[c + width];
+        }
+    }
+    p[0]
+}
+
 #[inline(always)]
 fn fmax(a: f32, b: f32) -> f32 {
     if a > b {
@@ -725,10 +751,7 @@ impl FootprintProjector {
                                 acc[c] += wr * line[c];
                             }
                         }
-                        let mut sum = 0f32;
-                        for c in 0..N {
-                            sum += acc[c] * wu[c];
-                        }
+                        let sum = dot_columns(&acc, &wu);
                         let idx = row0 + i0 + q;
                         out[idx] += amp * sum;
                         if let Some(cs) = col_sums.as_deref_mut() {
