@@ -1034,6 +1034,16 @@ const LANE_GATHER_MAX_SIDE: usize = 4;
 mod kernels {
     use super::*;
 
+    /// Defines `avx512::<N, D>` and `avx2::<N, D>`: `$body` compiled for each instruction set.
+    macro_rules! variants {
+        (fn($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
+            #[target_feature(enable = "avx512f,avx2")]
+            unsafe fn avx512<const N: usize, const D: bool>($($arg: $ty),*) $body
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2<const N: usize, const D: bool>($($arg: $ty),*) $body
+        };
+    }
+
     pub(super) fn scatter<const N: usize, const D: bool>(
         p: &FootprintProjector,
         view: usize,
@@ -1043,34 +1053,13 @@ mod kernels {
     ) {
         #[cfg(target_arch = "x86_64")]
         {
-            #[target_feature(enable = "avx512f,avx2")]
-            unsafe fn avx512<const N: usize, const D: bool>(
-                p: &FootprintProjector,
-                view: usize,
-                ks: Range<usize>,
-                x: &[f32],
-                img: &mut [f32],
-            ) {
+            variants!(fn(p: &FootprintProjector, view: usize, ks: Range<usize>, x: &[f32], img: &mut [f32]) {
                 if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
                     p.scatter::<N, D, true>(view, ks, x, img)
                 } else {
                     p.scatter::<N, D, false>(view, ks, x, img)
                 }
-            }
-            #[target_feature(enable = "avx2")]
-            unsafe fn avx2<const N: usize, const D: bool>(
-                p: &FootprintProjector,
-                view: usize,
-                ks: Range<usize>,
-                x: &[f32],
-                img: &mut [f32],
-            ) {
-                if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
-                    p.scatter::<N, D, true>(view, ks, x, img)
-                } else {
-                    p.scatter::<N, D, false>(view, ks, x, img)
-                }
-            }
+            });
             match p.isa {
                 // SAFETY: `p.isa` never exceeds what `Isa::detected` found on this CPU.
                 Isa::Avx512 => return unsafe { avx512::<N, D>(p, view, ks, x, img) },
@@ -1093,8 +1082,7 @@ mod kernels {
     ) {
         #[cfg(target_arch = "x86_64")]
         {
-            #[target_feature(enable = "avx512f,avx2")]
-            unsafe fn avx512<const N: usize, const D: bool>(
+            variants!(fn(
                 p: &FootprintProjector,
                 view: usize,
                 ks: Range<usize>,
@@ -1104,19 +1092,7 @@ mod kernels {
                 col_sums: Option<&mut [f32]>,
             ) {
                 p.gather::<N, D>(view, ks, y, masks, out, col_sums)
-            }
-            #[target_feature(enable = "avx2")]
-            unsafe fn avx2<const N: usize, const D: bool>(
-                p: &FootprintProjector,
-                view: usize,
-                ks: Range<usize>,
-                y: &[f32],
-                masks: (&[f32], &[f32]),
-                out: &mut [f32],
-                col_sums: Option<&mut [f32]>,
-            ) {
-                p.gather::<N, D>(view, ks, y, masks, out, col_sums)
-            }
+            });
             let lanes = N <= LANE_GATHER_MAX_SIDE && col_sums.is_none() && y.len() < i32::MAX as usize;
             // SAFETY (all four calls): `p.isa` never exceeds what `Isa::detected` found on this
             // CPU, and the lane kernels get images of fewer than 2³¹ pixels.
