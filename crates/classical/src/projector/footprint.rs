@@ -606,37 +606,51 @@ impl FootprintProjector {
         self.views[view].side
     }
 
-    /// Visits every voxel of z-slices `ks` whose footprint square touches the padded image of
-    /// view `view`: `visit(voxel index, chunk, entry)`.
+    /// Computes the footprints of every chunk of z-slices `ks` of view `view` (pixel-major with
+    /// `LANES`) and hands each to `visit(chunk, index of its first voxel, voxels of the chunk
+    /// inside the grid row)`; indices count from the first voxel of slice `ks.start`.
     #[inline(always)]
-    fn for_each_voxel<const N: usize, const DISTORTED: bool>(
+    fn for_each_chunk<const N: usize, const DISTORTED: bool, const LANES: bool>(
         &self,
         view: usize,
         ks: Range<usize>,
-        mut visit: impl FnMut(usize, &Chunk<N>, usize),
+        mut visit: impl FnMut(&Chunk<N>, usize, usize),
     ) {
         let fv = &self.views[view];
         let [nx, ny, _] = self.grid.dims;
         let mut ch = Chunk::<N>::default();
-        for k in ks {
+        for (kk, k) in ks.enumerate() {
             for j in 0..ny {
                 let (base, step) = fv.row_start(&self.gf, j, k);
-                let row0 = (k * ny + j) * nx;
+                let row0 = (kk * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED, false>(base, step, i0, &mut ch);
-                    for q in 0..CHUNK.min(nx - i0) {
-                        if ch.col[q] >= 0.0 {
-                            visit(row0 + i0 + q, &ch, q);
-                        }
-                    }
+                    fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
+                    visit(&ch, row0 + i0, CHUNK.min(nx - i0));
                 }
             }
         }
     }
 
-    /// Forward kernel: accumulates `A_v x` of slices `ks` into the two padded images `img`
-    /// (voxels alternate between them by parity: neighbouring voxels mostly hit the same pixels,
-    /// and alternating breaks the read-modify-write chains through memory).
+    /// Visits every voxel of the grid whose footprint square touches the padded image of view
+    /// `view`: `visit(voxel index, chunk, entry)`.
+    #[inline(always)]
+    fn for_each_voxel<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        mut visit: impl FnMut(usize, &Chunk<N>, usize),
+    ) {
+        self.for_each_chunk::<N, DISTORTED, false>(view, 0..self.grid.dims[2], |ch, first, valid| {
+            for q in 0..valid {
+                if ch.col[q] >= 0.0 {
+                    visit(first + q, ch, q);
+                }
+            }
+        });
+    }
+
+    /// Forward kernel: accumulates `A_v x` of slices `ks` into the [`SCATTER_IMAGES`] padded
+    /// images `img`. It keeps its own loops rather than [`Self::for_each_chunk`]'s: with the
+    /// per-chunk work in a closure the AVX-512 forward projection ran 16 % slower.
     #[inline(always)]
     fn scatter<const N: usize, const DISTORTED: bool, const LANES: bool>(
         &self,
@@ -731,45 +745,36 @@ impl FootprintProjector {
         let fv = &self.views[view];
         let pw = fv.padded().0;
         let nr = fv.rows;
-        let [nx, ny, _] = self.grid.dims;
         let (col_mask, row_mask) = masks;
-        let mut ch = Chunk::<N>::default();
-        for (kk, k) in ks.enumerate() {
-            for j in 0..ny {
-                let (base, step) = fv.row_start(&self.gf, j, k);
-                let row0 = (kk * ny + j) * nx;
-                for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED, false>(base, step, i0, &mut ch);
-                    for q in 0..CHUNK.min(nx - i0) {
-                        let Some((col, row, amp)) = ch.get(q) else { continue };
-                        let (wu, wv) = ch.weights(q);
-                        let at = row * pw + col;
-                        let mut acc = [0f32; N];
-                        for (r, &wr) in wv[..nr].iter().enumerate() {
-                            let line: &[f32; N] = (&y[at + r * pw..][..N]).try_into().expect("N pixels");
-                            for c in 0..N {
-                                acc[c] += wr * line[c];
-                            }
-                        }
-                        let sum = dot_columns(&acc, &wu);
-                        let idx = row0 + i0 + q;
-                        out[idx] += amp * sum;
-                        if let Some(cs) = col_sums.as_deref_mut() {
-                            let cm: &[f32; N] = (&col_mask[col..][..N]).try_into().expect("N columns");
-                            let rm: &[f32; N] = (&row_mask[row..][..N]).try_into().expect("N rows");
-                            let (mut su, mut sv) = (0f32, 0f32);
-                            for c in 0..N {
-                                su += wu[c] * cm[c];
-                            }
-                            for r in 0..nr {
-                                sv += wv[r] * rm[r];
-                            }
-                            cs[idx] += amp * su * sv;
-                        }
+        self.for_each_chunk::<N, DISTORTED, false>(view, ks, |ch, first, valid| {
+            for q in 0..valid {
+                let Some((col, row, amp)) = ch.get(q) else { continue };
+                let (wu, wv) = ch.weights(q);
+                let at = row * pw + col;
+                let mut acc = [0f32; N];
+                for (r, &wr) in wv[..nr].iter().enumerate() {
+                    let line: &[f32; N] = (&y[at + r * pw..][..N]).try_into().expect("N pixels");
+                    for c in 0..N {
+                        acc[c] += wr * line[c];
                     }
                 }
+                let sum = dot_columns(&acc, &wu);
+                let idx = first + q;
+                out[idx] += amp * sum;
+                if let Some(cs) = col_sums.as_deref_mut() {
+                    let cm: &[f32; N] = (&col_mask[col..][..N]).try_into().expect("N columns");
+                    let rm: &[f32; N] = (&row_mask[row..][..N]).try_into().expect("N rows");
+                    let (mut su, mut sv) = (0f32, 0f32);
+                    for c in 0..N {
+                        su += wu[c] * cm[c];
+                    }
+                    for r in 0..nr {
+                        sv += wv[r] * rm[r];
+                    }
+                    cs[idx] += amp * su * sv;
+                }
             }
-        }
+        });
     }
 
     /// [`Self::gather`] without column sums, eight voxels at a time in the AVX2 lanes: each
@@ -795,55 +800,45 @@ impl FootprintProjector {
         let pw = fv.padded().0;
         debug_assert!(y.len() == pw * fv.padded().1 && y.len() < i32::MAX as usize);
         let nr = fv.rows;
-        let [nx, ny, _] = self.grid.dims;
-        let mut ch = Chunk::<N>::default();
         let pw_v = _mm256_set1_epi32(pw as i32);
         let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        for (kk, k) in ks.enumerate() {
-            for j in 0..ny {
-                let (base, step) = fv.row_start(&self.gf, j, k);
-                let row0 = (kk * ny + j) * nx;
-                for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED, true>(base, step, i0, &mut ch);
-                    let valid = CHUNK.min(nx - i0);
-                    for h in (0..valid).step_by(LANES) {
-                        // SAFETY: every pointer below is in bounds: `h + 8 ≤ CHUNK` for the chunk's
-                        // arrays; a voxel that hits has its N × rows square inside the padded
-                        // image (see `chunk`: c0 < width + N, r0 < height + N, rows ≤ N), and
-                        // one that misses reads from pixel 0 onwards, inside the image too; the
-                        // masked load and store of `out` touch only voxels of this row.
-                        unsafe {
-                            let col = _mm256_loadu_ps(ch.col.as_ptr().add(h));
-                            let hit = _mm256_cmp_ps::<_CMP_GE_OQ>(col, _mm256_setzero_ps());
-                            let at = _mm256_add_epi32(
-                                _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))), pw_v),
-                                _mm256_cvttps_epi32(col),
-                            );
-                            let at = _mm256_and_si256(at, _mm256_castps_si256(hit));
-                            let mut sum = _mm256_setzero_ps();
-                            for c in 0..N {
-                                let mut acc = _mm256_setzero_ps();
-                                for r in 0..nr {
-                                    let idx = _mm256_add_epi32(at, _mm256_set1_epi32((r * pw + c) as i32));
-                                    let px = _mm256_i32gather_ps::<4>(y.as_ptr(), idx);
-                                    let wr = _mm256_loadu_ps(ch.wv_lanes[r].as_ptr().add(h));
-                                    acc = _mm256_add_ps(acc, _mm256_mul_ps(wr, px));
-                                }
-                                let wc = _mm256_loadu_ps(ch.wu_lanes[c].as_ptr().add(h));
-                                sum = _mm256_add_ps(sum, _mm256_mul_ps(acc, wc));
-                            }
-                            // out += amp · sum for the voxels that hit, inside the row.
-                            let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - h) as i32), iota);
-                            let keep = _mm256_and_si256(inside, _mm256_castps_si256(hit));
-                            let dst = out[row0 + i0 + h..].as_mut_ptr();
-                            let prev = _mm256_maskload_ps(dst, keep);
-                            let amp = _mm256_loadu_ps(ch.amp.as_ptr().add(h));
-                            _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, sum)));
+        self.for_each_chunk::<N, DISTORTED, true>(view, ks, |ch, first, valid| {
+            for h in (0..valid).step_by(LANES) {
+                // SAFETY: every pointer below is in bounds: `h + 8 ≤ CHUNK` for the chunk's
+                // arrays; a voxel that hits has its N × rows square inside the padded
+                // image (see `chunk`: c0 < width + N, r0 < height + N, rows ≤ N), and
+                // one that misses reads from pixel 0 onwards, inside the image too; the
+                // masked load and store of `out` touch only voxels of this row.
+                unsafe {
+                    let col = _mm256_loadu_ps(ch.col.as_ptr().add(h));
+                    let hit = _mm256_cmp_ps::<_CMP_GE_OQ>(col, _mm256_setzero_ps());
+                    let at = _mm256_add_epi32(
+                        _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))), pw_v),
+                        _mm256_cvttps_epi32(col),
+                    );
+                    let at = _mm256_and_si256(at, _mm256_castps_si256(hit));
+                    let mut sum = _mm256_setzero_ps();
+                    for c in 0..N {
+                        let mut acc = _mm256_setzero_ps();
+                        for r in 0..nr {
+                            let idx = _mm256_add_epi32(at, _mm256_set1_epi32((r * pw + c) as i32));
+                            let px = _mm256_i32gather_ps::<4>(y.as_ptr(), idx);
+                            let wr = _mm256_loadu_ps(ch.wv_lanes[r].as_ptr().add(h));
+                            acc = _mm256_add_ps(acc, _mm256_mul_ps(wr, px));
                         }
+                        let wc = _mm256_loadu_ps(ch.wu_lanes[c].as_ptr().add(h));
+                        sum = _mm256_add_ps(sum, _mm256_mul_ps(acc, wc));
                     }
+                    // out += amp · sum for the voxels that hit, inside the row.
+                    let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - h) as i32), iota);
+                    let keep = _mm256_and_si256(inside, _mm256_castps_si256(hit));
+                    let dst = out[first + h..].as_mut_ptr();
+                    let prev = _mm256_maskload_ps(dst, keep);
+                    let amp = _mm256_loadu_ps(ch.amp.as_ptr().add(h));
+                    _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, sum)));
                 }
             }
-        }
+        });
     }
 
     /// [`Self::gather_lanes`] with AVX-512: one chunk of sixteen voxels per gather, the same
@@ -866,55 +861,45 @@ impl FootprintProjector {
         let pw = fv.padded().0;
         debug_assert!(y.len() == pw * fv.padded().1 && y.len() < i32::MAX as usize);
         let nr = fv.rows;
-        let [nx, ny, _] = self.grid.dims;
-        let mut ch = Chunk::<N>::default();
         let pw_v = _mm512_set1_epi32(pw as i32);
-        for (kk, k) in ks.enumerate() {
-            for j in 0..ny {
-                let (base, step) = fv.row_start(&self.gf, j, k);
-                let row0 = (kk * ny + j) * nx;
-                for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED, true>(base, step, i0, &mut ch);
-                    // SAFETY: as in `gather_lanes`: the chunk's arrays hold 16 entries, and every
-                    // gathered index lies inside the padded image (a voxel that misses reads
-                    // from pixel 0 onwards).
-                    unsafe {
-                        let col = _mm512_loadu_ps(ch.col.as_ptr());
-                        let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
-                        let at = _mm512_add_epi32(
-                            _mm512_mullo_epi32(_mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())), pw_v),
-                            _mm512_cvttps_epi32(col),
-                        );
-                        let at = _mm512_maskz_mov_epi32(hit, at);
-                        let mut sum = _mm512_setzero_ps();
-                        for c in 0..N {
-                            let mut acc = _mm512_setzero_ps();
-                            for r in 0..nr {
-                                let idx = _mm512_add_epi32(at, _mm512_set1_epi32((r * pw + c) as i32));
-                                let px = _mm512_i32gather_ps::<4>(idx, y.as_ptr());
-                                let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
-                                acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
-                            }
-                            let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
-                            sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
-                        }
-                        // out += amp · sum for the voxels that hit, inside the row.
-                        let keep = hit & ((1u32 << CHUNK.min(nx - i0)) - 1) as u16;
-                        let dst = out[row0 + i0..][..CHUNK.min(nx - i0)].as_mut_ptr();
-                        let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
-                        let add = _mm512_add_ps(prev, _mm512_mul_ps(_mm512_loadu_ps(ch.amp.as_ptr()), sum));
-                        _mm512_mask_storeu_ps(dst, keep, add);
+        self.for_each_chunk::<N, DISTORTED, true>(view, ks, |ch, first, valid| {
+            // SAFETY: as in `gather_lanes`: the chunk's arrays hold 16 entries, and every
+            // gathered index lies inside the padded image (a voxel that misses reads
+            // from pixel 0 onwards).
+            unsafe {
+                let col = _mm512_loadu_ps(ch.col.as_ptr());
+                let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
+                let at = _mm512_add_epi32(
+                    _mm512_mullo_epi32(_mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())), pw_v),
+                    _mm512_cvttps_epi32(col),
+                );
+                let at = _mm512_maskz_mov_epi32(hit, at);
+                let mut sum = _mm512_setzero_ps();
+                for c in 0..N {
+                    let mut acc = _mm512_setzero_ps();
+                    for r in 0..nr {
+                        let idx = _mm512_add_epi32(at, _mm512_set1_epi32((r * pw + c) as i32));
+                        let px = _mm512_i32gather_ps::<4>(idx, y.as_ptr());
+                        let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
+                        acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
                     }
+                    let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
+                    sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
                 }
+                // out += amp · sum for the voxels that hit, inside the row.
+                let keep = hit & ((1u32 << valid) - 1) as u16;
+                let dst = out[first..][..valid].as_mut_ptr();
+                let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+                let add = _mm512_add_ps(prev, _mm512_mul_ps(_mm512_loadu_ps(ch.amp.as_ptr()), sum));
+                _mm512_mask_storeu_ps(dst, keep, add);
             }
-        }
+        });
     }
 
     /// The rows of `A_v` (see [`Projector::rows`]).
     fn rows_impl<const N: usize, const DISTORTED: bool>(&self, view: usize) -> SparseRows {
         let fv = &self.views[view];
         let (w, h) = (fv.width, fv.height);
-        let nz = self.grid.dims[2];
         // (pixel, weight) of every in-image footprint pixel with a positive weight.
         let visit_pixels = |ch: &Chunk<N>, q: usize, emit: &mut dyn FnMut(usize, f32)| {
             let Some((col, row, amp)) = ch.get(q) else { return };
@@ -930,9 +915,7 @@ impl FootprintProjector {
             }
         };
         let mut ptr = vec![0u64; w * h + 1];
-        self.for_each_voxel::<N, DISTORTED>(view, 0..nz, |_, ch, q| {
-            visit_pixels(ch, q, &mut |pix, _| ptr[pix + 1] += 1)
-        });
+        self.for_each_voxel::<N, DISTORTED>(view, |_, ch, q| visit_pixels(ch, q, &mut |pix, _| ptr[pix + 1] += 1));
         for i in 0..w * h {
             ptr[i + 1] += ptr[i];
         }
@@ -940,7 +923,7 @@ impl FootprintProjector {
         let mut cols = vec![0u32; nnz];
         let mut vals = vec![0f32; nnz];
         let mut fill: Vec<u64> = ptr[..w * h].to_vec();
-        self.for_each_voxel::<N, DISTORTED>(view, 0..nz, |idx, ch, q| {
+        self.for_each_voxel::<N, DISTORTED>(view, |idx, ch, q| {
             visit_pixels(ch, q, &mut |pix, wgt| {
                 let at = fill[pix] as usize;
                 cols[at] = idx as u32;
