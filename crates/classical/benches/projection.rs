@@ -155,7 +155,17 @@ fn main() {
                 }
             })
             .wall;
-            fields.push(format!("\"forward_s_{res}\": {t_fwd:.6}, \"back_s_{res}\": {t_back:.6}"));
+            // With column sums, as SART and ASART call it.
+            let mut cols = vec![0f32; grid.len()];
+            let t_cols = best(3, &mut || {
+                for v in 0..p.n_views() {
+                    p.back_add(v, &img, &mut back, Some(&mut cols));
+                }
+            })
+            .wall;
+            fields.push(format!(
+                "\"forward_s_{res}\": {t_fwd:.6}, \"back_s_{res}\": {t_back:.6}, \"back_colsums_s_{res}\": {t_cols:.6}"
+            ));
         }
         println!("{{\"views\": {views}, \"pixels\": {pixels}, {}}}", fields.join(", "));
         return;
