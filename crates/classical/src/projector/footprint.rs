@@ -777,11 +777,12 @@ impl FootprintProjector {
         });
     }
 
-    /// [`Self::gather`] without column sums, eight voxels at a time in the AVX2 lanes: each
-    /// footprint pixel of eight voxels is read with one gather, and the weights stay in the
-    /// pixel-major layout the footprints are computed in. Every voxel's arithmetic is that of
-    /// [`Self::gather`] in the same order (rows summed per column, then columns), so the results
-    /// are identical. For small sides, where a voxel's row is too short for a vector of its own.
+    /// [`Self::gather`] eight voxels at a time in the AVX2 lanes: each footprint pixel of eight
+    /// voxels is read with one gather, and the weights stay in the pixel-major layout the
+    /// footprints are computed in. Every voxel's arithmetic is that of [`Self::gather`] in the
+    /// same order (rows summed per column, then columns; the column sums' two masked sums
+    /// likewise), so the results are identical. For small sides, where a voxel's row is too
+    /// short for a vector of its own.
     ///
     /// # Safety
     /// The CPU must support AVX2, and the padded image must hold fewer than 2³¹ pixels.
@@ -792,7 +793,9 @@ impl FootprintProjector {
         view: usize,
         ks: Range<usize>,
         y: &[f32],
+        masks: (&[f32], &[f32]),
         out: &mut [f32],
+        mut col_sums: Option<&mut [f32]>,
     ) {
         use std::arch::x86_64::*;
         const LANES: usize = 8;
@@ -818,6 +821,9 @@ impl FootprintProjector {
                     );
                     let at = _mm256_and_si256(at, _mm256_castps_si256(hit));
                     let mut sum = _mm256_setzero_ps();
+                    let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - h) as i32), iota);
+                    let keep = _mm256_and_si256(inside, _mm256_castps_si256(hit));
+                    let amp = _mm256_loadu_ps(ch.amp.as_ptr().add(h));
                     for c in 0..N {
                         let mut acc = _mm256_setzero_ps();
                         for r in 0..nr {
@@ -830,19 +836,43 @@ impl FootprintProjector {
                         sum = _mm256_add_ps(sum, _mm256_mul_ps(acc, wc));
                     }
                     // out += amp · sum for the voxels that hit, inside the row.
-                    let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - h) as i32), iota);
-                    let keep = _mm256_and_si256(inside, _mm256_castps_si256(hit));
                     let dst = out[first + h..].as_mut_ptr();
                     let prev = _mm256_maskload_ps(dst, keep);
-                    let amp = _mm256_loadu_ps(ch.amp.as_ptr().add(h));
                     _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, sum)));
+                    if let Some(cs) = col_sums.as_deref_mut() {
+                        // cs += amp · (Σ_c wu · col_mask) · (Σ_r wv · row_mask); a miss reads the
+                        // masks from index 0 onwards (c0 + N ≤ padded width for a hit).
+                        let cols = _mm256_and_si256(_mm256_cvttps_epi32(col), _mm256_castps_si256(hit));
+                        let rows = _mm256_and_si256(
+                            _mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))),
+                            _mm256_castps_si256(hit),
+                        );
+                        let (mut su, mut sv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+                        for c in 0..N {
+                            let m = _mm256_i32gather_ps::<4>(
+                                masks.0.as_ptr(),
+                                _mm256_add_epi32(cols, _mm256_set1_epi32(c as i32)),
+                            );
+                            su = _mm256_add_ps(su, _mm256_mul_ps(_mm256_loadu_ps(ch.wu_lanes[c].as_ptr().add(h)), m));
+                        }
+                        for r in 0..nr {
+                            let m = _mm256_i32gather_ps::<4>(
+                                masks.1.as_ptr(),
+                                _mm256_add_epi32(rows, _mm256_set1_epi32(r as i32)),
+                            );
+                            sv = _mm256_add_ps(sv, _mm256_mul_ps(_mm256_loadu_ps(ch.wv_lanes[r].as_ptr().add(h)), m));
+                        }
+                        let dst = cs[first + h..].as_mut_ptr();
+                        let prev = _mm256_maskload_ps(dst, keep);
+                        _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(_mm256_mul_ps(amp, su), sv)));
+                    }
                 }
             }
         });
     }
 
     /// [`Self::gather_lanes`] with AVX-512: one chunk of sixteen voxels per gather, the same
-    /// arithmetic in the same order.
+    /// arithmetic in the same order, column sums included.
     ///
     /// # Safety
     /// The CPU must support AVX-512F, and the padded image must hold fewer than 2³¹ pixels.
@@ -853,7 +883,9 @@ impl FootprintProjector {
         view: usize,
         ks: Range<usize>,
         y: &[f32],
+        masks: (&[f32], &[f32]),
         out: &mut [f32],
+        mut col_sums: Option<&mut [f32]>,
     ) {
         use std::arch::x86_64::*;
         const { assert!(CHUNK == 16) };
@@ -888,10 +920,33 @@ impl FootprintProjector {
                 }
                 // out += amp · sum for the voxels that hit, inside the row.
                 let keep = hit & ((1u32 << valid) - 1) as u16;
+                let amp = _mm512_loadu_ps(ch.amp.as_ptr());
                 let dst = out[first..][..valid].as_mut_ptr();
                 let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
-                let add = _mm512_add_ps(prev, _mm512_mul_ps(_mm512_loadu_ps(ch.amp.as_ptr()), sum));
-                _mm512_mask_storeu_ps(dst, keep, add);
+                _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(amp, sum)));
+                if let Some(cs) = col_sums.as_deref_mut() {
+                    // As in `gather_lanes`.
+                    let cols = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(col));
+                    let rows = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
+                    let (mut su, mut sv) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+                    for c in 0..N {
+                        let m = _mm512_i32gather_ps::<4>(
+                            _mm512_add_epi32(cols, _mm512_set1_epi32(c as i32)),
+                            masks.0.as_ptr(),
+                        );
+                        su = _mm512_add_ps(su, _mm512_mul_ps(_mm512_loadu_ps(ch.wu_lanes[c].as_ptr()), m));
+                    }
+                    for r in 0..nr {
+                        let m = _mm512_i32gather_ps::<4>(
+                            _mm512_add_epi32(rows, _mm512_set1_epi32(r as i32)),
+                            masks.1.as_ptr(),
+                        );
+                        sv = _mm512_add_ps(sv, _mm512_mul_ps(_mm512_loadu_ps(ch.wv_lanes[r].as_ptr()), m));
+                    }
+                    let dst = cs[first..][..valid].as_mut_ptr();
+                    let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+                    _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(_mm512_mul_ps(amp, su), sv)));
+                }
             }
         });
     }
@@ -1076,13 +1131,13 @@ mod kernels {
             ) {
                 p.gather::<N, D>(view, ks, y, masks, out, col_sums)
             });
-            let lanes = N <= LANE_GATHER_MAX_SIDE && col_sums.is_none() && y.len() < i32::MAX as usize;
+            let lanes = N <= LANE_GATHER_MAX_SIDE && y.len() < i32::MAX as usize;
             // SAFETY (all four calls): `p.isa` never exceeds what `Isa::detected` found on this
             // CPU, and the lane kernels get images of fewer than 2³¹ pixels.
             match (p.isa, lanes) {
-                (Isa::Avx512, true) => return unsafe { p.gather_lanes16::<N, D>(view, ks, y, out) },
+                (Isa::Avx512, true) => return unsafe { p.gather_lanes16::<N, D>(view, ks, y, masks, out, col_sums) },
                 (Isa::Avx512, false) => return unsafe { avx512::<N, D>(p, view, ks, y, masks, out, col_sums) },
-                (Isa::Avx2, true) => return unsafe { p.gather_lanes::<N, D>(view, ks, y, out) },
+                (Isa::Avx2, true) => return unsafe { p.gather_lanes::<N, D>(view, ks, y, masks, out, col_sums) },
                 (Isa::Avx2, false) => return unsafe { avx2::<N, D>(p, view, ks, y, masks, out, col_sums) },
                 (Isa::Baseline, _) => {}
             }
