@@ -815,11 +815,13 @@ impl FootprintProjector {
                 unsafe {
                     let col = _mm256_loadu_ps(ch.col.as_ptr().add(h));
                     let hit = _mm256_cmp_ps::<_CMP_GE_OQ>(col, _mm256_setzero_ps());
-                    let at = _mm256_add_epi32(
-                        _mm256_mullo_epi32(_mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))), pw_v),
-                        _mm256_cvttps_epi32(col),
+                    // First column and row, 0 for a miss.
+                    let cols = _mm256_and_si256(_mm256_cvttps_epi32(col), _mm256_castps_si256(hit));
+                    let rows = _mm256_and_si256(
+                        _mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))),
+                        _mm256_castps_si256(hit),
                     );
-                    let at = _mm256_and_si256(at, _mm256_castps_si256(hit));
+                    let at = _mm256_add_epi32(_mm256_mullo_epi32(rows, pw_v), cols);
                     let mut sum = _mm256_setzero_ps();
                     let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - h) as i32), iota);
                     let keep = _mm256_and_si256(inside, _mm256_castps_si256(hit));
@@ -842,11 +844,6 @@ impl FootprintProjector {
                     if let Some(cs) = col_sums.as_deref_mut() {
                         // cs += amp · (Σ_c wu · col_mask) · (Σ_r wv · row_mask); a miss reads the
                         // masks from index 0 onwards (c0 + N ≤ padded width for a hit).
-                        let cols = _mm256_and_si256(_mm256_cvttps_epi32(col), _mm256_castps_si256(hit));
-                        let rows = _mm256_and_si256(
-                            _mm256_cvttps_epi32(_mm256_loadu_ps(ch.row.as_ptr().add(h))),
-                            _mm256_castps_si256(hit),
-                        );
                         let (mut su, mut sv) = (_mm256_setzero_ps(), _mm256_setzero_ps());
                         for c in 0..N {
                             let m = _mm256_i32gather_ps::<4>(
@@ -901,11 +898,10 @@ impl FootprintProjector {
             unsafe {
                 let col = _mm512_loadu_ps(ch.col.as_ptr());
                 let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
-                let at = _mm512_add_epi32(
-                    _mm512_mullo_epi32(_mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())), pw_v),
-                    _mm512_cvttps_epi32(col),
-                );
-                let at = _mm512_maskz_mov_epi32(hit, at);
+                // First column and row, 0 for a miss.
+                let cols = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(col));
+                let rows = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
+                let at = _mm512_add_epi32(_mm512_mullo_epi32(rows, pw_v), cols);
                 let mut sum = _mm512_setzero_ps();
                 for c in 0..N {
                     let mut acc = _mm512_setzero_ps();
@@ -926,8 +922,6 @@ impl FootprintProjector {
                 _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(amp, sum)));
                 if let Some(cs) = col_sums.as_deref_mut() {
                     // As in `gather_lanes`.
-                    let cols = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(col));
-                    let rows = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
                     let (mut su, mut sv) = (_mm512_setzero_ps(), _mm512_setzero_ps());
                     for c in 0..N {
                         let m = _mm512_i32gather_ps::<4>(
