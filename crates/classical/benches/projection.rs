@@ -40,6 +40,16 @@ fn phantom(grid: &Grid) -> Vec<f32> {
     v.data
 }
 
+/// The dense volume kept inside an upright cylinder over the lower three quarters of the box
+/// (about 15 % of the voxels), zero elsewhere: a flow's volume, where a projection may skip
+/// the empty voxels.
+fn sparse_phantom(grid: &Grid) -> Vec<f32> {
+    let inside = fluidnerf_core::Volume::from_fn(grid.dims, grid.aabb, |p| {
+        f32::from(u8::from(p.x * p.x + p.y * p.y < 100.0 && p.z < 10.0))
+    });
+    phantom(grid).iter().zip(&inside.data).map(|(v, m)| v * m).collect()
+}
+
 /// CPU seconds (user + system, all threads) of this process so far (Linux; 10 ms ticks).
 fn cpu_seconds() -> f64 {
     let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
@@ -155,6 +165,14 @@ fn main() {
                 }
             })
             .wall;
+            let xs = sparse_phantom(&grid);
+            let t_sparse = best(3, &mut || {
+                for v in 0..p.n_views() {
+                    p.forward(v, &xs, &mut img);
+                }
+            })
+            .wall;
+            fields.push(format!("\"forward_sparse_s_{res}\": {t_sparse:.6}"));
             // With column sums, as SART and ASART call it.
             let mut cols = vec![0f32; grid.len()];
             let t_cols = best(3, &mut || {
@@ -222,6 +240,19 @@ fn main() {
             bb.cpu / b.cpu
         );
     }
+    let grid = Grid::with_resolution(aabb, 128);
+    let (x, xs) = (phantom(&grid), sparse_phantom(&grid));
+    let p = FootprintProjector::new(grid, &ring90, 1.0).expect("valid");
+    let (dense, _) = rates(&p, &x, ring90.len(), 3);
+    let (sparse, _) = rates(&p, &xs, ring90.len(), 3);
+    println!(
+        "footprint forward, 90 x 128^2, 128^3: dense volume {:.3} s, flow-like volume ({:.0} % non-zero) {:.3} s; \
+         dense/flow-like {:.1}x (CPU time)",
+        dense.wall * (x.len() * ring90.len()) as f64,
+        100.0 * xs.iter().filter(|&&v| v != 0.0).count() as f64 / xs.len() as f64,
+        sparse.wall * (x.len() * ring90.len()) as f64,
+        dense.cpu / sparse.cpu
+    );
     let grid = Grid::with_resolution(aabb, 64);
     let x = phantom(&grid);
     let old = SplatProjector::new(grid, &ring15, 1.0).expect("valid");

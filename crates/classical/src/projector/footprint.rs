@@ -52,8 +52,9 @@
 //! Footprints are evaluated 16 voxels of a grid row at a time, vectorised across the voxels
 //! (projection, trapezoids and pixel weights; one division for `1/z` and one for the ramps'
 //! `1/(2l)` and the amplitude together; the narrowing's division only in chunks that need it).
-//! Forward projection scatters: each thread takes a band of z-slices and accumulates into its
-//! own padded images (neighbouring voxels go to different images, so that voxels writing the
+//! Forward projection scatters: each thread takes every other z-slice (every `T`-th of `T`
+//! tasks, so that uneven work is shared evenly), skips runs of a chunk's worth of empty voxels
+//! without computing their footprints, and accumulates into its own padded images (neighbouring voxels go to different images, so that voxels writing the
 //! same pixels do not chain through memory; a margin of `N` pixels on every side, so the inner
 //! loop has no bounds tests), and the images are summed. Back projection gathers: every voxel
 //! computes its footprint again and reads its pixels from a zero-padded copy of the image, so
@@ -80,7 +81,7 @@ use std::ops::Range;
 use fluidnerf_core::Camera;
 use rayon::prelude::*;
 
-use super::{bands, check_shapes, scatter_parts, splat::validate, Grid, Projector, SparseRows};
+use super::{check_shapes, scatter_parts, splat::validate, Grid, Projector, SparseRows};
 use crate::ClassicalError;
 
 /// Footprint sides (pixels per axis) the kernels are compiled for.
@@ -120,6 +121,9 @@ struct FootView {
     /// fixed trip count.
     rows: usize,
 }
+
+/// The z-slices one forward-projection task takes: every `parts`-th from its first.
+type Slices = std::iter::StepBy<Range<usize>>;
 
 /// Voxels projected per batch.
 const CHUNK: usize = 16;
@@ -655,7 +659,7 @@ impl FootprintProjector {
     fn scatter<const N: usize, const DISTORTED: bool, const LANES: bool>(
         &self,
         view: usize,
-        ks: Range<usize>,
+        ks: Slices,
         x: &[f32],
         img: &mut [f32],
     ) {
@@ -669,8 +673,13 @@ impl FootprintProjector {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (k * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
-                    fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
                     let valid = CHUNK.min(nx - i0);
+                    // Empty voxels add nothing: a chunk of them needs no footprints. Flows leave
+                    // most of a box dark, so this is most of the work of a projection there.
+                    if x[row0 + i0..][..valid].iter().all(|&g| g == 0.0) {
+                        continue;
+                    }
+                    fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
                     if LANES {
                         // Each voxel's start pixel and weighted value, vectorised across the chunk;
                         // misses and empty voxels get a zero value and are skipped.
@@ -1079,13 +1088,13 @@ mod kernels {
     pub(super) fn scatter<const N: usize, const D: bool>(
         p: &FootprintProjector,
         view: usize,
-        ks: Range<usize>,
+        ks: Slices,
         x: &[f32],
         img: &mut [f32],
     ) {
         #[cfg(target_arch = "x86_64")]
         {
-            variants!(fn(p: &FootprintProjector, view: usize, ks: Range<usize>, x: &[f32], img: &mut [f32]) {
+            variants!(fn(p: &FootprintProjector, view: usize, ks: Slices, x: &[f32], img: &mut [f32]) {
                 if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
                     p.scatter::<N, D, true>(view, ks, x, img)
                 } else {
@@ -1155,9 +1164,13 @@ impl Projector for FootprintProjector {
         let (pw, ph) = fv.padded();
         let (w, n) = (fv.width, fv.side);
         let nz = self.grid.dims[2];
-        let partials: Vec<Vec<f32>> = bands(nz, scatter_parts())
+        // Interleaved slices, so that the threads share the work evenly when it is uneven
+        // (chunks of empty voxels are skipped, and a flow fills part of the box).
+        let parts = scatter_parts().clamp(1, nz);
+        let partials: Vec<Vec<f32>> = (0..parts)
             .into_par_iter()
-            .map(|ks| {
+            .map(|first| {
+                let ks = (first..nz).step_by(parts);
                 let mut img = vec![0f32; SCATTER_IMAGES * pw * ph];
                 dispatch!(fv.side, fv.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, &mut img));
                 img
