@@ -147,8 +147,12 @@ fn main() {
         for res in [64usize, 128] {
             let grid = Grid::with_resolution(aabb, res);
             let x = phantom(&grid);
-            let p = FootprintProjector::new(grid, &cams, 1.0).expect("valid").with_isa(isa);
+            let p = FootprintProjector::new(grid, &cams, 1.0)
+                .expect("valid")
+                .with_isa(isa)
+                .with_shared_rows(!args.iter().any(|a| a == "--no-shared-rows"));
             if res == 64 {
+                fields.push(format!("\"shared_row_views\": {}", p.shared_row_views()));
                 fields.push(format!("\"isa\": \"{:?}\"", p.isa()));
             }
             let mut img = vec![0f32; p.view_len(0)];
@@ -238,6 +242,24 @@ fn main() {
             bf.cpu / f.cpu,
             1e-6 / b.wall,
             bb.cpu / b.cpu
+        );
+    }
+    println!("footprint, shared rows (the ring is around the grid's x axis) against voxel by voxel, 90 x 128^2 (M voxel-views/s, best of 3; ratio of CPU time)");
+    for res in [64usize, 128] {
+        let grid = Grid::with_resolution(aabb, res);
+        let x = phantom(&grid);
+        let general = FootprintProjector::new(grid, &ring90, 1.0).expect("valid").with_shared_rows(false);
+        let shared = FootprintProjector::new(grid, &ring90, 1.0).expect("valid");
+        let (gf, gb) = rates(&general, &x, ring90.len(), 3);
+        let (sf, sb) = rates(&shared, &x, ring90.len(), 3);
+        println!(
+            "  {res:>3}^3  forward {:>6.1} -> {:>6.1} ({:>4.2}x)  back {:>6.1} -> {:>6.1} ({:>4.2}x)",
+            1e-6 / gf.wall,
+            1e-6 / sf.wall,
+            gf.cpu / sf.cpu,
+            1e-6 / gb.wall,
+            1e-6 / sb.wall,
+            gb.cpu / sb.cpu
         );
     }
     let grid = Grid::with_resolution(aabb, 128);

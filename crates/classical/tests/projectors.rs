@@ -116,6 +116,70 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
     assert!(sides.contains(&2) && sides.contains(&4) && sides.len() >= 3, "sides covered: {sides:?}");
 }
 
+/// The cameras of [`ring`] turned a quarter about their axis: a grid row is horizontal in
+/// their images (as in the synthetic jets' rings), where [`ring`]'s see it vertical.
+fn ring_turned(n: usize, px: u32) -> Vec<fluidnerf_core::Camera> {
+    ring(n, px)
+        .into_iter()
+        .map(|c| {
+            let eye = c.centre();
+            let up = glam::DVec3::X.cross(eye).normalize();
+            fluidnerf_core::Camera::look_at(c.intrinsics, eye, glam::DVec3::ZERO, up)
+        })
+        .collect()
+}
+
+/// On a ring around the grid's x axis the voxels of a row share their footprint along one
+/// image axis, computed once per chunk: the projections, the column sums and the back
+/// projections agree with the voxel-by-voxel evaluation to rounding, with every instruction
+/// set, whether rows image vertical or horizontal, and each path is its own exact adjoint.
+#[test]
+fn footprint_shared_rows_agree_with_the_general_path() {
+    let cases = [([40, 18, 16], 24, false), ([20, 12, 10], 64, false), ([9, 7, 6], 40, false)];
+    let turned = [([40, 18, 16], 24, true), ([20, 12, 10], 64, true), ([9, 7, 6], 40, true)];
+    for (dims, px, turn) in cases.into_iter().chain(turned) {
+        let grid = Grid::new(dims, aabb());
+        let cams = if turn { ring_turned(3, px) } else { ring(3, px) };
+        let general = FootprintProjector::new(grid, &cams, 0.7).expect("valid").with_shared_rows(false);
+        assert_eq!(general.shared_row_views(), 0);
+        let x = uniform(3, grid.len());
+        for isa in Isa::available() {
+            let shared = FootprintProjector::new(grid, &cams, 0.7).expect("valid").with_isa(isa);
+            assert_eq!(shared.shared_row_views(), 3, "a ring around x shares its rows");
+            let general = general.clone().with_isa(isa);
+            for v in 0..3 {
+                let side = shared.footprint_side(v);
+                let (mut a, mut b) = (vec![0f32; shared.view_len(v)], vec![0f32; shared.view_len(v)]);
+                shared.forward(v, &x, &mut a);
+                general.forward(v, &x, &mut b);
+                let peak = b.iter().cloned().fold(0f32, f32::max);
+                assert!(peak > 0.0);
+                for (i, (p, q)) in a.iter().zip(&b).enumerate() {
+                    assert!(
+                        (p - q).abs() <= 2e-5 * peak,
+                        "{isa:?} {dims:?} view {v} side {side} pixel {i}: {p} vs {q}"
+                    );
+                }
+                let y = uniform(40 + v as u64, shared.view_len(v));
+                let (mut ba, mut bb) = (vec![0f32; grid.len()], vec![0f32; grid.len()]);
+                let (mut ca, mut cb) = (vec![0f32; grid.len()], vec![0f32; grid.len()]);
+                shared.back_add(v, &y, &mut ba, Some(&mut ca));
+                general.back_add(v, &y, &mut bb, Some(&mut cb));
+                let top = bb.iter().chain(&cb).cloned().fold(0f32, f32::max);
+                for (j, ((p, q), (c, d))) in ba.iter().zip(&bb).zip(ca.iter().zip(&cb)).enumerate() {
+                    assert!((p - q).abs() <= 2e-5 * top, "{isa:?} {dims:?} view {v} voxel {j}: {p} vs {q}");
+                    assert!((c - d).abs() <= 2e-5 * top, "{isa:?} {dims:?} view {v} column sum {j}: {c} vs {d}");
+                }
+                let (lhs, rhs) = (dot(&a, &y), dot(&x, &ba));
+                assert!(
+                    (lhs - rhs).abs() <= 1e-5 * lhs.abs(),
+                    "{isa:?} {dims:?} view {v}: <Ax,y> {lhs} vs <x,A'y> {rhs}"
+                );
+            }
+        }
+    }
+}
+
 /// The forward projection skips runs of empty voxels: a volume that is empty but for a few
 /// voxels (alone in their chunk, at a chunk's edge, in a row's short last chunk) projects as
 /// its matrix rows say, with every instruction set, and an empty volume projects to zero.

@@ -61,6 +61,10 @@
 //! z-slices are independent and no atomics or per-thread volumes are needed; the back
 //! projector does the same arithmetic as the forward one.
 //!
+//! When a camera sees the grid's rows (its `x` axis) as vertical or horizontal lines in its
+//! image, exactly (CT-style rings around that axis; see `Shared`), the voxels of a chunk share
+//! their depth and their footprint along one image axis, and a chunk computes that axis once.
+//!
 //! Wider footprints are stored voxel-major, so that each voxel reads its weights as one vector
 //! per axis. With footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's row
 //! of pixels is too short for a vector) the vector kernels work across voxels instead: the back
@@ -120,6 +124,24 @@ struct FootView {
     /// Rows each footprint spans (at most `side`): constant per view, so the row loop has a
     /// fixed trip count.
     rows: usize,
+    /// Which image axis the voxels of a grid row share their footprint along (see [`Shared`]).
+    shared: Shared,
+}
+
+/// Views whose camera sees a grid row (the grid's `x` axis) as a vertical or a horizontal line
+/// of voxels: the camera's depth and one of its coordinates do not change along the row, so
+/// the voxels of a chunk share their projection and whole footprint along that image axis,
+/// which [`FootView::chunk`] then computes once per chunk. Exact zeros in the rotation decide
+/// (CT-style rings around the grid's `x` axis: the benchmark's ring, the synthetic jets').
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Shared {
+    /// Every voxel has its own footprint along both axes.
+    None,
+    /// Camera `x` and `z` are constant along a row (the row is vertical in the image), no skew
+    /// or distortion.
+    U,
+    /// Camera `y` and `z` are constant along a row (the row is horizontal), no distortion.
+    V,
 }
 
 /// The z-slices one forward-projection task takes: every `parts`-th from its first.
@@ -127,6 +149,18 @@ type Slices = std::iter::StepBy<Range<usize>>;
 
 /// Voxels projected per batch.
 const CHUNK: usize = 16;
+
+/// `0, 1, …, CHUNK − 1` as f32: `(i0 + q) as f32` without a conversion per lane (exact: grids
+/// are far below 2²⁴).
+const Q: [f32; CHUNK] = {
+    let mut q = [0f32; CHUNK];
+    let mut i = 0;
+    while i < CHUNK {
+        q[i] = i as f32;
+        i += 1;
+    }
+    q
+};
 
 /// Padded images each forward-projection task accumulates into: the voxel-by-voxel kernel
 /// alternates between the first two by parity, the lane kernel cycles through all four.
@@ -341,7 +375,9 @@ impl FootView {
             edges,
             side: MAX_FOOTPRINT_SIDE,
             rows: MAX_FOOTPRINT_SIDE,
+            shared: Shared::None,
         };
+        view.shared = view.sharing();
         let (su, sv) = view.support_px(grid);
         // Pixels a support of s can touch: ⌈s⌉ + 1, with a margin for the lattice's sampling.
         let need = |s: f64| ((s * 1.02 + 1.0).ceil() as usize).clamp(2, MAX_FOOTPRINT_SIDE);
@@ -402,21 +438,18 @@ impl FootView {
         i0: usize,
         out: &mut Chunk<N>,
     ) {
+        if !DISTORTED {
+            match self.shared {
+                Shared::U => return self.chunk_shared::<N, LANES, false>(base, step, i0, out),
+                Shared::V => return self.chunk_shared::<N, LANES, true>(base, step, i0, out),
+                Shared::None => {}
+            }
+        }
         let n = N as f32;
         let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
         let z = [0f32; CHUNK];
         let (mut u, mut v, mut gamma, mut front) = (z, z, z, z);
         let (mut pu, mut lu, mut pv, mut lv) = (z, z, z, z);
-        // (i0 + q) as f32 without a conversion per lane (exact: grids are far below 2²⁴).
-        const Q: [f32; CHUNK] = {
-            let mut q = [0f32; CHUNK];
-            let mut i = 0;
-            while i < CHUNK {
-                q[i] = i as f32;
-                i += 1;
-            }
-            q
-        };
         let f0 = i0 as f32;
         for q in 0..CHUNK {
             let fi = f0 + Q[q];
@@ -461,6 +494,132 @@ impl FootView {
         } else {
             axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, |q, k, w| out.wu[q][k] = w);
             axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, |q, k, w| out.wv[q][k] = w);
+        }
+    }
+
+    /// How the voxels of a grid row share their footprints in this view: exact zeros in the
+    /// rotation make every voxel of a row have the same camera depth and `x` (or `y`), bit for
+    /// bit.
+    fn sharing(&self) -> Shared {
+        let r = &self.rot;
+        if self.distorted || r[2][0] != 0.0 {
+            Shared::None
+        } else if r[0][0] == 0.0 && self.skew == 0.0 {
+            Shared::U
+        } else if r[1][0] == 0.0 {
+            Shared::V
+        } else {
+            Shared::None
+        }
+    }
+
+    /// The centre and the three edge widths of a voxel along `u` (or with `ALONG_V` along `v`)
+    /// from its normalised camera coordinates and `1/z` (undistorted; as [`Self::project`]).
+    #[inline(always)]
+    fn along<const ALONG_V: bool>(&self, xn: f32, yn: f32, iz: f32) -> (f32, [f32; 3]) {
+        if ALONG_V {
+            (self.fy * yn + self.cy, self.edges.map(|e| (self.fy * (iz * (e[1] - yn * e[2]))).abs()))
+        } else {
+            let w = self.edges.map(|e| {
+                let (dx, dy) = (iz * (e[0] - xn * e[2]), iz * (e[1] - yn * e[2]));
+                (self.fx * dx + self.skew * dy).abs()
+            });
+            (self.fx * xn + self.skew * yn + self.cx, w)
+        }
+    }
+
+    /// [`Self::chunk`] for views whose grid rows share their footprint along `u` (or with
+    /// `SHARED_V` along `v`), see [`Shared`]: that axis's projection, the depth and the pixel
+    /// weights along it are computed once for the chunk, and only the other axis per voxel. The
+    /// shared axis's `1/(2l)` and `1/p` then cost one division per chunk each, and the other
+    /// axis's `1/(2l)` and the amplitude one per voxel.
+    #[inline(always)]
+    fn chunk_shared<const N: usize, const LANES: bool, const SHARED_V: bool>(
+        &self,
+        base: [f32; 3],
+        step: [f32; 3],
+        i0: usize,
+        out: &mut Chunk<N>,
+    ) {
+        let n = N as f32;
+        // The camera coordinate that changes along the row: y when u is shared, x when v is.
+        let moving = if SHARED_V { 0 } else { 1 };
+        let (n_s, n_l) = if SHARED_V { (self.rows, N) } else { (N, self.rows) };
+        let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
+        let (bound_s, bound_l) = if SHARED_V { (hmax, wmax) } else { (wmax, hmax) };
+        // What the voxels share.
+        let z = base[2];
+        let in_front = z > 1e-6;
+        let zs = if in_front { z } else { 1.0 };
+        let iz = 1.0 / zs;
+        let fixed = base[1 - moving];
+        let (centre_s, w_s) =
+            if SHARED_V { self.along::<true>(0.0, fixed * iz, iz) } else { self.along::<false>(fixed * iz, 0.0, iz) };
+        let (ps, ls) = trapezoid(w_s);
+        let base_s = fixed * fixed + zs * zs;
+        let g0 = self.gain * iz * iz * iz;
+        // Per voxel: the moving coordinate and what follows from it.
+        let z16 = [0f32; CHUNK];
+        let (mut centre, mut gamma, mut pl, mut ll) = (z16, z16, z16, z16);
+        let f0 = i0 as f32;
+        for q in 0..CHUNK {
+            let c = base[moving] + (f0 + Q[q]) * step[moving];
+            let (cq, w) = if SHARED_V {
+                self.along::<false>(c * iz, fixed * iz, iz)
+            } else {
+                self.along::<true>(0.0, c * iz, iz)
+            };
+            centre[q] = cq;
+            (pl[q], ll[q]) = trapezoid(w);
+            gamma[q] = g0 * (base_s + c * c).sqrt();
+        }
+        let (lim_s, lim_l) = (n_s as f32 - 1.0, n_l as f32 - 1.0);
+        let wide = (ps + ls > lim_s) | (0..CHUNK).fold(false, |any, q| any | (pl[q] + ll[q] > lim_l));
+        let (ps, ls) = fit_trapezoid(ps, ls, n_s, wide);
+        let t_s = centre_s - 0.5 * (ps + ls) + 0.5 + n;
+        let first_s = if in_front & (t_s >= 0.0) & (t_s < bound_s) { floor_small(t_s) } else { -1.0 };
+        let (inv_ps, inv_s) = (1.0 / ps, 0.5 / ls);
+        let (mut off_l, mut inv_l) = (z16, z16);
+        for q in 0..CHUNK {
+            (pl[q], ll[q]) = fit_trapezoid(pl[q], ll[q], n_l, wide);
+            let t_l = centre[q] - 0.5 * (pl[q] + ll[q]) + 0.5 + n;
+            let hit = (first_s >= 0.0) & (t_l >= 0.0) & (t_l < bound_l);
+            let first_l = if hit { floor_small(t_l) } else { -1.0 };
+            (out.col[q], out.row[q]) = match (hit, SHARED_V) {
+                (false, _) => (-1.0, 0.0),
+                (true, false) => (first_s, first_l),
+                (true, true) => (first_l, first_s),
+            };
+            off_l[q] = (centre[q] + n + 0.5) - first_l;
+            let r = 1.0 / (pl[q] * ll[q]);
+            inv_l[q] = 0.5 * pl[q] * r;
+            out.amp[q] = gamma[q] * inv_ps * (ll[q] * r);
+        }
+        // The shared axis's weights, once for every voxel.
+        let mut w_px = [0f32; N];
+        let off_s = (centre_s + n + 0.5) - first_s;
+        axis_weights_chunk::<N>(&[off_s; CHUNK], &[ps; CHUNK], &[ls; CHUNK], &[inv_s; CHUNK], |q, k, w| {
+            if q == 0 {
+                w_px[k] = w
+            }
+        });
+        match (LANES, SHARED_V) {
+            (true, false) => {
+                out.wu_lanes = w_px.map(|w| [w; CHUNK]);
+                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wv_lanes[k][q] = w);
+            }
+            (true, true) => {
+                out.wv_lanes = w_px.map(|w| [w; CHUNK]);
+                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wu_lanes[k][q] = w);
+            }
+            (false, false) => {
+                out.wu = [w_px; CHUNK];
+                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wv[q][k] = w);
+            }
+            (false, true) => {
+                out.wv = [w_px; CHUNK];
+                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wu[q][k] = w);
+            }
         }
     }
 
@@ -590,6 +749,23 @@ impl FootprintProjector {
     /// The instruction set the kernels run with.
     pub fn isa(&self) -> Isa {
         self.isa
+    }
+
+    /// The same projector with the shared-row shortcut on (the default) or off: with it, views
+    /// whose camera sees a grid row as a vertical line of voxels (a ring around the grid's `x`
+    /// axis, no skew or distortion) compute the row's footprint along `u` once per chunk
+    /// instead of once per voxel. Both give the same weights up to rounding; off is for
+    /// comparisons in tests and benchmarks.
+    pub fn with_shared_rows(mut self, on: bool) -> Self {
+        for (view, camera) in self.views.iter_mut().zip(&self.cameras) {
+            view.shared = if on { FootView::new(camera, &self.grid, 1.0).shared } else { Shared::None };
+        }
+        self
+    }
+
+    /// Views that use the shared-row shortcut ([`Self::with_shared_rows`]).
+    pub fn shared_row_views(&self) -> usize {
+        self.views.iter().filter(|v| v.shared != Shared::None).count()
     }
 
     /// Largest width of a voxel's footprint over all views, in pixels (the support of the
