@@ -72,6 +72,13 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
         ([20, 18, 16], distorted_ring(3, 40)),
         ([10, 9, 8], distorted_ring(2, 40)),
         ([6, 6, 5], ring(2, 64)),
+        ([20, 18, 16], ring_turned(3, 24)),
+        ([40, 36, 32], zoomed(2, 24, 1.8, false)),
+        ([40, 36, 32], zoomed(2, 24, 1.8, true)),
+        ([16, 32, 32], zoomed(2, 24, 3.3, false)),
+        ([16, 32, 32], zoomed(2, 24, 3.3, true)),
+        ([16, 32, 32], zoomed(2, 48, 1.65, false)),
+        ([16, 32, 32], zoomed(2, 48, 1.65, true)),
     ] {
         let grid = Grid::new(dims, aabb());
         let base = FootprintProjector::new(grid, &cams, 0.9).expect("valid").with_isa(Isa::Baseline);
@@ -119,12 +126,20 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
 /// The cameras of [`ring`] turned a quarter about their axis: a grid row is horizontal in
 /// their images (as in the synthetic jets' rings), where [`ring`]'s see it vertical.
 fn ring_turned(n: usize, px: u32) -> Vec<fluidnerf_core::Camera> {
+    zoomed(n, px, 1.0, true)
+}
+
+/// [`ring`] (or [`ring_turned`]) with the focal length scaled by `zoom`: above about 1.4 the
+/// box overfills the images, so footprints cross their edges.
+fn zoomed(n: usize, px: u32, zoom: f64, turned: bool) -> Vec<fluidnerf_core::Camera> {
     ring(n, px)
         .into_iter()
         .map(|c| {
             let eye = c.centre();
-            let up = glam::DVec3::X.cross(eye).normalize();
-            fluidnerf_core::Camera::look_at(c.intrinsics, eye, glam::DVec3::ZERO, up)
+            let up = if turned { glam::DVec3::X.cross(eye).normalize() } else { glam::DVec3::X };
+            let mut k = c.intrinsics;
+            (k.fx, k.fy) = (k.fx * zoom, k.fy * zoom);
+            fluidnerf_core::Camera::look_at(k, eye, glam::DVec3::ZERO, up)
         })
         .collect()
 }

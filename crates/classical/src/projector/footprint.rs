@@ -144,6 +144,15 @@ enum Shared {
     V,
 }
 
+/// A view's image laid out for [`FootprintProjector::gather_shared16`]: the padded image
+/// (rows horizontal, `shared_v`) or its transpose, and the column and row masks, each with 32
+/// trailing zeros.
+struct Lines<'a> {
+    shared_v: bool,
+    image: &'a [f32],
+    masks: (&'a [f32], &'a [f32]),
+}
+
 /// The z-slices one forward-projection task takes: every `parts`-th from its first.
 type Slices = std::iter::StepBy<Range<usize>>;
 
@@ -1069,57 +1078,189 @@ impl FootprintProjector {
         out: &mut [f32],
         mut col_sums: Option<&mut [f32]>,
     ) {
+        let fv = &self.views[view];
+        debug_assert!(y.len() == fv.padded().0 * fv.padded().1 && y.len() < i32::MAX as usize);
+        self.for_each_chunk::<N, DISTORTED, true>(view, ks, |ch, first, valid| {
+            // SAFETY: AVX-512F is enabled here (this function's contract), and `y` is the view's
+            // padded image.
+            unsafe { self.lanes16_chunk(fv, ch, first, valid, y, masks, out, col_sums.as_deref_mut()) }
+        });
+    }
+
+    /// One chunk of [`Self::gather_lanes16`]: `out[first..][..valid] += A_vᵀ y` of the chunk's
+    /// voxels that hit, and their column sums if asked.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F; `y` is the view's padded image (fewer than 2³¹ pixels).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2")]
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn lanes16_chunk<const N: usize>(
+        &self,
+        fv: &FootView,
+        ch: &Chunk<N>,
+        first: usize,
+        valid: usize,
+        y: &[f32],
+        masks: (&[f32], &[f32]),
+        out: &mut [f32],
+        col_sums: Option<&mut [f32]>,
+    ) {
         use std::arch::x86_64::*;
         const { assert!(CHUNK == 16) };
-        let fv = &self.views[view];
         let pw = fv.padded().0;
-        debug_assert!(y.len() == pw * fv.padded().1 && y.len() < i32::MAX as usize);
         let nr = fv.rows;
         let pw_v = _mm512_set1_epi32(pw as i32);
-        self.for_each_chunk::<N, DISTORTED, true>(view, ks, |ch, first, valid| {
-            // SAFETY: as in `gather_lanes`: the chunk's arrays hold 16 entries, and every
-            // gathered index lies inside the padded image (a voxel that misses reads
-            // from pixel 0 onwards).
+        // SAFETY: as in `gather_lanes`: the chunk's arrays hold 16 entries, and every
+        // gathered index lies inside the padded image (a voxel that misses reads
+        // from pixel 0 onwards).
+        unsafe {
+            let col = _mm512_loadu_ps(ch.col.as_ptr());
+            let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
+            // First column and row, 0 for a miss.
+            let cols = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(col));
+            let rows = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
+            let at = _mm512_add_epi32(_mm512_mullo_epi32(rows, pw_v), cols);
+            let mut sum = _mm512_setzero_ps();
+            for c in 0..N {
+                let mut acc = _mm512_setzero_ps();
+                for r in 0..nr {
+                    let idx = _mm512_add_epi32(at, _mm512_set1_epi32((r * pw + c) as i32));
+                    let px = _mm512_i32gather_ps::<4>(idx, y.as_ptr());
+                    let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
+                    acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
+                }
+                let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
+                sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
+            }
+            // out += amp · sum for the voxels that hit, inside the row.
+            let keep = hit & ((1u32 << valid) - 1) as u16;
+            let amp = _mm512_loadu_ps(ch.amp.as_ptr());
+            let dst = out[first..][..valid].as_mut_ptr();
+            let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+            _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(amp, sum)));
+            if let Some(cs) = col_sums {
+                // As in `gather_lanes`.
+                let (mut su, mut sv) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+                for c in 0..N {
+                    let m =
+                        _mm512_i32gather_ps::<4>(_mm512_add_epi32(cols, _mm512_set1_epi32(c as i32)), masks.0.as_ptr());
+                    su = _mm512_add_ps(su, _mm512_mul_ps(_mm512_loadu_ps(ch.wu_lanes[c].as_ptr()), m));
+                }
+                for r in 0..nr {
+                    let m =
+                        _mm512_i32gather_ps::<4>(_mm512_add_epi32(rows, _mm512_set1_epi32(r as i32)), masks.1.as_ptr());
+                    sv = _mm512_add_ps(sv, _mm512_mul_ps(_mm512_loadu_ps(ch.wv_lanes[r].as_ptr()), m));
+                }
+                let dst = cs[first..][..valid].as_mut_ptr();
+                let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+                _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(_mm512_mul_ps(amp, su), sv)));
+            }
+        }
+    }
+
+    /// [`Self::gather_lanes16`] for views whose grid rows share a footprint axis ([`Shared`]).
+    /// A chunk's voxels then read their pixels from one line of the image per footprint row
+    /// (`SHARED_V`: rows horizontal) or column (rows vertical), within 32 pixels of each other
+    /// in the common case: two vector loads per line and a permutation replace the gathers.
+    /// `lines` is the padded image, transposed when rows are vertical, and `line_masks` the
+    /// column and row masks, each followed by 32 zeros; the loads read up to 32 values from a
+    /// voxel's first pixel on. The arithmetic is the gather's, so the result is the same bit
+    /// for bit; a chunk spread wider falls back to the gathers (from `y`).
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F; `y` is the view's padded image (fewer than 2³¹ pixels),
+    /// `lines` the same laid out as above, with 32 trailing zeros.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn gather_shared16<const N: usize, const SHARED_V: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        y: &[f32],
+        lines: &[f32],
+        masks: (&[f32], &[f32]),
+        line_masks: (&[f32], &[f32]),
+        out: &mut [f32],
+        mut col_sums: Option<&mut [f32]>,
+    ) {
+        use std::arch::x86_64::*;
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let nr = fv.rows;
+        assert!(lines.len() == pw * ph + 32 && line_masks.0.len() == pw + 32 && line_masks.1.len() == ph + 32);
+        // Pixels along a line between two lines' starts, and the footprint's extent along them.
+        let (line_len, along_n) = if SHARED_V { (pw, N) } else { (ph, nr) };
+        self.for_each_chunk::<N, false, true>(view, ks, |ch, first, valid| {
+            // SAFETY: AVX-512F is enabled here. Every load reads 32 values from a pixel of the
+            // image (or mask) inside the padded extent, whose buffers carry 32 more values.
             unsafe {
                 let col = _mm512_loadu_ps(ch.col.as_ptr());
                 let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
-                // First column and row, 0 for a miss.
-                let cols = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(col));
-                let rows = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
-                let at = _mm512_add_epi32(_mm512_mullo_epi32(rows, pw_v), cols);
+                let keep = hit & ((1u32 << valid) - 1) as u16;
+                if keep == 0 {
+                    return;
+                }
+                let cols = _mm512_maskz_mov_epi32(keep, _mm512_cvttps_epi32(col));
+                let rows = _mm512_maskz_mov_epi32(keep, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
+                // `along`: each voxel's first pixel along the lines; `across`: the first line,
+                // the same for every voxel that hits (misses are 0 in both).
+                let (along, across) = if SHARED_V { (cols, rows) } else { (rows, cols) };
+                let across = _mm512_reduce_max_epi32(across) as usize;
+                let base = _mm512_mask_reduce_min_epi32(keep, along);
+                let off = _mm512_maskz_sub_epi32(keep, along, _mm512_set1_epi32(base));
+                if _mm512_reduce_max_epi32(off) as usize + along_n > 32 {
+                    return self.lanes16_chunk(fv, ch, first, valid, y, masks, out, col_sums.as_deref_mut());
+                }
+                let base = base as usize;
+                // The lines a footprint reads: its rows (rows horizontal) or columns.
+                let n_lines = if SHARED_V { nr } else { N };
+                let mut lo = [_mm512_setzero_ps(); N];
+                let mut hi = [_mm512_setzero_ps(); N];
+                for l in 0..n_lines {
+                    let p = lines.as_ptr().add((across + l) * line_len + base);
+                    lo[l] = _mm512_loadu_ps(p);
+                    hi[l] = _mm512_loadu_ps(p.add(16));
+                }
                 let mut sum = _mm512_setzero_ps();
                 for c in 0..N {
                     let mut acc = _mm512_setzero_ps();
                     for r in 0..nr {
-                        let idx = _mm512_add_epi32(at, _mm512_set1_epi32((r * pw + c) as i32));
-                        let px = _mm512_i32gather_ps::<4>(idx, y.as_ptr());
+                        let (l, k) = if SHARED_V { (r, c) } else { (c, r) };
+                        let px =
+                            _mm512_permutex2var_ps(lo[l], _mm512_add_epi32(off, _mm512_set1_epi32(k as i32)), hi[l]);
                         let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
                         acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
                     }
                     let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
                     sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
                 }
-                // out += amp · sum for the voxels that hit, inside the row.
-                let keep = hit & ((1u32 << valid) - 1) as u16;
                 let amp = _mm512_loadu_ps(ch.amp.as_ptr());
                 let dst = out[first..][..valid].as_mut_ptr();
                 let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
                 _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(amp, sum)));
                 if let Some(cs) = col_sums.as_deref_mut() {
-                    // As in `gather_lanes`.
+                    // The mask along the lines by permutation, the one across them broadcast.
+                    let (m_along, m_across) =
+                        if SHARED_V { (line_masks.0, line_masks.1) } else { (line_masks.1, line_masks.0) };
+                    let p = m_along.as_ptr().add(base);
+                    let (mlo, mhi) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
+                    let mask_at = |k: usize, shared_axis: bool| {
+                        if shared_axis {
+                            _mm512_set1_ps(m_across[across + k])
+                        } else {
+                            _mm512_permutex2var_ps(mlo, _mm512_add_epi32(off, _mm512_set1_epi32(k as i32)), mhi)
+                        }
+                    };
                     let (mut su, mut sv) = (_mm512_setzero_ps(), _mm512_setzero_ps());
                     for c in 0..N {
-                        let m = _mm512_i32gather_ps::<4>(
-                            _mm512_add_epi32(cols, _mm512_set1_epi32(c as i32)),
-                            masks.0.as_ptr(),
-                        );
+                        let m = mask_at(c, !SHARED_V);
                         su = _mm512_add_ps(su, _mm512_mul_ps(_mm512_loadu_ps(ch.wu_lanes[c].as_ptr()), m));
                     }
                     for r in 0..nr {
-                        let m = _mm512_i32gather_ps::<4>(
-                            _mm512_add_epi32(rows, _mm512_set1_epi32(r as i32)),
-                            masks.1.as_ptr(),
-                        );
+                        let m = mask_at(r, SHARED_V);
                         sv = _mm512_add_ps(sv, _mm512_mul_ps(_mm512_loadu_ps(ch.wv_lanes[r].as_ptr()), m));
                     }
                     let dst = cs[first..][..valid].as_mut_ptr();
@@ -1288,12 +1429,14 @@ mod kernels {
         p.scatter::<N, D, false>(view, ks, x, img)
     }
 
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn gather<const N: usize, const D: bool>(
         p: &FootprintProjector,
         view: usize,
         ks: Range<usize>,
         y: &[f32],
         masks: (&[f32], &[f32]),
+        lines: Option<&Lines>,
         out: &mut [f32],
         col_sums: Option<&mut [f32]>,
     ) {
@@ -1314,6 +1457,16 @@ mod kernels {
             // SAFETY (all four calls): `p.isa` never exceeds what `Isa::detected` found on this
             // CPU, and the lane kernels get images of fewer than 2³¹ pixels.
             match (p.isa, lanes) {
+                (Isa::Avx512, true) if !D && lines.is_some() => {
+                    let l = lines.expect("lines");
+                    return unsafe {
+                        if l.shared_v {
+                            p.gather_shared16::<N, true>(view, ks, y, l.image, masks, l.masks, out, col_sums)
+                        } else {
+                            p.gather_shared16::<N, false>(view, ks, y, l.image, masks, l.masks, out, col_sums)
+                        }
+                    };
+                }
                 (Isa::Avx512, true) => return unsafe { p.gather_lanes16::<N, D>(view, ks, y, masks, out, col_sums) },
                 (Isa::Avx512, false) => return unsafe { avx512::<N, D>(p, view, ks, y, masks, out, col_sums) },
                 (Isa::Avx2, true) => return unsafe { p.gather_lanes::<N, D>(view, ks, y, masks, out, col_sums) },
@@ -1373,23 +1526,42 @@ impl Projector for FootprintProjector {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let (w, h, n) = (fv.width, fv.height, fv.side);
-        let mut padded = vec![0f32; pw * ph];
+        // 32 trailing zeros (and on the masks) for the shared-row kernel's loads.
+        let mut padded = vec![0f32; pw * ph + 32];
         for (r, row) in y.chunks_exact(w).enumerate() {
             padded[(r + n) * pw + n..][..w].copy_from_slice(row);
         }
-        let col_mask: Vec<f32> = (0..pw).map(|c| if (n..n + w).contains(&c) { 1.0 } else { 0.0 }).collect();
-        let row_mask: Vec<f32> = (0..ph).map(|r| if (n..n + h).contains(&r) { 1.0 } else { 0.0 }).collect();
-        let masks = (col_mask.as_slice(), row_mask.as_slice());
+        let col_mask: Vec<f32> = (0..pw + 32).map(|c| if (n..n + w).contains(&c) { 1.0 } else { 0.0 }).collect();
+        let row_mask: Vec<f32> = (0..ph + 32).map(|r| if (n..n + h).contains(&r) { 1.0 } else { 0.0 }).collect();
+        let masks = (&col_mask[..pw], &row_mask[..ph]);
+        // Rows that share a footprint axis read along image lines: rows (the padded image as it
+        // is) when they image horizontal, columns (the image transposed) when vertical.
+        let transposed = (fv.shared == Shared::U && self.isa == Isa::Avx512).then(|| {
+            let mut t = vec![0f32; pw * ph + 32];
+            for (r, row) in padded[..pw * ph].chunks_exact(pw).enumerate() {
+                for (c, &v) in row.iter().enumerate() {
+                    t[c * ph + r] = v;
+                }
+            }
+            t
+        });
+        let lines = match (fv.shared, self.isa) {
+            (Shared::V, Isa::Avx512) => Some(padded.as_slice()),
+            (Shared::U, Isa::Avx512) => transposed.as_deref(),
+            _ => None,
+        };
+        let lines = lines.map(|l| Lines { shared_v: fv.shared == Shared::V, image: l, masks: (&col_mask, &row_mask) });
+        let padded = &padded[..pw * ph];
         let [nx, ny, nz] = self.grid.dims;
         let slab = nx * ny;
         // A few slices per task: enough to balance, few enough to keep the overhead small.
         let per = nz.div_ceil(8 * scatter_parts()).max(1);
-        let padded = &padded;
+        let lines = lines.as_ref();
         match col_sums {
             None => out.par_chunks_mut(per * slab).enumerate().for_each(|(t, o)| {
                 let ks = t * per..(t * per + o.len() / slab);
                 dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
-                    self, view, ks, padded, masks, o, None
+                    self, view, ks, padded, masks, lines, o, None
                 ));
             }),
             Some(cs) => {
@@ -1402,6 +1574,7 @@ impl Projector for FootprintProjector {
                         ks,
                         padded,
                         masks,
+                        lines,
                         o,
                         Some(c)
                     ));
