@@ -227,40 +227,35 @@ fn main() {
             );
         }
     }
-    println!("footprint kernels per instruction set, 90 x 128^2, 128^3 (M voxel-views/s, best of 3; ratio to baseline of CPU time)");
+    // One line of `reference -> p` figures: M voxel-views per wall-clock second, and the ratio
+    // of CPU times.
+    let versus = |label: String, (rf, rb): (Cost, Cost), (f, b): (Cost, Cost)| {
+        println!(
+            "  {label:<9} forward {:>6.1} -> {:>6.1} ({:>4.2}x)  back {:>6.1} -> {:>6.1} ({:>4.2}x)",
+            1e-6 / rf.wall,
+            1e-6 / f.wall,
+            rf.cpu / f.cpu,
+            1e-6 / rb.wall,
+            1e-6 / b.wall,
+            rb.cpu / b.cpu
+        )
+    };
+    println!("footprint kernels per instruction set against the baseline, 90 x 128^2, 128^3 (M voxel-views/s, best of 3; ratio of CPU time)");
     let grid = Grid::with_resolution(aabb, 128);
     let x = phantom(&grid);
     let mut base = None;
     for isa in Isa::available() {
         let p = FootprintProjector::new(grid, &ring90, 1.0).expect("valid").with_isa(isa);
-        let (f, b) = rates(&p, &x, ring90.len(), 3);
-        let (bf, bb) = *base.get_or_insert((f, b));
-        println!(
-            "  {:<9} forward {:>6.1} ({:>4.1}x)  back {:>6.1} ({:>4.1}x)",
-            format!("{isa:?}"),
-            1e-6 / f.wall,
-            bf.cpu / f.cpu,
-            1e-6 / b.wall,
-            bb.cpu / b.cpu
-        );
+        let r = rates(&p, &x, ring90.len(), 3);
+        versus(format!("{isa:?}"), *base.get_or_insert(r), r);
     }
-    println!("footprint, shared rows (the ring is around the grid's x axis) against voxel by voxel, 90 x 128^2 (M voxel-views/s, best of 3; ratio of CPU time)");
+    println!("footprint, voxel by voxel -> shared rows (the ring is around the grid's x axis), 90 x 128^2 (M voxel-views/s, best of 3; ratio of CPU time)");
     for res in [64usize, 128] {
         let grid = Grid::with_resolution(aabb, res);
         let x = phantom(&grid);
         let general = FootprintProjector::new(grid, &ring90, 1.0).expect("valid").with_shared_rows(false);
         let shared = FootprintProjector::new(grid, &ring90, 1.0).expect("valid");
-        let (gf, gb) = rates(&general, &x, ring90.len(), 3);
-        let (sf, sb) = rates(&shared, &x, ring90.len(), 3);
-        println!(
-            "  {res:>3}^3  forward {:>6.1} -> {:>6.1} ({:>4.2}x)  back {:>6.1} -> {:>6.1} ({:>4.2}x)",
-            1e-6 / gf.wall,
-            1e-6 / sf.wall,
-            gf.cpu / sf.cpu,
-            1e-6 / gb.wall,
-            1e-6 / sb.wall,
-            gb.cpu / sb.cpu
-        );
+        versus(format!("{res}^3"), rates(&general, &x, ring90.len(), 3), rates(&shared, &x, ring90.len(), 3));
     }
     let grid = Grid::with_resolution(aabb, 128);
     let (x, xs) = (phantom(&grid), sparse_phantom(&grid));
