@@ -52,11 +52,12 @@
 //! Footprints are evaluated 16 voxels of a grid row at a time, vectorised across the voxels
 //! (projection, trapezoids and pixel weights; one division for `1/z` and one for the ramps'
 //! `1/(2l)` and the amplitude together; the narrowing's division only in chunks that need it).
-//! Forward projection scatters: each thread takes every other z-slice (every `T`-th of `T`
-//! tasks, so that uneven work is shared evenly), skips runs of a chunk's worth of empty voxels
-//! without computing their footprints, and accumulates into its own padded images (neighbouring voxels go to different images, so that voxels writing the
-//! same pixels do not chain through memory; a margin of `N` pixels on every side, so the inner
-//! loop has no bounds tests), and the images are summed. Back projection gathers: every voxel
+//! Forward projection scatters: each of `T` tasks (one per thread) takes every `T`-th z-slice,
+//! so that uneven work is shared evenly, skips chunks of sixteen empty voxels without computing
+//! their footprints, and accumulates into its own padded images (neighbouring voxels go to
+//! different images, so that voxels writing the same pixels do not chain through memory; a
+//! margin of `N` pixels on every side, so the inner loop has no bounds tests), and the images
+//! are summed. Back projection gathers: every voxel
 //! computes its footprint again and reads its pixels from a zero-padded copy of the image, so
 //! z-slices are independent and no atomics or per-thread volumes are needed; the back
 //! projector does the same arithmetic as the forward one.
@@ -761,10 +762,11 @@ impl FootprintProjector {
     }
 
     /// The same projector with the shared-row shortcut on (the default) or off: with it, views
-    /// whose camera sees a grid row as a vertical line of voxels (a ring around the grid's `x`
-    /// axis, no skew or distortion) compute the row's footprint along `u` once per chunk
-    /// instead of once per voxel. Both give the same weights up to rounding; off is for
-    /// comparisons in tests and benchmarks.
+    /// whose camera sees a grid row as a vertical or horizontal line of voxels (a ring around
+    /// the grid's `x` axis, no distortion) compute the row's footprint along that image axis
+    /// once per chunk instead of once per voxel, and their AVX-512 back projection reads pixels
+    /// along image lines. Both give the same weights up to rounding; off is for comparisons in
+    /// tests and benchmarks.
     pub fn with_shared_rows(mut self, on: bool) -> Self {
         for (view, camera) in self.views.iter_mut().zip(&self.cameras) {
             view.shared = if on { FootView::new(camera, &self.grid, 1.0).shared } else { Shared::None };
