@@ -81,6 +81,13 @@ fn best(reps: usize, f: &mut dyn FnMut()) -> Cost {
     c
 }
 
+/// Forward and back of a reference and a new projector (costs per voxel-view, from
+/// [`rates`]): M voxel-views per wall-clock second of each and the ratio of their CPU times,
+/// forward then back.
+fn against((rf, rb): (Cost, Cost), (f, b): (Cost, Cost)) -> [f64; 6] {
+    [1e-6 / rf.wall, 1e-6 / f.wall, rf.cpu / f.cpu, 1e-6 / rb.wall, 1e-6 / b.wall, rb.cpu / b.cpu]
+}
+
 /// Forward and back costs of `p` over its first `views` views, per voxel-view.
 fn rates(p: &dyn Projector, x: &[f32], views: usize, reps: usize) -> (Cost, Cost) {
     let mut imgs: Vec<Vec<f32>> = (0..views).map(|v| vec![0f32; p.view_len(v)]).collect();
@@ -212,33 +219,17 @@ fn main() {
             // About 0.1–0.4 s per pass for the splat.
             let sub_views =
                 (4e8 / (grid.len() as f64 * old.subdivisions().pow(3) as f64)).clamp(1.0, cams.len() as f64);
-            let (of, ob) = rates(&old, &x, sub_views as usize, 2);
-            let (nf, nb) = rates(&new, &x, cams.len(), 3);
+            let [a, b, c, d, e, f] = against(rates(&old, &x, sub_views as usize, 2), rates(&new, &x, cams.len(), 3));
             println!(
-                "{name:<11} {:>4}^3 {:>4} {:>9.1} {:>9.1} {:>8.1}x {:>9.1} {:>9.1} {:>8.1}x",
-                res,
-                old.subdivisions(),
-                1e-6 / of.wall,
-                1e-6 / nf.wall,
-                of.cpu / nf.cpu,
-                1e-6 / ob.wall,
-                1e-6 / nb.wall,
-                ob.cpu / nb.cpu
+                "{name:<11} {res:>4}^3 {:>4} {a:>9.1} {b:>9.1} {c:>8.1}x {d:>9.1} {e:>9.1} {f:>8.1}x",
+                old.subdivisions()
             );
         }
     }
-    // One line of `reference -> p` figures: M voxel-views per wall-clock second, and the ratio
-    // of CPU times.
-    let versus = |label: String, (rf, rb): (Cost, Cost), (f, b): (Cost, Cost)| {
-        println!(
-            "  {label:<9} forward {:>6.1} -> {:>6.1} ({:>4.2}x)  back {:>6.1} -> {:>6.1} ({:>4.2}x)",
-            1e-6 / rf.wall,
-            1e-6 / f.wall,
-            rf.cpu / f.cpu,
-            1e-6 / rb.wall,
-            1e-6 / b.wall,
-            rb.cpu / b.cpu
-        )
+    // One line of `reference -> new` figures.
+    let versus = |label: String, reference: (Cost, Cost), new: (Cost, Cost)| {
+        let [a, b, c, d, e, f] = against(reference, new);
+        println!("  {label:<9} forward {a:>6.1} -> {b:>6.1} ({c:>4.2}x)  back {d:>6.1} -> {e:>6.1} ({f:>4.2}x)")
     };
     println!("footprint kernels per instruction set against the baseline, 90 x 128^2, 128^3 (M voxel-views/s, best of 3; ratio of CPU time)");
     let grid = Grid::with_resolution(aabb, 128);
