@@ -1112,7 +1112,6 @@ impl FootprintProjector {
         use std::arch::x86_64::*;
         const { assert!(CHUNK == 16) };
         let pw = fv.padded().0;
-        let nr = fv.rows;
         let pw_v = _mm512_set1_epi32(pw as i32);
         // SAFETY: as in `gather_lanes`: the chunk's arrays hold 16 entries, and every
         // gathered index lies inside the padded image (a voxel that misses reads
@@ -1124,20 +1123,57 @@ impl FootprintProjector {
             let cols = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(col));
             let rows = _mm512_maskz_mov_epi32(hit, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
             let at = _mm512_add_epi32(_mm512_mullo_epi32(rows, pw_v), cols);
+            let plus = |v: __m512i, k: usize| _mm512_add_epi32(v, _mm512_set1_epi32(k as i32));
+            Self::weigh16(
+                ch,
+                fv.rows,
+                (first, valid, hit & ((1u32 << valid) - 1) as u16),
+                out,
+                col_sums,
+                |c, r| _mm512_i32gather_ps::<4>(plus(at, r * pw + c), y.as_ptr()),
+                |c| _mm512_i32gather_ps::<4>(plus(cols, c), masks.0.as_ptr()),
+                |r| _mm512_i32gather_ps::<4>(plus(rows, r), masks.1.as_ptr()),
+            );
+        }
+    }
+
+    /// The arithmetic of the AVX-512 lane kernels, whatever reads the pixels: for the voxels
+    /// of a chunk in `keep` (`at = (first, valid, keep)`), `out += amp · Σ_c wu_c Σ_r wv_r
+    /// px(c, r)` (rows summed per column, then columns, as [`Self::gather`] does), and with
+    /// `col_sums` `amp · (Σ_c wu_c mu(c)) · (Σ_r wv_r mv(r))`, where `mu` and `mv` give the
+    /// column and row masks.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F; `first + valid` lies inside `out` (and `col_sums`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2")]
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn weigh16<const N: usize>(
+        ch: &Chunk<N>,
+        nr: usize,
+        (first, valid, keep): (usize, usize, u16),
+        out: &mut [f32],
+        col_sums: Option<&mut [f32]>,
+        px: impl Fn(usize, usize) -> std::arch::x86_64::__m512,
+        mu: impl Fn(usize) -> std::arch::x86_64::__m512,
+        mv: impl Fn(usize) -> std::arch::x86_64::__m512,
+    ) {
+        use std::arch::x86_64::*;
+        // SAFETY: the chunk's arrays hold 16 entries, and the masked loads and stores touch
+        // `valid` entries from `first` on (the caller's contract).
+        unsafe {
             let mut sum = _mm512_setzero_ps();
             for c in 0..N {
                 let mut acc = _mm512_setzero_ps();
                 for r in 0..nr {
-                    let idx = _mm512_add_epi32(at, _mm512_set1_epi32((r * pw + c) as i32));
-                    let px = _mm512_i32gather_ps::<4>(idx, y.as_ptr());
                     let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
-                    acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
+                    acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px(c, r)));
                 }
                 let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
                 sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
             }
             // out += amp · sum for the voxels that hit, inside the row.
-            let keep = hit & ((1u32 << valid) - 1) as u16;
             let amp = _mm512_loadu_ps(ch.amp.as_ptr());
             let dst = out[first..][..valid].as_mut_ptr();
             let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
@@ -1146,14 +1182,10 @@ impl FootprintProjector {
                 // As in `gather_lanes`.
                 let (mut su, mut sv) = (_mm512_setzero_ps(), _mm512_setzero_ps());
                 for c in 0..N {
-                    let m =
-                        _mm512_i32gather_ps::<4>(_mm512_add_epi32(cols, _mm512_set1_epi32(c as i32)), masks.0.as_ptr());
-                    su = _mm512_add_ps(su, _mm512_mul_ps(_mm512_loadu_ps(ch.wu_lanes[c].as_ptr()), m));
+                    su = _mm512_add_ps(su, _mm512_mul_ps(_mm512_loadu_ps(ch.wu_lanes[c].as_ptr()), mu(c)));
                 }
                 for r in 0..nr {
-                    let m =
-                        _mm512_i32gather_ps::<4>(_mm512_add_epi32(rows, _mm512_set1_epi32(r as i32)), masks.1.as_ptr());
-                    sv = _mm512_add_ps(sv, _mm512_mul_ps(_mm512_loadu_ps(ch.wv_lanes[r].as_ptr()), m));
+                    sv = _mm512_add_ps(sv, _mm512_mul_ps(_mm512_loadu_ps(ch.wv_lanes[r].as_ptr()), mv(r)));
                 }
                 let dst = cs[first..][..valid].as_mut_ptr();
                 let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
@@ -1226,49 +1258,28 @@ impl FootprintProjector {
                     lo[l] = _mm512_loadu_ps(p);
                     hi[l] = _mm512_loadu_ps(p.add(16));
                 }
-                let mut sum = _mm512_setzero_ps();
-                for c in 0..N {
-                    let mut acc = _mm512_setzero_ps();
-                    for r in 0..nr {
+                // The masks: along the lines by permutation, across them broadcast.
+                let (m_along, m_across) =
+                    if SHARED_V { (line_masks.0, line_masks.1) } else { (line_masks.1, line_masks.0) };
+                let p = m_along.as_ptr().add(base);
+                let (mlo, mhi) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
+                let pick = |lo, k: usize, hi| {
+                    _mm512_permutex2var_ps(lo, _mm512_add_epi32(off, _mm512_set1_epi32(k as i32)), hi)
+                };
+                let across_mask = |k: usize| _mm512_set1_ps(m_across[across + k]);
+                Self::weigh16(
+                    ch,
+                    nr,
+                    (first, valid, keep),
+                    out,
+                    col_sums.as_deref_mut(),
+                    |c, r| {
                         let (l, k) = if SHARED_V { (r, c) } else { (c, r) };
-                        let px =
-                            _mm512_permutex2var_ps(lo[l], _mm512_add_epi32(off, _mm512_set1_epi32(k as i32)), hi[l]);
-                        let wr = _mm512_loadu_ps(ch.wv_lanes[r].as_ptr());
-                        acc = _mm512_add_ps(acc, _mm512_mul_ps(wr, px));
-                    }
-                    let wc = _mm512_loadu_ps(ch.wu_lanes[c].as_ptr());
-                    sum = _mm512_add_ps(sum, _mm512_mul_ps(acc, wc));
-                }
-                let amp = _mm512_loadu_ps(ch.amp.as_ptr());
-                let dst = out[first..][..valid].as_mut_ptr();
-                let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
-                _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(amp, sum)));
-                if let Some(cs) = col_sums.as_deref_mut() {
-                    // The mask along the lines by permutation, the one across them broadcast.
-                    let (m_along, m_across) =
-                        if SHARED_V { (line_masks.0, line_masks.1) } else { (line_masks.1, line_masks.0) };
-                    let p = m_along.as_ptr().add(base);
-                    let (mlo, mhi) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
-                    let mask_at = |k: usize, shared_axis: bool| {
-                        if shared_axis {
-                            _mm512_set1_ps(m_across[across + k])
-                        } else {
-                            _mm512_permutex2var_ps(mlo, _mm512_add_epi32(off, _mm512_set1_epi32(k as i32)), mhi)
-                        }
-                    };
-                    let (mut su, mut sv) = (_mm512_setzero_ps(), _mm512_setzero_ps());
-                    for c in 0..N {
-                        let m = mask_at(c, !SHARED_V);
-                        su = _mm512_add_ps(su, _mm512_mul_ps(_mm512_loadu_ps(ch.wu_lanes[c].as_ptr()), m));
-                    }
-                    for r in 0..nr {
-                        let m = mask_at(r, SHARED_V);
-                        sv = _mm512_add_ps(sv, _mm512_mul_ps(_mm512_loadu_ps(ch.wv_lanes[r].as_ptr()), m));
-                    }
-                    let dst = cs[first..][..valid].as_mut_ptr();
-                    let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
-                    _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(_mm512_mul_ps(amp, su), sv)));
-                }
+                        pick(lo[l], k, hi[l])
+                    },
+                    |c| if SHARED_V { pick(mlo, c, mhi) } else { across_mask(c) },
+                    |r| if SHARED_V { across_mask(r) } else { pick(mlo, r, mhi) },
+                );
             }
         });
     }
