@@ -145,16 +145,21 @@ fn zoomed(n: usize, px: u32, zoom: f64, turned: bool) -> Vec<fluidnerf_core::Cam
 }
 
 /// On a ring around the grid's x axis the voxels of a row share their footprint along one
-/// image axis, computed once per chunk: the projections, the column sums and the back
+/// image axis, computed once per row: the projections, the column sums and the back
 /// projections agree with the voxel-by-voxel evaluation to rounding, with every instruction
-/// set, whether rows image vertical or horizontal, and each path is its own exact adjoint.
+/// set, whether rows image vertical or horizontal, also where footprints cross the image's
+/// edges (the column sums' masks), and each path is its own exact adjoint.
 #[test]
 fn footprint_shared_rows_agree_with_the_general_path() {
-    let cases = [([40, 18, 16], 24, false), ([20, 12, 10], 64, false), ([9, 7, 6], 40, false)];
-    let turned = [([40, 18, 16], 24, true), ([20, 12, 10], 64, true), ([9, 7, 6], 40, true)];
-    for (dims, px, turn) in cases.into_iter().chain(turned) {
+    let mut cases = Vec::new();
+    for turn in [false, true] {
+        for (dims, px) in [([40, 18, 16], 24), ([20, 12, 10], 64), ([9, 7, 6], 40)] {
+            cases.push((dims, if turn { ring_turned(3, px) } else { ring(3, px) }));
+        }
+        cases.push(([16, 32, 32], zoomed(3, 24, 3.3, turn)));
+    }
+    for (dims, cams) in cases {
         let grid = Grid::new(dims, aabb());
-        let cams = if turn { ring_turned(3, px) } else { ring(3, px) };
         let general = FootprintProjector::new(grid, &cams, 0.7).expect("valid").with_shared_rows(false);
         assert_eq!(general.shared_row_views(), 0);
         let x = uniform(3, grid.len());

@@ -63,8 +63,12 @@
 //! projector does the same arithmetic as the forward one.
 //!
 //! When a camera sees the grid's rows (its `x` axis) as vertical or horizontal lines in its
-//! image, exactly (CT-style rings around that axis; see `Shared`), the voxels of a chunk share
-//! their depth and their footprint along one image axis, and a chunk computes that axis once.
+//! image, exactly (CT-style rings around that axis; see `Shared`), the voxels of a row share
+//! their depth and their footprint along one image axis, which is then computed once per row
+//! (sixteen rows at a time). The footprint is then separable across the whole row, and the
+//! back projection uses it: the image lines under the row's shared footprint are summed with
+//! its weights into one line first, and each voxel weighs that line with its weights along the
+//! other axis, `n_s + n_l` products per voxel instead of `n_s · n_l`.
 //!
 //! Wider footprints are stored voxel-major, so that each voxel reads its weights as one vector
 //! per axis. With footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's row
@@ -131,8 +135,8 @@ struct FootView {
 
 /// Views whose camera sees a grid row (the grid's `x` axis) as a vertical or a horizontal line
 /// of voxels: the camera's depth and one of its coordinates do not change along the row, so
-/// the voxels of a chunk share their projection and whole footprint along that image axis,
-/// which [`FootView::chunk`] then computes once per chunk. Exact zeros in the rotation decide
+/// the voxels of a row share their projection and whole footprint along that image axis,
+/// which [`FootView::rows_shared`] then computes once per row. Exact zeros in the rotation decide
 /// (CT-style rings around the grid's `x` axis: the benchmark's ring, the synthetic jets').
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Shared {
@@ -145,13 +149,43 @@ enum Shared {
     V,
 }
 
-/// A view's image laid out for [`FootprintProjector::gather_shared16`]: the padded image
-/// (rows horizontal, `shared_v`) or its transpose, and the column and row masks, each with 32
-/// trailing zeros.
-struct Lines<'a> {
-    shared_v: bool,
-    image: &'a [f32],
-    masks: (&'a [f32], &'a [f32]),
+/// What the voxels of a grid row share along one image axis ([`FootView::rows_shared`]).
+#[derive(Clone, Copy, Debug)]
+struct RowShared<const N: usize> {
+    /// First padded pixel along the shared axis; −1 when the row misses the padded image.
+    first: f32,
+    /// The pixel weights along it.
+    w: [f32; N],
+    /// `1 / p` of its trapezoid.
+    inv_p: f32,
+    /// The row's camera depth (1 behind the camera) and its inverse.
+    zs: f32,
+    iz: f32,
+    /// The camera coordinate that stays fixed along the row (`y` when `v` is shared, `x`
+    /// when `u` is).
+    fixed: f32,
+}
+
+impl<const N: usize> Default for RowShared<N> {
+    fn default() -> Self {
+        RowShared { first: -1.0, w: [0.0; N], inv_p: 0.0, zs: 1.0, iz: 1.0, fixed: 0.0 }
+    }
+}
+
+/// A chunk's footprints along the axis its voxels do not share ([`FootView::chunk_moving`]).
+#[derive(Clone, Copy, Debug)]
+struct Moving<const N: usize> {
+    /// First padded pixel along that axis; −1 for a miss.
+    first: [f32; CHUNK],
+    amp: [f32; CHUNK],
+    /// Pixel-major weights `w[k][q]`.
+    w: [[f32; CHUNK]; N],
+}
+
+impl<const N: usize> Default for Moving<N> {
+    fn default() -> Self {
+        Moving { first: [-1.0; CHUNK], amp: [0.0; CHUNK], w: [[0.0; CHUNK]; N] }
+    }
 }
 
 /// The z-slices one forward-projection task takes: every `parts`-th from its first.
@@ -248,6 +282,7 @@ fn axis_weights_chunk<const N: usize>(
     p: &[f32; CHUNK],
     l: &[f32; CHUNK],
     inv: &[f32; CHUNK],
+    limit: usize,
     mut store: impl FnMut(usize, usize, f32),
 ) {
     let (mut h1, mut h2) = ([0f32; CHUNK], [0f32; CHUNK]);
@@ -256,7 +291,7 @@ fn axis_weights_chunk<const N: usize>(
         h2[q] = 0.5 * (p[q] - l[q]);
     }
     let mut prev = [0f32; CHUNK];
-    for k in 0..N {
+    for k in 0..N.min(limit) {
         for q in 0..CHUNK {
             let (h1, h2, inv) = (h1[q], h2[q], inv[q]);
             let t = (k + 1) as f32 - off[q];
@@ -499,11 +534,11 @@ impl FootView {
             out.amp[q] = gamma[q] * luv * r;
         }
         if LANES {
-            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, |q, k, w| out.wu_lanes[k][q] = w);
-            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, |q, k, w| out.wv_lanes[k][q] = w);
+            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, N, |q, k, w| out.wu_lanes[k][q] = w);
+            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, N, |q, k, w| out.wv_lanes[k][q] = w);
         } else {
-            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, |q, k, w| out.wu[q][k] = w);
-            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, |q, k, w| out.wv[q][k] = w);
+            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, N, |q, k, w| out.wu[q][k] = w);
+            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, N, |q, k, w| out.wv[q][k] = w);
         }
     }
 
@@ -539,10 +574,8 @@ impl FootView {
     }
 
     /// [`Self::chunk`] for views whose grid rows share their footprint along `u` (or with
-    /// `SHARED_V` along `v`), see [`Shared`]: that axis's projection, the depth and the pixel
-    /// weights along it are computed once for the chunk, and only the other axis per voxel. The
-    /// shared axis's `1/(2l)` and `1/p` then cost one division per chunk each, and the other
-    /// axis's `1/(2l)` and the amplitude one per voxel.
+    /// `SHARED_V` along `v`), see [`Shared`]: [`Self::rows_shared`] and [`Self::chunk_moving`]
+    /// laid out as a [`Chunk`].
     #[inline(always)]
     fn chunk_shared<const N: usize, const LANES: bool, const SHARED_V: bool>(
         &self,
@@ -551,24 +584,107 @@ impl FootView {
         i0: usize,
         out: &mut Chunk<N>,
     ) {
+        let mut rs = [RowShared::<N>::default()];
+        self.rows_shared::<N, SHARED_V>(&[base; CHUNK], &mut rs);
+        let rs = rs[0];
+        let mut mv = Moving::<N>::default();
+        self.chunk_moving::<N, SHARED_V>(&rs, base, step, i0, N, &mut mv);
+        out.amp = mv.amp;
+        for q in 0..CHUNK {
+            let hit = mv.first[q] >= 0.0;
+            (out.col[q], out.row[q]) = match (hit, SHARED_V) {
+                (false, _) => (-1.0, 0.0),
+                (true, false) => (rs.first, mv.first[q]),
+                (true, true) => (mv.first[q], rs.first),
+            };
+        }
+        match (LANES, SHARED_V) {
+            (true, false) => {
+                out.wu_lanes = rs.w.map(|w| [w; CHUNK]);
+                out.wv_lanes = mv.w;
+            }
+            (true, true) => {
+                out.wv_lanes = rs.w.map(|w| [w; CHUNK]);
+                out.wu_lanes = mv.w;
+            }
+            (false, false) => {
+                out.wu = [rs.w; CHUNK];
+                out.wv = std::array::from_fn(|q| std::array::from_fn(|k| mv.w[k][q]));
+            }
+            (false, true) => {
+                out.wv = [rs.w; CHUNK];
+                out.wu = std::array::from_fn(|q| std::array::from_fn(|k| mv.w[k][q]));
+            }
+        }
+    }
+
+    /// What the voxels of a grid row share when the row is seen along one image axis
+    /// ([`Shared`]; `u`, or with `SHARED_V` `v`): the depth, the first pixel and the weights
+    /// along that axis, and `1/p` of its trapezoid, for the `CHUNK` rows whose first voxels
+    /// are `bases` ([`Self::row_start`]), vectorised across the rows.
+    #[inline(always)]
+    fn rows_shared<const N: usize, const SHARED_V: bool>(&self, bases: &[[f32; 3]; CHUNK], out: &mut [RowShared<N>]) {
         let n = N as f32;
-        // The camera coordinate that changes along the row: y when u is shared, x when v is.
         let moving = if SHARED_V { 0 } else { 1 };
-        let (n_s, n_l) = if SHARED_V { (self.rows, N) } else { (N, self.rows) };
-        let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
-        let (bound_s, bound_l) = if SHARED_V { (hmax, wmax) } else { (wmax, hmax) };
-        // What the voxels share.
-        let z = base[2];
-        let in_front = z > 1e-6;
-        let zs = if in_front { z } else { 1.0 };
-        let iz = 1.0 / zs;
-        let fixed = base[1 - moving];
-        let (centre_s, w_s) =
-            if SHARED_V { self.along::<true>(0.0, fixed * iz, iz) } else { self.along::<false>(fixed * iz, 0.0, iz) };
-        let (ps, ls) = trapezoid(w_s);
-        let base_s = fixed * fixed + zs * zs;
+        let n_s = if SHARED_V { self.rows } else { N };
+        let bound_s = if SHARED_V { (self.height + N) as f32 } else { (self.width + N) as f32 };
+        let z16 = [0f32; CHUNK];
+        let (mut first, mut inv_p, mut zs, mut iz, mut fixed) = (z16, z16, z16, z16, z16);
+        let (mut off, mut ps, mut ls, mut inv_s) = (z16, z16, z16, z16);
+        for q in 0..CHUNK {
+            let base = bases[q];
+            let z = base[2];
+            let in_front = z > 1e-6;
+            zs[q] = if in_front { z } else { 1.0 };
+            iz[q] = 1.0 / zs[q];
+            fixed[q] = base[1 - moving];
+            let (f, i) = (fixed[q], iz[q]);
+            let (centre_s, w_s) =
+                if SHARED_V { self.along::<true>(0.0, f * i, i) } else { self.along::<false>(f * i, 0.0, i) };
+            let (p, l) = trapezoid(w_s);
+            // Narrowing leaves a trapezoid that already fits unchanged, so it does not depend
+            // on the other voxels of a chunk.
+            let (p, l) = fit_trapezoid(p, l, n_s, p + l > n_s as f32 - 1.0);
+            let t_s = centre_s - 0.5 * (p + l) + 0.5 + n;
+            first[q] = if in_front & (t_s >= 0.0) & (t_s < bound_s) { floor_small(t_s) } else { -1.0 };
+            off[q] = (centre_s + n + 0.5) - first[q];
+            (ps[q], ls[q], inv_s[q], inv_p[q]) = (p, l, 0.5 / l, 1.0 / p);
+        }
+        let mut w = [z16; N];
+        axis_weights_chunk::<N>(&off, &ps, &ls, &inv_s, n_s, |q, k, v| w[k][q] = v);
+        for (q, rs) in out.iter_mut().enumerate().take(CHUNK) {
+            *rs = RowShared {
+                first: first[q],
+                w: std::array::from_fn(|k| w[k][q]),
+                inv_p: inv_p[q],
+                iz: iz[q],
+                zs: zs[q],
+                fixed: fixed[q],
+            };
+        }
+    }
+
+    /// The footprints of `CHUNK` consecutive voxels of a row (`p = base + (i0 + q) · step`)
+    /// along the axis they do not share (see [`Self::rows_shared`]): first pixel (−1: the voxel
+    /// misses, or the row does), amplitude, and the first `n_l ≤ N` pixel weights, pixel-major.
+    /// One division per voxel, for that axis's `1/(2l)` and the amplitude together.
+    #[inline(always)]
+    fn chunk_moving<const N: usize, const SHARED_V: bool>(
+        &self,
+        rs: &RowShared<N>,
+        base: [f32; 3],
+        step: [f32; 3],
+        i0: usize,
+        n_l: usize,
+        out: &mut Moving<N>,
+    ) {
+        let n = N as f32;
+        let moving = if SHARED_V { 0 } else { 1 };
+        let n_lim = if SHARED_V { N } else { self.rows };
+        let bound_l = if SHARED_V { (self.width + N) as f32 } else { (self.height + N) as f32 };
+        let (iz, fixed) = (rs.iz, rs.fixed);
+        let base_s = fixed * fixed + rs.zs * rs.zs;
         let g0 = self.gain * iz * iz * iz;
-        // Per voxel: the moving coordinate and what follows from it.
         let z16 = [0f32; CHUNK];
         let (mut centre, mut gamma, mut pl, mut ll) = (z16, z16, z16, z16);
         let f0 = i0 as f32;
@@ -583,54 +699,21 @@ impl FootView {
             (pl[q], ll[q]) = trapezoid(w);
             gamma[q] = g0 * (base_s + c * c).sqrt();
         }
-        let (lim_s, lim_l) = (n_s as f32 - 1.0, n_l as f32 - 1.0);
-        let wide = (ps + ls > lim_s) | (0..CHUNK).fold(false, |any, q| any | (pl[q] + ll[q] > lim_l));
-        let (ps, ls) = fit_trapezoid(ps, ls, n_s, wide);
-        let t_s = centre_s - 0.5 * (ps + ls) + 0.5 + n;
-        let first_s = if in_front & (t_s >= 0.0) & (t_s < bound_s) { floor_small(t_s) } else { -1.0 };
-        let (inv_ps, inv_s) = (1.0 / ps, 0.5 / ls);
+        let lim_l = n_lim as f32 - 1.0;
+        let wide = (0..CHUNK).fold(false, |any, q| any | (pl[q] + ll[q] > lim_l));
         let (mut off_l, mut inv_l) = (z16, z16);
         for q in 0..CHUNK {
-            (pl[q], ll[q]) = fit_trapezoid(pl[q], ll[q], n_l, wide);
+            (pl[q], ll[q]) = fit_trapezoid(pl[q], ll[q], n_lim, wide);
             let t_l = centre[q] - 0.5 * (pl[q] + ll[q]) + 0.5 + n;
-            let hit = (first_s >= 0.0) & (t_l >= 0.0) & (t_l < bound_l);
+            let hit = (rs.first >= 0.0) & (t_l >= 0.0) & (t_l < bound_l);
             let first_l = if hit { floor_small(t_l) } else { -1.0 };
-            (out.col[q], out.row[q]) = match (hit, SHARED_V) {
-                (false, _) => (-1.0, 0.0),
-                (true, false) => (first_s, first_l),
-                (true, true) => (first_l, first_s),
-            };
+            out.first[q] = first_l;
             off_l[q] = (centre[q] + n + 0.5) - first_l;
             let r = 1.0 / (pl[q] * ll[q]);
             inv_l[q] = 0.5 * pl[q] * r;
-            out.amp[q] = gamma[q] * inv_ps * (ll[q] * r);
+            out.amp[q] = gamma[q] * rs.inv_p * (ll[q] * r);
         }
-        // The shared axis's weights, once for every voxel.
-        let mut w_px = [0f32; N];
-        let off_s = (centre_s + n + 0.5) - first_s;
-        axis_weights_chunk::<N>(&[off_s; CHUNK], &[ps; CHUNK], &[ls; CHUNK], &[inv_s; CHUNK], |q, k, w| {
-            if q == 0 {
-                w_px[k] = w
-            }
-        });
-        match (LANES, SHARED_V) {
-            (true, false) => {
-                out.wu_lanes = w_px.map(|w| [w; CHUNK]);
-                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wv_lanes[k][q] = w);
-            }
-            (true, true) => {
-                out.wv_lanes = w_px.map(|w| [w; CHUNK]);
-                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wu_lanes[k][q] = w);
-            }
-            (false, false) => {
-                out.wu = [w_px; CHUNK];
-                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wv[q][k] = w);
-            }
-            (false, true) => {
-                out.wv = [w_px; CHUNK];
-                axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, |q, k, w| out.wu[q][k] = w);
-            }
-        }
+        axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, n_l, |q, k, w| out.w[k][q] = w);
     }
 
     /// Largest footprint support `p + l` along `u` and along `v` over a 9³ lattice spanning the
@@ -764,8 +847,8 @@ impl FootprintProjector {
     /// The same projector with the shared-row shortcut on (the default) or off: with it, views
     /// whose camera sees a grid row as a vertical or horizontal line of voxels (a ring around
     /// the grid's `x` axis, no distortion) compute the row's footprint along that image axis
-    /// once per chunk instead of once per voxel, and their AVX-512 back projection reads pixels
-    /// along image lines. Both give the same weights up to rounding; off is for comparisons in
+    /// once per row instead of once per voxel, and their back projection sums the image lines
+    /// under it first. Both give the same weights up to rounding; off is for comparisons in
     /// tests and benchmarks.
     pub fn with_shared_rows(mut self, on: bool) -> Self {
         for (view, camera) in self.views.iter_mut().zip(&self.cameras) {
@@ -1194,94 +1277,269 @@ impl FootprintProjector {
         }
     }
 
-    /// [`Self::gather_lanes16`] for views whose grid rows share a footprint axis ([`Shared`]).
-    /// A chunk's voxels then read their pixels from one line of the image per footprint row
-    /// (`SHARED_V`: rows horizontal) or column (rows vertical), within 32 pixels of each other
-    /// in the common case: two vector loads per line and a permutation replace the gathers.
-    /// `lines` is the padded image, transposed when rows are vertical, and `line_masks` the
-    /// column and row masks, each followed by 32 zeros; the loads read up to 32 values from a
-    /// voxel's first pixel on. The arithmetic is the gather's, so the result is the same bit
-    /// for bit; a chunk spread wider falls back to the gathers (from `y`).
-    ///
-    /// # Safety
-    /// The CPU must support AVX-512F; `y` is the view's padded image (fewer than 2³¹ pixels),
-    /// `lines` the same laid out as above, with 32 trailing zeros.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx2")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn gather_shared16<const N: usize, const SHARED_V: bool>(
+    /// [`FootView::rows_shared`] of every grid row of slice `k` in view `view`, sixteen rows at
+    /// a time, into `out` (one entry per row).
+    #[inline(always)]
+    fn slice_rows_shared<const N: usize, const SHARED_V: bool>(&self, view: usize, k: usize, out: &mut [RowShared<N>]) {
+        let fv = &self.views[view];
+        let ny = self.grid.dims[1];
+        let mut rs = [RowShared::<N>::default(); CHUNK];
+        for j0 in (0..ny).step_by(CHUNK) {
+            let bases: [[f32; 3]; CHUNK] = std::array::from_fn(|q| fv.row_start(&self.gf, (j0 + q).min(ny - 1), k).0);
+            fv.rows_shared::<N, SHARED_V>(&bases, &mut rs);
+            let m = CHUNK.min(ny - j0);
+            out[j0..j0 + m].copy_from_slice(&rs[..m]);
+        }
+    }
+
+    /// [`Self::scatter`] for views whose grid rows share a footprint axis ([`Shared`]): the
+    /// shared axis's footprint is computed once per grid row ([`FootView::rows_shared`]) and
+    /// only the other axis per chunk ([`FootView::chunk_moving`]); each voxel then adds its
+    /// `rows × N` square as [`Self::scatter`] does, alternating between the
+    /// [`SCATTER_IMAGES`] padded images `img`.
+    #[inline(always)]
+    fn scatter_shared<const N: usize, const SHARED_V: bool>(
         &self,
         view: usize,
-        ks: Range<usize>,
-        y: &[f32],
-        lines: &[f32],
-        masks: (&[f32], &[f32]),
-        line_masks: (&[f32], &[f32]),
-        out: &mut [f32],
-        mut col_sums: Option<&mut [f32]>,
+        ks: Slices,
+        x: &[f32],
+        img: &mut [f32],
     ) {
-        use std::arch::x86_64::*;
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let nr = fv.rows;
-        assert!(lines.len() == pw * ph + 32 && line_masks.0.len() == pw + 32 && line_masks.1.len() == ph + 32);
-        // Pixels along a line between two lines' starts, and the footprint's extent along them.
-        let (line_len, along_n) = if SHARED_V { (pw, N) } else { (ph, nr) };
-        self.for_each_chunk::<N, false, true>(view, ks, |ch, first, valid| {
-            // SAFETY: AVX-512F is enabled here. Every load reads 32 values from a pixel of the
-            // image (or mask) inside the padded extent, whose buffers carry 32 more values.
-            unsafe {
-                let col = _mm512_loadu_ps(ch.col.as_ptr());
-                let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(col, _mm512_setzero_ps());
-                let keep = hit & ((1u32 << valid) - 1) as u16;
-                if keep == 0 {
-                    return;
+        let n_l = if SHARED_V { N } else { nr };
+        let [nx, ny, _] = self.grid.dims;
+        let mut mv = Moving::<N>::default();
+        let mut rss = vec![RowShared::<N>::default(); ny];
+        for k in ks {
+            self.slice_rows_shared::<N, SHARED_V>(view, k, &mut rss);
+            for (j, rs) in rss.iter().enumerate() {
+                let row0 = (k * ny + j) * nx;
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                if rs.first < 0.0 {
+                    continue;
                 }
-                let cols = _mm512_maskz_mov_epi32(keep, _mm512_cvttps_epi32(col));
-                let rows = _mm512_maskz_mov_epi32(keep, _mm512_cvttps_epi32(_mm512_loadu_ps(ch.row.as_ptr())));
-                // `along`: each voxel's first pixel along the lines; `across`: the first line,
-                // the same for every voxel that hits (misses are 0 in both).
-                let (along, across) = if SHARED_V { (cols, rows) } else { (rows, cols) };
-                let across = _mm512_reduce_max_epi32(across) as usize;
-                let base = _mm512_mask_reduce_min_epi32(keep, along);
-                let off = _mm512_maskz_sub_epi32(keep, along, _mm512_set1_epi32(base));
-                if _mm512_reduce_max_epi32(off) as usize + along_n > 32 {
-                    return self.lanes16_chunk(fv, ch, first, valid, y, masks, out, col_sums.as_deref_mut());
+                let across = rs.first as usize;
+                for i0 in (0..nx).step_by(CHUNK) {
+                    let valid = CHUNK.min(nx - i0);
+                    let g = &x[row0 + i0..][..valid];
+                    // Empty voxels add nothing (branch-free, so that the test vectorises).
+                    if !g.iter().fold(false, |any, &g| any | (g != 0.0)) {
+                        continue;
+                    }
+                    fv.chunk_moving::<N, SHARED_V>(rs, base, step, i0, n_l, &mut mv);
+                    for (q, &g) in g.iter().enumerate() {
+                        if mv.first[q] < 0.0 || g == 0.0 {
+                            continue;
+                        }
+                        let first = mv.first[q] as usize;
+                        let (col, row) = if SHARED_V { (first, across) } else { (across, first) };
+                        let a = g * mv.amp[q];
+                        let dst = &mut img[(q % SCATTER_IMAGES) * pw * ph..][..pw * ph];
+                        let wu: [f32; N] = if SHARED_V { std::array::from_fn(|c| mv.w[c][q]) } else { rs.w };
+                        for r in 0..nr {
+                            let s = a * if SHARED_V { rs.w[r] } else { mv.w[r][q] };
+                            // A voxel that hits has its N × rows square inside the padded image
+                            // (`chunk_moving`: first < len + N, and the padded image is
+                            // (width + 2N) × (height + 2N)).
+                            let line: &mut [f32; N] =
+                                (&mut dst[(row + r) * pw + col..][..N]).try_into().expect("N pixels");
+                            for c in 0..N {
+                                line[c] += s * wu[c];
+                            }
+                        }
+                    }
                 }
-                let base = base as usize;
-                // The lines a footprint reads: its rows (rows horizontal) or columns.
-                let n_lines = if SHARED_V { nr } else { N };
-                let mut lo = [_mm512_setzero_ps(); N];
-                let mut hi = [_mm512_setzero_ps(); N];
-                for l in 0..n_lines {
-                    let p = lines.as_ptr().add((across + l) * line_len + base);
-                    lo[l] = _mm512_loadu_ps(p);
-                    hi[l] = _mm512_loadu_ps(p.add(16));
-                }
-                // The masks: along the lines by permutation, across them broadcast.
-                let (m_along, m_across) =
-                    if SHARED_V { (line_masks.0, line_masks.1) } else { (line_masks.1, line_masks.0) };
-                let p = m_along.as_ptr().add(base);
-                let (mlo, mhi) = (_mm512_loadu_ps(p), _mm512_loadu_ps(p.add(16)));
-                let pick = |lo, k: usize, hi| {
-                    _mm512_permutex2var_ps(lo, _mm512_add_epi32(off, _mm512_set1_epi32(k as i32)), hi)
-                };
-                let across_mask = |k: usize| _mm512_set1_ps(m_across[across + k]);
-                Self::weigh16(
-                    ch,
-                    nr,
-                    (first, valid, keep),
-                    out,
-                    col_sums.as_deref_mut(),
-                    |c, r| {
-                        let (l, k) = if SHARED_V { (r, c) } else { (c, r) };
-                        pick(lo[l], k, hi[l])
-                    },
-                    |c| if SHARED_V { pick(mlo, c, mhi) } else { across_mask(c) },
-                    |r| if SHARED_V { across_mask(r) } else { pick(mlo, r, mhi) },
-                );
             }
-        });
+        }
+    }
+
+    /// Back kernel for views whose grid rows share a footprint axis ([`Shared`]): every voxel
+    /// of a grid row has the same first pixel and weights along the shared axis, so the
+    /// footprint is separable across the whole row. The `n_s` image lines of the row's shared
+    /// footprint are first summed with its weights into one line (as whole vectors, over the
+    /// stretch the row's voxels read), and each voxel then weighs that line with its `n_l`
+    /// weights along the other axis: `n_s + n_l` products per voxel instead of `n_s · n_l`.
+    /// `lines` is the padded image laid out as lines: as it is when rows image horizontal
+    /// (`SHARED_V`), transposed (column after column) when vertical; `masks` the padded column
+    /// and row masks, each followed by 32 zeros. The same arithmetic in the same order
+    /// whatever the instruction set, so the result is the same bit for bit.
+    #[inline(always)]
+    fn gather_rows<const N: usize, const SHARED_V: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        lines: &[f32],
+        masks: (&[f32], &[f32]),
+        out: &mut [f32],
+        mut col_sums: Option<&mut [f32]>,
+    ) {
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let (line_len, n_l, n_s) = if SHARED_V { (pw, N, fv.rows) } else { (ph, fv.rows, N) };
+        let (m_along, m_across) = if SHARED_V { masks } else { (masks.1, masks.0) };
+        let [nx, ny, _] = self.grid.dims;
+        // 32 more, for the vector kernel's window.
+        let mut acc = vec![0f32; line_len + 32];
+        let mut mvs = vec![Moving::<N>::default(); nx.div_ceil(CHUNK)];
+        let mut rss = vec![RowShared::<N>::default(); ny];
+        for (kk, k) in ks.enumerate() {
+            self.slice_rows_shared::<N, SHARED_V>(view, k, &mut rss);
+            for (j, rs) in rss.iter().enumerate() {
+                let (base, step) = fv.row_start(&self.gf, j, k);
+                if rs.first < 0.0 {
+                    continue;
+                }
+                let across = rs.first as usize;
+                let mut m_s = 0f32;
+                for s in 0..n_s {
+                    m_s += rs.w[s] * m_across[across + s];
+                }
+                // Every chunk's footprints, and the stretch of the line they read (lane-wise
+                // minimum and maximum first pixel of the hits; misses are −1).
+                let (mut lo, mut hi) = ([f32::MAX; CHUNK], [-1f32; CHUNK]);
+                for (c, mv) in mvs.iter_mut().enumerate() {
+                    fv.chunk_moving::<N, SHARED_V>(rs, base, step, c * CHUNK, n_l, mv);
+                    if (c + 1) * CHUNK > nx {
+                        // The short last chunk: lanes past the row are not voxels.
+                        mv.first[nx - c * CHUNK..].fill(-1.0);
+                    }
+                    for q in 0..CHUNK {
+                        let f = mv.first[q];
+                        lo[q] = fmin(lo[q], if f >= 0.0 { f } else { f32::MAX });
+                        hi[q] = fmax(hi[q], f);
+                    }
+                }
+                let (lo, hi) = (lo.into_iter().fold(f32::MAX, fmin), hi.into_iter().fold(-1.0, fmax));
+                if hi < 0.0 {
+                    continue;
+                }
+                // The shared footprint's lines summed over [lo, hi + n_l): every hit has
+                // `first + n_l ≤ line_len` (see `chunk_moving`: first < len + N, n_l ≤ N).
+                let (lo, hi) = (lo as usize, hi as usize + n_l);
+                let a = &mut acc[lo..hi];
+                a.fill(0.0);
+                for (s, &w) in rs.w[..n_s].iter().enumerate() {
+                    for (d, &p) in a.iter_mut().zip(&lines[(across + s) * line_len + lo..][..hi - lo]) {
+                        *d += w * p;
+                    }
+                }
+                let row0 = (kk * ny + j) * nx;
+                for (c, mv) in mvs.iter().enumerate() {
+                    let at = (row0 + c * CHUNK, CHUNK.min(nx - c * CHUNK));
+                    #[cfg(target_arch = "x86_64")]
+                    if self.isa == Isa::Avx512 {
+                        // SAFETY: AVX-512F is available (`isa`); `acc` and the masks hold 32
+                        // values past their padded extent, and `at` lies inside `out` and
+                        // `col_sums`.
+                        if unsafe {
+                            Self::weigh_rows16::<N, SHARED_V>(
+                                mv,
+                                n_l,
+                                &acc,
+                                m_along,
+                                m_s,
+                                at,
+                                out,
+                                col_sums.as_deref_mut(),
+                            )
+                        } {
+                            continue;
+                        }
+                    }
+                    for q in 0..at.1 {
+                        if mv.first[q] < 0.0 {
+                            continue;
+                        }
+                        let first = mv.first[q] as usize;
+                        let mut sum = 0f32;
+                        for l in 0..n_l {
+                            sum += mv.w[l][q] * acc[first + l];
+                        }
+                        let idx = at.0 + q;
+                        let amp = mv.amp[q];
+                        out[idx] += amp * sum;
+                        if let Some(cs) = col_sums.as_deref_mut() {
+                            let mut m_l = 0f32;
+                            for l in 0..n_l {
+                                m_l += mv.w[l][q] * m_along[first + l];
+                            }
+                            let (su, sv) = if SHARED_V { (m_l, m_s) } else { (m_s, m_l) };
+                            cs[idx] += amp * su * sv;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The per-voxel part of [`Self::gather_rows`] for one chunk, sixteen voxels at a time when
+    /// they read within 32 pixels of each other (else it returns `false` and does nothing):
+    /// each weight's pixels come from the summed line by one permutation. The arithmetic and
+    /// its order are the scalar loop's.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F; `acc` and `m_along` hold 32 values past any voxel's
+    /// first pixel, and `at.0 + at.1` lies inside `out` (and `col_sums`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2")]
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn weigh_rows16<const N: usize, const SHARED_V: bool>(
+        mv: &Moving<N>,
+        n_l: usize,
+        acc: &[f32],
+        m_along: &[f32],
+        m_s: f32,
+        (first, valid): (usize, usize),
+        out: &mut [f32],
+        col_sums: Option<&mut [f32]>,
+    ) -> bool {
+        use std::arch::x86_64::*;
+        const { assert!(CHUNK == 16) };
+        // SAFETY: the chunk's arrays hold 16 entries; the window [lo, lo + 32) is checked
+        // against both buffers; the masked loads and stores touch `valid` entries from `first`.
+        unsafe {
+            let f = _mm512_loadu_ps(mv.first.as_ptr());
+            let keep = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(f, _mm512_setzero_ps()) & ((1u32 << valid) - 1) as u16;
+            if keep == 0 {
+                return true;
+            }
+            let fi = _mm512_cvttps_epi32(f);
+            let lo = _mm512_mask_reduce_min_epi32(keep, fi);
+            let off = _mm512_maskz_sub_epi32(keep, fi, _mm512_set1_epi32(lo));
+            let lo = lo as usize;
+            if _mm512_reduce_max_epi32(off) as usize + n_l > 32 || lo + 32 > acc.len().min(m_along.len()) {
+                return false;
+            }
+            let pick = |p: *const f32, l: usize| {
+                let idx = _mm512_add_epi32(off, _mm512_set1_epi32(l as i32));
+                _mm512_permutex2var_ps(_mm512_loadu_ps(p), idx, _mm512_loadu_ps(p.add(16)))
+            };
+            let a = acc.as_ptr().add(lo);
+            let mut sum = _mm512_setzero_ps();
+            for l in 0..n_l.min(N) {
+                sum = _mm512_add_ps(sum, _mm512_mul_ps(_mm512_loadu_ps(mv.w[l].as_ptr()), pick(a, l)));
+            }
+            let amp = _mm512_loadu_ps(mv.amp.as_ptr());
+            let dst = out[first..][..valid].as_mut_ptr();
+            let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+            _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(amp, sum)));
+            if let Some(cs) = col_sums {
+                let m = m_along.as_ptr().add(lo);
+                let mut m_l = _mm512_setzero_ps();
+                for l in 0..n_l.min(N) {
+                    m_l = _mm512_add_ps(m_l, _mm512_mul_ps(_mm512_loadu_ps(mv.w[l].as_ptr()), pick(m, l)));
+                }
+                let m_s = _mm512_set1_ps(m_s);
+                let (su, sv) = if SHARED_V { (m_l, m_s) } else { (m_s, m_l) };
+                let dst = cs[first..][..valid].as_mut_ptr();
+                let prev = _mm512_mask_loadu_ps(_mm512_setzero_ps(), keep, dst);
+                _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(_mm512_mul_ps(amp, su), sv)));
+            }
+            true
+        }
     }
 
     /// The rows of `A_v` (see [`Projector::rows`]).
@@ -1425,7 +1683,12 @@ mod kernels {
         #[cfg(target_arch = "x86_64")]
         {
             variants!(fn(p: &FootprintProjector, view: usize, ks: Slices, x: &[f32], img: &mut [f32]) {
-                if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
+                let shared = p.views[view].shared;
+                if shared == Shared::V && !D {
+                    p.scatter_shared::<N, true>(view, ks, x, img)
+                } else if shared == Shared::U && !D {
+                    p.scatter_shared::<N, false>(view, ks, x, img)
+                } else if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
                     p.scatter::<N, D, true>(view, ks, x, img)
                 } else {
                     p.scatter::<N, D, false>(view, ks, x, img)
@@ -1439,7 +1702,45 @@ mod kernels {
                 Isa::Baseline => {}
             }
         }
-        p.scatter::<N, D, false>(view, ks, x, img)
+        match p.views[view].shared {
+            Shared::V if !D => p.scatter_shared::<N, true>(view, ks, x, img),
+            Shared::U if !D => p.scatter_shared::<N, false>(view, ks, x, img),
+            _ => p.scatter::<N, D, false>(view, ks, x, img),
+        }
+    }
+
+    /// [`FootprintProjector::gather_rows`], rows horizontal with `V`.
+    pub(super) fn gather_rows<const N: usize, const V: bool>(
+        p: &FootprintProjector,
+        view: usize,
+        ks: Range<usize>,
+        lines: &[f32],
+        masks: (&[f32], &[f32]),
+        out: &mut [f32],
+        col_sums: Option<&mut [f32]>,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            variants!(fn(
+                p: &FootprintProjector,
+                view: usize,
+                ks: Range<usize>,
+                lines: &[f32],
+                masks: (&[f32], &[f32]),
+                out: &mut [f32],
+                col_sums: Option<&mut [f32]>,
+            ) {
+                p.gather_rows::<N, D>(view, ks, lines, masks, out, col_sums)
+            });
+            match p.isa {
+                // SAFETY: `p.isa` never exceeds what `Isa::detected` found on this CPU.
+                Isa::Avx512 => return unsafe { avx512::<N, V>(p, view, ks, lines, masks, out, col_sums) },
+                // SAFETY: as above.
+                Isa::Avx2 => return unsafe { avx2::<N, V>(p, view, ks, lines, masks, out, col_sums) },
+                Isa::Baseline => {}
+            }
+        }
+        p.gather_rows::<N, V>(view, ks, lines, masks, out, col_sums)
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -1449,7 +1750,6 @@ mod kernels {
         ks: Range<usize>,
         y: &[f32],
         masks: (&[f32], &[f32]),
-        lines: Option<&Lines>,
         out: &mut [f32],
         col_sums: Option<&mut [f32]>,
     ) {
@@ -1470,16 +1770,6 @@ mod kernels {
             // SAFETY (all four calls): `p.isa` never exceeds what `Isa::detected` found on this
             // CPU, and the lane kernels get images of fewer than 2³¹ pixels.
             match (p.isa, lanes) {
-                (Isa::Avx512, true) if !D && lines.is_some() => {
-                    let l = lines.expect("lines");
-                    return unsafe {
-                        if l.shared_v {
-                            p.gather_shared16::<N, true>(view, ks, y, l.image, masks, l.masks, out, col_sums)
-                        } else {
-                            p.gather_shared16::<N, false>(view, ks, y, l.image, masks, l.masks, out, col_sums)
-                        }
-                    };
-                }
                 (Isa::Avx512, true) => return unsafe { p.gather_lanes16::<N, D>(view, ks, y, masks, out, col_sums) },
                 (Isa::Avx512, false) => return unsafe { avx512::<N, D>(p, view, ks, y, masks, out, col_sums) },
                 (Isa::Avx2, true) => return unsafe { p.gather_lanes::<N, D>(view, ks, y, masks, out, col_sums) },
@@ -1539,59 +1829,53 @@ impl Projector for FootprintProjector {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let (w, h, n) = (fv.width, fv.height, fv.side);
-        // 32 trailing zeros (and on the masks) for the shared-row kernel's loads.
-        let mut padded = vec![0f32; pw * ph + 32];
+        let mut padded = vec![0f32; pw * ph];
         for (r, row) in y.chunks_exact(w).enumerate() {
             padded[(r + n) * pw + n..][..w].copy_from_slice(row);
         }
+        // 32 trailing zeros on the masks for the shared-row kernel's vector window.
         let col_mask: Vec<f32> = (0..pw + 32).map(|c| if (n..n + w).contains(&c) { 1.0 } else { 0.0 }).collect();
         let row_mask: Vec<f32> = (0..ph + 32).map(|r| if (n..n + h).contains(&r) { 1.0 } else { 0.0 }).collect();
+        let rows_masks = (&col_mask[..], &row_mask[..]);
         let masks = (&col_mask[..pw], &row_mask[..ph]);
         // Rows that share a footprint axis read along image lines: rows (the padded image as it
         // is) when they image horizontal, columns (the image transposed) when vertical.
-        let transposed = (fv.shared == Shared::U && self.isa == Isa::Avx512).then(|| {
-            let mut t = vec![0f32; pw * ph + 32];
-            for (r, row) in padded[..pw * ph].chunks_exact(pw).enumerate() {
+        if fv.shared == Shared::U {
+            let mut t = vec![0f32; pw * ph];
+            for (r, row) in padded.chunks_exact(pw).enumerate() {
                 for (c, &v) in row.iter().enumerate() {
                     t[c * ph + r] = v;
                 }
             }
-            t
-        });
-        let lines = match (fv.shared, self.isa) {
-            (Shared::V, Isa::Avx512) => Some(padded.as_slice()),
-            (Shared::U, Isa::Avx512) => transposed.as_deref(),
-            _ => None,
-        };
-        let lines = lines.map(|l| Lines { shared_v: fv.shared == Shared::V, image: l, masks: (&col_mask, &row_mask) });
-        let padded = &padded[..pw * ph];
+            padded = t;
+        }
+        let padded = &padded[..];
         let [nx, ny, nz] = self.grid.dims;
         let slab = nx * ny;
         // A few slices per task: enough to balance, few enough to keep the overhead small.
         let per = nz.div_ceil(8 * scatter_parts()).max(1);
-        let lines = lines.as_ref();
+        let task = |t: usize, o: &mut [f32], c: Option<&mut [f32]>| {
+            let ks = t * per..(t * per + o.len() / slab);
+            match fv.shared {
+                Shared::V => dispatch!(fv.side, false, |N, _D| kernels::gather_rows::<N, true>(
+                    self, view, ks, padded, rows_masks, o, c
+                )),
+                Shared::U => dispatch!(fv.side, false, |N, _D| kernels::gather_rows::<N, false>(
+                    self, view, ks, padded, rows_masks, o, c
+                )),
+                Shared::None => dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
+                    self, view, ks, padded, masks, o, c
+                )),
+            }
+        };
         match col_sums {
-            None => out.par_chunks_mut(per * slab).enumerate().for_each(|(t, o)| {
-                let ks = t * per..(t * per + o.len() / slab);
-                dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
-                    self, view, ks, padded, masks, lines, o, None
-                ));
-            }),
+            None => out.par_chunks_mut(per * slab).enumerate().for_each(|(t, o)| task(t, o, None)),
             Some(cs) => {
                 assert_eq!(cs.len(), out.len(), "column-sum buffer has the wrong length");
-                out.par_chunks_mut(per * slab).zip(cs.par_chunks_mut(per * slab)).enumerate().for_each(|(t, (o, c))| {
-                    let ks = t * per..(t * per + o.len() / slab);
-                    dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
-                        self,
-                        view,
-                        ks,
-                        padded,
-                        masks,
-                        lines,
-                        o,
-                        Some(c)
-                    ));
-                })
+                out.par_chunks_mut(per * slab)
+                    .zip(cs.par_chunks_mut(per * slab))
+                    .enumerate()
+                    .for_each(|(t, (o, c))| task(t, o, Some(c)))
             }
         }
     }
