@@ -1329,13 +1329,24 @@ impl FootprintProjector {
                         continue;
                     }
                     fv.chunk_moving::<N, SHARED_V>(rs, base, step, i0, n_l, &mut mv);
-                    for (q, &g) in g.iter().enumerate() {
-                        if mv.first[q] < 0.0 || g == 0.0 {
+                    // Each voxel's first pixel and weighted value, vectorised across the chunk;
+                    // misses and empty voxels get a zero value and are skipped.
+                    let mut gq = [0f32; CHUNK];
+                    gq[..valid].copy_from_slice(g);
+                    let (mut firsts, mut values) = ([0u32; CHUNK], [0f32; CHUNK]);
+                    for q in 0..CHUNK {
+                        let hit = mv.first[q] >= 0.0;
+                        // SAFETY: a whole number in [0, width + 2N) (`chunk_moving`), or 0.
+                        firsts[q] = unsafe { (if hit { mv.first[q] } else { 0.0 }).to_int_unchecked::<u32>() };
+                        values[q] = if hit { gq[q] * mv.amp[q] } else { 0.0 };
+                    }
+                    for q in 0..valid {
+                        let a = values[q];
+                        if a == 0.0 {
                             continue;
                         }
-                        let first = mv.first[q] as usize;
+                        let first = firsts[q] as usize;
                         let (col, row) = if SHARED_V { (first, across) } else { (across, first) };
-                        let a = g * mv.amp[q];
                         let dst = &mut img[(q % SCATTER_IMAGES) * pw * ph..][..pw * ph];
                         let wu: [f32; N] = if SHARED_V { std::array::from_fn(|c| mv.w[c][q]) } else { rs.w };
                         for r in 0..nr {
