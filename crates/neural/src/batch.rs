@@ -14,7 +14,9 @@
 //! - Training, iteration `i` ([`training_batch`]): `N_pix/img` rays with replacement from every
 //!   training view that sees the box (with [`Batching::OneTimeStep`], only the views of frame
 //!   time `i mod N_t`), in view order, uniformly among each view's kept rays, from the ChaCha8
-//!   stream `stream_seed(seed, i, usize::MAX)`.
+//!   stream `stream_seed(seed, i, usize::MAX)`. With [`TrainConfig::pixel_supersample`]
+//!   `S > 1` each drawn pixel becomes `S²` consecutive rays through its sub-pixel centres
+//!   ([`RayBatch::group`]; the pixels drawn are the same whatever `S`).
 //! - Held out ([`holdout_batch`]): `⌈validate_pixels / N_views⌉` rays per held-out view, the
 //!   same every time (stream `stream_seed(seed ^ 0x5EED, usize::MAX, 0)`).
 //! - One whole view ([`view_batch`]): all its kept rays in order.
@@ -42,7 +44,7 @@ pub const GAIN_STREAM: usize = usize::MAX - 2;
 pub const HOLDOUT_SEED: u64 = 0x5EED;
 
 /// Rays named as `(view, ray)` pairs of one split, with the keys of their random streams.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RayBatch {
     /// Which views of the [`Prepared`] problem the pairs index.
     pub split: Split,
@@ -53,6 +55,11 @@ pub struct RayBatch {
     /// Second key of the sample streams: the iteration, or [`HOLDOUT_STREAM`] /
     /// [`VIEW_STREAM`].
     pub stream: usize,
+    /// Per ray, its offset `(a, b)` from the pixel centre in pixels, `|a|, |b| ≤ ½`
+    /// ([`TrainConfig::pixel_supersample`]); empty: every ray through its pixel's centre.
+    pub jitter: Vec<[f32; 2]>,
+    /// Consecutive rays that make one pixel (their mean is scored): `S²`, or 1.
+    pub group: usize,
 }
 
 /// One ray of a batch with everything an engine needs to sample, render and score it.
@@ -78,7 +85,7 @@ pub struct BatchRay {
 impl RayBatch {
     /// An empty batch of `split` with stream keys `(seed, stream)`.
     pub fn new(split: Split, seed: u64, stream: usize) -> Self {
-        RayBatch { split, rays: Vec::new(), seed, stream }
+        RayBatch { split, rays: Vec::new(), seed, stream, jitter: Vec::new(), group: 1 }
     }
 
     pub fn len(&self) -> usize {
@@ -104,9 +111,10 @@ impl RayBatch {
         let (v, r) = self.rays[i];
         let view = &prep.views(self.split)[v as usize];
         let (rays, r) = (view.rays(), r as usize);
+        let dir_unit = rays.dir_jittered(r, self.jitter.get(i).copied());
         BatchRay {
             origin_unit: rays.origin_unit,
-            dir_unit: [rays.dir_unit[0][r], rays.dir_unit[1][r], rays.dir_unit[2][r]],
+            dir_unit,
             near: rays.near[r],
             far: rays.far[r],
             target: view.targets()[r],
@@ -152,6 +160,22 @@ pub fn training_batch(
             batch.rays.push((v as u32, rng.random_range(0..pv.rays().len()) as u32));
         }
     }
+    batch.jitter.clear();
+    batch.group = 1;
+    let n = cfg.pixel_supersample;
+    if n > 1 {
+        let pixels = std::mem::take(&mut batch.rays);
+        let at = |k: usize| (k as f32 + 0.5) / n as f32 - 0.5;
+        for p in pixels {
+            for b in 0..n {
+                for a in 0..n {
+                    batch.rays.push(p);
+                    batch.jitter.push([at(a), at(b)]);
+                }
+            }
+        }
+        batch.group = n * n;
+    }
 }
 
 /// The learning rate of training iteration `iteration`: `cfg.schedule` at the iteration, or,
@@ -187,7 +211,14 @@ pub fn holdout_batch(prep: &Prepared, cfg: &TrainConfig, seed: u64) -> Option<Ra
 /// `(seed, VIEW_STREAM)`.
 pub fn view_batch(prep: &Prepared, split: Split, index: usize, seed: u64) -> RayBatch {
     let n = prep.views(split)[index].rays().len() as u32;
-    RayBatch { split, rays: (0..n).map(|r| (index as u32, r)).collect(), seed, stream: VIEW_STREAM }
+    RayBatch {
+        split,
+        rays: (0..n).map(|r| (index as u32, r)).collect(),
+        seed,
+        stream: VIEW_STREAM,
+        jitter: Vec::new(),
+        group: 1,
+    }
 }
 
 #[cfg(test)]

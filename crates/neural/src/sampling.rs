@@ -39,6 +39,14 @@ pub struct ImageRays {
     pub origin_unit: [f32; 3],
     /// Per ray, box-normalised direction components `d / size`.
     pub dir_unit: [Vec<f32>; 3],
+    /// Per ray, the change of `dir_unit` across the pixel along its columns and along its rows
+    /// (the rays through the middles of its left and right edges, and of its top and bottom
+    /// edges): a ray through `(col + a, row + b)`, `|a|, |b| ≤ ½`, has the direction
+    /// `dir_unit + a · dir_du + b · dir_dv` to first order (exactly for an undistorted pinhole
+    /// before normalisation; the length changes by less than one part in 10⁵ for pixels under
+    /// a hundredth of the focal length).
+    pub dir_du: [Vec<f32>; 3],
+    pub dir_dv: [Vec<f32>; 3],
     /// Per ray, entry distance into the box (or into its first occupied cell), world units.
     pub near: Vec<f32>,
     /// Per ray, exit distance, world units.
@@ -63,6 +71,8 @@ impl ImageRays {
         let mut rays = ImageRays {
             origin_unit,
             dir_unit: [Vec::new(), Vec::new(), Vec::new()],
+            dir_du: [Vec::new(), Vec::new(), Vec::new()],
+            dir_dv: [Vec::new(), Vec::new(), Vec::new()],
             near: Vec::new(),
             far: Vec::new(),
             pixel: Vec::new(),
@@ -83,8 +93,15 @@ impl ImageRays {
                     },
                     None => (near as f32, far as f32),
                 };
+                let unit =
+                    |u: f64, v: f64| -> Result<glam::DVec3, CoreError> { Ok(camera.pixel_ray(u, v)?.dir / size) };
+                let (c, r) = (col as f64, row as f64);
+                let du = unit(c + 0.5, r)? - unit(c - 0.5, r)?;
+                let dv = unit(c, r + 0.5)? - unit(c, r - 0.5)?;
                 for a in 0..3 {
                     rays.dir_unit[a].push(dir_unit[a]);
+                    rays.dir_du[a].push(du[a] as f32);
+                    rays.dir_dv[a].push(dv[a] as f32);
                 }
                 rays.near.push(near);
                 rays.far.push(far);
@@ -100,6 +117,17 @@ impl ImageRays {
 
     pub fn is_empty(&self) -> bool {
         self.near.is_empty()
+    }
+
+    /// Box-normalised direction of ray `r` moved by `jitter = (a, b)` pixels from its pixel's
+    /// centre (see [`Self::dir_du`]); the ray's own direction without it.
+    #[inline]
+    pub fn dir_jittered(&self, r: usize, jitter: Option<[f32; 2]>) -> [f32; 3] {
+        let d = [self.dir_unit[0][r], self.dir_unit[1][r], self.dir_unit[2][r]];
+        match jitter {
+            None => d,
+            Some([a, b]) => std::array::from_fn(|k| d[k] + a * self.dir_du[k][r] + b * self.dir_dv[k][r]),
+        }
     }
 
     /// Box-normalised position of ray `r` at distance `s`.

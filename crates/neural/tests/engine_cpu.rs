@@ -315,3 +315,73 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
     assert_eq!((learner.adam.step, learner.iteration), (0, 0));
     assert!(learner.adam.m.iter().chain(&learner.adam.v).all(|&m| m == 0.0));
 }
+
+/// With `pixel_supersample = 2` a training pixel is four rays through its sub-pixel centres,
+/// and the loss scores their mean: the batch names each drawn pixel four times with the
+/// offsets (±¼, ±¼), each ray's direction is the camera's ray through that point, the loss is
+/// the MSE of the four rays' mean against the pixel, and its gradient matches finite
+/// differences.
+#[test]
+fn supersampled_pixels_score_the_mean_of_their_sub_pixel_rays() {
+    let problem = problem();
+    let cfg = TrainConfig { fine_samples: 0, pixel_supersample: 2, ..settings() };
+    let prep = Prepared::new(&problem, &cfg).expect("prepares");
+    let (mut batch, mut single) = (RayBatch::new(Split::Train, 0, 0), RayBatch::new(Split::Train, 0, 0));
+    training_batch(&prep, &cfg, 1, 0, &prep.time_steps(), &mut batch);
+    training_batch(&prep, &TrainConfig { pixel_supersample: 1, ..cfg.clone() }, 1, 0, &prep.time_steps(), &mut single);
+    assert_eq!((batch.group, single.group), (4, 1));
+    assert_eq!(batch.len(), 4 * single.len());
+    assert!(single.jitter.is_empty());
+    for (p, &pixel) in single.rays.iter().enumerate() {
+        let mut offsets: Vec<[f32; 2]> = (0..4).map(|k| batch.jitter[4 * p + k]).collect();
+        offsets.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+        assert_eq!(offsets, [[-0.25, -0.25], [-0.25, 0.25], [0.25, -0.25], [0.25, 0.25]]);
+        for k in 0..4 {
+            let i = 4 * p + k;
+            assert_eq!(batch.rays[i], pixel);
+            // The ray through the sub-pixel centre, from the camera itself, to the first order
+            // the batch uses (this test camera's pixels are wide: 1e-4 of the direction).
+            let (v, r) = pixel;
+            let at = prep.views(Split::Train)[v as usize].rays().pixel[r as usize] as usize;
+            let camera = &problem.views[v as usize].camera;
+            let [a, b] = batch.jitter[i];
+            let (col, row) = ((at % camera.width()) as f64 + a as f64, (at / camera.width()) as f64 + b as f64);
+            let want = camera.pixel_ray(col, row).expect("ray").dir / problem.aabb.size();
+            let got = batch.ray(&prep, i).dir_unit;
+            for c in 0..3 {
+                assert!((got[c] as f64 - want[c]).abs() <= 1e-4 * want.length(), "ray {i}: {got:?} vs {want}");
+            }
+        }
+    }
+    let mut field = grid(4);
+    let mut engine = CpuEngine::new(&field, 2);
+    engine.load_state(&field, &Adam::new(field.num_params(), AdamConfig::default())).expect("fits");
+    let mut pixels = Vec::new();
+    let rendered = engine.render(&field, &prep, &cfg, &batch, &mut pixels);
+    let direct: f64 = (0..single.len())
+        .map(|p| {
+            let mean = (0..4).map(|k| pixels[4 * p + k]).sum::<f32>() / 4.0;
+            ((mean - batch.ray(&prep, 4 * p).target) as f64).powi(2)
+        })
+        .sum::<f64>()
+        / single.len() as f64;
+    assert!((direct - rendered.loss).abs() <= 1e-6 * direct, "{direct} vs {}", rendered.loss);
+    let loss = engine.loss_and_gradient(&field, &prep, &cfg, &batch).loss;
+    assert!((loss - direct).abs() <= 1e-6 * direct, "{loss} vs {direct}");
+    let grads = engine.gradient().to_vec();
+    let h = 1e-3f32;
+    let mut checked = 0;
+    for p in 0..field.num_params() {
+        let x = field.params()[p];
+        field.params_mut()[p] = x + h;
+        let plus = engine.loss_and_gradient(&field, &prep, &cfg, &batch).loss;
+        field.params_mut()[p] = x - h;
+        let minus = engine.loss_and_gradient(&field, &prep, &cfg, &batch).loss;
+        field.params_mut()[p] = x;
+        let fd = (plus - minus) / (2.0 * h as f64);
+        let an = grads[p] as f64;
+        assert!((fd - an).abs() <= 2e-5 + 1e-2 * fd.abs().max(an.abs()), "parameter {p}: fd {fd} vs {an}");
+        checked += (an != 0.0) as usize;
+    }
+    assert!(checked > field.num_params() / 2, "only {checked} parameters are seen by the batch");
+}

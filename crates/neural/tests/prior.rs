@@ -48,7 +48,7 @@ fn problem(cameras: usize, px: u32, noise: f32, seed: u64) -> Problem {
 }
 
 fn batch(stream: usize) -> RayBatch {
-    RayBatch { split: Split::Train, rays: Vec::new(), seed: 11, stream }
+    RayBatch { split: Split::Train, rays: Vec::new(), seed: 11, stream, jitter: Vec::new(), group: 1 }
 }
 
 fn prior_value<F: TrainableField>(field: &F, prep: &Prepared, prior: &Prior, stream: usize) -> (f32, Vec<f32>) {

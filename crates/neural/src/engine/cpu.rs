@@ -105,10 +105,18 @@ impl<F: TrainableField> CpuEngine<F> {
         batch: &RayBatch,
         pixels: Option<&mut [f32]>,
     ) -> (f64, usize) {
-        let rays_per_chunk = RayBatch::rays_per_chunk(cfg);
+        // Chunks hold whole pixels (`batch.group` rays each).
+        let group = batch.group.max(1);
+        let rays_per_chunk = (RayBatch::rays_per_chunk(cfg) / group).max(1) * group;
         let chunks: Vec<&[(u32, u32)]> = batch.rays.chunks(rays_per_chunk).collect();
+        // Each chunk's pixel offsets, or none.
+        let jitter: Vec<&[[f32; 2]]> = if batch.jitter.is_empty() {
+            vec![&[][..]; chunks.len()]
+        } else {
+            batch.jitter.chunks(rays_per_chunk).collect()
+        };
         let nw = self.workers.len();
-        let n_pix = batch.len();
+        let n_pix = batch.len() / group;
         let views = prep.views(batch.split);
         let with_grad = pixels.is_none();
         // Each worker's chunks, with the slice of `pixels` each renders into.
@@ -127,7 +135,18 @@ impl<F: TrainableField> CpuEngine<F> {
             wk.samples = 0;
             for (c, out) in share {
                 let mut rng = batch.chunk_rng(c);
-                process_chunk(field, prep, views, cfg, chunks[c], n_pix, &mut rng, wk, with_grad, out);
+                process_chunk(
+                    field,
+                    prep,
+                    views,
+                    cfg,
+                    ChunkRays { rays: chunks[c], jitter: jitter[c], group },
+                    n_pix,
+                    &mut rng,
+                    wk,
+                    with_grad,
+                    out,
+                );
             }
         });
         (self.workers.iter().map(|w| w.loss).sum(), self.workers.iter().map(|w| w.samples).sum())
@@ -201,16 +220,25 @@ impl<F: TrainableField> Engine<F> for CpuEngine<F> {
     }
 }
 
+/// One chunk's rays as `(view, ray)` pairs, their offsets from their pixels' centres (empty:
+/// none) and the rays per pixel.
+struct ChunkRays<'a> {
+    rays: &'a [(u32, u32)],
+    jitter: &'a [[f32; 2]],
+    group: usize,
+}
+
 /// Renders the rays `batch` (view, ray) of `views` and accumulates the loss over `n_pix`
-/// pixels into the worker; `with_grad` adds its parameter gradient into the worker's buffer,
-/// otherwise the rendered pixels go to `rendered` (one per ray).
+/// pixels (the mean of each `group` consecutive rays is one pixel) into the worker;
+/// `with_grad` adds its parameter gradient into the worker's buffer, otherwise the rendered
+/// rays go to `rendered` (one per ray).
 #[allow(clippy::too_many_arguments)]
 fn process_chunk<F: TrainableField>(
     field: &F,
     prep: &Prepared,
     views: &[PreparedView],
     cfg: &TrainConfig,
-    batch: &[(u32, u32)],
+    ChunkRays { rays: batch, jitter, group }: ChunkRays,
     n_pix: usize,
     rng: &mut rand_chacha::ChaCha8Rng,
     wk: &mut Worker<F::Tape>,
@@ -232,8 +260,11 @@ fn process_chunk<F: TrainableField>(
         active.clear();
         for (r, &(v, ray)) in batch.iter().enumerate() {
             let pv = &views[v as usize];
+            let o = pv.rays.origin_unit;
+            let d = pv.rays.dir_jittered(ray as usize, jitter.get(r).copied());
             for q in 0..n {
-                let u = pv.rays.point_unit(ray as usize, s[r * n + q]);
+                let t = s[r * n + q];
+                let u = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
                 if occ.is_some_and(|g| !g.is_occupied(u)) {
                     continue;
                 }
@@ -287,21 +318,36 @@ fn process_chunk<F: TrainableField>(
     // Render, loss, and ∂L/∂E per sample (stored in e_all's place once a ray is rendered).
     let quad = prep.quadrature();
     let length_scale = prep.length_scale();
-    for (r, &(v, ray)) in batch.iter().enumerate() {
-        let pv = &views[v as usize];
-        let ray = ray as usize;
-        let s = &wk.s_all[r * nt..(r + 1) * nt];
-        quadrature_weights(s, pv.rays.near[ray], pv.rays.far[ray], &pv.rays.emission, &quad, length_scale, &mut wk.w);
-        let e = &mut wk.e_all[r * nt..(r + 1) * nt];
-        let pixel = render(&wk.w, e);
-        let (l, d_pixel) = mse_term(pixel, pv.targets[ray], n_pix);
+    // A pixel is `group` consecutive rays (its sub-pixel rays): its value is their mean.
+    let weights = |r: usize, w: &mut [f32]| {
+        let (v, ray) = batch[r];
+        let rays = &views[v as usize].rays;
+        let (s, ray) = (&wk.s_all[r * nt..(r + 1) * nt], ray as usize);
+        quadrature_weights(s, rays.near[ray], rays.far[ray], &rays.emission, &quad, length_scale, w);
+    };
+    for first in (0..nr).step_by(group) {
+        let mut sum = 0f32;
+        for r in first..first + group {
+            weights(r, &mut wk.w);
+            let pixel = render(&wk.w, &wk.e_all[r * nt..(r + 1) * nt]);
+            sum += pixel;
+            if !with_grad {
+                rendered[r] = pixel;
+            }
+        }
+        let (v, ray) = batch[first];
+        let (l, d_pixel) = mse_term(sum / group as f32, views[v as usize].targets[ray as usize], n_pix);
         wk.loss += l as f64;
         if with_grad {
-            for (ej, &wj) in e.iter_mut().zip(&wk.w) {
-                *ej = d_pixel * wj;
+            let d_ray = d_pixel / group as f32;
+            for r in first..first + group {
+                if group > 1 {
+                    weights(r, &mut wk.w);
+                }
+                for (ej, &wj) in wk.e_all[r * nt..(r + 1) * nt].iter_mut().zip(&wk.w) {
+                    *ej = d_ray * wj;
+                }
             }
-        } else {
-            rendered[r] = pixel;
         }
     }
     if with_grad && !wk.active.is_empty() {
