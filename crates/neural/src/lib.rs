@@ -56,6 +56,7 @@ pub mod optim;
 pub mod prior;
 pub mod render;
 pub mod sampling;
+pub mod start;
 pub mod temporal;
 pub mod train;
 pub mod trained;

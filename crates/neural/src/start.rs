@@ -1,0 +1,137 @@
+//! Starting a field from another reconstruction: before training on rays, the field is fitted
+//! to a given field (a classical method's volume, say) by least squares on random points, as
+//! in prior-embedded neural tomography (NeRP, Shen et al. 2022). Ray training then continues
+//! from that field with a fresh optimiser.
+//!
+//! Each fitting step draws [`StartFit::points`] points uniformly in the occupied part of the
+//! box (all of it without empty-space skipping; for space–time fields at a training frame's
+//! time), evaluates the target there and takes one Adam step on the mean squared difference,
+//! at the constant rate [`StartFit::learning_rate`]. The points come from their own random
+//! stream (`stream_seed(seed ^ START_KEY, step, 0)`), so a start is reproducible.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::batch::stream_seed;
+use crate::optim::{Adam, AdamConfig};
+use crate::train::Prepared;
+use crate::{NeuralError, TrainableField};
+
+/// Key that separates the start's random stream from the samplers' and the prior's.
+const START_KEY: u64 = 0x7374_6172_7400_0001;
+
+/// How a field is fitted to a starting field.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StartFit {
+    /// Adam steps. Default 300.
+    pub iterations: usize,
+    /// Points per step. Default 16384.
+    pub points: usize,
+    /// Constant Adam learning rate. Default 1e-2.
+    pub learning_rate: f32,
+}
+
+impl Default for StartFit {
+    fn default() -> Self {
+        StartFit { iterations: 300, points: 16384, learning_rate: 1e-2 }
+    }
+}
+
+impl StartFit {
+    /// Rejects settings no fit can use.
+    pub fn validate(&self) -> Result<(), NeuralError> {
+        if self.iterations == 0 {
+            return Err(NeuralError::invalid("start.iterations", "must be at least 1"));
+        }
+        if self.points == 0 {
+            return Err(NeuralError::invalid("start.points", "must be at least 1"));
+        }
+        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
+            return Err(NeuralError::invalid(
+                "start.learning_rate",
+                format!("must be positive, got {}", self.learning_rate),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What a fit reached: the mean squared difference (field units²) of its last step and the
+/// mean square of the target there, so `(mse / mean_square).sqrt()` is a relative error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartReport {
+    pub mse: f64,
+    pub mean_square: f64,
+    pub seconds: f64,
+}
+
+/// Fits `field` to `target` (module doc). `target(points, out)` writes the target in field
+/// units at box-normalised points (rows of `field.input_dim()` values: `x, y, z[, t']`).
+pub fn fit_to_target<F: TrainableField>(
+    field: &mut F,
+    prep: &Prepared,
+    target: &(dyn Fn(&[f32], &mut [f32]) + Sync),
+    fit: &StartFit,
+    seed: u64,
+) -> Result<StartReport, NeuralError> {
+    fit.validate()?;
+    let t0 = std::time::Instant::now();
+    let dim = field.input_dim();
+    let times = prep.time_steps();
+    let occupancy = prep.occupancy();
+    let mut adam = Adam::new(field.num_params(), AdamConfig::default());
+    let mut grads = vec![0f32; field.num_params()];
+    let mut tape = field.new_tape();
+    let (mut inputs, mut values, mut wanted, mut d_out) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0 };
+    for step in 0..fit.iterations {
+        let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed ^ START_KEY, step, 0));
+        inputs.clear();
+        let mut n = 0;
+        // A bounded number of draws: with a sparse hull most draws may land in empty cells.
+        for _ in 0..fit.points * 8 {
+            if n == fit.points {
+                break;
+            }
+            let x: [f32; 3] = std::array::from_fn(|_| rng.random::<f32>());
+            if occupancy.is_some_and(|g| !g.is_occupied(x)) {
+                continue;
+            }
+            inputs.extend_from_slice(&x);
+            if dim == 4 {
+                inputs.push(if times.is_empty() { 0.0 } else { times[rng.random_range(0..times.len())] });
+            }
+            n += 1;
+        }
+        if n == 0 {
+            return Err(NeuralError::invalid("start", "no point of the box is occupied; nothing to fit"));
+        }
+        values.resize(n, 0.0);
+        wanted.resize(n, 0.0);
+        target(&inputs, &mut wanted);
+        if let Some(bad) = wanted.iter().position(|v| !v.is_finite()) {
+            let p = &inputs[bad * dim..bad * dim + 3];
+            return Err(NeuralError::invalid(
+                "start",
+                format!("the starting field is not finite at {p:?} (box units)"),
+            ));
+        }
+        field.forward(&inputs, &mut values, &mut tape);
+        d_out.clear();
+        let (mut se, mut sq) = (0f64, 0f64);
+        for (&e, &y) in values.iter().zip(&wanted) {
+            let r = e - y;
+            se += (r * r) as f64;
+            sq += (y * y) as f64;
+            d_out.push(2.0 * r / n as f32);
+        }
+        grads.fill(0.0);
+        field.backward(&mut tape, &d_out, &mut grads);
+        adam.step(field.params_mut(), &grads, fit.learning_rate);
+        last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, seconds: 0.0 };
+    }
+    last.seconds = t0.elapsed().as_secs_f64();
+    Ok(last)
+}

@@ -1,0 +1,108 @@
+//! Starting a field from another reconstruction ([`fluidnerf_neural::start`]): a fit recovers a
+//! target the field can represent exactly, is reproducible from its seed, and refuses settings
+//! and targets it cannot use, naming them.
+
+use fluidnerf_core::{render_image, Aabb, RenderSettings};
+use fluidnerf_neural::dense::DenseGridField;
+use fluidnerf_neural::start::{fit_to_target, StartFit};
+use fluidnerf_neural::train::{Prepared, Problem, TrainConfig, View};
+use fluidnerf_neural::{NeuralError, TrainableField};
+use glam::{DVec3, Vec3};
+
+mod common;
+use common::ring;
+
+fn problem() -> Problem {
+    let aabb = Aabb::cube(DVec3::ZERO, 2.0);
+    let blob = |p: Vec3, _t: f64| (-(p.as_dvec3()).length_squared() * 2.0).exp() as f32;
+    let settings = RenderSettings { scale: 2.0, ..Default::default() };
+    let views = ring(3, 12)
+        .into_iter()
+        .map(|camera| {
+            let image = render_image(&blob, &camera, &aabb, &settings).expect("renders");
+            View { camera, image, time: 0.0 }
+        })
+        .collect();
+    Problem { aabb, intensity_scale: 2.0, views, holdout: Vec::new(), time_step: 1.0 }
+}
+
+/// A 5³ grid field with raw values spread over [-1.5, 1.5]: not uniform, all finite.
+fn target_grid() -> DenseGridField {
+    let params = (0..125).map(|i| -1.5 + 3.0 * ((i * 37) % 29) as f32 / 28.0).collect();
+    DenseGridField::from_raw([5, 5, 5], params)
+}
+
+fn eval(field: &DenseGridField, inputs: &[f32]) -> Vec<f32> {
+    let mut out = vec![0f32; inputs.len() / 3];
+    field.eval(inputs, &mut out, &mut field.new_tape());
+    out
+}
+
+/// Relative RMS difference of two fields on a fixed lattice of points.
+fn relative_difference(a: &DenseGridField, b: &DenseGridField) -> f64 {
+    let inputs: Vec<f32> = (0..11 * 11 * 11)
+        .flat_map(|i| [(i % 11) as f32 / 10.0, (i / 11 % 11) as f32 / 10.0, (i / 121) as f32 / 10.0])
+        .collect();
+    let (x, y) = (eval(a, &inputs), eval(b, &inputs));
+    let se: f64 = x.iter().zip(&y).map(|(p, q)| ((p - q) as f64).powi(2)).sum();
+    let sq: f64 = y.iter().map(|q| (*q as f64).powi(2)).sum();
+    (se / sq).sqrt()
+}
+
+#[test]
+fn a_fit_recovers_a_target_the_field_can_represent() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let target = target_grid();
+    let to_target = |inputs: &[f32], out: &mut [f32]| out.copy_from_slice(&eval(&target, inputs));
+    let mut field = DenseGridField::new([5, 5, 5], 0.5);
+    let before = relative_difference(&field, &target);
+    let fit = StartFit { iterations: 400, points: 4096, learning_rate: 5e-2 };
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3).expect("fits");
+    let after = relative_difference(&field, &target);
+    assert!(before > 0.4, "the start is far from the target: {before}");
+    assert!(after < 0.02, "fitted: relative difference {after} (from {before})");
+    // The report's error is the last step's, on its own points: as small.
+    assert!((report.mse / report.mean_square).sqrt() < 0.03, "{report:?}");
+    assert!(report.seconds >= 0.0);
+}
+
+#[test]
+fn a_fit_is_reproducible_from_its_seed() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let target = target_grid();
+    let to_target = |inputs: &[f32], out: &mut [f32]| out.copy_from_slice(&eval(&target, inputs));
+    let fit = StartFit { iterations: 20, points: 256, learning_rate: 5e-2 };
+    let run = |seed| {
+        let mut field = DenseGridField::new([5, 5, 5], 0.5);
+        fit_to_target(&mut field, &prep, &to_target, &fit, seed).expect("fits");
+        field.params().to_vec()
+    };
+    assert_eq!(run(1), run(1));
+    assert_ne!(run(1), run(2));
+}
+
+#[test]
+fn settings_and_targets_a_fit_cannot_use_are_refused_by_name() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let zero = |_: &[f32], out: &mut [f32]| out.fill(0.0);
+    let why = |fit: StartFit, target: &(dyn Fn(&[f32], &mut [f32]) + Sync)| {
+        let mut field = DenseGridField::new([5, 5, 5], 0.5);
+        let before = field.params().to_vec();
+        let err = fit_to_target(&mut field, &prep, target, &fit, 0).expect_err("refused");
+        assert_eq!(field.params(), before, "a refused fit leaves the field as it was");
+        match err {
+            NeuralError::Invalid { what, why } => format!("{what}: {why}"),
+            e => panic!("{e}"),
+        }
+    };
+    let ok = StartFit::default();
+    assert!(why(StartFit { iterations: 0, ..ok }, &zero).starts_with("start.iterations"));
+    assert!(why(StartFit { points: 0, ..ok }, &zero).starts_with("start.points"));
+    assert!(why(StartFit { learning_rate: f32::NAN, ..ok }, &zero).starts_with("start.learning_rate"));
+    let broken = |_: &[f32], out: &mut [f32]| out.fill(f32::INFINITY);
+    let msg = why(ok, &broken);
+    assert!(msg.contains("not finite"), "{msg}");
+}
