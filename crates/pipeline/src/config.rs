@@ -34,6 +34,7 @@ use fluidnerf_classical::{
     Algorithm, ArtParams, AsartParams, ClassicalMethod, MartParams, MlemParams, ProjectorConfig, SartParams,
     SmartParams, TikhonovParams, TvParams,
 };
+use fluidnerf_neural::start::StartFit;
 use fluidnerf_neural::temporal::{temporal_preset, TemporalConfig, WindowConfig, TEMPORAL_PRESETS};
 use fluidnerf_neural::train::{Batching, TrainConfig};
 use fluidnerf_neural::trained::{FieldConfig, NeuralConfig, PRESETS};
@@ -59,6 +60,7 @@ pub enum Method {
     Fluidnerf,
     Fast,
     Voxel,
+    Hybrid,
     TrFluidnerf,
     TrFast,
     StaticPerFrame,
@@ -76,7 +78,7 @@ pub enum Family {
 }
 
 impl Method {
-    pub const ALL: [Method; 14] = [
+    pub const ALL: [Method; 15] = [
         Method::Asart,
         Method::Art,
         Method::Sart,
@@ -88,6 +90,7 @@ impl Method {
         Method::Fluidnerf,
         Method::Fast,
         Method::Voxel,
+        Method::Hybrid,
         Method::TrFluidnerf,
         Method::TrFast,
         Method::StaticPerFrame,
@@ -107,6 +110,7 @@ impl Method {
             Method::Fluidnerf => "fluidnerf",
             Method::Fast => "fast",
             Method::Voxel => "voxel",
+            Method::Hybrid => "hybrid",
             Method::TrFluidnerf => "tr-fluidnerf",
             Method::TrFast => "tr-fast",
             Method::StaticPerFrame => "static-per-frame",
@@ -127,6 +131,7 @@ impl Method {
             Method::Fluidnerf => "FluidNeRF",
             Method::Fast => "FluidNeRF (fast field)",
             Method::Voxel => "voxel grid + TV",
+            Method::Hybrid => "SART-TV → grid field",
             Method::TrFluidnerf => "TR-FluidNeRF",
             Method::TrFast => "TR-FluidNeRF (fast field)",
             Method::StaticPerFrame => "FluidNeRF per frame",
@@ -147,6 +152,7 @@ impl Method {
             Method::Fluidnerf => "FluidNeRF as published: positional encoding + MLP (chapter 5.1)",
             Method::Fast => "FluidNeRF with a multiresolution grid and a tiny MLP: much faster",
             Method::Voxel => "voxel baseline: a grid at the output resolution trained like the fields, with TV",
+            Method::Hybrid => "SART-TV first, then the fast field started from its volume, in one time budget",
             Method::TrFluidnerf => "time-resolved FluidNeRF (chapter 5.2): one MLP E(x, t) for all frames",
             Method::TrFast => "time-resolved, with a space–time hash grid, in sliding windows",
             Method::StaticPerFrame => "static FluidNeRF trained on each frame separately (TR baseline)",
@@ -155,7 +161,7 @@ impl Method {
 
     pub fn family(self) -> Family {
         match self {
-            Method::Fluidnerf | Method::Fast | Method::Voxel => Family::Neural,
+            Method::Fluidnerf | Method::Fast | Method::Voxel | Method::Hybrid => Family::Neural,
             Method::TrFluidnerf | Method::TrFast | Method::StaticPerFrame => Family::Temporal,
             _ => Family::Classical,
         }
@@ -181,6 +187,7 @@ impl Method {
             Method::Fluidnerf => Some("faithful"),
             Method::Fast => Some("fast"),
             Method::Voxel => Some("voxel"),
+            Method::Hybrid => Some("fast"),
             Method::TrFluidnerf => Some("tr-faithful"),
             Method::TrFast => Some("tr-fast"),
             Method::StaticPerFrame => Some("static-swish"),
@@ -236,6 +243,54 @@ pub struct NeuralSpec {
     pub preset: Option<String>,
     pub field: FieldConfig,
     pub train: TrainConfig,
+    /// Start the field from another run's reconstruction instead of a uniform field
+    /// ([`StartSpec`]). Default none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start: Option<StartSpec>,
+}
+
+/// A field's start from another reconstruction: before ray training the field is fitted to
+/// it (a volume read trilinearly, or a field) by least squares on random points
+/// ([`fluidnerf_neural::start`]), and ray training then runs at reduced learning rates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StartSpec {
+    /// A run folder written by `reconstruct` (any static method); its time is not part of
+    /// this run's. None: [`StartSpec::method`] runs first into `start/` of this run's folder,
+    /// and its time counts against this run's budget. Default none.
+    #[serde(default)]
+    pub run: Option<PathBuf>,
+    /// The voxel method run first when no run is named (its defaults, this run's stopping
+    /// policy and output grid). Default `tv` (SART with total variation), chosen on the jet
+    /// (docs/claims.md).
+    #[serde(default = "default_start_method")]
+    pub method: Method,
+    #[serde(default)]
+    pub fit: StartFit,
+    /// Factor on the ray training's learning-rate schedule: a start is close to a solution,
+    /// and the full rate of a fresh field scrambles it. Default 0.25, chosen on the jet
+    /// (docs/claims.md).
+    #[serde(default = "default_start_lr_scale")]
+    pub learning_rate_scale: f32,
+}
+
+impl Default for StartSpec {
+    fn default() -> Self {
+        StartSpec {
+            run: None,
+            method: default_start_method(),
+            fit: StartFit::default(),
+            learning_rate_scale: default_start_lr_scale(),
+        }
+    }
+}
+
+fn default_start_method() -> Method {
+    Method::Tv
+}
+
+fn default_start_lr_scale() -> f32 {
+    0.25
 }
 
 /// A time-resolved method: field, training, windows, and which times are held out.
@@ -304,9 +359,11 @@ impl MethodConfig {
             }
             Family::Neural => {
                 let c = NeuralConfig::preset(preset).ok_or_else(|| unknown(PRESETS.join(", ")))?;
+                // The hybrid starts from a voxel method run first in the same run folder.
+                let start = (method == Method::Hybrid).then(StartSpec::default);
                 Ok(MethodConfig::Neural(
                     method,
-                    NeuralSpec { preset: Some(preset.into()), field: c.field, train: c.train },
+                    NeuralSpec { preset: Some(preset.into()), field: c.field, train: c.train, start },
                 ))
             }
             Family::Temporal => {
@@ -363,7 +420,29 @@ impl MethodConfig {
                 c.projector.validate().map_err(|e| key(&e))?;
                 c.method.validate().map_err(|e| key(&e))
             }
-            MethodConfig::Neural(_, n) => n.train.validate().map_err(|e| key(&e)),
+            MethodConfig::Neural(m, n) => {
+                if let Some(start) = &n.start {
+                    start.fit.validate().map_err(|e| key(&e))?;
+                    if start.method.family() != Family::Classical {
+                        return Err(PipelineError::invalid(
+                            "method.start.method",
+                            format!("{} is not a voxel method; a start runs one of those", start.method),
+                        ));
+                    }
+                    if !(start.learning_rate_scale > 0.0 && start.learning_rate_scale <= 1.0) {
+                        return Err(PipelineError::invalid(
+                            "method.start.learning_rate_scale",
+                            format!("must be in (0, 1], got {}", start.learning_rate_scale),
+                        ));
+                    }
+                } else if *m == Method::Hybrid {
+                    return Err(PipelineError::invalid(
+                        "method.start",
+                        "the hybrid method starts from a run: give start",
+                    ));
+                }
+                n.train.validate().map_err(|e| key(&e))
+            }
             MethodConfig::Temporal(m, t) => {
                 t.temporal_config().validate().map_err(|e| key(&e))?;
                 if let Some(dt) = t.time_step {
@@ -774,6 +853,7 @@ enum WireMethod {
     Fluidnerf(NeuralSpec),
     Fast(NeuralSpec),
     Voxel(NeuralSpec),
+    Hybrid(NeuralSpec),
     TrFluidnerf(TemporalSpec),
     TrFast(TemporalSpec),
     StaticPerFrame(TemporalSpec),
@@ -803,6 +883,7 @@ impl From<MethodConfig> for WireMethod {
             },
             MethodConfig::Neural(Method::Fluidnerf, n) => WireMethod::Fluidnerf(n),
             MethodConfig::Neural(Method::Voxel, n) => WireMethod::Voxel(n),
+            MethodConfig::Neural(Method::Hybrid, n) => WireMethod::Hybrid(n),
             MethodConfig::Neural(_, n) => WireMethod::Fast(n),
             MethodConfig::Temporal(Method::TrFluidnerf, t) => WireMethod::TrFluidnerf(t),
             MethodConfig::Temporal(Method::TrFast, t) => WireMethod::TrFast(t),
@@ -826,6 +907,7 @@ impl From<WireMethod> for MethodConfig {
             WireMethod::Fluidnerf(n) => MethodConfig::Neural(Method::Fluidnerf, n),
             WireMethod::Fast(n) => MethodConfig::Neural(Method::Fast, n),
             WireMethod::Voxel(n) => MethodConfig::Neural(Method::Voxel, n),
+            WireMethod::Hybrid(n) => MethodConfig::Neural(Method::Hybrid, n),
             WireMethod::TrFluidnerf(t) => MethodConfig::Temporal(Method::TrFluidnerf, t),
             WireMethod::TrFast(t) => MethodConfig::Temporal(Method::TrFast, t),
             WireMethod::StaticPerFrame(t) => MethodConfig::Temporal(Method::StaticPerFrame, t),

@@ -9,6 +9,7 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+use fluidnerf_core::glam::Vec3;
 use fluidnerf_core::{Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
 use fluidnerf_neural::train::{
@@ -21,7 +22,7 @@ use crate::measured::Measured;
 use crate::{
     check_memory, finish, peak_rss, write_volume, BestHoldout, Family, GainConfig, GainMode, History, HoldoutPoint,
     HoldoutScore, LossKind, MethodConfig, NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent,
-    RunReport, Session, StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
+    RunReport, Session, StartSpec, StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
 };
 
 /// A rough peak-memory estimate of a neural run: images and their ray tables, parameters with
@@ -150,6 +151,92 @@ pub(crate) fn run(
     fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, session))
 }
 
+/// Fits `field` to the reconstruction [`StartSpec`] names (running its voxel method first into
+/// `start/` when it names no run) and returns the seconds of this run's that took.
+fn start_from<F: TrainableField>(
+    start: &StartSpec,
+    scene: &Scene,
+    config: &RunConfig,
+    run_dir: &RunDir,
+    truth: &[(Option<f64>, Volume)],
+    prep: &Prepared,
+    field: &mut F,
+) -> Result<f64, PipelineError> {
+    let mut seconds = 0.0;
+    let path = match &start.run {
+        Some(p) => p.clone(),
+        None => {
+            let path = run_dir.path("start");
+            let mut voxel = RunConfig::new(config.scene.clone(), start.method);
+            voxel.seed = config.seed;
+            voxel.resolution = config.resolution;
+            voxel.stopping = config.stopping;
+            voxel.gains = config.gains;
+            voxel.memory_limit_gib = config.memory_limit_gib;
+            voxel.eval_every = Some(0);
+            let dir = RunDir::create(&path, crate::Overwrite::Force, Some(&scene.root))?;
+            // Its own session: the caller's progress and time estimate follow the field.
+            let mut quiet = |_: &RunEvent| ControlFlow::Continue(());
+            let mut inner = Session {
+                on_event: &mut quiet,
+                stopped: false,
+                started: Instant::now(),
+                cpu0: None,
+                budget_s: voxel.stopping.time_budget_s,
+                estimate: Default::default(),
+            };
+            let report = crate::classical::run(scene, &voxel, &dir, truth, &mut inner)?;
+            log::info!(
+                "{} for the start: {} iterations in {:.1} s, kept {}",
+                start.method,
+                report.iterations,
+                report.train_time_s,
+                report.kept_iteration
+            );
+            seconds += report.train_time_s;
+            path
+        }
+    };
+    let run = crate::load::LoadedRun::open(&path, Some(scene.aabb))?;
+    if run.kind == crate::RunKind::Temporal {
+        return Err(PipelineError::invalid(
+            "method.start.run",
+            format!("{}: a time-resolved run; a static field starts from a static one", path.display()),
+        ));
+    }
+    if run.aabb != scene.aabb {
+        return Err(PipelineError::invalid(
+            "method.start.run",
+            format!(
+                "{}: its box {:?}–{:?} is not the scene's {:?}–{:?}",
+                path.display(),
+                run.aabb.min,
+                run.aabb.max,
+                scene.aabb.min,
+                scene.aabb.max
+            ),
+        ));
+    }
+    let source = run.field()?;
+    let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
+    let inv_scale = (1.0 / prep.meta.value_scale) as f32;
+    let dim = field.input_dim();
+    let target = |inputs: &[f32], out: &mut [f32]| {
+        let points: Vec<Vec3> = inputs.chunks_exact(dim).map(|u| min + Vec3::new(u[0], u[1], u[2]) * size).collect();
+        source.eval(&points, 0.0, out);
+        out.iter_mut().for_each(|v| *v *= inv_scale);
+    };
+    let report = fluidnerf_neural::start::fit_to_target(field, prep, &target, &start.fit, config.seed)?;
+    log::info!(
+        "started from {}: relative RMS difference {:.4} after {} steps ({:.1} s)",
+        path.display(),
+        (report.mse / report.mean_square.max(f64::MIN_POSITIVE)).sqrt(),
+        start.fit.iterations,
+        report.seconds
+    );
+    Ok(seconds + report.seconds)
+}
+
 /// What a resumed run keeps of the report of the run it continues.
 fn earlier_report(dir: &RunDir) -> Option<RunReport> {
     let path = dir.report();
@@ -184,12 +271,25 @@ impl Ctx<'_> {
     fn train_and_write<F: TrainableField>(self, field: F, session: &mut Session) -> Result<RunReport, PipelineError> {
         let (config, dir) = (self.config, self.dir);
         let mut prep = self.prep;
-        let train_cfg = &self.spec.train;
+        let mut train_cfg = &self.spec.train;
         let mut learner = Learner::fresh(field, &prep, train_cfg);
         let ckpt = dir.checkpoint();
+        let mut budgeted;
         if dir.resuming() {
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             log::info!("resuming at iteration {}", learner.iteration);
+        } else if let Some(start) = &self.spec.start {
+            let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;
+            // Its time is the run's: the curves of NRMSE against time start after it.
+            learner.train_time_s += seconds;
+            budgeted = train_cfg.clone();
+            budgeted.schedule.initial *= start.learning_rate_scale;
+            budgeted.schedule.at_decay_iters *= start.learning_rate_scale;
+            // The start is part of the run's work: it counts against the time budget.
+            if let Some(b) = budgeted.time_budget_s {
+                budgeted.time_budget_s = Some((b - seconds).max(1e-3));
+            }
+            train_cfg = &budgeted;
         }
         let sample = self.truth.first().map(|(_, t)| TruthSample::new(t));
         let eval_every = config.eval_interval();

@@ -13,7 +13,9 @@ use clap::builder::PossibleValue;
 use fluidnerf_classical::{Plateau, ProjectorKind};
 use fluidnerf_neural::occupancy::OccupancyConfig;
 use fluidnerf_neural::temporal::TimeOrigin;
-use fluidnerf_pipeline::{Family, Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunStatus, StopRule};
+use fluidnerf_pipeline::{
+    Family, Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunStatus, StartSpec, StopRule,
+};
 
 /// `--method` values, with their help.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -21,7 +23,7 @@ pub struct MethodArg(pub Method);
 
 impl clap::ValueEnum for MethodArg {
     fn value_variants<'a>() -> &'a [Self] {
-        const ALL: [MethodArg; 14] = [
+        const ALL: [MethodArg; 15] = [
             MethodArg(Method::Asart),
             MethodArg(Method::Art),
             MethodArg(Method::Sart),
@@ -33,6 +35,7 @@ impl clap::ValueEnum for MethodArg {
             MethodArg(Method::Fluidnerf),
             MethodArg(Method::Fast),
             MethodArg(Method::Voxel),
+            MethodArg(Method::Hybrid),
             MethodArg(Method::TrFluidnerf),
             MethodArg(Method::TrFast),
             MethodArg(Method::StaticPerFrame),
@@ -325,6 +328,14 @@ pub struct NeuralArgs {
     /// --tv-prior) [default: 0].
     #[arg(long, value_name = "WEIGHT")]
     pub sparsity_prior: Option<f32>,
+    /// Start the field from another run's reconstruction (a run folder of any static
+    /// method on the same box, e.g. an ASART run of the same scene) instead of a uniform
+    /// field: the field is first fitted to it on random points (300 Adam steps of 16384
+    /// points; that time counts against --time-budget, the other run's does not), then
+    /// trained on the images at a quarter of the learning rate. `--method hybrid` does this
+    /// with a SART-TV run of its own. Static neural methods only.
+    #[arg(long, value_name = "RUN")]
+    pub start_from: Option<PathBuf>,
 }
 
 /// Options of the time-resolved methods.
@@ -402,6 +413,9 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
             ("--checkpoint-every", args.checkpoint_every.is_some()),
             ("--resume", args.resume),
         ]));
+    }
+    if family != Family::Neural {
+        wrong.extend(given(&[("--start-from", n.start_from.is_some())]));
     }
     if family != Family::Temporal {
         wrong.extend(given(&[
@@ -612,6 +626,10 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         if let Some(w) = n.sparsity_prior {
             train.prior.sparsity = w;
         }
+    }
+    if let (MethodConfig::Neural(_, spec), Some(run)) = (&mut *method, &n.start_from) {
+        let start = spec.start.get_or_insert_with(StartSpec::default);
+        start.run = Some(run.clone());
     }
     let t = &args.temporal;
     if let MethodConfig::Temporal(_, spec) = method {
