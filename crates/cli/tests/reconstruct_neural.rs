@@ -187,6 +187,10 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     run("reconstruct scene -o h --method hybrid --resolution 16 --max-iterations 30 -q");
     let start = report(&d.join("h/start"));
     assert_eq!(start["method"], "tv");
+    // The voxel run keeps its own cap and rule: the field's cap is not its.
+    let start_cfg = json(&d.join("h/start/config.json"));
+    assert_eq!(start_cfg["stopping"]["max_iterations"], serde_json::Value::Null, "{start_cfg}");
+    assert_eq!(start_cfg["stopping"]["rule"], "own", "{start_cfg}");
     let cfg = json(&d.join("h/config.json"));
     assert_eq!(cfg["method"]["name"], "hybrid");
     assert_eq!(cfg["method"]["start"]["learning_rate_scale"], serde_json::json!(0.25));

@@ -260,9 +260,10 @@ pub struct StartSpec {
     /// and its time counts against this run's budget. Default none.
     #[serde(default)]
     pub run: Option<PathBuf>,
-    /// The voxel method run first when no run is named (its defaults, this run's stopping
-    /// policy and output grid). Default `tv` (SART with total variation), chosen on the jet
-    /// (docs/claims.md).
+    /// The voxel method run first when no run is named: its defaults, this run's output grid,
+    /// its own iteration cap, this run's held-out rule if it has one (otherwise its own rule)
+    /// and at most half this run's time budget. Default `tv` (SART with total variation),
+    /// chosen on the jet (docs/claims.md).
     #[serde(default = "default_start_method")]
     pub method: Method,
     #[serde(default)]

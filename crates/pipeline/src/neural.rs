@@ -22,7 +22,7 @@ use crate::measured::Measured;
 use crate::{
     check_memory, finish, peak_rss, write_volume, BestHoldout, Family, GainConfig, GainMode, History, HoldoutPoint,
     HoldoutScore, LossKind, MethodConfig, NeuralDetails, NeuralSpec, PipelineError, RunConfig, RunDir, RunEvent,
-    RunReport, Session, StartSpec, StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
+    RunReport, Session, StartSpec, StopReason, StopRule, StoppingPolicy, VolumeRecord, REPORT_FORMAT,
 };
 
 /// A rough peak-memory estimate of a neural run: images and their ray tables, parameters with
@@ -170,7 +170,16 @@ fn start_from<F: TrainableField>(
             let mut voxel = RunConfig::new(config.scene.clone(), start.method);
             voxel.seed = config.seed;
             voxel.resolution = config.resolution;
-            voxel.stopping = config.stopping;
+            // Its own iteration cap and rule (the run's held-out rule if it has one), and at
+            // most half the run's time: a budget rule or a large cap set for the field would
+            // otherwise let it take the whole budget.
+            voxel.stopping = StoppingPolicy {
+                rule: if config.stopping.rule == StopRule::HeldOut { StopRule::HeldOut } else { StopRule::Own },
+                max_iterations: None,
+                time_budget_s: config.stopping.time_budget_s.map(|b| b / 2.0),
+                holdout_every: None,
+                patience: config.stopping.patience,
+            };
             voxel.gains = config.gains;
             voxel.memory_limit_gib = config.memory_limit_gib;
             voxel.eval_every = Some(0);
