@@ -199,10 +199,14 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     run("reconstruct scene -o f --method fast --resolution 16 --max-iterations 30 -q");
     let fresh = report(&d.join("f"))["final_nrmse"].as_f64().expect("truth was used");
     assert!(hybrid < 1.15 * voxel && hybrid < 0.7 * fresh, "hybrid {hybrid}, SART-TV {voxel}, fresh field {fresh}");
+    // A rerun from the saved configuration repeats the voxel run, the fit and the training.
+    run("reconstruct --config h/config.json -o h2 -q");
+    assert_eq!(report(&d.join("h2"))["final_nrmse"].as_f64(), Some(hybrid), "the rerun differs");
     // The same start from a run the user names; its config records it and reruns from it.
     run("reconstruct scene -o s --method fast --start-from h/start --resolution 16 --max-iterations 30 -q");
     let cfg = json(&d.join("s/config.json"));
-    assert!(cfg["method"]["start"]["run"].as_str().is_some_and(|p| p.ends_with("start")), "{cfg}");
+    let recorded = cfg["method"]["start"]["run"].as_str().map(std::path::PathBuf::from);
+    assert!(recorded.as_ref().is_some_and(|p| p.is_absolute() && p.ends_with("h/start")), "{cfg}");
     let from_run = report(&d.join("s"))["final_nrmse"].as_f64().expect("truth was used");
     assert!(from_run < 1.15 * voxel, "started from h/start: {from_run}, SART-TV {voxel}");
     let bad = fluidnerf(d, &["reconstruct", "scene", "-o", "x", "--method", "asart", "--start-from", "h/start"]);
