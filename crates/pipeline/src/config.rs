@@ -797,6 +797,14 @@ impl RunConfig {
             c.stopping.rule =
                 if held_out && self.method().family() != Family::Temporal { StopRule::HeldOut } else { StopRule::Own };
         }
+        // A start's run folder is recorded absolute, as the scene is, so the saved
+        // configuration reruns from any working directory.
+        if let MethodConfig::Neural(_, NeuralSpec { start: Some(StartSpec { run: Some(run), .. }), .. }) = &mut c.method
+        {
+            if let Ok(abs) = std::path::absolute(&*run) {
+                *run = abs;
+            }
+        }
         c
     }
 
@@ -1005,5 +1013,31 @@ mod tests {
         let mut c = RunConfig::new("scene", Method::Fast);
         c.stopping.rule = StopRule::Budget;
         assert_eq!(c.resolved(&scene(true)).stopping.rule, StopRule::Budget);
+    }
+
+    #[test]
+    fn a_start_run_is_resolved_to_an_absolute_folder() {
+        let scene = fluidnerf_core::Scene {
+            root: "scene".into(),
+            aabb: fluidnerf_core::Aabb::new(
+                fluidnerf_core::glam::DVec3::splat(-1.0),
+                fluidnerf_core::glam::DVec3::splat(1.0),
+            ),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: Vec::new(),
+            truth: Vec::new(),
+        };
+        let mut c = RunConfig::new("scene", Method::Fast);
+        let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };
+        spec.start = Some(StartSpec { run: Some("runs/asart".into()), ..StartSpec::default() });
+        let r = c.resolved(&scene);
+        let MethodConfig::Neural(_, spec) = &r.method else { unreachable!("fast is neural") };
+        let run = spec.start.as_ref().and_then(|s| s.run.clone()).expect("kept");
+        assert!(run.is_absolute() && run.ends_with("runs/asart"), "{}", run.display());
+        // The hybrid's default start names no run, and stays so.
+        let h = RunConfig::new("scene", Method::Hybrid).resolved(&scene);
+        let MethodConfig::Neural(_, spec) = &h.method else { unreachable!("hybrid is neural") };
+        assert_eq!(spec.start, Some(StartSpec::default()));
     }
 }

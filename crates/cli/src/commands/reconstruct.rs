@@ -629,8 +629,7 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     }
     if let (MethodConfig::Neural(_, spec), Some(run)) = (&mut *method, &n.start_from) {
         let start = spec.start.get_or_insert_with(StartSpec::default);
-        // Recorded absolute, as the scene is, so the config reruns from any working directory.
-        start.run = Some(std::path::absolute(run).unwrap_or_else(|_| run.clone()));
+        start.run = Some(run.clone());
     }
     let t = &args.temporal;
     if let MethodConfig::Temporal(_, spec) = method {
