@@ -340,9 +340,15 @@ pub fn window_masks(problem: &Problem, masks: &ViewMasks, times: &[f64], range: 
 
 /// Whether a view's time lies in the frames `range` of `times` (up to rounding).
 fn in_window(times: &[f64], range: Range<usize>) -> impl Fn(&crate::train::View) -> bool {
+    let inside = time_in_window(times, range);
+    move |v| inside(v.time)
+}
+
+/// Whether a time lies in the frames `range` of `times` (up to rounding).
+fn time_in_window(times: &[f64], range: Range<usize>) -> impl Fn(f64) -> bool {
     let (t_first, t_last) = (times[range.start], times[range.end - 1]);
     let tol = 1e-9 * (1.0 + t_first.abs().max(t_last.abs()));
-    move |v| v.time >= t_first - tol && v.time <= t_last + tol
+    move |t| t >= t_first - tol && t <= t_last + tol
 }
 
 /// The origin `t₀` of window `range` ([`TimeOrigin`]).
@@ -454,6 +460,7 @@ pub fn train_windows<F: TrainableField + Clone>(
     init: F,
     seed: u64,
     resume: ResumeState<F>,
+    start: Option<&FrameStart>,
     mut on_event: impl FnMut(WindowEvent<'_, F>) -> ControlFlow<()>,
 ) -> Result<TemporalRun<F>, NeuralError> {
     windows.validate()?;
@@ -482,15 +489,15 @@ pub fn train_windows<F: TrainableField + Clone>(
             // A finished window is taken as it is: no events, not trained.
             let start = WindowStart::Finished(learner, report);
             let no_events = |_: &WindowInfo, _: &TrainState<'_, F>| ControlFlow::Continue(());
-            out.push(train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, start, no_events)?);
+            out.push(train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, start, None, no_events)?);
             continue;
         }
-        let start = match (running.take(), out.last().filter(|_| windows.warm_start && k > 0)) {
+        let begin = match (running.take(), out.last().filter(|_| windows.warm_start && k > 0)) {
             (Some(saved), _) => WindowStart::Resume(saved),
             (None, Some(prev)) => WindowStart::Warm(prev.learner.field.clone()),
             (None, None) => WindowStart::Fresh(init.clone()),
         };
-        let w = train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, start, |info, s| {
+        let w = train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, begin, start, |info, s| {
             on_event(WindowEvent::Iteration(info, s))
         })?;
         out.push(w);
@@ -502,6 +509,22 @@ pub fn train_windows<F: TrainableField + Clone>(
         }
     }
     Ok(TemporalRun { frame_times: times, plan, windows: out, interrupted })
+}
+
+/// `target(frame_time, points, out)`: a reconstruction's values at world points at one
+/// frame time ([`FrameStart`]).
+pub type FrameTarget<'a> = dyn Fn(f64, &[Vec3], &mut [f32]) + Sync + 'a;
+
+/// Reconstructions of single instants that a window's fresh field is fitted to before it
+/// trains ([`crate::start`]), one instant at a time: `target(frame_time, points, out)` writes
+/// the value (world units) at world points at one of the recording's frame times. The window
+/// then trains at `learning_rate_scale` times its schedule's rates, and the time those
+/// reconstructions took (`seconds`: per frame time) and the fit's come out of its time budget.
+pub struct FrameStart<'a> {
+    pub target: &'a FrameTarget<'a>,
+    pub fit: crate::start::StartFit,
+    pub learning_rate_scale: f32,
+    pub seconds: Vec<(f64, f64)>,
 }
 
 /// Where the learner of one window starts ([`train_window`]).
@@ -536,6 +559,7 @@ pub fn train_window<F: TrainableField + Clone>(
     windows: &WindowConfig,
     seed: u64,
     start: WindowStart<F>,
+    frame_start: Option<&FrameStart>,
     mut on_iteration: impl FnMut(&WindowInfo, &TrainState<'_, F>) -> ControlFlow<()>,
 ) -> Result<TrainedWindow<F>, NeuralError> {
     let Some(range) = plan.get(k) else {
@@ -566,11 +590,38 @@ pub fn train_window<F: TrainableField + Clone>(
             cfg.max_iterations = m;
         }
     }
+    // A window that does not continue the previous one starts from the instants' own
+    // reconstructions, and trains (or resumes) at the reduced rates.
+    let frame_start = frame_start.filter(|_| !warm);
+    if let Some(fs) = frame_start {
+        cfg.schedule.initial *= fs.learning_rate_scale;
+        cfg.schedule.at_decay_iters *= fs.learning_rate_scale;
+    }
     let mut learner = match start {
         WindowStart::Finished(learner, report) => return Ok(trained(learner, report)),
         WindowStart::Resume(saved) => saved,
         WindowStart::Warm(previous) => Learner::new(previous),
-        WindowStart::Fresh(init) => Learner::fresh(init, &prep, &cfg),
+        WindowStart::Fresh(init) => {
+            let mut learner = Learner::fresh(init, &prep, &cfg);
+            if let Some(fs) = frame_start {
+                let t0 = std::time::Instant::now();
+                let first = range.start as f64;
+                let at = |t: f64| match time_axis {
+                    TimeAxis::Time => t - origin,
+                    TimeAxis::Frames => frame_position(times, t) - first,
+                };
+                let frames: Vec<(f32, f64)> = times[range.clone()].iter().map(|&t| (at(t) as f32, t)).collect();
+                fit_to_frames(&mut learner.field, &prep, &frames, fs, seed.wrapping_add(k as u64))?;
+                let inside = time_in_window(times, range.clone());
+                let voxel: f64 = fs.seconds.iter().filter(|(t, _)| inside(*t)).map(|(_, s)| s).sum();
+                let spent = voxel + t0.elapsed().as_secs_f64();
+                learner.train_time_s += spent;
+                if let Some(b) = cfg.time_budget_s {
+                    cfg.time_budget_s = Some((b - spent).max(1e-3));
+                }
+            }
+            learner
+        }
     };
     // A window saved at the iteration at which it converged stops there, as it did then.
     let report = if learner.iteration > 0 && converged(&learner.losses, &cfg.stop) {
@@ -579,6 +630,55 @@ pub fn train_window<F: TrainableField + Clone>(
         train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iteration(&info, s))?
     };
     Ok(trained(learner, report))
+}
+
+/// Fits a 4D field to [`FrameStart::target`] at the window's frames: `frames` pairs each
+/// frame's `t'` with its time in the recording.
+fn fit_to_frames<F: TrainableField>(
+    field: &mut F,
+    prep: &Prepared,
+    frames: &[(f32, f64)],
+    fs: &FrameStart,
+    seed: u64,
+) -> Result<(), NeuralError> {
+    let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
+    let inv_scale = (1.0 / prep.meta.value_scale) as f32;
+    let dim = field.input_dim();
+    // A field of space alone (per-frame windows) holds one frame.
+    if dim == 3 && frames.len() != 1 {
+        return Err(NeuralError::invalid(
+            "start",
+            format!(
+                "a field of space alone cannot start from {} instants; it needs a field of space and time",
+                frames.len()
+            ),
+        ));
+    }
+    let target = |inputs: &[f32], out: &mut [f32]| {
+        out.fill(0.0);
+        let rows: Vec<&[f32]> = inputs.chunks_exact(dim).collect();
+        for &(tp, t) in frames {
+            let tol = 1e-4 * (1.0 + tp.abs());
+            let at: Vec<usize> = (0..rows.len()).filter(|&i| dim == 3 || (rows[i][3] - tp).abs() <= tol).collect();
+            if at.is_empty() {
+                continue;
+            }
+            let points: Vec<Vec3> =
+                at.iter().map(|&i| min + Vec3::new(rows[i][0], rows[i][1], rows[i][2]) * size).collect();
+            let mut values = vec![0f32; at.len()];
+            (fs.target)(t, &points, &mut values);
+            for (&i, v) in at.iter().zip(values) {
+                out[i] = v * inv_scale;
+            }
+        }
+    };
+    let report = crate::start::fit_to_target(field, prep, &target, &fs.fit, seed)?;
+    log::info!(
+        "window started from its instants' reconstructions: relative RMS difference {:.4} ({:.1} s)",
+        (report.mse / report.mean_square.max(f64::MIN_POSITIVE)).sqrt(),
+        report.seconds
+    );
+    Ok(())
 }
 
 /// The report of a window that had already converged when it was saved.
