@@ -286,6 +286,26 @@ impl Default for StartSpec {
     }
 }
 
+impl StartSpec {
+    /// Rejects settings no start can use.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        self.fit.validate().map_err(|e| PipelineError::invalid("method", e.to_string()))?;
+        if self.method.family() != Family::Classical {
+            return Err(PipelineError::invalid(
+                "method.start.method",
+                format!("{} is not a voxel method; a start runs one of those", self.method),
+            ));
+        }
+        if !(self.learning_rate_scale > 0.0 && self.learning_rate_scale <= 1.0) {
+            return Err(PipelineError::invalid(
+                "method.start.learning_rate_scale",
+                format!("must be in (0, 1], got {}", self.learning_rate_scale),
+            ));
+        }
+        Ok(())
+    }
+}
+
 fn default_start_method() -> Method {
     Method::Tv
 }
@@ -310,6 +330,13 @@ pub struct TemporalSpec {
     /// Frame spacing Δt of `t' = (t − t₀)/Δt`; None: the smallest gap between training times.
     #[serde(default)]
     pub time_step: Option<f64>,
+    /// Start every window that does not continue the previous one from reconstructions of its
+    /// instants: [`StartSpec::method`] runs on each training instant alone into
+    /// `start/tNN/`, and the window's field is fitted to those volumes at its frames. Its
+    /// time counts against the time budget of every window. A start names no run here.
+    /// Default none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start: Option<StartSpec>,
 }
 
 impl TemporalSpec {
@@ -384,6 +411,7 @@ impl MethodConfig {
                     windows: c.windows,
                     holdout_times: Vec::new(),
                     time_step: None,
+                    start: None,
                 };
                 if method == Method::StaticPerFrame {
                     spec.windows = WindowConfig::per_frame();
@@ -423,19 +451,7 @@ impl MethodConfig {
             }
             MethodConfig::Neural(m, n) => {
                 if let Some(start) = &n.start {
-                    start.fit.validate().map_err(|e| key(&e))?;
-                    if start.method.family() != Family::Classical {
-                        return Err(PipelineError::invalid(
-                            "method.start.method",
-                            format!("{} is not a voxel method; a start runs one of those", start.method),
-                        ));
-                    }
-                    if !(start.learning_rate_scale > 0.0 && start.learning_rate_scale <= 1.0) {
-                        return Err(PipelineError::invalid(
-                            "method.start.learning_rate_scale",
-                            format!("must be in (0, 1], got {}", start.learning_rate_scale),
-                        ));
-                    }
+                    start.validate().map_err(|e| key(&e))?;
                 } else if *m == Method::Hybrid {
                     return Err(PipelineError::invalid(
                         "method.start",
@@ -446,6 +462,15 @@ impl MethodConfig {
             }
             MethodConfig::Temporal(m, t) => {
                 t.temporal_config().validate().map_err(|e| key(&e))?;
+                if let Some(start) = &t.start {
+                    start.validate().map_err(|e| key(&e))?;
+                    if start.run.is_some() {
+                        return Err(PipelineError::invalid(
+                            "method.start.run",
+                            "a time-resolved run starts from voxel runs of its own instants; it names no run",
+                        ));
+                    }
+                }
                 if let Some(dt) = t.time_step {
                     if !(dt > 0.0 && dt.is_finite()) {
                         return Err(PipelineError::invalid("method.time_step", format!("must be positive, got {dt}")));

@@ -16,8 +16,8 @@ use std::time::Instant;
 use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_metrics::VolumeMetricOptions;
 use fluidnerf_neural::temporal::{
-    field_for_window, frame_times, infer_time_step, train_windows, ResumeState, StitchedField, TemporalRecord,
-    TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
+    field_for_window, frame_times, infer_time_step, train_windows, FrameStart, ResumeState, StitchedField,
+    TemporalRecord, TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
 };
 use fluidnerf_neural::train::ViewMasks;
 use fluidnerf_neural::train::{Learner, TrainConfig, TrainReport};
@@ -317,7 +317,67 @@ struct Ctx<'a> {
     masks: &'a ViewMasks,
 }
 
+/// The voxel reconstructions of the instants that start a window: time, field, seconds.
+type InstantStarts = Vec<(f64, Box<dyn ScalarField + Send + Sync>, f64)>;
+
 impl Ctx<'_> {
+    /// Runs `start.method` on every training instant of a window that starts afresh (the
+    /// first, or every one without warm starts) alone, into `start/tNN/` of the run folder
+    /// ([`TemporalSpec::start`]), with at most half the window's time budget over its instants.
+    fn instant_starts(&self, start: &crate::StartSpec) -> Result<InstantStarts, PipelineError> {
+        let (scene, config, spec) = (self.scene, self.config, self.spec);
+        let times = frame_times(self.problem);
+        let plan = plan_windows(times.len(), spec.windows.frames, spec.windows.overlap);
+        let fresh = plan.iter().enumerate().filter(|(k, _)| *k == 0 || !spec.windows.warm_start);
+        let mut wanted: Vec<(usize, usize)> = fresh.flat_map(|(_, r)| r.clone().map(move |i| (i, r.len()))).collect();
+        wanted.sort_unstable();
+        wanted.dedup_by_key(|w| w.0);
+        let mut fields = Vec::with_capacity(wanted.len());
+        for (i, frames) in wanted {
+            let t = times[i];
+            let mut sub = scene.clone();
+            sub.frames.retain(|f| same_time(f.time.unwrap_or(0.0), t));
+            sub.truth.retain(|r| r.time.is_none_or(|rt| same_time(rt, t)));
+            let truth: Vec<(Option<f64>, Volume)> =
+                self.truth.iter().filter(|(rt, _)| rt.is_none_or(|rt| same_time(rt, t))).cloned().collect();
+            let mut voxel = RunConfig::new(config.scene.clone(), start.method);
+            voxel.seed = config.seed;
+            voxel.resolution = config.resolution;
+            voxel.gains = config.gains;
+            voxel.memory_limit_gib = config.memory_limit_gib;
+            voxel.eval_every = Some(0);
+            let held_out = sub.holdout_frames().next().is_some();
+            voxel.stopping = crate::StoppingPolicy {
+                rule: if held_out { crate::StopRule::HeldOut } else { crate::StopRule::Own },
+                max_iterations: None,
+                time_budget_s: config.stopping.time_budget_s.map(|b| b / (2.0 * frames as f64)),
+                holdout_every: None,
+                patience: config.stopping.patience,
+            };
+            let path = self.dir.path(&format!("start/t{i:02}"));
+            let dir = RunDir::create(&path, crate::Overwrite::Force, Some(&scene.root))?;
+            let mut quiet = |_: &RunEvent| ControlFlow::Continue(());
+            let mut inner = Session {
+                on_event: &mut quiet,
+                stopped: false,
+                started: Instant::now(),
+                cpu0: None,
+                budget_s: voxel.stopping.time_budget_s,
+                estimate: Default::default(),
+            };
+            let report = crate::classical::run(&sub, &voxel, &dir, &truth, &mut inner)?;
+            log::info!(
+                "{} at t = {t}: {} iterations in {:.1} s, kept {}",
+                start.method,
+                report.iterations,
+                report.train_time_s,
+                report.kept_iteration
+            );
+            fields.push((t, crate::load::LoadedRun::open(&path, Some(scene.aabb))?.field()?, report.train_time_s));
+        }
+        Ok(fields)
+    }
+
     /// The saved state of an interrupted run, as learners of the field `init`.
     fn resume_state<F: TrainableField + Clone>(
         &self,
@@ -364,8 +424,34 @@ impl Ctx<'_> {
         let mut io_error = None;
         let mut interrupted = false;
         let t_start = Instant::now();
-        let run: TemporalRun<F> =
-            train_windows(self.problem, self.masks, &spec.train, &spec.windows, init, config.seed, resume, |e| {
+        // The instants' own reconstructions, when the windows start from them.
+        let starts = match &spec.start {
+            Some(start) => Some(self.instant_starts(start)?),
+            None => None,
+        };
+        let target = |t: f64, points: &[fluidnerf_core::glam::Vec3], out: &mut [f32]| {
+            let nearest = starts.iter().flatten().min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
+            match nearest {
+                Some((_, field, _)) => field.eval(points, 0.0, out),
+                None => out.fill(0.0),
+            }
+        };
+        let frame_start = spec.start.as_ref().map(|s| FrameStart {
+            target: &target,
+            fit: s.fit,
+            learning_rate_scale: s.learning_rate_scale,
+            seconds: starts.iter().flatten().map(|(t, _, s)| (*t, *s)).collect(),
+        });
+        let run: TemporalRun<F> = train_windows(
+            self.problem,
+            self.masks,
+            &spec.train,
+            &spec.windows,
+            init,
+            config.seed,
+            resume,
+            frame_start.as_ref(),
+            |e| {
                 let (w, s) = match e {
                     WindowEvent::Iteration(w, s) => (w, s),
                     WindowEvent::Finished(w, done) => {
@@ -414,7 +500,8 @@ impl Ctx<'_> {
                 } else {
                     ControlFlow::Continue(())
                 }
-            })?;
+            },
+        )?;
         if let Some(e) = io_error {
             return Err(e);
         }
@@ -657,6 +744,12 @@ pub fn reconstruct_windows(
         estimate: crate::Estimator::default(),
     };
     let Setup { spec, method, problem, masks, field, progress, .. } = setup(scene, config, &[], &mut session)?;
+    if spec.start.is_some() {
+        return Err(PipelineError::invalid(
+            "method.start",
+            "a run trained window by window does not start from its instants' reconstructions yet; run it whole",
+        ));
+    }
     let count = progress.plan.len();
     if windows.start >= windows.end || windows.end > count {
         return Err(PipelineError::invalid(
@@ -772,8 +865,18 @@ fn train_some<F: TrainableField + Clone>(
         };
         let pos = WindowPos { index: k, count: plan.len(), frames };
         let mut io_error = None;
-        let trained =
-            train_window(problem, masks, times, &plan, k, &spec.train, &spec.windows, config.seed, start, |_, s| {
+        let trained = train_window(
+            problem,
+            masks,
+            times,
+            &plan,
+            k,
+            &spec.train,
+            &spec.windows,
+            config.seed,
+            start,
+            None,
+            |_, s| {
                 let event = RunEvent::Iteration {
                     window: Some(pos),
                     iteration: s.iteration,
@@ -789,7 +892,8 @@ fn train_some<F: TrainableField + Clone>(
                     }
                 }
                 flow
-            })?;
+            },
+        )?;
         if let Some(e) = io_error {
             return Err(e);
         }

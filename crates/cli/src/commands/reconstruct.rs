@@ -336,6 +336,12 @@ pub struct NeuralArgs {
     /// with a SART-TV run of its own. Static neural methods only.
     #[arg(long, value_name = "RUN")]
     pub start_from: Option<PathBuf>,
+    /// Start from a voxel method run first on the same images (e.g. tv, asart): for a
+    /// static field one run into OUT/start/ (what --method hybrid does with tv), for a
+    /// time-resolved one a run per instant into OUT/start/tNN/ for every window that does not
+    /// continue the previous one. Its time counts against the time budget.
+    #[arg(long, value_name = "METHOD")]
+    pub start_method: Option<MethodArg>,
 }
 
 /// Options of the time-resolved methods.
@@ -416,6 +422,9 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
     }
     if family != Family::Neural {
         wrong.extend(given(&[("--start-from", n.start_from.is_some())]));
+    }
+    if family == Family::Classical {
+        wrong.extend(given(&[("--start-method", n.start_method.is_some())]));
     }
     if family != Family::Temporal {
         wrong.extend(given(&[
@@ -630,6 +639,20 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     if let (MethodConfig::Neural(_, spec), Some(run)) = (&mut *method, &n.start_from) {
         let start = spec.start.get_or_insert_with(StartSpec::default);
         start.run = Some(run.clone());
+    }
+    if n.start_from.is_some() && n.start_method.is_some() {
+        bail!("--start-from and --start-method: give one (a run to start from, or a voxel method to run first)");
+    }
+    if let Some(MethodArg(m)) = n.start_method {
+        if m.family() != Family::Classical {
+            bail!("--start-method: {m} is not a voxel method (asart, art, sart, mart, smart, mlem, tv, tikhonov)");
+        }
+        let start = match method {
+            MethodConfig::Neural(_, spec) => spec.start.get_or_insert_with(StartSpec::default),
+            MethodConfig::Temporal(_, spec) => spec.start.get_or_insert_with(StartSpec::default),
+            MethodConfig::Classical(_) => unreachable!("refused above"),
+        };
+        start.method = m;
     }
     let t = &args.temporal;
     if let MethodConfig::Temporal(_, spec) = method {
