@@ -336,11 +336,12 @@ pub struct NeuralArgs {
     /// with a SART-TV run of its own. Static neural methods only.
     #[arg(long, value_name = "RUN")]
     pub start_from: Option<PathBuf>,
-    /// Start from a voxel method run first on the same images (e.g. tv, asart): for a
-    /// static field one run into OUT/start/ (what --method hybrid does with tv), for a
-    /// time-resolved one a run per instant into OUT/start/tNN/ for every window that does not
-    /// continue the previous one. Its time counts against the time budget.
-    #[arg(long, value_name = "METHOD")]
+    /// Start from a voxel method (asart, art, sart, mart, smart, mlem, tv, tikhonov) run first
+    /// on the same images: for a static field one run into OUT/start/ (what --method hybrid
+    /// does with tv), for a time-resolved one a run per instant into OUT/start/tNN/ for every
+    /// window that does not continue the previous one. Its time counts against the time
+    /// budget.
+    #[arg(long, value_name = "METHOD", hide_possible_values = true)]
     pub start_method: Option<MethodArg>,
 }
 
