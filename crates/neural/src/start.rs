@@ -16,6 +16,8 @@ use serde::{Deserialize, Serialize};
 use crate::batch::stream_seed;
 use crate::optim::{Adam, AdamConfig};
 use crate::train::Prepared;
+use glam::Vec3;
+
 use crate::{NeuralError, TrainableField};
 
 /// Key that separates the start's random stream from the samplers' and the prior's.
@@ -65,6 +67,61 @@ pub struct StartReport {
     pub mse: f64,
     pub mean_square: f64,
     pub seconds: f64,
+}
+
+impl StartReport {
+    /// The last step's RMS difference relative to the target's RMS.
+    pub fn relative_difference(&self) -> f64 {
+        (self.mse / self.mean_square.max(f64::MIN_POSITIVE)).sqrt()
+    }
+}
+
+/// `target(frame_time, points, out)`: a reconstruction's values (world units) at world points
+/// at one frame time.
+pub type FrameTarget<'a> = dyn Fn(f64, &[Vec3], &mut [f32]) + Sync + 'a;
+
+/// [`fit_to_target`] for a target in world coordinates and units, given per frame: `frames`
+/// pairs each training frame's `t'` with its time in the recording. A field of space alone
+/// takes exactly one frame (a static field: `[(0.0, 0.0)]`).
+pub fn fit_to_frames<F: TrainableField>(
+    field: &mut F,
+    prep: &Prepared,
+    frames: &[(f32, f64)],
+    target: &FrameTarget,
+    fit: &StartFit,
+    seed: u64,
+) -> Result<StartReport, NeuralError> {
+    let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
+    let inv_scale = (1.0 / prep.meta.value_scale) as f32;
+    let dim = field.input_dim();
+    if dim == 3 && frames.len() != 1 {
+        return Err(NeuralError::invalid(
+            "start",
+            format!(
+                "a field of space alone cannot start from {} instants; it needs a field of space and time",
+                frames.len()
+            ),
+        ));
+    }
+    let in_units = |inputs: &[f32], out: &mut [f32]| {
+        out.fill(0.0);
+        let rows: Vec<&[f32]> = inputs.chunks_exact(dim).collect();
+        for &(tp, t) in frames {
+            let tol = 1e-4 * (1.0 + tp.abs());
+            let at: Vec<usize> = (0..rows.len()).filter(|&i| dim == 3 || (rows[i][3] - tp).abs() <= tol).collect();
+            if at.is_empty() {
+                continue;
+            }
+            let points: Vec<Vec3> =
+                at.iter().map(|&i| min + Vec3::new(rows[i][0], rows[i][1], rows[i][2]) * size).collect();
+            let mut values = vec![0f32; at.len()];
+            target(t, &points, &mut values);
+            for (&i, v) in at.iter().zip(values) {
+                out[i] = v * inv_scale;
+            }
+        }
+    };
+    fit_to_target(field, prep, &in_units, fit, seed)
 }
 
 /// Fits `field` to `target` (module doc). `target(points, out)` writes the target in field

@@ -511,9 +511,7 @@ pub fn train_windows<F: TrainableField + Clone>(
     Ok(TemporalRun { frame_times: times, plan, windows: out, interrupted })
 }
 
-/// `target(frame_time, points, out)`: a reconstruction's values at world points at one
-/// frame time ([`FrameStart`]).
-pub type FrameTarget<'a> = dyn Fn(f64, &[Vec3], &mut [f32]) + Sync + 'a;
+pub use crate::start::FrameTarget;
 
 /// Reconstructions of single instants that a window's fresh field is fitted to before it
 /// trains ([`crate::start`]), one instant at a time: `target(frame_time, points, out)` writes
@@ -611,7 +609,19 @@ pub fn train_window<F: TrainableField + Clone>(
                     TimeAxis::Frames => frame_position(times, t) - first,
                 };
                 let frames: Vec<(f32, f64)> = times[range.clone()].iter().map(|&t| (at(t) as f32, t)).collect();
-                fit_to_frames(&mut learner.field, &prep, &frames, fs, seed.wrapping_add(k as u64))?;
+                let report = crate::start::fit_to_frames(
+                    &mut learner.field,
+                    &prep,
+                    &frames,
+                    fs.target,
+                    &fs.fit,
+                    seed.wrapping_add(k as u64),
+                )?;
+                log::info!(
+                    "window {k} started from its instants' reconstructions: relative RMS difference {:.4} ({:.1} s)",
+                    report.relative_difference(),
+                    report.seconds
+                );
                 let inside = time_in_window(times, range.clone());
                 let voxel: f64 = fs.seconds.iter().filter(|(t, _)| inside(*t)).map(|(_, s)| s).sum();
                 let spent = voxel + t0.elapsed().as_secs_f64();
@@ -630,55 +640,6 @@ pub fn train_window<F: TrainableField + Clone>(
         train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iteration(&info, s))?
     };
     Ok(trained(learner, report))
-}
-
-/// Fits a 4D field to [`FrameStart::target`] at the window's frames: `frames` pairs each
-/// frame's `t'` with its time in the recording.
-fn fit_to_frames<F: TrainableField>(
-    field: &mut F,
-    prep: &Prepared,
-    frames: &[(f32, f64)],
-    fs: &FrameStart,
-    seed: u64,
-) -> Result<(), NeuralError> {
-    let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
-    let inv_scale = (1.0 / prep.meta.value_scale) as f32;
-    let dim = field.input_dim();
-    // A field of space alone (per-frame windows) holds one frame.
-    if dim == 3 && frames.len() != 1 {
-        return Err(NeuralError::invalid(
-            "start",
-            format!(
-                "a field of space alone cannot start from {} instants; it needs a field of space and time",
-                frames.len()
-            ),
-        ));
-    }
-    let target = |inputs: &[f32], out: &mut [f32]| {
-        out.fill(0.0);
-        let rows: Vec<&[f32]> = inputs.chunks_exact(dim).collect();
-        for &(tp, t) in frames {
-            let tol = 1e-4 * (1.0 + tp.abs());
-            let at: Vec<usize> = (0..rows.len()).filter(|&i| dim == 3 || (rows[i][3] - tp).abs() <= tol).collect();
-            if at.is_empty() {
-                continue;
-            }
-            let points: Vec<Vec3> =
-                at.iter().map(|&i| min + Vec3::new(rows[i][0], rows[i][1], rows[i][2]) * size).collect();
-            let mut values = vec![0f32; at.len()];
-            (fs.target)(t, &points, &mut values);
-            for (&i, v) in at.iter().zip(values) {
-                out[i] = v * inv_scale;
-            }
-        }
-    };
-    let report = crate::start::fit_to_target(field, prep, &target, &fs.fit, seed)?;
-    log::info!(
-        "window started from its instants' reconstructions: relative RMS difference {:.4} ({:.1} s)",
-        (report.mse / report.mean_square.max(f64::MIN_POSITIVE)).sqrt(),
-        report.seconds
-    );
-    Ok(())
 }
 
 /// The report of a window that had already converged when it was saved.

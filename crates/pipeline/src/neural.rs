@@ -151,6 +151,46 @@ pub(crate) fn run(
     fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, session))
 }
 
+/// Runs the voxel `method` of a start on `scene` into `path` with `config`'s seed, output grid
+/// and gains: its own iteration cap, the held-out rule when `held_out` (otherwise its own
+/// rule) and at most `budget_s` seconds, so that a budget rule or a large cap set for the field
+/// cannot let it take the whole budget. It reports to a session of its own: the caller's
+/// progress and time estimate follow the field.
+pub(crate) fn run_voxel_start(
+    method: crate::Method,
+    scene: &Scene,
+    truth: &[(Option<f64>, Volume)],
+    config: &RunConfig,
+    held_out: bool,
+    budget_s: Option<f64>,
+    path: &std::path::Path,
+) -> Result<RunReport, PipelineError> {
+    let mut voxel = RunConfig::new(config.scene.clone(), method);
+    voxel.seed = config.seed;
+    voxel.resolution = config.resolution;
+    voxel.stopping = StoppingPolicy {
+        rule: if held_out { StopRule::HeldOut } else { StopRule::Own },
+        max_iterations: None,
+        time_budget_s: budget_s,
+        holdout_every: None,
+        patience: config.stopping.patience,
+    };
+    voxel.gains = config.gains;
+    voxel.memory_limit_gib = config.memory_limit_gib;
+    voxel.eval_every = Some(0);
+    let dir = RunDir::create(path, crate::Overwrite::Force, Some(&scene.root))?;
+    let mut quiet = |_: &RunEvent| ControlFlow::Continue(());
+    let mut inner = Session {
+        on_event: &mut quiet,
+        stopped: false,
+        started: Instant::now(),
+        cpu0: None,
+        budget_s,
+        estimate: Default::default(),
+    };
+    crate::classical::run(scene, &voxel, &dir, truth, &mut inner)
+}
+
 /// Fits `field` to the reconstruction [`StartSpec`] names (running its voxel method first into
 /// `start/` when it names no run) and returns the seconds of this run's that took.
 fn start_from<F: TrainableField>(
@@ -167,34 +207,9 @@ fn start_from<F: TrainableField>(
         Some(p) => p.clone(),
         None => {
             let path = run_dir.path("start");
-            let mut voxel = RunConfig::new(config.scene.clone(), start.method);
-            voxel.seed = config.seed;
-            voxel.resolution = config.resolution;
-            // Its own iteration cap and rule (the run's held-out rule if it has one), and at
-            // most half the run's time: a budget rule or a large cap set for the field would
-            // otherwise let it take the whole budget.
-            voxel.stopping = StoppingPolicy {
-                rule: if config.stopping.rule == StopRule::HeldOut { StopRule::HeldOut } else { StopRule::Own },
-                max_iterations: None,
-                time_budget_s: config.stopping.time_budget_s.map(|b| b / 2.0),
-                holdout_every: None,
-                patience: config.stopping.patience,
-            };
-            voxel.gains = config.gains;
-            voxel.memory_limit_gib = config.memory_limit_gib;
-            voxel.eval_every = Some(0);
-            let dir = RunDir::create(&path, crate::Overwrite::Force, Some(&scene.root))?;
-            // Its own session: the caller's progress and time estimate follow the field.
-            let mut quiet = |_: &RunEvent| ControlFlow::Continue(());
-            let mut inner = Session {
-                on_event: &mut quiet,
-                stopped: false,
-                started: Instant::now(),
-                cpu0: None,
-                budget_s: voxel.stopping.time_budget_s,
-                estimate: Default::default(),
-            };
-            let report = crate::classical::run(scene, &voxel, &dir, truth, &mut inner)?;
+            let held_out = config.stopping.rule == StopRule::HeldOut;
+            let budget = config.stopping.time_budget_s.map(|b| b / 2.0);
+            let report = run_voxel_start(start.method, scene, truth, config, held_out, budget, &path)?;
             log::info!(
                 "{} for the start: {} iterations in {:.1} s, kept {}",
                 start.method,
@@ -227,19 +242,12 @@ fn start_from<F: TrainableField>(
         ));
     }
     let source = run.field()?;
-    let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
-    let inv_scale = (1.0 / prep.meta.value_scale) as f32;
-    let dim = field.input_dim();
-    let target = |inputs: &[f32], out: &mut [f32]| {
-        let points: Vec<Vec3> = inputs.chunks_exact(dim).map(|u| min + Vec3::new(u[0], u[1], u[2]) * size).collect();
-        source.eval(&points, 0.0, out);
-        out.iter_mut().for_each(|v| *v *= inv_scale);
-    };
-    let report = fluidnerf_neural::start::fit_to_target(field, prep, &target, &start.fit, config.seed)?;
+    let target = |_: f64, points: &[Vec3], out: &mut [f32]| source.eval(points, 0.0, out);
+    let report = fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed)?;
     log::info!(
         "started from {}: relative RMS difference {:.4} after {} steps ({:.1} s)",
         path.display(),
-        (report.mse / report.mean_square.max(f64::MIN_POSITIVE)).sqrt(),
+        report.relative_difference(),
         start.fit.iterations,
         report.seconds
     );

@@ -26,7 +26,7 @@ use fluidnerf_neural::window::plan_windows;
 use fluidnerf_neural::TrainableField;
 use serde::{Deserialize, Serialize};
 
-use crate::neural::{estimate_memory, write_checkpoint_to};
+use crate::neural::{estimate_memory, run_voxel_start, write_checkpoint_to};
 use crate::{
     check_memory, finish, mean, peak_rss, write_volume, Family, History, LossKind, Method, MethodConfig, PipelineError,
     RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails,
@@ -340,32 +340,10 @@ impl Ctx<'_> {
             sub.truth.retain(|r| r.time.is_none_or(|rt| same_time(rt, t)));
             let truth: Vec<(Option<f64>, Volume)> =
                 self.truth.iter().filter(|(rt, _)| rt.is_none_or(|rt| same_time(rt, t))).cloned().collect();
-            let mut voxel = RunConfig::new(config.scene.clone(), start.method);
-            voxel.seed = config.seed;
-            voxel.resolution = config.resolution;
-            voxel.gains = config.gains;
-            voxel.memory_limit_gib = config.memory_limit_gib;
-            voxel.eval_every = Some(0);
             let held_out = sub.holdout_frames().next().is_some();
-            voxel.stopping = crate::StoppingPolicy {
-                rule: if held_out { crate::StopRule::HeldOut } else { crate::StopRule::Own },
-                max_iterations: None,
-                time_budget_s: config.stopping.time_budget_s.map(|b| b / (2.0 * frames as f64)),
-                holdout_every: None,
-                patience: config.stopping.patience,
-            };
+            let budget = config.stopping.time_budget_s.map(|b| b / (2.0 * frames as f64));
             let path = self.dir.path(&format!("start/t{i:02}"));
-            let dir = RunDir::create(&path, crate::Overwrite::Force, Some(&scene.root))?;
-            let mut quiet = |_: &RunEvent| ControlFlow::Continue(());
-            let mut inner = Session {
-                on_event: &mut quiet,
-                stopped: false,
-                started: Instant::now(),
-                cpu0: None,
-                budget_s: voxel.stopping.time_budget_s,
-                estimate: Default::default(),
-            };
-            let report = crate::classical::run(&sub, &voxel, &dir, &truth, &mut inner)?;
+            let report = run_voxel_start(start.method, &sub, &truth, config, held_out, budget, &path)?;
             log::info!(
                 "{} at t = {t}: {} iterations in {:.1} s, kept {}",
                 start.method,
