@@ -174,10 +174,11 @@ fn voxel_baseline_recovers_blobs() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("prior.tv"), "{}", String::from_utf8_lossy(&bad.stderr));
 }
 
-/// `--method hybrid` runs SART-TV into `start/` of its folder, fits the field to that volume
-/// and trains on from there: after a few iterations the field is about as accurate as that
-/// volume, where the field started from a uniform value is not. `--start-from` does the same
-/// from a run given by the user, and only static neural methods take it.
+/// `--method hybrid` runs a voxel method into `start/` of its folder (ASART on these clean
+/// images, SART-TV on noisy ones), fits the field to that volume and trains on from there:
+/// after a few iterations the field is about as accurate as that volume, where the field
+/// started from a uniform value is not. `--start-from` does the same from a run given by the
+/// user, and only static neural methods take it.
 #[test]
 fn hybrid_starts_the_field_from_its_own_voxel_run() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -186,7 +187,7 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     let run = |args: &str| ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
     run("reconstruct scene -o h --method hybrid --resolution 16 --max-iterations 30 -q");
     let start = report(&d.join("h/start"));
-    assert_eq!(start["method"], "tv");
+    assert_eq!(start["method"], "asart");
     // The voxel run keeps its own cap and rule: the field's cap is not its.
     let start_cfg = json(&d.join("h/start/config.json"));
     assert_eq!(start_cfg["stopping"]["max_iterations"], serde_json::Value::Null, "{start_cfg}");
@@ -194,11 +195,15 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     let cfg = json(&d.join("h/config.json"));
     assert_eq!(cfg["method"]["name"], "hybrid");
     assert_eq!(cfg["method"]["start"]["learning_rate_scale"], serde_json::json!(0.25));
+    assert_eq!(cfg["method"]["start"]["method"], "auto");
     let voxel = start["final_nrmse"].as_f64().expect("truth was used");
     let hybrid = report(&d.join("h"))["final_nrmse"].as_f64().expect("truth was used");
     run("reconstruct scene -o f --method fast --resolution 16 --max-iterations 30 -q");
     let fresh = report(&d.join("f"))["final_nrmse"].as_f64().expect("truth was used");
-    assert!(hybrid < 1.15 * voxel && hybrid < 0.7 * fresh, "hybrid {hybrid}, SART-TV {voxel}, fresh field {fresh}");
+    assert!(
+        hybrid < 1.15 * voxel && hybrid < 0.7 * fresh,
+        "hybrid {hybrid}, its ASART start {voxel}, fresh field {fresh}"
+    );
     // A rerun from the saved configuration repeats the voxel run, the fit and the training.
     run("reconstruct --config h/config.json -o h2 -q");
     assert_eq!(report(&d.join("h2"))["final_nrmse"].as_f64(), Some(hybrid), "the rerun differs");
@@ -208,7 +213,24 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     let recorded = cfg["method"]["start"]["run"].as_str().map(std::path::PathBuf::from);
     assert!(recorded.as_ref().is_some_and(|p| p.is_absolute() && p.ends_with("h/start")), "{cfg}");
     let from_run = report(&d.join("s"))["final_nrmse"].as_f64().expect("truth was used");
-    assert!(from_run < 1.15 * voxel, "started from h/start: {from_run}, SART-TV {voxel}");
+    assert!(from_run < 1.15 * voxel, "started from h/start: {from_run}, ASART {voxel}");
+    // With 5 % noise the same start is SART-TV, and a method named on the command line wins.
+    let noisy = d.join("noisy");
+    std::fs::create_dir(&noisy).expect("mkdir");
+    demo_scene(&noisy, "blobs", 8, 32, 16, &["--noise", "0.05"]);
+    let run_noisy = |args: &str| ok(&fluidnerf(&noisy, &args.split_whitespace().collect::<Vec<_>>()));
+    run_noisy("reconstruct scene -o h --method hybrid --resolution 16 --max-iterations 2 -q");
+    assert_eq!(report(&noisy.join("h/start"))["method"], "tv");
+    run_noisy("reconstruct scene -o m --method hybrid --start-method mlem --resolution 16 --max-iterations 2 -q");
+    assert_eq!(report(&noisy.join("m/start"))["method"], "mlem");
+    assert_eq!(json(&noisy.join("m/config.json"))["method"]["start"]["method"], "mlem");
+    let bad = fluidnerf(d, &["reconstruct", "scene", "-o", "x", "--method", "hybrid", "--start-method", "fast"]);
+    assert!(!bad.status.success());
+    assert!(
+        String::from_utf8_lossy(&bad.stderr).contains("not a voxel method"),
+        "{}",
+        String::from_utf8_lossy(&bad.stderr)
+    );
     let bad = fluidnerf(d, &["reconstruct", "scene", "-o", "x", "--method", "asart", "--start-from", "h/start"]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--start-from"), "{}", String::from_utf8_lossy(&bad.stderr));

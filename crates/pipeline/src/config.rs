@@ -131,7 +131,7 @@ impl Method {
             Method::Fluidnerf => "FluidNeRF",
             Method::Fast => "FluidNeRF (fast field)",
             Method::Voxel => "voxel grid + TV",
-            Method::Hybrid => "SART-TV → grid field",
+            Method::Hybrid => "voxel start → grid field",
             Method::TrFluidnerf => "TR-FluidNeRF",
             Method::TrFast => "TR-FluidNeRF (fast field)",
             Method::StaticPerFrame => "FluidNeRF per frame",
@@ -152,7 +152,10 @@ impl Method {
             Method::Fluidnerf => "FluidNeRF as published: positional encoding + MLP (chapter 5.1)",
             Method::Fast => "FluidNeRF with a multiresolution grid and a tiny MLP: much faster",
             Method::Voxel => "voxel baseline: a grid at the output resolution trained like the fields, with TV",
-            Method::Hybrid => "SART-TV first, then the fast field started from its volume, in one time budget",
+            Method::Hybrid => {
+                "ASART (clean images) or SART-TV (noisy ones) first, then the fast field started from its volume, \
+                 in one time budget"
+            }
             Method::TrFluidnerf => "time-resolved FluidNeRF (chapter 5.2): one MLP E(x, t) for all frames",
             Method::TrFast => "time-resolved, with a space–time hash grid, in sliding windows",
             Method::StaticPerFrame => "static FluidNeRF trained on each frame separately (TR baseline)",
@@ -262,10 +265,11 @@ pub struct StartSpec {
     pub run: Option<PathBuf>,
     /// The voxel method run first when no run is named: its defaults, this run's output grid,
     /// its own iteration cap, this run's held-out rule if it has one (otherwise its own rule)
-    /// and at most half this run's time budget. Default `tv` (SART with total variation),
-    /// chosen on the jet (docs/claims.md).
-    #[serde(default = "default_start_method")]
-    pub method: Method,
+    /// and at most half this run's time budget. Default `auto`: ASART when the training
+    /// images are clean, SART-TV when they are noisy ([`StartMethod::Auto`]), chosen on the
+    /// jet (docs/claims.md).
+    #[serde(default)]
+    pub method: StartMethod,
     #[serde(default)]
     pub fit: StartFit,
     /// Factor on the ray training's learning-rate schedule: a start is close to a solution,
@@ -279,7 +283,7 @@ impl Default for StartSpec {
     fn default() -> Self {
         StartSpec {
             run: None,
-            method: default_start_method(),
+            method: StartMethod::Auto,
             fit: StartFit::default(),
             learning_rate_scale: default_start_lr_scale(),
         }
@@ -290,11 +294,13 @@ impl StartSpec {
     /// Rejects settings no start can use.
     pub fn validate(&self) -> Result<(), PipelineError> {
         self.fit.validate().map_err(|e| PipelineError::invalid("method", e.to_string()))?;
-        if self.method.family() != Family::Classical {
-            return Err(PipelineError::invalid(
-                "method.start.method",
-                format!("{} is not a voxel method; a start runs one of those", self.method),
-            ));
+        if let StartMethod::Method(m) = self.method {
+            if m.family() != Family::Classical {
+                return Err(PipelineError::invalid(
+                    "method.start.method",
+                    format!("{m} is not a voxel method; a start runs one of those"),
+                ));
+            }
         }
         if !(self.learning_rate_scale > 0.0 && self.learning_rate_scale <= 1.0) {
             return Err(PipelineError::invalid(
@@ -306,8 +312,68 @@ impl StartSpec {
     }
 }
 
-fn default_start_method() -> Method {
-    Method::Tv
+/// The voxel method of a start ([`StartSpec::method`]): `"auto"` or a voxel method's name in
+/// the configuration.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StartMethod {
+    /// ASART when the training images are clean, SART-TV when they are noisy: the median over
+    /// the training images of their estimated noise ([`fluidnerf_core::Image::relative_noise`],
+    /// a fraction of each image's range) decides, against [`StartMethod::NOISY_ABOVE`]. An
+    /// unregularised start carries the images' noise into the field, which the field then
+    /// keeps; on clean images it is the more detailed start (docs/claims.md).
+    #[default]
+    Auto,
+    /// This voxel method, whatever the images.
+    Method(Method),
+}
+
+impl StartMethod {
+    /// Images whose estimated noise is above this fraction of their range count as noisy.
+    /// Chosen on the jet (docs/claims.md).
+    pub const NOISY_ABOVE: f64 = 0.03;
+
+    /// The voxel method for training images whose median estimated noise is `noise` (`None`:
+    /// no estimate, which counts as noisy), and why.
+    pub fn resolve(self, noise: Option<f64>) -> (Method, String) {
+        match (self, noise) {
+            (StartMethod::Method(m), _) => (m, format!("{m}, as configured")),
+            (StartMethod::Auto, Some(n)) if n <= Self::NOISY_ABOVE => (
+                Method::Asart,
+                format!("asart: the images' noise is estimated at {:.2} % of their range, clean", 100.0 * n),
+            ),
+            (StartMethod::Auto, Some(n)) => {
+                (Method::Tv, format!("tv: the images' noise is estimated at {:.2} % of their range, noisy", 100.0 * n))
+            }
+            (StartMethod::Auto, None) => (Method::Tv, "tv: the images' noise could not be estimated".into()),
+        }
+    }
+}
+
+impl std::fmt::Display for StartMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StartMethod::Auto => f.write_str("auto"),
+            StartMethod::Method(m) => f.write_str(m.name()),
+        }
+    }
+}
+
+impl Serialize for StartMethod {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.to_string())
+    }
+}
+
+impl<'de> Deserialize<'de> for StartMethod {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        if name == "auto" {
+            return Ok(StartMethod::Auto);
+        }
+        name.parse::<Method>()
+            .map(StartMethod::Method)
+            .map_err(|e| serde::de::Error::custom(format!("{e}; or \"auto\"")))
+    }
 }
 
 fn default_start_lr_scale() -> f32 {
@@ -1064,5 +1130,28 @@ mod tests {
         let h = RunConfig::new("scene", Method::Hybrid).resolved(&scene);
         let MethodConfig::Neural(_, spec) = &h.method else { unreachable!("hybrid is neural") };
         assert_eq!(spec.start, Some(StartSpec::default()));
+    }
+
+    /// `method.start.method` is `"auto"` or a voxel method's name, both ways; `auto` picks by
+    /// the images' noise, and a missing estimate counts as noisy.
+    #[test]
+    fn a_start_method_is_auto_or_a_voxel_method() {
+        let spec: StartSpec = serde_json::from_str("{}").expect("defaults");
+        assert_eq!(spec.method, StartMethod::Auto);
+        assert_eq!(serde_json::to_value(&spec).expect("json")["method"], "auto");
+        let spec: StartSpec = serde_json::from_str(r#"{"method": "mlem"}"#).expect("a voxel method");
+        assert_eq!(spec.method, StartMethod::Method(Method::Mlem));
+        assert_eq!(serde_json::to_value(&spec).expect("json")["method"], "mlem");
+        let e = serde_json::from_str::<StartSpec>(r#"{"method": "sirt"}"#).expect_err("unknown");
+        assert!(e.to_string().contains("sirt") && e.to_string().contains("auto"), "{e}");
+        let fast: StartSpec = serde_json::from_str(r#"{"method": "fast"}"#).expect("a method");
+        let e = fast.validate().expect_err("not a voxel method");
+        assert!(e.to_string().contains("method.start.method"), "{e}");
+        let edge = StartMethod::NOISY_ABOVE;
+        assert_eq!(StartMethod::Auto.resolve(Some(0.0)).0, Method::Asart);
+        assert_eq!(StartMethod::Auto.resolve(Some(edge)).0, Method::Asart);
+        assert_eq!(StartMethod::Auto.resolve(Some(1.5 * edge)).0, Method::Tv);
+        assert_eq!(StartMethod::Auto.resolve(None).0, Method::Tv);
+        assert_eq!(StartMethod::Method(Method::Sart).resolve(Some(0.5)).0, Method::Sart);
     }
 }

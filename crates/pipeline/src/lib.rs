@@ -52,8 +52,8 @@ use std::time::Instant;
 use fluidnerf_core::{Scene, Volume};
 
 pub use config::{
-    ClassicalSpec, Family, GainConfig, GainMode, Method, MethodConfig, NeuralSpec, RunConfig, StartSpec, StopRule,
-    StoppingPolicy, TemporalSpec, CONFIG_FORMAT,
+    ClassicalSpec, Family, GainConfig, GainMode, Method, MethodConfig, NeuralSpec, RunConfig, StartMethod, StartSpec,
+    StopRule, StoppingPolicy, TemporalSpec, CONFIG_FORMAT,
 };
 pub use error::PipelineError;
 pub use event::{duration, RunEvent, WindowPos};

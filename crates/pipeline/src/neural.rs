@@ -156,6 +156,18 @@ pub(crate) fn run(
 /// rule) and at most `budget_s` seconds, so that a budget rule or a large cap set for the field
 /// cannot let it take the whole budget. It reports to a session of its own: the caller's
 /// progress and time estimate follow the field.
+/// The median over `views` of their images' estimated noise, a fraction of each image's range
+/// ([`fluidnerf_core::Image::relative_noise`]); `None` when no image gives an estimate.
+pub(crate) fn median_noise<'a>(views: impl IntoIterator<Item = &'a fluidnerf_neural::train::View>) -> Option<f64> {
+    let mut levels: Vec<f64> = views.into_iter().filter_map(|v| v.image.relative_noise()).collect();
+    if levels.is_empty() {
+        return None;
+    }
+    levels.sort_by(f64::total_cmp);
+    let n = levels.len();
+    Some(if n % 2 == 1 { levels[n / 2] } else { 0.5 * (levels[n / 2 - 1] + levels[n / 2]) })
+}
+
 pub(crate) fn run_voxel_start(
     method: crate::Method,
     scene: &Scene,
@@ -193,8 +205,10 @@ pub(crate) fn run_voxel_start(
 
 /// Fits `field` to the reconstruction [`StartSpec`] names (running its voxel method first into
 /// `start/` when it names no run) and returns the seconds of this run's that took.
+#[allow(clippy::too_many_arguments)]
 fn start_from<F: TrainableField>(
     start: &StartSpec,
+    views: &[fluidnerf_neural::train::View],
     scene: &Scene,
     config: &RunConfig,
     run_dir: &RunDir,
@@ -209,10 +223,12 @@ fn start_from<F: TrainableField>(
             let path = run_dir.path("start");
             let held_out = config.stopping.rule == StopRule::HeldOut;
             let budget = config.stopping.time_budget_s.map(|b| b / 2.0);
-            let report = run_voxel_start(start.method, scene, truth, config, held_out, budget, &path)?;
+            let (method, why) = start.method.resolve(median_noise(views));
+            log::info!("start: {why}");
+            let report = run_voxel_start(method, scene, truth, config, held_out, budget, &path)?;
             log::info!(
                 "{} for the start: {} iterations in {:.1} s, kept {}",
-                start.method,
+                method,
                 report.iterations,
                 report.train_time_s,
                 report.kept_iteration
@@ -296,7 +312,8 @@ impl Ctx<'_> {
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
-            let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;
+            let seconds =
+                start_from(start, &self.problem.views, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;
             // Its time is the run's: the curves of NRMSE against time start after it.
             learner.train_time_s += seconds;
             budgeted = train_cfg.clone();

@@ -343,10 +343,13 @@ impl Ctx<'_> {
             let held_out = sub.holdout_frames().next().is_some();
             let budget = config.stopping.time_budget_s.map(|b| b / (2.0 * frames as f64));
             let path = self.dir.path(&format!("start/t{i:02}"));
-            let report = run_voxel_start(start.method, &sub, &truth, config, held_out, budget, &path)?;
+            let views = self.problem.views.iter().filter(|v| same_time(v.time, t));
+            let (method, why) = start.method.resolve(crate::neural::median_noise(views));
+            log::info!("start at t = {t}: {why}");
+            let report = run_voxel_start(method, &sub, &truth, config, held_out, budget, &path)?;
             log::info!(
                 "{} at t = {t}: {} iterations in {:.1} s, kept {}",
-                start.method,
+                method,
                 report.iterations,
                 report.train_time_s,
                 report.kept_iteration

@@ -15,11 +15,12 @@ use super::reconstruct::StopArg;
 /// Run the whole pipeline on a built-in example and compare FluidNeRF with ASART.
 ///
 /// Synthesises a small turbulent-jet scene, reconstructs it with FluidNeRF (the fast grid
-/// field), with the hybrid (the same field started from a SART-TV volume) and with ASART (the
-/// classical baseline) under the same stopping policy — held-out early stopping: each keeps
-/// the iterate whose loss on the held-out camera was lowest, and stops after 10 evaluations
-/// without improvement; no ground truth is used — scores them against the known truth, and
-/// writes pictures and a self-contained report.html.
+/// field), with the hybrid (the same field started from a voxel reconstruction, its method
+/// chosen by the images' noise) and with ASART (the classical baseline) under the same
+/// stopping policy — held-out early stopping: each keeps the iterate whose loss on the
+/// held-out camera was lowest, and stops after 10 evaluations without improvement; no ground
+/// truth is used — scores them against the known truth, and writes pictures and a
+/// self-contained report.html.
 ///
 /// Everything lands in OUT: `scene/` (the synthetic data set), `fluidnerf/`, `hybrid/` and
 /// `asart/` (one run folder each, with volumes, settings and reports), `slices.png`,

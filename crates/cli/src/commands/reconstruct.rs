@@ -14,7 +14,7 @@ use fluidnerf_classical::{Plateau, ProjectorKind};
 use fluidnerf_neural::occupancy::OccupancyConfig;
 use fluidnerf_neural::temporal::TimeOrigin;
 use fluidnerf_pipeline::{
-    Family, Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunStatus, StartSpec, StopRule,
+    Family, Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunStatus, StartMethod, StartSpec, StopRule,
 };
 
 /// `--method` values, with their help.
@@ -333,16 +333,18 @@ pub struct NeuralArgs {
     /// field: the field is first fitted to it on random points (300 Adam steps of 16384
     /// points; that time counts against --time-budget, the other run's does not), then
     /// trained on the images at a quarter of the learning rate. `--method hybrid` does this
-    /// with a SART-TV run of its own. Static neural methods only.
+    /// with a voxel run of its own (see --start-method). Static neural methods only.
     #[arg(long, value_name = "RUN")]
     pub start_from: Option<PathBuf>,
     /// Start from a voxel method (asart, art, sart, mart, smart, mlem, tv, tikhonov) run first
     /// on the same images: for a static field one run into OUT/start/ (what --method hybrid
-    /// does with tv), for a time-resolved one a run per instant into OUT/start/tNN/ for every
-    /// window that does not continue the previous one. Its time counts against the time
-    /// budget.
-    #[arg(long, value_name = "METHOD", hide_possible_values = true)]
-    pub start_method: Option<MethodArg>,
+    /// does), for a time-resolved one a run per instant into OUT/start/tNN/ for every window
+    /// that does not continue the previous one. Its time counts against the time budget.
+    /// `auto` (hybrid's default) runs asart when the training images are clean and tv when
+    /// their estimated noise exceeds 3 % of their range: an unregularised start passes the
+    /// noise on to the field.
+    #[arg(long, value_name = "METHOD", value_parser = parse_start_method)]
+    pub start_method: Option<StartMethod>,
 }
 
 /// Options of the time-resolved methods.
@@ -644,10 +646,7 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     if n.start_from.is_some() && n.start_method.is_some() {
         bail!("--start-from and --start-method: give one (a run to start from, or a voxel method to run first)");
     }
-    if let Some(MethodArg(m)) = n.start_method {
-        if m.family() != Family::Classical {
-            bail!("--start-method: {m} is not a voxel method (asart, art, sart, mart, smart, mlem, tv, tikhonov)");
-        }
+    if let Some(m) = n.start_method {
         let start = match method {
             MethodConfig::Neural(_, spec) => spec.start.get_or_insert_with(StartSpec::default),
             MethodConfig::Temporal(_, spec) => spec.start.get_or_insert_with(StartSpec::default),
@@ -864,4 +863,17 @@ fn run_split(args: &Args, config: &RunConfig) -> anyhow::Result<std::process::Ex
         );
     }
     Ok(if interrupted { std::process::ExitCode::from(130) } else { std::process::ExitCode::SUCCESS })
+}
+
+/// `--start-method`: `auto` or a voxel method.
+fn parse_start_method(s: &str) -> Result<StartMethod, String> {
+    const VOXEL: &str = "auto, asart, art, sart, mart, smart, mlem, tv, tikhonov";
+    if s == "auto" {
+        return Ok(StartMethod::Auto);
+    }
+    match s.parse::<Method>() {
+        Ok(m) if m.family() == Family::Classical => Ok(StartMethod::Method(m)),
+        Ok(m) => Err(format!("{m} is not a voxel method (one of {VOXEL})")),
+        Err(_) => Err(format!("unknown start method {s:?} (one of {VOXEL})")),
+    }
 }
