@@ -196,6 +196,7 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     assert_eq!(cfg["method"]["name"], "hybrid");
     assert_eq!(cfg["method"]["start"]["learning_rate_scale"], serde_json::json!(0.25));
     assert_eq!(cfg["method"]["start"]["method"], "auto");
+    assert_eq!(cfg["method"]["train"]["pixel_supersample"], "auto");
     let voxel = start["final_nrmse"].as_f64().expect("truth was used");
     let hybrid = report(&d.join("h"))["final_nrmse"].as_f64().expect("truth was used");
     run("reconstruct scene -o f --method fast --resolution 16 --max-iterations 30 -q");

@@ -146,6 +146,7 @@ pub fn training_batch(
     batch: &mut RayBatch,
 ) {
     let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed, iteration, usize::MAX));
+    let (n, pixels) = cfg.pixel_rays(prep.noise());
     let step = (cfg.batching == Batching::OneTimeStep && !time_steps.is_empty())
         .then(|| time_steps[iteration % time_steps.len()]);
     batch.split = Split::Train;
@@ -156,13 +157,12 @@ pub fn training_batch(
         if pv.rays().is_empty() || step.is_some_and(|t| pv.time() != t) {
             continue;
         }
-        for _ in 0..cfg.rays_per_image {
+        for _ in 0..pixels {
             batch.rays.push((v as u32, rng.random_range(0..pv.rays().len()) as u32));
         }
     }
     batch.jitter.clear();
     batch.group = 1;
-    let n = cfg.pixel_supersample;
     if n > 1 {
         let pixels = std::mem::take(&mut batch.rays);
         let at = |k: usize| (k as f32 + 0.5) / n as f32 - 0.5;

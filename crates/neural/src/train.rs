@@ -131,8 +131,9 @@ pub struct TrainConfig {
     /// scored, so that the field is fitted to the pixel's average over its area, which is what
     /// a camera pixel measures (and what the synthetic images' supersampled pixels hold).
     /// Costs `S²` rays per pixel. Held-out scoring and rendering keep one ray per pixel centre.
+    /// `"auto"` in a configuration chooses by the images' noise ([`Supersample::Auto`]).
     /// Default 1 (the dissertation's pixel-centre rays).
-    pub pixel_supersample: usize,
+    pub pixel_supersample: Supersample,
 }
 
 impl Default for TrainConfig {
@@ -156,17 +157,83 @@ impl Default for TrainConfig {
             schedule_per_frame: false,
             uniform_start: true,
             prior: Prior::default(),
-            pixel_supersample: 1,
+            pixel_supersample: Supersample::Fixed(1),
         }
     }
 }
 
+/// Rays per training pixel along each axis ([`TrainConfig::pixel_supersample`]): a number, or
+/// `"auto"` in a configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Supersample {
+    /// `S` rays per axis, 1 to 4.
+    Fixed(usize),
+    /// By the training images' noise ([`Prepared::noise`]): when they are clean (at most
+    /// [`fluidnerf_core::image::NOISY_ABOVE`]), 2 per axis over a quarter of `rays_per_image`
+    /// pixels, so the same rays per iteration; when they are noisy, or give no estimate, one
+    /// ray per pixel. Area rays make the fit to clean images sharper; on noisy ones, fewer
+    /// distinct pixels per iteration average less noise (docs/claims.md).
+    Auto,
+}
+
+impl Serialize for Supersample {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Supersample::Fixed(n) => s.serialize_u64(*n as u64),
+            Supersample::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Supersample {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl serde::de::Visitor<'_> for Visit {
+            type Value = Supersample;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("rays per pixel along each axis (1 to 4) or \"auto\"")
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Supersample, E> {
+                Ok(Supersample::Fixed(usize::try_from(v).map_err(E::custom)?))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Supersample, E> {
+                usize::try_from(v)
+                    .map(Supersample::Fixed)
+                    .map_err(|_| E::custom(format!("rays per pixel must be 1 to 4 or \"auto\", got {v}")))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Supersample, E> {
+                if v == "auto" {
+                    Ok(Supersample::Auto)
+                } else {
+                    Err(E::custom(format!("expected 1 to 4 or \"auto\", got {v:?}")))
+                }
+            }
+        }
+        d.deserialize_any(Visit)
+    }
+}
+
 impl TrainConfig {
+    /// Rays per pixel along each axis, and pixels drawn from each training image per
+    /// iteration, for training images whose median estimated noise is `noise`
+    /// ([`Supersample::Auto`]).
+    pub fn pixel_rays(&self, noise: Option<f64>) -> (usize, usize) {
+        match self.pixel_supersample {
+            Supersample::Fixed(s) => (s, self.rays_per_image),
+            Supersample::Auto if noise.is_some_and(|n| n <= fluidnerf_core::image::NOISY_ABOVE) => {
+                (2, self.rays_per_image.div_ceil(4))
+            }
+            Supersample::Auto => (1, self.rays_per_image),
+        }
+    }
+
     /// Rejects settings no run can use.
     pub fn validate(&self) -> Result<(), NeuralError> {
         let bad = |what: &str, why: String| Err(NeuralError::invalid(what, why));
-        if !(1..=4).contains(&self.pixel_supersample) {
-            return bad("pixel_supersample", format!("must be 1 to 4, got {}", self.pixel_supersample));
+        if let Supersample::Fixed(s) = self.pixel_supersample {
+            if !(1..=4).contains(&s) {
+                return bad("pixel_supersample", format!("must be 1 to 4 or \"auto\", got {s}"));
+            }
         }
         for (what, w) in
             [("prior.tv", self.prior.tv), ("prior.smooth", self.prior.smooth), ("prior.sparsity", self.prior.sparsity)]
@@ -257,6 +324,20 @@ pub struct Prepared {
     quad: Quadrature,
     /// `intensity_scale × L`.
     intensity_length: f64,
+    /// The training images' median estimated noise ([`median_noise`]).
+    noise: Option<f64>,
+}
+
+/// The median over `views` of their images' estimated noise, a fraction of each image's range
+/// ([`Image::relative_noise`]); `None` when no image gives an estimate.
+pub fn median_noise<'a>(views: impl IntoIterator<Item = &'a View>) -> Option<f64> {
+    let mut levels: Vec<f64> = views.into_iter().filter_map(|v| v.image.relative_noise()).collect();
+    if levels.is_empty() {
+        return None;
+    }
+    levels.sort_by(f64::total_cmp);
+    let n = levels.len();
+    Some(if n % 2 == 1 { levels[n / 2] } else { 0.5 * (levels[n / 2 - 1] + levels[n / 2]) })
 }
 
 /// One prepared view: its cached rays, their normalised target pixels and its frame time.
@@ -441,7 +522,14 @@ impl Prepared {
             length_scale: (1.0 / length) as f32,
             quad: Quadrature { close_ends: cfg.close_ends },
             intensity_length: problem.intensity_scale * length,
+            noise: median_noise(&problem.views),
         })
+    }
+
+    /// The training images' median estimated noise, a fraction of each image's range
+    /// ([`median_noise`]); `None` when no image gives an estimate.
+    pub fn noise(&self) -> Option<f64> {
+        self.noise
     }
 
     /// Sets the gain and offset of every training view: training then fits the field to

@@ -12,7 +12,7 @@ use fluidnerf_neural::optim::{Adam, AdamConfig};
 use fluidnerf_neural::render::{mse_term, quadrature_weights, render};
 use fluidnerf_neural::sampling::{feature_samples, merge_sorted, stratified};
 use fluidnerf_neural::train::{
-    train, train_with_engine, Batching, Learner, Prepared, Problem, Split, StopRule, TrainConfig, View,
+    train, train_with_engine, Batching, Learner, Prepared, Problem, Split, StopRule, Supersample, TrainConfig, View,
 };
 use fluidnerf_neural::{CpuEngine, Engine, NeuralError, TrainableField};
 use glam::{DVec3, Vec3};
@@ -316,6 +316,47 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
     assert!(learner.adam.m.iter().chain(&learner.adam.v).all(|&m| m == 0.0));
 }
 
+/// `pixel_supersample = "auto"` draws 2 × 2 rays over a quarter of the pixels from clean
+/// images, the same rays per iteration, and one ray per pixel from noisy ones (5 % of the peak
+/// added); the setting reads and writes as `"auto"` or a number.
+#[test]
+fn automatic_supersampling_follows_the_images_noise() {
+    let clean = problem();
+    let mut noisy = problem();
+    for (k, v) in noisy.views.iter_mut().enumerate() {
+        let top = v.image.min_max().1;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(k as u64);
+        let normal = rand_distr::Normal::new(0.0f32, 0.05 * top).expect("valid");
+        for p in &mut v.image.data {
+            *p = (*p + rand_distr::Distribution::sample(&normal, &mut rng)).max(0.0);
+        }
+    }
+    let cfg = TrainConfig { pixel_supersample: Supersample::Auto, rays_per_image: 32, ..settings() };
+    let counts = |problem: &Problem| {
+        let prep = Prepared::new(problem, &cfg).expect("prepares");
+        let mut batch = RayBatch::new(Split::Train, 0, 0);
+        training_batch(&prep, &cfg, 1, 0, &prep.time_steps(), &mut batch);
+        (prep.noise().expect("estimated"), batch.group, batch.len())
+    };
+    let (clean_noise, clean_group, clean_rays) = counts(&clean);
+    let (noisy_noise, noisy_group, noisy_rays) = counts(&noisy);
+    assert!(clean_noise < 0.01 && noisy_noise > 0.03, "noise {clean_noise} clean, {noisy_noise} noisy");
+    assert_eq!((clean_group, noisy_group), (4, 1));
+    assert_eq!((clean_rays, noisy_rays), (4 * 4 * 8, 4 * 32), "4 views: 8 pixels × 4 rays, 32 × 1");
+    assert_eq!(cfg.pixel_rays(Some(0.0)), (2, 8));
+    assert_eq!(cfg.pixel_rays(None), (1, 32));
+    let json = serde_json::to_value(&cfg).expect("serialises");
+    assert_eq!(json["pixel_supersample"], "auto");
+    let back: TrainConfig = serde_json::from_value(json).expect("reads back");
+    assert_eq!(back.pixel_supersample, Supersample::Auto);
+    let two: Supersample = serde_json::from_str("2").expect("a number");
+    assert_eq!(two, Supersample::Fixed(2));
+    let bad = serde_json::from_str::<Supersample>("\"twice\"").expect_err("not a setting");
+    assert!(bad.to_string().contains("auto"), "{bad}");
+    let bad = TrainConfig { pixel_supersample: Supersample::Fixed(5), ..settings() }.validate().expect_err("too many");
+    assert!(bad.to_string().contains("pixel_supersample"), "{bad}");
+}
+
 /// With `pixel_supersample = 2` a training pixel is four rays through its sub-pixel centres,
 /// and the loss scores their mean: the batch names each drawn pixel four times with the
 /// offsets (±¼, ±¼), each ray's direction is the camera's ray through that point, the loss is
@@ -324,11 +365,12 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
 #[test]
 fn supersampled_pixels_score_the_mean_of_their_sub_pixel_rays() {
     let problem = problem();
-    let cfg = TrainConfig { fine_samples: 0, pixel_supersample: 2, ..settings() };
+    let cfg = TrainConfig { fine_samples: 0, pixel_supersample: Supersample::Fixed(2), ..settings() };
     let prep = Prepared::new(&problem, &cfg).expect("prepares");
     let (mut batch, mut single) = (RayBatch::new(Split::Train, 0, 0), RayBatch::new(Split::Train, 0, 0));
     training_batch(&prep, &cfg, 1, 0, &prep.time_steps(), &mut batch);
-    training_batch(&prep, &TrainConfig { pixel_supersample: 1, ..cfg.clone() }, 1, 0, &prep.time_steps(), &mut single);
+    let centres = TrainConfig { pixel_supersample: Supersample::Fixed(1), ..cfg.clone() };
+    training_batch(&prep, &centres, 1, 0, &prep.time_steps(), &mut single);
     assert_eq!((batch.group, single.group), (4, 1));
     assert_eq!(batch.len(), 4 * single.len());
     assert!(single.jitter.is_empty());

@@ -328,9 +328,9 @@ pub enum StartMethod {
 }
 
 impl StartMethod {
-    /// Images whose estimated noise is above this fraction of their range count as noisy.
-    /// Chosen on the jet (docs/claims.md).
-    pub const NOISY_ABOVE: f64 = 0.03;
+    /// Images whose estimated noise is above this fraction of their range count as noisy
+    /// ([`fluidnerf_core::image::NOISY_ABOVE`]).
+    pub const NOISY_ABOVE: f64 = fluidnerf_core::image::NOISY_ABOVE;
 
     /// The voxel method for training images whose median estimated noise is `noise` (`None`:
     /// no estimate, which counts as noisy), and why.
@@ -452,9 +452,14 @@ impl MethodConfig {
                 Err(PipelineError::invalid("preset", format!("{method} is a voxel method and has no presets")))
             }
             Family::Neural => {
-                let c = NeuralConfig::preset(preset).ok_or_else(|| unknown(PRESETS.join(", ")))?;
-                // The hybrid starts from a voxel method run first in the same run folder.
+                let mut c = NeuralConfig::preset(preset).ok_or_else(|| unknown(PRESETS.join(", ")))?;
+                // The hybrid starts from a voxel method run first in the same run folder, and
+                // on clean images trains on rays over each pixel's area (both chosen by the
+                // images' noise).
                 let start = (method == Method::Hybrid).then(StartSpec::default);
+                if method == Method::Hybrid {
+                    c.train.pixel_supersample = fluidnerf_neural::train::Supersample::Auto;
+                }
                 Ok(MethodConfig::Neural(
                     method,
                     NeuralSpec { preset: Some(preset.into()), field: c.field, train: c.train, start },

@@ -134,6 +134,11 @@ pub(crate) fn run(
         problem.holdout.len(),
         100.0 * prep.occupied_fraction()
     );
+    if spec.train.pixel_supersample == fluidnerf_neural::train::Supersample::Auto {
+        let (per_axis, pixels) = spec.train.pixel_rays(prep.noise());
+        let noise = prep.noise().map_or("not estimated".into(), |n| format!("{:.2} % of their range", 100.0 * n));
+        log::info!("images' noise {noise}: {pixels} pixels per image, {per_axis} × {per_axis} rays each");
+    }
     let ctx = Ctx {
         scene,
         config,
@@ -156,18 +161,6 @@ pub(crate) fn run(
 /// rule) and at most `budget_s` seconds, so that a budget rule or a large cap set for the field
 /// cannot let it take the whole budget. It reports to a session of its own: the caller's
 /// progress and time estimate follow the field.
-/// The median over `views` of their images' estimated noise, a fraction of each image's range
-/// ([`fluidnerf_core::Image::relative_noise`]); `None` when no image gives an estimate.
-pub(crate) fn median_noise<'a>(views: impl IntoIterator<Item = &'a fluidnerf_neural::train::View>) -> Option<f64> {
-    let mut levels: Vec<f64> = views.into_iter().filter_map(|v| v.image.relative_noise()).collect();
-    if levels.is_empty() {
-        return None;
-    }
-    levels.sort_by(f64::total_cmp);
-    let n = levels.len();
-    Some(if n % 2 == 1 { levels[n / 2] } else { 0.5 * (levels[n / 2 - 1] + levels[n / 2]) })
-}
-
 pub(crate) fn run_voxel_start(
     method: crate::Method,
     scene: &Scene,
@@ -223,7 +216,7 @@ fn start_from<F: TrainableField>(
             let path = run_dir.path("start");
             let held_out = config.stopping.rule == StopRule::HeldOut;
             let budget = config.stopping.time_budget_s.map(|b| b / 2.0);
-            let (method, why) = start.method.resolve(median_noise(views));
+            let (method, why) = start.method.resolve(fluidnerf_neural::train::median_noise(views));
             log::info!("start: {why}");
             let report = run_voxel_start(method, scene, truth, config, held_out, budget, &path)?;
             log::info!(

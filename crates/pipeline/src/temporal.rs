@@ -344,7 +344,7 @@ impl Ctx<'_> {
             let budget = config.stopping.time_budget_s.map(|b| b / (2.0 * frames as f64));
             let path = self.dir.path(&format!("start/t{i:02}"));
             let views = self.problem.views.iter().filter(|v| same_time(v.time, t));
-            let (method, why) = start.method.resolve(crate::neural::median_noise(views));
+            let (method, why) = start.method.resolve(fluidnerf_neural::train::median_noise(views));
             log::info!("start at t = {t}: {why}");
             let report = run_voxel_start(method, &sub, &truth, config, held_out, budget, &path)?;
             log::info!(
