@@ -2,8 +2,8 @@
 
 /// Images whose [`Image::relative_noise`] is above this fraction of their range count as noisy:
 /// runs that adapt to the noise ([`Image::relative_noise`]'s users) treat them so. Chosen on
-/// the jet phantom, between 2.5 % noise and 5 % (docs/claims.md).
-pub const NOISY_ABOVE: f64 = 0.03;
+/// the jet phantom, between 1 % noise and 2.5 % (docs/claims.md).
+pub const NOISY_ABOVE: f64 = 0.015;
 
 /// A single-channel image of linear intensities, row-major: pixel `(col, row)` is
 /// `data[row * width + col]` and has its centre at image coordinates `(col, row)`.

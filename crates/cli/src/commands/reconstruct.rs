@@ -341,7 +341,7 @@ pub struct NeuralArgs {
     /// does), for a time-resolved one a run per instant into OUT/start/tNN/ for every window
     /// that does not continue the previous one. Its time counts against the time budget.
     /// `auto` (hybrid's default) runs asart when the training images are clean and tv when
-    /// their estimated noise exceeds 3 % of their range: an unregularised start passes the
+    /// their estimated noise exceeds 1.5 % of their range: an unregularised start passes the
     /// noise on to the field.
     #[arg(long, value_name = "METHOD", value_parser = parse_start_method)]
     pub start_method: Option<StartMethod>,
