@@ -57,15 +57,20 @@ impl Image {
 
     /// The image's noise as a fraction of its range: a robust estimate of the standard
     /// deviation of additive pixel noise, divided by `max − min`. `None` when the image is
-    /// constant, holds a non-finite value, or has fewer than 16 usable pixels.
+    /// constant, smaller than 3 × 3, or holds a non-finite value.
     ///
     /// The estimate is Immerkær's ("Fast noise variance estimation", CVIU 1996): the image is
     /// filtered with the difference of two Laplacians, `[1 −2 1; −2 4 −2; 1 −2 1]`, which
     /// cancels planes and most of a smooth image's curvature and scales white noise of
     /// deviation σ to deviation 6σ. Its median absolute value, times 1.4826, is then σ robustly
-    /// (edges are a minority of the pixels). Only pixels whose 3 × 3 neighbourhood lies above
-    /// the image's minimum count, so that background clipped to the sensor's floor (noise cut
-    /// off at zero) does not read as a noiseless image.
+    /// (edges are a minority of the pixels). It is taken two ways, and the smaller counts:
+    /// - over the pixels whose 3 × 3 neighbourhood lies above the image's minimum, so that a
+    ///   background clipped to the sensor's floor (noise cut off at zero) does not read as a
+    ///   noiseless image (needs 16 such pixels);
+    /// - over every pixel, divided by [`CLIPPED_NOISE_RESPONSE`], the same median for noise
+    ///   clipped at zero, so that an image whose background lies exactly on the floor — a
+    ///   noiseless image of a small object, whose own sharp structure would dominate the
+    ///   first median — reads as clean.
     pub fn relative_noise(&self) -> Option<f64> {
         let (lo, hi) = self.min_max();
         let (w, h) = (self.width, self.height);
@@ -73,26 +78,33 @@ impl Image {
             return None;
         }
         let above = |c: usize, r: usize| self.data[r * w + c] > lo;
-        let mut filtered = Vec::new();
+        let (mut lifted, mut all) = (Vec::new(), Vec::with_capacity((w - 2) * (h - 2)));
         for r in 1..h - 1 {
             for c in 1..w - 1 {
-                if !(r - 1..=r + 1).all(|rr| (c - 1..=c + 1).all(|cc| above(cc, rr))) {
-                    continue;
-                }
                 let p = |dc: usize, dr: usize| self.data[(r + dr - 1) * w + c + dc - 1] as f64;
                 let corners = p(0, 0) + p(2, 0) + p(0, 2) + p(2, 2);
                 let edges = p(1, 0) + p(0, 1) + p(2, 1) + p(1, 2);
-                filtered.push((corners - 2.0 * edges + 4.0 * p(1, 1)).abs());
+                let response = (corners - 2.0 * edges + 4.0 * p(1, 1)).abs();
+                all.push(response);
+                if (r - 1..=r + 1).all(|rr| (c - 1..=c + 1).all(|cc| above(cc, rr))) {
+                    lifted.push(response);
+                }
             }
         }
-        if filtered.len() < 16 {
-            return None;
-        }
-        let mid = filtered.len() / 2;
-        let (_, median, _) = filtered.select_nth_unstable_by(mid, f64::total_cmp);
-        Some(1.4826 * *median / 6.0 / (hi - lo) as f64)
+        let sigma = |v: &mut Vec<f64>| {
+            let mid = v.len() / 2;
+            1.4826 * *v.select_nth_unstable_by(mid, f64::total_cmp).1 / 6.0
+        };
+        let floor = sigma(&mut all) / CLIPPED_NOISE_RESPONSE;
+        let sigma = if lifted.len() >= 16 { sigma(&mut lifted).min(floor) } else { floor };
+        Some(sigma / (hi - lo) as f64)
     }
 }
+
+/// The robust deviation [`Image::relative_noise`] reads from white noise of deviation 1
+/// clipped at zero, `max(0, N(0, 1))`, over every pixel: 0.533 (a 2048² simulation; 0.5331 ±
+/// 0.001 between seeds). It turns that reading back into σ.
+pub const CLIPPED_NOISE_RESPONSE: f64 = 0.533;
 
 #[cfg(test)]
 mod tests {
@@ -146,6 +158,33 @@ mod tests {
         }
     }
 
+    /// A small, sharp object on a background exactly at zero is clean, although its own
+    /// structure is all the first estimate sees. Pure noise clipped at zero reads as noisy:
+    /// there the pixels above the floor are the positive half of the noise, whose spread is
+    /// about 0.6 σ, so it reads low, but within a factor of two.
+    #[test]
+    fn relative_noise_reads_small_objects_and_clipped_backgrounds() {
+        let mut small = Image::zeros(64, 64);
+        for r in 0..64 {
+            for c in 0..64 {
+                let d2 = ((c as f64 - 30.3).powi(2) + (r as f64 - 33.7).powi(2)) / 2.0;
+                let v = 1000.0 * (-d2).exp();
+                small.set(c, r, if v > 1.0 { v as f32 } else { 0.0 });
+            }
+        }
+        let level = small.relative_noise().expect("readable");
+        assert!(level < 1e-3, "a noiseless small object read as {level}");
+        let mut noise = Image::zeros(256, 256);
+        for (p, z) in noise.data.iter_mut().zip(normals(256 * 256)) {
+            *p = (100.0 * z).max(0.0) as f32;
+        }
+        let (lo, hi) = noise.min_max();
+        let truth = 100.0 / (hi - lo) as f64;
+        let level = noise.relative_noise().expect("readable");
+        assert!(level > 0.5 * truth && level < 1.1 * truth, "clipped noise: estimated {level}, added {truth}");
+        assert!(level > NOISY_ABOVE);
+    }
+
     #[test]
     fn relative_noise_refuses_images_it_cannot_read() {
         assert_eq!(Image::zeros(32, 32).relative_noise(), None);
@@ -153,5 +192,6 @@ mod tests {
         nan.set(3, 4, f32::NAN);
         assert_eq!(nan.relative_noise(), None);
         assert_eq!(Image::from_vec(2, 2, vec![0.0, 1.0, 2.0, 3.0]).relative_noise(), None);
+        assert_eq!(Image::from_vec(3, 1, vec![0.0, 1.0, 2.0]).relative_noise(), None);
     }
 }
