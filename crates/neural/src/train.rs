@@ -331,13 +331,7 @@ pub struct Prepared {
 /// The median over `views` of their images' estimated noise, a fraction of each image's range
 /// ([`Image::relative_noise`]); `None` when no image gives an estimate.
 pub fn median_noise<'a>(views: impl IntoIterator<Item = &'a View>) -> Option<f64> {
-    let mut levels: Vec<f64> = views.into_iter().filter_map(|v| v.image.relative_noise()).collect();
-    if levels.is_empty() {
-        return None;
-    }
-    levels.sort_by(f64::total_cmp);
-    let n = levels.len();
-    Some(if n % 2 == 1 { levels[n / 2] } else { 0.5 * (levels[n / 2 - 1] + levels[n / 2]) })
+    fluidnerf_core::image::median_noise(views.into_iter().filter_map(|v| v.image.relative_noise()))
 }
 
 /// One prepared view: its cached rays, their normalised target pixels and its frame time.

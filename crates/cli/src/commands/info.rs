@@ -135,6 +135,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ));
     }
     let mut kinds = Vec::new();
+    // The training images' noise readings ([`fluidnerf_core::Image::relative_noise`]).
+    let mut noise_levels = Vec::new();
     let bar = crate::progress::bar(scene.frames.len() as u64, "checking");
     for (i, f) in scene.frames.iter().enumerate() {
         let _ = writeln!(out, "{}", frame_title(i, f));
@@ -165,9 +167,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     let (w, h) = (f.camera.width(), f.camera.height());
                     let (lo, hi) = img.min_max();
                     let mean = img.sum() / img.data.len().max(1) as f64;
+                    let noise = img.relative_noise();
+                    if !f.holdout {
+                        noise_levels.extend(noise);
+                    }
+                    let noise = noise.map_or("not estimated".into(), |n| format!("{:.2} % of the range", 100.0 * n));
                     let _ = writeln!(
                         out,
-                        "  image {}x{} {kind}, values {lo} .. {hi}, mean {mean:.4}",
+                        "  image {}x{} {kind}, values {lo} .. {hi}, mean {mean:.4}, noise {noise}",
                         img.width, img.height
                     );
                     if (img.width, img.height) != (w, h) {
@@ -194,6 +201,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let Some(median) = fluidnerf_core::image::median_noise(noise_levels) {
+        let reads = if median > fluidnerf_core::image::NOISY_ABOVE {
+            "noisy: automatic settings start from SART-TV, one ray per pixel"
+        } else {
+            "clean: automatic settings start from ASART, rays over each pixel's area"
+        };
+        let _ = writeln!(
+            out,
+            "training images' noise (median of the estimates): {:.2} % of their range, {reads}",
+            100.0 * median
+        );
+    }
     let only_kinds: Vec<_> = kinds.iter().map(|k| k.1).collect();
     if let Some((at, kind, usual)) = odd_sample_kind(&only_kinds) {
         let i = kinds[at].0;
