@@ -318,7 +318,8 @@ impl StartSpec {
 pub enum StartMethod {
     /// ASART when the training images are clean, SART-TV when they are noisy: the median over
     /// the training images of their estimated noise ([`fluidnerf_core::Image::relative_noise`],
-    /// a fraction of each image's range) decides, against [`StartMethod::NOISY_ABOVE`]. An
+    /// a fraction of each image's range) decides, against
+    /// [`fluidnerf_core::image::NOISY_ABOVE`]. An
     /// unregularised start carries the images' noise into the field, which the field then
     /// keeps; on clean images it is the more detailed start (docs/claims.md).
     #[default]
@@ -328,16 +329,12 @@ pub enum StartMethod {
 }
 
 impl StartMethod {
-    /// Images whose estimated noise is above this fraction of their range count as noisy
-    /// ([`fluidnerf_core::image::NOISY_ABOVE`]).
-    pub const NOISY_ABOVE: f64 = fluidnerf_core::image::NOISY_ABOVE;
-
     /// The voxel method for training images whose median estimated noise is `noise` (`None`:
     /// no estimate, which counts as noisy), and why.
     pub fn resolve(self, noise: Option<f64>) -> (Method, String) {
         match (self, noise) {
             (StartMethod::Method(m), _) => (m, format!("{m}, as configured")),
-            (StartMethod::Auto, Some(n)) if n <= Self::NOISY_ABOVE => (
+            (StartMethod::Auto, Some(n)) if n <= fluidnerf_core::image::NOISY_ABOVE => (
                 Method::Asart,
                 format!("asart: the images' noise is estimated at {:.2} % of their range, clean", 100.0 * n),
             ),
@@ -364,15 +361,24 @@ impl Serialize for StartMethod {
     }
 }
 
-impl<'de> Deserialize<'de> for StartMethod {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let name = String::deserialize(d)?;
+/// `"auto"` or any method's name; [`StartSpec::validate`] then refuses a method that is not a
+/// voxel method.
+impl FromStr for StartMethod {
+    type Err = PipelineError;
+
+    fn from_str(name: &str) -> Result<Self, Self::Err> {
         if name == "auto" {
             return Ok(StartMethod::Auto);
         }
         name.parse::<Method>()
             .map(StartMethod::Method)
-            .map_err(|e| serde::de::Error::custom(format!("{e}; or \"auto\"")))
+            .map_err(|e| PipelineError::invalid("method", format!("{e}; or \"auto\"")))
+    }
+}
+
+impl<'de> Deserialize<'de> for StartMethod {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
     }
 }
 
@@ -1152,7 +1158,7 @@ mod tests {
         let fast: StartSpec = serde_json::from_str(r#"{"method": "fast"}"#).expect("a method");
         let e = fast.validate().expect_err("not a voxel method");
         assert!(e.to_string().contains("method.start.method"), "{e}");
-        let edge = StartMethod::NOISY_ABOVE;
+        let edge = fluidnerf_core::image::NOISY_ABOVE;
         assert_eq!(StartMethod::Auto.resolve(Some(0.0)).0, Method::Asart);
         assert_eq!(StartMethod::Auto.resolve(Some(edge)).0, Method::Asart);
         assert_eq!(StartMethod::Auto.resolve(Some(1.5 * edge)).0, Method::Tv);

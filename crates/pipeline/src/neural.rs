@@ -198,10 +198,8 @@ pub(crate) fn run_voxel_start(
 
 /// Fits `field` to the reconstruction [`StartSpec`] names (running its voxel method first into
 /// `start/` when it names no run) and returns the seconds of this run's that took.
-#[allow(clippy::too_many_arguments)]
 fn start_from<F: TrainableField>(
     start: &StartSpec,
-    views: &[fluidnerf_neural::train::View],
     scene: &Scene,
     config: &RunConfig,
     run_dir: &RunDir,
@@ -216,7 +214,7 @@ fn start_from<F: TrainableField>(
             let path = run_dir.path("start");
             let held_out = config.stopping.rule == StopRule::HeldOut;
             let budget = config.stopping.time_budget_s.map(|b| b / 2.0);
-            let (method, why) = start.method.resolve(fluidnerf_neural::train::median_noise(views));
+            let (method, why) = start.method.resolve(prep.noise());
             log::info!("start: {why}");
             let report = run_voxel_start(method, scene, truth, config, held_out, budget, &path)?;
             log::info!(
@@ -305,8 +303,7 @@ impl Ctx<'_> {
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
-            let seconds =
-                start_from(start, &self.problem.views, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;
+            let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;
             // Its time is the run's: the curves of NRMSE against time start after it.
             learner.train_time_s += seconds;
             budgeted = train_cfg.clone();

@@ -868,12 +868,11 @@ fn run_split(args: &Args, config: &RunConfig) -> anyhow::Result<std::process::Ex
 /// `--start-method`: `auto` or a voxel method.
 fn parse_start_method(s: &str) -> Result<StartMethod, String> {
     const VOXEL: &str = "auto, asart, art, sart, mart, smart, mlem, tv, tikhonov";
-    if s == "auto" {
-        return Ok(StartMethod::Auto);
-    }
-    match s.parse::<Method>() {
-        Ok(m) if m.family() == Family::Classical => Ok(StartMethod::Method(m)),
-        Ok(m) => Err(format!("{m} is not a voxel method (one of {VOXEL})")),
+    match s.parse::<StartMethod>() {
+        Ok(StartMethod::Method(m)) if m.family() != Family::Classical => {
+            Err(format!("{m} is not a voxel method (one of {VOXEL})"))
+        }
+        Ok(m) => Ok(m),
         Err(_) => Err(format!("unknown start method {s:?} (one of {VOXEL})")),
     }
 }
