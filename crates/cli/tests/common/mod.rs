@@ -18,6 +18,14 @@ pub fn ok(out: &Output) {
     );
 }
 
+/// Asserts that a run failed and that its error output names `needle`.
+#[allow(dead_code)] // not every test file checks refusals
+pub fn refused(out: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "succeeded, but should have refused ({needle}): {stderr}");
+    assert!(stderr.contains(needle), "{stderr}");
+}
+
 /// Parses a JSON file.
 pub fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("readable")).expect("json")
