@@ -240,13 +240,11 @@ pub fn temporal_preset(name: &str) -> Option<TemporalConfig> {
                 field: FieldConfig::HashGrid(HashGridConfig { log2_table_size: 18, ..grid }),
                 // Each frame's table entries get the updates and the learning rates a run on
                 // that frame alone would give them (docs/time-resolved.md, "The fast field").
-                // Rays over each pixel's area on clean images, as the static hybrid's
-                // (docs/time-resolved.md, "Rays over the pixel's area").
+                // Like `fast`, rays over each pixel's area on clean images.
                 train: TrainConfig {
                     batching: Batching::OneTimeStep,
                     schedule_per_frame: true,
                     adam: AdamConfig { lazy: true, ..base.train.adam },
-                    pixel_supersample: crate::train::Supersample::Auto,
                     occupancy: Some(OccupancyConfig::default()),
                     ..base.train
                 },

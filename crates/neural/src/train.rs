@@ -132,7 +132,8 @@ pub struct TrainConfig {
     /// a camera pixel measures (and what the synthetic images' supersampled pixels hold).
     /// Costs `S²` rays per pixel. Held-out scoring and rendering keep one ray per pixel centre.
     /// `"auto"` in a configuration chooses by the images' noise ([`Supersample::Auto`]).
-    /// Default 1 (the dissertation's pixel-centre rays).
+    /// Default 1 (the dissertation's pixel-centre rays); `"auto"` in the `fast` and `tr-fast`
+    /// presets.
     pub pixel_supersample: Supersample,
 }
 

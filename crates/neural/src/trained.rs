@@ -19,7 +19,7 @@ use crate::dense::DenseGridField;
 use crate::hashgrid::{HashGridConfig, HashGridField};
 use crate::mlp::{Activation, MlpConfig, MlpField};
 use crate::occupancy::{OccupancyConfig, OccupancyGrid};
-use crate::train::{FieldMeta, TrainConfig};
+use crate::train::{FieldMeta, Supersample, TrainConfig};
 use crate::{NeuralError, TrainableField};
 
 /// Rows per batch handed to the field when sampling in world coordinates.
@@ -123,6 +123,9 @@ impl NeuralConfig {
                     stop: crate::train::StopRule { smoothing: 50, window: 300, tolerance: 0.01 },
                     occupancy: Some(OccupancyConfig::default()),
                     chunk_samples: 8192,
+                    // Rays over each drawn pixel's area on clean images (docs/claims.md,
+                    // "Rays over the pixel's area").
+                    pixel_supersample: Supersample::Auto,
                     ..faithful.train
                 },
             }),
