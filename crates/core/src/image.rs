@@ -5,6 +5,13 @@
 /// the jet phantom, between 1 % noise and 2.5 % (docs/claims.md).
 pub const NOISY_ABOVE: f64 = 0.015;
 
+/// Whether images whose (median) [`Image::relative_noise`] is `noise` count as clean: an
+/// estimate of at most [`NOISY_ABOVE`]. No estimate counts as noisy, the cautious reading.
+/// The one rule the automatic settings share.
+pub fn reads_clean(noise: Option<f64>) -> bool {
+    noise.is_some_and(|n| n <= NOISY_ABOVE)
+}
+
 /// A single-channel image of linear intensities, row-major: pixel `(col, row)` is
 /// `data[row * width + col]` and has its centre at image coordinates `(col, row)`.
 #[derive(Clone, Debug, PartialEq)]

@@ -221,9 +221,7 @@ impl TrainConfig {
     pub fn pixel_rays(&self, noise: Option<f64>) -> (usize, usize) {
         match self.pixel_supersample {
             Supersample::Fixed(s) => (s, self.rays_per_image),
-            Supersample::Auto if noise.is_some_and(|n| n <= fluidnerf_core::image::NOISY_ABOVE) => {
-                (2, self.rays_per_image.div_ceil(4))
-            }
+            Supersample::Auto if fluidnerf_core::image::reads_clean(noise) => (2, self.rays_per_image.div_ceil(4)),
             Supersample::Auto => (1, self.rays_per_image),
         }
     }

@@ -334,7 +334,7 @@ impl StartMethod {
     pub fn resolve(self, noise: Option<f64>) -> (Method, String) {
         match (self, noise) {
             (StartMethod::Method(m), _) => (m, format!("{m}, as configured")),
-            (StartMethod::Auto, Some(n)) if n <= fluidnerf_core::image::NOISY_ABOVE => (
+            (StartMethod::Auto, Some(n)) if fluidnerf_core::image::reads_clean(noise) => (
                 Method::Asart,
                 format!("asart: the images' noise is estimated at {:.2} % of their range, clean", 100.0 * n),
             ),

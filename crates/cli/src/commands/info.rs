@@ -202,10 +202,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     if let Some(median) = fluidnerf_core::image::median_noise(noise_levels) {
-        let reads = if median > fluidnerf_core::image::NOISY_ABOVE {
-            "noisy: automatic settings start from SART-TV, one ray per pixel"
-        } else {
+        let reads = if fluidnerf_core::image::reads_clean(Some(median)) {
             "clean: automatic settings start from ASART, rays over each pixel's area"
+        } else {
+            "noisy: automatic settings start from SART-TV, one ray per pixel"
         };
         let _ = writeln!(
             out,
