@@ -685,17 +685,25 @@ impl FootView {
         let (iz, fixed) = (rs.iz, rs.fixed);
         let base_s = fixed * fixed + rs.zs * rs.zs;
         let g0 = self.gain * iz * iz * iz;
+        // Along the row only the moving camera coordinate `c` changes, and the centre and the
+        // three edge widths of `Self::along` are affine in it: `centre = c0 + c1 c` and
+        // `w_a = |a0_a + a1_a c|` (the same quantities, with the row's factors taken once).
+        let (c0, c1, a0, a1) = if SHARED_V {
+            let yn = fixed * iz;
+            let (f, s) = (self.fx * iz, self.skew * iz);
+            let a0 = self.edges.map(|e| f * e[0] + s * (e[1] - yn * e[2]));
+            (self.skew * yn + self.cx, f, a0, self.edges.map(|e| -f * iz * e[2]))
+        } else {
+            let f = self.fy * iz;
+            (self.cy, f, self.edges.map(|e| f * e[1]), self.edges.map(|e| -f * iz * e[2]))
+        };
         let z16 = [0f32; CHUNK];
         let (mut centre, mut gamma, mut pl, mut ll) = (z16, z16, z16, z16);
         let f0 = i0 as f32;
         for q in 0..CHUNK {
             let c = base[moving] + (f0 + Q[q]) * step[moving];
-            let (cq, w) = if SHARED_V {
-                self.along::<false>(c * iz, fixed * iz, iz)
-            } else {
-                self.along::<true>(0.0, c * iz, iz)
-            };
-            centre[q] = cq;
+            centre[q] = c0 + c1 * c;
+            let w = [0, 1, 2].map(|a| (a0[a] + a1[a] * c).abs());
             (pl[q], ll[q]) = trapezoid(w);
             gamma[q] = g0 * (base_s + c * c).sqrt();
         }
@@ -1430,9 +1438,12 @@ impl FootprintProjector {
                 // `first + n_l ≤ line_len` (see `chunk_moving`: first < len + N, n_l ≤ N).
                 let (lo, hi) = (lo as usize, hi as usize + n_l);
                 let a = &mut acc[lo..hi];
-                a.fill(0.0);
-                for (s, &w) in rs.w[..n_s].iter().enumerate() {
-                    for (d, &p) in a.iter_mut().zip(&lines[(across + s) * line_len + lo..][..hi - lo]) {
+                let line = |s: usize| &lines[(across + s) * line_len + lo..][..hi - lo];
+                for (d, &p) in a.iter_mut().zip(line(0)) {
+                    *d = rs.w[0] * p;
+                }
+                for (s, &w) in rs.w[..n_s].iter().enumerate().skip(1) {
+                    for (d, &p) in a.iter_mut().zip(line(s)) {
                         *d += w * p;
                     }
                 }
