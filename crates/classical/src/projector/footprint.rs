@@ -188,6 +188,78 @@ impl<const N: usize> Default for Moving<N> {
     }
 }
 
+/// What the voxels of a grid row share along the axis that moves ([`FootView::moving_row`]):
+/// the moving camera coordinate `c = start + i · step` of voxel `i`, the footprint's centre
+/// `c0 + c1 c` and edge widths `|a0 + a1 c|` on that axis, and the amplitude's factors.
+#[derive(Clone, Copy, Debug)]
+struct MovingRow {
+    start: f32,
+    step: f32,
+    c0: f32,
+    c1: f32,
+    a0: [f32; 3],
+    a1: [f32; 3],
+    base_s: f32,
+    g0: f32,
+    n: f32,
+    n_lim: usize,
+    bound: f32,
+}
+
+/// A chunk's trapezoids along the moving axis: centre (then the offset of the first pixel),
+/// `γ` (then `1/(2l)`), and `(p, l)`.
+#[derive(Clone, Copy, Debug, Default)]
+struct MovingTrapezoids {
+    off: [f32; CHUNK],
+    inv: [f32; CHUNK],
+    p: [f32; CHUNK],
+    l: [f32; CHUNK],
+}
+
+impl MovingRow {
+    /// The trapezoids of the `CHUNK` voxels from `i0`; `off` holds the centres and `inv` the
+    /// `γ` until [`Self::place`].
+    #[inline(always)]
+    fn trapezoids(&self, i0: usize, t: &mut MovingTrapezoids) {
+        let f0 = i0 as f32;
+        for q in 0..CHUNK {
+            let c = self.start + (f0 + Q[q]) * self.step;
+            t.off[q] = self.c0 + self.c1 * c;
+            let w = [0, 1, 2].map(|a| (self.a0[a] + self.a1[a] * c).abs());
+            (t.p[q], t.l[q]) = trapezoid(w);
+            t.inv[q] = self.g0 * (self.base_s + c * c).sqrt();
+        }
+    }
+
+    /// Whether a trapezoid of the chunk needs narrowing.
+    #[inline(always)]
+    fn wide(&self, t: &MovingTrapezoids) -> bool {
+        let lim = self.n_lim as f32 - 1.0;
+        (0..CHUNK).fold(false, |any, q| any | (t.p[q] + t.l[q] > lim))
+    }
+
+    /// Narrows the trapezoids if `wide` (which leaves those that fit unchanged, so it may be
+    /// decided for more voxels than the chunk's), and places them: first pixel and amplitude
+    /// into `out`, the first pixel's offset and `1/(2l)` into `t`.
+    #[inline(always)]
+    fn place<const N: usize>(&self, rs: &RowShared<N>, wide: bool, t: &mut MovingTrapezoids, out: &mut Moving<N>) {
+        let n = self.n;
+        for q in 0..CHUNK {
+            let (centre, gamma) = (t.off[q], t.inv[q]);
+            let (p, l) = fit_trapezoid(t.p[q], t.l[q], self.n_lim, wide);
+            (t.p[q], t.l[q]) = (p, l);
+            let t_l = centre - 0.5 * (p + l) + 0.5 + n;
+            let hit = (rs.first >= 0.0) & (t_l >= 0.0) & (t_l < self.bound);
+            let first_l = if hit { floor_small(t_l) } else { -1.0 };
+            out.first[q] = first_l;
+            t.off[q] = (centre + n + 0.5) - first_l;
+            let r = 1.0 / (p * l);
+            t.inv[q] = 0.5 * p * r;
+            out.amp[q] = gamma * rs.inv_p * (l * r);
+        }
+    }
+}
+
 /// The z-slices one forward-projection task takes: every `parts`-th from its first.
 type Slices = std::iter::StepBy<Range<usize>>;
 
@@ -678,13 +750,56 @@ impl FootView {
         n_l: usize,
         out: &mut Moving<N>,
     ) {
-        let n = N as f32;
+        let row = self.moving_row::<N, SHARED_V>(rs, base, step);
+        let mut t = MovingTrapezoids::default();
+        row.trapezoids(i0, &mut t);
+        let wide = row.wide(&t);
+        row.place(rs, wide, &mut t, out);
+        axis_weights_chunk::<N>(&t.off, &t.p, &t.l, &t.inv, n_l, |q, k, w| out.w[k][q] = w);
+    }
+
+    /// [`Self::chunk_moving`] for the chunks of a row that start at the voxels `starts` (lanes
+    /// past the row's end are computed as if the row went on) into `out`, stage by stage
+    /// across the chunks, so that the chunks' long chains of dependent operations (two square
+    /// roots and a division) overlap. The same arithmetic per voxel, so the same results bit
+    /// for bit.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn row_moving<const N: usize, const SHARED_V: bool>(
+        &self,
+        rs: &RowShared<N>,
+        base: [f32; 3],
+        step: [f32; 3],
+        n_l: usize,
+        starts: &[usize],
+        scratch: &mut Vec<MovingTrapezoids>,
+        out: &mut [Moving<N>],
+    ) {
+        let row = self.moving_row::<N, SHARED_V>(rs, base, step);
+        scratch.resize(starts.len(), MovingTrapezoids::default());
+        let mut wide = false;
+        for (&i0, t) in starts.iter().zip(scratch.iter_mut()) {
+            row.trapezoids(i0, t);
+            wide |= row.wide(t);
+        }
+        for (t, mv) in scratch.iter_mut().zip(out.iter_mut()) {
+            row.place(rs, wide, t, mv);
+        }
+        for (t, mv) in scratch.iter().zip(out.iter_mut()) {
+            axis_weights_chunk::<N>(&t.off, &t.p, &t.l, &t.inv, n_l, |q, k, w| mv.w[k][q] = w);
+        }
+    }
+
+    /// The factors of a row's moving axis (see [`MovingRow`]).
+    #[inline(always)]
+    fn moving_row<const N: usize, const SHARED_V: bool>(
+        &self,
+        rs: &RowShared<N>,
+        base: [f32; 3],
+        step: [f32; 3],
+    ) -> MovingRow {
         let moving = if SHARED_V { 0 } else { 1 };
-        let n_lim = if SHARED_V { N } else { self.rows };
-        let bound_l = if SHARED_V { (self.width + N) as f32 } else { (self.height + N) as f32 };
         let (iz, fixed) = (rs.iz, rs.fixed);
-        let base_s = fixed * fixed + rs.zs * rs.zs;
-        let g0 = self.gain * iz * iz * iz;
         // Along the row only the moving camera coordinate `c` changes, and the centre and the
         // three edge widths of `Self::along` are affine in it: `centre = c0 + c1 c` and
         // `w_a = |a0_a + a1_a c|` (the same quantities, with the row's factors taken once).
@@ -697,31 +812,19 @@ impl FootView {
             let f = self.fy * iz;
             (self.cy, f, self.edges.map(|e| f * e[1]), self.edges.map(|e| -f * iz * e[2]))
         };
-        let z16 = [0f32; CHUNK];
-        let (mut centre, mut gamma, mut pl, mut ll) = (z16, z16, z16, z16);
-        let f0 = i0 as f32;
-        for q in 0..CHUNK {
-            let c = base[moving] + (f0 + Q[q]) * step[moving];
-            centre[q] = c0 + c1 * c;
-            let w = [0, 1, 2].map(|a| (a0[a] + a1[a] * c).abs());
-            (pl[q], ll[q]) = trapezoid(w);
-            gamma[q] = g0 * (base_s + c * c).sqrt();
+        MovingRow {
+            start: base[moving],
+            step: step[moving],
+            c0,
+            c1,
+            a0,
+            a1,
+            base_s: fixed * fixed + rs.zs * rs.zs,
+            g0: self.gain * iz * iz * iz,
+            n: N as f32,
+            n_lim: if SHARED_V { N } else { self.rows },
+            bound: if SHARED_V { (self.width + N) as f32 } else { (self.height + N) as f32 },
         }
-        let lim_l = n_lim as f32 - 1.0;
-        let wide = (0..CHUNK).fold(false, |any, q| any | (pl[q] + ll[q] > lim_l));
-        let (mut off_l, mut inv_l) = (z16, z16);
-        for q in 0..CHUNK {
-            (pl[q], ll[q]) = fit_trapezoid(pl[q], ll[q], n_lim, wide);
-            let t_l = centre[q] - 0.5 * (pl[q] + ll[q]) + 0.5 + n;
-            let hit = (rs.first >= 0.0) & (t_l >= 0.0) & (t_l < bound_l);
-            let first_l = if hit { floor_small(t_l) } else { -1.0 };
-            out.first[q] = first_l;
-            off_l[q] = (centre[q] + n + 0.5) - first_l;
-            let r = 1.0 / (pl[q] * ll[q]);
-            inv_l[q] = 0.5 * pl[q] * r;
-            out.amp[q] = gamma[q] * rs.inv_p * (ll[q] * r);
-        }
-        axis_weights_chunk::<N>(&off_l, &pl, &ll, &inv_l, n_l, |q, k, w| out.w[k][q] = w);
     }
 
     /// Largest footprint support `p + l` along `u` and along `v` over a 9³ lattice spanning the
@@ -1318,7 +1421,9 @@ impl FootprintProjector {
         let nr = fv.rows;
         let n_l = if SHARED_V { N } else { nr };
         let [nx, ny, _] = self.grid.dims;
-        let mut mv = Moving::<N>::default();
+        let mut mvs = vec![Moving::<N>::default(); nx.div_ceil(CHUNK)];
+        let mut starts = Vec::with_capacity(mvs.len());
+        let mut scratch = Vec::with_capacity(mvs.len());
         let mut rss = vec![RowShared::<N>::default(); ny];
         for k in ks {
             self.slice_rows_shared::<N, SHARED_V>(view, k, &mut rss);
@@ -1329,14 +1434,20 @@ impl FootprintProjector {
                     continue;
                 }
                 let across = rs.first as usize;
+                // Empty voxels add nothing: only the chunks with a non-zero voxel (the test is
+                // branch-free, so that it vectorises) get footprints.
+                starts.clear();
                 for i0 in (0..nx).step_by(CHUNK) {
+                    let g = &x[row0 + i0..][..CHUNK.min(nx - i0)];
+                    if g.iter().fold(false, |any, &g| any | (g != 0.0)) {
+                        starts.push(i0);
+                    }
+                }
+                let mvs = &mut mvs[..starts.len()];
+                fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, &starts, &mut scratch, mvs);
+                for (&i0, mv) in starts.iter().zip(mvs.iter()) {
                     let valid = CHUNK.min(nx - i0);
                     let g = &x[row0 + i0..][..valid];
-                    // Empty voxels add nothing (branch-free, so that the test vectorises).
-                    if !g.iter().fold(false, |any, &g| any | (g != 0.0)) {
-                        continue;
-                    }
-                    fv.chunk_moving::<N, SHARED_V>(rs, base, step, i0, n_l, &mut mv);
                     // Each voxel's first pixel and weighted value, vectorised across the chunk;
                     // misses and empty voxels get a zero value and are skipped.
                     let mut gq = [0f32; CHUNK];
@@ -1402,6 +1513,8 @@ impl FootprintProjector {
         // 32 more, for the vector kernel's window.
         let mut acc = vec![0f32; line_len + 32];
         let mut mvs = vec![Moving::<N>::default(); nx.div_ceil(CHUNK)];
+        let starts: Vec<usize> = (0..nx).step_by(CHUNK).collect();
+        let mut scratch = Vec::with_capacity(mvs.len());
         let mut rss = vec![RowShared::<N>::default(); ny];
         for (kk, k) in ks.enumerate() {
             self.slice_rows_shared::<N, SHARED_V>(view, k, &mut rss);
@@ -1418,8 +1531,8 @@ impl FootprintProjector {
                 // Every chunk's footprints, and the stretch of the line they read (lane-wise
                 // minimum and maximum first pixel of the hits; misses are −1).
                 let (mut lo, mut hi) = ([f32::MAX; CHUNK], [-1f32; CHUNK]);
+                fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, &starts, &mut scratch, &mut mvs);
                 for (c, mv) in mvs.iter_mut().enumerate() {
-                    fv.chunk_moving::<N, SHARED_V>(rs, base, step, c * CHUNK, n_l, mv);
                     if (c + 1) * CHUNK > nx {
                         // The short last chunk: lanes past the row are not voxels.
                         mv.first[nx - c * CHUNK..].fill(-1.0);
