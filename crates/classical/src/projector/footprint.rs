@@ -206,6 +206,22 @@ struct MovingRow {
     bound: f32,
 }
 
+/// A chunk's projected footprints before they are placed ([`FootView::chunk_trapezoids`]):
+/// centres, `γ` and whether in front of the camera, then ([`FootView::chunk_place`]) the first
+/// pixels' offsets and the ramps' `1/(2l)` in their place; the trapezoids `(p, l)` along `u`
+/// and `v`.
+#[derive(Clone, Copy, Debug, Default)]
+struct ChunkTrapezoids {
+    u: [f32; CHUNK],
+    v: [f32; CHUNK],
+    gamma: [f32; CHUNK],
+    front: [f32; CHUNK],
+    pu: [f32; CHUNK],
+    lu: [f32; CHUNK],
+    pv: [f32; CHUNK],
+    lv: [f32; CHUNK],
+}
+
 /// A chunk's trapezoids along the moving axis: centre (then the offset of the first pixel),
 /// `γ` (then `1/(2l)`), and `(p, l)`.
 #[derive(Clone, Copy, Debug, Default)]
@@ -562,55 +578,124 @@ impl FootView {
                 Shared::None => {}
             }
         }
-        let n = N as f32;
-        let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
-        let z = [0f32; CHUNK];
-        let (mut u, mut v, mut gamma, mut front) = (z, z, z, z);
-        let (mut pu, mut lu, mut pv, mut lv) = (z, z, z, z);
+        let mut t = ChunkTrapezoids::default();
+        self.chunk_trapezoids::<DISTORTED>(base, step, i0, &mut t);
+        let wide = self.chunk_wide::<N>(&t);
+        self.chunk_place::<N>(wide, &mut t, out);
+        Self::chunk_weights::<N, LANES>(&t, out);
+    }
+
+    /// [`Self::chunk`] for the chunks of a row that start at the voxels `starts`, into `out`,
+    /// stage by stage across the chunks (as [`Self::row_moving`]), with the same arithmetic
+    /// per voxel. Views that share a footprint axis and sides above 8, whose chunks are large,
+    /// go chunk by chunk.
+    #[inline(always)]
+    fn row_chunks<const N: usize, const DISTORTED: bool, const LANES: bool>(
+        &self,
+        base: [f32; 3],
+        step: [f32; 3],
+        starts: &[usize],
+        scratch: &mut Vec<ChunkTrapezoids>,
+        out: &mut [Chunk<N>],
+    ) {
+        if N > 8 || (!DISTORTED && self.shared != Shared::None) {
+            for (&i0, ch) in starts.iter().zip(out.iter_mut()) {
+                self.chunk::<N, DISTORTED, LANES>(base, step, i0, ch);
+            }
+            return;
+        }
+        scratch.resize(starts.len(), ChunkTrapezoids::default());
+        let mut wide = false;
+        for (&i0, t) in starts.iter().zip(scratch.iter_mut()) {
+            self.chunk_trapezoids::<DISTORTED>(base, step, i0, t);
+            wide |= self.chunk_wide::<N>(t);
+        }
+        for (t, ch) in scratch.iter_mut().zip(out.iter_mut()) {
+            self.chunk_place::<N>(wide, t, ch);
+        }
+        for (t, ch) in scratch.iter().zip(out.iter_mut()) {
+            Self::chunk_weights::<N, LANES>(t, ch);
+        }
+    }
+
+    /// The projected centres, `γ`, and the trapezoids along `u` and `v` of the `CHUNK` voxels
+    /// from `i0` of a row (`p = base + (i0 + q) · step`); `front` is 1 in front of the camera.
+    #[inline(always)]
+    fn chunk_trapezoids<const DISTORTED: bool>(
+        &self,
+        base: [f32; 3],
+        step: [f32; 3],
+        i0: usize,
+        t: &mut ChunkTrapezoids,
+    ) {
         let f0 = i0 as f32;
         for q in 0..CHUNK {
             let fi = f0 + Q[q];
             let p = [base[0] + fi * step[0], base[1] + fi * step[1], base[2] + fi * step[2]];
             let (in_front, uq, vq, wu, wv, g) = self.project::<DISTORTED>(p);
-            (u[q], v[q], gamma[q]) = (uq, vq, g);
-            front[q] = if in_front { 1.0 } else { 0.0 };
-            (pu[q], lu[q]) = trapezoid(wu);
-            (pv[q], lv[q]) = trapezoid(wv);
+            (t.u[q], t.v[q], t.gamma[q]) = (uq, vq, g);
+            t.front[q] = if in_front { 1.0 } else { 0.0 };
+            (t.pu[q], t.lu[q]) = trapezoid(wu);
+            (t.pv[q], t.lv[q]) = trapezoid(wv);
         }
-        // Narrowing (a division per axis) is needed only next to the camera: test the chunk.
-        let (lim_u, lim_v) = (n - 1.0, self.rows as f32 - 1.0);
-        let wide = (0..CHUNK).fold(0u32, |any, q| any | u32::from((pu[q] + lu[q] > lim_u) | (pv[q] + lv[q] > lim_v)));
-        let (mut off_u, mut off_v, mut inv_u, mut inv_v) = (z, z, z, z);
+    }
+
+    /// Whether a trapezoid of the chunk needs narrowing (a division per axis; only next to the
+    /// camera). Narrowing leaves those that fit unchanged, so it may be decided for more
+    /// voxels than the chunk's.
+    #[inline(always)]
+    fn chunk_wide<const N: usize>(&self, t: &ChunkTrapezoids) -> bool {
+        let (lim_u, lim_v) = (N as f32 - 1.0, self.rows as f32 - 1.0);
+        (0..CHUNK).fold(0u32, |any, q| any | u32::from((t.pu[q] + t.lu[q] > lim_u) | (t.pv[q] + t.lv[q] > lim_v))) != 0
+    }
+
+    /// Narrows the trapezoids if `wide`, and places them: first column and row (−1: the
+    /// voxel's square misses the padded image, or it lies behind the camera) and amplitude
+    /// into `out`; the offsets of the first pixels and the ramps' `1/(2l)` replace the centres
+    /// and `γ`, `front` in `t`.
+    #[inline(always)]
+    fn chunk_place<const N: usize>(&self, wide: bool, t: &mut ChunkTrapezoids, out: &mut Chunk<N>) {
+        let n = N as f32;
+        let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
         for q in 0..CHUNK {
-            (pu[q], lu[q]) = fit_trapezoid(pu[q], lu[q], N, wide != 0);
-            (pv[q], lv[q]) = fit_trapezoid(pv[q], lv[q], self.rows, wide != 0);
+            (t.pu[q], t.lu[q]) = fit_trapezoid(t.pu[q], t.lu[q], N, wide);
+            (t.pv[q], t.lv[q]) = fit_trapezoid(t.pv[q], t.lv[q], self.rows, wide);
+            let (pu, lu, pv, lv) = (t.pu[q], t.lu[q], t.pv[q], t.lv[q]);
+            let (u, v, gamma) = (t.u[q], t.v[q], t.gamma[q]);
             // First pixel c0 = ⌊u − (p + l)/2 + ½⌋, shifted by the margin N so that every
             // square that can touch the image starts at a non-negative padded column.
             // Comparisons are false for NaN.
-            let tc = u[q] - 0.5 * (pu[q] + lu[q]) + 0.5 + n;
-            let tr = v[q] - 0.5 * (pv[q] + lv[q]) + 0.5 + n;
-            let hit = (front[q] > 0.0) & (tc >= 0.0) & (tr >= 0.0) & (tc < wmax) & (tr < hmax);
+            let tc = u - 0.5 * (pu + lu) + 0.5 + n;
+            let tr = v - 0.5 * (pv + lv) + 0.5 + n;
+            let hit = (t.front[q] > 0.0) & (tc >= 0.0) & (tr >= 0.0) & (tc < wmax) & (tr < hmax);
             let (col, row) = if hit { (floor_small(tc), floor_small(tr)) } else { (-1.0, 0.0) };
             out.col[q] = col;
             out.row[q] = row;
             // u − (c0 − ½) and v − (r0 − ½).
-            off_u[q] = (u[q] + n + 0.5) - col;
-            off_v[q] = (v[q] + n + 0.5) - row;
+            t.u[q] = (u + n + 0.5) - col;
+            t.v[q] = (v + n + 0.5) - row;
             // The ramps' 1/(2l) and the amplitude γ/(p_u p_v) from one division (dear next to
             // the rest): all four factors lie in [1e-6, 64], so the product cannot under- or
             // overflow.
-            let (puv, luv) = (pu[q] * pv[q], lu[q] * lv[q]);
+            let (puv, luv) = (pu * pv, lu * lv);
             let r = 1.0 / (puv * luv);
-            inv_u[q] = 0.5 * (puv * lv[q]) * r;
-            inv_v[q] = 0.5 * (puv * lu[q]) * r;
-            out.amp[q] = gamma[q] * luv * r;
+            t.gamma[q] = 0.5 * (puv * lv) * r;
+            t.front[q] = 0.5 * (puv * lu) * r;
+            out.amp[q] = gamma * luv * r;
         }
+    }
+
+    /// The pixel weights of a placed chunk ([`Self::chunk_place`]) along both axes, voxel-major
+    /// or with `LANES` pixel-major.
+    #[inline(always)]
+    fn chunk_weights<const N: usize, const LANES: bool>(t: &ChunkTrapezoids, out: &mut Chunk<N>) {
+        let (off_u, off_v, inv_u, inv_v) = (&t.u, &t.v, &t.gamma, &t.front);
         if LANES {
-            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, N, |q, k, w| out.wu_lanes[k][q] = w);
-            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, N, |q, k, w| out.wv_lanes[k][q] = w);
+            axis_weights_chunk::<N>(off_u, &t.pu, &t.lu, inv_u, N, |q, k, w| out.wu_lanes[k][q] = w);
+            axis_weights_chunk::<N>(off_v, &t.pv, &t.lv, inv_v, N, |q, k, w| out.wv_lanes[k][q] = w);
         } else {
-            axis_weights_chunk::<N>(&off_u, &pu, &lu, &inv_u, N, |q, k, w| out.wu[q][k] = w);
-            axis_weights_chunk::<N>(&off_v, &pv, &lv, &inv_v, N, |q, k, w| out.wv[q][k] = w);
+            axis_weights_chunk::<N>(off_u, &t.pu, &t.lu, inv_u, N, |q, k, w| out.wu[q][k] = w);
+            axis_weights_chunk::<N>(off_v, &t.pv, &t.lv, inv_v, N, |q, k, w| out.wv[q][k] = w);
         }
     }
 
@@ -1048,19 +1133,23 @@ impl FootprintProjector {
         let (pw, ph) = fv.padded();
         let nr = fv.rows;
         let [nx, ny, _] = self.grid.dims;
-        let mut ch = Chunk::<N>::default();
+        let mut chunks = vec![Chunk::<N>::default(); nx.div_ceil(CHUNK)];
+        let mut starts = Vec::with_capacity(chunks.len());
+        let mut scratch = Vec::with_capacity(chunks.len());
         for k in ks {
             for j in 0..ny {
                 let (base, step) = fv.row_start(&self.gf, j, k);
                 let row0 = (k * ny + j) * nx;
-                for i0 in (0..nx).step_by(CHUNK) {
+                // Empty voxels add nothing: a chunk of them needs no footprints. Flows leave
+                // most of a box dark, so this is most of the work of a projection there.
+                starts.clear();
+                starts.extend(
+                    (0..nx).step_by(CHUNK).filter(|&i0| x[row0 + i0..][..CHUNK.min(nx - i0)].iter().any(|&g| g != 0.0)),
+                );
+                let chunks = &mut chunks[..starts.len()];
+                fv.row_chunks::<N, DISTORTED, LANES>(base, step, &starts, &mut scratch, chunks);
+                for (&i0, ch) in starts.iter().zip(chunks.iter()) {
                     let valid = CHUNK.min(nx - i0);
-                    // Empty voxels add nothing: a chunk of them needs no footprints. Flows leave
-                    // most of a box dark, so this is most of the work of a projection there.
-                    if x[row0 + i0..][..valid].iter().all(|&g| g == 0.0) {
-                        continue;
-                    }
-                    fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
                     if LANES {
                         // Each voxel's start pixel and weighted value, vectorised across the chunk;
                         // misses and empty voxels get a zero value and are skipped.
