@@ -215,3 +215,74 @@ fn trained_fields_render_exactly_or_baked() {
     let nrmse = (se / ss).sqrt();
     assert!(ss > 0.0 && nrmse < 0.02, "baked vs exact NRMSE {nrmse}");
 }
+
+fn nrmse(x: &[f32], reference: &[f32]) -> f64 {
+    let (mut se, mut ss) = (0.0f64, 0.0f64);
+    for (a, b) in x.iter().zip(reference) {
+        se += ((a - b) as f64).powi(2);
+        ss += (*b as f64).powi(2);
+    }
+    assert!(ss > 0.0, "an empty reference");
+    (se / ss).sqrt()
+}
+
+/// `--projector footprint` renders a volume with the footprint projector exactly as the
+/// classical methods project it, close to the ray renderer's images with many rays per pixel;
+/// a trained field is sampled on twice its finest level first; options that only apply to
+/// rays, and `--bake off`, are refused.
+#[test]
+fn footprint_renders_match_the_projector_and_the_ray_renderer() {
+    use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, vol) = make_scene(dir.path());
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let render = |recon: &Path, name: &str, extra: &[&str]| -> Output {
+        let out = dir.path().join(name);
+        let args = ["render", &d(recon), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff"];
+        fluidnerf(&args.iter().copied().chain(extra.iter().copied()).collect::<Vec<_>>())
+    };
+    let read = |name: &str, c: usize| {
+        fluidnerf_io::image::read_image(&dir.path().join(name).join(format!("view_{c:03}.tif"))).expect("reads").data
+    };
+    let cameras: Vec<Camera> = scene.frames.iter().map(|f| f.camera.clone()).collect();
+
+    ok(&render(&dir.path().join("recon.npy"), "fp", &["--projector", "footprint"]));
+    let p = FootprintProjector::new(Grid::new(vol.dims, vol.aabb), &cameras, SCALE).expect("projector");
+    for (c, camera) in cameras.iter().enumerate() {
+        let mut want = vec![0f32; camera.width() * camera.height()];
+        p.forward(c, &vol.data, &mut want);
+        assert_eq!(read("fp", c), want, "camera {c}: the projector's image");
+        let s = RenderSettings { scale: SCALE, supersample: 4, ..Default::default() };
+        let rays = render_image(&vol, camera, &scene.aabb, &s).expect("renders");
+        let e = nrmse(&want, &rays.data);
+        assert!(e < 0.02, "camera {c}: footprint against 4 × 4 rays per pixel, NRMSE {e}");
+    }
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("fp/render.json")).expect("settings"))
+            .expect("JSON");
+    assert_eq!(settings["projector"], "footprint");
+
+    let run = dir.path().join("run");
+    write_trained(&run, scene.aabb);
+    ok(&render(&run, "fp-field", &["--projector", "footprint"]));
+    ok(&render(&run, "rays-field", &["--bake", "off", "--supersample", "4"]));
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("fp-field/render.json")).expect("settings"))
+            .expect("JSON");
+    assert_eq!(settings["baked"], serde_json::json!([32, 32, 32]), "twice the finest level (16)");
+    for c in 0..3 {
+        let e = nrmse(&read("fp-field", c), &read("rays-field", c));
+        assert!(e < 0.015, "camera {c}: the field's footprint render against 4 × 4 exact rays, NRMSE {e}");
+    }
+
+    for (extra, says) in [
+        (&["--projector", "footprint", "--supersample", "2"][..], "--supersample"),
+        (&["--projector", "footprint", "--step", "0.1"][..], "--step"),
+        (&["--projector", "footprint", "--bake", "off"][..], "--bake"),
+    ] {
+        let o = render(&run, "refused", extra);
+        assert!(!o.status.success(), "{extra:?} should be refused");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(says), "{extra:?}: {err}");
+    }
+}
