@@ -145,10 +145,39 @@ pub(crate) fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + fast_exp(-x))
 }
 
-/// Softplus `ln(1 + e^x)`, computed stably as `max(x, 0) + ln(1 + e^{−|x|})`.
+/// Softplus `ln(1 + e^x)`, computed stably as `max(x, 0) + ln(1 + e^{−|x|})`, in branch-free
+/// arithmetic that vectorises (libm's `expf` and `log1pf` do not): [`fast_exp`], then
+/// `ln(1 + y) = 2 atanh(s)` with `s = y / (2 + y) ∈ [0, 1/3]`, whose odd series to `s¹⁵`
+/// leaves a relative error under 2e-9, small arguments included. Within 4e-7 of the exact
+/// value relative (tested).
 #[inline(always)]
 pub(crate) fn softplus(x: f32) -> f32 {
-    x.max(0.0) + (-x.abs()).exp().ln_1p()
+    let y = fast_exp(-x.abs());
+    let s = y / (2.0 + y);
+    let q = s * s;
+    let series = 1.0
+        + q * (1.0 / 3.0
+            + q * (1.0 / 5.0
+                + q * (1.0 / 7.0 + q * (1.0 / 9.0 + q * (1.0 / 11.0 + q * (1.0 / 13.0 + q * (1.0 / 15.0)))))));
+    x.max(0.0) + 2.0 * s * series
+}
+
+multiversion! {
+    /// `z = softplus(z)` in place.
+    fn softplus_inplace(z: &mut [f32]) {
+        for v in z.iter_mut() {
+            *v = softplus(*v);
+        }
+    }
+}
+
+multiversion! {
+    /// `out = softplus(z)` elementwise.
+    fn softplus_into(z: &[f32], out: &mut [f32]) {
+        for (o, &v) in out.iter_mut().zip(z) {
+            *o = softplus(v);
+        }
+    }
 }
 
 /// The `x` with `softplus(x) = e` (> 0), computed without overflow.
@@ -277,6 +306,29 @@ multiversion! {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn softplus_is_accurate() {
+        let mut worst = 0.0f64;
+        let mut x = -60.0f32;
+        while x < 60.0 {
+            let xd = x as f64;
+            let want = xd.max(0.0) + (-xd.abs()).exp().ln_1p();
+            let got = softplus(x) as f64;
+            worst = worst.max(((got - want) / want).abs());
+            x += 0.001_3;
+        }
+        assert!(worst < 4e-7, "softplus relative error {worst}");
+        // The dispatched kernel (AVX-512 or AVX2 where the CPU has them) gives the bits of the
+        // baseline scalar function: results do not depend on the CPU.
+        let z: Vec<f32> = (0..20_000).map(|i| (i as f32 - 10_000.0) * 0.004_7).collect();
+        let mut out = vec![0f32; z.len()];
+        softplus_into(&z, &mut out);
+        assert!(z.iter().zip(&out).all(|(&a, &b)| b.to_bits() == softplus(a).to_bits()));
+        softplus_inplace(&mut out);
+        assert!(z.iter().zip(&out).all(|(&a, &b)| b.to_bits() == softplus(softplus(a)).to_bits()));
+        assert!((softplus(0.0) - std::f32::consts::LN_2).abs() < 1e-7);
+    }
 
     #[test]
     fn fast_exp_is_accurate() {

@@ -323,11 +323,7 @@ impl Mlp {
                     *o = z.max(0.0);
                 }
             }
-            OutputActivation::Softplus => {
-                for (o, &z) in out.iter_mut().zip(pre_out.iter()) {
-                    *o = kernels::softplus(z);
-                }
-            }
+            OutputActivation::Softplus => kernels::softplus_into(pre_out, out),
         }
     }
 
@@ -362,7 +358,7 @@ impl Mlp {
         kernels::rows_dot(prev, &params[self.out_weight.clone()], params[self.out_bias], out);
         match self.output_activation {
             OutputActivation::Relu => out.iter_mut().for_each(|o| *o = o.max(0.0)),
-            OutputActivation::Softplus => out.iter_mut().for_each(|o| *o = kernels::softplus(*o)),
+            OutputActivation::Softplus => kernels::softplus_inplace(out),
         }
     }
 
