@@ -65,6 +65,9 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     let vol = fluidnerf_io::volume::read_npy(&run.join("frames/volume_002.npy"), scene.aabb).expect("npy");
     let again = fluidnerf_core::Volume::from_field(vol.dims, vol.aabb, &field, 15.0);
     assert_eq!(vol.data, again.data);
+    // Its finest detail is its windows' finest grid level: what a bake must resolve.
+    let finest = config["method"]["field"]["hash-grid"]["max_resolution"].as_u64().expect("max_resolution") as usize;
+    assert_eq!(fluidnerf_core::ScalarField::detail_dims(&field), Some([finest; 3]));
 
     // Results are not overwritten without --force.
     let refused = fluidnerf(d, &args);
@@ -100,6 +103,12 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     let written = fluidnerf_io::volume::read_npy(&run.join("frames/volume_002.npy"), vol_box(d)).expect("npy");
     assert_eq!(exported.data, written.data, "export at t = 15 is the run's frame at 15");
     ok(&fluidnerf(d, &["render", "fast", "--scene", "scene", "--out", "ren", "--time", "15", "-q"]));
+    // The footprint projector samples the stitched field on twice its finest level first.
+    ok(&fluidnerf(
+        d,
+        &["render", "fast", "--scene", "scene", "--out", "ren-fp", "--time", "15", "--projector", "footprint", "-q"],
+    ));
+    assert_eq!(json(&d.join("ren-fp/render.json"))["baked"], serde_json::json!([2 * finest, 2 * finest, 2 * finest]));
     // compare takes it too: its curve is one point, the mean NRMSE over the trained times.
     ok(&fluidnerf(d, &["compare", "fast", "-o", "cmp", "-q"]));
     let c = json(&d.join("cmp/compare.json"));

@@ -716,6 +716,14 @@ impl ScalarField for StitchedField {
             }
         }
     }
+    /// The finest detail of any window (windows share their configuration, so their grids
+    /// agree): what a bake of the stitched field must resolve.
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        self.fields.iter().try_fold([0usize; 3], |acc, f| {
+            let d = f.detail_dims()?;
+            Some([0, 1, 2].map(|a| acc[a].max(d[a])))
+        })
+    }
 }
 
 /// One window of `temporal.json`.

@@ -67,7 +67,8 @@ pub struct Args {
     /// classical methods, each voxel a box integrated exactly over each pixel's area; a
     /// trained field is first sampled on a grid (`--bake`), at its finest level's resolution
     /// by default. It costs voxels × views rather than rays × samples, so it is many times
-    /// faster for large images and orbits (`docs/performance.md`).
+    /// faster for large images and orbits; where pixels are wider than the field's detail it is
+    /// also closer to what a camera records than one ray per pixel (`docs/performance.md`).
     #[arg(long, value_enum, default_value = "rays")]
     pub projector: RenderProjector,
     /// Rays per pixel along each image axis (anti-aliasing; `--projector rays` only).
