@@ -229,7 +229,8 @@ fn nrmse(x: &[f32], reference: &[f32]) -> f64 {
 /// `--projector footprint` renders a volume with the footprint projector exactly as the
 /// classical methods project it, close to the ray renderer's images with many rays per pixel;
 /// a trained field is sampled on twice its finest level first; options that only apply to
-/// rays, and `--bake off`, are refused.
+/// rays, `--bake off`, and voxels too wide for the projector are refused before anything is
+/// written.
 #[test]
 fn footprint_renders_match_the_projector_and_the_ray_renderer() {
     use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
@@ -279,10 +280,12 @@ fn footprint_renders_match_the_projector_and_the_ray_renderer() {
         (&["--projector", "footprint", "--supersample", "2"][..], "--supersample"),
         (&["--projector", "footprint", "--step", "0.1"][..], "--step"),
         (&["--projector", "footprint", "--bake", "off"][..], "--bake"),
+        (&["--projector", "footprint", "--orbit", "2", "--width", "4000"][..], "63 pixels"),
     ] {
         let o = render(&run, "refused", extra);
         assert!(!o.status.success(), "{extra:?} should be refused");
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(says), "{extra:?}: {err}");
     }
+    assert!(!dir.path().join("refused").exists(), "refused before anything is written");
 }

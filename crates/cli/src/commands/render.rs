@@ -245,8 +245,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let source = load_source(&args.recon, Some(&scene))?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-
     let footprint = args.projector == RenderProjector::Footprint;
     let step = args.step.or(match &source {
         Source::Volume(v) if !footprint => Some(0.5 * v.spacing().min_element()),
@@ -285,13 +283,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             (busiest * ss * ss) as f64 * samples_per_ray >= 2.0 * dims.iter().map(|n| n + 1).product::<usize>() as f64
         }),
     };
+    // The footprint projector, from the grid it will project (checked before anything is
+    // written: voxels may image too wide for it).
+    let projector = match (footprint, &source, bake_dims) {
+        (false, ..) => None,
+        (true, Source::Volume(volume), _) => Some(Grid::new(volume.dims, volume.aabb)),
+        (true, Source::Field { .. }, dims) => {
+            Some(Grid::new(dims.expect("footprint renders of a field have a bake grid"), scene.aabb))
+        }
+    }
+    .map(|grid| {
+        let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
+        FootprintProjector::new(grid, &cameras, scene.intensity_scale)
+            .context("--projector footprint (--projector rays renders any voxel size)")
+    })
+    .transpose()?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
     let mut baked: Option<(f64, Baked)> = None;
     // With the footprint projector a field is sampled at the cell centres of a grid filling
     // the box (each voxel a box of the field's value), built once for all views.
     let mut sampled: Option<(f64, Volume)> = None;
-    let mut projector: Option<FootprintProjector> = None;
     for (i, v) in views.iter().enumerate() {
         if crate::interrupt::requested() {
             bail!("interrupted");
@@ -307,16 +320,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     &sampled.as_ref().expect("sampled just above").1
                 }
             };
-            if projector.is_none() {
-                let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
-                let grid = Grid::new(volume.dims, volume.aabb);
-                projector = Some(
-                    FootprintProjector::new(grid, &cameras, scene.intensity_scale)
-                        .context("--projector footprint (--projector rays renders any voxel size)")?,
-                );
-            }
             let mut img = Image::zeros(v.camera.width(), v.camera.height());
-            projector.as_ref().expect("built just above").forward(i, &volume.data, &mut img.data);
+            projector.as_ref().expect("built for footprint renders").forward(i, &volume.data, &mut img.data);
             img
         } else {
             let settings = RenderSettings { supersample: ss, time: v.time, scale: scene.intensity_scale, step };
