@@ -28,8 +28,9 @@ pub enum ImageFormat {
 ///
 /// Pixel values are `intensity_scale × ∫E ds` along each pixel's ray through the box, the same
 /// model the reconstruction was fitted to, so a scene camera's rendering compares directly with
-/// its image; with `--projector footprint`, that integral over each pixel's area. Views of scene cameras go to `view_<index>.<ext>`, orbit views to
-/// `orbit_<k>.<ext>` plus `turntable.gif`. Writes `render.json` with the resolved settings.
+/// its image; with `--projector footprint`, that integral over each pixel's area. Views of
+/// scene cameras go to `view_<index>.<ext>`, orbit views to `orbit_<k>.<ext>` plus
+/// `turntable.gif`. Writes `render.json` with the resolved settings.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, `.raw`) or a
@@ -65,7 +66,7 @@ pub struct Args {
     /// centre (or `--supersample` rays), with the volume read trilinearly, the model the
     /// neural fields are trained with. `footprint`: the separable-footprint projector of the
     /// classical methods, each voxel a box integrated exactly over each pixel's area; a
-    /// trained field is first sampled on a grid (`--bake`), at its finest level's resolution
+    /// trained field is first sampled on a grid (`--bake`), twice as fine as its finest level
     /// by default. It costs voxels × views rather than rays × samples, so it is many times
     /// faster for large images and orbits; where pixels are wider than the field's detail it is
     /// also closer to what a camera records than one ray per pixel (`docs/performance.md`).
