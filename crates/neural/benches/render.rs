@@ -13,13 +13,13 @@
 //!   footprint`), which integrates each pixel's area; its NRMSE against `exact` and against
 //!   exact rendering with 2 × 2 rays per pixel (a closer model of a pixel's area).
 //!
-//! Then one view of 480 × 270 px at 2 × 2 rays per pixel with the full hull (518 400 rays; a
-//! real camera's frame, and the case where rendering a field was slowest), against the
-//! footprint renders of the same view.
-//!
 //! Each for a jet-like hull (a cone along x, 18 % of the box) and for a full box. The weights
 //! are random (a rougher field than a trained one: the bake errors here are upper bounds; for
 //! a trained field see docs/performance.md). Best of 3 runs (1 with `--quick`).
+//!
+//! Then one view of 480 × 270 px at 2 × 2 rays per pixel with the full hull (518 400 rays; a
+//! real camera's frame, and the case where rendering a field was slowest), against the
+//! footprint renders of the same view.
 //!
 //!   cargo bench -p fluidnerf-neural --bench render [-- --quick]
 #![allow(clippy::print_stdout)]
