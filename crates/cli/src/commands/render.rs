@@ -260,29 +260,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         (_, Bake::Off) => None,
         (Source::Field { .. }, Bake::Cells(n)) => Some(Volume::dims_for(&scene.aabb, n)),
-        (Source::Field { .. }, Bake::Auto) if footprint => match source.field().detail_dims() {
-            Some(dims) => Some(dims.map(|n| 2 * n)),
-            None => bail!(
-                "{}: this field has no grid of its own to bake on; with --projector footprint give --bake N \
-                 (cells along the box's longest side)",
-                args.recon.display()
-            ),
-        },
-        (Source::Field { .. }, Bake::Auto) => source.field().detail_dims().map(|d| d.map(|n| 2 * n)).filter(|dims| {
-            let samples_per_ray = scene.aabb.size().length() / step.unwrap_or(scene.aabb.size().min_element() / 256.0);
-            let busiest = views
-                .iter()
-                .map(|v| {
-                    views
+        (Source::Field { .. }, Bake::Auto) => {
+            let doubled = source.field().detail_dims().map(|d| d.map(|n| 2 * n));
+            match doubled {
+                None if footprint => bail!(
+                    "{}: this field has no grid of its own to bake on; with --projector footprint give --bake N \
+                     (cells along the box's longest side)",
+                    args.recon.display()
+                ),
+                _ if footprint => doubled,
+                _ => doubled.filter(|dims| {
+                    let samples_per_ray =
+                        scene.aabb.size().length() / step.unwrap_or(scene.aabb.size().min_element() / 256.0);
+                    let busiest = views
                         .iter()
-                        .filter(|o| o.time == v.time)
-                        .map(|o| o.camera.width() * o.camera.height())
-                        .sum::<usize>()
-                })
-                .max()
-                .unwrap_or(0);
-            (busiest * ss * ss) as f64 * samples_per_ray >= 2.0 * dims.iter().map(|n| n + 1).product::<usize>() as f64
-        }),
+                        .map(|v| {
+                            views
+                                .iter()
+                                .filter(|o| o.time == v.time)
+                                .map(|o| o.camera.width() * o.camera.height())
+                                .sum::<usize>()
+                        })
+                        .max()
+                        .unwrap_or(0);
+                    (busiest * ss * ss) as f64 * samples_per_ray
+                        >= 2.0 * dims.iter().map(|n| n + 1).product::<usize>() as f64
+                }),
+            }
+        }
     };
     // The footprint projector, from the grid it will project (checked before anything is
     // written: voxels may image too wide for it).
@@ -303,26 +308,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
     let mut baked: Option<(f64, Baked)> = None;
-    // With the footprint projector a field is sampled at the cell centres of a grid filling
-    // the box (each voxel a box of the field's value), built once for all views.
+    // With the footprint projector a field is sampled at the cell centres of the projector's
+    // grid (each voxel a box of the field's value), once per distinct time.
     let mut sampled: Option<(f64, Volume)> = None;
     for (i, v) in views.iter().enumerate() {
         if crate::interrupt::requested() {
             bail!("interrupted");
         }
         let img = if footprint {
-            let volume = match (&source, bake_dims) {
-                (Source::Volume(volume), _) => volume,
-                (Source::Field { .. }, dims) => {
-                    let dims = dims.expect("footprint renders of a field have a bake grid");
+            let p = projector.as_ref().expect("built for footprint renders");
+            let volume = match &source {
+                Source::Volume(volume) => volume,
+                Source::Field { .. } => {
                     if sampled.as_ref().is_none_or(|(t, _)| *t != v.time) {
-                        sampled = Some((v.time, Volume::from_field(dims, scene.aabb, source.field(), v.time)));
+                        let g = p.grid();
+                        sampled = Some((v.time, Volume::from_field(g.dims, g.aabb, source.field(), v.time)));
                     }
                     &sampled.as_ref().expect("sampled just above").1
                 }
             };
             let mut img = Image::zeros(v.camera.width(), v.camera.height());
-            projector.as_ref().expect("built for footprint renders").forward(i, &volume.data, &mut img.data);
+            p.forward(i, &volume.data, &mut img.data);
             img
         } else {
             let settings = RenderSettings { supersample: ss, time: v.time, scale: scene.intensity_scale, step };
