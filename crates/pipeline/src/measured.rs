@@ -126,9 +126,11 @@ fn used_sum(data: &[f32], mask: Option<&[bool]>) -> f64 {
 }
 
 /// The gain (and, with `offset`, the offset) minimising `Σ (p − g r − b)²` over the used
-/// pixels; None when the model image is (nearly) dark or the fit is not a positive gain.
+/// pixels; None when the model image is (nearly) dark or the fit is not a positive gain. Nearly
+/// dark is below a millionth of the measured image's RMS: a field that renders 10⁻²⁰ everywhere
+/// would otherwise "fit" with a gain of 10²⁰.
 pub(crate) fn fit_gain(p: &[f32], r: &[f32], mask: Option<&[bool]>, offset: bool) -> Option<(f64, f64)> {
-    let (mut n, mut sr, mut sp, mut srr, mut srp) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+    let (mut n, mut sr, mut sp, mut srr, mut srp, mut spp) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
     for (k, (&pv, &rv)) in p.iter().zip(r).enumerate() {
         if mask.is_some_and(|m| !m[k]) {
             continue;
@@ -139,6 +141,10 @@ pub(crate) fn fit_gain(p: &[f32], r: &[f32], mask: Option<&[bool]>, offset: bool
         sp += pv;
         srr += rv * rv;
         srp += rv * pv;
+        spp += pv * pv;
+    }
+    if srr.is_nan() || srr <= 1e-12 * spp {
+        return None;
     }
     let (g, b) = if offset {
         let det = n * srr - sr * sr;
@@ -268,6 +274,12 @@ mod tests {
         let (gm, _) = fit_gain(&q, &r, Some(&mask), false).expect("fit");
         assert!((gm - 0.7).abs() < 1e-6);
         assert!(fit_gain(&p, &[0.0; 50], None, false).is_none());
+        // A rendering far too dark to carry a signal fits no gain, and the held-out score
+        // after "fitting" is the raw one.
+        let dark: Vec<f32> = r.iter().map(|&v| 1e-20 * v).collect();
+        assert!(fit_gain(&p, &dark, None, false).is_none() && fit_gain(&p, &dark, None, true).is_none());
+        let s = holdout_score(&p, &dark, None);
+        assert!(s.fitted_gain == 1.0 && s.nrmse_fitted == s.nrmse_raw && s.nrmse_raw > 0.99, "{s:?}");
         let s = holdout_score(&p, &r, None);
         assert!(s.nrmse_raw > 0.3 && s.nrmse_fitted < 1e-6 && (s.fitted_gain - 0.7).abs() < 1e-6, "{s:?}");
         let mut gains = vec![(2.0, 0.0), (4.0, 1.0)];
