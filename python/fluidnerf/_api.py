@@ -16,6 +16,11 @@ import numpy as np
 from . import _fluidnerf as _ext
 from ._fluidnerf import FluidNerfError, Scene
 
+#: The method of a run given neither a method nor a configuration, as ``fluidnerf
+#: reconstruct`` without ``--method``: a voxel reconstruction first, then the grid field
+#: started from it, the most accurate method in every comparison of ``docs/claims.md``.
+DEFAULT_METHOD = "hybrid"
+
 PathLike = Union[str, "os.PathLike[str]"]
 Callback = Callable[[dict], Optional[bool]]
 
@@ -164,7 +169,8 @@ def build_config(
     """The run configuration (``config.json``'s content, a ``RunConfig``) of a run.
 
     It starts from ``config`` (a dict or a ``config.json`` path, as ``--config``) or from the
-    defaults of ``method`` (with ``preset`` for neural methods); ``method`` may also be a dict
+    defaults of ``method`` (with ``preset`` for neural methods; ``None``: the configuration's
+    method, else :data:`DEFAULT_METHOD`, ``"hybrid"``); ``method`` may also be a dict
     such as ``{"name": "asart", "params": {"relaxation": 0.3}}``, merged into the method's
     defaults. Every other keyword is a ``RunConfig`` key (``resolution``, ``seed``,
     ``stopping``, ``checkpoint_every``, ``eval_every``, ``memory_limit_gib``); dicts are merged
@@ -195,11 +201,13 @@ def build_config(
                 f"the configuration was written for method {written}; to run method {name}, leave out config"
             )
         if preset is not None:
-            fresh = json.loads(_ext.default_config(str(root or ""), written or name or "fast", preset))
+            fresh = json.loads(
+                _ext.default_config(str(root or ""), written or name or DEFAULT_METHOD, preset)
+            )
             kept = {k: v for k, v in base["method"].items() if k in ("holdout_times", "time_step")}
             base["method"] = _merge(fresh["method"], kept)
     else:
-        base = json.loads(_ext.default_config(str(root or ""), name or "fast", preset))
+        base = json.loads(_ext.default_config(str(root or ""), name or DEFAULT_METHOD, preset))
     if root is not None:
         base["scene"] = str(Path(root).absolute())
     if method_patch:
@@ -360,7 +368,7 @@ def _progress_callback(callback: Callback | None, progress: bool | None) -> tupl
 
 def reconstruct(
     scene: Scene | PathLike,
-    method: str | dict | None = "fast",
+    method: str | dict | None = None,
     out: PathLike | None = None,
     *,
     config: dict | PathLike | None = None,
@@ -372,6 +380,8 @@ def reconstruct(
 ) -> Run:
     """Reconstructs ``scene`` with ``method`` into the run folder ``out`` through the library
     pipeline (``fluidnerf_pipeline::reconstruct``), exactly as ``fluidnerf reconstruct`` does.
+    ``method`` None runs the method of ``config``, or without one :data:`DEFAULT_METHOD`
+    (``"hybrid"``), as the command line does without ``--method``.
 
     ``options`` are ``RunConfig`` keys (see :func:`build_config`), e.g.
     ``reconstruct(scene, "asart", "run", resolution=64, stopping={"rule": "held-out"})``.

@@ -79,6 +79,20 @@ def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
     np.testing.assert_allclose(run.field(c).reshape(run.volume.shape), run.volume, rtol=1e-5, atol=1e-7)
 
 
+def test_a_saved_configuration_reruns_its_own_method(static_scene, tmp_path):
+    first = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "a", resolution=8, stopping={"max_iterations": 2}, progress=False
+    )
+    # No method given: the configuration's, not the default's.
+    again = fluidnerf.reconstruct(
+        static_scene, config=first.path / "config.json", out=tmp_path / "b", progress=False
+    )
+    assert again.report["method"] == "asart"
+    np.testing.assert_array_equal(again.volume, first.volume)
+    # Neither given: the default method, as on the command line.
+    assert fluidnerf.build_config(static_scene)["method"]["name"] == "hybrid"
+
+
 def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene, cli, tmp_path):
     with pytest.raises(fluidnerf.FluidNerfError) as e:
         fluidnerf.reconstruct(static_scene, "asart", tmp_path / "a", resolution=1)

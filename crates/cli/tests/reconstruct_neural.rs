@@ -175,8 +175,9 @@ fn voxel_baseline_recovers_blobs() {
     );
 }
 
-/// `--method hybrid` runs a voxel method into `start/` of its folder (ASART on these clean
-/// images, SART-TV on noisy ones), fits the field to that volume and trains on from there:
+/// `--method hybrid`, the default method, runs a voxel method into `start/` of its folder
+/// (ASART on these clean images, SART-TV on noisy ones), fits the field to that volume and
+/// trains on from there:
 /// after a few iterations the field is about as accurate as that volume, where the field
 /// started from a uniform value is not. `--start-from` does the same from a run given by the
 /// user, and only static neural methods take it.
@@ -186,7 +187,8 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     let d = tmp.path();
     demo_scene(d, "blobs", 8, 32, 16, &[]);
     let run = |args: &str| ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
-    run("reconstruct scene -o h --method hybrid --resolution 16 --max-iterations 30 -q");
+    // No --method: the default, hybrid.
+    run("reconstruct scene -o h --resolution 16 --max-iterations 30 -q");
     let start = report(&d.join("h/start"));
     assert_eq!(start["method"], "asart");
     // The voxel run keeps its own cap and rule: the field's cap is not its.

@@ -111,7 +111,9 @@ pub struct Args {
     /// Output directory; created if missing. One that holds a run needs --force (or --resume).
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Reconstruction method [default: fast, or the --config's].
+    /// Reconstruction method [default: hybrid, or the --config's]. `hybrid` was the most accurate
+    /// method in every comparison measured (docs/claims.md); `fast` alone trains the field from
+    /// a uniform start.
     #[arg(short, long, value_enum)]
     pub method: Option<MethodArg>,
     /// Voxels along the longest side of the reconstruction box for the output volume (and the
@@ -483,7 +485,7 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         }
         None => {
             let scene = args.scene.clone().context("a scene (or --config) is needed")?;
-            RunConfig::new(scene, args.method.map_or(Method::Fast, |m| m.0))
+            RunConfig::new(scene, args.method.map_or(Method::Hybrid, |m| m.0))
         }
     };
     let method = cfg.method();
