@@ -253,6 +253,35 @@ fn rows_reproduce_the_forward_projection() {
     }
 }
 
+/// The footprint projector's rows are built in parallel, each thread over a range of
+/// z-slices: they are the same, entry for entry and in the same order (voxel order within a
+/// row), whatever the number of threads and the instruction set, for undistorted views (rows
+/// shared along an image axis) and distorted ones.
+#[test]
+fn footprint_rows_do_not_depend_on_threads_or_instruction_set() {
+    let grid = Grid::new([13, 11, 9], aabb());
+    for cams in [ring(2, 30), distorted_ring(2, 30)] {
+        let reference = FootprintProjector::new(grid, &cams, 1.5).expect("valid").with_isa(Isa::Baseline);
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+        let want: Vec<_> = one.install(|| (0..2).map(|v| reference.rows(v)).collect());
+        assert!(want.iter().all(|r| r.vals.len() > grid.len()), "too few entries to test");
+        for isa in Isa::available() {
+            let p = FootprintProjector::new(grid, &cams, 1.5).expect("valid").with_isa(isa);
+            for threads in [1, 2, 3, 5] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+                for (v, want) in want.iter().enumerate() {
+                    let got = pool.install(|| p.rows(v));
+                    assert_eq!(got.ptr, want.ptr, "{isa:?}, {threads} threads, view {v}: row starts");
+                    assert_eq!(got.cols, want.cols, "{isa:?}, {threads} threads, view {v}: voxels");
+                    let bits =
+                        |r: &fluidnerf_classical::SparseRows| r.vals.iter().map(|w| w.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(want), "{isa:?}, {threads} threads, view {v}: weights");
+                }
+            }
+        }
+    }
+}
+
 /// Forward projection of a smooth volume = the renderer's image of that volume (same imaging
 /// law and scale): total intensity within 0.5 %, and pixel by pixel within 5 % relative L2 for
 /// the splat (its 2 × 2 bilinear footprint blurs by about a pixel; measured 2.5–3.7 %) and

@@ -1124,23 +1124,6 @@ impl FootprintProjector {
         }
     }
 
-    /// Visits every voxel of the grid whose footprint square touches the padded image of view
-    /// `view`: `visit(voxel index, chunk, entry)`.
-    #[inline(always)]
-    fn for_each_voxel<const N: usize, const DISTORTED: bool>(
-        &self,
-        view: usize,
-        mut visit: impl FnMut(usize, &Chunk<N>, usize),
-    ) {
-        self.for_each_chunk::<N, DISTORTED, false>(view, 0..self.grid.dims[2], |ch, first, valid| {
-            for q in 0..valid {
-                if ch.col[q] >= 0.0 {
-                    visit(first + q, ch, q);
-                }
-            }
-        });
-    }
-
     /// Forward kernel: accumulates `A_v x` of slices `ks` into the [`SCATTER_IMAGES`] padded
     /// images `img`. It keeps its own loops rather than [`Self::for_each_chunk`]'s: with the
     /// per-chunk work in a closure the AVX-512 forward projection ran 16 % slower.
@@ -1780,44 +1763,95 @@ impl FootprintProjector {
         }
     }
 
-    /// The rows of `A_v` (see [`Projector::rows`]).
+    /// The rows of `A_v` (see [`Projector::rows`]), built in parallel: each thread takes a
+    /// contiguous range of z-slices, counts its entries per pixel, and after the counts are
+    /// laid out (pixel by pixel, the threads' ranges in slice order) writes them into its own
+    /// slots. The entries of a row come in voxel order, as one pass over the grid would give.
     fn rows_impl<const N: usize, const DISTORTED: bool>(&self, view: usize) -> SparseRows {
         let fv = &self.views[view];
-        let (w, h) = (fv.width, fv.height);
-        // (pixel, weight) of every in-image footprint pixel with a positive weight.
-        let visit_pixels = |ch: &Chunk<N>, q: usize, emit: &mut dyn FnMut(usize, f32)| {
-            let Some((col, row, amp)) = ch.get(q) else { return };
-            let (wu, wv) = ch.weights(q);
-            for (r, &wr) in wv[..fv.rows].iter().enumerate() {
-                let Some(pr) = (row + r).checked_sub(N).filter(|&pr| pr < h) else { continue };
-                for (c, &wc) in wu.iter().enumerate() {
-                    let wgt = amp * wr * wc;
-                    if let Some(pc) = (col + c).checked_sub(N).filter(|&pc| pc < w && wgt > 0.0) {
-                        emit(pr * w + pc, wgt);
-                    }
-                }
+        let pixels = fv.width * fv.height;
+        let nz = self.grid.dims[2];
+        let parts = rayon::current_num_threads().clamp(1, nz.max(1));
+        let ranges: Vec<Range<usize>> = (0..parts).map(|t| t * nz / parts..(t + 1) * nz / parts).collect();
+        let counts: Vec<Vec<u32>> = ranges
+            .par_iter()
+            .map(|ks| {
+                let mut c = vec![0u32; pixels];
+                kernels::rows_count::<N, DISTORTED>(self, view, ks.clone(), &mut c);
+                c
+            })
+            .collect();
+        // Row `pix` holds part 0's entries, then part 1's, …: `next[t][pix]` is part t's first.
+        let mut ptr = vec![0u64; pixels + 1];
+        let mut next = vec![vec![0u64; pixels]; parts];
+        let mut at = 0u64;
+        for pix in 0..pixels {
+            ptr[pix] = at;
+            for (t, c) in counts.iter().enumerate() {
+                next[t][pix] = at;
+                at += c[pix] as u64;
             }
-        };
-        let mut ptr = vec![0u64; w * h + 1];
-        self.for_each_voxel::<N, DISTORTED>(view, |_, ch, q| visit_pixels(ch, q, &mut |pix, _| ptr[pix + 1] += 1));
-        for i in 0..w * h {
-            ptr[i + 1] += ptr[i];
         }
-        let nnz = ptr[w * h] as usize;
+        ptr[pixels] = at;
+        drop(counts);
+        let nnz = at as usize;
         let mut cols = vec![0u32; nnz];
         let mut vals = vec![0f32; nnz];
-        let mut fill: Vec<u64> = ptr[..w * h].to_vec();
-        self.for_each_voxel::<N, DISTORTED>(view, |idx, ch, q| {
-            visit_pixels(ch, q, &mut |pix, wgt| {
-                let at = fill[pix] as usize;
-                cols[at] = idx as u32;
-                vals[at] = wgt;
-                fill[pix] += 1;
-            })
+        let slots = Slots { cols: cols.as_mut_ptr(), vals: vals.as_mut_ptr(), len: nnz };
+        ranges.par_iter().zip(next.par_iter_mut()).for_each(|(ks, next)| {
+            // SAFETY: part t writes only the slots from `next[t][pix]` on, as many as it
+            // counted for `pix`, which no other part's slots overlap, all below `nnz`; the
+            // pass visits the same entries as the count did (the same code on the same view).
+            unsafe { kernels::rows_fill::<N, DISTORTED>(self, view, ks.clone(), next, slots) };
         });
         SparseRows { ptr, cols, vals }
     }
+
+    /// Hands every entry of the rows of `A_v` that the voxels of slices `ks` give to
+    /// `emit(pixel, voxel, weight)`: every in-image footprint pixel with a positive weight, in
+    /// voxel order.
+    #[inline(always)]
+    fn rows_part<const N: usize, const DISTORTED: bool>(
+        &self,
+        view: usize,
+        ks: Range<usize>,
+        mut emit: impl FnMut(usize, u32, f32),
+    ) {
+        let fv = &self.views[view];
+        let (w, h) = (fv.width, fv.height);
+        let [nx, ny, _] = self.grid.dims;
+        let first_voxel = ks.start * nx * ny;
+        self.for_each_chunk::<N, DISTORTED, false>(view, ks, |ch, first, valid| {
+            for q in 0..valid {
+                let Some((col, row, amp)) = ch.get(q) else { continue };
+                let (wu, wv) = ch.weights(q);
+                let voxel = (first_voxel + first + q) as u32;
+                for (r, &wr) in wv[..fv.rows].iter().enumerate() {
+                    let Some(pr) = (row + r).checked_sub(N).filter(|&pr| pr < h) else { continue };
+                    for (c, &wc) in wu.iter().enumerate() {
+                        let wgt = amp * wr * wc;
+                        if let Some(pc) = (col + c).checked_sub(N).filter(|&pc| pc < w && wgt > 0.0) {
+                            emit(pr * w + pc, voxel, wgt);
+                        }
+                    }
+                }
+            }
+        });
+    }
 }
+
+/// Where [`FootprintProjector::rows_impl`]'s threads write their entries.
+#[derive(Clone, Copy)]
+struct Slots {
+    cols: *mut u32,
+    vals: *mut f32,
+    len: usize,
+}
+
+// SAFETY: the threads that share `Slots` write disjoint slots (see `rows_impl`).
+unsafe impl Send for Slots {}
+// SAFETY: as above.
+unsafe impl Sync for Slots {}
 
 /// Runs `$body` with `N` bound to the view's footprint side and `D` to its distortion flag,
 /// one monomorphised kernel per side (the kernels choose baseline or AVX2 code themselves).
@@ -1979,6 +2013,86 @@ mod kernels {
             }
         }
         p.gather_rows::<N, V>(view, ks, lines, masks, out, col_sums)
+    }
+
+    /// Counts, per pixel, the entries of the rows of `A_v` that slices `ks` give
+    /// ([`FootprintProjector::rows_part`]).
+    pub(super) fn rows_count<const N: usize, const D: bool>(
+        p: &FootprintProjector,
+        view: usize,
+        ks: Range<usize>,
+        counts: &mut [u32],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            variants!(fn(p: &FootprintProjector, view: usize, ks: Range<usize>, counts: &mut [u32]) {
+                p.rows_part::<N, D>(view, ks, |pix, _, _| counts[pix] += 1)
+            });
+            match p.isa {
+                // SAFETY: `p.isa` never exceeds what `Isa::detected` found on this CPU.
+                Isa::Avx512 => return unsafe { avx512::<N, D>(p, view, ks, counts) },
+                // SAFETY: as above.
+                Isa::Avx2 => return unsafe { avx2::<N, D>(p, view, ks, counts) },
+                Isa::Baseline => {}
+            }
+        }
+        p.rows_part::<N, D>(view, ks, |pix, _, _| counts[pix] += 1)
+    }
+
+    /// Writes the entries that slices `ks` give into `slots`, each pixel's from `next[pixel]`
+    /// on (advanced past them).
+    ///
+    /// # Safety
+    /// The slots from `next[pixel]`, as many as slices `ks` give entries to `pixel`
+    /// ([`rows_count`]), lie below `slots.len` and no other thread writes them.
+    pub(super) unsafe fn rows_fill<const N: usize, const D: bool>(
+        p: &FootprintProjector,
+        view: usize,
+        ks: Range<usize>,
+        next: &mut [u64],
+        slots: Slots,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            variants!(fn(p: &FootprintProjector, view: usize, ks: Range<usize>, next: &mut [u64], slots: Slots) {
+                // SAFETY: the caller's contract.
+                unsafe { fill::<N, D>(p, view, ks, next, slots) }
+            });
+            match p.isa {
+                // SAFETY: `p.isa` never exceeds what `Isa::detected` found on this CPU; the
+                // slots as the caller's contract.
+                Isa::Avx512 => return unsafe { avx512::<N, D>(p, view, ks, next, slots) },
+                // SAFETY: as above.
+                Isa::Avx2 => return unsafe { avx2::<N, D>(p, view, ks, next, slots) },
+                Isa::Baseline => {}
+            }
+        }
+        // SAFETY: the caller's contract.
+        unsafe { fill::<N, D>(p, view, ks, next, slots) }
+    }
+
+    /// The body of [`rows_fill`].
+    ///
+    /// # Safety
+    /// As [`rows_fill`].
+    #[inline(always)]
+    unsafe fn fill<const N: usize, const D: bool>(
+        p: &FootprintProjector,
+        view: usize,
+        ks: Range<usize>,
+        next: &mut [u64],
+        slots: Slots,
+    ) {
+        p.rows_part::<N, D>(view, ks, |pix, voxel, wgt| {
+            let at = next[pix] as usize;
+            debug_assert!(at < slots.len);
+            // SAFETY: `at` is one of this thread's slots (the caller's contract).
+            unsafe {
+                *slots.cols.add(at) = voxel;
+                *slots.vals.add(at) = wgt;
+            }
+            next[pix] += 1;
+        })
     }
 
     #[allow(clippy::too_many_arguments)]
