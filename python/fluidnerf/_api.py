@@ -381,7 +381,8 @@ def reconstruct(
     """Reconstructs ``scene`` with ``method`` into the run folder ``out`` through the library
     pipeline (``fluidnerf_pipeline::reconstruct``), exactly as ``fluidnerf reconstruct`` does.
     ``method`` None runs the method of ``config``, or without one :data:`DEFAULT_METHOD`
-    (``"hybrid"``), as the command line does without ``--method``.
+    (``"hybrid"``), as the command line does without ``--method``; with ``overwrite="resume"``
+    and no ``config``, the settings of the run in ``out`` (its ``config.json``) are the base.
 
     ``options`` are ``RunConfig`` keys (see :func:`build_config`), e.g.
     ``reconstruct(scene, "asart", "run", resolution=64, stopping={"rule": "held-out"})``.
@@ -399,6 +400,9 @@ def reconstruct(
     out_path = Path(os.fspath(out)) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
     if scene.root is None:
         scene.save(out_path / "scene", force=overwrite == "force")
+    if overwrite == "resume" and config is None and (out_path / "config.json").is_file():
+        # A resumed run continues with the settings it was started with (as --resume).
+        config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     cb, bars = _progress_callback(callback, progress)
     try:

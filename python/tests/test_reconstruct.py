@@ -91,6 +91,14 @@ def test_a_saved_configuration_reruns_its_own_method(static_scene, tmp_path):
     np.testing.assert_array_equal(again.volume, first.volume)
     # Neither given: the default method, as on the command line.
     assert fluidnerf.build_config(static_scene)["method"]["name"] == "hybrid"
+    # A resumed run continues with its own settings, here to a higher cap.
+    short = dict(FAST, stopping={"rule": "budget", "max_iterations": 5})
+    fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "r", progress=False, **short)
+    more = fluidnerf.reconstruct(
+        static_scene, out=tmp_path / "r", overwrite="resume", stopping={"max_iterations": 8}, progress=False
+    )
+    assert more.report["method"] == "fast" and more.report["iterations"] == 8
+    assert more.config["method"]["train"]["rays_per_image"] == 64
 
 
 def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene, cli, tmp_path):

@@ -175,6 +175,36 @@ fn voxel_baseline_recovers_blobs() {
     );
 }
 
+/// `--resume` continues a run with its own settings (OUT/config.json, options given override
+/// them) and the held-out rule's state: a run stopped at an iteration cap and resumed to a
+/// higher one keeps the same iterate and writes the same volume as a run that went on
+/// uninterrupted. A different method for the run in OUT is refused.
+#[test]
+fn a_resumed_run_keeps_its_settings_and_its_held_out_best() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    // Noisy images, so that the held-out loss turns within a hundred iterations.
+    demo_scene(d, "ball", 6, 32, 24, &["--holdout", "1", "--noise", "0.05"]);
+    let run = |args: &str| ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let common = "--method fast --resolution 16 --rays-per-image 64 --stop held-out --holdout-every 10 \
+                  --patience 4 -q";
+    run(&format!("reconstruct scene -o whole --max-iterations 400 {common}"));
+    let whole = report(&d.join("whole"));
+    let kept = whole["kept_iteration"].as_u64().expect("kept");
+    let cut = kept + 15;
+    assert!(whole["iterations"].as_u64().expect("iterations") > cut, "{whole}");
+    run(&format!("reconstruct scene -o cut --max-iterations {cut} {common}"));
+    // No scene, no method: those of the run in `cut`.
+    run("reconstruct -o cut --resume --max-iterations 400 -q");
+    let resumed = report(&d.join("cut"));
+    assert_eq!(resumed["method"], "fast");
+    assert_eq!(resumed["kept_iteration"], whole["kept_iteration"], "{resumed}");
+    assert_eq!(resumed["iterations"], whole["iterations"], "{resumed}");
+    let volume = |run: &str| std::fs::read(d.join(run).join("volume.npy")).expect("volume");
+    assert!(volume("cut") == volume("whole"), "the resumed run wrote another volume");
+    refused(&fluidnerf(d, &["reconstruct", "-o", "cut", "--resume", "--method", "asart"]), "holds a --method fast run");
+}
+
 /// `--method hybrid`, the default method, runs a voxel method into `start/` of its folder
 /// (ASART on these clean images, SART-TV on noisy ones), fits the field to that volume and
 /// trains on from there:

@@ -276,6 +276,49 @@ fn earlier_report(dir: &RunDir) -> Option<RunReport> {
     }
 }
 
+/// The held-out rule's state when a run is resumed: the best evaluation up to the checkpoint
+/// (from the earlier report's held-out curve), the field kept for it (the earlier run's
+/// `weights.safetensors`, which holds the field of its best evaluation), and the evaluations
+/// since. None, with a warning, when the earlier run did not stop by that rule or its kept
+/// field is not that evaluation's: then the rule starts afresh.
+fn resumed_best<F: TrainableField>(
+    earlier: Option<&RunReport>,
+    dir: &RunDir,
+    learner: &mut Learner<F>,
+    patience: usize,
+) -> Option<BestHoldout<Vec<f32>>> {
+    let r = earlier?;
+    let upto: Vec<&HoldoutPoint> = r.history.holdout.iter().filter(|p| p.iteration <= learner.iteration).collect();
+    let first = upto.first()?;
+    let top = upto.iter().fold(*first, |b, p| if p.loss < b.loss { p } else { b });
+    if r.stopping.rule != StopRule::HeldOut || r.kept_iteration != top.iteration {
+        log::warn!(
+            "the earlier run kept the field of iteration {} and not that of its best held-out loss; the held-out \
+             rule starts afresh from the checkpoint",
+            r.kept_iteration
+        );
+        return None;
+    }
+    let current = learner.field.params().to_vec();
+    let weights = dir.root().join("weights.safetensors");
+    let kept = match fluidnerf_neural::weights::load_weights(&weights, &mut learner.field) {
+        Ok(()) => learner.field.params().to_vec(),
+        Err(e) => {
+            log::warn!("{}: {e}; the held-out rule starts afresh from the checkpoint", weights.display());
+            learner.field.params_mut().copy_from_slice(&current);
+            return None;
+        }
+    };
+    learner.field.params_mut().copy_from_slice(&current);
+    let since = upto.iter().filter(|p| p.iteration > top.iteration).count();
+    log::info!(
+        "resumed held-out rule: best at iteration {} (loss {:.3e}), {since} evaluations since",
+        top.iteration,
+        top.loss
+    );
+    Some(BestHoldout::resumed(patience, top.iteration, top.loss, kept, since))
+}
+
 struct Ctx<'a> {
     scene: &'a Scene,
     config: &'a RunConfig,
@@ -330,7 +373,11 @@ impl Ctx<'_> {
             None => (Vec::new(), Vec::new()),
         };
         let held_out_rule = config.stopping.rule == StopRule::HeldOut;
-        let mut best = BestHoldout::<Vec<f32>>::new(config.stopping.patience);
+        let mut best = match (held_out_rule, dir.resuming()) {
+            (true, true) => resumed_best(self.earlier.as_ref(), dir, &mut learner, config.stopping.patience),
+            _ => None,
+        }
+        .unwrap_or_else(|| BestHoldout::new(config.stopping.patience));
         let mut cause = None;
         let mut ckpt_error = None;
         let mut eval_s = 0.0;

@@ -105,13 +105,14 @@ pub enum TimeOriginArg {
                              defaults (for neural methods, its --preset).")]
 pub struct Args {
     /// The scene: a folder holding `transforms.json`, or the file itself [default with
-    /// --config: the scene it names].
-    #[arg(required_unless_present_any = ["config", "finish"])]
+    /// --config, or --resume: the scene the configuration names].
+    #[arg(required_unless_present_any = ["config", "finish", "resume"])]
     pub scene: Option<PathBuf>,
     /// Output directory; created if missing. One that holds a run needs --force (or --resume).
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Reconstruction method [default: hybrid, or the --config's]. `hybrid` was the most accurate
+    /// Reconstruction method [default: hybrid, or the --config's, or with --resume the resumed
+    /// run's]. `hybrid` was the most accurate
     /// method in every comparison measured (docs/claims.md); `fast` alone trains the field from
     /// a uniform start.
     #[arg(short, long, value_enum)]
@@ -129,7 +130,8 @@ pub struct Args {
     /// Replace a run already in OUT.
     #[arg(long, conflicts_with = "resume")]
     pub force: bool,
-    /// Continue the neural or time-resolved run in OUT from its checkpoints.
+    /// Continue the neural or time-resolved run in OUT from its checkpoints, with the settings
+    /// it was started with (OUT/config.json; options given here override them).
     #[arg(long)]
     pub resume: bool,
     /// Refuse runs whose estimated memory exceeds this many GiB [default: the memory
@@ -469,11 +471,25 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         (None, None) if args.split.finish => Some(args.out.join("config.json")),
         _ => None,
     };
-    let mut cfg = match args.config.as_ref().or(finish_config.as_ref()) {
+    // A resumed run continues with the settings it was started with (options given here
+    // still override them), not with the defaults of some method.
+    let resume_config = match &args.config {
+        None if args.resume => Some(args.out.join("config.json")).filter(|p| p.is_file()),
+        _ => None,
+    };
+    let mut cfg = match args.config.as_ref().or(finish_config.as_ref()).or(resume_config.as_ref()) {
         Some(path) => {
             let cfg = RunConfig::read(path)?;
             if let Some(MethodArg(m)) = args.method {
                 if m != cfg.method() {
+                    if resume_config.is_some() {
+                        bail!(
+                            "{} holds a --method {} run, which --resume continues with its own settings; leave out \
+                             --method {m} (or use --force to replace it with a new run)",
+                            args.out.display(),
+                            cfg.method()
+                        );
+                    }
                     bail!(
                         "{} was written for --method {}; to run --method {m}, leave out --config",
                         path.display(),
