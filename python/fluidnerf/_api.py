@@ -18,8 +18,16 @@ from ._fluidnerf import FluidNerfError, Scene
 
 #: The method of a run given neither a method nor a configuration, as ``fluidnerf
 #: reconstruct`` without ``--method``: a voxel reconstruction first, then the grid field
-#: started from it, the most accurate method in every comparison of ``docs/claims.md``.
+#: started from it, the most accurate method in every comparison of ``docs/claims.md``; for
+#: a scene whose frames hold several times, :data:`DEFAULT_TIME_RESOLVED_METHOD`.
 DEFAULT_METHOD = "hybrid"
+DEFAULT_TIME_RESOLVED_METHOD = "tr-fast"
+
+
+def _default_method(scene: Scene | PathLike) -> str:
+    times = {t for t in _as_scene(scene).times() if t is not None}
+    return DEFAULT_TIME_RESOLVED_METHOD if len(times) > 1 else DEFAULT_METHOD
+
 
 PathLike = Union[str, "os.PathLike[str]"]
 Callback = Callable[[dict], Optional[bool]]
@@ -170,7 +178,8 @@ def build_config(
 
     It starts from ``config`` (a dict or a ``config.json`` path, as ``--config``) or from the
     defaults of ``method`` (with ``preset`` for neural methods; ``None``: the configuration's
-    method, else :data:`DEFAULT_METHOD`, ``"hybrid"``); ``method`` may also be a dict
+    method, else ``"hybrid"``, or ``"tr-fast"`` for a scene of several times); ``method`` may
+    also be a dict
     such as ``{"name": "asart", "params": {"relaxation": 0.3}}``, merged into the method's
     defaults. Every other keyword is a ``RunConfig`` key (``resolution``, ``seed``,
     ``stopping``, ``checkpoint_every``, ``eval_every``, ``memory_limit_gib``); dicts are merged
@@ -202,12 +211,12 @@ def build_config(
             )
         if preset is not None:
             fresh = json.loads(
-                _ext.default_config(str(root or ""), written or name or DEFAULT_METHOD, preset)
+                _ext.default_config(str(root or ""), written or name or _default_method(scene), preset)
             )
             kept = {k: v for k, v in base["method"].items() if k in ("holdout_times", "time_step")}
             base["method"] = _merge(fresh["method"], kept)
     else:
-        base = json.loads(_ext.default_config(str(root or ""), name or DEFAULT_METHOD, preset))
+        base = json.loads(_ext.default_config(str(root or ""), name or _default_method(scene), preset))
     if root is not None:
         base["scene"] = str(Path(root).absolute())
     if method_patch:
@@ -380,8 +389,8 @@ def reconstruct(
 ) -> Run:
     """Reconstructs ``scene`` with ``method`` into the run folder ``out`` through the library
     pipeline (``fluidnerf_pipeline::reconstruct``), exactly as ``fluidnerf reconstruct`` does.
-    ``method`` None runs the method of ``config``, or without one :data:`DEFAULT_METHOD`
-    (``"hybrid"``), as the command line does without ``--method``; with ``overwrite="resume"``
+    ``method`` None runs the method of ``config``, or without one ``"hybrid"`` (``"tr-fast"``
+    for a scene of several times), as the command line does without ``--method``; with ``overwrite="resume"``
     and no ``config``, the settings of the run in ``out`` (its ``config.json``) are the base.
 
     ``options`` are ``RunConfig`` keys (see :func:`build_config`), e.g.

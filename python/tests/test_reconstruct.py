@@ -79,7 +79,7 @@ def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
     np.testing.assert_allclose(run.field(c).reshape(run.volume.shape), run.volume, rtol=1e-5, atol=1e-7)
 
 
-def test_a_saved_configuration_reruns_its_own_method(static_scene, tmp_path):
+def test_a_saved_configuration_reruns_its_own_method(static_scene, tr_scene, tmp_path):
     first = fluidnerf.reconstruct(
         static_scene, "asart", tmp_path / "a", resolution=8, stopping={"max_iterations": 2}, progress=False
     )
@@ -89,8 +89,9 @@ def test_a_saved_configuration_reruns_its_own_method(static_scene, tmp_path):
     )
     assert again.report["method"] == "asart"
     np.testing.assert_array_equal(again.volume, first.volume)
-    # Neither given: the default method, as on the command line.
+    # Neither given: the default method, as on the command line; tr-fast for several times.
     assert fluidnerf.build_config(static_scene)["method"]["name"] == "hybrid"
+    assert fluidnerf.build_config(tr_scene)["method"]["name"] == "tr-fast"
     # A resumed run continues with its own settings, here to a higher cap.
     short = dict(FAST, stopping={"rule": "budget", "max_iterations": 5})
     fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "r", progress=False, **short)

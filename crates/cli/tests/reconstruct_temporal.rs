@@ -227,7 +227,7 @@ fn vol_box(d: &std::path::Path) -> fluidnerf_core::Aabb {
 }
 
 /// A time step given to the space–time grid is reported as unused: the grid reads time on each
-/// window's frame axis.
+/// window's frame axis. And `tr-fast` is the default method for a scene of several instants.
 #[test]
 fn a_time_step_given_to_the_grid_field_is_reported_unused() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -248,6 +248,10 @@ fn a_time_step_given_to_the_grid_field_is_reported_unused() {
     assert!(!run("inferred", &[]).contains(warning));
     let temporal = json(&d.join("given/temporal.json"));
     assert_eq!(temporal["windows"][0]["time_axis"], "frames");
+    // Without --method, a scene of several instants gets tr-fast, not a static method.
+    let args = "reconstruct scene -o default --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    assert_eq!(report(&d.join("default"))["method"], "tr-fast");
 }
 
 /// `--start-method tv` on a time-resolved run: SART-TV runs on each instant of the window that

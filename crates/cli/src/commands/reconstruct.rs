@@ -111,10 +111,10 @@ pub struct Args {
     /// Output directory; created if missing. One that holds a run needs --force (or --resume).
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Reconstruction method [default: hybrid, or the --config's, or with --resume the resumed
-    /// run's]. `hybrid` was the most accurate
-    /// method in every comparison measured (docs/claims.md); `fast` alone trains the field from
-    /// a uniform start.
+    /// Reconstruction method [default: the --config's, or with --resume the resumed run's;
+    /// else hybrid, or tr-fast when the scene's frames hold several times]. `hybrid` was the
+    /// most accurate method in every comparison measured (docs/claims.md); `fast` alone trains
+    /// the field from a uniform start.
     #[arg(short, long, value_enum)]
     pub method: Option<MethodArg>,
     /// Voxels along the longest side of the reconstruction box for the output volume (and the
@@ -465,6 +465,19 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The method of a run given neither `--method` nor a configuration: `hybrid` for a scene of
+/// one instant (the most accurate method in every comparison measured, docs/claims.md), and
+/// `tr-fast` for a scene whose frames hold several times, which a static method would mix into
+/// one field.
+fn default_method(scene: &std::path::Path) -> anyhow::Result<Method> {
+    // Only the frames' times are needed here; the run checks the whole scene.
+    let draft = fluidnerf_io::scene::read_scene_draft(scene)?;
+    let mut times: Vec<f64> = draft.frames.iter().filter_map(|f| f.time).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    Ok(if times.len() > 1 { Method::TrFast } else { Method::Hybrid })
+}
+
 /// The run's configuration: `--config` (or the method's defaults), then every option given.
 pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     let finish_config = match (&args.config, &args.scene) {
@@ -501,7 +514,11 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         }
         None => {
             let scene = args.scene.clone().context("a scene (or --config) is needed")?;
-            RunConfig::new(scene, args.method.map_or(Method::Hybrid, |m| m.0))
+            let method = match args.method {
+                Some(MethodArg(m)) => m,
+                None => default_method(&scene)?,
+            };
+            RunConfig::new(scene, method)
         }
     };
     let method = cfg.method();
