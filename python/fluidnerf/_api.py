@@ -25,7 +25,7 @@ DEFAULT_TIME_RESOLVED_METHOD = "tr-fast"
 
 
 def _default_method(scene: Scene | PathLike) -> str:
-    times = {t for t in _as_scene(scene).times() if t is not None}
+    times = {t for t in _as_scene(scene).times if t is not None}
     return DEFAULT_TIME_RESOLVED_METHOD if len(times) > 1 else DEFAULT_METHOD
 
 
