@@ -66,11 +66,16 @@ impl Scene {
 
     /// The distinct frame times in increasing order (empty for a static scene).
     pub fn times(&self) -> Vec<f64> {
-        let mut t: Vec<f64> = self.frames.iter().filter_map(|f| f.time).collect();
-        t.sort_by(f64::total_cmp);
-        t.dedup();
-        t
+        frame_times(&self.frames)
     }
+}
+
+/// The distinct times of `frames` in increasing order (empty when none has a time).
+pub fn frame_times(frames: &[Frame]) -> Vec<f64> {
+    let mut t: Vec<f64> = frames.iter().filter_map(|f| f.time).collect();
+    t.sort_by(f64::total_cmp);
+    t.dedup();
+    t
 }
 
 /// Settings of [`estimate_box`].

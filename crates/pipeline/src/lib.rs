@@ -285,12 +285,6 @@ impl<T> BestHoldout<T> {
         BestHoldout { best: None, since: 0, patience }
     }
 
-    /// The state of a run that is resumed: its best evaluation so far and the evaluations
-    /// since.
-    pub(crate) fn resumed(patience: usize, iteration: usize, loss: f64, state: T, since: usize) -> Self {
-        BestHoldout { best: Some((iteration, loss, state)), since, patience }
-    }
-
     /// Records an evaluation; `keep` makes the state to keep when it is the best. Returns true
     /// when patience has run out.
     pub(crate) fn record(&mut self, iteration: usize, loss: f64, keep: impl FnOnce() -> T) -> bool {

@@ -153,9 +153,6 @@ pub(crate) fn fit_gain(p: &[f32], r: &[f32], mask: Option<&[bool]>, offset: bool
         }
         ((n * srp - sr * sp) / det, (srr * sp - sr * srp) / det)
     } else {
-        if srr.is_nan() || srr <= 0.0 {
-            return None;
-        }
         (srp / srr, 0.0)
     };
     (g.is_finite() && g > 0.0 && b.is_finite()).then_some((g, b))

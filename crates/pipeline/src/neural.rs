@@ -276,11 +276,10 @@ fn earlier_report(dir: &RunDir) -> Option<RunReport> {
     }
 }
 
-/// The held-out rule's state when a run is resumed: the best evaluation up to the checkpoint
-/// (from the earlier report's held-out curve), the field kept for it (the earlier run's
-/// `weights.safetensors`, which holds the field of its best evaluation), and the evaluations
-/// since. None, with a warning, when the earlier run did not stop by that rule or its kept
-/// field is not that evaluation's: then the rule starts afresh.
+/// The held-out rule's state when a run is resumed: the earlier report's held-out curve up to
+/// the checkpoint replayed through the rule, with the field kept for its best evaluation (the
+/// earlier run's `weights.safetensors`). None, with a warning, when the earlier run kept
+/// another field (it stopped by another rule): then the rule starts afresh.
 fn resumed_best<F: TrainableField>(
     earlier: Option<&RunReport>,
     dir: &RunDir,
@@ -288,35 +287,34 @@ fn resumed_best<F: TrainableField>(
     patience: usize,
 ) -> Option<BestHoldout<Vec<f32>>> {
     let r = earlier?;
-    let upto: Vec<&HoldoutPoint> = r.history.holdout.iter().filter(|p| p.iteration <= learner.iteration).collect();
-    let first = upto.first()?;
-    let top = upto.iter().fold(*first, |b, p| if p.loss < b.loss { p } else { b });
-    if r.stopping.rule != StopRule::HeldOut || r.kept_iteration != top.iteration {
+    let mut best = BestHoldout::new(patience);
+    for p in r.history.holdout.iter().filter(|p| p.iteration <= learner.iteration) {
+        best.record(p.iteration, p.loss, Vec::new);
+    }
+    let (iteration, loss, _) = best.best.as_ref()?;
+    if r.stopping.rule != StopRule::HeldOut || r.kept_iteration != *iteration {
         log::warn!(
-            "the earlier run kept the field of iteration {} and not that of its best held-out loss; the held-out \
-             rule starts afresh from the checkpoint",
+            "the earlier run kept the field of iteration {}, not that of its best held-out loss (iteration \
+             {iteration}); the held-out rule starts afresh from the checkpoint",
             r.kept_iteration
         );
         return None;
     }
+    log::info!("resumed held-out rule: best at iteration {iteration} (loss {loss:.3e})");
+    // The kept field is read into the learner's, which then gets its checkpoint state back.
     let current = learner.field.params().to_vec();
     let weights = dir.root().join("weights.safetensors");
-    let kept = match fluidnerf_neural::weights::load_weights(&weights, &mut learner.field) {
-        Ok(()) => learner.field.params().to_vec(),
-        Err(e) => {
-            log::warn!("{}: {e}; the held-out rule starts afresh from the checkpoint", weights.display());
-            learner.field.params_mut().copy_from_slice(&current);
-            return None;
-        }
-    };
+    let loaded = fluidnerf_neural::weights::load_weights(&weights, &mut learner.field);
+    let kept = learner.field.params().to_vec();
     learner.field.params_mut().copy_from_slice(&current);
-    let since = upto.iter().filter(|p| p.iteration > top.iteration).count();
-    log::info!(
-        "resumed held-out rule: best at iteration {} (loss {:.3e}), {since} evaluations since",
-        top.iteration,
-        top.loss
-    );
-    Some(BestHoldout::resumed(patience, top.iteration, top.loss, kept, since))
+    if let Err(e) = loaded {
+        log::warn!("{}: {e}; the held-out rule starts afresh from the checkpoint", weights.display());
+        return None;
+    }
+    if let Some(b) = best.best.as_mut() {
+        b.2 = kept;
+    }
+    Some(best)
 }
 
 struct Ctx<'a> {

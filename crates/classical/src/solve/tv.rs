@@ -44,8 +44,9 @@ impl Default for TvParams {
 }
 
 /// Compiles `$body` (plain loops over slices that LLVM vectorises) for AVX-512, for AVX2 and
-/// for the baseline, and runs the best the CPU has. No fused multiply–adds are formed and
-/// division and square root are exact, so every version gives the same bits.
+/// for the baseline, and runs the one [`crate::Isa::detected`] names, as the projectors do. No fused
+/// multiply–adds are formed and division and square root are exact, so every version gives the
+/// same bits.
 macro_rules! dispatched {
     ($(#[$meta:meta])* fn $name:ident($($arg:ident : $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
         $(#[$meta])*
@@ -62,13 +63,12 @@ macro_rules! dispatched {
                 unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
                     body($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx512f") {
-                    // SAFETY: AVX-512F was detected just above.
-                    return unsafe { avx512($($arg),*) };
-                }
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: AVX2 was detected just above.
-                    return unsafe { avx2($($arg),*) };
+                match crate::Isa::detected() {
+                    // SAFETY: the CPU has AVX-512F and AVX2 (`Isa::detected`).
+                    crate::Isa::Avx512 => return unsafe { avx512($($arg),*) },
+                    // SAFETY: the CPU has AVX2 (`Isa::detected`).
+                    crate::Isa::Avx2 => return unsafe { avx2($($arg),*) },
+                    crate::Isa::Baseline => {}
                 }
             }
             body($($arg),*)
@@ -76,9 +76,8 @@ macro_rules! dispatched {
     };
 }
 
-/// A grid row `c` along `x` and its neighbours: the rows before it along `y` and `z` (`ym`,
-/// `zm`, each `None` across the grid's face, where the difference is zero), and after it
-/// (`yp`, `zp`, with their norms; `None` across the face).
+/// A grid row `c` along `x` and the rows before it along `y` and `z` (`ym`, `zm`, each `None`
+/// across the grid's face, where the difference is zero).
 #[derive(Clone, Copy)]
 struct Rows<'a> {
     c: &'a [f32],

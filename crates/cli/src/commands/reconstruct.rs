@@ -472,10 +472,8 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
 fn default_method(scene: &std::path::Path) -> anyhow::Result<Method> {
     // Only the frames' times are needed here; the run checks the whole scene.
     let draft = fluidnerf_io::scene::read_scene_draft(scene)?;
-    let mut times: Vec<f64> = draft.frames.iter().filter_map(|f| f.time).collect();
-    times.sort_by(f64::total_cmp);
-    times.dedup();
-    Ok(if times.len() > 1 { Method::TrFast } else { Method::Hybrid })
+    let instants = fluidnerf_core::scene::frame_times(&draft.frames).len();
+    Ok(if instants > 1 { Method::TrFast } else { Method::Hybrid })
 }
 
 /// The run's configuration: `--config` (or the method's defaults), then every option given.
