@@ -20,6 +20,12 @@
 //! `time_resolution` at the finest), the 16 surrounding vertices are blended quadrilinearly,
 //! and hashing uses the 4th prime. Dense levels stay dense in 4D while they fit.
 //!
+//! With `static_levels = S > 0` a 4D field has `S` more levels without a time axis, at
+//! resolutions from `N_min` to `N_max` spaced as above: one table that every instant reads,
+//! for what the instants have in common (the static-plus-dynamic split of dynamic radiance
+//! fields such as K-Planes and HexPlane), while the space–time levels keep each frame apart.
+//! Their features follow the space–time levels' (`(L + S) · F` inputs to the MLP).
+//!
 //! # Parameter layout
 //! `grid.level.l` `[entries_l, F]` for each level (feature-fastest), then the MLP's tensors
 //! prefixed `mlp.` (see [`crate::mlp`]). Table entries start uniform in `±init_scale`
@@ -77,6 +83,9 @@ pub struct HashGridConfig {
     pub time_base_resolution: usize,
     /// 4D only: the span of `t'` mapped onto `[0, 1]` (e.g. number of frames − 1). Default 1.
     pub time_span: f32,
+    /// 4D only: levels without a time axis added to the `levels` space–time ones, at
+    /// resolutions from `base_resolution` to `max_resolution` (module docs). Default 0.
+    pub static_levels: usize,
     /// Hidden layers of the MLP. Default 2.
     pub mlp_depth: usize,
     /// Width of the MLP's hidden layers. Default 64.
@@ -104,6 +113,7 @@ impl Default for HashGridConfig {
             time_resolution: 16,
             time_base_resolution: 0,
             time_span: 1.0,
+            static_levels: 0,
             mlp_depth: 2,
             mlp_width: 64,
             activation: Activation::Relu,
@@ -138,6 +148,9 @@ impl HashGridConfig {
                 format!("time_resolution {} and time_span {} must be positive", self.time_resolution, self.time_span),
             );
         }
+        if self.static_levels > 32 {
+            return bad("hash-grid static levels", format!("{} not in 0..=32", self.static_levels));
+        }
         if self.mlp_depth == 0 || self.mlp_width == 0 || self.mlp_width > 1024 {
             return bad("hash-grid MLP", format!("depth {} width {}", self.mlp_depth, self.mlp_width));
         }
@@ -153,7 +166,8 @@ impl HashGridConfig {
 struct Level {
     /// Cells per spatial side.
     res: u32,
-    /// Cells along time (4D).
+    /// Cells along time (4D; 0 on a level without a time axis, whose time weight is then
+    /// exactly 1 at the lower vertex, so the upper one is never read).
     res_t: u32,
     /// Entries (vertices or hash slots).
     entries: usize,
@@ -205,19 +219,37 @@ impl HashGridField {
         if input_dim != 3 && input_dim != 4 {
             return Err(NeuralError::invalid("field input dimension", format!("{input_dim} (must be 3 or 4)")));
         }
+        if input_dim == 3 && config.static_levels > 0 {
+            return Err(NeuralError::invalid(
+                "hash-grid static levels",
+                format!(
+                    "{} given to a field of space alone (they are for fields of space and time)",
+                    config.static_levels
+                ),
+            ));
+        }
         let f = config.features_per_level;
         let table = 1usize << config.log2_table_size;
-        let growth = if config.levels > 1 {
-            ((config.max_resolution as f64).ln() - (config.base_resolution as f64).ln()) / (config.levels - 1) as f64
-        } else {
-            0.0
-        }
-        .exp();
-        let mut levels = Vec::with_capacity(config.levels);
-        let mut offset = 0;
-        for l in 0..config.levels {
-            let res = ((config.base_resolution as f64 * growth.powi(l as i32)) + 1e-9).floor().max(1.0) as u32;
+        // `count` resolutions from N_min to N_max (instant-ngp Eq. 2–3).
+        let resolutions = |count: usize| -> Vec<u32> {
+            let growth = if count > 1 {
+                ((config.max_resolution as f64).ln() - (config.base_resolution as f64).ln()) / (count - 1) as f64
+            } else {
+                0.0
+            }
+            .exp();
+            (0..count)
+                .map(|l| ((config.base_resolution as f64 * growth.powi(l as i32)) + 1e-9).floor().max(1.0) as u32)
+                .collect()
+        };
+        let timed = resolutions(config.levels).into_iter().enumerate().map(|(l, res)| {
             let res_t = if input_dim == 4 { res.min(time_cells(config, l)) } else { 0 };
+            (res, res_t)
+        });
+        let fixed = resolutions(config.static_levels).into_iter().map(|res| (res, 0));
+        let mut levels = Vec::with_capacity(config.levels + config.static_levels);
+        let mut offset = 0;
+        for (res, res_t) in timed.chain(fixed) {
             let side = res as u128 + 1;
             let vertices = side * side * side * (res_t as u128 + 1);
             let dense = vertices <= table as u128;
@@ -226,7 +258,7 @@ impl HashGridField {
             offset += entries * f;
         }
         let mlp = Mlp::new(
-            config.levels * f,
+            levels.len() * f,
             config.mlp_width,
             config.mlp_depth,
             config.activation,
@@ -415,14 +447,17 @@ impl TrainableField for HashGridField {
 
     fn restrict_gradient(&self, steps_taken: u64, grads: &mut [f32]) {
         let every = self.config.coarse_to_fine as u64;
-        let levels = self.levels.len();
         if every == 0 {
             return;
         }
-        let active = (levels.div_ceil(2) as u64 + steps_taken / every).min(levels as u64) as usize;
-        if let (Some(first), Some(last)) = (self.levels.get(active), self.levels.last()) {
-            let f = self.config.features_per_level;
-            grads[first.offset..last.offset + last.entries * f].fill(0.0);
+        // The space–time levels and the static ones each open coarse to fine.
+        let (timed, fixed) = self.levels.split_at(self.config.levels);
+        for group in [timed, fixed] {
+            let active = (group.len().div_ceil(2) as u64 + steps_taken / every).min(group.len() as u64) as usize;
+            if let (Some(first), Some(last)) = (group.get(active), group.last()) {
+                let f = self.config.features_per_level;
+                grads[first.offset..last.offset + last.entries * f].fill(0.0);
+            }
         }
     }
 
@@ -723,6 +758,50 @@ mod tests {
         assert_eq!(cells(4, 4), [4; 8]);
         // More cells along time than in space are capped by the spatial cells.
         assert_eq!(cells(0, 40), [16, 21, 28, 39, 40, 40, 40, 40]);
+    }
+
+    /// Static levels: a 4D field's extra levels read the same features at every time (and the
+    /// batched encoding and gradient agree with the row-by-row ones on them), the space–time
+    /// levels do not; a field of space alone refuses them.
+    #[test]
+    fn static_levels_read_the_same_features_at_every_time() {
+        let cfg = HashGridConfig { static_levels: 3, ..mixed_grid(2, 12, 1.0) };
+        let field = HashGridField::new(&cfg, 4, 9).unwrap();
+        let fixed = &field.levels[6..];
+        assert_eq!(fixed.iter().map(|l| (l.res, l.res_t)).collect::<Vec<_>>(), [(5, 0), (21, 0), (90, 0)]);
+        assert!(fixed[0].dense && !fixed[2].dense);
+        assert_eq!(field.mlp.in_dim(), 18);
+        let points = [[0.3f32, 0.61, 0.17], [0.92, 0.05, 0.5], [-0.1, 0.4, 1.2]];
+        let times = [0.0f32, 0.4, 1.0, 2.5, 3.0];
+        let inputs: Vec<f32> =
+            points.iter().flat_map(|p| times.iter().flat_map(move |&t| [p[0], p[1], p[2], t])).collect();
+        let mut feats = Vec::new();
+        field.encode(&inputs, &mut feats);
+        assert_encoding_matches_rows(&field, &inputs, &feats, "static levels");
+        // Row by row (one arithmetic path), the static features are the same bits at every time.
+        let mut rows = Vec::new();
+        for x in inputs.chunks(4) {
+            field.encode(x, &mut feats);
+            rows.push(feats[..18].to_vec());
+        }
+        for (i, by_time) in rows.chunks(times.len()).enumerate() {
+            for (k, row) in by_time.iter().enumerate() {
+                assert_eq!(row[12..], by_time[0][12..], "point {i}: static features at time {}", times[k]);
+            }
+            assert_ne!(by_time[0][..12], by_time[3][..12], "point {i}: the space–time levels must see the time");
+        }
+        field.encode(&inputs, &mut feats);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let dfeat: Vec<f32> = (0..feats.len()).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let (batch, rows) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
+        for (i, (a, b)) in batch.iter().zip(&rows).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "gradient entry {i}: {a} vs {b}");
+        }
+        // Every instant's gradient reaches the static tables.
+        let at = fixed[0].offset..fixed[0].offset + fixed[0].entries * 2;
+        assert!(batch[at].iter().any(|&g| g != 0.0));
+        let err = HashGridField::new(&cfg, 3, 9).unwrap_err().to_string();
+        assert!(err.contains("static levels") && err.contains("space alone"), "{err}");
     }
 
     /// Coarse-to-fine: the finer half of the levels gets no gradient at first, one level joins

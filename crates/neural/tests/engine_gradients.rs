@@ -162,6 +162,8 @@ fn small_grid(d: usize, seed: u64) -> HashGridField {
         time_resolution: 3,
         time_base_resolution: 0,
         time_span: 3.0,
+        // A 4D grid with levels without a time axis too, so their gradients are checked.
+        static_levels: if d == 4 { 2 } else { 0 },
         mlp_depth: 2,
         mlp_width: 8,
         activation: Activation::Swish,
