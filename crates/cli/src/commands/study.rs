@@ -81,7 +81,8 @@ pub struct Args {
     /// Synthetic scene preset the cells start from (`fluidnerf synth --list-presets`).
     #[arg(long, default_value = "demo")]
     pub scene_preset: String,
-    /// Methods, comma-separated [default: fast,asart].
+    /// Methods, comma-separated [default: fast,hybrid,asart: the grid field alone, the default
+    /// method, and the classical baseline].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub methods: Option<Vec<MethodArg>>,
     /// Training camera counts, comma-separated [default: the preset's].
@@ -176,7 +177,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         methods: args
             .methods
             .as_ref()
-            .map_or_else(|| vec![Method::Fast, Method::Asart], |m| m.iter().map(|m| m.0).collect()),
+            .map_or_else(|| vec![Method::Fast, Method::Hybrid, Method::Asart], |m| m.iter().map(|m| m.0).collect()),
         cameras: args.cameras.clone().unwrap_or(cameras),
         noise: args.noise.clone().unwrap_or(noise),
         layouts: args.layouts.clone().unwrap_or(layouts),
