@@ -237,14 +237,10 @@ pub fn temporal_preset(name: &str) -> Option<TemporalConfig> {
             let base = NeuralConfig::preset("fast")?;
             let FieldConfig::HashGrid(grid) = base.field else { return None };
             Some(TemporalConfig {
-                // As many levels without a time axis as with one: what the instants share is
-                // learnt once from all of them (docs/time-resolved.md, "Levels without a time
-                // axis").
-                field: FieldConfig::HashGrid(HashGridConfig {
-                    log2_table_size: 18,
-                    static_levels: grid.levels,
-                    ..grid
-                }),
+                // No levels without a time axis (`static_levels`): they helped the 12-camera jet
+                // and cost the 60-camera one at equal time (docs/time-resolved.md, "Levels
+                // without a time axis, three seeds").
+                field: FieldConfig::HashGrid(HashGridConfig { log2_table_size: 18, ..grid }),
                 // Each frame's learning rates are those a run on that frame alone would give
                 // it; Adam stays dense, which measured better than lazy updates of the
                 // frames' table entries (docs/time-resolved.md, "Each frame trained as if
