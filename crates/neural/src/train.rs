@@ -118,6 +118,12 @@ pub struct TrainConfig {
     /// `schedule.lr(n)`, as a run on that frame alone would. Default false (the dissertation's
     /// schedule counts iterations).
     pub schedule_per_frame: bool,
+    /// With [`Batching::OneTimeStep`], count the stopping rule's smoothing and window
+    /// ([`StopRule`]) in cycles through the window's frames instead of iterations, so that a
+    /// frame is judged settled after as many of its own updates as a run on that frame alone
+    /// would need (the companion of [`Self::schedule_per_frame`]; applied per window by
+    /// [`crate::temporal`]). Default false.
+    pub stop_per_frame: bool,
     /// Start a fresh field from the uniform value that explains the mean training pixel
     /// ([`TrainableField::start_uniform`]) instead of the representation's own
     /// initialisation. Default true.
@@ -156,6 +162,7 @@ impl Default for TrainConfig {
             validate_pixels: 4096,
             batching: Batching::AllViews,
             schedule_per_frame: false,
+            stop_per_frame: false,
             uniform_start: true,
             prior: Prior::default(),
             pixel_supersample: Supersample::Fixed(1),

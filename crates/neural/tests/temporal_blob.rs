@@ -579,3 +579,35 @@ fn a_window_starts_from_its_instants_reconstructions() {
         }
     }
 }
+
+/// With `stop_per_frame` a window's stopping rule counts cycles through its frames: a rule
+/// that holds as soon as it can be evaluated stops a three-frame window after
+/// `(window + smoothing)` iterations without it and three times as many with it (and a
+/// one-frame window alike either way).
+#[test]
+fn the_stopping_rule_counts_cycles_through_the_frames_when_asked() {
+    let times = [0.0, 1.0, 2.0];
+    let p = problem(&times);
+    let run = |frames: usize, per_frame: bool| {
+        let windows = WindowConfig { frames, overlap: 0, warm_start: false, ..WindowConfig::default() };
+        let (_, init, cfg) = grid_windows_setup(frames);
+        let cfg = TrainConfig {
+            rays_per_image: 16,
+            coarse_samples: 8,
+            // Any change of the smoothed loss is within this tolerance.
+            stop: StopRule { smoothing: 2, window: 3, tolerance: 1e9 },
+            stop_per_frame: per_frame,
+            ..cfg
+        };
+        let run =
+            train_windows(&p, &ViewMasks::default(), &cfg, &windows, init, 1, ResumeState::default(), None, |_| {
+                ControlFlow::Continue(())
+            })
+            .expect("trains");
+        run.windows.iter().map(|w| (w.report.iterations, w.report.stop_reason)).collect::<Vec<_>>()
+    };
+    use fluidnerf_neural::train::StopReason::Converged;
+    assert_eq!(run(3, false), [(5, Converged)]);
+    assert_eq!(run(3, true), [(15, Converged)]);
+    assert_eq!(run(1, true), [(5, Converged); 3]);
+}
