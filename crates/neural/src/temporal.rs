@@ -593,7 +593,7 @@ pub fn train_window<F: TrainableField + Clone>(
     let warm = windows.warm_start && k > 0;
     let mut cfg = train_cfg.clone();
     if cfg.stop_per_frame && cfg.batching == Batching::OneTimeStep {
-        cfg.stop = per_frame_stop(&cfg.stop, range.len());
+        cfg.stop = cfg.stop.in_cycles(range.len());
     }
     if warm {
         if let Some(m) = windows.warm_max_iterations {
@@ -652,12 +652,6 @@ pub fn train_window<F: TrainableField + Clone>(
         train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iteration(&info, s))?
     };
     Ok(trained(learner, report))
-}
-
-/// `rule` counted in cycles through `frames` frames (see [`TrainConfig::stop_per_frame`]).
-pub fn per_frame_stop(rule: &StopRule, frames: usize) -> StopRule {
-    let f = frames.max(1);
-    StopRule { smoothing: rule.smoothing * f, window: rule.window * f, ..*rule }
 }
 
 /// The report of a window that had already converged when it was saved.

@@ -60,6 +60,15 @@ pub struct StopRule {
     pub tolerance: f64,
 }
 
+impl StopRule {
+    /// The rule counted in cycles through `frames` frames instead of iterations (see
+    /// [`TrainConfig::stop_per_frame`]).
+    pub(crate) fn in_cycles(&self, frames: usize) -> StopRule {
+        let f = frames.max(1);
+        StopRule { smoothing: self.smoothing * f, window: self.window * f, ..*self }
+    }
+}
+
 impl Default for StopRule {
     fn default() -> Self {
         StopRule { smoothing: 200, window: 2000, tolerance: 0.02 }
