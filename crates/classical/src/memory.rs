@@ -60,7 +60,9 @@ impl MemoryEstimate {
 /// for the splat, `subdivisions`
 /// sub-voxels per axis ([`crate::SplatProjector::subdivisions`]), before anything is allocated.
 /// The estimate is within tens of percent; the row-holding methods (ART, MART, SMART's setup)
-/// are estimated for a ray step of half a voxel.
+/// are estimated for a ray step of half a voxel. ART and MART keep views' rows between
+/// iterations up to `row_cache_bytes` (their `row_cache_mib`; 0 for the other methods), which
+/// the estimate counts in full when every view's rows would exceed it.
 pub fn estimate_memory(
     algorithm: Algorithm,
     projector: ProjectorKind,
@@ -68,6 +70,7 @@ pub fn estimate_memory(
     view_sizes: &[(usize, usize)],
     threads: usize,
     subdivisions: usize,
+    row_cache_bytes: u64,
 ) -> MemoryEstimate {
     let n = grid.len() as u64;
     let pixels: u64 = view_sizes.iter().map(|&(w, h)| (w * h) as u64).sum();
@@ -83,7 +86,7 @@ pub fn estimate_memory(
         ProjectorKind::Splat => 2 * threads * max_view * 4,
         ProjectorKind::Ray => pixels * 32 + 2 * threads * n * 4,
     };
-    let rows = if algorithm.holds_rows() {
+    let view_rows = if algorithm.holds_rows() {
         match projector {
             // About 3 × 3 pixels with a positive weight per voxel (voxels of 1–2 px).
             ProjectorKind::Auto | ProjectorKind::Footprint => n * 8 * 9 + max_view * 8,
@@ -97,5 +100,9 @@ pub fn estimate_memory(
     } else {
         0
     };
-    MemoryEstimate { volumes, images, projector: scratch + rows }
+    let kept = match algorithm {
+        Algorithm::Art | Algorithm::Mart => row_cache_bytes.min(view_rows * view_sizes.len() as u64),
+        _ => 0,
+    };
+    MemoryEstimate { volumes, images, projector: scratch + view_rows + kept }
 }

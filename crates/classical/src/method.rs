@@ -176,7 +176,20 @@ impl ClassicalMethod {
     ) -> MemoryEstimate {
         let sizes: Vec<(usize, usize)> = cameras.iter().map(|c| (c.width(), c.height())).collect();
         let kind = projector.resolve(grid, cameras);
-        estimate_memory(self.algorithm(), kind, grid, &sizes, threads, projector.subdivisions(grid, cameras))
+        let row_cache_mib = match self {
+            ClassicalMethod::Art(p) => p.row_cache_mib,
+            ClassicalMethod::Mart(p) => p.row_cache_mib,
+            _ => 0,
+        };
+        estimate_memory(
+            self.algorithm(),
+            kind,
+            grid,
+            &sizes,
+            threads,
+            projector.subdivisions(grid, cameras),
+            row_cache_mib.saturating_mul(1 << 20),
+        )
     }
 }
 

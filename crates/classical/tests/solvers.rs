@@ -227,3 +227,42 @@ fn the_footprint_projector_is_no_worse_for_any_method() {
         }
     }
 }
+
+/// ART and MART keep views' rows between iterations as the budget allows: keeping all of them,
+/// some (a budget that holds a few views) or none gives the same volume bit for bit, with and
+/// without a support (whose voxels the kept rows leave out, as the row-by-row filter did).
+#[test]
+fn kept_rows_change_no_result() {
+    let c = case(blobs);
+    let view_bytes = c.projector.rows(0).bytes();
+    // 1 MiB holds some views' rows but not all eight.
+    assert!(view_bytes < 1 << 20 && 8 * view_bytes > 1 << 20, "one view's rows take {view_bytes} bytes");
+    let hull = visual_hull(&c.grid, c.projector.cameras(), &c.images, DEFAULT_HULL_THRESHOLD);
+    let free = Problem::new(&c.projector, &c.images).expect("consistent");
+    let masked = free.with_support(&hull);
+    let stopping = Stopping { max_iterations: 3, plateau: None };
+    for problem in [&free, &masked] {
+        let art_with = |mib| {
+            let params = ArtParams { stopping, row_cache_mib: mib, ..Default::default() };
+            art(problem, None, &params, |_| ControlFlow::Continue(())).expect("runs").volume
+        };
+        let mart_with = |mib| {
+            let params = MartParams { stopping, row_cache_mib: mib, ..Default::default() };
+            mart(problem, None, &params, |_| ControlFlow::Continue(())).expect("runs").volume
+        };
+        let (art0, mart0) = (art_with(0), mart_with(0));
+        assert!(nrmse(&art0, &c.truth) < 0.5 && nrmse(&mart0, &c.truth) < 0.5, "the runs did not reconstruct");
+        for mib in [1, ROW_CACHE_MIB] {
+            assert_eq!(art_with(mib), art0, "ART with {mib} MiB of kept rows");
+            assert_eq!(mart_with(mib), mart0, "MART with {mib} MiB of kept rows");
+        }
+    }
+    // The memory estimate counts the kept rows, as roughly as it estimates one view's (its
+    // 3 × 3 pixels per voxel are 2.2× the entries of these 2-pixel voxels).
+    let fp = FootprintProjector::new(c.grid, c.projector.cameras(), SCALE).expect("valid");
+    let kept: usize = (0..8).map(|v| fp.rows(v).bytes()).sum();
+    let sizes = vec![(48, 48); 8];
+    let est = |cache| estimate_memory(Algorithm::Mart, ProjectorKind::Footprint, &c.grid, &sizes, 2, 1, cache).total();
+    let counted = (est(1 << 30) - est(0)) as f64;
+    assert!((1.0..3.0).contains(&(counted / kept as f64)), "estimated {counted} bytes for {kept} bytes of rows");
+}

@@ -133,6 +133,25 @@ impl SparseRows {
         (&self.cols[a..b], &self.vals[a..b])
     }
 
+    /// The rows with only the entries of voxels in `keep` (entries in their order).
+    pub fn restricted(&self, keep: &[bool]) -> SparseRows {
+        let mut out = SparseRows { ptr: Vec::with_capacity(self.ptr.len()), cols: Vec::new(), vals: Vec::new() };
+        out.ptr.push(0);
+        for i in 0..self.n_rows() {
+            let (c, w) = self.row(i);
+            for (&j, &wij) in c.iter().zip(w) {
+                if keep[j as usize] {
+                    out.cols.push(j);
+                    out.vals.push(wij);
+                }
+            }
+            out.ptr.push(out.cols.len() as u64);
+        }
+        out.cols.shrink_to_fit();
+        out.vals.shrink_to_fit();
+        out
+    }
+
     /// Largest weight of each row (0 for empty rows): `A_{i,max}` of Eq. 2.24–2.28.
     pub fn row_max(&self) -> Vec<f32> {
         (0..self.n_rows()).map(|i| self.row(i).1.iter().fold(0f32, |m, &v| m.max(v))).collect()
@@ -231,4 +250,27 @@ pub(crate) fn check_shapes<P: Projector + ?Sized>(p: &P, view: usize, x_len: usi
     assert!(view < p.n_views(), "view {view} out of range ({} views)", p.n_views());
     assert_eq!(x_len, p.grid().len(), "voxel buffer has the wrong length");
     assert_eq!(img_len, p.view_len(view), "image buffer of view {view} has the wrong length");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SparseRows;
+
+    /// Restricting rows to a support keeps the supported entries of each row in their order,
+    /// and empties rows with none.
+    #[test]
+    fn restricted_rows_keep_the_supported_entries_in_order() {
+        let rows = SparseRows {
+            ptr: vec![0, 3, 4, 6],
+            cols: vec![4, 0, 2, 1, 3, 2],
+            vals: vec![0.5, 1.0, 2.0, 3.0, 4.0, 5.0],
+        };
+        let keep = [false, false, true, false, true];
+        let r = rows.restricted(&keep);
+        assert_eq!(r.n_rows(), 3);
+        assert_eq!(r.row(0), (&[4u32, 2][..], &[0.5f32, 2.0][..]));
+        assert_eq!(r.row(1), (&[][..], &[][..]));
+        assert_eq!(r.row(2), (&[2u32][..], &[5.0f32][..]));
+        assert_eq!(r.bytes(), 4 * 8 + 3 * 4 + 3 * 4);
+    }
 }

@@ -7,9 +7,13 @@
 //!
 //! One row (pixel ray) at a time. Random order beats sequential order (dissertation §2.3.1):
 //! every iteration visits the views in a shuffled order and, within each view, its rows in a
-//! shuffled order, from a seeded ChaCha8 generator. Only the current view's rows are held
-//! ([`crate::Projector::rows`]); a fully random order over all rows would hold the whole
-//! matrix. Row actions are sequential, so these two run on one core.
+//! shuffled order, from a seeded ChaCha8 generator; a fully random order over all rows would
+//! need the whole matrix at once. A view's rows ([`crate::Projector::rows`], built on both
+//! cores, with the voxels outside the support left out) are kept for the next iterations while
+//! all kept rows fit in `row_cache_mib`; the views that do not fit are built again each time
+//! they come up. Building the rows is most of an iteration's work when they are not kept
+//! (`docs/performance.md`); keeping them changes no result, only the time. Row actions are
+//! sequential, so they run on one core.
 //!
 //! ART starts from zero. MART starts from one on every voxel some view sees and zero elsewhere
 //! (the usual unity start); its ratio is floored, `(p_i + ε)/(q_i + ε)` with ε = 10⁻⁶ × the
@@ -24,7 +28,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{drive, ratio_floor, total_column_sums, IterState, Problem, Report, Stopping};
-use crate::SolveError;
+use crate::{SolveError, SparseRows};
 
 /// Parameters of [`art`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -36,11 +40,14 @@ pub struct ArtParams {
     pub seed: u64,
     /// Default: at most 20 iterations, plateau rule on.
     pub stopping: Stopping,
+    /// MiB of views' rows kept between iterations (see the module docs); 0 builds every
+    /// view's rows again each iteration. Default [`ROW_CACHE_MIB`].
+    pub row_cache_mib: u64,
 }
 
 impl Default for ArtParams {
     fn default() -> Self {
-        ArtParams { relaxation: 1.0, seed: 0, stopping: Stopping::with_cap(20) }
+        ArtParams { relaxation: 1.0, seed: 0, stopping: Stopping::with_cap(20), row_cache_mib: ROW_CACHE_MIB }
     }
 }
 
@@ -54,47 +61,77 @@ pub struct MartParams {
     pub seed: u64,
     /// Default: at most 20 iterations, plateau rule on.
     pub stopping: Stopping,
+    /// MiB of views' rows kept between iterations (see the module docs); 0 builds every
+    /// view's rows again each iteration. Default [`ROW_CACHE_MIB`].
+    pub row_cache_mib: u64,
 }
 
 impl Default for MartParams {
     fn default() -> Self {
-        MartParams { relaxation: 1.0, seed: 0, stopping: Stopping::with_cap(20) }
+        MartParams { relaxation: 1.0, seed: 0, stopping: Stopping::with_cap(20), row_cache_mib: ROW_CACHE_MIB }
+    }
+}
+
+/// Default of `row_cache_mib`: 1 GiB holds the rows of 15 views of 128² px and 64³ voxels (18 MB
+/// per view where voxels image at 1.7 px, 63 MB where they image at 4 px).
+pub const ROW_CACHE_MIB: u64 = 1024;
+
+/// The views' rows with the support applied, kept while they fit in the budget.
+struct RowCache {
+    views: Vec<Option<SparseRows>>,
+    bytes: usize,
+    budget: usize,
+}
+
+impl RowCache {
+    fn new(views: usize, budget_mib: u64) -> Self {
+        let budget = usize::try_from(budget_mib.saturating_mul(1 << 20)).unwrap_or(usize::MAX);
+        RowCache { views: vec![None; views], bytes: 0, budget }
+    }
+
+    /// `f` of view `v`'s rows: the kept ones, or built now (and kept if they fit).
+    fn with_rows<R>(&mut self, problem: &Problem, v: usize, f: impl FnOnce(&SparseRows) -> R) -> R {
+        if let Some(rows) = &self.views[v] {
+            return f(rows);
+        }
+        let rows = problem.projector.rows(v);
+        let rows = match problem.support {
+            None => rows,
+            Some(s) => rows.restricted(s),
+        };
+        let out = f(&rows);
+        if self.bytes + rows.bytes() <= self.budget {
+            self.bytes += rows.bytes();
+            self.views[v] = Some(rows);
+        }
+        out
     }
 }
 
 /// Visits every row of every view in a seeded random order:
 /// `act(pixel value, voxel indices, weights) -> residual`; returns the sum of squared residuals.
-fn row_sweep(problem: &Problem, rng: &mut ChaCha8Rng, mut act: impl FnMut(f32, &[u32], &[f32]) -> f32) -> f64 {
-    let p = problem.projector;
-    let mut views: Vec<usize> = (0..p.n_views()).collect();
+fn row_sweep(
+    problem: &Problem,
+    rng: &mut ChaCha8Rng,
+    cache: &mut RowCache,
+    mut act: impl FnMut(f32, &[u32], &[f32]) -> f32,
+) -> f64 {
+    let mut views: Vec<usize> = (0..problem.projector.n_views()).collect();
     views.shuffle(rng);
     let mut ss = 0f64;
-    let mut cols: Vec<u32> = Vec::new();
-    let mut vals: Vec<f32> = Vec::new();
+    let mut order: Vec<u32> = Vec::new();
     for v in views {
-        let rows = p.rows(v);
-        let mut order: Vec<u32> = (0..rows.n_rows() as u32).collect();
-        order.shuffle(rng);
         let data = &problem.images[v].data;
-        for i in order {
-            let (c, w) = rows.row(i as usize);
-            let (c, w) = match problem.support {
-                None => (c, w),
-                Some(s) => {
-                    cols.clear();
-                    vals.clear();
-                    for (&j, &wij) in c.iter().zip(w) {
-                        if s[j as usize] {
-                            cols.push(j);
-                            vals.push(wij);
-                        }
-                    }
-                    (&cols[..], &vals[..])
-                }
-            };
-            let r = if c.is_empty() { data[i as usize] } else { act(data[i as usize], c, w) };
-            ss += r as f64 * r as f64;
-        }
+        cache.with_rows(problem, v, |rows| {
+            order.clear();
+            order.extend(0..rows.n_rows() as u32);
+            order.shuffle(rng);
+            for &i in &order {
+                let (c, w) = rows.row(i as usize);
+                let r = if c.is_empty() { data[i as usize] } else { act(data[i as usize], c, w) };
+                ss += r as f64 * r as f64;
+            }
+        });
     }
     ss
 }
@@ -109,13 +146,14 @@ pub fn art(
     let x = problem.start(init, || vec![0f32; problem.projector.grid().len()]);
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
     let mu = params.relaxation as f32;
+    let mut cache = RowCache::new(problem.projector.n_views(), params.row_cache_mib);
     drive(
         "ART",
         problem,
         &params.stopping,
         x,
         |x, _| {
-            row_sweep(problem, &mut rng, |p, cols, w| {
+            row_sweep(problem, &mut rng, &mut cache, |p, cols, w| {
                 let (mut q, mut norm2) = (0f32, 0f32);
                 for (&j, &wij) in cols.iter().zip(w) {
                     q += wij * x[j as usize];
@@ -152,13 +190,14 @@ pub fn mart(
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
     let mu = params.relaxation as f32;
     let eps = ratio_floor(problem);
+    let mut cache = RowCache::new(problem.projector.n_views(), params.row_cache_mib);
     drive(
         "MART",
         problem,
         &params.stopping,
         x,
         |x, _| {
-            row_sweep(problem, &mut rng, |p, cols, w| {
+            row_sweep(problem, &mut rng, &mut cache, |p, cols, w| {
                 let (mut q, mut wmax) = (0f32, 0f32);
                 for (&j, &wij) in cols.iter().zip(w) {
                     q += wij * x[j as usize];

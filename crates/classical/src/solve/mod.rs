@@ -39,7 +39,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use art::{art, mart, ArtParams, MartParams};
+pub use art::{art, mart, ArtParams, MartParams, ROW_CACHE_MIB};
 pub use asart::{asart, AsartParams};
 pub use mlem::{mlem, smart, MlemParams, SmartParams};
 pub use sart::{sart, SartParams};
