@@ -240,7 +240,7 @@ impl MovingRow {
         for q in 0..CHUNK {
             let c = self.start + (f0 + Q[q]) * self.step;
             t.off[q] = self.c0 + self.c1 * c;
-            let w = [0, 1, 2].map(|a| (self.a0[a] + self.a1[a] * c).abs());
+            let w = axes3(|a| (self.a0[a] + self.a1[a] * c).abs());
             (t.p[q], t.l[q]) = trapezoid(w);
             t.inv[q] = self.g0 * (self.base_s + c * c).sqrt();
         }
@@ -430,6 +430,13 @@ fn nonempty_chunks(row: &[f32], starts: &mut Vec<usize>) {
     }
 }
 
+/// `[f(0), f(1), f(2)]`, written out: `array::map` and `array::from_fn` were left as calls in
+/// the row loops.
+#[inline(always)]
+fn axes3<T>(f: impl Fn(usize) -> T) -> [T; 3] {
+    [f(0), f(1), f(2)]
+}
+
 #[inline(always)]
 fn fmax(a: f32, b: f32) -> f32 {
     if a > b {
@@ -537,8 +544,8 @@ impl FootView {
         let y = grid.min[1] + (j as f32 + 0.5) * grid.sp[1];
         let z = grid.min[2] + (k as f32 + 0.5) * grid.sp[2];
         let r = &self.rot;
-        let base = [0, 1, 2].map(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
-        let step = [0, 1, 2].map(|a| r[a][0] * grid.sp[0]);
+        let base = axes3(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
+        let step = axes3(|a| r[a][0] * grid.sp[0]);
         (base, step)
     }
 
@@ -748,9 +755,10 @@ impl FootView {
     #[inline(always)]
     fn along<const ALONG_V: bool>(&self, xn: f32, yn: f32, iz: f32) -> (f32, [f32; 3]) {
         if ALONG_V {
-            (self.fy * yn + self.cy, self.edges.map(|e| (self.fy * (iz * (e[1] - yn * e[2]))).abs()))
+            (self.fy * yn + self.cy, axes3(|a| (self.fy * (iz * (self.edges[a][1] - yn * self.edges[a][2]))).abs()))
         } else {
-            let w = self.edges.map(|e| {
+            let w = axes3(|a| {
+                let e = self.edges[a];
                 let (dx, dy) = (iz * (e[0] - xn * e[2]), iz * (e[1] - yn * e[2]));
                 (self.fx * dx + self.skew * dy).abs()
             });
@@ -838,14 +846,11 @@ impl FootView {
         let mut w = [z16; N];
         axis_weights_chunk::<N>(&off, &ps, &ls, &inv_s, n_s, |q, k, v| w[k][q] = v);
         for (q, rs) in out.iter_mut().enumerate().take(CHUNK) {
-            *rs = RowShared {
-                first: first[q],
-                w: std::array::from_fn(|k| w[k][q]),
-                inv_p: inv_p[q],
-                iz: iz[q],
-                zs: zs[q],
-                fixed: fixed[q],
-            };
+            let mut wq = [0f32; N];
+            for (k, wk) in wq.iter_mut().enumerate() {
+                *wk = w[k][q];
+            }
+            *rs = RowShared { first: first[q], w: wq, inv_p: inv_p[q], iz: iz[q], zs: zs[q], fixed: fixed[q] };
         }
     }
 
@@ -915,11 +920,13 @@ impl FootView {
         let (c0, c1, a0, a1) = if SHARED_V {
             let yn = fixed * iz;
             let (f, s) = (self.fx * iz, self.skew * iz);
-            let a0 = self.edges.map(|e| f * e[0] + s * (e[1] - yn * e[2]));
-            (self.skew * yn + self.cx, f, a0, self.edges.map(|e| -f * iz * e[2]))
+            let e = &self.edges;
+            let a0 = axes3(|a| f * e[a][0] + s * (e[a][1] - yn * e[a][2]));
+            (self.skew * yn + self.cx, f, a0, axes3(|a| -f * iz * e[a][2]))
         } else {
             let f = self.fy * iz;
-            (self.cy, f, self.edges.map(|e| f * e[1]), self.edges.map(|e| -f * iz * e[2]))
+            let e = &self.edges;
+            (self.cy, f, axes3(|a| f * e[a][1]), axes3(|a| -f * iz * e[a][2]))
         };
         MovingRow {
             start: base[moving],
@@ -1488,7 +1495,10 @@ impl FootprintProjector {
         let ny = self.grid.dims[1];
         let mut rs = [RowShared::<N>::default(); CHUNK];
         for j0 in (0..ny).step_by(CHUNK) {
-            let bases: [[f32; 3]; CHUNK] = std::array::from_fn(|q| fv.row_start(&self.gf, (j0 + q).min(ny - 1), k).0);
+            let mut bases = [[0f32; 3]; CHUNK];
+            for (q, b) in bases.iter_mut().enumerate() {
+                *b = fv.row_start(&self.gf, (j0 + q).min(ny - 1), k).0;
+            }
             fv.rows_shared::<N, SHARED_V>(&bases, &mut rs);
             let m = CHUNK.min(ny - j0);
             out[j0..j0 + m].copy_from_slice(&rs[..m]);
