@@ -85,6 +85,16 @@ impl ClassicalMethod {
         }
     }
 
+    /// The budget for views' rows kept between iterations, for the methods that keep them (ART
+    /// and MART).
+    pub fn row_cache_mib_mut(&mut self) -> Option<&mut u64> {
+        match self {
+            ClassicalMethod::Art(p) => Some(&mut p.row_cache_mib),
+            ClassicalMethod::Mart(p) => Some(&mut p.row_cache_mib),
+            _ => None,
+        }
+    }
+
     /// The relaxation factor μ, for the methods that have one (MLEM has none).
     pub fn relaxation_mut(&mut self) -> Option<&mut f64> {
         match self {
@@ -176,11 +186,7 @@ impl ClassicalMethod {
     ) -> MemoryEstimate {
         let sizes: Vec<(usize, usize)> = cameras.iter().map(|c| (c.width(), c.height())).collect();
         let kind = projector.resolve(grid, cameras);
-        let row_cache_mib = match self {
-            ClassicalMethod::Art(p) => p.row_cache_mib,
-            ClassicalMethod::Mart(p) => p.row_cache_mib,
-            _ => 0,
-        };
+        let row_cache_mib = self.clone().row_cache_mib_mut().map_or(0, |m| *m);
         estimate_memory(
             self.algorithm(),
             kind,

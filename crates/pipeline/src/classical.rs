@@ -10,16 +10,34 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use fluidnerf_classical::{voxel_footprint_px, Grid, Problem, Projector, ProjectorConfig, ProjectorKind};
+use fluidnerf_classical::{
+    voxel_footprint_px, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
+};
 use fluidnerf_core::{Image, Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
 
 use crate::measured::{fit_gain, normalise, MaskedProjector};
 use crate::{
-    check_memory, finish, peak_rss, write_volume, BestHoldout, ClassicalDetails, Family, GainMode, History,
-    HoldoutPoint, HoldoutScore, LossKind, MethodConfig, PipelineError, RunConfig, RunDir, RunEvent, RunReport, Session,
-    StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
+    check_memory, finish, memory_limit, peak_rss, write_volume, BestHoldout, ClassicalDetails, Family, GainMode,
+    History, HoldoutPoint, HoldoutScore, LossKind, MethodConfig, PipelineError, RunConfig, RunDir, RunEvent, RunReport,
+    Session, StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
 };
+
+/// Kept rows (ART and MART, `row_cache_mib`) speed a run up but are not needed, so they get at
+/// most half the memory the run leaves free under `limit` (`estimate`: the run's bytes with a
+/// given method) and never make a run refuse to start. The volumes do not depend on them.
+fn fit_row_cache(method: &mut ClassicalMethod, limit: u64, estimate: impl Fn(&ClassicalMethod) -> u64) {
+    let Some(wanted) = method.row_cache_mib_mut().map(std::mem::take) else { return };
+    let room_mib = (limit.saturating_sub(estimate(method)) / 2) >> 20;
+    if room_mib < wanted {
+        log::info!(
+            "rows kept between iterations: at most {room_mib} MiB of the {wanted} MiB asked, for the memory limit"
+        );
+    }
+    if let Some(m) = method.row_cache_mib_mut() {
+        *m = wanted.min(room_mib);
+    }
+}
 
 pub(crate) fn run(
     scene: &Scene,
@@ -56,9 +74,13 @@ pub(crate) fn run(
         ));
     }
     let threads = rayon::current_num_threads();
-    let estimate = spec.method.memory(&spec.projector, &grid, &cameras, threads);
     // Scoring holds the truth, a resampled copy and temporaries; the curve a copy of the volume.
     let truth_bytes: u64 = truth.first().map_or(0, |(_, t)| 3 * 4 * t.len() as u64 + 4 * grid.len() as u64);
+    let mut solver = spec.method.clone();
+    fit_row_cache(&mut solver, memory_limit(config), |m| {
+        m.memory(&spec.projector, &grid, &cameras, threads).total() + truth_bytes
+    });
+    let estimate = solver.memory(&spec.projector, &grid, &cameras, threads);
     let needed = estimate.total() + truth_bytes;
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
@@ -130,7 +152,7 @@ pub(crate) fn run(
     let mut holdout_history = Vec::new();
     let mut cause = None;
     let mut eval_s = 0.0;
-    let cap = spec.method.stopping().max_iterations;
+    let cap = solver.stopping().max_iterations;
     let _ = session.emit(RunEvent::Started { method, max_iterations: cap, windows: 1, start_iteration: 0 });
     let budget = config.stopping.time_budget_s;
     let t_solve = Instant::now();
@@ -147,7 +169,7 @@ pub(crate) fn run(
     let segments = if fit { config.gains.rounds + 1 } else { 1 };
     for segment in 0..segments {
         let last = segment + 1 == segments;
-        let mut seg_method = spec.method.clone();
+        let mut seg_method = solver.clone();
         let remaining = cap.saturating_sub(done);
         if remaining == 0 {
             break;
@@ -379,5 +401,41 @@ impl HoldoutScorer {
             .zip(&self.masks)
             .map(|((r, im), m)| crate::measured::holdout_score(&im.data, r, m.as_deref()))
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use fluidnerf_classical::{Algorithm, ClassicalMethod};
+
+    use super::fit_row_cache;
+
+    const MIB: u64 = 1 << 20;
+
+    /// A run that needs 100 MiB without kept rows, and 1 MiB more per MiB kept.
+    fn estimate(m: &ClassicalMethod) -> u64 {
+        100 * MIB + m.clone().row_cache_mib_mut().map_or(0, |c| *c * MIB)
+    }
+
+    /// Kept rows shrink to half the free memory under the limit, never below zero, so the run
+    /// itself still fits; they stay as asked when there is room; other methods are untouched.
+    #[test]
+    fn kept_rows_take_at_most_half_the_free_memory() {
+        let mart = ClassicalMethod::default_for(Algorithm::Mart);
+        let cache = |limit: u64| {
+            let mut m = mart.clone();
+            fit_row_cache(&mut m, limit, estimate);
+            let kept = *m.row_cache_mib_mut().expect("MART keeps rows");
+            assert!(estimate(&m) <= limit.max(100 * MIB), "{kept} MiB kept under {limit} bytes");
+            kept
+        };
+        assert_eq!(cache(u64::MAX), 1024);
+        assert_eq!(cache(300 * MIB), 100);
+        assert_eq!(cache(101 * MIB), 0);
+        assert_eq!(cache(50 * MIB), 0);
+        let mut sart = ClassicalMethod::default_for(Algorithm::Sart);
+        let before = sart.clone();
+        fit_row_cache(&mut sart, 50 * MIB, estimate);
+        assert_eq!(sart, before);
     }
 }

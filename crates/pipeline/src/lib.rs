@@ -207,17 +207,23 @@ impl Session<'_> {
     }
 }
 
+const GIB: f64 = (1u64 << 30) as f64;
+
+/// The memory a run may use: `--memory-limit`, else the memory available now.
+pub(crate) fn memory_limit(config: &RunConfig) -> u64 {
+    match config.memory_limit_gib {
+        Some(g) => (g * GIB) as u64,
+        None => proc_bytes("/proc/meminfo", "MemAvailable:").unwrap_or(u64::MAX),
+    }
+}
+
 /// Refuses a run whose estimated memory exceeds the limit (default: the memory available now).
 pub(crate) fn check_memory(
     config: &RunConfig,
     needed: u64,
     what: impl FnOnce() -> String,
 ) -> Result<(), PipelineError> {
-    const GIB: f64 = (1u64 << 30) as f64;
-    let limit = match config.memory_limit_gib {
-        Some(g) => (g * GIB) as u64,
-        None => proc_bytes("/proc/meminfo", "MemAvailable:").unwrap_or(u64::MAX),
-    };
+    let limit = memory_limit(config);
     log::info!("estimated memory {:.3} GiB of {:.3} GiB allowed", needed as f64 / GIB, limit as f64 / GIB);
     if needed > limit {
         return Err(PipelineError::Memory(format!(
