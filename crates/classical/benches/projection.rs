@@ -176,6 +176,11 @@ fn main() {
                 }
             })
             .wall;
+            // Every view in one call, as MLEM back-projects (and as mbirjax does).
+            let views: Vec<usize> = (0..p.n_views()).collect();
+            let imgs: Vec<&[f32]> = views.iter().map(|_| img.as_slice()).collect();
+            let t_back_all = best(3, &mut || p.back_add_views(&views, &imgs, &mut back, None)).wall;
+            fields.push(format!("\"back_all_s_{res}\": {t_back_all:.6}"));
             let xs = sparse_phantom(&grid);
             let t_sparse = best(3, &mut || {
                 for v in 0..p.n_views() {

@@ -77,12 +77,19 @@ pub fn estimate_memory(
     let max_view = view_sizes.iter().map(|&(w, h)| (w * h) as u64).max().unwrap_or(0);
     let threads = threads.max(1) as u64;
     let volumes = n * 4 * algorithm.volume_buffers() as u64 + n;
-    // Data, a per-view cache (SART row sums, SMART row maxima) and two view-sized buffers.
-    let images = pixels * 4 * 2 + max_view * 4 * 2;
+    // Data, a per-view cache (SART row sums, SMART row maxima) and two view-sized buffers;
+    // MLEM and SMART hold every view's ratio image for one back projection of them all.
+    let ratios = if matches!(algorithm, Algorithm::Mlem | Algorithm::Smart) { pixels * 4 } else { 0 };
+    let images = pixels * 4 * 2 + max_view * 4 * 2 + ratios;
     let scratch = match projector {
         // Two padded images per thread and a padded copy for the back projection; the margins
         // are small next to the image at the voxel sizes the footprint is chosen for.
-        ProjectorKind::Auto | ProjectorKind::Footprint => (2 * threads + 1) * max_view * 4 * 5 / 4,
+        // A back projection of all views at once (MLEM, SMART, the column sums of MART's
+        // start) holds a padded copy of each.
+        ProjectorKind::Auto | ProjectorKind::Footprint => {
+            let all_views = matches!(algorithm, Algorithm::Mlem | Algorithm::Smart | Algorithm::Mart);
+            (2 * threads + 1) * max_view * 4 * 5 / 4 + if all_views { pixels * 4 * 5 / 4 } else { 0 }
+        }
         ProjectorKind::Splat => 2 * threads * max_view * 4,
         ProjectorKind::Ray => pixels * 32 + 2 * threads * n * 4,
     };

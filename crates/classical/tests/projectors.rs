@@ -123,6 +123,46 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
     assert!(sides.contains(&2) && sides.contains(&4) && sides.len() >= 3, "sides covered: {sides:?}");
 }
 
+/// Back-projecting several views in one call (one pass over the grid, each slab taking the
+/// views in turn) gives what `back_add` gives view by view, bit for bit, with and without
+/// column sums, for views that share rows, views that do not, and distorted ones mixed, in
+/// any order; and a projector without its own version (the ray projector) does the same.
+#[test]
+fn back_projection_of_several_views_equals_view_by_view() {
+    let mut cams = ring(2, 24);
+    cams.extend(ring_turned(2, 40));
+    cams.extend(distorted_ring(2, 40));
+    cams.extend(zoomed(1, 24, 3.3, false));
+    let grid = Grid::new([20, 18, 16], aabb());
+    let footprint = FootprintProjector::new(grid, &cams, 0.8).expect("valid");
+    assert!(footprint.shared_row_views() >= 3, "some views share their rows");
+    let ray: Box<dyn Projector> = Box::new(RayProjector::new(grid, &cams[..3], 0.8, 0.5).expect("valid"));
+    let fp: Box<dyn Projector> = Box::new(footprint);
+    for (p, views) in [(&fp, vec![6, 0, 4, 2, 5, 1, 3]), (&fp, vec![3]), (&ray, vec![2, 0, 1])] {
+        let ys: Vec<Vec<f32>> = views.iter().map(|&v| uniform(60 + v as u64, p.view_len(v))).collect();
+        let refs: Vec<&[f32]> = ys.iter().map(Vec::as_slice).collect();
+        for with_cols in [false, true] {
+            let start = uniform(5, grid.len());
+            let (mut one, mut ones_cols) = (start.clone(), vec![0.5f32; grid.len()]);
+            for (&v, y) in views.iter().zip(&refs) {
+                p.back_add(v, y, &mut one, with_cols.then_some(&mut ones_cols[..]));
+            }
+            let (mut all, mut all_cols) = (start.clone(), vec![0.5f32; grid.len()]);
+            p.back_add_views(&views, &refs, &mut all, with_cols.then_some(&mut all_cols[..]));
+            assert!(one != start, "the views add something");
+            for (j, (a, b)) in all.iter().zip(&one).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "views {views:?}, voxel {j}: {a} vs {b}");
+            }
+            if with_cols {
+                assert!(ones_cols.iter().any(|&c| c > 0.5));
+                for (j, (a, b)) in all_cols.iter().zip(&ones_cols).enumerate() {
+                    assert_eq!(a.to_bits(), b.to_bits(), "views {views:?}, column sum {j}");
+                }
+            }
+        }
+    }
+}
+
 /// The cameras of [`ring`] turned a quarter about their axis: a grid row is horizontal in
 /// their images (as in the synthetic jets' rings), where [`ring`]'s see it vertical.
 fn ring_turned(n: usize, px: u32) -> Vec<fluidnerf_core::Camera> {

@@ -222,6 +222,25 @@ impl Projector for MaskedProjector<'_> {
         }
     }
 
+    fn back_add_views(&self, views: &[usize], ys: &[&[f32]], out: &mut [f32], mut col_sums: Option<&mut [f32]>) {
+        if col_sums.is_some() {
+            // Masked column sums come from images of ones, view by view.
+            for (&v, y) in views.iter().zip(ys) {
+                self.back_add(v, y, out, col_sums.as_deref_mut());
+            }
+            return;
+        }
+        let masked: Vec<Option<Vec<f32>>> = views
+            .iter()
+            .zip(ys)
+            .map(|(&v, y)| {
+                self.masks[v].as_ref().map(|m| y.iter().zip(m).map(|(&v, &k)| if k { v } else { 0.0 }).collect())
+            })
+            .collect();
+        let ys: Vec<&[f32]> = masked.iter().zip(ys).map(|(m, y)| m.as_deref().unwrap_or(y)).collect();
+        self.inner.back_add_views(views, &ys, out, None);
+    }
+
     fn rows(&self, view: usize) -> SparseRows {
         let rows = self.inner.rows(view);
         let Some(m) = &self.masks[view] else { return rows };

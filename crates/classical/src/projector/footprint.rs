@@ -2143,6 +2143,65 @@ mod kernels {
     }
 }
 
+/// A view's image as the back projection reads it ([`FootprintProjector::back_image`]).
+struct BackImage {
+    /// The image with a margin of the footprint side on every side, transposed when the
+    /// view's grid rows image as columns.
+    padded: Vec<f32>,
+    /// 1 on the image's columns and rows, 0 on the margins, with 32 trailing zeros for the
+    /// shared-row kernel's vector window.
+    col_mask: Vec<f32>,
+    row_mask: Vec<f32>,
+}
+
+impl FootprintProjector {
+    /// View `view`'s image `y` padded (and transposed) for [`Self::back_slab`].
+    fn back_image(&self, view: usize, y: &[f32]) -> BackImage {
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let (w, h, n) = (fv.width, fv.height, fv.side);
+        let mut padded = vec![0f32; pw * ph];
+        for (r, row) in y.chunks_exact(w).enumerate() {
+            padded[(r + n) * pw + n..][..w].copy_from_slice(row);
+        }
+        let col_mask: Vec<f32> = (0..pw + 32).map(|c| if (n..n + w).contains(&c) { 1.0 } else { 0.0 }).collect();
+        let row_mask: Vec<f32> = (0..ph + 32).map(|r| if (n..n + h).contains(&r) { 1.0 } else { 0.0 }).collect();
+        // Rows that share a footprint axis read along image lines: rows (the padded image as it
+        // is) when they image horizontal, columns (the image transposed) when vertical.
+        if fv.shared == Shared::U {
+            let mut t = vec![0f32; pw * ph];
+            for (r, row) in padded.chunks_exact(pw).enumerate() {
+                for (c, &v) in row.iter().enumerate() {
+                    t[c * ph + r] = v;
+                }
+            }
+            padded = t;
+        }
+        BackImage { padded, col_mask, row_mask }
+    }
+
+    /// Adds view `view`'s back projection of `im` to the z-slices `ks` (`o`, and `c` the
+    /// column sums, hold those slices).
+    fn back_slab(&self, view: usize, im: &BackImage, ks: Range<usize>, o: &mut [f32], c: Option<&mut [f32]>) {
+        let fv = &self.views[view];
+        let (pw, ph) = fv.padded();
+        let padded = &im.padded[..];
+        let rows_masks = (&im.col_mask[..], &im.row_mask[..]);
+        let masks = (&im.col_mask[..pw], &im.row_mask[..ph]);
+        match fv.shared {
+            Shared::V => dispatch!(fv.side, false, |N, _D| kernels::gather_rows::<N, true>(
+                self, view, ks, padded, rows_masks, o, c
+            )),
+            Shared::U => dispatch!(fv.side, false, |N, _D| kernels::gather_rows::<N, false>(
+                self, view, ks, padded, rows_masks, o, c
+            )),
+            Shared::None => {
+                dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(self, view, ks, padded, masks, o, c))
+            }
+        }
+    }
+}
+
 impl Projector for FootprintProjector {
     fn grid(&self) -> &Grid {
         &self.grid
@@ -2187,47 +2246,31 @@ impl Projector for FootprintProjector {
     }
 
     fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>) {
-        check_shapes(self, view, out.len(), y.len());
-        let fv = &self.views[view];
-        let (pw, ph) = fv.padded();
-        let (w, h, n) = (fv.width, fv.height, fv.side);
-        let mut padded = vec![0f32; pw * ph];
-        for (r, row) in y.chunks_exact(w).enumerate() {
-            padded[(r + n) * pw + n..][..w].copy_from_slice(row);
+        self.back_add_views(&[view], &[y], out, col_sums);
+    }
+
+    /// One pass over the grid for all the views: each task takes a slab of z-slices and adds
+    /// every view's back projection to it in turn, so the slab stays in cache across the views
+    /// and the threads meet once, not once per view.
+    fn back_add_views(&self, views: &[usize], ys: &[&[f32]], out: &mut [f32], col_sums: Option<&mut [f32]>) {
+        assert_eq!(views.len(), ys.len(), "one image per view");
+        for (&v, y) in views.iter().zip(ys) {
+            check_shapes(self, v, out.len(), y.len());
         }
-        // 32 trailing zeros on the masks for the shared-row kernel's vector window.
-        let col_mask: Vec<f32> = (0..pw + 32).map(|c| if (n..n + w).contains(&c) { 1.0 } else { 0.0 }).collect();
-        let row_mask: Vec<f32> = (0..ph + 32).map(|r| if (n..n + h).contains(&r) { 1.0 } else { 0.0 }).collect();
-        let rows_masks = (&col_mask[..], &row_mask[..]);
-        let masks = (&col_mask[..pw], &row_mask[..ph]);
-        // Rows that share a footprint axis read along image lines: rows (the padded image as it
-        // is) when they image horizontal, columns (the image transposed) when vertical.
-        if fv.shared == Shared::U {
-            let mut t = vec![0f32; pw * ph];
-            for (r, row) in padded.chunks_exact(pw).enumerate() {
-                for (c, &v) in row.iter().enumerate() {
-                    t[c * ph + r] = v;
-                }
-            }
-            padded = t;
-        }
-        let padded = &padded[..];
+        let images: Vec<BackImage> = if views.len() == 1 {
+            vec![self.back_image(views[0], ys[0])]
+        } else {
+            views.par_iter().zip(ys).map(|(&v, y)| self.back_image(v, y)).collect()
+        };
         let [nx, ny, nz] = self.grid.dims;
         let slab = nx * ny;
-        // A few slices per task: enough to balance, few enough to keep the overhead small.
+        // A few slices per task: enough to balance, few enough to keep the overhead small and
+        // a slab in cache.
         let per = nz.div_ceil(8 * scatter_parts()).max(1);
-        let task = |t: usize, o: &mut [f32], c: Option<&mut [f32]>| {
+        let task = |t: usize, o: &mut [f32], mut c: Option<&mut [f32]>| {
             let ks = t * per..(t * per + o.len() / slab);
-            match fv.shared {
-                Shared::V => dispatch!(fv.side, false, |N, _D| kernels::gather_rows::<N, true>(
-                    self, view, ks, padded, rows_masks, o, c
-                )),
-                Shared::U => dispatch!(fv.side, false, |N, _D| kernels::gather_rows::<N, false>(
-                    self, view, ks, padded, rows_masks, o, c
-                )),
-                Shared::None => dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(
-                    self, view, ks, padded, masks, o, c
-                )),
+            for (&view, im) in views.iter().zip(&images) {
+                self.back_slab(view, im, ks.clone(), o, c.as_deref_mut());
             }
         };
         match col_sums {

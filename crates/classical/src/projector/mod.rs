@@ -219,6 +219,17 @@ pub trait Projector: Sync {
     /// the view) in the same pass.
     fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>);
 
+    /// `out += Σ_k A_{views[k]}ᵀ ys[k]` (and the column sums with it), the views added to each
+    /// voxel in the order given, so the result is [`Projector::back_add`]'s for each view in
+    /// turn, bit for bit. A projector may do it in one pass over the grid (the footprint
+    /// projector does); the default calls `back_add` view by view.
+    fn back_add_views(&self, views: &[usize], ys: &[&[f32]], out: &mut [f32], mut col_sums: Option<&mut [f32]>) {
+        assert_eq!(views.len(), ys.len(), "one image per view");
+        for (&v, y) in views.iter().zip(ys) {
+            self.back_add(v, y, out, col_sums.as_deref_mut());
+        }
+    }
+
     /// The rows of `A_v`, for the row-action methods (ART, MART). Holds the view's part of the
     /// matrix, so it costs memory ([`Projector::rows_bytes_estimate`]) while alive.
     fn rows(&self, view: usize) -> SparseRows;

@@ -60,7 +60,9 @@ pub fn mlem(
     let p = problem.projector;
     let col_sums = total_column_sums(problem);
     let x = problem.start(init, || col_sums.iter().map(|&c| if c > 0.0 { 1.0 } else { 0.0 }).collect());
-    let mut q = vec![0f32; problem.max_view_len()];
+    // Every view's ratio image, back-projected together in one pass over the grid.
+    let views: Vec<usize> = (0..p.n_views()).collect();
+    let mut qs: Vec<Vec<f32>> = views.iter().map(|&v| vec![0f32; p.view_len(v)]).collect();
     let mut acc = vec![0f32; p.grid().len()];
     drive(
         "MLEM",
@@ -70,16 +72,16 @@ pub fn mlem(
         |x, _| {
             let mut ss = 0f64;
             acc.par_iter_mut().for_each(|a| *a = 0.0);
-            for v in 0..p.n_views() {
-                let q = &mut q[..p.view_len(v)];
+            for (v, q) in qs.iter_mut().enumerate() {
                 p.forward(v, x, q);
                 for (qi, &pi) in q.iter_mut().zip(&problem.images[v].data) {
                     let res = pi - *qi;
                     ss += res as f64 * res as f64;
                     *qi = if *qi > 0.0 { pi.max(0.0) / *qi } else { 0.0 };
                 }
-                p.back_add(v, q, &mut acc, None);
             }
+            let ys: Vec<&[f32]> = qs.iter().map(Vec::as_slice).collect();
+            p.back_add_views(&views, &ys, &mut acc, None);
             x.par_iter_mut().zip(acc.par_iter().zip(col_sums.par_iter())).for_each(|(g, (&a, &c))| {
                 *g = if c > 0.0 { *g * a / c } else { 0.0 };
             });
@@ -112,7 +114,8 @@ pub fn smart(
     let x = problem.start(init, || unity_start(problem));
     let eps = ratio_floor(problem);
     let mu = params.relaxation as f32;
-    let mut q = vec![0f32; problem.max_view_len()];
+    let views: Vec<usize> = (0..p.n_views()).collect();
+    let mut qs: Vec<Vec<f32>> = views.iter().map(|&v| vec![0f32; p.view_len(v)]).collect();
     let mut acc = vec![0f32; n];
     drive(
         "SMART",
@@ -122,16 +125,16 @@ pub fn smart(
         |x, _| {
             let mut ss = 0f64;
             acc.par_iter_mut().for_each(|a| *a = 0.0);
-            for v in 0..p.n_views() {
-                let q = &mut q[..p.view_len(v)];
+            for (v, q) in qs.iter_mut().enumerate() {
                 p.forward(v, x, q);
                 for ((qi, &pi), &inv) in q.iter_mut().zip(&problem.images[v].data).zip(&inv_row_max[v]) {
                     let res = pi - *qi;
                     ss += res as f64 * res as f64;
                     *qi = ((pi.max(0.0) + eps) / (*qi + eps)).ln() * inv;
                 }
-                p.back_add(v, q, &mut acc, None);
             }
+            let ys: Vec<&[f32]> = qs.iter().map(Vec::as_slice).collect();
+            p.back_add_views(&views, &ys, &mut acc, None);
             x.par_iter_mut().zip(acc.par_iter().zip(rays_per_voxel.par_iter())).for_each(|(g, (&a, &nj))| {
                 if nj > 0.0 {
                     *g *= (mu * a / nj).exp();

@@ -300,10 +300,10 @@ pub fn multilevel_order(cameras: &[Camera], centre: DVec3) -> Vec<usize> {
 pub(crate) fn total_column_sums(problem: &Problem) -> Vec<f32> {
     let p = problem.projector;
     let mut cs = vec![0f32; p.grid().len()];
-    for v in 0..p.n_views() {
-        let ones = vec![1f32; p.view_len(v)];
-        p.back_add(v, &ones, &mut cs, None);
-    }
+    let views: Vec<usize> = (0..p.n_views()).collect();
+    let ones: Vec<Vec<f32>> = views.iter().map(|&v| vec![1f32; p.view_len(v)]).collect();
+    let ys: Vec<&[f32]> = ones.iter().map(Vec::as_slice).collect();
+    p.back_add_views(&views, &ys, &mut cs, None);
     cs
 }
 
