@@ -72,8 +72,8 @@ impl Default for MartParams {
     }
 }
 
-/// Default of `row_cache_mib`: 1 GiB holds the rows of 15 views of 128² px and 64³ voxels (18 MB
-/// per view where voxels image at 1.7 px, 63 MB where they image at 4 px).
+/// Default of `row_cache_mib`: 1 GiB holds the rows of 15 views of 128² px at 64³ (18 MB per
+/// view) and at 128³ (63 MB per view).
 pub const ROW_CACHE_MIB: u64 = 1024;
 
 /// The views' rows with the support applied, kept while they fit in the budget.
