@@ -10,7 +10,6 @@
 
 #![allow(clippy::print_stdout)]
 
-use std::ops::ControlFlow;
 use std::time::Instant;
 
 use fluidnerf_classical::{
@@ -21,15 +20,7 @@ use fluidnerf_core::{Aabb, Image};
 use glam::DVec3;
 
 mod common;
-use common::ring;
-
-/// Mean seconds per iteration over iterations 2 and 3 (the first carries the setup).
-fn per_iteration(run: impl FnOnce(&mut dyn FnMut())) -> f64 {
-    let mut stamps = Vec::new();
-    run(&mut || stamps.push(Instant::now()));
-    let d: Vec<f64> = stamps.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
-    d.iter().sum::<f64>() / d.len().max(1) as f64
-}
+use common::{per_iteration, ring, smooth_jet};
 
 fn main() {
     if !std::env::args().any(|a| a == "--bench") {
@@ -37,9 +28,7 @@ fn main() {
     }
     let grid = Grid::with_resolution(Aabb::cube(DVec3::ZERO, 40.0), 128);
     let cams = ring(15, 256);
-    let truth = fluidnerf_core::Volume::from_fn(grid.dims, grid.aabb, |p| {
-        ((-(p.y * p.y + p.z * p.z) / 60.0).exp() * (1.0 + 0.3 * (p.x / 3.0).sin())) as f32
-    });
+    let truth = smooth_jet(&grid);
     let splat = SplatProjector::new(grid, &cams, 1.0).expect("valid").with_subdivisions(1);
     let images: Vec<Image> = (0..cams.len())
         .map(|v| {
@@ -63,26 +52,14 @@ fn main() {
     let (mut s, mut k, mut v) = (Vec::new(), Vec::new(), Vec::new());
     // Interleaved, twice: the machine is shared, so each ratio compares neighbours in time.
     for _ in 0..2 {
-        s.push(per_iteration(|tick| {
-            sart(&problem, None, &SartParams { stopping, ..Default::default() }, |_| {
-                tick();
-                ControlFlow::Continue(())
-            })
-            .expect("runs");
+        s.push(per_iteration(|on_iter| {
+            sart(&problem, None, &SartParams { stopping, ..Default::default() }, on_iter).expect("runs");
         }));
-        k.push(per_iteration(|tick| {
-            sart_tikhonov(&problem, None, &TikhonovParams { stopping, ..Default::default() }, |_| {
-                tick();
-                ControlFlow::Continue(())
-            })
-            .expect("runs");
+        k.push(per_iteration(|on_iter| {
+            sart_tikhonov(&problem, None, &TikhonovParams { stopping, ..Default::default() }, on_iter).expect("runs");
         }));
-        v.push(per_iteration(|tick| {
-            sart_tv(&problem, None, &TvParams { stopping, ..Default::default() }, |_| {
-                tick();
-                ControlFlow::Continue(())
-            })
-            .expect("runs");
+        v.push(per_iteration(|on_iter| {
+            sart_tv(&problem, None, &TvParams { stopping, ..Default::default() }, on_iter).expect("runs");
         }));
     }
     let min = |x: &[f64]| x.iter().cloned().fold(f64::INFINITY, f64::min);

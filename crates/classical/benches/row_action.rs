@@ -10,9 +10,6 @@
 
 #![allow(clippy::print_stdout)]
 
-use std::ops::ControlFlow;
-use std::time::Instant;
-
 use fluidnerf_classical::{
     art, mart, ArtParams, FootprintProjector, Grid, MartParams, Problem, Projector, Stopping, ROW_CACHE_MIB,
 };
@@ -20,15 +17,7 @@ use fluidnerf_core::{Aabb, Image};
 use glam::DVec3;
 
 mod common;
-use common::ring;
-
-/// Mean seconds per iteration over iterations 2 to 4 (the first builds the kept rows).
-fn per_iteration(run: impl FnOnce(&mut dyn FnMut())) -> f64 {
-    let mut stamps = Vec::new();
-    run(&mut || stamps.push(Instant::now()));
-    let d: Vec<f64> = stamps.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
-    d.iter().sum::<f64>() / d.len().max(1) as f64
-}
+use common::{per_iteration, ring, smooth_jet};
 
 fn main() {
     if !std::env::args().any(|a| a == "--bench") {
@@ -36,9 +25,7 @@ fn main() {
     }
     let grid = Grid::with_resolution(Aabb::cube(DVec3::ZERO, 40.0), 64);
     let cams = ring(15, 128);
-    let truth = fluidnerf_core::Volume::from_fn(grid.dims, grid.aabb, |p| {
-        ((-(p.y * p.y + p.z * p.z) / 60.0).exp() * (1.0 + 0.3 * (p.x / 3.0).sin())) as f32
-    });
+    let truth = smooth_jet(&grid);
     let projector = FootprintProjector::new(grid, &cams, 1.0).expect("valid");
     let images: Vec<Image> = (0..cams.len())
         .map(|v| {
@@ -55,29 +42,22 @@ fn main() {
         rayon::current_num_threads(),
         kept as f64 / 1e6
     );
-    let tick_art = |mib: u64| {
-        per_iteration(|tick| {
-            art(&problem, None, &ArtParams { stopping, row_cache_mib: mib, ..Default::default() }, |_| {
-                tick();
-                ControlFlow::Continue(())
-            })
-            .expect("runs");
-        })
-    };
-    let tick_mart = |mib: u64| {
-        per_iteration(|tick| {
-            mart(&problem, None, &MartParams { stopping, row_cache_mib: mib, ..Default::default() }, |_| {
-                tick();
-                ControlFlow::Continue(())
-            })
+    // Seconds per iteration over iterations 2 to 4 (the first builds the kept rows).
+    let seconds = |is_mart: bool, mib: u64| {
+        per_iteration(|on_iter| {
+            if is_mart {
+                mart(&problem, None, &MartParams { stopping, row_cache_mib: mib, ..Default::default() }, on_iter)
+            } else {
+                art(&problem, None, &ArtParams { stopping, row_cache_mib: mib, ..Default::default() }, on_iter)
+            }
             .expect("runs");
         })
     };
     let mut t = [[f64::INFINITY; 2]; 2];
     for _ in 0..2 {
-        for (m, run) in [&tick_art as &dyn Fn(u64) -> f64, &tick_mart].iter().enumerate() {
-            t[m][0] = t[m][0].min(run(0));
-            t[m][1] = t[m][1].min(run(ROW_CACHE_MIB));
+        for (m, is_mart) in [false, true].into_iter().enumerate() {
+            t[m][0] = t[m][0].min(seconds(is_mart, 0));
+            t[m][1] = t[m][1].min(seconds(is_mart, ROW_CACHE_MIB));
         }
     }
     for (m, name) in ["ART", "MART"].iter().enumerate() {

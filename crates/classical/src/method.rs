@@ -87,6 +87,15 @@ impl ClassicalMethod {
 
     /// The budget for views' rows kept between iterations, for the methods that keep them (ART
     /// and MART).
+    pub fn row_cache_mib(&self) -> Option<u64> {
+        match self {
+            ClassicalMethod::Art(p) => Some(p.row_cache_mib),
+            ClassicalMethod::Mart(p) => Some(p.row_cache_mib),
+            _ => None,
+        }
+    }
+
+    /// [`Self::row_cache_mib`], to change.
     pub fn row_cache_mib_mut(&mut self) -> Option<&mut u64> {
         match self {
             ClassicalMethod::Art(p) => Some(&mut p.row_cache_mib),
@@ -186,7 +195,7 @@ impl ClassicalMethod {
     ) -> MemoryEstimate {
         let sizes: Vec<(usize, usize)> = cameras.iter().map(|c| (c.width(), c.height())).collect();
         let kind = projector.resolve(grid, cameras);
-        let row_cache_mib = self.clone().row_cache_mib_mut().map_or(0, |m| *m);
+        let row_cache_mib = self.row_cache_mib().unwrap_or(0);
         estimate_memory(
             self.algorithm(),
             kind,

@@ -414,7 +414,7 @@ mod tests {
 
     /// A run that needs 100 MiB without kept rows, and 1 MiB more per MiB kept.
     fn estimate(m: &ClassicalMethod) -> u64 {
-        100 * MIB + m.clone().row_cache_mib_mut().map_or(0, |c| *c * MIB)
+        100 * MIB + m.row_cache_mib().unwrap_or(0) * MIB
     }
 
     /// Kept rows shrink to half the free memory under the limit, never below zero, so the run
@@ -425,7 +425,7 @@ mod tests {
         let cache = |limit: u64| {
             let mut m = mart.clone();
             fit_row_cache(&mut m, limit, estimate);
-            let kept = *m.row_cache_mib_mut().expect("MART keeps rows");
+            let kept = m.row_cache_mib().expect("MART keeps rows");
             assert!(estimate(&m) <= limit.max(100 * MIB), "{kept} MiB kept under {limit} bytes");
             kept
         };
