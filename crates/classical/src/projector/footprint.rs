@@ -129,6 +129,10 @@ struct FootView {
     /// Rows each footprint spans (at most `side`): constant per view, so the row loop has a
     /// fixed trip count.
     rows: usize,
+    /// Columns each footprint spans (at most `side`). The kernels that work across a
+    /// footprint's columns take all `side` of them (the ones past `cols` weigh zero); the
+    /// shared-row kernels take `cols`.
+    cols: usize,
     /// Which image axis the voxels of a grid row share their footprint along (see [`Shared`]).
     shared: Shared,
 }
@@ -378,16 +382,39 @@ fn axis_weights_chunk<const N: usize>(
         h2[q] = 0.5 * (p[q] - l[q]);
     }
     let mut prev = [0f32; CHUNK];
-    for k in 0..N.min(limit) {
-        for q in 0..CHUNK {
-            let (h1, h2, inv) = (h1[q], h2[q], inv[q]);
-            let t = (k + 1) as f32 - off[q];
-            let a = fmin(fmax(t, -h1), -h2) + h1;
-            let b = fmin(fmax(t, -h2), h2) + h2;
-            let c = fmin(fmax(t, h2), h1) - h2;
-            let cdf = a * a * inv + b + c - c * c * inv;
-            store(q, k, cdf - prev[q]);
-            prev[q] = cdf;
+    // The integral up to the end of pixel `k` for every voxel, then the weight of pixel `k`;
+    // with `$rest`, the last pixel `k + 1` then takes what is left of the trapezoid's area
+    // `p`, kept from rounding below zero.
+    macro_rules! pixel {
+        ($k:expr, $rest:expr) => {
+            for q in 0..CHUNK {
+                let (h1, h2, inv) = (h1[q], h2[q], inv[q]);
+                let t = ($k + 1) as f32 - off[q];
+                let a = fmin(fmax(t, -h1), -h2) + h1;
+                let b = fmin(fmax(t, -h2), h2) + h2;
+                let c = fmin(fmax(t, h2), h1) - h2;
+                let cdf = a * a * inv + b + c - c * c * inv;
+                store(q, $k, cdf - prev[q]);
+                prev[q] = cdf;
+                if $rest {
+                    // Exactly zero when the support ends before the last pixel, as the
+                    // difference of two equal integrals was (multiplicative methods divide by
+                    // column sums that tiny weights would make).
+                    store(q, $k + 1, if t >= h1 { 0.0 } else { fmax(p[q] - cdf, 0.0) });
+                }
+            }
+        };
+    }
+    let m = N.min(limit);
+    if m >= 2 {
+        // The support ends inside pixel m − 1 (see `fit_trapezoid`): one integral fewer.
+        for k in 0..m - 2 {
+            pixel!(k, false);
+        }
+        pixel!(m - 2, true);
+    } else {
+        for k in 0..m {
+            pixel!(k, false);
         }
     }
 }
@@ -526,6 +553,7 @@ impl FootView {
             edges,
             side: MAX_FOOTPRINT_SIDE,
             rows: MAX_FOOTPRINT_SIDE,
+            cols: MAX_FOOTPRINT_SIDE,
             shared: Shared::None,
         };
         view.shared = view.sharing();
@@ -534,6 +562,7 @@ impl FootView {
         let need = |s: f64| ((s * 1.02 + 1.0).ceil() as usize).clamp(2, MAX_FOOTPRINT_SIDE);
         view.side = FOOTPRINT_SIDES.into_iter().find(|&n| n >= need(su.max(sv))).unwrap_or(MAX_FOOTPRINT_SIDE);
         view.rows = need(sv);
+        view.cols = need(su);
         view
     }
 
@@ -680,7 +709,7 @@ impl FootView {
     /// voxels than the chunk's.
     #[inline(always)]
     fn chunk_wide<const N: usize>(&self, t: &ChunkTrapezoids) -> bool {
-        let (lim_u, lim_v) = (N as f32 - 1.0, self.rows as f32 - 1.0);
+        let (lim_u, lim_v) = (self.cols as f32 - 1.0, self.rows as f32 - 1.0);
         (0..CHUNK).fold(0u32, |any, q| any | u32::from((t.pu[q] + t.lu[q] > lim_u) | (t.pv[q] + t.lv[q] > lim_v))) != 0
     }
 
@@ -693,7 +722,7 @@ impl FootView {
         let n = N as f32;
         let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
         for q in 0..CHUNK {
-            (t.pu[q], t.lu[q]) = fit_trapezoid(t.pu[q], t.lu[q], N, wide);
+            (t.pu[q], t.lu[q]) = fit_trapezoid(t.pu[q], t.lu[q], self.cols, wide);
             (t.pv[q], t.lv[q]) = fit_trapezoid(t.pv[q], t.lv[q], self.rows, wide);
             let (pu, lu, pv, lv) = (t.pu[q], t.lu[q], t.pv[q], t.lv[q]);
             let (u, v, gamma) = (t.u[q], t.v[q], t.gamma[q]);
@@ -819,7 +848,7 @@ impl FootView {
     fn rows_shared<const N: usize, const SHARED_V: bool>(&self, bases: &[[f32; 3]; CHUNK], out: &mut [RowShared<N>]) {
         let n = N as f32;
         let moving = if SHARED_V { 0 } else { 1 };
-        let n_s = if SHARED_V { self.rows } else { N };
+        let n_s = if SHARED_V { self.rows } else { self.cols };
         let bound_s = if SHARED_V { (self.height + N) as f32 } else { (self.width + N) as f32 };
         let z16 = [0f32; CHUNK];
         let (mut first, mut inv_p, mut zs, mut iz, mut fixed) = (z16, z16, z16, z16, z16);
@@ -937,7 +966,7 @@ impl FootView {
             a1,
             base_s: fixed * fixed + rs.zs * rs.zs,
             g0: self.gain * iz * iz * iz,
-            n_lim: if SHARED_V { N } else { self.rows },
+            n_lim: if SHARED_V { self.cols } else { self.rows },
             bound: if SHARED_V { (self.width + N) as f32 } else { (self.height + N) as f32 },
         }
     }
@@ -1521,7 +1550,7 @@ impl FootprintProjector {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let nr = fv.rows;
-        let n_l = if SHARED_V { N } else { nr };
+        let n_l = if SHARED_V { fv.cols } else { nr };
         let [nx, ny, _] = self.grid.dims;
         let mut mvs = vec![Moving::<N>::default(); nx.div_ceil(CHUNK)];
         let mut starts = Vec::with_capacity(mvs.len());
@@ -1603,7 +1632,7 @@ impl FootprintProjector {
     ) {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
-        let (line_len, n_l, n_s) = if SHARED_V { (pw, N, fv.rows) } else { (ph, fv.rows, N) };
+        let (line_len, n_l, n_s) = if SHARED_V { (pw, fv.cols, fv.rows) } else { (ph, fv.rows, fv.cols) };
         let (m_along, m_across) = if SHARED_V { masks } else { (masks.1, masks.0) };
         let [nx, ny, _] = self.grid.dims;
         // 32 more, for the vector kernel's window.
