@@ -399,8 +399,11 @@ fn axis_weights_chunk<const N: usize>(
                 if $rest {
                     // Exactly zero when the support ends before the last pixel, as the
                     // difference of two equal integrals was (multiplicative methods divide by
-                    // column sums that tiny weights would make).
-                    store(q, $k + 1, if t >= h1 { 0.0 } else { fmax(p[q] - cdf, 0.0) });
+                    // column sums that tiny weights would make): the factor is 0 there and 1
+                    // once the support reaches 2⁻²⁰ px into it. Arithmetic rather than a
+                    // select, which the baseline instruction set would branch on.
+                    let reach = fmin(fmax((h1 - t) * 1_048_576.0, 0.0), 1.0);
+                    store(q, $k + 1, reach * fmax(p[q] - cdf, 0.0));
                 }
             }
         };
