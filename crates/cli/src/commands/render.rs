@@ -70,7 +70,11 @@ pub struct Args {
     /// by default. It costs voxels × views rather than rays × samples, so it is many times
     /// faster for large images and orbits; where pixels are wider than the field's detail it is
     /// also closer to what a camera records than one ray per pixel (`docs/performance.md`).
-    #[arg(long, value_enum, default_value = "rays")]
+    /// `auto`: `footprint` where the cells it would project (a volume's voxels; a field's
+    /// finest level, or the `--bake N` grid) image at most 1.5 px wide in every view, the field
+    /// then sampled on those cells; `rays` otherwise, and whenever `--supersample`, `--step` or
+    /// `--bake off` asks for rays. `render.json` records the choice.
+    #[arg(long, value_enum, default_value = "auto")]
     pub projector: RenderProjector,
     /// Rays per pixel along each image axis (anti-aliasing; `--projector rays` only).
     #[arg(long, default_value_t = 1)]
@@ -91,7 +95,8 @@ pub struct Args {
     /// with `--projector rays`, bakes on twice the resolution of the field's finest grid level
     /// (a `fast` or `dense` field) when the views' samples outnumber twice the grid's
     /// vertices, else renders exactly; with `--projector footprint` it always samples the
-    /// field at the cell centres of a grid twice as fine as its finest level. Baking is
+    /// field at the cell centres of a grid twice as fine as its finest level (on the finest
+    /// level's own cells when `--projector auto` chose the footprint projector). Baking is
     /// several times faster for orbits and all-camera renders; on the demo jet's `fast` field
     /// the baked images differ from exact ones by 0.3–0.4 % NRMSE, and with the footprint
     /// projector at the finest level's own resolution (`--bake 128`) by 1.6 %, in a fifth of
@@ -113,6 +118,8 @@ pub struct Args {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum RenderProjector {
+    /// The footprint projector where the cells image at most 1.5 px wide, else rays.
+    Auto,
     /// Line integrals along rays through the pixel centres (trilinear volumes).
     Rays,
     /// The separable-footprint projector: box voxels integrated over each pixel's area.
@@ -246,7 +253,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let source = load_source(&args.recon, Some(&scene))?;
-    let footprint = args.projector == RenderProjector::Footprint;
+    let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
+    let footprint = match args.projector {
+        RenderProjector::Footprint => true,
+        RenderProjector::Rays => false,
+        RenderProjector::Auto => auto_footprint(&args, &source, &scene.aabb, &cameras),
+    };
     let step = args.step.or(match &source {
         Source::Volume(v) if !footprint => Some(0.5 * v.spacing().min_element()),
         _ => None,
@@ -268,6 +280,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                      (cells along the box's longest side)",
                     args.recon.display()
                 ),
+                // Chosen because the finest level's cells image at most a pixel and a half.
+                _ if footprint && args.projector == RenderProjector::Auto => source.field().detail_dims(),
                 _ if footprint => doubled,
                 _ => doubled.filter(|dims| {
                     let samples_per_ray =
@@ -299,7 +313,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     .map(|grid| {
-        let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
         FootprintProjector::new(grid, &cameras, scene.intensity_scale)
             .context("--projector footprint (--projector rays renders any voxel size)")
     })
@@ -371,7 +384,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         orbit: args.orbit,
         width: args.width,
         format: args.format,
-        projector: args.projector,
+        projector: if footprint { RenderProjector::Footprint } else { RenderProjector::Rays },
         supersample: args.supersample.max(1),
         step,
         time: args.time,
@@ -401,4 +414,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// Widest image of a cell, in pixels, up to which `--projector auto` takes the footprint
+/// projector. There a pixel spans about a cell or more, so integrating box cells over its area
+/// is closer to what the camera records than a ray through its centre, and a field sampled on
+/// its finest level's cells loses little (`docs/performance.md`).
+pub const AUTO_FOOTPRINT_MAX_PX: f64 = 1.5;
+
+/// Whether `--projector auto` renders with the footprint projector (see [`Args::projector`]):
+/// nothing asks for rays, and the cells it would project image at most
+/// [`AUTO_FOOTPRINT_MAX_PX`] wide in every view.
+fn auto_footprint(args: &Args, source: &Source, aabb: &fluidnerf_core::Aabb, cameras: &[Camera]) -> bool {
+    if args.supersample > 1 || args.step.is_some() {
+        return false;
+    }
+    let grid = match (source, args.bake) {
+        (Source::Volume(v), _) => Grid::new(v.dims, v.aabb),
+        (Source::Field { .. }, Bake::Off) => return false,
+        (Source::Field { .. }, Bake::Cells(n)) => Grid::new(Volume::dims_for(aabb, n), *aabb),
+        (Source::Field { .. }, Bake::Auto) => match source.field().detail_dims() {
+            Some(dims) => Grid::new(dims, *aabb),
+            None => return false,
+        },
+    };
+    FootprintProjector::largest_footprint_px(&grid, cameras) <= AUTO_FOOTPRINT_MAX_PX
 }
