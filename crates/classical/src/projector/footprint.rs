@@ -399,11 +399,11 @@ fn axis_weights_chunk<const N: usize>(
                 if $rest {
                     // Exactly zero when the support ends before the last pixel, as the
                     // difference of two equal integrals was (multiplicative methods divide by
-                    // column sums that tiny weights would make): the factor is 0 there and 1
-                    // once the support reaches 2⁻²⁰ px into it. Arithmetic rather than a
-                    // select, which the baseline instruction set would branch on.
-                    let reach = fmin(fmax((h1 - t) * 1_048_576.0, 0.0), 1.0);
-                    store(q, $k + 1, reach * fmax(p[q] - cdf, 0.0));
+                    // column sums that tiny weights would make): the overlap `h1 − t` is ≤ 0
+                    // there. Where it is positive it bounds the rest of the area (the ramp is
+                    // at most 1 high), so scaled by 2²⁰ it bites only on rounding. Arithmetic
+                    // rather than a select, which the baseline instruction set would branch on.
+                    store(q, $k + 1, fmax(fmin(p[q] - cdf, (h1 - t) * 1_048_576.0), 0.0));
                 }
             }
         };
