@@ -28,7 +28,8 @@ pub enum ImageFormat {
 ///
 /// Pixel values are `intensity_scale × ∫E ds` along each pixel's ray through the box, the same
 /// model the reconstruction was fitted to, so a scene camera's rendering compares directly with
-/// its image; with `--projector footprint`, that integral over each pixel's area. Views of
+/// its image; with the footprint projector (by default where a pixel spans the cells it
+/// projects, see `--projector`), that integral over each pixel's area. Views of
 /// scene cameras go to `view_<index>.<ext>`, orbit views to `orbit_<k>.<ext>` plus
 /// `turntable.gif`. Writes `render.json` with the resolved settings.
 #[derive(clap::Args, Debug)]
