@@ -26,7 +26,7 @@ use std::time::Instant;
 use fluidnerf_classical::{
     asart, AsartParams, FootprintProjector, Grid, Isa, Problem, Projector, SplatProjector, Stopping,
 };
-use fluidnerf_core::{Aabb, Camera, Image};
+use fluidnerf_core::{Aabb, Camera};
 use glam::DVec3;
 
 mod common;
@@ -110,16 +110,7 @@ fn rates(p: &dyn Projector, x: &[f32], views: usize, reps: usize) -> (Cost, Cost
 /// Mean wall and CPU seconds per ASART iteration (iterations 2..=3; the first carries the
 /// start, Eq. 2.29).
 fn asart_iteration(p: &dyn Projector, x: &[f32]) -> Cost {
-    let images: Vec<Image> = p
-        .cameras()
-        .iter()
-        .enumerate()
-        .map(|(v, c)| {
-            let mut im = Image::zeros(c.width(), c.height());
-            p.forward(v, x, &mut im.data);
-            im
-        })
-        .collect();
+    let images = common::project_all(p, x);
     let problem = Problem::new(p, &images).expect("consistent");
     let params = AsartParams { stopping: Stopping { max_iterations: 3, plateau: None }, ..Default::default() };
     let mut stamps = vec![];

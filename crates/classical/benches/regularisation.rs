@@ -13,10 +13,10 @@
 use std::time::Instant;
 
 use fluidnerf_classical::{
-    laplacian, sart, sart_tikhonov, sart_tv, Grid, Problem, Projector, SartParams, SplatProjector, Stopping,
-    TikhonovParams, TvParams,
+    laplacian, sart, sart_tikhonov, sart_tv, Grid, Problem, SartParams, SplatProjector, Stopping, TikhonovParams,
+    TvParams,
 };
-use fluidnerf_core::{Aabb, Image};
+use fluidnerf_core::Aabb;
 use glam::DVec3;
 
 mod common;
@@ -30,13 +30,7 @@ fn main() {
     let cams = ring(15, 256);
     let truth = smooth_jet(&grid);
     let splat = SplatProjector::new(grid, &cams, 1.0).expect("valid").with_subdivisions(1);
-    let images: Vec<Image> = (0..cams.len())
-        .map(|v| {
-            let mut im = Image::zeros(256, 256);
-            splat.forward(v, &truth.data, &mut im.data);
-            im
-        })
-        .collect();
+    let images = common::project_all(&splat, &truth.data);
     let problem = Problem::new(&splat, &images).expect("consistent");
     let stopping = Stopping { max_iterations: 3, plateau: None };
     println!("128^3 voxels, 15 views of 256^2 px, {} rayon threads", rayon::current_num_threads());

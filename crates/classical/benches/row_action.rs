@@ -13,7 +13,7 @@
 use fluidnerf_classical::{
     art, mart, ArtParams, FootprintProjector, Grid, MartParams, Problem, Projector, Stopping, ROW_CACHE_MIB,
 };
-use fluidnerf_core::{Aabb, Image};
+use fluidnerf_core::Aabb;
 use glam::DVec3;
 
 mod common;
@@ -27,13 +27,7 @@ fn main() {
     let cams = ring(15, 128);
     let truth = smooth_jet(&grid);
     let projector = FootprintProjector::new(grid, &cams, 1.0).expect("valid");
-    let images: Vec<Image> = (0..cams.len())
-        .map(|v| {
-            let mut im = Image::zeros(128, 128);
-            projector.forward(v, &truth.data, &mut im.data);
-            im
-        })
-        .collect();
+    let images = common::project_all(&projector, &truth.data);
     let problem = Problem::new(&projector, &images).expect("consistent");
     let stopping = Stopping { max_iterations: 4, plateau: None };
     let kept: usize = (0..cams.len()).map(|v| projector.rows(v).bytes()).sum();

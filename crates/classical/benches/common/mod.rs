@@ -3,8 +3,8 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use fluidnerf_classical::{Grid, IterState};
-use fluidnerf_core::{Camera, Intrinsics, Volume};
+use fluidnerf_classical::{Grid, IterState, Projector};
+use fluidnerf_core::{Camera, Image, Intrinsics, Volume};
 use glam::DVec3;
 
 /// `n` cameras of `px`² px on a ring of radius 360 mm around the x axis, looking at the origin.
@@ -40,4 +40,18 @@ pub fn per_iteration(run: impl FnOnce(&mut dyn FnMut(&IterState) -> ControlFlow<
     });
     let d: Vec<f64> = stamps.windows(2).map(|w| (w[1] - w[0]).as_secs_f64()).collect();
     d.iter().sum::<f64>() / d.len().max(1) as f64
+}
+
+/// The images of `x` in every view of `p`: the data the solver benchmarks reconstruct from.
+#[allow(dead_code)] // not every benchmark uses every fixture
+pub fn project_all(p: &dyn Projector, x: &[f32]) -> Vec<Image> {
+    p.cameras()
+        .iter()
+        .enumerate()
+        .map(|(v, c)| {
+            let mut im = Image::zeros(c.width(), c.height());
+            p.forward(v, x, &mut im.data);
+            im
+        })
+        .collect()
 }
