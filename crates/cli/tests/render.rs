@@ -21,6 +21,11 @@ fn ok(out: &Output) {
     );
 }
 
+/// The `render.json` a render wrote into `out`.
+fn render_json(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("render.json")).expect("JSON")
+}
+
 /// A Gaussian blob in a 3 × 2 × 2 box, three cameras on a ring about x (images not needed).
 fn make_scene(dir: &Path) -> (Scene, Volume) {
     let aabb = Aabb::new(DVec3::new(-1.5, -1.0, -1.0), DVec3::new(1.5, 1.0, 1.0));
@@ -89,9 +94,7 @@ fn scene_camera_renders_match_the_reference_renderer() {
         "--projector",
         "rays",
     ]));
-    let settings: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out16.join("render.json")).expect("settings")).expect("JSON");
-    let full_scale = settings["full_scale"].as_f64().expect("full_scale");
+    let full_scale = render_json(&out16)["full_scale"].as_f64().expect("full_scale");
     let counts = fluidnerf_io::image::read_image(&out16.join("view_001.png")).expect("reads");
     for (c, b) in counts.data.iter().zip(&want.data) {
         let value = *c as f64 * full_scale / 65535.0;
@@ -189,13 +192,10 @@ fn trained_fields_render_exactly_or_baked() {
                 .collect::<Vec<_>>(),
         );
         ok(&o);
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("render.json"))
-                .expect("json");
         let images: Vec<Vec<f32>> = (0..3)
             .map(|c| fluidnerf_io::image::read_image(&out.join(format!("view_{c:03}.tif"))).expect("reads").data)
             .collect();
-        (json["baked"].clone(), images)
+        (render_json(&out)["baked"].clone(), images)
     };
     let (exact_json, exact) = render("off");
     assert!(exact_json.is_null());
@@ -258,19 +258,17 @@ fn footprint_renders_match_the_projector_and_the_ray_renderer() {
         let e = nrmse(&want, &rays.data);
         assert!(e < 0.02, "camera {c}: footprint against 4 × 4 rays per pixel, NRMSE {e}");
     }
-    let settings: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("fp/render.json")).expect("settings"))
-            .expect("JSON");
-    assert_eq!(settings["projector"], "footprint");
+    assert_eq!(render_json(&dir.path().join("fp"))["projector"], "footprint");
 
     let run = dir.path().join("run");
     write_trained(&run, scene.aabb);
     ok(&render(&run, "fp-field", &["--projector", "footprint"]));
     ok(&render(&run, "rays-field", &["--bake", "off", "--supersample", "4"]));
-    let settings: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("fp-field/render.json")).expect("settings"))
-            .expect("JSON");
-    assert_eq!(settings["baked"], serde_json::json!([32, 32, 32]), "twice the finest level (16)");
+    assert_eq!(
+        render_json(&dir.path().join("fp-field"))["baked"],
+        serde_json::json!([32, 32, 32]),
+        "twice the finest level (16)"
+    );
     for c in 0..3 {
         let e = nrmse(&read("fp-field", c), &read("rays-field", c));
         assert!(e < 0.015, "camera {c}: the field's footprint render against 4 × 4 exact rays, NRMSE {e}");
@@ -306,7 +304,7 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
         let out = dir.path().join(name);
         let args = ["render", &d(recon), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff", "-q"];
         ok(&fluidnerf(&args.iter().copied().chain(extra.iter().copied()).collect::<Vec<_>>()));
-        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("render.json")).expect("JSON")
+        render_json(&out)
     };
     let read = |name: &str, c: usize| {
         fluidnerf_io::image::read_image(&dir.path().join(name).join(format!("view_{c:03}.tif"))).expect("reads").data
