@@ -1,6 +1,7 @@
 //! The scalar-field abstraction shared by phantoms, voxel grids and neural fields.
 
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
 use crate::{Aabb, Ray, Volume};
 
@@ -24,6 +25,16 @@ pub trait ScalarField: Sync {
         None
     }
 
+    /// E at `points` as the field's own representation holds it, without the mask of its
+    /// [`ScalarField::support`]: outside the occupied cells, where [`ScalarField::eval`] gives
+    /// zero, the values continue the field. A grid read trilinearly inside the support
+    /// ([`Baked`]) needs them at the vertices on and just past the support's faces, or the
+    /// cells inside are pulled towards zero. Default: [`ScalarField::eval`] (a field without a
+    /// support, or one whose zeros are its own).
+    fn eval_unmasked(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.eval(points, time, out);
+    }
+
     /// Grid dimensions that resolve the field's finest detail (a trained grid's finest level),
     /// if it has one: the grid to bake it on ([`Baked`]). Default: none.
     fn detail_dims(&self) -> Option<[usize; 3]> {
@@ -45,11 +56,76 @@ impl Baked {
     /// the grid read back has `dims + 1` cells per axis, centred on those vertices (its box
     /// reaches half a cell beyond `aabb`), so a field that is trilinear on the partition's
     /// cells — a trained grid's finest level — is read back exactly.
+    ///
+    /// A field with a support is sampled without its mask ([`ScalarField::eval_unmasked`]) at
+    /// every vertex a read inside an occupied cell uses, and nowhere else: a read near a face
+    /// of the support then interpolates the field, not a step down to the zeros outside it.
+    /// (The renderer reads a baked field only inside the occupied cells.)
     pub fn on_vertices(field: &dyn ScalarField, dims: [usize; 3], aabb: Aabb, time: f64) -> Self {
-        let n = glam::DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let n = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let half = 0.5 * aabb.size() / n;
         let grid = Aabb::new(aabb.min - half, aabb.max + half);
-        let volume = Volume::from_field(dims.map(|d| d + 1), grid, field, time);
+        let vdims = dims.map(|d| d + 1);
+        let volume = match field.support() {
+            None => Volume::from_field(vdims, grid, field, time),
+            Some(sup) => {
+                let mut v = Volume::zeros(vdims, grid);
+                let sp = v.spacing();
+                // Per axis, the support cells each vertex's two neighbouring grid cells overlap
+                // (with positive length): the vertex is read from inside an occupied cell only
+                // if one of them is occupied.
+                let reach = |a: usize| -> Vec<(usize, usize)> {
+                    let hs = sup.aabb.size()[a] / sup.dims[a] as f64;
+                    let r = sp[a] / hs;
+                    (0..vdims[a])
+                        .map(|i| {
+                            let c = (aabb.min[a] + i as f64 * sp[a] - sup.aabb.min[a]) / hs;
+                            let lo = (c - r + 1e-6).floor().max(0.0);
+                            let hi = ((c + r - 1e-6).ceil() - 1.0).min(sup.dims[a] as f64 - 1.0);
+                            if lo > hi {
+                                (1, 0)
+                            } else {
+                                (lo as usize, hi as usize)
+                            }
+                        })
+                        .collect()
+                };
+                let (rx, ry, rz) = (reach(0), reach(1), reach(2));
+                let [sx, sy, _] = sup.dims;
+                let [nx, ny, _] = vdims;
+                v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+                    let (mut pts, mut at) = (Vec::new(), Vec::new());
+                    // The support's columns along x that a vertex row of this slab can read.
+                    let mut column = vec![false; sx];
+                    for j in 0..ny {
+                        column.fill(false);
+                        for ck in rz[k].0..=rz[k].1 {
+                            for cj in ry[j].0..=ry[j].1 {
+                                let row = &sup.cells[(ck * sy + cj) * sx..][..sx];
+                                for (c, &o) in column.iter_mut().zip(row) {
+                                    *c |= o;
+                                }
+                            }
+                        }
+                        for (i, &(lo, hi)) in rx.iter().enumerate() {
+                            if lo <= hi && column[lo..=hi].iter().any(|&o| o) {
+                                // The cell centre of `Volume::from_field`, as a field without a
+                                // support is sampled.
+                                let p = grid.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * sp;
+                                pts.push(p.as_vec3());
+                                at.push(j * nx + i);
+                            }
+                        }
+                    }
+                    let mut vals = vec![0f32; pts.len()];
+                    field.eval_unmasked(&pts, time, &mut vals);
+                    for (&i, &x) in at.iter().zip(&vals) {
+                        slab[i] = x;
+                    }
+                });
+                v
+            }
+        };
         let support = field.support().map(|s| (s.aabb, s.dims, s.cells.to_vec()));
         Baked { volume, support }
     }

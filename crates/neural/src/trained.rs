@@ -184,6 +184,18 @@ impl<F: TrainableField> ScalarField for WorldField<'_, F> {
     }
 
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.eval_masked(points, time, out, true);
+    }
+
+    /// The network's values in the empty cells too (inside the box; zero outside it).
+    fn eval_unmasked(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.eval_masked(points, time, out, false);
+    }
+}
+
+impl<F: TrainableField> WorldField<'_, F> {
+    /// [`ScalarField::eval`], with the occupancy mask applied when `masked`.
+    fn eval_masked(&self, points: &[Vec3], time: f64, out: &mut [f32], masked: bool) {
         assert_eq!(points.len(), out.len(), "WorldField::eval: points and out differ in length");
         let dim = self.field.input_dim();
         let min = self.meta.aabb.min.as_vec3();
@@ -207,7 +219,7 @@ impl<F: TrainableField> ScalarField for WorldField<'_, F> {
                 }
                 let u = u.clamp(Vec3::ZERO, Vec3::ONE);
                 let u = [u.x, u.y, u.z];
-                if self.occupancy.is_some_and(|g| !g.is_occupied(u)) {
+                if masked && self.occupancy.is_some_and(|g| !g.is_occupied(u)) {
                     continue;
                 }
                 inputs.extend_from_slice(&u);
@@ -256,6 +268,10 @@ impl<F: TrainableField> TrainedField<F> {
 impl<F: TrainableField> ScalarField for TrainedField<F> {
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
         self.view().eval(points, time, out);
+    }
+
+    fn eval_unmasked(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.view().eval_unmasked(points, time, out);
     }
 
     fn support(&self) -> Option<fluidnerf_core::Support<'_>> {

@@ -1,0 +1,61 @@
+//! A trained field in world coordinates: its occupancy mask zeroes the empty cells in `eval`,
+//! and `eval_unmasked` gives the network's own values there (what a bake reads at the vertices
+//! on the hull's faces), the same values in the occupied cells, and zero outside the box.
+
+use fluidnerf_core::{Aabb, ScalarField};
+use fluidnerf_neural::occupancy::OccupancyGrid;
+use fluidnerf_neural::train::FieldMeta;
+use fluidnerf_neural::trained::WorldField;
+use fluidnerf_neural::{HashGridConfig, HashGridField, TrainableField};
+use glam::{DVec3, Vec3};
+
+#[test]
+fn the_mask_zeroes_the_empty_cells_and_nothing_else() {
+    let cfg = HashGridConfig {
+        levels: 4,
+        log2_table_size: 12,
+        base_resolution: 4,
+        max_resolution: 16,
+        init_scale: 0.0,
+        ..HashGridConfig::default()
+    };
+    let mut field = HashGridField::new(&cfg, 3, 1).expect("valid config");
+    let grid = field.grid_params();
+    for (i, p) in field.params_mut()[..grid].iter_mut().enumerate() {
+        *p = 0.4 * ((i as f32 * 0.37).sin() + (i as f32 * 0.011).cos());
+    }
+    // Every cell of a 4³ hull occupied but those with i < 2 and j < 2.
+    let cells: Vec<bool> = (0..64).map(|c| !(c % 4 < 2 && (c / 4) % 4 < 2)).collect();
+    let hull = OccupancyGrid::from_cells([4, 4, 4], cells).expect("4³ cells");
+    let aabb = Aabb::new(DVec3::new(-1.0, -2.0, 0.0), DVec3::new(3.0, 2.0, 2.0));
+    let meta = FieldMeta { aabb, value_scale: 2.5, time_step: 1.0, occupancy: None };
+    let world = WorldField { field: &field, meta: &meta, occupancy: Some(&hull) };
+
+    // A lattice over the box and a little beyond it.
+    let points: Vec<Vec3> = (0..13 * 13 * 13)
+        .map(|n| {
+            let f = |m: usize| (m as f32 + 0.5) / 12.0 * 1.1 - 0.05;
+            let (u, v, w) = (f(n % 13), f((n / 13) % 13), f(n / 169));
+            Vec3::new(-1.0 + 4.0 * u, -2.0 + 4.0 * v, 2.0 * w)
+        })
+        .collect();
+    let (mut masked, mut unmasked) = (vec![0f32; points.len()], vec![0f32; points.len()]);
+    world.eval(&points, 0.0, &mut masked);
+    world.eval_unmasked(&points, 0.0, &mut unmasked);
+    let (mut empty_nonzero, mut occupied) = (0, 0);
+    for ((p, &m), &u) in points.iter().zip(&masked).zip(&unmasked) {
+        let rel = (*p - Vec3::new(-1.0, -2.0, 0.0)) / Vec3::new(4.0, 4.0, 2.0);
+        if rel.cmplt(Vec3::ZERO).any() || rel.cmpgt(Vec3::ONE).any() {
+            assert_eq!((m, u), (0.0, 0.0), "outside the box at {p}");
+        } else if rel.x < 0.5 && rel.y < 0.5 {
+            assert_eq!(m, 0.0, "an empty cell at {p}");
+            empty_nonzero += usize::from(u != 0.0);
+        } else {
+            // The same network on other batches: equal up to the kernels' rounding.
+            assert!((m - u).abs() <= 1e-5 * u.abs().max(1.0), "an occupied cell at {p}: {m} vs {u}");
+            occupied += usize::from(m != 0.0);
+        }
+    }
+    assert!(empty_nonzero > 100, "the network holds values in the empty cells: {empty_nonzero}");
+    assert!(occupied > 500, "{occupied}");
+}
