@@ -32,7 +32,7 @@ pub struct Intrinsics {
     pub fy: f64,
     pub cx: f64,
     pub cy: f64,
-    /// The K[0][1] entry (zero for square-pixel sensors).
+    /// The `K[0][1]` entry (zero for square-pixel sensors).
     #[serde(default)]
     pub skew: f64,
 }

@@ -22,7 +22,7 @@
 //!   subsets, jitter, held-out cameras).
 //! - [`image`]: the pinhole and thin-lens image models.
 //! - [`sensor`]: counts, Gaussian and photon noise, dark offset, quantisation.
-//! - [`generate()`]: all of it from one [`SynthSettings`]; [`preset`] names the standard sets.
+//! - [`generate()`]: all of it from one [`SynthSettings`]; [`preset()`] names the standard sets.
 
 mod error;
 mod fastmath;
