@@ -57,7 +57,7 @@
 use std::ops::{ControlFlow, Range};
 use std::path::Path;
 
-use fluidnerf_core::ScalarField;
+use fluidnerf_core::{ScalarField, Support};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -709,6 +709,43 @@ impl StitchedField {
 
 impl ScalarField for StitchedField {
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.eval_windows(points, time, out, true);
+    }
+
+    fn eval_unmasked(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+        self.eval_windows(points, time, out, false);
+    }
+
+    /// The windows' hull when they all have the same one (one window, or windows whose hulls
+    /// came out alike): where the field may be non-zero at any time, so renders skip the rest
+    /// and a bake keeps the field at the hull's faces. Windows with different hulls state none:
+    /// inside their union, a bake read without the masks would show one window's values in
+    /// cells that only another's hull holds.
+    fn support(&self) -> Option<Support<'_>> {
+        let (first, rest) = self.fields.split_first()?;
+        let hull = first.support()?;
+        for f in rest {
+            let other = f.support()?;
+            if (other.aabb, other.dims, other.cells) != (hull.aabb, hull.dims, hull.cells) {
+                return None;
+            }
+        }
+        Some(hull)
+    }
+
+    /// The finest detail of any window (windows share their configuration, so their grids
+    /// agree): what a bake of the stitched field must resolve.
+    fn detail_dims(&self) -> Option<[usize; 3]> {
+        self.fields.iter().try_fold([0usize; 3], |acc, f| {
+            let d = f.detail_dims()?;
+            Some([0, 1, 2].map(|a| acc[a].max(d[a])))
+        })
+    }
+}
+
+impl StitchedField {
+    /// [`ScalarField::eval`], each window's mask applied when `masked`.
+    fn eval_windows(&self, points: &[Vec3], time: f64, out: &mut [f32], masked: bool) {
         assert_eq!(points.len(), out.len(), "StitchedField::eval: points and out differ in length");
         out.fill(0.0);
         let f = frame_position(&self.frame_times, time);
@@ -721,19 +758,15 @@ impl ScalarField for StitchedField {
                 TimeAxis::Time => time_at(&self.frame_times, pos) - self.origins[i],
                 TimeAxis::Frames => pos - self.plan[i].start as f64,
             };
-            self.fields[i].eval(points, t, &mut tmp);
+            if masked {
+                self.fields[i].eval(points, t, &mut tmp);
+            } else {
+                self.fields[i].eval_unmasked(points, t, &mut tmp);
+            }
             for (o, &v) in out.iter_mut().zip(&tmp) {
                 *o += w as f32 * v;
             }
         }
-    }
-    /// The finest detail of any window (windows share their configuration, so their grids
-    /// agree): what a bake of the stitched field must resolve.
-    fn detail_dims(&self) -> Option<[usize; 3]> {
-        self.fields.iter().try_fold([0usize; 3], |acc, f| {
-            let d = f.detail_dims()?;
-            Some([0, 1, 2].map(|a| acc[a].max(d[a])))
-        })
     }
 }
 

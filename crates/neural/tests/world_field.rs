@@ -1,16 +1,17 @@
 //! A trained field in world coordinates: its occupancy mask zeroes the empty cells in `eval`,
 //! and `eval_unmasked` gives the network's own values there (what a bake reads at the vertices
-//! on the hull's faces), the same values in the occupied cells, and zero outside the box.
+//! on the hull's faces), the same values in the occupied cells, and zero outside the box. A
+//! time-resolved run's stitched field states its windows' hull when they share one.
 
 use fluidnerf_core::{Aabb, ScalarField};
 use fluidnerf_neural::occupancy::OccupancyGrid;
+use fluidnerf_neural::temporal::{StitchedField, TimeAxis};
 use fluidnerf_neural::train::FieldMeta;
-use fluidnerf_neural::trained::WorldField;
+use fluidnerf_neural::trained::{TrainedField, WorldField};
 use fluidnerf_neural::{HashGridConfig, HashGridField, TrainableField};
 use glam::{DVec3, Vec3};
 
-#[test]
-fn the_mask_zeroes_the_empty_cells_and_nothing_else() {
+fn field(seed: u64) -> HashGridField {
     let cfg = HashGridConfig {
         levels: 4,
         log2_table_size: 12,
@@ -19,16 +20,30 @@ fn the_mask_zeroes_the_empty_cells_and_nothing_else() {
         init_scale: 0.0,
         ..HashGridConfig::default()
     };
-    let mut field = HashGridField::new(&cfg, 3, 1).expect("valid config");
+    let mut field = HashGridField::new(&cfg, 3, seed).expect("valid config");
     let grid = field.grid_params();
     for (i, p) in field.params_mut()[..grid].iter_mut().enumerate() {
-        *p = 0.4 * ((i as f32 * 0.37).sin() + (i as f32 * 0.011).cos());
+        *p = 0.4 * ((i as f32 * 0.37 + seed as f32).sin() + (i as f32 * 0.011).cos());
     }
-    // Every cell of a 4³ hull occupied but those with i < 2 and j < 2.
-    let cells: Vec<bool> = (0..64).map(|c| !(c % 4 < 2 && (c / 4) % 4 < 2)).collect();
-    let hull = OccupancyGrid::from_cells([4, 4, 4], cells).expect("4³ cells");
-    let aabb = Aabb::new(DVec3::new(-1.0, -2.0, 0.0), DVec3::new(3.0, 2.0, 2.0));
-    let meta = FieldMeta { aabb, value_scale: 2.5, time_step: 1.0, occupancy: None };
+    field
+}
+
+/// Every cell of a 4³ hull occupied but those with i < 2 and j < 2 (and, with `more`, the
+/// cell at the far corner).
+fn hull(more: bool) -> OccupancyGrid {
+    let empty = |c: usize| (c % 4 < 2 && (c / 4) % 4 < 2) || (more && c == 63);
+    let cells: Vec<bool> = (0..64).map(|c| !empty(c)).collect();
+    OccupancyGrid::from_cells([4, 4, 4], cells).expect("4³ cells")
+}
+
+fn aabb() -> Aabb {
+    Aabb::new(DVec3::new(-1.0, -2.0, 0.0), DVec3::new(3.0, 2.0, 2.0))
+}
+
+#[test]
+fn the_mask_zeroes_the_empty_cells_and_nothing_else() {
+    let (field, hull) = (field(1), hull(false));
+    let meta = FieldMeta { aabb: aabb(), value_scale: 2.5, time_step: 1.0, occupancy: None };
     let world = WorldField { field: &field, meta: &meta, occupancy: Some(&hull) };
 
     // A lattice over the box and a little beyond it.
@@ -58,4 +73,37 @@ fn the_mask_zeroes_the_empty_cells_and_nothing_else() {
     }
     assert!(empty_nonzero > 100, "the network holds values in the empty cells: {empty_nonzero}");
     assert!(occupied > 500, "{occupied}");
+}
+
+/// Two windows with one hull: the stitched field states it, zeroes the empty cells in `eval`
+/// and gives the blend of the windows' own values there in `eval_unmasked`. Windows whose
+/// hulls differ state none, since a bake read inside their union would show one window's
+/// values where only the other's hull holds the flow.
+#[test]
+fn a_stitched_field_states_the_hull_its_windows_share() {
+    let window = |seed: u64, more: bool| -> Box<dyn ScalarField + Send + Sync> {
+        let occupancy = Some(hull(more).to_record());
+        let meta = FieldMeta { aabb: aabb(), value_scale: 1.0, time_step: 1.0, occupancy };
+        Box::new(TrainedField::new(field(seed), meta).expect("valid hull"))
+    };
+    let stitched = |more: bool| StitchedField {
+        frame_times: vec![0.0, 1.0, 2.0, 3.0],
+        plan: vec![0..3, 1..4],
+        origins: vec![0.0, 1.0],
+        axes: vec![TimeAxis::Time; 2],
+        fields: vec![window(1, false), window(2, more)],
+    };
+    let shared = stitched(false);
+    let sup = shared.support().expect("the windows share their hull");
+    assert_eq!((sup.dims, sup.cells), ([4, 4, 4], hull(false).cells()));
+    assert!(stitched(true).support().is_none(), "different hulls state none");
+
+    // In an empty cell (i, j < 2) and an occupied one, at a time both windows blend.
+    let points = [Vec3::new(-0.5, -1.5, 0.7), Vec3::new(2.5, 1.5, 0.7)];
+    let (mut masked, mut unmasked) = ([0f32; 2], [0f32; 2]);
+    shared.eval(&points, 1.5, &mut masked);
+    shared.eval_unmasked(&points, 1.5, &mut unmasked);
+    assert_eq!(masked[0], 0.0);
+    assert!(unmasked[0] != 0.0, "the windows' own values in the empty cell");
+    assert!(masked[1] != 0.0 && (masked[1] - unmasked[1]).abs() <= 1e-5 * masked[1].abs());
 }
