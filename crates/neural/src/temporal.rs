@@ -56,8 +56,9 @@
 
 use std::ops::{ControlFlow, Range};
 use std::path::Path;
+use std::sync::OnceLock;
 
-use fluidnerf_core::{ScalarField, Support};
+use fluidnerf_core::{Aabb, ScalarField, Support};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -679,6 +680,16 @@ pub struct StitchedField {
     /// Each window's field, queried with times relative to its origin (on [`TimeAxis::Time`])
     /// or with its frame position (on [`TimeAxis::Frames`]).
     pub fields: Vec<Box<dyn ScalarField + Send + Sync>>,
+    /// The windows' hulls ([`StitchedHull`]), gathered on first use.
+    hull: OnceLock<StitchedHull>,
+}
+
+/// What the windows' hulls give the stitched field: the union of them (`None` unless every
+/// window has one, on the same grid), and whether they are all the same hull.
+#[derive(Debug, Default)]
+struct StitchedHull {
+    union: Option<(Aabb, [usize; 3], Vec<bool>)>,
+    shared: bool,
 }
 
 impl std::fmt::Debug for StitchedField {
@@ -688,6 +699,38 @@ impl std::fmt::Debug for StitchedField {
 }
 
 impl StitchedField {
+    /// The windows `fields`, trained over the frames `plan` of the recording's `frame_times`,
+    /// with their time origins and axes (one per window), stitched into one field.
+    pub fn new(
+        frame_times: Vec<f64>,
+        plan: Vec<Range<usize>>,
+        origins: Vec<f64>,
+        axes: Vec<TimeAxis>,
+        fields: Vec<Box<dyn ScalarField + Send + Sync>>,
+    ) -> Self {
+        StitchedField { frame_times, plan, origins, axes, fields, hull: OnceLock::new() }
+    }
+
+    fn hull(&self) -> &StitchedHull {
+        self.hull.get_or_init(|| {
+            let hulls: Option<Vec<Support<'_>>> = self.fields.iter().map(|f| f.support()).collect();
+            let Some((first, rest)) = hulls.as_deref().and_then(|h| h.split_first()) else {
+                return StitchedHull::default();
+            };
+            if rest.iter().any(|h| (h.aabb, h.dims) != (first.aabb, first.dims)) {
+                return StitchedHull::default();
+            }
+            let mut cells = first.cells.to_vec();
+            for h in rest {
+                for (c, &o) in cells.iter_mut().zip(h.cells) {
+                    *c |= o;
+                }
+            }
+            let shared = rest.iter().all(|h| h.cells == first.cells);
+            StitchedHull { union: Some((first.aabb, first.dims, cells)), shared }
+        })
+    }
+
     /// Stitches the windows of `run` (all trained windows; an interrupted run covers fewer
     /// frames and is stitched over those).
     pub fn from_run<F: TrainableField + Clone + 'static>(run: &TemporalRun<F>) -> Result<Self, NeuralError> {
@@ -697,13 +740,13 @@ impl StitchedField {
             fields.push(Box::new(TrainedField::new(w.learner.field.clone(), w.meta.clone())?));
         }
         let covered = run.windows.last().map_or(0, |w| w.frames.end);
-        Ok(StitchedField {
-            frame_times: run.frame_times[..covered.max(1).min(run.frame_times.len())].to_vec(),
-            plan: run.plan[..n].to_vec(),
-            origins: run.windows.iter().map(|w| w.time_origin).collect(),
-            axes: run.windows.iter().map(|w| w.time_axis).collect(),
+        Ok(StitchedField::new(
+            run.frame_times[..covered.max(1).min(run.frame_times.len())].to_vec(),
+            run.plan[..n].to_vec(),
+            run.windows.iter().map(|w| w.time_origin).collect(),
+            run.windows.iter().map(|w| w.time_axis).collect(),
             fields,
-        })
+        ))
     }
 }
 
@@ -712,25 +755,20 @@ impl ScalarField for StitchedField {
         self.eval_windows(points, time, out, true);
     }
 
+    /// The windows' own values without their masks when they share one hull; with different
+    /// hulls, the masked values. (A bake reads its grid inside the union of the hulls: at a
+    /// vertex on one window's face the cells on one side need that window's values and those
+    /// on the other its zeros, so the masks stay.)
     fn eval_unmasked(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
-        self.eval_windows(points, time, out, false);
+        let shared = self.hull().shared;
+        self.eval_windows(points, time, out, !shared);
     }
 
-    /// The windows' hull when they all have the same one (one window, or windows whose hulls
-    /// came out alike): where the field may be non-zero at any time, so renders skip the rest
-    /// and a bake keeps the field at the hull's faces. Windows with different hulls state none:
-    /// inside their union, a bake read without the masks would show one window's values in
-    /// cells that only another's hull holds.
+    /// The union of the windows' hulls (when every window has one, on the same grid): where
+    /// the field may be non-zero at some time, so renders sample only there. Each window still
+    /// masks its own values with its own hull.
     fn support(&self) -> Option<Support<'_>> {
-        let (first, rest) = self.fields.split_first()?;
-        let hull = first.support()?;
-        for f in rest {
-            let other = f.support()?;
-            if (other.aabb, other.dims, other.cells) != (hull.aabb, hull.dims, hull.cells) {
-                return None;
-            }
-        }
-        Some(hull)
+        self.hull().union.as_ref().map(|(aabb, dims, cells)| Support { aabb: *aabb, dims: *dims, cells })
     }
 
     /// The finest detail of any window (windows share their configuration, so their grids
@@ -823,11 +861,11 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         };
         fields.push(boxed);
     }
-    Ok(StitchedField {
-        frame_times: rec.frame_times,
+    Ok(StitchedField::new(
+        rec.frame_times,
         plan,
-        origins: rec.windows.iter().map(|w| w.time_origin).collect(),
-        axes: rec.windows.iter().map(|w| w.time_axis).collect(),
+        rec.windows.iter().map(|w| w.time_origin).collect(),
+        rec.windows.iter().map(|w| w.time_axis).collect(),
         fields,
-    })
+    ))
 }

@@ -77,33 +77,55 @@ fn the_mask_zeroes_the_empty_cells_and_nothing_else() {
 
 /// Two windows with one hull: the stitched field states it, zeroes the empty cells in `eval`
 /// and gives the blend of the windows' own values there in `eval_unmasked`. Windows whose
-/// hulls differ state none, since a bake read inside their union would show one window's
-/// values where only the other's hull holds the flow.
+/// hulls differ state their union, and `eval_unmasked` keeps their masks: a bake read inside
+/// the union would otherwise show one window's values where only the other's hull holds the
+/// flow.
 #[test]
-fn a_stitched_field_states_the_hull_its_windows_share() {
+fn a_stitched_field_states_the_union_of_its_windows_hulls() {
     let window = |seed: u64, more: bool| -> Box<dyn ScalarField + Send + Sync> {
         let occupancy = Some(hull(more).to_record());
         let meta = FieldMeta { aabb: aabb(), value_scale: 1.0, time_step: 1.0, occupancy };
         Box::new(TrainedField::new(field(seed), meta).expect("valid hull"))
     };
-    let stitched = |more: bool| StitchedField {
-        frame_times: vec![0.0, 1.0, 2.0, 3.0],
-        plan: vec![0..3, 1..4],
-        origins: vec![0.0, 1.0],
-        axes: vec![TimeAxis::Time; 2],
-        fields: vec![window(1, false), window(2, more)],
+    let stitched = |more: bool| {
+        StitchedField::new(
+            vec![0.0, 1.0, 2.0, 3.0],
+            vec![0..3, 1..4],
+            vec![0.0, 1.0],
+            vec![TimeAxis::Time; 2],
+            vec![window(1, more), window(2, false)],
+        )
     };
+    // In an empty cell of both hulls (i, j < 2), in the far corner cell that only the second
+    // window's hull holds with `more`, and in a cell both hold; at a time both windows blend.
+    let points = [Vec3::new(-0.5, -1.5, 0.7), Vec3::new(2.5, 1.5, 1.7), Vec3::new(2.5, 1.5, 0.7)];
+    let eval = |f: &StitchedField| {
+        let (mut masked, mut unmasked) = ([0f32; 3], [0f32; 3]);
+        f.eval(&points, 1.5, &mut masked);
+        f.eval_unmasked(&points, 1.5, &mut unmasked);
+        (masked, unmasked)
+    };
+
     let shared = stitched(false);
     let sup = shared.support().expect("the windows share their hull");
     assert_eq!((sup.dims, sup.cells), ([4, 4, 4], hull(false).cells()));
-    assert!(stitched(true).support().is_none(), "different hulls state none");
-
-    // In an empty cell (i, j < 2) and an occupied one, at a time both windows blend.
-    let points = [Vec3::new(-0.5, -1.5, 0.7), Vec3::new(2.5, 1.5, 0.7)];
-    let (mut masked, mut unmasked) = ([0f32; 2], [0f32; 2]);
-    shared.eval(&points, 1.5, &mut masked);
-    shared.eval_unmasked(&points, 1.5, &mut unmasked);
+    let (masked, unmasked) = eval(&shared);
     assert_eq!(masked[0], 0.0);
     assert!(unmasked[0] != 0.0, "the windows' own values in the empty cell");
-    assert!(masked[1] != 0.0 && (masked[1] - unmasked[1]).abs() <= 1e-5 * masked[1].abs());
+    for c in 1..3 {
+        assert!(masked[c] != 0.0 && (masked[c] - unmasked[c]).abs() <= 1e-5 * masked[c].abs());
+    }
+
+    let differ = stitched(true);
+    let sup = differ.support().expect("the union of the hulls");
+    assert_eq!(sup.cells, hull(false).cells(), "the second window's hull holds the first's");
+    let (masked, unmasked) = eval(&differ);
+    assert_eq!(masked, unmasked, "the masks stay");
+    assert_eq!(masked[0], 0.0);
+    assert!(masked[1] != 0.0, "the second window holds the corner");
+    // The first window's own mask, at a time only it covers, drops the corner.
+    let mut first = [0f32; 3];
+    differ.eval(&points, 0.0, &mut first);
+    assert_eq!(first[1], 0.0);
+    assert!(first[2] != 0.0);
 }
