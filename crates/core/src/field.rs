@@ -67,8 +67,8 @@ impl Baked {
         let grid = Aabb::new(aabb.min - half, aabb.max + half);
         let vdims = dims.map(|d| d + 1);
         let volume = match field.support() {
-            None => Volume::from_field(vdims, grid, field, time),
-            Some(sup) => {
+            // A support whose cells do not fill its grid says nothing (as for the renderer).
+            Some(sup) if sup.cells.len() == sup.dims.iter().product::<usize>() => {
                 let mut v = Volume::zeros(vdims, grid);
                 let sp = v.spacing();
                 // Per axis, the support cells each vertex's two neighbouring grid cells overlap
@@ -125,6 +125,7 @@ impl Baked {
                 });
                 v
             }
+            _ => Volume::from_field(vdims, grid, field, time),
         };
         let support = field.support().map(|s| (s.aabb, s.dims, s.cells.to_vec()));
         Baked { volume, support }
