@@ -174,8 +174,10 @@ fn write_trained(dir: &Path, aabb: Aabb) {
 }
 
 /// `--bake off` renders a trained field exactly (the reference renderer on the loaded field);
-/// `auto` bakes it on twice its finest level when the views are many enough, and the baked
-/// images stay within 2 % NRMSE of the exact ones; `render.json` records which was done.
+/// `auto` bakes it on twice its finest level when the views' samples inside its hull
+/// outnumber twice the grid's vertices there, and the baked images stay within 2 % NRMSE of
+/// the exact ones; with a quarter of the rays it renders exactly; `render.json` records which
+/// was done.
 #[test]
 fn trained_fields_render_exactly_or_baked() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -183,12 +185,12 @@ fn trained_fields_render_exactly_or_baked() {
     let run = dir.path().join("run");
     write_trained(&run, scene.aabb);
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
-    let render = |bake: &str| {
-        let out = dir.path().join(format!("views-{bake}"));
+    let render = |bake: &str, ss: usize| {
+        let out = dir.path().join(format!("views-{bake}-{ss}"));
         let o = fluidnerf(
             &["render", &d(&run), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff", "-q"]
                 .into_iter()
-                .chain(["--projector", "rays", "--bake", bake])
+                .chain(["--projector", "rays", "--bake", bake, "--supersample", &ss.to_string()])
                 .collect::<Vec<_>>(),
         );
         ok(&o);
@@ -197,15 +199,20 @@ fn trained_fields_render_exactly_or_baked() {
             .collect();
         (render_json(&out)["baked"].clone(), images)
     };
-    let (exact_json, exact) = render("off");
-    assert!(exact_json.is_null());
     let (field, _) = fluidnerf_neural::trained::load_trained(&run).expect("loads");
-    for (c, img) in exact.iter().enumerate() {
-        let s = RenderSettings { scale: SCALE, ..Default::default() };
-        let want = render_image(field.as_ref(), &scene.frames[c].camera, &scene.aabb, &s).expect("renders");
-        assert!(img.iter().zip(&want.data).all(|(a, b)| (a - b).abs() <= 1e-5 * b.abs().max(1.0)));
-    }
-    let (auto_json, baked) = render("auto");
+    let reference = |ss: usize| -> Vec<Vec<f32>> {
+        let s = RenderSettings { scale: SCALE, supersample: ss, ..Default::default() };
+        (0..3)
+            .map(|c| render_image(field.as_ref(), &scene.frames[c].camera, &scene.aabb, &s).expect("renders").data)
+            .collect()
+    };
+    let close = |a: &[Vec<f32>], b: &[Vec<f32>]| {
+        a.iter().flatten().zip(b.iter().flatten()).all(|(a, b)| (a - b).abs() <= 1e-5 * b.abs().max(1.0))
+    };
+    let (exact_json, exact) = render("off", 2);
+    assert!(exact_json.is_null());
+    assert!(close(&exact, &reference(2)));
+    let (auto_json, baked) = render("auto", 2);
     assert_eq!(auto_json, serde_json::json!([32, 32, 32]), "twice the finest level (16)");
     let (mut se, mut ss) = (0.0f64, 0.0f64);
     for (a, b) in baked.iter().flatten().zip(exact.iter().flatten()) {
@@ -214,6 +221,10 @@ fn trained_fields_render_exactly_or_baked() {
     }
     let nrmse = (se / ss).sqrt();
     assert!(ss > 0.0 && nrmse < 0.02, "baked vs exact NRMSE {nrmse}");
+    // One ray per pixel: 61 k samples inside the hull, against twice its 31 k vertices.
+    let (few_json, few) = render("auto", 1);
+    assert!(few_json.is_null(), "too few samples to bake: {few_json}");
+    assert!(close(&few, &reference(1)));
 }
 
 fn nrmse(x: &[f32], reference: &[f32]) -> f64 {

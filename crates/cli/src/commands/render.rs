@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
-use fluidnerf_core::{render_image, Baked, Camera, Image, RenderSettings, ScalarField, Volume};
+use fluidnerf_core::{render_image, Aabb, Baked, Camera, Image, RenderSettings, ScalarField, Support, Volume};
 use fluidnerf_viz::Colormap;
 use serde::Serialize;
 
@@ -95,7 +95,8 @@ pub struct Args {
     /// empty space still skipped; at their centres for `--projector footprint`); `auto`,
     /// with `--projector rays`, bakes on twice the resolution of the field's finest grid level
     /// (a `fast` or `dense` field) when the views' samples outnumber twice the grid's
-    /// vertices, else renders exactly; with `--projector footprint` it always samples the
+    /// vertices (inside the field's hull, when it has one: the network evaluations each way),
+    /// else renders exactly; with `--projector footprint` it always samples the
     /// field at the cell centres of a grid twice as fine as its finest level (on the finest
     /// level's own cells when `--projector auto` chose the footprint projector). Baking is
     /// several times faster for orbits and all-camera renders; on the demo jet's `fast` field
@@ -172,6 +173,35 @@ struct View {
     camera: Camera,
     time: f64,
     file_stem: String,
+}
+
+/// The samples (of length `step`) that the views of the busiest time draw inside `hull`, with
+/// `ss × ss` rays per pixel: what rendering them exactly costs in network evaluations,
+/// estimated from every 8th ray along each image axis.
+fn samples_in_hull(hull: &Support<'_>, views: &[View], aabb: &Aabb, ss: usize, step: f64) -> f64 {
+    const STRIDE: u32 = 8;
+    let mut per_time: Vec<(f64, f64)> = Vec::new();
+    let mut cells = Vec::new();
+    for v in views {
+        let (w, h) = (v.camera.width(), v.camera.height());
+        let (mut length, mut rays) = (0.0, 0usize);
+        for row in (0..h).step_by(STRIDE as usize) {
+            for col in (0..w).step_by(STRIDE as usize) {
+                rays += 1;
+                let Ok(ray) = v.camera.pixel_ray(col as f64, row as f64) else { continue };
+                let Some((s0, s1)) = aabb.intersect(&ray) else { continue };
+                cells.clear();
+                hull.occupied_intervals(&ray, s0, s1, &mut cells);
+                length += cells.iter().map(|(a, b)| b - a).sum::<f64>();
+            }
+        }
+        let samples = length / rays.max(1) as f64 * (w * h) as f64 * (ss * ss) as f64 / step;
+        match per_time.iter_mut().find(|(t, _)| *t == v.time) {
+            Some((_, sum)) => *sum += samples,
+            None => per_time.push((v.time, samples)),
+        }
+    }
+    per_time.into_iter().map(|(_, s)| s).fold(0.0, f64::max)
 }
 
 #[allow(clippy::print_stdout)]
@@ -285,21 +315,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 _ if footprint && args.projector == RenderProjector::Auto => source.field().detail_dims(),
                 _ if footprint => doubled,
                 _ => doubled.filter(|dims| {
-                    let samples_per_ray =
-                        scene.aabb.size().length() / step.unwrap_or(scene.aabb.size().min_element() / 256.0);
-                    let busiest = views
-                        .iter()
-                        .map(|v| {
-                            views
+                    let step = step.unwrap_or(scene.aabb.size().min_element() / 256.0);
+                    let vertices = dims.iter().map(|n| n + 1).product::<usize>() as f64;
+                    match source.field().support() {
+                        // Inside the hull: the network evaluations each way.
+                        Some(hull) => {
+                            let occupied = hull.cells.iter().filter(|&&c| c).count() as f64 / hull.cells.len() as f64;
+                            samples_in_hull(&hull, &views, &scene.aabb, ss, step) >= 2.0 * occupied * vertices
+                        }
+                        None => {
+                            let samples_per_ray = scene.aabb.size().length() / step;
+                            let busiest = views
                                 .iter()
-                                .filter(|o| o.time == v.time)
-                                .map(|o| o.camera.width() * o.camera.height())
-                                .sum::<usize>()
-                        })
-                        .max()
-                        .unwrap_or(0);
-                    (busiest * ss * ss) as f64 * samples_per_ray
-                        >= 2.0 * dims.iter().map(|n| n + 1).product::<usize>() as f64
+                                .map(|v| {
+                                    views
+                                        .iter()
+                                        .filter(|o| o.time == v.time)
+                                        .map(|o| o.camera.width() * o.camera.height())
+                                        .sum::<usize>()
+                                })
+                                .max()
+                                .unwrap_or(0);
+                            (busiest * ss * ss) as f64 * samples_per_ray >= 2.0 * vertices
+                        }
+                    }
                 }),
             }
         }
