@@ -439,6 +439,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut how = match bake_dims {
         Some([x, y, z]) if footprint => format!(", sampled on {x}x{y}x{z} cells"),
         Some([x, y, z]) => format!(", sampled on {x}x{y}x{z} cells (--bake off renders it exactly)"),
+        // `--bake auto` chose not to: say why, since the user may expect a bake.
+        None if args.bake == Bake::Auto
+            && matches!(source, Source::Field { .. })
+            && source.field().detail_dims().is_some() =>
+        {
+            ", exactly: a bake would not halve the network's evaluations".to_string()
+        }
         None => String::new(),
     };
     if footprint {
