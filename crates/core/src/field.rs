@@ -157,6 +157,33 @@ pub struct Support<'a> {
 }
 
 impl Support<'_> {
+    /// The box of the occupied cells (`None` when none is occupied, or the cells do not fill
+    /// the grid): a ray that misses it crosses no occupied cell.
+    pub fn occupied_box(&self) -> Option<Aabb> {
+        let [nx, ny, nz] = self.dims;
+        if self.cells.len() != nx * ny * nz {
+            return None;
+        }
+        let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+        // Row by row along x: the first and last occupied cell of each (a full row costs two
+        // reads, an empty one a scan).
+        for (r, row) in self.cells.chunks_exact(nx.max(1)).enumerate() {
+            let Some(first) = row.iter().position(|&c| c) else { continue };
+            let last = row.iter().rposition(|&c| c).unwrap_or(first);
+            let (j, k) = (r % ny, r / ny);
+            for (a, (l, h)) in [(first, last), (j, j), (k, k)].into_iter().enumerate() {
+                lo[a] = lo[a].min(l);
+                hi[a] = hi[a].max(h + 1);
+            }
+        }
+        if lo[0] == usize::MAX {
+            return None;
+        }
+        let h = self.aabb.size() / DVec3::new(nx as f64, ny as f64, nz as f64);
+        let at = |i: [usize; 3]| self.aabb.min + DVec3::new(i[0] as f64, i[1] as f64, i[2] as f64) * h;
+        Some(Aabb::new(at(lo), at(hi)))
+    }
+
     /// Appends to `out` the parameter intervals `[a, b] ⊆ [s0, s1]` of `ray` that cross
     /// occupied cells, sorted and merged (a 3D DDA through the grid). Intervals are exact up to
     /// rounding; callers that must not miss a sample near a cell face widen them.

@@ -57,6 +57,14 @@ pub fn render_image(
     let mut img = Image::zeros(w, h);
     let norm = (settings.scale / (n * n) as f64) as f32;
     let support = field.support();
+    // The occupied cells' box, widened by a hair so that rounding never clips a ray's walk
+    // through its faces: rays that miss it skip the walk through the support's grid.
+    let occupied = support.as_ref().map(|s| {
+        s.occupied_box().map(|b| {
+            let pad = 1e-9 * s.aabb.size().max_element();
+            Aabb::new(b.min - glam::DVec3::splat(pad), b.max + glam::DVec3::splat(pad))
+        })
+    });
     let sampler = field.as_volume().map(crate::Volume::sampler);
     img.data.par_chunks_mut(w).enumerate().try_for_each(|(row, out_row)| -> Result<(), CoreError> {
         let mut pts: Vec<Vec3> = Vec::with_capacity(BATCH + 4096);
@@ -92,7 +100,11 @@ pub fn render_image(
                     match &support {
                         Some(sup) => {
                             cells.clear();
-                            sup.occupied_intervals(&ray, s0, s1, &mut cells);
+                            if let Some((h0, h1)) = occupied.flatten().and_then(|b| b.intersect(&ray)) {
+                                if h0.max(s0) < h1.min(s1) {
+                                    sup.occupied_intervals(&ray, h0.max(s0), h1.min(s1), &mut cells);
+                                }
+                            }
                             for &(a, b) in &cells {
                                 let lo = (((a - s0) / ds).ceil() as usize).saturating_sub(1);
                                 let hi = ((((b - s0) / ds).floor().max(0.0) as usize) + 1).min(segments);
@@ -356,6 +368,34 @@ mod tests {
             }
         }
         assert!(checked > 100_000);
+    }
+
+    /// The occupied cells' box holds every occupied cell's centre and touches the outermost
+    /// ones; no occupied cell, no box.
+    #[test]
+    fn the_occupied_box_bounds_the_occupied_cells() {
+        let mut field = masked(true);
+        // Clear the outermost layers along x, so the box is smaller than the grid.
+        for (n, c) in field.cells.iter_mut().enumerate() {
+            if n % 7 == 0 || n % 7 == 6 {
+                *c = false;
+            }
+        }
+        let sup = field.support().expect("support");
+        let b = sup.occupied_box().expect("some cells are occupied");
+        let h = field.aabb.size() / DVec3::new(7.0, 5.0, 6.0);
+        assert!(
+            (b.min.x - (field.aabb.min.x + h.x)).abs() < 1e-12 && (b.max.x - (field.aabb.max.x - h.x)).abs() < 1e-12
+        );
+        for (n, &c) in field.cells.iter().enumerate() {
+            if c {
+                let centre = field.aabb.min
+                    + DVec3::new((n % 7) as f64 + 0.5, ((n / 7) % 5) as f64 + 0.5, (n / 35) as f64 + 0.5) * h;
+                assert!(centre.cmpge(b.min).all() && centre.cmple(b.max).all());
+            }
+        }
+        field.cells.iter_mut().for_each(|c| *c = false);
+        assert!(field.support().expect("support").occupied_box().is_none());
     }
 
     /// Rendering with the support skips the empty cells and gives the same image.

@@ -182,6 +182,7 @@ fn samples_in_hull(hull: &Support<'_>, views: &[View], aabb: &Aabb, ss: usize, s
     const STRIDE: u32 = 8;
     let mut per_time: Vec<(f64, f64)> = Vec::new();
     let mut cells = Vec::new();
+    let Some(occupied) = hull.occupied_box() else { return 0.0 };
     for v in views {
         let (w, h) = (v.camera.width(), v.camera.height());
         let (mut length, mut rays) = (0.0, 0usize);
@@ -189,9 +190,13 @@ fn samples_in_hull(hull: &Support<'_>, views: &[View], aabb: &Aabb, ss: usize, s
             for col in (0..w).step_by(STRIDE as usize) {
                 rays += 1;
                 let Ok(ray) = v.camera.pixel_ray(col as f64, row as f64) else { continue };
-                let Some((s0, s1)) = aabb.intersect(&ray) else { continue };
+                let (Some((s0, s1)), Some((h0, h1))) = (aabb.intersect(&ray), occupied.intersect(&ray)) else {
+                    continue;
+                };
                 cells.clear();
-                hull.occupied_intervals(&ray, s0, s1, &mut cells);
+                if h0.max(s0) < h1.min(s1) {
+                    hull.occupied_intervals(&ray, h0.max(s0), h1.min(s1), &mut cells);
+                }
                 length += cells.iter().map(|(a, b)| b - a).sum::<f64>();
             }
         }
