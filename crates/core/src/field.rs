@@ -66,7 +66,8 @@ impl Baked {
         let half = 0.5 * aabb.size() / n;
         let grid = Aabb::new(aabb.min - half, aabb.max + half);
         let vdims = dims.map(|d| d + 1);
-        let volume = match field.support() {
+        let support = field.support();
+        let volume = match support {
             // A support whose cells do not fill its grid says nothing (as for the renderer).
             Some(sup) if sup.cells.len() == sup.dims.iter().product::<usize>() => {
                 let mut v = Volume::zeros(vdims, grid);
@@ -127,8 +128,7 @@ impl Baked {
             }
             _ => Volume::from_field(vdims, grid, field, time),
         };
-        let support = field.support().map(|s| (s.aabb, s.dims, s.cells.to_vec()));
-        Baked { volume, support }
+        Baked { volume, support: support.map(|s| (s.aabb, s.dims, s.cells.to_vec())) }
     }
 }
 
@@ -154,6 +154,35 @@ pub struct Support<'a> {
     pub aabb: Aabb,
     pub dims: [usize; 3],
     pub cells: &'a [bool],
+}
+
+/// A [`Support`] prepared for walking many rays: the box of its occupied cells found once,
+/// and each ray clipped to it before the walk through the grid (a ray that misses it crosses
+/// no occupied cell).
+#[derive(Clone, Copy, Debug)]
+pub struct SupportWalk<'a> {
+    pub support: Support<'a>,
+    occupied: Option<Aabb>,
+}
+
+impl<'a> Support<'a> {
+    /// This support with its occupied cells' box, widened by a hair so that rounding never
+    /// clips a walk through its faces.
+    pub fn walk(self) -> SupportWalk<'a> {
+        let pad = DVec3::splat(1e-9 * self.aabb.size().max_element());
+        SupportWalk { support: self, occupied: self.occupied_box().map(|b| Aabb::new(b.min - pad, b.max + pad)) }
+    }
+}
+
+impl SupportWalk<'_> {
+    /// [`Support::occupied_intervals`], the walk limited to the occupied cells' box.
+    pub fn occupied_intervals(&self, ray: &Ray, s0: f64, s1: f64, out: &mut Vec<(f64, f64)>) {
+        let Some((h0, h1)) = self.occupied.and_then(|b| b.intersect(ray)) else { return };
+        let (a, b) = (h0.max(s0), h1.min(s1));
+        if a < b {
+            self.support.occupied_intervals(ray, a, b, out);
+        }
+    }
 }
 
 impl Support<'_> {

@@ -28,7 +28,7 @@ pub mod volume;
 
 pub use camera::{Camera, Distortion, Intrinsics, ThinLens, Visibility};
 pub use error::CoreError;
-pub use field::{Baked, ScalarField, Support};
+pub use field::{Baked, ScalarField, Support, SupportWalk};
 pub use geometry::{Aabb, Ray};
 pub use glam;
 pub use image::Image;

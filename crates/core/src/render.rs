@@ -56,15 +56,7 @@ pub fn render_image(
     let (w, h) = (camera.width(), camera.height());
     let mut img = Image::zeros(w, h);
     let norm = (settings.scale / (n * n) as f64) as f32;
-    let support = field.support();
-    // The occupied cells' box, widened by a hair so that rounding never clips a ray's walk
-    // through its faces: rays that miss it skip the walk through the support's grid.
-    let occupied = support.as_ref().map(|s| {
-        s.occupied_box().map(|b| {
-            let pad = 1e-9 * s.aabb.size().max_element();
-            Aabb::new(b.min - glam::DVec3::splat(pad), b.max + glam::DVec3::splat(pad))
-        })
-    });
+    let support = field.support().map(crate::Support::walk);
     let sampler = field.as_volume().map(crate::Volume::sampler);
     img.data.par_chunks_mut(w).enumerate().try_for_each(|(row, out_row)| -> Result<(), CoreError> {
         let mut pts: Vec<Vec3> = Vec::with_capacity(BATCH + 4096);
@@ -96,21 +88,20 @@ pub fn render_image(
                     // The samples of the whole chord, or only those in the field's occupied
                     // cells, widened by one sample each side so rounding at a cell face never
                     // drops one the field would count (the field is zero at the others).
+                    // A grid with a support reads the intervals themselves (below).
                     spans.clear();
                     match &support {
                         Some(sup) => {
                             cells.clear();
-                            if let Some((h0, h1)) = occupied.flatten().and_then(|b| b.intersect(&ray)) {
-                                if h0.max(s0) < h1.min(s1) {
-                                    sup.occupied_intervals(&ray, h0.max(s0), h1.min(s1), &mut cells);
-                                }
-                            }
-                            for &(a, b) in &cells {
-                                let lo = (((a - s0) / ds).ceil() as usize).saturating_sub(1);
-                                let hi = ((((b - s0) / ds).floor().max(0.0) as usize) + 1).min(segments);
-                                match spans.last_mut() {
-                                    Some(last) if lo <= last.1 + 1 => last.1 = last.1.max(hi),
-                                    _ => spans.push((lo, hi)),
+                            sup.occupied_intervals(&ray, s0, s1, &mut cells);
+                            if sampler.is_none() {
+                                for &(a, b) in &cells {
+                                    let lo = (((a - s0) / ds).ceil() as usize).saturating_sub(1);
+                                    let hi = ((((b - s0) / ds).floor().max(0.0) as usize) + 1).min(segments);
+                                    match spans.last_mut() {
+                                        Some(last) if lo <= last.1 + 1 => last.1 = last.1.max(hi),
+                                        _ => spans.push((lo, hi)),
+                                    }
                                 }
                             }
                         }

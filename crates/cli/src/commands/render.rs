@@ -178,11 +178,11 @@ struct View {
 /// The samples (of length `step`) that the views of the busiest time draw inside `hull`, with
 /// `ss × ss` rays per pixel: what rendering them exactly costs in network evaluations,
 /// estimated from every 8th ray along each image axis.
-fn samples_in_hull(hull: &Support<'_>, views: &[View], aabb: &Aabb, ss: usize, step: f64) -> f64 {
+fn samples_in_hull(hull: Support<'_>, views: &[View], aabb: &Aabb, ss: usize, step: f64) -> f64 {
     const STRIDE: u32 = 8;
     let mut per_time: Vec<(f64, f64)> = Vec::new();
     let mut cells = Vec::new();
-    let Some(occupied) = hull.occupied_box() else { return 0.0 };
+    let hull = hull.walk();
     for v in views {
         let (w, h) = (v.camera.width(), v.camera.height());
         let (mut length, mut rays) = (0.0, 0usize);
@@ -190,13 +190,9 @@ fn samples_in_hull(hull: &Support<'_>, views: &[View], aabb: &Aabb, ss: usize, s
             for col in (0..w).step_by(STRIDE as usize) {
                 rays += 1;
                 let Ok(ray) = v.camera.pixel_ray(col as f64, row as f64) else { continue };
-                let (Some((s0, s1)), Some((h0, h1))) = (aabb.intersect(&ray), occupied.intersect(&ray)) else {
-                    continue;
-                };
+                let Some((s0, s1)) = aabb.intersect(&ray) else { continue };
                 cells.clear();
-                if h0.max(s0) < h1.min(s1) {
-                    hull.occupied_intervals(&ray, h0.max(s0), h1.min(s1), &mut cells);
-                }
+                hull.occupied_intervals(&ray, s0, s1, &mut cells);
                 length += cells.iter().map(|(a, b)| b - a).sum::<f64>();
             }
         }
@@ -326,7 +322,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         // Inside the hull: the network evaluations each way.
                         Some(hull) => {
                             let occupied = hull.cells.iter().filter(|&&c| c).count() as f64 / hull.cells.len() as f64;
-                            samples_in_hull(&hull, &views, &scene.aabb, ss, step) >= 2.0 * occupied * vertices
+                            samples_in_hull(hull, &views, &scene.aabb, ss, step) >= 2.0 * occupied * vertices
                         }
                         None => {
                             let samples_per_ray = scene.aabb.size().length() / step;
@@ -477,7 +473,7 @@ pub const AUTO_FOOTPRINT_MAX_PX: f64 = 1.5;
 /// Whether `--projector auto` renders with the footprint projector (see [`Args::projector`]):
 /// nothing asks for rays, and the cells it would project image at most
 /// [`AUTO_FOOTPRINT_MAX_PX`] wide in every view.
-fn auto_footprint(args: &Args, source: &Source, aabb: &fluidnerf_core::Aabb, cameras: &[Camera]) -> bool {
+fn auto_footprint(args: &Args, source: &Source, aabb: &Aabb, cameras: &[Camera]) -> bool {
     if args.supersample > 1 || args.step.is_some() {
         return false;
     }
