@@ -122,7 +122,10 @@ impl NeuralConfig {
                     max_iterations: 2000,
                     stop: crate::train::StopRule { smoothing: 50, window: 300, tolerance: 0.01 },
                     occupancy: Some(OccupancyConfig::default()),
-                    chunk_samples: 8192,
+                    // Small enough that a chunk's activations stay in a core's L2 cache: 2048
+                    // trained the demo scene 1.2–1.3× faster than 8192 at the same accuracy
+                    // (docs/training-engine.md, "Chunks that fit the cache").
+                    chunk_samples: 2048,
                     // Rays over each drawn pixel's area on clean images (docs/claims.md,
                     // "Rays over the pixel's area").
                     pixel_supersample: Supersample::Auto,
