@@ -100,6 +100,23 @@ pub struct HashGridConfig {
     /// at first, one more joins every `coarse_to_fine` optimiser steps (their tables keep their
     /// near-zero start until then). 0 trains every level from the start. Default 0.
     pub coarse_to_fine: usize,
+    /// The precision of the MLP's matrix products while training. Default `f32`.
+    pub mlp_precision: MlpPrecision,
+}
+
+/// The precision of the hash grid's MLP products in training (see [`HashGridConfig`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MlpPrecision {
+    /// f32 throughout.
+    #[default]
+    F32,
+    /// On CPUs with AVX-512 BF16, the products of the forward and backward passes take their
+    /// operands in bfloat16 and sum in f32 (two multiply–adds per lane and instruction); the
+    /// activations, biases, gradients' sums and Adam stay in f32, as does inference. Only for
+    /// the ReLU MLPs of width 64 whose input is at most 64 features wide; everywhere else, and
+    /// on other CPUs, f32.
+    Bf16,
 }
 
 impl Default for HashGridConfig {
@@ -120,6 +137,7 @@ impl Default for HashGridConfig {
             output_activation: OutputActivation::Softplus,
             init_scale: 1e-4,
             coarse_to_fine: 0,
+            mlp_precision: MlpPrecision::F32,
         }
     }
 }
@@ -264,7 +282,8 @@ impl HashGridField {
             config.activation,
             config.output_activation,
             false,
-        );
+        )
+        .with_bf16_products(config.mlp_precision == MlpPrecision::Bf16);
         let mut params = vec![0.0; offset + mlp.num_params()];
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let s = config.init_scale;
@@ -275,6 +294,12 @@ impl HashGridField {
         }
         mlp.init(&mut params[offset..], &mut rng);
         Ok(Self { config: config.clone(), input_dim, levels, grid_params: offset, mlp, params })
+    }
+
+    /// Whether training takes the MLP's products in bfloat16 ([`MlpPrecision::Bf16`] on a
+    /// CPU that has it).
+    pub fn bf16_products(&self) -> bool {
+        self.mlp.bf16_products()
     }
 
     pub fn config(&self) -> &HashGridConfig {

@@ -67,5 +67,5 @@ pub use engine::cpu::CpuEngine;
 pub use engine::Engine;
 pub use error::NeuralError;
 pub use field::{Prior, TrainableField};
-pub use hashgrid::{HashGridConfig, HashGridField};
+pub use hashgrid::{HashGridConfig, HashGridField, MlpPrecision};
 pub use mlp::{Activation, MlpConfig, MlpField, OutputActivation};

@@ -31,6 +31,8 @@ use crate::error::NeuralError;
 use crate::field::TrainableField;
 use crate::kernels::{self, matmul, Op};
 
+mod bf16;
+
 /// Factor on the initial output weights in [`TrainableField::start_uniform`]: small enough
 /// that the initial field is nearly uniform, large enough that every hidden unit receives a
 /// gradient from the first iteration on.
@@ -154,6 +156,8 @@ pub(crate) struct Mlp {
     out_weight: Range<usize>,
     out_bias: usize,
     num_params: usize,
+    /// Whether training takes the matrix products in bfloat16 ([`bf16`]).
+    bf16: bool,
 }
 
 /// Activations of one chunk, recorded by [`Mlp::forward`] for [`Mlp::backward`]. All buffers
@@ -173,6 +177,8 @@ pub(crate) struct MlpTape {
     /// Two ping-pong buffers for inference, separate so that `infer` between a `forward` and
     /// its `backward` leaves the recorded pass intact.
     eval: [Vec<f32>; 2],
+    /// Scratch of the bfloat16 passes.
+    bf16: bf16::Scratch,
 }
 
 impl Mlp {
@@ -209,7 +215,20 @@ impl Mlp {
             out_weight,
             out_bias,
             num_params: out_bias + 1,
+            bf16: false,
         }
+    }
+
+    /// With `want`, training takes the products in bfloat16 where this network and the CPU
+    /// allow ([`bf16`]); inference stays in f32.
+    pub(crate) fn with_bf16_products(mut self, want: bool) -> Self {
+        self.bf16 = want && bf16::fits(&self) && bf16::cpu_has_bf16();
+        self
+    }
+
+    /// Whether training takes the products in bfloat16.
+    pub(crate) fn bf16_products(&self) -> bool {
+        self.bf16
     }
 
     pub(crate) fn num_params(&self) -> usize {
@@ -289,6 +308,10 @@ impl Mlp {
         self.reserve(tape, n);
         let h = self.width;
         let stride = tape.cap * h;
+        if self.bf16 {
+            bf16::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], out, &mut tape.bf16);
+            return;
+        }
         for (l, layer) in self.layers.iter().enumerate() {
             let (prev, rest) = tape.acts.split_at_mut(l * stride);
             let act = &mut rest[..n * h];
@@ -394,6 +417,11 @@ impl Mlp {
             }
         }
         grads[self.out_bias] += g.iter().sum::<f32>();
+        if self.bf16 {
+            let g = &tape.pre_out[..n];
+            bf16::backward(self, params, x, &tape.acts, stride, g, &mut tape.bf16, grads, d_x);
+            return;
+        }
         let last = (self.layers.len() - 1) * stride;
         let [da0, da1] = &mut tape.da;
         let (mut cur, mut next) = (&mut da0[..n * h], &mut da1[..n * h]);

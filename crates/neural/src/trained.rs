@@ -16,7 +16,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::dense::DenseGridField;
-use crate::hashgrid::{HashGridConfig, HashGridField};
+use crate::hashgrid::{HashGridConfig, HashGridField, MlpPrecision};
 use crate::mlp::{Activation, MlpConfig, MlpField};
 use crate::occupancy::{OccupancyConfig, OccupancyGrid};
 use crate::train::{FieldMeta, Supersample, TrainConfig};
@@ -112,6 +112,9 @@ impl NeuralConfig {
                     levels: 8,
                     log2_table_size: 16,
                     max_resolution: 128,
+                    // bfloat16 products where the CPU has them (docs/training-engine.md,
+                    // "The decoder's products in bfloat16").
+                    mlp_precision: MlpPrecision::Bf16,
                     ..HashGridConfig::default()
                 }),
                 train: TrainConfig {

@@ -12,7 +12,7 @@
 //! parameter.
 
 use fluidnerf_neural::{
-    Activation, HashGridConfig, HashGridField, MlpConfig, MlpField, OutputActivation, TrainableField,
+    Activation, HashGridConfig, HashGridField, MlpConfig, MlpField, MlpPrecision, OutputActivation, TrainableField,
 };
 use rand::{Rng, SeedableRng};
 
@@ -171,6 +171,8 @@ fn small_grid(d: usize, seed: u64) -> HashGridField {
         // Large enough that the MLP sees features of order one.
         init_scale: 0.5,
         coarse_to_fine: 0,
+        // Finite differences need the f32 products.
+        mlp_precision: MlpPrecision::F32,
     };
     HashGridField::new(&cfg, d, seed).unwrap()
 }
