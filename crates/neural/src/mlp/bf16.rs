@@ -490,14 +490,11 @@ unsafe fn backward_v4(
             let dwt = &mut s.dwt[w_off(l)..w_off(l) + k_pad * WIDTH];
             // SAFETY: `dwt` is 64 × k_pad, `inp` and `dzp` hold b2 / 2 pairs; features enabled.
             unsafe {
-                if k_pad == WIDTH {
-                    x86::rank::<4>(dwt, &inp, &dzp, b2 / 2);
-                } else {
-                    match k_pad {
-                        16 => x86::rank::<1>(dwt, &inp, &dzp, b2 / 2),
-                        32 => x86::rank::<2>(dwt, &inp, &dzp, b2 / 2),
-                        _ => x86::rank::<3>(dwt, &inp, &dzp, b2 / 2),
-                    }
+                match k_pad {
+                    16 => x86::rank::<1>(dwt, &inp, &dzp, b2 / 2),
+                    32 => x86::rank::<2>(dwt, &inp, &dzp, b2 / 2),
+                    48 => x86::rank::<3>(dwt, &inp, &dzp, b2 / 2),
+                    _ => x86::rank::<4>(dwt, &inp, &dzp, b2 / 2),
                 }
             }
             // ∂(layer input) = ∂z Wᵀ.
