@@ -83,6 +83,12 @@ pub trait TrainableField: Send + Sync {
         false
     }
 
+    /// Whether training takes some of the field's products in bfloat16 (the hash grid's
+    /// `mlp_precision`, on a CPU that has it); the training report records it.
+    fn bf16_products(&self) -> bool {
+        false
+    }
+
     /// Whether the field implements the priors of [`Prior`] ([`TrainableField::add_prior`]).
     fn supports_prior(&self) -> bool {
         false

@@ -296,12 +296,6 @@ impl HashGridField {
         Ok(Self { config: config.clone(), input_dim, levels, grid_params: offset, mlp, params })
     }
 
-    /// Whether training takes the MLP's products in bfloat16 ([`MlpPrecision::Bf16`] on a
-    /// CPU that has it).
-    pub fn bf16_products(&self) -> bool {
-        self.mlp.bf16_products()
-    }
-
     pub fn config(&self) -> &HashGridConfig {
         &self.config
     }
@@ -505,6 +499,10 @@ impl TrainableField for HashGridField {
 
     fn start_uniform(&mut self, level: f32) {
         self.mlp.start_uniform(&mut self.params[self.grid_params..], level);
+    }
+
+    fn bf16_products(&self) -> bool {
+        self.mlp.bf16_products()
     }
 
     fn eval(&self, inputs: &[f32], out: &mut [f32], tape: &mut HashGridTape) {

@@ -656,7 +656,7 @@ pub fn train_window<F: TrainableField + Clone>(
 }
 
 /// The report of a window that had already converged when it was saved.
-fn finished_report<F>(learner: &Learner<F>, cfg: &TrainConfig) -> TrainReport {
+fn finished_report<F: TrainableField>(learner: &Learner<F>, cfg: &TrainConfig) -> TrainReport {
     let smoothing = cfg.stop.smoothing.max(1);
     TrainReport {
         stop_reason: StopReason::Converged,
@@ -666,6 +666,7 @@ fn finished_report<F>(learner: &Learner<F>, cfg: &TrainConfig) -> TrainReport {
         train_time_s: learner.train_time_s,
         seconds_per_iteration: 0.0,
         samples_per_second: 0.0,
+        bf16_products: learner.field.bf16_products(),
     }
 }
 

@@ -751,6 +751,7 @@ pub fn train_fitting_gains<F: TrainableField>(
         train_time_s: learner.train_time_s,
         seconds_per_iteration: if done > 0 { loop_time / done as f64 } else { 0.0 },
         samples_per_second: if loop_time > 0.0 { samples / loop_time } else { 0.0 },
+        bf16_products: learner.field.bf16_products(),
     };
     Ok((report, gains))
 }
@@ -860,6 +861,10 @@ pub struct TrainReport {
     pub seconds_per_iteration: f64,
     /// Field rows forwarded per second in this call (coarse passes not counted).
     pub samples_per_second: f64,
+    /// Whether training took some of the field's products in bfloat16
+    /// ([`TrainableField::bf16_products`]): which arithmetic this machine ran.
+    #[serde(default)]
+    pub bf16_products: bool,
 }
 
 /// Which views of a [`Prepared`] problem.
@@ -998,6 +1003,7 @@ pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
         train_time_s: learner.train_time_s,
         seconds_per_iteration: if done > 0 { loop_time / done as f64 } else { 0.0 },
         samples_per_second: if loop_time > 0.0 { total_samples as f64 / loop_time } else { 0.0 },
+        bf16_products: learner.field.bf16_products(),
     })
 }
 

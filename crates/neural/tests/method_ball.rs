@@ -7,10 +7,11 @@ use std::ops::Range;
 
 use fluidnerf_core::{render_image, Aabb, Image, RenderSettings, ScalarField, Volume};
 use fluidnerf_neural::dense::DenseGridField;
+use fluidnerf_neural::hashgrid::{HashGridConfig, HashGridField, MlpPrecision};
 use fluidnerf_neural::mlp::{MlpConfig, MlpField};
 use fluidnerf_neural::occupancy::OccupancyConfig;
 use fluidnerf_neural::train::{render_view, train, Learner, Prepared, Problem, Split, StopRule, TrainConfig, View};
-use fluidnerf_neural::trained::{NeuralConfig, WorldField};
+use fluidnerf_neural::trained::{FieldConfig, NeuralConfig, WorldField};
 use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
@@ -147,6 +148,40 @@ fn dense_grid_reconstructs_the_ball() {
         "the loss must fall: {:?}",
         (learner.losses[0], report.smoothed_loss)
     );
+}
+
+#[test]
+fn fast_preset_reconstructs_the_ball_in_either_precision() {
+    // Bound: NRMSE < 0.15 after 300 iterations of the `fast` preset's grid and training, its
+    // decoder's products in bfloat16 (where the CPU has AVX-512 BF16) or in f32, the two
+    // within 15 % of each other; the report states which arithmetic ran.
+    let (problem, truth) = ball_problem(6, 0);
+    let NeuralConfig { field: FieldConfig::HashGrid(grid), train: base } =
+        NeuralConfig::preset("fast").expect("preset")
+    else {
+        panic!("the fast preset is a hash grid")
+    };
+    assert_eq!(grid.mlp_precision, MlpPrecision::Bf16);
+    #[cfg(target_arch = "x86_64")]
+    let cpu_bf16 = std::arch::is_x86_feature_detected!("avx512bf16") && std::arch::is_x86_feature_detected!("avx512bw");
+    #[cfg(not(target_arch = "x86_64"))]
+    let cpu_bf16 = false;
+    let cfg = TrainConfig { max_iterations: 300, stop: StopRule { window: 0, ..Default::default() }, ..base };
+    let prep = Prepared::new(&problem, &cfg).expect("prepares");
+    let errors: Vec<f64> = [MlpPrecision::Bf16, MlpPrecision::F32]
+        .into_iter()
+        .map(|mlp_precision| {
+            let grid = HashGridConfig { mlp_precision, ..grid.clone() };
+            let mut learner = Learner::new(HashGridField::new(&grid, 3, 2).expect("field"));
+            let report = train(&prep, &mut learner, &cfg, 1, |_| ControlFlow::Continue(())).expect("trains");
+            assert_eq!(report.bf16_products, cpu_bf16 && mlp_precision == MlpPrecision::Bf16, "{mlp_precision:?}");
+            let world = WorldField { field: &learner.field, meta: &prep.meta, occupancy: prep.occupancy() };
+            let e = nrmse(&Volume::from_field(truth.dims, truth.aabb, &world, 0.0), &truth);
+            assert!(e < 0.15, "fast preset, {mlp_precision:?} products: NRMSE {e:.3}");
+            e
+        })
+        .collect();
+    assert!((errors[0] - errors[1]).abs() < 0.15 * errors[1], "bf16 {:.4} against f32 {:.4}", errors[0], errors[1]);
 }
 
 #[test]
