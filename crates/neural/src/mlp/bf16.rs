@@ -264,6 +264,35 @@ mod x86 {
         }
     }
 
+    /// The output layer's backward pass for `rows` rows: `d[p] = g[p] w` (rows of 64) and
+    /// `dw += Σ_p g[p] h[p]`; rows from `g.len()` on get `d = 0`.
+    #[inline(always)]
+    pub(super) unsafe fn output_backward(g: &[f32], h: &[f32], w: &[f32], rows: usize, d: &mut [f32], dw: &mut [f32]) {
+        debug_assert!(h.len() >= g.len() * WIDTH && w.len() >= WIDTH && d.len() >= rows * WIDTH && dw.len() >= WIDTH);
+        // SAFETY: the assert bounds every pointer.
+        unsafe {
+            let (hp, dp) = (h.as_ptr(), d.as_mut_ptr());
+            let mut wv = [_mm512_setzero_ps(); WIDTH / 16];
+            let mut acc = wv;
+            for c in 0..WIDTH / 16 {
+                wv[c] = _mm512_loadu_ps(w.as_ptr().add(16 * c));
+                acc[c] = _mm512_loadu_ps(dw.as_ptr().add(16 * c));
+            }
+            for p in 0..rows {
+                let gp = _mm512_set1_ps(g.get(p).copied().unwrap_or(0.0));
+                for c in 0..WIDTH / 16 {
+                    _mm512_storeu_ps(dp.add(p * WIDTH + 16 * c), _mm512_mul_ps(gp, wv[c]));
+                    if p < g.len() {
+                        acc[c] = _mm512_fmadd_ps(gp, _mm512_loadu_ps(hp.add(p * WIDTH + 16 * c)), acc[c]);
+                    }
+                }
+            }
+            for (c, v) in acc.iter().enumerate() {
+                _mm512_storeu_ps(dw.as_mut_ptr().add(16 * c), *v);
+            }
+        }
+    }
+
     /// Packs `w` (`k × 64` row-major f32) for the forward products: `[k_pad / 2][64][2]`.
     #[inline(always)]
     pub(super) unsafe fn pack_forward(w: &[f32], k: usize, dst: &mut [u16], idx: __m512i) {
@@ -441,15 +470,10 @@ unsafe fn backward_v4(
         let b = (n - r).min(BLOCK);
         let b2 = b.div_ceil(2) * 2;
         let last = (depth - 1) * stride;
-        for p in 0..b2 {
-            let gp = if p < b { g[r + p] } else { 0.0 };
-            let h = if p < b { &acts[last + (r + p) * WIDTH..last + (r + p + 1) * WIDTH] } else { &zero[..] };
-            let d = &mut da[p * WIDTH..(p + 1) * WIDTH];
-            for j in 0..WIDTH {
-                d[j] = gp * w_out[j];
-                d_out_w[j] = gp.mul_add(h[j], d_out_w[j]);
-            }
-        }
+        let h = &acts[last + r * WIDTH..last + (r + b) * WIDTH];
+        // SAFETY: `g[r..r + b]` with b rows of 64 in `h`, b2 ≤ BLOCK rows in `da`; features
+        // enabled.
+        unsafe { x86::output_backward(&g[r..r + b], h, w_out, b2, &mut da, &mut d_out_w) };
         for l in (0..depth).rev() {
             // ∂z = ∂a [a > 0], ∂b += Σ ∂z.
             let db = &mut s.db[l * WIDTH..(l + 1) * WIDTH];
