@@ -527,9 +527,11 @@ fn method_benches(steps: usize) {
     let prep = Prepared::new(&problem, &fast_train).expect("prepares");
     let fluidnerf_neural::trained::FieldConfig::HashGrid(grid) = fast.field else { unreachable!("fast is a grid") };
     let field = HashGridField::new(&grid, 3, 0).expect("preset is valid");
+    let products = if field.bf16_products() { "bf16" } else { "f32" };
     let (t, rows) = time_iterations(&prep, field, &fast_train, 4 * steps);
     println!(
-        "method, fast grid (48 samples, skipping, 8 x 2048 rays, chunk 8192): {:.4} | {:.4} s/iteration, {:.2} | {:.2} M rows/s",
+        "method, fast grid (48 samples, skipping, 8 x 2048 rays, chunk {}, {products} products): {:.4} | {:.4} s/iteration, {:.2} | {:.2} M rows/s",
+        fast_train.chunk_samples,
         t.wall_s,
         t.cpu_s,
         rows as f64 / t.wall_s / 1e6,
