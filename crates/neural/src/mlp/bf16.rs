@@ -321,32 +321,30 @@ mod x86 {
     }
 }
 
-/// Packs every layer's weights (forward and transposed) into `s`.
+/// Packs every layer's weights into `dst`, one block after another: for the forward products,
+/// or transposed for `∂z Wᵀ`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
-unsafe fn pack(mlp: &Mlp, params: &[f32], s: &mut Scratch, backward: bool) {
+unsafe fn pack(mlp: &Mlp, params: &[f32], dst: &mut Vec<u16>, transposed: bool) {
     let k0 = padded(mlp.in_dim);
     let sizes = |l: usize| if l == 0 { k0 } else { WIDTH };
-    let total: usize = (0..mlp.layers.len()).map(|l| sizes(l) * WIDTH).sum();
-    s.w_fwd.resize(total, 0);
-    if backward {
-        s.w_bwd.resize(total, 0);
-    }
+    dst.resize((0..mlp.layers.len()).map(|l| sizes(l) * WIDTH).sum(), 0);
     // SAFETY: AVX-512 BW is enabled on this function.
     let idx = unsafe { x86::interleave_index() };
     let mut t = [0f32; 2 * WIDTH];
     let mut off = 0;
     for (l, layer) in mlp.layers.iter().enumerate() {
         let (w, k) = (&params[layer.weight.clone()], layer.fan_in);
-        let n = sizes(l) * WIDTH;
+        let block = &mut dst[off..off + sizes(l) * WIDTH];
         // SAFETY: each block holds `padded(k) × 64` values; AVX-512 BW and BF16 are enabled.
         unsafe {
-            x86::pack_forward(w, k, &mut s.w_fwd[off..off + n], idx);
-            if backward {
-                x86::pack_backward(w, k, &mut s.w_bwd[off..off + n], &mut t, idx);
+            if transposed {
+                x86::pack_backward(w, k, block, &mut t, idx);
+            } else {
+                x86::pack_forward(w, k, block, idx);
             }
         }
-        off += n;
+        off += sizes(l) * WIDTH;
     }
 }
 
@@ -366,7 +364,7 @@ unsafe fn forward_v4(
     let n = pre_out.len();
     let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
     // SAFETY: the target features are enabled on this function.
-    unsafe { pack(mlp, params, s, false) };
+    unsafe { pack(mlp, params, &mut s.w_fwd, false) };
     let depth = mlp.layers.len();
     let mut xin = [0u16; P * WIDTH];
     let mut hb = [0u16; P * WIDTH];
@@ -444,7 +442,7 @@ unsafe fn backward_v4(
     let depth = mlp.layers.len();
     let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
     // SAFETY: the target features are enabled on this function.
-    unsafe { pack(mlp, params, s, true) };
+    unsafe { pack(mlp, params, &mut s.w_bwd, true) };
     let k_of = |l: usize| if l == 0 { kp0 } else { WIDTH };
     let w_off = |l: usize| if l == 0 { 0 } else { kp0 * WIDTH + (l - 1) * WIDTH * WIDTH };
     let total: usize = (0..depth).map(|l| k_of(l) * WIDTH).sum();
