@@ -234,6 +234,21 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     let hybrid = report(&d.join("h"))["final_nrmse"].as_f64().expect("truth was used");
     run("reconstruct scene -o f --method fast --resolution 16 --max-iterations 30 -q");
     let fresh = report(&d.join("f"))["final_nrmse"].as_f64().expect("truth was used");
+    // The preset asks for bfloat16 products; the report and the summary line say whether this
+    // CPU ran them.
+    assert_eq!(json(&d.join("f/config.json"))["method"]["field"]["hash-grid"]["mlp_precision"], "bf16");
+    #[cfg(target_arch = "x86_64")]
+    let bf16 = std::arch::is_x86_feature_detected!("avx512bf16") && std::arch::is_x86_feature_detected!("avx512bw");
+    #[cfg(not(target_arch = "x86_64"))]
+    let bf16 = false;
+    assert_eq!(report(&d.join("f"))["neural"]["train"]["bf16_products"], bf16);
+    let out = fluidnerf(
+        d,
+        &["reconstruct", "scene", "-o", "f1", "--method", "fast", "--resolution", "16", "--max-iterations", "2"],
+    );
+    ok(&out);
+    let said = String::from_utf8_lossy(&out.stdout).contains("decoder trained with bfloat16 products");
+    assert_eq!(said, bf16, "{}", String::from_utf8_lossy(&out.stdout));
     assert!(
         hybrid < 1.15 * voxel && hybrid < 0.7 * fresh,
         "hybrid {hybrid}, its ASART start {voxel}, fresh field {fresh}"

@@ -327,6 +327,10 @@ impl RunReport {
         if let Some(g) = self.final_ssim_global {
             s += &format!(", global SSIM {}", fluidnerf_viz::report::format_value(g));
         }
+        let trains = self.neural.iter().map(|n| &n.train).chain(self.windows.iter().map(|w| &w.train));
+        if trains.into_iter().any(|t| t.bf16_products) {
+            s += ", decoder trained with bfloat16 products";
+        }
         s
     }
 }
