@@ -21,7 +21,7 @@ use fluidnerf_core::{render_image, Aabb, Camera, Intrinsics, RenderSettings};
 use fluidnerf_neural::optim::{sum_gradients, Adam, AdamConfig};
 use fluidnerf_neural::train::{train, Learner, Prepared, Problem, StopRule, TrainConfig, View};
 use fluidnerf_neural::trained::NeuralConfig;
-use fluidnerf_neural::{HashGridConfig, HashGridField, MlpConfig, MlpField, TrainableField};
+use fluidnerf_neural::{HashGridConfig, HashGridField, MlpConfig, MlpField, MlpPrecision, TrainableField};
 use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -522,19 +522,37 @@ fn method_benches(steps: usize) {
         rows as f64 / t.wall_s,
         rows as f64 / t.cpu_s
     );
+    // The preset, then its decoder's products in f32, then also the chunk it had before
+    // (8192 samples): each line's ratio is to the last one's time, all from this run.
     let fast = NeuralConfig::preset("fast").expect("preset");
-    let fast_train = TrainConfig { rays_per_image: 2048, ..fast.train };
-    let prep = Prepared::new(&problem, &fast_train).expect("prepares");
     let fluidnerf_neural::trained::FieldConfig::HashGrid(grid) = fast.field else { unreachable!("fast is a grid") };
-    let field = HashGridField::new(&grid, 3, 0).expect("preset is valid");
-    let products = if field.bf16_products() { "bf16" } else { "f32" };
-    let (t, rows) = time_iterations(&prep, field, &fast_train, 4 * steps);
-    println!(
-        "method, fast grid (48 samples, skipping, 8 x 2048 rays, chunk {}, {products} products): {:.4} | {:.4} s/iteration, {:.2} | {:.2} M rows/s",
-        fast_train.chunk_samples,
-        t.wall_s,
-        t.cpu_s,
-        rows as f64 / t.wall_s / 1e6,
-        rows as f64 / t.cpu_s / 1e6
-    );
+    let f32_grid = HashGridConfig { mlp_precision: MlpPrecision::F32, ..grid.clone() };
+    let preset_train = TrainConfig { rays_per_image: 2048, ..fast.train };
+    let old_chunk = TrainConfig { chunk_samples: 8192, ..preset_train.clone() };
+    let variants = [
+        ("the preset", &grid, &preset_train),
+        ("f32 products", &f32_grid, &preset_train),
+        ("f32, chunk 8192", &f32_grid, &old_chunk),
+    ];
+    let timings: Vec<(Timing, usize, &str, usize)> = variants
+        .iter()
+        .map(|&(_, grid, cfg)| {
+            let prep = Prepared::new(&problem, cfg).expect("prepares");
+            let field = HashGridField::new(grid, 3, 0).expect("preset is valid");
+            let products = if field.bf16_products() { "bf16" } else { "f32" };
+            let (t, rows) = time_iterations(&prep, field, cfg, 4 * steps);
+            (t, rows, products, cfg.chunk_samples)
+        })
+        .collect();
+    let reference = timings.last().expect("three variants").0.cpu_s;
+    for ((name, ..), (t, rows, products, chunk)) in variants.iter().zip(&timings) {
+        println!(
+            "method, fast grid, {name} (48 samples, skipping, 8 x 2048 rays, chunk {chunk}, {products} products): {:.4} | {:.4} s/iteration, {:.2} | {:.2} M rows/s, x{:.2} against f32 and chunk 8192 (core-normalised)",
+            t.wall_s,
+            t.cpu_s,
+            *rows as f64 / t.wall_s / 1e6,
+            *rows as f64 / t.cpu_s / 1e6,
+            reference / t.cpu_s
+        );
+    }
 }
