@@ -309,9 +309,24 @@ impl Mlp {
         let h = self.width;
         let stride = tape.cap * h;
         if self.bf16 {
-            bf16::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], out, &mut tape.bf16);
-            return;
+            bf16::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], &mut tape.bf16);
+        } else {
+            self.forward_f32(params, x, tape, stride);
         }
+        let pre_out = &tape.pre_out[..n];
+        match self.output_activation {
+            OutputActivation::Relu => {
+                for (o, &z) in out.iter_mut().zip(pre_out.iter()) {
+                    *o = z.max(0.0);
+                }
+            }
+            OutputActivation::Softplus => kernels::softplus_into(pre_out, out),
+        }
+    }
+
+    /// The hidden layers and the output's pre-activation of [`Mlp::forward`] over GEMMs in f32.
+    fn forward_f32(&self, params: &[f32], x: &[f32], tape: &mut MlpTape, stride: usize) {
+        let (n, h) = (tape.rows, self.width);
         for (l, layer) in self.layers.iter().enumerate() {
             let (prev, rest) = tape.acts.split_at_mut(l * stride);
             let act = &mut rest[..n * h];
@@ -333,21 +348,12 @@ impl Mlp {
             }
         }
         let last = (self.layers.len() - 1) * stride;
-        let pre_out = &mut tape.pre_out[..n];
         kernels::rows_dot(
             &tape.acts[last..last + n * h],
             &params[self.out_weight.clone()],
             params[self.out_bias],
-            pre_out,
+            &mut tape.pre_out[..n],
         );
-        match self.output_activation {
-            OutputActivation::Relu => {
-                for (o, &z) in out.iter_mut().zip(pre_out.iter()) {
-                    *o = z.max(0.0);
-                }
-            }
-            OutputActivation::Softplus => kernels::softplus_into(pre_out, out),
-        }
     }
 
     /// Inference: like [`Mlp::forward`] but keeps only two layers of activations (ping-pong,

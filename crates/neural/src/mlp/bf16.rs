@@ -20,8 +20,7 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
-use super::{Mlp, OutputActivation};
-use crate::kernels;
+use super::Mlp;
 
 /// The width the passes are written for.
 const WIDTH: usize = 64;
@@ -586,9 +585,8 @@ unsafe fn backward_v4(
 }
 
 /// Forward pass of `mlp` over `x` (`n × in_dim`): every layer's activations into `acts`
-/// (`D × stride`, rows of 64), the output's pre-activation into `pre_out` and its activation
-/// into `out`. Requires [`cpu_has_bf16`] and [`fits`].
-#[allow(clippy::too_many_arguments)]
+/// (`D × stride`, rows of 64) and the output's pre-activation into `pre_out` (the caller
+/// applies the output activation). Requires [`cpu_has_bf16`] and [`fits`].
 pub(super) fn forward(
     mlp: &Mlp,
     params: &[f32],
@@ -596,7 +594,6 @@ pub(super) fn forward(
     acts: &mut [f32],
     stride: usize,
     pre_out: &mut [f32],
-    out: &mut [f32],
     s: &mut Scratch,
 ) {
     assert!(cpu_has_bf16() && fits(mlp), "bf16::forward on an unfit network or CPU");
@@ -605,14 +602,6 @@ pub(super) fn forward(
     unsafe {
         forward_v4(mlp, params, x, acts, stride, pre_out, s)
     };
-    match mlp.output_activation {
-        OutputActivation::Relu => {
-            for (o, &z) in out.iter_mut().zip(pre_out.iter()) {
-                *o = z.max(0.0);
-            }
-        }
-        OutputActivation::Softplus => kernels::softplus_into(pre_out, out),
-    }
 }
 
 /// Backward pass after [`forward`] with `acts`. Requires [`cpu_has_bf16`] and [`fits`].
