@@ -448,6 +448,42 @@ fn dot_columns<const N: usize>(acc: &[f32; N], wu: &[f32; N]) -> f32 {
     p[0]
 }
 
+/// The least first pixel of the hits among the chunks `mvs` (`f32::MAX` if none) and the
+/// greatest (−1 if none: misses are −1).
+#[inline(always)]
+fn first_range<const N: usize>(mvs: &[Moving<N>]) -> (f32, f32) {
+    let (mut lo, mut hi) = ([f32::MAX; CHUNK], [-1f32; CHUNK]);
+    for mv in mvs {
+        for q in 0..CHUNK {
+            let f = mv.first[q];
+            lo[q] = fmin(lo[q], if f >= 0.0 { f } else { f32::MAX });
+            hi[q] = fmax(hi[q], f);
+        }
+    }
+    (lo.into_iter().fold(f32::MAX, fmin), hi.into_iter().fold(-1.0, fmax))
+}
+
+/// [`first_range`] sixteen lanes at a time (the same result: minima and maxima are exact).
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+#[inline]
+unsafe fn first_range16<const N: usize>(mvs: &[Moving<N>]) -> (f32, f32) {
+    use std::arch::x86_64::*;
+    const { assert!(CHUNK == 16) };
+    let (mut lo, mut hi) = (_mm512_set1_ps(f32::MAX), _mm512_set1_ps(-1.0));
+    for mv in mvs {
+        // SAFETY: `first` holds 16 values.
+        let f = unsafe { _mm512_loadu_ps(mv.first.as_ptr()) };
+        let hit = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(f, _mm512_setzero_ps());
+        lo = _mm512_mask_min_ps(lo, hit, lo, f);
+        hi = _mm512_max_ps(hi, f);
+    }
+    (_mm512_reduce_min_ps(lo), _mm512_reduce_max_ps(hi))
+}
+
 /// The first voxels of the chunks of a grid row `row` that hold a non-zero value, into `starts`
 /// (the test is branch-free, so that it vectorises).
 #[inline(always)]
@@ -1658,35 +1694,56 @@ impl FootprintProjector {
                 }
                 // Every chunk's footprints, and the stretch of the line they read (lane-wise
                 // minimum and maximum first pixel of the hits; misses are −1).
-                let (mut lo, mut hi) = ([f32::MAX; CHUNK], [-1f32; CHUNK]);
                 fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, &starts, &mut scratch, &mut mvs);
-                for (c, mv) in mvs.iter_mut().enumerate() {
-                    if (c + 1) * CHUNK > nx {
-                        // The short last chunk: lanes past the row are not voxels.
-                        mv.first[nx - c * CHUNK..].fill(-1.0);
-                    }
-                    for q in 0..CHUNK {
-                        let f = mv.first[q];
-                        lo[q] = fmin(lo[q], if f >= 0.0 { f } else { f32::MAX });
-                        hi[q] = fmax(hi[q], f);
-                    }
+                if nx % CHUNK != 0 {
+                    // The short last chunk: lanes past the row are not voxels.
+                    mvs[nx / CHUNK].first[nx % CHUNK..].fill(-1.0);
                 }
-                let (lo, hi) = (lo.into_iter().fold(f32::MAX, fmin), hi.into_iter().fold(-1.0, fmax));
+                #[cfg(target_arch = "x86_64")]
+                let (lo, hi) = if self.isa == Isa::Avx512 {
+                    // SAFETY: AVX-512F is available (`isa`).
+                    unsafe { first_range16(&mvs) }
+                } else {
+                    first_range(&mvs)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let (lo, hi) = first_range(&mvs);
                 if hi < 0.0 {
                     continue;
                 }
                 // The shared footprint's lines summed over [lo, hi + n_l): every hit has
                 // `first + n_l ≤ line_len` (see `chunk_moving`: first < len + N, n_l ≤ N).
                 let (lo, hi) = (lo as usize, hi as usize + n_l);
-                let a = &mut acc[lo..hi];
-                let line = |s: usize| &lines[(across + s) * line_len + lo..][..hi - lo];
-                for (d, &p) in a.iter_mut().zip(line(0)) {
-                    *d = rs.w[0] * p;
-                }
-                for (s, &w) in rs.w[..n_s].iter().enumerate().skip(1) {
-                    for (d, &p) in a.iter_mut().zip(line(s)) {
-                        *d += w * p;
+                // Sixteen pixels at a time, each written once (the window may run 15 pixels
+                // past `hi`, into `acc`'s slack); pixel by pixel where it would run past the
+                // last line's end. The same sums in the same order either way.
+                let n_s = n_s.min(N);
+                let base_at = |s: usize, c: usize| (across + s) * line_len + c;
+                let mut c = lo;
+                while c < hi && base_at(n_s - 1, c) + CHUNK <= lines.len() {
+                    let line = |s: usize| -> &[f32; CHUNK] {
+                        lines[base_at(s, c)..][..CHUNK].try_into().expect("CHUNK values")
+                    };
+                    let mut v = [0f32; CHUNK];
+                    let l0 = line(0);
+                    for i in 0..CHUNK {
+                        v[i] = rs.w[0] * l0[i];
                     }
+                    for s in 1..n_s {
+                        let (w, ls) = (rs.w[s], line(s));
+                        for i in 0..CHUNK {
+                            v[i] += w * ls[i];
+                        }
+                    }
+                    acc[c..c + CHUNK].copy_from_slice(&v);
+                    c += CHUNK;
+                }
+                for c in c..hi {
+                    let mut v = rs.w[0] * lines[base_at(0, c)];
+                    for s in 1..n_s {
+                        v += rs.w[s] * lines[base_at(s, c)];
+                    }
+                    acc[c] = v;
                 }
                 let row0 = (kk * ny + j) * nx;
                 for (c, mv) in mvs.iter().enumerate() {
