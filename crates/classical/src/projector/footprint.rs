@@ -1768,6 +1768,24 @@ impl FootprintProjector {
                             continue;
                         }
                     }
+                    #[cfg(target_arch = "x86_64")]
+                    if self.isa == Isa::Avx2 {
+                        // SAFETY: AVX2 is available (`isa`); every hit's pixels lie inside
+                        // `acc` and the mask, and `at` inside `out` and `col_sums`.
+                        unsafe {
+                            Self::weigh_rows8::<N, SHARED_V>(
+                                mv,
+                                n_l,
+                                &acc,
+                                m_along,
+                                m_s,
+                                at,
+                                out,
+                                col_sums.as_deref_mut(),
+                            )
+                        };
+                        continue;
+                    }
                     for q in 0..at.1 {
                         if mv.first[q] < 0.0 {
                             continue;
@@ -1859,6 +1877,73 @@ impl FootprintProjector {
                 _mm512_mask_storeu_ps(dst, keep, _mm512_add_ps(prev, _mm512_mul_ps(_mm512_mul_ps(amp, su), sv)));
             }
             true
+        }
+    }
+
+    /// The per-voxel part of [`Self::gather_rows`] for one chunk with AVX2, eight voxels at a
+    /// time: each weight's pixels gathered from the summed line. The arithmetic and its order
+    /// are the scalar loop's.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2; every hit's first pixel plus `n_l` lies inside `acc` and
+    /// `m_along`, and `at.0 + at.1` inside `out` (and `col_sums`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn weigh_rows8<const N: usize, const SHARED_V: bool>(
+        mv: &Moving<N>,
+        n_l: usize,
+        acc: &[f32],
+        m_along: &[f32],
+        m_s: f32,
+        (first, valid): (usize, usize),
+        out: &mut [f32],
+        mut col_sums: Option<&mut [f32]>,
+    ) {
+        use std::arch::x86_64::*;
+        const { assert!(CHUNK == 16) };
+        let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        for h in 0..2 {
+            let q0 = 8 * h;
+            if q0 >= valid {
+                break;
+            }
+            // SAFETY: the chunk's arrays hold 16 entries; gathers read only the lanes that hit
+            // (whose pixels lie inside the buffers), and the masked loads and stores only the
+            // `valid` entries from `first`.
+            unsafe {
+                let f = _mm256_loadu_ps(mv.first.as_ptr().add(q0));
+                let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - q0) as i32), lane);
+                let keep =
+                    _mm256_and_si256(_mm256_castps_si256(_mm256_cmp_ps::<_CMP_GE_OQ>(f, _mm256_setzero_ps())), inside);
+                if _mm256_testz_si256(keep, keep) != 0 {
+                    continue;
+                }
+                let fi = _mm256_and_si256(_mm256_cvttps_epi32(f), keep);
+                let keep_ps = _mm256_castsi256_ps(keep);
+                let dot = |p: *const f32| {
+                    let mut sum = _mm256_setzero_ps();
+                    for l in 0..n_l.min(N) {
+                        let idx = _mm256_add_epi32(fi, _mm256_set1_epi32(l as i32));
+                        let g = _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), p, idx, keep_ps);
+                        sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_loadu_ps(mv.w[l].as_ptr().add(q0)), g));
+                    }
+                    sum
+                };
+                let amp = _mm256_loadu_ps(mv.amp.as_ptr().add(q0));
+                let dst = out.as_mut_ptr().add(first + q0);
+                let prev = _mm256_maskload_ps(dst, keep);
+                _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, dot(acc.as_ptr()))));
+                if let Some(cs) = col_sums.as_deref_mut() {
+                    let m_l = dot(m_along.as_ptr());
+                    let m_s = _mm256_set1_ps(m_s);
+                    let (su, sv) = if SHARED_V { (m_l, m_s) } else { (m_s, m_l) };
+                    let dst = cs.as_mut_ptr().add(first + q0);
+                    let prev = _mm256_maskload_ps(dst, keep);
+                    _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(_mm256_mul_ps(amp, su), sv)));
+                }
+            }
         }
     }
 
