@@ -1845,10 +1845,23 @@ impl FootprintProjector {
                 return true;
             }
             let fi = _mm512_cvttps_epi32(f);
-            let lo = _mm512_mask_reduce_min_epi32(keep, fi);
+            // The window starts at the hits' least first pixel. Along a row the footprints
+            // move one way, so when both ends of the chunk hit, the lesser of their first
+            // pixels is it (checked against every lane; a reduction otherwise).
+            let mut lo = if keep == u16::MAX {
+                let last = _mm_extract_epi32::<3>(_mm512_extracti32x4_epi32::<3>(fi));
+                _mm512_cvtsi512_si32(fi).min(last)
+            } else {
+                _mm512_mask_reduce_min_epi32(keep, fi)
+            };
+            if _mm512_mask_cmplt_epi32_mask(keep, fi, _mm512_set1_epi32(lo)) != 0 {
+                lo = _mm512_mask_reduce_min_epi32(keep, fi);
+            }
             let off = _mm512_maskz_sub_epi32(keep, fi, _mm512_set1_epi32(lo));
             let lo = lo as usize;
-            if _mm512_reduce_max_epi32(off) as usize + n_l > 32 || lo + 32 > acc.len().min(m_along.len()) {
+            if _mm512_mask_cmpgt_epi32_mask(keep, off, _mm512_set1_epi32(32 - n_l as i32)) != 0
+                || lo + 32 > acc.len().min(m_along.len())
+            {
                 return false;
             }
             let pick = |p: *const f32, l: usize| {
