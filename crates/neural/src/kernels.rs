@@ -225,11 +225,34 @@ multiversion! {
     }
 }
 
+/// The layer width whose bias gradient [`relu_backward`] keeps in registers (the fast field's
+/// decoder).
+const RELU_BLOCK: usize = 64;
+
 multiversion! {
     /// ReLU backward fused with the bias gradient: `dz = da · [a > 0]` in place over
     /// `da` (`rows × db.len()`), and `db += Σ_rows dz`.
     fn relu_backward(da: &mut [f32], a: &[f32], db: &mut [f32]) {
         let w = db.len();
+        if w == RELU_BLOCK {
+            // The bias gradient summed in registers across the rows and stored once: the same
+            // additions in the same order as summing into `db` row by row, where every row
+            // waited for the previous row's stores (8 % of the fast field's step with AVX2).
+            // Wider layers have enough independent columns per row, and passes over blocks of
+            // their columns were slower.
+            let mut acc: [f32; RELU_BLOCK] = (&*db).try_into().expect("a row of biases");
+            for (drow, arow) in da.chunks_exact_mut(w).zip(a.chunks_exact(w)) {
+                let drow: &mut [f32; RELU_BLOCK] = drow.try_into().expect("a row");
+                let arow: &[f32; RELU_BLOCK] = arow.try_into().expect("a row");
+                for j in 0..RELU_BLOCK {
+                    let v = if arow[j] > 0.0 { drow[j] } else { 0.0 };
+                    drow[j] = v;
+                    acc[j] += v;
+                }
+            }
+            db.copy_from_slice(&acc);
+            return;
+        }
         for (drow, arow) in da.chunks_exact_mut(w).zip(a.chunks_exact(w)) {
             for ((d, &a), g) in drow.iter_mut().zip(arow).zip(db.iter_mut()) {
                 let v = if a > 0.0 { *d } else { 0.0 };
@@ -306,6 +329,31 @@ multiversion! {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The ReLU backward pass, with the bias gradient held in registers (width 64) or summed
+    /// row by row (other widths), gives the bits of the plain loop written out here: masked
+    /// gradients, and bias gradients added to what `db` held, row after row.
+    #[test]
+    fn relu_backward_matches_the_row_by_row_sums() {
+        for (rows, w) in [(37, 64), (200, 128), (9, 48), (5, 70)] {
+            let val = |i: usize, s: usize| (((i * 7919 + s) % 1013) as f32 / 1013.0 - 0.4) * 1.7;
+            let a: Vec<f32> = (0..rows * w).map(|i| val(i, 3)).collect();
+            let da0: Vec<f32> = (0..rows * w).map(|i| val(i, 11)).collect();
+            let db0: Vec<f32> = (0..w).map(|j| val(j, 29)).collect();
+            let (mut want_da, mut want_db) = (da0.clone(), db0.clone());
+            for r in 0..rows {
+                for j in 0..w {
+                    let v = if a[r * w + j] > 0.0 { want_da[r * w + j] } else { 0.0 };
+                    want_da[r * w + j] = v;
+                    want_db[j] += v;
+                }
+            }
+            let (mut da, mut db) = (da0, db0);
+            relu_backward(&mut da, &a, &mut db);
+            assert!(da.iter().zip(&want_da).all(|(x, y)| x.to_bits() == y.to_bits()), "{rows}×{w}: dz");
+            assert!(db.iter().zip(&want_db).all(|(x, y)| x.to_bits() == y.to_bits()), "{rows}×{w}: db");
+        }
+    }
 
     #[test]
     fn softplus_is_accurate() {
