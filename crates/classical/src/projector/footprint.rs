@@ -1749,42 +1749,29 @@ impl FootprintProjector {
                 for (c, mv) in mvs.iter().enumerate() {
                     let at = (row0 + c * CHUNK, CHUNK.min(nx - c * CHUNK));
                     #[cfg(target_arch = "x86_64")]
-                    if self.isa == Isa::Avx512 {
-                        // SAFETY: AVX-512F is available (`isa`); `acc` and the masks hold 32
-                        // values past their padded extent, and `at` lies inside `out` and
-                        // `col_sums`.
-                        if unsafe {
-                            Self::weigh_rows16::<N, SHARED_V>(
-                                mv,
-                                n_l,
-                                &acc,
-                                m_along,
-                                m_s,
-                                at,
-                                out,
-                                col_sums.as_deref_mut(),
-                            )
-                        } {
-                            continue;
+                    {
+                        let line = SummedLine { acc: &acc, m_along, m_s, n_l };
+                        match self.isa {
+                            // SAFETY: AVX-512F is available (`isa`); `acc` and the masks hold
+                            // 32 values past their padded extent, and `at` lies inside `out`
+                            // and `col_sums`.
+                            Isa::Avx512 => {
+                                if unsafe {
+                                    Self::weigh_rows16::<N, SHARED_V>(mv, &line, at, out, col_sums.as_deref_mut())
+                                } {
+                                    continue;
+                                }
+                            }
+                            // SAFETY: AVX2 is available (`isa`); every hit's pixels lie inside
+                            // `acc` and the mask, and `at` inside `out` and `col_sums`.
+                            Isa::Avx2 => {
+                                unsafe {
+                                    Self::weigh_rows8::<N, SHARED_V>(mv, &line, at, out, col_sums.as_deref_mut())
+                                };
+                                continue;
+                            }
+                            Isa::Baseline => {}
                         }
-                    }
-                    #[cfg(target_arch = "x86_64")]
-                    if self.isa == Isa::Avx2 {
-                        // SAFETY: AVX2 is available (`isa`); every hit's pixels lie inside
-                        // `acc` and the mask, and `at` inside `out` and `col_sums`.
-                        unsafe {
-                            Self::weigh_rows8::<N, SHARED_V>(
-                                mv,
-                                n_l,
-                                &acc,
-                                m_along,
-                                m_s,
-                                at,
-                                out,
-                                col_sums.as_deref_mut(),
-                            )
-                        };
-                        continue;
                     }
                     for q in 0..at.1 {
                         if mv.first[q] < 0.0 {
@@ -1823,13 +1810,9 @@ impl FootprintProjector {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx2")]
     #[inline]
-    #[allow(clippy::too_many_arguments)]
     unsafe fn weigh_rows16<const N: usize, const SHARED_V: bool>(
         mv: &Moving<N>,
-        n_l: usize,
-        acc: &[f32],
-        m_along: &[f32],
-        m_s: f32,
+        &SummedLine { acc, m_along, m_s, n_l }: &SummedLine<'_>,
         (first, valid): (usize, usize),
         out: &mut [f32],
         col_sums: Option<&mut [f32]>,
@@ -1903,13 +1886,9 @@ impl FootprintProjector {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[inline]
-    #[allow(clippy::too_many_arguments)]
     unsafe fn weigh_rows8<const N: usize, const SHARED_V: bool>(
         mv: &Moving<N>,
-        n_l: usize,
-        acc: &[f32],
-        m_along: &[f32],
-        m_s: f32,
+        &SummedLine { acc, m_along, m_s, n_l }: &SummedLine<'_>,
         (first, valid): (usize, usize),
         out: &mut [f32],
         mut col_sums: Option<&mut [f32]>,
@@ -2328,6 +2307,18 @@ mod kernels {
         }
         p.gather::<N, D>(view, ks, y, masks, out, col_sums)
     }
+}
+
+/// A grid row's summed image line and what the per-voxel weighing of
+/// [`FootprintProjector::gather_rows`] reads with it: the line `acc`, the image mask along it
+/// `m_along` and across it summed under the shared footprint `m_s`, and the moving footprint's
+/// pixel count `n_l`.
+#[cfg(target_arch = "x86_64")]
+struct SummedLine<'a> {
+    acc: &'a [f32],
+    m_along: &'a [f32],
+    m_s: f32,
+    n_l: usize,
 }
 
 /// A view's image as the back projection reads it ([`FootprintProjector::back_image`]).
