@@ -97,18 +97,22 @@ def main():
         f"fluidnerf on {mine.get('threads', '?')} threads"
     )
     # "ours back": one `back_add` call per view, as ASART and SART use it; "all views": one
-    # `back_add_views` call for the 90 views, as MLEM uses it and as mbirjax back-projects.
+    # `back_add_views` call for the 90 views, as MLEM uses it and as mbirjax back-projects;
+    # "kept": view by view again, reading the footprints an earlier back projection kept
+    # (their memory in the last column; the first, filling pass is in the bench's JSON).
     print(
         f"{'grid':>6} {'mbirjax fwd':>12} {'ours fwd':>10} {'ratio':>7} {'mbirjax back':>13} {'ours back':>10} "
-        f"{'ratio':>7} {'all views':>10} {'ratio':>7}"
+        f"{'ratio':>7} {'all views':>10} {'ratio':>7} {'kept':>8} {'ratio':>7} {'MiB':>6}"
     )
+    nan = float("nan")
     for res in [int(r) for r in args.resolutions.split(",")]:
         f, b = mbirjax_times(res)
         of, ob = mine[f"forward_s_{res}"], mine[f"back_s_{res}"]
-        oa = mine.get(f"back_all_s_{res}", float("nan"))
+        oa = mine.get(f"back_all_s_{res}", nan)
+        ok, mib = mine.get(f"back_kept_s_{res}", nan), mine.get(f"kept_mib_{res}", nan)
         print(
             f"{res:>4}^3 {f:>12.3f} {of:>10.3f} {f / of:>6.1f}x {b:>13.3f} {ob:>10.3f} {b / ob:>6.1f}x "
-            f"{oa:>10.3f} {b / oa:>6.1f}x"
+            f"{oa:>10.3f} {b / oa:>6.1f}x {ok:>8.3f} {b / ok:>6.1f}x {mib:>6.0f}"
         )
 
 

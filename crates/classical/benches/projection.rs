@@ -172,6 +172,26 @@ fn main() {
             let imgs: Vec<&[f32]> = views.iter().map(|_| img.as_slice()).collect();
             let t_back_all = best(3, &mut || p.back_add_views(&views, &imgs, &mut back, None)).wall;
             fields.push(format!("\"back_all_s_{res}\": {t_back_all:.6}"));
+            // With the moving axis's footprints kept between back projections: the first pass
+            // computes and stores them, the later ones read them.
+            let kept = p.clone().with_kept_footprints(u64::MAX);
+            let t_first = best(1, &mut || {
+                for v in 0..kept.n_views() {
+                    kept.back_add(v, &img, &mut back, None);
+                }
+            })
+            .wall;
+            let t_kept = best(3, &mut || {
+                for v in 0..kept.n_views() {
+                    kept.back_add(v, &img, &mut back, None);
+                }
+            })
+            .wall;
+            let mib = kept.kept_footprint_bytes() as f64 / (1u64 << 20) as f64;
+            fields.push(format!(
+                "\"back_kept_s_{res}\": {t_kept:.6}, \"back_kept_first_s_{res}\": {t_first:.6}, \"kept_mib_{res}\": {mib:.0}"
+            ));
+            drop(kept);
             let xs = sparse_phantom(&grid);
             let t_sparse = best(3, &mut || {
                 for v in 0..p.n_views() {
@@ -268,5 +288,13 @@ fn main() {
         t_old.wall,
         t_new.wall,
         t_old.cpu / t_new.cpu
+    );
+    let kept = new.clone().with_kept_footprints(u64::MAX);
+    let t_kept = asart_iteration(&kept, &x);
+    println!(
+        "ASART, 64^3, 15 x 256^2, footprints kept ({:.0} MiB): {:.3} s per iteration; new/kept {:.2}x (CPU time)",
+        kept.kept_footprint_bytes() as f64 / (1u64 << 20) as f64,
+        t_kept.wall,
+        t_new.cpu / t_kept.cpu
     );
 }

@@ -65,7 +65,7 @@ fn back_add_accumulates_and_column_sums_are_adjoint_of_ones() {
 /// and without lens distortion; the forward projections agree up to the order of summation.
 #[test]
 fn footprint_back_projection_paths_agree_bit_for_bit() {
-    let mut sides = Vec::new();
+    let (mut sides, mut kept_views) = (Vec::new(), 0);
     for (dims, cams) in [
         ([40, 36, 32], ring(3, 24)),
         ([20, 18, 16], ring(3, 24)),
@@ -110,6 +110,31 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
                 for (j, (c, r)) in cols.iter().zip(&ref_cols).enumerate() {
                     assert_eq!(c.to_bits(), r.to_bits(), "{isa:?} column sum {j} of {dims:?}, view {v}, side {side}");
                 }
+                // Footprints kept by the first back projection and read by the next: the same
+                // bits, with and without column sums.
+                let kept = p.clone().with_kept_footprints(u64::MAX);
+                kept_views += kept.kept_footprint_views();
+                for pass in 0..2 {
+                    let (mut b, mut kc, mut bc) =
+                        (vec![0f32; grid.len()], vec![0f32; grid.len()], vec![0f32; grid.len()]);
+                    kept.back_add(v, &y, &mut b, None);
+                    kept.back_add(v, &y, &mut bc, Some(&mut kc));
+                    for (j, ((a, c), r)) in b.iter().zip(&bc).zip(&reference).enumerate() {
+                        assert_eq!(
+                            a.to_bits(),
+                            r.to_bits(),
+                            "{isa:?} kept, pass {pass}, voxel {j} of {dims:?}, view {v}"
+                        );
+                        assert_eq!(
+                            c.to_bits(),
+                            r.to_bits(),
+                            "{isa:?} kept, pass {pass}, voxel {j} of {dims:?}, view {v}"
+                        );
+                    }
+                    for (j, (c, r)) in kc.iter().zip(&ref_cols).enumerate() {
+                        assert_eq!(c.to_bits(), r.to_bits(), "{isa:?} kept column sum {j} of {dims:?}, view {v}");
+                    }
+                }
                 let mut fwd = vec![0f32; p.view_len(v)];
                 p.forward(v, &x, &mut fwd);
                 for (i, (a, r)) in fwd.iter().zip(&fwd_ref).enumerate() {
@@ -121,6 +146,41 @@ fn footprint_back_projection_paths_agree_bit_for_bit() {
     sides.sort_unstable();
     sides.dedup();
     assert!(sides.contains(&2) && sides.contains(&4) && sides.len() >= 3, "sides covered: {sides:?}");
+    assert!(kept_views > 0, "no view kept footprints");
+}
+
+/// Kept footprints fill a budget view by view, each view whole or not at all: with room for
+/// one view of a ring around the grid's `x` axis exactly that view is kept, its bytes are
+/// what the projector reports, and back projections of every view, several passes, match a
+/// projector that keeps none bit for bit.
+#[test]
+fn kept_footprints_fill_their_budget_view_by_view() {
+    let grid = Grid::new([40, 36, 32], aabb());
+    let cams = ring(3, 24);
+    let plain = FootprintProjector::new(grid, &cams, 0.9).expect("valid");
+    let all = plain.clone().with_kept_footprints(u64::MAX);
+    assert_eq!(all.kept_footprint_views(), 3);
+    let per_view = all.kept_footprint_bytes() / 3;
+    assert!(per_view > grid.len() as u64 * 4, "{per_view} bytes per view");
+    let one = plain.clone().with_kept_footprints(per_view + per_view / 2);
+    assert_eq!((one.kept_footprint_views(), one.kept_footprint_bytes()), (1, per_view));
+    assert_eq!(plain.clone().with_kept_footprints(per_view - 1).kept_footprint_views(), 0);
+    assert_eq!(one.bytes() - plain.bytes(), per_view as usize);
+    let ys: Vec<Vec<f32>> = (0..3).map(|v| uniform(40 + v as u64, plain.view_len(v))).collect();
+    let back = |p: &FootprintProjector| {
+        let mut out = vec![0f32; grid.len()];
+        for _ in 0..2 {
+            for (v, y) in ys.iter().enumerate() {
+                p.back_add(v, y, &mut out, None);
+            }
+        }
+        out
+    };
+    let reference = back(&plain);
+    assert!(reference.iter().any(|&b| b != 0.0));
+    for p in [&one, &all] {
+        assert!(back(p).iter().zip(&reference).all(|(a, r)| a.to_bits() == r.to_bits()));
+    }
 }
 
 /// Back-projecting several views in one call (one pass over the grid, each slab taking the
