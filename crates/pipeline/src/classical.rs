@@ -23,19 +23,39 @@ use crate::{
     Session, StopReason, StopRule, VolumeRecord, REPORT_FORMAT,
 };
 
-/// Kept rows (ART and MART, `row_cache_mib`) speed a run up but are not needed, so they get at
-/// most half the memory the run leaves free under `limit` (`estimate`: the run's bytes with a
-/// given method) and never make a run refuse to start. The volumes do not depend on them.
+/// At most `wanted` MiB for a cache that speeds a run up but is not needed: half the memory
+/// the run leaves free under `limit` (`without`: the run's bytes without the cache), so that
+/// it never makes a run refuse to start. The volumes do not depend on it.
+fn fit_cache(what: &str, wanted: u64, limit: u64, without: u64) -> u64 {
+    let room_mib = (limit.saturating_sub(without) / 2) >> 20;
+    if room_mib < wanted {
+        log::info!("{what}: at most {room_mib} MiB of the {wanted} MiB asked, for the memory limit");
+    }
+    wanted.min(room_mib)
+}
+
+/// Kept rows (ART and MART, `row_cache_mib`) get what [`fit_cache`] leaves them (`estimate`:
+/// the run's bytes with a given method).
 fn fit_row_cache(method: &mut ClassicalMethod, limit: u64, estimate: impl Fn(&ClassicalMethod) -> u64) {
     let Some(wanted) = method.row_cache_mib_mut().map(std::mem::take) else { return };
-    let room_mib = (limit.saturating_sub(estimate(method)) / 2) >> 20;
-    if room_mib < wanted {
-        log::info!(
-            "rows kept between iterations: at most {room_mib} MiB of the {wanted} MiB asked, for the memory limit"
-        );
-    }
+    let fitted = fit_cache("rows kept between iterations", wanted, limit, estimate(method));
     if let Some(m) = method.row_cache_mib_mut() {
-        *m = wanted.min(room_mib);
+        *m = fitted;
+    }
+}
+
+/// Kept footprints (`kept_footprints_mib`) likewise, for the methods that back-project in
+/// every iteration; none for the others.
+fn fit_kept_footprints(
+    method: &ClassicalMethod,
+    projector: &mut ProjectorConfig,
+    limit: u64,
+    estimate: impl Fn(&ProjectorConfig) -> u64,
+) {
+    let wanted = std::mem::take(&mut projector.kept_footprints_mib);
+    if method.back_projects() {
+        projector.kept_footprints_mib =
+            fit_cache("footprints kept between projections", wanted, limit, estimate(projector));
     }
 }
 
@@ -77,10 +97,13 @@ pub(crate) fn run(
     // Scoring holds the truth, a resampled copy and temporaries; the curve a copy of the volume.
     let truth_bytes: u64 = truth.first().map_or(0, |(_, t)| 3 * 4 * t.len() as u64 + 4 * grid.len() as u64);
     let mut solver = spec.method.clone();
-    fit_row_cache(&mut solver, memory_limit(config), |m| {
-        m.memory(&spec.projector, &grid, &cameras, threads).total() + truth_bytes
+    let mut projector_config = spec.projector.clone();
+    let limit = memory_limit(config);
+    fit_row_cache(&mut solver, limit, |m| m.memory(&projector_config, &grid, &cameras, threads).total() + truth_bytes);
+    fit_kept_footprints(&solver, &mut projector_config, limit, |p| {
+        solver.memory(p, &grid, &cameras, threads).total() + truth_bytes
     });
-    let estimate = solver.memory(&spec.projector, &grid, &cameras, threads);
+    let estimate = solver.memory(&projector_config, &grid, &cameras, threads);
     let needed = estimate.total() + truth_bytes;
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
@@ -101,7 +124,7 @@ pub(crate) fn run(
     let subdivisions = spec.projector.subdivisions(&grid, &cameras);
     // `auto` resolved once, so the held-out views and the report use the same projector.
     let kind = spec.projector.resolve(&grid, &cameras);
-    let resolved = ProjectorConfig { kind, ..spec.projector.clone() };
+    let resolved = ProjectorConfig { kind, ..projector_config };
     let base_projector = resolved.build(grid, &cameras, scene.intensity_scale)?;
     let masked_projector = MaskedProjector { inner: base_projector.as_ref(), masks: train_masks.clone() };
     let projector: &dyn Projector =
@@ -406,9 +429,9 @@ impl HoldoutScorer {
 
 #[cfg(test)]
 mod tests {
-    use fluidnerf_classical::{Algorithm, ClassicalMethod};
+    use fluidnerf_classical::{Algorithm, ClassicalMethod, ProjectorConfig};
 
-    use super::fit_row_cache;
+    use super::{fit_kept_footprints, fit_row_cache};
 
     const MIB: u64 = 1 << 20;
 
@@ -437,5 +460,24 @@ mod tests {
         let before = sart.clone();
         fit_row_cache(&mut sart, 50 * MIB, estimate);
         assert_eq!(sart, before);
+    }
+
+    /// Kept footprints shrink the same way for the methods that back-project every iteration,
+    /// and are dropped for ART and MART, which work on rows.
+    #[test]
+    fn kept_footprints_take_at_most_half_the_free_memory() {
+        let fitted = |algorithm: Algorithm, limit: u64| {
+            let mut p = ProjectorConfig { kept_footprints_mib: 1024, ..ProjectorConfig::default() };
+            fit_kept_footprints(&ClassicalMethod::default_for(algorithm), &mut p, limit, |p| {
+                assert_eq!(p.kept_footprints_mib, 0, "estimated without the footprints");
+                100 * MIB
+            });
+            p.kept_footprints_mib
+        };
+        assert_eq!(fitted(Algorithm::Asart, u64::MAX), 1024);
+        assert_eq!(fitted(Algorithm::Mlem, 300 * MIB), 100);
+        assert_eq!(fitted(Algorithm::Tv, 50 * MIB), 0);
+        assert_eq!(fitted(Algorithm::Art, u64::MAX), 0);
+        assert_eq!(fitted(Algorithm::Mart, u64::MAX), 0);
     }
 }

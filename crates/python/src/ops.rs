@@ -13,12 +13,12 @@ use crate::scene::{images_to_py, PyScene};
 use crate::{err, guard, volume_from_py};
 
 /// The projector settings from JSON text (`fluidnerf_classical::ProjectorConfig`; unknown keys
-/// are refused), validated.
+/// are refused), validated. A projector here serves one call, so it keeps no footprints.
 fn projector_config(text: &str) -> PyResult<ProjectorConfig> {
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("projector: {e}")))?;
     let config: ProjectorConfig = serde_json::from_value(value).map_err(|e| err(format!("projector: {e}")))?;
     config.validate().map_err(|e| err(format!("projector: {e}")))?;
-    Ok(config)
+    Ok(ProjectorConfig { kept_footprints_mib: 0, ..config })
 }
 
 /// `A x`: the images the scene's cameras record of the volume `(nz, ny, nx)` filling the
