@@ -395,4 +395,34 @@ mod tests {
             m.validate().unwrap();
         }
     }
+
+    /// The memory estimate counts kept footprints for the methods that back-project every
+    /// iteration, as much as the projector keeps (whole views within the budget), and none for
+    /// ART and MART or without a budget.
+    #[test]
+    fn memory_counts_kept_footprints() {
+        use fluidnerf_core::{Aabb, Intrinsics};
+        use glam::DVec3;
+        let k = Intrinsics { width: 32, height: 32, fx: 60.0, fy: 60.0, cx: 15.5, cy: 15.5, skew: 0.0 };
+        // A ring around the grid's x axis: its rows share a footprint axis.
+        let cameras: Vec<Camera> = (0..3)
+            .map(|i| {
+                let a = 0.4 + i as f64;
+                Camera::look_at(k, DVec3::new(0.0, 9.0 * a.cos(), 9.0 * a.sin()), DVec3::ZERO, DVec3::X)
+            })
+            .collect();
+        let grid = Grid::new([20, 18, 16], Aabb::cube(DVec3::ZERO, 4.0));
+        let projector =
+            |mib| ProjectorConfig { kind: ProjectorKind::Footprint, kept_footprints_mib: mib, ..Default::default() };
+        let all = FootprintProjector::new(grid, &cameras, 1.0).expect("valid").with_kept_footprints(u64::MAX);
+        assert_eq!(all.kept_footprint_views(), 3);
+        let full = all.kept_footprint_bytes();
+        assert_eq!(projector(1024).kept_footprint_bytes(&grid, &cameras), full);
+        assert_eq!(projector(0).kept_footprint_bytes(&grid, &cameras), 0);
+        let memory = |a, mib| ClassicalMethod::default_for(a).memory(&projector(mib), &grid, &cameras, 2).projector;
+        assert_eq!(memory(Algorithm::Sart, 1024) - memory(Algorithm::Sart, 0), full);
+        assert_eq!(memory(Algorithm::Mlem, 1024) - memory(Algorithm::Mlem, 0), full);
+        assert_eq!(memory(Algorithm::Art, 1024), memory(Algorithm::Art, 0));
+        assert_eq!(memory(Algorithm::Mart, 1024), memory(Algorithm::Mart, 0));
+    }
 }
