@@ -335,6 +335,9 @@ impl ProjectorConfig {
     /// view has been back-projected: at most [`Self::kept_footprints_mib`], 0 for the other
     /// projectors.
     pub fn kept_footprint_bytes(&self, grid: &Grid, cameras: &[Camera]) -> u64 {
+        if self.kept_footprints_mib == 0 {
+            return 0;
+        }
         match self.resolve(grid, cameras) {
             ProjectorKind::Auto | ProjectorKind::Footprint => FootprintProjector::new(*grid, cameras, 1.0)
                 .map_or(0, |p| p.with_kept_footprints(self.kept_footprint_budget()).kept_footprint_bytes()),
