@@ -91,32 +91,18 @@ impl Baked {
                         })
                         .collect()
                 };
-                let (rx, ry, rz) = (reach(0), reach(1), reach(2));
-                let [sx, sy, _] = sup.dims;
+                let rows = SupportRows { support: sup, reach: [reach(0), reach(1), reach(2)] };
                 let [nx, ny, _] = vdims;
                 v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-                    let (mut pts, mut at) = (Vec::new(), Vec::new());
-                    // The support's columns along x that a vertex row of this slab can read.
-                    let mut column = vec![false; sx];
+                    let (mut pts, mut at, mut column) = (Vec::new(), Vec::new(), Vec::new());
                     for j in 0..ny {
-                        column.fill(false);
-                        for ck in rz[k].0..=rz[k].1 {
-                            for cj in ry[j].0..=ry[j].1 {
-                                let row = &sup.cells[(ck * sy + cj) * sx..][..sx];
-                                for (c, &o) in column.iter_mut().zip(row) {
-                                    *c |= o;
-                                }
-                            }
-                        }
-                        for (i, &(lo, hi)) in rx.iter().enumerate() {
-                            if lo <= hi && column[lo..=hi].iter().any(|&o| o) {
-                                // The cell centre of `Volume::from_field`, as a field without a
-                                // support is sampled.
-                                let p = grid.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * sp;
-                                pts.push(p.as_vec3());
-                                at.push(j * nx + i);
-                            }
-                        }
+                        rows.row(j, k, &mut column, |i| {
+                            // The cell centre of `Volume::from_field`, as a field without a
+                            // support is sampled.
+                            let p = grid.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * sp;
+                            pts.push(p.as_vec3());
+                            at.push(j * nx + i);
+                        });
                     }
                     let mut vals = vec![0f32; pts.len()];
                     field.eval_unmasked(&pts, time, &mut vals);
@@ -171,6 +157,75 @@ impl<'a> Support<'a> {
     pub fn walk(self) -> SupportWalk<'a> {
         let pad = DVec3::splat(1e-9 * self.aabb.size().max_element());
         SupportWalk { support: self, occupied: self.occupied_box().map(|b| Aabb::new(b.min - pad, b.max + pad)) }
+    }
+}
+
+/// Which points of a grid a [`Support`] may hold non-zero values at: per axis, the support
+/// cells each grid index reaches, and a row at a time the indices along x whose reach holds an
+/// occupied cell. Sampling a field on a grid then evaluates it only there; a flow's hull is
+/// a small part of its box.
+pub(crate) struct SupportRows<'a> {
+    pub(crate) support: Support<'a>,
+    /// Per axis and grid index, the first and last support cell it reaches (`(1, 0)`: none).
+    pub(crate) reach: [Vec<(usize, usize)>; 3],
+}
+
+impl<'a> SupportRows<'a> {
+    /// For a grid of `dims` cells over `aabb`, each sampled at `n³` points as
+    /// [`Volume::from_field_averaged`] places them (`n = 1`: the cell centres): the support
+    /// cells those points may fall in, widened by a thousandth of a support cell so that no
+    /// point's rounding puts it in a cell left out, and clamped to the support's grid (a point
+    /// outside its box evaluates to zero wherever it is counted). `None` when the support's
+    /// cells do not fill its grid, which then says nothing.
+    pub(crate) fn for_samples(support: Support<'a>, aabb: &Aabb, dims: [usize; 3], n: usize) -> Option<Self> {
+        const SLACK: f64 = 1e-3;
+        if support.cells.len() != support.dims.iter().product::<usize>() {
+            return None;
+        }
+        let n = n.max(1) as f64;
+        let reach = |a: usize| -> Vec<(usize, usize)> {
+            let cells = support.dims[a] as f64;
+            let hs = support.aabb.size()[a] / cells;
+            let h = aabb.size()[a] / dims[a] as f64;
+            (0..dims[a])
+                .map(|i| {
+                    let at = |q: f64| {
+                        ((aabb.min[a] + (i as f64 + (q + 0.5) / n) * h - support.aabb.min[a]) / hs).clamp(0.0, cells)
+                    };
+                    let lo = (at(0.0) - SLACK).floor().max(0.0);
+                    let hi = (at(n - 1.0) + SLACK).floor().min(cells - 1.0);
+                    (lo as usize, hi as usize)
+                })
+                .collect()
+        };
+        Some(SupportRows { support, reach: [reach(0), reach(1), reach(2)] })
+    }
+
+    /// Calls `hit(i)`, in order, for every grid index `i` along x of row `(j, k)` whose reach
+    /// holds an occupied support cell. `column` is scratch space.
+    pub(crate) fn row(&self, j: usize, k: usize, column: &mut Vec<bool>, mut hit: impl FnMut(usize)) {
+        let sup = &self.support;
+        let [sx, sy, _] = sup.dims;
+        let ((y0, y1), (z0, z1)) = (self.reach[1][j], self.reach[2][k]);
+        // The support's columns along x that the row reaches.
+        column.clear();
+        column.resize(sx, false);
+        for ck in z0..=z1 {
+            for cj in y0..=y1 {
+                let row = &sup.cells[(ck * sy + cj) * sx..][..sx];
+                for (c, &o) in column.iter_mut().zip(row) {
+                    *c |= o;
+                }
+            }
+        }
+        if !column.contains(&true) {
+            return;
+        }
+        for (i, &(lo, hi)) in self.reach[0].iter().enumerate() {
+            if lo <= hi && column[lo..=hi].contains(&true) {
+                hit(i);
+            }
+        }
     }
 }
 

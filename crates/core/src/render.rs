@@ -332,6 +332,56 @@ mod tests {
         Masked { aabb: Aabb::new(DVec3::new(-1.0, -0.8, -0.9), DVec3::new(1.1, 0.9, 1.0)), dims, cells, tell }
     }
 
+    /// [`Masked`], counting the points it is asked for.
+    struct Counted(Masked, std::sync::atomic::AtomicUsize);
+
+    impl ScalarField for Counted {
+        fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
+            self.1.fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
+            self.0.eval(points, time, out);
+        }
+
+        fn support(&self) -> Option<crate::Support<'_>> {
+            self.0.support()
+        }
+    }
+
+    /// Sampling a field with a support on a grid evaluates it only where the support may hold
+    /// a value, and gives the grid that evaluating every point gives, bit for bit: on grids
+    /// finer and coarser than the support's cells, aligned with them (14 × 10 × 12 cells
+    /// against 7 × 5 × 6) or not, at the cell centres and averaged over 2³ and 3³ points, and
+    /// on a grid reaching past the field's box.
+    #[test]
+    fn sampling_a_grid_skips_the_empty_cells_and_gives_the_same_values() {
+        let aabb = masked(true).aabb;
+        let wider = Aabb::new(aabb.min - DVec3::splat(0.3), aabb.max + DVec3::splat(0.2));
+        for (dims, b, n) in [
+            ([14, 10, 12], aabb, 1),
+            ([23, 17, 19], aabb, 1),
+            ([5, 4, 3], aabb, 3),
+            ([9, 8, 11], aabb, 2),
+            ([20, 18, 16], wider, 1),
+        ] {
+            let every = Volume::from_field_averaged(dims, b, &masked(false), 0.0, n);
+            let field = Counted(masked(true), Default::default());
+            let skipped = Volume::from_field_averaged(dims, b, &field, 0.0, n);
+            assert_eq!(skipped.data, every.data, "grid {dims:?}, {n}³ points per cell");
+            assert!(every.data.iter().any(|&v| v > 0.5), "grid {dims:?}: some cells are occupied");
+            // A cell counts where any support cell its points may reach is occupied. On the
+            // aligned grid twice as fine as the support's, each centre lies well inside one
+            // support cell, so exactly the cells that hold a value are evaluated (about a third).
+            let asked = field.1.into_inner();
+            let all = dims.iter().product::<usize>() * n * n * n;
+            assert!(asked <= all, "grid {dims:?}: {asked} of {all} points evaluated");
+            let needed = every.data.iter().filter(|&&v| v != 0.0).count() * n * n * n;
+            assert!(asked >= needed, "grid {dims:?}: {asked} points evaluated, {needed} hold a value");
+            if dims == [14, 10, 12] {
+                assert_eq!(asked, needed, "the aligned grid");
+                assert!(asked < all / 2, "the aligned grid: {asked} of {all}");
+            }
+        }
+    }
+
     /// The DDA's intervals hold exactly the points of the ray in occupied cells (checked on a
     /// fine march, away from cell faces).
     #[test]

@@ -3,6 +3,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
+use crate::field::SupportRows;
 use crate::{Aabb, ScalarField};
 
 /// A dense f32 grid of `nx × ny × nz` cells filling `aabb`, x varying fastest
@@ -50,53 +51,52 @@ impl Volume {
     }
 
     /// Samples any [`ScalarField`] at every voxel centre at time `time`, one batch per z-slice.
+    /// A field with a [`ScalarField::support`] is evaluated only at the centres that may lie in
+    /// its occupied cells; the others hold the zero it has there.
     pub fn from_field(dims: [usize; 3], aabb: Aabb, field: &dyn ScalarField, time: f64) -> Self {
-        let mut v = Volume::zeros(dims, aabb);
-        let [nx, ny, _] = dims;
-        let sp = v.spacing();
-        v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-            let mut pts = Vec::with_capacity(nx * ny);
-            for j in 0..ny {
-                for i in 0..nx {
-                    let p = aabb.min + DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * sp;
-                    pts.push(p.as_vec3());
-                }
-            }
-            field.eval(&pts, time, slab);
-        });
-        v
+        Volume::from_field_averaged(dims, aabb, field, time, 1)
     }
 
     /// Samples `field` at `time` as the mean over each cell of `n³` points on a regular
     /// sub-lattice (`(i + (a + ½)/n) · h` per axis): the cell average up to the sub-lattice's
     /// quadrature error, a box filter that keeps detail finer than a cell from aliasing into the
-    /// grid. `n = 1` is [`Volume::from_field`].
+    /// grid. `n = 1` is [`Volume::from_field`]. As there, a field with a support is evaluated
+    /// only in the cells whose points may lie in its occupied cells.
     pub fn from_field_averaged(dims: [usize; 3], aabb: Aabb, field: &dyn ScalarField, time: f64, n: usize) -> Self {
         let n = n.max(1);
-        if n == 1 {
-            return Volume::from_field(dims, aabb, field, time);
-        }
         let mut v = Volume::zeros(dims, aabb);
         let [nx, ny, _] = dims;
         let sp = v.spacing();
         let sub = n * n * n;
         let inv = 1.0 / sub as f32;
+        let rows = field.support().and_then(|s| SupportRows::for_samples(s, &aabb, dims, n));
         v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-            let mut pts = Vec::with_capacity(nx * ny * sub);
+            let (mut pts, mut at, mut column) = (Vec::new(), Vec::new(), Vec::new());
             for j in 0..ny {
-                for i in 0..nx {
+                let cell = |i: usize| {
                     for c in 0..sub {
                         let (a, b, d) = (c % n, (c / n) % n, c / (n * n));
                         let off = |cell: usize, q: usize| cell as f64 + (q as f64 + 0.5) / n as f64;
                         let p = aabb.min + DVec3::new(off(i, a), off(j, b), off(k, d)) * sp;
                         pts.push(p.as_vec3());
                     }
+                    at.push(j * nx + i);
+                };
+                match &rows {
+                    Some(rows) => rows.row(j, k, &mut column, cell),
+                    None => (0..nx).for_each(cell),
                 }
             }
             let mut vals = vec![0.0f32; pts.len()];
             field.eval(&pts, time, &mut vals);
-            for (o, cell) in slab.iter_mut().zip(vals.chunks_exact(sub)) {
-                *o = cell.iter().sum::<f32>() * inv;
+            if sub == 1 {
+                for (&i, &x) in at.iter().zip(&vals) {
+                    slab[i] = x;
+                }
+            } else {
+                for (&i, cell) in at.iter().zip(vals.chunks_exact(sub)) {
+                    slab[i] = cell.iter().sum::<f32>() * inv;
+                }
             }
         });
         v
