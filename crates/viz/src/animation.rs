@@ -8,8 +8,6 @@ use std::path::Path;
 
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
-use image::codecs::gif::{GifEncoder, Repeat};
-use image::{Delay, Frame, RgbaImage};
 
 use crate::{output, Colormap, VizError};
 
@@ -28,8 +26,12 @@ pub fn encode_image_png(image: &Image, colormap: Colormap, lo: f32, hi: f32) -> 
 
 /// Writes an endlessly looping GIF of `frames` (all the same size), each colour-mapped on the
 /// common range `[0, max]` of all frames (so brightness compares across frames), shown for
-/// `frame_ms` milliseconds. GIF holds 256 colours per frame; the encoder quantises each frame.
+/// `frame_ms` milliseconds (rounded to the GIF's 10 ms, at least 10). GIF holds 256 colours:
+/// the colour map is laid down once as a global palette of 255 evenly spaced colours, plus mid
+/// grey for NaN, so every frame shows the same value in the same colour and no frame is
+/// quantised.
 pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, frame_ms: u32) -> Result<(), VizError> {
+    const LEVELS: usize = 255;
     let Some(first) = frames.first() else {
         return Err(VizError::invalid("turntable", "there are no frames"));
     };
@@ -39,20 +41,38 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
             format!("frames differ in size ({}x{} and {}x{})", first.width, first.height, f.width, f.height),
         ));
     }
+    let (Ok(width), Ok(height)) = (u16::try_from(first.width), u16::try_from(first.height)) else {
+        return Err(VizError::invalid(
+            "turntable",
+            format!("frames of {}x{} px exceed the GIF's 65535 px per side", first.width, first.height),
+        ));
+    };
     let hi = frames.iter().flat_map(|f| f.data.iter()).copied().filter(|v| v.is_finite()).fold(0f32, f32::max);
-    let hi = if hi > 0.0 { hi } else { 1.0 };
+    let scale = if hi > 0.0 { (LEVELS - 1) as f32 / hi } else { (LEVELS - 1) as f32 };
+    let mut palette = Vec::with_capacity(3 * (LEVELS + 1));
+    for i in 0..LEVELS {
+        palette.extend(colormap.rgb(i as f64 / (LEVELS - 1) as f64));
+    }
+    palette.extend(colormap.rgb(f64::NAN));
+    let enc_err = |source| VizError::EncodeGif { what: format!("turntable {}", path.display()), source };
     let mut bytes = Vec::new();
     {
-        let mut enc = GifEncoder::new_with_speed(&mut bytes, 10);
-        let enc_err = |source| VizError::Encode { what: format!("turntable {}", path.display()), source };
-        enc.set_repeat(Repeat::Infinite).map_err(enc_err)?;
+        let mut enc = gif::Encoder::new(&mut bytes, width, height, &palette).map_err(enc_err)?;
+        enc.set_repeat(gif::Repeat::Infinite).map_err(enc_err)?;
+        let mut indices = vec![0u8; first.data.len()];
         for f in frames {
-            let rgb = colorize(f, colormap, 0.0, hi);
-            let rgba: Vec<u8> = rgb.chunks_exact(3).flat_map(|c| [c[0], c[1], c[2], 255]).collect();
-            let buf = RgbaImage::from_raw(f.width as u32, f.height as u32, rgba)
-                .ok_or_else(|| VizError::invalid("turntable frame", "buffer size mismatch"))?;
-            let frame = Frame::from_parts(buf, 0, 0, Delay::from_numer_denom_ms(frame_ms.max(10), 1));
-            enc.encode_frame(frame).map_err(enc_err)?;
+            for (i, &v) in indices.iter_mut().zip(&f.data) {
+                // As `colorize` maps it: clamped to the range, NaN grey.
+                *i = if v.is_nan() { LEVELS as u8 } else { (v * scale).round().clamp(0.0, (LEVELS - 1) as f32) as u8 };
+            }
+            let frame = gif::Frame {
+                width,
+                height,
+                delay: (frame_ms.max(10).saturating_add(5) / 10).min(u16::MAX as u32) as u16,
+                buffer: std::borrow::Cow::Borrowed(&indices),
+                ..gif::Frame::default()
+            };
+            enc.write_frame(&frame).map_err(enc_err)?;
         }
     }
     output::write_atomic(path, &bytes)
@@ -171,19 +191,38 @@ mod tests {
         assert_eq!(cams[0].forward().z.signum(), 1.0, "first camera looks along +z");
     }
 
+    /// The turntable decodes to its frames, each pixel in the colour map's colour for its value
+    /// on the frames' common range (NaN grey), with the frame time asked for.
     #[test]
-    fn turntable_round_trips_frame_count() {
-        let frames: Vec<Image> =
-            (0..4).map(|k| Image::from_vec(8, 6, (0..48).map(|i| ((i + k * 5) % 48) as f32).collect())).collect();
+    fn turntable_round_trips_frames_and_colours() {
+        let frames: Vec<Image> = (0..4)
+            .map(|k| {
+                let mut data: Vec<f32> = (0..48).map(|i| ((i + k * 5) % 48 * 5) as f32).collect();
+                data[1] = 254.0;
+                data[7] = f32::NAN;
+                Image::from_vec(8, 6, data)
+            })
+            .collect();
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("t.gif");
         write_turntable_gif(&path, &frames, Colormap::Magma, 80).expect("writes");
-        use image::AnimationDecoder;
-        let file = std::io::BufReader::new(std::fs::File::open(&path).expect("opens"));
-        let decoded =
-            image::codecs::gif::GifDecoder::new(file).expect("a GIF").into_frames().collect_frames().expect("frames");
-        assert_eq!(decoded.len(), 4);
-        assert_eq!(decoded[0].buffer().dimensions(), (8, 6));
+        let mut opts = gif::DecodeOptions::new();
+        opts.set_color_output(gif::ColorOutput::RGBA);
+        let mut dec = opts.read_info(std::fs::File::open(&path).expect("opens")).expect("a GIF");
+        assert_eq!((dec.width(), dec.height()), (8, 6));
+        let mut n = 0;
+        while let Some(frame) = dec.read_next_frame().expect("a frame") {
+            assert_eq!(frame.delay, 8, "80 ms in the GIF's 10 ms");
+            let src = &frames[n];
+            for (q, (&v, px)) in src.data.iter().zip(frame.buffer.chunks_exact(4)).enumerate() {
+                // The values are whole numbers, on the palette's levels (the peak, 254, is the
+                // top one), so the colour is the colour map's at the value exactly.
+                let want = colorize(&Image::from_vec(1, 1, vec![v]), Colormap::Magma, 0.0, 254.0);
+                assert_eq!(&px[..3], &want[..], "frame {n}, pixel {q} ({v})");
+            }
+            n += 1;
+        }
+        assert_eq!(n, 4);
         assert!(write_turntable_gif(&path, &[], Colormap::Magma, 80).is_err());
     }
 }

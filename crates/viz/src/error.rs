@@ -18,12 +18,19 @@ pub enum VizError {
     /// The drawing library failed (a font or backend problem).
     #[error("drawing {what} failed: {message}")]
     Draw { what: String, message: String },
-    /// Encoding a PNG or GIF failed.
+    /// Encoding a PNG failed.
     #[error("cannot encode {what}: {source}")]
     Encode {
         what: String,
         #[source]
         source: image::ImageError,
+    },
+    /// Encoding a GIF failed.
+    #[error("cannot encode {what}: {source}")]
+    EncodeGif {
+        what: String,
+        #[source]
+        source: gif::EncodingError,
     },
     /// An argument is out of its valid range.
     #[error("invalid {what}: {why}")]
