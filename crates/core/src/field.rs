@@ -91,7 +91,7 @@ impl Baked {
                         })
                         .collect()
                 };
-                let rows = SupportRows { support: sup, reach: [reach(0), reach(1), reach(2)] };
+                let rows = SupportRows::new(sup, [reach(0), reach(1), reach(2)]);
                 let [nx, ny, _] = vdims;
                 v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
                     let (mut pts, mut at, mut column) = (Vec::new(), Vec::new(), Vec::new());
@@ -165,12 +165,29 @@ impl<'a> Support<'a> {
 /// occupied cell. Sampling a field on a grid then evaluates it only there; a flow's hull is
 /// a small part of its box.
 pub(crate) struct SupportRows<'a> {
-    pub(crate) support: Support<'a>,
+    support: Support<'a>,
     /// Per axis and grid index, the first and last support cell it reaches (`(1, 0)`: none).
-    pub(crate) reach: [Vec<(usize, usize)>; 3],
+    reach: [Vec<(usize, usize)>; 3],
+    /// Per support cell along x, the first and last grid index that reaches it (`(1, 0)`:
+    /// none). The reaches move along the axis as the index grows, so these are intervals.
+    reached_by: Vec<(usize, usize)>,
 }
 
 impl<'a> SupportRows<'a> {
+    /// From the reach of every grid index along each axis (cells of the support's grid), which
+    /// must move along the axis as the index grows (both ends non-decreasing).
+    pub(crate) fn new(support: Support<'a>, reach: [Vec<(usize, usize)>; 3]) -> Self {
+        let mut reached_by = vec![(1, 0); support.dims[0]];
+        for (i, &(lo, hi)) in reach[0].iter().enumerate() {
+            if lo <= hi {
+                for r in &mut reached_by[lo..=hi] {
+                    *r = if r.0 > r.1 { (i, i) } else { (r.0, i) };
+                }
+            }
+        }
+        SupportRows { support, reach, reached_by }
+    }
+
     /// For a grid of `dims` cells over `aabb`, each sampled at `n³` points as
     /// [`Volume::from_field_averaged`] places them (`n = 1`: the cell centres): the support
     /// cells those points may fall in, widened by a thousandth of a support cell so that no
@@ -198,7 +215,7 @@ impl<'a> SupportRows<'a> {
                 })
                 .collect()
         };
-        Some(SupportRows { support, reach: [reach(0), reach(1), reach(2)] })
+        Some(SupportRows::new(support, [reach(0), reach(1), reach(2)]))
     }
 
     /// Calls `hit(i)`, in order, for every grid index `i` along x of row `(j, k)` whose reach
@@ -218,12 +235,14 @@ impl<'a> SupportRows<'a> {
                 }
             }
         }
-        if !column.contains(&true) {
-            return;
-        }
-        for (i, &(lo, hi)) in self.reach[0].iter().enumerate() {
-            if lo <= hi && column[lo..=hi].contains(&true) {
-                hit(i);
+        // Each occupied column's grid indices, in order and once each.
+        let mut next = 0;
+        for (&o, &(first, last)) in column.iter().zip(&self.reached_by) {
+            if o && first <= last {
+                for i in first.max(next)..=last {
+                    hit(i);
+                }
+                next = next.max(last + 1);
             }
         }
     }
