@@ -32,6 +32,7 @@ use crate::field::TrainableField;
 use crate::kernels::{self, matmul, Op};
 
 mod bf16;
+mod infer64;
 
 /// Factor on the initial output weights in [`TrainableField::start_uniform`]: small enough
 /// that the initial field is nearly uniform, large enough that every hidden unit receives a
@@ -360,9 +361,22 @@ impl Mlp {
     /// cache-resident for large chunks) and records nothing.
     pub(crate) fn infer(&self, params: &[f32], x: &[f32], out: &mut [f32], tape: &mut MlpTape) {
         let n = out.len();
-        let h = self.width;
         assert_eq!(x.len(), n * self.in_dim, "Mlp::infer: input is not {n}×{}", self.in_dim);
         assert_eq!(params.len(), self.num_params, "Mlp::infer: wrong parameter count");
+        match infer64::Kernel::detect().filter(|_| infer64::fits(self)) {
+            Some(kernel) => infer64::infer(self, params, x, out, kernel),
+            None => self.infer_gemm(params, x, out, tape),
+        }
+        match self.output_activation {
+            OutputActivation::Relu => out.iter_mut().for_each(|o| *o = o.max(0.0)),
+            OutputActivation::Softplus => kernels::softplus_inplace(out),
+        }
+    }
+
+    /// The output's pre-activation of [`Mlp::infer`] over GEMMs, any shape.
+    fn infer_gemm(&self, params: &[f32], x: &[f32], out: &mut [f32], tape: &mut MlpTape) {
+        let n = out.len();
+        let h = self.width;
         for b in &mut tape.eval {
             if b.len() < n * h {
                 b.resize(n * h, 0.0);
@@ -385,10 +399,6 @@ impl Mlp {
             std::mem::swap(&mut prev, &mut cur);
         }
         kernels::rows_dot(prev, &params[self.out_weight.clone()], params[self.out_bias], out);
-        match self.output_activation {
-            OutputActivation::Relu => out.iter_mut().for_each(|o| *o = o.max(0.0)),
-            OutputActivation::Softplus => kernels::softplus_inplace(out),
-        }
     }
 
     /// Adds ∂L/∂params into `grads` (`num_params()` long) given `d_out = ∂L/∂out` of the last

@@ -45,11 +45,7 @@ pub(super) fn cpu_has_bf16() -> bool {
 
 /// Whether `mlp`'s shape is the one these passes are written for.
 pub(super) fn fits(mlp: &Mlp) -> bool {
-    mlp.width == WIDTH
-        && mlp.in_dim <= WIDTH
-        && mlp.activation == super::Activation::Relu
-        && mlp.skip.is_none()
-        && !mlp.layers.is_empty()
+    super::infer64::fits(mlp)
 }
 
 /// `k` rounded up to whole vectors of 16.
