@@ -49,6 +49,15 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     // Refuses to overwrite; resumes to a higher cap.
     let again = fluidnerf(d, &run);
     assert!(!again.status.success(), "overwrote results without --force");
+    // A resume whose checkpoint does not load (another field) leaves the finished run as it was.
+    let kept = |f: &str| std::fs::read(dir.join(f)).expect("readable");
+    let (report_before, config_before) = (kept("report.json"), kept("config.json"));
+    let mut other: Vec<&str> = run.to_vec();
+    other[7] = "fast";
+    other.push("--resume");
+    refused(&fluidnerf(d, &other), "checkpoint.safetensors");
+    assert!(kept("report.json") == report_before, "a refused resume changed report.json");
+    assert!(kept("config.json") == config_before, "a refused resume changed config.json");
     let mut resume: Vec<&str> = run.to_vec();
     resume[9] = "200";
     resume.push("--resume");

@@ -219,6 +219,16 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
     assert!(volumes == files(&cut, "frames", ".npy"), "the resumed run's volumes differ");
     let histories = |dir: &std::path::Path| report(dir)["history"]["loss"].clone();
     assert_eq!(histories(&full), histories(&cut));
+
+    // A resume that cannot load a window's saved state leaves the finished run as it was.
+    let first = cut.join("windows/w000.checkpoint.safetensors");
+    std::fs::write(&first, &std::fs::read(&first).expect("readable")[..1000]).expect("truncated");
+    let before = std::fs::read(cut.join("report.json")).expect("readable");
+    common::refused(
+        &fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>()),
+        "w000.checkpoint.safetensors",
+    );
+    assert!(std::fs::read(cut.join("report.json")).expect("kept") == before, "a refused resume changed report.json");
 }
 
 /// The box of the generated scene.

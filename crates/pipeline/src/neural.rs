@@ -122,11 +122,11 @@ pub(crate) fn run(
     let (problem, masks, measured) = problem(scene, &config.gains)?;
     let prep = Prepared::with_masks(&problem, &spec.train, &masks)?;
     let setup_s = t0.elapsed().as_secs_f64();
-    // Written once everything has been read and checked: a refused run leaves nothing.
-    if dir.resuming() {
-        let _ = std::fs::remove_file(dir.report());
+    // Written once everything has been read and checked: a refused run leaves nothing. A
+    // resumed run replaces its report and settings once its checkpoint has loaded.
+    if !dir.resuming() {
+        dir.write_json("config.json", config)?;
     }
-    dir.write_json("config.json", config)?;
     let (rays_kept, rays_on_box) = prep.ray_counts();
     log::info!(
         "{} training views, {} held out; {rays_kept} of {rays_on_box} rays kept, {:.1} % of the box occupied",
@@ -342,6 +342,7 @@ impl Ctx<'_> {
         let mut budgeted;
         if dir.resuming() {
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
+            dir.replace_finished(config)?;
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
             let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;

@@ -231,6 +231,14 @@ impl RunDir {
         self.root.join(name)
     }
 
+    /// A resumed run, once its saved state has loaded: drops the finished run's report (so a
+    /// continuation that is interrupted reads as unfinished) and records the settings it goes
+    /// on with (`config`). Until then a refused resume leaves the run as it was.
+    pub fn replace_finished(&self, config: &impl Serialize) -> Result<(), PipelineError> {
+        let _ = std::fs::remove_file(self.report());
+        self.write_json("config.json", config).map(drop)
+    }
+
     pub fn config(&self) -> PathBuf {
         self.path("config.json")
     }

@@ -281,10 +281,8 @@ pub(crate) fn run(
                 ),
             });
         }
-        let _ = std::fs::remove_file(dir.report());
-    }
-    dir.write_json("config.json", config)?;
-    if !dir.resuming() {
+    } else {
+        dir.write_json("config.json", config)?;
         dir.write_json("windows/progress.json", &progress)?;
     }
     let ctx = Ctx {
@@ -394,7 +392,13 @@ impl Ctx<'_> {
         session: &mut Session,
     ) -> Result<RunReport, PipelineError> {
         let (config, dir, spec) = (self.config, self.dir, self.spec);
-        let resume = if dir.resuming() { self.resume_state(&init, &progress)? } else { ResumeState::default() };
+        let resume = if dir.resuming() {
+            let state = self.resume_state(&init, &progress)?;
+            dir.replace_finished(config)?;
+            state
+        } else {
+            ResumeState::default()
+        };
         let windows = progress.plan.len().max(1);
         let _ = session.emit(RunEvent::Started {
             method: self.method,
