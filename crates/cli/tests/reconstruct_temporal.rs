@@ -102,6 +102,30 @@ fn time_resolved_runs_write_a_series_metrics_and_a_loadable_field() {
     let exported = fluidnerf_io::volume::read_npy(&d.join("exp/volume.npy"), vol_box(d)).expect("npy");
     let written = fluidnerf_io::volume::read_npy(&run.join("frames/volume_002.npy"), vol_box(d)).expect("npy");
     assert_eq!(exported.data, written.data, "export at t = 15 is the run's frame at 15");
+    // Without --time, its first instant; outside its instants, or not a number, refused (the
+    // field would only repeat its first or last instant there).
+    ok(&fluidnerf(d, &["export", "fast", "--out", "exp0", "--npy", "--resolution", "12", "-q"]));
+    assert_eq!(json(&d.join("exp0/export.json"))["time"], 14.0);
+    let first = fluidnerf_io::volume::read_npy(&run.join("frames/volume_000.npy"), vol_box(d)).expect("npy");
+    let exported = fluidnerf_io::volume::read_npy(&d.join("exp0/volume.npy"), vol_box(d)).expect("npy");
+    assert_eq!(exported.data, first.data, "export without --time is the run's first frame");
+    for (time, needle) in [("16.5", "outside the time-resolved run's instants 14 … 16"), ("NaN", "finite")] {
+        let t = format!("--time={time}");
+        common::refused(&fluidnerf(d, &["export", "fast", "--out", "exp1", "--npy", &t, "-q"]), needle);
+        common::refused(
+            &fluidnerf(d, &["render", "fast", "--scene", "scene", "--out", "ren1", "--orbit", "1", &t]),
+            needle,
+        );
+    }
+    // A scene without times does not score it.
+    ok(&fluidnerf(
+        d,
+        &["synth", "-q", "--preset", "demo", "--cameras", "3", "--pixels", "8", "--resolution", "8", "-o", "s3"],
+    ));
+    common::refused(
+        &fluidnerf(d, &["eval", "fast", "--scene", "s3", "--no-reprojection", "--json", "e3.json"]),
+        "has no time",
+    );
     ok(&fluidnerf(d, &["render", "fast", "--scene", "scene", "--out", "ren", "--time", "15", "-q"]));
     // The footprint projector samples the stitched field on twice its finest level first.
     ok(&fluidnerf(

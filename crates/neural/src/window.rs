@@ -62,7 +62,8 @@ pub fn plan_windows(n_frames: usize, window: usize, overlap: usize) -> Vec<Range
 /// Position of time `t` on the frame axis (`times` increasing, non-empty), clamped.
 pub fn frame_position(times: &[f64], t: f64) -> f64 {
     assert!(!times.is_empty(), "frame_position: no frames");
-    if t <= times[0] || times.len() == 1 {
+    // `!(t > …)` so that NaN reads as the first frame instead of indexing before it.
+    if !(t > times[0]) || times.len() == 1 {
         return 0.0;
     }
     let last = times.len() - 1;
@@ -179,6 +180,7 @@ mod tests {
         assert!((frame_position(&t, 14.5) - 0.5).abs() < 1e-12);
         assert!((frame_position(&t, 16.0) - 1.5).abs() < 1e-12);
         assert_eq!(frame_position(&t, 18.0), 2.0);
+        assert_eq!(frame_position(&t, f64::NAN), 0.0, "NaN reads as the first frame, not before it");
         for f in [0.0, 0.25, 1.0, 1.5, 2.0] {
             assert!((frame_position(&t, time_at(&t, f)) - f).abs() < 1e-12);
         }

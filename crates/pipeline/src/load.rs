@@ -70,6 +70,20 @@ impl LoadedRun {
         })
     }
 
+    /// The first and last instants of a time-resolved run (`temporal.json`); None for static
+    /// runs. Its field is clamped to them outside, so it stands for nothing there.
+    pub fn time_range(&self) -> Result<Option<(f64, f64)>, PipelineError> {
+        if self.kind != RunKind::Temporal {
+            return Ok(None);
+        }
+        let path = self.dir.join("temporal.json");
+        let record: fluidnerf_neural::temporal::TemporalRecord = crate::rundir::read_json(&path)?;
+        match (record.frame_times.first(), record.frame_times.last()) {
+            (Some(&a), Some(&b)) if a.is_finite() && b.is_finite() && a <= b => Ok(Some((a, b))),
+            _ => Err(PipelineError::file(&path, "frame_times: no frames, or not finite and increasing")),
+        }
+    }
+
     /// Every volume written, with its time (None for static runs).
     pub fn volumes(&self) -> Result<Vec<(Option<f64>, Volume)>, PipelineError> {
         let files: Vec<(Option<f64>, String)> = match &self.report {

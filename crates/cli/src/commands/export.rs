@@ -52,9 +52,10 @@ pub struct Args {
     /// reconstruction's box.
     #[arg(long = "box", value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
     pub bbox: Option<String>,
-    /// Time at which a time-resolved field is sampled.
-    #[arg(long, default_value_t = 0.0)]
-    pub time: f64,
+    /// Time at which a time-resolved field is sampled, between its first and last instants.
+    /// Default: its first instant.
+    #[arg(long)]
+    pub time: Option<f64>,
     /// A trained field's voxel is the mean of N³ points spread evenly over it (its cell
     /// average, a box filter against aliasing when the field holds detail finer than a voxel);
     /// 1 samples the voxel's centre.
@@ -100,7 +101,12 @@ pub struct Args {
 /// A loaded reconstruction.
 pub(crate) enum Source {
     Volume(Volume),
-    Field { field: Box<dyn ScalarField + Send + Sync>, aabb: Aabb },
+    /// A trained field; `times`: the first and last instants of a time-resolved one.
+    Field {
+        field: Box<dyn ScalarField + Send + Sync>,
+        aabb: Aabb,
+        times: Option<(f64, f64)>,
+    },
 }
 
 impl Source {
@@ -115,6 +121,24 @@ impl Source {
         match self {
             Source::Volume(v) => v,
             Source::Field { field, .. } => field.as_ref(),
+        }
+    }
+
+    /// The time at which to sample the source for `what` (`--time`, a frame): `given`, refused
+    /// when not finite or outside a time-resolved field's instants (where the field only
+    /// repeats its first or last one); else that field's first instant, and 0 for the others.
+    pub(crate) fn sample_time(&self, given: Option<f64>, what: &str) -> anyhow::Result<f64> {
+        if let Some(t) = given.filter(|t| !t.is_finite()) {
+            bail!("{what}: the time must be a finite number, got {t}");
+        }
+        let Source::Field { times: Some((first, last)), .. } = self else { return Ok(given.unwrap_or(0.0)) };
+        let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
+        match given {
+            None => Ok(*first),
+            Some(t) if t < first - slack || t > last + slack => {
+                bail!("{what}: time {t} lies outside the time-resolved run's instants {first} … {last}")
+            }
+            Some(t) => Ok(t),
         }
     }
 
@@ -154,7 +178,7 @@ pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<
         let run = fluidnerf_pipeline::load::LoadedRun::open(path, scene.map(|s| s.aabb))?;
         return Ok(match run.kind {
             fluidnerf_pipeline::RunKind::Volume => Source::Volume(run.first_volume()?),
-            _ => Source::Field { field: run.field()?, aabb: run.aabb },
+            _ => Source::Field { field: run.field()?, aabb: run.aabb, times: run.time_range()? },
         });
     }
     if !path.exists() {
@@ -238,8 +262,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let units = args.units.clone().or_else(|| scene.as_ref().map(|s| s.units.clone())).unwrap_or_else(|| "mm".into());
     let source = load_source(&args.recon, scene.as_ref())?;
-    if matches!(source, Source::Volume(_)) && args.time != 0.0 {
-        log::warn!("--time {} has no effect: {} is a volume, fixed in time", args.time, args.recon.display());
+    let time = source.sample_time(args.time, "--time")?;
+    if let (Source::Volume(_), Some(t)) = (&source, args.time) {
+        log::warn!("--time {t} has no effect: {} is a volume, fixed in time", args.recon.display());
     }
 
     // The export grid.
@@ -252,7 +277,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         (Source::Field { field, .. }, res, _) => {
             let dims = Volume::dims_for(&aabb, res.unwrap_or(128));
-            Volume::from_field_averaged(dims, aabb, field.as_ref(), args.time, args.average as usize)
+            Volume::from_field_averaged(dims, aabb, field.as_ref(), time, args.average as usize)
         }
     };
     let truth = match &args.compare {
@@ -363,7 +388,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene: args.scene.as_deref(),
         aabb: volume.aabb,
         dims: volume.dims,
-        time: args.time,
+        time,
         units: &units,
         colormap: args.colormap,
         value_label: &args.value_label,

@@ -85,8 +85,8 @@ pub struct Args {
     /// side / 256 for a trained field.
     #[arg(long)]
     pub step: Option<f64>,
-    /// Time at which a time-resolved field is rendered. Default: each frame's own time; 0 for
-    /// orbit views.
+    /// Time at which a time-resolved field is rendered, between its first and last instants.
+    /// Default: each frame's own time; for orbit views the field's first instant.
     #[arg(long)]
     pub time: Option<f64>,
     /// How a trained field is evaluated: `off` evaluates the network at every sample of every
@@ -243,11 +243,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .flow_axis
             .unwrap_or(fluidnerf_core::glam::DVec3::X),
     };
-    let views: Vec<View> = match args.orbit {
+    // Each view's time as asked (`--time`, else its frame's); resolved once the source is read.
+    let mut asked: Vec<(Option<f64>, String)> = Vec::new();
+    let mut views: Vec<View> = match args.orbit {
         Some(n) => fluidnerf_viz::orbit_cameras_about(&scene.aabb, n, args.width, flow)
             .into_iter()
             .enumerate()
-            .map(|(k, camera)| View { camera, time: args.time.unwrap_or(0.0), file_stem: format!("orbit_{k:03}") })
+            .map(|(k, camera)| {
+                asked.push((args.time, "--time".into()));
+                View { camera, time: 0.0, file_stem: format!("orbit_{k:03}") }
+            })
             .collect(),
         None => {
             let indices: Vec<usize> =
@@ -257,11 +262,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let Some(frame) = scene.frames.get(i) else {
                     bail!("--camera {i}: the scene has {} frames (0..{})", scene.frames.len(), scene.frames.len());
                 };
-                views.push(View {
-                    camera: frame.camera.clone(),
-                    time: args.time.or(frame.time).unwrap_or(0.0),
-                    file_stem: format!("view_{i:03}"),
+                asked.push(match args.time {
+                    Some(t) => (Some(t), "--time".into()),
+                    None => (frame.time, format!("frame {i} ({})", frame.file_path.display())),
                 });
+                views.push(View { camera: frame.camera.clone(), time: 0.0, file_stem: format!("view_{i:03}") });
             }
             views
         }
@@ -285,6 +290,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let source = load_source(&args.recon, Some(&scene))?;
+    for (view, (time, what)) in views.iter_mut().zip(&asked) {
+        view.time = source.sample_time(*time, what)?;
+    }
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
     let footprint = match args.projector {
         RenderProjector::Footprint => true,
@@ -428,7 +436,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         projector: if footprint { RenderProjector::Footprint } else { RenderProjector::Rays },
         supersample: args.supersample.max(1),
         step,
-        time: args.time,
+        // The time asked, or that of a time-resolved field's orbit views (all at one).
+        time: args.time.or_else(|| match &source {
+            Source::Field { times: Some(_), .. } if args.orbit.is_some() => views.first().map(|v| v.time),
+            _ => None,
+        }),
         baked: bake_dims,
         intensity_scale: scene.intensity_scale,
         full_scale,
