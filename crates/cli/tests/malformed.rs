@@ -274,6 +274,42 @@ fn cases() -> Vec<Case> {
         ),
         c("eval of a folder without a run", None, &["eval", "SCENE/images", "--scene", "SCENE"], "images"),
         c("fast run of an unreadable image", File("images/cam001.png", b""), FAST, "cam001.png"),
+        c(
+            "more rays per image than memory holds",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--rays-per-image", "1000000000"],
+            "rays per image",
+        ),
+        c(
+            "export finer than the largest grid",
+            None,
+            &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--npy", "--resolution", "5000"],
+            "--resolution",
+        ),
+        c(
+            "export beyond memory",
+            None,
+            &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--npy", "--resolution", "4096"],
+            "available",
+        ),
+        c(
+            "export at a time that is not a number",
+            None,
+            &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--npy", "--time=NaN"],
+            "--time",
+        ),
+        c(
+            "render of too many orbit views",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--orbit", "100000000"],
+            "--orbit",
+        ),
+        c(
+            "render of too wide an orbit view",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--orbit", "1", "--width", "100000"],
+            "--width",
+        ),
     ]
 }
 

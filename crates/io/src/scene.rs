@@ -453,7 +453,7 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
     }
     if let Some(a) = top.flow_axis {
         let v = DVec3::from_array(a);
-        if !(v.is_finite() && v.length() > 0.0) {
+        if !(v.is_finite() && v != DVec3::ZERO) {
             return Err(IoError::invalid(file, format!("`flow_axis` must be a non-zero finite vector, got {a:?}")));
         }
     }

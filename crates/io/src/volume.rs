@@ -198,12 +198,20 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
             return Err(bad("only the identity Direction is supported"));
         }
     }
-    let dims: Vec<usize> = (0..3).map(|a| (extent[2 * a + 1] - extent[2 * a] + 1).max(0) as usize).collect();
-    let dims = [dims[0], dims[1], dims[2]];
-    let n = dims[0] * dims[1] * dims[2];
+    // A corrupt extent can claim any size: its count must fit before anything is allocated.
+    let side = |a: usize| extent[2 * a + 1].checked_sub(extent[2 * a]).and_then(|d| d.checked_add(1));
+    let dims = [side(0), side(1), side(2)];
+    let n = dims.iter().try_fold(1i64, |acc, d| d.and_then(|d| acc.checked_mul(d.max(0))));
+    let (Some(n), [Some(nx), Some(ny), Some(nz)]) = (n, dims) else {
+        return Err(bad("WholeExtent: more voxels than a volume can hold"));
+    };
     if n == 0 {
         return Err(bad("empty extent"));
     }
+    if n > u32::MAX as i64 {
+        return Err(bad(&format!("WholeExtent: {n} voxels, more than a volume can hold (2^32)")));
+    }
+    let (dims, n) = ([nx as usize, ny as usize, nz as usize], n as usize);
     let array_tag = start_tag(xml, "DataArray").ok_or_else(|| bad("no <DataArray> element"))?;
     if attribute(array_tag, "NumberOfComponents").is_some_and(|c| c != "1") {
         return Err(bad("only single-component arrays are supported"));
@@ -322,10 +330,13 @@ pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     if meta.dims.contains(&0) {
         return Err(IoError::invalid(&json_path, "dims must be positive"));
     }
+    let needed = meta.dims.iter().try_fold(4usize, |acc, &d| acc.checked_mul(d));
+    let Some(needed) = needed else {
+        return Err(IoError::invalid(&json_path, format!("dims {:?}: more voxels than a volume can hold", meta.dims)));
+    };
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "raw volume", e))?;
-    let n = meta.dims.iter().product::<usize>();
-    if bytes.len() != 4 * n {
-        return Err(IoError::invalid(path, format!("{} bytes, but dims {:?} need {}", bytes.len(), meta.dims, 4 * n)));
+    if bytes.len() != needed {
+        return Err(IoError::invalid(path, format!("{} bytes, but dims {:?} need {needed}", bytes.len(), meta.dims)));
     }
     let data = bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
     Ok(Volume::from_vec(meta.dims, aabb, data))
@@ -456,6 +467,19 @@ mod tests {
         std::fs::write(&p, "<VTKFile type=\"PolyData\">").expect("write");
         let err = read_vti(&p).expect_err("polydata").to_string();
         assert!(err.contains("a.vti") && err.contains("ImageData"), "{err}");
+        // Extents whose voxel count overflows, or exceeds what a volume holds, are refused.
+        for extent in
+            ["0 4611686018427387904 0 3 0 0", "-9223372036854775806 9223372036854775806 0 0 0 0", "0 65535 0 65536 0 0"]
+        {
+            let text = format!(
+                "<VTKFile type=\"ImageData\"><ImageData WholeExtent=\"{extent}\" Origin=\"0 0 0\" Spacing=\"1 1 1\">\
+                 <Piece><PointData><DataArray type=\"Float32\" format=\"ascii\">1 1</DataArray></PointData></Piece>\
+                 </ImageData></VTKFile>"
+            );
+            std::fs::write(&p, text).expect("write");
+            let err = read_vti(&p).expect_err(extent).to_string();
+            assert!(err.contains("a.vti") && err.contains("WholeExtent"), "{extent}: {err}");
+        }
     }
 
     #[test]
@@ -470,5 +494,12 @@ mod tests {
                 .expect("json");
         assert_eq!(side["dims"], serde_json::json!([5, 4, 3]));
         assert_eq!(read_raw(&p).expect("read"), v);
+        // A sidecar whose dims overflow is refused, naming it.
+        let sidecar = dir.path().join("v.raw.json");
+        let mut meta = side;
+        meta["dims"] = serde_json::json!([4294967296u64, 4294967296u64, 1]);
+        std::fs::write(&sidecar, meta.to_string()).expect("write");
+        let err = read_raw(&p).expect_err("overflowing dims").to_string();
+        assert!(err.contains("v.raw.json") && err.contains("dims"), "{err}");
     }
 }

@@ -25,10 +25,12 @@ use crate::{
     RunReport, Session, StartSpec, StopReason, StopRule, StoppingPolicy, VolumeRecord, REPORT_FORMAT,
 };
 
-/// A rough peak-memory estimate of a neural run: images and their ray tables, parameters with
-/// optimiser state and per-thread gradients, the output volume and the truth.
+/// A rough peak-memory estimate of a neural run: images and their ray tables, an iteration's
+/// rays (`views` of them drawn from), parameters with optimiser state and per-thread
+/// gradients, the output volume and the truth.
 pub(crate) fn estimate_memory(
     pixels: u64,
+    views: u64,
     params: u64,
     out_voxels: u64,
     truth_voxels: u64,
@@ -36,10 +38,16 @@ pub(crate) fn estimate_memory(
     train: &TrainConfig,
 ) -> u64 {
     let images = pixels * (4 + 4 + 32);
+    let per_pixel = match train.pixel_supersample {
+        fluidnerf_neural::train::Supersample::Fixed(s) => (s * s) as u64,
+        fluidnerf_neural::train::Supersample::Auto => 1,
+    };
+    // Each ray with its pixel, sample span and the values the iteration keeps of it.
+    let rays = views * train.rays_per_image as u64 * per_pixel * 128;
     let optimiser = params * 4 * (3 + threads);
     let samples = (train.coarse_samples + train.fine_samples) as u64;
     let scratch = threads * (train.chunk_samples as u64 * 4 * 16 + samples * 64);
-    images + optimiser + scratch + out_voxels * 4 * 2 + truth_voxels * 4 * 3
+    images + rays + optimiser + scratch + out_voxels * 4 * 2 + truth_voxels * 4 * 3
 }
 
 /// The training problem of a scene: its training and held-out views, their images
@@ -107,6 +115,7 @@ pub(crate) fn run(
     let out_dims = Volume::dims_for(&scene.aabb, config.resolution);
     let needed = estimate_memory(
         pixels,
+        scene.frames.len() as u64,
         num_params as u64,
         out_dims.iter().map(|&n| n as u64).product(),
         truth.first().map_or(0, |(_, t)| t.len() as u64),
@@ -114,7 +123,11 @@ pub(crate) fn run(
         &spec.train,
     );
     check_memory(config, needed, || {
-        format!("{method} with {num_params} parameters, {pixels} pixels and a {out_dims:?} output volume")
+        format!(
+            "{method} with {num_params} parameters, {pixels} pixels, {} rays per image and a {out_dims:?} output \
+             volume",
+            spec.train.rays_per_image
+        )
     })?;
     // An earlier curve is read before the report that holds it is removed.
     let earlier = if dir.resuming() { earlier_report(dir) } else { None };

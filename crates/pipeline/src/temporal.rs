@@ -196,6 +196,7 @@ fn setup(
     // Finished windows stay in memory until the field is stitched.
     let needed = estimate_memory(
         pixels,
+        scene.frames.len() as u64,
         (num_params * plan.len().max(1)) as u64,
         out_dims.iter().map(|&n| n as u64).product(),
         truth.first().map_or(0, |(_, t)| t.len() as u64),
@@ -203,7 +204,11 @@ fn setup(
         &spec.train,
     );
     check_memory(config, needed, || {
-        format!("{method} with {} windows of {num_params} parameters and {pixels} pixels", plan.len())
+        format!(
+            "{method} with {} windows of {num_params} parameters, {pixels} pixels and {} rays per image",
+            plan.len(),
+            spec.train.rays_per_image
+        )
     })?;
     let progress = Progress {
         field: field_cfg.clone(),

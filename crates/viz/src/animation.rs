@@ -91,8 +91,10 @@ pub fn orbit_cameras(aabb: &Aabb, n: usize, width_px: u32) -> Vec<Camera> {
 /// box centre, the flow pointing right in every view. `flow = +x` gives [`orbit_cameras`].
 pub fn orbit_cameras_about(aabb: &Aabb, n: usize, width_px: u32, flow: DVec3) -> Vec<Camera> {
     assert!(width_px >= 16, "orbit_cameras: width {width_px} px is too small");
-    assert!(flow.is_finite() && flow.length() > 0.0, "orbit_cameras: the flow direction must be non-zero");
-    let axis = flow.normalize();
+    let largest = flow.abs().max_element();
+    assert!(flow.is_finite() && largest > 0.0, "orbit_cameras: the flow direction must be finite and non-zero");
+    // Scaled first, so that neither tiny nor huge components under- or overflow the length.
+    let axis = (flow / largest).normalize();
     let centre = aabb.centre();
     // The box's half-length along the axis and its radius about it.
     let (mut half_axis, mut r_yz) = (0.0f64, 0.0f64);
@@ -168,6 +170,10 @@ mod tests {
         }
         let x = orbit_cameras(&aabb, 3, 64);
         assert_eq!(x, orbit_cameras_about(&aabb, 3, 64, DVec3::new(2.0, 0.0, 0.0)));
+        // Only the direction counts, however small or large the components.
+        assert_eq!(x, orbit_cameras_about(&aabb, 3, 64, DVec3::new(1e-300, 0.0, 0.0)));
+        let diagonal = orbit_cameras_about(&aabb, 3, 64, DVec3::new(1.0, 1.0, 0.0));
+        assert_eq!(diagonal, orbit_cameras_about(&aabb, 3, 64, DVec3::new(1e200, 1e200, 0.0)));
     }
 
     #[test]

@@ -13,6 +13,9 @@ use fluidnerf_viz::{Axis, Colormap, PanelStyle};
 use serde::Serialize;
 
 /// Mesh file formats.
+/// The most voxels along an export's longest side (as for a reconstruction).
+const MAX_RESOLUTION: usize = 4096;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MeshFormat {
@@ -226,8 +229,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if nothing_chosen {
         slices = vec![(Axis::X, 0.5), (Axis::Y, 0.5), (Axis::Z, 0.5)];
     }
-    if args.resolution == Some(0) {
-        bail!("--resolution must be positive");
+    if let Some(n) = args.resolution.filter(|n| !(1..=MAX_RESOLUTION).contains(n)) {
+        bail!("--resolution must be between 1 and {MAX_RESOLUTION} voxels, got {n}");
     }
     if args.colormap.is_diverging() {
         bail!("--colormap diverging is kept for differences; choose a sequential map for the field");
@@ -269,6 +272,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // The export grid.
     let aabb = export_box.unwrap_or_else(|| source.aabb());
+    if let Some(n) = args.resolution {
+        // The volume, and a copy as the files are written.
+        let voxels: u64 = Volume::dims_for(&aabb, n).iter().map(|&d| d as u64).product();
+        super::check_memory(|| format!("--resolution {n} ({voxels} voxels)"), 8 * voxels)?;
+    }
     let volume = match (&source, args.resolution, export_box) {
         (Source::Volume(v), None, None) => v.clone(),
         (Source::Volume(v), res, _) => {

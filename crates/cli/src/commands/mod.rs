@@ -48,6 +48,20 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// Refuses work whose largest buffers (`bytes`, estimated) exceed the memory available now,
+/// before anything is computed or written: an allocation that fails aborts the program.
+pub(crate) fn check_memory(what: impl FnOnce() -> String, bytes: u64) -> anyhow::Result<()> {
+    match fluidnerf_synth::available_memory_bytes() {
+        Some(available) if bytes > available => anyhow::bail!(
+            "{} needs about {} but only {} are available",
+            what(),
+            fluidnerf_pipeline::bytes(bytes),
+            fluidnerf_pipeline::bytes(available)
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// Runs one subcommand line in-process, exactly as a user would type it (without the program
 /// name): the demo and studies synthesise their scenes and score their runs this way.
 pub(crate) fn run_line(line: &[String]) -> anyhow::Result<()> {

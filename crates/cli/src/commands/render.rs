@@ -14,6 +14,11 @@ use serde::Serialize;
 use super::export::{load_source, Source};
 
 /// Image file formats.
+/// The most views of an orbit.
+const MAX_ORBIT_VIEWS: usize = 3600;
+/// The widest orbit view, in pixels.
+const MAX_WIDTH: u32 = 16384;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ImageFormat {
@@ -207,8 +212,8 @@ fn samples_in_hull(hull: Support<'_>, views: &[View], aabb: &Aabb, ss: usize, st
 
 #[allow(clippy::print_stdout)]
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.orbit == Some(0) {
-        bail!("--orbit needs at least one view");
+    if let Some(n) = args.orbit.filter(|n| !(1..=MAX_ORBIT_VIEWS).contains(n)) {
+        bail!("--orbit must be between 1 and {MAX_ORBIT_VIEWS} views, got {n}");
     }
     if args.orbit.is_some() && !args.camera.is_empty() {
         bail!("give either --camera or --orbit, not both");
@@ -228,8 +233,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("--step applies to --projector rays; the footprint projector takes no samples along rays");
         }
     }
-    if args.width < 16 {
-        bail!("--width must be at least 16 px, got {}", args.width);
+    if !(16..=MAX_WIDTH).contains(&args.width) {
+        bail!("--width must be between 16 and {MAX_WIDTH} px, got {}", args.width);
     }
     let scene = fluidnerf_io::scene::load_scene(&args.scene)
         .with_context(|| format!("reading the scene {}", args.scene.display()))?;
@@ -366,6 +371,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .context("--projector footprint (--projector rays renders any voxel size)")
     })
     .transpose()?;
+    // Every image is kept (as floats, and coloured for a turntable), and a field is sampled on
+    // one grid at a time.
+    let pixels: u64 = views.iter().map(|v| (v.camera.width() * v.camera.height()) as u64).sum();
+    let grid: u64 = bake_dims.map_or(0, |d| d.iter().map(|&n| n as u64 + 1).product());
+    super::check_memory(
+        || format!("rendering {} views of {pixels} pixels in all", views.len()),
+        8 * pixels + 4 * grid,
+    )?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
