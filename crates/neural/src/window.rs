@@ -62,8 +62,8 @@ pub fn plan_windows(n_frames: usize, window: usize, overlap: usize) -> Vec<Range
 /// Position of time `t` on the frame axis (`times` increasing, non-empty), clamped.
 pub fn frame_position(times: &[f64], t: f64) -> f64 {
     assert!(!times.is_empty(), "frame_position: no frames");
-    // `!(t > …)` so that NaN reads as the first frame instead of indexing before it.
-    if !(t > times[0]) || times.len() == 1 {
+    // NaN reads as the first frame instead of indexing before it.
+    if t.is_nan() || t <= times[0] || times.len() == 1 {
         return 0.0;
     }
     let last = times.len() - 1;
