@@ -185,6 +185,16 @@ fn scores_a_trained_field_run_directory_at_the_truth_voxel_centres() {
     let want = fluidnerf_metrics::nrmse(&constant, &truth.data);
     assert!((got - want).abs() < 1e-4, "NRMSE {got}, a constant 0.5 scores {want}");
     assert_eq!(json["reprojection"].as_array().expect("reprojection").len(), 1);
+
+    // A hand-made run folder holding only a volume with a NaN voxel is refused, naming it.
+    let vol = d.join("vol");
+    std::fs::create_dir_all(&vol).expect("mkdir");
+    let mut v = fluidnerf_core::Volume::zeros([4, 4, 4], scene.aabb);
+    v.data[5] = f32::NAN;
+    fluidnerf_io::volume::write_npy(&vol.join("volume.npy"), &v).expect("writes");
+    let out = fluidnerf(&["eval", "vol", "--scene", ".", "--no-regions", "--no-reprojection"], d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("volume.npy") && err.contains("voxel 5 is NaN"), "{err}");
 }
 
 #[test]

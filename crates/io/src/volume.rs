@@ -316,6 +316,14 @@ pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
     atomic_write(&json_path, |w| w.write_all(json.as_bytes()))
 }
 
+/// Refuses a volume read from `path` that holds a NaN or infinite voxel, naming the first.
+pub fn check_finite(path: &Path, volume: &Volume) -> Result<(), IoError> {
+    match volume.data.iter().position(|x| !x.is_finite()) {
+        Some(i) => Err(IoError::NonFinite { path: path.into(), location: format!("voxel {i}"), value: volume.data[i] }),
+        None => Ok(()),
+    }
+}
+
 /// Reads a raw volume written by [`write_raw`] (its sidecar must sit next to it).
 pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     let json_path = raw_sidecar_path(path);

@@ -852,6 +852,9 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
             return Err(NeuralError::checkpoint(&path, format!("window frames {:?} out of range", w.frames)));
         }
         plan.push(w.frames[0]..w.frames[1]);
+        if let Some(why) = w.meta.problem() {
+            return Err(NeuralError::checkpoint(&path, format!("window {:?}: {why}", w.frames)));
+        }
         let mut field = build_field(&rec.field, &w.meta.aabb, rec.input_dim, 0)?;
         let weights = run_dir.join(&w.weights);
         crate::with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;

@@ -328,6 +328,23 @@ pub struct FieldMeta {
     pub occupancy: Option<OccupancyRecord>,
 }
 
+impl FieldMeta {
+    /// Why a description read from a file cannot place a field, if it cannot: a box that is
+    /// not finite and positive on every axis, a value scale or time step that is not finite
+    /// and positive.
+    pub fn problem(&self) -> Option<String> {
+        if let Err(e) = self.aabb.validate() {
+            return Some(e.to_string());
+        }
+        for (key, v) in [("value_scale", self.value_scale), ("time_step", self.time_step)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Some(format!("{key} must be finite and positive, got {v}"));
+            }
+        }
+        None
+    }
+}
+
 /// Training data prepared once: cached rays, normalised targets, occupancy.
 #[derive(Debug)]
 pub struct Prepared {

@@ -335,14 +335,19 @@ pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync
         std::fs::read_to_string(&model_path).map_err(|source| NeuralError::Io { path: model_path.clone(), source })?;
     let record: ModelRecord = serde_json::from_str(&text)
         .map_err(|e| NeuralError::checkpoint(&model_path, format!("malformed model description: {e}")))?;
+    // The description's own problems name it, not the weights.
+    let named = |e: NeuralError| NeuralError::checkpoint(&model_path, e.to_string());
+    if let Some(why) = record.meta.problem() {
+        return Err(NeuralError::checkpoint(&model_path, format!("meta: {why}")));
+    }
     let aabb = record.meta.aabb;
-    let mut field = build_field(&record.field, &aabb, record.input_dim, 0)?;
+    let mut field = build_field(&record.field, &aabb, record.input_dim, 0).map_err(named)?;
     let weights = run_dir.join("weights.safetensors");
     with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
     let boxed: Box<dyn ScalarField + Send + Sync> = match field {
-        AnyField::Mlp(f) => Box::new(TrainedField::new(f, record.meta)?),
-        AnyField::HashGrid(f) => Box::new(TrainedField::new(f, record.meta)?),
-        AnyField::Dense(f) => Box::new(TrainedField::new(f, record.meta)?),
+        AnyField::Mlp(f) => Box::new(TrainedField::new(f, record.meta).map_err(named)?),
+        AnyField::HashGrid(f) => Box::new(TrainedField::new(f, record.meta).map_err(named)?),
+        AnyField::Dense(f) => Box::new(TrainedField::new(f, record.meta).map_err(named)?),
     };
     Ok((boxed, aabb))
 }

@@ -60,6 +60,13 @@ fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: 
     for (d, b) in dst.iter_mut().zip(t.data().chunks_exact(4)) {
         *d = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
     }
+    // A field with a NaN or infinite weight gives NaN or infinite values wherever it reads it.
+    if let Some(i) = dst.iter().position(|v| !v.is_finite()) {
+        return Err(NeuralError::checkpoint(
+            path,
+            format!("tensor {name}: value {i} is {}; weights must be finite", dst[i]),
+        ));
+    }
     Ok(())
 }
 

@@ -269,6 +269,26 @@ fn trained_field_round_trips_through_a_run_directory() {
     WorldField { field: &field, meta: &meta, occupancy: None }.eval(&pts, 0.0, &mut e);
     assert_eq!(a, e);
     assert!(a[0] > 0.0 && a[2] == 0.0);
+
+    // A weight that is not finite, or a description that places the field nowhere, is refused
+    // naming the file.
+    let mut bad = field.clone();
+    bad.params_mut()[17] = f32::NAN;
+    let weights = dir.path().join("weights.safetensors");
+    std::fs::write(&weights, fluidnerf_neural::weights::weights_bytes(&bad).expect("bytes")).expect("writes");
+    let err = fluidnerf_neural::trained::load_trained(dir.path()).err().expect("NaN weight").to_string();
+    assert!(err.contains("weights.safetensors") && err.contains("value 17 is NaN"), "{err}");
+    std::fs::write(&weights, fluidnerf_neural::weights::weights_bytes(&field).expect("bytes")).expect("writes");
+    for (edit, says) in [
+        ((|r: &mut fluidnerf_neural::trained::ModelRecord| r.meta.aabb.max.x = -5.0) as fn(&mut _), "aabb"),
+        (|r| r.meta.value_scale = -1.0, "value_scale"),
+    ] {
+        let mut broken = record.clone();
+        edit(&mut broken);
+        std::fs::write(dir.path().join("model.json"), serde_json::to_string(&broken).expect("json")).expect("writes");
+        let err = fluidnerf_neural::trained::load_trained(dir.path()).err().expect(says).to_string();
+        assert!(err.contains("model.json") && err.contains(says), "{err}");
+    }
 }
 
 #[test]

@@ -96,7 +96,7 @@ impl LoadedRun {
             }
             None => vec![(None, "volume.npy".into())],
         };
-        files.into_iter().map(|(t, f)| Ok((t, fluidnerf_io::volume::read_npy(&self.dir.join(f), self.aabb)?))).collect()
+        files.into_iter().map(|(t, f)| Ok((t, self.read_volume(&f)?))).collect()
     }
 
     /// The first (for static runs: the only) volume.
@@ -109,6 +109,14 @@ impl LoadedRun {
                 .ok_or_else(|| PipelineError::file(&self.dir.join("report.json"), "lists no volume"))?,
             None => "volume.npy".into(),
         };
-        Ok(fluidnerf_io::volume::read_npy(&self.dir.join(file), self.aabb)?)
+        self.read_volume(&file)
+    }
+
+    /// The run's volume file `name`, refused when it holds a value that is not finite.
+    fn read_volume(&self, name: &str) -> Result<Volume, PipelineError> {
+        let path = self.dir.join(name);
+        let volume = fluidnerf_io::volume::read_npy(&path, self.aabb)?;
+        fluidnerf_io::volume::check_finite(&path, &volume)?;
+        Ok(volume)
     }
 }

@@ -8,12 +8,14 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
-use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
+use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
     estimate_flow_axis, evaluate_volume, reproject, MetricsReport, Region, ReprojectionOptions, SsimParams, SsimWindow,
     VolumeMetricOptions,
 };
 use serde::Serialize;
+
+use super::export::read_volume;
 
 /// The local window of the windowed SSIM.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
@@ -206,7 +208,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
-        Some(path) => vec![(None, read_volume(path, scene.aabb)?)],
+        Some(path) => vec![(None, read_volume(path, Some(scene.aabb))?)],
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
     };
@@ -309,22 +311,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads a volume file by extension; `.npy` fills `aabb`.
-fn read_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let v = match ext.as_str() {
-        "npy" => fluidnerf_io::volume::read_npy(path, aabb),
-        "vti" => fluidnerf_io::volume::read_vti(path),
-        "raw" => fluidnerf_io::volume::read_raw(path),
-        _ => bail!("{}: unknown volume format (expected .npy, .vti or .raw)", path.display()),
-    }
-    .with_context(|| format!("reading the volume {}", path.display()))?;
-    if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
-        bail!("{}: voxel {i} is {}; values must be finite", path.display(), v.data[i]);
-    }
-    Ok(v)
-}
-
 /// Loads the reconstruction arguments: volume files, or one run folder of any kind (its
 /// trained field, static or of space and time, unless `use_volume`; else its volumes).
 fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Result<Recon> {
@@ -371,7 +357,7 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Res
         if p.is_dir() {
             bail!("{}: give one run folder, or volume files", p.display());
         }
-        volumes.push(read_volume(p, scene.aabb)?);
+        volumes.push(read_volume(p, Some(scene.aabb))?);
     }
     Ok(Recon::Volumes(volumes))
 }

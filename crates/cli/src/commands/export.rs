@@ -168,9 +168,7 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>) -> anyhow::Result<Vol
         _ => bail!("{}: unknown volume format (expected .npy, .vti or .raw)", path.display()),
     }
     .with_context(|| format!("reading the volume {}", path.display()))?;
-    if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
-        bail!("{}: voxel {i} is {}; values must be finite", path.display(), v.data[i]);
-    }
+    fluidnerf_io::volume::check_finite(path, &v)?;
     Ok(v)
 }
 
