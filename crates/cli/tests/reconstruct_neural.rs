@@ -58,6 +58,22 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     refused(&fluidnerf(d, &other), "checkpoint.safetensors");
     assert!(kept("report.json") == report_before, "a refused resume changed report.json");
     assert!(kept("config.json") == config_before, "a refused resume changed config.json");
+    // Nor does one continue on another scene, or without the settings it ran with; and a
+    // folder whose field is gone is not read as its volume alone.
+    let synth = ["synth", "-q", "--preset", "demo", "--cameras", "3", "--pixels", "8", "--resolution", "8", "-o"];
+    ok(&fluidnerf(d, &[&synth[..], &["other"]].concat()));
+    let mut elsewhere: Vec<&str> = run.to_vec();
+    elsewhere[1] = "other";
+    elsewhere.push("--resume");
+    refused(&fluidnerf(d, &elsewhere), "holds a run of the scene");
+    let bare = d.join("bare");
+    std::fs::create_dir(&bare).expect("mkdir");
+    for f in ["checkpoint.safetensors", "report.json", "volume.npy", "weights.safetensors"] {
+        std::fs::copy(dir.join(f), bare.join(f)).expect("copies");
+    }
+    refused(&fluidnerf(d, &["reconstruct", "scene", "-o", "bare", "--resume"]), "no config.json");
+    std::fs::copy(dir.join("config.json"), bare.join("config.json")).expect("copies");
+    refused(&fluidnerf(d, &["eval", "bare", "--scene", "scene", "--json", "bare.json"]), "model.json is missing");
     let mut resume: Vec<&str> = run.to_vec();
     resume[9] = "200";
     resume.push("--resume");

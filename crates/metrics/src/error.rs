@@ -10,12 +10,8 @@ pub enum MetricsError {
     #[error("invalid {what}: {why}")]
     Invalid { what: String, why: String },
     /// Rendering a reconstruction failed.
-    #[error("rendering frame {frame} failed: {source}")]
-    Render {
-        frame: usize,
-        #[source]
-        source: fluidnerf_core::CoreError,
-    },
+    #[error("rendering frame {frame} failed: {error}")]
+    Render { frame: usize, error: fluidnerf_core::CoreError },
 }
 
 impl MetricsError {

@@ -91,7 +91,7 @@ pub fn reproject(
         scale: scene.intensity_scale,
     };
     let rendered = render_image(field, &f.camera, &scene.aabb, &settings)
-        .map_err(|source| MetricsError::Render { frame, source })?;
+        .map_err(|error| MetricsError::Render { frame, error })?;
     let metrics = compare_images(&rendered, measured, &options.ssim)?;
     Ok(Reprojection {
         metrics: ReprojectionMetrics { frame, camera_name: f.camera_name.clone(), time: f.time, ..metrics },

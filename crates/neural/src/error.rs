@@ -9,12 +9,8 @@ pub enum NeuralError {
     #[error("invalid {what}: {why}")]
     Invalid { what: String, why: String },
     /// Reading or writing a file failed.
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("{}: {error}", path.display())]
+    Io { path: PathBuf, error: std::io::Error },
     /// A checkpoint file is malformed or does not match the field it is loaded into.
     #[error("checkpoint {}: {why}", path.display())]
     Checkpoint { path: PathBuf, why: String },

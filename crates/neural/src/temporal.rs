@@ -839,7 +839,7 @@ pub struct TemporalRecord {
 /// Reads `run_dir/temporal.json` and the window weights it names; returns the stitched field.
 pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
     let path = run_dir.join("temporal.json");
-    let text = std::fs::read_to_string(&path).map_err(|source| NeuralError::Io { path: path.clone(), source })?;
+    let text = std::fs::read_to_string(&path).map_err(|error| NeuralError::Io { path: path.clone(), error })?;
     let rec: TemporalRecord = serde_json::from_str(&text)
         .map_err(|e| NeuralError::checkpoint(&path, format!("malformed time-resolved run description: {e}")))?;
     if rec.frame_times.is_empty() || rec.windows.is_empty() {

@@ -332,7 +332,7 @@ macro_rules! with_field {
 pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync>, Aabb), NeuralError> {
     let model_path = run_dir.join("model.json");
     let text =
-        std::fs::read_to_string(&model_path).map_err(|source| NeuralError::Io { path: model_path.clone(), source })?;
+        std::fs::read_to_string(&model_path).map_err(|error| NeuralError::Io { path: model_path.clone(), error })?;
     let record: ModelRecord = serde_json::from_str(&text)
         .map_err(|e| NeuralError::checkpoint(&model_path, format!("malformed model description: {e}")))?;
     // The description's own problems name it, not the weights.

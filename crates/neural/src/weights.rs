@@ -46,7 +46,7 @@ pub fn weights_bytes<F: TrainableField>(field: &F) -> Result<Vec<u8>, NeuralErro
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, NeuralError> {
-    std::fs::read(path).map_err(|source| NeuralError::Io { path: path.to_path_buf(), source })
+    std::fs::read(path).map_err(|error| NeuralError::Io { path: path.to_path_buf(), error })
 }
 
 fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: &mut [f32]) -> Result<(), NeuralError> {

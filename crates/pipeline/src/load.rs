@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use fluidnerf_core::{Aabb, ScalarField, Volume};
 use fluidnerf_neural::trained::ModelRecord;
 
-use crate::{PipelineError, RunConfig, RunDir, RunKind, RunReport};
+use crate::{Family, PipelineError, RunConfig, RunDir, RunKind, RunReport};
 
 /// A run folder's results and, for runs of `reconstruct`, their configuration and report.
 pub struct LoadedRun {
@@ -41,6 +41,15 @@ impl LoadedRun {
         if rd.report().is_file() {
             let report = RunReport::read(&rd.report())?;
             let config = RunConfig::read(&rd.config())?;
+            // What the method writes must be there: a field's volume alone is not the field.
+            let (wanted, file) = match config.method().family() {
+                Family::Neural => (RunKind::Field, "model.json"),
+                Family::Temporal => (RunKind::Temporal, "temporal.json"),
+                Family::Classical => (RunKind::Volume, "volume.npy"),
+            };
+            if kind != wanted {
+                return Err(refuse(&format!("a {} run whose {file} is missing", config.method())));
+            }
             let aabb = report.aabb;
             return Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: Some(config), report: Some(report), aabb });
         }

@@ -246,7 +246,7 @@ pub(crate) fn run(
     if dir.resuming() && !progress_path.is_file() {
         return Err(PipelineError::RunDir {
             path: dir.root().to_path_buf(),
-            why: "--resume: no windows/progress.json (nothing to continue)".into(),
+            why: "no windows/progress.json: nothing to continue or finish".into(),
         });
     }
     let Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, mut progress } =
@@ -278,7 +278,7 @@ pub(crate) fn run(
             return Err(PipelineError::RunDir {
                 path: dir.root().to_path_buf(),
                 why: format!(
-                    "cannot finish: window(s) {} of {} have not finished (no {}); run them first (--window K), or \
+                    "cannot finish: window(s) {} of {} have not finished (no {}); run them first (--window-index K), or \
                      --resume to train what is left here",
                     missing.join(", "),
                     progress.plan.len(),

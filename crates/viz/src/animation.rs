@@ -54,7 +54,7 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
         palette.extend(colormap.rgb(i as f64 / (LEVELS - 1) as f64));
     }
     palette.extend(colormap.rgb(f64::NAN));
-    let enc_err = |source| VizError::EncodeGif { what: format!("turntable {}", path.display()), source };
+    let enc_err = |error| VizError::EncodeGif { what: format!("turntable {}", path.display()), error };
     let mut bytes = Vec::new();
     {
         let mut enc = gif::Encoder::new(&mut bytes, width, height, &palette).map_err(enc_err)?;

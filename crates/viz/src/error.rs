@@ -9,29 +9,17 @@ pub enum VizError {
     #[error(transparent)]
     File(#[from] fluidnerf_io::IoError),
     /// Reading an input file failed.
-    #[error("cannot read {path}: {source}")]
-    Read {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    #[error("cannot read {path}: {error}")]
+    Read { path: PathBuf, error: std::io::Error },
     /// The drawing library failed (a font or backend problem).
     #[error("drawing {what} failed: {message}")]
     Draw { what: String, message: String },
     /// Encoding a PNG failed.
-    #[error("cannot encode {what}: {source}")]
-    Encode {
-        what: String,
-        #[source]
-        source: image::ImageError,
-    },
+    #[error("cannot encode {what}: {error}")]
+    Encode { what: String, error: image::ImageError },
     /// Encoding a GIF failed.
-    #[error("cannot encode {what}: {source}")]
-    EncodeGif {
-        what: String,
-        #[source]
-        source: gif::EncodingError,
-    },
+    #[error("cannot encode {what}: {error}")]
+    EncodeGif { what: String, error: gif::EncodingError },
     /// An argument is out of its valid range.
     #[error("invalid {what}: {why}")]
     Invalid { what: String, why: String },

@@ -17,6 +17,6 @@ pub(crate) fn encode_rgb_png(rgb: &[u8], width: u32, height: u32, what: &str) ->
     let mut out = Vec::new();
     image::codecs::png::PngEncoder::new(&mut out)
         .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-        .map_err(|source| VizError::Encode { what: what.to_string(), source })?;
+        .map_err(|error| VizError::Encode { what: what.to_string(), error })?;
     Ok(out)
 }

@@ -19,7 +19,7 @@ pub enum ImageData {
 impl ImageData {
     /// Reads a `.png`, `.gif` or `.svg` file (by extension).
     pub fn from_file(path: &Path) -> Result<Self, VizError> {
-        let read_err = |source| VizError::Read { path: path.to_path_buf(), source };
+        let read_err = |error| VizError::Read { path: path.to_path_buf(), error };
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
         match ext.as_str() {
             "png" => Ok(ImageData::Png(std::fs::read(path).map_err(read_err)?)),

@@ -476,19 +476,50 @@ fn default_method(scene: &std::path::Path) -> anyhow::Result<Method> {
     Ok(if instants > 1 { Method::TrFast } else { Method::Hybrid })
 }
 
+/// Refuses to continue the run in `out`, made from the scene `saved`, on another scene
+/// (`given`): its field was trained on the other's box and images. A saved scene that no
+/// longer exists (moved) is taken to be the one given.
+fn same_scene(given: &std::path::Path, saved: &std::path::Path, out: &std::path::Path) -> anyhow::Result<()> {
+    let folder = |p: &std::path::Path| {
+        let p = if p.is_file() { p.parent().unwrap_or(p) } else { p };
+        std::fs::canonicalize(p).ok()
+    };
+    match (folder(given), folder(saved)) {
+        (Some(a), Some(b)) if a != b => bail!(
+            "{} holds a run of the scene {}, not {}; leave out the scene to continue it, or use --force to start a \
+             new run there",
+            out.display(),
+            saved.display(),
+            given.display()
+        ),
+        (Some(_), None) => {
+            log::warn!("the run's scene {} is gone; continuing on {}", saved.display(), given.display());
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
 /// The run's configuration: `--config` (or the method's defaults), then every option given.
 pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
-    let finish_config = match (&args.config, &args.scene) {
-        (None, None) if args.split.finish => Some(args.out.join("config.json")),
+    // A resumed or finished run continues with the settings it was started with (options
+    // given here still override them), not with the defaults of some method.
+    let continued = match &args.config {
+        None if args.resume || args.split.finish => {
+            let path = args.out.join("config.json");
+            if !path.is_file() {
+                bail!(
+                    "{}: {} holds no run to continue (no config.json)",
+                    if args.resume { "--resume" } else { "--finish" },
+                    args.out.display()
+                );
+            }
+            Some(path)
+        }
         _ => None,
     };
-    // A resumed run continues with the settings it was started with (options given here
-    // still override them), not with the defaults of some method.
-    let resume_config = match &args.config {
-        None if args.resume => Some(args.out.join("config.json")).filter(|p| p.is_file()),
-        _ => None,
-    };
-    let mut cfg = match args.config.as_ref().or(finish_config.as_ref()).or(resume_config.as_ref()) {
+    let resume_config = continued.as_ref().filter(|_| args.resume);
+    let mut cfg = match args.config.as_ref().or(continued.as_ref()) {
         Some(path) => {
             let cfg = RunConfig::read(path)?;
             if let Some(MethodArg(m)) = args.method {
@@ -522,6 +553,9 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     let method = cfg.method();
     check_applicable(args, method)?;
     if let Some(scene) = &args.scene {
+        if continued.is_some() {
+            same_scene(scene, &cfg.scene, &args.out)?;
+        }
         cfg.scene = scene.clone();
     }
     // Recorded absolute, so the config reruns from any working directory.
