@@ -237,6 +237,50 @@ fn two_frames_on_one_image_is_an_error() {
 }
 
 #[test]
+fn the_same_image_spelled_otherwise_is_found() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.frames[2].file_path = dir.path().join("images/c0.png");
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(dir.path().join("images/c1.png"), dir.path().join("images/link.png")).expect("link");
+        assert_fails_with(&info(dir.path()), &["frames 0 and 2 both use the image"]);
+        scene.frames[2].file_path = "images/link.png".into();
+        fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+        assert_fails_with(&info(dir.path()), &["frames 1 and 2 both use the image", "link.png"]);
+    }
+}
+
+#[test]
+fn black_and_saturated_images_are_flagged() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    write_png16_counts(&dir.path().join("images/c1.png"), &Image::zeros(32, 24)).expect("writes image");
+    let mut bright = Image::from_vec(32, 24, vec![1000.0; 32 * 24]);
+    bright.set(4, 5, 65535.0);
+    bright.set(6, 5, 65535.0);
+    write_png16_counts(&dir.path().join("images/c2.png"), &bright).expect("writes image");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.contains("warning: frame 1 (images/c1.png): the image is black"), "{stdout}");
+    assert!(stdout.contains("warning: frame 2 (images/c2.png): 2 pixel(s) at the 16-bit full scale"), "{stdout}");
+}
+
+#[test]
+fn masks_are_checked_as_a_run_reads_them() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    write_png16_counts(&dir.path().join("masks/m.png"), &Image::from_vec(8, 8, vec![255.0; 64])).expect("writes");
+    let file = dir.path().join("transforms.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("reads")).expect("json");
+    v["frames"][1]["mask_path"] = serde_json::json!("masks/m.png");
+    std::fs::write(&file, v.to_string()).expect("writes");
+    assert_fails_with(&info(dir.path()), &["m.png", "8x8"]);
+}
+
+#[test]
 fn cameras_inside_or_near_the_box() {
     let dir = tempfile::tempdir().expect("tempdir");
     let mut scene = good_scene(dir.path());

@@ -274,6 +274,8 @@ fn cases() -> Vec<Case> {
         ),
         c("eval of a folder without a run", None, &["eval", "SCENE/images", "--scene", "SCENE"], "images"),
         c("fast run of an unreadable image", File("images/cam001.png", b""), FAST, "cam001.png"),
+        c("background above every pixel", Json(|v| v["background"] = serde_json::json!(1e9)), RUN, "black"),
+        c("negative background", Json(|v| v["background"] = serde_json::json!(-100.0)), RUN, "at least 0"),
         c(
             "more rays per image than memory holds",
             None,

@@ -438,9 +438,10 @@ fn background_to_key(file: &Path, b: &Background) -> Result<Option<BackgroundKey
 /// non-zero flow axis. Errors name the key and the frame.
 fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Result<(), IoError> {
     let check_bg = |b: &Option<BackgroundKey>, place: &str| match b {
-        Some(BackgroundKey::Constant(c)) if !c.is_finite() => {
-            Err(IoError::invalid(file, format!("{place}: `background` must be a finite number, got {c}")))
-        }
+        Some(BackgroundKey::Constant(c)) if !(c.is_finite() && *c >= 0.0) => Err(IoError::invalid(
+            file,
+            format!("{place}: `background` must be a finite number of counts, at least 0, got {c}"),
+        )),
         Some(BackgroundKey::Frames(v)) if v.is_empty() => Err(IoError::invalid(
             file,
             format!("{place}: `background` is an empty list; give at least one background image or a number"),
@@ -921,7 +922,11 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             file_path: f.file_path.clone(),
             error,
         })?;
-        if let Some(j) = seen.insert(normalise(&scene.resolve(&f.file_path)), i) {
+        // The file itself where it exists (links and spellings resolved), else its absolute path.
+        let path = scene.resolve(&f.file_path);
+        let key = std::fs::canonicalize(&path)
+            .unwrap_or_else(|_| normalise(&std::path::absolute(&path).unwrap_or_else(|_| path.clone())));
+        if let Some(j) = seen.insert(key, i) {
             return Err(IoError::invalid(
                 file,
                 format!(
@@ -1148,7 +1153,7 @@ pub struct Preprocessed {
 /// distinct list. Errors name the background or mask file, the frame and its camera.
 pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
     let recording = recorded(scene)?;
-    let mut images = load_images_with(scene, recording.linearisation)?;
+    let (mut images, kind) = load_images_and_kind(scene, recording.linearisation)?;
     let file = scene.root.join(SCENE_FILE);
     let frame_label = |i: usize| {
         let f = &scene.frames[i];
@@ -1172,12 +1177,23 @@ pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
                     let mut stack = Vec::with_capacity(list.len());
                     for p in list {
                         let path = scene.resolve(p);
-                        let (bg, _) = crate::image::read_image_with(&path, recording.linearisation).map_err(|e| {
-                            IoError::invalid(
-                                &file,
-                                format!("{}: background image {}: {e}", frame_label(i), path.display()),
-                            )
-                        })?;
+                        let (bg, bg_kind) =
+                            crate::image::read_image_with(&path, recording.linearisation).map_err(|e| {
+                                IoError::invalid(
+                                    &file,
+                                    format!("{}: background image {}: {e}", frame_label(i), path.display()),
+                                )
+                            })?;
+                        if bg_kind != kind {
+                            return Err(IoError::invalid(
+                                &path,
+                                format!(
+                                    "background image is {} image but the scene's images are {kind}; {}",
+                                    bg_kind.with_article(),
+                                    different_scales(bg_kind, kind)
+                                ),
+                            ));
+                        }
                         if (bg.width, bg.height) != (w, h) {
                             return Err(IoError::invalid(
                                 &path,
@@ -1203,6 +1219,13 @@ pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
                 *v = 0.0;
                 clipped += 1;
             }
+        }
+        if image.data.iter().all(|&v| v == 0.0) {
+            log::warn!(
+                "{}: nothing is left after its background is subtracted (every pixel at or below it); the frame \
+                 now reads as black",
+                frame_label(i)
+            );
         }
     }
     let masks = load_masks(scene, &recording)?;
@@ -1282,6 +1305,11 @@ fn load_masks(scene: &Scene, recording: &Recording) -> Result<Vec<Option<Vec<boo
 /// samples alike (an 8-bit image among 16-bit ones would read about 257 times too dark). The
 /// first failing frame (in frame order) gives the error.
 pub fn load_images_with(scene: &Scene, linearisation: Linearisation) -> Result<Vec<Image>, IoError> {
+    load_images_and_kind(scene, linearisation).map(|(images, _)| images)
+}
+
+/// [`load_images_with`], and how every image stores its samples.
+fn load_images_and_kind(scene: &Scene, linearisation: Linearisation) -> Result<(Vec<Image>, SampleKind), IoError> {
     let results: Vec<Result<(Image, SampleKind), IoError>> = scene
         .frames
         .par_iter()
@@ -1310,14 +1338,30 @@ pub fn load_images_with(scene: &Scene, linearisation: Linearisation) -> Result<V
         return Err(IoError::invalid(
             scene.resolve(&scene.frames[i].file_path),
             format!(
-                "frame {i} is {} image but the other images of the scene are {usual}; their values \
-                 are not on one scale (an 8-bit image among 16-bit ones reads about 257 times too dark): \
-                 convert the images to one bit depth",
-                kind.with_article()
+                "frame {i} is {} image but the other images of the scene are {usual}; {}",
+                kind.with_article(),
+                different_scales(kind, usual)
             ),
         ));
     }
-    Ok(read.into_iter().map(|r| r.0).collect())
+    let kind = kinds.first().copied().unwrap_or(SampleKind::Float);
+    Ok((read.into_iter().map(|r| r.0).collect(), kind))
+}
+
+/// Why images of kinds `a` and `b` cannot be used together, and what to do.
+pub fn different_scales(a: SampleKind, b: SampleKind) -> String {
+    let example = match (a, b) {
+        (SampleKind::Integer(x), SampleKind::Integer(y)) => {
+            let (lo, hi) = (x.min(y), x.max(y));
+            let factor = ((1u64 << hi.min(63)) - 1) as f64 / ((1u64 << lo) - 1) as f64;
+            format!(
+                " ({} image among {hi}-bit ones reads about {factor:.0} times too dark)",
+                SampleKind::Integer(lo).with_article()
+            )
+        }
+        _ => " (integer counts and floating-point values have no common scale)".into(),
+    };
+    format!("their values are not on one scale{example}: convert the images to one bit depth")
 }
 
 /// Refuses NaN, infinite and negative pixels, naming the first.

@@ -98,6 +98,12 @@ fn bad_backgrounds_and_masks_name_the_file_frame_and_camera() {
     save_scene_recording(&scene, dir.path(), &recording, false).expect("save");
     let e = load_preprocessed(&load_scene(dir.path()).expect("load")).unwrap_err().to_string();
     assert!(e.contains("small.png") && e.contains("3x3") && e.contains("camera c0"), "{e}");
+    // A background frame stored otherwise than the images (floats among 16-bit counts).
+    fluidnerf_io::image::write_tiff_f32(&dir.path().join("bg/float.tif"), &image(|_| 20.0)).expect("write");
+    recording.frames[0].background = Background::Frames(vec!["bg/float.tif".into()]);
+    save_scene_recording(&scene, dir.path(), &recording, false).expect("save");
+    let e = load_preprocessed(&load_scene(dir.path()).expect("load")).unwrap_err().to_string();
+    assert!(e.contains("float.tif") && e.contains("not on one scale"), "{e}");
     // A missing background frame.
     recording.frames[0].background = Background::Frames(vec!["bg/none.png".into()]);
     save_scene_recording(&scene, dir.path(), &recording, false).expect("save");
@@ -124,4 +130,10 @@ fn bad_backgrounds_and_masks_name_the_file_frame_and_camera() {
     std::fs::write(&file, serde_json::to_string(&v).expect("json")).expect("write");
     let e = load_scene(dir.path()).unwrap_err().to_string();
     assert!(e.contains("flow_axis") && e.contains("non-zero"), "{e}");
+    // A negative constant would add light, not remove it.
+    v["flow_axis"] = serde_json::json!([0, 1, 0]);
+    v["frames"][0]["background"] = serde_json::json!(-100.0);
+    std::fs::write(&file, serde_json::to_string(&v).expect("json")).expect("write");
+    let e = load_scene(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("frame 0") && e.contains("at least 0"), "{e}");
 }

@@ -177,6 +177,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         "  image {}x{} {kind}, values {lo} .. {hi}, mean {mean:.4}, noise {noise}",
                         img.width, img.height
                     );
+                    if hi <= 0.0 {
+                        warnings.push(format!(
+                            "frame {i} ({}): the image is black (every pixel 0); it carves everything it sees \
+                             out of the volume",
+                            f.file_path.display()
+                        ));
+                    }
+                    if let fluidnerf_io::image::SampleKind::Integer(bits) = kind {
+                        let full = ((1u64 << bits.min(63)) - 1) as f32;
+                        let saturated = img.data.iter().filter(|&&v| v >= full).count();
+                        if saturated > 0 {
+                            warnings.push(format!(
+                                "frame {i} ({}): {saturated} pixel(s) at the {bits}-bit full scale ({full}); a \
+                                 saturated pixel recorded less light than arrived, so the line-integral model \
+                                 does not hold there: mask them (mask_path) or record with less exposure",
+                                f.file_path.display()
+                            ));
+                        }
+                    }
                     if (img.width, img.height) != (w, h) {
                         problems.push(format!(
                             "frame {i}: {}: image is {}x{} pixels but the frame's intrinsics say {w}x{h}",
@@ -217,11 +236,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some((at, kind, usual)) = odd_sample_kind(&only_kinds) {
         let i = kinds[at].0;
         problems.push(format!(
-            "frame {i}: {}: {} image among {usual} ones; their values are not on one scale (an 8-bit \
-             image among 16-bit ones reads about 257 times too dark)",
+            "frame {i}: {}: {} image among {usual} ones; {}",
             scene.resolve(&scene.frames[i].file_path).display(),
-            kind.with_article()
+            kind.with_article(),
+            fluidnerf_io::scene::different_scales(kind, usual)
         ));
+    }
+    // Backgrounds and masks, read as a run reads them, once the images themselves are sound.
+    let preprocessed = fluidnerf_io::scene::recorded(&scene)
+        .map(|r| r.frames.iter().any(|f| f.mask_path.is_some() || f.background != Default::default()));
+    if !args.no_images && problems.is_empty() && !matches!(preprocessed, Ok(false)) {
+        if let Err(e) = fluidnerf_io::scene::load_preprocessed(&scene) {
+            problems.push(format!("preprocessing: {e}"));
+        }
     }
     let _ = writeln!(out);
 
