@@ -81,6 +81,15 @@ fn opencv_calibration_and_images_become_a_scene() {
     let mut forced = args.to_vec();
     forced.push("--force");
     assert!(fluidnerf(&forced).status.success());
+    // So does one into a folder holding an import.json of the user's.
+    let other = dir.path().join("other");
+    std::fs::create_dir_all(&other).expect("mkdir");
+    std::fs::write(other.join("import.json"), "mine").expect("writes");
+    let mut into_other = args.to_vec();
+    *into_other.last_mut().expect("out") = s(&other);
+    let o = fluidnerf(&into_other);
+    assert!(!o.status.success() && stderr(&o).contains("import.json"), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(other.join("import.json")).expect("kept"), "mine");
 }
 
 #[test]

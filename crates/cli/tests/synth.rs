@@ -81,6 +81,13 @@ fn writes_a_scene_that_reads_back() {
     assert!(!o.status.success());
     assert!(text(&o).1.contains("--force"), "{:?}", text(&o));
     assert!(run_small(&dir, &["--force"]).status.success());
+    // Nor are a user's files in a folder without a scene.
+    let mine = tmp.path().join("mine");
+    std::fs::create_dir_all(mine.join("images")).expect("mkdir");
+    std::fs::write(mine.join("images/cam000.png"), "mine").expect("writes");
+    let o = run_small(&mine, &[]);
+    assert!(!o.status.success() && text(&o).1.contains("not empty"), "{:?}", text(&o));
+    assert_eq!(std::fs::read_to_string(mine.join("images/cam000.png")).expect("kept"), "mine");
 }
 
 #[test]

@@ -384,8 +384,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ensure!(images.is_dir(), "the image folder {} does not exist", images.display());
     }
     let out_file = args.out.join(SCENE_FILE);
-    if out_file.exists() && !args.force {
-        bail!("{} already exists; pass --force to overwrite it", out_file.display());
+    if let Some(p) = [out_file.clone(), args.out.join("import.json")].iter().find(|p| p.exists() && !args.force) {
+        bail!("{} already exists; pass --force to overwrite it", p.display());
     }
 
     let (frames, mut from_file) = if let Some(path) = &args.transforms {

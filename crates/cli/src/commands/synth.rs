@@ -500,6 +500,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if scene_file.exists() && !args.force {
         bail!("{} already holds a scene; pass --force to overwrite it", out.display());
     }
+    // A scene's files (images, truth, previews) would replace whatever of the same name is there.
+    if !args.force && std::fs::read_dir(&out).is_ok_and(|mut d| d.next().is_some()) {
+        bail!("{} is not empty; write the scene into a new or empty folder, or pass --force", out.display());
+    }
     let volume = match &settings.phantom.volume_path {
         Some(path) if settings.phantom.kind == PhantomKind::Volume => Some(read_truth_volume(path, settings.aabb)?),
         _ => None,
