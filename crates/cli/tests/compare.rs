@@ -140,6 +140,22 @@ fn compares_classical_neural_and_external_runs() {
     let c = json(&d.join("cmp/compare.json"));
     assert_eq!(c["runs"].as_array().map(Vec::len), Some(2));
     assert_eq!(c["runs"][1]["speedup"], 1.0);
+
+    // Runs of different scenes are compared, with a warning that names them.
+    let same = fluidnerf(d, &["compare", "sart", "dense", "-o", "cmp2"]);
+    ok(&same);
+    assert!(!String::from_utf8_lossy(&same.stderr).contains("different scenes"));
+    std::fs::create_dir(d.join("elsewhere")).expect("mkdir");
+    for f in ["report.json", "config.json"] {
+        std::fs::copy(d.join("sart").join(f), d.join("elsewhere").join(f)).expect("copies");
+    }
+    let mut config = json(&d.join("elsewhere/config.json"));
+    config["scene"] = serde_json::json!(d.join("cmp").to_string_lossy());
+    std::fs::write(d.join("elsewhere/config.json"), config.to_string()).expect("writes");
+    let other = fluidnerf(d, &["compare", "sart", "elsewhere", "-o", "cmp3"]);
+    ok(&other);
+    let err = String::from_utf8_lossy(&other.stderr);
+    assert!(err.contains("2 different scenes") && err.contains("(elsewhere)"), "{err}");
 }
 
 #[test]

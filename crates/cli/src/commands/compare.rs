@@ -211,6 +211,31 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     })
 }
 
+/// Warns when the runs were made from different scenes (their `config.json`), whose NRMSE
+/// curves measure different problems.
+fn warn_of_other_scenes(runs: &[Run]) {
+    let mut scenes: Vec<(PathBuf, Vec<&str>)> = Vec::new();
+    for run in runs {
+        let Ok(config) = fluidnerf_pipeline::RunConfig::read(&run.report.with_file_name("config.json")) else {
+            continue;
+        };
+        let scene = super::scene_folder(&config.scene).unwrap_or(config.scene);
+        match scenes.iter_mut().find(|(s, _)| *s == scene) {
+            Some((_, labels)) => labels.push(&run.label),
+            None => scenes.push((scene, vec![&run.label])),
+        }
+    }
+    if scenes.len() > 1 {
+        let list: Vec<String> =
+            scenes.iter().map(|(s, labels)| format!("{} ({})", s.display(), labels.join(", "))).collect();
+        log::warn!(
+            "the runs were made from {} different scenes: {}; their curves are not comparable",
+            list.len(),
+            list.join("; ")
+        );
+    }
+}
+
 /// The first time `curve` was at or below `nrmse`.
 fn time_to(curve: &[Point], nrmse: f64) -> Option<f64> {
     curve.iter().find(|p| p.nrmse <= nrmse).map(|p| p.train_time_s)
@@ -355,6 +380,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     };
     let reference_path = runs[reference].path.clone();
+    warn_of_other_scenes(&runs);
 
     let plot = LinePlot {
         title: "Volume NRMSE vs training time".into(),

@@ -317,6 +317,17 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Res
     if let [dir] = paths {
         if dir.is_dir() {
             let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
+            if let Some(config) = &run.config {
+                let (made_from, given) = (super::scene_folder(&config.scene), super::scene_folder(&scene.root));
+                if made_from.is_some() && made_from != given {
+                    log::warn!(
+                        "{} was made from the scene {}, not {}; scored against this one",
+                        dir.display(),
+                        config.scene.display(),
+                        scene.root.display()
+                    );
+                }
+            }
             if run.aabb != scene.aabb {
                 log::warn!(
                     "the run's box {:?}..{:?} differs from the scene's; it is zero outside its own box",

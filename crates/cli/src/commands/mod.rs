@@ -48,6 +48,13 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// The folder of the scene at `path` (the folder or its `transforms.json`), resolved to one
+/// spelling; None when it does not exist.
+pub(crate) fn scene_folder(path: &std::path::Path) -> Option<std::path::PathBuf> {
+    let folder = if path.is_file() { path.parent().unwrap_or(path) } else { path };
+    std::fs::canonicalize(folder).ok()
+}
+
 /// Refuses work whose largest buffers (`bytes`, estimated) exceed the memory available now,
 /// before anything is computed or written: an allocation that fails aborts the program.
 pub(crate) fn check_memory(what: impl FnOnce() -> String, bytes: u64) -> anyhow::Result<()> {

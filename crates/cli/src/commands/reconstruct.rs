@@ -480,11 +480,7 @@ fn default_method(scene: &std::path::Path) -> anyhow::Result<Method> {
 /// (`given`): its field was trained on the other's box and images. A saved scene that no
 /// longer exists (moved) is taken to be the one given.
 fn same_scene(given: &std::path::Path, saved: &std::path::Path, out: &std::path::Path) -> anyhow::Result<()> {
-    let folder = |p: &std::path::Path| {
-        let p = if p.is_file() { p.parent().unwrap_or(p) } else { p };
-        std::fs::canonicalize(p).ok()
-    };
-    match (folder(given), folder(saved)) {
+    match (super::scene_folder(given), super::scene_folder(saved)) {
         (Some(a), Some(b)) if a != b => bail!(
             "{} holds a run of the scene {}, not {}; leave out the scene to continue it, or use --force to start a \
              new run there",
