@@ -274,6 +274,12 @@ fn cases() -> Vec<Case> {
         ),
         c("eval of a folder without a run", None, &["eval", "SCENE/images", "--scene", "SCENE"], "images"),
         c("fast run of an unreadable image", File("images/cam001.png", b""), FAST, "cam001.png"),
+        c(
+            "two frames of one camera at one instant",
+            Json(|v| v["frames"][1]["camera"] = v["frames"][0]["camera"].clone()),
+            RUN,
+            "both camera",
+        ),
         c("background above every pixel", Json(|v| v["background"] = serde_json::json!(1e9)), RUN, "black"),
         c("negative background", Json(|v| v["background"] = serde_json::json!(-100.0)), RUN, "at least 0"),
         c(

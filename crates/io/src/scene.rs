@@ -912,9 +912,23 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
         return Err(IoError::invalid(file, format!("intensity_scale must be positive, got {s}")));
     }
     let mut seen: std::collections::HashMap<PathBuf, usize> = std::collections::HashMap::new();
+    // A camera records one image per instant (its gain and holding out go by its name).
+    let mut shots: std::collections::HashMap<(&str, u64), usize> = std::collections::HashMap::new();
     for (i, f) in scene.frames.iter().enumerate() {
         if f.time.is_some_and(|t| !t.is_finite()) {
             return Err(IoError::invalid(file, format!("frame {i} ({}): time must be finite", f.file_path.display())));
+        }
+        if let Some(name) = &f.camera_name {
+            if let Some(j) = shots.insert((name.as_str(), f.time.unwrap_or(0.0).to_bits()), i) {
+                return Err(IoError::invalid(
+                    file,
+                    format!(
+                        "frames {j} and {i} are both camera {name:?}{}; a camera records one image per \
+                         instant: give the frames of different cameras different `camera` names",
+                        f.time.map(|t| format!(" at time {t}")).unwrap_or_default()
+                    ),
+                ));
+            }
         }
         f.camera.validate().map_err(|error| IoError::Camera {
             path: file.to_path_buf(),
