@@ -405,3 +405,25 @@ fn list(dir: &Path) -> Vec<(String, u64)> {
     v.sort();
     v
 }
+
+/// A scene folder whose name is not UTF-8 cannot be recorded in `config.json`: refused before
+/// any work, naming the path and not the config file.
+#[cfg(unix)]
+#[test]
+fn a_scene_path_that_is_not_utf8_is_refused_up_front() {
+    use std::os::unix::ffi::OsStrExt;
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 3, 12, 8, &[]);
+    let odd = d.join(std::ffi::OsStr::from_bytes(b"scene\xff"));
+    std::fs::rename(d.join("scene"), &odd).expect("renames");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .arg("reconstruct")
+        .arg(&odd)
+        .args(["-o", "run", "--method", "asart"])
+        .output()
+        .expect("runs");
+    refused(&out, "not valid UTF-8");
+    assert!(!d.join("run").exists(), "left an output folder");
+}

@@ -558,6 +558,13 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     if let Ok(abs) = std::path::absolute(&cfg.scene) {
         cfg.scene = abs;
     }
+    if cfg.scene.to_str().is_none() {
+        bail!(
+            "the scene path {} is not valid UTF-8, so config.json (JSON text) cannot record it for reruns; rename \
+             the folder",
+            cfg.scene.display()
+        );
+    }
     cfg.fluidnerf_version = env!("CARGO_PKG_VERSION").to_string();
     if let Some(p) = &args.neural.preset {
         let kept = match &cfg.method {
