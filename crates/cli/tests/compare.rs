@@ -156,6 +156,13 @@ fn compares_classical_neural_and_external_runs() {
     ok(&other);
     let err = String::from_utf8_lossy(&other.stderr);
     assert!(err.contains("2 different scenes") && err.contains("(elsewhere)"), "{err}");
+    // Runs in folders of one name are told apart by their paths.
+    std::fs::create_dir_all(d.join("copy/sart")).expect("mkdir");
+    std::fs::copy(d.join("sart/report.json"), d.join("copy/sart/report.json")).expect("copies");
+    let twins = fluidnerf(d, &["compare", "sart", "copy/sart", "-o", "cmp4", "-q"]);
+    ok(&twins);
+    let stdout = String::from_utf8_lossy(&twins.stdout);
+    assert!(stdout.contains("sart (sart) [sart]") && stdout.contains("sart (sart) [copy/sart]"), "{stdout}");
 }
 
 #[test]

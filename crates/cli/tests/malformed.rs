@@ -283,6 +283,24 @@ fn cases() -> Vec<Case> {
         c("background above every pixel", Json(|v| v["background"] = serde_json::json!(1e9)), RUN, "black"),
         c("negative background", Json(|v| v["background"] = serde_json::json!(-100.0)), RUN, "at least 0"),
         c(
+            "metrics as JSON and CSV into one file",
+            None,
+            &["eval", "SCENE/truth/truth.npy", "--scene", "SCENE", "--json", "OUT/m", "--csv", "OUT/m"],
+            "same file",
+        ),
+        c(
+            "metrics into a folder that does not exist",
+            None,
+            &["eval", "SCENE/truth/truth.npy", "--scene", "SCENE", "--json", "OUT/m.json"],
+            "does not exist",
+        ),
+        c(
+            "two slices into one picture",
+            None,
+            &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--slices", "x=0.5,x=0.5004"],
+            "would both write",
+        ),
+        c(
             "more rays per image than memory holds",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--rays-per-image", "1000000000"],

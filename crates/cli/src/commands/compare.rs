@@ -248,8 +248,10 @@ fn rows(runs: &[Run], reference: usize, thresholds: &[f64]) -> Vec<Row> {
         .map(|run| {
             let time_to_best_s = time_to(&run.curve, run.best_nrmse).unwrap_or(run.wall_time_s);
             let reference_time_s = time_to(&r.curve, run.best_nrmse);
-            let speedup = reference_time_s.map(|t| t / time_to_best_s.max(1e-12));
-            let speedup_at_least = reference_time_s.is_none().then(|| r.wall_time_s / time_to_best_s.max(1e-12));
+            // A curve whose best point took no measured time gives no ratio.
+            let timed = time_to_best_s > 0.0;
+            let speedup = reference_time_s.filter(|_| timed).map(|t| t / time_to_best_s);
+            let speedup_at_least = (reference_time_s.is_none() && timed).then(|| r.wall_time_s / time_to_best_s);
             Row {
                 run: run.clone(),
                 time_to_threshold_s: thresholds.iter().map(|&t| time_to(&run.curve, t)).collect(),
@@ -381,6 +383,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let reference_path = runs[reference].path.clone();
     warn_of_other_scenes(&runs);
+    // Runs in folders of the same name are told apart by the path given.
+    let labels: Vec<String> = runs.iter().map(|r| r.label.clone()).collect();
+    for run in &mut runs {
+        if labels.iter().filter(|l| **l == run.label).count() > 1 {
+            run.label = format!("{} [{}]", run.label, run.path.display());
+        }
+    }
 
     let plot = LinePlot {
         title: "Volume NRMSE vs training time".into(),
@@ -471,5 +480,9 @@ mod tests {
         assert!(text.contains("ref *") && text.contains(">4.00x") && text.contains("never"), "{text}");
         assert_eq!(csv_field("a,b \"c\""), "\"a,b \"\"c\"\"\"");
         assert_eq!([ratio(0.004517), ratio(1.0), ratio(38.46), ratio(1250.2)], ["0.00452", "1.00", "38.5", "1250"]);
+        // A curve without measured time (an external tool's at 0 s) gives no ratio, not 0x.
+        let untimed = run("untimed", &[(0.0, 0.5), (0.0, 0.3)]);
+        let rows = super::rows(&[untimed.clone(), untimed], 0, &[]);
+        assert_eq!((rows[0].speedup, rows[0].speedup_at_least), (None, None));
     }
 }

@@ -201,9 +201,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (None, None, Some(dir)) => (Some(dir.join("metrics.json")), Some(dir.join("metrics.csv"))),
         (j, c, _) => (j.clone(), c.clone()),
     };
+    if json_path.is_some() && json_path == csv_path {
+        bail!("--json and --csv name the same file; give two");
+    }
     for p in json_path.iter().chain(csv_path.iter()) {
         if p.exists() && !args.force {
             bail!("{} exists; pass --force to overwrite it", p.display());
+        }
+        // Checked now, not after the scoring.
+        let folder = p.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        if !folder.is_dir() {
+            bail!("{}: the folder {} does not exist", p.display(), folder.display());
         }
     }
 

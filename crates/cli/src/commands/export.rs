@@ -308,7 +308,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outputs.push(fluidnerf_io::volume::raw_sidecar_path(&out.join("volume.raw")));
     }
     let slice_name = |prefix: &str, (a, f): (Axis, f64)| out.join(format!("{prefix}_{a}_{f:.3}.png"));
-    for &s in &slices {
+    for (k, &s) in slices.iter().enumerate() {
+        if let Some(same) = slices[..k].iter().find(|&&o| slice_name("slice", o) == slice_name("slice", s)) {
+            bail!(
+                "--slices {}={} and {}={} would both write {}; give slices at least 0.001 apart",
+                same.0,
+                same.1,
+                s.0,
+                s.1,
+                slice_name("slice", s).display()
+            );
+        }
         outputs.push(slice_name("slice", s));
         if truth.is_some() {
             outputs.push(slice_name("compare", s));
