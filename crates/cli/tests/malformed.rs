@@ -267,6 +267,12 @@ fn cases() -> Vec<Case> {
             "format 7",
         ),
         c(
+            "config naming no scene that exists",
+            File("run.json", br#"{"format":1,"scene":"nowhere","method":{"name":"asart"}}"#),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],
+            "its `scene`, nowhere, does not exist",
+        ),
+        c(
             "config of another method",
             File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart"}}"#),
             &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT", "--method", "fast"],

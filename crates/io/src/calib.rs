@@ -1179,6 +1179,9 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         let (_, k, d) = cameras.iter().find(|c| c.0 == im.camera_id).ok_or_else(|| {
             bad(format!("image {} uses camera id {}, which the cameras file does not define", im.name, im.camera_id))
         })?;
+        if out.iter().any(|(name, _)| *name == im.name) {
+            return Err(bad(format!("image {} is listed twice; every image has one pose", im.name)));
+        }
         let pose = colmap_pose(im.q, im.t).map_err(bad)?;
         out.push((im.name, Camera { intrinsics: *k, distortion: *d, world_from_camera: pose, lens: None }));
     }

@@ -267,6 +267,13 @@ fn colmap_errors_name_the_file_and_line() {
     std::fs::write(dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n").expect("write");
     let err = read_colmap(dir.path()).expect_err("camera 2 missing").to_string();
     assert!(err.contains("images.txt") && err.contains("radial.png") && err.contains("camera id 2"), "{err}");
+    // One image name twice: two poses for one picture.
+    let text = std::fs::read_to_string(fixtures().join("colmap/images.txt")).expect("read");
+    std::fs::write(dir.path().join("images.txt"), text.replace("side.png", "front.png")).expect("write");
+    std::fs::write(dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n2 PINHOLE 64 48 50 50 32 24\n")
+        .expect("write");
+    let err = read_colmap(dir.path()).expect_err("front.png twice").to_string();
+    assert!(err.contains("images.txt") && err.contains("front.png is listed twice"), "{err}");
 }
 
 /// Bytes of a COLMAP binary model built by hand from the documented layout

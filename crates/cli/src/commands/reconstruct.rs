@@ -553,6 +553,15 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             same_scene(scene, &cfg.scene, &args.out)?;
         }
         cfg.scene = scene.clone();
+    } else if let Some(file) = args.config.as_ref().or(continued.as_ref()) {
+        if !cfg.scene.exists() {
+            bail!(
+                "{}: its `scene`, {}, does not exist{}; give the scene on the command line",
+                file.display(),
+                cfg.scene.display(),
+                if cfg.scene.is_relative() { " (a relative path is read from the working directory)" } else { "" }
+            );
+        }
     }
     // Recorded absolute, so the config reruns from any working directory.
     if let Ok(abs) = std::path::absolute(&cfg.scene) {
