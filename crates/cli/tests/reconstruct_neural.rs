@@ -49,13 +49,23 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     // Refuses to overwrite; resumes to a higher cap.
     let again = fluidnerf(d, &run);
     assert!(!again.status.success(), "overwrote results without --force");
-    // A resume whose checkpoint does not load (another field) leaves the finished run as it was.
-    let kept = |f: &str| std::fs::read(dir.join(f)).expect("readable");
-    let (report_before, config_before) = (kept("report.json"), kept("config.json"));
+    // A resume that would change the field is refused up front; one whose checkpoint does not
+    // load (here a damaged copy) leaves the finished run as it was.
     let mut other: Vec<&str> = run.to_vec();
     other[7] = "fast";
     other.push("--resume");
-    refused(&fluidnerf(d, &other), "checkpoint.safetensors");
+    refused(&fluidnerf(d, &other), "change the field");
+    let damaged = d.join("damaged");
+    std::fs::create_dir(&damaged).expect("mkdir");
+    for e in std::fs::read_dir(&dir).expect("lists") {
+        let p = e.expect("entry").path();
+        std::fs::copy(&p, damaged.join(p.file_name().expect("name"))).expect("copies");
+    }
+    let ckpt = damaged.join("checkpoint.safetensors");
+    std::fs::write(&ckpt, &std::fs::read(&ckpt).expect("readable")[..5000]).expect("truncates");
+    let kept = |f: &str| std::fs::read(damaged.join(f)).expect("readable");
+    let (report_before, config_before) = (kept("report.json"), kept("config.json"));
+    refused(&fluidnerf(d, &["reconstruct", "scene", "-o", "damaged", "--resume", "-q"]), "checkpoint.safetensors");
     assert!(kept("report.json") == report_before, "a refused resume changed report.json");
     assert!(kept("config.json") == config_before, "a refused resume changed config.json");
     // Nor does one continue on another scene, or without the settings it ran with; and a

@@ -635,6 +635,21 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     }
     apply_method_options(args, &mut cfg.method)?;
     cfg.validate()?;
+    // Its checkpoint holds the saved field's parameters: another field cannot take them.
+    if let Some(saved) = resume_config {
+        let field = |m: &MethodConfig| match m {
+            MethodConfig::Neural(_, s) => Some(s.field.clone()),
+            MethodConfig::Temporal(_, t) => Some(t.field.clone()),
+            MethodConfig::Classical(_) => None,
+        };
+        if field(&cfg.method) != field(&RunConfig::read(saved)?.method) {
+            bail!(
+                "the options given change the field of the run in {} (its architecture or its grid), so its \
+                 checkpoint cannot continue it; leave them out to resume, or use --force to start a new run",
+                args.out.display()
+            );
+        }
+    }
     Ok(cfg)
 }
 
