@@ -309,14 +309,16 @@ class Run:
         """Every volume with its time (time-resolved runs: one per frame)."""
         return self._h.volumes()
 
-    def field(self, points: np.ndarray, time: float = 0.0) -> np.ndarray:
+    def field(self, points: np.ndarray, time: float | None = None) -> np.ndarray:
         """The result at world points ``(N, 3)`` (x, y, z) at ``time``: the trained network of
         neural runs (static or of space and time), the volume sampled trilinearly otherwise.
-        Returns ``(N,)`` float32; points outside the box give 0."""
+        Returns ``(N,)`` float32; points outside the box give 0. A time-resolved run is sampled
+        at ``time`` between its first and last instants (default: the first); a time outside
+        them raises :class:`FluidNerfError`. Static results ignore ``time``."""
         pts = np.ascontiguousarray(points, dtype=np.float32)
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
-        return self._h.field(pts, float(time))
+        return self._h.field(pts, None if time is None else float(time))
 
     def voxel_centres(self) -> np.ndarray:
         """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""

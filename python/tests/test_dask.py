@@ -50,6 +50,15 @@ def assert_same_run(a: fluidnerf.Run, b: fluidnerf.Run) -> None:
     assert (a.path / "volumes.pvd").read_text() == (b.path / "volumes.pvd").read_text()
 
 
+def test_a_time_resolved_field_is_sampled_only_between_its_instants(serial):
+    points = np.zeros((2, 3), dtype=np.float32)
+    np.testing.assert_array_equal(serial.field(points), serial.field(points, time=14.0))
+    with pytest.raises(fluidnerf.FluidNerfError, match="outside the time-resolved run's instants 14"):
+        serial.field(points, time=17.0)
+    with pytest.raises(fluidnerf.FluidNerfError, match="finite"):
+        serial.field(points, time=float("nan"))
+
+
 def test_the_plan_is_the_one_tr_fast_uses(tr_scene):
     plan = fluidnerf.window_plan(tr_scene, TR_METHOD, **TR_OPTIONS)
     assert (

@@ -13,6 +13,26 @@ use fluidnerf_neural::trained::ModelRecord;
 
 use crate::{Family, PipelineError, RunConfig, RunDir, RunKind, RunReport};
 
+/// The time at which to sample a result whose instants span `range` (None for a static one)
+/// for `what` (an option or a frame, named in errors): `given`, refused when it is not finite
+/// or lies outside a time-resolved run's instants (where its field only repeats its first or
+/// last one); else the first instant, and 0 for static results.
+pub fn sample_time(range: Option<(f64, f64)>, given: Option<f64>, what: &str) -> Result<f64, PipelineError> {
+    let refuse = |why: String| PipelineError::invalid(what, why);
+    if let Some(t) = given.filter(|t| !t.is_finite()) {
+        return Err(refuse(format!("the time must be a finite number, got {t}")));
+    }
+    let Some((first, last)) = range else { return Ok(given.unwrap_or(0.0)) };
+    let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
+    match given {
+        None => Ok(first),
+        Some(t) if t < first - slack || t > last + slack => {
+            Err(refuse(format!("time {t} lies outside the time-resolved run's instants {first} … {last}")))
+        }
+        Some(t) => Ok(t),
+    }
+}
+
 /// A run folder's results and, for runs of `reconstruct`, their configuration and report.
 pub struct LoadedRun {
     pub dir: PathBuf,

@@ -348,24 +348,14 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Res
             }
             if let Some((first, last)) = run.time_range()? {
                 // A time-resolved field repeats its first or last instant outside them.
-                let slack = 1e-9 * f64::max(first.abs().max(last.abs()), 1.0);
                 let times = scene.truth.iter().map(|t| (t.time, "truth volume", &t.file_path));
                 let times = times.chain(scene.frames.iter().map(|f| (f.time, "frame", &f.file_path)));
                 for (time, what, path) in times {
-                    match time {
-                        None => bail!(
-                            "{}: a time-resolved run (instants {first} … {last}), but the scene's {what} {} has no \
-                             time",
-                            dir.display(),
-                            path.display()
-                        ),
-                        Some(t) if t < first - slack || t > last + slack => bail!(
-                            "{}: the scene's {what} {} is at time {t}, outside the run's instants {first} … {last}",
-                            dir.display(),
-                            path.display()
-                        ),
-                        Some(_) => {}
-                    }
+                    let what = format!("{}: the scene's {what} {}", dir.display(), path.display());
+                    let Some(t) = time else {
+                        bail!("{what} has no time, but the run is time-resolved (instants {first} … {last})");
+                    };
+                    fluidnerf_pipeline::load::sample_time(Some((first, last)), Some(t), &what)?;
                 }
             }
             return Ok(Recon::Field(run.field()?));

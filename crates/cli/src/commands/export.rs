@@ -131,18 +131,11 @@ impl Source {
     /// when not finite or outside a time-resolved field's instants (where the field only
     /// repeats its first or last one); else that field's first instant, and 0 for the others.
     pub(crate) fn sample_time(&self, given: Option<f64>, what: &str) -> anyhow::Result<f64> {
-        if let Some(t) = given.filter(|t| !t.is_finite()) {
-            bail!("{what}: the time must be a finite number, got {t}");
-        }
-        let Source::Field { times: Some((first, last)), .. } = self else { return Ok(given.unwrap_or(0.0)) };
-        let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
-        match given {
-            None => Ok(*first),
-            Some(t) if t < first - slack || t > last + slack => {
-                bail!("{what}: time {t} lies outside the time-resolved run's instants {first} … {last}")
-            }
-            Some(t) => Ok(t),
-        }
+        let range = match self {
+            Source::Field { times, .. } => *times,
+            Source::Volume(_) => None,
+        };
+        Ok(fluidnerf_pipeline::load::sample_time(range, given, what)?)
     }
 
     pub(crate) fn describe(&self) -> String {
