@@ -51,10 +51,13 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     assert!(!again.status.success(), "overwrote results without --force");
     // A resume that would change the field is refused up front; one whose checkpoint does not
     // load (here a damaged copy) leaves the finished run as it was.
-    let mut other: Vec<&str> = run.to_vec();
-    other[7] = "fast";
-    other.push("--resume");
-    refused(&fluidnerf(d, &other), "change the field");
+    let resumed_with = |k: usize, value: &'static str| {
+        let mut args: Vec<&str> = run.to_vec();
+        args[k] = value;
+        args.push("--resume");
+        fluidnerf(d, &args)
+    };
+    refused(&resumed_with(7, "fast"), "change the field");
     let damaged = d.join("damaged");
     std::fs::create_dir(&damaged).expect("mkdir");
     for e in std::fs::read_dir(&dir).expect("lists") {
@@ -72,10 +75,7 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     // folder whose field is gone is not read as its volume alone.
     let synth = ["synth", "-q", "--preset", "demo", "--cameras", "3", "--pixels", "8", "--resolution", "8", "-o"];
     ok(&fluidnerf(d, &[&synth[..], &["other"]].concat()));
-    let mut elsewhere: Vec<&str> = run.to_vec();
-    elsewhere[1] = "other";
-    elsewhere.push("--resume");
-    refused(&fluidnerf(d, &elsewhere), "holds a run of the scene");
+    refused(&resumed_with(1, "other"), "holds a run of the scene");
     let bare = d.join("bare");
     std::fs::create_dir(&bare).expect("mkdir");
     for f in ["checkpoint.safetensors", "report.json", "volume.npy", "weights.safetensors"] {
