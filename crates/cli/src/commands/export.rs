@@ -12,10 +12,10 @@ use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_viz::{Axis, Colormap, PanelStyle};
 use serde::Serialize;
 
-/// Mesh file formats.
 /// The most voxels along an export's longest side (as for a reconstruction).
 const MAX_RESOLUTION: usize = 4096;
 
+/// Mesh file formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MeshFormat {

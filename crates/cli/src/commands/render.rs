@@ -13,12 +13,12 @@ use serde::Serialize;
 
 use super::export::{load_source, Source};
 
-/// Image file formats.
 /// The most views of an orbit.
 const MAX_ORBIT_VIEWS: usize = 3600;
 /// The widest orbit view, in pixels.
 const MAX_WIDTH: u32 = 16384;
 
+/// Image file formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ImageFormat {
