@@ -143,6 +143,20 @@ impl SampleKind {
             _ => format!("a {self}"),
         }
     }
+
+    /// The largest count of integer images (`2^bits − 1`, on the scale they are read on, 8-bit
+    /// ones linearised included); None for floats, which have no full scale.
+    pub fn full_scale(self) -> Option<f32> {
+        match self {
+            SampleKind::Integer(bits) => Some(((1u64 << bits.min(63)) - 1) as f32),
+            SampleKind::Float => None,
+        }
+    }
+
+    /// Pixels of `image` (read as this kind) at its full scale: saturated.
+    pub fn saturated(self, image: &Image) -> usize {
+        self.full_scale().map_or(0, |full| image.data.iter().filter(|&&v| v >= full).count())
+    }
 }
 
 impl std::fmt::Display for SampleKind {

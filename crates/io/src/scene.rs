@@ -1157,6 +1157,9 @@ pub struct Preprocessed {
     pub masks: Vec<Option<Vec<bool>>>,
     /// Pixels that were negative after background subtraction and were set to 0.
     pub clipped: usize,
+    /// Pixels at the full scale of their integer images (saturated: they recorded less light
+    /// than arrived), counted before any subtraction.
+    pub saturated: usize,
     /// What was asked for ([`Recording::describe`]).
     pub recording: Recording,
 }
@@ -1168,6 +1171,7 @@ pub struct Preprocessed {
 pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
     let recording = recorded(scene)?;
     let (mut images, kind) = load_images_and_kind(scene, recording.linearisation)?;
+    let saturated = saturated_pixels(scene, &images, kind);
     let file = scene.root.join(SCENE_FILE);
     let frame_label = |i: usize| {
         let f = &scene.frames[i];
@@ -1250,7 +1254,28 @@ pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
             100.0 * clipped as f64 / total.max(1) as f64
         );
     }
-    Ok(Preprocessed { images, masks, clipped, recording })
+    Ok(Preprocessed { images, masks, clipped, saturated, recording })
+}
+
+/// Pixels at the full scale of `kind` (integer images only) in `images`, the scene's frames;
+/// a warning names the frames that have them.
+fn saturated_pixels(scene: &Scene, images: &[Image], kind: SampleKind) -> usize {
+    let counts: Vec<usize> = images.iter().map(|im| kind.saturated(im)).collect();
+    let total: usize = counts.iter().sum();
+    if total > 0 {
+        let frames: Vec<String> = counts
+            .iter()
+            .zip(&scene.frames)
+            .filter(|(&n, _)| n > 0)
+            .map(|(n, f)| format!("{} ({n})", f.file_path.display()))
+            .collect();
+        log::warn!(
+            "{total} pixel(s) at the {kind} full scale (saturated) in {}: they recorded less light than arrived, \
+             so the line-integral model does not hold there; mask them (mask_path) or record with less exposure",
+            frames.join(", ")
+        );
+    }
+    total
 }
 
 /// The pixelwise median of images of one size (the mean of the middle two for an even count).
@@ -1367,7 +1392,8 @@ pub fn different_scales(a: SampleKind, b: SampleKind) -> String {
     let example = match (a, b) {
         (SampleKind::Integer(x), SampleKind::Integer(y)) => {
             let (lo, hi) = (x.min(y), x.max(y));
-            let factor = ((1u64 << hi.min(63)) - 1) as f64 / ((1u64 << lo) - 1) as f64;
+            let full = |bits| SampleKind::Integer(bits).full_scale().map_or(1.0, f64::from);
+            let factor = full(hi) / full(lo);
             format!(
                 " ({} image among {hi}-bit ones reads about {factor:.0} times too dark)",
                 SampleKind::Integer(lo).with_article()

@@ -86,6 +86,13 @@ fn background_median_clipping_and_masks_are_applied_and_round_trip() {
     assert!(pre.masks[1].is_none());
     let text = pre.recording.describe();
     assert!(text.contains("median of 3 background frames (1 frames)") && text.contains("masks: 1"), "{text}");
+    // Pixels at the 16-bit full scale are counted as saturated, before any subtraction.
+    assert_eq!(pre.saturated, 0);
+    let mut bright = image(|i| 100.0 + i as f32);
+    bright.data[3] = 65535.0;
+    bright.data[7] = 65535.0;
+    write_png16_counts(&dir.path().join("images/c0.png"), &bright).expect("write");
+    assert_eq!(load_preprocessed(&loaded).expect("preprocess").saturated, 2);
 }
 
 #[test]

@@ -65,6 +65,7 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, Pipeli
     let preprocessing = Preprocessing {
         scene: pre.recording.describe(),
         clipped_pixels: pre.clipped,
+        saturated_pixels: pre.saturated,
         masked_pixels,
         gains: *gains,
         frames: Vec::new(),

@@ -216,6 +216,9 @@ pub struct Preprocessing {
     pub scene: String,
     /// Pixels negative after background subtraction, set to 0.
     pub clipped_pixels: usize,
+    /// Pixels at the full scale of their integer images (saturated), used as they are.
+    #[serde(default)]
+    pub saturated_pixels: usize,
     /// Pixels left out by the frames' masks.
     pub masked_pixels: usize,
     pub gains: crate::GainConfig,
@@ -227,9 +230,10 @@ impl Preprocessing {
     /// Lines for a terminal: what was done, each camera's gain, the held-out scores.
     pub fn summary_lines(&self) -> Vec<String> {
         let mut out = vec![format!(
-            "preprocessing: {}; {} pixel(s) clipped at 0, {} masked; gains: {}{}",
+            "preprocessing: {}; {} pixel(s) clipped at 0, {} saturated, {} masked; gains: {}{}",
             self.scene,
             self.clipped_pixels,
+            self.saturated_pixels,
             self.masked_pixels,
             self.gains.mode,
             if self.gains.offset { " with offsets" } else { "" }

@@ -184,17 +184,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                             f.file_path.display()
                         ));
                     }
-                    if let fluidnerf_io::image::SampleKind::Integer(bits) = kind {
-                        let full = ((1u64 << bits.min(63)) - 1) as f32;
-                        let saturated = img.data.iter().filter(|&&v| v >= full).count();
-                        if saturated > 0 {
-                            warnings.push(format!(
-                                "frame {i} ({}): {saturated} pixel(s) at the {bits}-bit full scale ({full}); a \
-                                 saturated pixel recorded less light than arrived, so the line-integral model \
-                                 does not hold there: mask them (mask_path) or record with less exposure",
-                                f.file_path.display()
-                            ));
-                        }
+                    let saturated = kind.saturated(&img);
+                    if saturated > 0 {
+                        warnings.push(format!(
+                            "frame {i} ({}): {saturated} pixel(s) at the {kind} full scale; a saturated pixel \
+                             recorded less light than arrived, so the line-integral model does not hold there: \
+                             mask them (mask_path) or record with less exposure",
+                            f.file_path.display()
+                        ));
                     }
                     if (img.width, img.height) != (w, h) {
                         problems.push(format!(
