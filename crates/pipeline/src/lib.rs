@@ -213,7 +213,7 @@ const GIB: f64 = (1u64 << 30) as f64;
 pub(crate) fn memory_limit(config: &RunConfig) -> u64 {
     match config.memory_limit_gib {
         Some(g) => (g * GIB) as u64,
-        None => proc_bytes("/proc/meminfo", "MemAvailable:").unwrap_or(u64::MAX),
+        None => available_memory().unwrap_or(u64::MAX),
     }
 }
 
@@ -263,6 +263,12 @@ pub fn proc_bytes(file: &str, key: &str) -> Option<u64> {
     let line = text.lines().find(|l| l.starts_with(key))?;
     let kib: u64 = line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
     Some(kib * 1024)
+}
+
+/// Memory the system can still hand out now (Linux; None elsewhere): the limit of runs and
+/// of the commands that check their buffers before allocating them.
+pub fn available_memory() -> Option<u64> {
+    proc_bytes("/proc/meminfo", "MemAvailable:")
 }
 
 /// Peak resident memory of this process (Linux).

@@ -58,7 +58,7 @@ pub(crate) fn scene_folder(path: &std::path::Path) -> Option<std::path::PathBuf>
 /// Refuses work whose largest buffers (`bytes`, estimated) exceed the memory available now,
 /// before anything is computed or written: an allocation that fails aborts the program.
 pub(crate) fn check_memory(what: impl FnOnce() -> String, bytes: u64) -> anyhow::Result<()> {
-    match fluidnerf_synth::available_memory_bytes() {
+    match fluidnerf_pipeline::available_memory() {
         Some(available) if bytes > available => anyhow::bail!(
             "{} needs about {} but only {} are available",
             what(),
