@@ -23,7 +23,10 @@
 //! `image_width_cam0`, ...), or each camera is a mapping named after it
 //! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`), or the cameras are a list
 //! of such mappings (`cameras: [{name: left, camera_matrix: ...}, ...]`; an entry without a
-//! `name` is `cam<index>`, counting from 0). A file with unsuffixed keys holds one camera named
+//! `name` is `cam<index>`, counting from 0). A camera's name is the suffix of its
+//! `camera_matrix_<name>`; its other keys may spell the suffix in another letter case
+//! (`rvec_Left` beside `camera_matrix_left`) unless two names differ only in letter case. A
+//! file with unsuffixed keys holds one camera named
 //! after the file stem (`cam3.yml` → `cam3`); a file may not mix unsuffixed and suffixed keys.
 //! A folder is read as all its `.yml`, `.yaml`, `.xml` and `.json` files in name order; camera
 //! names must be unique. [`write_opencv`] writes unsuffixed keys when it writes a single camera
@@ -539,7 +542,9 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         .keys()
         .filter(|raw| {
             let key = canonical_key(raw);
-            let known = OPENCV_KEYS.iter().any(|k| key == *k || named.iter().any(|n| key == format!("{k}_{n}")));
+            let known = OPENCV_KEYS
+                .iter()
+                .any(|k| key == *k || named.iter().any(|n| key.eq_ignore_ascii_case(&format!("{k}_{n}"))));
             !known && !nested.iter().any(|(n, _)| n == raw) && !listed.iter().any(|(n, _)| n == raw)
         })
         .collect();
@@ -596,7 +601,7 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             let camera = camera_from_nodes(
                 n,
                 &CameraNodes {
-                    get: &|k| nodes.get(&format!("{k}_{n}")).cloned(),
+                    get: &|k| suffixed_node(&nodes, k, n, &named),
                     label: &|k| spelled(&raw_nodes, &format!("{k}_{n}")),
                     file: &|_| path.to_path_buf(),
                 },
@@ -604,6 +609,24 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             Ok((n.clone(), camera))
         })
         .collect()
+}
+
+/// Camera `name`'s node `key` (`key_name`) in a multi-camera file: spelled exactly, or else its
+/// one spelling in another letter case (`rvec_Left` for the camera of `camera_matrix_left`), as
+/// long as none of the other cameras' `names` differs from `name` only in letter case.
+fn suffixed_node(nodes: &Map<String, Value>, key: &str, name: &str, names: &[String]) -> Option<Value> {
+    let wanted = format!("{key}_{name}");
+    if let Some(v) = nodes.get(&wanted) {
+        return Some(v.clone());
+    }
+    if names.iter().any(|m| m != name && m.eq_ignore_ascii_case(name)) {
+        return None;
+    }
+    let mut found = nodes.iter().filter(|(k, _)| k.eq_ignore_ascii_case(&wanted));
+    match (found.next(), found.next()) {
+        (Some((_, v)), None) => Some(v.clone()),
+        _ => None,
+    }
 }
 
 /// The node `key` of `nodes`, matched ignoring letter case.

@@ -97,6 +97,28 @@ fn reads_files_written_by_cv_file_storage() {
     assert!(worst_projection_error(&cases[3], &cams[0].1) < 1e-3);
 }
 
+/// A multi-camera file whose keys spell a camera's suffix in other letter cases reads as the
+/// file with one spelling; two cameras whose names differ only in letter case keep their own.
+#[test]
+fn suffixes_in_another_letter_case_name_the_same_camera() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(fixtures().join("opencv_two_cameras.json")).expect("read");
+    let mixed = text.replace("\"rvec_four\"", "\"rvec_Four\"").replace("\"tvec_four\"", "\"TVEC_FOUR\"");
+    assert_ne!(mixed, text);
+    std::fs::write(dir.path().join("mixed.json"), &mixed).expect("write");
+    let read = read_opencv(&dir.path().join("mixed.json")).expect("reads");
+    assert_same_cameras(&read, &read_opencv(&fixtures().join("opencv_two_cameras.json")).expect("reads"));
+    // With a camera `Four` beside `four` each name takes its own spelling only, so `four`,
+    // whose pose is spelled `_FOUR`, has none.
+    let twins = text
+        .replace("_five\"", "_Four\"")
+        .replace("\"rvec_four\"", "\"rvec_FOUR\"")
+        .replace("\"tvec_four\"", "\"tvec_FOUR\"");
+    std::fs::write(dir.path().join("twins.json"), &twins).expect("write");
+    let err = read_opencv(&dir.path().join("twins.json")).expect_err("no pose for four").to_string();
+    assert!(err.contains("camera `four`") && err.contains("no pose"), "{err}");
+}
+
 #[test]
 fn reads_a_folder_of_calibration_files() {
     let dir = tempfile::tempdir().expect("tempdir");
