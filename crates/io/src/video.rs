@@ -229,6 +229,29 @@ pub fn read_video_frames(
     if !opts.time_offset_s.is_finite() {
         return Err(IoError::invalid(path, format!("time offset {} s is not finite", opts.time_offset_s)));
     }
+    // Two kept frames at one time would be one camera twice at one instant: refused here,
+    // naming the frames, where a large offset has swamped the frame interval.
+    let mut last: Option<(usize, f64)> = None;
+    let mut on_frame = |frame: VideoFrame| {
+        match last {
+            Some((index, time)) if index < frame.index && frame.time_s <= time => {
+                let why = if opts.time_offset_s == 0.0 {
+                    String::new()
+                } else {
+                    format!(
+                        " (with the time offset of {} s added, which rounds the frame interval away)",
+                        opts.time_offset_s
+                    )
+                };
+                return Err(IoError::invalid(
+                    path,
+                    format!("frame {} is at {} s, not after frame {index} at {time} s{why}", frame.index, frame.time_s),
+                ));
+            }
+            _ => last = Some((frame.index, frame.time_s)),
+        }
+        on_frame(frame)
+    };
     let mut head = Vec::with_capacity(12);
     File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).map_err(|e| IoError::io(path, "video file", e))?;
     let info = match sniff(&head) {

@@ -114,6 +114,10 @@ fn selection_and_time_offset() {
     let nan = VideoOptions { time_offset_s: f64::NAN, ..VideoOptions::default() };
     let err = read_video(&fixture("ramp_mjpeg.avi"), &nan).expect_err("NaN offset").to_string();
     assert!(err.contains("not finite"), "{err}");
+    // An offset that rounds the 0.1 s frame interval away would put frames at one time.
+    let huge = VideoOptions { time_offset_s: 1e17, ..VideoOptions::default() };
+    let err = read_video(&fixture("ramp_mjpeg.avi"), &huge).expect_err("frames at one time").to_string();
+    assert!(err.contains("ramp_mjpeg.avi") && err.contains("not after frame 0") && err.contains("offset"), "{err}");
 }
 
 /// The offset of the `n`-th occurrence of `tag` in `bytes`.
