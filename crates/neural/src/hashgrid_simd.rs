@@ -4,7 +4,10 @@
 //!
 //! Per point and level it computes what the scalar loop does — clamp, cell, trilinear weights
 //! multiplied in axis order, the dense vertex index or the spatial hash — in eight lanes, and
-//! gathers the `F` features of each corner with `vgatherdps`. The features are accumulated with
+//! gathers the `F` features of each corner with `vgatherdps`. Batches are prepared [`AHEAD`]
+//! batches before they are used, their table entries fetched into the cache meanwhile: the
+//! hashed levels' tables (and their gradients) are larger than a core's cache, and a gather or
+//! an addition would otherwise wait on each entry in turn. The features are accumulated with
 //! fused multiply–adds, so results differ from the scalar loop by rounding only (tested), and a
 //! NaN coordinate reads as 0 instead of propagating.
 
@@ -61,10 +64,22 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
     let zero = _mm256_setzero_ps();
     let table = args.table.as_ptr();
     let mut out = [[0.0f32; 8]; F];
-    for base in (0..full).step_by(8) {
-        let (w, part) = axes::<D, DENSE>(args, &inputs[base * D..(base + 8) * D]);
-        let idle = idle_time_corners::<D>(&w);
-        let mask = _mm256_set1_epi32(args.mask as i32);
+    let mask = _mm256_set1_epi32(args.mask as i32);
+    // Batches of eight points are prepared AHEAD batches before they gather: their corners'
+    // weights and entries computed, the entries fetched into the cache (the tables are larger
+    // than the cache, and the gathers would otherwise wait on them in turn).
+    let batches = full / 8;
+    let mut ring = [Corners::EMPTY; AHEAD + 1];
+    for b in 0..batches.min(AHEAD) {
+        ring[b].prepare::<D, F, DENSE>(args, &inputs[b * 8 * D..(b + 1) * 8 * D], mask, table);
+    }
+    for b in 0..batches {
+        if b + AHEAD < batches {
+            let first = (b + AHEAD) * 8 * D;
+            ring[(b + AHEAD) % (AHEAD + 1)].prepare::<D, F, DENSE>(args, &inputs[first..first + 8 * D], mask, table);
+        }
+        let base = b * 8;
+        let c = &ring[b % (AHEAD + 1)];
         if F == 2 {
             // Both features of a vertex in one 64-bit element: four points per gather, with
             // their weights duplicated to match, accumulated in the rows' own layout.
@@ -72,17 +87,18 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
             let dup_lo = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
             let dup_hi = _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7);
             for corner in 0..1usize << D {
-                if skipped::<D>(corner, idle) {
+                if skipped::<D>(corner, c.idle) {
                     continue;
                 }
-                let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
+                let (wc, at) = (c.weight[corner], c.entry[corner]);
                 let pairs = table as *const i64;
-                // SAFETY: `idx` is a vertex index or masked hash below the level's entries, and
-                // entry `idx` is the pair of floats at `2 · idx` (the caller's contract).
+                // SAFETY: `at / 2` is a vertex index or masked hash below the level's entries,
+                // and its pair of floats starts at float `at`, byte `4 · at` (the caller's
+                // contract).
                 let (v_lo, v_hi) = unsafe {
                     (
-                        _mm256_i32gather_epi64::<8>(pairs, _mm256_castsi256_si128(idx)),
-                        _mm256_i32gather_epi64::<8>(pairs, _mm256_extracti128_si256::<1>(idx)),
+                        _mm256_i32gather_epi64::<4>(pairs, _mm256_castsi256_si128(at)),
+                        _mm256_i32gather_epi64::<4>(pairs, _mm256_extracti128_si256::<1>(at)),
                     )
                 };
                 lo = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_lo), _mm256_castsi256_ps(v_lo), lo);
@@ -103,11 +119,10 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
         }
         let mut acc = [zero; F];
         for corner in 0..1usize << D {
-            if skipped::<D>(corner, idle) {
+            if skipped::<D>(corner, c.idle) {
                 continue;
             }
-            let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
-            let at = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
+            let (wc, at) = (c.weight[corner], c.entry[corner]);
             for (k, acc) in acc.iter_mut().enumerate() {
                 // SAFETY: `idx` is a vertex index or masked hash below the level's entries, so
                 // `idx · F + k` is inside the table (the caller's contract).
@@ -193,56 +208,127 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
     let n = inputs.len() / D;
     let full = n / 8 * 8;
     assert!(dfeats.len() >= n * args.row_len && args.column + F <= args.row_len);
-    let corners = 1usize << D;
     let g = gtable.as_mut_ptr();
     let mut d = [[0.0f32; 8]; F];
-    // Per corner: the eight points' entries, and their F products weight × ∂L/∂feature.
-    let mut at = [[0u32; 8]; 16];
-    let mut prod = [[[0.0f32; 8]; F]; 16];
+    // Batches of eight points are prepared AHEAD batches before their additions: their
+    // corners' weights and entries computed with the products weight × ∂L/∂feature, and the
+    // entries fetched into the cache (the gradient table is larger than the cache, and the
+    // additions would otherwise wait on its entries in turn).
+    let batches = full / 8;
+    let mut ring = [Corners::EMPTY; AHEAD + 1];
+    let mut prod = [[[[0.0f32; 8]; F]; 16]; AHEAD + 1];
     let mask = _mm256_set1_epi32(args.mask as i32);
-    for base in (0..full).step_by(8) {
-        for j in 0..8 {
-            let row = (base + j) * args.row_len + args.column;
-            for k in 0..F {
-                d[k][j] = dfeats[row + k];
+    for b in 0..batches + AHEAD {
+        if b < batches {
+            let base = b * 8;
+            for j in 0..8 {
+                let row = (base + j) * args.row_len + args.column;
+                for k in 0..F {
+                    d[k][j] = dfeats[row + k];
+                }
+            }
+            let slot = b % (AHEAD + 1);
+            let c = &mut ring[slot];
+            c.prepare::<D, F, DENSE>(args, &inputs[base * D..(base + 8) * D], mask, g);
+            for corner in 0..1usize << D {
+                if skipped::<D>(corner, c.idle) {
+                    continue;
+                }
+                for k in 0..F {
+                    // SAFETY: `d[k]` and the product hold eight floats.
+                    unsafe {
+                        let dv = _mm256_loadu_ps(d[k].as_ptr());
+                        _mm256_storeu_ps(prod[slot][corner][k].as_mut_ptr(), _mm256_mul_ps(c.weight[corner], dv));
+                    }
+                }
             }
         }
-        let (w, part) = axes::<D, DENSE>(args, &inputs[base * D..(base + 8) * D]);
-        let idle = idle_time_corners::<D>(&w);
-        let mut dv = [_mm256_setzero_ps(); F];
-        for k in 0..F {
-            // SAFETY: `d[k]` holds eight floats.
-            dv[k] = unsafe { _mm256_loadu_ps(d[k].as_ptr()) };
+        if b >= AHEAD {
+            let slot = (b - AHEAD) % (AHEAD + 1);
+            // SAFETY: the entries are inside `gtable` (the caller's contract).
+            unsafe { add_batch::<D, F>(g, &ring[slot], &prod[slot]) };
         }
-        for corner in 0..corners {
-            if skipped::<D>(corner, idle) {
+    }
+    full
+}
+
+/// How many batches of eight points ahead the encoding fetches table entries into the cache.
+const AHEAD: usize = 2;
+
+/// One batch of eight points at one level: every corner's trilinear weights and table entry
+/// (its first value's index, `F` values per entry), and which corners are idle.
+#[derive(Clone, Copy)]
+struct Corners {
+    weight: [__m256; 16],
+    entry: [__m256i; 16],
+    idle: (bool, bool),
+}
+
+impl Corners {
+    const EMPTY: Corners = Corners {
+        weight: [unsafe { std::mem::zeroed() }; 16],
+        entry: [unsafe { std::mem::zeroed() }; 16],
+        idle: (false, false),
+    };
+
+    /// Computes the corners of the eight points `points` (`8 × D`) and fetches their entries of
+    /// `table` (the level's table or its gradient) into the cache.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn prepare<const D: usize, const F: usize, const DENSE: bool>(
+        &mut self,
+        args: &LevelArgs<'_>,
+        points: &[f32],
+        mask: __m256i,
+        table: *const f32,
+    ) {
+        let (w, part) = axes::<D, DENSE>(args, points);
+        self.idle = idle_time_corners::<D>(&w);
+        let mut at = [0u32; 8];
+        for corner in 0..1usize << D {
+            if skipped::<D>(corner, self.idle) {
                 continue;
             }
             let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
             let idx = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
-            // SAFETY: each array holds eight values.
-            unsafe {
-                _mm256_storeu_si256(at[corner].as_mut_ptr() as *mut __m256i, idx);
-                for k in 0..F {
-                    _mm256_storeu_ps(prod[corner][k].as_mut_ptr(), _mm256_mul_ps(wc, dv[k]));
-                }
-            }
-        }
-        for j in 0..8 {
-            for corner in 0..corners {
-                if skipped::<D>(corner, idle) {
-                    continue;
-                }
-                let e = at[corner][j] as usize;
-                for k in 0..F {
-                    // SAFETY: `e / F` is a vertex index or masked hash below the level's
-                    // entries, so `e + k` is inside `gtable` (the caller's contract).
-                    unsafe { *g.add(e + k) += prod[corner][k][j] };
-                }
+            self.weight[corner] = wc;
+            self.entry[corner] = idx;
+            // SAFETY: `at` holds eight values.
+            unsafe { _mm256_storeu_si256(at.as_mut_ptr() as *mut __m256i, idx) };
+            for &e in &at {
+                // A prefetch reads nothing; the address is an entry of the table.
+                _mm_prefetch::<_MM_HINT_T0>(table.wrapping_add(e as usize) as *const i8);
             }
         }
     }
-    full
+}
+
+/// Adds one batch's products into the gradient table at `g`: point by point, corner by
+/// corner, each product added once (the scalar loop's order).
+///
+/// # Safety
+/// Every entry of `c` and the `F` values from it must lie inside the table at `g`.
+#[inline(always)]
+unsafe fn add_batch<const D: usize, const F: usize>(g: *mut f32, c: &Corners, prod: &[[[f32; 8]; F]; 16]) {
+    let mut at = [[0u32; 8]; 16];
+    for (corner, at) in at.iter_mut().enumerate().take(1 << D) {
+        if !skipped::<D>(corner, c.idle) {
+            // SAFETY: `at` holds eight values.
+            unsafe { _mm256_storeu_si256(at.as_mut_ptr() as *mut __m256i, c.entry[corner]) };
+        }
+    }
+    for j in 0..8 {
+        for corner in 0..1usize << D {
+            if skipped::<D>(corner, c.idle) {
+                continue;
+            }
+            let e = at[corner][j] as usize;
+            for k in 0..F {
+                // SAFETY: inside the table (the caller's contract).
+                unsafe { *g.add(e + k) += prod[corner][k][j] };
+            }
+        }
+    }
 }
 
 /// For a 4D level: whether every one of the eight points has time weight exactly 0 at the
