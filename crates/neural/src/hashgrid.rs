@@ -310,8 +310,10 @@ impl HashGridField {
         self.grid_params
     }
 
-    /// Encodes `inputs` (`n × input_dim`) into `features` (grown to `n × L·F` if needed).
-    fn encode(&self, inputs: &[f32], features: &mut Vec<f32>) {
+    /// Encodes `inputs` (`n × input_dim`) into `features` (grown to `n × L·F` if needed);
+    /// `training`: the points are training samples in random order (see
+    /// [`crate::hashgrid_simd::LevelArgs::fetch_ahead`]).
+    fn encode(&self, inputs: &[f32], features: &mut Vec<f32>, training: bool) {
         let lf = self.levels.len() * self.config.features_per_level;
         let n = inputs.len() / self.input_dim;
         if features.len() < n * lf {
@@ -319,29 +321,36 @@ impl HashGridField {
         }
         let feats = &mut features[..n * lf];
         for l in 0..self.levels.len() {
-            self.dispatch::<false>(l, inputs, feats, &mut []);
+            self.dispatch::<false>(l, inputs, feats, &mut [], training);
         }
     }
 
     /// Runs `level_pass` monomorphised for the input dimension and features per level.
-    fn dispatch<const BACKWARD: bool>(&self, l: usize, inputs: &[f32], feats: &mut [f32], grads: &mut [f32]) {
+    fn dispatch<const BACKWARD: bool>(
+        &self,
+        l: usize,
+        inputs: &[f32],
+        feats: &mut [f32],
+        grads: &mut [f32],
+        training: bool,
+    ) {
         match self.input_dim {
-            3 => self.dispatch_f::<3, BACKWARD>(l, inputs, feats, grads),
-            _ => self.dispatch_f::<4, BACKWARD>(l, inputs, feats, grads),
+            3 => self.dispatch_f::<3, BACKWARD>(l, inputs, feats, grads, training),
+            _ => self.dispatch_f::<4, BACKWARD>(l, inputs, feats, grads, training),
         }
     }
 
-    fn dispatch_f<const D: usize, const B: bool>(&self, l: usize, x: &[f32], f: &mut [f32], g: &mut [f32]) {
+    fn dispatch_f<const D: usize, const B: bool>(&self, l: usize, x: &[f32], f: &mut [f32], g: &mut [f32], t: bool) {
         let level = &self.levels[l];
         match (self.config.features_per_level, level.dense) {
-            (1, true) => self.level_pass::<D, 1, B, true>(l, level, x, f, g),
-            (1, false) => self.level_pass::<D, 1, B, false>(l, level, x, f, g),
-            (2, true) => self.level_pass::<D, 2, B, true>(l, level, x, f, g),
-            (2, false) => self.level_pass::<D, 2, B, false>(l, level, x, f, g),
-            (4, true) => self.level_pass::<D, 4, B, true>(l, level, x, f, g),
-            (4, false) => self.level_pass::<D, 4, B, false>(l, level, x, f, g),
-            (_, true) => self.level_pass::<D, 8, B, true>(l, level, x, f, g),
-            (_, false) => self.level_pass::<D, 8, B, false>(l, level, x, f, g),
+            (1, true) => self.level_pass::<D, 1, B, true>(l, level, x, f, g, t),
+            (1, false) => self.level_pass::<D, 1, B, false>(l, level, x, f, g, t),
+            (2, true) => self.level_pass::<D, 2, B, true>(l, level, x, f, g, t),
+            (2, false) => self.level_pass::<D, 2, B, false>(l, level, x, f, g, t),
+            (4, true) => self.level_pass::<D, 4, B, true>(l, level, x, f, g, t),
+            (4, false) => self.level_pass::<D, 4, B, false>(l, level, x, f, g, t),
+            (_, true) => self.level_pass::<D, 8, B, true>(l, level, x, f, g, t),
+            (_, false) => self.level_pass::<D, 8, B, false>(l, level, x, f, g, t),
         }
     }
 
@@ -356,6 +365,7 @@ impl HashGridField {
         inputs: &[f32],
         feats: &mut [f32],
         grads: &mut [f32],
+        training: bool,
     ) {
         let lf = self.levels.len() * F;
         debug_assert_eq!(DENSE, level.dense);
@@ -389,6 +399,7 @@ impl HashGridField {
                 table,
                 column: l * F,
                 row_len: lf,
+                fetch_ahead: training,
             };
             // SAFETY: AVX2 and FMA were detected just above; `table` and `gtable` are this
             // level's whole table and its gradient (`entries × F`: every dense vertex, or
@@ -509,7 +520,7 @@ impl TrainableField for HashGridField {
         let n = out.len();
         let d = self.input_dim;
         assert_eq!(inputs.len(), n * d, "HashGridField: inputs are not {n}×{d}");
-        self.encode(inputs, &mut tape.eval_features);
+        self.encode(inputs, &mut tape.eval_features, false);
         let lf = self.mlp.in_dim();
         self.mlp.infer(&self.params[self.grid_params..], &tape.eval_features[..n * lf], out, &mut tape.mlp);
     }
@@ -523,7 +534,7 @@ impl TrainableField for HashGridField {
         }
         tape.inputs[..n * d].copy_from_slice(inputs);
         tape.rows = n;
-        self.encode(&tape.inputs[..n * d], &mut tape.features);
+        self.encode(&tape.inputs[..n * d], &mut tape.features, true);
         let lf = self.mlp.in_dim();
         self.mlp.forward(&self.params[self.grid_params..], &tape.features[..n * lf], out, &mut tape.mlp);
     }
@@ -548,7 +559,7 @@ impl TrainableField for HashGridField {
         let dfeat = &mut tape.d_features[..n * lf];
         // The level tables come first in `params`, so `grid_grads` indexes like them.
         for l in 0..self.levels.len() {
-            self.dispatch::<true>(l, inputs, dfeat, grid_grads);
+            self.dispatch::<true>(l, inputs, dfeat, grid_grads, true);
         }
     }
 
@@ -626,7 +637,7 @@ mod tests {
         let (d, lf) = (field.input_dim, field.levels.len() * field.config.features_per_level);
         let mut single = Vec::new();
         for (r, x) in inputs.chunks(d).enumerate() {
-            field.encode(x, &mut single);
+            field.encode(x, &mut single, false);
             for k in 0..lf {
                 let (a, b) = (batch[r * lf + k], single[k]);
                 assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{what}: row {r} feature {k}: {a} vs {b}");
@@ -642,13 +653,13 @@ mod tests {
         let mut batch = vec![0.0f32; field.num_params()];
         let mut df = dfeat.to_vec();
         for l in 0..levels {
-            field.dispatch::<true>(l, inputs, &mut df, &mut batch);
+            field.dispatch::<true>(l, inputs, &mut df, &mut batch, true);
         }
         let mut rows = vec![0.0f32; field.num_params()];
         for (r, x) in inputs.chunks(d).enumerate() {
             let mut df = dfeat[r * lf..(r + 1) * lf].to_vec();
             for l in 0..levels {
-                field.dispatch::<true>(l, x, &mut df, &mut rows);
+                field.dispatch::<true>(l, x, &mut df, &mut rows, false);
             }
         }
         (batch, rows)
@@ -682,9 +693,12 @@ mod tests {
             let inputs: Vec<f32> = (0..n * d)
                 .map(|i| if i % d == 3 { rng.random_range(-0.5..3.5) } else { rng.random_range(-0.1..1.1) })
                 .collect();
-            let mut batch = Vec::new();
-            field.encode(&inputs, &mut batch);
-            assert_encoding_matches_rows(&field, &inputs, &batch, &format!("d {d} F {f}"));
+            // Both ways the vectorised pass runs: fetching entries ahead (training) or not.
+            for training in [false, true] {
+                let mut batch = Vec::new();
+                field.encode(&inputs, &mut batch, training);
+                assert_encoding_matches_rows(&field, &inputs, &batch, &format!("d {d} F {f} training {training}"));
+            }
         }
     }
 
@@ -743,9 +757,9 @@ mod tests {
             inputs.iter().enumerate().map(|(i, &x)| if i % 4 == 3 { (x + dt).clamp(0.0, 3.0) } else { x }).collect()
         };
         let (mut at, mut before, mut after) = (Vec::new(), Vec::new(), Vec::new());
-        field.encode(&inputs, &mut at);
-        field.encode(&shifted(-1e-3), &mut before);
-        field.encode(&shifted(1e-3), &mut after);
+        field.encode(&inputs, &mut at, false);
+        field.encode(&shifted(-1e-3), &mut before, false);
+        field.encode(&shifted(1e-3), &mut after, false);
         for k in 0..n * lf {
             let near = (at[k] - before[k]).abs().min((at[k] - after[k]).abs());
             assert!(near < 1e-2, "feature {k}: {} at a whole time, {} / {} around it", at[k], before[k], after[k]);
@@ -799,12 +813,12 @@ mod tests {
         let inputs: Vec<f32> =
             points.iter().flat_map(|p| times.iter().flat_map(move |&t| [p[0], p[1], p[2], t])).collect();
         let mut feats = Vec::new();
-        field.encode(&inputs, &mut feats);
+        field.encode(&inputs, &mut feats, false);
         assert_encoding_matches_rows(&field, &inputs, &feats, "static levels");
         // Row by row (one arithmetic path), the static features are the same bits at every time.
         let mut rows = Vec::new();
         for x in inputs.chunks(4) {
-            field.encode(x, &mut feats);
+            field.encode(x, &mut feats, false);
             rows.push(feats[..18].to_vec());
         }
         for (i, by_time) in rows.chunks(times.len()).enumerate() {
@@ -813,7 +827,7 @@ mod tests {
             }
             assert_ne!(by_time[0][..12], by_time[3][..12], "point {i}: the space–time levels must see the time");
         }
-        field.encode(&inputs, &mut feats);
+        field.encode(&inputs, &mut feats, false);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let dfeat: Vec<f32> = (0..feats.len()).map(|_| rng.random_range(-1.0..1.0)).collect();
         let (batch, rows) = gradients_batched_and_by_row(&field, &inputs, &dfeat);

@@ -34,6 +34,10 @@ pub(crate) struct LevelArgs<'a> {
     pub column: usize,
     /// Features per row (`L · F`).
     pub row_len: usize,
+    /// Whether the table entries of batches ahead are fetched into the cache: for points in
+    /// random order (training samples of random rays), not for points that follow each other
+    /// in space (a grid, a ray marched in order), whose entries the cache already holds.
+    pub fetch_ahead: bool,
 }
 
 /// Whether the kernel runs: the CPU has AVX2 and FMA (cached by the standard library) and
@@ -69,14 +73,15 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
     // weights and entries computed, the entries fetched into the cache (the tables are larger
     // than the cache, and the gathers would otherwise wait on them in turn).
     let batches = full / 8;
+    let fetch = args.fetch_ahead.then_some(table);
     let mut ring = [Corners::EMPTY; AHEAD + 1];
     for b in 0..batches.min(AHEAD) {
-        ring[b].prepare::<D, F, DENSE>(args, &inputs[b * 8 * D..(b + 1) * 8 * D], mask, table);
+        ring[b].prepare::<D, F, DENSE>(args, &inputs[b * 8 * D..(b + 1) * 8 * D], mask, fetch);
     }
     for b in 0..batches {
         if b + AHEAD < batches {
             let first = (b + AHEAD) * 8 * D;
-            ring[(b + AHEAD) % (AHEAD + 1)].prepare::<D, F, DENSE>(args, &inputs[first..first + 8 * D], mask, table);
+            ring[(b + AHEAD) % (AHEAD + 1)].prepare::<D, F, DENSE>(args, &inputs[first..first + 8 * D], mask, fetch);
         }
         let base = b * 8;
         let c = &ring[b % (AHEAD + 1)];
@@ -215,6 +220,7 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
     // entries fetched into the cache (the gradient table is larger than the cache, and the
     // additions would otherwise wait on its entries in turn).
     let batches = full / 8;
+    let fetch = args.fetch_ahead.then_some(g as *const f32);
     let mut ring = [Corners::EMPTY; AHEAD + 1];
     let mut prod = [[[[0.0f32; 8]; F]; 16]; AHEAD + 1];
     let mask = _mm256_set1_epi32(args.mask as i32);
@@ -229,7 +235,7 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
             }
             let slot = b % (AHEAD + 1);
             let c = &mut ring[slot];
-            c.prepare::<D, F, DENSE>(args, &inputs[base * D..(base + 8) * D], mask, g);
+            c.prepare::<D, F, DENSE>(args, &inputs[base * D..(base + 8) * D], mask, fetch);
             for corner in 0..1usize << D {
                 if skipped::<D>(corner, c.idle) {
                     continue;
@@ -280,7 +286,7 @@ impl Corners {
         args: &LevelArgs<'_>,
         points: &[f32],
         mask: __m256i,
-        table: *const f32,
+        table: Option<*const f32>,
     ) {
         let (w, part) = axes::<D, DENSE>(args, points);
         self.idle = idle_time_corners::<D>(&w);
@@ -293,11 +299,13 @@ impl Corners {
             let idx = _mm256_mullo_epi32(idx, _mm256_set1_epi32(F as i32));
             self.weight[corner] = wc;
             self.entry[corner] = idx;
-            // SAFETY: `at` holds eight values.
-            unsafe { _mm256_storeu_si256(at.as_mut_ptr() as *mut __m256i, idx) };
-            for &e in &at {
-                // A prefetch reads nothing; the address is an entry of the table.
-                _mm_prefetch::<_MM_HINT_T0>(table.wrapping_add(e as usize) as *const i8);
+            if let Some(table) = table {
+                // SAFETY: `at` holds eight values.
+                unsafe { _mm256_storeu_si256(at.as_mut_ptr() as *mut __m256i, idx) };
+                for &e in &at {
+                    // A prefetch reads nothing; the address is an entry of the table.
+                    _mm_prefetch::<_MM_HINT_T0>(table.wrapping_add(e as usize) as *const i8);
+                }
             }
         }
     }
