@@ -69,82 +69,102 @@ pub(crate) unsafe fn level_forward<const D: usize, const F: usize, const DENSE: 
     let table = args.table.as_ptr();
     let mut out = [[0.0f32; 8]; F];
     let mask = _mm256_set1_epi32(args.mask as i32);
+    // Gathers the features of the batch of eight rows from `$base`, whose corners' weights and
+    // entries (`F` values per entry) `$corner => $wa` gives; `$idle` as [`skipped`] takes it.
+    macro_rules! gather_batch {
+        ($base:expr, $idle:expr, $corner:ident => $wa:expr) => {{
+            let base = $base;
+            if F == 2 {
+                // Both features of a vertex in one 64-bit element: four points per gather, with
+                // their weights duplicated to match, accumulated in the rows' own layout.
+                let (mut lo, mut hi) = (zero, zero);
+                let dup_lo = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
+                let dup_hi = _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7);
+                for $corner in 0..1usize << D {
+                    if skipped::<D>($corner, $idle) {
+                        continue;
+                    }
+                    let (wc, at): (__m256, __m256i) = $wa;
+                    let pairs = table as *const i64;
+                    // SAFETY: `at / 2` is a vertex index or masked hash below the level's
+                    // entries, and its pair of floats starts at float `at`, byte `4 · at` (the
+                    // caller's contract).
+                    let (v_lo, v_hi) = unsafe {
+                        (
+                            _mm256_i32gather_epi64::<4>(pairs, _mm256_castsi256_si128(at)),
+                            _mm256_i32gather_epi64::<4>(pairs, _mm256_extracti128_si256::<1>(at)),
+                        )
+                    };
+                    lo = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_lo), _mm256_castsi256_ps(v_lo), lo);
+                    hi = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_hi), _mm256_castsi256_ps(v_hi), hi);
+                }
+                let mut pair = [[0.0f32; 8]; 2];
+                // SAFETY: each array holds eight floats.
+                unsafe {
+                    _mm256_storeu_ps(pair[0].as_mut_ptr(), lo);
+                    _mm256_storeu_ps(pair[1].as_mut_ptr(), hi);
+                }
+                for j in 0..8 {
+                    let row = (base + j) * args.row_len + args.column;
+                    let src = &pair[j / 4][2 * (j % 4)..2 * (j % 4) + 2];
+                    feats[row..row + 2].copy_from_slice(src);
+                }
+            } else {
+                let mut acc = [zero; F];
+                for $corner in 0..1usize << D {
+                    if skipped::<D>($corner, $idle) {
+                        continue;
+                    }
+                    let (wc, at): (__m256, __m256i) = $wa;
+                    for (k, acc) in acc.iter_mut().enumerate() {
+                        // SAFETY: `at / F` is a vertex index or masked hash below the level's
+                        // entries, so `at + k` is inside the table (the caller's contract).
+                        let v = unsafe { _mm256_i32gather_ps::<4>(table.add(k), at) };
+                        *acc = _mm256_fmadd_ps(wc, v, *acc);
+                    }
+                }
+                for k in 0..F {
+                    // SAFETY: `out[k]` holds eight floats.
+                    unsafe { _mm256_storeu_ps(out[k].as_mut_ptr(), acc[k]) };
+                }
+                for j in 0..8 {
+                    let row = (base + j) * args.row_len + args.column;
+                    for k in 0..F {
+                        feats[row + k] = out[k][j];
+                    }
+                }
+            }
+        }};
+    }
+    let times_f = _mm256_set1_epi32(F as i32);
+    if !args.fetch_ahead {
+        // Points in spatial order: their entries are mostly in the cache already, and the
+        // corners are computed where they are used.
+        for base in (0..full).step_by(8) {
+            let (w, part) = axes::<D, DENSE>(args, &inputs[base * D..(base + 8) * D]);
+            let idle = idle_time_corners::<D>(&w);
+            gather_batch!(base, idle, corner => {
+                let (wc, idx) = corner_of::<D, DENSE>(&w, &part, corner, mask);
+                (wc, _mm256_mullo_epi32(idx, times_f))
+            });
+        }
+        return full;
+    }
     // Batches of eight points are prepared AHEAD batches before they gather: their corners'
     // weights and entries computed, the entries fetched into the cache (the tables are larger
     // than the cache, and the gathers would otherwise wait on them in turn).
     let batches = full / 8;
-    let fetch = args.fetch_ahead.then_some(table);
     let mut ring = [Corners::EMPTY; AHEAD + 1];
     for b in 0..batches.min(AHEAD) {
-        ring[b].prepare::<D, F, DENSE>(args, &inputs[b * 8 * D..(b + 1) * 8 * D], mask, fetch);
+        ring[b].prepare::<D, F, DENSE>(args, &inputs[b * 8 * D..(b + 1) * 8 * D], mask, Some(table));
     }
     for b in 0..batches {
         if b + AHEAD < batches {
-            let first = (b + AHEAD) * 8 * D;
-            ring[(b + AHEAD) % (AHEAD + 1)].prepare::<D, F, DENSE>(args, &inputs[first..first + 8 * D], mask, fetch);
+            let points = &inputs[(b + AHEAD) * 8 * D..(b + AHEAD + 1) * 8 * D];
+            ring[(b + AHEAD) % (AHEAD + 1)].prepare::<D, F, DENSE>(args, points, mask, Some(table));
         }
-        let base = b * 8;
         let c = &ring[b % (AHEAD + 1)];
-        if F == 2 {
-            // Both features of a vertex in one 64-bit element: four points per gather, with
-            // their weights duplicated to match, accumulated in the rows' own layout.
-            let (mut lo, mut hi) = (zero, zero);
-            let dup_lo = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
-            let dup_hi = _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7);
-            for corner in 0..1usize << D {
-                if skipped::<D>(corner, c.idle) {
-                    continue;
-                }
-                let (wc, at) = (c.weight[corner], c.entry[corner]);
-                let pairs = table as *const i64;
-                // SAFETY: `at / 2` is a vertex index or masked hash below the level's entries,
-                // and its pair of floats starts at float `at`, byte `4 · at` (the caller's
-                // contract).
-                let (v_lo, v_hi) = unsafe {
-                    (
-                        _mm256_i32gather_epi64::<4>(pairs, _mm256_castsi256_si128(at)),
-                        _mm256_i32gather_epi64::<4>(pairs, _mm256_extracti128_si256::<1>(at)),
-                    )
-                };
-                lo = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_lo), _mm256_castsi256_ps(v_lo), lo);
-                hi = _mm256_fmadd_ps(_mm256_permutevar8x32_ps(wc, dup_hi), _mm256_castsi256_ps(v_hi), hi);
-            }
-            let mut pair = [[0.0f32; 8]; 2];
-            // SAFETY: each array holds eight floats.
-            unsafe {
-                _mm256_storeu_ps(pair[0].as_mut_ptr(), lo);
-                _mm256_storeu_ps(pair[1].as_mut_ptr(), hi);
-            }
-            for j in 0..8 {
-                let row = (base + j) * args.row_len + args.column;
-                let src = &pair[j / 4][2 * (j % 4)..2 * (j % 4) + 2];
-                feats[row..row + 2].copy_from_slice(src);
-            }
-            continue;
-        }
-        let mut acc = [zero; F];
-        for corner in 0..1usize << D {
-            if skipped::<D>(corner, c.idle) {
-                continue;
-            }
-            let (wc, at) = (c.weight[corner], c.entry[corner]);
-            for (k, acc) in acc.iter_mut().enumerate() {
-                // SAFETY: `idx` is a vertex index or masked hash below the level's entries, so
-                // `idx · F + k` is inside the table (the caller's contract).
-                let v = unsafe { _mm256_i32gather_ps::<4>(table.add(k), at) };
-                *acc = _mm256_fmadd_ps(wc, v, *acc);
-            }
-        }
-        for k in 0..F {
-            // SAFETY: `out[k]` holds eight floats.
-            unsafe { _mm256_storeu_ps(out[k].as_mut_ptr(), acc[k]) };
-        }
-        for j in 0..8 {
-            let row = (base + j) * args.row_len + args.column;
-            for k in 0..F {
-                feats[row + k] = out[k][j];
-            }
-        }
+        gather_batch!(b * 8, c.idle, corner => (c.weight[corner], c.entry[corner]));
     }
     full
 }
