@@ -291,6 +291,8 @@ struct Corners {
 }
 
 impl Corners {
+    /// Zero weights and entries: a ring's slots before their first batch.
+    // SAFETY: all-zero bits are a valid `__m256` and `__m256i` (eight 0.0 floats, eight zeros).
     const EMPTY: Corners = Corners {
         weight: [unsafe { std::mem::zeroed() }; 16],
         entry: [unsafe { std::mem::zeroed() }; 16],
