@@ -253,6 +253,11 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
                     d[k][j] = dfeats[row + k];
                 }
             }
+            let mut dv = [_mm256_setzero_ps(); F];
+            for k in 0..F {
+                // SAFETY: `d[k]` holds eight floats.
+                dv[k] = unsafe { _mm256_loadu_ps(d[k].as_ptr()) };
+            }
             let slot = b % (AHEAD + 1);
             let c = &mut ring[slot];
             c.prepare::<D, F, DENSE>(args, &inputs[base * D..(base + 8) * D], mask, fetch);
@@ -261,11 +266,10 @@ pub(crate) unsafe fn level_backward<const D: usize, const F: usize, const DENSE:
                     continue;
                 }
                 for k in 0..F {
-                    // SAFETY: `d[k]` and the product hold eight floats.
+                    // SAFETY: each product holds eight floats.
                     unsafe {
-                        let dv = _mm256_loadu_ps(d[k].as_ptr());
-                        _mm256_storeu_ps(prod[slot][corner][k].as_mut_ptr(), _mm256_mul_ps(c.weight[corner], dv));
-                    }
+                        _mm256_storeu_ps(prod[slot][corner][k].as_mut_ptr(), _mm256_mul_ps(c.weight[corner], dv[k]))
+                    };
                 }
             }
         }
