@@ -186,20 +186,31 @@ impl LrSchedule {
 }
 
 /// `total = Σ_k per_thread[k]`, then zeroes every `per_thread[k]` for the next step. Parallel
-/// over blocks; the sum over threads runs in a fixed order, so it is deterministic.
+/// over blocks; the sum over threads runs in a fixed order, so it is deterministic. Each
+/// block's task clears the ranges it has just read, while they are in its cache, instead of a
+/// pass of its own over every buffer afterwards.
 pub fn sum_gradients(per_thread: &mut [Vec<f32>], total: &mut [f32]) {
     for g in per_thread.iter() {
         assert_eq!(g.len(), total.len(), "sum_gradients: buffer length differs from total");
     }
-    let n = total.len();
+    /// A worker's buffer, shared between the block tasks, each of which touches only its own
+    /// range of it.
+    struct Buffer(*mut f32);
+    // SAFETY: the tasks access disjoint ranges of the buffer (below).
+    unsafe impl Sync for Buffer {}
+    let buffers: Vec<Buffer> = per_thread.iter_mut().map(|g| Buffer(g.as_mut_ptr())).collect();
     total.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
-        let r = b * BLOCK..(b * BLOCK + out.len()).min(n);
+        let start = b * BLOCK;
         out.fill(0.0);
-        for g in per_thread.iter() {
-            crate::kernels::add_assign(out, &g[r.clone()]);
+        for buffer in &buffers {
+            // SAFETY: every buffer is `total.len()` long (asserted above) and outlives this
+            // call, in which nothing else accesses it; block `b` is the only task that reads or
+            // writes `start..start + out.len()` of it.
+            let g = unsafe { std::slice::from_raw_parts_mut(buffer.0.add(start), out.len()) };
+            crate::kernels::add_assign(out, g);
+            g.fill(0.0);
         }
     });
-    per_thread.par_iter_mut().for_each(|g| g.fill(0.0));
 }
 
 #[cfg(test)]
