@@ -286,7 +286,18 @@ fn cases() -> Vec<Case> {
             RUN,
             "both camera",
         ),
-        c("background above every pixel", Json(|v| v["background"] = serde_json::json!(1e9)), RUN, "black"),
+        c(
+            "background above every pixel",
+            Json(|v| v["background"] = serde_json::json!(1e9)),
+            RUN,
+            fluidnerf_core::image::ALL_BLACK,
+        ),
+        c(
+            "background above every pixel, a field",
+            Json(|v| v["background"] = serde_json::json!(1e9)),
+            FAST,
+            fluidnerf_core::image::ALL_BLACK,
+        ),
         c("negative background", Json(|v| v["background"] = serde_json::json!(-100.0)), RUN, "at least 0"),
         c(
             "metrics as JSON and CSV into one file",

@@ -12,6 +12,10 @@ pub fn reads_clean(noise: Option<f64>) -> bool {
     noise.is_some_and(|n| n <= NOISY_ABOVE)
 }
 
+/// The refusal of every method whose training images hold no light where they are used (no
+/// pixel above 0 outside the masks): they can only give an empty volume.
+pub const ALL_BLACK: &str = "all training images are black (no pixel above 0 outside the masks)";
+
 /// A single-channel image of linear intensities, row-major: pixel `(col, row)` is
 /// `data[row * width + col]` and has its centre at image coordinates `(col, row)`.
 #[derive(Clone, Debug, PartialEq)]

@@ -467,7 +467,7 @@ impl Prepared {
                 .fold(0.0f32, f32::max),
         };
         if image_scale.is_nan() || image_scale <= 0.0 {
-            return Err(NeuralError::invalid("images", "all training images are black"));
+            return Err(NeuralError::invalid("images", fluidnerf_core::image::ALL_BLACK));
         }
         let length = problem.aabb.size().max_element();
         // A hull holds for one instant: carve each training time's views on their own and take

@@ -118,9 +118,8 @@ pub(crate) fn run(
         im
     };
     let measured_images: Vec<Image> = train_idx.iter().map(|&i| masked_image(i)).collect();
-    // As for the fields: black images can only give an empty volume.
     if measured_images.iter().all(|im| im.data.iter().all(|&v| v <= 0.0)) {
-        return Err(PipelineError::invalid("images", "all training images are black (every pixel 0)"));
+        return Err(PipelineError::invalid("images", fluidnerf_core::image::ALL_BLACK));
     }
     let train_masks: Vec<Option<Vec<bool>>> = train_idx.iter().map(|&i| measured.masks[i].clone()).collect();
     let holdout_images: Vec<Image> = held_idx.iter().map(|&i| masked_image(i)).collect();
