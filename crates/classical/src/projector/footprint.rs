@@ -91,6 +91,7 @@ use std::sync::{Arc, OnceLock};
 use fluidnerf_core::Camera;
 use rayon::prelude::*;
 
+use super::camera32::{distort, CameraF32, GridF32};
 use super::{check_shapes, scatter_parts, splat::validate, Grid, Projector, SparseRows};
 use crate::ClassicalError;
 
@@ -108,19 +109,7 @@ pub const AUTO_FOOTPRINT_MAX_PX: f64 = (MAX_FOOTPRINT_SIDE as f64 - 1.0) / 1.02;
 /// One view's camera in f32, ready for the voxel loop.
 #[derive(Clone, Copy, Debug)]
 struct FootView {
-    width: usize,
-    height: usize,
-    /// Rows of the camera-from-world rotation.
-    rot: [[f32; 3]; 3],
-    trans: [f32; 3],
-    fx: f32,
-    fy: f32,
-    cx: f32,
-    cy: f32,
-    skew: f32,
-    /// k1, k2, p1, p2, k3, k4, k5, k6.
-    dist: [f32; 8],
-    distorted: bool,
+    cam: CameraF32,
     /// `intensity_scale · V_vox · f_x · f_y`.
     gain: f32,
     /// The voxel's edges in camera axes: `edges[a] = R (Δ_a e_a)`.
@@ -539,26 +528,6 @@ fn fmin(a: f32, b: f32) -> f32 {
     }
 }
 
-/// OpenCV distortion of normalised coordinates in f32, with its Jacobian `[dxx, dxy, dyx, dyy]`
-/// (mirrors [`fluidnerf_core::Distortion::apply_with_jacobian`]).
-#[inline(always)]
-fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, [f32; 4]) {
-    let [k1, k2, p1, p2, k3, k4, k5, k6] = *d;
-    let r2 = x * x + y * y;
-    let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-    let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
-    let a = num / den;
-    let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
-    let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
-    let da = (dnum * den - num * dden) / (den * den);
-    let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-    let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-    let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
-    let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
-    let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
-    (xd, yd, [dxx, dxy, dxy, dyy])
-}
-
 /// The trapezoid `(p, l)` approximating the sum of three uniform variables of widths `w`
 /// (same variance, exact when one width is zero), `p ≥ l`.
 #[inline(always)]
@@ -580,13 +549,8 @@ fn fit_trapezoid(p: f32, l: f32, n: usize, narrow: bool) -> (f32, f32) {
 
 impl FootView {
     fn new(camera: &Camera, grid: &Grid, intensity_scale: f64) -> Self {
-        let cfw = camera.camera_from_world();
-        let m = cfw.matrix3;
-        // glam stores columns; row r of R is (m.x_axis[r], m.y_axis[r], m.z_axis[r]).
-        let rot = [0, 1, 2].map(|r| [m.x_axis[r] as f32, m.y_axis[r] as f32, m.z_axis[r] as f32]);
-        let t = cfw.translation;
+        let m = camera.camera_from_world().matrix3;
         let k = camera.intrinsics;
-        let d = camera.distortion;
         let sp = grid.spacing();
         let sides = [sp.x, sp.y, sp.z];
         let cols = [m.x_axis, m.y_axis, m.z_axis];
@@ -595,17 +559,7 @@ impl FootView {
             [e.x as f32, e.y as f32, e.z as f32]
         });
         let mut view = FootView {
-            width: camera.width(),
-            height: camera.height(),
-            rot,
-            trans: [t.x as f32, t.y as f32, t.z as f32],
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            skew: k.skew as f32,
-            dist: [d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6].map(|v| v as f32),
-            distorted: !d.is_identity(),
+            cam: CameraF32::new(camera),
             gain: (intensity_scale * grid.voxel_volume() * k.fx * k.fy) as f32,
             edges,
             side: MAX_FOOTPRINT_SIDE,
@@ -623,18 +577,6 @@ impl FootView {
         view
     }
 
-    /// Camera-frame centre of voxel `(0, j, k)` and the step per `i`.
-    #[inline(always)]
-    fn row_start(&self, grid: &GridF32, j: usize, k: usize) -> ([f32; 3], [f32; 3]) {
-        let x = grid.min[0] + 0.5 * grid.sp[0];
-        let y = grid.min[1] + (j as f32 + 0.5) * grid.sp[1];
-        let z = grid.min[2] + (k as f32 + 0.5) * grid.sp[2];
-        let r = &self.rot;
-        let base = axes3(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
-        let step = axes3(|a| r[a][0] * grid.sp[0]);
-        (base, step)
-    }
-
     /// Projected centre, the three edge widths along `u` and along `v`, and `γ` of a voxel
     /// centred at camera-frame `p`; `None` behind the camera.
     #[inline(always)]
@@ -644,9 +586,9 @@ impl FootView {
         let zs = if in_front { z } else { 1.0 };
         let iz = 1.0 / zs;
         let (xn, yn) = (x * iz, y * iz);
-        let (xd, yd, jac) = if DISTORTED { distort(&self.dist, xn, yn) } else { (xn, yn, [1.0, 0.0, 0.0, 1.0]) };
-        let u = self.fx * xd + self.skew * yd + self.cx;
-        let v = self.fy * yd + self.cy;
+        let (xd, yd, jac) = if DISTORTED { distort(&self.cam.dist, xn, yn) } else { (xn, yn, [1.0, 0.0, 0.0, 1.0]) };
+        let u = self.cam.fx * xd + self.cam.skew * yd + self.cam.cx;
+        let v = self.cam.fy * yd + self.cam.cy;
         let mut wu = [0f32; 3];
         let mut wv = [0f32; 3];
         for a in 0..3 {
@@ -654,8 +596,8 @@ impl FootView {
             let dx = iz * (e[0] - xn * e[2]);
             let dy = iz * (e[1] - yn * e[2]);
             let (dxd, dyd) = if DISTORTED { (jac[0] * dx + jac[1] * dy, jac[2] * dx + jac[3] * dy) } else { (dx, dy) };
-            wu[a] = (self.fx * dxd + self.skew * dyd).abs();
-            wv[a] = (self.fy * dyd).abs();
+            wu[a] = (self.cam.fx * dxd + self.cam.skew * dyd).abs();
+            wv[a] = (self.cam.fy * dyd).abs();
         }
         let det = if DISTORTED { (jac[0] * jac[3] - jac[1] * jac[2]).abs() } else { 1.0 };
         let s = (x * x + y * y + zs * zs).sqrt();
@@ -777,7 +719,7 @@ impl FootView {
     #[inline(always)]
     fn chunk_place<const N: usize>(&self, wide: bool, t: &mut ChunkTrapezoids, out: &mut Chunk<N>) {
         let n = N as f32;
-        let (wmax, hmax) = ((self.width + N) as f32, (self.height + N) as f32);
+        let (wmax, hmax) = ((self.cam.width + N) as f32, (self.cam.height + N) as f32);
         for q in 0..CHUNK {
             (t.pu[q], t.lu[q]) = fit_trapezoid(t.pu[q], t.lu[q], self.cols, wide);
             (t.pv[q], t.lv[q]) = fit_trapezoid(t.pv[q], t.lv[q], self.rows, wide);
@@ -824,10 +766,10 @@ impl FootView {
     /// rotation make every voxel of a row have the same camera depth and `x` (or `y`), bit for
     /// bit.
     fn sharing(&self) -> Shared {
-        let r = &self.rot;
-        if self.distorted || r[2][0] != 0.0 {
+        let r = &self.cam.rot;
+        if self.cam.distorted || r[2][0] != 0.0 {
             Shared::None
-        } else if r[0][0] == 0.0 && self.skew == 0.0 {
+        } else if r[0][0] == 0.0 && self.cam.skew == 0.0 {
             Shared::U
         } else if r[1][0] == 0.0 {
             Shared::V
@@ -841,14 +783,17 @@ impl FootView {
     #[inline(always)]
     fn along<const ALONG_V: bool>(&self, xn: f32, yn: f32, iz: f32) -> (f32, [f32; 3]) {
         if ALONG_V {
-            (self.fy * yn + self.cy, axes3(|a| (self.fy * (iz * (self.edges[a][1] - yn * self.edges[a][2]))).abs()))
+            (
+                self.cam.fy * yn + self.cam.cy,
+                axes3(|a| (self.cam.fy * (iz * (self.edges[a][1] - yn * self.edges[a][2]))).abs()),
+            )
         } else {
             let w = axes3(|a| {
                 let e = self.edges[a];
                 let (dx, dy) = (iz * (e[0] - xn * e[2]), iz * (e[1] - yn * e[2]));
-                (self.fx * dx + self.skew * dy).abs()
+                (self.cam.fx * dx + self.cam.skew * dy).abs()
             });
-            (self.fx * xn + self.skew * yn + self.cx, w)
+            (self.cam.fx * xn + self.cam.skew * yn + self.cam.cx, w)
         }
     }
 
@@ -906,7 +851,7 @@ impl FootView {
         let n = N as f32;
         let moving = if SHARED_V { 0 } else { 1 };
         let n_s = if SHARED_V { self.rows } else { self.cols };
-        let bound_s = if SHARED_V { (self.height + N) as f32 } else { (self.width + N) as f32 };
+        let bound_s = if SHARED_V { (self.cam.height + N) as f32 } else { (self.cam.width + N) as f32 };
         let z16 = [0f32; CHUNK];
         let (mut first, mut inv_p, mut zs, mut iz, mut fixed) = (z16, z16, z16, z16, z16);
         let (mut off, mut ps, mut ls, mut inv_s) = (z16, z16, z16, z16);
@@ -1005,14 +950,14 @@ impl FootView {
         // `w_a = |a0_a + a1_a c|` (the same quantities, with the row's factors taken once).
         let (c0, c1, a0, a1) = if SHARED_V {
             let yn = fixed * iz;
-            let (f, s) = (self.fx * iz, self.skew * iz);
+            let (f, s) = (self.cam.fx * iz, self.cam.skew * iz);
             let e = &self.edges;
             let a0 = axes3(|a| f * e[a][0] + s * (e[a][1] - yn * e[a][2]));
-            (self.skew * yn + self.cx, f, a0, axes3(|a| -f * iz * e[a][2]))
+            (self.cam.skew * yn + self.cam.cx, f, a0, axes3(|a| -f * iz * e[a][2]))
         } else {
-            let f = self.fy * iz;
+            let f = self.cam.fy * iz;
             let e = &self.edges;
-            (self.cy, f, axes3(|a| f * e[a][1]), axes3(|a| -f * iz * e[a][2]))
+            (self.cam.cy, f, axes3(|a| f * e[a][1]), axes3(|a| -f * iz * e[a][2]))
         };
         MovingRow {
             start: base[moving],
@@ -1024,7 +969,7 @@ impl FootView {
             base_s: fixed * fixed + rs.zs * rs.zs,
             g0: self.gain * iz * iz * iz,
             n_lim: if SHARED_V { self.cols } else { self.rows },
-            bound: if SHARED_V { (self.width + N) as f32 } else { (self.height + N) as f32 },
+            bound: if SHARED_V { (self.cam.width + N) as f32 } else { (self.cam.height + N) as f32 },
         }
     }
 
@@ -1042,10 +987,10 @@ impl FootView {
                     let f = glam::DVec3::new(a as f64, b as f64, c as f64) / (n - 1) as f64;
                     let w = lo + f * span;
                     let w = [w.x as f32, w.y as f32, w.z as f32];
-                    let r = &self.rot;
-                    let p = [0, 1, 2].map(|i| r[i][0] * w[0] + r[i][1] * w[1] + r[i][2] * w[2] + self.trans[i]);
+                    let r = &self.cam.rot;
+                    let p = [0, 1, 2].map(|i| r[i][0] * w[0] + r[i][1] * w[1] + r[i][2] * w[2] + self.cam.trans[i]);
                     let (in_front, _, _, wu, wv, _) =
-                        if self.distorted { self.project::<true>(p) } else { self.project::<false>(p) };
+                        if self.cam.distorted { self.project::<true>(p) } else { self.project::<false>(p) };
                     if in_front {
                         let (pu, lu) = trapezoid(wu);
                         let (pv, lv) = trapezoid(wv);
@@ -1060,14 +1005,8 @@ impl FootView {
 
     /// Padded image size for footprints of side `N`: `(width + 2N) × (height + 2N)`.
     fn padded(&self) -> (usize, usize) {
-        (self.width + 2 * self.side, self.height + 2 * self.side)
+        (self.cam.width + 2 * self.side, self.cam.height + 2 * self.side)
     }
-}
-
-#[derive(Clone, Copy, Debug)]
-struct GridF32 {
-    min: [f32; 3],
-    sp: [f32; 3],
 }
 
 /// The separable-footprint projector; see the module docs.
@@ -1179,11 +1118,7 @@ impl FootprintProjector {
                 ));
             }
         }
-        let sp = grid.spacing();
-        let gf = GridF32 {
-            min: [grid.aabb.min.x as f32, grid.aabb.min.y as f32, grid.aabb.min.z as f32],
-            sp: [sp.x as f32, sp.y as f32, sp.z as f32],
-        };
+        let gf = GridF32::new(&grid);
         Ok(FootprintProjector { grid, cameras: cameras.to_vec(), views, gf, isa: Isa::detected(), kept: None })
     }
 
@@ -1265,7 +1200,7 @@ impl FootprintProjector {
             if rs.first < 0.0 {
                 continue;
             }
-            let (base, step) = fv.row_start(&self.gf, j, k);
+            let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
             fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, &starts, &mut scratch, &mut mvs);
             if nx % CHUNK != 0 {
                 mvs[nx / CHUNK].first[nx % CHUNK..].fill(-1.0);
@@ -1337,7 +1272,7 @@ impl FootprintProjector {
         let mut ch = Chunk::<N>::default();
         for (kk, k) in ks.enumerate() {
             for j in 0..ny {
-                let (base, step) = fv.row_start(&self.gf, j, k);
+                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 let row0 = (kk * ny + j) * nx;
                 for i0 in (0..nx).step_by(CHUNK) {
                     fv.chunk::<N, DISTORTED, LANES>(base, step, i0, &mut ch);
@@ -1367,7 +1302,7 @@ impl FootprintProjector {
         let mut scratch = vec![ChunkTrapezoids::default(); chunks.len()];
         for k in ks {
             for j in 0..ny {
-                let (base, step) = fv.row_start(&self.gf, j, k);
+                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 let row0 = (k * ny + j) * nx;
                 // Empty voxels add nothing: a chunk of them needs no footprints. Flows leave
                 // most of a box dark, so this is most of the work of a projection there.
@@ -1713,7 +1648,7 @@ impl FootprintProjector {
         for j0 in (0..ny).step_by(CHUNK) {
             let mut bases = [[0f32; 3]; CHUNK];
             for (q, b) in bases.iter_mut().enumerate() {
-                *b = fv.row_start(&self.gf, (j0 + q).min(ny - 1), k).0;
+                *b = fv.cam.row_start(&self.gf, (j0 + q).min(ny - 1), k, [0.0; 3]).0;
             }
             fv.rows_shared::<N, SHARED_V>(&bases, &mut rs);
             let m = CHUNK.min(ny - j0);
@@ -1747,7 +1682,7 @@ impl FootprintProjector {
             self.slice_rows_shared::<N, SHARED_V>(view, k, &mut rss);
             for (j, rs) in rss.iter().enumerate() {
                 let row0 = (k * ny + j) * nx;
-                let (base, step) = fv.row_start(&self.gf, j, k);
+                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 if rs.first < 0.0 {
                     continue;
                 }
@@ -1838,7 +1773,7 @@ impl FootprintProjector {
                 .and_then(|kf| kf.views[view].as_ref())
                 .map(|slices| slices[k].get_or_init(|| self.keep_slice::<N, SHARED_V>(view, k, &rss, n_l)));
             for (j, rs) in rss.iter().enumerate() {
-                let (base, step) = fv.row_start(&self.gf, j, k);
+                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 if rs.first < 0.0 {
                     continue;
                 }
@@ -2105,7 +2040,7 @@ impl FootprintProjector {
     /// slots. The entries of a row come in voxel order, as one pass over the grid would give.
     fn rows_impl<const N: usize, const DISTORTED: bool>(&self, view: usize) -> SparseRows {
         let fv = &self.views[view];
-        let pixels = fv.width * fv.height;
+        let pixels = fv.cam.width * fv.cam.height;
         let nz = self.grid.dims[2];
         let parts = rayon::current_num_threads().clamp(1, nz.max(1));
         let ranges: Vec<Range<usize>> = (0..parts).map(|t| t * nz / parts..(t + 1) * nz / parts).collect();
@@ -2154,7 +2089,7 @@ impl FootprintProjector {
         mut emit: impl FnMut(usize, u32, f32),
     ) {
         let fv = &self.views[view];
-        let (w, h) = (fv.width, fv.height);
+        let (w, h) = (fv.cam.width, fv.cam.height);
         let [nx, ny, _] = self.grid.dims;
         let first_voxel = ks.start * nx * ny;
         self.for_each_chunk::<N, DISTORTED, false>(view, ks, |ch, first, valid| {
@@ -2497,7 +2432,7 @@ impl FootprintProjector {
     fn back_image(&self, view: usize, y: &[f32]) -> BackImage {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
-        let (w, h, n) = (fv.width, fv.height, fv.side);
+        let (w, h, n) = (fv.cam.width, fv.cam.height, fv.side);
         let mut padded = vec![0f32; pw * ph];
         for (r, row) in y.chunks_exact(w).enumerate() {
             padded[(r + n) * pw + n..][..w].copy_from_slice(row);
@@ -2534,7 +2469,9 @@ impl FootprintProjector {
                 self, view, ks, padded, rows_masks, o, c
             )),
             Shared::None => {
-                dispatch!(fv.side, fv.distorted, |N, D| kernels::gather::<N, D>(self, view, ks, padded, masks, o, c))
+                dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::gather::<N, D>(
+                    self, view, ks, padded, masks, o, c
+                ))
             }
         }
     }
@@ -2553,7 +2490,7 @@ impl Projector for FootprintProjector {
         check_shapes(self, view, x.len(), out.len());
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
-        let (w, n) = (fv.width, fv.side);
+        let (w, n) = (fv.cam.width, fv.side);
         let nz = self.grid.dims[2];
         // Interleaved slices, so that the threads share the work evenly when it is uneven
         // (chunks of empty voxels are skipped, and a flow fills part of the box).
@@ -2563,7 +2500,7 @@ impl Projector for FootprintProjector {
             .map(|first| {
                 let ks = (first..nz).step_by(parts);
                 let mut img = vec![0f32; SCATTER_IMAGES * pw * ph];
-                dispatch!(fv.side, fv.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, &mut img));
+                dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, &mut img));
                 img
             })
             .collect();
@@ -2625,7 +2562,7 @@ impl Projector for FootprintProjector {
 
     fn rows(&self, view: usize) -> SparseRows {
         let fv = &self.views[view];
-        dispatch!(fv.side, fv.distorted, |N, D| self.rows_impl::<N, D>(view))
+        dispatch!(fv.side, fv.cam.distorted, |N, D| self.rows_impl::<N, D>(view))
     }
 
     fn rows_bytes_estimate(&self, view: usize) -> usize {

@@ -38,6 +38,7 @@
 //! (about 1.5×) but blurs by a pixel and leaves gaps once voxels grow, so the rule does not
 //! pick it. The splat stays available by name (`kind: "splat"`), as the dissertation's scheme.
 
+mod camera32;
 mod footprint;
 mod ray;
 mod splat;

@@ -26,25 +26,14 @@
 use fluidnerf_core::Camera;
 use rayon::prelude::*;
 
+use super::camera32::{distort, CameraF32, GridF32};
 use super::{bands, check_shapes, scatter_parts, Grid, Projector, SparseRows};
 use crate::ClassicalError;
 
 /// One view's camera in f32, ready for the voxel loop.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SplatView {
-    width: usize,
-    height: usize,
-    /// Rows of the camera-from-world rotation.
-    rot: [[f32; 3]; 3],
-    trans: [f32; 3],
-    fx: f32,
-    fy: f32,
-    cx: f32,
-    cy: f32,
-    skew: f32,
-    /// k1, k2, p1, p2, k3, k4, k5, k6.
-    dist: [f32; 8],
-    distorted: bool,
+    cam: CameraF32,
     /// `intensity_scale · V_vox · f_x · f_y`.
     gain: f32,
 }
@@ -61,40 +50,8 @@ pub(crate) struct Footprint {
 impl SplatView {
     fn new(camera: &Camera, gain_base: f64) -> Self {
         // `gain_base` already holds 1 / subdivisions³.
-        let cfw = camera.camera_from_world();
-        let m = cfw.matrix3;
-        // glam stores columns; row r of R is (m.x_axis[r], m.y_axis[r], m.z_axis[r]).
-        let rot = [0, 1, 2].map(|r| [m.x_axis[r] as f32, m.y_axis[r] as f32, m.z_axis[r] as f32]);
-        let t = cfw.translation;
         let k = camera.intrinsics;
-        let d = camera.distortion;
-        SplatView {
-            width: camera.width(),
-            height: camera.height(),
-            rot,
-            trans: [t.x as f32, t.y as f32, t.z as f32],
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            skew: k.skew as f32,
-            dist: [d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6].map(|v| v as f32),
-            distorted: !d.is_identity(),
-            gain: (gain_base * k.fx * k.fy) as f32,
-        }
-    }
-
-    /// Camera-frame position of the voxel row `(·, j, k)`'s first sample point (the centre
-    /// moved by `offset` voxel sides) and the step per `i`.
-    #[inline(always)]
-    fn row_start(&self, grid: &GridF32, j: usize, k: usize, offset: [f32; 3]) -> ([f32; 3], [f32; 3]) {
-        let y = grid.min[1] + (j as f32 + 0.5 + offset[1]) * grid.sp[1];
-        let z = grid.min[2] + (k as f32 + 0.5 + offset[2]) * grid.sp[2];
-        let x = grid.min[0] + (0.5 + offset[0]) * grid.sp[0];
-        let r = &self.rot;
-        let base = [0, 1, 2].map(|a| r[a][0] * x + r[a][1] * y + r[a][2] * z + self.trans[a]);
-        let step = [0, 1, 2].map(|a| r[a][0] * grid.sp[0]);
-        (base, step)
+        SplatView { cam: CameraF32::new(camera), gain: (gain_base * k.fx * k.fy) as f32 }
     }
 
     /// Projects `len ≤ CHUNK` consecutive voxels of a row (`p = base + (i0 + q) · step`) into
@@ -102,7 +59,7 @@ impl SplatView {
     /// that lie behind the camera) get `col = MISS`.
     #[inline(always)]
     fn project_chunk<const DISTORTED: bool>(&self, base: [f32; 3], step: [f32; 3], i0: usize, out: &mut Chunk) {
-        let (w, h) = (self.width as f32, self.height as f32);
+        let (w, h) = (self.cam.width as f32, self.cam.height as f32);
         for q in 0..CHUNK {
             let fi = (i0 + q) as f32;
             let x = base[0] + fi * step[0];
@@ -112,9 +69,14 @@ impl SplatView {
             let zs = if in_front { z } else { 1.0 };
             let inv_z = 1.0 / zs;
             let (xn, yn) = (x * inv_z, y * inv_z);
-            let (xd, yd, det) = if DISTORTED { distort(&self.dist, xn, yn) } else { (xn, yn, 1.0) };
-            let u = self.fx * xd + self.skew * yd + self.cx;
-            let v = self.fy * yd + self.cy;
+            let (xd, yd, det) = if DISTORTED {
+                let (xd, yd, j) = distort(&self.cam.dist, xn, yn);
+                (xd, yd, j[0] * j[3] - j[1] * j[2])
+            } else {
+                (xn, yn, 1.0)
+            };
+            let u = self.cam.fx * xd + self.cam.skew * yd + self.cam.cx;
+            let v = self.cam.fy * yd + self.cam.cy;
             // `u > -1` makes `u + 1` positive, so truncation is floor (and vectorises, unlike
             // `floor` on baseline x86-64). The comparisons are false for NaN.
             let hit = in_front & (u > -1.0) & (v > -1.0) & (u < w) & (v < h);
@@ -142,42 +104,22 @@ impl SplatView {
     /// skipped.
     #[inline(always)]
     fn for_each_pixel(&self, f: &Footprint, mut visit: impl FnMut(usize, f32)) {
-        let (w, h) = (self.width as i32, self.height as i32);
+        let (w, h) = (self.cam.width as i32, self.cam.height as i32);
         if f.col >= 0 && f.row >= 0 && f.col + 1 < w && f.row + 1 < h {
-            let at = f.row as usize * self.width + f.col as usize;
+            let at = f.row as usize * self.cam.width + f.col as usize;
             visit(at, f.w[0]);
             visit(at + 1, f.w[1]);
-            visit(at + self.width, f.w[2]);
-            visit(at + self.width + 1, f.w[3]);
+            visit(at + self.cam.width, f.w[2]);
+            visit(at + self.cam.width + 1, f.w[3]);
             return;
         }
         for (q, (dc, dr)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
             let (c, r) = (f.col + dc, f.row + dr);
             if c >= 0 && r >= 0 && c < w && r < h {
-                visit(r as usize * self.width + c as usize, f.w[q]);
+                visit(r as usize * self.cam.width + c as usize, f.w[q]);
             }
         }
     }
-}
-
-/// OpenCV distortion of normalised coordinates in f32, with the determinant of its Jacobian
-/// (mirrors [`fluidnerf_core::Distortion::apply_with_jacobian`]).
-#[inline(always)]
-fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, f32) {
-    let [k1, k2, p1, p2, k3, k4, k5, k6] = *d;
-    let r2 = x * x + y * y;
-    let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-    let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
-    let a = num / den;
-    let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
-    let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
-    let da = (dnum * den - num * dden) / (den * den);
-    let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-    let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-    let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
-    let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
-    let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
-    (xd, yd, dxx * dyy - dxy * dxy)
 }
 
 /// Voxels projected per batch.
@@ -196,12 +138,6 @@ impl Default for Chunk {
     fn default() -> Self {
         Chunk { u: [-1.0; CHUNK], v: [0.0; CHUNK], gamma: [0.0; CHUNK] }
     }
-}
-
-#[derive(Clone, Copy, Debug)]
-struct GridF32 {
-    min: [f32; 3],
-    sp: [f32; 3],
 }
 
 /// The voxel-driven bilinear splat projector; see the module docs.
@@ -227,11 +163,7 @@ impl SplatProjector {
     pub fn new(grid: Grid, cameras: &[Camera], intensity_scale: f64) -> Result<Self, ClassicalError> {
         validate(&grid, cameras, intensity_scale)?;
         let sub = Self::auto_subdivisions(&grid, cameras);
-        let sp = grid.spacing();
-        let gf = GridF32 {
-            min: [grid.aabb.min.x as f32, grid.aabb.min.y as f32, grid.aabb.min.z as f32],
-            sp: [sp.x as f32, sp.y as f32, sp.z as f32],
-        };
+        let gf = GridF32::new(&grid);
         let mut p = SplatProjector { grid, cameras: cameras.to_vec(), views: Vec::new(), gf, sub, intensity_scale };
         p.set_views();
         Ok(p)
@@ -282,7 +214,7 @@ impl SplatProjector {
     /// `visit(voxel index, footprint)`.
     #[inline(always)]
     fn for_each_voxel(&self, view: usize, ks: std::ops::Range<usize>, visit: impl FnMut(usize, &Footprint)) {
-        if self.views[view].distorted {
+        if self.views[view].cam.distorted {
             self.for_each_voxel_impl::<true>(view, ks, visit)
         } else {
             self.for_each_voxel_impl::<false>(view, ks, visit)
@@ -305,7 +237,7 @@ impl SplatProjector {
                 for &oy in &offs {
                     for &ox in &offs {
                         for j in 0..ny {
-                            let (base, step) = sv.row_start(&self.gf, j, k, [ox, oy, oz]);
+                            let (base, step) = sv.cam.row_start(&self.gf, j, k, [ox, oy, oz]);
                             let row0 = (k * ny + j) * nx;
                             for i0 in (0..nx).step_by(CHUNK) {
                                 sv.project_chunk::<DISTORTED>(base, step, i0, &mut chunk);
@@ -469,7 +401,7 @@ impl Projector for SplatProjector {
 
     fn rows(&self, view: usize) -> SparseRows {
         let sv = &self.views[view];
-        let n_pix = sv.width * sv.height;
+        let n_pix = sv.cam.width * sv.cam.height;
         let nz = self.grid.dims[2];
         let mut ptr = vec![0u64; n_pix + 1];
         self.for_each_voxel(view, 0..nz, |_, f| sv.for_each_pixel(f, |pix, _| ptr[pix + 1] += 1));
