@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import operator
 import os
 import shutil
 import tempfile
@@ -467,9 +468,23 @@ def render(
 ) -> np.ndarray | list[np.ndarray]:
     """Line integrals of ``volume`` ``(nz, ny, nx)`` (trilinear) through every pixel of the
     scene's cameras, times ``intensity_scale`` (the reference renderer). ``step``: quadrature
-    step in world units (None: the box's smallest side / 256)."""
+    step in world units (None: the box's smallest side / 256; at most 2^20 steps along the
+    box's diagonal), ``supersample`` rays per pixel along each axis (1 to 64)."""
     vol = np.ascontiguousarray(volume, dtype=np.float32)
-    return _ext.render(_as_scene(scene), vol, step, int(supersample))
+    return _ext.render(_as_scene(scene), vol, step, _positive_int(supersample, "supersample"))
+
+
+def _positive_int(value: Any, name: str) -> int:
+    """``value`` as an int of at least 1; a float (even 2.0) or a bool is refused, not rounded."""
+    if isinstance(value, bool):
+        raise TypeError(f"{name}: expected an integer, got {value!r}")
+    try:
+        n = operator.index(value)
+    except TypeError:
+        raise TypeError(f"{name}: expected an integer, got {value!r}") from None
+    if n < 1:
+        raise FluidNerfError(f"{name}: must be at least 1, got {n}")
+    return n
 
 
 def _f32(a: np.ndarray) -> np.ndarray:

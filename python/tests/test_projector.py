@@ -147,3 +147,24 @@ def test_metrics_give_their_known_answers():
     assert fluidnerf.ssim(e, t, window="global") == pytest.approx(want, rel=1e-9)
     with pytest.raises(fluidnerf.FluidNerfError, match="differ in shape"):
         fluidnerf.nrmse(t, t[0])
+
+
+def test_render_refuses_steps_and_supersampling_it_would_never_finish(scene):
+    """A step of 1e-300 or 10⁵ rays per pixel axis held the interpreter for good (the renderer
+    takes no Ctrl-C); a float or negative ray count was truncated or raised a nameless error."""
+    s, *_ = scene
+    vol = np.ones((4, 4, 4), np.float32)
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"step: 1e-300 would take more than 1048576 samples"):
+        fluidnerf.render(s, vol, step=1e-300)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"step: must be a positive number of world units, got -1"
+    ):
+        fluidnerf.render(s, vol, step=-1.0)
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"supersample: .* between 1 and 64, got 100000"):
+        fluidnerf.render(s, vol, supersample=100_000)
+    for bad in (0, -1):
+        with pytest.raises(fluidnerf.FluidNerfError, match=rf"supersample: must be at least 1, got {bad}"):
+            fluidnerf.render(s, vol, supersample=bad)
+    with pytest.raises(TypeError, match="supersample: expected an integer, got 2.5"):
+        fluidnerf.render(s, vol, supersample=2.5)
+    assert fluidnerf.render(s, vol, step=0.5, supersample=np.int64(2)).shape == (4, 16, 16)

@@ -104,10 +104,19 @@ pub fn back_project<'py>(
     PyArray1::from_vec(py, out).reshape([nz, ny, nx])
 }
 
+/// The most samples [`render`] takes along the box's diagonal: 4096 times the default density
+/// (the box's smallest side / 256). The renderer walks every step of a ray without a check for
+/// Ctrl-C, so a step of 1e-300 would otherwise hold the interpreter for good.
+const MAX_SAMPLES_ON_DIAGONAL: f64 = (1u64 << 20) as f64;
+
+/// The most rays per pixel along each axis [`render`] takes (4096 rays per pixel).
+const MAX_SUPERSAMPLE: usize = 64;
+
 /// Line integrals of the volume `(nz, ny, nx)` (trilinear, filling the scene's box) through
 /// every pixel centre of the scene's cameras, times `intensity_scale`: the reference renderer
 /// (`fluidnerf_core::render_image`). `step` is the quadrature step in world units (None: the
-/// box's smallest side / 256), `supersample` rays per pixel per axis.
+/// box's smallest side / 256; at most 2^20 steps along the box's diagonal), `supersample` rays
+/// per pixel per axis (1 to 64).
 #[pyfunction]
 #[pyo3(signature = (scene, volume, step=None, supersample=1))]
 pub fn render(
@@ -117,6 +126,25 @@ pub fn render(
     step: Option<f64>,
     supersample: usize,
 ) -> PyResult<PyObject> {
+    if !(1..=MAX_SUPERSAMPLE).contains(&supersample) {
+        return Err(err(format!(
+            "supersample: rays per pixel along each axis must be between 1 and {MAX_SUPERSAMPLE}, got {supersample}"
+        )));
+    }
+    if let Some(step) = step {
+        if !(step > 0.0 && step.is_finite()) {
+            return Err(err(format!("step: must be a positive number of world units, got {step}")));
+        }
+        let diagonal = scene.inner.aabb.size().length();
+        if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {
+            return Err(err(format!(
+                "step: {step:e} would take more than {MAX_SAMPLES_ON_DIAGONAL} samples along the box's diagonal \
+                 ({diagonal:.4} {units}); give a step of at least {:.3e}",
+                diagonal / MAX_SAMPLES_ON_DIAGONAL,
+                units = scene.inner.units
+            )));
+        }
+    }
     let volume = volume_from_py(&volume, scene.inner.aabb)?;
     let cameras = scene.cameras();
     let settings = RenderSettings { step, supersample, time: 0.0, scale: scene.inner.intensity_scale };
