@@ -168,3 +168,19 @@ def test_render_refuses_steps_and_supersampling_it_would_never_finish(scene):
     with pytest.raises(TypeError, match="supersample: expected an integer, got 2.5"):
         fluidnerf.render(s, vol, supersample=2.5)
     assert fluidnerf.render(s, vol, step=0.5, supersample=np.int64(2)).shape == (4, 16, 16)
+
+
+def test_back_projection_refuses_images_that_are_not_finite(scene):
+    """A NaN or infinite pixel gave a volume of NaN without a word."""
+    s, *_ = scene
+    y = np.ones((4, 16, 16), np.float32)
+    y[2, 5, 7] = np.inf
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"images\[2\]: pixel \(row 5, column 7\) is not finite \(inf\)"
+    ):
+        fluidnerf.back_project(s, y, (N, N, N))
+    y[2, 5, 7] = np.nan
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"images\[2\]: pixel \(row 5, column 7\) is not finite \(NaN\)"
+    ):
+        fluidnerf.back_project(s, list(y), (N, N, N))

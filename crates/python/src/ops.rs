@@ -82,7 +82,16 @@ pub fn back_project<'py>(
                 a.shape()
             )));
         }
-        data.push(a.iter().copied().collect::<Vec<f32>>());
+        let pixels: Vec<f32> = a.iter().copied().collect();
+        if let Some(p) = pixels.iter().position(|v| !v.is_finite()) {
+            return Err(err(format!(
+                "images[{i}]: pixel (row {}, column {}) is not finite ({})",
+                p / c.width(),
+                p % c.width(),
+                pixels[p]
+            )));
+        }
+        data.push(pixels);
     }
     let (nz, ny, nx) = shape;
     if nx == 0 || ny == 0 || nz == 0 {
