@@ -459,7 +459,9 @@ def back_project(
     """``Aᵀ y``: the exact adjoint of :func:`forward_project`, images (one per frame) back into
     a volume of ``shape`` ``(nz, ny, nx)``."""
     imgs = [np.ascontiguousarray(i, dtype=np.float32) for i in images]
-    nz, ny, nx = (int(s) for s in shape)
+    if isinstance(shape, (str, bytes)) or not hasattr(shape, "__len__") or len(shape) != 3:
+        raise FluidNerfError(f"shape: expected the volume's three sides (nz, ny, nx), got {shape!r}")
+    nz, ny, nx = (_positive_int(n, f"shape[{i}]") for i, n in enumerate(shape))
     return _ext.back_project(_as_scene(scene), imgs, (nz, ny, nx), _projector(projector))
 
 

@@ -184,3 +184,21 @@ def test_back_projection_refuses_images_that_are_not_finite(scene):
         fluidnerf.FluidNerfError, match=r"images\[2\]: pixel \(row 5, column 7\) is not finite \(NaN\)"
     ):
         fluidnerf.back_project(s, list(y), (N, N, N))
+
+
+def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(scene):
+    """A negative side raised an OverflowError naming nothing, two sides a bare unpacking
+    error, and a side of 6.5 was truncated to 6."""
+    s, *_ = scene
+    y = np.ones((4, 16, 16), np.float32)
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"shape\[0\]: must be at least 1, got -1"):
+        fluidnerf.back_project(s, y, (-1, N, N))
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"shape: expected the volume's three sides .*\(6, 6\)"
+    ):
+        fluidnerf.back_project(s, y, (6, 6))
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"shape: expected the volume's three sides .* 6"):
+        fluidnerf.back_project(s, y, 6)
+    with pytest.raises(TypeError, match=r"shape\[2\]: expected an integer, got 6.5"):
+        fluidnerf.back_project(s, y, (N, N, 6.5))
+    assert fluidnerf.back_project(s, y, np.array([N, N, N])).shape == (N, N, N)
