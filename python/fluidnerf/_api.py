@@ -33,6 +33,19 @@ def _default_method(scene: Scene | PathLike) -> str:
 PathLike = Union[str, "os.PathLike[str]"]
 Callback = Callable[[dict], Optional[bool]]
 
+
+def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
+    """``value`` as a C-ordered array of ``dtype`` with as many dimensions as ``shape`` (e.g.
+    ``"(N, 3, 3)"``) names; anything else is refused naming the argument and the shape."""
+    try:
+        a = np.ascontiguousarray(value, dtype=dtype)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected an array of numbers of shape {shape}: {e}") from None
+    if a.ndim != len([side for side in shape.strip("()").split(",") if side.strip()]):
+        raise FluidNerfError(f"{name}: expected shape {shape}, got an array of shape {a.shape}")
+    return a
+
+
 __all__ = [
     "Camera",
     "FluidNerfError",
@@ -112,14 +125,16 @@ def scene_from_arrays(
     - ``times``: ``(N,)`` frame times for time-resolved recordings; ``distortion``:
       ``(N, 4|5|8)`` OpenCV coefficients; ``holdout``: frames kept out of training.
     """
-    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    f64 = np.float64
     return Scene.from_arrays(
-        f64(K),
-        f64(world_from_camera),
-        np.ascontiguousarray(images, dtype=np.float32),
-        f64(aabb),
-        times=None if times is None else f64(times),
-        distortion=None if distortion is None else f64(np.atleast_2d(distortion)),
+        _array(K, f64, "K", "(N, 3, 3)"),
+        _array(world_from_camera, f64, "world_from_camera", "(N, 4, 4)"),
+        _array(images, np.float32, "images", "(N, H, W)"),
+        _array(aabb, f64, "aabb", "(2, 3)"),
+        times=None if times is None else _array(times, f64, "times", "(N,)"),
+        distortion=None
+        if distortion is None
+        else _array(np.atleast_2d(distortion), f64, "distortion", "(N, 4|5|8)"),
         holdout=None if holdout is None else [bool(h) for h in holdout],
         names=names,
         units=units,
@@ -130,7 +145,7 @@ def scene_from_arrays(
 def read_transforms(path: PathLike, aabb: np.ndarray | None = None) -> Scene:
     """Reads a ``transforms.json`` of nerfstudio, instant-ngp or a Blender/NeRF exporter as a
     scene; ``aabb`` ``(2, 3)`` gives the box when the file has none."""
-    box = None if aabb is None else np.ascontiguousarray(aabb, dtype=np.float64)
+    box = None if aabb is None else _array(aabb, np.float64, "aabb", "(2, 3)")
     return _ext.read_transforms(os.fspath(path), box)
 
 
@@ -316,8 +331,8 @@ class Run:
         Returns ``(N,)`` float32; points outside the box give 0. A time-resolved run is sampled
         at ``time`` between its first and last instants (default: the first); a time outside
         them raises :class:`FluidNerfError`. Static results ignore ``time``."""
-        pts = np.ascontiguousarray(points, dtype=np.float32)
-        if pts.ndim != 2 or pts.shape[1] != 3:
+        pts = _array(points, np.float32, "points", "(N, 3)")
+        if pts.shape[1] != 3:
             raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
         return self._h.field(pts, None if time is None else float(time))
 
@@ -341,7 +356,7 @@ class Run:
 def open_run(folder: PathLike, aabb: np.ndarray | None = None) -> Run:
     """Reads any finished run folder (voxel, static neural or time-resolved). ``aabb``
     ``(2, 3)`` places a bare ``volume.npy`` that has no report."""
-    box = None if aabb is None else np.ascontiguousarray(aabb, dtype=np.float64)
+    box = None if aabb is None else _array(aabb, np.float64, "aabb", "(2, 3)")
     return Run(_ext.open_run(os.fspath(folder), box))
 
 
@@ -446,7 +461,7 @@ def forward_project(
     choice from the voxels' image size), ``"footprint"``, ``"splat"``, ``"ray"``, or a dict of
     the projector settings (``{"kind", "splat_subdivisions", "ray_step"}``). Returns ``(N, H, W)`` float32 (a list
     when image sizes differ)."""
-    vol = np.ascontiguousarray(volume, dtype=np.float32)
+    vol = _array(volume, np.float32, "volume", "(nz, ny, nx)")
     return _ext.forward_project(_as_scene(scene), vol, _projector(projector))
 
 
@@ -472,7 +487,7 @@ def render(
     scene's cameras, times ``intensity_scale`` (the reference renderer). ``step``: quadrature
     step in world units (None: the box's smallest side / 256; at most 2^20 steps along the
     box's diagonal), ``supersample`` rays per pixel along each axis (1 to 64)."""
-    vol = np.ascontiguousarray(volume, dtype=np.float32)
+    vol = _array(volume, np.float32, "volume", "(nz, ny, nx)")
     return _ext.render(_as_scene(scene), vol, step, _positive_int(supersample, "supersample"))
 
 

@@ -95,3 +95,42 @@ def test_calibration_importers_read_the_library_fixtures():
         np.testing.assert_array_equal(c.world_from_camera[3], [0, 0, 0, 1])
     colmap = fluidnerf.read_colmap(fixtures / "colmap")
     assert len(colmap) >= 1 and all(c.size[0] > 0 for c in colmap)
+
+
+def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shape(tmp_path):
+    """Before, the extension raised "TypeError: argument 'images': 'ndarray' object cannot be
+    converted to 'PyArray<T, D>'", which named neither the shape expected nor the one given,
+    and a string for an array raised a ValueError that named no argument."""
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    cases = [
+        ({"images": images[0]}, r"images: expected shape \(N, H, W\), got an array of shape \(16, 16\)"),
+        ({"K": K[0]}, r"K: expected shape \(N, 3, 3\), got an array of shape \(3, 3\)"),
+        (
+            {"world_from_camera": poses[..., None]},
+            r"world_from_camera: expected shape \(N, 4, 4\), got .*\(3, 4, 4, 1\)",
+        ),
+        ({"aabb": aabb.ravel()}, r"aabb: expected shape \(2, 3\), got an array of shape \(6,\)"),
+        ({"times": np.zeros((3, 1))}, r"times: expected shape \(N,\), got an array of shape \(3, 1\)"),
+    ]
+    for change, message in cases:
+        args = {"K": K, "world_from_camera": poses, "images": images, "aabb": aabb, **change}
+        with pytest.raises(fluidnerf.FluidNerfError, match=message):
+            fluidnerf.scene_from_arrays(**args)
+    with pytest.raises(TypeError, match=r"images: expected an array of numbers of shape \(N, H, W\)"):
+        fluidnerf.scene_from_arrays(K, poses, "images", aabb)
+    scene = fluidnerf.scene_from_arrays(K, poses, images, aabb)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"volume: expected shape \(nz, ny, nx\), got .*\(4, 4\)"
+    ):
+        fluidnerf.forward_project(scene, np.ones((4, 4), np.float32))
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"volume: expected shape \(nz, ny, nx\), got .*\(1, 4, 4, 4\)"
+    ):
+        fluidnerf.render(scene, np.ones((1, 4, 4, 4), np.float32))
+    (tmp_path / "volume.npy").write_bytes(b"")
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"aabb: expected shape \(2, 3\), got an array of shape \(6,\)"
+    ):
+        fluidnerf.open_run(tmp_path, aabb=aabb.ravel())
