@@ -27,6 +27,7 @@
 //! Equations are numbered as in the dissertation ("On the development of a Neural Radiance
 //! Field technique for tomographic reconstruction applied to flow diagnostics", chapter 2.3).
 
+mod axes;
 mod error;
 mod hull;
 mod memory;
@@ -34,6 +35,7 @@ mod method;
 pub mod projector;
 pub mod solve;
 
+pub use axes::{rows_shared_along, AxisShift};
 pub use error::{ClassicalError, SolveError};
 pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};

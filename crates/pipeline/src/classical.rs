@@ -11,9 +11,9 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use fluidnerf_classical::{
-    voxel_footprint_px, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
+    voxel_footprint_px, AxisShift, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
 };
-use fluidnerf_core::{Image, Scene, Volume};
+use fluidnerf_core::{Camera, Image, Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
 
 use crate::measured::{fit_gain, normalise, MaskedProjector};
@@ -93,17 +93,32 @@ pub(crate) fn run(
             "held-out early stopping needs held-out views in the scene (frames with \"holdout\": true)",
         ));
     }
+    // `auto` resolved once, so the held-out views and the report use the same projector.
+    let kind = spec.projector.resolve(&grid, &cameras);
+    // The footprint projector shares footprints along grid rows on `x`: a scene whose cameras
+    // ring another axis is solved on axes renamed so that it becomes `x` (an exact rotation;
+    // the volume is put back on the scene's axes at the end).
+    let shift = if kind == ProjectorKind::Footprint { AxisShift::for_rows(&cameras) } else { AxisShift::IDENTITY };
+    let (grid_s, cameras_s, holdout_cameras_s) = if shift.is_identity() {
+        (grid, cameras.clone(), holdout_cameras.clone())
+    } else {
+        log::debug!("{method}: solved on shifted axes ({shift:?}), whose grid rows share footprints");
+        let moved = |cs: &[Camera]| cs.iter().map(|c| shift.camera(c)).collect::<Vec<_>>();
+        (shift.grid(&grid), moved(&cameras), moved(&holdout_cameras))
+    };
     let threads = rayon::current_num_threads();
     // Scoring holds the truth, a resampled copy and temporaries; the curve a copy of the volume.
     let truth_bytes: u64 = truth.first().map_or(0, |(_, t)| 3 * 4 * t.len() as u64 + 4 * grid.len() as u64);
     let mut solver = spec.method.clone();
     let mut projector_config = spec.projector.clone();
     let limit = memory_limit(config);
-    fit_row_cache(&mut solver, limit, |m| m.memory(&projector_config, &grid, &cameras, threads).total() + truth_bytes);
-    fit_kept_footprints(&solver, &mut projector_config, limit, |p| {
-        solver.memory(p, &grid, &cameras, threads).total() + truth_bytes
+    fit_row_cache(&mut solver, limit, |m| {
+        m.memory(&projector_config, &grid_s, &cameras_s, threads).total() + truth_bytes
     });
-    let estimate = solver.memory(&projector_config, &grid, &cameras, threads);
+    fit_kept_footprints(&solver, &mut projector_config, limit, |p| {
+        solver.memory(p, &grid_s, &cameras_s, threads).total() + truth_bytes
+    });
+    let estimate = solver.memory(&projector_config, &grid_s, &cameras_s, threads);
     let needed = estimate.total() + truth_bytes;
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
@@ -125,10 +140,8 @@ pub(crate) fn run(
     let holdout_images: Vec<Image> = held_idx.iter().map(|&i| masked_image(i)).collect();
     let holdout_masks: Vec<Option<Vec<bool>>> = held_idx.iter().map(|&i| measured.masks[i].clone()).collect();
     let subdivisions = spec.projector.subdivisions(&grid, &cameras);
-    // `auto` resolved once, so the held-out views and the report use the same projector.
-    let kind = spec.projector.resolve(&grid, &cameras);
     let resolved = ProjectorConfig { kind, ..projector_config };
-    let base_projector = resolved.build(grid, &cameras, scene.intensity_scale)?;
+    let base_projector = resolved.build(grid_s, &cameras_s, scene.intensity_scale)?;
     let masked_projector = MaskedProjector { inner: base_projector.as_ref(), masks: train_masks.clone() };
     let projector: &dyn Projector =
         if train_masks.iter().any(Option::is_some) { &masked_projector } else { base_projector.as_ref() };
@@ -152,7 +165,7 @@ pub(crate) fn run(
             im
         })
         .collect();
-    let support = spec.projector.support(&grid, &cameras, &hull_images);
+    let support = spec.projector.support(&grid_s, &cameras_s, &hull_images);
     drop(hull_images);
     let hull_voxels = support.as_ref().map(|h| h.iter().filter(|&&b| b).count());
     let fit = config.gains.mode == GainMode::Fit;
@@ -161,7 +174,7 @@ pub(crate) fn run(
         None
     } else {
         Some(HoldoutScorer::new(
-            fixed.build(grid, &holdout_cameras, scene.intensity_scale)?,
+            fixed.build(grid_s, &holdout_cameras_s, scene.intensity_scale)?,
             holdout_images,
             holdout_masks,
             config.gains.mode != GainMode::None,
@@ -173,7 +186,13 @@ pub(crate) fn run(
 
     let eval_every = config.eval_interval();
     let holdout_every = config.stopping.holdout_interval(Family::Classical);
-    let mut curve = truth.first().map(|(_, t)| Curve::new(t, grid));
+    let mut curve = truth.first().map(|(_, t)| {
+        if shift.is_identity() {
+            Curve::new(t, grid_s)
+        } else {
+            Curve::new(&shift.volume(t), grid_s)
+        }
+    });
     let mut best = BestHoldout::<Vec<f32>>::new(config.stopping.patience);
     let mut holdout_history = Vec::new();
     let mut cause = None;
@@ -295,7 +314,7 @@ pub(crate) fn run(
         None => Vec::new(),
     };
     let preprocessing = measured.report(scene, fit.then_some(gains.as_slice()), &scores);
-    let volume = grid.volume(data);
+    let volume = grid.volume(if shift.is_identity() { data } else { shift.data_back(grid.dims, &data) });
     write_volume(dir, "volume", &volume)?;
 
     let t_eval = Instant::now();
