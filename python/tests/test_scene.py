@@ -134,3 +134,14 @@ def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shap
         fluidnerf.FluidNerfError, match=r"aabb: expected shape \(2, 3\), got an array of shape \(6,\)"
     ):
         fluidnerf.open_run(tmp_path, aabb=aabb.ravel())
+
+
+def test_a_scene_without_frames_is_refused():
+    """Zero frames made a scene that nothing could use: saving it, loading it back and
+    projecting through it failed later, each with its own message, and render returned []."""
+    K, poses = ring(3)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"images: a scene needs at least one frame, .*\(0, 16, 16\)"
+    ):
+        fluidnerf.scene_from_arrays(K[:0], poses[:0], np.ones((0, 16, 16), np.float32), aabb)

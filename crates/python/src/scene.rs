@@ -170,6 +170,11 @@ impl PyScene {
             let (k, pose, imgs) = (k.as_array(), world_from_camera.as_array(), images.as_array());
             let n = imgs.shape()[0];
             let (h, w) = (imgs.shape()[1], imgs.shape()[2]);
+            if n == 0 {
+                return Err(err(format!(
+                    "images: a scene needs at least one frame, got an array of shape (0, {h}, {w})"
+                )));
+            }
             if k.shape() != [n, 3, 3] {
                 return Err(err(format!("K: expected shape ({n}, 3, 3) for {n} images, got {:?}", k.shape())));
             }
