@@ -116,17 +116,33 @@ impl Callback {
         Callback { callback, error: None, last_check: None }
     }
 
-    /// Delivers a run event to Python; stops the run on Ctrl-C or an exception in the callback.
-    pub fn on_event(&mut self, event: &fluidnerf_pipeline::RunEvent) -> ControlFlow<()> {
+    /// Looks for Ctrl-C (at most every [`SIGNAL_CHECK_INTERVAL`]), for work without events of
+    /// a run (a synthesis); keeps the `KeyboardInterrupt` and stops.
+    pub fn check_signals(&mut self) -> ControlFlow<()> {
         if self.error.is_some() {
             return ControlFlow::Break(());
         }
-        if self.callback.is_none() {
-            let now = std::time::Instant::now();
-            if self.last_check.is_some_and(|t| now.duration_since(t) < SIGNAL_CHECK_INTERVAL) {
-                return ControlFlow::Continue(());
+        let now = std::time::Instant::now();
+        if self.last_check.is_some_and(|t| now.duration_since(t) < SIGNAL_CHECK_INTERVAL) {
+            return ControlFlow::Continue(());
+        }
+        self.last_check = Some(now);
+        Python::with_gil(|py| match py.check_signals() {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                self.error = Some(e);
+                ControlFlow::Break(())
             }
-            self.last_check = Some(now);
+        })
+    }
+
+    /// Delivers a run event to Python; stops the run on Ctrl-C or an exception in the callback.
+    pub fn on_event(&mut self, event: &fluidnerf_pipeline::RunEvent) -> ControlFlow<()> {
+        if self.callback.is_none() {
+            return self.check_signals();
+        }
+        if self.error.is_some() {
+            return ControlFlow::Break(());
         }
         Python::with_gil(|py| {
             if let Err(e) = py.check_signals() {

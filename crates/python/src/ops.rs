@@ -1,7 +1,6 @@
 //! Operators on NumPy arrays: the classical projectors (forward and adjoint), the reference
 //! renderer, the metrics, and synthetic scenes.
 
-use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use fluidnerf_classical::{Grid, ProjectorConfig};
@@ -10,7 +9,7 @@ use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArra
 use pyo3::prelude::*;
 
 use crate::scene::{images_to_py, PyScene};
-use crate::{err, guard, volume_from_py};
+use crate::{err, guard, volume_from_py, Callback};
 
 /// The projector settings from JSON text (`fluidnerf_classical::ProjectorConfig`; unknown keys
 /// are refused), validated. A projector here serves one call, so it keeps no footprints.
@@ -265,10 +264,16 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
     if scene_file.exists() && !force {
         return Err(err(format!("{} already holds a scene; pass force=True to overwrite it", folder.display())));
     }
+    // Ctrl-C stops the synthesis between images (before anything is written): the images of a
+    // large rig take minutes, and the GIL is released meanwhile.
+    let mut signals = Callback::new(None);
     let scene = py.allow_threads(|| {
         guard(|| {
-            let syn = fluidnerf_synth::generate(&settings, None, |_| ControlFlow::Continue(()))
-                .map_err(|e| err(e.to_string()))?;
+            let syn = fluidnerf_synth::generate(&settings, None, |_| signals.check_signals());
+            if let Some(e) = signals.error.take() {
+                return Err(e);
+            }
+            let syn = syn.map_err(|e| err(e.to_string()))?;
             let io = |e: fluidnerf_io::IoError| err(e.to_string());
             for f in &syn.frames {
                 fluidnerf_io::image::write_png16_counts(&folder.join(syn.image_path(f)), &f.counts).map_err(io)?;
