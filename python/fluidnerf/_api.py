@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import operator
 import os
 import shutil
@@ -32,6 +33,33 @@ def _default_method(scene: Scene | PathLike) -> str:
 
 PathLike = Union[str, "os.PathLike[str]"]
 Callback = Callable[[dict], Optional[bool]]
+
+
+def _plain(value: Any, what: str, key: str = "") -> Any:
+    """Settings ``value`` in JSON's types: NumPy numbers and arrays become numbers and lists,
+    paths strings. A NaN or an infinity (JSON has neither) or any other object is refused,
+    naming ``what`` and the key."""
+    at = f"{what}: at `{key}`" if key else what
+    if isinstance(value, dict):
+        return {k: _plain(v, what, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, what, f"{key}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        raise FluidNerfError(f"{at}: {value} is not a finite number")
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise TypeError(f"{at}: expected a number, string, list or dict, got {type(value).__name__} {value!r}")
+
+
+def _dumps(value: Any, what: str) -> str:
+    """``value`` (settings) as JSON text; see :func:`_plain`."""
+    return json.dumps(_plain(value, what))
 
 
 def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
@@ -238,7 +266,7 @@ def build_config(
     if method_patch:
         _merge(base["method"], method_patch)
     _merge(base, options)
-    return json.loads(_ext.check_config(json.dumps(base)))
+    return json.loads(_ext.check_config(_dumps(base, "configuration")))
 
 
 def window_plan(scene: Scene | PathLike, method: str | dict = "tr-fast", **options: Any) -> dict:
@@ -449,7 +477,7 @@ def _projector(projector: str | dict | None) -> str:
         return "{}"
     if isinstance(projector, str):
         return json.dumps({"kind": projector})
-    return json.dumps(projector)
+    return _dumps(projector, "projector")
 
 
 def forward_project(
@@ -534,4 +562,4 @@ def synth(
     ``synth("jet", "jet-tr60", resolution=24, lens={"resolution": [24, 24]})``."""
     if seed is not None:
         settings["seed"] = int(seed)
-    return _ext.synth(os.fspath(folder), preset, json.dumps(settings), force)
+    return _ext.synth(os.fspath(folder), preset, _dumps(settings, "synth settings"), force)

@@ -137,6 +137,47 @@ def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene
     fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, overwrite="force")
 
 
+def test_settings_given_as_numpy_numbers_or_not_finite_are_read_or_refused_by_key(static_scene, tmp_path):
+    """NumPy numbers and arrays in settings raised "TypeError: Object of type int64 is not JSON
+    serializable", and a NaN or an infinity "configuration: expected value at line 1 column
+    482": neither named the key."""
+    cfg = fluidnerf.build_config(
+        static_scene, "asart", resolution=np.int64(8), stopping={"time_budget_s": np.float32(2.5)}
+    )
+    assert cfg["resolution"] == 8 and cfg["stopping"]["time_budget_s"] == 2.5
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"configuration: at `stopping.time_budget_s`: nan is not"
+    ):
+        fluidnerf.reconstruct(static_scene, "asart", tmp_path / "a", stopping={"time_budget_s": float("nan")})
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"configuration: at `method.params.relaxation`: inf is"
+    ):
+        fluidnerf.build_config(static_scene, {"name": "asart", "params": {"relaxation": np.inf}})
+    with pytest.raises(TypeError, match=r"configuration: at `seed`: expected a number, .* got object"):
+        fluidnerf.build_config(static_scene, "asart", seed=object())
+    vol = np.ones((4, 4, 4), np.float32)
+    assert (
+        fluidnerf.forward_project(static_scene, vol, {"kind": "ray", "ray_step": np.float32(0.5)}).shape[0]
+        == 8
+    )
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"projector: at `ray_step`: nan is not a finite number"
+    ):
+        fluidnerf.forward_project(static_scene, vol, {"kind": "ray", "ray_step": float("nan")})
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"synth settings: at `lens.resolution\[1\]`: inf is not"
+    ):
+        fluidnerf.synth(tmp_path / "s", "demo", lens={"resolution": np.array([8.0, np.inf])})
+    scene = fluidnerf.synth(
+        tmp_path / "t",
+        "demo",
+        resolution=np.int64(8),
+        lens={"resolution": np.array([8, 8])},
+        rig={"layout": {"count": 3}},
+    )
+    assert len(scene) == 3
+
+
 def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_path):
     def stop_at_5(event):
         return not (event["kind"] == "iteration" and event["iteration"] >= 5)
