@@ -239,15 +239,30 @@ def build_config(
         name = method_patch.get("name")
     elif method is not None:
         name = method
+    if name is not None and not isinstance(name, str):
+        raise TypeError(
+            f"method: expected a method name (see fluidnerf.methods()) or a dict of its settings, got {method!r}"
+        )
     if config is not None:
         if isinstance(config, dict):
-            base = copy.deepcopy(config)
-        else:
+            base, source = copy.deepcopy(config), "config"
+        elif isinstance(config, (str, os.PathLike)):
             path = Path(os.fspath(config))
             try:
-                base = json.loads(path.read_text())
+                base, source = json.loads(path.read_text()), str(path)
             except (OSError, ValueError) as e:
                 raise FluidNerfError(f"{path}: cannot read the configuration: {e}") from None
+        else:
+            raise TypeError(
+                f"config: expected a dict or the path of a config.json, got {type(config).__name__}"
+            )
+        if not isinstance(base, dict):
+            raise FluidNerfError(f"{source}: the configuration must be an object of settings, got {base!r}")
+        if not isinstance(base.get("method") or {}, dict):
+            raise FluidNerfError(
+                f'{source}: at `method`: expected the method\'s settings such as {{"name": "asart"}}, '
+                f"got {base['method']!r}"
+            )
         written = (base.get("method") or {}).get("name")
         if name is not None and written is not None and name != written:
             raise FluidNerfError(
@@ -257,7 +272,9 @@ def build_config(
             fresh = json.loads(
                 _ext.default_config(str(root or ""), written or name or _default_method(scene), preset)
             )
-            kept = {k: v for k, v in base["method"].items() if k in ("holdout_times", "time_step")}
+            kept = {
+                k: v for k, v in (base.get("method") or {}).items() if k in ("holdout_times", "time_step")
+            }
             base["method"] = _merge(fresh["method"], kept)
     else:
         base = json.loads(_ext.default_config(str(root or ""), name or _default_method(scene), preset))

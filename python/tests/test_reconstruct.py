@@ -178,6 +178,25 @@ def test_settings_given_as_numpy_numbers_or_not_finite_are_read_or_refused_by_ke
     assert len(scene) == 3
 
 
+def test_a_configuration_or_method_of_the_wrong_kind_is_refused_by_name(static_scene, tmp_path):
+    """config={"method": "asart"} raised "AttributeError: 'str' object has no attribute 'get'", a
+    config.json holding a list the same, config=[...] a TypeError naming no argument, and a
+    configuration without a method given with a preset "KeyError: 'method'"."""
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"config: at `method`: expected the method's settings"
+    ):
+        fluidnerf.build_config(static_scene, config={"method": "asart"})
+    (tmp_path / "list.json").write_text("[1, 2]")
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"list.json: the configuration must be an object"):
+        fluidnerf.build_config(static_scene, config=tmp_path / "list.json")
+    with pytest.raises(TypeError, match=r"config: expected a dict or the path of a config.json, got list"):
+        fluidnerf.build_config(static_scene, config=[1])
+    with pytest.raises(TypeError, match=r"method: expected a method name .* got 3"):
+        fluidnerf.build_config(static_scene, 3)
+    cfg = fluidnerf.build_config(static_scene, "fast", config={"format": 1, "resolution": 8}, preset="fast")
+    assert cfg["method"]["name"] == "fast" and cfg["resolution"] == 8
+
+
 def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_path):
     def stop_at_5(event):
         return not (event["kind"] == "iteration" and event["iteration"] >= 5)
