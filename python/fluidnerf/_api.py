@@ -405,6 +405,13 @@ def open_run(folder: PathLike, aabb: np.ndarray | None = None) -> Run:
     return Run(_ext.open_run(os.fspath(folder), box))
 
 
+def _check_callback(callback: Any) -> None:
+    """Refuses a callback that cannot be called before a run starts: called at the first event,
+    it would stop the run and leave an interrupted run in its folder."""
+    if callback is not None and not callable(callback):
+        raise TypeError(f"callback: expected a function of one event dict, got {callback!r}")
+
+
 def _progress_callback(callback: Callback | None, progress: bool | None) -> tuple[Callback | None, Any]:
     """The callback given, combined with a tqdm bar when asked (None: when tqdm is installed)."""
     bar_holder: dict = {}
@@ -468,6 +475,7 @@ def reconstruct(
     The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
     written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.
     """
+    _check_callback(callback)
     scene = _as_scene(scene)
     out_path = Path(os.fspath(out)) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
     if scene.root is None:

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from . import _fluidnerf as _ext
-from ._api import PathLike, Run, Scene, _as_scene, build_config, open_run
+from ._api import PathLike, Run, Scene, _as_scene, _check_callback, build_config, open_run
 
 __all__ = ["finish", "reconstruct", "train_window"]
 
@@ -76,6 +76,7 @@ def reconstruct(
     """
     from distributed import as_completed
 
+    _check_callback(callback)
     scene = _as_scene(scene)
     if out is None:
         raise ValueError("out: a run folder on a file system every worker sees is needed")

@@ -127,3 +127,10 @@ def test_a_killed_worker_loses_and_duplicates_no_window(client, tr_scene, serial
     # Run again on the finished windows: every window is read back, and the results written again equal.
     again = fluidnerf.dask.reconstruct(client, tr_scene, TR_METHOD, tmp_path / "again", **TR_OPTIONS)
     assert_same_run(run, again)
+
+
+def test_a_callback_that_cannot_be_called_is_refused_before_any_task(tr_scene, tmp_path):
+    """callback=3 failed only when the first window finished, after the windows were trained."""
+    with pytest.raises(TypeError, match="callback: expected a function of one event dict, got 3"):
+        fluidnerf.dask.reconstruct(None, tr_scene, TR_METHOD, tmp_path / "run", callback=3, **TR_OPTIONS)
+    assert not (tmp_path / "run").exists()

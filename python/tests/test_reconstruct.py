@@ -214,6 +214,14 @@ def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_p
     assert fluidnerf.open_run(tmp_path / "boom").status == "interrupted"
 
 
+def test_a_callback_that_cannot_be_called_is_refused_before_the_run_starts(static_scene, tmp_path):
+    """callback=3 started the run, which stopped at its first event, left an interrupted run
+    in the folder and then raised "TypeError: 'int' object is not callable"."""
+    with pytest.raises(TypeError, match="callback: expected a function of one event dict, got 3"):
+        fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", callback=3, resolution=8)
+    assert not (tmp_path / "run").exists()
+
+
 def test_ctrl_c_stops_a_run_cleanly(static_scene, tmp_path):
     """SIGINT while the run works (GIL released) stops it at the next iteration: the results are
     written, the report says interrupted, and KeyboardInterrupt reaches the caller."""
