@@ -202,3 +202,23 @@ def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(sce
     with pytest.raises(TypeError, match=r"shape\[2\]: expected an integer, got 6.5"):
         fluidnerf.back_project(s, y, (N, N, 6.5))
     assert fluidnerf.back_project(s, y, np.array([N, N, N])).shape == (N, N, N)
+
+
+def test_metrics_refuse_values_that_are_not_finite_and_a_zero_truth():
+    """A NaN or an infinity in either array made every metric NaN (or inf) without a word, and
+    an all-zero truth made the NRMSE NaN."""
+    t = blob_volume()
+    bad = t.copy()
+    bad[1, 2, 3] = np.nan
+    flat = np.ravel_multi_index((1, 2, 3), t.shape)
+    for metric in (fluidnerf.nrmse, fluidnerf.psnr, fluidnerf.ssim):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=rf"estimate: element {flat} \(flat index, C order\)"
+        ):
+            metric(bad, t)
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=rf"truth: element {flat} .* is not finite \(NaN\)"
+        ):
+            metric(t, bad)
+    with pytest.raises(fluidnerf.FluidNerfError, match="truth: every element is zero"):
+        fluidnerf.nrmse(t, np.zeros_like(t))

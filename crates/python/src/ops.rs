@@ -172,7 +172,7 @@ pub fn render(
     images_to_py(py, images)
 }
 
-/// Two arrays of one shape as flat f32 vectors.
+/// Two arrays of one shape as flat f32 vectors, every value finite.
 fn pair(
     a: &PyReadonlyArrayDyn<'_, f32>,
     b: &PyReadonlyArrayDyn<'_, f32>,
@@ -184,13 +184,22 @@ fn pair(
     if x.is_empty() {
         return Err(err("empty arrays"));
     }
-    Ok((x.iter().copied().collect(), y.iter().copied().collect(), x.shape().to_vec()))
+    let (a, b): (Vec<f32>, Vec<f32>) = (x.iter().copied().collect(), y.iter().copied().collect());
+    for (name, v) in [("estimate", &a), ("truth", &b)] {
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(err(format!("{name}: element {i} (flat index, C order) is not finite ({})", v[i])));
+        }
+    }
+    Ok((a, b, x.shape().to_vec()))
 }
 
 /// NRMSE of `estimate` against `truth` (dissertation Eq. 6.18: RMS error over the truth's RMS).
 #[pyfunction]
 pub fn nrmse(estimate: PyReadonlyArrayDyn<'_, f32>, truth: PyReadonlyArrayDyn<'_, f32>) -> PyResult<f64> {
     let (a, b, _) = pair(&estimate, &truth)?;
+    if b.iter().all(|&v| v == 0.0) {
+        return Err(err("truth: every element is zero, so the NRMSE (relative to the truth's norm) is undefined"));
+    }
     guard(|| Ok(fluidnerf_metrics::nrmse(&a, &b)))
 }
 
