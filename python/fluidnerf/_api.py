@@ -166,7 +166,7 @@ def scene_from_arrays(
         holdout=None if holdout is None else [bool(h) for h in holdout],
         names=names,
         units=units,
-        intensity_scale=float(intensity_scale),
+        intensity_scale=_real(intensity_scale, "intensity_scale"),
     )
 
 
@@ -379,7 +379,7 @@ class Run:
         pts = _array(points, np.float32, "points", "(N, 3)")
         if pts.shape[1] != 3:
             raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
-        return self._h.field(pts, None if time is None else float(time))
+        return self._h.field(pts, None if time is None else _real(time, "time"))
 
     def voxel_centres(self) -> np.ndarray:
         """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""
@@ -544,14 +544,29 @@ def render(
     return _ext.render(_as_scene(scene), vol, step, _positive_int(supersample, "supersample"))
 
 
-def _positive_int(value: Any, name: str) -> int:
-    """``value`` as an int of at least 1; a float (even 2.0) or a bool is refused, not rounded."""
+def _integer(value: Any, name: str) -> int:
+    """``value`` as an int; a float (even 2.0) or a bool is refused, not rounded."""
     if isinstance(value, bool):
         raise TypeError(f"{name}: expected an integer, got {value!r}")
     try:
-        n = operator.index(value)
+        return operator.index(value)
     except TypeError:
         raise TypeError(f"{name}: expected an integer, got {value!r}") from None
+
+
+def _real(value: Any, name: str) -> float:
+    """``value`` as a float; a string or another object is refused naming ``name``."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name}: expected a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name}: expected a number, got {value!r}") from None
+
+
+def _positive_int(value: Any, name: str) -> int:
+    """``value`` as an int of at least 1; a float (even 2.0) or a bool is refused, not rounded."""
+    n = _integer(value, name)
     if n < 1:
         raise FluidNerfError(f"{name}: must be at least 1, got {n}")
     return n
@@ -586,5 +601,5 @@ def synth(
     returns it. ``settings`` override the preset's ``SynthSettings`` key by key, e.g.
     ``synth("jet", "jet-tr60", resolution=24, lens={"resolution": [24, 24]})``."""
     if seed is not None:
-        settings["seed"] = int(seed)
+        settings["seed"] = _integer(seed, "seed")
     return _ext.synth(os.fspath(folder), preset, _dumps(settings, "synth settings"), force)

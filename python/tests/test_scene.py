@@ -141,6 +141,19 @@ def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shap
         fluidnerf.open_run(tmp_path, aabb=aabb.ravel())
 
 
+def test_numbers_of_the_wrong_type_are_refused_naming_the_argument(tmp_path):
+    """intensity_scale="x" raised float()'s "could not convert string to float: 'x'", which
+    named no argument, and synth(seed=3.7) ran with seed 3."""
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    with pytest.raises(TypeError, match="intensity_scale: expected a number, got 'x'"):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, intensity_scale="x")
+    with pytest.raises(TypeError, match="seed: expected an integer, got 3.7"):
+        fluidnerf.synth(tmp_path / "s", "demo", seed=3.7)
+    assert not (tmp_path / "s").exists()
+
+
 def test_a_scene_without_frames_is_refused():
     """Zero frames made a scene that nothing could use: saving it, loading it back and
     projecting through it failed later, each with its own message, and render returned []."""
