@@ -69,6 +69,15 @@ def test_the_plan_is_the_one_tr_fast_uses(tr_scene):
     assert plan["warm_start"] is True and plan["frame_times"] == [14.0, 14.5, 15.0, 15.5, 16.0]
 
 
+def test_a_plan_of_more_than_a_million_windows_is_refused():
+    assert len(fluidnerf.plan_windows(2_000_000, 2, 0)) == 1_000_000
+    with pytest.raises(fluidnerf.FluidNerfError, match="make 1000001 windows"):
+        fluidnerf.plan_windows(2_000_001, 2, 0)
+    # Refused from its count, before any window is listed.
+    with pytest.raises(fluidnerf.FluidNerfError, match="make 999999999999 windows"):
+        fluidnerf.plan_windows(10**12, 2, 1)
+
+
 def test_a_dask_run_equals_the_serial_run(client, tr_scene, serial, tmp_path):
     seen = []
     run = fluidnerf.dask.reconstruct(

@@ -80,6 +80,16 @@ fn plan_windows(n_frames: usize, window: usize, overlap: usize) -> PyResult<Vec<
     if window > 0 && window < n_frames && overlap >= window {
         return Err(err(format!("overlap: {overlap} frames must be fewer than the window's {window}")));
     }
+    // Each window is a field trained on its own: a plan of more than a million is a mistake,
+    // and listing one of 10¹² would exhaust the memory before saying so.
+    const MAX_WINDOWS: usize = 1_000_000;
+    let count = if window == 0 || window >= n_frames { 1 } else { (n_frames - window).div_ceil(window - overlap) + 1 };
+    if count > MAX_WINDOWS {
+        return Err(err(format!(
+            "n_frames: {n_frames} frames in windows of {window} overlapping by {overlap} make {count} windows; \
+             at most {MAX_WINDOWS} are planned"
+        )));
+    }
     Ok(fluidnerf_neural::window::plan_windows(n_frames, window, overlap)
         .into_iter()
         .map(|r| (r.start, r.end))
