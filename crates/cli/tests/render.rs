@@ -340,3 +340,24 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
     }
     assert_eq!(render(&run, "off", &["--bake", "off"])["projector"], "rays");
 }
+
+/// A step or supersampling that would never finish is refused, naming the option and what it
+/// allows, and leaves nothing behind.
+#[test]
+fn steps_and_supersampling_that_would_never_finish_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    make_scene(dir.path());
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let (recon, scene, out) = (d(&dir.path().join("recon.npy")), d(dir.path()), dir.path().join("views"));
+    for (extra, says) in [
+        (&["--step", "1e-300"][..], "give a step of at least"),
+        (&["--supersample", "1000"][..], "--supersample must be between 1 and 64"),
+        (&["--supersample", "0"][..], "--supersample must be between 1 and 64"),
+    ] {
+        let o = fluidnerf(&[&["render", &recon, "--scene", &scene, "-o", &d(&out), "-q"][..], extra].concat());
+        assert!(!o.status.success(), "{extra:?} ran");
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(e.contains(says), "{extra:?}: {e}");
+        assert!(!out.join("render.json").exists(), "{extra:?} wrote render.json");
+    }
+}

@@ -15,6 +15,14 @@ use rayon::prelude::*;
 
 use crate::{Aabb, Camera, CoreError, Image, ScalarField};
 
+/// The most quadrature samples [`render_image`] takes along the box's diagonal: 4096 times
+/// the default density (the box's smallest side / 256). It walks every step of every ray, so a
+/// step of 1e-300 would otherwise never finish.
+pub const MAX_SAMPLES_ON_DIAGONAL: f64 = (1u64 << 20) as f64;
+
+/// The most rays per pixel along each image axis [`render_image`] takes (4096 per pixel).
+pub const MAX_SUPERSAMPLE: usize = 64;
+
 /// Settings of [`render_image`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
@@ -51,6 +59,23 @@ pub fn render_image(
     let step = settings.step.unwrap_or(aabb.size().min_element() / 256.0);
     if !(step > 0.0 && step.is_finite()) {
         return Err(CoreError::invalid("render step", format!("must be positive, got {step}")));
+    }
+    let diagonal = aabb.size().length();
+    if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {
+        return Err(CoreError::invalid(
+            "render step",
+            format!(
+                "{step:e} would take more than {MAX_SAMPLES_ON_DIAGONAL} samples along the box's diagonal ({diagonal:.4}); \
+                 give a step of at least {:.3e}",
+                diagonal / MAX_SAMPLES_ON_DIAGONAL
+            ),
+        ));
+    }
+    if settings.supersample > MAX_SUPERSAMPLE {
+        return Err(CoreError::invalid(
+            "render supersampling",
+            format!("rays per pixel along each axis must be at most {MAX_SUPERSAMPLE}, got {}", settings.supersample),
+        ));
     }
     let n = settings.supersample.max(1);
     let (w, h) = (camera.width(), camera.height());
@@ -190,6 +215,30 @@ mod tests {
             }
         }
         assert!(hits > 50, "the box must fill part of the image");
+    }
+
+    /// Steps and supersampling that would never finish are refused before any ray is walked,
+    /// naming the setting; the limits themselves render.
+    #[test]
+    fn steps_and_supersampling_that_would_never_finish_are_refused() {
+        let aabb = Aabb::cube(DVec3::ZERO, 2.0);
+        let field = |_p: Vec3, _t: f64| 1.0f32;
+        let cam = camera();
+        let tiny = RenderSettings { step: Some(1e-300), ..Default::default() };
+        let e = render_image(&field, &cam, &aabb, &tiny).expect_err("refused").to_string();
+        assert!(e.contains("render step") && e.contains("at least"), "{e}");
+        let wide = RenderSettings { supersample: MAX_SUPERSAMPLE + 1, ..Default::default() };
+        let e = render_image(&field, &cam, &aabb, &wide).expect_err("refused").to_string();
+        assert!(e.contains("render supersampling") && e.contains("at most 64"), "{e}");
+        let finest = aabb.size().length() / MAX_SAMPLES_ON_DIAGONAL;
+        let small = Camera::look_at(
+            Intrinsics { width: 2, height: 2, fx: 4.0, fy: 4.0, cx: 0.5, cy: 0.5, skew: 0.0 },
+            DVec3::new(0.0, -6.0, 0.0),
+            DVec3::ZERO,
+            DVec3::Z,
+        );
+        let at_limit = RenderSettings { step: Some(finest), ..Default::default() };
+        assert!(render_image(&field, &small, &aabb, &at_limit).is_ok());
     }
 
     #[test]

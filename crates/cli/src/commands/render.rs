@@ -223,6 +223,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("--step must be positive, got {step}");
         }
     }
+    if !(1..=fluidnerf_core::render::MAX_SUPERSAMPLE).contains(&args.supersample) {
+        bail!(
+            "--supersample must be between 1 and {} rays per pixel along each axis, got {}",
+            fluidnerf_core::render::MAX_SUPERSAMPLE,
+            args.supersample
+        );
+    }
     if args.projector == RenderProjector::Footprint {
         if args.supersample > 1 {
             bail!(
