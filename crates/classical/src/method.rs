@@ -308,6 +308,17 @@ impl ProjectorConfig {
     }
 
     /// The projector of `grid` seen by `cameras` ([`ProjectorConfig::resolve`] picks it).
+    /// The renaming of the world's axes under which this projector's grid rows share their
+    /// footprints ([`crate::AxisShift::for_rows`]): the identity unless it resolves to the
+    /// footprint projector, the only one that shares them.
+    pub fn row_shift(&self, grid: &Grid, cameras: &[Camera]) -> crate::AxisShift {
+        if self.resolve(grid, cameras) == ProjectorKind::Footprint {
+            crate::AxisShift::for_rows(cameras)
+        } else {
+            crate::AxisShift::IDENTITY
+        }
+    }
+
     pub fn build(
         &self,
         grid: Grid,

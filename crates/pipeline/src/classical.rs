@@ -11,7 +11,7 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use fluidnerf_classical::{
-    voxel_footprint_px, AxisShift, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
+    voxel_footprint_px, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
 };
 use fluidnerf_core::{Camera, Image, Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
@@ -98,7 +98,7 @@ pub(crate) fn run(
     // The footprint projector shares footprints along grid rows on `x`: a scene whose cameras
     // ring another axis is solved on axes renamed so that it becomes `x` (an exact rotation;
     // the volume is put back on the scene's axes at the end).
-    let shift = if kind == ProjectorKind::Footprint { AxisShift::for_rows(&cameras) } else { AxisShift::IDENTITY };
+    let shift = spec.projector.row_shift(&grid, &cameras);
     let (grid_s, cameras_s, holdout_cameras_s) = if shift.is_identity() {
         (grid, cameras.clone(), holdout_cameras.clone())
     } else {

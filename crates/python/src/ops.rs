@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use fluidnerf_classical::{Grid, ProjectorConfig};
-use fluidnerf_core::{Image, RenderSettings};
+use fluidnerf_core::{Camera, Image, RenderSettings};
 use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
@@ -40,11 +40,21 @@ pub fn forward_project(
     let images = py.allow_threads(|| {
         guard(|| {
             let grid = Grid::new(volume.dims, volume.aabb);
-            let p = config.build(grid, &cameras, scale).map_err(|e| err(e.to_string()))?;
+            // On axes where the grid rows share footprints, if the cameras ring `y` or `z`.
+            let shift = config.row_shift(&grid, &cameras);
+            let moved: Vec<Camera> = cameras.iter().map(|c| shift.camera(c)).collect();
+            let shifted;
+            let x: &[f32] = if shift.is_identity() {
+                &volume.data
+            } else {
+                shifted = shift.data(grid.dims, &volume.data);
+                &shifted
+            };
+            let p = config.build(shift.grid(&grid), &moved, scale).map_err(|e| err(e.to_string()))?;
             let mut images = Vec::with_capacity(cameras.len());
             for (v, c) in cameras.iter().enumerate() {
                 let mut out = vec![0f32; c.width() * c.height()];
-                p.forward(v, &volume.data, &mut out);
+                p.forward(v, x, &mut out);
                 images.push(Image::from_vec(c.width(), c.height(), out));
             }
             Ok(images)
@@ -101,12 +111,14 @@ pub fn back_project<'py>(
     let out = py.allow_threads(|| {
         guard(|| {
             let grid = Grid::new([nx, ny, nz], aabb);
-            let p = config.build(grid, &cameras, scale).map_err(|e| err(e.to_string()))?;
+            let shift = config.row_shift(&grid, &cameras);
+            let moved: Vec<Camera> = cameras.iter().map(|c| shift.camera(c)).collect();
+            let p = config.build(shift.grid(&grid), &moved, scale).map_err(|e| err(e.to_string()))?;
             let mut out = vec![0f32; grid.len()];
-            for (v, y) in data.iter().enumerate() {
-                p.back_add(v, y, &mut out, None);
-            }
-            Ok(out)
+            let views: Vec<usize> = (0..data.len()).collect();
+            let ys: Vec<&[f32]> = data.iter().map(Vec::as_slice).collect();
+            p.back_add_views(&views, &ys, &mut out, None);
+            Ok(if shift.is_identity() { out } else { shift.data_back(grid.dims, &out) })
         })
     })?;
     PyArray1::from_vec(py, out).reshape([nz, ny, nx])
