@@ -76,6 +76,34 @@ pub struct Distortion {
     pub k6: f64,
 }
 
+/// The OpenCV distortion of normalised coordinates `(x, y)` with the coefficients `[k1, k2, p1,
+/// p2, k3, k4, k5, k6]`, and its Jacobian `[dxx, dxy, dyx, dyy]`, in one float type: f64 for
+/// [`Distortion::apply_with_jacobian`], f32 for the projectors' voxel loops.
+macro_rules! opencv_distortion {
+    ($name:ident, $t:ty) => {
+        #[doc = concat!("The OpenCV distortion and its Jacobian in `", stringify!($t), "` (see [`Distortion`]).")]
+        #[inline(always)]
+        pub fn $name(d: &[$t; 8], x: $t, y: $t) -> ($t, $t, [$t; 4]) {
+            let [k1, k2, p1, p2, k3, k4, k5, k6] = *d;
+            let r2 = x * x + y * y;
+            let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+            let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
+            let a = num / den;
+            let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+            let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
+            let da = (dnum * den - num * dden) / (den * den);
+            let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+            let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+            let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
+            let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
+            let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
+            (xd, yd, [dxx, dxy, dxy, dyy])
+        }
+    };
+}
+opencv_distortion!(distort_f64, f64);
+opencv_distortion!(distort_f32, f32);
+
 impl Distortion {
     /// From an OpenCV coefficient vector of length 4, 5, 8 (or more; thin-prism and tilt terms
     /// beyond the eighth are rejected because they are not modelled).
@@ -121,20 +149,7 @@ impl Distortion {
     /// Distorted coordinates and the Jacobian `d(x_d, y_d)/d(x, y)` as columns.
     pub fn apply_with_jacobian(&self, p: DVec2) -> (DVec2, DMat2x2) {
         let Distortion { k1, k2, p1, p2, k3, k4, k5, k6 } = *self;
-        let (x, y) = (p.x, p.y);
-        let r2 = x * x + y * y;
-        let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
-        let a = num / den;
-        let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
-        let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
-        let da = (dnum * den - num * dden) / (den * den);
-        let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-        let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-        let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
-        let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
-        let dyx = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
-        let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
+        let (xd, yd, [dxx, dxy, dyx, dyy]) = distort_f64(&[k1, k2, p1, p2, k3, k4, k5, k6], p.x, p.y);
         (DVec2::new(xd, yd), DMat2x2 { dxx, dxy, dyx, dyy })
     }
 }

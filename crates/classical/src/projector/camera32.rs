@@ -2,6 +2,7 @@
 //! separable-footprint projector and the splat): the camera-from-world rotation and
 //! translation, the intrinsics and the OpenCV distortion, converted once per view.
 
+pub(crate) use fluidnerf_core::camera::distort_f32 as distort;
 use fluidnerf_core::Camera;
 
 use super::Grid;
@@ -77,24 +78,4 @@ impl GridF32 {
             sp: [sp.x as f32, sp.y as f32, sp.z as f32],
         }
     }
-}
-
-/// OpenCV distortion of normalised coordinates in f32, with its Jacobian `[dxx, dxy, dyx, dyy]`
-/// (mirrors [`fluidnerf_core::Distortion::apply_with_jacobian`]).
-#[inline(always)]
-pub(crate) fn distort(d: &[f32; 8], x: f32, y: f32) -> (f32, f32, [f32; 4]) {
-    let [k1, k2, p1, p2, k3, k4, k5, k6] = *d;
-    let r2 = x * x + y * y;
-    let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-    let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
-    let a = num / den;
-    let dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
-    let dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
-    let da = (dnum * den - num * dden) / (den * den);
-    let xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-    let yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-    let dxx = a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x;
-    let dxy = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y;
-    let dyy = a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x;
-    (xd, yd, [dxx, dxy, dxy, dyy])
 }
