@@ -4,6 +4,8 @@
 use std::path::PathBuf;
 
 use fluidnerf_classical::{Grid, ProjectorConfig};
+// The reference renderer's limits, checked in `render` to name the Python arguments.
+use fluidnerf_core::render::{MAX_SAMPLES_ON_DIAGONAL, MAX_SUPERSAMPLE};
 use fluidnerf_core::{Camera, Image, RenderSettings};
 use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
@@ -123,14 +125,6 @@ pub fn back_project<'py>(
     })?;
     PyArray1::from_vec(py, out).reshape([nz, ny, nx])
 }
-
-/// The most samples [`render`] takes along the box's diagonal: 4096 times the default density
-/// (the box's smallest side / 256). The renderer walks every step of a ray without a check for
-/// Ctrl-C, so a step of 1e-300 would otherwise hold the interpreter for good.
-const MAX_SAMPLES_ON_DIAGONAL: f64 = (1u64 << 20) as f64;
-
-/// The most rays per pixel along each axis [`render`] takes (4096 rays per pixel).
-const MAX_SUPERSAMPLE: usize = 64;
 
 /// Line integrals of the volume `(nz, ny, nx)` (trilinear, filling the scene's box) through
 /// every pixel centre of the scene's cameras, times `intensity_scale`: the reference renderer
