@@ -132,7 +132,7 @@ def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene
         fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "c", stopping={"max_iterations": 0})
     # A folder holding a finished run is not overwritten without being asked.
     fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, stopping={"max_iterations": 1})
-    with pytest.raises(fluidnerf.FluidNerfError, match="already holds a finished run"):
+    with pytest.raises(fluidnerf.FluidNerfError, match='already holds a finished run.*overwrite="force"'):
         fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8)
     fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, overwrite="force")
 

@@ -94,7 +94,7 @@ pub(crate) fn run(
     if dir.resuming() && !dir.checkpoint().is_file() {
         return Err(PipelineError::RunDir {
             path: dir.root().to_path_buf(),
-            why: "--resume: no checkpoint.safetensors to continue from".into(),
+            why: "nothing to resume: no checkpoint.safetensors to continue from".into(),
         });
     }
     if scene.times().len() > 1 {

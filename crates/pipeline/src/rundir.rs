@@ -132,20 +132,23 @@ impl RunDir {
         dir.take_lock()?;
         match (dir.state(), overwrite) {
             (DirState::Empty, Overwrite::Resume) => {
-                return Err(refuse("--resume: holds no run to continue".into()));
+                return Err(refuse(
+                    "nothing to resume (--resume; `overwrite=\"resume\"` from Python): it holds no run".into(),
+                ));
             }
             (DirState::Empty, _) => dir.resume = false,
             (DirState::Finished, Overwrite::Refuse) => {
                 return Err(refuse(
                     "already holds a finished run; use --force to replace it (or --resume to continue training a \
-                     neural run)"
+                     neural run; from Python `overwrite=\"force\"` or `\"resume\"`)"
                         .into(),
                 ))
             }
             (DirState::Unfinished, Overwrite::Refuse) => {
                 return Err(refuse(
                     "holds an unfinished run (run files but no report.json: it died or was killed); use --resume \
-                     to continue it (neural methods) or --force to replace it"
+                     to continue it (neural methods) or --force to replace it (from Python `overwrite=\"resume\"` \
+                     or `\"force\"`)"
                         .into(),
                 ))
             }

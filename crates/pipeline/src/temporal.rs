@@ -256,7 +256,10 @@ pub(crate) fn run(
         if let Some(why) = progress.mismatch(&saved) {
             return Err(PipelineError::RunDir {
                 path: progress_path,
-                why: format!("cannot resume: {why}; rerun with its settings, or use --force to start over"),
+                why: format!(
+                    "cannot resume: {why}; rerun with its settings, or use --force (`overwrite=\"force\"` from \
+                     Python) to start over"
+                ),
             });
         }
         if saved.train != progress.train {
@@ -278,8 +281,8 @@ pub(crate) fn run(
             return Err(PipelineError::RunDir {
                 path: dir.root().to_path_buf(),
                 why: format!(
-                    "cannot finish: window(s) {} of {} have not finished (no {}); run them first (--window-index K), or \
-                     --resume to train what is left here",
+                    "cannot finish: window(s) {} of {} have not finished (no {}); run them first (--window-index K; \
+                     `fluidnerf.dask.train_window` from Python), or --resume to train what is left here",
                     missing.join(", "),
                     progress.plan.len(),
                     done_name(progress.finished.len())
