@@ -65,6 +65,8 @@ def _dumps(value: Any, what: str) -> str:
 def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
     """``value`` as a C-ordered array of ``dtype`` with as many dimensions as ``shape`` (e.g.
     ``"(N, 3, 3)"``) names; anything else is refused naming the argument and the shape."""
+    if np.iscomplexobj(value):
+        raise TypeError(f"{name}: expected real numbers of shape {shape}, got complex ones")
     try:
         a = np.ascontiguousarray(value, dtype=dtype)
     except (TypeError, ValueError) as e:
@@ -127,6 +129,20 @@ def load_scene(folder: PathLike) -> Scene:
     return Scene.load(os.fspath(folder))
 
 
+def _flags(value: Any, name: str) -> list[bool]:
+    """``value`` as a list of booleans (``True``/``False``, NumPy booleans, or the integers 0
+    and 1); a string or any other element is refused naming the argument."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name}: expected a sequence of booleans, one per frame, got the string {value!r}")
+    flags = []
+    for i, v in enumerate(value):
+        if isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1)):
+            flags.append(bool(v))
+        else:
+            raise TypeError(f"{name}[{i}]: expected a boolean, got {type(v).__name__} {v!r}")
+    return flags
+
+
 def scene_from_arrays(
     K: np.ndarray,
     world_from_camera: np.ndarray,
@@ -163,7 +179,7 @@ def scene_from_arrays(
         distortion=None
         if distortion is None
         else _array(np.atleast_2d(distortion), f64, "distortion", "(N, 4|5|8)"),
-        holdout=None if holdout is None else [bool(h) for h in holdout],
+        holdout=None if holdout is None else _flags(holdout, "holdout"),
         names=names,
         units=units,
         intensity_scale=_real(intensity_scale, "intensity_scale"),

@@ -154,6 +154,26 @@ def test_numbers_of_the_wrong_type_are_refused_naming_the_argument(tmp_path):
     assert not (tmp_path / "s").exists()
 
 
+def test_hold_out_flags_and_complex_images_are_refused_naming_the_argument():
+    """holdout="yes" was read as three flags ("expected 3 entries"), a flag of "no" as True,
+    and complex images lost their imaginary part with only NumPy's warning."""
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    with pytest.raises(
+        TypeError, match="holdout: expected a sequence of booleans, one per frame, got the string 'yes'"
+    ):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, holdout="yes")
+    with pytest.raises(TypeError, match=r"holdout\[1\]: expected a boolean, got str 'no'"):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, holdout=[False, "no", True])
+    with pytest.raises(
+        TypeError, match=r"images: expected real numbers of shape \(N, H, W\), got complex ones"
+    ):
+        fluidnerf.scene_from_arrays(K, poses, images.astype(np.complex64), aabb)
+    scene = fluidnerf.scene_from_arrays(K, poses, images, aabb, holdout=[0, np.bool_(True), False])
+    assert scene is not None
+
+
 def test_a_scene_without_frames_is_refused():
     """Zero frames made a scene that nothing could use: saving it, loading it back and
     projecting through it failed later, each with its own message, and render returned []."""
