@@ -77,6 +77,11 @@ impl AxisShift {
         Camera { world_from_camera: pose, ..c.clone() }
     }
 
+    /// Every camera of `cameras` in the shifted world ([`Self::camera`]).
+    pub fn cameras(&self, cameras: &[Camera]) -> Vec<Camera> {
+        cameras.iter().map(|c| self.camera(c)).collect()
+    }
+
     /// `data` (on a grid of `dims`, `x` fastest) on the shifted grid.
     pub fn data(&self, dims: [usize; 3], data: &[f32]) -> Vec<f32> {
         let mut out = vec![0f32; data.len()];
@@ -212,7 +217,7 @@ mod tests {
         assert_eq!(shift, AxisShift::to_x(1));
         let x: Vec<f32> = (0..grid.len()).map(|v| ((v * 37 % 101) as f32) / 101.0).collect();
         let before = FootprintProjector::new(grid, &cams, 1.0).unwrap();
-        let shifted_cams: Vec<Camera> = cams.iter().map(|c| shift.camera(c)).collect();
+        let shifted_cams = shift.cameras(&cams);
         let after = FootprintProjector::new(shift.grid(&grid), &shifted_cams, 1.0).unwrap();
         assert_eq!((before.shared_row_views(), after.shared_row_views()), (0, cams.len()));
         let xs = shift.data(grid.dims, &x);

@@ -13,7 +13,7 @@ use std::time::Instant;
 use fluidnerf_classical::{
     voxel_footprint_px, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
 };
-use fluidnerf_core::{Camera, Image, Scene, Volume};
+use fluidnerf_core::{Image, Scene, Volume};
 use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
 
 use crate::measured::{fit_gain, normalise, MaskedProjector};
@@ -99,13 +99,11 @@ pub(crate) fn run(
     // ring another axis is solved on axes renamed so that it becomes `x` (an exact rotation;
     // the volume is put back on the scene's axes at the end).
     let shift = spec.projector.row_shift(&grid, &cameras);
-    let (grid_s, cameras_s, holdout_cameras_s) = if shift.is_identity() {
-        (grid, cameras.clone(), holdout_cameras.clone())
-    } else {
+    if !shift.is_identity() {
         log::debug!("{method}: solved on shifted axes ({shift:?}), whose grid rows share footprints");
-        let moved = |cs: &[Camera]| cs.iter().map(|c| shift.camera(c)).collect::<Vec<_>>();
-        (shift.grid(&grid), moved(&cameras), moved(&holdout_cameras))
-    };
+    }
+    let (grid_s, cameras_s, holdout_cameras_s) =
+        (shift.grid(&grid), shift.cameras(&cameras), shift.cameras(&holdout_cameras));
     let threads = rayon::current_num_threads();
     // Scoring holds the truth, a resampled copy and temporaries; the curve a copy of the volume.
     let truth_bytes: u64 = truth.first().map_or(0, |(_, t)| 3 * 4 * t.len() as u64 + 4 * grid.len() as u64);

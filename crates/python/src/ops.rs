@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use fluidnerf_classical::{Grid, ProjectorConfig};
 // The reference renderer's limits, checked in `render` to name the Python arguments.
 use fluidnerf_core::render::{MAX_SAMPLES_ON_DIAGONAL, MAX_SUPERSAMPLE};
-use fluidnerf_core::{Camera, Image, RenderSettings};
+use fluidnerf_core::{Image, RenderSettings};
 use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
@@ -44,7 +44,7 @@ pub fn forward_project(
             let grid = Grid::new(volume.dims, volume.aabb);
             // On axes where the grid rows share footprints, if the cameras ring `y` or `z`.
             let shift = config.row_shift(&grid, &cameras);
-            let moved: Vec<Camera> = cameras.iter().map(|c| shift.camera(c)).collect();
+            let moved = shift.cameras(&cameras);
             let shifted;
             let x: &[f32] = if shift.is_identity() {
                 &volume.data
@@ -114,7 +114,7 @@ pub fn back_project<'py>(
         guard(|| {
             let grid = Grid::new([nx, ny, nz], aabb);
             let shift = config.row_shift(&grid, &cameras);
-            let moved: Vec<Camera> = cameras.iter().map(|c| shift.camera(c)).collect();
+            let moved = shift.cameras(&cameras);
             let p = config.build(shift.grid(&grid), &moved, scale).map_err(|e| err(e.to_string()))?;
             let mut out = vec![0f32; grid.len()];
             let views: Vec<usize> = (0..data.len()).collect();
