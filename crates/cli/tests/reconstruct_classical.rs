@@ -54,6 +54,9 @@ fn classical_runs_write_results_refuse_overwrite_and_rerun_from_config() {
     assert!(String::from_utf8_lossy(&wrong.stderr).contains("--method"));
 }
 
+/// The warning of a SART-TV run inside a visual hull.
+const HULL_TV: &str = "SART-TV inside a visual hull";
+
 #[test]
 fn every_method_and_option_runs_and_memory_is_checked() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -61,7 +64,7 @@ fn every_method_and_option_runs_and_memory_is_checked() {
     demo_scene(d, "ball", 5, 32, 16, &[]);
     for method in ["art", "sart", "mart", "smart", "mlem", "tv", "tikhonov"] {
         let out = format!("run-{method}");
-        ok(&fluidnerf(
+        let run = fluidnerf(
             d,
             &[
                 "reconstruct",
@@ -74,14 +77,15 @@ fn every_method_and_option_runs_and_memory_is_checked() {
                 "12",
                 "--max-iterations",
                 "3",
-                "-q",
             ],
-        ));
+        );
+        ok(&run);
+        assert!(!String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "{method}: no hull, no warning");
         let r = report(&d.join(&out));
         assert_eq!(r["iterations"], 3, "{method}");
     }
-    // Ray projector, visual hull, TV weight, no plateau rule.
-    ok(&fluidnerf(
+    // Ray projector, visual hull, TV weight, no plateau rule. TV inside a hull is warned of.
+    let run = fluidnerf(
         d,
         &[
             "reconstruct",
@@ -103,9 +107,10 @@ fn every_method_and_option_runs_and_memory_is_checked() {
             "0",
             "--max-iterations",
             "4",
-            "-q",
         ],
-    ));
+    );
+    ok(&run);
+    assert!(String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "{}", String::from_utf8_lossy(&run.stderr));
     let r = report(&d.join("ray"));
     assert_eq!(r["classical"]["projector"], "ray");
     assert_eq!(r["iterations"], 4);

@@ -166,6 +166,18 @@ pub(crate) fn run(
     let support = spec.projector.support(&grid_s, &cameras_s, &hull_images);
     drop(hull_images);
     let hull_voxels = support.as_ref().map(|h| h.iter().filter(|&&b| b).count());
+    if let (Some(inside), ClassicalMethod::Tv(p)) = (hull_voxels, &spec.method) {
+        if p.tv_weight > 0.0 && inside < grid.len() {
+            session.warn(&format!(
+                "SART-TV inside a visual hull: each total-variation step has the length it would have \
+                 without one, and now moves only the hull's {inside} voxels ({:.0} % of the grid), so \
+                 tv_weight {} smooths them much harder; on the synthetic jet a quarter of the default \
+                 weight did better with a hull (docs/claims.md)",
+                100.0 * inside as f64 / grid.len() as f64,
+                p.tv_weight
+            ));
+        }
+    }
     let fit = config.gains.mode == GainMode::Fit;
     let fixed = ProjectorConfig { splat_subdivisions: subdivisions, ..resolved.clone() };
     let holdout = if holdout_cameras.is_empty() {

@@ -267,6 +267,7 @@ pub struct ClassicalArgs {
     #[arg(long, value_name = "VOXELS")]
     pub ray_step: Option<f64>,
     /// Hold voxels at zero whose centre projects onto a dark pixel in any view (visual hull).
+    /// With --method tv, lower --tv-weight too: the TV steps then move only the hull's voxels.
     #[arg(long)]
     pub visual_hull: bool,
     /// Dark threshold of --visual-hull, as a fraction of each image's maximum [default: 0.02].
