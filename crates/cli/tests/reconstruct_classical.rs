@@ -66,18 +66,7 @@ fn every_method_and_option_runs_and_memory_is_checked() {
         let out = format!("run-{method}");
         let run = fluidnerf(
             d,
-            &[
-                "reconstruct",
-                "scene",
-                "-o",
-                &out,
-                "--method",
-                method,
-                "--resolution",
-                "12",
-                "--max-iterations",
-                "3",
-            ],
+            &["reconstruct", "scene", "-o", &out, "--method", method, "--resolution", "12", "--max-iterations", "3"],
         );
         ok(&run);
         assert!(!String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "{method}: no hull, no warning");
