@@ -71,9 +71,11 @@ fn every_method_and_option_runs_and_memory_is_checked() {
         ok(&run);
         assert!(!String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "{method}: no hull, no warning");
         let r = report(&d.join(&out));
+        assert_eq!(r["warnings"], serde_json::json!([]), "{method}");
         assert_eq!(r["iterations"], 3, "{method}");
     }
-    // Ray projector, visual hull, TV weight, no plateau rule. TV inside a hull is warned of.
+    // Ray projector, visual hull, TV weight, no plateau rule. TV inside a hull is warned of,
+    // also in report.json and report.html, where a quiet run (-q) still records it.
     let run = fluidnerf(
         d,
         &[
@@ -96,11 +98,16 @@ fn every_method_and_option_runs_and_memory_is_checked() {
             "0",
             "--max-iterations",
             "4",
+            "-q",
         ],
     );
     ok(&run);
-    assert!(String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(!String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "-q prints only errors");
     let r = report(&d.join("ray"));
+    let warnings = r["warnings"].as_array().expect("warnings");
+    assert!(warnings.len() == 1 && warnings[0].as_str().is_some_and(|w| w.starts_with(HULL_TV)), "{warnings:?}");
+    let html = std::fs::read_to_string(d.join("ray/report.html")).expect("report.html");
+    assert!(html.contains(HULL_TV), "report.html shows the warning");
     assert_eq!(r["classical"]["projector"], "ray");
     assert_eq!(r["iterations"], 4);
     let kept = r["classical"]["hull_voxels"].as_u64().expect("hull used");

@@ -383,6 +383,7 @@ pub(crate) fn run(
         neural: None,
         windows: Vec::new(),
         preprocessing: Some(preprocessing),
+        warnings: Vec::new(),
     };
     log::debug!("{method}: {:.1} s in all", session.elapsed_s());
     finish(scene, dir, report, truth, session)

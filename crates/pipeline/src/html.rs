@@ -276,6 +276,7 @@ pub(crate) fn write_run_html(
         None => truth.first(),
     };
     let mut html = build_report(&format!("{label} reconstruction"), scene, truth_volume.map(|(_, v)| v), &[&run])?;
+    html.summary.extend(report.warnings.iter().map(|w| ("warning".to_string(), w.clone())));
     if let Some(p) = &report.preprocessing {
         let mut table = Table::new(
             format!(

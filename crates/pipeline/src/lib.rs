@@ -83,6 +83,7 @@ pub fn reconstruct(
         cpu0: cpu_seconds(),
         budget_s: config.stopping.time_budget_s,
         estimate: Estimator::default(),
+        warnings: Vec::new(),
     };
     let truth = load_truth(scene)?;
     match config.method().family() {
@@ -118,6 +119,8 @@ pub(crate) struct Session<'a> {
     cpu0: Option<f64>,
     /// The run's time budget (`stopping.time_budget_s`), which bounds the estimate.
     budget_s: Option<f64>,
+    /// Every warning given, for `report.json` and `report.html`.
+    warnings: Vec<String>,
     estimate: Estimator,
 }
 
@@ -194,7 +197,10 @@ impl Session<'_> {
         flow
     }
 
+    /// Delivers a warning and keeps it for the run's report, so that it is not lost where
+    /// nobody watches the events (`-q`, a Python call without a callback, a study).
     pub(crate) fn warn(&mut self, message: &str) {
+        self.warnings.push(message.to_string());
         let _ = self.emit(RunEvent::Warning(message));
     }
 
@@ -315,12 +321,14 @@ impl<T> BestHoldout<T> {
 pub(crate) fn finish(
     scene: &Scene,
     dir: &RunDir,
-    report: RunReport,
+    mut report: RunReport,
     truth: &[(Option<f64>, Volume)],
     session: &mut Session,
 ) -> Result<RunReport, PipelineError> {
+    report.warnings = session.warnings.clone();
     if let Err(e) = html::write_run_html(dir, scene, &report, truth) {
         session.warn(&format!("could not write {}: {e}", dir.report_html().display()));
+        report.warnings = session.warnings.clone();
     }
     dir.write_json("report.json", &report)?;
     Ok(report)

@@ -205,6 +205,7 @@ pub(crate) fn run_voxel_start(
         cpu0: None,
         budget_s,
         estimate: Default::default(),
+        warnings: Vec::new(),
     };
     crate::classical::run(scene, &voxel, &dir, truth, &mut inner)
 }
@@ -567,6 +568,7 @@ impl Ctx<'_> {
             }),
             windows: Vec::new(),
             preprocessing: Some(self.measured.report(self.scene, fitted.as_deref(), &holdout_scores)),
+            warnings: Vec::new(),
         };
         finish(self.scene, dir, report, self.truth, session)
     }

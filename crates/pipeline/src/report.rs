@@ -206,6 +206,10 @@ pub struct RunReport {
     /// What was done to the images before and during the reconstruction.
     #[serde(default)]
     pub preprocessing: Option<Preprocessing>,
+    /// The warnings the run gave, in order (also shown by the command and sent to a Python
+    /// callback as they happen).
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
 
 /// The preprocessing of a run's images: what the scene records (background, masks), what the

@@ -572,6 +572,7 @@ impl Ctx<'_> {
         log::debug!("{}: prepare and train {wall_s:.1} s", self.method);
         let report = RunReport {
             preprocessing: None,
+            warnings: Vec::new(),
             format: REPORT_FORMAT,
             fluidnerf_version: env!("CARGO_PKG_VERSION").to_string(),
             method: self.method,
@@ -735,6 +736,7 @@ pub fn reconstruct_windows(
         cpu0: None,
         budget_s: config.stopping.time_budget_s,
         estimate: crate::Estimator::default(),
+        warnings: Vec::new(),
     };
     let Setup { spec, method, problem, masks, field, progress, .. } = setup(scene, config, &[], &mut session)?;
     if spec.start.is_some() {
@@ -941,6 +943,7 @@ pub fn finish_windows(
         cpu0: crate::cpu_seconds(),
         budget_s: config.stopping.time_budget_s,
         estimate: crate::Estimator::default(),
+        warnings: Vec::new(),
     };
     let truth = crate::load_truth(scene)?;
     run(scene, config, &dir, &truth, &mut session, true)
