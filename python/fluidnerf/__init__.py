@@ -24,6 +24,7 @@ arrays of cell-centred voxels filling the box ``[[xmin, ymin, zmin], [xmax, ymax
 from ._api import (
     Camera,
     FluidNerfError,
+    FluidNerfWarning,
     Run,
     Scene,
     back_project,
@@ -51,6 +52,7 @@ from ._fluidnerf import __version__
 __all__ = [
     "Camera",
     "FluidNerfError",
+    "FluidNerfWarning",
     "Run",
     "Scene",
     "__version__",

@@ -9,6 +9,7 @@ import operator
 import os
 import shutil
 import tempfile
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional, Union
@@ -79,6 +80,7 @@ def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
 __all__ = [
     "Camera",
     "FluidNerfError",
+    "FluidNerfWarning",
     "Run",
     "Scene",
     "back_project",
@@ -428,6 +430,22 @@ def _check_callback(callback: Any) -> None:
         raise TypeError(f"callback: expected a function of one event dict, got {callback!r}")
 
 
+class FluidNerfWarning(UserWarning):
+    """A run's warning, issued through Python's :mod:`warnings` as it happens (the run also
+    keeps it in ``report["warnings"]``)."""
+
+
+def _warning_callback(callback: Callback | None) -> Callback:
+    """``callback`` that also issues each ``warning`` event as a :class:`FluidNerfWarning`."""
+
+    def on_event(event: dict) -> bool | None:
+        if event["kind"] == "warning":
+            warnings.warn(event["message"], FluidNerfWarning, stacklevel=2)
+        return callback(event) if callback is not None else None
+
+    return on_event
+
+
 def _progress_callback(callback: Callback | None, progress: bool | None) -> tuple[Callback | None, Any]:
     """The callback given, combined with a tqdm bar when asked (None: when tqdm is installed)."""
     bar_holder: dict = {}
@@ -488,6 +506,7 @@ def reconstruct(
     ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
     ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
     ``False`` stops the run. ``progress`` shows a tqdm bar (None: when tqdm is installed).
+    A run's warnings are issued as :class:`FluidNerfWarning` and kept in ``run.report["warnings"]``.
     The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
     written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.
     """
@@ -500,7 +519,7 @@ def reconstruct(
         # A resumed run continues with the settings it was started with (as --resume).
         config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
-    cb, bars = _progress_callback(callback, progress)
+    cb, bars = _progress_callback(_warning_callback(callback), progress)
     try:
         _ext.reconstruct(scene, json.dumps(cfg), os.fspath(out_path), overwrite, cb)
     finally:

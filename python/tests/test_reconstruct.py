@@ -79,6 +79,27 @@ def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
     np.testing.assert_allclose(run.field(c).reshape(run.volume.shape), run.volume, rtol=1e-5, atol=1e-7)
 
 
+def test_a_runs_warnings_are_issued_and_kept_in_its_report(static_scene, tmp_path):
+    # SART-TV inside a visual hull warns that its weight then over-smooths the hull's voxels.
+    method = {"name": "tv", "projector": {"visual_hull": True}}
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="SART-TV inside a visual hull"):
+        run = fluidnerf.reconstruct(
+            static_scene,
+            method,
+            tmp_path / "tv",
+            resolution=8,
+            stopping={"max_iterations": 2},
+            progress=False,
+        )
+    (warning,) = run.report["warnings"]
+    assert warning.startswith("SART-TV inside a visual hull")
+    # Without the hull, nothing to warn of.
+    plain = fluidnerf.reconstruct(
+        static_scene, "tv", tmp_path / "plain", resolution=8, stopping={"max_iterations": 2}, progress=False
+    )
+    assert plain.report["warnings"] == []
+
+
 def test_a_saved_configuration_reruns_its_own_method(static_scene, tr_scene, tmp_path):
     first = fluidnerf.reconstruct(
         static_scene, "asart", tmp_path / "a", resolution=8, stopping={"max_iterations": 2}, progress=False
