@@ -9,6 +9,8 @@
 //! point, which keeps a camera's exact zeros where they were. [`AxisShift`] does that to the
 //! grid, the cameras and volumes, and puts a volume back on the original axes.
 
+use std::borrow::Cow;
+
 use fluidnerf_core::{Aabb, Camera, Volume};
 use glam::{DAffine3, DMat3, DVec3};
 
@@ -82,23 +84,34 @@ impl AxisShift {
         cameras.iter().map(|c| self.camera(c)).collect()
     }
 
-    /// `data` (on a grid of `dims`, `x` fastest) on the shifted grid.
-    pub fn data(&self, dims: [usize; 3], data: &[f32]) -> Vec<f32> {
+    /// `data` (on a grid of `dims`, `x` fastest) on the shifted grid; borrowed, not copied,
+    /// when the shift is the identity.
+    pub fn data<'a>(&self, dims: [usize; 3], data: &'a [f32]) -> Cow<'a, [f32]> {
+        if self.is_identity() {
+            return Cow::Borrowed(data);
+        }
         let mut out = vec![0f32; data.len()];
         self.walk(dims, |orig, shifted| out[shifted] = data[orig]);
-        out
+        Cow::Owned(out)
     }
 
-    /// `shifted` (on the shifted grid of a grid of `dims`) back on the original grid.
-    pub fn data_back(&self, dims: [usize; 3], shifted: &[f32]) -> Vec<f32> {
+    /// `shifted` (on the shifted grid of a grid of `dims`) back on the original grid; returned
+    /// as it is when the shift is the identity.
+    pub fn data_back(&self, dims: [usize; 3], shifted: Vec<f32>) -> Vec<f32> {
+        if self.is_identity() {
+            return shifted;
+        }
         let mut out = vec![0f32; shifted.len()];
         self.walk(dims, |orig, s| out[orig] = shifted[s]);
         out
     }
 
-    /// `v` on the shifted axes.
-    pub fn volume(&self, v: &Volume) -> Volume {
-        Volume::from_vec(self.dims(v.dims), self.aabb(&v.aabb), self.data(v.dims, &v.data))
+    /// `v` on the shifted axes; borrowed when the shift is the identity.
+    pub fn volume<'a>(&self, v: &'a Volume) -> Cow<'a, Volume> {
+        if self.is_identity() {
+            return Cow::Borrowed(v);
+        }
+        Cow::Owned(Volume::from_vec(self.dims(v.dims), self.aabb(&v.aabb), self.data(v.dims, &v.data).into_owned()))
     }
 
     /// Calls `f(original index, shifted index)` for every voxel of a grid of `dims`.
@@ -166,7 +179,7 @@ mod tests {
         for s in 0..3 {
             let shift = AxisShift::to_x(s);
             let shifted = shift.data(dims, &data);
-            assert_eq!(shift.data_back(dims, &shifted), data, "shift {s}");
+            assert_eq!(shift.data_back(dims, shifted.to_vec()), data, "shift {s}");
             // Voxel (i, j, k) = (3, 2, 1) of the original grid.
             // i + nx (j + ny k) with k = 1.
             let (orig, idx) = (3 + 4 * (2 + 3), [3usize, 2, 1]);
@@ -233,7 +246,7 @@ mod tests {
             before.back_add(v, &a, &mut back_before, None);
             after.back_add(v, &a, &mut back_after, None);
         }
-        let back_after = shift.data_back(grid.dims, &back_after);
+        let back_after = shift.data_back(grid.dims, back_after);
         let peak = back_before.iter().fold(0f32, |m, &p| m.max(p));
         let worst = back_before.iter().zip(&back_after).fold(0f32, |m, (p, q)| m.max((p - q).abs()));
         assert!(worst <= 1e-4 * peak, "back projections differ by {worst} (peak {peak})");

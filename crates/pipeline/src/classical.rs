@@ -196,13 +196,7 @@ pub(crate) fn run(
 
     let eval_every = config.eval_interval();
     let holdout_every = config.stopping.holdout_interval(Family::Classical);
-    let mut curve = truth.first().map(|(_, t)| {
-        if shift.is_identity() {
-            Curve::new(t, grid_s)
-        } else {
-            Curve::new(&shift.volume(t), grid_s)
-        }
-    });
+    let mut curve = truth.first().map(|(_, t)| Curve::new(&shift.volume(t), grid_s));
     let mut best = BestHoldout::<Vec<f32>>::new(config.stopping.patience);
     let mut holdout_history = Vec::new();
     let mut cause = None;
@@ -324,7 +318,7 @@ pub(crate) fn run(
         None => Vec::new(),
     };
     let preprocessing = measured.report(scene, fit.then_some(gains.as_slice()), &scores);
-    let volume = grid.volume(if shift.is_identity() { data } else { shift.data_back(grid.dims, &data) });
+    let volume = grid.volume(shift.data_back(grid.dims, data));
     write_volume(dir, "volume", &volume)?;
 
     let t_eval = Instant::now();

@@ -45,18 +45,12 @@ pub fn forward_project(
             // On axes where the grid rows share footprints, if the cameras ring `y` or `z`.
             let shift = config.row_shift(&grid, &cameras);
             let moved = shift.cameras(&cameras);
-            let shifted;
-            let x: &[f32] = if shift.is_identity() {
-                &volume.data
-            } else {
-                shifted = shift.data(grid.dims, &volume.data);
-                &shifted
-            };
+            let x = shift.data(grid.dims, &volume.data);
             let p = config.build(shift.grid(&grid), &moved, scale).map_err(|e| err(e.to_string()))?;
             let mut images = Vec::with_capacity(cameras.len());
             for (v, c) in cameras.iter().enumerate() {
                 let mut out = vec![0f32; c.width() * c.height()];
-                p.forward(v, x, &mut out);
+                p.forward(v, &x, &mut out);
                 images.push(Image::from_vec(c.width(), c.height(), out));
             }
             Ok(images)
@@ -120,7 +114,7 @@ pub fn back_project<'py>(
             let views: Vec<usize> = (0..data.len()).collect();
             let ys: Vec<&[f32]> = data.iter().map(Vec::as_slice).collect();
             p.back_add_views(&views, &ys, &mut out, None);
-            Ok(if shift.is_identity() { out } else { shift.data_back(grid.dims, &out) })
+            Ok(shift.data_back(grid.dims, out))
         })
     })?;
     PyArray1::from_vec(py, out).reshape([nz, ny, nx])
