@@ -37,7 +37,7 @@ pub mod solve;
 
 pub use axes::{rows_shared_along, AxisShift};
 pub use error::{ClassicalError, SolveError};
-pub use hull::{visual_hull, DEFAULT_HULL_THRESHOLD};
+pub use hull::{dark_level, visual_hull, DEFAULT_HULL_NOISE_SIGMAS, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
 pub use method::{voxel_footprint_px, ClassicalMethod, ProjectorConfig};
 pub use projector::{

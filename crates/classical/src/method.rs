@@ -14,7 +14,7 @@ use crate::{
     art, asart, estimate_memory, mart, mlem, sart, sart_tikhonov, sart_tv, smart, visual_hull, Algorithm, ArtParams,
     AsartParams, ClassicalError, FootprintProjector, Grid, IterState, MartParams, MemoryEstimate, MlemParams, Problem,
     Projector, ProjectorKind, RayProjector, Report, SartParams, SmartParams, SplatProjector, Stopping, TikhonovParams,
-    TvParams, DEFAULT_HULL_THRESHOLD,
+    TvParams, DEFAULT_HULL_NOISE_SIGMAS, DEFAULT_HULL_THRESHOLD,
 };
 
 /// A classical method and its parameters.
@@ -236,6 +236,15 @@ pub struct ProjectorConfig {
     pub visual_hull: bool,
     /// Dark threshold of the hull, a fraction of each image's maximum. Default 0.02.
     pub hull_threshold: f64,
+    /// Noise deviations above each image's background that still count as dark in the hull, when
+    /// that is above `hull_threshold` ([`crate::dark_level`]). Default 4; a saved
+    /// configuration without the key reads 0, the threshold alone, as it was run.
+    #[serde(default)]
+    pub hull_noise_sigmas: f64,
+    /// Voxels by which the hull is dilated after carving ([`crate::visual_hull`]). Default 1;
+    /// a saved configuration without the key reads 0, as it was run.
+    #[serde(default)]
+    pub hull_dilation: usize,
     /// MiB of footprints the footprint projector may keep between back projections, for views
     /// whose grid rows share a footprint axis (rings around the grid's `x` axis; see
     /// [`FootprintProjector::with_kept_footprints`]): about 20 bytes per voxel and view. The
@@ -253,6 +262,8 @@ impl Default for ProjectorConfig {
             ray_step: 0.5,
             visual_hull: false,
             hull_threshold: DEFAULT_HULL_THRESHOLD,
+            hull_noise_sigmas: DEFAULT_HULL_NOISE_SIGMAS,
+            hull_dilation: 1,
             kept_footprints_mib: 0,
         }
     }
@@ -266,16 +277,28 @@ impl ProjectorConfig {
                 format!("must be at most 16, got {}", self.splat_subdivisions),
             ));
         }
-        if !(self.ray_step > 0.0 && self.ray_step <= 4.0) {
+        if !(self.ray_step >= 0.01 && self.ray_step <= 4.0) {
             return Err(ClassicalError::invalid(
                 "ray_step",
-                format!("must be in (0, 4] voxel sides, got {}", self.ray_step),
+                format!("must be in [0.01, 4] voxel sides, got {}", self.ray_step),
             ));
         }
         if !(self.hull_threshold >= 0.0 && self.hull_threshold < 1.0) {
             return Err(ClassicalError::invalid(
                 "hull_threshold",
                 format!("must be in [0, 1), got {}", self.hull_threshold),
+            ));
+        }
+        if self.hull_dilation > 16 {
+            return Err(ClassicalError::invalid(
+                "hull_dilation",
+                format!("must be at most 16 voxels, got {}", self.hull_dilation),
+            ));
+        }
+        if !(self.hull_noise_sigmas >= 0.0 && self.hull_noise_sigmas <= 100.0) {
+            return Err(ClassicalError::invalid(
+                "hull_noise_sigmas",
+                format!("must be in [0, 100], got {}", self.hull_noise_sigmas),
             ));
         }
         Ok(())
@@ -358,7 +381,9 @@ impl ProjectorConfig {
 
     /// The support mask, when the visual hull is on.
     pub fn support(&self, grid: &Grid, cameras: &[Camera], images: &[Image]) -> Option<Vec<bool>> {
-        self.visual_hull.then(|| visual_hull(grid, cameras, images, self.hull_threshold))
+        self.visual_hull.then(|| {
+            visual_hull(grid, cameras, images, self.hull_threshold, self.hull_noise_sigmas, self.hull_dilation)
+        })
     }
 }
 

@@ -166,7 +166,8 @@ fn callback_break_returns_the_finished_iteration() {
 #[test]
 fn visual_hull_keeps_the_object_and_carves_the_rest() {
     let c = case(ball);
-    let hull = visual_hull(&c.grid, c.projector.cameras(), &c.images, DEFAULT_HULL_THRESHOLD);
+    let hull =
+        visual_hull(&c.grid, c.projector.cameras(), &c.images, DEFAULT_HULL_THRESHOLD, DEFAULT_HULL_NOISE_SIGMAS, 0);
     let inside = c.truth.iter().zip(&hull).filter(|(&t, _)| t > 0.0);
     assert!(inside.clone().all(|(_, &h)| h), "the hull cut into the ball");
     let kept = hull.iter().filter(|&&h| h).count();
@@ -237,7 +238,8 @@ fn kept_rows_change_no_result() {
     let view_bytes = c.projector.rows(0).bytes();
     // 1 MiB holds some views' rows but not all eight.
     assert!(view_bytes < 1 << 20 && 8 * view_bytes > 1 << 20, "one view's rows take {view_bytes} bytes");
-    let hull = visual_hull(&c.grid, c.projector.cameras(), &c.images, DEFAULT_HULL_THRESHOLD);
+    let hull =
+        visual_hull(&c.grid, c.projector.cameras(), &c.images, DEFAULT_HULL_THRESHOLD, DEFAULT_HULL_NOISE_SIGMAS, 0);
     let free = Problem::new(&c.projector, &c.images).expect("consistent");
     let masked = free.with_support(&hull);
     let stopping = Stopping { max_iterations: 3, plateau: None };

@@ -184,6 +184,12 @@ fn cases() -> Vec<Case> {
             "hull_threshold",
         ),
         c(
+            "hull noise sigmas -1",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--hull-noise-sigmas=-1"],
+            "hull_noise_sigmas",
+        ),
+        c(
             "TV option on ASART",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--tv-weight", "0.1"],

@@ -112,6 +112,34 @@ impl Image {
     }
 }
 
+/// The dark level of an image with noise: its background and the standard deviation of its
+/// noise, in pixel units, from which a pixel can be judged bright or dark.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Background {
+    /// The image's background level: its median, or its 10th percentile plus 1.28 deviations
+    /// (where the 10th percentile of Gaussian noise lies; the floor itself when a tenth of the
+    /// pixels lie on it, as noise clipped there does) when that is lower, so that an object
+    /// covering most of the image is not taken for background.
+    pub level: f64,
+    /// [`Image::relative_noise`] times the image's range: 0 for a noiseless image.
+    pub sigma: f64,
+}
+
+impl Image {
+    /// The image's [`Background`]; `None` when [`Image::relative_noise`] gives no estimate.
+    pub fn background(&self) -> Option<Background> {
+        let noise = self.relative_noise()?;
+        let (lo, hi) = self.min_max();
+        let sigma = noise * (hi - lo) as f64;
+        let mut values = self.data.clone();
+        let n = values.len();
+        let median = *values.select_nth_unstable_by(n / 2, f32::total_cmp).1 as f64;
+        let p10 = *values.select_nth_unstable_by(n / 10, f32::total_cmp).1 as f64;
+        let low = if p10 <= lo as f64 { p10 } else { p10 + 1.28 * sigma };
+        Some(Background { level: median.min(low), sigma })
+    }
+}
+
 /// The median of several images' noise readings ([`Image::relative_noise`]); `None` for none.
 pub fn median_noise(levels: impl IntoIterator<Item = f64>) -> Option<f64> {
     let mut levels: Vec<f64> = levels.into_iter().collect();

@@ -271,8 +271,19 @@ pub struct ClassicalArgs {
     #[arg(long)]
     pub visual_hull: bool,
     /// Dark threshold of --visual-hull, as a fraction of each image's maximum [default: 0.02].
+    /// A pixel also counts as dark up to the image's background plus --hull-noise-sigmas deviations
+    /// of its noise, when that is higher.
     #[arg(long, value_name = "FRACTION")]
     pub hull_threshold: Option<f64>,
+    /// Noise deviations above each image's background that still count as dark for --visual-hull,
+    /// so that noisy images carve their background too; 0 leaves --hull-threshold alone
+    /// [default: 4].
+    #[arg(long, value_name = "SIGMAS")]
+    pub hull_noise_sigmas: Option<f64>,
+    /// Voxels by which --visual-hull's hull is dilated after carving, so that it keeps the
+    /// object's faint rim [default: 1].
+    #[arg(long, value_name = "VOXELS")]
+    pub hull_dilation: Option<usize>,
     /// Method tv: size of each total-variation step relative to the SART step [default: 0.2].
     #[arg(long, value_name = "WEIGHT")]
     pub tv_weight: Option<f64>,
@@ -401,6 +412,8 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
             ("--ray-step", c.ray_step.is_some()),
             ("--visual-hull", c.visual_hull),
             ("--hull-threshold", c.hull_threshold.is_some()),
+            ("--hull-noise-sigmas", c.hull_noise_sigmas.is_some()),
+            ("--hull-dilation", c.hull_dilation.is_some()),
             ("--plateau-tolerance", c.plateau_tolerance.is_some()),
         ]));
     }
@@ -676,6 +689,12 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         }
         if let Some(t) = c.hull_threshold {
             spec.projector.hull_threshold = t;
+        }
+        if let Some(k) = c.hull_noise_sigmas {
+            spec.projector.hull_noise_sigmas = k;
+        }
+        if let Some(d) = c.hull_dilation {
+            spec.projector.hull_dilation = d;
         }
         if let Some(mu) = c.relaxation {
             if let Some(r) = spec.method.relaxation_mut() {
