@@ -284,6 +284,78 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT", "--method", "fast"],
             "--method",
         ),
+        c(
+            "config: occupancy margin negative",
+            File(
+                "run.json",
+                br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"occupancy":{"margin_px":-5}}}}"#,
+            ),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "occupancy.margin_px",
+        ),
+        c(
+            "config: occupancy grid too fine",
+            File(
+                "run.json",
+                br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"occupancy":{"resolution":100000}}}}"#,
+            ),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "occupancy.resolution",
+        ),
+        c(
+            "config: occupancy dilated without end",
+            File(
+                "run.json",
+                br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"occupancy":{"dilate":1000000000}}}}"#,
+            ),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "occupancy.dilate",
+        ),
+        c(
+            "config: occupancy floor above 1",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"occupancy":{"floor":5}}}}"#),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "occupancy.floor",
+        ),
+        c(
+            "config: occupancy noise sigmas negative",
+            File(
+                "run.json",
+                br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"occupancy":{"noise_sigmas":-1}}}}"#,
+            ),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "occupancy.noise_sigmas",
+        ),
+        c(
+            "config: dense field too fine",
+            File(
+                "run.json",
+                br#"{"format":1,"scene":"x","method":{"name":"voxel","field":{"dense":{"resolution":100000}},"train":{}}}"#,
+            ),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "dense field",
+        ),
+        c(
+            "config: samples per ray without end",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"coarse_samples":100000}}}"#),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "coarse_samples",
+        ),
+        c(
+            "config: no training iteration",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"fast","field":{"hash-grid":{}},"train":{"max_iterations":0}}}"#),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "max_iterations",
+        ),
+        c(
+            "config: ray step too fine",
+            File(
+                "run.json",
+                br#"{"format":1,"scene":"x","method":{"name":"asart","projector":{"kind":"ray","ray_step":1e-6}}}"#,
+            ),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            "ray_step",
+        ),
         c("eval of a folder without a run", None, &["eval", "SCENE/images", "--scene", "SCENE"], "images"),
         c("fast run of an unreadable image", File("images/cam001.png", b""), FAST, "cam001.png"),
         c(

@@ -68,6 +68,35 @@ impl Default for OccupancyConfig {
     }
 }
 
+/// The finest occupancy grid a run may ask for, in cells along the box's longest side.
+pub const MAX_OCCUPANCY_RESOLUTION: usize = 512;
+
+impl OccupancyConfig {
+    /// Rejects settings no carving can use.
+    pub fn validate(&self) -> Result<(), crate::NeuralError> {
+        let bad = |what: &str, why: String| Err(crate::NeuralError::invalid(format!("occupancy.{what}"), why));
+        if !(1..=MAX_OCCUPANCY_RESOLUTION).contains(&self.resolution) {
+            return bad(
+                "resolution",
+                format!("must be 1 to {MAX_OCCUPANCY_RESOLUTION} cells, got {}", self.resolution),
+            );
+        }
+        if !(self.noise_sigmas >= 0.0 && self.noise_sigmas <= 100.0) {
+            return bad("noise_sigmas", format!("must be in [0, 100], got {}", self.noise_sigmas));
+        }
+        if !(self.floor >= 0.0 && self.floor < 1.0) {
+            return bad("floor", format!("must be a fraction in [0, 1), got {}", self.floor));
+        }
+        if !(self.margin_px >= 0.0 && self.margin_px <= 100.0) {
+            return bad("margin_px", format!("must be in [0, 100] pixels, got {}", self.margin_px));
+        }
+        if self.dilate > 16 {
+            return bad("dilate", format!("must be at most 16 cells, got {}", self.dilate));
+        }
+        Ok(())
+    }
+}
+
 /// How [`dark_threshold`] reads an image's background and noise.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]

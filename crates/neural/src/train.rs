@@ -88,6 +88,9 @@ pub enum Batching {
     OneTimeStep,
 }
 
+/// The most samples a ray may take (coarse and fine together): the dissertation's are 64 + 128.
+pub const MAX_SAMPLES_PER_RAY: usize = 4096;
+
 /// Sampling, optimisation and stopping settings (defaults: Table 5.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -266,6 +269,21 @@ impl TrainConfig {
         }
         if self.coarse_samples < 2 {
             return bad("coarse_samples", format!("needs at least 2, got {}", self.coarse_samples));
+        }
+        if self.coarse_samples + self.fine_samples > MAX_SAMPLES_PER_RAY {
+            return bad(
+                "coarse_samples",
+                format!(
+                    "coarse and fine samples together must be at most {MAX_SAMPLES_PER_RAY} per ray, got {} + {}",
+                    self.coarse_samples, self.fine_samples
+                ),
+            );
+        }
+        if self.max_iterations == 0 {
+            return bad("max_iterations", "must be at least 1".into());
+        }
+        if let Some(occupancy) = &self.occupancy {
+            occupancy.validate()?;
         }
         if self.rays_per_image == 0 {
             return bad("rays_per_image", "must be positive".into());

@@ -25,6 +25,10 @@ use crate::{NeuralError, TrainableField};
 /// Rows per batch handed to the field when sampling in world coordinates.
 const EVAL_CHUNK: usize = 1024;
 
+/// The finest dense field a run may ask for, in cells along the box's longest side: 1024³
+/// cells take 4 GiB, and four times that with the optimiser's state.
+pub const MAX_DENSE_RESOLUTION: usize = 1024;
+
 /// Settings of the dense voxel-grid field ([`DenseGridField`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -300,6 +304,12 @@ pub fn build_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: u6
             }
             if c.resolution == 0 || c.initial.is_nan() || c.initial <= 0.0 {
                 return Err(NeuralError::invalid("dense field", "resolution and initial value must be positive"));
+            }
+            if c.resolution > MAX_DENSE_RESOLUTION {
+                return Err(NeuralError::invalid(
+                    "dense field",
+                    format!("resolution must be at most {MAX_DENSE_RESOLUTION} cells, got {}", c.resolution),
+                ));
             }
             let dims = fluidnerf_core::Volume::dims_for(aabb, c.resolution);
             Ok(AnyField::Dense(DenseGridField::new(dims, c.initial)))

@@ -47,7 +47,9 @@ pub(crate) fn estimate_memory(
     let optimiser = params * 4 * (3 + threads);
     let samples = (train.coarse_samples + train.fine_samples) as u64;
     let scratch = threads * (train.chunk_samples as u64 * 4 * 16 + samples * 64);
-    images + rays + optimiser + scratch + out_voxels * 4 * 2 + truth_voxels * 4 * 3
+    // The occupancy grid is carved into one byte per cell, and a copy when it is dilated.
+    let occupancy = train.occupancy.as_ref().map_or(0, |o| 2 * (o.resolution as u64).pow(3));
+    images + rays + optimiser + scratch + occupancy + out_voxels * 4 * 2 + truth_voxels * 4 * 3
 }
 
 /// The training problem of a scene: its training and held-out views, their images
