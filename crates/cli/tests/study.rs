@@ -47,4 +47,28 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     let other = fluidnerf(d, &["study", "--preset", "smoke", "--methods", "asart", "-o", "st", "-q"]);
     assert!(!other.status.success());
     assert!(String::from_utf8_lossy(&other.stderr).contains("--force"));
+    let hull =
+        fluidnerf(d, &["study", "--preset", "smoke", "--methods", "fast,sart", "--visual-hull", "-o", "st", "-q"]);
+    assert!(!hull.status.success(), "the same folder with the voxel methods' hull");
+}
+
+/// `--visual-hull` holds every voxel method inside the images' visual hull; the runs without it
+/// have none.
+#[test]
+fn a_study_can_give_the_voxel_methods_the_visual_hull() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    for (dir, flag) in [("without", None), ("with", Some("--visual-hull"))] {
+        let mut args = vec!["study", "--preset", "smoke", "--methods", "sart,mlem", "--cameras", "4", "-o", dir, "-q"];
+        args.extend(flag);
+        ok(&fluidnerf(d, &args));
+        let record = json(&d.join(dir).join("study.json"));
+        assert_eq!(record["grid"]["visual_hull"], flag.is_some());
+        let rows = record["rows"].as_array().expect("rows");
+        assert_eq!(rows.len(), 2);
+        for r in rows {
+            let cfg = json(&d.join(dir).join(r["run"].as_str().expect("run")).join("config.json"));
+            assert_eq!(cfg["method"]["projector"]["visual_hull"], flag.is_some(), "{dir}: {cfg}");
+        }
+    }
 }
