@@ -419,8 +419,8 @@ impl TemporalSpec {
 }
 
 /// A method with its parameters. Serialised tagged by `name` (module docs).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(from = "WireMethod", into = "WireMethod")]
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(into = "WireMethod")]
 pub enum MethodConfig {
     Classical(ClassicalSpec),
     /// `fluidnerf` or `fast`.
@@ -949,8 +949,77 @@ impl RunConfig {
     }
 }
 
+/// Read by `name` first, then the rest as that method's settings, so that an error names the
+/// key inside `method` where it is (serde's tagged enums read the block as a whole and name
+/// only `method`). [`METHOD_NAMES`] lists the names, which the round-trip test holds to
+/// [`Method::ALL`].
+impl<'de> Deserialize<'de> for MethodConfig {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut map = serde_json::Map::<String, serde_json::Value>::deserialize(d)?;
+        let name = match map.remove("name") {
+            Some(serde_json::Value::String(name)) => name,
+            Some(other) => return Err(D::Error::custom(format!("`name` must be a method's name, got {other}"))),
+            None => return Err(D::Error::missing_field("name")),
+        };
+        let rest = serde_json::Value::Object(map);
+        fn settings<T: serde::de::DeserializeOwned>(rest: serde_json::Value) -> Result<T, String> {
+            serde_path_to_error::deserialize(rest).map_err(|e| {
+                let (path, why) = (e.path().to_string(), e.inner().to_string());
+                if path.is_empty() || path == "." {
+                    why
+                } else {
+                    format!("{NESTED_KEY}{path}`: {why}")
+                }
+            })
+        }
+        let wire = match name.as_str() {
+            "asart" => settings(rest).map(WireMethod::Asart),
+            "art" => settings(rest).map(WireMethod::Art),
+            "sart" => settings(rest).map(WireMethod::Sart),
+            "mart" => settings(rest).map(WireMethod::Mart),
+            "smart" => settings(rest).map(WireMethod::Smart),
+            "mlem" => settings(rest).map(WireMethod::Mlem),
+            "tv" => settings(rest).map(WireMethod::Tv),
+            "tikhonov" => settings(rest).map(WireMethod::Tikhonov),
+            "fluidnerf" => settings(rest).map(WireMethod::Fluidnerf),
+            "fast" => settings(rest).map(WireMethod::Fast),
+            "voxel" => settings(rest).map(WireMethod::Voxel),
+            "hybrid" => settings(rest).map(WireMethod::Hybrid),
+            "tr-fluidnerf" => settings(rest).map(WireMethod::TrFluidnerf),
+            "tr-fast" => settings(rest).map(WireMethod::TrFast),
+            "static-per-frame" => settings(rest).map(WireMethod::StaticPerFrame),
+            other => return Err(D::Error::unknown_variant(other, METHOD_NAMES)),
+        }
+        .map_err(D::Error::custom)?;
+        Ok(wire.into())
+    }
+}
+
+/// How a key inside `method` is named in its error, for [`crate::rundir`] to join to `method`.
+pub(crate) const NESTED_KEY: &str = "at key `";
+
+/// Every `name` of [`WireMethod`].
+const METHOD_NAMES: &[&str] = &[
+    "asart",
+    "art",
+    "sart",
+    "mart",
+    "smart",
+    "mlem",
+    "tv",
+    "tikhonov",
+    "fluidnerf",
+    "fast",
+    "voxel",
+    "hybrid",
+    "tr-fluidnerf",
+    "tr-fast",
+    "static-per-frame",
+];
+
 /// The on-disk form of [`MethodConfig`]: tagged by `name`, one variant per method.
-#[derive(Serialize, Deserialize)]
+#[derive(Serialize)]
 #[serde(tag = "name", rename_all = "kebab-case")]
 enum WireMethod {
     Asart(Voxel<AsartParams>),
@@ -1043,6 +1112,29 @@ mod tests {
             assert_eq!(back.method(), m);
             assert_eq!(m.name().parse::<Method>().unwrap(), m);
         }
+    }
+
+    #[test]
+    fn a_wrong_type_inside_method_is_named_by_its_whole_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("config.json");
+        for (method, key, value, says) in [
+            (Method::Fast, "/method/train/coarse_samples", serde_json::json!(-5), "method.train.coarse_samples"),
+            (Method::Fast, "/method/field/hash-grid/activation", serde_json::json!("tanhh"), "hash-grid.activation"),
+            (Method::Asart, "/method/params/relaxation", serde_json::json!("0.5"), "method.params.relaxation"),
+            (Method::TrFast, "/method/windows/frames", serde_json::json!(2.5), "method.windows.frames"),
+        ] {
+            let mut v = serde_json::to_value(RunConfig::new("scene", method)).unwrap();
+            *v.pointer_mut(key).unwrap_or_else(|| panic!("{key}")) = value;
+            std::fs::write(&path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+            let e = crate::rundir::read_json::<RunConfig>(&path).unwrap_err().to_string();
+            assert!(e.contains(&format!("at `{says}")) || e.contains(says), "{key}: {e}");
+            assert!(e.contains("config.json") && !e.contains(" at line "), "{key}: {e}");
+        }
+        for m in Method::ALL {
+            assert!(METHOD_NAMES.contains(&m.name()), "{m} is not read back");
+        }
+        assert_eq!(METHOD_NAMES.len(), Method::ALL.len());
     }
 
     #[test]

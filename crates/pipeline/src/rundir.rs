@@ -392,11 +392,19 @@ pub fn from_json_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<
 
 fn describe(e: &serde_path_to_error::Error<serde_json::Error>) -> String {
     let path = e.path().to_string();
+    let why = e.inner().to_string();
     if path.is_empty() || path == "." {
-        e.inner().to_string()
-    } else {
-        format!("at `{path}`: {}", e.inner())
+        return why;
     }
+    // A key inside a block read in two steps (`method`) comes back in the message: join the
+    // paths, and drop the position, which is the end of the block rather than the key.
+    if let Some(rest) = why.strip_prefix(crate::config::NESTED_KEY) {
+        if let Some((inner, why)) = rest.split_once("`: ") {
+            let why = why.rsplit_once(" at line ").map_or(why, |(w, _)| w);
+            return format!("at `{path}.{inner}`: {why}");
+        }
+    }
+    format!("at `{path}`: {why}")
 }
 
 #[cfg(test)]
