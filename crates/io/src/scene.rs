@@ -330,12 +330,14 @@ struct TopIn {
     frames: Vec<Value>,
 }
 
-/// `background` as written: a constant or the images whose pixelwise median is subtracted.
+/// `background` as written: a constant, or the images whose pixelwise median is subtracted (a
+/// list, or one path alone).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(untagged)]
+#[serde(untagged, expecting = "a number of counts, an image's path or a list of images' paths")]
 enum BackgroundKey {
     Constant(f64),
     Frames(Vec<String>),
+    Frame(String),
 }
 
 /// What is subtracted from a frame's image before reconstruction (key `background`).
@@ -421,6 +423,7 @@ fn background_from_key(key: Option<&BackgroundKey>) -> Background {
         None => Background::None,
         Some(BackgroundKey::Constant(c)) => Background::Constant(*c),
         Some(BackgroundKey::Frames(v)) => Background::Frames(v.iter().map(PathBuf::from).collect()),
+        Some(BackgroundKey::Frame(p)) => Background::Frames(vec![PathBuf::from(p)]),
     }
 }
 

@@ -143,4 +143,15 @@ fn bad_backgrounds_and_masks_name_the_file_frame_and_camera() {
     std::fs::write(&file, serde_json::to_string(&v).expect("json")).expect("write");
     let e = load_scene(dir.path()).unwrap_err().to_string();
     assert!(e.contains("frame 0") && e.contains("at least 0"), "{e}");
+    // One path alone is read as a list of one (here of a missing file) ...
+    v["frames"][0]["background"] = serde_json::json!("bg/none.png");
+    std::fs::write(&file, serde_json::to_string(&v).expect("json")).expect("write");
+    let loaded = load_scene(dir.path()).expect("a path alone is a background");
+    let e = load_preprocessed(&loaded).unwrap_err().to_string();
+    assert!(e.contains("frame 0") && e.contains("none.png"), "{e}");
+    // ... and anything else is told what `background` may be.
+    v["frames"][0]["background"] = serde_json::json!(true);
+    std::fs::write(&file, serde_json::to_string(&v).expect("json")).expect("write");
+    let e = load_scene(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("background") && e.contains("an image's path or a list of images' paths"), "{e}");
 }
