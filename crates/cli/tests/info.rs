@@ -307,3 +307,19 @@ fn truth_of_another_grid_is_an_error() {
     fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
     assert_fails_with(&info(dir.path()), &["t1.npy", "8x8x4 voxels", "8x8x8"]);
 }
+
+/// Ground truth at a time no frame has is never scored by a time-resolved run: a warning.
+#[test]
+fn truth_at_a_time_no_frame_has_is_flagged() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.truth[0].time = Some(-0.5);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("warning: ground truth at time -0.5 matches no frame's time (frames at 0, 0.5)"),
+        "{stdout}"
+    );
+}

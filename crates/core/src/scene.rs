@@ -68,6 +68,18 @@ impl Scene {
     pub fn times(&self) -> Vec<f64> {
         frame_times(&self.frames)
     }
+
+    /// The times of ground-truth volumes that no frame has, when the frames have times: a
+    /// time-resolved run scores each instant against the volume at its time, so these are
+    /// never scored there (a sign of a mistyped time).
+    pub fn unmatched_truth_times(&self) -> Vec<f64> {
+        let times = self.times();
+        if times.is_empty() {
+            return Vec::new();
+        }
+        let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs());
+        self.truth.iter().filter_map(|t| t.time).filter(|&t| !times.iter().any(|&f| same(f, t))).collect()
+    }
 }
 
 /// The distinct times of `frames` in increasing order (empty when none has a time).
@@ -224,6 +236,27 @@ mod tests {
     use super::*;
     use crate::glam::DVec3;
     use crate::{Image, Intrinsics};
+
+    #[test]
+    fn truth_at_a_time_no_frame_has_is_found() {
+        let k = Intrinsics { width: 8, height: 8, fx: 8.0, fy: 8.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
+        let frame =
+            |time| Frame { camera: camera.clone(), file_path: "a.png".into(), time, camera_name: None, holdout: false };
+        let truth = |time| TruthRef { time, file_path: "t.npy".into() };
+        let mut scene = Scene {
+            root: ".".into(),
+            aabb: Aabb::cube(DVec3::ZERO, 2.0),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: vec![frame(Some(14.0)), frame(Some(15.0))],
+            truth: vec![truth(Some(14.0)), truth(Some(-15.0)), truth(Some(15.0 + 1e-12))],
+        };
+        assert_eq!(scene.unmatched_truth_times(), vec![-15.0]);
+        // Frames without times (a static scene): every truth volume is the scene's.
+        scene.frames = vec![frame(None)];
+        assert!(scene.unmatched_truth_times().is_empty());
+    }
 
     /// Six cameras at two heights around a bright ball: the estimated box holds the ball and
     /// is not much larger; with black images the common view is used instead.

@@ -86,11 +86,27 @@ pub fn reconstruct(
         warnings: Vec::new(),
     };
     let truth = load_truth(scene)?;
+    if let Some(message) = unmatched_truth(scene) {
+        session.warn(&message);
+    }
     match config.method().family() {
         Family::Classical => classical::run(scene, config, dir, &truth, &mut session),
         Family::Neural => neural::run(scene, config, dir, &truth, &mut session),
         Family::Temporal => temporal::run(scene, config, dir, &truth, &mut session, false),
     }
+}
+
+/// A warning for ground truth at times no frame has ([`Scene::unmatched_truth_times`]).
+pub fn unmatched_truth(scene: &Scene) -> Option<String> {
+    let unmatched = scene.unmatched_truth_times();
+    (!unmatched.is_empty()).then(|| {
+        let list = |t: &[f64]| t.iter().map(f64::to_string).collect::<Vec<_>>().join(", ");
+        format!(
+            "ground truth at time {} matches no frame's time (frames at {}): a time-resolved run never scores it",
+            list(&unmatched),
+            list(&scene.times())
+        )
+    })
 }
 
 /// The scene's ground truth; one that is listed but unreadable is refused, naming the file.
