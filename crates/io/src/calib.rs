@@ -134,6 +134,75 @@ fn yaml_to_json(y: &yaml_rust2::Yaml) -> Value {
     }
 }
 
+/// At most this many YAML nodes may come from aliases (`*name`, each a copy of the node its
+/// anchor `&name` marks). OpenCV writes no aliases; a hand-written file may share a small node
+/// or two, while nested aliases grow exponentially (a "billion laughs" document) and would
+/// exhaust memory when expanded.
+const MAX_ALIAS_NODES: u64 = 100_000;
+
+/// Counts the nodes a YAML document's aliases expand to, without expanding them.
+#[derive(Default)]
+struct AliasCount {
+    /// Expanded node count of each anchored node, by anchor id.
+    anchors: std::collections::HashMap<usize, u64>,
+    /// Open collections: (anchor id, expanded nodes so far).
+    open: Vec<(usize, u64)>,
+    /// Nodes that aliases add.
+    from_aliases: u64,
+}
+
+impl AliasCount {
+    fn node(&mut self, anchor: usize, size: u64) {
+        if anchor > 0 {
+            self.anchors.insert(anchor, size);
+        }
+        if let Some((_, n)) = self.open.last_mut() {
+            *n = n.saturating_add(size);
+        }
+    }
+}
+
+impl yaml_rust2::parser::EventReceiver for AliasCount {
+    fn on_event(&mut self, ev: yaml_rust2::Event) {
+        use yaml_rust2::Event;
+        match ev {
+            Event::Scalar(_, _, anchor, _) => self.node(anchor, 1),
+            Event::SequenceStart(anchor, _) | Event::MappingStart(anchor, _) => self.open.push((anchor, 1)),
+            Event::SequenceEnd | Event::MappingEnd => {
+                if let Some((anchor, size)) = self.open.pop() {
+                    self.node(anchor, size);
+                }
+            }
+            Event::Alias(id) => {
+                let size = self.anchors.get(&id).copied().unwrap_or(1);
+                self.from_aliases = self.from_aliases.saturating_add(size);
+                self.node(0, size);
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Parses YAML `body` of the file `path`, refusing a document whose aliases would expand to
+/// more than [`MAX_ALIAS_NODES`] nodes before expanding anything.
+fn load_yaml(path: &Path, body: &str) -> Result<Vec<yaml_rust2::Yaml>, IoError> {
+    let malformed = |e: yaml_rust2::ScanError| IoError::invalid(path, format!("malformed YAML: {e}"));
+    let mut count = AliasCount::default();
+    yaml_rust2::parser::Parser::new_from_str(body).load(&mut count, true).map_err(malformed)?;
+    if count.from_aliases > MAX_ALIAS_NODES {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "its YAML aliases (`*name`) expand to {}{} nodes, more than the {MAX_ALIAS_NODES} allowed; an OpenCV \
+                 calibration needs none: write the nodes out instead of nesting aliases",
+                if count.from_aliases == u64::MAX { "over " } else { "" },
+                count.from_aliases
+            ),
+        ));
+    }
+    yaml_rust2::YamlLoader::load_from_str(body).map_err(malformed)
+}
+
 /// The top-level nodes of a `cv::FileStorage` file, and its text.
 fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "calibration file", e))?;
@@ -150,8 +219,7 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     } else {
         // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
         let body: String = text.lines().filter(|l| !l.starts_with('%')).map(|l| format!("{l}\n")).collect();
-        let docs = yaml_rust2::YamlLoader::load_from_str(&body)
-            .map_err(|e| IoError::invalid(path, format!("malformed YAML: {e}")))?;
+        let docs = load_yaml(path, &body)?;
         docs.first().map(yaml_to_json).unwrap_or(Value::Null)
     };
     match value {
@@ -1273,5 +1341,38 @@ mod tests {
             let q = DMat3::from_quat(DQuat::from_scaled_axis(r));
             assert!((m - q).to_cols_array().iter().all(|e| e.abs() < 1e-15));
         }
+    }
+
+    /// A "billion laughs" document: level `i` lists its predecessor 9 times, so level `n - 1`
+    /// expands to 9ⁿ nodes.
+    fn nested_aliases(n: usize) -> String {
+        let mut s = String::from("%YAML 1.2\n---\na: &a [x]\n");
+        for i in 0..n {
+            let prev = if i == 0 { "a".to_string() } else { format!("l{}", i - 1) };
+            s.push_str(&format!("l{i}: &l{i} [{}]\n", vec![format!("*{prev}"); 9].join(",")));
+        }
+        s
+    }
+
+    #[test]
+    fn nested_aliases_are_refused_before_they_expand() {
+        let dir = tempfile::tempdir().unwrap();
+        let bomb = dir.path().join("bomb.yml");
+        // About 10⁶ nodes once expanded (small enough that even expanding it would not exhaust
+        // the memory; each level more multiplies it by 9).
+        std::fs::write(&bomb, nested_aliases(6)).unwrap();
+        let started = std::time::Instant::now();
+        let e = read_opencv(&bomb).unwrap_err().to_string();
+        assert!(e.contains("bomb.yml") && e.contains("aliases") && e.contains("100000"), "{e}");
+        assert!(started.elapsed().as_secs_f64() < 5.0);
+        // A few shared nodes are still read as before (and then as a calibration).
+        let few = dir.path().join("few.yml");
+        std::fs::write(&few, nested_aliases(2)).unwrap();
+        let e = read_opencv(&few).unwrap_err().to_string();
+        assert!(!e.contains("aliases"), "{e}");
+        let mut count = AliasCount::default();
+        yaml_rust2::parser::Parser::new_from_str(&nested_aliases(3)).load(&mut count, true).unwrap();
+        // `a` is 2 nodes (the list and `x`), `l0` 1 + 9 × 2, `l1` 1 + 9 × 19; `l2` copies `l1` 9 times.
+        assert_eq!(count.from_aliases, 9 * 2 + 9 * 19 + 9 * 172);
     }
 }
