@@ -223,3 +223,32 @@ fn without_truth_only_held_out_views_are_scored() {
     assert!(!none.status.success());
     assert!(String::from_utf8_lossy(&none.stderr).contains("nothing to evaluate"));
 }
+
+/// Settings under which a metric would be undefined are refused, naming the file or option,
+/// and nothing is written: an all-zero truth (NRMSE is relative to its norm), a 1-voxel SSIM
+/// window (no sample variance) and no rays per pixel.
+#[test]
+fn undefined_metrics_are_refused_not_written_as_nan() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let zero = Volume::from_fn([18, 12, 12], scene.aabb, |_| 0.0);
+    fluidnerf_io::volume::write_npy(&d.join("zero.npy"), &zero).expect("writes");
+    let recon = Volume::from_fn([18, 12, 12], scene.aabb, |p| blob(p, 0.0));
+    fluidnerf_io::volume::write_npy(&d.join("run/volume.npy"), &recon).expect("writes");
+    for (args, says) in [
+        (&["--truth", "zero.npy", "--no-reprojection"][..], "zero.npy: every voxel of the ground truth is zero"),
+        (&["--ssim-size", "1"][..], "--ssim-size must be odd and at least 3"),
+        (&["--supersample", "0"][..], "--supersample must be between 1 and"),
+    ] {
+        let out = fluidnerf(&[&["eval", "run", "--scene", "."][..], args].concat(), d);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(says), "{args:?}: {e}");
+        assert!(!d.join("run/metrics.json").exists() && !d.join("run/metrics.csv").exists(), "{args:?}");
+    }
+    // The scene's own truth, all zero, is named too.
+    fluidnerf_io::volume::write_npy(&d.join("truth_0.npy"), &zero).expect("writes");
+    let out = fluidnerf(&["eval", "run", "--scene", ".", "--no-reprojection"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("truth_0.npy: every voxel"), "{e}");
+}

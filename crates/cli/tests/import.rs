@@ -433,3 +433,38 @@ fn opencv_cameras_with_videos() {
     let err = stderr(&bad);
     assert!(err.contains("camera cam1") && err.contains("cam1.avi") && err.contains("not a video file"), "{err}");
 }
+
+/// A YAML calibration whose nested aliases would expand to millions of nodes is refused at
+/// once, naming the file, instead of filling the memory.
+#[test]
+fn a_yaml_alias_bomb_is_refused_quickly() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let mut text = String::from("%YAML 1.2\n---\na: &a [x]\n");
+    // About 10⁶ nodes once expanded; each level more multiplies that by 9.
+    for i in 0..6 {
+        let prev = if i == 0 { "a".to_string() } else { format!("l{}", i - 1) };
+        text.push_str(&format!("l{i}: &l{i} [{}]\n", vec![format!("*{prev}"); 9].join(",")));
+    }
+    let bomb = tmp.path().join("bomb.yml");
+    std::fs::write(&bomb, text).expect("writes");
+    let images = tmp.path().join("images");
+    std::fs::create_dir_all(&images).expect("mkdir");
+    let out = tmp.path().join("out");
+    let started = std::time::Instant::now();
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&bomb),
+        "--images",
+        s(&images),
+        "-o",
+        s(&out),
+        "--aabb",
+        "-20,-20,-20,20,20,20",
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("bomb.yml") && e.contains("aliases"), "{e}");
+    assert!(started.elapsed().as_secs_f64() < 20.0, "took {:?}", started.elapsed());
+    assert!(!out.join("transforms.json").exists());
+}

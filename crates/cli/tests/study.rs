@@ -72,3 +72,21 @@ fn a_study_can_give_the_voxel_methods_the_visual_hull() {
         }
     }
 }
+
+/// A time budget that is not a positive, finite number of seconds is refused up front, naming
+/// --time-budget, before any scene is synthesised; `--force` removes nothing from a folder
+/// that is not a study.
+#[test]
+fn bad_budgets_are_refused_up_front_and_force_spares_other_folders() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    for budget in ["0", "inf", "NaN", "-5"] {
+        let out = fluidnerf(d, &["study", "--preset", "smoke", &format!("--time-budget={budget}"), "-o", "st", "-q"]);
+        refused(&out, "--time-budget must be a positive, finite number of seconds");
+        assert!(!d.join("st").exists(), "{budget}: wrote output");
+    }
+    std::fs::create_dir_all(d.join("mine/runs")).expect("mkdir");
+    std::fs::write(d.join("mine/runs/notes.txt"), "mine").expect("writes");
+    refused(&fluidnerf(d, &["study", "--preset", "smoke", "--force", "-o", "mine", "-q"]), "not a study folder");
+    assert!(d.join("mine/runs/notes.txt").is_file());
+}

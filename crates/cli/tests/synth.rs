@@ -152,6 +152,47 @@ fn user_volume_becomes_the_truth() {
     assert!(text(&o).1.contains("/nonexistent/v.npy"), "{:?}", text(&o));
 }
 
+/// A scene that `info` would reject is refused before anything is written: a ground truth with
+/// NaN or infinite voxels (float64 values beyond float32's range read as infinite), and a time
+/// given twice.
+#[test]
+fn truths_that_are_not_finite_and_repeated_times_are_refused_up_front() {
+    use fluidnerf_core::glam::DVec3;
+    use fluidnerf_core::{Aabb, Volume};
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let aabb = Aabb::cube(DVec3::ZERO, 40.0);
+    let mut vol = Volume::from_fn([8, 8, 8], aabb, |p| (1.0 - p.length() / 20.0).max(0.0) as f32);
+    vol.data[3] = f32::NAN;
+    let nan = tmp.path().join("nan.npy");
+    fluidnerf_io::volume::write_npy(&nan, &vol).expect("writes volume");
+    // A float64 volume whose values overflow float32.
+    let big = tmp.path().join("big.npy");
+    let mut header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 2, 2), }".to_string();
+    while !(10 + header.len() + 1).is_multiple_of(64) {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    for v in [1.0f64, 2.0, 1e300, 0.0, 0.0, 0.0, 0.0, 0.0] {
+        bytes.extend(v.to_le_bytes());
+    }
+    std::fs::write(&big, bytes).expect("writes volume");
+    for (extra, needle) in [
+        (vec!["--truth-volume", nan.to_str().expect("utf-8")], "nan.npy: voxel (i 3, j 0, k 0) is NaN"),
+        (vec!["--truth-volume", big.to_str().expect("utf-8")], "beyond float32's range"),
+        (vec!["--phantom", "jet-tr", "--times", "14,14"], "14 is given twice"),
+    ] {
+        let dir = tmp.path().join("set");
+        let o = run_small(&dir, &extra);
+        let (_, err) = text(&o);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(err.contains(needle), "{extra:?}: expected `{needle}` in: {err}");
+        assert!(!dir.exists(), "{extra:?} wrote output");
+    }
+}
+
 #[test]
 fn aabb_takes_negative_corners_and_exactly_six_numbers() {
     let tmp = tempfile::tempdir().expect("tempdir");

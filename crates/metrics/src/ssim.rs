@@ -93,6 +93,12 @@ impl SsimParams {
             SsimWindow::Uniform { size } if size == 0 || size % 2 == 0 => {
                 return Err(MetricsError::invalid("SSIM window size", format!("must be odd and positive, got {size}")))
             }
+            SsimWindow::Uniform { size: 1 } if self.sample_covariance => {
+                return Err(MetricsError::invalid(
+                    "SSIM window size",
+                    "must be at least 3 with sample (co)variances: a 1-voxel window has none (N - 1 = 0)",
+                ))
+            }
             SsimWindow::Gaussian { sigma } if !(sigma > 0.0 && sigma.is_finite()) => {
                 return Err(MetricsError::invalid("SSIM Gaussian sigma", format!("must be positive, got {sigma}")))
             }
@@ -497,5 +503,23 @@ mod tests {
         assert!(matches!(ssim_2d(&a, &a, 6, 8, &SsimParams::default()), Err(MetricsError::TooSmall { .. })));
         let even = SsimParams { window: SsimWindow::Uniform { size: 4 }, ..Default::default() };
         assert!(ssim_2d(&a, &a, 6, 8, &even).is_err());
+    }
+
+    #[test]
+    fn a_one_voxel_window_needs_population_covariance() {
+        let (a, b) = (field([5, 5, 5], 1), field([5, 5, 5], 2));
+        let one = SsimParams { window: SsimWindow::Uniform { size: 1 }, ..Default::default() };
+        let e = ssim_3d(&a, &b, [5, 5, 5], &one).unwrap_err().to_string();
+        assert!(e.contains("at least 3"), "{e}");
+        // Without the N - 1 correction it is defined: the mean luminance term of each voxel.
+        let population = SsimParams { sample_covariance: false, data_range: Some(1.0), ..one };
+        let c1 = 1e-4;
+        let want = a
+            .iter()
+            .zip(&b)
+            .map(|(&x, &y)| (x as f64, y as f64))
+            .map(|(x, y)| (2.0 * x * y + c1) / (x * x + y * y + c1));
+        let want = want.sum::<f64>() / a.len() as f64;
+        assert_relative_eq!(ssim_3d(&a, &b, [5, 5, 5], &population).unwrap(), want, epsilon = 1e-9);
     }
 }

@@ -629,7 +629,10 @@ impl StoppingPolicy {
         }
         if let Some(t) = self.time_budget_s {
             if !(t > 0.0 && t.is_finite()) {
-                return Err(PipelineError::invalid("stopping.time_budget_s", format!("must be positive, got {t}")));
+                return Err(PipelineError::invalid(
+                    "stopping.time_budget_s",
+                    format!("must be a positive, finite number of seconds, got {t}"),
+                ));
             }
         }
         if self.holdout_every == Some(0) {

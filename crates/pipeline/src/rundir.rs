@@ -12,8 +12,13 @@
 //! A folder with run files but no `report.json` holds a run that died (or is still running,
 //! which the lock tells): it is never taken for a finished one, and it is resumed or replaced
 //! only when asked.
+//!
+//! A run folder is never the scene's folder, a folder inside it, or one that holds anything
+//! the scene reads (its images, masks, background frames and ground truth); nor a folder of
+//! another kind ([`FolderKind`]). `--force` replaces only a fluidnerf run: a folder whose
+//! `config.json` is a run's configuration.
 
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -41,6 +46,170 @@ pub enum DirState {
     Finished,
     /// Run files without a report: a run that died, or one still running.
     Unfinished,
+    /// Files with the names a run writes (e.g. `volume.npy`) but no run configuration
+    /// (`config.json` of a run): not a fluidnerf run, so never replaced or continued.
+    Foreign,
+}
+
+/// The kind of folder a fluidnerf command writes, told by the file that marks it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FolderKind {
+    /// A scene: `transforms.json` (written by `synth` and `import`).
+    Scene,
+    /// A reconstruction run: `config.json` or `report.json` (written by `reconstruct`).
+    Run,
+    /// An export: `export.json` (written by `export`).
+    Export,
+    /// Rendered views: `render.json` (written by `render`).
+    Render,
+}
+
+impl FolderKind {
+    /// What such a folder is, with the file that tells, e.g. "a scene folder (it holds
+    /// transforms.json)".
+    pub fn describe(self) -> &'static str {
+        match self {
+            FolderKind::Scene => "a scene folder (it holds transforms.json)",
+            FolderKind::Run => "a reconstruction run folder (it holds config.json or report.json)",
+            FolderKind::Export => "an export folder (it holds export.json)",
+            FolderKind::Render => "a folder of rendered views (it holds render.json)",
+        }
+    }
+}
+
+/// The kind of fluidnerf folder `dir` is, if any (None also when it does not exist).
+pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
+    let has = |name: &str| dir.join(name).is_file();
+    if has(fluidnerf_io::scene::SCENE_FILE) {
+        Some(FolderKind::Scene)
+    } else if has("config.json") || has("report.json") {
+        Some(FolderKind::Run)
+    } else if has("export.json") {
+        Some(FolderKind::Export)
+    } else if has("render.json") {
+        Some(FolderKind::Render)
+    } else {
+        None
+    }
+}
+
+/// Refuses `out` as the output folder of `command`, which writes folders of kind `kind`, when
+/// it is a fluidnerf folder of another kind: writing there would mix two kinds of results (and
+/// make, e.g., a scene folder pass for a run).
+pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<(), PipelineError> {
+    match folder_kind(out) {
+        Some(found) if found != kind => Err(PipelineError::RunDir {
+            path: out.to_path_buf(),
+            why: format!(
+                "is {}; `{command}` writes {} only: choose another output folder",
+                found.describe(),
+                match kind {
+                    FolderKind::Scene => "scene folders",
+                    FolderKind::Run => "run folders",
+                    FolderKind::Export => "export folders",
+                    FolderKind::Render => "folders of rendered views",
+                }
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// Refuses `out` as an output folder for results of the scene in `scene_root` when it is the
+/// scene's folder, lies inside it, contains it, or contains a file the scene reads (listed in
+/// its `transforms.json`: images, masks, background frames, ground truth), wherever those lie.
+/// Results written there would mix with the scene's inputs, and replacing them could delete
+/// them.
+pub fn refuse_scene_inputs(out: &Path, scene_root: &Path) -> Result<(), PipelineError> {
+    let refuse = |why: String| PipelineError::RunDir { path: out.to_path_buf(), why };
+    let out_abs = resolved(out);
+    let root = resolved(scene_root);
+    if out_abs == root {
+        return Err(refuse("is the scene's own folder; choose another output folder".into()));
+    }
+    if out_abs.starts_with(&root) {
+        return Err(refuse(format!(
+            "lies inside the scene folder {} (which holds its images and truth); choose an output folder \
+             outside the scene",
+            scene_root.display()
+        )));
+    }
+    if root.starts_with(&out_abs) {
+        return Err(refuse(format!(
+            "contains the scene folder {}; choose an output folder that does not hold the scene",
+            scene_root.display()
+        )));
+    }
+    for (file, what) in scene_inputs(scene_root) {
+        if resolved(&file).starts_with(&out_abs) {
+            return Err(refuse(format!(
+                "holds {} ({what} the scene reads); choose an output folder apart from the scene's inputs",
+                file.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The files the scene file in `scene_root` lists, each with what it is for: frame images,
+/// masks, background frames and ground truth (relative paths resolved against the folder).
+/// The scene was read before; a file that cannot be read here lists nothing.
+fn scene_inputs(scene_root: &Path) -> Vec<(PathBuf, &'static str)> {
+    use serde_json::Value;
+    let file = scene_root.join(fluidnerf_io::scene::SCENE_FILE);
+    let Some(raw) = std::fs::read_to_string(&file).ok().and_then(|t| serde_json::from_str::<Value>(&t).ok()) else {
+        return Vec::new();
+    };
+    let mut found = Vec::new();
+    let mut add = |v: Option<&Value>, what: &'static str| {
+        if let Some(p) = v.and_then(Value::as_str) {
+            let p = Path::new(p);
+            found.push((if p.is_absolute() { p.to_path_buf() } else { scene_root.join(p) }, what));
+        }
+    };
+    // A list, or (for `background`) one path alone.
+    let list = |v: Option<&Value>| match v {
+        Some(Value::Array(a)) => a.clone(),
+        Some(s @ Value::String(_)) => vec![s.clone()],
+        _ => Vec::new(),
+    };
+    for t in list(raw.get("truth")) {
+        add(t.get("file_path"), "ground truth");
+    }
+    for b in list(raw.get("background")) {
+        add(Some(&b), "a background frame");
+    }
+    for f in list(raw.get("frames")) {
+        add(f.get("file_path"), "an image");
+        add(f.get("mask_path"), "a mask");
+        for b in list(f.get("background")) {
+            add(Some(&b), "a background frame");
+        }
+    }
+    found
+}
+
+/// `path` made absolute, with symbolic links and `..` resolved as far as it exists; the part
+/// that does not exist yet is appended with `.` and `..` applied as written.
+fn resolved(path: &Path) -> PathBuf {
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let parts: Vec<Component> = abs.components().collect();
+    for k in (1..=parts.len()).rev() {
+        let head: PathBuf = parts[..k].iter().collect();
+        if let Ok(mut out) = head.canonicalize() {
+            for c in &parts[k..] {
+                match c {
+                    Component::ParentDir => {
+                        out.pop();
+                    }
+                    Component::CurDir => {}
+                    other => out.push(other),
+                }
+            }
+            return out;
+        }
+    }
+    abs
 }
 
 /// The kind of result a run folder holds, as the commands that read runs see it.
@@ -105,8 +274,10 @@ impl RunDir {
         Ok(RunDir { root, lock: None, resume: false, created: false })
     }
 
-    /// Creates (or reuses, as `overwrite` allows) the folder of a new run, refusing the scene's
-    /// own folder, and takes its lock. A stale lock (its process is gone) is replaced.
+    /// Creates (or reuses, as `overwrite` allows) the folder of a new run and takes its lock. A
+    /// stale lock (its process is gone) is replaced. Refused: a folder apart from the scene in
+    /// `scene_root` is needed ([`refuse_scene_inputs`]), a folder of another kind
+    /// ([`FolderKind`]), and one that holds run files but no run ([`DirState::Foreign`]).
     pub fn create(
         root: impl Into<PathBuf>,
         overwrite: Overwrite,
@@ -114,23 +285,13 @@ impl RunDir {
     ) -> Result<Self, PipelineError> {
         let root: PathBuf = root.into();
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
-        if let Some(scene) = scene_root {
-            let same = match (root.canonicalize(), scene.canonicalize()) {
-                (Ok(a), Ok(b)) => a == b,
-                _ => false,
-            };
-            if same {
-                return Err(refuse("is the scene's own folder; choose another output folder".into()));
-            }
-        }
-        if root.exists() && !root.is_dir() {
-            return Err(refuse("exists and is not a folder".into()));
-        }
+        check_new_run_folder(&root, scene_root)?;
         let created = !root.exists();
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
         let mut dir = RunDir { root: root.clone(), lock: None, resume: overwrite == Overwrite::Resume, created };
         dir.take_lock()?;
         match (dir.state(), overwrite) {
+            (DirState::Foreign, _) => return Err(dir.foreign()),
             (DirState::Empty, Overwrite::Resume) => {
                 return Err(refuse(
                     "nothing to resume (--resume; `overwrite=\"resume\"` from Python): it holds no run".into(),
@@ -158,6 +319,19 @@ impl RunDir {
         Ok(dir)
     }
 
+    /// The refusal of a folder with run files but no run ([`DirState::Foreign`]).
+    fn foreign(&self) -> PipelineError {
+        let files: Vec<&str> = RUN_FILES.iter().copied().filter(|n| self.root.join(n).exists()).collect();
+        PipelineError::RunDir {
+            path: self.root.clone(),
+            why: format!(
+                "holds {} but is not a fluidnerf run folder (no run configuration in config.json); a run is never \
+                 written into it, and --force replaces only fluidnerf's own runs: choose another output folder",
+                files.join(", ")
+            ),
+        }
+    }
+
     fn take_lock(&mut self) -> Result<(), PipelineError> {
         self.lock = Some(acquire_lock(&self.root, &self.root.join(".lock"))?);
         Ok(())
@@ -171,15 +345,12 @@ impl RunDir {
     pub fn for_windows(root: impl Into<PathBuf>, scene_root: Option<&Path>) -> Result<Self, PipelineError> {
         let root: PathBuf = root.into();
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
-        if let Some(scene) = scene_root {
-            if let (Ok(a), Ok(b)) = (root.canonicalize(), scene.canonicalize()) {
-                if a == b {
-                    return Err(refuse("is the scene's own folder; choose another output folder".into()));
-                }
-            }
-        }
+        check_new_run_folder(&root, scene_root)?;
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
         let dir = RunDir { root: root.clone(), lock: None, resume: false, created: false };
+        if dir.state() == DirState::Foreign {
+            return Err(dir.foreign());
+        }
         if dir.report().is_file() {
             return Err(refuse(
                 "already holds a finished run; training windows into it would mix two runs (remove it, or use \
@@ -205,8 +376,12 @@ impl RunDir {
         Ok(FileLock { path: acquire_lock(&self.root, &self.path(name))? })
     }
 
-    /// Removes the files of an earlier run (only those a run writes).
+    /// Removes the files of an earlier run (only those a run writes, and only from a folder that
+    /// holds a run).
     fn clear(&self) -> Result<(), PipelineError> {
+        if self.state() == DirState::Foreign {
+            return Err(self.foreign());
+        }
         for name in RUN_FILES {
             let p = self.root.join(name);
             let removed = if p.is_dir() {
@@ -268,15 +443,25 @@ impl RunDir {
 
     /// What the folder holds.
     pub fn state(&self) -> DirState {
-        if self.report().is_file() {
-            return DirState::Finished;
-        }
-        let any = RUN_FILES.iter().any(|n| self.root.join(n).exists());
-        if any {
-            DirState::Unfinished
-        } else {
+        if !RUN_FILES.iter().any(|n| self.root.join(n).exists()) {
             DirState::Empty
+        } else if !self.holds_run_config() {
+            DirState::Foreign
+        } else if self.report().is_file() {
+            DirState::Finished
+        } else {
+            DirState::Unfinished
         }
+    }
+
+    /// Whether `config.json` is a run's configuration (written first by every run): a JSON
+    /// object with the keys `scene` and `method`. Checked by shape rather than read as a
+    /// [`crate::RunConfig`], so that a run written by another version is still recognised.
+    fn holds_run_config(&self) -> bool {
+        std::fs::read_to_string(self.config())
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .is_some_and(|v| v.get("scene").is_some() && v.get("method").is_some())
     }
 
     /// The kind of result the folder holds, if any.
@@ -303,6 +488,18 @@ impl RunDir {
     pub fn write_json(&self, name: &str, value: &impl Serialize) -> Result<PathBuf, PipelineError> {
         write_json(&self.path(name), value)
     }
+}
+
+/// The checks of a folder about to receive a run, before anything is created: apart from the
+/// scene, a folder (when it exists) and not one of another kind.
+fn check_new_run_folder(root: &Path, scene_root: Option<&Path>) -> Result<(), PipelineError> {
+    if let Some(scene) = scene_root {
+        refuse_scene_inputs(root, scene)?;
+    }
+    if root.exists() && !root.is_dir() {
+        return Err(PipelineError::RunDir { path: root.to_path_buf(), why: "exists and is not a folder".into() });
+    }
+    refuse_other_kind(root, FolderKind::Run, "reconstruct")
 }
 
 /// A lock file held until dropped ([`RunDir::lock_file`]).
@@ -422,7 +619,7 @@ mod tests {
         {
             let dir = RunDir::create(&out, Overwrite::Refuse, Some(&scene)).unwrap();
             assert_eq!(dir.state(), DirState::Empty);
-            dir.write_json("config.json", &1).unwrap();
+            dir.write_json("config.json", &run_config()).unwrap();
             // A second run into the same folder while the first holds it.
             let e = RunDir::create(&out, Overwrite::Force, None).unwrap_err().to_string();
             assert!(e.contains("in use by another run") && e.contains(&std::process::id().to_string()), "{e}");
@@ -445,6 +642,92 @@ mod tests {
         let dir = RunDir::create(&out, Overwrite::Force, None).unwrap();
         assert_eq!(dir.state(), DirState::Empty);
         assert!(out.join("notes.txt").exists(), "--force removes run files only");
+    }
+
+    /// A `config.json` as a run writes it (the keys that tell a run).
+    fn run_config() -> serde_json::Value {
+        serde_json::json!({ "scene": "scene", "method": { "name": "asart" } })
+    }
+
+    /// A scene folder whose files lie inside it (`images/`, `truth/`) and outside it
+    /// (`elsewhere/`, by an absolute path).
+    fn scene_with_inputs(tmp: &Path) -> PathBuf {
+        let scene = tmp.join("scene");
+        std::fs::create_dir_all(scene.join("images")).unwrap();
+        std::fs::create_dir_all(scene.join("truth")).unwrap();
+        std::fs::create_dir_all(tmp.join("elsewhere")).unwrap();
+        std::fs::write(scene.join("truth/volume.npy"), "truth").unwrap();
+        let outside = tmp.join("elsewhere/mask.png");
+        let text = serde_json::json!({
+            "truth": [{ "file_path": "truth/volume.npy" }],
+            "frames": [{ "file_path": "images/r_0.png", "mask_path": outside }],
+        });
+        std::fs::write(scene.join("transforms.json"), text.to_string()).unwrap();
+        scene
+    }
+
+    #[test]
+    fn refuses_every_folder_that_holds_the_scenes_inputs() {
+        let tmp = tempfile::tempdir().unwrap();
+        let scene = scene_with_inputs(tmp.path());
+        let cases = [
+            (scene.join("truth"), "inside the scene folder"),
+            (scene.join("images"), "inside the scene folder"),
+            (scene.join("new"), "inside the scene folder"),
+            (scene.join("../scene/./truth"), "inside the scene folder"),
+            (tmp.path().to_path_buf(), "contains the scene folder"),
+            (tmp.path().join("elsewhere"), "mask.png (a mask the scene reads)"),
+        ];
+        for (out, needle) in cases {
+            for overwrite in [Overwrite::Refuse, Overwrite::Force, Overwrite::Resume] {
+                let e = RunDir::create(&out, overwrite, Some(&scene)).unwrap_err().to_string();
+                assert!(e.contains(needle), "{}: {e}", out.display());
+                let e = RunDir::for_windows(&out, Some(&scene)).unwrap_err().to_string();
+                assert!(e.contains(needle), "{}: {e}", out.display());
+            }
+        }
+        assert_eq!(std::fs::read_to_string(scene.join("truth/volume.npy")).unwrap(), "truth");
+        assert!(!scene.join("new").exists(), "a refused folder is not created");
+        assert!(!scene.join("truth/.lock").exists());
+        // A folder beside the scene is fine.
+        drop(RunDir::create(tmp.path().join("run"), Overwrite::Refuse, Some(&scene)).unwrap());
+    }
+
+    #[test]
+    fn force_replaces_only_fluidnerf_runs() {
+        let tmp = tempfile::tempdir().unwrap();
+        // Files with a run's names but no run: a user's volume, an export.
+        let mine = tmp.path().join("mine");
+        std::fs::create_dir_all(&mine).unwrap();
+        std::fs::write(mine.join("volume.npy"), "mine").unwrap();
+        std::fs::write(mine.join("config.json"), "{\"other\": \"tool\"}").unwrap();
+        for overwrite in [Overwrite::Refuse, Overwrite::Force, Overwrite::Resume] {
+            let e = RunDir::create(&mine, overwrite, None).unwrap_err().to_string();
+            assert!(e.contains("not a fluidnerf run folder") && e.contains("volume.npy"), "{e}");
+        }
+        assert!(RunDir::for_windows(&mine, None).unwrap_err().to_string().contains("not a fluidnerf run folder"));
+        assert_eq!(std::fs::read_to_string(mine.join("volume.npy")).unwrap(), "mine");
+        assert!(!mine.join(".lock").exists());
+        // Folders of another kind.
+        for (marker, needle) in [
+            ("transforms.json", "a scene folder"),
+            ("export.json", "an export folder"),
+            ("render.json", "rendered views"),
+        ] {
+            let d = tmp.path().join(marker);
+            std::fs::create_dir_all(&d).unwrap();
+            std::fs::write(d.join(marker), "{}").unwrap();
+            let e = RunDir::create(&d, Overwrite::Force, None).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+            assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "{marker}: nothing written or removed");
+        }
+        // A run is replaced.
+        let run = tmp.path().join("run");
+        std::fs::create_dir_all(&run).unwrap();
+        write_json(&run.join("config.json"), &run_config()).unwrap();
+        std::fs::write(run.join("volume.npy"), "old").unwrap();
+        let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
+        assert_eq!(dir.state(), DirState::Empty);
     }
 
     #[test]

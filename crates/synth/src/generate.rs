@@ -85,6 +85,12 @@ impl SynthSettings {
         if let Some(t) = self.times.iter().find(|t| !t.is_finite()) {
             return Err(SynthError::invalid("times", format!("must be finite, got {t}")));
         }
+        if let Some((i, t)) = self.times.iter().enumerate().find(|&(i, t)| self.times[..i].contains(t)) {
+            return Err(SynthError::invalid(
+                "times",
+                format!("{t} is given twice (times {:?}, the second at position {i}); give each time once", self.times),
+            ));
+        }
         if self.phantom.kind.cfd_case().is_some() {
             if let Some(t) = self.times.iter().find(|&&t| crate::phantom::cfd::step_of(t).is_none()) {
                 return Err(SynthError::invalid(
@@ -425,6 +431,22 @@ mod tests {
         s.rig.layout = Layout::Ring { count: 4, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
         s.sensor.gaussian_noise = 0.02;
         s
+    }
+
+    #[test]
+    fn repeated_times_and_truths_that_are_not_finite_are_refused() {
+        let mut s = tiny();
+        s.phantom.kind = crate::PhantomKind::JetTr;
+        s.times = vec![14.0, 15.0, 14.0];
+        let e = s.validate().unwrap_err().to_string();
+        assert!(e.contains("times") && e.contains("14 is given twice"), "{e}");
+        let aabb = s.aabb;
+        let mut v = Volume::from_fn([4, 4, 4], aabb, |_| 1.0);
+        v.data[5] = f32::INFINITY;
+        let settings = crate::PhantomSettings { kind: crate::PhantomKind::Volume, ..Default::default() };
+        let Err(e) = crate::Phantom::build(&settings, &aabb, 0, Some(v)) else { panic!("accepted") };
+        let e = e.to_string();
+        assert!(e.contains("voxel (i 1, j 1, k 0) is inf"), "{e}");
     }
 
     #[test]

@@ -78,13 +78,13 @@ pub struct Args {
     /// Window of the windowed SSIM.
     #[arg(long, value_enum, default_value = "uniform")]
     pub ssim_window: Window,
-    /// Side of the uniform SSIM window in voxels (odd).
+    /// Side of the uniform SSIM window in voxels (odd, at least 3).
     #[arg(long, default_value_t = 7)]
     pub ssim_size: usize,
     /// Data range R of PSNR and SSIM for the volume metrics. Default: the truth's max - min.
     #[arg(long)]
     pub data_range: Option<f64>,
-    /// Rays per pixel along each image axis when rendering held-out views.
+    /// Rays per pixel along each image axis when rendering held-out views (1 to 64).
     #[arg(long, default_value_t = 2)]
     pub supersample: usize,
     /// Skip the reprojection onto held-out cameras.
@@ -178,8 +178,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Window::Uniform => SsimWindow::Uniform { size: args.ssim_size },
         Window::Gaussian => SsimWindow::Gaussian { sigma: 1.5 },
     };
-    if args.ssim_size == 0 || args.ssim_size.is_multiple_of(2) {
-        bail!("--ssim-size must be odd and positive, got {}", args.ssim_size);
+    if args.ssim_size < 3 || args.ssim_size.is_multiple_of(2) {
+        bail!(
+            "--ssim-size must be odd and at least 3 (a 1-voxel window has no sample variance, so its SSIM is \
+             undefined), got {}",
+            args.ssim_size
+        );
+    }
+    if !(1..=fluidnerf_core::render::MAX_SUPERSAMPLE).contains(&args.supersample) {
+        bail!(
+            "--supersample must be between 1 and {} rays per pixel along each axis, got {}",
+            fluidnerf_core::render::MAX_SUPERSAMPLE,
+            args.supersample
+        );
     }
     if let Some(r) = args.data_range {
         if !(r > 0.0 && r.is_finite()) {
@@ -192,7 +203,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let ssim = SsimParams { window, ..Default::default() };
-    let reprojection_options = ReprojectionOptions { supersample: args.supersample.max(1), step: None, ssim };
+    let reprojection_options = ReprojectionOptions { supersample: args.supersample, step: None, ssim };
 
     let scene = fluidnerf_io::scene::load_scene(&args.scene)
         .with_context(|| format!("reading the scene {}", args.scene.display()))?;
@@ -220,6 +231,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
     };
+    // NRMSE is relative to the truth's norm: undefined for an all-zero truth.
+    for (i, (_, t)) in truth.iter().enumerate() {
+        if t.data.iter().all(|&v| v == 0.0) {
+            let file = match (&args.truth, scene.truth.get(i)) {
+                (Some(p), _) => p.clone(),
+                (None, Some(r)) => scene.resolve(&r.file_path),
+                (None, None) => args.scene.clone(),
+            };
+            bail!(
+                "{}: every voxel of the ground truth is zero, so the NRMSE (relative to the truth's norm) is \
+                 undefined; give a truth that holds the field",
+                file.display()
+            );
+        }
+    }
     // The regions follow the flow: given, recorded in the scene, or estimated from the truth.
     if default_regions {
         let recorded = fluidnerf_io::scene::recorded(&scene).context("the scene's flow_axis")?.flow_axis;

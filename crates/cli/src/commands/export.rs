@@ -9,6 +9,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
+use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use fluidnerf_viz::{Axis, Colormap, PanelStyle};
 use serde::Serialize;
 
@@ -214,6 +215,7 @@ struct Settings<'a> {
 #[allow(clippy::print_stdout)]
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Validate the arguments before any work.
+    refuse_other_kind(&args.out, FolderKind::Export, "export")?;
     let mut slices: Vec<(Axis, f64)> = args.slices.iter().map(|s| parse_slice(s)).collect::<anyhow::Result<_>>()?;
     let nothing_chosen = !args.npy && !args.vti && !args.raw && slices.is_empty() && args.isosurface.is_none();
     let (npy, vti, raw) = (args.npy || nothing_chosen, args.vti || nothing_chosen, args.raw);

@@ -10,6 +10,7 @@ use fluidnerf_core::scene::{estimate_box, BoxEstimateParams};
 use fluidnerf_core::{Aabb, Camera, Frame, Scene, TruthRef};
 use fluidnerf_io::image::{read_image_with, Linearisation, SampleKind};
 use fluidnerf_io::scene::{load_images_with, read_scene_draft, save_scene_recording, validate_scene, SCENE_FILE};
+use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use serde::Serialize;
 use std::io::Write as _;
 
@@ -378,6 +379,7 @@ fn aabb_text(a: &Aabb) -> String {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
     let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
     if let Some(images) = &args.images {

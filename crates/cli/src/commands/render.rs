@@ -8,6 +8,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
 use fluidnerf_core::{render_image, Aabb, Baked, Camera, Image, RenderSettings, ScalarField, Support, Volume};
+use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use fluidnerf_viz::Colormap;
 use serde::Serialize;
 
@@ -212,6 +213,7 @@ fn samples_in_hull(hull: Support<'_>, views: &[View], aabb: &Aabb, ss: usize, st
 
 #[allow(clippy::print_stdout)]
 pub fn run(args: Args) -> anyhow::Result<()> {
+    refuse_other_kind(&args.out, FolderKind::Render, "render")?;
     if let Some(n) = args.orbit.filter(|n| !(1..=MAX_ORBIT_VIEWS).contains(n)) {
         bail!("--orbit must be between 1 and {MAX_ORBIT_VIEWS} views, got {n}");
     }

@@ -182,6 +182,12 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         StudyPreset::Smoke => (vec![4, 6], vec![0.0], vec![LayoutChoice::Ring360]),
     };
     let smoke = args.preset == StudyPreset::Smoke;
+    if !(args.time_budget > 0.0 && args.time_budget.is_finite()) {
+        bail!("--time-budget must be a positive, finite number of seconds, got {}", args.time_budget);
+    }
+    if args.max_iterations == Some(0) {
+        bail!("--max-iterations must be at least 1");
+    }
     let g = Grid {
         preset: args.preset,
         scene_preset: args.scene_preset.clone(),
@@ -272,6 +278,16 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let out = &args.out;
     let record = out.join("study.json");
     if args.force {
+        // Only a study's own folders are removed: a folder that is not a study is left as it is.
+        if !record.is_file() {
+            if let Some(sub) = ["scenes", "runs"].into_iter().find(|s| out.join(s).exists()) {
+                bail!(
+                    "{} holds {sub}/ but no study.json, so it is not a study folder; --force replaces only an \
+                     earlier study's scenes and runs: choose another output folder",
+                    out.display()
+                );
+            }
+        }
         for sub in ["scenes", "runs"] {
             let p = out.join(sub);
             if p.exists() {

@@ -431,11 +431,30 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
 
 fn read_truth_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    match ext.as_str() {
-        "npy" => fluidnerf_io::volume::read_npy(path, aabb).with_context(|| format!("cannot read {}", path.display())),
-        "vti" => fluidnerf_io::volume::read_vti(path).with_context(|| format!("cannot read {}", path.display())),
+    let volume = match ext.as_str() {
+        "npy" => {
+            fluidnerf_io::volume::read_npy(path, aabb).with_context(|| format!("cannot read {}", path.display()))?
+        }
+        "vti" => fluidnerf_io::volume::read_vti(path).with_context(|| format!("cannot read {}", path.display()))?,
         _ => bail!("{}: the ground truth must be a .npy or .vti volume", path.display()),
+    };
+    if let Some(i) = volume.data.iter().position(|x| !x.is_finite()) {
+        let [nx, ny, _] = volume.dims;
+        let v = volume.data[i];
+        bail!(
+            "{}: voxel (i {}, j {}, k {}) is {v}; the ground truth must be finite{}",
+            path.display(),
+            i % nx,
+            (i / nx) % ny,
+            i / (nx * ny),
+            if v.is_infinite() {
+                " (float64 values beyond float32's range, about ±3.4e38, read as infinite)"
+            } else {
+                ""
+            }
+        );
     }
+    Ok(volume)
 }
 
 fn write_preview(path: &Path, syn: &Synthesis) -> anyhow::Result<()> {
@@ -496,6 +515,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     apply_overrides(&args, &mut settings)?;
     settings.validate()?;
+    fluidnerf_pipeline::rundir::refuse_other_kind(&out, fluidnerf_pipeline::rundir::FolderKind::Scene, "synth")?;
     let scene_file = out.join("transforms.json");
     if scene_file.exists() && !args.force {
         bail!("{} already holds a scene; pass --force to overwrite it", out.display());

@@ -162,9 +162,24 @@ impl Phantom {
             PhantomKind::BallAndBlobs => Phantom::Shapes(ShapeSum::ball_and_blobs(aabb, settings.blob_count, seed)),
             PhantomKind::Plume => Phantom::Cfd(CfdPhantom::new(CfdCase::Plume, settings.cfd_step)?),
             PhantomKind::CfdJet => Phantom::Cfd(CfdPhantom::new(CfdCase::Jet, settings.cfd_step)?),
-            PhantomKind::Volume => Phantom::Volume(
-                volume.ok_or_else(|| SynthError::invalid("phantom.kind", "`volume` needs a ground-truth volume"))?,
-            ),
+            PhantomKind::Volume => {
+                let v = volume
+                    .ok_or_else(|| SynthError::invalid("phantom.kind", "`volume` needs a ground-truth volume"))?;
+                if let Some(i) = v.data.iter().position(|x| !x.is_finite()) {
+                    let [nx, ny, _] = v.dims;
+                    return Err(SynthError::invalid(
+                        "phantom.volume",
+                        format!(
+                            "voxel (i {}, j {}, k {}) is {}; the ground truth must be finite",
+                            i % nx,
+                            (i / nx) % ny,
+                            i / (nx * ny),
+                            v.data[i]
+                        ),
+                    ));
+                }
+                Phantom::Volume(v)
+            }
         })
     }
 

@@ -1,0 +1,116 @@
+//! Output folders: a run is never written into its scene (its folder, a folder inside it, or
+//! one holding its inputs), `--force` replaces only fluidnerf's own runs, and `import`,
+//! `export`, `render` and `synth` refuse folders that hold results of another kind.
+
+mod common;
+use common::*;
+
+use std::path::Path;
+
+/// The files under `dir`, relative, sorted.
+fn files(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).expect("reads the folder") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).expect("inside").display().to_string());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A scene whose truth is `truth/volume.npy` (the name a run's volume has).
+fn scene_with_truth_named_volume(d: &Path) {
+    ok(&fluidnerf(d, &["synth", "--pixels", "16", "--resolution", "12", "--cameras", "4", "-o", "s", "-q"]));
+    let s = d.join("s");
+    std::fs::rename(s.join("truth/truth.npy"), s.join("truth/volume.npy")).expect("renames the truth");
+    let text = std::fs::read_to_string(s.join("transforms.json")).expect("reads");
+    assert!(text.contains("truth/truth.npy"));
+    std::fs::write(s.join("transforms.json"), text.replace("truth/truth.npy", "truth/volume.npy")).expect("writes");
+}
+
+#[test]
+fn reconstruct_never_writes_into_the_scene_or_replaces_what_is_not_a_run() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    scene_with_truth_named_volume(d);
+    let before = files(&d.join("s"));
+    let run = |out: &str, extra: &[&str]| {
+        let mut args = vec!["reconstruct", "s", "-o", out, "-m", "asart", "--resolution", "8"];
+        args.extend(["--max-iterations", "2", "-q"]);
+        args.extend_from_slice(extra);
+        fluidnerf(d, &args)
+    };
+    for out in ["s/truth", "s/images", "s/new"] {
+        for extra in [&[][..], &["--force"]] {
+            refused(&run(out, extra), "lies inside the scene folder");
+        }
+    }
+    refused(&run(".", &["--force"]), "contains the scene folder");
+    assert_eq!(files(&d.join("s")), before, "the scene is untouched");
+
+    // Images kept outside the scene folder, named by absolute path.
+    let text = std::fs::read_to_string(d.join("s/transforms.json")).expect("reads");
+    std::fs::rename(d.join("s/images"), d.join("images")).expect("moves the images");
+    let abs = d.join("images").canonicalize().expect("exists");
+    std::fs::write(d.join("s/transforms.json"), text.replace("\"images/", &format!("\"{}/", abs.display())))
+        .expect("writes");
+    refused(&run("images", &["--force"]), "an image the scene reads");
+    ok(&run("run", &[]));
+
+    // A folder with a run's file names but no run is never replaced, even with --force.
+    std::fs::create_dir_all(d.join("mine")).expect("mkdir");
+    std::fs::write(d.join("mine/volume.npy"), "mine").expect("writes");
+    refused(&run("mine", &["--force"]), "not a fluidnerf run folder");
+    assert_eq!(std::fs::read_to_string(d.join("mine/volume.npy")).expect("kept"), "mine");
+    // A run is.
+    ok(&run("run", &["--force"]));
+}
+
+#[test]
+fn import_export_render_and_synth_refuse_folders_of_another_kind() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(d, &["synth", "--pixels", "16", "--resolution", "12", "--cameras", "4", "-o", "s", "-q"]));
+    let recon = ["-m", "asart", "--resolution", "8", "--max-iterations", "2", "-q"];
+    ok(&fluidnerf(d, &[&["reconstruct", "s", "-o", "r1"][..], &recon].concat()));
+    ok(&fluidnerf(d, &[&["reconstruct", "s", "-o", "r2"][..], &recon].concat()));
+    ok(&fluidnerf(d, &["export", "r1", "-o", "exp", "--npy", "-q"]));
+    ok(&fluidnerf(d, &["render", "r1", "-s", "s", "-o", "views", "--camera", "0", "-q"]));
+    let (scene, run1, run2) = (files(&d.join("s")), files(&d.join("r1")), files(&d.join("r2")));
+
+    for force in [&[][..], &["--force"]] {
+        let import = |out: &str| fluidnerf(d, &[&["import", "--transforms", "s", "-o", out][..], force].concat());
+        refused(&import("r1"), "is a reconstruction run folder");
+        refused(&import("exp"), "is an export folder");
+        refused(&import("views"), "is a folder of rendered views");
+        let export = |out: &str| fluidnerf(d, &[&["export", "r1", "-o", out, "--npy", "-q"][..], force].concat());
+        refused(&export("s"), "is a scene folder");
+        refused(&export("r1"), "is a reconstruction run folder");
+        refused(&export("views"), "is a folder of rendered views");
+        let render = |out: &str| {
+            fluidnerf(d, &[&["render", "r1", "-s", "s", "-o", out, "--camera", "0", "-q"][..], force].concat())
+        };
+        refused(&render("r2"), "is a reconstruction run folder");
+        refused(&render("s"), "is a scene folder");
+        refused(&render("exp"), "is an export folder");
+        let synth = |out: &str| fluidnerf(d, &[&["synth", "--pixels", "16", "-o", out, "-q"][..], force].concat());
+        refused(&synth("r1"), "is a reconstruction run folder");
+        refused(&synth("exp"), "is an export folder");
+        let reconstruct = |out: &str| fluidnerf(d, &[&["reconstruct", "s", "-o", out][..], &recon, force].concat());
+        refused(&reconstruct("exp"), "is an export folder");
+        refused(&reconstruct("views"), "is a folder of rendered views");
+    }
+    assert_eq!(files(&d.join("s")), scene);
+    assert_eq!(files(&d.join("r1")), run1);
+    assert_eq!(files(&d.join("r2")), run2);
+    // The same commands into folders of their own kind go on as before.
+    ok(&fluidnerf(d, &["export", "r1", "-o", "exp", "--npy", "--force", "-q"]));
+    ok(&fluidnerf(d, &["render", "r1", "-s", "s", "-o", "views", "--camera", "0", "--force", "-q"]));
+}
