@@ -77,9 +77,14 @@ impl Scene {
         if times.is_empty() {
             return Vec::new();
         }
-        let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs());
-        self.truth.iter().filter_map(|t| t.time).filter(|&t| !times.iter().any(|&f| same(f, t))).collect()
+        self.truth.iter().filter_map(|t| t.time).filter(|&t| !times.iter().any(|&f| same_time(f, t))).collect()
     }
+}
+
+/// Whether two times name the same instant (equal to a relative 10⁻⁹, so that times written
+/// and read back as text still match).
+pub fn same_time(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * (1.0 + a.abs())
 }
 
 /// The distinct times of `frames` in increasing order (empty when none has a time).

@@ -10,6 +10,7 @@
 //! running one from its last checkpoint, and equals an uninterrupted run (same seed and
 //! thread count).
 
+use fluidnerf_core::scene::same_time;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -113,10 +114,6 @@ fn read_done(root: &std::path::Path, k: usize) -> Result<Option<FinishedWindow>,
     } else {
         Ok(None)
     }
-}
-
-fn same_time(a: f64, b: f64) -> bool {
-    (a - b).abs() <= 1e-9 * (1.0 + a.abs())
 }
 
 /// A time-resolved run set up: its training problem, window plan, initial field and the
