@@ -361,3 +361,31 @@ fn steps_and_supersampling_that_would_never_finish_are_refused() {
         assert!(!out.join("render.json").exists(), "{extra:?} wrote render.json");
     }
 }
+
+/// `--time` on a field of space alone changes nothing, and says so; the views are those
+/// rendered without it.
+#[test]
+fn a_time_given_to_a_static_field_is_warned_of() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, _) = make_scene(dir.path());
+    let run = dir.path().join("run");
+    write_trained(&run, scene.aabb);
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let render = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let o = fluidnerf(
+            &["render", &d(&run), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff", "--camera", "0"]
+                .into_iter()
+                .chain(extra.iter().copied())
+                .collect::<Vec<_>>(),
+        );
+        ok(&o);
+        let image = fluidnerf_io::image::read_image(&out.join("view_000.tif")).expect("reads").data;
+        (String::from_utf8_lossy(&o.stderr).into_owned(), image)
+    };
+    let (quiet, plain) = render("plain", &[]);
+    assert!(!quiet.contains("has no effect"), "{quiet}");
+    let (said, timed) = render("timed", &["--time", "3"]);
+    assert!(said.contains("--time 3 has no effect") && said.contains("static field"), "{said}");
+    assert_eq!(plain, timed);
+}

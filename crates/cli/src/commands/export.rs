@@ -139,6 +139,19 @@ impl Source {
         Ok(fluidnerf_pipeline::load::sample_time(range, given, what)?)
     }
 
+    /// Warns that `--time` (`given`) changes nothing when the source is fixed in time: a volume,
+    /// or a field of space alone.
+    pub(crate) fn warn_time_unused(&self, given: Option<f64>, path: &Path) {
+        let Some(t) = given else { return };
+        match self {
+            Source::Volume(_) => log::warn!("--time {t} has no effect: {} is a volume, fixed in time", path.display()),
+            Source::Field { times: None, .. } => {
+                log::warn!("--time {t} has no effect: {} is a static field, fixed in time", path.display())
+            }
+            Source::Field { times: Some(_), .. } => {}
+        }
+    }
+
     pub(crate) fn describe(&self) -> String {
         match self {
             Source::Volume(v) => format!("a {}x{}x{} volume", v.dims[0], v.dims[1], v.dims[2]),
@@ -259,9 +272,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let units = args.units.clone().or_else(|| scene.as_ref().map(|s| s.units.clone())).unwrap_or_else(|| "mm".into());
     let source = load_source(&args.recon, scene.as_ref())?;
     let time = source.sample_time(args.time, "--time")?;
-    if let (Source::Volume(_), Some(t)) = (&source, args.time) {
-        log::warn!("--time {t} has no effect: {} is a volume, fixed in time", args.recon.display());
-    }
+    source.warn_time_unused(args.time, &args.recon);
 
     // The export grid.
     let aabb = export_box.unwrap_or_else(|| source.aabb());

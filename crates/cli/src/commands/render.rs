@@ -304,6 +304,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let source = load_source(&args.recon, Some(&scene))?;
+    source.warn_time_unused(args.time, &args.recon);
     for (view, (time, what)) in views.iter_mut().zip(&asked) {
         view.time = source.sample_time(*time, what)?;
     }
