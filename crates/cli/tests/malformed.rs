@@ -70,6 +70,8 @@ fn cases() -> Vec<Case> {
         c("aabb missing", Json(|v| drop(v.as_object_mut().unwrap().remove("aabb"))), RUN, "aabb"),
         c("aabb wrong type", Json(|v| v["aabb"] = serde_json::json!("box")), RUN, "aabb"),
         c("negative intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(-1.0)), RUN, "intensity_scale"),
+        c("tiny intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e-40)), RUN, "overflow or vanish"),
+        c("huge intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e300)), RUN, "overflow or vanish"),
         c("negative focal length", Json(|v| v["fl_x"] = serde_json::json!(-5.0)), RUN, "focal"),
         c(
             "transform matrix too short",

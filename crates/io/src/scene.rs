@@ -900,6 +900,12 @@ fn normalise(path: &Path) -> PathBuf {
     out
 }
 
+/// The range of `intensity_scale` a scene may have: reconstructions run in f32, whose values
+/// (about pixel ÷ intensity_scale) leave its range, or its precision, beyond it (an
+/// intensity_scale of 1e-40 wrote a volume of infinities, 1e300 one of zeros).
+pub const MIN_INTENSITY_SCALE: f64 = 1e-20;
+pub const MAX_INTENSITY_SCALE: f64 = 1e20;
+
 /// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb, at least one
 /// frame, a positive intensity scale, finite times, no two frames on the same image file, every
 /// camera valid, outside the box, and seeing the box (at least one pixel's ray crosses it).
@@ -913,6 +919,16 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     let s = scene.intensity_scale;
     if !(s.is_finite() && s > 0.0) {
         return Err(IoError::invalid(file, format!("intensity_scale must be positive, got {s}")));
+    }
+    if !(MIN_INTENSITY_SCALE..=MAX_INTENSITY_SCALE).contains(&s) {
+        return Err(IoError::invalid(
+            file,
+            format!(
+                "intensity_scale {s:e} lies outside {MIN_INTENSITY_SCALE:e} … {MAX_INTENSITY_SCALE:e}: the field's \
+                 values (pixel ÷ intensity_scale per unit length) would overflow or vanish in 32-bit floating \
+                 point; give the pixels or the lengths in other units"
+            ),
+        ));
     }
     let mut seen: std::collections::HashMap<PathBuf, usize> = std::collections::HashMap::new();
     // A camera records one image per instant (its gain and holding out go by its name).
