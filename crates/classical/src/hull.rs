@@ -7,6 +7,7 @@
 //! their background too. The four-pixel test keeps the hull conservative at the object's
 //! silhouette. Voxels that project outside a view's image are not judged by that view.
 
+use fluidnerf_core::volume::dilate_mask;
 use fluidnerf_core::{Camera, Image};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -76,28 +77,8 @@ pub fn visual_hull(
             }
         }
     });
-    dilate(&mut mask, grid.dims, dilation);
+    dilate_mask(&mut mask, grid.dims, dilation);
     mask
-}
-
-/// Adds the 26 neighbours of every kept voxel, `steps` times.
-fn dilate(mask: &mut [bool], dims: [usize; 3], steps: usize) {
-    let [nx, ny, nz] = dims;
-    for _ in 0..steps {
-        let kept = mask.to_vec();
-        let at = |i: usize, j: usize, k: usize| (k * ny + j) * nx + i;
-        mask.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let near = (k.saturating_sub(1)..(k + 2).min(nz)).any(|kk| {
-                        (j.saturating_sub(1)..(j + 2).min(ny))
-                            .any(|jj| (i.saturating_sub(1)..(i + 2).min(nx)).any(|ii| kept[at(ii, jj, kk)]))
-                    });
-                    slab[j * nx + i] = near;
-                }
-            }
-        });
-    }
 }
 
 #[cfg(test)]
@@ -128,14 +109,14 @@ mod tests {
         let dims = [5, 5, 5];
         let mut mask = vec![false; 125];
         mask[(2 * 5 + 2) * 5 + 2] = true;
-        dilate(&mut mask, dims, 1);
+        dilate_mask(&mut mask, dims, 1);
         assert_eq!(mask.iter().filter(|&&m| m).count(), 27);
         assert!(mask[(5 + 1) * 5 + 1] && mask[(3 * 5 + 3) * 5 + 3] && !mask[0]);
-        dilate(&mut mask, dims, 1);
+        dilate_mask(&mut mask, dims, 1);
         assert!(mask.iter().all(|&m| m));
         let mut corner = vec![false; 125];
         corner[0] = true;
-        dilate(&mut corner, dims, 1);
+        dilate_mask(&mut corner, dims, 1);
         assert_eq!(corner.iter().filter(|&&m| m).count(), 8, "clipped at the grid's faces");
     }
 

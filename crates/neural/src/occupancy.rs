@@ -273,28 +273,7 @@ impl OccupancyGrid {
 
     /// Grows the occupied set by `cells` (26-neighbourhood, repeated).
     pub fn dilate(&mut self, cells: usize) {
-        let [nx, ny, nz] = self.dims;
-        for _ in 0..cells {
-            let src = self.occupied.clone();
-            for k in 0..nz {
-                for j in 0..ny {
-                    for i in 0..nx {
-                        if src[(k * ny + j) * nx + i] {
-                            continue;
-                        }
-                        let mut any = false;
-                        for dk in k.saturating_sub(1)..=(k + 1).min(nz - 1) {
-                            for dj in j.saturating_sub(1)..=(j + 1).min(ny - 1) {
-                                for di in i.saturating_sub(1)..=(i + 1).min(nx - 1) {
-                                    any |= src[(dk * ny + dj) * nx + di];
-                                }
-                            }
-                        }
-                        self.occupied[(k * ny + j) * nx + i] = any;
-                    }
-                }
-            }
-        }
+        fluidnerf_core::volume::dilate_mask(&mut self.occupied, self.dims, cells);
     }
 
     /// Fraction of occupied cells.
