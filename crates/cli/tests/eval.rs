@@ -252,3 +252,38 @@ fn undefined_metrics_are_refused_not_written_as_nan() {
     let e = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && e.contains("truth_0.npy: every voxel"), "{e}");
 }
+
+#[test]
+fn a_run_folder_names_its_own_scene_for_eval_and_render() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    std::fs::create_dir(d.join("scene")).expect("mkdir");
+    make_scene(&d.join("scene"), &[]);
+    let run = fluidnerf(&["reconstruct", "scene", "-o", "run", "--method", "asart", "--max-iterations", "2"], d);
+    assert!(run.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&run.stderr));
+
+    // Without --scene the run's recorded scene is scored, and said to be: the same figures as
+    // with it.
+    let implicit = fluidnerf(&["eval", "run", "--no-regions"], d);
+    assert!(implicit.status.success(), "eval failed: {}", String::from_utf8_lossy(&implicit.stderr));
+    assert!(String::from_utf8_lossy(&implicit.stdout).contains("recorded in run/config.json"));
+    let nrmse = |json: &Value| json["steps"][0]["global"]["nrmse"].as_f64().expect("nrmse");
+    let without = nrmse(&read_json(&d.join("run/metrics.json")));
+    let explicit = fluidnerf(&["eval", "run", "--scene", "scene", "--no-regions", "--force"], d);
+    assert!(explicit.status.success(), "eval failed: {}", String::from_utf8_lossy(&explicit.stderr));
+    assert_eq!(without, nrmse(&read_json(&d.join("run/metrics.json"))));
+
+    let views = fluidnerf(&["render", "run", "-o", "views"], d);
+    assert!(views.status.success(), "render failed: {}", String::from_utf8_lossy(&views.stderr));
+    assert_eq!(std::fs::read_dir(d.join("views")).expect("views").count(), 4 + 1, "four views and render.json");
+
+    // A volume file records no scene; a run whose scene is gone names the path it recorded.
+    let bare = fluidnerf(&["eval", "run/volume.npy"], d);
+    let err = String::from_utf8_lossy(&bare.stderr);
+    assert!(!bare.status.success() && err.contains("--scene") && err.contains("run/volume.npy"), "{err}");
+    std::fs::rename(d.join("scene"), d.join("moved")).expect("moves the scene");
+    let gone = fluidnerf(&["render", "run", "-o", "views2"], d);
+    let err = String::from_utf8_lossy(&gone.stderr);
+    assert!(!gone.status.success() && err.contains("which is not there") && err.contains("--scene"), "{err}");
+    assert!(!d.join("views2").exists(), "nothing written");
+}

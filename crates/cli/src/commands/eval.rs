@@ -50,9 +50,10 @@ pub struct Args {
     /// order the scene lists its truth, or one run directory (a time-resolved field).
     #[arg(required = true, num_args = 1..)]
     pub recon: Vec<PathBuf>,
-    /// The scene: a folder holding `transforms.json`, or the file itself.
+    /// The scene: a folder holding `transforms.json`, or the file itself [default: for a run
+    /// folder, the scene its `config.json` records].
     #[arg(short, long)]
-    pub scene: PathBuf,
+    pub scene: Option<PathBuf>,
     /// Ground-truth volume to use instead of the scene's (`.npy` filling the scene's box, or
     /// `.vti`).
     #[arg(long)]
@@ -205,8 +206,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let ssim = SsimParams { window, ..Default::default() };
     let reprojection_options = ReprojectionOptions { supersample: args.supersample, step: None, ssim };
 
-    let scene = fluidnerf_io::scene::load_scene(&args.scene)
-        .with_context(|| format!("reading the scene {}", args.scene.display()))?;
+    let scene_path = super::scene_or_recorded(args.scene.as_deref(), &args.recon)?;
+    let scene = fluidnerf_io::scene::load_scene(&scene_path)
+        .with_context(|| format!("reading the scene {}", scene_path.display()))?;
     let run_dir = (args.recon.len() == 1 && args.recon[0].is_dir()).then(|| args.recon[0].clone());
     let (json_path, csv_path) = match (&args.json, &args.csv, &run_dir) {
         (None, None, Some(dir)) => (Some(dir.join("metrics.json")), Some(dir.join("metrics.csv"))),
@@ -229,7 +231,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
         Some(path) => vec![(None, read_volume(path, Some(scene.aabb))?)],
         None => fluidnerf_io::scene::load_truth(&scene)
-            .with_context(|| format!("reading the ground truth of {}", args.scene.display()))?,
+            .with_context(|| format!("reading the ground truth of {}", scene_path.display()))?,
     };
     // NRMSE is relative to the truth's norm: undefined for an all-zero truth.
     for (i, (_, t)) in truth.iter().enumerate() {
@@ -237,7 +239,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let file = match (&args.truth, scene.truth.get(i)) {
                 (Some(p), _) => p.clone(),
                 (None, Some(r)) => scene.resolve(&r.file_path),
-                (None, None) => args.scene.clone(),
+                (None, None) => scene_path.clone(),
             };
             bail!(
                 "{}: every voxel of the ground truth is zero, so the NRMSE (relative to the truth's norm) is \
@@ -292,7 +294,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if truth.is_empty() && holdouts.is_empty() {
         bail!(
             "nothing to evaluate: the scene {} has no ground truth and no held-out frames (give --truth)",
-            args.scene.display()
+            scene_path.display()
         );
     }
 
@@ -324,7 +326,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
         reconstruction: &args.recon,
-        scene: args.scene.clone(),
+        scene: scene_path.clone(),
         truth: args.truth.as_deref(),
         volume: &volume_options,
         reprojection: (!args.no_reprojection).then_some(&reprojection_options),

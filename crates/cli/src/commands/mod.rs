@@ -48,6 +48,42 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// The scene a command reads: `--scene` when given, else the scene a run folder's
+/// `config.json` records (its path as the run was given it, made absolute). A volume file
+/// records no scene, nor does a run folder without a configuration.
+#[allow(clippy::print_stdout)]
+pub(crate) fn scene_or_recorded(
+    given: Option<&std::path::Path>,
+    recon: &[std::path::PathBuf],
+) -> anyhow::Result<std::path::PathBuf> {
+    use anyhow::{bail, Context};
+    if let Some(scene) = given {
+        return Ok(scene.to_path_buf());
+    }
+    let [dir] = recon else {
+        bail!("give the scene with --scene: {} volumes record no scene", recon.len());
+    };
+    if !dir.is_dir() {
+        bail!("give the scene with --scene: the volume file {} records no scene", dir.display());
+    }
+    let config = dir.join("config.json");
+    if !config.is_file() {
+        bail!("give the scene with --scene: {} holds no config.json that would name its scene", dir.display());
+    }
+    let recorded = fluidnerf_pipeline::RunConfig::read(&config)
+        .with_context(|| format!("reading {} for the run's scene", config.display()))?
+        .scene;
+    if !recorded.exists() {
+        bail!(
+            "{} names the scene {}, which is not there; give the scene with --scene",
+            config.display(),
+            recorded.display()
+        );
+    }
+    println!("scene {} (recorded in {})", recorded.display(), config.display());
+    Ok(recorded)
+}
+
 /// The folder of the scene at `path` (the folder or its `transforms.json`), resolved to one
 /// spelling; None when it does not exist.
 pub(crate) fn scene_folder(path: &std::path::Path) -> Option<std::path::PathBuf> {

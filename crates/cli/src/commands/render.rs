@@ -44,9 +44,9 @@ pub struct Args {
     /// reconstruction run directory (trained field, else its volume).
     pub recon: PathBuf,
     /// The scene (folder holding `transforms.json`, or the file): cameras, box and intensity
-    /// scale.
+    /// scale [default: for a run folder, the scene its `config.json` records].
     #[arg(short, long)]
-    pub scene: PathBuf,
+    pub scene: Option<PathBuf>,
     /// Output directory; created if missing.
     #[arg(short, long)]
     pub out: PathBuf,
@@ -245,8 +245,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(16..=MAX_WIDTH).contains(&args.width) {
         bail!("--width must be between 16 and {MAX_WIDTH} px, got {}", args.width);
     }
-    let scene = fluidnerf_io::scene::load_scene(&args.scene)
-        .with_context(|| format!("reading the scene {}", args.scene.display()))?;
+    let scene_path = super::scene_or_recorded(args.scene.as_deref(), std::slice::from_ref(&args.recon))?;
+    let scene = fluidnerf_io::scene::load_scene(&scene_path)
+        .with_context(|| format!("reading the scene {}", scene_path.display()))?;
     let flow = match &args.flow_axis {
         Some(a) if a.len() == 3 && a.iter().all(|v| v.is_finite()) && a.iter().any(|&v| v != 0.0) => {
             fluidnerf_core::glam::DVec3::new(a[0], a[1], a[2])
@@ -286,7 +287,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     if views.is_empty() {
-        bail!("{}: the scene has no frames to render", args.scene.display());
+        bail!("{}: the scene has no frames to render", scene_path.display());
     }
     let ext = match args.format {
         ImageFormat::Png16 => "png",
@@ -451,7 +452,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
         reconstruction: &args.recon,
-        scene: &args.scene,
+        scene: &scene_path,
         cameras: &args.camera,
         orbit: args.orbit,
         width: args.width,
