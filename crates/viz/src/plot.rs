@@ -182,18 +182,26 @@ fn draw_figure<DB: DrawingBackend>(
     Ok(())
 }
 
+/// The largest magnitude a plot draws: an axis padded around values near `f64::MAX` would reach
+/// infinity, and its ticks would never end.
+const PLOT_LIMIT: f64 = 1e300;
+
+fn plottable(v: f64) -> bool {
+    v.is_finite() && v.abs() <= PLOT_LIMIT
+}
+
 /// The points of a series that can be drawn on the plot's axes.
 fn drawable(plot: &LinePlot, s: &Series) -> Vec<(f64, f64)> {
     let pts: Vec<(f64, f64)> =
         s.x.iter()
             .zip(&s.y)
             .map(|(&x, &y)| (x, y))
-            .filter(|&(x, y)| x.is_finite() && y.is_finite() && (!plot.log_x || x > 0.0) && (!plot.log_y || y > 0.0))
+            .filter(|&(x, y)| plottable(x) && plottable(y) && (!plot.log_x || x > 0.0) && (!plot.log_y || y > 0.0))
             .collect();
     let dropped = s.x.len().min(s.y.len()) - pts.len();
     if dropped > 0 {
         log::warn!(
-            "plot {:?}: {dropped} points of {:?} are not finite or not positive on a log axis",
+            "plot {:?}: {dropped} points of {:?} are not finite, beyond ±{PLOT_LIMIT:e}, or not positive on a log axis",
             plot.title,
             s.label
         );
@@ -420,5 +428,19 @@ mod tests {
         );
         write_plots(&dir.path().join("s.png"), &[sweep], 1).expect("png");
         assert!(spans_a_decade([0.01, 0.5].into_iter()) && !spans_a_decade([0.15, 1.1, -3.0].into_iter()));
+    }
+
+    #[test]
+    fn values_near_the_largest_float_are_left_out_and_the_plot_finishes() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        for (log, big) in [(true, 1e308), (false, 1.7e308), (true, 1e299), (false, -1e299)] {
+            let series = |x: Vec<f64>, y: Vec<f64>| vec![Series { label: "run".into(), x, y }];
+            let mut plot = sweep_plot("time", "NRMSE", log, series(vec![1.0, 2.0, 3.0], vec![big, 0.4, 0.3]));
+            plot.log_y = log;
+            write_plots(&dir.path().join("y.png"), &[plot], 1).expect("plots huge values");
+            let plot = sweep_plot("time", "NRMSE", log, series(vec![1.0, big.abs(), 3.0], vec![0.5, 0.4, 0.3]));
+            write_plots(&dir.path().join("x.svg"), &[plot], 1).expect("plots huge times");
+        }
+        assert!(plottable(1e300) && !plottable(1.0001e300) && !plottable(f64::NAN) && plottable(-3.0));
     }
 }
