@@ -321,3 +321,42 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
         "nowhere",
     );
 }
+
+#[test]
+fn a_resume_after_the_box_changed_and_a_failed_run_are_handled() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 16, &[]);
+    let run = |out: &str, extra: &[&str]| {
+        let mut args = vec!["reconstruct", "scene", "-o", out, "--method", "fast", "--preset", "dense"];
+        args.extend(["--resolution", "16", "--rays-per-image", "64", "-q"]);
+        args.extend_from_slice(extra);
+        fluidnerf(d, &args)
+    };
+    ok(&run("run", &["--max-iterations", "10"]));
+    // The field's coordinates are the box's: a scene whose aabb changed cannot continue it.
+    let scene = d.join("scene/transforms.json");
+    let original = std::fs::read_to_string(&scene).expect("reads the scene");
+    let mut edited: serde_json::Value = serde_json::from_str(&original).expect("JSON");
+    let half: Vec<Vec<f64>> = edited["aabb"]
+        .as_array()
+        .expect("aabb")
+        .iter()
+        .map(|c| c.as_array().expect("corner").iter().map(|v| v.as_f64().expect("number") / 2.0).collect())
+        .collect();
+    edited["aabb"] = serde_json::json!(half);
+    std::fs::write(&scene, serde_json::to_string(&edited).expect("JSON")).expect("writes");
+    let report_before = std::fs::read(d.join("run/report.json")).expect("report");
+    refused(&run("run", &["--max-iterations", "20", "--resume"]), "box");
+    assert_eq!(std::fs::read(d.join("run/report.json")).expect("report"), report_before, "a refused resume wrote");
+    std::fs::write(&scene, &original).expect("restores the scene");
+    ok(&run("run", &["--max-iterations", "20", "--resume"]));
+    assert_eq!(report(&d.join("run"))["iterations"], 20);
+
+    // A fresh run that fails before any checkpoint leaves no unfinished run behind: the same
+    // command with a sane rate then runs without --force or --resume.
+    let diverged = run("new", &["--max-iterations", "5", "--learning-rate", "1e30"]);
+    assert!(!diverged.status.success(), "a rate of 1e30 trained");
+    assert!(!d.join("new").exists(), "the failed run left {:?}", std::fs::read_dir(d.join("new")).map(|r| r.count()));
+    ok(&run("new", &["--max-iterations", "5"]));
+}

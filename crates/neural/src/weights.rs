@@ -92,6 +92,15 @@ struct LearnerMeta {
 
 /// A resumable checkpoint of `learner` (weights, Adam moments, histories).
 pub fn checkpoint_bytes<F: TrainableField>(learner: &Learner<F>) -> Result<Vec<u8>, NeuralError> {
+    checkpoint_bytes_tagged(learner, &[])
+}
+
+/// [`checkpoint_bytes`] with `tags`: strings of the caller's, kept in the file's metadata beside
+/// the training state, for it to check when it resumes ([`checkpoint_tag`]).
+pub fn checkpoint_bytes_tagged<F: TrainableField>(
+    learner: &Learner<F>,
+    tags: &[(&str, String)],
+) -> Result<Vec<u8>, NeuralError> {
     let p = learner.field.params();
     let mut tensors = Vec::new();
     for (n, s, r) in learner.field.tensors() {
@@ -107,7 +116,30 @@ pub fn checkpoint_bytes<F: TrainableField>(learner: &Learner<F>) -> Result<Vec<u
         train_time_s: learner.train_time_s,
     };
     let json = serde_json::to_string(&meta).map_err(|e| NeuralError::invalid("checkpoint", e.to_string()))?;
-    serialise(tensors, Some(HashMap::from([("learner".to_string(), json)])))
+    let mut metadata = HashMap::from([("learner".to_string(), json)]);
+    for (key, value) in tags {
+        metadata.insert(format!("tag.{key}"), value.clone());
+    }
+    serialise(tensors, Some(metadata))
+}
+
+/// The tag `key` of the checkpoint at `path` ([`checkpoint_bytes_tagged`]); None when it has none.
+/// Reads the file's header only (its first 8 bytes give the length of the JSON that follows).
+pub fn checkpoint_tag(path: &Path, key: &str) -> Result<Option<String>, NeuralError> {
+    use std::io::Read;
+    let io = |error| NeuralError::Io { path: path.to_path_buf(), error };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut len = [0u8; 8];
+    file.read_exact(&mut len).map_err(io)?;
+    let len = u64::from_le_bytes(len);
+    if len > 100 << 20 {
+        return Err(NeuralError::checkpoint(path, format!("a header of {len} bytes is not a safetensors header")));
+    }
+    let mut header = vec![0u8; len as usize];
+    file.read_exact(&mut header).map_err(io)?;
+    let header: serde_json::Value =
+        serde_json::from_slice(&header).map_err(|e| NeuralError::checkpoint(path, format!("header: {e}")))?;
+    Ok(header.get("__metadata__").and_then(|m| m.get(format!("tag.{key}"))).and_then(|v| v.as_str()).map(String::from))
 }
 
 /// Restores `learner` (whose field has the checkpoint's architecture) from `path`.

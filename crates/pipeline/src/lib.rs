@@ -66,7 +66,8 @@ pub use temporal::{finish_windows, reconstruct_windows, window_plan, WindowOutco
 
 /// Runs the reconstruction `config` of `scene` into `dir`: decides the stopping rule
 /// ([`RunConfig::resolved`]), validates everything first, writes `config.json`, works (reporting through `on_event`, which may stop the run), then writes
-/// the results, `report.html`, and `report.json` last. A run stopped by `on_event` still writes
+/// the results, `report.html`, and `report.json` last. A fresh run that fails before it saved
+/// anything to resume from removes what it wrote ([`RunDir::discard_unresumable`]). A run stopped by `on_event` still writes
 /// its results and returns a report with [`RunStatus::Interrupted`].
 pub fn reconstruct(
     scene: &Scene,
@@ -89,11 +90,15 @@ pub fn reconstruct(
     if let Some(message) = unmatched_truth(scene) {
         session.warn(&message);
     }
-    match config.method().family() {
+    let result = match config.method().family() {
         Family::Classical => classical::run(scene, config, dir, &truth, &mut session),
         Family::Neural => neural::run(scene, config, dir, &truth, &mut session),
         Family::Temporal => temporal::run(scene, config, dir, &truth, &mut session, false),
+    };
+    if result.is_err() {
+        dir.discard_unresumable();
     }
+    result
 }
 
 /// A warning for ground truth at times no frame has ([`Scene::unmatched_truth_times`]).

@@ -357,6 +357,7 @@ impl Ctx<'_> {
         let ckpt = dir.checkpoint();
         let mut budgeted;
         if dir.resuming() {
+            check_checkpoint_box(&ckpt, &self.scene.aabb)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             dir.replace_finished(config)?;
             log::info!("resuming at iteration {}", learner.iteration);
@@ -439,7 +440,7 @@ impl Ctx<'_> {
                 }
             }
             if config.checkpoint_every > 0 && s.iteration.is_multiple_of(config.checkpoint_every) {
-                match write_checkpoint(dir, s.learner) {
+                match write_checkpoint(dir, s.learner, &self.scene.aabb) {
                     Ok(path) => {
                         let _ = session.emit(RunEvent::Checkpoint { path: &path });
                     }
@@ -479,7 +480,7 @@ impl Ctx<'_> {
         }
         let _ = session.emit(RunEvent::Writing);
         // The checkpoint holds the last state, so a resumed run continues where this one stopped.
-        write_checkpoint(dir, &learner)?;
+        write_checkpoint(dir, &learner, &self.scene.aabb)?;
         let stop_reason = cause.unwrap_or(report.stop_reason.into());
         let mut kept_iteration = learner.iteration;
         if let Some((iteration, loss, params)) = best.best.take() {
@@ -605,12 +606,38 @@ fn holdout_scores<F: TrainableField>(
         .collect()
 }
 
-/// Writes a training checkpoint (weights, optimiser state, histories) atomically.
+/// The checkpoint tag of the box a field was trained in: its coordinates are the box's, so a
+/// scene whose box changed cannot continue it.
+const BOX_TAG: &str = "aabb";
+
+fn box_tag(aabb: &fluidnerf_core::Aabb) -> String {
+    format!("{:?}", [aabb.min.to_array(), aabb.max.to_array()])
+}
+
+/// Writes a training checkpoint (weights, optimiser state, histories, the scene's box)
+/// atomically.
 pub(crate) fn write_checkpoint<F: TrainableField>(
     dir: &RunDir,
     learner: &Learner<F>,
+    aabb: &fluidnerf_core::Aabb,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    write_checkpoint_to(dir, "checkpoint.safetensors", learner)
+    let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &[(BOX_TAG, box_tag(aabb))])?;
+    dir.write_bytes("checkpoint.safetensors", &bytes)
+}
+
+/// Refuses to continue a checkpoint trained in another box than the scene's now.
+fn check_checkpoint_box(path: &std::path::Path, aabb: &fluidnerf_core::Aabb) -> Result<(), PipelineError> {
+    match fluidnerf_neural::weights::checkpoint_tag(path, BOX_TAG)? {
+        Some(saved) if saved != box_tag(aabb) => Err(PipelineError::file(
+            path,
+            format!(
+                "was trained in the box {saved}, but the scene's box is now {}; the field's coordinates are \
+                 the box's, so it cannot be continued: restore the scene's aabb, or start a new run (--force)",
+                box_tag(aabb)
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 pub(crate) fn write_checkpoint_to<F: TrainableField>(

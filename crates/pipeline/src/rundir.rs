@@ -409,6 +409,20 @@ impl RunDir {
         self.root.join(name)
     }
 
+    /// After a fresh run failed: when it left nothing to resume (no checkpoint, no window's),
+    /// removes the run files it wrote, so that the folder does not read as an unfinished run
+    /// that `--resume` could continue. Only [`RUN_FILES`] go: a fresh run starts in a folder
+    /// holding none of them (or whose earlier ones `--force` removed), so they are its own.
+    pub fn discard_unresumable(&self) {
+        if self.resume || self.lock.is_none() || self.checkpoint().exists() || self.path("windows").exists() {
+            return;
+        }
+        for name in RUN_FILES {
+            let path = self.path(name);
+            let _ = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
+        }
+    }
+
     /// A resumed run, once its saved state has loaded: drops the finished run's report (so a
     /// continuation that is interrupted reads as unfinished) and records the settings it goes
     /// on with (`config`). Until then a refused resume leaves the run as it was.

@@ -50,6 +50,10 @@ struct Progress {
     train: TrainConfig,
     /// The first windows of the plan, finished, in order.
     finished: Vec<FinishedWindow>,
+    /// The scene's box, in whose coordinates the fields were trained (absent in runs written
+    /// before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    aabb: Option<fluidnerf_core::Aabb>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -78,6 +82,17 @@ impl Progress {
         }
         if saved.seed != self.seed {
             return differs(&format!("seed ({}, now {})", saved.seed, self.seed));
+        }
+        if let (Some(a), Some(b)) = (saved.aabb, self.aabb) {
+            if a != b {
+                return differs(&format!(
+                    "box (the scene's aabb was {:?}..{:?}, now {:?}..{:?}; the fields' coordinates are the box's)",
+                    a.min.to_array(),
+                    a.max.to_array(),
+                    b.min.to_array(),
+                    b.max.to_array()
+                ));
+            }
         }
         None
     }
@@ -217,6 +232,7 @@ fn setup(
         seed: config.seed,
         train: spec.train.clone(),
         finished: Vec::new(),
+        aabb: Some(scene.aabb),
     };
     log::info!(
         "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
