@@ -136,3 +136,31 @@ fn slices_comparison_and_isosurface() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("axis"));
 }
+
+#[test]
+fn a_box_apart_from_the_reconstruction_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let export = |b: &str| {
+        fluidnerf(&[
+            "export",
+            src.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--npy",
+            "--box",
+            b,
+            "--resolution",
+            "8",
+        ])
+    };
+    // Beyond the box, and touching it only at a face: nothing of the reconstruction inside.
+    for b in ["1000,1000,1000,1010,1010,1010", "4,0,0,5,4,4", "-2,-2,-2,0,4,4"] {
+        let o = export(b);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("does not overlap"), "--box {b}: {err}");
+        assert!(!out.exists(), "--box {b} wrote {}", out.display());
+    }
+    ok(&export("3,3,3,5,5,5"));
+}

@@ -275,6 +275,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     source.warn_time_unused(args.time, &args.recon);
 
     // The export grid.
+    if let Some(b) = export_box {
+        let r = source.aabb();
+        let apart = (0..3).any(|a| b.min[a] >= r.max[a] || b.max[a] <= r.min[a]);
+        if apart {
+            bail!(
+                "--box {:?}..{:?} does not overlap the reconstruction's box {:?}..{:?}: the export would hold only zeros",
+                b.min.to_array(),
+                b.max.to_array(),
+                r.min.to_array(),
+                r.max.to_array()
+            );
+        }
+    }
     let aabb = export_box.unwrap_or_else(|| source.aabb());
     if let Some(n) = args.resolution {
         // The volume, and a copy as the files are written.
