@@ -1423,7 +1423,11 @@ pub fn different_scales(a: SampleKind, b: SampleKind) -> String {
     format!("their values are not on one scale{example}: convert the images to one bit depth")
 }
 
-/// Refuses NaN, infinite and negative pixels, naming the first.
+/// The largest pixel value read: squared residuals of larger values overflow 32-bit floats
+/// (about 3.4e38), and one such pixel would set the scale of every image.
+pub const MAX_PIXEL: f32 = 1e18;
+
+/// Refuses NaN, infinite, negative and overflowing pixels, naming the first.
 pub fn check_pixels(path: &Path, image: &Image) -> Result<(), IoError> {
     if let Some((col, row)) = image.first_non_finite() {
         return Err(IoError::NonFinite {
@@ -1438,6 +1442,18 @@ pub fn check_pixels(path: &Path, image: &Image) -> Result<(), IoError> {
             format!(
                 "pixel (col {}, row {}) is {}; pixel values are emitted light and must not be negative \
                  (clip background-subtracted images at 0)",
+                i % image.width,
+                i / image.width,
+                image.data[i]
+            ),
+        ));
+    }
+    if let Some(i) = image.data.iter().position(|&v| v > MAX_PIXEL) {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "pixel (col {}, row {}) is {:e}, above {MAX_PIXEL:e}, where 32-bit arithmetic overflows: a corrupt \
+                 or hot pixel, or values that need rescaling (the scene's intensity_scale takes the units)",
                 i % image.width,
                 i / image.width,
                 image.data[i]
@@ -1493,6 +1509,18 @@ pub fn load_truth(scene: &Scene) -> Result<Vec<(Option<f64>, Volume)>, IoError> 
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn pixels_that_would_overflow_are_refused_naming_the_pixel() {
+        let path = Path::new("images/cam001.tif");
+        let mut image = Image { width: 4, height: 3, data: vec![1.0; 12] };
+        check_pixels(path, &image).expect("ordinary pixels");
+        image.data[9] = MAX_PIXEL;
+        check_pixels(path, &image).expect("the limit itself");
+        image.data[9] = 3e38;
+        let err = check_pixels(path, &image).expect_err("3e38 overflows").to_string();
+        assert!(err.contains("cam001.tif") && err.contains("col 1, row 2") && err.contains("3e38"), "{err}");
+    }
     use super::*;
     use fluidnerf_core::glam::DVec2;
 
