@@ -468,3 +468,138 @@ fn a_yaml_alias_bomb_is_refused_quickly() {
     assert!(started.elapsed().as_secs_f64() < 20.0, "took {:?}", started.elapsed());
     assert!(!out.join("transforms.json").exists());
 }
+
+/// A camera with both an image and a folder of images is refused as matching several inputs,
+/// naming both, rather than blaming the image on no camera.
+#[test]
+fn a_camera_with_an_image_and_a_folder_matches_several_inputs() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    for n in ["cam0.png", "cam1.png", "cam2.png", "cam2/t0.png"] {
+        image(&images, n);
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.contains("camera cam2 matches several inputs"), "{err}");
+    let folder = format!("the folder {} and", images.join("cam2").display());
+    assert!(err.contains(&folder) && err.contains(s(&images.join("cam2.png"))), "{err}");
+    assert!(!err.contains("no calibrated camera"), "{err}");
+    assert!(!out.exists(), "nothing is created for a refused import");
+}
+
+/// A failed import leaves nothing it created: the decoded frames of the cameras read before a
+/// broken video are removed (with OUT, when the import made it), so the rerun after the fix
+/// needs no --force; a folder that existed keeps what was in it.
+#[test]
+fn a_failed_import_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let videos = dir.path().join("videos");
+    std::fs::create_dir_all(&videos).expect("mkdir");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    let bytes = std::fs::read(&fixture).expect("reads the fixture");
+    for n in ["cam0", "cam1"] {
+        std::fs::write(videos.join(format!("{n}.avi")), &bytes).expect("writes");
+    }
+    // cam2's video is cut short: cam0's and cam1's frames are written before it fails.
+    std::fs::write(videos.join("cam2.avi"), &bytes[..3000]).expect("writes");
+    let run = |out: &Path| {
+        fluidnerf(&[
+            "import",
+            "--opencv",
+            s(&calib),
+            "--images",
+            s(&videos),
+            "--aabb",
+            "-10,-10,-10,10,10,10",
+            "-o",
+            s(out),
+        ])
+    };
+    let out = dir.path().join("new/scene");
+    let o = run(&out);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("camera cam2"), "{}", stderr(&o));
+    assert!(!dir.path().join("new").exists(), "the folders the import made are removed");
+
+    // Into a folder of the user's: it and its file stay, the frames go.
+    let mine = dir.path().join("mine");
+    std::fs::create_dir_all(mine.join("frames")).expect("mkdir");
+    std::fs::write(mine.join("notes.txt"), "keep me").expect("writes");
+    let o = run(&mine);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(std::fs::read_to_string(mine.join("notes.txt")).expect("kept"), "keep me");
+    assert!(mine.join("frames").is_dir(), "a folder that existed stays");
+    let left: Vec<_> = std::fs::read_dir(mine.join("frames")).expect("lists").collect();
+    assert!(left.is_empty(), "{left:?}");
+
+    // With the video fixed, the same import succeeds without --force.
+    std::fs::write(videos.join("cam2.avi"), &bytes).expect("writes");
+    let o = run(&out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").frames.len(), 12);
+
+    // An early failure (an unknown --holdout) creates no folder either.
+    let early = dir.path().join("early");
+    let o = fluidnerf(&["import", "--opencv", s(&calib), "--images", s(&videos), "--holdout", "cam9", "-o", s(&early)]);
+    assert!(!o.status.success() && stderr(&o).contains("no camera or image named `cam9`"), "{}", stderr(&o));
+    assert!(!early.exists());
+}
+
+/// A transforms.json whose `fl_x` and `camera_angle_x` disagree is read with `fl_x`, with a
+/// warning naming both (once for the top level, per frame for a frame's own keys); agreeing
+/// keys give no warning.
+#[test]
+fn disagreeing_focal_length_and_field_of_view_are_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("src");
+    let cams = rig();
+    let mut frames = Vec::new();
+    for (n, cam) in &cams {
+        image(&src, &format!("{n}.png"));
+        let m = fluidnerf_io::scene::world_from_camera_to_opengl_c2w(&cam.world_from_camera);
+        frames.push(serde_json::json!({"file_path": format!("{n}.png"), "transform_matrix": m}));
+    }
+    let agreeing = 2.0 * (16.0f64 / 40.0).atan();
+    let mut v = serde_json::json!({
+        "w": 32, "h": 24, "fl_x": 40.0, "fl_y": 40.5, "cx": 15.75, "cy": 12.0,
+        "aabb": [[-10, -10, -10], [10, 10, 10]], "camera_angle_x": 1.0, "frames": frames,
+    });
+    let file = src.join("transforms.json");
+    let out = dir.path().join("scene");
+    let import = |v: &serde_json::Value| {
+        std::fs::write(&file, v.to_string()).expect("writes");
+        let o = fluidnerf(&["import", "--transforms", s(&file), "-o", s(&out), "--force"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(load_scene(&out).expect("loads").frames[0].camera.intrinsics.fx, 40.0, "fl_x is used");
+        stderr(&o)
+    };
+    let err = import(&v);
+    let warning = "top level: `fl_x` 40 and `camera_angle_x` 1 disagree";
+    assert_eq!(err.matches(warning).count(), 1, "{err}");
+    assert!(err.contains("using `fl_x`") && err.contains("transforms.json"), "{err}");
+
+    v["camera_angle_x"] = serde_json::json!(agreeing);
+    let err = import(&v);
+    assert!(!err.contains("disagree"), "{err}");
+
+    v["frames"][1]["camera_angle_x"] = serde_json::json!(0.5);
+    let err = import(&v);
+    assert!(err.contains("frame 1 (cam1.png): `fl_x` 40 and `camera_angle_x` 0.5 disagree"), "{err}");
+    assert_eq!(err.matches("disagree").count(), 1, "{err}");
+}

@@ -24,7 +24,8 @@
 //! (`cam0: {camera_matrix: ..., R: ..., T: ..., image_width: ...}`), or the cameras are a list
 //! of such mappings (`cameras: [{name: left, camera_matrix: ...}, ...]`; an entry without a
 //! `name` is `cam<index>`, counting from 0). A camera's name is the suffix of its
-//! `camera_matrix_<name>`; its other keys may spell the suffix in another letter case
+//! `camera_matrix_<name>` (a suffix that two or more other per-camera keys carry, as `R_cam2` and
+//! `T_cam2` without `camera_matrix_cam2`, names a camera too, refused for the node it lacks); its other keys may spell the suffix in another letter case
 //! (`rvec_Left` beside `camera_matrix_left`) unless two names differ only in letter case. A
 //! file with unsuffixed keys holds one camera named
 //! after the file stem (`cam3.yml` → `cam3`); a file may not mix unsuffixed and suffixed keys.
@@ -579,6 +580,28 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
             "mixes an unsuffixed `camera_matrix` with per-camera `camera_matrix_<name>` keys",
         ));
     }
+    if !named.is_empty() {
+        // A camera whose other nodes are there without its `camera_matrix_<name>` is a camera of
+        // the file all the same: it gets the error for the node it lacks, rather than being left
+        // out. Two of its nodes make it one; a lone `T_world` may be something else.
+        let mut others: Vec<(String, usize)> = Vec::new();
+        for key in nodes.keys() {
+            let suffix = OPENCV_KEYS
+                .iter()
+                .filter(|base| **base != "camera_matrix")
+                .find_map(|base| key.strip_prefix(base).and_then(|rest| rest.strip_prefix('_')));
+            if let Some(n) = suffix.filter(|n| !n.is_empty()) {
+                if named.iter().any(|m| m.eq_ignore_ascii_case(n)) {
+                    continue;
+                }
+                match others.iter_mut().find(|(m, _)| m.eq_ignore_ascii_case(n)) {
+                    Some((_, count)) => *count += 1,
+                    None => others.push((n.to_string(), 1)),
+                }
+            }
+        }
+        named.extend(others.into_iter().filter(|(_, count)| *count >= 2).map(|(n, _)| n));
+    }
     if !single && named.is_empty() {
         if let Some(intrinsics) = stereo_intrinsics_of(path, &raw_nodes) {
             let (intrinsic_nodes, _) = parse_storage(&intrinsics)?;
@@ -590,11 +613,18 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     // One mapping per camera (`cam0: {camera_matrix: ..., R: ..., T: ...}`), or lists of them.
     let grouped = !single && named.is_empty();
     let nested: Vec<(&String, &Map<String, Value>)> = if grouped {
-        raw_nodes
-            .iter()
-            .filter_map(|(k, v)| v.as_object().map(|m| (k, m)))
-            .filter(|(_, m)| canonical_keys(m).contains_key("camera_matrix"))
-            .collect()
+        let mappings: Vec<(&String, &Map<String, Value>)> =
+            raw_nodes.iter().filter_map(|(k, v)| v.as_object().map(|m| (k, m))).collect();
+        if mappings.iter().any(|(_, m)| canonical_keys(m).contains_key("camera_matrix")) {
+            // Beside cameras, a mapping with some of a camera's nodes is one too (and its
+            // missing node is named).
+            mappings
+                .into_iter()
+                .filter(|(_, m)| canonical_keys(m).keys().any(|k| OPENCV_KEYS.contains(&k.as_str())))
+                .collect()
+        } else {
+            Vec::new()
+        }
     } else {
         Vec::new()
     };
@@ -1125,6 +1155,9 @@ fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
         }
         let bad = |why: String| IoError::invalid(path, format!("line {}: {why}", n + 1));
         let t: Vec<&str> = line.split_whitespace().collect();
+        if t.len() == 9 && t.iter().all(|s| s.parse::<f64>().is_ok()) {
+            return Err(bad(format!("image id {} has an empty name", t[0])));
+        }
         if t.len() < 10 {
             return Err(bad("expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME".into()));
         }
@@ -1141,10 +1174,45 @@ fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
             camera_id,
             place: format!("line {}", n + 1),
         });
-        // The next line lists the image's 2D points; skip it.
-        lines.next();
+        // The next line lists the image's 2D points (empty when it has none); it is checked, not
+        // read, so that a file without these lines is refused rather than read as every other image.
+        for (m, points) in lines.by_ref() {
+            if points.trim_start().starts_with('#') {
+                continue;
+            }
+            if !is_points2d_line(points) {
+                return Err(IoError::invalid(
+                    path,
+                    format!(
+                        "line {}: expected the POINTS2D line of image {} (X Y POINT3D_ID triples), got `{}`; every \
+                         image takes two lines, its own and the line of its 2D points (empty when it has none)",
+                        m + 1,
+                        t[0],
+                        excerpt(points.trim())
+                    ),
+                ));
+            }
+            break;
+        }
     }
     Ok(out)
+}
+
+/// Whether `line` is a POINTS2D line of `images.txt`: whole `X Y POINT3D_ID` triples (none for
+/// an image without 2D points), the coordinates numbers and the id an integer (−1 for none).
+fn is_points2d_line(line: &str) -> bool {
+    let t: Vec<&str> = line.split_whitespace().collect();
+    t.len().is_multiple_of(3)
+        && t.chunks(3)
+            .all(|p| p[0].parse::<f64>().is_ok() && p[1].parse::<f64>().is_ok() && p[2].parse::<i64>().is_ok())
+}
+
+/// `text` cut to its first 80 characters (with `…` when cut), for messages.
+fn excerpt(text: &str) -> String {
+    match text.char_indices().nth(80) {
+        Some((i, _)) => format!("{}…", &text[..i]),
+        None => text.to_string(),
+    }
 }
 
 /// Little-endian reads from a byte slice that fail, rather than panic, past its end.
@@ -1238,6 +1306,9 @@ fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
             let t = [b.f64()?, b.f64()?, b.f64()?];
             let camera_id = b.i32()?;
             let name = b.c_string()?;
+            if name.is_empty() {
+                return Err(format!("image id {image_id} has an empty name"));
+            }
             let points = b.u64()?;
             let skip = usize::try_from(points).ok().and_then(|p| p.checked_mul(24)).ok_or("too many 2D points")?;
             b.take(skip)?;

@@ -23,7 +23,8 @@
 //!   level (shared) or in a frame; a key in a frame overrides the same key at the top level.
 //!   As instant-ngp and Blender's NeRF exporters write them: `camera_angle_x`/`camera_angle_y`
 //!   (field of view in radians) stand in for a missing `fl_x`/`fl_y`
-//!   (`fl = size / (2 tan(angle / 2))`; with `camera_angle_x` alone the pixels are square);
+//!   (`fl = size / (2 tan(angle / 2))`; with `camera_angle_x` alone the pixels are square); when
+//!   both are given and disagree by more than 0.1 %, the focal length is used, with a warning;
 //!   `w`/`h` may be whole floats (`605.0`) or absent (then read from the image's header);
 //!   a missing `cx`/`cy` is the image centre (`w/2`, `h/2` in the file's convention).
 //!   `camera_model` may be `PINHOLE`, `SIMPLE_PINHOLE`, `OPENCV`, `SIMPLE_RADIAL`, `RADIAL` or
@@ -674,6 +675,70 @@ fn frame_camera(
     Ok(camera)
 }
 
+/// How far (relative) a focal length may lie from the one its field of view gives before
+/// [`warn_focal_conflicts`] warns.
+const FOCAL_ANGLE_TOLERANCE: f64 = 1e-3;
+
+/// Warns when frame `index` (its own keys `frame`, the top level's `global`) gives both a focal
+/// length and a field of view for an axis (`fl_x` and `camera_angle_x`, `fl_y` and
+/// `camera_angle_y`) that disagree by more than [`FOCAL_ANGLE_TOLERANCE`]; the focal length is
+/// used (`intrinsics`). A conflict at the top level is warned about once (`warned_top`).
+fn warn_focal_conflicts(
+    file: &Path,
+    index: usize,
+    name: &str,
+    frame: &IntrinsicKeys,
+    global: &IntrinsicKeys,
+    intrinsics: &Intrinsics,
+    warned_top: &mut [bool; 2],
+) {
+    let axes = [
+        (
+            "fl_x",
+            frame.fl_x,
+            global.fl_x,
+            "camera_angle_x",
+            frame.camera_angle_x,
+            global.camera_angle_x,
+            "w",
+            intrinsics.width,
+        ),
+        (
+            "fl_y",
+            frame.fl_y,
+            global.fl_y,
+            "camera_angle_y",
+            frame.camera_angle_y,
+            global.camera_angle_y,
+            "h",
+            intrinsics.height,
+        ),
+    ];
+    for (axis, (fl_key, fl_frame, fl_top, angle_key, angle_frame, angle_top, size_key, size)) in
+        axes.into_iter().enumerate()
+    {
+        let (Some(fl), Some(angle)) = (fl_frame.or(fl_top), angle_frame.or(angle_top)) else { continue };
+        if !(angle > 0.0 && angle < std::f64::consts::PI) {
+            continue;
+        }
+        let from_angle = 0.5 * f64::from(size) / (0.5 * angle).tan();
+        if (fl - from_angle).abs() <= FOCAL_ANGLE_TOLERANCE * from_angle {
+            continue;
+        }
+        let at_top = fl_frame.is_none() && angle_frame.is_none();
+        if at_top && warned_top[axis] {
+            continue;
+        }
+        warned_top[axis] |= at_top;
+        let place = if at_top { "top level".to_string() } else { format!("frame {index} ({name})") };
+        log::warn!(
+            "{}: {place}: `{fl_key}` {fl} and `{angle_key}` {angle} disagree (the angle gives a focal length of \
+             {from_angle:.4} px at {size_key} = {size}); using `{fl_key}`",
+            file.display()
+        );
+    }
+}
+
 /// A scene file as read, before the checks of [`load_scene`]; its box may be missing (the
 /// tools that write `transforms.json` for NeRFs do not write one).
 #[derive(Clone, Debug, PartialEq)]
@@ -756,6 +821,8 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     let mut frames = Vec::with_capacity(top.frames.len());
     let mut frame_recordings = Vec::with_capacity(top.frames.len());
     let mut renamed: Vec<(String, PathBuf)> = Vec::new();
+    // Whether the top level's focal lengths and angles were found to disagree (warned once).
+    let mut warned_top = [false; 2];
     for (i, value) in top.frames.iter().enumerate() {
         let prefix = format!("frames[{i}]");
         if !value.is_object() {
@@ -792,8 +859,10 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
                 format!("frame {i}: is_fisheye is true: fisheye cameras are not supported"),
             ));
         }
+        let camera = frame_camera(&file, i, &entry, &keys.over(&global), &image)?;
+        warn_focal_conflicts(&file, i, &entry.file_path, &keys, &global, &camera.intrinsics, &mut warned_top);
         frames.push(Frame {
-            camera: frame_camera(&file, i, &entry, &keys.over(&global), &image)?,
+            camera,
             file_path,
             time: entry.time,
             camera_name: entry.camera.clone(),

@@ -1023,3 +1023,97 @@ fn opencv_xml_is_written_and_read_back() {
     assert!(std::fs::read_to_string(&file).expect("read").contains("\n<camera_matrix type_id="));
     assert_same_cameras(&single, &read_opencv(&file).expect("reads"));
 }
+
+/// `images.txt` gives each image two lines, the second listing its 2D points (empty when it
+/// has none). A file without the points lines is refused at the first image line found where
+/// a points line belongs, rather than read as every other image; real files (comments, empty
+/// and filled points lines) read as before.
+#[test]
+fn colmap_images_txt_without_points2d_lines_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(dir.path().join("cameras.txt"), "# Camera list\n1 PINHOLE 64 48 50 50 32 24\n").expect("write");
+    let lines = [
+        "1 1 0 0 0 0 0 10 1 a.png",
+        "2 1 0 0 0 0 0 11 1 b.png",
+        "3 1 0 0 0 0 0 12 1 c.png",
+        "4 1 0 0 0 0 0 13 1 d.png",
+    ];
+    std::fs::write(dir.path().join("images.txt"), format!("# Image list\n{}\n", lines.join("\n"))).expect("write");
+    let err = read_colmap(dir.path()).expect_err("no POINTS2D lines").to_string();
+    assert!(
+        err.contains("images.txt: line 3: expected the POINTS2D line of image 1 (X Y POINT3D_ID triples), got `2 1 0"),
+        "{err}"
+    );
+    // Points lines that are not whole triples of numbers are refused too.
+    for bad in ["1 2", "1 2 x", "1.5 2 0.5"] {
+        std::fs::write(dir.path().join("images.txt"), format!("{}\n{bad}\n", lines[0])).expect("write");
+        let err = read_colmap(dir.path()).expect_err(bad).to_string();
+        assert!(err.contains("line 2: expected the POINTS2D line of image 1"), "{bad}: {err}");
+    }
+    // Comments, empty and filled points lines, and a last image without its points line read.
+    let text = format!(
+        "# Image list\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n{}\n\n{}\n# a comment\n37 14 1 10.5 20.25 -1\n{}\n   \n{}\n",
+        lines[0], lines[1], lines[2], lines[3]
+    );
+    std::fs::write(dir.path().join("images.txt"), text).expect("write");
+    let cams = read_colmap(dir.path()).expect("reads");
+    assert_eq!(cams.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(), ["a.png", "b.png", "c.png", "d.png"]);
+}
+
+/// An image without a name (which no image file can match) is refused, naming the image.
+#[test]
+fn colmap_images_with_an_empty_name_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    colmap_bin_by_hand(dir.path());
+    let mut imgs = Vec::new();
+    imgs.extend(1u64.to_le_bytes());
+    imgs.extend(1i32.to_le_bytes());
+    [1.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0].iter().for_each(|v| imgs.extend(v.to_le_bytes()));
+    imgs.extend(7i32.to_le_bytes());
+    imgs.push(0);
+    imgs.extend(0u64.to_le_bytes());
+    std::fs::write(dir.path().join("images.bin"), imgs).expect("write");
+    let err = read_colmap(dir.path()).expect_err("empty name").to_string();
+    assert!(err.contains("images.bin: image id 1 has an empty name"), "{err}");
+
+    let text_dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(text_dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n").expect("write");
+    std::fs::write(text_dir.path().join("images.txt"), "# Image list\n1 1 0 0 0 0 0 10 1\n\n").expect("write");
+    let err = read_colmap(text_dir.path()).expect_err("empty name").to_string();
+    assert!(err.contains("images.txt: line 2: image id 1 has an empty name"), "{err}");
+}
+
+/// A camera of a multi-camera file whose other nodes are there without its camera matrix is
+/// named with the node it lacks, as a camera missing its `T` is, instead of being left out.
+#[test]
+fn opencv_camera_without_its_camera_matrix_is_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("rig.yml");
+    let (k, r) = ("[ 10, 0, 4, 0, 10, 4, 0, 0, 1 ]", "[ 1, 0, 0, 0, 1, 0, 0, 0, 1 ]");
+    let suffixed = format!(
+        "%YAML:1.0\nimage_width_a: 8\nimage_height_a: 8\ncamera_matrix_a: {k}\nR_a: {r}\nT_a: [ 0, 0, 5 ]\n\
+         image_width_b: 8\nimage_height_b: 8\ndistortion_coefficients_b: [ 0, 0, 0, 0, 0 ]\nR_b: {r}\nT_b: [ 0, 0, 6 ]\n"
+    );
+    std::fs::write(&file, &suffixed).expect("write");
+    let err = read_opencv(&file).expect_err("camera b has no camera matrix").to_string();
+    assert!(err.contains("rig.yml: camera `b`: missing the node `camera_matrix_b`"), "{err}");
+    // Complete, and with a suffix in another letter case (the same camera, not another one).
+    let complete = format!("{suffixed}camera_matrix_b: {k}\n").replace("T_a:", "T_A:");
+    std::fs::write(&file, complete).expect("write");
+    let names: Vec<String> = read_opencv(&file).expect("reads").into_iter().map(|c| c.0).collect();
+    assert_eq!(names, ["a", "b"]);
+    // A lone node with a suffix of its own is not taken for a camera.
+    let with_world = format!("{suffixed}camera_matrix_b: {k}\nT_world: [ 0, 0, 1 ]\n");
+    std::fs::write(&file, with_world).expect("write");
+    let names: Vec<String> = read_opencv(&file).expect("reads").into_iter().map(|c| c.0).collect();
+    assert_eq!(names, ["a", "b"]);
+
+    // One mapping per camera.
+    let nested = format!(
+        "%YAML:1.0\na:\n   image_width: 8\n   image_height: 8\n   camera_matrix: {k}\n   R: {r}\n   T: [ 0, 0, 5 ]\n\
+         b:\n   image_width: 8\n   image_height: 8\n   R: {r}\n   T: [ 0, 0, 6 ]\nnotes:\n   by: me\n"
+    );
+    std::fs::write(&file, nested).expect("write");
+    let err = read_opencv(&file).expect_err("camera b has no camera matrix").to_string();
+    assert!(err.contains("rig.yml: camera `b`: missing the node `camera_matrix`"), "{err}");
+}

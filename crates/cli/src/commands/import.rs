@@ -50,7 +50,9 @@ use std::io::Write as _;
 /// camera (unless --skip-uncalibrated). The scene is validated (each camera must see the box,
 /// image sizes must match the calibration, no NaN/Inf pixels) before `OUT/transforms.json` is
 /// written, together with `OUT/import.json` (the settings of this run). Image paths are
-/// written relative to OUT when IMAGES is inside OUT, absolute otherwise.
+/// written relative to OUT when IMAGES is inside OUT, absolute otherwise. An import that fails
+/// removes what it created (decoded video frames, OUT itself when it made it) and nothing else,
+/// so the same command can run again once the input is fixed.
 #[derive(clap::Args, Debug, Serialize)]
 #[command(group(clap::ArgGroup::new("source").required(true)))]
 pub struct Args {
@@ -133,6 +135,52 @@ struct VideoRecord {
     last_time_s: f64,
 }
 
+/// What an import created in OUT: removed again when the import fails, so that a failed
+/// import leaves nothing behind and its rerun needs no --force. Files and folders that existed
+/// before are never removed (a file overwritten with --force keeps its new content).
+#[derive(Default)]
+struct Created {
+    /// Files written that did not exist before, in the order written.
+    files: Vec<PathBuf>,
+    /// Folders made, parents before their children.
+    dirs: Vec<PathBuf>,
+}
+
+impl Created {
+    /// Creates `dir` and its missing parents, recording the folders it makes.
+    fn dir_all(&mut self, dir: &Path) -> anyhow::Result<()> {
+        let missing: Vec<PathBuf> =
+            dir.ancestors().take_while(|d| !d.as_os_str().is_empty() && !d.exists()).map(Path::to_path_buf).collect();
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        self.dirs.extend(missing.into_iter().rev());
+        Ok(())
+    }
+
+    /// Records the file `path`, about to be written, unless it exists already.
+    fn file(&mut self, path: &Path) {
+        if !path.exists() {
+            self.files.push(path.to_path_buf());
+        }
+    }
+
+    /// Removes what was recorded: the files, then the folders, children first and only when
+    /// empty (a file someone else put there meanwhile keeps its folder).
+    fn undo(self) {
+        for f in self.files.iter().rev() {
+            if let Err(e) = std::fs::remove_file(f) {
+                if e.kind() != std::io::ErrorKind::NotFound {
+                    log::warn!("cannot remove {} after the failed import: {e}", f.display());
+                }
+            }
+        }
+        for d in self.dirs.iter().rev() {
+            if std::fs::remove_dir(d).is_err() && d.exists() {
+                log::warn!("cannot remove the folder {} after the failed import", d.display());
+            }
+        }
+    }
+}
+
 /// `A..B` or `A..` as (start, end).
 fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
     let bad = || anyhow::anyhow!("--video-frames: expected A..B or A.. (frame indices from 0), got `{s}`");
@@ -153,6 +201,7 @@ fn expand_videos(
     out: &Path,
     opts: &fluidnerf_io::video::VideoOptions,
     force: bool,
+    created: &mut Created,
 ) -> anyhow::Result<(Vec<Frame>, Vec<VideoRecord>)> {
     let mut expanded = Vec::new();
     let mut records: Vec<VideoRecord> = Vec::new();
@@ -172,7 +221,7 @@ fn expand_videos(
             );
         }
         let dir = out.join("frames").join(&name);
-        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        created.dir_all(&dir)?;
         let mut times = Vec::new();
         let info = fluidnerf_io::video::read_video_frames(&f.file_path, opts, |frame| {
             let path = dir.join(format!("{:06}.tif", times.len()));
@@ -182,6 +231,7 @@ fn expand_videos(
                     "exists (from an earlier import); pass --force to overwrite it",
                 ));
             }
+            created.file(&path);
             fluidnerf_io::image::write_tiff_f32(&path, &frame.image)?;
             times.push(frame.time_s);
             expanded.push(Frame { file_path: path, time: Some(frame.time_s), ..f.clone() });
@@ -259,7 +309,20 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     let mut unmatched = Vec::new();
     for (name, cam) in cameras {
         let folder = images.join(name);
+        let candidates: Vec<PathBuf> = fluidnerf_io::image::IMAGE_EXTENSIONS
+            .iter()
+            .chain(fluidnerf_io::video::VIDEO_EXTENSIONS.iter())
+            .map(|e| images.join(format!("{name}.{e}")))
+            .collect();
+        let found: Vec<&PathBuf> = candidates.iter().filter(|p| p.is_file()).collect();
         if folder.is_dir() {
+            if !found.is_empty() {
+                bail!(
+                    "camera {name} matches several inputs: the folder {} and {}; keep one",
+                    folder.display(),
+                    found.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+                );
+            }
             let series: Vec<PathBuf> = list_dir(&folder)?.into_iter().filter(|p| is_image(p)).collect();
             if series.is_empty() {
                 unmatched.push(format!("{name} (the folder {} holds no images)", folder.display()));
@@ -276,12 +339,6 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             used.insert(folder);
             continue;
         }
-        let candidates: Vec<PathBuf> = fluidnerf_io::image::IMAGE_EXTENSIONS
-            .iter()
-            .chain(fluidnerf_io::video::VIDEO_EXTENSIONS.iter())
-            .map(|e| images.join(format!("{name}.{e}")))
-            .collect();
-        let found: Vec<&PathBuf> = candidates.iter().filter(|p| p.is_file()).collect();
         match found.as_slice() {
             [one] => {
                 used.insert((*one).clone());
@@ -379,6 +436,21 @@ fn aabb_text(a: &Aabb) -> String {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut created = Created::default();
+    let result = import(&args, &mut created);
+    if result.is_err() {
+        created.undo();
+    }
+    result
+}
+
+/// The name a frame goes by for --holdout: its camera's, else its image's stem.
+fn frame_name(f: &Frame) -> Option<String> {
+    f.camera_name.clone().or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()))
+}
+
+/// The import; what it creates in OUT is recorded in `created`.
+fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
     let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
@@ -456,8 +528,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (frames, FromFile::default())
     };
     ensure!(!frames.is_empty(), "no frames to import");
+    // Checked before anything is written (a video's frames go by its camera's name).
+    let names: BTreeSet<String> = frames.iter().filter_map(frame_name).collect();
+    if let Some(h) = args.holdout.iter().find(|h| !names.contains(*h)) {
+        bail!(
+            "--holdout: no camera or image named `{h}` (cameras: {})",
+            names.into_iter().collect::<Vec<_>>().join(", ")
+        );
+    }
 
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    created.dir_all(&args.out)?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
     let video_opts = fluidnerf_io::video::VideoOptions {
         range: args.video_range,
@@ -467,7 +547,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         time_offset_s: args.video_time_offset,
         linearisation: args.linearisation.or(from_file.linearisation).unwrap_or_default(),
     };
-    let (frames, videos) = expand_videos(frames, &out_abs, &video_opts, args.force)?;
+    let (frames, videos) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
     let video_flags = args.video_frames.is_some()
         || args.video_every != 1
         || args.video_time_offset != 0.0
@@ -491,27 +571,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for f in &mut scene.frames {
         f.file_path = relative(&f.file_path)?;
     }
-    let mut unmatched: Vec<&String> = args.holdout.iter().collect();
     for f in &mut scene.frames {
-        let stem = f.file_path.file_stem().map(|s| s.to_string_lossy().to_string());
-        let name = f.camera_name.clone().or(stem);
-        if let Some(n) = name.filter(|n| args.holdout.contains(n)) {
+        if frame_name(f).is_some_and(|n| args.holdout.contains(&n)) {
             f.holdout = true;
-            unmatched.retain(|h| **h != n);
         }
-    }
-    if let Some(h) = unmatched.first() {
-        let names: BTreeSet<String> = scene
-            .frames
-            .iter()
-            .filter_map(|f| {
-                f.camera_name.clone().or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().to_string()))
-            })
-            .collect();
-        bail!(
-            "--holdout: no camera or image named `{h}` (cameras: {})",
-            names.into_iter().collect::<Vec<_>>().join(", ")
-        );
     }
     let mut recording = match from_file.recording.take() {
         Some(mut r) if r.frames.len() == scene.frames.len() => {
@@ -575,10 +638,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
     }
     recording.linearisation = linearisation;
+    created.file(&out_file);
     save_scene_recording(&scene, &args.out, &recording, true)?;
-    let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args: &args, videos: &videos };
+    let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args, videos: &videos };
     let json = serde_json::to_string_pretty(&settings)?;
-    fluidnerf_io::atomic_write(&args.out.join("import.json"), |w| w.write_all(json.as_bytes()))?;
+    let settings_file = args.out.join("import.json");
+    created.file(&settings_file);
+    fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(json.as_bytes()))?;
 
     let cameras: BTreeSet<String> = scene
         .frames
