@@ -144,7 +144,11 @@ impl ClassicalMethod {
             if !(p.tolerance > 0.0 && p.tolerance.is_finite() && p.window > 0 && p.smoothing > 0) {
                 return Err(ClassicalError::invalid(
                     "plateau",
-                    format!("needs window > 0, smoothing > 0 and a positive tolerance, got {p:?}"),
+                    format!(
+                        "needs window > 0, smoothing > 0 and a positive tolerance, got window {}, smoothing {}, \
+                         tolerance {}",
+                        p.window, p.smoothing, p.tolerance
+                    ),
                 ));
             }
         }

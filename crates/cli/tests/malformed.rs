@@ -66,6 +66,16 @@ fn cases() -> Vec<Case> {
             RUN,
             "truth.npy",
         ),
+        c(
+            "every frame held out, fast",
+            Json(|v| {
+                for f in v["frames"].as_array_mut().unwrap() {
+                    f["holdout"] = serde_json::json!(true);
+                }
+            }),
+            FAST,
+            "every frame is held out",
+        ),
         c("aabb inverted", Json(|v| v["aabb"] = serde_json::json!([[1, 1, 1], [-1, -1, -1]])), RUN, "aabb"),
         c("aabb missing", Json(|v| drop(v.as_object_mut().unwrap().remove("aabb"))), RUN, "aabb"),
         c("aabb wrong type", Json(|v| v["aabb"] = serde_json::json!("box")), RUN, "aabb"),
@@ -541,4 +551,32 @@ fn a_scene_path_that_is_not_utf8_is_refused_up_front() {
         .expect("runs");
     refused(&out, "not valid UTF-8");
     assert!(!d.join("run").exists(), "left an output folder");
+}
+
+#[test]
+fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    ok(&fluidnerf(
+        d,
+        &["reconstruct", "scene", "-o", "run", "--method", "fast", "--resolution", "8", "--max-iterations", "1", "-q"],
+    ));
+    let saved: serde_json::Value = json(&d.join("run/config.json"));
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(&str, Edit); 4] = [
+        ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
+        ("method.train.coarse_samples", |v| v["method"]["train"]["coarse_samples"] = 1.into()),
+        ("method.train.adam.beta1", |v| v["method"]["train"]["adam"]["beta1"] = 1.0.into()),
+        ("method.train.schedule", |v| v["method"]["train"]["schedule"]["initial"] = 0.0.into()),
+    ];
+    for (key, edit) in edits {
+        let mut v = saved.clone();
+        edit(&mut v);
+        std::fs::write(d.join("cfg.json"), v.to_string()).expect("writes");
+        let o = fluidnerf(d, &["reconstruct", "--config", "cfg.json", "-o", "again"]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("cfg.json") && err.contains(key), "{key}: {err}");
+        assert!(!d.join("again").exists(), "{key}: left an output folder");
+    }
 }

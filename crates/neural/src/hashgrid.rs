@@ -144,36 +144,37 @@ impl Default for HashGridConfig {
 
 impl HashGridConfig {
     pub fn validate(&self) -> Result<(), NeuralError> {
-        let bad = |what: &str, why: String| Err(NeuralError::invalid(what, why));
+        // Named by their keys, under "hash-grid." (the key of this field in a configuration).
+        let bad = |what: &str, why: String| Err(NeuralError::invalid(format!("hash-grid.{what}"), why));
         if self.levels == 0 || self.levels > 32 {
-            return bad("hash-grid levels", format!("{} not in 1..=32", self.levels));
+            return bad("levels", format!("{} not in 1..=32", self.levels));
         }
         if ![1, 2, 4, 8].contains(&self.features_per_level) {
-            return bad("hash-grid features per level", format!("{} not 1, 2, 4 or 8", self.features_per_level));
+            return bad("features_per_level", format!("{} not 1, 2, 4 or 8", self.features_per_level));
         }
         if !(4..=24).contains(&self.log2_table_size) {
-            return bad("hash-grid log2 table size", format!("{} not in 4..=24", self.log2_table_size));
+            return bad("log2_table_size", format!("{} not in 4..=24", self.log2_table_size));
         }
         if self.base_resolution == 0 || self.max_resolution < self.base_resolution || self.max_resolution > 1 << 16 {
             return bad(
-                "hash-grid resolutions",
+                "max_resolution",
                 format!("need 1 ≤ base {} ≤ max {} ≤ 65536", self.base_resolution, self.max_resolution),
             );
         }
         if self.time_resolution == 0 || !(self.time_span > 0.0 && self.time_span.is_finite()) {
             return bad(
-                "hash-grid time axis",
+                "time_span",
                 format!("time_resolution {} and time_span {} must be positive", self.time_resolution, self.time_span),
             );
         }
         if self.static_levels > 32 {
-            return bad("hash-grid static levels", format!("{} not in 0..=32", self.static_levels));
+            return bad("static_levels", format!("{} not in 0..=32", self.static_levels));
         }
         if self.mlp_depth == 0 || self.mlp_width == 0 || self.mlp_width > 1024 {
-            return bad("hash-grid MLP", format!("depth {} width {}", self.mlp_depth, self.mlp_width));
+            return bad("mlp_width", format!("depth {} width {}", self.mlp_depth, self.mlp_width));
         }
         if !(self.init_scale >= 0.0 && self.init_scale.is_finite()) {
-            return bad("hash-grid init scale", format!("{}", self.init_scale));
+            return bad("init_scale", format!("{}", self.init_scale));
         }
         Ok(())
     }

@@ -119,15 +119,15 @@ impl MlpConfig {
 
     pub fn validate(&self) -> Result<(), NeuralError> {
         if self.depth == 0 || self.depth > 64 {
-            return Err(NeuralError::invalid("MLP depth", format!("{} not in 1..=64", self.depth)));
+            return Err(NeuralError::invalid("mlp.depth", format!("{} not in 1..=64", self.depth)));
         }
         if self.width == 0 || self.width > 4096 {
-            return Err(NeuralError::invalid("MLP width", format!("{} not in 1..=4096", self.width)));
+            return Err(NeuralError::invalid("mlp.width", format!("{} not in 1..=4096", self.width)));
         }
         // 2^{L−1} π τ must stay well inside f32's exact-integer range.
         if self.space_freqs > 20 || self.time_freqs > 20 {
             return Err(NeuralError::invalid(
-                "encoding frequencies",
+                "mlp.space_freqs",
                 format!("L_x = {}, L_t = {}: at most 20", self.space_freqs, self.time_freqs),
             ));
         }

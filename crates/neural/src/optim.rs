@@ -51,14 +51,13 @@ impl Default for AdamConfig {
 impl AdamConfig {
     pub fn validate(&self) -> Result<(), NeuralError> {
         let ok = |b: f32| (0.0..1.0).contains(&b);
-        if !ok(self.beta1) || !ok(self.beta2) {
-            return Err(NeuralError::invalid(
-                "Adam betas",
-                format!("β₁ = {}, β₂ = {} must lie in [0, 1)", self.beta1, self.beta2),
-            ));
+        for (key, b) in [("adam.beta1", self.beta1), ("adam.beta2", self.beta2)] {
+            if !ok(b) {
+                return Err(NeuralError::invalid(key, format!("Adam's decay rate must lie in [0, 1), got {b}")));
+            }
         }
         if !(self.eps > 0.0 && self.eps.is_finite()) {
-            return Err(NeuralError::invalid("Adam epsilon", format!("{} must be positive", self.eps)));
+            return Err(NeuralError::invalid("adam.eps", format!("must be positive, got {}", self.eps)));
         }
         Ok(())
     }
@@ -174,9 +173,9 @@ impl LrSchedule {
     pub fn validate(&self) -> Result<(), NeuralError> {
         if !(self.initial > 0.0 && self.at_decay_iters > 0.0 && self.decay_iters > 0) {
             return Err(NeuralError::invalid(
-                "learning-rate schedule",
+                "schedule",
                 format!(
-                    "initial {} and final {} must be positive, decay_iters {} non-zero",
+                    "the learning rate's initial {} and at_decay_iters {} must be positive, decay_iters {} non-zero",
                     self.initial, self.at_decay_iters, self.decay_iters
                 ),
             ));

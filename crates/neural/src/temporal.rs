@@ -130,7 +130,7 @@ impl WindowConfig {
     pub fn validate(&self) -> Result<(), NeuralError> {
         if self.frames > 0 && self.overlap >= self.frames {
             return Err(NeuralError::invalid(
-                "window overlap",
+                "windows.overlap",
                 format!("{} frames must be fewer than the window's {}", self.overlap, self.frames),
             ));
         }
@@ -164,7 +164,7 @@ impl TemporalConfig {
             && self.windows.frames > 0
         {
             return Err(NeuralError::invalid(
-                "time origin",
+                "windows.time_origin",
                 "the hash grid's time axis spans one window; windows of a grid field need the window origin",
             ));
         }

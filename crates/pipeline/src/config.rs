@@ -527,6 +527,8 @@ impl MethodConfig {
                 c.method.validate().map_err(|e| key(&e))
             }
             MethodConfig::Neural(m, n) => {
+                validate_field(&n.field)?;
+                n.train.validate().map_err(|e| under("method.train", e))?;
                 if let Some(start) = &n.start {
                     start.validate().map_err(|e| key(&e))?;
                 } else if *m == Method::Hybrid {
@@ -535,10 +537,12 @@ impl MethodConfig {
                         "the hybrid method starts from a run: give start",
                     ));
                 }
-                n.train.validate().map_err(|e| key(&e))
+                Ok(())
             }
             MethodConfig::Temporal(m, t) => {
-                t.temporal_config().validate().map_err(|e| key(&e))?;
+                validate_field(&t.field)?;
+                t.train.validate().map_err(|e| under("method.train", e))?;
+                t.temporal_config().validate().map_err(|e| under("method", e))?;
                 if let Some(start) = &t.start {
                     start.validate().map_err(|e| key(&e))?;
                     if start.run.is_some() {
@@ -566,6 +570,28 @@ impl MethodConfig {
             }
         }
     }
+}
+
+/// A neural setting's error under its place in the configuration: `prefix.what` when the error
+/// names a key (no spaces), else `prefix` with the error's own words.
+fn under(prefix: &str, e: fluidnerf_neural::NeuralError) -> PipelineError {
+    match e {
+        fluidnerf_neural::NeuralError::Invalid { what, why } if !what.contains(' ') => {
+            PipelineError::invalid(format!("{prefix}.{what}"), why)
+        }
+        other => PipelineError::invalid(prefix, other.to_string()),
+    }
+}
+
+/// Checks a field's settings before any run builds it (the dense grid's are checked as it is
+/// built).
+fn validate_field(field: &FieldConfig) -> Result<(), PipelineError> {
+    match field {
+        FieldConfig::Mlp(c) => c.validate(),
+        FieldConfig::HashGrid(c) => c.validate(),
+        FieldConfig::Dense(_) => Ok(()),
+    }
+    .map_err(|e| under("method.field", e))
 }
 
 /// The rule that ends a run, besides the iteration cap and the time budget.

@@ -99,6 +99,12 @@ pub(crate) fn run(
             why: "nothing to resume: no checkpoint.safetensors to continue from".into(),
         });
     }
+    if scene.training_frames().next().is_none() {
+        return Err(PipelineError::invalid(
+            "scene",
+            format!("{}: every frame is held out; nothing to reconstruct from", scene.root.display()),
+        ));
+    }
     if scene.times().len() > 1 {
         session.warn(&format!(
             "the scene has {} time steps; static training mixes them into one field",

@@ -648,7 +648,10 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         cfg.gains.rounds = v;
     }
     apply_method_options(args, &mut cfg.method)?;
-    cfg.validate()?;
+    match args.config.as_ref().or(continued.as_ref()) {
+        Some(file) => cfg.validate().with_context(|| format!("the settings of {}", file.display()))?,
+        None => cfg.validate()?,
+    }
     // Its checkpoint holds the saved field's parameters: another field cannot take them.
     if let Some(saved) = resume_config {
         let field = |m: &MethodConfig| match m {
