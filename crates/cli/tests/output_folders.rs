@@ -1,6 +1,7 @@
 //! Output folders: a run is never written into its scene (its folder, a folder inside it, or
 //! one holding its inputs), `--force` replaces only fluidnerf's own runs, and `import`,
-//! `export`, `render` and `synth` refuse folders that hold results of another kind.
+//! `export`, `render`, `compare` and `synth` refuse folders that hold results of another kind
+//! (and exports and renders the scene's folder and its inputs' folders).
 
 mod common;
 use common::*;
@@ -106,6 +107,12 @@ fn import_export_render_and_synth_refuse_folders_of_another_kind() {
         let reconstruct = |out: &str| fluidnerf(d, &[&["reconstruct", "s", "-o", out][..], &recon, force].concat());
         refused(&reconstruct("exp"), "is an export folder");
         refused(&reconstruct("views"), "is a folder of rendered views");
+        // Nor do exports and renders go among the scene's inputs, the scene given or recorded.
+        refused(&render("s/images"), "holds");
+        refused(&export("s/truth"), "holds");
+        let compare = |out: &str| fluidnerf(d, &[&["compare", "r1", "-o", out][..], force].concat());
+        refused(&compare("s"), "is a scene folder");
+        refused(&compare("r2"), "is a reconstruction run folder");
     }
     assert_eq!(files(&d.join("s")), scene);
     assert_eq!(files(&d.join("r1")), run1);
@@ -113,4 +120,7 @@ fn import_export_render_and_synth_refuse_folders_of_another_kind() {
     // The same commands into folders of their own kind go on as before.
     ok(&fluidnerf(d, &["export", "r1", "-o", "exp", "--npy", "--force", "-q"]));
     ok(&fluidnerf(d, &["render", "r1", "-s", "s", "-o", "views", "--camera", "0", "--force", "-q"]));
+    // A folder of their own inside the scene's is allowed for renders and exports.
+    ok(&fluidnerf(d, &["render", "r1", "-o", "s/renders", "--camera", "0", "-q"]));
+    ok(&fluidnerf(d, &["export", "r1", "-o", "s/exports", "--npy", "-q"]));
 }

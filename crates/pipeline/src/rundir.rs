@@ -62,6 +62,8 @@ pub enum FolderKind {
     Export,
     /// Rendered views: `render.json` (written by `render`).
     Render,
+    /// A comparison of runs: `compare.json` (written by `compare`).
+    Compare,
 }
 
 impl FolderKind {
@@ -73,6 +75,7 @@ impl FolderKind {
             FolderKind::Run => "a reconstruction run folder (it holds config.json or report.json)",
             FolderKind::Export => "an export folder (it holds export.json)",
             FolderKind::Render => "a folder of rendered views (it holds render.json)",
+            FolderKind::Compare => "a comparison folder (it holds compare.json)",
         }
     }
 }
@@ -88,6 +91,8 @@ pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
         Some(FolderKind::Export)
     } else if has("render.json") {
         Some(FolderKind::Render)
+    } else if has("compare.json") {
+        Some(FolderKind::Compare)
     } else {
         None
     }
@@ -108,6 +113,7 @@ pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<
                     FolderKind::Run => "run folders",
                     FolderKind::Export => "export folders",
                     FolderKind::Render => "folders of rendered views",
+                    FolderKind::Compare => "comparison folders",
                 }
             ),
         }),
@@ -121,18 +127,30 @@ pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<
 /// Results written there would mix with the scene's inputs, and replacing them could delete
 /// them.
 pub fn refuse_scene_inputs(out: &Path, scene_root: &Path) -> Result<(), PipelineError> {
+    let (out_abs, root) = (resolved(out), resolved(scene_root));
+    if out_abs != root && out_abs.starts_with(&root) {
+        return Err(PipelineError::RunDir {
+            path: out.to_path_buf(),
+            why: format!(
+                "lies inside the scene folder {} (which holds its images and truth); choose an output folder \
+                 outside the scene",
+                scene_root.display()
+            ),
+        });
+    }
+    refuse_among_scene_inputs(out, scene_root)
+}
+
+/// Refuses `out` as an output folder of pictures or volumes made from the scene in
+/// `scene_root` when it is the scene's folder, contains it, or holds a file the scene reads:
+/// renders written among a scene's images would be read as more images. A folder of its own
+/// inside the scene's (`scene/renders`) is allowed, unlike for runs ([`refuse_scene_inputs`]).
+pub fn refuse_among_scene_inputs(out: &Path, scene_root: &Path) -> Result<(), PipelineError> {
     let refuse = |why: String| PipelineError::RunDir { path: out.to_path_buf(), why };
     let out_abs = resolved(out);
     let root = resolved(scene_root);
     if out_abs == root {
         return Err(refuse("is the scene's own folder; choose another output folder".into()));
-    }
-    if out_abs.starts_with(&root) {
-        return Err(refuse(format!(
-            "lies inside the scene folder {} (which holds its images and truth); choose an output folder \
-             outside the scene",
-            scene_root.display()
-        )));
     }
     if root.starts_with(&out_abs) {
         return Err(refuse(format!(

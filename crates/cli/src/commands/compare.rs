@@ -365,6 +365,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--thresholds must be NRMSE values in (0, 10), got {:?}", args.thresholds);
     }
     let out = &args.out;
+    fluidnerf_pipeline::rundir::refuse_other_kind(out, fluidnerf_pipeline::rundir::FolderKind::Compare, "compare")?;
     let outputs = ["time_to_accuracy.png", "time_to_accuracy.svg", "time_to_accuracy.csv", "compare.json"];
     if !args.force && outputs.iter().any(|f| out.join(f).exists()) {
         bail!("{} already holds comparison results; use --force to overwrite", out.display());

@@ -269,6 +269,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => None,
     };
+    // Exports go apart from the scene's inputs, whether the scene is given or the run records it.
+    let scene_root = match &scene {
+        Some(s) => Some(s.root.clone()),
+        None => super::recorded_scene(&args.recon)?.and_then(|p| super::scene_folder(&p)),
+    };
+    if let Some(root) = scene_root {
+        fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, &root)?;
+    }
     let units = args.units.clone().or_else(|| scene.as_ref().map(|s| s.units.clone())).unwrap_or_else(|| "mm".into());
     let source = load_source(&args.recon, scene.as_ref())?;
     let time = source.sample_time(args.time, "--time")?;

@@ -56,7 +56,7 @@ pub(crate) fn scene_or_recorded(
     given: Option<&std::path::Path>,
     recon: &[std::path::PathBuf],
 ) -> anyhow::Result<std::path::PathBuf> {
-    use anyhow::{bail, Context};
+    use anyhow::bail;
     if let Some(scene) = given {
         return Ok(scene.to_path_buf());
     }
@@ -67,12 +67,9 @@ pub(crate) fn scene_or_recorded(
         bail!("give the scene with --scene: the volume file {} records no scene", dir.display());
     }
     let config = dir.join("config.json");
-    if !config.is_file() {
+    let Some(recorded) = recorded_scene(dir)? else {
         bail!("give the scene with --scene: {} holds no config.json that would name its scene", dir.display());
-    }
-    let recorded = fluidnerf_pipeline::RunConfig::read(&config)
-        .with_context(|| format!("reading {} for the run's scene", config.display()))?
-        .scene;
+    };
     if !recorded.exists() {
         bail!(
             "{} names the scene {}, which is not there; give the scene with --scene",
@@ -82,6 +79,20 @@ pub(crate) fn scene_or_recorded(
     }
     println!("scene {} (recorded in {})", recorded.display(), config.display());
     Ok(recorded)
+}
+
+/// The scene a run folder's `config.json` records; None when `recon` is not a run folder with
+/// one.
+pub(crate) fn recorded_scene(recon: &std::path::Path) -> anyhow::Result<Option<std::path::PathBuf>> {
+    use anyhow::Context;
+    let config = recon.join("config.json");
+    if !(recon.is_dir() && config.is_file()) {
+        return Ok(None);
+    }
+    let scene = fluidnerf_pipeline::RunConfig::read(&config)
+        .with_context(|| format!("reading {} for the run's scene", config.display()))?
+        .scene;
+    Ok(Some(scene))
 }
 
 /// The folder of the scene at `path` (the folder or its `transforms.json`), resolved to one

@@ -114,7 +114,8 @@ pub struct Args {
     /// Colour map of the turntable GIF.
     #[arg(long, default_value = "magma")]
     pub colormap: Colormap,
-    /// Display time of each turntable frame in milliseconds.
+    /// Display time of each turntable frame in milliseconds: 10 to 655350, in steps of 10 (a
+    /// GIF counts hundredths of a second; other values are rounded).
     #[arg(long, default_value_t = 80)]
     pub frame_ms: u32,
     /// Overwrite existing outputs in OUT.
@@ -160,6 +161,9 @@ struct Settings<'a> {
     scene: &'a Path,
     cameras: &'a [usize],
     orbit: Option<usize>,
+    /// The turntable's display time per frame, as the GIF holds it (orbits only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    frame_ms: Option<u32>,
     width: u32,
     format: ImageFormat,
     projector: RenderProjector,
@@ -242,12 +246,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("--step applies to --projector rays; the footprint projector takes no samples along rays");
         }
     }
+    if !(10..=655_350).contains(&args.frame_ms) {
+        bail!("--frame-ms must be between 10 and 655350 (a GIF counts hundredths of a second), got {}", args.frame_ms);
+    }
     if !(16..=MAX_WIDTH).contains(&args.width) {
         bail!("--width must be between 16 and {MAX_WIDTH} px, got {}", args.width);
     }
     let scene_path = super::scene_or_recorded(args.scene.as_deref(), std::slice::from_ref(&args.recon))?;
     let scene = fluidnerf_io::scene::load_scene(&scene_path)
         .with_context(|| format!("reading the scene {}", scene_path.display()))?;
+    fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, &scene.root)?;
     let flow = match &args.flow_axis {
         Some(a) if a.len() == 3 && a.iter().all(|v| v.is_finite()) && a.iter().any(|&v| v != 0.0) => {
             fluidnerf_core::glam::DVec3::new(a[0], a[1], a[2])
@@ -455,6 +463,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene: &scene_path,
         cameras: &args.camera,
         orbit: args.orbit,
+        frame_ms: args.orbit.map(|_| (args.frame_ms + 5) / 10 * 10),
         width: args.width,
         format: args.format,
         projector: if footprint { RenderProjector::Footprint } else { RenderProjector::Rays },
