@@ -128,6 +128,24 @@ fn orbit_writes_views_and_a_turntable() {
     }
     let gif = std::fs::read(out.join("turntable.gif")).expect("a turntable");
     assert!(gif.starts_with(b"GIF89a"));
+    assert_eq!(render_json(&out)["frame_ms"], 80, "the GIF's display time is recorded");
+    // A display time a GIF cannot hold is refused, not clamped.
+    for ms in ["0", "9", "655351", "4294967295"] {
+        let o = fluidnerf(&[
+            "render",
+            &d(&dir.path().join("recon.npy")),
+            "--scene",
+            &d(dir.path()),
+            "--out",
+            &d(&dir.path().join("slow")),
+            "--orbit",
+            "2",
+            "--frame-ms",
+            ms,
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains("--frame-ms"), "--frame-ms {ms}: {err}");
+    }
     let bad = fluidnerf(&[
         "render",
         &d(&dir.path().join("recon.npy")),
