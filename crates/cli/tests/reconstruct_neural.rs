@@ -272,10 +272,7 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     // The preset asks for bfloat16 products; the report and the summary line say whether this
     // CPU ran them.
     assert_eq!(json(&d.join("f/config.json"))["method"]["field"]["hash-grid"]["mlp_precision"], "bf16");
-    #[cfg(target_arch = "x86_64")]
-    let bf16 = std::arch::is_x86_feature_detected!("avx512bf16") && std::arch::is_x86_feature_detected!("avx512bw");
-    #[cfg(not(target_arch = "x86_64"))]
-    let bf16 = false;
+    let bf16 = fluidnerf_neural::bf16_products_available();
     assert_eq!(report(&d.join("f"))["neural"]["train"]["bf16_products"], bf16);
     let out = fluidnerf(
         d,

@@ -111,11 +111,11 @@ pub enum MlpPrecision {
     /// f32 throughout.
     #[default]
     F32,
-    /// On CPUs with AVX-512 BF16, the products of the forward and backward passes take their
-    /// operands in bfloat16 and sum in f32 (two multiply–adds per lane and instruction); the
-    /// activations, biases, gradients' sums and Adam stay in f32, as does inference. Only for
-    /// the ReLU MLPs of width 64 whose input is at most 64 features wide; everywhere else, and
-    /// on other CPUs, f32.
+    /// On CPUs where AVX-512 BF16 pays ([`crate::bf16_products_available`]: AMD Zen 4 and 5),
+    /// the products of the forward and backward passes take their operands in bfloat16 and sum
+    /// in f32 (two multiply–adds per lane and instruction); the activations, biases, gradients'
+    /// sums and Adam stay in f32, as does inference. Only for the ReLU MLPs of width 64 whose
+    /// input is at most 64 features wide; everywhere else, and on other CPUs, f32.
     Bf16,
 }
 

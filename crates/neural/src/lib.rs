@@ -68,4 +68,4 @@ pub use engine::Engine;
 pub use error::NeuralError;
 pub use field::{Prior, TrainableField};
 pub use hashgrid::{HashGridConfig, HashGridField, MlpPrecision};
-pub use mlp::{Activation, MlpConfig, MlpField, OutputActivation};
+pub use mlp::{bf16_products_available, Activation, MlpConfig, MlpField, OutputActivation};

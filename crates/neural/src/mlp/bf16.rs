@@ -1,5 +1,5 @@
 //! The hash grid's decoder (a ReLU network of width 64 without a skip) with its products in
-//! bfloat16, on CPUs with AVX-512 BF16.
+//! bfloat16, on CPUs with AVX-512 BF16 where it pays ([`bf16_pays`]).
 //!
 //! `vdpbf16ps` multiplies pairs of bfloat16 values and adds both products to one f32 lane: 32
 //! multiply–adds per instruction where an f32 FMA does 16. Every matrix product of the
@@ -36,6 +36,26 @@ pub(super) fn cpu_has_bf16() -> bool {
         std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx512bw")
             && std::arch::is_x86_feature_detected!("avx512bf16")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Whether the products pay here: AMD's Zen 4 and Zen 5 execute `vdpbf16ps` at twice the
+/// multiply–adds of an f32 FMA, where Intel's cores (Sapphire Rapids measured) execute it on
+/// one port against FMAs on two, the same multiply–adds, so the conversions to bfloat16 made
+/// the step slower there (7.0 s against 6.5 s in f32 for 150 iterations of the demo scene).
+/// A rule by vendor rather than a timing at start-up, so that a configuration gives the same
+/// arithmetic on every run of a machine.
+pub(super) fn bf16_pays() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        // CPUID leaf 0 (the vendor) exists on every x86-64 CPU.
+        let id = std::arch::x86_64::__cpuid(0);
+        let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163); // "AuthenticAMD"
+        amd && cpu_has_bf16()
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -710,12 +730,15 @@ mod tests {
     /// sums. Row counts that fill no whole tile or block, inputs narrower than a vector and
     /// depths 1–3. Against the f32 passes the output differs by bfloat16's rounding only
     /// (the gradients also by the few ReLU units that rounding moves across zero). On a CPU
-    /// without AVX-512 BF16 the request falls back to f32, bit for bit.
+    /// without AVX-512 BF16 the request falls back to f32, bit for bit; on one where it does not
+    /// pay the request gives f32 and the kernels are still tested.
     #[test]
     fn bfloat16_products_compute_the_rounded_arithmetic() {
         for (in_dim, depth, n) in [(16, 2, 101), (18, 1, 7), (32, 3, 200)] {
             let f32_net = Mlp::new(in_dim, 64, depth, Activation::Relu, OutputActivation::Softplus, false);
-            let bf16_net = f32_net.clone().with_bf16_products(true);
+            assert_eq!(f32_net.clone().with_bf16_products(true).bf16_products(), super::bf16_pays());
+            // The kernels wherever the CPU has them, whether or not they pay.
+            let bf16_net = f32_net.clone().with_bf16_kernels();
             assert_eq!(bf16_net.bf16_products(), super::cpu_has_bf16());
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
             let mut params = vec![0.0; f32_net.num_params()];
