@@ -31,6 +31,8 @@ use crate::error::NeuralError;
 use crate::field::TrainableField;
 use crate::kernels::{self, matmul, Op};
 
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+mod amx;
 mod bf16;
 mod infer64;
 

@@ -47,20 +47,48 @@ pub(super) fn cpu_has_bf16() -> bool {
 /// multiply–adds of an f32 FMA, where Intel's cores (Sapphire Rapids measured) execute it on
 /// one port against FMAs on two, the same multiply–adds, so the conversions to bfloat16 made
 /// the step slower there (7.0 s against 6.5 s in f32 for 150 iterations of the demo scene).
-/// A rule by vendor rather than a timing at start-up, so that a configuration gives the same
-/// arithmetic on every run of a machine.
+/// Intel's CPUs with AMX take the products on its tiles instead ([`super::amx`]). A rule by
+/// vendor and instruction set rather than a timing at start-up, so that a configuration gives
+/// the same arithmetic on every run of a machine.
 pub(super) fn bf16_pays() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         // CPUID leaf 0 (the vendor) exists on every x86-64 CPU.
         let id = std::arch::x86_64::__cpuid(0);
         let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163); // "AuthenticAMD"
-        amd && cpu_has_bf16()
+        (amd && cpu_has_bf16()) || amx_ready()
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
     }
+}
+
+/// Whether the products run on AMX tiles ([`super::amx`]): where the CPU and the kernel allow.
+fn amx_ready() -> bool {
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    {
+        super::amx::ready()
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
+    {
+        false
+    }
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests of the AVX-512 kernels on a CPU that has AMX.
+    static WITHOUT_AMX: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether this pass takes the AMX products.
+fn use_amx() -> bool {
+    #[cfg(test)]
+    if WITHOUT_AMX.with(|w| w.get()) {
+        return false;
+    }
+    amx_ready()
 }
 
 /// Whether `mlp`'s shape is the one these passes are written for.
@@ -437,6 +465,82 @@ unsafe fn forward_v4(
     }
 }
 
+/// [`forward_v4`] with the products on AMX tiles, 16 rows at a time.
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
+unsafe fn forward_amx(
+    mlp: &Mlp,
+    params: &[f32],
+    x: &[f32],
+    acts: &mut [f32],
+    stride: usize,
+    pre_out: &mut [f32],
+    s: &mut Scratch,
+) {
+    use super::amx::{self, ROWS};
+    let n = pre_out.len();
+    let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
+    // SAFETY: the target features are enabled on this function.
+    unsafe { pack(mlp, params, &mut s.w_fwd, false) };
+    let depth = mlp.layers.len();
+    let mut xin = [0u16; ROWS * WIDTH];
+    let mut hb = [0u16; ROWS * WIDTH];
+    let mut sums = [0f32; ROWS * WIDTH];
+    let mut row = [0f32; WIDTH];
+    let (w_out, b_out) = (&params[mlp.out_weight.clone()], params[mlp.out_bias]);
+    // SAFETY: the caller checked AMX (`use_amx`).
+    unsafe { amx::configure() };
+    let mut r = 0;
+    while r < n {
+        // Rows past `rows` in the last block hold zeros or an earlier block's values; each
+        // output row depends on its own input row only, and those are not written.
+        let rows = (n - r).min(ROWS);
+        if rows < ROWS {
+            xin.fill(0);
+        }
+        for p in 0..rows {
+            let src = &x[(r + p) * k0..(r + p + 1) * k0];
+            let src = if k0 == kp0 {
+                src
+            } else {
+                row[..kp0].fill(0.0);
+                row[..k0].copy_from_slice(src);
+                &row[..kp0]
+            };
+            // SAFETY: kp0 ≤ 64 values; the features are enabled here.
+            unsafe { x86::row_bf16(src, kp0, &mut xin[p * kp0..]) };
+        }
+        let mut off = 0;
+        for l in 0..depth {
+            let layer = &mlp.layers[l];
+            let (k_pad, inp): (usize, &[u16]) = if l == 0 { (kp0, &xin) } else { (WIDTH, &hb) };
+            let n_w = k_pad * WIDTH;
+            // SAFETY: `inp` holds 16 rows of k_pad, the packed weights k_pad × 64, `sums` 16
+            // rows of 64; the tiles are configured.
+            unsafe {
+                amx::product::<4>(inp, k_pad, &s.w_fwd[off..off + n_w], Some(&params[layer.bias.clone()]), &mut sums)
+            };
+            let out = &mut acts[l * stride + r * WIDTH..l * stride + (r + rows) * WIDTH];
+            for p in 0..rows {
+                let o = &mut out[p * WIDTH..(p + 1) * WIDTH];
+                for (o, &v) in o.iter_mut().zip(&sums[p * WIDTH..(p + 1) * WIDTH]) {
+                    *o = v.max(0.0);
+                }
+                // SAFETY: rows of 64; features enabled.
+                unsafe { x86::row_bf16(o, WIDTH, &mut hb[p * WIDTH..]) };
+                if l + 1 == depth {
+                    // SAFETY: rows of 64; features enabled.
+                    pre_out[r + p] = b_out + unsafe { x86::dot64(o, w_out) };
+                }
+            }
+            off += n_w;
+        }
+        r += rows;
+    }
+    // SAFETY: configured above.
+    unsafe { amx::release() };
+}
+
 /// The backward pass after [`forward_v4`] on the same rows, given `g = ∂L/∂(output
 /// pre-activation)`: adds the gradients into `grads` and writes `∂L/∂x` into `d_x`.
 #[allow(clippy::too_many_arguments)]
@@ -452,9 +556,19 @@ unsafe fn backward_v4(
     s: &mut Scratch,
     grads: &mut [f32],
     d_x: Option<&mut [f32]>,
+    amx: bool,
 ) {
     let n = g.len();
     let depth = mlp.layers.len();
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    let mut sums = [0f32; 16 * WIDTH];
+    if amx {
+        #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+        // SAFETY: the caller checked AMX (`use_amx`).
+        unsafe {
+            super::amx::configure()
+        };
+    }
     let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
     // SAFETY: the target features are enabled on this function.
     unsafe { pack(mlp, params, &mut s.w_bwd, true) };
@@ -472,8 +586,14 @@ unsafe fn backward_v4(
     let mut da = [0f32; BLOCK * WIDTH];
     let mut next = [0f32; BLOCK * WIDTH];
     let mut dzb = [0u16; (BLOCK + P) * WIDTH];
-    let mut dzp = [0u16; BLOCK * WIDTH];
+    // Pairs of bfloat16 are read as 32-bit units below: storage of u32.
+    let mut dzp_store = [0u32; BLOCK * WIDTH / 2];
+    let dzp: &mut [u16] = bytemuck::cast_slice_mut(&mut dzp_store[..]);
     let mut inp = [0u16; BLOCK * WIDTH];
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    let mut dzt_store = [0u32; WIDTH * BLOCK / 2];
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    let dzt: &mut [u16] = bytemuck::cast_slice_mut(&mut dzt_store[..]);
     let mut o_tmp = [0f32; P * WIDTH];
     let zero = [0f32; WIDTH];
     let mut xrow = [[0f32; WIDTH]; 2];
@@ -525,13 +645,39 @@ unsafe fn backward_v4(
                 }
             }
             let dwt = &mut s.dwt[w_off(l)..w_off(l) + k_pad * WIDTH];
+            #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+            if amx {
+                // The pairs of ∂z rows transposed (a pair is one 32-bit unit): the tiles' A
+                // operand, rows j of p_len / 2 pairs, zero past the block's pairs.
+                let p_len = b.div_ceil(16) * 16;
+                let (pairs, all) = (b2 / 2, p_len / 2);
+                let src: &[u32] = bytemuck::cast_slice(&dzp[..]);
+                let dst: &mut [u32] = bytemuck::cast_slice_mut(&mut dzt[..]);
+                for (j, row) in dst.chunks_exact_mut(BLOCK / 2).enumerate() {
+                    for (q, v) in row[..all].iter_mut().enumerate() {
+                        *v = if q < pairs { src[q * WIDTH + j] } else { 0 };
+                    }
+                }
+                // SAFETY: `dwt` is 64 × k_pad, `dzt` 64 × 48, `inp` holds p_len / 2 pairs of
+                // rows of k_pad (those past b2 / 2 meet zeros); the tiles are configured.
+                unsafe {
+                    match k_pad {
+                        16 => super::amx::rank::<1>(dwt, dzt, &inp, p_len),
+                        32 => super::amx::rank::<2>(dwt, dzt, &inp, p_len),
+                        48 => super::amx::rank::<3>(dwt, dzt, &inp, p_len),
+                        _ => super::amx::rank::<4>(dwt, dzt, &inp, p_len),
+                    }
+                }
+            }
             // SAFETY: `dwt` is 64 × k_pad, `inp` and `dzp` hold b2 / 2 pairs; features enabled.
-            unsafe {
-                match k_pad {
-                    16 => x86::rank::<1>(dwt, &inp, &dzp, b2 / 2),
-                    32 => x86::rank::<2>(dwt, &inp, &dzp, b2 / 2),
-                    48 => x86::rank::<3>(dwt, &inp, &dzp, b2 / 2),
-                    _ => x86::rank::<4>(dwt, &inp, &dzp, b2 / 2),
+            if !amx {
+                unsafe {
+                    match k_pad {
+                        16 => x86::rank::<1>(dwt, &inp, dzp, b2 / 2),
+                        32 => x86::rank::<2>(dwt, &inp, dzp, b2 / 2),
+                        48 => x86::rank::<3>(dwt, &inp, dzp, b2 / 2),
+                        _ => x86::rank::<4>(dwt, &inp, dzp, b2 / 2),
+                    }
                 }
             }
             // ∂(layer input) = ∂z Wᵀ.
@@ -541,6 +687,41 @@ unsafe fn backward_v4(
                     unsafe { x86::row_bf16(&da[p * WIDTH..], WIDTH, &mut dzb[p * WIDTH..]) };
                 }
                 let wb = &s.w_bwd[w_off(l)..w_off(l) + k_pad * WIDTH];
+                #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+                if amx {
+                    use super::amx::{self, ROWS};
+                    let mut q = 0;
+                    while q < b {
+                        let rows = (b - q).min(ROWS);
+                        // Rows past `b` hold an earlier block's values; their sums are not read.
+                        let tile = &dzb[q * WIDTH..(q + ROWS) * WIDTH];
+                        // SAFETY: the tile holds 16 rows of 64 (q + 16 ≤ BLOCK), `wb` is
+                        // [32][k_pad][2], `sums` 16 rows of 64; the tiles are configured.
+                        unsafe {
+                            match k_pad {
+                                64 => amx::product::<4>(tile, WIDTH, wb, None, &mut sums),
+                                48 => amx::product::<3>(tile, WIDTH, wb, None, &mut sums),
+                                32 => amx::product::<2>(tile, WIDTH, wb, None, &mut sums),
+                                _ => amx::product::<1>(tile, WIDTH, wb, None, &mut sums),
+                            }
+                        }
+                        for p in 0..rows {
+                            let src = &sums[p * WIDTH..];
+                            if l > 0 {
+                                next[(q + p) * WIDTH..(q + p + 1) * WIDTH].copy_from_slice(&src[..WIDTH]);
+                            } else {
+                                let dx = d_x.as_deref_mut().expect("d_x wanted");
+                                dx[(r + q + p) * k0..(r + q + p + 1) * k0].copy_from_slice(&src[..k0]);
+                            }
+                        }
+                        q += rows;
+                    }
+                    if l > 0 {
+                        next[b * WIDTH..b2 * WIDTH].fill(0.0);
+                        std::mem::swap(&mut da, &mut next);
+                    }
+                    continue;
+                }
                 let direct = l > 0 || k0 == kp0;
                 let mut q = 0;
                 while q < b {
@@ -582,6 +763,13 @@ unsafe fn backward_v4(
         }
         r += b;
     }
+    if amx {
+        #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+        // SAFETY: configured above.
+        unsafe {
+            super::amx::release()
+        };
+    }
     for (j, v) in d_out_w.iter().enumerate() {
         grads[mlp.out_weight.start + j] += v;
     }
@@ -613,6 +801,12 @@ pub(super) fn forward(
     s: &mut Scratch,
 ) {
     assert!(cpu_has_bf16() && fits(mlp), "bf16::forward on an unfit network or CPU");
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    if use_amx() {
+        // SAFETY: the CPU features and AMX were checked just above.
+        unsafe { forward_amx(mlp, params, x, acts, stride, pre_out, s) };
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     // SAFETY: the CPU features were checked just above.
     unsafe {
@@ -637,7 +831,7 @@ pub(super) fn backward(
     #[cfg(target_arch = "x86_64")]
     // SAFETY: the CPU features were checked just above.
     unsafe {
-        backward_v4(mlp, params, x, acts, stride, g, s, grads, d_x)
+        backward_v4(mlp, params, x, acts, stride, g, s, grads, d_x, use_amx())
     };
 }
 
@@ -760,20 +954,26 @@ mod tests {
                 (out, grads, dx)
             };
             let (out, _, _) = run(&f32_net);
-            let (out_b, grads_b, dx_b) = run(&bf16_net);
             if !bf16_net.bf16_products() {
-                assert_eq!(run(&f32_net), (out_b, grads_b, dx_b), "the f32 fallback");
+                assert_eq!(run(&f32_net), run(&bf16_net), "the f32 fallback");
                 continue;
             }
-            let case = format!("{in_dim} inputs, depth {depth}, {n} rows");
-            let e = relative(&out_b, &out);
-            assert!(e > 1e-5 && e < 5e-3, "output against f32 ({case}): relative error {e:e}");
             let (out_e, grads_e, dx_e) = emulated(&bf16_net, &params, &x, &d_out, n);
-            for (what, a, b) in
-                [("output", &out_b, &out_e), ("gradient", &grads_b, &grads_e), ("input gradient", &dx_b, &dx_e)]
-            {
-                let e = relative(a, b);
-                assert!(e < 1e-5, "{what} against the scalar bfloat16 arithmetic ({case}): relative error {e:e}");
+            // The AMX tiles where the CPU has them, and the AVX-512 kernels.
+            let kernels: &[bool] = if super::amx_ready() { &[false, true] } else { &[true] };
+            for &without_amx in kernels {
+                super::WITHOUT_AMX.with(|w| w.set(without_amx));
+                let (out_b, grads_b, dx_b) = run(&bf16_net);
+                super::WITHOUT_AMX.with(|w| w.set(false));
+                let case = format!("{in_dim} inputs, depth {depth}, {n} rows, AMX {}", !without_amx);
+                let e = relative(&out_b, &out);
+                assert!(e > 1e-5 && e < 5e-3, "output against f32 ({case}): relative error {e:e}");
+                for (what, a, b) in
+                    [("output", &out_b, &out_e), ("gradient", &grads_b, &grads_e), ("input gradient", &dx_b, &dx_e)]
+                {
+                    let e = relative(a, b);
+                    assert!(e < 1e-5, "{what} against the scalar bfloat16 arithmetic ({case}): relative error {e:e}");
+                }
             }
         }
     }
