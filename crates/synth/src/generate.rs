@@ -69,8 +69,9 @@ impl SynthSettings {
     pub fn validate(&self) -> Result<(), SynthError> {
         self.phantom.validate()?;
         self.aabb.validate()?;
-        if self.phantom.kind != PhantomKind::Volume && !(1..=4096).contains(&self.resolution) {
-            return Err(SynthError::invalid("resolution", format!("must be in 1..=4096, got {}", self.resolution)));
+        // Two voxels along the longest side at least: every reconstruction needs as many.
+        if self.phantom.kind != PhantomKind::Volume && !(2..=4096).contains(&self.resolution) {
+            return Err(SynthError::invalid("resolution", format!("must be in 2..=4096, got {}", self.resolution)));
         }
         if self.phantom.kind.is_time_resolved() {
             if self.times.is_empty() {

@@ -69,10 +69,13 @@ impl SensorSettings {
                 format!("must be in (0, 1], got {}", self.full_scale_fraction),
             ));
         }
-        if !(self.gaussian_noise >= 0.0 && self.gaussian_noise.is_finite()) {
+        if !(self.gaussian_noise >= 0.0 && self.gaussian_noise < 1.0) {
             return Err(SynthError::invalid(
                 "sensor.gaussian_noise",
-                format!("must be zero or positive, got {}", self.gaussian_noise),
+                format!(
+                    "must be a fraction of the image's maximum in [0, 1) (0.05 for 5 %), got {}",
+                    self.gaussian_noise
+                ),
             ));
         }
         if let Some(fw) = self.full_well {
@@ -198,6 +201,8 @@ mod tests {
     #[test]
     fn bad_settings_are_rejected() {
         assert!(SensorSettings { gaussian_noise: -0.01, ..Default::default() }.validate().is_err());
+        assert!(SensorSettings { gaussian_noise: 5.0, ..Default::default() }.validate().is_err());
+        assert!(SensorSettings { gaussian_noise: 0.99, ..Default::default() }.validate().is_ok());
         assert!(SensorSettings { bit_depth: 14, ..Default::default() }.validate().is_err());
         assert!(SensorSettings { full_well: Some(0.0), ..Default::default() }.validate().is_err());
     }

@@ -212,6 +212,16 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     if g.methods.is_empty() || g.cameras.is_empty() || g.noise.is_empty() || g.layouts.is_empty() {
         bail!("the grid is empty: give at least one method, camera count, noise level and layout");
     }
+    // A value given twice would run the same cells twice and print the same rows twice.
+    fn twice<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {
+        match values.iter().enumerate().find(|&(i, v)| values[..i].contains(v)) {
+            Some((_, v)) => bail!("{option}: {v} is given twice; give each value once"),
+            None => Ok(()),
+        }
+    }
+    twice("--methods", &g.methods)?;
+    twice("--cameras", &g.cameras)?;
+    twice("--noise", &g.noise)?;
     if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
         bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
     }
