@@ -84,6 +84,49 @@ macro_rules! per_sum_tile {
     };
 }
 
+/// Adds `A · B` to the sums `tmm0`… for `N` blocks of 16 columns, over `len` values of the
+/// inner dimension (a multiple of 16): A is 16 rows from `a` (row stride `a_stride` bytes), B
+/// the pairs of rows `[len / 2][16 N][2]` from `b`; 32 values a step, and 16 for a last half.
+unsafe fn accumulate<const N: usize>(a: *const u16, a_stride: usize, b: *const u16, len: usize) {
+    let b_stride = 64 * N;
+    let mut k0 = 0;
+    // SAFETY (whole body): the callers bound A's 16 rows of `len` values and B's `len / 2`
+    // rows of `16 N` pairs; the tiles are configured.
+    unsafe {
+        while k0 < len {
+            let whole = len - k0 >= 32;
+            let a_step = a.add(k0);
+            if whole {
+                asm!("tileloadd tmm5, [{p} + {s}*1]", p = in(reg) a_step, s = in(reg) a_stride, options(nostack, readonly));
+            } else {
+                asm!("tileloadd tmm4, [{p} + {s}*1]", p = in(reg) a_step, s = in(reg) a_stride, options(nostack, readonly));
+            }
+            for c in 0..N {
+                // Pairs of rows k0 / 2 onwards, columns 16c onwards.
+                let b_step = b.add((k0 / 2) * 32 * N + 32 * c);
+                if whole {
+                    asm!("tileloadd tmm7, [{p} + {s}*1]", p = in(reg) b_step, s = in(reg) b_stride, options(nostack, readonly));
+                    macro_rules! dp {
+                        ($t:literal) => {
+                            asm!(concat!("tdpbf16ps ", $t, ", tmm5, tmm7"), options(nostack, nomem))
+                        };
+                    }
+                    per_sum_tile!(c, dp);
+                } else {
+                    asm!("tileloadd tmm6, [{p} + {s}*1]", p = in(reg) b_step, s = in(reg) b_stride, options(nostack, readonly));
+                    macro_rules! dp {
+                        ($t:literal) => {
+                            asm!(concat!("tdpbf16ps ", $t, ", tmm4, tmm6"), options(nostack, nomem))
+                        };
+                    }
+                    per_sum_tile!(c, dp);
+                }
+            }
+            k0 += if whole { 32 } else { 16 };
+        }
+    }
+}
+
 /// `out[p][16c + j] = bias[16c + j] + Σ_k a[p][k] · w[k][16c + j]` for the 16 rows of `a`
 /// (row stride `k`, a multiple of 16 up to 64) and `16 NC` columns: `w` packed as `[k / 2][16
 /// NC][2]`; `out` rows of 64 f32. Requires [`configure`] on this thread.
@@ -92,7 +135,6 @@ pub(super) unsafe fn product<const NC: usize>(a: &[u16], k: usize, w: &[u16], bi
     debug_assert!(a.len() >= ROWS * k && w.len() >= k * 16 * NC && out.len() >= ROWS * 64);
     debug_assert!(bias.is_none_or(|b| b.len() >= 16 * NC));
     let a_stride = 2 * k;
-    let w_stride = 64 * NC;
     // SAFETY (whole body): the asserts bound every tile's reach: A rows of `k` values, B rows
     // of `16 NC` pairs over `k / 2` rows, sums of 16 rows of 64 f32; the tiles are configured.
     unsafe {
@@ -117,39 +159,7 @@ pub(super) unsafe fn product<const NC: usize>(a: &[u16], k: usize, w: &[u16], bi
                 }
             }
         }
-        let (ap, wp) = (a.as_ptr(), w.as_ptr());
-        let mut k0 = 0;
-        while k0 < k {
-            let whole = k - k0 >= 32;
-            let a_step = ap.add(k0);
-            if whole {
-                asm!("tileloadd tmm5, [{p} + {s}*1]", p = in(reg) a_step, s = in(reg) a_stride, options(nostack, readonly));
-            } else {
-                asm!("tileloadd tmm4, [{p} + {s}*1]", p = in(reg) a_step, s = in(reg) a_stride, options(nostack, readonly));
-            }
-            for c in 0..NC {
-                // Pairs of rows k0 / 2 onwards, columns 16c onwards.
-                let b = wp.add((k0 / 2) * 32 * NC + 32 * c);
-                if whole {
-                    asm!("tileloadd tmm7, [{p} + {s}*1]", p = in(reg) b, s = in(reg) w_stride, options(nostack, readonly));
-                    macro_rules! dp {
-                        ($t:literal) => {
-                            asm!(concat!("tdpbf16ps ", $t, ", tmm5, tmm7"), options(nostack, nomem))
-                        };
-                    }
-                    per_sum_tile!(c, dp);
-                } else {
-                    asm!("tileloadd tmm6, [{p} + {s}*1]", p = in(reg) b, s = in(reg) w_stride, options(nostack, readonly));
-                    macro_rules! dp {
-                        ($t:literal) => {
-                            asm!(concat!("tdpbf16ps ", $t, ", tmm4, tmm6"), options(nostack, nomem))
-                        };
-                    }
-                    per_sum_tile!(c, dp);
-                }
-            }
-            k0 += if whole { 32 } else { 16 };
-        }
+        accumulate::<NC>(a.as_ptr(), a_stride, w.as_ptr(), k);
         let op = out.as_mut_ptr();
         for c in 0..NC {
             let p = op.add(16 * c);
@@ -171,7 +181,7 @@ pub(super) unsafe fn rank<const NK: usize>(dwt: &mut [f32], dzt: &[u16], inp: &[
     let k = 16 * NK;
     debug_assert!(NK <= 4 && p_len.is_multiple_of(16) && p_len <= 48);
     debug_assert!(dwt.len() >= 64 * k && dzt.len() >= 64 * 48 && inp.len() >= p_len * k);
-    let (c_stride, a_stride, b_stride): (usize, usize, usize) = (4 * k, 2 * 48, 4 * k);
+    let (c_stride, a_stride): (usize, usize) = (4 * k, 2 * 48);
     // SAFETY (whole body): the asserts bound every tile's reach: sums of 16 rows of `k` f32
     // inside `dwt`, A rows of 48 values, B rows of `k` pairs over `p_len / 2` rows.
     unsafe {
@@ -186,37 +196,7 @@ pub(super) unsafe fn rank<const NK: usize>(dwt: &mut [f32], dzt: &[u16], inp: &[
                 }
                 per_sum_tile!(c, load);
             }
-            let mut p0 = 0;
-            while p0 < p_len {
-                let whole = p_len - p0 >= 32;
-                let a = ap.add(jb * 16 * 48 + p0);
-                if whole {
-                    asm!("tileloadd tmm5, [{p} + {s}*1]", p = in(reg) a, s = in(reg) a_stride, options(nostack, readonly));
-                } else {
-                    asm!("tileloadd tmm4, [{p} + {s}*1]", p = in(reg) a, s = in(reg) a_stride, options(nostack, readonly));
-                }
-                for c in 0..NK {
-                    let b = bp.add(((p0 / 2) * k + 16 * c) * 2);
-                    if whole {
-                        asm!("tileloadd tmm7, [{p} + {s}*1]", p = in(reg) b, s = in(reg) b_stride, options(nostack, readonly));
-                        macro_rules! dp {
-                            ($t:literal) => {
-                                asm!(concat!("tdpbf16ps ", $t, ", tmm5, tmm7"), options(nostack, nomem))
-                            };
-                        }
-                        per_sum_tile!(c, dp);
-                    } else {
-                        asm!("tileloadd tmm6, [{p} + {s}*1]", p = in(reg) b, s = in(reg) b_stride, options(nostack, readonly));
-                        macro_rules! dp {
-                            ($t:literal) => {
-                                asm!(concat!("tdpbf16ps ", $t, ", tmm4, tmm6"), options(nostack, nomem))
-                            };
-                        }
-                        per_sum_tile!(c, dp);
-                    }
-                }
-                p0 += if whole { 32 } else { 16 };
-            }
+            accumulate::<NK>(ap.add(jb * 16 * 48), a_stride, bp, p_len);
             for c in 0..NK {
                 let p = dp_.add(jb * 16 * k + 16 * c);
                 macro_rules! store {

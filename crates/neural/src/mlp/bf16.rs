@@ -391,6 +391,26 @@ unsafe fn pack(mlp: &Mlp, params: &[f32], dst: &mut Vec<u16>, transposed: bool) 
     }
 }
 
+/// The rows `rows` of `x` (rows of `k0` values) in bfloat16 into `xin`, each padded with
+/// zeros to `padded(k0)` values.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
+unsafe fn input_rows(x: &[f32], k0: usize, rows: std::ops::Range<usize>, xin: &mut [u16]) {
+    let kp0 = padded(k0);
+    let mut row = [0f32; WIDTH];
+    for (p, r) in rows.enumerate() {
+        let src = &x[r * k0..(r + 1) * k0];
+        let src = if k0 == kp0 {
+            src
+        } else {
+            row[..k0].copy_from_slice(src);
+            &row[..kp0]
+        };
+        // SAFETY: kp0 ≤ 64 values; the features are enabled here.
+        unsafe { x86::row_bf16(src, kp0, &mut xin[p * kp0..]) };
+    }
+}
+
 /// The forward pass: every layer's activations into `acts` (`D × stride`, rows of 64) and the
 /// output's pre-activation into `pre_out`.
 #[cfg(target_arch = "x86_64")]
@@ -411,7 +431,6 @@ unsafe fn forward_v4(
     let depth = mlp.layers.len();
     let mut xin = [0u16; P * WIDTH];
     let mut hb = [0u16; P * WIDTH];
-    let mut row = [0f32; WIDTH];
     let (w_out, b_out) = (&params[mlp.out_weight.clone()], params[mlp.out_bias]);
     let mut r = 0;
     while r < n {
@@ -419,18 +438,8 @@ unsafe fn forward_v4(
         if rows < P {
             xin.fill(0);
         }
-        for p in 0..rows {
-            let src = &x[(r + p) * k0..(r + p + 1) * k0];
-            let src = if k0 == kp0 {
-                src
-            } else {
-                row[..kp0].fill(0.0);
-                row[..k0].copy_from_slice(src);
-                &row[..kp0]
-            };
-            // SAFETY: kp0 ≤ 64 values; the features are enabled here.
-            unsafe { x86::row_bf16(src, kp0, &mut xin[p * kp0..]) };
-        }
+        // SAFETY: the features are enabled here.
+        unsafe { input_rows(x, k0, r..r + rows, &mut xin) };
         let mut off = 0;
         for l in 0..depth {
             let layer = &mlp.layers[l];
@@ -486,7 +495,6 @@ unsafe fn forward_amx(
     let mut xin = [0u16; ROWS * WIDTH];
     let mut hb = [0u16; ROWS * WIDTH];
     let mut sums = [0f32; ROWS * WIDTH];
-    let mut row = [0f32; WIDTH];
     let (w_out, b_out) = (&params[mlp.out_weight.clone()], params[mlp.out_bias]);
     // SAFETY: the caller checked AMX (`use_amx`).
     unsafe { amx::configure() };
@@ -498,18 +506,8 @@ unsafe fn forward_amx(
         if rows < ROWS {
             xin.fill(0);
         }
-        for p in 0..rows {
-            let src = &x[(r + p) * k0..(r + p + 1) * k0];
-            let src = if k0 == kp0 {
-                src
-            } else {
-                row[..kp0].fill(0.0);
-                row[..k0].copy_from_slice(src);
-                &row[..kp0]
-            };
-            // SAFETY: kp0 ≤ 64 values; the features are enabled here.
-            unsafe { x86::row_bf16(src, kp0, &mut xin[p * kp0..]) };
-        }
+        // SAFETY: the features are enabled here.
+        unsafe { input_rows(x, k0, r..r + rows, &mut xin) };
         let mut off = 0;
         for l in 0..depth {
             let layer = &mlp.layers[l];
