@@ -393,10 +393,17 @@ class Run:
         neural runs (static or of space and time), the volume sampled trilinearly otherwise.
         Returns ``(N,)`` float32; points outside the box give 0. A time-resolved run is sampled
         at ``time`` between its first and last instants (default: the first); a time outside
-        them raises :class:`FluidNerfError`. Static results ignore ``time``."""
+        them raises :class:`FluidNerfError`. Static results are the same at every time: a
+        ``time`` given to one is warned of (:class:`FluidNerfWarning`), as the command line does."""
         pts = _array(points, np.float32, "points", "(N, 3)")
         if pts.shape[1] != 3:
             raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
+        if time is not None and self.kind != "temporal":
+            warnings.warn(
+                f"time={time} has no effect: {self.path} is a static result, fixed in time",
+                FluidNerfWarning,
+                stacklevel=2,
+            )
         return self._h.field(pts, None if time is None else _real(time, "time"))
 
     def voxel_centres(self) -> np.ndarray:

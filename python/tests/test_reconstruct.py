@@ -56,6 +56,10 @@ def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(stati
     assert (run.field(np.array([[1e3, 0.0, 0.0], [0.0, -1e3, 0.0]])) == 0).all()
     with pytest.raises(fluidnerf.FluidNerfError, match=r"points: expected shape \(N, 3\)"):
         run.field(np.zeros((4, 2)))
+    # A static field is the same at every time; a time given to it is warned of.
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="time=3.0 has no effect"):
+        at_three = run.field(centres[:5], time=3.0)
+    np.testing.assert_array_equal(at_three, run.field(centres[:5]))
 
     copy = run.save(tmp_path / "copy")
     np.testing.assert_array_equal(copy.volume, run.volume)

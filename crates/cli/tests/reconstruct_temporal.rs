@@ -175,7 +175,7 @@ fn files(dir: &std::path::Path, sub: &str, suffix: &str) -> Vec<(String, Vec<u8>
 }
 
 /// A run stopped by Ctrl-C inside its second window and then resumed writes exactly what an
-/// uninterrupted run writes; a resume with another window plan is refused, naming the file.
+/// uninterrupted run writes; a resume with another window plan or box is refused, naming the file.
 #[cfg(unix)]
 #[test]
 fn an_interrupted_windowed_run_resumes_to_the_same_result() {
@@ -232,6 +232,16 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
 
     let mut resume = run("cut");
     resume.push("--resume".into());
+    // Nor can a scene whose box changed: the fields' coordinates are the box's.
+    let transforms = d.join("scene/transforms.json");
+    let original = std::fs::read_to_string(&transforms).expect("reads the scene");
+    let mut moved: serde_json::Value = serde_json::from_str(&original).expect("JSON");
+    moved["aabb"][1][0] = serde_json::json!(moved["aabb"][1][0].as_f64().expect("a number") + 1.0);
+    std::fs::write(&transforms, moved.to_string()).expect("writes");
+    let refused = fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("progress.json") && err.contains("box"), "{err}");
+    std::fs::write(&transforms, &original).expect("restores the scene");
     ok(&fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>()));
     let (full, cut) = (d.join("full"), d.join("cut"));
     assert_eq!(report(&cut)["status"], "finished");
