@@ -1274,7 +1274,7 @@ fn read_cameras_bin(path: &Path) -> Result<ColmapCameras, IoError> {
                 .ok()
                 .and_then(|m| COLMAP_MODELS.get(m))
                 .copied()
-                .ok_or_else(|| format!("camera {i}: unknown model id {model_id}"))?;
+                .ok_or_else(|| format!("camera id {id} (entry {i}): unknown model id {model_id}"))?;
             let (width, height) = (b.u64()?, b.u64()?);
             let params = (0..count).map(|_| b.f64()).collect::<Result<Vec<_>, _>>()?;
             let size = |v: u64| u32::try_from(v).map_err(|_| format!("camera id {id}: size {v} is too large"));

@@ -387,6 +387,10 @@ fn colmap_binary_errors_name_the_file() {
     std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
     let err = read_colmap(dir.path()).expect_err("fisheye").to_string();
     assert!(err.contains("cameras.bin") && err.contains("camera id 7") && err.contains("OPENCV_FISHEYE"), "{err}");
+    cams[12..16].copy_from_slice(&99i32.to_le_bytes());
+    std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
+    let err = read_colmap(dir.path()).expect_err("unknown model").to_string();
+    assert!(err.contains("camera id 7") && err.contains("unknown model id 99"), "{err}");
 }
 
 /// The file OpenCV's calibration sample writes (`out_camera_data.yml`, as in the tutorial
