@@ -148,6 +148,38 @@ mod x86 {
         }
     }
 
+    /// `dst[j][q] = src[q][j]` for the 64 columns `j` of `src` (rows of 64 units) and `q <
+    /// all` (a multiple of 8, at most 24; `dst` rows of 24), zero for `q ≥ pairs`: sixteen
+    /// rows of a column gathered at once. For the AMX passes.
+    #[cfg(target_os = "linux")]
+    #[inline(always)]
+    pub(super) unsafe fn transpose_pairs(src: &[u32], pairs: usize, all: usize, dst: &mut [u32]) {
+        const ROW: usize = BLOCK / 2;
+        debug_assert!(pairs <= all && all <= ROW && all.is_multiple_of(8));
+        debug_assert!(src.len() >= pairs * WIDTH && dst.len() >= WIDTH * ROW);
+        // SAFETY (whole body): the gathers read rows q < pairs of `src` (masked), the stores
+        // write q < all ≤ 24 of each row of `dst`.
+        unsafe {
+            let rows = _mm512_mullo_epi32(
+                _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15),
+                _mm512_set1_epi32(WIDTH as i32),
+            );
+            let zero = _mm512_setzero_si512();
+            let (sp, dp) = (src.as_ptr(), dst.as_mut_ptr());
+            for q0 in (0..all).step_by(16) {
+                let valid = pairs.saturating_sub(q0).min(16);
+                let read: __mmask16 = if valid == 16 { 0xffff } else { (1u16 << valid) - 1 };
+                let write: __mmask16 = if all - q0 >= 16 { 0xffff } else { 0x00ff };
+                let base = sp.add(q0 * WIDTH).cast::<i32>();
+                for j in 0..WIDTH {
+                    let idx = _mm512_add_epi32(rows, _mm512_set1_epi32(j as i32));
+                    let v = _mm512_mask_i32gather_epi32::<4>(zero, read, idx, base);
+                    _mm512_mask_storeu_epi32(dp.add(j * ROW + q0).cast(), write, v);
+                }
+            }
+        }
+    }
+
     /// A row of `len` (a multiple of 16) f32 to bfloat16.
     #[inline(always)]
     pub(super) unsafe fn row_bf16(a: &[f32], len: usize, dst: &mut [u16]) {
@@ -651,11 +683,9 @@ unsafe fn backward_v4(
                 let (pairs, all) = (b2 / 2, p_len / 2);
                 let src: &[u32] = bytemuck::cast_slice(&dzp[..]);
                 let dst: &mut [u32] = bytemuck::cast_slice_mut(&mut dzt[..]);
-                for (j, row) in dst.chunks_exact_mut(BLOCK / 2).enumerate() {
-                    for (q, v) in row[..all].iter_mut().enumerate() {
-                        *v = if q < pairs { src[q * WIDTH + j] } else { 0 };
-                    }
-                }
+                // SAFETY: `src` holds 24 pairs of rows of 64 units and `dst` 64 rows of 24;
+                // `all` ≤ 24 and `pairs` ≤ `all`; features enabled.
+                unsafe { x86::transpose_pairs(src, pairs, all, dst) };
                 // SAFETY: `dwt` is 64 × k_pad, `dzt` 64 × 48, `inp` holds p_len / 2 pairs of
                 // rows of k_pad (those past b2 / 2 meet zeros); the tiles are configured.
                 unsafe {
