@@ -78,7 +78,7 @@ pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
 /// one given, and cells far from cubic usually mean an array of another box or a cropped one.
 /// Grids made for a box ([`Volume::dims_for`]) stay within 1.34 between axes of two or more
 /// cells.
-pub fn uneven_cells(dims: [usize; 3], aabb: &Aabb) -> Option<String> {
+fn uneven_cells(dims: [usize; 3], aabb: &Aabb) -> Option<String> {
     let size = aabb.size();
     let cells: Vec<f64> = (0..3).filter(|&a| dims[a] >= 2).map(|a| size[a] / dims[a] as f64).collect();
     let (lo, hi) = cells.iter().fold((f64::INFINITY, 0f64), |(lo, hi), &c| (lo.min(c), hi.max(c)));
@@ -380,24 +380,6 @@ pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
 
 #[cfg(test)]
 mod tests {
-
-    #[test]
-    fn cells_far_from_cubic_are_named_and_grids_made_for_the_box_are_not() {
-        use fluidnerf_core::glam::DVec3;
-        let cube = Aabb::new(DVec3::splat(-20.0), DVec3::splat(20.0));
-        let why = uneven_cells([32, 32, 16], &cube).expect("half the slices over the whole box");
-        assert!(why.contains("32×32×16") && why.contains("1.2500×1.2500×2.5000"), "{why}");
-        assert!(uneven_cells([32, 32, 32], &cube).is_none());
-        for (size, longest) in
-            [(DVec3::new(3.0, 1.0, 0.5), 7), (DVec3::new(1.0, 0.75, 0.3), 5), (DVec3::new(2.0, 2.0, 0.1), 64)]
-        {
-            let aabb = Aabb::new(DVec3::ZERO, size);
-            let dims = Volume::dims_for(&aabb, longest);
-            assert!(uneven_cells(dims, &aabb).is_none(), "{dims:?} for {size}");
-        }
-        // A flat grid (one cell across) has no cubic shape to keep.
-        assert!(uneven_cells([32, 32, 1], &cube).is_none());
-    }
     use super::*;
 
     fn test_volume() -> Volume {
@@ -555,5 +537,23 @@ mod tests {
         std::fs::write(&sidecar, meta.to_string()).expect("write");
         let err = read_raw(&p).expect_err("overflowing dims").to_string();
         assert!(err.contains("v.raw.json") && err.contains("dims"), "{err}");
+    }
+
+    #[test]
+    fn cells_far_from_cubic_are_named_and_grids_made_for_the_box_are_not() {
+        use fluidnerf_core::glam::DVec3;
+        let cube = Aabb::new(DVec3::splat(-20.0), DVec3::splat(20.0));
+        let why = uneven_cells([32, 32, 16], &cube).expect("half the slices over the whole box");
+        assert!(why.contains("32×32×16") && why.contains("1.2500×1.2500×2.5000"), "{why}");
+        assert!(uneven_cells([32, 32, 32], &cube).is_none());
+        for (size, longest) in
+            [(DVec3::new(3.0, 1.0, 0.5), 7), (DVec3::new(1.0, 0.75, 0.3), 5), (DVec3::new(2.0, 2.0, 0.1), 64)]
+        {
+            let aabb = Aabb::new(DVec3::ZERO, size);
+            let dims = Volume::dims_for(&aabb, longest);
+            assert!(uneven_cells(dims, &aabb).is_none(), "{dims:?} for {size}");
+        }
+        // A flat grid (one cell across) has no cubic shape to keep.
+        assert!(uneven_cells([32, 32, 1], &cube).is_none());
     }
 }
