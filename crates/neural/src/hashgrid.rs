@@ -695,12 +695,29 @@ mod tests {
                 .map(|i| if i % d == 3 { rng.random_range(-0.5..3.5) } else { rng.random_range(-0.1..1.1) })
                 .collect();
             // Both ways the vectorised pass runs: fetching entries ahead (training) or not.
-            for training in [false, true] {
-                let mut batch = Vec::new();
-                field.encode(&inputs, &mut batch, training);
-                assert_encoding_matches_rows(&field, &inputs, &batch, &format!("d {d} F {f} training {training}"));
-            }
+            for_each_width(|width| {
+                for training in [false, true] {
+                    let mut batch = Vec::new();
+                    field.encode(&inputs, &mut batch, training);
+                    let what = format!("d {d} F {f} training {training} {width}");
+                    assert_encoding_matches_rows(&field, &inputs, &batch, &what);
+                }
+            });
         }
+    }
+
+    /// Runs `check` with the vectorised passes at each width this CPU takes: sixteen rows at a
+    /// time where it does, then eight (43 or 45 rows run sixteen, eight and the scalar loop).
+    fn for_each_width(mut check: impl FnMut(&str)) {
+        #[cfg(target_arch = "x86_64")]
+        for narrow in [false, true] {
+            crate::hashgrid_simd::NARROW.with(|n| n.set(narrow));
+            check(if narrow { "narrow" } else { "widest" });
+        }
+        #[cfg(target_arch = "x86_64")]
+        crate::hashgrid_simd::NARROW.with(|n| n.set(false));
+        #[cfg(not(target_arch = "x86_64"))]
+        check("scalar");
     }
 
     /// The encoding's gradient scattered for a batch (weights and indices eight rows at a time,
@@ -719,11 +736,13 @@ mod tests {
                 (0..n * d).map(|i| start[i % d] + (i / d) as f32 * 0.004 + rng.random_range(0.0..0.002)).collect();
             let lf = cfg.levels * f;
             let dfeat: Vec<f32> = (0..n * lf).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let (batch, single) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
-            assert!(batch.iter().filter(|&&g| g != 0.0).count() > n, "d {d} F {f}: too few entries touched");
-            for (i, (a, b)) in batch.iter().zip(&single).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "d {d} F {f}: gradient entry {i}: {a} vs {b}");
-            }
+            for_each_width(|width| {
+                let (batch, single) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
+                assert!(batch.iter().filter(|&&g| g != 0.0).count() > n, "d {d} F {f}: too few entries touched");
+                for (i, (a, b)) in batch.iter().zip(&single).enumerate() {
+                    assert_eq!(a.to_bits(), b.to_bits(), "d {d} F {f} {width}: gradient entry {i}: {a} vs {b}");
+                }
+            });
         }
     }
 
