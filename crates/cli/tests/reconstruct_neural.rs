@@ -356,4 +356,20 @@ fn a_resume_after_the_box_changed_and_a_failed_run_are_handled() {
     assert!(!diverged.status.success(), "a rate of 1e30 trained");
     assert!(!d.join("new").exists(), "the failed run left {:?}", std::fs::read_dir(d.join("new")).map(|r| r.count()));
     ok(&run("new", &["--max-iterations", "5"]));
+    // Nor does a hybrid run that fails after its voxel start: the start goes with it.
+    let hybrid = |extra: &[&str]| {
+        let mut args = vec!["reconstruct", "scene", "-o", "hyb", "--method", "hybrid", "--resolution", "16"];
+        args.extend(["--rays-per-image", "64", "--max-iterations", "5", "-q"]);
+        args.extend_from_slice(extra);
+        fluidnerf(d, &args)
+    };
+    let diverged = hybrid(&["--learning-rate", "1e30"]);
+    assert!(!diverged.status.success(), "a rate of 1e30 trained");
+    assert!(
+        !d.join("hyb").exists(),
+        "the failed hybrid run left {:?}",
+        std::fs::read_dir(d.join("hyb")).map(|r| r.count())
+    );
+    ok(&hybrid(&[]));
+    assert!(d.join("hyb/start/config.json").is_file(), "the hybrid run kept no start");
 }

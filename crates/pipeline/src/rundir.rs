@@ -259,6 +259,11 @@ const RUN_FILES: [&str; 14] = [
     "metrics.csv",
 ];
 
+/// Folders inside a run's folder that hold runs of their own, written by the run (`hybrid`'s
+/// voxel run, its start). They go with the run's files when they hold a run (its `config.json`),
+/// and do not make a folder read as one with run files ([`DirState::Foreign`]).
+const OWN_RUNS: [&str; 1] = ["start"];
+
 /// The folder of one run. Opening it for writing ([`RunDir::create`]) takes its lock, which is
 /// released when the `RunDir` is dropped.
 #[derive(Debug)]
@@ -268,6 +273,9 @@ pub struct RunDir {
     resume: bool,
     /// The folder did not exist before: if the run is refused before writing anything, it goes.
     created: bool,
+    /// The folders of [`OWN_RUNS`] holding a run when this one began (a resumed run's start):
+    /// not this run's to discard.
+    kept_runs: Vec<PathBuf>,
 }
 
 impl Drop for RunDir {
@@ -289,7 +297,7 @@ impl RunDir {
         if !root.is_dir() {
             return Err(PipelineError::RunDir { path: root, why: "is not a folder".into() });
         }
-        Ok(RunDir { root, lock: None, resume: false, created: false })
+        Ok(RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new() })
     }
 
     /// Creates (or reuses, as `overwrite` allows) the folder of a new run and takes its lock. A
@@ -306,7 +314,8 @@ impl RunDir {
         check_new_run_folder(&root, scene_root)?;
         let created = !root.exists();
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
-        let mut dir = RunDir { root: root.clone(), lock: None, resume: overwrite == Overwrite::Resume, created };
+        let resume = overwrite == Overwrite::Resume;
+        let mut dir = RunDir { root: root.clone(), lock: None, resume, created, kept_runs: Vec::new() };
         dir.take_lock()?;
         match (dir.state(), overwrite) {
             (DirState::Foreign, _) => return Err(dir.foreign()),
@@ -334,6 +343,7 @@ impl RunDir {
             (_, Overwrite::Force) => dir.clear()?,
             (_, Overwrite::Resume) => {}
         }
+        dir.kept_runs = dir.own_runs();
         Ok(dir)
     }
 
@@ -365,7 +375,7 @@ impl RunDir {
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
         check_new_run_folder(&root, scene_root)?;
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
-        let dir = RunDir { root: root.clone(), lock: None, resume: false, created: false };
+        let dir = RunDir { root: root.clone(), lock: None, resume: false, created: false, kept_runs: Vec::new() };
         if dir.state() == DirState::Foreign {
             return Err(dir.foreign());
         }
@@ -411,7 +421,16 @@ impl RunDir {
             };
             removed.map_err(|e| PipelineError::file(&p, format!("cannot remove the earlier run's file: {e}")))?;
         }
+        for p in self.own_runs() {
+            std::fs::remove_dir_all(&p)
+                .map_err(|e| PipelineError::file(&p, format!("cannot remove the earlier run's start: {e}")))?;
+        }
         Ok(())
+    }
+
+    /// The folders of [`OWN_RUNS`] that hold a run.
+    fn own_runs(&self) -> Vec<PathBuf> {
+        OWN_RUNS.iter().map(|n| self.root.join(n)).filter(|p| p.join("config.json").is_file()).collect()
     }
 
     pub fn root(&self) -> &Path {
@@ -429,8 +448,9 @@ impl RunDir {
 
     /// After a fresh run failed: when it left nothing to resume (no checkpoint, no window's),
     /// removes the run files it wrote, so that the folder does not read as an unfinished run
-    /// that `--resume` could continue. Only [`RUN_FILES`] go: a fresh run starts in a folder
-    /// holding none of them (or whose earlier ones `--force` removed), so they are its own.
+    /// that `--resume` could continue. Only [`RUN_FILES`] go, and the runs of [`OWN_RUNS`] it
+    /// wrote: a fresh run starts in a folder holding none of them (or whose earlier ones
+    /// `--force` removed), so they are its own.
     pub fn discard_unresumable(&self) {
         if self.resume || self.lock.is_none() || self.checkpoint().exists() || self.path("windows").exists() {
             return;
@@ -438,6 +458,9 @@ impl RunDir {
         for name in RUN_FILES {
             let path = self.path(name);
             let _ = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
+        }
+        for path in self.own_runs().into_iter().filter(|p| !self.kept_runs.contains(p)) {
+            let _ = std::fs::remove_dir_all(&path);
         }
     }
 
