@@ -1250,6 +1250,18 @@ impl<'a> Bytes<'a> {
         Ok(f64::from_le_bytes(self.array()?))
     }
 
+    /// Refuses bytes after the last of the `count` records the file announced (`what`): a
+    /// count that is too small, or a file of another kind, would otherwise lose the rest.
+    fn end(&self, count: u64, what: &str) -> Result<(), String> {
+        match self.data.len() - self.at {
+            0 => Ok(()),
+            extra => Err(format!(
+                "{extra} bytes follow the last of the {count} {what} its count announces (a wrong count or a \
+                 file of another format)"
+            )),
+        }
+    }
+
     /// A NUL-terminated UTF-8 string.
     fn c_string(&mut self) -> Result<String, String> {
         let len = self.data[self.at..].iter().position(|&b| b == 0).ok_or("unterminated image name")?;
@@ -1286,6 +1298,7 @@ fn read_cameras_bin(path: &Path) -> Result<ColmapCameras, IoError> {
             }
             cameras.push((id, k, d));
         }
+        b.end(n, "cameras")?;
         Ok(cameras)
     };
     run().map_err(|e| IoError::invalid(path, e))
@@ -1316,6 +1329,7 @@ fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
                 u64::try_from(camera_id).map_err(|_| format!("image {name}: camera id {camera_id} is negative"))?;
             out.push(ColmapImage { name, q, t, camera_id, place: format!("image id {image_id}") });
         }
+        b.end(n, "images")?;
         Ok(out)
     };
     run().map_err(|e| IoError::invalid(path, e))

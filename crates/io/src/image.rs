@@ -335,6 +335,26 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
     if pixels == 0 || data.len() % pixels != 0 || data.len() / pixels > 4 {
         return Err(IoError::invalid(path, format!("TIFF of {w}x{h} pixels holds {} samples", data.len())));
     }
+    // Further pages of the same size are a stack (frames, or a z-stack), not one image: reading
+    // the first alone would lose the rest silently. Smaller pages (thumbnails, a pyramid's
+    // reduced levels) are skipped.
+    let mut stacked = 0usize;
+    while dec.more_images() && stacked < 1 << 16 {
+        dec.next_image().map_err(bad)?;
+        if dec.dimensions().map_err(bad)? == (w as u32, h as u32) {
+            stacked += 1;
+        }
+    }
+    if stacked > 0 {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "a TIFF stack: {} more page(s) of {w}x{h} pixels after the first; fluidnerf reads one image per \
+                 file: write each page to a file of its own (one per camera, or per frame of a recording)",
+                stacked
+            ),
+        ));
+    }
     Ok((to_gray(path, w, h, data.len() / pixels, data), kind))
 }
 
@@ -505,6 +525,30 @@ mod tests {
         img.set(1, 1, f32::NAN);
         write_tiff_f32(&p, &img).expect("write");
         assert_eq!(read_image(&p).expect("read").first_non_finite(), Some((1, 1)));
+    }
+
+    /// A stack of pages of one size is refused by name; a smaller page after the image (a
+    /// thumbnail) is not a stack.
+    #[test]
+    fn tiff_stacks_are_refused_and_thumbnails_skipped() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let write = |pages: &[(u32, u32)]| {
+            let mut f = std::io::Cursor::new(Vec::new());
+            let mut enc = tiff::encoder::TiffEncoder::new(&mut f).expect("encoder");
+            for &(w, h) in pages {
+                let data: Vec<u16> = (0..w * h).map(|i| i as u16).collect();
+                enc.write_image::<tiff::encoder::colortype::Gray16>(w, h, &data).expect("page");
+            }
+            let p = dir.path().join(format!("{}.tif", pages.len()));
+            std::fs::write(&p, f.into_inner()).expect("write");
+            p
+        };
+        let stack = write(&[(4, 3), (4, 3), (4, 3)]);
+        let err = read_image(&stack).expect_err("a stack").to_string();
+        assert!(err.contains("3.tif") && err.contains("2 more page(s) of 4x3"), "{err}");
+        let thumbnail = write(&[(4, 3), (2, 1)]);
+        let img = read_image(&thumbnail).expect("image and thumbnail");
+        assert_eq!((img.width, img.height, img.get(3, 2)), (4, 3, 11.0));
     }
 
     #[test]

@@ -382,7 +382,20 @@ fn colmap_binary_errors_name_the_file() {
     std::fs::write(dir.path().join("images.bin"), &bytes[..bytes.len() - 30]).expect("write");
     let err = read_colmap(dir.path()).expect_err("truncated").to_string();
     assert!(err.contains("images.bin") && err.contains("truncated"), "{err}");
+    // A count too small for the records that follow (here: one image of two) loses none silently.
+    let mut fewer = bytes.clone();
+    fewer[..8].copy_from_slice(&1u64.to_le_bytes());
+    std::fs::write(dir.path().join("images.bin"), &fewer).expect("write");
+    let err = read_colmap(dir.path()).expect_err("trailing records").to_string();
+    assert!(err.contains("images.bin") && err.contains("bytes follow the last of the 1 images"), "{err}");
     let mut cams = std::fs::read(dir.path().join("cameras.bin")).expect("read");
+    cams.extend_from_slice(&[0; 5]);
+    std::fs::write(dir.path().join("images.bin"), &bytes).expect("write");
+    std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
+    let err = read_colmap(dir.path()).expect_err("trailing bytes").to_string();
+    assert!(err.contains("cameras.bin") && err.contains("5 bytes follow"), "{err}");
+    cams.truncate(cams.len() - 5);
+    std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
     cams[12..16].copy_from_slice(&5i32.to_le_bytes());
     std::fs::write(dir.path().join("cameras.bin"), &cams).expect("write");
     let err = read_colmap(dir.path()).expect_err("fisheye").to_string();
