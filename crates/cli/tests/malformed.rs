@@ -120,7 +120,7 @@ fn cases() -> Vec<Case> {
             "max-iterations 0 neural",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--max-iterations", "0"],
-            "max_iterations",
+            "--max-iterations on the command line: stopping.max_iterations",
         ),
         c(
             "max-iterations 0 voxel",
@@ -128,7 +128,12 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--max-iterations", "0"],
             "max_iterations",
         ),
-        c("negative time budget", None, &["reconstruct", "SCENE", "-o", "OUT", "--time-budget=-1"], "time_budget"),
+        c(
+            "negative time budget",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--time-budget=-1"],
+            "--time-budget on the command line: stopping.time_budget_s",
+        ),
         c("NaN time budget", None, &["reconstruct", "SCENE", "-o", "OUT", "--time-budget", "NaN"], "time_budget"),
         c(
             "relaxation 3 asart",

@@ -648,9 +648,17 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         cfg.gains.rounds = v;
     }
     apply_method_options(args, &mut cfg.method)?;
-    match args.config.as_ref().or(continued.as_ref()) {
-        Some(file) => cfg.validate().with_context(|| format!("the settings of {}", file.display()))?,
-        None => cfg.validate()?,
+    if let Err(e) = cfg.validate() {
+        // A value from the command line is named by its option, one from a file by the file.
+        let flag = match &e {
+            fluidnerf_pipeline::PipelineError::Invalid { key, .. } => flag_of(args, key),
+            _ => None,
+        };
+        return Err(match (flag, args.config.as_ref().or(continued.as_ref())) {
+            (Some(flag), _) => anyhow::Error::new(e).context(format!("{flag} on the command line")),
+            (None, Some(file)) => anyhow::Error::new(e).context(format!("the settings of {}", file.display())),
+            (None, None) => e.into(),
+        });
     }
     // Its checkpoint holds the saved field's parameters: another field cannot take them.
     if let Some(saved) = resume_config {
@@ -992,4 +1000,23 @@ fn parse_start_method(s: &str) -> Result<StartMethod, String> {
         Ok(m) => Ok(m),
         Err(_) => Err(format!("unknown start method {s:?} (one of {VOXEL})")),
     }
+}
+
+/// The command-line option that set the configuration key `key` in this invocation, if one did.
+fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
+    let s = &args.stop;
+    let given = [
+        ("seed", "--seed", args.seed.is_some()),
+        ("resolution", "--resolution", args.resolution.is_some()),
+        ("memory_limit_gib", "--memory-limit", args.memory_limit.is_some()),
+        ("eval_every", "--eval-every", args.eval_every.is_some()),
+        ("checkpoint_every", "--checkpoint-every", args.checkpoint_every.is_some()),
+        ("stopping.max_iterations", "--max-iterations", s.max_iterations.is_some()),
+        ("stopping.time_budget_s", "--time-budget", s.time_budget.is_some()),
+        ("stopping.holdout_every", "--holdout-every", s.holdout_every.is_some()),
+        ("stopping.patience", "--patience", s.patience.is_some()),
+        ("gains.every", "--gain-every", args.gains.gain_every.is_some()),
+        ("gains.rounds", "--gain-rounds", args.gains.gain_rounds.is_some()),
+    ];
+    given.into_iter().find(|&(k, _, set)| set && k == key).map(|(_, flag, _)| flag)
 }
