@@ -386,7 +386,7 @@ impl HashGridField {
         let table_range = level.offset..level.offset + level.entries * F;
         let table = &self.params[table_range.clone()];
         let gtable: &mut [f32] = if BACKWARD { &mut grads[table_range] } else { &mut [] };
-        // Whole groups of eight rows run vectorised where the CPU can.
+        // Whole groups of sixteen or eight rows run vectorised where the CPU can.
         let mut done = 0;
         #[cfg(target_arch = "x86_64")]
         if crate::hashgrid_simd::available() {
@@ -681,7 +681,7 @@ mod tests {
         }
     }
 
-    /// The encoding of a batch (eight rows at a time vectorised where the CPU can) equals the
+    /// The encoding of a batch (sixteen or eight rows at a time vectorised where the CPU can) equals the
     /// row-by-row scalar encoding, for dense and hashed levels, 3D and 4D inputs and every
     /// feature count, with coordinates outside the box clamped alike.
     #[test]
@@ -720,7 +720,7 @@ mod tests {
         check("scalar");
     }
 
-    /// The encoding's gradient scattered for a batch (weights and indices eight rows at a time,
+    /// The encoding's gradient scattered for a batch (weights and indices sixteen or eight rows at a time,
     /// vectorised where the CPU can) is bit-identical to the scalar loop run row by row: the
     /// same products added in the same order, also where the rows share vertices.
     #[test]
@@ -765,13 +765,13 @@ mod tests {
             ..HashGridConfig::default()
         };
         let field = HashGridField::new(&cfg, 4, 3).unwrap();
-        let n = 40;
+        let n = 72;
         let lf = cfg.levels * 2;
         let mut inputs = Vec::new();
         for i in 0..n {
             inputs.extend((0..3).map(|_| rng.random_range(0.0..1.0f32)));
-            // Groups of eight points share a whole time, as a training chunk does.
-            inputs.push(((i / 8) % 4) as f32);
+            // Groups of sixteen points share a whole time, as a training chunk does.
+            inputs.push(((i / 16) % 4) as f32);
         }
         let shifted = |dt: f32| -> Vec<f32> {
             inputs.iter().enumerate().map(|(i, &x)| if i % 4 == 3 { (x + dt).clamp(0.0, 3.0) } else { x }).collect()
@@ -786,10 +786,12 @@ mod tests {
         }
         assert_encoding_matches_rows(&field, &inputs, &at, "whole times");
         let dfeat: Vec<f32> = (0..n * lf).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let (batch, rows) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
-        for (i, (a, b)) in batch.iter().zip(&rows).enumerate() {
-            assert_eq!(a.to_bits(), b.to_bits(), "gradient entry {i}: {a} vs {b}");
-        }
+        for_each_width(|width| {
+            let (batch, rows) = gradients_batched_and_by_row(&field, &inputs, &dfeat);
+            for (i, (a, b)) in batch.iter().zip(&rows).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "{width}: gradient entry {i}: {a} vs {b}");
+            }
+        });
     }
 
     /// With a base time resolution the cells along time grow geometrically from the coarsest
