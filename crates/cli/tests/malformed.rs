@@ -18,6 +18,8 @@ enum Break {
     File(&'static str, &'static [u8]),
     /// Removes a file of the scene.
     Remove(&'static str),
+    /// Replaces a file of the scene with a link to this path (a device, say).
+    Link(&'static str, &'static str),
     /// Writes a ground-truth volume built by the function.
     Truth(fn(&Path)),
 }
@@ -53,6 +55,8 @@ fn cases() -> Vec<Case> {
         ),
         c("image missing", Remove("images/cam000.png"), RUN, "cam000.png"),
         c("image garbage", File("images/cam000.png", b"not a png"), RUN, "cam000.png"),
+        // Read whole, /dev/zero never ended and grew without limit.
+        c("image linked to a device", Link("images/cam000.png", "/dev/zero"), RUN, "cam000.png: image file is a device"),
         c("truth missing", Remove("truth/truth.npy"), RUN, "truth.npy"),
         c("truth garbage", File("truth/truth.npy", b"\x93NUMPY garbage"), RUN, "truth.npy"),
         c(
@@ -488,6 +492,10 @@ fn malformed_scenes_and_options_are_refused_cleanly() {
             }
             Break::File(name, bytes) => std::fs::write(scene.join(name), bytes).expect("writes"),
             Break::Remove(name) => std::fs::remove_file(scene.join(name)).expect("removes"),
+            Break::Link(name, target) => {
+                std::fs::remove_file(scene.join(name)).expect("removes");
+                std::os::unix::fs::symlink(target, scene.join(name)).expect("links");
+            }
             Break::Truth(edit) => edit(&scene.join("truth/truth.npy")),
         }
         let out = d.join(format!("o{k:02}"));

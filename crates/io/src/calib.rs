@@ -206,7 +206,7 @@ fn load_yaml(path: &Path, body: &str) -> Result<Vec<yaml_rust2::Yaml>, IoError> 
 
 /// The top-level nodes of a `cv::FileStorage` file, and its text.
 fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "calibration file", e))?;
+    let text = crate::read_input_text(path, "calibration file")?;
     let is_json =
         path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) || text.trim_start().starts_with('{');
     let trimmed = text.trim_start_matches('\u{feff}').trim_start();
@@ -1116,7 +1116,7 @@ struct ColmapImage {
 type ColmapCameras = Vec<(u64, Intrinsics, Distortion)>;
 
 fn read_cameras_txt(path: &Path) -> Result<ColmapCameras, IoError> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "COLMAP cameras.txt", e))?;
+    let text = crate::read_input_text(path, "COLMAP cameras.txt")?;
     let mut cameras: ColmapCameras = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -1145,7 +1145,7 @@ fn read_cameras_txt(path: &Path) -> Result<ColmapCameras, IoError> {
 }
 
 fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, "COLMAP images.txt", e))?;
+    let text = crate::read_input_text(path, "COLMAP images.txt")?;
     let mut out = Vec::new();
     let mut lines = text.lines().enumerate();
     while let Some((n, line)) = lines.next() {
@@ -1274,7 +1274,7 @@ impl<'a> Bytes<'a> {
 /// `cameras.bin`: `u64` count, then per camera `i32` id, `i32` model id, `u64` width, `u64`
 /// height and the model's parameters as `f64` (COLMAP `WriteCamerasBinary`).
 fn read_cameras_bin(path: &Path) -> Result<ColmapCameras, IoError> {
-    let data = std::fs::read(path).map_err(|e| IoError::io(path, "COLMAP cameras.bin", e))?;
+    let data = crate::read_input(path, "COLMAP cameras.bin")?;
     let mut b = Bytes { data: &data, at: 0 };
     let mut run = || -> Result<ColmapCameras, String> {
         let n = b.u64()?;
@@ -1308,7 +1308,7 @@ fn read_cameras_bin(path: &Path) -> Result<ColmapCameras, IoError> {
 /// as `f64`, `i32` camera id, the NUL-terminated name, a `u64` count of 2D points and 24 bytes
 /// per point (COLMAP `WriteImagesBinary`).
 fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
-    let data = std::fs::read(path).map_err(|e| IoError::io(path, "COLMAP images.bin", e))?;
+    let data = crate::read_input(path, "COLMAP images.bin")?;
     let mut b = Bytes { data: &data, at: 0 };
     let mut run = || -> Result<Vec<ColmapImage>, String> {
         let n = b.u64()?;

@@ -177,7 +177,7 @@ pub fn read_image(path: &Path) -> Result<Image, IoError> {
 /// Reads a PNG, JPEG or TIFF image (chosen by content, not extension) as f32, applying
 /// `linearisation` to 8-bit samples, and says how its samples were stored.
 pub fn read_image_with(path: &Path, linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "image file", e))?;
+    let bytes = crate::read_input(path, "image file")?;
     decode_image(path, &bytes, linearisation)
 }
 
@@ -211,6 +211,7 @@ fn is_tiff(bytes: &[u8]) -> bool {
 /// The size `(width, height)` of a PNG, JPEG or TIFF image, read from its header only.
 pub fn read_dimensions(path: &Path) -> Result<(u32, u32), IoError> {
     use std::io::Read;
+    crate::check_regular_file(path, "image file")?;
     let mut file = std::fs::File::open(path).map_err(|e| IoError::io(path, "image file", e))?;
     let mut head = [0u8; 8];
     let n = file.read(&mut head).map_err(|e| IoError::io(path, "image file", e))?;

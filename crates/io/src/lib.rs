@@ -38,6 +38,30 @@ pub mod volume;
 
 pub use error::IoError;
 
+/// Refuses an input that is not a regular file (after following links): a folder, a device
+/// such as `/dev/zero` or a pipe would make a whole-file read fail late, never end, or grow
+/// without limit.
+pub fn check_regular_file(path: &Path, what: &'static str) -> Result<(), IoError> {
+    let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, what, e))?;
+    if meta.is_file() {
+        return Ok(());
+    }
+    let kind = if meta.is_dir() { "a folder" } else { "a device, pipe or socket" };
+    Err(IoError::invalid(path, format!("{what} is {kind}, not a regular file")))
+}
+
+/// The whole of the input file `path` ([`check_regular_file`] first); `what` names it in errors.
+pub fn read_input(path: &Path, what: &'static str) -> Result<Vec<u8>, IoError> {
+    check_regular_file(path, what)?;
+    std::fs::read(path).map_err(|e| IoError::io(path, what, e))
+}
+
+/// The whole of the text input file `path` ([`check_regular_file`] first).
+pub fn read_input_text(path: &Path, what: &'static str) -> Result<String, IoError> {
+    check_regular_file(path, what)?;
+    std::fs::read_to_string(path).map_err(|e| IoError::io(path, what, e))
+}
+
 /// Writes a file atomically: `write` fills a temporary file in the same folder, which is then
 /// renamed over `path`. Missing parent folders are created. On any error the temporary file is
 /// removed and `path` is left as it was.
@@ -69,6 +93,28 @@ pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Folders and devices are refused by what they are, before any read.
+    #[test]
+    fn inputs_must_be_regular_files() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let err = read_input(dir.path(), "image file").expect_err("a folder").to_string();
+        assert!(err.contains("image file is a folder, not a regular file"), "{err}");
+        #[cfg(unix)]
+        {
+            let err = read_input(Path::new("/dev/zero"), "image file").expect_err("a device").to_string();
+            assert!(err.contains("/dev/zero") && err.contains("a device, pipe or socket"), "{err}");
+            let link = dir.path().join("a.png");
+            std::os::unix::fs::symlink("/dev/zero", &link).expect("symlink");
+            let err = read_input_text(&link, "scene file").expect_err("a link to a device").to_string();
+            assert!(err.contains("a.png") && err.contains("not a regular file"), "{err}");
+        }
+        let file = dir.path().join("f.txt");
+        std::fs::write(&file, "text").expect("write");
+        assert_eq!(read_input_text(&file, "scene file").expect("a file"), "text");
+        let err = read_input(&dir.path().join("missing"), "image file").expect_err("missing").to_string();
+        assert!(err.contains("image file not found"), "{err}");
+    }
 
     #[test]
     fn atomic_write_replaces_and_leaves_no_temporaries() {

@@ -790,7 +790,7 @@ fn missing_aabb(file: &Path) -> IoError {
 /// `train/r_0.png`).
 pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     let file = scene_file_path(path);
-    let text = std::fs::read_to_string(&file).map_err(|e| IoError::io(&file, "scene file", e))?;
+    let text = crate::read_input_text(&file, "scene file")?;
     let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;
     if !raw.is_object() {
         return Err(IoError::invalid(

@@ -252,6 +252,7 @@ pub fn read_video_frames(
         }
         on_frame(frame)
     };
+    crate::check_regular_file(path, "video file")?;
     let mut head = Vec::with_capacity(12);
     File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).map_err(|e| IoError::io(path, "video file", e))?;
     let info = match sniff(&head) {

@@ -26,7 +26,7 @@ use crate::{atomic_write, IoError};
 /// (NumPy writes them for transposed arrays, `fortran_order: True`) are reordered on read, so
 /// the element at index `[k, j, i]` is voxel `(i, j, k)` either way.
 pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "volume file", e))?;
+    let bytes = crate::read_input(path, "volume file")?;
     let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| IoError::invalid(path, format!("not a .npy file: {e}")))?;
     let fortran = npy.order() == npyz::Order::Fortran;
     let shape = npy.shape().to_vec();
@@ -192,7 +192,7 @@ fn numbers<T: std::str::FromStr>(s: &str) -> Option<Vec<T>> {
 /// `Direction`). The box is recovered as `Origin − Spacing / 2` to
 /// `Origin + (dims − ½) · Spacing`.
 pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "volume file", e))?;
+    let bytes = crate::read_input(path, "volume file")?;
     let bad = |what: &str| IoError::invalid(path, format!("not a VTK ImageData file we can read: {what}"));
     // The appended section is binary; only the XML before it is text.
     let xml_end = find(&bytes, b"<AppendedData").unwrap_or(bytes.len());
@@ -355,7 +355,7 @@ pub fn check_finite(path: &Path, volume: &Volume) -> Result<(), IoError> {
 /// Reads a raw volume written by [`write_raw`] (its sidecar must sit next to it).
 pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     let json_path = raw_sidecar_path(path);
-    let text = std::fs::read_to_string(&json_path).map_err(|e| IoError::io(&json_path, "raw volume sidecar", e))?;
+    let text = crate::read_input_text(&json_path, "raw volume sidecar")?;
     let meta: RawSidecar =
         serde_json::from_str(&text).map_err(|e| IoError::Json { path: json_path.clone(), error: e })?;
     if meta.dtype != "<f4" {
@@ -370,7 +370,7 @@ pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     let Some(needed) = needed else {
         return Err(IoError::invalid(&json_path, format!("dims {:?}: more voxels than a volume can hold", meta.dims)));
     };
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, "raw volume", e))?;
+    let bytes = crate::read_input(path, "raw volume")?;
     if bytes.len() != needed {
         return Err(IoError::invalid(path, format!("{} bytes, but dims {:?} need {needed}", bytes.len(), meta.dims)));
     }
