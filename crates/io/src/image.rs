@@ -188,6 +188,16 @@ pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> 
     } else if bytes.starts_with(PNG_MAGIC) {
         read_with_image_crate(path, bytes, image::ImageFormat::Png, linearisation)
     } else if bytes.starts_with(JPEG_MAGIC) {
+        if jpeg_end(bytes) == JpegEnd::Truncated {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "truncated JPEG: its {} bytes end before the end-of-image marker (a decoder would fill the \
+                     missing part with grey)",
+                    bytes.len()
+                ),
+            ));
+        }
         read_with_image_crate(path, bytes, image::ImageFormat::Jpeg, linearisation)
     } else {
         Err(IoError::invalid(
@@ -195,6 +205,63 @@ pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> 
             "unreadable image: not a PNG, JPEG or TIFF file (supported: 8/16-bit PNG, 8-bit JPEG, \
              8/16/32-bit and float TIFF)",
         ))
+    }
+}
+
+/// What [`jpeg_end`] found.
+#[derive(Debug, PartialEq, Eq)]
+enum JpegEnd {
+    /// The end-of-image marker, where the data say it is.
+    Complete,
+    /// The bytes ran out first.
+    Truncated,
+    /// A byte where a marker should be: left to the decoder, which tolerates some damage.
+    Unparsed,
+}
+
+/// Walks a JPEG's marker segments and entropy-coded scans to its end-of-image marker. Decoders
+/// fill a truncated file's missing blocks with grey and report no error, so a file cut short
+/// (an interrupted copy, say) would otherwise be read as an image.
+fn jpeg_end(b: &[u8]) -> JpegEnd {
+    let mut i = 2; // after the start-of-image marker
+    loop {
+        match b.get(i) {
+            None => return JpegEnd::Truncated,
+            Some(0xFF) => {}
+            Some(_) => return JpegEnd::Unparsed,
+        }
+        // Fill bytes (0xFF) may precede a marker's code.
+        while b.get(i + 1) == Some(&0xFF) {
+            i += 1;
+        }
+        let Some(&code) = b.get(i + 1) else { return JpegEnd::Truncated };
+        i += 2;
+        match code {
+            0xD9 => return JpegEnd::Complete,
+            0xD0..=0xD7 | 0x01 => continue,
+            0x00 => return JpegEnd::Unparsed,
+            _ => {}
+        }
+        let (Some(&hi), Some(&lo)) = (b.get(i), b.get(i + 1)) else { return JpegEnd::Truncated };
+        let len = usize::from(u16::from_be_bytes([hi, lo]));
+        if len < 2 {
+            return JpegEnd::Unparsed;
+        }
+        i += len;
+        if code == 0xDA {
+            // The scan's data run to the next marker other than a stuffed 0xFF00 or a restart.
+            loop {
+                let Some(at) = b.get(i..).and_then(|rest| rest.iter().position(|&x| x == 0xFF)) else {
+                    return JpegEnd::Truncated;
+                };
+                i += at;
+                match b.get(i + 1) {
+                    None => return JpegEnd::Truncated,
+                    Some(0x00 | 0xD0..=0xD7) => i += 2,
+                    Some(_) => break,
+                }
+            }
+        }
     }
 }
 
@@ -576,6 +643,34 @@ mod tests {
         let err = read_image(&dir.path().join("none.png")).expect_err("missing");
         assert!(matches!(err, IoError::NotFound { .. }), "{err}");
         assert!(err.to_string().contains("none.png"), "{err}");
+    }
+
+    /// A JPEG cut short anywhere after its headers is refused; whole ones, with or without
+    /// bytes after the end marker, progressive ones and ones with restart markers are read.
+    #[test]
+    fn truncated_jpegs_are_refused() {
+        use image::ImageEncoder;
+        let (w, h) = (37u32, 23u32);
+        let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i * 37 % 251) as u8).collect();
+        let mut whole = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut whole, 90)
+            .write_image(&rgb, w, h, image::ExtendedColorType::Rgb8)
+            .expect("jpeg");
+        let p = Path::new("cut.jpg");
+        assert_eq!(jpeg_end(&whole), JpegEnd::Complete);
+        decode_image(p, &whole, Linearisation::Srgb).expect("a whole JPEG");
+        let mut padded = whole.clone();
+        padded.extend_from_slice(&[0; 7]);
+        decode_image(p, &padded, Linearisation::Srgb).expect("bytes after the end marker");
+        for cut in [whole.len() - 1, whole.len() - 2, whole.len() * 2 / 3, 300, 40] {
+            let err = decode_image(p, &whole[..cut], Linearisation::Srgb).expect_err("cut").to_string();
+            assert!(err.contains("cut.jpg") && err.contains(&format!("truncated JPEG: its {cut} bytes")), "{err}");
+        }
+        // Restart markers inside a scan, and a stuffed 0xFF00, are scan data.
+        let scan = [0xFF, 0xD8, 0xFF, 0xDA, 0, 2, 1, 0xFF, 0, 2, 0xFF, 0xD3, 4, 0xFF, 0xD9];
+        assert_eq!(jpeg_end(&scan), JpegEnd::Complete);
+        assert_eq!(jpeg_end(&scan[..12]), JpegEnd::Truncated);
+        assert_eq!(jpeg_end(&[0xFF, 0xD8, 0xFF, 0xE0, 0, 4, 0, 0, 7]), JpegEnd::Unparsed);
     }
 
     #[test]
