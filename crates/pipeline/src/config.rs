@@ -915,6 +915,16 @@ impl RunConfig {
                  whole times with holdout_times",
             ));
         }
+        if let MethodConfig::Neural(_, NeuralSpec { train, .. }) = &self.method {
+            if self.stopping.rule == StopRule::HeldOut && train.validate_pixels == 0 {
+                return Err(PipelineError::invalid(
+                    "method.train.validate_pixels",
+                    "0 renders no held-out pixels, so held-out early stopping (the rule for scenes with held-out \
+                     views) could never judge the field: give at least 1 (default 4096) or choose another \
+                     stopping.rule",
+                ));
+            }
+        }
         self.effective_method().validate()
     }
 
@@ -1236,6 +1246,14 @@ mod tests {
         let mut c = RunConfig::new("scene", Method::Fast);
         c.stopping.rule = StopRule::Budget;
         assert_eq!(c.resolved(&scene(true)).stopping.rule, StopRule::Budget);
+        // Held-out stopping needs held-out pixels to judge by: refused once the rule is decided.
+        let mut c = RunConfig::new("scene", Method::Fast);
+        let MethodConfig::Neural(_, spec) = &mut c.method else { panic!() };
+        spec.train.validate_pixels = 0;
+        c.validate().expect("without held-out views the rule is the method's own");
+        c.resolved(&scene(false)).validate().expect("no held-out views");
+        let e = c.resolved(&scene(true)).validate().unwrap_err().to_string();
+        assert!(e.contains("method.train.validate_pixels") && e.contains("held-out"), "{e}");
     }
 
     #[test]
