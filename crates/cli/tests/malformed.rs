@@ -60,6 +60,15 @@ fn cases() -> Vec<Case> {
         c("truth missing", Remove("truth/truth.npy"), RUN, "truth.npy"),
         c("truth garbage", File("truth/truth.npy", b"\x93NUMPY garbage"), RUN, "truth.npy"),
         c(
+            "two truths of one instant",
+            Json(|v| {
+                let first = v["truth"][0].clone();
+                v["truth"].as_array_mut().unwrap().push(first);
+            }),
+            RUN,
+            "truth entries 0 (truth/truth.npy) and 1 (truth/truth.npy) are both",
+        ),
+        c(
             "truth with NaN",
             Truth(|p| {
                 let mut v =

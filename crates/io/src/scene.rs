@@ -1049,6 +1049,20 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             ));
         }
     }
+    // One ground truth per instant: a second one at the same time would go unused, unreported.
+    for (i, t) in scene.truth.iter().enumerate() {
+        if let Some(j) = scene.truth[..i].iter().position(|u| u.time.map(f64::to_bits) == t.time.map(f64::to_bits)) {
+            return Err(IoError::invalid(
+                file,
+                format!(
+                    "truth entries {j} ({}) and {i} ({}) are both {}; give one ground truth per instant",
+                    scene.truth[j].file_path.display(),
+                    t.file_path.display(),
+                    t.time.map(|t| format!("at time {t}")).unwrap_or_else(|| "without a time".into())
+                ),
+            ));
+        }
+    }
     // Frames of one physical camera at many times share a camera: test each distinct one once.
     let mut distinct: Vec<usize> = Vec::new();
     let first_equal: Vec<usize> = scene
