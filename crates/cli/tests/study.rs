@@ -73,9 +73,9 @@ fn a_study_can_give_the_voxel_methods_the_visual_hull() {
     }
 }
 
-/// A time budget that is not a positive, finite number of seconds is refused up front, naming
-/// --time-budget, before any scene is synthesised; `--force` removes nothing from a folder
-/// that is not a study.
+/// A time budget that is not a positive, finite number of seconds, and a scene preset of
+/// several instants, are refused up front, naming the option, before any scene is
+/// synthesised; `--force` removes nothing from a folder that is not a study.
 #[test]
 fn bad_budgets_are_refused_up_front_and_force_spares_other_folders() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -85,6 +85,11 @@ fn bad_budgets_are_refused_up_front_and_force_spares_other_folders() {
         refused(&out, "--time-budget must be a positive, finite number of seconds");
         assert!(!d.join("st").exists(), "{budget}: wrote output");
     }
+    // A scene of several instants: every static method would mix them.
+    let out =
+        fluidnerf(d, &["study", "--preset", "smoke", "--scene-preset", "plume-tr", "--methods", "asart", "-o", "st"]);
+    refused(&out, "--scene-preset: plume-tr holds 3 instants");
+    assert!(!d.join("st").exists(), "a time-resolved scene preset wrote output");
     std::fs::create_dir_all(d.join("mine/runs")).expect("mkdir");
     std::fs::write(d.join("mine/runs/notes.txt"), "mine").expect("writes");
     refused(&fluidnerf(d, &["study", "--preset", "smoke", "--force", "-o", "mine", "-q"]), "not a study folder");

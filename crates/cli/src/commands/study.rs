@@ -225,6 +225,17 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
         bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
     }
+    // A scene of several instants would have every static method mix them.
+    if let Ok(scene) = fluidnerf_synth::preset::preset(&g.scene_preset) {
+        if scene.times.len() > 1 {
+            bail!(
+                "--scene-preset: {} holds {} instants; a study compares static reconstructions of one \
+                 instant: choose a static preset (fluidnerf synth --list-presets)",
+                g.scene_preset,
+                scene.times.len()
+            );
+        }
+    }
     if let Some(&c) = g.cameras.iter().find(|&&c| c < 2) {
         bail!("--cameras: {c} is too few; give at least 2 training cameras");
     }
