@@ -194,4 +194,18 @@ fn runs_that_cannot_be_compared_are_named() {
     let out = fluidnerf(d, &["compare", "missing", "-o", "cmp", "--thresholds", "0", "-q"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--thresholds"));
+
+    // A history that goes back in time would give wrong times to the thresholds.
+    let point = |i: u32, t: f64, n: &str| format!(r#"{{"iteration": {i}, "train_time_s": {t}, "nrmse": {n}}}"#);
+    let history = |points: &[String]| format!(r#"{{"method": "sart", "nrmse_history": [{}]}}"#, points.join(", "));
+    std::fs::write(d.join("back.json"), history(&[point(1, 0.5, "0.9"), point(2, 0.2, "0.5")])).expect("writes");
+    let out = fluidnerf(d, &["compare", "back.json", "-o", "cmp", "-q"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("back.json: NRMSE history point 1 (iteration 2, 0.2 s) comes before point 0"), "{err}");
+    std::fs::write(d.join("nan.json"), history(&[point(1, 0.5, "-1")])).expect("writes");
+    let out = fluidnerf(d, &["compare", "nan.json", "-o", "cmp", "-q"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("point 0 (iteration 1) has a negative or non-finite value: time 0.5 s, NRMSE -1"), "{err}");
+    assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
 }

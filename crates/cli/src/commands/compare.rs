@@ -187,12 +187,30 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     let mut curve = Vec::with_capacity(history.len());
     for (k, p) in history.iter().enumerate() {
         if !(p.train_time_s.is_finite() && p.train_time_s >= 0.0 && p.nrmse.is_finite() && p.nrmse >= 0.0) {
-            bail!("{}: NRMSE history point {k} has a negative or non-finite value: {p:?}", report.display());
+            bail!(
+                "{}: NRMSE history point {k} (iteration {}) has a negative or non-finite value: time {} s, NRMSE {}",
+                report.display(),
+                p.iteration,
+                p.train_time_s,
+                p.nrmse
+            );
         }
-        curve.push(Point { iteration: p.iteration as u64, train_time_s: p.train_time_s, nrmse: p.nrmse });
-    }
-    if curve.windows(2).any(|w| w[1].train_time_s < w[0].train_time_s) {
-        log::warn!("{}: the NRMSE history goes back in time; points are taken in the order given", report.display());
+        let point = Point { iteration: p.iteration as u64, train_time_s: p.train_time_s, nrmse: p.nrmse };
+        // Times to a threshold are read off the curve in order: one that goes back would give
+        // wrong times and speed-ups.
+        if let Some(prev) = curve.last().filter(|q: &&Point| point.train_time_s < q.train_time_s) {
+            bail!(
+                "{}: NRMSE history point {k} (iteration {}, {} s) comes before point {} (iteration {}, {} s) in \
+                 time: the history must go forward in time",
+                report.display(),
+                point.iteration,
+                point.train_time_s,
+                k - 1,
+                prev.iteration,
+                prev.train_time_s
+            );
+        }
+        curve.push(point);
     }
     let last = curve[curve.len() - 1];
     let final_nrmse = final_nrmse.unwrap_or(last.nrmse);
