@@ -600,8 +600,14 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 4] = [
+    let edits: [(&str, Edit); 6] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
+        ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
+            v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
+        }),
+        ("method.field.hash-grid.init_scale: -1 is not", |v| {
+            v["method"]["field"]["hash-grid"]["init_scale"] = (-1.0).into()
+        }),
         ("method.train.coarse_samples", |v| v["method"]["train"]["coarse_samples"] = 1.into()),
         ("method.train.adam.beta1", |v| v["method"]["train"]["adam"]["beta1"] = 1.0.into()),
         ("method.train.schedule", |v| v["method"]["train"]["schedule"]["initial"] = 0.0.into()),

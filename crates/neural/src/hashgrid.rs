@@ -170,11 +170,17 @@ impl HashGridConfig {
         if self.static_levels > 32 {
             return bad("static_levels", format!("{} not in 0..=32", self.static_levels));
         }
-        if self.mlp_depth == 0 || self.mlp_width == 0 || self.mlp_width > 1024 {
-            return bad("mlp_width", format!("depth {} width {}", self.mlp_depth, self.mlp_width));
+        if !(1..=16).contains(&self.mlp_depth) {
+            return bad("mlp_depth", format!("{} not in 1..=16 hidden layers", self.mlp_depth));
+        }
+        if !(1..=1024).contains(&self.mlp_width) {
+            return bad("mlp_width", format!("{} not in 1..=1024 units per hidden layer", self.mlp_width));
         }
         if !(self.init_scale >= 0.0 && self.init_scale.is_finite()) {
-            return bad("init_scale", format!("{}", self.init_scale));
+            return bad(
+                "init_scale",
+                format!("{} is not a finite, non-negative half-width of the tables' start", self.init_scale),
+            );
         }
         Ok(())
     }
