@@ -67,6 +67,8 @@ pub struct StartReport {
     pub mse: f64,
     pub mean_square: f64,
     pub seconds: f64,
+    /// The factor the target was multiplied by, when it lay outside [`START_LEVELS`].
+    pub rescaled: Option<f64>,
 }
 
 impl StartReport {
@@ -124,6 +126,15 @@ pub fn fit_to_frames<F: TrainableField>(
     fit_to_target(field, prep, &in_units, fit, seed)
 }
 
+/// The range of the target's RMS over the occupied points, as a multiple of the level the
+/// training images ask for ([`Prepared::mean_level`]), within which a start is taken as it is.
+/// Starts of the same scene measured 2.1–2.5; one 100 times too dim (a run of a scene whose
+/// `intensity_scale` differs, say) left a field the decoder could not bring back to life.
+pub const START_LEVELS: (f64, f64) = (0.1, 100.0);
+
+/// The ratio a start outside [`START_LEVELS`] is scaled to: that of a start of the same scene.
+const TYPICAL_LEVEL: f64 = 2.0;
+
 /// Fits `field` to `target` (module doc). `target(points, out)` writes the target in field
 /// units at box-normalised points (rows of `field.input_dim()` values: `x, y, z[, t']`).
 pub fn fit_to_target<F: TrainableField>(
@@ -142,7 +153,8 @@ pub fn fit_to_target<F: TrainableField>(
     let mut grads = vec![0f32; field.num_params()];
     let mut tape = field.new_tape();
     let (mut inputs, mut values, mut wanted, mut d_out) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0 };
+    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, rescaled: None };
+    let mut scale = 1.0f32;
     for step in 0..fit.iterations {
         let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed ^ START_KEY, step, 0));
         inputs.clear();
@@ -175,6 +187,30 @@ pub fn fit_to_target<F: TrainableField>(
                 format!("the starting field is not finite at {p:?} (box units)"),
             ));
         }
+        if step == 0 {
+            let rms = (wanted.iter().map(|&y| f64::from(y).powi(2)).sum::<f64>() / n as f64).sqrt();
+            if rms == 0.0 {
+                return Err(NeuralError::invalid(
+                    "start",
+                    "the starting field is zero at every occupied point: there is nothing to start from",
+                ));
+            }
+            let level = f64::from(prep.mean_level());
+            let ratio = rms / level;
+            if level > 0.0 && !(START_LEVELS.0..=START_LEVELS.1).contains(&ratio) {
+                scale = (TYPICAL_LEVEL / ratio) as f32;
+                last.rescaled = Some(f64::from(scale));
+                log::warn!(
+                    "the starting field is {:.3e} times the level the training images ask for (a start of the \
+                     same scene is about 1): its values look like those of other units (another \
+                     intensity_scale, 8- against 16-bit images); it is multiplied by {scale:.3e} before the fit",
+                    ratio / TYPICAL_LEVEL
+                );
+            }
+        }
+        if scale != 1.0 {
+            wanted.iter_mut().for_each(|v| *v *= scale);
+        }
         field.forward(&inputs, &mut values, &mut tape);
         d_out.clear();
         let (mut se, mut sq) = (0f64, 0f64);
@@ -187,7 +223,7 @@ pub fn fit_to_target<F: TrainableField>(
         grads.fill(0.0);
         field.backward(&mut tape, &d_out, &mut grads);
         adam.step(field.params_mut(), &grads, fit.learning_rate);
-        last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, seconds: 0.0 };
+        last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, ..last };
     }
     last.seconds = t0.elapsed().as_secs_f64();
     Ok(last)

@@ -67,6 +67,30 @@ fn a_fit_recovers_a_target_the_field_can_represent() {
     assert!(report.seconds >= 0.0);
 }
 
+/// A start far dimmer than the images ask for (values in other units) is scaled to their level
+/// before the fit, and said so in the report; one at their level is taken as it is.
+#[test]
+fn a_start_in_other_units_is_scaled_to_the_images() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let level = prep.mean_level();
+    let fit = StartFit { iterations: 150, points: 2048, learning_rate: 5e-2 };
+    let mean = |field: &DenseGridField| eval(field, &[0.5f32; 3])[0];
+    for (dim, rescaled) in [(1.0f32, false), (1e-3, true), (1e4, true)] {
+        let to_target = |_: &[f32], out: &mut [f32]| out.fill(2.0 * level * dim);
+        let mut field = DenseGridField::new([5, 5, 5], 0.5);
+        let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3).expect("fits");
+        assert_eq!(report.rescaled.is_some(), rescaled, "{dim}: {report:?}");
+        let reached = mean(&field) / level;
+        let wanted = if rescaled { 2.0 } else { 2.0 * dim };
+        assert!((reached / wanted - 1.0).abs() < 0.05, "{dim}: the field reached {reached} × the level");
+    }
+    let zero = |_: &[f32], out: &mut [f32]| out.fill(0.0);
+    let mut field = DenseGridField::new([5, 5, 5], 0.5);
+    let err = fit_to_target(&mut field, &prep, &zero, &fit, 3).expect_err("a zero start").to_string();
+    assert!(err.contains("zero at every occupied point"), "{err}");
+}
+
 #[test]
 fn a_fit_is_reproducible_from_its_seed() {
     let problem = problem();
