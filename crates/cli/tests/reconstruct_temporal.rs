@@ -344,3 +344,55 @@ fn time_resolved_windows_start_from_their_instants_voxel_runs() {
         "not a voxel method",
     );
 }
+
+/// A run stopped inside its first window writes the frames that window trained and no others:
+/// the report lists the instants it did not reach (a held-out time among them) and
+/// `volumes.pvd` only the frames written. `--resume` then writes the whole series, as an
+/// uninterrupted run does.
+#[test]
+fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
+    use std::ops::ControlFlow;
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 6, 24, 12, &["--times", "14,15,16,17,18,19"]);
+    // Windows of 3 frames overlapping by 1: frames 0..3, 2..5, 3..6.
+    let args = "reconstruct scene --method tr-fast --window 3 --overlap 1 --holdout-times 18.5 --max-iterations 12 \
+                --rays-per-image 64 --coarse-samples 16 --resolution 12 --checkpoint-every 0 -q -o full";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+
+    // The same run, stopped at the fifth iteration of its first window.
+    let scene = fluidnerf_io::scene::load_scene(&d.join("scene")).expect("scene");
+    let mut config = fluidnerf_pipeline::RunConfig::read(&d.join("full/config.json")).expect("config");
+    config.scene = scene.root.clone();
+    let dir =
+        fluidnerf_pipeline::RunDir::create(d.join("cut"), fluidnerf_pipeline::Overwrite::Refuse, Some(&scene.root))
+            .expect("run folder");
+    let cut = fluidnerf_pipeline::reconstruct(&scene, &config, &dir, |e| match e {
+        fluidnerf_pipeline::RunEvent::Iteration { iteration: 5.., .. } => ControlFlow::Break(()),
+        _ => ControlFlow::Continue(()),
+    })
+    .expect("runs");
+    drop(dir);
+    assert_eq!(cut.status, fluidnerf_pipeline::RunStatus::Interrupted);
+    assert_eq!(cut.windows.len(), 1);
+    let written: Vec<(Option<f64>, bool)> = cut.volumes.iter().map(|v| (v.time, v.trained)).collect();
+    assert_eq!(written, [(Some(14.0), true), (Some(15.0), true), (Some(16.0), true)]);
+    assert_eq!(cut.not_reached, [17.0, 18.0, 18.5, 19.0]);
+    assert!(cut.warnings.iter().any(|w| w.contains("t = 17, 18, 18.5, 19") && w.contains("--resume")), "{cut:?}");
+    let on_disk = report(&d.join("cut"));
+    assert_eq!(on_disk["not_reached"], serde_json::json!([17.0, 18.0, 18.5, 19.0]));
+    assert_eq!(files(&d.join("cut"), "frames", ".npy").len(), 3, "volumes written past the trained frames");
+    let pvd = std::fs::read_to_string(d.join("cut/volumes.pvd")).expect("pvd");
+    assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
+    assert!(pvd.contains("timestep=\"16\"") && !pvd.contains("timestep=\"17\""), "{pvd}");
+
+    // Resumed, it writes what the uninterrupted run writes.
+    ok(&fluidnerf(d, &["reconstruct", "-o", "cut", "--resume", "-q"]));
+    let resumed = report(&d.join("cut"));
+    assert_eq!(resumed["status"], "finished");
+    assert_eq!(resumed["not_reached"], serde_json::json!([]));
+    assert_eq!(resumed["volumes"].as_array().map(Vec::len), Some(7));
+    let volumes = files(&d.join("full"), "frames", ".npy");
+    assert_eq!(volumes.len(), 7);
+    assert!(volumes == files(&d.join("cut"), "frames", ".npy"), "the resumed run's volumes differ");
+}

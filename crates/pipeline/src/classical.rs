@@ -365,6 +365,7 @@ pub(crate) fn run(
         final_nrmse: metrics.as_ref().map(|m| m.global.nrmse),
         final_ssim_global: metrics.as_ref().map(|m| m.global.ssim_global),
         volumes: vec![VolumeRecord { file: "volume.npy".into(), time: None, trained: true, dims: grid.dims, metrics }],
+        not_reached: Vec::new(),
         classical: Some(ClassicalDetails {
             projector: kind,
             splat_subdivisions: (kind == ProjectorKind::Splat).then_some(subdivisions),

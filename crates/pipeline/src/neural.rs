@@ -564,6 +564,7 @@ impl Ctx<'_> {
             final_nrmse: metrics.as_ref().map(|m| m.global.nrmse),
             final_ssim_global: metrics.as_ref().map(|m| m.global.ssim_global),
             volumes: vec![VolumeRecord { file: "volume.npy".into(), time: None, trained: true, dims, metrics }],
+            not_reached: Vec::new(),
             classical: None,
             neural: Some(NeuralDetails {
                 preset: self.spec.preset.clone(),

@@ -197,6 +197,12 @@ pub struct RunReport {
     pub result_bytes: u64,
     pub history: History,
     pub volumes: Vec<VolumeRecord>,
+    /// The instants (training and held-out times, increasing) of a time-resolved run that was
+    /// stopped before its windows reached them: no volume is written there, and its field does
+    /// not stand for them (after the last trained frame it only repeats that frame). Empty
+    /// when the run reached every instant; `--resume` trains the rest.
+    #[serde(default)]
+    pub not_reached: Vec<f64>,
     /// Mean volume NRMSE over the trained times with truth (the static result's NRMSE).
     pub final_nrmse: Option<f64>,
     pub final_ssim_global: Option<f64>,

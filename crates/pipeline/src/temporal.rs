@@ -2,7 +2,9 @@
 //! time trained on a scene whose frames carry times (dissertation §5.2), in windows.
 //!
 //! Writes `frames/volume_NNN.npy|.vti` at every training time and every held-out time, in
-//! increasing time, `volumes.pvd` (the ParaView collection of the series), the weights and
+//! increasing time (a stopped run: at those up to the last frame its windows trained; the
+//! later ones are listed in the report's `not_reached`), `volumes.pvd` (the ParaView
+//! collection of the series), the weights and
 //! checkpoints of every window under `windows/`, and `temporal.json`, from which
 //! `fluidnerf_neural::temporal::load_temporal` rebuilds the stitched field E(x, t).
 //! `windows/progress.json` records the window plan and the finished windows when each
@@ -542,11 +544,27 @@ impl Ctx<'_> {
         )?;
         let stitched = StitchedField::from_run(&run)?;
 
-        // Volumes at every training and held-out time, and their metrics.
+        // Volumes at every training and held-out time the windows reached, and their metrics.
         let t_eval = Instant::now();
-        let mut out_times: Vec<(f64, bool)> = run.frame_times.iter().map(|&t| (t, true)).collect();
-        out_times.extend(spec.holdout_times.iter().map(|&t| (t, false)));
-        out_times.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut all_times: Vec<(f64, bool)> = run.frame_times.iter().map(|&t| (t, true)).collect();
+        all_times.extend(spec.holdout_times.iter().map(|&t| (t, false)));
+        all_times.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // A stopped run's windows cover the first frames only: after the last of them its field
+        // only repeats that frame, so no volume stands for a later time.
+        let covered = run.windows.iter().map(|w| w.frames.end).max().unwrap_or(0).max(1);
+        let last_reached = run.frame_times[covered - 1];
+        let reached = |t: f64| covered == run.frame_times.len() || t <= last_reached || same_time(t, last_reached);
+        let not_reached: Vec<f64> = all_times.iter().map(|&(t, _)| t).filter(|&t| !reached(t)).collect();
+        let out_times: Vec<(f64, bool)> = all_times.into_iter().filter(|&(t, _)| reached(t)).collect();
+        if !not_reached.is_empty() {
+            let list: Vec<String> = not_reached.iter().map(f64::to_string).collect();
+            session.warn(&format!(
+                "the run was stopped before it reached t = {} (its windows trained up to t = {last_reached}): no \
+                 volume is written there; continue it with `reconstruct --resume` (`overwrite=\"resume\"` from \
+                 Python)",
+                list.join(", ")
+            ));
+        }
         let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
         let mut volumes = Vec::new();
         let mut pvd_entries = Vec::new();
@@ -617,6 +635,7 @@ impl Ctx<'_> {
             final_nrmse,
             final_ssim_global: mean(trained().map(|m| m.global.ssim_global)),
             volumes,
+            not_reached,
             classical: None,
             neural: None,
             windows: run
