@@ -346,8 +346,9 @@ fn time_resolved_windows_start_from_their_instants_voxel_runs() {
 }
 
 /// A run stopped inside its first window writes the frames that window trained and no others:
-/// the report lists the instants it did not reach (a held-out time among them) and
-/// `volumes.pvd` only the frames written. `--resume` then writes the whole series, as an
+/// the report lists the instants it did not reach (a held-out time among them), `volumes.pvd`
+/// only the frames written, and `export`, `render` and `eval` at an instant it did not reach
+/// refuse, naming the time and `--resume`. `--resume` then writes the whole series, as an
 /// uninterrupted run does.
 #[test]
 fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
@@ -386,6 +387,19 @@ fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
     assert_eq!(pvd.matches("<DataSet").count(), 3, "{pvd}");
     assert!(pvd.contains("timestep=\"16\"") && !pvd.contains("timestep=\"17\""), "{pvd}");
 
+    // Its field is read at the instants it trained, and refused at those it did not reach.
+    ok(&fluidnerf(d, &["export", "cut", "--out", "exp", "--npy", "--time", "15", "--resolution", "12", "-q"]));
+    let never = "time 18 was never trained: the run was stopped before it reached t = 17, 18, 18.5, 19 (its \
+                 windows trained 14 … 16); continue it with `reconstruct --resume`";
+    common::refused(&fluidnerf(d, &["export", "cut", "--out", "exp18", "--npy", "--time", "18", "-q"]), never);
+    common::refused(
+        &fluidnerf(d, &["render", "cut", "--scene", "scene", "--out", "ren18", "--camera", "0", "--time", "18"]),
+        never,
+    );
+    for args in [&["eval", "cut", "--no-regions"][..], &["eval", "cut", "--no-regions", "--use-volume"]] {
+        common::refused(&fluidnerf(d, args), "time 17 was never trained");
+    }
+
     // Resumed, it writes what the uninterrupted run writes.
     ok(&fluidnerf(d, &["reconstruct", "-o", "cut", "--resume", "-q"]));
     let resumed = report(&d.join("cut"));
@@ -395,4 +409,5 @@ fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
     let volumes = files(&d.join("full"), "frames", ".npy");
     assert_eq!(volumes.len(), 7);
     assert!(volumes == files(&d.join("cut"), "frames", ".npy"), "the resumed run's volumes differ");
+    ok(&fluidnerf(d, &["export", "cut", "--out", "exp18", "--npy", "--time", "18", "--resolution", "12", "-q"]));
 }

@@ -13,19 +13,42 @@ use fluidnerf_neural::trained::ModelRecord;
 
 use crate::{Family, PipelineError, RunConfig, RunDir, RunKind, RunReport};
 
-/// The time at which to sample a result whose instants span `range` (None for a static one)
-/// for `what` (an option or a frame, named in errors): `given`, refused when it is not finite
-/// or lies outside a time-resolved run's instants (where its field only repeats its first or
-/// last one); else the first instant, and 0 for static results.
-pub fn sample_time(range: Option<(f64, f64)>, given: Option<f64>, what: &str) -> Result<f64, PipelineError> {
+/// The instants a time-resolved run's field stands for ([`LoadedRun::time_span`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimeSpan {
+    /// The first frame time its windows trained.
+    pub first: f64,
+    /// The last frame time its windows trained: outside `first … last` the field only repeats
+    /// one of them.
+    pub last: f64,
+    /// The later instants of the recording (frame and held-out times, increasing) that the run
+    /// was stopped before reaching; `reconstruct --resume` trains them. Empty for a run that
+    /// reached every instant.
+    pub not_reached: Vec<f64>,
+}
+
+/// The time at which to sample a result whose instants are `span` (None for a static one) for
+/// `what` (an option or a frame, named in errors): `given`, refused when it is not finite or
+/// lies outside a time-resolved run's instants (where its field only repeats its first or last
+/// one, or, after a stopped run's last trained frame, was never trained); else the first
+/// instant, and 0 for static results.
+pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> Result<f64, PipelineError> {
     let refuse = |why: String| PipelineError::invalid(what, why);
     if let Some(t) = given.filter(|t| !t.is_finite()) {
         return Err(refuse(format!("the time must be a finite number, got {t}")));
     }
-    let Some((first, last)) = range else { return Ok(given.unwrap_or(0.0)) };
+    let Some(&TimeSpan { first, last, ref not_reached }) = span else { return Ok(given.unwrap_or(0.0)) };
     let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
     match given {
         None => Ok(first),
+        Some(t) if t > last + slack && !not_reached.is_empty() => {
+            let list: Vec<String> = not_reached.iter().map(f64::to_string).collect();
+            Err(refuse(format!(
+                "time {t} was never trained: the run was stopped before it reached t = {} (its windows trained \
+                 {first} … {last}); continue it with `reconstruct --resume` (`overwrite=\"resume\"` from Python)",
+                list.join(", ")
+            )))
+        }
         Some(t) if t < first - slack || t > last + slack => {
             Err(refuse(format!("time {t} lies outside the time-resolved run's instants {first} … {last}")))
         }
@@ -99,18 +122,32 @@ impl LoadedRun {
         })
     }
 
-    /// The first and last instants of a time-resolved run (`temporal.json`); None for static
-    /// runs. Its field is clamped to them outside, so it stands for nothing there.
-    pub fn time_range(&self) -> Result<Option<(f64, f64)>, PipelineError> {
+    /// The instants of a time-resolved run (`temporal.json`, and `not_reached` of its report);
+    /// None for static runs. Its field is clamped to its first and last trained frames
+    /// outside them, so it stands for nothing there.
+    pub fn time_span(&self) -> Result<Option<TimeSpan>, PipelineError> {
         if self.kind != RunKind::Temporal {
             return Ok(None);
         }
         let path = self.dir.join("temporal.json");
         let record: fluidnerf_neural::temporal::TemporalRecord = crate::rundir::read_json(&path)?;
-        match (record.frame_times.first(), record.frame_times.last()) {
-            (Some(&a), Some(&b)) if a.is_finite() && b.is_finite() && a <= b => Ok(Some((a, b))),
-            _ => Err(PipelineError::file(&path, "frame_times: no frames, or not finite and increasing")),
+        let times = &record.frame_times;
+        if times.is_empty() || times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[0] > w[1]) {
+            return Err(PipelineError::file(&path, "frame_times: no frames, or not finite and increasing"));
         }
+        // A stopped run's windows cover its first frames only.
+        let covered = record.windows.iter().map(|w| w.frames[1]).max().unwrap_or(0);
+        if covered == 0 || covered > times.len() {
+            return Err(PipelineError::file(
+                &path,
+                format!("its windows cover frames 0..{covered} of {}", times.len()),
+            ));
+        }
+        let mut not_reached = times[covered..].to_vec();
+        not_reached.extend(self.report.iter().flat_map(|r| r.not_reached.iter().copied()));
+        not_reached.sort_by(f64::total_cmp);
+        not_reached.dedup_by(|a, b| fluidnerf_core::scene::same_time(*a, *b));
+        Ok(Some(TimeSpan { first: times[0], last: times[covered - 1], not_reached }))
     }
 
     /// Every volume written, with its time (None for static runs).

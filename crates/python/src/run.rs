@@ -292,8 +292,8 @@ impl PyRun {
 
     /// The result evaluated at world points `(N, 3)` (x, y, z) at `time`: the trained field
     /// of neural runs, the volume sampled trilinearly for voxel runs. Returns `(N,)` float32.
-    /// For a time-resolved run `time` must lie between its first and last instants (default:
-    /// the first); static results ignore it.
+    /// For a time-resolved run `time` must lie between its first and last instants (a stopped
+    /// run: the last it trained; default: the first); static results ignore it.
     #[pyo3(signature = (points, time=None))]
     fn field<'py>(
         &mut self,
@@ -301,8 +301,9 @@ impl PyRun {
         points: PyReadonlyArray2<'py, f32>,
         time: Option<f64>,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
-        let range = self.run.time_range().map_err(|e| err(e.to_string()))?;
-        let time = fluidnerf_pipeline::load::sample_time(range, time, "time").map_err(|e| err(e.to_string()))?;
+        let span = self.run.time_span().map_err(|e| err(e.to_string()))?;
+        let time =
+            fluidnerf_pipeline::load::sample_time(span.as_ref(), time, "time").map_err(|e| err(e.to_string()))?;
         let p = points.as_array();
         if p.ncols() != 3 {
             return Err(err(format!("points: expected shape (N, 3), got {:?}", p.shape())));

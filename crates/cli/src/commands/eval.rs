@@ -371,20 +371,27 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Res
                     run.aabb.max
                 );
             }
-            if use_volume || run.kind == fluidnerf_pipeline::RunKind::Volume {
-                return Ok(Recon::Volumes(run.volumes()?.into_iter().map(|(_, v)| v).collect()));
-            }
-            if let Some((first, last)) = run.time_range()? {
-                // A time-resolved field repeats its first or last instant outside them.
+            let use_volume = use_volume || run.kind == fluidnerf_pipeline::RunKind::Volume;
+            // A time-resolved field repeats its first or last instant outside them (its volumes
+            // may stand for held-out times there), and a stopped run has neither field nor
+            // volumes at the instants it did not reach.
+            if let Some(span) = run.time_span()?.filter(|s| !use_volume || !s.not_reached.is_empty()) {
                 let times = scene.truth.iter().map(|t| (t.time, "truth volume", &t.file_path));
                 let times = times.chain(scene.frames.iter().map(|f| (f.time, "frame", &f.file_path)));
                 for (time, what, path) in times {
                     let what = format!("{}: the scene's {what} {}", dir.display(), path.display());
                     let Some(t) = time else {
-                        bail!("{what} has no time, but the run is time-resolved (instants {first} … {last})");
+                        bail!(
+                            "{what} has no time, but the run is time-resolved (instants {} … {})",
+                            span.first,
+                            span.last
+                        );
                     };
-                    fluidnerf_pipeline::load::sample_time(Some((first, last)), Some(t), &what)?;
+                    fluidnerf_pipeline::load::sample_time(Some(&span), Some(t), &what)?;
                 }
+            }
+            if use_volume {
+                return Ok(Recon::Volumes(run.volumes()?.into_iter().map(|(_, v)| v).collect()));
             }
             return Ok(Recon::Field(run.field()?));
         }

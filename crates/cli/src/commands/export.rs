@@ -105,11 +105,11 @@ pub struct Args {
 /// A loaded reconstruction.
 pub(crate) enum Source {
     Volume(Volume),
-    /// A trained field; `times`: the first and last instants of a time-resolved one.
+    /// A trained field; `times`: the instants of a time-resolved one.
     Field {
         field: Box<dyn ScalarField + Send + Sync>,
         aabb: Aabb,
-        times: Option<(f64, f64)>,
+        times: Option<fluidnerf_pipeline::load::TimeSpan>,
     },
 }
 
@@ -130,13 +130,14 @@ impl Source {
 
     /// The time at which to sample the source for `what` (`--time`, a frame): `given`, refused
     /// when not finite or outside a time-resolved field's instants (where the field only
-    /// repeats its first or last one); else that field's first instant, and 0 for the others.
+    /// repeats its first or last one, or a stopped run never trained); else that field's first
+    /// instant, and 0 for the others.
     pub(crate) fn sample_time(&self, given: Option<f64>, what: &str) -> anyhow::Result<f64> {
-        let range = match self {
-            Source::Field { times, .. } => *times,
+        let span = match self {
+            Source::Field { times, .. } => times.as_ref(),
             Source::Volume(_) => None,
         };
-        Ok(fluidnerf_pipeline::load::sample_time(range, given, what)?)
+        Ok(fluidnerf_pipeline::load::sample_time(span, given, what)?)
     }
 
     /// Warns that `--time` (`given`) changes nothing when the source is fixed in time: a volume,
@@ -186,7 +187,7 @@ pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<
         let run = fluidnerf_pipeline::load::LoadedRun::open(path, scene.map(|s| s.aabb))?;
         return Ok(match run.kind {
             fluidnerf_pipeline::RunKind::Volume => Source::Volume(run.first_volume()?),
-            _ => Source::Field { field: run.field()?, aabb: run.aabb, times: run.time_range()? },
+            _ => Source::Field { field: run.field()?, aabb: run.aabb, times: run.time_span()? },
         });
     }
     if !path.exists() {
