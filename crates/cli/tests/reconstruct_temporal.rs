@@ -411,3 +411,55 @@ fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
     assert!(volumes == files(&d.join("cut"), "frames", ".npy"), "the resumed run's volumes differ");
     ok(&fluidnerf(d, &["export", "cut", "--out", "exp18", "--npy", "--time", "18", "--resolution", "12", "-q"]));
 }
+
+/// A time whose every frame the scene holds out is reconstructed and scored as a held-out time,
+/// as one given to `--holdout-times` is, and the run says so: between training times it comes
+/// from the field there (eval scores it and reprojects its frames), at the end it is held at
+/// the last training time, with the same warning as a held-out time there.
+#[test]
+fn a_time_whose_frames_are_all_held_out_is_reconstructed_as_a_held_out_time() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 12, &["--times", "14,15,16"]);
+    let transforms = d.join("scene/transforms.json");
+    let original: serde_json::Value = json(&transforms);
+    let hold_out = |time: f64| {
+        let mut scene = original.clone();
+        for frame in scene["frames"].as_array_mut().expect("frames") {
+            if frame["time"] == time {
+                frame["holdout"] = serde_json::json!(true);
+            }
+        }
+        std::fs::write(&transforms, scene.to_string()).expect("writes");
+    };
+    let run = |out: &str| {
+        let args = "reconstruct scene --method tr-fast --max-iterations 8 --rays-per-image 32 --coarse-samples 8 \
+                    --resolution 12 --checkpoint-every 0 -q --force -o";
+        ok(&fluidnerf(d, &args.split_whitespace().chain([out]).collect::<Vec<_>>()));
+        report(&d.join(out))
+    };
+    let volumes = |r: &serde_json::Value| -> Vec<(f64, bool)> {
+        let v = r["volumes"].as_array().expect("volumes");
+        v.iter().map(|v| (v["time"].as_f64().expect("time"), v["trained"] == true)).collect()
+    };
+    let warned = |r: &serde_json::Value, needle: &str| {
+        r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains(needle)))
+    };
+    let every = |t: &str| format!("every frame at t = {t} is held out in the scene");
+
+    hold_out(15.0);
+    let middle = run("middle");
+    assert_eq!(volumes(&middle), [(14.0, true), (15.0, false), (16.0, true)]);
+    assert!(middle["volumes"][1]["metrics"]["global"]["nrmse"].is_number(), "{middle}");
+    assert!(warned(&middle, &every("15")) && !warned(&middle, "outside the training times"), "{middle}");
+    ok(&fluidnerf(d, &["eval", "middle", "--no-regions", "--json", "middle.json"]));
+    let scored = json(&d.join("middle.json"));
+    assert_eq!(scored["steps"].as_array().map(Vec::len), Some(3));
+    assert_eq!(scored["reprojection"].as_array().map(Vec::len), Some(4), "the frames at t = 15 are reprojected");
+
+    hold_out(16.0);
+    let end = run("end");
+    assert_eq!(volumes(&end), [(14.0, true), (15.0, true), (16.0, false)]);
+    assert!(warned(&end, &every("16")), "{end}");
+    assert!(warned(&end, "held-out time 16 lies outside the training times"), "{end}");
+}

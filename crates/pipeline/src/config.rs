@@ -396,7 +396,7 @@ pub struct TemporalSpec {
     pub train: TrainConfig,
     pub windows: WindowConfig,
     /// Frame times whose images are not trained on; volumes and metrics are still produced
-    /// there. Default none.
+    /// there (as at a time whose every frame the scene holds out). Default none.
     #[serde(default)]
     pub holdout_times: Vec<f64>,
     /// Frame spacing Δt of `t' = (t − t₀)/Δt`; None: the smallest gap between training times.

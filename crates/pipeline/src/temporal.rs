@@ -156,7 +156,7 @@ fn setup(
     truth: &[(Option<f64>, Volume)],
     session: &mut Session,
 ) -> Result<Setup, PipelineError> {
-    let MethodConfig::Temporal(method, spec) = config.effective_method() else {
+    let MethodConfig::Temporal(method, mut spec) = config.effective_method() else {
         return Err(PipelineError::invalid(
             "method",
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
@@ -182,6 +182,19 @@ fn setup(
             format!("{}: no training images left (all their times are held out)", scene.root.display()),
         ));
     }
+    // A time whose every frame the scene holds out has no image to train on either: it is
+    // reconstructed and scored as a held-out time, as those of `holdout_times` are.
+    let mut unseen: Vec<f64> =
+        problem.holdout.iter().map(|v| v.time).filter(|&t| !times.iter().any(|&f| same_time(f, t))).collect();
+    unseen.sort_by(f64::total_cmp);
+    unseen.dedup_by(|a, b| same_time(*a, *b));
+    for &t in &unseen {
+        session.warn(&format!(
+            "every frame at t = {t} is held out in the scene, so no image of that time is trained on: t = {t} is \
+             reconstructed from the training times and scored as a held-out time (as with --holdout-times)"
+        ));
+    }
+    spec.holdout_times.extend(unseen);
     if times.len() < 2 && method != Method::StaticPerFrame {
         session.warn("the scene has a single training time; a time-resolved field reduces to a static one");
     }
