@@ -372,4 +372,11 @@ fn a_resume_after_the_box_changed_and_a_failed_run_are_handled() {
     );
     ok(&hybrid(&[]));
     assert!(d.join("hyb/start/config.json").is_file(), "the hybrid run kept no start");
+    // A run killed outright before its first checkpoint leaves its configuration alone: the
+    // rerun is told to replace it, and --resume that there is nothing to resume.
+    std::fs::create_dir(d.join("dead")).expect("mkdir");
+    std::fs::copy(d.join("new/config.json"), d.join("dead/config.json")).expect("copies");
+    refused(&run("dead", &["--max-iterations", "5"]), "stopped before its first checkpoint");
+    refused(&run("dead", &["--max-iterations", "5", "--resume"]), "use --force to replace it");
+    ok(&run("dead", &["--max-iterations", "5", "--force"]));
 }

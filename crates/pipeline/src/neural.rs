@@ -96,7 +96,9 @@ pub(crate) fn run(
     if dir.resuming() && !dir.checkpoint().is_file() {
         return Err(PipelineError::RunDir {
             path: dir.root().to_path_buf(),
-            why: "nothing to resume: no checkpoint.safetensors to continue from".into(),
+            why: "nothing to resume: no checkpoint.safetensors to continue from (the run stopped before its first \
+                  checkpoint); use --force to replace it"
+                .into(),
         });
     }
     if scene.training_frames().next().is_none() {

@@ -332,6 +332,16 @@ impl RunDir {
                         .into(),
                 ))
             }
+            (DirState::Unfinished, Overwrite::Refuse)
+                if !dir.checkpoint().exists() && !dir.path("windows").exists() =>
+            {
+                return Err(refuse(
+                    "holds an unfinished run that stopped before its first checkpoint (run files but no \
+                     report.json: it died or was killed), so there is nothing to resume; use --force to replace \
+                     it (from Python `overwrite=\"force\"`)"
+                        .into(),
+                ))
+            }
             (DirState::Unfinished, Overwrite::Refuse) => {
                 return Err(refuse(
                     "holds an unfinished run (run files but no report.json: it died or was killed); use --resume \
