@@ -113,6 +113,13 @@ fn import_export_render_and_synth_refuse_folders_of_another_kind() {
         let compare = |out: &str| fluidnerf(d, &[&["compare", "r1", "-o", out][..], force].concat());
         refused(&compare("s"), "is a scene folder");
         refused(&compare("r2"), "is a reconstruction run folder");
+        // A file where the folder, or one of its parents, would go is named as such.
+        std::fs::write(d.join("afile"), "mine").expect("writes");
+        for out in [export("afile"), render("afile"), synth("afile"), compare("afile")] {
+            refused(&out, "afile: exists and is not a folder");
+        }
+        refused(&export("afile/sub"), "afile/sub: cannot create the output folder, ");
+        assert_eq!(std::fs::read_to_string(d.join("afile")).expect("reads"), "mine");
     }
     assert_eq!(files(&d.join("s")), scene);
     assert_eq!(files(&d.join("r1")), run1);

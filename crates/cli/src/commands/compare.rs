@@ -426,7 +426,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             })
             .collect(),
     };
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::create_output_folder(out)?;
     for ext in ["png", "svg"] {
         let path = out.join(format!("time_to_accuracy.{ext}"));
         write_plots(&path, std::slice::from_ref(&plot), 1).with_context(|| format!("writing {}", path.display()))?;

@@ -5,8 +5,6 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context;
-
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StoppingPolicy};
 
@@ -71,7 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if out.join("report.html").exists() && !args.force {
         anyhow::bail!("{} already holds a demo; pass --force to replace it", out.display());
     }
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::create_output_folder(out)?;
     let start = Instant::now();
     let scene_dir = out.join("scene");
     #[allow(clippy::print_stdout)]

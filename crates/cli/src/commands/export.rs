@@ -366,7 +366,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("{} exists; pass --force to overwrite it", p.display());
         }
     }
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::create_output_folder(out)?;
 
     let [nx, ny, nz] = volume.dims;
     println!("{}: {} sampled on {nx}x{ny}x{nz} voxels", args.recon.display(), source.describe());

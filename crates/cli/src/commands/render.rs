@@ -398,7 +398,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         || format!("rendering {} views of {pixels} pixels in all", views.len()),
         8 * pixels + 4 * grid,
     )?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::create_output_folder(out)?;
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
     let mut baked: Option<(f64, Baked)> = None;

@@ -329,7 +329,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
             );
         }
     }
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    super::create_output_folder(out)?;
     let start = Instant::now();
     let total = g.layouts.len() * g.cameras.len() * g.noise.len() * g.methods.len();
     let mut rows = Vec::with_capacity(total);

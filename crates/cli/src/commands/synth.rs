@@ -544,7 +544,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
 
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    super::create_output_folder(&out)?;
     for f in &syn.frames {
         let path = out.join(syn.image_path(f));
         match &syn.real {
