@@ -287,3 +287,85 @@ fn a_run_folder_names_its_own_scene_for_eval_and_render() {
     assert!(!gone.status.success() && err.contains("which is not there") && err.contains("--scene"), "{err}");
     assert!(!d.join("views2").exists(), "nothing written");
 }
+
+/// Every file under `dir` with its bytes.
+fn snapshot(dir: &Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).expect("lists") {
+            let path = entry.expect("entry").path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                files.push((path.clone(), std::fs::read(&path).expect("reads")));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+#[test]
+fn never_overwrites_its_inputs_nor_the_scenes_or_the_runs_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    std::fs::create_dir(d.join("scene")).expect("mkdir");
+    make_scene(&d.join("scene"), &[]);
+    let run = fluidnerf(&["reconstruct", "scene", "-o", "run", "--method", "asart", "--max-iterations", "2"], d);
+    assert!(run.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&run.stderr));
+    std::fs::write(d.join("scene/synth.json"), "{}").expect("writes a scene record");
+
+    let score = |extra: &[&str]| {
+        let mut args = vec!["eval", "run", "--no-regions", "--force"];
+        args.extend_from_slice(extra);
+        fluidnerf(&args, d)
+    };
+    let mut cases: Vec<(&[&str], &str)> = vec![
+        (&["--json", "scene/transforms.json"], "scene/transforms.json: is the scene file"),
+        (&["--csv", "scene/images/t0_c0.tif"], "as an image"),
+        (&["--csv", "scene/images/../images/t0_c3.tif"], "as an image"),
+        (&["--json", "scene/truth_0.npy"], "as ground truth"),
+        (&["--json", "scene/synth.json"], "the scene's record synth.json"),
+        (&["--json", "run/config.json"], "run/config.json: is the file config.json that the run in run wrote"),
+        (&["--csv", "run/report.json"], "is the file report.json that the run"),
+        (&["--csv", "run/report.html"], "is the file report.html that the run"),
+        (&["--json", "./run/volume.npy"], "is the file volume.npy that the run"),
+        (&["--json", "run/volume.vti", "--csv", "elsewhere.csv"], "--json: run/volume.vti"),
+        (&["--json", "run/eval.json", "--csv", "run/volume.npy"], "--csv: run/volume.npy"),
+        (&["--truth", "scene/truth_0.npy", "--json", "scene/truth_0.npy"], "as ground truth"),
+    ];
+    // The same files by another way there.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(d.join("scene"), d.join("alias")).expect("links");
+        cases.push((&["--json", "alias/transforms.json"], "alias/transforms.json: is the scene file"));
+        cases.push((&["--csv", "alias/images/t0_c1.tif"], "as an image"));
+    }
+    let before = snapshot(d);
+    for (extra, needle) in cases {
+        let out = score(extra);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(needle) && e.contains("never overwritten"), "{extra:?}: {e}");
+    }
+    // A volume file given to score, and the truth given in its place.
+    let out = fluidnerf(&["eval", "run/volume.npy", "--scene", "scene", "--csv", "run/volume.npy", "--force"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("a reconstruction volume being scored"), "{e}");
+    std::fs::copy(d.join("scene/truth_0.npy"), d.join("truth.npy")).expect("copies the truth");
+    let out = fluidnerf(&["eval", "run", "--truth", "truth.npy", "--json", "truth.npy", "--force"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("truth.npy: is the ground truth given with --truth"), "{e}");
+    std::fs::remove_file(d.join("truth.npy")).expect("removes the copy");
+    assert!(before == snapshot(d), "a refused evaluation changed a file");
+
+    // Results go anywhere else: into the run folder by default (and again with --force), or
+    // under new names, in the run's folder or the scene's.
+    let out = fluidnerf(&["eval", "run", "--no-regions"], d);
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(score(&[]).status.success());
+    let out = score(&["--json", "run/eval.json", "--csv", "scene/eval.csv"]);
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(d.join("run/metrics.json").is_file() && d.join("run/eval.json").is_file());
+    assert!(d.join("scene/eval.csv").is_file());
+}

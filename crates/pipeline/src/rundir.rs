@@ -158,7 +158,7 @@ pub fn refuse_among_scene_inputs(out: &Path, scene_root: &Path) -> Result<(), Pi
             scene_root.display()
         )));
     }
-    for (file, what) in scene_inputs(scene_root) {
+    for (file, what) in scene_inputs(&scene_root.join(fluidnerf_io::scene::SCENE_FILE)) {
         if resolved(&file).starts_with(&out_abs) {
             return Err(refuse(format!(
                 "holds {} ({what} the scene reads); choose an output folder apart from the scene's inputs",
@@ -169,13 +169,87 @@ pub fn refuse_among_scene_inputs(out: &Path, scene_root: &Path) -> Result<(), Pi
     Ok(())
 }
 
-/// The files the scene file in `scene_root` lists, each with what it is for: frame images,
-/// masks, background frames and ground truth (relative paths resolved against the folder).
+/// Files of results that commands write into a scene folder beside its scene file: the
+/// settings `synth` and `import` record, and `synth`'s preview picture.
+const SCENE_RECORDS: [&str; 3] = ["synth.json", "import.json", "preview.png"];
+
+/// Refuses `out` as a file of results made from the scene file `scene_file` when it is that
+/// file, a file the scene reads (an image, mask, background frame or ground truth it lists) or
+/// a record written with the scene ([`SCENE_RECORDS`] beside the scene file). Replacing any of
+/// them, even when asked to overwrite, would destroy the scene.
+pub fn refuse_scene_file(out: &Path, scene_file: &Path) -> Result<(), PipelineError> {
+    let out_abs = resolved(out);
+    let refuse = |why: String| {
+        Err(PipelineError::File {
+            path: out.to_path_buf(),
+            why: format!("{why}; it is never overwritten, even with --force: choose another output file"),
+        })
+    };
+    if out_abs == resolved(scene_file) {
+        return refuse("is the scene file".into());
+    }
+    let root = scene_file.parent().unwrap_or(Path::new(""));
+    for name in SCENE_RECORDS {
+        if out_abs == resolved(&root.join(name)) {
+            return refuse(format!("is the scene's record {name}, written with it"));
+        }
+    }
+    for (file, what) in scene_inputs(scene_file) {
+        if out_abs == resolved(&file) {
+            return refuse(format!("is listed in the scene file {} as {what}", scene_file.display()));
+        }
+    }
+    Ok(())
+}
+
+/// Refuses `out` as a file of results about the run in `run_root` when it is a file the run
+/// wrote ([`RUN_FILES`], anything in its `frames/`, `windows/` or [`OWN_RUNS`] folders, its
+/// lock), or lies inside one of them. The evaluation of a run ([`EVAL_FILES`]) is written into
+/// its folder and may be replaced.
+pub fn refuse_run_file(out: &Path, run_root: &Path) -> Result<(), PipelineError> {
+    let (out_abs, root) = (resolved(out), resolved(run_root));
+    let Ok(inside) = out_abs.strip_prefix(&root) else { return Ok(()) };
+    let Some(first) = inside.components().next().and_then(|c| c.as_os_str().to_str()) else {
+        return Err(PipelineError::File {
+            path: out.to_path_buf(),
+            why: format!("is the run folder {}; give a file", run_root.display()),
+        });
+    };
+    let written = RUN_FILES.contains(&first) && !EVAL_FILES.contains(&first);
+    if written || OWN_RUNS.contains(&first) || first == ".lock" {
+        let what = if inside.components().count() > 1 { "lies in the folder" } else { "is the file" };
+        return Err(PipelineError::File {
+            path: out.to_path_buf(),
+            why: format!(
+                "{what} {first} that the run in {} wrote; a run's files are never overwritten, even with --force: \
+                 choose another output file (a new name inside the run folder is fine)",
+                run_root.display()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Refuses `out` as a file of results when it is `input`, a file the command reads (`what`
+/// says which, e.g. "the reconstruction").
+pub fn refuse_input_file(out: &Path, input: &Path, what: &str) -> Result<(), PipelineError> {
+    if resolved(out) == resolved(input) {
+        return Err(PipelineError::File {
+            path: out.to_path_buf(),
+            why: format!("is {what}; an input is never overwritten, even with --force: choose another output file"),
+        });
+    }
+    Ok(())
+}
+
+/// The files the scene file `scene_file` lists, each with what it is for: frame images, masks,
+/// background frames and ground truth (relative paths resolved against the file's folder).
 /// The scene was read before; a file that cannot be read here lists nothing.
-fn scene_inputs(scene_root: &Path) -> Vec<(PathBuf, &'static str)> {
+fn scene_inputs(scene_file: &Path) -> Vec<(PathBuf, &'static str)> {
     use serde_json::Value;
-    let file = scene_root.join(fluidnerf_io::scene::SCENE_FILE);
-    let Some(raw) = std::fs::read_to_string(&file).ok().and_then(|t| serde_json::from_str::<Value>(&t).ok()) else {
+    let scene_root = scene_file.parent().unwrap_or(Path::new(""));
+    let Some(raw) = std::fs::read_to_string(scene_file).ok().and_then(|t| serde_json::from_str::<Value>(&t).ok())
+    else {
         return Vec::new();
     };
     let mut found = Vec::new();
@@ -258,6 +332,10 @@ const RUN_FILES: [&str; 14] = [
     "metrics.json",
     "metrics.csv",
 ];
+
+/// The files of [`RUN_FILES`] that `eval` writes into a run's folder: not the run's own, so an
+/// evaluation may replace them.
+const EVAL_FILES: [&str; 2] = ["metrics.json", "metrics.csv"];
 
 /// Folders inside a run's folder that hold runs of their own, written by the run (`hybrid`'s
 /// voxel run, its start). They go with the run's files when they hold a run (its `config.json`),
@@ -756,6 +834,43 @@ mod tests {
         assert!(!scene.join("truth/.lock").exists());
         // A folder beside the scene is fine.
         drop(RunDir::create(tmp.path().join("run"), Overwrite::Refuse, Some(&scene)).unwrap());
+    }
+
+    #[test]
+    fn refuses_output_files_that_are_the_scenes_or_the_runs() {
+        let tmp = tempfile::tempdir().unwrap();
+        let scene = scene_with_inputs(tmp.path());
+        let file = scene.join("transforms.json");
+        for (out, needle) in [
+            (file.clone(), "is the scene file"),
+            (scene.join("images/../truth/volume.npy"), "as ground truth"),
+            (scene.join("images/r_0.png"), "as an image"),
+            (tmp.path().join("elsewhere/mask.png"), "as a mask"),
+            (scene.join("synth.json"), "the scene's record synth.json"),
+        ] {
+            let e = refuse_scene_file(&out, &file).unwrap_err().to_string();
+            assert!(e.contains(needle) && e.contains("--force"), "{}: {e}", out.display());
+        }
+        for fine in [scene.join("metrics.json"), scene.join("images/notes.csv"), tmp.path().join("metrics.json")] {
+            refuse_scene_file(&fine, &file).unwrap();
+        }
+
+        let run = tmp.path().join("run");
+        std::fs::create_dir_all(&run).unwrap();
+        for (name, needle) in [
+            ("config.json", "the file config.json"),
+            ("weights.safetensors", "the file weights.safetensors"),
+            ("frames/volume_000.npy", "in the folder frames"),
+            ("windows/progress.json", "in the folder windows"),
+            ("start/config.json", "in the folder start"),
+        ] {
+            let e = refuse_run_file(&run.join(name), &run).unwrap_err().to_string();
+            assert!(e.contains(needle), "{name}: {e}");
+        }
+        for fine in ["metrics.json", "metrics.csv", "eval.json"] {
+            refuse_run_file(&run.join(fine), &run).unwrap();
+        }
+        refuse_run_file(&tmp.path().join("config.json"), &run).unwrap();
     }
 
     #[test]

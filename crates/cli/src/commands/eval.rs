@@ -217,6 +217,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if json_path.is_some() && json_path == csv_path {
         bail!("--json and --csv name the same file; give two");
     }
+    let outputs = [
+        (if args.json.is_some() { "--json" } else { "the JSON output" }, &json_path),
+        (if args.csv.is_some() { "--csv" } else { "the CSV output" }, &csv_path),
+    ];
+    for (option, p) in outputs.iter().filter_map(|(o, p)| p.as_ref().map(|p| (o, p))) {
+        refuse_inputs(p, &scene_path, run_dir.as_deref(), &args).with_context(|| option.to_string())?;
+    }
     for p in json_path.iter().chain(csv_path.iter()) {
         if p.exists() && !args.force {
             bail!("{} exists; pass --force to overwrite it", p.display());
@@ -343,6 +350,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
             .with_context(|| format!("writing {}", path.display()))?;
         println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// Refuses `out` as an output file when it is a file this evaluation reads or that belongs to
+/// the scene or the run: the scene file and what it lists (images, masks, background frames,
+/// truth) or records, the files the run in `run_dir` wrote, the volume files given, and their
+/// sidecars. `--force` replaces earlier results, never the inputs they were made from.
+fn refuse_inputs(out: &Path, scene_path: &Path, run_dir: Option<&Path>, args: &Args) -> anyhow::Result<()> {
+    use fluidnerf_pipeline::rundir::{refuse_input_file, refuse_run_file, refuse_scene_file};
+    refuse_scene_file(out, &fluidnerf_io::scene::scene_file_path(scene_path))?;
+    if let Some(dir) = run_dir {
+        refuse_run_file(out, dir)?;
+    }
+    let volumes = args.recon.iter().filter(|_| run_dir.is_none()).map(|p| (p, "a reconstruction volume being scored"));
+    for (volume, what) in volumes.chain(args.truth.iter().map(|p| (p, "the ground truth given with --truth"))) {
+        refuse_input_file(out, volume, what)?;
+        let sidecar = fluidnerf_io::volume::raw_sidecar_path(volume);
+        if volume.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw")) {
+            refuse_input_file(out, &sidecar, &format!("the JSON sidecar of {}", volume.display()))?;
+        }
     }
     Ok(())
 }
