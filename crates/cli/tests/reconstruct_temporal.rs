@@ -463,3 +463,22 @@ fn a_time_whose_frames_are_all_held_out_is_reconstructed_as_a_held_out_time() {
     assert!(warned(&end, &every("16")), "{end}");
     assert!(warned(&end, "held-out time 16 lies outside the training times"), "{end}");
 }
+
+#[test]
+fn a_frame_without_time_in_a_time_resolved_scene_is_refused_by_name() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 12, &["--times", "14,15"]);
+    let file = d.join("scene/transforms.json");
+    let mut v = json(&file);
+    let image = v["frames"][2]["file_path"].as_str().expect("file_path").to_string();
+    v["frames"][2].as_object_mut().expect("frame").remove("time");
+    std::fs::write(&file, v.to_string()).expect("writes the scene");
+
+    // Read as time 0, it was one more instant seen by a single camera.
+    let needle = format!("frame 2 ({image}) has no `time`, but the other 7 frame(s) have one");
+    refused(&fluidnerf(d, &["info", "scene"]), &needle);
+    let run = ["reconstruct", "scene", "-o", "run", "--method", "tr-fast", "--stop", "budget", "--resolution", "8"];
+    refused(&fluidnerf(d, &[&run[..], &["--max-iterations", "2", "-q"]].concat()), &needle);
+    assert!(!d.join("run").exists(), "nothing written");
+}

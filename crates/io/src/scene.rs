@@ -49,8 +49,9 @@
 //!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `linearisation`
 //!   (how 8-bit images become linear: `"linear"` (default), `"srgb"` or a gamma; see
 //!   [`crate::image`]), `truth` (optional list of `{time, file_path}` `.npy` volumes filling the
-//!   aabb); per frame `time`, `camera` (a physical camera's name), `holdout` (default false)
-//!   and `thin_lens` ([`ThinLens`] fields, world units).
+//!   aabb); per frame `time` (on every frame of a time-resolved scene, on none of a static
+//!   one), `camera` (a physical camera's name), `holdout` (default false) and `thin_lens`
+//!   ([`ThinLens`] fields, world units).
 //! - Keys fluidnerf does not read are reported in at most two log lines per file, however many
 //!   frames hold them: the ones NeRF tools write routinely (`aabb_scale`, `colmap_im_id`,
 //!   `applied_transform`, ...) at info level, others as a warning.
@@ -976,9 +977,9 @@ pub const MIN_INTENSITY_SCALE: f64 = 1e-20;
 pub const MAX_INTENSITY_SCALE: f64 = 1e20;
 
 /// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb, at least one
-/// frame, a positive intensity scale, finite times, no two frames on the same image file, every
-/// camera valid, outside the box, and seeing the box (at least one pixel's ray crosses it).
-/// `file` names the scene in error messages.
+/// frame, a positive intensity scale, finite times, a time on every frame or on none, no two
+/// frames on the same image file, every camera valid, outside the box, and seeing the box (at
+/// least one pixel's ray crosses it). `file` names the scene in error messages.
 pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     let aabb = scene.aabb;
     aabb.validate().map_err(|e| IoError::invalid(file, format!("`aabb`: {e}")))?;
@@ -999,6 +1000,7 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             ),
         ));
     }
+    check_times_on_every_frame(scene, file)?;
     let mut seen: std::collections::HashMap<PathBuf, usize> = std::collections::HashMap::new();
     // A camera records one image per instant (its gain and holding out go by its name).
     let mut shots: std::collections::HashMap<(&str, u64), usize> = std::collections::HashMap::new();
@@ -1090,6 +1092,36 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
         });
     }
     Ok(())
+}
+
+/// Refuses a scene in which some frames have a `time` and others none: a frame without one
+/// cannot be placed among the instants (it would be read as time 0, an instant of its own). The
+/// error names the frames without time, at most five of them, with their images.
+fn check_times_on_every_frame(scene: &Scene, file: &Path) -> Result<(), IoError> {
+    const SHOWN: usize = 5;
+    let untimed: Vec<usize> =
+        scene.frames.iter().enumerate().filter(|(_, f)| f.time.is_none()).map(|(i, _)| i).collect();
+    let timed = scene.frames.len() - untimed.len();
+    if untimed.is_empty() || timed == 0 {
+        return Ok(());
+    }
+    let mut named: Vec<String> =
+        untimed.iter().take(SHOWN).map(|&i| format!("{i} ({})", scene.frames[i].file_path.display())).collect();
+    if untimed.len() > SHOWN {
+        named.push(format!("{} more", untimed.len() - SHOWN));
+    }
+    let (which, have) = match named.len() {
+        1 => (format!("frame {}", named[0]), "has"),
+        n => (format!("frames {} and {}", named[..n - 1].join(", "), named[n - 1]), "have"),
+    };
+    Err(IoError::invalid(
+        file,
+        format!(
+            "{which} {have} no `time`, but the other {timed} frame(s) have one: in a time-resolved scene every frame \
+             needs its `time` (a frame without one would not be placed among the instants); give it, or remove \
+             `time` from every frame for a scene of one instant"
+        ),
+    ))
 }
 
 fn path_str(file: &Path, p: &Path) -> Result<String, IoError> {
@@ -1736,6 +1768,31 @@ mod tests {
         let scene = ring_scene(dir, 3, Distortion::default());
         save_scene(&scene, dir).expect("save");
         serde_json::from_str(&std::fs::read_to_string(dir.join(SCENE_FILE)).expect("read")).expect("json")
+    }
+
+    #[test]
+    fn frames_without_time_among_timed_ones_are_refused_by_name() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let msg = |v: &serde_json::Value| load_scene(&write_json(d, v)).expect_err("must fail").to_string();
+        let mut v = good_json(d);
+        v["frames"][1].as_object_mut().expect("object").remove("time");
+        let m = msg(&v);
+        assert!(m.contains("frame 1 (images/c1.tif) has no `time`") && m.contains("the other 2 frame(s)"), "{m}");
+        v["frames"][2]["time"] = serde_json::Value::Null;
+        let m = msg(&v);
+        assert!(m.contains("frames 1 (images/c1.tif) and 2 (images/c2.tif) have no `time`"), "{m}");
+        // A static scene has no time on any frame.
+        v["frames"][0].as_object_mut().expect("object").remove("time");
+        let scene = load_scene(&write_json(d, &v)).expect("a scene of one instant");
+        assert!(scene.times().is_empty());
+        // Many frames without time are counted past the first five.
+        let mut scene = ring_scene(d, 8, Distortion::default());
+        for (i, f) in scene.frames.iter_mut().enumerate() {
+            f.time = (i == 7).then_some(1.0);
+        }
+        let m = validate_scene(&scene, Path::new("x.json")).expect_err("must fail").to_string();
+        assert!(m.contains("frames 0 (images/c0.tif), 1 (") && m.contains("4 (images/c4.tif) and 2 more have"), "{m}");
     }
 
     #[test]
