@@ -603,3 +603,37 @@ fn disagreeing_focal_length_and_field_of_view_are_warned_about() {
     assert!(err.contains("frame 1 (cam1.png): `fl_x` 40 and `camera_angle_x` 0.5 disagree"), "{err}");
     assert_eq!(err.matches("disagree").count(), 1, "{err}");
 }
+
+/// One calibration file per camera of [`rig`] in `dir/calib`, and the folder `dir/images`.
+fn rig_calibration(dir: &Path) -> (PathBuf, PathBuf) {
+    let calib = dir.join("calib");
+    for c in &rig() {
+        write_opencv(&calib.join(format!("{}.json", c.0)), std::slice::from_ref(c)).expect("writes calibration");
+    }
+    (calib, dir.join("images"))
+}
+
+/// `import --opencv calib --images images -o out --force`, with a box.
+fn import_opencv(calib: &Path, images: &Path, out: &Path) -> Output {
+    let aabb = "-10,-10,-10,10,10,10";
+    fluidnerf(&["import", "--opencv", s(calib), "--images", s(images), "--aabb", aabb, "-o", s(out), "--force"])
+}
+
+/// A camera with a single image among cameras with time series belongs to no instant: refused
+/// by name, rather than written with `"time": null`.
+#[test]
+fn a_single_image_among_time_series_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (calib, images) = rig_calibration(dir.path());
+    for camera in ["cam0", "cam1"] {
+        for n in ["t0.png", "t1.png"] {
+            image(&images.join(camera), n);
+        }
+    }
+    image(&images, "cam2.png");
+    let out = dir.path().join("scene");
+    let err = stderr(&import_opencv(&calib, &images, &out));
+    let single = format!("camera(s) cam2 have a single image ({})", images.join("cam2.png").display());
+    assert!(err.contains(&single) && err.contains("while camera(s) cam0, cam1 are recorded over time"), "{err}");
+    assert!(!out.exists(), "nothing is created for a refused import");
+}

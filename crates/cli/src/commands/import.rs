@@ -29,12 +29,13 @@ use std::io::Write as _;
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
 /// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`), or, for a time series, every image in the
 /// folder `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
-/// `transforms.json` if they are physical), or the video `IMAGES/NAME.avi` (`.mp4`, `.mov`,
-/// `.mkv`, `.m4v`, `.webm`): its frames are decoded (MJPEG AVI directly, other formats with
-/// ffmpeg), range-mapped and linearised, and written as float TIFFs to `OUT/frames/NAME/` with
-/// their times in seconds (see --video-range, --video-frames, --video-every,
-/// --video-time-offset). How each video was read (decoder, range and why, clipped pixels) is
-/// recorded in `OUT/import.json`.
+/// `transforms.json` if they are physical); a camera with a single image cannot join cameras
+/// recorded over time. Or the video `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`,
+/// `.webm`): its frames are decoded (MJPEG AVI directly, other formats with ffmpeg),
+/// range-mapped and linearised, and written as float TIFFs to `OUT/frames/NAME/` with their
+/// times in seconds (see --video-range, --video-frames, --video-every, --video-time-offset).
+/// How each video was read (decoder, range and why, clipped pixels) is recorded in
+/// `OUT/import.json`.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
 /// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
@@ -302,11 +303,16 @@ fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// Frames for OpenCV cameras matched to images by name, and the image entries used.
+/// Frames for OpenCV cameras matched to images by name, and the image entries used. A camera
+/// with a single image cannot join cameras recorded over time (a folder of images or a video).
 fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(Vec<Frame>, BTreeSet<PathBuf>)> {
     let mut frames = Vec::new();
     let mut used = BTreeSet::new();
     let mut unmatched = Vec::new();
+    // The cameras recorded over time (a series of images or a video), and those with a single
+    // image.
+    let mut timed: Vec<&str> = Vec::new();
+    let mut stills: Vec<(&str, PathBuf)> = Vec::new();
     for (name, cam) in cameras {
         let folder = images.join(name);
         let candidates: Vec<PathBuf> = fluidnerf_io::image::IMAGE_EXTENSIONS
@@ -336,11 +342,17 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
                     holdout: false,
                 });
             }
+            timed.push(name);
             used.insert(folder);
             continue;
         }
         match found.as_slice() {
             [one] => {
+                if fluidnerf_io::video::is_video(one) {
+                    timed.push(name);
+                } else {
+                    stills.push((name, (*one).clone()));
+                }
                 used.insert((*one).clone());
                 frames.push(Frame {
                     camera: cam.clone(),
@@ -360,6 +372,17 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     }
     if !unmatched.is_empty() {
         bail!("no image found in {} for camera(s): {}", images.display(), unmatched.join("; "));
+    }
+    if !stills.is_empty() && !timed.is_empty() {
+        bail!(
+            "camera(s) {} have a single image ({}) while camera(s) {} are recorded over time (a folder of images or \
+             a video): a single image belongs to no instant of theirs; give each such camera a folder \
+             {}/NAME/ holding one image per instant, or import the cameras of one instant only",
+            stills.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "),
+            stills.iter().map(|(_, p)| p.display().to_string()).collect::<Vec<_>>().join(", "),
+            timed.join(", "),
+            images.display()
+        );
     }
     Ok((frames, used))
 }
