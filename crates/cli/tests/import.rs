@@ -619,6 +619,53 @@ fn import_opencv(calib: &Path, images: &Path, out: &Path) -> Output {
     fluidnerf(&["import", "--opencv", s(calib), "--images", s(images), "--aabb", aabb, "-o", s(out), "--force"])
 }
 
+/// The n-th image of every camera's folder is instant n: folders holding different numbers
+/// of images, or different names where they share names, are refused (a camera lacking one
+/// image saw every later instant one step early), naming the cameras, their counts and the
+/// names each lacks.
+#[test]
+fn opencv_time_series_that_do_not_line_up_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (calib, images) = rig_calibration(dir.path());
+    let out = dir.path().join("scene");
+    let write = |files: &[(&str, &[&str])]| {
+        let _ = std::fs::remove_dir_all(&images);
+        for (camera, names) in files {
+            for n in *names {
+                image(&images.join(camera), n);
+            }
+        }
+    };
+    let all: &[&str] = &["t0.png", "t1.png", "t2.png", "t3.png"];
+    write(&[("cam0", all), ("cam1", all), ("cam2", &["t0.png", "t1.png", "t3.png"])]);
+    let err = stderr(&import_opencv(&calib, &images, &out));
+    assert!(err.contains("hold different numbers of images (cam0, cam1: 4 image(s); cam2: 3 image(s))"), "{err}");
+    assert!(err.contains("cam2 lack(s) t2.png;"), "{err}");
+    assert!(!out.exists(), "nothing is created for a refused import");
+
+    // As many images, under other names.
+    write(&[("cam0", all), ("cam1", all), ("cam2", &["t0.png", "t1.png", "t3.png", "t4.png"])]);
+    let err = stderr(&import_opencv(&calib, &images, &out));
+    assert!(err.contains("hold different file names (cam0, cam1, cam2: 4 image(s))"), "{err}");
+    assert!(err.contains("cam0, cam1 lack(s) t4.png; cam2 lack(s) t2.png;"), "{err}");
+
+    // Names of each camera's own: the counts alone tell.
+    write(&[("cam0", &["a0.png", "a1.png"]), ("cam1", &["b0.png", "b1.png"]), ("cam2", &["c0.png"])]);
+    let err = stderr(&import_opencv(&calib, &images, &out));
+    assert!(err.contains("(cam0, cam1: 2 image(s); cam2: 1 image(s))") && !err.contains("lack(s)"), "{err}");
+    image(&images.join("cam2"), "c1.png");
+    let o = import_opencv(&calib, &images, &out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").times(), vec![0.0, 1.0]);
+
+    // A folder named like an image is not skipped: the series would lack an instant.
+    write(&[("cam0", all), ("cam1", all), ("cam2", &["t0.png", "t1.png", "t3.png"])]);
+    std::fs::create_dir_all(images.join("cam2/t2.png")).expect("mkdir");
+    let err = stderr(&import_opencv(&calib, &images, &out));
+    let folder = images.join("cam2/t2.png");
+    assert!(err.contains(&format!("{}: folder(s) named like images", folder.display())), "{err}");
+}
+
 /// A camera with a single image among cameras with time series belongs to no instant: refused
 /// by name, rather than written with `"time": null`.
 #[test]

@@ -29,13 +29,14 @@ use std::io::Write as _;
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
 /// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`), or, for a time series, every image in the
 /// folder `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
-/// `transforms.json` if they are physical); a camera with a single image cannot join cameras
-/// recorded over time. Or the video `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`,
-/// `.webm`): its frames are decoded (MJPEG AVI directly, other formats with ffmpeg),
-/// range-mapped and linearised, and written as float TIFFs to `OUT/frames/NAME/` with their
-/// times in seconds (see --video-range, --video-frames, --video-every, --video-time-offset).
-/// How each video was read (decoder, range and why, clipped pixels) is recorded in
-/// `OUT/import.json`.
+/// `transforms.json` if they are physical): every camera's folder must hold as many images,
+/// under the same names when the folders share names, and no folder named like an image; a
+/// camera with a single image cannot join cameras recorded over time. Or the video
+/// `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`, `.webm`): its frames are decoded (MJPEG
+/// AVI directly, other formats with ffmpeg), range-mapped and linearised, and written as float
+/// TIFFs to `OUT/frames/NAME/` with their times in seconds (see --video-range, --video-frames,
+/// --video-every, --video-time-offset). How each video was read (decoder, range and why,
+/// clipped pixels) is recorded in `OUT/import.json`.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
 /// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
@@ -288,10 +289,13 @@ fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
 }
 
 fn is_image(p: &Path) -> bool {
-    p.is_file()
-        && p.extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| fluidnerf_io::image::IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+    p.is_file() && named_like_image(p)
+}
+
+fn named_like_image(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| fluidnerf_io::image::IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
 fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
@@ -303,8 +307,9 @@ fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// Frames for OpenCV cameras matched to images by name, and the image entries used. A camera
-/// with a single image cannot join cameras recorded over time (a folder of images or a video).
+/// Frames for OpenCV cameras matched to images by name, and the image entries used. The
+/// cameras' time series must line up ([`check_series`]), and a camera with a single image
+/// cannot join cameras recorded over time (a folder of images or a video).
 fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(Vec<Frame>, BTreeSet<PathBuf>)> {
     let mut frames = Vec::new();
     let mut used = BTreeSet::new();
@@ -313,6 +318,9 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     // image.
     let mut timed: Vec<&str> = Vec::new();
     let mut stills: Vec<(&str, PathBuf)> = Vec::new();
+    // Each series of images, with its camera, and what its folders hold that is no image.
+    let mut series: Vec<(&str, Vec<PathBuf>)> = Vec::new();
+    let mut folders_named_like_images = Vec::new();
     for (name, cam) in cameras {
         let folder = images.join(name);
         let candidates: Vec<PathBuf> = fluidnerf_io::image::IMAGE_EXTENSIONS
@@ -329,20 +337,23 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
                     found.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
                 );
             }
-            let series: Vec<PathBuf> = list_dir(&folder)?.into_iter().filter(|p| is_image(p)).collect();
-            if series.is_empty() {
+            let entries = list_dir(&folder)?;
+            folders_named_like_images.extend(entries.iter().filter(|p| p.is_dir() && named_like_image(p)).cloned());
+            let files: Vec<PathBuf> = entries.into_iter().filter(|p| is_image(p)).collect();
+            if files.is_empty() {
                 unmatched.push(format!("{name} (the folder {} holds no images)", folder.display()));
             }
-            for (t, p) in series.into_iter().enumerate() {
+            for (t, p) in files.iter().enumerate() {
                 frames.push(Frame {
                     camera: cam.clone(),
-                    file_path: p,
+                    file_path: p.clone(),
                     time: Some(t as f64),
                     camera_name: Some(name.clone()),
                     holdout: false,
                 });
             }
             timed.push(name);
+            series.push((name, files));
             used.insert(folder);
             continue;
         }
@@ -373,6 +384,13 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     if !unmatched.is_empty() {
         bail!("no image found in {} for camera(s): {}", images.display(), unmatched.join("; "));
     }
+    if !folders_named_like_images.is_empty() {
+        bail!(
+            "{}: folder(s) named like images in the cameras' series folders; a camera's folder holds its images, \
+             one per instant, and a folder among them would leave its series an instant short: move or rename it",
+            folders_named_like_images.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+        );
+    }
     if !stills.is_empty() && !timed.is_empty() {
         bail!(
             "camera(s) {} have a single image ({}) while camera(s) {} are recorded over time (a folder of images or \
@@ -384,7 +402,69 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             images.display()
         );
     }
+    check_series(&series, images)?;
     Ok((frames, used))
+}
+
+/// Most file names listed in an error about series that do not line up.
+const NAMES_SHOWN: usize = 5;
+
+/// Checks that the cameras' series of images (each in name order) line up instant by instant:
+/// the n-th image of every series is instant n, so every series must hold as many images, and
+/// series that share file names (the usual `t000.png`, `t001.png`, … in every camera's folder)
+/// must hold the same names. A camera lacking one image would otherwise see every later
+/// instant one step early. The error gives each camera's count and, when the names are
+/// shared, the names each camera lacks.
+fn check_series(series: &[(&str, Vec<PathBuf>)], images: &Path) -> anyhow::Result<()> {
+    let names: Vec<BTreeSet<String>> = series
+        .iter()
+        .map(|(_, files)| {
+            files.iter().filter_map(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned()).collect()
+        })
+        .collect();
+    let counts: BTreeSet<usize> = series.iter().map(|(_, files)| files.len()).collect();
+    let all: BTreeSet<&String> = names.iter().flatten().collect();
+    let shared = all.iter().any(|n| names.iter().filter(|set| set.contains(*n)).count() > 1);
+    let same_names = names.windows(2).all(|w| w[0] == w[1]);
+    if counts.len() <= 1 && (same_names || !shared) {
+        return Ok(());
+    }
+    let held = by_camera(series.iter().map(|(camera, files)| (*camera, format!("{} image(s)", files.len()))));
+    let mut text = format!(
+        "the cameras' image series in {} do not line up: the n-th image of each camera's folder (in name order) is \
+         instant n, but they hold {} ({})",
+        images.display(),
+        if counts.len() > 1 { "different numbers of images" } else { "different file names" },
+        held.iter().map(|(count, cameras)| format!("{}: {count}", cameras.join(", "))).collect::<Vec<_>>().join("; ")
+    );
+    if shared {
+        let lacking = by_camera(series.iter().zip(&names).filter_map(|((camera, _), own)| {
+            let missing: Vec<&str> = all.iter().filter(|n| !own.contains(**n)).map(|n| n.as_str()).collect();
+            let shown = missing.iter().take(NAMES_SHOWN).copied().collect::<Vec<_>>().join(", ");
+            match missing.len() {
+                0 => None,
+                n if n > NAMES_SHOWN => Some((*camera, format!("{shown} and {} more", n - NAMES_SHOWN))),
+                _ => Some((*camera, shown)),
+            }
+        }));
+        for (missing, cameras) in lacking {
+            text += &format!("; {} lack(s) {missing}", cameras.join(", "));
+        }
+    }
+    bail!("{text}; give every camera one image per instant (or remove the instants some camera lacks)")
+}
+
+/// `(camera, what)` pairs grouped by what, in order of first appearance: the cameras that hold
+/// the same, together.
+fn by_camera<'a>(pairs: impl Iterator<Item = (&'a str, String)>) -> Vec<(String, Vec<&'a str>)> {
+    let mut groups: Vec<(String, Vec<&'a str>)> = Vec::new();
+    for (camera, what) in pairs {
+        match groups.iter_mut().find(|(w, _)| *w == what) {
+            Some((_, cameras)) => cameras.push(camera),
+            None => groups.push((what, vec![camera])),
+        }
+    }
+    groups
 }
 
 /// Frames for COLMAP images, and the image files used.
