@@ -97,7 +97,8 @@ pub struct Args {
     /// Write the metrics table as CSV here.
     #[arg(long)]
     pub csv: Option<PathBuf>,
-    /// Overwrite existing output files.
+    /// Overwrite existing output files: earlier results only, never a file of the scene or of
+    /// the run, nor a volume being read.
     #[arg(long)]
     pub force: bool,
 }
