@@ -253,14 +253,21 @@ fn undefined_metrics_are_refused_not_written_as_nan() {
     assert!(!out.status.success() && e.contains("truth_0.npy: every voxel"), "{e}");
 }
 
-#[test]
-fn a_run_folder_names_its_own_scene_for_eval_and_render() {
+/// A folder holding `scene` and a two-iteration ASART run of it, `run`.
+fn scene_and_run() -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     std::fs::create_dir(d.join("scene")).expect("mkdir");
     make_scene(&d.join("scene"), &[]);
     let run = fluidnerf(&["reconstruct", "scene", "-o", "run", "--method", "asart", "--max-iterations", "2"], d);
     assert!(run.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&run.stderr));
+    dir
+}
+
+#[test]
+fn a_run_folder_names_its_own_scene_for_eval_and_render() {
+    let dir = scene_and_run();
+    let d = dir.path();
 
     // Without --scene the run's recorded scene is scored, and said to be: the same figures as
     // with it.
@@ -308,12 +315,8 @@ fn snapshot(dir: &Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
 
 #[test]
 fn never_overwrites_its_inputs_nor_the_scenes_or_the_runs_files() {
-    let dir = tempfile::tempdir().expect("tempdir");
+    let dir = scene_and_run();
     let d = dir.path();
-    std::fs::create_dir(d.join("scene")).expect("mkdir");
-    make_scene(&d.join("scene"), &[]);
-    let run = fluidnerf(&["reconstruct", "scene", "-o", "run", "--method", "asart", "--max-iterations", "2"], d);
-    assert!(run.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&run.stderr));
     std::fs::write(d.join("scene/synth.json"), "{}").expect("writes a scene record");
 
     let score = |extra: &[&str]| {
