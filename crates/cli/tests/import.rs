@@ -143,7 +143,13 @@ fn unmatched_cameras_and_images_are_errors() {
     let o = run(&[]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("cam2") && stderr(&o).contains("no image found"), "{}", stderr(&o));
-    image(&images, "cam2.png");
+    // A folder named like the image is named as what it is.
+    std::fs::create_dir(images.join("cam2.png")).expect("mkdir");
+    let o = run(&[]);
+    assert!(stderr(&o).contains("cam2.png is not a file"), "{}", stderr(&o));
+    std::fs::remove_dir(images.join("cam2.png")).expect("rmdir");
+    // Extensions match in any case, as cameras write them.
+    image(&images, "cam2.PNG");
     image(&images, "stray.png");
     let o = run(&[]);
     assert_eq!(o.status.code(), Some(1));

@@ -321,14 +321,21 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     // Each series of images, with its camera, and what its folders hold that is no image.
     let mut series: Vec<(&str, Vec<PathBuf>)> = Vec::new();
     let mut folders_named_like_images = Vec::new();
+    // The entries named like an image or a video, by stem; extensions in any case (cameras
+    // write `.JPG`).
+    let mut by_stem: std::collections::HashMap<String, Vec<PathBuf>> = std::collections::HashMap::new();
+    for p in list_dir(images)? {
+        let ext = p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+        let known = fluidnerf_io::image::IMAGE_EXTENSIONS.iter().chain(fluidnerf_io::video::VIDEO_EXTENSIONS.iter());
+        if let (Some(stem), true) = (p.file_stem().and_then(|s| s.to_str()), known.clone().any(|e| *e == ext)) {
+            by_stem.entry(stem.to_string()).or_default().push(p.clone());
+        }
+    }
     for (name, cam) in cameras {
         let folder = images.join(name);
-        let candidates: Vec<PathBuf> = fluidnerf_io::image::IMAGE_EXTENSIONS
-            .iter()
-            .chain(fluidnerf_io::video::VIDEO_EXTENSIONS.iter())
-            .map(|e| images.join(format!("{name}.{e}")))
-            .collect();
-        let found: Vec<&PathBuf> = candidates.iter().filter(|p| p.is_file()).collect();
+        let named: &[PathBuf] = by_stem.get(name.as_str()).map_or(&[], Vec::as_slice);
+        let found: Vec<&PathBuf> = named.iter().filter(|p| p.is_file()).collect();
+        let not_files: Vec<String> = named.iter().filter(|p| !p.is_file()).map(|p| p.display().to_string()).collect();
         if folder.is_dir() {
             if !found.is_empty() {
                 bail!(
@@ -372,6 +379,9 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
                     camera_name: Some(name.clone()),
                     holdout: false,
                 });
+            }
+            [] if !not_files.is_empty() => {
+                unmatched.push(format!("{name} ({} is not a file)", not_files.join(", ")));
             }
             [] => unmatched
                 .push(format!("{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov or folder {name}/)")),
