@@ -280,3 +280,25 @@ fn cfd_phantoms_from_any_preset_and_their_steps() {
         assert!(out.lines().any(|l| l.split_whitespace().next() == Some(name)), "{name} missing from {out}");
     }
 }
+
+/// Ctrl-C (SIGINT) stops a synthesis as it stops a reconstruction: exit status 130, and
+/// nothing half-written left behind.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_synthesis_exits_130_and_leaves_nothing() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let out = tmp.path().join("big");
+    let child = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .args(["synth", "--preset", "planar60", "-q", "-o", out.to_str().expect("utf-8 path")])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("starts");
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill runs");
+    assert!(killed.success());
+    let o = child.wait_with_output().expect("waits");
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(!out.exists(), "an interrupted synthesis left {}", out.display());
+}

@@ -44,7 +44,14 @@ pub fn run(command: Command) -> anyhow::Result<ExitCode> {
         Command::Export(args) => done(export::run(args)),
         Command::Render(args) => done(render::run(args)),
         Command::Study(args) => study::run(args),
-        Command::Synth(args) => done(synth::run(args)),
+        Command::Synth(args) => match synth::run(args) {
+            // Stopped by Ctrl-C, as a stopped reconstruction is: its own status, not an error.
+            Err(e) if matches!(e.downcast_ref(), Some(fluidnerf_synth::SynthError::Cancelled)) => {
+                log::warn!("synth stopped by Ctrl-C; nothing was written");
+                Ok(ExitCode::from(130))
+            }
+            r => done(r),
+        },
     }
 }
 
