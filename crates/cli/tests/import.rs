@@ -487,17 +487,7 @@ fn a_camera_with_an_image_and_a_folder_matches_several_inputs() {
         image(&images, n);
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&images),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_opencv(&calib, &images, &out);
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(err.contains("camera cam2 matches several inputs"), "{err}");

@@ -302,7 +302,8 @@ pub fn read_dimensions(path: &Path) -> Result<(u32, u32), IoError> {
 /// Extensions of the image files fluidnerf reads (lower case).
 pub const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "tif", "tiff"];
 
-fn has_image_extension(p: &Path) -> bool {
+/// Whether `p` is named like an image fluidnerf reads (its extension in any case).
+pub fn has_image_extension(p: &Path) -> bool {
     p.extension().and_then(|e| e.to_str()).is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 

@@ -293,9 +293,7 @@ fn is_image(p: &Path) -> bool {
 }
 
 fn named_like_image(p: &Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| fluidnerf_io::image::IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+    fluidnerf_io::image::has_image_extension(p)
 }
 
 fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
@@ -325,9 +323,10 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     // write `.JPG`).
     let mut by_stem: std::collections::HashMap<String, Vec<PathBuf>> = std::collections::HashMap::new();
     for p in list_dir(images)? {
-        let ext = p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
-        let known = fluidnerf_io::image::IMAGE_EXTENSIONS.iter().chain(fluidnerf_io::video::VIDEO_EXTENSIONS.iter());
-        if let (Some(stem), true) = (p.file_stem().and_then(|s| s.to_str()), known.clone().any(|e| *e == ext)) {
+        if !(named_like_image(&p) || fluidnerf_io::video::is_video(&p)) {
+            continue;
+        }
+        if let Some(stem) = p.file_stem().and_then(|s| s.to_str()) {
             by_stem.entry(stem.to_string()).or_default().push(p.clone());
         }
     }
