@@ -240,6 +240,17 @@ pub struct HashGridTape {
 impl HashGridField {
     /// A freshly initialised field for `input_dim` = 3 or 4 inputs.
     pub fn new(config: &HashGridConfig, input_dim: usize, seed: u64) -> Result<Self, NeuralError> {
+        Self::build(config, input_dim, Some(seed))
+    }
+
+    /// The field with every parameter zero, for weights about to be loaded into all of them
+    /// ([`crate::weights::load_weights`]): no random draws (a second and more of a load's time
+    /// for the larger tables went to drawing values that were then overwritten).
+    pub fn zeroed(config: &HashGridConfig, input_dim: usize) -> Result<Self, NeuralError> {
+        Self::build(config, input_dim, None)
+    }
+
+    fn build(config: &HashGridConfig, input_dim: usize, seed: Option<u64>) -> Result<Self, NeuralError> {
         config.validate()?;
         if input_dim != 3 && input_dim != 4 {
             return Err(NeuralError::invalid("field input dimension", format!("{input_dim} (must be 3 or 4)")));
@@ -292,14 +303,16 @@ impl HashGridField {
         )
         .with_bf16_products(config.mlp_precision == MlpPrecision::Bf16);
         let mut params = vec![0.0; offset + mlp.num_params()];
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let s = config.init_scale;
-        if s > 0.0 {
-            for p in &mut params[..offset] {
-                *p = rng.random_range(-s..s);
+        if let Some(seed) = seed {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let s = config.init_scale;
+            if s > 0.0 {
+                for p in &mut params[..offset] {
+                    *p = rng.random_range(-s..s);
+                }
             }
+            mlp.init(&mut params[offset..], &mut rng);
         }
-        mlp.init(&mut params[offset..], &mut rng);
         Ok(Self { config: config.clone(), input_dim, levels, grid_params: offset, mlp, params })
     }
 

@@ -519,6 +519,15 @@ pub struct MlpFieldTape {
 impl MlpField {
     /// A freshly initialised field for `input_dim` = 3 (E(x)) or 4 (E(x, t')) inputs.
     pub fn new(config: &MlpConfig, input_dim: usize, seed: u64) -> Result<Self, NeuralError> {
+        Self::build(config, input_dim, Some(seed))
+    }
+
+    /// The field with every parameter zero, for weights about to be loaded into all of them.
+    pub fn zeroed(config: &MlpConfig, input_dim: usize) -> Result<Self, NeuralError> {
+        Self::build(config, input_dim, None)
+    }
+
+    fn build(config: &MlpConfig, input_dim: usize, seed: Option<u64>) -> Result<Self, NeuralError> {
         config.validate()?;
         if input_dim != 3 && input_dim != 4 {
             return Err(NeuralError::invalid("field input dimension", format!("{input_dim} (must be 3 or 4)")));
@@ -533,8 +542,9 @@ impl MlpField {
             config.skip,
         );
         let mut params = vec![0.0; mlp.num_params()];
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        mlp.init(&mut params, &mut rng);
+        if let Some(seed) = seed {
+            mlp.init(&mut params, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+        }
         Ok(Self { config: config.clone(), encoding, mlp, params })
     }
 

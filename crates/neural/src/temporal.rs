@@ -70,7 +70,7 @@ use crate::train::{
     converged, running_mean, train, Batching, FieldMeta, Learner, Prepared, Problem, StopReason, StopRule, TrainConfig,
     TrainReport, TrainState, ViewMasks,
 };
-use crate::trained::{build_field, AnyField, FieldConfig, NeuralConfig, TrainedField};
+use crate::trained::{build_field_for_weights, AnyField, FieldConfig, NeuralConfig, TrainedField};
 use crate::window::{blend, frame_position, plan_windows, time_at};
 use crate::{NeuralError, TrainableField};
 
@@ -855,7 +855,7 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         if let Some(why) = w.meta.problem() {
             return Err(NeuralError::checkpoint(&path, format!("window {:?}: {why}", w.frames)));
         }
-        let mut field = build_field(&rec.field, &w.meta.aabb, rec.input_dim, 0)?;
+        let mut field = build_field_for_weights(&rec.field, &w.meta.aabb, rec.input_dim)?;
         let weights = run_dir.join(&w.weights);
         crate::with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
         let boxed: Box<dyn ScalarField + Send + Sync> = match field {

@@ -295,9 +295,26 @@ impl<F: TrainableField> ScalarField for TrainedField<F> {
 
 /// Builds the (untrained) field `config` describes, for `input_dim` inputs, seeded.
 pub fn build_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: u64) -> Result<AnyField, NeuralError> {
+    make_field(config, aabb, input_dim, Some(seed))
+}
+
+/// The field `config` describes without drawing its initial values, for weights that
+/// [`crate::weights::load_weights`] will then set, every one of them (it refuses a file that
+/// lacks a tensor).
+pub fn build_field_for_weights(config: &FieldConfig, aabb: &Aabb, input_dim: usize) -> Result<AnyField, NeuralError> {
+    make_field(config, aabb, input_dim, None)
+}
+
+fn make_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: Option<u64>) -> Result<AnyField, NeuralError> {
     match config {
-        FieldConfig::Mlp(c) => Ok(AnyField::Mlp(MlpField::new(c, input_dim, seed)?)),
-        FieldConfig::HashGrid(c) => Ok(AnyField::HashGrid(HashGridField::new(c, input_dim, seed)?)),
+        FieldConfig::Mlp(c) => Ok(AnyField::Mlp(match seed {
+            Some(seed) => MlpField::new(c, input_dim, seed)?,
+            None => MlpField::zeroed(c, input_dim)?,
+        })),
+        FieldConfig::HashGrid(c) => Ok(AnyField::HashGrid(match seed {
+            Some(seed) => HashGridField::new(c, input_dim, seed)?,
+            None => HashGridField::zeroed(c, input_dim)?,
+        })),
         FieldConfig::Dense(c) => {
             if input_dim != 3 {
                 return Err(NeuralError::invalid("dense field", "only E(x) (3 inputs) is supported"));
@@ -351,7 +368,7 @@ pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync
         return Err(NeuralError::checkpoint(&model_path, format!("meta: {why}")));
     }
     let aabb = record.meta.aabb;
-    let mut field = build_field(&record.field, &aabb, record.input_dim, 0).map_err(named)?;
+    let mut field = build_field_for_weights(&record.field, &aabb, record.input_dim).map_err(named)?;
     let weights = run_dir.join("weights.safetensors");
     with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
     let boxed: Box<dyn ScalarField + Send + Sync> = match field {
