@@ -418,24 +418,39 @@ impl Camera {
                 }
             }
         }
-        let m = 64usize;
-        let (mw, mh) = (m.min(self.width()), m.min(self.height()));
-        let mut on_box = 0usize;
-        for j in 0..mh {
-            for i in 0..mw {
-                let u = (i as f64 + 0.5) / mw as f64 * w - 0.5;
-                let v = (j as f64 + 0.5) / mh as f64 * h - 0.5;
-                if let Ok(ray) = self.pixel_ray(u, v) {
-                    if aabb.intersect(&ray).is_some() {
-                        on_box += 1;
-                    }
-                }
-            }
-        }
+        let (mw, mh) = self.probe_lattice();
+        let on_box =
+            (0..mh).flat_map(|j| (0..mw).map(move |i| (i, j))).filter(|&(i, j)| self.probe_hits(aabb, i, j)).count();
         Visibility {
             box_fraction_in_view: inside as f64 / (n * n * n) as f64,
             pixel_fraction_on_box: on_box as f64 / (mw * mh) as f64,
         }
+    }
+
+    /// Whether any pixel of [`Self::visibility`]'s lattice sees the box: the same answer as
+    /// `pixel_fraction_on_box > 0`, found from the middle of the image outwards and stopped at
+    /// the first ray that crosses it (a camera aimed at the box answers after one ray, where the
+    /// fraction takes 4096).
+    pub fn sees_box(&self, aabb: &Aabb) -> bool {
+        let (mw, mh) = self.probe_lattice();
+        let outwards = |m: usize| (0..m).map(move |k| if k % 2 == 0 { m / 2 + k / 2 } else { m / 2 - 1 - k / 2 });
+        outwards(mh).any(|j| outwards(mw).any(|i| self.probe_hits(aabb, i, j)))
+    }
+
+    /// The lattice of pixels that [`Self::visibility`] and [`Self::sees_box`] probe: at most
+    /// 64 × 64, spread evenly over the image.
+    fn probe_lattice(&self) -> (usize, usize) {
+        let m = 64usize;
+        (m.min(self.width()), m.min(self.height()))
+    }
+
+    /// Whether the ray of lattice pixel `(i, j)` crosses `aabb`.
+    fn probe_hits(&self, aabb: &Aabb, i: usize, j: usize) -> bool {
+        let (mw, mh) = self.probe_lattice();
+        let (w, h) = (self.intrinsics.width as f64, self.intrinsics.height as f64);
+        let u = (i as f64 + 0.5) / mw as f64 * w - 0.5;
+        let v = (j as f64 + 0.5) / mh as f64 * h - 0.5;
+        self.pixel_ray(u, v).is_ok_and(|ray| aabb.intersect(&ray).is_some())
     }
 }
 
@@ -562,5 +577,24 @@ mod tests {
         let missed = cam.visibility(&Aabb::cube(DVec3::new(3000.0, 0.0, 0.0), 10.0));
         assert_eq!(missed.box_fraction_in_view, 0.0);
         assert_eq!(missed.pixel_fraction_on_box, 0.0);
+    }
+
+    /// `sees_box` answers what `pixel_fraction_on_box > 0` answers, for boxes in the middle,
+    /// at the image's edges and corners, too small to meet a probed ray, and out of view.
+    #[test]
+    fn sees_box_agrees_with_the_pixel_fraction() {
+        let cam = test_camera(Distortion::default());
+        let mut seen = 0;
+        for x in (-400..=400).step_by(50) {
+            for y in (-400..=400).step_by(50) {
+                for size in [0.05, 2.0, 40.0] {
+                    let aabb = Aabb::cube(DVec3::new(x as f64, y as f64, 0.0), size);
+                    let fraction = cam.visibility(&aabb).pixel_fraction_on_box;
+                    assert_eq!(cam.sees_box(&aabb), fraction > 0.0, "box at ({x}, {y}) of side {size}: {fraction}");
+                    seen += usize::from(fraction > 0.0);
+                }
+            }
+        }
+        assert!(seen > 10 && seen < 17 * 17 * 3 - 10, "the boxes must include seen and unseen ones: {seen}");
     }
 }

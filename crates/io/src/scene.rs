@@ -1079,11 +1079,8 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             }
         })
         .collect();
-    let blind_cameras: Vec<usize> = distinct
-        .par_iter()
-        .copied()
-        .filter(|&i| scene.frames[i].camera.visibility(&aabb).pixel_fraction_on_box == 0.0)
-        .collect();
+    let blind_cameras: Vec<usize> =
+        distinct.par_iter().copied().filter(|&i| !scene.frames[i].camera.sees_box(&aabb)).collect();
     if let Some(i) = first_equal.iter().position(|j| blind_cameras.contains(j)) {
         return Err(IoError::CameraMissesBox {
             path: file.to_path_buf(),
