@@ -503,6 +503,69 @@ fn nonempty_chunks(row: &[f32], starts: &mut Vec<usize>) {
     }
 }
 
+/// The chunks of every grid row of one volume that hold a non-zero value
+/// ([`FootprintProjector::forward_views`]): what each view's projection would otherwise find by
+/// reading the whole volume again. Rows are numbered `k · ny + j`.
+#[derive(Clone, Debug, Default)]
+struct NonEmptyChunks {
+    /// Row `r`'s chunk starts are `starts[ends[r - 1]..ends[r]]` (from 0 for row 0).
+    ends: Vec<usize>,
+    starts: Vec<usize>,
+}
+
+impl NonEmptyChunks {
+    fn of(grid: &Grid, x: &[f32]) -> Self {
+        let [nx, ny, _] = grid.dims;
+        let slices: Vec<(Vec<usize>, Vec<usize>)> = x
+            .par_chunks(nx * ny)
+            .map(|slice| {
+                let (mut counts, mut starts, mut row) = (Vec::with_capacity(ny), Vec::new(), Vec::new());
+                for r in slice.chunks(nx) {
+                    nonempty_chunks(r, &mut row);
+                    counts.push(row.len());
+                    starts.extend_from_slice(&row);
+                }
+                (counts, starts)
+            })
+            .collect();
+        let mut out = NonEmptyChunks {
+            ends: Vec::with_capacity(x.len() / nx.max(1)),
+            starts: Vec::with_capacity(slices.iter().map(|s| s.1.len()).sum()),
+        };
+        for (counts, starts) in slices {
+            for c in counts {
+                out.ends.push(out.ends.last().copied().unwrap_or(0) + c);
+            }
+            out.starts.extend(starts);
+        }
+        out
+    }
+
+    fn row(&self, r: usize) -> &[usize] {
+        let first = if r == 0 { 0 } else { self.ends[r - 1] };
+        &self.starts[first..self.ends[r]]
+    }
+}
+
+/// The non-empty chunks of row `row0 / nx` of `x`: from `known` when the caller found them
+/// once for many views, else read from the row into `own`.
+#[inline(always)]
+fn row_chunks_of<'a>(
+    known: Option<&'a NonEmptyChunks>,
+    x: &[f32],
+    row0: usize,
+    nx: usize,
+    own: &'a mut Vec<usize>,
+) -> &'a [usize] {
+    match known {
+        Some(c) => c.row(row0 / nx),
+        None => {
+            nonempty_chunks(&x[row0..row0 + nx], own);
+            own
+        }
+    }
+}
+
 /// `[f(0), f(1), f(2)]`, written out: `array::map` and `array::from_fn` were left as calls in
 /// the row loops.
 #[inline(always)]
@@ -1291,6 +1354,7 @@ impl FootprintProjector {
         view: usize,
         ks: Slices,
         x: &[f32],
+        known: Option<&NonEmptyChunks>,
         img: &mut [f32],
     ) {
         let fv = &self.views[view];
@@ -1298,15 +1362,18 @@ impl FootprintProjector {
         let nr = fv.rows;
         let [nx, ny, _] = self.grid.dims;
         let mut chunks = vec![Chunk::<N>::default(); nx.div_ceil(CHUNK)];
-        let mut starts = Vec::with_capacity(chunks.len());
+        let mut own = Vec::with_capacity(chunks.len());
         let mut scratch = vec![ChunkTrapezoids::default(); chunks.len()];
         for k in ks {
             for j in 0..ny {
-                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 let row0 = (k * ny + j) * nx;
                 // Empty voxels add nothing: a chunk of them needs no footprints. Flows leave
                 // most of a box dark, so this is most of the work of a projection there.
-                nonempty_chunks(&x[row0..row0 + nx], &mut starts);
+                let starts = row_chunks_of(known, x, row0, nx, &mut own);
+                if starts.is_empty() {
+                    continue;
+                }
+                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 let chunks = &mut chunks[..starts.len()];
                 fv.row_chunks::<N, DISTORTED, LANES>(base, step, &starts, &mut scratch, chunks);
                 for (&i0, ch) in starts.iter().zip(chunks.iter()) {
@@ -1667,6 +1734,7 @@ impl FootprintProjector {
         view: usize,
         ks: Slices,
         x: &[f32],
+        known: Option<&NonEmptyChunks>,
         img: &mut [f32],
     ) {
         let fv = &self.views[view];
@@ -1675,21 +1743,27 @@ impl FootprintProjector {
         let n_l = if SHARED_V { fv.cols } else { nr };
         let [nx, ny, _] = self.grid.dims;
         let mut mvs = vec![Moving::<N>::default(); nx.div_ceil(CHUNK)];
-        let mut starts = Vec::with_capacity(mvs.len());
+        let mut own = Vec::with_capacity(mvs.len());
         let mut scratch = vec![MovingTrapezoids::default(); mvs.len()];
         let mut rss = vec![RowShared::<N>::default(); ny];
         for k in ks {
+            if known.is_some_and(|c| (0..ny).all(|j| c.row(k * ny + j).is_empty())) {
+                continue;
+            }
             self.slice_rows_shared::<N, SHARED_V>(view, k, &mut rss);
             for (j, rs) in rss.iter().enumerate() {
                 let row0 = (k * ny + j) * nx;
-                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 if rs.first < 0.0 {
                     continue;
                 }
-                let across = rs.first as usize;
                 // Empty voxels add nothing: only the chunks with a non-zero voxel get
                 // footprints.
-                nonempty_chunks(&x[row0..row0 + nx], &mut starts);
+                let starts = row_chunks_of(known, x, row0, nx, &mut own);
+                if starts.is_empty() {
+                    continue;
+                }
+                let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
+                let across = rs.first as usize;
                 let mvs = &mut mvs[..starts.len()];
                 fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, &starts, &mut scratch, mvs);
                 for (&i0, mv) in starts.iter().zip(mvs.iter()) {
@@ -2221,34 +2295,42 @@ mod kernels {
         view: usize,
         ks: Slices,
         x: &[f32],
+        known: Option<&NonEmptyChunks>,
         img: &mut [f32],
     ) {
         #[cfg(target_arch = "x86_64")]
         {
-            variants!(fn(p: &FootprintProjector, view: usize, ks: Slices, x: &[f32], img: &mut [f32]) {
+            variants!(fn(
+                p: &FootprintProjector,
+                view: usize,
+                ks: Slices,
+                x: &[f32],
+                known: Option<&NonEmptyChunks>,
+                img: &mut [f32],
+            ) {
                 let shared = p.views[view].shared;
                 if shared == Shared::V && !D {
-                    p.scatter_shared::<N, true>(view, ks, x, img)
+                    p.scatter_shared::<N, true>(view, ks, x, known, img)
                 } else if shared == Shared::U && !D {
-                    p.scatter_shared::<N, false>(view, ks, x, img)
+                    p.scatter_shared::<N, false>(view, ks, x, known, img)
                 } else if N <= LANE_GATHER_MAX_SIDE && img.len() / SCATTER_IMAGES < u32::MAX as usize {
-                    p.scatter::<N, D, true>(view, ks, x, img)
+                    p.scatter::<N, D, true>(view, ks, x, known, img)
                 } else {
-                    p.scatter::<N, D, false>(view, ks, x, img)
+                    p.scatter::<N, D, false>(view, ks, x, known, img)
                 }
             });
             match p.isa {
                 // SAFETY: `p.isa` never exceeds what `Isa::detected` found on this CPU.
-                Isa::Avx512 => return unsafe { avx512::<N, D>(p, view, ks, x, img) },
+                Isa::Avx512 => return unsafe { avx512::<N, D>(p, view, ks, x, known, img) },
                 // SAFETY: as above.
-                Isa::Avx2 => return unsafe { avx2::<N, D>(p, view, ks, x, img) },
+                Isa::Avx2 => return unsafe { avx2::<N, D>(p, view, ks, x, known, img) },
                 Isa::Baseline => {}
             }
         }
         match p.views[view].shared {
-            Shared::V if !D => p.scatter_shared::<N, true>(view, ks, x, img),
-            Shared::U if !D => p.scatter_shared::<N, false>(view, ks, x, img),
-            _ => p.scatter::<N, D, false>(view, ks, x, img),
+            Shared::V if !D => p.scatter_shared::<N, true>(view, ks, x, known, img),
+            Shared::U if !D => p.scatter_shared::<N, false>(view, ks, x, known, img),
+            _ => p.scatter::<N, D, false>(view, ks, x, known, img),
         }
     }
 
@@ -2477,17 +2559,24 @@ impl FootprintProjector {
     }
 }
 
-impl Projector for FootprintProjector {
-    fn grid(&self) -> &Grid {
-        &self.grid
+impl FootprintProjector {
+    /// `A_v x` for each of `views` into `outs` (one image per view, as [`Projector::forward`]
+    /// writes it), the same bits as projecting them one by one. Which chunks of the volume hold
+    /// anything is found once instead of once per view: for a flow that fills part of the box,
+    /// reading the whole volume again for each view was a sixth of a projection's time.
+    pub fn forward_views(&self, views: &[usize], x: &[f32], outs: &mut [&mut [f32]]) {
+        assert_eq!(views.len(), outs.len(), "one image per view");
+        for (&v, out) in views.iter().zip(outs.iter()) {
+            check_shapes(self, v, x.len(), out.len());
+        }
+        let known = NonEmptyChunks::of(&self.grid, x);
+        for (&v, out) in views.iter().zip(outs.iter_mut()) {
+            self.forward_known(v, x, Some(&known), out);
+        }
     }
 
-    fn cameras(&self) -> &[Camera] {
-        &self.cameras
-    }
-
-    fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
-        check_shapes(self, view, x.len(), out.len());
+    /// [`Projector::forward`], with the volume's non-empty chunks found beforehand or not.
+    fn forward_known(&self, view: usize, x: &[f32], known: Option<&NonEmptyChunks>, out: &mut [f32]) {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let (w, n) = (fv.cam.width, fv.side);
@@ -2500,7 +2589,9 @@ impl Projector for FootprintProjector {
             .map(|first| {
                 let ks = (first..nz).step_by(parts);
                 let mut img = vec![0f32; SCATTER_IMAGES * pw * ph];
-                dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, &mut img));
+                dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::scatter::<N, D>(
+                    self, view, ks, x, known, &mut img
+                ));
                 img
             })
             .collect();
@@ -2518,6 +2609,21 @@ impl Projector for FootprintProjector {
                 }
             }
         });
+    }
+}
+
+impl Projector for FootprintProjector {
+    fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    fn cameras(&self) -> &[Camera] {
+        &self.cameras
+    }
+
+    fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
+        check_shapes(self, view, x.len(), out.len());
+        self.forward_known(view, x, None, out);
     }
 
     fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>) {

@@ -409,7 +409,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if crate::interrupt::requested() {
             bail!("interrupted");
         }
-        let img = if footprint {
+        if footprint {
+            // Views are projected in groups of one time, where the volume's empty chunks are
+            // found once for the group; `i` opens a group or is in one already drawn.
+            if i < images.len() {
+                continue;
+            }
             let p = projector.as_ref().expect("built for footprint renders");
             let volume = match &source {
                 Source::Volume(volume) => volume,
@@ -421,10 +426,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     &sampled.as_ref().expect("sampled just above").1
                 }
             };
-            let mut img = Image::zeros(v.camera.width(), v.camera.height());
-            p.forward(i, &volume.data, &mut img.data);
-            img
-        } else {
+            let group: Vec<usize> =
+                (i..views.len()).take(FOOTPRINT_GROUP).take_while(|&j| views[j].time == v.time).collect();
+            let mut drawn: Vec<Image> =
+                group.iter().map(|&j| Image::zeros(views[j].camera.width(), views[j].camera.height())).collect();
+            let mut outs: Vec<&mut [f32]> = drawn.iter_mut().map(|img| img.data.as_mut_slice()).collect();
+            p.forward_views(&group, &volume.data, &mut outs);
+            bar.inc(drawn.len() as u64);
+            images.extend(drawn);
+            continue;
+        }
+        let img = {
             let settings = RenderSettings { supersample: ss, time: v.time, scale: scene.intensity_scale, step };
             let field: &dyn ScalarField = match bake_dims {
                 Some(dims) => {
@@ -514,6 +526,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// is closer to what the camera records than a ray through its centre, and a field sampled on
 /// its finest level's cells loses little (`docs/performance.md`).
 pub const AUTO_FOOTPRINT_MAX_PX: f64 = 1.5;
+
+/// Views the footprint projector draws together, sharing one pass over the volume to find its
+/// empty chunks; few enough that an interruption is seen soon.
+const FOOTPRINT_GROUP: usize = 16;
 
 /// Whether `--projector auto` renders with the footprint projector (see [`Args::projector`]):
 /// nothing asks for rays, and the cells it would project image at most
