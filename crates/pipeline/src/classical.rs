@@ -423,16 +423,16 @@ impl HoldoutScorer {
 
     /// Each view's reprojection, masked pixels zeroed.
     fn reprojections(&self, volume: &[f32]) -> Vec<Vec<f32>> {
-        (0..self.images.len())
-            .map(|v| {
-                let mut buf = vec![0.0; self.projector.view_len(v)];
-                self.projector.forward(v, volume, &mut buf);
-                if let Some(m) = &self.masks[v] {
-                    buf.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(b, _)| *b = 0.0);
-                }
-                buf
-            })
-            .collect()
+        let views: Vec<usize> = (0..self.images.len()).collect();
+        let mut bufs: Vec<Vec<f32>> = views.iter().map(|&v| vec![0.0; self.projector.view_len(v)]).collect();
+        let mut outs: Vec<&mut [f32]> = bufs.iter_mut().map(Vec::as_mut_slice).collect();
+        self.projector.forward_views(&views, volume, &mut outs);
+        for (buf, mask) in bufs.iter_mut().zip(&self.masks) {
+            if let Some(m) = mask {
+                buf.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(b, _)| *b = 0.0);
+            }
+        }
+        bufs
     }
 
     fn loss(&self, volume: &[f32]) -> f64 {

@@ -47,12 +47,10 @@ pub fn forward_project(
             let moved = shift.cameras(&cameras);
             let x = shift.data(grid.dims, &volume.data);
             let p = config.build(shift.grid(&grid), &moved, scale).map_err(|e| err(e.to_string()))?;
-            let mut images = Vec::with_capacity(cameras.len());
-            for (v, c) in cameras.iter().enumerate() {
-                let mut out = vec![0f32; c.width() * c.height()];
-                p.forward(v, &x, &mut out);
-                images.push(Image::from_vec(c.width(), c.height(), out));
-            }
+            let mut images: Vec<Image> = cameras.iter().map(|c| Image::zeros(c.width(), c.height())).collect();
+            let views: Vec<usize> = (0..cameras.len()).collect();
+            let mut outs: Vec<&mut [f32]> = images.iter_mut().map(|im| im.data.as_mut_slice()).collect();
+            p.forward_views(&views, &x, &mut outs);
             Ok(images)
         })
     })?;

@@ -2560,21 +2560,6 @@ impl FootprintProjector {
 }
 
 impl FootprintProjector {
-    /// `A_v x` for each of `views` into `outs` (one image per view, as [`Projector::forward`]
-    /// writes it), the same bits as projecting them one by one. Which chunks of the volume hold
-    /// anything is found once instead of once per view: for a flow that fills part of the box,
-    /// reading the whole volume again for each view was a sixth of a projection's time.
-    pub fn forward_views(&self, views: &[usize], x: &[f32], outs: &mut [&mut [f32]]) {
-        assert_eq!(views.len(), outs.len(), "one image per view");
-        for (&v, out) in views.iter().zip(outs.iter()) {
-            check_shapes(self, v, x.len(), out.len());
-        }
-        let known = NonEmptyChunks::of(&self.grid, x);
-        for (&v, out) in views.iter().zip(outs.iter_mut()) {
-            self.forward_known(v, x, Some(&known), out);
-        }
-    }
-
     /// [`Projector::forward`], with the volume's non-empty chunks found beforehand or not.
     fn forward_known(&self, view: usize, x: &[f32], known: Option<&NonEmptyChunks>, out: &mut [f32]) {
         let fv = &self.views[view];
@@ -2624,6 +2609,20 @@ impl Projector for FootprintProjector {
     fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
         check_shapes(self, view, x.len(), out.len());
         self.forward_known(view, x, None, out);
+    }
+
+    /// Which chunks of the volume hold anything is found once instead of once per view: for a
+    /// flow that fills part of the box, reading the whole volume again for each view was a
+    /// sixth of a projection's time.
+    fn forward_views(&self, views: &[usize], x: &[f32], outs: &mut [&mut [f32]]) {
+        assert_eq!(views.len(), outs.len(), "one image per view");
+        for (&v, out) in views.iter().zip(outs.iter()) {
+            check_shapes(self, v, x.len(), out.len());
+        }
+        let known = NonEmptyChunks::of(&self.grid, x);
+        for (&v, out) in views.iter().zip(outs.iter_mut()) {
+            self.forward_known(v, x, Some(&known), out);
+        }
     }
 
     fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>) {

@@ -216,6 +216,17 @@ pub trait Projector: Sync {
     /// `out = A_v x` (overwrites `out`).
     fn forward(&self, view: usize, x: &[f32], out: &mut [f32]);
 
+    /// `outs[k] = A_{views[k]} x` for one volume and several views, the images of
+    /// [`Projector::forward`] for each view in turn, bit for bit. A projector may share work
+    /// between the views (the footprint projector finds the volume's empty chunks once); the
+    /// default calls `forward` view by view.
+    fn forward_views(&self, views: &[usize], x: &[f32], outs: &mut [&mut [f32]]) {
+        assert_eq!(views.len(), outs.len(), "one image per view");
+        for (&v, out) in views.iter().zip(outs.iter_mut()) {
+            self.forward(v, x, out);
+        }
+    }
+
     /// `out += A_vᵀ y`, and, if given, `col_sums += A_vᵀ 1` (the column sums `Σ_i w_ij` of
     /// the view) in the same pass.
     fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], col_sums: Option<&mut [f32]>);
