@@ -323,6 +323,18 @@ fn cases() -> Vec<Case> {
             "its `scene`, nowhere, does not exist",
         ),
         c(
+            "config naming a file as its scene",
+            File("run.json", br#"{"format":1,"scene":"scene/images/cam000.png","method":{"name":"asart"}}"#),
+            &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],
+            "run.json: its `scene`: ",
+        ),
+        c(
+            "scene given as a file",
+            None,
+            &["reconstruct", "SCENE/images/cam000.png", "-o", "OUT", "--method", "asart"],
+            "cam000.png: is a file, not a scene folder",
+        ),
+        c(
             "config of another method",
             File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart"}}"#),
             &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT", "--method", "fast"],

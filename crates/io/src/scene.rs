@@ -466,6 +466,21 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
     Ok(())
 }
 
+/// Refuses a scene path that is a regular file not ending in `.json`: it would otherwise be
+/// read as a folder (`path/transforms.json`) and fail with the system's "Not a directory".
+pub fn check_scene_path(path: &Path) -> Result<(), IoError> {
+    if path.is_file() && scene_file_path(path) != path {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "is a file, not a scene folder; give the folder holding {SCENE_FILE}, or the scene file itself \
+                 (a name ending in .json)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The scene file for `path`: `path` itself if it ends in `.json`, else `path/transforms.json`.
 pub fn scene_file_path(path: &Path) -> PathBuf {
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
@@ -790,6 +805,7 @@ fn missing_aabb(file: &Path) -> IoError {
 /// image with the same stem and another extension is then used: `train/r_0` →
 /// `train/r_0.png`).
 pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
+    check_scene_path(path)?;
     let file = scene_file_path(path);
     let text = crate::read_input_text(&file, "scene file")?;
     let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;

@@ -577,6 +577,8 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
                 if cfg.scene.is_relative() { " (a relative path is read from the working directory)" } else { "" }
             );
         }
+        fluidnerf_io::scene::check_scene_path(&cfg.scene)
+            .with_context(|| format!("{}: its `scene`", file.display()))?;
     }
     // Recorded absolute, so the config reruns from any working directory.
     if let Ok(abs) = std::path::absolute(&cfg.scene) {
