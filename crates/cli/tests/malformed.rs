@@ -323,6 +323,39 @@ fn cases() -> Vec<Case> {
             "its `scene`, nowhere, does not exist",
         ),
         c(
+            "frame times whose spread overflows",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = if i % 2 == 0 { -1.7e308 } else { 1.7e308 }.into();
+                }
+            }),
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--resolution", "8", "--max-iterations", "1"],
+            "the frame times run from frame 0 (images/cam000.png) at -1.7e308 to frame 1 (images/cam001.png) at 1.7e308, a spread too large",
+        ),
+        c(
+            "a time step too small for the times",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = (i % 2).into();
+                }
+            }),
+            &[
+                "reconstruct",
+                "SCENE",
+                "-o",
+                "OUT",
+                "--method",
+                "tr-fluidnerf",
+                "--resolution",
+                "8",
+                "--max-iterations",
+                "1",
+                "--time-step",
+                "1e-40",
+            ],
+            "method.time_step: the times run from 0 to 1, 1e40 time steps",
+        ),
+        c(
             "config naming a file as its scene",
             File("run.json", br#"{"format":1,"scene":"scene/images/cam000.png","method":{"name":"asart"}}"#),
             &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],

@@ -1067,6 +1067,7 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             ));
         }
     }
+    check_time_spread(scene, file)?;
     // One ground truth per instant: a second one at the same time would go unused, unreported.
     for (i, t) in scene.truth.iter().enumerate() {
         if let Some(j) = scene.truth[..i].iter().position(|u| u.time.map(f64::to_bits) == t.time.map(f64::to_bits)) {
@@ -1110,6 +1111,32 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
 /// Refuses a scene in which some frames have a `time` and others none: a frame without one
 /// cannot be placed among the instants (it would be read as time 0, an instant of its own). The
 /// error names the frames without time, at most five of them, with their images.
+/// Refuses frame times (finite each) whose spread, latest minus earliest, overflows: every
+/// time-resolved method works with time differences, which would be infinite, and its training
+/// would diverge or its volumes be garbage.
+fn check_time_spread(scene: &Scene, file: &Path) -> Result<(), IoError> {
+    let timed = || scene.frames.iter().enumerate().filter_map(|(i, f)| f.time.map(|t| (i, t)));
+    // The first frame at the earliest time and the first at the latest.
+    let (Some(first), Some(last)) =
+        (timed().min_by(|a, b| a.1.total_cmp(&b.1)), timed().reduce(|a, b| if b.1 > a.1 { b } else { a }))
+    else {
+        return Ok(());
+    };
+    if (last.1 - first.1).is_finite() {
+        return Ok(());
+    }
+    let frame = |(i, t): (usize, f64)| format!("frame {i} ({}) at {t:e}", scene.frames[i].file_path.display());
+    Err(IoError::invalid(
+        file,
+        format!(
+            "the frame times run from {} to {}, a spread too large to represent (it overflows 64-bit floating \
+             point), so no time difference can be computed; give the times in another unit or from a nearer origin",
+            frame(first),
+            frame(last)
+        ),
+    ))
+}
+
 fn check_times_on_every_frame(scene: &Scene, file: &Path) -> Result<(), IoError> {
     const SHOWN: usize = 5;
     let untimed: Vec<usize> =

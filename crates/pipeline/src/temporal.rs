@@ -205,6 +205,7 @@ fn setup(
              (one time vertex per frame, whatever their spacing)",
         );
     }
+    check_time_range(&spec, method, &times, problem.time_step)?;
     for &h in &spec.holdout_times {
         if h < times[0] || h > times[times.len() - 1] {
             session.warn(&format!(
@@ -992,6 +993,31 @@ pub fn finish_windows(
     };
     let truth = crate::load_truth(scene)?;
     run(scene, config, &dir, &truth, &mut session, true)
+}
+
+/// Refuses a time step by which the span of the run's times (training and held out) is more
+/// steps than 32-bit floating point holds: a space–time network reads `t' = (t − t₀)/Δt` in
+/// it, and an infinite `t'` makes the first loss NaN, which would be reported as a divergence.
+/// A hash-grid field reads frame positions instead and a per-frame field no time at all.
+fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f64) -> Result<(), PipelineError> {
+    if input_dim_of(method) != 4 || matches!(spec.field, FieldConfig::HashGrid(_)) {
+        return Ok(());
+    }
+    let all = || times.iter().chain(&spec.holdout_times).copied();
+    let (first, last) = (all().fold(f64::INFINITY, f64::min), all().fold(f64::NEG_INFINITY, f64::max));
+    let steps = (last - first) / step;
+    if steps <= f64::from(f32::MAX) {
+        return Ok(());
+    }
+    Err(PipelineError::invalid(
+        "method.time_step",
+        format!(
+            "the times run from {first} to {last}, {steps:e} time steps of Δt = {step:e}{}: more than the \
+             network's 32-bit time input t' = (t − t₀)/Δt can hold; give a larger time step (--time-step) or the \
+             times in another unit",
+            if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" }
+        ),
+    ))
 }
 
 /// The field's input dimension for a time-resolved method: 3 for per-frame static fields, 4
