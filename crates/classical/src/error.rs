@@ -20,9 +20,10 @@ pub enum ClassicalError {
     /// The iteration produced NaN or infinity: too large a relaxation factor, or values beyond
     /// single precision (images on a scale far from the field's, see `intensity_scale`).
     #[error(
-        "{method} diverged at iteration {iteration} (residual {residual}): its values left single precision; \
+        "{method} diverged at iteration {iteration} (residual {}): its values left single precision; \
          check that the images and the scene's intensity_scale put the field's values between about 1e-30 and \
-         1e30, and lower the relaxation factor if the method has one"
+         1e30, and lower the relaxation factor if the method has one",
+        fluidnerf_core::num(*residual)
     )]
     Diverged { method: &'static str, iteration: usize, residual: f64 },
 }

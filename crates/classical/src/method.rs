@@ -5,6 +5,7 @@
 //! [`ProjectorConfig`] holds what all voxel methods share: the projector, its sampling, and the
 //! optional visual-hull support mask.
 
+use fluidnerf_core::num;
 use std::ops::ControlFlow;
 
 use fluidnerf_core::{Camera, Image};
@@ -147,7 +148,9 @@ impl ClassicalMethod {
                     format!(
                         "needs window > 0, smoothing > 0 and a positive tolerance, got window {}, smoothing {}, \
                          tolerance {}",
-                        p.window, p.smoothing, p.tolerance
+                        p.window,
+                        p.smoothing,
+                        num(p.tolerance)
                     ),
                 ));
             }
@@ -159,7 +162,7 @@ impl ClassicalMethod {
             if !(mu > 0.0 && mu <= upper) {
                 return Err(ClassicalError::invalid(
                     "relaxation",
-                    format!("for {algorithm:?} must be in (0, {upper}], got {mu}"),
+                    format!("for {algorithm:?} must be in (0, {upper}], got {}", num(mu)),
                 ));
             }
         }
@@ -167,7 +170,7 @@ impl ClassicalMethod {
             if v >= 0.0 && v.is_finite() {
                 Ok(())
             } else {
-                Err(ClassicalError::invalid(what, format!("must be non-negative, got {v}")))
+                Err(ClassicalError::invalid(what, format!("must be non-negative, got {}", num(v))))
             }
         };
         match self {
@@ -284,13 +287,13 @@ impl ProjectorConfig {
         if !(self.ray_step >= 0.01 && self.ray_step <= 4.0) {
             return Err(ClassicalError::invalid(
                 "ray_step",
-                format!("must be in [0.01, 4] voxel sides, got {}", self.ray_step),
+                format!("must be in [0.01, 4] voxel sides, got {}", num(self.ray_step)),
             ));
         }
         if !(self.hull_threshold >= 0.0 && self.hull_threshold < 1.0) {
             return Err(ClassicalError::invalid(
                 "hull_threshold",
-                format!("must be in [0, 1), got {}", self.hull_threshold),
+                format!("must be in [0, 1), got {}", num(self.hull_threshold)),
             ));
         }
         if self.hull_dilation > 16 {
@@ -302,7 +305,7 @@ impl ProjectorConfig {
         if !(self.hull_noise_sigmas >= 0.0 && self.hull_noise_sigmas <= 100.0) {
             return Err(ClassicalError::invalid(
                 "hull_noise_sigmas",
-                format!("must be in [0, 100], got {}", self.hull_noise_sigmas),
+                format!("must be in [0, 100], got {}", num(self.hull_noise_sigmas)),
             ));
         }
         Ok(())

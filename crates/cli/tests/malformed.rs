@@ -356,6 +356,19 @@ fn cases() -> Vec<Case> {
             "method.time_step: the times run from 0 to 1, 1e40 time steps",
         ),
         c(
+            "config relaxation far out of range",
+            File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart","params":{"relaxation":1e300}}}"#),
+            &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
+            // Written compactly, not as 301 digits.
+            "relaxation: for Asart must be in (0, 2], got 1e300\n",
+        ),
+        c(
+            "relaxation flag far out of range",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--relaxation=-1e-300"],
+            "got -1e-300\n",
+        ),
+        c(
             "config naming a file as its scene",
             File("run.json", br#"{"format":1,"scene":"scene/images/cam000.png","method":{"name":"asart"}}"#),
             &["reconstruct", "--config", "SCENE/run.json", "-o", "OUT"],

@@ -16,6 +16,7 @@
 //! (The dissertation's Eq. 8.6–8.7 print the tangential terms with typos; OpenCV is the
 //! reference.)
 
+use crate::num;
 use glam::{DAffine3, DMat3, DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 
@@ -50,7 +51,7 @@ impl Intrinsics {
         if self.fx <= 0.0 || self.fy <= 0.0 {
             return Err(CoreError::invalid(
                 "intrinsics",
-                format!("focal lengths must be positive (fx = {}, fy = {})", self.fx, self.fy),
+                format!("focal lengths must be positive (fx = {}, fy = {})", num(self.fx), num(self.fy)),
             ));
         }
         Ok(())
@@ -203,7 +204,10 @@ impl ThinLens {
                 format!(
                     "needs focal length > 0, aperture >= 0, pixel pitch > 0 and magnification < 0 \
                      (got f = {}, d_a = {}, M = {}, pitch = {})",
-                    self.focal_length, self.aperture_diameter, self.magnification, self.pixel_pitch
+                    num(self.focal_length),
+                    num(self.aperture_diameter),
+                    num(self.magnification),
+                    num(self.pixel_pitch)
                 ),
             ))
         }

@@ -1,5 +1,6 @@
 //! Axis-aligned boxes and rays.
 
+use crate::num;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
@@ -52,7 +53,11 @@ impl Aabb {
         if !self.min.cmplt(self.max).all() {
             return Err(crate::CoreError::invalid(
                 "aabb",
-                format!("min {} must be below max {} on every axis", self.min, self.max),
+                format!(
+                    "min {} must be below max {} on every axis",
+                    num(self.min.to_array()),
+                    num(self.max.to_array())
+                ),
             ));
         }
         Ok(())

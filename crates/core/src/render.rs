@@ -10,6 +10,7 @@
 //! the image is the same up to summation order. A grid with a support (a [`crate::Baked`]
 //! field) is read at the samples inside the occupied cells only, where its source is non-zero.
 
+use crate::num;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -58,7 +59,7 @@ pub fn render_image(
     aabb.validate()?;
     let step = settings.step.unwrap_or(aabb.size().min_element() / 256.0);
     if !(step > 0.0 && step.is_finite()) {
-        return Err(CoreError::invalid("render step", format!("must be positive, got {step}")));
+        return Err(CoreError::invalid("render step", format!("must be positive, got {}", num(step))));
     }
     let diagonal = aabb.size().length();
     if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {

@@ -67,6 +67,7 @@
 //! the same scene exactly, except `cx, cy`, which pass through `± 0.5` and may differ in the
 //! last bit.
 
+use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
@@ -241,7 +242,7 @@ fn pixel_count<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u32>, D:
     match Option::<f64>::deserialize(d)? {
         None => Ok(None),
         Some(v) if v.fract() == 0.0 && (1.0..=f64::from(u32::MAX)).contains(&v) => Ok(Some(v as u32)),
-        Some(v) => Err(serde::de::Error::custom(format!("expected a positive whole number of pixels, got {v}"))),
+        Some(v) => Err(serde::de::Error::custom(format!("expected a positive whole number of pixels, got {}", num(v)))),
     }
 }
 
@@ -445,7 +446,7 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
     let check_bg = |b: &Option<BackgroundKey>, place: &str| match b {
         Some(BackgroundKey::Constant(c)) if !(c.is_finite() && *c >= 0.0) => Err(IoError::invalid(
             file,
-            format!("{place}: `background` must be a finite number of counts, at least 0, got {c}"),
+            format!("{place}: `background` must be a finite number of counts, at least 0, got {}", num(*c)),
         )),
         Some(BackgroundKey::Frames(v)) if v.is_empty() => Err(IoError::invalid(
             file,
@@ -629,7 +630,7 @@ fn frame_camera(
     let from_angle = |angle: Option<f64>, key: &str, size: u32| match angle {
         None => Ok(None),
         Some(a) if a > 0.0 && a < std::f64::consts::PI => Ok(Some(0.5 * f64::from(size) / (0.5 * a).tan())),
-        Some(a) => Err(bad(format!("`{key}` must be a field of view in (0, π) radians, got {a}"))),
+        Some(a) => Err(bad(format!("`{key}` must be a field of view in (0, π) radians, got {}", num(a)))),
     };
     let fx = match k.fl_x {
         Some(f) => f,
@@ -1004,7 +1005,7 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     }
     let s = scene.intensity_scale;
     if !(s.is_finite() && s > 0.0) {
-        return Err(IoError::invalid(file, format!("intensity_scale must be positive, got {s}")));
+        return Err(IoError::invalid(file, format!("intensity_scale must be positive, got {}", num(s))));
     }
     if !(MIN_INTENSITY_SCALE..=MAX_INTENSITY_SCALE).contains(&s) {
         return Err(IoError::invalid(

@@ -11,6 +11,7 @@
 //! `max` corner; per axis). A voxel belongs to a region when its centre lies inside, so regions
 //! that tile `[0, 1]` partition the voxels.
 
+use fluidnerf_core::num;
 use std::ops::Range;
 
 use fluidnerf_core::{Aabb, Volume};
@@ -102,7 +103,7 @@ impl Region {
             if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo >= hi {
                 return Err(MetricsError::invalid(
                     format!("region '{}'", self.name),
-                    format!("axis {a}: need 0 <= min < max <= 1, got [{lo}, {hi})"),
+                    format!("axis {a}: need 0 <= min < max <= 1, got [{}, {})", num(lo), num(hi)),
                 ));
             }
         }

@@ -124,7 +124,10 @@ pub fn evaluate_volume(
     }
     if let Some(r) = options.data_range {
         if !(r > 0.0 && r.is_finite()) {
-            return Err(MetricsError::invalid("data range", format!("must be positive, got {r}")));
+            return Err(MetricsError::invalid(
+                "data range",
+                format!("must be positive, got {}", fluidnerf_core::num(r)),
+            ));
         }
     }
     let resampled;

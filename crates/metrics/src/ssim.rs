@@ -26,6 +26,7 @@
 //! uses direct taps. 3D work is split over output z-slabs with rayon, each slab holding only a
 //! few planes of f64 moments.
 
+use fluidnerf_core::num;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -100,19 +101,22 @@ impl SsimParams {
                 ))
             }
             SsimWindow::Gaussian { sigma } if !(sigma > 0.0 && sigma.is_finite()) => {
-                return Err(MetricsError::invalid("SSIM Gaussian sigma", format!("must be positive, got {sigma}")))
+                return Err(MetricsError::invalid(
+                    "SSIM Gaussian sigma",
+                    format!("must be positive, got {}", num(sigma)),
+                ))
             }
             _ => {}
         }
         if !(self.k1 >= 0.0 && self.k2 >= 0.0) {
             return Err(MetricsError::invalid(
                 "SSIM constants",
-                format!("K1 {} and K2 {} must be >= 0", self.k1, self.k2),
+                format!("K1 {} and K2 {} must be >= 0", num(self.k1), num(self.k2)),
             ));
         }
         if let Some(r) = self.data_range {
             if !(r > 0.0 && r.is_finite()) {
-                return Err(MetricsError::invalid("SSIM data range", format!("must be positive, got {r}")));
+                return Err(MetricsError::invalid("SSIM data range", format!("must be positive, got {}", num(r))));
             }
         }
         Ok(())

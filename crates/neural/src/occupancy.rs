@@ -27,6 +27,7 @@
 //!
 //! Valid for views of one instant (a static scene, or the frames of one time step).
 
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Camera, Image};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -82,13 +83,13 @@ impl OccupancyConfig {
             );
         }
         if !(self.noise_sigmas >= 0.0 && self.noise_sigmas <= 100.0) {
-            return bad("noise_sigmas", format!("must be in [0, 100], got {}", self.noise_sigmas));
+            return bad("noise_sigmas", format!("must be in [0, 100], got {}", num(self.noise_sigmas)));
         }
         if !(self.floor >= 0.0 && self.floor < 1.0) {
-            return bad("floor", format!("must be a fraction in [0, 1), got {}", self.floor));
+            return bad("floor", format!("must be a fraction in [0, 1), got {}", num(self.floor)));
         }
         if !(self.margin_px >= 0.0 && self.margin_px <= 100.0) {
-            return bad("margin_px", format!("must be in [0, 100] pixels, got {}", self.margin_px));
+            return bad("margin_px", format!("must be in [0, 100] pixels, got {}", num(self.margin_px)));
         }
         if self.dilate > 16 {
             return bad("dilate", format!("must be at most 16 cells, got {}", self.dilate));

@@ -19,6 +19,7 @@
 //! arithmetic is independent of the blocking, so results are bit-identical for any number of
 //! threads.
 
+use fluidnerf_core::num;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -53,11 +54,11 @@ impl AdamConfig {
         let ok = |b: f32| (0.0..1.0).contains(&b);
         for (key, b) in [("adam.beta1", self.beta1), ("adam.beta2", self.beta2)] {
             if !ok(b) {
-                return Err(NeuralError::invalid(key, format!("Adam's decay rate must lie in [0, 1), got {b}")));
+                return Err(NeuralError::invalid(key, format!("Adam's decay rate must lie in [0, 1), got {}", num(b))));
             }
         }
         if !(self.eps > 0.0 && self.eps.is_finite()) {
-            return Err(NeuralError::invalid("adam.eps", format!("must be positive, got {}", self.eps)));
+            return Err(NeuralError::invalid("adam.eps", format!("must be positive, got {}", num(self.eps))));
         }
         Ok(())
     }
@@ -176,7 +177,9 @@ impl LrSchedule {
                 "schedule",
                 format!(
                     "the learning rate's initial {} and at_decay_iters {} must be positive, decay_iters {} non-zero",
-                    self.initial, self.at_decay_iters, self.decay_iters
+                    num(self.initial),
+                    num(self.at_decay_iters),
+                    self.decay_iters
                 ),
             ));
         }

@@ -53,7 +53,7 @@ impl StartFit {
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
             return Err(NeuralError::invalid(
                 "start.learning_rate",
-                format!("must be positive, got {}", self.learning_rate),
+                format!("must be positive, got {}", fluidnerf_core::num(self.learning_rate)),
             ));
         }
         Ok(())

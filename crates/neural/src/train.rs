@@ -31,6 +31,7 @@
 //! resuming at iteration `k` continues exactly as an uninterrupted run would (given the
 //! optimiser state).
 
+use fluidnerf_core::num;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -258,14 +259,14 @@ impl TrainConfig {
             [("prior.tv", self.prior.tv), ("prior.smooth", self.prior.smooth), ("prior.sparsity", self.prior.sparsity)]
         {
             if !(w >= 0.0 && w.is_finite()) {
-                return bad(what, format!("must be a non-negative weight, got {w}"));
+                return bad(what, format!("must be a non-negative weight, got {}", num(w)));
             }
         }
         if self.prior.points == 0 {
             return bad("prior.points", "needs at least 1".into());
         }
         if !(self.prior.step > 0.0 && self.prior.step < 0.5) {
-            return bad("prior.step", format!("must be in (0, 0.5) box units, got {}", self.prior.step));
+            return bad("prior.step", format!("must be in (0, 0.5) box units, got {}", num(self.prior.step)));
         }
         if self.coarse_samples < 2 {
             return bad("coarse_samples", format!("needs at least 2, got {}", self.coarse_samples));
@@ -292,12 +293,12 @@ impl TrainConfig {
         self.adam.validate()?;
         if let Some(t) = self.time_budget_s {
             if t.is_nan() || t <= 0.0 {
-                return bad("time_budget_s", format!("must be positive, got {t}"));
+                return bad("time_budget_s", format!("must be positive, got {}", num(t)));
             }
         }
         if let Some(s) = self.image_scale {
             if !(s > 0.0 && s.is_finite()) {
-                return bad("image_scale", format!("must be positive, got {s}"));
+                return bad("image_scale", format!("must be positive, got {}", num(s)));
             }
         }
         if self.stop.window > 0
@@ -356,7 +357,7 @@ impl FieldMeta {
         }
         for (key, v) in [("value_scale", self.value_scale), ("time_step", self.time_step)] {
             if !(v.is_finite() && v > 0.0) {
-                return Some(format!("{key} must be finite and positive, got {v}"));
+                return Some(format!("{key} must be finite and positive, got {}", num(v)));
             }
         }
         None
@@ -449,11 +450,11 @@ impl Prepared {
         if !(problem.intensity_scale > 0.0 && problem.intensity_scale.is_finite()) {
             return Err(NeuralError::invalid(
                 "intensity_scale",
-                format!("must be positive, got {}", problem.intensity_scale),
+                format!("must be positive, got {}", num(problem.intensity_scale)),
             ));
         }
         if !(problem.time_step > 0.0 && problem.time_step.is_finite()) {
-            return Err(NeuralError::invalid("time_step", format!("must be positive, got {}", problem.time_step)));
+            return Err(NeuralError::invalid("time_step", format!("must be positive, got {}", num(problem.time_step))));
         }
         for (i, v) in problem.views.iter().chain(&problem.holdout).enumerate() {
             if (v.camera.width(), v.camera.height()) != (v.image.width, v.image.height) {

@@ -27,6 +27,7 @@
 //! The [`StoppingPolicy`] is applied on top of every method's own parameters, so one policy
 //! stops classical and neural methods alike ([`RunConfig::effective_method`]).
 
+use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
@@ -305,7 +306,7 @@ impl StartSpec {
         if !(self.learning_rate_scale > 0.0 && self.learning_rate_scale <= 1.0) {
             return Err(PipelineError::invalid(
                 "method.start.learning_rate_scale",
-                format!("must be in (0, 1], got {}", self.learning_rate_scale),
+                format!("must be in (0, 1], got {}", num(self.learning_rate_scale)),
             ));
         }
         Ok(())
@@ -554,11 +555,14 @@ impl MethodConfig {
                 }
                 if let Some(dt) = t.time_step {
                     if !(dt > 0.0 && dt.is_finite()) {
-                        return Err(PipelineError::invalid("method.time_step", format!("must be positive, got {dt}")));
+                        return Err(PipelineError::invalid(
+                            "method.time_step",
+                            format!("must be positive, got {}", num(dt)),
+                        ));
                     }
                 }
                 if let Some(h) = t.holdout_times.iter().find(|h| !h.is_finite()) {
-                    return Err(PipelineError::invalid("method.holdout_times", format!("{h} is not a time")));
+                    return Err(PipelineError::invalid("method.holdout_times", format!("{} is not a time", num(*h))));
                 }
                 if *m == Method::StaticPerFrame && t.windows != WindowConfig::per_frame() {
                     return Err(PipelineError::invalid(
@@ -657,7 +661,7 @@ impl StoppingPolicy {
             if !(t > 0.0 && t.is_finite()) {
                 return Err(PipelineError::invalid(
                     "stopping.time_budget_s",
-                    format!("must be a positive, finite number of seconds, got {t}"),
+                    format!("must be a positive, finite number of seconds, got {}", num(t)),
                 ));
             }
         }
@@ -682,7 +686,7 @@ impl StoppingPolicy {
             s += &format!(", at most {n} iterations");
         }
         if let Some(t) = self.time_budget_s {
-            s += &format!(", at most {t} s");
+            s += &format!(", at most {} s", num(t));
         }
         s
     }
@@ -706,7 +710,7 @@ impl StoppingPolicy {
             s += &format!(", at most {n} iterations");
         }
         if let Some(t) = self.time_budget_s {
-            s += &format!(", at most {t} s");
+            s += &format!(", at most {} s", num(t));
         }
         s
     }
@@ -897,7 +901,7 @@ impl RunConfig {
         }
         if let Some(g) = self.memory_limit_gib {
             if !(g > 0.0 && g.is_finite()) {
-                return Err(PipelineError::invalid("memory_limit_gib", format!("must be positive, got {g}")));
+                return Err(PipelineError::invalid("memory_limit_gib", format!("must be positive, got {}", num(g))));
             }
         }
         self.stopping.validate()?;

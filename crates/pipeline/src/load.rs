@@ -6,6 +6,7 @@
 //! hand or by another tool (no `config.json`) is read by what it holds: `model.json` with its
 //! weights, or `volume.npy` on a box given by the caller.
 
+use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use fluidnerf_core::{Aabb, ScalarField, Volume};
@@ -35,23 +36,29 @@ pub struct TimeSpan {
 pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> Result<f64, PipelineError> {
     let refuse = |why: String| PipelineError::invalid(what, why);
     if let Some(t) = given.filter(|t| !t.is_finite()) {
-        return Err(refuse(format!("the time must be a finite number, got {t}")));
+        return Err(refuse(format!("the time must be a finite number, got {}", num(t))));
     }
     let Some(&TimeSpan { first, last, ref not_reached }) = span else { return Ok(given.unwrap_or(0.0)) };
     let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
     match given {
         None => Ok(first),
         Some(t) if t > last + slack && !not_reached.is_empty() => {
-            let list: Vec<String> = not_reached.iter().map(f64::to_string).collect();
+            let list: Vec<String> = not_reached.iter().map(|&t| num(t).to_string()).collect();
             Err(refuse(format!(
-                "time {t} was never trained: the run was stopped before it reached t = {} (its windows trained \
-                 {first} … {last}); continue it with `reconstruct --resume` (`overwrite=\"resume\"` from Python)",
-                list.join(", ")
+                "time {} was never trained: the run was stopped before it reached t = {} (its windows trained \
+                 {} … {}); continue it with `reconstruct --resume` (`overwrite=\"resume\"` from Python)",
+                num(t),
+                list.join(", "),
+                num(first),
+                num(last)
             )))
         }
-        Some(t) if t < first - slack || t > last + slack => {
-            Err(refuse(format!("time {t} lies outside the time-resolved run's instants {first} … {last}")))
-        }
+        Some(t) if t < first - slack || t > last + slack => Err(refuse(format!(
+            "time {} lies outside the time-resolved run's instants {} … {}",
+            num(t),
+            num(first),
+            num(last)
+        ))),
         Some(t) => Ok(t),
     }
 }

@@ -12,6 +12,7 @@
 //! running one from its last checkpoint, and equals an uninterrupted run (same seed and
 //! thread count).
 
+use fluidnerf_core::num;
 use fluidnerf_core::scene::same_time;
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -209,7 +210,8 @@ fn setup(
     for &h in &spec.holdout_times {
         if h < times[0] || h > times[times.len() - 1] {
             session.warn(&format!(
-                "held-out time {h} lies outside the training times; the field is held at the nearest end"
+                "held-out time {} lies outside the training times; the field is held at the nearest end",
+                num(h)
             ));
         }
     }
@@ -1012,9 +1014,12 @@ fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f6
     Err(PipelineError::invalid(
         "method.time_step",
         format!(
-            "the times run from {first} to {last}, {steps:e} time steps of Δt = {step:e}{}: more than the \
-             network's 32-bit time input t' = (t − t₀)/Δt can hold; give a larger time step (--time-step) or the \
-             times in another unit",
+            "the times run from {} to {}, {} time steps of Δt = {}{}: more than the network's 32-bit time \
+             input t' = (t − t₀)/Δt can hold; give a larger time step (--time-step) or the times in another unit",
+            num(first),
+            num(last),
+            num(steps),
+            num(step),
             if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" }
         ),
     ))

@@ -1,6 +1,7 @@
 //! Operators on NumPy arrays: the classical projectors (forward and adjoint), the reference
 //! renderer, the metrics, and synthetic scenes.
 
+use fluidnerf_core::num;
 use std::path::PathBuf;
 
 use fluidnerf_classical::{Grid, ProjectorConfig};
@@ -139,7 +140,7 @@ pub fn render(
     }
     if let Some(step) = step {
         if !(step > 0.0 && step.is_finite()) {
-            return Err(err(format!("step: must be a positive number of world units, got {step}")));
+            return Err(err(format!("step: must be a positive number of world units, got {}", num(step))));
         }
         let diagonal = scene.inner.aabb.size().length();
         if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {
@@ -212,7 +213,7 @@ pub fn psnr(
     let (a, b, _) = pair(&estimate, &truth)?;
     let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(&b));
     if !(range > 0.0 && range.is_finite()) {
-        return Err(err(format!("data_range: must be positive, got {range}")));
+        return Err(err(format!("data_range: must be positive, got {}", num(range))));
     }
     guard(|| Ok(fluidnerf_metrics::psnr(&a, &b, range)))
 }
@@ -231,7 +232,7 @@ pub fn ssim(
     let (a, b, shape) = pair(&estimate, &truth)?;
     let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(&b));
     if !(range > 0.0 && range.is_finite()) {
-        return Err(err(format!("data_range: must be positive, got {range}")));
+        return Err(err(format!("data_range: must be positive, got {}", num(range))));
     }
     let params = match window {
         "global" => return guard(|| Ok(fluidnerf_metrics::ssim_global(&a, &b, range))),

@@ -206,7 +206,10 @@ impl PyScene {
                 }
             }
             if !(intensity_scale > 0.0 && intensity_scale.is_finite()) {
-                return Err(err(format!("intensity_scale: must be positive, got {intensity_scale}")));
+                return Err(err(format!(
+                    "intensity_scale: must be positive, got {}",
+                    fluidnerf_core::num(intensity_scale)
+                )));
             }
             let mut frames = Vec::with_capacity(n);
             let mut images_out = Vec::with_capacity(n);

@@ -7,6 +7,7 @@
 //! writing files is the caller's business ([`Synthesis::scene`] gives the scene description
 //! with the file names it expects).
 
+use fluidnerf_core::num;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 
@@ -84,7 +85,7 @@ impl SynthSettings {
             ));
         }
         if let Some(t) = self.times.iter().find(|t| !t.is_finite()) {
-            return Err(SynthError::invalid("times", format!("must be finite, got {t}")));
+            return Err(SynthError::invalid("times", format!("must be finite, got {}", num(*t))));
         }
         if let Some((i, t)) = self.times.iter().enumerate().find(|&(i, t)| self.times[..i].contains(t)) {
             return Err(SynthError::invalid(
@@ -97,8 +98,9 @@ impl SynthSettings {
                 return Err(SynthError::invalid(
                     "times",
                     format!(
-                        "the CFD phantoms' times are stored solver steps, one of {:?}; got {t}",
-                        crate::phantom::cfd::STEPS
+                        "the CFD phantoms' times are stored solver steps, one of {:?}; got {}",
+                        crate::phantom::cfd::STEPS,
+                        num(*t)
                     ),
                 ));
             }

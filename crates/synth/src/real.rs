@@ -22,6 +22,7 @@
 //! `L_c / 255`), which adds quantisation and compression error. A reconstruction recovers `k ·
 //! ∫E ds` by subtracting the background frames and dividing out the gains.
 
+use fluidnerf_core::num;
 use fluidnerf_core::Image;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -59,19 +60,19 @@ impl RealLike {
         if !(0.0..1.0).contains(&self.gain_spread) {
             return Err(SynthError::invalid(
                 "real.gain_spread",
-                format!("must be in [0, 1), got {}", self.gain_spread),
+                format!("must be in [0, 1), got {}", num(self.gain_spread)),
             ));
         }
         if !(0.0..0.5).contains(&self.background) {
             return Err(SynthError::invalid(
                 "real.background",
-                format!("must be in [0, 0.5), got {}", self.background),
+                format!("must be in [0, 0.5), got {}", num(self.background)),
             ));
         }
         if !(0.0..0.5).contains(&self.dark_noise) {
             return Err(SynthError::invalid(
                 "real.dark_noise",
-                format!("must be in [0, 0.5), got {}", self.dark_noise),
+                format!("must be in [0, 0.5), got {}", num(self.dark_noise)),
             ));
         }
         if self.background_frames == 0 || self.background_frames > 100 {

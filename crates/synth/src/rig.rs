@@ -10,6 +10,7 @@
 //! layout (the dissertation's 4…60-camera sets are subsets of its 120-camera ring).
 
 use fluidnerf_core::glam::{DAffine3, DMat3, DQuat, DVec3};
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Camera, Intrinsics, ThinLens};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal, UnitSphere};
@@ -52,24 +53,24 @@ impl LensSettings {
         if !(self.magnification < 0.0 && self.magnification.is_finite()) {
             return Err(SynthError::invalid(
                 "lens.magnification",
-                format!("must be negative (a real image), got {}", self.magnification),
+                format!("must be negative (a real image), got {}", num(self.magnification)),
             ));
         }
         if !(self.focal_length_mm > 0.0 && self.focal_length_mm.is_finite()) {
             return Err(SynthError::invalid(
                 "lens.focal_length_mm",
-                format!("must be positive, got {}", self.focal_length_mm),
+                format!("must be positive, got {}", num(self.focal_length_mm)),
             ));
         }
         if !(self.f_number > 0.0 && self.f_number.is_finite()) {
-            return Err(SynthError::invalid("lens.f_number", format!("must be positive, got {}", self.f_number)));
+            return Err(SynthError::invalid("lens.f_number", format!("must be positive, got {}", num(self.f_number))));
         }
         if self.resolution[0] == 0 || self.resolution[1] == 0 {
             return Err(SynthError::invalid("lens.resolution", "width and height must be positive"));
         }
         if let Some(p) = self.pixel_pitch_mm {
             if !(p > 0.0 && p.is_finite()) {
-                return Err(SynthError::invalid("lens.pixel_pitch_mm", format!("must be positive, got {p}")));
+                return Err(SynthError::invalid("lens.pixel_pitch_mm", format!("must be positive, got {}", num(p))));
             }
         }
         Ok(())
@@ -223,7 +224,7 @@ impl RigSettings {
                 if !(*arc_deg > 0.0 && *arc_deg <= 360.0) {
                     return Err(SynthError::invalid(
                         "rig.layout.arc_deg",
-                        format!("must be in (0, 360], got {arc_deg}"),
+                        format!("must be in (0, 360], got {}", num(*arc_deg)),
                     ));
                 }
                 if !start_deg.is_finite() {
@@ -274,12 +275,12 @@ impl RigSettings {
             [("rig.jitter.position_mm", self.jitter.position_mm), ("rig.jitter.rotation_deg", self.jitter.rotation_deg)]
         {
             if !(v >= 0.0 && v.is_finite()) {
-                return Err(SynthError::invalid(name, format!("must be zero or positive, got {v}")));
+                return Err(SynthError::invalid(name, format!("must be zero or positive, got {}", num(v))));
             }
         }
         if let Some(d) = self.distance_mm {
             if !(d > 0.0 && d.is_finite()) {
-                return Err(SynthError::invalid("rig.distance_mm", format!("must be positive, got {d}")));
+                return Err(SynthError::invalid("rig.distance_mm", format!("must be positive, got {}", num(d))));
             }
         }
         Ok(())

@@ -15,6 +15,7 @@
 //! So `counts − dark_offset ≈ intensity_scale × ∫E ds`. Counts are stored unscaled (a 12-bit
 //! sensor's values stay in 0..=4095, in a 16-bit file).
 
+use fluidnerf_core::num;
 use fluidnerf_core::Image;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal, Poisson};
@@ -66,7 +67,7 @@ impl SensorSettings {
         if !(self.full_scale_fraction > 0.0 && self.full_scale_fraction <= 1.0) {
             return Err(SynthError::invalid(
                 "sensor.full_scale_fraction",
-                format!("must be in (0, 1], got {}", self.full_scale_fraction),
+                format!("must be in (0, 1], got {}", num(self.full_scale_fraction)),
             ));
         }
         if !(self.gaussian_noise >= 0.0 && self.gaussian_noise < 1.0) {
@@ -74,19 +75,19 @@ impl SensorSettings {
                 "sensor.gaussian_noise",
                 format!(
                     "must be a fraction of the image's maximum in [0, 1) (0.05 for 5 %), got {}",
-                    self.gaussian_noise
+                    num(self.gaussian_noise)
                 ),
             ));
         }
         if let Some(fw) = self.full_well {
             if !(fw > 0.0 && fw.is_finite()) {
-                return Err(SynthError::invalid("sensor.full_well", format!("must be positive, got {fw}")));
+                return Err(SynthError::invalid("sensor.full_well", format!("must be positive, got {}", num(fw))));
             }
         }
         if !(self.dark_offset >= 0.0 && self.dark_offset < self.full_scale()) {
             return Err(SynthError::invalid(
                 "sensor.dark_offset",
-                format!("must be in [0, {}), got {}", self.full_scale(), self.dark_offset),
+                format!("must be in [0, {}), got {}", num(self.full_scale()), num(self.dark_offset)),
             ));
         }
         Ok(())

@@ -8,6 +8,7 @@
 //! axes); the longer side is [`PanelStyle::plot_size_px`] pixels, or up to 2.5 times that for
 //! elongated extents.
 
+use fluidnerf_core::num;
 use std::fmt;
 use std::path::Path;
 use std::str::FromStr;
@@ -214,7 +215,7 @@ pub fn slice(volume: &Volume, axis: Axis, position: f64, units: &str) -> Result<
     if !(position >= lo && position <= hi) {
         return Err(VizError::invalid(
             "slice position",
-            format!("{axis} = {position} {units} lies outside the volume's box [{lo}, {hi}]"),
+            format!("{axis} = {} {units} lies outside the volume's box [{}, {}]", num(position), num(lo), num(hi)),
         ));
     }
     let n = volume.dims[a];

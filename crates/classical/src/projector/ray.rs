@@ -9,6 +9,7 @@
 //!
 //! [`Volume::sample`]: fluidnerf_core::Volume::sample
 
+use fluidnerf_core::num;
 use fluidnerf_core::Camera;
 use rayon::prelude::*;
 
@@ -49,7 +50,7 @@ impl RayProjector {
         if !(step_fraction > 0.0 && step_fraction <= 4.0) {
             return Err(ClassicalError::invalid(
                 "ray step",
-                format!("fraction must be in (0, 4], got {step_fraction}"),
+                format!("fraction must be in (0, 4], got {}", num(step_fraction)),
             ));
         }
         let sp = grid.spacing();

@@ -23,6 +23,7 @@
 //! ([`SplatProjector::with_subdivisions`]). Sub-voxels of one voxel share its unknown, so the
 //! map stays a linear function of the voxel values with an exact adjoint.
 
+use fluidnerf_core::num;
 use fluidnerf_core::Camera;
 use rayon::prelude::*;
 
@@ -320,7 +321,10 @@ pub(crate) fn validate(grid: &Grid, cameras: &[Camera], intensity_scale: f64) ->
         c.validate()?;
     }
     if !(intensity_scale > 0.0 && intensity_scale.is_finite()) {
-        return Err(ClassicalError::invalid("intensity scale", format!("must be positive, got {intensity_scale}")));
+        return Err(ClassicalError::invalid(
+            "intensity scale",
+            format!("must be positive, got {}", num(intensity_scale)),
+        ));
     }
     if u32::try_from(grid.len()).is_err() {
         return Err(ClassicalError::invalid("grid", format!("{:?} has more than 2^32 voxels", grid.dims)));

@@ -154,7 +154,10 @@ pub fn sart_tikhonov(
     on_iter: impl FnMut(&IterState) -> ControlFlow<()>,
 ) -> Result<Report, SolveError> {
     if !(params.weight >= 0.0 && params.weight.is_finite()) {
-        return Err(crate::ClassicalError::invalid("Tikhonov weight", format!("must be ≥ 0, got {}", params.weight)));
+        return Err(crate::ClassicalError::invalid(
+            "Tikhonov weight",
+            format!("must be ≥ 0, got {}", fluidnerf_core::num(params.weight)),
+        ));
     }
     let grid = *problem.projector.grid();
     let n = grid.len();

@@ -2,6 +2,7 @@
 //! PSNR, global and windowed SSIM, globally and per region, per time step) and against the
 //! scene's held-out images (reprojection), prints a table and writes JSON and CSV.
 
+use fluidnerf_core::num;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
@@ -196,7 +197,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(r) = args.data_range {
         if !(r > 0.0 && r.is_finite()) {
-            bail!("--data-range must be positive, got {r}");
+            bail!("--data-range must be positive, got {}", num(r));
         }
     }
     if let Some(a) = &args.flow_axis {

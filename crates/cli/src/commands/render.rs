@@ -2,6 +2,7 @@
 //! model of the reconstruction) from the scene's cameras or from an orbit of virtual cameras,
 //! to 16-bit PNG or 32-bit float TIFF, and an orbit as a turntable GIF.
 
+use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
@@ -226,7 +227,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(step) = args.step {
         if !(step > 0.0 && step.is_finite()) {
-            bail!("--step must be positive, got {step}");
+            bail!("--step must be positive, got {}", num(step));
         }
     }
     if !(1..=fluidnerf_core::render::MAX_SUPERSAMPLE).contains(&args.supersample) {

@@ -3,6 +3,7 @@
 //! a table, plots and a report. Resumable: a cell whose run folder holds a finished run is
 //! read back, not run again.
 
+use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -183,7 +184,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     };
     let smoke = args.preset == StudyPreset::Smoke;
     if !(args.time_budget > 0.0 && args.time_budget.is_finite()) {
-        bail!("--time-budget must be a positive, finite number of seconds, got {}", args.time_budget);
+        bail!("--time-budget must be a positive, finite number of seconds, got {}", num(args.time_budget));
     }
     if args.max_iterations == Some(0) {
         bail!("--max-iterations must be at least 1");

@@ -46,7 +46,7 @@ impl PinholeSettings {
         if !(self.step_fraction > 0.0 && self.step_fraction <= 2.0) {
             return Err(SynthError::invalid(
                 "image.step_fraction",
-                format!("must be in (0, 2], got {}", self.step_fraction),
+                format!("must be in (0, 2], got {}", fluidnerf_core::num(self.step_fraction)),
             ));
         }
         Ok(())

@@ -34,6 +34,7 @@
 //! exact and the image is the same bytes for the same seed on any number of threads.
 
 use fluidnerf_core::glam::Vec3;
+use fluidnerf_core::num;
 use fluidnerf_core::{Camera, Image, Volume};
 use rand::{Rng, RngCore, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -64,13 +65,13 @@ impl ThinLensSettings {
         if !(self.rays_per_voxel > 0.0 && self.rays_per_voxel.is_finite()) {
             return Err(SynthError::invalid(
                 "image.rays_per_voxel",
-                format!("must be positive, got {}", self.rays_per_voxel),
+                format!("must be positive, got {}", num(self.rays_per_voxel)),
             ));
         }
         if !self.threshold.is_finite() || self.threshold < 0.0 {
             return Err(SynthError::invalid(
                 "image.threshold",
-                format!("must be zero or positive, got {}", self.threshold),
+                format!("must be zero or positive, got {}", num(self.threshold)),
             ));
         }
         Ok(())

@@ -44,6 +44,7 @@
 //! third of the box. Everything random derives from the seed.
 
 use fluidnerf_core::glam::Vec3;
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, ScalarField};
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -121,7 +122,7 @@ impl JetParams {
         ];
         for (name, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(SynthError::invalid(format!("jet.{name}"), format!("must be positive, got {v}")));
+                return Err(SynthError::invalid(format!("jet.{name}"), format!("must be positive, got {}", num(v))));
             }
         }
         let non_negative = [
@@ -136,7 +137,10 @@ impl JetParams {
         ];
         for (name, v) in non_negative {
             if !(v >= 0.0 && v.is_finite()) {
-                return Err(SynthError::invalid(format!("jet.{name}"), format!("must be zero or positive, got {v}")));
+                return Err(SynthError::invalid(
+                    format!("jet.{name}"),
+                    format!("must be zero or positive, got {}", num(v)),
+                ));
             }
         }
         if self.transition_end_d <= self.core_length_d {
@@ -144,7 +148,7 @@ impl JetParams {
         }
         if let Some(d) = self.nozzle_diameter_mm {
             if !(d > 0.0 && d.is_finite()) {
-                return Err(SynthError::invalid("jet.nozzle_diameter_mm", format!("must be positive, got {d}")));
+                return Err(SynthError::invalid("jet.nozzle_diameter_mm", format!("must be positive, got {}", num(d))));
             }
         }
         Ok(())

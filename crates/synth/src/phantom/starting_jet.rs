@@ -32,6 +32,7 @@
 //!    carried with the ring and confined to the head.
 
 use fluidnerf_core::glam::Vec3;
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, ScalarField};
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -119,7 +120,7 @@ impl StartingJetParams {
         ];
         for (name, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(SynthError::invalid(format!("jet_tr.{name}"), format!("must be positive, got {v}")));
+                return Err(SynthError::invalid(format!("jet_tr.{name}"), format!("must be positive, got {}", num(v))));
             }
         }
         let non_negative = [
@@ -134,19 +135,22 @@ impl StartingJetParams {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(SynthError::invalid(
                     format!("jet_tr.{name}"),
-                    format!("must be zero or positive, got {v}"),
+                    format!("must be zero or positive, got {}", num(v)),
                 ));
             }
         }
         if !(0.0..=1.0).contains(&self.mixing) {
-            return Err(SynthError::invalid("jet_tr.mixing", format!("must be in [0, 1], got {}", self.mixing)));
+            return Err(SynthError::invalid("jet_tr.mixing", format!("must be in [0, 1], got {}", num(self.mixing))));
         }
         if !self.widnall_growth.is_finite() {
             return Err(SynthError::invalid("jet_tr.widnall_growth", "must be finite"));
         }
         if let Some(d) = self.nozzle_diameter_mm {
             if !(d > 0.0 && d.is_finite()) {
-                return Err(SynthError::invalid("jet_tr.nozzle_diameter_mm", format!("must be positive, got {d}")));
+                return Err(SynthError::invalid(
+                    "jet_tr.nozzle_diameter_mm",
+                    format!("must be positive, got {}", num(d)),
+                ));
             }
         }
         Ok(())
