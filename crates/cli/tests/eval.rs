@@ -253,6 +253,44 @@ fn undefined_metrics_are_refused_not_written_as_nan() {
     assert!(!out.status.success() && e.contains("truth_0.npy: every voxel"), "{e}");
 }
 
+/// A region where the truth is zero has no NRMSE (it divides by the truth's energy): the table
+/// says `undefined` and why, the JSON holds null and the reason, never NaN.
+#[test]
+fn a_region_whose_truth_is_zero_has_an_undefined_nrmse_with_its_reason() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let half = Volume::from_fn([18, 12, 12], scene.aabb, |p| if p.x < 0.0 { 0.0 } else { blob(p, 0.0) });
+    fluidnerf_io::volume::write_npy(&d.join("half.npy"), &half).expect("writes");
+    let recon = Volume::from_fn([18, 12, 12], scene.aabb, |p| blob(p, 0.0));
+    fluidnerf_io::volume::write_npy(&d.join("run/volume.npy"), &recon).expect("writes");
+    let out = fluidnerf(
+        &[
+            "eval",
+            "run",
+            "--scene",
+            ".",
+            "--truth",
+            "half.npy",
+            "--no-reprojection",
+            "--regions",
+            "empty:0:0.4,full:0.6:1",
+        ],
+        d,
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(!table.to_lowercase().contains("nan"), "{table}");
+    let row = table.lines().find(|l| l.contains(" empty ")).expect("a row for the region");
+    assert!(row.contains("undefined"), "{table}");
+    assert!(table.contains("NRMSE undefined for volume empty: the truth is zero throughout"), "{table}");
+    let json = read_json(&d.join("run/metrics.json"));
+    let regions = &json["steps"][0]["regions"];
+    assert!(regions[0]["metrics"]["nrmse"].is_null(), "{regions}");
+    assert!(regions[0]["metrics"]["nrmse_undefined"].as_str().is_some_and(|s| s.contains("truth is zero")));
+    assert!(regions[1]["metrics"]["nrmse"].is_f64() && regions[1]["metrics"].get("nrmse_undefined").is_none());
+}
+
 /// A folder holding `scene` and a two-iteration ASART run of it, `run`.
 fn scene_and_run() -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -4,13 +4,23 @@
 //! the truth (`Ê`), in any layout (they compare element `i` with element `i`), and accumulate
 //! in f64.
 
+/// Why an NRMSE is undefined when [`nrmse`] returns NaN: reports give it next to the
+/// missing value (`null` in JSON).
+pub const NRMSE_UNDEFINED: &str = "the truth is zero throughout, and NRMSE divides by its energy";
+
+/// [`NRMSE_UNDEFINED`] when `nrmse` is NaN (undefined), else `None`.
+pub fn nrmse_undefined(nrmse: f64) -> Option<String> {
+    nrmse.is_nan().then(|| NRMSE_UNDEFINED.to_string())
+}
+
 /// Normalised root-mean-square error, dissertation Eq. 6.18:
 ///
 /// `ε₂(E, Ê) = sqrt( Σⱼ (Eⱼ − Êⱼ)² / Σⱼ Êⱼ² )`
 ///
 /// with `E` the estimate and `Ê` the truth (so the normalisation is by the truth's energy and
 /// the measure is not symmetric). 0 is perfect; an all-zero estimate scores 1. Returns NaN when
-/// the truth is all zero (the ratio is undefined). Panics if the lengths differ.
+/// the truth is all zero (the ratio is undefined: [`NRMSE_UNDEFINED`]). Panics if the lengths
+/// differ.
 pub fn nrmse(estimate: &[f32], truth: &[f32]) -> f64 {
     assert_eq!(estimate.len(), truth.len(), "nrmse: estimate and truth differ in length");
     let (err, energy) = estimate.iter().zip(truth).fold((0f64, 0f64), |(err, energy), (&e, &t)| {

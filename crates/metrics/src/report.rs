@@ -17,16 +17,21 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::reprojection::ReprojectionMetrics;
-use crate::{data_range_of, nrmse, psnr, region, ssim_3d, ssim_global, MetricsError, Region, SsimParams};
+use crate::{
+    data_range_of, nrmse, nrmse_undefined, psnr, region, ssim_3d, ssim_global, MetricsError, Region, SsimParams,
+};
 
 /// The metrics of one array pair.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct VolumeMetrics {
     /// Number of voxels compared.
     pub voxels: usize,
-    /// Eq. 6.18; lower is better, 0 perfect.
+    /// Eq. 6.18; lower is better, 0 perfect; NaN (`null` in JSON) when undefined.
     #[serde(deserialize_with = "null_as_nan")]
     pub nrmse: f64,
+    /// Why `nrmse` is undefined, when it is ([`crate::NRMSE_UNDEFINED`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nrmse_undefined: Option<String>,
     /// `10 log₁₀(R² / MSE)` in dB; higher is better.
     #[serde(deserialize_with = "null_as_inf")]
     pub psnr_db: f64,
@@ -100,9 +105,11 @@ pub fn array_metrics(
         Err(MetricsError::TooSmall { .. }) => None,
         Err(e) => return Err(e),
     };
+    let nrmse = nrmse(estimate, truth);
     Ok(VolumeMetrics {
         voxels: truth.len(),
-        nrmse: nrmse(estimate, truth),
+        nrmse,
+        nrmse_undefined: nrmse_undefined(nrmse),
         psnr_db: psnr(estimate, truth, data_range),
         ssim_global: ssim_global(estimate, truth, data_range),
         ssim_windowed: windowed,
@@ -202,6 +209,8 @@ pub struct Row {
     /// Voxels or pixels compared.
     pub count: usize,
     pub nrmse: f64,
+    /// Why `nrmse` is undefined (NaN), when it is.
+    pub nrmse_undefined: Option<String>,
     pub psnr_db: f64,
     pub ssim_global: f64,
     /// Windowed SSIM (3D for volumes, 2D for images).
@@ -221,6 +230,7 @@ impl MetricsReport {
                     subset: subset.to_string(),
                     count: m.voxels,
                     nrmse: m.nrmse,
+                    nrmse_undefined: m.nrmse_undefined.clone(),
                     psnr_db: m.psnr_db,
                     ssim_global: m.ssim_global,
                     ssim_windowed: m.ssim_windowed,
@@ -238,6 +248,7 @@ impl MetricsReport {
                 subset: p.label(),
                 count: p.pixels,
                 nrmse: p.nrmse,
+                nrmse_undefined: p.nrmse_undefined.clone(),
                 psnr_db: p.psnr_db,
                 ssim_global: p.ssim_global,
                 ssim_windowed: Some(p.ssim_windowed),

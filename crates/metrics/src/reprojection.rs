@@ -39,8 +39,12 @@ pub struct ReprojectionMetrics {
     pub time: Option<f64>,
     /// Pixels compared.
     pub pixels: usize,
+    /// NaN (`null` in JSON) when undefined: a measured image that is zero throughout.
     #[serde(deserialize_with = "crate::report::null_as_nan")]
     pub nrmse: f64,
+    /// Why `nrmse` is undefined, when it is ([`crate::NRMSE_UNDEFINED`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nrmse_undefined: Option<String>,
     #[serde(deserialize_with = "crate::report::null_as_inf")]
     pub psnr_db: f64,
     #[serde(deserialize_with = "crate::report::null_as_nan")]
@@ -125,12 +129,14 @@ pub fn compare_images(
     );
     let range = ssim.data_range.unwrap_or_else(|| data_range_of(&measured.data));
     let params = SsimParams { data_range: Some(range), ..*ssim };
+    let nrmse = nrmse(&rendered.data, &measured.data);
     Ok(ReprojectionMetrics {
         frame: 0,
         camera_name: None,
         time: None,
         pixels: measured.data.len(),
-        nrmse: nrmse(&rendered.data, &measured.data),
+        nrmse,
+        nrmse_undefined: crate::nrmse_undefined(nrmse),
         psnr_db: psnr(&rendered.data, &measured.data, range),
         ssim_global: ssim_global(&rendered.data, &measured.data, range),
         ssim_windowed: ssim_2d(&rendered.data, &measured.data, measured.width, measured.height, &params)?,

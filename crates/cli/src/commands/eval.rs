@@ -436,7 +436,8 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Res
     Ok(Recon::Volumes(volumes))
 }
 
-/// Formats a metric for the table: fixed decimals, `inf`, or `-`.
+/// Formats a metric for the table: fixed decimals, `inf`, or `-` (an undefined NRMSE is
+/// `undefined`, with its reason under the table).
 fn fmt(v: Option<f64>, decimals: usize) -> String {
     match v {
         Some(v) if v.is_finite() => format!("{v:.decimals$}"),
@@ -451,20 +452,37 @@ fn print_table(report: &MetricsReport) {
     let rows = report.rows();
     let subset_w = rows.iter().map(|r| r.subset.len()).max().unwrap_or(6).max(6);
     println!(
-        "{:<12} {:>8} {:<subset_w$} {:>10} {:>8} {:>9} {:>11} {:>13}",
+        "{:<12} {:>8} {:<subset_w$} {:>10} {:>9} {:>9} {:>11} {:>13}",
         "kind", "time", "subset", "count", "NRMSE", "PSNR dB", "SSIM global", "SSIM windowed"
     );
     for r in &rows {
         println!(
-            "{:<12} {:>8} {:<subset_w$} {:>10} {:>8} {:>9} {:>11} {:>13}",
+            "{:<12} {:>8} {:<subset_w$} {:>10} {:>9} {:>9} {:>11} {:>13}",
             r.kind,
             r.time.map_or("-".to_string(), |t| format!("{t}")),
             r.subset,
             r.count,
-            fmt(Some(r.nrmse), 4),
+            if r.nrmse_undefined.is_some() { "undefined".to_string() } else { fmt(Some(r.nrmse), 4) },
             fmt(Some(r.psnr_db), 2),
             fmt(Some(r.ssim_global), 4),
             fmt(r.ssim_windowed, 4),
         );
+    }
+    // One note per reason, naming the rows it stands for.
+    let mut notes: Vec<(&str, Vec<String>)> = Vec::new();
+    for r in &rows {
+        if let Some(why) = &r.nrmse_undefined {
+            let row = match r.time {
+                Some(t) => format!("{} {} at t = {t}", r.kind, r.subset),
+                None => format!("{} {}", r.kind, r.subset),
+            };
+            match notes.iter_mut().find(|(w, _)| w == why) {
+                Some((_, list)) => list.push(row),
+                None => notes.push((why, vec![row])),
+            }
+        }
+    }
+    for (why, list) in notes {
+        println!("NRMSE undefined for {}: {why}", list.join(", "));
     }
 }
