@@ -103,6 +103,59 @@ fn cases() -> Vec<Case> {
             &["study", "-o", "OUT", "--methods", "asart,asart", "--cameras", "4", "--noise", "0"],
             "--methods: asart is given twice",
         ),
+        c(
+            "study layout twice",
+            None,
+            &["study", "-o", "OUT", "--methods", "asart", "--cameras", "4", "--layouts", "ring360,ring360"],
+            "--layouts: ring360 is given twice",
+        ),
+        c(
+            "study noise levels named alike",
+            None,
+            &["study", "-o", "OUT", "--methods", "asart", "--cameras", "4", "--noise", "0.0001,0.0002"],
+            "--noise: 0.0001 and 0.0002 would share one scene folder",
+        ),
+        c(
+            "synth camera held out twice",
+            None,
+            &["synth", "-o", "OUT", "--pixels", "16", "--holdout", "cam008,1"],
+            "--holdout: cam008 and 1 name the same camera",
+        ),
+        c(
+            "import camera held out twice",
+            None,
+            &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--holdout", "cam000,cam000"],
+            "--holdout: cam000 is given twice",
+        ),
+        c(
+            "held-out time twice",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = (i % 2).into();
+                }
+            }),
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--holdout-times", "1,1"],
+            "--holdout-times on the command line: method.holdout_times: 1 is given twice",
+        ),
+        c("compare threshold twice", None, &["compare", "SCENE", "-o", "OUT", "--thresholds", "0.5,0.5"], "--thresholds"),
+        c(
+            "render camera twice",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--camera", "0,0"],
+            "--camera: 0 is given twice",
+        ),
+        c(
+            "export mesh format twice",
+            None,
+            &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--isosurface", "0.1", "--mesh", "ply,ply"],
+            "--mesh: ply is given twice",
+        ),
+        c(
+            "eval region name twice",
+            None,
+            &["eval", "SCENE/truth/truth.npy", "--scene", "SCENE", "--json", "OUT/m.json", "--regions", "a:0:0.5,a:0.5:1"],
+            "--regions: the name a is given twice",
+        ),
         c("aabb inverted", Json(|v| v["aabb"] = serde_json::json!([[1, 1, 1], [-1, -1, -1]])), RUN, "aabb"),
         c("aabb missing", Json(|v| drop(v.as_object_mut().unwrap().remove("aabb"))), RUN, "aabb"),
         c("aabb wrong type", Json(|v| v["aabb"] = serde_json::json!("box")), RUN, "aabb"),

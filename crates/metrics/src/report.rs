@@ -126,8 +126,15 @@ pub fn evaluate_volume(
     time: Option<f64>,
     options: &VolumeMetricOptions,
 ) -> Result<StepMetrics, MetricsError> {
-    for r in &options.regions {
+    for (i, r) in options.regions.iter().enumerate() {
         r.validate()?;
+        // Results go by the region's name.
+        if options.regions[..i].iter().any(|q| q.name == r.name) {
+            return Err(MetricsError::invalid(
+                format!("region '{}'", r.name),
+                "the name is given twice; give each region its own name",
+            ));
+        }
     }
     if let Some(r) = options.data_range {
         if !(r > 0.0 && r.is_finite()) {
@@ -295,6 +302,16 @@ mod tests {
 
     fn blob(p: DVec3) -> f32 {
         (-(p - DVec3::new(1.5, 0.5, 0.5)).length_squared() * 4.0).exp() as f32
+    }
+
+    #[test]
+    fn two_regions_of_one_name_are_refused() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let regions = vec![Region::along_x("a", 0.0, 0.5), Region::along_x("a", 0.5, 1.0)];
+        let e = evaluate_volume(&t, &t, None, &VolumeMetricOptions { regions, ..Default::default() })
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains("region 'a'") && e.contains("given twice"), "{e}");
     }
 
     #[test]

@@ -564,6 +564,19 @@ impl MethodConfig {
                 if let Some(h) = t.holdout_times.iter().find(|h| !h.is_finite()) {
                     return Err(PipelineError::invalid("method.holdout_times", format!("{} is not a time", num(*h))));
                 }
+                // A time given twice would be reconstructed, written and scored twice.
+                let times = &t.holdout_times;
+                let repeat = times.iter().enumerate().find_map(|(i, &h)| {
+                    times[..i].iter().find(|&&g| fluidnerf_core::scene::same_time(g, h)).map(|&g| (g, h))
+                });
+                if let Some((g, h)) = repeat {
+                    let what = if g == h {
+                        format!("{} is given twice", num(h))
+                    } else {
+                        format!("{} and {} are the same time", num(g), num(h))
+                    };
+                    return Err(PipelineError::invalid("method.holdout_times", format!("{what}; give each time once")));
+                }
                 if *m == Method::StaticPerFrame && t.windows != WindowConfig::per_frame() {
                     return Err(PipelineError::invalid(
                         "method.windows",

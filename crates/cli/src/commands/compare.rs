@@ -382,6 +382,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.thresholds.is_empty() || args.thresholds.iter().any(|t| !(*t > 0.0 && *t < 10.0)) {
         bail!("--thresholds must be NRMSE values in (0, 10), got {:?}", args.thresholds);
     }
+    super::given_once("--thresholds", &args.thresholds)?;
     let out = &args.out;
     fluidnerf_pipeline::rundir::refuse_other_kind(out, fluidnerf_pipeline::rundir::FolderKind::Compare, "compare")?;
     let outputs = ["time_to_accuracy.png", "time_to_accuracy.svg", "time_to_accuracy.csv", "compare.json"];

@@ -177,6 +177,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         args.regions.iter().map(|s| Region::parse(s)).collect::<Result<_, _>>().context("--regions")?
     };
+    // Rows and JSON entries go by the region's name.
+    if let Some((_, r)) = regions.iter().enumerate().find(|&(i, r)| regions[..i].iter().any(|q| q.name == r.name)) {
+        bail!("--regions: the name {} is given twice; give each region its own name", r.name);
+    }
     let window = match args.ssim_window {
         Window::Uniform => SsimWindow::Uniform { size: args.ssim_size },
         Window::Gaussian => SsimWindow::Gaussian { sigma: 1.5 },

@@ -230,6 +230,8 @@ struct Settings<'a> {
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Validate the arguments before any work.
     refuse_other_kind(&args.out, FolderKind::Export, "export")?;
+    let meshes: Vec<&str> = args.mesh.iter().map(|m| if *m == MeshFormat::Ply { "ply" } else { "obj" }).collect();
+    super::given_once("--mesh", &meshes)?;
     let mut slices: Vec<(Axis, f64)> = args.slices.iter().map(|s| parse_slice(s)).collect::<anyhow::Result<_>>()?;
     let nothing_chosen = !args.npy && !args.vti && !args.raw && slices.is_empty() && args.isosurface.is_none();
     let (npy, vti, raw) = (args.npy || nothing_chosen, args.vti || nothing_chosen, args.raw);

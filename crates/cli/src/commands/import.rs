@@ -642,6 +642,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     ensure!(!frames.is_empty(), "no frames to import");
     // Checked before anything is written (a video's frames go by its camera's name).
     let names: BTreeSet<String> = frames.iter().filter_map(frame_name).collect();
+    super::given_once("--holdout", &args.holdout)?;
     if let Some(h) = args.holdout.iter().find(|h| !names.contains(*h)) {
         bail!(
             "--holdout: no camera or image named `{h}` (cameras: {})",

@@ -109,6 +109,15 @@ pub(crate) fn scene_folder(path: &std::path::Path) -> Option<std::path::PathBuf>
     std::fs::canonicalize(folder).ok()
 }
 
+/// Refuses a value given twice to the list option `option`: the repeat would run the same work
+/// twice, write the same file twice or print the same row twice.
+pub(crate) fn given_once<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {
+    match values.iter().enumerate().find(|&(i, v)| values[..i].contains(v)) {
+        Some((_, v)) => anyhow::bail!("{option}: {v} is given twice; give each value once"),
+        None => Ok(()),
+    }
+}
+
 /// Refuses work whose largest buffers (`bytes`, estimated) exceed the memory available now,
 /// before anything is computed or written: an allocation that fails aborts the program.
 pub(crate) fn check_memory(what: impl FnOnce() -> String, bytes: u64) -> anyhow::Result<()> {

@@ -1020,6 +1020,8 @@ fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
         ("stopping.patience", "--patience", s.patience.is_some()),
         ("gains.every", "--gain-every", args.gains.gain_every.is_some()),
         ("gains.rounds", "--gain-rounds", args.gains.gain_rounds.is_some()),
+        ("method.holdout_times", "--holdout-times", args.temporal.holdout_times.is_some()),
+        ("method.time_step", "--time-step", args.temporal.time_step.is_some()),
     ];
     given.into_iter().find(|&(k, _, set)| set && k == key).map(|(_, flag, _)| flag)
 }

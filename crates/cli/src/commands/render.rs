@@ -225,6 +225,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.orbit.is_some() && !args.camera.is_empty() {
         bail!("give either --camera or --orbit, not both");
     }
+    super::given_once("--camera", &args.camera)?;
     if let Some(step) = args.step {
         if !(step > 0.0 && step.is_finite()) {
             bail!("--step must be positive, got {}", num(step));

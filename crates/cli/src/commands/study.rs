@@ -214,15 +214,22 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         bail!("the grid is empty: give at least one method, camera count, noise level and layout");
     }
     // A value given twice would run the same cells twice and print the same rows twice.
-    fn twice<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {
-        match values.iter().enumerate().find(|&(i, v)| values[..i].contains(v)) {
-            Some((_, v)) => bail!("{option}: {v} is given twice; give each value once"),
-            None => Ok(()),
+    super::given_once("--methods", &g.methods)?;
+    super::given_once("--cameras", &g.cameras)?;
+    super::given_once("--noise", &g.noise)?;
+    super::given_once("--layouts", &g.layouts.iter().map(|l| l.name()).collect::<Vec<_>>())?;
+    // Scenes are named by their noise in thousandths: two levels named alike would share one
+    // scene and its runs, so the second level's rows would be the first's.
+    let named = |n: f64| scene_name(LayoutChoice::Ring360, 0, n);
+    for (i, &a) in g.noise.iter().enumerate() {
+        if let Some(&b) = g.noise[..i].iter().find(|&&b| named(b) == named(a)) {
+            bail!(
+                "--noise: {b} and {a} would share one scene folder (…-n{:03}: levels are named in thousandths); give \
+                 levels at least 0.001 apart",
+                (a * 1000.0).round() as u64
+            );
         }
     }
-    twice("--methods", &g.methods)?;
-    twice("--cameras", &g.cameras)?;
-    twice("--noise", &g.noise)?;
     if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
         bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
     }

@@ -231,7 +231,19 @@ fn holdout_indices(given: &[String], s: &SynthSettings) -> anyhow::Result<Vec<us
             }),
             (Err(_), None) => bail!("--holdout: `{g}` is neither an index nor a camera name"),
         })
-        .collect()
+        .collect::<anyhow::Result<Vec<usize>>>()
+        .and_then(|indices| {
+            match indices.iter().enumerate().find_map(|(i, a)| indices[..i].iter().position(|b| b == a).map(|j| (j, i)))
+            {
+                Some((j, i)) if given[j] == given[i] => {
+                    bail!("--holdout: {} is given twice; give each camera once", given[i])
+                }
+                Some((j, i)) => {
+                    bail!("--holdout: {} and {} name the same camera; give each camera once", given[j], given[i])
+                }
+                None => Ok(indices),
+            }
+        })
 }
 
 /// Applies the command-line overrides to `s`.
