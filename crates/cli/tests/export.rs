@@ -130,6 +130,19 @@ fn slices_comparison_and_isosurface() {
     assert!(obj.lines().filter(|l| l.starts_with("f ")).count() > 100);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("isosurface at 0.5"), "{stdout}");
+    // A level no value reaches gives an empty surface, said as such, never an area of -0.
+    let empty = dir.path().join("empty");
+    let o = fluidnerf(&[
+        "export",
+        r.to_str().expect("utf-8"),
+        "--out",
+        empty.to_str().expect("utf-8"),
+        "--isosurface",
+        "5",
+    ]);
+    ok(&o);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("isosurface at 5: empty, area 0:") && !stdout.contains("area -"), "{stdout}");
     // Bad slice specifications are rejected before any work.
     let bad =
         fluidnerf(&["export", r.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--slices", "w=0.5"]);

@@ -29,7 +29,8 @@ pub struct TriMesh {
 
 impl TriMesh {
     /// The signed volume enclosed by a closed mesh (divergence theorem:
-    /// `V = Σ (a · (b × c)) / 6` over triangles `abc`), accumulated in f64.
+    /// `V = Σ (a · (b × c)) / 6` over triangles `abc`), accumulated in f64; 0 (not −0, the
+    /// empty sum of floats) for an empty mesh.
     pub fn enclosed_volume(&self) -> f64 {
         self.triangles
             .iter()
@@ -37,10 +38,10 @@ impl TriMesh {
                 let [a, b, c] = t.map(|i| glam::DVec3::from(self.vertices[i as usize].map(f64::from)));
                 a.dot(b.cross(c)) / 6.0
             })
-            .sum()
+            .fold(0.0, |sum, v| sum + v)
     }
 
-    /// Total triangle area.
+    /// Total triangle area; 0 (not −0) for an empty mesh.
     pub fn area(&self) -> f64 {
         self.triangles
             .iter()
@@ -48,7 +49,7 @@ impl TriMesh {
                 let [a, b, c] = t.map(|i| glam::DVec3::from(self.vertices[i as usize].map(f64::from)));
                 0.5 * (b - a).cross(c - a).length()
             })
-            .sum()
+            .fold(0.0, |sum, v| sum + v)
     }
 
     /// Edges (vertex index pairs, smaller first) not shared by exactly two triangles, or shared
@@ -244,6 +245,16 @@ mod tests {
         }
         // One corner inside: one triangle cutting it off.
         assert_eq!(table()[1].len(), 1);
+    }
+
+    #[test]
+    fn an_empty_surface_has_zero_area_and_volume_not_negative_zero() {
+        let vol = Volume::from_fn([4, 4, 4], Aabb::cube(DVec3::ZERO, 1.0), |_| 0.25);
+        let mesh = marching_cubes(&vol, 0.5);
+        assert!(mesh.triangles.is_empty());
+        for v in [mesh.area(), mesh.enclosed_volume()] {
+            assert!(v == 0.0 && v.is_sign_positive(), "{v}");
+        }
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! the difference) and as isosurface meshes. Also home of the reconstruction loader that
 //! `render` shares.
 
+use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
@@ -400,10 +401,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(iso) = args.isosurface {
         let mesh = fluidnerf_viz::marching_cubes(&volume, iso);
-        if mesh.triangles.is_empty() {
-            let (lo, hi) = volume.min_max();
-            log::warn!("the isosurface at {iso} is empty: the exported values range over [{lo}, {hi}]");
-        }
         for m in &args.mesh {
             let (p, r) = match m {
                 MeshFormat::Ply => {
@@ -419,14 +416,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             r.with_context(|| format!("writing {}", p.display()))?;
         }
-        println!(
-            "isosurface at {iso}: {} vertices, {} triangles, area {:.4} {units}², enclosed volume {:.4} {units}³{}",
-            mesh.vertices.len(),
-            mesh.triangles.len(),
-            mesh.area(),
-            mesh.enclosed_volume(),
-            if mesh.is_watertight() { "" } else { " (open where it leaves the box)" }
-        );
+        if mesh.triangles.is_empty() {
+            let (lo, hi) = volume.min_max();
+            println!(
+                "isosurface at {}: empty, area 0: the exported values range over [{}, {}], so no cell crosses it; the \
+                 mesh file holds no triangles",
+                num(iso),
+                num(lo),
+                num(hi)
+            );
+        } else {
+            println!(
+                "isosurface at {}: {} vertices, {} triangles, area {:.4} {units}², enclosed volume {:.4} {units}³{}",
+                num(iso),
+                mesh.vertices.len(),
+                mesh.triangles.len(),
+                mesh.area(),
+                mesh.enclosed_volume(),
+                if mesh.is_watertight() { "" } else { " (open where it leaves the box)" }
+            );
+        }
     }
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
