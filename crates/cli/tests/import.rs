@@ -680,3 +680,35 @@ fn a_single_image_among_time_series_is_refused() {
     assert!(err.contains(&single) && err.contains("while camera(s) cam0, cam1 are recorded over time"), "{err}");
     assert!(!out.exists(), "nothing is created for a refused import");
 }
+
+/// Cameras recorded as image series and cameras recorded as videos cannot be matched instant
+/// by instant: a series' n-th image is instant n, a video's frames carry their times in
+/// seconds. Refused, naming the cameras of each kind, rather than mixing the two clocks.
+#[test]
+fn image_series_and_videos_together_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (calib, images) = rig_calibration(dir.path());
+    // Floating-point images, as the videos' frames become: one scale, so only time tells.
+    for camera in ["cam0", "cam1"] {
+        std::fs::create_dir_all(images.join(camera)).expect("mkdir");
+        for n in ["t0.tif", "t1.tif", "t2.tif", "t3.tif"] {
+            let img = Image::from_vec(32, 24, vec![70.0; 32 * 24]);
+            fluidnerf_io::image::write_tiff_f32(&images.join(camera).join(n), &img).expect("writes image");
+        }
+    }
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    std::fs::copy(fixture, images.join("cam2.avi")).expect("copies the fixture");
+    let out = dir.path().join("scene");
+    let o = import_opencv(&calib, &images, &out);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success(),
+        "imported: {}",
+        load_scene(&out).map(|s| format!("{:?}", s.times())).unwrap_or_default()
+    );
+    assert!(
+        err.contains("camera(s) cam0, cam1 are series of images") && err.contains("camera(s) cam2 are videos"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing is created for a refused import");
+}

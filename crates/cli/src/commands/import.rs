@@ -35,7 +35,7 @@ use std::io::Write as _;
 /// `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`, `.webm`): its frames are decoded (MJPEG
 /// AVI directly, other formats with ffmpeg), range-mapped and linearised, and written as float
 /// TIFFs to `OUT/frames/NAME/` with their times in seconds (see --video-range, --video-frames,
-/// --video-every, --video-time-offset). How each video was read (decoder, range and why,
+/// --video-every, --video-time-offset); videos cannot join series of images. How each video was read (decoder, range and why,
 /// clipped pixels) is recorded in `OUT/import.json`.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
@@ -306,8 +306,9 @@ fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 }
 
 /// Frames for OpenCV cameras matched to images by name, and the image entries used. The
-/// cameras' time series must line up ([`check_series`]), and a camera with a single image
-/// cannot join cameras recorded over time (a folder of images or a video).
+/// cameras' time series must line up ([`check_series`]), a camera with a single image cannot
+/// join cameras recorded over time (a folder of images or a video), and series of images cannot
+/// join videos (their instants are counted, the videos' frames timed in seconds).
 fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(Vec<Frame>, BTreeSet<PathBuf>)> {
     let mut frames = Vec::new();
     let mut used = BTreeSet::new();
@@ -316,6 +317,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     // image.
     let mut timed: Vec<&str> = Vec::new();
     let mut stills: Vec<(&str, PathBuf)> = Vec::new();
+    let mut videos: Vec<&str> = Vec::new();
     // Each series of images, with its camera, and what its folders hold that is no image.
     let mut series: Vec<(&str, Vec<PathBuf>)> = Vec::new();
     let mut folders_named_like_images = Vec::new();
@@ -367,6 +369,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             [one] => {
                 if fluidnerf_io::video::is_video(one) {
                     timed.push(name);
+                    videos.push(name);
                 } else {
                     stills.push((name, (*one).clone()));
                 }
@@ -409,6 +412,16 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             stills.iter().map(|(_, p)| p.display().to_string()).collect::<Vec<_>>().join(", "),
             timed.join(", "),
             images.display()
+        );
+    }
+    if !series.is_empty() && !videos.is_empty() {
+        bail!(
+            "camera(s) {} are series of images, whose n-th image is instant n, and camera(s) {} are videos, whose \
+             frames are timed in seconds: their frames cannot be matched instant by instant; record every camera \
+             the same way (the videos' frames as folders of images, one per instant under the same names, or the \
+             series as videos), or import the two kinds separately",
+            series.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "),
+            videos.join(", ")
         );
     }
     check_series(&series, images)?;
