@@ -1109,9 +1109,6 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     Ok(())
 }
 
-/// Refuses a scene in which some frames have a `time` and others none: a frame without one
-/// cannot be placed among the instants (it would be read as time 0, an instant of its own). The
-/// error names the frames without time, at most five of them, with their images.
 /// Refuses frame times (finite each) whose spread, latest minus earliest, overflows: every
 /// time-resolved method works with time differences, which would be infinite, and its training
 /// would diverge or its volumes be garbage.
@@ -1138,6 +1135,9 @@ fn check_time_spread(scene: &Scene, file: &Path) -> Result<(), IoError> {
     ))
 }
 
+/// Refuses a scene in which some frames have a `time` and others none: a frame without one
+/// cannot be placed among the instants (it would be read as time 0, an instant of its own). The
+/// error names the frames without time, at most five of them, with their images.
 fn check_times_on_every_frame(scene: &Scene, file: &Path) -> Result<(), IoError> {
     const SHOWN: usize = 5;
     let untimed: Vec<usize> =
