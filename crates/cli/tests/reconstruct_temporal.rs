@@ -482,3 +482,46 @@ fn a_frame_without_time_in_a_time_resolved_scene_is_refused_by_name() {
     refused(&fluidnerf(d, &[&run[..], &["--max-iterations", "2", "-q"]].concat()), &needle);
     assert!(!d.join("run").exists(), "nothing written");
 }
+
+/// Ground truth at only some of the frame times: reconstruct warns, naming the times without
+/// truth, and says its NRMSE is a mean over the others; eval and info say which times go
+/// unscored, and a list of volumes that does not match the truth is refused naming them.
+#[test]
+fn truth_at_only_some_times_is_reported_naming_the_times_without() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 12, &["--times", "14,15,16"]);
+    let file = d.join("scene/transforms.json");
+    let mut v = json(&file);
+    v["truth"].as_array_mut().expect("truth").retain(|t| t["time"] != 15.0);
+    std::fs::write(&file, v.to_string()).expect("writes the scene");
+    let gap = "the ground truth covers 2 of the 3 frame times: none at t = 15";
+
+    let info = fluidnerf(d, &["info", "scene"]);
+    assert!(String::from_utf8_lossy(&info.stdout).contains(gap), "{}", String::from_utf8_lossy(&info.stdout));
+    let args = "reconstruct scene --method tr-fast --max-iterations 4 --rays-per-image 32 --coarse-samples 8 \
+                --resolution 12 --checkpoint-every 0 -o run";
+    let out = fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>());
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("(mean over the 2 of 3 times with ground truth)"));
+    let r = report(&d.join("run"));
+    assert!(r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains(gap))));
+    let scored: Vec<bool> =
+        r["volumes"].as_array().expect("volumes").iter().map(|v| v["metrics"].is_object()).collect();
+    assert_eq!(scored, [true, false, true]);
+
+    let out = fluidnerf(d, &["eval", "run", "--no-regions"]);
+    ok(&out);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("not scored: no ground truth at t = 15 (the scene's truth covers 2 of its 3 frame times)"));
+    assert_eq!(json(&d.join("run/metrics.json"))["times_without_truth"], serde_json::json!([15.0]));
+    let volumes = ["run/frames/volume_000.npy", "run/frames/volume_001.npy", "run/frames/volume_002.npy"];
+    let out = fluidnerf(d, &[&["eval", "--scene", "scene", "--json", "m.json"][..], &volumes[..]].concat());
+    refused(&out, "3 reconstruction volumes given but the scene has 2 ground-truth time steps (none at t = 15");
+
+    // A static run mixes the times and is scored against the first truth listed, and says so.
+    ok(&fluidnerf(d, &["reconstruct", "scene", "--method", "asart", "--max-iterations", "2", "-q", "-o", "voxel"]));
+    let r = report(&d.join("voxel"));
+    let says = "its metrics are against the first of the 2 ground truths listed (at t = 14) only";
+    assert!(r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains(says))));
+}

@@ -69,6 +69,18 @@ impl Scene {
         frame_times(&self.frames)
     }
 
+    /// The frame times no ground-truth volume is at, when the truth is given per time (some
+    /// entry has a time): a time-resolved run writes a volume there but cannot score it, so its
+    /// scores cover only the other times. Empty without truth, and for one volume without a
+    /// time, which stands for every time.
+    pub fn times_without_truth(&self) -> Vec<f64> {
+        if !self.truth.iter().any(|t| t.time.is_some()) {
+            return Vec::new();
+        }
+        let timed: Vec<f64> = self.truth.iter().filter_map(|t| t.time).collect();
+        self.times().into_iter().filter(|&f| !timed.iter().any(|&t| same_time(f, t))).collect()
+    }
+
     /// The times of ground-truth volumes that no frame has, when the frames have times: a
     /// time-resolved run scores each instant against the volume at its time, so these are
     /// never scored there (a sign of a mistyped time).
@@ -258,9 +270,36 @@ mod tests {
             truth: vec![truth(Some(14.0)), truth(Some(-15.0)), truth(Some(15.0 + 1e-12))],
         };
         assert_eq!(scene.unmatched_truth_times(), vec![-15.0]);
+        assert!(scene.times_without_truth().is_empty(), "15 is matched within 1e-9");
         // Frames without times (a static scene): every truth volume is the scene's.
         scene.frames = vec![frame(None)];
         assert!(scene.unmatched_truth_times().is_empty());
+    }
+
+    #[test]
+    fn frame_times_without_truth_are_found() {
+        let k = Intrinsics { width: 8, height: 8, fx: 8.0, fy: 8.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
+        let frame =
+            |time| Frame { camera: camera.clone(), file_path: "a.png".into(), time, camera_name: None, holdout: false };
+        let truth = |time| TruthRef { time, file_path: "t.npy".into() };
+        let mut scene = Scene {
+            root: ".".into(),
+            aabb: Aabb::cube(DVec3::ZERO, 2.0),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: vec![frame(Some(14.0)), frame(Some(15.0)), frame(Some(16.0))],
+            truth: vec![truth(Some(16.0)), truth(Some(14.0))],
+        };
+        assert_eq!(scene.times_without_truth(), vec![15.0]);
+        // One volume without a time stands for every time; no truth leaves nothing to score.
+        scene.truth = vec![truth(None)];
+        assert!(scene.times_without_truth().is_empty());
+        scene.truth.clear();
+        assert!(scene.times_without_truth().is_empty());
+        // Beside a timed one, a volume without a time covers no time.
+        scene.truth = vec![truth(None), truth(Some(15.0))];
+        assert_eq!(scene.times_without_truth(), vec![14.0, 16.0]);
     }
 
     /// Six cameras at two heights around a bright ball: the estimated box holds the ball and

@@ -73,8 +73,9 @@ pub(crate) fn run(
     }
     if scene.times().len() > 1 {
         session.warn(&format!(
-            "the scene has {} time steps; a voxel reconstruction mixes them into one volume",
-            scene.times().len()
+            "the scene has {} time steps; a voxel reconstruction mixes them into one volume{}",
+            scene.times().len(),
+            crate::first_truth_only(scene)
         ));
     }
     let grid = Grid::with_resolution(scene.aabb, config.resolution);

@@ -101,6 +101,35 @@ pub fn reconstruct(
     result
 }
 
+/// A warning for frame times without ground truth ([`Scene::times_without_truth`]): their
+/// volumes are not scored, and a time-resolved run's scores cover the other times only.
+pub fn truth_gaps(scene: &Scene) -> Option<String> {
+    let missing = scene.times_without_truth();
+    (!missing.is_empty()).then(|| {
+        let times = scene.times();
+        format!(
+            "the ground truth covers {} of the {} frame times: none at t = {}, so a time-resolved run cannot score \
+             its volume{} there and its scores (final_nrmse among them) are over the other times only",
+            times.len() - missing.len(),
+            times.len(),
+            missing.iter().map(|&t| fluidnerf_core::num(t).to_string()).collect::<Vec<_>>().join(", "),
+            if missing.len() == 1 { "" } else { "s" }
+        )
+    })
+}
+
+/// Why a static run's metrics are against one ground truth of several: the first one listed.
+pub(crate) fn first_truth_only(scene: &Scene) -> String {
+    match scene.truth.first() {
+        Some(first) if scene.truth.len() > 1 => format!(
+            "; its metrics are against the first of the {} ground truths listed ({}) only",
+            scene.truth.len(),
+            first.time.map_or("without a time".to_string(), |t| format!("at t = {}", fluidnerf_core::num(t)))
+        ),
+        _ => String::new(),
+    }
+}
+
 /// A warning for ground truth at times no frame has ([`Scene::unmatched_truth_times`]).
 pub fn unmatched_truth(scene: &Scene) -> Option<String> {
     let unmatched = scene.unmatched_truth_times();

@@ -109,8 +109,9 @@ pub(crate) fn run(
     }
     if scene.times().len() > 1 {
         session.warn(&format!(
-            "the scene has {} time steps; static training mixes them into one field",
-            scene.times().len()
+            "the scene has {} time steps; static training mixes them into one field{}",
+            scene.times().len(),
+            crate::first_truth_only(scene)
         ));
     }
     if config.stopping.rule == StopRule::HeldOut && scene.holdout_frames().next().is_none() {

@@ -337,6 +337,12 @@ impl RunReport {
         }
         if let Some(n) = self.final_nrmse {
             s += &format!(", volume NRMSE {}", fluidnerf_viz::report::format_value(n));
+            // A time-resolved run whose truth covers only some of its times.
+            let trained = self.volumes.iter().filter(|v| v.trained).count();
+            let scored = self.volumes.iter().filter(|v| v.trained && v.metrics.is_some()).count();
+            if scored < trained {
+                s += &format!(" (mean over the {scored} of {trained} times with ground truth)");
+            }
         }
         if let Some(g) = self.final_ssim_global {
             s += &format!(", global SSIM {}", fluidnerf_viz::report::format_value(g));

@@ -122,6 +122,9 @@ struct Output<'a> {
     settings: Settings<'a>,
     #[serde(flatten)]
     report: &'a MetricsReport,
+    /// The scene's frame times without ground truth, not scored ([`Scene::times_without_truth`]).
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    times_without_truth: &'a [f64],
 }
 
 /// A reconstruction, as the metrics need it.
@@ -286,11 +289,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         truth.iter().map(|(t, _)| *t).collect()
     };
+    // Times the scene's truth does not cover are not scored, and said so.
+    let without_truth = if args.truth.is_some() { Vec::new() } else { scene.times_without_truth() };
+    let listed = |times: &[f64]| times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
     let recon = load_recon(&args.recon, &scene, args.use_volume)?;
     if let Recon::Volumes(volumes) = &recon {
         if volumes.len() > 1 && volumes.len() != step_times.len() {
+            let steps = if truth.is_empty() { "frame times" } else { "ground-truth time steps" };
+            let gaps = if without_truth.is_empty() {
+                String::new()
+            } else {
+                format!(" (none at t = {}, which is not scored)", listed(&without_truth))
+            };
             bail!(
-                "{} reconstruction volumes given but the scene has {} time steps; give one volume, or one per step",
+                "{} reconstruction volumes given but the scene has {} {steps}{gaps}; give one volume, or one per \
+                 step in the order the scene lists them",
                 volumes.len(),
                 step_times.len()
             );
@@ -335,6 +348,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     print_table(&report);
+    if !without_truth.is_empty() && !truth.is_empty() {
+        println!(
+            "not scored: no ground truth at t = {} (the scene's truth covers {} of its {} frame times)",
+            listed(&without_truth),
+            scene.times().len() - without_truth.len(),
+            scene.times().len()
+        );
+    }
 
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
@@ -345,7 +366,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         reprojection: (!args.no_reprojection).then_some(&reprojection_options),
     };
     if let Some(path) = &json_path {
-        let mut text = serde_json::to_string_pretty(&Output { settings, report: &report })?;
+        let output = Output { settings, report: &report, times_without_truth: &without_truth };
+        let mut text = serde_json::to_string_pretty(&output)?;
         text.push('\n');
         fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
             .with_context(|| format!("writing {}", path.display()))?;
