@@ -1375,7 +1375,7 @@ impl FootprintProjector {
                 }
                 let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 let chunks = &mut chunks[..starts.len()];
-                fv.row_chunks::<N, DISTORTED, LANES>(base, step, &starts, &mut scratch, chunks);
+                fv.row_chunks::<N, DISTORTED, LANES>(base, step, starts, &mut scratch, chunks);
                 for (&i0, ch) in starts.iter().zip(chunks.iter()) {
                     let valid = CHUNK.min(nx - i0);
                     if LANES {
@@ -1765,7 +1765,7 @@ impl FootprintProjector {
                 let (base, step) = fv.cam.row_start(&self.gf, j, k, [0.0; 3]);
                 let across = rs.first as usize;
                 let mvs = &mut mvs[..starts.len()];
-                fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, &starts, &mut scratch, mvs);
+                fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, starts, &mut scratch, mvs);
                 for (&i0, mv) in starts.iter().zip(mvs.iter()) {
                     let valid = CHUNK.min(nx - i0);
                     let g = &x[row0 + i0..][..valid];
