@@ -5,9 +5,9 @@
 //! [`ProjectorConfig`] holds what all voxel methods share: the projector, its sampling, and the
 //! optional visual-hull support mask.
 
-use fluidnerf_core::num;
 use std::ops::ControlFlow;
 
+use fluidnerf_core::num;
 use fluidnerf_core::{Camera, Image};
 use serde::{Deserialize, Serialize};
 

@@ -67,10 +67,10 @@
 //! the same scene exactly, except `cx, cy`, which pass through `± 0.5` and may differ in the
 //! last bit.
 
-use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume};
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;

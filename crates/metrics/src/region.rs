@@ -11,9 +11,9 @@
 //! `max` corner; per axis). A voxel belongs to a region when its centre lies inside, so regions
 //! that tile `[0, 1]` partition the voxels.
 
-use fluidnerf_core::num;
 use std::ops::Range;
 
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Volume};
 use serde::{Deserialize, Serialize};
 

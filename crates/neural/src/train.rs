@@ -31,10 +31,10 @@
 //! resuming at iteration `k` continues exactly as an uninterrupted run would (given the
 //! optimiser state).
 
-use fluidnerf_core::num;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Camera, Image};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

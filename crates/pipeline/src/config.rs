@@ -27,7 +27,6 @@
 //! The [`StoppingPolicy`] is applied on top of every method's own parameters, so one policy
 //! stops classical and neural methods alike ([`RunConfig::effective_method`]).
 
-use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
@@ -35,6 +34,7 @@ use fluidnerf_classical::{
     Algorithm, ArtParams, AsartParams, ClassicalMethod, MartParams, MlemParams, ProjectorConfig, SartParams,
     SmartParams, TikhonovParams, TvParams,
 };
+use fluidnerf_core::num;
 use fluidnerf_neural::start::StartFit;
 use fluidnerf_neural::temporal::{temporal_preset, TemporalConfig, WindowConfig, TEMPORAL_PRESETS};
 use fluidnerf_neural::train::{Batching, TrainConfig};

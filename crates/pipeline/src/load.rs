@@ -6,9 +6,9 @@
 //! hand or by another tool (no `config.json`) is read by what it holds: `model.json` with its
 //! weights, or `volume.npy` on a box given by the caller.
 
-use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, ScalarField, Volume};
 use fluidnerf_neural::trained::ModelRecord;
 

@@ -12,11 +12,11 @@
 //! running one from its last checkpoint, and equals an uninterrupted run (same seed and
 //! thread count).
 
-use fluidnerf_core::num;
-use fluidnerf_core::scene::same_time;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+use fluidnerf_core::num;
+use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_metrics::VolumeMetricOptions;
 use fluidnerf_neural::temporal::{

@@ -1,11 +1,11 @@
 //! Operators on NumPy arrays: the classical projectors (forward and adjoint), the reference
 //! renderer, the metrics, and synthetic scenes.
 
-use fluidnerf_core::num;
 use std::path::PathBuf;
 
 use fluidnerf_classical::{Grid, ProjectorConfig};
 // The reference renderer's limits, checked in `render` to name the Python arguments.
+use fluidnerf_core::num;
 use fluidnerf_core::render::{MAX_SAMPLES_ON_DIAGONAL, MAX_SUPERSAMPLE};
 use fluidnerf_core::{Image, RenderSettings};
 use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArrayDyn};

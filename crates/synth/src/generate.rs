@@ -7,11 +7,11 @@
 //! writing files is the caller's business ([`Synthesis::scene`] gives the scene description
 //! with the file names it expects).
 
-use fluidnerf_core::num;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Frame, Image, Scene, TruthRef, Volume};
 use serde::{Deserialize, Serialize};
 

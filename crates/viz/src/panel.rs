@@ -8,11 +8,11 @@
 //! axes); the longer side is [`PanelStyle::plot_size_px`] pixels, or up to 2.5 times that for
 //! elongated extents.
 
-use fluidnerf_core::num;
 use std::fmt;
 use std::path::Path;
 use std::str::FromStr;
 
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Image, Volume};
 use plotters::coord::Shift;
 use plotters::prelude::*;

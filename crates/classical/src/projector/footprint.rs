@@ -504,7 +504,7 @@ fn nonempty_chunks(row: &[f32], starts: &mut Vec<usize>) {
 }
 
 /// The chunks of every grid row of one volume that hold a non-zero value
-/// ([`FootprintProjector::forward_views`]): what each view's projection would otherwise find by
+/// ([`Projector::forward_views`]): what each view's projection would otherwise find by
 /// reading the whole volume again. Rows are numbered `k · ny + j`.
 #[derive(Clone, Debug, Default)]
 struct NonEmptyChunks {

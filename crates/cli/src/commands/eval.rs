@@ -2,13 +2,13 @@
 //! PSNR, global and windowed SSIM, globally and per region, per time step) and against the
 //! scene's held-out images (reprojection), prints a table and writes JSON and CSV.
 
-use fluidnerf_core::num;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::num;
 use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
     estimate_flow_axis, evaluate_volume, reproject, MetricsReport, Region, ReprojectionOptions, SsimParams, SsimWindow,

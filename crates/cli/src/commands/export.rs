@@ -3,12 +3,12 @@
 //! the difference) and as isosurface meshes. Also home of the reconstruction loader that
 //! `render` shares.
 
-use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use fluidnerf_viz::{Axis, Colormap, PanelStyle};

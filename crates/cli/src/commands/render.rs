@@ -2,13 +2,12 @@
 //! model of the reconstruction) from the scene's cameras or from an orbit of virtual cameras,
 //! to 16-bit PNG or 32-bit float TIFF, and an orbit as a turntable GIF.
 
-use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
-use fluidnerf_core::{render_image, Aabb, Baked, Camera, Image, RenderSettings, ScalarField, Support, Volume};
+use fluidnerf_core::{num, render_image, Aabb, Baked, Camera, Image, RenderSettings, ScalarField, Support, Volume};
 use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use fluidnerf_viz::Colormap;
 use serde::Serialize;
@@ -438,20 +437,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             images.extend(drawn);
             continue;
         }
-        let img = {
-            let settings = RenderSettings { supersample: ss, time: v.time, scale: scene.intensity_scale, step };
-            let field: &dyn ScalarField = match bake_dims {
-                Some(dims) => {
-                    if baked.as_ref().is_none_or(|(t, _)| *t != v.time) {
-                        baked = Some((v.time, Baked::on_vertices(source.field(), dims, scene.aabb, v.time)));
-                    }
-                    &baked.as_ref().expect("baked just above").1
+        let settings = RenderSettings { supersample: ss, time: v.time, scale: scene.intensity_scale, step };
+        let field: &dyn ScalarField = match bake_dims {
+            Some(dims) => {
+                if baked.as_ref().is_none_or(|(t, _)| *t != v.time) {
+                    baked = Some((v.time, Baked::on_vertices(source.field(), dims, scene.aabb, v.time)));
                 }
-                None => source.field(),
-            };
-            render_image(field, &v.camera, &scene.aabb, &settings)
-                .with_context(|| format!("rendering {}", v.file_stem))?
+                &baked.as_ref().expect("baked just above").1
+            }
+            None => source.field(),
         };
+        let img = render_image(field, &v.camera, &scene.aabb, &settings)
+            .with_context(|| format!("rendering {}", v.file_stem))?;
         images.push(img);
         bar.inc(1);
     }

@@ -3,11 +3,11 @@
 //! a table, plots and a report. Resumable: a cell whose run folder holds a finished run is
 //! read back, not run again.
 
-use fluidnerf_core::num;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
+use fluidnerf_core::num;
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunStatus, StoppingPolicy};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
