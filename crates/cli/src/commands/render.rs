@@ -392,12 +392,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })
     .transpose()?;
     // Every image is kept (as floats, and coloured for a turntable), and a field is sampled on
-    // one grid at a time.
+    // one grid at a time; the footprint projector lists the grid's non-empty chunks of sixteen
+    // voxels (8 bytes each) for the views it draws together.
     let pixels: u64 = views.iter().map(|v| (v.camera.width() * v.camera.height()) as u64).sum();
     let grid: u64 = bake_dims.map_or(0, |d| d.iter().map(|&n| n as u64 + 1).product());
+    let chunk_lists = match (&source, footprint) {
+        (_, false) => 0,
+        (Source::Volume(v), true) => v.data.len() as u64 / 2,
+        (Source::Field { .. }, true) => grid / 2,
+    };
     super::check_memory(
         || format!("rendering {} views of {pixels} pixels in all", views.len()),
-        8 * pixels + 4 * grid,
+        8 * pixels + 4 * grid + chunk_lists,
     )?;
     super::create_output_folder(out)?;
     let bar = crate::progress::bar(views.len() as u64, "render");
