@@ -250,6 +250,19 @@ fn cases() -> Vec<Case> {
             "learning",
         ),
         c(
+            "absurd learning rate",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--learning-rate", "1e300"],
+            "--learning-rate on the command line: method.train.schedule.initial: the learning rate must be positive \
+             and at most 1",
+        ),
+        c(
+            "large learning rate, time-resolved",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--learning-rate", "5"],
+            "--learning-rate on the command line: method.train.schedule.initial",
+        ),
+        c(
             "held-out every 0",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--stop", "held-out", "--holdout-every", "0"],
@@ -711,7 +724,7 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 6] = [
+    let edits: [(&str, Edit); 8] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
         ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
             v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
@@ -722,6 +735,10 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
         ("method.train.coarse_samples", |v| v["method"]["train"]["coarse_samples"] = 1.into()),
         ("method.train.adam.beta1", |v| v["method"]["train"]["adam"]["beta1"] = 1.0.into()),
         ("method.train.schedule", |v| v["method"]["train"]["schedule"]["initial"] = 0.0.into()),
+        ("method.train.schedule.initial: the learning rate must be positive and at most 1", |v| {
+            v["method"]["train"]["schedule"]["initial"] = 1e30.into()
+        }),
+        ("method.train.schedule.at_decay_iters", |v| v["method"]["train"]["schedule"]["at_decay_iters"] = 20.0.into()),
     ];
     for (key, edit) in edits {
         let mut v = saved.clone();

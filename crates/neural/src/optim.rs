@@ -146,6 +146,12 @@ multiversion! {
     }
 }
 
+/// The largest learning rate a schedule or a start's fit accepts. Adam moves each parameter by
+/// about the rate at every step, and the fields' parameters are of order 10⁻⁴ to 1, so a rate
+/// above 1 is never a training setting: it diverges or overflows at its first steps. The presets
+/// use 5·10⁻⁴ to 2·10⁻².
+pub const MAX_LEARNING_RATE: f32 = 1.0;
+
 /// Exponential learning-rate decay of section 5.1.5.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -171,17 +177,25 @@ impl LrSchedule {
         (self.initial as f64 * ratio.powf(iter as f64 / self.decay_iters as f64)) as f32
     }
 
+    /// Rejects a schedule no run can train with: rates outside (0, [`MAX_LEARNING_RATE`]] (an
+    /// Adam step moves every parameter by about the rate, so a larger one only diverges or
+    /// overflows), or no decay length.
     pub fn validate(&self) -> Result<(), NeuralError> {
-        if !(self.initial > 0.0 && self.at_decay_iters > 0.0 && self.decay_iters > 0) {
-            return Err(NeuralError::invalid(
-                "schedule",
-                format!(
-                    "the learning rate's initial {} and at_decay_iters {} must be positive, decay_iters {} non-zero",
-                    num(self.initial),
-                    num(self.at_decay_iters),
-                    self.decay_iters
-                ),
-            ));
+        for (key, rate) in [("schedule.initial", self.initial), ("schedule.at_decay_iters", self.at_decay_iters)] {
+            if !(rate > 0.0 && rate <= MAX_LEARNING_RATE) {
+                return Err(NeuralError::invalid(
+                    key,
+                    format!(
+                        "the learning rate must be positive and at most {} (an Adam step moves each parameter by \
+                         about the rate), got {}",
+                        num(MAX_LEARNING_RATE),
+                        num(rate)
+                    ),
+                ));
+            }
+        }
+        if self.decay_iters == 0 {
+            return Err(NeuralError::invalid("schedule.decay_iters", "must be at least 1"));
         }
         Ok(())
     }
@@ -225,6 +239,25 @@ mod tests {
         assert!((s.lr(0) - 5e-4).abs() < 1e-9);
         assert!((s.lr(25_000) - 5e-5).abs() < 1e-10);
         assert!((s.lr(12_500) - 5e-4 * 0.1f32.sqrt()).abs() < 1e-9);
+    }
+
+    /// Rates that are not positive, absurdly large (finite or not) or NaN are refused under
+    /// their own key; the largest accepted rate passes.
+    #[test]
+    fn schedule_refuses_rates_out_of_range_by_key() {
+        let ok = LrSchedule { initial: MAX_LEARNING_RATE, at_decay_iters: 1e-6, ..LrSchedule::default() };
+        assert!(ok.validate().is_ok());
+        for bad in [0.0, -1e-3, 1.5, 1e30, f32::INFINITY, f32::NAN] {
+            for (key, s) in [
+                ("schedule.initial", LrSchedule { initial: bad, ..LrSchedule::default() }),
+                ("schedule.at_decay_iters", LrSchedule { at_decay_iters: bad, ..LrSchedule::default() }),
+            ] {
+                let e = s.validate().expect_err("refused").to_string();
+                assert!(e.contains(key) && e.contains("at most 1") && e.contains(&num(bad).to_string()), "{e}");
+            }
+        }
+        let e = LrSchedule { decay_iters: 0, ..LrSchedule::default() }.validate().expect_err("refused");
+        assert!(e.to_string().contains("schedule.decay_iters"), "{e}");
     }
 
     /// Lazy Adam leaves elements without a gradient exactly as they were, and updates the others

@@ -50,10 +50,15 @@ impl StartFit {
         if self.points == 0 {
             return Err(NeuralError::invalid("start.points", "must be at least 1"));
         }
-        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
+        let max = crate::optim::MAX_LEARNING_RATE;
+        if !(self.learning_rate > 0.0 && self.learning_rate <= max) {
             return Err(NeuralError::invalid(
                 "start.learning_rate",
-                format!("must be positive, got {}", fluidnerf_core::num(self.learning_rate)),
+                format!(
+                    "must be positive and at most {}, got {}",
+                    fluidnerf_core::num(max),
+                    fluidnerf_core::num(self.learning_rate)
+                ),
             ));
         }
         Ok(())

@@ -1022,6 +1022,9 @@ fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
         ("gains.rounds", "--gain-rounds", args.gains.gain_rounds.is_some()),
         ("method.holdout_times", "--holdout-times", args.temporal.holdout_times.is_some()),
         ("method.time_step", "--time-step", args.temporal.time_step.is_some()),
+        // --learning-rate sets the schedule's both ends, keeping their ratio.
+        ("method.train.schedule.initial", "--learning-rate", args.neural.learning_rate.is_some()),
+        ("method.train.schedule.at_decay_iters", "--learning-rate", args.neural.learning_rate.is_some()),
     ];
     given.into_iter().find(|&(k, _, set)| set && k == key).map(|(_, flag, _)| flag)
 }
