@@ -207,6 +207,19 @@ fn aabb_takes_negative_corners_and_exactly_six_numbers() {
     let o = run_small(&tmp.path().join("five"), &["--aabb", "-12,-10,-8,12,10"]);
     assert!(!o.status.success());
     assert!(text(&o).1.contains("--aabb takes 6 numbers"), "{}", text(&o).1);
+
+    // A box too large for 32-bit rendering is refused up front, naming --aabb, not by a
+    // non-finite pixel after the rendering; one wide but within range still renders.
+    for aabb in ["--aabb=-1e300,-1,-1,1,1,1", "--aabb=-1,-1,-1,1,1e17,1"] {
+        let dir = tmp.path().join("huge");
+        let o = run_small(&dir, &[aabb]);
+        let err = text(&o).1;
+        assert!(!o.status.success() && err.contains("--aabb") && err.contains("within ±1e16"), "{aabb}: {err}");
+        assert!(!err.contains("non-finite"), "{aabb}: {err}");
+        assert!(!dir.exists(), "{aabb}: wrote output");
+    }
+    let o = run_small(&tmp.path().join("wide"), &["--aabb=-1e15,-1e15,-1e15,1e15,1e15,1e15"]);
+    assert!(o.status.success(), "{}", text(&o).1);
 }
 
 /// Fraction of pixels above 5 % of the image's peak, and the lit region's height / width (rows

@@ -31,6 +31,11 @@ pub struct Aabb {
     pub max: DVec3,
 }
 
+/// The farthest a box's corner may lie from the origin on any axis. Rays are marched and
+/// pixels rendered in 32-bit floats: lengths of 1e16 square to 1e32, within their range (about
+/// 3.4e38) with room for sums and factors, while a box of ±1e300 made every pixel infinite.
+pub const MAX_COORDINATE: f64 = 1e16;
+
 impl Aabb {
     /// A box from its corners. Panics if any `min` component exceeds `max` (a programmer error;
     /// input from files is validated with [`Aabb::validate`]).
@@ -45,10 +50,24 @@ impl Aabb {
         Aabb::new(centre - h, centre + h)
     }
 
-    /// Checks that the box is finite and has positive extent on every axis.
+    /// Checks that the box is finite, within [`MAX_COORDINATE`] of the origin, and has positive
+    /// extent on every axis.
     pub fn validate(&self) -> Result<(), crate::CoreError> {
         if !(self.min.is_finite() && self.max.is_finite()) {
             return Err(crate::CoreError::invalid("aabb", "corners must be finite"));
+        }
+        let far = self.min.abs().max(self.max.abs()).max_element();
+        if far > MAX_COORDINATE {
+            return Err(crate::CoreError::invalid(
+                "aabb",
+                format!(
+                    "corners must lie within ±{} of the origin (rendering and training run in 32-bit floats, \
+                     whose squared lengths overflow beyond), got min {} max {}",
+                    num(MAX_COORDINATE),
+                    num(self.min.to_array()),
+                    num(self.max.to_array())
+                ),
+            ));
         }
         if !self.min.cmplt(self.max).all() {
             return Err(crate::CoreError::invalid(
@@ -165,5 +184,18 @@ mod tests {
         assert!(b.validate().is_err());
         let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, f64::NAN, 1.0) };
         assert!(b.validate().is_err());
+    }
+
+    /// A box whose corners are finite but too far out for 32-bit rendering is refused, naming
+    /// the limit; one just inside it passes.
+    #[test]
+    fn validate_rejects_boxes_beyond_the_f32_range() {
+        let b = Aabb { min: DVec3::splat(-1e300), max: DVec3::splat(1.0) };
+        let e = b.validate().expect_err("refused").to_string();
+        assert!(e.contains("aabb") && e.contains("±1e16") && e.contains("-1e300"), "{e}");
+        let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, 2e16, 1.0) };
+        assert!(b.validate().is_err());
+        let b = Aabb { min: DVec3::splat(-MAX_COORDINATE), max: DVec3::splat(MAX_COORDINATE) };
+        assert!(b.validate().is_ok());
     }
 }
