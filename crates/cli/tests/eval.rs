@@ -410,3 +410,47 @@ fn never_overwrites_its_inputs_nor_the_scenes_or_the_runs_files() {
     assert!(d.join("run/metrics.json").is_file() && d.join("run/eval.json").is_file());
     assert!(d.join("scene/eval.csv").is_file());
 }
+
+/// A run's report and `eval` place the default regions along the same flow axis (here the
+/// scene's `flow_axis`, +y, not the +x of regions without one), so each region's name means
+/// the same part of the box and scores the same in both.
+#[test]
+fn the_report_and_eval_score_the_same_regions() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    std::fs::create_dir(d.join("scene")).expect("mkdir");
+    make_scene(&d.join("scene"), &[]);
+    let file = d.join("scene/transforms.json");
+    let mut scene = read_json(&file);
+    scene["flow_axis"] = serde_json::json!([0.0, 1.0, 0.0]);
+    std::fs::write(&file, serde_json::to_string_pretty(&scene).expect("json")).expect("writes scene");
+    let run = fluidnerf(&["reconstruct", "scene", "-o", "run", "--method", "asart", "--max-iterations", "2"], d);
+    assert!(run.status.success(), "reconstruct failed: {}", String::from_utf8_lossy(&run.stderr));
+    let out = fluidnerf(&["eval", "run", "--no-reprojection"], d);
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+    let report = read_json(&d.join("run/report.json"));
+    let metrics = read_json(&d.join("run/metrics.json"));
+    let by_name = |regions: &Value| -> Vec<(String, [f64; 2], Option<f64>)> {
+        regions
+            .as_array()
+            .expect("regions")
+            .iter()
+            .map(|r| {
+                let name = r["region"]["name"].as_str().expect("name").to_string();
+                let y = [r["bounds"]["min"][1].as_f64().expect("min"), r["bounds"]["max"][1].as_f64().expect("max")];
+                (name, y, r["metrics"]["nrmse"].as_f64())
+            })
+            .collect()
+    };
+    let reported = by_name(&report["volumes"][0]["metrics"]["regions"]);
+    let evaluated = by_name(&metrics["steps"][0]["regions"]);
+    assert_eq!(reported.len(), 3, "{reported:?}");
+    assert!(reported.iter().all(|(_, y, _)| y[1] - y[0] < 1.0), "thirds along y (the box is 2 high): {reported:?}");
+    for ((a, ya, na), (b, yb, nb)) in reported.iter().zip(&evaluated) {
+        assert_eq!((a, ya), (b, yb), "region {a} of the report against {b} of eval");
+        match (na, nb) {
+            (Some(x), Some(y)) => assert!((x - y).abs() <= 1e-9 * x.abs(), "region {a}: NRMSE {x} against {y}"),
+            _ => assert_eq!(na, nb, "region {a}"),
+        }
+    }
+}

@@ -41,6 +41,8 @@ fn writes_a_scene_that_reads_back() {
     assert_eq!(scene.frames.len(), 5);
     assert!(scene.frames[4].holdout && !scene.frames[0].holdout);
     assert_eq!(scene.units, "mm");
+    let recorded = fluidnerf_io::scene::recorded(&scene).expect("recording").flow_axis;
+    assert_eq!(recorded.map(|a| a.to_array()), Some([1.0, 0.0, 0.0]), "the jet's flow axis is recorded");
     let images = fluidnerf_io::scene::load_images(&scene).expect("images read back");
     let peak = images.iter().map(|i| i.min_max().1).fold(0.0f32, f32::max);
     // Brightest noiseless pixel at 80 % of 16-bit full scale, plus a little noise.
@@ -147,6 +149,8 @@ fn user_volume_becomes_the_truth() {
     let scene = fluidnerf_io::scene::load_scene(&dir).expect("scene");
     let truth = fluidnerf_io::scene::load_truth(&scene).expect("truth");
     assert_eq!(truth[0].1.data, vol.data);
+    let recorded = fluidnerf_io::scene::recorded(&scene).expect("recording").flow_axis;
+    assert_eq!(recorded, None, "a user's volume has no known flow axis");
     let o = run_small(&tmp.path().join("missing"), &["--truth-volume", "/nonexistent/v.npy"]);
     assert!(!o.status.success());
     assert!(text(&o).1.contains("/nonexistent/v.npy"), "{:?}", text(&o));
@@ -263,6 +267,8 @@ fn cfd_plume_preset_is_time_resolved_and_rises_in_the_images() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("synth.json")).expect("synth.json")).expect("json");
     let note = record["phantom_note"].as_str().expect("a CFD data set records a note");
     assert!(note.contains("+y") && note.contains("solver steps"), "{note}");
+    let recorded = fluidnerf_io::scene::recorded(&scene).expect("recording").flow_axis;
+    assert_eq!(recorded.map(|a| a.to_array()), Some([0.0, 1.0, 0.0]), "the plume's flow axis is recorded");
 }
 
 #[test]

@@ -130,6 +130,39 @@ impl Region {
     }
 }
 
+/// Where the flow axis of the default regions came from ([`regions_flow_axis`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FlowAxisFrom {
+    /// Given by the user for this evaluation.
+    Given,
+    /// The scene's `flow_axis`.
+    Recorded,
+    /// Estimated from the ground truth ([`estimate_flow_axis`]).
+    Estimated,
+}
+
+/// The flow axis that the default regions (the laminar, transition and turbulent thirds,
+/// [`Region::jet_thirds_along`]) follow, and where it came from: `given`, else `recorded` (the
+/// scene's `flow_axis`), else estimated from `truth`. None when none of them gives one: the
+/// regions are then thirds along +x ([`Region::jet_thirds`]). `reconstruct`'s report and `eval`
+/// both take their regions from here, so that a region's name means the same part of the box
+/// in both.
+pub fn regions_flow_axis(
+    given: Option<fluidnerf_core::glam::DVec3>,
+    recorded: Option<fluidnerf_core::glam::DVec3>,
+    truth: Option<&Volume>,
+) -> Option<(fluidnerf_core::glam::DVec3, FlowAxisFrom)> {
+    given
+        .map(|a| (a, FlowAxisFrom::Given))
+        .or(recorded.map(|a| (a, FlowAxisFrom::Recorded)))
+        .or_else(|| truth.and_then(estimate_flow_axis).map(|a| (a, FlowAxisFrom::Estimated)))
+}
+
+/// The default regions along [`regions_flow_axis`]'s answer.
+pub fn default_regions(axis: Option<fluidnerf_core::glam::DVec3>) -> Vec<Region> {
+    axis.map_or_else(Region::jet_thirds, Region::jet_thirds_along)
+}
+
 /// The flow direction of a jet or plume estimated from its field: the principal axis of the
 /// intensity-weighted second moment of the voxel centres (the direction along which the field
 /// is most elongated), pointing towards the end where the field is wider (a jet spreads as it
@@ -226,6 +259,32 @@ pub fn extract_volume(volume: &Volume, region: &Region) -> Option<Volume> {
 
 #[cfg(test)]
 mod tests {
+    /// The default regions' flow axis: given, else recorded, else estimated; +x thirds when
+    /// none is known.
+    #[test]
+    fn the_regions_flow_axis_is_given_then_recorded_then_estimated() {
+        use fluidnerf_core::glam::DVec3;
+        let aabb = fluidnerf_core::Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0));
+        // Elongated along z and wider at +z: estimated as +z.
+        let truth = Volume::from_fn([8, 8, 24], aabb, |p| {
+            let r = (1.2 + p.z) * 0.3;
+            if p.x * p.x + p.y * p.y < r * r {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let (x, y) = (Some(DVec3::X), Some(DVec3::Y));
+        assert_eq!(regions_flow_axis(x, y, Some(&truth)), Some((DVec3::X, FlowAxisFrom::Given)));
+        assert_eq!(regions_flow_axis(None, y, Some(&truth)), Some((DVec3::Y, FlowAxisFrom::Recorded)));
+        let (axis, from) = regions_flow_axis(None, None, Some(&truth)).expect("estimated");
+        assert_eq!(from, FlowAxisFrom::Estimated);
+        assert!(axis.z > 0.99, "{axis:?}");
+        assert_eq!(regions_flow_axis(None, None, None), None);
+        assert_eq!(default_regions(None), Region::jet_thirds());
+        assert_eq!(default_regions(Some(DVec3::Y)), Region::jet_thirds_along(DVec3::Y));
+    }
+
     use super::*;
 
     /// A cone widening along −y: the estimate points along −y, and the regions start at the

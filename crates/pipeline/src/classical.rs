@@ -14,7 +14,7 @@ use fluidnerf_classical::{
     voxel_footprint_px, ClassicalMethod, Grid, Problem, Projector, ProjectorConfig, ProjectorKind,
 };
 use fluidnerf_core::{Image, Scene, Volume};
-use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
+use fluidnerf_metrics::{NrmsePoint, TruthSample};
 
 use crate::measured::{fit_gain, normalise, MaskedProjector};
 use crate::{
@@ -325,7 +325,7 @@ pub(crate) fn run(
     let t_eval = Instant::now();
     let metrics = match truth.first() {
         Some((time, t)) => {
-            Some(fluidnerf_metrics::evaluate_volume(&volume, t, *time, &VolumeMetricOptions::default())?)
+            Some(fluidnerf_metrics::evaluate_volume(&volume, t, *time, &crate::metric_options(scene, truth)?)?)
         }
         None => None,
     };

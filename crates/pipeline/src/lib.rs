@@ -144,6 +144,22 @@ pub fn unmatched_truth(scene: &Scene) -> Option<String> {
 }
 
 /// The scene's ground truth; one that is listed but unreadable is refused, naming the file.
+/// How a run scores its volumes against the truth: the default metric options, with the
+/// regions along the scene's `flow_axis`, else along the axis estimated from the first truth,
+/// else along +x ([`fluidnerf_metrics::regions_flow_axis`]), as `fluidnerf eval` takes them, so
+/// that a region of the report and of `eval` is the same part of the box.
+fn metric_options(
+    scene: &Scene,
+    truth: &[(Option<f64>, Volume)],
+) -> Result<fluidnerf_metrics::VolumeMetricOptions, PipelineError> {
+    let recorded = fluidnerf_io::scene::recorded(scene)?.flow_axis;
+    let axis = fluidnerf_metrics::regions_flow_axis(None, recorded, truth.first().map(|(_, t)| t));
+    Ok(fluidnerf_metrics::VolumeMetricOptions {
+        regions: fluidnerf_metrics::default_regions(axis.map(|(a, _)| a)),
+        ..Default::default()
+    })
+}
+
 fn load_truth(scene: &Scene) -> Result<Vec<(Option<f64>, Volume)>, PipelineError> {
     let truth = fluidnerf_io::scene::load_truth(scene)?;
     for ((time, volume), r) in truth.iter().zip(&scene.truth) {

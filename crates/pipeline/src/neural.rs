@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use fluidnerf_core::glam::Vec3;
 use fluidnerf_core::{Scene, Volume};
-use fluidnerf_metrics::{NrmsePoint, TruthSample, VolumeMetricOptions};
+use fluidnerf_metrics::{NrmsePoint, TruthSample};
 use fluidnerf_neural::train::{
     render_view, train, train_fitting_gains, GainFit, Learner, Prepared, Problem, Split, TrainConfig, View, ViewMasks,
 };
@@ -523,7 +523,7 @@ impl Ctx<'_> {
                 } else {
                     Volume::from_field(t.dims, t.aabb, &world, 0.0)
                 };
-                Some(fluidnerf_metrics::evaluate_volume(&v, t, *time, &VolumeMetricOptions::default())?)
+                Some(fluidnerf_metrics::evaluate_volume(&v, t, *time, &crate::metric_options(self.scene, self.truth)?)?)
             }
             None => None,
         };

@@ -18,7 +18,6 @@ use std::time::Instant;
 use fluidnerf_core::num;
 use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{ScalarField, Scene, Volume};
-use fluidnerf_metrics::VolumeMetricOptions;
 use fluidnerf_neural::temporal::{
     field_for_window, frame_times, infer_time_step, train_windows, FrameStart, ResumeState, StitchedField,
     TemporalRecord, TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
@@ -587,6 +586,7 @@ impl Ctx<'_> {
         let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
         let mut volumes = Vec::new();
         let mut pvd_entries = Vec::new();
+        let options = crate::metric_options(self.scene, self.truth)?;
         for (i, &(t, trained)) in out_times.iter().enumerate() {
             let volume = Volume::from_field(dims, self.scene.aabb, &stitched, t);
             let stem = format!("frames/volume_{i:03}");
@@ -600,7 +600,7 @@ impl Ctx<'_> {
             let metrics = match truth {
                 Some((_, tv)) => {
                     let v = Volume::from_field(tv.dims, tv.aabb, &stitched as &dyn ScalarField, t);
-                    Some(fluidnerf_metrics::evaluate_volume(&v, tv, Some(t), &VolumeMetricOptions::default())?)
+                    Some(fluidnerf_metrics::evaluate_volume(&v, tv, Some(t), &options)?)
                 }
                 None => None,
             };

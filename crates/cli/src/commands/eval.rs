@@ -11,8 +11,8 @@ use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::num;
 use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
-    estimate_flow_axis, evaluate_volume, reproject, MetricsReport, Region, ReprojectionOptions, SsimParams, SsimWindow,
-    VolumeMetricOptions,
+    evaluate_volume, regions_flow_axis, reproject, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions,
+    SsimParams, SsimWindow, VolumeMetricOptions,
 };
 use serde::Serialize;
 
@@ -267,20 +267,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The regions follow the flow: given, recorded in the scene, or estimated from the truth.
     if default_regions {
         let recorded = fluidnerf_io::scene::recorded(&scene).context("the scene's flow_axis")?.flow_axis;
-        let flow = match (&args.flow_axis, recorded) {
-            (Some(a), _) => Some((DVec3::new(a[0], a[1], a[2]), "--flow-axis")),
-            (None, Some(a)) => Some((a, "the scene's flow_axis")),
-            (None, None) => {
-                truth.first().and_then(|(_, t)| estimate_flow_axis(t)).map(|a| (a, "estimated from the truth"))
-            }
-        };
+        let given = args.flow_axis.as_ref().map(|a| DVec3::new(a[0], a[1], a[2]));
+        let flow = regions_flow_axis(given, recorded, truth.first().map(|(_, t)| t));
         match flow {
             Some((axis, from)) => {
+                let from = match from {
+                    FlowAxisFrom::Given => "--flow-axis",
+                    FlowAxisFrom::Recorded => "the scene's flow_axis",
+                    FlowAxisFrom::Estimated => "estimated from the truth",
+                };
                 log::info!("flow axis {:?} ({from}): laminar, transition, turbulent thirds along it", axis.to_array());
-                regions = Region::jet_thirds_along(axis);
             }
             None => log::info!("no flow axis given, recorded or estimable: regions are thirds along +x"),
         }
+        regions = fluidnerf_metrics::default_regions(flow.map(|(axis, _)| axis));
     }
     let volume_options = VolumeMetricOptions { regions, ssim, data_range: args.data_range };
     // The time steps the reconstruction volumes stand for: the truth's, else the frames'.

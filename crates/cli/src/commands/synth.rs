@@ -579,8 +579,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fluidnerf_io::volume::write_npy(&path, vol).with_context(|| format!("cannot write {}", path.display()))?;
     }
     let scene = syn.scene(out.clone());
+    // The flows' direction, so that `eval` and the runs' reports place the laminar, transition
+    // and turbulent thirds where the flow enters and leaves instead of estimating it.
+    let flow_axis = match settings.phantom.kind {
+        PhantomKind::Jet | PhantomKind::JetTr => Some(DVec3::X),
+        PhantomKind::Plume | PhantomKind::CfdJet => Some(DVec3::Y),
+        PhantomKind::Ball | PhantomKind::Blobs | PhantomKind::BallAndBlobs | PhantomKind::Volume => None,
+    };
     let recording = match &syn.real {
-        None => Recording::plain(scene.frames.len()),
+        None => Recording { flow_axis, ..Recording::plain(scene.frames.len()) },
         Some(_) => Recording {
             linearisation: Linearisation::Srgb,
             frames: syn
@@ -591,7 +598,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     mask_path: None,
                 })
                 .collect(),
-            flow_axis: None,
+            flow_axis,
         },
     };
     fluidnerf_io::scene::save_scene_recording(&scene, &scene_file, &recording, false)
