@@ -254,21 +254,36 @@ mod tests {
     use crate::glam::DVec3;
     use crate::{Image, Intrinsics};
 
-    #[test]
-    fn truth_at_a_time_no_frame_has_is_found() {
+    /// A frame at `time` of one small camera, for the time-matching tests.
+    fn frame(time: Option<f64>) -> Frame {
         let k = Intrinsics { width: 8, height: 8, fx: 8.0, fy: 8.0, cx: 3.5, cy: 3.5, skew: 0.0 };
         let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
-        let frame =
-            |time| Frame { camera: camera.clone(), file_path: "a.png".into(), time, camera_name: None, holdout: false };
-        let truth = |time| TruthRef { time, file_path: "t.npy".into() };
-        let mut scene = Scene {
+        Frame { camera, file_path: "a.png".into(), time, camera_name: None, holdout: false }
+    }
+
+    /// A truth entry at `time`.
+    fn truth(time: Option<f64>) -> TruthRef {
+        TruthRef { time, file_path: "t.npy".into() }
+    }
+
+    /// A scene of `frames` and `truth`.
+    fn timed_scene(frames: Vec<Frame>, truth: Vec<TruthRef>) -> Scene {
+        Scene {
             root: ".".into(),
             aabb: Aabb::cube(DVec3::ZERO, 2.0),
             units: "mm".into(),
             intensity_scale: 1.0,
-            frames: vec![frame(Some(14.0)), frame(Some(15.0))],
-            truth: vec![truth(Some(14.0)), truth(Some(-15.0)), truth(Some(15.0 + 1e-12))],
-        };
+            frames,
+            truth,
+        }
+    }
+
+    #[test]
+    fn truth_at_a_time_no_frame_has_is_found() {
+        let mut scene = timed_scene(
+            vec![frame(Some(14.0)), frame(Some(15.0))],
+            vec![truth(Some(14.0)), truth(Some(-15.0)), truth(Some(15.0 + 1e-12))],
+        );
         assert_eq!(scene.unmatched_truth_times(), vec![-15.0]);
         assert!(scene.times_without_truth().is_empty(), "15 is matched within 1e-9");
         // Frames without times (a static scene): every truth volume is the scene's.
@@ -278,19 +293,10 @@ mod tests {
 
     #[test]
     fn frame_times_without_truth_are_found() {
-        let k = Intrinsics { width: 8, height: 8, fx: 8.0, fy: 8.0, cx: 3.5, cy: 3.5, skew: 0.0 };
-        let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
-        let frame =
-            |time| Frame { camera: camera.clone(), file_path: "a.png".into(), time, camera_name: None, holdout: false };
-        let truth = |time| TruthRef { time, file_path: "t.npy".into() };
-        let mut scene = Scene {
-            root: ".".into(),
-            aabb: Aabb::cube(DVec3::ZERO, 2.0),
-            units: "mm".into(),
-            intensity_scale: 1.0,
-            frames: vec![frame(Some(14.0)), frame(Some(15.0)), frame(Some(16.0))],
-            truth: vec![truth(Some(16.0)), truth(Some(14.0))],
-        };
+        let mut scene = timed_scene(
+            vec![frame(Some(14.0)), frame(Some(15.0)), frame(Some(16.0))],
+            vec![truth(Some(16.0)), truth(Some(14.0))],
+        );
         assert_eq!(scene.times_without_truth(), vec![15.0]);
         // One volume without a time stands for every time; no truth leaves nothing to score.
         scene.truth = vec![truth(None)];
