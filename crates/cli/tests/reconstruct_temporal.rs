@@ -469,11 +469,10 @@ fn a_frame_without_time_in_a_time_resolved_scene_is_refused_by_name() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "jet-tr", 4, 16, 12, &["--times", "14,15"]);
-    let file = d.join("scene/transforms.json");
-    let mut v = json(&file);
-    let image = v["frames"][2]["file_path"].as_str().expect("file_path").to_string();
-    v["frames"][2].as_object_mut().expect("frame").remove("time");
-    std::fs::write(&file, v.to_string()).expect("writes the scene");
+    let image = edit_json(&d.join("scene/transforms.json"), |v| {
+        v["frames"][2].as_object_mut().expect("frame").remove("time");
+        v["frames"][2]["file_path"].as_str().expect("file_path").to_string()
+    });
 
     // Read as time 0, it was one more instant seen by a single camera.
     let needle = format!("frame 2 ({image}) has no `time`, but the other 7 frame(s) have one");
@@ -491,10 +490,9 @@ fn truth_at_only_some_times_is_reported_naming_the_times_without() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "jet-tr", 4, 16, 12, &["--times", "14,15,16"]);
-    let file = d.join("scene/transforms.json");
-    let mut v = json(&file);
-    v["truth"].as_array_mut().expect("truth").retain(|t| t["time"] != 15.0);
-    std::fs::write(&file, v.to_string()).expect("writes the scene");
+    edit_json(&d.join("scene/transforms.json"), |v| {
+        v["truth"].as_array_mut().expect("truth").retain(|t| t["time"] != 15.0)
+    });
     let gap = "the ground truth covers 2 of the 3 frame times: none at t = 15";
 
     let info = fluidnerf(d, &["info", "scene"]);

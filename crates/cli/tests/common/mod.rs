@@ -31,6 +31,16 @@ pub fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("readable")).expect("json")
 }
 
+/// Reads the JSON file `path`, lets `change` edit it, writes it back and returns what `change`
+/// returned: how the tests make a scene file bad in one place.
+#[allow(dead_code)] // not every test file edits files
+pub fn edit_json<R>(path: &Path, change: impl FnOnce(&mut serde_json::Value) -> R) -> R {
+    let mut v = json(path);
+    let r = change(&mut v);
+    std::fs::write(path, v.to_string()).expect("writes the edited file");
+    r
+}
+
 /// The `report.json` of a run directory.
 #[allow(dead_code)] // not every test file reads reports
 pub fn report(dir: &Path) -> serde_json::Value {
