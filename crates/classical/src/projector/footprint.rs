@@ -65,10 +65,13 @@
 //! When a camera sees the grid's rows (its `x` axis) as vertical or horizontal lines in its
 //! image, exactly (CT-style rings around that axis; see `Shared`), the voxels of a row share
 //! their depth and their footprint along one image axis, which is then computed once per row
-//! (sixteen rows at a time). The footprint is then separable across the whole row, and the
-//! back projection uses it: the image lines under the row's shared footprint are summed with
-//! its weights into one line first, and each voxel weighs that line with its weights along the
-//! other axis, `n_s + n_l` products per voxel instead of `n_s · n_l`.
+//! (sixteen rows at a time). The footprint is then separable across the whole row, and both
+//! projections use it. The back projection sums the image lines under the row's shared
+//! footprint with its weights into one line first, and each voxel weighs that line with its
+//! weights along the other axis, `n_s + n_l` products per voxel instead of `n_s · n_l`. The
+//! forward projection does the transpose: each voxel adds its weights along the other axis to
+//! one line, and that line is added to the image lines under the shared footprint with its
+//! weights.
 //!
 //! Wider footprints are stored voxel-major, so that each voxel reads its weights as one vector
 //! per axis. With footprints of side 2 or 4 (voxels under about 3 pixels, where a voxel's row
@@ -489,6 +492,60 @@ unsafe fn first_range16<'a>(firsts: impl Iterator<Item = &'a [f32; CHUNK]>) -> (
         hi = _mm512_max_ps(hi, f);
     }
     (_mm512_reduce_min_ps(lo), _mm512_reduce_max_ps(hi))
+}
+
+/// Adds each voxel's weights times its value to its line of the forward projection's summed
+/// lines ([`FootprintProjector::scatter_shared`]): `w[l][q] · values[q]` to `acc[at[q] + l]`
+/// for `l < N`, skipping voxels of value zero. With SSE (every x86-64 CPU) and sides of a
+/// multiple of four, each voxel adds whole vectors of four, transposed from the pixel-major
+/// weights four voxels at a time; else the products are transposed through memory.
+///
+/// # Safety
+/// For every voxel of non-zero value, `acc[at[q]..at[q] + N]` lies inside the buffer `acc`.
+#[inline(always)]
+unsafe fn add_to_lines<const N: usize>(acc: *mut f32, at: &[u32; CHUNK], values: &[f32; CHUNK], w: &[[f32; CHUNK]; N]) {
+    #[cfg(target_arch = "x86_64")]
+    if N.is_multiple_of(4) {
+        use std::arch::x86_64::*;
+        for qb in (0..CHUNK).step_by(4) {
+            // SAFETY: `values` and `w` hold CHUNK lanes, qb + 4 ≤ CHUNK; the stores as the
+            // caller's contract.
+            unsafe {
+                let a = _mm_loadu_ps(values.as_ptr().add(qb));
+                for lb in (0..N).step_by(4) {
+                    let row = |l: usize| _mm_mul_ps(_mm_loadu_ps(w[lb + l].as_ptr().add(qb)), a);
+                    let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+                    let (t0, t1) = (_mm_unpacklo_ps(r0, r1), _mm_unpacklo_ps(r2, r3));
+                    let (t2, t3) = (_mm_unpackhi_ps(r0, r1), _mm_unpackhi_ps(r2, r3));
+                    let cols =
+                        [_mm_movelh_ps(t0, t1), _mm_movehl_ps(t1, t0), _mm_movelh_ps(t2, t3), _mm_movehl_ps(t3, t2)];
+                    for (q, col) in cols.into_iter().enumerate() {
+                        if values[qb + q] != 0.0 {
+                            let p = acc.add(at[qb + q] as usize + lb);
+                            _mm_storeu_ps(p, _mm_add_ps(_mm_loadu_ps(p), col));
+                        }
+                    }
+                }
+            }
+        }
+        return;
+    }
+    let mut prods = [[0f32; N]; CHUNK];
+    for (q, p) in prods.iter_mut().enumerate() {
+        for l in 0..N {
+            p[l] = values[q] * w[l][q];
+        }
+    }
+    for q in 0..CHUNK {
+        if values[q] == 0.0 {
+            continue;
+        }
+        // SAFETY: the caller's contract.
+        let line = unsafe { &mut *acc.add(at[q] as usize).cast::<[f32; N]>() };
+        for l in 0..N {
+            line[l] += prods[q][l];
+        }
+    }
 }
 
 /// The first voxels of the chunks of a grid row `row` that hold a non-zero value, into `starts`
@@ -1724,10 +1781,16 @@ impl FootprintProjector {
     }
 
     /// [`Self::scatter`] for views whose grid rows share a footprint axis ([`Shared`]): the
-    /// shared axis's footprint is computed once per grid row ([`FootView::rows_shared`]) and
-    /// only the other axis per chunk ([`FootView::chunk_moving`]); each voxel then adds its
-    /// `rows × N` square as [`Self::scatter`] does, alternating between the
-    /// [`SCATTER_IMAGES`] padded images `img`.
+    /// transpose of [`Self::gather_rows`]. The shared axis's footprint is computed once per grid
+    /// row ([`FootView::rows_shared`]) and only the other axis per chunk
+    /// ([`FootView::chunk_moving`]). Each voxel adds its `n_l` weights along the moving axis to
+    /// one line (`n_l` products per voxel instead of `n_s · n_l`; consecutive voxels alternate
+    /// between [`SCATTER_IMAGES`] lines, so that voxels adding to the same pixel do not chain
+    /// through memory), and the summed line is then added to the `n_s` image lines under the
+    /// row's shared footprint with its weights, as whole vectors. The image lines are the
+    /// padded image's rows when rows image horizontal (`SHARED_V`); when they image vertical
+    /// they are its columns, accumulated transposed in the first image and added in place at
+    /// the end.
     #[inline(always)]
     fn scatter_shared<const N: usize, const SHARED_V: bool>(
         &self,
@@ -1739,13 +1802,18 @@ impl FootprintProjector {
     ) {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
-        let nr = fv.rows;
-        let n_l = if SHARED_V { fv.cols } else { nr };
+        let (line_len, n_l, n_s) = if SHARED_V { (pw, fv.cols, fv.rows) } else { (ph, fv.rows, fv.cols) };
         let [nx, ny, _] = self.grid.dims;
         let mut mvs = vec![Moving::<N>::default(); nx.div_ceil(CHUNK)];
         let mut own = Vec::with_capacity(mvs.len());
         let mut scratch = vec![MovingTrapezoids::default(); mvs.len()];
         let mut rss = vec![RowShared::<N>::default(); ny];
+        // The summed lines, one per voxel of a group of SCATTER_IMAGES consecutive voxels,
+        // each with N values of slack past the line's end.
+        const { assert!(SCATTER_IMAGES == 4) };
+        let stride = line_len + N;
+        let mut acc = vec![0f32; SCATTER_IMAGES * stride];
+        let lines = &mut img[..pw * ph];
         for k in ks {
             if known.is_some_and(|c| (0..ny).all(|j| c.row(k * ny + j).is_empty())) {
                 continue;
@@ -1766,43 +1834,72 @@ impl FootprintProjector {
                 let across = rs.first as usize;
                 let mvs = &mut mvs[..starts.len()];
                 fv.row_moving::<N, SHARED_V>(rs, base, step, n_l, starts, &mut scratch, mvs);
+                // The stretch of the line the row's voxels add to: lane-wise least and greatest
+                // first pixel of the voxels that add something.
+                let (mut lo, mut hi) = ([u32::MAX; CHUNK], [0u32; CHUNK]);
+                let acc_at = acc.as_mut_ptr();
                 for (&i0, mv) in starts.iter().zip(mvs.iter()) {
                     let valid = CHUNK.min(nx - i0);
                     let g = &x[row0 + i0..][..valid];
-                    // Each voxel's first pixel and weighted value, vectorised across the chunk;
+                    // Each voxel's products and place in its line, vectorised across the chunk;
                     // misses and empty voxels get a zero value and are skipped.
                     let mut gq = [0f32; CHUNK];
                     gq[..valid].copy_from_slice(g);
-                    let (mut firsts, mut values) = ([0u32; CHUNK], [0f32; CHUNK]);
+                    let (mut values, mut at) = ([0f32; CHUNK], [0u32; CHUNK]);
                     for q in 0..CHUNK {
-                        let hit = mv.first[q] >= 0.0;
-                        // SAFETY: a whole number in [0, width + 2N) (`chunk_moving`), or 0.
-                        firsts[q] = unsafe { (if hit { mv.first[q] } else { 0.0 }).to_int_unchecked::<u32>() };
-                        values[q] = if hit { gq[q] * mv.amp[q] } else { 0.0 };
+                        // Selects written as masks and minima, which vectorise without branches.
+                        let keep = u32::from(mv.first[q] >= 0.0).wrapping_neg();
+                        let v = f32::from_bits((gq[q] * mv.amp[q]).to_bits() & keep);
+                        values[q] = v;
+                        // SAFETY: a whole number in [0, line_len) (`chunk_moving`), or 0.
+                        let first = unsafe { fmax(mv.first[q], 0.0).to_int_unchecked::<u32>() };
+                        let adds = u32::from(v != 0.0).wrapping_neg();
+                        lo[q] = lo[q].min(first | !adds);
+                        hi[q] = hi[q].max(first & adds);
+                        at[q] = (q % SCATTER_IMAGES) as u32 * stride as u32 + first;
                     }
-                    for q in 0..valid {
-                        let a = values[q];
-                        if a == 0.0 {
-                            continue;
-                        }
-                        let first = firsts[q] as usize;
-                        let (col, row) = if SHARED_V { (first, across) } else { (across, first) };
-                        let dst = &mut img[(q % SCATTER_IMAGES) * pw * ph..][..pw * ph];
-                        let wu: [f32; N] = if SHARED_V { std::array::from_fn(|c| mv.w[c][q]) } else { rs.w };
-                        for r in 0..nr {
-                            let s = a * if SHARED_V { rs.w[r] } else { mv.w[r][q] };
-                            // A voxel that hits has its N × rows square inside the padded image
-                            // (`chunk_moving`: first < len + N, and the padded image is
-                            // (width + 2N) × (height + 2N)).
-                            let line: &mut [f32; N] =
-                                (&mut dst[(row + r) * pw + col..][..N]).try_into().expect("N pixels");
-                            for c in 0..N {
-                                line[c] += s * wu[c];
-                            }
-                        }
+                    // SAFETY: a hit has `first + n_l ≤ line_len` (`chunk_moving`: first < len +
+                    // N, n_l ≤ N), each line has N values of slack, and weights past `n_l` are
+                    // zero; lanes past the row's end have a zero value.
+                    unsafe { add_to_lines::<N>(acc_at, &at, &values, &mv.w) };
+                }
+                let (lo, hi) = (lo.into_iter().min().unwrap_or(u32::MAX), hi.into_iter().max().unwrap_or(0));
+                let (lo, hi) = (lo as usize, hi as usize);
+                if lo > hi {
+                    continue;
+                }
+                let hi = hi + N;
+                // The lines summed, then added under the shared footprint; lines past its last
+                // non-zero weight add nothing.
+                let (a0, rest) = acc.split_at_mut(stride);
+                let (a1, rest) = rest.split_at_mut(stride);
+                let (a2, a3) = rest.split_at_mut(stride);
+                for c in lo..hi {
+                    a0[c] = (a0[c] + a1[c]) + (a2[c] + a3[c]);
+                }
+                a1[lo..hi].fill(0.0);
+                a2[lo..hi].fill(0.0);
+                a3[lo..hi].fill(0.0);
+                let n_s = (0..n_s.min(N)).rev().find(|&s| rs.w[s] != 0.0).map_or(1, |s| s + 1);
+                for s in 0..n_s {
+                    let w = rs.w[s];
+                    let dst = &mut lines[(across + s) * line_len..][lo..hi.min(line_len)];
+                    for (d, &v) in dst.iter_mut().zip(&a0[lo..]) {
+                        *d += w * v;
                     }
                 }
+                a0[lo..hi].fill(0.0);
             }
+        }
+        if !SHARED_V {
+            // The columns accumulated as lines: added to the second image in place.
+            let (t, rest) = img.split_at_mut(pw * ph);
+            for (r, row) in rest[..pw * ph].chunks_exact_mut(pw).enumerate() {
+                for (c, o) in row.iter_mut().enumerate() {
+                    *o += t[c * ph + r];
+                }
+            }
+            t.fill(0.0);
         }
     }
 
