@@ -1809,11 +1809,10 @@ impl FootprintProjector {
         let mut scratch = vec![MovingTrapezoids::default(); mvs.len()];
         let mut rss = vec![RowShared::<N>::default(); ny];
         // The summed lines, one per voxel of a group of SCATTER_IMAGES consecutive voxels,
-        // each with N values of slack past the line's end.
+        // each with N + CHUNK values of slack past the line's end.
         const { assert!(SCATTER_IMAGES == 4) };
-        let stride = line_len + N;
+        let stride = line_len + N + CHUNK;
         let mut acc = vec![0f32; SCATTER_IMAGES * stride];
-        let lines = &mut img[..pw * ph];
         for k in ks {
             if known.is_some_and(|c| (0..ny).all(|j| c.row(k * ny + j).is_empty())) {
                 continue;
@@ -1868,27 +1867,34 @@ impl FootprintProjector {
                 if lo > hi {
                     continue;
                 }
-                let hi = hi + N;
-                // The lines summed, then added under the shared footprint; lines past its last
-                // non-zero weight add nothing.
-                let (a0, rest) = acc.split_at_mut(stride);
-                let (a1, rest) = rest.split_at_mut(stride);
-                let (a2, a3) = rest.split_at_mut(stride);
-                for c in lo..hi {
-                    a0[c] = (a0[c] + a1[c]) + (a2[c] + a3[c]);
-                }
-                a1[lo..hi].fill(0.0);
-                a2[lo..hi].fill(0.0);
-                a3[lo..hi].fill(0.0);
+                // The lines summed and cleared, and their sum added under the shared footprint
+                // (lines past its last non-zero weight add nothing), sixteen pixels at a time.
                 let n_s = (0..n_s.min(N)).rev().find(|&s| rs.w[s] != 0.0).map_or(1, |s| s + 1);
-                for s in 0..n_s {
-                    let w = rs.w[s];
-                    let dst = &mut lines[(across + s) * line_len..][lo..hi.min(line_len)];
-                    for (d, &v) in dst.iter_mut().zip(&a0[lo..]) {
-                        *d += w * v;
+                let img_at = img.as_mut_ptr();
+                for c in (lo..hi + N).step_by(CHUNK) {
+                    // SAFETY: `c + CHUNK ≤ line_len + N + CHUNK` = the summed lines' stride, so
+                    // the four windows lie inside `acc` and apart. The image window starts
+                    // inside line `across + s < pw · ph / line_len` and may run past its end by
+                    // `N + CHUNK` values, into the next line or the next image, whose values
+                    // it leaves as they are: the summed line is zero past `line_len` (weights
+                    // past a voxel's `n_l` are zero and `first + n_l ≤ line_len`).
+                    unsafe {
+                        let window = |i: usize| &mut *acc_at.add(i * stride + c).cast::<[f32; CHUNK]>();
+                        let (l0, l1, l2, l3) = (window(0), window(1), window(2), window(3));
+                        let mut v = [0f32; CHUNK];
+                        for i in 0..CHUNK {
+                            v[i] = (l0[i] + l1[i]) + (l2[i] + l3[i]);
+                        }
+                        (*l0, *l1, *l2, *l3) = ([0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK]);
+                        for s in 0..n_s {
+                            let w = rs.w[s];
+                            let d = &mut *img_at.add((across + s) * line_len + c).cast::<[f32; CHUNK]>();
+                            for i in 0..CHUNK {
+                                d[i] += w * v[i];
+                            }
+                        }
                     }
                 }
-                a0[lo..hi].fill(0.0);
             }
         }
         if !SHARED_V {
