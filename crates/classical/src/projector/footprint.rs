@@ -1955,9 +1955,12 @@ impl FootprintProjector {
                     continue;
                 }
                 let across = rs.first as usize;
+                // The mask under the shared footprint, for the column sums only.
                 let mut m_s = 0f32;
-                for s in 0..n_s {
-                    m_s += rs.w[s] * m_across[across + s];
+                if col_sums.is_some() {
+                    for s in 0..n_s {
+                        m_s += rs.w[s] * m_across[across + s];
+                    }
                 }
                 // Every chunk's footprints, and the stretch of the line they read (lane-wise
                 // minimum and maximum first pixel of the hits; misses are −1).
@@ -1985,38 +1988,30 @@ impl FootprintProjector {
                 }
                 // The shared footprint's lines summed over [lo, hi + n_l): every hit has
                 // `first + n_l ≤ line_len` (see `chunk_moving`: first < len + N, n_l ≤ N).
-                let (lo, hi) = (lo as usize, hi as usize + n_l);
-                // Sixteen pixels at a time, each written once (the window may run 15 pixels
-                // past `hi`, into `acc`'s slack); pixel by pixel where it would run past the
-                // last line's end. The same sums in the same order either way.
                 // Lines past the footprint's last non-zero weight add nothing.
+                let (lo, hi) = (lo as usize, hi as usize + n_l);
                 let n_s = (0..n_s.min(N)).rev().find(|&s| rs.w[s] != 0.0).map_or(1, |s| s + 1);
-                let base_at = |s: usize, c: usize| (across + s) * line_len + c;
-                let mut c = lo;
-                while c < hi && base_at(n_s - 1, c) + CHUNK <= lines.len() {
-                    let line = |s: usize| -> &[f32; CHUNK] {
-                        lines[base_at(s, c)..][..CHUNK].try_into().expect("CHUNK values")
-                    };
-                    let mut v = [0f32; CHUNK];
-                    let l0 = line(0);
-                    for i in 0..CHUNK {
-                        v[i] = rs.w[0] * l0[i];
-                    }
-                    for s in 1..n_s {
-                        let (w, ls) = (rs.w[s], line(s));
+                let (lines_at, acc_at) = (lines.as_ptr(), acc.as_mut_ptr());
+                for c in (lo..hi).step_by(CHUNK) {
+                    // SAFETY: `c < hi ≤ line_len`, so the window lies inside `acc` (32 values of
+                    // slack) and the image windows inside `lines`, which holds CHUNK values past
+                    // its last line. A window running past its line's end reads the next line
+                    // into `acc` past `hi`, where no voxel reads with a non-zero weight.
+                    unsafe {
+                        let line = |s: usize| &*lines_at.add((across + s) * line_len + c).cast::<[f32; CHUNK]>();
+                        let mut v = [0f32; CHUNK];
+                        let l0 = line(0);
                         for i in 0..CHUNK {
-                            v[i] += w * ls[i];
+                            v[i] = rs.w[0] * l0[i];
                         }
+                        for s in 1..n_s {
+                            let (w, ls) = (rs.w[s], line(s));
+                            for i in 0..CHUNK {
+                                v[i] += w * ls[i];
+                            }
+                        }
+                        *acc_at.add(c).cast::<[f32; CHUNK]>() = v;
                     }
-                    acc[c..c + CHUNK].copy_from_slice(&v);
-                    c += CHUNK;
-                }
-                for c in c..hi {
-                    let mut v = rs.w[0] * lines[base_at(0, c)];
-                    for s in 1..n_s {
-                        v += rs.w[s] * lines[base_at(s, c)];
-                    }
-                    acc[c] = v;
                 }
                 let row0 = (kk * ny + j) * nx;
                 for c in 0..nc {
@@ -2604,7 +2599,8 @@ struct SummedLine<'a> {
 /// A view's image as the back projection reads it ([`FootprintProjector::back_image`]).
 struct BackImage {
     /// The image with a margin of the footprint side on every side, transposed when the
-    /// view's grid rows image as columns.
+    /// view's grid rows image as columns, and followed by [`CHUNK`] zeros for the shared-row
+    /// kernel's vector reads.
     padded: Vec<f32>,
     /// 1 on the image's columns and rows, 0 on the margins, with 32 trailing zeros for the
     /// shared-row kernel's vector window.
@@ -2618,7 +2614,7 @@ impl FootprintProjector {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let (w, h, n) = (fv.cam.width, fv.cam.height, fv.side);
-        let mut padded = vec![0f32; pw * ph];
+        let mut padded = vec![0f32; pw * ph + CHUNK];
         for (r, row) in y.chunks_exact(w).enumerate() {
             padded[(r + n) * pw + n..][..w].copy_from_slice(row);
         }
@@ -2627,8 +2623,8 @@ impl FootprintProjector {
         // Rows that share a footprint axis read along image lines: rows (the padded image as it
         // is) when they image horizontal, columns (the image transposed) when vertical.
         if fv.shared == Shared::U {
-            let mut t = vec![0f32; pw * ph];
-            for (r, row) in padded.chunks_exact(pw).enumerate() {
+            let mut t = vec![0f32; pw * ph + CHUNK];
+            for (r, row) in padded[..pw * ph].chunks_exact(pw).enumerate() {
                 for (c, &v) in row.iter().enumerate() {
                     t[c * ph + r] = v;
                 }
@@ -2655,7 +2651,13 @@ impl FootprintProjector {
             )),
             Shared::None => {
                 dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::gather::<N, D>(
-                    self, view, ks, padded, masks, o, c
+                    self,
+                    view,
+                    ks,
+                    &padded[..pw * ph],
+                    masks,
+                    o,
+                    c
                 ))
             }
         }
