@@ -70,15 +70,20 @@ impl Volume {
         let sub = n * n * n;
         let inv = 1.0 / sub as f32;
         let rows = field.support().and_then(|s| SupportRows::for_samples(s, &aabb, dims, n));
+        // The sub-lattice's offsets within a cell, point `c` at `(c % n, (c / n) % n, c / n²)`.
+        let offsets: Vec<DVec3> = (0..sub)
+            .map(|c| {
+                let q = |m: usize| (m as f64 + 0.5) / n as f64;
+                DVec3::new(q(c % n), q((c / n) % n), q(c / (n * n)))
+            })
+            .collect();
         v.data.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
             let (mut pts, mut at, mut column) = (Vec::new(), Vec::new(), Vec::new());
             for j in 0..ny {
                 let cell = |i: usize| {
-                    for c in 0..sub {
-                        let (a, b, d) = (c % n, (c / n) % n, c / (n * n));
-                        let off = |cell: usize, q: usize| cell as f64 + (q as f64 + 0.5) / n as f64;
-                        let p = aabb.min + DVec3::new(off(i, a), off(j, b), off(k, d)) * sp;
-                        pts.push(p.as_vec3());
+                    for o in &offsets {
+                        let at = DVec3::new(i as f64 + o.x, j as f64 + o.y, k as f64 + o.z);
+                        pts.push((aabb.min + at * sp).as_vec3());
                     }
                     at.push(j * nx + i);
                 };
