@@ -494,6 +494,18 @@ unsafe fn first_range16<'a>(firsts: impl Iterator<Item = &'a [f32; CHUNK]>) -> (
     (_mm512_reduce_min_ps(lo), _mm512_reduce_max_ps(hi))
 }
 
+/// The `valid ≤ CHUNK` values of `x` from `at`, zero past them: a whole chunk as one vector
+/// load (a copy of a run-time length was a call to `memmove` per chunk).
+#[inline(always)]
+fn chunk_values(x: &[f32], at: usize, valid: usize) -> [f32; CHUNK] {
+    if valid == CHUNK {
+        return x[at..at + CHUNK].try_into().expect("CHUNK values");
+    }
+    let mut g = [0f32; CHUNK];
+    g[..valid].copy_from_slice(&x[at..at + valid]);
+    g
+}
+
 /// Adds each voxel's weights times its value to its line of the forward projection's summed
 /// lines ([`FootprintProjector::scatter_shared`]): `w[l][q] · values[q]` to `acc[at[q] + l]`
 /// for `l < N`, skipping voxels of value zero. With SSE (every x86-64 CPU) and sides of a
@@ -1438,8 +1450,7 @@ impl FootprintProjector {
                     if LANES {
                         // Each voxel's start pixel and weighted value, vectorised across the chunk;
                         // misses and empty voxels get a zero value and are skipped.
-                        let mut g = [0f32; CHUNK];
-                        g[..valid].copy_from_slice(&x[row0 + i0..][..valid]);
+                        let g = chunk_values(x, row0 + i0, valid);
                         let (mut at, mut a) = ([0u32; CHUNK], [0f32; CHUNK]);
                         for q in 0..CHUNK {
                             let hit = ch.col[q] >= 0.0;
@@ -1839,11 +1850,9 @@ impl FootprintProjector {
                 let acc_at = acc.as_mut_ptr();
                 for (&i0, mv) in starts.iter().zip(mvs.iter()) {
                     let valid = CHUNK.min(nx - i0);
-                    let g = &x[row0 + i0..][..valid];
                     // Each voxel's products and place in its line, vectorised across the chunk;
                     // misses and empty voxels get a zero value and are skipped.
-                    let mut gq = [0f32; CHUNK];
-                    gq[..valid].copy_from_slice(g);
+                    let gq = chunk_values(x, row0 + i0, valid);
                     let (mut values, mut at) = ([0f32; CHUNK], [0u32; CHUNK]);
                     for q in 0..CHUNK {
                         // Selects written as masks and minima, which vectorise without branches.
