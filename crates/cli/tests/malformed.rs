@@ -253,14 +253,20 @@ fn cases() -> Vec<Case> {
             "absurd learning rate",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--learning-rate", "1e300"],
-            "--learning-rate on the command line: method.train.schedule.initial: the learning rate must be positive \
-             and at most 1",
+            "'--learning-rate <LEARNING_RATE>': a learning rate must be positive and at most 1 (an Adam step moves \
+             each parameter by about the rate), got 1e300",
+        ),
+        c(
+            "learning rate below what f32 holds",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--learning-rate", "1e-50"],
+            "1e-50 is below the smallest the training's f32 holds",
         ),
         c(
             "large learning rate, time-resolved",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--learning-rate", "5"],
-            "--learning-rate on the command line: method.train.schedule.initial",
+            "'--learning-rate <LEARNING_RATE>': a learning rate must be positive and at most 1",
         ),
         c(
             "held-out every 0",

@@ -216,6 +216,21 @@ fn parse_frames(s: &str) -> Result<std::ops::Range<usize>, String> {
     Ok(a..b)
 }
 
+/// A learning rate, refused as typed when it is out of (0, 1] or does not survive the
+/// training's f32 (before, 1e300 read as infinity and 1e-50 as 0, and the refusal named those).
+fn parse_learning_rate(s: &str) -> Result<f32, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("{s:?} is not a number"))?;
+    let rule = "a learning rate must be positive and at most 1 (an Adam step moves each parameter by about the rate)";
+    if !(v > 0.0 && v <= 1.0) {
+        return Err(format!("{rule}, got {s}"));
+    }
+    let rate = v as f32;
+    if !rate.is_normal() {
+        return Err(format!("{rule}; {s} is below the smallest the training's f32 holds ({:e})", f32::MIN_POSITIVE));
+    }
+    Ok(rate)
+}
+
 /// The stopping policy, one for every method.
 #[derive(clap::Args, Debug)]
 #[command(next_help_heading = "Stopping (every method)")]
@@ -323,8 +338,9 @@ pub struct NeuralArgs {
     /// Hierarchical feature samples per ray (N_f; 0 disables) [default: the preset's].
     #[arg(long)]
     pub fine_samples: Option<usize>,
-    /// Initial learning rate (the schedule keeps its decay ratio) [default: the preset's].
-    #[arg(long)]
+    /// Initial learning rate (the schedule keeps its decay ratio), in (0, 1] [default: the
+    /// preset's].
+    #[arg(long, value_parser = parse_learning_rate)]
     pub learning_rate: Option<f32>,
     /// Empty-space skipping: drop rays through dark pixels and never evaluate the field in
     /// space some camera sees dark (a visual hull carved from the images). Several times
