@@ -159,6 +159,12 @@ fn cases() -> Vec<Case> {
         c("aabb inverted", Json(|v| v["aabb"] = serde_json::json!([[1, 1, 1], [-1, -1, -1]])), RUN, "aabb"),
         c("aabb missing", Json(|v| drop(v.as_object_mut().unwrap().remove("aabb"))), RUN, "aabb"),
         c("aabb wrong type", Json(|v| v["aabb"] = serde_json::json!("box")), RUN, "aabb"),
+        c(
+            "aabb small and far out",
+            Json(|v| v["aabb"] = serde_json::json!([[1e6, 0, 0], [1.00001e6, 10, 10]])),
+            RUN,
+            "transforms.json: `aabb`: invalid aabb: the box reaches 1000010 from the origin, more than 10000 times its smallest side (10)",
+        ),
         c("negative intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(-1.0)), RUN, "intensity_scale"),
         c("tiny intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e-40)), RUN, "overflow or vanish"),
         c("huge intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e300)), RUN, "overflow or vanish"),
