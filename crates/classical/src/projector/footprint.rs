@@ -762,7 +762,7 @@ impl FootView {
         self.chunk_trapezoids::<DISTORTED>(base, step, i0, &mut t);
         let wide = self.chunk_wide::<N>(&t);
         self.chunk_place::<N>(wide, &mut t, out);
-        Self::chunk_weights::<N, LANES>(&t, out);
+        self.chunk_weights::<N, LANES>(&t, out);
     }
 
     /// [`Self::chunk`] for the chunks of a row that start at the voxels `starts`, into `out`,
@@ -809,7 +809,7 @@ impl FootView {
             self.chunk_place::<N>(wide, t, ch);
         }
         for (t, ch) in scratch.iter().zip(out.iter_mut()) {
-            Self::chunk_weights::<N, LANES>(t, ch);
+            self.chunk_weights::<N, LANES>(t, ch);
         }
     }
 
@@ -881,16 +881,18 @@ impl FootView {
     }
 
     /// The pixel weights of a placed chunk ([`Self::chunk_place`]) along both axes, voxel-major
-    /// or with `LANES` pixel-major.
+    /// or with `LANES` pixel-major: the view's `cols` and `rows` pixels, which hold every
+    /// footprint ([`fit_trapezoid`]); the weights past them stay zero.
     #[inline(always)]
-    fn chunk_weights<const N: usize, const LANES: bool>(t: &ChunkTrapezoids, out: &mut Chunk<N>) {
+    fn chunk_weights<const N: usize, const LANES: bool>(&self, t: &ChunkTrapezoids, out: &mut Chunk<N>) {
         let (off_u, off_v, inv_u, inv_v) = (&t.u, &t.v, &t.gamma, &t.front);
+        let (cols, rows) = (self.cols, self.rows);
         if LANES {
-            axis_weights_chunk::<N>(off_u, &t.pu, &t.lu, inv_u, N, |q, k, w| out.wu_lanes[k][q] = w);
-            axis_weights_chunk::<N>(off_v, &t.pv, &t.lv, inv_v, N, |q, k, w| out.wv_lanes[k][q] = w);
+            axis_weights_chunk::<N>(off_u, &t.pu, &t.lu, inv_u, cols, |q, k, w| out.wu_lanes[k][q] = w);
+            axis_weights_chunk::<N>(off_v, &t.pv, &t.lv, inv_v, rows, |q, k, w| out.wv_lanes[k][q] = w);
         } else {
-            axis_weights_chunk::<N>(off_u, &t.pu, &t.lu, inv_u, N, |q, k, w| out.wu[q][k] = w);
-            axis_weights_chunk::<N>(off_v, &t.pv, &t.lv, inv_v, N, |q, k, w| out.wv[q][k] = w);
+            axis_weights_chunk::<N>(off_u, &t.pu, &t.lu, inv_u, cols, |q, k, w| out.wu[q][k] = w);
+            axis_weights_chunk::<N>(off_v, &t.pv, &t.lv, inv_v, rows, |q, k, w| out.wv[q][k] = w);
         }
     }
 
