@@ -82,8 +82,8 @@ impl Volume {
             for j in 0..ny {
                 let cell = |i: usize| {
                     for o in &offsets {
-                        let at = DVec3::new(i as f64 + o.x, j as f64 + o.y, k as f64 + o.z);
-                        pts.push((aabb.min + at * sp).as_vec3());
+                        let index = DVec3::new(i as f64 + o.x, j as f64 + o.y, k as f64 + o.z);
+                        pts.push((aabb.min + index * sp).as_vec3());
                     }
                     at.push(j * nx + i);
                 };

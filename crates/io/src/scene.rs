@@ -994,10 +994,10 @@ pub const MIN_INTENSITY_SCALE: f64 = 1e-20;
 pub const MAX_INTENSITY_SCALE: f64 = 1e20;
 
 /// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb near enough the
-/// origin for its size ([`Aabb::check_resolvable`]), at least one
-/// frame, a positive intensity scale, finite times, a time on every frame or on none, no two
-/// frames on the same image file, every camera valid, outside the box, and seeing the box (at
-/// least one pixel's ray crosses it). `file` names the scene in error messages.
+/// origin for its size ([`Aabb::check_resolvable`]), at least one frame, a positive intensity
+/// scale, finite times, a time on every frame or on none, no two frames on the same image file,
+/// every camera valid, outside the box, and seeing the box (at least one pixel's ray crosses
+/// it). `file` names the scene in error messages.
 pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     let aabb = scene.aabb;
     aabb.validate().map_err(|e| IoError::invalid(file, format!("`aabb`: {e}")))?;
