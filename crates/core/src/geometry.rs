@@ -63,7 +63,7 @@ impl Aabb {
         if !(self.min.is_finite() && self.max.is_finite()) {
             return Err(crate::CoreError::invalid("aabb", "corners must be finite"));
         }
-        let far = self.min.abs().max(self.max.abs()).max_element();
+        let far = self.farthest_coordinate();
         if far > MAX_COORDINATE {
             return Err(crate::CoreError::invalid(
                 "aabb",
@@ -92,7 +92,7 @@ impl Aabb {
     /// Checks that the box lies within [`MAX_OFFSET_IN_SIDES`] of its smallest side from the
     /// origin, so that 32-bit arithmetic resolves its voxels (a valid box, [`Aabb::validate`]).
     pub fn check_resolvable(&self) -> Result<(), crate::CoreError> {
-        let far = self.min.abs().max(self.max.abs()).max_element();
+        let far = self.farthest_coordinate();
         let side = self.size().min_element();
         if far > MAX_OFFSET_IN_SIDES * side {
             return Err(crate::CoreError::invalid(
@@ -108,6 +108,11 @@ impl Aabb {
             ));
         }
         Ok(())
+    }
+
+    /// The largest absolute coordinate of the box's corners.
+    fn farthest_coordinate(&self) -> f64 {
+        self.min.abs().max(self.max.abs()).max_element()
     }
 
     pub fn size(&self) -> DVec3 {
