@@ -253,9 +253,9 @@ pub fn ssim(
 }
 
 /// Synthesises the scene of preset `preset` (settings overridden by the JSON object
-/// `overrides`, merged key by key into the preset's settings; see `merge`) into `folder`: images (16-bit
-/// PNG counts), ground truth (`truth/*.npy`), `transforms.json` and `synth.json`. Returns the
-/// scene.
+/// `overrides`, merged key by key into the preset's settings; see `merge`) into `folder` as the
+/// `synth` command writes it (`fluidnerf_pipeline::synthetic`): images, ground truth
+/// (`truth/*.npy`), `transforms.json`, and `synth.json`. Returns the scene.
 #[pyfunction]
 #[pyo3(signature = (folder, preset, overrides="{}", force=false))]
 pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, force: bool) -> PyResult<PyScene> {
@@ -283,14 +283,7 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
             }
             let syn = syn.map_err(|e| err(e.to_string()))?;
             let io = |e: fluidnerf_io::IoError| err(e.to_string());
-            for f in &syn.frames {
-                fluidnerf_io::image::write_png16_counts(&folder.join(syn.image_path(f)), &f.counts).map_err(io)?;
-            }
-            for (k, (_, vol)) in syn.truth.iter().enumerate() {
-                fluidnerf_io::volume::write_npy(&folder.join(syn.truth_path(k)), vol).map_err(io)?;
-            }
-            let scene = syn.scene(folder.clone());
-            fluidnerf_io::scene::save_scene(&scene, &scene_file).map_err(io)?;
+            fluidnerf_pipeline::synthetic::write_synthesis(&syn, &folder).map_err(io)?;
             let record = serde_json::json!({
                 "fluidnerf_version": env!("CARGO_PKG_VERSION"),
                 "command": "synth",

@@ -10,8 +10,6 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::{Aabb, Volume};
-use fluidnerf_io::image::Linearisation;
-use fluidnerf_io::scene::{Background, FrameRecording, Recording};
 use fluidnerf_synth::{
     generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings, Synthesis,
     ThinLensSettings, DEFAULT_PRESET,
@@ -557,52 +555,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let elapsed = started.elapsed().as_secs_f64();
 
     super::create_output_folder(&out)?;
-    for f in &syn.frames {
-        let path = out.join(syn.image_path(f));
-        match &syn.real {
-            None => fluidnerf_io::image::write_png16_counts(&path, &f.counts),
-            Some(r) => fluidnerf_io::image::write_jpeg_srgb(&path, &f.counts, 255.0, r.jpeg_quality),
-        }
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    }
-    if let Some(r) = &syn.real {
-        for (c, frames) in r.backgrounds.iter().enumerate() {
-            for (img, rel) in frames.iter().zip(syn.background_paths(c)) {
-                let path = out.join(rel);
-                fluidnerf_io::image::write_jpeg_srgb(&path, img, 255.0, r.jpeg_quality)
-                    .with_context(|| format!("cannot write {}", path.display()))?;
-            }
-        }
-    }
-    for (k, (_, vol)) in syn.truth.iter().enumerate() {
-        let path = out.join(syn.truth_path(k));
-        fluidnerf_io::volume::write_npy(&path, vol).with_context(|| format!("cannot write {}", path.display()))?;
-    }
-    let scene = syn.scene(out.clone());
-    // The flows' direction, so that `eval` and the runs' reports place the laminar, transition
-    // and turbulent thirds where the flow enters and leaves instead of estimating it.
-    let flow_axis = match settings.phantom.kind {
-        PhantomKind::Jet | PhantomKind::JetTr => Some(DVec3::X),
-        PhantomKind::Plume | PhantomKind::CfdJet => Some(DVec3::Y),
-        PhantomKind::Ball | PhantomKind::Blobs | PhantomKind::BallAndBlobs | PhantomKind::Volume => None,
-    };
-    let recording = match &syn.real {
-        None => Recording { flow_axis, ..Recording::plain(scene.frames.len()) },
-        Some(_) => Recording {
-            linearisation: Linearisation::Srgb,
-            frames: syn
-                .frames
-                .iter()
-                .map(|f| FrameRecording {
-                    background: Background::Frames(syn.background_paths(f.camera)),
-                    mask_path: None,
-                })
-                .collect(),
-            flow_axis,
-        },
-    };
-    fluidnerf_io::scene::save_scene_recording(&scene, &scene_file, &recording, false)
-        .with_context(|| format!("cannot write {}", scene_file.display()))?;
+    fluidnerf_pipeline::synthetic::write_synthesis(&syn, &out)
+        .with_context(|| format!("cannot write the scene into {}", out.display()))?;
     let preview = out.join("preview.png");
     write_preview(&preview, &syn).with_context(|| format!("cannot write {}", preview.display()))?;
     let record = serde_json::json!({

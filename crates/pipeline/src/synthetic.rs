@@ -1,0 +1,141 @@
+//! A synthesised data set written as a scene folder, the same way for every front end (the
+//! `fluidnerf synth` command and Python's `synth`): the images, the ground truth and
+//! `transforms.json` with the preprocessing the recording needs.
+//!
+//! - A plain sensor's images are 16-bit PNG counts. When the sensor adds a dark offset, every
+//!   frame records it as a constant `background`, so that a reconstruction subtracts it
+//!   instead of reading it as light.
+//! - A real-like recording's images and background frames are 8-bit sRGB JPEGs; every frame
+//!   records its camera's background frames and the scene its sRGB linearisation.
+//! - The phantoms with a known flow direction record it (`flow_axis`), so that reports place
+//!   the laminar, transition and turbulent thirds where the flow enters and leaves.
+//!
+//! The caller owns the folder: it checks that nothing is overwritten without being asked and
+//! writes its own record of the settings (`synth.json`).
+
+use std::path::Path;
+
+use fluidnerf_core::glam::DVec3;
+use fluidnerf_core::Scene;
+use fluidnerf_io::image::Linearisation;
+use fluidnerf_io::scene::{Background, FrameRecording, Recording};
+use fluidnerf_io::IoError;
+use fluidnerf_synth::{PhantomKind, Synthesis};
+
+/// The flow direction of a phantom kind, where it has one.
+pub fn flow_axis(kind: PhantomKind) -> Option<DVec3> {
+    match kind {
+        PhantomKind::Jet | PhantomKind::JetTr => Some(DVec3::X),
+        PhantomKind::Plume | PhantomKind::CfdJet => Some(DVec3::Y),
+        PhantomKind::Ball | PhantomKind::Blobs | PhantomKind::BallAndBlobs | PhantomKind::Volume => None,
+    }
+}
+
+/// The preprocessing `syn`'s images need (module docs), one entry per frame.
+pub fn recording(syn: &Synthesis) -> Recording {
+    let flow_axis = flow_axis(syn.settings.phantom.kind);
+    let background = |camera: usize| match &syn.real {
+        Some(_) => Background::Frames(syn.background_paths(camera)),
+        None if syn.settings.sensor.dark_offset > 0.0 => Background::Constant(syn.settings.sensor.dark_offset),
+        None => Background::None,
+    };
+    Recording {
+        linearisation: if syn.real.is_some() { Linearisation::Srgb } else { Linearisation::Linear },
+        frames: syn
+            .frames
+            .iter()
+            .map(|f| FrameRecording { background: background(f.camera), mask_path: None })
+            .collect(),
+        flow_axis,
+    }
+}
+
+/// Writes `syn` into `folder` (created if missing): images, background frames, truth volumes
+/// and `transforms.json`. Returns the scene as written.
+pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError> {
+    std::fs::create_dir_all(folder).map_err(|e| IoError::io(folder, "scene folder", e))?;
+    for f in &syn.frames {
+        let path = folder.join(syn.image_path(f));
+        match &syn.real {
+            None => fluidnerf_io::image::write_png16_counts(&path, &f.counts)?,
+            Some(r) => fluidnerf_io::image::write_jpeg_srgb(&path, &f.counts, 255.0, r.jpeg_quality)?,
+        }
+    }
+    if let Some(r) = &syn.real {
+        for (c, frames) in r.backgrounds.iter().enumerate() {
+            for (img, rel) in frames.iter().zip(syn.background_paths(c)) {
+                fluidnerf_io::image::write_jpeg_srgb(&folder.join(rel), img, 255.0, r.jpeg_quality)?;
+            }
+        }
+    }
+    for (k, (_, vol)) in syn.truth.iter().enumerate() {
+        fluidnerf_io::volume::write_npy(&folder.join(syn.truth_path(k)), vol)?;
+    }
+    let scene = syn.scene(folder.to_path_buf());
+    fluidnerf_io::scene::save_scene_recording(
+        &scene,
+        &folder.join(fluidnerf_io::scene::SCENE_FILE),
+        &recording(syn),
+        false,
+    )?;
+    Ok(scene)
+}
+
+#[cfg(test)]
+mod tests {
+    use fluidnerf_io::scene::{load_preprocessed, load_scene};
+    use fluidnerf_synth::generate::no_progress;
+    use fluidnerf_synth::{generate, preset};
+
+    use super::*;
+
+    fn small(name: &str) -> fluidnerf_synth::SynthSettings {
+        let mut s = preset(name).expect("preset");
+        s.resolution = 16;
+        s.lens.resolution = [24, 24];
+        s.rig.layout = fluidnerf_synth::Layout::Ring {
+            count: 4,
+            arc_deg: 360.0,
+            start_deg: 0.0,
+            axis: fluidnerf_synth::RingAxis::X,
+        };
+        s.rig.holdout = vec![];
+        s
+    }
+
+    #[test]
+    fn a_sensors_dark_offset_is_subtracted_when_the_scene_is_read() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut plain = small("demo");
+        let clean = generate(&plain, None, no_progress).expect("generate");
+        plain.sensor.dark_offset = 500.0;
+        let offset = generate(&plain, None, no_progress).expect("generate");
+        // The stored counts carry the offset…
+        let (a, b) = (&clean.frames[0].counts, &offset.frames[0].counts);
+        assert!(a.data.iter().zip(&b.data).all(|(x, y)| (y - x - 500.0).abs() < 1e-3), "offset in the counts");
+        write_synthesis(&offset, dir.path()).expect("write");
+        let scene = load_scene(dir.path()).expect("scene");
+        assert_eq!(scene.frames.len(), 4);
+        // …and reading the scene takes it off again, pixel for pixel.
+        let read = load_preprocessed(&scene).expect("preprocessed");
+        for (img, f) in read.images.iter().zip(&clean.frames) {
+            assert_eq!(img.data, f.counts.data, "counts after the dark offset's subtraction");
+        }
+        assert_eq!(read.recording.flow_axis, Some(DVec3::X));
+    }
+
+    #[test]
+    fn a_real_like_recording_keeps_its_background_frames_and_linearisation() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let syn = generate(&small("real-like-small"), None, no_progress).expect("generate");
+        write_synthesis(&syn, dir.path()).expect("write");
+        let read = load_preprocessed(&load_scene(dir.path()).expect("scene")).expect("preprocessed");
+        assert_eq!(read.recording.linearisation, Linearisation::Srgb);
+        assert!(read.recording.frames.iter().all(|f| matches!(f.background, Background::Frames(_))));
+        // The background is subtracted: the dark corners read near zero, not at the
+        // background's level (5 % of the brightest pixel).
+        let peak = read.images.iter().flat_map(|i| i.data.iter().copied()).fold(0f32, f32::max);
+        let corner = read.images[0].get(0, 0);
+        assert!(corner < 0.03 * peak, "corner {corner} of peak {peak}");
+    }
+}
