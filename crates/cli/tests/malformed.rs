@@ -92,6 +92,12 @@ fn cases() -> Vec<Case> {
         c("synth noise of 500 %", None, &["synth", "-o", "OUT", "--pixels", "16", "--noise", "5"], "gaussian_noise"),
         c("synth one voxel", None, &["synth", "-o", "OUT", "--pixels", "16", "--resolution", "1"], "resolution"),
         c(
+            "synth real-like with the plain sensor's noise",
+            None,
+            &["synth", "-o", "OUT", "--pixels", "16", "--real-like", "--noise", "0.05"],
+            "`sensor.gaussian_noise`: --noise does not apply to a real-like recording",
+        ),
+        c(
             "study camera count twice",
             None,
             &["study", "-o", "OUT", "--methods", "asart", "--cameras", "4,4", "--noise", "0"],

@@ -111,6 +111,42 @@ impl SynthSettings {
         self.sensor.validate()?;
         if let Some(r) = &self.real {
             r.validate()?;
+            // A real-like recording has its own noise and background and writes 8-bit JPEGs;
+            // the plain sensor's settings would be ignored without a word.
+            let defaults = SensorSettings::default();
+            let ignored = [
+                (
+                    self.sensor.gaussian_noise != defaults.gaussian_noise,
+                    "gaussian_noise",
+                    "--noise",
+                    "dark_noise",
+                    "--dark-noise",
+                ),
+                (self.sensor.full_well.is_some(), "full_well", "--full-well", "dark_noise", "--dark-noise"),
+                (
+                    self.sensor.dark_offset != defaults.dark_offset,
+                    "dark_offset",
+                    "--dark-offset",
+                    "background",
+                    "--background-level",
+                ),
+                (
+                    self.sensor.bit_depth != defaults.bit_depth,
+                    "bit_depth",
+                    "--bit-depth",
+                    "jpeg_quality",
+                    "--jpeg-quality",
+                ),
+            ];
+            if let Some((_, key, flag, instead, instead_flag)) = ignored.iter().find(|i| i.0) {
+                return Err(SynthError::invalid(
+                    format!("sensor.{key}"),
+                    format!(
+                        "{flag} does not apply to a real-like recording, which writes 8-bit JPEGs with its own noise \
+                         and background; set real.{instead} ({instead_flag}) instead, or record without `real`"
+                    ),
+                ));
+            }
         }
         Ok(())
     }
