@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import threading
@@ -200,3 +201,27 @@ def test_ctrl_c_stops_a_synthesis_before_it_writes_anything(tmp_path):
         signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - started < 4
     assert not (tmp_path / "big" / "transforms.json").exists()
+
+
+def test_synth_records_the_preprocessing_its_images_need(tmp_path):
+    """Python's synth wrote every scene as 16-bit counts without preprocessing keys: a dark
+    offset was read as light, and a real-like recording lost its background frames and was
+    refused on its JPEG's name."""
+    small = {
+        "resolution": 12,
+        "lens": {"resolution": [16, 16]},
+        "rig": {"layout": {"count": 3}, "holdout": []},
+    }
+    fluidnerf.synth(tmp_path / "offset", "demo", sensor={"dark_offset": 500.0}, **small)
+    scene = json.loads((tmp_path / "offset" / "transforms.json").read_text())
+    backgrounds = [f.get("background", scene.get("background")) for f in scene["frames"]]
+    assert backgrounds == [500.0] * 3
+    assert scene["flow_axis"] == [1.0, 0.0, 0.0]
+
+    fluidnerf.synth(tmp_path / "real", "real-like-small", **small)
+    scene = json.loads((tmp_path / "real" / "transforms.json").read_text())
+    assert scene["linearisation"] == "srgb"
+    for f in scene["frames"]:
+        assert f["file_path"].endswith(".jpg")
+        for b in f["background"]:
+            assert (tmp_path / "real" / b).is_file()
