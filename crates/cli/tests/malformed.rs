@@ -122,6 +122,12 @@ fn cases() -> Vec<Case> {
             "--noise: 0.0001 and 0.0002 would share one scene folder",
         ),
         c(
+            "study noise on a real-like preset",
+            None,
+            &["study", "-o", "OUT", "--methods", "asart", "--cameras", "4", "--noise", "0,0.05", "--scene-preset", "real-like-small"],
+            "--noise: 0.05 does not apply to real-like-small",
+        ),
+        c(
             "synth camera held out twice",
             None,
             &["synth", "-o", "OUT", "--pixels", "16", "--holdout", "cam008,1"],

@@ -243,6 +243,16 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
                 scene.times.len()
             );
         }
+        // A real-like recording has its own dark noise; the sensor's noise does not apply.
+        if scene.real.is_some() {
+            if let Some(n) = g.noise.iter().find(|&&n| n != 0.0) {
+                bail!(
+                    "--noise: {n} does not apply to {}, a real-like recording with its own dark noise; give \
+                     --noise 0",
+                    g.scene_preset
+                );
+            }
+        }
     }
     if let Some(&c) = g.cameras.iter().find(|&&c| c < 2) {
         bail!("--cameras: {c} is too few; give at least 2 training cameras");
