@@ -774,3 +774,43 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
         assert!(!d.join("again").exists(), "{key}: left an output folder");
     }
 }
+
+/// A run folder whose volume is another run's (another grid than its report records) is not
+/// scored, exported or rendered as its own.
+#[test]
+fn a_run_holding_another_runs_volume_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    for (run, resolution) in [("run", "8"), ("other", "10")] {
+        ok(&fluidnerf(
+            d,
+            &[
+                "reconstruct",
+                "scene",
+                "-o",
+                run,
+                "--method",
+                "asart",
+                "--resolution",
+                resolution,
+                "--max-iterations",
+                "1",
+            ],
+        ));
+    }
+    std::fs::copy(d.join("other/volume.npy"), d.join("run/volume.npy")).expect("copies");
+    let says = "run/volume.npy: holds a 10x10x10 volume, but the run's report.json records 8x8x8";
+    for args in [
+        &["eval", "run", "--json", "m.json"][..],
+        &["export", "run", "-o", "exported", "--npy"],
+        &["render", "run", "-o", "views"],
+    ] {
+        let o = fluidnerf(d, args);
+        refused(&o, says);
+        assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"), "{args:?}");
+    }
+    for made in ["m.json", "exported", "views"] {
+        assert!(!d.join(made).exists(), "left {made}");
+    }
+}

@@ -185,10 +185,25 @@ impl LoadedRun {
         self.read_volume(&file)
     }
 
-    /// The run's volume file `name`, refused when it holds a value that is not finite.
+    /// The run's volume file `name`, refused when it holds a value that is not finite, or a
+    /// grid other than the one its report records (a volume copied in from another run would
+    /// otherwise be scored, exported and rendered as this run's).
     fn read_volume(&self, name: &str) -> Result<Volume, PipelineError> {
         let path = self.dir.join(name);
         let volume = fluidnerf_io::volume::read_npy(&path, self.aabb)?;
+        let recorded = self.report.as_ref().and_then(|r| r.volumes.iter().find(|v| v.file == name));
+        if let Some(record) = recorded.filter(|r| r.dims != volume.dims) {
+            let grid = |d: [usize; 3]| format!("{}x{}x{}", d[0], d[1], d[2]);
+            return Err(PipelineError::file(
+                &path,
+                format!(
+                    "holds a {} volume, but the run's report.json records {}: the file is not this run's result \
+                     (copied from another run?); rerun the reconstruction or restore the file",
+                    grid(volume.dims),
+                    grid(record.dims)
+                ),
+            ));
+        }
         fluidnerf_io::volume::check_finite(&path, &volume)?;
         Ok(volume)
     }
