@@ -748,7 +748,7 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 8] = [
+    let edits: [(&str, Edit); 10] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
         ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
             v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
@@ -763,6 +763,13 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
             v["method"]["train"]["schedule"]["initial"] = 1e30.into()
         }),
         ("method.train.schedule.at_decay_iters", |v| v["method"]["train"]["schedule"]["at_decay_iters"] = 20.0.into()),
+        // Beyond f32: shown as written, not as the infinity or zero it would round to.
+        ("at `method.train.schedule.initial`: 1e300 is beyond what this setting's 32-bit float holds", |v| {
+            v["method"]["train"]["schedule"]["initial"] = 1e300.into()
+        }),
+        ("at `method.train.adam.eps`: 1e-60 is below the smallest non-zero value", |v| {
+            v["method"]["train"]["adam"]["eps"] = 1e-60.into()
+        }),
     ];
     for (key, edit) in edits {
         let mut v = saved.clone();

@@ -4,8 +4,14 @@
 //! setting wants 0.5 would come back in a refusal as 301 digits, and 1e-300 as 302. Messages that
 //! echo a number write it through [`num`]: as `{}` while that is short, in scientific notation
 //! (`{:e}`) beyond.
+//!
+//! Settings held in 32-bit floats are read from their files through [`f32_setting`], so that a
+//! refusal shows the number written rather than the infinity or zero serde would round it to.
 
 use std::fmt;
+
+use serde::de::Error as _;
+use serde::{Deserialize, Deserializer};
 
 /// A number as messages show it (see [`num`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,6 +53,42 @@ impl fmt::Display for Num<[f64; 3]> {
         let [x, y, z] = self.0;
         write!(f, "[{}, {}, {}]", Num(x), Num(y), Num(z))
     }
+}
+
+/// Reads an `f32` setting as the number written, for `#[serde(deserialize_with = ...)]`.
+/// serde's own `f32` rounds the decimal to the nearest `f32`, so 1e300 became infinity and 1e-50
+/// zero, and whatever check followed refused "inf" or "0", a value nobody wrote (or, worse, let
+/// the zero pass). A number no `f32` holds, beyond ±[`f32::MAX`] or so small that it would read
+/// as 0, is refused here, with the number as written; the caller's error adds the key.
+pub fn f32_setting<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
+    to_f32(f64::deserialize(d)?).map_err(D::Error::custom)
+}
+
+/// [`f32_setting`] for an optional setting.
+pub fn optional_f32_setting<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f32>, D::Error> {
+    Option::<f64>::deserialize(d)?.map(to_f32).transpose().map_err(D::Error::custom)
+}
+
+fn to_f32(x: f64) -> Result<f32, String> {
+    let y = x as f32;
+    // serde_json's parser may land an ulp off the decimal written (1e-60 as
+    // 1.0000000000000001e-60): to the 15 significant digits every f64 keeps, it reads as written.
+    let written = || num(format!("{x:.14e}").parse().unwrap_or(x));
+    if x.is_finite() && y.is_infinite() {
+        return Err(format!(
+            "{} is beyond what this setting's 32-bit float holds (at most {:e} in magnitude)",
+            written(),
+            f32::MAX
+        ));
+    }
+    if x != 0.0 && y == 0.0 {
+        return Err(format!(
+            "{} is below the smallest non-zero value this setting's 32-bit float holds ({:e}); it would read as 0",
+            written(),
+            f32::from_bits(1)
+        ));
+    }
+    Ok(y)
 }
 
 #[cfg(test)]

@@ -118,12 +118,16 @@ pub trait TrainableField: Send + Sync {
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Prior {
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub tv: f32,
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub smooth: f32,
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub sparsity: f32,
     /// Random points per iteration for fields without a grid prior. Default 2048.
     pub points: usize,
     /// Their finite-difference step in box-normalised units. Default 1/128.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub step: f32,
 }
 

@@ -82,6 +82,7 @@ pub struct HashGridConfig {
     /// `min(N_l, time_resolution)` cells. Default 0.
     pub time_base_resolution: usize,
     /// 4D only: the span of `t'` mapped onto `[0, 1]` (e.g. number of frames − 1). Default 1.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub time_span: f32,
     /// 4D only: levels without a time axis added to the `levels` space–time ones, at
     /// resolutions from `base_resolution` to `max_resolution` (module docs). Default 0.
@@ -95,6 +96,7 @@ pub struct HashGridConfig {
     /// Output activation. Default softplus.
     pub output_activation: OutputActivation,
     /// Table entries start uniform in `±init_scale`. Default 1e-4.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub init_scale: f32,
     /// Coarse-to-fine training: the finer half of the levels (`⌊L/2⌋` finest) are not trained
     /// at first, one more joins every `coarse_to_fine` optimiser steps (their tables keep their

@@ -41,6 +41,7 @@ pub struct OccupancyConfig {
     pub resolution: usize,
     /// A pixel is bright above `background + noise_sigmas · σ̂`, with the background and σ̂ as
     /// [`OccupancyConfig::noise_estimate`] says. Default 4.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub noise_sigmas: f32,
     /// How the background and σ̂ are read. Default `median`: `laplacian` carves the plume's
     /// noisy images, which `median` leaves whole, but made the hybrid 1–7 % worse on the noisy
@@ -48,6 +49,7 @@ pub struct OccupancyConfig {
     pub noise_estimate: NoiseEstimate,
     /// The threshold is at least `background + floor · (max − background)`, which decides for
     /// noiseless images. Default 0.01.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub floor: f32,
     /// Widening of each cell's projected footprint, pixels (absorbs lens distortion and
     /// rounding). Default 1.

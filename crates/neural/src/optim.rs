@@ -34,10 +34,13 @@ const BLOCK: usize = 1 << 14;
 #[serde(default, deny_unknown_fields)]
 pub struct AdamConfig {
     /// Decay of the first-moment average β₁. Default 0.9.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub beta1: f32,
     /// Decay of the second-moment average β₂. Default 0.999.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub beta2: f32,
     /// ε added to √v̂. Default 1e-7.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub eps: f32,
     /// Skip elements whose gradient is exactly zero (see the module docs). Default false.
     pub lazy: bool,
@@ -157,8 +160,10 @@ pub const MAX_LEARNING_RATE: f32 = 1.0;
 #[serde(default, deny_unknown_fields)]
 pub struct LrSchedule {
     /// Learning rate at iteration 0. Default 5e-4.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub initial: f32,
     /// Learning rate reached at `decay_iters`. Default 5e-5.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub at_decay_iters: f32,
     /// Iterations over which the rate falls from `initial` to `at_decay_iters`. Default 25 000.
     pub decay_iters: u64,
@@ -258,6 +263,18 @@ mod tests {
         }
         let e = LrSchedule { decay_iters: 0, ..LrSchedule::default() }.validate().expect_err("refused");
         assert!(e.to_string().contains("schedule.decay_iters"), "{e}");
+    }
+
+    /// A rate written beyond what an f32 holds is refused as written, not as the infinity or
+    /// zero it would round to (which the range check would then report as "got inf").
+    #[test]
+    fn a_schedule_read_from_a_file_refuses_rates_no_f32_holds_as_written() {
+        let read = |text: &str| serde_json::from_str::<LrSchedule>(text).map_err(|e| e.to_string());
+        assert_eq!(read(r#"{"initial": 0.01}"#).map(|s| s.initial), Ok(0.01));
+        let e = read(r#"{"initial": 1e300}"#).expect_err("refused");
+        assert!(e.starts_with("1e300 is beyond what this setting's 32-bit float holds"), "{e}");
+        let e = read(r#"{"at_decay_iters": -1e-50}"#).expect_err("refused");
+        assert!(e.starts_with("-1e-50 is below the smallest non-zero value"), "{e}");
     }
 
     /// Lazy Adam leaves elements without a gradient exactly as they were, and updates the others

@@ -32,6 +32,7 @@ pub struct StartFit {
     /// Points per step. Default 16384.
     pub points: usize,
     /// Constant Adam learning rate. Default 1e-2.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub learning_rate: f32,
 }
 

@@ -120,6 +120,7 @@ pub struct TrainConfig {
     /// 2048, the dense grid 8192.
     pub chunk_samples: usize,
     /// Pixel normalisation; None takes the largest training pixel. Default None.
+    #[serde(deserialize_with = "fluidnerf_core::number::optional_f32_setting")]
     pub image_scale: Option<f32>,
     /// Iterations between evaluations of the held-out views (0: never). Default 100.
     pub validate_every: usize,

@@ -36,6 +36,7 @@ pub struct DenseConfig {
     /// Cells along the longest box side. Default 64.
     pub resolution: usize,
     /// Initial value of every cell (field units, see [`FieldMeta::value_scale`]). Default 0.05.
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub initial: f32,
 }
 

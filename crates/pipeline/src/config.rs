@@ -277,6 +277,7 @@ pub struct StartSpec {
     /// and the full rate of a fresh field scrambles it. Default 0.25, chosen on the jet
     /// (docs/claims.md).
     #[serde(default = "default_start_lr_scale")]
+    #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub learning_rate_scale: f32,
 }
 
