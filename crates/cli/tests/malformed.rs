@@ -557,6 +557,41 @@ fn cases() -> Vec<Case> {
             "both camera",
         ),
         c(
+            "one camera at times 0 and -0",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = ((i % 2) as f64).into();
+                }
+                v["frames"][2]["camera"] = v["frames"][0]["camera"].clone();
+                v["frames"][2]["time"] = (-0.0).into();
+            }),
+            RUN,
+            "frames 0 and 2 are both camera",
+        ),
+        c(
+            "one instant written two ways",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = ((i % 2) as f64).into();
+                }
+                v["frames"][2]["time"] = 1e-10.into();
+            }),
+            RUN,
+            "frame 0 (images/cam000.png) at 0 and frame 2 (images/cam002.png) at 0.0000000001 are one instant",
+        ),
+        c(
+            "two truths at 0 and -0",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = ((i % 2) as f64).into();
+                }
+                let file = v["truth"][0]["file_path"].clone();
+                v["truth"] = serde_json::json!([{ "time": 0.0, "file_path": file }, { "time": -0.0, "file_path": file }]);
+            }),
+            RUN,
+            "truth entries 0 (truth/truth.npy) and 1 (truth/truth.npy) are both at time",
+        ),
+        c(
             "background above every pixel",
             Json(|v| v["background"] = serde_json::json!(1e9)),
             RUN,

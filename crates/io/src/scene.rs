@@ -71,6 +71,7 @@ use std::path::{Path, PathBuf};
 
 use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
 use fluidnerf_core::num;
+use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume};
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;
@@ -1021,14 +1022,16 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     }
     check_times_on_every_frame(scene, file)?;
     let mut seen: std::collections::HashMap<PathBuf, usize> = std::collections::HashMap::new();
-    // A camera records one image per instant (its gain and holding out go by its name).
+    // A camera records one image per instant (its gain and holding out go by its name). Times
+    // are compared as numbers (0 and -0 are one instant); times that differ by less than
+    // `same_time` tells apart are refused after the loop.
     let mut shots: std::collections::HashMap<(&str, u64), usize> = std::collections::HashMap::new();
     for (i, f) in scene.frames.iter().enumerate() {
         if f.time.is_some_and(|t| !t.is_finite()) {
             return Err(IoError::invalid(file, format!("frame {i} ({}): time must be finite", f.file_path.display())));
         }
         if let Some(name) = &f.camera_name {
-            if let Some(j) = shots.insert((name.as_str(), f.time.unwrap_or(0.0).to_bits()), i) {
+            if let Some(j) = shots.insert((name.as_str(), (f.time.unwrap_or(0.0) + 0.0).to_bits()), i) {
                 return Err(IoError::invalid(
                     file,
                     format!(
@@ -1071,9 +1074,14 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
         }
     }
     check_time_spread(scene, file)?;
+    check_instants_apart(scene, file)?;
     // One ground truth per instant: a second one at the same time would go unused, unreported.
+    let same_instant = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) => same_time(a, b),
+        (a, b) => a.is_none() && b.is_none(),
+    };
     for (i, t) in scene.truth.iter().enumerate() {
-        if let Some(j) = scene.truth[..i].iter().position(|u| u.time.map(f64::to_bits) == t.time.map(f64::to_bits)) {
+        if let Some(j) = scene.truth[..i].iter().position(|u| same_instant(u.time, t.time)) {
             return Err(IoError::invalid(
                 file,
                 format!(
@@ -1133,6 +1141,31 @@ fn check_time_spread(scene: &Scene, file: &Path) -> Result<(), IoError> {
              point), so no time difference can be computed; give the times in another unit or from a nearer origin",
             frame(first),
             frame(last)
+        ),
+    ))
+}
+
+/// Refuses frame times that differ yet name one instant ([`same_time`]: equal to a relative
+/// 10⁻⁹): the time-resolved methods would list both as instants and give each the frames of
+/// both, so one recorded instant would be reconstructed twice from a mix of its frames.
+fn check_instants_apart(scene: &Scene, file: &Path) -> Result<(), IoError> {
+    let mut timed: Vec<(f64, usize)> =
+        scene.frames.iter().enumerate().filter_map(|(i, f)| f.time.map(|t| (t, i))).collect();
+    // The first frame of each time, in order of time.
+    timed.sort_by(|a, b| a.0.total_cmp(&b.0));
+    timed.dedup_by(|later, first| later.0 == first.0);
+    let Some(w) = timed.windows(2).find(|w| same_time(w[0].0, w[1].0)) else {
+        return Ok(());
+    };
+    let frame = |(t, i): (f64, usize)| format!("frame {i} ({}) at {t}", scene.frames[i].file_path.display());
+    Err(IoError::invalid(
+        file,
+        format!(
+            "{} and {} are one instant written two ways (times within a relative 1e-9 of each other name the \
+             same instant); write the instant's time alike in every frame, or, for different instants, times \
+             further apart (from a nearer origin, or in a finer unit)",
+            frame(w[0]),
+            frame(w[1])
         ),
     ))
 }
