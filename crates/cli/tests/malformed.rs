@@ -856,3 +856,29 @@ fn a_run_holding_another_runs_volume_is_refused() {
         assert!(!d.join(made).exists(), "left {made}");
     }
 }
+
+/// A run given twice to `compare` (as its folder and its report, or through a link) would be
+/// drawn and tabled as two runs that agree.
+#[test]
+fn a_run_given_twice_to_compare_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    ok(&fluidnerf(
+        d,
+        &["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "8", "--max-iterations", "1"],
+    ));
+    std::os::unix::fs::symlink("run", d.join("link")).expect("links");
+    for (args, says) in [
+        (
+            &["compare", "run", "run/report.json", "-o", "compared"],
+            "run/report.json is given twice (as run and run/report.json)",
+        ),
+        (&["compare", "run", "link", "-o", "compared"], "link/report.json is given twice (as run and link)"),
+    ] {
+        let o = fluidnerf(d, args);
+        refused(&o, says);
+        assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"), "{args:?}");
+        assert!(!d.join("compared").exists(), "{args:?}: left an output folder");
+    }
+}

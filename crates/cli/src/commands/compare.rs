@@ -390,6 +390,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("{} already holds comparison results; use --force to overwrite", out.display());
     }
     let mut runs = args.runs.iter().map(|p| read_run(p)).collect::<anyhow::Result<Vec<Run>>>()?;
+    // One run twice (as itself, through a link, or as its folder and its report file) would be
+    // drawn and tabled twice, as if two runs had agreed.
+    for (i, run) in runs.iter().enumerate() {
+        if let Some(first) = runs[..i].iter().find(|r| same_file(&r.report, &run.report)) {
+            bail!(
+                "{} is given twice (as {} and {}); give each run once",
+                run.report.display(),
+                first.path.display(),
+                run.path.display()
+            );
+        }
+    }
     let reference = match &args.reference {
         None => 0,
         // A run given as its directory and as its report file is the same run.
