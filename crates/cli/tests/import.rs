@@ -337,6 +337,43 @@ fn colmap_binary_model_with_other_extensions() {
     assert!(stderr(&o).contains("cam1.jpg") && stderr(&o).contains("other extensions"), "{}", stderr(&o));
 }
 
+/// A COLMAP model whose images sit in a folder per camera (`left/0001.png`, as COLMAP's
+/// `single_camera_per_folder` reads them): the folders are not taken for uncalibrated entries,
+/// an image in them that the model lacks is, and a name through `..` is the image it names.
+#[test]
+fn colmap_model_with_images_in_subfolders() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model = dir.path().join("sparse/0");
+    let names = ["left/a.png", "left/b.png", "../images/right/c.png"];
+    let cams: Vec<(String, Camera)> = rig().into_iter().zip(names).map(|((_, c), n)| (n.to_string(), c)).collect();
+    std::fs::create_dir_all(&model).expect("mkdir");
+    fluidnerf_io::calib::write_colmap_bin(&model, &cams).expect("writes model");
+    let images = dir.path().join("images");
+    for sub in ["left", "right"] {
+        std::fs::create_dir_all(images.join(sub)).expect("mkdir");
+    }
+    for n in ["left/a.png", "left/b.png", "right/c.png"] {
+        image(&images, n);
+    }
+    let out = dir.path().join("scene");
+    let import = |force: bool| {
+        let mut a = vec!["import", "--colmap", s(&model), "--images", s(&images), "--aabb", "-10,-10,-10,10,10,10"];
+        a.extend(["-o", s(&out)]);
+        if force {
+            a.push("--force");
+        }
+        fluidnerf(&a)
+    };
+    let o = import(false);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").frames.len(), 3);
+    image(&images, "left/extra.png");
+    let o = import(true);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.contains("no calibrated camera for 1 entr(ies)") && err.contains("left/extra.png"), "{err}");
+}
+
 /// One video per camera (two full-range MJPEG AVIs, one limited-range): each kept frame
 /// becomes a float TIFF in `frames/<camera>/` with its time; `--video-frames`,
 /// `--video-every` and `--video-time-offset` select and shift; `import.json` records how each

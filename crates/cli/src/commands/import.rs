@@ -305,6 +305,47 @@ fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(v)
 }
 
+/// The images, videos and folders in `images` that no camera uses. A folder that holds used
+/// images (a COLMAP model's `cam1/0001.png`) is looked into instead of counted whole, and paths
+/// are compared as the files they name (a model's `../images/a.png` or absolute path is the
+/// image it names).
+fn unused_entries(images: &Path, used: &BTreeSet<PathBuf>) -> anyhow::Result<Vec<PathBuf>> {
+    fn canonical(p: &Path) -> PathBuf {
+        p.canonicalize().unwrap_or_else(|_| p.to_path_buf())
+    }
+    fn walk(
+        dir: &Path,
+        used: &BTreeSet<PathBuf>,
+        visited: &mut BTreeSet<PathBuf>,
+        out: &mut Vec<PathBuf>,
+    ) -> anyhow::Result<()> {
+        // A link back up the tree is looked into once.
+        if !visited.insert(canonical(dir)) {
+            return Ok(());
+        }
+        for p in list_dir(dir)? {
+            let c = canonical(&p);
+            if used.contains(&c) {
+                continue;
+            }
+            if p.is_dir() {
+                if used.iter().any(|u| u.starts_with(&c)) {
+                    walk(&p, used, visited, out)?;
+                } else {
+                    out.push(p);
+                }
+            } else if is_image(&p) || (p.is_file() && fluidnerf_io::video::is_video(&p)) {
+                out.push(p);
+            }
+        }
+        Ok(())
+    }
+    let used: BTreeSet<PathBuf> = used.iter().map(|p| canonical(p)).collect();
+    let mut out = Vec::new();
+    walk(images, &used, &mut BTreeSet::new(), &mut out)?;
+    Ok(out)
+}
+
 /// Frames for OpenCV cameras matched to images by name, and the image entries used. The
 /// cameras' time series must line up ([`check_series`]), a camera with a single image cannot
 /// join cameras recorded over time (a folder of images or a video), and series of images cannot
@@ -631,13 +672,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         } else {
             bail!("give --transforms, --opencv or --colmap");
         };
-        let extra: Vec<String> = list_dir(images)?
-            .into_iter()
-            .filter(|p| {
-                (is_image(p) || p.is_dir() || (p.is_file() && fluidnerf_io::video::is_video(p))) && !used.contains(p)
-            })
-            .map(|p| p.display().to_string())
-            .collect();
+        let extra: Vec<String> = unused_entries(images, &used)?.iter().map(|p| p.display().to_string()).collect();
         if !extra.is_empty() {
             if args.skip_uncalibrated {
                 log::warn!("left out {} image(s) without a calibrated camera: {}", extra.len(), extra.join(", "));
