@@ -374,6 +374,45 @@ fn colmap_model_with_images_in_subfolders() {
     assert!(err.contains("no calibrated camera for 1 entr(ies)") && err.contains("left/extra.png"), "{err}");
 }
 
+/// A transforms.json whose frames are videos: each video's mask goes with every frame decoded
+/// from it, and the file's other keys (`flow_axis`) are kept.
+#[test]
+fn transforms_json_of_videos_keeps_masks_and_keys() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("rig");
+    std::fs::create_dir_all(&src).expect("mkdir");
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video");
+    let mut frames = Vec::new();
+    for (n, cam) in rig() {
+        std::fs::copy(fixtures.join("ramp_mjpeg.avi"), src.join(format!("{n}.avi"))).expect("copies the fixture");
+        let m = fluidnerf_io::scene::world_from_camera_to_opengl_c2w(&cam.world_from_camera);
+        let mut f = serde_json::json!({"file_path": format!("{n}.avi"), "camera": n, "transform_matrix": m});
+        if n == "cam1" {
+            f["mask_path"] = "mask.png".into();
+        }
+        frames.push(f);
+    }
+    image::GrayImage::from_fn(32, 24, |x, _| image::Luma([if x < 16 { 255 } else { 0 }]))
+        .save(src.join("mask.png"))
+        .expect("saves");
+    let v = serde_json::json!({
+        "w": 32, "h": 24, "fl_x": 40.0, "fl_y": 40.5, "cx": 15.25, "cy": 11.5,
+        "aabb": [[-10, -10, -10], [10, 10, 10]], "flow_axis": [0, 0, 1], "frames": frames,
+    });
+    std::fs::write(src.join("transforms.json"), v.to_string()).expect("writes");
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&["import", "--transforms", s(&src), "--video-frames", "0..2", "-o", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 6, "two frames of three videos");
+    let recording = fluidnerf_io::scene::recorded(&scene).expect("reads the keys");
+    assert_eq!(recording.flow_axis, Some(DVec3::Z));
+    for (f, r) in scene.frames.iter().zip(&recording.frames) {
+        let masked = f.camera_name.as_deref() == Some("cam1");
+        assert_eq!(r.mask_path.is_some(), masked, "{}", f.file_path.display());
+    }
+}
+
 /// One video per camera (two full-range MJPEG AVIs, one limited-range): each kept frame
 /// becomes a float TIFF in `frames/<camera>/` with its time; `--video-frames`,
 /// `--video-every` and `--video-time-offset` select and shift; `import.json` records how each

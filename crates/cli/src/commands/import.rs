@@ -198,18 +198,22 @@ fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
 /// Replaces every frame whose file is a video by its decoded frames, each written as a float
 /// TIFF (linearised, range-mapped values) into `out/frames/<camera>/` as it is decoded, with
 /// its time. All videos must give the same number of frames (a synchronised recording).
+/// Also returns, for each frame returned, the index of the frame it came from (a video's
+/// frames keep its mask and background).
 fn expand_videos(
     frames: Vec<Frame>,
     out: &Path,
     opts: &fluidnerf_io::video::VideoOptions,
     force: bool,
     created: &mut Created,
-) -> anyhow::Result<(Vec<Frame>, Vec<VideoRecord>)> {
+) -> anyhow::Result<(Vec<Frame>, Vec<VideoRecord>, Vec<usize>)> {
     let mut expanded = Vec::new();
+    let mut sources = Vec::new();
     let mut records: Vec<VideoRecord> = Vec::new();
-    for f in frames {
+    for (source, f) in frames.into_iter().enumerate() {
         if !fluidnerf_io::video::is_video(&f.file_path) {
             expanded.push(f);
+            sources.push(source);
             continue;
         }
         let name = f
@@ -237,6 +241,7 @@ fn expand_videos(
             fluidnerf_io::image::write_tiff_f32(&path, &frame.image)?;
             times.push(frame.time_s);
             expanded.push(Frame { file_path: path, time: Some(frame.time_s), ..f.clone() });
+            sources.push(source);
             Ok(())
         })
         .with_context(|| format!("camera {name}: reading its video"))?;
@@ -281,7 +286,7 @@ fn expand_videos(
             );
         }
     }
-    Ok((expanded, records))
+    Ok((expanded, records, sources))
 }
 
 fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
@@ -708,7 +713,11 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         time_offset_s: args.video_time_offset,
         linearisation: args.linearisation.or(from_file.linearisation).unwrap_or_default(),
     };
-    let (frames, videos) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
+    let (frames, videos, sources) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
+    // The file's masks and backgrounds follow its frames into the decoded video frames.
+    if let Some(r) = &mut from_file.recording {
+        r.frames = sources.iter().map(|&k| r.frames[k].clone()).collect();
+    }
     let video_flags = args.video_frames.is_some()
         || args.video_every != 1
         || args.video_time_offset != 0.0
@@ -738,7 +747,8 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         }
     }
     let mut recording = match from_file.recording.take() {
-        Some(mut r) if r.frames.len() == scene.frames.len() => {
+        Some(mut r) => {
+            assert_eq!(r.frames.len(), scene.frames.len(), "one recording entry per frame");
             for fr in &mut r.frames {
                 if let fluidnerf_io::scene::Background::Frames(list) = &mut fr.background {
                     for p in list.iter_mut() {
@@ -751,7 +761,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             }
             r
         }
-        _ => fluidnerf_io::scene::Recording::plain(scene.frames.len()),
+        None => fluidnerf_io::scene::Recording::plain(scene.frames.len()),
     };
     for t in &mut scene.truth {
         if t.file_path.exists() {
