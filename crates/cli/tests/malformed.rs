@@ -592,6 +592,18 @@ fn cases() -> Vec<Case> {
             "truth entries 0 (truth/truth.npy) and 1 (truth/truth.npy) are both at time",
         ),
         c(
+            "a truth without time among timed ones",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = ((i % 2) as f64).into();
+                }
+                let file = v["truth"][0]["file_path"].clone();
+                v["truth"] = serde_json::json!([{ "time": 0.0, "file_path": file }, { "file_path": file }]);
+            }),
+            RUN,
+            "truth entry 1 (truth/truth.npy) has no `time`, but entry 0 (truth/truth.npy) has one",
+        ),
+        c(
             "background above every pixel",
             Json(|v| v["background"] = serde_json::json!(1e9)),
             RUN,

@@ -1075,6 +1075,21 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     }
     check_time_spread(scene, file)?;
     check_instants_apart(scene, file)?;
+    // Among truths with a time, one without is matched to no instant and would go unused,
+    // unreported.
+    let timed_truth = scene.truth.iter().position(|t| t.time.is_some());
+    if let (Some(j), Some(i)) = (timed_truth, scene.truth.iter().position(|t| t.time.is_none())) {
+        return Err(IoError::invalid(
+            file,
+            format!(
+                "truth entry {i} ({}) has no `time`, but entry {j} ({}) has one: an entry without a time \
+                 would be matched to no instant and left unused; give every truth entry its instant's \
+                 `time`, or none for a truth of one instant",
+                scene.truth[i].file_path.display(),
+                scene.truth[j].file_path.display()
+            ),
+        ));
+    }
     // One ground truth per instant: a second one at the same time would go unused, unreported.
     let same_instant = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) => same_time(a, b),
