@@ -615,6 +615,12 @@ fn cases() -> Vec<Case> {
             FAST,
             fluidnerf_core::image::ALL_BLACK,
         ),
+        c(
+            "background above every pixel, info",
+            Json(|v| v["background"] = serde_json::json!(1e9)),
+            &["info", "SCENE"],
+            fluidnerf_core::image::ALL_BLACK,
+        ),
         c("negative background", Json(|v| v["background"] = serde_json::json!(-100.0)), RUN, "at least 0"),
         c(
             "metrics as JSON and CSV into one file",

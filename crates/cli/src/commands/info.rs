@@ -137,6 +137,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut kinds = Vec::new();
     // The training images' noise readings ([`fluidnerf_core::Image::relative_noise`]).
     let mut noise_levels = Vec::new();
+    // Whether a training (not held-out) image has a pixel above 0, before any preprocessing.
+    let mut training_lit = false;
     let bar = crate::progress::bar(scene.frames.len() as u64, "checking");
     for (i, f) in scene.frames.iter().enumerate() {
         let _ = writeln!(out, "{}", frame_title(i, f));
@@ -170,6 +172,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     let noise = img.relative_noise();
                     if !f.holdout {
                         noise_levels.extend(noise);
+                        training_lit |= hi > 0.0;
                     }
                     let noise = noise.map_or("not estimated".into(), |n| format!("{:.2} % of the range", 100.0 * n));
                     let _ = writeln!(
@@ -243,9 +246,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let preprocessed = fluidnerf_io::scene::recorded(&scene)
         .map(|r| r.frames.iter().any(|f| f.mask_path.is_some() || f.background != Default::default()));
     if !args.no_images && problems.is_empty() && !matches!(preprocessed, Ok(false)) {
-        if let Err(e) = fluidnerf_io::scene::load_preprocessed(&scene) {
-            problems.push(format!("preprocessing: {e}"));
+        match fluidnerf_io::scene::load_preprocessed(&scene) {
+            Err(e) => problems.push(format!("preprocessing: {e}")),
+            // What a run trains on: the pixels left after the background, inside the masks.
+            Ok(p) => {
+                training_lit = scene.frames.iter().enumerate().filter(|(_, f)| !f.holdout).any(|(i, _)| {
+                    let lit = p.images[i].data.iter().enumerate().filter(|&(_, &v)| v > 0.0);
+                    lit.map(|(k, _)| k).any(|k| p.masks[i].as_ref().is_none_or(|m| m[k]))
+                })
+            }
         }
+    }
+    // Every run refuses such a scene: say so here, not only when a run starts.
+    let training = scene.frames.iter().any(|f| !f.holdout);
+    if !args.no_images && problems.is_empty() && training && !training_lit {
+        problems.push(fluidnerf_core::image::ALL_BLACK.to_string());
     }
     let _ = writeln!(out);
 
