@@ -900,3 +900,37 @@ fn a_run_given_twice_to_compare_is_refused() {
         assert!(!d.join("compared").exists(), "{args:?}: left an output folder");
     }
 }
+
+/// A volume given with `eval --truth` has no time: a time-resolved run was scored at time 0,
+/// its first instant, whatever instant the volume held.
+#[test]
+fn a_timeless_truth_for_a_time_resolved_run_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(
+        d,
+        &[
+            "synth",
+            "--preset",
+            "jet-tr60",
+            "--pixels",
+            "16",
+            "--resolution",
+            "8",
+            "--cameras",
+            "3",
+            "--times",
+            "14,15",
+            "-o",
+            "scene",
+            "-q",
+        ],
+    ));
+    let run =
+        ["reconstruct", "scene", "-o", "run", "--method", "tr-fast", "--resolution", "8", "--max-iterations", "2"];
+    ok(&fluidnerf(d, &run));
+    let o = fluidnerf(d, &["eval", "run", "--truth", "scene/truth/truth_t01.npy", "--json", "m.json"]);
+    refused(&o, "--truth scene/truth/truth_t01.npy: a volume without a time, but the run in run is time-resolved");
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
+    assert!(!d.join("m.json").exists(), "wrote metrics");
+}

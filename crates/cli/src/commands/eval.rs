@@ -292,7 +292,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Times the scene's truth does not cover are not scored, and said so.
     let without_truth = if args.truth.is_some() { Vec::new() } else { scene.times_without_truth() };
     let listed = |times: &[f64]| times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
-    let recon = load_recon(&args.recon, &scene, args.use_volume)?;
+    let recon = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref())?;
     if let Recon::Volumes(volumes) = &recon {
         if volumes.len() > 1 && volumes.len() != step_times.len() {
             let steps = if truth.is_empty() { "frame times" } else { "ground-truth time steps" };
@@ -405,7 +405,7 @@ fn refuse_inputs(out: &Path, scene_path: &Path, run_dir: Option<&Path>, args: &A
 
 /// Loads the reconstruction arguments: volume files, or one run folder of any kind (its
 /// trained field, static or of space and time, unless `use_volume`; else its volumes).
-fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Result<Recon> {
+fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<&Path>) -> anyhow::Result<Recon> {
     if let [dir] = paths {
         if dir.is_dir() {
             let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
@@ -425,6 +425,20 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool) -> anyhow::Res
                     "the run's box {:?}..{:?} differs from the scene's; it is zero outside its own box",
                     run.aabb.min,
                     run.aabb.max
+                );
+            }
+            // A volume given with --truth has no time: a time-resolved run would be scored at
+            // time 0 (its first instant, or its first volume), whatever instant the file holds.
+            if let (Some(file), Some(span)) = (truth, run.time_span()?) {
+                bail!(
+                    "--truth {}: a volume without a time, but the run in {} is time-resolved (instants {} … {}), \
+                     so there is no telling which of its instants to score against it; score the run against the \
+                     scene's truth, whose entries have times, or export the instant with `export --time` and \
+                     score that volume",
+                    file.display(),
+                    dir.display(),
+                    num(span.first),
+                    num(span.last)
                 );
             }
             let use_volume = use_volume || run.kind == fluidnerf_pipeline::RunKind::Volume;
