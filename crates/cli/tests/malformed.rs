@@ -104,6 +104,12 @@ fn cases() -> Vec<Case> {
             "--cameras: 4 is given twice",
         ),
         c(
+            "study of an unknown scene preset",
+            None,
+            &["study", "-o", "OUT", "--methods", "asart", "--cameras", "4", "--noise", "0", "--scene-preset", "nope"],
+            "--scene-preset: unknown preset `nope`",
+        ),
+        c(
             "study method twice",
             None,
             &["study", "-o", "OUT", "--methods", "asart,asart", "--cameras", "4", "--noise", "0"],

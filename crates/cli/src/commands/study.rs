@@ -233,25 +233,26 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
         bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
     }
+    // Known before anything is made: an unknown one failed only when its first scene was
+    // synthesised, leaving the study's folder behind.
+    let scene = fluidnerf_synth::preset::preset(&g.scene_preset)
+        .map_err(|e| anyhow::anyhow!("--scene-preset: {e} (fluidnerf synth --list-presets)"))?;
     // A scene of several instants would have every static method mix them.
-    if let Ok(scene) = fluidnerf_synth::preset::preset(&g.scene_preset) {
-        if scene.times.len() > 1 {
+    if scene.times.len() > 1 {
+        bail!(
+            "--scene-preset: {} holds {} instants; a study compares static reconstructions of one instant: \
+             choose a static preset (fluidnerf synth --list-presets)",
+            g.scene_preset,
+            scene.times.len()
+        );
+    }
+    // A real-like recording has its own dark noise; the sensor's noise does not apply.
+    if scene.real.is_some() {
+        if let Some(n) = g.noise.iter().find(|&&n| n != 0.0) {
             bail!(
-                "--scene-preset: {} holds {} instants; a study compares static reconstructions of one \
-                 instant: choose a static preset (fluidnerf synth --list-presets)",
-                g.scene_preset,
-                scene.times.len()
+                "--noise: {n} does not apply to {}, a real-like recording with its own dark noise; give --noise 0",
+                g.scene_preset
             );
-        }
-        // A real-like recording has its own dark noise; the sensor's noise does not apply.
-        if scene.real.is_some() {
-            if let Some(n) = g.noise.iter().find(|&&n| n != 0.0) {
-                bail!(
-                    "--noise: {n} does not apply to {}, a real-like recording with its own dark noise; give \
-                     --noise 0",
-                    g.scene_preset
-                );
-            }
         }
     }
     if let Some(&c) = g.cameras.iter().find(|&&c| c < 2) {
