@@ -796,6 +796,50 @@ fn a_scene_path_that_is_not_utf8_is_refused_up_front() {
     assert!(!d.join("run").exists(), "left an output folder");
 }
 
+/// An input whose path is not UTF-8 cannot be recorded in the JSON file a command writes next
+/// to its results: refused before any work, naming the path and the option, and leaving
+/// nothing behind (serialising it used to fail after the results were written, naming
+/// nothing).
+#[cfg(unix)]
+#[test]
+fn inputs_whose_paths_are_not_utf8_are_refused_before_any_output() {
+    use std::os::unix::ffi::OsStrExt;
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    ok(&fluidnerf(
+        d,
+        &["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "8", "--max-iterations", "1"],
+    ));
+    let odd = std::ffi::OsStr::from_bytes(b"run\xff");
+    std::fs::rename(d.join("run"), d.join(odd)).expect("renames");
+    let odd_scene = std::ffi::OsStr::from_bytes(b"scene\xfe");
+    copy_dir(&d.join("scene"), &d.join(odd_scene));
+    let cases: [(&[&std::ffi::OsStr], &str); 5] = [
+        (&["eval".as_ref(), odd, "--json".as_ref(), "m.json".as_ref()], "RECON run"),
+        (&["export".as_ref(), odd, "-o".as_ref(), "exported".as_ref(), "--npy".as_ref()], "RECON run"),
+        (&["render".as_ref(), odd, "-o".as_ref(), "views".as_ref()], "RECON run"),
+        (&["compare".as_ref(), odd, "-o".as_ref(), "compared".as_ref()], "RUN run"),
+        (
+            &["import".as_ref(), "--transforms".as_ref(), odd_scene, "-o".as_ref(), "imported".as_ref()],
+            "--transforms scene",
+        ),
+    ];
+    for (args, says) in cases {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+            .current_dir(d)
+            .args(args)
+            .output()
+            .expect("runs");
+        refused(&o, says);
+        refused(&o, "the path is not valid UTF-8");
+        assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"), "{args:?}");
+    }
+    for made in ["m.json", "exported", "views", "compared", "imported"] {
+        assert!(!d.join(made).exists(), "left {made}");
+    }
+}
+
 #[test]
 fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key() {
     let tmp = tempfile::tempdir().expect("tempdir");

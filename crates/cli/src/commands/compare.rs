@@ -383,6 +383,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--thresholds must be NRMSE values in (0, 10), got {:?}", args.thresholds);
     }
     super::given_once("--thresholds", &args.thresholds)?;
+    let reference = args.reference.as_deref().map(|p| ("--reference", p));
+    super::recordable("compare.json", args.runs.iter().map(|p| ("RUN", p.as_path())).chain(reference))?;
     let out = &args.out;
     fluidnerf_pipeline::rundir::refuse_other_kind(out, fluidnerf_pipeline::rundir::FolderKind::Compare, "compare")?;
     let outputs = ["time_to_accuracy.png", "time_to_accuracy.svg", "time_to_accuracy.csv", "compare.json"];

@@ -226,6 +226,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if json_path.is_some() && json_path == csv_path {
         bail!("--json and --csv name the same file; give two");
     }
+    if let Some(json) = &json_path {
+        let record = json.display().to_string();
+        let recon = args.recon.iter().map(|p| ("RECON", p.as_path()));
+        let given = [("--scene", &args.scene), ("--truth", &args.truth)];
+        super::recordable(&record, recon.chain(given.iter().filter_map(|(o, p)| Some((*o, p.as_deref()?)))))?;
+    }
     let outputs = [
         (if args.json.is_some() { "--json" } else { "the JSON output" }, &json_path),
         (if args.csv.is_some() { "--csv" } else { "the CSV output" }, &csv_path),

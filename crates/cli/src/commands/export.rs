@@ -230,6 +230,9 @@ struct Settings<'a> {
 #[allow(clippy::print_stdout)]
 pub fn run(args: Args) -> anyhow::Result<()> {
     // Validate the arguments before any work.
+    let given = [("--scene", &args.scene), ("--compare", &args.compare)];
+    let given = given.iter().filter_map(|(o, p)| Some((*o, p.as_deref()?)));
+    super::recordable("export.json", std::iter::once(("RECON", args.recon.as_path())).chain(given))?;
     refuse_other_kind(&args.out, FolderKind::Export, "export")?;
     let meshes: Vec<&str> = args.mesh.iter().map(|m| if *m == MeshFormat::Ply { "ply" } else { "obj" }).collect();
     super::given_once("--mesh", &meshes)?;

@@ -623,6 +623,9 @@ fn frame_name(f: &Frame) -> Option<String> {
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
+    let given = [("--opencv", &args.opencv), ("--colmap", &args.colmap), ("--transforms", &args.transforms)];
+    let given = given.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
+    super::recordable("import.json", given.chain([("--out", args.out.as_path())]))?;
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
     let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
     if let Some(images) = &args.images {

@@ -118,6 +118,24 @@ pub(crate) fn given_once<T: PartialEq + std::fmt::Display>(option: &str, values:
     }
 }
 
+/// Refuses, before any work, a path given as `what` (an option or argument) that the record
+/// file `record` (JSON text) must hold but that is not valid UTF-8: serialising it failed only
+/// after the results were written, with an error that named neither path nor option.
+pub(crate) fn recordable<'a>(
+    record: &str,
+    paths: impl IntoIterator<Item = (&'a str, &'a std::path::Path)>,
+) -> anyhow::Result<()> {
+    for (what, path) in paths {
+        if path.to_str().is_none() {
+            anyhow::bail!(
+                "{what} {}: the path is not valid UTF-8, so {record} (JSON text) cannot record it; rename it",
+                path.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Refuses work whose largest buffers (`bytes`, estimated) exceed the memory available now,
 /// before anything is computed or written: an allocation that fails aborts the program.
 pub(crate) fn check_memory(what: impl FnOnce() -> String, bytes: u64) -> anyhow::Result<()> {
