@@ -815,7 +815,18 @@ fn inputs_whose_paths_are_not_utf8_are_refused_before_any_output() {
     std::fs::rename(d.join("run"), d.join(odd)).expect("renames");
     let odd_scene = std::ffi::OsStr::from_bytes(b"scene\xfe");
     copy_dir(&d.join("scene"), &d.join(odd_scene));
-    let cases: [(&[&std::ffi::OsStr], &str); 5] = [
+    let odd_study = std::ffi::OsStr::from_bytes(b"study\xfd");
+    let study: &[&std::ffi::OsStr] = &[
+        "study".as_ref(),
+        "-o".as_ref(),
+        odd_study,
+        "--preset".as_ref(),
+        "smoke".as_ref(),
+        "--methods".as_ref(),
+        "asart".as_ref(),
+    ];
+    let cases: [(&[&std::ffi::OsStr], &str); 6] = [
+        (study, "--out study"),
         (&["eval".as_ref(), odd, "--json".as_ref(), "m.json".as_ref()], "RECON run"),
         (&["export".as_ref(), odd, "-o".as_ref(), "exported".as_ref(), "--npy".as_ref()], "RECON run"),
         (&["render".as_ref(), odd, "-o".as_ref(), "views".as_ref()], "RECON run"),
@@ -838,6 +849,8 @@ fn inputs_whose_paths_are_not_utf8_are_refused_before_any_output() {
     for made in ["m.json", "exported", "views", "compared", "imported"] {
         assert!(!d.join(made).exists(), "left {made}");
     }
+    let names: Vec<_> = std::fs::read_dir(d).expect("lists").map(|e| e.expect("entry").file_name()).collect();
+    assert!(!names.iter().any(|n| n.to_string_lossy().starts_with("study")), "left a study folder: {names:?}");
 }
 
 #[test]

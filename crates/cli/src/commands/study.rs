@@ -315,6 +315,9 @@ fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, nois
 
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let g = grid(&args)?;
+    // The cells' synth and reconstruct lines name their folders as text: a path that is not
+    // UTF-8 became another folder (its bytes replaced), so the scenes went elsewhere.
+    super::recordable("the study's synth and reconstruct lines", [("--out", args.out.as_path())])?;
     let out = &args.out;
     let record = out.join("study.json");
     if args.force {
