@@ -936,6 +936,27 @@ fn a_run_holding_another_runs_volume_is_refused() {
     for made in ["m.json", "exported", "views"] {
         assert!(!d.join(made).exists(), "left {made}");
     }
+    // A report whose volume lies outside its folder (here the other run's, of the same grid).
+    ok(&fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "run",
+            "--method",
+            "asart",
+            "--resolution",
+            "10",
+            "--max-iterations",
+            "1",
+            "--force",
+        ],
+    ));
+    edit_json(&d.join("run/report.json"), |v| v["volumes"][0]["file"] = "../other/volume.npy".into());
+    let o = fluidnerf(d, &["eval", "run", "--json", "m.json"]);
+    refused(&o, "run/report.json: lists the volume ../other/volume.npy, which is not a file inside the run folder");
+    assert!(!d.join("m.json").exists(), "wrote metrics");
 }
 
 /// A run given twice to `compare` (as its folder and its report, or through a link) would be

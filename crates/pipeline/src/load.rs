@@ -189,6 +189,14 @@ impl LoadedRun {
     /// grid other than the one its report records (a volume copied in from another run would
     /// otherwise be scored, exported and rendered as this run's).
     fn read_volume(&self, name: &str) -> Result<Volume, PipelineError> {
+        // A run writes its volumes inside its folder; a report naming one elsewhere (edited, or
+        // copied with another run's paths) would have that file scored as this run's.
+        if Path::new(name).components().any(|c| !matches!(c, std::path::Component::Normal(_))) {
+            return Err(PipelineError::file(
+                &self.dir.join("report.json"),
+                format!("lists the volume {name}, which is not a file inside the run folder"),
+            ));
+        }
         let path = self.dir.join(name);
         let volume = fluidnerf_io::volume::read_npy(&path, self.aabb)?;
         let recorded = self.report.as_ref().and_then(|r| r.volumes.iter().find(|v| v.file == name));
