@@ -351,7 +351,8 @@ pub struct FieldMeta {
 impl FieldMeta {
     /// Why a description read from a file cannot place a field, if it cannot: a box that is
     /// not finite and positive on every axis, a value scale or time step that is not finite
-    /// and positive.
+    /// and positive, or one that the field's 32-bit arithmetic turns into infinity or zero
+    /// (a value scale of 1e300 made every value infinite, 1e-300 every value zero).
     pub fn problem(&self) -> Option<String> {
         if let Err(e) = self.aabb.validate() {
             return Some(e.to_string());
@@ -359,6 +360,14 @@ impl FieldMeta {
         for (key, v) in [("value_scale", self.value_scale), ("time_step", self.time_step)] {
             if !(v.is_finite() && v > 0.0) {
                 return Some(format!("{key} must be finite and positive, got {}", num(v)));
+            }
+            if !(v as f32).is_normal() {
+                return Some(format!(
+                    "{key} {} lies outside what the field's 32-bit floats hold ({:e} … {:e})",
+                    num(v),
+                    f32::MIN_POSITIVE,
+                    f32::MAX
+                ));
             }
         }
         None

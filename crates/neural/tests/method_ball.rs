@@ -282,6 +282,10 @@ fn trained_field_round_trips_through_a_run_directory() {
     for (edit, says) in [
         ((|r: &mut fluidnerf_neural::trained::ModelRecord| r.meta.aabb.max.x = -5.0) as fn(&mut _), "aabb"),
         (|r| r.meta.value_scale = -1.0, "value_scale"),
+        // Finite in the file, but infinite or zero in the field's f32 arithmetic.
+        (|r| r.meta.value_scale = 1e300, "value_scale 1e300 lies outside what the field's 32-bit floats hold"),
+        (|r| r.meta.value_scale = 1e-300, "value_scale 1e-300 lies outside"),
+        (|r| r.meta.time_step = 1e-300, "time_step 1e-300 lies outside"),
     ] {
         let mut broken = record.clone();
         edit(&mut broken);
