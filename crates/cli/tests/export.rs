@@ -124,6 +124,21 @@ fn slices_comparison_and_isosurface() {
         assert!(img.width > 200 && img.height > 150, "{f}: {}x{}", img.width, img.height);
     }
     assert!(!out.join("volume.npy").exists(), "volumes only when asked for");
+    // A .npy truth holds no box: without --scene it fills the reconstruction's.
+    let tn = dir.path().join("truth.npy");
+    fluidnerf_io::volume::write_npy(&tn, &truth).expect("writes");
+    let out_npy = dir.path().join("out_npy");
+    ok(&fluidnerf(&[
+        "export",
+        r.to_str().expect("utf-8"),
+        "--out",
+        out_npy.to_str().expect("utf-8"),
+        "--slices",
+        "z=0.5",
+        "--compare",
+        tn.to_str().expect("utf-8"),
+    ]));
+    assert!(out_npy.join("compare_z_0.500.png").is_file());
     let ply = std::fs::read(out.join("isosurface.ply")).expect("a mesh");
     assert!(ply.starts_with(b"ply\n"));
     let obj = std::fs::read_to_string(out.join("isosurface.obj")).expect("a mesh");

@@ -79,8 +79,9 @@ pub struct Args {
     /// `x=0.5,z=0.25`; comma-separated or repeated. Each goes to `slice_<axis>_<fraction>.png`.
     #[arg(long, value_delimiter = ',', value_name = "AXIS=FRACTION")]
     pub slices: Vec<String>,
-    /// Ground-truth volume (`.npy` filling the scene's box, `.vti` or `.raw`): slices are also
-    /// drawn as truth | reconstruction | difference (`compare_<axis>_<fraction>.png`).
+    /// Ground-truth volume (`.npy` filling the scene's box, or the reconstruction's without
+    /// --scene; `.vti` or `.raw`): slices are also drawn as truth | reconstruction | difference
+    /// (`compare_<axis>_<fraction>.png`).
     #[arg(long, value_name = "TRUTH")]
     pub compare: Option<PathBuf>,
     /// Extract the isosurface at this field value by marching cubes (`isosurface.ply`).
@@ -322,7 +323,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let truth = match &args.compare {
         Some(p) => {
-            let t = read_volume(p, scene.as_ref().map(|s| s.aabb))?;
+            // A .npy truth holds no box: it fills the scene's, which is the reconstruction's
+            // when no scene is given (a run records its scene's box).
+            let t = read_volume(p, Some(scene.as_ref().map_or_else(|| source.aabb(), |s| s.aabb)))?;
             Some(if t.dims == volume.dims && t.aabb == volume.aabb { t } else { t.resample(volume.dims, volume.aabb) })
         }
         None => None,
