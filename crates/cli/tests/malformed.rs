@@ -157,6 +157,12 @@ fn cases() -> Vec<Case> {
         ),
         c("compare threshold twice", None, &["compare", "SCENE", "-o", "OUT", "--thresholds", "0.5,0.5"], "--thresholds"),
         c(
+            "compare a volume file",
+            None,
+            &["compare", "SCENE/truth/truth.npy", "-o", "OUT"],
+            "truth.npy: not a run directory or a report (a JSON object",
+        ),
+        c(
             "render camera twice",
             None,
             &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--camera", "0,0"],

@@ -124,6 +124,13 @@ fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
         }
         Ok(p)
     } else if run.is_file() {
+        // A report is a JSON object; say so for anything else (a volume, a picture) instead of
+        // the JSON reader's complaint about its bytes.
+        let mut head = [0u8; 256];
+        let read = std::fs::File::open(run).and_then(|mut f| std::io::Read::read(&mut f, &mut head));
+        if read.is_ok_and(|n| head[..n].iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{')) {
+            bail!("{}: not a run directory or a report (a JSON object with the run's NRMSE history)", run.display());
+        }
         Ok(run.to_path_buf())
     } else {
         bail!("{}: no such run directory or report file", run.display())
