@@ -15,25 +15,15 @@
 
 use std::path::Path;
 
-use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::Scene;
 use fluidnerf_io::image::Linearisation;
 use fluidnerf_io::scene::{Background, FrameRecording, Recording};
 use fluidnerf_io::IoError;
-use fluidnerf_synth::{PhantomKind, Synthesis};
-
-/// The flow direction of a phantom kind, where it has one.
-pub fn flow_axis(kind: PhantomKind) -> Option<DVec3> {
-    match kind {
-        PhantomKind::Jet | PhantomKind::JetTr => Some(DVec3::X),
-        PhantomKind::Plume | PhantomKind::CfdJet => Some(DVec3::Y),
-        PhantomKind::Ball | PhantomKind::Blobs | PhantomKind::BallAndBlobs | PhantomKind::Volume => None,
-    }
-}
+use fluidnerf_synth::Synthesis;
 
 /// The preprocessing `syn`'s images need (module docs), one entry per frame.
 pub fn recording(syn: &Synthesis) -> Recording {
-    let flow_axis = flow_axis(syn.settings.phantom.kind);
+    let flow_axis = syn.settings.phantom.kind.flow_direction();
     let background = |camera: usize| match &syn.real {
         Some(_) => Background::Frames(syn.background_paths(camera)),
         None if syn.settings.sensor.dark_offset > 0.0 => Background::Constant(syn.settings.sensor.dark_offset),
@@ -86,6 +76,8 @@ mod tests {
     use fluidnerf_io::scene::{load_preprocessed, load_scene};
     use fluidnerf_synth::generate::no_progress;
     use fluidnerf_synth::{generate, preset};
+
+    use fluidnerf_core::glam::DVec3;
 
     use super::*;
 

@@ -16,7 +16,7 @@ mod simple;
 mod starting_jet;
 mod turbulence;
 
-use fluidnerf_core::glam::Vec3;
+use fluidnerf_core::glam::{DVec3, Vec3};
 use fluidnerf_core::{Aabb, ScalarField, Volume};
 use serde::{Deserialize, Serialize};
 
@@ -80,6 +80,18 @@ impl PhantomKind {
             RingAxis::Y
         } else {
             RingAxis::X
+        }
+    }
+
+    /// The direction the flow runs in ([`PhantomKind::flow_axis`]), for the phantoms that are
+    /// flows (jets and plumes); `None` for balls, blobs and user volumes.
+    pub fn flow_direction(self) -> Option<DVec3> {
+        match self {
+            PhantomKind::Ball | PhantomKind::Blobs | PhantomKind::BallAndBlobs | PhantomKind::Volume => None,
+            _ => Some(match self.flow_axis() {
+                RingAxis::X => DVec3::X,
+                RingAxis::Y => DVec3::Y,
+            }),
         }
     }
 }
