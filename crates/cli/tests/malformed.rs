@@ -193,6 +193,16 @@ fn cases() -> Vec<Case> {
         c("tiny intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e-40)), RUN, "overflow or vanish"),
         c("huge intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e300)), RUN, "overflow or vanish"),
         c("negative focal length", Json(|v| v["fl_x"] = serde_json::json!(-5.0)), RUN, "focal"),
+        // Such a size left the camera blind, and the error said the camera did not see the box.
+        c(
+            "image size mistyped as huge",
+            Json(|v| {
+                v["w"] = serde_json::json!(1_000_000_000u64);
+                v["h"] = serde_json::json!(1_000_000_000u64);
+            }),
+            RUN,
+            "cam000.png: image is 20x20 pixels but frame 0's intrinsics say 1000000000x1000000000",
+        ),
         c(
             "transform matrix too short",
             Json(|v| v["frames"][0]["transform_matrix"] = serde_json::json!([[1, 0, 0, 0]])),

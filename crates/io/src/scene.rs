@@ -1125,6 +1125,24 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     let blind_cameras: Vec<usize> =
         distinct.par_iter().copied().filter(|&i| !scene.frames[i].camera.sees_box(&aabb)).collect();
     if let Some(i) = first_equal.iter().position(|j| blind_cameras.contains(j)) {
+        // Intrinsics of another image size (`w`/`h` mistyped, or the frames of another camera)
+        // can leave a camera blind; that is the problem to name, when the image's header says
+        // so. An image that cannot be read is left to the loading of the images.
+        let frame = &scene.frames[i];
+        let path = scene.resolve(&frame.file_path);
+        let (w, h) = (frame.camera.width(), frame.camera.height());
+        if let Ok((iw, ih)) = crate::image::read_dimensions(&path) {
+            if (iw as usize, ih as usize) != (w, h) {
+                return Err(IoError::ImageSize {
+                    path,
+                    frame: i,
+                    found_width: iw as usize,
+                    found_height: ih as usize,
+                    expected_width: w,
+                    expected_height: h,
+                });
+            }
+        }
         return Err(IoError::CameraMissesBox {
             path: file.to_path_buf(),
             frame: i,
