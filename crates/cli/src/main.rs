@@ -21,7 +21,8 @@ struct Cli {
     /// More log output (-v: info, -vv: debug). RUST_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
     verbose: u8,
-    /// Only errors; no progress bars.
+    /// Log only errors and draw no progress bars. A command's results, and the files it wrote,
+    /// still print on standard output.
     #[arg(short, long, global = true)]
     quiet: bool,
     #[command(subcommand)]
