@@ -523,3 +523,33 @@ fn truth_at_only_some_times_is_reported_naming_the_times_without() {
     let says = "its metrics are against the first of the 2 ground truths listed (at t = 14) only";
     assert!(r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains(says))));
 }
+
+/// One ground truth without a time, in a scene of several times, stands for every time: a
+/// time-resolved run scores each instant against it (a steady flow's truth), and info and the
+/// run say so, since one instant's truth given without its time would score the others against
+/// the wrong volume. Eval, which scores such a run at the truth's times, refuses it with the fix.
+#[test]
+fn a_timeless_truth_of_a_time_resolved_scene_is_used_for_every_instant_and_said_so() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 3, 16, 8, &["--times", "14,15"]);
+    edit_json(&d.join("scene/transforms.json"), |v| {
+        v["truth"] = serde_json::json!([{"file_path": "truth/truth_t00.npy"}]);
+    });
+    let says = "the ground truth (truth/truth_t00.npy) has no time, so a time-resolved run scores each of the 2 \
+                frame times (14 … 15) against it, as for a steady flow";
+    let info = fluidnerf(d, &["info", "scene"]);
+    ok(&info);
+    assert!(String::from_utf8_lossy(&info.stdout).contains(says), "{}", String::from_utf8_lossy(&info.stdout));
+    let args = "reconstruct scene --method tr-fast --max-iterations 2 --rays-per-image 32 --coarse-samples 8 \
+                --resolution 8 --checkpoint-every 0 -q -o run";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let r = report(&d.join("run"));
+    assert!(r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains(says))));
+    let scored: Vec<bool> =
+        r["volumes"].as_array().expect("volumes").iter().map(|v| v["metrics"].is_object()).collect();
+    assert_eq!(scored, [true, true]);
+    let out = fluidnerf(d, &["eval", "run", "--json", "m.json"]);
+    refused(&out, "give the entry its instant's `time`, or export an instant with `export --time`");
+    assert!(!d.join("m.json").exists(), "wrote metrics");
+}

@@ -119,6 +119,25 @@ pub fn truth_gaps(scene: &Scene) -> Option<String> {
     })
 }
 
+/// A warning for one ground truth without a time in a scene of several frame times: it stands
+/// for every time ([`Scene::times_without_truth`]), so a time-resolved run scores each of its
+/// instants against it. Right for a steady flow; for one instant's truth given without its
+/// time, every other instant's score would be against the wrong volume, so it is said.
+pub fn timeless_truth(scene: &Scene) -> Option<String> {
+    let times = scene.times();
+    match scene.truth.as_slice() {
+        [only] if only.time.is_none() && times.len() > 1 => Some(format!(
+            "the ground truth ({}) has no time, so a time-resolved run scores each of the {} frame times ({} … {}) \
+             against it, as for a steady flow; if it is one instant's truth, give it that instant's `time`",
+            only.file_path.display(),
+            times.len(),
+            fluidnerf_core::num(times[0]),
+            fluidnerf_core::num(times[times.len() - 1])
+        )),
+        _ => None,
+    }
+}
+
 /// Why a static run's metrics are against one ground truth of several: the first one listed.
 pub(crate) fn first_truth_only(scene: &Scene) -> String {
     match scene.truth.first() {

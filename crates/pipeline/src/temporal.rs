@@ -198,6 +198,9 @@ fn setup(
     if let Some(message) = crate::truth_gaps(scene) {
         session.warn(&message);
     }
+    if let Some(message) = crate::timeless_truth(scene) {
+        session.warn(&message);
+    }
     if times.len() < 2 && method != Method::StaticPerFrame {
         session.warn("the scene has a single training time; a time-resolved field reduces to a static one");
     }

@@ -458,9 +458,11 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
                     let what = format!("{}: the scene's {what} {}", dir.display(), path.display());
                     let Some(t) = time else {
                         bail!(
-                            "{what} has no time, but the run is time-resolved (instants {} … {})",
-                            span.first,
-                            span.last
+                            "{what} has no time, but the run is time-resolved (instants {} … {}), and eval scores \
+                             such a run at each truth volume's time; give the entry its instant's `time`, or export \
+                             an instant with `export --time` and score that volume",
+                            num(span.first),
+                            num(span.last)
                         );
                     };
                     fluidnerf_pipeline::load::sample_time(Some(&span), Some(t), &what)?;

@@ -315,6 +315,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(message) = fluidnerf_pipeline::truth_gaps(&scene) {
         warnings.push(message);
     }
+    if let Some(message) = fluidnerf_pipeline::timeless_truth(&scene) {
+        warnings.push(message);
+    }
     if times.len() > 1 {
         for &t in &times {
             if !scene.training_frames().any(|(_, f)| f.time == Some(t)) {
