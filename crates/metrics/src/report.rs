@@ -117,6 +117,19 @@ pub fn array_metrics(
     })
 }
 
+/// A region whose truth holds less than this fraction of the whole truth's energy (`Σ Ê²`) has
+/// no NRMSE: it divides by that energy, which is then zero or floating-point dust.
+pub const REGION_ENERGY_FLOOR: f64 = 1e-12;
+
+/// Why a region has no NRMSE ([`REGION_ENERGY_FLOOR`]).
+pub const REGION_NRMSE_UNDEFINED: &str =
+    "the truth holds less than 10⁻¹² of its energy in this region, and NRMSE divides by that energy";
+
+/// `Σ v²`, in f64.
+fn energy(values: &[f32]) -> f64 {
+    values.iter().map(|&v| f64::from(v) * f64::from(v)).sum()
+}
+
 /// Scores `estimate` against `truth` over the truth's voxel centres, globally and per region.
 /// An estimate on another grid or box is first resampled trilinearly at the truth's voxel
 /// centres ([`Volume::resample`]; zero outside the estimate's box).
@@ -154,6 +167,7 @@ pub fn evaluate_volume(
     };
     let range = options.data_range.unwrap_or_else(|| data_range_of(&truth.data));
     let global = array_metrics(&est.data, &truth.data, truth.dims, &options.ssim, range)?;
+    let truth_energy = energy(&truth.data);
     let mut regions = Vec::with_capacity(options.regions.len());
     for r in &options.regions {
         let ranges = r.voxel_ranges(truth.dims);
@@ -163,7 +177,12 @@ pub fn evaluate_volume(
         }
         let (e, dims) = region::extract(&est.data, truth.dims, &ranges);
         let (t, _) = region::extract(&truth.data, truth.dims, &ranges);
-        let metrics = array_metrics(&e, &t, dims, &options.ssim, range)?;
+        let mut metrics = array_metrics(&e, &t, dims, &options.ssim, range)?;
+        if !metrics.nrmse.is_nan() && energy(&t) < REGION_ENERGY_FLOOR * truth_energy {
+            // Floating-point dust (a Gaussian's far tail, say) would make the ratio astronomic.
+            metrics.nrmse = f64::NAN;
+            metrics.nrmse_undefined = Some(REGION_NRMSE_UNDEFINED.to_string());
+        }
         if metrics.ssim_windowed.is_none() {
             log::warn!("region '{}' ({dims:?} voxels) is smaller than the SSIM window; no windowed SSIM", r.name);
         }
@@ -347,6 +366,26 @@ mod tests {
             .sum();
         assert!((total / energy(&t.data) - s.global.nrmse.powi(2)).abs() < 1e-9);
         assert_eq!(s.time, Some(2.0));
+    }
+
+    /// A region holding floating-point dust of the truth (here 10⁻²⁰ of its peak) has no NRMSE,
+    /// where dividing by that energy gave 10³⁷ on a real jet; a dim region keeps its NRMSE.
+    #[test]
+    fn a_region_of_floating_point_dust_has_no_nrmse() {
+        let truth = |p: DVec3| match p.x {
+            x if x < 1.0 => 1e-20,
+            x if x < 2.0 => blob(p),
+            _ => 1e-3,
+        };
+        let t = Volume::from_fn([24, 8, 8], aabb(), truth);
+        let e = Volume::from_fn([24, 8, 8], aabb(), |p| truth(p) + 1e-4);
+        let s = evaluate_volume(&e, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        let [laminar, transition, turbulent] = [0, 1, 2].map(|i| &s.regions[i].metrics);
+        assert!(laminar.nrmse.is_nan());
+        assert_eq!(laminar.nrmse_undefined.as_deref(), Some(REGION_NRMSE_UNDEFINED));
+        assert!(transition.nrmse > 0.0 && transition.nrmse_undefined.is_none());
+        assert!((turbulent.nrmse - 0.1).abs() < 1e-6, "{}", turbulent.nrmse);
+        assert!(s.global.nrmse.is_finite());
     }
 
     #[test]
