@@ -102,6 +102,7 @@ pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
 /// it is a fluidnerf folder of another kind: writing there would mix two kinds of results (and
 /// make, e.g., a scene folder pass for a run).
 pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<(), PipelineError> {
+    refuse_non_folder(out)?;
     match folder_kind(out) {
         Some(found) if found != kind => Err(PipelineError::RunDir {
             path: out.to_path_buf(),
@@ -119,6 +120,25 @@ pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<
         }),
         _ => Ok(()),
     }
+}
+
+/// Refuses `out` as an output folder when it cannot be one: an existing file, or a file where one
+/// of its parent folders would go. Commands check this before their work, not when they come to
+/// write (`synth` took half a minute to make a scene, then refused a file given as its folder).
+pub fn refuse_non_folder(out: &Path) -> Result<(), PipelineError> {
+    if out.exists() && !out.is_dir() {
+        return Err(PipelineError::RunDir {
+            path: out.to_path_buf(),
+            why: "exists and is not a folder; give a new or existing folder for the output".into(),
+        });
+    }
+    if let Some(file) = out.ancestors().skip(1).find(|a| a.is_file()) {
+        return Err(PipelineError::RunDir {
+            path: out.to_path_buf(),
+            why: format!("cannot create the output folder, {} is a file", file.display()),
+        });
+    }
+    Ok(())
 }
 
 /// Refuses `out` as an output folder for results of the scene in `scene_root` when it is the

@@ -163,11 +163,6 @@ pub(crate) fn run_line(line: &[String]) -> anyhow::Result<()> {
 /// Creates a command's output folder `out` (and its parents), or refuses it by what is in the
 /// way: an existing file there, or a file where one of its parents should be.
 pub(crate) fn create_output_folder(out: &std::path::Path) -> anyhow::Result<()> {
-    if out.exists() && !out.is_dir() {
-        anyhow::bail!("{}: exists and is not a folder; give a new or existing folder for the output", out.display());
-    }
-    if let Some(file) = out.ancestors().skip(1).find(|a| a.is_file()) {
-        anyhow::bail!("{}: cannot create the output folder, {} is a file", out.display(), file.display());
-    }
+    fluidnerf_pipeline::rundir::refuse_non_folder(out)?;
     std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", out.display()))
 }
