@@ -63,15 +63,24 @@ def _dumps(value: Any, what: str) -> str:
     return json.dumps(_plain(value, what))
 
 
+def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
+    """``value`` as a C-ordered array of ``dtype``; complex numbers, strings, ragged lists and
+    other objects that are no array of real numbers are refused naming the argument (NumPy's
+    own messages name none, and a cast to a real type silently drops imaginary parts)."""
+    try:
+        complex_numbers = np.iscomplexobj(value)
+        a = None if complex_numbers else np.ascontiguousarray(value, dtype=dtype)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected an array of numbers{shape}: {e}") from None
+    if a is None:
+        raise TypeError(f"{name}: expected real numbers{shape}, got complex ones")
+    return a
+
+
 def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
     """``value`` as a C-ordered array of ``dtype`` with as many dimensions as ``shape`` (e.g.
     ``"(N, 3, 3)"``) names; anything else is refused naming the argument and the shape."""
-    if np.iscomplexobj(value):
-        raise TypeError(f"{name}: expected real numbers of shape {shape}, got complex ones")
-    try:
-        a = np.ascontiguousarray(value, dtype=dtype)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"{name}: expected an array of numbers of shape {shape}: {e}") from None
+    a = _numbers(value, dtype, name, f" of shape {shape}")
     if a.ndim != len([side for side in shape.strip("()").split(",") if side.strip()]):
         raise FluidNerfError(f"{name}: expected shape {shape}, got an array of shape {a.shape}")
     return a
@@ -568,7 +577,9 @@ def back_project(
 ) -> np.ndarray:
     """``Aᵀ y``: the exact adjoint of :func:`forward_project`, images (one per frame) back into
     a volume of ``shape`` ``(nz, ny, nx)``."""
-    imgs = [np.ascontiguousarray(i, dtype=np.float32) for i in images]
+    if isinstance(images, (str, bytes)) or not hasattr(images, "__iter__"):
+        raise TypeError(f"images: expected an (N, H, W) array or a list of (H, W) arrays, got {images!r}")
+    imgs = [_numbers(im, np.float32, f"images[{i}]", " of shape (H, W)") for i, im in enumerate(images)]
     if isinstance(shape, (str, bytes)) or not hasattr(shape, "__len__") or len(shape) != 3:
         raise FluidNerfError(f"shape: expected the volume's three sides (nz, ny, nx), got {shape!r}")
     nz, ny, nx = (_positive_int(n, f"shape[{i}]") for i, n in enumerate(shape))
@@ -614,18 +625,20 @@ def _positive_int(value: Any, name: str) -> int:
     return n
 
 
-def _f32(a: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float32)
+def _pair(estimate: Any, truth: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The two arrays of a metric as float32, each refused naming it when it is no array of
+    real numbers."""
+    return _numbers(estimate, np.float32, "estimate"), _numbers(truth, np.float32, "truth")
 
 
 def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     """Normalised RMS error: ``‖estimate − truth‖₂ / ‖truth‖₂`` (dissertation Eq. 6.18)."""
-    return _ext.nrmse(_f32(estimate), _f32(truth))
+    return _ext.nrmse(*_pair(estimate, truth))
 
 
 def psnr(estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None) -> float:
     """PSNR in dB with peak ``data_range`` (None: the truth's max − min)."""
-    return _ext.psnr(_f32(estimate), _f32(truth), data_range)
+    return _ext.psnr(*_pair(estimate, truth), data_range)
 
 
 def ssim(
@@ -633,7 +646,7 @@ def ssim(
 ) -> float:
     """SSIM of 2D or 3D arrays: ``window`` ``"uniform"`` (7 wide, as skimage), ``"gaussian"``
     (σ 1.5) or ``"global"`` (one window over everything)."""
-    return _ext.ssim(_f32(estimate), _f32(truth), data_range, window)
+    return _ext.ssim(*_pair(estimate, truth), data_range, window)
 
 
 def synth(

@@ -231,6 +231,31 @@ def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(sce
     assert fluidnerf.back_project(s, y, np.array([N, N, N])).shape == (N, N, N)
 
 
+def test_arrays_that_are_no_real_numbers_are_refused_naming_the_argument(scene):
+    """A complex estimate lost its imaginary part (NRMSE 1.0 with only NumPy's warning), and a
+    string or a ragged list raised NumPy's ValueError, a scalar for the images Python's "'float'
+    object is not iterable": none named the argument."""
+    s, *_ = scene
+    t = blob_volume()
+    for metric in (fluidnerf.nrmse, fluidnerf.psnr, fluidnerf.ssim):
+        with pytest.raises(TypeError, match="estimate: expected real numbers, got complex ones"):
+            metric(t.astype(np.complex64), t)
+        with pytest.raises(TypeError, match="truth: expected an array of numbers: could not convert"):
+            metric(t, "truth")
+    with pytest.raises(TypeError, match="truth: expected an array of numbers: .*inhomogeneous"):
+        fluidnerf.nrmse([1.0, 2.0], [[1.0], [2.0, 3.0]])
+    y = np.ones((4, 16, 16), np.float32)
+    with pytest.raises(
+        TypeError, match=r"images: expected an \(N, H, W\) array or a list of \(H, W\) arrays"
+    ):
+        fluidnerf.back_project(s, 1.0, (N, N, N))
+    with pytest.raises(TypeError, match=r"images: expected an \(N, H, W\) array .*got 'abc'"):
+        fluidnerf.back_project(s, "abc", (N, N, N))
+    with pytest.raises(TypeError, match=r"images\[0\]: expected real numbers of shape \(H, W\), got complex"):
+        fluidnerf.back_project(s, y.astype(np.complex64), (N, N, N))
+    assert fluidnerf.back_project(s, list(y), (N, N, N)).shape == (N, N, N)
+
+
 def test_metrics_refuse_values_that_are_not_finite_and_a_zero_truth():
     """A NaN or an infinity in either array made every metric NaN (or inf) without a word, and
     an all-zero truth made the NRMSE NaN."""

@@ -126,6 +126,8 @@ def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shap
             fluidnerf.scene_from_arrays(**args)
     with pytest.raises(TypeError, match=r"images: expected an array of numbers of shape \(N, H, W\)"):
         fluidnerf.scene_from_arrays(K, poses, "images", aabb)
+    with pytest.raises(TypeError, match=r"images: expected an array of numbers of shape .*inhomogeneous"):
+        fluidnerf.scene_from_arrays(K, poses, [images[0], images[0, :8], images[0]], aabb)
     scene = fluidnerf.scene_from_arrays(K, poses, images, aabb)
     with pytest.raises(
         fluidnerf.FluidNerfError, match=r"volume: expected shape \(nz, ny, nx\), got .*\(4, 4\)"
