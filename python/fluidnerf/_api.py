@@ -258,7 +258,10 @@ def build_config(
     library: an unknown key or a value out of range raises :class:`FluidNerfError` with the
     message ``config.json`` would give.
     """
-    root = scene.root if isinstance(scene, Scene) else Path(os.fspath(scene))
+    # A path is loaded (and so checked) as reconstruct loads it: a configuration of a folder
+    # that holds no scene would only fail when run.
+    scene = _as_scene(scene)
+    root = scene.root
     method_patch: dict = {}
     name: str | None = None
     if isinstance(method, dict):

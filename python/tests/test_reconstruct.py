@@ -222,6 +222,15 @@ def test_a_configuration_or_method_of_the_wrong_kind_is_refused_by_name(static_s
     assert cfg["method"]["name"] == "fast" and cfg["resolution"] == 8
 
 
+def test_a_configuration_of_a_folder_without_a_scene_is_refused(static_scene, tmp_path):
+    """build_config(path, "asart") of a folder that holds no scene returned a configuration
+    whose run could only fail; the folder is now loaded as reconstruct loads it."""
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"scene file not found: .*nothing.*transforms.json"):
+        fluidnerf.build_config(tmp_path / "nothing", "asart")
+    cfg = fluidnerf.build_config(static_scene.root / "transforms.json", "asart")
+    assert cfg["scene"] == str(static_scene.root)
+
+
 def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_path):
     def stop_at_5(event):
         return not (event["kind"] == "iteration" and event["iteration"] >= 5)
