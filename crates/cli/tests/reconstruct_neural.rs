@@ -68,7 +68,12 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     std::fs::write(&ckpt, &std::fs::read(&ckpt).expect("readable")[..5000]).expect("truncates");
     let kept = |f: &str| std::fs::read(damaged.join(f)).expect("readable");
     let (report_before, config_before) = (kept("report.json"), kept("config.json"));
-    refused(&fluidnerf(d, &["reconstruct", "scene", "-o", "damaged", "--resume", "-q"]), "checkpoint.safetensors");
+    let truncated = fluidnerf(d, &["reconstruct", "scene", "-o", "damaged", "--resume", "-q"]);
+    refused(&truncated, "checkpoint.safetensors: the file is truncated");
+    std::fs::write(&ckpt, &std::fs::read(&ckpt).expect("readable")[..6]).expect("truncates");
+    let truncated = fluidnerf(d, &["reconstruct", "scene", "-o", "damaged", "--resume", "-q"]);
+    // read_exact's "failed to fill whole buffer" said nothing of the file.
+    refused(&truncated, "checkpoint.safetensors: the file is truncated: it ends inside its safetensors header");
     assert!(kept("report.json") == report_before, "a refused resume changed report.json");
     assert!(kept("config.json") == config_before, "a refused resume changed config.json");
     // Nor does one continue on another scene, or without the settings it ran with; and a

@@ -49,6 +49,11 @@ fn read(path: &Path) -> Result<Vec<u8>, NeuralError> {
     std::fs::read(path).map_err(|error| NeuralError::Io { path: path.to_path_buf(), error })
 }
 
+/// A file that safetensors cannot read: truncated (a partial copy) or not a safetensors file.
+fn damaged(path: &Path, e: safetensors::SafeTensorError) -> NeuralError {
+    NeuralError::checkpoint(path, format!("the file is truncated or damaged, not a complete safetensors file ({e})"))
+}
+
 fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: &mut [f32]) -> Result<(), NeuralError> {
     let t = st.tensor(name).map_err(|e| NeuralError::checkpoint(path, format!("tensor {name}: {e}")))?;
     if t.dtype() != Dtype::F32 || t.shape() != shape {
@@ -74,7 +79,7 @@ fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: 
 /// the same architecture.
 pub fn load_weights<F: TrainableField>(path: &Path, field: &mut F) -> Result<(), NeuralError> {
     let bytes = read(path)?;
-    let st = SafeTensors::deserialize(&bytes).map_err(|e| NeuralError::checkpoint(path, e.to_string()))?;
+    let st = SafeTensors::deserialize(&bytes).map_err(|e| damaged(path, e))?;
     for (name, shape, range) in field.tensors() {
         copy_tensor(&st, path, &name, &shape, &mut field.params_mut()[range])?;
     }
@@ -127,7 +132,13 @@ pub fn checkpoint_bytes_tagged<F: TrainableField>(
 /// Reads the file's header only (its first 8 bytes give the length of the JSON that follows).
 pub fn checkpoint_tag(path: &Path, key: &str) -> Result<Option<String>, NeuralError> {
     use std::io::Read;
-    let io = |error| NeuralError::Io { path: path.to_path_buf(), error };
+    let io = |error: std::io::Error| match error.kind() {
+        // read_exact's own message, "failed to fill whole buffer", says nothing of the file.
+        std::io::ErrorKind::UnexpectedEof => {
+            NeuralError::checkpoint(path, "the file is truncated: it ends inside its safetensors header")
+        }
+        _ => NeuralError::Io { path: path.to_path_buf(), error },
+    };
     let mut file = std::fs::File::open(path).map_err(io)?;
     let mut len = [0u8; 8];
     file.read_exact(&mut len).map_err(io)?;
@@ -145,8 +156,8 @@ pub fn checkpoint_tag(path: &Path, key: &str) -> Result<Option<String>, NeuralEr
 /// Restores `learner` (whose field has the checkpoint's architecture) from `path`.
 pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>) -> Result<(), NeuralError> {
     let bytes = read(path)?;
-    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| NeuralError::checkpoint(path, e.to_string()))?;
-    let st = SafeTensors::deserialize(&bytes).map_err(|e| NeuralError::checkpoint(path, e.to_string()))?;
+    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| damaged(path, e))?;
+    let st = SafeTensors::deserialize(&bytes).map_err(|e| damaged(path, e))?;
     let json = header
         .metadata()
         .as_ref()
