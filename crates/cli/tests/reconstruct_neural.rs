@@ -76,6 +76,15 @@ fn dense_and_mlp_runs_write_resume_and_load() {
     refused(&truncated, "checkpoint.safetensors: the file is truncated: it ends inside its safetensors header");
     assert!(kept("report.json") == report_before, "a refused resume changed report.json");
     assert!(kept("config.json") == config_before, "a refused resume changed config.json");
+    // A resume to a cap below the checkpoint's iteration kept the 150-iteration result and
+    // recorded the cap of 100 in config.json, which reruns to another volume.
+    let (report_before, config_before) = (
+        std::fs::read(dir.join("report.json")).expect("report"),
+        std::fs::read(dir.join("config.json")).expect("config"),
+    );
+    refused(&resumed_with(9, "100"), "is at iteration 150, beyond the cap of 100");
+    assert!(std::fs::read(dir.join("report.json")).expect("report") == report_before, "a refused resume wrote");
+    assert!(std::fs::read(dir.join("config.json")).expect("config") == config_before, "a refused resume wrote");
     // Nor does one continue on another scene, or without the settings it ran with; and a
     // folder whose field is gone is not read as its volume alone.
     let synth = ["synth", "-q", "--preset", "demo", "--cameras", "3", "--pixels", "8", "--resolution", "8", "-o"];

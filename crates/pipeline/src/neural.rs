@@ -368,6 +368,22 @@ impl Ctx<'_> {
         if dir.resuming() {
             check_checkpoint_box(&ckpt, &self.scene.aabb)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
+            // A resumed run only continues: below the checkpoint's iteration it would keep the
+            // result of the longer run and record the lower cap in config.json, which reruns
+            // to another result.
+            if learner.iteration > train_cfg.max_iterations {
+                return Err(PipelineError::invalid(
+                    "stopping.max_iterations",
+                    format!(
+                        "{} is at iteration {}, beyond the cap of {} asked for; a resumed run only continues, so \
+                         give --max-iterations of at least {} (or start afresh with --force)",
+                        ckpt.display(),
+                        learner.iteration,
+                        train_cfg.max_iterations,
+                        learner.iteration
+                    ),
+                ));
+            }
             dir.replace_finished(config)?;
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
