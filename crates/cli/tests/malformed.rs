@@ -174,6 +174,13 @@ fn cases() -> Vec<Case> {
             &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--isosurface", "0.1", "--mesh", "ply,ply"],
             "--mesh: ply is given twice",
         ),
+        // Without an isosurface no mesh is written: the format was ignored without a word.
+        c(
+            "export mesh format without an isosurface",
+            None,
+            &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--mesh", "obj"],
+            "--isosurface",
+        ),
         c(
             "eval region name twice",
             None,

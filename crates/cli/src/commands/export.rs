@@ -87,8 +87,8 @@ pub struct Args {
     /// Extract the isosurface at this field value by marching cubes (`isosurface.ply`).
     #[arg(long, value_name = "VALUE")]
     pub isosurface: Option<f32>,
-    /// Mesh formats of the isosurface; comma-separated.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "ply")]
+    /// Mesh formats of the isosurface; comma-separated (with --isosurface).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "ply", requires = "isosurface")]
     pub mesh: Vec<MeshFormat>,
     /// Colour map of the slices: viridis, magma, inferno, cividis, gray.
     #[arg(long, default_value = "viridis")]
