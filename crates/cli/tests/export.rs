@@ -91,6 +91,27 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
     assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
 }
 
+/// `--average` takes cell averages of trained fields; a volume is resampled as it is, so
+/// on one the option did nothing without a word, as `--time` does with one.
+#[test]
+fn average_on_a_volume_is_warned_of() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let o = fluidnerf(&[
+        "export",
+        src.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--npy",
+        "--average",
+        "4",
+    ]);
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--average 4 has no effect") && err.contains("recon.vti is a volume"), "{err}");
+}
+
 #[test]
 fn slices_comparison_and_isosurface() {
     let dir = tempfile::tempdir().expect("tempdir");

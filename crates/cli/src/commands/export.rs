@@ -289,6 +289,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let source = load_source(&args.recon, scene.as_ref())?;
     let time = source.sample_time(args.time, "--time")?;
     source.warn_time_unused(args.time, &args.recon);
+    if args.average > 1 && matches!(source, Source::Volume(_)) {
+        log::warn!(
+            "--average {} has no effect: {} is a volume, resampled trilinearly; cell averages are taken of trained \
+             fields",
+            args.average,
+            args.recon.display()
+        );
+    }
 
     // The export grid.
     if let Some(b) = export_box {
