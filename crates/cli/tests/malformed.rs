@@ -699,6 +699,13 @@ fn cases() -> Vec<Case> {
             &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--orbit", "100000000"],
             "--orbit",
         ),
+        // Refused by the renderer at the first view, after the output folder was made.
+        c(
+            "render with a step too fine to finish",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--projector", "rays", "--step", "1e-9"],
+            "--step 1e-9 would take more than 1048576 samples",
+        ),
         c(
             "render of too wide an orbit view",
             None,
