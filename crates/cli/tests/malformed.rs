@@ -699,6 +699,25 @@ fn cases() -> Vec<Case> {
             &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--orbit", "100000000"],
             "--orbit",
         ),
+        // Options of orbit views and their turntable were ignored without a word otherwise.
+        c(
+            "render width without an orbit",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--width", "64"],
+            "--orbit",
+        ),
+        c(
+            "render turntable colour map without an orbit",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--colormap", "gray"],
+            "--orbit",
+        ),
+        c(
+            "render turntable frame time without an orbit",
+            None,
+            &["render", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--frame-ms", "200"],
+            "--orbit",
+        ),
         // Refused by the renderer at the first view, after the output folder was made.
         c(
             "render with a step too fine to finish",

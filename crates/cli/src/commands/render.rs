@@ -64,7 +64,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, requires = "orbit")]
     pub flow_axis: Option<Vec<f64>>,
     /// Width of orbit views in pixels (the height follows the box's cross-section).
-    #[arg(long, default_value_t = 320)]
+    #[arg(long, default_value_t = 320, requires = "orbit")]
     pub width: u32,
     /// Image format of the views.
     #[arg(long, value_enum, default_value = "png16")]
@@ -112,11 +112,11 @@ pub struct Args {
     #[arg(long, default_value = "auto", value_parser = parse_bake)]
     pub bake: Bake,
     /// Colour map of the turntable GIF.
-    #[arg(long, default_value = "magma")]
+    #[arg(long, default_value = "magma", requires = "orbit")]
     pub colormap: Colormap,
     /// Display time of each turntable frame in milliseconds: 10 to 655350, in steps of 10 (a
     /// GIF counts hundredths of a second; other values are rounded).
-    #[arg(long, default_value_t = 80)]
+    #[arg(long, default_value_t = 80, requires = "orbit")]
     pub frame_ms: u32,
     /// Overwrite existing outputs in OUT.
     #[arg(long)]
