@@ -159,6 +159,22 @@ fn orbit_writes_views_and_a_turntable() {
     ]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("3 frames"));
+    // --bake samples trained fields; on a volume it did nothing without a word.
+    let baked = fluidnerf(&[
+        "render",
+        &d(&dir.path().join("recon.npy")),
+        "--scene",
+        &d(dir.path()),
+        "--out",
+        &d(&dir.path().join("baked")),
+        "--camera",
+        "0",
+        "--bake",
+        "32",
+    ]);
+    ok(&baked);
+    let err = String::from_utf8_lossy(&baked.stderr);
+    assert!(err.contains("--bake has no effect") && err.contains("recon.npy is a volume"), "{err}");
 }
 
 /// A hash-grid field written as a run folder (model.json and weights), with smooth random

@@ -330,6 +330,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let source = load_source(&args.recon, Some(&scene))?;
     source.warn_time_unused(args.time, &args.recon);
+    if args.bake != Bake::Auto && matches!(source, Source::Volume(_)) {
+        log::warn!(
+            "--bake has no effect: {} is a volume, rendered as it is; baking samples trained fields",
+            args.recon.display()
+        );
+    }
     for (view, (time, what)) in views.iter_mut().zip(&asked) {
         view.time = source.sample_time(*time, what)?;
     }
