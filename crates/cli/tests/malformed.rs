@@ -181,6 +181,20 @@ fn cases() -> Vec<Case> {
             &["export", "SCENE/truth/truth.npy", "--scene", "SCENE", "-o", "OUT", "--mesh", "obj"],
             "--isosurface",
         ),
+        // Each was ignored without a word: the gaussian window has its own side, and without
+        // reprojection no ray is cast.
+        c(
+            "eval uniform window side with the gaussian window",
+            None,
+            &["eval", "SCENE/truth/truth.npy", "--scene", "SCENE", "--json", "OUT/m.json", "--ssim-window", "gaussian", "--ssim-size", "9"],
+            "--ssim-size 9 sets the side of the uniform window",
+        ),
+        c(
+            "eval supersampling without reprojection",
+            None,
+            &["eval", "SCENE/truth/truth.npy", "--scene", "SCENE", "--json", "OUT/m.json", "--no-reprojection", "--supersample", "4"],
+            "--no-reprojection",
+        ),
         c(
             "eval region name twice",
             None,

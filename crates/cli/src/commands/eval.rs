@@ -80,14 +80,14 @@ pub struct Args {
     /// Window of the windowed SSIM.
     #[arg(long, value_enum, default_value = "uniform")]
     pub ssim_window: Window,
-    /// Side of the uniform SSIM window in voxels (odd, at least 3).
-    #[arg(long, default_value_t = 7)]
-    pub ssim_size: usize,
+    /// Side of the uniform SSIM window in voxels (odd, at least 3) [default: 7].
+    #[arg(long)]
+    pub ssim_size: Option<usize>,
     /// Data range R of PSNR and SSIM for the volume metrics. Default: the truth's max - min.
     #[arg(long)]
     pub data_range: Option<f64>,
     /// Rays per pixel along each image axis when rendering held-out views (1 to 64).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, conflicts_with = "no_reprojection")]
     pub supersample: usize,
     /// Skip the reprojection onto held-out cameras.
     #[arg(long)]
@@ -184,15 +184,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some((_, r)) = regions.iter().enumerate().find(|&(i, r)| regions[..i].iter().any(|q| q.name == r.name)) {
         bail!("--regions: the name {} is given twice; give each region its own name", r.name);
     }
+    let ssim_size = args.ssim_size.unwrap_or(7);
     let window = match args.ssim_window {
-        Window::Uniform => SsimWindow::Uniform { size: args.ssim_size },
+        Window::Uniform => SsimWindow::Uniform { size: ssim_size },
+        Window::Gaussian if args.ssim_size.is_some() => bail!(
+            "--ssim-size {ssim_size} sets the side of the uniform window; the gaussian window's is fixed (sigma 1.5 \
+             voxels, 11 taps): leave out --ssim-size or --ssim-window gaussian"
+        ),
         Window::Gaussian => SsimWindow::Gaussian { sigma: 1.5 },
     };
-    if args.ssim_size < 3 || args.ssim_size.is_multiple_of(2) {
+    if ssim_size < 3 || ssim_size.is_multiple_of(2) {
         bail!(
             "--ssim-size must be odd and at least 3 (a 1-voxel window has no sample variance, so its SSIM is \
-             undefined), got {}",
-            args.ssim_size
+             undefined), got {ssim_size}"
         );
     }
     if !(1..=fluidnerf_core::render::MAX_SUPERSAMPLE).contains(&args.supersample) {
