@@ -139,6 +139,19 @@ fn cases() -> Vec<Case> {
             &["synth", "-o", "OUT", "--pixels", "16", "--holdout", "cam008,1"],
             "--holdout: cam008 and 1 name the same camera",
         ),
+        // A transforms.json points at its own images: both options were ignored without a word.
+        c(
+            "import --images with --transforms",
+            None,
+            &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--images", "SCENE/images"],
+            "'--transforms <TRANSFORMS>' cannot be used with '--images <IMAGES>'",
+        ),
+        c(
+            "import --skip-uncalibrated with --transforms",
+            None,
+            &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--skip-uncalibrated"],
+            "'--transforms <TRANSFORMS>' cannot be used with '--skip-uncalibrated'",
+        ),
         c(
             "import camera held out twice",
             None,

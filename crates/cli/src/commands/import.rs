@@ -69,7 +69,7 @@ pub struct Args {
     #[arg(long, group = "source")]
     pub transforms: Option<PathBuf>,
     /// Folder with the images (for --opencv and --colmap).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "transforms")]
     pub images: Option<PathBuf>,
     /// Reconstruction box in world units: xmin,ymin,zmin,xmax,ymax,zmax (e.g.
     /// `-10,-10,-10,10,10,10`). Without it, the box is estimated from the images.
@@ -92,8 +92,9 @@ pub struct Args {
     /// Overwrite an existing `transforms.json` in OUT.
     #[arg(long)]
     pub force: bool,
-    /// Leave out images that no camera is calibrated for (with a warning) instead of failing.
-    #[arg(long)]
+    /// Leave out images that no camera is calibrated for (with a warning) instead of failing
+    /// (for --opencv and --colmap).
+    #[arg(long, conflicts_with = "transforms")]
     pub skip_uncalibrated: bool,
     /// Cameras to hold out for validation, comma separated: camera names, or image names
     /// without extension for frames that name no camera. Every frame of such a camera is held
