@@ -152,6 +152,13 @@ fn cases() -> Vec<Case> {
             &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--skip-uncalibrated"],
             "'--transforms <TRANSFORMS>' cannot be used with '--skip-uncalibrated'",
         ),
+        // Named the transforms.json being written rather than the option.
+        c(
+            "import with an intensity scale of zero",
+            None,
+            &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--intensity-scale", "0"],
+            "--intensity-scale must be a positive number",
+        ),
         c(
             "import camera held out twice",
             None,

@@ -628,6 +628,13 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     let given = given.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
     super::recordable("import.json", given.chain([("--out", args.out.as_path())]))?;
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
+    if let Some(scale) = args.intensity_scale {
+        ensure!(
+            scale > 0.0 && scale.is_finite(),
+            "--intensity-scale must be a positive number (pixel value per unit of ∫E ds), got {}",
+            fluidnerf_core::num(scale)
+        );
+    }
     let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
     if let Some(images) = &args.images {
         ensure!(images.is_dir(), "the image folder {} does not exist", images.display());
