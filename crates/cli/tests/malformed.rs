@@ -159,6 +159,14 @@ fn cases() -> Vec<Case> {
             &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--intensity-scale", "0"],
             "--intensity-scale must be a positive number",
         ),
+        // The scene imported, and every reconstruction of it was refused (cam001 is held out
+        // in the file already).
+        c(
+            "import with every camera held out",
+            None,
+            &["import", "--transforms", "SCENE/transforms.json", "-o", "OUT", "--holdout", "cam000,cam002,cam003,cam004"],
+            "--holdout: every frame would be held out",
+        ),
         c(
             "import camera held out twice",
             None,

@@ -713,6 +713,10 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             names.into_iter().collect::<Vec<_>>().join(", ")
         );
     }
+    let held_out = |f: &Frame| f.holdout || frame_name(f).is_some_and(|n| args.holdout.contains(&n));
+    if !args.holdout.is_empty() && frames.iter().all(held_out) {
+        bail!("--holdout: every frame would be held out, leaving none to reconstruct from; keep at least one camera");
+    }
 
     created.dir_all(&args.out)?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
