@@ -227,3 +227,52 @@ def test_synth_records_the_preprocessing_its_images_need(tmp_path):
         assert f["file_path"].endswith(".jpg")
         for b in f["background"]:
             assert (tmp_path / "real" / b).is_file()
+
+
+def _png8(path, pixels: np.ndarray) -> None:
+    """An 8-bit grayscale PNG of ``pixels`` (H, W)."""
+    import struct
+    import zlib
+
+    h, w = pixels.shape
+    raw = b"".join(b"\x00" + pixels[r].astype(np.uint8).tobytes() for r in range(h))
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
+        )
+
+    header = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
+
+
+def test_a_saved_copy_keeps_the_masks_and_flow_axis_of_its_recording(tmp_path):
+    """scene.save wrote the images but dropped their masks and the flow axis: a copy of a scene
+    whose recording masks a reflection out reconstructed from the masked pixels too."""
+    scene = fluidnerf.synth(
+        tmp_path / "scene", "demo", resolution=12, lens={"resolution": [12, 12]}, rig={"layout": {"count": 3}}
+    )
+    mask = np.full((12, 12), 255, np.uint8)
+    mask[:5] = 0
+    _png8(tmp_path / "scene" / "mask1.png", mask)
+    file = tmp_path / "scene" / "transforms.json"
+    meta = json.loads(file.read_text())
+    meta["frames"][1]["mask_path"] = "mask1.png"
+    meta["flow_axis"] = [0.0, 1.0, 0.0]
+    file.write_text(json.dumps(meta))
+    scene = fluidnerf.load_scene(tmp_path / "scene")
+    scene.save(tmp_path / "copy")
+    copied = json.loads((tmp_path / "copy" / "transforms.json").read_text())
+    assert copied["flow_axis"] == [0.0, 1.0, 0.0]
+    assert "mask_path" not in copied["frames"][0] and "mask_path" not in copied["frames"][2]
+    assert copied["frames"][1]["mask_path"] == "masks/frame_0001.png"
+    np.testing.assert_array_equal(fluidnerf.load_scene(tmp_path / "copy").images(), scene.images())
+    options = {"resolution": 8, "stopping": {"max_iterations": 2}, "progress": False}
+    a = fluidnerf.reconstruct(scene, "asart", tmp_path / "a", **options)
+    b = fluidnerf.reconstruct(tmp_path / "copy", "asart", tmp_path / "b", **options)
+    np.testing.assert_array_equal(a.volume, b.volume)

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
 use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, TruthRef};
+use fluidnerf_io::scene::Recording;
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 
@@ -278,8 +279,10 @@ impl PyScene {
         })
     }
 
-    /// Writes the scene into `folder`: `transforms.json`, every image as a float32 TIFF under
-    /// `images/` and the ground-truth volumes under `truth/`. Afterwards the scene lives there.
+    /// Writes the scene into `folder`: `transforms.json` (with the flow axis), every image as a
+    /// float32 TIFF under `images/` as it is reconstructed from (linear, background subtracted),
+    /// the frames' masks under `masks/` and the ground-truth volumes under `truth/`. Afterwards
+    /// the scene lives there.
     #[pyo3(signature = (folder, force=false))]
     fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
         guard(|| {
@@ -290,7 +293,15 @@ impl PyScene {
                     folder.display()
                 )));
             }
-            let images = self.images_vec()?;
+            // The images as preprocessed (linear, background subtracted); their masks and the
+            // flow axis go with them, or the copy would use the pixels its recording left out.
+            let (images, masks, flow_axis) = match &self.images {
+                Some(images) => (images.clone(), vec![None; images.len()], None),
+                None => {
+                    let p = fluidnerf_io::scene::load_preprocessed(&self.inner).map_err(|e| err(e.to_string()))?;
+                    (p.images, p.masks, p.recording.flow_axis)
+                }
+            };
             let truth = if self.saved {
                 fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?
             } else {
@@ -298,10 +309,22 @@ impl PyScene {
             };
             let mut scene = self.inner.clone();
             scene.root = folder.clone();
+            let mut recording = Recording { flow_axis, ..Recording::plain(scene.frames.len()) };
             for (i, (frame, image)) in scene.frames.iter_mut().zip(&images).enumerate() {
                 frame.file_path = PathBuf::from(format!("images/frame_{i:04}.tiff"));
                 fluidnerf_io::image::write_tiff_f32(&folder.join(&frame.file_path), image)
                     .map_err(|e| err(e.to_string()))?;
+                if let Some(keep) = &masks[i] {
+                    let path = PathBuf::from(format!("masks/frame_{i:04}.png"));
+                    let mask = Image::from_vec(
+                        image.width,
+                        image.height,
+                        keep.iter().map(|&k| f32::from(u8::from(k))).collect(),
+                    );
+                    fluidnerf_io::image::write_png16(&folder.join(&path), &mask, 1.0)
+                        .map_err(|e| err(e.to_string()))?;
+                    recording.frames[i].mask_path = Some(path);
+                }
             }
             scene.truth = Vec::new();
             for (k, (time, volume)) in truth.iter().enumerate() {
@@ -309,7 +332,8 @@ impl PyScene {
                 fluidnerf_io::volume::write_npy(&folder.join(&path), volume).map_err(|e| err(e.to_string()))?;
                 scene.truth.push(TruthRef { time: *time, file_path: path });
             }
-            fluidnerf_io::scene::save_scene(&scene, &folder).map_err(|e| err(e.to_string()))?;
+            fluidnerf_io::scene::save_scene_recording(&scene, &folder, &recording, false)
+                .map_err(|e| err(e.to_string()))?;
             self.inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
             self.images = None;
             self.saved = true;
