@@ -286,3 +286,31 @@ def _interrupt_a_run(static_scene, tmp_path):
     run = fluidnerf.open_run(tmp_path / "ctrl-c")
     assert run.status == "interrupted" and 0 < run.report["iterations"] < 1_000_000
     assert run.volume.shape == (16, 16, 16)
+
+
+def test_a_scene_built_from_arrays_is_reconstructed_in_its_run_folder(static_scene, cli, tmp_path):
+    """A scene from arrays is saved into out/scene before its run, and the run was then refused
+    because its folder held the scene ("contains the scene folder"), whatever out was."""
+    K, poses, _, _ = static_scene.camera_arrays()
+    scene = fluidnerf.scene_from_arrays(K, poses, static_scene.images(), static_scene.aabb)
+    options = {"resolution": 8, "stopping": {"max_iterations": 2}, "progress": False}
+    run = fluidnerf.reconstruct(scene, "asart", tmp_path / "run", **options)
+    assert run.status == "finished" and (tmp_path / "run" / "scene" / "transforms.json").is_file()
+    assert run.config["scene"] == str((tmp_path / "run" / "scene").absolute())
+    again = fluidnerf.reconstruct(scene, "asart", tmp_path / "run", overwrite="force", **options)
+    np.testing.assert_array_equal(again.volume, run.volume)
+    assert (tmp_path / "run" / "scene" / "transforms.json").is_file(), "--force removed the run's scene"
+    # The command line reruns it, and replaces it keeping its scene.
+    subprocess.run(
+        [
+            cli,
+            "reconstruct",
+            "--config",
+            str(tmp_path / "run" / "config.json"),
+            "-o",
+            str(tmp_path / "cli"),
+            "-q",
+        ],
+        check=True,
+    )
+    np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "cli").volume, run.volume)

@@ -178,12 +178,23 @@ pub fn refuse_among_scene_inputs(out: &Path, scene_root: &Path) -> Result<(), Pi
             scene_root.display()
         )));
     }
+    refuse_inputs_in(out, scene_root, false)
+}
+
+/// Refuses `out` when it holds a file the scene in `scene_root` reads, apart from those in the
+/// scene's own folder when `own_scene` (a run's own scene, [`OWN_SCENE`]).
+fn refuse_inputs_in(out: &Path, scene_root: &Path, own_scene: bool) -> Result<(), PipelineError> {
+    let (out_abs, root) = (resolved(out), resolved(scene_root));
     for (file, what) in scene_inputs(&scene_root.join(fluidnerf_io::scene::SCENE_FILE)) {
-        if resolved(&file).starts_with(&out_abs) {
-            return Err(refuse(format!(
-                "holds {} ({what} the scene reads); choose an output folder apart from the scene's inputs",
-                file.display()
-            )));
+        let file_abs = resolved(&file);
+        if file_abs.starts_with(&out_abs) && !(own_scene && file_abs.starts_with(&root)) {
+            return Err(PipelineError::RunDir {
+                path: out.to_path_buf(),
+                why: format!(
+                    "holds {} ({what} the scene reads); choose an output folder apart from the scene's inputs",
+                    file.display()
+                ),
+            });
         }
     }
     Ok(())
@@ -361,6 +372,12 @@ const EVAL_FILES: [&str; 2] = ["metrics.json", "metrics.csv"];
 /// voxel run, its start). They go with the run's files when they hold a run (its `config.json`),
 /// and do not make a folder read as one with run files ([`DirState::Foreign`]).
 const OWN_RUNS: [&str; 1] = ["start"];
+
+/// The folder inside a run's folder that may hold the run's own scene: the Python API saves a
+/// scene built from arrays there (`reconstruct(scene, method, out)` into `out/scene`). A run
+/// writes nothing there ([`RUN_FILES`], [`OWN_RUNS`]), so the scene is neither overwritten nor
+/// read as the run's, and `--force` leaves it.
+pub const OWN_SCENE: &str = "scene";
 
 /// The folder of one run. Opening it for writing ([`RunDir::create`]) takes its lock, which is
 /// released when the `RunDir` is dropped.
@@ -654,10 +671,13 @@ impl RunDir {
 }
 
 /// The checks of a folder about to receive a run, before anything is created: apart from the
-/// scene, a folder (when it exists) and not one of another kind.
+/// scene (unless the scene is the run's own, in [`OWN_SCENE`]), a folder (when it exists) and
+/// not one of another kind.
 fn check_new_run_folder(root: &Path, scene_root: Option<&Path>) -> Result<(), PipelineError> {
-    if let Some(scene) = scene_root {
-        refuse_scene_inputs(root, scene)?;
+    match scene_root {
+        Some(scene) if resolved(scene) == resolved(&root.join(OWN_SCENE)) => refuse_inputs_in(root, scene, true)?,
+        Some(scene) => refuse_scene_inputs(root, scene)?,
+        None => {}
     }
     if root.exists() && !root.is_dir() {
         return Err(PipelineError::RunDir { path: root.to_path_buf(), why: "exists and is not a folder".into() });
@@ -838,7 +858,8 @@ mod tests {
             (scene.join("images"), "inside the scene folder"),
             (scene.join("new"), "inside the scene folder"),
             (scene.join("../scene/./truth"), "inside the scene folder"),
-            (tmp.path().to_path_buf(), "contains the scene folder"),
+            // The scene is the run's own (in OWN_SCENE), but one of its inputs lies beside it.
+            (tmp.path().to_path_buf(), "mask.png (a mask the scene reads)"),
             (tmp.path().join("elsewhere"), "mask.png (a mask the scene reads)"),
         ];
         for (out, needle) in cases {
@@ -854,6 +875,33 @@ mod tests {
         assert!(!scene.join("truth/.lock").exists());
         // A folder beside the scene is fine.
         drop(RunDir::create(tmp.path().join("run"), Overwrite::Refuse, Some(&scene)).unwrap());
+        // A folder holding the scene other than as its own is not.
+        let holder = tempfile::tempdir().unwrap();
+        let deep = scene_with_inputs(&holder.path().join("data"));
+        let e = RunDir::create(holder.path(), Overwrite::Force, Some(&deep)).unwrap_err().to_string();
+        assert!(e.contains("contains the scene folder"), "{e}");
+    }
+
+    /// The Python API saves a scene built from arrays into `OUT/scene`, the run's own scene: the
+    /// run goes into OUT (before, "contains the scene folder" refused every such run), and
+    /// `--force` keeps the scene.
+    #[test]
+    fn a_runs_own_scene_lives_in_its_folder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("run");
+        let scene = out.join(OWN_SCENE);
+        std::fs::create_dir_all(scene.join("images")).unwrap();
+        let text = serde_json::json!({ "frames": [{ "file_path": "images/r_0.png" }] });
+        std::fs::write(scene.join("transforms.json"), text.to_string()).unwrap();
+        std::fs::write(scene.join("images/r_0.png"), "image").unwrap();
+        let dir = RunDir::create(&out, Overwrite::Refuse, Some(&scene)).unwrap();
+        dir.write_json("config.json", &run_config()).unwrap();
+        dir.write_json("report.json", &serde_json::json!({})).unwrap();
+        drop(dir);
+        drop(RunDir::create(&out, Overwrite::Force, Some(&scene)).unwrap());
+        assert_eq!(std::fs::read_to_string(scene.join("images/r_0.png")).unwrap(), "image");
+        assert!(!out.join("report.json").exists(), "--force replaced the run");
+        drop(RunDir::for_windows(&out, Some(&scene)).unwrap());
     }
 
     #[test]
