@@ -314,3 +314,22 @@ def test_a_scene_built_from_arrays_is_reconstructed_in_its_run_folder(static_sce
         check=True,
     )
     np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "cli").volume, run.volume)
+
+
+def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static_scene, tmp_path):
+    """The scene was saved into out/scene before the folder was checked: a refused run left a
+    scene inside another run's folder, and into a file failed with "Not a directory"."""
+    K, poses, _, _ = static_scene.camera_arrays()
+    scene = fluidnerf.scene_from_arrays(K, poses, static_scene.images(), static_scene.aabb)
+    options = {"resolution": 8, "stopping": {"max_iterations": 2}, "progress": False}
+    fluidnerf.reconstruct(static_scene, "asart", tmp_path / "finished", **options)
+    before = sorted(p.name for p in (tmp_path / "finished").iterdir())
+    with pytest.raises(fluidnerf.FluidNerfError, match="finished: already holds a finished run"):
+        fluidnerf.reconstruct(scene, "asart", tmp_path / "finished", **options)
+    assert sorted(p.name for p in (tmp_path / "finished").iterdir()) == before
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(fluidnerf.FluidNerfError, match="file: exists and is not a folder"):
+        fluidnerf.reconstruct(scene, "asart", tmp_path / "file", **options)
+    with pytest.raises(fluidnerf.FluidNerfError, match="nothing to resume"):
+        fluidnerf.reconstruct(scene, "fast", tmp_path / "new", overwrite="resume", **options)
+    assert not (tmp_path / "new").exists()

@@ -432,44 +432,55 @@ impl RunDir {
         let resume = overwrite == Overwrite::Resume;
         let mut dir = RunDir { root: root.clone(), lock: None, resume, created, kept_runs: Vec::new() };
         dir.take_lock()?;
-        match (dir.state(), overwrite) {
-            (DirState::Foreign, _) => return Err(dir.foreign()),
-            (DirState::Empty, Overwrite::Resume) => {
-                return Err(refuse(
-                    "nothing to resume (--resume; `overwrite=\"resume\"` from Python): it holds no run".into(),
-                ));
-            }
+        let state = dir.state();
+        dir.refusal(state, overwrite)?;
+        match (state, overwrite) {
             (DirState::Empty, _) => dir.resume = false,
-            (DirState::Finished, Overwrite::Refuse) => {
-                return Err(refuse(
-                    "already holds a finished run; use --force to replace it (or --resume to continue training a \
-                     neural run; from Python `overwrite=\"force\"` or `\"resume\"`)"
-                        .into(),
-                ))
-            }
-            (DirState::Unfinished, Overwrite::Refuse)
-                if !dir.checkpoint().exists() && !dir.path("windows").exists() =>
-            {
-                return Err(refuse(
-                    "holds an unfinished run that stopped before its first checkpoint (run files but no \
-                     report.json: it died or was killed), so there is nothing to resume; use --force to replace \
-                     it (from Python `overwrite=\"force\"`)"
-                        .into(),
-                ))
-            }
-            (DirState::Unfinished, Overwrite::Refuse) => {
-                return Err(refuse(
-                    "holds an unfinished run (run files but no report.json: it died or was killed); use --resume \
-                     to continue it (neural methods) or --force to replace it (from Python `overwrite=\"resume\"` \
-                     or `\"force\"`)"
-                        .into(),
-                ))
-            }
             (_, Overwrite::Force) => dir.clear()?,
-            (_, Overwrite::Resume) => {}
+            _ => {}
         }
         dir.kept_runs = dir.own_runs();
         Ok(dir)
+    }
+
+    /// The refusals of [`RunDir::create`] for `overwrite` (the folder's lock aside), without
+    /// creating, locking or clearing anything: for a caller that writes into the folder before
+    /// the run (the Python API saves a scene built from arrays into [`OWN_SCENE`]).
+    pub fn check(root: impl Into<PathBuf>, overwrite: Overwrite) -> Result<(), PipelineError> {
+        let root: PathBuf = root.into();
+        check_new_run_folder(&root, None)?;
+        let dir = RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new() };
+        dir.refusal(dir.state(), overwrite)
+    }
+
+    /// Why a folder in `state` cannot take a run as `overwrite` asks, if it cannot.
+    fn refusal(&self, state: DirState, overwrite: Overwrite) -> Result<(), PipelineError> {
+        let refuse = |why: &str| Err(PipelineError::RunDir { path: self.root.clone(), why: why.into() });
+        match (state, overwrite) {
+            (DirState::Foreign, _) => Err(self.foreign()),
+            (DirState::Empty, Overwrite::Resume) => {
+                refuse("nothing to resume (--resume; `overwrite=\"resume\"` from Python): it holds no run")
+            }
+            (DirState::Finished, Overwrite::Refuse) => refuse(
+                "already holds a finished run; use --force to replace it (or --resume to continue training a neural \
+                 run; from Python `overwrite=\"force\"` or `\"resume\"`)",
+            ),
+            (DirState::Unfinished, Overwrite::Refuse)
+                if !self.checkpoint().exists() && !self.path("windows").exists() =>
+            {
+                refuse(
+                    "holds an unfinished run that stopped before its first checkpoint (run files but no \
+                     report.json: it died or was killed), so there is nothing to resume; use --force to replace \
+                     it (from Python `overwrite=\"force\"`)",
+                )
+            }
+            (DirState::Unfinished, Overwrite::Refuse) => refuse(
+                "holds an unfinished run (run files but no report.json: it died or was killed); use --resume to \
+                 continue it (neural methods) or --force to replace it (from Python `overwrite=\"resume\"` or \
+                 `\"force\"`)",
+            ),
+            _ => Ok(()),
+        }
     }
 
     /// The refusal of a folder with run files but no run ([`DirState::Foreign`]).

@@ -123,6 +123,15 @@ fn overwrite_of(s: &str) -> PyResult<Overwrite> {
     }
 }
 
+/// Refuses `out` as a run folder for `overwrite` as `reconstruct` would, without writing
+/// anything: checked before a scene built from arrays is saved into `out/scene`.
+#[pyfunction]
+#[pyo3(signature = (out, overwrite="refuse"))]
+pub fn check_run_folder(out: PathBuf, overwrite: &str) -> PyResult<()> {
+    let overwrite = overwrite_of(overwrite)?;
+    guard(|| RunDir::check(&out, overwrite).map_err(|e| err(e.to_string())))
+}
+
 /// Runs the configuration (JSON text) on the saved `scene` into `out` with the GIL released;
 /// returns `report.json`'s text. `callback(event: dict)` sees every event; Ctrl-C (and an
 /// exception in the callback) stops the run, which writes its results, and is raised after.
