@@ -327,6 +327,10 @@ def window_plan(scene: Scene | PathLike, method: str | dict = "tr-fast", **optio
 def plan_windows(n_frames: int, window: int, overlap: int) -> list[tuple[int, int]]:
     """Windows of ``window`` frames overlapping by ``overlap`` over ``n_frames`` frames, as
     ``tr-fast`` plans them: ``(first, end)`` frame ranges, ``end`` exclusive."""
+    counts = {"n_frames": n_frames, "window": window, "overlap": overlap}
+    for name, value in counts.items():
+        if _integer(value, name) < 0:
+            raise FluidNerfError(f"{name}: must be at least 0, got {value}")
     return _ext.plan_windows(n_frames, window, overlap)
 
 

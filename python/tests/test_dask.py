@@ -143,3 +143,15 @@ def test_a_callback_that_cannot_be_called_is_refused_before_any_task(tr_scene, t
     with pytest.raises(TypeError, match="callback: expected a function of one event dict, got 3"):
         fluidnerf.dask.reconstruct(None, tr_scene, TR_METHOD, tmp_path / "run", callback=3, **TR_OPTIONS)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_plan_of_negative_or_fractional_counts_is_refused_naming_the_argument():
+    """A negative count raised pyo3's "OverflowError: can't convert negative int to unsigned",
+    naming no argument, and window=True planned windows of one frame."""
+    for args, name in [((-1, 2, 0), "n_frames"), ((5, -2, 0), "window"), ((5, 2, -1), "overlap")]:
+        with pytest.raises(fluidnerf.FluidNerfError, match=rf"{name}: must be at least 0, got -"):
+            fluidnerf.plan_windows(*args)
+    with pytest.raises(TypeError, match="window: expected an integer, got True"):
+        fluidnerf.plan_windows(5, True, 0)
+    with pytest.raises(TypeError, match="n_frames: expected an integer, got 5.0"):
+        fluidnerf.plan_windows(5.0, 2, 0)
