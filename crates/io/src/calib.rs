@@ -1129,8 +1129,12 @@ fn read_cameras_txt(path: &Path) -> Result<ColmapCameras, IoError> {
             return Err(bad("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS...".into()));
         }
         let id: u64 = t[0].parse().map_err(|_| bad(format!("camera id `{}` is not an integer", t[0])))?;
-        let width: u32 = t[2].parse().map_err(|_| bad(format!("width `{}` is not an integer", t[2])))?;
-        let height: u32 = t[3].parse().map_err(|_| bad(format!("height `{}` is not an integer", t[3])))?;
+        let pixels = |what: &str, v: &str| {
+            v.parse::<u32>().map_err(|_| {
+                bad(format!("{what} `{v}` is not a positive whole number of pixels (at most {})", u32::MAX))
+            })
+        };
+        let (width, height) = (pixels("width", t[2])?, pixels("height", t[3])?);
         let p: Vec<f64> = t[4..]
             .iter()
             .map(|s| s.parse::<f64>().map_err(|_| bad(format!("parameter `{s}` is not a number"))))

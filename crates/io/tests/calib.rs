@@ -296,6 +296,18 @@ fn colmap_errors_name_the_file_and_line() {
         .expect("write");
     let err = read_colmap(dir.path()).expect_err("front.png twice").to_string();
     assert!(err.contains("images.txt") && err.contains("front.png is listed twice"), "{err}");
+    // A negative or huge size was said not to be an integer.
+    std::fs::write(dir.path().join("images.txt"), &text).expect("write");
+    for (size, says) in [("-64 48", "width `-64`"), ("64 99999999999", "height `99999999999`")] {
+        let line = format!("1 PINHOLE {size} 50 50 32 24\n2 PINHOLE 64 48 50 50 32 24\n");
+        std::fs::write(dir.path().join("cameras.txt"), line).expect("write");
+        let err = read_colmap(dir.path()).expect_err("bad size").to_string();
+        assert!(
+            err.contains("cameras.txt: line 1")
+                && err.contains(&format!("{says} is not a positive whole number of pixels")),
+            "{err}"
+        );
+    }
 }
 
 /// Bytes of a COLMAP binary model built by hand from the documented layout
