@@ -23,7 +23,7 @@ use super::reconstruct::StopArg;
 /// Everything lands in OUT: `scene/` (the synthetic data set), `fluidnerf/`, `hybrid/` and
 /// `asart/` (one run folder each, with volumes, settings and reports), `slices.png`,
 /// `convergence.png`, `comparison.json` and `report.html`. Takes well under a minute on a
-/// 2-core machine (32 s on a 2-core Intel Xeon, build excluded).
+/// 2-core machine (32–38 s on a 2-core Intel Xeon, build excluded).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Output directory.
