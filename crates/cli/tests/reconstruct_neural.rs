@@ -363,6 +363,22 @@ fn a_resume_after_the_box_changed_and_a_failed_run_are_handled() {
     std::fs::write(&scene, &original).expect("restores the scene");
     ok(&run("run", &["--max-iterations", "20", "--resume"]));
     assert_eq!(report(&d.join("run"))["iterations"], 20);
+    // Nor on other images: one pixel of one image changed.
+    let image = d.join("scene/images/cam000.png");
+    let bytes = std::fs::read(&image).expect("reads the image");
+    let mut pixels = image::load_from_memory(&bytes).expect("decodes").to_luma16();
+    let (w, h) = pixels.dimensions();
+    pixels.get_pixel_mut(w / 2, h / 2).0[0] ^= 0x0100;
+    pixels.save(&image).expect("writes the image");
+    let report_before = std::fs::read(d.join("run/report.json")).expect("report");
+    refused(
+        &run("run", &["--max-iterations", "30", "--resume"]),
+        "was trained on other images or cameras than the scene's now",
+    );
+    assert_eq!(std::fs::read(d.join("run/report.json")).expect("report"), report_before, "a refused resume wrote");
+    std::fs::write(&image, &bytes).expect("restores the image");
+    ok(&run("run", &["--max-iterations", "30", "--resume"]));
+    assert_eq!(report(&d.join("run"))["iterations"], 30);
 
     // A fresh run that fails before any checkpoint leaves no unfinished run behind: the same
     // command with a sane rate then runs without --force or --resume.

@@ -601,6 +601,33 @@ impl Prepared {
         }
     }
 
+    /// A fingerprint of what the field is fitted to: every view's time, camera centre, pixels,
+    /// ray directions and measured pixel values (before any fitted gain), as 16 hex digits of a
+    /// 64-bit FNV-1a hash. A checkpoint records it, so that a run is not continued on other
+    /// images or cameras than it started with.
+    pub fn fingerprint(&self) -> String {
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |word: u32| {
+            for byte in word.to_le_bytes() {
+                h = (h ^ u64::from(byte)).wrapping_mul(PRIME);
+            }
+        };
+        for (set, views) in [&self.train, &self.holdout].into_iter().enumerate() {
+            eat(set as u32);
+            eat(views.len() as u32);
+            for v in views {
+                eat(v.time.to_bits());
+                v.rays.origin_unit.iter().for_each(|c| eat(c.to_bits()));
+                eat(v.rays.len() as u32);
+                v.rays.pixel.iter().for_each(|&p| eat(p));
+                v.rays.dir_unit.iter().flatten().for_each(|c| eat(c.to_bits()));
+                v.measured.as_ref().unwrap_or(&v.targets).iter().for_each(|t| eat(t.to_bits()));
+            }
+        }
+        format!("{h:016x}")
+    }
+
     /// Rays kept for training, and rays whose pixel sees the box at all (their difference is
     /// what empty-space skipping dropped).
     pub fn ray_counts(&self) -> (usize, usize) {

@@ -365,8 +365,10 @@ impl Ctx<'_> {
         let mut learner = Learner::fresh(field, &prep, train_cfg);
         let ckpt = dir.checkpoint();
         let mut budgeted;
+        // Before any gain is fitted (the fingerprint reads the measured pixels either way).
+        let views = prep.fingerprint();
         if dir.resuming() {
-            check_checkpoint_box(&ckpt, &self.scene.aabb)?;
+            check_checkpoint(&ckpt, &self.scene.aabb, &views)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             // A resumed run only continues: below the checkpoint's iteration it would keep the
             // result of the longer run and record the lower cap in config.json, which reruns
@@ -465,7 +467,7 @@ impl Ctx<'_> {
                 }
             }
             if config.checkpoint_every > 0 && s.iteration.is_multiple_of(config.checkpoint_every) {
-                match write_checkpoint(dir, s.learner, &self.scene.aabb) {
+                match write_checkpoint(dir, s.learner, &self.scene.aabb, &views) {
                     Ok(path) => {
                         let _ = session.emit(RunEvent::Checkpoint { path: &path });
                     }
@@ -505,7 +507,7 @@ impl Ctx<'_> {
         }
         let _ = session.emit(RunEvent::Writing);
         // The checkpoint holds the last state, so a resumed run continues where this one stopped.
-        write_checkpoint(dir, &learner, &self.scene.aabb)?;
+        write_checkpoint(dir, &learner, &self.scene.aabb, &views)?;
         let stop_reason = cause.unwrap_or(report.stop_reason.into());
         let mut kept_iteration = learner.iteration;
         if let Some((iteration, loss, params)) = best.best.take() {
@@ -640,30 +642,46 @@ fn box_tag(aabb: &fluidnerf_core::Aabb) -> String {
     format!("{:?}", [aabb.min.to_array(), aabb.max.to_array()])
 }
 
-/// Writes a training checkpoint (weights, optimiser state, histories, the scene's box)
-/// atomically.
+/// The checkpoint tag of the fingerprint of the views a field was trained on
+/// ([`fluidnerf_neural::train::Prepared::fingerprint`]): their images and cameras.
+const VIEWS_TAG: &str = "views";
+
+/// Writes a training checkpoint (weights, optimiser state, histories, the scene's box and the
+/// fingerprint of the training views) atomically.
 pub(crate) fn write_checkpoint<F: TrainableField>(
     dir: &RunDir,
     learner: &Learner<F>,
     aabb: &fluidnerf_core::Aabb,
+    views: &str,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &[(BOX_TAG, box_tag(aabb))])?;
+    let tags = [(BOX_TAG, box_tag(aabb)), (VIEWS_TAG, views.to_string())];
+    let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?;
     dir.write_bytes("checkpoint.safetensors", &bytes)
 }
 
-/// Refuses to continue a checkpoint trained in another box than the scene's now.
-fn check_checkpoint_box(path: &std::path::Path, aabb: &fluidnerf_core::Aabb) -> Result<(), PipelineError> {
-    match fluidnerf_neural::weights::checkpoint_tag(path, BOX_TAG)? {
-        Some(saved) if saved != box_tag(aabb) => Err(PipelineError::file(
+/// Refuses to continue a checkpoint trained in another box than the scene's now, or on other
+/// images or cameras (a checkpoint written before the views' fingerprint was recorded is
+/// checked for its box only).
+fn check_checkpoint(path: &std::path::Path, aabb: &fluidnerf_core::Aabb, views: &str) -> Result<(), PipelineError> {
+    if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, BOX_TAG)?.filter(|s| *s != box_tag(aabb)) {
+        return Err(PipelineError::file(
             path,
             format!(
                 "was trained in the box {saved}, but the scene's box is now {}; the field's coordinates are \
                  the box's, so it cannot be continued: restore the scene's aabb, or start a new run (--force)",
                 box_tag(aabb)
             ),
-        )),
-        _ => Ok(()),
+        ));
     }
+    if fluidnerf_neural::weights::checkpoint_tag(path, VIEWS_TAG)?.is_some_and(|saved| saved != views) {
+        return Err(PipelineError::file(
+            path,
+            "was trained on other images or cameras than the scene's now (the fingerprint of its training \
+             views differs); a run continues only on the views it started with: restore them, or start a new \
+             run (--force)",
+        ));
+    }
+    Ok(())
 }
 
 pub(crate) fn write_checkpoint_to<F: TrainableField>(
