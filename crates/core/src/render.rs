@@ -48,6 +48,21 @@ impl Default for RenderSettings {
 /// in cache for cheap fields.
 const BATCH: usize = 16_384;
 
+/// Why a ray-marching `step` is too fine for `aabb`: more than [`MAX_SAMPLES_ON_DIAGONAL`]
+/// samples along its diagonal, with the finest step allowed (`units`, the box's length unit,
+/// follows the diagonal when not empty). `None` when the step is fine.
+pub fn step_too_fine(aabb: &Aabb, step: f64, units: &str) -> Option<String> {
+    let diagonal = aabb.size().length();
+    let units = if units.is_empty() { String::new() } else { format!(" {units}") };
+    (diagonal / step > MAX_SAMPLES_ON_DIAGONAL).then(|| {
+        format!(
+            "{step:e} would take more than {MAX_SAMPLES_ON_DIAGONAL} samples along the box's diagonal \
+             ({diagonal:.4}{units}); give a step of at least {:.3e}",
+            diagonal / MAX_SAMPLES_ON_DIAGONAL
+        )
+    })
+}
+
 /// Renders `camera`'s image of `field` inside `aabb`: each pixel is `scale` times the mean,
 /// over its sub-pixel rays, of `∫ E ds` over the ray's segment in the box.
 pub fn render_image(
@@ -61,16 +76,8 @@ pub fn render_image(
     if !(step > 0.0 && step.is_finite()) {
         return Err(CoreError::invalid("render step", format!("must be positive, got {}", num(step))));
     }
-    let diagonal = aabb.size().length();
-    if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {
-        return Err(CoreError::invalid(
-            "render step",
-            format!(
-                "{step:e} would take more than {MAX_SAMPLES_ON_DIAGONAL} samples along the box's diagonal ({diagonal:.4}); \
-                 give a step of at least {:.3e}",
-                diagonal / MAX_SAMPLES_ON_DIAGONAL
-            ),
-        ));
+    if let Some(problem) = step_too_fine(aabb, step, "") {
+        return Err(CoreError::invalid("render step", problem));
     }
     if settings.supersample > MAX_SUPERSAMPLE {
         return Err(CoreError::invalid(

@@ -683,16 +683,14 @@ impl RunDir {
 
 /// The checks of a folder about to receive a run, before anything is created: apart from the
 /// scene (unless the scene is the run's own, in [`OWN_SCENE`]), a folder (when it exists) and
-/// not one of another kind.
+/// not one of another kind ([`refuse_other_kind`]).
 fn check_new_run_folder(root: &Path, scene_root: Option<&Path>) -> Result<(), PipelineError> {
     match scene_root {
         Some(scene) if resolved(scene) == resolved(&root.join(OWN_SCENE)) => refuse_inputs_in(root, scene, true)?,
         Some(scene) => refuse_scene_inputs(root, scene)?,
         None => {}
     }
-    if root.exists() && !root.is_dir() {
-        return Err(PipelineError::RunDir { path: root.to_path_buf(), why: "exists and is not a folder".into() });
-    }
+    // A file at the folder's place, or at a parent's, is refused there too.
     refuse_other_kind(root, FolderKind::Run, "reconstruct")
 }
 

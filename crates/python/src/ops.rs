@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use fluidnerf_classical::{Grid, ProjectorConfig};
 // The reference renderer's limits, checked in `render` to name the Python arguments.
 use fluidnerf_core::num;
-use fluidnerf_core::render::{MAX_SAMPLES_ON_DIAGONAL, MAX_SUPERSAMPLE};
+use fluidnerf_core::render::MAX_SUPERSAMPLE;
 use fluidnerf_core::{Image, RenderSettings};
 use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
@@ -142,14 +142,8 @@ pub fn render(
         if !(step > 0.0 && step.is_finite()) {
             return Err(err(format!("step: must be a positive number of world units, got {}", num(step))));
         }
-        let diagonal = scene.inner.aabb.size().length();
-        if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {
-            return Err(err(format!(
-                "step: {step:e} would take more than {MAX_SAMPLES_ON_DIAGONAL} samples along the box's diagonal \
-                 ({diagonal:.4} {units}); give a step of at least {:.3e}",
-                diagonal / MAX_SAMPLES_ON_DIAGONAL,
-                units = scene.inner.units
-            )));
+        if let Some(problem) = fluidnerf_core::render::step_too_fine(&scene.inner.aabb, step, &scene.inner.units) {
+            return Err(err(format!("step: {problem}")));
         }
     }
     let volume = volume_from_py(&volume, scene.inner.aabb)?;

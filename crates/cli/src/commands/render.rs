@@ -260,17 +260,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("reading the scene {}", scene_path.display()))?;
     fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, &scene.root)?;
     // Checked here, not by the renderer at the first view, when the output folder is made.
-    if let Some(step) = args.step {
-        let diagonal = scene.aabb.size().length();
-        let most = fluidnerf_core::render::MAX_SAMPLES_ON_DIAGONAL;
-        if diagonal / step > most {
-            bail!(
-                "--step {step:e} would take more than {most} samples along the box's diagonal ({diagonal:.4} {}); \
-                 give a step of at least {:.3e}",
-                scene.units,
-                diagonal / most
-            );
-        }
+    if let Some(problem) = args.step.and_then(|s| fluidnerf_core::render::step_too_fine(&scene.aabb, s, &scene.units)) {
+        bail!("--step {problem}");
     }
     let flow = match &args.flow_axis {
         Some(a) if a.len() == 3 && a.iter().all(|v| v.is_finite()) && a.iter().any(|&v| v != 0.0) => {
