@@ -84,6 +84,23 @@ fn windows_run_separately_and_finished_equal_the_run_in_one_piece() {
     let e = stderr(&out);
     assert!(e.contains("window(s) 1, 2, 3 of 4 have not finished") && e.contains("w001.done.json"), "{e}");
 
+    // Window 1 does not warm-start from a window trained on other images: one pixel of an
+    // image of window 0 changed, it is refused, naming window 0's checkpoint.
+    let image = d.join("scene/images/cam000_t00.png");
+    let bytes = std::fs::read(&image).expect("reads the image");
+    let mut pixels = image::load_from_memory(&bytes).expect("decodes").to_luma16();
+    let (w, h) = pixels.dimensions();
+    pixels.get_pixel_mut(w / 2, h / 2).0[0] ^= 0x0100;
+    pixels.save(&image).expect("writes the image");
+    let out = reconstruct(d, "split", &["--window-index", "1"]);
+    let e = stderr(&out);
+    assert!(
+        !out.status.success() && e.contains("w000.checkpoint.safetensors") && e.contains("other images or cameras"),
+        "{e}"
+    );
+    assert!(!d.join("split/windows/w001.checkpoint.safetensors").exists(), "the refused window trained");
+    std::fs::write(&image, &bytes).expect("restores the image");
+
     // Frames 1..5 hold windows 1, 2 and 3; window 0 is done, so they run in order.
     let out = reconstruct(d, "split", &["--frames", "1..5"]);
     ok(&out);

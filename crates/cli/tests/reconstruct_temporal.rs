@@ -175,7 +175,8 @@ fn files(dir: &std::path::Path, sub: &str, suffix: &str) -> Vec<(String, Vec<u8>
 }
 
 /// A run stopped by Ctrl-C inside its second window and then resumed writes exactly what an
-/// uninterrupted run writes; a resume with another window plan or box is refused, naming the file.
+/// uninterrupted run writes; a resume with another window plan, box or images is refused,
+/// naming the file.
 #[cfg(unix)]
 #[test]
 fn an_interrupted_windowed_run_resumes_to_the_same_result() {
@@ -242,6 +243,25 @@ fn an_interrupted_windowed_run_resumes_to_the_same_result() {
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success() && err.contains("progress.json") && err.contains("box"), "{err}");
     std::fs::write(&transforms, &original).expect("restores the scene");
+    // Nor other images: one pixel changed in an image of the finished window, then in one of
+    // the window that was running only; each refusal names that window's checkpoint.
+    for (image, checkpoint) in [("cam000_t00.png", "w000.checkpoint"), ("cam003_t04.png", "w001.checkpoint")] {
+        let image = d.join("scene/images").join(image);
+        let bytes = std::fs::read(&image).expect("reads the image");
+        let mut pixels = image::load_from_memory(&bytes).expect("decodes").to_luma16();
+        let (w, h) = pixels.dimensions();
+        pixels.get_pixel_mut(w / 2, h / 2).0[0] ^= 0x0100;
+        pixels.save(&image).expect("writes the image");
+        let before = std::fs::read(d.join("cut/report.json")).expect("report");
+        let refused = fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>());
+        let err = String::from_utf8_lossy(&refused.stderr);
+        assert!(
+            !refused.status.success() && err.contains(checkpoint) && err.contains("other images or cameras"),
+            "{err}"
+        );
+        assert!(std::fs::read(d.join("cut/report.json")).expect("kept") == before, "a refused resume wrote");
+        std::fs::write(&image, &bytes).expect("restores the image");
+    }
     ok(&fluidnerf(d, &resume.iter().map(String::as_str).collect::<Vec<_>>()));
     let (full, cut) = (d.join("full"), d.join("cut"));
     assert_eq!(report(&cut)["status"], "finished");

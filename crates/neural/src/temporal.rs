@@ -391,6 +391,8 @@ pub struct WindowInfo {
     pub count: usize,
     /// Frame indices of the window.
     pub frames: Range<usize>,
+    /// The fingerprint of the views the window trains on ([`Prepared::fingerprint`]).
+    pub views: String,
 }
 
 /// One trained window.
@@ -407,6 +409,8 @@ pub struct TrainedWindow<F> {
     pub report: TrainReport,
     /// Fraction of the box occupied (1 without empty-space skipping).
     pub occupied_fraction: f64,
+    /// The fingerprint of the views it was trained on ([`Prepared::fingerprint`]).
+    pub views: String,
 }
 
 /// The result of [`train_windows`].
@@ -511,7 +515,8 @@ pub fn train_windows<F: TrainableField + Clone>(
             on_event(WindowEvent::Iteration(info, s))
         })?;
         out.push(w);
-        let info = WindowInfo { index: k, count: plan.len(), frames: plan[k].clone() };
+        let views = out.last().map(|w| w.views.clone()).unwrap_or_default();
+        let info = WindowInfo { index: k, count: plan.len(), frames: plan[k].clone(), views };
         let stopped = out.last().is_some_and(|w| w.report.stop_reason == StopReason::Interrupted);
         if stopped || out.last().is_some_and(|w| on_event(WindowEvent::Finished(&info, w)).is_break()) {
             interrupted = stopped || k + 1 < plan.len();
@@ -573,15 +578,13 @@ pub fn train_window<F: TrainableField + Clone>(
     let Some(range) = plan.get(k) else {
         return Err(NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len())));
     };
-    let origin = window_origin(windows.time_origin, times, range);
     let axis = match &start {
         WindowStart::Finished(l, _) | WindowStart::Resume(l) => l.field.time_on_frame_axis(),
         WindowStart::Warm(f) | WindowStart::Fresh(f) => f.time_on_frame_axis(),
     };
-    let time_axis = if axis { TimeAxis::Frames } else { TimeAxis::Time };
-    let sub = window_problem(problem, times, range.clone(), origin, time_axis);
-    let prep = Prepared::with_masks(&sub, train_cfg, &window_masks(problem, masks, times, range.clone()))?;
-    let info = WindowInfo { index: k, count: plan.len(), frames: range.clone() };
+    let (origin, time_axis, prep) = prepare_window(problem, masks, times, range, train_cfg, windows, axis)?;
+    let views = prep.fingerprint();
+    let info = WindowInfo { index: k, count: plan.len(), frames: range.clone(), views: views.clone() };
     let trained = |learner: Learner<F>, report: TrainReport| TrainedWindow {
         frames: range.clone(),
         time_origin: origin,
@@ -590,6 +593,7 @@ pub fn train_window<F: TrainableField + Clone>(
         meta: prep.meta.clone(),
         report,
         occupied_fraction: prep.occupied_fraction(),
+        views: views.clone(),
     };
     let warm = windows.warm_start && k > 0;
     let mut cfg = train_cfg.clone();
@@ -653,6 +657,48 @@ pub fn train_window<F: TrainableField + Clone>(
         train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iteration(&info, s))?
     };
     Ok(trained(learner, report))
+}
+
+/// Window `range` of `problem` prepared for training as [`train_window`] prepares it, for a
+/// field that reads time on the frame axis (`frame_axis`) or not: its time origin, time axis
+/// and training data.
+#[allow(clippy::too_many_arguments)]
+fn prepare_window(
+    problem: &Problem,
+    masks: &ViewMasks,
+    times: &[f64],
+    range: &Range<usize>,
+    train_cfg: &TrainConfig,
+    windows: &WindowConfig,
+    frame_axis: bool,
+) -> Result<(f64, TimeAxis, Prepared), NeuralError> {
+    let origin = window_origin(windows.time_origin, times, range);
+    let time_axis = if frame_axis { TimeAxis::Frames } else { TimeAxis::Time };
+    let sub = window_problem(problem, times, range.clone(), origin, time_axis);
+    let prep = Prepared::with_masks(&sub, train_cfg, &window_masks(problem, masks, times, range.clone()))?;
+    Ok((origin, time_axis, prep))
+}
+
+/// The fingerprint ([`Prepared::fingerprint`]) of the views that window `k` of `plan` trains
+/// on, as [`train_window`] prepares them for a field that reads time on the frame axis
+/// (`frame_axis`, [`TrainableField::time_on_frame_axis`]) or not: a saved window is continued
+/// only on the views it was trained on.
+#[allow(clippy::too_many_arguments)]
+pub fn window_fingerprint(
+    problem: &Problem,
+    masks: &ViewMasks,
+    times: &[f64],
+    plan: &[Range<usize>],
+    k: usize,
+    train_cfg: &TrainConfig,
+    windows: &WindowConfig,
+    frame_axis: bool,
+) -> Result<String, NeuralError> {
+    let Some(range) = plan.get(k) else {
+        return Err(NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len())));
+    };
+    let (_, _, prep) = prepare_window(problem, masks, times, range, train_cfg, windows, frame_axis)?;
+    Ok(prep.fingerprint())
 }
 
 /// The report of a window that had already converged when it was saved.

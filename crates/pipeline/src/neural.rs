@@ -673,7 +673,20 @@ fn check_checkpoint(path: &std::path::Path, aabb: &fluidnerf_core::Aabb, views: 
             ),
         ));
     }
-    if fluidnerf_neural::weights::checkpoint_tag(path, VIEWS_TAG)?.is_some_and(|saved| saved != views) {
+    check_views(path, || Ok(views.to_string()))
+}
+
+/// Refuses to continue a checkpoint whose recorded fingerprint of its training views differs
+/// from `views()`, the fingerprint of the views it would continue on (computed only for a
+/// checkpoint that records one: one written before it was recorded is not checked).
+pub(crate) fn check_views(
+    path: &std::path::Path,
+    views: impl FnOnce() -> Result<String, PipelineError>,
+) -> Result<(), PipelineError> {
+    let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, VIEWS_TAG)? else {
+        return Ok(());
+    };
+    if saved != views()? {
         return Err(PipelineError::file(
             path,
             "was trained on other images or cameras than the scene's now (the fingerprint of its training \
@@ -684,10 +697,14 @@ fn check_checkpoint(path: &std::path::Path, aabb: &fluidnerf_core::Aabb, views: 
     Ok(())
 }
 
+/// Writes the checkpoint `name` of the run folder (training state and the fingerprint of the
+/// views trained on, `views`) atomically.
 pub(crate) fn write_checkpoint_to<F: TrainableField>(
     dir: &RunDir,
     name: &str,
     learner: &Learner<F>,
+    views: &str,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    dir.write_bytes(name, &fluidnerf_neural::weights::checkpoint_bytes(learner)?)
+    let tags = [(VIEWS_TAG, views.to_string())];
+    dir.write_bytes(name, &fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?)
 }

@@ -19,8 +19,8 @@ use fluidnerf_core::num;
 use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_neural::temporal::{
-    field_for_window, frame_times, infer_time_step, train_windows, FrameStart, ResumeState, StitchedField,
-    TemporalRecord, TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
+    field_for_window, frame_times, infer_time_step, train_windows, window_fingerprint, FrameStart, ResumeState,
+    StitchedField, TemporalRecord, TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
 };
 use fluidnerf_neural::train::ViewMasks;
 use fluidnerf_neural::train::{Learner, TrainConfig, TrainReport};
@@ -29,7 +29,7 @@ use fluidnerf_neural::window::plan_windows;
 use fluidnerf_neural::TrainableField;
 use serde::{Deserialize, Serialize};
 
-use crate::neural::{estimate_memory, run_voxel_start, write_checkpoint_to};
+use crate::neural::{check_views, estimate_memory, run_voxel_start, write_checkpoint_to};
 use crate::{
     check_memory, finish, mean, peak_rss, write_volume, Family, History, LossKind, Method, MethodConfig, PipelineError,
     RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails,
@@ -121,6 +121,26 @@ fn checkpoint_name(k: usize) -> String {
 /// its final checkpoint), relative to the run folder.
 fn done_name(k: usize) -> String {
     format!("windows/w{k:03}.done.json")
+}
+
+/// Refuses the checkpoint `name` of window `k` (loaded into `learner`) when it was trained on
+/// other images or cameras than the window's now: a window continues only on its own views.
+#[allow(clippy::too_many_arguments)]
+fn check_window_views<F: TrainableField>(
+    dir: &RunDir,
+    name: &str,
+    k: usize,
+    learner: &Learner<F>,
+    (problem, masks): (&fluidnerf_neural::train::Problem, &ViewMasks),
+    spec: &TemporalSpec,
+    progress: &Progress,
+) -> Result<(), PipelineError> {
+    check_views(&dir.path(name), || {
+        let plan: Vec<std::ops::Range<usize>> = progress.plan.iter().map(|&[a, b]| a..b).collect();
+        let frame_axis = learner.field.time_on_frame_axis();
+        let times = &progress.frame_times;
+        Ok(window_fingerprint(problem, masks, times, &plan, k, &spec.train, &spec.windows, frame_axis)?)
+    })
 }
 
 /// Window `k`'s done file, if it has finished.
@@ -407,18 +427,20 @@ impl Ctx<'_> {
         init: &F,
         progress: &Progress,
     ) -> Result<ResumeState<F>, PipelineError> {
-        let load = |name: &str| -> Result<Learner<F>, PipelineError> {
+        // Every saved window, checked against the views it would continue on.
+        let load = |k: usize, name: &str| -> Result<Learner<F>, PipelineError> {
             let mut learner = Learner::new(init.clone());
             fluidnerf_neural::weights::load_checkpoint(&self.dir.path(name), &mut learner)?;
+            check_window_views(self.dir, name, k, &learner, (self.problem, self.masks), self.spec, progress)?;
             Ok(learner)
         };
         let mut state = ResumeState::default();
-        for w in &progress.finished {
-            state.finished.push((load(&w.checkpoint)?, w.report.clone()));
+        for (k, w) in progress.finished.iter().enumerate() {
+            state.finished.push((load(k, &w.checkpoint)?, w.report.clone()));
         }
         let next = checkpoint_name(progress.finished.len());
         if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() {
-            state.running = Some(load(&next)?);
+            state.running = Some(load(progress.finished.len(), &next)?);
         }
         log::info!(
             "resuming: {} of {} windows finished{}",
@@ -486,7 +508,7 @@ impl Ctx<'_> {
                     WindowEvent::Finished(w, done) => {
                         // The checkpoint first: a window listed as finished always has its final one.
                         let name = checkpoint_name(progress.finished.len());
-                        let saved = write_checkpoint_to(dir, &name, &done.learner).and_then(|_| {
+                        let saved = write_checkpoint_to(dir, &name, &done.learner, &done.views).and_then(|_| {
                             progress.finished.push(FinishedWindow { checkpoint: name, report: done.report.clone() });
                             dir.write_json("windows/progress.json", &progress)
                         });
@@ -514,7 +536,7 @@ impl Ctx<'_> {
                     interrupted = true;
                 }
                 if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
-                    match write_checkpoint_to(dir, &checkpoint_name(w.index), s.learner) {
+                    match write_checkpoint_to(dir, &checkpoint_name(w.index), s.learner, &w.views) {
                         Ok(path) => {
                             let _ = session.emit(RunEvent::Checkpoint { path: &path });
                         }
@@ -545,7 +567,7 @@ impl Ctx<'_> {
             let bytes = fluidnerf_neural::weights::weights_bytes(&w.learner.field)?;
             result_bytes += bytes.len() as u64;
             dir.write_bytes(&name, &bytes)?;
-            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner)?;
+            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner, &w.views)?;
             records.push(WindowRecord {
                 frames: [w.frames.start, w.frames.end],
                 time_origin: w.time_origin,
@@ -870,9 +892,12 @@ fn train_some<F: TrainableField + Clone>(
     use fluidnerf_neural::temporal::{train_window, WindowStart};
     let times = &progress.frame_times;
     let plan: Vec<std::ops::Range<usize>> = progress.plan.iter().map(|&[a, b]| a..b).collect();
-    let load = |name: &str| -> Result<Learner<F>, PipelineError> {
+    // A saved window, checked against the views it was trained on.
+    let load = |k: usize| -> Result<Learner<F>, PipelineError> {
         let mut learner = Learner::new(init.clone());
-        fluidnerf_neural::weights::load_checkpoint(&dir.path(name), &mut learner)?;
+        let name = checkpoint_name(k);
+        fluidnerf_neural::weights::load_checkpoint(&dir.path(&name), &mut learner)?;
+        check_window_views(dir, &name, k, &learner, (problem, masks), spec, progress)?;
         Ok(learner)
     };
     let mut outcomes = Vec::new();
@@ -893,7 +918,7 @@ fn train_some<F: TrainableField + Clone>(
         }
         let start = if dir.path(&checkpoint_name(k)).is_file() {
             log::info!("window {k}: continuing from {}", checkpoint_name(k));
-            WindowStart::Resume(load(&checkpoint_name(k))?)
+            WindowStart::Resume(load(k)?)
         } else if progress.warm_start && k > 0 {
             if read_done(dir.root(), k - 1)?.is_none() {
                 return Err(PipelineError::RunDir {
@@ -908,7 +933,7 @@ fn train_some<F: TrainableField + Clone>(
                     ),
                 });
             }
-            WindowStart::Warm(load(&checkpoint_name(k - 1))?.field)
+            WindowStart::Warm(load(k - 1)?.field)
         } else {
             WindowStart::Fresh(init.clone())
         };
@@ -925,7 +950,7 @@ fn train_some<F: TrainableField + Clone>(
             config.seed,
             start,
             None,
-            |_, s| {
+            |info, s| {
                 let event = RunEvent::Iteration {
                     window: Some(pos),
                     iteration: s.iteration,
@@ -935,7 +960,7 @@ fn train_some<F: TrainableField + Clone>(
                 };
                 let flow = session.emit(event);
                 if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
-                    if let Err(e) = write_checkpoint_to(dir, &checkpoint_name(k), s.learner) {
+                    if let Err(e) = write_checkpoint_to(dir, &checkpoint_name(k), s.learner, &info.views) {
                         io_error = Some(e);
                         return ControlFlow::Break(());
                     }
@@ -947,7 +972,7 @@ fn train_some<F: TrainableField + Clone>(
             return Err(e);
         }
         // The checkpoint first: a window with a done file always has its final checkpoint.
-        write_checkpoint_to(dir, &checkpoint_name(k), &trained.learner)?;
+        write_checkpoint_to(dir, &checkpoint_name(k), &trained.learner, &trained.views)?;
         let interrupted = trained.report.stop_reason == fluidnerf_neural::train::StopReason::Interrupted;
         outcomes.push(WindowOutcome {
             index: k,
