@@ -288,6 +288,9 @@ fn cfd_phantoms_from_any_preset_and_their_steps() {
     for (extra, needle) in [
         (&["--phantom", "plume", "--times", "51"][..], "solver steps"),
         (&["--phantom", "plume", "--cfd-step", "7"][..], "cfd_step"),
+        // A step no phantom reads was ignored without a word.
+        (&["--cfd-step", "50"][..], "applies to the CFD phantoms (plume, cfd-jet) only"),
+        (&["--phantom", "plume", "--times", "40,50", "--cfd-step", "60"][..], "give one or the other"),
     ] {
         let o = run_small(&tmp.path().join("bad"), extra);
         assert!(!o.status.success(), "{extra:?} should fail");

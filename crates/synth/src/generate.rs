@@ -105,6 +105,29 @@ impl SynthSettings {
                 ));
             }
         }
+        // A solver step that no phantom reads would be ignored without a word.
+        if let Some(step) = self.phantom.cfd_step {
+            if self.phantom.kind.cfd_case().is_none() {
+                return Err(SynthError::invalid(
+                    "phantom.cfd_step",
+                    format!(
+                        "step {step} applies to the CFD phantoms (plume, cfd-jet) only; the {:?} phantom has no \
+                         solver steps",
+                        self.phantom.kind
+                    ),
+                ));
+            }
+            if !self.times.is_empty() {
+                return Err(SynthError::invalid(
+                    "phantom.cfd_step",
+                    format!(
+                        "step {step} is the instant of a static scene, but times {:?} make a series of solver \
+                         steps; give one or the other",
+                        self.times
+                    ),
+                ));
+            }
+        }
         self.rig.validate()?;
         self.lens.validate()?;
         self.image.validate()?;
@@ -583,6 +606,8 @@ mod tests {
         assert_eq!(syn.truth.len(), 1);
         assert_eq!(syn.truth[0].1, CfdCase::Plume.instant(50).expect("decodes"));
         assert!(syn.frames.iter().all(|f| f.clean.min_max().1 > 0.0), "every camera sees the plume");
+        // A series takes its steps from the times alone.
+        s.phantom.cfd_step = None;
         s.times = vec![50.0, 60.0];
         s.resolution = 24;
         s.phantom.kind = PhantomKind::CfdJet;
