@@ -81,13 +81,21 @@ def reconstruct(
     if out is None:
         raise ValueError("out: a run folder on a file system every worker sees is needed")
     out_path = Path(os.fspath(out)).absolute()
-    if scene.root is None:
-        scene.save(out_path / "scene")
     cfg = build_config(scene, method, config=config, preset=preset, **options)
+    whole = cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame")
+    if scene.root is None:
+        # The settings and the folder are checked before the scene is written into it: a
+        # refused run leaves the folder as it was.
+        if whole:
+            _ext.check_run_folder(os.fspath(out_path), "refuse")
+        else:
+            _ext.check_window_folder(os.fspath(out_path))
+        scene.save(out_path / "scene")
+        cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cfg_json = json.dumps(cfg)
     root = str(scene.root)
     token = uuid.uuid4().hex[:8]
-    if cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame"):
+    if whole:
         client.submit(
             _whole_run, root, cfg_json, str(out_path), key=f"fluidnerf-run-{token}", pure=False
         ).result()

@@ -155,3 +155,25 @@ def test_a_plan_of_negative_or_fractional_counts_is_refused_naming_the_argument(
         fluidnerf.plan_windows(5, True, 0)
     with pytest.raises(TypeError, match="n_frames: expected an integer, got 5.0"):
         fluidnerf.plan_windows(5.0, 2, 0)
+
+
+def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(
+    tr_scene, static_scene, serial, tmp_path
+):
+    """A scene from arrays was saved into out/scene before the folder was checked: a run
+    refused because the folder held a finished run left a scene inside that run's folder."""
+    before = sorted(p.name for p in serial.path.iterdir())
+    K, poses, _, _ = tr_scene.camera_arrays()
+    times = np.array(tr_scene.times, dtype=np.float64)
+    scene = fluidnerf.scene_from_arrays(K, poses, tr_scene.images(), tr_scene.aabb, times=times)
+    # No client is used: the refusal comes before any task.
+    with pytest.raises(fluidnerf.FluidNerfError, match="already holds a finished run"):
+        fluidnerf.dask.reconstruct(None, scene, TR_METHOD, serial.path, **TR_OPTIONS)
+    K, poses, _, _ = static_scene.camera_arrays()
+    still = fluidnerf.scene_from_arrays(K, poses, static_scene.images(), static_scene.aabb)
+    with pytest.raises(fluidnerf.FluidNerfError, match="already holds a finished run"):
+        fluidnerf.dask.reconstruct(None, still, "asart", serial.path, resolution=8)
+    assert sorted(p.name for p in serial.path.iterdir()) == before
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(fluidnerf.FluidNerfError, match="file: exists and is not a folder"):
+        fluidnerf.dask.reconstruct(None, scene, TR_METHOD, tmp_path / "file", **TR_OPTIONS)

@@ -508,9 +508,19 @@ impl RunDir {
     /// each window is locked while it trains ([`RunDir::lock_file`]).
     pub fn for_windows(root: impl Into<PathBuf>, scene_root: Option<&Path>) -> Result<Self, PipelineError> {
         let root: PathBuf = root.into();
+        Self::check_windows(&root, scene_root)?;
+        std::fs::create_dir_all(&root)
+            .map_err(|e| PipelineError::RunDir { path: root.clone(), why: format!("cannot create the folder: {e}") })?;
+        Ok(RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new() })
+    }
+
+    /// The refusals of [`RunDir::for_windows`], without creating anything: for a caller that
+    /// writes into the folder before its windows are trained (the Python API saves a scene
+    /// built from arrays into [`OWN_SCENE`]).
+    pub fn check_windows(root: impl Into<PathBuf>, scene_root: Option<&Path>) -> Result<(), PipelineError> {
+        let root: PathBuf = root.into();
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
         check_new_run_folder(&root, scene_root)?;
-        std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
         let dir = RunDir { root: root.clone(), lock: None, resume: false, created: false, kept_runs: Vec::new() };
         if dir.state() == DirState::Foreign {
             return Err(dir.foreign());
@@ -531,7 +541,7 @@ impl RunDir {
                 )));
             }
         }
-        Ok(dir)
+        Ok(())
     }
 
     /// Takes the lock file `name` (relative to the folder) until the guard is dropped; refused

@@ -188,6 +188,7 @@ fn _fluidnerf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run::default_config, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_config, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_run_folder, m)?)?;
+    m.add_function(wrap_pyfunction!(run::check_window_folder, m)?)?;
     m.add_function(wrap_pyfunction!(run::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(run::window_plan, m)?)?;
     m.add_function(wrap_pyfunction!(run::reconstruct_windows, m)?)?;

@@ -132,6 +132,14 @@ pub fn check_run_folder(out: PathBuf, overwrite: &str) -> PyResult<()> {
     guard(|| RunDir::check(&out, overwrite).map_err(|e| err(e.to_string())))
 }
 
+/// Refuses `out` as the folder of a time-resolved run trained window by window as
+/// `reconstruct_windows` would, without writing anything: checked before a scene built from
+/// arrays is saved into `out/scene`.
+#[pyfunction]
+pub fn check_window_folder(out: PathBuf) -> PyResult<()> {
+    guard(|| RunDir::check_windows(&out, None).map_err(|e| err(e.to_string())))
+}
+
 /// Runs the configuration (JSON text) on the saved `scene` into `out` with the GIL released;
 /// returns `report.json`'s text. `callback(event: dict)` sees every event; Ctrl-C (and an
 /// exception in the callback) stops the run, which writes its results, and is raised after.
