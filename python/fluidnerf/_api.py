@@ -536,15 +536,17 @@ def reconstruct(
     _check_callback(callback)
     scene = _as_scene(scene)
     out_path = Path(os.fspath(out)) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
-    if scene.root is None:
-        # The folder is checked before the scene is written into it: a refused run leaves it
-        # as it was. Resuming continues on the scene given, saved over the run's own.
-        _ext.check_run_folder(os.fspath(out_path), overwrite)
-        scene.save(out_path / "scene", force=overwrite in ("force", "resume"))
     if overwrite == "resume" and config is None and (out_path / "config.json").is_file():
         # A resumed run continues with the settings it was started with (as --resume).
         config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
+    if scene.root is None:
+        # The settings and the folder are checked before the scene is written into it: a
+        # refused run leaves it as it was. Resuming continues on the scene given, saved over
+        # the run's own.
+        _ext.check_run_folder(os.fspath(out_path), overwrite)
+        scene.save(out_path / "scene", force=overwrite in ("force", "resume"))
+        cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cb, bars = _progress_callback(_warning_callback(callback), progress)
     try:
         _ext.reconstruct(scene, json.dumps(cfg), os.fspath(out_path), overwrite, cb)

@@ -333,3 +333,9 @@ def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static
     with pytest.raises(fluidnerf.FluidNerfError, match="nothing to resume"):
         fluidnerf.reconstruct(scene, "fast", tmp_path / "new", overwrite="resume", **options)
     assert not (tmp_path / "new").exists()
+    # Nor is one refused for its settings: the scene was saved before they were checked.
+    with pytest.raises(fluidnerf.FluidNerfError, match="stopping.max_iterations: must be at least 1"):
+        fluidnerf.reconstruct(
+            scene, "asart", tmp_path / "new", **{**options, "stopping": {"max_iterations": 0}}
+        )
+    assert not (tmp_path / "new").exists()
