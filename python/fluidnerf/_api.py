@@ -431,10 +431,16 @@ class Run:
         return np.stack([x, y, z], axis=-1)
 
     def save(self, folder: PathLike) -> Run:
-        """Copies the run folder to ``folder`` (which must not exist) and returns that copy."""
+        """Copies the run folder to ``folder`` (which must not exist, nor lie inside the run's
+        folder) and returns that copy."""
         dest = Path(os.fspath(folder))
         if dest.exists():
             raise FluidNerfError(f"{dest}: already exists; choose a new folder")
+        if self.path.resolve() in dest.resolve().parents:
+            # It would be copied into itself, and left among the run's files.
+            raise FluidNerfError(
+                f"{dest}: lies inside the run's own folder {self.path}; choose a folder outside it"
+            )
         shutil.copytree(self.path, dest, ignore=shutil.ignore_patterns(".lock", "*.lock"))
         return open_run(dest)
 

@@ -63,6 +63,15 @@ def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(stati
 
     copy = run.save(tmp_path / "copy")
     np.testing.assert_array_equal(copy.volume, run.volume)
+    # Not into a folder that exists, its own or another run's, nor inside its own folder (a copy
+    # there was left among the run's files, and copied again with every later copy).
+    for folder in (run.path, copy.path):
+        with pytest.raises(fluidnerf.FluidNerfError, match="already exists; choose a new folder"):
+            run.save(folder)
+    before = sorted(p.name for p in run.path.iterdir())
+    with pytest.raises(fluidnerf.FluidNerfError, match="lies inside the run's own folder"):
+        run.save(run.path / "copy")
+    assert sorted(p.name for p in run.path.iterdir()) == before
 
 
 def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
