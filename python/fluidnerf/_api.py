@@ -432,7 +432,8 @@ class Run:
 
     def save(self, folder: PathLike) -> Run:
         """Copies the run folder to ``folder`` (which must not exist, nor lie inside the run's
-        folder) and returns that copy."""
+        folder) and returns that copy. A run's own scene (one built from arrays, saved in its
+        ``scene/``) goes with it, and the copy's settings name the copy's."""
         dest = Path(os.fspath(folder))
         if dest.exists():
             raise FluidNerfError(f"{dest}: already exists; choose a new folder")
@@ -442,6 +443,18 @@ class Run:
                 f"{dest}: lies inside the run's own folder {self.path}; choose a folder outside it"
             )
         shutil.copytree(self.path, dest, ignore=shutil.ignore_patterns(".lock", "*.lock"))
+        # A scene inside the run's folder (one built from arrays, in scene/) is copied with it:
+        # the copy's settings (its own and its start runs') read the copy's, not the original's.
+        src, copied = self.path.resolve(), dest.resolve()
+        for path in sorted(copied.rglob("config.json")):
+            try:
+                cfg = json.loads(path.read_text())
+                scene = Path(cfg["scene"])
+            except (OSError, ValueError, TypeError, KeyError):
+                continue
+            if scene.is_absolute() and src in scene.resolve().parents:
+                cfg["scene"] = str(copied / scene.resolve().relative_to(src))
+                path.write_text(json.dumps(cfg, indent=2) + "\n")
         return open_run(dest)
 
 

@@ -5,6 +5,7 @@ callbacks that watch and stop a run."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import threading
@@ -323,6 +324,24 @@ def test_a_scene_built_from_arrays_is_reconstructed_in_its_run_folder(static_sce
         check=True,
     )
     np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "cli").volume, run.volume)
+    # A copy reads its own copy of the scene: it named the original's, so it broke when the
+    # original was removed.
+    copy = run.save(tmp_path / "copy")
+    assert copy.config["scene"] == str((tmp_path / "copy" / "scene").resolve())
+    shutil.rmtree(tmp_path / "run")
+    subprocess.run(
+        [
+            cli,
+            "reconstruct",
+            "--config",
+            str(tmp_path / "copy" / "config.json"),
+            "-o",
+            str(tmp_path / "again"),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "again").volume, copy.volume)
 
 
 def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static_scene, tmp_path):
