@@ -160,6 +160,20 @@ fn slices_comparison_and_isosurface() {
         tn.to_str().expect("utf-8"),
     ]));
     assert!(out_npy.join("compare_z_0.500.png").is_file());
+    // Without slices a truth is drawn nowhere: it was taken and ignored without a word.
+    let unused = dir.path().join("unused");
+    let refused = fluidnerf(&[
+        "export",
+        r.to_str().expect("utf-8"),
+        "--out",
+        unused.to_str().expect("utf-8"),
+        "--npy",
+        "--compare",
+        tn.to_str().expect("utf-8"),
+    ]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("add --slices"), "--compare without slices: {err}");
+    assert!(!unused.exists(), "a refused export wrote");
     let ply = std::fs::read(out.join("isosurface.ply")).expect("a mesh");
     assert!(ply.starts_with(b"ply\n"));
     let obj = std::fs::read_to_string(out.join("isosurface.obj")).expect("a mesh");

@@ -243,6 +243,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if nothing_chosen {
         slices = vec![(Axis::X, 0.5), (Axis::Y, 0.5), (Axis::Z, 0.5)];
     }
+    if let (Some(truth), true) = (&args.compare, slices.is_empty()) {
+        bail!(
+            "--compare {}: the truth is drawn beside slices only, and none are asked for; add --slices (e.g. \
+             --slices z=0.5)",
+            truth.display()
+        );
+    }
     if let Some(n) = args.resolution.filter(|n| !(1..=MAX_RESOLUTION).contains(n)) {
         bail!("--resolution must be between 1 and {MAX_RESOLUTION} voxels, got {n}");
     }
