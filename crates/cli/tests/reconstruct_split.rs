@@ -206,4 +206,9 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
     assert!(!out.status.success() && stderr(&out).contains("the range is empty"), "{}", stderr(&out));
     let out = fluidnerf(d, &["reconstruct", "scene", "-o", "y", "--method", "asart", "--window-index", "0"]);
     assert!(!out.status.success() && stderr(&out).contains("--window-index do(es) not apply to --method asart"));
+    // An overlap without windows to overlap was recorded and ignored without a word.
+    let out =
+        fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "tr-fast", "--window", "0", "--overlap", "1"]);
+    assert!(!out.status.success() && stderr(&out).contains("no windows to overlap"), "{}", stderr(&out));
+    assert!(!d.join("z").exists(), "a refused run wrote");
 }

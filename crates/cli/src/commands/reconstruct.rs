@@ -805,6 +805,13 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         }
         if let Some(o) = t.overlap {
             spec.windows.overlap = o;
+            // One field for every frame has no windows whose overlap the option could set.
+            if spec.windows.frames == 0 {
+                bail!(
+                    "--overlap {o}: the run trains one field on every frame (windows of 0 frames), so there are no \
+                     windows to overlap; give --window N frames per window with it, or leave --overlap out"
+                );
+            }
         }
         if t.no_warm_start {
             spec.windows.warm_start = false;
