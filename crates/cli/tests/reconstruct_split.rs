@@ -211,4 +211,9 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
         fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "tr-fast", "--window", "0", "--overlap", "1"]);
     assert!(!out.status.success() && stderr(&out).contains("no windows to overlap"), "{}", stderr(&out));
     assert!(!d.join("z").exists(), "a refused run wrote");
+    // Nor does a time step apply to static fields, one per frame.
+    let out = fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "static-per-frame", "--time-step", "0.5"]);
+    let e = stderr(&out);
+    assert!(!out.status.success() && e.contains("--time-step do(es) not apply to --method static-per-frame"), "{e}");
+    assert!(!d.join("z").exists(), "a refused run wrote");
 }

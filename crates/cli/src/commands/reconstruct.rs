@@ -483,9 +483,11 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
         ]));
     }
     if method == Method::StaticPerFrame {
+        // A static field per frame reads no time.
         wrong.extend(given(&[
             ("--window", t.window.is_some()),
             ("--overlap", t.overlap.is_some()),
+            ("--time-step", t.time_step.is_some()),
             ("--time-origin", t.time_origin.is_some()),
         ]));
     }
