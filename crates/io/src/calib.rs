@@ -69,7 +69,7 @@
 use std::path::{Path, PathBuf};
 
 use fluidnerf_core::glam::{DAffine3, DMat3, DQuat, DVec3};
-use fluidnerf_core::{Camera, Distortion, Intrinsics};
+use fluidnerf_core::{num, Camera, Distortion, Intrinsics};
 use serde_json::{json, Map, Value};
 
 use crate::{atomic_write, IoError};
@@ -1094,7 +1094,8 @@ fn colmap_camera(model: &str, width: u32, height: u32, p: &[f64]) -> Result<(Int
 fn colmap_pose(q: [f64; 4], t: [f64; 3]) -> Result<DAffine3, String> {
     let q = DQuat::from_xyzw(q[1], q[2], q[3], q[0]);
     if !q.is_finite() || (q.length() - 1.0).abs() > 1e-3 {
-        return Err(format!("quaternion (w, x, y, z) = ({}, {}, {}, {}) is not a unit quaternion", q.w, q.x, q.y, q.z));
+        let (w, x, y, z) = (num(q.w), num(q.x), num(q.y), num(q.z));
+        return Err(format!("quaternion (w, x, y, z) = ({w}, {x}, {y}, {z}) is not a unit quaternion"));
     }
     let t = DVec3::from_array(t);
     if !t.is_finite() {

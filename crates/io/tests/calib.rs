@@ -308,6 +308,16 @@ fn colmap_errors_name_the_file_and_line() {
             "{err}"
         );
     }
+    // A huge quaternion was printed with all of its three hundred digits.
+    std::fs::write(dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n2 PINHOLE 64 48 50 50 32 24\n")
+        .expect("write");
+    std::fs::write(
+        dir.path().join("images.txt"),
+        text.replacen("1 1 0 0 0 0 0 10 1 front.png", "1 1e300 0 0 0 0 0 10 1 front.png", 1),
+    )
+    .expect("write");
+    let err = read_colmap(dir.path()).expect_err("not a unit quaternion").to_string();
+    assert!(err.contains("images.txt: line") && err.contains("= (1e300, 0, 0, 0) is not a unit quaternion"), "{err}");
 }
 
 /// Bytes of a COLMAP binary model built by hand from the documented layout
