@@ -94,4 +94,20 @@ fn bad_budgets_are_refused_up_front_and_force_spares_other_folders() {
     std::fs::write(d.join("mine/runs/notes.txt"), "mine").expect("writes");
     refused(&fluidnerf(d, &["study", "--preset", "smoke", "--force", "-o", "mine", "-q"]), "not a study folder");
     assert!(d.join("mine/runs/notes.txt").is_file());
+    // Nor is a study written into another kind of folder, or over a report of the user's: into
+    // a run's folder it replaced the run's report.html.
+    demo_scene(d, "blobs", 4, 16, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "sart", "--resolution", "8", "-q"]));
+    let html = std::fs::read(d.join("run/report.html")).expect("the run's report");
+    let study = |out: &str| fluidnerf(d, &["study", "--preset", "smoke", "--methods", "sart", "-o", out, "-q"]);
+    refused(&study("run"), "is a reconstruction run folder");
+    assert!(std::fs::read(d.join("run/report.html")).expect("kept") == html, "the run's report was replaced");
+    assert!(!d.join("run/scenes").exists() && !d.join("run/study.json").exists(), "a refused study wrote");
+    refused(&study("scene"), "is a scene folder");
+    assert!(!d.join("scene/scenes").exists(), "a refused study wrote");
+    std::fs::create_dir_all(d.join("notes")).expect("mkdir");
+    std::fs::write(d.join("notes/report.html"), "mine").expect("writes");
+    refused(&study("notes"), "holds report.html but no study.json");
+    assert_eq!(std::fs::read_to_string(d.join("notes/report.html")).expect("kept"), "mine");
+    assert!(!d.join("notes/scenes").exists(), "a refused study wrote");
 }

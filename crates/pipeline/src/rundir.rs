@@ -64,6 +64,8 @@ pub enum FolderKind {
     Render,
     /// A comparison of runs: `compare.json` (written by `compare`).
     Compare,
+    /// A study of methods: `study.json` (written by `study`).
+    Study,
 }
 
 impl FolderKind {
@@ -76,6 +78,7 @@ impl FolderKind {
             FolderKind::Export => "an export folder (it holds export.json)",
             FolderKind::Render => "a folder of rendered views (it holds render.json)",
             FolderKind::Compare => "a comparison folder (it holds compare.json)",
+            FolderKind::Study => "a study folder (it holds study.json)",
         }
     }
 }
@@ -93,6 +96,8 @@ pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
         Some(FolderKind::Render)
     } else if has("compare.json") {
         Some(FolderKind::Compare)
+    } else if has("study.json") {
+        Some(FolderKind::Study)
     } else {
         None
     }
@@ -115,6 +120,7 @@ pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<
                     FolderKind::Export => "export folders",
                     FolderKind::Render => "folders of rendered views",
                     FolderKind::Compare => "comparison folders",
+                    FolderKind::Study => "study folders",
                 }
             ),
         }),

@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use fluidnerf_core::num;
 use fluidnerf_pipeline::html::{self, RunSummary};
+use fluidnerf_pipeline::rundir::FolderKind;
 use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunStatus, StoppingPolicy};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{LinePlot, Series};
@@ -320,6 +321,20 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     super::recordable("the study's synth and reconstruct lines", [("--out", args.out.as_path())])?;
     let out = &args.out;
     let record = out.join("study.json");
+    // A study writes its report.html, plots and table at the top of OUT: never into another
+    // kind of fluidnerf folder (a run's report.html was replaced), nor over files of the same
+    // names in a folder that holds no study.
+    fluidnerf_pipeline::rundir::refuse_other_kind(out, FolderKind::Study, "study")?;
+    if !record.is_file() {
+        let written = ["report.html", "study.csv", "against_cameras.png", "against_noise.png"];
+        if let Some(file) = written.into_iter().find(|f| out.join(f).exists()) {
+            bail!(
+                "{} holds {file} but no study.json, so it is not a study folder; a study would overwrite it: choose \
+                 another output folder",
+                out.display()
+            );
+        }
+    }
     if args.force {
         // Only a study's own folders are removed: a folder that is not a study is left as it is.
         if !record.is_file() {
