@@ -788,3 +788,33 @@ fn image_series_and_videos_together_are_refused() {
     );
     assert!(!out.exists(), "nothing is created for a refused import");
 }
+
+/// A transforms.json whose image is missing, or that lists no frame, is refused naming the
+/// file and the frame (the missing image was "cannot resolve PATH: No such file or directory").
+#[test]
+fn a_transforms_json_with_a_missing_image_or_no_frame_is_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("src");
+    image(&src, "a.png");
+    let frame = |name: &str| serde_json::json!({"file_path": name, "transform_matrix": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 90], [0, 0, 0, 1]]});
+    let write = |frames: Vec<serde_json::Value>| {
+        let doc =
+            serde_json::json!({"fl_x": 40, "fl_y": 40, "cx": 15.5, "cy": 11.5, "w": 32, "h": 24, "frames": frames});
+        std::fs::write(src.join("transforms.json"), doc.to_string()).expect("writes");
+    };
+    let out = dir.path().join("out");
+    let import = || fluidnerf(&["import", "--transforms", s(&src), "--aabb", "-10,-10,-10,10,10,10", "-o", s(&out)]);
+    write(vec![frame("a.png"), frame("images/b.png")]);
+    let o = import();
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("transforms.json: frame 1's image") && e.contains("b.png does not exist"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a refused import wrote");
+    write(Vec::new());
+    let o = import();
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("transforms.json: lists no frames"), "{e}");
+    assert!(!out.exists(), "a refused import wrote");
+}

@@ -647,7 +647,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     let (frames, mut from_file) = if let Some(path) = &args.transforms {
         let draft = read_scene_draft(path).context("cannot read the transforms.json")?;
         let root = draft.root.clone();
-        let frames = draft
+        let frames: Vec<Frame> = draft
             .frames
             .into_iter()
             .map(|mut f| {
@@ -655,6 +655,17 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 f
             })
             .collect();
+        let file = fluidnerf_io::scene::scene_file_path(path);
+        ensure!(!frames.is_empty(), "{}: lists no frames (its `frames` is empty): nothing to import", file.display());
+        // Named here with its frame and file, not later as a path that cannot be resolved.
+        if let Some((i, f)) = frames.iter().enumerate().find(|(_, f)| !f.file_path.exists()) {
+            bail!(
+                "{}: frame {i}'s image {} does not exist (`file_path` {:?}, relative to the file's folder)",
+                file.display(),
+                f.file_path.display(),
+                f.file_path.strip_prefix(&root).unwrap_or(&f.file_path).display()
+            );
+        }
         let truth =
             draft.truth.into_iter().map(|t| TruthRef { time: t.time, file_path: root.join(&t.file_path) }).collect();
         let mut recording = draft.recording.clone();
