@@ -59,6 +59,14 @@ def test_a_scene_from_arrays_round_trips_through_a_folder(tmp_path):
     np.testing.assert_allclose(again.camera_arrays()[1], poses, atol=1e-12)
     with pytest.raises(fluidnerf.FluidNerfError, match="already holds a scene"):
         scene.save(tmp_path / "s")
+    # Nor into a folder of another kind, as synth and import refuse: it wrote transforms.json
+    # and images/ among a run's files.
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.json").write_text('{"scene": "elsewhere", "method": {"name": "asart"}}')
+    with pytest.raises(fluidnerf.FluidNerfError, match="run: is a reconstruction run folder"):
+        scene.save(run, force=True)
+    assert sorted(p.name for p in run.iterdir()) == ["config.json"]
 
 
 def test_bad_arrays_are_refused_naming_the_array_and_frame():

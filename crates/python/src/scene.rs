@@ -286,6 +286,9 @@ impl PyScene {
     #[pyo3(signature = (folder, force=false))]
     fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
         guard(|| {
+            // Never among a run's (or an export's, ...) files, as `synth` and `import` refuse.
+            use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
+            refuse_other_kind(&folder, FolderKind::Scene, "Scene.save").map_err(|e| err(e.to_string()))?;
             let file = fluidnerf_io::scene::scene_file_path(&folder);
             if file.exists() && !force {
                 return Err(err(format!(
