@@ -204,6 +204,66 @@ fn load_yaml(path: &Path, body: &str) -> Result<Vec<yaml_rust2::Yaml>, IoError> 
     yaml_rust2::YamlLoader::load_from_str(body).map_err(malformed)
 }
 
+/// JSON text as a value, refusing an object that gives a key twice: serde_json keeps the last
+/// of them without a word, where the YAML and XML readers refuse a node given twice.
+fn json_without_duplicates(text: &str) -> Result<Value, serde_json::Error> {
+    use serde::de::{DeserializeSeed, Deserializer, Error, MapAccess, SeqAccess, Visitor};
+
+    struct Strict;
+    impl<'de> DeserializeSeed<'de> for Strict {
+        type Value = Value;
+        fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+            d.deserialize_any(Strict)
+        }
+    }
+    impl<'de> Visitor<'de> for Strict {
+        type Value = Value;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a JSON value")
+        }
+        fn visit_bool<E: Error>(self, v: bool) -> Result<Value, E> {
+            Ok(Value::Bool(v))
+        }
+        fn visit_i64<E: Error>(self, v: i64) -> Result<Value, E> {
+            Ok(Value::from(v))
+        }
+        fn visit_u64<E: Error>(self, v: u64) -> Result<Value, E> {
+            Ok(Value::from(v))
+        }
+        fn visit_f64<E: Error>(self, v: f64) -> Result<Value, E> {
+            Ok(serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number))
+        }
+        fn visit_str<E: Error>(self, v: &str) -> Result<Value, E> {
+            Ok(Value::String(v.to_string()))
+        }
+        fn visit_unit<E: Error>(self) -> Result<Value, E> {
+            Ok(Value::Null)
+        }
+        fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+            let mut out = Vec::new();
+            while let Some(v) = seq.next_element_seed(Strict)? {
+                out.push(v);
+            }
+            Ok(Value::Array(out))
+        }
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Value, A::Error> {
+            let mut out = Map::new();
+            while let Some(key) = map.next_key::<String>()? {
+                if out.contains_key(&key) {
+                    return Err(A::Error::custom(format!("`{key}` is given twice in one object")));
+                }
+                let v = map.next_value_seed(Strict)?;
+                out.insert(key, v);
+            }
+            Ok(Value::Object(out))
+        }
+    }
+    let mut de = serde_json::Deserializer::from_str(text);
+    let value = Strict.deserialize(&mut de)?;
+    de.end()?;
+    Ok(value)
+}
+
 /// The top-level nodes of a `cv::FileStorage` file, and its text.
 fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let text = crate::read_input_text(path, "calibration file")?;
@@ -216,7 +276,7 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let value = if is_xml {
         xml_storage(path, &text)?
     } else if is_json {
-        serde_json::from_str::<Value>(&text).map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
+        json_without_duplicates(&text).map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
     } else {
         // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
         let body: String = text.lines().filter(|l| !l.starts_with('%')).map(|l| format!("{l}\n")).collect();

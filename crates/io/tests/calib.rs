@@ -1156,3 +1156,21 @@ fn opencv_camera_without_its_camera_matrix_is_named() {
     let err = read_opencv(&file).expect_err("camera b has no camera matrix").to_string();
     assert!(err.contains("rig.yml: camera `b`: missing the node `camera_matrix`"), "{err}");
 }
+
+/// A JSON calibration that gives a node twice is refused, as a YAML or XML one is: the last of
+/// the two was taken without a word.
+#[test]
+fn a_json_node_given_twice_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let text = std::fs::read_to_string(fixtures().join("opencv_two_cameras.json")).expect("read");
+    let twice = text.replacen("\"image_width_four\": 800,", "\"image_width_four\": 640, \"image_width_four\": 800,", 1);
+    assert_ne!(twice, text);
+    std::fs::write(dir.path().join("twice.json"), &twice).expect("write");
+    let err = read_opencv(&dir.path().join("twice.json")).expect_err("a node given twice").to_string();
+    assert!(err.contains("twice.json") && err.contains("`image_width_four` is given twice"), "{err}");
+    // Nested too.
+    let nested = text.replacen("\"rows\": 3,", "\"rows\": 3, \"rows\": 3,", 1);
+    std::fs::write(dir.path().join("nested.json"), &nested).expect("write");
+    let err = read_opencv(&dir.path().join("nested.json")).expect_err("a node given twice").to_string();
+    assert!(err.contains("nested.json") && err.contains("`rows` is given twice"), "{err}");
+}
