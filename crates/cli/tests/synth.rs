@@ -157,8 +157,8 @@ fn user_volume_becomes_the_truth() {
 }
 
 /// A scene that `info` would reject is refused before anything is written: a ground truth with
-/// NaN or infinite voxels (float64 values beyond float32's range read as infinite), and a time
-/// given twice.
+/// NaN or infinite voxels (float64 values beyond float32's range read as infinite), no positive
+/// voxel, and a time given twice.
 #[test]
 fn truths_that_are_not_finite_and_repeated_times_are_refused_up_front() {
     use fluidnerf_core::glam::DVec3;
@@ -183,8 +183,15 @@ fn truths_that_are_not_finite_and_repeated_times_are_refused_up_front() {
         bytes.extend(v.to_le_bytes());
     }
     std::fs::write(&big, bytes).expect("writes volume");
+    // A volume with no positive voxel made black images said to be seen by no camera.
+    let dark = tmp.path().join("dark.npy");
+    fluidnerf_io::volume::write_npy(&dark, &Volume::from_fn([8, 8, 8], aabb, |_| -1.0)).expect("writes volume");
     for (extra, needle) in [
         (vec!["--truth-volume", nan.to_str().expect("utf-8")], "nan.npy: voxel (i 3, j 0, k 0) is NaN"),
+        (
+            vec!["--truth-volume", dark.to_str().expect("utf-8")],
+            "dark.npy: no voxel is positive (the largest value is -1)",
+        ),
         (vec!["--truth-volume", big.to_str().expect("utf-8")], "beyond float32's range"),
         (vec!["--phantom", "jet-tr", "--times", "14,14"], "14 is given twice"),
     ] {

@@ -634,5 +634,9 @@ mod tests {
         let syn = generate(&s, Some(vol.clone()), no_progress).expect("generates");
         assert_eq!(syn.truth[0].1, vol);
         assert_eq!(syn.aabb, aabb);
+        // One with no positive voxel would image as black everywhere.
+        let dark = Volume::from_fn([4, 4, 4], aabb, |_| 0.0);
+        let err = generate(&s, Some(dark), no_progress).expect_err("a dark volume").to_string();
+        assert!(err.contains("phantom.volume") && err.contains("no voxel is positive"), "{err}");
     }
 }

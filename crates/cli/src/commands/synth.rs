@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
-use fluidnerf_core::{Aabb, Volume};
+use fluidnerf_core::{num, Aabb, Volume};
 use fluidnerf_synth::{
     generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings, Synthesis,
     ThinLensSettings, DEFAULT_PRESET,
@@ -464,6 +464,16 @@ fn read_truth_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
             } else {
                 ""
             }
+        );
+    }
+    // Every image of a field with no positive value is black: the scene could not be used.
+    let top = volume.data.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    if top <= 0.0 {
+        bail!(
+            "{}: no voxel is positive (the largest value is {}): a field of emission with none images as \
+             black in every camera; give a volume whose glowing parts are positive",
+            path.display(),
+            num(top)
         );
     }
     Ok(volume)

@@ -190,6 +190,16 @@ impl Phantom {
                         ),
                     ));
                 }
+                let top = v.data.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                if top <= 0.0 {
+                    return Err(SynthError::invalid(
+                        "phantom.volume",
+                        format!(
+                            "no voxel is positive (the largest value is {top}): a field of emission with none images \
+                             as black in every camera; give a volume whose glowing parts are positive"
+                        ),
+                    ));
+                }
                 Phantom::Volume(v)
             }
         })
