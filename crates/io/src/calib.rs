@@ -542,6 +542,14 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
             ),
         ));
     };
+    // A rotation vector whose length overflows gives no rotation, which the camera's check would
+    // call a translation that is not finite (the values read are finite).
+    if !rotation.is_finite() {
+        return Err(bad(
+            pose_key,
+            "does not give a rotation: the rotation vector is too long for its length to be finite".into(),
+        ));
+    }
     let camera =
         Camera { intrinsics, distortion, world_from_camera: world_from_camera_of(rotation, translation), lens: None };
     // The intrinsics passed above, so what is left to fail is the pose.

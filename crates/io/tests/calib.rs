@@ -1012,7 +1012,7 @@ fn opencv_malformed_nodes_are_named() {
     let d2 = "cols: 5\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0. ]";
     let m1 = "data: [ 500., 0., 319.5, 0., 502., 239.5, 0., 0., 1. ]";
     let sample_k = "6.5746697810243404e+02 0. 3.1950000000000000e+02 0.\n    6.5746697810243404e+02 2.3950000000000000e+02 0. 0. 1.";
-    let cases: [(&str, String, &str); 17] = [
+    let cases: [(&str, String, &str); 18] = [
         ("calib.yml", stereo.replace(d2, "cols: 3\n   dt: d\n   data: [ -0.12, 0.03, 0. ]"), "calib.yml: camera `cam2`: `D2` has 3 values; expected 4, 5, 8, 12 or 14"),
         ("calib.yml", stereo.replace(d2, "cols: 9\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0., 0., 0., 0., 0. ]"), "`D2` has 9 values"),
         ("calib.yml", stereo.replace(m1, "data: [ 500., 0., 319.5, 0., 502., 239.5 ]").replace("rows: 3\n   cols: 3\n   dt: d\n   data: [ 500.,", "rows: 2\n   cols: 3\n   dt: d\n   data: [ 500.,"), "camera `cam1`: `M1` has 6 values; expected 9 (3 × 3)"),
@@ -1031,6 +1031,7 @@ fn opencv_malformed_nodes_are_named() {
         ("rig.xml", "<?xml version=\"1.0\"?>\n<opencv_storage>\n</opencv_storage>\n".into(), "rig.xml: no camera matrix"),
         ("rig.xml", "<?xml version=\"1.0\"?>\n<opencv_storage><left><camera_matrix>1 0 1 0 1 1 0 0 1</camera_matrix><image_width>8</image_width><image_height>8</image_height><R>1 0 0 0 1 0 0 0 1</R></left></opencv_storage>".into(), "rig.xml: camera `left`: missing the node `T`"),
         ("rig.yml", "%YAML:1.0\nimage_width_a: 8\nimage_height_a: 8\nCamera_Matrix_a: [ 1, 0, 1, 0, 1, 1, 0, 0, 1 ]\nrvec_a: [ 0, 0 ]\ntvec_a: [ 0, 0, 1 ]\n".into(), "rig.yml: camera `a`: `rvec_a` has 2 values; expected 3"),
+        ("rig.yml", "%YAML:1.0\nimage_width_a: 8\nimage_height_a: 8\nCamera_Matrix_a: [ 1, 0, 1, 0, 1, 1, 0, 0, 1 ]\nrvec_a: [ 1e300, 1e300, 1e300 ]\ntvec_a: [ 0, 0, 1 ]\n".into(), "rig.yml: camera `a`: `rvec_a`: does not give a rotation"),
     ];
     for (name, text, want) in cases {
         let file = dir.path().join(name);
