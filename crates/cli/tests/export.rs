@@ -193,6 +193,19 @@ fn slices_comparison_and_isosurface() {
     ok(&o);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("isosurface at 5: empty, area 0:") && !stdout.contains("area -"), "{stdout}");
+    // A negative level is a value (algebraic methods leave negative voxels), not an option.
+    let below = dir.path().join("below");
+    let o = fluidnerf(&[
+        "export",
+        r.to_str().expect("utf-8"),
+        "--out",
+        below.to_str().expect("utf-8"),
+        "--isosurface",
+        "-1",
+    ]);
+    ok(&o);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("isosurface at -1:") && !stdout.contains("empty"), "{stdout}");
     // Bad slice specifications are rejected before any work.
     let bad =
         fluidnerf(&["export", r.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8"), "--slices", "w=0.5"]);

@@ -59,7 +59,7 @@ pub struct Args {
     pub bbox: Option<String>,
     /// Time at which a time-resolved field is sampled, between its first and last instants.
     /// Default: its first instant.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub time: Option<f64>,
     /// A trained field's voxel is the mean of N³ points spread evenly over it (its cell
     /// average, a box filter against aliasing when the field holds detail finer than a voxel);
@@ -85,7 +85,7 @@ pub struct Args {
     #[arg(long, value_name = "TRUTH")]
     pub compare: Option<PathBuf>,
     /// Extract the isosurface at this field value by marching cubes (`isosurface.ply`).
-    #[arg(long, value_name = "VALUE")]
+    #[arg(long, value_name = "VALUE", allow_hyphen_values = true)]
     pub isosurface: Option<f32>,
     /// Mesh formats of the isosurface; comma-separated (with --isosurface).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "ply", requires = "isosurface")]

@@ -93,7 +93,7 @@ pub struct Args {
     pub step: Option<f64>,
     /// Time at which a time-resolved field is rendered, between its first and last instants.
     /// Default: each frame's own time; for orbit views the field's first instant.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub time: Option<f64>,
     /// How a trained field is evaluated: `off` evaluates the network at every sample of every
     /// ray (exact); `N` samples it once on a grid with N cells along the box's longest side
