@@ -689,9 +689,10 @@ pub(crate) fn check_views(
     if saved != views()? {
         return Err(PipelineError::file(
             path,
-            "was trained on other images or cameras than the scene's now (the fingerprint of its training \
-             views differs); a run continues only on the views it started with: restore them, or start a new \
-             run (--force)",
+            "was trained on other images or cameras than the scene's now, or on pixels picked or scaled otherwise \
+             (the fingerprint of its training views differs: an image, mask or camera changed, or a setting that \
+             picks or scales the pixels, such as the empty-space hull or the image scale); a run continues only \
+             on the views it started with: restore them, or start a new run (--force)",
         ));
     }
     Ok(())
