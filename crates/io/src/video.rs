@@ -255,6 +255,10 @@ pub fn read_video_frames(
     crate::check_regular_file(path, "video file")?;
     let mut head = Vec::with_capacity(12);
     File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).map_err(|e| IoError::io(path, "video file", e))?;
+    if head.is_empty() {
+        // Said as such: an interrupted copy or download leaves one, not a file of another kind.
+        return Err(IoError::invalid(path, "the video file is empty (0 bytes)"));
+    }
     let info = match sniff(&head) {
         Container::Avi => match read_mjpeg_avi(path, opts, &mut on_frame)? {
             Some(info) => info,

@@ -156,7 +156,7 @@ fn broken_video_files_are_refused_with_their_name() {
         ("truncated.avi", good[..good.len() / 2].to_vec(), "truncated"),
         ("headers_only.avi", good[..400].to_vec(), "malformed AVI"),
         ("notriff.avi", b"this is not a video at all, just some text".to_vec(), "not a video file"),
-        ("empty.mp4", Vec::new(), "not a video file"),
+        ("empty.mp4", Vec::new(), "the video file is empty (0 bytes)"),
         ("zero_rate.avi", zero_rate, "zero frame rate"),
         ("no_video.avi", no_video, "no video stream"),
         ("bad_jpeg.avi", bad_jpeg, "frame 2: not a decodable JPEG"),
