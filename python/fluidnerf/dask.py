@@ -27,8 +27,10 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 from . import _fluidnerf as _ext
-from ._api import PathLike, Run, Scene, _as_scene, _check_callback, build_config, open_run
+from ._api import FluidNerfError, PathLike, Run, Scene, _as_scene, _check_callback, build_config, open_run
 
 __all__ = ["finish", "reconstruct", "train_window"]
 
@@ -54,6 +56,27 @@ def _whole_run(scene_root: str, config_json: str, out: str) -> dict:
     return json.loads(_ext.reconstruct(scene, config_json, out, "refuse", None))
 
 
+def _same_scene(scene: Scene, saved: Path) -> Scene:
+    """The scene saved in ``saved`` when ``scene`` (built from arrays, not saved) holds the
+    same cameras, images and settings; else refused, leaving both as they are."""
+    kept = Scene.load(os.fspath(saved))
+    same = (
+        len(scene) == len(kept)
+        and all(np.array_equal(a, b) for a, b in zip(scene.camera_arrays(), kept.camera_arrays()))
+        and np.array_equal(scene.aabb, kept.aabb)
+        and (scene.times, scene.holdout, scene.names) == (kept.times, kept.holdout, kept.names)
+        and (scene.units, scene.intensity_scale) == (kept.units, kept.intensity_scale)
+        and all(np.array_equal(a, b) for a, b in zip(scene.images(), kept.images()))
+    )
+    if not same:
+        raise FluidNerfError(
+            f"{saved}: holds the scene an earlier call saved, and the scene given differs from it "
+            "(its cameras, images or settings); the run's windows are trained on the saved one: give "
+            "that scene (fluidnerf.Scene.load of the folder) or the same arrays, or another output folder"
+        )
+    return kept
+
+
 def reconstruct(
     client: Any,
     scene: Scene | PathLike,
@@ -72,7 +95,9 @@ def reconstruct(
     static method (not time-resolved) runs as a single task. ``callback(event)`` receives
     ``{"kind": "window_finished", "window": k, "windows": n, "reused": bool, ...}`` as windows
     complete. Calling it again on the same folder reuses every finished window, so an
-    interrupted scale-out continues where it stopped.
+    interrupted scale-out continues where it stopped; a scene built from arrays may be built
+    again for that call, and must then be the same scene as the one the first call saved in
+    ``out/scene``.
     """
     from distributed import as_completed
 
@@ -90,7 +115,14 @@ def reconstruct(
             _ext.check_run_folder(os.fspath(out_path), "refuse")
         else:
             _ext.check_window_folder(os.fspath(out_path))
-        scene.save(out_path / "scene")
+        own = out_path / "scene"
+        if own.exists():
+            # A call that continues an interrupted one, with the scene built again from its
+            # arrays: the windows already trained were trained on the scene saved then, so it
+            # must be the same scene, and the saved one is never overwritten.
+            scene = _same_scene(scene, own)
+        else:
+            scene.save(own)
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cfg_json = json.dumps(cfg)
     root = str(scene.root)

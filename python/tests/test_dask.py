@@ -177,3 +177,42 @@ def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(
     (tmp_path / "file").write_text("x")
     with pytest.raises(fluidnerf.FluidNerfError, match="file: exists and is not a folder"):
         fluidnerf.dask.reconstruct(None, scene, TR_METHOD, tmp_path / "file", **TR_OPTIONS)
+
+
+def test_a_scene_from_arrays_built_again_continues_its_dask_run_and_another_is_refused(tr_scene, tmp_path):
+    """Called again after an interruption, with the scene built again from its arrays, a
+    scale-out was refused ("pass force=True"): the first call had saved it in out/scene. The
+    same arrays now continue the run; other arrays are refused and the saved scene kept."""
+
+    class Stop(Exception):
+        pass
+
+    class Submits:
+        """A client that records the first task of each call and stops the call there."""
+
+        def __init__(self) -> None:
+            self.keys: list[str] = []
+
+        def submit(self, *args, key: str, **kwargs):
+            self.keys.append(key)
+            raise Stop
+
+    K, poses, _, _ = tr_scene.camera_arrays()
+    times = np.array(tr_scene.times, dtype=np.float64)
+    images = np.asarray(tr_scene.images())
+    out = tmp_path / "run"
+
+    def build(pixels: np.ndarray) -> fluidnerf.Scene:
+        return fluidnerf.scene_from_arrays(K, poses, pixels, tr_scene.aabb, times=times)
+
+    client = Submits()
+    with pytest.raises(Stop):
+        fluidnerf.dask.reconstruct(client, build(images), TR_METHOD, out, **TR_OPTIONS)
+    with pytest.raises(Stop):
+        fluidnerf.dask.reconstruct(client, build(images), TR_METHOD, out, **TR_OPTIONS)
+    assert [k.startswith("fluidnerf-window-000-") for k in client.keys] == [True, True]
+    saved = out / "scene" / "transforms.json"
+    stamp = saved.stat().st_mtime_ns
+    with pytest.raises(fluidnerf.FluidNerfError, match="differs from it"):
+        fluidnerf.dask.reconstruct(client, build(images * 2), TR_METHOD, out, **TR_OPTIONS)
+    assert len(client.keys) == 2 and saved.stat().st_mtime_ns == stamp
