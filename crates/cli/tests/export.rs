@@ -180,31 +180,24 @@ fn slices_comparison_and_isosurface() {
     assert!(obj.lines().filter(|l| l.starts_with("f ")).count() > 100);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("isosurface at 0.5"), "{stdout}");
+    // The isosurface at `level` alone, into `name`: what it printed.
+    let surface = |name: &str, level: &str| {
+        let o = fluidnerf(&[
+            "export",
+            r.to_str().expect("utf-8"),
+            "--out",
+            dir.path().join(name).to_str().expect("utf-8"),
+            "--isosurface",
+            level,
+        ]);
+        ok(&o);
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
     // A level no value reaches gives an empty surface, said as such, never an area of -0.
-    let empty = dir.path().join("empty");
-    let o = fluidnerf(&[
-        "export",
-        r.to_str().expect("utf-8"),
-        "--out",
-        empty.to_str().expect("utf-8"),
-        "--isosurface",
-        "5",
-    ]);
-    ok(&o);
-    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stdout = surface("empty", "5");
     assert!(stdout.contains("isosurface at 5: empty, area 0:") && !stdout.contains("area -"), "{stdout}");
     // A negative level is a value (algebraic methods leave negative voxels), not an option.
-    let below = dir.path().join("below");
-    let o = fluidnerf(&[
-        "export",
-        r.to_str().expect("utf-8"),
-        "--out",
-        below.to_str().expect("utf-8"),
-        "--isosurface",
-        "-1",
-    ]);
-    ok(&o);
-    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stdout = surface("below", "-1");
     assert!(stdout.contains("isosurface at -1:") && !stdout.contains("empty"), "{stdout}");
     // Bad slice specifications are rejected before any work.
     let bad =

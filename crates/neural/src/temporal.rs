@@ -575,9 +575,7 @@ pub fn train_window<F: TrainableField + Clone>(
     frame_start: Option<&FrameStart>,
     mut on_iteration: impl FnMut(&WindowInfo, &TrainState<'_, F>) -> ControlFlow<()>,
 ) -> Result<TrainedWindow<F>, NeuralError> {
-    let Some(range) = plan.get(k) else {
-        return Err(NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len())));
-    };
+    let range = window_range(plan, k)?;
     let axis = match &start {
         WindowStart::Finished(l, _) | WindowStart::Resume(l) => l.field.time_on_frame_axis(),
         WindowStart::Warm(f) | WindowStart::Fresh(f) => f.time_on_frame_axis(),
@@ -679,6 +677,13 @@ fn prepare_window(
     Ok((origin, time_axis, prep))
 }
 
+/// Window `k` of `plan`, refused when the plan has no such window.
+fn window_range(plan: &[Range<usize>], k: usize) -> Result<&Range<usize>, NeuralError> {
+    plan.get(k).ok_or_else(|| {
+        NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len()))
+    })
+}
+
 /// The fingerprint ([`Prepared::fingerprint`]) of the views that window `k` of `plan` trains
 /// on, as [`train_window`] prepares them for a field that reads time on the frame axis
 /// (`frame_axis`, [`TrainableField::time_on_frame_axis`]) or not: a saved window is continued
@@ -694,9 +699,7 @@ pub fn window_fingerprint(
     windows: &WindowConfig,
     frame_axis: bool,
 ) -> Result<String, NeuralError> {
-    let Some(range) = plan.get(k) else {
-        return Err(NeuralError::invalid("window", format!("window {k} is not in the plan of {} windows", plan.len())));
-    };
+    let range = window_range(plan, k)?;
     let (_, _, prep) = prepare_window(problem, masks, times, range, train_cfg, windows, frame_axis)?;
     Ok(prep.fingerprint())
 }
