@@ -54,6 +54,8 @@ def test_a_scene_from_arrays_round_trips_through_a_folder(tmp_path):
     np.testing.assert_array_equal(back.aabb, aabb)
     assert back.times == list(times) and back.holdout == holdout and back.names == names
     assert back.units == "cm" and back.intensity_scale == 2.5
+    with pytest.raises(fluidnerf.FluidNerfError, match="units: the length unit must be named"):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, units=" ")
     # The same file through the transforms.json importer.
     again = fluidnerf.read_transforms(tmp_path / "s" / "transforms.json")
     np.testing.assert_allclose(again.camera_arrays()[1], poses, atol=1e-12)

@@ -198,6 +198,14 @@ fn colmap_model_becomes_a_scene() {
     assert_eq!(scene.frames[0].camera.intrinsics.cx, 31.5, "COLMAP's +0.5 pixel centres are converted");
     let text = std::fs::read_to_string(out.join("transforms.json")).expect("reads");
     assert!(text.contains("\"cx\": 32.0"), "transforms.json uses nerfstudio's (= COLMAP's) convention again");
+    // A unit that cannot label an axis is refused before anything is written.
+    let other = dir.path().join("other");
+    let mut a = vec!["import", "--colmap", s(&model), "--images", s(&images), "--aabb", "-1,-1,-1,1,1,1"];
+    a.extend_from_slice(&["--units", "", "-o", s(&other)]);
+    let o = fluidnerf(&a);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--units") && stderr(&o).contains("must be named"), "{}", stderr(&o));
+    assert!(!other.exists());
 }
 
 /// A NeRF-style `transforms.json` (field of view, no size, no extension, no box) of six

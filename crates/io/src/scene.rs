@@ -928,6 +928,25 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     })
 }
 
+/// Checks a length unit's name: it labels axes, exports and reports, so it must be a short
+/// printable name such as `mm` or `m`, not empty or blank and without control characters.
+pub fn check_units(units: &str) -> Result<(), String> {
+    if units.trim().is_empty() {
+        return Err(format!("the length unit must be named (e.g. \"mm\"), got {units:?}"));
+    }
+    if units.chars().any(char::is_control) || units.trim() != units {
+        return Err(format!(
+            "the length unit {units:?} holds control characters or surrounding blanks; name it as it is printed, e.g. \"mm\""
+        ));
+    }
+    if units.chars().count() > 32 {
+        return Err(format!(
+            "the length unit {units:?} is longer than 32 characters; name it as it is printed, e.g. \"mm\""
+        ));
+    }
+    Ok(())
+}
+
 /// Reads a scene from a `transforms.json` or a folder holding one, and validates it (see
 /// [`validate_scene`]); the file must give an `aabb`. Images are not read (see
 /// [`load_images`]) except for their size when `w`/`h` are missing. `Scene::root` is the
@@ -1000,6 +1019,7 @@ pub const MAX_INTENSITY_SCALE: f64 = 1e20;
 /// every camera valid, outside the box, and seeing the box (at least one pixel's ray crosses
 /// it). `file` names the scene in error messages.
 pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
+    check_units(&scene.units).map_err(|e| IoError::invalid(file, format!("`units`: {e}")))?;
     let aabb = scene.aabb;
     aabb.validate().map_err(|e| IoError::invalid(file, format!("`aabb`: {e}")))?;
     aabb.check_resolvable().map_err(|e| IoError::invalid(file, format!("`aabb`: {e}")))?;
@@ -1934,6 +1954,17 @@ mod tests {
         let mut v = good_json(d);
         v["frames"] = serde_json::json!([]);
         assert!(msg(&v).contains("no frames"));
+
+        // A unit that cannot label an axis.
+        for bad in ["", "  ", "mm\n", " mm"] {
+            let mut v = good_json(d);
+            v["units"] = serde_json::json!(bad);
+            let m = msg(&v);
+            assert!(m.contains("`units`") && m.contains(SCENE_FILE), "{bad:?}: {m}");
+        }
+        let mut v = good_json(d);
+        v["units"] = serde_json::json!("µm");
+        assert_eq!(load_scene(&write_json(d, &v)).expect("µm is a unit").units, "µm");
 
         let mut v = good_json(d);
         v["camera_model"] = serde_json::json!("OPENCV_FISHEYE");

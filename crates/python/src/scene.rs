@@ -185,6 +185,7 @@ impl PyScene {
                     pose.shape()
                 )));
             }
+            fluidnerf_io::scene::check_units(&units).map_err(|e| err(format!("units: {e}")))?;
             let aabb = aabb_from(&aabb)?;
             let times: Option<Vec<f64>> = times.map(|t| t.as_array().to_vec());
             if let Some(t) = &times {

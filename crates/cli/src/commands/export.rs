@@ -97,7 +97,7 @@ pub struct Args {
     #[arg(long, default_value = "emission E [a.u.]")]
     pub value_label: String,
     /// Length unit for axis labels. Default: the scene's, else mm.
-    #[arg(long)]
+    #[arg(long, value_parser = super::import::parse_units)]
     pub units: Option<String>,
     /// Overwrite existing outputs in OUT.
     #[arg(long)]

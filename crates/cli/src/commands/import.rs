@@ -76,7 +76,7 @@ pub struct Args {
     #[arg(long, allow_hyphen_values = true)]
     pub aabb: Option<String>,
     /// Length unit of the calibration's world frame [default: mm, or the file's].
-    #[arg(long)]
+    #[arg(long, value_parser = parse_units)]
     pub units: Option<String>,
     /// Pixel value = intensity_scale × ∫E ds (world units) [default: 1, or the file's].
     #[arg(long)]
@@ -292,6 +292,11 @@ fn expand_videos(
 
 fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
     s.parse()
+}
+
+/// A length unit's name, checked as a scene's `units` is.
+pub(crate) fn parse_units(s: &str) -> Result<String, String> {
+    fluidnerf_io::scene::check_units(s).map(|()| s.to_string())
 }
 
 fn is_image(p: &Path) -> bool {
