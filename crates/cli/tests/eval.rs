@@ -454,3 +454,19 @@ fn the_report_and_eval_score_the_same_regions() {
         }
     }
 }
+
+/// `--json` and `--csv` naming one file by two spellings are refused before any scoring: the
+/// CSV, written second, replaced the JSON, and both were reported written.
+#[test]
+fn json_and_csv_naming_one_file_by_two_spellings_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    for (json, csv) in [("m.json", "./m.json"), ("m.json", "images/../m.json")] {
+        let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", json, "--csv", csv], d);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains("name the same file"), "{json} and {csv}: {e}");
+        assert!(e.contains(json) && e.contains(csv), "{e}");
+        assert!(!d.join("m.json").exists(), "a refused evaluation wrote m.json");
+    }
+}

@@ -318,6 +318,12 @@ fn scene_inputs(scene_file: &Path) -> Vec<(PathBuf, &'static str)> {
     found
 }
 
+/// Whether `a` and `b` name one file, however they are spelled (`./a.json`, `a.json`,
+/// `out/../a.json`, a link), whether or not it exists yet.
+pub fn same_path(a: &Path, b: &Path) -> bool {
+    resolved(a) == resolved(b)
+}
+
 /// `path` made absolute, with symbolic links and `..` resolved as far as it exists; the part
 /// that does not exist yet is appended with `.` and `..` applied as written.
 fn resolved(path: &Path) -> PathBuf {

@@ -227,8 +227,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (None, None, Some(dir)) => (Some(dir.join("metrics.json")), Some(dir.join("metrics.csv"))),
         (j, c, _) => (j.clone(), c.clone()),
     };
-    if json_path.is_some() && json_path == csv_path {
-        bail!("--json and --csv name the same file; give two");
+    // One file under two spellings (`a.json`, `./a.json`) would have the CSV replace the JSON.
+    if let (Some(json), Some(csv)) = (&json_path, &csv_path) {
+        if fluidnerf_pipeline::rundir::same_path(json, csv) {
+            bail!("--json {} and --csv {} name the same file; give two", json.display(), csv.display());
+        }
     }
     if let Some(json) = &json_path {
         let record = json.display().to_string();
