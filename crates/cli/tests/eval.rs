@@ -470,3 +470,23 @@ fn json_and_csv_naming_one_file_by_two_spellings_are_refused() {
         assert!(!d.join("m.json").exists(), "a refused evaluation wrote m.json");
     }
 }
+
+/// A folder given as `--json` or `--csv` is refused before any scoring, --force or not: it was
+/// said to exist and to need --force, and with --force the write failed after the work.
+#[test]
+fn a_folder_given_for_the_metrics_is_refused_before_scoring() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    std::fs::create_dir(d.join("results")).expect("mkdir");
+    for option in ["--json", "--csv"] {
+        for force in [false, true] {
+            let mut args = vec!["eval", "truth_0.npy", "--scene", ".", option, "results"];
+            args.extend(force.then_some("--force"));
+            let out = fluidnerf(&args, d);
+            let e = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success() && e.contains(&format!("{option} results: is a folder")), "{args:?}: {e}");
+            assert!(out.stdout.is_empty(), "{args:?} scored before refusing: {}", String::from_utf8_lossy(&out.stdout));
+        }
+    }
+}

@@ -240,13 +240,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         super::recordable(&record, recon.chain(given.iter().filter_map(|(o, p)| Some((*o, p.as_deref()?)))))?;
     }
     let outputs = [
-        (if args.json.is_some() { "--json" } else { "the JSON output" }, &json_path),
-        (if args.csv.is_some() { "--csv" } else { "the CSV output" }, &csv_path),
+        (if args.json.is_some() { "--json" } else { "the JSON output" }, &json_path, "metrics.json"),
+        (if args.csv.is_some() { "--csv" } else { "the CSV output" }, &csv_path, "metrics.csv"),
     ];
-    for (option, p) in outputs.iter().filter_map(|(o, p)| p.as_ref().map(|p| (o, p))) {
+    let outputs: Vec<(&str, &PathBuf, &str)> =
+        outputs.iter().filter_map(|&(o, p, name)| p.as_ref().map(|p| (o, p, name))).collect();
+    for &(option, p, _) in &outputs {
         refuse_inputs(p, &scene_path, run_dir.as_deref(), &args).with_context(|| option.to_string())?;
     }
-    for p in json_path.iter().chain(csv_path.iter()) {
+    for &(option, p, name) in &outputs {
+        // A folder is no file to replace, --force or not: writing failed only after the scoring.
+        if p.is_dir() {
+            let instead = match option.starts_with("--") {
+                true => format!("give the name of a file to write, e.g. {}", p.join(name).display()),
+                false => "move it away, or give --json and --csv".to_string(),
+            };
+            bail!("{option} {}: is a folder; {instead}", p.display());
+        }
         if p.exists() && !args.force {
             bail!("{} exists; pass --force to overwrite it", p.display());
         }
