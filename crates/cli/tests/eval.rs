@@ -490,3 +490,24 @@ fn a_folder_given_for_the_metrics_is_refused_before_scoring() {
         }
     }
 }
+
+/// An SSIM window wider than a held-out image is refused before any scoring, naming the option
+/// and the frame: it failed only after the volumes were scored, without naming --ssim-size.
+#[test]
+fn an_ssim_window_wider_than_a_held_out_image_is_refused_before_scoring() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--ssim-size", "21"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(e.contains("--ssim-size 21") && e.contains("held-out frame 3") && e.contains("24x20 px"), "{e}");
+    assert!(e.contains("--ssim-size 19 or less") && e.contains("--no-reprojection"), "{e}");
+    assert!(out.stdout.is_empty(), "scored before refusing: {}", String::from_utf8_lossy(&out.stdout));
+    // The widest window that fits, and any window without reprojection.
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--ssim-size", "19"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let args = ["eval", "truth_0.npy", "--scene", ".", "--json", "n.json", "--ssim-size", "21", "--no-reprojection"];
+    let out = fluidnerf(&args, d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -222,6 +222,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene_path = super::scene_or_recorded(args.scene.as_deref(), &args.recon)?;
     let scene = fluidnerf_io::scene::load_scene(&scene_path)
         .with_context(|| format!("reading the scene {}", scene_path.display()))?;
+    let holdouts: Vec<usize> =
+        if args.no_reprojection { Vec::new() } else { scene.holdout_frames().map(|(i, _)| i).collect() };
+    // The windowed 2D SSIM needs its window inside every held-out image: refused now, not after
+    // the volumes are scored.
+    let side = window.size();
+    if let Some(&i) = holdouts.iter().find(|&&i| {
+        let camera = &scene.frames[i].camera;
+        camera.width().min(camera.height()) < side
+    }) {
+        let (frame, camera) = (&scene.frames[i], &scene.frames[i].camera);
+        // The widest odd window that fits, where one of at least 3 does.
+        let fits = camera.width().min(camera.height());
+        let widest = if fits.is_multiple_of(2) { fits.saturating_sub(1) } else { fits };
+        let (what, instead) = match args.ssim_window {
+            Window::Uniform => (format!("--ssim-size {side}"), format!("give --ssim-size {widest} or less, or ")),
+            Window::Gaussian => (
+                format!("--ssim-window gaussian ({side} px wide)"),
+                format!("give --ssim-window uniform --ssim-size {widest} or less, or "),
+            ),
+        };
+        let instead = if widest >= 3 { instead } else { String::new() };
+        bail!(
+            "{what}: the held-out frame {i} ({}) is only {}x{} px, smaller than the SSIM window; {instead}give \
+             --no-reprojection",
+            frame.file_path.display(),
+            camera.width(),
+            camera.height()
+        );
+    }
     let run_dir = (args.recon.len() == 1 && args.recon[0].is_dir()).then(|| args.recon[0].clone());
     let (json_path, csv_path) = match (&args.json, &args.csv, &run_dir) {
         (None, None, Some(dir)) => (Some(dir.join("metrics.json")), Some(dir.join("metrics.csv"))),
@@ -338,8 +367,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
-    let holdouts: Vec<usize> =
-        if args.no_reprojection { Vec::new() } else { scene.holdout_frames().map(|(i, _)| i).collect() };
     if truth.is_empty() && holdouts.is_empty() {
         bail!(
             "nothing to evaluate: the scene {} has no ground truth and no held-out frames (give --truth)",
