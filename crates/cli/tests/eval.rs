@@ -511,3 +511,16 @@ fn an_ssim_window_wider_than_a_held_out_image_is_refused_before_scoring() {
     let out = fluidnerf(&args, d);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// A region named `all` is refused: its row read exactly as the whole volume's, twice `all` in
+/// the table and the CSV.
+#[test]
+fn a_region_named_all_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--csv", "m.csv", "--regions", "all:0:0.5"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("--regions: the name all is the whole volume's row"), "{e}");
+    assert!(!d.join("m.csv").exists(), "a refused evaluation wrote m.csv");
+}

@@ -26,6 +26,7 @@ pub use pointwise::{data_range_of, mse, nrmse, nrmse_undefined, psnr, NRMSE_UNDE
 pub use region::{default_regions, estimate_flow_axis, regions_flow_axis, FlowAxisFrom, Region};
 pub use report::{
     evaluate_field, evaluate_volume, MetricsReport, RegionMetrics, StepMetrics, VolumeMetricOptions, VolumeMetrics,
+    WHOLE_VOLUME,
 };
 pub use reprojection::{
     compare_images, reproject, reproject_all, Reprojection, ReprojectionMetrics, ReprojectionOptions,

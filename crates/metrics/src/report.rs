@@ -130,6 +130,10 @@ fn energy(values: &[f32]) -> f64 {
     values.iter().map(|&v| f64::from(v) * f64::from(v)).sum()
 }
 
+/// The subset name of the whole volume's row in [`MetricsReport::rows`] (and so in tables and
+/// CSV files); no region may take it, or its row would read as the whole volume's.
+pub const WHOLE_VOLUME: &str = "all";
+
 /// Scores `estimate` against `truth` over the truth's voxel centres, globally and per region.
 /// An estimate on another grid or box is first resampled trilinearly at the truth's voxel
 /// centres ([`Volume::resample`]; zero outside the estimate's box).
@@ -141,6 +145,12 @@ pub fn evaluate_volume(
 ) -> Result<StepMetrics, MetricsError> {
     for (i, r) in options.regions.iter().enumerate() {
         r.validate()?;
+        if r.name == WHOLE_VOLUME {
+            return Err(MetricsError::invalid(
+                format!("region '{}'", r.name),
+                format!("'{WHOLE_VOLUME}' names the whole volume's row; give the region another name"),
+            ));
+        }
         // Results go by the region's name.
         if options.regions[..i].iter().any(|q| q.name == r.name) {
             return Err(MetricsError::invalid(
@@ -262,7 +272,7 @@ impl MetricsReport {
                     ssim_windowed: m.ssim_windowed,
                 });
             };
-            push("all", &s.global);
+            push(WHOLE_VOLUME, &s.global);
             for r in &s.regions {
                 push(&r.region.name, &r.metrics);
             }
@@ -331,6 +341,16 @@ mod tests {
             .expect_err("refused")
             .to_string();
         assert!(e.contains("region 'a'") && e.contains("given twice"), "{e}");
+    }
+
+    #[test]
+    fn a_region_named_as_the_whole_volume_is_refused() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let regions = vec![Region::along_x(WHOLE_VOLUME, 0.0, 0.5)];
+        let e = evaluate_volume(&t, &t, None, &VolumeMetricOptions { regions, ..Default::default() })
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains("region 'all'") && e.contains("whole volume"), "{e}");
     }
 
     #[test]

@@ -61,8 +61,8 @@ pub struct Args {
     pub truth: Option<PathBuf>,
     /// Regions scored separately, as NAME:X0:X1 (a slab along the jet axis x) or
     /// NAME:X0:X1:Y0:Y1:Z0:Z1, in coordinates normalised to the box (0 = min corner,
-    /// 1 = max corner); comma-separated or repeated. Default: laminar, transition and turbulent
-    /// thirds of the box along +x.
+    /// 1 = max corner); comma-separated or repeated. Each NAME once, and not `all` (the whole
+    /// volume's row). Default: laminar, transition and turbulent thirds of the box along +x.
     #[arg(long, value_delimiter = ',', conflicts_with = "no_regions")]
     pub regions: Vec<String>,
     /// The flow direction x,y,z (world) for the default regions: the laminar, transition and
@@ -183,6 +183,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Rows and JSON entries go by the region's name.
     if let Some((_, r)) = regions.iter().enumerate().find(|&(i, r)| regions[..i].iter().any(|q| q.name == r.name)) {
         bail!("--regions: the name {} is given twice; give each region its own name", r.name);
+    }
+    if let Some(r) = regions.iter().find(|r| r.name == fluidnerf_metrics::WHOLE_VOLUME) {
+        bail!(
+            "--regions: the name {} is the whole volume's row in the table and the CSV; give the region another name",
+            r.name
+        );
     }
     let ssim_size = args.ssim_size.unwrap_or(7);
     let window = match args.ssim_window {
