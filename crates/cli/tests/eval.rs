@@ -524,3 +524,19 @@ fn a_region_named_all_is_refused() {
     assert!(!out.status.success() && e.contains("--regions: the name all is the whole volume's row"), "{e}");
     assert!(!d.join("m.csv").exists(), "a refused evaluation wrote m.csv");
 }
+
+/// A reconstruction volume given twice is refused, however it is spelled: the steps it was
+/// given for were scored against it without a word, one of them against another step's volume.
+#[test]
+fn a_reconstruction_volume_given_twice_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[0.0, 1.0, 2.0]);
+    let out =
+        fluidnerf(&["eval", "truth_0.npy", "./truth_0.npy", "truth_2.npy", "--scene", ".", "--json", "m.json"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("is given twice (as truth_0.npy and ./truth_0.npy)"), "{e}");
+    assert!(!d.join("m.json").exists(), "a refused evaluation wrote m.json");
+    let out = fluidnerf(&["eval", "truth_0.npy", "truth_1.npy", "truth_2.npy", "--scene", ".", "--json", "m.json"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

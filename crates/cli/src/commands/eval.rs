@@ -190,6 +190,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r.name
         );
     }
+    // One volume file for two steps is a slip (a glob or a copied line): each step would be
+    // scored against the other's reconstruction.
+    for (i, p) in args.recon.iter().enumerate() {
+        if let Some(first) = args.recon[..i].iter().find(|q| fluidnerf_pipeline::rundir::same_path(q, p)) {
+            bail!(
+                "RECON: {} is given twice (as {} and {}); give one volume per time step, each once, or one volume \
+                 for all",
+                p.display(),
+                first.display(),
+                p.display()
+            );
+        }
+    }
     let ssim_size = args.ssim_size.unwrap_or(7);
     let window = match args.ssim_window {
         Window::Uniform => SsimWindow::Uniform { size: ssim_size },
