@@ -540,3 +540,33 @@ fn a_reconstruction_volume_given_twice_is_refused() {
     let out = fluidnerf(&["eval", "truth_0.npy", "truth_1.npy", "truth_2.npy", "--scene", ".", "--json", "m.json"], d);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// A `.vti` reconstruction or truth of another box than the scene's is warned about, as a run
+/// of another box is: it was scored without a word, zero outside its own box.
+#[test]
+fn a_volume_or_truth_of_another_box_is_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let own = Volume::from_fn([18, 12, 12], scene.aabb, |p| blob(p, 0.0));
+    fluidnerf_io::volume::write_vti(&d.join("own.vti"), &own).expect("writes");
+    let half = Aabb::new(0.5 * scene.aabb.min, 0.5 * scene.aabb.max);
+    let small = Volume::from_fn([18, 12, 12], half, |p| blob(p, 0.0));
+    fluidnerf_io::volume::write_vti(&d.join("small.vti"), &small).expect("writes");
+    let warning =
+        "fills the box [-0.75, -0.5, -0.5] .. [0.75, 0.5, 0.5], not the scene's [-1.5, -1, -1] .. [1.5, 1, 1]";
+    for (args, warned) in [
+        (["eval", "own.vti", "--truth", "own.vti"], None),
+        (["eval", "small.vti", "--truth", "own.vti"], Some("small.vti")),
+        (["eval", "own.vti", "--truth", "small.vti"], Some("--truth small.vti")),
+    ] {
+        let out =
+            fluidnerf(&[&args[..], &["--scene", ".", "--no-reprojection", "--json", "m.json", "--force"]].concat(), d);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {e}");
+        match warned {
+            Some(what) => assert!(e.contains(&format!("{what} {warning}")), "{args:?}: {e}"),
+            None => assert!(!e.contains("fills the box"), "{args:?}: {e}"),
+        }
+    }
+}

@@ -9,7 +9,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::num;
-use fluidnerf_core::{ScalarField, Scene, Volume};
+use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
     evaluate_volume, regions_flow_axis, reproject, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions,
     SsimParams, SsimWindow, VolumeMetricOptions,
@@ -316,7 +316,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
-        Some(path) => vec![(None, read_volume(path, Some(scene.aabb))?)],
+        Some(path) => {
+            let volume = read_volume(path, Some(scene.aabb))?;
+            let what = format!("--truth {}", path.display());
+            warn_of_other_box(
+                &what,
+                &volume.aabb,
+                &scene,
+                "the metrics cover that box only, and the reconstruction is zero outside its own",
+            );
+            vec![(None, volume)]
+        }
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", scene_path.display()))?,
     };
@@ -489,13 +499,7 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
                     );
                 }
             }
-            if run.aabb != scene.aabb {
-                log::warn!(
-                    "the run's box {:?}..{:?} differs from the scene's; it is zero outside its own box",
-                    run.aabb.min,
-                    run.aabb.max
-                );
-            }
+            warn_of_other_box(&format!("the run in {}", dir.display()), &run.aabb, scene, "it is zero outside it");
             // A volume given with --truth has no time: a time-resolved run would be scored at
             // time 0 (its first instant, or its first volume), whatever instant the file holds.
             if let (Some(file), Some(span)) = (truth, run.time_span()?) {
@@ -542,9 +546,30 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
         if p.is_dir() {
             bail!("{}: give one run folder, or volume files", p.display());
         }
-        volumes.push(read_volume(p, Some(scene.aabb))?);
+        let volume = read_volume(p, Some(scene.aabb))?;
+        warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
+        volumes.push(volume);
     }
     Ok(Recon::Volumes(volumes))
+}
+
+/// Warns that `what` (a run, a volume file, the truth) fills `aabb`, not the scene's box: what
+/// is scored then is not what the scene's cameras saw (`consequence` says how). A `.npy` fills
+/// the scene's box by definition; a `.vti` or `.raw` and a run record their own.
+fn warn_of_other_box(what: &str, aabb: &Aabb, scene: &Scene, consequence: &str) {
+    // A box read back from a file's origin and spacing may differ from the scene's in its last
+    // bits.
+    let tolerance = 1e-9 * scene.aabb.size().max_element();
+    let off = (aabb.min - scene.aabb.min).abs().max((aabb.max - scene.aabb.max).abs()).max_element();
+    if off > tolerance {
+        log::warn!(
+            "{what} fills the box {} .. {}, not the scene's {} .. {}: {consequence}",
+            num(aabb.min.to_array()),
+            num(aabb.max.to_array()),
+            num(scene.aabb.min.to_array()),
+            num(scene.aabb.max.to_array())
+        );
+    }
 }
 
 /// Formats a metric for the table: fixed decimals, `inf`, or `-` (an undefined NRMSE is
