@@ -423,3 +423,26 @@ fn a_time_given_to_a_static_field_is_warned_of() {
     assert!(said.contains("--time 3 has no effect") && said.contains("static field"), "{said}");
     assert_eq!(plain, timed);
 }
+
+/// A run rendered with a scene other than the one it was made from, or a reconstruction of
+/// another box than the scene's, is warned about, as `eval` warns: both were rendered without
+/// a word.
+#[test]
+fn a_run_of_another_scene_or_box_is_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    for (name, aabb) in [("scene", "-20,-20,-20,20,20,20"), ("other", "-10,-10,-10,10,10,10")] {
+        let synth = ["synth", "--preset", "demo", "--phantom", "ball", "--cameras", "3", "--pixels", "16"];
+        ok(&fluidnerf(&[&synth[..], &["--resolution", "8", "--aabb", aabb, "-o", &d(name), "-q"]].concat()));
+    }
+    ok(&fluidnerf(&["reconstruct", &d("scene"), "-o", &d("run"), "--method", "asart", "--max-iterations", "1", "-q"]));
+    let o = fluidnerf(&["render", &d("run"), "-o", &d("own"), "--camera", "0"]);
+    ok(&o);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!e.contains("was made from") && !e.contains("fills the box"), "{e}");
+    let o = fluidnerf(&["render", &d("run"), "--scene", &d("other"), "-o", &d("views"), "--camera", "0"]);
+    ok(&o);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("run was made from the scene") && e.contains("other; rendered from this one's cameras"), "{e}");
+    assert!(e.contains("fills the box [-20, -20, -20] .. [20, 20, 20], not the scene's [-10, -10, -10]"), "{e}");
+}

@@ -9,7 +9,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::num;
-use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
+use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
     evaluate_volume, regions_flow_axis, reproject, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions,
     SsimParams, SsimWindow, VolumeMetricOptions,
@@ -319,7 +319,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(path) => {
             let volume = read_volume(path, Some(scene.aabb))?;
             let what = format!("--truth {}", path.display());
-            warn_of_other_box(
+            super::warn_of_other_box(
                 &what,
                 &volume.aabb,
                 &scene,
@@ -489,17 +489,10 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
         if dir.is_dir() {
             let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
             if let Some(config) = &run.config {
-                let (made_from, given) = (super::scene_folder(&config.scene), super::scene_folder(&scene.root));
-                if made_from.is_some() && made_from != given {
-                    log::warn!(
-                        "{} was made from the scene {}, not {}; scored against this one",
-                        dir.display(),
-                        config.scene.display(),
-                        scene.root.display()
-                    );
-                }
+                super::warn_of_other_scene(dir, &config.scene, &scene.root, "scored against this one");
             }
-            warn_of_other_box(&format!("the run in {}", dir.display()), &run.aabb, scene, "it is zero outside it");
+            let what = format!("the run in {}", dir.display());
+            super::warn_of_other_box(&what, &run.aabb, scene, "it is zero outside it");
             // A volume given with --truth has no time: a time-resolved run would be scored at
             // time 0 (its first instant, or its first volume), whatever instant the file holds.
             if let (Some(file), Some(span)) = (truth, run.time_span()?) {
@@ -547,29 +540,10 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
             bail!("{}: give one run folder, or volume files", p.display());
         }
         let volume = read_volume(p, Some(scene.aabb))?;
-        warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
+        super::warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
         volumes.push(volume);
     }
     Ok(Recon::Volumes(volumes))
-}
-
-/// Warns that `what` (a run, a volume file, the truth) fills `aabb`, not the scene's box: what
-/// is scored then is not what the scene's cameras saw (`consequence` says how). A `.npy` fills
-/// the scene's box by definition; a `.vti` or `.raw` and a run record their own.
-fn warn_of_other_box(what: &str, aabb: &Aabb, scene: &Scene, consequence: &str) {
-    // A box read back from a file's origin and spacing may differ from the scene's in its last
-    // bits.
-    let tolerance = 1e-9 * scene.aabb.size().max_element();
-    let off = (aabb.min - scene.aabb.min).abs().max((aabb.max - scene.aabb.max).abs()).max_element();
-    if off > tolerance {
-        log::warn!(
-            "{what} fills the box {} .. {}, not the scene's {} .. {}: {consequence}",
-            num(aabb.min.to_array()),
-            num(aabb.max.to_array()),
-            num(scene.aabb.min.to_array()),
-            num(scene.aabb.max.to_array())
-        );
-    }
 }
 
 /// Formats a metric for the table: fixed decimals, `inf`, or `-` (an undefined NRMSE is

@@ -109,6 +109,45 @@ pub(crate) fn scene_folder(path: &std::path::Path) -> Option<std::path::PathBuf>
     std::fs::canonicalize(folder).ok()
 }
 
+/// Warns that `what` (a run, a volume file, the truth) fills `aabb`, not the scene's box: what
+/// is scored or rendered then is not what the scene's cameras saw (`consequence` says how). A
+/// `.npy` fills the scene's box by definition; a `.vti` or `.raw` and a run record their own.
+pub(crate) fn warn_of_other_box(
+    what: &str,
+    aabb: &fluidnerf_core::Aabb,
+    scene: &fluidnerf_core::Scene,
+    consequence: &str,
+) {
+    // A box read back from a file's origin and spacing may differ from the scene's in its last
+    // bits.
+    let tolerance = 1e-9 * scene.aabb.size().max_element();
+    let off = (aabb.min - scene.aabb.min).abs().max((aabb.max - scene.aabb.max).abs()).max_element();
+    if off > tolerance {
+        log::warn!(
+            "{what} fills the box {} .. {}, not the scene's {} .. {}: {consequence}",
+            fluidnerf_core::num(aabb.min.to_array()),
+            fluidnerf_core::num(aabb.max.to_array()),
+            fluidnerf_core::num(scene.aabb.min.to_array()),
+            fluidnerf_core::num(scene.aabb.max.to_array())
+        );
+    }
+}
+
+/// Warns that the run in `dir`, made from the scene `made_from` (as its `config.json` records
+/// it), is used with the scene `given` (`how` says how): a run of one scene with the cameras,
+/// box or truth of another is seldom what was meant.
+pub(crate) fn warn_of_other_scene(
+    dir: &std::path::Path,
+    made_from: &std::path::Path,
+    given: &std::path::Path,
+    how: &str,
+) {
+    let recorded = scene_folder(made_from);
+    if recorded.is_some() && recorded != scene_folder(given) {
+        log::warn!("{} was made from the scene {}, not {}; {how}", dir.display(), made_from.display(), given.display());
+    }
+}
+
 /// Refuses a value given twice to the list option `option`: the repeat would run the same work
 /// twice, write the same file twice or print the same row twice.
 pub(crate) fn given_once<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {

@@ -320,6 +320,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let source = load_source(&args.recon, Some(&scene))?;
+    // A run rendered with another scene's cameras and box is seldom what was meant.
+    if args.scene.is_some() {
+        if let Some(made_from) = super::recorded_scene(&args.recon)? {
+            super::warn_of_other_scene(&args.recon, &made_from, &scene.root, "rendered from this one's cameras");
+        }
+    }
+    let what = args.recon.display().to_string();
+    super::warn_of_other_box(&what, &source.aabb(), &scene, "is it a reconstruction of this scene?");
     source.warn_time_unused(args.time, &args.recon);
     if args.bake != Bake::Auto && matches!(source, Source::Volume(_)) {
         log::warn!(
