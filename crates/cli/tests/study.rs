@@ -111,3 +111,17 @@ fn bad_budgets_are_refused_up_front_and_force_spares_other_folders() {
     assert_eq!(std::fs::read_to_string(d.join("notes/report.html")).expect("kept"), "mine");
     assert!(!d.join("notes/scenes").exists(), "a refused study wrote");
 }
+
+/// `--visual-hull` without a voxel method is refused before anything is made: it changed no
+/// run, while the grid and the report said the voxel methods had the hull.
+#[test]
+fn the_visual_hull_without_a_voxel_method_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let out = fluidnerf(d, &["study", "--preset", "smoke", "--methods", "fast,hybrid", "--visual-hull", "-o", "st"]);
+    refused(
+        &out,
+        "--visual-hull applies to the voxel methods (asart, sart, tv, ...), and --methods fast,hybrid has none",
+    );
+    assert!(!d.join("st").exists(), "a refused study wrote output");
+}

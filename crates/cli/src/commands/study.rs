@@ -234,6 +234,16 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
         bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
     }
+    // Only the voxel methods take the hull (the fields carve their own): without one the option
+    // would change nothing, while the grid and the report said it applied.
+    if g.visual_hull && !g.methods.iter().any(|m| m.family() == fluidnerf_pipeline::Family::Classical) {
+        let methods: Vec<&str> = g.methods.iter().map(|m| m.name()).collect();
+        bail!(
+            "--visual-hull applies to the voxel methods (asart, sart, tv, ...), and --methods {} has none: add one, or \
+             leave out --visual-hull",
+            methods.join(",")
+        );
+    }
     // Known before anything is made: an unknown one failed only when its first scene was
     // synthesised, leaving the study's folder behind.
     let scene = fluidnerf_synth::preset::preset(&g.scene_preset)
