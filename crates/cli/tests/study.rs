@@ -125,3 +125,16 @@ fn the_visual_hull_without_a_voxel_method_is_refused() {
     );
     assert!(!d.join("st").exists(), "a refused study wrote output");
 }
+
+/// A noise level out of range beside a level of 0 is refused for being out of range: it was
+/// refused as sharing the scene folder of 0, as if the two were merely too close.
+#[test]
+fn a_noise_level_out_of_range_is_named_as_such() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    for (levels, bad) in [("0,NaN", "NaN"), ("0,-0.5", "-0.5"), ("0.0001,-0.0002", "-0.0002")] {
+        let out = fluidnerf(d, &["study", "--preset", "smoke", &format!("--noise={levels}"), "-o", "st"]);
+        refused(&out, &format!("--noise: {bad} is not a fraction in [0, 1)"));
+        assert!(!d.join("st").exists(), "{levels}: wrote output");
+    }
+}

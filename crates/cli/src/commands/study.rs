@@ -219,6 +219,10 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     super::given_once("--cameras", &g.cameras)?;
     super::given_once("--noise", &g.noise)?;
     super::given_once("--layouts", &g.layouts.iter().map(|l| l.name()).collect::<Vec<_>>())?;
+    // Before the names below, which a level out of range (NaN, negative) would share with 0.
+    if let Some(n) = g.noise.iter().find(|n| !(**n >= 0.0 && **n < 1.0)) {
+        bail!("--noise: {n} is not a fraction in [0, 1)");
+    }
     // Scenes are named by their noise in thousandths: two levels named alike would share one
     // scene and its runs, so the second level's rows would be the first's.
     let named = |n: f64| scene_name(LayoutChoice::Ring360, 0, n);
@@ -268,9 +272,6 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     }
     if let Some(&c) = g.cameras.iter().find(|&&c| c < 2) {
         bail!("--cameras: {c} is too few; give at least 2 training cameras");
-    }
-    if let Some(n) = g.noise.iter().find(|n| !(**n >= 0.0 && **n < 1.0)) {
-        bail!("--noise: {n} is not a fraction in [0, 1)");
     }
     if !(8..=1024).contains(&g.pixels) {
         bail!("--pixels must be between 8 and 1024, got {}", g.pixels);
