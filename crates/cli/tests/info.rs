@@ -323,3 +323,14 @@ fn truth_at_a_time_no_frame_has_is_flagged() {
         "{stdout}"
     );
 }
+
+/// A truth that is zero throughout is a problem: eval refuses it and a run's NRMSE against it
+/// is NaN, yet info found no problem.
+#[test]
+fn truth_that_is_zero_throughout_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = good_scene(dir.path());
+    let zero = Volume::from_fn([8, 8, 8], scene.aabb, |_| 0.0);
+    fluidnerf_io::volume::write_npy(&dir.path().join("truth/t0.npy"), &zero).expect("writes truth");
+    assert_fails_with(&info(dir.path()), &["truth", "t0.npy", "every voxel is zero", "NRMSE"]);
+}

@@ -22,8 +22,8 @@ use fluidnerf_io::volume::read_npy;
 /// thin lens, how much of the box the camera sees, and the image's size and value range; the
 /// time steps, held-out frames and truth volumes. Problems (a camera that misses the box, an
 /// image that is missing, unreadable, of the wrong size, with NaN/Inf or negative pixels, or of
-/// another bit depth than the others, a broken truth volume or one whose grid differs from the
-/// others) are listed at the end and make the command exit with status 1; cameras close to the
+/// another bit depth than the others, a broken truth volume, one that is zero throughout or one
+/// whose grid differs from the others) are listed at the end and make the command exit with status 1; cameras close to the
 /// box are warned about. 8-bit images are shown after the scene's `linearisation`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -294,6 +294,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let _ = writeln!(out, "truth{when}: {} {nx}x{ny}x{nz} voxels, values {lo} .. {hi}", path.display());
                 if !(lo.is_finite() && hi.is_finite()) {
                     problems.push(format!("truth {}: has NaN or infinite values", path.display()));
+                } else if lo == 0.0 && hi == 0.0 {
+                    // eval refuses it; a run's NRMSE against it is NaN.
+                    problems.push(format!(
+                        "truth {}: every voxel is zero, so the NRMSE against it (relative to the truth's norm) is \
+                         undefined; give a truth that holds the field",
+                        path.display()
+                    ));
                 }
                 match truth_dims {
                     Some([a, b, c]) if [a, b, c] != v.dims => problems.push(format!(
