@@ -446,3 +446,25 @@ fn a_run_of_another_scene_or_box_is_warned_about() {
     assert!(e.contains("run was made from the scene") && e.contains("other; rendered from this one's cameras"), "{e}");
     assert!(e.contains("fills the box [-20, -20, -20] .. [20, 20, 20], not the scene's [-10, -10, -10]"), "{e}");
 }
+
+/// Negative pixels, which a 16-bit PNG cannot hold, are warned about: they were written as 0
+/// without a word, so the PNG's counts no longer gave the rendered values.
+#[test]
+fn negative_pixels_written_as_zero_to_a_png_are_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, vol) = make_scene(dir.path());
+    let negative = Volume { data: vol.data.iter().map(|v| v - 0.5).collect(), ..vol };
+    fluidnerf_io::volume::write_npy(&dir.path().join("negative.npy"), &negative).expect("writes");
+    let d = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    let render = |recon: &str, out: &str, format: &str| {
+        let o = fluidnerf(&["render", &d(recon), "--scene", &d(""), "-o", &d(out), "--format", format]);
+        ok(&o);
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let e = render("negative.npy", "png", "png16");
+    assert!(e.contains("pixel(s) of the views are negative") && e.contains("--format tiff keeps them"), "{e}");
+    for (recon, out, format) in [("negative.npy", "tiff", "tiff"), ("recon.npy", "positive", "png16")] {
+        let e = render(recon, out, format);
+        assert!(!e.contains("negative"), "{recon} as {format}: {e}");
+    }
+}

@@ -24,7 +24,8 @@ const MAX_WIDTH: u32 = 16384;
 #[serde(rename_all = "lowercase")]
 pub enum ImageFormat {
     /// 16-bit grayscale PNG; counts scale so the brightest pixel of all views is 65535 (the
-    /// factor is recorded in `render.json`: value = count × full_scale / 65535).
+    /// factor is recorded in `render.json`: value = count × full_scale / 65535). Negative
+    /// values have no count and are written as 0, with a warning.
     Png16,
     /// 32-bit float grayscale TIFF with the rendered values exactly.
     Tiff,
@@ -482,6 +483,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let peak = images.iter().flat_map(|i| i.data.iter()).copied().filter(|v| v.is_finite()).fold(0f32, f32::max);
     let full_scale = (args.format == ImageFormat::Png16).then_some(if peak > 0.0 { peak } else { 1.0 });
+    // A 16-bit PNG holds no negative count: the pixels of a reconstruction with negative values
+    // that would round below 0 are written as 0.
+    if let Some(fs) = full_scale {
+        let below = |v: f32| f64::from(v) / f64::from(fs) * 65535.0 < -0.5;
+        let (count, lowest) = images
+            .iter()
+            .flat_map(|i| i.data.iter())
+            .filter(|&&v| below(v))
+            .fold((0usize, 0f32), |(n, lo), &v| (n + 1, lo.min(v)));
+        if count > 0 {
+            log::warn!(
+                "{count} pixel(s) of the views are negative (down to {lowest}: the reconstruction holds negative \
+                 values), and a 16-bit PNG holds no negative count, so they are written as 0; --format tiff keeps \
+                 them"
+            );
+        }
+    }
     for (img, path) in images.iter().zip(&outputs) {
         match full_scale {
             Some(fs) => fluidnerf_io::image::write_png16(path, img, fs),
