@@ -209,3 +209,17 @@ fn runs_that_cannot_be_compared_are_named() {
     assert!(err.contains("point 0 (iteration 1) has a negative or non-finite value: time 0.5 s, NRMSE -1"), "{err}");
     assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
 }
+
+/// A run folder whose run never finished (its config.json, no report.json) is named as such:
+/// it was asked whether it was a run folder at all.
+#[test]
+fn an_unfinished_run_is_named_as_such() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    std::fs::create_dir(d.join("run")).expect("mkdir");
+    std::fs::write(d.join("run/config.json"), "{}").expect("writes");
+    let out = fluidnerf(d, &["compare", "run", "-o", "cmp", "-q"]);
+    refused(&out, "run: holds an unfinished run (config.json but no report.json)");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("reconstruct --resume"));
+    assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
+}

@@ -119,6 +119,14 @@ struct CompareRecord<'a> {
 fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
     if run.is_dir() {
         let p = run.join("report.json");
+        if !p.is_file() && run.join("config.json").is_file() {
+            // A run writes its report last: one that was killed, or is still running, has none.
+            bail!(
+                "{}: holds an unfinished run (config.json but no report.json), which has no NRMSE history to \
+                 compare yet; let it finish, continue it with `reconstruct --resume`, or leave it out",
+                run.display()
+            );
+        }
         if !p.is_file() {
             bail!("{}: no report.json (is it a run directory of `fluidnerf reconstruct`?)", run.display());
         }
