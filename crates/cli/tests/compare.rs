@@ -223,3 +223,19 @@ fn an_unfinished_run_is_named_as_such() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("reconstruct --resume"));
     assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
 }
+
+/// A run's config.json given in place of its report is named as such: it was read as a report
+/// and refused for an unknown variant of `method`.
+#[test]
+fn a_runs_configuration_given_as_its_report_is_named_as_such() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 16, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "sart", "--max-iterations", "1", "-q"]));
+    let out = fluidnerf(d, &["compare", "run/config.json", "-o", "cmp", "-q"]);
+    refused(
+        &out,
+        "run/config.json: is a run's configuration, not its report; give the run folder run or its report.json",
+    );
+    assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
+}

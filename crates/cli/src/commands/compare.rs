@@ -188,7 +188,19 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     }
     let probe: Probe = fluidnerf_pipeline::rundir::read_json(&report)?;
     let (method, preset, history, final_nrmse, wall_time_s) = if probe.format.is_some() {
-        let r = RunReport::read(&report)?;
+        let r = match RunReport::read(&report) {
+            Ok(r) => r,
+            // A run's configuration has a `format` too: say what the file is, not what it lacks.
+            Err(_) if fluidnerf_pipeline::RunConfig::read(&report).is_ok() => {
+                let folder = report.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(Path::new("."));
+                bail!(
+                    "{}: is a run's configuration, not its report; give the run folder {} or its report.json",
+                    report.display(),
+                    folder.display()
+                );
+            }
+            Err(e) => return Err(e.into()),
+        };
         let preset = r.neural.as_ref().and_then(|n| n.preset.clone());
         (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s))
     } else {
