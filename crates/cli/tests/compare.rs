@@ -207,6 +207,16 @@ fn runs_that_cannot_be_compared_are_named() {
     let out = fluidnerf(d, &["compare", "nan.json", "-o", "cmp", "-q"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("point 0 (iteration 1) has a negative or non-finite value: time 0.5 s, NRMSE -1"), "{err}");
+    // So are a final NRMSE and a run time that no run writes: the table printed them as results.
+    let curve = |extra: &str| format!(r#"{{"method": "sart", "nrmse_history": [{}]{extra}}}"#, point(1, 0.5, "0.9"));
+    std::fs::write(d.join("final.json"), curve(r#", "final_nrmse": -3"#)).expect("writes");
+    let out = fluidnerf(d, &["compare", "final.json", "-o", "cmp", "-q"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("final.json: `final_nrmse` is -3"), "{err}");
+    std::fs::write(d.join("time.json"), curve(r#", "train": {"train_time_s": -1}"#)).expect("writes");
+    let out = fluidnerf(d, &["compare", "time.json", "-o", "cmp", "-q"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("time.json: `train_time_s` of the run is -1 s"), "{err}");
     assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
 }
 

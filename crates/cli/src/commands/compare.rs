@@ -239,6 +239,14 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         }
         curve.push(point);
     }
+    // The table prints the final NRMSE and the run's time as they are; a value no run writes
+    // would be printed as a result.
+    if let Some(v) = final_nrmse.filter(|v| !(v.is_finite() && *v >= 0.0)) {
+        bail!("{}: `final_nrmse` is {v}; an NRMSE is a finite number ≥ 0 (or leave the key out)", report.display());
+    }
+    if let Some(v) = wall_time_s.filter(|v| !(v.is_finite() && *v >= 0.0)) {
+        bail!("{}: `train_time_s` of the run is {v} s; a time is a finite number ≥ 0", report.display());
+    }
     let last = curve[curve.len() - 1];
     let final_nrmse = final_nrmse.unwrap_or(last.nrmse);
     let best_nrmse = curve.iter().map(|p| p.nrmse).fold(f64::INFINITY, f64::min);
