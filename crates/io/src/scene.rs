@@ -480,7 +480,41 @@ pub fn check_scene_path(path: &Path) -> Result<(), IoError> {
             ),
         ));
     }
+    if path.is_dir() && !path.join(SCENE_FILE).exists() {
+        if let Some((kind, advice)) = other_folder_kind(path) {
+            return Err(IoError::invalid(
+                path,
+                format!("is {kind}, not a scene folder (it has no {SCENE_FILE}){advice}"),
+            ));
+        }
+    }
     Ok(())
+}
+
+/// What a folder without a scene file is, when fluidnerf wrote it: a run, an export, rendered
+/// views, a comparison or a study (their marker files, as the pipeline's folder kinds), and
+/// what to give instead where that is known.
+fn other_folder_kind(dir: &Path) -> Option<(&'static str, String)> {
+    let has = |name: &str| dir.join(name).is_file();
+    if has("config.json") || has("report.json") {
+        // A run's configuration names the scene it was made from.
+        let scene = std::fs::read_to_string(dir.join("config.json"))
+            .ok()
+            .and_then(|text| serde_json::from_str::<Value>(&text).ok())
+            .and_then(|v| v.get("scene").and_then(Value::as_str).map(str::to_string));
+        let advice = scene.map(|scene| format!(" ({scene})")).unwrap_or_default();
+        Some(("a reconstruction run folder", format!("; give the scene it was made from{advice}")))
+    } else if has("export.json") {
+        Some(("an export folder", String::new()))
+    } else if has("render.json") {
+        Some(("a folder of rendered views", String::new()))
+    } else if has("compare.json") {
+        Some(("a comparison folder", String::new()))
+    } else if has("study.json") {
+        Some(("a study folder", "; its scenes are the folders in its scenes/".to_string()))
+    } else {
+        None
+    }
 }
 
 /// The scene file for `path`: `path` itself if it ends in `.json`, else `path/transforms.json`.
@@ -1985,6 +2019,18 @@ mod tests {
 
         let m = load_scene(&d.join("nowhere")).expect_err("missing").to_string();
         assert!(m.contains("scene file not found") && m.contains("nowhere"), "{m}");
+        // A run's folder given for its scene is named as such, with the scene it was made from.
+        let run = d.join("run");
+        std::fs::create_dir(&run).expect("mkdir");
+        std::fs::write(run.join("config.json"), r#"{"scene": "/data/jet15", "method": {"name": "asart"}}"#)
+            .expect("writes");
+        let m = load_scene(&run).expect_err("a run folder").to_string();
+        let want = "is a reconstruction run folder, not a scene folder (it has no transforms.json); give the scene \
+                    it was made from (/data/jet15)";
+        assert!(m.contains(want), "{m}");
+        std::fs::write(run.join("config.json"), "{").expect("writes");
+        let m = load_scene(&run).expect_err("a run folder").to_string();
+        assert!(m.contains("is a reconstruction run folder") && m.contains("no transforms.json"), "{m}");
     }
 
     #[test]
