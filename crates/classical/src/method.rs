@@ -139,12 +139,12 @@ impl ClassicalMethod {
     pub fn validate(&self) -> Result<(), ClassicalError> {
         let stopping = self.stopping();
         if stopping.max_iterations == 0 {
-            return Err(ClassicalError::invalid("max_iterations", "must be at least 1"));
+            return Err(ClassicalError::invalid("stopping.max_iterations", "must be at least 1"));
         }
         if let Some(p) = stopping.plateau {
             if !(p.tolerance > 0.0 && p.tolerance.is_finite() && p.window > 0 && p.smoothing > 0) {
                 return Err(ClassicalError::invalid(
-                    "plateau",
+                    "stopping.plateau",
                     format!(
                         "needs window > 0, smoothing > 0 and a positive tolerance, got window {}, smoothing {}, \
                          tolerance {}",
@@ -175,7 +175,7 @@ impl ClassicalMethod {
         };
         match self {
             ClassicalMethod::Tv(p) => non_negative("tv_weight", p.tv_weight),
-            ClassicalMethod::Tikhonov(p) => non_negative("tikhonov weight", p.weight),
+            ClassicalMethod::Tikhonov(p) => non_negative("weight", p.weight),
             _ => Ok(()),
         }
     }

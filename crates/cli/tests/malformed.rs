@@ -989,6 +989,56 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     }
 }
 
+/// A method's setting out of range is named by its key, and by the option that gave it when it
+/// came from the command line, not blamed on the `--config` file it overrode.
+#[test]
+fn a_method_setting_is_named_by_its_key_and_by_the_option_that_gave_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    let synth = ["synth", "--preset", "demo", "--phantom", "jet-tr", "--times", "1,2,3", "--cameras", "3"];
+    ok(&fluidnerf(d, &[&synth[..], &["--pixels", "12", "--resolution", "8", "-o", "timed", "-q"]].concat()));
+    let quick = ["--resolution", "8", "--max-iterations", "1", "-q", "--checkpoint-every", "0"];
+    for (scene, method) in [("scene", "tv"), ("scene", "fast"), ("timed", "tr-fast")] {
+        let run = ["reconstruct", scene, "-o", method, "--method", method];
+        let quick = if method == "tv" { &quick[..5] } else { &quick[..] };
+        ok(&fluidnerf(d, &[&run[..], quick].concat()));
+    }
+    for (method, option, value, key) in [
+        ("tv", "--ray-step", "0", "method.projector.ray_step"),
+        ("tv", "--splat-subdivisions", "17", "method.projector.splat_subdivisions"),
+        ("tv", "--hull-threshold", "1.5", "method.projector.hull_threshold"),
+        ("tv", "--hull-noise-sigmas", "1000", "method.projector.hull_noise_sigmas"),
+        ("tv", "--hull-dilation", "99", "method.projector.hull_dilation"),
+        ("tv", "--relaxation", "3", "method.params.relaxation"),
+        ("tv", "--plateau-tolerance", "inf", "method.params.stopping.plateau"),
+        ("tv", "--tv-weight", "nan", "method.params.tv_weight"),
+        ("fast", "--rays-per-image", "0", "method.train.rays_per_image"),
+        ("fast", "--coarse-samples", "1", "method.train.coarse_samples"),
+        ("fast", "--fine-samples", "100000", "method.train.coarse_samples"),
+        ("fast", "--tv-prior", "nan", "method.train.prior.tv"),
+        ("fast", "--smooth-prior=-1", "", "method.train.prior.smooth"),
+        ("fast", "--sparsity-prior", "inf", "method.train.prior.sparsity"),
+        ("tr-fast", "--window", "1", "method.windows.overlap"),
+        ("tr-fast", "--time-origin", "recording", "method.windows.time_origin"),
+    ] {
+        let config = format!("{method}/config.json");
+        let mut args = vec!["reconstruct", "--config", &config, "-o", "again", option];
+        args.extend([value].iter().filter(|v| !v.is_empty()));
+        let o = fluidnerf(d, &args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        let flag = option.split('=').next().unwrap_or(option);
+        assert!(!o.status.success(), "{option} {value}: accepted");
+        assert!(err.contains(&format!("{flag} on the command line: {key}")), "{option} {value}: {err}");
+        assert!(!err.contains("config.json"), "{option} {value}: blames the file: {err}");
+        assert!(!d.join("again").exists(), "{option}: left an output folder");
+    }
+    // The same value in the file is the file's, named with its key.
+    edit_json(&d.join("tv/config.json"), |v| v["method"]["projector"]["ray_step"] = 0.into());
+    let o = fluidnerf(d, &["reconstruct", "--config", "tv/config.json", "-o", "again"]);
+    refused(&o, "the settings of tv/config.json: method.projector.ray_step: must be in [0.01, 4]");
+}
+
 /// A run folder whose volume is another run's (another grid than its report records) is not
 /// scored, exported or rendered as its own.
 #[test]

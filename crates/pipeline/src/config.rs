@@ -525,8 +525,8 @@ impl MethodConfig {
         let key = |e: &dyn std::fmt::Display| PipelineError::invalid("method", e.to_string());
         match self {
             MethodConfig::Classical(c) => {
-                c.projector.validate().map_err(|e| key(&e))?;
-                c.method.validate().map_err(|e| key(&e))
+                c.projector.validate().map_err(|e| classical_under("method.projector", e))?;
+                c.method.validate().map_err(|e| classical_under("method.params", e))
             }
             MethodConfig::Neural(m, n) => {
                 validate_field(&n.field)?;
@@ -595,6 +595,17 @@ impl MethodConfig {
 fn under(prefix: &str, e: fluidnerf_neural::NeuralError) -> PipelineError {
     match e {
         fluidnerf_neural::NeuralError::Invalid { what, why } if !what.contains(' ') => {
+            PipelineError::invalid(format!("{prefix}.{what}"), why)
+        }
+        other => PipelineError::invalid(prefix, other.to_string()),
+    }
+}
+
+/// A voxel method's setting error under its key in the configuration (`method.projector.ray_step`,
+/// `method.params.relaxation`), so that the key, and the option that set it, can be named.
+fn classical_under(prefix: &str, e: fluidnerf_classical::ClassicalError) -> PipelineError {
+    match e {
+        fluidnerf_classical::ClassicalError::Invalid { what, why } => {
             PipelineError::invalid(format!("{prefix}.{what}"), why)
         }
         other => PipelineError::invalid(prefix, other.to_string()),

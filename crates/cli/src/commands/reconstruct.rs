@@ -1033,6 +1033,7 @@ fn parse_start_method(s: &str) -> Result<StartMethod, String> {
 /// The command-line option that set the configuration key `key` in this invocation, if one did.
 fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
     let s = &args.stop;
+    let (c, n, t) = (&args.classical, &args.neural, &args.temporal);
     let given = [
         ("seed", "--seed", args.seed.is_some()),
         ("resolution", "--resolution", args.resolution.is_some()),
@@ -1045,11 +1046,32 @@ fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
         ("stopping.patience", "--patience", s.patience.is_some()),
         ("gains.every", "--gain-every", args.gains.gain_every.is_some()),
         ("gains.rounds", "--gain-rounds", args.gains.gain_rounds.is_some()),
-        ("method.holdout_times", "--holdout-times", args.temporal.holdout_times.is_some()),
-        ("method.time_step", "--time-step", args.temporal.time_step.is_some()),
+        ("method.holdout_times", "--holdout-times", t.holdout_times.is_some()),
+        ("method.time_step", "--time-step", t.time_step.is_some()),
+        ("method.projector.splat_subdivisions", "--splat-subdivisions", c.splat_subdivisions.is_some()),
+        ("method.projector.ray_step", "--ray-step", c.ray_step.is_some()),
+        ("method.projector.hull_threshold", "--hull-threshold", c.hull_threshold.is_some()),
+        ("method.projector.hull_noise_sigmas", "--hull-noise-sigmas", c.hull_noise_sigmas.is_some()),
+        ("method.projector.hull_dilation", "--hull-dilation", c.hull_dilation.is_some()),
+        ("method.params.relaxation", "--relaxation", c.relaxation.is_some()),
+        ("method.params.stopping.plateau", "--plateau-tolerance", c.plateau_tolerance.is_some()),
+        ("method.params.tv_weight", "--tv-weight", c.tv_weight.is_some()),
+        ("method.params.weight", "--tikhonov-weight", c.tikhonov_weight.is_some()),
+        ("method.train.rays_per_image", "--rays-per-image", n.rays_per_image.is_some()),
+        ("method.train.coarse_samples", "--coarse-samples", n.coarse_samples.is_some()),
+        // Coarse and fine samples together are capped, under the coarse samples' key.
+        ("method.train.coarse_samples", "--fine-samples", n.fine_samples.is_some()),
+        ("method.train.prior.tv", "--tv-prior", n.tv_prior.is_some()),
+        ("method.train.prior.smooth", "--smooth-prior", n.smooth_prior.is_some()),
+        ("method.train.prior.sparsity", "--sparsity-prior", n.sparsity_prior.is_some()),
+        ("method.windows.overlap", "--overlap", t.overlap.is_some()),
+        // The overlap must be shorter than the window, which --window may have shortened.
+        ("method.windows.overlap", "--window", t.window.is_some()),
+        ("method.windows.time_origin", "--time-origin", t.time_origin.is_some()),
+        ("method.windows.time_origin", "--window", t.window.is_some()),
         // --learning-rate sets the schedule's both ends, keeping their ratio.
-        ("method.train.schedule.initial", "--learning-rate", args.neural.learning_rate.is_some()),
-        ("method.train.schedule.at_decay_iters", "--learning-rate", args.neural.learning_rate.is_some()),
+        ("method.train.schedule.initial", "--learning-rate", n.learning_rate.is_some()),
+        ("method.train.schedule.at_decay_iters", "--learning-rate", n.learning_rate.is_some()),
     ];
     given.into_iter().find(|&(k, _, set)| set && k == key).map(|(_, flag, _)| flag)
 }
