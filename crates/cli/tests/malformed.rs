@@ -290,6 +290,19 @@ fn cases() -> Vec<Case> {
             "--time-budget on the command line: stopping.time_budget_s",
         ),
         c("NaN time budget", None, &["reconstruct", "SCENE", "-o", "OUT", "--time-budget", "NaN"], "time_budget"),
+        // Both turned the plateau rule off, as 0 does, and the run went on to the cap.
+        c(
+            "NaN plateau tolerance",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--plateau-tolerance", "nan"],
+            "--plateau-tolerance <FRACTION>': nan: the tolerance is a positive fraction",
+        ),
+        c(
+            "negative plateau tolerance",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--plateau-tolerance=-0.5"],
+            "or 0 to run to the iteration cap",
+        ),
         c(
             "relaxation 3 asart",
             None,
@@ -1011,7 +1024,6 @@ fn a_method_setting_is_named_by_its_key_and_by_the_option_that_gave_it() {
         ("tv", "--hull-noise-sigmas", "1000", "method.projector.hull_noise_sigmas"),
         ("tv", "--hull-dilation", "99", "method.projector.hull_dilation"),
         ("tv", "--relaxation", "3", "method.params.relaxation"),
-        ("tv", "--plateau-tolerance", "inf", "method.params.stopping.plateau"),
         ("tv", "--tv-weight", "nan", "method.params.tv_weight"),
         ("fast", "--rays-per-image", "0", "method.train.rays_per_image"),
         ("fast", "--coarse-samples", "1", "method.train.coarse_samples"),

@@ -231,6 +231,18 @@ fn parse_learning_rate(s: &str) -> Result<f32, String> {
     Ok(rate)
 }
 
+/// A plateau tolerance, refused as typed unless it is 0 (no plateau rule) or a positive finite
+/// fraction: a NaN or a negative one turned the rule off as 0 does, without a word.
+fn parse_plateau_tolerance(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v >= 0.0 && v.is_finite() => Ok(v),
+        Ok(_) => Err(format!(
+            "{s}: the tolerance is a positive fraction of the residual (e.g. 0.02), or 0 to run to the iteration cap"
+        )),
+        Err(_) => Err(format!("{s:?} is not a number")),
+    }
+}
+
 /// The stopping policy, one for every method.
 #[derive(clap::Args, Debug)]
 #[command(next_help_heading = "Stopping (every method)")]
@@ -314,7 +326,7 @@ pub struct ClassicalArgs {
     pub tikhonov_weight: Option<f64>,
     /// The `own` rule of voxel methods: stop when the residual (sliding mean of 4) varies by
     /// less than this fraction over 20 iterations; 0 runs to the cap [default: 0.02].
-    #[arg(long, value_name = "FRACTION")]
+    #[arg(long, value_name = "FRACTION", value_parser = parse_plateau_tolerance)]
     pub plateau_tolerance: Option<f64>,
 }
 
