@@ -290,6 +290,25 @@ fn cases() -> Vec<Case> {
             "--time-budget on the command line: stopping.time_budget_s",
         ),
         c("NaN time budget", None, &["reconstruct", "SCENE", "-o", "OUT", "--time-budget", "NaN"], "time_budget"),
+        // Each was ignored without a word.
+        c(
+            "gain refits without fitted gains",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--gain-every", "3"],
+            "--gain-every applies only to fitted gains, but the gains are `none`; add --gains fit",
+        ),
+        c(
+            "gain rounds with balanced gains",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--gains", "balance", "--gain-rounds", "2"],
+            "--gain-rounds applies only to fitted gains, but the gains are `balance`",
+        ),
+        c(
+            "gain rounds for a neural method",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--gains", "fit", "--gain-rounds", "2"],
+            "--gain-rounds do(es) not apply to --method fast",
+        ),
         // Both turned the plateau rule off, as 0 does, and the run went on to the cap.
         c(
             "NaN plateau tolerance",

@@ -870,6 +870,17 @@ impl GainConfig {
         if self.offset && self.mode != GainMode::Fit {
             return Err(PipelineError::invalid("gains.offset", "is fitted only with gains.mode fit"));
         }
+        // Refits happen only when the gains are fitted; the interval would be ignored.
+        if let (Some(every), false) = (self.every, self.mode == GainMode::Fit) {
+            return Err(PipelineError::invalid(
+                "gains.every",
+                format!(
+                    "{every} iterations between gain refits, but gains.mode is {}, which fits no gains; set \
+                     gains.mode fit, or leave gains.every out",
+                    self.mode
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -1241,6 +1252,19 @@ mod tests {
         let mut c = RunConfig::new("scene", Method::Fast);
         c.stopping.max_iterations = Some(0);
         assert!(c.validate().unwrap_err().to_string().contains("max_iterations"));
+    }
+
+    /// A refit interval without fitted gains would be ignored.
+    #[test]
+    fn a_gain_refit_interval_needs_fitted_gains() {
+        let mut c = RunConfig::new("scene", Method::Asart);
+        c.gains.every = Some(5);
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("gains.every") && e.contains("gains.mode is none"), "{e}");
+        c.gains.mode = GainMode::Balance;
+        assert!(c.validate().unwrap_err().to_string().contains("gains.every"));
+        c.gains.mode = GainMode::Fit;
+        c.validate().expect("refits of fitted gains");
     }
 
     #[test]

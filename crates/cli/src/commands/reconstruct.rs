@@ -473,6 +473,10 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
     if family != Family::Neural {
         wrong.extend(given(&[("--start-from", n.start_from.is_some())]));
     }
+    // Neural methods refit their gains as they train, in no rounds.
+    if family != Family::Classical {
+        wrong.extend(given(&[("--gain-rounds", args.gains.gain_rounds.is_some())]));
+    }
     if family == Family::Classical {
         wrong.extend(given(&[("--start-method", n.start_method.is_some())]));
     }
@@ -681,6 +685,21 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         cfg.gains.rounds = v;
     }
     apply_method_options(args, &mut cfg.method)?;
+    // The rounds, the refit interval and the offset belong to fitted gains; with others they
+    // would be ignored.
+    let fit_only = given(&[
+        ("--gain-every", g.gain_every.is_some()),
+        ("--gain-rounds", g.gain_rounds.is_some()),
+        ("--gain-offset", g.gain_offset),
+    ]);
+    if !fit_only.is_empty() && cfg.gains.mode != fluidnerf_pipeline::GainMode::Fit {
+        let (verb, them) = if fit_only.len() == 1 { ("applies", "it") } else { ("apply", "them") };
+        bail!(
+            "{} {verb} only to fitted gains, but the gains are `{}`; add --gains fit, or leave {them} out",
+            fit_only.join(", "),
+            cfg.gains.mode
+        );
+    }
     if let Err(e) = cfg.validate() {
         // A value from the command line is named by its option, one from a file by the file.
         let flag = match &e {
