@@ -395,6 +395,23 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "SCENE", "-o", "OUT", "--stop", "held-out", "--holdout-every", "0"],
             "holdout_every",
         ),
+        // The held-out rule's settings were ignored by runs that stop otherwise.
+        c(
+            "patience with the method's own rule",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--stop", "own", "--patience", "3"],
+            "--patience sets held-out early stopping, which this run does not use: the run stops by the method's own",
+        ),
+        c(
+            "held-out interval on a scene without held-out views",
+            Json(|v| {
+                for f in v["frames"].as_array_mut().expect("frames") {
+                    f["holdout"] = false.into();
+                }
+            }),
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--holdout-every", "2", "--patience", "3"],
+            "--holdout-every, --patience set held-out early stopping, which this run does not use: the scene",
+        ),
         c("memory limit 0", None, &["reconstruct", "SCENE", "-o", "OUT", "--memory-limit", "0"], "memory_limit"),
         c(
             "memory limit too small",

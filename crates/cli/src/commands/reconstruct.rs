@@ -700,6 +700,7 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             cfg.gains.mode
         );
     }
+    held_out_options_apply(args, &cfg)?;
     if let Err(e) = cfg.validate() {
         // A value from the command line is named by its option, one from a file by the file.
         let flag = match &e {
@@ -728,6 +729,40 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         }
     }
     Ok(cfg)
+}
+
+/// Refuses --holdout-every and --patience for a run that will not stop by held-out views, which
+/// would ignore them: one whose rule is its own or the budget, a time-resolved one, or one whose
+/// rule `auto` finds no held-out view in the scene.
+fn held_out_options_apply(args: &Args, cfg: &RunConfig) -> anyhow::Result<()> {
+    let s = &args.stop;
+    let options = given(&[("--holdout-every", s.holdout_every.is_some()), ("--patience", s.patience.is_some())]);
+    if options.is_empty() || cfg.stopping.rule == StopRule::HeldOut {
+        return Ok(());
+    }
+    let why = match cfg.stopping.rule {
+        StopRule::Own => "the run stops by the method's own rule (--stop own)".to_string(),
+        StopRule::Budget => "the run stops by its budget alone (--stop budget)".to_string(),
+        _ if cfg.method().family() == Family::Temporal => {
+            "a time-resolved run holds out whole times, and does not stop early on them".to_string()
+        }
+        _ => {
+            let draft = fluidnerf_io::scene::read_scene_draft(&cfg.scene)?;
+            if draft.frames.iter().any(|f| f.holdout) {
+                return Ok(());
+            }
+            format!(
+                "the scene {} holds out no views, so --stop auto stops by the method's own rule",
+                cfg.scene.display()
+            )
+        }
+    };
+    let (verb, them) = if options.len() == 1 { ("sets", "it") } else { ("set", "them") };
+    bail!(
+        "{} {verb} held-out early stopping, which this run does not use: {why}; use --stop held-out on a scene with \
+         held-out views, or leave {them} out",
+        options.join(", ")
+    );
 }
 
 fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Result<()> {
