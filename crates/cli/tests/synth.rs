@@ -24,6 +24,16 @@ fn run_small(dir: &Path, extra: &[&str]) -> Output {
     synth(&args)
 }
 
+/// [`run_small`] imaging the truth volume `truth` (on its own grid, so without `--resolution`).
+fn run_small_volume(dir: &Path, truth: &Path, extra: &[&str]) -> Output {
+    let mut args: Vec<&str> = vec!["-q", "-o", dir.to_str().expect("utf-8 path")];
+    let at = SMALL.iter().position(|&a| a == "--resolution").expect("SMALL gives a resolution");
+    args.extend(SMALL[..at].iter().chain(&SMALL[at + 2..]));
+    args.extend(["--truth-volume", truth.to_str().expect("utf-8 path")]);
+    args.extend_from_slice(extra);
+    synth(&args)
+}
+
 #[test]
 fn writes_a_scene_that_reads_back() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -144,16 +154,35 @@ fn user_volume_becomes_the_truth() {
     let npy = tmp.path().join("mine.npy");
     fluidnerf_io::volume::write_npy(&npy, &vol).expect("writes volume");
     let dir = tmp.path().join("set");
-    let o = run_small(&dir, &["--truth-volume", npy.to_str().expect("utf-8")]);
+    let o = run_small_volume(&dir, &npy, &[]);
     assert!(o.status.success(), "{:?}", text(&o));
     let scene = fluidnerf_io::scene::load_scene(&dir).expect("scene");
     let truth = fluidnerf_io::scene::load_truth(&scene).expect("truth");
     assert_eq!(truth[0].1.data, vol.data);
     let recorded = fluidnerf_io::scene::recorded(&scene).expect("recording").flow_axis;
     assert_eq!(recorded, None, "a user's volume has no known flow axis");
-    let o = run_small(&tmp.path().join("missing"), &["--truth-volume", "/nonexistent/v.npy"]);
+    let o = run_small_volume(&tmp.path().join("missing"), Path::new("/nonexistent/v.npy"), &[]);
     assert!(!o.status.success());
     assert!(text(&o).1.contains("/nonexistent/v.npy"), "{:?}", text(&o));
+
+    // What the volume replaces is refused, not ignored: the phantom, its grid, and the box of a
+    // .vti, which holds its own.
+    let vti = tmp.path().join("mine.vti");
+    fluidnerf_io::volume::write_vti(&vti, &vol).expect("writes volume");
+    for (truth, extra, needle) in [
+        (&npy, &["--phantom", "ball"][..], "'--truth-volume <TRUTH_VOLUME>' cannot be used with '--phantom"),
+        (&npy, &["--resolution", "8"][..], "--resolution 8: the truth volume"),
+        (&vti, &["--aabb", "-5,-5,-5,5,5,5"][..], "mine.vti is a .vti, which holds its own box"),
+    ] {
+        let dir = tmp.path().join("refused");
+        let o = run_small_volume(&dir, truth, extra);
+        let (_, err) = text(&o);
+        assert!(!o.status.success() && err.contains(needle), "{extra:?}: expected `{needle}` in: {err}");
+        assert!(!dir.exists(), "{extra:?} wrote output");
+    }
+    // A .npy fills the box given.
+    let o = run_small_volume(&tmp.path().join("boxed"), &npy, &["--aabb", "-5,-5,-5,5,5,5"]);
+    assert!(o.status.success(), "{:?}", text(&o));
 }
 
 /// A scene that `info` would reject is refused before anything is written: a ground truth with
@@ -186,17 +215,17 @@ fn truths_that_are_not_finite_and_repeated_times_are_refused_up_front() {
     // A volume with no positive voxel made black images said to be seen by no camera.
     let dark = tmp.path().join("dark.npy");
     fluidnerf_io::volume::write_npy(&dark, &Volume::from_fn([8, 8, 8], aabb, |_| -1.0)).expect("writes volume");
-    for (extra, needle) in [
-        (vec!["--truth-volume", nan.to_str().expect("utf-8")], "nan.npy: voxel (i 3, j 0, k 0) is NaN"),
-        (
-            vec!["--truth-volume", dark.to_str().expect("utf-8")],
-            "dark.npy: no voxel is positive (the largest value is -1)",
-        ),
-        (vec!["--truth-volume", big.to_str().expect("utf-8")], "beyond float32's range"),
-        (vec!["--phantom", "jet-tr", "--times", "14,14"], "14 is given twice"),
+    for (truth, extra, needle) in [
+        (Some(&nan), vec![], "nan.npy: voxel (i 3, j 0, k 0) is NaN"),
+        (Some(&dark), vec![], "dark.npy: no voxel is positive (the largest value is -1)"),
+        (Some(&big), vec![], "beyond float32's range"),
+        (None, vec!["--phantom", "jet-tr", "--times", "14,14"], "14 is given twice"),
     ] {
         let dir = tmp.path().join("set");
-        let o = run_small(&dir, &extra);
+        let o = match truth {
+            Some(truth) => run_small_volume(&dir, truth, &extra),
+            None => run_small(&dir, &extra),
+        };
         let (_, err) = text(&o);
         assert!(!o.status.success(), "{extra:?} should fail");
         assert!(err.contains(needle), "{extra:?}: expected `{needle}` in: {err}");

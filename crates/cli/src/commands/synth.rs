@@ -97,8 +97,9 @@ pub struct Args {
     /// Phantom [default: the preset's].
     #[arg(long, value_enum, help_heading = "Phantom")]
     pub phantom: Option<PhantomArg>,
-    /// Use this volume (.npy of shape (nz, ny, nx) filling --aabb, or .vti) as the ground truth.
-    #[arg(long, help_heading = "Phantom")]
+    /// Use this volume (.npy of shape (nz, ny, nx) filling --aabb, or .vti, which holds its own
+    /// box) as the ground truth, on its own grid.
+    #[arg(long, help_heading = "Phantom", conflicts_with = "phantom")]
     pub truth_volume: Option<PathBuf>,
     /// Truth voxels along the box's longest side [default: the preset's].
     #[arg(long, help_heading = "Phantom")]
@@ -299,6 +300,24 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
     }
     if let Some(t) = &args.times {
         s.times = t.clone();
+    }
+    // A volume of the user's is the truth as it is: its grid, and a .vti's box, are its own.
+    if let (PhantomKind::Volume, Some(path)) = (s.phantom.kind, &s.phantom.volume_path) {
+        if let Some(r) = args.resolution {
+            bail!(
+                "--resolution {r}: the truth volume {} is imaged on its own grid; resample it first (e.g. fluidnerf \
+                 export --resolution {r}), or leave --resolution out",
+                path.display()
+            );
+        }
+        let vti = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("vti"));
+        if vti && args.aabb.is_some() {
+            bail!(
+                "--aabb: the truth volume {} is a .vti, which holds its own box; leave --aabb out, or give the volume \
+                 as a .npy, which fills the box given",
+                path.display()
+            );
+        }
     }
     if let Some(step) = args.cfd_step {
         s.phantom.cfd_step = Some(step);
