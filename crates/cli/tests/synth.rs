@@ -258,8 +258,15 @@ fn aabb_takes_negative_corners_and_exactly_six_numbers() {
         assert!(!err.contains("non-finite"), "{aabb}: {err}");
         assert!(!dir.exists(), "{aabb}: wrote output");
     }
-    let o = run_small(&tmp.path().join("wide"), &["--aabb=-1e15,-1e15,-1e15,1e15,1e15,1e15"]);
+    // With the cameras outside it: a camera inside the box would make a scene no command reads.
+    let wide = "--aabb=-1e15,-1e15,-1e15,1e15,1e15,1e15";
+    let o = run_small(&tmp.path().join("wide"), &[wide, "--distance", "4e15"]);
     assert!(o.status.success(), "{}", text(&o).1);
+    let dir = tmp.path().join("inside");
+    let o = run_small(&dir, &[wide]);
+    let err = text(&o).1;
+    assert!(!o.status.success() && err.contains("camera 0 (cam000) at [0.0, 360.0, 0.0] mm is inside"), "{err}");
+    assert!(!dir.exists(), "wrote a scene no command reads");
 }
 
 /// Fraction of pixels above 5 % of the image's peak, and the lit region's height / width (rows

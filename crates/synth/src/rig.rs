@@ -362,6 +362,26 @@ impl RigSettings {
         }
         let mut partial = Vec::new();
         for (i, c) in cams.iter().enumerate() {
+            // Such a scene would be written, then refused by every command that reads it.
+            if aabb.contains(c.camera.centre()) {
+                let (key, fix) = match self.layout {
+                    Layout::Explicit { .. } => ("rig.layout.positions", "place it outside the box"),
+                    _ => (
+                        "rig.distance_mm",
+                        "place the rig farther from the box's centre than its corners (--distance), or shrink the box",
+                    ),
+                };
+                return Err(SynthError::invalid(
+                    key,
+                    format!(
+                        "camera {i} ({}) at {:?} mm is inside the reconstruction box {:?}..{:?}; {fix}",
+                        c.name,
+                        c.camera.centre().to_array(),
+                        aabb.min.to_array(),
+                        aabb.max.to_array()
+                    ),
+                ));
+            }
             let vis = c.camera.visibility(aabb);
             if vis.box_fraction_in_view == 0.0 && vis.pixel_fraction_on_box == 0.0 {
                 return Err(SynthError::CameraMissesBox { index: i, name: c.name.clone() });
@@ -495,6 +515,14 @@ mod tests {
         assert!(holdout.build(&lens, &box40(), 0).is_err());
         let jitter = RigSettings { jitter: Jitter { position_mm: -1.0, rotation_deg: 0.0 }, ..Default::default() };
         assert!(jitter.build(&lens, &box40(), 0).is_err());
+        // A camera inside the box: its scene would be written, then refused by every reader.
+        let inside = RigSettings { distance_mm: Some(10.0), ..Default::default() };
+        let e = inside.build(&lens, &box40(), 0).expect_err("a camera inside the box").to_string();
+        assert!(e.contains("rig.distance_mm") && e.contains("camera 0 (cam000)") && e.contains("inside"), "{e}");
+        let explicit = Layout::Explicit { positions: vec![[0.0, 360.0, 0.0], [5.0, 0.0, 0.0]], targets: vec![] };
+        let inside = RigSettings { layout: explicit, ..Default::default() };
+        let e = inside.build(&lens, &box40(), 0).expect_err("a camera inside the box").to_string();
+        assert!(e.contains("rig.layout.positions") && e.contains("camera 1 (cam001)"), "{e}");
     }
 
     #[test]
