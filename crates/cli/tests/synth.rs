@@ -79,6 +79,21 @@ fn writes_a_scene_that_reads_back() {
             "{f} differs"
         );
     }
+    // A value of the wrong type in a saved configuration is named by its key in the file.
+    let record = std::fs::read_to_string(dir.join("synth.json")).expect("read");
+    let mut v: serde_json::Value = serde_json::from_str(&record).expect("json");
+    v["settings"]["rig"]["subset"]["every"] = "2".into();
+    let (bad, unused) = (tmp.path().join("bad.json"), tmp.path().join("unused"));
+    let bad_config = ["-q", "-o", unused.to_str().expect("utf-8"), "--config", bad.to_str().expect("utf-8")];
+    std::fs::write(&bad, v.to_string()).expect("writes");
+    let o = synth(&bad_config);
+    let err = text(&o).1;
+    assert!(!o.status.success() && err.contains("bad.json: not a valid synth configuration"), "{err}");
+    assert!(err.contains("at `settings.rig.subset.every`: invalid type: string \"2\", expected usize"), "{err}");
+    std::fs::write(&bad, v["settings"].to_string()).expect("writes");
+    let o = synth(&bad_config);
+    assert!(text(&o).1.contains("at `rig.subset.every`"), "the settings alone: {}", text(&o).1);
+
     // Another seed changes the noise.
     let other = tmp.path().join("other");
     let o = run_small(&other, &["--noise", "0.02", "--seed", "4"]);

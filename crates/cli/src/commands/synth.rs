@@ -548,9 +548,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
             let value: serde_json::Value =
                 serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", path.display()))?;
-            let inner = value.get("settings").cloned().unwrap_or(value);
-            serde_json::from_value::<SynthSettings>(inner)
-                .with_context(|| format!("{}: not a valid synth configuration", path.display()))?
+            // A synth.json holds the settings under `settings`; a file of the settings alone works too.
+            let (inner, under) = match value.get("settings") {
+                Some(settings) => (settings.clone(), "settings."),
+                None => (value, ""),
+            };
+            // Named by the key's path in the file, which serde's own message leaves out.
+            fluidnerf_pipeline::rundir::from_json_value::<SynthSettings>(inner).map_err(|e| {
+                let why = match e {
+                    fluidnerf_pipeline::PipelineError::Invalid { why, .. } => {
+                        why.replacen("at `", &format!("at `{under}"), 1)
+                    }
+                    other => other.to_string(),
+                };
+                anyhow::anyhow!("{}: not a valid synth configuration: {why}", path.display())
+            })?
         }
         None => preset(&args.preset)?,
     };
