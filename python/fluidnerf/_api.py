@@ -685,7 +685,9 @@ def synth(
 ) -> Scene:
     """Synthesises the scene of ``preset`` (see :func:`synth_presets`) into ``folder`` and
     returns it. ``settings`` override the preset's ``SynthSettings`` key by key, e.g.
-    ``synth("jet", "jet-tr60", resolution=24, lens={"resolution": [24, 24]})``."""
+    ``synth("jet", "jet-tr60", resolution=24, lens={"resolution": [24, 24]})``. As ``fluidnerf
+    synth``, it refuses a folder of another kind (a run's, an export's) and, without
+    ``force=True``, one that already holds a scene or any other file."""
     if seed is not None:
         settings["seed"] = _integer(seed, "seed")
     return _ext.synth(os.fspath(folder), preset, _dumps(settings, "synth settings"), force)

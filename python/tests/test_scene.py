@@ -239,6 +239,27 @@ def test_synth_records_the_preprocessing_its_images_need(tmp_path):
             assert (tmp_path / "real" / b).is_file()
 
 
+def test_synth_refuses_a_run_folder_and_a_users_files_as_the_command_does(tmp_path, static_scene):
+    """Python's synth wrote its scene into any folder: among a run's files, and over a user's
+    images of the names it writes, where ``fluidnerf synth`` refuses both."""
+    small = {"resolution": 8, "lens": {"resolution": [12, 12]}, "rig": {"layout": {"count": 3}}}
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "run", resolution=8, stopping={"max_iterations": 1}, progress=False
+    )
+    before = sorted(p.name for p in run.path.iterdir())
+    with pytest.raises(fluidnerf.FluidNerfError, match="run"):
+        fluidnerf.synth(run.path, "demo", **small)
+    assert sorted(p.name for p in run.path.iterdir()) == before
+    mine = tmp_path / "mine"
+    (mine / "images").mkdir(parents=True)
+    (mine / "images" / "cam000.png").write_text("mine")
+    with pytest.raises(fluidnerf.FluidNerfError, match="is not empty; .* or pass force=True"):
+        fluidnerf.synth(mine, "demo", **small)
+    assert (mine / "images" / "cam000.png").read_text() == "mine"
+    fluidnerf.synth(mine, "demo", force=True, **small)
+    assert (mine / "transforms.json").is_file()
+
+
 def _png8(path, pixels: np.ndarray) -> None:
     """An 8-bit grayscale PNG of ``pixels`` (H, W)."""
     import struct

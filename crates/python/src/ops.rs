@@ -262,9 +262,19 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
             .map_err(|e| err(e.to_string().replacen("configuration", "synth settings", 1)))?;
     }
     guard(|| settings.validate().map_err(|e| err(e.to_string())))?;
+    // The folder checks of `fluidnerf synth`: never among a run's (or an export's, ...) files,
+    // and a user's files are not replaced by the scene's of the same name without force=True.
+    use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
+    guard(|| refuse_other_kind(&folder, FolderKind::Scene, "synth").map_err(|e| err(e.to_string())))?;
     let scene_file = folder.join("transforms.json");
     if scene_file.exists() && !force {
         return Err(err(format!("{} already holds a scene; pass force=True to overwrite it", folder.display())));
+    }
+    if !force && std::fs::read_dir(&folder).is_ok_and(|mut d| d.next().is_some()) {
+        return Err(err(format!(
+            "{} is not empty; write the scene into a new or empty folder, or pass force=True",
+            folder.display()
+        )));
     }
     // Ctrl-C stops the synthesis between images (before anything is written): the images of a
     // large rig take minutes, and the GIL is released meanwhile.
