@@ -826,3 +826,54 @@ fn a_transforms_json_with_a_missing_image_or_no_frame_is_named() {
     assert!(!o.status.success() && e.contains("transforms.json: lists no frames"), "{e}");
     assert!(!out.exists(), "a refused import wrote");
 }
+
+/// A truth volume fills its scene's box: imported with another box (given, or estimated for a
+/// file without one) it stood where the flow is not, and every score against it was meaningless.
+#[test]
+fn a_truth_volume_is_not_moved_into_another_box() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("synth");
+    let o = fluidnerf(&[
+        "synth",
+        "-q",
+        "--preset",
+        "demo",
+        "--cameras",
+        "4",
+        "--pixels",
+        "16",
+        "--resolution",
+        "8",
+        "-o",
+        s(&src),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.path().join("scene");
+    let import = |extra: &[&str]| {
+        let mut args = vec!["import", "--transforms", s(&src), "-o", s(&out), "--force"];
+        args.extend_from_slice(extra);
+        fluidnerf(&args)
+    };
+    let o = import(&["--aabb", "-10,-10,-10,10,10,10"]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "imported: {err}");
+    assert!(err.contains("truth/truth.npy) fill its box -20.0000,-20.0000,-20.0000,20.0000,20.0000,20.0000"), "{err}");
+    assert!(!out.exists(), "wrote the scene");
+    // The box the truth fills, given again, is the same box.
+    let o = import(&["--aabb", "-20,-20,-20,20,20,20"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = import(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(fluidnerf_io::scene::load_truth(&load_scene(&out).expect("loads")).expect("truth").len(), 1);
+    // Without a box in the file, an estimated one is not the truth's.
+    let file = src.join("transforms.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("reads")).expect("json");
+    v.as_object_mut().expect("object").remove("aabb");
+    std::fs::write(&file, v.to_string()).expect("writes");
+    std::fs::remove_dir_all(&out).expect("removes");
+    let o = import(&[]);
+    let err = stderr(&o);
+    assert!(!o.status.success() && err.contains("has truth volume(s) (") && err.contains("but no `aabb`"), "{err}");
+    assert!(!out.exists(), "wrote the scene");
+    assert!(import(&["--aabb", "-20,-20,-20,20,20,20"]).status.success());
+}

@@ -20,7 +20,8 @@ use std::io::Write as _;
 /// transforms.json (`--transforms`): read as `load_scene` reads scene files (`fl_x`/`fl_y` or
 /// `camera_angle_x`/`camera_angle_y`, sizes from the images when `w`/`h` are missing), its
 /// images where its `file_path`s point. Its `aabb`, `units`, `intensity_scale` and
-/// `linearisation`, when present, are kept unless given on the command line.
+/// `linearisation`, when present, are kept unless given on the command line; its ground truth
+/// too, which fills the file's box, so another box is refused for a file with truth.
 ///
 /// OpenCV (`--opencv`): a `cv::FileStorage` YAML/XML/JSON file or a folder of them (a stereo
 /// pair's `M1 D1 M2 D2 R T` too, see docs/real-data.md), with
@@ -734,6 +735,31 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         bail!("--holdout: every frame would be held out, leaving none to reconstruct from; keep at least one camera");
     }
 
+    // A truth volume (.npy) fills its scene's box: placed in another box it would stand where
+    // the flow is not, and every score against it would be meaningless.
+    if let (Some(path), Some(first)) = (&args.transforms, from_file.truth.first()) {
+        let file = fluidnerf_io::scene::scene_file_path(path);
+        let truth = if from_file.truth.len() == 1 {
+            first.file_path.display().to_string()
+        } else {
+            format!("{} and {} more", first.file_path.display(), from_file.truth.len() - 1)
+        };
+        match (from_file.aabb, given_aabb) {
+            (Some(own), Some(given)) if own != given => bail!(
+                "--aabb {}: the truth volume(s) of {} ({truth}) fill its box {}; in another box they would stand in \
+                 the wrong place: leave --aabb out, or remove the truth entries from the file",
+                aabb_text(&given),
+                file.display(),
+                aabb_text(&own)
+            ),
+            (None, None) => bail!(
+                "{} has truth volume(s) ({truth}) but no `aabb`: a truth volume fills the scene's box, which an \
+                 estimate from the images would not be; give the box the truth fills with --aabb",
+                file.display()
+            ),
+            _ => {}
+        }
+    }
     created.dir_all(&args.out)?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
     let video_opts = fluidnerf_io::video::VideoOptions {
