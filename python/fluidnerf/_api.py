@@ -199,7 +199,10 @@ def scene_from_arrays(
 
 def read_transforms(path: PathLike, aabb: np.ndarray | None = None) -> Scene:
     """Reads a ``transforms.json`` of nerfstudio, instant-ngp or a Blender/NeRF exporter as a
-    scene; ``aabb`` ``(2, 3)`` gives the box when the file has none."""
+    scene; ``aabb`` ``(2, 3)`` gives the box when the file has none. A box the file does not
+    hold makes a scene of its own, in memory until saved (``reconstruct`` saves it into the
+    run's ``scene/``, as one built from arrays); it is refused for a file with ground truth,
+    which fills the file's box."""
     box = None if aabb is None else _array(aabb, np.float64, "aabb", "(2, 3)")
     return _ext.read_transforms(os.fspath(path), box)
 

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -258,6 +260,33 @@ def test_synth_refuses_a_run_folder_and_a_users_files_as_the_command_does(tmp_pa
     assert (mine / "images" / "cam000.png").read_text() == "mine"
     fluidnerf.synth(mine, "demo", force=True, **small)
     assert (mine / "transforms.json").is_file()
+
+
+def test_a_transforms_json_read_in_another_box_is_a_scene_of_its_own(tmp_path, static_scene):
+    """read_transforms(aabb=...) gave a scene said to live in the file's folder, in a box the file
+    does not hold: a run recorded that folder as its scene, so its config.json reran in the
+    file's box (or not at all, for a file without one), and the file's truth stood in the new box."""
+    folder = Path(static_scene.root)
+    box = np.array([[-10.0, -10.0, -10.0], [10.0, 10.0, 10.0]])
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"aabb: the truth volume\(s\) of .* fill its box"):
+        fluidnerf.read_transforms(folder, aabb=box)
+    # A file without a box (as NeRF tools write it) and without truth.
+    nerf = tmp_path / "nerf"
+    shutil.copytree(folder, nerf)
+    meta = json.loads((nerf / "transforms.json").read_text())
+    own = np.array(meta.pop("aabb"))
+    meta.pop("truth")
+    (nerf / "transforms.json").write_text(json.dumps(meta))
+    scene = fluidnerf.read_transforms(nerf, aabb=own)
+    assert scene.root is None and "in memory" in repr(scene)
+    run = fluidnerf.reconstruct(
+        scene, "asart", tmp_path / "run", resolution=8, stopping={"max_iterations": 1}, progress=False
+    )
+    recorded = Path(json.loads((run.path / "config.json").read_text())["scene"])
+    assert recorded == (tmp_path / "run" / "scene").absolute()
+    np.testing.assert_array_equal(fluidnerf.load_scene(recorded).aabb, own)
+    # The file's own box, given again, is the file's scene.
+    assert fluidnerf.read_transforms(folder, aabb=static_scene.aabb).root == folder
 
 
 def _png8(path, pixels: np.ndarray) -> None:

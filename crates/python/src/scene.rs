@@ -306,11 +306,8 @@ impl PyScene {
                     (p.images, p.masks, p.recording.flow_axis)
                 }
             };
-            let truth = if self.saved {
-                fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?
-            } else {
-                Vec::new()
-            };
+            // A scene read from a file keeps its truth, saved or not (one from arrays has none).
+            let truth = fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?;
             let mut scene = self.inner.clone();
             scene.root = folder.clone();
             let mut recording = Recording { flow_axis, ..Recording::plain(scene.frames.len()) };
@@ -418,7 +415,7 @@ impl PyScene {
 
     /// The ground-truth volumes `(time or None, (nz, ny, nx) array)` of a scene on disk.
     fn truth(&self, py: Python<'_>) -> PyResult<Vec<(Option<f64>, PyObject)>> {
-        if !self.saved {
+        if self.inner.truth.is_empty() {
             return Ok(Vec::new());
         }
         let truth = guard(|| fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string())))?;
@@ -438,7 +435,8 @@ pub fn read_transforms(path: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -
     guard(|| {
         let draft = fluidnerf_io::scene::read_scene_draft(&path).map_err(|e| err(e.to_string()))?;
         let file = draft.file.clone();
-        let aabb = match (aabb, draft.aabb) {
+        let own = draft.aabb;
+        let aabb = match (aabb, own) {
             (Some(a), _) => aabb_from(&a)?,
             (None, Some(a)) => a,
             (None, None) => {
@@ -448,9 +446,25 @@ pub fn read_transforms(path: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -
                 )))
             }
         };
+        // A truth volume fills the file's box: in another it would stand where the flow is not.
+        if let (Some(own), Some(truth)) = (own, draft.truth.first()) {
+            if own != aabb {
+                return Err(err(format!(
+                    "aabb: the truth volume(s) of {} ({}) fill its box {:?}..{:?}; in another box they would stand \
+                     in the wrong place: leave aabb out, or remove the truth entries from the file",
+                    file.display(),
+                    truth.file_path.display(),
+                    own.min.to_array(),
+                    own.max.to_array()
+                )));
+            }
+        }
         let inner = draft.into_scene(aabb);
         fluidnerf_io::scene::validate_scene(&inner, &file).map_err(|e| err(e.to_string()))?;
-        Ok(PyScene { inner, images: None, saved: true })
+        // A box the file does not hold makes a scene of its own, which lives in memory until it
+        // is saved (a run saves it into its folder): the file, reloaded, would not be it, and a
+        // run's config.json naming the file would not rerun.
+        Ok(PyScene { inner, images: None, saved: own == Some(aabb) })
     })
 }
 
