@@ -179,6 +179,9 @@ def scene_from_arrays(
     - ``aabb``: ``(2, 3)``, ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` in world units.
     - ``times``: ``(N,)`` frame times for time-resolved recordings; ``distortion``:
       ``(N, 4|5|8)`` OpenCV coefficients; ``holdout``: frames kept out of training.
+
+    The scene is checked as a scene read from a folder is (every camera outside the box and
+    seeing it, a camera name once per instant, ...), naming the frame.
     """
     f64 = np.float64
     return Scene.from_arrays(

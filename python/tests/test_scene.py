@@ -100,6 +100,29 @@ def test_bad_arrays_are_refused_naming_the_array_and_frame():
         fluidnerf.load_scene("/nonexistent/scene")
 
 
+def test_arrays_that_make_no_usable_scene_are_refused_when_given():
+    """A scene from arrays was checked as a scene only when saved: a camera inside the box or
+    blind to it, or a camera named twice, was refused naming a transforms.json the caller never
+    wrote, after Scene.save had written it and the images."""
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    for aabb, names, says in [
+        (
+            np.array([[-100.0, -100, -100], [100, 100, 100]]),
+            None,
+            r"frame 0 .*the camera centre .* is inside",
+        ),
+        (np.array([[1000.0, 1000, 1000], [1010, 1010, 1010]]), None, "does not see the reconstruction box"),
+        (
+            np.array([[-10.0, -10, -10], [10, 10, 10]]),
+            ["a", "b", "a"],
+            r"frames 0 and 2 are both camera \"a\"",
+        ),
+    ]:
+        with pytest.raises(fluidnerf.FluidNerfError, match="^scene_from_arrays: .*" + says):
+            fluidnerf.scene_from_arrays(K, poses, images, aabb, names=names)
+
+
 def test_calibration_importers_read_the_library_fixtures():
     from conftest import REPO
 

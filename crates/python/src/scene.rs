@@ -276,6 +276,11 @@ impl PyScene {
                 frames,
                 truth: Vec::<TruthRef>::new(),
             };
+            // The checks of a scene read from a file (a camera inside the box or blind to it, a
+            // camera named twice at one instant, ...): found only when the scene was saved, they
+            // named a transforms.json the caller never wrote, and left it half-written.
+            fluidnerf_io::scene::validate_scene(&inner, Path::new("scene_from_arrays"))
+                .map_err(|e| err(e.to_string()))?;
             Ok(PyScene { inner, images: Some(images_out), saved: false })
         })
     }
