@@ -333,6 +333,27 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     );
 }
 
+/// A run that cannot be started from is named by its option and key, whatever is wrong with it:
+/// a path that is no run said only "nowhere: is not a folder", naming neither.
+#[test]
+fn a_start_run_that_cannot_be_used_is_named_by_its_option() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 12, 8, &[]);
+    let small = ["--preset", "demo", "--phantom", "ball", "--cameras", "3", "--pixels", "12", "--resolution", "8"];
+    ok(&fluidnerf(d, &[&["synth", "-q", "-o", "other", "--aabb=-10,-10,-10,10,10,10"][..], &small[..]].concat()));
+    ok(&fluidnerf(d, &["reconstruct", "other", "-o", "a", "--method", "asart", "--resolution", "8", "-q"]));
+    for (start, says) in [
+        ("nowhere", "nowhere: is not a folder"),
+        ("scene", "scene: holds no reconstruction"),
+        ("a", "a: its box [-10.0, -10.0, -10.0]–[10.0, 10.0, 10.0] is not the scene's"),
+    ] {
+        let o = fluidnerf(d, &["reconstruct", "scene", "-o", "x", "--method", "fast", "--start-from", start]);
+        refused(&o, &format!("--start-from on the command line: method.start.run: {}", d.join(says).display()));
+        assert!(!d.join("x").exists(), "{start}: left an output folder");
+    }
+}
+
 #[test]
 fn a_resume_after_the_box_changed_and_a_failed_run_are_handled() {
     let tmp = tempfile::tempdir().expect("tempdir");

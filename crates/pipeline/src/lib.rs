@@ -78,6 +78,11 @@ pub fn reconstruct(
 ) -> Result<RunReport, PipelineError> {
     let config = &config.resolved(scene);
     config.validate()?;
+    // A start run that cannot be started from is refused before any work, not after the
+    // training views are prepared.
+    if let MethodConfig::Neural(_, NeuralSpec { start: Some(StartSpec { run: Some(run), .. }), .. }) = &config.method {
+        neural::start_run(run, scene)?;
+    }
     let mut session = Session {
         on_event: &mut on_event,
         stopped: false,

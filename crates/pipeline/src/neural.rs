@@ -253,26 +253,7 @@ fn start_from<F: TrainableField>(
             path
         }
     };
-    let run = crate::load::LoadedRun::open(&path, Some(scene.aabb))?;
-    if run.kind == crate::RunKind::Temporal {
-        return Err(PipelineError::invalid(
-            "method.start.run",
-            format!("{}: a time-resolved run; a static field starts from a static one", path.display()),
-        ));
-    }
-    if run.aabb != scene.aabb {
-        return Err(PipelineError::invalid(
-            "method.start.run",
-            format!(
-                "{}: its box {:?}–{:?} is not the scene's {:?}–{:?}",
-                path.display(),
-                run.aabb.min,
-                run.aabb.max,
-                scene.aabb.min,
-                scene.aabb.max
-            ),
-        ));
-    }
+    let run = start_run(&path, scene)?;
     let source = run.field()?;
     let target = |_: f64, points: &[Vec3], out: &mut [f32]| source.eval(points, 0.0, out);
     let report = fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed)?;
@@ -284,6 +265,31 @@ fn start_from<F: TrainableField>(
         report.seconds
     );
     Ok(seconds + report.seconds)
+}
+
+/// The run a field starts from, refused under `method.start.run` (the key a run names it by)
+/// when it is no static run of the scene's box: checked before the run does any work, and again
+/// when the field starts from it.
+pub(crate) fn start_run(path: &std::path::Path, scene: &Scene) -> Result<crate::load::LoadedRun, PipelineError> {
+    let refuse = |why: String| PipelineError::invalid("method.start.run", why);
+    let run = crate::load::LoadedRun::open(path, Some(scene.aabb)).map_err(|e| refuse(e.to_string()))?;
+    if run.kind == crate::RunKind::Temporal {
+        return Err(refuse(format!(
+            "{}: a time-resolved run; a static field starts from a static one",
+            path.display()
+        )));
+    }
+    if run.aabb != scene.aabb {
+        return Err(refuse(format!(
+            "{}: its box {:?}–{:?} is not the scene's {:?}–{:?}",
+            path.display(),
+            run.aabb.min.to_array(),
+            run.aabb.max.to_array(),
+            scene.aabb.min.to_array(),
+            scene.aabb.max.to_array()
+        )));
+    }
+    Ok(run)
 }
 
 /// What a resumed run keeps of the report of the run it continues.

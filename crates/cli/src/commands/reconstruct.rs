@@ -1019,7 +1019,17 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         (_, true) => Overwrite::Resume,
         _ => Overwrite::Refuse,
     };
-    let report = run_config(&config, &args.out, overwrite)?;
+    let report = run_config(&config, &args.out, overwrite).map_err(|e| {
+        // The start run is checked with the scene, as the run begins: named by its option too.
+        let key = e.downcast_ref::<fluidnerf_pipeline::PipelineError>().and_then(|p| match p {
+            fluidnerf_pipeline::PipelineError::Invalid { key, .. } => Some(key.as_str()),
+            _ => None,
+        });
+        match (key, &args.neural.start_from) {
+            (Some("method.start.run"), Some(_)) => e.context("--start-from on the command line"),
+            _ => e,
+        }
+    })?;
     #[allow(clippy::print_stdout)]
     {
         println!("{}", report.summary_line());
