@@ -548,8 +548,9 @@ def reconstruct(
     ``options`` are ``RunConfig`` keys (see :func:`build_config`), e.g.
     ``reconstruct(scene, "asart", "run", resolution=64, stopping={"rule": "held-out"})``.
     ``out`` None writes into a new temporary folder (kept; see ``run.path``). A scene built
-    from arrays is first saved into ``out/scene``. ``overwrite`` is ``"refuse"``, ``"force"``
-    or ``"resume"`` (``--force``, ``--resume``).
+    from arrays is first saved into ``out/scene`` (and removed again, the scene back in memory,
+    when the run is refused). ``overwrite`` is ``"refuse"``, ``"force"`` or ``"resume"``
+    (``--force``, ``--resume``).
 
     ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
     ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
@@ -565,16 +566,34 @@ def reconstruct(
         # A resumed run continues with the settings it was started with (as --resume).
         config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
+    # A scene from arrays saved into the run folder by this call, and the folders made for it:
+    # removed again when the run is refused, with the scene back in memory, so that the call
+    # can be made again as it could before (the command line leaves nothing either).
+    undo: tuple[Scene, Path, bool] | None = None
     if scene.root is None:
         # The settings and the folder are checked before the scene is written into it: a
         # refused run leaves it as it was. Resuming continues on the scene given, saved over
         # the run's own.
         _ext.check_run_folder(os.fspath(out_path), overwrite)
-        scene.save(out_path / "scene", force=overwrite in ("force", "resume"))
+        own = out_path / "scene"
+        if not own.exists():
+            undo = (scene._copy(), own, not out_path.exists())
+        scene.save(own, force=overwrite in ("force", "resume"))
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cb, bars = _progress_callback(_warning_callback(callback), progress)
     try:
         _ext.reconstruct(scene, json.dumps(cfg), os.fspath(out_path), overwrite, cb)
+    except FluidNerfError:
+        if undo is not None:
+            pristine, own, made = undo
+            shutil.rmtree(own, ignore_errors=True)
+            if made:
+                try:
+                    out_path.rmdir()
+                except OSError:
+                    pass
+            scene._restore(pristine)
+        raise
     finally:
         if bars and "bar" in bars:
             bars.pop("bar").close()

@@ -367,3 +367,10 @@ def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static
             scene, "asart", tmp_path / "new", **{**options, "stopping": {"max_iterations": 0}}
         )
     assert not (tmp_path / "new").exists()
+    # Nor one refused by the run, after the scene was saved: it left out/scene, and the same
+    # call, corrected, was then refused for the scene it had left ("pass force=True").
+    with pytest.raises(fluidnerf.FluidNerfError, match="needs about"):
+        fluidnerf.reconstruct(scene, "asart", tmp_path / "new", memory_limit_gib=1e-6, **options)
+    assert not (tmp_path / "new").exists() and scene.root is None
+    run = fluidnerf.reconstruct(scene, "asart", tmp_path / "new", **options)
+    assert run.status == "finished" and scene.root == (tmp_path / "new" / "scene").absolute()

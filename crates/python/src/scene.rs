@@ -347,6 +347,17 @@ impl PyScene {
         })
     }
 
+    /// A copy of the scene, images and all (for `reconstruct`, to put back a scene it saved
+    /// into a run folder that was then refused).
+    fn _copy(&self) -> PyScene {
+        self.clone()
+    }
+
+    /// Becomes `other` again (see [`PyScene::_copy`]).
+    fn _restore(&mut self, other: PyRef<'_, PyScene>) {
+        *self = other.clone();
+    }
+
     /// The folder the scene lives in, or None before it is saved.
     #[getter]
     fn root(&self) -> Option<PathBuf> {
