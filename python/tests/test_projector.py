@@ -213,6 +213,23 @@ def test_back_projection_refuses_images_that_are_not_finite(scene):
         fluidnerf.back_project(s, list(y), (N, N, N))
 
 
+def test_visual_hull_settings_are_refused_by_the_projections(scene):
+    """A visual hull given to a projection was accepted and ignored: the images and the volume
+    were those without it."""
+    s, *_ = scene
+    vol = np.ones((N, N, N), np.float32)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"projector: visual_hull set\(s\) the visual hull .* leave it out"
+    ):
+        fluidnerf.forward_project(s, vol, {"kind": "footprint", "visual_hull": True})
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"projector: hull_threshold, hull_dilation set"):
+        fluidnerf.back_project(
+            s, np.ones((4, 16, 16), np.float32), (N, N, N), {"hull_threshold": 0.1, "hull_dilation": 3}
+        )
+    # The other settings still apply.
+    assert fluidnerf.forward_project(s, vol, {"kind": "ray", "ray_step": 0.25}).shape == (4, 16, 16)
+
+
 def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(scene):
     """A negative side raised an OverflowError naming nothing, two sides a bare unpacking
     error, and a side of 6.5 was truncated to 6."""

@@ -18,6 +18,17 @@ use crate::{err, guard, volume_from_py, Callback};
 /// are refused), validated. A projector here serves one call, so it keeps no footprints.
 fn projector_config(text: &str) -> PyResult<ProjectorConfig> {
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("projector: {e}")))?;
+    // The visual hull holds a reconstruction's voxels at zero; a projection has none to hold.
+    const HULL: [&str; 4] = ["visual_hull", "hull_threshold", "hull_noise_sigmas", "hull_dilation"];
+    let given: Vec<&str> = HULL.into_iter().filter(|k| value.get(*k).is_some()).collect();
+    if !given.is_empty() {
+        return Err(err(format!(
+            "projector: {} set(s) the visual hull of the voxel methods' reconstructions (a run's \
+             method.projector), which a projection does not use; leave {} out",
+            given.join(", "),
+            if given.len() == 1 { "it" } else { "them" }
+        )));
+    }
     let config: ProjectorConfig = serde_json::from_value(value).map_err(|e| err(format!("projector: {e}")))?;
     config.validate().map_err(|e| err(format!("projector: {e}")))?;
     Ok(ProjectorConfig { kept_footprints_mib: 0, ..config })
