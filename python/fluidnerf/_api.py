@@ -584,7 +584,9 @@ def reconstruct(
     try:
         _ext.reconstruct(scene, json.dumps(cfg), os.fspath(out_path), overwrite, cb)
     except FluidNerfError:
-        if undo is not None:
+        # Only a run refused before it wrote anything: a run that failed later keeps the scene
+        # its config.json names, so that it can be resumed.
+        if undo is not None and not (out_path / "config.json").exists():
             pristine, own, made = undo
             shutil.rmtree(own, ignore_errors=True)
             if made:
