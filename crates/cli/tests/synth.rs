@@ -93,6 +93,26 @@ fn writes_a_scene_that_reads_back() {
     std::fs::write(&bad, v["settings"].to_string()).expect("writes");
     let o = synth(&bad_config);
     assert!(text(&o).1.contains("at `rig.subset.every`"), "the settings alone: {}", text(&o).1);
+    // Another fluidnerf file is named for what it is, not by its first unknown key.
+    std::fs::write(&bad, r#"{"format": 1, "scene": "s", "method": {"name": "asart"}, "seed": 0}"#).expect("writes");
+    let o = synth(&bad_config);
+    assert!(
+        text(&o).1.contains("bad.json: is a run's configuration (config.json), not the settings"),
+        "{:?}",
+        text(&o)
+    );
+    // And a synth.json given to reconstruct, which names its key too.
+    let o = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .args(["reconstruct", "--config", dir.join("synth.json").to_str().expect("utf-8"), "-o"])
+        .arg(&unused)
+        .output()
+        .expect("runs");
+    let err = text(&o).1;
+    assert!(
+        err.contains("synth.json: is the settings of a synthetic scene (synth.json), not a run's configuration"),
+        "{err}"
+    );
+    assert!(!unused.exists());
 
     // Another seed changes the noise.
     let other = tmp.path().join("other");

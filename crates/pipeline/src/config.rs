@@ -905,7 +905,17 @@ impl RunConfig {
 
     /// Reads a `config.json`; errors name the file and the key path.
     pub fn read(path: &Path) -> Result<Self, PipelineError> {
-        let config: RunConfig = crate::rundir::read_json(path)?;
+        let config: RunConfig = crate::rundir::read_json(path).map_err(|e| {
+            // Another fluidnerf file is named for what it is, not by the first key it has.
+            let value: Option<serde_json::Value> = crate::rundir::read_json(path).ok();
+            match value.as_ref().and_then(crate::rundir::json_file_kind) {
+                Some(kind) if kind != "a run's configuration (config.json)" => PipelineError::File {
+                    path: path.to_path_buf(),
+                    why: format!("is {kind}, not a run's configuration (a run folder's config.json)"),
+                },
+                _ => e,
+            }
+        })?;
         if config.format != CONFIG_FORMAT {
             return Err(PipelineError::File {
                 path: path.to_path_buf(),

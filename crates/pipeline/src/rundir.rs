@@ -796,6 +796,25 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, PipelineError> {
     serde_path_to_error::deserialize(de).map_err(|e| PipelineError::file(path, describe(&e)))
 }
 
+/// What kind of fluidnerf file a JSON document is, told by its keys: a run's configuration
+/// (`config.json`), a run's report (`report.json`), a synthetic scene's settings (`synth.json`)
+/// or a scene file (`transforms.json`). Readers name it when they are given the wrong one,
+/// instead of the first key they do not know.
+pub fn json_file_kind(value: &serde_json::Value) -> Option<&'static str> {
+    let has = |key: &str| value.get(key).is_some();
+    if has("frames") {
+        Some("a scene file (transforms.json)")
+    } else if value.get("command").and_then(serde_json::Value::as_str) == Some("synth") || has("settings") {
+        Some("the settings of a synthetic scene (synth.json)")
+    } else if has("method") && (has("status") || has("stop_reason") || has("final_nrmse")) {
+        Some("a run's report (report.json)")
+    } else if has("method") && has("scene") {
+        Some("a run's configuration (config.json)")
+    } else {
+        None
+    }
+}
+
 /// A JSON value as `T`, with the key path in the error.
 pub fn from_json_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<T, PipelineError> {
     serde_path_to_error::deserialize(value).map_err(|e| PipelineError::invalid("configuration", describe(&e)))

@@ -548,6 +548,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
             let value: serde_json::Value =
                 serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", path.display()))?;
+            // Another fluidnerf file is named for what it is, not by the first key it has.
+            if let Some(kind) = fluidnerf_pipeline::rundir::json_file_kind(&value)
+                .filter(|k| *k != "the settings of a synthetic scene (synth.json)")
+            {
+                bail!(
+                    "{}: is {kind}, not the settings of a synthetic scene (the synth.json beside a scene that \
+                     synth wrote)",
+                    path.display()
+                );
+            }
             // A synth.json holds the settings under `settings`; a file of the settings alone works too.
             let (inner, under) = match value.get("settings") {
                 Some(settings) => (settings.clone(), "settings."),
