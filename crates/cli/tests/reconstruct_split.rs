@@ -199,7 +199,11 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
     assert!(!out.status.success() && stderr(&out).contains("other settings"), "{}", stderr(&out));
     // An index beyond the plan, a frame range holding no window, a static method.
     let out = reconstruct(d, "x", &["--window-index", "4"]);
-    assert!(!out.status.success() && stderr(&out).contains("the run has 4 window(s)"), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        !out.status.success() && err.contains("--window-index 4: the run has 4 window(s), numbered 0 to 3"),
+        "{err}"
+    );
     let out = reconstruct(d, "x", &["--frames", "0..1"]);
     assert!(!out.status.success() && stderr(&out).contains("no window lies inside frames 0..1"), "{}", stderr(&out));
     let out = reconstruct(d, "x", &["--frames", "3..2"]);

@@ -1065,6 +1065,12 @@ fn run_split(args: &Args, config: &RunConfig) -> anyhow::Result<std::process::Ex
     }
     let plan = fluidnerf_pipeline::window_plan(&scene, config)?;
     let windows = match (args.split.window_index, &args.split.frames) {
+        (Some(k), _) if k >= plan.windows.len() => bail!(
+            "--window-index {k}: the run has {} window(s), numbered 0 to {} (its frames and --window / --overlap \
+             make the plan)",
+            plan.windows.len(),
+            plan.windows.len().saturating_sub(1)
+        ),
         (Some(k), _) => k..k + 1,
         (None, Some(frames)) => plan.windows_in(frames.clone())?,
         (None, None) => unreachable!("run_split is called with --window-index or --frames"),
