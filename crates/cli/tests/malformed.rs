@@ -412,6 +412,14 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--holdout-every", "2", "--patience", "3"],
             "--holdout-every, --patience set held-out early stopping, which this run does not use: the scene",
         ),
+        c(
+            "NRMSE interval on a scene without ground truth",
+            Json(|v| {
+                v.as_object_mut().expect("object").remove("truth");
+            }),
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--eval-every", "2"],
+            "--eval-every evaluates the volume NRMSE against the scene's ground truth, and the scene",
+        ),
         c("memory limit 0", None, &["reconstruct", "SCENE", "-o", "OUT", "--memory-limit", "0"], "memory_limit"),
         c(
             "memory limit too small",

@@ -701,6 +701,14 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         );
     }
     held_out_options_apply(args, &cfg)?;
+    if args.eval_every.is_some() && fluidnerf_io::scene::read_scene_draft(&cfg.scene)?.truth.is_empty() {
+        // The run would record the interval and evaluate nothing.
+        bail!(
+            "--eval-every evaluates the volume NRMSE against the scene's ground truth, and the scene {} has none; \
+             leave it out (held-out views are scored by --stop held-out)",
+            cfg.scene.display()
+        );
+    }
     if let Err(e) = cfg.validate() {
         // A value from the command line is named by its option, one from a file by the file.
         let flag = match &e {
