@@ -527,6 +527,33 @@ def _progress_callback(callback: Callback | None, progress: bool | None) -> tupl
     return on_event, bar_holder
 
 
+class _SavedScene:
+    """A scene from arrays that a call saves into ``out/scene`` of the run folder ``out``,
+    with what it takes to take that back (see :meth:`take_back`)."""
+
+    def __init__(self, scene: Scene, out: Path):
+        self.scene, self.out, self.own = scene, out, out / "scene"
+        # Only a folder this call makes is taken back, and the run folder only if it makes it.
+        self.pristine = None if self.own.exists() else scene._copy()
+        self.made_out = not out.exists()
+
+    def take_back(self) -> None:
+        """Removes the saved scene, and the run folder if the call made it, and puts the scene
+        back in memory as it was, when the run was refused before it wrote anything (its
+        ``config.json``), so that the call can be made again as before; the command line leaves
+        nothing either. A run that failed later keeps the scene its ``config.json`` names, so
+        that it can be resumed."""
+        if self.pristine is None or (self.out / "config.json").exists():
+            return
+        shutil.rmtree(self.own, ignore_errors=True)
+        if self.made_out:
+            try:
+                self.out.rmdir()
+            except OSError:
+                pass
+        self.scene._restore(self.pristine)
+
+
 def reconstruct(
     scene: Scene | PathLike,
     method: str | dict | None = None,
@@ -566,35 +593,21 @@ def reconstruct(
         # A resumed run continues with the settings it was started with (as --resume).
         config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
-    # A scene from arrays saved into the run folder by this call, and the folders made for it:
-    # removed again when the run is refused, with the scene back in memory, so that the call
-    # can be made again as it could before (the command line leaves nothing either).
-    undo: tuple[Scene, Path, bool] | None = None
+    saved: _SavedScene | None = None
     if scene.root is None:
         # The settings and the folder are checked before the scene is written into it: a
         # refused run leaves it as it was. Resuming continues on the scene given, saved over
         # the run's own.
         _ext.check_run_folder(os.fspath(out_path), overwrite)
-        own = out_path / "scene"
-        if not own.exists():
-            undo = (scene._copy(), own, not out_path.exists())
-        scene.save(own, force=overwrite in ("force", "resume"))
+        saved = _SavedScene(scene, out_path)
+        scene.save(saved.own, force=overwrite in ("force", "resume"))
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cb, bars = _progress_callback(_warning_callback(callback), progress)
     try:
         _ext.reconstruct(scene, json.dumps(cfg), os.fspath(out_path), overwrite, cb)
     except FluidNerfError:
-        # Only a run refused before it wrote anything: a run that failed later keeps the scene
-        # its config.json names, so that it can be resumed.
-        if undo is not None and not (out_path / "config.json").exists():
-            pristine, own, made = undo
-            shutil.rmtree(own, ignore_errors=True)
-            if made:
-                try:
-                    out_path.rmdir()
-                except OSError:
-                    pass
-            scene._restore(pristine)
+        if saved is not None:
+            saved.take_back()
         raise
     finally:
         if bars and "bar" in bars:

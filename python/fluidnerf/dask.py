@@ -30,7 +30,17 @@ from typing import Any, Callable
 import numpy as np
 
 from . import _fluidnerf as _ext
-from ._api import FluidNerfError, PathLike, Run, Scene, _as_scene, _check_callback, build_config, open_run
+from ._api import (
+    FluidNerfError,
+    PathLike,
+    Run,
+    Scene,
+    _as_scene,
+    _check_callback,
+    _SavedScene,
+    build_config,
+    open_run,
+)
 
 __all__ = ["finish", "reconstruct", "train_window"]
 
@@ -99,8 +109,6 @@ def reconstruct(
     again for that call, and must then be the same scene as the one the first call saved in
     ``out/scene``.
     """
-    from distributed import as_completed
-
     _check_callback(callback)
     scene = _as_scene(scene)
     if out is None:
@@ -108,6 +116,7 @@ def reconstruct(
     out_path = Path(os.fspath(out)).absolute()
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     whole = cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame")
+    saved: _SavedScene | None = None
     if scene.root is None:
         # The settings and the folder are checked before the scene is written into it: a
         # refused run leaves the folder as it was.
@@ -122,8 +131,29 @@ def reconstruct(
             # must be the same scene, and the saved one is never overwritten.
             scene = _same_scene(scene, own)
         else:
+            saved = _SavedScene(scene, out_path)
             scene.save(own)
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
+    try:
+        return _run(client, scene, cfg, out_path, whole, callback)
+    except FluidNerfError:
+        # A run refused before it wrote anything takes back the scene this call saved.
+        if saved is not None:
+            saved.take_back()
+        raise
+
+
+def _run(
+    client: Any,
+    scene: Scene,
+    cfg: dict,
+    out_path: Path,
+    whole: bool,
+    callback: Callable[[dict], None] | None,
+) -> Run:
+    """The tasks of :func:`reconstruct`, submitted to ``client``, and the finished run."""
+    from distributed import as_completed
+
     cfg_json = json.dumps(cfg)
     root = str(scene.root)
     token = uuid.uuid4().hex[:8]

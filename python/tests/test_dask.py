@@ -216,3 +216,29 @@ def test_a_scene_from_arrays_built_again_continues_its_dask_run_and_another_is_r
     with pytest.raises(fluidnerf.FluidNerfError, match="differs from it"):
         fluidnerf.dask.reconstruct(client, build(images * 2), TR_METHOD, out, **TR_OPTIONS)
     assert len(client.keys) == 2 and saved.stat().st_mtime_ns == stamp
+
+
+def test_a_scale_out_refused_before_it_wrote_takes_back_the_scene_it_saved(tr_scene, tmp_path):
+    """A scene from arrays saved into out/scene stayed there when the run was refused after
+    that (a worker's refusal before the run wrote anything): the same call, corrected, then had
+    to match a scene the caller never meant to keep. It is taken back, as ``reconstruct`` does;
+    a call stopped otherwise keeps it, so that it can continue."""
+
+    class Refuses:
+        """A client whose first task is refused, as a worker refuses a run it cannot do."""
+
+        def submit(self, *args, key: str, **kwargs):
+            raise fluidnerf.FluidNerfError("refused by the worker")
+
+    K, poses, _, _ = tr_scene.camera_arrays()
+    times = np.array(tr_scene.times, dtype=np.float64)
+    scene = fluidnerf.scene_from_arrays(K, poses, tr_scene.images(), tr_scene.aabb, times=times)
+    out = tmp_path / "run"
+    with pytest.raises(fluidnerf.FluidNerfError, match="refused by the worker"):
+        fluidnerf.dask.reconstruct(Refuses(), scene, TR_METHOD, out, **TR_OPTIONS)
+    assert not out.exists() and scene.root is None
+    # A folder the caller made stays; only what the call saved goes.
+    out.mkdir()
+    with pytest.raises(fluidnerf.FluidNerfError, match="refused by the worker"):
+        fluidnerf.dask.reconstruct(Refuses(), scene, TR_METHOD, out, **TR_OPTIONS)
+    assert out.is_dir() and not any(out.iterdir()) and scene.root is None
