@@ -159,6 +159,29 @@ fn orbit_writes_views_and_a_turntable() {
     ]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("3 frames"));
+    // Rendered again over it with fewer views: the earlier views the new render.json does not
+    // list are removed, not left to pass for this render's; other files stay.
+    std::fs::write(out.join("notes.png"), "mine").expect("writes");
+    ok(&fluidnerf(&[
+        "render",
+        &d(&dir.path().join("recon.npy")),
+        "--scene",
+        &d(dir.path()),
+        "--out",
+        &d(&out),
+        "--orbit",
+        "2",
+        "--width",
+        "48",
+        "--force",
+    ]));
+    let mut files: Vec<String> = std::fs::read_dir(&out)
+        .expect("lists")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    files.sort();
+    assert_eq!(files, ["notes.png", "orbit_000.png", "orbit_001.png", "render.json", "turntable.gif"]);
+    assert_eq!(render_json(&out)["outputs"].as_array().expect("a list").len(), 3);
     // --bake samples trained fields; on a volume it did nothing without a word.
     let baked = fluidnerf(&[
         "render",

@@ -119,7 +119,8 @@ pub struct Args {
     /// GIF counts hundredths of a second; other values are rounded).
     #[arg(long, default_value_t = 80, requires = "orbit")]
     pub frame_ms: u32,
-    /// Overwrite existing outputs in OUT.
+    /// Overwrite existing outputs in OUT; the views and turntable of an earlier render there
+    /// that this one does not write (listed in its render.json) are removed.
     #[arg(long)]
     pub force: bool,
 }
@@ -320,6 +321,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("{} exists; pass --force to overwrite it", p.display());
         }
     }
+    // An earlier render's files that this one does not write: left beside the new render.json,
+    // which would not list them, they would pass for this render's views.
+    let stale = if args.force { stale_outputs(&settings_path, &outputs) } else { Vec::new() };
     let source = load_source(&args.recon, Some(&scene))?;
     // A run rendered with another scene's cameras and box is seldom what was meant.
     if args.scene.is_some() {
@@ -537,6 +541,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let text = serde_json::to_string_pretty(&settings)?;
     fluidnerf_io::atomic_write(&settings_path, |w| w.write_all(text.as_bytes()))
         .with_context(|| format!("writing {}", settings_path.display()))?;
+    for p in &stale {
+        std::fs::remove_file(p).with_context(|| format!("removing {}, a view of the earlier render", p.display()))?;
+    }
+    if !stale.is_empty() {
+        log::info!("removed {} file(s) of the earlier render in {} that this one replaces", stale.len(), out.display());
+    }
     let mut how = match bake_dims {
         Some([x, y, z]) if footprint => format!(", sampled on {x}x{y}x{z} cells"),
         Some([x, y, z]) => format!(", sampled on {x}x{y}x{z} cells (--bake off renders it exactly)"),
@@ -591,4 +601,32 @@ fn auto_footprint(args: &Args, source: &Source, aabb: &Aabb, cameras: &[Camera])
         },
     };
     FootprintProjector::largest_footprint_px(&grid, cameras) <= AUTO_FOOTPRINT_MAX_PX
+}
+
+/// The files an earlier render listed in `settings` (its `render.json`) that the new render's
+/// `outputs` do not hold: views and turntables in the same folder, found by their names there
+/// (a render.json records them as the command was given them). Anything else is left alone.
+fn stale_outputs(settings: &Path, outputs: &[PathBuf]) -> Vec<PathBuf> {
+    let Some(folder) = settings.parent() else { return Vec::new() };
+    let Some(listed) = std::fs::read_to_string(settings)
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|v| v.get("outputs").and_then(|o| o.as_array()).cloned())
+    else {
+        return Vec::new();
+    };
+    let new: std::collections::HashSet<&std::ffi::OsStr> = outputs.iter().filter_map(|p| p.file_name()).collect();
+    let ours = |name: &std::ffi::OsStr| {
+        Path::new(name).extension().and_then(|e| e.to_str()).is_some_and(|e| ["png", "tif", "gif"].contains(&e))
+    };
+    let mut stale: Vec<PathBuf> = listed
+        .iter()
+        .filter_map(|p| p.as_str().and_then(|p| Path::new(p).file_name()))
+        .filter(|name| ours(name) && !new.contains(name))
+        .map(|name| folder.join(name))
+        .filter(|p| p.is_file())
+        .collect();
+    stale.sort();
+    stale.dedup();
+    stale
 }
