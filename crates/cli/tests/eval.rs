@@ -537,6 +537,10 @@ fn a_reconstruction_volume_given_twice_is_refused() {
     let e = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && e.contains("is given twice (as truth_0.npy and ./truth_0.npy)"), "{e}");
     assert!(!d.join("m.json").exists(), "a refused evaluation wrote m.json");
+    // --use-volume picks a run's volume over its field; with volume files it did nothing.
+    let out = fluidnerf(&["eval", "truth_0.npy", "truth_1.npy", "truth_2.npy", "--scene", ".", "--use-volume"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("--use-volume applies to a run folder"), "{e}");
     let out = fluidnerf(&["eval", "truth_0.npy", "truth_1.npy", "truth_2.npy", "--scene", ".", "--json", "m.json"], d);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }

@@ -534,11 +534,17 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
             return Ok(Recon::Field(run.field()?));
         }
     }
+    if let Some(p) = paths.iter().find(|p| p.is_dir()) {
+        bail!("{}: give one run folder, or volume files", p.display());
+    }
+    if use_volume {
+        bail!(
+            "--use-volume applies to a run folder (it scores the run's volume instead of its trained field); volume \
+             files are scored as they are: leave it out"
+        );
+    }
     let mut volumes = Vec::with_capacity(paths.len());
     for p in paths {
-        if p.is_dir() {
-            bail!("{}: give one run folder, or volume files", p.display());
-        }
         let volume = read_volume(p, Some(scene.aabb))?;
         super::warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
         volumes.push(volume);
