@@ -196,7 +196,8 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
             "-q",
         ],
     );
-    assert!(!out.status.success() && stderr(&out).contains("other settings"), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(!out.status.success() && err.contains("other settings (`stopping.max_iterations`: 2 → 3)"), "{err}");
     // An index beyond the plan, a frame range holding no window, a static method.
     let out = reconstruct(d, "x", &["--window-index", "4"]);
     let err = stderr(&out);

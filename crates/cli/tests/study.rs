@@ -46,10 +46,12 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     // Other settings in the same folder are refused.
     let other = fluidnerf(d, &["study", "--preset", "smoke", "--methods", "asart", "-o", "st", "-q"]);
     assert!(!other.status.success());
-    assert!(String::from_utf8_lossy(&other.stderr).contains("--force"));
+    let err = String::from_utf8_lossy(&other.stderr);
+    assert!(err.contains("--force") && err.contains(r#"`methods`: ["fast","sart"] → ["asart"]"#), "{err}");
     let hull =
         fluidnerf(d, &["study", "--preset", "smoke", "--methods", "fast,sart", "--visual-hull", "-o", "st", "-q"]);
     assert!(!hull.status.success(), "the same folder with the voxel methods' hull");
+    assert!(String::from_utf8_lossy(&hull.stderr).contains("`visual_hull`: false → true"));
 }
 
 /// `--visual-hull` holds every voxel method inside the images' visual hull; the runs without it

@@ -796,6 +796,37 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, PipelineError> {
     serde_path_to_error::deserialize(de).map_err(|e| PipelineError::file(path, describe(&e)))
 }
 
+/// The keys in which two settings differ, as `path: saved → given` (values in JSON), at most
+/// `max` of them and a count of the rest: a refusal of "other settings" says which.
+pub fn settings_differences<T: serde::Serialize>(saved: &T, given: &T, max: usize) -> String {
+    fn walk(a: &serde_json::Value, b: &serde_json::Value, path: &str, out: &mut Vec<String>) {
+        use serde_json::Value;
+        match (a, b) {
+            (Value::Object(x), Value::Object(y)) => {
+                let mut keys: Vec<&String> = x.keys().chain(y.keys().filter(|k| !x.contains_key(*k))).collect();
+                keys.sort();
+                for k in keys {
+                    let sub = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                    walk(x.get(k).unwrap_or(&Value::Null), y.get(k).unwrap_or(&Value::Null), &sub, out);
+                }
+            }
+            _ if a != b => out.push(format!("`{path}`: {a} → {b}")),
+            _ => {}
+        }
+    }
+    let (Ok(a), Ok(b)) = (serde_json::to_value(saved), serde_json::to_value(given)) else {
+        return String::new();
+    };
+    let mut found = Vec::new();
+    walk(&a, &b, "", &mut found);
+    let more = found.len().saturating_sub(max);
+    found.truncate(max);
+    if more > 0 {
+        found.push(format!("and {more} more"));
+    }
+    found.join(", ")
+}
+
 /// What kind of fluidnerf file a JSON document is, told by its keys: a run's configuration
 /// (`config.json`), a run's report (`report.json`), a synthetic scene's settings (`synth.json`)
 /// or a scene file (`transforms.json`). Readers name it when they are given the wrong one,
@@ -839,6 +870,17 @@ fn describe(e: &serde_path_to_error::Error<serde_json::Error>) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn settings_differences_name_the_keys() {
+        let a = serde_json::json!({"seed": 0, "method": {"name": "tr-fast", "windows": {"frames": 4}}, "x": [1, 2]});
+        let b = serde_json::json!({"seed": 1, "method": {"name": "tr-fast", "windows": {"frames": 3}}, "x": [1, 2]});
+        assert_eq!(super::settings_differences(&a, &b, 5), "`method.windows.frames`: 4 → 3, `seed`: 0 → 1");
+        assert_eq!(super::settings_differences(&a, &b, 1), "`method.windows.frames`: 4 → 3, and 1 more");
+        assert_eq!(super::settings_differences(&a, &a, 5), "");
+        let c = serde_json::json!({"seed": 0});
+        assert_eq!(super::settings_differences(&c, &serde_json::json!({}), 5), "`seed`: 0 → null");
+    }
+
     use super::*;
 
     #[test]

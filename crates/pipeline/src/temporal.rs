@@ -853,11 +853,13 @@ fn prepare_folder(dir: &RunDir, config: &RunConfig, progress: &Progress) -> Resu
         let mut ours = config.clone();
         ours.fluidnerf_version.clone_from(&saved.fluidnerf_version);
         if saved != ours {
+            let keys = crate::rundir::settings_differences(&saved, &ours, 5);
             return Err(PipelineError::RunDir {
                 path: config_path,
-                why: "holds a run with other settings; run every window with the same settings (or use another \
-                      folder)"
-                    .into(),
+                why: format!(
+                    "holds a run with other settings ({keys}); run every window with the same settings (or use \
+                     another folder)"
+                ),
             });
         }
     } else {

@@ -371,9 +371,10 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         let earlier: Earlier = fluidnerf_pipeline::rundir::read_json(&record)?;
         if earlier.grid != g {
             bail!(
-                "{} holds a study with other settings ({}); use --force to start over or another folder",
+                "{} holds a study with other settings ({}: {}); use --force to start over or another folder",
                 out.display(),
-                record.display()
+                record.display(),
+                fluidnerf_pipeline::rundir::settings_differences(&earlier.grid, &g, 5)
             );
         }
     }
