@@ -109,20 +109,15 @@ fn orbit_writes_views_and_a_turntable() {
     make_scene(dir.path());
     let out = dir.path().join("orbit");
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
-    ok(&fluidnerf(&[
-        "render",
-        &d(&dir.path().join("recon.npy")),
-        "--scene",
-        &d(dir.path()),
-        "--out",
-        &d(&out),
-        "--orbit",
-        "6",
-        "--width",
-        "48",
-        "--supersample",
-        "1",
-    ]));
+    let (recon, scene) = (d(&dir.path().join("recon.npy")), d(dir.path()));
+    // `render recon.npy --scene DIR --out OUT` and `extra`.
+    let render = |out: &Path, extra: &[&str]| {
+        let out = d(out);
+        let mut args = vec!["render", recon.as_str(), "--scene", scene.as_str(), "--out", out.as_str()];
+        args.extend_from_slice(extra);
+        fluidnerf(&args)
+    };
+    ok(&render(&out, &["--orbit", "6", "--width", "48", "--supersample", "1"]));
     for k in 0..6 {
         assert!(out.join(format!("orbit_{k:03}.png")).exists());
     }
@@ -131,50 +126,17 @@ fn orbit_writes_views_and_a_turntable() {
     assert_eq!(render_json(&out)["frame_ms"], 80, "the GIF's display time is recorded");
     // A display time a GIF cannot hold is refused, not clamped.
     for ms in ["0", "9", "655351", "4294967295"] {
-        let o = fluidnerf(&[
-            "render",
-            &d(&dir.path().join("recon.npy")),
-            "--scene",
-            &d(dir.path()),
-            "--out",
-            &d(&dir.path().join("slow")),
-            "--orbit",
-            "2",
-            "--frame-ms",
-            ms,
-        ]);
+        let o = render(&dir.path().join("slow"), &["--orbit", "2", "--frame-ms", ms]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success() && err.contains("--frame-ms"), "--frame-ms {ms}: {err}");
     }
-    let bad = fluidnerf(&[
-        "render",
-        &d(&dir.path().join("recon.npy")),
-        "--scene",
-        &d(dir.path()),
-        "--out",
-        &d(&out),
-        "--camera",
-        "7",
-        "--force",
-    ]);
+    let bad = render(&out, &["--camera", "7", "--force"]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("3 frames"));
     // Rendered again over it with fewer views: the earlier views the new render.json does not
     // list are removed, not left to pass for this render's; other files stay.
     std::fs::write(out.join("notes.png"), "mine").expect("writes");
-    ok(&fluidnerf(&[
-        "render",
-        &d(&dir.path().join("recon.npy")),
-        "--scene",
-        &d(dir.path()),
-        "--out",
-        &d(&out),
-        "--orbit",
-        "2",
-        "--width",
-        "48",
-        "--force",
-    ]));
+    ok(&render(&out, &["--orbit", "2", "--width", "48", "--force"]));
     let mut files: Vec<String> = std::fs::read_dir(&out)
         .expect("lists")
         .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
@@ -183,18 +145,7 @@ fn orbit_writes_views_and_a_turntable() {
     assert_eq!(files, ["notes.png", "orbit_000.png", "orbit_001.png", "render.json", "turntable.gif"]);
     assert_eq!(render_json(&out)["outputs"].as_array().expect("a list").len(), 3);
     // --bake samples trained fields; on a volume it did nothing without a word.
-    let baked = fluidnerf(&[
-        "render",
-        &d(&dir.path().join("recon.npy")),
-        "--scene",
-        &d(dir.path()),
-        "--out",
-        &d(&dir.path().join("baked")),
-        "--camera",
-        "0",
-        "--bake",
-        "32",
-    ]);
+    let baked = render(&dir.path().join("baked"), &["--camera", "0", "--bake", "32"]);
     ok(&baked);
     let err = String::from_utf8_lossy(&baked.stderr);
     assert!(err.contains("--bake has no effect") && err.contains("recon.npy is a volume"), "{err}");
