@@ -30,6 +30,7 @@ use std::path::Path;
 
 pub mod calib;
 mod error;
+pub mod folder;
 pub mod image;
 pub mod mesh;
 pub mod scene;

@@ -78,6 +78,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::folder::{folder_kind, FolderKind};
 use crate::image::{Linearisation, SampleKind};
 use crate::{atomic_write, IoError};
 
@@ -480,41 +481,25 @@ pub fn check_scene_path(path: &Path) -> Result<(), IoError> {
             ),
         ));
     }
-    if path.is_dir() && !path.join(SCENE_FILE).exists() {
-        if let Some((kind, advice)) = other_folder_kind(path) {
-            return Err(IoError::invalid(
-                path,
-                format!("is {kind}, not a scene folder (it has no {SCENE_FILE}){advice}"),
-            ));
-        }
+    if let Some(kind) = folder_kind(path).filter(|k| *k != FolderKind::Scene) {
+        let advice = match kind {
+            // A run's configuration names the scene it was made from.
+            FolderKind::Run => {
+                let scene = std::fs::read_to_string(path.join("config.json"))
+                    .ok()
+                    .and_then(|text| serde_json::from_str::<Value>(&text).ok())
+                    .and_then(|v| v.get("scene").and_then(Value::as_str).map(|s| format!(" ({s})")));
+                format!("; give the scene it was made from{}", scene.unwrap_or_default())
+            }
+            FolderKind::Study => "; its scenes are the folders in its scenes/".to_string(),
+            _ => String::new(),
+        };
+        return Err(IoError::invalid(
+            path,
+            format!("is {}, not a scene folder (it has no {SCENE_FILE}){advice}", kind.name()),
+        ));
     }
     Ok(())
-}
-
-/// What a folder without a scene file is, when fluidnerf wrote it: a run, an export, rendered
-/// views, a comparison or a study (their marker files, as the pipeline's folder kinds), and
-/// what to give instead where that is known.
-fn other_folder_kind(dir: &Path) -> Option<(&'static str, String)> {
-    let has = |name: &str| dir.join(name).is_file();
-    if has("config.json") || has("report.json") {
-        // A run's configuration names the scene it was made from.
-        let scene = std::fs::read_to_string(dir.join("config.json"))
-            .ok()
-            .and_then(|text| serde_json::from_str::<Value>(&text).ok())
-            .and_then(|v| v.get("scene").and_then(Value::as_str).map(str::to_string));
-        let advice = scene.map(|scene| format!(" ({scene})")).unwrap_or_default();
-        Some(("a reconstruction run folder", format!("; give the scene it was made from{advice}")))
-    } else if has("export.json") {
-        Some(("an export folder", String::new()))
-    } else if has("render.json") {
-        Some(("a folder of rendered views", String::new()))
-    } else if has("compare.json") {
-        Some(("a comparison folder", String::new()))
-    } else if has("study.json") {
-        Some(("a study folder", "; its scenes are the folders in its scenes/".to_string()))
-    } else {
-        None
-    }
 }
 
 /// The scene file for `path`: `path` itself if it ends in `.json`, else `path/transforms.json`.

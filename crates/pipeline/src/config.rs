@@ -908,10 +908,10 @@ impl RunConfig {
         let config: RunConfig = crate::rundir::read_json(path).map_err(|e| {
             // Another fluidnerf file is named for what it is, not by the first key it has.
             let value: Option<serde_json::Value> = crate::rundir::read_json(path).ok();
-            match value.as_ref().and_then(crate::rundir::json_file_kind) {
-                Some(kind) if kind != "a run's configuration (config.json)" => PipelineError::File {
+            match value.as_ref().and_then(crate::rundir::JsonFileKind::of) {
+                Some(kind) if kind != crate::rundir::JsonFileKind::RunConfig => PipelineError::File {
                     path: path.to_path_buf(),
-                    why: format!("is {kind}, not a run's configuration (a run folder's config.json)"),
+                    why: format!("is {}, not a run's configuration (a run folder's config.json)", kind.describe()),
                 },
                 _ => e,
             }

@@ -51,57 +51,7 @@ pub enum DirState {
     Foreign,
 }
 
-/// The kind of folder a fluidnerf command writes, told by the file that marks it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FolderKind {
-    /// A scene: `transforms.json` (written by `synth` and `import`).
-    Scene,
-    /// A reconstruction run: `config.json` or `report.json` (written by `reconstruct`).
-    Run,
-    /// An export: `export.json` (written by `export`).
-    Export,
-    /// Rendered views: `render.json` (written by `render`).
-    Render,
-    /// A comparison of runs: `compare.json` (written by `compare`).
-    Compare,
-    /// A study of methods: `study.json` (written by `study`).
-    Study,
-}
-
-impl FolderKind {
-    /// What such a folder is, with the file that tells, e.g. "a scene folder (it holds
-    /// transforms.json)".
-    pub fn describe(self) -> &'static str {
-        match self {
-            FolderKind::Scene => "a scene folder (it holds transforms.json)",
-            FolderKind::Run => "a reconstruction run folder (it holds config.json or report.json)",
-            FolderKind::Export => "an export folder (it holds export.json)",
-            FolderKind::Render => "a folder of rendered views (it holds render.json)",
-            FolderKind::Compare => "a comparison folder (it holds compare.json)",
-            FolderKind::Study => "a study folder (it holds study.json)",
-        }
-    }
-}
-
-/// The kind of fluidnerf folder `dir` is, if any (None also when it does not exist).
-pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
-    let has = |name: &str| dir.join(name).is_file();
-    if has(fluidnerf_io::scene::SCENE_FILE) {
-        Some(FolderKind::Scene)
-    } else if has("config.json") || has("report.json") {
-        Some(FolderKind::Run)
-    } else if has("export.json") {
-        Some(FolderKind::Export)
-    } else if has("render.json") {
-        Some(FolderKind::Render)
-    } else if has("compare.json") {
-        Some(FolderKind::Compare)
-    } else if has("study.json") {
-        Some(FolderKind::Study)
-    } else {
-        None
-    }
-}
+pub use fluidnerf_io::folder::{folder_kind, FolderKind};
 
 /// Refuses `out` as the output folder of `command`, which writes folders of kind `kind`, when
 /// it is a fluidnerf folder of another kind: writing there would mix two kinds of results (and
@@ -827,22 +777,45 @@ pub fn settings_differences<T: serde::Serialize>(saved: &T, given: &T, max: usiz
     found.join(", ")
 }
 
-/// What kind of fluidnerf file a JSON document is, told by its keys: a run's configuration
-/// (`config.json`), a run's report (`report.json`), a synthetic scene's settings (`synth.json`)
-/// or a scene file (`transforms.json`). Readers name it when they are given the wrong one,
-/// instead of the first key they do not know.
-pub fn json_file_kind(value: &serde_json::Value) -> Option<&'static str> {
-    let has = |key: &str| value.get(key).is_some();
-    if has("frames") {
-        Some("a scene file (transforms.json)")
-    } else if value.get("command").and_then(serde_json::Value::as_str) == Some("synth") || has("settings") {
-        Some("the settings of a synthetic scene (synth.json)")
-    } else if has("method") && (has("status") || has("stop_reason") || has("final_nrmse")) {
-        Some("a run's report (report.json)")
-    } else if has("method") && has("scene") {
-        Some("a run's configuration (config.json)")
-    } else {
-        None
+/// A fluidnerf JSON file, told by its keys ([`JsonFileKind::of`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JsonFileKind {
+    /// A scene file (`transforms.json`).
+    Scene,
+    /// A synthetic scene's settings (`synth.json`).
+    SynthSettings,
+    /// A run's report (`report.json`).
+    RunReport,
+    /// A run's configuration (`config.json`).
+    RunConfig,
+}
+
+impl JsonFileKind {
+    /// What kind of fluidnerf file a JSON document is, told by its keys. Readers name it when
+    /// they are given the wrong one, instead of the first key they do not know.
+    pub fn of(value: &serde_json::Value) -> Option<Self> {
+        let has = |key: &str| value.get(key).is_some();
+        if has("frames") {
+            Some(Self::Scene)
+        } else if value.get("command").and_then(serde_json::Value::as_str) == Some("synth") || has("settings") {
+            Some(Self::SynthSettings)
+        } else if has("method") && (has("status") || has("stop_reason") || has("final_nrmse")) {
+            Some(Self::RunReport)
+        } else if has("method") && has("scene") {
+            Some(Self::RunConfig)
+        } else {
+            None
+        }
+    }
+
+    /// The kind in words, with its usual file name.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Scene => "a scene file (transforms.json)",
+            Self::SynthSettings => "the settings of a synthetic scene (synth.json)",
+            Self::RunReport => "a run's report (report.json)",
+            Self::RunConfig => "a run's configuration (config.json)",
+        }
     }
 }
 

@@ -549,13 +549,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let value: serde_json::Value =
                 serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", path.display()))?;
             // Another fluidnerf file is named for what it is, not by the first key it has.
-            if let Some(kind) = fluidnerf_pipeline::rundir::json_file_kind(&value)
-                .filter(|k| *k != "the settings of a synthetic scene (synth.json)")
-            {
+            use fluidnerf_pipeline::rundir::JsonFileKind;
+            if let Some(kind) = JsonFileKind::of(&value).filter(|k| *k != JsonFileKind::SynthSettings) {
                 bail!(
-                    "{}: is {kind}, not the settings of a synthetic scene (the synth.json beside a scene that \
-                     synth wrote)",
-                    path.display()
+                    "{}: is {}, not the settings of a synthetic scene (the synth.json beside a scene that synth \
+                     wrote)",
+                    path.display(),
+                    kind.describe()
                 );
             }
             // A synth.json holds the settings under `settings`; a file of the settings alone works too.

@@ -1,0 +1,68 @@
+//! The kinds of folder fluidnerf's commands write, told by the file that marks each: readers
+//! name a folder of another kind for what it is, and writers refuse to mix two kinds.
+
+use std::path::Path;
+
+/// The kind of folder a fluidnerf command writes, told by the file that marks it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FolderKind {
+    /// A scene: `transforms.json` (written by `synth` and `import`).
+    Scene,
+    /// A reconstruction run: `config.json` or `report.json` (written by `reconstruct`).
+    Run,
+    /// An export: `export.json` (written by `export`).
+    Export,
+    /// Rendered views: `render.json` (written by `render`).
+    Render,
+    /// A comparison of runs: `compare.json` (written by `compare`).
+    Compare,
+    /// A study of methods: `study.json` (written by `study`).
+    Study,
+}
+
+impl FolderKind {
+    /// What such a folder is, e.g. "a scene folder".
+    pub fn name(self) -> &'static str {
+        match self {
+            FolderKind::Scene => "a scene folder",
+            FolderKind::Run => "a reconstruction run folder",
+            FolderKind::Export => "an export folder",
+            FolderKind::Render => "a folder of rendered views",
+            FolderKind::Compare => "a comparison folder",
+            FolderKind::Study => "a study folder",
+        }
+    }
+
+    /// What such a folder is, with the file that tells, e.g. "a scene folder (it holds
+    /// transforms.json)".
+    pub fn describe(self) -> &'static str {
+        match self {
+            FolderKind::Scene => "a scene folder (it holds transforms.json)",
+            FolderKind::Run => "a reconstruction run folder (it holds config.json or report.json)",
+            FolderKind::Export => "an export folder (it holds export.json)",
+            FolderKind::Render => "a folder of rendered views (it holds render.json)",
+            FolderKind::Compare => "a comparison folder (it holds compare.json)",
+            FolderKind::Study => "a study folder (it holds study.json)",
+        }
+    }
+}
+
+/// The kind of fluidnerf folder `dir` is, if any (None also when it does not exist).
+pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
+    let has = |name: &str| dir.join(name).is_file();
+    if has(crate::scene::SCENE_FILE) {
+        Some(FolderKind::Scene)
+    } else if has("config.json") || has("report.json") {
+        Some(FolderKind::Run)
+    } else if has("export.json") {
+        Some(FolderKind::Export)
+    } else if has("render.json") {
+        Some(FolderKind::Render)
+    } else if has("compare.json") {
+        Some(FolderKind::Compare)
+    } else if has("study.json") {
+        Some(FolderKind::Study)
+    } else {
+        None
+    }
+}
