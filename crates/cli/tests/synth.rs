@@ -218,6 +218,23 @@ fn user_volume_becomes_the_truth() {
     // A .npy fills the box given.
     let o = run_small_volume(&tmp.path().join("boxed"), &npy, &["--aabb", "-5,-5,-5,5,5,5"]);
     assert!(o.status.success(), "{:?}", text(&o));
+
+    // Rerun from its synth.json with another phantom, the volume is no longer read, and the
+    // new synth.json does not name it either.
+    let ball = tmp.path().join("ball");
+    let config = dir.join("synth.json");
+    let o = synth(&[
+        "-q",
+        "-o",
+        ball.to_str().expect("utf-8"),
+        "--config",
+        config.to_str().expect("utf-8"),
+        "--phantom",
+        "ball",
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let written = std::fs::read_to_string(ball.join("synth.json")).expect("synth.json");
+    assert!(!written.contains("mine.npy"), "the replaced volume is still recorded: {written}");
 }
 
 /// A scene that `info` would reject is refused before anything is written: a ground truth with

@@ -279,6 +279,9 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
             *axis = kind.flow_axis();
         }
         s.phantom.kind = kind;
+        // A volume of the user's that the new phantom replaces (from a `synth.json` given to
+        // --config) is no longer read, so it is not recorded either.
+        s.phantom.volume_path = None;
     }
     if let Some(path) = &args.truth_volume {
         s.phantom.kind = PhantomKind::Volume;
