@@ -188,7 +188,7 @@ pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> 
     } else if bytes.starts_with(PNG_MAGIC) {
         read_with_image_crate(path, bytes, image::ImageFormat::Png, linearisation)
     } else if bytes.starts_with(JPEG_MAGIC) {
-        if jpeg_end(bytes) == JpegEnd::Truncated {
+        if jpeg_is_truncated(bytes) {
             return Err(IoError::invalid(
                 path,
                 format!(
@@ -206,6 +206,12 @@ pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> 
              8/16/32-bit and float TIFF)",
         ))
     }
+}
+
+/// Whether a JPEG's bytes end before its end-of-image marker ([`jpeg_end`]): decoders fill the
+/// missing blocks with grey and report no error.
+pub(crate) fn jpeg_is_truncated(bytes: &[u8]) -> bool {
+    jpeg_end(bytes) == JpegEnd::Truncated
 }
 
 /// What [`jpeg_end`] found.

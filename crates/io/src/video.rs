@@ -3,7 +3,8 @@
 //! - **MJPEG in AVI** (RIFF `AVI `, the usual format of high-speed and machine-vision cameras)
 //!   is read here: the stream header's `dwRate / dwScale` (else the main header's
 //!   microseconds per frame) gives the frame rate, the `movi` list's `##dc`/`##db` chunks
-//!   (including OpenDML `AVIX` extensions) the frames, each decoded as a JPEG. An empty chunk
+//!   (including OpenDML `AVIX` extensions) the frames, each decoded as a JPEG (one that ends
+//!   before its end-of-image marker is refused, as a JPEG file is). An empty chunk
 //!   (a frame the camera dropped) gives no frame but keeps its time slot, as in ffmpeg. The file is
 //!   walked chunk by chunk and only the kept frames are read, so a long recording never sits
 //!   in memory whole.
@@ -432,6 +433,16 @@ fn read_mjpeg_avi(
             continue;
         }
         let data = riff.read_at(offset, n).map_err(io)?;
+        // Checked here as for a JPEG file: the decoder would fill a cut frame with grey.
+        if crate::image::jpeg_is_truncated(&data) {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "frame {i}: truncated JPEG: its chunk's {n} bytes end before the end-of-image marker (a decoder \
+                     would fill the missing part with grey)"
+                ),
+            ));
+        }
         // The first kept frame decides the range for all.
         let (range, _) = *range.get_or_insert_with(|| match opts.range {
             VideoRange::Auto if jpeg_says_limited(&data) => (VideoRange::Limited, RangeSource::File),

@@ -152,7 +152,12 @@ fn broken_video_files_are_refused_with_their_name() {
     let size = u32::from_le_bytes(good[chunk + 4..chunk + 8].try_into().expect("4 bytes")) as usize;
     bad_jpeg[chunk + 8..chunk + 8 + size].fill(0);
 
-    let cases: [(&str, Vec<u8>, &str); 7] = [
+    // Frame 2's JPEG cut short inside its scan: its last 22 bytes, the end-of-image marker
+    // among them, zeroed (a camera that stopped writing mid-frame).
+    let mut cut_jpeg = good.clone();
+    cut_jpeg[chunk + 8 + size - 22..chunk + 8 + size].fill(0);
+
+    let cases: [(&str, Vec<u8>, &str); 8] = [
         ("truncated.avi", good[..good.len() / 2].to_vec(), "truncated"),
         ("headers_only.avi", good[..400].to_vec(), "malformed AVI"),
         ("notriff.avi", b"this is not a video at all, just some text".to_vec(), "not a video file"),
@@ -160,6 +165,7 @@ fn broken_video_files_are_refused_with_their_name() {
         ("zero_rate.avi", zero_rate, "zero frame rate"),
         ("no_video.avi", no_video, "no video stream"),
         ("bad_jpeg.avi", bad_jpeg, "frame 2: not a decodable JPEG"),
+        ("cut_jpeg.avi", cut_jpeg, "frame 2: truncated JPEG"),
     ];
     for (name, data, want) in cases {
         let p = dir.path().join(name);
