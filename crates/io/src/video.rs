@@ -221,7 +221,7 @@ pub fn read_video(path: &Path, opts: &VideoOptions) -> Result<Video, IoError> {
 
 /// Decodes the kept frames of a video file one at a time, in order, passing each to
 /// `on_frame` (which may stop the reading by returning an error). At least one frame is kept,
-/// else it is an error.
+/// else it is an error; so is a selection that ends past the file's last frame.
 pub fn read_video_frames(
     path: &Path,
     opts: &VideoOptions,
@@ -280,6 +280,21 @@ pub fn read_video_frames(
             format!(
                 "no frame kept: the video has {} frame(s) and the selection starts at frame {}",
                 info.frames_in_file, opts.start
+            ),
+        ));
+    }
+    // A selection past the end would otherwise be cut short without a word, and the recording
+    // taken for the longer one asked for.
+    if let Some(end) = opts.end.filter(|&end| end > info.frames_in_file) {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "the selection runs to frame {} but the video has only {} frame(s), 0 to {}: end the selection at \
+                 {} at most, or leave its end open",
+                end - 1,
+                info.frames_in_file,
+                info.frames_in_file - 1,
+                info.frames_in_file
             ),
         ));
     }

@@ -111,6 +111,15 @@ fn selection_and_time_offset() {
     let past = VideoOptions { start: 4, ..VideoOptions::default() };
     let err = read_video(&fixture("ramp_mjpeg.avi"), &past).expect_err("nothing kept").to_string();
     assert!(err.contains("ramp_mjpeg.avi") && err.contains("no frame kept"), "{err}");
+    // Frames past the end are not silently dropped from the selection.
+    let long = VideoOptions { start: 1, end: Some(10), ..VideoOptions::default() };
+    let err = read_video(&fixture("ramp_mjpeg.avi"), &long).expect_err("past the end").to_string();
+    assert!(
+        err.contains("ramp_mjpeg.avi") && err.contains("runs to frame 9 but the video has only 4 frame(s), 0 to 3"),
+        "{err}"
+    );
+    let to_end = VideoOptions { start: 1, end: Some(4), ..VideoOptions::default() };
+    assert_eq!(read_video(&fixture("ramp_mjpeg.avi"), &to_end).expect("frames 1 to 3").times.len(), 3);
     let nan = VideoOptions { time_offset_s: f64::NAN, ..VideoOptions::default() };
     let err = read_video(&fixture("ramp_mjpeg.avi"), &nan).expect_err("NaN offset").to_string();
     assert!(err.contains("not finite"), "{err}");

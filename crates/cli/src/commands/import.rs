@@ -109,8 +109,8 @@ pub struct Args {
     #[arg(long, value_name = "auto|full|limited", default_value = "auto")]
     pub video_range: fluidnerf_io::video::VideoRange,
     /// Frames of video recordings to import, as `A..B`: 0-based indices in the file, B
-    /// excluded; `A..` runs to the end, `..B` starts at 0. Times stay those of the recording
-    /// (plus --video-time-offset).
+    /// excluded (a B past a file's last frame is refused); `A..` runs to the end, `..B` starts
+    /// at 0. Times stay those of the recording (plus --video-time-offset).
     #[arg(long, value_name = "A..B")]
     pub video_frames: Option<String>,
     /// Import every N-th frame of video recordings, counted from the first of --video-frames.
