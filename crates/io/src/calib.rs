@@ -550,8 +550,16 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
             "does not give a rotation: the rotation vector is too long for its length to be finite".into(),
         ));
     }
-    let camera =
-        Camera { intrinsics, distortion, world_from_camera: world_from_camera_of(rotation, translation), lens: None };
+    // The pose inverts the matrix read: a singular one has no inverse, and the NaN it gives
+    // would be blamed on the translation.
+    let world_from_camera = world_from_camera_of(rotation, translation);
+    if !world_from_camera.is_finite() {
+        return Err(says(
+            pose_key,
+            format!("is singular (determinant {}), not a rotation", num(rotation.determinant())),
+        ));
+    }
+    let camera = Camera { intrinsics, distortion, world_from_camera, lens: None };
     // The intrinsics passed above, so what is left to fail is the pose.
     camera.validate().map_err(|e| bad(pose_key, e.to_string()))?;
     Ok(camera)

@@ -1012,13 +1012,14 @@ fn opencv_malformed_nodes_are_named() {
     let d2 = "cols: 5\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0. ]";
     let m1 = "data: [ 500., 0., 319.5, 0., 502., 239.5, 0., 0., 1. ]";
     let sample_k = "6.5746697810243404e+02 0. 3.1950000000000000e+02 0.\n    6.5746697810243404e+02 2.3950000000000000e+02 0. 0. 1.";
-    let cases: [(&str, String, &str); 18] = [
+    let cases: [(&str, String, &str); 19] = [
         ("calib.yml", stereo.replace(d2, "cols: 3\n   dt: d\n   data: [ -0.12, 0.03, 0. ]"), "calib.yml: camera `cam2`: `D2` has 3 values; expected 4, 5, 8, 12 or 14"),
         ("calib.yml", stereo.replace(d2, "cols: 9\n   dt: d\n   data: [ -0.12, 0.03, 0., 0., 0., 0., 0., 0., 0. ]"), "`D2` has 9 values"),
         ("calib.yml", stereo.replace(m1, "data: [ 500., 0., 319.5, 0., 502., 239.5 ]").replace("rows: 3\n   cols: 3\n   dt: d\n   data: [ 500.,", "rows: 2\n   cols: 3\n   dt: d\n   data: [ 500.,"), "camera `cam1`: `M1` has 6 values; expected 9 (3 × 3)"),
         ("calib.yml", stereo.replace(m1, "data: [ 500., 0., 319.5, 0., abc, 239.5, 0., 0., 1. ]"), "camera `cam1`: `M1`: matrix data must be numbers"),
         ("calib.yml", stereo.replace(m1, "data: [ -500., 0., 319.5, 0., 502., 239.5, 0., 0., 1. ]"), "camera `cam1`: `M1`: invalid intrinsics: focal lengths must be positive"),
         ("calib.yml", stereo.replace("R: [ 1., 0., 0.,", "R: [ 2., 0., 0.,"), "camera `cam2`: `R`: invalid camera pose: rotation is not a proper rotation"),
+        ("calib.yml", stereo.replace("R: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]", "R: [ 0., 0., 0., 0., 0., 0., 0., 0., 0. ]"), "camera `cam2`: `R` is singular (determinant 0), not a rotation"),
         ("calib.yml", stereo.replace("imageSize: [ 640, 480 ]", "imageSize: [ 640.5, 480 ]"), "camera `cam1`: `imageSize`: expected [width, height] as two positive integers"),
         ("calib.yml", stereo.replace("imageSize: [ 640, 480 ]", "imageSize: [ 640, 480, 3 ]"), "`imageSize`: expected [width, height]"),
         ("calib.yml", stereo.replace("   rows: 3\n   cols: 3\n   dt: d\n   data: [ 510.", "   rows: 4294967296\n   cols: 4294967296\n   dt: d\n   data: [ 510."), "camera `cam2`: `M2`: rows × cols = 4294967296 × 4294967296 but 9 values"),
