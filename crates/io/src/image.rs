@@ -2,7 +2,8 @@
 //!
 //! # Reading
 //! - 8- and 16-bit PNG, 8-bit JPEG (baseline and progressive), 8/16/32-bit integer and
-//!   32/64-bit float TIFF. The format is chosen by content, not by extension.
+//!   32/64-bit float TIFF (greyscale or RGB; CMYK, YCbCr and L*a*b* TIFFs are refused). The
+//!   format is chosen by content, not by extension.
 //! - Values stay unscaled: integer images give their sensor counts as f32 (a 16-bit PNG pixel
 //!   stored as 40000 reads as 40000.0, never normalised to [0, 1]); float TIFF values are
 //!   returned as stored.
@@ -381,6 +382,7 @@ fn read_with_image_crate(
 
 fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
     use tiff::decoder::{Decoder, DecodingResult};
+    use tiff::ColorType;
     let bad = |e: tiff::TiffError| IoError::invalid(path, format!("unreadable TIFF: {e}"));
     let mut dec = Decoder::new(Cursor::new(bytes)).map_err(bad)?;
     let (w, h) = dec.dimensions().map_err(bad)?;
@@ -389,6 +391,28 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
     if w.checked_mul(h).is_none_or(|n| n == 0 || n > 1 << 30) {
         return Err(IoError::invalid(path, format!("TIFF claims {w}x{h} pixels")));
     }
+    // Grey (with extra samples, which are dropped) and RGB are read; the samples of other
+    // colour models (CMYK, YCbCr, CIE L*a*b*) would be taken for RGB and give garbage.
+    let grey = match dec.colortype().map_err(bad)? {
+        ColorType::Gray(_) | ColorType::GrayA(_) | ColorType::Multiband { .. } => true,
+        ColorType::RGB(_) | ColorType::RGBA(_) => false,
+        other => {
+            let model = match other {
+                ColorType::CMYK(_) | ColorType::CMYKA(_) => "CMYK",
+                ColorType::YCbCr(_) => "YCbCr",
+                ColorType::Lab(_) => "CIE L*a*b*",
+                ColorType::Palette(_) => "palette",
+                _ => "unknown",
+            };
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "a TIFF of the {model} colour model, which fluidnerf does not convert; write the image as \
+                     greyscale (or RGB)"
+                ),
+            ));
+        }
+    };
     let lut = linearisation.table();
     let (data, kind): (Vec<f32>, SampleKind) = match dec.read_image().map_err(bad)? {
         DecodingResult::U8(v) => (v.into_iter().map(|c| lut[usize::from(c)]).collect(), SampleKind::Integer(8)),
@@ -430,7 +454,12 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
             ),
         ));
     }
-    Ok((to_gray(path, w, h, data.len() / pixels, data), kind))
+    let channels = data.len() / pixels;
+    if grey && channels > 1 {
+        log::debug!("{}: dropping {} extra sample(s) per pixel", path.display(), channels - 1);
+        return Ok((Image::from_vec(w, h, data.chunks_exact(channels).map(|p| p[0]).collect()), kind));
+    }
+    Ok((to_gray(path, w, h, channels, data), kind))
 }
 
 /// Interleaved samples with `channels` per pixel (1 gray, 2 gray+alpha, 3 RGB, 4 RGBA) to gray.
@@ -624,6 +653,61 @@ mod tests {
         let thumbnail = write(&[(4, 3), (2, 1)]);
         let img = read_image(&thumbnail).expect("image and thumbnail");
         assert_eq!((img.width, img.height, img.get(3, 2)), (4, 3, 11.0));
+    }
+
+    /// A little-endian TIFF of `w`×`h` pixels of `samples` 8-bit samples each (interleaved),
+    /// photometric interpretation `photometric`, written by hand: the encoder writes no grey
+    /// image with extra samples.
+    fn tiff_by_hand(w: u32, h: u32, samples: u16, photometric: u16, data: &[u8]) -> Vec<u8> {
+        let mut b = b"II*\0".to_vec();
+        b.extend((8 + data.len() as u32).to_le_bytes());
+        b.extend(data);
+        let entries: [(u16, u16, u32); 9] = [
+            (256, 4, w),
+            (257, 4, h),
+            (258, 3, 8),
+            (259, 3, 1),
+            (262, 3, u32::from(photometric)),
+            (273, 4, 8),
+            (277, 3, u32::from(samples)),
+            (278, 4, h),
+            (279, 4, data.len() as u32),
+        ];
+        b.extend((entries.len() as u16).to_le_bytes());
+        for (tag, kind, value) in entries {
+            b.extend(tag.to_le_bytes());
+            b.extend(kind.to_le_bytes());
+            b.extend(1u32.to_le_bytes());
+            if kind == 3 {
+                b.extend((value as u16).to_le_bytes());
+                b.extend([0, 0]);
+            } else {
+                b.extend(value.to_le_bytes());
+            }
+        }
+        b.extend(0u32.to_le_bytes());
+        b
+    }
+
+    /// Grey samples with extra ones keep the grey one; CMYK and YCbCr samples, which would be
+    /// taken for RGB, are refused naming the colour model.
+    #[test]
+    fn tiff_colour_models_other_than_grey_and_rgb_are_refused() {
+        let p = Path::new("model.tif");
+        let grey_extra: Vec<u8> = (0..6u8).flat_map(|i| [10 * i, 200, 255]).collect();
+        let (img, kind) =
+            decode_image(p, &tiff_by_hand(3, 2, 3, 1, &grey_extra), Linearisation::Linear).expect("grey and extras");
+        assert_eq!((img.data, kind), (vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0], SampleKind::Integer(8)));
+        let mut cmyk = Cursor::new(Vec::new());
+        tiff::encoder::TiffEncoder::new(&mut cmyk)
+            .expect("encoder")
+            .write_image::<tiff::encoder::colortype::CMYK8>(2, 2, &[0u8, 0, 0, 255].repeat(4))
+            .expect("CMYK");
+        let err = decode_image(p, cmyk.get_ref(), Linearisation::Linear).expect_err("CMYK").to_string();
+        assert!(err.contains("model.tif") && err.contains("CMYK colour model"), "{err}");
+        let ycbcr = tiff_by_hand(2, 1, 3, 6, &[128, 128, 128, 200, 128, 128]);
+        let err = decode_image(p, &ycbcr, Linearisation::Linear).expect_err("YCbCr").to_string();
+        assert!(err.contains("model.tif") && err.contains("YCbCr colour model"), "{err}");
     }
 
     #[test]
