@@ -877,3 +877,27 @@ fn a_truth_volume_is_not_moved_into_another_box() {
     assert!(!out.exists(), "wrote the scene");
     assert!(import(&["--aabb", "-20,-20,-20,20,20,20"]).status.success());
 }
+
+/// A transforms.json's mask or background image that does not exist is named with its frame
+/// and key, before anything is written.
+#[test]
+fn a_transforms_json_with_a_missing_mask_or_background_is_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("src");
+    image(&src, "a.png");
+    let out = dir.path().join("out");
+    for (key, value, want) in [
+        ("mask_path", serde_json::json!("masks/a.png"), "transforms.json: frame 0's `mask_path`"),
+        ("background", serde_json::json!(["dark/0.png"]), "transforms.json: frame 0's `background` image"),
+    ] {
+        let mut frame = serde_json::json!({"file_path": "a.png", "transform_matrix": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 90], [0, 0, 0, 1]]});
+        frame[key] = value;
+        let doc =
+            serde_json::json!({"fl_x": 40, "fl_y": 40, "cx": 15.5, "cy": 11.5, "w": 32, "h": 24, "frames": [frame]});
+        std::fs::write(src.join("transforms.json"), doc.to_string()).expect("writes");
+        let o = fluidnerf(&["import", "--transforms", s(&src), "--aabb", "-10,-10,-10,10,10,10", "-o", s(&out)]);
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains(want) && e.contains("does not exist"), "{e}");
+        assert!(!out.exists(), "a refused import wrote");
+    }
+}

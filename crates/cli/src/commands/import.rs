@@ -685,6 +685,17 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 }
             }
         }
+        // Named here with the frame and the key, not later as a path that cannot be resolved.
+        for (i, r) in recording.frames.iter().enumerate() {
+            if let Some(m) = r.mask_path.as_ref().filter(|m| !m.exists()) {
+                bail!("{}: frame {i}'s `mask_path` {} does not exist", file.display(), m.display());
+            }
+            if let fluidnerf_io::scene::Background::Frames(list) = &r.background {
+                if let Some(b) = list.iter().find(|b| !b.exists()) {
+                    bail!("{}: frame {i}'s `background` image {} does not exist", file.display(), b.display());
+                }
+            }
+        }
         let file = FromFile {
             recording: Some(recording),
             aabb: draft.aabb,
