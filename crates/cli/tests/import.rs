@@ -901,3 +901,26 @@ fn a_transforms_json_with_a_missing_mask_or_background_is_named() {
         assert!(!out.exists(), "a refused import wrote");
     }
 }
+
+/// A transforms.json's mask or background of another size than its frame's image is refused
+/// by the import, naming the file, rather than written into a scene every later command refuses.
+#[test]
+fn a_transforms_json_whose_mask_or_background_does_not_fit_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("src");
+    image(&src, "a.png");
+    write_png16_counts(&src.join("small.png"), &Image::from_vec(16, 12, vec![1.0; 16 * 12])).expect("writes");
+    let out = dir.path().join("out");
+    for (key, value) in [("mask_path", serde_json::json!("small.png")), ("background", serde_json::json!("small.png"))]
+    {
+        let mut frame = serde_json::json!({"file_path": "a.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 90], [0, 0, 0, 1]]});
+        frame[key] = value;
+        let doc =
+            serde_json::json!({"fl_x": 40, "fl_y": 40, "cx": 15.5, "cy": 11.5, "w": 32, "h": 24, "frames": [frame]});
+        std::fs::write(src.join("transforms.json"), doc.to_string()).expect("writes");
+        let o = fluidnerf(&["import", "--transforms", s(&src), "--aabb", "-10,-10,-10,10,10,10", "-o", s(&out)]);
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains("small.png") && e.contains("is 16x12 pixels but"), "{key}: {e}");
+        assert!(!out.exists(), "a refused import wrote");
+    }
+}

@@ -1451,7 +1451,14 @@ pub struct Preprocessed {
 /// the size of their frame; the median of several is taken pixel by pixel and computed once per
 /// distinct list. Errors name the background or mask file, the frame and its camera.
 pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
-    let recording = recorded(scene)?;
+    load_preprocessed_with(scene, recorded(scene)?)
+}
+
+/// [`load_preprocessed`] with the preprocessing keys given (one entry per frame, paths relative
+/// to `scene.root` unless absolute) rather than read from the scene file: for a scene about to
+/// be written.
+pub fn load_preprocessed_with(scene: &Scene, recording: Recording) -> Result<Preprocessed, IoError> {
+    assert_eq!(recording.frames.len(), scene.frames.len(), "load_preprocessed_with: one recording entry per frame");
     let (mut images, kind) = load_images_and_kind(scene, recording.linearisation)?;
     let saturated = saturated_pixels(scene, &images, kind);
     let file = scene.root.join(SCENE_FILE);

@@ -9,7 +9,9 @@ use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::scene::{estimate_box, BoxEstimateParams};
 use fluidnerf_core::{Aabb, Camera, Frame, Scene, TruthRef};
 use fluidnerf_io::image::{read_image_with, Linearisation, SampleKind};
-use fluidnerf_io::scene::{load_images_with, read_scene_draft, save_scene_recording, validate_scene, SCENE_FILE};
+use fluidnerf_io::scene::{
+    load_images_with, load_preprocessed_with, read_scene_draft, save_scene_recording, validate_scene, SCENE_FILE,
+};
 use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use serde::Serialize;
 use std::io::Write as _;
@@ -51,7 +53,8 @@ use std::io::Write as _;
 ///
 /// Every calibrated camera must find its image(s), and every image in IMAGES must belong to a
 /// camera (unless --skip-uncalibrated). The scene is validated (each camera must see the box,
-/// image sizes must match the calibration, no NaN/Inf pixels) before `OUT/transforms.json` is
+/// image sizes must match the calibration, no NaN/Inf pixels, a transforms.json's masks and
+/// backgrounds must fit their frames) before `OUT/transforms.json` is
 /// written, together with `OUT/import.json` (the settings of this run). Image paths are
 /// written relative to OUT when IMAGES is inside OUT, absolute otherwise. An import that fails
 /// removes what it created (decoded video frames, OUT itself when it made it) and nothing else,
@@ -844,6 +847,12 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     }
     let linearisation = args.linearisation.or(from_file.linearisation).unwrap_or_default();
     let images = load_images_with(&scene, linearisation).context("the images do not fit the calibration")?;
+    recording.linearisation = linearisation;
+    // The masks and backgrounds a transforms.json brings must fit the images too, or the scene
+    // written would be refused by every command that reads it.
+    if recording.frames.iter().any(|r| r.mask_path.is_some() || r.background != fluidnerf_io::scene::Background::None) {
+        load_preprocessed_with(&scene, recording.clone()).context("the masks or backgrounds do not fit the images")?;
+    }
     let first = scene.resolve(&scene.frames[0].file_path);
     if args.linearisation.is_none() && linearisation == Linearisation::Linear {
         if let Ok((_, SampleKind::Integer(8))) = read_image_with(&first, linearisation) {
@@ -876,7 +885,6 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         };
         validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
     }
-    recording.linearisation = linearisation;
     created.file(&out_file);
     save_scene_recording(&scene, &args.out, &recording, true)?;
     let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args, videos: &videos };
