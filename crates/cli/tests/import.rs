@@ -924,3 +924,45 @@ fn a_transforms_json_whose_mask_or_background_does_not_fit_is_refused() {
         assert!(!out.exists(), "a refused import wrote");
     }
 }
+
+/// Videos of as many frames but another frame rate are not one recording: their n-th frames are
+/// other instants, each of which one camera alone would see. They are refused, naming both
+/// cameras, their times and their rates.
+#[test]
+fn videos_of_different_frame_rates_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let videos = dir.path().join("videos");
+    std::fs::create_dir_all(&videos).expect("mkdir");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    let bytes = std::fs::read(fixture).expect("reads the fixture");
+    // The video stream header's dwRate (at 24 in `strh`'s data) doubled: 20 frames per second.
+    let mut fast = bytes.clone();
+    let rate = bytes.windows(4).position(|w| w == b"strh").expect("strh") + 8 + 24;
+    let doubled = 2 * u32::from_le_bytes(bytes[rate..rate + 4].try_into().expect("4 bytes"));
+    fast[rate..rate + 4].copy_from_slice(&doubled.to_le_bytes());
+    for (name, data) in [("cam0", &bytes), ("cam1", &fast), ("cam2", &bytes)] {
+        std::fs::write(videos.join(format!("{name}.avi")), data).expect("writes");
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&videos),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "imported: {e}");
+    assert!(
+        e.contains("the frame 1 kept of camera cam0 is at 0.1 s, that of camera cam1 at 0.05 s")
+            && e.contains("frame rates 10 and 20 fps"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a refused import wrote");
+}

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context};
 use fluidnerf_core::glam::DVec3;
-use fluidnerf_core::scene::{estimate_box, BoxEstimateParams};
+use fluidnerf_core::scene::{estimate_box, same_time, BoxEstimateParams};
 use fluidnerf_core::{Aabb, Camera, Frame, Scene, TruthRef};
 use fluidnerf_io::image::{read_image_with, Linearisation, SampleKind};
 use fluidnerf_io::scene::{
@@ -202,7 +202,8 @@ fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
 
 /// Replaces every frame whose file is a video by its decoded frames, each written as a float
 /// TIFF (linearised, range-mapped values) into `out/frames/<camera>/` as it is decoded, with
-/// its time. All videos must give the same number of frames (a synchronised recording).
+/// its time. All videos must give the same number of frames at the same times (a synchronised
+/// recording).
 /// Also returns, for each frame returned, the index of the frame it came from (a video's
 /// frames keep its mask and background).
 fn expand_videos(
@@ -215,6 +216,8 @@ fn expand_videos(
     let mut expanded = Vec::new();
     let mut sources = Vec::new();
     let mut records: Vec<VideoRecord> = Vec::new();
+    // Each video's frame times, in the order of `records`.
+    let mut all_times: Vec<Vec<f64>> = Vec::new();
     for (source, f) in frames.into_iter().enumerate() {
         if !fluidnerf_io::video::is_video(&f.file_path) {
             expanded.push(f);
@@ -278,6 +281,7 @@ fn expand_videos(
             first_time_s: times.first().copied().unwrap_or(0.0),
             last_time_s: times.last().copied().unwrap_or(0.0),
         });
+        all_times.push(times);
     }
     if let Some(first) = records.first() {
         if let Some(other) = records.iter().find(|r| r.info.frames_kept != first.info.frames_kept) {
@@ -288,6 +292,25 @@ fn expand_videos(
                 first.info.frames_kept,
                 other.camera,
                 other.info.frames_kept
+            );
+        }
+        // The n-th frames of the cameras are one instant only at one time: videos of other frame
+        // rates or starts would give instants seen by one camera each.
+        for (other, times) in records.iter().zip(&all_times).skip(1) {
+            let Some(n) = times.iter().zip(&all_times[0]).position(|(&t, &t0)| !same_time(t, t0)) else {
+                continue;
+            };
+            let rate = |r: &VideoRecord| r.info.frame_rate.map_or_else(|| "no stated".to_string(), |f| format!("{f}"));
+            bail!(
+                "the videos are not synchronised: the frame {n} kept of camera {} is at {} s, that of camera {} at \
+                 {} s (frame rates {} and {} fps); every camera's n-th frame must be the same instant: record \
+                 the cameras at one rate from one trigger, or import them separately",
+                first.camera,
+                all_times[0][n],
+                other.camera,
+                times[n],
+                rate(first),
+                rate(other)
             );
         }
     }
