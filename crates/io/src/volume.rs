@@ -183,13 +183,25 @@ fn start_tag<'a>(text: &'a str, name: &str) -> Option<&'a str> {
     Some(&text[start..=start + len])
 }
 
+/// Every start tag `<name ...>` (or `<name .../>`) in `text`, in order.
+fn start_tags<'a>(text: &'a str, name: &str) -> Vec<&'a str> {
+    let open = format!("<{name} ");
+    text.match_indices(&open)
+        .filter_map(|(start, _)| {
+            let len = text[start..].find('>')?;
+            Some(&text[start..=start + len])
+        })
+        .collect()
+}
+
 fn numbers<T: std::str::FromStr>(s: &str) -> Option<Vec<T>> {
     s.split_whitespace().map(|t| t.parse().ok()).collect()
 }
 
 /// Reads a `.vti` with one scalar point-data array (Float32 or Float64, appended raw binary as
 /// [`write_vti`] writes it, or inline ASCII), little-endian, axis-aligned (identity
-/// `Direction`). The box is recovered as `Origin − Spacing / 2` to
+/// `Direction`). Of several arrays, the one `<PointData Scalars="NAME">` names is read; without
+/// that attribute, several arrays are refused. The box is recovered as `Origin − Spacing / 2` to
 /// `Origin + (dims − ½) · Spacing`.
 pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     let bytes = crate::read_input(path, "volume file")?;
@@ -240,7 +252,27 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
         return Err(bad(&format!("WholeExtent: {n} voxels, more than a volume can hold (2^32)")));
     }
     let (dims, n) = ([nx as usize, ny as usize, nz as usize], n as usize);
-    let array_tag = start_tag(xml, "DataArray").ok_or_else(|| bad("no <DataArray> element"))?;
+    // The array to read: the only one, or the one `<PointData Scalars="...">` names; taking the
+    // first of several would read whichever the writer put first (a mask, say) as the field.
+    let arrays = start_tags(xml, "DataArray");
+    let scalars = start_tag(xml, "PointData").and_then(|t| attribute(t, "Scalars"));
+    let array_tag = match (arrays.as_slice(), scalars) {
+        ([], _) => return Err(bad("no <DataArray> element")),
+        ([one], _) => *one,
+        (several, Some(name)) => *several
+            .iter()
+            .find(|t| attribute(t, "Name") == Some(name))
+            .ok_or_else(|| bad(&format!("<PointData Scalars=\"{name}\"> names no <DataArray> of the file")))?,
+        (several, None) => {
+            let names: Vec<&str> = several.iter().map(|t| attribute(t, "Name").unwrap_or("(unnamed)")).collect();
+            return Err(bad(&format!(
+                "{} data arrays ({}) and no <PointData Scalars=\"NAME\"> saying which is the field; keep one \
+                 array, or name it there",
+                several.len(),
+                names.join(", ")
+            )));
+        }
+    };
     if attribute(array_tag, "NumberOfComponents").is_some_and(|c| c != "1") {
         return Err(bad("only single-component arrays are supported"));
     }
@@ -516,6 +548,32 @@ mod tests {
             let err = read_vti(&p).expect_err(extent).to_string();
             assert!(err.contains("a.vti") && err.contains("WholeExtent"), "{extent}: {err}");
         }
+    }
+
+    /// Of several arrays, the one `<PointData Scalars>` names is read, not the first; without
+    /// that name, several arrays are refused, listed.
+    #[test]
+    fn vti_with_several_arrays_reads_the_named_one() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("two.vti");
+        let write = |point_data: &str| {
+            let text = format!(
+                "<VTKFile type=\"ImageData\" byte_order=\"LittleEndian\"><ImageData WholeExtent=\"0 1 0 0 0 0\" \
+                 Origin=\"0 0 0\" Spacing=\"1 1 1\"><Piece>{point_data}\
+                 <DataArray type=\"Float32\" Name=\"mask\" format=\"ascii\">1 1</DataArray>\
+                 <DataArray type=\"Float32\" Name=\"density\" format=\"ascii\">0.5 2</DataArray>\
+                 </PointData></Piece></ImageData></VTKFile>"
+            );
+            std::fs::write(&p, text).expect("write");
+        };
+        write("<PointData Scalars=\"density\">");
+        assert_eq!(read_vti(&p).expect("the named array").data, vec![0.5, 2.0]);
+        write("<PointData>");
+        let err = read_vti(&p).expect_err("which array").to_string();
+        assert!(err.contains("two.vti") && err.contains("2 data arrays (mask, density)"), "{err}");
+        write("<PointData Scalars=\"speed\">");
+        let err = read_vti(&p).expect_err("no such array").to_string();
+        assert!(err.contains("two.vti") && err.contains("Scalars=\"speed\"> names no <DataArray>"), "{err}");
     }
 
     #[test]
