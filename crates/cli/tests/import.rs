@@ -966,3 +966,39 @@ fn videos_of_different_frame_rates_are_refused() {
     );
     assert!(!out.exists(), "a refused import wrote");
 }
+
+/// A camera's distortion under a name the reader does not know (`dist_coeffs_cam1` for
+/// `distortion_coefficients_cam1`) would leave it undistorted without a word: the import warns,
+/// naming the camera, the node it read and the node to rename.
+#[test]
+fn distortion_under_an_unknown_name_is_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let text = std::fs::read_to_string(&calib).expect("reads");
+    std::fs::write(&calib, text.replace("distortion_coefficients_cam1:", "dist_coeffs_cam1:")).expect("writes");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("camera `cam1` has no `distortion_coefficients_cam1` node")
+            && e.contains("the file has `dist_coeffs_cam1`, which is not read"),
+        "{e}"
+    );
+    assert!(!e.contains("camera `cam0`") && !e.contains("camera `cam2`"), "{e}");
+}

@@ -6,7 +6,9 @@
 //! - `camera_matrix`: 3 × 3 K (`fx skew cx / 0 fy cy / 0 0 1`), pixel centres at integers
 //!   (OpenCV's convention is fluidnerf's: no shift).
 //! - `distortion_coefficients`: 0, 4, 5, 8 (or 12/14 with zero thin-prism/tilt terms) values in
-//!   OpenCV's order `k1 k2 p1 p2 [k3 [k4 k5 k6]]` (optional; none means no distortion).
+//!   OpenCV's order `k1 k2 p1 p2 [k3 [k4 k5 k6]]` (optional; none means no distortion, with a
+//!   warning when the file has a node named like a distortion that is not read: `dist_coeffs`,
+//!   `distCoeffs`, `D`, `kc`).
 //! - the pose, world → camera (`x_cam = R x_world + t`): `rvec` (Rodrigues vector, 3 values)
 //!   and `tvec` (3), or `R` (3 × 3) and `T` (3). If both are given, `R`/`T` win (warning).
 //! - `image_width`, `image_height` (integers).
@@ -595,9 +597,46 @@ fn spelled(nodes: &Map<String, Value>, key: &str) -> String {
     nodes.keys().find(|k| k.eq_ignore_ascii_case(key)).cloned().unwrap_or_else(|| key.to_string())
 }
 
+/// Of a file's `(node, node without its camera suffix)` pairs, the nodes named like a camera's
+/// distortion under a name the reader does not know (`dist_coeffs`, `distCoeffs`, `D`, the
+/// calibration toolbox's `kc`).
+fn distortion_lookalikes<'a>(nodes: impl Iterator<Item = (&'a str, &'a str)>) -> Vec<&'a str> {
+    nodes
+        .filter(|(_, base)| {
+            let b = base.to_ascii_lowercase().replace('_', "");
+            (b.starts_with("dist")
+                && !b.starts_with("distance")
+                && b != "distortionmodel"
+                && b != "distortioncoefficients")
+                || b == "d"
+                || b == "kc"
+        })
+        .map(|(node, _)| node)
+        .collect()
+}
+
+/// Warns that camera `name`, read without distortion (it has no node `wanted`, its
+/// `distortion_coefficients`), sits beside `lookalikes` ([`distortion_lookalikes`]): its
+/// distortion is most likely there, unread.
+fn warn_unread_distortion(path: &Path, name: &str, wanted: &str, lookalikes: &[&str]) {
+    if lookalikes.is_empty() {
+        return;
+    }
+    log::warn!(
+        "{}: camera `{name}` has no `{wanted}` node and is read without distortion, but the file has {}, which \
+         is not read: if that is the camera's distortion (k1 k2 p1 p2 [k3 ...]), rename it `{wanted}`",
+        path.display(),
+        lookalikes.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
+    );
+}
+
 /// A camera whose nodes are one mapping (a whole file, a named mapping or a list entry).
 fn camera_from_map(path: &Path, name: &str, raw: &Map<String, Value>) -> Result<Camera, IoError> {
     let nodes = canonical_keys(raw);
+    if !nodes.contains_key("distortion_coefficients") {
+        let lookalikes = distortion_lookalikes(raw.keys().map(|k| (k.as_str(), k.as_str())));
+        warn_unread_distortion(path, name, "distortion_coefficients", &lookalikes);
+    }
     camera_from_nodes(
         name,
         &CameraNodes { get: &|k| nodes.get(k).cloned(), label: &|k| spelled(raw, k), file: &|_| path.to_path_buf() },
@@ -772,6 +811,15 @@ fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     named
         .iter()
         .map(|n| {
+            if suffixed_node(&nodes, "distortion_coefficients", n, &named).is_none() {
+                let suffix = format!("_{}", n.to_ascii_lowercase());
+                let own = raw_nodes.keys().filter_map(|k| {
+                    let cut = k.len().checked_sub(suffix.len())?;
+                    (k.is_char_boundary(cut) && k[cut..].eq_ignore_ascii_case(&suffix)).then(|| (k.as_str(), &k[..cut]))
+                });
+                let wanted = format!("distortion_coefficients_{n}");
+                warn_unread_distortion(path, n, &wanted, &distortion_lookalikes(own));
+            }
             let camera = camera_from_nodes(
                 n,
                 &CameraNodes {
