@@ -1002,3 +1002,32 @@ fn distortion_under_an_unknown_name_is_warned_about() {
     );
     assert!(!e.contains("camera `cam0`") && !e.contains("camera `cam2`"), "{e}");
 }
+
+/// Two videos of a transforms.json named alike (no `camera`, one file name in two folders) would
+/// be decoded into one folder, the second over the first: refused before anything is decoded,
+/// naming both files, not as frames "from an earlier import".
+#[test]
+fn videos_that_would_share_a_frames_folder_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("rig");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    let mut frames = Vec::new();
+    for (folder, (_, cam)) in ["a", "b"].into_iter().zip(rig()) {
+        std::fs::create_dir_all(src.join(folder)).expect("mkdir");
+        std::fs::copy(&fixture, src.join(folder).join("cam.avi")).expect("copies the fixture");
+        let m = fluidnerf_io::scene::world_from_camera_to_opengl_c2w(&cam.world_from_camera);
+        frames.push(serde_json::json!({"file_path": format!("{folder}/cam.avi"), "transform_matrix": m}));
+    }
+    let v = serde_json::json!({
+        "w": 32, "h": 24, "fl_x": 40.0, "fl_y": 40.5, "cx": 15.25, "cy": 11.5,
+        "aabb": [[-10, -10, -10], [10, 10, 10]], "frames": frames,
+    });
+    std::fs::write(src.join("transforms.json"), v.to_string()).expect("writes");
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&["import", "--transforms", s(&src), "-o", s(&out)]);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "imported: {e}");
+    assert!(e.contains("a/cam.avi and ") && e.contains("b/cam.avi both go by the name `cam`"), "{e}");
+    assert!(!e.contains("earlier import"), "{e}");
+    assert!(!out.exists(), "a refused import wrote");
+}

@@ -213,6 +213,26 @@ fn expand_videos(
     force: bool,
     created: &mut Created,
 ) -> anyhow::Result<(Vec<Frame>, Vec<VideoRecord>, Vec<usize>)> {
+    // A video's frames go to `frames/<name>/`, by its camera's name, else its file's stem.
+    let video_name = |f: &Frame| {
+        f.camera_name
+            .clone()
+            .unwrap_or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default())
+    };
+    // Two videos of one name would write into one folder, the second over the first's frames.
+    let mut folders: std::collections::HashMap<String, &Path> = std::collections::HashMap::new();
+    for f in frames.iter().filter(|f| fluidnerf_io::video::is_video(&f.file_path)) {
+        if let Some(other) = folders.insert(video_name(f), &f.file_path) {
+            bail!(
+                "the videos {} and {} both go by the name `{}` (their camera's, else their file's name), and the \
+                 frames of both would be decoded into {}: give each video's frame its own `camera` name",
+                other.display(),
+                f.file_path.display(),
+                video_name(f),
+                out.join("frames").join(video_name(f)).display()
+            );
+        }
+    }
     let mut expanded = Vec::new();
     let mut sources = Vec::new();
     let mut records: Vec<VideoRecord> = Vec::new();
@@ -224,10 +244,7 @@ fn expand_videos(
             sources.push(source);
             continue;
         }
-        let name = f
-            .camera_name
-            .clone()
-            .unwrap_or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
+        let name = video_name(&f);
         if records.is_empty() && opts.linearisation == Linearisation::Linear {
             log::warn!(
                 "video frames are read as linear; most cameras store gamma-encoded video (pass --linearisation \
