@@ -1005,7 +1005,8 @@ fn distortion_under_an_unknown_name_is_warned_about() {
 
 /// Two videos of a transforms.json named alike (no `camera`, one file name in two folders) would
 /// be decoded into one folder, the second over the first: refused before anything is decoded,
-/// naming both files, not as frames "from an earlier import".
+/// naming both files, not as frames "from an earlier import". So is a video whose camera name is
+/// a path, whose frames would land outside OUT/frames.
 #[test]
 fn videos_that_would_share_a_frames_folder_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -1030,4 +1031,15 @@ fn videos_that_would_share_a_frames_folder_are_refused() {
     assert!(e.contains("a/cam.avi and ") && e.contains("b/cam.avi both go by the name `cam`"), "{e}");
     assert!(!e.contains("earlier import"), "{e}");
     assert!(!out.exists(), "a refused import wrote");
+    // A camera name that is a path would put the frames outside the scene's frames folder.
+    let outside = dir.path().join("elsewhere");
+    for name in ["../../elsewhere", s(&outside)] {
+        let mut v = v.clone();
+        v["frames"][0]["camera"] = name.into();
+        std::fs::write(src.join("transforms.json"), v.to_string()).expect("writes");
+        let o = fluidnerf(&["import", "--transforms", s(&src), "-o", s(&out)]);
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains(&format!("goes by the name `{name}`, which cannot name")), "{e}");
+        assert!(!outside.exists() && !out.exists(), "a refused import wrote");
+    }
 }

@@ -222,7 +222,18 @@ fn expand_videos(
     // Two videos of one name would write into one folder, the second over the first's frames.
     let mut folders: std::collections::HashMap<String, &Path> = std::collections::HashMap::new();
     for f in frames.iter().filter(|f| fluidnerf_io::video::is_video(&f.file_path)) {
-        if let Some(other) = folders.insert(video_name(f), &f.file_path) {
+        // A name of several components (`../x`, `/tmp/x`) would put the frames outside OUT/frames.
+        let name = video_name(f);
+        let mut parts = Path::new(&name).components();
+        if !matches!((parts.next(), parts.next()), (Some(std::path::Component::Normal(_)), None)) {
+            bail!(
+                "the video {} goes by the name `{name}`, which cannot name its frames' folder in {} (it is empty, \
+                 `.` or `..`, or holds a path separator): give its frame a plain `camera` name",
+                f.file_path.display(),
+                out.join("frames").display()
+            );
+        }
+        if let Some(other) = folders.insert(name, &f.file_path) {
             bail!(
                 "the videos {} and {} both go by the name `{}` (their camera's, else their file's name), and the \
                  frames of both would be decoded into {}: give each video's frame its own `camera` name",
