@@ -1043,3 +1043,21 @@ fn videos_that_would_share_a_frames_folder_are_refused() {
         assert!(!outside.exists() && !out.exists(), "a refused import wrote");
     }
 }
+
+/// An --images that is a file is said to be one, not a folder that does not exist.
+#[test]
+fn images_given_as_a_file_are_named_as_such() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    image(dir.path(), "cam0.png");
+    let file = dir.path().join("cam0.png");
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&["import", "--opencv", s(&calib), "--images", s(&file), "-o", s(&out)]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains(&format!("--images {}: not a folder", file.display())), "{e}");
+    let missing = dir.path().join("nothing");
+    let o = fluidnerf(&["import", "--opencv", s(&calib), "--images", s(&missing), "-o", s(&out)]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains(&format!("--images {}: no such folder", missing.display())), "{e}");
+}

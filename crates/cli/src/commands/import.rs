@@ -697,7 +697,12 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     }
     let (start, end) = args.video_frames.as_deref().map(parse_frame_range).transpose()?.unwrap_or((0, None));
     if let Some(images) = &args.images {
-        ensure!(images.is_dir(), "the image folder {} does not exist", images.display());
+        ensure!(
+            images.is_dir(),
+            "--images {}: {}",
+            images.display(),
+            if images.exists() { "not a folder; give the folder that holds the images" } else { "no such folder" }
+        );
     }
     let out_file = args.out.join(SCENE_FILE);
     if let Some(p) = [out_file.clone(), args.out.join("import.json")].iter().find(|p| p.exists() && !args.force) {
