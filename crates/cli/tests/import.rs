@@ -829,6 +829,7 @@ fn a_transforms_json_with_a_missing_image_or_no_frame_is_named() {
 
 /// A truth volume fills its scene's box: imported with another box (given, or estimated for a
 /// file without one) it stood where the flow is not, and every score against it was meaningless.
+/// One that does not exist is named before anything is written.
 #[test]
 fn a_truth_volume_is_not_moved_into_another_box() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -854,6 +855,20 @@ fn a_truth_volume_is_not_moved_into_another_box() {
         args.extend_from_slice(extra);
         fluidnerf(&args)
     };
+    // A truth volume that does not exist is named, not written with a path that resolves nowhere.
+    let file = src.join("transforms.json");
+    let text = std::fs::read_to_string(&file).expect("reads");
+    std::fs::write(&file, text.replace("truth/truth.npy", "truth/missing.npy")).expect("writes");
+    let o = import(&[]);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success()
+            && err.contains("transforms.json: truth entry 0's volume")
+            && err.contains("does not exist"),
+        "{err}"
+    );
+    assert!(!out.exists(), "wrote the scene");
+    std::fs::write(&file, text).expect("writes");
     let o = import(&["--aabb", "-10,-10,-10,10,10,10"]);
     let err = stderr(&o);
     assert!(!o.status.success(), "imported: {err}");

@@ -731,8 +731,17 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 f.file_path.strip_prefix(&root).unwrap_or(&f.file_path).display()
             );
         }
-        let truth =
+        let truth: Vec<TruthRef> =
             draft.truth.into_iter().map(|t| TruthRef { time: t.time, file_path: root.join(&t.file_path) }).collect();
+        // A missing one would be written with a path that no longer resolves from OUT.
+        if let Some((i, t)) = truth.iter().enumerate().find(|(_, t)| !t.file_path.exists()) {
+            bail!(
+                "{}: truth entry {i}'s volume {} does not exist (`file_path` {:?}, relative to the file's folder)",
+                file.display(),
+                t.file_path.display(),
+                t.file_path.strip_prefix(&root).unwrap_or(&t.file_path).display()
+            );
+        }
         let mut recording = draft.recording.clone();
         for r in &mut recording.frames {
             if let fluidnerf_io::scene::Background::Frames(list) = &mut r.background {
