@@ -1076,3 +1076,39 @@ fn images_given_as_a_file_are_named_as_such() {
     let e = stderr(&o);
     assert!(!o.status.success() && e.contains(&format!("--images {}: no such folder", missing.display())), "{e}");
 }
+
+/// --linearisation acts on 8-bit images only: given for 16-bit ones it would be recorded and
+/// ignored without a word, so the import warns that it has no effect.
+#[test]
+fn a_linearisation_for_16_bit_images_is_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let import = |linearisation: &str| {
+        fluidnerf(&[
+            "import",
+            "--opencv",
+            s(&calib),
+            "--images",
+            s(&images),
+            "--aabb",
+            "-10,-10,-10,10,10,10",
+            "--linearisation",
+            linearisation,
+            "--force",
+            "-o",
+            s(&out),
+        ])
+    };
+    let o = import("srgb");
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("--linearisation srgb has no effect: the images are 16-bit"), "{e}");
+    let o = import("linear");
+    assert!(o.status.success() && !stderr(&o).contains("no effect"), "{}", stderr(&o));
+}

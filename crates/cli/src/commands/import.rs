@@ -85,9 +85,10 @@ pub struct Args {
     /// Pixel value = intensity_scale × ∫E ds (world units) [default: 1, or the file's].
     #[arg(long)]
     pub intensity_scale: Option<f64>,
-    /// How 8-bit images (PNG, JPEG, TIFF) become linear: `linear` (counts as stored), `srgb`
-    /// (undo the sRGB curve, right for camera JPEGs) or a gamma such as `2.2`; written into the
-    /// scene [default: linear, or the file's].
+    /// How 8-bit images (PNG, JPEG, TIFF) and video frames become linear: `linear` (counts as
+    /// stored), `srgb` (undo the sRGB curve, right for camera JPEGs) or a gamma such as `2.2`;
+    /// written into the scene [default: linear, or the file's]. Images of more bits are always
+    /// read as linear (a warning says so when this is given for them).
     #[arg(long, value_parser = parse_linearisation)]
     pub linearisation: Option<Linearisation>,
     /// Output scene folder (created if missing).
@@ -925,6 +926,18 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 "8-bit images are read as linear counts; if they are ordinary camera images (JPEG, sRGB PNG) \
                  pass --linearisation srgb"
             );
+        }
+    }
+    // Only 8-bit images (and video frames, as they are decoded) are linearised; the images'
+    // kinds agree, so the first one's tells.
+    if let Some(given) = args.linearisation.filter(|l| *l != Linearisation::Linear && videos.is_empty()) {
+        if let Ok((_, kind)) = read_image_with(&first, linearisation) {
+            if kind != SampleKind::Integer(8) {
+                log::warn!(
+                    "--linearisation {given} has no effect: the images are {kind}, and only 8-bit images (and \
+                     video frames) are linearised; images of more bits are read as linear"
+                );
+            }
         }
     }
     if known_aabb.is_none() {
