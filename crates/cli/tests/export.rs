@@ -233,3 +233,19 @@ fn a_box_apart_from_the_reconstruction_is_refused() {
     }
     ok(&export("3,3,3,5,5,5"));
 }
+
+/// With --force, a folder where an output goes is refused before anything is written: found only
+/// when its turn came, it left the outputs before it overwritten and export.json stale.
+#[test]
+fn a_folder_in_an_outputs_place_is_refused_before_writing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(out.join("volume.vti")).expect("mkdir");
+    std::fs::write(out.join("volume.npy"), "mine").expect("writes");
+    let (src, out_text) = (src.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let o = fluidnerf(&["export", src, "-o", out_text, "--npy", "--vti", "--force"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("volume.vti exists and is not a file"), "{e}");
+    assert_eq!(std::fs::read_to_string(out.join("volume.npy")).expect("kept"), "mine");
+}

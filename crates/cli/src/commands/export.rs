@@ -390,6 +390,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("{} exists; pass --force to overwrite it", p.display());
         }
     }
+    // --force overwrites files; a folder in an output's place would stop the export part way,
+    // the outputs before it overwritten and export.json not.
+    if let Some(p) = outputs.iter().chain([&settings_path]).find(|p| p.exists() && !p.is_file()) {
+        bail!("{} exists and is not a file; --force overwrites earlier outputs, not folders: move it", p.display());
+    }
     super::create_output_folder(out)?;
 
     let [nx, ny, nz] = volume.dims;
