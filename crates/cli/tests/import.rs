@@ -1112,3 +1112,40 @@ fn a_linearisation_for_16_bit_images_is_warned_about() {
     let o = import("linear");
     assert!(o.status.success() && !stderr(&o).contains("no effect"), "{}", stderr(&o));
 }
+
+/// Intrinsics calibrated at another resolution than the images (here a larger sensor) put the
+/// principal point outside the image: the import warns, naming the camera and its node.
+#[test]
+fn a_principal_point_outside_the_image_is_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    let mut cams = rig();
+    // The box still shows in the image's right part: without the warning, nothing would be said.
+    cams[1].1.intrinsics.cx = 35.0;
+    write_opencv(&calib, &cams).expect("writes calibration");
+    let images = dir.path().join("images");
+    for (n, _) in &cams {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&images),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    let e = stderr(&o);
+    assert!(
+        e.contains(
+            "camera `cam1`: `camera_matrix_cam1`: the principal point (cx, cy) = (35, 11.5) lies outside the \
+             32x24 image"
+        ),
+        "{e}"
+    );
+    assert!(!e.contains("camera `cam0`") && !e.contains("camera `cam2`"), "{e}");
+}

@@ -4,7 +4,8 @@
 //! # OpenCV (`cv::FileStorage`: YAML `%YAML:1.0` with `!!opencv-matrix`, XML or JSON)
 //! Per camera:
 //! - `camera_matrix`: 3 × 3 K (`fx skew cx / 0 fy cy / 0 0 1`), pixel centres at integers
-//!   (OpenCV's convention is fluidnerf's: no shift).
+//!   (OpenCV's convention is fluidnerf's: no shift). A principal point outside the image is
+//!   warned about (intrinsics of another resolution, as in COLMAP models).
 //! - `distortion_coefficients`: 0, 4, 5, 8 (or 12/14 with zero thin-prism/tilt terms) values in
 //!   OpenCV's order `k1 k2 p1 p2 [k3 [k4 k5 k6]]` (optional; none means no distortion, with a
 //!   warning when the file has a node named like a distortion that is not read: `dist_coeffs`,
@@ -497,6 +498,10 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
         skew: k[1],
     };
     intrinsics.validate().map_err(|e| bad("camera_matrix", e.to_string()))?;
+    if let Some(why) = principal_point_outside(&intrinsics) {
+        let file = (nodes.file)("camera_matrix");
+        log::warn!("{}: camera `{name}`: `{}`: {why}", file.display(), (nodes.label)("camera_matrix"));
+    }
     let distortion = match (nodes.get)("distortion_coefficients") {
         None => Distortion::default(),
         Some(_) => {
@@ -565,6 +570,24 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
     // The intrinsics passed above, so what is left to fail is the pose.
     camera.validate().map_err(|e| bad(pose_key, e.to_string()))?;
     Ok(camera)
+}
+
+/// Why the principal point of `k` looks wrong: it lies outside the image, as it does with
+/// intrinsics calibrated at another resolution (binned, cropped or the full sensor) than the
+/// image size given.
+fn principal_point_outside(k: &Intrinsics) -> Option<String> {
+    // Pixel centres at integers: the image spans -½ to n - ½.
+    let inside = |c: f64, n: u32| (-0.5..=f64::from(n) - 0.5).contains(&c);
+    (!inside(k.cx, k.width) || !inside(k.cy, k.height)).then(|| {
+        format!(
+            "the principal point (cx, cy) = ({}, {}) lies outside the {}x{} image: are the intrinsics those of \
+             another resolution (binned, cropped or the full sensor)?",
+            num(k.cx),
+            num(k.cy),
+            k.width,
+            k.height
+        )
+    })
 }
 
 /// The per-camera keys (suffixed `_<name>` in multi-camera files), longest first so that
@@ -1265,6 +1288,9 @@ fn read_cameras_txt(path: &Path) -> Result<ColmapCameras, IoError> {
             .map(|s| s.parse::<f64>().map_err(|_| bad(format!("parameter `{s}` is not a number"))))
             .collect::<Result<_, _>>()?;
         let (k, d) = colmap_camera(t[1], width, height, &p).map_err(bad)?;
+        if let Some(why) = principal_point_outside(&k) {
+            log::warn!("{}: line {}: camera id {id}: {why}", path.display(), n + 1);
+        }
         if cameras.iter().any(|c| c.0 == id) {
             return Err(bad(format!("camera id {id} appears twice")));
         }
@@ -1421,6 +1447,9 @@ fn read_cameras_bin(path: &Path) -> Result<ColmapCameras, IoError> {
             let size = |v: u64| u32::try_from(v).map_err(|_| format!("camera id {id}: size {v} is too large"));
             let (k, d) = colmap_camera(model, size(width)?, size(height)?, &params)
                 .map_err(|e| format!("camera id {id}: {e}"))?;
+            if let Some(why) = principal_point_outside(&k) {
+                log::warn!("{}: camera id {id}: {why}", path.display());
+            }
             let id = u64::try_from(id).map_err(|_| format!("camera id {id} is negative"))?;
             if cameras.iter().any(|c| c.0 == id) {
                 return Err(format!("camera id {id} appears twice"));
