@@ -325,6 +325,10 @@ impl Camera {
             lens.validate()?;
         }
         let m = self.world_from_camera.matrix3;
+        // `f64::max` passes over NaN, so a rotation with a NaN entry would measure as orthonormal.
+        if !m.is_finite() {
+            return Err(CoreError::invalid("camera pose", "rotation must be finite"));
+        }
         let err = (m.transpose() * m - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
         if !err.is_finite() || err > 1e-6 || m.determinant() < 0.0 {
             return Err(CoreError::invalid(
@@ -488,6 +492,27 @@ mod tests {
             }
             assert!(worst < 1e-4, "worst round-trip error {worst} px");
         }
+    }
+
+    /// A pose whose rotation is not finite, or not a proper rotation, or whose translation is
+    /// not finite, is refused; a NaN entry once measured as orthonormal (`f64::max` passes over
+    /// NaN), so the pose was taken.
+    #[test]
+    fn validate_refuses_poses_that_are_not_rigid_motions() {
+        assert!(test_camera(Distortion::default()).validate().is_ok());
+        let with = |edit: fn(&mut DAffine3)| {
+            let mut cam = test_camera(Distortion::default());
+            edit(&mut cam.world_from_camera);
+            cam.validate().map_err(|e| e.to_string())
+        };
+        let nan = with(|p| p.matrix3.x_axis.x = f64::NAN).unwrap_err();
+        assert!(nan.contains("rotation must be finite"), "{nan}");
+        let scaled = with(|p| p.matrix3 *= 2.0).unwrap_err();
+        assert!(scaled.contains("not a proper rotation"), "{scaled}");
+        let mirrored = with(|p| p.matrix3.x_axis *= -1.0).unwrap_err();
+        assert!(mirrored.contains("not a proper rotation"), "{mirrored}");
+        let far = with(|p| p.translation.y = f64::INFINITY).unwrap_err();
+        assert!(far.contains("translation must be finite"), "{far}");
     }
 
     #[test]
