@@ -1527,7 +1527,8 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
 
 /// Writes a COLMAP binary model (`cameras.bin`, `images.bin`) in `dir`, one camera per image,
 /// with models `PINHOLE` or `FULL_OPENCV` and no 2D points. Pixel centres are shifted to
-/// COLMAP's convention (`cx_file = cx + ½`); poses are written world → camera.
+/// COLMAP's convention (`cx_file = cx + ½`); poses are written world → camera. A camera with
+/// skew is refused: no COLMAP model holds it.
 pub fn write_colmap_bin(dir: &Path, images: &[(String, Camera)]) -> Result<(), IoError> {
     let mut cams = Vec::new();
     let mut imgs = Vec::new();
@@ -1535,7 +1536,12 @@ pub fn write_colmap_bin(dir: &Path, images: &[(String, Camera)]) -> Result<(), I
     imgs.extend((images.len() as u64).to_le_bytes());
     for (i, (name, cam)) in images.iter().enumerate() {
         let k = &cam.intrinsics;
-        assert!(k.skew == 0.0, "write_colmap_bin: COLMAP cameras have no skew");
+        if k.skew != 0.0 {
+            return Err(IoError::invalid(
+                dir.join("cameras.bin"),
+                format!("camera of image {name} has skew {}, which no COLMAP camera model holds", k.skew),
+            ));
+        }
         let id = i as i32 + 1;
         let mut params = vec![k.fx, k.fy, k.cx + 0.5, k.cy + 0.5];
         let model: i32 = if cam.distortion.is_identity() {
