@@ -266,6 +266,49 @@ pub struct Visibility {
     pub pixel_fraction_on_box: f64,
 }
 
+/// Largest orthonormality error ([`orthonormality_error`]) a camera's rotation may have:
+/// [`Camera::validate`] refuses more.
+pub const ROTATION_TOLERANCE: f64 = 1e-6;
+
+/// Largest orthonormality error of a matrix that [`rounded_rotation`] takes for a rotation
+/// written with few digits. Entries rounded to three decimals are off by up to 5·10⁻⁴ each,
+/// which puts the error at about 10⁻³ at most; a matrix further off is not a rotation.
+pub const ROUNDED_ROTATION_MAX: f64 = 5e-3;
+
+/// The largest entry of `|mᵀm − I|`: 0 for a rotation or a reflection, NaN when `m` holds an
+/// entry that is not finite (which `f64::max` would pass over).
+pub fn orthonormality_error(m: DMat3) -> f64 {
+    if !m.is_finite() {
+        return f64::NAN;
+    }
+    (m.transpose() * m - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()))
+}
+
+/// The rotation nearest to `m`, when `m` is a rotation up to the rounding of values written
+/// with few digits: its orthonormality error lies above [`ROTATION_TOLERANCE`] and at most
+/// [`ROUNDED_ROTATION_MAX`], and its determinant is positive. Returns that rotation (the
+/// orthogonal factor of `m`'s polar decomposition, the closest rotation in the Frobenius norm)
+/// and `m`'s error. `None` for a matrix that is a rotation already, or too far from one to be
+/// a rounded one, which [`Camera::validate`] then judges.
+pub fn rounded_rotation(m: DMat3) -> Option<(DMat3, f64)> {
+    let error = orthonormality_error(m);
+    if !(error > ROTATION_TOLERANCE && error <= ROUNDED_ROTATION_MAX && m.determinant() > 0.0) {
+        return None;
+    }
+    // Newton's iteration for the polar factor, X ← (X + X⁻ᵀ) / 2: quadratic from a start this
+    // close, so a few steps reach the rounding of f64.
+    let mut x = m;
+    for _ in 0..10 {
+        let next = 0.5 * (x + x.inverse().transpose());
+        let step = (next - x).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        x = next;
+        if step < 1e-15 {
+            break;
+        }
+    }
+    Some((x, error))
+}
+
 /// A calibrated pinhole camera with lens distortion and an optional thin-lens description.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
@@ -329,8 +372,8 @@ impl Camera {
         if !m.is_finite() {
             return Err(CoreError::invalid("camera pose", "rotation must be finite"));
         }
-        let err = (m.transpose() * m - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        if !err.is_finite() || err > 1e-6 || m.determinant() < 0.0 {
+        let err = orthonormality_error(m);
+        if !err.is_finite() || err > ROTATION_TOLERANCE || m.determinant() < 0.0 {
             return Err(CoreError::invalid(
                 "camera pose",
                 format!(
@@ -513,6 +556,27 @@ mod tests {
         assert!(mirrored.contains("not a proper rotation"), "{mirrored}");
         let far = with(|p| p.translation.y = f64::INFINITY).unwrap_err();
         assert!(far.contains("translation must be finite"), "{far}");
+    }
+
+    /// A rotation written with three or four decimals is taken back to the nearest rotation,
+    /// which lies within the rounding of the one written; a rotation, a reflection and a
+    /// scaled matrix are left to the camera's check.
+    #[test]
+    fn rounded_rotations_are_taken_to_the_nearest_rotation() {
+        let exact = test_camera(Distortion::default()).world_from_camera.matrix3;
+        for decimals in [3, 4] {
+            let scale = 10f64.powi(decimals);
+            let rounded = DMat3::from_cols_array(&exact.to_cols_array().map(|v| (v * scale).round() / scale));
+            let (r, error) = rounded_rotation(rounded).expect("a rounded rotation");
+            assert!(error > ROTATION_TOLERANCE && error <= ROUNDED_ROTATION_MAX, "{decimals} decimals: {error}");
+            assert!(orthonormality_error(r) < 1e-14 && r.determinant() > 0.0);
+            let off = (r - exact).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            assert!(off < 1.0 / scale, "{decimals} decimals: {off} from the exact rotation");
+        }
+        assert_eq!(rounded_rotation(exact), None, "a rotation already");
+        assert_eq!(rounded_rotation(-exact), None, "a reflection");
+        assert_eq!(rounded_rotation(exact * 1.01), None, "a scaled rotation is not rounding");
+        assert!(orthonormality_error(DMat3::from_cols_array(&[f64::NAN; 9])).is_nan());
     }
 
     #[test]

@@ -557,6 +557,20 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
             "does not give a rotation: the rotation vector is too long for its length to be finite".into(),
         ));
     }
+    // A matrix written with few digits is a rotation only up to their rounding, which the
+    // camera's check would refuse: the nearest rotation is taken, and said.
+    let rotation = match fluidnerf_core::camera::rounded_rotation(rotation) {
+        Some((nearest, error)) => {
+            log::warn!(
+                "{}: camera {name}: {} is a rotation only to within {error:.1e} (written with few digits?); the \
+                 nearest rotation is used",
+                (nodes.file)(pose_key).display(),
+                (nodes.label)(pose_key)
+            );
+            nearest
+        }
+        None => rotation,
+    };
     // The pose inverts the matrix read: a singular one has no inverse, and the NaN it gives
     // would be blamed on the translation.
     let world_from_camera = world_from_camera_of(rotation, translation);

@@ -616,15 +616,16 @@ fn resolve_in(root: &Path, p: &Path) -> PathBuf {
     }
 }
 
-/// The camera of frame `index`. `image` is the frame's image file (resolved), read for its size
-/// only when `w` or `h` is missing.
+/// The camera of frame `index`, and the orthonormality error of its rotation when that was a
+/// rotation only up to rounding and the nearest rotation was taken. `image` is the frame's
+/// image file (resolved), read for its size only when `w` or `h` is missing.
 fn frame_camera(
     file: &Path,
     index: usize,
     entry: &FrameIn,
     keys: &IntrinsicKeys,
     image: &Path,
-) -> Result<Camera, IoError> {
+) -> Result<(Camera, Option<f64>), IoError> {
     let k = keys;
     let name = &entry.file_path;
     let bad = |problem: String| IoError::invalid(file, format!("frame {index} ({name}): {problem}"));
@@ -701,15 +702,21 @@ fn frame_camera(
     if m[3] != [0.0, 0.0, 0.0, 1.0] {
         return Err(bad(format!("transform_matrix's last row must be [0, 0, 0, 1], got {:?}", m[3])));
     }
-    let camera =
-        Camera { intrinsics, distortion, world_from_camera: opengl_c2w_to_world_from_camera(m), lens: entry.thin_lens };
+    // A matrix written with few digits is a rotation only up to their rounding, which the
+    // camera's check would refuse: the nearest rotation is taken (and said by the caller).
+    let mut world_from_camera = opengl_c2w_to_world_from_camera(m);
+    let rounded = fluidnerf_core::camera::rounded_rotation(world_from_camera.matrix3);
+    if let Some((nearest, _)) = rounded {
+        world_from_camera.matrix3 = nearest;
+    }
+    let camera = Camera { intrinsics, distortion, world_from_camera, lens: entry.thin_lens };
     camera.validate().map_err(|error| IoError::Camera {
         path: file.to_path_buf(),
         frame: index,
         file_path: PathBuf::from(name),
         error,
     })?;
-    Ok(camera)
+    Ok((camera, rounded.map(|(_, error)| error)))
 }
 
 /// How far (relative) a focal length may lie from the one its field of view gives before
@@ -859,6 +866,8 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     let mut frames = Vec::with_capacity(top.frames.len());
     let mut frame_recordings = Vec::with_capacity(top.frames.len());
     let mut renamed: Vec<(String, PathBuf)> = Vec::new();
+    // Frames whose rotation was one only up to rounding: how many, the largest error, the first.
+    let mut rounded_rotations: Option<(usize, f64, usize)> = None;
     // Whether the top level's focal lengths and angles were found to disagree (warned once).
     let mut warned_top = [false; 2];
     for (i, value) in top.frames.iter().enumerate() {
@@ -897,7 +906,12 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
                 format!("frame {i}: is_fisheye is true: fisheye cameras are not supported"),
             ));
         }
-        let camera = frame_camera(&file, i, &entry, &keys.over(&global), &image)?;
+        let (camera, rounded) = frame_camera(&file, i, &entry, &keys.over(&global), &image)?;
+        if let Some(error) = rounded {
+            let (count, worst, _) = rounded_rotations.get_or_insert((0, 0.0, i));
+            *count += 1;
+            *worst = error.max(*worst);
+        }
         warn_focal_conflicts(&file, i, &entry.file_path, &keys, &global, &camera.intrinsics, &mut warned_top);
         frames.push(Frame {
             camera,
@@ -908,6 +922,13 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
         });
     }
     report.log(&file);
+    if let Some((count, worst, first)) = rounded_rotations {
+        log::warn!(
+            "{}: the transform_matrix of {count} frame(s) (the first: frame {first}) holds a rotation only to within \
+             {worst:.1e} (written with few digits?); the nearest rotations are used",
+            file.display()
+        );
+    }
     if let Some((from, to)) = renamed.first() {
         log::info!(
             "{}: {} frame(s) name an image by another extension or none; matched by name stem (e.g. {from} → {})",

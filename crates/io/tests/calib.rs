@@ -1048,6 +1048,28 @@ fn opencv_malformed_nodes_are_named() {
     }
 }
 
+/// An `R` written with four decimals is a rotation only up to their rounding, which the
+/// camera's check refused: the nearest rotation is taken, within the rounding of the exact one.
+#[test]
+fn opencv_rotation_written_with_few_digits_is_taken_to_the_nearest_rotation() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (s, c) = (0.5f64, 0.75f64.sqrt());
+    let stereo = format!(
+        "{STEREO_INTRINSICS}imageSize: [ 640, 480 ]\nR: [ {c:.4}, 0., {s:.4}, 0., 1., 0., {:.4}, 0., {c:.4} ]\nT: [ -120., \
+         0., 0. ]\n",
+        -s
+    );
+    let file = dir.path().join("calib.yml");
+    std::fs::write(&file, &stereo).expect("write");
+    let cams = read_opencv(&file).expect("a rounded rotation reads");
+    // R maps world to camera; the pose holds its transpose.
+    let exact = DMat3::from_cols_array(&[c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c]);
+    let read = cams[1].1.world_from_camera.matrix3;
+    let off = (read - exact).to_cols_array().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    assert!(off < 1e-4, "{off} from the exact rotation: {read}");
+    assert!(fluidnerf_core::camera::orthonormality_error(read) < 1e-12);
+}
+
 /// `write_opencv` writes FileStorage XML for `.xml`: the cameras read back the same, with
 /// suffixed keys for a rig and plain keys for one camera named after the file.
 #[test]

@@ -206,3 +206,31 @@ fn float_sizes_and_bad_angles() {
     let m = scene_error(d, &v).to_string();
     assert!(m.contains("frame 0 (a.png)") && m.contains("camera_angle_x") && m.contains("(0, π)"), "{m}");
 }
+
+/// A `transform_matrix` written with four decimals holds a rotation only up to their rounding
+/// (orthonormality error about 10⁻⁴), which the camera's check refused: its nearest rotation
+/// is taken, and projects within the rounding of the exact camera. A matrix off by more than
+/// rounding is still refused.
+#[test]
+fn rotations_written_with_few_digits_are_taken_to_the_nearest_rotation() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let eye = DVec3::new(3.0, -4.0, 1.5);
+    let (r, m) = c2w_gl(eye, DVec3::ZERO, DVec3::Z);
+    let rounded = m.map(|row| [0, 1, 2, 3].map(|j| if j < 3 { (row[j] * 1e4).round() / 1e4 } else { row[j] }));
+    write(d, &good(rounded));
+    let scene = load_scene(d).expect("a rounded rotation loads");
+    for f in &scene.frames {
+        for p in [DVec3::ZERO, DVec3::new(0.3, -0.2, 0.1), DVec3::new(-0.4, 0.25, -0.3)] {
+            let ours = f.camera.project(p).expect("in front");
+            let exact = project_gl(r, eye, (50.0, 50.0), (16.0, 12.0), p);
+            assert!((ours - exact).length() < 1e-2, "{p}: {ours} against {exact}");
+        }
+    }
+    let mut scaled = m;
+    for row in scaled.iter_mut().take(3) {
+        row[0] *= 1.01;
+    }
+    let e = scene_error(d, &good(scaled)).to_string();
+    assert!(e.contains("frame 0 (a.png)") && e.contains("not a proper rotation"), "{e}");
+}
