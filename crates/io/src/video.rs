@@ -465,6 +465,7 @@ fn read_mjpeg_avi(
             forced => (forced, RangeSource::Option),
         });
         mapper.limited = range == VideoRange::Limited;
+        let data = with_standard_huffman_tables(&data);
         let img = image::load_from_memory_with_format(&data, image::ImageFormat::Jpeg)
             .map_err(|e| IoError::invalid(path, format!("frame {i}: not a decodable JPEG: {e}")))?
             .into_luma8();
@@ -497,6 +498,116 @@ fn read_mjpeg_avi(
         range_source,
         clipped_pixels: mapper.clipped,
     }))
+}
+
+/// The Huffman tables of the JPEG standard (ITU-T T.81, Annex K.3) as one DHT segment:
+/// luminance DC and AC (class and id `0x00`, `0x10`), chrominance DC and AC (`0x01`, `0x11`),
+/// each as its 16 counts of codes per length, then its symbols.
+const STANDARD_DHT: [u8; 420] = {
+    const TABLES: [(u8, [u8; 16], &[u8]); 4] = [
+        (0x00, [0, 1, 5, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0], &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]),
+        (
+            0x10,
+            [0, 2, 1, 3, 3, 2, 4, 3, 5, 5, 4, 4, 0, 0, 1, 0x7d],
+            &[
+                0x01, 0x02, 0x03, 0x00, 0x04, 0x11, 0x05, 0x12, 0x21, 0x31, 0x41, 0x06, 0x13, 0x51, 0x61, 0x07, 0x22,
+                0x71, 0x14, 0x32, 0x81, 0x91, 0xa1, 0x08, 0x23, 0x42, 0xb1, 0xc1, 0x15, 0x52, 0xd1, 0xf0, 0x24, 0x33,
+                0x62, 0x72, 0x82, 0x09, 0x0a, 0x16, 0x17, 0x18, 0x19, 0x1a, 0x25, 0x26, 0x27, 0x28, 0x29, 0x2a, 0x34,
+                0x35, 0x36, 0x37, 0x38, 0x39, 0x3a, 0x43, 0x44, 0x45, 0x46, 0x47, 0x48, 0x49, 0x4a, 0x53, 0x54, 0x55,
+                0x56, 0x57, 0x58, 0x59, 0x5a, 0x63, 0x64, 0x65, 0x66, 0x67, 0x68, 0x69, 0x6a, 0x73, 0x74, 0x75, 0x76,
+                0x77, 0x78, 0x79, 0x7a, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8a, 0x92, 0x93, 0x94, 0x95, 0x96,
+                0x97, 0x98, 0x99, 0x9a, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7, 0xa8, 0xa9, 0xaa, 0xb2, 0xb3, 0xb4, 0xb5,
+                0xb6, 0xb7, 0xb8, 0xb9, 0xba, 0xc2, 0xc3, 0xc4, 0xc5, 0xc6, 0xc7, 0xc8, 0xc9, 0xca, 0xd2, 0xd3, 0xd4,
+                0xd5, 0xd6, 0xd7, 0xd8, 0xd9, 0xda, 0xe1, 0xe2, 0xe3, 0xe4, 0xe5, 0xe6, 0xe7, 0xe8, 0xe9, 0xea, 0xf1,
+                0xf2, 0xf3, 0xf4, 0xf5, 0xf6, 0xf7, 0xf8, 0xf9, 0xfa,
+            ],
+        ),
+        (0x01, [0, 3, 1, 1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0], &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11]),
+        (
+            0x11,
+            [0, 2, 1, 2, 4, 4, 3, 4, 7, 5, 4, 4, 0, 1, 2, 0x77],
+            &[
+                0x00, 0x01, 0x02, 0x03, 0x11, 0x04, 0x05, 0x21, 0x31, 0x06, 0x12, 0x41, 0x51, 0x07, 0x61, 0x71, 0x13,
+                0x22, 0x32, 0x81, 0x08, 0x14, 0x42, 0x91, 0xa1, 0xb1, 0xc1, 0x09, 0x23, 0x33, 0x52, 0xf0, 0x15, 0x62,
+                0x72, 0xd1, 0x0a, 0x16, 0x24, 0x34, 0xe1, 0x25, 0xf1, 0x17, 0x18, 0x19, 0x1a, 0x26, 0x27, 0x28, 0x29,
+                0x2a, 0x35, 0x36, 0x37, 0x38, 0x39, 0x3a, 0x43, 0x44, 0x45, 0x46, 0x47, 0x48, 0x49, 0x4a, 0x53, 0x54,
+                0x55, 0x56, 0x57, 0x58, 0x59, 0x5a, 0x63, 0x64, 0x65, 0x66, 0x67, 0x68, 0x69, 0x6a, 0x73, 0x74, 0x75,
+                0x76, 0x77, 0x78, 0x79, 0x7a, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8a, 0x92, 0x93, 0x94,
+                0x95, 0x96, 0x97, 0x98, 0x99, 0x9a, 0xa2, 0xa3, 0xa4, 0xa5, 0xa6, 0xa7, 0xa8, 0xa9, 0xaa, 0xb2, 0xb3,
+                0xb4, 0xb5, 0xb6, 0xb7, 0xb8, 0xb9, 0xba, 0xc2, 0xc3, 0xc4, 0xc5, 0xc6, 0xc7, 0xc8, 0xc9, 0xca, 0xd2,
+                0xd3, 0xd4, 0xd5, 0xd6, 0xd7, 0xd8, 0xd9, 0xda, 0xe2, 0xe3, 0xe4, 0xe5, 0xe6, 0xe7, 0xe8, 0xe9, 0xea,
+                0xf2, 0xf3, 0xf4, 0xf5, 0xf6, 0xf7, 0xf8, 0xf9, 0xfa,
+            ],
+        ),
+    ];
+    let mut out = [0u8; 420];
+    // Marker, then the segment's length (its bytes after the marker).
+    out[0] = 0xFF;
+    out[1] = 0xC4;
+    out[2] = (418u16 >> 8) as u8;
+    out[3] = (418u16 & 0xFF) as u8;
+    let mut at = 4;
+    let mut t = 0;
+    while t < TABLES.len() {
+        let (class_id, counts, symbols) = TABLES[t];
+        out[at] = class_id;
+        at += 1;
+        let mut i = 0;
+        while i < 16 {
+            out[at] = counts[i];
+            at += 1;
+            i += 1;
+        }
+        let mut i = 0;
+        while i < symbols.len() {
+            out[at] = symbols[i];
+            at += 1;
+            i += 1;
+        }
+        t += 1;
+    }
+    assert!(at == 420, "the four tables fill the segment");
+    out
+};
+
+/// `jpeg` with the standard Huffman tables ([`STANDARD_DHT`]) put before its scan when it
+/// defines none: MJPEG cameras commonly leave them out of every frame (the AVI1 form of
+/// MJPEG), relying on the decoder to use the standard ones, which JPEG decoders of still
+/// images do not do. A JPEG with tables of its own, or whose markers cannot be walked, is
+/// returned as it is (for the decoder to judge).
+fn with_standard_huffman_tables(jpeg: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    use std::borrow::Cow;
+    if !jpeg.starts_with(&[0xFF, 0xD8]) {
+        return Cow::Borrowed(jpeg);
+    }
+    let mut at = 2;
+    while at + 1 < jpeg.len() {
+        if jpeg[at] != 0xFF {
+            return Cow::Borrowed(jpeg);
+        }
+        let marker = jpeg[at + 1];
+        match marker {
+            // Fill bytes before a marker.
+            0xFF => at += 1,
+            // Markers without a segment.
+            0x01 | 0xD0..=0xD7 => at += 2,
+            0xC4 => return Cow::Borrowed(jpeg),
+            0xDA => {
+                let mut out = Vec::with_capacity(jpeg.len() + STANDARD_DHT.len());
+                out.extend_from_slice(&jpeg[..at]);
+                out.extend_from_slice(&STANDARD_DHT);
+                out.extend_from_slice(&jpeg[at..]);
+                return Cow::Owned(out);
+            }
+            _ => {
+                let Some(len) = jpeg.get(at + 2..at + 4).map(|b| usize::from(u16::from_be_bytes([b[0], b[1]]))) else {
+                    return Cow::Borrowed(jpeg);
+                };
+                at += 2 + len;
+            }
+        }
+    }
+    Cow::Borrowed(jpeg)
 }
 
 /// Whether a JPEG's comments mark it limited range: libavcodec writes `CS=ITU601` into
@@ -809,6 +920,60 @@ fn read_with_ffmpeg(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The segments of a JPEG up to its scan, as (marker, its bytes from the marker on).
+    fn segments(jpeg: &[u8]) -> Vec<(u8, std::ops::Range<usize>)> {
+        let mut out = Vec::new();
+        let mut at = 2;
+        while jpeg[at + 1] != 0xDA {
+            let len = usize::from(u16::from_be_bytes([jpeg[at + 2], jpeg[at + 3]]));
+            out.push((jpeg[at + 1], at..at + 2 + len));
+            at += 2 + len;
+        }
+        out
+    }
+
+    /// The standard tables are those a JPEG encoder writes by default (the `image` crate's, an
+    /// independent transcription of Annex K.3), table by table; a frame stripped of its tables
+    /// decodes with them to the same pixels as with its own, and a JPEG with tables is kept.
+    #[test]
+    fn a_jpeg_without_huffman_tables_takes_the_standard_ones() {
+        let rgb =
+            image::RgbImage::from_fn(40, 24, |x, y| image::Rgb([(6 * x) as u8, (10 * y) as u8, ((x * y) % 251) as u8]));
+        let mut jpeg = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90).encode_image(&rgb).expect("encodes");
+        let tables = |dht: &[u8]| {
+            // One or more tables after the marker and length: class/id, 16 counts, the symbols.
+            let mut found = std::collections::BTreeMap::new();
+            let mut at = 4;
+            while at < dht.len() {
+                let n: usize = dht[at + 1..at + 17].iter().map(|&c| usize::from(c)).sum();
+                found.insert(dht[at], dht[at + 1..at + 17 + n].to_vec());
+                at += 17 + n;
+            }
+            found
+        };
+        let theirs = segments(&jpeg).into_iter().filter(|(m, _)| *m == 0xC4).fold(
+            std::collections::BTreeMap::new(),
+            |mut all, (_, r)| {
+                all.extend(tables(&jpeg[r]));
+                all
+            },
+        );
+        assert_eq!(theirs.len(), 4, "the encoder writes four tables");
+        assert_eq!(tables(&STANDARD_DHT), theirs);
+
+        let decoded = |bytes: &[u8]| image::load_from_memory_with_format(bytes, image::ImageFormat::Jpeg);
+        let mut stripped = jpeg.clone();
+        for (_, r) in segments(&jpeg).into_iter().filter(|(m, _)| *m == 0xC4).rev() {
+            stripped.drain(r);
+        }
+        assert!(decoded(&stripped).is_err(), "a still-image decoder needs the tables");
+        let mended = with_standard_huffman_tables(&stripped);
+        assert_eq!(decoded(&mended).expect("decodes").to_rgb8(), decoded(&jpeg).expect("decodes").to_rgb8());
+        assert!(matches!(with_standard_huffman_tables(&jpeg), std::borrow::Cow::Borrowed(_)));
+        assert!(matches!(with_standard_huffman_tables(b"not a jpeg"), std::borrow::Cow::Borrowed(_)));
+    }
 
     #[test]
     fn containers_are_told_apart_by_their_first_bytes() {
