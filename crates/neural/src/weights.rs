@@ -75,11 +75,41 @@ fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: 
     Ok(())
 }
 
+/// Refuses a file holding a tensor that `field` has no place for (nor, for Adam's moments
+/// `adam.m.<name>` / `adam.v.<name>`, a tensor of that name): the file is of a larger field. A
+/// model.json or config.json edited to fewer layers would otherwise take the first layers of
+/// the file's field and drop the rest without a word, and every tensor it kept would match.
+fn refuse_unknown_tensors<F: TrainableField>(st: &SafeTensors, path: &Path, field: &F) -> Result<(), NeuralError> {
+    let own: std::collections::HashSet<String> = field.tensors().into_iter().map(|(name, _, _)| name).collect();
+    let known = |name: &str| {
+        own.contains(name)
+            || ["adam.m.", "adam.v."].iter().any(|p| name.strip_prefix(p).is_some_and(|n| own.contains(n)))
+    };
+    let mut unknown: Vec<String> = st.names().into_iter().filter(|n| !known(n)).map(String::from).collect();
+    if unknown.is_empty() {
+        return Ok(());
+    }
+    unknown.sort();
+    let count = unknown.len();
+    unknown.truncate(5);
+    let more = if count > 5 { format!(" and {} more", count - 5) } else { String::new() };
+    Err(NeuralError::checkpoint(
+        path,
+        format!(
+            "holds {count} tensor(s) the field described does not have ({}{more}): the file is of another field \
+             (more layers or levels) than its model.json or config.json describes",
+            unknown.join(", ")
+        ),
+    ))
+}
+
 /// Loads weights written by [`weights_bytes`] (or a checkpoint) into `field`, which must have
-/// the same architecture.
+/// the same architecture: a file lacking one of its tensors, or holding one it lacks, is
+/// refused.
 pub fn load_weights<F: TrainableField>(path: &Path, field: &mut F) -> Result<(), NeuralError> {
     let bytes = read(path)?;
     let st = SafeTensors::deserialize(&bytes).map_err(|e| damaged(path, e))?;
+    refuse_unknown_tensors(&st, path, field)?;
     for (name, shape, range) in field.tensors() {
         copy_tensor(&st, path, &name, &shape, &mut field.params_mut()[range])?;
     }
@@ -165,6 +195,7 @@ pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>)
         .ok_or_else(|| NeuralError::checkpoint(path, "no training state (weights only?)"))?;
     let meta: LearnerMeta =
         serde_json::from_str(json).map_err(|e| NeuralError::checkpoint(path, format!("training state: {e}")))?;
+    refuse_unknown_tensors(&st, path, &learner.field)?;
     let n = learner.field.num_params();
     learner.adam.m.resize(n, 0.0);
     learner.adam.v.resize(n, 0.0);
@@ -190,6 +221,36 @@ mod tests {
     use crate::hashgrid::HashGridConfig;
     use crate::mlp::MlpConfig;
     use crate::trained::{build_field, build_field_for_weights, AnyField, DenseConfig, FieldConfig};
+
+    /// A file of a deeper field than the one it is loaded into is refused, naming the tensors
+    /// it has no place for: every tensor of the shallower field matches one of the file's, so
+    /// only the file's extra layers tell the two apart. A checkpoint's Adam moments of the
+    /// field's own tensors are no such extra.
+    #[test]
+    fn a_file_of_a_deeper_field_is_refused_naming_the_extra_tensors() {
+        let aabb = Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0));
+        let mlp = MlpConfig { depth: 3, width: 16, space_freqs: 2, skip: false, ..MlpConfig::default() };
+        let deep = build_field(&FieldConfig::Mlp(mlp.clone()), &aabb, 3, 11).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let weights = dir.path().join("weights.safetensors");
+        std::fs::write(&weights, crate::with_field!(&deep, f => weights_bytes(f)).unwrap()).unwrap();
+        let AnyField::Mlp(deep) = deep else { panic!("an MLP") };
+        let checkpoint = dir.path().join("checkpoint.safetensors");
+        std::fs::write(&checkpoint, checkpoint_bytes(&Learner::new(deep.clone())).unwrap()).unwrap();
+
+        let shallow = FieldConfig::Mlp(MlpConfig { depth: 2, ..mlp });
+        let AnyField::Mlp(mut field) = build_field_for_weights(&shallow, &aabb, 3).unwrap() else { panic!() };
+        let e = load_weights(&weights, &mut field).unwrap_err().to_string();
+        assert!(e.contains("weights.safetensors") && e.contains("layers.2.bias, layers.2.weight"), "{e}");
+        let mut learner = Learner::new(field);
+        let e = load_checkpoint(&checkpoint, &mut learner).unwrap_err().to_string();
+        assert!(e.contains("checkpoint.safetensors") && e.contains("adam.m.layers.2.bias"), "{e}");
+
+        // The field the files were written from takes them, the checkpoint's moments included.
+        let mut same = deep.clone();
+        load_weights(&checkpoint, &mut same).unwrap();
+        load_checkpoint(&checkpoint, &mut Learner::new(deep)).unwrap();
+    }
 
     /// A field built without its initial draws and then loaded holds exactly the saved
     /// parameters, for every field kind, 3D and 4D: the tensors cover every parameter, so
