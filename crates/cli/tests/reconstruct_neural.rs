@@ -431,3 +431,32 @@ fn a_resume_after_the_box_changed_and_a_failed_run_are_handled() {
     refused(&run("dead", &["--max-iterations", "5", "--resume"]), "use --force to replace it");
     ok(&run("dead", &["--max-iterations", "5", "--force"]));
 }
+
+/// A checkpoint continues only the field it was trained as: a config.json edited to another
+/// field of the same tensor shapes (here the decoder's activation) is refused on --resume,
+/// naming the setting, instead of training the saved parameters as another network. (A
+/// --preset or option given with --resume is refused before; the file itself only here.)
+#[test]
+fn a_resume_of_a_config_edited_to_another_field_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 16, &[]);
+    let args = ["reconstruct", "scene", "-o", "run", "--method", "fast", "--resolution", "16"];
+    ok(&fluidnerf(d, &[&args[..], &["--rays-per-image", "64", "--max-iterations", "5", "-q"]].concat()));
+    let config = d.join("run/config.json");
+    fn activation(v: &mut serde_json::Value) -> &mut serde_json::Value {
+        &mut v["method"]["field"]["hash-grid"]["activation"]
+    }
+    edit_json(&config, |v| {
+        assert_eq!(*activation(v), "relu");
+        *activation(v) = "swish".into();
+    });
+    let resume = ["reconstruct", "-o", "run", "--resume", "--max-iterations", "10", "-q"];
+    let report_before = std::fs::read(d.join("run/report.json")).expect("report");
+    refused(&fluidnerf(d, &resume), r#"checkpoint.safetensors: was trained as another field"#);
+    refused(&fluidnerf(d, &resume), r#"`hash-grid.activation`: "relu" → "swish""#);
+    assert_eq!(std::fs::read(d.join("run/report.json")).expect("report"), report_before, "a refused resume wrote");
+    edit_json(&config, |v| *activation(v) = "relu".into());
+    ok(&fluidnerf(d, &resume));
+    assert_eq!(report(&d.join("run"))["iterations"], 10);
+}

@@ -15,7 +15,7 @@ use fluidnerf_metrics::{NrmsePoint, TruthSample};
 use fluidnerf_neural::train::{
     render_view, train, train_fitting_gains, GainFit, Learner, Prepared, Problem, Split, TrainConfig, View, ViewMasks,
 };
-use fluidnerf_neural::trained::{build_field, ModelRecord, WorldField};
+use fluidnerf_neural::trained::{build_field, FieldConfig, ModelRecord, WorldField};
 use fluidnerf_neural::TrainableField;
 
 use crate::measured::Measured;
@@ -374,7 +374,7 @@ impl Ctx<'_> {
         // Before any gain is fitted (the fingerprint reads the measured pixels either way).
         let views = prep.fingerprint();
         if dir.resuming() {
-            check_checkpoint(&ckpt, &self.scene.aabb, &views)?;
+            check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &views)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             // A resumed run only continues: below the checkpoint's iteration it would keep the
             // result of the longer run and record the lower cap in config.json, which reruns
@@ -473,7 +473,7 @@ impl Ctx<'_> {
                 }
             }
             if config.checkpoint_every > 0 && s.iteration.is_multiple_of(config.checkpoint_every) {
-                match write_checkpoint(dir, s.learner, &self.scene.aabb, &views) {
+                match write_checkpoint(dir, s.learner, &self.scene.aabb, &self.spec.field, &views) {
                     Ok(path) => {
                         let _ = session.emit(RunEvent::Checkpoint { path: &path });
                     }
@@ -513,7 +513,7 @@ impl Ctx<'_> {
         }
         let _ = session.emit(RunEvent::Writing);
         // The checkpoint holds the last state, so a resumed run continues where this one stopped.
-        write_checkpoint(dir, &learner, &self.scene.aabb, &views)?;
+        write_checkpoint(dir, &learner, &self.scene.aabb, &self.spec.field, &views)?;
         let stop_reason = cause.unwrap_or(report.stop_reason.into());
         let mut kept_iteration = learner.iteration;
         if let Some((iteration, loss, params)) = best.best.take() {
@@ -648,27 +648,42 @@ fn box_tag(aabb: &fluidnerf_core::Aabb) -> String {
     format!("{:?}", [aabb.min.to_array(), aabb.max.to_array()])
 }
 
+/// The checkpoint tag of the field's configuration (JSON): its parameters are that field's, and
+/// another one of the same tensor shapes (another activation, scale or hash) would take them
+/// without a word.
+const FIELD_TAG: &str = "field";
+
+fn field_tag(field: &FieldConfig) -> Result<String, PipelineError> {
+    serde_json::to_string(field).map_err(|e| PipelineError::invalid("method.field", e.to_string()))
+}
+
 /// The checkpoint tag of the fingerprint of the views a field was trained on
 /// ([`fluidnerf_neural::train::Prepared::fingerprint`]): their images and cameras.
 const VIEWS_TAG: &str = "views";
 
-/// Writes a training checkpoint (weights, optimiser state, histories, the scene's box and the
-/// fingerprint of the training views) atomically.
+/// Writes a training checkpoint (weights, optimiser state, histories, the scene's box, the
+/// field's configuration and the fingerprint of the training views) atomically.
 pub(crate) fn write_checkpoint<F: TrainableField>(
     dir: &RunDir,
     learner: &Learner<F>,
     aabb: &fluidnerf_core::Aabb,
+    field: &FieldConfig,
     views: &str,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let tags = [(BOX_TAG, box_tag(aabb)), (VIEWS_TAG, views.to_string())];
+    let tags = [(BOX_TAG, box_tag(aabb)), (FIELD_TAG, field_tag(field)?), (VIEWS_TAG, views.to_string())];
     let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?;
     dir.write_bytes("checkpoint.safetensors", &bytes)
 }
 
-/// Refuses to continue a checkpoint trained in another box than the scene's now, or on other
-/// images or cameras (a checkpoint written before the views' fingerprint was recorded is
-/// checked for its box only).
-fn check_checkpoint(path: &std::path::Path, aabb: &fluidnerf_core::Aabb, views: &str) -> Result<(), PipelineError> {
+/// Refuses to continue a checkpoint trained in another box than the scene's now, as another
+/// field than the settings now describe, or on other images or cameras (a checkpoint written
+/// before the field or the views' fingerprint was recorded is not checked for them).
+fn check_checkpoint(
+    path: &std::path::Path,
+    aabb: &fluidnerf_core::Aabb,
+    field: &FieldConfig,
+    views: &str,
+) -> Result<(), PipelineError> {
     if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, BOX_TAG)?.filter(|s| *s != box_tag(aabb)) {
         return Err(PipelineError::file(
             path,
@@ -678,6 +693,23 @@ fn check_checkpoint(path: &std::path::Path, aabb: &fluidnerf_core::Aabb, views: 
                 box_tag(aabb)
             ),
         ));
+    }
+    if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, FIELD_TAG)? {
+        let now = field_tag(field)?;
+        if saved != now {
+            let saved: serde_json::Value = serde_json::from_str(&saved)
+                .map_err(|e| PipelineError::file(path, format!("its recorded field is not JSON: {e}")))?;
+            let now: serde_json::Value = serde_json::from_str(&now).unwrap_or_default();
+            return Err(PipelineError::file(
+                path,
+                format!(
+                    "was trained as another field than the run's settings now describe ({}); its parameters are \
+                     that field's: restore the field's settings in config.json (or give the run's own), or start \
+                     a new run (--force)",
+                    crate::rundir::settings_differences(&saved, &now, 5)
+                ),
+            ));
+        }
     }
     check_views(path, || Ok(views.to_string()))
 }
