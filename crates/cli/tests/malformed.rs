@@ -1156,6 +1156,27 @@ fn a_run_holding_another_runs_volume_is_refused() {
     assert!(!d.join("m.json").exists(), "wrote metrics");
 }
 
+/// A run folder whose report.json is another run's (of another method) is not read as one run:
+/// the report's scores and curves would be taken for the results of the folder's own method.
+#[test]
+fn a_run_holding_another_runs_report_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    for (run, method) in [("run", "asart"), ("other", "sart")] {
+        let args = ["reconstruct", "scene", "-o", run, "--method", method, "--resolution", "8"];
+        ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "1", "-q"]].concat()));
+    }
+    std::fs::copy(d.join("other/report.json"), d.join("run/report.json")).expect("copies");
+    let says = "run/report.json: reports a run of method sart, but the folder's config.json configures method asart";
+    for args in [&["eval", "run", "--json", "m.json"][..], &["render", "run", "-o", "views"]] {
+        refused(&fluidnerf(d, args), says);
+    }
+    for made in ["m.json", "views"] {
+        assert!(!d.join(made).exists(), "left {made}");
+    }
+}
+
 /// A run given twice to `compare` (as its folder and its report, or through a link) would be
 /// drawn and tabled as two runs that agree.
 #[test]

@@ -91,6 +91,20 @@ impl LoadedRun {
         if rd.report().is_file() {
             let report = RunReport::read(&rd.report())?;
             let config = RunConfig::read(&rd.config())?;
+            // Both are written by the same run: a report copied in from another run would have
+            // its scores, curves and volumes taken for this run's.
+            if report.method != config.method() {
+                return Err(PipelineError::file(
+                    &rd.report(),
+                    format!(
+                        "reports a run of method {}, but the folder's config.json configures method {}: the two \
+                         files are of different runs (one copied in from another folder?); rerun the reconstruction or restore \
+                         the file",
+                        report.method,
+                        config.method()
+                    ),
+                ));
+            }
             // What the method writes must be there: a field's volume alone is not the field.
             let (wanted, file) = match config.method().family() {
                 Family::Neural => (RunKind::Field, "model.json"),
