@@ -1177,6 +1177,46 @@ fn a_run_holding_another_runs_report_is_refused() {
     }
 }
 
+/// A run folder whose model.json is not its own — a field of another box than its report
+/// records, or of other settings than its config.json (here the decoder's activation, which
+/// the weights' shapes do not tell) — is not scored or rendered as its result.
+#[test]
+fn a_run_holding_another_runs_model_description_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    let args = ["reconstruct", "scene", "-o", "run", "--method", "fast", "--resolution", "8"];
+    ok(&fluidnerf(d, &[&args[..], &["--rays-per-image", "32", "--max-iterations", "2", "-q"]].concat()));
+    let model = d.join("run/model.json");
+    let original = std::fs::read(&model).expect("model.json");
+    let max = edit_json(&model, |v| {
+        let max = v["meta"]["aabb"]["max"][0].as_f64().expect("a box");
+        v["meta"]["aabb"]["max"][0] = (2.0 * max).into();
+        max
+    });
+    let says = format!("run/model.json: describes a field in the box [{}", -max);
+    let says_box = format!(
+        "but the run's report.json records the box [{}, {}, {}] .. [{}, {}, {}]",
+        -max, -max, -max, max, max, max
+    );
+    for args in [&["eval", "run", "--json", "m.json"][..], &["render", "run", "-o", "views"]] {
+        let o = fluidnerf(d, args);
+        refused(&o, &says);
+        refused(&o, &says_box);
+    }
+    std::fs::write(&model, &original).expect("restores model.json");
+    edit_json(&model, |v| v["field"]["hash-grid"]["activation"] = "swish".into());
+    let says = r#"run/model.json: describes another field than the run's config.json configures (`hash-grid.activation`: "relu" → "swish")"#;
+    for args in [&["eval", "run", "--json", "m.json"][..], &["render", "run", "-o", "views"]] {
+        refused(&fluidnerf(d, args), says);
+    }
+    for made in ["m.json", "views"] {
+        assert!(!d.join(made).exists(), "left {made}");
+    }
+    std::fs::write(&model, &original).expect("restores model.json");
+    ok(&fluidnerf(d, &["eval", "run", "--json", "m.json", "-q"]));
+}
+
 /// A run given twice to `compare` (as its folder and its report, or through a link) would be
 /// drawn and tabled as two runs that agree.
 #[test]

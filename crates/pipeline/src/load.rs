@@ -63,6 +63,54 @@ pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> R
     }
 }
 
+/// Refuses a run's `model.json` or `temporal.json` that is not the run's own: one whose field
+/// fills another box than its report records (the run's box is the report's: eval, render and
+/// export would place the field there), or, for a static field, another field than its
+/// config.json configures. Copied in from another run or edited, it would be read as this run's
+/// result in this run's box.
+fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &RunReport) -> Result<(), PipelineError> {
+    let boxes: Vec<(PathBuf, Aabb)> = match kind {
+        RunKind::Field => {
+            let path = rd.path("model.json");
+            let record: ModelRecord = crate::rundir::read_json(&path)?;
+            if let crate::MethodConfig::Neural(_, spec) = &config.method {
+                if spec.field != record.field {
+                    return Err(PipelineError::file(
+                        &path,
+                        format!(
+                            "describes another field than the run's config.json configures ({}): the file is not \
+                             this run's result (copied from another run, or edited?); rerun the reconstruction or \
+                             restore the file",
+                            crate::rundir::settings_differences(&spec.field, &record.field, 5)
+                        ),
+                    ));
+                }
+            }
+            vec![(path, record.meta.aabb)]
+        }
+        RunKind::Temporal => {
+            let path = rd.path("temporal.json");
+            let record: fluidnerf_neural::temporal::TemporalRecord = crate::rundir::read_json(&path)?;
+            record.windows.iter().map(|w| (path.clone(), w.meta.aabb)).collect()
+        }
+        RunKind::Volume => Vec::new(),
+    };
+    let text = |a: &Aabb| format!("{} .. {}", num(a.min.to_array()), num(a.max.to_array()));
+    if let Some((path, aabb)) = boxes.into_iter().find(|(_, aabb)| *aabb != report.aabb) {
+        return Err(PipelineError::file(
+            &path,
+            format!(
+                "describes a field in the box {}, but the run's report.json records the box {}: the file is not \
+                 this run's result (copied from another run, or edited?); rerun the reconstruction or restore the \
+                 file",
+                text(&aabb),
+                text(&report.aabb)
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A run folder's results and, for runs of `reconstruct`, their configuration and report.
 pub struct LoadedRun {
     pub dir: PathBuf,
@@ -114,6 +162,7 @@ impl LoadedRun {
             if kind != wanted {
                 return Err(refuse(&format!("a {} run whose {file} is missing", config.method())));
             }
+            check_description(&rd, kind, &config, &report)?;
             let aabb = report.aabb;
             return Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: Some(config), report: Some(report), aabb });
         }
