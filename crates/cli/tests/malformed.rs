@@ -1217,6 +1217,49 @@ fn a_run_holding_another_runs_model_description_is_refused() {
     ok(&fluidnerf(d, &["eval", "run", "--json", "m.json", "-q"]));
 }
 
+/// A time-resolved run's temporal.json is stitched as a run plans its windows: one listing other
+/// windows than the run's report (one left out, or reordered), windows out of order in a folder
+/// without a report, or weights outside the run folder, would blend other fields than the
+/// run's. Each is refused naming temporal.json and the windows.
+#[test]
+fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth = ["synth", "-q", "--preset", "jet-tr60", "--cameras", "4", "--pixels", "16", "--resolution", "8"];
+    ok(&fluidnerf(d, &[&synth[..], &["--model", "pinhole", "--times", "14,15,16,17", "-o", "scene"]].concat()));
+    let args = ["reconstruct", "scene", "-o", "run", "--method", "tr-fast", "--window", "2", "--overlap", "1"];
+    let small = ["--max-iterations", "2", "--rays-per-image", "16", "--coarse-samples", "8", "--resolution", "8"];
+    ok(&fluidnerf(d, &[&args[..], &small, &["-q"]].concat()));
+    let temporal = d.join("run/temporal.json");
+    let original = std::fs::read(&temporal).expect("temporal.json");
+    let eval = |run: &str, extra: &[&str]| fluidnerf(d, &[&["eval", run, "--json", "m.json"][..], extra].concat());
+
+    edit_json(&temporal, |v| v["windows"].as_array_mut().expect("windows").remove(1));
+    refused(
+        &eval("run", &[]),
+        "run/temporal.json: lists the windows [[0, 2], [2, 4]], but the run's report.json records the windows [[0, 2], \
+         [1, 3], [2, 4]]",
+    );
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    let elsewhere = d.join("run/windows/w001.safetensors").to_str().expect("UTF-8").to_string();
+    edit_json(&temporal, |v| v["windows"][1]["weights"] = elsewhere.clone().into());
+    refused(&eval("run", &[]), &format!("window frames [1, 3]: its weights {elsewhere} are not a file inside the run"));
+
+    // Assembled by hand: no report to compare with, but the windows must still follow each other.
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    edit_json(&temporal, |v| v["windows"].as_array_mut().expect("windows").reverse());
+    for file in ["report.json", "config.json"] {
+        std::fs::remove_file(d.join("run").join(file)).expect("removes");
+    }
+    refused(
+        &eval("run", &["--scene", "scene"]),
+        "run/temporal.json: window frames [2, 4] do not follow the window before them",
+    );
+    assert!(!d.join("m.json").exists(), "wrote metrics");
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    ok(&eval("run", &["--scene", "scene", "-q"]));
+}
+
 /// A run given twice to `compare` (as its folder and its report, or through a link) would be
 /// drawn and tabled as two runs that agree.
 #[test]

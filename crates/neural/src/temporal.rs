@@ -895,10 +895,36 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         return Err(NeuralError::checkpoint(&path, "no frames or no windows"));
     }
     let mut fields: Vec<Box<dyn ScalarField + Send + Sync>> = Vec::new();
-    let mut plan = Vec::new();
+    let mut plan: Vec<Range<usize>> = Vec::new();
     for w in &rec.windows {
         if w.frames[0] >= w.frames[1] || w.frames[1] > rec.frame_times.len() {
             return Err(NeuralError::checkpoint(&path, format!("window frames {:?} out of range", w.frames)));
+        }
+        // The stitching reads the windows as a run plans them (crate::window): from the first
+        // frame on, in order, each starting after the previous one starts and no later than
+        // it ends. Windows reordered, or one left out, would blend other frames' fields.
+        let follows = match plan.last() {
+            None => w.frames[0] == 0,
+            Some(p) => p.start < w.frames[0] && w.frames[0] <= p.end && p.end < w.frames[1],
+        };
+        if !follows {
+            let listed: Vec<[usize; 2]> = rec.windows.iter().map(|w| w.frames).collect();
+            return Err(NeuralError::checkpoint(
+                &path,
+                format!(
+                    "window frames {:?} do not follow the window before them (windows {listed:?}): windows start at \
+                     frame 0 and each starts after the one before starts and no later than it ends",
+                    w.frames
+                ),
+            ));
+        }
+        // A run writes its windows' weights inside its folder; a description naming a file
+        // elsewhere (another run's) would have that field read as this run's.
+        if Path::new(&w.weights).components().any(|c| !matches!(c, std::path::Component::Normal(_))) {
+            return Err(NeuralError::checkpoint(
+                &path,
+                format!("window frames {:?}: its weights {} are not a file inside the run folder", w.frames, w.weights),
+            ));
         }
         plan.push(w.frames[0]..w.frames[1]);
         if let Some(why) = w.meta.problem() {

@@ -65,8 +65,8 @@ pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> R
 
 /// Refuses a run's `model.json` or `temporal.json` that is not the run's own: one whose field
 /// fills another box than its report records (the run's box is the report's: eval, render and
-/// export would place the field there), or, for a static field, another field than its
-/// config.json configures. Copied in from another run or edited, it would be read as this run's
+/// export would place the field there), for a static field another field than its config.json
+/// configures, and for a time-resolved one other windows than its report lists. Copied in from another run or edited, it would be read as this run's
 /// result in this run's box.
 fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &RunReport) -> Result<(), PipelineError> {
     let boxes: Vec<(PathBuf, Aabb)> = match kind {
@@ -91,6 +91,19 @@ fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &Ru
         RunKind::Temporal => {
             let path = rd.path("temporal.json");
             let record: fluidnerf_neural::temporal::TemporalRecord = crate::rundir::read_json(&path)?;
+            // The report lists the windows the run trained; the field is stitched from these.
+            let listed: Vec<[usize; 2]> = record.windows.iter().map(|w| w.frames).collect();
+            let reported: Vec<[usize; 2]> = report.windows.iter().map(|w| w.frames).collect();
+            if listed != reported {
+                return Err(PipelineError::file(
+                    &path,
+                    format!(
+                        "lists the windows {listed:?}, but the run's report.json records the windows {reported:?}: \
+                         the file is not this run's (copied from another run, or edited?); rerun the reconstruction \
+                         or restore the file"
+                    ),
+                ));
+            }
             record.windows.iter().map(|w| (path.clone(), w.meta.aabb)).collect()
         }
         RunKind::Volume => Vec::new(),
