@@ -374,3 +374,32 @@ def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static
     assert not (tmp_path / "new").exists() and scene.root is None
     run = fluidnerf.reconstruct(scene, "asart", tmp_path / "new", **options)
     assert run.status == "finished" and scene.root == (tmp_path / "new" / "scene").absolute()
+
+
+def test_a_resume_with_another_method_is_refused_and_leaves_the_run(static_scene, tmp_path):
+    """A resume given another run's configuration (a voxel method's, or another neural method's)
+    wrote that method's results over the run in the folder, leaving a folder of two runs' files
+    that open_run then refused; the command line refuses both from its options."""
+    short = dict(FAST, stopping={"rule": "budget", "max_iterations": 3})
+    fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "r", progress=False, **short)
+    voxel = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "v", resolution=8, stopping={"max_iterations": 2}, progress=False
+    )
+    before = {p.name: p.read_bytes() for p in (tmp_path / "r").iterdir()}
+    with pytest.raises(fluidnerf.FluidNerfError, match="asart is a voxel method, which keeps no checkpoint"):
+        fluidnerf.reconstruct(
+            static_scene,
+            out=tmp_path / "r",
+            config=voxel.path / "config.json",
+            overwrite="resume",
+            progress=False,
+        )
+    other = fluidnerf.build_config(static_scene, "hybrid", **short)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="holds a run of method fast, which a resume continues"
+    ):
+        fluidnerf.reconstruct(
+            static_scene, out=tmp_path / "r", config=other, overwrite="resume", progress=False
+        )
+    assert {p.name: p.read_bytes() for p in (tmp_path / "r").iterdir()} == before
+    assert fluidnerf.open_run(tmp_path / "r").report["iterations"] == 3

@@ -78,6 +78,9 @@ pub fn reconstruct(
 ) -> Result<RunReport, PipelineError> {
     let config = &config.resolved(scene);
     config.validate()?;
+    if dir.resuming() {
+        check_resumable(config, dir)?;
+    }
     // A start run that cannot be started from is refused before any work, not after the
     // training views are prepared.
     if let MethodConfig::Neural(_, NeuralSpec { start: Some(StartSpec { run: Some(run), .. }), .. }) = &config.method {
@@ -105,6 +108,39 @@ pub fn reconstruct(
         dir.discard_unresumable();
     }
     result
+}
+
+/// Refuses to resume the run in `dir` with `config` when it cannot continue it: a voxel method
+/// keeps no checkpoint to continue from, and a method other than that of the folder's run would
+/// write its results over that run's, leaving the two runs' files mixed in one folder (the
+/// command line refuses both from its options; a library or Python caller gives a whole
+/// configuration).
+fn check_resumable(config: &RunConfig, dir: &RunDir) -> Result<(), PipelineError> {
+    let method = config.method();
+    if method.family() == Family::Classical {
+        return Err(PipelineError::invalid(
+            "method.name",
+            format!(
+                "{method} is a voxel method, which keeps no checkpoint to resume from; run it anew (--force; \
+                 `overwrite=\"force\"` from Python)"
+            ),
+        ));
+    }
+    let path = dir.config();
+    if path.is_file() {
+        let saved = RunConfig::read(&path)?.method();
+        if saved != method {
+            return Err(PipelineError::file(
+                &path,
+                format!(
+                    "holds a run of method {saved}, which a resume continues with its own method, not {method}; \
+                     resume it with its own settings, or start a new run (--force; `overwrite=\"force\"` from \
+                     Python)"
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A warning for frame times without ground truth ([`Scene::times_without_truth`]): their
