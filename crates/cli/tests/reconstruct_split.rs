@@ -222,3 +222,38 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
     assert!(!out.status.success() && e.contains("--time-step do(es) not apply to --method static-per-frame"), "{e}");
     assert!(!d.join("z").exists(), "a refused run wrote");
 }
+
+/// A window's done file names the checkpoint of its final state: one naming another window's
+/// (or another run's) would have that state stitched in as this window. It was refused only
+/// when the views differed, and then blamed on the scene's images; another run's of the same
+/// views was taken. It is refused naming the done file and both checkpoints.
+#[test]
+fn a_done_file_naming_another_checkpoint_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    split_scene(d);
+    for k in ["0", "1", "2", "3"] {
+        ok(&reconstruct(d, "w", &["--window-index", k]));
+    }
+    let done = d.join("w/windows/w001.done.json");
+    let original = std::fs::read(&done).expect("done file");
+    let copy = d.join("copy");
+    std::fs::create_dir_all(copy.join("windows")).expect("mkdir");
+    std::fs::copy(d.join("w/windows/w001.checkpoint.safetensors"), copy.join("windows/w001.checkpoint.safetensors"))
+        .expect("copies");
+    let elsewhere = copy.join("windows/w001.checkpoint.safetensors").to_str().expect("UTF-8").to_string();
+    for other in ["windows/w000.checkpoint.safetensors", &elsewhere] {
+        edit_json(&done, |v| v["checkpoint"] = other.into());
+        let out = fluidnerf(d, &["reconstruct", "--finish", "-o", "w", "-q"]);
+        refused(
+            &out,
+            &format!(
+                "w/windows/w001.done.json: window 1 is recorded as finished with the checkpoint {other}, but a \
+                 window's final state is its own windows/w001.checkpoint.safetensors"
+            ),
+        );
+        assert!(!d.join("w/report.json").exists(), "finished with {other}");
+        std::fs::write(&done, &original).expect("restores the done file");
+    }
+    ok(&fluidnerf(d, &["reconstruct", "--finish", "-o", "w", "-q"]));
+}

@@ -147,10 +147,31 @@ fn check_window_views<F: TrainableField>(
 fn read_done(root: &std::path::Path, k: usize) -> Result<Option<FinishedWindow>, PipelineError> {
     let path = root.join(done_name(k));
     if path.is_file() {
-        Ok(Some(crate::rundir::read_json(&path)?))
+        let done: FinishedWindow = crate::rundir::read_json(&path)?;
+        check_own_checkpoint(&path, k, &done)?;
+        Ok(Some(done))
     } else {
         Ok(None)
     }
+}
+
+/// Refuses the record of finished window `k` (in `path`, a done file or `progress.json`) when it
+/// names another checkpoint than the window's own: a run writes each window's final state to
+/// [`checkpoint_name`], so another name is another window's state, or another run's, which a
+/// resume would stitch in as this window (and, of the same views, could not tell apart).
+fn check_own_checkpoint(path: &std::path::Path, k: usize, done: &FinishedWindow) -> Result<(), PipelineError> {
+    let own = checkpoint_name(k);
+    if done.checkpoint != own {
+        return Err(PipelineError::file(
+            path,
+            format!(
+                "window {k} is recorded as finished with the checkpoint {}, but a window's final state is its own \
+                 {own}: the record is not this window's (copied or edited?); restore it, or start a new run (--force)",
+                done.checkpoint
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// A time-resolved run set up: its training problem, window plan, initial field and the
@@ -320,6 +341,9 @@ pub(crate) fn run(
         }
         if saved.train != progress.train {
             session.warn("the training settings differ from the run being resumed; its finished windows keep theirs");
+        }
+        for (k, done) in saved.finished.iter().enumerate() {
+            check_own_checkpoint(&progress_path, k, done)?;
         }
         progress.finished = saved.finished;
         // Windows run one at a time (`reconstruct_windows`) record themselves in done files.
