@@ -202,7 +202,21 @@ pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>)
     for (name, shape, range) in learner.field.tensors() {
         copy_tensor(&st, path, &name, &shape, &mut learner.field.params_mut()[range.clone()])?;
         copy_tensor(&st, path, &format!("adam.m.{name}"), &shape, &mut learner.adam.m[range.clone()])?;
-        copy_tensor(&st, path, &format!("adam.v.{name}"), &shape, &mut learner.adam.v[range])?;
+        let second = format!("adam.v.{name}");
+        let moments = &mut learner.adam.v[range];
+        copy_tensor(&st, path, &second, &shape, moments)?;
+        // Averages of squared gradients: a negative one (a damaged or edited file) makes the
+        // step's square root NaN, which training reports as a diverged loss, blaming the rate.
+        if let Some(i) = moments.iter().position(|&v| v < 0.0) {
+            return Err(NeuralError::checkpoint(
+                path,
+                format!(
+                    "tensor {second}: value {i} is {}; Adam's second moments are averages of squared gradients \
+                     and cannot be negative (the file is damaged or edited)",
+                    moments[i]
+                ),
+            ));
+        }
     }
     learner.adam.step = meta.adam_step;
     learner.iteration = meta.iteration;
@@ -250,6 +264,26 @@ mod tests {
         let mut same = deep.clone();
         load_weights(&checkpoint, &mut same).unwrap();
         load_checkpoint(&checkpoint, &mut Learner::new(deep)).unwrap();
+    }
+
+    /// A checkpoint with a negative Adam second moment is refused naming the tensor: training
+    /// would take the square root of it and stop with a NaN loss, reported as divergence.
+    #[test]
+    fn a_checkpoint_with_a_negative_second_moment_is_refused() {
+        let aabb = Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0));
+        let mlp = FieldConfig::Mlp(MlpConfig { depth: 2, width: 8, space_freqs: 2, ..MlpConfig::default() });
+        let AnyField::Mlp(field) = build_field(&mlp, &aabb, 3, 5).unwrap() else { panic!("an MLP") };
+        let mut learner = Learner::new(field.clone());
+        let (_, _, range) = field.tensors().into_iter().find(|t| t.0 == "output.bias").unwrap();
+        learner.adam.v[range.start] = -1.0;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.safetensors");
+        std::fs::write(&path, checkpoint_bytes(&learner).unwrap()).unwrap();
+        let e = load_checkpoint(&path, &mut Learner::new(field.clone())).unwrap_err().to_string();
+        assert!(e.contains("checkpoint.safetensors: tensor adam.v.output.bias: value 0 is -1"), "{e}");
+        learner.adam.v[range.start] = 0.0;
+        std::fs::write(&path, checkpoint_bytes(&learner).unwrap()).unwrap();
+        load_checkpoint(&path, &mut Learner::new(field)).unwrap();
     }
 
     /// A field built without its initial draws and then loaded holds exactly the saved
