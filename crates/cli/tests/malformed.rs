@@ -1260,6 +1260,29 @@ fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
     ok(&eval("run", &["--scene", "scene", "-q"]));
 }
 
+/// A voxel run's folder holding a neural field's model.json (copied in from another run) was
+/// read as a field, and refused saying that its own volume.npy, which is there, is missing.
+/// The stray file is named instead.
+#[test]
+fn a_run_holding_a_description_of_another_kind_names_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    for (run, method) in [("run", "asart"), ("field", "fast")] {
+        let args = ["reconstruct", "scene", "-o", run, "--method", method, "--resolution", "8"];
+        ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "2", "-q"]].concat()));
+    }
+    for file in ["model.json", "weights.safetensors"] {
+        std::fs::copy(d.join("field").join(file), d.join("run").join(file)).expect("copies");
+    }
+    let says = "run: a asart run that holds model.json, which such a run does not write";
+    for args in [&["eval", "run", "--json", "m.json"][..], &["render", "run", "-o", "views"]] {
+        refused(&fluidnerf(d, args), says);
+    }
+    std::fs::remove_file(d.join("run/model.json")).expect("removes");
+    ok(&fluidnerf(d, &["eval", "run", "--json", "m.json", "-q"]));
+}
+
 /// A run given twice to `compare` (as its folder and its report, or through a link) would be
 /// drawn and tabled as two runs that agree.
 #[test]

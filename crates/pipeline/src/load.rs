@@ -159,8 +159,8 @@ impl LoadedRun {
                     &rd.report(),
                     format!(
                         "reports a run of method {}, but the folder's config.json configures method {}: the two \
-                         files are of different runs (one copied in from another folder?); rerun the reconstruction or restore \
-                         the file",
+                         files are of different runs (one copied in from another folder?); rerun the reconstruction \
+                         or restore the file",
                         report.method,
                         config.method()
                     ),
@@ -172,9 +172,23 @@ impl LoadedRun {
                 Family::Temporal => (RunKind::Temporal, "temporal.json"),
                 Family::Classical => (RunKind::Volume, "volume.npy"),
             };
-            if kind != wanted {
+            if !rd.path(file).is_file() {
                 return Err(refuse(&format!("a {} run whose {file} is missing", config.method())));
             }
+            // A description of another kind of result beside it is another run's: the folder
+            // would be read as that kind (model.json before volume.npy), and the refusal would
+            // say the run's own file is missing when it is there.
+            let foreign = [("model.json", RunKind::Field), ("temporal.json", RunKind::Temporal)]
+                .into_iter()
+                .find(|&(name, k)| k != wanted && rd.path(name).is_file());
+            if let Some((name, _)) = foreign {
+                return Err(refuse(&format!(
+                    "a {} run that holds {name}, which such a run does not write: it is another run's (copied in?); \
+                     remove it, or rerun the reconstruction",
+                    config.method()
+                )));
+            }
+            let kind = wanted;
             check_description(&rd, kind, &config, &report)?;
             let aabb = report.aabb;
             return Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: Some(config), report: Some(report), aabb });
