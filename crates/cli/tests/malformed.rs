@@ -1220,7 +1220,8 @@ fn a_run_holding_another_runs_model_description_is_refused() {
 /// A time-resolved run's temporal.json is stitched as a run plans its windows: one listing other
 /// windows than the run's report (one left out, or reordered), windows out of order in a folder
 /// without a report, or weights outside the run folder, would blend other fields than the
-/// run's. Each is refused naming temporal.json and the windows.
+/// run's; one of another field than config.json configures would read them as another network.
+/// Each is refused naming temporal.json.
 #[test]
 fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -1239,6 +1240,12 @@ fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
         &eval("run", &[]),
         "run/temporal.json: lists the windows [[0, 2], [2, 4]], but the run's report.json records the windows [[0, 2], \
          [1, 3], [2, 4]]",
+    );
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    edit_json(&temporal, |v| v["field"]["hash-grid"]["activation"] = "swish".into());
+    refused(
+        &eval("run", &[]),
+        r#"run/temporal.json: describes another field than the run's config.json configures (`hash-grid.activation`: "relu" → "swish")"#,
     );
     std::fs::write(&temporal, &original).expect("restores temporal.json");
     let elsewhere = d.join("run/windows/w001.safetensors").to_str().expect("UTF-8").to_string();

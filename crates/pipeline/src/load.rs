@@ -65,8 +65,8 @@ pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> R
 
 /// Refuses a run's `model.json` or `temporal.json` that is not the run's own: one whose field
 /// fills another box than its report records (the run's box is the report's: eval, render and
-/// export would place the field there), for a static field another field than its config.json
-/// configures, and for a time-resolved one other windows than its report lists. Copied in from another run or edited, it would be read as this run's
+/// export would place the field there), another field than its config.json configures, or, for
+/// a time-resolved run, other windows than its report lists. Copied in from another run or edited, it would be read as this run's
 /// result in this run's box.
 fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &RunReport) -> Result<(), PipelineError> {
     let boxes: Vec<(PathBuf, Aabb)> = match kind {
@@ -103,6 +103,23 @@ fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &Ru
                          or restore the file"
                     ),
                 ));
+            }
+            // Every window's field is the configured one, given its time axis for the windows'
+            // length (`field_for_window`), as the run built it.
+            if let (crate::MethodConfig::Temporal(_, spec), Some(first)) = (&config.method, record.windows.first()) {
+                let built =
+                    fluidnerf_neural::temporal::field_for_window(&spec.field, first.frames[1] - first.frames[0]);
+                if built != record.field {
+                    return Err(PipelineError::file(
+                        &path,
+                        format!(
+                            "describes another field than the run's config.json configures ({}): the file is not \
+                             this run's result (copied from another run, or edited?); rerun the reconstruction or \
+                             restore the file",
+                            crate::rundir::settings_differences(&built, &record.field, 5)
+                        ),
+                    ));
+                }
             }
             record.windows.iter().map(|w| (path.clone(), w.meta.aabb)).collect()
         }
