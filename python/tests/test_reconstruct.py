@@ -403,3 +403,18 @@ def test_a_resume_with_another_method_is_refused_and_leaves_the_run(static_scene
         )
     assert {p.name: p.read_bytes() for p in (tmp_path / "r").iterdir()} == before
     assert fluidnerf.open_run(tmp_path / "r").report["iterations"] == 3
+
+
+def test_a_start_run_inside_the_folder_a_forced_run_replaces_is_refused(static_scene, tmp_path):
+    """Starting from the run in ``out`` itself with ``overwrite="force"`` removed that run before
+    its start was read, then refused the start as holding nothing: the run was lost."""
+    voxel = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "a", resolution=8, stopping={"max_iterations": 2}, progress=False
+    )
+    before = voxel.volume.copy()
+    method = dict(FAST_METHOD, start={"run": str(tmp_path / "a")})
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="is the run in the output folder .* or one of its start runs"
+    ):
+        fluidnerf.reconstruct(static_scene, method, tmp_path / "a", overwrite="force", progress=False, **FAST)
+    np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "a").volume, before)

@@ -460,3 +460,24 @@ fn a_resume_of_a_config_edited_to_another_field_is_refused() {
     ok(&fluidnerf(d, &resume));
     assert_eq!(report(&d.join("run"))["iterations"], 10);
 }
+
+/// `--start-from` a run in the output folder itself, or inside it (a hybrid run's `start/`),
+/// with --force: the folder's run was removed before the start was read, so the user's run was
+/// deleted and the new one refused as starting from a folder that "holds no reconstruction".
+/// It is refused before anything is removed.
+#[test]
+fn a_start_run_inside_the_folder_force_replaces_is_refused_before_it_is_removed() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 12, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "a", "--method", "asart", "--resolution", "8", "-q"]));
+    let before = std::fs::read(d.join("a/volume.npy")).expect("volume");
+    let args = ["reconstruct", "scene", "-o", "a", "--method", "fast", "--force", "--max-iterations", "2"];
+    for start in ["a", "a/start"] {
+        std::fs::create_dir_all(d.join("a/start")).expect("mkdir");
+        let o = fluidnerf(d, &[&args[..], &["--start-from", start]].concat());
+        refused(&o, &format!("method.start.run: {start} is the run in the output folder a or one of its start runs"));
+        assert_eq!(std::fs::read(d.join("a/volume.npy")).expect("the run is kept"), before, "{start}");
+    }
+    ok(&fluidnerf(d, &["eval", "a", "--json", "m.json", "-q"]));
+}

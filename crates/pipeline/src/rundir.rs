@@ -666,6 +666,38 @@ fn check_new_run_folder(root: &Path, scene_root: Option<&Path>) -> Result<(), Pi
     refuse_other_kind(root, FolderKind::Run, "reconstruct")
 }
 
+/// Refuses a run that replaces the run in `out` (`overwrite` [`Overwrite::Force`]) while it starts
+/// (`config`'s `method.start.run`, `--start-from`) from that run or from a folder its clearing
+/// removes ([`RUN_FILES`], [`OWN_RUNS`] such as a hybrid run's `start/`): the clearing happens
+/// before the run reads its start, so the start was deleted and then refused as holding
+/// nothing. A run in another subfolder of `out` is kept, and may be started from. Called
+/// before [`RunDir::create`].
+pub fn check_start_outside(config: &crate::RunConfig, out: &Path, overwrite: Overwrite) -> Result<(), PipelineError> {
+    let crate::MethodConfig::Neural(_, crate::NeuralSpec { start: Some(start), .. }) = &config.method else {
+        return Ok(());
+    };
+    let Some(run) = &start.run else { return Ok(()) };
+    if overwrite != Overwrite::Force || !out.exists() {
+        return Ok(());
+    }
+    let (run_path, out_path) = (resolved(run), resolved(out));
+    let removed =
+        run_path == out_path || RUN_FILES.iter().chain(&OWN_RUNS).any(|name| run_path.starts_with(out_path.join(name)));
+    if removed {
+        return Err(PipelineError::invalid(
+            "method.start.run",
+            format!(
+                "{} is the run in the output folder {} or one of its start runs, which --force \
+                 (`overwrite=\"force\"` from Python) removes before the new run reads its start; copy the start \
+                 run elsewhere, or write the new run to another folder",
+                run.display(),
+                out.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A lock file held until dropped ([`RunDir::lock_file`]).
 #[derive(Debug)]
 pub struct FileLock {

@@ -159,6 +159,8 @@ pub fn reconstruct(
     let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
+            fluidnerf_pipeline::rundir::check_start_outside(&config, &out, overwrite)
+                .map_err(|e| err(e.to_string()))?;
             let dir = RunDir::create(&out, overwrite, Some(&scene.root)).map_err(|e| err(e.to_string()))?;
             let report = fluidnerf_pipeline::reconstruct(&scene, &config, &dir, |e| cb.on_event(e))
                 .map_err(|e| err(e.to_string()))?;

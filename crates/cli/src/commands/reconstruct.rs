@@ -1011,6 +1011,7 @@ pub fn run_config(
 ) -> anyhow::Result<fluidnerf_pipeline::RunReport> {
     crate::interrupt::install();
     let scene = fluidnerf_io::scene::load_scene(&config.scene)?;
+    fluidnerf_pipeline::rundir::check_start_outside(config, out, overwrite)?;
     let dir = RunDir::create(out, overwrite, Some(&scene.root))?;
     let mut view = ProgressView::default();
     let report = fluidnerf_pipeline::reconstruct(&scene, config, &dir, |e| view.on_event(e))?;
