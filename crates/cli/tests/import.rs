@@ -47,6 +47,22 @@ fn assert_same(a: &Camera, b: &Camera) {
     assert!((a.centre() - b.centre()).length() < 1e-9);
 }
 
+/// The fixture's MJPEG recording of four frames (32 × 24 px, 10 frames per second).
+fn ramp_video() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi")
+}
+
+/// A temporary folder with the rig's calibration (`rig.yml`) and an empty `videos/` folder
+/// for its cameras' recordings: the folder, the calibration and the videos' folder.
+fn video_rig() -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let videos = dir.path().join("videos");
+    std::fs::create_dir_all(&videos).expect("mkdir");
+    (dir, calib, videos)
+}
+
 #[test]
 fn opencv_calibration_and_images_become_a_scene() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -586,13 +602,8 @@ fn a_camera_with_an_image_and_a_folder_matches_several_inputs() {
 /// needs no --force; a folder that existed keeps what was in it.
 #[test]
 fn a_failed_import_leaves_nothing_behind() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let calib = dir.path().join("rig.yml");
-    write_opencv(&calib, &rig()).expect("writes calibration");
-    let videos = dir.path().join("videos");
-    std::fs::create_dir_all(&videos).expect("mkdir");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
-    let bytes = std::fs::read(&fixture).expect("reads the fixture");
+    let (dir, calib, videos) = video_rig();
+    let bytes = std::fs::read(ramp_video()).expect("reads the fixture");
     for n in ["cam0", "cam1"] {
         std::fs::write(videos.join(format!("{n}.avi")), &bytes).expect("writes");
     }
@@ -780,7 +791,7 @@ fn image_series_and_videos_together_are_refused() {
             fluidnerf_io::image::write_tiff_f32(&images.join(camera).join(n), &img).expect("writes image");
         }
     }
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    let fixture = ramp_video();
     std::fs::copy(fixture, images.join("cam2.avi")).expect("copies the fixture");
     let out = dir.path().join("scene");
     let o = import_opencv(&calib, &images, &out);
@@ -945,13 +956,8 @@ fn a_transforms_json_whose_mask_or_background_does_not_fit_is_refused() {
 /// cameras, their times and their rates.
 #[test]
 fn videos_of_different_frame_rates_are_refused() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let calib = dir.path().join("rig.yml");
-    write_opencv(&calib, &rig()).expect("writes calibration");
-    let videos = dir.path().join("videos");
-    std::fs::create_dir_all(&videos).expect("mkdir");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
-    let bytes = std::fs::read(fixture).expect("reads the fixture");
+    let (dir, calib, videos) = video_rig();
+    let bytes = std::fs::read(ramp_video()).expect("reads the fixture");
     // The video stream header's dwRate (at 24 in `strh`'s data) doubled: 20 frames per second.
     let mut fast = bytes.clone();
     let rate = bytes.windows(4).position(|w| w == b"strh").expect("strh") + 8 + 24;
@@ -1026,7 +1032,7 @@ fn distortion_under_an_unknown_name_is_warned_about() {
 fn videos_that_would_share_a_frames_folder_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
     let src = dir.path().join("rig");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi");
+    let fixture = ramp_video();
     let mut frames = Vec::new();
     for (folder, (_, cam)) in ["a", "b"].into_iter().zip(rig()) {
         std::fs::create_dir_all(src.join(folder)).expect("mkdir");

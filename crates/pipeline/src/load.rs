@@ -63,11 +63,24 @@ pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> R
     }
 }
 
+/// The refusal of a run's description `path` whose field (`described`) is not the one its
+/// config.json configures (`configured`).
+fn other_field<T: serde::Serialize>(path: &std::path::Path, configured: &T, described: &T) -> PipelineError {
+    PipelineError::file(
+        path,
+        format!(
+            "describes another field than the run's config.json configures ({}): the file is not this run's result \
+             (copied from another run, or edited?); rerun the reconstruction or restore the file",
+            crate::rundir::settings_differences(configured, described, 5)
+        ),
+    )
+}
+
 /// Refuses a run's `model.json` or `temporal.json` that is not the run's own: one whose field
 /// fills another box than its report records (the run's box is the report's: eval, render and
-/// export would place the field there), another field than its config.json configures, or, for
-/// a time-resolved run, other windows than its report lists. Copied in from another run or edited, it would be read as this run's
-/// result in this run's box.
+/// export would place the field there), another field than its config.json configures, or,
+/// for a time-resolved run, other windows than its report lists. Copied in from another run or
+/// edited, it would be read as this run's result in this run's box.
 fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &RunReport) -> Result<(), PipelineError> {
     let boxes: Vec<(PathBuf, Aabb)> = match kind {
         RunKind::Field => {
@@ -75,15 +88,7 @@ fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &Ru
             let record: ModelRecord = crate::rundir::read_json(&path)?;
             if let crate::MethodConfig::Neural(_, spec) = &config.method {
                 if spec.field != record.field {
-                    return Err(PipelineError::file(
-                        &path,
-                        format!(
-                            "describes another field than the run's config.json configures ({}): the file is not \
-                             this run's result (copied from another run, or edited?); rerun the reconstruction or \
-                             restore the file",
-                            crate::rundir::settings_differences(&spec.field, &record.field, 5)
-                        ),
-                    ));
+                    return Err(other_field(&path, &spec.field, &record.field));
                 }
             }
             vec![(path, record.meta.aabb)]
@@ -110,15 +115,7 @@ fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &Ru
                 let built =
                     fluidnerf_neural::temporal::field_for_window(&spec.field, first.frames[1] - first.frames[0]);
                 if built != record.field {
-                    return Err(PipelineError::file(
-                        &path,
-                        format!(
-                            "describes another field than the run's config.json configures ({}): the file is not \
-                             this run's result (copied from another run, or edited?); rerun the reconstruction or \
-                             restore the file",
-                            crate::rundir::settings_differences(&built, &record.field, 5)
-                        ),
-                    ));
+                    return Err(other_field(&path, &built, &record.field));
                 }
             }
             record.windows.iter().map(|w| (path.clone(), w.meta.aabb)).collect()
