@@ -420,13 +420,17 @@ class Run:
         pts = _array(points, np.float32, "points", "(N, 3)")
         if pts.shape[1] != 3:
             raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
-        if time is not None and self.kind != "temporal":
+        # A time that is no number is refused before a static result warns that it is unused.
+        t = None if time is None else _real(time, "time")
+        if t is not None and not math.isfinite(t):
+            raise FluidNerfError(f"time: expected a finite number, got {time!r}")
+        if t is not None and self.kind != "temporal":
             warnings.warn(
                 f"time={time} has no effect: {self.path} is a static result, fixed in time",
                 FluidNerfWarning,
                 stacklevel=2,
             )
-        return self._h.field(pts, None if time is None else _real(time, "time"))
+        return self._h.field(pts, t)
 
     def voxel_centres(self) -> np.ndarray:
         """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import threading
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -61,6 +62,13 @@ def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(stati
     with pytest.warns(fluidnerf.FluidNerfWarning, match="time=3.0 has no effect"):
         at_three = run.field(centres[:5], time=3.0)
     np.testing.assert_array_equal(at_three, run.field(centres[:5]))
+    # A time that is no finite number is refused, and not first warned of as unused.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(TypeError, match="time: expected a number, got '1'"):
+            run.field(centres[:5], time="1")
+        with pytest.raises(fluidnerf.FluidNerfError, match="time: expected a finite number"):
+            run.field(centres[:5], time=float("nan"))
 
     copy = run.save(tmp_path / "copy")
     np.testing.assert_array_equal(copy.volume, run.volume)
