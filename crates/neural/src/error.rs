@@ -11,8 +11,10 @@ pub enum NeuralError {
     /// Reading or writing a file failed.
     #[error("{}: {error}", path.display())]
     Io { path: PathBuf, error: std::io::Error },
-    /// A checkpoint file is malformed or does not match the field it is loaded into.
-    #[error("checkpoint {}: {why}", path.display())]
+    /// A file of a trained field (its weights, a checkpoint, `model.json` or `temporal.json`) is
+    /// malformed or does not match the field it is loaded into. The message names the file,
+    /// which says which of them it is.
+    #[error("{}: {why}", path.display())]
     Checkpoint { path: PathBuf, why: String },
     /// Training produced a non-finite loss. It is caught before the optimiser step, so the
     /// parameters and optimiser state are those after the previous iteration.
