@@ -200,9 +200,11 @@ fn numbers<T: std::str::FromStr>(s: &str) -> Option<Vec<T>> {
 
 /// Reads a `.vti` with one scalar point-data array (Float32 or Float64, appended raw binary as
 /// [`write_vti`] writes it, or inline ASCII), little-endian, axis-aligned (identity
-/// `Direction`). Of several arrays, the one `<PointData Scalars="NAME">` names is read; without
-/// that attribute, several arrays are refused. The box is recovered as `Origin − Spacing / 2` to
-/// `Origin + (dims − ½) · Spacing`.
+/// `Direction`). Of several arrays, the one `<PointData Scalars="NAME">` (else `<CellData
+/// Scalars="NAME">`) names is read; without that attribute, several arrays are refused. Point
+/// data is a voxel per point: the box is recovered as `Origin + (i₀ − ½) · Spacing` to
+/// `Origin + (i₁ + ½) · Spacing` for the extent `i₀..i₁`. Cell data is a voxel per cell: the box
+/// is the extent's, `Origin + i₀ · Spacing` to `Origin + i₁ · Spacing`.
 pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     let bytes = crate::read_input(path, "volume file")?;
     let bad = |what: &str| IoError::invalid(path, format!("not a VTK ImageData file we can read: {what}"));
@@ -251,11 +253,14 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     if n > u32::MAX as i64 {
         return Err(bad(&format!("WholeExtent: {n} voxels, more than a volume can hold (2^32)")));
     }
-    let (dims, n) = ([nx as usize, ny as usize, nz as usize], n as usize);
-    // The array to read: the only one, or the one `<PointData Scalars="...">` names; taking the
-    // first of several would read whichever the writer put first (a mask, say) as the field.
+    let (mut dims, mut n) = ([nx as usize, ny as usize, nz as usize], n as usize);
+    // The array to read: the only one, or the one `<PointData Scalars="...">` (else
+    // `<CellData Scalars="...">`) names; taking the first of several would read whichever the
+    // writer put first (a mask, say) as the field.
     let arrays = start_tags(xml, "DataArray");
-    let scalars = start_tag(xml, "PointData").and_then(|t| attribute(t, "Scalars"));
+    let scalars = start_tag(xml, "PointData")
+        .and_then(|t| attribute(t, "Scalars"))
+        .or_else(|| start_tag(xml, "CellData").and_then(|t| attribute(t, "Scalars")));
     let array_tag = match (arrays.as_slice(), scalars) {
         ([], _) => return Err(bad("no <DataArray> element")),
         ([one], _) => *one,
@@ -273,6 +278,23 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
             )));
         }
     };
+    // Cell data (finite-volume solvers write it) holds a value per cell, between the points:
+    // one fewer along each axis.
+    let cell_data = {
+        let before = &xml[..array_tag.as_ptr() as usize - xml.as_ptr() as usize];
+        // Inside a `<CellData>` that is open (not `<CellData/>`, and not closed since).
+        before.rfind("<CellData").is_some_and(|at| {
+            let tag = &before[at..at + before[at..].find('>').unwrap_or(before.len() - at)];
+            !tag.ends_with('/') && !before[at..].contains("</CellData>")
+        })
+    };
+    if cell_data {
+        if dims.iter().any(|&d| d < 2) {
+            return Err(bad("cell data on a WholeExtent one point thin along an axis, which holds no cells"));
+        }
+        dims = dims.map(|d| d - 1);
+        n = dims.iter().product();
+    }
     if attribute(array_tag, "NumberOfComponents").is_some_and(|c| c != "1") {
         return Err(bad("only single-component arrays are supported"));
     }
@@ -328,7 +350,10 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     };
     let spacing = DVec3::new(spacing[0], spacing[1], spacing[2]);
     let origin = DVec3::new(origin[0], origin[1], origin[2]);
-    let min = origin - 0.5 * spacing;
+    // Point `i` of the extent lies at `Origin + i · Spacing`; a voxel is the box around a point,
+    // or a cell between points.
+    let first = DVec3::new(extent[0] as f64, extent[2] as f64, extent[4] as f64);
+    let min = origin + (first - if cell_data { 0.0 } else { 0.5 }) * spacing;
     let max = min + spacing * DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
     let aabb = Aabb { min, max };
     aabb.validate().map_err(|e| IoError::invalid(path, format!("Origin/Spacing give an invalid box: {e}")))?;
@@ -548,6 +573,38 @@ mod tests {
             let err = read_vti(&p).expect_err(extent).to_string();
             assert!(err.contains("a.vti") && err.contains("WholeExtent"), "{extent}: {err}");
         }
+    }
+
+    /// Cell data, as finite-volume solvers write it, is a voxel per cell, filling the extent's
+    /// box; point data is a voxel per point, in the box around them, placed by where the
+    /// extent starts (both were read as point data from index 0: cell data refused for its
+    /// count, an extent from 10 placed ten spacings off).
+    #[test]
+    fn vti_cell_data_and_extents_that_do_not_start_at_zero() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("cells.vti");
+        let write = |extent: &str, data: &str| {
+            let text = format!(
+                r#"<VTKFile type="ImageData" byte_order="LittleEndian"><ImageData WholeExtent="{extent}" Origin="1 0 0" Spacing="2 1 1"><Piece>{data}</Piece></ImageData></VTKFile>"#
+            );
+            std::fs::write(&p, text).expect("write");
+        };
+        // Three points along x, so two cells; one cell along y and z.
+        let cells = r#"<PointData/><CellData Scalars="smoke"><DataArray type="Float32" Name="smoke" format="ascii">0.25 0.75</DataArray></CellData>"#;
+        write("0 2 0 1 0 1", cells);
+        let v = read_vti(&p).expect("cell data");
+        assert_eq!((v.dims, v.data.clone()), ([2, 1, 1], vec![0.25, 0.75]));
+        assert_eq!((v.aabb.min, v.aabb.max), (DVec3::new(1.0, 0.0, 0.0), DVec3::new(5.0, 1.0, 1.0)));
+        write("10 12 0 1 0 1", cells);
+        let v = read_vti(&p).expect("cell data");
+        assert_eq!((v.aabb.min, v.aabb.max), (DVec3::new(21.0, 0.0, 0.0), DVec3::new(25.0, 1.0, 1.0)));
+        let points = r#"<CellData/><PointData><DataArray type="Float32" format="ascii">1 2</DataArray></PointData>"#;
+        write("10 11 0 0 0 0", points);
+        let v = read_vti(&p).expect("point data");
+        assert_eq!((v.aabb.min, v.aabb.max), (DVec3::new(20.0, -0.5, -0.5), DVec3::new(24.0, 0.5, 0.5)));
+        write("0 2 0 0 0 1", cells);
+        let err = read_vti(&p).expect_err("no cells").to_string();
+        assert!(err.contains("cells.vti") && err.contains("holds no cells"), "{err}");
     }
 
     /// Of several arrays, the one `<PointData Scalars>` names is read, not the first; without
