@@ -723,25 +723,24 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             .collect();
         let file = fluidnerf_io::scene::scene_file_path(path);
         ensure!(!frames.is_empty(), "{}: lists no frames (its `frames` is empty): nothing to import", file.display());
-        // Named here with its frame and file, not later as a path that cannot be resolved.
-        if let Some((i, f)) = frames.iter().enumerate().find(|(_, f)| !f.file_path.exists()) {
-            bail!(
-                "{}: frame {i}'s image {} does not exist (`file_path` {:?}, relative to the file's folder)",
+        // An input the file names that is not there: refused here with its entry and file, not
+        // later as a path that cannot be resolved.
+        let missing = |what: String, path: &Path| {
+            anyhow::anyhow!(
+                "{}: {what} {} does not exist (`file_path` {:?}, relative to the file's folder)",
                 file.display(),
-                f.file_path.display(),
-                f.file_path.strip_prefix(&root).unwrap_or(&f.file_path).display()
-            );
+                path.display(),
+                path.strip_prefix(&root).unwrap_or(path).display()
+            )
+        };
+        if let Some((i, f)) = frames.iter().enumerate().find(|(_, f)| !f.file_path.exists()) {
+            return Err(missing(format!("frame {i}'s image"), &f.file_path));
         }
         let truth: Vec<TruthRef> =
             draft.truth.into_iter().map(|t| TruthRef { time: t.time, file_path: root.join(&t.file_path) }).collect();
         // A missing one would be written with a path that no longer resolves from OUT.
         if let Some((i, t)) = truth.iter().enumerate().find(|(_, t)| !t.file_path.exists()) {
-            bail!(
-                "{}: truth entry {i}'s volume {} does not exist (`file_path` {:?}, relative to the file's folder)",
-                file.display(),
-                t.file_path.display(),
-                t.file_path.strip_prefix(&root).unwrap_or(&t.file_path).display()
-            );
+            return Err(missing(format!("truth entry {i}'s volume"), &t.file_path));
         }
         let mut recording = draft.recording.clone();
         for r in &mut recording.frames {
