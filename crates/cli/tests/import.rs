@@ -1155,3 +1155,49 @@ fn a_principal_point_outside_the_image_is_warned_about() {
     );
     assert!(!e.contains("camera `cam0`") && !e.contains("camera `cam2`"), "{e}");
 }
+
+/// A forced re-import that decodes fewer frames removes the earlier import's frames it does
+/// not write again, which would otherwise sit beside the new ones as if they were the scene's;
+/// a file of the user's in the frames' folder stays.
+#[test]
+fn a_forced_reimport_removes_the_frames_it_no_longer_writes() {
+    let (dir, calib, videos) = video_rig();
+    for n in ["cam0", "cam1", "cam2"] {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let run = |extra: &[&str]| {
+        let mut a = vec!["import", "--opencv", s(&calib), "--images", s(&videos), "--aabb", "-10,-10,-10,10,10,10"];
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&["-o", s(&out)]);
+        fluidnerf(&a)
+    };
+    let o = run(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frames = |cam: &str| {
+        let mut names: Vec<String> = std::fs::read_dir(out.join("frames").join(cam))
+            .expect("lists")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(frames("cam1"), ["000000.tif", "000001.tif", "000002.tif", "000003.tif"]);
+    std::fs::write(out.join("frames/cam1/notes.txt"), "keep me").expect("writes");
+
+    let o = run(&["--video-frames", "1..3", "--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").frames.len(), 6);
+    assert_eq!(frames("cam0"), ["000000.tif", "000001.tif"]);
+    assert_eq!(frames("cam1"), ["000000.tif", "000001.tif", "notes.txt"]);
+
+    // Still images instead of videos: the frames go, and their folders when nothing else is in them.
+    for n in ["cam0", "cam1", "cam2"] {
+        std::fs::remove_file(videos.join(format!("{n}.avi"))).expect("removes");
+        image(&videos, &format!("{n}.png"));
+    }
+    let o = run(&["--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("frames/cam0").exists() && !out.join("frames/cam2").exists());
+    assert_eq!(frames("cam1"), ["notes.txt"]);
+}

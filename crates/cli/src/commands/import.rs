@@ -682,6 +682,52 @@ fn frame_name(f: &Frame) -> Option<String> {
     f.camera_name.clone().or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()))
 }
 
+/// The frames an earlier import into `out` decoded from videos, by camera, as its `import.json`
+/// records them (`frames/<camera>/000000.tif` onwards). Empty when there is no such record.
+fn earlier_video_frames(out: &Path) -> Vec<(String, usize)> {
+    let Ok(text) = std::fs::read_to_string(out.join("import.json")) else { return Vec::new() };
+    let Ok(record) = serde_json::from_str::<serde_json::Value>(&text) else { return Vec::new() };
+    if record["command"] != "import" {
+        return Vec::new();
+    }
+    let videos = record["videos"].as_array().map(Vec::as_slice).unwrap_or_default();
+    videos
+        .iter()
+        .filter_map(|v| Some((v["camera"].as_str()?.to_owned(), usize::try_from(v["frames_kept"].as_u64()?).ok()?)))
+        // Only plain names: anything else did not come from an import.
+        .filter(|(name, _)| {
+            let mut parts = Path::new(name).components();
+            matches!((parts.next(), parts.next()), (Some(std::path::Component::Normal(_)), None))
+        })
+        .collect()
+}
+
+/// Removes the frames an earlier import decoded (`earlier`) that this import did not write
+/// again: the rest of a longer selection, or a camera that has no video now. Left behind, they
+/// would sit beside the new frames in `frames/<camera>/` as if they belonged to the scene.
+fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoRecord]) {
+    let mut removed = 0usize;
+    for (camera, count) in earlier {
+        let kept = videos.iter().find(|v| &v.camera == camera).map_or(0, |v| v.info.frames_kept);
+        let dir = out.join("frames").join(camera);
+        for i in kept..*count {
+            let frame = dir.join(format!("{i:06}.tif"));
+            match std::fs::remove_file(&frame) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => log::warn!("cannot remove {}, a frame of the earlier import: {e}", frame.display()),
+            }
+        }
+        if kept == 0 {
+            // Only when empty: a file of the user's keeps its folder.
+            let _ = std::fs::remove_dir(&dir);
+        }
+    }
+    if removed > 0 {
+        log::info!("removed {removed} frame(s) of the earlier import that this one does not use");
+    }
+}
+
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
@@ -709,6 +755,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     if let Some(p) = [out_file.clone(), args.out.join("import.json")].iter().find(|p| p.exists() && !args.force) {
         bail!("{} already exists; pass --force to overwrite it", p.display());
     }
+    // Read before it is replaced: the frames an earlier import decoded that this one does not
+    // write again are removed once this one has succeeded.
+    let earlier_frames = earlier_video_frames(&args.out);
 
     let (frames, mut from_file) = if let Some(path) = &args.transforms {
         let draft = read_scene_draft(path).context("cannot read the transforms.json")?;
@@ -969,6 +1018,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     let settings_file = args.out.join("import.json");
     created.file(&settings_file);
     fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(json.as_bytes()))?;
+    remove_stale_frames(&args.out, &earlier_frames, &videos);
 
     let cameras: BTreeSet<String> = scene
         .frames
