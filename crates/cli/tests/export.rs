@@ -249,3 +249,27 @@ fn a_folder_in_an_outputs_place_is_refused_before_writing() {
     assert!(!o.status.success() && e.contains("volume.vti exists and is not a file"), "{e}");
     assert_eq!(std::fs::read_to_string(out.join("volume.npy")).expect("kept"), "mine");
 }
+
+/// A forced export into the folder of an earlier one removes the earlier outputs it does not
+/// write again (the `export.json` left would describe none of them); other files stay.
+#[test]
+fn a_forced_export_removes_the_earlier_outputs_it_does_not_write() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let (src, out) = (src.to_str().expect("utf-8"), dir.path().join("out"));
+    let out_text = out.to_str().expect("utf-8");
+    ok(&fluidnerf(&["export", src, "-o", out_text, "--npy", "--vti", "--raw", "--slices", "z=0.5,x=0.25"]));
+    for f in ["volume.vti", "volume.raw", "volume.raw.json", "slice_x_0.250.png", "slice_z_0.500.png"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    std::fs::write(out.join("notes.txt"), "keep me").expect("writes");
+    let o = fluidnerf(&["export", src, "-o", out_text, "--npy", "--slices", "z=0.5", "--resolution", "8", "--force"]);
+    ok(&o);
+    let mut left: Vec<String> = std::fs::read_dir(&out)
+        .expect("lists")
+        .map(|e| e.expect("entry").file_name().into_string().expect("utf-8"))
+        .collect();
+    left.sort();
+    assert_eq!(left, ["export.json", "notes.txt", "slice_z_0.500.png", "volume.npy"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("an output of the earlier export"));
+}

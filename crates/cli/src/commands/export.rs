@@ -209,6 +209,27 @@ fn parse_slice(s: &str) -> anyhow::Result<(Axis, f64)> {
     Ok((axis, fraction))
 }
 
+/// The file names of the outputs an earlier export listed in its `export.json` (`settings`),
+/// those only that an export writes: with --force, the ones not written again would be left
+/// beside the new outputs as if `export.json` described them.
+fn earlier_outputs(settings: &Path) -> Vec<PathBuf> {
+    let Ok(text) = std::fs::read_to_string(settings) else { return Vec::new() };
+    let Ok(record) = serde_json::from_str::<serde_json::Value>(&text) else { return Vec::new() };
+    let listed = record["outputs"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let ours = |name: &str| {
+        matches!(
+            name,
+            "volume.npy" | "volume.vti" | "volume.raw" | "volume.raw.json" | "isosurface.ply" | "isosurface.obj"
+        ) || ((name.starts_with("slice_") || name.starts_with("compare_")) && name.ends_with(".png"))
+    };
+    listed
+        .iter()
+        .filter_map(|p| Path::new(p.as_str()?).file_name())
+        .filter(|n| n.to_str().is_some_and(ours))
+        .map(PathBuf::from)
+        .collect()
+}
+
 /// The settings written to `export.json`.
 #[derive(Serialize)]
 struct Settings<'a> {
@@ -395,6 +416,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(p) = outputs.iter().chain([&settings_path]).find(|p| p.exists() && !p.is_file()) {
         bail!("{} exists and is not a file; --force overwrites earlier outputs, not folders: move it", p.display());
     }
+    // Read before it is replaced: an earlier export's outputs this one does not write again are
+    // removed once it has written its own.
+    let earlier = earlier_outputs(&settings_path);
     super::create_output_folder(out)?;
 
     let [nx, ny, nz] = volume.dims;
@@ -482,6 +506,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let text = serde_json::to_string_pretty(&settings)?;
     fluidnerf_io::atomic_write(&settings_path, |w| w.write_all(text.as_bytes()))
         .with_context(|| format!("writing {}", settings_path.display()))?;
+    let written: Vec<&std::ffi::OsStr> = outputs.iter().filter_map(|p| p.file_name()).collect();
+    for name in earlier.iter().filter(|n| !written.contains(&n.as_os_str())) {
+        let p = out.join(name);
+        match std::fs::remove_file(&p) {
+            Ok(()) => println!("removed {}, an output of the earlier export", p.display()),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => log::warn!("cannot remove {}, an output of the earlier export: {e}", p.display()),
+        }
+    }
     for p in &outputs {
         println!("wrote {}", p.display());
     }
