@@ -579,6 +579,9 @@ fn draw_colorbar_axes<DB: DrawingBackend>(
         .configure_mesh()
         .disable_mesh()
         .disable_x_axis()
+        // plotters sizes ticks by the plotting area, a few pixels wide here: without a size of
+        // their own they are a dot and the labels touch the bar (a `0.77` reads `.77`).
+        .set_tick_mark_size(LabelAreaPosition::Right, 5)
         .y_labels(n)
         .y_label_formatter(&f)
         .label_style((font::FAMILY, TICK_FONT))
@@ -679,6 +682,28 @@ mod tests {
         // Panel row 0 is the bottom, so the image's top row (1, 2, 3) is the panel's last row.
         assert_eq!(p.data, vec![4.0, 5.0, 6.0, 1.0, 2.0, 3.0]);
         assert_eq!(p.extent, [0.0, 3.0, 0.0, 2.0]);
+    }
+
+    /// The colour bar's ticks stand out from it and its labels keep clear of them: with
+    /// plotters' own tick size, a dot here, the labels touched the bar.
+    #[test]
+    fn colour_bar_ticks_are_marks_and_labels_keep_clear() {
+        let s = slice(&volume(), Axis::Z, 0.0, "mm").expect("inside");
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("p.png");
+        write_panels_png(&path, std::slice::from_ref(&s), &PanelStyle::default()).expect("writes");
+        let img = image::open(&path).expect("reads back").to_rgb8();
+        let dark = |x: u32, y: u32| img.get_pixel(x, y).0.iter().all(|&c| c < 128);
+        // The bar's right frame: the rightmost long run of frame-grey pixels in a column.
+        let frame = |x: u32| (0..img.height()).filter(|&y| img.get_pixel(x, y).0 == [40, 40, 40]).collect::<Vec<_>>();
+        let xr = (0..img.width()).rev().find(|&x| frame(x).len() > 100).expect("the colour bar's frame");
+        let rows = frame(xr);
+        let (top, bottom) = (rows[0], rows[rows.len() - 1]);
+        let ticks = (top..=bottom).filter(|&y| dark(xr + 3, y)).count();
+        assert!(ticks >= 2, "{ticks} tick(s) 3 px right of the bar");
+        for x in xr + 6..xr + 9 {
+            assert!((top..=bottom).all(|y| !dark(x, y)), "column {} px right of the bar holds text", x - xr);
+        }
     }
 
     #[test]
