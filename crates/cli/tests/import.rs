@@ -1201,3 +1201,40 @@ fn a_forced_reimport_removes_the_frames_it_no_longer_writes() {
     assert!(!out.join("frames/cam0").exists() && !out.join("frames/cam2").exists());
     assert_eq!(frames("cam1"), ["notes.txt"]);
 }
+
+/// Phantom cine recordings, one per camera, import as videos do: each frame a float TIFF of
+/// the sensor's counts above the black level, at the file's frame rate, with no word of gamma.
+#[test]
+fn phantom_cine_recordings_import_as_videos() {
+    let (dir, calib, videos) = video_rig();
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_16bit.cine");
+    for n in ["cam0", "cam1", "cam2"] {
+        std::fs::copy(&fixture, videos.join(format!("{n}.cine"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&videos),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "--video-frames",
+        "2..",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("gamma"), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 6);
+    assert_eq!(scene.times(), [0.002, 0.003]);
+    let f = scene.frames.iter().find(|f| f.camera_name.as_deref() == Some("cam1") && f.time == Some(0.003));
+    let img = fluidnerf_io::image::read_image(&out.join(&f.expect("cam1 at 3 ms").file_path)).expect("reads");
+    assert_eq!(img.get(5, 7), 10.0 * (20.0 + 4.0 * 5.0 + 3.0 * 7.0 + 30.0));
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("import.json")).expect("import.json")).expect("JSON");
+    assert_eq!(record["videos"][0]["decoder"], "cine");
+    assert_eq!(record["videos"][0]["range_source"], "raw");
+}

@@ -29,6 +29,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 pub mod calib;
+mod cine;
 mod error;
 pub mod folder;
 pub mod image;

@@ -8,6 +8,9 @@
 //!   (a frame the camera dropped) gives no frame but keeps its time slot, as in ffmpeg. The file is
 //!   walked chunk by chunk and only the kept frames are read, so a long recording never sits
 //!   in memory whole.
+//! - **Phantom cine** (`.cine`, high-speed cameras' raw recordings) is read here too, its grey
+//!   frames as the sensor's linear counts above the black level, with no range mapping or
+//!   linearisation; packed and colour frames are refused.
 //! - **Everything else** (MP4, MOV, MKV, WebM, H.264/H.265, AVI with other codecs) is decoded
 //!   by an external `ffmpeg` (frames as 16-bit grey on a pipe, read one at a time) after
 //!   `ffprobe` reports the size, the frames' time stamps and the colour range. When they are
@@ -48,7 +51,7 @@ pub const FFMPEG_ENV: &str = "FLUIDNERF_FFMPEG";
 pub const FFPROBE_ENV: &str = "FLUIDNERF_FFPROBE";
 
 /// File extensions read as video.
-pub const VIDEO_EXTENSIONS: [&str; 6] = ["avi", "mp4", "mov", "mkv", "m4v", "webm"];
+pub const VIDEO_EXTENSIONS: [&str; 7] = ["avi", "mp4", "mov", "mkv", "m4v", "webm", "cine"];
 
 /// Whether `path` has a video file's extension.
 pub fn is_video(path: &Path) -> bool {
@@ -104,6 +107,8 @@ pub enum RangeSource {
     JpegDefault,
     /// The stream states no range; video codecs default to limited.
     VideoDefault,
+    /// Raw sensor counts (a cine file): no range applies.
+    Raw,
 }
 
 /// Which decoder read a video.
@@ -114,6 +119,8 @@ pub enum Decoder {
     MjpegAvi,
     /// An external `ffmpeg`.
     Ffmpeg,
+    /// fluidnerf's own reader of Phantom cine files.
+    Cine,
 }
 
 impl std::fmt::Display for Decoder {
@@ -121,6 +128,7 @@ impl std::fmt::Display for Decoder {
         f.write_str(match self {
             Decoder::MjpegAvi => "mjpeg-avi",
             Decoder::Ffmpeg => "ffmpeg",
+            Decoder::Cine => "cine",
         })
     }
 }
@@ -156,14 +164,14 @@ impl Default for VideoOptions {
 }
 
 impl VideoOptions {
-    fn keeps(&self, index: usize) -> bool {
+    pub(crate) fn keeps(&self, index: usize) -> bool {
         index >= self.start
             && self.end.is_none_or(|e| index < e)
             && (index - self.start).is_multiple_of(self.every.max(1))
     }
 
     /// Whether no frame at or after `index` is kept.
-    fn done(&self, index: usize) -> bool {
+    pub(crate) fn done(&self, index: usize) -> bool {
         self.end.is_some_and(|e| index >= e)
     }
 }
@@ -265,11 +273,12 @@ pub fn read_video_frames(
             Some(info) => info,
             None => read_with_ffmpeg(path, opts, &mut on_frame)?,
         },
+        Container::Cine => crate::cine::read_cine(path, opts, &mut on_frame)?,
         Container::Unknown if is_video(path) || head.len() < 12 => {
             return Err(IoError::invalid(
                 path,
-                "not a video file: it begins with neither a RIFF `AVI ` header, an MP4/MOV box nor a \
-                 Matroska/WebM header (damaged, or not what its extension says)",
+                "not a video file: it begins with neither a RIFF `AVI ` header, a Phantom cine header, an MP4/MOV \
+                 box nor a Matroska/WebM header (damaged, or not what its extension says)",
             ))
         }
         Container::IsoBmff | Container::Matroska | Container::Unknown => read_with_ffmpeg(path, opts, &mut on_frame)?,
@@ -305,6 +314,8 @@ pub fn read_video_frames(
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Container {
     Avi,
+    /// Phantom cine.
+    Cine,
     /// MP4, MOV, M4V (ISO base media file format / QuickTime atoms).
     IsoBmff,
     /// MKV, WebM.
@@ -315,6 +326,8 @@ enum Container {
 fn sniff(head: &[u8]) -> Container {
     if head.len() >= 12 && &head[0..4] == b"RIFF" && &head[8..12] == b"AVI " {
         Container::Avi
+    } else if crate::cine::is_cine(head) {
+        Container::Cine
     } else if head.starts_with(&[0x1A, 0x45, 0xDF, 0xA3]) {
         Container::Matroska
     } else if head.len() >= 8

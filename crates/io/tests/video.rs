@@ -253,3 +253,166 @@ fn h264_mp4_reads_through_ffmpeg() {
         assert!(d <= 5.0, "native MJPEG and ffmpeg H.264 frames differ by {d}");
     }
 }
+
+/// Phantom cine reading against fixtures laid out with pycine's header structures and read
+/// back by pycine (fixtures/video/make_cine.py, check_cine_with_pycine.py and its output
+/// check_cine_with_pycine.txt): four grey 32 × 24 frames at 1000 frames/s, pixel (x, y) of
+/// frame k = 20 + 4x + 3y + 10k, stored bottom-up; 16-bit with black level 64 and stored value
+/// 64 + 10 v, and 8-bit with the value itself.
+mod cine {
+    use std::path::{Path, PathBuf};
+
+    use fluidnerf_io::video::{read_video, Decoder, RangeSource, VideoOptions};
+
+    use super::{fixture, ramp};
+
+    /// Per frame: `((x, y), value)` at four pixels, and the frame's sum.
+    type Recorded = Vec<(Vec<((usize, usize), i64)>, i64)>;
+
+    /// pycine's recorded values of `file`.
+    fn pycine(file: &str) -> Recorded {
+        let text = std::fs::read_to_string(fixture("check_cine_with_pycine.txt")).expect("reads the record");
+        let mut frames = Vec::new();
+        let mut inside = false;
+        for line in text.lines() {
+            if !line.starts_with("frame ") {
+                inside = line.starts_with(file);
+                continue;
+            }
+            if !inside {
+                continue;
+            }
+            let mut pixels = Vec::new();
+            let mut sum = 0;
+            for item in line.split_whitespace().skip(2) {
+                let (key, value) = item.split_once('=').expect("key=value");
+                let value: i64 = value.parse().expect("a count");
+                match key.split_once(',') {
+                    Some((x, y)) => pixels.push(((x.parse().expect("x"), y.parse().expect("y")), value)),
+                    None => sum = value,
+                }
+            }
+            frames.push((pixels, sum));
+        }
+        assert_eq!(frames.len(), 4, "{file}: four frames recorded");
+        frames
+    }
+
+    #[test]
+    fn sixteen_bit_frames_are_counts_above_the_black_level() {
+        let video = read_video(&fixture("ramp_16bit.cine"), &VideoOptions::default()).expect("reads");
+        assert_eq!(video.info.decoder, Decoder::Cine);
+        assert_eq!(video.info.range_source, RangeSource::Raw);
+        assert_eq!((video.info.width, video.info.height, video.info.frame_rate), (32, 24, Some(1000.0)));
+        assert_eq!((video.info.frames_in_file, video.info.frames_kept, video.info.clipped_pixels), (4, 4, 0));
+        assert_eq!(video.times, [0.0, 0.001, 0.002, 0.003]);
+        for (k, img) in video.frames.iter().enumerate() {
+            assert_eq!((img.width, img.height), (32, 24));
+            for y in 0..24 {
+                for x in 0..32 {
+                    assert_eq!(img.get(x, y), 10.0 * ramp(x, y, k), "frame {k} pixel ({x}, {y})");
+                }
+            }
+        }
+        // pycine maps [black 64, white 4064] onto [0, 4095] and truncates: so do we, from our counts.
+        let as_pycine = |c: f32| (f64::from(c) * 4095.0 / 4000.0).floor() as i64;
+        for (k, (pixels, sum)) in pycine("ramp_16bit.cine").into_iter().enumerate() {
+            let img = &video.frames[k];
+            for ((x, y), v) in pixels {
+                assert_eq!(as_pycine(img.get(x, y)), v, "frame {k} pixel ({x}, {y})");
+            }
+            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<i64>(), sum, "frame {k}");
+        }
+    }
+
+    #[test]
+    fn eight_bit_frames_match_pycine_and_the_selection_keeps_times() {
+        let video = read_video(&fixture("ramp_8bit.cine"), &VideoOptions::default()).expect("reads");
+        for (k, (pixels, sum)) in pycine("ramp_8bit.cine").into_iter().enumerate() {
+            let img = &video.frames[k];
+            for ((x, y), v) in pixels {
+                assert_eq!(img.get(x, y), v as f32, "frame {k} pixel ({x}, {y})");
+            }
+            assert_eq!(img.data.iter().map(|&c| c as i64).sum::<i64>(), sum, "frame {k}");
+        }
+        let opts = VideoOptions { start: 1, every: 2, time_offset_s: 0.5, ..Default::default() };
+        let video = read_video(&fixture("ramp_8bit.cine"), &opts).expect("reads");
+        assert_eq!(video.times, [0.501, 0.503]);
+        assert_eq!(video.frames[1].get(5, 7), ramp(5, 7, 3));
+    }
+
+    /// The 16-bit fixture with `patch` applied to its bytes, written to `dir`.
+    fn patched(dir: &Path, patch: impl FnOnce(&mut Vec<u8>)) -> PathBuf {
+        let mut bytes = std::fs::read(fixture("ramp_16bit.cine")).expect("reads the fixture");
+        patch(&mut bytes);
+        let path = dir.join("patched.cine");
+        std::fs::write(&path, bytes).expect("writes");
+        path
+    }
+
+    /// Offsets in the fixture: the bitmap header at 44, the setup at 84.
+    const BITMAP: usize = 44;
+    const SETUP: usize = 84;
+
+    fn put_u32(b: &mut [u8], at: usize, v: u32) {
+        b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    }
+
+    #[test]
+    fn a_negative_height_is_read_top_down() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = patched(dir.path(), |b| put_u32(b, BITMAP + 8, (-24i32) as u32));
+        let video = read_video(&path, &VideoOptions::default()).expect("reads");
+        // The stored first row (the picture's bottom, y = 23) is now the top.
+        assert_eq!(video.frames[0].get(3, 0), 10.0 * ramp(3, 23, 0));
+    }
+
+    #[test]
+    fn frames_it_cannot_read_are_refused_with_the_reason() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let err = |patch: &dyn Fn(&mut Vec<u8>)| {
+            let path = patched(dir.path(), patch);
+            let e = read_video(&path, &VideoOptions::default()).expect_err("refused").to_string();
+            assert!(e.contains("patched.cine"), "{e}");
+            e
+        };
+        let e = err(&|b| put_u32(b, SETUP + 808, 3));
+        assert!(e.contains("Bayer mosaic") && e.contains("code 3"), "{e}");
+        let e = err(&|b| put_u32(b, BITMAP + 16, 256));
+        assert!(e.contains("packed 10-bit"), "{e}");
+        let e = err(&|b| put_u32(b, BITMAP + 16, 1024));
+        assert!(e.contains("packed 12-bit"), "{e}");
+        let e = err(&|b| b[BITMAP + 14..BITMAP + 16].copy_from_slice(&48u16.to_le_bytes()));
+        assert!(e.contains("colour-interpolated"), "{e}");
+        let e = err(&|b| put_u32(b, SETUP + 768, 0));
+        assert!(e.contains("frame rate of 0"), "{e}");
+        let e = err(&|b| put_u32(b, 20, 0));
+        assert!(e.contains("no images"), "{e}");
+        let e = err(&|b| b.truncate(b.len() - 100));
+        assert!(e.contains("image 3") && e.contains("past the end of the file"), "{e}");
+        // An image size that fits no row layout.
+        let e = err(&|b| {
+            let first = u64::from_le_bytes(b[84 + 12432..84 + 12432 + 8].try_into().expect("8 bytes")) as usize;
+            put_u32(b, first + 4, 1000);
+        });
+        assert!(e.contains("image 0 holds 1000 bytes"), "{e}");
+    }
+
+    /// Pixels below the black level read as 0 and are counted.
+    #[test]
+    fn counts_below_the_black_level_are_clipped_and_counted() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        // A black level of 300 is above the ramp's lowest stored values (64 + 10 v from 264).
+        let path = patched(dir.path(), |b| put_u32(b, SETUP + 5732, 300));
+        let video = read_video(&path, &VideoOptions::default()).expect("reads");
+        let below =
+            (0..24).flat_map(|y| (0..32).map(move |x| (x, y))).filter(|&(x, y)| 64.0 + 10.0 * ramp(x, y, 0) < 300.0);
+        let n = below.clone().count();
+        assert!(n > 0);
+        for (x, y) in below {
+            assert_eq!(video.frames[0].get(x, y), 0.0);
+        }
+        assert_eq!(video.frames[0].get(31, 23), 64.0 + 10.0 * ramp(31, 23, 0) - 300.0);
+        assert_eq!(video.info.clipped_pixels, n as u64);
+    }
+}

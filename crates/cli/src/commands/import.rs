@@ -35,10 +35,12 @@ use std::io::Write as _;
 /// `transforms.json` if they are physical): every camera's folder must hold as many images,
 /// under the same names when the folders share names, and no folder named like an image; a
 /// camera with a single image cannot join cameras recorded over time. Or the video
-/// `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`, `.webm`): its frames are decoded (MJPEG
-/// AVI directly, other formats with ffmpeg), range-mapped and linearised, and written as float
-/// TIFFs to `OUT/frames/NAME/` with their times in seconds (see --video-range, --video-frames,
-/// --video-every, --video-time-offset); videos cannot join series of images. How each video was read (decoder, range and why,
+/// `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`, `.webm`, or a Phantom `.cine`): its
+/// frames are decoded (MJPEG AVI and cine directly, other formats with ffmpeg), range-mapped
+/// and linearised (a cine's frames are its sensor's counts above the black level, as stored),
+/// and written as float TIFFs to `OUT/frames/NAME/` with their times in seconds (see
+/// --video-range, --video-frames, --video-every, --video-time-offset); videos cannot join
+/// series of images. How each video was read (decoder, range and why,
 /// clipped pixels) is recorded in `OUT/import.json`.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
@@ -257,7 +259,8 @@ fn expand_videos(
             continue;
         }
         let name = video_name(&f);
-        if records.is_empty() && opts.linearisation == Linearisation::Linear {
+        let cine = f.file_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("cine"));
+        if records.is_empty() && opts.linearisation == Linearisation::Linear && !cine {
             log::warn!(
                 "video frames are read as linear; most cameras store gamma-encoded video (pass --linearisation \
                  srgb or a gamma) unless they record raw or linear luma"
@@ -284,24 +287,31 @@ fn expand_videos(
         .with_context(|| format!("camera {name}: reading its video"))?;
         if info.clipped_pixels > 0 {
             log::warn!(
-                "{}: {} pixel(s) outside the limited range 16–235 were clipped",
+                "{}: {} pixel(s) {} were clipped",
                 f.file_path.display(),
-                info.clipped_pixels
+                info.clipped_pixels,
+                if info.range_source == fluidnerf_io::video::RangeSource::Raw {
+                    "below the camera's black level"
+                } else {
+                    "outside the limited range 16–235"
+                }
             );
         }
+        let range = match info.range_source {
+            fluidnerf_io::video::RangeSource::Option => format!("{} range, as --video-range says", info.range),
+            fluidnerf_io::video::RangeSource::File => format!("{} range, as the file states", info.range),
+            fluidnerf_io::video::RangeSource::JpegDefault => format!("{} range, the JPEG default", info.range),
+            fluidnerf_io::video::RangeSource::VideoDefault => {
+                format!("{} range, the video default; the file states none", info.range)
+            }
+            fluidnerf_io::video::RangeSource::Raw => "raw sensor counts above the black level".to_owned(),
+        };
         log::info!(
-            "{}: {} of {} frame(s) decoded ({}, {} range, {})",
+            "{}: {} of {} frame(s) decoded ({}, {range})",
             f.file_path.display(),
             info.frames_kept,
             info.frames_in_file,
             info.decoder,
-            info.range,
-            match info.range_source {
-                fluidnerf_io::video::RangeSource::Option => "as --video-range says",
-                fluidnerf_io::video::RangeSource::File => "as the file states",
-                fluidnerf_io::video::RangeSource::JpegDefault => "the JPEG default",
-                fluidnerf_io::video::RangeSource::VideoDefault => "the video default; the file states none",
-            }
         );
         records.push(VideoRecord {
             camera: name,
@@ -493,8 +503,9 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
             [] if !not_files.is_empty() => {
                 unmatched.push(format!("{name} ({} is not a file)", not_files.join(", ")));
             }
-            [] => unmatched
-                .push(format!("{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov or folder {name}/)")),
+            [] => unmatched.push(format!(
+                "{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov/.cine or folder {name}/)"
+            )),
             several => bail!(
                 "camera {name} matches several images: {}",
                 several.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")

@@ -1,0 +1,250 @@
+//! Phantom cine recordings (`.cine`, Vision Research high-speed cameras), read without ffmpeg.
+//!
+//! A cine file is a `CINEFILEHEADER` (44 bytes, `"CI"` first), a `BITMAPINFOHEADER` (the
+//! frames' size and storage), the camera's `SETUP` (frame rate, bit depth, black and white
+//! levels), a table of 64-bit offsets, one per image, and the images, each after an
+//! annotation whose last four bytes give the image's size. Rows are stored bottom-up, as in a
+//! BMP, unless the height is negative. The offsets of the `SETUP` fields read here are those of
+//! the vendor's structure as pycine lays it out (packed, 1-byte aligned).
+//!
+//! **Values.** Frames are read as the sensor stored them: linear counts, minus the black level
+//! the `SETUP` states (clamped at 0, the pixels below it counted as clipped), as `f32`. No
+//! linearisation or range mapping applies (unlike 8-bit video), so 12-bit data keeps its 12
+//! bits.
+//!
+//! **Read:** grey frames of 8 or 16 bits per pixel, uncompressed. **Refused**, each with its
+//! reason: packed 10- and 12-bit frames (save the cine from PCC as 16-bit), colour sensors'
+//! Bayer mosaics and colour-interpolated frames (fluidnerf does not demosaic).
+//!
+//! **Times.** Frame `i` (from 0, the first image saved in the file) is at `i / FrameRate`
+//! seconds, plus the time offset.
+
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::Path;
+
+use fluidnerf_core::Image;
+
+use crate::video::{Decoder, RangeSource, VideoFrame, VideoInfo, VideoOptions, VideoRange};
+use crate::IoError;
+
+/// `CINEFILEHEADER`: size and the offsets of the fields read.
+const FILE_HEADER_LEN: usize = 44;
+const OFF_IMAGE_COUNT: usize = 20;
+const OFF_IMAGE_HEADER: usize = 24;
+const OFF_SETUP: usize = 28;
+const OFF_IMAGE_OFFSETS: usize = 32;
+/// `BITMAPINFOHEADER`: size and fields.
+const BITMAP_LEN: usize = 40;
+const BI_WIDTH: usize = 4;
+const BI_HEIGHT: usize = 8;
+const BI_BIT_COUNT: usize = 14;
+const BI_COMPRESSION: usize = 16;
+/// `SETUP`: the fields read, as offsets from its start.
+const SETUP_FRAME_RATE16: usize = 0;
+const SETUP_LENGTH: usize = 142;
+const SETUP_FRAME_RATE: usize = 768;
+const SETUP_CFA: usize = 808;
+const SETUP_REAL_BPP: usize = 896;
+const SETUP_BLACK_LEVEL: usize = 5732;
+
+/// Whether `head` (the file's first bytes) begins like a cine file.
+pub(crate) fn is_cine(head: &[u8]) -> bool {
+    head.len() >= 4 && &head[0..2] == b"CI" && usize::from(u16::from_le_bytes([head[2], head[3]])) >= FILE_HEADER_LEN
+}
+
+fn u16_at(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([b[at], b[at + 1]])
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn i32_at(b: &[u8], at: usize) -> i32 {
+    i32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+/// Reads the cine file `path`, passing each kept frame to `on_frame`; see the module's
+/// documentation for what is read and how.
+pub(crate) fn read_cine(
+    path: &Path,
+    opts: &VideoOptions,
+    on_frame: &mut dyn FnMut(VideoFrame) -> Result<(), IoError>,
+) -> Result<VideoInfo, IoError> {
+    let bad = |why: String| IoError::invalid(path, format!("malformed cine file: {why}"));
+    let io = |e| IoError::io(path, "cine file", e);
+    let file = File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    let mut file = BufReader::new(file);
+    let mut read_at = |at: u64, n: usize, what: &str| -> Result<Vec<u8>, IoError> {
+        if at.checked_add(n as u64).is_none_or(|end| end > len) {
+            return Err(bad(format!(
+                "the {what} ({n} bytes at byte {at}) runs past the end of the file at byte {len}"
+            )));
+        }
+        file.seek(SeekFrom::Start(at)).map_err(io)?;
+        let mut buf = vec![0; n];
+        file.read_exact(&mut buf).map_err(io)?;
+        Ok(buf)
+    };
+    let header = read_at(0, FILE_HEADER_LEN, "file header")?;
+    let count = u32_at(&header, OFF_IMAGE_COUNT) as usize;
+    if count == 0 {
+        return Err(bad("it holds no images (ImageCount 0)".into()));
+    }
+    let bitmap = read_at(u64::from(u32_at(&header, OFF_IMAGE_HEADER)), BITMAP_LEN, "image header")?;
+    let width = i32_at(&bitmap, BI_WIDTH);
+    let height = i32_at(&bitmap, BI_HEIGHT);
+    let bits = u16_at(&bitmap, BI_BIT_COUNT);
+    let compression = u32_at(&bitmap, BI_COMPRESSION);
+    let (w, h) = (width.unsigned_abs() as usize, height.unsigned_abs() as usize);
+    if width <= 0 || h == 0 || w.checked_mul(h).is_none_or(|n| n > 1 << 28) {
+        return Err(bad(format!("frames of {width}×{height} pixels")));
+    }
+    let setup_at = u64::from(u32_at(&header, OFF_SETUP));
+    let setup_head = read_at(setup_at, SETUP_LENGTH + 2, "camera setup")?;
+    let setup_len = usize::from(u16_at(&setup_head, SETUP_LENGTH));
+    if setup_len <= SETUP_REAL_BPP + 4 {
+        return Err(bad(format!(
+            "its camera setup is {setup_len} bytes long, too short to state the frame rate and bit depth (a cine \
+             of a Phantom software older than 2002?)"
+        )));
+    }
+    let setup = read_at(setup_at, setup_len.min(SETUP_BLACK_LEVEL + 4), "camera setup")?;
+    let cfa = u32_at(&setup, SETUP_CFA) & 0x00ff_ffff;
+    match (compression, bits) {
+        (0, 8 | 16) if cfa != 0 => {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "a colour sensor's raw frames (colour filter array code {cfa}): each is a Bayer mosaic, which \
+                     fluidnerf does not demosaic; record with a monochrome camera, or convert the frames to grey \
+                     images (one folder per camera) with the camera's software"
+                ),
+            ))
+        }
+        (0, 8 | 16) => {}
+        (0, 24 | 48) => {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "colour-interpolated frames ({bits} bits per pixel), which fluidnerf does not read: save the \
+                     cine as grey, or convert its frames to grey images"
+                ),
+            ))
+        }
+        (256 | 1024, _) => {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "packed {}-bit frames (compression {compression}), which fluidnerf does not unpack: save the cine \
+                     from the camera's software with 16 bits per pixel",
+                    if compression == 256 { 10 } else { 12 }
+                ),
+            ))
+        }
+        _ => return Err(bad(format!("{bits} bits per pixel with compression {compression}"))),
+    }
+    let rate = match u32_at(&setup, SETUP_FRAME_RATE) {
+        0 => u32::from(u16_at(&setup, SETUP_FRAME_RATE16)),
+        r => r,
+    };
+    if rate == 0 {
+        return Err(bad("its camera setup states a frame rate of 0 frames per second".into()));
+    }
+    let real_bpp = u32_at(&setup, SETUP_REAL_BPP);
+    let black = if setup.len() >= SETUP_BLACK_LEVEL + 4 { u32_at(&setup, SETUP_BLACK_LEVEL) } else { 0 };
+    let full_scale = if bits == 8 { 255 } else { 65535 };
+    if black >= full_scale {
+        return Err(bad(format!("its black level {black} is at or above the {bits}-bit full scale")));
+    }
+    if opts.range != VideoRange::Auto {
+        log::warn!(
+            "{}: --video-range has no effect on a cine file, whose frames are raw sensor counts",
+            path.display()
+        );
+    }
+    if opts.linearisation != crate::image::Linearisation::Linear {
+        log::warn!(
+            "{}: the linearisation has no effect on a cine file, whose frames are linear sensor counts",
+            path.display()
+        );
+    }
+    let offsets_at = u64::from(u32_at(&header, OFF_IMAGE_OFFSETS));
+    let offsets: Vec<u64> = read_at(offsets_at, 8 * count, "image offset table")?
+        .chunks_exact(8)
+        .map(|c| u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+        .collect();
+    let bytes_per_pixel = usize::from(bits / 8);
+    let row_bytes = w * bytes_per_pixel;
+    let mut clipped = 0u64;
+    let mut kept = 0;
+    for (i, &offset) in offsets.iter().enumerate() {
+        if opts.done(i) {
+            break;
+        }
+        if !opts.keeps(i) {
+            continue;
+        }
+        let annotation = read_at(offset, 4, &format!("annotation of image {i}"))?;
+        let annotation_len = u64::from(u32_at(&annotation, 0));
+        if annotation_len < 8 {
+            return Err(bad(format!("image {i}'s annotation claims {annotation_len} bytes, fewer than its own 8")));
+        }
+        let size_field = read_at(offset + annotation_len - 4, 4, &format!("size of image {i}"))?;
+        let size = u32_at(&size_field, 0) as usize;
+        // Rows are packed, or padded to four bytes as in a BMP.
+        let padded = row_bytes.div_ceil(4) * 4;
+        let stride = if size == row_bytes * h {
+            row_bytes
+        } else if size == padded * h {
+            padded
+        } else {
+            return Err(bad(format!(
+                "image {i} holds {size} bytes; {w}×{h} pixels of {bits} bits take {} (or {} with rows padded to \
+                 four bytes)",
+                row_bytes * h,
+                padded * h
+            )));
+        };
+        let data = read_at(offset + annotation_len, size, &format!("image {i}"))?;
+        let mut image = Image::zeros(w, h);
+        for (r, row) in data.chunks_exact(stride).enumerate() {
+            // Bottom-up unless the height is negative.
+            let y = if height > 0 { h - 1 - r } else { r };
+            let out = &mut image.data[y * w..(y + 1) * w];
+            let mut put = |o: &mut f32, v: u32| {
+                if v < black {
+                    clipped += 1;
+                }
+                *o = v.saturating_sub(black) as f32;
+            };
+            if bits == 8 {
+                out.iter_mut().zip(&row[..row_bytes]).for_each(|(o, &v)| put(o, u32::from(v)));
+            } else {
+                out.iter_mut()
+                    .zip(row[..row_bytes].chunks_exact(2))
+                    .for_each(|(o, v)| put(o, u32::from(u16::from_le_bytes([v[0], v[1]]))));
+            }
+        }
+        let time_s = i as f64 / f64::from(rate) + opts.time_offset_s;
+        on_frame(VideoFrame { index: i, time_s, image })?;
+        kept += 1;
+    }
+    log::debug!(
+        "{}: cine of {w}×{h} px, {bits} bits per pixel ({real_bpp} significant), black level {black}, {rate} frames/s",
+        path.display()
+    );
+    Ok(VideoInfo {
+        decoder: Decoder::Cine,
+        width: w as u32,
+        height: h as u32,
+        frame_rate: Some(f64::from(rate)),
+        frames_in_file: count,
+        frames_kept: kept,
+        range: VideoRange::Full,
+        range_source: RangeSource::Raw,
+        clipped_pixels: clipped,
+    })
+}
