@@ -231,6 +231,31 @@ fn avi_files_never_panic() {
 }
 
 #[test]
+fn cine_files_never_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let seed = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/video/ramp_8bit.cine"))
+        .expect("fixture");
+    // The headers and the offset table: where a mutation changes what is read, and where.
+    let mut head = seed[..84].to_vec();
+    head.extend_from_slice(&seed[84 + 12432..84 + 12432 + 32]);
+    let p = dir.path().join("f.cine");
+    fuzz("cine", std::slice::from_ref(&seed), 300, |bytes| {
+        write_and(&p, bytes);
+        let _ = fluidnerf_io::video::read_video(&p, &Default::default());
+    });
+    fuzz("cine-header", &[head], 300, |bytes| {
+        // The mutated headers over the file's own, the mutated table over its table.
+        let mut file = seed.clone();
+        let table = 84 + 12432;
+        for (k, &b) in bytes.iter().enumerate().take(84 + 32) {
+            file[if k < 84 { k } else { table + k - 84 }] = b;
+        }
+        write_and(&p, &file);
+        let _ = fluidnerf_io::video::read_video(&p, &Default::default());
+    });
+}
+
+#[test]
 fn colmap_models_never_panic() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
