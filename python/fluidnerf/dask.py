@@ -37,6 +37,7 @@ from ._api import (
     Scene,
     _as_scene,
     _check_callback,
+    _integer,
     _SavedScene,
     build_config,
     open_run,
@@ -50,7 +51,16 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
     finished before) and returns its outcome. ``_after`` are the results of the tasks it must
     wait for (the window it warm-starts from); only their completion matters."""
     scene = Scene.load(scene_root)
-    outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, window, window + 1, None))
+    k = _integer(window, "window")
+    plan = json.loads(_ext.window_plan(scene, config_json))["windows"]
+    if not 0 <= k < len(plan):
+        # Not left to the extension, whose unsigned window index made a negative one a bare
+        # OverflowError naming no argument.
+        raise FluidNerfError(
+            f"window: {k} is not in the plan: the run has {len(plan)} window(s), 0 to {len(plan) - 1} "
+            f"(frames {plan})"
+        )
+    outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, k, k + 1, None))
     return outcomes[0]
 
 

@@ -157,6 +157,23 @@ def test_a_plan_of_negative_or_fractional_counts_is_refused_naming_the_argument(
         fluidnerf.plan_windows(5.0, 2, 0)
 
 
+def test_a_window_index_outside_the_plan_is_refused_naming_the_argument_and_the_range(tr_scene, tmp_path):
+    """train_window(window=-1) raised pyo3's bare "OverflowError: can't convert negative int to
+    unsigned", and window=True trained window 1."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    out = tmp_path / "run"
+    for window in (-1, 4, 2**64 - 1, -(2**70)):
+        with pytest.raises(
+            fluidnerf.FluidNerfError,
+            match=rf"window: {window} is not in the plan: the run has 4 window\(s\), 0 to 3",
+        ):
+            fluidnerf.dask.train_window(str(tr_scene.root), cfg, str(out), window)
+    for window in (True, 1.0):
+        with pytest.raises(TypeError, match=rf"window: expected an integer, got {window}"):
+            fluidnerf.dask.train_window(str(tr_scene.root), cfg, str(out), window)
+    assert not out.exists()
+
+
 def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(
     tr_scene, static_scene, serial, tmp_path
 ):
