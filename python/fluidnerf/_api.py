@@ -645,6 +645,10 @@ def forward_project(
     return _ext.forward_project(_as_scene(scene), vol, _projector(projector))
 
 
+#: The most voxels a volume of the classical projectors holds (they index voxels in 32 bits).
+_MAX_VOXELS = 2**32 - 1
+
+
 def back_project(
     scene: Scene | PathLike,
     images: np.ndarray | list[np.ndarray],
@@ -659,6 +663,12 @@ def back_project(
     if isinstance(shape, (str, bytes)) or not hasattr(shape, "__len__") or len(shape) != 3:
         raise FluidNerfError(f"shape: expected the volume's three sides (nz, ny, nx), got {shape!r}")
     nz, ny, nx = (_positive_int(n, f"shape[{i}]") for i, n in enumerate(shape))
+    if nz * ny * nx > _MAX_VOXELS:
+        # Checked here: a side beyond 64 bits is no count the extension can take at all.
+        raise FluidNerfError(
+            f"shape: {(nz, ny, nx)} makes {nz * ny * nx} voxels, more than the {_MAX_VOXELS} "
+            "(2^32 - 1) the projectors hold"
+        )
     return _ext.back_project(_as_scene(scene), imgs, (nz, ny, nx), _projector(projector))
 
 

@@ -248,6 +248,22 @@ def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(sce
     assert fluidnerf.back_project(s, y, np.array([N, N, N])).shape == (N, N, N)
 
 
+def test_back_projection_refuses_a_shape_of_more_voxels_than_the_projectors_hold(scene):
+    """Sides of 2^40 made the footprint projector panic ("internal error (please report):
+    chunk_size must not be zero"), and a side of 2^64 raised a bare OverflowError."""
+    s, *_ = scene
+    y = np.ones((4, 16, 16), np.float32)
+    for shape, count in [((2**40,) * 3, 2**120), ((2**64, 1, 1), 2**64), ((2**16, 2**16, 1), 2**32)]:
+        with pytest.raises(
+            fluidnerf.FluidNerfError,
+            match=rf"shape: .* makes {count} voxels, more than the 4294967295 \(2\^32 - 1\) the projectors hold",
+        ):
+            fluidnerf.back_project(s, y, shape)
+    # The extension refuses it as well, naming the argument.
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"shape: .* more voxels than the 4294967295"):
+        fluidnerf._fluidnerf.back_project(s, list(y), (2**40,) * 3)
+
+
 def test_arrays_that_are_no_real_numbers_are_refused_naming_the_argument(scene):
     """A complex estimate lost its imaginary part (NRMSE 1.0 with only NumPy's warning), and a
     string or a ragged list raised NumPy's ValueError, a scalar for the images Python's "'float'

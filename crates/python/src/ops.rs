@@ -12,6 +12,9 @@ use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray3, PyReadonlyArra
 use pyo3::prelude::*;
 
 use crate::scene::{images_to_py, PyScene};
+
+/// The most voxels a volume of the classical projectors holds (they index voxels in 32 bits).
+pub const MAX_VOXELS: u64 = u32::MAX as u64;
 use crate::{err, guard, volume_from_py, Callback};
 
 /// The projector settings from JSON text (`fluidnerf_classical::ProjectorConfig`; unknown keys
@@ -111,6 +114,14 @@ pub fn back_project<'py>(
     let (nz, ny, nx) = shape;
     if nx == 0 || ny == 0 || nz == 0 {
         return Err(err(format!("shape: every side must be positive, got {shape:?}")));
+    }
+    // The projectors index voxels in 32 bits: a larger grid, or one whose count overflows,
+    // made the footprint projector panic ("chunk_size must not be zero").
+    let count = [nx, ny, nz].iter().try_fold(1u64, |acc, &n| acc.checked_mul(n as u64));
+    if count.is_none_or(|c| c > MAX_VOXELS) {
+        return Err(err(format!(
+            "shape: {shape:?} makes more voxels than the {MAX_VOXELS} (2^32 - 1) the projectors hold"
+        )));
     }
     let scale = scene.inner.intensity_scale;
     let aabb = scene.inner.aabb;
