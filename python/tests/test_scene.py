@@ -73,6 +73,30 @@ def test_a_scene_from_arrays_round_trips_through_a_folder(tmp_path):
     assert sorted(p.name for p in run.iterdir()) == ["config.json"]
 
 
+def test_a_scene_is_saved_over_files_of_a_folder_only_when_asked(tmp_path):
+    """Scene.save into a folder holding a user's images/frame_0000.tiff replaced that file
+    with the scene's first image, without force=True and without a word."""
+    K, poses = ring(3)
+    scene = fluidnerf.scene_from_arrays(
+        K, poses, np.ones((3, 16, 16), np.float32), np.array([[-10.0, -10, -10], [10, 10, 10]])
+    )
+    folder = tmp_path / "mine"
+    (folder / "images").mkdir(parents=True)
+    (folder / "images" / "frame_0000.tiff").write_text("the user's own image")
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="mine is not empty; save the scene into a new or empty"
+    ):
+        scene.save(folder)
+    assert (folder / "images" / "frame_0000.tiff").read_text() == "the user's own image"
+    assert sorted(p.name for p in folder.rglob("*")) == ["frame_0000.tiff", "images"]
+    assert scene.root is None
+    scene.save(folder, force=True)
+    assert fluidnerf.load_scene(folder).root == folder.absolute()
+    # An empty folder, or a new one, needs no force.
+    (tmp_path / "empty").mkdir()
+    scene.save(tmp_path / "empty")
+
+
 def test_bad_arrays_are_refused_naming_the_array_and_frame():
     K, poses = ring(3)
     images = np.ones((3, 16, 16), np.float32)

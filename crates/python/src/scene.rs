@@ -288,7 +288,7 @@ impl PyScene {
     /// Writes the scene into `folder`: `transforms.json` (with the flow axis), every image as a
     /// float32 TIFF under `images/` as it is reconstructed from (linear, background subtracted),
     /// the frames' masks under `masks/` and the ground-truth volumes under `truth/`. Afterwards
-    /// the scene lives there.
+    /// the scene lives there. A folder that is not empty is refused without `force`.
     #[pyo3(signature = (folder, force=false))]
     fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
         guard(|| {
@@ -299,6 +299,14 @@ impl PyScene {
             if file.exists() && !force {
                 return Err(err(format!(
                     "{} already holds a scene; pass force=True to overwrite it",
+                    folder.display()
+                )));
+            }
+            // As `synth` refuses: the images, masks and truth written have fixed names
+            // (images/frame_0000.tiff, ...), which would replace a user's files of those names.
+            if !force && std::fs::read_dir(&folder).is_ok_and(|mut d| d.next().is_some()) {
+                return Err(err(format!(
+                    "{} is not empty; save the scene into a new or empty folder, or pass force=True",
                     folder.display()
                 )));
             }
