@@ -680,6 +680,7 @@ def render(
     step in world units (None: the box's smallest side / 256; at most 2^20 steps along the
     box's diagonal), ``supersample`` rays per pixel along each axis (1 to 64)."""
     vol = _array(volume, np.float32, "volume", "(nz, ny, nx)")
+    step = None if step is None else _real(step, "step")
     return _ext.render(_as_scene(scene), vol, step, _positive_int(supersample, "supersample"))
 
 
@@ -694,13 +695,19 @@ def _integer(value: Any, name: str) -> int:
 
 
 def _real(value: Any, name: str) -> float:
-    """``value`` as a float; a string or another object is refused naming ``name``."""
+    """``value`` as a float; a string or another object is refused naming ``name``, and an
+    integer beyond the range of floats (Python's bare OverflowError) too."""
     if isinstance(value, (str, bytes)):
         raise TypeError(f"{name}: expected a number, got {value!r}")
     try:
         return float(value)
     except (TypeError, ValueError):
         raise TypeError(f"{name}: expected a number, got {value!r}") from None
+    except OverflowError:
+        digits = len(str(abs(int(value))))
+        raise FluidNerfError(
+            f"{name}: an integer of {digits} digits is beyond the range of floating-point numbers"
+        ) from None
 
 
 def _positive_int(value: Any, name: str) -> int:
@@ -717,6 +724,10 @@ def _pair(estimate: Any, truth: Any) -> tuple[np.ndarray, np.ndarray]:
     return _numbers(estimate, np.float32, "estimate"), _numbers(truth, np.float32, "truth")
 
 
+def _data_range(data_range: Any) -> float | None:
+    return None if data_range is None else _real(data_range, "data_range")
+
+
 def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
     """Normalised RMS error: ``‖estimate − truth‖₂ / ‖truth‖₂`` (dissertation Eq. 6.18)."""
     return _ext.nrmse(*_pair(estimate, truth))
@@ -724,7 +735,7 @@ def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 def psnr(estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None) -> float:
     """PSNR in dB with peak ``data_range`` (None: the truth's max − min)."""
-    return _ext.psnr(*_pair(estimate, truth), data_range)
+    return _ext.psnr(*_pair(estimate, truth), _data_range(data_range))
 
 
 def ssim(
@@ -732,7 +743,7 @@ def ssim(
 ) -> float:
     """SSIM of 2D or 3D arrays: ``window`` ``"uniform"`` (7 wide, as skimage), ``"gaussian"``
     (σ 1.5) or ``"global"`` (one window over everything)."""
-    return _ext.ssim(*_pair(estimate, truth), data_range, window)
+    return _ext.ssim(*_pair(estimate, truth), _data_range(data_range), window)
 
 
 def synth(

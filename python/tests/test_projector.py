@@ -197,6 +197,33 @@ def test_render_refuses_steps_and_supersampling_it_would_never_finish(scene):
     assert fluidnerf.render(s, vol, step=0.5, supersample=np.int64(2)).shape == (4, 16, 16)
 
 
+def test_an_integer_beyond_floats_is_refused_naming_the_argument(scene, tmp_path):
+    """An integer too large for a float (10**400) raised Python's bare "OverflowError: int too
+    large to convert to float" naming no argument, and a string step or data range pyo3's
+    "argument 'step': must be real number, not str"."""
+    s, K, poses, *_ = scene
+    vol = np.ones((4, 4, 4), np.float32)
+    huge = 10**400
+    beyond = "an integer of 401 digits is beyond the range of floating-point numbers"
+    with pytest.raises(fluidnerf.FluidNerfError, match=f"step: {beyond}"):
+        fluidnerf.render(s, vol, step=huge)
+    with pytest.raises(TypeError, match="step: expected a number, got '1'"):
+        fluidnerf.render(s, vol, step="1")
+    for metric in (fluidnerf.psnr, fluidnerf.ssim):
+        with pytest.raises(fluidnerf.FluidNerfError, match=f"data_range: {beyond}"):
+            metric(blob_volume(), blob_volume(), huge)
+        with pytest.raises(TypeError, match="data_range: expected a number, got '1'"):
+            metric(blob_volume(), blob_volume(), "1")
+    with pytest.raises(fluidnerf.FluidNerfError, match=f"intensity_scale: {beyond}"):
+        fluidnerf.scene_from_arrays(
+            K, poses, np.ones((len(K), 16, 16), np.float32), BOX, intensity_scale=huge
+        )
+    np.save(tmp_path / "volume.npy", vol)
+    run = fluidnerf.open_run(tmp_path, aabb=BOX)
+    with pytest.raises(fluidnerf.FluidNerfError, match=f"time: {beyond}"):
+        run.field(np.zeros((1, 3)), time=huge)
+
+
 def test_back_projection_refuses_images_that_are_not_finite(scene):
     """A NaN or infinite pixel gave a volume of NaN without a word."""
     s, *_ = scene
