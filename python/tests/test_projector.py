@@ -224,6 +224,20 @@ def test_an_integer_beyond_floats_is_refused_naming_the_argument(scene, tmp_path
         run.field(np.zeros((1, 3)), time=huge)
 
 
+def test_a_data_range_wider_than_float32_values_is_refused():
+    """data_range=1e300 made the PSNR infinite and the SSIM NaN without a word: its square
+    overflowed. A range no two float32 values differ by is refused; the widest one still
+    scores."""
+    t = blob_volume()
+    widest = 2.0 * float(np.finfo(np.float32).max)
+    for metric in (fluidnerf.psnr, fluidnerf.ssim, lambda a, b, r: fluidnerf.ssim(a, b, r, "global")):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match="data_range: .* is more than any two float32 values differ by"
+        ):
+            metric(t, t * 0.9, 1e300)
+        assert np.isfinite(metric(t, t * 0.9, widest))
+
+
 def test_back_projection_refuses_images_that_are_not_finite(scene):
     """A NaN or infinite pixel gave a volume of NaN without a word."""
     s, *_ = scene

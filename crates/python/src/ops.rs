@@ -208,6 +208,25 @@ fn pair(
     Ok((a, b, x.shape().to_vec()))
 }
 
+/// The peak of PSNR and SSIM: `data_range`, else the truth's max − min. A range beyond the
+/// largest difference of two float32 values is refused: no two values compared differ by it,
+/// and its square overflowed the metrics' constants (PSNR infinite, SSIM NaN, unannounced).
+fn metric_range(data_range: Option<f64>, truth: &[f32]) -> PyResult<f64> {
+    let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(truth));
+    if !(range > 0.0 && range.is_finite()) {
+        return Err(err(format!("data_range: must be positive, got {}", num(range))));
+    }
+    let widest = 2.0 * f64::from(f32::MAX);
+    if range > widest {
+        return Err(err(format!(
+            "data_range: {} is more than any two float32 values differ by ({widest:e}); give the range of \
+             the values compared",
+            num(range)
+        )));
+    }
+    Ok(range)
+}
+
 /// NRMSE of `estimate` against `truth` (dissertation Eq. 6.18: RMS error over the truth's RMS).
 #[pyfunction]
 pub fn nrmse(estimate: PyReadonlyArrayDyn<'_, f32>, truth: PyReadonlyArrayDyn<'_, f32>) -> PyResult<f64> {
@@ -227,10 +246,7 @@ pub fn psnr(
     data_range: Option<f64>,
 ) -> PyResult<f64> {
     let (a, b, _) = pair(&estimate, &truth)?;
-    let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(&b));
-    if !(range > 0.0 && range.is_finite()) {
-        return Err(err(format!("data_range: must be positive, got {}", num(range))));
-    }
+    let range = metric_range(data_range, &b)?;
     guard(|| Ok(fluidnerf_metrics::psnr(&a, &b, range)))
 }
 
@@ -246,10 +262,7 @@ pub fn ssim(
     window: &str,
 ) -> PyResult<f64> {
     let (a, b, shape) = pair(&estimate, &truth)?;
-    let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(&b));
-    if !(range > 0.0 && range.is_finite()) {
-        return Err(err(format!("data_range: must be positive, got {}", num(range))));
-    }
+    let range = metric_range(data_range, &b)?;
     let params = match window {
         "global" => return guard(|| Ok(fluidnerf_metrics::ssim_global(&a, &b, range))),
         "uniform" => fluidnerf_metrics::SsimParams { data_range: Some(range), ..Default::default() },
