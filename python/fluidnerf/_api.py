@@ -470,7 +470,8 @@ class Run:
 
 def open_run(folder: PathLike, aabb: np.ndarray | None = None) -> Run:
     """Reads any finished run folder (voxel, static neural or time-resolved). ``aabb``
-    ``(2, 3)`` places a bare ``volume.npy`` that has no report."""
+    ``(2, 3)`` places a bare ``volume.npy`` that has no report; a run that records its box
+    (its report, a field's ``model.json``) is refused a box other than its own."""
     box = None if aabb is None else _array(aabb, np.float64, "aabb", "(2, 3)")
     return Run(_ext.open_run(os.fspath(folder), box))
 

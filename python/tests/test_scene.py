@@ -203,6 +203,23 @@ def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shap
         fluidnerf.open_run(tmp_path, aabb=aabb.ravel())
 
 
+def test_a_run_that_records_its_box_is_not_placed_in_another(static_scene, tmp_path):
+    """open_run(folder, aabb=...) of a run with a report put it in the run's own box and
+    ignored the one given, without a word: the box given was never the results'."""
+    run = fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
+    other = run.aabb / 2
+    with pytest.raises(
+        fluidnerf.FluidNerfError,
+        match=r"aabb: .*run records the box its results fill, \[-20.0, .* not the one given",
+    ):
+        fluidnerf.open_run(run.path, aabb=other)
+    np.testing.assert_array_equal(fluidnerf.open_run(run.path, aabb=run.aabb).aabb, run.aabb)
+    # A bare volume.npy is placed by the box given.
+    (tmp_path / "bare").mkdir()
+    np.save(tmp_path / "bare" / "volume.npy", run.volume)
+    np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "bare", aabb=other).aabb, other)
+
+
 def test_numbers_of_the_wrong_type_are_refused_naming_the_argument(tmp_path):
     """intensity_scale="x" raised float()'s "could not convert string to float: 'x'", which
     named no argument, and synth(seed=3.7) ran with seed 3."""

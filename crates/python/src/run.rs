@@ -256,6 +256,20 @@ pub fn open_run(folder: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyR
     let hint = aabb.map(|a| crate::aabb_arg(&a)).transpose()?;
     guard(|| {
         let run = LoadedRun::open(&folder, hint).map_err(|e| err(e.to_string()))?;
+        // A run that records its box (its report, or a field's model.json) fills that box, not
+        // the one given: placing it there was left unsaid.
+        let own = run.report.is_some() || run.kind == RunKind::Field;
+        if let Some(given) = hint.filter(|&h| own && h != run.aabb) {
+            return Err(err(format!(
+                "aabb: {} records the box its results fill, {:?}..{:?}, not the one given ({:?}..{:?}); leave \
+                 aabb out (it places only a bare volume.npy)",
+                folder.display(),
+                run.aabb.min.to_array(),
+                run.aabb.max.to_array(),
+                given.min.to_array(),
+                given.max.to_array()
+            )));
+        }
         Ok(PyRun { run, field: None })
     })
 }
