@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 import signal
 import threading
 import time
@@ -172,6 +173,26 @@ def test_a_window_index_outside_the_plan_is_refused_naming_the_argument_and_the_
         with pytest.raises(TypeError, match=rf"window: expected an integer, got {window}"):
             fluidnerf.dask.train_window(str(tr_scene.root), cfg, str(out), window)
     assert not out.exists()
+
+
+def test_windows_are_trained_only_on_the_scene_their_configuration_names(tr_scene, static_scene, tmp_path):
+    """train_window(scene_root, config) trained on scene_root while the run's config.json
+    recorded the configuration's scene: windows of two scenes could be stitched into one run."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    out = tmp_path / "run"
+    named = "scene: the configuration names the scene " + re.escape(
+        f"{tr_scene.root}/transforms.json, not the one"
+    )
+    with pytest.raises(fluidnerf.FluidNerfError, match=named):
+        fluidnerf.dask.train_window(str(static_scene.root), cfg, str(out), 0)
+    assert not out.exists()
+    with pytest.raises(fluidnerf.FluidNerfError, match=named):
+        fluidnerf.dask.finish(str(static_scene.root), cfg, str(out))
+    assert not out.exists()
+    # The scene's file, or its folder by another spelling, is the same scene.
+    same = json.loads(cfg) | {"scene": str(tr_scene.root / "." / "transforms.json")}
+    outcome = fluidnerf.dask.train_window(str(tr_scene.root), json.dumps(same), str(out), 0)
+    assert outcome["index"] == 0 and outcome["status"] == "finished"
 
 
 def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(

@@ -184,6 +184,26 @@ pub fn window_plan(scene: &PyScene, config: &str) -> PyResult<String> {
     })
 }
 
+/// Refuses to train or finish windows of `scene` with a configuration that names another
+/// scene: the run's config.json would name a scene its windows were not trained on, and
+/// windows trained on either could be stitched into one run.
+fn check_scene_named(config: &RunConfig, scene: &fluidnerf_core::Scene) -> PyResult<()> {
+    let file = |p: &std::path::Path| {
+        let f = fluidnerf_io::scene::scene_file_path(p);
+        f.canonicalize().unwrap_or_else(|_| std::path::absolute(&f).unwrap_or(f))
+    };
+    let (named, given) = (file(&config.scene), file(&scene.root));
+    if named != given {
+        return Err(err(format!(
+            "scene: the configuration names the scene {}, not the one given ({}); give the scene it names, or \
+             a configuration made for this one",
+            named.display(),
+            given.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Trains windows `start..end` of a time-resolved run into `out`
 /// (`fluidnerf_pipeline::reconstruct_windows`); returns the outcomes as JSON text.
 #[pyfunction]
@@ -199,6 +219,7 @@ pub fn reconstruct_windows(
 ) -> PyResult<String> {
     let config = guard(|| parse_config(config))?;
     let scene = scene.require_saved("reconstruct_windows")?.clone();
+    check_scene_named(&config, &scene)?;
     let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
@@ -227,6 +248,7 @@ pub fn finish_windows(
 ) -> PyResult<String> {
     let config = guard(|| parse_config(config))?;
     let scene = scene.require_saved("finish_windows")?.clone();
+    check_scene_named(&config, &scene)?;
     let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
