@@ -337,6 +337,7 @@ def plan_windows(n_frames: int, window: int, overlap: int) -> list[tuple[int, in
     for name, value in counts.items():
         if _integer(value, name) < 0:
             raise FluidNerfError(f"{name}: must be at least 0, got {value}")
+        _within_u64(value, name)
     return _ext.plan_windows(n_frames, window, overlap)
 
 
@@ -711,12 +712,21 @@ def _real(value: Any, name: str) -> float:
         ) from None
 
 
+def _within_u64(n: int, name: str) -> int:
+    """``n``, a count the extension takes as a 64-bit unsigned integer; a larger one raised
+    pyo3's bare "OverflowError: int too big to convert", naming no argument."""
+    if n > 2**64 - 1:
+        raise FluidNerfError(f"{name}: {n} is more than the largest count, 2^64 - 1")
+    return n
+
+
 def _positive_int(value: Any, name: str) -> int:
-    """``value`` as an int of at least 1; a float (even 2.0) or a bool is refused, not rounded."""
+    """``value`` as an int of at least 1 that fits in 64 bits; a float (even 2.0) or a bool is
+    refused, not rounded."""
     n = _integer(value, name)
     if n < 1:
         raise FluidNerfError(f"{name}: must be at least 1, got {n}")
-    return n
+    return _within_u64(n, name)
 
 
 def _pair(estimate: Any, truth: Any) -> tuple[np.ndarray, np.ndarray]:

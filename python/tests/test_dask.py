@@ -158,6 +158,17 @@ def test_a_plan_of_negative_or_fractional_counts_is_refused_naming_the_argument(
         fluidnerf.plan_windows(5.0, 2, 0)
 
 
+def test_a_plan_of_counts_beyond_64_bits_is_refused_naming_the_argument():
+    """plan_windows(2**64, 2, 0) raised pyo3's bare "OverflowError: int too big to convert"."""
+    for args, name in [((2**64, 2, 0), "n_frames"), ((5, 2**64, 0), "window"), ((5, 2, 2**70), "overlap")]:
+        value = max(args)
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=rf"{name}: {value} is more than the largest count, 2\^64 - 1"
+        ):
+            fluidnerf.plan_windows(*args)
+    assert fluidnerf.plan_windows(5, 2**64 - 1, 0) == [(0, 5)]
+
+
 def test_a_window_index_outside_the_plan_is_refused_naming_the_argument_and_the_range(tr_scene, tmp_path):
     """train_window(window=-1) raised pyo3's bare "OverflowError: can't convert negative int to
     unsigned", and window=True trained window 1."""
