@@ -38,8 +38,8 @@ Callback = Callable[[dict], Optional[bool]]
 
 def _plain(value: Any, what: str, key: str = "") -> Any:
     """Settings ``value`` in JSON's types: NumPy numbers and arrays become numbers and lists,
-    paths strings. A NaN or an infinity (JSON has neither) or any other object is refused,
-    naming ``what`` and the key."""
+    paths strings. A NaN or an infinity (JSON has neither), an integer beyond 64 bits or any
+    other object is refused, naming ``what`` and the key."""
     at = f"{what}: at `{key}`" if key else what
     if isinstance(value, dict):
         return {k: _plain(v, what, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
@@ -53,6 +53,10 @@ def _plain(value: Any, what: str, key: str = "") -> Any:
         return os.fspath(value)
     if isinstance(value, float) and not math.isfinite(value):
         raise FluidNerfError(f"{at}: {value} is not a finite number")
+    if isinstance(value, int) and not isinstance(value, bool) and not -(2**63) <= value <= 2**64 - 1:
+        # JSON would carry it, but the library reads such an integer as a float, and its
+        # refusal spoke of "floating point 1.8446744073709552e+19" for the integer given.
+        raise FluidNerfError(f"{at}: {value} is beyond the 64-bit integers settings hold")
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     raise TypeError(f"{at}: expected a number, string, list or dict, got {type(value).__name__} {value!r}")

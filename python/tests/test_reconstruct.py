@@ -180,6 +180,24 @@ def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene
     fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, overwrite="force")
 
 
+def test_an_integer_setting_beyond_64_bits_is_refused_as_the_integer_given(static_scene, tmp_path):
+    """seed=2**64 was refused as "invalid type: floating point `1.8446744073709552e+19`,
+    expected u64", an error about a float the caller never gave."""
+    beyond = "is beyond the 64-bit integers settings hold"
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=f"configuration: at `seed`: 18446744073709551616 {beyond}"
+    ):
+        fluidnerf.build_config(static_scene, "asart", seed=2**64)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=rf"configuration: at `stopping.max_iterations`: -{2**63 + 1} {beyond}"
+    ):
+        fluidnerf.build_config(static_scene, "asart", stopping={"max_iterations": -(2**63) - 1})
+    with pytest.raises(fluidnerf.FluidNerfError, match=f"synth settings: at `seed`: {2**70} {beyond}"):
+        fluidnerf.synth(tmp_path / "s", "demo", seed=2**70)
+    assert not (tmp_path / "s").exists()
+    assert fluidnerf.build_config(static_scene, "asart", seed=2**64 - 1)["seed"] == 2**64 - 1
+
+
 def test_settings_given_as_numpy_numbers_or_not_finite_are_read_or_refused_by_key(static_scene, tmp_path):
     """NumPy numbers and arrays in settings raised "TypeError: Object of type int64 is not JSON
     serializable", and a NaN or an infinity "configuration: expected value at line 1 column
