@@ -139,9 +139,17 @@ class Camera:
     size: tuple[int, int]
 
 
+def _path(value: Any, name: str, expected: str = "a path (a string or os.PathLike)") -> str:
+    """``value`` (a string or path) as a string; anything else is refused naming ``name``
+    (``os.fspath``'s own message names no argument)."""
+    if not isinstance(value, (str, bytes, os.PathLike)):
+        raise TypeError(f"{name}: expected {expected}, got {type(value).__name__} {value!r}")
+    return os.fsdecode(os.fspath(value))
+
+
 def load_scene(folder: PathLike) -> Scene:
     """Reads and validates the scene in ``folder`` (a folder with ``transforms.json``, or the file)."""
-    return Scene.load(os.fspath(folder))
+    return Scene.load(_path(folder, "folder"))
 
 
 def _flags(value: Any, name: str) -> list[bool]:
@@ -211,7 +219,7 @@ def read_transforms(path: PathLike, aabb: np.ndarray | None = None) -> Scene:
     run's ``scene/``, as one built from arrays); it is refused for a file with ground truth,
     which fills the file's box."""
     box = None if aabb is None else _array(aabb, np.float64, "aabb", "(2, 3)")
-    return _ext.read_transforms(os.fspath(path), box)
+    return _ext.read_transforms(_path(path, "path"), box)
 
 
 def _cameras(raw: list) -> list[Camera]:
@@ -221,17 +229,19 @@ def _cameras(raw: list) -> list[Camera]:
 def read_opencv(path: PathLike) -> list[Camera]:
     """The cameras of an OpenCV calibration (``cv::FileStorage`` YAML/XML/JSON file, a
     stereo pair's files, or a folder of them), as ``fluidnerf import --opencv`` reads it."""
-    return _cameras(_ext.read_opencv(os.fspath(path)))
+    return _cameras(_ext.read_opencv(_path(path, "path")))
 
 
 def read_colmap(folder: PathLike) -> list[Camera]:
     """The images of a COLMAP model (text or binary) as cameras named by image file, with
     COLMAP's pixel centres converted."""
-    return _cameras(_ext.read_colmap(os.fspath(folder)))
+    return _cameras(_ext.read_colmap(_path(folder, "folder")))
 
 
 def _as_scene(scene: Scene | PathLike) -> Scene:
-    return scene if isinstance(scene, Scene) else load_scene(scene)
+    if isinstance(scene, Scene):
+        return scene
+    return Scene.load(_path(scene, "scene", "a Scene or the path of a scene folder"))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -449,7 +459,7 @@ class Run:
         """Copies the run folder to ``folder`` (which must not exist, nor lie inside the run's
         folder) and returns that copy. A run's own scene (one built from arrays, saved in its
         ``scene/``) goes with it, and the copy's settings name the copy's."""
-        dest = Path(os.fspath(folder))
+        dest = Path(_path(folder, "folder"))
         if dest.exists():
             raise FluidNerfError(f"{dest}: already exists; choose a new folder")
         if self.path.resolve() in dest.resolve().parents:
@@ -478,7 +488,7 @@ def open_run(folder: PathLike, aabb: np.ndarray | None = None) -> Run:
     ``(2, 3)`` places a bare ``volume.npy`` that has no report; a run that records its box
     (its report, a field's ``model.json``) is refused a box other than its own."""
     box = None if aabb is None else _array(aabb, np.float64, "aabb", "(2, 3)")
-    return Run(_ext.open_run(os.fspath(folder), box))
+    return Run(_ext.open_run(_path(folder, "folder"), box))
 
 
 def _check_callback(callback: Any) -> None:
@@ -598,7 +608,7 @@ def reconstruct(
     """
     _check_callback(callback)
     scene = _as_scene(scene)
-    out_path = Path(os.fspath(out)) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
+    out_path = Path(_path(out, "out")) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
     if overwrite == "resume" and config is None and (out_path / "config.json").is_file():
         # A resumed run continues with the settings it was started with (as --resume).
         config = out_path / "config.json"
@@ -771,4 +781,4 @@ def synth(
     ``force=True``, one that already holds a scene or any other file."""
     if seed is not None:
         settings["seed"] = _integer(seed, "seed")
-    return _ext.synth(os.fspath(folder), preset, _dumps(settings, "synth settings"), force)
+    return _ext.synth(_path(folder, "folder"), preset, _dumps(settings, "synth settings"), force)

@@ -38,6 +38,7 @@ from ._api import (
     _as_scene,
     _check_callback,
     _integer,
+    _path,
     _SavedScene,
     build_config,
     open_run,
@@ -123,7 +124,7 @@ def reconstruct(
     scene = _as_scene(scene)
     if out is None:
         raise ValueError("out: a run folder on a file system every worker sees is needed")
-    out_path = Path(os.fspath(out)).absolute()
+    out_path = Path(_path(out, "out")).absolute()
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     whole = cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame")
     saved: _SavedScene | None = None

@@ -233,6 +233,26 @@ def test_numbers_of_the_wrong_type_are_refused_naming_the_argument(tmp_path):
     assert not (tmp_path / "s").exists()
 
 
+def test_a_path_that_is_no_path_is_refused_naming_the_argument(static_scene, tmp_path):
+    """A scene, folder or output given as a number raised os.fspath's "expected str, bytes or
+    os.PathLike object, not int", which named no argument."""
+    vol = np.ones((4, 4, 4), np.float32)
+    with pytest.raises(TypeError, match="scene: expected a Scene or the path of a scene folder, got int 3"):
+        fluidnerf.forward_project(3, vol)
+    path = r"expected a path \(a string or os.PathLike\), got"
+    calls = [
+        (lambda: fluidnerf.load_scene(3), f"folder: {path} int 3"),
+        (lambda: fluidnerf.open_run(None), f"folder: {path} NoneType None"),
+        (lambda: fluidnerf.read_transforms(1.5), f"path: {path} float 1.5"),
+        (lambda: fluidnerf.synth(["s"], "demo"), rf"folder: {path} list \['s'\]"),
+        (lambda: fluidnerf.reconstruct(static_scene, "asart", 7, resolution=8), f"out: {path} int 7"),
+    ]
+    for call, message in calls:
+        with pytest.raises(TypeError, match=message):
+            call()
+    assert fluidnerf.load_scene(os.fsencode(static_scene.root)).root == static_scene.root
+
+
 def test_hold_out_flags_and_complex_images_are_refused_naming_the_argument():
     """holdout="yes" was read as three flags ("expected 3 entries"), a flag of "no" as True,
     and complex images lost their imaginary part with only NumPy's warning."""
