@@ -1238,3 +1238,34 @@ fn phantom_cine_recordings_import_as_videos() {
     assert_eq!(record["videos"][0]["decoder"], "cine");
     assert_eq!(record["videos"][0]["range_source"], "raw");
 }
+
+/// Photron MRAW recordings with their headers beside them import as videos; the headers are
+/// not taken for uncalibrated entries.
+#[test]
+fn photron_mraw_recordings_import_as_videos() {
+    let (dir, calib, videos) = video_rig();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video");
+    for n in ["cam0", "cam1", "cam2"] {
+        std::fs::copy(fixtures.join("ramp_12bit.mraw"), videos.join(format!("{n}.mraw"))).expect("copies");
+        std::fs::copy(fixtures.join("ramp_12bit.cihx"), videos.join(format!("{n}.cihx"))).expect("copies");
+    }
+    let out = dir.path().join("scene");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&videos),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("gamma"), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 12);
+    let f = scene.frames.iter().find(|f| f.camera_name.as_deref() == Some("cam2") && f.time == Some(0.001));
+    let img = fluidnerf_io::image::read_image(&out.join(&f.expect("cam2 at 1 ms").file_path)).expect("reads");
+    assert_eq!(img.get(5, 7), 64.0 + 10.0 * (20.0 + 4.0 * 5.0 + 3.0 * 7.0 + 10.0));
+}

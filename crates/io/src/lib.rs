@@ -34,6 +34,7 @@ mod error;
 pub mod folder;
 pub mod image;
 pub mod mesh;
+mod mraw;
 pub mod scene;
 pub mod video;
 pub mod volume;

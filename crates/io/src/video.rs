@@ -11,6 +11,8 @@
 //! - **Phantom cine** (`.cine`, high-speed cameras' raw recordings) is read here too, its grey
 //!   frames as the sensor's linear counts above the black level, with no range mapping or
 //!   linearisation; packed and colour frames are refused.
+//! - **Photron MRAW** (`.mraw` with its `.cihx`/`.cih` header beside it) likewise: grey frames
+//!   of 8, 12 (packed) or 16 bits as the sensor's linear counts.
 //! - **Everything else** (MP4, MOV, MKV, WebM, H.264/H.265, AVI with other codecs) is decoded
 //!   by an external `ffmpeg` (frames as 16-bit grey on a pipe, read one at a time) after
 //!   `ffprobe` reports the size, the frames' time stamps and the colour range. When they are
@@ -51,7 +53,7 @@ pub const FFMPEG_ENV: &str = "FLUIDNERF_FFMPEG";
 pub const FFPROBE_ENV: &str = "FLUIDNERF_FFPROBE";
 
 /// File extensions read as video.
-pub const VIDEO_EXTENSIONS: [&str; 7] = ["avi", "mp4", "mov", "mkv", "m4v", "webm", "cine"];
+pub const VIDEO_EXTENSIONS: [&str; 8] = ["avi", "mp4", "mov", "mkv", "m4v", "webm", "cine", "mraw"];
 
 /// Whether `path` has a video file's extension.
 pub fn is_video(path: &Path) -> bool {
@@ -107,7 +109,7 @@ pub enum RangeSource {
     JpegDefault,
     /// The stream states no range; video codecs default to limited.
     VideoDefault,
-    /// Raw sensor counts (a cine file): no range applies.
+    /// Raw sensor counts (a cine or MRAW file): no range applies.
     Raw,
 }
 
@@ -121,6 +123,8 @@ pub enum Decoder {
     Ffmpeg,
     /// fluidnerf's own reader of Phantom cine files.
     Cine,
+    /// fluidnerf's own reader of Photron MRAW files.
+    Mraw,
 }
 
 impl std::fmt::Display for Decoder {
@@ -129,6 +133,7 @@ impl std::fmt::Display for Decoder {
             Decoder::MjpegAvi => "mjpeg-avi",
             Decoder::Ffmpeg => "ffmpeg",
             Decoder::Cine => "cine",
+            Decoder::Mraw => "mraw",
         })
     }
 }
@@ -262,26 +267,11 @@ pub fn read_video_frames(
         on_frame(frame)
     };
     crate::check_regular_file(path, "video file")?;
-    let mut head = Vec::with_capacity(12);
-    File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).map_err(|e| IoError::io(path, "video file", e))?;
-    if head.is_empty() {
-        // Said as such: an interrupted copy or download leaves one, not a file of another kind.
-        return Err(IoError::invalid(path, "the video file is empty (0 bytes)"));
-    }
-    let info = match sniff(&head) {
-        Container::Avi => match read_mjpeg_avi(path, opts, &mut on_frame)? {
-            Some(info) => info,
-            None => read_with_ffmpeg(path, opts, &mut on_frame)?,
-        },
-        Container::Cine => crate::cine::read_cine(path, opts, &mut on_frame)?,
-        Container::Unknown if is_video(path) || head.len() < 12 => {
-            return Err(IoError::invalid(
-                path,
-                "not a video file: it begins with neither a RIFF `AVI ` header, a Phantom cine header, an MP4/MOV \
-                 box nor a Matroska/WebM header (damaged, or not what its extension says)",
-            ))
-        }
-        Container::IsoBmff | Container::Matroska | Container::Unknown => read_with_ffmpeg(path, opts, &mut on_frame)?,
+    // An MRAW has no header of its own to sniff: its extension says what it is.
+    let info = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mraw")) {
+        crate::mraw::read_mraw(path, opts, &mut on_frame)?
+    } else {
+        read_sniffed(path, opts, &mut on_frame)?
     };
     if info.frames_kept == 0 {
         return Err(IoError::invalid(
@@ -308,6 +298,35 @@ pub fn read_video_frames(
         ));
     }
     Ok(info)
+}
+
+/// Reads a video by the container its first bytes announce.
+fn read_sniffed(
+    path: &Path,
+    opts: &VideoOptions,
+    on_frame: &mut dyn FnMut(VideoFrame) -> Result<(), IoError>,
+) -> Result<VideoInfo, IoError> {
+    let mut head = Vec::with_capacity(12);
+    File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).map_err(|e| IoError::io(path, "video file", e))?;
+    if head.is_empty() {
+        // Said as such: an interrupted copy or download leaves one, not a file of another kind.
+        return Err(IoError::invalid(path, "the video file is empty (0 bytes)"));
+    }
+    Ok(match sniff(&head) {
+        Container::Avi => match read_mjpeg_avi(path, opts, on_frame)? {
+            Some(info) => info,
+            None => read_with_ffmpeg(path, opts, on_frame)?,
+        },
+        Container::Cine => crate::cine::read_cine(path, opts, on_frame)?,
+        Container::Unknown if is_video(path) || head.len() < 12 => {
+            return Err(IoError::invalid(
+                path,
+                "not a video file: it begins with neither a RIFF `AVI ` header, a Phantom cine header, an MP4/MOV \
+                 box nor a Matroska/WebM header (damaged, or not what its extension says)",
+            ))
+        }
+        Container::IsoBmff | Container::Matroska | Container::Unknown => read_with_ffmpeg(path, opts, on_frame)?,
+    })
 }
 
 /// The container a file's first 12 bytes announce.

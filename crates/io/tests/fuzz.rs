@@ -256,6 +256,23 @@ fn cine_files_never_panic() {
 }
 
 #[test]
+fn mraw_headers_never_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/video");
+    let mraw = dir.path().join("f.mraw");
+    std::fs::copy(fixtures.join("ramp_12bit.mraw"), &mraw).expect("copies");
+    for header in ["ramp_12bit.cihx", "ramp_16bit.cih"] {
+        let seed = std::fs::read(fixtures.join(header)).expect("fixture");
+        let p = mraw.with_extension(Path::new(header).extension().expect("an extension"));
+        fuzz(header, std::slice::from_ref(&seed), 300, |bytes| {
+            write_and(&p, bytes);
+            let _ = fluidnerf_io::video::read_video(&mraw, &Default::default());
+        });
+        std::fs::remove_file(&p).expect("removes");
+    }
+}
+
+#[test]
 fn colmap_models_never_panic() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();

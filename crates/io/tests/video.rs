@@ -15,6 +15,38 @@ fn ramp(x: usize, y: usize, k: usize) -> f32 {
     (20 + 4 * x + 3 * y + 10 * k) as f32
 }
 
+/// Per frame: `((x, y), value)` at four pixels, and the frame's sum.
+type Recorded = Vec<(Vec<((usize, usize), f32)>, f64)>;
+
+/// What a reference reader recorded in the fixture file `record` for the recording `file`:
+/// after a line that begins with `file`, lines `frame K X,Y=V … sum=S`.
+fn recorded(record: &str, file: &str) -> Recorded {
+    let text = std::fs::read_to_string(fixture(record)).expect("reads the record");
+    let mut frames = Vec::new();
+    let mut inside = false;
+    for line in text.lines() {
+        if !line.starts_with("frame ") {
+            inside = line.starts_with(file);
+            continue;
+        }
+        if inside {
+            let mut pixels = Vec::new();
+            let mut sum = 0.0;
+            for item in line.split_whitespace().skip(2) {
+                let (key, value) = item.split_once('=').expect("key=value");
+                let value: f64 = value.parse().expect("a count");
+                match key.split_once(',') {
+                    Some((x, y)) => pixels.push(((x.parse().expect("x"), y.parse().expect("y")), value as f32)),
+                    None => sum = value,
+                }
+            }
+            frames.push((pixels, sum));
+        }
+    }
+    assert_eq!(frames.len(), 4, "{record}: four frames of {file}");
+    frames
+}
+
 /// The ramp as limited-range code values.
 fn limited(c: f32) -> f32 {
     16.0 + 219.0 * c / 255.0
@@ -264,39 +296,7 @@ mod cine {
 
     use fluidnerf_io::video::{read_video, Decoder, RangeSource, VideoOptions};
 
-    use super::{fixture, ramp};
-
-    /// Per frame: `((x, y), value)` at four pixels, and the frame's sum.
-    type Recorded = Vec<(Vec<((usize, usize), i64)>, i64)>;
-
-    /// pycine's recorded values of `file`.
-    fn pycine(file: &str) -> Recorded {
-        let text = std::fs::read_to_string(fixture("check_cine_with_pycine.txt")).expect("reads the record");
-        let mut frames = Vec::new();
-        let mut inside = false;
-        for line in text.lines() {
-            if !line.starts_with("frame ") {
-                inside = line.starts_with(file);
-                continue;
-            }
-            if !inside {
-                continue;
-            }
-            let mut pixels = Vec::new();
-            let mut sum = 0;
-            for item in line.split_whitespace().skip(2) {
-                let (key, value) = item.split_once('=').expect("key=value");
-                let value: i64 = value.parse().expect("a count");
-                match key.split_once(',') {
-                    Some((x, y)) => pixels.push(((x.parse().expect("x"), y.parse().expect("y")), value)),
-                    None => sum = value,
-                }
-            }
-            frames.push((pixels, sum));
-        }
-        assert_eq!(frames.len(), 4, "{file}: four frames recorded");
-        frames
-    }
+    use super::{fixture, ramp, recorded};
 
     #[test]
     fn sixteen_bit_frames_are_counts_above_the_black_level() {
@@ -315,25 +315,25 @@ mod cine {
             }
         }
         // pycine maps [black 64, white 4064] onto [0, 4095] and truncates: so do we, from our counts.
-        let as_pycine = |c: f32| (f64::from(c) * 4095.0 / 4000.0).floor() as i64;
-        for (k, (pixels, sum)) in pycine("ramp_16bit.cine").into_iter().enumerate() {
+        let as_pycine = |c: f32| (f64::from(c) * 4095.0 / 4000.0).floor();
+        for (k, (pixels, sum)) in recorded("check_cine_with_pycine.txt", "ramp_16bit.cine").into_iter().enumerate() {
             let img = &video.frames[k];
             for ((x, y), v) in pixels {
-                assert_eq!(as_pycine(img.get(x, y)), v, "frame {k} pixel ({x}, {y})");
+                assert_eq!(as_pycine(img.get(x, y)), f64::from(v), "frame {k} pixel ({x}, {y})");
             }
-            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<i64>(), sum, "frame {k}");
+            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<f64>(), sum, "frame {k}");
         }
     }
 
     #[test]
     fn eight_bit_frames_match_pycine_and_the_selection_keeps_times() {
         let video = read_video(&fixture("ramp_8bit.cine"), &VideoOptions::default()).expect("reads");
-        for (k, (pixels, sum)) in pycine("ramp_8bit.cine").into_iter().enumerate() {
+        for (k, (pixels, sum)) in recorded("check_cine_with_pycine.txt", "ramp_8bit.cine").into_iter().enumerate() {
             let img = &video.frames[k];
             for ((x, y), v) in pixels {
-                assert_eq!(img.get(x, y), v as f32, "frame {k} pixel ({x}, {y})");
+                assert_eq!(img.get(x, y), v, "frame {k} pixel ({x}, {y})");
             }
-            assert_eq!(img.data.iter().map(|&c| c as i64).sum::<i64>(), sum, "frame {k}");
+            assert_eq!(img.data.iter().map(|&c| f64::from(c)).sum::<f64>(), sum, "frame {k}");
         }
         let opts = VideoOptions { start: 1, every: 2, time_offset_s: 0.5, ..Default::default() };
         let video = read_video(&fixture("ramp_8bit.cine"), &opts).expect("reads");
@@ -414,5 +414,83 @@ mod cine {
         }
         assert_eq!(video.frames[0].get(31, 23), 64.0 + 10.0 * ramp(31, 23, 0) - 300.0);
         assert_eq!(video.info.clipped_pixels, n as u64);
+    }
+}
+
+/// Photron MRAW reading against fixtures written by pyMRAW (16-bit, with its text `.cih`) and
+/// by fixtures/video/make_mraw.py (8-bit and packed 12-bit, with XML `.cihx` headers), all
+/// read back by pyMRAW (check_mraw_with_pymraw.py and its output check_mraw_with_pymraw.txt):
+/// four grey 32 × 24 frames at 1000 frames/s, pixel (x, y) of frame k holding 64 + 10 v
+/// (16 and 12 bits) or v (8 bits), v = 20 + 4x + 3y + 10k.
+mod mraw {
+    use std::path::Path;
+
+    use fluidnerf_io::video::{read_video, Decoder, RangeSource, VideoOptions};
+
+    use super::{fixture, ramp, recorded};
+
+    #[test]
+    fn eight_twelve_and_sixteen_bit_frames_match_pymraw() {
+        for (file, stored) in [
+            ("ramp_16bit.mraw", (|v| 64.0 + 10.0 * v) as fn(f32) -> f32),
+            ("ramp_12bit.mraw", |v| 64.0 + 10.0 * v),
+            ("ramp_8bit.mraw", |v| v),
+        ] {
+            let video = read_video(&fixture(file), &VideoOptions::default()).expect(file);
+            assert_eq!(video.info.decoder, Decoder::Mraw);
+            assert_eq!(video.info.range_source, RangeSource::Raw);
+            assert_eq!((video.info.width, video.info.height, video.info.frame_rate), (32, 24, Some(1000.0)));
+            assert_eq!((video.info.frames_in_file, video.info.frames_kept), (4, 4));
+            assert_eq!(video.times, [0.0, 0.001, 0.002, 0.003]);
+            for (k, (pixels, sum)) in recorded("check_mraw_with_pymraw.txt", file).into_iter().enumerate() {
+                let img = &video.frames[k];
+                for ((x, y), v) in pixels {
+                    assert_eq!(img.get(x, y), v, "{file} frame {k} pixel ({x}, {y})");
+                    assert_eq!(v, stored(ramp(x, y, k)), "{file}: the fixture's own ramp");
+                }
+                assert_eq!(img.data.iter().map(|&c| f64::from(c)).sum::<f64>(), sum, "{file} frame {k}");
+            }
+        }
+        let opts = VideoOptions { start: 1, every: 2, ..Default::default() };
+        let video = read_video(&fixture("ramp_12bit.mraw"), &opts).expect("reads");
+        assert_eq!(video.times, [0.001, 0.003]);
+        assert_eq!(video.frames[1].get(5, 7), 64.0 + 10.0 * ramp(5, 7, 3));
+    }
+
+    /// A copy of the 8-bit fixture in `dir` (`.mraw`, and the header `.cihx` with `edit`).
+    fn copy(dir: &Path, edit: impl Fn(&str) -> String) -> std::path::PathBuf {
+        let header = std::fs::read(fixture("ramp_8bit.cihx")).expect("reads");
+        let text = String::from_utf8_lossy(&header).into_owned();
+        std::fs::write(dir.join("rec.cihx"), edit(&text)).expect("writes");
+        let mraw = dir.join("rec.mraw");
+        std::fs::copy(fixture("ramp_8bit.mraw"), &mraw).expect("copies");
+        mraw
+    }
+
+    #[test]
+    fn headers_that_do_not_fit_are_refused_with_the_reason() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let err = |edit: &dyn Fn(&str) -> String| {
+            let mraw = copy(dir.path(), edit);
+            read_video(&mraw, &VideoOptions::default()).expect_err("refused").to_string()
+        };
+        let e = err(&|t| t.replace("<type>Mono</type>", "<type>Color</type>"));
+        assert!(e.contains("rec.cihx") && e.contains("colour recording"), "{e}");
+        let e = err(&|t| t.replace("<totalFrame>4</totalFrame>", "<totalFrame>5</totalFrame>"));
+        assert!(e.contains("rec.mraw") && e.contains("3072 bytes, fewer than the 3840"), "{e}");
+        let e = err(&|t| t.replace("<bit>8</bit>", "<bit>10</bit>"));
+        assert!(e.contains("10 bits per pixel"), "{e}");
+        let e = err(&|t| t.replace("<recordRate>1000</recordRate>", "<recordRate>0</recordRate>"));
+        assert!(e.contains("not a frame rate"), "{e}");
+        let e = err(&|t| t.replace("<width>32</width>", ""));
+        assert!(e.contains("states no `imageDataInfo/resolution/width`"), "{e}");
+        let e = err(&|t| t.replace("MRaw", "TIFF"));
+        assert!(e.contains("file format is `TIFF`"), "{e}");
+        let e = err(&|t| t.replace("</cih>", "</ci>"));
+        assert!(e.contains("without a <cih> element"), "{e}");
+        // Without its header.
+        std::fs::remove_file(dir.path().join("rec.cihx")).expect("removes");
+        let e = read_video(&dir.path().join("rec.mraw"), &VideoOptions::default()).expect_err("refused").to_string();
+        assert!(e.contains("rec.cihx") && e.contains("rec.cih") && e.contains("no header of its own"), "{e}");
     }
 }

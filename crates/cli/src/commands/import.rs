@@ -35,9 +35,10 @@ use std::io::Write as _;
 /// `transforms.json` if they are physical): every camera's folder must hold as many images,
 /// under the same names when the folders share names, and no folder named like an image; a
 /// camera with a single image cannot join cameras recorded over time. Or the video
-/// `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`, `.webm`, or a Phantom `.cine`): its
-/// frames are decoded (MJPEG AVI and cine directly, other formats with ffmpeg), range-mapped
-/// and linearised (a cine's frames are its sensor's counts above the black level, as stored),
+/// `IMAGES/NAME.avi` (`.mp4`, `.mov`, `.mkv`, `.m4v`, `.webm`, a Phantom `.cine`, or a
+/// Photron `.mraw` with its `NAME.cihx`/`NAME.cih` header): its frames are decoded (MJPEG
+/// AVI, cine and MRAW directly, other formats with ffmpeg), range-mapped and linearised (the
+/// frames of a cine or MRAW are its sensor's counts, as stored, a cine's above its black level),
 /// and written as float TIFFs to `OUT/frames/NAME/` with their times in seconds (see
 /// --video-range, --video-frames, --video-every, --video-time-offset); videos cannot join
 /// series of images. How each video was read (decoder, range and why,
@@ -259,8 +260,10 @@ fn expand_videos(
             continue;
         }
         let name = video_name(&f);
-        let cine = f.file_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("cine"));
-        if records.is_empty() && opts.linearisation == Linearisation::Linear && !cine {
+        // The raw recordings of high-speed cameras hold linear counts.
+        let raw =
+            f.file_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("cine") || e.eq_ignore_ascii_case("mraw"));
+        if records.is_empty() && opts.linearisation == Linearisation::Linear && !raw {
             log::warn!(
                 "video frames are read as linear; most cameras store gamma-encoded video (pass --linearisation \
                  srgb or a gamma) unless they record raw or linear luma"
@@ -504,7 +507,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
                 unmatched.push(format!("{name} ({} is not a file)", not_files.join(", ")));
             }
             [] => unmatched.push(format!(
-                "{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov/.cine or folder {name}/)"
+                "{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov/.cine/.mraw or folder {name}/)"
             )),
             several => bail!(
                 "camera {name} matches several images: {}",
