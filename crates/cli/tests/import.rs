@@ -1237,6 +1237,24 @@ fn phantom_cine_recordings_import_as_videos() {
         serde_json::from_str(&std::fs::read_to_string(out.join("import.json")).expect("import.json")).expect("JSON");
     assert_eq!(record["videos"][0]["decoder"], "cine");
     assert_eq!(record["videos"][0]["range_source"], "raw");
+
+    // A camera whose file begins one image later than the others' holds other instants.
+    let mut bytes = std::fs::read(&fixture).expect("reads");
+    bytes[16..20].copy_from_slice(&1i32.to_le_bytes());
+    std::fs::write(videos.join("cam2.cine"), bytes).expect("writes");
+    let o = fluidnerf(&[
+        "import",
+        "--opencv",
+        s(&calib),
+        "--images",
+        s(&videos),
+        "--aabb",
+        "-10,-10,-10,10,10,10",
+        "-o",
+        s(&dir.path().join("late")),
+    ]);
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("not synchronised") && stderr(&o).contains("camera cam2 at 0.001 s"), "{}", stderr(&o));
 }
 
 /// Photron MRAW recordings with their headers beside them import as videos; the headers are

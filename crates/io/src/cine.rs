@@ -16,8 +16,11 @@
 //! reason: packed 10- and 12-bit frames (save the cine from PCC as 16-bit), colour sensors'
 //! Bayer mosaics and colour-interpolated frames (fluidnerf does not demosaic).
 //!
-//! **Times.** Frame `i` (from 0, the first image saved in the file) is at `i / FrameRate`
-//! seconds, plus the time offset.
+//! **Times.** Frame `i` (from 0, the first image saved in the file) is at
+//! `(FirstImageNo + i) / FrameRate` seconds from the trigger, plus the time offset:
+//! `FirstImageNo` is the first saved image's number counted from the trigger (negative for
+//! images before it), so cameras triggered together whose files keep different ranges of
+//! images give their frames the same times at the same instants.
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
@@ -30,6 +33,7 @@ use crate::IoError;
 
 /// `CINEFILEHEADER`: size and the offsets of the fields read.
 const FILE_HEADER_LEN: usize = 44;
+const OFF_FIRST_IMAGE_NO: usize = 16;
 const OFF_IMAGE_COUNT: usize = 20;
 const OFF_IMAGE_HEADER: usize = 24;
 const OFF_SETUP: usize = 28;
@@ -90,6 +94,8 @@ pub(crate) fn read_cine(
     };
     let header = read_at(0, FILE_HEADER_LEN, "file header")?;
     let count = u32_at(&header, OFF_IMAGE_COUNT) as usize;
+    // The first saved image's number counted from the trigger (negative before it).
+    let first_image_no = i32_at(&header, OFF_FIRST_IMAGE_NO);
     if count == 0 {
         return Err(bad("it holds no images (ImageCount 0)".into()));
     }
@@ -228,7 +234,7 @@ pub(crate) fn read_cine(
                     .for_each(|(o, v)| put(o, u32::from(u16::from_le_bytes([v[0], v[1]]))));
             }
         }
-        let time_s = i as f64 / f64::from(rate) + opts.time_offset_s;
+        let time_s = (f64::from(first_image_no) + i as f64) / f64::from(rate) + opts.time_offset_s;
         on_frame(VideoFrame { index: i, time_s, image })?;
         kept += 1;
     }

@@ -358,6 +358,15 @@ mod cine {
         b[at..at + 4].copy_from_slice(&v.to_le_bytes());
     }
 
+    /// Times count from the trigger: a file whose first image is number −2 begins 2 ms before it.
+    #[test]
+    fn times_count_from_the_trigger() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = patched(dir.path(), |b| put_u32(b, 16, (-2i32) as u32));
+        let video = read_video(&path, &VideoOptions::default()).expect("reads");
+        assert_eq!(video.times, [-0.002, -0.001, 0.0, 0.001]);
+    }
+
     #[test]
     fn a_negative_height_is_read_top_down() {
         let dir = tempfile::tempdir().expect("tempdir");

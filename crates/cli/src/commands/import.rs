@@ -346,7 +346,8 @@ fn expand_videos(
             bail!(
                 "the videos are not synchronised: the frame {n} kept of camera {} is at {} s, that of camera {} at \
                  {} s (frame rates {} and {} fps); every camera's n-th frame must be the same instant: record \
-                 the cameras at one rate from one trigger, or import them separately",
+                 the cameras at one rate from one trigger and keep the same frames of each (a high-speed camera's \
+                 file may begin before or after the others'), or import them separately",
                 first.camera,
                 all_times[0][n],
                 other.camera,
