@@ -152,18 +152,42 @@ def load_scene(folder: PathLike) -> Scene:
     return Scene.load(_path(folder, "folder"))
 
 
+def _sequence(value: Any, name: str, expected: str) -> Any:
+    """``value``, a sequence with one entry per frame; a string, a mapping, a set, or an
+    object that is no sequence at all (``holdout=5``, which raised a bare "'int' object is
+    not iterable") is refused naming the argument and ``expected``."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name}: expected {expected}, one per frame, got the string {value!r}")
+    zero_d = isinstance(value, np.ndarray) and value.ndim == 0
+    if zero_d or isinstance(value, (dict, set, frozenset)) or not hasattr(value, "__iter__"):
+        raise TypeError(f"{name}: expected {expected}, one per frame, got {type(value).__name__} {value!r}")
+    return value
+
+
 def _flags(value: Any, name: str) -> list[bool]:
     """``value`` as a list of booleans (``True``/``False``, NumPy booleans, or the integers 0
-    and 1); a string or any other element is refused naming the argument."""
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"{name}: expected a sequence of booleans, one per frame, got the string {value!r}")
+    and 1); a string, any other object or element is refused naming the argument."""
     flags = []
-    for i, v in enumerate(value):
+    for i, v in enumerate(_sequence(value, name, "a sequence of booleans")):
         if isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1)):
             flags.append(bool(v))
         else:
             raise TypeError(f"{name}[{i}]: expected a boolean, got {type(v).__name__} {v!r}")
     return flags
+
+
+def _names(value: Any, name: str) -> list[str | None]:
+    """``value`` as a list of camera names (strings, or None for a frame without one); a
+    string, any other object or element is refused naming the argument (the extension's
+    messages, "Can't extract `str` to `Vec`", named no type expected)."""
+    names: list[str | None] = []
+    for i, v in enumerate(_sequence(value, name, "a sequence of camera names (strings or None)")):
+        if v is not None and not isinstance(v, str):
+            raise TypeError(
+                f"{name}[{i}]: expected a camera name (a string) or None, got {type(v).__name__} {v!r}"
+            )
+        names.append(None if v is None else str(v))
+    return names
 
 
 def scene_from_arrays(
@@ -206,7 +230,7 @@ def scene_from_arrays(
         if distortion is None
         else _array(np.atleast_2d(distortion), f64, "distortion", "(N, 4|5|8)"),
         holdout=None if holdout is None else _flags(holdout, "holdout"),
-        names=names,
+        names=None if names is None else _names(names, "names"),
         units=units,
         intensity_scale=_real(intensity_scale, "intensity_scale"),
     )

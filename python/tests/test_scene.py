@@ -273,6 +273,40 @@ def test_hold_out_flags_and_complex_images_are_refused_naming_the_argument():
     assert scene is not None
 
 
+def test_hold_out_flags_and_names_that_are_no_sequence_are_refused_naming_the_argument():
+    """holdout=5 raised a bare "'int' object is not iterable", naming no argument, and
+    names="abc" the extension's "argument 'names': Can't extract `str` to `Vec`"."""
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    flags = r"holdout: expected a sequence of booleans, one per frame, got"
+    for value, shown in [
+        (5, "int 5"),
+        (2.5, "float 2.5"),
+        (np.array(True), "ndarray array"),
+        ({0: True}, r"dict \{0: True\}"),
+    ]:
+        with pytest.raises(TypeError, match=f"{flags} {shown}"):
+            fluidnerf.scene_from_arrays(K, poses, images, aabb, holdout=value)
+    names = r"names: expected a sequence of camera names \(strings or None\), one per frame, got"
+    for value, shown in [(5, "int 5"), ("abc", "the string 'abc'"), ({"a", "b", "c"}, "set")]:
+        with pytest.raises(TypeError, match=f"{names} {shown}"):
+            fluidnerf.scene_from_arrays(K, poses, images, aabb, names=value)
+    with pytest.raises(
+        TypeError, match=r"names\[1\]: expected a camera name \(a string\) or None, got int 2"
+    ):
+        fluidnerf.scene_from_arrays(K, poses, images, aabb, names=["a", 2, "c"])
+    scene = fluidnerf.scene_from_arrays(
+        K, poses, images, aabb, holdout=np.array([False, True, False]), names=np.array(["a", "b", "c"])
+    )
+    assert scene.holdout == [False, True, False] and scene.names == ["a", "b", "c"]
+    assert fluidnerf.scene_from_arrays(K, poses, images, aabb, names=("a", None, "c")).names == [
+        "a",
+        None,
+        "c",
+    ]
+
+
 def test_a_scene_without_frames_is_refused():
     """Zero frames made a scene that nothing could use: saving it, loading it back and
     projecting through it failed later, each with its own message, and render returned []."""
