@@ -538,6 +538,17 @@ def _warning_callback(callback: Callback | None) -> Callback:
     return on_event
 
 
+def _progress(progress: Any) -> bool | None:
+    """``progress`` as True, False or None; any other object is refused naming it (``"no"``
+    counted as true, and was then refused as "progress=True needs tqdm")."""
+    if progress is None or isinstance(progress, (bool, np.bool_)):
+        return None if progress is None else bool(progress)
+    raise TypeError(
+        f"progress: expected True, False or None (a bar when tqdm is installed), "
+        f"got {type(progress).__name__} {progress!r}"
+    )
+
+
 def _progress_callback(callback: Callback | None, progress: bool | None) -> tuple[Callback | None, Any]:
     """The callback given, combined with a tqdm bar when asked (None: when tqdm is installed)."""
     bar_holder: dict = {}
@@ -625,12 +636,13 @@ def reconstruct(
 
     ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
     ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
-    ``False`` stops the run. ``progress`` shows a tqdm bar (None: when tqdm is installed).
+    ``False`` stops the run. ``progress`` (True or False) shows a tqdm bar (None: when tqdm is installed).
     A run's warnings are issued as :class:`FluidNerfWarning` and kept in ``run.report["warnings"]``.
     The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
     written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.
     """
     _check_callback(callback)
+    progress = _progress(progress)
     scene = _as_scene(scene)
     out_path = Path(_path(out, "out")) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
     if overwrite == "resume" and config is None and (out_path / "config.json").is_file():

@@ -292,6 +292,19 @@ def test_a_callback_that_cannot_be_called_is_refused_before_the_run_starts(stati
     assert not (tmp_path / "run").exists()
 
 
+def test_a_progress_that_is_no_boolean_is_refused_naming_it_before_the_run_starts(static_scene, tmp_path):
+    """progress="no" counted as true, and the run was then refused with "progress=True needs
+    tqdm", a value the caller never gave (with tqdm installed, it drew a bar)."""
+    for value, shown in [("no", "str 'no'"), (0, "int 0"), ([], r"list \[\]")]:
+        with pytest.raises(TypeError, match=rf"progress: expected True, False or None .*, got {shown}$"):
+            fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", progress=value, resolution=8)
+    assert not (tmp_path / "run").exists()
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "run", progress=np.bool_(False), resolution=8
+    )
+    assert run.status == "finished"
+
+
 def test_ctrl_c_stops_a_run_cleanly(static_scene, tmp_path):
     """SIGINT while the run works (GIL released) stops it at the next iteration: the results are
     written, the report says interrupted, and KeyboardInterrupt reaches the caller."""
