@@ -481,11 +481,16 @@ class Run:
 
     def save(self, folder: PathLike) -> Run:
         """Copies the run folder to ``folder`` (which must not exist, nor lie inside the run's
-        folder) and returns that copy. A run's own scene (one built from arrays, saved in its
+        folder or under a file) and returns that copy. A run's own scene (one built from arrays, saved in its
         ``scene/``) goes with it, and the copy's settings name the copy's."""
         dest = Path(_path(folder, "folder"))
         if dest.exists():
             raise FluidNerfError(f"{dest}: already exists; choose a new folder")
+        file = next((p for p in dest.absolute().parents if p.is_file()), None)
+        if file is not None:
+            # Refused as the library refuses an output folder there (copytree raised a bare
+            # NotADirectoryError).
+            raise FluidNerfError(f"{dest}: cannot create the folder, {file} is a file; choose a new folder")
         if self.path.resolve() in dest.resolve().parents:
             # It would be copied into itself, and left among the run's files.
             raise FluidNerfError(

@@ -5,6 +5,7 @@ callbacks that watch and stop a run."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -81,6 +82,19 @@ def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(stati
     with pytest.raises(fluidnerf.FluidNerfError, match="lies inside the run's own folder"):
         run.save(run.path / "copy")
     assert sorted(p.name for p in run.path.iterdir()) == before
+
+
+def test_a_run_is_not_saved_under_a_file(static_scene, tmp_path):
+    """run.save("a_file/sub") raised a bare NotADirectoryError from the copy."""
+    run = fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
+    (tmp_path / "a_file").write_text("x")
+    for folder in (tmp_path / "a_file" / "sub", tmp_path / "a_file" / "sub" / "deeper"):
+        with pytest.raises(
+            fluidnerf.FluidNerfError,
+            match=re.escape(f"{folder}: cannot create the folder, {tmp_path / 'a_file'} is a file"),
+        ):
+            run.save(folder)
+    assert (tmp_path / "a_file").read_text() == "x"
 
 
 def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
