@@ -127,14 +127,15 @@ def reconstruct(
     out_path = Path(_path(out, "out")).absolute()
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     whole = cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame")
+    # The folder is checked here, before any task: the workers would refuse it only after
+    # they were sent the run. For a scene built from arrays, also before the scene is written
+    # into it: a refused run leaves the folder as it was.
+    if whole:
+        _ext.check_run_folder(os.fspath(out_path), "refuse")
+    else:
+        _ext.check_window_folder(os.fspath(out_path))
     saved: _SavedScene | None = None
     if scene.root is None:
-        # The settings and the folder are checked before the scene is written into it: a
-        # refused run leaves the folder as it was.
-        if whole:
-            _ext.check_run_folder(os.fspath(out_path), "refuse")
-        else:
-            _ext.check_window_folder(os.fspath(out_path))
         own = out_path / "scene"
         if own.exists():
             # A call that continues an interrupted one, with the scene built again from its

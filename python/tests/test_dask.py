@@ -228,6 +228,24 @@ def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(
         fluidnerf.dask.reconstruct(None, scene, TR_METHOD, tmp_path / "file", **TR_OPTIONS)
 
 
+def test_the_output_folder_of_a_scene_on_disk_is_refused_before_any_task(
+    tr_scene, static_scene, serial, tmp_path
+):
+    """With a scene already saved, the output folder was not checked before the tasks were
+    submitted: an output that is a file, or a finished run, was refused only by the workers."""
+    (tmp_path / "file").write_text("x")
+    # No client is used: the refusal comes before any task.
+    for scene, method, options in [
+        (tr_scene, TR_METHOD, TR_OPTIONS),
+        (static_scene, "asart", {"resolution": 8}),
+    ]:
+        with pytest.raises(fluidnerf.FluidNerfError, match="file: exists and is not a folder"):
+            fluidnerf.dask.reconstruct(None, scene, method, tmp_path / "file", **options)
+        with pytest.raises(fluidnerf.FluidNerfError, match="already holds a finished run"):
+            fluidnerf.dask.reconstruct(None, scene, method, serial.path, **options)
+    assert (tmp_path / "file").read_text() == "x"
+
+
 def test_a_scene_from_arrays_built_again_continues_its_dask_run_and_another_is_refused(tr_scene, tmp_path):
     """Called again after an interruption, with the scene built again from its arrays, a
     scale-out was refused ("pass force=True"): the first call had saved it in out/scene. The
