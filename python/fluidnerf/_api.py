@@ -71,14 +71,27 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
     """``value`` as a C-ordered array of ``dtype``; complex numbers, strings, ragged lists and
     other objects that are no array of real numbers are refused naming the argument (NumPy's
     own messages name none, and a cast to a real type silently drops imaginary parts)."""
+    if value is None:
+        # NumPy reads None as NaN.
+        raise TypeError(f"{name}: expected an array of numbers{shape}, got None")
     try:
         complex_numbers = np.iscomplexobj(value)
-        a = None if complex_numbers else np.ascontiguousarray(value, dtype=dtype)
+        # Not np.ascontiguousarray, which makes a 0-d array (a single number) one of shape (1,).
+        a = None if complex_numbers else np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as e:
         raise TypeError(f"{name}: expected an array of numbers{shape}: {e}") from None
     if a is None:
         raise TypeError(f"{name}: expected real numbers{shape}, got complex ones")
-    return a
+    return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def _given(value: Any, a: np.ndarray) -> str:
+    """What was given as the array ``a``, for a message: its shape, or a single number as
+    itself."""
+    if a.ndim == 0 and not isinstance(value, np.ndarray):
+        shown = value.item() if isinstance(value, np.generic) else value
+        return f"{type(value).__name__} {shown!r}, which is no array"
+    return f"an array of shape {a.shape}"
 
 
 def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
@@ -86,7 +99,7 @@ def _array(value: Any, dtype: type, name: str, shape: str) -> np.ndarray:
     ``"(N, 3, 3)"``) names; anything else is refused naming the argument and the shape."""
     a = _numbers(value, dtype, name, f" of shape {shape}")
     if a.ndim != len([side for side in shape.strip("()").split(",") if side.strip()]):
-        raise FluidNerfError(f"{name}: expected shape {shape}, got an array of shape {a.shape}")
+        raise FluidNerfError(f"{name}: expected shape {shape}, got {_given(value, a)}")
     return a
 
 
@@ -190,6 +203,13 @@ def _names(value: Any, name: str) -> list[str | None]:
     return names
 
 
+def _distortion(value: Any) -> np.ndarray:
+    """The distortion coefficients ``(N, 4|5|8)``; one row ``(4|5|8,)`` is read as ``(1, ...)``."""
+    a = _numbers(value, np.float64, "distortion", " of shape (N, 4|5|8)")
+    # A single number is refused as given (np.atleast_2d made it one row of one coefficient).
+    return _array(value if a.ndim == 0 else np.atleast_2d(a), np.float64, "distortion", "(N, 4|5|8)")
+
+
 def scene_from_arrays(
     K: np.ndarray,
     world_from_camera: np.ndarray,
@@ -226,9 +246,7 @@ def scene_from_arrays(
         _array(images, np.float32, "images", "(N, H, W)"),
         _array(aabb, f64, "aabb", "(2, 3)"),
         times=None if times is None else _array(times, f64, "times", "(N,)"),
-        distortion=None
-        if distortion is None
-        else _array(np.atleast_2d(distortion), f64, "distortion", "(N, 4|5|8)"),
+        distortion=None if distortion is None else _distortion(distortion),
         holdout=None if holdout is None else _flags(holdout, "holdout"),
         names=None if names is None else _names(names, "names"),
         units=units,

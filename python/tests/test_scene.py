@@ -203,6 +203,42 @@ def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shap
         fluidnerf.open_run(tmp_path, aabb=aabb.ravel())
 
 
+def test_a_single_number_or_none_for_an_array_is_refused_as_given():
+    """A 0-d array, a number or None given for an array was reported as "got an array of shape
+    (1,)": np.ascontiguousarray made it one, and None read as NaN."""
+    K, poses = ring(3)
+    images = np.ones((3, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10, -10], [10, 10, 10]])
+    cases = [
+        ({"K": np.array(3.0)}, r"K: expected shape \(N, 3, 3\), got an array of shape \(\)$"),
+        ({"K": np.float64(3.0)}, r"K: expected shape \(N, 3, 3\), got float64 3.0, which is no array$"),
+        ({"images": 1.0}, r"images: expected shape \(N, H, W\), got float 1.0, which is no array$"),
+        ({"times": 5}, r"times: expected shape \(N,\), got int 5, which is no array$"),
+        (
+            {"distortion": 0.1},
+            r"distortion: expected shape \(N, 4\|5\|8\), got float 0.1, which is no array$",
+        ),
+    ]
+    for change, message in cases:
+        args = {"K": K, "world_from_camera": poses, "images": images, "aabb": aabb, **change}
+        with pytest.raises(fluidnerf.FluidNerfError, match=message):
+            fluidnerf.scene_from_arrays(**args)
+    with pytest.raises(TypeError, match=r"K: expected an array of numbers of shape \(N, 3, 3\), got None$"):
+        fluidnerf.scene_from_arrays(None, poses, images, aabb)
+    scene = fluidnerf.scene_from_arrays(K, poses, images, aabb)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"volume: expected shape \(nz, ny, nx\), got an array of shape \(\)"
+    ):
+        fluidnerf.forward_project(scene, np.array(1.0, np.float32))
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"differ in shape: \[\] and \[3\]"):
+        fluidnerf.nrmse(np.float32(1), np.ones(3))
+    with pytest.raises(TypeError, match="truth: expected an array of numbers, got None"):
+        fluidnerf.nrmse(np.ones(3), None)
+    # Arrays that are not C-ordered are still read as they are.
+    fortran = fluidnerf.scene_from_arrays(K, poses, np.asfortranarray(images[:, ::-1]), aabb)
+    np.testing.assert_array_equal(fortran.images(), images[:, ::-1])
+
+
 def test_a_run_that_records_its_box_is_not_placed_in_another(static_scene, tmp_path):
     """open_run(folder, aabb=...) of a run with a report put it in the run's own box and
     ignored the one given, without a word: the box given was never the results'."""
