@@ -206,6 +206,27 @@ def test_windows_are_trained_only_on_the_scene_their_configuration_names(tr_scen
     assert outcome["index"] == 0 and outcome["status"] == "finished"
 
 
+def test_finishing_a_folder_without_trained_windows_says_to_train_them_first(tr_scene, tmp_path):
+    """finish on a folder with no window trained said "nothing to resume (--resume;
+    `overwrite="resume"` from Python): it holds no run", options the caller never used."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    (tmp_path / "empty").mkdir()
+    for out in (tmp_path / "run", tmp_path / "empty"):
+        with pytest.raises(fluidnerf.FluidNerfError) as refused:
+            fluidnerf.dask.finish(str(tr_scene.root), cfg, str(out))
+        message = str(refused.value)
+        assert message.startswith(f"{out}: no window of the run has been trained in this folder yet"), message
+        assert "train its windows first (fluidnerf.dask.train_window" in message, message
+        assert "resume" not in message, message
+    assert not (tmp_path / "run").exists() and not any((tmp_path / "empty").iterdir())
+    # A folder refused for its place is refused as before.
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(fluidnerf.FluidNerfError, match="file: exists and is not a folder"):
+        fluidnerf.dask.finish(str(tr_scene.root), cfg, str(tmp_path / "file"))
+    with pytest.raises(fluidnerf.FluidNerfError, match="is the scene's own folder"):
+        fluidnerf.dask.finish(str(tr_scene.root), cfg, str(tr_scene.root))
+
+
 def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(
     tr_scene, static_scene, serial, tmp_path
 ):

@@ -655,8 +655,10 @@ impl RunDir {
 
 /// The checks of a folder about to receive a run, before anything is created: apart from the
 /// scene (unless the scene is the run's own, in [`OWN_SCENE`]), a folder (when it exists) and
-/// not one of another kind ([`refuse_other_kind`]).
-fn check_new_run_folder(root: &Path, scene_root: Option<&Path>) -> Result<(), PipelineError> {
+/// not one of another kind ([`refuse_other_kind`]). [`RunDir::create`] makes them before it
+/// reads what the folder holds; a caller that refuses a folder for what it holds makes them
+/// first too, so that a folder refused for its place is refused as `create` refuses it.
+pub fn check_new_run_folder(root: &Path, scene_root: Option<&Path>) -> Result<(), PipelineError> {
     match scene_root {
         Some(scene) if resolved(scene) == resolved(&root.join(OWN_SCENE)) => refuse_inputs_in(root, scene, true)?,
         Some(scene) => refuse_scene_inputs(root, scene)?,

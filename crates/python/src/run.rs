@@ -1,12 +1,12 @@
 //! Runs: configuration (JSON text of `RunConfig`), `reconstruct` through the library
 //! pipeline, the window-by-window path of time-resolved runs, and reading run folders.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use fluidnerf_core::glam::Vec3;
 use fluidnerf_core::ScalarField;
 use fluidnerf_pipeline::load::LoadedRun;
-use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunKind};
+use fluidnerf_pipeline::{DirState, Method, MethodConfig, Overwrite, RunConfig, RunDir, RunEvent, RunKind};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -204,6 +204,24 @@ fn check_scene_named(config: &RunConfig, scene: &fluidnerf_core::Scene) -> PyRes
     Ok(())
 }
 
+/// Refuses to finish a run in `out` when no window of it has been trained there (the folder
+/// holds none of a run's files, or does not exist). The library refuses it as a resume with
+/// nothing to resume, naming `--resume` and `overwrite="resume"`, which the caller of
+/// `finish` never used. A folder refused for its place (a file, the scene's folder, a folder
+/// of another kind) is refused as the library refuses it.
+fn refuse_untrained(out: &Path, scene_root: &Path) -> PyResult<()> {
+    fluidnerf_pipeline::rundir::check_new_run_folder(out, Some(scene_root)).map_err(|e| err(e.to_string()))?;
+    let untrained = !out.exists() || RunDir::open(out).is_ok_and(|dir| dir.state() == DirState::Empty);
+    if untrained {
+        return Err(err(format!(
+            "{}: no window of the run has been trained in this folder yet, so there is nothing to finish; train \
+             its windows first (fluidnerf.dask.train_window, one task per window), then finish",
+            out.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Trains windows `start..end` of a time-resolved run into `out`
 /// (`fluidnerf_pipeline::reconstruct_windows`); returns the outcomes as JSON text.
 #[pyfunction]
@@ -252,6 +270,7 @@ pub fn finish_windows(
     let mut cb = Callback::new(callback);
     let result = py.allow_threads(|| {
         guard(|| {
+            refuse_untrained(&out, &scene.root)?;
             let report = fluidnerf_pipeline::finish_windows(&scene, &config, &out, |e| cb.on_event(e))
                 .map_err(|e| err(e.to_string()))?;
             to_json(&report)
