@@ -16,7 +16,10 @@
 //! recordings (a Bayer mosaic or interpolated colour), which fluidnerf does not demosaic, and
 //! headers whose file format is not MRAW.
 //!
-//! **Times.** Frame `i` of the file is at `i / rate` seconds, plus the time offset.
+//! **Times.** Frame `i` of the file is at `(start + i) / rate` seconds from the trigger, plus
+//! the time offset, where `start` is the header's first frame number (`Start Frame`,
+//! `frameInfo/startFrame`; negative before the trigger, 0 when unstated), so cameras whose files
+//! begin at other frames give their frames the same times at the same instants.
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
@@ -34,6 +37,8 @@ struct Header {
     height: usize,
     frames: usize,
     rate: f64,
+    /// The first frame's number counted from the trigger (negative before it); 0 unstated.
+    start_frame: i64,
     bits: u32,
     /// Whether the camera recorded grey frames.
     mono: bool,
@@ -99,11 +104,23 @@ fn read_header(path: &Path) -> Result<Header, IoError> {
         ["Image Width", "Image Height", "Total Frame", "Record Rate(fps)", "Color Bit", "Color Type", "File Format"]
     };
     let colour_type = if xml { xml_field(path, &text, keys[5])? } else { cih_field(&text, keys[5]) };
+    let start_key = if xml { "frameInfo/startFrame" } else { "Start Frame" };
+    let start = if xml { xml_field(path, &text, start_key)? } else { cih_field(&text, start_key) };
+    let start_frame = match start {
+        None => 0,
+        Some(v) => v
+            .trim()
+            .parse::<i64>()
+            .ok()
+            .filter(|n| n.unsigned_abs() < 1 << 53)
+            .ok_or_else(|| IoError::invalid(path, format!("`{start_key}` is `{v}`, not a frame number")))?,
+    };
     let header = Header {
         width: count(keys[0])?,
         height: count(keys[1])?,
         frames: count(keys[2])?,
         rate: number(keys[3])?,
+        start_frame,
         bits: count(keys[4])? as u32,
         // Not every header states it; one that does not is taken for grey.
         mono: colour_type.is_none_or(|t| t.trim().to_ascii_lowercase().starts_with("mono")),
@@ -252,7 +269,7 @@ pub(crate) fn read_mraw(
                 }
             }
         }
-        let time_s = i as f64 / header.rate + opts.time_offset_s;
+        let time_s = (header.start_frame as f64 + i as f64) / header.rate + opts.time_offset_s;
         on_frame(VideoFrame { index: i, time_s, image })?;
         kept += 1;
     }

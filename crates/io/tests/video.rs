@@ -497,6 +497,12 @@ mod mraw {
         assert!(e.contains("file format is `TIFF`"), "{e}");
         let e = err(&|t| t.replace("</cih>", "</ci>"));
         assert!(e.contains("without a <cih> element"), "{e}");
+        // Times count from the trigger.
+        let mraw = copy(dir.path(), |t: &str| t.replace("<totalFrame>", "<startFrame>-3</startFrame><totalFrame>"));
+        let video = read_video(&mraw, &VideoOptions::default()).expect("reads");
+        assert_eq!(video.times, [-0.003, -0.002, -0.001, 0.0]);
+        let e = err(&|t| t.replace("<totalFrame>", "<startFrame>x</startFrame><totalFrame>"));
+        assert!(e.contains("`frameInfo/startFrame` is `x`"), "{e}");
         // Without its header.
         std::fs::remove_file(dir.path().join("rec.cihx")).expect("removes");
         let e = read_video(&dir.path().join("rec.mraw"), &VideoOptions::default()).expect_err("refused").to_string();
