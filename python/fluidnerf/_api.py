@@ -280,6 +280,53 @@ def read_colmap(folder: PathLike) -> list[Camera]:
     return _cameras(_ext.read_colmap(_path(folder, "folder")))
 
 
+def read_video(
+    path: PathLike,
+    *,
+    start: int = 0,
+    end: int | None = None,
+    every: int = 1,
+    time_offset: float = 0.0,
+    range: str = "auto",
+    linearisation: str = "linear",
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The frames of one camera's recording, decoded as ``fluidnerf import`` decodes them:
+    MJPEG AVI, Phantom ``.cine`` and Photron ``.mraw`` (its ``.cihx``/``.cih`` header beside
+    it) without ffmpeg, other formats through ``ffmpeg``.
+
+    Keeps frames ``start`` to ``end - 1`` (0-based; ``end=None``: to the last), every
+    ``every``-th of them. Returns ``(frames, times, info)``: ``frames`` of shape
+    ``(n, height, width)`` and dtype float32 (8-bit video on the 0–255 scale, range-mapped by
+    ``range`` — ``"auto"``, ``"full"`` or ``"limited"`` — and linearised by ``linearisation``
+    — ``"linear"``, ``"srgb"`` or a gamma such as ``"2.2"``; a cine's or MRAW's frames as the
+    sensor's linear counts), ``times`` in seconds (float64, plus ``time_offset``), and
+    ``info``, how the file was read (decoder, size, frame rate, frames in the file and kept,
+    range and where it came from, clipped pixels), as ``import.json`` records it."""
+    start = _integer(start, "start")
+    every = _integer(every, "every")
+    if start < 0:
+        raise ValueError(f"start: {start} is negative; frames count from 0")
+    if every < 1:
+        raise ValueError(f"every: {every}; keep every 1st frame or more (every >= 1)")
+    if end is not None:
+        end = _integer(end, "end")
+        if end <= start:
+            raise ValueError(f"end: {end} is not after start {start}: the selection is empty")
+    for name, value in (("start", start), ("every", every), ("end", end)):
+        if value is not None:
+            _within_u64(value, name)
+    time_offset = _real(time_offset, "time_offset")
+    if not np.isfinite(time_offset):
+        raise ValueError(f"time_offset: {time_offset} is not a finite number of seconds")
+    for name, value in (("range", range), ("linearisation", linearisation)):
+        if not isinstance(value, str):
+            raise TypeError(f"{name}: expected a string, got {type(value).__name__} {value!r}")
+    frames, times, info = _ext.read_video(
+        _path(path, "path"), start, end, every, time_offset, range, linearisation
+    )
+    return frames, times, json.loads(info)
+
+
 def _as_scene(scene: Scene | PathLike) -> Scene:
     if isinstance(scene, Scene):
         return scene

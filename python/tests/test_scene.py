@@ -490,3 +490,53 @@ def test_a_saved_copy_keeps_the_masks_and_flow_axis_of_its_recording(tmp_path):
     a = fluidnerf.reconstruct(scene, "asart", tmp_path / "a", **options)
     b = fluidnerf.reconstruct(tmp_path / "copy", "asart", tmp_path / "b", **options)
     np.testing.assert_array_equal(a.volume, b.volume)
+
+
+FIXTURES = Path(__file__).resolve().parents[2] / "crates" / "io" / "tests" / "fixtures" / "video"
+
+
+def test_read_video_decodes_high_speed_recordings_and_mjpeg_as_import_does():
+    # The fixtures' pixel (x, y) of frame k is v = 20 + 4x + 3y + 10k; the 12-bit MRAW and
+    # the 16-bit cine store 64 + 10 v (the cine's black level is 64).
+    y, x = np.mgrid[0:24, 0:32]
+    frames, times, info = fluidnerf.read_video(FIXTURES / "ramp_12bit.mraw", start=1, every=2)
+    assert frames.shape == (2, 24, 32) and frames.dtype == np.float32
+    np.testing.assert_array_equal(times, [0.001, 0.003])
+    np.testing.assert_array_equal(frames[1], 64 + 10 * (20 + 4 * x + 3 * y + 30))
+    assert (info["decoder"], info["range_source"], info["frames_kept"]) == ("mraw", "raw", 2)
+    frames, times, info = fluidnerf.read_video(str(FIXTURES / "ramp_16bit.cine"), end=2, time_offset=1.0)
+    np.testing.assert_array_equal(frames[0], 10 * (20 + 4 * x + 3 * y))
+    np.testing.assert_array_equal(times, [1.0, 1.001])
+    # MJPEG, linearised as asked: the ramp within JPEG's error, then through the sRGB curve.
+    frames, times, info = fluidnerf.read_video(FIXTURES / "ramp_mjpeg.avi", linearisation="srgb")
+    c = (20 + 4 * 5 + 3 * 7 + 10) / 255
+    assert info["decoder"] == "mjpeg-avi" and frames.shape == (4, 24, 32)
+    assert abs(frames[1, 7, 5] - 255 * ((c + 0.055) / 1.055) ** 2.4) < 1.0
+    np.testing.assert_allclose(times, [0.0, 0.1, 0.2, 0.3])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "words"),
+    [
+        ({"start": -1}, ValueError, "start: -1 is negative"),
+        ({"every": 0}, ValueError, "every: 0"),
+        ({"start": 2, "end": 2}, ValueError, "end: 2 is not after start 2"),
+        ({"end": 9}, fluidnerf.FluidNerfError, "has only 4 frame(s)"),
+        ({"time_offset": float("nan")}, ValueError, "time_offset: nan"),
+        ({"range": "tv-ish"}, fluidnerf.FluidNerfError, "range: expected auto, full or limited"),
+        ({"linearisation": "-1"}, fluidnerf.FluidNerfError, "linearisation: `-1` is not a linearisation"),
+        ({"start": 1.0}, TypeError, "start: expected an integer"),
+    ],
+)
+def test_read_video_refuses_a_bad_selection_naming_it(kwargs, error, words):
+    with pytest.raises(error, match=None) as e:
+        fluidnerf.read_video(FIXTURES / "ramp_8bit.mraw", **kwargs)
+    assert words in str(e.value)
+
+
+def test_read_video_names_the_file_it_cannot_read(tmp_path):
+    (tmp_path / "cam.mraw").write_bytes(b"\0" * 10)
+    with pytest.raises(fluidnerf.FluidNerfError, match="cam.mraw.*no header of its own"):
+        fluidnerf.read_video(tmp_path / "cam.mraw")
+    with pytest.raises(TypeError, match="path: expected a path"):
+        fluidnerf.read_video(3)

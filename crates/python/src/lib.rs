@@ -185,6 +185,7 @@ fn _fluidnerf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::read_transforms, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_opencv, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_colmap, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::read_video, m)?)?;
     m.add_function(wrap_pyfunction!(run::default_config, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_config, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_run_folder, m)?)?;

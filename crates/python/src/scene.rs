@@ -523,3 +523,43 @@ pub fn read_colmap(py: Python<'_>, folder: PathBuf) -> PyResult<Vec<NamedCamera<
     let cams = guard(|| fluidnerf_io::calib::read_colmap(&folder).map_err(|e| err(e.to_string())))?;
     named_cameras(py, cams)
 }
+
+/// A decoded recording for Python: frames `(n, height, width)`, times, how it was read (JSON).
+type DecodedVideo<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray1<f64>>, String);
+
+/// The frames of a camera's recording (`fluidnerf_io::video`: MJPEG AVI, Phantom cine and
+/// Photron MRAW directly, other formats through ffmpeg), as `import` decodes them: the frames
+/// kept (`start`, `end`, every `every`-th) as an array `(n, height, width)` of float32, their
+/// times in seconds (plus `time_offset`), and how the file was read as JSON text.
+#[pyfunction]
+#[pyo3(signature = (path, start, end, every, time_offset, range, linearisation))]
+#[allow(clippy::too_many_arguments)]
+pub fn read_video<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    start: usize,
+    end: Option<usize>,
+    every: usize,
+    time_offset: f64,
+    range: &str,
+    linearisation: &str,
+) -> PyResult<DecodedVideo<'py>> {
+    let range: fluidnerf_io::video::VideoRange = range.parse().map_err(|e: String| err(format!("range: {e}")))?;
+    let linearisation: fluidnerf_io::image::Linearisation =
+        linearisation.parse().map_err(|e: String| err(format!("linearisation: {e}")))?;
+    let opts =
+        fluidnerf_io::video::VideoOptions { range, start, end, every, time_offset_s: time_offset, linearisation };
+    let video =
+        py.allow_threads(|| guard(|| fluidnerf_io::video::read_video(&path, &opts).map_err(|e| err(e.to_string()))))?;
+    let (w, h) = (video.info.width as usize, video.info.height as usize);
+    let n = video.frames.len();
+    let mut data = Vec::with_capacity(n * w * h);
+    for (k, f) in video.frames.iter().enumerate() {
+        if (f.width, f.height) != (w, h) {
+            return Err(err(format!("{}: frame {k} is {}×{} pixels, not {w}×{h}", path.display(), f.width, f.height)));
+        }
+        data.extend_from_slice(&f.data);
+    }
+    let info = serde_json::to_string(&video.info).map_err(|e| err(e.to_string()))?;
+    Ok((PyArray1::from_vec(py, data).reshape([n, h, w])?, PyArray1::from_vec(py, video.times), info))
+}
