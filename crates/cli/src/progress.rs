@@ -28,3 +28,21 @@ pub fn bar(len: u64, what: &str) -> ProgressBar {
     pb.enable_steady_tick(Duration::from_millis(250));
     pb
 }
+
+/// A counter of steps whose number is not known in advance (frames decoded from a video),
+/// labelled `what`, with the rate; hidden as [`bar`] is.
+pub fn counter(what: &str, unit: &str) -> ProgressBar {
+    if QUIET.load(Ordering::Relaxed) {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::no_length();
+    pb.set_style(
+        ProgressStyle::with_template(&format!(
+            "{{prefix:>12}} {{spinner}} {{pos}} {unit} {{elapsed_precise}} ({{per_sec}}) {{msg}}"
+        ))
+        .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    pb.set_prefix(what.to_string());
+    pb.enable_steady_tick(Duration::from_millis(250));
+    pb
+}

@@ -272,6 +272,7 @@ fn expand_videos(
         let dir = out.join("frames").join(&name);
         created.dir_all(&dir)?;
         let mut times = Vec::new();
+        let bar = crate::progress::counter(&name, "frames");
         let info = fluidnerf_io::video::read_video_frames(&f.file_path, opts, |frame| {
             let path = dir.join(format!("{:06}.tif", times.len()));
             if path.exists() && !force {
@@ -285,9 +286,11 @@ fn expand_videos(
             times.push(frame.time_s);
             expanded.push(Frame { file_path: path, time: Some(frame.time_s), ..f.clone() });
             sources.push(source);
+            bar.inc(1);
             Ok(())
         })
         .with_context(|| format!("camera {name}: reading its video"))?;
+        bar.finish_and_clear();
         if info.clipped_pixels > 0 {
             log::warn!(
                 "{}: {} pixel(s) {} were clipped",
