@@ -52,6 +52,14 @@ fn ramp_video() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg.avi")
 }
 
+/// `import --opencv calib --images videos --aabb … EXTRA… -o out`: the rig's recordings.
+fn import_recordings(calib: &Path, videos: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["import", "--opencv", s(calib), "--images", s(videos), "--aabb", "-10,-10,-10,10,10,10"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["-o", s(out)]);
+    fluidnerf(&args)
+}
+
 /// A temporary folder with the rig's calibration (`rig.yml`) and an empty `videos/` folder
 /// for its cameras' recordings: the folder, the calibration and the videos' folder.
 fn video_rig() -> (tempfile::TempDir, PathBuf, PathBuf) {
@@ -1166,12 +1174,7 @@ fn a_forced_reimport_removes_the_frames_it_no_longer_writes() {
         std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
     }
     let out = dir.path().join("scene");
-    let run = |extra: &[&str]| {
-        let mut a = vec!["import", "--opencv", s(&calib), "--images", s(&videos), "--aabb", "-10,-10,-10,10,10,10"];
-        a.extend_from_slice(extra);
-        a.extend_from_slice(&["-o", s(&out)]);
-        fluidnerf(&a)
-    };
+    let run = |extra: &[&str]| import_recordings(&calib, &videos, &out, extra);
     let o = run(&[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let frames = |cam: &str| {
@@ -1212,19 +1215,7 @@ fn phantom_cine_recordings_import_as_videos() {
         std::fs::copy(&fixture, videos.join(format!("{n}.cine"))).expect("copies the fixture");
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&videos),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "--video-frames",
-        "2..",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(&calib, &videos, &out, &["--video-frames", "2.."]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stderr(&o).contains("gamma"), "{}", stderr(&o));
     let scene = load_scene(&out).expect("loads");
@@ -1242,17 +1233,7 @@ fn phantom_cine_recordings_import_as_videos() {
     let mut bytes = std::fs::read(&fixture).expect("reads");
     bytes[16..20].copy_from_slice(&1i32.to_le_bytes());
     std::fs::write(videos.join("cam2.cine"), bytes).expect("writes");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&videos),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&dir.path().join("late")),
-    ]);
+    let o = import_recordings(&calib, &videos, &dir.path().join("late"), &[]);
     assert!(!o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("not synchronised") && stderr(&o).contains("camera cam2 at 0.001 s"), "{}", stderr(&o));
 }
@@ -1268,17 +1249,7 @@ fn photron_mraw_recordings_import_as_videos() {
         std::fs::copy(fixtures.join("ramp_12bit.cihx"), videos.join(format!("{n}.cihx"))).expect("copies");
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&videos),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(&calib, &videos, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stderr(&o).contains("gamma"), "{}", stderr(&o));
     let scene = load_scene(&out).expect("loads");

@@ -165,18 +165,7 @@ pub(crate) fn read_cine(
     if black >= full_scale {
         return Err(bad(format!("its black level {black} is at or above the {bits}-bit full scale")));
     }
-    if opts.range != VideoRange::Auto {
-        log::warn!(
-            "{}: --video-range has no effect on a cine file, whose frames are raw sensor counts",
-            path.display()
-        );
-    }
-    if opts.linearisation != crate::image::Linearisation::Linear {
-        log::warn!(
-            "{}: the linearisation has no effect on a cine file, whose frames are linear sensor counts",
-            path.display()
-        );
-    }
+    crate::video::warn_unused_by_raw(path, opts, "a cine file");
     let offsets_at = u64::from(u32_at(&header, OFF_IMAGE_OFFSETS));
     let offsets: Vec<u64> = read_at(offsets_at, 8 * count, "image offset table")?
         .chunks_exact(8)

@@ -205,18 +205,7 @@ pub(crate) fn read_mraw(
             ))
         }
     };
-    if opts.range != VideoRange::Auto {
-        log::warn!(
-            "{}: --video-range has no effect on an MRAW file, whose frames are raw sensor counts",
-            path.display()
-        );
-    }
-    if opts.linearisation != crate::image::Linearisation::Linear {
-        log::warn!(
-            "{}: the linearisation has no effect on an MRAW file, whose frames are linear sensor counts",
-            path.display()
-        );
-    }
+    crate::video::warn_unused_by_raw(path, opts, "an MRAW file");
     let io = |e| IoError::io(path, "MRAW file", e);
     let file = File::open(path).map_err(io)?;
     let len = file.metadata().map_err(io)?.len();

@@ -300,6 +300,20 @@ pub fn read_video_frames(
     Ok(info)
 }
 
+/// Warns that `--video-range` and the linearisation do not apply to `path`, a raw recording
+/// (`kind`: "a cine file") whose frames are linear sensor counts, when either is given.
+pub(crate) fn warn_unused_by_raw(path: &Path, opts: &VideoOptions, kind: &str) {
+    if opts.range != VideoRange::Auto {
+        log::warn!("{}: --video-range has no effect on {kind}, whose frames are raw sensor counts", path.display());
+    }
+    if opts.linearisation != Linearisation::Linear {
+        log::warn!(
+            "{}: the linearisation has no effect on {kind}, whose frames are linear sensor counts",
+            path.display()
+        );
+    }
+}
+
 /// Reads a video by the container its first bytes announce.
 fn read_sniffed(
     path: &Path,
