@@ -140,3 +140,19 @@ fn a_noise_level_out_of_range_is_named_as_such() {
         assert!(!d.join("st").exists(), "{levels}: wrote output");
     }
 }
+
+/// A camera count beyond what a rig can sensibly have is refused before anything is made:
+/// it synthesised that many views, one cell after the others had run, without a word.
+#[test]
+fn a_camera_count_beyond_a_rig_is_refused_up_front() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    for counts in ["4,1000", "100000"] {
+        let out = fluidnerf(d, &["study", "--preset", "smoke", "--methods", "asart", "--cameras", counts, "-o", "st"]);
+        refused(
+            &out,
+            "training cameras (and the one held out) are more than a rig can sensibly have; give at most 999",
+        );
+        assert!(!d.join("st").exists(), "--cameras {counts}: a refused study wrote output");
+    }
+}

@@ -188,6 +188,18 @@ impl SynthSettings {
         Volume::dims_for(aabb, self.resolution)
     }
 
+    /// Refuses settings whose [`Self::memory_bytes`] exceed the memory available now, for a
+    /// truth grid of `voxels` cells: the allocation would abort the program part-way.
+    pub fn check_memory(&self, voxels: u64) -> Result<(), SynthError> {
+        let needed = self.memory_bytes(voxels);
+        match available_memory_bytes() {
+            Some(avail) if needed > avail => {
+                Err(SynthError::OutOfMemory { needed_mib: needed >> 20, available_mib: avail >> 20 })
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// Peak memory of [`generate`] in bytes (truth volumes, emitters, images and per-thread
     /// accumulators), for a truth grid of `voxels` cells.
     pub fn memory_bytes(&self, voxels: u64) -> u64 {
@@ -335,12 +347,7 @@ pub fn generate(
         _ => settings.truth_dims(&aabb),
     };
     let voxels = dims.iter().map(|&n| n as u64).product::<u64>();
-    let needed = settings.memory_bytes(voxels);
-    if let Some(avail) = available_memory_bytes() {
-        if needed > avail {
-            return Err(SynthError::OutOfMemory { needed_mib: needed >> 20, available_mib: avail >> 20 });
-        }
-    }
+    settings.check_memory(voxels)?;
     let cameras = settings.rig.build(&settings.lens, &aabb, settings.seed)?;
     let phantom = Phantom::build(&settings.phantom, &aabb, settings.seed, volume)?;
     let steps = settings.time_steps();

@@ -45,5 +45,5 @@ pub use phantom::{
 };
 pub use preset::{preset, presets, DEFAULT_PRESET};
 pub use real::{RealLike, RealRecording};
-pub use rig::{Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset};
+pub use rig::{Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset, MAX_CAMERAS};
 pub use sensor::SensorSettings;

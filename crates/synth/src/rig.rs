@@ -194,6 +194,11 @@ pub struct RigSettings {
     pub distance_mm: Option<f64>,
 }
 
+/// Most cameras a layout may have. The dissertation's largest rig has 120; a thousand, named
+/// `cam000` … `cam999`, is more than any laboratory sets up, and beyond it a count is a slip
+/// that would image (and write) that many views before anything else could say so.
+pub const MAX_CAMERAS: usize = 1000;
+
 /// One camera of a rig.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RigCamera {
@@ -216,6 +221,16 @@ impl RigSettings {
 
     /// Checks the settings that need no geometry.
     pub fn validate(&self) -> Result<(), SynthError> {
+        let (key, total) = match &self.layout {
+            Layout::Ring { count, .. } | Layout::Sphere { count } => ("rig.layout.count", *count),
+            Layout::Explicit { positions, .. } => ("rig.layout.positions", positions.len()),
+        };
+        if total > MAX_CAMERAS {
+            return Err(SynthError::invalid(
+                key,
+                format!("{total} cameras are more than a rig can sensibly have; give at most {MAX_CAMERAS}"),
+            ));
+        }
         match &self.layout {
             Layout::Ring { count, arc_deg, start_deg, .. } => {
                 if *count == 0 {
@@ -416,6 +431,25 @@ mod tests {
 
     fn box40() -> Aabb {
         Aabb::cube(DVec3::ZERO, 40.0)
+    }
+
+    #[test]
+    fn a_layout_of_more_cameras_than_a_rig_can_have_is_refused() {
+        let ring = |count| RigSettings {
+            layout: Layout::Ring { count, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X },
+            ..Default::default()
+        };
+        assert!(ring(MAX_CAMERAS).validate().is_ok());
+        let e = ring(MAX_CAMERAS + 1).validate().expect_err("too many").to_string();
+        assert!(e.contains("rig.layout.count") && e.contains("1001 cameras") && e.contains("at most 1000"), "{e}");
+        let sphere = RigSettings { layout: Layout::Sphere { count: 1_000_000 }, ..Default::default() };
+        assert!(sphere.validate().is_err());
+        let explicit = RigSettings {
+            layout: Layout::Explicit { positions: vec![[0.0, 0.0, 400.0]; MAX_CAMERAS + 1], targets: vec![] },
+            ..Default::default()
+        };
+        let e = explicit.validate().expect_err("too many").to_string();
+        assert!(e.contains("rig.layout.positions"), "{e}");
     }
 
     #[test]

@@ -87,7 +87,7 @@ pub struct Args {
     /// method, and the classical baseline].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub methods: Option<Vec<MethodArg>>,
-    /// Training camera counts, comma-separated [default: the preset's].
+    /// Training camera counts, comma-separated, each 2 to 999 [default: the preset's].
     #[arg(long, value_delimiter = ',')]
     pub cameras: Option<Vec<usize>>,
     /// Image noise levels (fraction of each image's maximum), comma-separated [default: the
@@ -273,12 +273,21 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     if let Some(&c) = g.cameras.iter().find(|&&c| c < 2) {
         bail!("--cameras: {c} is too few; give at least 2 training cameras");
     }
+    // Each scene has one camera more than its count, held out.
+    let most = fluidnerf_synth::MAX_CAMERAS - 1;
+    if let Some(&c) = g.cameras.iter().find(|&&c| c > most) {
+        bail!(
+            "--cameras: {c} training cameras (and the one held out) are more than a rig can sensibly have; give at \
+             most {most}"
+        );
+    }
     if !(8..=1024).contains(&g.pixels) {
         bail!("--pixels must be between 8 and 1024, got {}", g.pixels);
     }
     if !(4..=512).contains(&g.resolution) {
         bail!("--resolution must be between 4 and 512, got {}", g.resolution);
     }
+    check_scenes(&g)?;
     Ok(g)
 }
 
@@ -303,11 +312,8 @@ fn scene_name(layout: LayoutChoice, cameras: usize, noise: f64) -> String {
     format!("{}-c{cameras:02}-n{:03}", layout.name(), (noise * 1000.0).round() as u64)
 }
 
-/// Synthesises the scene of a cell unless a finished one is there.
-fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise: f64) -> anyhow::Result<()> {
-    if dir.join("transforms.json").is_file() && dir.join("synth.json").is_file() {
-        return Ok(());
-    }
+/// The `synth` line of a cell's scene, written into `dir`.
+fn synth_line(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise: f64) -> Vec<String> {
     let mut line: Vec<String> =
         vec!["synth".into(), "-q".into(), "--force".into(), "--preset".into(), g.scene_preset.clone()];
     for (k, v) in [
@@ -322,7 +328,43 @@ fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, nois
     }
     line.extend(layout.synth_args().iter().map(|s| s.to_string()));
     line.extend(["-o".into(), dir.to_string_lossy().into_owned()]);
-    super::run_line(&line).with_context(|| format!("synthesising {}", dir.display()))
+    line
+}
+
+/// Synthesises the scene of a cell unless a finished one is there.
+fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise: f64) -> anyhow::Result<()> {
+    if dir.join("transforms.json").is_file() && dir.join("synth.json").is_file() {
+        return Ok(());
+    }
+    super::run_line(&synth_line(g, dir, layout, cameras, noise))
+        .with_context(|| format!("synthesising {}", dir.display()))
+}
+
+/// Checks the scene of every cell as `synth` would, and that it fits in memory, before anything
+/// is made: a cell refused only when its turn came left the cells before it made and the study
+/// unfinished.
+fn check_scenes(g: &Grid) -> anyhow::Result<()> {
+    use clap::Parser;
+    for &layout in &g.layouts {
+        for &cameras in &g.cameras {
+            for &noise in &g.noise {
+                let line = synth_line(g, Path::new("scene"), layout, cameras, noise);
+                let cell = || format!("the scene of {} cameras, noise {noise}, {}", cameras, layout.name());
+                let argv = std::iter::once("fluidnerf".to_string()).chain(line);
+                let super::Command::Synth(args) =
+                    crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{}: {e}", cell()))?.command
+                else {
+                    bail!("{}: not a synth line", cell());
+                };
+                let settings = super::synth::resolve(&args).with_context(cell)?;
+                let voxels = settings.truth_dims(&settings.aabb).iter().map(|&n| n as u64).product();
+                settings.check_memory(voxels).with_context(|| {
+                    format!("{} (--cameras {cameras}, --pixels {}, --resolution {})", cell(), g.pixels, g.resolution)
+                })?;
+            }
+        }
+    }
+    Ok(())
 }
 
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {

@@ -534,18 +534,9 @@ fn write_preview(path: &Path, syn: &Synthesis) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut stdout = std::io::stdout().lock();
-    if args.list_presets {
-        let mut text = String::new();
-        for (name, what) in presets() {
-            let mark = if name == DEFAULT_PRESET { "*" } else { " " };
-            let _ = writeln!(text, "{mark} {name:<13} {what}");
-        }
-        stdout.write_all(text.as_bytes()).context("cannot write to stdout")?;
-        return Ok(());
-    }
-    let Some(out) = args.out.clone() else { bail!("--out is required") };
+/// The settings `args` ask for: the --config file or the preset, with the options applied,
+/// validated.
+pub(crate) fn resolve(args: &Args) -> anyhow::Result<SynthSettings> {
     let mut settings = match &args.config {
         Some(path) => {
             let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -579,8 +570,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => preset(&args.preset)?,
     };
-    apply_overrides(&args, &mut settings)?;
+    apply_overrides(args, &mut settings)?;
     settings.validate()?;
+    Ok(settings)
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut stdout = std::io::stdout().lock();
+    if args.list_presets {
+        let mut text = String::new();
+        for (name, what) in presets() {
+            let mark = if name == DEFAULT_PRESET { "*" } else { " " };
+            let _ = writeln!(text, "{mark} {name:<13} {what}");
+        }
+        stdout.write_all(text.as_bytes()).context("cannot write to stdout")?;
+        return Ok(());
+    }
+    let Some(out) = args.out.clone() else { bail!("--out is required") };
+    let settings = resolve(&args)?;
     fluidnerf_pipeline::rundir::refuse_other_kind(&out, fluidnerf_pipeline::rundir::FolderKind::Scene, "synth")?;
     let scene_file = out.join("transforms.json");
     if scene_file.exists() && !args.force {
