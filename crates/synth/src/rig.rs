@@ -9,6 +9,7 @@
 //! cameras of the whole layout (`cam000`, …) so that a subset keeps the names of its parent
 //! layout (the dissertation's 4…60-camera sets are subsets of its 120-camera ring).
 
+use fluidnerf_core::geometry::MAX_COORDINATE;
 use fluidnerf_core::glam::{DAffine3, DMat3, DQuat, DVec3};
 use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, Camera, Intrinsics, ThinLens};
@@ -257,6 +258,17 @@ impl RigSettings {
                 if positions.iter().chain(targets).flatten().any(|v| !v.is_finite()) {
                     return Err(SynthError::invalid("rig.layout.positions", "positions and targets must be finite"));
                 }
+                if let Some(v) = positions.iter().chain(targets).flatten().find(|v| v.abs() > MAX_COORDINATE) {
+                    return Err(SynthError::invalid(
+                        "rig.layout.positions",
+                        format!(
+                            "coordinate {} is beyond ±{} mm of the origin, where camera positions and rays have no \
+                             finite length in the floats they are computed in",
+                            num(*v),
+                            num(MAX_COORDINATE)
+                        ),
+                    ));
+                }
                 if !targets.is_empty() && targets.len() != positions.len() {
                     return Err(SynthError::invalid(
                         "rig.layout.targets",
@@ -309,6 +321,27 @@ impl RigSettings {
         aabb.validate()?;
         let centre = aabb.centre();
         let dist = self.distance_mm.unwrap_or_else(|| lens.thin_lens().object_distance());
+        // Farther out, a camera's position has no finite length in 64-bit floats (its viewing
+        // direction is undefined) and its rays none in the 32-bit floats of rendering.
+        let ring_or_sphere = !matches!(self.layout, Layout::Explicit { .. });
+        if ring_or_sphere && !(dist.is_finite() && dist <= MAX_COORDINATE) {
+            let (key, what) = match self.distance_mm {
+                Some(_) => ("rig.distance_mm", "the distance"),
+                None => (
+                    "lens.magnification",
+                    "the lens's object distance f (1 - 1/M), from lens.magnification and lens.focal_length_mm,",
+                ),
+            };
+            return Err(SynthError::invalid(
+                key,
+                format!(
+                    "{what} {} mm is more than {} mm, where camera positions and rays have no finite length in \
+                     the floats they are computed in",
+                    num(dist),
+                    num(MAX_COORDINATE)
+                ),
+            ));
+        }
         let positions: Vec<DVec3> = match &self.layout {
             Layout::Ring { count, arc_deg, start_deg, axis } => (0..*count)
                 .map(|i| {
@@ -450,6 +483,23 @@ mod tests {
         };
         let e = explicit.validate().expect_err("too many").to_string();
         assert!(e.contains("rig.layout.positions"), "{e}");
+    }
+
+    #[test]
+    fn cameras_too_far_for_finite_rays_are_refused_not_a_panic() {
+        let lens = LensSettings { resolution: [24, 24], ..Default::default() };
+        let far = RigSettings { distance_mm: Some(1e300), ..Default::default() };
+        let e = far.build(&lens, &box40(), 0).expect_err("too far").to_string();
+        assert!(e.contains("rig.distance_mm") && e.contains("1e300"), "{e}");
+        let tiny = LensSettings { magnification: -1e-300, ..lens.clone() };
+        let e = RigSettings::default().build(&tiny, &box40(), 0).expect_err("too far").to_string();
+        assert!(e.contains("lens.magnification"), "{e}");
+        let explicit = RigSettings {
+            layout: Layout::Explicit { positions: vec![[1e200, 1e200, 0.0]], targets: vec![] },
+            ..Default::default()
+        };
+        let e = explicit.build(&lens, &box40(), 0).expect_err("too far").to_string();
+        assert!(e.contains("rig.layout.positions") && e.contains("1e200"), "{e}");
     }
 
     #[test]
