@@ -148,6 +148,9 @@ fn bad_settings_fail_before_any_work() {
         (&["--bit-depth", "14"][..], "bit_depth"),
         (&["--holdout", "9"][..], "does not exist"),
         (&["--f-number", "0"][..], "f_number"),
+        // The box images between the pixels: the scene was written, then refused by every reader.
+        (&["--distance", "100000"][..], "camera 0 (cam000) images the reconstruction box smaller than its pixels"),
+        (&["--pixel-pitch", "1e300"][..], "no pixel's ray crosses the box"),
     ] {
         let o = run_small(&dir, extra);
         let (out, err) = text(&o);

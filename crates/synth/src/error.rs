@@ -10,6 +10,14 @@ pub enum SynthError {
     /// A camera of the rig does not see the reconstruction box at all.
     #[error("camera {index} ({name}) does not see the reconstruction box: place the rig around the box or enlarge the field of view")]
     CameraMissesBox { index: usize, name: String },
+    /// A camera sees the box, but so small that no pixel's ray crosses it: its image would be
+    /// black, and every command that reads the scene would refuse it.
+    #[error(
+        "camera {index} ({name}) images the reconstruction box smaller than its pixels are apart: no pixel's ray \
+         crosses the box, so every command would refuse the scene; bring the rig closer (rig.distance_mm, \
+         --distance), or give a smaller pixel pitch or more pixels"
+    )]
+    BoxBetweenPixels { index: usize, name: String },
     /// The data set would not fit in memory.
     #[error(
         "these settings need about {needed_mib} MiB of memory but only {available_mib} MiB are available; \

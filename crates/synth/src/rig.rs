@@ -434,6 +434,10 @@ impl RigSettings {
             if vis.box_fraction_in_view == 0.0 && vis.pixel_fraction_on_box == 0.0 {
                 return Err(SynthError::CameraMissesBox { index: i, name: c.name.clone() });
             }
+            // Every command that reads a scene refuses a camera no pixel of which sees the box.
+            if vis.pixel_fraction_on_box == 0.0 {
+                return Err(SynthError::BoxBetweenPixels { index: i, name: c.name.clone() });
+            }
             if vis.box_fraction_in_view < 1.0 {
                 partial.push(vis.box_fraction_in_view);
             }
@@ -595,6 +599,9 @@ mod tests {
         let away = Layout::Explicit { positions, targets: vec![[0.0, 0.0, 0.0], [0.0, 0.0, 720.0]] };
         let missed = RigSettings { layout: away, ..Default::default() };
         assert!(matches!(missed.build(&lens, &box40(), 0), Err(SynthError::CameraMissesBox { index: 1, .. })));
+        // Far enough that the box falls between the pixels' rays: the scene would be refused.
+        let far = RigSettings { distance_mm: Some(1e5), ..Default::default() };
+        assert!(matches!(far.build(&lens, &box40(), 0), Err(SynthError::BoxBetweenPixels { index: 0, .. })));
         let holdout = RigSettings { holdout: vec![15], ..Default::default() };
         assert!(holdout.build(&lens, &box40(), 0).is_err());
         let jitter = RigSettings { jitter: Jitter { position_mm: -1.0, rotation_deg: 0.0 }, ..Default::default() };
