@@ -422,3 +422,32 @@ fn an_interrupted_synthesis_exits_130_and_leaves_nothing() {
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(!out.exists(), "an interrupted synthesis left {}", out.display());
 }
+
+/// Counts of a configuration's phantom far beyond their defaults are refused, naming the key:
+/// a billion blobs or turbulence modes failed to allocate and aborted the program, and a
+/// hundred octaves of turbulence gave images of NaN, blamed on `phantom` as a whole.
+#[test]
+fn phantom_counts_beyond_reason_are_refused_by_key() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let (config, out) = (tmp.path().join("synth.json"), tmp.path().join("out"));
+    for (kind, key, value, needle) in [
+        ("blobs", "blob_count", serde_json::json!(1_000_000_000u64), "`phantom.blob_count`: must be in 1..=1000"),
+        ("jet", "turbulence_modes", serde_json::json!(10_000_000_000u64), "`jet.turbulence_modes`: must be at most"),
+        ("jet", "inertial_octaves", serde_json::json!(100.0), "`jet.inertial_octaves`: must be at most 20"),
+    ] {
+        let mut phantom = serde_json::json!({ "kind": kind });
+        match key {
+            "blob_count" => phantom[key] = value,
+            _ => phantom["jet"] = serde_json::json!({ key: value }),
+        }
+        let settings = serde_json::json!({
+            "phantom": phantom, "resolution": 8, "lens": { "resolution": [16, 16] },
+            "rig": { "layout": { "layout": "ring", "count": 3, "arc_deg": 360.0, "start_deg": 0.0 } },
+        });
+        std::fs::write(&config, settings.to_string()).expect("writes");
+        let o = synth(&["-q", "-o", out.to_str().expect("utf-8"), "--config", config.to_str().expect("utf-8")]);
+        let err = text(&o).1;
+        assert!(!o.status.success() && err.contains(needle), "{key}: {err}");
+        assert!(!out.exists(), "{key}: wrote output");
+    }
+}

@@ -52,6 +52,12 @@ use serde::{Deserialize, Serialize};
 use super::turbulence::KinematicModes;
 use crate::SynthError;
 
+/// Most random Fourier modes of the jet's turbulence ([`JetParams::turbulence_modes`]).
+pub const MAX_TURBULENCE_MODES: usize = 4096;
+
+/// Widest −5/3 range of the jet's turbulence, octaves ([`JetParams::inertial_octaves`]).
+pub const MAX_INERTIAL_OCTAVES: f64 = 20.0;
+
 /// Parameters of the [`Jet`] phantom; lengths with suffix `_d` are in nozzle diameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -79,9 +85,11 @@ pub struct JetParams {
     pub helical_twist: f64,
     /// Azimuthal distortion of the rings, in wavelengths. Default 0.12.
     pub asymmetry: f64,
-    /// Number of random Fourier modes of the turbulence. Default 64.
+    /// Number of random Fourier modes of the turbulence, at most [`MAX_TURBULENCE_MODES`].
+    /// Default 64.
     pub turbulence_modes: usize,
-    /// Width of the −5/3 range, in octaves below the largest eddy (2.5 b). Default 5.
+    /// Width of the −5/3 range, in octaves below the largest eddy (2.5 b), at most
+    /// [`MAX_INERTIAL_OCTAVES`]. Default 5.
     pub inertial_octaves: f64,
     /// rms displacement of the turbulence, in local half-widths b. Default 0.3.
     pub wrinkle: f64,
@@ -142,6 +150,23 @@ impl JetParams {
                     format!("must be zero or positive, got {}", num(v)),
                 ));
             }
+        }
+        // Each mode is summed at every sample of every ray: a count far beyond the default's 64
+        // would run for days, or fail to allocate and abort.
+        if self.turbulence_modes > MAX_TURBULENCE_MODES {
+            return Err(SynthError::invalid(
+                "jet.turbulence_modes",
+                format!("must be at most {MAX_TURBULENCE_MODES}, got {}", self.turbulence_modes),
+            ));
+        }
+        // Eddies 2^-20 of the largest are far finer than a voxel of the finest truth grid
+        // (4096 along the box); much farther, their wavenumbers overflow 32-bit floats and the
+        // images hold NaN.
+        if self.inertial_octaves > MAX_INERTIAL_OCTAVES {
+            return Err(SynthError::invalid(
+                "jet.inertial_octaves",
+                format!("must be at most {MAX_INERTIAL_OCTAVES}, got {}", num(self.inertial_octaves)),
+            ));
         }
         if self.transition_end_d <= self.core_length_d {
             return Err(SynthError::invalid("jet.transition_end_d", "must exceed core_length_d"));

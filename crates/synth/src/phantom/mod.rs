@@ -97,6 +97,9 @@ impl PhantomKind {
 }
 
 /// Phantom settings; only the block of the chosen kind is used.
+/// Most Gaussian blobs of the `blobs` and `ball-and-blobs` phantoms.
+pub const MAX_BLOBS: usize = 1000;
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PhantomSettings {
@@ -104,7 +107,7 @@ pub struct PhantomSettings {
     pub kind: PhantomKind,
     pub jet: JetParams,
     pub jet_tr: StartingJetParams,
-    /// Number of blobs of `blobs` and `ball-and-blobs`. Default 5.
+    /// Number of blobs of `blobs` and `ball-and-blobs`, at most [`MAX_BLOBS`]. Default 5.
     pub blob_count: usize,
     /// The user volume for `volume` (recorded for reruns; the caller loads it).
     pub volume_path: Option<std::path::PathBuf>,
@@ -131,8 +134,13 @@ impl PhantomSettings {
         match self.kind {
             PhantomKind::Jet => self.jet.validate(),
             PhantomKind::JetTr => self.jet_tr.validate(),
-            PhantomKind::Blobs | PhantomKind::BallAndBlobs if self.blob_count == 0 => {
-                Err(SynthError::invalid("phantom.blob_count", "must be at least 1"))
+            // Every blob is summed at every sample of every ray: a count far beyond the default's
+            // 5 would run for days, or fail to allocate and abort.
+            PhantomKind::Blobs | PhantomKind::BallAndBlobs if !(1..=MAX_BLOBS).contains(&self.blob_count) => {
+                Err(SynthError::invalid(
+                    "phantom.blob_count",
+                    format!("must be in 1..={MAX_BLOBS}, got {}", self.blob_count),
+                ))
             }
             PhantomKind::Plume | PhantomKind::CfdJet => match self.cfd_step {
                 Some(s) if !cfd::STEPS.contains(&s) => Err(SynthError::invalid(
