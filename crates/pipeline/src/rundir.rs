@@ -859,8 +859,13 @@ pub fn from_json_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<
 }
 
 fn describe(e: &serde_path_to_error::Error<serde_json::Error>) -> String {
-    let path = e.path().to_string();
     let why = e.inner().to_string();
+    // A file cut short (a write that was interrupted) ends inside a value: no key is at fault.
+    if e.inner().is_eof() {
+        return format!("the JSON text ends early, as in a file cut short: {why}");
+    }
+    // `?` stands for a key the parser had not read yet; it names nothing in the file.
+    let path = e.path().to_string().split('.').filter(|s| *s != "?").collect::<Vec<_>>().join(".");
     if path.is_empty() || path == "." {
         return why;
     }
@@ -877,6 +882,27 @@ fn describe(e: &serde_path_to_error::Error<serde_json::Error>) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_file_cut_short_is_said_to_be_so_and_names_no_unknown_key() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("cut.json");
+        for text in ["{\"seed\": 1, ", "{\"a\": {\"b\": [1,", "{"] {
+            std::fs::write(&path, text).expect("writes");
+            let e = super::read_json::<serde_json::Value>(&path).expect_err("cut short").to_string();
+            assert!(e.contains("cut.json") && e.contains("ends early, as in a file cut short"), "{text}: {e}");
+            assert!(!e.contains('?'), "{text}: {e}");
+        }
+        // Other errors keep the key's path.
+        std::fs::write(&path, "{\"seed\": \"x\"}").expect("writes");
+        #[derive(serde::Deserialize, Debug)]
+        #[allow(dead_code)]
+        struct Seed {
+            seed: u64,
+        }
+        let e = super::read_json::<Seed>(&path).expect_err("a string").to_string();
+        assert!(e.contains("at `seed`: invalid type"), "{e}");
+    }
+
     #[test]
     fn settings_differences_name_the_keys() {
         let a = serde_json::json!({"seed": 0, "method": {"name": "tr-fast", "windows": {"frames": 4}}, "x": [1, 2]});
