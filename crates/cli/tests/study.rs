@@ -156,3 +156,26 @@ fn a_camera_count_beyond_a_rig_is_refused_up_front() {
         assert!(!d.join("st").exists(), "--cameras {counts}: a refused study wrote output");
     }
 }
+
+/// A cell whose run was stopped by Ctrl-C is run again when the study is continued: the rerun
+/// that the interruption asks for read its report back as if the run had finished, and the
+/// table showed the cut-short run beside runs that spent their whole budget.
+#[test]
+fn an_interrupted_cell_is_run_again_when_the_study_continues() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "asart", "--cameras", "2", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    let run = d.join("st/runs/ring360-c02-n000/asart");
+    // What a run stopped by Ctrl-C leaves: its report, with the status and reason of a stop.
+    edit_json(&run.join("report.json"), |r| {
+        r["status"] = "interrupted".into();
+        r["stop_reason"] = "interrupted".into();
+    });
+    let out = fluidnerf(d, &args);
+    ok(&out);
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("done earlier"), "the interrupted cell was read back");
+    assert_eq!(report(&run)["status"], "finished");
+    let record = json(&d.join("st/study.json"));
+    assert_ne!(record["rows"][0]["stop_reason"], "Interrupted", "{record}");
+}

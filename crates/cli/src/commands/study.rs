@@ -434,7 +434,11 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                 for &method in &g.methods {
                     k += 1;
                     let run_dir = out.join("runs").join(scene_name(layout, cameras, noise)).join(method.name());
-                    let finished = run_dir.join("report.json").is_file();
+                    // A run stopped by Ctrl-C writes its report too: its cell is run again, not
+                    // read back as if its budget had been spent.
+                    let report_file = run_dir.join("report.json");
+                    let finished = report_file.is_file()
+                        && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished;
                     #[allow(clippy::print_stdout)]
                     {
                         println!(
