@@ -451,3 +451,31 @@ fn phantom_counts_beyond_reason_are_refused_by_key() {
         assert!(!out.exists(), "{key}: wrote output");
     }
 }
+
+/// `--force` over an earlier synthetic scene replaces it whole: its images, background frames
+/// and truth volumes that the new scene has not were left beside the new scene's, so the
+/// folder held the files of two scenes. Files that are no scene's stay.
+#[test]
+fn force_leaves_no_file_of_the_earlier_scene() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("scene");
+    let out = dir.to_str().expect("utf-8 path");
+    let tiny = ["-q", "--preset", "demo", "--pixels", "16", "--resolution", "8", "-o", out];
+    let o = synth(&[&tiny[..], &["--cameras", "6", "--real-like"]].concat());
+    assert!(o.status.success(), "{:?}", text(&o));
+    std::fs::write(dir.join("notes.txt"), "mine").expect("writes");
+    let o = synth(&[&tiny[..], &["--cameras", "3", "--phantom", "jet-tr", "--force"]].concat());
+    assert!(o.status.success(), "{:?}", text(&o));
+    let names = |sub: &str| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir.join(sub))
+            .map(|d| d.map(|e| e.expect("entry").file_name().to_string_lossy().into_owned()).collect())
+            .unwrap_or_default();
+        v.sort();
+        v
+    };
+    let images: Vec<String> = (0..3).flat_map(|c| (0..3).map(move |t| format!("cam{c:03}_t{t:02}.png"))).collect();
+    assert_eq!(names("images"), images);
+    assert_eq!(names("truth"), ["truth_t00.npy", "truth_t01.npy", "truth_t02.npy"]);
+    assert!(!dir.join("background").exists(), "the earlier recording's background frames stayed");
+    assert!(dir.join("notes.txt").is_file(), "a file of no scene was removed");
+}

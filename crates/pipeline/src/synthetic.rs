@@ -13,7 +13,7 @@
 //! The caller owns the folder: it checks that nothing is overwritten without being asked and
 //! writes its own record of the settings (`synth.json`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use fluidnerf_core::Scene;
 use fluidnerf_io::image::Linearisation;
@@ -41,8 +41,11 @@ pub fn recording(syn: &Synthesis) -> Recording {
 }
 
 /// Writes `syn` into `folder` (created if missing): images, background frames, truth volumes
-/// and `transforms.json`. Returns the scene as written.
+/// and `transforms.json`. Returns the scene as written. A synthetic scene already there (one
+/// with `synth`'s `synth.json`) is replaced whole: its images, background frames and truth
+/// volumes that `syn` has not are removed, so that none of its files stays beside the new ones.
 pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError> {
+    let earlier = synthesised_files(folder);
     std::fs::create_dir_all(folder).map_err(|e| IoError::io(folder, "scene folder", e))?;
     for f in &syn.frames {
         let path = folder.join(syn.image_path(f));
@@ -68,7 +71,62 @@ pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError>
         &recording(syn),
         false,
     )?;
+    let written: std::collections::HashSet<PathBuf> = syn
+        .frames
+        .iter()
+        .map(|f| syn.image_path(f))
+        .chain((0..syn.cameras.len()).flat_map(|c| syn.background_paths(c)))
+        .chain((0..syn.truth.len()).map(|k| syn.truth_path(k)))
+        .collect();
+    for stale in earlier.iter().filter(|p| !written.contains(*p)) {
+        let path = folder.join(stale);
+        if path.is_file() {
+            std::fs::remove_file(&path).map_err(|e| IoError::io(&path, "file of the earlier scene", e))?;
+        }
+    }
+    // A folder the new scene has no file in (the background frames of a real-like recording)
+    // goes too, when nothing else is left in it.
+    for dir in ["images", "background", "truth"] {
+        if earlier.iter().any(|p| p.starts_with(dir)) && !written.iter().any(|p| p.starts_with(dir)) {
+            let _ = std::fs::remove_dir(folder.join(dir));
+        }
+    }
     Ok(scene)
+}
+
+/// The images, background frames and truth volumes that the `transforms.json` of a scene
+/// `synth` wrote into `folder` lists, relative to `folder`; none for a folder without one, or
+/// whose scene was not synthesised (its images are a user's), and only paths inside the
+/// folders `synth` writes.
+fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
+    let read = |name: &str| -> Option<serde_json::Value> {
+        serde_json::from_str(&std::fs::read_to_string(folder.join(name)).ok()?).ok()
+    };
+    let synthesised =
+        read("synth.json").is_some_and(|r| r.get("command").and_then(serde_json::Value::as_str) == Some("synth"));
+    let Some(scene) = read(fluidnerf_io::scene::SCENE_FILE).filter(|_| synthesised) else {
+        return Vec::new();
+    };
+    let list = |key: &str| scene.get(key).and_then(serde_json::Value::as_array).cloned().unwrap_or_default();
+    let mut paths: Vec<&str> = Vec::new();
+    let (frames, truth) = (list("frames"), list("truth"));
+    for entry in frames.iter().chain(&truth) {
+        paths.extend(entry.get("file_path").and_then(serde_json::Value::as_str));
+        match entry.get("background") {
+            Some(serde_json::Value::String(p)) => paths.push(p),
+            Some(serde_json::Value::Array(ps)) => paths.extend(ps.iter().filter_map(serde_json::Value::as_str)),
+            _ => {}
+        }
+    }
+    paths
+        .into_iter()
+        .map(PathBuf::from)
+        .filter(|p| {
+            let mut parts = p.components();
+            matches!(parts.next(), Some(std::path::Component::Normal(d)) if ["images", "background", "truth"].iter().any(|s| d == *s))
+                && parts.all(|c| matches!(c, std::path::Component::Normal(_)))
+        })
+        .collect()
 }
 
 #[cfg(test)]
