@@ -549,17 +549,32 @@ pub fn read_video<'py>(
         linearisation.parse().map_err(|e: String| err(format!("linearisation: {e}")))?;
     let opts =
         fluidnerf_io::video::VideoOptions { range, start, end, every, time_offset_s: time_offset, linearisation };
-    let video =
-        py.allow_threads(|| guard(|| fluidnerf_io::video::read_video(&path, &opts).map_err(|e| err(e.to_string()))))?;
-    let (w, h) = (video.info.width as usize, video.info.height as usize);
-    let n = video.frames.len();
-    let mut data = Vec::with_capacity(n * w * h);
-    for (k, f) in video.frames.iter().enumerate() {
-        if (f.width, f.height) != (w, h) {
-            return Err(err(format!("{}: frame {k} is {}×{} pixels, not {w}×{h}", path.display(), f.width, f.height)));
-        }
-        data.extend_from_slice(&f.data);
-    }
-    let info = serde_json::to_string(&video.info).map_err(|e| err(e.to_string()))?;
-    Ok((PyArray1::from_vec(py, data).reshape([n, h, w])?, PyArray1::from_vec(py, video.times), info))
+    // The frames go straight into the array's buffer as they are decoded: one copy of the
+    // recording in memory, not a list of frames and then the array.
+    let (mut data, mut times) = (Vec::<f32>::new(), Vec::<f64>::new());
+    let mut size = None;
+    let info = py.allow_threads(|| {
+        guard(|| {
+            fluidnerf_io::video::read_video_frames(&path, &opts, |frame| {
+                let (w, h) = *size.get_or_insert((frame.image.width, frame.image.height));
+                if (frame.image.width, frame.image.height) != (w, h) {
+                    return Err(fluidnerf_io::IoError::invalid(
+                        &path,
+                        format!(
+                            "frame {} is {}×{} pixels, not {w}×{h}",
+                            frame.index, frame.image.width, frame.image.height
+                        ),
+                    ));
+                }
+                data.extend_from_slice(&frame.image.data);
+                times.push(frame.time_s);
+                Ok(())
+            })
+            .map_err(|e| err(e.to_string()))
+        })
+    })?;
+    let (w, h) = size.unwrap_or((info.width as usize, info.height as usize));
+    let n = times.len();
+    let info = serde_json::to_string(&info).map_err(|e| err(e.to_string()))?;
+    Ok((PyArray1::from_vec(py, data).reshape([n, h, w])?, PyArray1::from_vec(py, times), info))
 }
