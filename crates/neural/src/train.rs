@@ -92,6 +92,10 @@ pub enum Batching {
 /// The most samples a ray may take (coarse and fine together): the dissertation's are 64 + 128.
 pub const MAX_SAMPLES_PER_RAY: usize = 4096;
 
+/// The most pixels drawn from one image per iteration: every pixel of a 2048 × 2048 image.
+/// More would only repeat pixels, and their rays could not be held.
+pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
+
 /// Sampling, optimisation and stopping settings (defaults: Table 5.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -287,8 +291,11 @@ impl TrainConfig {
         if let Some(occupancy) = &self.occupancy {
             occupancy.validate()?;
         }
-        if self.rays_per_image == 0 {
-            return bad("rays_per_image", "must be positive".into());
+        if !(1..=MAX_RAYS_PER_IMAGE).contains(&self.rays_per_image) {
+            return bad(
+                "rays_per_image",
+                format!("must be 1 to {MAX_RAYS_PER_IMAGE} pixels per image, got {}", self.rays_per_image),
+            );
         }
         self.schedule.validate()?;
         self.adam.validate()?;

@@ -37,19 +37,27 @@ pub(crate) fn estimate_memory(
     threads: u64,
     train: &TrainConfig,
 ) -> u64 {
-    let images = pixels * (4 + 4 + 32);
+    // Saturating: a setting too large for any memory is refused as such, not wrapped round
+    // into a small estimate.
+    let mul = |factors: &[u64]| factors.iter().fold(1u64, |acc, &f| acc.saturating_mul(f));
+    let images = mul(&[pixels, 4 + 4 + 32]);
     let per_pixel = match train.pixel_supersample {
-        fluidnerf_neural::train::Supersample::Fixed(s) => (s * s) as u64,
+        fluidnerf_neural::train::Supersample::Fixed(s) => mul(&[s as u64, s as u64]),
         fluidnerf_neural::train::Supersample::Auto => 1,
     };
     // Each ray with its pixel, sample span and the values the iteration keeps of it.
-    let rays = views * train.rays_per_image as u64 * per_pixel * 128;
-    let optimiser = params * 4 * (3 + threads);
-    let samples = (train.coarse_samples + train.fine_samples) as u64;
-    let scratch = threads * (train.chunk_samples as u64 * 4 * 16 + samples * 64);
+    let rays = mul(&[views, train.rays_per_image as u64, per_pixel, 128]);
+    let optimiser = mul(&[params, 4, 3u64.saturating_add(threads)]);
+    let samples = (train.coarse_samples as u64).saturating_add(train.fine_samples as u64);
+    let scratch = mul(&[threads, mul(&[train.chunk_samples as u64, 4, 16]).saturating_add(mul(&[samples, 64]))]);
     // The occupancy grid is carved into one byte per cell, and a copy when it is dilated.
-    let occupancy = train.occupancy.as_ref().map_or(0, |o| 2 * (o.resolution as u64).pow(3));
-    images + rays + optimiser + scratch + occupancy + out_voxels * 4 * 2 + truth_voxels * 4 * 3
+    let occupancy = train
+        .occupancy
+        .as_ref()
+        .map_or(0, |o| mul(&[2, o.resolution as u64, o.resolution as u64, o.resolution as u64]));
+    [images, rays, optimiser, scratch, occupancy, mul(&[out_voxels, 4, 2]), mul(&[truth_voxels, 4, 3])]
+        .into_iter()
+        .fold(0u64, u64::saturating_add)
 }
 
 /// The training problem of a scene: its training and held-out views, their images
@@ -746,4 +754,22 @@ pub(crate) fn write_checkpoint_to<F: TrainableField>(
 ) -> Result<std::path::PathBuf, PipelineError> {
     let tags = [(VIEWS_TAG, views.to_string())];
     dir.write_bytes(name, &fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Settings too large for any memory give an estimate no memory holds, not one wrapped
+    /// round to a few bytes that lets the run start and abort.
+    #[test]
+    fn the_memory_estimate_saturates_instead_of_wrapping() {
+        let mut train = TrainConfig { chunk_samples: 1 << 60, ..TrainConfig::default() };
+        assert_eq!(estimate_memory(1024, 4, 1000, 512, 0, 2, &train), u64::MAX);
+        train.chunk_samples = 256;
+        train.rays_per_image = usize::MAX;
+        assert_eq!(estimate_memory(1024, 4, 1000, 512, 0, 2, &train), u64::MAX);
+        train.rays_per_image = 1024;
+        assert!(estimate_memory(1024, 4, 1000, 512, 0, 2, &train) < 1 << 30);
+    }
 }
