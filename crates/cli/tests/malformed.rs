@@ -1012,7 +1012,7 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 11] = [
+    let edits: [(&str, Edit); 12] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
         ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
             v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
@@ -1037,6 +1037,11 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
         // Beyond any memory: refused by its key, not a panic or an aborted allocation.
         ("method.train.rays_per_image: must be 1 to 4194304 pixels per image, got 18446744073709551615", |v| {
             v["method"]["train"]["rays_per_image"] = u64::MAX.into()
+        }),
+        // Not a prior silently left out (its draws counted beyond 64 bits) nor one that never ends.
+        ("method.train.prior.points: must be 1 to 65536 points per iteration, got 4611686018427387904", |v| {
+            v["method"]["train"]["prior"]["tv"] = 1.0.into();
+            v["method"]["train"]["prior"]["points"] = (1u64 << 62).into();
         }),
     ];
     for (key, edit) in edits {

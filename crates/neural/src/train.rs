@@ -92,6 +92,10 @@ pub enum Batching {
 /// The most samples a ray may take (coarse and fine together): the dissertation's are 64 + 128.
 pub const MAX_SAMPLES_PER_RAY: usize = 4096;
 
+/// The most random points of the field's priors per iteration ([`Prior::points`]): they are
+/// evaluated in one pass, four field rows each, held with the field's activations.
+pub const MAX_PRIOR_POINTS: usize = 1 << 16;
+
 /// The most pixels drawn from one image per iteration: every pixel of a 2048 × 2048 image.
 /// More would only repeat pixels, and their rays could not be held.
 pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
@@ -267,8 +271,11 @@ impl TrainConfig {
                 return bad(what, format!("must be a non-negative weight, got {}", num(w)));
             }
         }
-        if self.prior.points == 0 {
-            return bad("prior.points", "needs at least 1".into());
+        if !(1..=MAX_PRIOR_POINTS).contains(&self.prior.points) {
+            return bad(
+                "prior.points",
+                format!("must be 1 to {MAX_PRIOR_POINTS} points per iteration, got {}", self.prior.points),
+            );
         }
         if !(self.prior.step > 0.0 && self.prior.step < 0.5) {
             return bad("prior.step", format!("must be in (0, 0.5) box units, got {}", num(self.prior.step)));
