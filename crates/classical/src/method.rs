@@ -31,6 +31,9 @@ pub enum ClassicalMethod {
     Tikhonov(TikhonovParams),
 }
 
+/// The largest `tv_weight` of SART-TV: a TV step as large as the SART step it is tied to.
+pub const MAX_TV_WEIGHT: f64 = 1.0;
+
 impl ClassicalMethod {
     /// The method's defaults.
     pub fn default_for(algorithm: Algorithm) -> Self {
@@ -174,7 +177,22 @@ impl ClassicalMethod {
             }
         };
         match self {
-            ClassicalMethod::Tv(p) => non_negative("tv_weight", p.tv_weight),
+            ClassicalMethod::Tv(p) => {
+                non_negative("tv_weight", p.tv_weight)?;
+                // A TV step larger than the SART step it is tied to overshoots, and the
+                // iteration diverges (on a blobs scene, 2 gave an NRMSE of 165 after 20
+                // iterations, 10 one of 4e16) or, far beyond, sets every voxel to zero.
+                if p.tv_weight > MAX_TV_WEIGHT {
+                    return Err(ClassicalError::invalid(
+                        "tv_weight",
+                        format!(
+                            "must be at most {MAX_TV_WEIGHT} (a TV step as large as the SART step), got {}",
+                            num(p.tv_weight)
+                        ),
+                    ));
+                }
+                Ok(())
+            }
             ClassicalMethod::Tikhonov(p) => non_negative("weight", p.weight),
             _ => Ok(()),
         }

@@ -1078,6 +1078,7 @@ fn a_method_setting_is_named_by_its_key_and_by_the_option_that_gave_it() {
         ("tv", "--hull-dilation", "99", "method.projector.hull_dilation"),
         ("tv", "--relaxation", "3", "method.params.relaxation"),
         ("tv", "--tv-weight", "nan", "method.params.tv_weight"),
+        ("tv", "--tv-weight", "2", "method.params.tv_weight"),
         ("fast", "--rays-per-image", "0", "method.train.rays_per_image"),
         ("fast", "--coarse-samples", "1", "method.train.coarse_samples"),
         ("fast", "--fine-samples", "100000", "method.train.coarse_samples"),

@@ -1264,6 +1264,23 @@ mod tests {
         assert!(c.validate().unwrap_err().to_string().contains("max_iterations"));
     }
 
+    /// SART-TV's TV step is at most the SART step: beyond it the iteration diverges.
+    #[test]
+    fn a_tv_step_larger_than_the_sart_step_is_refused() {
+        use fluidnerf_classical::TvParams;
+        let tv = |tv_weight| {
+            let mut c = RunConfig::new("scene", Method::Tv);
+            let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("tv is classical") };
+            spec.method = ClassicalMethod::Tv(TvParams { tv_weight, ..Default::default() });
+            c.validate().map_err(|e| e.to_string())
+        };
+        tv(1.0).expect("a TV step as large as the SART step");
+        for weight in [2.0, 1e300] {
+            let e = tv(weight).unwrap_err();
+            assert!(e.starts_with("method.params.tv_weight: must be at most 1"), "{e}");
+        }
+    }
+
     /// A refit interval without fitted gains would be ignored.
     #[test]
     fn a_gain_refit_interval_needs_fitted_gains() {

@@ -29,7 +29,7 @@ use crate::{Grid, SolveError};
 pub struct TvParams {
     /// SART relaxation μ. Default 1.
     pub relaxation: f64,
-    /// TV step per descent step, as a fraction of the SART step's size. Default 0.2.
+    /// TV step per descent step, as a fraction of the SART step's size; at most 1. Default 0.2.
     pub tv_weight: f64,
     /// TV descent steps per iteration. Default 20.
     pub tv_steps: usize,
