@@ -34,6 +34,9 @@ pub enum ClassicalMethod {
 /// The largest `tv_weight` of SART-TV: a TV step as large as the SART step it is tied to.
 pub const MAX_TV_WEIGHT: f64 = 1.0;
 
+/// The most TV descent steps per SART-TV iteration (the default is 20).
+pub const MAX_TV_STEPS: usize = 1000;
+
 impl ClassicalMethod {
     /// The method's defaults.
     pub fn default_for(algorithm: Algorithm) -> Self {
@@ -189,6 +192,12 @@ impl ClassicalMethod {
                             "must be at most {MAX_TV_WEIGHT} (a TV step as large as the SART step), got {}",
                             num(p.tv_weight)
                         ),
+                    ));
+                }
+                if p.tv_steps > MAX_TV_STEPS {
+                    return Err(ClassicalError::invalid(
+                        "tv_steps",
+                        format!("must be at most {MAX_TV_STEPS} steps per iteration, got {}", p.tv_steps),
                     ));
                 }
                 Ok(())

@@ -1079,6 +1079,7 @@ fn a_method_setting_is_named_by_its_key_and_by_the_option_that_gave_it() {
         ("tv", "--relaxation", "3", "method.params.relaxation"),
         ("tv", "--tv-weight", "nan", "method.params.tv_weight"),
         ("tv", "--tv-weight", "2", "method.params.tv_weight"),
+        ("tv", "--tv-steps", "100000", "method.params.tv_steps"),
         ("fast", "--rays-per-image", "0", "method.train.rays_per_image"),
         ("fast", "--coarse-samples", "1", "method.train.coarse_samples"),
         ("fast", "--fine-samples", "100000", "method.train.coarse_samples"),

@@ -1281,6 +1281,21 @@ mod tests {
         }
     }
 
+    /// A number of TV steps per iteration that would never finish is refused.
+    #[test]
+    fn tv_steps_without_end_are_refused() {
+        use fluidnerf_classical::TvParams;
+        let tv = |tv_steps| {
+            let mut c = RunConfig::new("scene", Method::Tv);
+            let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("tv is classical") };
+            spec.method = ClassicalMethod::Tv(TvParams { tv_steps, ..Default::default() });
+            c.validate().map_err(|e| e.to_string())
+        };
+        tv(1000).expect("1000 TV steps");
+        let e = tv(1_000_000_000_000).unwrap_err();
+        assert!(e.starts_with("method.params.tv_steps: must be at most 1000"), "{e}");
+    }
+
     /// A refit interval without fitted gains would be ignored.
     #[test]
     fn a_gain_refit_interval_needs_fitted_gains() {

@@ -31,7 +31,7 @@ pub struct TvParams {
     pub relaxation: f64,
     /// TV step per descent step, as a fraction of the SART step's size; at most 1. Default 0.2.
     pub tv_weight: f64,
-    /// TV descent steps per iteration. Default 20.
+    /// TV descent steps per iteration; at most 1000. Default 20.
     pub tv_steps: usize,
     /// Default: at most 50 iterations, plateau rule on.
     pub stopping: Stopping,

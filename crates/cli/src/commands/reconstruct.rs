@@ -1147,6 +1147,7 @@ fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
         ("method.params.relaxation", "--relaxation", c.relaxation.is_some()),
         ("method.params.stopping.plateau", "--plateau-tolerance", c.plateau_tolerance.is_some()),
         ("method.params.tv_weight", "--tv-weight", c.tv_weight.is_some()),
+        ("method.params.tv_steps", "--tv-steps", c.tv_steps.is_some()),
         ("method.params.weight", "--tikhonov-weight", c.tikhonov_weight.is_some()),
         ("method.train.rays_per_image", "--rays-per-image", n.rays_per_image.is_some()),
         ("method.train.coarse_samples", "--coarse-samples", n.coarse_samples.is_some()),
