@@ -39,7 +39,9 @@ pub use axes::{rows_shared_along, AxisShift};
 pub use error::{ClassicalError, SolveError};
 pub use hull::{dark_level, visual_hull, DEFAULT_HULL_NOISE_SIGMAS, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
-pub use method::{voxel_footprint_px, ClassicalMethod, ProjectorConfig, MAX_TV_STEPS, MAX_TV_WEIGHT};
+pub use method::{
+    voxel_footprint_px, ClassicalMethod, ProjectorConfig, MAX_TIKHONOV_WEIGHT, MAX_TV_STEPS, MAX_TV_WEIGHT,
+};
 pub use projector::{
     FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector,
     AUTO_FOOTPRINT_MAX_PX,

@@ -37,6 +37,10 @@ pub const MAX_TV_WEIGHT: f64 = 1.0;
 /// The most TV descent steps per SART-TV iteration (the default is 20).
 pub const MAX_TV_STEPS: usize = 1000;
 
+/// The largest Tikhonov weight λ: an iteration then takes up to 2880 smoothing passes (μ ≤ 2),
+/// and with μ = 1 already damps a wavelength of ten voxels by about three quarters.
+pub const MAX_TIKHONOV_WEIGHT: f64 = 10.0;
+
 impl ClassicalMethod {
     /// The method's defaults.
     pub fn default_for(algorithm: Algorithm) -> Self {
@@ -202,7 +206,22 @@ impl ClassicalMethod {
                 }
                 Ok(())
             }
-            ClassicalMethod::Tikhonov(p) => non_negative("weight", p.weight),
+            ClassicalMethod::Tikhonov(p) => {
+                non_negative("weight", p.weight)?;
+                // Each iteration takes ⌈144 μ λ⌉ smoothing passes over the grid: a huge λ never
+                // finishes its first iteration.
+                if p.weight > MAX_TIKHONOV_WEIGHT {
+                    return Err(ClassicalError::invalid(
+                        "weight",
+                        format!(
+                            "must be at most {} (an iteration smooths the grid in ⌈144 μ λ⌉ passes), got {}",
+                            num(MAX_TIKHONOV_WEIGHT),
+                            num(p.weight)
+                        ),
+                    ));
+                }
+                Ok(())
+            }
             _ => Ok(()),
         }
     }

@@ -1296,6 +1296,23 @@ mod tests {
         assert!(e.starts_with("method.params.tv_steps: must be at most 1000"), "{e}");
     }
 
+    /// A Tikhonov weight whose smoothing passes would never end is refused.
+    #[test]
+    fn a_tikhonov_weight_without_end_is_refused() {
+        use fluidnerf_classical::TikhonovParams;
+        let tik = |weight| {
+            let mut c = RunConfig::new("scene", Method::Tikhonov);
+            let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("tikhonov is classical") };
+            spec.method = ClassicalMethod::Tikhonov(TikhonovParams { weight, ..Default::default() });
+            c.validate().map_err(|e| e.to_string())
+        };
+        tik(10.0).expect("the largest weight");
+        for weight in [10.5, 1e30] {
+            let e = tik(weight).unwrap_err();
+            assert!(e.starts_with("method.params.weight: must be at most 10"), "{e}");
+        }
+    }
+
     /// A refit interval without fitted gains would be ignored.
     #[test]
     fn a_gain_refit_interval_needs_fitted_gains() {

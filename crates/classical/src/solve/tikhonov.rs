@@ -65,7 +65,7 @@ const LTL_SPECTRAL_BOUND: f64 = 144.0;
 pub struct TikhonovParams {
     /// SART relaxation μ (Eq. 2.27). Default 1.
     pub relaxation: f64,
-    /// Weight λ of the penalty `‖∇² g‖²` (Eq. 2.35), in voxel units. Default 0.003.
+    /// Weight λ of the penalty `‖∇² g‖²` (Eq. 2.35), in voxel units; at most 10. Default 0.003.
     pub weight: f64,
     /// Default: at most 50 iterations, plateau rule on.
     pub stopping: Stopping,
