@@ -23,6 +23,10 @@ use crate::{NeuralError, TrainableField};
 /// Key that separates the start's random stream from the samplers' and the prior's.
 const START_KEY: u64 = 0x7374_6172_7400_0001;
 
+/// The most points of one fitting step ([`StartFit::points`]): they are evaluated in one
+/// pass, held with the field's activations.
+pub const MAX_START_POINTS: usize = 1 << 20;
+
 /// How a field is fitted to a starting field.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -48,8 +52,11 @@ impl StartFit {
         if self.iterations == 0 {
             return Err(NeuralError::invalid("start.iterations", "must be at least 1"));
         }
-        if self.points == 0 {
-            return Err(NeuralError::invalid("start.points", "must be at least 1"));
+        if !(1..=MAX_START_POINTS).contains(&self.points) {
+            return Err(NeuralError::invalid(
+                "start.points",
+                format!("must be 1 to {MAX_START_POINTS} points per step, got {}", self.points),
+            ));
         }
         let max = crate::optim::MAX_LEARNING_RATE;
         if !(self.learning_rate > 0.0 && self.learning_rate <= max) {

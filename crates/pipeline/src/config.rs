@@ -295,7 +295,14 @@ impl Default for StartSpec {
 impl StartSpec {
     /// Rejects settings no start can use.
     pub fn validate(&self) -> Result<(), PipelineError> {
-        self.fit.validate().map_err(|e| PipelineError::invalid("method", e.to_string()))?;
+        // The fit's settings are named by their key under `method.start.fit`.
+        self.fit.validate().map_err(|e| match e {
+            fluidnerf_neural::NeuralError::Invalid { what, why } => PipelineError::invalid(
+                format!("method.start.fit.{}", what.strip_prefix("start.").unwrap_or(&what)),
+                why,
+            ),
+            other => PipelineError::invalid("method.start.fit", other.to_string()),
+        })?;
         if let StartMethod::Method(m) = self.method {
             if m.family() != Family::Classical {
                 return Err(PipelineError::invalid(
@@ -522,7 +529,6 @@ impl MethodConfig {
 
     /// Rejects parameters no run can use.
     pub fn validate(&self) -> Result<(), PipelineError> {
-        let key = |e: &dyn std::fmt::Display| PipelineError::invalid("method", e.to_string());
         match self {
             MethodConfig::Classical(c) => {
                 c.projector.validate().map_err(|e| classical_under("method.projector", e))?;
@@ -532,7 +538,7 @@ impl MethodConfig {
                 validate_field(&n.field)?;
                 n.train.validate().map_err(|e| under("method.train", e))?;
                 if let Some(start) = &n.start {
-                    start.validate().map_err(|e| key(&e))?;
+                    start.validate()?;
                 } else if *m == Method::Hybrid {
                     return Err(PipelineError::invalid(
                         "method.start",
@@ -546,7 +552,7 @@ impl MethodConfig {
                 t.train.validate().map_err(|e| under("method.train", e))?;
                 t.temporal_config().validate().map_err(|e| under("method", e))?;
                 if let Some(start) = &t.start {
-                    start.validate().map_err(|e| key(&e))?;
+                    start.validate()?;
                     if start.run.is_some() {
                         return Err(PipelineError::invalid(
                             "method.start.run",
@@ -1310,6 +1316,26 @@ mod tests {
         for weight in [10.5, 1e30] {
             let e = tik(weight).unwrap_err();
             assert!(e.starts_with("method.params.weight: must be at most 10"), "{e}");
+        }
+    }
+
+    /// A start's fit is named by its key under `method.start.fit`, and points beyond what one
+    /// step can hold are refused.
+    #[test]
+    fn a_start_fit_setting_is_named_by_its_key() {
+        for (edit, says) in [
+            (
+                (|f: &mut StartFit| f.iterations = 0) as fn(&mut StartFit),
+                "method.start.fit.iterations: must be at least 1",
+            ),
+            (|f| f.points = usize::MAX, "method.start.fit.points: must be 1 to 1048576 points per step"),
+            (|f| f.learning_rate = 0.0, "method.start.fit.learning_rate: must be positive"),
+        ] {
+            let mut c = RunConfig::new("scene", Method::Hybrid);
+            let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("hybrid is neural") };
+            edit(&mut spec.start.as_mut().expect("the hybrid starts").fit);
+            let e = c.validate().expect_err("refused").to_string();
+            assert!(e.starts_with(says), "{e}");
         }
     }
 
