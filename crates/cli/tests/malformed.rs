@@ -653,7 +653,7 @@ fn cases() -> Vec<Case> {
                 br#"{"format":1,"scene":"x","method":{"name":"voxel","field":{"dense":{"resolution":100000}},"train":{}}}"#,
             ),
             &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
-            "dense field",
+            "run.json: method.field.dense.resolution: must be 1 to 1024 cells, got 100000",
         ),
         c(
             "config: samples per ray without end",

@@ -40,6 +40,25 @@ pub struct DenseConfig {
     pub initial: f32,
 }
 
+impl DenseConfig {
+    /// Rejects settings no grid can use; the error names the key under `dense`.
+    pub fn validate(&self) -> Result<(), NeuralError> {
+        if !(1..=MAX_DENSE_RESOLUTION).contains(&self.resolution) {
+            return Err(NeuralError::invalid(
+                "dense.resolution",
+                format!("must be 1 to {MAX_DENSE_RESOLUTION} cells, got {}", self.resolution),
+            ));
+        }
+        if !(self.initial > 0.0 && self.initial.is_finite()) {
+            return Err(NeuralError::invalid(
+                "dense.initial",
+                format!("must be a positive value, got {}", fluidnerf_core::num(self.initial)),
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for DenseConfig {
     fn default() -> Self {
         DenseConfig { resolution: 64, initial: 0.05 }
@@ -320,15 +339,7 @@ fn make_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: Option<
             if input_dim != 3 {
                 return Err(NeuralError::invalid("dense field", "only E(x) (3 inputs) is supported"));
             }
-            if c.resolution == 0 || c.initial.is_nan() || c.initial <= 0.0 {
-                return Err(NeuralError::invalid("dense field", "resolution and initial value must be positive"));
-            }
-            if c.resolution > MAX_DENSE_RESOLUTION {
-                return Err(NeuralError::invalid(
-                    "dense field",
-                    format!("resolution must be at most {MAX_DENSE_RESOLUTION} cells, got {}", c.resolution),
-                ));
-            }
+            c.validate()?;
             let dims = fluidnerf_core::Volume::dims_for(aabb, c.resolution);
             Ok(AnyField::Dense(DenseGridField::new(dims, c.initial)))
         }

@@ -549,6 +549,12 @@ impl MethodConfig {
             }
             MethodConfig::Temporal(m, t) => {
                 validate_field(&t.field)?;
+                if matches!(t.field, FieldConfig::Dense(_)) && *m != Method::StaticPerFrame {
+                    return Err(PipelineError::invalid(
+                        "method.field.dense",
+                        format!("{m} trains a field of space and time; a dense grid holds one of space only"),
+                    ));
+                }
                 t.train.validate().map_err(|e| under("method.train", e))?;
                 t.temporal_config().validate().map_err(|e| under("method", e))?;
                 if let Some(start) = &t.start {
@@ -618,13 +624,12 @@ fn classical_under(prefix: &str, e: fluidnerf_classical::ClassicalError) -> Pipe
     }
 }
 
-/// Checks a field's settings before any run builds it (the dense grid's are checked as it is
-/// built).
+/// Checks a field's settings before any run builds it.
 fn validate_field(field: &FieldConfig) -> Result<(), PipelineError> {
     match field {
         FieldConfig::Mlp(c) => c.validate(),
         FieldConfig::HashGrid(c) => c.validate(),
-        FieldConfig::Dense(_) => Ok(()),
+        FieldConfig::Dense(c) => c.validate(),
     }
     .map_err(|e| under("method.field", e))
 }
@@ -1337,6 +1342,34 @@ mod tests {
             let e = c.validate().expect_err("refused").to_string();
             assert!(e.starts_with(says), "{e}");
         }
+    }
+
+    /// A dense grid's settings are named by their key before any run builds it, and a grid of
+    /// space alone is refused for a field of space and time.
+    #[test]
+    fn a_dense_grid_setting_is_named_by_its_key() {
+        use fluidnerf_neural::trained::DenseConfig;
+        for (dense, says) in [
+            (DenseConfig { resolution: 0, initial: 0.05 }, "method.field.dense.resolution: must be 1 to 1024"),
+            (DenseConfig { resolution: 100_000, initial: 0.05 }, "method.field.dense.resolution: must be 1 to 1024"),
+            (DenseConfig { resolution: 64, initial: -1.0 }, "method.field.dense.initial: must be a positive value"),
+            (DenseConfig { resolution: 64, initial: f32::NAN }, "method.field.dense.initial"),
+        ] {
+            let mut c = RunConfig::new("scene", Method::Voxel);
+            let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("voxel is neural") };
+            spec.field = FieldConfig::Dense(dense);
+            let e = c.validate().expect_err("refused").to_string();
+            assert!(e.starts_with(says), "{e}");
+        }
+        let mut c = RunConfig::new("scene", Method::TrFast);
+        let MethodConfig::Temporal(_, spec) = &mut c.method else { unreachable!("tr-fast is time-resolved") };
+        spec.field = FieldConfig::Dense(DenseConfig::default());
+        let e = c.validate().expect_err("refused").to_string();
+        assert!(e.starts_with("method.field.dense: tr-fast trains a field of space and time"), "{e}");
+        let mut c = RunConfig::new("scene", Method::StaticPerFrame);
+        let MethodConfig::Temporal(_, spec) = &mut c.method else { unreachable!("time-resolved") };
+        spec.field = FieldConfig::Dense(DenseConfig::default());
+        c.validate().expect("a static field per frame may be a dense grid");
     }
 
     /// A refit interval without fitted gains would be ignored.
