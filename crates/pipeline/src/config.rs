@@ -502,6 +502,10 @@ impl MethodConfig {
                 if method == Method::StaticPerFrame {
                     spec.windows = WindowConfig::per_frame();
                     spec.train.batching = Batching::AllViews;
+                    // Its fields are of space alone: a time-resolved preset's time encoding goes.
+                    if let FieldConfig::Mlp(mlp) = &mut spec.field {
+                        mlp.time_freqs = 0;
+                    }
                 } else {
                     spec.train.batching = Batching::OneTimeStep;
                 }
@@ -536,6 +540,7 @@ impl MethodConfig {
             }
             MethodConfig::Neural(m, n) => {
                 validate_field(&n.field)?;
+                refuse_time_frequencies(*m, &n.field)?;
                 n.train.validate().map_err(|e| under("method.train", e))?;
                 if let Some(start) = &n.start {
                     start.validate()?;
@@ -549,6 +554,9 @@ impl MethodConfig {
             }
             MethodConfig::Temporal(m, t) => {
                 validate_field(&t.field)?;
+                if *m == Method::StaticPerFrame {
+                    refuse_time_frequencies(*m, &t.field)?;
+                }
                 if matches!(t.field, FieldConfig::Dense(_)) && *m != Method::StaticPerFrame {
                     return Err(PipelineError::invalid(
                         "method.field.dense",
@@ -621,6 +629,22 @@ fn classical_under(prefix: &str, e: fluidnerf_classical::ClassicalError) -> Pipe
             PipelineError::invalid(format!("{prefix}.{what}"), why)
         }
         other => PipelineError::invalid(prefix, other.to_string()),
+    }
+}
+
+/// Refuses time frequencies for a field of space alone (`method`'s field has no time input),
+/// where they would be ignored.
+fn refuse_time_frequencies(method: Method, field: &FieldConfig) -> Result<(), PipelineError> {
+    match field {
+        FieldConfig::Mlp(c) if c.time_freqs > 0 => Err(PipelineError::invalid(
+            "method.field.mlp.time_freqs",
+            format!(
+                "{} time frequencies, but {method} trains a field of space alone, which has no time to encode; \
+                 set 0, or use a time-resolved method (tr-fluidnerf)",
+                c.time_freqs
+            ),
+        )),
+        _ => Ok(()),
     }
 }
 
@@ -1370,6 +1394,34 @@ mod tests {
         let MethodConfig::Temporal(_, spec) = &mut c.method else { unreachable!("time-resolved") };
         spec.field = FieldConfig::Dense(DenseConfig::default());
         c.validate().expect("a static field per frame may be a dense grid");
+    }
+
+    /// Time frequencies of a field of space alone would be ignored: refused naming the key.
+    #[test]
+    fn time_frequencies_of_a_static_field_are_refused() {
+        for method in [Method::Fluidnerf, Method::StaticPerFrame, Method::TrFluidnerf] {
+            let mut c = RunConfig::new("scene", method);
+            let field = match &mut c.method {
+                MethodConfig::Neural(_, n) => &mut n.field,
+                MethodConfig::Temporal(_, t) => &mut t.field,
+                MethodConfig::Classical(_) => unreachable!("{method} has a field"),
+            };
+            let FieldConfig::Mlp(mlp) = field else { unreachable!("{method} is an MLP") };
+            mlp.time_freqs = 4;
+            match (method, c.validate()) {
+                (Method::TrFluidnerf, r) => r.expect("a field of space and time encodes time"),
+                (_, r) => {
+                    let e = r.expect_err("refused").to_string();
+                    assert!(e.starts_with("method.field.mlp.time_freqs: 4 time frequencies, but"), "{method}: {e}");
+                }
+            }
+        }
+        // A time-resolved preset for fields of one frame each drops its time encoding.
+        for preset in TEMPORAL_PRESETS {
+            let method = MethodConfig::with_preset(Method::StaticPerFrame, preset).expect("a preset");
+            let c = RunConfig { method, ..RunConfig::new("scene", Method::StaticPerFrame) };
+            c.validate().unwrap_or_else(|e| panic!("{preset}: {e}"));
+        }
     }
 
     /// A refit interval without fitted gains would be ignored.
