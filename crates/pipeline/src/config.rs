@@ -1299,35 +1299,26 @@ mod tests {
         assert!(c.validate().unwrap_err().to_string().contains("max_iterations"));
     }
 
-    /// SART-TV's TV step is at most the SART step: beyond it the iteration diverges.
-    #[test]
-    fn a_tv_step_larger_than_the_sart_step_is_refused() {
-        use fluidnerf_classical::TvParams;
-        let tv = |tv_weight| {
-            let mut c = RunConfig::new("scene", Method::Tv);
-            let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("tv is classical") };
-            spec.method = ClassicalMethod::Tv(TvParams { tv_weight, ..Default::default() });
-            c.validate().map_err(|e| e.to_string())
-        };
-        tv(1.0).expect("a TV step as large as the SART step");
-        for weight in [2.0, 1e300] {
-            let e = tv(weight).unwrap_err();
-            assert!(e.starts_with("method.params.tv_weight: must be at most 1"), "{e}");
-        }
+    /// The validation of a run of `method` with the classical settings `params`.
+    fn validate_classical(method: Method, params: ClassicalMethod) -> Result<(), String> {
+        let mut c = RunConfig::new("scene", method);
+        let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("{method} is classical") };
+        spec.method = params;
+        c.validate().map_err(|e| e.to_string())
     }
 
-    /// A number of TV steps per iteration that would never finish is refused.
+    /// SART-TV's TV step is at most the SART step (beyond it the iteration diverges), and its
+    /// TV steps per iteration are bounded (a huge count never finishes an iteration).
     #[test]
-    fn tv_steps_without_end_are_refused() {
+    fn sart_tv_steps_too_large_or_too_many_are_refused() {
         use fluidnerf_classical::TvParams;
-        let tv = |tv_steps| {
-            let mut c = RunConfig::new("scene", Method::Tv);
-            let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("tv is classical") };
-            spec.method = ClassicalMethod::Tv(TvParams { tv_steps, ..Default::default() });
-            c.validate().map_err(|e| e.to_string())
-        };
-        tv(1000).expect("1000 TV steps");
-        let e = tv(1_000_000_000_000).unwrap_err();
+        let tv = |p: TvParams| validate_classical(Method::Tv, ClassicalMethod::Tv(p));
+        tv(TvParams { tv_weight: 1.0, tv_steps: 1000, ..Default::default() }).expect("the largest step and count");
+        for weight in [2.0, 1e300] {
+            let e = tv(TvParams { tv_weight: weight, ..Default::default() }).unwrap_err();
+            assert!(e.starts_with("method.params.tv_weight: must be at most 1"), "{e}");
+        }
+        let e = tv(TvParams { tv_steps: 1_000_000_000_000, ..Default::default() }).unwrap_err();
         assert!(e.starts_with("method.params.tv_steps: must be at most 1000"), "{e}");
     }
 
@@ -1336,10 +1327,10 @@ mod tests {
     fn a_tikhonov_weight_without_end_is_refused() {
         use fluidnerf_classical::TikhonovParams;
         let tik = |weight| {
-            let mut c = RunConfig::new("scene", Method::Tikhonov);
-            let MethodConfig::Classical(spec) = &mut c.method else { unreachable!("tikhonov is classical") };
-            spec.method = ClassicalMethod::Tikhonov(TikhonovParams { weight, ..Default::default() });
-            c.validate().map_err(|e| e.to_string())
+            validate_classical(
+                Method::Tikhonov,
+                ClassicalMethod::Tikhonov(TikhonovParams { weight, ..Default::default() }),
+            )
         };
         tik(10.0).expect("the largest weight");
         for weight in [10.5, 1e30] {
