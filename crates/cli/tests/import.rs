@@ -131,17 +131,7 @@ fn opencv_time_series_folders() {
         }
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&images),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(&calib, &images, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let scene = load_scene(&out).expect("loads");
     assert_eq!(scene.frames.len(), 6);
@@ -463,23 +453,12 @@ fn opencv_cameras_with_videos() {
         std::fs::copy(fixtures.join(video), images.join(format!("{n}.avi"))).expect("copies the fixture");
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&images),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "--video-frames",
-        "1..",
-        "--video-every",
-        "2",
-        "--video-time-offset",
-        "-0.1",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(
+        &calib,
+        &images,
+        &out,
+        &["--video-frames", "1..", "--video-every", "2", "--video-time-offset", "-0.1"],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let scene = load_scene(&out).expect("loads");
     assert_eq!(scene.frames.len(), 6, "frames 1 and 3 of three cameras");
@@ -532,17 +511,7 @@ fn opencv_cameras_with_videos() {
         fluidnerf(&["import", "--opencv", s(&calib), "--images", s(&images), "--video-range", "tv-ish", "-o", "x"]);
     assert!(!bad.status.success() && stderr(&bad).contains("expected auto, full or limited"), "{}", stderr(&bad));
     std::fs::write(images.join("cam1.avi"), "not a video").expect("write");
-    let bad = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&images),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&dir.path().join("y")),
-    ]);
+    let bad = import_recordings(&calib, &images, &dir.path().join("y"), &[]);
     assert_eq!(bad.status.code(), Some(1));
     let err = stderr(&bad);
     assert!(err.contains("camera cam1") && err.contains("cam1.avi") && err.contains("not a video file"), "{err}");
@@ -617,19 +586,7 @@ fn a_failed_import_leaves_nothing_behind() {
     }
     // cam2's video is cut short: cam0's and cam1's frames are written before it fails.
     std::fs::write(videos.join("cam2.avi"), &bytes[..3000]).expect("writes");
-    let run = |out: &Path| {
-        fluidnerf(&[
-            "import",
-            "--opencv",
-            s(&calib),
-            "--images",
-            s(&videos),
-            "--aabb",
-            "-10,-10,-10,10,10,10",
-            "-o",
-            s(out),
-        ])
-    };
+    let run = |out: &Path| import_recordings(&calib, &videos, out, &[]);
     let out = dir.path().join("new/scene");
     let o = run(&out);
     assert_eq!(o.status.code(), Some(1));
@@ -714,8 +671,7 @@ fn rig_calibration(dir: &Path) -> (PathBuf, PathBuf) {
 
 /// `import --opencv calib --images images -o out --force`, with a box.
 fn import_opencv(calib: &Path, images: &Path, out: &Path) -> Output {
-    let aabb = "-10,-10,-10,10,10,10";
-    fluidnerf(&["import", "--opencv", s(calib), "--images", s(images), "--aabb", aabb, "-o", s(out), "--force"])
+    import_recordings(calib, images, out, &["--force"])
 }
 
 /// The n-th image of every camera's folder is instant n: folders holding different numbers
@@ -975,17 +931,7 @@ fn videos_of_different_frame_rates_are_refused() {
         std::fs::write(videos.join(format!("{name}.avi")), data).expect("writes");
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&videos),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(&calib, &videos, &out, &[]);
     let e = stderr(&o);
     assert!(!o.status.success(), "imported: {e}");
     assert!(
@@ -1011,17 +957,7 @@ fn distortion_under_an_unknown_name_is_warned_about() {
         image(&images, &format!("{n}.png"));
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&images),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(&calib, &images, &out, &[]);
     let e = stderr(&o);
     assert!(o.status.success(), "{e}");
     assert!(
@@ -1142,17 +1078,7 @@ fn a_principal_point_outside_the_image_is_warned_about() {
         image(&images, &format!("{n}.png"));
     }
     let out = dir.path().join("scene");
-    let o = fluidnerf(&[
-        "import",
-        "--opencv",
-        s(&calib),
-        "--images",
-        s(&images),
-        "--aabb",
-        "-10,-10,-10,10,10,10",
-        "-o",
-        s(&out),
-    ]);
+    let o = import_recordings(&calib, &images, &out, &[]);
     let e = stderr(&o);
     assert!(
         e.contains(
