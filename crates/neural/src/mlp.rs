@@ -230,7 +230,9 @@ impl Mlp {
     }
 
     /// With `want`, training takes the products in bfloat16 where this network allows and the
-    /// CPU runs them faster than f32 ([`bf16_products_available`]); inference stays in f32.
+    /// CPU runs them faster than f32 ([`bf16_products_available`]). Inference takes the same
+    /// products where `vdpbf16ps` pays (AMD); on Intel's cores, whose training products run on
+    /// AMX tiles, it stays in f32.
     pub(crate) fn with_bf16_products(mut self, want: bool) -> Self {
         self.bf16 = want && bf16::fits(&self) && bf16::bf16_pays();
         self
@@ -379,9 +381,13 @@ impl Mlp {
         let n = out.len();
         assert_eq!(x.len(), n * self.in_dim, "Mlp::infer: input is not {n}×{}", self.in_dim);
         assert_eq!(params.len(), self.num_params, "Mlp::infer: wrong parameter count");
-        match infer64::Kernel::detect().filter(|_| infer64::fits(self)) {
-            Some(kernel) => infer64::infer(self, params, x, out, kernel),
-            None => self.infer_gemm(params, x, out, tape),
+        if self.bf16 && bf16::infer_pays() {
+            bf16::infer(self, params, x, out, &mut tape.bf16);
+        } else {
+            match infer64::Kernel::detect().filter(|_| infer64::fits(self)) {
+                Some(kernel) => infer64::infer(self, params, x, out, kernel),
+                None => self.infer_gemm(params, x, out, tape),
+            }
         }
         match self.output_activation {
             OutputActivation::Relu => out.iter_mut().for_each(|o| *o = o.max(0.0)),

@@ -506,6 +506,58 @@ unsafe fn forward_v4(
     }
 }
 
+/// Inference with the products of [`forward_v4`], one tile of `P` rows at a time kept in L1:
+/// the output's pre-activation of the `n = pre_out.len()` rows of `x`, equal bit for bit to
+/// what [`forward_v4`] computes for them (the same products, summed in the same order).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
+unsafe fn infer_v4(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s: &mut Scratch) {
+    let n = pre_out.len();
+    let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
+    // SAFETY: the target features are enabled on this function.
+    unsafe { pack(mlp, params, &mut s.w_fwd, false) };
+    let depth = mlp.layers.len();
+    let mut xin = [0u16; P * WIDTH];
+    let (mut hb, mut nb) = ([0u16; P * WIDTH], [0u16; P * WIDTH]);
+    let mut out = [0f32; P * WIDTH];
+    let (w_out, b_out) = (&params[mlp.out_weight.clone()], params[mlp.out_bias]);
+    let mut r = 0;
+    while r < n {
+        let rows = (n - r).min(P);
+        if rows < P {
+            xin.fill(0);
+        }
+        // SAFETY: the features are enabled here.
+        unsafe { input_rows(x, k0, r..r + rows, &mut xin) };
+        let mut off = 0;
+        for (l, layer) in mlp.layers.iter().enumerate() {
+            let (k_pad, inp): (usize, &[u16]) = if l == 0 { (kp0, &xin) } else { (WIDTH, &hb) };
+            let n_w = k_pad * WIDTH;
+            // SAFETY: `inp` holds P rows of k_pad, the packed weights k_pad × 64, `out` P rows of
+            // 64; the features are enabled here.
+            unsafe {
+                x86::product::<4, true>(
+                    inp,
+                    k_pad,
+                    &s.w_fwd[off..off + n_w],
+                    Some(&params[layer.bias.clone()]),
+                    rows,
+                    &mut out,
+                    WIDTH,
+                    (l + 1 < depth).then_some(&mut nb[..]),
+                )
+            };
+            std::mem::swap(&mut hb, &mut nb);
+            off += n_w;
+        }
+        for (p, o) in pre_out[r..r + rows].iter_mut().enumerate() {
+            // SAFETY: rows of 64; features enabled.
+            *o = b_out + unsafe { x86::dot64(&out[p * WIDTH..], w_out) };
+        }
+        r += rows;
+    }
+}
+
 /// [`forward_v4`] with the products on AMX tiles, 16 rows at a time.
 #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
 #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
@@ -842,6 +894,26 @@ pub(super) fn forward(
     };
 }
 
+/// Inference with the products of [`forward`] on AVX-512 BF16: the output's pre-activation of
+/// `n = pre_out.len()` rows of `x` (the caller applies the output activation), equal to
+/// [`forward`]'s on that path. Requires [`cpu_has_bf16`] and [`fits`].
+pub(super) fn infer(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s: &mut Scratch) {
+    assert!(cpu_has_bf16() && fits(mlp), "bf16::infer on an unfit network or CPU");
+    assert_eq!(x.len(), pre_out.len() * mlp.in_dim, "bf16::infer: input is not {}×{}", pre_out.len(), mlp.in_dim);
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the CPU features were checked just above.
+    unsafe {
+        infer_v4(mlp, params, x, pre_out, s)
+    };
+}
+
+/// Whether inference takes the bfloat16 products of a network trained with them: where
+/// `vdpbf16ps` pays (AMD's Zen 4 and Zen 5), not on Intel's cores, where it does not and where
+/// training takes the products on AMX tiles instead.
+pub(super) fn infer_pays() -> bool {
+    cpu_has_bf16() && bf16_pays() && !amx_ready()
+}
+
 /// Backward pass after [`forward`] with `acts`. Requires [`cpu_has_bf16`] and [`fits`].
 #[allow(clippy::too_many_arguments)]
 pub(super) fn backward(
@@ -1001,6 +1073,45 @@ mod tests {
                 {
                     let e = relative(a, b);
                     assert!(e < 1e-5, "{what} against the scalar bfloat16 arithmetic ({case}): relative error {e:e}");
+                }
+            }
+        }
+    }
+
+    /// Inference takes the training pass's products: its output's pre-activation equals the
+    /// forward pass's bit for bit, for every size of last tile and depths 1–3, and `Mlp::infer`
+    /// takes it for a network trained in bfloat16 where it pays.
+    #[test]
+    fn inference_computes_what_training_did() {
+        if !super::cpu_has_bf16() {
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for (in_dim, depth) in [(16, 2), (18, 1), (32, 3)] {
+            let net =
+                Mlp::new(in_dim, 64, depth, Activation::Relu, OutputActivation::Softplus, false).with_bf16_kernels();
+            let mut params = vec![0.0; net.num_params()];
+            net.init(&mut params, &mut rng);
+            for layer in &net.layers {
+                for b in &mut params[layer.bias.clone()] {
+                    *b = rng.random_range(-0.5..0.5);
+                }
+            }
+            for n in [1, 5, 6, 7, 13, 101] {
+                let x: Vec<f32> = (0..n * in_dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+                let (mut want, mut got) = (vec![0.0; n], vec![f32::NAN; n]);
+                let mut acts = vec![0.0; depth * n * 64];
+                let mut s = super::Scratch::default();
+                super::WITHOUT_AMX.with(|w| w.set(true));
+                super::forward(&net, &params, &x, &mut acts, n * 64, &mut want, &mut s);
+                super::WITHOUT_AMX.with(|w| w.set(false));
+                super::infer(&net, &params, &x, &mut got, &mut s);
+                assert_eq!(got, want, "{in_dim} inputs, depth {depth}, {n} rows");
+                if super::infer_pays() {
+                    let mut out = vec![0.0; n];
+                    net.infer(&params, &x, &mut out, &mut MlpTape::default());
+                    let soft: Vec<f32> = want.iter().map(|&z| kernels::softplus(z)).collect();
+                    assert_eq!(out, soft, "Mlp::infer, {in_dim} inputs, depth {depth}, {n} rows");
                 }
             }
         }
