@@ -49,14 +49,18 @@ pub(super) fn cpu_has_bf16() -> bool {
 /// the step slower there (7.0 s against 6.5 s in f32 for 150 iterations of the demo scene).
 /// Intel's CPUs with AMX take the products on its tiles instead ([`super::amx`]). A rule by
 /// vendor and instruction set rather than a timing at start-up, so that a configuration gives
-/// the same arithmetic on every run of a machine.
+/// the same arithmetic on every run of a machine. Read once: `cpuid` traps to the hypervisor
+/// in a virtual machine, and inference asks for every chunk of points.
 pub(super) fn bf16_pays() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        // CPUID leaf 0 (the vendor) exists on every x86-64 CPU.
-        let id = std::arch::x86_64::__cpuid(0);
-        let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163); // "AuthenticAMD"
-        (amd && cpu_has_bf16()) || amx_ready()
+        static PAYS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *PAYS.get_or_init(|| {
+            // CPUID leaf 0 (the vendor) exists on every x86-64 CPU.
+            let id = std::arch::x86_64::__cpuid(0);
+            let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163); // "AuthenticAMD"
+            (amd && cpu_has_bf16()) || amx_ready()
+        })
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
