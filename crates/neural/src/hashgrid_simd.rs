@@ -13,13 +13,13 @@
 //! only (tested), and a NaN coordinate reads as 0 instead of propagating.
 //!
 //! Both widths run one generic kernel over [`Lanes`], whose operations are inlined into each
-//! width's `#[target_feature]` entry point. Sixteen lanes are taken on Intel CPUs with
-//! AVX-512 ([`wide`]), where they were measured; the first rows go sixteen at a time, then
+//! width's `#[target_feature]` entry point. Sixteen lanes are taken on CPUs with AVX-512
+//! ([`wide`]; measured faster on Intel's Sapphire Rapids and AMD's Zen 4); the first rows go
+//! sixteen at a time, then
 //! eight, then the scalar loop, in row order, so the gradient's additions keep the scalar
 //! loop's order at either width.
 
 use std::arch::x86_64::*;
-use std::sync::LazyLock;
 
 use super::hashgrid::PRIMES;
 
@@ -57,31 +57,22 @@ pub(crate) fn available() -> bool {
         && is_x86_feature_detected!("fma")
 }
 
-/// Whether the CPU is Intel's and has AVX-512 (read once).
-static INTEL_AVX512: LazyLock<bool> = LazyLock::new(|| {
-    // CPUID leaf 0 (the vendor) exists on every x86-64 CPU.
-    let id = __cpuid(0);
-    let intel = (id.ebx, id.edx, id.ecx) == (0x756e_6547, 0x4965_6e69, 0x6c65_746e); // "GenuineIntel"
-    intel && is_x86_feature_detected!("avx512f")
-});
-
 #[cfg(test)]
 thread_local! {
     /// Tests of the eight-lane kernels on a CPU that takes sixteen.
     pub(crate) static NARROW: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Whether the kernels take sixteen points at a time: on Intel CPUs with AVX-512, where the
-/// training step measured faster with them (docs/training-engine.md). AMD's Zen 4 splits
-/// 512-bit operations in two and its wide gathers were not measured, so AMD CPUs keep eight.
-/// A rule by vendor and instruction set, like the decoder's bfloat16 rule: the same rows take
-/// the same path on every run of a machine.
+/// Whether the kernels take sixteen points at a time: on CPUs with AVX-512, where the training
+/// step measured faster with them, on Intel's Sapphire Rapids and on AMD's Zen 4, which splits
+/// 512-bit operations in two (docs/training-engine.md). A rule by instruction set, like the
+/// decoder's bfloat16 rule: the same rows take the same path on every run of a machine.
 fn wide() -> bool {
     #[cfg(test)]
     if NARROW.with(|n| n.get()) {
         return false;
     }
-    *INTEL_AVX512
+    is_x86_feature_detected!("avx512f")
 }
 
 /// Writes the level's features of the first rows of `inputs` (`n × D`) into `feats`, whole
