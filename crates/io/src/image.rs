@@ -12,6 +12,13 @@
 //!   gamma `g` (`count^g`), each keeping 255 at 255: `value = 255 · f(count / 255)`. Cameras
 //!   that write JPEG almost always store sRGB-encoded values; scientific cameras store linear
 //!   counts. 16-bit, 32-bit and float images are always read as linear.
+//! - TIFFs tagged `PhotometricInterpretation = WhiteIsZero` (tag 262 = 0: 0 is white, the
+//!   stored values are a negative) are read as the TIFF standard defines when the samples are
+//!   unsigned integers, `value = 2^bits − 1 − stored`, with one warning per run, since a
+//!   radiometric camera writing this tag is unusual and an inverted measurement looks
+//!   plausible. Float and signed samples have no maximum to invert from (a decoder would
+//!   return `1 − v`, garbage for radiometric floats), so such TIFFs are refused naming the
+//!   file and the tag.
 //! - Colour images are reduced to luminance `Y = 0.2126 R + 0.7152 G + 0.0722 B` (Rec. 709
 //!   weights applied to the linearised values) with one warning per run; an alpha channel is
 //!   dropped.
@@ -380,6 +387,9 @@ fn read_with_image_crate(
     Ok((to_gray(path, w, h, channels, data), kind))
 }
 
+/// Reads the first page of a TIFF. `WhiteIsZero` images are inverted as the standard defines
+/// for unsigned integers (with a warning) and refused for float and signed samples, which have
+/// no maximum to invert from: see [`check_white_is_zero`].
 fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::ColorType;
@@ -413,6 +423,7 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
             ));
         }
     };
+    check_white_is_zero(path, &mut dec)?;
     let lut = linearisation.table();
     let (data, kind): (Vec<f32>, SampleKind) = match dec.read_image().map_err(bad)? {
         DecodingResult::U8(v) => (v.into_iter().map(|c| lut[usize::from(c)]).collect(), SampleKind::Integer(8)),
@@ -460,6 +471,65 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         return Ok((Image::from_vec(w, h, data.chunks_exact(channels).map(|p| p[0]).collect()), kind));
     }
     Ok((to_gray(path, w, h, channels, data), kind))
+}
+
+/// Refuses the `WhiteIsZero` TIFFs (tag 262, PhotometricInterpretation, = 0) that cannot be
+/// read as light, and warns once per run about the others.
+///
+/// For unsigned integer samples the standard's reading, `2^bits − 1 − stored`, is exact and is
+/// what the decoder returns: it is kept, but a radiometric camera writing a negative is unusual
+/// and an inverted measurement still looks plausible, so the user is told. Float samples have
+/// no maximum: the decoder would return `1 − v`, which is garbage unless the image happened to
+/// be normalised to [0, 1]; signed samples have no defined inversion; grey with extra samples
+/// is not inverted by the decoder at all. These are refused naming the file and the tag.
+fn check_white_is_zero<R: std::io::Read + std::io::Seek>(
+    path: &Path,
+    dec: &mut tiff::decoder::Decoder<R>,
+) -> Result<(), IoError> {
+    use tiff::tags::Tag;
+    let bad = |e: tiff::TiffError| IoError::invalid(path, format!("unreadable TIFF: {e}"));
+    const WHITE_IS_ZERO: u16 = 0;
+    if dec.find_tag_unsigned::<u16>(Tag::PhotometricInterpretation).map_err(bad)? != Some(WHITE_IS_ZERO) {
+        return Ok(());
+    }
+    let refuse = |what: &str| {
+        IoError::invalid(
+            path,
+            format!(
+                "TIFF tag PhotometricInterpretation (262) is WhiteIsZero (0, a negative) with {what}, which has no \
+                 maximum to invert from; write the image as BlackIsZero (1) with its values as measured"
+            ),
+        )
+    };
+    // SampleFormat (339): 1 unsigned (the default), 2 signed, 3 float; one value per sample.
+    let formats = dec.find_tag_unsigned_vec::<u16>(Tag::SampleFormat).map_err(bad)?.unwrap_or_default();
+    if formats.contains(&3) {
+        return Err(refuse("floating-point samples"));
+    }
+    if formats.iter().any(|&f| f != 1) {
+        return Err(refuse("signed (or undefined) integer samples"));
+    }
+    let samples = dec.find_tag_unsigned::<u16>(Tag::SamplesPerPixel).map_err(bad)?.unwrap_or(1);
+    if samples > 1 {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "TIFF tag PhotometricInterpretation (262) is WhiteIsZero (0, a negative) with {samples} samples per \
+                 pixel, which the decoder does not invert; write the image as BlackIsZero (1) greyscale"
+            ),
+        ));
+    }
+    // Datasets hold hundreds of images: say it once per run, not once per file.
+    static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !WARNED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        log::warn!(
+            "{}: TIFF tag PhotometricInterpretation is WhiteIsZero (a negative): its counts are read inverted, \
+             as the TIFF standard defines (2^bits − 1 − stored); check the camera meant it, since an inverted \
+             measurement still looks plausible; further such images are not reported",
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 /// Interleaved samples with `channels` per pixel (1 gray, 2 gray+alpha, 3 RGB, 4 RGBA) to gray.
@@ -659,13 +729,26 @@ mod tests {
     /// photometric interpretation `photometric`, written by hand: the encoder writes no grey
     /// image with extra samples.
     fn tiff_by_hand(w: u32, h: u32, samples: u16, photometric: u16, data: &[u8]) -> Vec<u8> {
+        tiff_by_hand_as(w, h, samples, (8, 1), photometric, data)
+    }
+
+    /// [`tiff_by_hand`] with `(bits, format)` per sample: SampleFormat 1 unsigned, 2 signed,
+    /// 3 float; `data` holds the samples' little-endian bytes.
+    fn tiff_by_hand_as(
+        w: u32,
+        h: u32,
+        samples: u16,
+        (bits, format): (u16, u16),
+        photometric: u16,
+        data: &[u8],
+    ) -> Vec<u8> {
         let mut b = b"II*\0".to_vec();
         b.extend((8 + data.len() as u32).to_le_bytes());
         b.extend(data);
-        let entries: [(u16, u16, u32); 9] = [
+        let mut entries: Vec<(u16, u16, u32)> = vec![
             (256, 4, w),
             (257, 4, h),
-            (258, 3, 8),
+            (258, 3, u32::from(bits)),
             (259, 3, 1),
             (262, 3, u32::from(photometric)),
             (273, 4, 8),
@@ -673,6 +756,9 @@ mod tests {
             (278, 4, h),
             (279, 4, data.len() as u32),
         ];
+        if format != 1 {
+            entries.push((339, 3, u32::from(format)));
+        }
         b.extend((entries.len() as u16).to_le_bytes());
         for (tag, kind, value) in entries {
             b.extend(tag.to_le_bytes());
@@ -708,6 +794,41 @@ mod tests {
         let ycbcr = tiff_by_hand(2, 1, 3, 6, &[128, 128, 128, 200, 128, 128]);
         let err = decode_image(p, &ycbcr, Linearisation::Linear).expect_err("YCbCr").to_string();
         assert!(err.contains("model.tif") && err.contains("YCbCr colour model"), "{err}");
+    }
+
+    /// WhiteIsZero integers read as the standard's negative (`2^bits − 1 − stored`); floats and
+    /// signed integers, which have no maximum to invert from, are refused naming the file and
+    /// the tag, as is grey with extra samples.
+    #[test]
+    fn tiff_white_is_zero_inverts_integers_and_refuses_floats() {
+        let p = Path::new("negative.tif");
+        let (img, kind) =
+            decode_image(p, &tiff_by_hand(2, 1, 1, 0, &[0, 200]), Linearisation::Linear).expect("8-bit negative");
+        assert_eq!((img.data, kind), (vec![255.0, 55.0], SampleKind::Integer(8)));
+        let u16s: Vec<u8> = [0u16, 1000].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let (img, _) = decode_image(p, &tiff_by_hand_as(2, 1, 1, (16, 1), 0, &u16s), Linearisation::Linear)
+            .expect("16-bit negative");
+        assert_eq!(img.data, vec![65535.0, 64535.0]);
+        let f32s: Vec<u8> = [0.25f32, 300.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let (img, kind) = decode_image(p, &tiff_by_hand_as(2, 1, 1, (32, 3), 1, &f32s), Linearisation::Linear)
+            .expect("BlackIsZero float");
+        assert_eq!((img.data, kind), (vec![0.25, 300.0], SampleKind::Float));
+        let err = decode_image(p, &tiff_by_hand_as(2, 1, 1, (32, 3), 0, &f32s), Linearisation::Linear)
+            .expect_err("WhiteIsZero float")
+            .to_string();
+        assert!(
+            err.contains("negative.tif") && err.contains("PhotometricInterpretation") && err.contains("floating-point"),
+            "{err}"
+        );
+        let i16s: Vec<u8> = [-5i16, 7].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let err = decode_image(p, &tiff_by_hand_as(2, 1, 1, (16, 2), 0, &i16s), Linearisation::Linear)
+            .expect_err("WhiteIsZero signed")
+            .to_string();
+        assert!(err.contains("negative.tif") && err.contains("WhiteIsZero") && err.contains("signed"), "{err}");
+        let err = decode_image(p, &tiff_by_hand(2, 1, 2, 0, &[0, 9, 200, 9]), Linearisation::Linear)
+            .expect_err("WhiteIsZero with an extra sample")
+            .to_string();
+        assert!(err.contains("negative.tif") && err.contains("WhiteIsZero") && err.contains("2 samples"), "{err}");
     }
 
     #[test]
