@@ -491,6 +491,29 @@ fn a_folder_given_for_the_metrics_is_refused_before_scoring() {
     }
 }
 
+/// A `--json` or `--csv` whose folder takes no new file is refused before any scoring, naming
+/// the option and the folder: the write failed only after the work.
+#[cfg(target_os = "linux")]
+#[test]
+fn an_unwritable_folder_for_the_metrics_is_refused_before_scoring() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    // sysfs takes no new file, root included.
+    if !Path::new("/sys").is_dir() {
+        return;
+    }
+    for (option, file) in [("--json", "/sys/m.json"), ("--csv", "/sys/m.csv")] {
+        let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", option, file], d);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && e.contains(&format!("{option} {file}: cannot write into its folder /sys")),
+            "{e}"
+        );
+        assert!(out.stdout.is_empty(), "{option} scored before refusing: {}", String::from_utf8_lossy(&out.stdout));
+    }
+}
+
 /// An SSIM window wider than a held-out image is refused before any scoring, naming the option
 /// and the frame: it failed only after the volumes were scored, without naming --ssim-size.
 #[test]

@@ -74,15 +74,7 @@ pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
         _ => Path::new("."),
     };
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".fluidnerf-").suffix(".tmp");
-    #[cfg(unix)]
-    {
-        // tempfile's default 0600 would make results unreadable to others; the umask still applies.
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
-    }
-    let tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
+    let tmp = temporary_file_in(dir)?;
     let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
     {
         let mut w = BufWriter::new(tmp.as_file());
@@ -91,6 +83,31 @@ pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
     }
     tmp.persist(path).map_err(|e| io_err(e.error))?;
     Ok(())
+}
+
+/// Checks, before any work, that [`atomic_write`] could write `path` into its existing folder:
+/// a temporary file is created there the same way and removed. A folder that is read-only, on
+/// a read-only file system or not a folder at all would otherwise fail only once the results
+/// are ready. The error names the folder.
+pub fn check_writable(path: &Path) -> Result<(), IoError> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    temporary_file_in(dir).map(drop)
+}
+
+/// The temporary file [`atomic_write`] fills in `dir` before renaming it over its target.
+fn temporary_file_in(dir: &Path) -> Result<tempfile::NamedTempFile, IoError> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".fluidnerf-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        // tempfile's default 0600 would make results unreadable to others; the umask still applies.
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    builder.tempfile_in(dir).map_err(|e| IoError::io(dir, "output folder", e))
 }
 
 #[cfg(test)]
@@ -117,6 +134,26 @@ mod tests {
         assert_eq!(read_input_text(&file, "scene file").expect("a file"), "text");
         let err = read_input(&dir.path().join("missing"), "image file").expect_err("missing").to_string();
         assert!(err.contains("image file not found"), "{err}");
+    }
+
+    /// A folder that takes no new file is refused naming it, and a writable one is left as it was.
+    #[test]
+    fn check_writable_probes_the_folder_and_leaves_nothing() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        check_writable(&dir.path().join("out.json")).expect("a writable folder");
+        assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 0, "the probe left a file");
+        let err = check_writable(&dir.path().join("missing/out.json")).expect_err("a missing folder").to_string();
+        assert!(err.contains("missing"), "{err}");
+        let file = dir.path().join("f.txt");
+        std::fs::write(&file, "text").expect("write");
+        let err = check_writable(&file.join("out.json")).expect_err("a file for a folder").to_string();
+        assert!(err.contains("f.txt"), "{err}");
+        // Read-only for everyone, root included.
+        #[cfg(target_os = "linux")]
+        if Path::new("/sys").is_dir() {
+            let err = check_writable(Path::new("/sys/out.json")).expect_err("sysfs").to_string();
+            assert!(err.contains("/sys"), "{err}");
+        }
     }
 
     #[test]

@@ -308,11 +308,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if p.exists() && !args.force {
             bail!("{} exists; pass --force to overwrite it", p.display());
         }
-        // Checked now, not after the scoring.
+        // Checked now, not after the scoring: the folder must exist and take a new file.
         let folder = p.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
         if !folder.is_dir() {
             bail!("{}: the folder {} does not exist", p.display(), folder.display());
         }
+        fluidnerf_io::check_writable(p)
+            .with_context(|| format!("{option} {}: cannot write into its folder {}", p.display(), folder.display()))?;
     }
 
     let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
