@@ -452,6 +452,21 @@ fn phantom_counts_beyond_reason_are_refused_by_key() {
     }
 }
 
+/// Thin-lens rays per voxel beyond the bound are refused naming the option: 1e300 counted rays
+/// past `u64::MAX` and never finished.
+#[test]
+fn rays_per_voxel_beyond_the_bound_are_refused_naming_the_option() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("out");
+    for n in ["1e300", "2000000", "0", "NaN"] {
+        let o = run_small(&dir, &["--model", "thin-lens", "--rays-per-voxel", n]);
+        let err = text(&o).1;
+        assert!(!o.status.success(), "{n}: {err}");
+        assert!(err.contains("--rays-per-voxel on the command line") && err.contains("at most 1048576"), "{n}: {err}");
+        assert!(!dir.exists(), "{n}: wrote output");
+    }
+}
+
 /// `--force` over an earlier synthetic scene replaces it whole: its images, background frames
 /// and truth volumes that the new scene has not were left beside the new scene's, so the
 /// folder held the files of two scenes. Files that are no scene's stay.

@@ -571,7 +571,23 @@ pub(crate) fn resolve(args: &Args) -> anyhow::Result<SynthSettings> {
         None => preset(&args.preset)?,
     };
     apply_overrides(args, &mut settings)?;
-    settings.validate()?;
+    if let Err(e) = settings.validate() {
+        // A value from the command line is named by its option, not only by the key it sets.
+        let options = [
+            ("image.rays_per_voxel", "--rays-per-voxel", args.rays_per_voxel.is_some()),
+            ("image.supersample", "--supersample", args.supersample.is_some()),
+        ];
+        let option = match &e {
+            fluidnerf_synth::SynthError::Invalid { setting, .. } => {
+                options.iter().find(|&&(key, _, given)| given && key == setting).map(|&(_, option, _)| option)
+            }
+            _ => None,
+        };
+        return Err(match option {
+            Some(option) => anyhow::Error::new(e).context(format!("{option} on the command line")),
+            None => e.into(),
+        });
+    }
     Ok(settings)
 }
 

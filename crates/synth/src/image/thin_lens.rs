@@ -43,12 +43,18 @@ use serde::{Deserialize, Serialize};
 
 use crate::SynthError;
 
+/// The most rays [`ThinLensSettings::rays_per_voxel`] may ask for: 2²⁰, about 2000 times the
+/// dissertation's 500. Beyond it the shot noise is far below any sensor's while the cost grows
+/// without bound: 10³⁰⁰ would count rays past `u64::MAX` and never finish.
+pub const MAX_RAYS_PER_VOXEL: f64 = (1u64 << 20) as f64;
+
 /// Settings of the thin-lens image model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ThinLensSettings {
     /// Rays cast from a voxel on the focal plane, `N_rays` of Eq. 6.7. The dissertation used
-    /// 500 with 0.05 mm voxels; fewer rays give more shot noise. Default 128.
+    /// 500 with 0.05 mm voxels; fewer rays give more shot noise. More than 0 and at most
+    /// [`MAX_RAYS_PER_VOXEL`]. Default 128.
     pub rays_per_voxel: f64,
     /// Voxels with values at or below this are not cast. Default 0 (every non-zero voxel).
     pub threshold: f32,
@@ -62,10 +68,13 @@ impl Default for ThinLensSettings {
 
 impl ThinLensSettings {
     pub fn validate(&self) -> Result<(), SynthError> {
-        if !(self.rays_per_voxel > 0.0 && self.rays_per_voxel.is_finite()) {
+        if !(self.rays_per_voxel > 0.0 && self.rays_per_voxel <= MAX_RAYS_PER_VOXEL) {
             return Err(SynthError::invalid(
                 "image.rays_per_voxel",
-                format!("must be positive, got {}", num(self.rays_per_voxel)),
+                format!(
+                    "must be more than 0 and at most {MAX_RAYS_PER_VOXEL} rays per voxel, got {}",
+                    num(self.rays_per_voxel)
+                ),
             ));
         }
         if !self.threshold.is_finite() || self.threshold < 0.0 {
@@ -304,6 +313,18 @@ mod tests {
             shapes: vec![Shape::Blob(GaussianBlob { centre: DVec3::new(2.0, -1.0, 1.5), sigma: 5.0, amplitude: 1.0 })],
         };
         Volume::from_field([n, n, n], aabb, &blob, 0.0)
+    }
+
+    /// Ray counts are bounded: 1e300 counted rays past `u64::MAX` and never finished.
+    #[test]
+    fn rays_per_voxel_are_bounded() {
+        let with = |n: f64| ThinLensSettings { rays_per_voxel: n, threshold: 0.0 }.validate();
+        with(0.5).expect("a fraction of a ray on average");
+        with(MAX_RAYS_PER_VOXEL).expect("the bound");
+        for n in [0.0, -1.0, MAX_RAYS_PER_VOXEL * 2.0, 1e300, f64::INFINITY, f64::NAN] {
+            let err = with(n).expect_err("out of range").to_string();
+            assert!(err.contains("image.rays_per_voxel") && err.contains("at most 1048576"), "{n}: {err}");
+        }
     }
 
     #[test]
