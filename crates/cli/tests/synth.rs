@@ -423,25 +423,74 @@ fn an_interrupted_synthesis_exits_130_and_leaves_nothing() {
     assert!(!out.exists(), "an interrupted synthesis left {}", out.display());
 }
 
-/// Counts of a configuration's phantom far beyond their defaults are refused, naming the key:
-/// a billion blobs or turbulence modes failed to allocate and aborted the program, and a
-/// hundred octaves of turbulence gave images of NaN, blamed on `phantom` as a whole.
+/// Counts and lengths of a configuration's phantom far beyond their defaults are refused,
+/// naming the key: a billion blobs or turbulence modes failed to allocate and aborted the
+/// program, and a hundred octaves of turbulence, or lengths such as 1e300 (past f32's range),
+/// gave images of NaN, blamed on `phantom` as a whole.
 #[test]
 fn phantom_counts_beyond_reason_are_refused_by_key() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let (config, out) = (tmp.path().join("synth.json"), tmp.path().join("out"));
     for (kind, key, value, needle) in [
         ("blobs", "blob_count", serde_json::json!(1_000_000_000u64), "`phantom.blob_count`: must be in 1..=1000"),
-        ("jet", "turbulence_modes", serde_json::json!(10_000_000_000u64), "`jet.turbulence_modes`: must be at most"),
-        ("jet", "inertial_octaves", serde_json::json!(100.0), "`jet.inertial_octaves`: must be at most 20"),
+        (
+            "jet",
+            "turbulence_modes",
+            serde_json::json!(10_000_000_000u64),
+            "`phantom.jet.turbulence_modes`: must be at most",
+        ),
+        (
+            "jet",
+            "inertial_octaves",
+            serde_json::json!(100.0),
+            "`phantom.jet.inertial_octaves`: must be zero or positive and at most 20",
+        ),
+        (
+            "jet",
+            "spreading_rate",
+            serde_json::json!(1e300),
+            "`phantom.jet.spreading_rate`: must be positive and at most 1000, got 1e300",
+        ),
+        (
+            "jet",
+            "transition_end_d",
+            serde_json::json!(1e300),
+            "`phantom.jet.transition_end_d`: must exceed core_length_d (5.5) and be at most 1000",
+        ),
+        (
+            "jet",
+            "wrinkle",
+            serde_json::json!(1e300),
+            "`phantom.jet.wrinkle`: must be zero or positive and at most 1000",
+        ),
+        (
+            "jet",
+            "nozzle_diameter_mm",
+            serde_json::json!(1e300),
+            "`phantom.jet.nozzle_diameter_mm`: must be positive and at most 1000000 mm",
+        ),
+        (
+            "jet-tr",
+            "nozzle_diameter_mm",
+            serde_json::json!(1e30),
+            "`phantom.jet_tr.nozzle_diameter_mm`: must be positive and at most 1000000 mm",
+        ),
+        (
+            "jet-tr",
+            "front_speed",
+            serde_json::json!(1e300),
+            "`phantom.jet_tr.front_speed`: must be positive and at most 1000",
+        ),
     ] {
         let mut phantom = serde_json::json!({ "kind": kind });
-        match key {
-            "blob_count" => phantom[key] = value,
-            _ => phantom["jet"] = serde_json::json!({ key: value }),
+        match kind {
+            "jet" => phantom["jet"] = serde_json::json!({ key: value }),
+            "jet-tr" => phantom["jet_tr"] = serde_json::json!({ key: value }),
+            _ => phantom[key] = value,
         }
+        let times: &[f64] = if kind == "jet-tr" { &[15.0] } else { &[] };
         let settings = serde_json::json!({
-            "phantom": phantom, "resolution": 8, "lens": { "resolution": [16, 16] },
+            "phantom": phantom, "resolution": 8, "lens": { "resolution": [16, 16] }, "times": times,
             "rig": { "layout": { "layout": "ring", "count": 3, "arc_deg": 360.0, "start_deg": 0.0 } },
         });
         std::fs::write(&config, settings.to_string()).expect("writes");

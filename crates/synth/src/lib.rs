@@ -41,7 +41,8 @@ pub use generate::{
 pub use image::{Emitters, ImageModel, PinholeSettings, ThinLensSettings};
 pub use phantom::{
     analytic_image, CfdCase, CfdPhantom, GaussianBlob, Jet, JetParams, LineIntegral, Phantom, PhantomKind,
-    PhantomSettings, Shape, ShapeSum, StartingJet, StartingJetParams, UniformBall,
+    PhantomSettings, Shape, ShapeSum, StartingJet, StartingJetParams, UniformBall, MAX_JET_PARAMETER,
+    MAX_NOZZLE_DIAMETER_MM,
 };
 pub use preset::{preset, presets, DEFAULT_PRESET};
 pub use real::{RealLike, RealRecording};

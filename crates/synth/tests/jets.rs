@@ -5,7 +5,7 @@
 
 use fluidnerf_core::glam::{DVec3, Vec3};
 use fluidnerf_core::{Aabb, ScalarField};
-use fluidnerf_synth::{Jet, JetParams, StartingJet, StartingJetParams};
+use fluidnerf_synth::{Jet, JetParams, StartingJet, StartingJetParams, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM};
 use rand::{Rng, SeedableRng};
 
 fn box40() -> Aabb {
@@ -47,6 +47,66 @@ fn values_are_bounded_finite_and_seeded() {
 }
 
 /// Ensemble mean over realisations (seeds), azimuths and a short axial window.
+/// Every parameter at its upper bound, the others at their defaults, still gives finite values
+/// (10³⁰⁰, past f32's range, gave NaN), and just past it is refused naming its key.
+#[test]
+fn parameters_at_their_bounds_give_finite_values_and_past_them_are_refused_by_key() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+    let pts: Vec<Vec3> = (0..4_000)
+        .map(|_| Vec3::new(rng.random_range(-20.0..20.0), rng.random_range(-20.0..20.0), rng.random_range(-20.0..20.0)))
+        .collect();
+    let with = |defaults: serde_json::Value, key: &str, v: f64| {
+        let mut p = defaults;
+        p[key] = serde_json::json!(v);
+        p
+    };
+    let finite = |field: &dyn ScalarField, time: f64, what: &str| {
+        let mut v = vec![0.0; pts.len()];
+        field.eval(&pts, time, &mut v);
+        assert!(v.iter().all(|x| x.is_finite()), "{what}: non-finite values");
+    };
+    let real = |p: &serde_json::Value| -> Vec<String> {
+        p.as_object()
+            .expect("object")
+            .iter()
+            .filter(|(_, v)| v.is_f64() || v.is_null())
+            .map(|(k, _)| k.clone())
+            .collect()
+    };
+    let jet = serde_json::to_value(JetParams::default()).expect("json");
+    assert_eq!(real(&jet).len(), 14, "the jet's real-valued parameters");
+    for key in &real(&jet) {
+        let (max, unit) = match key.as_str() {
+            "nozzle_diameter_mm" => (MAX_NOZZLE_DIAMETER_MM, " mm"),
+            "inertial_octaves" => (20.0, ""),
+            _ => (MAX_JET_PARAMETER, ""),
+        };
+        let at: JetParams = serde_json::from_value(with(jet.clone(), key, max)).expect("params");
+        if key == "core_length_d" {
+            // The transition must end past the core.
+            at.validate().expect_err("the core past the transition's end");
+        } else {
+            finite(&Jet::new(&at, &box40(), 0).expect(key), 0.0, key);
+        }
+        let past: JetParams = serde_json::from_value(with(jet.clone(), key, 1e300)).expect("params");
+        let err = past.validate().expect_err(key).to_string();
+        assert!(err.contains(&format!("`phantom.jet.{key}`")) && err.contains(&format!("{max}{unit}")), "{err}");
+    }
+    let tr = serde_json::to_value(StartingJetParams::default()).expect("json");
+    assert_eq!(real(&tr).len(), 16, "the starting jet's real-valued parameters");
+    for key in &real(&tr) {
+        let max = if key == "nozzle_diameter_mm" { MAX_NOZZLE_DIAMETER_MM } else { MAX_JET_PARAMETER };
+        let max = if key == "mixing" { 1.0 } else { max };
+        let at: StartingJetParams = serde_json::from_value(with(tr.clone(), key, max)).expect("params");
+        for time in [0.0, 15.0, 40.0] {
+            finite(&StartingJet::new(&at, &box40(), 0).expect(key), time, key);
+        }
+        let past: StartingJetParams = serde_json::from_value(with(tr.clone(), key, 1e300)).expect("params");
+        let err = past.validate().expect_err(key).to_string();
+        assert!(err.contains(&format!("`phantom.jet_tr.{key}`")), "{err}");
+    }
+}
+
 fn mean_at(jets: &[Jet], xi: f64, r: f64, window: f64) -> f64 {
     let (n_t, n_x) = (12, 12);
     let mut sum = 0.0;

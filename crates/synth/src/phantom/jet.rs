@@ -58,6 +58,15 @@ pub const MAX_TURBULENCE_MODES: usize = 4096;
 /// Widest −5/3 range of the jet's turbulence, octaves ([`JetParams::inertial_octaves`]).
 pub const MAX_INERTIAL_OCTAVES: f64 = 20.0;
 
+/// Largest value of a jet parameter given in nozzle diameters, in speeds of `U`, in radians or
+/// as a rate (here and in the starting jet's): far beyond any jet's (the defaults lie between
+/// 0.03 and 11), and small enough that the phantom, evaluated in f32, stays finite: 10³⁰⁰ made
+/// every image NaN.
+pub const MAX_JET_PARAMETER: f64 = 1000.0;
+
+/// Largest nozzle diameter, mm (a kilometre): beyond it the phantom's f32 coordinates overflow.
+pub const MAX_NOZZLE_DIAMETER_MM: f64 = 1e6;
+
 /// Parameters of the [`Jet`] phantom; lengths with suffix `_d` are in nozzle diameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -120,7 +129,8 @@ impl Default for JetParams {
 }
 
 impl JetParams {
-    /// Checks ranges; `setting` prefixes the names in messages.
+    /// Checks ranges, naming the key (`phantom.jet.…`) in messages: every parameter at most
+    /// [`MAX_JET_PARAMETER`] (the nozzle diameter [`MAX_NOZZLE_DIAMETER_MM`]).
     pub fn validate(&self) -> Result<(), SynthError> {
         let positive = [
             ("core_length_d", self.core_length_d),
@@ -129,8 +139,11 @@ impl JetParams {
             ("rollup_wavelength_d", self.rollup_wavelength_d),
         ];
         for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(SynthError::invalid(format!("jet.{name}"), format!("must be positive, got {}", num(v))));
+            if !(v > 0.0 && v <= MAX_JET_PARAMETER) {
+                return Err(SynthError::invalid(
+                    format!("phantom.jet.{name}"),
+                    format!("must be positive and at most {MAX_JET_PARAMETER}, got {}", num(v)),
+                ));
             }
         }
         let non_negative = [
@@ -139,15 +152,14 @@ impl JetParams {
             ("rollup_twist", self.rollup_twist),
             ("helical_twist", self.helical_twist),
             ("asymmetry", self.asymmetry),
-            ("inertial_octaves", self.inertial_octaves),
             ("wrinkle", self.wrinkle),
             ("scalar_fluctuation", self.scalar_fluctuation),
         ];
         for (name, v) in non_negative {
-            if !(v >= 0.0 && v.is_finite()) {
+            if !(0.0..=MAX_JET_PARAMETER).contains(&v) {
                 return Err(SynthError::invalid(
-                    format!("jet.{name}"),
-                    format!("must be zero or positive, got {}", num(v)),
+                    format!("phantom.jet.{name}"),
+                    format!("must be zero or positive and at most {MAX_JET_PARAMETER}, got {}", num(v)),
                 ));
             }
         }
@@ -155,25 +167,38 @@ impl JetParams {
         // would run for days, or fail to allocate and abort.
         if self.turbulence_modes > MAX_TURBULENCE_MODES {
             return Err(SynthError::invalid(
-                "jet.turbulence_modes",
+                "phantom.jet.turbulence_modes",
                 format!("must be at most {MAX_TURBULENCE_MODES}, got {}", self.turbulence_modes),
             ));
         }
         // Eddies 2^-20 of the largest are far finer than a voxel of the finest truth grid
         // (4096 along the box); much farther, their wavenumbers overflow 32-bit floats and the
         // images hold NaN.
-        if self.inertial_octaves > MAX_INERTIAL_OCTAVES {
+        if !(0.0..=MAX_INERTIAL_OCTAVES).contains(&self.inertial_octaves) {
             return Err(SynthError::invalid(
-                "jet.inertial_octaves",
-                format!("must be at most {MAX_INERTIAL_OCTAVES}, got {}", num(self.inertial_octaves)),
+                "phantom.jet.inertial_octaves",
+                format!(
+                    "must be zero or positive and at most {MAX_INERTIAL_OCTAVES}, got {}",
+                    num(self.inertial_octaves)
+                ),
             ));
         }
-        if self.transition_end_d <= self.core_length_d {
-            return Err(SynthError::invalid("jet.transition_end_d", "must exceed core_length_d"));
+        if !(self.transition_end_d > self.core_length_d && self.transition_end_d <= MAX_JET_PARAMETER) {
+            return Err(SynthError::invalid(
+                "phantom.jet.transition_end_d",
+                format!(
+                    "must exceed core_length_d ({}) and be at most {MAX_JET_PARAMETER}, got {}",
+                    num(self.core_length_d),
+                    num(self.transition_end_d)
+                ),
+            ));
         }
         if let Some(d) = self.nozzle_diameter_mm {
-            if !(d > 0.0 && d.is_finite()) {
-                return Err(SynthError::invalid("jet.nozzle_diameter_mm", format!("must be positive, got {}", num(d))));
+            if !(d > 0.0 && d <= MAX_NOZZLE_DIAMETER_MM) {
+                return Err(SynthError::invalid(
+                    "phantom.jet.nozzle_diameter_mm",
+                    format!("must be positive and at most {MAX_NOZZLE_DIAMETER_MM} mm, got {}", num(d)),
+                ));
             }
         }
         Ok(())

@@ -37,7 +37,7 @@ use fluidnerf_core::{Aabb, ScalarField};
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::jet::{smoothstep, RollupTrain};
+use super::jet::{smoothstep, RollupTrain, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM};
 use super::turbulence::KinematicModes;
 use crate::SynthError;
 
@@ -108,6 +108,8 @@ impl Default for StartingJetParams {
 }
 
 impl StartingJetParams {
+    /// Checks ranges, naming the key (`phantom.jet_tr.…`) in messages: every parameter at most
+    /// [`MAX_JET_PARAMETER`] (the nozzle diameter [`MAX_NOZZLE_DIAMETER_MM`]).
     pub fn validate(&self) -> Result<(), SynthError> {
         let positive = [
             ("front_speed", self.front_speed),
@@ -119,8 +121,11 @@ impl StartingJetParams {
             ("edge_thickness_d", self.edge_thickness_d),
         ];
         for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(SynthError::invalid(format!("jet_tr.{name}"), format!("must be positive, got {}", num(v))));
+            if !(v > 0.0 && v <= MAX_JET_PARAMETER) {
+                return Err(SynthError::invalid(
+                    format!("phantom.jet_tr.{name}"),
+                    format!("must be positive and at most {MAX_JET_PARAMETER}, got {}", num(v)),
+                ));
             }
         }
         let non_negative = [
@@ -132,24 +137,30 @@ impl StartingJetParams {
             ("wrinkle_d", self.wrinkle_d),
         ];
         for (name, v) in non_negative {
-            if !(v >= 0.0 && v.is_finite()) {
+            if !(0.0..=MAX_JET_PARAMETER).contains(&v) {
                 return Err(SynthError::invalid(
-                    format!("jet_tr.{name}"),
-                    format!("must be zero or positive, got {}", num(v)),
+                    format!("phantom.jet_tr.{name}"),
+                    format!("must be zero or positive and at most {MAX_JET_PARAMETER}, got {}", num(v)),
                 ));
             }
         }
         if !(0.0..=1.0).contains(&self.mixing) {
-            return Err(SynthError::invalid("jet_tr.mixing", format!("must be in [0, 1], got {}", num(self.mixing))));
+            return Err(SynthError::invalid(
+                "phantom.jet_tr.mixing",
+                format!("must be in [0, 1], got {}", num(self.mixing)),
+            ));
         }
-        if !self.widnall_growth.is_finite() {
-            return Err(SynthError::invalid("jet_tr.widnall_growth", "must be finite"));
+        if !(-MAX_JET_PARAMETER..=MAX_JET_PARAMETER).contains(&self.widnall_growth) {
+            return Err(SynthError::invalid(
+                "phantom.jet_tr.widnall_growth",
+                format!("must be at most {MAX_JET_PARAMETER} either way, got {}", num(self.widnall_growth)),
+            ));
         }
         if let Some(d) = self.nozzle_diameter_mm {
-            if !(d > 0.0 && d.is_finite()) {
+            if !(d > 0.0 && d <= MAX_NOZZLE_DIAMETER_MM) {
                 return Err(SynthError::invalid(
-                    "jet_tr.nozzle_diameter_mm",
-                    format!("must be positive, got {}", num(d)),
+                    "phantom.jet_tr.nozzle_diameter_mm",
+                    format!("must be positive and at most {MAX_NOZZLE_DIAMETER_MM} mm, got {}", num(d)),
                 ));
             }
         }
