@@ -81,15 +81,22 @@ pub(crate) fn read_cine(
     let file = File::open(path).map_err(io)?;
     let len = file.metadata().map_err(io)?.len();
     let mut file = BufReader::new(file);
-    let mut read_at = |at: u64, n: usize, what: &str| -> Result<Vec<u8>, IoError> {
+    // Makes `buf` the `n` bytes from byte `at`, growing it only when it is too short, so that
+    // the frames share one buffer; `what` is formatted only for an error.
+    let mut read_into = |at: u64, n: usize, buf: &mut Vec<u8>, what: &dyn std::fmt::Display| {
+        // Checked before any allocation: a corrupt offset or size can claim anything.
         if at.checked_add(n as u64).is_none_or(|end| end > len) {
             return Err(bad(format!(
                 "the {what} ({n} bytes at byte {at}) runs past the end of the file at byte {len}"
             )));
         }
         file.seek(SeekFrom::Start(at)).map_err(io)?;
-        let mut buf = vec![0; n];
-        file.read_exact(&mut buf).map_err(io)?;
+        buf.resize(n, 0);
+        file.read_exact(buf).map_err(io)
+    };
+    let mut read_at = |at: u64, n: usize, what: &str| -> Result<Vec<u8>, IoError> {
+        let mut buf = Vec::new();
+        read_into(at, n, &mut buf, &what)?;
         Ok(buf)
     };
     let header = read_at(0, FILE_HEADER_LEN, "file header")?;
@@ -175,6 +182,8 @@ pub(crate) fn read_cine(
     let row_bytes = w * bytes_per_pixel;
     let mut clipped = 0u64;
     let mut kept = 0;
+    // The current frame's stored bytes and its 4-byte fields: one buffer each for all frames.
+    let (mut data, mut word) = (Vec::new(), Vec::with_capacity(4));
     for (i, &offset) in offsets.iter().enumerate() {
         if opts.done(i) {
             break;
@@ -182,13 +191,13 @@ pub(crate) fn read_cine(
         if !opts.keeps(i) {
             continue;
         }
-        let annotation = read_at(offset, 4, &format!("annotation of image {i}"))?;
-        let annotation_len = u64::from(u32_at(&annotation, 0));
+        read_into(offset, 4, &mut word, &format_args!("annotation of image {i}"))?;
+        let annotation_len = u64::from(u32_at(&word, 0));
         if annotation_len < 8 {
             return Err(bad(format!("image {i}'s annotation claims {annotation_len} bytes, fewer than its own 8")));
         }
-        let size_field = read_at(offset + annotation_len - 4, 4, &format!("size of image {i}"))?;
-        let size = u32_at(&size_field, 0) as usize;
+        read_into(offset + annotation_len - 4, 4, &mut word, &format_args!("size of image {i}"))?;
+        let size = u32_at(&word, 0) as usize;
         // Rows are packed, or padded to four bytes as in a BMP.
         let padded = row_bytes.div_ceil(4) * 4;
         let stride = if size == row_bytes * h {
@@ -203,7 +212,7 @@ pub(crate) fn read_cine(
                 padded * h
             )));
         };
-        let data = read_at(offset + annotation_len, size, &format!("image {i}"))?;
+        read_into(offset + annotation_len, size, &mut data, &format_args!("image {i}"))?;
         let mut image = Image::zeros(w, h);
         for (r, row) in data.chunks_exact(stride).enumerate() {
             // Bottom-up unless the height is negative.
