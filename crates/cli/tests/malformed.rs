@@ -1360,3 +1360,30 @@ fn a_timeless_truth_for_a_time_resolved_run_is_refused() {
     assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
     assert!(!d.join("m.json").exists(), "wrote metrics");
 }
+
+/// A seed out of range is refused by every command that takes one, saying what a seed is: `-1`
+/// was "unexpected argument '-1' found" (taken for an option) or "invalid digit found in
+/// string", and nothing was run or written.
+#[test]
+fn a_seed_out_of_range_says_what_a_seed_is() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let commands: [&[&str]; 4] = [
+        &["synth", "-o", "out"],
+        &["reconstruct", "scene", "-o", "out"],
+        &["demo", "-o", "out"],
+        &["study", "-o", "out"],
+    ];
+    for command in commands {
+        for seed in [&["--seed", "-1"][..], &["--seed=-1"], &["--seed", "1.5"], &["--seed", "18446744073709551616"]] {
+            let args: Vec<&str> = command.iter().chain(seed).copied().collect();
+            let out = fluidnerf(d, &args);
+            refused(&out, "a seed is a whole number from 0 to 2^64 - 1 (18446744073709551615)");
+            refused(&out, "--seed");
+            assert!(!d.join("out").exists(), "{args:?} wrote output");
+        }
+    }
+    // The largest seed is taken.
+    let out = fluidnerf(d, &["synth", "--list-presets", "--seed", "18446744073709551615"]);
+    ok(&out);
+}

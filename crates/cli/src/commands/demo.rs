@@ -49,7 +49,7 @@ pub struct Args {
     #[arg(long)]
     pub max_iterations: Option<usize>,
     /// Seed of the synthetic noise and of training.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::parse_seed)]
     pub seed: u64,
     /// Replace the results of an earlier demo in OUT.
     #[arg(long)]

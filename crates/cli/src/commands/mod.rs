@@ -148,6 +148,13 @@ pub(crate) fn warn_of_other_scene(
     }
 }
 
+/// Parses `--seed`: a whole number from 0 to 2^64 − 1. clap's own parser for a u64 answered
+/// `-1` with "unexpected argument" (taking it for an option) or "invalid digit found in
+/// string", neither of which says what a seed may be.
+pub(crate) fn parse_seed(s: &str) -> Result<u64, String> {
+    s.trim().parse().map_err(|_| format!("a seed is a whole number from 0 to 2^64 - 1 ({}), got `{s}`", u64::MAX))
+}
+
 /// Refuses a value given twice to the list option `option`: the repeat would run the same work
 /// twice, write the same file twice or print the same row twice.
 pub(crate) fn given_once<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {

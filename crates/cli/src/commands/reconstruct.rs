@@ -122,7 +122,7 @@ pub struct Args {
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Seed for every random choice; the same seed gives the same result [default: 0].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::parse_seed)]
     pub seed: Option<u64>,
     /// Rerun from a `config.json` written by an earlier run; options given here override it.
     #[arg(long)]

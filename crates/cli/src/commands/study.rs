@@ -116,7 +116,7 @@ pub struct Args {
     #[arg(long, default_value_t = 60.0)]
     pub time_budget: f64,
     /// Seed of the scenes and the runs.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::parse_seed)]
     pub seed: u64,
     /// Give every voxel method the images' visual hull (`reconstruct --visual-hull`: voxels
     /// some camera sees dark, up to 4 noise deviations above the background, held at zero;

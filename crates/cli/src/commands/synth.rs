@@ -91,7 +91,7 @@ pub struct Args {
     #[arg(long)]
     pub force: bool,
     /// Seed for the phantom, pose jitter, thin-lens rays and noise [default: the preset's, 0].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::parse_seed)]
     pub seed: Option<u64>,
 
     /// Phantom [default: the preset's].
