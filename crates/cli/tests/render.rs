@@ -310,8 +310,10 @@ fn footprint_renders_match_the_projector_and_the_ray_renderer() {
 /// `--projector auto` (the default) takes the footprint projector where the cells image at
 /// most 1.5 px wide: the scene cameras here, for a volume (the same images as
 /// `--projector footprint`) and for a field (sampled on its finest level's own cells, within
-/// 2 % NRMSE of 4 × 4 exact rays per pixel). It takes rays where the cells image wider (a
-/// large orbit view) and where an option asks for rays. `render.json` records the choice.
+/// 2 % NRMSE of 4 × 4 exact rays per pixel). For a field whose finest cells image wider, it
+/// samples a grid twice as fine where those cells image at most 1.5 px (a small orbit view,
+/// within 2 % of exact rays too). It takes rays where the cells image wider (a large orbit
+/// view) and where an option asks for rays. `render.json` records the choice.
 #[test]
 fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -347,6 +349,22 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
         assert!(e < 0.02, "camera {c}: the field's footprint render against 4 × 4 exact rays, NRMSE {e}");
     }
     assert_eq!(render(&run, "off", &["--bake", "off"])["projector"], "rays");
+
+    let orbit = |name: &str, width: &str, extra: &[&str]| {
+        render(&run, name, &[&["--orbit", "2", "--width", width][..], extra].concat())
+    };
+    let small = orbit("small-orbit", "40", &[]);
+    assert_eq!(small["projector"], "footprint", "{small}");
+    assert_eq!(small["baked"], serde_json::json!([32, 32, 32]), "a grid twice as fine as the finest level");
+    orbit("small-exact", "40", &["--bake", "off", "--supersample", "4"]);
+    let read_orbit = |name: &str, k: usize| {
+        fluidnerf_io::image::read_image(&dir.path().join(name).join(format!("orbit_{k:03}.tif"))).expect("reads").data
+    };
+    for k in 0..2 {
+        let e = nrmse(&read_orbit("small-orbit", k), &read_orbit("small-exact", k));
+        assert!(e < 0.02, "orbit view {k}: the field's footprint render against 4 × 4 exact rays, NRMSE {e}");
+    }
+    assert_eq!(orbit("large-orbit", "200", &[])["projector"], "rays");
 }
 
 /// A step or supersampling that would never finish is refused, naming the option and what it

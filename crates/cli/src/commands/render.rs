@@ -79,9 +79,10 @@ pub struct Args {
     /// faster for large images and orbits; where pixels are wider than the field's detail it is
     /// also closer to what a camera records than one ray per pixel (`docs/performance.md`).
     /// `auto`: `footprint` where the cells it would project (a volume's voxels; a field's
-    /// finest level, or the `--bake N` grid) image at most 1.5 px wide in every view, the field
-    /// then sampled on those cells; `rays` otherwise, and whenever `--supersample`, `--step` or
-    /// `--bake off` asks for rays. `render.json` records the choice.
+    /// finest level, else a grid twice as fine, or the `--bake N` grid) image at most 1.5 px
+    /// wide in every view, the field then sampled on those cells; `rays` otherwise, and
+    /// whenever `--supersample`, `--step` or `--bake off` asks for rays. `render.json` records
+    /// the choice.
     #[arg(long, value_enum, default_value = "auto")]
     pub projector: RenderProjector,
     /// Rays per pixel along each image axis (anti-aliasing; `--projector rays` only).
@@ -104,8 +105,8 @@ pub struct Args {
     /// (a `fast` or `dense` field) when the views' samples outnumber twice the grid's
     /// vertices (inside the field's hull, when it has one: the network evaluations each way),
     /// else renders exactly; with `--projector footprint` it always samples the
-    /// field at the cell centres of a grid twice as fine as its finest level (on the finest
-    /// level's own cells when `--projector auto` chose the footprint projector). Baking is
+    /// field at the cell centres of a grid twice as fine as its finest level (on the grid
+    /// `--projector auto` chose when it chose the footprint projector). Baking is
     /// several times faster for orbits and all-camera renders; on the demo jet's `fast` field
     /// the baked images differ from exact ones by 0.3–0.4 % NRMSE, and with the footprint
     /// projector at the finest level's own resolution (`--bake 128`) by 1.6 %, in a fifth of
@@ -344,10 +345,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         view.time = source.sample_time(*time, what)?;
     }
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
+    // The grid `--projector auto` chose for the footprint projector, if it chose it.
+    let auto_grid = match args.projector {
+        RenderProjector::Auto => auto_footprint(&args, &source, &scene.aabb, &cameras),
+        _ => None,
+    };
     let footprint = match args.projector {
         RenderProjector::Footprint => true,
         RenderProjector::Rays => false,
-        RenderProjector::Auto => auto_footprint(&args, &source, &scene.aabb, &cameras),
+        RenderProjector::Auto => auto_grid.is_some(),
     };
     let step = args.step.or(match &source {
         Source::Volume(v) if !footprint => Some(0.5 * v.spacing().min_element()),
@@ -370,8 +376,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                      (cells along the box's longest side)",
                     args.recon.display()
                 ),
-                // Chosen because the finest level's cells image at most a pixel and a half.
-                _ if footprint && args.projector == RenderProjector::Auto => source.field().detail_dims(),
+                // Chosen because those cells image at most a pixel and a half.
+                _ if footprint && args.projector == RenderProjector::Auto => auto_grid,
                 _ if footprint => doubled,
                 _ => doubled.filter(|dims| {
                     let step = step.unwrap_or(scene.aabb.size().min_element() / 256.0);
@@ -584,23 +590,30 @@ pub const AUTO_FOOTPRINT_MAX_PX: f64 = 1.5;
 /// empty chunks; few enough that an interruption is seen soon.
 const FOOTPRINT_GROUP: usize = 16;
 
-/// Whether `--projector auto` renders with the footprint projector (see [`Args::projector`]):
-/// nothing asks for rays, and the cells it would project image at most
-/// [`AUTO_FOOTPRINT_MAX_PX`] wide in every view.
-fn auto_footprint(args: &Args, source: &Source, aabb: &Aabb, cameras: &[Camera]) -> bool {
+/// The grid `--projector auto` renders with the footprint projector, if it does (see
+/// [`Args::projector`]): nothing asks for rays, and the cells it would project image at most
+/// [`AUTO_FOOTPRINT_MAX_PX`] wide in every view. For a field baked by default those are the
+/// finest level's cells, or else the cells of a grid twice as fine (the grid the footprint
+/// projector samples a field on when asked for it); rays where both image wider.
+fn auto_footprint(args: &Args, source: &Source, aabb: &Aabb, cameras: &[Camera]) -> Option<[usize; 3]> {
     if args.supersample > 1 || args.step.is_some() {
-        return false;
+        return None;
     }
-    let grid = match (source, args.bake) {
-        (Source::Volume(v), _) => Grid::new(v.dims, v.aabb),
-        (Source::Field { .. }, Bake::Off) => return false,
-        (Source::Field { .. }, Bake::Cells(n)) => Grid::new(Volume::dims_for(aabb, n), *aabb),
+    let fits = |dims: [usize; 3], aabb: Aabb| {
+        let px = FootprintProjector::largest_footprint_px(&Grid::new(dims, aabb), cameras);
+        log::debug!("--projector auto: cells of a {dims:?} grid image at most {px:.2} px wide");
+        px <= AUTO_FOOTPRINT_MAX_PX
+    };
+    let candidates: Vec<[usize; 3]> = match (source, args.bake) {
+        (Source::Volume(v), _) => return fits(v.dims, v.aabb).then_some(v.dims),
+        (Source::Field { .. }, Bake::Off) => return None,
+        (Source::Field { .. }, Bake::Cells(n)) => vec![Volume::dims_for(aabb, n)],
         (Source::Field { .. }, Bake::Auto) => match source.field().detail_dims() {
-            Some(dims) => Grid::new(dims, *aabb),
-            None => return false,
+            Some(dims) => vec![dims, dims.map(|n| 2 * n)],
+            None => return None,
         },
     };
-    FootprintProjector::largest_footprint_px(&grid, cameras) <= AUTO_FOOTPRINT_MAX_PX
+    candidates.into_iter().find(|&dims| fits(dims, *aabb))
 }
 
 /// The files an earlier render listed in `settings` (its `render.json`) that the new render's
