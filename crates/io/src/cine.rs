@@ -12,9 +12,14 @@
 //! linearisation or range mapping applies (unlike 8-bit video), so 12-bit data keeps its 12
 //! bits.
 //!
-//! **Read:** grey frames of 8 or 16 bits per pixel, uncompressed. **Refused**, each with its
-//! reason: packed 10- and 12-bit frames (save the cine from PCC as 16-bit), colour sensors'
-//! Bayer mosaics and colour-interpolated frames (fluidnerf does not demosaic).
+//! **Read:** grey frames of 8 or 16 bits per pixel, uncompressed, and grey frames packed at 12
+//! bits per pixel (`biCompression` 1024, "P12L": two pixels in three bytes, the first pixel's
+//! eight high bits, then its four low bits with the second's four high bits, then the second's
+//! eight low bits), linear like the 16-bit ones. Packed frames are stored top-down, unlike the
+//! others, as pycine and the PIMS reader of Dustin Kleckner read them. **Refused**, each with
+//! its reason: packed 10-bit frames (`biCompression` 256, stored through the camera's
+//! logarithmic 10-bit table; save the cine from PCC as 16-bit or 12-bit packed), colour
+//! sensors' Bayer mosaics and colour-interpolated frames (fluidnerf does not demosaic).
 //!
 //! **Times.** Frame `i` (from 0, the first image saved in the file) is at
 //! `(FirstImageNo + i) / FrameRate` seconds from the trigger, plus the time offset:
@@ -44,6 +49,10 @@ const BI_WIDTH: usize = 4;
 const BI_HEIGHT: usize = 8;
 const BI_BIT_COUNT: usize = 14;
 const BI_COMPRESSION: usize = 16;
+/// `biCompression` of frames packed at 10 bits per pixel through a logarithmic table (refused).
+const PACKED_10: u32 = 256;
+/// `biCompression` of frames packed at 12 bits per pixel, linear ("P12L").
+const PACKED_12L: u32 = 1024;
 /// `SETUP`: the fields read, as offsets from its start.
 const SETUP_FRAME_RATE16: usize = 0;
 const SETUP_LENGTH: usize = 142;
@@ -126,8 +135,10 @@ pub(crate) fn read_cine(
     }
     let setup = read_at(setup_at, setup_len.min(SETUP_BLACK_LEVEL + 4), "camera setup")?;
     let cfa = u32_at(&setup, SETUP_CFA) & 0x00ff_ffff;
+    // Whether the frames are packed at 12 bits per pixel.
+    let packed = compression == PACKED_12L;
     match (compression, bits) {
-        (0, 8 | 16) if cfa != 0 => {
+        (0, 8 | 16) | (PACKED_12L, _) if cfa != 0 => {
             return Err(IoError::invalid(
                 path,
                 format!(
@@ -137,7 +148,7 @@ pub(crate) fn read_cine(
                 ),
             ))
         }
-        (0, 8 | 16) => {}
+        (0, 8 | 16) | (PACKED_12L, _) => {}
         (0, 24 | 48) => {
             return Err(IoError::invalid(
                 path,
@@ -147,13 +158,13 @@ pub(crate) fn read_cine(
                 ),
             ))
         }
-        (256 | 1024, _) => {
+        (PACKED_10, _) => {
             return Err(IoError::invalid(
                 path,
                 format!(
-                    "packed {}-bit frames (compression {compression}), which fluidnerf does not unpack: save the cine \
-                     from the camera's software with 16 bits per pixel",
-                    if compression == 256 { 10 } else { 12 }
+                    "packed 10-bit frames (compression {compression}), stored through the camera's logarithmic \
+                     10-bit table, which fluidnerf does not unpack: save the cine from the camera's software with 16 \
+                     bits per pixel, or packed at 12 bits"
                 ),
             ))
         }
@@ -168,9 +179,10 @@ pub(crate) fn read_cine(
     }
     let real_bpp = u32_at(&setup, SETUP_REAL_BPP);
     let black = if setup.len() >= SETUP_BLACK_LEVEL + 4 { u32_at(&setup, SETUP_BLACK_LEVEL) } else { 0 };
-    let full_scale = if bits == 8 { 255 } else { 65535 };
+    let stored_bits = if packed { 12 } else { bits };
+    let full_scale = (1u32 << stored_bits) - 1;
     if black >= full_scale {
-        return Err(bad(format!("its black level {black} is at or above the {bits}-bit full scale")));
+        return Err(bad(format!("its black level {black} is at or above the {stored_bits}-bit full scale")));
     }
     crate::video::warn_unused_by_raw(path, opts, "a cine file");
     let offsets_at = u64::from(u32_at(&header, OFF_IMAGE_OFFSETS));
@@ -198,9 +210,15 @@ pub(crate) fn read_cine(
         }
         read_into(offset + annotation_len - 4, 4, &mut word, &format_args!("size of image {i}"))?;
         let size = u32_at(&word, 0) as usize;
-        // Rows are packed, or padded to four bytes as in a BMP.
+        // Rows are packed, or padded to four bytes as in a BMP; 12-bit pixels run on across rows.
         let padded = row_bytes.div_ceil(4) * 4;
-        let stride = if size == row_bytes * h {
+        let stride = if packed {
+            let want = (3 * w * h).div_ceil(2);
+            if size != want {
+                return Err(bad(format!("image {i} holds {size} bytes; {w}×{h} pixels packed at 12 bits take {want}")));
+            }
+            0
+        } else if size == row_bytes * h {
             row_bytes
         } else if size == padded * h {
             padded
@@ -214,22 +232,33 @@ pub(crate) fn read_cine(
         };
         read_into(offset + annotation_len, size, &mut data, &format_args!("image {i}"))?;
         let mut image = Image::zeros(w, h);
-        for (r, row) in data.chunks_exact(stride).enumerate() {
-            // Bottom-up unless the height is negative.
-            let y = if height > 0 { h - 1 - r } else { r };
-            let out = &mut image.data[y * w..(y + 1) * w];
-            let mut put = |o: &mut f32, v: u32| {
-                if v < black {
-                    clipped += 1;
+        let mut put = |o: &mut f32, v: u32| {
+            if v < black {
+                clipped += 1;
+            }
+            *o = v.saturating_sub(black) as f32;
+        };
+        if packed {
+            // Top-down, the pixels one run of pairs; an odd count's last pair is half of one.
+            for (pair, b) in image.data.chunks_mut(2).zip(data.chunks(3)) {
+                let b = [b[0], b.get(1).copied().unwrap_or(0), b.get(2).copied().unwrap_or(0)];
+                put(&mut pair[0], u32::from(b[0]) << 4 | u32::from(b[1]) >> 4);
+                if let Some(o) = pair.get_mut(1) {
+                    put(o, u32::from(b[1] & 0x0f) << 8 | u32::from(b[2]));
                 }
-                *o = v.saturating_sub(black) as f32;
-            };
-            if bits == 8 {
-                out.iter_mut().zip(&row[..row_bytes]).for_each(|(o, &v)| put(o, u32::from(v)));
-            } else {
-                out.iter_mut()
-                    .zip(row[..row_bytes].chunks_exact(2))
-                    .for_each(|(o, v)| put(o, u32::from(u16::from_le_bytes([v[0], v[1]]))));
+            }
+        } else {
+            for (r, row) in data.chunks_exact(stride).enumerate() {
+                // Bottom-up unless the height is negative.
+                let y = if height > 0 { h - 1 - r } else { r };
+                let out = &mut image.data[y * w..(y + 1) * w];
+                if bits == 8 {
+                    out.iter_mut().zip(&row[..row_bytes]).for_each(|(o, &v)| put(o, u32::from(v)));
+                } else {
+                    out.iter_mut()
+                        .zip(row[..row_bytes].chunks_exact(2))
+                        .for_each(|(o, v)| put(o, u32::from(u16::from_le_bytes([v[0], v[1]]))));
+                }
             }
         }
         let time_s = (f64::from(first_image_no) + i as f64) / f64::from(rate) + opts.time_offset_s;
@@ -237,8 +266,10 @@ pub(crate) fn read_cine(
         kept += 1;
     }
     log::debug!(
-        "{}: cine of {w}×{h} px, {bits} bits per pixel ({real_bpp} significant), black level {black}, {rate} frames/s",
-        path.display()
+        "{}: cine of {w}×{h} px, {stored_bits} bits per pixel{} ({real_bpp} significant), black level {black}, {rate} \
+         frames/s",
+        path.display(),
+        if packed { " packed" } else { "" }
     );
     Ok(VideoInfo {
         decoder: Decoder::Cine,

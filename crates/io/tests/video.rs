@@ -341,6 +341,49 @@ mod cine {
         assert_eq!(video.frames[1].get(5, 7), ramp(5, 7, 3));
     }
 
+    /// Frames packed at 12 bits per pixel (written by make_cine.py, top-down) read as the same
+    /// counts as the 16-bit fixture's frames, and as pycine's development version reads them.
+    #[test]
+    fn packed_twelve_bit_frames_are_the_same_counts() {
+        let packed = read_video(&fixture("ramp_12bit_packed.cine"), &VideoOptions::default()).expect("reads");
+        let plain = read_video(&fixture("ramp_16bit.cine"), &VideoOptions::default()).expect("reads");
+        assert_eq!((packed.info.width, packed.info.height, packed.info.frames_kept), (32, 24, 4));
+        assert_eq!(packed.times, plain.times);
+        for (k, (a, b)) in packed.frames.iter().zip(&plain.frames).enumerate() {
+            assert_eq!(a.data, b.data, "frame {k}");
+        }
+        let as_pycine = |c: f32| (f64::from(c) * 4095.0 / 4000.0).floor();
+        let recorded = recorded("check_cine_packed_with_pycine.txt", "ramp_12bit_packed.cine");
+        assert_eq!(recorded.len(), 4);
+        for (k, (pixels, sum)) in recorded.into_iter().enumerate() {
+            let img = &packed.frames[k];
+            for ((x, y), v) in pixels {
+                assert_eq!(as_pycine(img.get(x, y)), f64::from(v), "frame {k} pixel ({x}, {y})");
+            }
+            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<f64>(), sum, "frame {k}");
+        }
+    }
+
+    /// A packed frame whose size is not that of its pixels at 12 bits is refused, and a black
+    /// level at the 12-bit full scale too.
+    #[test]
+    fn packed_frames_of_the_wrong_size_are_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut bytes = std::fs::read(fixture("ramp_12bit_packed.cine")).expect("reads the fixture");
+        let offsets = u32::from_le_bytes(bytes[32..36].try_into().expect("4 bytes")) as usize;
+        let first = u64::from_le_bytes(bytes[offsets..offsets + 8].try_into().expect("8 bytes")) as usize;
+        put_u32(&mut bytes, first + 4, 1151);
+        let path = dir.path().join("short.cine");
+        std::fs::write(&path, &bytes).expect("writes");
+        let e = read_video(&path, &VideoOptions::default()).expect_err("refused").to_string();
+        assert!(e.contains("short.cine") && e.contains("image 0 holds 1151 bytes"), "{e}");
+        let mut bytes = std::fs::read(fixture("ramp_12bit_packed.cine")).expect("reads the fixture");
+        put_u32(&mut bytes, SETUP + 5732, 4095);
+        std::fs::write(&path, &bytes).expect("writes");
+        let e = read_video(&path, &VideoOptions::default()).expect_err("refused").to_string();
+        assert!(e.contains("black level 4095") && e.contains("12-bit full scale"), "{e}");
+    }
+
     /// The 16-bit fixture with `patch` applied to its bytes, written to `dir`.
     fn patched(dir: &Path, patch: impl FnOnce(&mut Vec<u8>)) -> PathBuf {
         let mut bytes = std::fs::read(fixture("ramp_16bit.cine")).expect("reads the fixture");
@@ -389,8 +432,14 @@ mod cine {
         assert!(e.contains("Bayer mosaic") && e.contains("code 3"), "{e}");
         let e = err(&|b| put_u32(b, BITMAP + 16, 256));
         assert!(e.contains("packed 10-bit"), "{e}");
+        // The 16-bit frames' 1536 bytes are not the 1152 of 32 × 24 pixels packed at 12 bits.
         let e = err(&|b| put_u32(b, BITMAP + 16, 1024));
-        assert!(e.contains("packed 12-bit"), "{e}");
+        assert!(e.contains("image 0 holds 1536 bytes") && e.contains("packed at 12 bits take 1152"), "{e}");
+        let e = err(&|b| {
+            put_u32(b, BITMAP + 16, 1024);
+            put_u32(b, SETUP + 808, 3);
+        });
+        assert!(e.contains("Bayer mosaic"), "{e}");
         let e = err(&|b| b[BITMAP + 14..BITMAP + 16].copy_from_slice(&48u16.to_le_bytes()));
         assert!(e.contains("colour-interpolated"), "{e}");
         let e = err(&|b| put_u32(b, SETUP + 768, 0));
