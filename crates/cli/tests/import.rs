@@ -1155,13 +1155,48 @@ fn phantom_cine_recordings_import_as_videos() {
     assert_eq!(record["videos"][0]["decoder"], "cine");
     assert_eq!(record["videos"][0]["range_source"], "raw");
 
-    // A camera whose file begins one image later than the others' holds other instants.
-    let mut bytes = std::fs::read(&fixture).expect("reads");
-    bytes[16..20].copy_from_slice(&1i32.to_le_bytes());
-    std::fs::write(videos.join("cam2.cine"), bytes).expect("writes");
-    let o = import_recordings(&calib, &videos, &dir.path().join("late"), &[]);
-    assert!(!o.status.success(), "{}", stderr(&o));
-    assert!(stderr(&o).contains("not synchronised") && stderr(&o).contains("camera cam2 at 0.001 s"), "{}", stderr(&o));
+    // A camera whose file begins one image later than the others' (at 1 to 4 ms, theirs at 0
+    // to 3 ms): the three instants all of them recorded, the others' first frames left out.
+    let patched = |first_image: i32, rate: Option<u32>| {
+        let mut bytes = std::fs::read(&fixture).expect("reads");
+        bytes[16..20].copy_from_slice(&first_image.to_le_bytes());
+        if let Some(r) = rate {
+            bytes[84 + 768..84 + 772].copy_from_slice(&r.to_le_bytes());
+        }
+        std::fs::write(videos.join("cam2.cine"), bytes).expect("writes");
+    };
+    patched(1, None);
+    let late = dir.path().join("late");
+    let o = import_recordings(&calib, &videos, &late, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("camera cam0: 1 frame(s) before 0.001 s and 0 after 0.003 s"), "{e}");
+    assert!(e.contains("camera cam2: 0 frame(s) before 0.001 s and 1 after 0.003 s"), "{e}");
+    let scene = load_scene(&late).expect("loads");
+    assert_eq!((scene.frames.len(), scene.times()), (9, vec![0.001, 0.002, 0.003]));
+    for f in &scene.frames {
+        let img = fluidnerf_io::image::read_image(&late.join(&f.file_path)).expect("reads");
+        let k =
+            (f.time.expect("a time") * 1000.0).round() as usize - usize::from(f.camera_name.as_deref() == Some("cam2"));
+        assert_eq!(img.get(5, 7), 10.0 * (20.0 + 4.0 * 5.0 + 3.0 * 7.0 + 10.0 * k as f32), "{f:?}");
+    }
+    assert!(!late.join("frames/cam0/000000.tif").exists() && late.join("frames/cam0/000001.tif").exists());
+    assert!(!late.join("frames/cam2/000003.tif").exists());
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(late.join("import.json")).expect("import.json")).expect("JSON");
+    assert_eq!(
+        (record["videos"][0]["frames_kept"].as_u64(), record["videos"][0]["first_time_s"].as_f64()),
+        (Some(3), Some(0.001))
+    );
+
+    // Files that share no run of instants are refused: at half the frame rate, the common times
+    // (0 and 2 ms) are every other frame of the others; a file of instants after theirs, none.
+    for (first_image, rate, says) in [(0, Some(500), "camera cam2 at 0.002 s"), (10, None, "camera cam2 at 0.01 s")] {
+        patched(first_image, rate);
+        let o = import_recordings(&calib, &videos, &dir.path().join(format!("apart{first_image}")), &[]);
+        assert!(!o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("not synchronised") && stderr(&o).contains(says), "{}", stderr(&o));
+    }
 }
 
 /// Photron MRAW recordings with their headers beside them import as videos; the headers are

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, ensure, Context};
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::scene::{estimate_box, same_time, BoxEstimateParams};
-use fluidnerf_core::{Aabb, Camera, Frame, Scene, TruthRef};
+use fluidnerf_core::{num, Aabb, Camera, Frame, Scene, TruthRef};
 use fluidnerf_io::image::{read_image_with, Linearisation, SampleKind};
 use fluidnerf_io::scene::{
     load_images_with, load_preprocessed_with, read_scene_draft, save_scene_recording, validate_scene, SCENE_FILE,
@@ -41,7 +41,9 @@ use std::io::Write as _;
 /// frames of a cine or MRAW are its sensor's counts, as stored, a cine's above its black level),
 /// and written as float TIFFs to `OUT/frames/NAME/` with their times in seconds (see
 /// --video-range, --video-frames, --video-every, --video-time-offset); videos cannot join
-/// series of images. How each video was read (decoder, range and why,
+/// series of images. Raw recordings (cine, MRAW) are paired by their frames' times from the
+/// trigger: files of one rate that began or ended apart keep the instants every camera
+/// recorded. How each video was read (decoder, range and why,
 /// clipped pixels) is recorded in `OUT/import.json`.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
@@ -206,8 +208,9 @@ fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
 
 /// Replaces every frame whose file is a video by its decoded frames, each written as a float
 /// TIFF (linearised, range-mapped values) into `out/frames/<camera>/` as it is decoded, with
-/// its time. All videos must give the same number of frames at the same times (a synchronised
-/// recording).
+/// its time. All videos must give their frames at the same times (a synchronised recording);
+/// raw recordings that began or ended apart keep the frames of the times every one of them
+/// recorded, the others' files removed again, with a warning.
 /// Also returns, for each frame returned, the index of the frame it came from (a video's
 /// frames keep its mask and background).
 fn expand_videos(
@@ -251,8 +254,9 @@ fn expand_videos(
     let mut expanded = Vec::new();
     let mut sources = Vec::new();
     let mut records: Vec<VideoRecord> = Vec::new();
-    // Each video's frame times, in the order of `records`.
+    // Each video's frame times, and the index of its frame in `frames`, in the order of `records`.
     let mut all_times: Vec<Vec<f64>> = Vec::new();
+    let mut video_sources: Vec<usize> = Vec::new();
     for (source, f) in frames.into_iter().enumerate() {
         if !fluidnerf_io::video::is_video(&f.file_path) {
             expanded.push(f);
@@ -327,12 +331,45 @@ fn expand_videos(
             last_time_s: times.last().copied().unwrap_or(0.0),
         });
         all_times.push(times);
+        video_sources.push(source);
     }
-    if let Some(first) = records.first() {
+    let Some(first) = records.first() else { return Ok((expanded, records, sources)) };
+    let same_times = |times: &Vec<f64>| {
+        times.len() == all_times[0].len() && times.iter().zip(&all_times[0]).all(|(&t, &t0)| same_time(t, t0))
+    };
+    if all_times.iter().all(same_times) {
+        return Ok((expanded, records, sources));
+    }
+    // Cameras triggered together whose files keep different spans of one rate: the times all
+    // of them recorded, a run of consecutive frames in each file. Only recordings whose times
+    // count from the trigger (a high-speed camera's raw files) are paired so; other videos'
+    // times count from each file's start, and files of different lengths say nothing of which
+    // frames were simultaneous.
+    let from_trigger = records.iter().all(|r| r.info.range_source == fluidnerf_io::video::RangeSource::Raw);
+    let common: Vec<f64> = all_times[0]
+        .iter()
+        .copied()
+        .filter(|&t| {
+            // Frames are decoded in time order: the first time not below `t` is `t` or none is.
+            all_times[1..].iter().all(|times| {
+                times.get(times.partition_point(|&u| u < t && !same_time(u, t))).is_some_and(|&u| same_time(t, u))
+            })
+        })
+        .collect();
+    let runs: Option<Vec<usize>> = all_times
+        .iter()
+        .map(|times| {
+            let start = times.iter().position(|&t| common.first().is_some_and(|&c| same_time(t, c)))?;
+            let run = times.get(start..start + common.len())?;
+            run.iter().zip(&common).all(|(&t, &c)| same_time(t, c)).then_some(start)
+        })
+        .collect();
+    let aligned = runs.filter(|_| !common.is_empty() && from_trigger);
+    let Some(starts) = aligned else {
         if let Some(other) = records.iter().find(|r| r.info.frames_kept != first.info.frames_kept) {
             bail!(
-                "the videos are not synchronised: camera {} gives {} frame(s), camera {} {}; select the common \
-                 frames with --video-frames",
+                "the videos are not synchronised: camera {} gives {} frame(s), camera {} {}, and they share no run \
+                 of frames at the same times; select the common frames with --video-frames",
                 first.camera,
                 first.info.frames_kept,
                 other.camera,
@@ -359,6 +396,46 @@ fn expand_videos(
                 rate(other)
             );
         }
+        bail!("the videos are not synchronised: their frames are at different times");
+    };
+    // Each video's frames outside the common run are left out, their files removed.
+    let (t0, t1) = (common[0], common[common.len() - 1]);
+    let mut outside = false;
+    for ((record, times), &start) in records.iter_mut().zip(&all_times).zip(&starts) {
+        let after = times.len() - start - common.len();
+        if start + after == 0 {
+            continue;
+        }
+        log::warn!(
+            "camera {}: {start} frame(s) before {} s and {after} after {} s, times not every camera recorded, are left \
+             out",
+            record.camera,
+            num(t0),
+            num(t1)
+        );
+        record.info.frames_kept = common.len();
+        (record.first_time_s, record.last_time_s) = (t0, t1);
+        outside = true;
+    }
+    if outside {
+        // The k-th frame decoded from the video of `source` is kept when its file's run holds it.
+        let mut seen = vec![0usize; records.len()];
+        let mut kept_frames = Vec::with_capacity(expanded.len());
+        let mut kept_sources = Vec::with_capacity(sources.len());
+        for (f, source) in expanded.into_iter().zip(sources) {
+            if let Some(r) = video_sources.iter().position(|&v| v == source) {
+                let k = seen[r];
+                seen[r] += 1;
+                if !(starts[r]..starts[r] + common.len()).contains(&k) {
+                    std::fs::remove_file(&f.file_path)
+                        .with_context(|| format!("removing {}, a frame left out", f.file_path.display()))?;
+                    continue;
+                }
+            }
+            kept_frames.push(f);
+            kept_sources.push(source);
+        }
+        return Ok((kept_frames, records, kept_sources));
     }
     Ok((expanded, records, sources))
 }
