@@ -425,8 +425,8 @@ fn an_interrupted_synthesis_exits_130_and_leaves_nothing() {
 
 /// Counts and lengths of a configuration's phantom far beyond their defaults are refused,
 /// naming the key: a billion blobs or turbulence modes failed to allocate and aborted the
-/// program, and a hundred octaves of turbulence, or lengths such as 1e300 (past f32's range),
-/// gave images of NaN, blamed on `phantom` as a whole.
+/// program, and a hundred octaves of turbulence, or lengths such as 1e300 (past f32's range)
+/// or 1e-45 (below it), gave images of NaN, blamed on `phantom` as a whole.
 #[test]
 fn phantom_counts_beyond_reason_are_refused_by_key() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -449,7 +449,7 @@ fn phantom_counts_beyond_reason_are_refused_by_key() {
             "jet",
             "spreading_rate",
             serde_json::json!(1e300),
-            "`phantom.jet.spreading_rate`: must be positive and at most 1000, got 1e300",
+            "`phantom.jet.spreading_rate`: must be between 0.001 and 1000, got 1e300",
         ),
         (
             "jet",
@@ -467,19 +467,43 @@ fn phantom_counts_beyond_reason_are_refused_by_key() {
             "jet",
             "nozzle_diameter_mm",
             serde_json::json!(1e300),
-            "`phantom.jet.nozzle_diameter_mm`: must be positive and at most 1000000 mm",
+            "`phantom.jet.nozzle_diameter_mm`: must be between 0.001 mm and 1000000 mm",
         ),
         (
             "jet-tr",
             "nozzle_diameter_mm",
             serde_json::json!(1e30),
-            "`phantom.jet_tr.nozzle_diameter_mm`: must be positive and at most 1000000 mm",
+            "`phantom.jet_tr.nozzle_diameter_mm`: must be between 0.001 mm and 1000000 mm",
         ),
         (
             "jet-tr",
             "front_speed",
             serde_json::json!(1e300),
-            "`phantom.jet_tr.front_speed`: must be positive and at most 1000",
+            "`phantom.jet_tr.front_speed`: must be between 0.001 and 1000",
+        ),
+        (
+            "jet",
+            "nozzle_diameter_mm",
+            serde_json::json!(1e-45),
+            "`phantom.jet.nozzle_diameter_mm`: must be between 0.001 mm and 1000000 mm, got 1e-45",
+        ),
+        (
+            "jet",
+            "spreading_rate",
+            serde_json::json!(1e-40),
+            "`phantom.jet.spreading_rate`: must be between 0.001 and 1000, got 1e-40",
+        ),
+        (
+            "jet-tr",
+            "nozzle_diameter_mm",
+            serde_json::json!(1e-45),
+            "`phantom.jet_tr.nozzle_diameter_mm`: must be between 0.001 mm and 1000000 mm, got 1e-45",
+        ),
+        (
+            "jet-tr",
+            "trailing_wavelength_d",
+            serde_json::json!(1e-40),
+            "`phantom.jet_tr.trailing_wavelength_d`: must be between 0.001 and 1000, got 1e-40",
         ),
     ] {
         let mut phantom = serde_json::json!({ "kind": kind });

@@ -42,7 +42,7 @@ pub use image::{Emitters, ImageModel, PinholeSettings, ThinLensSettings};
 pub use phantom::{
     analytic_image, CfdCase, CfdPhantom, GaussianBlob, Jet, JetParams, LineIntegral, Phantom, PhantomKind,
     PhantomSettings, Shape, ShapeSum, StartingJet, StartingJetParams, UniformBall, MAX_JET_PARAMETER,
-    MAX_NOZZLE_DIAMETER_MM,
+    MAX_NOZZLE_DIAMETER_MM, MIN_JET_PARAMETER, MIN_NOZZLE_DIAMETER_MM,
 };
 pub use preset::{preset, presets, DEFAULT_PRESET};
 pub use real::{RealLike, RealRecording};

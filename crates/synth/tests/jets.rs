@@ -5,7 +5,10 @@
 
 use fluidnerf_core::glam::{DVec3, Vec3};
 use fluidnerf_core::{Aabb, ScalarField};
-use fluidnerf_synth::{Jet, JetParams, StartingJet, StartingJetParams, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM};
+use fluidnerf_synth::{
+    Jet, JetParams, StartingJet, StartingJetParams, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM, MIN_JET_PARAMETER,
+    MIN_NOZZLE_DIAMETER_MM,
+};
 use rand::{Rng, SeedableRng};
 
 fn box40() -> Aabb {
@@ -105,6 +108,99 @@ fn parameters_at_their_bounds_give_finite_values_and_past_them_are_refused_by_ke
         let err = past.validate().expect_err(key).to_string();
         assert!(err.contains(&format!("`phantom.jet_tr.{key}`")), "{err}");
     }
+}
+
+/// At the other end: every parameter that must be positive, at its lower bound and the others
+/// at their defaults, gives finite values, and a tiny value (1e-45, which rounds to zero in f32
+/// and gave images of NaN) is refused naming its key. A parameter that may be zero gives, at a
+/// tiny value, nearly the field it gives at zero (a roll-up wavelength growing by 1e-10 per
+/// diameter twisted the whole jet into one vortex).
+#[test]
+fn tiny_parameters_are_refused_by_key_or_act_as_zero() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let pts: Vec<Vec3> = (0..4_000)
+        .map(|i| {
+            // Half near the axis, where the jets are.
+            let w = if i % 2 == 0 { 2.0 } else { 20.0 };
+            Vec3::new(rng.random_range(-20.0..20.0), rng.random_range(-w..w), rng.random_range(-w..w))
+        })
+        .collect();
+    let with = |defaults: &serde_json::Value, key: &str, v: f64| {
+        let mut p = defaults.clone();
+        p[key] = serde_json::json!(v);
+        p
+    };
+    let values = |field: &dyn ScalarField, time: f64, what: &str| {
+        let mut v = vec![0.0; pts.len()];
+        field.eval(&pts, time, &mut v);
+        assert!(v.iter().all(|x| x.is_finite()), "{what}: non-finite values");
+        v
+    };
+    let max_diff = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    let (tiny, mut refused, mut as_zero) = (1e-45, 0, 0);
+    let jet = serde_json::to_value(JetParams::default()).expect("json");
+    for (key, v) in jet.as_object().expect("object") {
+        if !(v.is_f64() || v.is_null()) {
+            continue;
+        }
+        let params = |v: f64| serde_json::from_value::<JetParams>(with(&jet, key, v)).expect("params");
+        match params(0.0).validate() {
+            Ok(()) => {
+                let zero = values(&Jet::new(&params(0.0), &box40(), 0).expect(key), 0.0, key);
+                let small = values(&Jet::new(&params(tiny), &box40(), 0).expect(key), 0.0, key);
+                assert!(max_diff(&zero, &small) < 1e-3, "phantom.jet.{key} = {tiny:e} is far from 0");
+                as_zero += 1;
+            }
+            Err(_) => {
+                let err = params(tiny).validate().expect_err(key).to_string();
+                assert!(err.contains(&format!("`phantom.jet.{key}`")), "{err}");
+                if key != "transition_end_d" {
+                    let (min, unit) = if key == "nozzle_diameter_mm" {
+                        (MIN_NOZZLE_DIAMETER_MM, " mm")
+                    } else {
+                        (MIN_JET_PARAMETER, "")
+                    };
+                    assert!(err.contains(&format!("between {min}{unit}")), "{err}");
+                    values(&Jet::new(&params(min), &box40(), 0).expect(key), 0.0, key);
+                }
+                refused += 1;
+            }
+        }
+    }
+    assert_eq!((refused, as_zero), (6, 8), "the jet's positive and non-negative parameters");
+    let (mut refused, mut as_zero) = (0, 0);
+    let tr = serde_json::to_value(StartingJetParams::default()).expect("json");
+    for (key, v) in tr.as_object().expect("object") {
+        if !(v.is_f64() || v.is_null()) {
+            continue;
+        }
+        let params = |v: f64| serde_json::from_value::<StartingJetParams>(with(&tr, key, v)).expect("params");
+        match params(0.0).validate() {
+            Ok(()) => {
+                let (zero, small) = (
+                    StartingJet::new(&params(0.0), &box40(), 0).expect(key),
+                    StartingJet::new(&params(tiny), &box40(), 0).expect(key),
+                );
+                for time in [0.0, 15.0, 40.0] {
+                    let d = max_diff(&values(&zero, time, key), &values(&small, time, key));
+                    assert!(d < 1e-3, "phantom.jet_tr.{key} = {tiny:e} is far from 0 at t* = {time}");
+                }
+                as_zero += 1;
+            }
+            Err(_) => {
+                let err = params(tiny).validate().expect_err(key).to_string();
+                let (min, unit) =
+                    if key == "nozzle_diameter_mm" { (MIN_NOZZLE_DIAMETER_MM, " mm") } else { (MIN_JET_PARAMETER, "") };
+                assert!(err.contains(&format!("`phantom.jet_tr.{key}`: must be between {min}{unit}")), "{err}");
+                let at = StartingJet::new(&params(min), &box40(), 0).expect(key);
+                for time in [0.0, 15.0, 40.0] {
+                    values(&at, time, key);
+                }
+                refused += 1;
+            }
+        }
+    }
+    assert_eq!((refused, as_zero), (8, 8), "the starting jet's positive and non-negative parameters");
 }
 
 fn mean_at(jets: &[Jet], xi: f64, r: f64, window: f64) -> f64 {

@@ -67,6 +67,17 @@ pub const MAX_JET_PARAMETER: f64 = 1000.0;
 /// Largest nozzle diameter, mm (a kilometre): beyond it the phantom's f32 coordinates overflow.
 pub const MAX_NOZZLE_DIAMETER_MM: f64 = 1e6;
 
+/// Smallest value of a jet parameter that must be positive (a length in nozzle diameters, a
+/// speed, a rate or a time, here and in the starting jet's): far below any jet's (the defaults
+/// lie between 0.03 and 11), and far above 32-bit floats' smallest normal number (about 1e-38):
+/// lengths of 1e-40 rounded to zero or lost their precision in the phantom's f32 arithmetic, and
+/// the images held NaN.
+pub const MIN_JET_PARAMETER: f64 = 1e-3;
+
+/// Smallest nozzle diameter, mm (a micrometre, finer than any jet's scalar field is imaged): the
+/// phantom divides by it in f32, and 1e-45 mm rounded to zero and made every image NaN.
+pub const MIN_NOZZLE_DIAMETER_MM: f64 = 1e-3;
+
 /// Parameters of the [`Jet`] phantom; lengths with suffix `_d` are in nozzle diameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -130,7 +141,9 @@ impl Default for JetParams {
 
 impl JetParams {
     /// Checks ranges, naming the key (`phantom.jet.…`) in messages: every parameter at most
-    /// [`MAX_JET_PARAMETER`] (the nozzle diameter [`MAX_NOZZLE_DIAMETER_MM`]).
+    /// [`MAX_JET_PARAMETER`] (the nozzle diameter [`MAX_NOZZLE_DIAMETER_MM`]), and those that
+    /// must be positive at least [`MIN_JET_PARAMETER`] (the nozzle diameter
+    /// [`MIN_NOZZLE_DIAMETER_MM`]).
     pub fn validate(&self) -> Result<(), SynthError> {
         let positive = [
             ("core_length_d", self.core_length_d),
@@ -139,10 +152,10 @@ impl JetParams {
             ("rollup_wavelength_d", self.rollup_wavelength_d),
         ];
         for (name, v) in positive {
-            if !(v > 0.0 && v <= MAX_JET_PARAMETER) {
+            if !(MIN_JET_PARAMETER..=MAX_JET_PARAMETER).contains(&v) {
                 return Err(SynthError::invalid(
                     format!("phantom.jet.{name}"),
-                    format!("must be positive and at most {MAX_JET_PARAMETER}, got {}", num(v)),
+                    format!("must be between {MIN_JET_PARAMETER} and {MAX_JET_PARAMETER}, got {}", num(v)),
                 ));
             }
         }
@@ -194,10 +207,13 @@ impl JetParams {
             ));
         }
         if let Some(d) = self.nozzle_diameter_mm {
-            if !(d > 0.0 && d <= MAX_NOZZLE_DIAMETER_MM) {
+            if !(MIN_NOZZLE_DIAMETER_MM..=MAX_NOZZLE_DIAMETER_MM).contains(&d) {
                 return Err(SynthError::invalid(
                     "phantom.jet.nozzle_diameter_mm",
-                    format!("must be positive and at most {MAX_NOZZLE_DIAMETER_MM} mm, got {}", num(d)),
+                    format!(
+                        "must be between {MIN_NOZZLE_DIAMETER_MM} mm and {MAX_NOZZLE_DIAMETER_MM} mm, got {}",
+                        num(d)
+                    ),
                 ));
             }
         }
@@ -233,13 +249,18 @@ impl RollupTrain {
         self.lambda0 + self.growth * (xi - self.start).max(0.0)
     }
 
-    /// Number of wavelengths from `start` to `xi` (negative upstream).
+    /// Number of wavelengths from `start` to `xi` (negative upstream): `ln(1 + g n) / g` for
+    /// `n = (xi − start) / λ₀` wavelengths of the initial size, computed as `n ln(1 + x) / x`
+    /// with `x = g n`, whose limit for a vanishing growth is `n`. The direct form rounded
+    /// `1 + g n` to 1 for a tiny growth (1e-10), so the phase stayed 0 all along the train and
+    /// one vortex twisted the whole jet, far from the field of zero growth.
     fn phase(&self, xi: f32) -> f32 {
-        let u = xi - self.start;
-        if u <= 0.0 || self.growth <= 0.0 {
-            u / self.lambda0
+        let n = (xi - self.start) / self.lambda0;
+        let x = self.growth * n;
+        if n <= 0.0 || x <= 0.0 {
+            n
         } else {
-            (1.0 + self.growth * u / self.lambda0).ln() / self.growth
+            n * (x.ln_1p() / x)
         }
     }
 

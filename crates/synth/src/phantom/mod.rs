@@ -21,7 +21,7 @@ use fluidnerf_core::{Aabb, ScalarField, Volume};
 use serde::{Deserialize, Serialize};
 
 pub use cfd::{CfdCase, CfdPhantom};
-pub use jet::{Jet, JetParams, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM};
+pub use jet::{Jet, JetParams, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM, MIN_JET_PARAMETER, MIN_NOZZLE_DIAMETER_MM};
 pub use simple::{analytic_image, GaussianBlob, LineIntegral, Shape, ShapeSum, UniformBall};
 pub use starting_jet::{StartingJet, StartingJetParams};
 

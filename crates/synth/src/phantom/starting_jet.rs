@@ -37,7 +37,9 @@ use fluidnerf_core::{Aabb, ScalarField};
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::jet::{smoothstep, RollupTrain, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM};
+use super::jet::{
+    smoothstep, RollupTrain, MAX_JET_PARAMETER, MAX_NOZZLE_DIAMETER_MM, MIN_JET_PARAMETER, MIN_NOZZLE_DIAMETER_MM,
+};
 use super::turbulence::KinematicModes;
 use crate::SynthError;
 
@@ -109,7 +111,9 @@ impl Default for StartingJetParams {
 
 impl StartingJetParams {
     /// Checks ranges, naming the key (`phantom.jet_tr.…`) in messages: every parameter at most
-    /// [`MAX_JET_PARAMETER`] (the nozzle diameter [`MAX_NOZZLE_DIAMETER_MM`]).
+    /// [`MAX_JET_PARAMETER`] (the nozzle diameter [`MAX_NOZZLE_DIAMETER_MM`]), and those that
+    /// must be positive at least [`MIN_JET_PARAMETER`] (the nozzle diameter
+    /// [`MIN_NOZZLE_DIAMETER_MM`]).
     pub fn validate(&self) -> Result<(), SynthError> {
         let positive = [
             ("front_speed", self.front_speed),
@@ -121,10 +125,10 @@ impl StartingJetParams {
             ("edge_thickness_d", self.edge_thickness_d),
         ];
         for (name, v) in positive {
-            if !(v > 0.0 && v <= MAX_JET_PARAMETER) {
+            if !(MIN_JET_PARAMETER..=MAX_JET_PARAMETER).contains(&v) {
                 return Err(SynthError::invalid(
                     format!("phantom.jet_tr.{name}"),
-                    format!("must be positive and at most {MAX_JET_PARAMETER}, got {}", num(v)),
+                    format!("must be between {MIN_JET_PARAMETER} and {MAX_JET_PARAMETER}, got {}", num(v)),
                 ));
             }
         }
@@ -157,10 +161,13 @@ impl StartingJetParams {
             ));
         }
         if let Some(d) = self.nozzle_diameter_mm {
-            if !(d > 0.0 && d <= MAX_NOZZLE_DIAMETER_MM) {
+            if !(MIN_NOZZLE_DIAMETER_MM..=MAX_NOZZLE_DIAMETER_MM).contains(&d) {
                 return Err(SynthError::invalid(
                     "phantom.jet_tr.nozzle_diameter_mm",
-                    format!("must be positive and at most {MAX_NOZZLE_DIAMETER_MM} mm, got {}", num(d)),
+                    format!(
+                        "must be between {MIN_NOZZLE_DIAMETER_MM} mm and {MAX_NOZZLE_DIAMETER_MM} mm, got {}",
+                        num(d)
+                    ),
                 ));
             }
         }
