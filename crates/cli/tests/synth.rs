@@ -540,6 +540,59 @@ fn rays_per_voxel_beyond_the_bound_are_refused_naming_the_option() {
     }
 }
 
+/// Every option that sets a key of the configuration names itself when its value is refused,
+/// not only the key: `--noise 5` was reported as `sensor.gaussian_noise` alone. A value refused
+/// only once the rig is built (a camera inside the box) is named alike.
+#[test]
+fn a_bad_value_of_any_option_is_refused_naming_the_option() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("out");
+    for (extra, option, key) in [
+        (&["--resolution", "1"][..], "--resolution", "resolution"),
+        (&["--phantom", "jet-tr", "--times", "15,15"], "--times", "times"),
+        (&["--cfd-step", "7"], "--cfd-step", "phantom.cfd_step"),
+        (&["--cameras", "0"], "--cameras", "rig.layout.count"),
+        (&["--arc", "400"], "--arc", "rig.layout.arc_deg"),
+        (&["--every", "0"], "--every", "rig.subset.every"),
+        (&["--first", "0"], "--first", "rig.subset"),
+        (&["--holdout", "9"], "--holdout", "rig.holdout"),
+        (&["--jitter-position", "NaN"], "--jitter-position", "rig.jitter.position_mm"),
+        (&["--jitter-rotation", "inf"], "--jitter-rotation", "rig.jitter.rotation_deg"),
+        (&["--distance", "0"], "--distance", "rig.distance_mm"),
+        (&["--distance", "1"], "--distance", "rig.distance_mm"),
+        (&["--pixels", "0"], "--pixels", "lens.resolution"),
+        (&["--magnification", "0.2"], "--magnification", "lens.magnification"),
+        (&["--focal-length", "0"], "--focal-length", "lens.focal_length_mm"),
+        (&["--f-number", "0"], "--f-number", "lens.f_number"),
+        (&["--pixel-pitch", "0"], "--pixel-pitch", "lens.pixel_pitch_mm"),
+        (&["--supersample", "0"], "--supersample", "image.supersample"),
+        (&["--noise", "5"], "--noise", "sensor.gaussian_noise"),
+        (&["--full-well", "0"], "--full-well", "sensor.full_well"),
+        (&["--dark-offset", "1e9"], "--dark-offset", "sensor.dark_offset"),
+        (&["--bit-depth", "9"], "--bit-depth", "sensor.bit_depth"),
+        (&["--full-scale-fraction", "2"], "--full-scale-fraction", "sensor.full_scale_fraction"),
+        (&["--real-like", "--noise", "0.05"], "--noise", "sensor.gaussian_noise"),
+        (&["--gain-spread", "2"], "--gain-spread", "real.gain_spread"),
+        (&["--background-level", "0.9"], "--background-level", "real.background"),
+        (&["--dark-noise", "0.9"], "--dark-noise", "real.dark_noise"),
+        (&["--background-frames", "0"], "--background-frames", "real.background_frames"),
+        (&["--jpeg-quality", "0"], "--jpeg-quality", "real.jpeg_quality"),
+    ] {
+        let o = run_small(&dir, extra);
+        let err = text(&o).1;
+        assert!(!o.status.success(), "{extra:?}: {err}");
+        assert!(err.contains(&format!("{option} on the command line: invalid setting `{key}`")), "{extra:?}: {err}");
+        assert!(!dir.exists(), "{extra:?}: wrote output");
+    }
+    // The key alone when it came from a file.
+    let config = tmp.path().join("synth.json");
+    std::fs::write(&config, serde_json::json!({ "sensor": { "gaussian_noise": 5.0 } }).to_string()).expect("writes");
+    let o = synth(&["-q", "-o", dir.to_str().expect("utf-8"), "--config", config.to_str().expect("utf-8")]);
+    let err = text(&o).1;
+    assert!(!o.status.success() && err.contains("invalid setting `sensor.gaussian_noise`"), "{err}");
+    assert!(!err.contains("on the command line"), "{err}");
+}
+
 /// `--force` over an earlier synthetic scene replaces it whole: its images, background frames
 /// and truth volumes that the new scene has not were left beside the new scene's, so the
 /// folder held the files of two scenes. Files that are no scene's stay.

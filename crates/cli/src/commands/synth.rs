@@ -571,24 +571,49 @@ pub(crate) fn resolve(args: &Args) -> anyhow::Result<SynthSettings> {
         None => preset(&args.preset)?,
     };
     apply_overrides(args, &mut settings)?;
-    if let Err(e) = settings.validate() {
-        // A value from the command line is named by its option, not only by the key it sets.
-        let options = [
-            ("image.rays_per_voxel", "--rays-per-voxel", args.rays_per_voxel.is_some()),
-            ("image.supersample", "--supersample", args.supersample.is_some()),
-        ];
-        let option = match &e {
-            fluidnerf_synth::SynthError::Invalid { setting, .. } => {
-                options.iter().find(|&&(key, _, given)| given && key == setting).map(|&(_, option, _)| option)
-            }
-            _ => None,
-        };
-        return Err(match option {
-            Some(option) => anyhow::Error::new(e).context(format!("{option} on the command line")),
-            None => e.into(),
-        });
-    }
+    settings.validate().map_err(|e| name_option(args, e))?;
     Ok(settings)
+}
+
+/// `e`, named by the option that set its key when that option was given: a value from the
+/// command line is named by what the user typed, not only by the key it sets.
+fn name_option(args: &Args, e: fluidnerf_synth::SynthError) -> anyhow::Error {
+    let fluidnerf_synth::SynthError::Invalid { setting, .. } = &e else { return e.into() };
+    let options = [
+        ("resolution", "--resolution", args.resolution.is_some()),
+        ("times", "--times", args.times.is_some()),
+        ("phantom.cfd_step", "--cfd-step", args.cfd_step.is_some()),
+        ("rig.layout.count", "--cameras", args.cameras.is_some()),
+        ("rig.layout.arc_deg", "--arc", args.arc.is_some()),
+        ("rig.subset.every", "--every", args.every.is_some()),
+        // Only a first count of 0 keeps no camera; otherwise the subset's offset does.
+        ("rig.subset", "--first", args.first == Some(0)),
+        ("rig.holdout", "--holdout", args.holdout.is_some()),
+        ("rig.jitter.position_mm", "--jitter-position", args.jitter_position.is_some()),
+        ("rig.jitter.rotation_deg", "--jitter-rotation", args.jitter_rotation.is_some()),
+        ("rig.distance_mm", "--distance", args.distance.is_some()),
+        ("lens.resolution", "--pixels", args.pixels.is_some()),
+        ("lens.magnification", "--magnification", args.magnification.is_some()),
+        ("lens.focal_length_mm", "--focal-length", args.focal_length.is_some()),
+        ("lens.f_number", "--f-number", args.f_number.is_some()),
+        ("lens.pixel_pitch_mm", "--pixel-pitch", args.pixel_pitch.is_some()),
+        ("image.supersample", "--supersample", args.supersample.is_some()),
+        ("image.rays_per_voxel", "--rays-per-voxel", args.rays_per_voxel.is_some()),
+        ("sensor.gaussian_noise", "--noise", args.noise.is_some()),
+        ("sensor.full_well", "--full-well", args.full_well.is_some()),
+        ("sensor.dark_offset", "--dark-offset", args.dark_offset.is_some()),
+        ("sensor.bit_depth", "--bit-depth", args.bit_depth.is_some()),
+        ("sensor.full_scale_fraction", "--full-scale-fraction", args.full_scale_fraction.is_some()),
+        ("real.gain_spread", "--gain-spread", args.gain_spread.is_some()),
+        ("real.background", "--background-level", args.background_level.is_some()),
+        ("real.dark_noise", "--dark-noise", args.dark_noise.is_some()),
+        ("real.background_frames", "--background-frames", args.background_frames.is_some()),
+        ("real.jpeg_quality", "--jpeg-quality", args.jpeg_quality.is_some()),
+    ];
+    match options.iter().find(|&&(key, _, given)| given && key == setting) {
+        Some((_, option, _)) => anyhow::Error::new(e).context(format!("{option} on the command line")),
+        None => e.into(),
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -629,7 +654,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             ControlFlow::Continue(())
         }
-    })?;
+    })
+    .map_err(|e| name_option(&args, e))?;
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
 
