@@ -100,7 +100,8 @@ pub struct HashGridConfig {
     pub init_scale: f32,
     /// Coarse-to-fine training: the finer half of the levels (`⌊L/2⌋` finest) are not trained
     /// at first, one more joins every `coarse_to_fine` optimiser steps (their tables keep their
-    /// near-zero start until then). 0 trains every level from the start. Default 0.
+    /// near-zero start until then), at most [`crate::train::MAX_ITERATION_SPAN`]. 0 trains
+    /// every level from the start. Default 0.
     pub coarse_to_fine: usize,
     /// The precision of the MLP's matrix products while training. Default `f32`.
     pub mlp_precision: MlpPrecision,
@@ -177,6 +178,17 @@ impl HashGridConfig {
         }
         if !(1..=1024).contains(&self.mlp_width) {
             return bad("mlp_width", format!("{} not in 1..=1024 units per hidden layer", self.mlp_width));
+        }
+        // A level that joins only after more steps than any run takes would never train.
+        if self.coarse_to_fine > crate::train::MAX_ITERATION_SPAN {
+            return bad(
+                "coarse_to_fine",
+                format!(
+                    "{} not in 0..={} optimiser steps between levels",
+                    self.coarse_to_fine,
+                    crate::train::MAX_ITERATION_SPAN
+                ),
+            );
         }
         if !(self.init_scale >= 0.0 && self.init_scale.is_finite()) {
             return bad(

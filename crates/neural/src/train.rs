@@ -52,10 +52,10 @@ use crate::{NeuralError, Prior, TrainableField};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct StopRule {
-    /// Iterations of the running mean. Default 200.
+    /// Iterations of the running mean, at most [`MAX_ITERATION_SPAN`]. Default 200.
     pub smoothing: usize,
-    /// Iterations over which the smoothed loss must stay within the tolerance; 0 disables the
-    /// rule. Default 2000.
+    /// Iterations over which the smoothed loss must stay within the tolerance, at most
+    /// [`MAX_ITERATION_SPAN`]; 0 disables the rule. Default 2000.
     pub window: usize,
     /// Relative change of the smoothed loss across the window. Default 0.02.
     pub tolerance: f64,
@@ -99,6 +99,14 @@ pub const MAX_PRIOR_POINTS: usize = 1 << 16;
 /// The most pixels drawn from one image per iteration: every pixel of a 2048 × 2048 image.
 /// More would only repeat pixels, and their rays could not be held.
 pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
+
+/// The most iterations a span of a run's schedule may take: the stopping rule's window and
+/// smoothing ([`StopRule`]), the hash grid's steps between levels
+/// ([`crate::hashgrid::HashGridConfig::coarse_to_fine`]) and a run's held-out interval. Ten
+/// million: ten times the 10⁶ iterations that runs bounded by a time budget take as their cap,
+/// 400 times the dissertation's 25 000. A longer span could never act within a run's cap, and
+/// a stopping window of 2⁶⁴ − 1 overflowed the rule's sums.
+pub const MAX_ITERATION_SPAN: usize = 10_000_000;
 
 /// Sampling, optimisation and stopping settings (defaults: Table 5.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -314,6 +322,11 @@ impl TrainConfig {
         if let Some(s) = self.image_scale {
             if !(s > 0.0 && s.is_finite()) {
                 return bad("image_scale", format!("must be positive, got {}", num(s)));
+            }
+        }
+        for (what, n) in [("stop.window", self.stop.window), ("stop.smoothing", self.stop.smoothing)] {
+            if n > MAX_ITERATION_SPAN {
+                return bad(what, format!("must be at most {MAX_ITERATION_SPAN} iterations, got {n}"));
             }
         }
         if self.stop.window > 0

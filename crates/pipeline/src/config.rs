@@ -687,7 +687,8 @@ pub struct StoppingPolicy {
     pub max_iterations: Option<usize>,
     /// Seconds of the method's own work (evaluations excluded); None: unlimited.
     pub time_budget_s: Option<f64>,
-    /// Held-out rule: iterations between evaluations; None: 1 for voxel methods (each
+    /// Held-out rule: iterations between evaluations, at most
+    /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 1 for voxel methods (each
     /// iteration is a full sweep), 25 for neural ones.
     pub holdout_every: Option<usize>,
     /// Held-out rule: evaluations without a new best before stopping; 0 never stops early.
@@ -727,6 +728,14 @@ impl StoppingPolicy {
         }
         if self.holdout_every == Some(0) {
             return Err(PipelineError::invalid("stopping.holdout_every", "must be at least 1"));
+        }
+        // An interval longer than any run would never evaluate the held-out views.
+        let max = fluidnerf_neural::train::MAX_ITERATION_SPAN;
+        if let Some(n) = self.holdout_every.filter(|&n| n > max) {
+            return Err(PipelineError::invalid(
+                "stopping.holdout_every",
+                format!("must be at most {max} iterations, got {n}"),
+            ));
         }
         Ok(())
     }
@@ -1297,6 +1306,40 @@ mod tests {
         let mut c = RunConfig::new("scene", Method::Fast);
         c.stopping.max_iterations = Some(0);
         assert!(c.validate().unwrap_err().to_string().contains("max_iterations"));
+    }
+
+    /// Spans of iterations beyond any run's cap are refused naming their key: they could never
+    /// act, and a stopping window of 2⁶⁴ − 1 overflowed the rule's sums.
+    #[test]
+    fn iteration_spans_beyond_any_run_are_refused_by_key() {
+        use fluidnerf_neural::train::MAX_ITERATION_SPAN;
+        type Edit = fn(&mut RunConfig, usize);
+        let edits: [(Method, &str, Edit); 4] = [
+            (Method::Asart, "stopping.holdout_every", |c, n| c.stopping.holdout_every = Some(n)),
+            (Method::Fast, "method.train.stop.window", |c, n| {
+                let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };
+                spec.train.stop.window = n;
+            }),
+            (Method::TrFast, "method.train.stop.smoothing", |c, n| {
+                let MethodConfig::Temporal(_, spec) = &mut c.method else { unreachable!("tr-fast is time-resolved") };
+                spec.train.stop.smoothing = n;
+            }),
+            (Method::Fast, "method.field.hash-grid.coarse_to_fine", |c, n| {
+                let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };
+                let FieldConfig::HashGrid(grid) = &mut spec.field else { unreachable!("fast is a hash grid") };
+                grid.coarse_to_fine = n;
+            }),
+        ];
+        for (method, key, edit) in edits {
+            let mut c = RunConfig::new("scene", method);
+            edit(&mut c, MAX_ITERATION_SPAN);
+            c.validate().unwrap_or_else(|e| panic!("{key} at its bound: {e}"));
+            for n in [MAX_ITERATION_SPAN + 1, usize::MAX] {
+                edit(&mut c, n);
+                let e = c.validate().expect_err(key).to_string();
+                assert!(e.starts_with(&format!("{key}: ")) && e.contains(&MAX_ITERATION_SPAN.to_string()), "{e}");
+            }
+        }
     }
 
     /// The validation of a run of `method` with the classical settings `params`.
