@@ -460,3 +460,38 @@ fn negative_pixels_written_as_zero_to_a_png_are_warned_about() {
         assert!(!e.contains("negative"), "{recon} as {format}: {e}");
     }
 }
+
+/// Negative pixels of orbit views are warned about for the turntable too, whose colour map
+/// starts at 0: they took the colour of 0 without a word, whatever the views' format.
+#[test]
+fn negative_pixels_shown_as_zero_in_a_turntable_are_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, vol) = make_scene(dir.path());
+    let negative = Volume { data: vol.data.iter().map(|v| v - 0.5).collect(), ..vol };
+    fluidnerf_io::volume::write_npy(&dir.path().join("negative.npy"), &negative).expect("writes");
+    let d = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    let render = |recon: &str, out: &str| {
+        let o = fluidnerf(&[
+            "render",
+            &d(recon),
+            "--scene",
+            &d(""),
+            "-o",
+            &d(out),
+            "--orbit",
+            "2",
+            "--width",
+            "32",
+            "--format",
+            "tiff",
+        ]);
+        ok(&o);
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let e = render("negative.npy", "negative");
+    let says = "pixel(s) of the orbit views are negative";
+    assert!(e.contains(says) && e.contains("turntable.gif shows them as 0"), "{e}");
+    assert_eq!(e.matches(says).count(), 1, "warned once: {e}");
+    let e = render("recon.npy", "positive");
+    assert!(!e.contains("negative"), "{e}");
+}

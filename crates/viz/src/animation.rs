@@ -24,13 +24,29 @@ pub fn encode_image_png(image: &Image, colormap: Colormap, lo: f32, hi: f32) -> 
     output::encode_rgb_png(&rgb, image.width as u32, image.height as u32, "colour-mapped image")
 }
 
+/// The pixels a turntable ([`write_turntable_gif`]) shows in another colour than their value's:
+/// those below its colour map's 0, shown as 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TurntableClipping {
+    /// Pixels whose value lies below the colour map's lowest level (by more than half a level).
+    pub negative: usize,
+    /// The lowest of them; 0 when there is none.
+    pub lowest: f32,
+}
+
 /// Writes an endlessly looping GIF of `frames` (all the same size), each colour-mapped on the
 /// common range `[0, max]` of all frames (so brightness compares across frames), shown for
 /// `frame_ms` milliseconds (rounded to the GIF's 10 ms, at least 10). GIF holds 256 colours:
 /// the colour map is laid down once as a global palette of 255 evenly spaced colours, plus mid
 /// grey for NaN, so every frame shows the same value in the same colour and no frame is
-/// quantised.
-pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, frame_ms: u32) -> Result<(), VizError> {
+/// quantised. Negative values have no colour of their own and show as 0: returns how many
+/// there were, for the caller to tell.
+pub fn write_turntable_gif(
+    path: &Path,
+    frames: &[Image],
+    colormap: Colormap,
+    frame_ms: u32,
+) -> Result<TurntableClipping, VizError> {
     const LEVELS: usize = 255;
     let Some(first) = frames.first() else {
         return Err(VizError::invalid("turntable", "there are no frames"));
@@ -56,6 +72,7 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
     palette.extend(colormap.rgb(f64::NAN));
     let enc_err = |error| VizError::EncodeGif { what: format!("turntable {}", path.display()), error };
     let mut bytes = Vec::new();
+    let mut clipping = TurntableClipping::default();
     {
         let mut enc = gif::Encoder::new(&mut bytes, width, height, &palette).map_err(enc_err)?;
         enc.set_repeat(gif::Repeat::Infinite).map_err(enc_err)?;
@@ -63,7 +80,12 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
         for f in frames {
             for (i, &v) in indices.iter_mut().zip(&f.data) {
                 // As `colorize` maps it: clamped to the range, NaN grey.
-                *i = if v.is_nan() { LEVELS as u8 } else { (v * scale).round().clamp(0.0, (LEVELS - 1) as f32) as u8 };
+                let level = (v * scale).round();
+                if level < 0.0 {
+                    clipping.negative += 1;
+                    clipping.lowest = clipping.lowest.min(v);
+                }
+                *i = if v.is_nan() { LEVELS as u8 } else { level.clamp(0.0, (LEVELS - 1) as f32) as u8 };
             }
             let frame = gif::Frame {
                 width,
@@ -75,7 +97,8 @@ pub fn write_turntable_gif(path: &Path, frames: &[Image], colormap: Colormap, fr
             enc.write_frame(&frame).map_err(enc_err)?;
         }
     }
-    output::write_atomic(path, &bytes)
+    output::write_atomic(path, &bytes)?;
+    Ok(clipping)
 }
 
 /// `n` pinhole cameras evenly spaced on a circle about the line through the box centre along
@@ -211,7 +234,7 @@ mod tests {
             .collect();
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("t.gif");
-        write_turntable_gif(&path, &frames, Colormap::Magma, 80).expect("writes");
+        assert_eq!(write_turntable_gif(&path, &frames, Colormap::Magma, 80).expect("writes"), Default::default());
         let mut opts = gif::DecodeOptions::new();
         opts.set_color_output(gif::ColorOutput::RGBA);
         let mut dec = opts.read_info(std::fs::File::open(&path).expect("opens")).expect("a GIF");
@@ -230,5 +253,18 @@ mod tests {
         }
         assert_eq!(n, 4);
         assert!(write_turntable_gif(&path, &[], Colormap::Magma, 80).is_err());
+    }
+
+    /// Negative values, shown as 0, are counted with the lowest of them, so that the caller
+    /// can tell: they were shown as 0 without a word. Half a level below 0 still shows as 0.
+    #[test]
+    fn turntable_counts_the_negative_values_it_shows_as_zero() {
+        let frames = [
+            Image::from_vec(2, 2, vec![254.0, -0.4, 3.0, f32::NAN]),
+            Image::from_vec(2, 2, vec![-3.0, 0.0, -0.6, 10.0]),
+        ];
+        let dir = tempfile::tempdir().expect("tempdir");
+        let clipping = write_turntable_gif(&dir.path().join("t.gif"), &frames, Colormap::Magma, 80).expect("writes");
+        assert_eq!(clipping, TurntableClipping { negative: 2, lowest: -3.0 });
     }
 }

@@ -38,7 +38,9 @@ pub mod panel;
 pub mod plot;
 pub mod report;
 
-pub use animation::{colorize, encode_image_png, orbit_cameras, orbit_cameras_about, write_turntable_gif};
+pub use animation::{
+    colorize, encode_image_png, orbit_cameras, orbit_cameras_about, write_turntable_gif, TurntableClipping,
+};
 pub use colormap::Colormap;
 pub use error::VizError;
 pub use isosurface::{marching_cubes, TriMesh};

@@ -113,7 +113,8 @@ pub struct Args {
     /// the time (`docs/performance.md`).
     #[arg(long, default_value = "auto", value_parser = parse_bake)]
     pub bake: Bake,
-    /// Colour map of the turntable GIF.
+    /// Colour map of the turntable GIF, from 0 to the brightest pixel of all views (negative
+    /// pixels show as 0, with a warning).
     #[arg(long, default_value = "magma", requires = "orbit")]
     pub colormap: Colormap,
     /// Display time of each turntable frame in milliseconds: 10 to 655350, in steps of 10 (a
@@ -519,8 +520,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.orbit.is_some() {
         let p = out.join("turntable.gif");
-        fluidnerf_viz::write_turntable_gif(&p, &images, args.colormap, args.frame_ms)
+        let clipping = fluidnerf_viz::write_turntable_gif(&p, &images, args.colormap, args.frame_ms)
             .with_context(|| format!("writing {}", p.display()))?;
+        // The turntable's colour map starts at 0: negative pixels take the colour of 0.
+        if clipping.negative > 0 {
+            log::warn!(
+                "{} pixel(s) of the orbit views are negative (down to {}: the reconstruction holds negative \
+                 values), below the turntable's colour map, which starts at 0, so {} shows them as 0; --format \
+                 tiff keeps their values in the views",
+                clipping.negative,
+                clipping.lowest,
+                p.display()
+            );
+        }
     }
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
