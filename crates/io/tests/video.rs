@@ -314,14 +314,20 @@ mod cine {
                 }
             }
         }
-        // pycine maps [black 64, white 4064] onto [0, 4095] and truncates: so do we, from our counts.
+        as_pycine_reads(&video.frames, "check_cine_with_pycine.txt", "ramp_16bit.cine");
+    }
+
+    /// `frames`, counts above the black level 64, against pycine's reading of `file` recorded in
+    /// `record`: pycine maps [black 64, white 4064] onto [0, 4095] and truncates, so the counts
+    /// are mapped so before they are compared.
+    fn as_pycine_reads(frames: &[fluidnerf_core::Image], record: &str, file: &str) {
         let as_pycine = |c: f32| (f64::from(c) * 4095.0 / 4000.0).floor();
-        for (k, (pixels, sum)) in recorded("check_cine_with_pycine.txt", "ramp_16bit.cine").into_iter().enumerate() {
-            let img = &video.frames[k];
+        for (k, (pixels, sum)) in recorded(record, file).into_iter().enumerate() {
+            let img = &frames[k];
             for ((x, y), v) in pixels {
-                assert_eq!(as_pycine(img.get(x, y)), f64::from(v), "frame {k} pixel ({x}, {y})");
+                assert_eq!(as_pycine(img.get(x, y)), f64::from(v), "{file}: frame {k} pixel ({x}, {y})");
             }
-            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<f64>(), sum, "frame {k}");
+            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<f64>(), sum, "{file}: frame {k}");
         }
     }
 
@@ -352,16 +358,7 @@ mod cine {
         for (k, (a, b)) in packed.frames.iter().zip(&plain.frames).enumerate() {
             assert_eq!(a.data, b.data, "frame {k}");
         }
-        let as_pycine = |c: f32| (f64::from(c) * 4095.0 / 4000.0).floor();
-        let recorded = recorded("check_cine_packed_with_pycine.txt", "ramp_12bit_packed.cine");
-        assert_eq!(recorded.len(), 4);
-        for (k, (pixels, sum)) in recorded.into_iter().enumerate() {
-            let img = &packed.frames[k];
-            for ((x, y), v) in pixels {
-                assert_eq!(as_pycine(img.get(x, y)), f64::from(v), "frame {k} pixel ({x}, {y})");
-            }
-            assert_eq!(img.data.iter().map(|&c| as_pycine(c)).sum::<f64>(), sum, "frame {k}");
-        }
+        as_pycine_reads(&packed.frames, "check_cine_packed_with_pycine.txt", "ramp_12bit_packed.cine");
     }
 
     /// A packed frame whose size is not that of its pixels at 12 bits is refused, and a black

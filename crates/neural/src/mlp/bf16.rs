@@ -460,54 +460,8 @@ unsafe fn forward_v4(
     pre_out: &mut [f32],
     s: &mut Scratch,
 ) {
-    let n = pre_out.len();
-    let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
     // SAFETY: the target features are enabled on this function.
-    unsafe { pack(mlp, params, &mut s.w_fwd, false) };
-    let depth = mlp.layers.len();
-    let mut xin = [0u16; P * WIDTH];
-    let mut hb = [0u16; P * WIDTH];
-    let (w_out, b_out) = (&params[mlp.out_weight.clone()], params[mlp.out_bias]);
-    let mut r = 0;
-    while r < n {
-        let rows = (n - r).min(P);
-        if rows < P {
-            xin.fill(0);
-        }
-        // SAFETY: the features are enabled here.
-        unsafe { input_rows(x, k0, r..r + rows, &mut xin) };
-        let mut off = 0;
-        for l in 0..depth {
-            let layer = &mlp.layers[l];
-            let (k_pad, inp): (usize, &[u16]) = if l == 0 { (kp0, &xin) } else { (WIDTH, &hb) };
-            let n_w = k_pad * WIDTH;
-            let mut nb = [0u16; P * WIDTH];
-            let out = &mut acts[l * stride + r * WIDTH..l * stride + (r + rows) * WIDTH];
-            // SAFETY: `inp` holds P rows of k_pad, the packed weights k_pad × 64, `out` `rows`
-            // rows of 64; the features are enabled here.
-            unsafe {
-                x86::product::<4, true>(
-                    inp,
-                    k_pad,
-                    &s.w_fwd[off..off + n_w],
-                    Some(&params[layer.bias.clone()]),
-                    rows,
-                    out,
-                    WIDTH,
-                    Some(&mut nb),
-                )
-            };
-            if l + 1 == depth {
-                for p in 0..rows {
-                    // SAFETY: rows of 64; features enabled.
-                    pre_out[r + p] = b_out + unsafe { x86::dot64(&out[p * WIDTH..], w_out) };
-                }
-            }
-            hb = nb;
-            off += n_w;
-        }
-        r += rows;
-    }
+    unsafe { tiles_v4(mlp, params, x, Some((acts, stride)), pre_out, s) }
 }
 
 /// Inference with the products of [`forward_v4`], one tile of `P` rows at a time kept in L1:
@@ -516,6 +470,23 @@ unsafe fn forward_v4(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
 unsafe fn infer_v4(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s: &mut Scratch) {
+    // SAFETY: the target features are enabled on this function.
+    unsafe { tiles_v4(mlp, params, x, None, pre_out, s) }
+}
+
+/// The products of the forward pass, `P` rows at a time through every layer: each layer's
+/// activations into `acts` (`D × stride`, rows of 64) when given, else into one tile kept in
+/// L1, and the output's pre-activation into `pre_out`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
+unsafe fn tiles_v4(
+    mlp: &Mlp,
+    params: &[f32],
+    x: &[f32],
+    mut acts: Option<(&mut [f32], usize)>,
+    pre_out: &mut [f32],
+    s: &mut Scratch,
+) {
     let n = pre_out.len();
     let (k0, kp0) = (mlp.in_dim, padded(mlp.in_dim));
     // SAFETY: the target features are enabled on this function.
@@ -523,7 +494,7 @@ unsafe fn infer_v4(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s:
     let depth = mlp.layers.len();
     let mut xin = [0u16; P * WIDTH];
     let (mut hb, mut nb) = ([0u16; P * WIDTH], [0u16; P * WIDTH]);
-    let mut out = [0f32; P * WIDTH];
+    let mut tile = [0f32; P * WIDTH];
     let (w_out, b_out) = (&params[mlp.out_weight.clone()], params[mlp.out_bias]);
     let mut r = 0;
     while r < n {
@@ -537,8 +508,12 @@ unsafe fn infer_v4(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s:
         for (l, layer) in mlp.layers.iter().enumerate() {
             let (k_pad, inp): (usize, &[u16]) = if l == 0 { (kp0, &xin) } else { (WIDTH, &hb) };
             let n_w = k_pad * WIDTH;
-            // SAFETY: `inp` holds P rows of k_pad, the packed weights k_pad × 64, `out` P rows of
-            // 64; the features are enabled here.
+            let out: &mut [f32] = match &mut acts {
+                Some((a, stride)) => &mut a[l * *stride + r * WIDTH..l * *stride + (r + rows) * WIDTH],
+                None => &mut tile[..],
+            };
+            // SAFETY: `inp` holds P rows of k_pad, the packed weights k_pad × 64, `out` at least
+            // `rows` rows of 64; the features are enabled here.
             unsafe {
                 x86::product::<4, true>(
                     inp,
@@ -546,17 +521,19 @@ unsafe fn infer_v4(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s:
                     &s.w_fwd[off..off + n_w],
                     Some(&params[layer.bias.clone()]),
                     rows,
-                    &mut out,
+                    out,
                     WIDTH,
                     (l + 1 < depth).then_some(&mut nb[..]),
                 )
             };
+            if l + 1 == depth {
+                for (p, o) in pre_out[r..r + rows].iter_mut().enumerate() {
+                    // SAFETY: rows of 64; features enabled.
+                    *o = b_out + unsafe { x86::dot64(&out[p * WIDTH..], w_out) };
+                }
+            }
             std::mem::swap(&mut hb, &mut nb);
             off += n_w;
-        }
-        for (p, o) in pre_out[r..r + rows].iter_mut().enumerate() {
-            // SAFETY: rows of 64; features enabled.
-            *o = b_out + unsafe { x86::dot64(&out[p * WIDTH..], w_out) };
         }
         r += rows;
     }
