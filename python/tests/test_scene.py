@@ -507,6 +507,13 @@ def test_read_video_decodes_high_speed_recordings_and_mjpeg_as_import_does():
     frames, times, info = fluidnerf.read_video(str(FIXTURES / "ramp_16bit.cine"), end=2, time_offset=1.0)
     np.testing.assert_array_equal(frames[0], 10 * (20 + 4 * x + 3 * y))
     np.testing.assert_array_equal(times, [1.0, 1.001])
+    # The same counts packed at 12 bits per pixel.
+    packed, packed_times, info = fluidnerf.read_video(
+        FIXTURES / "ramp_12bit_packed.cine", end=2, time_offset=1.0
+    )
+    np.testing.assert_array_equal(packed, frames)
+    np.testing.assert_array_equal(packed_times, times)
+    assert info["decoder"] == "cine"
     # MJPEG, linearised as asked: the ramp within JPEG's error, then through the sRGB curve.
     frames, times, info = fluidnerf.read_video(FIXTURES / "ramp_mjpeg.avi", linearisation="srgb")
     c = (20 + 4 * 5 + 3 * 7 + 10) / 255
