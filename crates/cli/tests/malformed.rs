@@ -238,6 +238,18 @@ fn cases() -> Vec<Case> {
             RUN,
             "transforms.json: `aabb`: invalid aabb: the box reaches 1000010 from the origin, more than 10000 times its smallest side (10)",
         ),
+        c(
+            "aabb tiny",
+            Json(|v| v["aabb"] = serde_json::json!([[0, 0, 0], [1e-36, 1e-36, 1e-36]])),
+            RUN,
+            "transforms.json: `aabb`: invalid aabb: sides must be between 1e-6 and 1e9 world units",
+        ),
+        c(
+            "aabb huge",
+            Json(|v| v["aabb"] = serde_json::json!([[-1e12, -1e12, -1e12], [1e12, 1e12, 1e12]])),
+            RUN,
+            "transforms.json: `aabb`: invalid aabb: sides must be between 1e-6 and 1e9 world units",
+        ),
         c("negative intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(-1.0)), RUN, "intensity_scale"),
         c("tiny intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e-40)), RUN, "overflow or vanish"),
         c("huge intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e300)), RUN, "overflow or vanish"),

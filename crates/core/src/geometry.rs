@@ -43,6 +43,19 @@ pub const MAX_COORDINATE: f64 = 1e16;
 /// gave ASART an NRMSE of 0.80 instead of 0.23).
 pub const MAX_OFFSET_IN_SIDES: f64 = 1e4;
 
+/// The shortest side a box may have, in world units: a micrometre in metres. The projectors and
+/// the networks work in 32-bit floats, and quantities derived from the box scale with powers of
+/// its side (a voxel's side and volume, ray steps, the field's values in inverse lengths); a
+/// 40-unit scene shrunk by 10⁻¹⁰ made ASART return a volume of zeros, while at this bound it
+/// reconstructs as the unshrunk scene does.
+pub const MIN_SIDE: f64 = 1e-6;
+
+/// The longest side a box may have, in world units: a thousand kilometres in millimetres. A
+/// 40-unit scene grown by 10¹² made ASART return a volume of zeros (the field's values, in
+/// inverse lengths, fall towards f32's smallest), while at this bound it reconstructs as the
+/// original does.
+pub const MAX_SIDE: f64 = 1e9;
+
 impl Aabb {
     /// A box from its corners. Panics if any `min` component exceeds `max` (a programmer error;
     /// input from files is validated with [`Aabb::validate`]).
@@ -57,8 +70,8 @@ impl Aabb {
         Aabb::new(centre - h, centre + h)
     }
 
-    /// Checks that the box is finite, within [`MAX_COORDINATE`] of the origin, and has positive
-    /// extent on every axis.
+    /// Checks that the box is finite, within [`MAX_COORDINATE`] of the origin, and has sides
+    /// between [`MIN_SIDE`] and [`MAX_SIDE`].
     pub fn validate(&self) -> Result<(), crate::CoreError> {
         if !(self.min.is_finite() && self.max.is_finite()) {
             return Err(crate::CoreError::invalid("aabb", "corners must be finite"));
@@ -83,6 +96,18 @@ impl Aabb {
                     "min {} must be below max {} on every axis",
                     num(self.min.to_array()),
                     num(self.max.to_array())
+                ),
+            ));
+        }
+        let size = self.size();
+        if size.min_element() < MIN_SIDE || size.max_element() > MAX_SIDE {
+            return Err(crate::CoreError::invalid(
+                "aabb",
+                format!(
+                    "sides must be between {MIN_SIDE:e} and {MAX_SIDE:e} world units (rendering and training run in 32-bit floats, \
+                     whose voxel sizes, ray steps and field values leave their range outside), got sides {}; \
+                     give the box in other units (e.g. mm instead of m), scaling the camera positions with it",
+                    num(size.to_array())
                 ),
             ));
         }
@@ -228,8 +253,30 @@ mod tests {
         assert!(e.contains("aabb") && e.contains("±1e16") && e.contains("-1e300"), "{e}");
         let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, 2e16, 1.0) };
         assert!(b.validate().is_err());
-        let b = Aabb { min: DVec3::splat(-MAX_COORDINATE), max: DVec3::splat(MAX_COORDINATE) };
+        let b = Aabb { min: DVec3::splat(MAX_COORDINATE - 1e9), max: DVec3::splat(MAX_COORDINATE) };
         assert!(b.validate().is_ok());
+    }
+
+    /// A box whose sides leave the range where 32-bit voxel sizes, ray steps and field values
+    /// stay meaningful is refused with the range and its sides (a side of 10⁻³⁶ or 10³⁶ passed,
+    /// and such scenes reconstructed to volumes of zeros); boxes from a micrometre in metres to
+    /// a thousand kilometres in millimetres pass.
+    #[test]
+    fn validate_rejects_sides_beyond_the_f32_range() {
+        for b in [
+            Aabb { min: DVec3::ZERO, max: DVec3::splat(1e-36) },
+            Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, 1.0, 1e-7) },
+            Aabb { min: DVec3::splat(-1e10), max: DVec3::splat(1e10) },
+            Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, 2e9, 1.0) },
+        ] {
+            let e = b.validate().expect_err("refused").to_string();
+            assert!(e.contains("aabb") && e.contains("between 1e-6 and 1e9"), "{e}");
+        }
+        let e = Aabb::cube(DVec3::ZERO, 1e36).validate().expect_err("refused").to_string();
+        assert!(e.contains("±1e16"), "{e}");
+        for side in [MIN_SIDE, 1e-3, 0.04, 1.0, 40.0, 2000.0, MAX_SIDE] {
+            Aabb::cube(DVec3::ZERO, side).validate().unwrap_or_else(|e| panic!("side {side}: {e}"));
+        }
     }
 
     /// A small box far from the origin, where 32-bit floats cannot place its voxels, is refused
@@ -244,7 +291,7 @@ mod tests {
         );
         assert!(Aabb::cube(DVec3::new(0.0, 0.0, -4e5 + 20.0), 40.0).check_resolvable().is_ok());
         assert!(Aabb::cube(DVec3::new(0.0, 0.0, -4e5 + 19.0), 40.0).check_resolvable().is_err());
-        assert!(Aabb::cube(DVec3::ZERO, 1e-9).check_resolvable().is_ok());
+        assert!(Aabb::cube(DVec3::ZERO, 1e-6).check_resolvable().is_ok());
         assert!(Aabb { min: DVec3::new(0.0, 0.0, 0.0), max: DVec3::new(1.0, 1e4, 1e4) }.check_resolvable().is_ok());
     }
 }

@@ -44,8 +44,10 @@
 //!   OpenGL camera axes (x right, y up, z backward). fluidnerf's cameras use OpenCV axes, so
 //!   `R_cv = R_gl · diag(1, −1, −1)` (negate the second and third columns); the translation
 //!   (camera centre) is unchanged.
-//! - **fluidnerf's additions**: `aabb` (world units; required by [`load_scene`], which says how
-//!   to supply it; [`read_scene_draft`] reads files without one), `units` (default `"mm"`),
+//! - **fluidnerf's additions**: `aabb` (world units, sides from 10⁻⁶ to 10⁹
+//!   ([`fluidnerf_core::geometry::MIN_SIDE`], [`fluidnerf_core::geometry::MAX_SIDE`]); required
+//!   by [`load_scene`], which says how to supply it; [`read_scene_draft`] reads files without
+//!   one), `units` (default `"mm"`),
 //!   `intensity_scale` (default 1: pixel value = intensity_scale × ∫E ds), `linearisation`
 //!   (how 8-bit images become linear: `"linear"` (default), `"srgb"` or a gamma; see
 //!   [`crate::image`]), `truth` (optional list of `{time, file_path}` `.npy` volumes filling the
