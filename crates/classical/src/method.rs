@@ -148,8 +148,12 @@ impl ClassicalMethod {
     /// Rejects parameters no run can use. `what` names are the configuration keys.
     pub fn validate(&self) -> Result<(), ClassicalError> {
         let stopping = self.stopping();
-        if stopping.max_iterations == 0 {
-            return Err(ClassicalError::invalid("stopping.max_iterations", "must be at least 1"));
+        let max = fluidnerf_core::MAX_ITERATIONS;
+        if !(1..=max).contains(&stopping.max_iterations) {
+            return Err(ClassicalError::invalid(
+                "stopping.max_iterations",
+                format!("must be 1 to {max} iterations, got {}", stopping.max_iterations),
+            ));
         }
         if let Some(p) = stopping.plateau {
             if !(p.tolerance > 0.0 && p.tolerance.is_finite() && p.window > 0 && p.smoothing > 0) {

@@ -295,6 +295,56 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--max-iterations", "0"],
             "max_iterations",
         ),
+        // Intervals, patience and caps beyond any run are refused naming the option: 2^64 - 1
+        // was taken, an interval never acted and a cap overflowed a progress total.
+        c(
+            "eval-every beyond any run",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--eval-every", "10000001"],
+            "--eval-every on the command line: eval_every: must be at most 10000000 iterations",
+        ),
+        c(
+            "checkpoint-every beyond any run",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--checkpoint-every", "18446744073709551615"],
+            "--checkpoint-every on the command line: checkpoint_every: must be at most 10000000 iterations",
+        ),
+        c(
+            "max-iterations beyond any run",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--max-iterations", "18446744073709551615"],
+            "--max-iterations on the command line: stopping.max_iterations: must be 1 to 1000000000 iterations",
+        ),
+        c(
+            "holdout-every beyond any run",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--stop", "held-out", "--holdout-every", "10000001"],
+            "--holdout-every on the command line: stopping.holdout_every: must be at most 10000000 iterations",
+        ),
+        c(
+            "patience beyond any run",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--stop", "held-out", "--patience", "18446744073709551615"],
+            "--patience on the command line: stopping.patience: must be at most 10000000 evaluations",
+        ),
+        c(
+            "gain-every beyond any run",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--gains", "fit", "--gain-every", "10000001"],
+            "--gain-every on the command line: gains.every: must be 1 to 10000000 iterations",
+        ),
+        c(
+            "demo max-iterations beyond any run",
+            None,
+            &["demo", "-o", "OUT", "--max-iterations", "18446744073709551615"],
+            "--max-iterations <MAX_ITERATIONS>': an iteration cap is a whole number from 1 to 1000000000",
+        ),
+        c(
+            "study max-iterations 0",
+            None,
+            &["study", "-o", "OUT", "--max-iterations", "0"],
+            "--max-iterations <MAX_ITERATIONS>': an iteration cap is a whole number from 1 to 1000000000",
+        ),
         c(
             "negative time budget",
             None,

@@ -27,6 +27,13 @@ pub mod render;
 pub mod scene;
 pub mod volume;
 
+/// The largest iteration cap a run may take (a run's `stopping.max_iterations`, a method's own
+/// cap, a warm-started window's): 10⁹, a thousand times the 10⁶ that runs bounded by a time
+/// budget take as their cap (`--max-iterations 1000000 --time-budget 90`), 40 000 times the
+/// dissertation's 25 000. A cap of 2⁶⁴ − 1 overflowed the progress total of a run of several
+/// windows (iterations per window × windows).
+pub const MAX_ITERATIONS: usize = 1_000_000_000;
+
 pub use camera::{Camera, Distortion, Intrinsics, ThinLens, Visibility};
 pub use error::CoreError;
 pub use field::{Baked, ScalarField, Support, SupportWalk};

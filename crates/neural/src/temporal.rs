@@ -84,7 +84,8 @@ pub struct WindowConfig {
     pub overlap: usize,
     /// Start each window from the previous window's weights. Default true.
     pub warm_start: bool,
-    /// Iteration cap of warm-started windows (None: the training config's). Default None.
+    /// Iteration cap of warm-started windows, 1 to [`fluidnerf_core::MAX_ITERATIONS`] (None: the
+    /// training config's). Default None.
     pub warm_max_iterations: Option<usize>,
     /// Where each window's time axis starts (module doc, "Time origin"). Default window.
     pub time_origin: TimeOrigin,
@@ -132,6 +133,13 @@ impl WindowConfig {
             return Err(NeuralError::invalid(
                 "windows.overlap",
                 format!("{} frames must be fewer than the window's {}", self.overlap, self.frames),
+            ));
+        }
+        let max = fluidnerf_core::MAX_ITERATIONS;
+        if let Some(n) = self.warm_max_iterations.filter(|n| !(1..=max).contains(n)) {
+            return Err(NeuralError::invalid(
+                "windows.warm_max_iterations",
+                format!("must be 1 to {max} iterations, got {n}"),
             ));
         }
         Ok(())

@@ -102,7 +102,9 @@ pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
 
 /// The most iterations a span of a run's schedule may take: the stopping rule's window and
 /// smoothing ([`StopRule`]), the hash grid's steps between levels
-/// ([`crate::hashgrid::HashGridConfig::coarse_to_fine`]) and a run's held-out interval. Ten
+/// ([`crate::hashgrid::HashGridConfig::coarse_to_fine`]), the held-out interval
+/// ([`TrainConfig::validate_every`]) and a run's intervals of evaluation, checkpoints and gain
+/// refits, and its patience in evaluations. Ten
 /// million: ten times the 10⁶ iterations that runs bounded by a time budget take as their cap,
 /// 400 times the dissertation's 25 000. A longer span could never act within a run's cap, and
 /// a stopping window of 2⁶⁴ − 1 overflowed the rule's sums.
@@ -124,7 +126,7 @@ pub struct TrainConfig {
     pub schedule: LrSchedule,
     /// Adam hyperparameters (β₁ 0.9, β₂ 0.999, ε 1e-7).
     pub adam: AdamConfig,
-    /// Iteration cap. Default 25 000.
+    /// Iteration cap, at most [`fluidnerf_core::MAX_ITERATIONS`]. Default 25 000.
     pub max_iterations: usize,
     /// Wall-time budget of the training loop in seconds (None: unlimited). Default None.
     pub time_budget_s: Option<f64>,
@@ -138,7 +140,8 @@ pub struct TrainConfig {
     /// Pixel normalisation; None takes the largest training pixel. Default None.
     #[serde(deserialize_with = "fluidnerf_core::number::optional_f32_setting")]
     pub image_scale: Option<f32>,
-    /// Iterations between evaluations of the held-out views (0: never). Default 100.
+    /// Iterations between evaluations of the held-out views (0: never), at most
+    /// [`MAX_ITERATION_SPAN`]. Default 100.
     pub validate_every: usize,
     /// Held-out pixels evaluated each time (a fixed random subset). Default 4096.
     pub validate_pixels: usize,
@@ -300,8 +303,11 @@ impl TrainConfig {
                 ),
             );
         }
-        if self.max_iterations == 0 {
-            return bad("max_iterations", "must be at least 1".into());
+        if !(1..=fluidnerf_core::MAX_ITERATIONS).contains(&self.max_iterations) {
+            return bad(
+                "max_iterations",
+                format!("must be 1 to {} iterations, got {}", fluidnerf_core::MAX_ITERATIONS, self.max_iterations),
+            );
         }
         if let Some(occupancy) = &self.occupancy {
             occupancy.validate()?;
@@ -324,7 +330,11 @@ impl TrainConfig {
                 return bad("image_scale", format!("must be positive, got {}", num(s)));
             }
         }
-        for (what, n) in [("stop.window", self.stop.window), ("stop.smoothing", self.stop.smoothing)] {
+        for (what, n) in [
+            ("stop.window", self.stop.window),
+            ("stop.smoothing", self.stop.smoothing),
+            ("validate_every", self.validate_every),
+        ] {
             if n > MAX_ITERATION_SPAN {
                 return bad(what, format!("must be at most {MAX_ITERATION_SPAN} iterations, got {n}"));
             }

@@ -683,7 +683,8 @@ pub enum StopRule {
 #[serde(default, deny_unknown_fields)]
 pub struct StoppingPolicy {
     pub rule: StopRule,
-    /// Iteration cap (per window for time-resolved runs); None: the method's own.
+    /// Iteration cap (per window for time-resolved runs), 1 to
+    /// [`fluidnerf_core::MAX_ITERATIONS`]; None: the method's own.
     pub max_iterations: Option<usize>,
     /// Seconds of the method's own work (evaluations excluded); None: unlimited.
     pub time_budget_s: Option<f64>,
@@ -691,8 +692,8 @@ pub struct StoppingPolicy {
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 1 for voxel methods (each
     /// iteration is a full sweep), 25 for neural ones.
     pub holdout_every: Option<usize>,
-    /// Held-out rule: evaluations without a new best before stopping; 0 never stops early.
-    /// Default 10.
+    /// Held-out rule: evaluations without a new best before stopping, at most
+    /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; 0 never stops early. Default 10.
     pub patience: usize,
 }
 
@@ -715,8 +716,12 @@ impl StoppingPolicy {
     }
 
     fn validate(&self) -> Result<(), PipelineError> {
-        if self.max_iterations == Some(0) {
-            return Err(PipelineError::invalid("stopping.max_iterations", "must be at least 1"));
+        let cap = fluidnerf_core::MAX_ITERATIONS;
+        if let Some(n) = self.max_iterations.filter(|n| !(1..=cap).contains(n)) {
+            return Err(PipelineError::invalid(
+                "stopping.max_iterations",
+                format!("must be 1 to {cap} iterations, got {n}"),
+            ));
         }
         if let Some(t) = self.time_budget_s {
             if !(t > 0.0 && t.is_finite()) {
@@ -735,6 +740,14 @@ impl StoppingPolicy {
             return Err(PipelineError::invalid(
                 "stopping.holdout_every",
                 format!("must be at most {max} iterations, got {n}"),
+            ));
+        }
+        // A run evaluates at most once an iteration: more evaluations than any span of a run
+        // would never stop it.
+        if self.patience > max {
+            return Err(PipelineError::invalid(
+                "stopping.patience",
+                format!("must be at most {max} evaluations (0: never stop early), got {}", self.patience),
             ));
         }
         Ok(())
@@ -819,12 +832,14 @@ pub struct RunConfig {
     pub resolution: usize,
     #[serde(default)]
     pub stopping: StoppingPolicy,
-    /// Neural methods: a resumable checkpoint every N iterations (0: only at the end and when
-    /// stopped). Default 500.
+    /// Neural methods: a resumable checkpoint every N iterations, at most
+    /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`] (0: only at the end and when stopped).
+    /// Default 500.
     #[serde(default = "default_checkpoint_every")]
     pub checkpoint_every: usize,
-    /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (0:
-    /// only at the end); None: 100 for neural methods, every iteration for voxel ones.
+    /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve, at
+    /// most [`fluidnerf_neural::train::MAX_ITERATION_SPAN`] (0: only at the end); None: 100 for
+    /// neural methods, every iteration for voxel ones.
     #[serde(default)]
     pub eval_every: Option<usize>,
     /// Refuse runs whose estimated memory exceeds this many GiB; None: the memory available
@@ -885,8 +900,9 @@ pub struct GainConfig {
     pub mode: GainMode,
     /// With `fit`: also fit a per-image offset (`pixel = gain × model + offset`). Default false.
     pub offset: bool,
-    /// With `fit`: iterations between refits; None: 25 for the neural methods, 5 for the voxel
-    /// methods.
+    /// With `fit`: iterations between refits, 1 to
+    /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 25 for the neural methods, 5 for
+    /// the voxel methods.
     pub every: Option<usize>,
     /// With `fit`, voxel methods: refits before the final solve. Default 4.
     pub rounds: usize,
@@ -905,8 +921,9 @@ impl GainConfig {
     }
 
     fn validate(&self) -> Result<(), PipelineError> {
-        if self.every == Some(0) {
-            return Err(PipelineError::invalid("gains.every", "must be at least 1"));
+        let max = fluidnerf_neural::train::MAX_ITERATION_SPAN;
+        if let Some(n) = self.every.filter(|n| !(1..=max).contains(n)) {
+            return Err(PipelineError::invalid("gains.every", format!("must be 1 to {max} iterations, got {n}")));
         }
         if self.mode == GainMode::Fit && self.rounds == 0 {
             return Err(PipelineError::invalid("gains.rounds", "must be at least 1 with gains.mode fit"));
@@ -992,6 +1009,16 @@ impl RunConfig {
         if let Some(g) = self.memory_limit_gib {
             if !(g > 0.0 && g.is_finite()) {
                 return Err(PipelineError::invalid("memory_limit_gib", format!("must be positive, got {}", num(g))));
+            }
+        }
+        // An interval longer than any run would never act (no evaluation, no checkpoint).
+        let max = fluidnerf_neural::train::MAX_ITERATION_SPAN;
+        for (key, n) in [("eval_every", self.eval_every.unwrap_or(0)), ("checkpoint_every", self.checkpoint_every)] {
+            if n > max {
+                return Err(PipelineError::invalid(
+                    key,
+                    format!("must be at most {max} iterations (0: only at the end), got {n}"),
+                ));
             }
         }
         self.stopping.validate()?;
@@ -1338,6 +1365,54 @@ mod tests {
                 edit(&mut c, n);
                 let e = c.validate().expect_err(key).to_string();
                 assert!(e.starts_with(&format!("{key}: ")) && e.contains(&MAX_ITERATION_SPAN.to_string()), "{e}");
+            }
+        }
+    }
+
+    /// A run's intervals (evaluation, checkpoints, held-out evaluations, gain refits), its
+    /// patience and its iteration caps are bounded and refused naming their key: 2⁶⁴ − 1 was
+    /// taken, an interval never acted and a cap overflowed the progress total of a run of
+    /// several windows.
+    #[test]
+    fn intervals_patience_and_caps_beyond_any_run_are_refused_by_key() {
+        use fluidnerf_core::MAX_ITERATIONS;
+        use fluidnerf_neural::train::MAX_ITERATION_SPAN;
+        type Edit = fn(&mut RunConfig, usize);
+        let fit = |c: &mut RunConfig, n| {
+            c.gains.mode = GainMode::Fit;
+            c.gains.every = Some(n);
+        };
+        let edits: [(Method, &str, usize, Edit); 9] = [
+            (Method::Fast, "eval_every", MAX_ITERATION_SPAN, |c, n| c.eval_every = Some(n)),
+            (Method::Fast, "checkpoint_every", MAX_ITERATION_SPAN, |c, n| c.checkpoint_every = n),
+            (Method::Fast, "method.train.validate_every", MAX_ITERATION_SPAN, |c, n| {
+                let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };
+                spec.train.validate_every = n;
+            }),
+            (Method::Asart, "gains.every", MAX_ITERATION_SPAN, fit),
+            (Method::Fast, "stopping.patience", MAX_ITERATION_SPAN, |c, n| c.stopping.patience = n),
+            (Method::TrFast, "stopping.max_iterations", MAX_ITERATIONS, |c, n| c.stopping.max_iterations = Some(n)),
+            (Method::Fast, "method.train.max_iterations", MAX_ITERATIONS, |c, n| {
+                let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };
+                spec.train.max_iterations = n;
+            }),
+            (Method::Sart, "method.params.stopping.max_iterations", MAX_ITERATIONS, |c, n| {
+                let MethodConfig::Classical(m) = &mut c.method else { unreachable!("sart is classical") };
+                m.method.stopping_mut().max_iterations = n;
+            }),
+            (Method::TrFast, "method.windows.warm_max_iterations", MAX_ITERATIONS, |c, n| {
+                let MethodConfig::Temporal(_, spec) = &mut c.method else { unreachable!("tr-fast is time-resolved") };
+                spec.windows.warm_max_iterations = Some(n);
+            }),
+        ];
+        for (method, key, bound, edit) in edits {
+            let mut c = RunConfig::new("scene", method);
+            edit(&mut c, bound);
+            c.validate().unwrap_or_else(|e| panic!("{key} at its bound: {e}"));
+            for n in [bound + 1, usize::MAX] {
+                edit(&mut c, n);
+                let e = c.validate().expect_err(key).to_string();
+                assert!(e.starts_with(&format!("{key}: ")) && e.contains(&bound.to_string()), "{e}");
             }
         }
     }

@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "held-out")]
     pub stop: StopArg,
     /// Iteration cap of every method [default: each method's own].
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse_max_iterations)]
     pub max_iterations: Option<usize>,
     /// Seed of the synthetic noise and of training.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::parse_seed)]

@@ -155,6 +155,16 @@ pub(crate) fn parse_seed(s: &str) -> Result<u64, String> {
     s.trim().parse().map_err(|_| format!("a seed is a whole number from 0 to 2^64 - 1 ({}), got `{s}`", u64::MAX))
 }
 
+/// Parses an iteration cap (`--max-iterations`): 1 to [`fluidnerf_core::MAX_ITERATIONS`]. A
+/// cap of 2^64 − 1 overflowed the progress total of a run of several windows.
+pub(crate) fn parse_max_iterations(s: &str) -> Result<usize, String> {
+    let max = fluidnerf_core::MAX_ITERATIONS;
+    match s.trim().parse::<u64>() {
+        Ok(n) if (1..=max as u64).contains(&n) => Ok(n as usize),
+        _ => Err(format!("an iteration cap is a whole number from 1 to {max}, got `{s}`")),
+    }
+}
+
 /// Refuses a value given twice to the list option `option`: the repeat would run the same work
 /// twice, write the same file twice or print the same row twice.
 pub(crate) fn given_once<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {

@@ -110,7 +110,7 @@ pub struct Args {
     /// Iteration cap of every method [default: 1000000 under held-out and budget, so that the
     /// held-out rule or the time budget ends every run, not a method's own cap (SART 50,
     /// ASART 250, the fields 2000, ...); each method's own under own; smoke 20].
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse_max_iterations)]
     pub max_iterations: Option<usize>,
     /// Seconds of work per run, the same for every method [default: 60].
     #[arg(long, default_value_t = 60.0)]
@@ -186,9 +186,6 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     let smoke = args.preset == StudyPreset::Smoke;
     if !(args.time_budget > 0.0 && args.time_budget.is_finite()) {
         bail!("--time-budget must be a positive, finite number of seconds, got {}", num(args.time_budget));
-    }
-    if args.max_iterations == Some(0) {
-        bail!("--max-iterations must be at least 1");
     }
     let g = Grid {
         preset: args.preset,
