@@ -20,9 +20,21 @@ pub enum NeuralError {
     /// parameters and optimiser state are those after the previous iteration.
     #[error(
         "training diverged: the loss of iteration {iteration} is {loss}; the parameters and optimiser state \
-         are kept as they were before that iteration (a lower learning rate may help)"
+         are kept as they were before that iteration ({})",
+        diverged_hint(*iteration)
     )]
     Diverged { iteration: usize, loss: f64 },
+}
+
+/// What to look at when the loss of `iteration` is not finite. Iteration 0's loss is that of
+/// the start, before any step, so the learning rate cannot be its cause.
+fn diverged_hint(iteration: usize) -> &'static str {
+    if iteration == 0 {
+        "no step was taken yet, so the learning rate is not the cause: look at the start, the training's \
+         image_scale, the hash grid's init_scale, the field given to start from, and the scene's intensity_scale"
+    } else {
+        "a lower learning rate may help"
+    }
 }
 
 impl NeuralError {

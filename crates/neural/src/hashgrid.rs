@@ -59,6 +59,12 @@ pub fn set_vectorised(enabled: bool) {
 
 pub(crate) const PRIMES: [u32; 4] = [1, 2_654_435_761, 805_459_861, 3_674_653_429];
 
+/// The widest start of the hash tables ([`HashGridConfig::init_scale`]), 10⁴ times the default.
+/// On a small synthetic jet (4 cameras, 30 iterations of `fast`) a start of ±1 trained (volume
+/// NRMSE 0.72), ±10 barely (0.96), ±10³ left the field black (1.0) and ±10³⁰ made the loss of
+/// iteration 0 infinite.
+pub const MAX_INIT_SCALE: f32 = 1.0;
+
 /// Configuration of [`HashGridField`]; defaults follow instant-ngp's NeRF setting, with the
 /// finest resolution matched to the volumes we reconstruct.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -95,7 +101,7 @@ pub struct HashGridConfig {
     pub activation: Activation,
     /// Output activation. Default softplus.
     pub output_activation: OutputActivation,
-    /// Table entries start uniform in `±init_scale`. Default 1e-4.
+    /// Table entries start uniform in `±init_scale`, at most [`MAX_INIT_SCALE`]. Default 1e-4.
     #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub init_scale: f32,
     /// Coarse-to-fine training: the finer half of the levels (`⌊L/2⌋` finest) are not trained
@@ -190,10 +196,14 @@ impl HashGridConfig {
                 ),
             );
         }
-        if !(self.init_scale >= 0.0 && self.init_scale.is_finite()) {
+        if !(0.0..=MAX_INIT_SCALE).contains(&self.init_scale) {
             return bad(
                 "init_scale",
-                format!("{} is not a finite, non-negative half-width of the tables' start", self.init_scale),
+                format!(
+                    "{} is not a half-width of the tables' start in [0, {MAX_INIT_SCALE}] (default 1e-4; wider \
+                     starts leave the field black or make the first loss infinite)",
+                    self.init_scale
+                ),
             );
         }
         Ok(())
@@ -615,6 +625,20 @@ impl TrainableField for HashGridField {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A table start wider than [`MAX_INIT_SCALE`] is refused naming init_scale (±10³⁰ made the
+    /// loss of iteration 0 infinite); 0, the default and the bound pass.
+    #[test]
+    fn init_scale_beyond_the_bound_is_refused() {
+        for s in [1.01, 1e3, 1e30, f32::INFINITY, -1e-4, f32::NAN] {
+            let e = HashGridConfig { init_scale: s, ..HashGridConfig::default() }.validate().expect_err("refused");
+            let e = e.to_string();
+            assert!(e.starts_with("invalid hash-grid.init_scale: ") && e.contains("in [0, 1]"), "{s}: {e}");
+        }
+        for s in [0.0, 1e-4, MAX_INIT_SCALE] {
+            HashGridConfig { init_scale: s, ..HashGridConfig::default() }.validate().expect("valid");
+        }
+    }
 
     #[test]
     fn coarse_levels_are_dense_and_fine_levels_hashed() {

@@ -110,6 +110,14 @@ pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
 /// a stopping window of 2⁶⁴ − 1 overflowed the rule's sums.
 pub const MAX_ITERATION_SPAN: usize = 10_000_000;
 
+/// The smallest and largest the brightest training pixel may be once divided by a given
+/// [`TrainConfig::image_scale`] (by default it is 1). Outside, the squared residuals the loss
+/// sums leave the range where f32 holds them: a scale of 10⁻³⁰ made the loss of iteration 0
+/// infinite.
+pub const MIN_TARGET_PEAK: f64 = 1e-6;
+/// See [`MIN_TARGET_PEAK`].
+pub const MAX_TARGET_PEAK: f64 = 1e6;
+
 /// Sampling, optimisation and stopping settings (defaults: Table 5.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -137,7 +145,8 @@ pub struct TrainConfig {
     /// MLP's sweet spot (its activations stay in cache); the `fast` preset's grid field takes
     /// 2048, the dense grid 8192.
     pub chunk_samples: usize,
-    /// Pixel normalisation; None takes the largest training pixel. Default None.
+    /// Pixel normalisation; None takes the largest training pixel. A given scale must put the
+    /// largest training pixel between [`MIN_TARGET_PEAK`] and [`MAX_TARGET_PEAK`]. Default None.
     #[serde(deserialize_with = "fluidnerf_core::number::optional_f32_setting")]
     pub image_scale: Option<f32>,
     /// Iterations between evaluations of the held-out views (0: never), at most
@@ -520,18 +529,32 @@ impl Prepared {
                 return Err(NeuralError::invalid(format!("view {i}"), format!("pixel ({c}, {r}) is not finite")));
             }
         }
-        let image_scale = match cfg.image_scale {
-            Some(s) => s,
-            None => problem
-                .views
-                .iter()
-                .enumerate()
-                .map(|(i, v)| match mask_of(&masks.train, i) {
-                    Some(m) => v.image.data.iter().zip(m).filter(|(_, &k)| k).fold(0.0f32, |a, (&p, _)| a.max(p)),
-                    None => v.image.min_max().1,
-                })
-                .fold(0.0f32, f32::max),
-        };
+        let largest = problem
+            .views
+            .iter()
+            .enumerate()
+            .map(|(i, v)| match mask_of(&masks.train, i) {
+                Some(m) => v.image.data.iter().zip(m).filter(|(_, &k)| k).fold(0.0f32, |a, (&p, _)| a.max(p)),
+                None => v.image.min_max().1,
+            })
+            .fold(0.0f32, f32::max);
+        let image_scale = cfg.image_scale.unwrap_or(largest);
+        // Targets far from 1 leave the f32 range the loss is summed in: a scale of 1e-30 made
+        // the loss of iteration 0 infinite, one of 1e8 made every target vanish beside the
+        // field's start.
+        let ratio = largest as f64 / image_scale as f64;
+        if largest > 0.0 && !(MIN_TARGET_PEAK..=MAX_TARGET_PEAK).contains(&ratio) {
+            return Err(NeuralError::invalid(
+                "image_scale",
+                format!(
+                    "{} puts the largest training pixel ({}) at {} once divided: it must come out between \
+                     {MIN_TARGET_PEAK:e} and {MAX_TARGET_PEAK:e}; leave image_scale out to take the largest pixel",
+                    num(image_scale),
+                    num(largest),
+                    num(ratio)
+                ),
+            ));
+        }
         if image_scale.is_nan() || image_scale <= 0.0 {
             return Err(NeuralError::invalid("images", fluidnerf_core::image::ALL_BLACK));
         }

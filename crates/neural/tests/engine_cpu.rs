@@ -297,6 +297,7 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
     .expect_err("diverges at iteration 3");
     assert!(matches!(err, NeuralError::Diverged { iteration: 3, loss } if loss.is_nan()), "{err:?}");
     assert!(err.to_string().contains("training diverged: the loss of iteration 3 is NaN"), "{err}");
+    assert!(err.to_string().contains("a lower learning rate may help"), "{err}");
     let (params, adam) = after_three.expect("three iterations ran");
     assert!(params.iter().all(|p| p.is_finite()));
     assert_eq!(learner.field.params(), params, "the parameters are those after iteration 3");
@@ -311,9 +312,31 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
     let err = train_with_engine(&prep, &mut learner, &cfg, 0, &mut engine, |_| ControlFlow::Continue(()))
         .expect_err("the squared residual overflows");
     assert!(matches!(err, NeuralError::Diverged { iteration: 0, loss } if loss.is_infinite()), "{err:?}");
+    // No step was taken: the message points at the start's settings, not at the learning rate.
+    let e = err.to_string();
+    assert!(e.contains("image_scale") && e.contains("init_scale") && !e.contains("lower learning rate"), "{e}");
     assert_eq!(learner.field.params(), start);
     assert_eq!((learner.adam.step, learner.iteration), (0, 0));
     assert!(learner.adam.m.iter().chain(&learner.adam.v).all(|&m| m == 0.0));
+}
+
+/// A given image_scale that puts the brightest training pixel out of 1e-6..1e6 is refused
+/// naming it (1e-30 made the loss of iteration 0 infinite); the bounds themselves prepare.
+#[test]
+fn an_image_scale_far_from_the_pixels_is_refused_naming_it() {
+    use fluidnerf_neural::train::{MAX_TARGET_PEAK, MIN_TARGET_PEAK};
+    let problem = problem();
+    let largest = problem.views.iter().map(|v| v.image.min_max().1).fold(0.0f32, f32::max) as f64;
+    for scale in [1e-30, largest / MAX_TARGET_PEAK / 10.0, largest / MIN_TARGET_PEAK * 10.0, 1e30] {
+        let cfg = TrainConfig { image_scale: Some(scale as f32), ..settings() };
+        let Err(e) = Prepared::new(&problem, &cfg) else { panic!("{scale}: prepared") };
+        let e = e.to_string();
+        assert!(e.starts_with("invalid image_scale: ") && e.contains("between 1e-6 and 1e6"), "{scale}: {e}");
+    }
+    for scale in [largest / MAX_TARGET_PEAK * 1.001, largest, largest / MIN_TARGET_PEAK * 0.999] {
+        let cfg = TrainConfig { image_scale: Some(scale as f32), ..settings() };
+        Prepared::new(&problem, &cfg).unwrap_or_else(|e| panic!("{scale}: {e}"));
+    }
 }
 
 /// `pixel_supersample = "auto"` draws 2 × 2 rays over a quarter of the pixels from clean
