@@ -185,7 +185,9 @@ def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene
         fluidnerf.reconstruct(static_scene, {"name": "asart", "params": {"relaxaton": 0.3}}, tmp_path / "c")
     with pytest.raises(fluidnerf.FluidNerfError, match='unknown method "nerf"'):
         fluidnerf.reconstruct(static_scene, "nerf", tmp_path / "c")
-    with pytest.raises(fluidnerf.FluidNerfError, match="stopping.max_iterations: must be at least 1"):
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="stopping.max_iterations: must be 1 to 1000000000 iterations, got 0"
+    ):
         fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "c", stopping={"max_iterations": 0})
     # A folder holding a finished run is not overwritten without being asked.
     fluidnerf.reconstruct(static_scene, "asart", tmp_path / "d", resolution=8, stopping={"max_iterations": 1})
@@ -415,7 +417,9 @@ def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static
         fluidnerf.reconstruct(scene, "fast", tmp_path / "new", overwrite="resume", **options)
     assert not (tmp_path / "new").exists()
     # Nor is one refused for its settings: the scene was saved before they were checked.
-    with pytest.raises(fluidnerf.FluidNerfError, match="stopping.max_iterations: must be at least 1"):
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="stopping.max_iterations: must be 1 to 1000000000 iterations, got 0"
+    ):
         fluidnerf.reconstruct(
             scene, "asart", tmp_path / "new", **{**options, "stopping": {"max_iterations": 0}}
         )
