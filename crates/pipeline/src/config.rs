@@ -1357,14 +1357,24 @@ mod tests {
                 grid.coarse_to_fine = n;
             }),
         ];
-        for (method, key, edit) in edits {
+        let edits = edits.map(|(method, key, edit)| (method, key, MAX_ITERATION_SPAN, edit));
+        refused_past_their_bounds(&edits);
+    }
+
+    /// A setting of a run of a method, its key and bound, and how to set it.
+    type Bounded<'a> = (Method, &'a str, usize, fn(&mut RunConfig, usize));
+
+    /// Each setting that `edit` sets in a run of `method` validates at its bound; one past it
+    /// and `usize::MAX` are refused, the message naming `key` first and the bound.
+    fn refused_past_their_bounds(edits: &[Bounded<'_>]) {
+        for &(method, key, bound, edit) in edits {
             let mut c = RunConfig::new("scene", method);
-            edit(&mut c, MAX_ITERATION_SPAN);
+            edit(&mut c, bound);
             c.validate().unwrap_or_else(|e| panic!("{key} at its bound: {e}"));
-            for n in [MAX_ITERATION_SPAN + 1, usize::MAX] {
+            for n in [bound + 1, usize::MAX] {
                 edit(&mut c, n);
                 let e = c.validate().expect_err(key).to_string();
-                assert!(e.starts_with(&format!("{key}: ")) && e.contains(&MAX_ITERATION_SPAN.to_string()), "{e}");
+                assert!(e.starts_with(&format!("{key}: ")) && e.contains(&bound.to_string()), "{e}");
             }
         }
     }
@@ -1405,16 +1415,7 @@ mod tests {
                 spec.windows.warm_max_iterations = Some(n);
             }),
         ];
-        for (method, key, bound, edit) in edits {
-            let mut c = RunConfig::new("scene", method);
-            edit(&mut c, bound);
-            c.validate().unwrap_or_else(|e| panic!("{key} at its bound: {e}"));
-            for n in [bound + 1, usize::MAX] {
-                edit(&mut c, n);
-                let e = c.validate().expect_err(key).to_string();
-                assert!(e.starts_with(&format!("{key}: ")) && e.contains(&bound.to_string()), "{e}");
-            }
-        }
+        refused_past_their_bounds(&edits);
     }
 
     /// The validation of a run of `method` with the classical settings `params`.
