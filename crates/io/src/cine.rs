@@ -61,6 +61,15 @@ const SETUP_CFA: usize = 808;
 const SETUP_REAL_BPP: usize = 896;
 const SETUP_BLACK_LEVEL: usize = 5732;
 
+/// How a frame's bytes hold its pixels.
+#[derive(Clone, Copy)]
+enum Layout {
+    /// Two pixels in three bytes, top-down, one run across rows.
+    Packed12,
+    /// Rows of 8- or 16-bit pixels this many bytes apart, bottom-up unless the height is negative.
+    Rows(usize),
+}
+
 /// Whether `head` (the file's first bytes) begins like a cine file.
 pub(crate) fn is_cine(head: &[u8]) -> bool {
     head.len() >= 4 && &head[0..2] == b"CI" && usize::from(u16::from_le_bytes([head[2], head[3]])) >= FILE_HEADER_LEN
@@ -212,16 +221,16 @@ pub(crate) fn read_cine(
         let size = u32_at(&word, 0) as usize;
         // Rows are packed, or padded to four bytes as in a BMP; 12-bit pixels run on across rows.
         let padded = row_bytes.div_ceil(4) * 4;
-        let stride = if packed {
+        let layout = if packed {
             let want = (3 * w * h).div_ceil(2);
             if size != want {
                 return Err(bad(format!("image {i} holds {size} bytes; {w}×{h} pixels packed at 12 bits take {want}")));
             }
-            0
+            Layout::Packed12
         } else if size == row_bytes * h {
-            row_bytes
+            Layout::Rows(row_bytes)
         } else if size == padded * h {
-            padded
+            Layout::Rows(padded)
         } else {
             return Err(bad(format!(
                 "image {i} holds {size} bytes; {w}×{h} pixels of {bits} bits take {} (or {} with rows padded to \
@@ -238,26 +247,29 @@ pub(crate) fn read_cine(
             }
             *o = v.saturating_sub(black) as f32;
         };
-        if packed {
+        match layout {
             // Top-down, the pixels one run of pairs; an odd count's last pair is half of one.
-            for (pair, b) in image.data.chunks_mut(2).zip(data.chunks(3)) {
-                let b = [b[0], b.get(1).copied().unwrap_or(0), b.get(2).copied().unwrap_or(0)];
-                put(&mut pair[0], u32::from(b[0]) << 4 | u32::from(b[1]) >> 4);
-                if let Some(o) = pair.get_mut(1) {
-                    put(o, u32::from(b[1] & 0x0f) << 8 | u32::from(b[2]));
+            Layout::Packed12 => {
+                for (pair, b) in image.data.chunks_mut(2).zip(data.chunks(3)) {
+                    let b = [b[0], b.get(1).copied().unwrap_or(0), b.get(2).copied().unwrap_or(0)];
+                    put(&mut pair[0], u32::from(b[0]) << 4 | u32::from(b[1]) >> 4);
+                    if let Some(o) = pair.get_mut(1) {
+                        put(o, u32::from(b[1] & 0x0f) << 8 | u32::from(b[2]));
+                    }
                 }
             }
-        } else {
-            for (r, row) in data.chunks_exact(stride).enumerate() {
-                // Bottom-up unless the height is negative.
-                let y = if height > 0 { h - 1 - r } else { r };
-                let out = &mut image.data[y * w..(y + 1) * w];
-                if bits == 8 {
-                    out.iter_mut().zip(&row[..row_bytes]).for_each(|(o, &v)| put(o, u32::from(v)));
-                } else {
-                    out.iter_mut()
-                        .zip(row[..row_bytes].chunks_exact(2))
-                        .for_each(|(o, v)| put(o, u32::from(u16::from_le_bytes([v[0], v[1]]))));
+            Layout::Rows(stride) => {
+                for (r, row) in data.chunks_exact(stride).enumerate() {
+                    // Bottom-up unless the height is negative.
+                    let y = if height > 0 { h - 1 - r } else { r };
+                    let out = &mut image.data[y * w..(y + 1) * w];
+                    if bits == 8 {
+                        out.iter_mut().zip(&row[..row_bytes]).for_each(|(o, &v)| put(o, u32::from(v)));
+                    } else {
+                        out.iter_mut()
+                            .zip(row[..row_bytes].chunks_exact(2))
+                            .for_each(|(o, v)| put(o, u32::from(u16::from_le_bytes([v[0], v[1]]))));
+                    }
                 }
             }
         }

@@ -69,10 +69,7 @@ pub fn read_input_text(path: &Path, what: &'static str) -> Result<String, IoErro
 /// renamed over `path`. Missing parent folders are created. On any error the temporary file is
 /// removed and `path` is left as it was.
 pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<(), IoError> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = folder_of(path);
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
     let tmp = temporary_file_in(dir)?;
     let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
@@ -90,11 +87,15 @@ pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::
 /// a read-only file system or not a folder at all would otherwise fail only once the results
 /// are ready. The error names the folder.
 pub fn check_writable(path: &Path) -> Result<(), IoError> {
-    let dir = match path.parent() {
+    temporary_file_in(folder_of(path)).map(drop)
+}
+
+/// The folder `path` is written into: its parent, or the working folder for a bare name.
+fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
-    };
-    temporary_file_in(dir).map(drop)
+    }
 }
 
 /// The temporary file [`atomic_write`] fills in `dir` before renaming it over its target.

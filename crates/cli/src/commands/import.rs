@@ -400,7 +400,6 @@ fn expand_videos(
     };
     // Each video's frames outside the common run are left out, their files removed.
     let (t0, t1) = (common[0], common[common.len() - 1]);
-    let mut outside = false;
     for ((record, times), &start) in records.iter_mut().zip(&all_times).zip(&starts) {
         let after = times.len() - start - common.len();
         if start + after == 0 {
@@ -415,15 +414,15 @@ fn expand_videos(
         );
         record.info.frames_kept = common.len();
         (record.first_time_s, record.last_time_s) = (t0, t1);
-        outside = true;
     }
-    if outside {
+    if all_times.iter().any(|times| times.len() != common.len()) {
         // The k-th frame decoded from the video of `source` is kept when its file's run holds it.
         let mut seen = vec![0usize; records.len()];
         let mut kept_frames = Vec::with_capacity(expanded.len());
         let mut kept_sources = Vec::with_capacity(sources.len());
         for (f, source) in expanded.into_iter().zip(sources) {
-            if let Some(r) = video_sources.iter().position(|&v| v == source) {
+            // `video_sources` is in increasing order, as the frames were enumerated.
+            if let Ok(r) = video_sources.binary_search(&source) {
                 let k = seen[r];
                 seen[r] += 1;
                 if !(starts[r]..starts[r] + common.len()).contains(&k) {
