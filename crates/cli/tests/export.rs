@@ -45,6 +45,7 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
         "--vti",
         "--npy",
         "--raw",
+        "--tiff",
         "--box",
         "0.5,1,1,3.5,3,2",
         "--resolution",
@@ -82,6 +83,24 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
     let raw = fluidnerf_io::volume::read_raw(&out.join("volume.raw")).expect("reads with its sidecar");
     assert_eq!((raw.dims, raw.aabb), (v.dims, v.aabb));
     assert_eq!(raw.data, v.data);
+    // The TIFF stack holds the same values and, from its calibration alone, the same box.
+    let tif = fluidnerf_io::volume::read_tiff_stack(&out.join("volume.tif"), None).expect("reads the stack");
+    assert_eq!((tif.dims, &tif.data), (v.dims, &v.data));
+    assert!(
+        (tif.aabb.min - v.aabb.min).abs().max_element() < 1e-9
+            && (tif.aabb.max - v.aabb.max).abs().max_element() < 1e-9
+    );
+    // ... and is read back as a reconstruction of its own, without a scene.
+    let again_out = dir.path().join("from_tif");
+    ok(&fluidnerf(&[
+        "export",
+        out.join("volume.tif").to_str().expect("utf-8"),
+        "-o",
+        again_out.to_str().expect("utf-8"),
+        "--npy",
+    ]));
+    let n = fluidnerf_io::volume::read_npy(&again_out.join("volume.npy"), v.aabb).expect("reads");
+    assert_eq!((n.dims, &n.data), (v.dims, &v.data));
     let settings: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).expect("settings")).expect("JSON");
     assert_eq!(settings["dims"], serde_json::json!([12, 8, 4]));
@@ -258,8 +277,8 @@ fn a_forced_export_removes_the_earlier_outputs_it_does_not_write() {
     let src = source(dir.path());
     let (src, out) = (src.to_str().expect("utf-8"), dir.path().join("out"));
     let out_text = out.to_str().expect("utf-8");
-    ok(&fluidnerf(&["export", src, "-o", out_text, "--npy", "--vti", "--raw", "--slices", "z=0.5,x=0.25"]));
-    for f in ["volume.vti", "volume.raw", "volume.raw.json", "slice_x_0.250.png", "slice_z_0.500.png"] {
+    ok(&fluidnerf(&["export", src, "-o", out_text, "--npy", "--vti", "--raw", "--tiff", "--slices", "z=0.5,x=0.25"]));
+    for f in ["volume.vti", "volume.raw", "volume.raw.json", "volume.tif", "slice_x_0.250.png", "slice_z_0.500.png"] {
         assert!(out.join(f).is_file(), "{f}");
     }
     std::fs::write(out.join("notes.txt"), "keep me").expect("writes");

@@ -10,8 +10,8 @@
 //!   binary) calibrations.
 //! - [`image`]: 8/16-bit PNG, 8-bit JPEG and 8/16/32-bit and float TIFF, read as f32 with an
 //!   explicit linearisation of 8-bit values.
-//! - [`volume`]: `.npy` (C or Fortran order), `.vti` (VTK XML ImageData) and raw + JSON
-//!   sidecar volumes.
+//! - [`volume`]: `.npy` (C or Fortran order), `.vti` (VTK XML ImageData), raw + JSON
+//!   sidecar and ImageJ TIFF stack volumes.
 //! - [`mesh`]: binary PLY and OBJ triangle meshes.
 //! - [`video`]: recordings as frames with times (MJPEG AVI natively, other formats through
 //!   ffmpeg), limited-range luma handled.
@@ -69,6 +69,15 @@ pub fn read_input_text(path: &Path, what: &'static str) -> Result<String, IoErro
 /// renamed over `path`. Missing parent folders are created. On any error the temporary file is
 /// removed and `path` is left as it was.
 pub fn atomic_write(path: &Path, write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<(), IoError> {
+    atomic_write_seekable(path, |w| write(w))
+}
+
+/// [`atomic_write`] for formats whose writer moves about in the file (a TIFF's directories
+/// point at data written before them).
+pub fn atomic_write_seekable(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), IoError> {
     let dir = folder_of(path);
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
     let tmp = temporary_file_in(dir)?;

@@ -1,4 +1,5 @@
-//! Volumes on disk: `.npy`, `.vti` (VTK XML ImageData) and raw f32 with a JSON sidecar.
+//! Volumes on disk: `.npy`, `.vti` (VTK XML ImageData), raw f32 with a JSON sidecar, and TIFF
+//! stacks.
 //!
 //! [`Volume`] is cell-centred, x fastest (`data[(k * ny + j) * nx + i]`), filling its
 //! [`Aabb`]. On disk:
@@ -11,6 +12,10 @@
 //!   0 nz−1`. ParaView therefore shows every value at its voxel centre, in world units.
 //! - raw: little-endian f32 in the same order, plus a sidecar `<file>.json` holding `dims`
 //!   `[nx, ny, nz]`, `aabb`, `spacing`, `dtype` (`"<f4"`) and `order` (`"x fastest"`).
+//! - `.tif`: a TIFF stack, page `k` the z-slice `k` (row `j`, column `i`), 32-bit float,
+//!   calibrated for ImageJ and Fiji: the resolution tags give the voxel's width and height in
+//!   the description's `unit`, `spacing` its depth, and `xorigin`/`yorigin`/`zorigin` (in
+//!   voxels, ImageJ's convention) place the box. NumPy's `tifffile` reads it as `(nz, ny, nx)`.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -21,6 +26,9 @@ use npyz::WriterBuilder;
 use serde::{Deserialize, Serialize};
 
 use crate::{atomic_write, IoError};
+
+mod stack;
+pub use stack::{read_tiff_stack, write_tiff_stack};
 
 /// Reads a `.npy` of shape `(nz, ny, nx)` as a volume filling `aabb`. Fortran-order files
 /// (NumPy writes them for transposed arrays, `fortran_order: True`) are reordered on read, so

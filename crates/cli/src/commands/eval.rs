@@ -45,8 +45,8 @@ pub enum Window {
 /// neither --json nor --csv is given, writes `metrics.json` and `metrics.csv` into it.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw`
-    /// with its JSON sidecar) or a reconstruction run directory (a trained field, or
+    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, `.raw`
+    /// with its JSON sidecar, or a `.tif` stack, calibrated or filling the scene's box) or a reconstruction run directory (a trained field, or
     /// `volume.npy`). For a time-resolved scene give one volume per truth time step, in the
     /// order the scene lists its truth, or one run directory (a time-resolved field).
     #[arg(required = true, num_args = 1..)]
@@ -55,8 +55,8 @@ pub struct Args {
     /// folder, the scene its `config.json` records].
     #[arg(short, long)]
     pub scene: Option<PathBuf>,
-    /// Ground-truth volume to use instead of the scene's (`.npy` filling the scene's box, or
-    /// `.vti`).
+    /// Ground-truth volume to use instead of the scene's (`.npy` filling the scene's box,
+    /// `.vti`, `.raw`, or a `.tif` stack, calibrated or filling the scene's box).
     #[arg(long)]
     pub truth: Option<PathBuf>,
     /// Regions scored separately, as NAME:X0:X1 (a slab along the jet axis x) or

@@ -1,5 +1,5 @@
 //! `fluidnerf export`: samples a reconstruction onto a grid of any resolution and box and writes
-//! it for other tools (`.npy`, `.vti`, raw), as slice pictures (optionally next to the truth and
+//! it for other tools (`.npy`, `.vti`, raw, TIFF stacks), as slice pictures (optionally next to the truth and
 //! the difference) and as isosurface meshes. Also home of the reconstruction loader that
 //! `render` shares.
 
@@ -29,17 +29,18 @@ pub enum MeshFormat {
 
 /// Export a reconstruction: volumes, slice pictures, comparisons and isosurfaces.
 ///
-/// Samples the reconstruction onto a grid and writes volumes for NumPy, ParaView and MATLAB,
+/// Samples the reconstruction onto a grid and writes volumes for NumPy, ParaView, MATLAB and
+/// ImageJ/Fiji,
 /// slice pictures with a colour bar, truth | reconstruction | difference panels, and
 /// isosurfaces as meshes.
 ///
-/// With none of --npy, --vti, --raw, --slices or --isosurface, writes `volume.npy`,
+/// With none of --npy, --vti, --raw, --tiff, --slices or --isosurface, writes `volume.npy`,
 /// `volume.vti` and slices through the middle of the box along x, y and z. Always writes
 /// `export.json` (the resolved settings). Existing outputs in OUT need --force.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, or `.raw` with
-    /// its JSON sidecar) or a run folder of any kind (a trained neural field, static or
+    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, `.raw` with
+    /// its JSON sidecar, or a `.tif` stack, calibrated or filling the scene's box) or a run folder of any kind (a trained neural field, static or
     /// time-resolved, is sampled exactly; a voxel run gives its volume).
     pub recon: PathBuf,
     /// The scene (folder holding `transforms.json`, or the file): gives the box of `.npy`
@@ -75,12 +76,16 @@ pub struct Args {
     /// Write `volume.raw` (f32, x fastest) with its JSON sidecar.
     #[arg(long)]
     pub raw: bool,
+    /// Write `volume.tif`: a 32-bit float TIFF stack, one page per z-slice, calibrated for
+    /// ImageJ and Fiji (voxel size in the length unit, and the box's origin).
+    #[arg(long)]
+    pub tiff: bool,
     /// Slice pictures as AXIS=FRACTION of the box (0 = min side, 1 = max side), e.g.
     /// `x=0.5,z=0.25`; comma-separated or repeated. Each goes to `slice_<axis>_<fraction>.png`.
     #[arg(long, value_delimiter = ',', value_name = "AXIS=FRACTION")]
     pub slices: Vec<String>,
     /// Ground-truth volume (`.npy` filling the scene's box, or the reconstruction's without
-    /// --scene; `.vti` or `.raw`): slices are also drawn as truth | reconstruction | difference
+    /// --scene; `.vti`, `.raw` or `.tif`): slices are also drawn as truth | reconstruction | difference
     /// (`compare_<axis>_<fraction>.png`).
     #[arg(long, value_name = "TRUTH")]
     pub compare: Option<PathBuf>,
@@ -175,7 +180,8 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>) -> anyhow::Result<Vol
         }
         "vti" => fluidnerf_io::volume::read_vti(path),
         "raw" => fluidnerf_io::volume::read_raw(path),
-        _ => bail!("{}: unknown volume format (expected .npy, .vti or .raw)", path.display()),
+        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, aabb),
+        _ => bail!("{}: unknown volume format (expected .npy, .vti, .raw or .tif)", path.display()),
     }
     .with_context(|| format!("reading the volume {}", path.display()))?;
     fluidnerf_io::volume::check_finite(path, &v)?;
@@ -219,7 +225,13 @@ fn earlier_outputs(settings: &Path) -> Vec<PathBuf> {
     let ours = |name: &str| {
         matches!(
             name,
-            "volume.npy" | "volume.vti" | "volume.raw" | "volume.raw.json" | "isosurface.ply" | "isosurface.obj"
+            "volume.npy"
+                | "volume.vti"
+                | "volume.raw"
+                | "volume.raw.json"
+                | "volume.tif"
+                | "isosurface.ply"
+                | "isosurface.obj"
         ) || ((name.starts_with("slice_") || name.starts_with("compare_")) && name.ends_with(".png"))
     };
     listed
@@ -259,7 +271,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let meshes: Vec<&str> = args.mesh.iter().map(|m| if *m == MeshFormat::Ply { "ply" } else { "obj" }).collect();
     super::given_once("--mesh", &meshes)?;
     let mut slices: Vec<(Axis, f64)> = args.slices.iter().map(|s| parse_slice(s)).collect::<anyhow::Result<_>>()?;
-    let nothing_chosen = !args.npy && !args.vti && !args.raw && slices.is_empty() && args.isosurface.is_none();
+    let nothing_chosen =
+        !args.npy && !args.vti && !args.raw && !args.tiff && slices.is_empty() && args.isosurface.is_none();
     let (npy, vti, raw) = (args.npy || nothing_chosen, args.vti || nothing_chosen, args.raw);
     if nothing_chosen {
         slices = vec![(Axis::X, 0.5), (Axis::Y, 0.5), (Axis::Z, 0.5)];
@@ -380,6 +393,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         outputs.push(out.join("volume.raw"));
         outputs.push(fluidnerf_io::volume::raw_sidecar_path(&out.join("volume.raw")));
     }
+    if args.tiff {
+        outputs.push(out.join("volume.tif"));
+    }
     let slice_name = |prefix: &str, (a, f): (Axis, f64)| out.join(format!("{prefix}_{a}_{f:.3}.png"));
     for (k, &s) in slices.iter().enumerate() {
         if let Some(same) = slices[..k].iter().find(|&&o| slice_name("slice", o) == slice_name("slice", s)) {
@@ -434,6 +450,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if raw {
         let p = out.join("volume.raw");
         fluidnerf_io::volume::write_raw(&p, &volume).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if args.tiff {
+        let p = out.join("volume.tif");
+        fluidnerf_io::volume::write_tiff_stack(&p, &volume, &units)
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     let style = PanelStyle { colormap: args.colormap, colorbar_label: args.value_label.clone(), ..Default::default() };
     for &(axis, fraction) in &slices {
