@@ -83,8 +83,12 @@ fn imagej_description(volume: &Volume, unit: &str) -> String {
 /// reads it as shape `(nz, ny, nx)`). `unit` names the world's length unit. Stacks of more
 /// than 4 GiB are written as BigTIFF, which Fiji opens through Bio-Formats.
 pub fn write_tiff_stack(path: &Path, volume: &Volume, unit: &str) -> Result<(), IoError> {
-    let description = imagej_description(volume, unit);
     let big = (volume.data.len() as u64).saturating_mul(4) > CLASSIC_TIFF_DATA_LIMIT;
+    write_stack(path, volume, unit, big)
+}
+
+fn write_stack(path: &Path, volume: &Volume, unit: &str, big: bool) -> Result<(), IoError> {
+    let description = imagej_description(volume, unit);
     let tiff_error = |e: tiff::TiffError| std::io::Error::other(format!("TIFF encoding failed: {e}"));
     crate::atomic_write_seekable(path, |w| {
         if big {
@@ -338,6 +342,22 @@ mod tests {
         // A given box does not override the file's own.
         let other = Aabb { min: DVec3::ZERO, max: DVec3::ONE };
         assert!((read_tiff_stack(&p, Some(other)).expect("read").aabb.min - aabb.min).length() < 1e-9);
+    }
+
+    #[test]
+    fn a_bigtiff_stack_round_trips_as_the_classic_one() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let aabb = Aabb { min: DVec3::new(-1.0, 0.0, 2.0), max: DVec3::new(3.0, 1.5, 4.0) };
+        let v = volume([8, 3, 4], aabb);
+        let (classic, big) = (dir.path().join("c.tif"), dir.path().join("b.tif"));
+        write_stack(&classic, &v, "mm", false).expect("classic");
+        write_stack(&big, &v, "mm", true).expect("big");
+        assert_eq!(&std::fs::read(&big).expect("bytes")[2..4], &43u16.to_le_bytes(), "BigTIFF's version number");
+        for p in [classic, big] {
+            let back = read_tiff_stack(&p, None).expect("read");
+            assert_eq!((back.dims, &back.data), (v.dims, &v.data));
+            assert!((back.aabb.max - aabb.max).abs().max_element() < 1e-9);
+        }
     }
 
     #[test]
