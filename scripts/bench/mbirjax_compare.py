@@ -38,7 +38,7 @@ def ours(json_path):
         return json.loads(Path(json_path).read_text())
     cmd = ["cargo", "bench", "-q", "-p", "fluidnerf-classical", "--bench", "projection", "--", "--json"]
     out = subprocess.run(cmd, cwd=REPO, check=True, capture_output=True, text=True).stdout
-    line = [l for l in out.splitlines() if l.startswith("{")][-1]
+    line = [x for x in out.splitlines() if x.startswith("{")][-1]
     return json.loads(line)
 
 

@@ -80,8 +80,23 @@ PRESETS = {"faithful": (128, 128), "ch7": (64, 64)}
 PDF_UNIFORM_FLOOR = 0.01
 UNIFORM_START_WEIGHT_SCALE = 0.1
 INTRINSIC_KEYS = (
-    "camera_model", "w", "h", "fl_x", "fl_y", "cx", "cy", "k1", "k2", "k3", "k4", "p1", "p2",
-    "skew", "opencv_k4", "opencv_k5", "opencv_k6",
+    "camera_model",
+    "w",
+    "h",
+    "fl_x",
+    "fl_y",
+    "cx",
+    "cy",
+    "k1",
+    "k2",
+    "k3",
+    "k4",
+    "p1",
+    "p2",
+    "skew",
+    "opencv_k4",
+    "opencv_k5",
+    "opencv_k6",
 )
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "SIMPLE_RADIAL", "RADIAL", "FULL_OPENCV")
 
@@ -118,12 +133,18 @@ def distort(x, y, dist):
     num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
     a = num / den
-    da = ((k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)) * den - num * (k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2))) / (den * den)
+    da = ((k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)) * den - num * (k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2))) / (
+        den * den
+    )
     xd = x * a + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * a + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     cross = 2.0 * x * y * da + 2.0 * p1 * x + 2.0 * p2 * y
-    jac = (a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x, cross, cross,
-           a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x)
+    jac = (
+        a + 2.0 * x * x * da + 2.0 * p1 * y + 6.0 * p2 * x,
+        cross,
+        cross,
+        a + 2.0 * y * y * da + 6.0 * p1 * y + 2.0 * p2 * x,
+    )
     return xd, yd, jac
 
 
@@ -246,9 +267,14 @@ def load_scene(scene_dir):
             "cy": float(k["cy"]) - 0.5,
             "skew": float(k["skew"] or 0.0),
             "dist": {
-                "k1": float(k["k1"] or 0.0), "k2": float(k["k2"] or 0.0), "k3": float(k["k3"] or 0.0),
-                "p1": float(k["p1"] or 0.0), "p2": float(k["p2"] or 0.0), "k4": float(k["opencv_k4"] or 0.0),
-                "k5": float(k["opencv_k5"] or 0.0), "k6": float(k["opencv_k6"] or 0.0),
+                "k1": float(k["k1"] or 0.0),
+                "k2": float(k["k2"] or 0.0),
+                "k3": float(k["k3"] or 0.0),
+                "p1": float(k["p1"] or 0.0),
+                "p2": float(k["p2"] or 0.0),
+                "k4": float(k["opencv_k4"] or 0.0),
+                "k5": float(k["opencv_k5"] or 0.0),
+                "k6": float(k["opencv_k6"] or 0.0),
             },
             "name": where,
             # OpenGL camera axes -> OpenCV: negate the second and third columns.
@@ -293,8 +319,8 @@ def build_field(torch, depth, width, freqs, seed):
         def __init__(self):
             super().__init__()
             self.layers = nn.ModuleList()
-            for l in range(depth):
-                fan_in = (enc_dim if l == 0 else width) + (enc_dim if l == skip else 0)
+            for k in range(depth):
+                fan_in = (enc_dim if k == 0 else width) + (enc_dim if k == skip else 0)
                 self.layers.append(nn.Linear(fan_in, width))
             self.output = nn.Linear(width, 1)
             self.register_buffer("scales", 2.0 ** torch.arange(freqs, dtype=torch.float32), persistent=False)
@@ -309,8 +335,8 @@ def build_field(torch, depth, width, freqs, seed):
         def forward(self, u):
             g = self.encode(u)
             h = g
-            for l, lin in enumerate(self.layers):
-                if l == skip:
+            for k, lin in enumerate(self.layers):
+                if k == skip:
                     h = torch.cat([h, g], dim=-1)
                 # In place: addmm's backward needs its inputs, not its output.
                 h = torch.relu_(lin(h))
@@ -445,8 +471,14 @@ class Prepared:
         cat = lambda xs: torch.from_numpy(np.ascontiguousarray(np.concatenate(xs)).astype(np.float32))  # noqa: E731
         counts = torch.tensor(counts, dtype=torch.int64)
         return {
-            "o": cat(o), "d": cat(d), "near": cat(near), "far": cat(far), "target": cat(target),
-            "counts": counts, "offsets": torch.cumsum(counts, 0) - counts, "n": int(counts.sum()),
+            "o": cat(o),
+            "d": cat(d),
+            "near": cat(near),
+            "far": cat(far),
+            "target": cat(target),
+            "counts": counts,
+            "offsets": torch.cumsum(counts, 0) - counts,
+            "n": int(counts.sum()),
         }
 
 
@@ -578,7 +610,10 @@ def train(torch, field, prep, truth, aabb, args, settings):
         t0, c0 = time.perf_counter(), time.process_time()
         for g in opt.param_groups:
             g["lr"] = lr0 * (lr1 / lr0) ** (it / decay)
-        idx = (offs[:, None] + (torch.rand(lens.shape[0], args.rays_per_image, generator=gen) * lens[:, None]).long())
+        idx = (
+            offs[:, None]
+            + (torch.rand(lens.shape[0], args.rays_per_image, generator=gen) * lens[:, None]).long()
+        )
         idx = torch.minimum(idx, (offs + lens - 1)[:, None]).reshape(-1)
         opt.zero_grad(set_to_none=True)
         loss = render_loss(torch, field, rays, idx, args, scale, gen, n_pix, True)
@@ -590,7 +625,9 @@ def train(torch, field, prep, truth, aabb, args, settings):
         it += 1
         if holdout_idx is not None and it % 100 == 0:
             hgen = torch.Generator().manual_seed(holdout_gen_seed)
-            h = render_loss(torch, field, prep.holdout, holdout_idx, args, scale, hgen, holdout_idx.shape[0], False)
+            h = render_loss(
+                torch, field, prep.holdout, holdout_idx, args, scale, hgen, holdout_idx.shape[0], False
+            )
             holdout_history.append([it, h])
         train_time += time.perf_counter() - t0
         train_cpu += time.process_time() - c0
@@ -695,23 +732,31 @@ def self_test(torch, scene_dir):
     err = float(((pix - 0.7 * (far - near) / 40.0).abs() / (0.7 * (far - near) / 40.0)).max())
     check("constant field renders to value x chord / L", err < 1e-4, f"max relative error {err:.2e}")
     on_chord = (s >= near[:, None] - 1e-3).all() and (s <= far[:, None] + 1e-3).all()
-    check("merged samples sorted and on [near, far]", bool((s[:, 1:] >= s[:, :-1]).all() and on_chord),
-          f"{s.shape[1]} samples per ray")
+    check(
+        "merged samples sorted and on [near, far]",
+        bool((s[:, 1:] >= s[:, :-1]).all() and on_chord),
+        f"{s.shape[1]} samples per ray",
+    )
     # Without the end pieces only [s_1, s_N] is covered (render.rs test).
     s5 = torch.tensor([[1.3, 1.9, 2.2, 3.7, 4.1]])
     w5 = quadrature_weights(torch, s5, torch.tensor([1.0]), torch.tensor([4.5]), 1.0)
     w5o = quadrature_weights(torch, s5, torch.tensor([1.0]), torch.tensor([4.5]), 1.0, close_ends=False)
-    check("trapezoid weights (render.rs known answer)",
-          abs(float((w5 * 2).sum()) - 7.0) < 1e-5 and abs(float((w5o * 2).sum()) - 5.6) < 1e-5,
-          f"{float((w5 * 2).sum()):.5f} (7), {float((w5o * 2).sum()):.5f} (5.6)")
+    check(
+        "trapezoid weights (render.rs known answer)",
+        abs(float((w5 * 2).sum()) - 7.0) < 1e-5 and abs(float((w5o * 2).sum()) - 5.6) < 1e-5,
+        f"{float((w5 * 2).sum()):.5f} (7), {float((w5o * 2).sum()):.5f} (5.6)",
+    )
     # Feature samples follow |dE/ds| (sampling.rs test): a step at s = 3.
     sc = torch.arange(11, dtype=torch.float32)[None] * 0.5
     ec = (sc > 3.1).float()
     sf = feature_samples(torch, sc, ec, 200, gen)
     inside = int(((sf >= 3.0) & (sf <= 3.5)).sum())
     flat = feature_samples(torch, sc, torch.full_like(sc, 0.3), 200, gen)
-    check("feature samples follow the step", inside >= 195 and int((flat < 2.5).sum()) == 100,
-          f"{inside} of 200 in the step's interval; flat: {int((flat < 2.5).sum())} of 200 in the first half")
+    check(
+        "feature samples follow the step",
+        inside >= 195 and int((flat < 2.5).sum()) == 100,
+        f"{inside} of 200 in the step's interval; flat: {int((flat < 2.5).sum())} of 200 in the first half",
+    )
     # Encoding = Eq. 5.2 on tau = 2u - 1 (encoding.rs test).
     field = build_field(torch, 8, 256, 8, 0)
     u = torch.tensor([[0.1, 0.77, 0.999], [0.0, 0.5, 1.0]])
@@ -731,21 +776,39 @@ def self_test(torch, scene_dir):
     check("parameter count (mlp.rs: 487 169)", n == 487_169, str(n))
     start_uniform(torch, field, 0.37)
     vals = field_values(torch, field, torch.rand(4096, 3, generator=gen))
-    check("uniform start sits near the level", abs(float(vals.mean()) - 0.37) < 0.1, f"mean {float(vals.mean()):.3f}")
+    check(
+        "uniform start sits near the level",
+        abs(float(vals.mean()) - 0.37) < 0.1,
+        f"mean {float(vals.mean()):.3f}",
+    )
 
     # Distorted camera: every pixel's ray, re-projected through the OpenCV model, lands on its
     # pixel centre (OpenCV convention: integer coordinates).
     dist = {"k1": -0.2, "k2": 0.05, "k3": 0.0, "p1": 1e-3, "p2": -5e-4, "k4": 0.01, "k5": 0.0, "k6": 0.0}
-    cam = {"w": 40, "h": 30, "fx": 50.0, "fy": 52.0, "cx": 19.3, "cy": 14.6, "skew": 0.2, "dist": dist,
-           "R": np.eye(3), "t": np.array([0.0, 0.0, -10.0]), "name": "self-test camera"}
+    cam = {
+        "w": 40,
+        "h": 30,
+        "fx": 50.0,
+        "fy": 52.0,
+        "cx": 19.3,
+        "cy": 14.6,
+        "skew": 0.2,
+        "dist": dist,
+        "R": np.eye(3),
+        "t": np.array([0.0, 0.0, -10.0]),
+        "name": "self-test camera",
+    }
     _, du, _, _, px = pixel_rays(cam, np.array([-100.0, -100.0, -1.0]), np.array([100.0, 100.0, 1.0]))
     p = du.astype(np.float64) * np.array([200.0, 200.0, 2.0])  # world = camera directions (R = I)
     xd, yd, _ = distort(p[:, 0] / p[:, 2], p[:, 1] / p[:, 2], dist)
     pu = cam["fx"] * xd + cam["skew"] * yd + cam["cx"]
     pv = cam["fy"] * yd + cam["cy"]
     perr = float(np.max(np.hypot(pu - px % 40, pv - px // 40)))
-    check("distorted rays re-project onto their pixel centres", len(px) == 1200 and perr < 1e-3,
-          f"{len(px)} rays, max error {perr:.1e} px (float32 directions)")
+    check(
+        "distorted rays re-project onto their pixel centres",
+        len(px) == 1200 and perr < 1e-3,
+        f"{len(px)} rays, max error {perr:.1e} px (float32 directions)",
+    )
 
     if scene_dir:
         # Camera and box conventions: rendering the truth through this script's rays and
@@ -760,21 +823,37 @@ def self_test(torch, scene_dir):
 
             def truth_field(uu):
                 grid = (2.0 * uu - 1.0).reshape(1, 1, 1, -1, 3)
-                v = torch.nn.functional.grid_sample(vol, grid, mode="bilinear", padding_mode="border",
-                                                    align_corners=False)
+                v = torch.nn.functional.grid_sample(
+                    vol, grid, mode="bilinear", padding_mode="border", align_corners=False
+                )
                 return v.reshape(uu.shape[:-1])
 
             rays = prep.train
             ci = torch.randperm(rays["n"], generator=gen)[:4096]
-            s, w = sample_ray_batch(torch, truth_field, rays["o"][ci], rays["d"][ci], rays["near"][ci],
-                                    rays["far"][ci], 256, 0, 1.0 / prep.length, gen)
+            s, w = sample_ray_batch(
+                torch,
+                truth_field,
+                rays["o"][ci],
+                rays["d"][ci],
+                rays["near"][ci],
+                rays["far"][ci],
+                256,
+                0,
+                1.0 / prep.length,
+                gen,
+            )
             pix = (w * truth_field(points(rays["o"][ci], rays["d"][ci], s))).sum(-1)
             t = rays["target"][ci]
             rel = float(((pix - t) ** 2).sum().sqrt() / (t**2).sum().sqrt())
-            check("rendered truth reproduces the images", rel < 0.05,
-                  f"relative RMS difference {rel:.4f} over 4096 random pixels (image formation supersamples)")
-            print(f"scene: {len(scene['views'])} views, {rays['n']} rays on the box, image_scale {prep.image_scale:g}, "
-                  f"value_scale {prep.value_scale:.6g}, mean level {prep.mean_level:.6g}")
+            check(
+                "rendered truth reproduces the images",
+                rel < 0.05,
+                f"relative RMS difference {rel:.4f} over 4096 random pixels (image formation supersamples)",
+            )
+            print(
+                f"scene: {len(scene['views'])} views, {rays['n']} rays on the box, image_scale {prep.image_scale:g}, "
+                f"value_scale {prep.value_scale:.6g}, mean level {prep.mean_level:.6g}"
+            )
     print("self-test", "FAILED: " + ", ".join(failures) if failures else "passed")
     return 1 if failures else 0
 
@@ -787,20 +866,34 @@ def main():
     ap.add_argument("scene", nargs="?", help="scene folder (transforms.json, images, truth)")
     ap.add_argument("--out", help="report JSON to write (refused if it exists, unless --force)")
     ap.add_argument("--force", action="store_true", help="overwrite an existing --out")
-    ap.add_argument("--preset", default="ch7", choices=sorted(PRESETS),
-                    help="sample counts of `fluidnerf reconstruct --preset` (faithful 128/128, ch7 64/64); default ch7")
+    ap.add_argument(
+        "--preset",
+        default="ch7",
+        choices=sorted(PRESETS),
+        help="sample counts of `fluidnerf reconstruct --preset` (faithful 128/128, ch7 64/64); default ch7",
+    )
     ap.add_argument("--rays-per-image", type=int, default=1024, help="N_pix/img (default 1024)")
     ap.add_argument("--coarse-samples", type=int, help="N_c (default: the preset's)")
-    ap.add_argument("--fine-samples", type=int, help="N_f, 0 disables the coarse pass (default: the preset's)")
+    ap.add_argument(
+        "--fine-samples", type=int, help="N_f, 0 disables the coarse pass (default: the preset's)"
+    )
     ap.add_argument("--time-budget", type=float, help="stop after this many seconds of training")
     ap.add_argument("--max-iterations", type=int, default=25_000, help="iteration cap (default 25 000)")
-    ap.add_argument("--eval-every", type=int, default=100, help="NRMSE every N iterations (0: only at the end)")
+    ap.add_argument(
+        "--eval-every", type=int, default=100, help="NRMSE every N iterations (0: only at the end)"
+    )
     ap.add_argument("--threads", type=int, default=2, help="torch.set_num_threads (default 2)")
     ap.add_argument("--seed", type=int, default=0, help="seed of initialisation and sampling (default 0)")
-    ap.add_argument("--chunk-rays", type=int, default=1024,
-                    help="rays per forward/backward chunk, gradients accumulated (default 1024)")
+    ap.add_argument(
+        "--chunk-rays",
+        type=int,
+        default=1024,
+        help="rays per forward/backward chunk, gradients accumulated (default 1024)",
+    )
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    ap.add_argument("--self-test", action="store_true", help="check the conventions (with SCENE: against its truth)")
+    ap.add_argument(
+        "--self-test", action="store_true", help="check the conventions (with SCENE: against its truth)"
+    )
     args = ap.parse_args()
 
     try:

@@ -43,9 +43,9 @@ def main() -> int:
     skip = D // 2
 
     layers = torch.nn.ModuleList()
-    for l in range(D):
-        fan_in = enc_dim if l == 0 else H
-        if l == skip:
+    for k in range(D):
+        fan_in = enc_dim if k == 0 else H
+        if k == skip:
             fan_in += enc_dim
         layers.append(torch.nn.Linear(fan_in, H))
     out_layer = torch.nn.Linear(H, 1)
@@ -62,8 +62,8 @@ def main() -> int:
     def net(u):
         g = encode(u)
         h = g
-        for l, lin in enumerate(layers):
-            if l == skip:
+        for k, lin in enumerate(layers):
+            if k == skip:
                 h = torch.cat([h, g], dim=-1)
             h = torch.relu(lin(h))
         return torch.nn.functional.softplus(out_layer(h)).squeeze(-1)

@@ -238,7 +238,9 @@ def main():
         def on_instant(step, vol, case=case, files=files, t0=t0):
             name = f"{case}_s{step:04d}.npy"
             np.save(args.out / name, vol)
-            files.append({"file": name, "step": step, "time": step * DT, "shape": list(vol.shape), **statistics(vol)})
+            files.append(
+                {"file": name, "step": step, "time": step * DT, "shape": list(vol.shape), **statistics(vol)}
+            )
             print(f"{case}: step {step}, max {vol.max():.3f}, {time.time() - t0:.0f} s", flush=True)
 
         simulate(case, args.seed + index, on_instant)
@@ -269,7 +271,10 @@ def main():
             "flow_axis": "+y",
         },
         "time_step": DT,
-        "ambient_disturbance": {"rms_speed_cells_per_time": AMBIENT_RMS, "wavelength_cells": AMBIENT_WAVELENGTH},
+        "ambient_disturbance": {
+            "rms_speed_cells_per_time": AMBIENT_RMS,
+            "wavelength_cells": AMBIENT_WAVELENGTH,
+        },
         "perturbation_phase_walk_rad_per_step": PHASE_WALK,
         "steps_saved": list(STEPS),
         "plume": {
