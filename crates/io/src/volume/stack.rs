@@ -21,6 +21,10 @@ const CLASSIC_TIFF_DATA_LIMIT: u64 = (1 << 32) - (1 << 24);
 /// chain of directories is cut here).
 const MAX_PAGES: usize = 1 << 16;
 
+/// The most voxels read from one stack (8 GiB of f32): compressed pages can claim far more
+/// than the file holds.
+const MAX_VOXELS: usize = 1 << 31;
+
 /// ImageJ's name for a length unit: it knows micrometres as `micron`, and a TIFF description
 /// is ASCII, so other characters are escaped as Java's `\uXXXX`.
 fn imagej_unit(unit: &str) -> String {
@@ -189,12 +193,12 @@ fn resolution<R: std::io::Read + Seek>(dec: &mut tiff::decoder::Decoder<R>, tag:
 /// [`write_tiff_stack`] and Fiji write them); a stack without one fills `aabb`, and is
 /// refused when none is given.
 pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoError> {
-    use tiff::decoder::{Decoder, DecodingResult, Limits};
+    use tiff::decoder::{Decoder, DecodingResult};
     use tiff::ColorType;
     crate::check_regular_file(path, "volume file")?;
     let file = std::fs::File::open(path).map_err(|e| IoError::io(path, "volume file", e))?;
     let bad = |e: tiff::TiffError| IoError::invalid(path, format!("unreadable TIFF: {e}"));
-    let mut dec = Decoder::new(BufReader::new(file)).map_err(bad)?.with_limits(Limits::unlimited());
+    let mut dec = Decoder::new(BufReader::new(file)).map_err(bad)?;
     let (w, h) = dec.dimensions().map_err(bad)?;
     let (nx, ny) = (w as usize, h as usize);
     if nx.checked_mul(ny).is_none_or(|n| n == 0 || n > 1 << 30) {
@@ -257,6 +261,15 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoErro
             return Err(IoError::invalid(
                 path,
                 format!("page {} holds {} samples for {nx}x{ny} pixels", nz + 1, page.len()),
+            ));
+        }
+        if data.len() + page.len() > MAX_VOXELS {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "page {}: the stack holds more than {MAX_VOXELS} voxels, more than a volume is read with",
+                    nz + 1
+                ),
             ));
         }
         data.extend_from_slice(&page);
