@@ -267,7 +267,7 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoErro
             return Err(IoError::invalid(
                 path,
                 format!(
-                    "page {}: the stack holds more than {MAX_VOXELS} voxels, more than a volume is read with",
+                    "page {}: the stack holds more than {MAX_VOXELS} voxels (8 GiB), the most a volume is read with",
                     nz + 1
                 ),
             ));
