@@ -222,6 +222,24 @@ fn user_volume_becomes_the_truth() {
     let o = run_small_volume(&tmp.path().join("boxed"), &npy, &["--aabb", "-5,-5,-5,5,5,5"]);
     assert!(o.status.success(), "{:?}", text(&o));
 
+    // A TIFF stack calibrated for ImageJ brings its box, as a .vti does, and refuses another.
+    let shifted = Aabb { min: DVec3::new(-10.0, -20.0, -5.0), max: DVec3::new(22.0, 4.0, 35.0) };
+    let stack_vol = Volume::from_vec([16, 12, 20], shifted, vol.data.clone());
+    let tif = tmp.path().join("mine.tif");
+    fluidnerf_io::volume::write_tiff_stack(&tif, &stack_vol, "mm").expect("writes the stack");
+    let from_tif = tmp.path().join("from_tif");
+    let o = run_small_volume(&from_tif, &tif, &[]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let scene = fluidnerf_io::scene::load_scene(&from_tif).expect("scene");
+    assert!((scene.aabb.min - shifted.min).abs().max_element() < 1e-9, "{:?}", scene.aabb);
+    assert!((scene.aabb.max - shifted.max).abs().max_element() < 1e-9, "{:?}", scene.aabb);
+    assert_eq!(fluidnerf_io::scene::load_truth(&scene).expect("truth")[0].1.data, vol.data);
+    let refused = tmp.path().join("refused_tif");
+    let o = run_small_volume(&refused, &tif, &["--aabb", "-5,-5,-5,5,5,5"]);
+    let (_, err) = text(&o);
+    assert!(!o.status.success() && err.contains("mine.tif is a TIFF stack calibrated with its own box"), "{err}");
+    assert!(!refused.exists(), "a refused stack wrote output");
+
     // Rerun from its synth.json with another phantom, the volume is no longer read, and the
     // new synth.json does not name it either.
     let ball = tmp.path().join("ball");

@@ -97,8 +97,9 @@ pub struct Args {
     /// Phantom [default: the preset's].
     #[arg(long, value_enum, help_heading = "Phantom")]
     pub phantom: Option<PhantomArg>,
-    /// Use this volume (.npy of shape (nz, ny, nx) filling --aabb, or .vti, which holds its own
-    /// box) as the ground truth, on its own grid.
+    /// Use this volume (.npy of shape (nz, ny, nx) filling --aabb, .vti, which holds its own
+    /// box, or a .tif stack, which holds its own when calibrated for ImageJ and else fills
+    /// --aabb) as the ground truth, on its own grid.
     #[arg(long, help_heading = "Phantom", conflicts_with = "phantom")]
     pub truth_volume: Option<PathBuf>,
     /// Truth voxels along the box's longest side [default: the preset's].
@@ -470,7 +471,9 @@ fn read_truth_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
             fluidnerf_io::volume::read_npy(path, aabb).with_context(|| format!("cannot read {}", path.display()))?
         }
         "vti" => fluidnerf_io::volume::read_vti(path).with_context(|| format!("cannot read {}", path.display()))?,
-        _ => bail!("{}: the ground truth must be a .npy or .vti volume", path.display()),
+        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb))
+            .with_context(|| format!("cannot read {}", path.display()))?,
+        _ => bail!("{}: the ground truth must be a .npy, .vti or .tif volume", path.display()),
     };
     if let Some(i) = volume.data.iter().position(|x| !x.is_finite()) {
         let [nx, ny, _] = volume.dims;
@@ -642,6 +645,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(path) if settings.phantom.kind == PhantomKind::Volume => Some(read_truth_volume(path, settings.aabb)?),
         _ => None,
     };
+    // A calibrated TIFF stack, like a .vti, holds its own box.
+    if let (Some(v), Some(path), Some(_)) = (&volume, &settings.phantom.volume_path, &args.aabb) {
+        if v.aabb != settings.aabb {
+            bail!(
+                "--aabb: the truth volume {} is a TIFF stack calibrated with its own box ({:?} .. {:?}); leave --aabb \
+                 out, or give the volume as a .npy, which fills the box given",
+                path.display(),
+                v.aabb.min.to_array(),
+                v.aabb.max.to_array()
+            );
+        }
+    }
     crate::interrupt::install();
     let started = std::time::Instant::now();
     let total = settings.time_steps().len() * (1 + settings.rig.count());
