@@ -89,3 +89,42 @@ def test_a_stack_without_calibration_needs_the_scene_for_its_box(static_scene, c
     assert out.returncode != 0 and "plain.tif" in out.stderr and "holds no box" in out.stderr
     run(cli, "export", tmp_path / "plain.tif", "--scene", static_scene.root, "-o", tmp_path / "b", "--npy")
     np.testing.assert_array_equal(np.load(tmp_path / "b" / "volume.npy"), volume.astype(np.float32))
+
+
+def test_a_scene_is_synthesised_from_a_stack_as_from_the_command_line(cli, tmp_path):
+    import fluidnerf
+
+    rng = np.random.default_rng(7)
+    volume = rng.random((10, 8, 12), dtype=np.float32)
+    tifffile.imwrite(
+        tmp_path / "truth.tif",
+        volume,
+        imagej=True,
+        resolution=(1 / 2.0, 1 / 2.5),
+        metadata={
+            "axes": "ZYX",
+            "unit": "mm",
+            "spacing": 3.0,
+            "xorigin": 6.0,
+            "yorigin": 4.0,
+            "zorigin": 5.0,
+        },
+    )
+    small = {"rig": {"layout": {"count": 4}}, "lens": {"resolution": [16, 16]}}
+    phantom = {"kind": "volume", "volume_path": str(tmp_path / "truth.tif")}
+    scene = fluidnerf.synth(tmp_path / "py", "demo", phantom=phantom, **small)
+    np.testing.assert_allclose(scene.aabb, [[-12.0, -10.0, -15.0], [12.0, 10.0, 15.0]])
+    [(_, truth)] = scene.truth()
+    np.testing.assert_array_equal(truth, volume)
+    # The command line makes the same scene from the same settings.
+    settings = tmp_path / "py" / "synth.json"
+    run(cli, "synth", "--config", settings, "-o", tmp_path / "cli", "-q")
+    for name in ["images/cam000.png", "truth/truth.npy"]:
+        assert (tmp_path / "py" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes(), name
+    # The stack's box is its own: another is refused, as is another grid.
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"aabb: the truth volume .*truth\.tif holds its own box"
+    ):
+        fluidnerf.synth(tmp_path / "a", "demo", phantom=phantom, aabb=[[0, 0, 0], [1, 1, 1]], **small)
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"resolution: the truth volume .* on its own grid"):
+        fluidnerf.synth(tmp_path / "b", "demo", phantom=phantom, resolution=16, **small)

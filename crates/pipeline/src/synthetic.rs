@@ -15,11 +15,13 @@
 
 use std::path::{Path, PathBuf};
 
-use fluidnerf_core::Scene;
+use fluidnerf_core::{num, Aabb, Scene, Volume};
 use fluidnerf_io::image::Linearisation;
 use fluidnerf_io::scene::{Background, FrameRecording, Recording};
 use fluidnerf_io::IoError;
 use fluidnerf_synth::Synthesis;
+
+use crate::PipelineError;
 
 /// The preprocessing `syn`'s images need (module docs), one entry per frame.
 pub fn recording(syn: &Synthesis) -> Recording {
@@ -127,6 +129,51 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
                 && parts.all(|c| matches!(c, std::path::Component::Normal(_)))
         })
         .collect()
+}
+
+/// Reads a user's volume to image as a synthetic scene's ground truth
+/// (`phantom.kind = "volume"`, `phantom.volume_path`): a `.npy` fills `aabb`, a `.vti` and a
+/// calibrated TIFF stack hold their own box, an uncalibrated stack fills `aabb`. Refused when a
+/// voxel is not finite or none is positive (every camera would image black).
+pub fn read_truth_volume(path: &Path, aabb: Aabb) -> Result<Volume, PipelineError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let volume = match ext.as_str() {
+        "npy" => fluidnerf_io::volume::read_npy(path, aabb)?,
+        "vti" => fluidnerf_io::volume::read_vti(path)?,
+        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb))?,
+        _ => return Err(PipelineError::file(path, "the ground truth must be a .npy, .vti or .tif volume")),
+    };
+    if let Some(i) = volume.data.iter().position(|x| !x.is_finite()) {
+        let [nx, ny, _] = volume.dims;
+        let v = volume.data[i];
+        let note = if v.is_infinite() {
+            " (float64 values beyond float32's range, about ±3.4e38, read as infinite)"
+        } else {
+            ""
+        };
+        return Err(PipelineError::file(
+            path,
+            format!(
+                "voxel (i {}, j {}, k {}) is {v}; the ground truth must be finite{note}",
+                i % nx,
+                (i / nx) % ny,
+                i / (nx * ny)
+            ),
+        ));
+    }
+    // Every image of a field with no positive value is black: the scene could not be used.
+    let top = volume.data.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    if top <= 0.0 {
+        return Err(PipelineError::file(
+            path,
+            format!(
+                "no voxel is positive (the largest value is {}): a field of emission with none images as black in \
+                 every camera; give a volume whose glowing parts are positive",
+                num(top)
+            ),
+        ));
+    }
+    Ok(volume)
 }
 
 #[cfg(test)]

@@ -290,6 +290,8 @@ pub fn ssim(
 pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, force: bool) -> PyResult<PyScene> {
     let mut settings = guard(|| fluidnerf_synth::preset(preset).map_err(|e| err(e.to_string())))?;
     let patch: serde_json::Value = serde_json::from_str(overrides).map_err(|e| err(format!("settings: {e}")))?;
+    let overridden = |key: &str| patch.get(key).is_some();
+    let (given_resolution, given_aabb) = (overridden("resolution"), overridden("aabb"));
     if patch.as_object().is_some_and(|o| !o.is_empty()) {
         let mut value = serde_json::to_value(&settings).map_err(|e| err(e.to_string()))?;
         merge(&mut value, patch);
@@ -297,6 +299,31 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
             .map_err(|e| err(e.to_string().replacen("configuration", "synth settings", 1)))?;
     }
     guard(|| settings.validate().map_err(|e| err(e.to_string())))?;
+    // A volume of the user's is the truth as it is, on its own grid; a .vti or a calibrated
+    // TIFF stack also brings its own box (as with `fluidnerf synth --truth-volume`).
+    let volume = match (&settings.phantom.volume_path, settings.phantom.kind) {
+        (Some(path), fluidnerf_synth::phantom::PhantomKind::Volume) => {
+            let volume = guard(|| {
+                fluidnerf_pipeline::synthetic::read_truth_volume(path, settings.aabb).map_err(|e| err(e.to_string()))
+            })?;
+            if given_resolution {
+                return Err(err(format!(
+                    "resolution: the truth volume {} is imaged on its own grid; resample it first, or leave \
+                     resolution out",
+                    path.display()
+                )));
+            }
+            if given_aabb && volume.aabb != settings.aabb {
+                return Err(err(format!(
+                    "aabb: the truth volume {} holds its own box; leave aabb out, or give the volume as a .npy, \
+                     which fills the box given",
+                    path.display()
+                )));
+            }
+            Some(volume)
+        }
+        _ => None,
+    };
     // The folder checks of `fluidnerf synth`: never among a run's (or an export's, ...) files,
     // and a user's files are not replaced by the scene's of the same name without force=True.
     use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
@@ -316,7 +343,7 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
     let mut signals = Callback::new(None);
     let scene = py.allow_threads(|| {
         guard(|| {
-            let syn = fluidnerf_synth::generate(&settings, None, |_| signals.check_signals());
+            let syn = fluidnerf_synth::generate(&settings, volume, |_| signals.check_signals());
             if let Some(e) = signals.error.take() {
                 return Err(e);
             }

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
-use fluidnerf_core::{num, Aabb, Volume};
+use fluidnerf_core::Aabb;
 use fluidnerf_synth::{
     generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings, Synthesis,
     ThinLensSettings, DEFAULT_PRESET,
@@ -464,46 +464,6 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn read_truth_volume(path: &Path, aabb: Aabb) -> anyhow::Result<Volume> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let volume = match ext.as_str() {
-        "npy" => {
-            fluidnerf_io::volume::read_npy(path, aabb).with_context(|| format!("cannot read {}", path.display()))?
-        }
-        "vti" => fluidnerf_io::volume::read_vti(path).with_context(|| format!("cannot read {}", path.display()))?,
-        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb))
-            .with_context(|| format!("cannot read {}", path.display()))?,
-        _ => bail!("{}: the ground truth must be a .npy, .vti or .tif volume", path.display()),
-    };
-    if let Some(i) = volume.data.iter().position(|x| !x.is_finite()) {
-        let [nx, ny, _] = volume.dims;
-        let v = volume.data[i];
-        bail!(
-            "{}: voxel (i {}, j {}, k {}) is {v}; the ground truth must be finite{}",
-            path.display(),
-            i % nx,
-            (i / nx) % ny,
-            i / (nx * ny),
-            if v.is_infinite() {
-                " (float64 values beyond float32's range, about ±3.4e38, read as infinite)"
-            } else {
-                ""
-            }
-        );
-    }
-    // Every image of a field with no positive value is black: the scene could not be used.
-    let top = volume.data.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-    if top <= 0.0 {
-        bail!(
-            "{}: no voxel is positive (the largest value is {}): a field of emission with none images as \
-             black in every camera; give a volume whose glowing parts are positive",
-            path.display(),
-            num(top)
-        );
-    }
-    Ok(volume)
-}
-
 fn write_preview(path: &Path, syn: &Synthesis) -> anyhow::Result<()> {
     use fluidnerf_viz::{slice, write_panel_groups_png, Axis, Panel, PanelGroup, PanelStyle};
     let (time, truth) = &syn.truth[syn.truth.len() / 2];
@@ -642,7 +602,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("{} is not empty; write the scene into a new or empty folder, or pass --force", out.display());
     }
     let volume = match &settings.phantom.volume_path {
-        Some(path) if settings.phantom.kind == PhantomKind::Volume => Some(read_truth_volume(path, settings.aabb)?),
+        Some(path) if settings.phantom.kind == PhantomKind::Volume => {
+            Some(fluidnerf_pipeline::synthetic::read_truth_volume(path, settings.aabb)?)
+        }
         _ => None,
     };
     // A calibrated TIFF stack, like a .vti, holds its own box.
