@@ -114,6 +114,41 @@ fn camera_missing_the_box_is_an_error() {
     );
 }
 
+/// A camera of very short focal length has a very wide view: it images the box a fraction of a
+/// pixel across, and sees it as long as a pixel's ray crosses the box. Where the box falls
+/// between pixel centres, the error says so rather than that the camera does not see it.
+#[test]
+fn a_camera_with_a_short_focal_length_sees_the_box() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    let cam = &mut scene.frames[2].camera;
+    let centre = cam.centre();
+    let k = Intrinsics { fx: 0.5, fy: 0.5, cx: 16.0, cy: 12.0, ..cam.intrinsics };
+    *cam = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stdout.contains("frame 2: images/c2.png"), "{stdout}");
+
+    let cam = &mut scene.frames[2].camera;
+    let k = Intrinsics { cx: 15.5, cy: 11.5, ..cam.intrinsics };
+    *cam = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(
+        &info(dir.path()),
+        &["transforms.json", "frame 2", "images/c2.png", "in the camera's view", "falls between pixel centres"],
+    );
+    // A box imaged large, but sheared past the image, is not said to fall between pixel centres.
+    let cam = &mut scene.frames[2].camera;
+    let k = Intrinsics { fx: 40.0, fy: 40.0, skew: 1e308, ..cam.intrinsics };
+    *cam = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
+    assert_fails_with(&o, &["frame 2", "images/c2.png", "does not see the reconstruction box"]);
+    assert!(!text(&o).1.contains("between pixel centres"), "{}", text(&o).1);
+}
+
 #[test]
 fn image_size_disagreeing_with_intrinsics_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

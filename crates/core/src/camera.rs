@@ -452,6 +452,8 @@ impl Camera {
     /// How much of the box this camera sees: the fraction of a 9³ lattice of points in the box
     /// that project inside the image, and the fraction of a lattice of pixels (at most 64 × 64)
     /// whose rays cross the box. Pixels whose undistortion fails count as not seeing the box.
+    /// A box imaged smaller than the lattice's spacing, which no lattice ray crosses, is looked
+    /// for among the pixels under its image: the fraction is then that of the image's pixels.
     pub fn visibility(&self, aabb: &Aabb) -> Visibility {
         let (w, h) = (self.intrinsics.width as f64, self.intrinsics.height as f64);
         let n = 9;
@@ -472,10 +474,14 @@ impl Camera {
         let (mw, mh) = self.probe_lattice();
         let on_box =
             (0..mh).flat_map(|j| (0..mw).map(move |i| (i, j))).filter(|&(i, j)| self.probe_hits(aabb, i, j)).count();
-        Visibility {
-            box_fraction_in_view: inside as f64 / (n * n * n) as f64,
-            pixel_fraction_on_box: on_box as f64 / (mw * mh) as f64,
-        }
+        let pixel_fraction_on_box = if on_box > 0 {
+            on_box as f64 / (mw * mh) as f64
+        } else {
+            // A box imaged smaller than the lattice's spacing: count the pixels under its image.
+            let hits = self.pixels_under_box_image(aabb).filter(|&(u, v)| self.pixel_hits(aabb, u, v)).count();
+            hits as f64 / (self.width() * self.height()) as f64
+        };
+        Visibility { box_fraction_in_view: inside as f64 / (n * n * n) as f64, pixel_fraction_on_box }
     }
 
     /// Whether any pixel of [`Self::visibility`]'s lattice sees the box: the same answer as
@@ -486,6 +492,66 @@ impl Camera {
         let (mw, mh) = self.probe_lattice();
         let outwards = |m: usize| (0..m).map(move |k| if k % 2 == 0 { m / 2 + k / 2 } else { m / 2 - 1 - k / 2 });
         outwards(mh).any(|j| outwards(mw).any(|i| self.probe_hits(aabb, i, j)))
+            || self.pixels_under_box_image(aabb).any(|(u, v)| self.pixel_hits(aabb, u, v))
+    }
+
+    /// The pixel centres (integer `(u, v)`) around the image of `aabb`: the bounding rectangle
+    /// of the projections of its corners and centre, one pixel wider on each side and clipped to
+    /// the image. A box imaged smaller than the probe lattice's spacing (a short focal length, a
+    /// far or small box) falls between its probes, but not between these pixels. Empty when no
+    /// corner is in front of the camera, or the rectangle is larger than the lattice would miss
+    /// (more than 64 × 64 pixels).
+    fn pixels_under_box_image(&self, aabb: &Aabb) -> impl Iterator<Item = (usize, usize)> {
+        let (lo, hi, _) = self.box_image_bounds(aabb);
+        let (w, h) = (self.width() as f64, self.height() as f64);
+        let u0 = (lo.x.floor() - 1.0).max(0.0);
+        let v0 = (lo.y.floor() - 1.0).max(0.0);
+        let u1 = (hi.x.ceil() + 1.0).min(w - 1.0);
+        let v1 = (hi.y.ceil() + 1.0).min(h - 1.0);
+        let small = lo.x <= hi.x && u0 <= u1 && v0 <= v1 && (u1 - u0 + 1.0) * (v1 - v0 + 1.0) <= 4096.0;
+        let (u0, v0, u1, v1) = if small { (u0 as usize, v0 as usize, u1 as usize, v1 as usize) } else { (1, 1, 0, 0) };
+        (v0..=v1).flat_map(move |v| (u0..=u1).map(move |u| (u, v)))
+    }
+
+    /// The bounding rectangle `(min, max)` of the projections of the corners and centre of
+    /// `aabb` that are in front of the camera, and whether all of them are.
+    fn box_image_bounds(&self, aabb: &Aabb) -> (DVec2, DVec2, bool) {
+        let corners = (0..8).map(|c| {
+            DVec3::new(
+                if c & 1 == 0 { aabb.min.x } else { aabb.max.x },
+                if c & 2 == 0 { aabb.min.y } else { aabb.max.y },
+                if c & 4 == 0 { aabb.min.z } else { aabb.max.z },
+            )
+        });
+        let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+        let mut all = true;
+        for p in corners.chain([aabb.centre()]) {
+            match self.project(p).filter(|uv| uv.is_finite()) {
+                Some(uv) => {
+                    lo = lo.min(uv);
+                    hi = hi.max(uv);
+                }
+                None => all = false,
+            }
+        }
+        (lo, hi, all)
+    }
+
+    /// How large, in pixels, the camera images `aabb` (the width and height of the rectangle its
+    /// corners project to), if the box is wholly in front of the camera and its image overlaps
+    /// the image; `None` otherwise. Explains why a camera whose view holds the box can still
+    /// have no pixel's ray crossing it: an image less than a pixel wide or high can fall between
+    /// the pixel centres.
+    pub fn box_image_size(&self, aabb: &Aabb) -> Option<DVec2> {
+        let (lo, hi, all) = self.box_image_bounds(aabb);
+        let (w, h) = (self.width() as f64, self.height() as f64);
+        let overlaps = hi.x >= -0.5 && hi.y >= -0.5 && lo.x < w - 0.5 && lo.y < h - 0.5;
+        (all && overlaps).then(|| hi - lo)
+    }
+
+    /// Whether the ray through pixel centre `(u, v)` crosses `aabb`.
+    fn pixel_hits(&self, aabb: &Aabb, u: usize, v: usize) -> bool {
+        self.pixel_ray(u as f64, v as f64).is_ok_and(|ray| aabb.intersect(&ray).is_some())
     }
 
     /// The lattice of pixels that [`Self::visibility`] and [`Self::sees_box`] probe: at most
@@ -670,6 +736,26 @@ mod tests {
         let missed = cam.visibility(&Aabb::cube(DVec3::new(3000.0, 0.0, 0.0), 10.0));
         assert_eq!(missed.box_fraction_in_view, 0.0);
         assert_eq!(missed.pixel_fraction_on_box, 0.0);
+    }
+
+    /// A camera of very short focal length (3 px over 96 px: a field of view of 172°) images a
+    /// 40 mm box at 360 mm a third of a pixel across, between the probe lattice's rays but on
+    /// the ray of the pixel at its centre: it sees the box. Moved to lie between pixel centres,
+    /// no pixel's ray crosses it.
+    #[test]
+    fn a_wide_field_of_view_sees_a_box_imaged_smaller_than_a_pixel() {
+        let k = Intrinsics { width: 96, height: 96, fx: 3.0, fy: 3.0, cx: 48.0, cy: 48.0, skew: 0.0 };
+        let cam = Camera::look_at(k, DVec3::new(0.0, -360.0, 0.0), DVec3::ZERO, DVec3::Z);
+        let aabb = Aabb::cube(DVec3::ZERO, 40.0);
+        assert!(cam.sees_box(&aabb));
+        let vis = cam.visibility(&aabb);
+        assert_eq!(vis.box_fraction_in_view, 1.0);
+        assert!(vis.pixel_fraction_on_box > 0.0, "{vis:?}");
+        let between = Camera::look_at(Intrinsics { cx: 48.5, cy: 48.5, ..k }, cam.centre(), DVec3::ZERO, DVec3::Z);
+        assert!(!between.sees_box(&aabb));
+        assert_eq!(between.visibility(&aabb).pixel_fraction_on_box, 0.0);
+        let size = between.box_image_size(&aabb).expect("in view");
+        assert!(size.x > 0.3 && size.x < 0.4 && size.y > 0.3 && size.y < 0.4, "{size}");
     }
 
     /// `sees_box` answers what `pixel_fraction_on_box > 0` answers, for boxes in the middle,

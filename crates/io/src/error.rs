@@ -35,6 +35,16 @@ pub enum IoError {
          (no pixel's ray crosses the aabb); check its pose and the aabb"
     )]
     CameraMissesBox { path: PathBuf, frame: usize, file_path: PathBuf },
+    /// A frame's camera has the box in view, but images it less than a pixel wide or high, so
+    /// that it falls between the centres of its pixels: no pixel's ray crosses it, and the
+    /// image says nothing about it.
+    #[error(
+        "{path}: frame {frame} ({file_path}): the reconstruction box is in the camera's view but \
+         its image, {width_px:.2} × {height_px:.2} px, falls between pixel centres, so no pixel's ray \
+         crosses the aabb; check the focal length (fl_x, fl_y: a short one images the box small), \
+         the camera's distance and the aabb"
+    )]
+    BoxBetweenPixels { path: PathBuf, frame: usize, file_path: PathBuf, width_px: f64, height_px: f64 },
     /// An image's size disagrees with the intrinsics of its frame.
     #[error(
         "{path}: image is {found_width}x{found_height} pixels but frame {frame}'s intrinsics \

@@ -1205,6 +1205,15 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
                 });
             }
         }
+        if let Some(size) = frame.camera.box_image_size(&aabb).filter(|s| s.min_element() < 1.0) {
+            return Err(IoError::BoxBetweenPixels {
+                path: file.to_path_buf(),
+                frame: i,
+                file_path: frame.file_path.clone(),
+                width_px: size.x,
+                height_px: size.y,
+            });
+        }
         return Err(IoError::CameraMissesBox {
             path: file.to_path_buf(),
             frame: i,
