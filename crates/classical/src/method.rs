@@ -156,6 +156,13 @@ impl ClassicalMethod {
             ));
         }
         if let Some(p) = stopping.plateau {
+            // A span longer than any run would never stop it, and 2⁶⁴ − 1 overflowed the rule.
+            let span = fluidnerf_core::MAX_ITERATION_SPAN;
+            for (key, n) in [("stopping.plateau.window", p.window), ("stopping.plateau.smoothing", p.smoothing)] {
+                if n > span {
+                    return Err(ClassicalError::invalid(key, format!("must be at most {span} iterations, got {n}")));
+                }
+            }
             if !(p.tolerance > 0.0 && p.tolerance.is_finite() && p.window > 0 && p.smoothing > 0) {
                 return Err(ClassicalError::invalid(
                     "stopping.plateau",

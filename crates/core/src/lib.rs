@@ -34,6 +34,15 @@ pub mod volume;
 /// windows (iterations per window × windows).
 pub const MAX_ITERATIONS: usize = 1_000_000_000;
 
+/// The most iterations a span of a run's schedule may take: a stopping rule's window and
+/// smoothing (the neural methods' and the voxel methods' plateau), the hash grid's steps
+/// between levels, the held-out interval and a run's intervals of evaluation, checkpoints and
+/// gain refits, and its patience in evaluations. Ten million: ten times the 10⁶ iterations
+/// that runs bounded by a time budget take as their cap, 400 times the dissertation's 25 000.
+/// A longer span could never act within a run's cap, and a stopping window of 2⁶⁴ − 1
+/// overflowed the rule's sums.
+pub const MAX_ITERATION_SPAN: usize = 10_000_000;
+
 pub use camera::{Camera, Distortion, Intrinsics, ThinLens, Visibility};
 pub use error::CoreError;
 pub use field::{Baked, ScalarField, Support, SupportWalk};

@@ -100,15 +100,11 @@ pub const MAX_PRIOR_POINTS: usize = 1 << 16;
 /// More would only repeat pixels, and their rays could not be held.
 pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
 
-/// The most iterations a span of a run's schedule may take: the stopping rule's window and
-/// smoothing ([`StopRule`]), the hash grid's steps between levels
-/// ([`crate::hashgrid::HashGridConfig::coarse_to_fine`]), the held-out interval
-/// ([`TrainConfig::validate_every`]) and a run's intervals of evaluation, checkpoints and gain
-/// refits, and its patience in evaluations. Ten
-/// million: ten times the 10⁶ iterations that runs bounded by a time budget take as their cap,
-/// 400 times the dissertation's 25 000. A longer span could never act within a run's cap, and
-/// a stopping window of 2⁶⁴ − 1 overflowed the rule's sums.
-pub const MAX_ITERATION_SPAN: usize = 10_000_000;
+/// The most iterations a span of a run's schedule may take ([`fluidnerf_core::MAX_ITERATION_SPAN`]):
+/// the stopping rule's window and smoothing ([`StopRule`]), the hash grid's steps between
+/// levels ([`crate::hashgrid::HashGridConfig::coarse_to_fine`]), the held-out interval
+/// ([`TrainConfig::validate_every`]).
+pub use fluidnerf_core::MAX_ITERATION_SPAN;
 
 /// The smallest and largest the brightest training pixel may be once divided by a given
 /// [`TrainConfig::image_scale`] (by default it is 1). Outside, the squared residuals the loss

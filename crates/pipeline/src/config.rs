@@ -1336,12 +1336,13 @@ mod tests {
     }
 
     /// Spans of iterations beyond any run's cap are refused naming their key: they could never
-    /// act, and a stopping window of 2⁶⁴ − 1 overflowed the rule's sums.
+    /// act, and a stopping window of 2⁶⁴ − 1 overflowed the rule's sums (the voxel methods'
+    /// plateau window and smoothing were taken unbounded and overflowed their rule).
     #[test]
     fn iteration_spans_beyond_any_run_are_refused_by_key() {
         use fluidnerf_neural::train::MAX_ITERATION_SPAN;
         type Edit = fn(&mut RunConfig, usize);
-        let edits: [(Method, &str, Edit); 4] = [
+        let edits: [(Method, &str, Edit); 6] = [
             (Method::Asart, "stopping.holdout_every", |c, n| c.stopping.holdout_every = Some(n)),
             (Method::Fast, "method.train.stop.window", |c, n| {
                 let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };
@@ -1350,6 +1351,14 @@ mod tests {
             (Method::TrFast, "method.train.stop.smoothing", |c, n| {
                 let MethodConfig::Temporal(_, spec) = &mut c.method else { unreachable!("tr-fast is time-resolved") };
                 spec.train.stop.smoothing = n;
+            }),
+            (Method::Asart, "method.params.stopping.plateau.window", |c, n| {
+                let MethodConfig::Classical(m) = &mut c.method else { unreachable!("asart is classical") };
+                m.method.stopping_mut().plateau.as_mut().expect("asart stops on a plateau").window = n;
+            }),
+            (Method::Sart, "method.params.stopping.plateau.smoothing", |c, n| {
+                let MethodConfig::Classical(m) = &mut c.method else { unreachable!("sart is classical") };
+                m.method.stopping_mut().plateau.as_mut().expect("sart stops on a plateau").smoothing = n;
             }),
             (Method::Fast, "method.field.hash-grid.coarse_to_fine", |c, n| {
                 let MethodConfig::Neural(_, spec) = &mut c.method else { unreachable!("fast is neural") };

@@ -174,9 +174,11 @@ pub struct Report {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Plateau {
-    /// Iterations over which the smoothed residual must vary less than `tolerance`. Default 20.
+    /// Iterations over which the smoothed residual must vary less than `tolerance`, at most
+    /// [`fluidnerf_core::MAX_ITERATION_SPAN`]. Default 20.
     pub window: usize,
-    /// Width of the sliding mean that smooths the residual. Default 4.
+    /// Width of the sliding mean that smooths the residual, at most
+    /// [`fluidnerf_core::MAX_ITERATION_SPAN`]. Default 4.
     pub smoothing: usize,
     /// Largest relative variation, `(max − min) / mean` of the smoothed residual over the
     /// window, still counted as a plateau. Default 0.02.
