@@ -481,3 +481,18 @@ fn a_start_run_inside_the_folder_force_replaces_is_refused_before_it_is_removed(
     }
     ok(&fluidnerf(d, &["eval", "a", "--json", "m.json", "-q"]));
 }
+
+/// An `image_scale` that would put the brightest pixel out of range is refused once the images
+/// are read, named by its full key as the checks before the run name every other setting.
+#[test]
+fn an_image_scale_far_from_the_pixels_is_named_by_its_key() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 16, &[]);
+    let args = ["reconstruct", "scene", "-o", "run", "--method", "fast", "--resolution", "16"];
+    ok(&fluidnerf(d, &[&args[..], &["--rays-per-image", "64", "--max-iterations", "2", "-q"]].concat()));
+    edit_json(&d.join("run/config.json"), |v| v["method"]["train"]["image_scale"] = serde_json::json!(1e-30));
+    let out = fluidnerf(d, &["reconstruct", "--config", "run/config.json", "-o", "again", "-q"]);
+    refused(&out, "method.train.image_scale: 1e-30 puts the largest training pixel");
+    assert!(!d.join("again/config.json").exists(), "a refused run wrote its settings");
+}

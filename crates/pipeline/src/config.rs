@@ -610,6 +610,18 @@ impl MethodConfig {
     }
 }
 
+/// An error of a neural method's training, with a setting of `method.train` that it refuses once
+/// the images are read (the `image_scale` that would put them out of range) named by its key,
+/// as its checks before the run name it.
+pub(crate) fn training_error(e: fluidnerf_neural::NeuralError) -> PipelineError {
+    match e {
+        fluidnerf_neural::NeuralError::Invalid { what, why } if what == "image_scale" => {
+            PipelineError::invalid(format!("method.train.{what}"), why)
+        }
+        other => other.into(),
+    }
+}
+
 /// A neural setting's error under its place in the configuration: `prefix.what` when the error
 /// names a key (no spaces), else `prefix` with the error's own words.
 fn under(prefix: &str, e: fluidnerf_neural::NeuralError) -> PipelineError {

@@ -576,7 +576,8 @@ impl Ctx<'_> {
                     ControlFlow::Continue(())
                 }
             },
-        )?;
+        )
+        .map_err(crate::config::training_error)?;
         if let Some(e) = io_error {
             return Err(e);
         }
@@ -993,7 +994,8 @@ fn train_some<F: TrainableField + Clone>(
                 }
                 flow
             },
-        )?;
+        )
+        .map_err(crate::config::training_error)?;
         if let Some(e) = io_error {
             return Err(e);
         }
