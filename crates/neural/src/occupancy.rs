@@ -339,22 +339,33 @@ impl OccupancyGrid {
         OccupancyRecord { dims: self.dims, runs }
     }
 
-    /// Inverse of [`OccupancyGrid::to_record`]; `None` if the runs do not fill the grid.
-    pub fn from_record(record: &OccupancyRecord) -> Option<Self> {
+    /// Inverse of [`OccupancyGrid::to_record`]; the problem if the dimensions are not those of
+    /// a grid a run makes (1 to [`MAX_OCCUPANCY_RESOLUTION`] cells along each axis) or the runs
+    /// do not fill the grid.
+    pub fn from_record(record: &OccupancyRecord) -> Result<Self, String> {
+        // Checked before anything is allocated: a record of a few bytes must not ask for more
+        // memory than the machine has.
+        if let Some(d) = record.dims.iter().find(|d| !(1..=MAX_OCCUPANCY_RESOLUTION).contains(d)) {
+            return Err(format!(
+                "dims must be 1 to {MAX_OCCUPANCY_RESOLUTION} cells along each axis, got {d} in {:?}",
+                record.dims
+            ));
+        }
         let n = record.dims.iter().product::<usize>();
-        if n == 0 {
-            return None;
+        let filled = record.runs.iter().map(|&r| r as u64).sum::<u64>();
+        if filled != n as u64 {
+            return Err(format!(
+                "run lengths do not fill the grid: they count {filled} cells, the grid {:?} has {n}",
+                record.dims
+            ));
         }
         let mut occupied = Vec::with_capacity(n);
         let mut current = false;
         for &r in &record.runs {
-            if occupied.len() + r as usize > n {
-                return None;
-            }
             occupied.extend(std::iter::repeat_n(current, r as usize));
             current = !current;
         }
-        (occupied.len() == n).then_some(OccupancyGrid { dims: record.dims, occupied })
+        Ok(OccupancyGrid { dims: record.dims, occupied })
     }
 }
 
@@ -407,7 +418,24 @@ mod tests {
         // A corner of the box far from the ball is empty.
         assert!(!grid.is_occupied([0.02, 0.02, 0.98]));
         // Round trip through the record.
-        assert_eq!(OccupancyGrid::from_record(&grid.to_record()).as_ref(), Some(&grid));
+        assert_eq!(OccupancyGrid::from_record(&grid.to_record()).as_ref(), Ok(&grid));
+    }
+
+    /// A record edited to dimensions no run makes, or whose runs count other cells than the
+    /// grid has, is refused before any memory is taken: dimensions of 10⁹ cells each panicked
+    /// on a capacity overflow, and runs of 4·10⁹ cells each would have asked for terabytes.
+    #[test]
+    fn records_of_impossible_grids_are_refused_before_allocating() {
+        let e = OccupancyGrid::from_record(&OccupancyRecord { dims: [1_000_000_000; 3], runs: vec![0, 1] });
+        assert!(e.expect_err("huge dims").contains("dims must be 1 to 512 cells along each axis"));
+        let e = OccupancyGrid::from_record(&OccupancyRecord { dims: [0, 4, 4], runs: vec![] });
+        assert!(e.expect_err("empty dims").contains("got 0"));
+        let runs = vec![u32::MAX; 300];
+        let e = OccupancyGrid::from_record(&OccupancyRecord { dims: [4, 4, 4], runs }).expect_err("too many cells");
+        assert!(e.contains("run lengths do not fill the grid") && e.contains("has 64"), "{e}");
+        let e = OccupancyGrid::from_record(&OccupancyRecord { dims: [4, 4, 4], runs: vec![10, 20] });
+        assert!(e.expect_err("too few cells").contains("they count 30 cells"));
+        assert!(OccupancyGrid::from_record(&OccupancyRecord { dims: [4, 4, 4], runs: vec![10, 20, 34] }).is_ok());
     }
 
     #[test]

@@ -281,10 +281,9 @@ impl<F: TrainableField> TrainedField<F> {
     /// Wraps `field`, decoding the mask stored in `meta`.
     pub fn new(field: F, meta: FieldMeta) -> Result<Self, NeuralError> {
         let occupancy = match &meta.occupancy {
-            Some(rec) => Some(
-                OccupancyGrid::from_record(rec)
-                    .ok_or_else(|| NeuralError::invalid("occupancy record", "run lengths do not fill the grid"))?,
-            ),
+            Some(rec) => {
+                Some(OccupancyGrid::from_record(rec).map_err(|why| NeuralError::invalid("meta.occupancy", why))?)
+            }
             None => None,
         };
         Ok(TrainedField { field, meta, occupancy })
