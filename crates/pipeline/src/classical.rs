@@ -216,7 +216,7 @@ pub(crate) fn run(
     let mut residual_history = Vec::new();
     let mut done = 0usize;
     let mut last_reason = fluidnerf_classical::solve::StopReason::MaxIterations;
-    let segments = if fit { config.gains.rounds + 1 } else { 1 };
+    let segments = if fit { config.gains.rounds.saturating_add(1) } else { 1 };
     for segment in 0..segments {
         let last = segment + 1 == segments;
         let mut seg_method = solver.clone();

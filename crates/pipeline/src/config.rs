@@ -916,7 +916,8 @@ pub struct GainConfig {
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 25 for the neural methods, 5 for
     /// the voxel methods.
     pub every: Option<usize>,
-    /// With `fit`, voxel methods: refits before the final solve. Default 4.
+    /// With `fit`, voxel methods: refits before the final solve, at most
+    /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]. Default 4.
     pub rounds: usize,
 }
 
@@ -939,6 +940,14 @@ impl GainConfig {
         }
         if self.mode == GainMode::Fit && self.rounds == 0 {
             return Err(PipelineError::invalid("gains.rounds", "must be at least 1 with gains.mode fit"));
+        }
+        // Each refit takes at least an iteration: more refits than any span of a run could never
+        // happen, and 2⁶⁴ − 1 overflowed the count of the solve's segments, which ran none.
+        if self.rounds > max {
+            return Err(PipelineError::invalid(
+                "gains.rounds",
+                format!("must be at most {max} refits, got {}", self.rounds),
+            ));
         }
         if self.offset && self.mode != GainMode::Fit {
             return Err(PipelineError::invalid("gains.offset", "is fitted only with gains.mode fit"));
@@ -1401,9 +1410,9 @@ mod tests {
     }
 
     /// A run's intervals (evaluation, checkpoints, held-out evaluations, gain refits), its
-    /// patience and its iteration caps are bounded and refused naming their key: 2⁶⁴ − 1 was
-    /// taken, an interval never acted and a cap overflowed the progress total of a run of
-    /// several windows.
+    /// patience, its gain refits and its iteration caps are bounded and refused naming their
+    /// key: 2⁶⁴ − 1 was taken, an interval never acted, a cap overflowed the progress total of a
+    /// run of several windows, and as many refits ran a voxel solve of no iterations.
     #[test]
     fn intervals_patience_and_caps_beyond_any_run_are_refused_by_key() {
         use fluidnerf_core::MAX_ITERATIONS;
@@ -1413,7 +1422,7 @@ mod tests {
             c.gains.mode = GainMode::Fit;
             c.gains.every = Some(n);
         };
-        let edits: [(Method, &str, usize, Edit); 9] = [
+        let edits: [(Method, &str, usize, Edit); 10] = [
             (Method::Fast, "eval_every", MAX_ITERATION_SPAN, |c, n| c.eval_every = Some(n)),
             (Method::Fast, "checkpoint_every", MAX_ITERATION_SPAN, |c, n| c.checkpoint_every = n),
             (Method::Fast, "method.train.validate_every", MAX_ITERATION_SPAN, |c, n| {
@@ -1421,6 +1430,10 @@ mod tests {
                 spec.train.validate_every = n;
             }),
             (Method::Asart, "gains.every", MAX_ITERATION_SPAN, fit),
+            (Method::Asart, "gains.rounds", MAX_ITERATION_SPAN, |c, n| {
+                c.gains.mode = GainMode::Fit;
+                c.gains.rounds = n;
+            }),
             (Method::Fast, "stopping.patience", MAX_ITERATION_SPAN, |c, n| c.stopping.patience = n),
             (Method::TrFast, "stopping.max_iterations", MAX_ITERATIONS, |c, n| c.stopping.max_iterations = Some(n)),
             (Method::Fast, "method.train.max_iterations", MAX_ITERATIONS, |c, n| {
