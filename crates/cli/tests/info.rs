@@ -149,6 +149,20 @@ fn a_camera_with_a_short_focal_length_sees_the_box() {
     assert!(!text(&o).1.contains("between pixel centres"), "{}", text(&o).1);
 }
 
+/// A distortion that cannot be inverted at the image's edges stopped every method after the
+/// scene was taken, with an error that named no camera; the scene is refused, naming the frame.
+#[test]
+fn a_distortion_not_invertible_at_the_image_edges_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.frames[1].camera.distortion.k1 = 1e300;
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    assert_fails_with(
+        &info(dir.path()),
+        &["transforms.json", "frame 1", "images/c1.png", "lens undistortion did not converge for pixel"],
+    );
+}
+
 #[test]
 fn image_size_disagreeing_with_intrinsics_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

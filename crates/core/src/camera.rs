@@ -449,6 +449,22 @@ impl Camera {
         Ok(Ray::new(self.centre(), dir))
     }
 
+    /// Whether every pixel's ray can be found: the distortion is inverted at each pixel of the
+    /// image's border, where a calibration invalid far from the image centre fails first. The
+    /// first pixel whose undistortion fails is the error; a camera without distortion passes.
+    pub fn check_undistortion(&self) -> Result<(), CoreError> {
+        if self.distortion.is_identity() {
+            return Ok(());
+        }
+        let (w, h) = (self.width(), self.height());
+        let rows = [0, h - 1].into_iter().flat_map(|v| (0..w).map(move |u| (u, v)));
+        let columns = [0, w - 1].into_iter().flat_map(|u| (0..h).map(move |v| (u, v)));
+        for (u, v) in rows.chain(columns) {
+            self.unproject_normalised(u as f64, v as f64)?;
+        }
+        Ok(())
+    }
+
     /// How much of the box this camera sees: the fraction of a 9³ lattice of points in the box
     /// that project inside the image, and the fraction of a lattice of pixels (at most 64 × 64)
     /// whose rays cross the box. Pixels whose undistortion fails count as not seeing the box.
@@ -736,6 +752,17 @@ mod tests {
         let missed = cam.visibility(&Aabb::cube(DVec3::new(3000.0, 0.0, 0.0), 10.0));
         assert_eq!(missed.box_fraction_in_view, 0.0);
         assert_eq!(missed.pixel_fraction_on_box, 0.0);
+    }
+
+    /// A distortion that cannot be inverted at the image's edges is found at the first such
+    /// pixel; one that can, and no distortion, pass.
+    #[test]
+    fn undistortion_is_checked_over_the_image_border() {
+        assert!(test_camera(Distortion::default()).check_undistortion().is_ok());
+        assert!(test_camera(strong_distortion()).check_undistortion().is_ok());
+        let wild = test_camera(Distortion { k1: 1e300, ..Distortion::default() });
+        let e = wild.check_undistortion().expect_err("fails at the corners");
+        assert!(matches!(e, CoreError::UndistortionFailed { u: 0.0, v: 0.0, .. }), "{e}");
     }
 
     /// A camera of very short focal length (3 px over 96 px: a field of view of 172°) images a

@@ -74,7 +74,9 @@ use std::path::{Path, PathBuf};
 use fluidnerf_core::glam::{DAffine3, DMat3, DVec3};
 use fluidnerf_core::num;
 use fluidnerf_core::scene::same_time;
-use fluidnerf_core::{Aabb, Camera, Distortion, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume};
+use fluidnerf_core::{
+    Aabb, Camera, CoreError, Distortion, Frame, Image, Intrinsics, Scene, ThinLens, TruthRef, Volume,
+};
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -1184,6 +1186,21 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             }
         })
         .collect();
+    // Every method casts a ray through every pixel: a distortion that cannot be inverted at the
+    // image's edges would stop each of them, unnamed, after the scene was taken.
+    let undistortion: Vec<(usize, CoreError)> = distinct
+        .par_iter()
+        .filter_map(|&i| scene.frames[i].camera.check_undistortion().err().map(|e| (i, e)))
+        .collect();
+    // The distinct cameras are in the order of their first frames, and so are their errors.
+    if let Some((i, error)) = undistortion.into_iter().next() {
+        return Err(IoError::Camera {
+            path: file.to_path_buf(),
+            frame: i,
+            file_path: scene.frames[i].file_path.clone(),
+            error,
+        });
+    }
     let blind_cameras: Vec<usize> =
         distinct.par_iter().copied().filter(|&i| !scene.frames[i].camera.sees_box(&aabb)).collect();
     if let Some(i) = first_equal.iter().position(|j| blind_cameras.contains(j)) {
