@@ -235,14 +235,23 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
         Some(other) => return Err(bad(&format!("header_type {other}"))),
     };
     let image_tag = start_tag(xml, "ImageData").ok_or_else(|| bad("no <ImageData> element"))?;
-    let extent: Vec<i64> = attribute(image_tag, "WholeExtent")
-        .and_then(numbers)
-        .filter(|e| e.len() == 6)
-        .ok_or_else(|| bad("WholeExtent"))?;
-    let origin: Vec<f64> =
-        attribute(image_tag, "Origin").and_then(numbers).filter(|e| e.len() == 3).ok_or_else(|| bad("Origin"))?;
-    let spacing: Vec<f64> =
-        attribute(image_tag, "Spacing").and_then(numbers).filter(|e| e.len() == 3).ok_or_else(|| bad("Spacing"))?;
+    // An attribute of `count` numbers of the kind `what`, or why it is not.
+    fn attribute_numbers<T: std::str::FromStr>(
+        tag: &str,
+        name: &str,
+        count: usize,
+        what: &str,
+    ) -> Result<Vec<T>, String> {
+        match attribute(tag, name) {
+            None => Err(format!("<ImageData> has no {name}")),
+            Some(text) => numbers(text)
+                .filter(|e: &Vec<T>| e.len() == count)
+                .ok_or_else(|| format!("{name} must be {count} {what}, got {text:?}")),
+        }
+    }
+    let extent: Vec<i64> = attribute_numbers(image_tag, "WholeExtent", 6, "whole numbers").map_err(|e| bad(&e))?;
+    let origin: Vec<f64> = attribute_numbers(image_tag, "Origin", 3, "numbers").map_err(|e| bad(&e))?;
+    let spacing: Vec<f64> = attribute_numbers(image_tag, "Spacing", 3, "numbers").map_err(|e| bad(&e))?;
     if let Some(dir) = attribute(image_tag, "Direction").and_then(numbers::<f64>) {
         if dir != [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0] {
             return Err(bad("only the identity Direction is supported"));
@@ -580,6 +589,28 @@ mod tests {
             std::fs::write(&p, text).expect("write");
             let err = read_vti(&p).expect_err(extent).to_string();
             assert!(err.contains("a.vti") && err.contains("WholeExtent"), "{extent}: {err}");
+        }
+        // A missing or malformed extent, origin or spacing is named with what is wrong: the
+        // error said only `WholeExtent`, even of an extent past the range of whole numbers.
+        for (image, expected) in [
+            (
+                "WholeExtent=\"0 18446744073709551615 0 0 0 0\" Origin=\"0 0 0\" Spacing=\"1 1 1\"",
+                "WholeExtent must be 6 whole numbers, got \"0 18446744073709551615 0 0 0 0\"",
+            ),
+            ("Origin=\"0 0 0\" Spacing=\"1 1 1\"", "<ImageData> has no WholeExtent"),
+            ("WholeExtent=\"0 1 0 0 0 0\" Origin=\"0 0\" Spacing=\"1 1 1\"", "Origin must be 3 numbers, got \"0 0\""),
+            (
+                "WholeExtent=\"0 1 0 0 0 0\" Origin=\"0 0 0\" Spacing=\"1 x 1\"",
+                "Spacing must be 3 numbers, got \"1 x 1\"",
+            ),
+        ] {
+            let text = format!(
+                "<VTKFile type=\"ImageData\"><ImageData {image}><Piece><PointData><DataArray type=\"Float32\" \
+                 format=\"ascii\">1 1</DataArray></PointData></Piece></ImageData></VTKFile>"
+            );
+            std::fs::write(&p, text).expect("write");
+            let err = read_vti(&p).expect_err(image).to_string();
+            assert!(err.contains("a.vti") && err.contains(expected), "{image}: {err}");
         }
     }
 
