@@ -163,6 +163,19 @@ fn a_distortion_not_invertible_at_the_image_edges_is_an_error() {
     );
 }
 
+/// A scene whose every frame is held out leaves every run nothing to reconstruct from: each
+/// refuses it, and so does `info`, which found no problem in it.
+#[test]
+fn a_scene_with_every_frame_held_out_is_a_problem() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.frames.iter_mut().for_each(|f| f.holdout = true);
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
+    assert_fails_with(&o, &["transforms.json", "every frame is held out"]);
+    assert!(!text(&o).0.contains("no problems found"), "{}", text(&o).0);
+}
+
 #[test]
 fn image_size_disagreeing_with_intrinsics_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -259,6 +259,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Every run refuses such a scene: say so here, not only when a run starts.
     let training = scene.frames.iter().any(|f| !f.holdout);
+    if !training {
+        problems.push(
+            "every frame is held out (`holdout`), so no image is left to reconstruct from; train on some of \
+             them"
+                .to_string(),
+        );
+    }
     if !args.no_images && problems.is_empty() && training && !training_lit {
         problems.push(fluidnerf_core::image::ALL_BLACK.to_string());
     }
