@@ -1229,6 +1229,31 @@ fn a_run_holding_another_runs_volume_is_refused() {
     assert!(!d.join("m.json").exists(), "wrote metrics");
 }
 
+/// A run whose report.json lists no volume (edited) is refused naming the key: eval indexed
+/// the first of none and panicked.
+#[test]
+fn a_run_whose_report_lists_no_volume_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    let args = ["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "8"];
+    ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "1", "-q"]].concat()));
+    edit_json(&d.join("run/report.json"), |v| v["volumes"] = serde_json::json!([]));
+    let says = "run/report.json: `volumes` lists no volume";
+    for args in [
+        &["eval", "run", "--json", "m.json", "--no-reprojection"][..],
+        &["render", "run", "-o", "views"],
+        &["export", "run", "-o", "exported", "--npy"],
+    ] {
+        let o = fluidnerf(d, args);
+        refused(&o, says);
+        assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"), "{args:?}");
+    }
+    for made in ["m.json", "views", "exported"] {
+        assert!(!d.join(made).exists(), "left {made}");
+    }
+}
+
 /// A run folder whose report.json is another run's (of another method) is not read as one run:
 /// the report's scores and curves would be taken for the results of the folder's own method.
 #[test]

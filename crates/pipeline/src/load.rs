@@ -180,6 +180,16 @@ impl LoadedRun {
                     ),
                 ));
             }
+            // Every run writes a volume (a time-resolved one, one per instant it reached): a
+            // report that lists none was edited, and its run would be scored, rendered and read
+            // as holding no result at all.
+            if report.volumes.is_empty() {
+                return Err(PipelineError::file(
+                    &rd.report(),
+                    "`volumes` lists no volume, but every run writes at least one (volume.npy): the file was \
+                     edited or is another run's; rerun the reconstruction or restore the file",
+                ));
+            }
             // What the method writes must be there: a field's volume alone is not the field.
             let (wanted, file) = match config.method().family() {
                 Family::Neural => (RunKind::Field, "model.json"),
