@@ -330,3 +330,10 @@ def test_a_scale_out_refused_before_it_wrote_takes_back_the_scene_it_saved(tr_sc
     with pytest.raises(fluidnerf.FluidNerfError, match="refused by the worker"):
         fluidnerf.dask.reconstruct(Refuses(), scene, TR_METHOD, out, **TR_OPTIONS)
     assert out.is_dir() and not any(out.iterdir()) and scene.root is None
+
+
+def test_windows_near_the_largest_count_are_planned():
+    """A window near 2^64 frames overflowed the plan's frame arithmetic, which then listed
+    windows until the memory ran out."""
+    n = 2**64 - 1
+    assert fluidnerf.plan_windows(n, n - 1, 1) == [(0, n - 1), (1, n)]

@@ -48,7 +48,9 @@ pub fn plan_windows(n_frames: usize, window: usize, overlap: usize) -> Vec<Range
     let mut out = Vec::new();
     let mut a = 0;
     loop {
-        if a + window >= n_frames {
+        // Not `a + window >= n_frames`: for windows near the largest count the sum wrapped
+        // around, and the plan grew without end.
+        if a >= n_frames - window {
             out.push(n_frames - window..n_frames);
             break;
         }
@@ -142,6 +144,13 @@ mod tests {
             assert_eq!(p.last().map(|r| r.end), Some(n));
             assert!(p.windows(2).all(|x| x[1].start <= x[0].end && x[1].start > x[0].start));
         }
+    }
+
+    #[test]
+    fn windows_near_the_largest_count_are_planned_without_overflow() {
+        let n = usize::MAX;
+        assert_eq!(plan_windows(n, n - 1, 1), vec![0..n - 1, 1..n]);
+        assert_eq!(plan_windows(n, n - 2, 0), vec![0..n - 2, 2..n]);
     }
 
     #[test]
