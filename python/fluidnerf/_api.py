@@ -817,8 +817,11 @@ def _integer(value: Any, name: str) -> int:
 
 
 def _real(value: Any, name: str) -> float:
-    """``value`` as a float; a string or another object is refused naming ``name``, and an
-    integer beyond the range of floats (Python's bare OverflowError) too."""
+    """``value`` as a float; a string, a bool or another object is refused naming ``name``, and
+    an integer beyond the range of floats (Python's bare OverflowError) too."""
+    if isinstance(value, (bool, np.bool_)):
+        # float(True) is 1.0: step=True rendered with a step of one world unit.
+        raise TypeError(f"{name}: expected a number, got {value!r}")
     if isinstance(value, (str, bytes)):
         raise TypeError(f"{name}: expected a number, got {value!r}")
     try:

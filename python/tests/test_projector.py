@@ -227,6 +227,27 @@ def test_an_integer_beyond_floats_is_refused_naming_the_argument(scene, tmp_path
         run.field(np.zeros((1, 3)), time=huge)
 
 
+def test_a_bool_where_a_number_is_expected_is_refused_naming_the_argument(scene, tmp_path):
+    """step=True rendered with a step of one world unit, data_range=True scored against a peak
+    of 1, and intensity_scale=True built a scene of scale 1: a bool was read as 1.0."""
+    s, K, poses, *_ = scene
+    vol = np.ones((4, 4, 4), np.float32)
+    for flag in (True, np.bool_(False)):
+        with pytest.raises(TypeError, match=f"step: expected a number, got {flag!r}"):
+            fluidnerf.render(s, vol, step=flag)
+        for metric in (fluidnerf.psnr, fluidnerf.ssim):
+            with pytest.raises(TypeError, match=f"data_range: expected a number, got {flag!r}"):
+                metric(blob_volume(), blob_volume(), flag)
+        with pytest.raises(TypeError, match=f"intensity_scale: expected a number, got {flag!r}"):
+            fluidnerf.scene_from_arrays(
+                K, poses, np.ones((len(K), 16, 16), np.float32), BOX, intensity_scale=flag
+            )
+    np.save(tmp_path / "volume.npy", vol)
+    run = fluidnerf.open_run(tmp_path, aabb=BOX)
+    with pytest.raises(TypeError, match="time: expected a number, got True"):
+        run.field(np.zeros((1, 3)), time=True)
+
+
 def test_a_data_range_wider_than_float32_values_is_refused():
     """data_range=1e300 made the PSNR infinite and the SSIM NaN without a word: its square
     overflowed. A range no two float32 values differ by is refused; the widest one still
