@@ -561,20 +561,54 @@ class Run:
             raise FluidNerfError(
                 f"{dest}: lies inside the run's own folder {self.path}; choose a folder outside it"
             )
-        shutil.copytree(self.path, dest, ignore=shutil.ignore_patterns(".lock", "*.lock"))
-        # A scene inside the run's folder (one built from arrays, in scene/) is copied with it:
-        # the copy's settings (its own and its start runs') read the copy's, not the original's.
-        src, copied = self.path.resolve(), dest.resolve()
-        for path in sorted(copied.rglob("config.json")):
-            try:
-                cfg = json.loads(path.read_text())
-                scene = Path(cfg["scene"])
-            except (OSError, ValueError, TypeError, KeyError):
-                continue
-            if scene.is_absolute() and src in scene.resolve().parents:
-                cfg["scene"] = str(copied / scene.resolve().relative_to(src))
-                path.write_text(json.dumps(cfg, indent=2) + "\n")
+        # Copied beside the destination and renamed into place when complete: a copy that
+        # failed part way (a file that cannot be read, a full disk) left a half run folder at
+        # `folder`, which a second attempt then refused as existing.
+        made = [p for p in dest.absolute().parents if not p.exists()]
+        tmp: Path | None = None
+        try:
+            dest.absolute().parent.mkdir(parents=True, exist_ok=True)
+            tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", dir=dest.absolute().parent))
+            staged = tmp / "run"
+            shutil.copytree(self.path, staged, ignore=shutil.ignore_patterns(".lock", "*.lock"))
+            _rehome_scenes(staged, self.path.resolve(), dest.absolute().resolve())
+            os.rename(staged, dest)
+        except (OSError, shutil.Error) as e:
+            raise FluidNerfError(f"{dest}: cannot copy the run {self.path} there: {_copy_problem(e)}") from None
+        finally:
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            if not dest.exists():
+                for parent in made:
+                    try:
+                        parent.rmdir()
+                    except OSError:
+                        pass
         return open_run(dest)
+
+
+def _copy_problem(e: BaseException) -> str:
+    """What went wrong in a copy: the first file shutil.copytree could not copy and why, or the
+    error itself."""
+    if isinstance(e, shutil.Error) and e.args and isinstance(e.args[0], list) and e.args[0]:
+        src, _, why = e.args[0][0]
+        return f"{src}: {why}"
+    return str(e)
+
+
+def _rehome_scenes(copied: Path, src: Path, dest: Path) -> None:
+    """Points the settings in the copy ``copied`` of the run ``src`` (its own and its start
+    runs') at the copy's scene, ``dest``'s, where they name a scene inside the run's folder (one
+    built from arrays, in scene/): the copy's settings read the copy's, not the original's."""
+    for path in sorted(copied.rglob("config.json")):
+        try:
+            cfg = json.loads(path.read_text())
+            scene = Path(cfg["scene"])
+        except (OSError, ValueError, TypeError, KeyError):
+            continue
+        if scene.is_absolute() and src in scene.resolve().parents:
+            cfg["scene"] = str(dest / scene.resolve().relative_to(src))
+            path.write_text(json.dumps(cfg, indent=2) + "\n")
 
 
 def open_run(folder: PathLike, aabb: np.ndarray | None = None) -> Run:

@@ -97,6 +97,22 @@ def test_a_run_is_not_saved_under_a_file(static_scene, tmp_path):
     assert (tmp_path / "a_file").read_text() == "x"
 
 
+def test_a_run_that_cannot_be_copied_whole_leaves_no_half_copy(static_scene, tmp_path):
+    """A file the copy could not read (here a link to nothing) raised a bare shutil.Error, and
+    left the files copied before it at the destination, which a second attempt then refused as
+    existing."""
+    run = fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
+    (run.path / "zz_link").symlink_to(tmp_path / "nothing")
+    dest = tmp_path / "copies" / "copy"
+    with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(f"{dest}: cannot copy the run {run.path} there")):
+        run.save(dest)
+    assert not (tmp_path / "copies").exists()
+    (run.path / "zz_link").unlink()
+    copy = run.save(dest)
+    np.testing.assert_array_equal(copy.volume, run.volume)
+    assert sorted(p.name for p in (tmp_path / "copies").iterdir()) == ["copy"]
+
+
 def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
     run = fluidnerf.reconstruct(
         static_scene,
