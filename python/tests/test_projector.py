@@ -248,6 +248,17 @@ def test_a_bool_where_a_number_is_expected_is_refused_naming_the_argument(scene,
         run.field(np.zeros((1, 3)), time=True)
 
 
+def test_a_volume_whose_images_overflow_floats_is_refused(scene):
+    """forward_project and render of a volume of values near the largest float32 returned images
+    of infinities and NaN without a word."""
+    s, *_ = scene
+    huge = np.full((4, 4, 4), 3e38, np.float32)
+    for project in (fluidnerf.forward_project, fluidnerf.render):
+        with pytest.raises(fluidnerf.FluidNerfError, match="volume: values up to 3.000e38 .* beyond the largest 32-bit"):
+            project(s, huge)
+        assert np.isfinite(project(s, huge / 1e34)).all()
+
+
 def test_a_data_range_wider_than_float32_values_is_refused():
     """data_range=1e300 made the PSNR infinite and the SSIM NaN without a word: its square
     overflowed. A range no two float32 values differ by is refused; the widest one still

@@ -495,3 +495,32 @@ fn negative_pixels_shown_as_zero_in_a_turntable_are_warned_about() {
     let e = render("recon.npy", "positive");
     assert!(!e.contains("negative"), "{e}");
 }
+
+/// A volume whose line integrals overflow 32-bit floats is refused before anything is written:
+/// its views were written as TIFFs full of infinities and NaN, with "brightest pixel 0".
+#[test]
+fn a_volume_whose_views_overflow_floats_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, vol) = make_scene(dir.path());
+    let huge = Volume { data: vol.data.iter().map(|v| v * 3e38).collect(), ..vol };
+    fluidnerf_io::volume::write_npy(&dir.path().join("huge.npy"), &huge).expect("writes");
+    let d = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    for projector in ["footprint", "rays"] {
+        let o = fluidnerf(&[
+            "render",
+            &d("huge.npy"),
+            "--scene",
+            &d(""),
+            "-o",
+            &d("views"),
+            "--format",
+            "tiff",
+            "--projector",
+            projector,
+        ]);
+        assert!(!o.status.success(), "{projector}: rendered");
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(e.contains("huge.npy: values up to 2.95") && e.contains("beyond the largest 32-bit float"), "{e}");
+        assert!(!dir.path().join("views").exists(), "{projector}: made the output folder");
+    }
+}

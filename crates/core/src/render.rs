@@ -63,6 +63,24 @@ pub fn step_too_fine(aabb: &Aabb, step: f64, units: &str) -> Option<String> {
     })
 }
 
+/// Why the images of a volume (values up to `largest` in magnitude, filling `aabb`) times
+/// `scale` would not be finite 32-bit floats: no ray crosses more of the volume than its box's
+/// diagonal, so its integral is at most `largest × diagonal × scale`, and beyond the largest
+/// float the renderers' sums overflow to infinities and NaN. `None` when every image is finite.
+pub fn integrals_overflow(largest: f32, aabb: &Aabb, scale: f64) -> Option<String> {
+    let diagonal = aabb.size().length();
+    let bound = f64::from(largest) * diagonal * scale;
+    (bound > f64::from(f32::MAX)).then(|| {
+        format!(
+            "values up to {largest:.3e} over paths up to the box's diagonal ({diagonal:.4}) long, times the \
+             intensity scale {}, make line integrals of up to {bound:.3e}, beyond the largest 32-bit float \
+             ({:.3e}): the images would hold infinities; scale the volume down",
+            num(scale),
+            f32::MAX
+        )
+    })
+}
+
 /// Renders `camera`'s image of `field` inside `aabb`: each pixel is `scale` times the mean,
 /// over its sub-pixel rays, of `∫ E ds` over the ray's segment in the box.
 pub fn render_image(

@@ -67,6 +67,16 @@ pub(crate) fn volume_from_py(
     Ok(fluidnerf_core::Volume::from_vec([shape[2], shape[1], shape[0]], aabb, data))
 }
 
+/// Refuses a volume whose images times `scale` would overflow 32-bit floats (see
+/// `fluidnerf_core::render::integrals_overflow`): they came back full of infinities and NaN.
+pub(crate) fn check_integrals(v: &fluidnerf_core::Volume, scale: f64) -> PyResult<()> {
+    let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
+    match fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scale) {
+        Some(problem) => Err(err(format!("volume: {problem}"))),
+        None => Ok(()),
+    }
+}
+
 /// A `(2, 3)` box as an `Aabb`.
 pub(crate) fn aabb_arg(a: &PyReadonlyArray2<'_, f64>) -> PyResult<fluidnerf_core::Aabb> {
     scene::aabb_from(a)

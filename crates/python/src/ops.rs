@@ -15,7 +15,7 @@ use crate::scene::{images_to_py, PyScene};
 
 /// The most voxels a volume of the classical projectors holds (they index voxels in 32 bits).
 pub const MAX_VOXELS: u64 = u32::MAX as u64;
-use crate::{err, guard, volume_from_py, Callback};
+use crate::{check_integrals, err, guard, volume_from_py, Callback};
 
 /// The projector settings from JSON text (`fluidnerf_classical::ProjectorConfig`; unknown keys
 /// are refused), validated. A projector here serves one call, so it keeps no footprints.
@@ -52,6 +52,7 @@ pub fn forward_project(
 ) -> PyResult<PyObject> {
     let config = projector_config(projector)?;
     let volume = volume_from_py(&volume, scene.inner.aabb)?;
+    check_integrals(&volume, scene.inner.intensity_scale)?;
     let cameras = scene.cameras();
     let scale = scene.inner.intensity_scale;
     let images = py.allow_threads(|| {
@@ -169,6 +170,7 @@ pub fn render(
         }
     }
     let volume = volume_from_py(&volume, scene.inner.aabb)?;
+    check_integrals(&volume, scene.inner.intensity_scale)?;
     let cameras = scene.cameras();
     let settings = RenderSettings { step, supersample, time: 0.0, scale: scene.inner.intensity_scale };
     let aabb = scene.inner.aabb;

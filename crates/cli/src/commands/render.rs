@@ -327,6 +327,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // which would not list them, they would pass for this render's views.
     let stale = if args.force { stale_outputs(&settings_path, &outputs) } else { Vec::new() };
     let source = load_source(&args.recon, Some(&scene))?;
+    // Checked before the output folder is made: the views would hold infinities and NaN.
+    if let Source::Volume(v) = &source {
+        let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
+        if let Some(problem) = fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scene.intensity_scale) {
+            bail!("{}: {problem}", args.recon.display());
+        }
+    }
     // A run rendered with another scene's cameras and box is seldom what was meant.
     if args.scene.is_some() {
         if let Some(made_from) = super::recorded_scene(&args.recon)? {
