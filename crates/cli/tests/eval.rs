@@ -535,6 +535,24 @@ fn an_ssim_window_wider_than_a_held_out_image_is_refused_before_scoring() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
+/// A --data-range wider than any two float32 values differ by is refused: its square overflowed
+/// the metrics' constants, and the PSNR was written as infinite and the SSIM as NaN.
+#[test]
+fn a_data_range_wider_than_float32_values_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--data-range", "1e300"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(e.contains("--data-range 1e300 is more than any two float32 values differ by"), "{e}");
+    assert!(out.stdout.is_empty() && !d.join("m.json").exists(), "scored before refusing");
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--data-range", "6e38"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The truth scored against itself: a PSNR of infinity, but an SSIM of 1, not NaN.
+    assert_eq!(read_json(&d.join("m.json"))["steps"][0]["global"]["ssim_global"], 1.0);
+}
+
 /// A region named `all` is refused: its row read exactly as the whole volume's, twice `all` in
 /// the table and the CSV.
 #[test]

@@ -229,6 +229,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if !(r > 0.0 && r.is_finite()) {
             bail!("--data-range must be positive, got {}", num(r));
         }
+        // Its square overflowed the metrics' constants: PSNR infinite and SSIM NaN, unannounced.
+        let widest = 2.0 * f64::from(f32::MAX);
+        if r > widest {
+            bail!(
+                "--data-range {} is more than any two float32 values differ by ({widest:e}); give the range of the \
+                 values compared",
+                num(r)
+            );
+        }
     }
     if let Some(a) = &args.flow_axis {
         if a.len() != 3 || a.iter().any(|v| !v.is_finite()) || a.iter().all(|&v| v == 0.0) {
