@@ -527,12 +527,29 @@ fn an_ssim_window_wider_than_a_held_out_image_is_refused_before_scoring() {
     assert!(e.contains("--ssim-size 21") && e.contains("held-out frame 3") && e.contains("24x20 px"), "{e}");
     assert!(e.contains("--ssim-size 19 or less") && e.contains("--no-reprojection"), "{e}");
     assert!(out.stdout.is_empty(), "scored before refusing: {}", String::from_utf8_lossy(&out.stdout));
-    // The widest window that fits, and any window without reprojection.
-    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--ssim-size", "19"], d);
+    // A window that fits the images (and the truth, 18x12x12 voxels).
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--ssim-size", "11"], d);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let args = ["eval", "truth_0.npy", "--scene", ".", "--json", "n.json", "--ssim-size", "21", "--no-reprojection"];
+}
+
+/// An --ssim-size wider than the ground truth's grid is refused before scoring: the windowed
+/// SSIM of the volume was left empty (`-`, `null`) without a word.
+#[test]
+fn an_ssim_window_wider_than_the_truth_is_refused_before_scoring() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    let args = ["eval", "truth_0.npy", "--scene", ".", "--json", "n.json", "--ssim-size", "13", "--no-reprojection"];
+    let out = fluidnerf(&args, d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(e.contains("--ssim-size 13: the ground truth") && e.contains("truth_0.npy is only 18x12x12 voxels"), "{e}");
+    assert!(e.contains("give --ssim-size 11 or less"), "{e}");
+    assert!(out.stdout.is_empty() && !d.join("n.json").exists(), "scored before refusing");
+    let args = ["eval", "truth_0.npy", "--scene", ".", "--json", "n.json", "--ssim-size", "11", "--no-reprojection"];
     let out = fluidnerf(&args, d);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(read_json(&d.join("n.json"))["steps"][0]["global"]["ssim_windowed"].is_f64());
 }
 
 /// A --data-range wider than any two float32 values differ by is refused: its square overflowed

@@ -341,6 +341,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => fluidnerf_io::scene::load_truth(&scene)
             .with_context(|| format!("reading the ground truth of {}", scene_path.display()))?,
     };
+    // The windowed SSIM of the whole volume needs its window inside the truth's grid: an
+    // explicit --ssim-size wider than it left the column empty without a word.
+    if let Some((i, (_, t))) = truth.iter().enumerate().find(|(_, (_, t))| t.dims.iter().any(|&n| n < side)) {
+        let [nx, ny, nz] = t.dims;
+        let smallest = nx.min(ny).min(nz);
+        let widest = if smallest.is_multiple_of(2) { smallest.saturating_sub(1) } else { smallest };
+        let file = match (&args.truth, scene.truth.get(i)) {
+            (Some(p), _) => p.clone(),
+            (None, Some(r)) => scene.resolve(&r.file_path),
+            (None, None) => scene_path.clone(),
+        };
+        let what = match args.ssim_window {
+            Window::Uniform => format!("--ssim-size {side}"),
+            Window::Gaussian => format!("--ssim-window gaussian ({side} voxels wide)"),
+        };
+        let instead = if widest >= 3 { format!("; give --ssim-size {widest} or less") } else { String::new() };
+        if args.ssim_size.is_some() {
+            bail!(
+                "{what}: the ground truth {} is only {nx}x{ny}x{nz} voxels, smaller than the SSIM window{instead}",
+                file.display()
+            );
+        }
+        log::warn!(
+            "the ground truth {} is only {nx}x{ny}x{nz} voxels, smaller than the {side}-voxel SSIM window: no windowed \
+             SSIM{instead}",
+            file.display()
+        );
+    }
     // NRMSE is relative to the truth's norm: undefined for an all-zero truth.
     for (i, (_, t)) in truth.iter().enumerate() {
         if t.data.iter().all(|&v| v == 0.0) {
