@@ -747,12 +747,17 @@ def reconstruct(
     """
     _check_callback(callback)
     progress = _progress(progress)
+    if overwrite not in ("refuse", "force", "resume"):
+        raise FluidNerfError(f"overwrite: expected 'refuse', 'force' or 'resume', got {overwrite!r}")
     scene = _as_scene(scene)
-    out_path = Path(_path(out, "out")) if out is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
-    if overwrite == "resume" and config is None and (out_path / "config.json").is_file():
+    given = Path(_path(out, "out")) if out is not None else None
+    if overwrite == "resume" and config is None and given is not None and (given / "config.json").is_file():
         # A resumed run continues with the settings it was started with (as --resume).
-        config = out_path / "config.json"
+        config = given / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
+    # The temporary folder is made once the settings are accepted, and removed again when the
+    # run is refused before it writes anything: each refused call left an empty one behind.
+    out_path = given if given is not None else Path(tempfile.mkdtemp(prefix="fluidnerf-run-"))
     saved: _SavedScene | None = None
     if scene.root is None:
         # The settings and the folder are checked before the scene is written into it: a
@@ -768,6 +773,8 @@ def reconstruct(
     except FluidNerfError:
         if saved is not None:
             saved.take_back()
+        if given is None and not (out_path / "config.json").exists():
+            shutil.rmtree(out_path, ignore_errors=True)
         raise
     finally:
         if bars and "bar" in bars:

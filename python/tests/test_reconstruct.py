@@ -9,6 +9,7 @@ import re
 import shutil
 import signal
 import subprocess
+import tempfile
 import threading
 import time
 import warnings
@@ -447,6 +448,26 @@ def test_a_refused_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(static
     assert not (tmp_path / "new").exists() and scene.root is None
     run = fluidnerf.reconstruct(scene, "asart", tmp_path / "new", **options)
     assert run.status == "finished" and scene.root == (tmp_path / "new" / "scene").absolute()
+
+
+def test_a_refused_run_into_a_temporary_folder_leaves_none_behind(static_scene, tmp_path, monkeypatch):
+    """Without `out` every call made a temporary run folder first, and each call refused for its
+    settings (or for a scene built from arrays, its folder) left an empty one behind."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    from_arrays = fluidnerf.scene_from_arrays(*static_scene.camera_arrays()[:2], static_scene.images(), static_scene.aabb)
+    for scene, method, options in [
+        (static_scene, "asart", {"resolution": -1}),
+        (static_scene, "asart", {"resolutoin": 8}),
+        (static_scene, "nope", {}),
+        (static_scene, "asart", {"overwrite": "bogus"}),
+        (from_arrays, "asart", {"resolution": -1}),
+        (from_arrays, "asart", {"overwrite": "bogus"}),
+    ]:
+        with pytest.raises(fluidnerf.FluidNerfError):
+            fluidnerf.reconstruct(scene, method, progress=False, **options)
+        assert list(tmp_path.iterdir()) == [], (method, options)
+    run = fluidnerf.reconstruct(static_scene, "asart", resolution=8, progress=False)
+    assert run.path.parent == tmp_path and run.status == "finished"
 
 
 def test_a_resume_with_another_method_is_refused_and_leaves_the_run(static_scene, tmp_path):
