@@ -541,6 +541,22 @@ def test_read_video_refuses_a_bad_selection_naming_it(kwargs, error, words):
     assert words in str(e.value)
 
 
+@pytest.mark.parametrize("name", ["ramp_8bit.mraw", "ramp_16bit.cine"])
+def test_read_video_refuses_a_range_or_linearisation_a_raw_recording_ignores(name):
+    """A cine's or MRAW's linear counts were returned as they are for linearisation="srgb" or
+    range="limited", as if either had been applied."""
+    for kwargs, words in [
+        ({"linearisation": "srgb"}, "linearisation: `srgb` does not apply to"),
+        ({"linearisation": "2.2"}, "linearisation: `2.2` does not apply to"),
+        ({"range": "limited"}, "range: the limited range does not apply to"),
+    ]:
+        with pytest.raises(fluidnerf.FluidNerfError, match=None) as e:
+            fluidnerf.read_video(FIXTURES / name, **kwargs)
+        assert words in str(e.value) and name in str(e.value) and "sensor's linear counts" in str(e.value)
+    for kwargs in ({"linearisation": "linear"}, {"range": "full"}, {"range": "auto"}):
+        assert fluidnerf.read_video(FIXTURES / name, **kwargs)[0].shape == (4, 24, 32)
+
+
 def test_read_video_names_the_file_it_cannot_read(tmp_path):
     (tmp_path / "cam.mraw").write_bytes(b"\0" * 10)
     with pytest.raises(fluidnerf.FluidNerfError, match="cam.mraw.*no header of its own"):

@@ -545,6 +545,7 @@ pub fn read_video<'py>(
     linearisation: &str,
 ) -> PyResult<DecodedVideo<'py>> {
     let range: fluidnerf_io::video::VideoRange = range.parse().map_err(|e: String| err(format!("range: {e}")))?;
+    let asked_linearisation = linearisation;
     let linearisation: fluidnerf_io::image::Linearisation =
         linearisation.parse().map_err(|e: String| err(format!("linearisation: {e}")))?;
     let opts =
@@ -573,6 +574,23 @@ pub fn read_video<'py>(
             .map_err(|e| err(e.to_string()))
         })
     })?;
+    // A cine's or MRAW's frames are the sensor's linear counts, read as they are: a range or a
+    // linearisation asked of them was ignored, and the frames returned as if it had been applied.
+    if info.range_source == fluidnerf_io::video::RangeSource::Raw {
+        let what = |asked: &str| {
+            format!(
+                "{asked} does not apply to {}, a raw recording of the sensor's linear counts, which are read as they \
+                 are: leave it out",
+                path.display()
+            )
+        };
+        if opts.range == fluidnerf_io::video::VideoRange::Limited {
+            return Err(err(format!("range: {}", what("the limited range"))));
+        }
+        if opts.linearisation != fluidnerf_io::image::Linearisation::Linear {
+            return Err(err(format!("linearisation: {}", what(&format!("`{asked_linearisation}`")))));
+        }
+    }
     let (w, h) = size.unwrap_or((info.width as usize, info.height as usize));
     let n = times.len();
     let info = serde_json::to_string(&info).map_err(|e| err(e.to_string()))?;
