@@ -259,6 +259,15 @@ def test_a_volume_whose_images_overflow_floats_is_refused(scene):
         assert np.isfinite(project(s, huge / 1e34)).all()
 
 
+def test_images_whose_back_projection_overflows_floats_are_refused(scene):
+    """back_project of images near the largest float32 returned a volume of NaN without a word."""
+    s, K, _, size = scene
+    huge = np.full((len(K), size, size), 3e38, np.float32)
+    with pytest.raises(fluidnerf.FluidNerfError, match="images: pixels up to 3.000e38, .* beyond the largest 32-bit"):
+        fluidnerf.back_project(s, huge, (4, 4, 4))
+    assert np.isfinite(fluidnerf.back_project(s, huge / 1e30, (4, 4, 4))).all()
+
+
 def test_a_data_range_wider_than_float32_values_is_refused():
     """data_range=1e300 made the PSNR infinite and the SSIM NaN without a word: its square
     overflowed. A range no two float32 values differ by is refused; the widest one still

@@ -139,6 +139,16 @@ pub fn back_project<'py>(
             Ok(shift.data_back(grid.dims, out))
         })
     })?;
+    // The pixels are finite, so a voxel that is not overflowed: the volume came back as NaN.
+    if out.iter().any(|v| !v.is_finite()) {
+        let largest = data.iter().flatten().fold(0f32, |m, v| m.max(v.abs()));
+        return Err(err(format!(
+            "images: pixels up to {largest:.3e}, smeared back through the box times the intensity scale {}, sum to \
+             voxels beyond the largest 32-bit float ({:.3e}): scale the images down",
+            num(scale),
+            f32::MAX
+        )));
+    }
     PyArray1::from_vec(py, out).reshape([nz, ny, nx])
 }
 
