@@ -632,3 +632,24 @@ fn a_volume_or_truth_of_another_box_is_warned_about() {
         }
     }
 }
+
+/// A volume whose views overflow 32-bit floats is refused before scoring when it is reprojected:
+/// its held-out views were rendered as infinities and their metrics written as infinite and NaN.
+#[test]
+fn a_volume_whose_held_out_views_overflow_floats_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    let aabb = Aabb::new(DVec3::new(-1.5, -1.0, -1.0), DVec3::new(1.5, 1.0, 1.0));
+    let truth = fluidnerf_io::volume::read_npy(&d.join("truth_0.npy"), aabb).expect("reads");
+    let huge = Volume { data: truth.data.iter().map(|v| v * 3e38).collect(), ..truth };
+    fluidnerf_io::volume::write_npy(&d.join("huge.npy"), &huge).expect("writes");
+    let out = fluidnerf(&["eval", "huge.npy", "--scene", ".", "--json", "m.json"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(e.contains("huge.npy: reprojected onto the held-out views: values up to"), "{e}");
+    assert!(e.contains("beyond the largest 32-bit float") && e.contains("--no-reprojection"), "{e}");
+    assert!(out.stdout.is_empty() && !d.join("m.json").exists(), "scored before refusing");
+    let out = fluidnerf(&["eval", "huge.npy", "--scene", ".", "--json", "m.json", "--no-reprojection"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -435,6 +435,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    // Checked before any scoring: the views rendered for reprojection would hold infinities, and
+    // their metrics were written as infinite and NaN.
+    if let (false, Recon::Volumes(volumes)) = (holdouts.is_empty(), &recon) {
+        for (i, v) in volumes.iter().enumerate() {
+            let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
+            if let Some(problem) = fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scene.intensity_scale) {
+                let file = if run_dir.is_some() { &args.recon[0] } else { &args.recon[i] };
+                bail!(
+                    "{}: reprojected onto the held-out views: {problem}, or give --no-reprojection",
+                    file.display()
+                );
+            }
+        }
+    }
     if truth.is_empty() && holdouts.is_empty() {
         bail!(
             "nothing to evaluate: the scene {} has no ground truth and no held-out frames (give --truth)",
