@@ -574,7 +574,9 @@ class Run:
             _rehome_scenes(staged, self.path.resolve(), dest.absolute().resolve())
             os.rename(staged, dest)
         except (OSError, shutil.Error) as e:
-            raise FluidNerfError(f"{dest}: cannot copy the run {self.path} there: {_copy_problem(e)}") from None
+            raise FluidNerfError(
+                f"{dest}: cannot copy the run {self.path} there: {_copy_problem(e)}"
+            ) from None
         finally:
             if tmp is not None:
                 shutil.rmtree(tmp, ignore_errors=True)

@@ -254,7 +254,9 @@ def test_a_volume_whose_images_overflow_floats_is_refused(scene):
     s, *_ = scene
     huge = np.full((4, 4, 4), 3e38, np.float32)
     for project in (fluidnerf.forward_project, fluidnerf.render):
-        with pytest.raises(fluidnerf.FluidNerfError, match="volume: values up to 3.000e38 .* beyond the largest 32-bit"):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match="volume: values up to 3.000e38 .* beyond the largest 32-bit"
+        ):
             project(s, huge)
         assert np.isfinite(project(s, huge / 1e34)).all()
 
@@ -263,7 +265,9 @@ def test_images_whose_back_projection_overflows_floats_are_refused(scene):
     """back_project of images near the largest float32 returned a volume of NaN without a word."""
     s, K, _, size = scene
     huge = np.full((len(K), size, size), 3e38, np.float32)
-    with pytest.raises(fluidnerf.FluidNerfError, match="images: pixels up to 3.000e38, .* beyond the largest 32-bit"):
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="images: pixels up to 3.000e38, .* beyond the largest 32-bit"
+    ):
         fluidnerf.back_project(s, huge, (4, 4, 4))
     assert np.isfinite(fluidnerf.back_project(s, huge / 1e30, (4, 4, 4))).all()
 

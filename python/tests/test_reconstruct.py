@@ -105,7 +105,9 @@ def test_a_run_that_cannot_be_copied_whole_leaves_no_half_copy(static_scene, tmp
     run = fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
     (run.path / "zz_link").symlink_to(tmp_path / "nothing")
     dest = tmp_path / "copies" / "copy"
-    with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(f"{dest}: cannot copy the run {run.path} there")):
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=re.escape(f"{dest}: cannot copy the run {run.path} there")
+    ):
         run.save(dest)
     assert not (tmp_path / "copies").exists()
     (run.path / "zz_link").unlink()
@@ -454,7 +456,9 @@ def test_a_refused_run_into_a_temporary_folder_leaves_none_behind(static_scene, 
     """Without `out` every call made a temporary run folder first, and each call refused for its
     settings (or for a scene built from arrays, its folder) left an empty one behind."""
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    from_arrays = fluidnerf.scene_from_arrays(*static_scene.camera_arrays()[:2], static_scene.images(), static_scene.aabb)
+    from_arrays = fluidnerf.scene_from_arrays(
+        *static_scene.camera_arrays()[:2], static_scene.images(), static_scene.aabb
+    )
     for scene, method, options in [
         (static_scene, "asart", {"resolution": -1}),
         (static_scene, "asart", {"resolutoin": 8}),

@@ -442,10 +442,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
             if let Some(problem) = fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scene.intensity_scale) {
                 let file = if run_dir.is_some() { &args.recon[0] } else { &args.recon[i] };
-                bail!(
-                    "{}: reprojected onto the held-out views: {problem}, or give --no-reprojection",
-                    file.display()
-                );
+                bail!("{}: reprojected onto the held-out views: {problem}, or give --no-reprojection", file.display());
             }
         }
     }
