@@ -93,6 +93,11 @@ impl std::fmt::Display for Linearisation {
     }
 }
 
+/// The gammas a linearisation takes: beyond them `(v/255)^γ` of an 8-bit value is 0 or 1 but
+/// for a few levels, the images black or white.
+const GAMMA_MIN: f64 = 0.1;
+const GAMMA_MAX: f64 = 10.0;
+
 impl std::str::FromStr for Linearisation {
     type Err = String;
 
@@ -101,7 +106,11 @@ impl std::str::FromStr for Linearisation {
             "linear" => Ok(Linearisation::Linear),
             "srgb" => Ok(Linearisation::Srgb),
             other => match other.strip_prefix("gamma").unwrap_or(other).trim().parse::<f64>() {
-                Ok(g) if g.is_finite() && g > 0.0 => Ok(Linearisation::Gamma(g)),
+                Ok(g) if (GAMMA_MIN..=GAMMA_MAX).contains(&g) => Ok(Linearisation::Gamma(g)),
+                Ok(g) if g.is_finite() && g > 0.0 => Err(format!(
+                    "`{s}` is a gamma outside {GAMMA_MIN}..{GAMMA_MAX}, which would leave an 8-bit image black or \
+                     white but for a few levels; cameras encode with gammas of about 1.8 to 2.6"
+                )),
                 _ => Err(format!("`{s}` is not a linearisation: use linear, srgb or a positive gamma such as 2.2")),
             },
         }
@@ -649,6 +658,21 @@ pub fn write_tiff_f32(path: &Path, image: &Image) -> Result<(), IoError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gammas_are_taken_within_their_range_and_refused_beyond_it() {
+        for (text, gamma) in [("2.2", 2.2), ("gamma 1.8", 1.8), ("0.1", 0.1), ("10", 10.0)] {
+            assert_eq!(text.parse::<Linearisation>(), Ok(Linearisation::Gamma(gamma)), "{text}");
+        }
+        for text in ["1e308", "1e-308", "0.05", "11"] {
+            let e = text.parse::<Linearisation>().expect_err(text);
+            assert!(e.contains(&format!("`{text}` is a gamma outside 0.1..10")), "{e}");
+        }
+        for text in ["0", "-1", "nan", "inf", "log"] {
+            let e = text.parse::<Linearisation>().expect_err(text);
+            assert!(e.contains("is not a linearisation"), "{e}");
+        }
+    }
 
     fn ramp(w: usize, h: usize, scale: f32) -> Image {
         Image::from_vec(w, h, (0..w * h).map(|i| i as f32 * scale).collect())
