@@ -77,8 +77,14 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
     try:
         complex_numbers = np.iscomplexobj(value)
         # Not np.ascontiguousarray, which makes a 0-d array (a single number) one of shape (1,).
-        a = None if complex_numbers else np.asarray(value, dtype=dtype)
+        given = None if complex_numbers else np.asarray(value)
+        # A mask given for an image or a volume would pass for one of zeros and ones.
+        if given is not None and given.dtype == np.bool_:
+            raise TypeError(f"{name}: expected an array of numbers{shape}, got booleans")
+        a = None if given is None else given.astype(dtype, copy=False)
     except (TypeError, ValueError) as e:
+        if "got booleans" in str(e):
+            raise
         raise TypeError(f"{name}: expected an array of numbers{shape}: {e}") from None
     if a is None:
         raise TypeError(f"{name}: expected real numbers{shape}, got complex ones")

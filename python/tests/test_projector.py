@@ -378,6 +378,11 @@ def test_arrays_that_are_no_real_numbers_are_refused_naming_the_argument(scene):
     with pytest.raises(TypeError, match=r"images\[0\]: expected real numbers of shape \(H, W\), got complex"):
         fluidnerf.back_project(s, y.astype(np.complex64), (N, N, N))
     assert fluidnerf.back_project(s, list(y), (N, N, N)).shape == (N, N, N)
+    # A mask passed for numbers would read as zeros and ones.
+    with pytest.raises(TypeError, match="truth: expected an array of numbers, got booleans"):
+        fluidnerf.nrmse(t, t > 0.5)
+    with pytest.raises(TypeError, match=r"images\[0\]: expected an array of numbers.*, got booleans"):
+        fluidnerf.back_project(s, y > 0, (N, N, N))
 
 
 def test_metrics_refuse_values_that_are_not_finite_and_a_zero_truth():
