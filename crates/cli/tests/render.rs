@@ -367,8 +367,8 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
     assert_eq!(orbit("large-orbit", "200", &[])["projector"], "rays");
 }
 
-/// A step or supersampling that would never finish is refused, naming the option and what it
-/// allows, and leaves nothing behind.
+/// A step or supersampling that would never finish, or a step that integrates rays from one
+/// sample, is refused, naming the option and what it allows, and leaves nothing behind.
 #[test]
 fn steps_and_supersampling_that_would_never_finish_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -377,6 +377,7 @@ fn steps_and_supersampling_that_would_never_finish_are_refused() {
     let (recon, scene, out) = (d(&dir.path().join("recon.npy")), d(dir.path()), dir.path().join("views"));
     for (extra, says) in [
         (&["--step", "1e-300"][..], "give a step of at least"),
+        (&["--step", "2.5"][..], "is longer than the box's thinnest side (2.0000"),
         (&["--supersample", "1000"][..], "--supersample must be between 1 and 64"),
         (&["--supersample", "0"][..], "--supersample must be between 1 and 64"),
     ] {

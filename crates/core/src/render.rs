@@ -48,17 +48,26 @@ impl Default for RenderSettings {
 /// in cache for cheap fields.
 const BATCH: usize = 16_384;
 
-/// Why a ray-marching `step` is too fine for `aabb`: more than [`MAX_SAMPLES_ON_DIAGONAL`]
-/// samples along its diagonal, with the finest step allowed (`units`, the box's length unit,
-/// follows the diagonal when not empty). `None` when the step is fine.
-pub fn step_too_fine(aabb: &Aabb, step: f64, units: &str) -> Option<String> {
+/// Why a ray-marching `step` does not suit `aabb`: too fine, more than
+/// [`MAX_SAMPLES_ON_DIAGONAL`] samples along its diagonal, or too coarse, longer than its
+/// thinnest side (rays across it would be integrated from at most one sample each, however far
+/// they cross), with the step allowed (`units`, the box's length unit, follows the lengths when
+/// not empty). `None` when the step suits the box. A step of a grid's cell is always allowed.
+pub fn step_out_of_range(aabb: &Aabb, step: f64, units: &str) -> Option<String> {
     let diagonal = aabb.size().length();
+    let thinnest = aabb.size().min_element();
     let units = if units.is_empty() { String::new() } else { format!(" {units}") };
-    (diagonal / step > MAX_SAMPLES_ON_DIAGONAL).then(|| {
-        format!(
+    if diagonal / step > MAX_SAMPLES_ON_DIAGONAL {
+        return Some(format!(
             "{step:e} would take more than {MAX_SAMPLES_ON_DIAGONAL} samples along the box's diagonal \
              ({diagonal:.4}{units}); give a step of at least {:.3e}",
             diagonal / MAX_SAMPLES_ON_DIAGONAL
+        ));
+    }
+    (step > thinnest).then(|| {
+        format!(
+            "{step:e} is longer than the box's thinnest side ({thinnest:.4}{units}): rays across it would be \
+             integrated from at most one sample each; give a step of at most {thinnest:.3e}"
         )
     })
 }
@@ -94,7 +103,7 @@ pub fn render_image(
     if !(step > 0.0 && step.is_finite()) {
         return Err(CoreError::invalid("render step", format!("must be positive, got {}", num(step))));
     }
-    if let Some(problem) = step_too_fine(aabb, step, "") {
+    if let Some(problem) = step_out_of_range(aabb, step, "") {
         return Err(CoreError::invalid("render step", problem));
     }
     if settings.supersample > MAX_SUPERSAMPLE {

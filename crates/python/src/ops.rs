@@ -175,7 +175,7 @@ pub fn render(
         if !(step > 0.0 && step.is_finite()) {
             return Err(err(format!("step: must be a positive number of world units, got {}", num(step))));
         }
-        if let Some(problem) = fluidnerf_core::render::step_too_fine(&scene.inner.aabb, step, &scene.inner.units) {
+        if let Some(problem) = fluidnerf_core::render::step_out_of_range(&scene.inner.aabb, step, &scene.inner.units) {
             return Err(err(format!("step: {problem}")));
         }
     }

@@ -264,7 +264,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("reading the scene {}", scene_path.display()))?;
     fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, &scene.root)?;
     // Checked here, not by the renderer at the first view, when the output folder is made.
-    if let Some(problem) = args.step.and_then(|s| fluidnerf_core::render::step_too_fine(&scene.aabb, s, &scene.units)) {
+    if let Some(problem) =
+        args.step.and_then(|s| fluidnerf_core::render::step_out_of_range(&scene.aabb, s, &scene.units))
+    {
         bail!("--step {problem}");
     }
     let flow = match &args.flow_axis {
