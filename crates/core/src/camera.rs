@@ -22,6 +22,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{Aabb, CoreError, Ray};
 
+/// The most pixels of each side of the image that [`Camera::check_undistortion`] tries.
+const BORDER_SAMPLES: usize = 4096;
+
 /// Pinhole intrinsics in pixels (OpenCV convention: pixel centres at integer coordinates).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Intrinsics {
@@ -457,8 +460,14 @@ impl Camera {
             return Ok(());
         }
         let (w, h) = (self.width(), self.height());
-        let rows = [0, h - 1].into_iter().flat_map(|v| (0..w).map(move |u| (u, v)));
-        let columns = [0, w - 1].into_iter().flat_map(|u| (0..h).map(move |v| (u, v)));
+        // Every pixel of the border, or, on sides longer than BORDER_SAMPLES pixels, that many
+        // spread evenly with both ends: the test stays cheap for any image size.
+        let along = |n: usize| {
+            let stride = n.div_ceil(BORDER_SAMPLES).max(1);
+            (0..n).step_by(stride).chain(std::iter::once(n - 1))
+        };
+        let rows = [0, h - 1].into_iter().flat_map(move |v| along(w).map(move |u| (u, v)));
+        let columns = [0, w - 1].into_iter().flat_map(move |u| along(h).map(move |v| (u, v)));
         for (u, v) in rows.chain(columns) {
             self.unproject_normalised(u as f64, v as f64)?;
         }
@@ -762,6 +771,25 @@ mod tests {
         assert!(test_camera(strong_distortion()).check_undistortion().is_ok());
         let wild = test_camera(Distortion { k1: 1e300, ..Distortion::default() });
         let e = wild.check_undistortion().expect_err("fails at the corners");
+        assert!(matches!(e, CoreError::UndistortionFailed { u: 0.0, v: 0.0, .. }), "{e}");
+        // The same camera with pixels a millionth as large: a border of 4.8·10⁸ and 6.4·10⁸
+        // pixels a side is sampled, not walked (2.2·10⁹ inversions would take minutes), and
+        // passes as the camera does; its far corner is among the samples.
+        let mut huge = test_camera(strong_distortion());
+        let k = huge.intrinsics;
+        let m = 1e6;
+        huge.intrinsics = Intrinsics {
+            width: k.width * 1_000_000,
+            height: k.height * 1_000_000,
+            fx: k.fx * m,
+            fy: k.fy * m,
+            cx: (k.cx + 0.5) * m - 0.5,
+            cy: (k.cy + 0.5) * m - 0.5,
+            skew: k.skew * m,
+        };
+        assert!(huge.check_undistortion().is_ok());
+        huge.distortion = Distortion { k1: 1e300, ..Distortion::default() };
+        let e = huge.check_undistortion().expect_err("fails at the corners");
         assert!(matches!(e, CoreError::UndistortionFailed { u: 0.0, v: 0.0, .. }), "{e}");
     }
 

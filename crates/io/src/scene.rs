@@ -1057,6 +1057,12 @@ fn normalise(path: &Path) -> PathBuf {
 pub const MIN_INTENSITY_SCALE: f64 = 1e-20;
 pub const MAX_INTENSITY_SCALE: f64 = 1e20;
 
+/// Intrinsics beyond this many pixels along a side, or in all, are held to their image's header
+/// when the scene is read (the largest camera sensors have about 150 megapixels; a side of
+/// 16384 and 2^28 pixels leave room).
+const CHECKED_SIDE: usize = 16384;
+const CHECKED_PIXELS: usize = 1 << 28;
+
 /// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb near enough the
 /// origin for its size ([`Aabb::check_resolvable`]), at least one frame, a positive intensity
 /// scale, finite times, a time on every frame or on none, no two frames on the same image file,
@@ -1186,6 +1192,30 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             }
         })
         .collect();
+    // Intrinsics that claim more pixels than cameras have (`w`/`h` mistyped) are held to the
+    // image's header now: every later step sizes its buffers and its memory estimate by them,
+    // and a camera imaging the box on such a grid still sees it. Plausible sizes are left to
+    // the loading of the images, which compares every image.
+    for &i in &distinct {
+        let frame = &scene.frames[i];
+        let (w, h) = (frame.camera.width(), frame.camera.height());
+        if w.max(h) <= CHECKED_SIDE && w.saturating_mul(h) <= CHECKED_PIXELS {
+            continue;
+        }
+        let path = scene.resolve(&frame.file_path);
+        if let Ok((iw, ih)) = crate::image::read_dimensions(&path) {
+            if (iw as usize, ih as usize) != (w, h) {
+                return Err(IoError::ImageSize {
+                    path,
+                    frame: i,
+                    found_width: iw as usize,
+                    found_height: ih as usize,
+                    expected_width: w,
+                    expected_height: h,
+                });
+            }
+        }
+    }
     // Every method casts a ray through every pixel: a distortion that cannot be inverted at the
     // image's edges would stop each of them, unnamed, after the scene was taken.
     let undistortion: Vec<(usize, CoreError)> = distinct
