@@ -1146,6 +1146,8 @@ fn a_method_setting_is_named_by_its_key_and_by_the_option_that_gave_it() {
         ("fast", "--coarse-samples", "1", "method.train.coarse_samples"),
         ("fast", "--fine-samples", "100000", "method.train.coarse_samples"),
         ("fast", "--tv-prior", "nan", "method.train.prior.tv"),
+        ("fast", "--tv-prior", "1e30", "method.train.prior.tv"),
+        ("tr-fast", "--smooth-prior", "3e38", "method.train.prior.smooth"),
         ("fast", "--smooth-prior=-1", "", "method.train.prior.smooth"),
         ("fast", "--sparsity-prior", "inf", "method.train.prior.sparsity"),
         ("tr-fast", "--window", "1", "method.windows.overlap"),

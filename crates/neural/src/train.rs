@@ -96,6 +96,15 @@ pub const MAX_SAMPLES_PER_RAY: usize = 4096;
 /// evaluated in one pass, four field rows each, held with the field's activations.
 pub const MAX_PRIOR_POINTS: usize = 1 << 16;
 
+/// The largest weight of each of the field's priors ([`Prior::tv`], [`Prior::smooth`],
+/// [`Prior::sparsity`]). The data term they are weighed against is a mean squared residual of
+/// images scaled to a peak of about 1, so it is at most about 1, and the prior terms are means
+/// of the normalised field's differences and values, of the same order: the weights that help
+/// are 10⁻⁴ to 10⁻² (docs/claims.md), and at 1 a prior already outweighs the images. A thousand
+/// leaves that far behind; beyond it a run only trains a flat field (10³⁰ did, without a word),
+/// or, nearer f32's end, overflows the loss and is reported as a divergence.
+pub const MAX_PRIOR_WEIGHT: f32 = 1e3;
+
 /// The most pixels drawn from one image per iteration: every pixel of a 2048 × 2048 image.
 /// More would only repeat pixels, and their rays could not be held.
 pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
@@ -285,6 +294,17 @@ impl TrainConfig {
         {
             if !(w >= 0.0 && w.is_finite()) {
                 return bad(what, format!("must be a non-negative weight, got {}", num(w)));
+            }
+            if w > MAX_PRIOR_WEIGHT {
+                return bad(
+                    what,
+                    format!(
+                        "must be at most {} (the images' term is about 1 and weights that help are 1e-4 to \
+                         1e-2; a larger one trains a flat field), got {}",
+                        num(MAX_PRIOR_WEIGHT),
+                        num(w)
+                    ),
+                );
             }
         }
         if !(1..=MAX_PRIOR_POINTS).contains(&self.prior.points) {
@@ -1076,7 +1096,7 @@ pub fn train_with_engine<F: TrainableField, E: Engine<F>>(
         let BatchLoss { loss, samples } = engine.loss_and_gradient(&learner.field, prep, cfg, &batch);
         if !loss.is_finite() {
             engine.save_state(&mut learner.field, &mut learner.adam);
-            return Err(NeuralError::Diverged { iteration: it, loss });
+            return Err(NeuralError::Diverged { iteration: it, loss, prior: cfg.prior });
         }
         total_samples += samples;
         let lr = crate::batch::learning_rate(cfg, it, steps.len());

@@ -295,7 +295,7 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
         ControlFlow::Continue(())
     })
     .expect_err("diverges at iteration 3");
-    assert!(matches!(err, NeuralError::Diverged { iteration: 3, loss } if loss.is_nan()), "{err:?}");
+    assert!(matches!(err, NeuralError::Diverged { iteration: 3, loss, .. } if loss.is_nan()), "{err:?}");
     assert!(err.to_string().contains("training diverged: the loss of iteration 3 is NaN"), "{err}");
     assert!(err.to_string().contains("a lower learning rate may help"), "{err}");
     let (params, adam) = after_three.expect("three iterations ran");
@@ -311,7 +311,7 @@ fn a_non_finite_loss_stops_training_before_the_optimiser_step() {
     let mut engine = CpuEngine::new(&learner.field, 2);
     let err = train_with_engine(&prep, &mut learner, &cfg, 0, &mut engine, |_| ControlFlow::Continue(()))
         .expect_err("the squared residual overflows");
-    assert!(matches!(err, NeuralError::Diverged { iteration: 0, loss } if loss.is_infinite()), "{err:?}");
+    assert!(matches!(err, NeuralError::Diverged { iteration: 0, loss, .. } if loss.is_infinite()), "{err:?}");
     // No step was taken: the message points at the start's settings, not at the learning rate.
     let e = err.to_string();
     assert!(e.contains("image_scale") && e.contains("init_scale") && !e.contains("lower learning rate"), "{e}");

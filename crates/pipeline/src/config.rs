@@ -1452,6 +1452,47 @@ mod tests {
         refused_past_their_bounds(&edits);
     }
 
+    /// A weight or tolerance of a run of a method, its key and bound, and how to set it.
+    type BoundedValue<'a> = (Method, &'a str, f64, fn(&mut RunConfig, f64));
+
+    /// Each value that `edit` sets in a run of `method` validates at its bound; beyond it
+    /// (twice it, and 10³⁰) it is refused, the message naming `key` first and the bound.
+    fn refused_beyond_their_bounds(edits: &[BoundedValue<'_>]) {
+        for &(method, key, bound, edit) in edits {
+            let mut c = RunConfig::new("scene", method);
+            edit(&mut c, bound);
+            c.validate().unwrap_or_else(|e| panic!("{key} at its bound: {e}"));
+            for v in [2.0 * bound, 1e30] {
+                edit(&mut c, v);
+                let e = c.validate().expect_err(key).to_string();
+                let says = format!("{key}: must be at most {}", fluidnerf_core::num(bound));
+                assert!(e.starts_with(&says), "{e}");
+            }
+        }
+    }
+
+    /// The priors' weights are bounded where they stop meaning anything: 10³⁰ trained a flat
+    /// field without a word, 3·10³⁸ diverged and blamed the learning rate.
+    #[test]
+    fn weights_and_tolerances_beyond_their_meaning_are_refused_by_key() {
+        use fluidnerf_neural::train::MAX_PRIOR_WEIGHT;
+        type Edit = fn(&mut RunConfig, f64);
+        fn train(c: &mut RunConfig) -> &mut fluidnerf_neural::train::TrainConfig {
+            match &mut c.method {
+                MethodConfig::Neural(_, spec) => &mut spec.train,
+                MethodConfig::Temporal(_, spec) => &mut spec.train,
+                MethodConfig::Classical(_) => unreachable!("a neural method"),
+            }
+        }
+        let prior = f64::from(MAX_PRIOR_WEIGHT);
+        let edits: [(Method, &str, f64, Edit); 3] = [
+            (Method::Fast, "method.train.prior.tv", prior, |c, w| train(c).prior.tv = w as f32),
+            (Method::Voxel, "method.train.prior.smooth", prior, |c, w| train(c).prior.smooth = w as f32),
+            (Method::TrFast, "method.train.prior.sparsity", prior, |c, w| train(c).prior.sparsity = w as f32),
+        ];
+        refused_beyond_their_bounds(&edits);
+    }
+
     /// The validation of a run of `method` with the classical settings `params`.
     fn validate_classical(method: Method, params: ClassicalMethod) -> Result<(), String> {
         let mut c = RunConfig::new("scene", method);
