@@ -1074,7 +1074,7 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 12] = [
+    let edits: [(&str, Edit); 13] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
         ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
             v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
@@ -1096,6 +1096,8 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
         ("at `method.train.adam.eps`: 1e-60 is below the smallest non-zero value", |v| {
             v["method"]["train"]["adam"]["eps"] = 1e-60.into()
         }),
+        // A step divided by ε instead of the gradients' size: training made no progress.
+        ("method.train.adam.eps: must be at most 1", |v| v["method"]["train"]["adam"]["eps"] = 1e30.into()),
         // Beyond any memory: refused by its key, not a panic or an aborted allocation.
         ("method.train.rays_per_image: must be 1 to 4194304 pixels per image, got 18446744073709551615", |v| {
             v["method"]["train"]["rays_per_image"] = u64::MAX.into()

@@ -29,6 +29,9 @@ use crate::kernels::multiversion;
 /// Elements per parallel block: large enough to amortise rayon, small enough to balance.
 const BLOCK: usize = 1 << 14;
 
+/// The largest [`AdamConfig::eps`] ([`AdamConfig::validate`] says why).
+pub const MAX_ADAM_EPS: f32 = 1.0;
+
 /// Adam hyperparameters (the learning rate comes from [`LrSchedule`] at each step).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -39,7 +42,7 @@ pub struct AdamConfig {
     /// Decay of the second-moment average β₂. Default 0.999.
     #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub beta2: f32,
-    /// ε added to √v̂. Default 1e-7.
+    /// ε added to √v̂, at most [`MAX_ADAM_EPS`]. Default 1e-7.
     #[serde(deserialize_with = "fluidnerf_core::number::f32_setting")]
     pub eps: f32,
     /// Skip elements whose gradient is exactly zero (see the module docs). Default false.
@@ -62,6 +65,20 @@ impl AdamConfig {
         }
         if !(self.eps > 0.0 && self.eps.is_finite()) {
             return Err(NeuralError::invalid("adam.eps", format!("must be positive, got {}", num(self.eps))));
+        }
+        // ε guards the division by √v̂, the root mean square of a parameter's gradient, which
+        // is well below 1 on images scaled to a peak of about 1. An ε beyond it divides every
+        // step by ε instead: at 1e30 training moved nothing and ran to its cap.
+        if self.eps > MAX_ADAM_EPS {
+            return Err(NeuralError::invalid(
+                "adam.eps",
+                format!(
+                    "must be at most {} (it only keeps the step's division by the gradients' root mean square \
+                     finite; a larger one shrinks every step), got {}",
+                    num(MAX_ADAM_EPS),
+                    num(self.eps)
+                ),
+            ));
         }
         Ok(())
     }

@@ -1472,7 +1472,8 @@ mod tests {
     }
 
     /// The priors' weights are bounded where they stop meaning anything: 10³⁰ trained a flat
-    /// field without a word, 3·10³⁸ diverged and blamed the learning rate.
+    /// field without a word, 3·10³⁸ diverged and blamed the learning rate. So is Adam's ε: at
+    /// 10³⁰ training made no progress.
     #[test]
     fn weights_and_tolerances_beyond_their_meaning_are_refused_by_key() {
         use fluidnerf_neural::train::MAX_PRIOR_WEIGHT;
@@ -1485,7 +1486,10 @@ mod tests {
             }
         }
         let prior = f64::from(MAX_PRIOR_WEIGHT);
-        let edits: [(Method, &str, f64, Edit); 3] = [
+        let eps = f64::from(fluidnerf_neural::optim::MAX_ADAM_EPS);
+        let edits: [(Method, &str, f64, Edit); 5] = [
+            (Method::Fast, "method.train.adam.eps", eps, |c, e| train(c).adam.eps = e as f32),
+            (Method::TrFast, "method.train.adam.eps", eps, |c, e| train(c).adam.eps = e as f32),
             (Method::Fast, "method.train.prior.tv", prior, |c, w| train(c).prior.tv = w as f32),
             (Method::Voxel, "method.train.prior.smooth", prior, |c, w| train(c).prior.smooth = w as f32),
             (Method::TrFast, "method.train.prior.sparsity", prior, |c, w| train(c).prior.sparsity = w as f32),
