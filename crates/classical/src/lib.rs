@@ -40,7 +40,8 @@ pub use error::{ClassicalError, SolveError};
 pub use hull::{dark_level, visual_hull, DEFAULT_HULL_NOISE_SIGMAS, DEFAULT_HULL_THRESHOLD};
 pub use memory::{estimate_memory, Algorithm, MemoryEstimate};
 pub use method::{
-    voxel_footprint_px, ClassicalMethod, ProjectorConfig, MAX_TIKHONOV_WEIGHT, MAX_TV_STEPS, MAX_TV_WEIGHT,
+    voxel_footprint_px, ClassicalMethod, ProjectorConfig, MAX_PLATEAU_TOLERANCE, MAX_TIKHONOV_WEIGHT, MAX_TV_STEPS,
+    MAX_TV_WEIGHT,
 };
 pub use projector::{
     FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector,

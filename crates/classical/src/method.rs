@@ -41,6 +41,10 @@ pub const MAX_TV_STEPS: usize = 1000;
 /// and with μ = 1 already damps a wavelength of ten voxels by about three quarters.
 pub const MAX_TIKHONOV_WEIGHT: f64 = 10.0;
 
+/// The largest tolerance of the plateau rule ([`crate::Plateau::tolerance`]): a relative
+/// variation of the residual as large as the residual itself.
+pub const MAX_PLATEAU_TOLERANCE: f64 = 1.0;
+
 impl ClassicalMethod {
     /// The method's defaults.
     pub fn default_for(algorithm: Algorithm) -> Self {
@@ -162,6 +166,20 @@ impl ClassicalMethod {
                 if n > span {
                     return Err(ClassicalError::invalid(key, format!("must be at most {span} iterations, got {n}")));
                 }
+            }
+            // The tolerance is a relative variation, (max − min) / mean of a residual that
+            // falls as the run converges: a variation as large as the residual itself is no
+            // plateau, and beyond 1 the rule stops a run right after its first window (1e300 did).
+            if p.tolerance > MAX_PLATEAU_TOLERANCE {
+                return Err(ClassicalError::invalid(
+                    "stopping.plateau.tolerance",
+                    format!(
+                        "must be at most {} (a fraction of the residual; a larger one stops the run after its \
+                         first window), got {}",
+                        num(MAX_PLATEAU_TOLERANCE),
+                        num(p.tolerance)
+                    ),
+                ));
             }
             if !(p.tolerance > 0.0 && p.tolerance.is_finite() && p.window > 0 && p.smoothing > 0) {
                 return Err(ClassicalError::invalid(

@@ -384,6 +384,13 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--plateau-tolerance=-0.5"],
             "or 0 to run to the iteration cap",
         ),
+        // The rule stopped the run right after its first window.
+        c(
+            "huge plateau tolerance",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--plateau-tolerance", "1e300"],
+            "--plateau-tolerance <FRACTION>': 1e300: the tolerance is a positive fraction of the residual, at most 1",
+        ),
         c(
             "relaxation 3 asart",
             None,

@@ -57,7 +57,8 @@ pub struct StopRule {
     /// Iterations over which the smoothed loss must stay within the tolerance, at most
     /// [`MAX_ITERATION_SPAN`]; 0 disables the rule. Default 2000.
     pub window: usize,
-    /// Relative change of the smoothed loss across the window. Default 0.02.
+    /// Relative change of the smoothed loss across the window, at most
+    /// [`MAX_STOP_TOLERANCE`]. Default 0.02.
     pub tolerance: f64,
 }
 
@@ -95,6 +96,11 @@ pub const MAX_SAMPLES_PER_RAY: usize = 4096;
 /// The most random points of the field's priors per iteration ([`Prior::points`]): they are
 /// evaluated in one pass, four field rows each, held with the field's activations.
 pub const MAX_PRIOR_POINTS: usize = 1 << 16;
+
+/// The largest [`StopRule::tolerance`]: a change of the smoothed loss as large as the loss
+/// itself. A falling loss cannot change by more, so beyond 1 the rule stops every run after
+/// its first window.
+pub const MAX_STOP_TOLERANCE: f64 = 1.0;
 
 /// The largest weight of each of the field's priors ([`Prior::tv`], [`Prior::smooth`],
 /// [`Prior::sparsity`]). The data term they are weighed against is a mean squared residual of
@@ -363,6 +369,17 @@ impl TrainConfig {
             if n > MAX_ITERATION_SPAN {
                 return bad(what, format!("must be at most {MAX_ITERATION_SPAN} iterations, got {n}"));
             }
+        }
+        if self.stop.tolerance > MAX_STOP_TOLERANCE {
+            return bad(
+                "stop.tolerance",
+                format!(
+                    "must be at most {} (a fraction of the smoothed loss; a larger one stops the run after its \
+                     first window), got {}",
+                    num(MAX_STOP_TOLERANCE),
+                    num(self.stop.tolerance)
+                ),
+            );
         }
         if self.stop.window > 0
             && (self.stop.smoothing == 0 || self.stop.tolerance.is_nan() || self.stop.tolerance <= 0.0)

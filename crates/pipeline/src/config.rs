@@ -1473,7 +1473,8 @@ mod tests {
 
     /// The priors' weights are bounded where they stop meaning anything: 10³⁰ trained a flat
     /// field without a word, 3·10³⁸ diverged and blamed the learning rate. So is Adam's ε: at
-    /// 10³⁰ training made no progress.
+    /// 10³⁰ training made no progress. And so are the stopping rules' relative tolerances: at
+    /// 10³⁰⁰ a voxel run stopped right after its plateau window.
     #[test]
     fn weights_and_tolerances_beyond_their_meaning_are_refused_by_key() {
         use fluidnerf_neural::train::MAX_PRIOR_WEIGHT;
@@ -1487,7 +1488,15 @@ mod tests {
         }
         let prior = f64::from(MAX_PRIOR_WEIGHT);
         let eps = f64::from(fluidnerf_neural::optim::MAX_ADAM_EPS);
-        let edits: [(Method, &str, f64, Edit); 5] = [
+        let plateau = fluidnerf_classical::MAX_PLATEAU_TOLERANCE;
+        let stop = fluidnerf_neural::train::MAX_STOP_TOLERANCE;
+        let edits: [(Method, &str, f64, Edit); 8] = [
+            (Method::Asart, "method.params.stopping.plateau.tolerance", plateau, |c, t| {
+                let MethodConfig::Classical(m) = &mut c.method else { unreachable!("asart is classical") };
+                m.method.stopping_mut().plateau.as_mut().expect("asart stops on a plateau").tolerance = t;
+            }),
+            (Method::Fast, "method.train.stop.tolerance", stop, |c, t| train(c).stop.tolerance = t),
+            (Method::TrFast, "method.train.stop.tolerance", stop, |c, t| train(c).stop.tolerance = t),
             (Method::Fast, "method.train.adam.eps", eps, |c, e| train(c).adam.eps = e as f32),
             (Method::TrFast, "method.train.adam.eps", eps, |c, e| train(c).adam.eps = e as f32),
             (Method::Fast, "method.train.prior.tv", prior, |c, w| train(c).prior.tv = w as f32),

@@ -181,7 +181,7 @@ pub struct Plateau {
     /// [`fluidnerf_core::MAX_ITERATION_SPAN`]. Default 4.
     pub smoothing: usize,
     /// Largest relative variation, `(max − min) / mean` of the smoothed residual over the
-    /// window, still counted as a plateau. Default 0.02.
+    /// window, still counted as a plateau, at most [`crate::MAX_PLATEAU_TOLERANCE`]. Default 0.02.
     pub tolerance: f64,
 }
 

@@ -231,13 +231,16 @@ fn parse_learning_rate(s: &str) -> Result<f32, String> {
     Ok(rate)
 }
 
-/// A plateau tolerance, refused as typed unless it is 0 (no plateau rule) or a positive finite
-/// fraction: a NaN or a negative one turned the rule off as 0 does, without a word.
+/// A plateau tolerance, refused as typed unless it is 0 (no plateau rule) or a positive
+/// fraction up to [`fluidnerf_classical::MAX_PLATEAU_TOLERANCE`]: a NaN or a negative one turned
+/// the rule off as 0 does, without a word, and 1e300 stopped the run right after its window.
 fn parse_plateau_tolerance(s: &str) -> Result<f64, String> {
+    let max = fluidnerf_classical::MAX_PLATEAU_TOLERANCE;
     match s.trim().parse::<f64>() {
-        Ok(v) if v >= 0.0 && v.is_finite() => Ok(v),
+        Ok(v) if (0.0..=max).contains(&v) => Ok(v),
         Ok(_) => Err(format!(
-            "{s}: the tolerance is a positive fraction of the residual (e.g. 0.02), or 0 to run to the iteration cap"
+            "{s}: the tolerance is a positive fraction of the residual, at most {max} (e.g. 0.02), or 0 to run to \
+             the iteration cap"
         )),
         Err(_) => Err(format!("{s:?} is not a number")),
     }
@@ -325,7 +328,7 @@ pub struct ClassicalArgs {
     #[arg(long, value_name = "LAMBDA")]
     pub tikhonov_weight: Option<f64>,
     /// The `own` rule of voxel methods: stop when the residual (sliding mean of 4) varies by
-    /// less than this fraction over 20 iterations; 0 runs to the cap [default: 0.02].
+    /// less than this fraction (at most 1) over 20 iterations; 0 runs to the cap [default: 0.02].
     #[arg(long, value_name = "FRACTION", value_parser = parse_plateau_tolerance)]
     pub plateau_tolerance: Option<f64>,
 }
