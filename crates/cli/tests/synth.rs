@@ -585,6 +585,7 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
         (&["--holdout", "9"], "--holdout", "rig.holdout"),
         (&["--jitter-position", "NaN"], "--jitter-position", "rig.jitter.position_mm"),
         (&["--jitter-rotation", "inf"], "--jitter-rotation", "rig.jitter.rotation_deg"),
+        (&["--jitter-rotation", "1e30"], "--jitter-rotation", "rig.jitter.rotation_deg"),
         (&["--distance", "0"], "--distance", "rig.distance_mm"),
         (&["--distance", "1"], "--distance", "rig.distance_mm"),
         (&["--pixels", "0"], "--pixels", "lens.resolution"),
@@ -618,6 +619,14 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
     let err = text(&o).1;
     assert!(!o.status.success() && err.contains("invalid setting `sensor.gaussian_noise`"), "{err}");
     assert!(!err.contains("on the command line"), "{err}");
+    // A ring started 1e30 degrees round put every camera at the same angle.
+    let ring = serde_json::json!({ "layout": "ring", "count": 3, "arc_deg": 360.0, "start_deg": 1e30 });
+    std::fs::write(&config, serde_json::json!({ "rig": { "layout": ring } }).to_string()).expect("writes");
+    let o = synth(&["-q", "-o", dir.to_str().expect("utf-8"), "--config", config.to_str().expect("utf-8")]);
+    let err = text(&o).1;
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("invalid setting `rig.layout.start_deg`: must lie in [-3600, 3600] degrees"), "{err}");
+    assert!(!dir.exists(), "wrote output");
 }
 
 /// `--force` over an earlier synthetic scene replaces it whole: its images, background frames

@@ -46,5 +46,8 @@ pub use phantom::{
 };
 pub use preset::{preset, presets, DEFAULT_PRESET};
 pub use real::{RealLike, RealRecording};
-pub use rig::{Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset, MAX_CAMERAS};
+pub use rig::{
+    Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset, MAX_CAMERAS, MAX_JITTER_ROTATION_DEG,
+    MAX_START_DEG,
+};
 pub use sensor::SensorSettings;

@@ -113,7 +113,8 @@ impl LensSettings {
 #[serde(tag = "layout", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Layout {
     /// `count` cameras in the plane through the box centre perpendicular to `axis` (the flow
-    /// axis), evenly spaced over `[start_deg, start_deg + arc_deg)`. About x (the default):
+    /// axis), evenly spaced over `[start_deg, start_deg + arc_deg)` (`arc_deg` in (0, 360],
+    /// `start_deg` within ±[`MAX_START_DEG`]). About x (the default):
     /// angle 0 is world +y, 90° is +z; about y: angle 0 is +z, 90° is +x.
     Ring {
         count: usize,
@@ -178,7 +179,8 @@ impl Default for Subset {
 pub struct Jitter {
     /// Standard deviation of each position coordinate, mm. Default 0.
     pub position_mm: f64,
-    /// Standard deviation of the rotation angle, degrees. Default 0.
+    /// Standard deviation of the rotation angle, degrees, at most [`MAX_JITTER_ROTATION_DEG`].
+    /// Default 0.
     pub rotation_deg: f64,
 }
 
@@ -199,6 +201,16 @@ pub struct RigSettings {
 /// `cam000` … `cam999`, is more than any laboratory sets up, and beyond it a count is a slip
 /// that would image (and write) that many views before anything else could say so.
 pub const MAX_CAMERAS: usize = 1000;
+
+/// The largest `start_deg` of a ring, either way: ten turns. Every ring starts within one turn,
+/// so beyond that a start is a slip, and far beyond it the cameras' angles lose their spacing
+/// in the floats they are computed in (at 1e30 degrees every camera of a ring stood at the
+/// same angle, without a word).
+pub const MAX_START_DEG: f64 = 3600.0;
+
+/// The largest standard deviation of the cameras' random rotation ([`Jitter::rotation_deg`]):
+/// half a turn. Beyond it a rotation is no perturbation of a pose but a random orientation.
+pub const MAX_JITTER_ROTATION_DEG: f64 = 180.0;
 
 /// One camera of a rig.
 #[derive(Clone, Debug, PartialEq)]
@@ -245,6 +257,16 @@ impl RigSettings {
                 }
                 if !start_deg.is_finite() {
                     return Err(SynthError::invalid("rig.layout.start_deg", "must be finite"));
+                }
+                if start_deg.abs() > MAX_START_DEG {
+                    return Err(SynthError::invalid(
+                        "rig.layout.start_deg",
+                        format!(
+                            "must lie in [-{max}, {max}] degrees (every ring starts within one turn), got {}",
+                            num(*start_deg),
+                            max = num(MAX_START_DEG)
+                        ),
+                    ));
                 }
             }
             Layout::Sphere { count } if *count == 0 => {
@@ -304,6 +326,16 @@ impl RigSettings {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(SynthError::invalid(name, format!("must be zero or positive, got {}", num(v))));
             }
+        }
+        if self.jitter.rotation_deg > MAX_JITTER_ROTATION_DEG {
+            return Err(SynthError::invalid(
+                "rig.jitter.rotation_deg",
+                format!(
+                    "must be at most {} degrees (a larger rotation is no perturbation of a pose), got {}",
+                    num(MAX_JITTER_ROTATION_DEG),
+                    num(self.jitter.rotation_deg)
+                ),
+            ));
         }
         if let Some(d) = self.distance_mm {
             if !(d > 0.0 && d.is_finite()) {
@@ -606,6 +638,29 @@ mod tests {
         assert!(holdout.build(&lens, &box40(), 0).is_err());
         let jitter = RigSettings { jitter: Jitter { position_mm: -1.0, rotation_deg: 0.0 }, ..Default::default() };
         assert!(jitter.build(&lens, &box40(), 0).is_err());
+        // Angles beyond any meaning are refused by key: at a start of 1e30 degrees every camera
+        // of the ring stood at the same angle.
+        for (start, ok) in [(-3600.0, true), (3600.0, true), (3600.5, false), (-1e30, false), (1e30, false)] {
+            let ring = Layout::Ring { count: 4, arc_deg: 360.0, start_deg: start, axis: RingAxis::X };
+            let r = RigSettings { layout: ring, ..Default::default() }.validate();
+            match (ok, r) {
+                (true, r) => r.unwrap_or_else(|e| panic!("{start}: {e}")),
+                (false, r) => {
+                    let e = r.expect_err("refused").to_string();
+                    assert!(e.contains("rig.layout.start_deg") && e.contains("[-3600, 3600]"), "{e}");
+                }
+            }
+        }
+        for (rotation, ok) in [(180.0, true), (180.5, false), (1e30, false)] {
+            let r = RigSettings { jitter: Jitter { position_mm: 0.0, rotation_deg: rotation }, ..Default::default() };
+            match (ok, r.validate()) {
+                (true, r) => r.unwrap_or_else(|e| panic!("{rotation}: {e}")),
+                (false, r) => {
+                    let e = r.expect_err("refused").to_string();
+                    assert!(e.contains("rig.jitter.rotation_deg") && e.contains("at most 180 degrees"), "{e}");
+                }
+            }
+        }
         // A camera inside the box: its scene would be written, then refused by every reader.
         let inside = RigSettings { distance_mm: Some(10.0), ..Default::default() };
         let e = inside.build(&lens, &box40(), 0).expect_err("a camera inside the box").to_string();

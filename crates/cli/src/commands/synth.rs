@@ -139,7 +139,7 @@ pub struct Args {
     /// Standard deviation of random camera position errors, mm [default: 0].
     #[arg(long, help_heading = "Cameras")]
     pub jitter_position: Option<f64>,
-    /// Standard deviation of random camera rotation errors, degrees [default: 0].
+    /// Standard deviation of random camera rotation errors, degrees, at most 180 [default: 0].
     #[arg(long, help_heading = "Cameras")]
     pub jitter_rotation: Option<f64>,
     /// Camera distance from the box centre, mm [default: the lens's object distance, 360].
