@@ -1219,3 +1219,39 @@ fn photron_mraw_recordings_import_as_videos() {
     let img = fluidnerf_io::image::read_image(&out.join(&f.expect("cam2 at 1 ms").file_path)).expect("reads");
     assert_eq!(img.get(5, 7), 64.0 + 10.0 * (20.0 + 4.0 * 5.0 + 3.0 * 7.0 + 10.0));
 }
+
+/// The video options act on video recordings only: given for still images the import warns,
+/// naming each option given and its value (a shifted time, --video-time-offset, was warned
+/// about only as one of "the --video-* options").
+#[test]
+fn video_options_for_still_images_are_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let out = dir.path().join("scene");
+    let import = |extra: &[&str]| {
+        let args = ["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-10,-10,-10,10,10,10"];
+        fluidnerf(&[&args[..], extra, &["--force", "-o", s(&out)]].concat())
+    };
+    for (extra, says) in [
+        (&["--video-time-offset", "0.5"][..], "--video-time-offset 0.5 has no effect"),
+        (&["--video-time-offset=-2"], "--video-time-offset -2 has no effect"),
+        (&["--video-every", "2"], "--video-every 2 has no effect"),
+        (&["--video-frames", "0..2"], "--video-frames 0..2 has no effect"),
+        (
+            &["--video-range", "full", "--video-time-offset", "1e-3"],
+            "--video-time-offset 0.001, --video-range full have",
+        ),
+    ] {
+        let o = import(extra);
+        let e = stderr(&o);
+        assert!(o.status.success(), "{extra:?}: {e}");
+        assert!(e.contains(says) && e.contains("no camera's recording is a video file"), "{extra:?}: {e}");
+    }
+    let o = import(&[]);
+    assert!(o.status.success() && !stderr(&o).contains("no effect"), "{}", stderr(&o));
+}

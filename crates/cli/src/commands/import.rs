@@ -997,12 +997,25 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     if let Some(r) = &mut from_file.recording {
         r.frames = sources.iter().map(|&k| r.frames[k].clone()).collect();
     }
-    let video_flags = args.video_frames.is_some()
-        || args.video_every != 1
-        || args.video_time_offset != 0.0
-        || args.video_range != fluidnerf_io::video::VideoRange::Auto;
-    if videos.is_empty() && video_flags {
-        log::warn!("the --video-* options have no effect: no camera's recording is a video file");
+    // The video options given, as given, so that the warning names each one.
+    let video_flags: Vec<String> = [
+        args.video_frames.as_ref().map(|r| format!("--video-frames {r}")),
+        (args.video_every != 1).then(|| format!("--video-every {}", args.video_every)),
+        (args.video_time_offset != 0.0)
+            .then(|| format!("--video-time-offset {}", fluidnerf_core::num(args.video_time_offset))),
+        (args.video_range != fluidnerf_io::video::VideoRange::Auto)
+            .then(|| format!("--video-range {}", args.video_range)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if videos.is_empty() && !video_flags.is_empty() {
+        log::warn!(
+            "{} {} no effect: no camera's recording is a video file (the images are stills or series of images, \
+             whose frames are all imported with the times they have)",
+            video_flags.join(", "),
+            if video_flags.len() == 1 { "has" } else { "have" }
+        );
     }
     let relative = |p: &Path| -> anyhow::Result<PathBuf> {
         let abs = p.canonicalize().with_context(|| format!("cannot resolve {}", p.display()))?;
