@@ -249,3 +249,25 @@ fn a_runs_configuration_given_as_its_report_is_named_as_such() {
     );
     assert!(!d.join("cmp").exists(), "nothing written for failed comparisons");
 }
+
+/// Times and ratios no run gives, read from a report, are tabled in scientific notation: a
+/// `train_time_s` of 1e308 was printed as 309 digits, which broke the table's columns.
+#[test]
+fn huge_times_keep_the_table_narrow() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let curve = |time: f64| {
+        serde_json::json!({
+            "method": "sart",
+            "nrmse_history": [{"iteration": 1, "train_time_s": 0.5, "nrmse": 0.4}],
+            "train": {"train_time_s": time},
+        })
+    };
+    std::fs::write(d.join("slow.json"), curve(1e308).to_string()).expect("writes");
+    std::fs::write(d.join("quick.json"), curve(1.0).to_string()).expect("writes");
+    let out = fluidnerf(d, &["compare", "slow.json", "quick.json", "-o", "cmp", "-q"]);
+    ok(&out);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("1.0e308"), "{table}");
+    assert!(table.lines().all(|l| l.chars().count() < 120), "{table}");
+}

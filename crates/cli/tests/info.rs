@@ -149,6 +149,24 @@ fn a_camera_with_a_short_focal_length_sees_the_box() {
     assert!(!text(&o).1.contains("between pixel centres"), "{}", text(&o).1);
 }
 
+/// Coefficients far from any lens's, that the scene still allows, are described in short:
+/// `{}` wrote a distortion coefficient of 1e-300 as 302 digits.
+#[test]
+fn extreme_coefficients_are_described_in_short() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.frames[1].camera.distortion.k2 = 1e-300;
+    scene.frames[1].camera.distortion.p1 = -2.5e-200;
+    scene.frames[1].camera.intrinsics.skew = 1e-250;
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stdout.contains("skew 1e-250"), "{stdout}");
+    assert!(stdout.contains("k2 1e-300 p1 -2.5e-200 p2 0"), "{stdout}");
+    assert!(stdout.lines().all(|l| l.chars().count() < 200), "{stdout}");
+}
+
 /// A distortion that cannot be inverted at the image's edges stopped every method after the
 /// scene was taken, with an error that named no camera; the scene is refused, naming the frame.
 #[test]
@@ -157,8 +175,9 @@ fn a_distortion_not_invertible_at_the_image_edges_is_an_error() {
     let mut scene = good_scene(dir.path());
     scene.frames[1].camera.distortion.k1 = 1e300;
     fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
     assert_fails_with(
-        &info(dir.path()),
+        &o,
         &["transforms.json", "frame 1", "images/c1.png", "lens undistortion did not converge for pixel"],
     );
 }

@@ -49,7 +49,7 @@ pub use field::{Baked, ScalarField, Support, SupportWalk};
 pub use geometry::{Aabb, Ray};
 pub use glam;
 pub use image::Image;
-pub use number::{num, Num};
+pub use number::{fixed, num, Num};
 pub use render::{render_image, RenderSettings};
 pub use scene::{Frame, Scene, TruthRef};
 pub use volume::Volume;

@@ -47,6 +47,21 @@ impl fmt::Display for Num<f32> {
     }
 }
 
+/// The magnitude from which [`fixed`] writes a number in scientific notation.
+const FIXED_UP_TO: f64 = 1e9;
+
+/// `x` with `decimals` decimals, as tables write measured values (`{:.N}`), while that is short:
+/// from 10⁹ in magnitude in scientific notation with as many decimals (`1.0e308`), so that a
+/// value no run gives (a time of 1e308 s read from a file) keeps its column narrow instead of
+/// taking 300 digits. `NaN`, `inf` and `-inf` as they are.
+pub fn fixed(x: f64, decimals: usize) -> String {
+    if x.is_finite() && x.abs() >= FIXED_UP_TO {
+        format!("{x:.decimals$e}")
+    } else {
+        format!("{x:.decimals$}")
+    }
+}
+
 /// A point or vector as `[x, y, z]`, each coordinate as [`num`] writes it.
 impl fmt::Display for Num<[f64; 3]> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -93,7 +108,24 @@ fn to_f32(x: f64) -> Result<f32, String> {
 
 #[cfg(test)]
 mod tests {
-    use super::num;
+    use super::{fixed, num};
+
+    #[test]
+    fn fixed_decimals_stay_short() {
+        for (x, decimals, shown) in [
+            (0.5, 2, "0.50"),
+            (12.345, 1, "12.3"),
+            (999_999_999.0, 1, "999999999.0"),
+            (1e9, 1, "1.0e9"),
+            (1e308, 2, "1.00e308"),
+            (-2.5e300, 3, "-2.500e300"),
+            (1e-300, 4, "0.0000"),
+            (f64::INFINITY, 1, "inf"),
+            (f64::NAN, 1, "NaN"),
+        ] {
+            assert_eq!(fixed(x, decimals), shown);
+        }
+    }
 
     #[test]
     fn short_numbers_are_written_as_they_are_and_long_ones_in_scientific_notation() {

@@ -20,6 +20,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use fluidnerf_core::{fixed, num};
 use fluidnerf_metrics::NrmsePoint;
 use fluidnerf_pipeline::RunReport;
 use fluidnerf_viz::{write_plots, LinePlot, Series};
@@ -218,8 +219,8 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
                 "{}: NRMSE history point {k} (iteration {}) has a negative or non-finite value: time {} s, NRMSE {}",
                 report.display(),
                 p.iteration,
-                p.train_time_s,
-                p.nrmse
+                num(p.train_time_s),
+                num(p.nrmse)
             );
         }
         let point = Point { iteration: p.iteration as u64, train_time_s: p.train_time_s, nrmse: p.nrmse };
@@ -231,10 +232,10 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
                  time: the history must go forward in time",
                 report.display(),
                 point.iteration,
-                point.train_time_s,
+                num(point.train_time_s),
                 k - 1,
                 prev.iteration,
-                prev.train_time_s
+                num(prev.train_time_s)
             );
         }
         curve.push(point);
@@ -242,10 +243,14 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     // The table prints the final NRMSE and the run's time as they are; a value no run writes
     // would be printed as a result.
     if let Some(v) = final_nrmse.filter(|v| !(v.is_finite() && *v >= 0.0)) {
-        bail!("{}: `final_nrmse` is {v}; an NRMSE is a finite number ≥ 0 (or leave the key out)", report.display());
+        bail!(
+            "{}: `final_nrmse` is {}; an NRMSE is a finite number ≥ 0 (or leave the key out)",
+            report.display(),
+            num(v)
+        );
     }
     if let Some(v) = wall_time_s.filter(|v| !(v.is_finite() && *v >= 0.0)) {
-        bail!("{}: `train_time_s` of the run is {v} s; a time is a finite number ≥ 0", report.display());
+        bail!("{}: `train_time_s` of the run is {} s; a time is a finite number ≥ 0", report.display(), num(v));
     }
     let last = curve[curve.len() - 1];
     let final_nrmse = final_nrmse.unwrap_or(last.nrmse);
@@ -336,26 +341,32 @@ fn curves_csv(runs: &[Run]) -> String {
                 csv_field(&run.method),
                 csv_field(run.preset.as_deref().unwrap_or("")),
                 p.iteration,
-                p.train_time_s,
-                p.nrmse
+                num(p.train_time_s),
+                num(p.nrmse)
             );
         }
     }
     text
 }
 
+/// A time in seconds for the table, short whatever a report holds (a `train_time_s` of 1e308
+/// took 309 digits and broke the table's columns).
 fn seconds(t: Option<f64>) -> String {
     match t {
-        Some(t) if t < 10.0 => format!("{t:.2}"),
-        Some(t) => format!("{t:.1}"),
+        Some(t) if t < 10.0 => fixed(t, 2),
+        Some(t) => fixed(t, 1),
         None => "never".into(),
     }
 }
 
-/// A ratio with three significant digits (0.00452, 1.21, 38.5, 1250).
+/// A ratio with three significant digits (0.00452, 1.21, 38.5, 1250), in scientific notation
+/// below 0.001 and from a million (1.00e308), where its digits would break the table.
 fn ratio(r: f64) -> String {
     if !(r.is_finite() && r > 0.0) {
         return format!("{r}");
+    }
+    if !(1e-3..1e6).contains(&r) {
+        return format!("{r:.2e}");
     }
     let decimals = (2 - r.log10().floor() as i32).max(0) as usize;
     format!("{r:.decimals$}")
@@ -371,8 +382,8 @@ fn table(rows: &[Row], reference: usize, thresholds: &[f64]) -> String {
     for (k, r) in rows.iter().enumerate() {
         let mut line = vec![
             if k == reference { format!("{} *", r.run.label) } else { r.run.label.clone() },
-            format!("{:.4}", r.run.final_nrmse),
-            format!("{:.4}", r.run.best_nrmse),
+            fixed(r.run.final_nrmse, 4),
+            fixed(r.run.best_nrmse, 4),
             seconds(Some(r.run.wall_time_s)),
         ];
         line.extend(r.time_to_threshold_s.iter().map(|&t| seconds(t)));

@@ -6,7 +6,7 @@ use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use fluidnerf_core::{Camera, Frame, Scene};
+use fluidnerf_core::{fixed, num, Camera, Frame, Scene};
 use fluidnerf_io::image::read_image_with;
 use fluidnerf_io::scene::{
     cameras_near_box, check_pixels, load_scene, odd_sample_kind, recorded_linearisation, scene_file_path,
@@ -37,7 +37,7 @@ pub struct Args {
 fn v3(v: fluidnerf_core::glam::DVec3) -> String {
     // Round-off below the printed precision must not print as "-0.000".
     let c = |x: f64| if x.abs() < 5e-4 { 0.0 } else { x };
-    format!("({:.3}, {:.3}, {:.3})", c(v.x), c(v.y), c(v.z))
+    format!("({}, {}, {})", fixed(c(v.x), 3), fixed(c(v.y), 3), fixed(c(v.z), 3))
 }
 
 fn describe_camera(out: &mut String, cam: &Camera, scene: &Scene) {
@@ -45,15 +45,21 @@ fn describe_camera(out: &mut String, cam: &Camera, scene: &Scene) {
     let k = &cam.intrinsics;
     let _ = writeln!(
         out,
-        "  centre {} {u}, looking along {}, {:.3} {u} from the box centre",
+        "  centre {} {u}, looking along {}, {} {u} from the box centre",
         v3(cam.centre()),
         v3(cam.forward()),
-        (scene.aabb.centre() - cam.centre()).length()
+        fixed((scene.aabb.centre() - cam.centre()).length(), 3)
     );
     let _ = writeln!(
         out,
         "  intrinsics {}x{} px, fx {} fy {}, cx {} cy {} (pixel centres at integers), skew {}",
-        k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.skew
+        k.width,
+        k.height,
+        num(k.fx),
+        num(k.fy),
+        num(k.cx),
+        num(k.cy),
+        num(k.skew)
     );
     let d = &cam.distortion;
     if d.is_identity() {
@@ -62,20 +68,27 @@ fn describe_camera(out: &mut String, cam: &Camera, scene: &Scene) {
         let _ = writeln!(
             out,
             "  distortion (OpenCV): k1 {} k2 {} p1 {} p2 {} k3 {} k4 {} k5 {} k6 {}",
-            d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6
+            num(d.k1),
+            num(d.k2),
+            num(d.p1),
+            num(d.p2),
+            num(d.k3),
+            num(d.k4),
+            num(d.k5),
+            num(d.k6)
         );
     }
     if let Some(lens) = &cam.lens {
         let _ = writeln!(
             out,
-            "  thin lens: f {} {u}, f/{:.3} (aperture {:.4} {u}), magnification {}, pixel pitch {} {u}, \
-             focused at {:.3} {u}",
-            lens.focal_length,
-            lens.f_number(),
-            lens.aperture_diameter,
-            lens.magnification,
-            lens.pixel_pitch,
-            lens.object_distance()
+            "  thin lens: f {} {u}, f/{} (aperture {} {u}), magnification {}, pixel pitch {} {u}, \
+             focused at {} {u}",
+            num(lens.focal_length),
+            fixed(lens.f_number(), 3),
+            fixed(lens.aperture_diameter, 4),
+            num(lens.magnification),
+            num(lens.pixel_pitch),
+            fixed(lens.object_distance(), 3)
         );
     }
 }
