@@ -13,6 +13,14 @@ import pytest
 tifffile = pytest.importorskip("tifffile")
 
 
+def imagej_stack(path, volume, voxel, origin):
+    """Writes `volume` (nz, ny, nx) as tifffile writes a stack for ImageJ: voxel sizes (x, y, z)
+    in mm, the origin in voxels (ImageJ's xorigin, yorigin, zorigin)."""
+    metadata = {"axes": "ZYX", "unit": "mm", "spacing": voxel[2]}
+    metadata.update(zip(("xorigin", "yorigin", "zorigin"), origin))
+    tifffile.imwrite(path, volume, imagej=True, resolution=(1 / voxel[0], 1 / voxel[1]), metadata=metadata)
+
+
 def run(cli, *args):
     out = subprocess.run([cli, *map(str, args)], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
@@ -57,20 +65,7 @@ def test_an_exported_stack_is_the_volume_with_its_calibration(static_scene, cli,
 def test_a_stack_written_for_imagej_is_read_with_its_box(cli, tmp_path):
     rng = np.random.default_rng(6)
     volume = rng.random((4, 3, 5), dtype=np.float32)
-    tifffile.imwrite(
-        tmp_path / "stack.tif",
-        volume,
-        imagej=True,
-        resolution=(1 / 0.5, 1 / 0.25),
-        metadata={
-            "axes": "ZYX",
-            "unit": "mm",
-            "spacing": 0.75,
-            "xorigin": 4.0,
-            "yorigin": -2.0,
-            "zorigin": 1.0,
-        },
-    )
+    imagej_stack(tmp_path / "stack.tif", volume, (0.5, 0.25, 0.75), (4.0, -2.0, 1.0))
     run(cli, "export", tmp_path / "stack.tif", "-o", tmp_path / "out", "--npy")
     np.testing.assert_array_equal(np.load(tmp_path / "out" / "volume.npy"), volume)
     settings = json.loads((tmp_path / "out" / "export.json").read_text())
@@ -96,20 +91,7 @@ def test_a_scene_is_synthesised_from_a_stack_as_from_the_command_line(cli, tmp_p
 
     rng = np.random.default_rng(7)
     volume = rng.random((10, 8, 12), dtype=np.float32)
-    tifffile.imwrite(
-        tmp_path / "truth.tif",
-        volume,
-        imagej=True,
-        resolution=(1 / 2.0, 1 / 2.5),
-        metadata={
-            "axes": "ZYX",
-            "unit": "mm",
-            "spacing": 3.0,
-            "xorigin": 6.0,
-            "yorigin": 4.0,
-            "zorigin": 5.0,
-        },
-    )
+    imagej_stack(tmp_path / "truth.tif", volume, (2.0, 2.5, 3.0), (6.0, 4.0, 5.0))
     small = {"rig": {"layout": {"count": 4}}, "lens": {"resolution": [16, 16]}}
     phantom = {"kind": "volume", "volume_path": str(tmp_path / "truth.tif")}
     scene = fluidnerf.synth(tmp_path / "py", "demo", phantom=phantom, **small)

@@ -1063,6 +1063,23 @@ pub const MAX_INTENSITY_SCALE: f64 = 1e20;
 const CHECKED_SIDE: usize = 16384;
 const CHECKED_PIXELS: usize = 1 << 28;
 
+/// The error of frame `i` whose image's header gives another size than its intrinsics; `None`
+/// when they agree or the header cannot be read (the loading of the images names that).
+fn header_disagrees(scene: &Scene, i: usize) -> Option<IoError> {
+    let frame = &scene.frames[i];
+    let path = scene.resolve(&frame.file_path);
+    let (w, h) = (frame.camera.width(), frame.camera.height());
+    let (iw, ih) = crate::image::read_dimensions(&path).ok()?;
+    ((iw as usize, ih as usize) != (w, h)).then(|| IoError::ImageSize {
+        path,
+        frame: i,
+        found_width: iw as usize,
+        found_height: ih as usize,
+        expected_width: w,
+        expected_height: h,
+    })
+}
+
 /// Checks what [`load_scene`] checks on a scene built in memory: a valid aabb near enough the
 /// origin for its size ([`Aabb::check_resolvable`]), at least one frame, a positive intensity
 /// scale, finite times, a time on every frame or on none, no two frames on the same image file,
@@ -1197,22 +1214,10 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     // and a camera imaging the box on such a grid still sees it. Plausible sizes are left to
     // the loading of the images, which compares every image.
     for &i in &distinct {
-        let frame = &scene.frames[i];
-        let (w, h) = (frame.camera.width(), frame.camera.height());
-        if w.max(h) <= CHECKED_SIDE && w.saturating_mul(h) <= CHECKED_PIXELS {
-            continue;
-        }
-        let path = scene.resolve(&frame.file_path);
-        if let Ok((iw, ih)) = crate::image::read_dimensions(&path) {
-            if (iw as usize, ih as usize) != (w, h) {
-                return Err(IoError::ImageSize {
-                    path,
-                    frame: i,
-                    found_width: iw as usize,
-                    found_height: ih as usize,
-                    expected_width: w,
-                    expected_height: h,
-                });
+        let (w, h) = (scene.frames[i].camera.width(), scene.frames[i].camera.height());
+        if w.max(h) > CHECKED_SIDE || w.saturating_mul(h) > CHECKED_PIXELS {
+            if let Some(e) = header_disagrees(scene, i) {
+                return Err(e);
             }
         }
     }
@@ -1238,19 +1243,8 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
         // can leave a camera blind; that is the problem to name, when the image's header says
         // so. An image that cannot be read is left to the loading of the images.
         let frame = &scene.frames[i];
-        let path = scene.resolve(&frame.file_path);
-        let (w, h) = (frame.camera.width(), frame.camera.height());
-        if let Ok((iw, ih)) = crate::image::read_dimensions(&path) {
-            if (iw as usize, ih as usize) != (w, h) {
-                return Err(IoError::ImageSize {
-                    path,
-                    frame: i,
-                    found_width: iw as usize,
-                    found_height: ih as usize,
-                    expected_width: w,
-                    expected_height: h,
-                });
-            }
+        if let Some(e) = header_disagrees(scene, i) {
+            return Err(e);
         }
         if let Some(size) = frame.camera.box_image_size(&aabb).filter(|s| s.min_element() < 1.0) {
             return Err(IoError::BoxBetweenPixels {
