@@ -1070,7 +1070,7 @@ fn header_disagrees(scene: &Scene, i: usize) -> Option<IoError> {
     let path = scene.resolve(&frame.file_path);
     let (w, h) = (frame.camera.width(), frame.camera.height());
     let (iw, ih) = crate::image::read_dimensions(&path).ok()?;
-    ((iw as usize, ih as usize) != (w, h)).then(|| IoError::ImageSize {
+    ((iw as usize, ih as usize) != (w, h)).then_some(IoError::ImageSize {
         path,
         frame: i,
         found_width: iw as usize,
