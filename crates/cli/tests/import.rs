@@ -35,6 +35,17 @@ fn rig() -> Vec<(String, Camera)> {
         .collect()
 }
 
+/// [`rig`]'s calibration (`DIR/rig.yml`) and a still image of each camera (`DIR/images/NAME.png`).
+fn rig_with_stills(dir: &Path) -> (PathBuf, PathBuf) {
+    let calib = dir.join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    (calib, images)
+}
+
 fn image(dir: &Path, name: &str) {
     write_png16_counts(&dir.join(name), &Image::from_vec(32, 24, vec![7.0; 32 * 24])).expect("writes image");
 }
@@ -1032,12 +1043,7 @@ fn images_given_as_a_file_are_named_as_such() {
 #[test]
 fn a_linearisation_for_16_bit_images_is_warned_about() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let calib = dir.path().join("rig.yml");
-    write_opencv(&calib, &rig()).expect("writes calibration");
-    let images = dir.path().join("images");
-    for (n, _) in rig() {
-        image(&images, &format!("{n}.png"));
-    }
+    let (calib, images) = rig_with_stills(dir.path());
     let out = dir.path().join("scene");
     let import = |linearisation: &str| {
         fluidnerf(&[
@@ -1226,12 +1232,7 @@ fn photron_mraw_recordings_import_as_videos() {
 #[test]
 fn video_options_for_still_images_are_warned_about() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let calib = dir.path().join("rig.yml");
-    write_opencv(&calib, &rig()).expect("writes calibration");
-    let images = dir.path().join("images");
-    for (n, _) in rig() {
-        image(&images, &format!("{n}.png"));
-    }
+    let (calib, images) = rig_with_stills(dir.path());
     let out = dir.path().join("scene");
     let import = |extra: &[&str]| {
         let args = ["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-10,-10,-10,10,10,10"];

@@ -72,12 +72,13 @@ pub fn step_out_of_range(aabb: &Aabb, step: f64, units: &str) -> Option<String> 
     })
 }
 
-/// Why the images of a volume (values up to `largest` in magnitude, filling `aabb`) times
-/// `scale` would not be finite 32-bit floats: no ray crosses more of the volume than its box's
-/// diagonal, so its integral is at most `largest × diagonal × scale`, and beyond the largest
-/// float the renderers' sums overflow to infinities and NaN. `None` when every image is finite.
-pub fn integrals_overflow(largest: f32, aabb: &Aabb, scale: f64) -> Option<String> {
-    let diagonal = aabb.size().length();
+/// Why the images of `volume` times `scale` would not be finite 32-bit floats: no ray crosses
+/// more of the volume than its box's diagonal, so its integral is at most its largest magnitude
+/// × the diagonal × `scale`, and beyond the largest float the renderers' sums overflow to
+/// infinities and NaN. `None` when every image is finite.
+pub fn integrals_overflow(volume: &crate::Volume, scale: f64) -> Option<String> {
+    let largest = volume.data.iter().fold(0f32, |m, x| m.max(x.abs()));
+    let diagonal = volume.aabb.size().length();
     let bound = f64::from(largest) * diagonal * scale;
     (bound > f64::from(f32::MAX)).then(|| {
         format!(

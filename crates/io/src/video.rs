@@ -300,6 +300,18 @@ pub fn read_video_frames(
     Ok(info)
 }
 
+/// Whether `path` is a raw recording of a high-speed camera (an MRAW, by its extension as its
+/// reader knows it, or a file with a cine header), whose frames are the sensor's linear
+/// counts: no range or linearisation applies to them. False for a file that cannot be read
+/// (reading it says why).
+pub fn is_raw_recording(path: &Path) -> bool {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mraw")) {
+        return true;
+    }
+    let mut head = Vec::with_capacity(12);
+    File::open(path).and_then(|f| f.take(12).read_to_end(&mut head)).is_ok() && sniff(&head) == Container::Cine
+}
+
 /// Warns that `--video-range` and the linearisation do not apply to `path`, a raw recording
 /// (`kind`: "a cine file") whose frames are linear sensor counts, when either is given.
 pub(crate) fn warn_unused_by_raw(path: &Path, opts: &VideoOptions, kind: &str) {

@@ -70,8 +70,7 @@ pub(crate) fn volume_from_py(
 /// Refuses a volume whose images times `scale` would overflow 32-bit floats (see
 /// `fluidnerf_core::render::integrals_overflow`): they came back full of infinities and NaN.
 pub(crate) fn check_integrals(v: &fluidnerf_core::Volume, scale: f64) -> PyResult<()> {
-    let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
-    match fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scale) {
+    match fluidnerf_core::render::integrals_overflow(v, scale) {
         Some(problem) => Err(err(format!("volume: {problem}"))),
         None => Ok(()),
     }

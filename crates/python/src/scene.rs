@@ -550,6 +550,24 @@ pub fn read_video<'py>(
         linearisation.parse().map_err(|e: String| err(format!("linearisation: {e}")))?;
     let opts =
         fluidnerf_io::video::VideoOptions { range, start, end, every, time_offset_s: time_offset, linearisation };
+    // A cine's or MRAW's frames are the sensor's linear counts, read as they are: a range or a
+    // linearisation asked of them would be ignored, and the frames returned as if it had been
+    // applied. Refused before any frame is decoded.
+    if fluidnerf_io::video::is_raw_recording(&path) {
+        let what = |asked: &str| {
+            format!(
+                "{asked} does not apply to {}, a raw recording of the sensor's linear counts, which are read as they \
+                 are: leave it out",
+                path.display()
+            )
+        };
+        if opts.range == fluidnerf_io::video::VideoRange::Limited {
+            return Err(err(format!("range: {}", what("the limited range"))));
+        }
+        if opts.linearisation != fluidnerf_io::image::Linearisation::Linear {
+            return Err(err(format!("linearisation: {}", what(&format!("`{asked_linearisation}`")))));
+        }
+    }
     // The frames go straight into the array's buffer as they are decoded: one copy of the
     // recording in memory, not a list of frames and then the array.
     let (mut data, mut times) = (Vec::<f32>::new(), Vec::<f64>::new());
@@ -574,23 +592,6 @@ pub fn read_video<'py>(
             .map_err(|e| err(e.to_string()))
         })
     })?;
-    // A cine's or MRAW's frames are the sensor's linear counts, read as they are: a range or a
-    // linearisation asked of them was ignored, and the frames returned as if it had been applied.
-    if info.range_source == fluidnerf_io::video::RangeSource::Raw {
-        let what = |asked: &str| {
-            format!(
-                "{asked} does not apply to {}, a raw recording of the sensor's linear counts, which are read as they \
-                 are: leave it out",
-                path.display()
-            )
-        };
-        if opts.range == fluidnerf_io::video::VideoRange::Limited {
-            return Err(err(format!("range: {}", what("the limited range"))));
-        }
-        if opts.linearisation != fluidnerf_io::image::Linearisation::Linear {
-            return Err(err(format!("linearisation: {}", what(&format!("`{asked_linearisation}`")))));
-        }
-    }
     let (w, h) = size.unwrap_or((info.width as usize, info.height as usize));
     let n = times.len();
     let info = serde_json::to_string(&info).map_err(|e| err(e.to_string()))?;

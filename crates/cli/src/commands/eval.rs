@@ -439,8 +439,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // their metrics were written as infinite and NaN.
     if let (false, Recon::Volumes(volumes)) = (holdouts.is_empty(), &recon) {
         for (i, v) in volumes.iter().enumerate() {
-            let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
-            if let Some(problem) = fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scene.intensity_scale) {
+            if let Some(problem) = fluidnerf_core::render::integrals_overflow(v, scene.intensity_scale) {
                 let file = if run_dir.is_some() { &args.recon[0] } else { &args.recon[i] };
                 bail!("{}: reprojected onto the held-out views: {problem}, or give --no-reprojection", file.display());
             }

@@ -331,8 +331,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let source = load_source(&args.recon, Some(&scene))?;
     // Checked before the output folder is made: the views would hold infinities and NaN.
     if let Source::Volume(v) = &source {
-        let largest = v.data.iter().fold(0f32, |m, x| m.max(x.abs()));
-        if let Some(problem) = fluidnerf_core::render::integrals_overflow(largest, &v.aabb, scene.intensity_scale) {
+        if let Some(problem) = fluidnerf_core::render::integrals_overflow(v, scene.intensity_scale) {
             bail!("{}: {problem}", args.recon.display());
         }
     }
