@@ -226,7 +226,9 @@ fn back_projection_of_several_views_equals_view_by_view() {
 /// Projecting one volume into several views at once finds its empty chunks once; the images
 /// are those of the views projected one by one, bit for bit, with every instruction set, for
 /// views that share their rows, general and distorted ones, and a volume with empty slices,
-/// empty rows, lone voxels and a filled block.
+/// empty rows, lone voxels and a filled block. With few views for the threads (seven on two)
+/// each view is split over the threads as one view alone is; with many (sixteen on two) each
+/// view runs on one thread, and its image is then the one a single thread draws.
 #[test]
 fn forward_projection_of_several_views_equals_view_by_view() {
     let mut cams = ring(2, 24);
@@ -247,19 +249,25 @@ fn forward_projection_of_several_views_equals_view_by_view() {
             }
         }
     }
+    let pool = |threads: usize| rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+    let (two, one_thread) = (pool(2), pool(1));
+    let few = [6, 0, 4, 2, 5, 1, 3];
+    let many: Vec<usize> = few.iter().chain(&few).chain(&[0, 6]).copied().collect();
     for isa in Isa::available() {
         let p = FootprintProjector::new(grid, &cams, 0.8).expect("valid").with_isa(isa);
         assert!(p.shared_row_views() >= 3, "some views share their rows");
-        let views = [6, 0, 4, 2, 5, 1, 3];
-        let mut together: Vec<Vec<f32>> = views.iter().map(|&v| vec![7f32; p.view_len(v)]).collect();
-        let mut outs: Vec<&mut [f32]> = together.iter_mut().map(Vec::as_mut_slice).collect();
-        p.forward_views(&views, &x, &mut outs);
-        for (&v, got) in views.iter().zip(&together) {
-            let mut one = vec![0f32; p.view_len(v)];
-            p.forward(v, &x, &mut one);
-            assert!(one.iter().any(|&a| a > 0.0), "{isa:?} view {v} sees nothing");
-            for (i, (a, b)) in got.iter().zip(&one).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "{isa:?} view {v}, pixel {i}: {a} vs {b}");
+        for (views, alone_on) in [(&few[..], &two), (&many[..], &one_thread)] {
+            let mut together: Vec<Vec<f32>> = views.iter().map(|&v| vec![7f32; p.view_len(v)]).collect();
+            let mut outs: Vec<&mut [f32]> = together.iter_mut().map(Vec::as_mut_slice).collect();
+            two.install(|| p.forward_views(views, &x, &mut outs));
+            for (&v, got) in views.iter().zip(&together) {
+                let mut one = vec![0f32; p.view_len(v)];
+                alone_on.install(|| p.forward(v, &x, &mut one));
+                assert!(one.iter().any(|&a| a > 0.0), "{isa:?} view {v} sees nothing");
+                for (i, (a, b)) in got.iter().zip(&one).enumerate() {
+                    let n = views.len();
+                    assert_eq!(a.to_bits(), b.to_bits(), "{isa:?}, {n} views, view {v}, pixel {i}: {a} vs {b}");
+                }
             }
         }
     }

@@ -295,6 +295,10 @@ type Slices = std::iter::StepBy<Range<usize>>;
 /// Voxels projected per batch.
 const CHUNK: usize = 16;
 
+/// Views per thread from which [`Projector::forward_views`] gives each view to one thread
+/// instead of splitting every view over all of them.
+const VIEWS_PER_THREAD: usize = 4;
+
 /// `0, 1, …, CHUNK − 1` as f32: `(i0 + q) as f32` without a conversion per lane (exact: grids
 /// are far below 2²⁴).
 const Q: [f32; CHUNK] = {
@@ -2677,26 +2681,25 @@ impl FootprintProjector {
 
 impl FootprintProjector {
     /// [`Projector::forward`], with the volume's non-empty chunks found beforehand or not.
-    fn forward_known(&self, view: usize, x: &[f32], known: Option<&NonEmptyChunks>, out: &mut [f32]) {
+    /// The forward projection of `view` into `out`; with `serial`, on the calling thread alone
+    /// (the caller runs views in parallel), else split over the threads by z-slices.
+    fn forward_known(&self, view: usize, x: &[f32], known: Option<&NonEmptyChunks>, out: &mut [f32], serial: bool) {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
         let (w, n) = (fv.cam.width, fv.side);
         let nz = self.grid.dims[2];
         // Interleaved slices, so that the threads share the work evenly when it is uneven
         // (chunks of empty voxels are skipped, and a flow fills part of the box).
-        let parts = scatter_parts().clamp(1, nz);
-        let partials: Vec<Vec<f32>> = (0..parts)
-            .into_par_iter()
-            .map(|first| {
-                let ks = (first..nz).step_by(parts);
-                let mut img = vec![0f32; SCATTER_IMAGES * pw * ph];
-                dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::scatter::<N, D>(
-                    self, view, ks, x, known, &mut img
-                ));
-                img
-            })
-            .collect();
-        out.par_chunks_mut(w).enumerate().for_each(|(r, row)| {
+        let parts = if serial { 1 } else { scatter_parts().clamp(1, nz) };
+        let scatter = |first: usize| {
+            let ks = (first..nz).step_by(parts);
+            let mut img = vec![0f32; SCATTER_IMAGES * pw * ph];
+            dispatch!(fv.side, fv.cam.distorted, |N, D| kernels::scatter::<N, D>(self, view, ks, x, known, &mut img));
+            img
+        };
+        let partials: Vec<Vec<f32>> =
+            if parts == 1 { vec![scatter(0)] } else { (0..parts).into_par_iter().map(scatter).collect() };
+        let sum_row = |(r, row): (usize, &mut [f32])| {
             let at = (r + n) * pw + n;
             row.fill(0.0);
             for p in &partials {
@@ -2709,7 +2712,12 @@ impl FootprintProjector {
                     *o += a + b;
                 }
             }
-        });
+        };
+        if serial {
+            out.chunks_mut(w).enumerate().for_each(sum_row);
+        } else {
+            out.par_chunks_mut(w).enumerate().for_each(sum_row);
+        }
     }
 }
 
@@ -2724,7 +2732,7 @@ impl Projector for FootprintProjector {
 
     fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
         check_shapes(self, view, x.len(), out.len());
-        self.forward_known(view, x, None, out);
+        self.forward_known(view, x, None, out, false);
     }
 
     /// Which chunks of the volume hold anything is found once instead of once per view: for a
@@ -2736,8 +2744,17 @@ impl Projector for FootprintProjector {
             check_shapes(self, v, x.len(), out.len());
         }
         let known = NonEmptyChunks::of(&self.grid, x);
-        for (&v, out) in views.iter().zip(outs.iter_mut()) {
-            self.forward_known(v, x, Some(&known), out);
+        // With enough views for every thread to take several, each view runs on one thread:
+        // the threads then meet once, not twice per view, and no view's image is split.
+        if views.len() >= VIEWS_PER_THREAD * rayon::current_num_threads() {
+            views
+                .par_iter()
+                .zip(outs.par_iter_mut())
+                .for_each(|(&v, out)| self.forward_known(v, x, Some(&known), out, true));
+        } else {
+            for (&v, out) in views.iter().zip(outs.iter_mut()) {
+                self.forward_known(v, x, Some(&known), out, false);
+            }
         }
     }
 
