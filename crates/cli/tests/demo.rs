@@ -1,0 +1,44 @@
+//! `fluidnerf demo` end to end, at a small output grid and a few iterations per method.
+
+mod common;
+use common::*;
+
+/// The demo runs the grid field, the hybrid, ASART and SART-TV under the same stopping rule,
+/// prints one table with all four, writes their runs and the comparison, and refuses to
+/// replace an earlier demo unless asked.
+#[test]
+fn demo_compares_the_fields_with_both_classical_methods() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let d = tmp.path();
+    let args = ["demo", "-o", "out", "--resolution", "16", "--max-iterations", "4", "-q"];
+    let out = fluidnerf(d, &args);
+    ok(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let labels = ["FluidNeRF (fast field)", "voxel start → grid field", "ASART", "SART-TV"];
+    for label in labels {
+        assert!(stdout.lines().any(|l| l.starts_with(label)), "no table row for {label}:\n{stdout}");
+    }
+    // Every run ended at the cap given: the table says so.
+    assert!(stdout.contains("* ended by its iteration cap"), "{stdout}");
+    let comparison = json(&d.join("out/comparison.json"));
+    let rows = comparison.as_array().expect("a list of runs");
+    assert_eq!(rows.len(), 4);
+    for ((row, label), (dir, method)) in rows.iter().zip(labels).zip([
+        ("fluidnerf", "fast"),
+        ("hybrid", "hybrid"),
+        ("asart", "asart"),
+        ("sart-tv", "tv"),
+    ]) {
+        assert_eq!(row["method"], label);
+        let stopping = row["stopping"].as_str().unwrap_or_default();
+        assert!(stopping.starts_with("held-out early stopping") && stopping.ends_with("at most 4 iterations"), "{row}");
+        assert_eq!(row["iterations"], 4);
+        assert!(row["metrics"]["global"]["nrmse"].as_f64().is_some_and(f64::is_finite), "{row}");
+        let report = report(&d.join("out").join(dir));
+        assert_eq!(report["method"], method, "{dir}");
+    }
+    for file in ["slices.png", "convergence.png", "report.html"] {
+        assert!(d.join("out").join(file).is_file(), "{file}");
+    }
+    refused(&fluidnerf(d, &args), "already holds a demo; pass --force to replace it");
+}
