@@ -179,3 +179,33 @@ fn an_interrupted_cell_is_run_again_when_the_study_continues() {
     let record = json(&d.join("st/study.json"));
     assert_ne!(record["rows"][0]["stop_reason"], "Interrupted", "{record}");
 }
+
+/// A study continued in a folder whose record is missing (the study was killed before it wrote
+/// one) is checked against the scenes and runs there: other settings read back the cells made
+/// with the earlier ones, and the table mixed the two studies under the new settings.
+#[test]
+fn a_continued_study_refuses_scenes_and_runs_made_with_other_settings() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "sart", "--cameras", "2", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    // What a study killed before its record leaves: its scenes and runs, no study.json.
+    for f in ["study.json", "study.csv", "report.html"] {
+        std::fs::remove_file(d.join("st").join(f)).expect("removes");
+    }
+    let with = |extra: &[&str]| fluidnerf(d, &[&args[..], extra].concat());
+    refused(
+        &with(&["--seed", "5"]),
+        "holds a scene with other settings than this study's (st/scenes/ring360-c02-n000/synth.json: `seed`: 0 → 5)",
+    );
+    refused(
+        &with(&["--max-iterations", "10"]),
+        "holds a run with other settings than this study's (st/runs/ring360-c02-n000/sart/config.json: \
+         `stopping.max_iterations`: 20 → 10)",
+    );
+    assert!(!d.join("st/study.json").exists(), "a refused study wrote its record");
+    // The same settings continue it, reading the finished cell back.
+    let out = fluidnerf(d, &args);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("done earlier"));
+}

@@ -337,27 +337,106 @@ fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, nois
         .with_context(|| format!("synthesising {}", dir.display()))
 }
 
+/// The settings `synth` resolves the scene of a cell to.
+fn cell_settings(
+    g: &Grid,
+    layout: LayoutChoice,
+    cameras: usize,
+    noise: f64,
+) -> anyhow::Result<fluidnerf_synth::SynthSettings> {
+    use clap::Parser;
+    let line = synth_line(g, Path::new("scene"), layout, cameras, noise);
+    let cell = || format!("the scene of {} cameras, noise {noise}, {}", cameras, layout.name());
+    let argv = std::iter::once("fluidnerf".to_string()).chain(line);
+    let super::Command::Synth(args) =
+        crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{}: {e}", cell()))?.command
+    else {
+        bail!("{}: not a synth line", cell());
+    };
+    super::synth::resolve(&args).with_context(cell)
+}
+
 /// Checks the scene of every cell as `synth` would, and that it fits in memory, before anything
 /// is made: a cell refused only when its turn came left the cells before it made and the study
 /// unfinished.
 fn check_scenes(g: &Grid) -> anyhow::Result<()> {
-    use clap::Parser;
     for &layout in &g.layouts {
         for &cameras in &g.cameras {
             for &noise in &g.noise {
-                let line = synth_line(g, Path::new("scene"), layout, cameras, noise);
                 let cell = || format!("the scene of {} cameras, noise {noise}, {}", cameras, layout.name());
-                let argv = std::iter::once("fluidnerf".to_string()).chain(line);
-                let super::Command::Synth(args) =
-                    crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{}: {e}", cell()))?.command
-                else {
-                    bail!("{}: not a synth line", cell());
-                };
-                let settings = super::synth::resolve(&args).with_context(cell)?;
+                let settings = cell_settings(g, layout, cameras, noise)?;
                 let voxels = settings.truth_dims(&settings.aabb).iter().map(|&n| n as u64).product();
                 settings.check_memory(voxels).with_context(|| {
                     format!("{} (--cameras {cameras}, --pixels {}, --resolution {})", cell(), g.pixels, g.resolution)
                 })?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The configuration of a cell's run.
+fn cell_config(g: &Grid, scene_dir: &Path, method: Method) -> anyhow::Result<RunConfig> {
+    let mut config = RunConfig::new(std::path::absolute(scene_dir)?, method);
+    config.resolution = g.resolution;
+    config.seed = g.seed;
+    config.stopping = g.stopping;
+    if let MethodConfig::Classical(spec) = &mut config.method {
+        spec.projector.visual_hull = g.visual_hull;
+    }
+    Ok(config)
+}
+
+/// Refuses to continue a study whose scenes or finished runs in `out`, which it would read back
+/// instead of making them again, were made with other settings than the grid's: the table would
+/// mix the cells of two studies under one grid. Their own records are compared, not study.json,
+/// which a study killed before it wrote one lacks.
+fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
+    let other = |dir: &Path, what: &str, file: &Path, differences: String| {
+        anyhow::anyhow!(
+            "{} holds a {what} with other settings than this study's ({}: {differences}); use --force to start over \
+             or another folder",
+            dir.display(),
+            file.display()
+        )
+    };
+    for &layout in &g.layouts {
+        for &cameras in &g.cameras {
+            for &noise in &g.noise {
+                let name = scene_name(layout, cameras, noise);
+                let scene_dir = out.join("scenes").join(&name);
+                let record = scene_dir.join("synth.json");
+                if scene_dir.join("transforms.json").is_file() && record.is_file() {
+                    let given = cell_settings(g, layout, cameras, noise)?;
+                    let value: serde_json::Value = fluidnerf_pipeline::rundir::read_json(&record)?;
+                    let saved: fluidnerf_synth::SynthSettings =
+                        serde_json::from_value(value.get("settings").cloned().unwrap_or_default())
+                            .with_context(|| format!("{}: not the settings of a synthetic scene", record.display()))?;
+                    if saved != given {
+                        let differences = fluidnerf_pipeline::rundir::settings_differences(&saved, &given, 5);
+                        return Err(other(&scene_dir, "scene", &record, differences));
+                    }
+                }
+                for &method in &g.methods {
+                    let run_dir = out.join("runs").join(&name).join(method.name());
+                    let report_file = run_dir.join("report.json");
+                    if !(report_file.is_file()
+                        && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished)
+                    {
+                        continue;
+                    }
+                    let file = run_dir.join("config.json");
+                    let saved = RunConfig::read(&file)?;
+                    let mut given = cell_config(g, &scene_dir, method)?;
+                    // The version that wrote it is information only; a study folder moved
+                    // since holds its scenes elsewhere.
+                    given.fluidnerf_version.clone_from(&saved.fluidnerf_version);
+                    given.scene.clone_from(&saved.scene);
+                    if saved != given {
+                        let differences = fluidnerf_pipeline::rundir::settings_differences(&saved, &given, 5);
+                        return Err(other(&run_dir, "run", &file, differences));
+                    }
+                }
             }
         }
     }
@@ -417,6 +496,9 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
             );
         }
     }
+    if !args.force {
+        check_earlier_cells(out, &g)?;
+    }
     super::create_output_folder(out)?;
     let start = Instant::now();
     let total = g.layouts.len() * g.cameras.len() * g.noise.len() * g.methods.len();
@@ -446,13 +528,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         );
                     }
                     if !finished {
-                        let mut config = RunConfig::new(std::path::absolute(&scene_dir)?, method);
-                        config.resolution = g.resolution;
-                        config.seed = g.seed;
-                        config.stopping = g.stopping;
-                        if let MethodConfig::Classical(spec) = &mut config.method {
-                            spec.projector.visual_hull = g.visual_hull;
-                        }
+                        let config = cell_config(&g, &scene_dir, method)?;
                         let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
                         if report.status == RunStatus::Interrupted {
                             write_outputs(out, &g, &rows, &summaries)?;
