@@ -1316,6 +1316,8 @@ fn read_cameras_txt(path: &Path) -> Result<ColmapCameras, IoError> {
 fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
     let text = crate::read_input_text(path, "COLMAP images.txt")?;
     let mut out = Vec::new();
+    // Each image id and the line it was read on.
+    let mut ids: Vec<(u64, usize)> = Vec::new();
     let mut lines = text.lines().enumerate();
     while let Some((n, line)) = lines.next() {
         let line = line.trim();
@@ -1335,6 +1337,12 @@ fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
             .map(|s| s.parse::<f64>().map_err(|_| bad(format!("`{s}` is not a number"))))
             .collect::<Result<_, _>>()?;
         let camera_id: u64 = t[8].parse().map_err(|_| bad(format!("camera id `{}` is not an integer", t[8])))?;
+        // COLMAP's key of an image: one id twice is two models' files pasted together.
+        let id: u64 = t[0].parse().map_err(|_| bad(format!("image id `{}` is not an integer", t[0])))?;
+        if let Some((_, first)) = ids.iter().find(|(i, _)| *i == id) {
+            return Err(bad(format!("image id {id} appears twice (first on line {})", first + 1)));
+        }
+        ids.push((id, n));
         // As COLMAP's own reader: the name is the tenth field (names cannot hold spaces).
         out.push(ColmapImage {
             name: t[9].to_string(),
@@ -1485,6 +1493,7 @@ fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
     let mut run = || -> Result<Vec<ColmapImage>, String> {
         let n = b.u64()?;
         let mut out = Vec::new();
+        let mut ids = Vec::new();
         for _ in 0..n {
             let image_id = b.i32()?;
             let q = [b.f64()?, b.f64()?, b.f64()?, b.f64()?];
@@ -1499,6 +1508,11 @@ fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
             b.take(skip)?;
             let camera_id =
                 u64::try_from(camera_id).map_err(|_| format!("image {name}: camera id {camera_id} is negative"))?;
+            // COLMAP's key of an image: one id twice is two models' files pasted together.
+            if ids.contains(&image_id) {
+                return Err(format!("image id {image_id} ({name}) appears twice"));
+            }
+            ids.push(image_id);
             out.push(ColmapImage { name, q, t, camera_id, place: format!("image id {image_id}") });
         }
         b.end(n, "images")?;

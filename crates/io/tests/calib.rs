@@ -296,6 +296,11 @@ fn colmap_errors_name_the_file_and_line() {
         .expect("write");
     let err = read_colmap(dir.path()).expect_err("front.png twice").to_string();
     assert!(err.contains("images.txt") && err.contains("front.png is listed twice"), "{err}");
+    // One image id twice, under two names: COLMAP's key of an image, so a file of two models
+    // pasted together, whose poses were read as one model's.
+    std::fs::write(dir.path().join("images.txt"), text.replace("2 0.7071", "1 0.7071")).expect("write");
+    let err = read_colmap(dir.path()).expect_err("image id 1 twice").to_string();
+    assert!(err.contains("images.txt: line 8: image id 1 appears twice (first on line 5)"), "{err}");
     // A negative or huge size was said not to be an integer.
     std::fs::write(dir.path().join("images.txt"), &text).expect("write");
     for (size, says) in [("-64 48", "width `-64`"), ("64 99999999999", "height `99999999999`")] {
@@ -416,6 +421,15 @@ fn colmap_binary_errors_name_the_file() {
     std::fs::write(dir.path().join("images.bin"), &fewer).expect("write");
     let err = read_colmap(dir.path()).expect_err("trailing records").to_string();
     assert!(err.contains("images.bin") && err.contains("bytes follow the last of the 1 images"), "{err}");
+    // The second image with the first one's id: after the count, the first image's id, pose,
+    // camera id, name with its NUL, point count and two points of 24 bytes.
+    let mut twice = bytes.clone();
+    let second = 8 + 4 + 7 * 8 + 4 + "front.jpg".len() + 1 + 8 + 2 * 24;
+    assert_eq!(twice[second..second + 4], 2i32.to_le_bytes());
+    twice[second..second + 4].copy_from_slice(&1i32.to_le_bytes());
+    std::fs::write(dir.path().join("images.bin"), &twice).expect("write");
+    let err = read_colmap(dir.path()).expect_err("image id 1 twice").to_string();
+    assert!(err.contains("images.bin") && err.contains("image id 1 (side.jpg) appears twice"), "{err}");
     let mut cams = std::fs::read(dir.path().join("cameras.bin")).expect("read");
     cams.extend_from_slice(&[0; 5]);
     std::fs::write(dir.path().join("images.bin"), &bytes).expect("write");
