@@ -417,6 +417,40 @@ fn a_time_given_to_a_static_field_is_warned_of() {
     assert_eq!(plain, timed);
 }
 
+/// A `--time` that is no finite number is refused in one message: on a volume or a field of
+/// space alone it was first warned of as having no effect, then refused.
+#[test]
+fn a_time_that_is_no_number_is_refused_in_one_message() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, _) = make_scene(dir.path());
+    let run = dir.path().join("run");
+    write_trained(&run, scene.aabb);
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    for recon in [dir.path().join("recon.npy"), run] {
+        for (time, shown) in [("nan", "NaN"), ("inf", "inf")] {
+            let out = dir.path().join("views");
+            let o = fluidnerf(&[
+                "render",
+                &d(&recon),
+                "--scene",
+                &d(dir.path()),
+                "--out",
+                &d(&out),
+                "--camera",
+                "0",
+                &format!("--time={time}"),
+            ]);
+            assert!(!o.status.success(), "{recon:?} --time {time} ran");
+            assert_eq!(
+                String::from_utf8_lossy(&o.stderr),
+                format!("error: --time: the time must be a finite number, got {shown}\n"),
+                "{recon:?}"
+            );
+            assert!(!out.exists(), "{recon:?} --time {time} wrote output");
+        }
+    }
+}
+
 /// A run rendered with a scene other than the one it was made from, or a reconstruction of
 /// another box than the scene's, is warned about, as `eval` warns: both were rendered without
 /// a word.

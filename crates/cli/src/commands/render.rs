@@ -343,15 +343,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let what = args.recon.display().to_string();
     super::warn_of_other_box(&what, &source.aabb(), &scene, "is it a reconstruction of this scene?");
+    // The times first, as `export` does: a --time refused there (not a finite number) was
+    // first warned of as having no effect.
+    for (view, (time, what)) in views.iter_mut().zip(&asked) {
+        view.time = source.sample_time(*time, what)?;
+    }
     source.warn_time_unused(args.time, &args.recon);
     if args.bake != Bake::Auto && matches!(source, Source::Volume(_)) {
         log::warn!(
             "--bake has no effect: {} is a volume, rendered as it is; baking samples trained fields",
             args.recon.display()
         );
-    }
-    for (view, (time, what)) in views.iter_mut().zip(&asked) {
-        view.time = source.sample_time(*time, what)?;
     }
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
     // The grid `--projector auto` chose for the footprint projector, if it chose it.
