@@ -186,19 +186,22 @@ def test_a_window_index_outside_the_plan_is_refused_naming_the_argument_and_the_
     assert not out.exists()
 
 
-def test_windows_are_trained_only_on_the_scene_their_configuration_names(tr_scene, static_scene, tmp_path):
+def test_windows_are_trained_only_on_the_scene_their_configuration_names(tr_scene, tmp_path):
     """train_window(scene_root, config) trained on scene_root while the run's config.json
     recorded the configuration's scene: windows of two scenes could be stitched into one run."""
     cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
     out = tmp_path / "run"
+    # Another scene with frame times (one without has no windows to plan).
+    other = tmp_path / "other"
+    fluidnerf.load_scene(tr_scene.root).save(other)
     named = "scene: the configuration names the scene " + re.escape(
         f"{tr_scene.root}/transforms.json, not the one"
     )
     with pytest.raises(fluidnerf.FluidNerfError, match=named):
-        fluidnerf.dask.train_window(str(static_scene.root), cfg, str(out), 0)
+        fluidnerf.dask.train_window(str(other), cfg, str(out), 0)
     assert not out.exists()
     with pytest.raises(fluidnerf.FluidNerfError, match=named):
-        fluidnerf.dask.finish(str(static_scene.root), cfg, str(out))
+        fluidnerf.dask.finish(str(other), cfg, str(out))
     assert not out.exists()
     # The scene's file, or its folder by another spelling, is the same scene.
     same = json.loads(cfg) | {"scene": str(tr_scene.root / "." / "transforms.json")}

@@ -116,6 +116,21 @@ def test_a_run_that_cannot_be_copied_whole_leaves_no_half_copy(static_scene, tmp
     assert sorted(p.name for p in (tmp_path / "copies").iterdir()) == ["copy"]
 
 
+def test_the_window_plan_of_a_scene_without_frame_times_is_refused(static_scene, tr_scene):
+    """A scene none of whose frames has a time was planned as one window of one frame at
+    t = 0, a time the scene does not have."""
+    assert fluidnerf.window_plan(tr_scene, "tr-fast")["frame_times"] == [14.0, 14.5, 15.0, 15.5, 16.0]
+    with pytest.raises(
+        fluidnerf.FluidNerfError,
+        match=re.escape(
+            f"method: tr-fast plans its windows over the frames' times, and the scene {static_scene.root} has "
+            "no frame times (no frame has a `time`); give every frame its time, or reconstruct the scene "
+            "with a static method"
+        ),
+    ):
+        fluidnerf.window_plan(static_scene, "tr-fast")
+
+
 def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
     run = fluidnerf.reconstruct(
         static_scene,

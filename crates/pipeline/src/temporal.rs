@@ -774,6 +774,22 @@ pub fn window_plan(scene: &Scene, config: &RunConfig) -> Result<WindowPlan, Pipe
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
         ));
     };
+    // Each frame's time would be taken as 0: one window of one frame at a time the scene has not.
+    if scene.frames.iter().all(|f| f.time.is_none()) {
+        let named = if scene.root.as_os_str().is_empty() {
+            "the scene".to_string()
+        } else {
+            format!("the scene {}", scene.root.display())
+        };
+        return Err(PipelineError::invalid(
+            "method",
+            format!(
+                "{} plans its windows over the frames' times, and {named} has no frame times (no frame has a \
+                 `time`); give every frame its time, or reconstruct the scene with a static method",
+                config.method()
+            ),
+        ));
+    }
     let mut times: Vec<f64> = scene
         .frames
         .iter()
