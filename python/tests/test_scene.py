@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import shutil
 import signal
 import threading
@@ -95,6 +96,50 @@ def test_a_scene_is_saved_over_files_of_a_folder_only_when_asked(tmp_path):
     # An empty folder, or a new one, needs no force.
     (tmp_path / "empty").mkdir()
     scene.save(tmp_path / "empty")
+
+
+def test_a_scene_that_cannot_be_saved_whole_leaves_its_folder_as_it_was(static_scene, tmp_path):
+    """Scene.save wrote the images, then failed on the truth (here: no file may pass 16 kB, as
+    on a full disk): a new folder was left half written, which a second attempt refused as not
+    empty, and over an earlier scene (force=True) the earlier transforms.json was left naming the
+    new images."""
+    scene = fluidnerf.load_scene(static_scene.root)
+    earlier = fluidnerf.scene_from_arrays(
+        *ring(3), np.ones((3, 16, 16), np.float32), np.array([[-10.0, -10, -10], [10, 10, 10]])
+    )
+    over = tmp_path / "earlier"
+    earlier.save(over)
+
+    def save_limited(folder, force=False):
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)
+        handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        try:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (16_000, limit[1]))
+            with pytest.raises(
+                fluidnerf.FluidNerfError, match="cannot save the scene there: .*File too large"
+            ):
+                scene.save(folder, force=force)
+        finally:
+            resource.setrlimit(resource.RLIMIT_FSIZE, limit)
+            signal.signal(signal.SIGXFSZ, handler)
+
+    dest = tmp_path / "new" / "copy"
+    save_limited(dest)
+    assert not (tmp_path / "new").exists()
+    assert scene.root == static_scene.root
+    save_limited(over, force=True)
+    assert sorted(p.relative_to(over).as_posix() for p in over.rglob("*")) == [
+        "images",
+        "images/frame_0000.tiff",
+        "images/frame_0001.tiff",
+        "images/frame_0002.tiff",
+        "transforms.json",
+    ]
+    np.testing.assert_array_equal(fluidnerf.load_scene(over).images(), earlier.images())
+    scene.save(dest)
+    again = fluidnerf.load_scene(dest)
+    np.testing.assert_array_equal(again.images(), scene.images())
+    assert [t for t, _ in again.truth()] == [t for t, _ in scene.truth()]
 
 
 def test_bad_arrays_are_refused_naming_the_array_and_frame():

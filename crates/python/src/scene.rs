@@ -29,6 +29,54 @@ pub struct PyScene {
     pub saved: bool,
 }
 
+/// Writes the files of `scene` (saved into `folder`) into `stage`: its images, masks, truth and
+/// transforms.json. Returns the files other than transforms.json, relative to the folder.
+fn write_staged(
+    stage: &Path,
+    scene: &fluidnerf_core::Scene,
+    recording: &Recording,
+    images: &[Image],
+    masks: &[Option<Vec<bool>>],
+    truth: &[(Option<f64>, fluidnerf_core::Volume)],
+) -> Result<Vec<PathBuf>, fluidnerf_io::IoError> {
+    std::fs::create_dir_all(stage).map_err(|e| fluidnerf_io::IoError::io(stage, "folder", e))?;
+    let mut files = Vec::new();
+    for ((frame, image), (rec, keep)) in scene.frames.iter().zip(images).zip(recording.frames.iter().zip(masks)) {
+        fluidnerf_io::image::write_tiff_f32(&stage.join(&frame.file_path), image)?;
+        files.push(frame.file_path.clone());
+        if let (Some(path), Some(keep)) = (&rec.mask_path, keep) {
+            let mask =
+                Image::from_vec(image.width, image.height, keep.iter().map(|&k| f32::from(u8::from(k))).collect());
+            fluidnerf_io::image::write_png16(&stage.join(path), &mask, 1.0)?;
+            files.push(path.clone());
+        }
+    }
+    for (entry, (_, volume)) in scene.truth.iter().zip(truth) {
+        fluidnerf_io::volume::write_npy(&stage.join(&entry.file_path), volume)?;
+        files.push(entry.file_path.clone());
+    }
+    fluidnerf_io::scene::save_scene_recording(scene, stage, recording, false)?;
+    Ok(files)
+}
+
+/// Moves the files written into `stage` into `folder`, transforms.json last. An earlier scene's
+/// transforms.json goes first, so that a move that fails leaves no scene naming images of two.
+fn install_staged(stage: &Path, folder: &Path, files: &[PathBuf]) -> Result<(), fluidnerf_io::IoError> {
+    let scene_file = Path::new(fluidnerf_io::scene::SCENE_FILE);
+    let earlier = folder.join(scene_file);
+    if earlier.exists() {
+        std::fs::remove_file(&earlier).map_err(|e| fluidnerf_io::IoError::io(&earlier, "earlier scene file", e))?;
+    }
+    for rel in files.iter().map(PathBuf::as_path).chain([scene_file]) {
+        let to = folder.join(rel);
+        if let Some(dir) = to.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| fluidnerf_io::IoError::io(dir, "folder", e))?;
+        }
+        std::fs::rename(stage.join(rel), &to).map_err(|e| fluidnerf_io::IoError::io(&to, "scene file", e))?;
+    }
+    Ok(())
+}
+
 impl PyScene {
     /// The scene's folder, or an error for a scene that has none.
     pub fn require_saved(&self, what: &str) -> PyResult<&fluidnerf_core::Scene> {
@@ -324,30 +372,38 @@ impl PyScene {
             let mut scene = self.inner.clone();
             scene.root = folder.clone();
             let mut recording = Recording { flow_axis, ..Recording::plain(scene.frames.len()) };
-            for (i, (frame, image)) in scene.frames.iter_mut().zip(&images).enumerate() {
+            for (i, frame) in scene.frames.iter_mut().enumerate() {
                 frame.file_path = PathBuf::from(format!("images/frame_{i:04}.tiff"));
-                fluidnerf_io::image::write_tiff_f32(&folder.join(&frame.file_path), image)
-                    .map_err(|e| err(e.to_string()))?;
-                if let Some(keep) = &masks[i] {
-                    let path = PathBuf::from(format!("masks/frame_{i:04}.png"));
-                    let mask = Image::from_vec(
-                        image.width,
-                        image.height,
-                        keep.iter().map(|&k| f32::from(u8::from(k))).collect(),
-                    );
-                    fluidnerf_io::image::write_png16(&folder.join(&path), &mask, 1.0)
-                        .map_err(|e| err(e.to_string()))?;
-                    recording.frames[i].mask_path = Some(path);
+                if masks[i].is_some() {
+                    recording.frames[i].mask_path = Some(PathBuf::from(format!("masks/frame_{i:04}.png")));
                 }
             }
-            scene.truth = Vec::new();
-            for (k, (time, volume)) in truth.iter().enumerate() {
-                let path = PathBuf::from(format!("truth/truth_{k:02}.npy"));
-                fluidnerf_io::volume::write_npy(&folder.join(&path), volume).map_err(|e| err(e.to_string()))?;
-                scene.truth.push(TruthRef { time: *time, file_path: path });
+            scene.truth = (0..truth.len())
+                .map(|k| TruthRef { time: truth[k].0, file_path: PathBuf::from(format!("truth/truth_{k:02}.npy")) })
+                .collect();
+            // Written into a folder of its own inside `folder` and moved into place when whole,
+            // transforms.json last (as Run.save copies beside its destination): a save that failed
+            // part way (a full disk) left a half-written folder, which a second attempt refused
+            // as not empty, and over an earlier scene that scene's transforms.json naming the
+            // images written before the failure.
+            let made: Vec<PathBuf> = std::path::absolute(&folder)
+                .map_err(|e| err(format!("{}: {e}", folder.display())))?
+                .ancestors()
+                .take_while(|p| !p.exists())
+                .map(Path::to_path_buf)
+                .collect();
+            let stage = folder.join(format!(".fluidnerf-save-{}", std::process::id()));
+            let written = write_staged(&stage, &scene, &recording, &images, &masks, &truth)
+                .and_then(|files| install_staged(&stage, &folder, &files));
+            // The staged files left (all of them after a failure), and what a failed save created.
+            let _ = std::fs::remove_dir_all(&stage);
+            if let Err(e) = written {
+                if let Some((own, parents)) = made.split_first() {
+                    let _ = std::fs::remove_dir_all(own);
+                    parents.iter().for_each(|p| drop(std::fs::remove_dir(p)));
+                }
+                return Err(err(format!("{}: cannot save the scene there: {e}", folder.display())));
             }
-            fluidnerf_io::scene::save_scene_recording(&scene, &folder, &recording, false)
-                .map_err(|e| err(e.to_string()))?;
             self.inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
             self.images = None;
             self.saved = true;
