@@ -177,7 +177,8 @@ impl Default for Subset {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Jitter {
-    /// Standard deviation of each position coordinate, mm. Default 0.
+    /// Standard deviation of each position coordinate, mm, at most the cameras' distance from
+    /// the point they look at. Default 0.
     pub position_mm: f64,
     /// Standard deviation of the rotation angle, degrees, at most [`MAX_JITTER_ROTATION_DEG`].
     /// Default 0.
@@ -402,6 +403,26 @@ impl RigSettings {
             Layout::Explicit { targets, .. } if !targets.is_empty() => DVec3::from(targets[index]),
             _ => centre,
         };
+        // A shift beyond the cameras' distance from what they look at is no perturbation of a
+        // pose (as a rotation beyond half a turn): a camera could land in the box or behind its
+        // target, or, far out, be refused as blind to the box without the jitter being named.
+        let nearest = match self.layout {
+            Layout::Explicit { .. } => {
+                positions.iter().enumerate().map(|(i, &p)| (p - target_of(i)).length()).fold(f64::INFINITY, f64::min)
+            }
+            _ => dist,
+        };
+        if self.jitter.position_mm > nearest {
+            return Err(SynthError::invalid(
+                "rig.jitter.position_mm",
+                format!(
+                    "must be at most {} mm, the cameras' distance from the point they look at (a larger shift is no \
+                     perturbation of a pose), got {}",
+                    num(nearest),
+                    num(self.jitter.position_mm)
+                ),
+            ));
+        }
         let intrinsics = lens.intrinsics();
         let thin = lens.thin_lens();
         let every = self.subset.every.max(1);
@@ -661,6 +682,27 @@ mod tests {
                 }
             }
         }
+        // A shift beyond the cameras' distance from what they look at is no perturbation of a
+        // pose: at 1e300 mm every camera was refused as blind to the box, the jitter unnamed.
+        let lens32 = LensSettings { resolution: [32, 32], ..Default::default() };
+        let jitter = |position_mm: f64, layout: Layout| RigSettings {
+            layout,
+            jitter: Jitter { position_mm, rotation_deg: 0.0 },
+            ..Default::default()
+        };
+        jitter(2.0, Layout::default()).build(&lens32, &box40(), 0).expect("a small shift");
+        for position in [360.5, 1e300] {
+            let e = jitter(position, Layout::default()).build(&lens32, &box40(), 0).expect_err("refused").to_string();
+            let says = format!(
+                "invalid setting `rig.jitter.position_mm`: must be at most 360 mm, the cameras' distance from the point they look \
+                 at (a larger shift is no perturbation of a pose), got {}",
+                num(position)
+            );
+            assert!(e.contains(&says), "{e}");
+        }
+        let explicit = Layout::Explicit { positions: vec![[0.0, 360.0, 0.0], [0.0, 0.0, 200.0]], targets: vec![] };
+        let e = jitter(250.0, explicit).build(&lens32, &box40(), 0).expect_err("refused").to_string();
+        assert!(e.contains("must be at most 200 mm, the cameras' distance from the point they look at"), "{e}");
         // A camera inside the box: its scene would be written, then refused by every reader.
         let inside = RigSettings { distance_mm: Some(10.0), ..Default::default() };
         let e = inside.build(&lens, &box40(), 0).expect_err("a camera inside the box").to_string();

@@ -136,7 +136,8 @@ pub struct Args {
     /// subsetting.
     #[arg(long, value_delimiter = ',', help_heading = "Cameras")]
     pub holdout: Option<Vec<String>>,
-    /// Standard deviation of random camera position errors, mm [default: 0].
+    /// Standard deviation of random camera position errors, mm, at most the cameras' distance
+    /// from the point they look at [default: 0].
     #[arg(long, help_heading = "Cameras")]
     pub jitter_position: Option<f64>,
     /// Standard deviation of random camera rotation errors, degrees, at most 180 [default: 0].
