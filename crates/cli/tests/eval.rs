@@ -156,6 +156,34 @@ fn scores_each_time_step_and_custom_regions() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("region"));
 }
 
+/// A region given that holds no voxel centre of the truth is refused by name: it was warned of
+/// and left out of the scores, which then lacked a region that was asked for.
+#[test]
+fn a_region_holding_no_voxel_of_the_truth_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let v = Volume::from_fn([18, 12, 12], scene.aabb, |p| blob(p, 0.0));
+    fluidnerf_io::volume::write_npy(&d.join("r.npy"), &v).expect("writes recon");
+    // Centres lie at (i + ½)/18 along x: none in 0.5 … 0.51.
+    let out =
+        fluidnerf(&["eval", "r.npy", "--scene", ".", "--regions", "left:0:0.5,thin:0.5:0.51", "--json", "m.json"], d);
+    assert!(!out.status.success(), "an empty region was scored");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(
+            "--regions: thin holds no voxel centre of the 18×12×12 truth grid (./truth_0.npy); widen it to hold one"
+        ),
+        "{err}"
+    );
+    assert!(!d.join("m.json").exists(), "a refused evaluation wrote its scores");
+    ok_eval(&fluidnerf(&["eval", "r.npy", "--scene", ".", "--regions", "left:0:0.5,wide:0.5:0.6"], d));
+}
+
+fn ok_eval(out: &std::process::Output) {
+    assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
+}
+
 #[test]
 fn scores_a_trained_field_run_directory_at_the_truth_voxel_centres() {
     use fluidnerf_neural::trained::{build_field, AnyField, DenseConfig, FieldConfig, ModelRecord};

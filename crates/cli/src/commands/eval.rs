@@ -371,12 +371,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // NRMSE is relative to the truth's norm: undefined for an all-zero truth.
     for (i, (_, t)) in truth.iter().enumerate() {
+        let file = match (&args.truth, scene.truth.get(i)) {
+            (Some(p), _) => p.clone(),
+            (None, Some(r)) => scene.resolve(&r.file_path),
+            (None, None) => scene_path.clone(),
+        };
+        // A region asked for is scored: one between the truth's voxel centres was warned of and
+        // left out of the table.
+        if !default_regions {
+            if let Some(r) = regions.iter().find(|r| r.voxel_ranges(t.dims).iter().any(|a| a.is_empty())) {
+                let [x, y, z] = t.dims;
+                bail!(
+                    "--regions: {} holds no voxel centre of the {x}×{y}×{z} truth grid ({}); widen it to hold one",
+                    r.name,
+                    file.display()
+                );
+            }
+        }
         if t.data.iter().all(|&v| v == 0.0) {
-            let file = match (&args.truth, scene.truth.get(i)) {
-                (Some(p), _) => p.clone(),
-                (None, Some(r)) => scene.resolve(&r.file_path),
-                (None, None) => scene_path.clone(),
-            };
             bail!(
                 "{}: every voxel of the ground truth is zero, so the NRMSE (relative to the truth's norm) is \
                  undefined; give a truth that holds the field",
