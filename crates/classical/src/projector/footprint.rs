@@ -2680,9 +2680,9 @@ impl FootprintProjector {
 }
 
 impl FootprintProjector {
-    /// [`Projector::forward`], with the volume's non-empty chunks found beforehand or not.
-    /// The forward projection of `view` into `out`; with `serial`, on the calling thread alone
-    /// (the caller runs views in parallel), else split over the threads by z-slices.
+    /// [`Projector::forward`], with the volume's non-empty chunks found beforehand or not; with
+    /// `serial` on the calling thread alone (the caller runs views in parallel), else split
+    /// over the threads by z-slices.
     fn forward_known(&self, view: usize, x: &[f32], known: Option<&NonEmptyChunks>, out: &mut [f32], serial: bool) {
         let fv = &self.views[view];
         let (pw, ph) = fv.padded();
