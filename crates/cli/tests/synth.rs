@@ -599,6 +599,9 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
         (&["--dark-offset", "1e9"], "--dark-offset", "sensor.dark_offset"),
         (&["--bit-depth", "9"], "--bit-depth", "sensor.bit_depth"),
         (&["--full-scale-fraction", "2"], "--full-scale-fraction", "sensor.full_scale_fraction"),
+        // The brightest pixel below one count: every image was written black.
+        (&["--full-scale-fraction", "1e-6"], "--full-scale-fraction", "sensor.full_scale_fraction"),
+        (&["--real-like", "--full-scale-fraction", "0.001"], "--full-scale-fraction", "sensor.full_scale_fraction"),
         (&["--real-like", "--noise", "0.05"], "--noise", "sensor.gaussian_noise"),
         (&["--gain-spread", "2"], "--gain-spread", "real.gain_spread"),
         (&["--background-level", "0.9"], "--background-level", "real.background"),
@@ -627,6 +630,26 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
     assert!(!o.status.success(), "{err}");
     assert!(err.contains("invalid setting `rig.layout.start_deg`: must lie in [-3600, 3600] degrees"), "{err}");
     assert!(!dir.exists(), "wrote output");
+}
+
+/// A brightest pixel below one count rounds every image to black: the scene was written as if
+/// fine, with an intensity scale that every reader then refused.
+#[test]
+fn a_full_scale_fraction_below_one_count_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("out");
+    let o = run_small(&dir, &["--full-scale-fraction", "1e-300"]);
+    let err = text(&o).1;
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("invalid setting `sensor.full_scale_fraction`: 1e-300 puts the brightest pixel at")
+            && err.contains("every image would round to black; give at least 1.526e-5"),
+        "{err}"
+    );
+    assert!(!dir.exists(), "wrote output");
+    // One count of the 8-bit sensor is enough.
+    let o = run_small(&dir, &["--bit-depth", "8", "--full-scale-fraction", "0.004"]);
+    assert!(o.status.success(), "{:?}", text(&o));
 }
 
 /// `--force` over an earlier synthetic scene replaces it whole: its images, background frames

@@ -132,6 +132,21 @@ impl SynthSettings {
         self.lens.validate()?;
         self.image.validate()?;
         self.sensor.validate()?;
+        // A brightest pixel below one count rounds every image to black (a real-like
+        // recording's 8-bit scale is 255 whatever the sensor's bit depth).
+        let full = if self.real.is_some() { 255.0 } else { self.sensor.full_scale() };
+        if self.sensor.full_scale_fraction * full < 1.0 {
+            return Err(SynthError::invalid(
+                "sensor.full_scale_fraction",
+                format!(
+                    "{} puts the brightest pixel at {:.3e} counts of full scale {full}: every image would round to \
+                     black; give at least {:.3e} (one count)",
+                    num(self.sensor.full_scale_fraction),
+                    self.sensor.full_scale_fraction * full,
+                    1.0 / full
+                ),
+            ));
+        }
         if let Some(r) = &self.real {
             r.validate()?;
             // A real-like recording has its own noise and background and writes 8-bit JPEGs;
