@@ -679,3 +679,22 @@ fn force_leaves_no_file_of_the_earlier_scene() {
     assert!(!dir.join("background").exists(), "the earlier recording's background frames stayed");
     assert!(dir.join("notes.txt").is_file(), "a file of no scene was removed");
 }
+
+/// A quadrature step of a vanishing fraction of a voxel took steps without end: synth with
+/// `image.step_fraction` 1e-300 ran until it was killed.
+#[test]
+fn a_step_fraction_too_small_to_finish_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("out");
+    let config = tmp.path().join("synth.json");
+    std::fs::write(
+        &config,
+        serde_json::json!({ "image": { "model": "pinhole", "step_fraction": 1e-300 } }).to_string(),
+    )
+    .expect("writes");
+    let o = synth(&["-q", "-o", dir.to_str().expect("utf-8"), "--config", config.to_str().expect("utf-8")]);
+    let err = text(&o).1;
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("invalid setting `image.step_fraction`: must be in [0.01, 2], got 1e-300"), "{err}");
+    assert!(!dir.exists(), "wrote output");
+}

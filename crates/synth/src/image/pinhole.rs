@@ -22,7 +22,7 @@ use crate::SynthError;
 pub struct PinholeSettings {
     /// Rays per pixel along each image axis (`n × n` rays per pixel). Default 2.
     pub supersample: usize,
-    /// Quadrature step as a fraction of the smallest voxel side. Default 0.5.
+    /// Quadrature step as a fraction of the smallest voxel side, 0.01 to 2. Default 0.5.
     pub step_fraction: f64,
     /// Render the continuous phantom with the reference renderer instead of its voxel grid
     /// (exact but slow for the jets). Default false.
@@ -43,10 +43,11 @@ impl PinholeSettings {
                 format!("must be in 1..=16, got {}", self.supersample),
             ));
         }
-        if !(self.step_fraction > 0.0 && self.step_fraction <= 2.0) {
+        // As the projectors' ray step: a vanishing step takes steps without end.
+        if !(0.01..=2.0).contains(&self.step_fraction) {
             return Err(SynthError::invalid(
                 "image.step_fraction",
-                format!("must be in (0, 2], got {}", fluidnerf_core::num(self.step_fraction)),
+                format!("must be in [0.01, 2], got {}", fluidnerf_core::num(self.step_fraction)),
             ));
         }
         Ok(())
