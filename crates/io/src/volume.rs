@@ -435,10 +435,31 @@ pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     if meta.dtype != "<f4" {
         return Err(IoError::invalid(&json_path, format!("dtype {} is not supported (only <f4)", meta.dtype)));
     }
+    // The values are read x fastest over the box: a sidecar saying otherwise describes another
+    // volume than the one read.
+    if !meta.order.starts_with("x fastest") {
+        return Err(IoError::invalid(
+            &json_path,
+            format!("order {:?} is not supported (only \"x fastest: index (k * ny + j) * nx + i\")", meta.order),
+        ));
+    }
     let aabb = Aabb { min: DVec3::from_array(meta.aabb[0]), max: DVec3::from_array(meta.aabb[1]) };
     aabb.validate().map_err(|e| IoError::invalid(&json_path, e.to_string()))?;
     if meta.dims.contains(&0) {
         return Err(IoError::invalid(&json_path, "dims must be positive"));
+    }
+    let spacing = aabb.size() / DVec3::from_array(meta.dims.map(|d| d as f64));
+    let given = DVec3::from_array(meta.spacing);
+    if (given - spacing).abs().cmpgt(spacing * 1e-6).any() || !given.is_finite() {
+        return Err(IoError::invalid(
+            &json_path,
+            format!(
+                "spacing {} is not the box's size over dims {:?}, {}: the sidecar describes two volumes",
+                fluidnerf_core::num(meta.spacing),
+                meta.dims,
+                fluidnerf_core::num(spacing.to_array().map(|h| (h * 1e9).round() / 1e9))
+            ),
+        ));
     }
     let needed = meta.dims.iter().try_fold(4usize, |acc, &d| acc.checked_mul(d));
     let Some(needed) = needed else {
@@ -691,6 +712,25 @@ mod tests {
         std::fs::write(&sidecar, meta.to_string()).expect("write");
         let err = read_raw(&p).expect_err("overflowing dims").to_string();
         assert!(err.contains("v.raw.json") && err.contains("dims"), "{err}");
+        // A sidecar of another order, or whose spacing is not its box's over its dims, was read
+        // as x fastest over the box without a word.
+        meta["dims"] = serde_json::json!([5, 4, 3]);
+        meta["order"] = serde_json::json!("z fastest");
+        std::fs::write(&sidecar, meta.to_string()).expect("write");
+        let err = read_raw(&p).expect_err("another order").to_string();
+        assert!(
+            err.contains("v.raw.json") && err.contains("order \"z fastest\" is not supported (only \"x fastest"),
+            "{err}"
+        );
+        meta["order"] = serde_json::json!("x fastest: index (k * ny + j) * nx + i");
+        meta["spacing"] = serde_json::json!([1.0, 1.0, 1.0]);
+        std::fs::write(&sidecar, meta.to_string()).expect("write");
+        let err = read_raw(&p).expect_err("another spacing").to_string();
+        assert!(
+            err.contains("v.raw.json")
+                && err.contains("spacing [1, 1, 1] is not the box's size over dims [5, 4, 3], [0.8, 0.625, 0.4]"),
+            "{err}"
+        );
     }
 
     #[test]
