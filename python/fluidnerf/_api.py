@@ -81,13 +81,24 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
         # A mask given for an image or a volume would pass for one of zeros and ones.
         if given is not None and given.dtype == np.bool_:
             raise TypeError(f"{name}: expected an array of numbers{shape}, got booleans")
-        a = None if given is None else given.astype(dtype, copy=False)
+        # A value beyond the type is found below, not left to NumPy's warning.
+        with np.errstate(over="ignore"):
+            a = None if given is None else given.astype(dtype, copy=False)
     except (TypeError, ValueError) as e:
         if "got booleans" in str(e):
             raise
         raise TypeError(f"{name}: expected an array of numbers{shape}: {e}") from None
     if a is None:
         raise TypeError(f"{name}: expected real numbers{shape}, got complex ones")
+    if a.dtype != given.dtype and given.dtype.kind == "f":
+        # Cast to an infinity, it was refused as "not finite (inf)", a value nobody gave.
+        beyond = np.flatnonzero(np.isinf(a) & np.isfinite(given))
+        if beyond.size:
+            i = int(beyond[0])
+            raise FluidNerfError(
+                f"{name}: element {i} (flat index, C order), {float(given.flat[i])!r}, is beyond the "
+                f"{a.dtype} values it is computed in (at most {str(np.finfo(a.dtype).max)} in magnitude)"
+            )
     return a if a.flags.c_contiguous else np.ascontiguousarray(a)
 
 

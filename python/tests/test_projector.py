@@ -403,3 +403,32 @@ def test_metrics_refuse_values_that_are_not_finite_and_a_zero_truth():
             metric(t, bad)
     with pytest.raises(fluidnerf.FluidNerfError, match="truth: every element is zero"):
         fluidnerf.nrmse(t, np.zeros_like(t))
+
+
+def test_finite_values_beyond_float32_are_refused_as_such(scene):
+    """A float64 value of 1e300 was cast to a float32 infinity, with NumPy's RuntimeWarning, and
+    refused as "not finite (inf)", a value nobody gave."""
+    import warnings
+
+    s, *_ = scene
+    t = blob_volume().astype(np.float64)
+    big = t.copy()
+    big[1, 2, 3] = -1e300
+    flat = np.ravel_multi_index((1, 2, 3), t.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for metric in (fluidnerf.nrmse, fluidnerf.psnr, fluidnerf.ssim):
+            with pytest.raises(
+                fluidnerf.FluidNerfError,
+                match=rf"estimate: element {flat} \(flat index, C order\), -1e\+300, is beyond the float32 "
+                r"values it is computed in \(at most 3.4028235e\+38 in magnitude\)",
+            ):
+                metric(big, t)
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=rf"volume: element {flat} .*, -1e\+300, is beyond"
+        ):
+            fluidnerf.forward_project(s, big)
+        y = np.ones((4, 16, 16))
+        y[2, 5, 7] = 1e39
+        with pytest.raises(fluidnerf.FluidNerfError, match=r"images\[2\]: element 87 .*, 1e\+39, is beyond"):
+            fluidnerf.back_project(s, y, (N, N, N))
