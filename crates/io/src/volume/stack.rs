@@ -150,6 +150,8 @@ struct Calibration {
     /// `channels`, `frames`: a hyperstack of more than one volume.
     channels: usize,
     frames: usize,
+    /// `images`: the pages of the stack, as ImageJ counts them.
+    images: Option<usize>,
 }
 
 fn parse_description(text: &str) -> Calibration {
@@ -165,6 +167,7 @@ fn parse_description(text: &str) -> Calibration {
             "zorigin" => c.origin[2] = number,
             "channels" => c.channels = number.map_or(1, |v| v as usize),
             "frames" => c.frames = number.map_or(1, |v| v as usize),
+            "images" => c.images = number.map(|v| v as usize),
             _ => {}
         }
     }
@@ -281,6 +284,18 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoErro
             return Err(IoError::invalid(path, format!("more than {MAX_PAGES} pages")));
         }
         dec.next_image().map_err(bad)?;
+    }
+    // ImageJ saves a stack beyond 4 GiB with one directory, the other slices' pixels following
+    // the first page's: reading the pages alone would give its first slice as the volume.
+    if let Some(images) = calibration.images.filter(|&n| calibration.imagej && n != nz) {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "its ImageJ description counts {images} images, but the file holds {nz} page(s): ImageJ writes a \
+                 stack beyond 4 GiB with one directory, which is not read; give the volume as a .npy or .vti, \
+                 or as stacks below 4 GiB"
+            ),
+        ));
     }
     let dims = [nx, ny, nz];
     let box_from_file = match (calibration.imagej, pixel, calibration.spacing) {
@@ -467,5 +482,27 @@ mod tests {
         assert!(err.contains("frames.tif") && err.contains("1 channel(s) and 2 frame(s)"), "{err}");
         let c = parse_description("ImageJ=1.54f\nimages=3\nslices=3\nunit=mm\nspacing=0.5\nxorigin=-4\n\0");
         assert_eq!((c.imagej, c.spacing, c.origin[0], c.origin[1]), (true, Some(0.5), Some(-4.0), None));
+    }
+
+    #[test]
+    fn an_imagej_stack_of_more_images_than_pages_is_refused() {
+        // ImageJ saves a stack beyond 4 GiB with one directory, its other slices following the
+        // first page's pixels: it was read as its first slice alone.
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("one.tif");
+        let mut f = std::fs::File::create(&p).expect("create");
+        let mut enc = TiffEncoder::new(&mut f).expect("encoder");
+        let mut page = enc.new_image::<tiff::encoder::colortype::Gray32Float>(2, 2).expect("page");
+        let d = "ImageJ=1.54f\nimages=3\nslices=3\nunit=mm\nspacing=1.5\n";
+        page.encoder().write_tag(Tag::ImageDescription, d).expect("description");
+        page.resolution(tiff::tags::ResolutionUnit::None, Rational { n: 1, d: 1 });
+        page.write_data(&[1.0; 4]).expect("pixels");
+        drop(f);
+        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0))).expect_err("one page").to_string();
+        assert!(
+            err.contains("one.tif")
+                && err.contains("its ImageJ description counts 3 images, but the file holds 1 page(s)"),
+            "{err}"
+        );
     }
 }
