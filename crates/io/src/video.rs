@@ -42,7 +42,7 @@ use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use fluidnerf_core::Image;
+use fluidnerf_core::{num, Image};
 
 use crate::image::Linearisation;
 use crate::IoError;
@@ -254,12 +254,17 @@ pub fn read_video_frames(
                 } else {
                     format!(
                         " (with the time offset of {} s added, which rounds the frame interval away)",
-                        opts.time_offset_s
+                        num(opts.time_offset_s)
                     )
                 };
                 return Err(IoError::invalid(
                     path,
-                    format!("frame {} is at {} s, not after frame {index} at {time} s{why}", frame.index, frame.time_s),
+                    format!(
+                        "frame {} is at {} s, not after frame {index} at {} s{why}",
+                        frame.index,
+                        num(frame.time_s),
+                        num(time)
+                    ),
                 ));
             }
             _ => last = Some((frame.index, frame.time_s)),

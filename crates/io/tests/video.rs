@@ -159,6 +159,16 @@ fn selection_and_time_offset() {
     let huge = VideoOptions { time_offset_s: 1e17, ..VideoOptions::default() };
     let err = read_video(&fixture("ramp_mjpeg.avi"), &huge).expect_err("frames at one time").to_string();
     assert!(err.contains("ramp_mjpeg.avi") && err.contains("not after frame 0") && err.contains("offset"), "{err}");
+    // The times and the offset in short: an offset of 1.7e308 s was written out in 309 digits,
+    // three times over.
+    let huge = VideoOptions { time_offset_s: 1.7e308, ..VideoOptions::default() };
+    let err = read_video(&fixture("ramp_mjpeg.avi"), &huge).expect_err("frames at one time").to_string();
+    assert!(
+        err.contains(
+            "frame 1 is at 1.7e308 s, not after frame 0 at 1.7e308 s (with the time offset of 1.7e308 s added"
+        ),
+        "{err}"
+    );
 }
 
 /// The offset of the `n`-th occurrence of `tag` in `bytes`.
