@@ -414,6 +414,12 @@ def build_config(
             )
         if not isinstance(base, dict):
             raise FluidNerfError(f"{source}: the configuration must be an object of settings, got {base!r}")
+        # Another fluidnerf file is named for what it is, as --config names it, not by a key.
+        other = _ext.other_file_kind(json.dumps(base))
+        if other is not None:
+            raise FluidNerfError(
+                f"{source}: is {other}, not a run's configuration (a run folder's config.json)"
+            )
         if not isinstance(base.get("method") or {}, dict):
             raise FluidNerfError(
                 f'{source}: at `method`: expected the method\'s settings such as {{"name": "asart"}}, '

@@ -4,6 +4,7 @@ callbacks that watch and stop a run."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -306,6 +307,23 @@ def test_a_configuration_or_method_of_the_wrong_kind_is_refused_by_name(static_s
         fluidnerf.build_config(static_scene, 3)
     cfg = fluidnerf.build_config(static_scene, "fast", config={"format": 1, "resolution": 8}, preset="fast")
     assert cfg["method"]["name"] == "fast" and cfg["resolution"] == 8
+
+
+def test_a_config_path_to_another_fluidnerf_file_is_named_for_what_it_is(static_scene, tmp_path):
+    """config= a scene's synth.json or transforms.json was refused as "configuration: at
+    `camera_gains`: unknown field", naming neither the file nor what it is, as --config does."""
+    synth = tmp_path / "synth.json"
+    synth.write_text(json.dumps({"command": "synth", "settings": {}, "seed": 0}))
+    with pytest.raises(
+        fluidnerf.FluidNerfError,
+        match=r"synth.json: is the settings of a synthetic scene \(synth.json\), not a run's configuration "
+        r"\(a run folder's config.json\)",
+    ):
+        fluidnerf.build_config(static_scene, config=synth)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"transforms.json: is a scene file \(transforms.json\)"
+    ):
+        fluidnerf.build_config(static_scene, config=static_scene.root / "transforms.json")
 
 
 def test_a_configuration_of_a_folder_without_a_scene_is_refused(static_scene, tmp_path):

@@ -197,6 +197,7 @@ fn _fluidnerf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::read_video, m)?)?;
     m.add_function(wrap_pyfunction!(run::default_config, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_config, m)?)?;
+    m.add_function(wrap_pyfunction!(run::other_file_kind, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_run_folder, m)?)?;
     m.add_function(wrap_pyfunction!(run::check_window_folder, m)?)?;
     m.add_function(wrap_pyfunction!(run::reconstruct, m)?)?;

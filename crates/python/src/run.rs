@@ -54,6 +54,15 @@ pub fn check_config(config: &str) -> PyResult<String> {
     guard(|| to_json(&parse_config(config)?))
 }
 
+/// What other fluidnerf file than a run's configuration the JSON text is, in words (as
+/// `--config` names a synth.json or a transforms.json given for one), or None.
+#[pyfunction]
+pub fn other_file_kind(text: &str) -> Option<&'static str> {
+    use fluidnerf_pipeline::rundir::JsonFileKind;
+    let value: serde_json::Value = serde_json::from_str(text).ok()?;
+    JsonFileKind::of(&value).filter(|k| *k != JsonFileKind::RunConfig).map(JsonFileKind::describe)
+}
+
 /// An event as a dict: `{"kind": ..., ...}`.
 pub(crate) fn event_dict<'py>(py: Python<'py>, event: &RunEvent) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
