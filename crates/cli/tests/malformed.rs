@@ -643,6 +643,31 @@ fn cases() -> Vec<Case> {
             "method.time_step: the times run from 0 to 1, 1e40 time steps",
         ),
         c(
+            // Every frame read as one instant: the field was trained as a static one.
+            "a time step too large for the times",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = (i % 2).into();
+                }
+            }),
+            &[
+                "reconstruct",
+                "SCENE",
+                "-o",
+                "OUT",
+                "--method",
+                "tr-fluidnerf",
+                "--resolution",
+                "8",
+                "--max-iterations",
+                "1",
+                "--time-step",
+                "1e308",
+            ],
+            "method.time_step: the times 0 and 1 are 1e-308 time steps of Δt = 1e308 apart, which the network's \
+             32-bit time input t' = (t − t₀)/Δt reads as one instant",
+        ),
+        c(
             "config relaxation far out of range",
             File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart","params":{"relaxation":1e300}}}"#),
             &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],

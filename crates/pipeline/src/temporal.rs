@@ -1075,7 +1075,8 @@ pub fn finish_windows(
 /// Refuses a time step by which the span of the run's times (training and held out) is more
 /// steps than 32-bit floating point holds: a space–time network reads `t' = (t − t₀)/Δt` in
 /// it, and an infinite `t'` makes the first loss NaN, which would be reported as a divergence.
-/// A hash-grid field reads frame positions instead and a per-frame field no time at all.
+/// Two times it reads as one instant are refused too. A hash-grid field reads frame positions
+/// instead and a per-frame field no time at all.
 fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f64) -> Result<(), PipelineError> {
     if input_dim_of(method) != 4 || matches!(spec.field, FieldConfig::HashGrid(_)) {
         return Ok(());
@@ -1083,6 +1084,26 @@ fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f6
     let all = || times.iter().chain(&spec.holdout_times).copied();
     let (first, last) = (all().fold(f64::INFINITY, f64::min), all().fold(f64::NEG_INFINITY, f64::max));
     let steps = (last - first) / step;
+    // Two times whose `t'` round to one 32-bit float are one instant to the network: a time
+    // step far beyond the frames' spacing trained every frame as one static field.
+    let mut sorted: Vec<f64> = all().collect();
+    sorted.sort_by(f64::total_cmp);
+    let input = |t: f64| ((t - first) / step) as f32;
+    if let Some(w) = sorted.windows(2).find(|w| w[0] < w[1] && input(w[0]) == input(w[1])) {
+        return Err(PipelineError::invalid(
+            "method.time_step",
+            format!(
+                "the times {} and {} are {} time steps of Δt = {}{} apart, which the network's 32-bit time input \
+                 t' = (t − t₀)/Δt reads as one instant; give a smaller time step (--time-step) or the times in \
+                 another unit",
+                num(w[0]),
+                num(w[1]),
+                num((w[1] - w[0]) / step),
+                num(step),
+                if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" }
+            ),
+        ));
+    }
     if steps <= f64::from(f32::MAX) {
         return Ok(());
     }
