@@ -592,6 +592,8 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
         (&["--magnification", "0.2"], "--magnification", "lens.magnification"),
         (&["--focal-length", "0"], "--focal-length", "lens.focal_length_mm"),
         (&["--f-number", "0"], "--f-number", "lens.f_number"),
+        // An aperture of 6e301 mm spread every voxel's light off the sensor: black images.
+        (&["--f-number", "1e-300"], "--f-number", "lens.f_number"),
         (&["--pixel-pitch", "0"], "--pixel-pitch", "lens.pixel_pitch_mm"),
         (&["--supersample", "0"], "--supersample", "image.supersample"),
         (&["--noise", "5"], "--noise", "sensor.gaussian_noise"),
@@ -678,6 +680,22 @@ fn force_leaves_no_file_of_the_earlier_scene() {
     assert_eq!(names("truth"), ["truth_t00.npy", "truth_t01.npy", "truth_t02.npy"]);
     assert!(!dir.join("background").exists(), "the earlier recording's background frames stayed");
     assert!(dir.join("notes.txt").is_file(), "a file of no scene was removed");
+}
+
+/// An f-number no lens in air has (below 0.5, a numerical aperture above 1) made an aperture of
+/// 6e301 mm at 1e-300 and a scene of black images; it is refused naming the key.
+#[test]
+fn an_f_number_below_any_lens_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("out");
+    let o = run_small(&dir, &["--f-number", "0.3"]);
+    let err = text(&o).1;
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("invalid setting `lens.f_number`: must be at least 0.5 (a lens in air has a numerical aperture of at most 1), got 0.3"),
+        "{err}"
+    );
+    assert!(!dir.exists(), "wrote output");
 }
 
 /// A quadrature step of a vanishing fraction of a voxel took steps without end: synth with

@@ -66,6 +66,17 @@ impl LensSettings {
         if !(self.f_number > 0.0 && self.f_number.is_finite()) {
             return Err(SynthError::invalid("lens.f_number", format!("must be positive, got {}", num(self.f_number))));
         }
+        // N = 1 / (2 NA): below 0.5 the aperture grows without bound (6e301 mm at 1e-300), and
+        // every voxel's light is spread off the sensor.
+        if self.f_number < 0.5 {
+            return Err(SynthError::invalid(
+                "lens.f_number",
+                format!(
+                    "must be at least 0.5 (a lens in air has a numerical aperture of at most 1), got {}",
+                    num(self.f_number)
+                ),
+            ));
+        }
         if self.resolution[0] == 0 || self.resolution[1] == 0 {
             return Err(SynthError::invalid("lens.resolution", "width and height must be positive"));
         }
