@@ -83,6 +83,13 @@ impl SensorSettings {
             if !(fw > 0.0 && fw.is_finite()) {
                 return Err(SynthError::invalid("sensor.full_well", format!("must be positive, got {}", num(fw))));
             }
+            // A pixel that holds no whole photo-electron records rare specks at full scale.
+            if fw < 1.0 {
+                return Err(SynthError::invalid(
+                    "sensor.full_well",
+                    format!("must be at least 1 photo-electron at full scale, got {}", num(fw)),
+                ));
+            }
         }
         if !(self.dark_offset >= 0.0 && self.dark_offset < self.full_scale()) {
             return Err(SynthError::invalid(
@@ -206,5 +213,9 @@ mod tests {
         assert!(SensorSettings { gaussian_noise: 0.99, ..Default::default() }.validate().is_ok());
         assert!(SensorSettings { bit_depth: 14, ..Default::default() }.validate().is_err());
         assert!(SensorSettings { full_well: Some(0.0), ..Default::default() }.validate().is_err());
+        // Less than one photo-electron at full scale: every count is a rare saturated speck.
+        let err = SensorSettings { full_well: Some(1e-300), ..Default::default() }.validate().expect_err("tiny");
+        assert!(err.to_string().contains("must be at least 1 photo-electron at full scale, got 1e-300"), "{err}");
+        assert!(SensorSettings { full_well: Some(1.0), ..Default::default() }.validate().is_ok());
     }
 }
