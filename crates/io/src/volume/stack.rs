@@ -152,6 +152,8 @@ struct Calibration {
     frames: usize,
     /// `images`: the pages of the stack, as ImageJ counts them.
     images: Option<usize>,
+    /// `spacing` as written, whether or not it is a depth.
+    spacing_text: Option<String>,
 }
 
 fn parse_description(text: &str) -> Calibration {
@@ -161,7 +163,10 @@ fn parse_description(text: &str) -> Calibration {
         let Some((key, value)) = line.split_once('=') else { continue };
         let number = value.trim().trim_end_matches('\0').parse::<f64>().ok().filter(|v| v.is_finite());
         match key.trim() {
-            "spacing" => c.spacing = number.filter(|&v| v > 0.0),
+            "spacing" => {
+                c.spacing = number.filter(|&v| v > 0.0);
+                c.spacing_text = Some(value.trim().trim_end_matches('\0').to_string());
+            }
             "xorigin" => c.origin[0] = number,
             "yorigin" => c.origin[1] = number,
             "zorigin" => c.origin[2] = number,
@@ -294,6 +299,19 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoErro
                 "its ImageJ description counts {images} images, but the file holds {nz} page(s): ImageJ writes a \
                  stack beyond 4 GiB with one directory, which is not read; give the volume as a .npy or .vti, \
                  or as stacks below 4 GiB"
+            ),
+        ));
+    }
+    // A calibrated stack whose slice depth is no depth would be stretched over the box given,
+    // as if it held no calibration.
+    if let (true, [Some(_), Some(_)], Some(text), None) =
+        (calibration.imagej && nz > 1, pixel, &calibration.spacing_text, calibration.spacing)
+    {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "its ImageJ calibration's slice spacing {text:?} is no positive depth; set the voxel depth (in \
+                 Fiji, Image > Properties)"
             ),
         ));
     }
@@ -504,5 +522,33 @@ mod tests {
                 && err.contains("its ImageJ description counts 3 images, but the file holds 1 page(s)"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn an_imagej_slice_spacing_that_is_no_depth_is_refused() {
+        // A calibrated stack whose spacing is 0 (or no number) was stretched over the box given
+        // as if it held no calibration, or refused as holding none.
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("flat.tif");
+        let mut f = std::fs::File::create(&p).expect("create");
+        let mut enc = TiffEncoder::new(&mut f).expect("encoder");
+        for k in 0..2 {
+            let mut page = enc.new_image::<tiff::encoder::colortype::Gray32Float>(2, 2).expect("page");
+            if k == 0 {
+                let d = "ImageJ=1.54f\nimages=2\nslices=2\nunit=mm\nspacing=0\n";
+                page.encoder().write_tag(Tag::ImageDescription, d).expect("description");
+                page.resolution(tiff::tags::ResolutionUnit::None, Rational { n: 2, d: 1 });
+            }
+            page.write_data(&[1.0; 4]).expect("pixels");
+        }
+        drop(f);
+        for aabb in [None, Some(Aabb::cube(DVec3::ZERO, 1.0))] {
+            let err = read_tiff_stack(&p, aabb).expect_err("spacing 0").to_string();
+            assert!(
+                err.contains("flat.tif")
+                    && err.contains("its ImageJ calibration's slice spacing \"0\" is no positive depth"),
+                "{err}"
+            );
+        }
     }
 }
