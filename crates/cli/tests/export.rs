@@ -84,7 +84,7 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
     assert_eq!((raw.dims, raw.aabb), (v.dims, v.aabb));
     assert_eq!(raw.data, v.data);
     // The TIFF stack holds the same values and, from its calibration alone, the same box.
-    let tif = fluidnerf_io::volume::read_tiff_stack(&out.join("volume.tif"), None).expect("reads the stack");
+    let tif = fluidnerf_io::volume::read_tiff_stack(&out.join("volume.tif"), None, None).expect("reads the stack");
     assert_eq!((tif.dims, &tif.data), (v.dims, &v.data));
     assert!(
         (tif.aabb.min - v.aabb.min).abs().max_element() < 1e-9

@@ -134,13 +134,14 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
 /// Reads a user's volume to image as a synthetic scene's ground truth
 /// (`phantom.kind = "volume"`, `phantom.volume_path`): a `.npy` fills `aabb`, a `.vti` and a
 /// calibrated TIFF stack hold their own box, an uncalibrated stack fills `aabb`. Refused when a
-/// voxel is not finite or none is positive (every camera would image black).
-pub fn read_truth_volume(path: &Path, aabb: Aabb) -> Result<Volume, PipelineError> {
+/// voxel is not finite or none is positive (every camera would image black). A calibrated
+/// stack's box is converted to the scene's length `unit`.
+pub fn read_truth_volume(path: &Path, aabb: Aabb, unit: &str) -> Result<Volume, PipelineError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let volume = match ext.as_str() {
         "npy" => fluidnerf_io::volume::read_npy(path, aabb)?,
         "vti" => fluidnerf_io::volume::read_vti(path)?,
-        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb))?,
+        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb), Some(unit))?,
         _ => return Err(PipelineError::file(path, "the ground truth must be a .npy, .vti or .tif volume")),
     };
     if let Some(i) = volume.data.iter().position(|x| !x.is_finite()) {

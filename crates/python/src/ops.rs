@@ -316,7 +316,8 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
     let volume = match (&settings.phantom.volume_path, settings.phantom.kind) {
         (Some(path), fluidnerf_synth::phantom::PhantomKind::Volume) => {
             let volume = guard(|| {
-                fluidnerf_pipeline::synthetic::read_truth_volume(path, settings.aabb).map_err(|e| err(e.to_string()))
+                fluidnerf_pipeline::synthetic::read_truth_volume(path, settings.aabb, fluidnerf_synth::UNITS)
+                    .map_err(|e| err(e.to_string()))
             })?;
             if given_resolution {
                 return Err(err(format!(

@@ -330,7 +330,14 @@ impl Synthesis {
             .collect();
         let truth =
             (0..self.truth.len()).map(|k| TruthRef { time: self.truth[k].0, file_path: self.truth_path(k) }).collect();
-        Scene { root, aabb: self.aabb, units: "mm".into(), intensity_scale: self.intensity_scale, frames, truth }
+        Scene {
+            root,
+            aabb: self.aabb,
+            units: crate::UNITS.into(),
+            intensity_scale: self.intensity_scale,
+            frames,
+            truth,
+        }
     }
 }
 

@@ -35,6 +35,9 @@ pub mod rig;
 pub mod sensor;
 
 pub use error::SynthError;
+
+/// The length unit of every synthetic scene: lengths (the box, the rig, the lens) are in mm.
+pub const UNITS: &str = "mm";
 pub use generate::{
     available_memory_bytes, generate, no_progress, Progress, SynthFrame, SynthSettings, SynthStats, Synthesis,
 };

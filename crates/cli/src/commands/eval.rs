@@ -328,7 +328,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
         Some(path) => {
-            let volume = read_volume(path, Some(scene.aabb))?;
+            let volume = read_volume(path, Some(scene.aabb), Some(&scene.units))?;
             let what = format!("--truth {}", path.display());
             super::warn_of_other_box(
                 &what,
@@ -606,7 +606,7 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
     }
     let mut volumes = Vec::with_capacity(paths.len());
     for p in paths {
-        let volume = read_volume(p, Some(scene.aabb))?;
+        let volume = read_volume(p, Some(scene.aabb), Some(&scene.units))?;
         super::warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
         volumes.push(volume);
     }

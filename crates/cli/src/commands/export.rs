@@ -168,8 +168,9 @@ impl Source {
     }
 }
 
-/// Reads a volume file by extension; `.npy` needs `aabb`.
-pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>) -> anyhow::Result<Volume> {
+/// Reads a volume file by extension; `.npy` needs `aabb`. A calibrated TIFF stack's box is
+/// converted to the scene's length `unit`, when given.
+pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> anyhow::Result<Volume> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let v = match ext.as_str() {
         "npy" => {
@@ -180,7 +181,7 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>) -> anyhow::Result<Vol
         }
         "vti" => fluidnerf_io::volume::read_vti(path),
         "raw" => fluidnerf_io::volume::read_raw(path),
-        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, aabb),
+        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, aabb, unit),
         _ => bail!("{}: unknown volume format (expected .npy, .vti, .raw or .tif)", path.display()),
     }
     .with_context(|| format!("reading the volume {}", path.display()))?;
@@ -201,7 +202,7 @@ pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
     }
-    Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb))?))
+    Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb), scene.map(|s| s.units.as_str()))?))
 }
 
 /// Parses `AXIS=FRACTION`.
@@ -374,7 +375,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(p) => {
             // A .npy truth holds no box: it fills the scene's, which is the reconstruction's
             // when no scene is given (a run records its scene's box).
-            let t = read_volume(p, Some(scene.as_ref().map_or_else(|| source.aabb(), |s| s.aabb)))?;
+            let t = read_volume(
+                p,
+                Some(scene.as_ref().map_or_else(|| source.aabb(), |s| s.aabb)),
+                scene.as_ref().map(|s| s.units.as_str()),
+            )?;
             Some(if t.dims == volume.dims && t.aabb == volume.aabb { t } else { t.resample(volume.dims, volume.aabb) })
         }
         None => None,

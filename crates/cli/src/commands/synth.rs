@@ -604,7 +604,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let volume = match &settings.phantom.volume_path {
         Some(path) if settings.phantom.kind == PhantomKind::Volume => {
-            Some(fluidnerf_pipeline::synthetic::read_truth_volume(path, settings.aabb)?)
+            Some(fluidnerf_pipeline::synthetic::read_truth_volume(path, settings.aabb, fluidnerf_synth::UNITS)?)
         }
         _ => None,
     };

@@ -34,6 +34,24 @@ fn imagej_unit(unit: &str) -> String {
     }
 }
 
+/// Metres in one `unit` of length, for the units a calibration is converted between (ImageJ's
+/// `micron` and its `\u00B5m` escape are micrometres).
+fn metres_per(unit: &str) -> Option<f64> {
+    Some(match unit {
+        "nm" => 1e-9,
+        "µm" | "μm" | "um" | "micron" | "microns" | "\\u00B5m" => 1e-6,
+        "mm" => 1e-3,
+        "cm" => 1e-2,
+        "m" => 1.0,
+        _ => return None,
+    })
+}
+
+/// ImageJ's word for a stack without a physical calibration.
+fn is_pixel_unit(unit: &str) -> bool {
+    matches!(unit, "pixel" | "pixels" | "")
+}
+
 /// The best rational approximation of `x > 0` with 32-bit numerator and denominator
 /// (continued fractions), as TIFF stores resolutions.
 fn rational(x: f64) -> Rational {
@@ -154,6 +172,8 @@ struct Calibration {
     images: Option<usize>,
     /// `spacing` as written, whether or not it is a depth.
     spacing_text: Option<String>,
+    /// `unit`: the length unit of the calibration, as written.
+    unit: Option<String>,
 }
 
 fn parse_description(text: &str) -> Calibration {
@@ -173,6 +193,7 @@ fn parse_description(text: &str) -> Calibration {
             "channels" => c.channels = number.map_or(1, |v| v as usize),
             "frames" => c.frames = number.map_or(1, |v| v as usize),
             "images" => c.images = number.map(|v| v as usize),
+            "unit" => c.unit = Some(value.trim().trim_end_matches('\0').to_string()),
             _ => {}
         }
     }
@@ -198,9 +219,11 @@ fn resolution<R: std::io::Read + Seek>(dec: &mut tiff::decoder::Decoder<R>, tag:
 /// Reads a TIFF stack (one greyscale page per z-slice, all of one size; 32/64-bit float or
 /// 8/16-bit unsigned samples) as a volume. Its box comes from the file's ImageJ calibration
 /// (pixel size from the resolution tags, slice spacing and origin from the description, as
-/// [`write_tiff_stack`] and Fiji write them); a stack without one fills `aabb`, and is
-/// refused when none is given.
-pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoError> {
+/// [`write_tiff_stack`] and Fiji write them), converted to the world's length `unit` when
+/// both are lengths fluidnerf knows (nm, µm, mm, cm, m) and refused when they differ
+/// otherwise; a stack without one (or calibrated in ImageJ's `pixel`) fills `aabb`, and is
+/// refused when none is given. `unit` None takes the calibration as it is.
+pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> Result<Volume, IoError> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::ColorType;
     crate::check_regular_file(path, "volume file")?;
@@ -316,7 +339,9 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoErro
         ));
     }
     let dims = [nx, ny, nz];
-    let box_from_file = match (calibration.imagej, pixel, calibration.spacing) {
+    let calibrated_in = calibration.unit.as_deref().filter(|u| !is_pixel_unit(u));
+    let pixel_units = calibration.unit.as_deref().is_some_and(is_pixel_unit);
+    let box_from_file = match (calibration.imagej && !pixel_units, pixel, calibration.spacing) {
         (true, [Some(px), Some(py)], spacing) if spacing.is_some() || nz == 1 => {
             let h = DVec3::new(1.0 / px, 1.0 / py, spacing.unwrap_or(1.0 / px));
             let origin = DVec3::new(
@@ -324,8 +349,26 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>) -> Result<Volume, IoErro
                 calibration.origin[1].unwrap_or(0.0),
                 calibration.origin[2].unwrap_or(0.0),
             );
-            let min = -origin * h;
-            let size = DVec3::new(nx as f64, ny as f64, nz as f64) * h;
+            // The calibration's unit in the world's: a stack calibrated in µm read into a scene
+            // in mm would otherwise be a thousand times too large.
+            let scale = match (calibrated_in, unit) {
+                (Some(from), Some(to)) if from != to => match (metres_per(from), metres_per(to)) {
+                    (Some(a), Some(b)) => a / b,
+                    _ => {
+                        return Err(IoError::invalid(
+                            path,
+                            format!(
+                                "its ImageJ calibration is in `{from}` and the scene's length unit is `{to}`: \
+                                 only nm, µm (micron), mm, cm and m are converted; set the stack's unit to the \
+                                 scene's (in Fiji, Image > Properties)"
+                            ),
+                        ))
+                    }
+                },
+                _ => 1.0,
+            };
+            let min = -origin * h * scale;
+            let size = DVec3::new(nx as f64, ny as f64, nz as f64) * h * scale;
             Some(Aabb { min, max: min + size })
         }
         _ => None,
@@ -379,7 +422,7 @@ mod tests {
         let aabb = Aabb { min: DVec3::new(-20.0, -7.5, 3.0), max: DVec3::new(20.0, 12.5, 18.0) };
         let v = volume([16, 8, 6], aabb);
         write_tiff_stack(&p, &v, "mm").expect("write");
-        let back = read_tiff_stack(&p, None).expect("read");
+        let back = read_tiff_stack(&p, None, None).expect("read");
         assert_eq!(back.dims, v.dims);
         assert_eq!(back.data, v.data);
         for (a, b) in [(back.aabb.min, v.aabb.min), (back.aabb.max, v.aabb.max)] {
@@ -387,7 +430,7 @@ mod tests {
         }
         // A given box does not override the file's own.
         let other = Aabb { min: DVec3::ZERO, max: DVec3::ONE };
-        assert!((read_tiff_stack(&p, Some(other)).expect("read").aabb.min - aabb.min).length() < 1e-9);
+        assert!((read_tiff_stack(&p, Some(other), None).expect("read").aabb.min - aabb.min).length() < 1e-9);
     }
 
     #[test]
@@ -400,7 +443,7 @@ mod tests {
         write_stack(&big, &v, "mm", true).expect("big");
         assert_eq!(&std::fs::read(&big).expect("bytes")[2..4], &43u16.to_le_bytes(), "BigTIFF's version number");
         for p in [classic, big] {
-            let back = read_tiff_stack(&p, None).expect("read");
+            let back = read_tiff_stack(&p, None, None).expect("read");
             assert_eq!((back.dims, &back.data), (v.dims, &v.data));
             assert!((back.aabb.max - aabb.max).abs().max_element() < 1e-9);
         }
@@ -413,12 +456,42 @@ mod tests {
         let aabb = Aabb { min: DVec3::new(0.0, 0.0, 0.0), max: DVec3::new(3.0, 2.0, 0.5) };
         let v = volume([6, 4, 1], aabb);
         write_tiff_stack(&p, &v, "µm").expect("write");
-        let back = read_tiff_stack(&p, None).expect("read");
+        let back = read_tiff_stack(&p, None, None).expect("read");
         assert_eq!((back.dims, &back.data), (v.dims, &v.data));
         assert!((back.aabb.max - aabb.max).abs().max_element() < 1e-9);
         let text = String::from_utf8_lossy(&std::fs::read(&p).expect("bytes")).to_string();
         assert!(text.contains("unit=micron\n"), "{text}");
         assert_eq!(imagej_unit("m²"), "m\\u00B2");
+    }
+
+    /// A calibration in another length unit than the scene's is converted to the scene's
+    /// (a stack in µm read into a scene in mm was a thousand times too large), one in a unit
+    /// that does not convert is refused naming both, and ImageJ's `pixel` is no calibration.
+    #[test]
+    fn a_calibration_in_another_unit_is_converted_or_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let aabb = Aabb { min: DVec3::new(-200.0, 0.0, 100.0), max: DVec3::new(400.0, 300.0, 400.0) };
+        let v = volume([6, 3, 3], aabb);
+        let microns = dir.path().join("um.tif");
+        write_tiff_stack(&microns, &v, "µm").expect("write");
+        let mm = read_tiff_stack(&microns, None, Some("mm")).expect("read");
+        for (a, b) in [(mm.aabb.min, aabb.min * 1e-3), (mm.aabb.max, aabb.max * 1e-3)] {
+            assert!((a - b).abs().max_element() < 1e-12, "{a} vs {b}");
+        }
+        let same = read_tiff_stack(&microns, None, Some("µm")).expect("read");
+        assert!((same.aabb.max - aabb.max).abs().max_element() < 1e-9, "{}", same.aabb.max);
+        let furlongs = dir.path().join("f.tif");
+        write_tiff_stack(&furlongs, &v, "furlong").expect("write");
+        let err = read_tiff_stack(&furlongs, None, Some("mm")).expect_err("no conversion").to_string();
+        assert!(
+            err.contains("f.tif")
+                && err.contains("its ImageJ calibration is in `furlong` and the scene's length unit is `mm`"),
+            "{err}"
+        );
+        let pixels = dir.path().join("p.tif");
+        write_tiff_stack(&pixels, &v, "pixel").expect("write");
+        let given = Aabb::cube(DVec3::ZERO, 2.0);
+        assert_eq!(read_tiff_stack(&pixels, Some(given), Some("mm")).expect("read").aabb, given);
     }
 
     #[test]
@@ -450,10 +523,10 @@ mod tests {
             enc.write_image::<tiff::encoder::colortype::Gray16>(4, 3, &page).expect("page");
         }
         drop(f);
-        let err = read_tiff_stack(&p, None).expect_err("no box").to_string();
+        let err = read_tiff_stack(&p, None, None).expect_err("no box").to_string();
         assert!(err.contains("plain.tif") && err.contains("holds no box"), "{err}");
         let aabb = Aabb { min: DVec3::ZERO, max: DVec3::new(4.0, 3.0, 3.0) };
-        let v = read_tiff_stack(&p, Some(aabb)).expect("read");
+        let v = read_tiff_stack(&p, Some(aabb), None).expect("read");
         assert_eq!(v.dims, [4, 3, 3]);
         assert_eq!(v.get(1, 2, 2), (9 + 200) as f32);
         assert_eq!(v.aabb.max, aabb.max);
@@ -468,7 +541,7 @@ mod tests {
         enc.write_image::<tiff::encoder::colortype::Gray32Float>(4, 3, &[0.0; 12]).expect("page");
         enc.write_image::<tiff::encoder::colortype::Gray32Float>(2, 3, &[0.0; 6]).expect("page");
         drop(f);
-        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0))).expect_err("sizes").to_string();
+        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0)), None).expect_err("sizes").to_string();
         assert!(err.contains("page 2 is 2x3 pixels, page 1 4x3"), "{err}");
         let p = dir.path().join("rgb.tif");
         let mut f = std::fs::File::create(&p).expect("create");
@@ -477,7 +550,7 @@ mod tests {
             .write_image::<tiff::encoder::colortype::RGB8>(2, 2, &[0; 12])
             .expect("page");
         drop(f);
-        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0))).expect_err("colour").to_string();
+        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0)), None).expect_err("colour").to_string();
         assert!(err.contains("page 1 is of colour type") && err.contains("greyscale"), "{err}");
     }
 
@@ -496,7 +569,7 @@ mod tests {
             page.write_data(&[1.0; 4]).expect("pixels");
         }
         drop(f);
-        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0))).expect_err("frames").to_string();
+        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0)), None).expect_err("frames").to_string();
         assert!(err.contains("frames.tif") && err.contains("1 channel(s) and 2 frame(s)"), "{err}");
         let c = parse_description("ImageJ=1.54f\nimages=3\nslices=3\nunit=mm\nspacing=0.5\nxorigin=-4\n\0");
         assert_eq!((c.imagej, c.spacing, c.origin[0], c.origin[1]), (true, Some(0.5), Some(-4.0), None));
@@ -516,7 +589,7 @@ mod tests {
         page.resolution(tiff::tags::ResolutionUnit::None, Rational { n: 1, d: 1 });
         page.write_data(&[1.0; 4]).expect("pixels");
         drop(f);
-        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0))).expect_err("one page").to_string();
+        let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0)), None).expect_err("one page").to_string();
         assert!(
             err.contains("one.tif")
                 && err.contains("its ImageJ description counts 3 images, but the file holds 1 page(s)"),
@@ -543,7 +616,7 @@ mod tests {
         }
         drop(f);
         for aabb in [None, Some(Aabb::cube(DVec3::ZERO, 1.0))] {
-            let err = read_tiff_stack(&p, aabb).expect_err("spacing 0").to_string();
+            let err = read_tiff_stack(&p, aabb, None).expect_err("spacing 0").to_string();
             assert!(
                 err.contains("flat.tif")
                     && err.contains("its ImageJ calibration's slice spacing \"0\" is no positive depth"),
