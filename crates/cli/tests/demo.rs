@@ -19,6 +19,8 @@ fn demo_compares_the_fields_with_both_classical_methods() {
         assert!(stdout.lines().any(|l| l.starts_with(label)), "no table row for {label}:\n{stdout}");
     }
     // Every run ended at the cap given: the table says so.
+    let rule = stdout.lines().find(|l| l.starts_with("every method stopped by held-out early stopping"));
+    assert!(rule.is_some_and(|l| l.ends_with(" or its iteration cap")), "{stdout}");
     assert!(stdout.contains("* ended by its iteration cap"), "{stdout}");
     let comparison = json(&d.join("out/comparison.json"));
     let rows = comparison.as_array().expect("a list of runs");

@@ -186,7 +186,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn print_table(runs: &[RunSummary], wall: &[f64], stopping: &StoppingPolicy) {
     let Some(first) = runs.iter().find_map(|r| r.metrics()) else { return };
     println!("\nvolume metrics against the truth; held-out = reprojection NRMSE of the held-out camera");
-    println!("every method stopped by {}", stopping.describe_rule());
+    println!("every method stopped by {} or its iteration cap", stopping.describe_rule());
     print!("\n{:<24} {:>7} {:>8} {:>8} {:>8}", "method", "NRMSE", "SSIM", "SSIM-w", "PSNR");
     for r in &first.regions {
         print!(" {:>11}", format!("NRMSE-{}", &r.region.name[..r.region.name.len().min(5)]));
