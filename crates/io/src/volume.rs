@@ -252,7 +252,10 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     let extent: Vec<i64> = attribute_numbers(image_tag, "WholeExtent", 6, "whole numbers").map_err(|e| bad(&e))?;
     let origin: Vec<f64> = attribute_numbers(image_tag, "Origin", 3, "numbers").map_err(|e| bad(&e))?;
     let spacing: Vec<f64> = attribute_numbers(image_tag, "Spacing", 3, "numbers").map_err(|e| bad(&e))?;
-    if let Some(dir) = attribute(image_tag, "Direction").and_then(numbers::<f64>) {
+    // A Direction that is not nine numbers says nothing readable of the axes: taken as the
+    // identity, a rotated grid would be read unrotated.
+    if attribute(image_tag, "Direction").is_some() {
+        let dir: Vec<f64> = attribute_numbers(image_tag, "Direction", 9, "numbers").map_err(|e| bad(&e))?;
         if dir != [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0] {
             return Err(bad("only the identity Direction is supported"));
         }
@@ -623,6 +626,11 @@ mod tests {
             (
                 "WholeExtent=\"0 1 0 0 0 0\" Origin=\"0 0 0\" Spacing=\"1 x 1\"",
                 "Spacing must be 3 numbers, got \"1 x 1\"",
+            ),
+            // A Direction of commas was taken as the identity, whatever axes it named.
+            (
+                "WholeExtent=\"0 1 0 0 0 0\" Origin=\"0 0 0\" Spacing=\"1 1 1\" Direction=\"0,1,0,1,0,0,0,0,1\"",
+                "Direction must be 9 numbers, got \"0,1,0,1,0,0,0,0,1\"",
             ),
         ] {
             let text = format!(
