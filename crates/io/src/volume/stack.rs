@@ -181,11 +181,12 @@ fn parse_description(text: &str) -> Calibration {
     c.imagej = text.starts_with("ImageJ=");
     for line in text.lines() {
         let Some((key, value)) = line.split_once('=') else { continue };
-        let number = value.trim().trim_end_matches('\0').parse::<f64>().ok().filter(|v| v.is_finite());
+        let value = value.trim().trim_end_matches('\0');
+        let number = value.parse::<f64>().ok().filter(|v| v.is_finite());
         match key.trim() {
             "spacing" => {
                 c.spacing = number.filter(|&v| v > 0.0);
-                c.spacing_text = Some(value.trim().trim_end_matches('\0').to_string());
+                c.spacing_text = Some(value.to_string());
             }
             "xorigin" => c.origin[0] = number,
             "yorigin" => c.origin[1] = number,
@@ -193,7 +194,7 @@ fn parse_description(text: &str) -> Calibration {
             "channels" => c.channels = number.map_or(1, |v| v as usize),
             "frames" => c.frames = number.map_or(1, |v| v as usize),
             "images" => c.images = number.map(|v| v as usize),
-            "unit" => c.unit = Some(value.trim().trim_end_matches('\0').to_string()),
+            "unit" => c.unit = Some(value.to_string()),
             _ => {}
         }
     }
@@ -339,8 +340,8 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> R
         ));
     }
     let dims = [nx, ny, nz];
-    let calibrated_in = calibration.unit.as_deref().filter(|u| !is_pixel_unit(u));
     let pixel_units = calibration.unit.as_deref().is_some_and(is_pixel_unit);
+    let calibrated_in = calibration.unit.as_deref().filter(|_| !pixel_units);
     let box_from_file = match (calibration.imagej && !pixel_units, pixel, calibration.spacing) {
         (true, [Some(px), Some(py)], spacing) if spacing.is_some() || nz == 1 => {
             let h = DVec3::new(1.0 / px, 1.0 / py, spacing.unwrap_or(1.0 / px));
@@ -554,21 +555,28 @@ mod tests {
         assert!(err.contains("page 1 is of colour type") && err.contains("greyscale"), "{err}");
     }
 
+    /// Writes `pages` float pages of 2 × 2 ones, the first with the ImageJ `description` and,
+    /// when given, a resolution of that many pixels per unit.
+    fn write_imagej_pages(p: &Path, pages: usize, description: &str, per_unit: Option<u32>) {
+        let mut f = std::fs::File::create(p).expect("create");
+        let mut enc = TiffEncoder::new(&mut f).expect("encoder");
+        for k in 0..pages {
+            let mut page = enc.new_image::<tiff::encoder::colortype::Gray32Float>(2, 2).expect("page");
+            if k == 0 {
+                page.encoder().write_tag(Tag::ImageDescription, description).expect("description");
+                if let Some(n) = per_unit {
+                    page.resolution(tiff::tags::ResolutionUnit::None, Rational { n, d: 1 });
+                }
+            }
+            page.write_data(&[1.0; 4]).expect("pixels");
+        }
+    }
+
     #[test]
     fn a_hyperstack_of_several_frames_is_refused() {
         let dir = tempfile::tempdir().expect("tempdir");
         let p = dir.path().join("frames.tif");
-        let mut f = std::fs::File::create(&p).expect("create");
-        let mut enc = TiffEncoder::new(&mut f).expect("encoder");
-        for k in 0..2 {
-            let mut page = enc.new_image::<tiff::encoder::colortype::Gray32Float>(2, 2).expect("page");
-            if k == 0 {
-                let d = "ImageJ=1.54f\nimages=2\nchannels=1\nslices=1\nframes=2\nhyperstack=true\n";
-                page.encoder().write_tag(Tag::ImageDescription, d).expect("description");
-            }
-            page.write_data(&[1.0; 4]).expect("pixels");
-        }
-        drop(f);
+        write_imagej_pages(&p, 2, "ImageJ=1.54f\nimages=2\nchannels=1\nslices=1\nframes=2\nhyperstack=true\n", None);
         let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0)), None).expect_err("frames").to_string();
         assert!(err.contains("frames.tif") && err.contains("1 channel(s) and 2 frame(s)"), "{err}");
         let c = parse_description("ImageJ=1.54f\nimages=3\nslices=3\nunit=mm\nspacing=0.5\nxorigin=-4\n\0");
@@ -581,14 +589,7 @@ mod tests {
         // first page's pixels: it was read as its first slice alone.
         let dir = tempfile::tempdir().expect("tempdir");
         let p = dir.path().join("one.tif");
-        let mut f = std::fs::File::create(&p).expect("create");
-        let mut enc = TiffEncoder::new(&mut f).expect("encoder");
-        let mut page = enc.new_image::<tiff::encoder::colortype::Gray32Float>(2, 2).expect("page");
-        let d = "ImageJ=1.54f\nimages=3\nslices=3\nunit=mm\nspacing=1.5\n";
-        page.encoder().write_tag(Tag::ImageDescription, d).expect("description");
-        page.resolution(tiff::tags::ResolutionUnit::None, Rational { n: 1, d: 1 });
-        page.write_data(&[1.0; 4]).expect("pixels");
-        drop(f);
+        write_imagej_pages(&p, 1, "ImageJ=1.54f\nimages=3\nslices=3\nunit=mm\nspacing=1.5\n", Some(1));
         let err = read_tiff_stack(&p, Some(Aabb::cube(DVec3::ZERO, 1.0)), None).expect_err("one page").to_string();
         assert!(
             err.contains("one.tif")
@@ -603,18 +604,7 @@ mod tests {
         // as if it held no calibration, or refused as holding none.
         let dir = tempfile::tempdir().expect("tempdir");
         let p = dir.path().join("flat.tif");
-        let mut f = std::fs::File::create(&p).expect("create");
-        let mut enc = TiffEncoder::new(&mut f).expect("encoder");
-        for k in 0..2 {
-            let mut page = enc.new_image::<tiff::encoder::colortype::Gray32Float>(2, 2).expect("page");
-            if k == 0 {
-                let d = "ImageJ=1.54f\nimages=2\nslices=2\nunit=mm\nspacing=0\n";
-                page.encoder().write_tag(Tag::ImageDescription, d).expect("description");
-                page.resolution(tiff::tags::ResolutionUnit::None, Rational { n: 2, d: 1 });
-            }
-            page.write_data(&[1.0; 4]).expect("pixels");
-        }
-        drop(f);
+        write_imagej_pages(&p, 2, "ImageJ=1.54f\nimages=2\nslices=2\nunit=mm\nspacing=0\n", Some(2));
         for aabb in [None, Some(Aabb::cube(DVec3::ZERO, 1.0))] {
             let err = read_tiff_stack(&p, aabb, None).expect_err("spacing 0").to_string();
             assert!(
