@@ -3,7 +3,11 @@
 //! # Reading
 //! - 8- and 16-bit PNG, 8-bit JPEG (baseline and progressive), 8/16/32-bit integer and
 //!   32/64-bit float TIFF (greyscale or RGB; CMYK, YCbCr and L*a*b* TIFFs are refused). The
-//!   format is chosen by content, not by extension.
+//!   format is chosen by content, not by extension, but for LaVision DaVis images (`.im7`,
+//!   `.imx`), which carry no signature: a file of one frame is read as stored (16-bit words,
+//!   bytes or floats, see [`crate::davis`]); one of several frames (every camera of an
+//!   instant) is refused here, since it is no one camera's image (`fluidnerf import` splits
+//!   such files into the cameras' images).
 //! - Values stay unscaled: integer images give their sensor counts as f32 (a 16-bit PNG pixel
 //!   stored as 40000 reads as 40000.0, never normalised to [0, 1]); float TIFF values are
 //!   returned as stored.
@@ -11,7 +15,8 @@
 //!   default: counts as stored), `srgb` (the sRGB transfer curve of IEC 61966-2-1 undone) or a
 //!   gamma `g` (`count^g`), each keeping 255 at 255: `value = 255 · f(count / 255)`. Cameras
 //!   that write JPEG almost always store sRGB-encoded values; scientific cameras store linear
-//!   counts. 16-bit, 32-bit and float images are always read as linear.
+//!   counts. 16-bit, 32-bit and float images are always read as linear, and DaVis images of
+//!   any depth are the camera's counts as stored (like the frames of a cine or MRAW).
 //! - TIFFs tagged `PhotometricInterpretation = WhiteIsZero` (tag 262 = 0: 0 is white, the
 //!   stored values are a negative) are read as the TIFF standard defines when the samples are
 //!   unsigned integers, `value = 2^bits − 1 − stored`, with one warning per run, since a
@@ -185,14 +190,15 @@ impl std::fmt::Display for SampleKind {
     }
 }
 
-/// Reads a PNG, JPEG or TIFF image (chosen by content, not extension) as f32; 8-bit values
-/// are taken as linear counts. See [`read_image_with`].
+/// Reads a PNG, JPEG, TIFF or DaVis image (chosen by content; DaVis by extension) as f32; 8-bit
+/// values are taken as linear counts. See [`read_image_with`].
 pub fn read_image(path: &Path) -> Result<Image, IoError> {
     read_image_with(path, Linearisation::Linear).map(|(image, _)| image)
 }
 
-/// Reads a PNG, JPEG or TIFF image (chosen by content, not extension) as f32, applying
-/// `linearisation` to 8-bit samples, and says how its samples were stored.
+/// Reads a PNG, JPEG, TIFF or DaVis image (chosen by content; DaVis by extension) as f32,
+/// applying `linearisation` to 8-bit PNG, JPEG and TIFF samples, and says how its samples were
+/// stored.
 pub fn read_image_with(path: &Path, linearisation: Linearisation) -> Result<(Image, SampleKind), IoError> {
     let bytes = crate::read_input(path, "image file")?;
     decode_image(path, &bytes, linearisation)
@@ -216,13 +222,37 @@ pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> 
             ));
         }
         read_with_image_crate(path, bytes, image::ImageFormat::Jpeg, linearisation)
+    } else if crate::davis::is_davis_path(path) {
+        let file = crate::davis::decode_davis(path, bytes)?;
+        let kind = file.kind;
+        one_davis_frame(path, file).map(|image| (image, kind))
     } else {
         Err(IoError::invalid(
             path,
-            "unreadable image: not a PNG, JPEG or TIFF file (supported: 8/16-bit PNG, 8-bit JPEG, \
-             8/16/32-bit and float TIFF)",
+            "unreadable image: not a PNG, JPEG, TIFF or DaVis (.im7, .imx) file (supported: 8/16-bit PNG, 8-bit \
+             JPEG, 8/16/32-bit and float TIFF, DaVis images of one frame)",
         ))
     }
+}
+
+/// The image of a DaVis file of one frame; a file of several (every camera of an instant, or
+/// a double-frame exposure) is no one camera's image and is refused, saying what it holds.
+fn one_davis_frame(path: &Path, mut file: crate::davis::DavisFile) -> Result<Image, IoError> {
+    if file.frames.len() == 1 {
+        return Ok(file.frames.remove(0));
+    }
+    let labels: Vec<String> =
+        (0..file.frames.len()).map(|k| file.frame_label(k).map_or_else(|| "?".into(), |l| l.to_string())).collect();
+    Err(IoError::invalid(
+        path,
+        format!(
+            "a DaVis image of {} frames (cameras and exposures {} by its attributes), not one camera's image: give \
+             `fluidnerf import` the folder of such files as --images, and it splits each into the cameras' images \
+             (see docs/real-data.md)",
+            file.frames.len(),
+            labels.join(", ")
+        ),
+    ))
 }
 
 /// Whether a JPEG's bytes end before its end-of-image marker ([`jpeg_end`]): decoders fill the
@@ -298,7 +328,7 @@ fn is_tiff(bytes: &[u8]) -> bool {
         || bytes.starts_with(b"MM\0+")
 }
 
-/// The size `(width, height)` of a PNG, JPEG or TIFF image, read from its header only.
+/// The size `(width, height)` of a PNG, JPEG, TIFF or DaVis image, read from its header only.
 pub fn read_dimensions(path: &Path) -> Result<(u32, u32), IoError> {
     use std::io::Read;
     crate::check_regular_file(path, "image file")?;
@@ -317,13 +347,20 @@ pub fn read_dimensions(path: &Path) -> Result<(u32, u32), IoError> {
             .map_err(|e| IoError::io(path, "image file", e))?
             .into_dimensions()
             .map_err(|e| IoError::invalid(path, format!("unreadable image header: {e}")))
+    } else if crate::davis::is_davis_path(path) {
+        let mut head = Vec::new();
+        let file = std::fs::File::open(path).map_err(|e| IoError::io(path, "image file", e))?;
+        file.take(crate::davis::HEADER_LEN as u64)
+            .read_to_end(&mut head)
+            .map_err(|e| IoError::io(path, "image file", e))?;
+        crate::davis::decode_dimensions(path, &head)
     } else {
-        Err(IoError::invalid(path, "unreadable image: not a PNG, JPEG or TIFF file"))
+        Err(IoError::invalid(path, "unreadable image: not a PNG, JPEG, TIFF or DaVis (.im7, .imx) file"))
     }
 }
 
-/// Extensions of the image files fluidnerf reads (lower case).
-pub const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "tif", "tiff"];
+/// Extensions of the image files fluidnerf reads (lower case); DaVis's last.
+pub const IMAGE_EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "tif", "tiff", "im7", "imx"];
 
 /// Whether `p` is named like an image fluidnerf reads (its extension in any case).
 pub fn has_image_extension(p: &Path) -> bool {

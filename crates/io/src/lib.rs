@@ -9,7 +9,9 @@
 //! - [`calib`]: OpenCV (`cv::FileStorage` YAML/XML/JSON, stereo pairs) and COLMAP (text or
 //!   binary) calibrations.
 //! - [`image`]: 8/16-bit PNG, 8-bit JPEG and 8/16/32-bit and float TIFF, read as f32 with an
-//!   explicit linearisation of 8-bit values.
+//!   explicit linearisation of 8-bit values, and LaVision DaVis images (through [`davis`]).
+//! - [`davis`]: LaVision DaVis `.im7`/`.imx` files: every frame of a recorded instant, with
+//!   the attributes that name each frame's camera.
 //! - [`volume`]: `.npy` (C or Fortran order), `.vti` (VTK XML ImageData), raw + JSON
 //!   sidecar and ImageJ TIFF stack volumes.
 //! - [`mesh`]: binary PLY and OBJ triangle meshes.
@@ -30,6 +32,7 @@ use std::path::Path;
 
 pub mod calib;
 mod cine;
+pub mod davis;
 mod error;
 pub mod folder;
 pub mod image;
