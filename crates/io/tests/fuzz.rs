@@ -1,6 +1,6 @@
 //! Mutated and random inputs never panic the readers: `transforms.json`, OpenCV
 //! `cv::FileStorage` (YAML, XML and JSON), MJPEG AVI video, COLMAP (text and binary), images
-//! (PNG 8/16-bit, JPEG, TIFF 16-bit and float) and `.npy` volumes. Each reader gets valid files
+//! (PNG 8/16-bit, JPEG, TIFF 16-bit and float, DaVis `.im7`/`.imx`) and `.npy` volumes. Each reader gets valid files
 //! written in code, then seeded byte mutations of them (flips, insertions of structural
 //! characters, deletions, truncations, duplicated runs) and plain random bytes; it may refuse
 //! them, but must return.
@@ -336,6 +336,24 @@ fn images_never_panic() {
         let _ = decode_image(&p, bytes, Linearisation::Srgb);
     });
     fuzz("image headers", &seeds, 300, |bytes| {
+        write_and(&p, bytes);
+        let _ = fluidnerf_io::image::read_dimensions(&p);
+    });
+}
+
+#[test]
+fn davis_images_never_panic() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/davis");
+    let seeds: Vec<Vec<u8>> = ["three_cameras_imx.im7", "float.im7", "word_old.imx", "zlib.im7", "fixed12.im7"]
+        .iter()
+        .map(|name| std::fs::read(fixtures.join(name)).expect("fixture"))
+        .collect();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("x.im7");
+    fuzz("davis", &seeds, 1000, |bytes| {
+        let _ = decode_image(&p, bytes, Linearisation::Linear);
+    });
+    fuzz("davis headers", &seeds, 300, |bytes| {
         write_and(&p, bytes);
         let _ = fluidnerf_io::image::read_dimensions(&p);
     });
