@@ -1256,3 +1256,96 @@ fn video_options_for_still_images_are_warned_about() {
     let o = import(&[]);
     assert!(o.status.success() && !stderr(&o).contains("no effect"), "{}", stderr(&o));
 }
+
+/// A DaVis 7 image (uncompressed 16-bit words) of 32 × 24 frames, frame k filled with
+/// `values[k]` and named by the attribute `CameraName<k> = labels[k]: …`.
+fn davis_file(path: &Path, values: &[u16], labels: &[&str]) {
+    let mut b = vec![0u8; 256];
+    b[4..6].copy_from_slice(&(-4i16).to_le_bytes());
+    for (at, v) in [(8, 32i32), (12, 24), (16, 1), (20, values.len() as i32)] {
+        b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    for v in values {
+        b.extend(std::iter::repeat_n(v.to_le_bytes(), 32 * 24).flatten());
+    }
+    for (k, label) in labels.iter().enumerate() {
+        let item = format!("CameraName{k}={label}: Imager (32 x 24 pixel)");
+        b.extend(6i32.to_le_bytes());
+        b.extend((item.len() as i32).to_le_bytes());
+        b.extend(item.as_bytes());
+    }
+    b.extend([0u8; 8]);
+    std::fs::create_dir_all(path.parent().expect("a folder")).expect("mkdir");
+    std::fs::write(path, b).expect("writes DaVis file");
+}
+
+/// [`rig`] with its cameras numbered from 1, as DaVis numbers them: `cam1`, `cam2`, `cam3`.
+fn davis_rig(dir: &Path) -> PathBuf {
+    let calib = dir.join("rig.yml");
+    let cams: Vec<(String, Camera)> =
+        rig().into_iter().enumerate().map(|(i, (_, c))| (format!("cam{}", i + 1), c)).collect();
+    write_opencv(&calib, &cams).expect("writes calibration");
+    calib
+}
+
+/// A folder of DaVis files, each holding every camera's frame of one instant, is split into
+/// the cameras' images by the camera names in its attributes, whatever their order in the
+/// file; a double-frame recording's exposures become consecutive instants.
+#[test]
+fn a_davis_recording_is_split_into_the_cameras_images() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = davis_rig(dir.path());
+    let rec = dir.path().join("rec");
+    // Frames stored as cameras 2, 3, 1; DaVis camera c at instant n holds 100·c + n.
+    for n in 0..2u16 {
+        davis_file(&rec.join(format!("B{:05}.im7", n + 1)), &[200 + n, 300 + n, 100 + n], &["2", "3", "1"]);
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &rec, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 6);
+    assert_eq!(scene.times(), vec![0.0, 1.0]);
+    for f in &scene.frames {
+        let camera: u16 = f.camera_name.as_deref().expect("named")[3..].parse().expect("numbered");
+        let n = f.time.expect("timed") as u16;
+        let name = format!("frames/{}/B{:05}.png", f.camera_name.as_deref().expect("named"), n + 1);
+        assert_eq!(f.file_path, PathBuf::from(&name));
+        let img = fluidnerf_io::image::read_image(&out.join(&name)).expect("reads");
+        assert!(img.data.iter().all(|&v| v == f32::from(100 * camera + n)), "{name}: {}", img.data[0]);
+    }
+    let record = std::fs::read_to_string(out.join("import.json")).expect("import.json");
+    assert!(record.contains("\"davis_camera\": 3"), "{record}");
+
+    // Double-frame: exposures A and B of one file are instants 0 and 1.
+    let rec2 = dir.path().join("rec2");
+    davis_file(&rec2.join("B00001.im7"), &[10, 11, 20, 21, 30, 31], &["1A", "1B", "2A", "2B", "3A", "3B"]);
+    let out2 = dir.path().join("scene2");
+    let o = import_recordings(&calib, &rec2, &out2, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out2).expect("loads");
+    assert_eq!((scene.frames.len(), scene.times()), (6, vec![0.0, 1.0]));
+    let b = out2.join("frames/cam2/B00001B.png");
+    assert_eq!(fluidnerf_io::image::read_image(&b).expect("reads").data[0], 21.0);
+
+    // Cameras that name no DaVis camera are refused, saying how they are matched.
+    let left = dir.path().join("left.yml");
+    write_opencv(&left, &[("left".to_owned(), rig()[0].1.clone())]).expect("writes calibration");
+    let o = import_recordings(&left, &rec, &dir.path().join("scene4"), &[]);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success() && err.contains("camera `left` has no number") && err.contains("cameras 1, 2, 3"),
+        "{err}"
+    );
+    // A multi-frame file as one camera's image is refused naming its frames.
+    let stills = dir.path().join("stills");
+    davis_file(&stills.join("cam1.im7"), &[5], &["1"]);
+    davis_file(&stills.join("cam2.im7"), &[6], &["2"]);
+    davis_file(&stills.join("cam3.im7"), &[7, 8], &["3A", "3B"]);
+    let o = import_recordings(&calib, &stills, &dir.path().join("scene5"), &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success() && err.contains("cam3.im7") && err.contains("2 frames"), "{err}");
+    davis_file(&stills.join("cam3.im7"), &[7], &["3"]);
+    let o = import_recordings(&calib, &stills, &dir.path().join("scene5"), &[]);
+    assert!(o.status.success(), "one frame per camera's file is its image: {}", stderr(&o));
+}

@@ -912,7 +912,10 @@ mod tests {
         let p = dir.path().join("junk.png");
         std::fs::write(&p, b"not an image").expect("write");
         let err = read_image(&p).expect_err("junk");
-        assert!(err.to_string().contains("junk.png") && err.to_string().contains("not a PNG, JPEG or TIFF"), "{err}");
+        assert!(
+            err.to_string().contains("junk.png") && err.to_string().contains("not a PNG, JPEG, TIFF or DaVis"),
+            "{err}"
+        );
         let err = read_image(&dir.path().join("none.png")).expect_err("missing");
         assert!(matches!(err, IoError::NotFound { .. }), "{err}");
         assert!(err.to_string().contains("none.png"), "{err}");

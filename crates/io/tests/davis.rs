@@ -123,6 +123,9 @@ fn truncated_files_are_refused() {
     assert!(err.contains("1 frame(s) of 15×5 16-bit pixels take 150 bytes") && err.contains("holds 100"), "{err}");
 }
 
+/// Bytes written over a file at an offset.
+type Edit<'a> = (usize, &'a [u8]);
+
 /// Headers that do not fit the file, or describe what fluidnerf does not read, are refused
 /// naming the file and the problem.
 #[test]
@@ -130,7 +133,7 @@ fn bad_and_unsupported_headers_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
     let word = std::fs::read(fixtures().join("word.im7")).expect("fixture");
     let p = dir.path().join("bad.im7");
-    let with = |edits: &[(usize, &[u8])]| {
+    let with = |edits: &[Edit]| {
         let mut b = word.clone();
         for (at, v) in edits {
             b[*at..*at + v.len()].copy_from_slice(v);
@@ -138,7 +141,7 @@ fn bad_and_unsupported_headers_are_refused() {
         std::fs::write(&p, &b).expect("write");
         read_davis(&p).expect_err("refused").to_string()
     };
-    let cases: [(&[(usize, &[u8])], &str); 10] = [
+    let cases: [(&[Edit], &str); 10] = [
         (&[(20, &4i32.to_le_bytes())], "4 frame(s) of 15×5 16-bit pixels take 600 bytes"),
         (&[(8, &1000i32.to_le_bytes())], "take 10000 bytes"),
         (&[(8, &(-3i32).to_le_bytes())], "claims 1 frame(s) of -3×5×1 pixels"),

@@ -16,6 +16,8 @@ use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use serde::Serialize;
 use std::io::Write as _;
 
+mod davis;
+
 /// Build a scene from an OpenCV or COLMAP calibration and a folder of images, or from a
 /// `transforms.json` written by nerfstudio, instant-ngp or a Blender/NeRF exporter.
 ///
@@ -587,7 +589,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
                 unmatched.push(format!("{name} ({} is not a file)", not_files.join(", ")));
             }
             [] => unmatched.push(format!(
-                "{name} (no {name}.png, .jpg, .tif, a video {name}.avi/.mp4/.mov/.cine/.mraw or folder {name}/)"
+                "{name} (no {name}.png, .jpg, .tif, .im7, a video {name}.avi/.mp4/.mov/.cine/.mraw or folder {name}/)"
             )),
             several => bail!(
                 "camera {name} matches several images: {}",
@@ -730,6 +732,9 @@ struct Settings<'a> {
     /// How each video was read.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
     videos: &'a [VideoRecord],
+    /// Which DaVis camera of a recording each calibrated camera is.
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    davis_cameras: &'a [davis::CameraRecord],
 }
 
 /// The box given as `xmin,ymin,zmin,xmax,ymax,zmax`.
@@ -852,6 +857,8 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     // Read before it is replaced: the frames an earlier import decoded that this one does not
     // write again are removed once this one has succeeded.
     let earlier_frames = earlier_video_frames(&args.out);
+    // A DaVis recording given as --images, split into the cameras' images once OUT exists.
+    let mut davis_recording: Option<davis::Recording> = None;
 
     let (frames, mut from_file) = if let Some(path) = &args.transforms {
         let draft = read_scene_draft(path).context("cannot read the transforms.json")?;
@@ -920,7 +927,14 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         let Some(images) = &args.images else { bail!("--opencv and --colmap need --images") };
         let (frames, used) = if let Some(path) = &args.opencv {
             let cams = fluidnerf_io::calib::read_opencv(path).context("cannot read the OpenCV calibration")?;
-            match_opencv(&cams, images)?
+            match davis::recording(&cams, images, &list_dir(images)?, args.skip_uncalibrated)? {
+                Some((recording, frames)) => {
+                    let used = recording.files.iter().cloned().collect();
+                    davis_recording = Some(recording);
+                    (frames, used)
+                }
+                None => match_opencv(&cams, images)?,
+            }
         } else if let Some(dir) = &args.colmap {
             let cams = fluidnerf_io::calib::read_colmap(dir).context("cannot read the COLMAP model")?;
             match_colmap(&cams, images)?
@@ -992,6 +1006,10 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         time_offset_s: args.video_time_offset,
         linearisation: args.linearisation.or(from_file.linearisation).unwrap_or_default(),
     };
+    let mut frames = frames;
+    if let Some(recording) = &davis_recording {
+        davis::split(recording, &mut frames, &out_abs, args.force, created)?;
+    }
     let (frames, videos, sources) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
     // The file's masks and backgrounds follow its frames into the decoded video frames.
     if let Some(r) = &mut from_file.recording {
@@ -1120,7 +1138,14 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     }
     created.file(&out_file);
     save_scene_recording(&scene, &args.out, &recording, true)?;
-    let settings = Settings { command: "import", version: env!("CARGO_PKG_VERSION"), args, videos: &videos };
+    let davis_cameras = davis_recording.map(|r| r.record).unwrap_or_default();
+    let settings = Settings {
+        command: "import",
+        version: env!("CARGO_PKG_VERSION"),
+        args,
+        videos: &videos,
+        davis_cameras: &davis_cameras,
+    };
     let json = serde_json::to_string_pretty(&settings)?;
     let settings_file = args.out.join("import.json");
     created.file(&settings_file);
