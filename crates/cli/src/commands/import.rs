@@ -32,7 +32,8 @@ mod davis;
 /// `camera_matrix`, `distortion_coefficients`, `rvec`/`tvec` or `R`/`T` (world to camera) and
 /// `image_width`/`image_height`; several cameras in one file use keys suffixed `_<name>`, a
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
-/// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`), or, for a time series, every image in the
+/// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`, or a DaVis `.im7`/`.imx` of one frame), or,
+/// for a time series, every image in the
 /// folder `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
 /// `transforms.json` if they are physical): every camera's folder must hold as many images,
 /// under the same names when the folders share names, and no folder named like an image; a
@@ -47,6 +48,14 @@ mod davis;
 /// trigger: files of one rate that began or ended apart keep the instants every camera
 /// recorded. How each video was read (decoder, range and why,
 /// clipped pixels) is recorded in `OUT/import.json`.
+///
+/// A DaVis recording (`--opencv`): when IMAGES holds LaVision DaVis files (`B00001.im7`, …,
+/// or `.imx`) and no camera has an entry of its own there, each file is one instant holding a
+/// frame of every camera; it is split into `OUT/frames/NAME/B00001.png` (16-bit counts as
+/// stored, or `.tif` for float images). Calibrated cameras are matched to DaVis cameras by the
+/// number their name ends with (`cam1` is DaVis camera 1, as the file's `CameraName<k>`
+/// attributes say, else frame k is camera k + 1), never by order; a double-frame recording's
+/// exposures A and B are consecutive instants. See docs/real-data.md.
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
 /// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
