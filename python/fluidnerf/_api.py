@@ -344,6 +344,22 @@ def read_video(
     return frames, times, json.loads(info)
 
 
+def read_davis(path: PathLike) -> tuple[np.ndarray, list[str | None], dict[str, str]]:
+    """Every frame of a LaVision DaVis image (``.im7``, or the older ``.imx``), as
+    ``fluidnerf import`` reads it.
+
+    A DaVis file holds one recorded instant of every camera, one frame per camera and
+    exposure. Returns ``(frames, labels, attributes)``: ``frames`` of shape
+    ``(n, height, width)`` and dtype float32, the counts as stored (no intensity scale
+    applied), row 0 at the top; ``labels``, each frame's camera number and exposure letter from
+    its ``CameraName<k>`` attribute (``"1A"``: camera 1, exposure A; ``"2"``: camera 2 of a
+    single-exposure recording; ``None`` when the file does not name it); ``attributes``, the
+    file's text attributes (``_SCALE_I``, ``AcqTimeSeries0``, ...), the last value of a name
+    given twice. Vector fields (``.vc7``), volumes and other buffer kinds are refused."""
+    frames, labels, attributes = _ext.read_davis(_path(path, "path"))
+    return frames, labels, dict(attributes)
+
+
 def _as_scene(scene: Scene | PathLike) -> Scene:
     if isinstance(scene, Scene):
         return scene

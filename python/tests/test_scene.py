@@ -608,3 +608,45 @@ def test_read_video_names_the_file_it_cannot_read(tmp_path):
         fluidnerf.read_video(tmp_path / "cam.mraw")
     with pytest.raises(TypeError, match="path: expected a path"):
         fluidnerf.read_video(3)
+
+
+DAVIS = FIXTURES.parent / "davis"
+
+
+def _readim_values() -> dict:
+    """The fixtures' frames and camera labels as LaVision's ReadIM read them back
+    (`make_davis_with_readim.py` recorded them in `make_davis_with_readim.txt`)."""
+    files, current = {}, None
+    for line in (DAVIS / "make_davis_with_readim.txt").read_text().splitlines():
+        words = line.split()
+        if words[0] == "frame":
+            current["frames"].append([float(v) for v in words[2:]])
+        else:
+            keys = dict(zip(words[1::2], words[2::2]))
+            labels = [None if c == "-" else c for c in keys["cameras"].split(",")]
+            current = {"shape": (int(keys["height"]), int(keys["width"])), "labels": labels, "frames": []}
+            files[words[0]] = current
+    return files
+
+
+@pytest.mark.parametrize("name", ["three_cameras_imx.im7", "float.im7", "zlib.im7", "word_old.imx"])
+def test_read_davis_gives_readims_frames_and_labels(name):
+    expected = _readim_values()[name]
+    frames, labels, attributes = fluidnerf.read_davis(DAVIS / name)
+    assert frames.dtype == np.float32
+    assert frames.shape == (len(expected["frames"]), *expected["shape"])
+    want = np.array(expected["frames"], dtype=np.float32).reshape(frames.shape)
+    np.testing.assert_array_equal(frames, want)
+    # A file without camera names has one unnamed frame per "-".
+    assert labels == expected["labels"]
+    assert isinstance(attributes, dict)
+    if any(labels):
+        assert all(f"CameraName{k}" in attributes for k in range(len(labels)))
+
+
+def test_read_davis_refuses_a_truncated_file_naming_it(tmp_path):
+    short = tmp_path / "short.im7"
+    short.write_bytes((DAVIS / "word.im7").read_bytes()[:300])
+    with pytest.raises(fluidnerf.FluidNerfError, match=None) as e:
+        fluidnerf.read_davis(short)
+    assert "short.im7" in str(e.value)

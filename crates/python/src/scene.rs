@@ -580,6 +580,25 @@ pub fn read_colmap(py: Python<'_>, folder: PathBuf) -> PyResult<Vec<NamedCamera<
     named_cameras(py, cams)
 }
 
+/// A DaVis file for Python: frames `(n, height, width)`, each frame's camera and exposure
+/// label (`"1A"`, or None), and its attributes in file order.
+type DecodedDavis<'py> = (Bound<'py, PyArray3<f32>>, Vec<Option<String>>, Vec<(String, String)>);
+
+/// Every frame of a LaVision DaVis image (`.im7`, `.imx`; `fluidnerf_io::davis`), the counts
+/// as stored, row 0 at the top, with each frame's label from its `CameraName<k>` attribute
+/// and the file's attributes.
+#[pyfunction]
+pub fn read_davis(py: Python<'_>, path: PathBuf) -> PyResult<DecodedDavis<'_>> {
+    let file = py.allow_threads(|| guard(|| fluidnerf_io::davis::read_davis(&path).map_err(|e| err(e.to_string()))))?;
+    let labels = (0..file.frames.len()).map(|k| file.frame_label(k).map(|l| l.to_string())).collect();
+    let (n, h, w) = (file.frames.len(), file.height, file.width);
+    let mut data = Vec::with_capacity(n * h * w);
+    for frame in &file.frames {
+        data.extend_from_slice(&frame.data);
+    }
+    Ok((PyArray1::from_vec(py, data).reshape([n, h, w])?, labels, file.attributes))
+}
+
 /// A decoded recording for Python: frames `(n, height, width)`, times, how it was read (JSON).
 type DecodedVideo<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray1<f64>>, String);
 
