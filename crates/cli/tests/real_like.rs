@@ -1,7 +1,8 @@
 //! A real-like recording end to end: `synth --preset real-like-small` (camera gains ±30 %, a 5 %
 //! background with dark noise, one background frame per camera, 8-bit sRGB JPEG) reconstructed
 //! with background subtraction and fitted gains comes close to the same jet recorded as clean
-//! linear images, and clearly closer than without them; the fitted gains match the drawn ones.
+//! linear images, and clearly closer than without them; the fitted gains match the drawn ones,
+//! and a run without gains warns that the images' totals differ as differing gains make them.
 
 mod common;
 use common::*;
@@ -72,4 +73,12 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
         }
     }
     assert!(stdout.contains("camera gains: cam000") && stdout.contains("held-out cam003"), "{stdout}");
+
+    // Without gains, the drawn gains show in the images' totals and the run says so; the clean
+    // recording's cameras agree and draw no such warning, nor does a run that fits the gains.
+    let hint = |r: &serde_json::Value| {
+        r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains("--gains fit")))
+    };
+    assert!(hint(&bare), "{}", bare["warnings"]);
+    assert!(!hint(&clean) && !hint(&fitted), "{} / {}", clean["warnings"], fitted["warnings"]);
 }

@@ -122,6 +122,9 @@ pub(crate) fn run(
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
     let measured = crate::measured::load(scene, &config.gains)?;
+    if let Some(hint) = &measured.gain_hint {
+        session.warn(hint);
+    }
     let (train_idx, held_idx) = measured.split(scene);
     // Masked pixels are rows of zeros ([`MaskedProjector`]): zero data, no weight.
     let masked_image = |i: usize| {

@@ -27,6 +27,9 @@ pub(crate) struct Measured {
     pub gains: Vec<f64>,
     /// What was done, for the report; gains are filled in by [`Measured::report`].
     preprocessing: Preprocessing,
+    /// Without balancing or fitted gains: a warning when the training images of one time
+    /// differ in total intensity as cameras of different gains do ([`gain_hint`]).
+    pub gain_hint: Option<String>,
 }
 
 /// Reads and preprocesses the scene's images ([`fluidnerf_io::scene::load_preprocessed`]) and,
@@ -37,8 +40,9 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, Pipeli
     let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
     let mut images = pre.images;
     let mut factors = vec![1.0; images.len()];
+    let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
+    let gain_hint = (gains.mode == GainMode::None).then(|| gain_hint(scene, &totals)).flatten();
     if gains.mode != GainMode::None {
-        let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
         let time_key = |i: usize| scene.frames[i].time.map(f64::to_bits);
         for i in 0..images.len() {
             // The mean over the training images of the time (all of them when every one is
@@ -70,7 +74,7 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, Pipeli
         gains: *gains,
         frames: Vec::new(),
     };
-    Ok(Measured { images, masks: pre.masks, gains: factors, preprocessing })
+    Ok(Measured { images, masks: pre.masks, gains: factors, preprocessing, gain_hint })
 }
 
 impl Measured {
@@ -111,6 +115,54 @@ impl Measured {
         }
         out
     }
+}
+
+/// How far (as a ratio) a training image's total intensity may lie from the median of its
+/// time's before [`gain_hint`] speaks. The line-of-sight integrals of one field seen whole by
+/// cameras around it have nearly the same total: the synthetic rings and sphere of
+/// `fluidnerf synth` spread by 0.1–4 % (`sphere15`), a recording with camera gains drawn in
+/// ±30 % (`real-like`) by −23 % to +29 %.
+pub(crate) const GAIN_HINT_RATIO: f64 = 1.15;
+
+/// A warning when, at some time with at least three training images, an image's total
+/// intensity (masked pixels left out) lies more than [`GAIN_HINT_RATIO`] from the median of
+/// its time's: a sign that the cameras' gains differ, which a run without `--gains` takes as
+/// differences of the field. None when nothing stands out. Cameras that see the flow only in
+/// part differ too, so this is a warning, never a refusal.
+fn gain_hint(scene: &Scene, totals: &[f64]) -> Option<String> {
+    let mut worst: Option<(usize, f64)> = None;
+    let key = |i: usize| scene.frames[i].time.map(f64::to_bits);
+    let mut keys: Vec<Option<u64>> = (0..totals.len()).map(key).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    for t in keys {
+        let group: Vec<usize> = (0..totals.len()).filter(|&i| !scene.frames[i].holdout && key(i) == t).collect();
+        if group.len() < 3 {
+            continue;
+        }
+        let mut sorted: Vec<f64> = group.iter().map(|&i| totals[i]).collect();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        if median.is_nan() || median <= 0.0 {
+            continue;
+        }
+        for &i in &group {
+            let ratio = totals[i] / median;
+            let off = if ratio > 0.0 { ratio.max(1.0 / ratio) } else { f64::INFINITY };
+            if off > GAIN_HINT_RATIO && worst.is_none_or(|(_, w)| off > w.max(1.0 / w)) {
+                worst = Some((i, ratio));
+            }
+        }
+    }
+    let (i, ratio) = worst?;
+    Some(format!(
+        "the training images' total intensities differ between cameras as differing gains make them: {} holds {:.2}× \
+         the median of its time (more than {:.0} % off); a run without gains takes that for the field. If the \
+         cameras' gains, apertures or filters differ, add --gains fit (or balance; docs/real-data.md)",
+        frame_label(scene, i),
+        ratio,
+        (GAIN_HINT_RATIO - 1.0) * 100.0
+    ))
 }
 
 /// A frame's camera name, or its image file.

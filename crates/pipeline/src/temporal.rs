@@ -203,7 +203,10 @@ fn setup(
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
         ));
     };
-    let (mut problem, mut masks, _) = crate::neural::problem(scene, &config.gains)?;
+    let (mut problem, mut masks, measured) = crate::neural::problem(scene, &config.gains)?;
+    if let Some(hint) = &measured.gain_hint {
+        session.warn(hint);
+    }
     // Held-out times leave training with their masks.
     let held = |t: f64| spec.holdout_times.iter().any(|&h| same_time(h, t));
     let keep = |views: &[fluidnerf_neural::train::View], list: Vec<Option<Vec<bool>>>| -> Vec<Option<Vec<bool>>> {
