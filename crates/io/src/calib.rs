@@ -1,5 +1,6 @@
-//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML, XML or JSON)
-//! and COLMAP models (text or binary); and writing both back.
+//! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML, XML or JSON),
+//! COLMAP models (text or binary) and Agisoft Metashape camera exports (read only, see
+//! [`read_metashape`]); and writing the first two back.
 //!
 //! # OpenCV (`cv::FileStorage`: YAML `%YAML:1.0` with `!!opencv-matrix`, XML or JSON)
 //! Per camera:
@@ -68,6 +69,11 @@
 //! `cameras.bin` and `images.bin` hold the same records, little-endian, as COLMAP's
 //! `WriteCamerasBinary`/`WriteImagesBinary` write them (model ids instead of names, 2D points
 //! skipped); when both kinds are present the binary files are read.
+//!
+//! # Agisoft Metashape camera exports ("Agisoft XML")
+//! Frame sensors, poses through the chunk's (or component's) transform, principal points from
+//! the image centre at `+0.5` pixel centres, and Metashape's `P1`/`P2` swapped into OpenCV's
+//! order: see [`read_metashape`]'s module, `metashape`, for every conversion.
 
 use std::path::{Path, PathBuf};
 
@@ -76,6 +82,9 @@ use fluidnerf_core::{num, Camera, Distortion, Intrinsics};
 use serde_json::{json, Map, Value};
 
 use crate::{atomic_write, IoError};
+
+mod metashape;
+pub use metashape::{read_metashape, MetashapeCameras};
 
 /// Rotation matrix of a Rodrigues (axis × angle) vector, as `cv::Rodrigues`:
 /// `R = cos θ I + (1 − cos θ) k kᵀ + sin θ [k]×` with `θ = |r|`, `k = r / θ`.

@@ -6,8 +6,8 @@
 //! - [`scene`]: nerfstudio-style `transforms.json` with fluidnerf's additions (the native
 //!   scene format; files from nerfstudio, instant-ngp and Blender/NeRF exporters read too),
 //!   and loading a scene's images and ground-truth volumes with their checks.
-//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/XML/JSON, stereo pairs) and COLMAP (text or
-//!   binary) calibrations.
+//! - [`calib`]: OpenCV (`cv::FileStorage` YAML/XML/JSON, stereo pairs), COLMAP (text or
+//!   binary) and Agisoft Metashape (camera export XML) calibrations.
 //! - [`image`]: 8/16-bit PNG, 8-bit JPEG and 8/16/32-bit and float TIFF, read as f32 with an
 //!   explicit linearisation of 8-bit values, and LaVision DaVis images (through [`davis`]).
 //! - [`davis`]: LaVision DaVis `.im7`/`.imx` files: every frame of a recorded instant, with
@@ -20,8 +20,9 @@
 //!
 //! # Conventions
 //! - Pixel centres: fluidnerf (OpenCV) puts pixel `(col, row)` at continuous image
-//!   coordinates `(col, row)`; nerfstudio and COLMAP put it at `(col + ½, row + ½)`. Readers and
-//!   writers of those formats convert principal points exactly: `cx_core = cx_file − ½`.
+//!   coordinates `(col, row)`; nerfstudio, COLMAP and Metashape put it at `(col + ½, row + ½)`.
+//!   Readers and writers of those formats convert principal points exactly: `cx_core = cx_file
+//!   − ½` (Metashape's `cx` counts from the image centre: `cx_core = width / 2 + cx − ½`).
 //! - Camera axes: OpenCV (x right, y down, z forward) in memory; nerfstudio's
 //!   `transform_matrix` uses OpenGL axes (x right, y up, z backward) and is converted with
 //!   `R_cv = R_gl · diag(1, −1, −1)`.
