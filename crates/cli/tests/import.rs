@@ -1,5 +1,8 @@
-//! End-to-end tests of `fluidnerf import` from OpenCV and COLMAP calibrations, in a temporary
-//! directory.
+//! End-to-end tests of `fluidnerf import` from OpenCV, COLMAP and Metashape calibrations, in a
+//! temporary directory.
+
+#[path = "../../io/tests/common/metashape.rs"]
+mod metashape_xml;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -1348,4 +1351,115 @@ fn a_davis_recording_is_split_into_the_cameras_images() {
     davis_file(&stills.join("cam3.im7"), &[7], &["3"]);
     let o = import_recordings(&calib, &stills, &dir.path().join("scene5"), &[]);
     assert!(o.status.success(), "one frame per camera's file is its image: {}", stderr(&o));
+}
+
+/// `import --metashape FILE --images IMAGES --aabb … EXTRA… -o OUT`.
+fn import_metashape(file: &Path, images: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["import", "--metashape", s(file), "--images", s(images), "--aabb", "-10,-10,-10,10,10,10"];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["-o", s(out)]);
+    fluidnerf(&args)
+}
+
+/// The rig exported by Metashape, its chunk rotated, moved and scaled: the cameras imported
+/// project every point where those of the rig's OpenCV calibration do, and the scene is in
+/// metres, the unit of Metashape's chunk coordinates.
+#[test]
+fn a_metashape_export_imports_as_the_opencv_calibration_of_its_cameras() {
+    use fluidnerf_core::glam::{DMat3, EulerRot};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (calib, images) = rig_with_stills(dir.path());
+    let chunk = metashape_xml::ChunkTransform {
+        rotation: DMat3::from_euler(EulerRot::XYZ, 0.4, -1.1, 2.5),
+        translation: DVec3::new(300.0, -20.0, 7.0),
+        scale: 0.5,
+    };
+    let xml = dir.path().join("cameras.xml");
+    std::fs::write(&xml, metashape_xml::metashape_xml(&rig(), Some(&chunk))).expect("writes");
+    let by_opencv = dir.path().join("opencv");
+    let args = ["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-10,-10,-10,10,10,10", "-o"];
+    let o = fluidnerf(&[&args[..], &[s(&by_opencv)]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.path().join("metashape");
+    let o = import_metashape(&xml, &images, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("imported 3 frames"));
+    let (ours, theirs) = (load_scene(&out).expect("loads"), load_scene(&by_opencv).expect("loads"));
+    assert_eq!((ours.units.as_str(), theirs.units.as_str()), ("m", "mm"));
+    let mut checked = 0;
+    for (a, b) in ours.frames.iter().zip(&theirs.frames) {
+        assert_eq!(a.file_path, b.file_path);
+        for p in [DVec3::ZERO, DVec3::new(5.0, -3.0, 2.0), DVec3::new(-7.0, 6.0, -4.0), DVec3::new(9.0, 9.0, 9.0)] {
+            let (u, v) = (a.camera.project(p).expect("in front"), b.camera.project(p).expect("in front"));
+            assert!((u - v).length() <= 1e-6 * v.length(), "{}: {p}: {u} vs {v}", a.file_path.display());
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 12);
+    let record = std::fs::read_to_string(out.join("import.json")).expect("import.json");
+    assert!(record.contains("\"metashape\"") && record.contains("cameras.xml"), "{record}");
+    // --units overrides the chunk's metres.
+    let o = import_metashape(&xml, &images, &out, &["--units", "mm", "--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").units, "mm");
+}
+
+/// A camera Metashape did not align is refused, named, unless --skip-uncalibrated leaves it and
+/// its image out; a disabled camera is left out with its image, with a warning; a camera on a
+/// sensor the file does not define is refused naming both, and the failed import leaves nothing.
+#[test]
+fn unaligned_disabled_and_malformed_metashape_cameras() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, images) = rig_with_stills(dir.path());
+    let full = metashape_xml::metashape_xml(&rig(), None);
+    let xml = dir.path().join("cameras.xml");
+    let out = dir.path().join("scene");
+    // cam1 without its transform.
+    let start = full.find("<camera id=\"1\"").expect("cam1");
+    let (from, to) =
+        (start + full[start..].find("<transform>").expect("t"), start + full[start..].find("</transform>").expect("t"));
+    let unaligned = format!("{}{}", &full[..from], &full[to + "</transform>".len()..]);
+    std::fs::write(&xml, &unaligned).expect("writes");
+    let o = import_metashape(&xml, &images, &out, &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("cameras.xml")
+            && e.contains("not aligned")
+            && e.contains("cam1")
+            && e.contains("--skip-uncalibrated"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a failed import leaves nothing behind");
+    let o = import_metashape(&xml, &images, &out, &["--skip-uncalibrated"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("without a pose") && stderr(&o).contains("cam1"), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 2);
+    assert!(stderr(&o).contains("internal frame"), "no chunk transform: the scale is arbitrary");
+    assert_eq!(scene.units, "mm", "without a chunk transform the units are the other importers' default");
+
+    // cam2 disabled: left out without --skip-uncalibrated.
+    std::fs::write(&xml, full.replace("label=\"cam2\"", "label=\"cam2\" enabled=\"false\"")).expect("writes");
+    let o = import_metashape(&xml, &images, &out, &["--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("disabled") && stderr(&o).contains("cam2"), "{}", stderr(&o));
+    let names: Vec<String> =
+        load_scene(&out).expect("loads").frames.iter().map(|f| f.file_path.display().to_string()).collect();
+    assert_eq!(names.len(), 2);
+    assert!(names.iter().all(|n| !n.contains("cam2")), "{names:?}");
+
+    // A camera on a sensor the file lacks, and a fisheye sensor.
+    let other = dir.path().join("other");
+    for (text, needles) in [
+        (full.replace("sensor_id=\"1\"", "sensor_id=\"4\""), ["camera `cam1`", "sensor 4"]),
+        (full.replace("type=\"frame\">", "type=\"fisheye\">"), ["sensor 0", "`fisheye`"]),
+    ] {
+        std::fs::write(&xml, text).expect("writes");
+        let o = import_metashape(&xml, &images, &other, &[]);
+        assert_eq!(o.status.code(), Some(1));
+        let e = stderr(&o);
+        assert!(e.contains("cameras.xml") && needles.iter().all(|n| e.contains(n)), "{e}");
+        assert!(!other.exists());
+    }
 }

@@ -1,5 +1,5 @@
-//! `fluidnerf import`: builds a scene (`transforms.json`) from an OpenCV or COLMAP calibration
-//! and a folder of images, or from a `transforms.json` written by another tool.
+//! `fluidnerf import`: builds a scene (`transforms.json`) from an OpenCV, COLMAP or Metashape
+//! calibration and a folder of images, or from a `transforms.json` written by another tool.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -18,8 +18,8 @@ use std::io::Write as _;
 
 mod davis;
 
-/// Build a scene from an OpenCV or COLMAP calibration and a folder of images, or from a
-/// `transforms.json` written by nerfstudio, instant-ngp or a Blender/NeRF exporter.
+/// Build a scene from an OpenCV, COLMAP or Metashape calibration and a folder of images, or from
+/// a `transforms.json` written by nerfstudio, instant-ngp or a Blender/NeRF exporter.
 ///
 /// transforms.json (`--transforms`): read as `load_scene` reads scene files (`fl_x`/`fl_y` or
 /// `camera_angle_x`/`camera_angle_y`, sizes from the images when `w`/`h` are missing), its
@@ -62,6 +62,17 @@ mod davis;
 /// its name stem when the extension differs (`a.jpg` finds `a.png`). COLMAP's pixel centres
 /// (+0.5) are converted.
 ///
+/// Metashape (`--metashape`): the XML of File > Export > Export Cameras ("Agisoft XML"), frame
+/// sensors only. Each enabled camera is looked up by its label, as a COLMAP image is (`IMG_1`
+/// finds `IMG_1.tif`). Poses go through the chunk's transform (Metashape 2: the camera's
+/// component's) into the chunk's coordinate system, in metres: the scene's units are `m` unless
+/// --units says otherwise; a file without a chunk transform holds Metashape's internal frame, of
+/// arbitrary scale (a warning says so; the units are then mm unless --units). Principal points
+/// (offsets from the image centre) and Metashape's tangential terms (its P1 is OpenCV's p2) are
+/// converted; b1 and b2 become fx − fy and the skew. k4, p3, p4 other than zero and fisheye or
+/// spherical sensors are refused. Cameras the file has not aligned (no transform) are refused,
+/// named, unless --skip-uncalibrated; disabled cameras are left out, with their images.
+///
 /// The box: `--aabb`, else the file's (`--transforms`), else estimated from the images: the
 /// bounding box of the points seen bright by every camera (a coarse visual hull), grown by a
 /// tenth of its size on every side; it is printed and written into the scene. Check it with
@@ -85,17 +96,21 @@ pub struct Args {
     /// COLMAP model folder (holding `cameras.txt` and `images.txt`, or `.bin`).
     #[arg(long, group = "source", requires = "images")]
     pub colmap: Option<PathBuf>,
+    /// Agisoft Metashape camera export (`.xml`, File > Export > Export Cameras).
+    #[arg(long, group = "source", requires = "images")]
+    pub metashape: Option<PathBuf>,
     /// A `transforms.json` (nerfstudio, instant-ngp, Blender/NeRF synthetic), or its folder.
     #[arg(long, group = "source")]
     pub transforms: Option<PathBuf>,
-    /// Folder with the images (for --opencv and --colmap).
+    /// Folder with the images (for --opencv, --colmap and --metashape).
     #[arg(long, conflicts_with = "transforms")]
     pub images: Option<PathBuf>,
     /// Reconstruction box in world units: xmin,ymin,zmin,xmax,ymax,zmax (e.g.
     /// `-10,-10,-10,10,10,10`). Without it, the box is estimated from the images.
     #[arg(long, allow_hyphen_values = true)]
     pub aabb: Option<String>,
-    /// Length unit of the calibration's world frame [default: mm, or the file's].
+    /// Length unit of the calibration's world frame [default: mm, or the file's; m for a
+    /// Metashape chunk with a transform].
     #[arg(long, value_parser = parse_units)]
     pub units: Option<String>,
     /// Pixel value = intensity_scale × ∫E ds (world units) [default: 1, or the file's].
@@ -114,7 +129,7 @@ pub struct Args {
     #[arg(long)]
     pub force: bool,
     /// Leave out images that no camera is calibrated for (with a warning) instead of failing
-    /// (for --opencv and --colmap).
+    /// (for --opencv, --colmap and --metashape), and cameras a Metashape file has not aligned.
     #[arg(long, conflicts_with = "transforms")]
     pub skip_uncalibrated: bool,
     /// Cameras to hold out for validation, comma separated: camera names, or image names
@@ -702,32 +717,80 @@ fn by_camera<'a>(pairs: impl Iterator<Item = (&'a str, String)>) -> Vec<(String,
     groups
 }
 
-/// Frames for COLMAP images, and the image files used.
-fn match_colmap(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(Vec<Frame>, BTreeSet<PathBuf>)> {
+/// The image `IMAGES/NAME`, or the one image whose stem is NAME's when that is no file (`a.jpg`
+/// finds `a.png`, `IMG_1` finds `IMG_1.tif`); `None` when there is none. Several images of that
+/// stem are an error.
+fn image_by_name(images: &Path, name: &str) -> Result<Option<PathBuf>, String> {
+    let p = images.join(name);
+    if p.is_file() {
+        return Ok(Some(p));
+    }
+    fluidnerf_io::image::find_image_by_stem(&p)
+}
+
+/// Frames for cameras named by their image (COLMAP's image names, Metashape's labels), found
+/// by [`image_by_name`], and the image files used; `source` names the file in errors.
+fn match_by_name(
+    cameras: &[(String, Camera)],
+    images: &Path,
+    source: &str,
+) -> anyhow::Result<(Vec<Frame>, BTreeSet<PathBuf>)> {
     let mut frames = Vec::new();
     let mut used = BTreeSet::new();
     let mut missing = Vec::new();
     for (name, cam) in cameras {
-        let mut p = images.join(name);
-        if !p.is_file() {
-            match fluidnerf_io::image::find_image_by_stem(&p) {
-                Ok(Some(found)) => p = found,
-                Ok(None) => {
-                    missing.push(name.clone());
-                    continue;
-                }
-                Err(e) => bail!("image {name} of the COLMAP model: {e}"),
+        let p = match image_by_name(images, name) {
+            Ok(Some(p)) => p,
+            Ok(None) => {
+                missing.push(name.clone());
+                continue;
             }
-        }
+            Err(e) => bail!("image {name} of {source}: {e}"),
+        };
         used.insert(p.clone());
         frames.push(Frame { camera: cam.clone(), file_path: p, time: None, camera_name: None, holdout: false });
     }
     if !missing.is_empty() {
         bail!(
-            "the COLMAP model lists image(s) missing from {} (also looked for other extensions): {}",
+            "{source} lists image(s) missing from {} (also looked for other extensions): {}",
             images.display(),
             missing.join(", ")
         );
+    }
+    Ok((frames, used))
+}
+
+/// Frames for the enabled, aligned cameras of a Metashape export (by label, as
+/// [`match_by_name`]), and the image files used. Cameras the file has not aligned are refused,
+/// named, unless `skip_uncalibrated` (their images are then left out as any image without a
+/// calibrated camera is); disabled cameras are left out, and their images with them.
+fn match_metashape(
+    file: &Path,
+    read: &fluidnerf_io::calib::MetashapeCameras,
+    images: &Path,
+    skip_uncalibrated: bool,
+) -> anyhow::Result<(Vec<Frame>, BTreeSet<PathBuf>)> {
+    if !read.unaligned.is_empty() {
+        let (n, list) = (read.unaligned.len(), read.unaligned.join(", "));
+        if !skip_uncalibrated {
+            bail!(
+                "{}: {n} camera(s) have no pose (not aligned in Metashape): {list}; align them, disable them, or \
+                 pass --skip-uncalibrated to leave them out",
+                file.display()
+            );
+        }
+        log::warn!("{}: left out {n} camera(s) without a pose (not aligned in Metashape): {list}", file.display());
+    }
+    let (frames, mut used) = match_by_name(&read.cameras, images, &format!("the Metashape file {}", file.display()))?;
+    if !read.disabled.is_empty() {
+        log::warn!(
+            "{}: left out {} disabled camera(s) and their images: {}",
+            file.display(),
+            read.disabled.len(),
+            read.disabled.join(", ")
+        );
+        // A disabled camera's image is accounted for: not one that no camera is calibrated for.
+        used.extend(read.disabled.iter().filter_map(|label| image_by_name(images, label).ok().flatten()));
     }
     Ok((frames, used))
 }
@@ -839,7 +902,12 @@ fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoR
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
-    let given = [("--opencv", &args.opencv), ("--colmap", &args.colmap), ("--transforms", &args.transforms)];
+    let given = [
+        ("--opencv", &args.opencv),
+        ("--colmap", &args.colmap),
+        ("--metashape", &args.metashape),
+        ("--transforms", &args.transforms),
+    ];
     let given = given.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
     super::recordable("import.json", given.chain([("--out", args.out.as_path())]))?;
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
@@ -933,7 +1001,8 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         };
         (frames, file)
     } else {
-        let Some(images) = &args.images else { bail!("--opencv and --colmap need --images") };
+        let Some(images) = &args.images else { bail!("--opencv, --colmap and --metashape need --images") };
+        let mut units = None;
         let (frames, used) = if let Some(path) = &args.opencv {
             let cams = fluidnerf_io::calib::read_opencv(path).context("cannot read the OpenCV calibration")?;
             match davis::recording(&cams, images, &list_dir(images)?, args.skip_uncalibrated)? {
@@ -946,9 +1015,20 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             }
         } else if let Some(dir) = &args.colmap {
             let cams = fluidnerf_io::calib::read_colmap(dir).context("cannot read the COLMAP model")?;
-            match_colmap(&cams, images)?
+            match_by_name(&cams, images, "the COLMAP model")?
+        } else if let Some(file) = &args.metashape {
+            let read = fluidnerf_io::calib::read_metashape(file).context("cannot read the Metashape cameras")?;
+            units = read.units;
+            if units.is_none() {
+                log::warn!(
+                    "{}: the chunk has no transform: the cameras stand in Metashape's internal frame, whose scale \
+                     is arbitrary (scale the chunk with scale bars or markers in Metashape to measure in metres)",
+                    file.display()
+                );
+            }
+            match_metashape(file, &read, images, args.skip_uncalibrated)?
         } else {
-            bail!("give --transforms, --opencv or --colmap");
+            bail!("give --transforms, --opencv, --colmap or --metashape");
         };
         let extra: Vec<String> = unused_entries(images, &used)?.iter().map(|p| p.display().to_string()).collect();
         if !extra.is_empty() {
@@ -963,7 +1043,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 );
             }
         }
-        (frames, FromFile::default())
+        (frames, FromFile { units: units.map(String::from), ..FromFile::default() })
     };
     ensure!(!frames.is_empty(), "no frames to import");
     // Checked before anything is written (a video's frames go by its camera's name).
