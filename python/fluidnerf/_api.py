@@ -136,6 +136,7 @@ __all__ = [
     "plan_windows",
     "psnr",
     "read_colmap",
+    "read_metashape",
     "read_opencv",
     "read_transforms",
     "reconstruct",
@@ -295,6 +296,16 @@ def read_colmap(folder: PathLike) -> list[Camera]:
     """The images of a COLMAP model (text or binary) as cameras named by image file, with
     COLMAP's pixel centres converted."""
     return _cameras(_ext.read_colmap(_path(folder, "folder")))
+
+
+def read_metashape(path: PathLike, skip_unaligned: bool = False) -> list[Camera]:
+    """The enabled, aligned cameras of an Agisoft Metashape camera export (``.xml``) named by
+    label, as ``fluidnerf import --metashape`` reads them: poses in the chunk's coordinate
+    system (metres) when the file gives the chunk's transform. Cameras the file has not
+    aligned are refused, named, unless ``skip_unaligned``; disabled cameras are left out."""
+    if not isinstance(skip_unaligned, bool):
+        raise TypeError(f"skip_unaligned: expected True or False, got {skip_unaligned!r}")
+    return _cameras(_ext.read_metashape(_path(path, "path"), skip_unaligned))
 
 
 def read_video(

@@ -207,6 +207,26 @@ def test_calibration_importers_read_the_library_fixtures():
     assert len(colmap) >= 1 and all(c.size[0] > 0 for c in colmap)
 
 
+def test_metashape_cameras_that_are_not_aligned_are_refused_unless_skipped(tmp_path):
+    sensor = (
+        '<sensor id="0" label="lens" type="frame"><resolution width="64" height="48"/>'
+        '<calibration type="frame" class="adjusted"><f>80</f><cx>1.5</cx><p1>0.002</p1></calibration></sensor>'
+    )
+    pose = "<transform>1 0 0 0 0 1 0 0 0 0 1 -100 0 0 0 1</transform>"
+    xml = tmp_path / "cameras.xml"
+    xml.write_text(
+        f'<document><chunk><sensors>{sensor}</sensors><cameras><camera id="0" sensor_id="0" label="a">{pose}'
+        '</camera><camera id="1" sensor_id="0" label="b"/></cameras></chunk></document>'
+    )
+    with pytest.raises(fluidnerf.FluidNerfError, match="not aligned in Metashape.*b"):
+        fluidnerf.read_metashape(xml)
+    (cam,) = fluidnerf.read_metashape(xml, skip_unaligned=True)
+    assert cam.name == "a" and cam.size == (64, 48)
+    # Offsets from the image centre with pixel centres at +0.5; Metashape's P1 is OpenCV's p2.
+    np.testing.assert_allclose(cam.K[0], [80, 0, 33.0])
+    assert cam.distortion[2:4] == (0.0, 0.002)
+
+
 def test_arrays_of_the_wrong_dimension_are_refused_naming_the_array_and_its_shape(tmp_path):
     """Before, the extension raised "TypeError: argument 'images': 'ndarray' object cannot be
     converted to 'PyArray<T, D>'", which named neither the shape expected nor the one given,

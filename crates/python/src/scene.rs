@@ -599,6 +599,25 @@ pub fn read_davis(py: Python<'_>, path: PathBuf) -> PyResult<DecodedDavis<'_>> {
     Ok((PyArray1::from_vec(py, data).reshape([n, h, w])?, labels, file.attributes))
 }
 
+/// The enabled, aligned cameras of an Agisoft Metashape camera export, named by label, as
+/// `import --metashape` reads them. Cameras the file has not aligned are refused, named,
+/// unless `skip_unaligned`; disabled cameras are left out.
+#[pyfunction]
+#[pyo3(signature = (path, skip_unaligned = false))]
+pub fn read_metashape(py: Python<'_>, path: PathBuf, skip_unaligned: bool) -> PyResult<Vec<NamedCamera<'_>>> {
+    let read = guard(|| fluidnerf_io::calib::read_metashape(&path).map_err(|e| err(e.to_string())))?;
+    if !read.unaligned.is_empty() && !skip_unaligned {
+        return Err(err(format!(
+            "{}: {} camera(s) have no pose (not aligned in Metashape): {}; align them, disable them, or pass \
+             skip_unaligned=True to leave them out",
+            path.display(),
+            read.unaligned.len(),
+            read.unaligned.join(", ")
+        )));
+    }
+    named_cameras(py, read.cameras)
+}
+
 /// A decoded recording for Python: frames `(n, height, width)`, times, how it was read (JSON).
 type DecodedVideo<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray1<f64>>, String);
 
