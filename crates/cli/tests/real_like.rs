@@ -77,8 +77,20 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
     // Without gains, the drawn gains show in the images' totals and the run says so; the clean
     // recording's cameras agree and draw no such warning, nor does a run that fits the gains.
     let hint = |r: &serde_json::Value| {
-        r["warnings"].as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains("--gains fit")))
+        r["warnings"]
+            .as_array()
+            .expect("warnings")
+            .iter()
+            .any(|w| w.as_str().is_some_and(|w| w.contains("--gains fit")))
     };
     assert!(hint(&bare), "{}", bare["warnings"]);
     assert!(!hint(&clean) && !hint(&fitted), "{} / {}", clean["warnings"], fitted["warnings"]);
+    // `info` says it before any run.
+    let said = |scene: &str| {
+        let o = fluidnerf(d, &["info", scene]);
+        ok(&o);
+        let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+        text.contains("differ between cameras") && text.contains("--gains fit")
+    };
+    assert!(said("real") && !said("clean"));
 }

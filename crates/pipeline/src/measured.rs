@@ -122,14 +122,14 @@ impl Measured {
 /// cameras around it have nearly the same total: the synthetic rings and sphere of
 /// `fluidnerf synth` spread by 0.1–4 % (`sphere15`), a recording with camera gains drawn in
 /// ±30 % (`real-like`) by −23 % to +29 %.
-pub(crate) const GAIN_HINT_RATIO: f64 = 1.15;
+pub const GAIN_HINT_RATIO: f64 = 1.15;
 
 /// A warning when, at some time with at least three training images, an image's total
-/// intensity (masked pixels left out) lies more than [`GAIN_HINT_RATIO`] from the median of
+/// intensity (`totals`, per frame of `scene`: masked pixels left out) lies more than [`GAIN_HINT_RATIO`] from the median of
 /// its time's: a sign that the cameras' gains differ, which a run without `--gains` takes as
 /// differences of the field. None when nothing stands out. Cameras that see the flow only in
 /// part differ too, so this is a warning, never a refusal.
-fn gain_hint(scene: &Scene, totals: &[f64]) -> Option<String> {
+pub fn gain_hint(scene: &Scene, totals: &[f64]) -> Option<String> {
     let mut worst: Option<(usize, f64)> = None;
     let key = |i: usize| scene.frames[i].time.map(f64::to_bits);
     let mut keys: Vec<Option<u64>> = (0..totals.len()).map(key).collect();

@@ -148,6 +148,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ));
     }
     let mut kinds = Vec::new();
+    // Each image's total, after the background and inside the masks when the scene has them.
+    let mut totals = vec![0.0f64; scene.frames.len()];
     // The training images' noise readings ([`fluidnerf_core::Image::relative_noise`]).
     let mut noise_levels = Vec::new();
     // Whether a training (not held-out) image has a pixel above 0, before any preprocessing.
@@ -179,6 +181,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
                 Ok((img, kind)) => {
                     kinds.push((i, kind));
+                    totals[i] = img.sum();
                     let (w, h) = (f.camera.width(), f.camera.height());
                     let (lo, hi) = img.min_max();
                     let mean = img.sum() / img.data.len().max(1) as f64;
@@ -263,6 +266,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Err(e) => problems.push(format!("preprocessing: {e}")),
             // What a run trains on: the pixels left after the background, inside the masks.
             Ok(p) => {
+                for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
+                    totals[i] = match m {
+                        Some(m) => im.data.iter().zip(m).filter(|(_, &k)| k).map(|(&v, _)| f64::from(v)).sum(),
+                        None => im.sum(),
+                    };
+                }
                 training_lit = scene.frames.iter().enumerate().filter(|(_, f)| !f.holdout).any(|(i, _)| {
                     let lit = p.images[i].data.iter().enumerate().filter(|&(_, &v)| v > 0.0);
                     lit.map(|(k, _)| k).any(|k| p.masks[i].as_ref().is_none_or(|m| m[k]))
@@ -281,6 +290,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if !args.no_images && problems.is_empty() && training && !training_lit {
         problems.push(fluidnerf_core::image::ALL_BLACK.to_string());
+    }
+    // What a run without gains would warn of: cameras whose images' totals differ.
+    if !args.no_images && problems.is_empty() {
+        warnings.extend(fluidnerf_pipeline::gain_hint(&scene, &totals));
     }
     let _ = writeln!(out);
 
