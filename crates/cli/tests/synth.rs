@@ -718,3 +718,23 @@ fn a_step_fraction_too_small_to_finish_is_refused() {
     assert!(err.contains("invalid setting `image.step_fraction`: must be in [0.01, 2], got 1e-300"), "{err}");
     assert!(!dir.exists(), "wrote output");
 }
+
+/// A starting jet before it starts (t* = 0) holds no light: every image was black, and the
+/// scene was written with a warning for every reader to refuse. It is refused naming the times
+/// and why; a series in which only some times are dark is still a series.
+#[test]
+fn a_phantom_empty_at_every_time_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("out");
+    let o = run_small(&dir, &["--phantom", "jet-tr", "--times", "0"]);
+    let err = text(&o).1;
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("invalid setting `times`: every image of the 5 cameras is black")
+            && err.contains("the jet-tr phantom is empty (no voxel above 0) at t* = 0"),
+        "{err}"
+    );
+    assert!(!dir.exists(), "wrote output");
+    let o = run_small(&dir, &["--phantom", "jet-tr", "--times", "0,14"]);
+    assert!(o.status.success(), "{:?}", text(&o));
+}

@@ -452,7 +452,14 @@ pub fn generate(
     let t0 = std::time::Instant::now();
     let peak = frames.iter().map(|f| f.clean.min_max().1 as f64).fold(0.0, f64::max);
     if peak <= 0.0 {
-        log::warn!("every image is black: no camera sees any of the field");
+        return Err(all_black(settings, &truth, cameras.len()));
+    }
+    let dark: Vec<String> = (0..steps.len())
+        .filter(|&ti| frames.iter().filter(|f| f.time_index == ti).all(|f| f.clean.min_max().1 <= 0.0))
+        .filter_map(|ti| steps[ti].map(|t| num(t).to_string()))
+        .collect();
+    if !dark.is_empty() {
+        log::warn!("every image at time {} is black: the phantom shows no light then", dark.join(", "));
     }
     let sensor_seed = settings.seed ^ 0x6e6f_6973_6521;
     let (intensity_scale, real) = match &settings.real {
@@ -503,6 +510,54 @@ pub fn generate(
     };
     stats.sensor_seconds = t0.elapsed().as_secs_f64();
     Ok(Synthesis { settings: settings.clone(), aabb, cameras, truth, frames, intensity_scale, stats, real })
+}
+
+/// The refusal of a data set whose every image is black, which every reader would refuse
+/// ([`fluidnerf_core::image::ALL_BLACK`]): it names the setting that made it so and why, the
+/// phantom empty at the times asked for, below the thin-lens threshold, or out of every view.
+fn all_black(settings: &SynthSettings, truth: &[(Option<f64>, Volume)], cameras: usize) -> SynthError {
+    let kind = settings.phantom.kind;
+    let head = format!("every image of the {cameras} cameras is black");
+    let largest = truth.iter().map(|(_, v)| v.min_max().1).fold(f32::NEG_INFINITY, f32::max);
+    let when = || {
+        let times: Vec<String> = truth.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
+        match kind.cfd_case() {
+            Some(_) => format!("solver step {}", times.join(", ")),
+            None => format!("t* = {}", times.join(", ")),
+        }
+    };
+    if largest <= 0.0 {
+        return if settings.times.is_empty() {
+            SynthError::invalid("phantom", format!("{head}: the {} phantom is empty (no voxel above 0)", kind.name()))
+        } else {
+            SynthError::invalid(
+                "times",
+                format!(
+                    "{head}: the {} phantom is empty (no voxel above 0) at {}; give times at which it holds light",
+                    kind.name(),
+                    when()
+                ),
+            )
+        };
+    }
+    if let ImageModel::ThinLens(s) = &settings.image {
+        if largest <= s.threshold {
+            return SynthError::invalid(
+                "image.threshold",
+                format!(
+                    "{head}: no voxel of the {} phantom is above the threshold {} (the largest is {}), so none \
+                     is cast; give a lower threshold",
+                    kind.name(),
+                    num(s.threshold),
+                    num(largest)
+                ),
+            );
+        }
+    }
+    SynthError::invalid(
+        "rig",
+        format!("{head}: no camera sees the light of the {} phantom; place the cameras so they see it", kind.name()),
+    )
 }
 
 /// Convenience for callers without a progress display.

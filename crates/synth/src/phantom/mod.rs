@@ -53,6 +53,20 @@ pub enum PhantomKind {
 }
 
 impl PhantomKind {
+    /// The name a setting gives it (`jet-tr`, `ball-and-blobs`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            PhantomKind::Jet => "jet",
+            PhantomKind::JetTr => "jet-tr",
+            PhantomKind::Ball => "ball",
+            PhantomKind::Blobs => "blobs",
+            PhantomKind::BallAndBlobs => "ball-and-blobs",
+            PhantomKind::Plume => "plume",
+            PhantomKind::CfdJet => "cfd-jet",
+            PhantomKind::Volume => "volume",
+        }
+    }
+
     /// Whether the phantom needs frame times (it has no static form).
     pub fn is_time_resolved(self) -> bool {
         matches!(self, PhantomKind::JetTr)
