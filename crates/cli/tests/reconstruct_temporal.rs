@@ -573,3 +573,30 @@ fn a_timeless_truth_of_a_time_resolved_scene_is_used_for_every_instant_and_said_
     refused(&out, "give the entry its instant's `time`, or export an instant with `export --time`");
     assert!(!d.join("m.json").exists(), "wrote metrics");
 }
+
+/// The grid's time axis spans each window's frames, one cell per frame interval: a `time_span`
+/// or `time_resolution` edited into a `tr-fast` configuration was replaced without a word. One
+/// that differs from both its default and the value used is refused naming its key; the
+/// value used is accepted.
+#[test]
+fn an_edited_time_axis_of_the_grid_that_windows_replace_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 3, 16, 12, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o first --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let run = |key: &str, value: serde_json::Value| {
+        let config = d.join("run.json");
+        std::fs::copy(d.join("first/config.json"), &config).expect("copies the config");
+        edit_json(&config, |v| v["method"]["field"]["hash-grid"][key] = value);
+        let _ = std::fs::remove_dir_all(d.join("again"));
+        fluidnerf(d, &["reconstruct", "--config", "run.json", "-o", "again", "-q"])
+    };
+    for key in ["time_span", "time_resolution"] {
+        let out = run(key, serde_json::json!(5));
+        refused(&out, &format!("method.field.hash-grid.{key}: 5 would be ignored"));
+        refused(&out, "sets it to 2 for windows of 3 frames");
+        assert!(!d.join("again").exists(), "nothing written");
+        ok(&run(key, serde_json::json!(2)));
+    }
+}

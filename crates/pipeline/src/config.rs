@@ -35,6 +35,7 @@ use fluidnerf_classical::{
     SmartParams, TikhonovParams, TvParams,
 };
 use fluidnerf_core::num;
+use fluidnerf_neural::hashgrid::HashGridConfig;
 use fluidnerf_neural::start::StartFit;
 use fluidnerf_neural::temporal::{temporal_preset, TemporalConfig, WindowConfig, TEMPORAL_PRESETS};
 use fluidnerf_neural::train::{Batching, TrainConfig};
@@ -644,10 +645,38 @@ fn classical_under(prefix: &str, e: fluidnerf_classical::ClassicalError) -> Pipe
     }
 }
 
-/// Refuses time frequencies for a field of space alone (`method`'s field has no time input),
-/// where they would be ignored.
+/// Refuses time frequencies, and a hash grid's time axis set off its defaults, for a field of
+/// space alone (`method`'s field has no time input), where they would be ignored.
 fn refuse_time_frequencies(method: Method, field: &FieldConfig) -> Result<(), PipelineError> {
     match field {
+        FieldConfig::HashGrid(c) => {
+            let d = HashGridConfig::default();
+            let set = [
+                ("time_span", c.time_span != d.time_span, num(c.time_span).to_string(), num(d.time_span).to_string()),
+                (
+                    "time_resolution",
+                    c.time_resolution != d.time_resolution,
+                    c.time_resolution.to_string(),
+                    d.time_resolution.to_string(),
+                ),
+                (
+                    "time_base_resolution",
+                    c.time_base_resolution != d.time_base_resolution,
+                    c.time_base_resolution.to_string(),
+                    d.time_base_resolution.to_string(),
+                ),
+            ];
+            match set.into_iter().find(|s| s.1) {
+                Some((key, _, given, default)) => Err(PipelineError::invalid(
+                    format!("method.field.hash-grid.{key}"),
+                    format!(
+                        "{given} would be ignored: {method} trains a field of space alone, which has no time axis; \
+                         leave it at its default {default}, or use a time-resolved method (tr-fast)"
+                    ),
+                )),
+                None => Ok(()),
+            }
+        }
         FieldConfig::Mlp(c) if c.time_freqs > 0 => Err(PipelineError::invalid(
             "method.field.mlp.time_freqs",
             format!(
@@ -1619,6 +1648,45 @@ mod tests {
             let method = MethodConfig::with_preset(Method::StaticPerFrame, preset).expect("a preset");
             let c = RunConfig { method, ..RunConfig::new("scene", Method::StaticPerFrame) };
             c.validate().unwrap_or_else(|e| panic!("{preset}: {e}"));
+        }
+    }
+
+    /// A hash grid's time axis in a field of space alone would be ignored: each of its keys,
+    /// set off its default, is refused naming it; at its default it is accepted.
+    #[test]
+    fn the_time_axis_of_a_static_hash_grid_is_refused() {
+        type Edit = fn(&mut HashGridConfig);
+        let edits: [(&str, Edit); 3] = [
+            ("time_span", |g| g.time_span = 5.0),
+            ("time_resolution", |g| g.time_resolution = 4),
+            ("time_base_resolution", |g| g.time_base_resolution = 2),
+        ];
+        for method in [Method::Fast, Method::StaticPerFrame] {
+            for (key, edit) in edits {
+                let mut c = RunConfig::new("scene", method);
+                let field = match &mut c.method {
+                    MethodConfig::Neural(_, n) => &mut n.field,
+                    MethodConfig::Temporal(_, t) => &mut t.field,
+                    MethodConfig::Classical(_) => unreachable!("{method} has a field"),
+                };
+                let mut grid = HashGridConfig::default();
+                if let FieldConfig::HashGrid(g) = field {
+                    grid = g.clone();
+                }
+                *field = FieldConfig::HashGrid(grid);
+                c.validate().unwrap_or_else(|e| panic!("{method} at the defaults: {e}"));
+                let (MethodConfig::Neural(_, NeuralSpec { field: FieldConfig::HashGrid(g), .. })
+                | MethodConfig::Temporal(_, TemporalSpec { field: FieldConfig::HashGrid(g), .. })) = &mut c.method
+                else {
+                    unreachable!("a hash grid")
+                };
+                edit(g);
+                let e = c.validate().expect_err("refused").to_string();
+                assert!(
+                    e.starts_with(&format!("method.field.hash-grid.{key}: ")) && e.contains("field of space alone"),
+                    "{method}: {e}"
+                );
+            }
         }
     }
 

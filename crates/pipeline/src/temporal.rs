@@ -268,6 +268,9 @@ fn setup(
     let window_len = plan.first().map_or(1, |r| r.len());
     let field_cfg = field_for_window(&spec.field, window_len);
     let input_dim = input_dim_of(method);
+    if input_dim == 4 {
+        refuse_replaced_time_axis(method, &spec.field, &field_cfg, window_len)?;
+    }
     let field = build_field(&field_cfg, &scene.aabb, input_dim, config.seed)?;
     let num_params = fluidnerf_neural::with_field!(&field, f => f.num_params());
     let pixels: u64 = scene.frames.iter().map(|f| (f.camera.width() * f.camera.height()) as u64).sum();
@@ -1073,6 +1076,49 @@ pub fn finish_windows(
     };
     let truth = crate::load_truth(scene)?;
     run(scene, config, &dir, &truth, &mut session, true)
+}
+
+/// Refuses a hash grid's `time_span` or `time_resolution` that [`field_for_window`] replaces
+/// (`given`, the configuration's field, becomes `used` for windows of `window_len` frames) when
+/// it was set to another value than its default and the one used: it would be ignored.
+fn refuse_replaced_time_axis(
+    method: Method,
+    given: &FieldConfig,
+    used: &FieldConfig,
+    window_len: usize,
+) -> Result<(), PipelineError> {
+    let (FieldConfig::HashGrid(given), FieldConfig::HashGrid(used)) = (given, used) else {
+        return Ok(());
+    };
+    let d = fluidnerf_neural::HashGridConfig::default();
+    let span = |v: f32| num(v).to_string();
+    let keys = [
+        (
+            "time_span",
+            given.time_span != d.time_span && given.time_span != used.time_span,
+            span(given.time_span),
+            span(used.time_span),
+            span(d.time_span),
+        ),
+        (
+            "time_resolution",
+            given.time_resolution != d.time_resolution && given.time_resolution != used.time_resolution,
+            given.time_resolution.to_string(),
+            used.time_resolution.to_string(),
+            d.time_resolution.to_string(),
+        ),
+    ];
+    match keys.into_iter().find(|k| k.1) {
+        Some((key, _, given, used, default)) => Err(PipelineError::invalid(
+            format!("method.field.hash-grid.{key}"),
+            format!(
+                "{given} would be ignored: the grid's time axis spans each window's frames, one cell per frame \
+                 interval, so {method} sets it to {used} for windows of {window_len} frames; leave it at its \
+                 default {default} or give {used}"
+            ),
+        )),
+        None => Ok(()),
+    }
 }
 
 /// Refuses a time step by which the span of the run's times (training and held out) is more
