@@ -141,7 +141,7 @@ fn compares_classical_neural_and_external_runs() {
     assert_eq!(c["runs"].as_array().map(Vec::len), Some(2));
     assert_eq!(c["runs"][1]["speedup"], 1.0);
 
-    // Runs of different scenes are compared, with a warning that names them.
+    // Runs of different scenes are refused, naming each run and its scene, unless asked for.
     let same = fluidnerf(d, &["compare", "sart", "dense", "-o", "cmp2"]);
     ok(&same);
     assert!(!String::from_utf8_lossy(&same.stderr).contains("different scenes"));
@@ -153,9 +153,22 @@ fn compares_classical_neural_and_external_runs() {
     config["scene"] = serde_json::json!(d.join("cmp").to_string_lossy());
     std::fs::write(d.join("elsewhere/config.json"), config.to_string()).expect("writes");
     let other = fluidnerf(d, &["compare", "sart", "elsewhere", "-o", "cmp3"]);
+    let scene = std::fs::canonicalize(d.join("scene")).expect("scene");
+    let cmp = std::fs::canonicalize(d.join("cmp")).expect("cmp");
+    refused(
+        &other,
+        &format!(
+            "the runs were made from 2 different scenes: run sart from the scene {}; run elsewhere from the scene {}",
+            scene.display(),
+            cmp.display()
+        ),
+    );
+    refused(&other, "--allow-different-scenes");
+    assert!(!d.join("cmp3").exists(), "nothing written");
+    let other = fluidnerf(d, &["compare", "sart", "elsewhere", "-o", "cmp3", "--allow-different-scenes"]);
     ok(&other);
     let err = String::from_utf8_lossy(&other.stderr);
-    assert!(err.contains("2 different scenes") && err.contains("(elsewhere)"), "{err}");
+    assert!(err.contains("2 different scenes") && err.contains("run elsewhere from"), "{err}");
     // Runs in folders of one name are told apart by their paths.
     std::fs::create_dir_all(d.join("copy/sart")).expect("mkdir");
     std::fs::copy(d.join("sart/report.json"), d.join("copy/sart/report.json")).expect("copies");

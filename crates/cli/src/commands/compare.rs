@@ -57,6 +57,10 @@ pub struct Args {
     /// Draw wall time on a linear axis instead of a logarithmic one.
     #[arg(long)]
     pub linear_time: bool,
+    /// Compare runs made from different scenes (by their `config.json`) with a warning
+    /// instead of refusing them: for copies of one scene in other folders.
+    #[arg(long)]
+    pub allow_different_scenes: bool,
     /// Overwrite results already in OUT.
     #[arg(long)]
     pub force: bool,
@@ -269,29 +273,42 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     })
 }
 
-/// Warns when the runs were made from different scenes (their `config.json`), whose NRMSE
-/// curves measure different problems.
-fn warn_of_other_scenes(runs: &[Run]) {
-    let mut scenes: Vec<(PathBuf, Vec<&str>)> = Vec::new();
+/// Refuses runs made from different scenes (their `config.json`), whose NRMSE curves measure
+/// different problems, naming each run and its scene; with `allow` (copies of one scene in
+/// other folders, say a cluster's and this machine's) it only warns.
+fn refuse_other_scenes(runs: &[Run], allow: bool) -> anyhow::Result<()> {
+    let mut scenes: Vec<(PathBuf, Vec<String>)> = Vec::new();
     for run in runs {
         let Ok(config) = fluidnerf_pipeline::RunConfig::read(&run.report.with_file_name("config.json")) else {
             continue;
         };
         let scene = super::scene_folder(&config.scene).unwrap_or(config.scene);
+        let named = run.path.display().to_string();
         match scenes.iter_mut().find(|(s, _)| *s == scene) {
-            Some((_, labels)) => labels.push(&run.label),
-            None => scenes.push((scene, vec![&run.label])),
+            Some((_, paths)) => paths.push(named),
+            None => scenes.push((scene, vec![named])),
         }
     }
-    if scenes.len() > 1 {
-        let list: Vec<String> =
-            scenes.iter().map(|(s, labels)| format!("{} ({})", s.display(), labels.join(", "))).collect();
-        log::warn!(
-            "the runs were made from {} different scenes: {}; their curves are not comparable",
-            list.len(),
-            list.join("; ")
-        );
+    if scenes.len() < 2 {
+        return Ok(());
     }
+    let list: Vec<String> = scenes
+        .iter()
+        .map(|(s, paths)| {
+            let runs = if paths.len() == 1 { "run" } else { "runs" };
+            format!("{runs} {} from the scene {}", paths.join(", "), s.display())
+        })
+        .collect();
+    let problem = format!(
+        "the runs were made from {} different scenes: {}; their curves measure different problems",
+        list.len(),
+        list.join("; ")
+    );
+    if allow {
+        log::warn!("{problem} (compared as --allow-different-scenes asks)");
+        return Ok(());
+    }
+    bail!("{problem} and are not comparable; compare runs of one scene, or give --allow-different-scenes if the scenes are copies of one")
 }
 
 /// The first time `curve` was at or below `nrmse`.
@@ -462,7 +479,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     };
     let reference_path = runs[reference].path.clone();
-    warn_of_other_scenes(&runs);
+    refuse_other_scenes(&runs, args.allow_different_scenes)?;
     // Runs in folders of the same name are told apart by the path given.
     let labels: Vec<String> = runs.iter().map(|r| r.label.clone()).collect();
     for run in &mut runs {
