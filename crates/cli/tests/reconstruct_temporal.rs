@@ -600,3 +600,26 @@ fn an_edited_time_axis_of_the_grid_that_windows_replace_is_refused() {
         ok(&run(key, serde_json::json!(2)));
     }
 }
+
+/// A scene whose frames hold no time trained a time-resolved field at t = 0 with only a warning
+/// in one piece, while its windows alone (--window-index) were refused: both refuse it alike,
+/// for every time-resolved method, and write nothing.
+#[test]
+fn a_time_resolved_run_of_a_scene_without_frame_times_is_refused_in_one_piece_as_in_windows() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 16, 8, &[]);
+    let scene = std::fs::canonicalize(d.join("scene")).expect("scene");
+    for method in ["tr-fast", "tr-fluidnerf", "static-per-frame"] {
+        let needle = format!(
+            "method: {method} plans its windows over the frames' times, and the scene {} has no frame times (no \
+             frame has a `time`); give every frame its time, or reconstruct the scene with a static method",
+            scene.display()
+        );
+        let run = ["reconstruct", "scene", "-o", "run", "--method", method, "--max-iterations", "2", "-q"];
+        refused(&fluidnerf(d, &run), &needle);
+        assert!(!d.join("run").exists(), "{method}: nothing written");
+        refused(&fluidnerf(d, &[&run[..], &["--window-index", "0"]].concat()), &needle);
+        assert!(!d.join("run").exists(), "{method}: nothing written");
+    }
+}

@@ -203,6 +203,7 @@ fn setup(
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
         ));
     };
+    refuse_timeless_scene(scene, method)?;
     let (mut problem, mut masks, measured) = crate::neural::problem(scene, &config.gains)?;
     if let Some(hint) = &measured.gain_hint {
         session.warn(hint);
@@ -769,6 +770,27 @@ impl WindowPlan {
     }
 }
 
+/// Refuses a time-resolved `method` on a scene none of whose frames has a time: each frame's
+/// time would be taken as 0, one window of one frame at a time the scene has not. Every path of
+/// a run (in one piece, by windows, the window plan) refuses it with these words.
+fn refuse_timeless_scene(scene: &Scene, method: Method) -> Result<(), PipelineError> {
+    if scene.frames.iter().any(|f| f.time.is_some()) {
+        return Ok(());
+    }
+    let named = if scene.root.as_os_str().is_empty() {
+        "the scene".to_string()
+    } else {
+        format!("the scene {}", scene.root.display())
+    };
+    Err(PipelineError::invalid(
+        "method",
+        format!(
+            "{method} plans its windows over the frames' times, and {named} has no frame times (no frame has a \
+             `time`); give every frame its time, or reconstruct the scene with a static method"
+        ),
+    ))
+}
+
 /// The window plan of the time-resolved run `config` of `scene`, from the scene file alone
 /// (no image is read).
 pub fn window_plan(scene: &Scene, config: &RunConfig) -> Result<WindowPlan, PipelineError> {
@@ -780,22 +802,7 @@ pub fn window_plan(scene: &Scene, config: &RunConfig) -> Result<WindowPlan, Pipe
             format!("{} is not a time-resolved method (tr-fluidnerf, tr-fast, static-per-frame)", config.method()),
         ));
     };
-    // Each frame's time would be taken as 0: one window of one frame at a time the scene has not.
-    if scene.frames.iter().all(|f| f.time.is_none()) {
-        let named = if scene.root.as_os_str().is_empty() {
-            "the scene".to_string()
-        } else {
-            format!("the scene {}", scene.root.display())
-        };
-        return Err(PipelineError::invalid(
-            "method",
-            format!(
-                "{} plans its windows over the frames' times, and {named} has no frame times (no frame has a \
-                 `time`); give every frame its time, or reconstruct the scene with a static method",
-                config.method()
-            ),
-        ));
-    }
+    refuse_timeless_scene(scene, config.method())?;
     let mut times: Vec<f64> = scene
         .frames
         .iter()
