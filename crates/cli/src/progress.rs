@@ -12,6 +12,11 @@ pub fn set_quiet(quiet: bool) {
     QUIET.store(quiet, Ordering::Relaxed);
 }
 
+/// Whether `--quiet` was given.
+pub fn quiet() -> bool {
+    QUIET.load(Ordering::Relaxed)
+}
+
 /// A bar over `len` steps labelled `what`; hidden with `--quiet` or when stderr is not a
 /// terminal (indicatif's default draw target).
 pub fn bar(len: u64, what: &str) -> ProgressBar {

@@ -9,7 +9,11 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     let args = ["study", "--preset", "smoke", "--methods", "fast,sart", "-o", "st", "-q"];
-    ok(&fluidnerf(d, &args));
+    let first = fluidnerf(d, &args);
+    ok(&first);
+    // Quiet: a line per cell and the table, not each scene's synth summary.
+    let stdout = String::from_utf8_lossy(&first.stdout);
+    assert!(stdout.contains("[1/4]") && !stdout.contains("wrote ") && !stdout.contains("phantom "), "{stdout}");
     let st = d.join("st");
     for f in ["study.json", "study.csv", "report.html", "against_cameras.png"] {
         assert!(st.join(f).is_file(), "{f} missing");

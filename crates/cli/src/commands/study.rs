@@ -328,13 +328,26 @@ fn synth_line(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise:
     line
 }
 
-/// Synthesises the scene of a cell unless a finished one is there.
+/// Synthesises the scene of a cell unless a finished one is there; its summary prints unless
+/// the study is quiet.
 fn ensure_scene(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise: f64) -> anyhow::Result<()> {
+    use clap::Parser;
     if dir.join("transforms.json").is_file() && dir.join("synth.json").is_file() {
         return Ok(());
     }
-    super::run_line(&synth_line(g, dir, layout, cameras, noise))
-        .with_context(|| format!("synthesising {}", dir.display()))
+    let argv = std::iter::once("fluidnerf".to_string()).chain(synth_line(g, dir, layout, cameras, noise));
+    let super::Command::Synth(args) = crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{e}"))?.command
+    else {
+        bail!("{}: not a synth line", dir.display());
+    };
+    let summary = super::synth::synthesise(&args).with_context(|| format!("synthesising {}", dir.display()))?;
+    if !crate::progress::quiet() {
+        #[allow(clippy::print_stdout)]
+        {
+            print!("{summary}");
+        }
+    }
+    Ok(())
 }
 
 /// The settings `synth` resolves the scene of a cell to.

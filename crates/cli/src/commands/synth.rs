@@ -581,18 +581,23 @@ fn name_option(args: &Args, e: fluidnerf_synth::SynthError) -> anyhow::Error {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut stdout = std::io::stdout().lock();
-    if args.list_presets {
+    let text = if args.list_presets {
         let mut text = String::new();
         for (name, what) in presets() {
             let mark = if name == DEFAULT_PRESET { "*" } else { " " };
             let _ = writeln!(text, "{mark} {name:<13} {what}");
         }
-        stdout.write_all(text.as_bytes()).context("cannot write to stdout")?;
-        return Ok(());
-    }
+        text
+    } else {
+        synthesise(&args)?
+    };
+    std::io::stdout().lock().write_all(text.as_bytes()).context("cannot write to stdout")
+}
+
+/// Writes the scene `args` asks for and returns its summary (what was written, for stdout).
+pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     let Some(out) = args.out.clone() else { bail!("--out is required") };
-    let settings = resolve(&args)?;
+    let settings = resolve(args)?;
     fluidnerf_pipeline::rundir::refuse_other_kind(&out, fluidnerf_pipeline::rundir::FolderKind::Scene, "synth")?;
     let scene_file = out.join("transforms.json");
     if scene_file.exists() && !args.force {
@@ -633,7 +638,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ControlFlow::Continue(())
         }
     })
-    .map_err(|e| name_option(&args, e))?;
+    .map_err(|e| name_option(args, e))?;
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
 
@@ -723,6 +728,5 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         syn.stats.rays as f64, elapsed, syn.stats.truth_seconds, syn.stats.image_seconds, syn.stats.sensor_seconds
     );
     let _ = writeln!(text, "  files     transforms.json, images/, truth/, preview.png, synth.json");
-    stdout.write_all(text.as_bytes()).context("cannot write to stdout")?;
-    Ok(())
+    Ok(text)
 }
