@@ -620,6 +620,17 @@ fn cases() -> Vec<Case> {
             "the frame times run from frame 0 (images/cam000.png) at -1.7e308 to frame 1 (images/cam001.png) at 1.7e308, a spread too large",
         ),
         c(
+            // Δt, the smallest gap, is 1e-8: the span is 1e316 steps, beyond a 32-bit time input.
+            "frame times whose span is more steps than 32-bit floating point holds",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = [0.0, 1e-8, 1e308][i % 3].into();
+                }
+            }),
+            &["info", "SCENE"],
+            "frame 2 (images/cam002.png) at 1e308 lies about 1e316 time steps of Δt = 1e-8",
+        ),
+        c(
             "a time step too small for the times",
             Json(|v| {
                 for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {

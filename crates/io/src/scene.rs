@@ -1162,6 +1162,7 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     }
     check_time_spread(scene, file)?;
     check_instants_apart(scene, file)?;
+    check_time_steps(scene, file)?;
     // Among truths with a time, one without is matched to no instant and would go unused,
     // unreported.
     let timed_truth = scene.truth.iter().position(|t| t.time.is_some());
@@ -1286,6 +1287,42 @@ fn check_time_spread(scene: &Scene, file: &Path) -> Result<(), IoError> {
              point), so no time difference can be computed; give the times in another unit or from a nearer origin",
             frame(first),
             frame(last)
+        ),
+    ))
+}
+
+/// Refuses frame times (finite, with a finite spread, [`check_time_spread`]) that span more
+/// steps of the smallest gap between them than 32-bit floating point holds: a field of space
+/// and time reads `t' = (t − t₀)/Δt` in 32 bits, `Δt` that gap by default, and an infinite `t'`
+/// makes its training NaN. Names the first frame at a time too far and its value.
+fn check_time_steps(scene: &Scene, file: &Path) -> Result<(), IoError> {
+    let mut timed: Vec<(f64, usize)> =
+        scene.frames.iter().enumerate().filter_map(|(i, f)| f.time.map(|t| (t, i))).collect();
+    timed.sort_by(|a, b| a.0.total_cmp(&b.0));
+    timed.dedup_by(|later, first| later.0 == first.0);
+    let Some(gap) = timed.windows(2).map(|w| w[1].0 - w[0].0).reduce(f64::min) else {
+        return Ok(());
+    };
+    let first = timed[0];
+    let steps = |t: f64| (t - first.0) / gap;
+    let Some(&(t, i)) = timed.iter().find(|(t, _)| steps(*t) > f32::MAX as f64) else {
+        return Ok(());
+    };
+    let n = steps(t);
+    let n =
+        if n.is_finite() { format!("{n:.3e}") } else { format!("about 1e{:.0}", (t - first.0).log10() - gap.log10()) };
+    let frame = |(t, i): (f64, usize)| {
+        format!("frame {i} ({}) at {}", scene.frames[i].file_path.display(), fluidnerf_core::num(t))
+    };
+    Err(IoError::invalid(
+        file,
+        format!(
+            "{} lies {n} time steps of Δt = {} (the smallest gap between frame times) after the first, {}: \
+             more than a field's 32-bit time input t' = (t − t₀)/Δt holds ({}); check the frame times",
+            frame((t, i)),
+            fluidnerf_core::num(gap),
+            frame(first),
+            fluidnerf_core::num(f32::MAX)
         ),
     ))
 }
@@ -2021,6 +2058,24 @@ mod tests {
         }
         let m = validate_scene(&scene, Path::new("x.json")).expect_err("must fail").to_string();
         assert!(m.contains("frames 0 (images/c0.tif), 1 (") && m.contains("4 (images/c4.tif) and 2 more have"), "{m}");
+    }
+
+    /// Times a 32-bit time input reads as infinite are refused naming the frame and its time,
+    /// for a scene built in memory (as Python's `scene_from_arrays` builds one) as for a file;
+    /// far apart but evenly spaced, they are kept.
+    #[test]
+    fn frame_times_beyond_a_32_bit_time_input_are_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut scene = ring_scene(dir.path(), 3, Distortion::default());
+        for (f, t) in scene.frames.iter_mut().zip([0.0, 1.0, 1e39]) {
+            f.time = Some(t);
+        }
+        let m = validate_scene(&scene, Path::new("x.json")).expect_err("must fail").to_string();
+        assert!(m.contains("frame 2 (images/c2.tif) at 1e39 lies 1.000e39 time steps of Δt = 1"), "{m}");
+        for (f, t) in scene.frames.iter_mut().zip([1e308, 1.5e308, 1.7e308]) {
+            f.time = Some(t);
+        }
+        validate_scene(&scene, Path::new("x.json")).expect("2.5 and 3.5 steps of the smallest gap");
     }
 
     #[test]
