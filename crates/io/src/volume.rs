@@ -337,18 +337,54 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
                 return Err(bad("only raw appended data is supported"));
             }
             let underscore = find(&tail[tag_end..], b"_").ok_or_else(|| bad("appended data marker '_'"))?;
-            let start = xml_end + tag_end + underscore + 1 + offset;
+            // The blocks lie between the marker and the section's closing tag (the last in the
+            // file: raw data may hold any bytes), or the file's end when that is cut off.
+            let data_start = xml_end + tag_end + underscore + 1;
+            let data_end = rfind(&bytes[data_start..], b"</AppendedData>").map_or(bytes.len(), |e| data_start + e);
+            let section = data_end - data_start;
+            let name = attribute(array_tag, "Name").unwrap_or("(unnamed)");
+            let bad_block = |what: String| bad(&format!("array \"{name}\": {what}"));
             let hlen = if header_u64 { 8 } else { 4 };
-            let head = bytes.get(start..start + hlen).ok_or_else(|| bad("truncated appended data"))?;
-            let nbytes = if header_u64 {
-                u64::from_le_bytes(head.try_into().map_err(|_| bad("header"))?) as usize
-            } else {
-                u32::from_le_bytes(head.try_into().map_err(|_| bad("header"))?) as usize
-            };
-            if nbytes != n * width {
-                return Err(bad(&format!("array holds {nbytes} bytes, the extent needs {}", n * width)));
+            if offset.checked_add(hlen).is_none_or(|e| e > section) {
+                return Err(bad_block(format!(
+                    "its appended block at offset {offset} lies past the end of the appended data ({section} bytes)"
+                )));
             }
-            let raw = bytes.get(start + hlen..start + hlen + nbytes).ok_or_else(|| bad("truncated appended data"))?;
+            let start = data_start + offset;
+            let head = &bytes[start..start + hlen];
+            let nbytes = if header_u64 {
+                u64::from_le_bytes(head.try_into().map_err(|_| bad("header"))?)
+            } else {
+                u32::from_le_bytes(head.try_into().map_err(|_| bad("header"))?) as u64
+            };
+            if nbytes != (n * width) as u64 {
+                return Err(bad_block(format!("its block holds {nbytes} bytes, the extent needs {}", n * width)));
+            }
+            let nbytes = n * width;
+            let end = offset + hlen + nbytes;
+            if end > section {
+                return Err(bad_block(format!(
+                    "its appended block at offset {offset} ({hlen}-byte header and {nbytes} bytes) runs past the \
+                     end of the appended data ({section} bytes): the file is cut short or its header is wrong"
+                )));
+            }
+            // Another array's block starting inside this one's: one of the two is wrong, and
+            // this one would be read with the other's header and values.
+            let next = arrays
+                .iter()
+                .filter(|t| attribute(t, "format") == Some("appended"))
+                .filter_map(|t| {
+                    Some((attribute(t, "Name").unwrap_or("(unnamed)"), attribute(t, "offset")?.parse().ok()?))
+                })
+                .filter(|&(_, o): &(&str, usize)| o > offset && o < end)
+                .min_by_key(|&(_, o)| o);
+            if let Some((other, at)) = next {
+                return Err(bad_block(format!(
+                    "its appended block at offset {offset} ({hlen}-byte header and {nbytes} bytes) runs into the \
+                     block of array \"{other}\" at offset {at}"
+                )));
+            }
+            let raw = &bytes[start + hlen..start + hlen + nbytes];
             if width == 4 {
                 raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
             } else {
@@ -378,6 +414,11 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     let aabb = Aabb { min, max };
     aabb.validate().map_err(|e| IoError::invalid(path, format!("Origin/Spacing give an invalid box: {e}")))?;
     Ok(Volume::from_vec(dims, aabb, data))
+}
+
+/// Where the last `needle` in `haystack` starts.
+fn rfind(haystack: &[u8], needle: &[u8]) -> Option<usize> {
+    haystack.windows(needle.len()).rposition(|w| w == needle)
 }
 
 fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
@@ -699,6 +740,64 @@ mod tests {
         write("<PointData Scalars=\"speed\">");
         let err = read_vti(&p).expect_err("no such array").to_string();
         assert!(err.contains("two.vti") && err.contains("Scalars=\"speed\"> names no <DataArray>"), "{err}");
+    }
+
+    /// An appended block is read by its length header and its array's offset: a block cut
+    /// short, a header that disagrees with the extent, an offset past the end of the file (or
+    /// of the address space: it wrapped round to the XML) and a block that runs into the next
+    /// array's are refused naming the file and the array.
+    #[test]
+    fn vti_appended_blocks_that_do_not_fit_are_refused_naming_the_array() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("b.vti");
+        let write = |arrays: &str, data: &[u8]| {
+            let mut bytes = format!(
+                "<VTKFile type=\"ImageData\" byte_order=\"LittleEndian\" header_type=\"UInt64\"><ImageData \
+                 WholeExtent=\"0 1 0 0 0 0\" Origin=\"0 0 0\" Spacing=\"1 1 1\"><Piece><PointData Scalars=\"v\">\
+                 {arrays}</PointData></Piece></ImageData><AppendedData encoding=\"raw\">_"
+            )
+            .into_bytes();
+            bytes.extend_from_slice(data);
+            bytes.extend_from_slice(b"</AppendedData></VTKFile>");
+            std::fs::write(&p, bytes).expect("write");
+        };
+        let array = |name: &str, offset: &str| {
+            format!("<DataArray type=\"Float32\" Name=\"{name}\" format=\"appended\" offset=\"{offset}\"/>")
+        };
+        let block = |len: u64, values: &[f32]| {
+            let mut b = len.to_le_bytes().to_vec();
+            values.iter().for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
+            b
+        };
+        write(&array("v", "0"), &block(8, &[1.0, 2.0]));
+        assert_eq!(read_vti(&p).expect("a good block").data, vec![1.0, 2.0]);
+        let refused = |needle: &str| {
+            let err = read_vti(&p).expect_err(needle).to_string();
+            assert!(err.contains("b.vti") && err.contains("array \"v\"") && err.contains(needle), "{err}");
+        };
+        // Cut short: the header says 8 bytes, 4 follow before the end of the file.
+        let mut short = block(8, &[1.0]);
+        std::fs::write(&p, []).expect("write");
+        write(&array("v", "0"), &short);
+        refused("its appended block");
+        short.truncate(4);
+        write(&array("v", "0"), &short);
+        refused("its appended block");
+        write(&array("v", "0"), &block(12, &[1.0, 2.0, 3.0]));
+        refused("holds 12 bytes, the extent needs 8");
+        for offset in ["1000", "18446744073709551615", "18446744073709551000"] {
+            write(&array("v", offset), &block(8, &[1.0, 2.0]));
+            refused("offset");
+        }
+        // Two arrays whose blocks overlap: v's header claims the bytes of w's block.
+        let two = format!("{}{}", array("v", "0"), array("w", "12"));
+        let mut data = block(8, &[1.0, 2.0]);
+        data.extend(block(8, &[3.0, 4.0]));
+        write(&two, &data);
+        refused("runs into the block of array \"w\" at offset 12");
+        let two = format!("{}{}", array("v", "0"), array("w", "16"));
+        write(&two, &data);
+        assert_eq!(read_vti(&p).expect("blocks one after the other").data, vec![1.0, 2.0]);
     }
 
     #[test]
