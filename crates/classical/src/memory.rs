@@ -49,8 +49,9 @@ pub struct MemoryEstimate {
 }
 
 impl MemoryEstimate {
+    /// The sum of the parts, saturating at `u64::MAX` (a request beyond any memory).
     pub fn total(&self) -> u64 {
-        self.volumes + self.images + self.projector
+        self.volumes.saturating_add(self.images).saturating_add(self.projector)
     }
 }
 
@@ -72,15 +73,22 @@ pub fn estimate_memory(
     subdivisions: usize,
     row_cache_bytes: u64,
 ) -> MemoryEstimate {
-    let n = grid.len() as u64;
-    let pixels: u64 = view_sizes.iter().map(|&(w, h)| (w * h) as u64).sum();
-    let max_view = view_sizes.iter().map(|&(w, h)| (w * h) as u64).max().unwrap_or(0);
+    // Saturating throughout: a request too large for any memory is estimated at `u64::MAX`,
+    // which every caller refuses, instead of wrapping round to a small estimate.
+    let mul = |factors: &[u64]| factors.iter().fold(1u64, |acc, &f| acc.saturating_mul(f));
+    let add = |terms: &[u64]| terms.iter().fold(0u64, |acc, &t| acc.saturating_add(t));
+    let n = mul(&grid.dims.map(|d| d as u64));
+    let view = |&(w, h): &(usize, usize)| mul(&[w as u64, h as u64]);
+    let pixels = add(&view_sizes.iter().map(view).collect::<Vec<_>>());
+    let max_view = view_sizes.iter().map(view).max().unwrap_or(0);
     let threads = threads.max(1) as u64;
-    let volumes = n * 4 * algorithm.volume_buffers() as u64 + n;
+    let volumes = add(&[mul(&[n, 4, algorithm.volume_buffers() as u64]), n]);
     // Data, a per-view cache (SART row sums, SMART row maxima) and two view-sized buffers;
     // MLEM and SMART hold every view's ratio image for one back projection of them all.
-    let ratios = if matches!(algorithm, Algorithm::Mlem | Algorithm::Smart) { pixels * 4 } else { 0 };
-    let images = pixels * 4 * 2 + max_view * 4 * 2 + ratios;
+    let ratios = if matches!(algorithm, Algorithm::Mlem | Algorithm::Smart) { mul(&[pixels, 4]) } else { 0 };
+    let images = add(&[mul(&[pixels, 4, 2]), mul(&[max_view, 4, 2]), ratios]);
+    // A padded copy: 5/4 of the image.
+    let padded = |bytes: u64| bytes.saturating_add(bytes / 4);
     let scratch = match projector {
         // Two padded images per thread and a padded copy for the back projection; the margins
         // are small next to the image at the voxel sizes the footprint is chosen for.
@@ -88,19 +96,26 @@ pub fn estimate_memory(
         // start) holds a padded copy of each.
         ProjectorKind::Auto | ProjectorKind::Footprint => {
             let all_views = matches!(algorithm, Algorithm::Mlem | Algorithm::Smart | Algorithm::Mart);
-            (2 * threads + 1) * max_view * 4 * 5 / 4 + if all_views { pixels * 4 * 5 / 4 } else { 0 }
+            add(&[
+                padded(mul(&[threads.saturating_mul(2).saturating_add(1), max_view, 4])),
+                if all_views { padded(mul(&[pixels, 4])) } else { 0 },
+            ])
         }
-        ProjectorKind::Splat => 2 * threads * max_view * 4,
-        ProjectorKind::Ray => pixels * 32 + 2 * threads * n * 4,
+        ProjectorKind::Splat => mul(&[2, threads, max_view, 4]),
+        ProjectorKind::Ray => add(&[mul(&[pixels, 32]), mul(&[2, threads, n, 4])]),
     };
     let view_rows = if algorithm.holds_rows() {
         match projector {
             // About 3 × 3 pixels with a positive weight per voxel (voxels of 1–2 px).
-            ProjectorKind::Auto | ProjectorKind::Footprint => n * 8 * 9 + max_view * 8,
-            ProjectorKind::Splat => n * 4 * 8 * (subdivisions.max(1) as u64).pow(3) + max_view * 16,
+            ProjectorKind::Auto | ProjectorKind::Footprint => add(&[mul(&[n, 8, 9]), mul(&[max_view, 8])]),
+            ProjectorKind::Splat => {
+                let sub = subdivisions.max(1) as u64;
+                add(&[mul(&[n, 4, 8, sub, sub, sub]), mul(&[max_view, 16])])
+            }
             ProjectorKind::Ray => {
-                // Samples per ray ≈ 2 × the grid's diagonal in voxels, ~4 distinct voxels each.
-                let d = grid.dims.iter().map(|&v| (v * v) as f64).sum::<f64>().sqrt();
+                // Samples per ray ≈ 2 × the grid's diagonal in voxels, ~4 distinct voxels each
+                // (a float past `u64::MAX` converts to it).
+                let d = grid.dims.iter().map(|&v| (v as f64) * (v as f64)).sum::<f64>().sqrt();
                 (max_view as f64 * 2.0 * d * 4.0 * 8.0) as u64
             }
         }
@@ -108,8 +123,50 @@ pub fn estimate_memory(
         0
     };
     let kept = match algorithm {
-        Algorithm::Art | Algorithm::Mart => row_cache_bytes.min(view_rows * view_sizes.len() as u64),
+        Algorithm::Art | Algorithm::Mart => row_cache_bytes.min(mul(&[view_rows, view_sizes.len() as u64])),
         _ => 0,
     };
-    MemoryEstimate { volumes, images, projector: scratch + view_rows + kept }
+    MemoryEstimate { volumes, images, projector: add(&[scratch, view_rows, kept]) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::Aabb;
+    use glam::DVec3;
+
+    const ALGORITHMS: [Algorithm; 8] = [
+        Algorithm::Asart,
+        Algorithm::Art,
+        Algorithm::Sart,
+        Algorithm::Mart,
+        Algorithm::Smart,
+        Algorithm::Mlem,
+        Algorithm::Tv,
+        Algorithm::Tikhonov,
+    ];
+    const PROJECTORS: [ProjectorKind; 4] =
+        [ProjectorKind::Auto, ProjectorKind::Footprint, ProjectorKind::Splat, ProjectorKind::Ray];
+
+    /// Grids and images too large for any memory saturate the estimate at `u64::MAX`, which
+    /// every caller refuses, instead of overflowing (a panic) or wrapping round to a small
+    /// estimate that let the run start.
+    #[test]
+    fn absurd_requests_saturate_instead_of_wrapping() {
+        let aabb = Aabb::cube(DVec3::ZERO, 1.0);
+        let huge_grid = Grid::new([1 << 21, 1 << 21, 1 << 21], aabb);
+        let small_grid = Grid::new([16, 16, 16], aabb);
+        let huge_views = vec![(1usize << 31, 1usize << 31); 4];
+        let small_views = vec![(32usize, 32usize); 4];
+        for algorithm in ALGORITHMS {
+            for projector in PROJECTORS {
+                for (grid, views) in [(&huge_grid, &small_views), (&small_grid, &huge_views)] {
+                    let e = estimate_memory(algorithm, projector, grid, views, 64, 1 << 10, u64::MAX);
+                    assert_eq!(e.total(), u64::MAX, "{algorithm:?} {projector:?} {:?} {:?}", grid.dims, views[0]);
+                }
+                let e = estimate_memory(algorithm, projector, &small_grid, &small_views, 4, 2, 0);
+                assert!(e.total() > 0 && e.total() < 1 << 30, "{algorithm:?} {projector:?}: {e:?}");
+            }
+        }
+    }
 }

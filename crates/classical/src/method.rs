@@ -279,7 +279,7 @@ impl ClassicalMethod {
             row_cache_mib.saturating_mul(1 << 20),
         );
         if self.back_projects() {
-            estimate.projector += projector.kept_footprint_bytes(grid, cameras);
+            estimate.projector = estimate.projector.saturating_add(projector.kept_footprint_bytes(grid, cameras));
         }
         estimate
     }

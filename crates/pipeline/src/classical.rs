@@ -112,13 +112,13 @@ pub(crate) fn run(
     let mut projector_config = spec.projector.clone();
     let limit = memory_limit(config);
     fit_row_cache(&mut solver, limit, |m| {
-        m.memory(&projector_config, &grid_s, &cameras_s, threads).total() + truth_bytes
+        m.memory(&projector_config, &grid_s, &cameras_s, threads).total().saturating_add(truth_bytes)
     });
     fit_kept_footprints(&solver, &mut projector_config, limit, |p| {
-        solver.memory(p, &grid_s, &cameras_s, threads).total() + truth_bytes
+        solver.memory(p, &grid_s, &cameras_s, threads).total().saturating_add(truth_bytes)
     });
     let estimate = solver.memory(&projector_config, &grid_s, &cameras_s, threads);
-    let needed = estimate.total() + truth_bytes;
+    let needed = estimate.total().saturating_add(truth_bytes);
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
     let measured = crate::measured::load(scene, &config.gains)?;

@@ -361,10 +361,11 @@ pub(crate) fn check_memory(
     log::info!("estimated memory {:.3} GiB of {:.3} GiB allowed", needed as f64 / GIB, limit as f64 / GIB);
     if needed > limit {
         return Err(PipelineError::Memory(format!(
-            "{} needs about {} but only {} {}; lower the resolution or the image count, or raise \
+            "{} needs {} but only {} {}; lower the resolution or the image count, or raise \
              --memory-limit",
             what(),
-            bytes(needed),
+            // A saturated estimate: the request is beyond what 64 bits count.
+            if needed == u64::MAX { "more than 16 EiB".to_string() } else { format!("about {}", bytes(needed)) },
             bytes(limit),
             if config.memory_limit_gib.is_some() { "are allowed (--memory-limit)" } else { "are available" }
         )));
