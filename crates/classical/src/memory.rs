@@ -21,6 +21,18 @@ pub enum Algorithm {
 }
 
 impl Algorithm {
+    /// Every algorithm, in the order of the enum.
+    pub const ALL: [Algorithm; 8] = [
+        Algorithm::Asart,
+        Algorithm::Art,
+        Algorithm::Sart,
+        Algorithm::Mart,
+        Algorithm::Smart,
+        Algorithm::Mlem,
+        Algorithm::Tv,
+        Algorithm::Tikhonov,
+    ];
+
     /// Voxel-sized f32 buffers the solver holds, the result included.
     fn volume_buffers(self) -> usize {
         match self {
@@ -135,16 +147,7 @@ mod tests {
     use fluidnerf_core::Aabb;
     use glam::DVec3;
 
-    const ALGORITHMS: [Algorithm; 8] = [
-        Algorithm::Asart,
-        Algorithm::Art,
-        Algorithm::Sart,
-        Algorithm::Mart,
-        Algorithm::Smart,
-        Algorithm::Mlem,
-        Algorithm::Tv,
-        Algorithm::Tikhonov,
-    ];
+    const ALGORITHMS: [Algorithm; 8] = Algorithm::ALL;
     const PROJECTORS: [ProjectorKind; 4] =
         [ProjectorKind::Auto, ProjectorKind::Footprint, ProjectorKind::Splat, ProjectorKind::Ray];
 

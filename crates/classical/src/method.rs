@@ -485,16 +485,7 @@ mod tests {
 
     #[test]
     fn every_algorithm_round_trips() {
-        for a in [
-            Algorithm::Asart,
-            Algorithm::Art,
-            Algorithm::Sart,
-            Algorithm::Mart,
-            Algorithm::Smart,
-            Algorithm::Mlem,
-            Algorithm::Tv,
-            Algorithm::Tikhonov,
-        ] {
+        for a in Algorithm::ALL {
             let m = ClassicalMethod::default_for(a);
             assert_eq!(m.algorithm(), a);
             m.validate().unwrap();
