@@ -41,7 +41,8 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, Pipeli
     let mut images = pre.images;
     let mut factors = vec![1.0; images.len()];
     let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
-    let gain_hint = (gains.mode == GainMode::None).then(|| gain_hint(scene, &totals)).flatten();
+    let comparable: Vec<Option<f64>> = totals.iter().zip(&pre.masks).map(|(&t, m)| m.is_none().then_some(t)).collect();
+    let gain_hint = (gains.mode == GainMode::None).then(|| gain_hint(scene, &comparable)).flatten();
     if gains.mode != GainMode::None {
         let time_key = |i: usize| scene.frames[i].time.map(f64::to_bits);
         for i in 0..images.len() {
@@ -124,30 +125,35 @@ impl Measured {
 /// ±30 % (`real-like`) by −23 % to +29 %.
 pub const GAIN_HINT_RATIO: f64 = 1.15;
 
-/// A warning when, at some time with at least three training images, an image's total
-/// intensity (`totals`, per frame of `scene`: masked pixels left out) lies more than [`GAIN_HINT_RATIO`] from the median of
-/// its time's: a sign that the cameras' gains differ, which a run without `--gains` takes as
-/// differences of the field. None when nothing stands out. Cameras that see the flow only in
-/// part differ too, so this is a warning, never a refusal.
-pub fn gain_hint(scene: &Scene, totals: &[f64]) -> Option<String> {
+/// A warning when, at some time with at least three comparable training images, an image's
+/// total intensity lies more than [`GAIN_HINT_RATIO`] from the median of its time's: a sign
+/// that the cameras' gains differ, which a run without `--gains` takes as differences of the
+/// field. `totals` holds each frame's total, None for a frame whose total does not compare
+/// (one with a mask, which hides part of the light; one not read). None when nothing stands
+/// out. Cameras that see the flow only in part differ too, so this is a warning, never a
+/// refusal.
+pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
     let mut worst: Option<(usize, f64)> = None;
     let key = |i: usize| scene.frames[i].time.map(f64::to_bits);
     let mut keys: Vec<Option<u64>> = (0..totals.len()).map(key).collect();
     keys.sort_unstable();
     keys.dedup();
     for t in keys {
-        let group: Vec<usize> = (0..totals.len()).filter(|&i| !scene.frames[i].holdout && key(i) == t).collect();
+        let group: Vec<(usize, f64)> = (0..totals.len())
+            .filter(|&i| !scene.frames[i].holdout && key(i) == t)
+            .filter_map(|i| totals[i].map(|total| (i, total)))
+            .collect();
         if group.len() < 3 {
             continue;
         }
-        let mut sorted: Vec<f64> = group.iter().map(|&i| totals[i]).collect();
+        let mut sorted: Vec<f64> = group.iter().map(|&(_, total)| total).collect();
         sorted.sort_by(f64::total_cmp);
         let median = sorted[sorted.len() / 2];
         if median.is_nan() || median <= 0.0 {
             continue;
         }
-        for &i in &group {
-            let ratio = totals[i] / median;
+        for &(i, total) in &group {
+            let ratio = total / median;
             let off = if ratio > 0.0 { ratio.max(1.0 / ratio) } else { f64::INFINITY };
             if off > GAIN_HINT_RATIO && worst.is_none_or(|(_, w)| off > w.max(1.0 / w)) {
                 worst = Some((i, ratio));
@@ -326,6 +332,37 @@ impl Projector for MaskedProjector<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_gain_hint_names_the_camera_off_its_times_median_and_skips_masked_ones() {
+        use fluidnerf_core::glam::DVec3;
+        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
+        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let scene = Scene {
+            root: "scene".into(),
+            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: (0..5)
+                .map(|i| Frame {
+                    file_path: format!("c{i}.tiff").into(),
+                    camera: Camera::look_at(k, DVec3::new(5.0, i as f64, 0.0), DVec3::ZERO, DVec3::Y),
+                    time: None,
+                    camera_name: Some(format!("cam{i}")),
+                    holdout: i == 4,
+                })
+                .collect(),
+            truth: Vec::new(),
+        };
+        let hint = |totals: [Option<f64>; 5]| gain_hint(&scene, &totals);
+        // Within 15 % of the median: nothing; the held-out camera does not count.
+        assert_eq!(hint([Some(1.0), Some(1.1), Some(0.9), Some(1.0), Some(3.0)]), None);
+        let said = hint([Some(1.0), Some(1.0), Some(0.8), Some(1.05), None]).expect("a camera 20 % dim");
+        assert!(said.contains("cam2 holds 0.80×") && said.contains("--gains fit"), "{said}");
+        // A masked image's total does not compare; two comparable images are too few.
+        assert_eq!(hint([Some(1.0), Some(1.0), None, Some(1.05), None]).map(|_| ()), None);
+        assert_eq!(hint([Some(1.0), None, Some(0.5), None, None]), None);
+    }
 
     #[test]
     fn gain_fits_recover_gain_and_offset() {

@@ -148,8 +148,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ));
     }
     let mut kinds = Vec::new();
-    // Each image's total, after the background and inside the masks when the scene has them.
-    let mut totals = vec![0.0f64; scene.frames.len()];
+    // Each image's total, after the background when the scene has one; None for a masked
+    // image, whose total does not compare with the others'.
+    let mut totals: Vec<Option<f64>> = vec![None; scene.frames.len()];
     // The training images' noise readings ([`fluidnerf_core::Image::relative_noise`]).
     let mut noise_levels = Vec::new();
     // Whether a training (not held-out) image has a pixel above 0, before any preprocessing.
@@ -181,7 +182,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
                 Ok((img, kind)) => {
                     kinds.push((i, kind));
-                    totals[i] = img.sum();
+                    totals[i] = Some(img.sum());
                     let (w, h) = (f.camera.width(), f.camera.height());
                     let (lo, hi) = img.min_max();
                     let mean = img.sum() / img.data.len().max(1) as f64;
@@ -267,10 +268,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             // What a run trains on: the pixels left after the background, inside the masks.
             Ok(p) => {
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
-                    totals[i] = match m {
-                        Some(m) => im.data.iter().zip(m).filter(|(_, &k)| k).map(|(&v, _)| f64::from(v)).sum(),
-                        None => im.sum(),
-                    };
+                    totals[i] = m.is_none().then(|| im.sum());
                 }
                 training_lit = scene.frames.iter().enumerate().filter(|(_, f)| !f.holdout).any(|(i, _)| {
                     let lit = p.images[i].data.iter().enumerate().filter(|&(_, &v)| v > 0.0);
