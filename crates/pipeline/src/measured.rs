@@ -128,7 +128,10 @@ pub const GAIN_HINT_RATIO: f64 = 1.15;
 /// A warning when, at some time with at least three comparable training images, an image's
 /// total intensity lies more than [`GAIN_HINT_RATIO`] from the median of its time's: a sign
 /// that the cameras' gains differ, which a run without `--gains` takes as differences of the
-/// field. `totals` holds each frame's total, None for a frame whose total does not compare
+/// field. A pixel sees `1 / (fx fy)` of the plane at unit depth, so an image of a field at depth
+/// `z` totals about `fx fy / z²` times the field's integral: each total is divided by that
+/// factor, `z` the depth of the box's centre, so cameras at other distances or with other
+/// lenses compare. `totals` holds each frame's total, None for a frame whose total does not compare
 /// (one with a mask, which hides part of the light; one not read). None when nothing stands
 /// out. Cameras that see the flow only in part differ too, so this is a warning, never a
 /// refusal.
@@ -141,7 +144,13 @@ pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
     for t in keys {
         let group: Vec<(usize, f64)> = (0..totals.len())
             .filter(|&i| !scene.frames[i].holdout && key(i) == t)
-            .filter_map(|i| totals[i].map(|total| (i, total)))
+            .filter_map(|i| {
+                let camera = &scene.frames[i].camera;
+                let z = camera.camera_from_world().transform_point3(scene.aabb.centre()).z;
+                let k = &camera.intrinsics;
+                let per_integral = k.fx * k.fy / (z * z);
+                (z > 0.0 && per_integral.is_finite()).then_some(i).zip(totals[i].map(|total| total / per_integral))
+            })
             .collect();
         if group.len() < 3 {
             continue;
@@ -163,8 +172,9 @@ pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
     let (i, ratio) = worst?;
     Some(format!(
         "the training images' total intensities differ between cameras as differing gains make them: {} holds {:.2}× \
-         the median of its time (more than {:.0} % off); a run without gains takes that for the field. If the \
-         cameras' gains, apertures or filters differ, add --gains fit (or balance; docs/real-data.md)",
+         the median of its time, for its distance and lens (more than {:.0} % off); a run without gains takes that \
+         for the field. If the cameras' gains, apertures or filters differ, add --gains fit (or balance; \
+         docs/real-data.md)",
         frame_label(scene, i),
         ratio,
         (GAIN_HINT_RATIO - 1.0) * 100.0
@@ -338,23 +348,30 @@ mod tests {
         use fluidnerf_core::glam::DVec3;
         use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
         let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
-        let scene = Scene {
+        // Five cameras on a ring of radius 5 around the box, the last held out; `far` puts
+        // camera 1 at twice the distance.
+        let scene = |far: bool| Scene {
             root: "scene".into(),
             aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
             units: "mm".into(),
             intensity_scale: 1.0,
             frames: (0..5)
-                .map(|i| Frame {
-                    file_path: format!("c{i}.tiff").into(),
-                    camera: Camera::look_at(k, DVec3::new(5.0, i as f64, 0.0), DVec3::ZERO, DVec3::Y),
-                    time: None,
-                    camera_name: Some(format!("cam{i}")),
-                    holdout: i == 4,
+                .map(|i| {
+                    let a = i as f64 * 1.2;
+                    let r = if far && i == 1 { 10.0 } else { 5.0 };
+                    Frame {
+                        file_path: format!("c{i}.tiff").into(),
+                        camera: Camera::look_at(k, r * DVec3::new(a.cos(), 0.0, a.sin()), DVec3::ZERO, DVec3::Y),
+                        time: None,
+                        camera_name: Some(format!("cam{i}")),
+                        holdout: i == 4,
+                    }
                 })
                 .collect(),
             truth: Vec::new(),
         };
-        let hint = |totals: [Option<f64>; 5]| gain_hint(&scene, &totals);
+        let ring = scene(false);
+        let hint = |totals: [Option<f64>; 5]| gain_hint(&ring, &totals);
         // Within 15 % of the median: nothing; the held-out camera does not count.
         assert_eq!(hint([Some(1.0), Some(1.1), Some(0.9), Some(1.0), Some(3.0)]), None);
         let said = hint([Some(1.0), Some(1.0), Some(0.8), Some(1.05), None]).expect("a camera 20 % dim");
@@ -362,6 +379,12 @@ mod tests {
         // A masked image's total does not compare; two comparable images are too few.
         assert_eq!(hint([Some(1.0), Some(1.0), None, Some(1.05), None]).map(|_| ()), None);
         assert_eq!(hint([Some(1.0), None, Some(0.5), None, None]), None);
+        // A camera twice as far sees the field a quarter as large: a quarter of the light is
+        // its share, and the same light as the others would be four times it.
+        let far = scene(true);
+        assert_eq!(gain_hint(&far, &[Some(1.0), Some(0.25), Some(1.0), Some(1.0), None]), None);
+        let said = gain_hint(&far, &[Some(1.0), Some(1.0), Some(1.0), Some(1.0), None]).expect("too bright");
+        assert!(said.contains("cam1 holds 4.00×"), "{said}");
     }
 
     #[test]
