@@ -106,6 +106,20 @@ impl DavisFile {
         }
     }
 
+    /// Every frame's camera and exposure ([`Self::frame_label`]) when every frame names one;
+    /// frame k as camera k + 1 when none does; `Err(k)` when frame k names none while others do,
+    /// so its camera is unknown.
+    pub fn frame_labels(&self) -> Result<Vec<FrameLabel>, usize> {
+        let named: Vec<Option<FrameLabel>> = (0..self.frames.len()).map(|k| self.frame_label(k)).collect();
+        if named.iter().all(Option::is_none) {
+            return Ok((1..=named.len() as u32).map(|camera| FrameLabel { camera, exposure: None }).collect());
+        }
+        match named.iter().position(Option::is_none) {
+            Some(k) => Err(k),
+            None => Ok(named.into_iter().flatten().collect()),
+        }
+    }
+
     /// The intensity scale `(factor, offset, unit)` of `_SCALE_I`, by which DaVis shows
     /// `factor · stored + offset`; None when absent or unreadable.
     pub fn intensity_scale(&self) -> Option<(f64, f64, String)> {

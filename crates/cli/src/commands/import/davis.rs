@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use fluidnerf_core::{Camera, Frame};
-use fluidnerf_io::davis::{read_davis, FrameLabel};
+use fluidnerf_io::davis::{read_davis, DavisFile, FrameLabel};
 use fluidnerf_io::image::SampleKind;
 use serde::Serialize;
 
@@ -65,19 +65,7 @@ pub(super) fn recording(
         return Ok(None);
     }
     let first = read_davis(&files[0]).context("reading the DaVis recording's first file")?;
-    let n = first.frames.len();
-    let named: Vec<Option<FrameLabel>> = (0..n).map(|k| first.frame_label(k)).collect();
-    let labels: Vec<FrameLabel> = if named.iter().all(Option::is_none) {
-        (1..=n as u32).map(|camera| FrameLabel { camera, exposure: None }).collect()
-    } else if let Some(k) = named.iter().position(Option::is_none) {
-        bail!(
-            "{}: frame {k} of the DaVis recording names no camera (its attribute CameraName{k} is missing or not \
-             like `1A: …`) while others do, so its camera is unknown",
-            files[0].display()
-        );
-    } else {
-        named.into_iter().flatten().collect()
-    };
+    let labels = labels_of(&first, &files[0])?;
     let mut sorted = labels.clone();
     sorted.sort();
     if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
@@ -178,7 +166,7 @@ pub(super) fn recording(
         "{}: a DaVis recording of {} file(s), {} frame(s) each; {}",
         images.display(),
         files.len(),
-        n,
+        labels.len(),
         cameras
             .iter()
             .map(|(name, _)| format!("{name} is DaVis camera {}", trailing_number(name).unwrap_or_default()))
@@ -200,6 +188,18 @@ fn letters(exposures: &[Option<char>]) -> String {
     exposures.iter().map(|e| e.map_or_else(|| "-".to_owned(), String::from)).collect::<Vec<_>>().join("/")
 }
 
+/// The cameras and exposures of `file`'s frames ([`DavisFile::frame_labels`]), refused when
+/// some frames name their camera and others do not.
+fn labels_of(davis: &DavisFile, file: &Path) -> anyhow::Result<Vec<FrameLabel>> {
+    davis.frame_labels().map_err(|k| {
+        anyhow::anyhow!(
+            "{}: frame {k} of the DaVis recording names no camera (its attribute CameraName{k} is missing or not \
+             like `1A: …`) while others do, so its camera is unknown",
+            file.display()
+        )
+    })
+}
+
 /// Writes every camera's frame of every file of `recording` into `out/frames/<camera>/`, as
 /// the file's stem (plus the exposure's letter) `.png` (16-bit counts, exact) or, for float
 /// pixels, `.tif`, and points `frames` at them.
@@ -214,10 +214,7 @@ pub(super) fn split(
     let mut warned_scale = false;
     for (n, file) in recording.files.iter().enumerate() {
         let davis = read_davis(file).context("reading the DaVis recording")?;
-        let labels: Vec<FrameLabel> = match (0..davis.frames.len()).map(|k| davis.frame_label(k)).collect() {
-            Some(named) => named,
-            None => (1..=davis.frames.len() as u32).map(|camera| FrameLabel { camera, exposure: None }).collect(),
-        };
+        let labels = labels_of(&davis, file)?;
         if labels != recording.labels {
             bail!(
                 "{}: its frames are DaVis cameras {}, those of {} are {}: every file of a recording must hold the \
