@@ -147,7 +147,6 @@ mod tests {
     use fluidnerf_core::Aabb;
     use glam::DVec3;
 
-    const ALGORITHMS: [Algorithm; 8] = Algorithm::ALL;
     const PROJECTORS: [ProjectorKind; 4] =
         [ProjectorKind::Auto, ProjectorKind::Footprint, ProjectorKind::Splat, ProjectorKind::Ray];
 
@@ -161,7 +160,7 @@ mod tests {
         let small_grid = Grid::new([16, 16, 16], aabb);
         let huge_views = vec![(1usize << 31, 1usize << 31); 4];
         let small_views = vec![(32usize, 32usize); 4];
-        for algorithm in ALGORITHMS {
+        for algorithm in Algorithm::ALL {
             for projector in PROJECTORS {
                 for (grid, views) in [(&huge_grid, &small_views), (&small_grid, &huge_views)] {
                     let e = estimate_memory(algorithm, projector, grid, views, 64, 1 << 10, u64::MAX);
