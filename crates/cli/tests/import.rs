@@ -1353,6 +1353,49 @@ fn a_davis_recording_is_split_into_the_cameras_images() {
     assert!(o.status.success(), "one frame per camera's file is its image: {}", stderr(&o));
 }
 
+/// Importing again into the same folder removes the images an earlier import split from a
+/// DaVis recording that the new scene does not read (here the second instant of a recording
+/// now one file long), and never those it reads, even when they are its images.
+#[test]
+fn a_davis_import_again_removes_the_earlier_split_images_it_does_not_use() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = davis_rig(dir.path());
+    let rec = dir.path().join("rec");
+    for n in 0..2u16 {
+        davis_file(&rec.join(format!("B{:05}.im7", n + 1)), &[100 + n, 200 + n, 300 + n], &["1", "2", "3"]);
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &rec, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.join("frames/cam3/B00002.png").is_file());
+
+    // The recording is one file now (a folder of its first file only).
+    let short = dir.path().join("short");
+    davis_file(&short.join("B00001.im7"), &[100, 200, 300], &["1", "2", "3"]);
+    let o = import_recordings(&calib, &short, &out, &["--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for c in 1..=3 {
+        assert!(out.join(format!("frames/cam{c}/B00001.png")).is_file(), "cam{c}'s image of the new import");
+        assert!(!out.join(format!("frames/cam{c}/B00002.png")).exists(), "cam{c}'s stale second instant");
+    }
+    let record = std::fs::read_to_string(out.join("import.json")).expect("import.json");
+    assert!(record.contains("frames/cam2/B00001.png"), "{record}");
+    assert_eq!(load_scene(&out).expect("loads").frames.len(), 3);
+
+    // A file of the user's beside them stays, and so does its folder.
+    std::fs::write(out.join("frames/cam1/notes.txt"), "mine").expect("writes");
+    // The split images themselves as the images of a new import into the same folder: the
+    // scene reads them, so none is removed.
+    let o = import_recordings(&calib, &out.join("frames"), &out, &["--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 3);
+    for f in &scene.frames {
+        assert!(scene.resolve(&f.file_path).is_file(), "{} is read by the scene", f.file_path.display());
+    }
+    assert!(out.join("frames/cam1/notes.txt").is_file());
+}
+
 /// `import --metashape FILE --images IMAGES --aabb … EXTRA… -o OUT`.
 fn import_metashape(file: &Path, images: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["import", "--metashape", s(file), "--images", s(images), "--aabb", "-10,-10,-10,10,10,10"];

@@ -1,7 +1,7 @@
 //! `fluidnerf import`: builds a scene (`transforms.json`) from an OpenCV, COLMAP or Metashape
 //! calibration and a folder of images, or from a `transforms.json` written by another tool.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context};
@@ -807,6 +807,9 @@ struct Settings<'a> {
     /// Which DaVis camera of a recording each calibrated camera is.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
     davis_cameras: &'a [davis::CameraRecord],
+    /// The cameras' images split from a DaVis recording, relative to OUT.
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    davis_frames: &'a [String],
 }
 
 /// The box given as `xmin,ymin,zmin,xmax,ymax,zmax`.
@@ -876,13 +879,17 @@ fn earlier_video_frames(out: &Path) -> Vec<(String, usize)> {
 /// Removes the frames an earlier import decoded (`earlier`) that this import did not write
 /// again: the rest of a longer selection, or a camera that has no video now. Left behind, they
 /// would sit beside the new frames in `frames/<camera>/` as if they belonged to the scene.
-fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoRecord]) {
+/// A file the new scene reads (`referenced`, canonical paths) is never removed.
+fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoRecord], referenced: &HashSet<PathBuf>) {
     let mut removed = 0usize;
     for (camera, count) in earlier {
         let kept = videos.iter().find(|v| &v.camera == camera).map_or(0, |v| v.info.frames_kept);
         let dir = out.join("frames").join(camera);
         for i in kept..*count {
             let frame = dir.join(format!("{i:06}.tif"));
+            if is_referenced(&frame, referenced) {
+                continue;
+            }
             match std::fs::remove_file(&frame) {
                 Ok(()) => removed += 1,
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
@@ -897,6 +904,69 @@ fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoR
     if removed > 0 {
         log::info!("removed {removed} frame(s) of the earlier import that this one does not use");
     }
+}
+
+/// The cameras' images an earlier import into `out` split from a DaVis recording, as its
+/// `import.json` records them (`frames/<camera>/<name>.png|tif`). Empty without such a record.
+fn earlier_davis_frames(out: &Path) -> Vec<PathBuf> {
+    let Ok(text) = std::fs::read_to_string(out.join("import.json")) else { return Vec::new() };
+    let Ok(record) = serde_json::from_str::<serde_json::Value>(&text) else { return Vec::new() };
+    if record["command"] != "import" {
+        return Vec::new();
+    }
+    let listed = record["davis_frames"].as_array().map(Vec::as_slice).unwrap_or_default();
+    listed
+        .iter()
+        .filter_map(|v| v.as_str())
+        .map(PathBuf::from)
+        // Only what a split writes: anything else did not come from an import.
+        .filter(|p| {
+            use std::path::Component::Normal;
+            let parts: Vec<_> = p.components().collect();
+            matches!(parts.as_slice(), [Normal(f), Normal(_), Normal(_)] if *f == "frames")
+                && p.extension().is_some_and(|e| e == "png" || e == "tif")
+        })
+        .collect()
+}
+
+/// Removes the images an earlier import split from a DaVis recording (`earlier`, relative to
+/// `out`) that the new scene does not read: the instants of a longer recording, or a camera it
+/// no longer has. Left behind, they would sit beside the new images as if part of the scene.
+fn remove_stale_davis_frames(out: &Path, earlier: &[PathBuf], referenced: &HashSet<PathBuf>) {
+    let mut removed = 0usize;
+    let mut dirs = BTreeSet::new();
+    for rel in earlier {
+        let frame = out.join(rel);
+        if is_referenced(&frame, referenced) {
+            continue;
+        }
+        match std::fs::remove_file(&frame) {
+            Ok(()) => removed += 1,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => log::warn!("cannot remove {}, an image of the earlier import: {e}", frame.display()),
+        }
+        dirs.extend(frame.parent().map(Path::to_path_buf));
+    }
+    for dir in dirs {
+        // Only when empty: a file of the user's keeps its folder.
+        let _ = std::fs::remove_dir(&dir);
+    }
+    if removed > 0 {
+        log::info!(
+            "removed {removed} image(s) the earlier import split from a DaVis recording that this one does not use"
+        );
+    }
+}
+
+/// The files `scene` reads, images and masks, as canonical paths.
+fn referenced_files(scene: &Scene, recording: &fluidnerf_io::scene::Recording) -> HashSet<PathBuf> {
+    let images = scene.frames.iter().map(|f| scene.resolve(&f.file_path));
+    let masks = recording.frames.iter().filter_map(|r| r.mask_path.as_ref()).map(|m| scene.resolve(m));
+    images.chain(masks).filter_map(|p| p.canonicalize().ok()).collect()
+}
+
+fn is_referenced(path: &Path, referenced: &HashSet<PathBuf>) -> bool {
+    path.canonicalize().is_ok_and(|p| referenced.contains(&p))
 }
 
 /// The import; what it creates in OUT is recorded in `created`.
@@ -934,6 +1004,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     // Read before it is replaced: the frames an earlier import decoded that this one does not
     // write again are removed once this one has succeeded.
     let earlier_frames = earlier_video_frames(&args.out);
+    let earlier_davis = earlier_davis_frames(&args.out);
     // A DaVis recording given as --images, split into the cameras' images once OUT exists.
     let mut davis_recording: Option<davis::Recording> = None;
 
@@ -1096,9 +1167,10 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         linearisation: args.linearisation.or(from_file.linearisation).unwrap_or_default(),
     };
     let mut frames = frames;
-    if let Some(recording) = &davis_recording {
-        davis::split(recording, &mut frames, &out_abs, args.force, created)?;
-    }
+    let davis_frames = match &davis_recording {
+        Some(recording) => davis::split(recording, &mut frames, &out_abs, args.force, created)?,
+        None => Vec::new(),
+    };
     let (frames, videos, sources) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
     // The file's masks and backgrounds follow its frames into the decoded video frames.
     if let Some(r) = &mut from_file.recording {
@@ -1234,12 +1306,15 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         args,
         videos: &videos,
         davis_cameras: &davis_cameras,
+        davis_frames: &davis_frames,
     };
     let json = serde_json::to_string_pretty(&settings)?;
     let settings_file = args.out.join("import.json");
     created.file(&settings_file);
     fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(json.as_bytes()))?;
-    remove_stale_frames(&args.out, &earlier_frames, &videos);
+    let referenced = referenced_files(&scene, &recording);
+    remove_stale_frames(&args.out, &earlier_frames, &videos, &referenced);
+    remove_stale_davis_frames(&args.out, &earlier_davis, &referenced);
 
     let cameras: BTreeSet<String> = scene
         .frames

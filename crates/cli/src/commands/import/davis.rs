@@ -202,14 +202,17 @@ fn labels_of(davis: &DavisFile, file: &Path) -> anyhow::Result<Vec<FrameLabel>> 
 
 /// Writes every camera's frame of every file of `recording` into `out/frames/<camera>/`, as
 /// the file's stem (plus the exposure's letter) `.png` (16-bit counts, exact) or, for float
-/// pixels, `.tif`, and points `frames` at them.
+/// pixels, `.tif`, and points `frames` at them. Returns the files written, relative to `out`
+/// (`frames/<camera>/<name>`), for `import.json`: a later import into `out` removes those it does
+/// not write again.
 pub(super) fn split(
     recording: &Recording,
     frames: &mut [Frame],
     out: &Path,
     force: bool,
     created: &mut Created,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Vec<String>> {
+    let mut written = Vec::with_capacity(frames.len());
     let per_file = frames.len() / recording.files.len();
     let mut warned_scale = false;
     for (n, file) in recording.files.iter().enumerate() {
@@ -244,7 +247,8 @@ pub(super) fn split(
             created.dir_all(&dir)?;
             let exposure = label.exposure.map(String::from).unwrap_or_default();
             let ext = if davis.kind == SampleKind::Float { "tif" } else { "png" };
-            let path = dir.join(format!("{stem}{exposure}.{ext}"));
+            let name = format!("{stem}{exposure}.{ext}");
+            let path = dir.join(&name);
             if path.exists() && !force {
                 bail!("{} exists (from an earlier import); pass --force to overwrite it", path.display());
             }
@@ -255,9 +259,10 @@ pub(super) fn split(
                 fluidnerf_io::image::write_png16_counts(&path, image)?;
             }
             frame.file_path = path;
+            written.push(format!("frames/{camera}/{name}"));
         }
     }
-    Ok(())
+    Ok(written)
 }
 
 #[cfg(test)]
