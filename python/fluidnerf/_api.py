@@ -177,7 +177,12 @@ def _path(value: Any, name: str, expected: str = "a path (a string or os.PathLik
     (``os.fspath``'s own message names no argument)."""
     if not isinstance(value, (str, bytes, os.PathLike)):
         raise TypeError(f"{name}: expected {expected}, got {type(value).__name__} {value!r}")
-    return os.fsdecode(os.fspath(value))
+    path = os.fsdecode(os.fspath(value))
+    if not path:
+        # An empty string (an unset variable, say) stood for the current folder: synth wrote
+        # its scene there past the check for a folder holding files, and a run wrote into it.
+        raise FluidNerfError(f"{name}: the path is empty; name a file or folder ('.' for the current folder)")
+    return path
 
 
 def load_scene(folder: PathLike) -> Scene:
@@ -431,8 +436,8 @@ def build_config(
     if config is not None:
         if isinstance(config, dict):
             base, source = copy.deepcopy(config), "config"
-        elif isinstance(config, (str, os.PathLike)):
-            path = Path(os.fspath(config))
+        elif isinstance(config, (str, bytes, os.PathLike)):
+            path = Path(_path(config, "config", "a dict or the path of a config.json"))
             try:
                 base, source = json.loads(path.read_text()), str(path)
             except (OSError, ValueError) as e:

@@ -355,6 +355,29 @@ def test_a_path_that_is_no_path_is_refused_naming_the_argument(static_scene, tmp
     assert fluidnerf.load_scene(os.fsencode(static_scene.root)).root == static_scene.root
 
 
+def test_an_empty_path_is_refused_naming_the_argument(static_scene, tmp_path, monkeypatch):
+    """An empty string stood for the current folder: synth wrote its scene there although it
+    held files, reconstruct wrote its run there, and Scene.save said "cannot make an empty
+    path absolute"."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mine.txt").write_text("mine")
+    small = {"resolution": 8, "lens": {"resolution": [12, 12]}, "rig": {"layout": {"count": 3}}}
+    K, poses = ring(3)
+    scene = fluidnerf.scene_from_arrays(K, poses, np.ones((3, 16, 16), np.float32), [[-10] * 3, [10] * 3])
+    calls = [
+        (lambda: fluidnerf.synth("", "demo", **small), "folder"),
+        (lambda: fluidnerf.reconstruct(static_scene, "asart", "", resolution=8), "out"),
+        (lambda: fluidnerf.build_config(static_scene, config=""), "config"),
+        (lambda: fluidnerf.load_scene(b""), "folder"),
+        (lambda: fluidnerf.read_davis(""), "path"),
+        (lambda: scene.save(""), "folder"),
+    ]
+    for call, name in calls:
+        with pytest.raises(fluidnerf.FluidNerfError, match=f"^{name}: the path is empty"):
+            call()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
+
+
 def test_hold_out_flags_and_complex_images_are_refused_naming_the_argument():
     """holdout="yes" was read as three flags ("expected 3 entries"), a flag of "no" as True,
     and complex images lost their imaginary part with only NumPy's warning."""

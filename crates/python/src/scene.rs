@@ -339,6 +339,10 @@ impl PyScene {
     /// the scene lives there. A folder that is not empty is refused without `force`.
     #[pyo3(signature = (folder, force=false))]
     fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
+        if folder.as_os_str().is_empty() {
+            // Refused as "cannot make an empty path absolute", which named no argument.
+            return Err(err("folder: the path is empty; name a folder ('.' for the current folder)"));
+        }
         guard(|| {
             // Never among a run's (or an export's, ...) files, as `synth` and `import` refuse.
             use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
