@@ -465,15 +465,21 @@ def build_config(
                 f"the configuration was written for method {written}; to run method {name}, leave out config"
             )
         if preset is not None:
+            chosen = next((m for m in (written, name) if m is not None), None)
             fresh = json.loads(
-                _ext.default_config(str(root or ""), written or name or _default_method(scene), preset)
+                _ext.default_config(
+                    str(root or ""), chosen if chosen is not None else _default_method(scene), preset
+                )
             )
             kept = {
                 k: v for k, v in (base.get("method") or {}).items() if k in ("holdout_times", "time_step")
             }
             base["method"] = _merge(fresh["method"], kept)
     else:
-        base = json.loads(_ext.default_config(str(root or ""), name or _default_method(scene), preset))
+        # An empty name is refused as the unknown method it is, not read as "no method given"
+        # (method="" ran the default method, unannounced).
+        chosen = name if name is not None else _default_method(scene)
+        base = json.loads(_ext.default_config(str(root or ""), chosen, preset))
     if root is not None:
         base["scene"] = str(Path(root).absolute())
     if method_patch:

@@ -293,7 +293,8 @@ def test_settings_given_as_numpy_numbers_or_not_finite_are_read_or_refused_by_ke
 def test_a_configuration_or_method_of_the_wrong_kind_is_refused_by_name(static_scene, tmp_path):
     """config={"method": "asart"} raised "AttributeError: 'str' object has no attribute 'get'", a
     config.json holding a list the same, config=[...] a TypeError naming no argument, and a
-    configuration without a method given with a preset "KeyError: 'method'"."""
+    configuration without a method given with a preset "KeyError: 'method'", and method=""
+    ran the default method."""
     with pytest.raises(
         fluidnerf.FluidNerfError, match=r"config: at `method`: expected the method's settings"
     ):
@@ -305,6 +306,12 @@ def test_a_configuration_or_method_of_the_wrong_kind_is_refused_by_name(static_s
         fluidnerf.build_config(static_scene, config=[1])
     with pytest.raises(TypeError, match=r"method: expected a method name .* got 3"):
         fluidnerf.build_config(static_scene, 3)
+    # An empty name ran the default method ("hybrid"), unannounced.
+    with pytest.raises(fluidnerf.FluidNerfError, match=r'method: unknown method "" \(known: asart'):
+        fluidnerf.build_config(static_scene, "")
+    with pytest.raises(fluidnerf.FluidNerfError, match=r'method: unknown method "" \(known: asart'):
+        fluidnerf.reconstruct(static_scene, "", tmp_path / "empty", resolution=8)
+    assert not (tmp_path / "empty").exists()
     cfg = fluidnerf.build_config(static_scene, "fast", config={"format": 1, "resolution": 8}, preset="fast")
     assert cfg["method"]["name"] == "fast" and cfg["resolution"] == 8
 
