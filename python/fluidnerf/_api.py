@@ -67,6 +67,10 @@ def _dumps(value: Any, what: str) -> str:
     return json.dumps(_plain(value, what))
 
 
+#: What arrays of NumPy's other kinds hold, named when one is given for numbers.
+_NOT_NUMBERS = {"U": "strings", "S": "strings", "M": "dates", "m": "durations", "V": "structured records"}
+
+
 def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
     """``value`` as a C-ordered array of ``dtype``; complex numbers, strings, ragged lists and
     other objects that are no array of real numbers are refused naming the argument (NumPy's
@@ -81,11 +85,22 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
         # A mask given for an image or a volume would pass for one of zeros and ones.
         if given is not None and given.dtype == np.bool_:
             raise TypeError(f"{name}: expected an array of numbers{shape}, got booleans")
+        # NumPy casts strings of digits, dates and durations to numbers without a word: "12"
+        # compared with "13" gave an NRMSE, dates one of days since 1970.
+        other = None if given is None else _NOT_NUMBERS.get(given.dtype.kind)
+        if (
+            given is not None
+            and given.dtype.kind == "O"
+            and any(isinstance(v, (str, bytes)) for v in given.flat)
+        ):
+            other = "strings"
+        if other is not None:
+            raise TypeError(f"{name}: expected an array of numbers{shape}, got {other} ({given.dtype})")
         # A value beyond the type is found below, not left to NumPy's warning.
         with np.errstate(over="ignore"):
             a = None if given is None else given.astype(dtype, copy=False)
     except (TypeError, ValueError) as e:
-        if "got booleans" in str(e):
+        if "got booleans" in str(e) or "expected an array of numbers" in str(e):
             raise
         raise TypeError(f"{name}: expected an array of numbers{shape}: {e}") from None
     if a is None:
