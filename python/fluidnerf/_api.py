@@ -96,9 +96,19 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
             other = "strings"
         if other is not None:
             raise TypeError(f"{name}: expected an array of numbers{shape}, got {other} ({given.dtype})")
+        if given is not None and given.dtype.kind == "O":
+            # A list of Python integers is an array of objects: one beyond the type was cast
+            # to an infinity (refused as "not finite (inf)", a value nobody gave), or beyond
+            # float64 raised a bare "OverflowError: int too large to convert to float".
+            largest = float(np.finfo(dtype).max)
+            for i, v in enumerate(given.flat):
+                if isinstance(v, int) and not isinstance(v, bool) and abs(v) > largest:
+                    _beyond(name, i, f"an integer of {len(str(abs(v)))} digits", np.dtype(dtype))
         # A value beyond the type is found below, not left to NumPy's warning.
         with np.errstate(over="ignore"):
             a = None if given is None else given.astype(dtype, copy=False)
+    except FluidNerfError:
+        raise
     except (TypeError, ValueError) as e:
         if "got booleans" in str(e) or "expected an array of numbers" in str(e):
             raise
@@ -110,11 +120,17 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
         beyond = np.flatnonzero(np.isinf(a) & np.isfinite(given))
         if beyond.size:
             i = int(beyond[0])
-            raise FluidNerfError(
-                f"{name}: element {i} (flat index, C order), {float(given.flat[i])!r}, is beyond the "
-                f"{a.dtype} values it is computed in (at most {str(np.finfo(a.dtype).max)} in magnitude)"
-            )
+            _beyond(name, i, repr(float(given.flat[i])), a.dtype)
     return a if a.flags.c_contiguous else np.ascontiguousarray(a)
+
+
+def _beyond(name: str, i: int, shown: str, dtype: np.dtype) -> None:
+    """Refuses element ``i`` of the argument ``name``, ``shown``, as beyond the values of
+    ``dtype``."""
+    raise FluidNerfError(
+        f"{name}: element {i} (flat index, C order), {shown}, is beyond the "
+        f"{dtype} values it is computed in (at most {str(np.finfo(dtype).max)} in magnitude)"
+    )
 
 
 def _given(value: Any, a: np.ndarray) -> str:

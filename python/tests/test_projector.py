@@ -433,8 +433,8 @@ def test_metrics_refuse_values_that_are_not_finite_and_a_zero_truth():
 
 
 def test_finite_values_beyond_float32_are_refused_as_such(scene):
-    """A float64 value of 1e300 was cast to a float32 infinity, with NumPy's RuntimeWarning, and
-    refused as "not finite (inf)", a value nobody gave."""
+    """A float64 value of 1e300 (or a Python integer of 2**200) was cast to a float32 infinity,
+    with NumPy's RuntimeWarning, and refused as "not finite (inf)", a value nobody gave."""
     import warnings
 
     s, *_ = scene
@@ -459,3 +459,13 @@ def test_finite_values_beyond_float32_are_refused_as_such(scene):
         y[2, 5, 7] = 1e39
         with pytest.raises(fluidnerf.FluidNerfError, match=r"images\[2\]: element 87 .*, 1e\+39, is beyond"):
             fluidnerf.back_project(s, y, (N, N, N))
+        # Python integers beyond float32 (an array of objects) were cast to an infinity and
+        # refused as "not finite (inf)", and beyond float64 raised a bare OverflowError.
+        for big_int in (2**200, -(2**2000)):
+            digits = len(str(abs(big_int)))
+            with pytest.raises(
+                fluidnerf.FluidNerfError,
+                match=rf"^estimate: element 1 \(flat index, C order\), an integer of {digits} digits, is "
+                r"beyond the float32 values",
+            ):
+                fluidnerf.nrmse([1, big_int], [1.0, 2.0])
