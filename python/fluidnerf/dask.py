@@ -134,6 +134,13 @@ def reconstruct(
         _ext.check_run_folder(os.fspath(out_path), "refuse")
     else:
         _ext.check_window_folder(os.fspath(out_path))
+    if not callable(getattr(client, "submit", None)):
+        # Found at the first task, as "AttributeError: 'NoneType' object has no attribute
+        # 'submit'", after a scene built from arrays was saved into the folder, and left there.
+        raise TypeError(
+            f"client: expected a Dask client (distributed.Client) to run the tasks on, got {type(client).__name__} "
+            f"{client!r}"
+        )
     saved: _SavedScene | None = None
     if scene.root is None:
         own = out_path / "scene"

@@ -146,6 +146,20 @@ def test_a_callback_that_cannot_be_called_is_refused_before_any_task(tr_scene, t
     assert not (tmp_path / "run").exists()
 
 
+def test_a_client_that_is_no_dask_client_is_refused_before_anything_is_written(tr_scene, tmp_path):
+    """client=None raised "AttributeError: 'NoneType' object has no attribute 'submit'" at
+    the first task, after a scene built from arrays was saved into the run folder, and left
+    there."""
+    K, poses, _, _ = tr_scene.camera_arrays()
+    times = np.array(tr_scene.times, dtype=np.float64)
+    scene = fluidnerf.scene_from_arrays(K, poses, tr_scene.images(), tr_scene.aabb, times=times)
+    for client in (None, "tcp://127.0.0.1:8786"):
+        with pytest.raises(TypeError, match=r"^client: expected a Dask client \(distributed.Client\)"):
+            fluidnerf.dask.reconstruct(client, scene, TR_METHOD, tmp_path / "run", **TR_OPTIONS)
+        assert not (tmp_path / "run").exists()
+        assert scene.root is None
+
+
 def test_a_plan_of_negative_or_fractional_counts_is_refused_naming_the_argument():
     """A negative count raised pyo3's "OverflowError: can't convert negative int to unsigned",
     naming no argument, and window=True planned windows of one frame."""
