@@ -78,6 +78,12 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
     if value is None:
         # NumPy reads None as NaN.
         raise TypeError(f"{name}: expected an array of numbers{shape}, got None")
+    if isinstance(value, np.ma.MaskedArray) and np.ma.count_masked(value):
+        # np.asarray drops the mask: the values under it were computed with as if given.
+        raise FluidNerfError(
+            f"{name}: a masked array with {np.ma.count_masked(value)} masked element(s), whose mask would be "
+            f"ignored: give a plain array{shape}, the masked elements filled (e.g. a.filled(0))"
+        )
     try:
         complex_numbers = np.iscomplexobj(value)
         # Not np.ascontiguousarray, which makes a 0-d array (a single number) one of shape (1,).

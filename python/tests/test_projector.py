@@ -412,6 +412,23 @@ def test_strings_dates_and_durations_are_refused_as_no_numbers(scene):
         fluidnerf.back_project(s, y.astype(str), (N, N, N))
 
 
+def test_a_masked_array_is_refused_rather_than_its_mask_ignored(scene):
+    """np.asarray dropped a masked array's mask: the metrics, projections and scenes used the
+    values under it as if they were data."""
+    s, *_ = scene
+    t = blob_volume()
+    masked = np.ma.masked_array(t, mask=t < 0.5 * t.max())
+    n = int(masked.mask.sum())
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=rf"^estimate: a masked array with {n} masked element\(s\)"
+    ):
+        fluidnerf.nrmse(masked, t)
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"^volume: a masked array .* mask would be ignored"):
+        fluidnerf.forward_project(s, masked)
+    # A masked array of which nothing is masked is its values.
+    assert fluidnerf.nrmse(np.ma.masked_array(t), t) == 0.0
+
+
 def test_metrics_refuse_values_that_are_not_finite_and_a_zero_truth():
     """A NaN or an infinity in either array made every metric NaN (or inf) without a word, and
     an all-zero truth made the NRMSE NaN."""
