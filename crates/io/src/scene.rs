@@ -1124,7 +1124,7 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
                     format!(
                         "frames {j} and {i} are both camera {name:?}{}; a camera records one image per \
                          instant: give the frames of different cameras different `camera` names",
-                        f.time.map(|t| format!(" at time {t}")).unwrap_or_default()
+                        f.time.map(|t| format!(" at time {}", fluidnerf_core::num(t))).unwrap_or_default()
                     ),
                 ));
             }
@@ -1191,7 +1191,9 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
                     "truth entries {j} ({}) and {i} ({}) are both {}; give one ground truth per instant",
                     scene.truth[j].file_path.display(),
                     t.file_path.display(),
-                    t.time.map(|t| format!("at time {t}")).unwrap_or_else(|| "without a time".into())
+                    t.time
+                        .map(|t| format!("at time {}", fluidnerf_core::num(t)))
+                        .unwrap_or_else(|| "without a time".into())
                 ),
             ));
         }
@@ -1339,7 +1341,10 @@ fn check_instants_apart(scene: &Scene, file: &Path) -> Result<(), IoError> {
     let Some(w) = timed.windows(2).find(|w| same_time(w[0].0, w[1].0)) else {
         return Ok(());
     };
-    let frame = |(t, i): (f64, usize)| format!("frame {i} ({}) at {t}", scene.frames[i].file_path.display());
+    // Written as `num` writes numbers: a time of 1e-300 took 300 digits of the message.
+    let frame = |(t, i): (f64, usize)| {
+        format!("frame {i} ({}) at {}", scene.frames[i].file_path.display(), fluidnerf_core::num(t))
+    };
     Err(IoError::invalid(
         file,
         format!(
@@ -2076,6 +2081,26 @@ mod tests {
             f.time = Some(t);
         }
         validate_scene(&scene, Path::new("x.json")).expect("2.5 and 3.5 steps of the smallest gap");
+    }
+
+    /// Times that name one instant, or a camera twice at one, are written as numbers are in
+    /// every message (`num`): 1e-300 filled the message with 300 digits, 1e300 with 301.
+    #[test]
+    fn frame_times_in_refusals_are_written_short() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut scene = ring_scene(dir.path(), 3, Distortion::default());
+        for (f, t) in scene.frames.iter_mut().zip([0.0, 1e-300, 1.0]) {
+            f.time = Some(t);
+        }
+        let m = validate_scene(&scene, Path::new("x.json")).expect_err("must fail").to_string();
+        assert!(m.contains("frame 1 (images/c1.tif) at 1e-300 are one instant written two ways"), "{m}");
+        for (f, t) in scene.frames.iter_mut().zip([1e300, 1e300, 2e300]) {
+            f.time = Some(t);
+            f.camera_name = Some("one".into());
+        }
+        let m = validate_scene(&scene, Path::new("x.json")).expect_err("must fail").to_string();
+        assert!(m.contains("frames 0 and 1 are both camera \"one\" at time 1e300;"), "{m}");
+        assert!(m.len() < 400, "{m}");
     }
 
     #[test]
