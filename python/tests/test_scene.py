@@ -156,6 +156,12 @@ def test_bad_arrays_are_refused_naming_the_array_and_frame():
     bad[1, 4, 7] = np.nan
     with pytest.raises(fluidnerf.FluidNerfError, match=r"images\[1\].*not finite"):
         fluidnerf.scene_from_arrays(K, poses, bad, aabb)
+    # Accepted, and refused by every run naming the image file it saved into its own folder.
+    bad[1, 4, 7] = 3e30
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"images\[1\]: pixel \(row 4, column 7\) is 3e30, above 1e18"
+    ):
+        fluidnerf.scene_from_arrays(K, poses, bad, aabb)
     with pytest.raises(fluidnerf.FluidNerfError, match="aabb"):
         fluidnerf.scene_from_arrays(K, poses, images, aabb[::-1])
     p = poses.copy()

@@ -307,6 +307,20 @@ impl PyScene {
                         image.data[p]
                     )));
                 }
+                // The largest pixel a scene's images may hold (`fluidnerf_io::scene::MAX_PIXEL`):
+                // a larger one was accepted here and refused by every run, naming the image file
+                // the run had saved into its own folder, which the caller never wrote.
+                let max = fluidnerf_io::scene::MAX_PIXEL;
+                if let Some(p) = image.data.iter().position(|&v| v > max) {
+                    return Err(err(format!(
+                        "images[{i}]: pixel (row {}, column {}) is {:e}, above {max:e}, where 32-bit arithmetic \
+                         overflows: a corrupt or hot pixel, or values that need rescaling (intensity_scale takes \
+                         the units)",
+                        p / w,
+                        p % w,
+                        image.data[p]
+                    )));
+                }
                 images_out.push(image);
                 frames.push(Frame {
                     camera,
