@@ -347,9 +347,10 @@ def read_metashape(path: PathLike, skip_unaligned: bool = False) -> list[Camera]
     label, as ``fluidnerf import --metashape`` reads them: poses in the chunk's coordinate
     system (metres) when the file gives the chunk's transform. Cameras the file has not
     aligned are refused, named, unless ``skip_unaligned``; disabled cameras are left out."""
-    if not isinstance(skip_unaligned, bool):
+    # A NumPy boolean (a flag read from an array) is a boolean, as for holdout and progress.
+    if not isinstance(skip_unaligned, (bool, np.bool_)):
         raise TypeError(f"skip_unaligned: expected True or False, got {skip_unaligned!r}")
-    return _cameras(_ext.read_metashape(_path(path, "path"), skip_unaligned))
+    return _cameras(_ext.read_metashape(_path(path, "path"), bool(skip_unaligned)))
 
 
 def read_video(

@@ -229,6 +229,12 @@ def test_metashape_cameras_that_are_not_aligned_are_refused_unless_skipped(tmp_p
         fluidnerf.read_metashape(xml)
     (cam,) = fluidnerf.read_metashape(xml, skip_unaligned=True)
     assert cam.name == "a" and cam.size == (64, 48)
+    # A NumPy boolean was refused as "expected True or False, got np.True_"; an integer still is.
+    assert [c.name for c in fluidnerf.read_metashape(xml, skip_unaligned=np.True_)] == ["a"]
+    with pytest.raises(fluidnerf.FluidNerfError, match="not aligned in Metashape.*b"):
+        fluidnerf.read_metashape(xml, skip_unaligned=np.False_)
+    with pytest.raises(TypeError, match="skip_unaligned: expected True or False, got 1"):
+        fluidnerf.read_metashape(xml, skip_unaligned=1)
     # Offsets from the image centre with pixel centres at +0.5; Metashape's P1 is OpenCV's p2.
     np.testing.assert_allclose(cam.K[0], [80, 0, 33.0])
     assert cam.distortion[2:4] == (0.0, 0.002)
