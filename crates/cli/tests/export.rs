@@ -1,5 +1,7 @@
 //! End-to-end tests of `fluidnerf export` on tiny volumes generated in a temporary directory.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -291,4 +293,28 @@ fn a_forced_export_removes_the_earlier_outputs_it_does_not_write() {
     left.sort();
     assert_eq!(left, ["export.json", "notes.txt", "slice_z_0.500.png", "volume.npy"]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("an output of the earlier export"));
+}
+
+/// A run's box is in its scene's unit, which its report records: an export of the run folder
+/// labels and calibrates its files in that unit without the scene, and refuses another --units,
+/// which would calibrate a TIFF stack of a scene in metres as millimetres.
+#[test]
+fn an_export_keeps_the_units_of_the_run_and_refuses_others() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    common::demo_scene(dir.path(), "ball", 4, 16, 12, &[]);
+    common::edit_json(&dir.path().join("scene/transforms.json"), |t| t["units"] = "m".into());
+    let run = ["reconstruct", "scene", "-o", "run", "-m", "asart", "--resolution", "12", "-q"];
+    common::ok(&common::fluidnerf(dir.path(), &run));
+
+    common::ok(&common::fluidnerf(dir.path(), &["export", "run", "-o", "out", "--tiff", "-q"]));
+    assert_eq!(common::json(&dir.path().join("out/export.json"))["units"], "m");
+    let tiff = fluidnerf_io::volume::read_tiff_stack(&dir.path().join("out/volume.tif"), None, Some("m"));
+    let box_max = tiff.expect("reads the stack").aabb.max;
+    assert!((box_max - DVec3::splat(20.0)).abs().max_element() < 1e-3, "{box_max:?}");
+
+    let o = common::fluidnerf(dir.path(), &["export", "run", "-o", "other", "--tiff", "--units", "mm"]);
+    common::refused(&o, "--units mm: the run run is in m");
+    assert!(!dir.path().join("other/volume.tif").exists());
+    let o = common::fluidnerf(dir.path(), &["export", "run", "-s", "scene", "-o", "other", "--units", "cm"]);
+    common::refused(&o, "--units cm: the scene");
 }

@@ -101,7 +101,9 @@ pub struct Args {
     /// Colour-bar label of the slices, with the field's unit.
     #[arg(long, default_value = "emission E [a.u.]")]
     pub value_label: String,
-    /// Length unit for axis labels. Default: the scene's, else mm.
+    /// Length unit of a volume file that records none, for axis labels and the TIFF
+    /// calibration. Default: the scene's, else the run's, else mm; another than the scene's or
+    /// the run's is refused.
     #[arg(long, value_parser = super::import::parse_units)]
     pub units: Option<String>,
     /// Overwrite existing outputs in OUT.
@@ -203,6 +205,17 @@ pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<
         bail!("{}: no such file or directory", path.display());
     }
     Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb), scene.map(|s| s.units.as_str()))?))
+}
+
+/// The length unit a run folder's `report.json` records for its scene, and the words naming
+/// it; None for a volume file or a folder without a report.
+fn run_units(recon: &Path) -> anyhow::Result<Option<(String, String)>> {
+    let report = recon.join("report.json");
+    if !(recon.is_dir() && report.is_file()) {
+        return Ok(None);
+    }
+    let r = fluidnerf_pipeline::RunReport::read(&report)?;
+    Ok(Some((r.units, format!("the run {}", recon.display()))))
 }
 
 /// Parses `AXIS=FRACTION`.
@@ -327,7 +340,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(root) = scene_root {
         fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, &root)?;
     }
-    let units = args.units.clone().or_else(|| scene.as_ref().map(|s| s.units.clone())).unwrap_or_else(|| "mm".into());
+    // The boxes, axis labels and the TIFF stack's calibration are in the reconstruction's length
+    // unit: the scene's, else the one a run folder's report records. --units names the unit of
+    // a volume file that records none; another unit than the recorded one would label the
+    // numbers falsely (a stack in mm calibrated as metres reads back a thousand times too large).
+    let recorded_units = match &scene {
+        Some(s) => Some((s.units.clone(), format!("the scene {}", s.root.display()))),
+        None => run_units(&args.recon)?,
+    };
+    let units = match (&args.units, recorded_units) {
+        (Some(given), Some((unit, whose))) if *given != unit => bail!(
+            "--units {given}: {whose} is in {unit}, and the export's box, axis labels and TIFF calibration are in \
+             its unit; leave out --units (it names the unit of a volume file that records none)"
+        ),
+        (Some(given), _) => given.clone(),
+        (None, Some((unit, _))) => unit,
+        (None, None) => "mm".into(),
+    };
     let source = load_source(&args.recon, scene.as_ref())?;
     let time = source.sample_time(args.time, "--time")?;
     source.warn_time_unused(args.time, &args.recon);
