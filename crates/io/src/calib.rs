@@ -1352,7 +1352,17 @@ fn read_images_txt(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
             return Err(bad(format!("image id {id} appears twice (first on line {})", first + 1)));
         }
         ids.push((id, n));
-        // As COLMAP's own reader: the name is the tenth field (names cannot hold spaces).
+        // As COLMAP's own reader: the name is the tenth field (names cannot hold spaces). COLMAP
+        // writes a name with spaces as it is, so text after the name is the rest of it: read
+        // alone, the first word would be looked up as the image, another image or none.
+        if t.len() > 10 {
+            return Err(bad(format!(
+                "the image name `{}` is followed by `{}`: a COLMAP image name cannot hold spaces (COLMAP's own \
+                 reader takes the first word alone); rename the image files without spaces and export the model again",
+                t[9],
+                excerpt(&t[10..].join(" "))
+            )));
+        }
         out.push(ColmapImage {
             name: t[9].to_string(),
             q: [v[0], v[1], v[2], v[3]],

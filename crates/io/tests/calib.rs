@@ -325,6 +325,23 @@ fn colmap_errors_name_the_file_and_line() {
     assert!(err.contains("images.txt: line") && err.contains("= (1e300, 0, 0, 0) is not a unit quaternion"), "{err}");
 }
 
+/// COLMAP writes an image name with spaces as it is: its first word alone was looked up as the
+/// image (`side` finds `side.png` by its stem), another image than the pose's, without a word.
+#[test]
+fn a_colmap_image_name_with_spaces_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(dir.path().join("cameras.txt"), "1 PINHOLE 64 48 50 50 32 24\n2 PINHOLE 64 48 50 50 32 24\n")
+        .expect("write");
+    let text = std::fs::read_to_string(fixtures().join("colmap/images.txt")).expect("read");
+    std::fs::write(dir.path().join("images.txt"), text.replace("1 side.png", "1 side view.png")).expect("write");
+    let err = read_colmap(dir.path()).expect_err("a name with a space").to_string();
+    assert!(
+        err.contains("images.txt: line 8: the image name `side` is followed by `view.png`")
+            && err.contains("cannot hold spaces"),
+        "{err}"
+    );
+}
+
 /// Bytes of a COLMAP binary model built by hand from the documented layout
 /// (`read_write_model.py`: cameras `<iiQQ` + params `<d`, images `<idddddddi` + name + NUL +
 /// `<Q` points + 24 bytes per point).
