@@ -982,6 +982,33 @@ fn distortion_under_an_unknown_name_is_warned_about() {
     assert!(!e.contains("camera `cam0`") && !e.contains("camera `cam2`"), "{e}");
 }
 
+/// A pose given twice, as `R`/`T` and `tvec`, is read from `R`/`T` with a warning, as when the
+/// second pose has an `rvec`: a `tvec` beside `T` was left unread without a word.
+#[test]
+fn a_tvec_beside_r_and_t_is_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let pose = rig()[1].1.camera_from_world();
+    let (m, t) = (pose.matrix3, pose.translation);
+    let r: Vec<String> = (0..3).flat_map(|i| (0..3).map(move |j| m.col(j)[i].to_string())).collect();
+    let matrix = |key: &str, rows: usize, cols: usize, data: String| {
+        format!("{key}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {data} ]\n")
+    };
+    let mut text = std::fs::read_to_string(&calib).expect("reads").replace("rvec_cam1:", "unused_cam1:");
+    text += &matrix("R_cam1", 3, 3, r.join(", "));
+    text += &matrix("T_cam1", 3, 1, format!("{}, {}, {}", t.x, t.y, t.z));
+    std::fs::write(&calib, text).expect("writes");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let o = import_recordings(&calib, &images, &dir.path().join("scene"), &[]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("camera cam1: both R_cam1/T_cam1 and tvec_cam1 given; using R/T"), "{e}");
+}
+
 /// Two videos of a transforms.json named alike (no `camera`, one file name in two folders) would
 /// be decoded into one folder, the second over the first: refused before anything is decoded,
 /// naming both files, not as frames "from an earlier import". So is a video whose camera name is

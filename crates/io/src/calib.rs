@@ -527,12 +527,16 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
         Ok(DVec3::new(v[0], v[1], v[2]))
     };
     let (rotation, translation, pose_key) = if (nodes.get)("R").is_some() {
-        if (nodes.get)("rvec").is_some() {
+        // A `tvec` beside `T` is the second pose as much as an `rvec` beside `R`.
+        let ignored: Vec<String> =
+            ["rvec", "tvec"].into_iter().filter(|k| (nodes.get)(k).is_some()).map(|k| (nodes.label)(k)).collect();
+        if !ignored.is_empty() {
             log::warn!(
-                "{}: camera {name}: both {} and {} given; using R/T",
+                "{}: camera {name}: both {}/{} and {} given; using R/T",
                 (nodes.file)("R").display(),
                 (nodes.label)("R"),
-                (nodes.label)("rvec")
+                (nodes.label)("T"),
+                ignored.join("/")
             );
         }
         let r = sized("R", 9, "3 × 3")?;
