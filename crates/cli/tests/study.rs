@@ -213,3 +213,21 @@ fn a_continued_study_refuses_scenes_and_runs_made_with_other_settings() {
     ok(&out);
     assert!(String::from_utf8_lossy(&out.stdout).contains("done earlier"));
 }
+
+/// A study started over (--force) with a grid that no longer sweeps the noise removes the
+/// earlier study's noise plot: left in OUT, it looked like this study's.
+#[test]
+fn a_forced_study_removes_the_plots_it_no_longer_draws() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let base = ["study", "--preset", "smoke", "--methods", "asart", "-o", "st", "-q"];
+    let mut noisy = base.to_vec();
+    noisy.extend(["--cameras", "4", "--noise", "0,0.05"]);
+    ok(&fluidnerf(d, &noisy));
+    assert!(d.join("st/against_noise.png").is_file());
+    let mut cameras = base.to_vec();
+    cameras.extend(["--cameras", "4,6", "--force"]);
+    ok(&fluidnerf(d, &cameras));
+    assert!(d.join("st/against_cameras.png").is_file());
+    assert!(!d.join("st/against_noise.png").exists(), "the earlier study's noise plot was left");
+}

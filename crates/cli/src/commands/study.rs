@@ -686,11 +686,17 @@ fn write_outputs(out: &Path, g: &Grid, rows: &[Row], summaries: &[(Row, RunSumma
             .iter()
             .filter_map(|m| sweep_plot(rows, &format!("{m} against {name}"), axis, m))
             .collect();
+        let file = out.join(format!("against_{name}.png"));
         if plots.is_empty() {
+            // The plot of an earlier study in OUT (--force) over a sweep this one does not make
+            // would stay beside this study's table and report as if it were this study's.
+            if file.is_file() {
+                std::fs::remove_file(&file).with_context(|| format!("removing {}", file.display()))?;
+            }
             continue;
         }
         let png = fluidnerf_viz::encode_plots_png(&plots, 2)?;
-        fluidnerf_io::atomic_write(&out.join(format!("against_{name}.png")), |w| w.write_all(&png))?;
+        fluidnerf_io::atomic_write(&file, |w| w.write_all(&png))?;
         figures.push(Figure {
             caption: format!("Volume NRMSE and global SSIM against {name}."),
             image: ImageData::Png(png),
