@@ -542,6 +542,7 @@ impl MethodConfig {
             MethodConfig::Neural(m, n) => {
                 validate_field(&n.field)?;
                 refuse_time_frequencies(*m, &n.field)?;
+                refuse_frame_batching(*m, &n.train)?;
                 n.train.validate().map_err(|e| under("method.train", e))?;
                 if let Some(start) = &n.start {
                     start.validate()?;
@@ -686,6 +687,28 @@ fn refuse_time_frequencies(method: Method, field: &FieldConfig) -> Result<(), Pi
             ),
         )),
         _ => Ok(()),
+    }
+}
+
+/// Refuses the training settings of a time-resolved run's frames for a static method, where
+/// they would be ignored: its field is of one instant, so `batching: one-time-step` batches
+/// every view as `all-views` does, and `schedule_per_frame` and `stop_per_frame`, which count
+/// cycles through the frames of one-time-step batching, count iterations.
+fn refuse_frame_batching(method: Method, train: &TrainConfig) -> Result<(), PipelineError> {
+    let set = [
+        ("batching", train.batching == Batching::OneTimeStep, "one-time-step"),
+        ("schedule_per_frame", train.schedule_per_frame, "true"),
+        ("stop_per_frame", train.stop_per_frame, "true"),
+    ];
+    match set.into_iter().find(|s| s.1) {
+        Some((key, _, given)) => Err(PipelineError::invalid(
+            format!("method.train.{key}"),
+            format!(
+                "{given} would be ignored: {method} trains a field of one instant, which has no frames to batch or \
+                 count by; leave it out, or use a time-resolved method (tr-fast, tr-fluidnerf)"
+            ),
+        )),
+        None => Ok(()),
     }
 }
 
@@ -1649,6 +1672,31 @@ mod tests {
             let c = RunConfig { method, ..RunConfig::new("scene", Method::StaticPerFrame) };
             c.validate().unwrap_or_else(|e| panic!("{preset}: {e}"));
         }
+    }
+
+    /// The frame batching of time-resolved training, edited into a static method's
+    /// configuration, changed nothing: refused naming the key; time-resolved methods keep it.
+    #[test]
+    fn frame_batching_of_a_static_method_is_refused() {
+        type Edit = fn(&mut TrainConfig);
+        let edits: [(&str, Edit); 3] = [
+            ("batching: one-time-step", |t| t.batching = Batching::OneTimeStep),
+            ("schedule_per_frame: true", |t| t.schedule_per_frame = true),
+            ("stop_per_frame: true", |t| t.stop_per_frame = true),
+        ];
+        for method in [Method::Fluidnerf, Method::Fast, Method::Voxel, Method::Hybrid] {
+            for (says, edit) in edits {
+                let mut c = RunConfig::new("scene", method);
+                edit(c.method.train_mut().expect("a neural method trains"));
+                let e = c.validate().expect_err("refused").to_string();
+                let (key, given) = says.split_once(": ").expect("key: value");
+                assert!(e.starts_with(&format!("method.train.{key}: {given} would be ignored: {method}")), "{e}");
+            }
+        }
+        let mut c = RunConfig::new("scene", Method::TrFast);
+        let train = c.method.train_mut().expect("trains");
+        (train.batching, train.schedule_per_frame, train.stop_per_frame) = (Batching::OneTimeStep, true, true);
+        c.validate().expect("time-resolved training batches by frame");
     }
 
     /// A hash grid's time axis in a field of space alone would be ignored: each of its keys,
