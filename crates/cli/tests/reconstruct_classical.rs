@@ -269,3 +269,30 @@ fn a_ring_around_y_comes_back_on_the_scenes_axes() {
     assert!(rms < 0.05 * peak, "footprint and ray volumes differ by {rms} RMS (peak {peak})");
     assert!(footprint < 0.4 && footprint < 1.3 * ray, "NRMSE footprint {footprint}, ray {ray}");
 }
+
+/// An option of a projector the run does not use, or of the visual hull without it, changed
+/// nothing and was taken without a word; it is refused naming the option, whether the
+/// projector comes from the command line or from --config.
+#[test]
+fn projector_and_hull_options_the_run_does_not_use_are_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    let run = ["reconstruct", "scene", "-o", "run", "--method", "sart", "--resolution", "8", "-q"];
+    for (extra, says) in [
+        (&["--projector", "splat", "--ray-step", "0.1"][..], "--ray-step sets the ray projector's step"),
+        (&["--projector", "footprint", "--ray-step", "0.1"][..], "uses the footprint projector, which casts no rays"),
+        (&["--projector", "ray", "--splat-subdivisions", "2"][..], "--splat-subdivisions sets the splat projector"),
+        (&["--splat-subdivisions", "2"][..], "but this run uses the auto projector"),
+        (&["--hull-threshold", "0.1"][..], "--hull-threshold sets the visual hull, which this run does not use"),
+        (&["--hull-dilation", "2", "--hull-noise-sigmas", "3"][..], "--hull-noise-sigmas, --hull-dilation set"),
+    ] {
+        refused(&fluidnerf(d, &[&run[..], extra].concat()), says);
+        assert!(!d.join("run").exists(), "{extra:?} started a run");
+    }
+    // Where they apply they are taken, the projector and hull also from a configuration.
+    ok(&fluidnerf(d, &[&run[..], &["--projector", "ray", "--ray-step", "0.7", "--visual-hull"]].concat()));
+    let again = ["reconstruct", "--config", "run/config.json", "-o", "again", "-q"];
+    ok(&fluidnerf(d, &[&again[..], &["--ray-step", "0.6", "--hull-threshold", "0.05"]].concat()));
+    refused(&fluidnerf(d, &[&again[..], &["--force", "--splat-subdivisions", "2"]].concat()), "the ray projector");
+}

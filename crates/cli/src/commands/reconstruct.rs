@@ -724,6 +724,10 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             (None, None) => e.into(),
         });
     }
+    // After the ranges: a value out of range is named as such, whether used or not.
+    if let MethodConfig::Classical(spec) = &cfg.method {
+        refuse_idle_projector_options(args, &spec.projector)?;
+    }
     // Its checkpoint holds the saved field's parameters: another field cannot take them.
     if let Some(saved) = resume_config {
         let field = |m: &MethodConfig| match m {
@@ -774,6 +778,48 @@ fn held_out_options_apply(args: &Args, cfg: &RunConfig) -> anyhow::Result<()> {
          held-out views, or leave {them} out",
         options.join(", ")
     );
+}
+
+/// Refuses a projector's option given for a run that uses another projector (`--ray-step`
+/// beside the footprint or splat projector, `--splat-subdivisions` beside any but the splat),
+/// and the hull's options for a run without the visual hull: each would be ignored. The
+/// projector and the hull are the run's, from --config or the options.
+fn refuse_idle_projector_options(args: &Args, projector: &fluidnerf_classical::ProjectorConfig) -> anyhow::Result<()> {
+    let c = &args.classical;
+    let kind = match projector.kind {
+        ProjectorKind::Auto => "auto",
+        ProjectorKind::Footprint => "footprint",
+        ProjectorKind::Splat => "splat",
+        ProjectorKind::Ray => "ray",
+    };
+    // `auto` chooses the ray projector where voxels image wide, never the splat.
+    if c.ray_step.is_some() && !matches!(projector.kind, ProjectorKind::Ray | ProjectorKind::Auto) {
+        bail!(
+            "--ray-step sets the ray projector's step, but this run uses the {kind} projector, which casts no rays: \
+             it would be ignored; use --projector ray (or auto), or leave it out"
+        );
+    }
+    if c.splat_subdivisions.is_some() && projector.kind != ProjectorKind::Splat {
+        bail!(
+            "--splat-subdivisions sets the splat projector's sub-voxels, but this run uses the {kind} projector: it \
+             would be ignored; use --projector splat, or leave it out"
+        );
+    }
+    if !projector.visual_hull {
+        let hull = given(&[
+            ("--hull-threshold", c.hull_threshold.is_some()),
+            ("--hull-noise-sigmas", c.hull_noise_sigmas.is_some()),
+            ("--hull-dilation", c.hull_dilation.is_some()),
+        ]);
+        if !hull.is_empty() {
+            let (verb, them) = if hull.len() == 1 { ("sets", "it") } else { ("set", "them") };
+            bail!(
+                "{} {verb} the visual hull, which this run does not use: add --visual-hull, or leave {them} out",
+                hull.join(", ")
+            );
+        }
+    }
+    Ok(())
 }
 
 fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Result<()> {
