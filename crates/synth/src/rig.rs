@@ -325,6 +325,15 @@ impl RigSettings {
         if let Some(&bad) = self.holdout.iter().find(|&&i| i >= n) {
             return Err(SynthError::invalid("rig.holdout", format!("camera {bad} does not exist (the rig has {n})")));
         }
+        // A camera held out twice is a slip for another camera, which would be reconstructed from.
+        if let Some(&twice) =
+            self.holdout.iter().enumerate().find(|(k, i)| self.holdout[..*k].contains(i)).map(|(_, i)| i)
+        {
+            return Err(SynthError::invalid(
+                "rig.holdout",
+                format!("camera {twice} is given twice; give each camera once"),
+            ));
+        }
         if self.holdout.len() >= n && n > 0 && self.holdout.iter().collect::<std::collections::BTreeSet<_>>().len() >= n
         {
             return Err(SynthError::invalid(
@@ -668,6 +677,10 @@ mod tests {
         assert!(matches!(far.build(&lens, &box40(), 0), Err(SynthError::BoxBetweenPixels { index: 0, .. })));
         let holdout = RigSettings { holdout: vec![15], ..Default::default() };
         assert!(holdout.build(&lens, &box40(), 0).is_err());
+        // One camera twice, as a configuration file may list it.
+        let twice = RigSettings { holdout: vec![3, 5, 3], ..Default::default() };
+        let e = twice.validate().expect_err("camera 3 twice").to_string();
+        assert!(e.contains("rig.holdout") && e.contains("camera 3 is given twice"), "{e}");
         let jitter = RigSettings { jitter: Jitter { position_mm: -1.0, rotation_deg: 0.0 }, ..Default::default() };
         assert!(jitter.build(&lens, &box40(), 0).is_err());
         // Angles beyond any meaning are refused by key: at a start of 1e30 degrees every camera
