@@ -516,6 +516,17 @@ pub(crate) fn resolve(args: &Args) -> anyhow::Result<SynthSettings> {
                     kind.describe()
                 );
             }
+            // synth.json records the seed at its top beside `settings.seed`, the one read: a seed
+            // edited at the top alone would be passed over without a word (--seed overrides both).
+            if let (Some(top), Some(used)) = (value.get("seed"), value.get("settings").and_then(|s| s.get("seed"))) {
+                if top != used && args.seed.is_none() {
+                    bail!(
+                        "{}: `seed` {top} and `settings.seed` {used} disagree; the scene is made with `settings.seed` \
+                         (the top-level `seed` records it): edit both alike, or give --seed",
+                        path.display()
+                    );
+                }
+            }
             // A synth.json holds the settings under `settings`; a file of the settings alone works too.
             let (inner, under) = match value.get("settings") {
                 Some(settings) => (settings.clone(), "settings."),
