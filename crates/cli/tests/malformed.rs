@@ -810,7 +810,7 @@ fn cases() -> Vec<Case> {
                 v["frames"][2]["time"] = 1e-10.into();
             }),
             RUN,
-            "frame 0 (images/cam000.png) at 0 and frame 2 (images/cam002.png) at 0.0000000001 are one instant",
+            "frame 0 (images/cam000.png) at 0 and frame 2 (images/cam002.png) at 1e-10 are one instant",
         ),
         c(
             "two truths at 0 and -0",
