@@ -356,8 +356,8 @@ fn cases() -> Vec<Case> {
         c(
             "gain refits without fitted gains",
             None,
-            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--gain-every", "3"],
-            "--gain-every applies only to fitted gains, but the gains are `none`; add --gains fit",
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--gains", "none", "--gain-every", "3"],
+            "--gain-every applies only to fitted gains, but the gains are `none`; give --gains fit (or auto)",
         ),
         c(
             "gain rounds with balanced gains",

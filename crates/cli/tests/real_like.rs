@@ -1,8 +1,9 @@
 //! A real-like recording end to end: `synth --preset real-like-small` (camera gains ±30 %, a 5 %
 //! background with dark noise, one background frame per camera, 8-bit sRGB JPEG) reconstructed
 //! with background subtraction and fitted gains comes close to the same jet recorded as clean
-//! linear images, and clearly closer than without them; the fitted gains match the drawn ones,
-//! and a run without gains warns that the images' totals differ as differing gains make them.
+//! linear images, and clearly closer than without them; the fitted gains match the drawn ones.
+//! By default (gains auto) a run fits them because the images' totals differ as differing gains
+//! make them, and a run told to take the images as they are warns of it.
 
 mod common;
 use common::*;
@@ -11,6 +12,11 @@ const SMALL: [&str; 8] = ["--pixels", "40", "--resolution", "40", "--cameras", "
 
 fn nrmse(r: &serde_json::Value) -> f64 {
     r["final_nrmse"].as_f64().expect("final_nrmse")
+}
+
+/// The gain mode a run took, as its report records it.
+fn pre_mode(r: &serde_json::Value) -> String {
+    r["preprocessing"]["gains"]["mode"].as_str().expect("gains mode").to_owned()
 }
 
 #[test]
@@ -40,12 +46,15 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
     std::fs::create_dir_all(d.join("raw/truth")).expect("mkdir");
     std::fs::copy(d.join("real/truth/truth.npy"), d.join("raw/truth/truth.npy")).expect("copy");
 
-    let run = |scene: &str, out: &str, gains: &str| {
-        let args = ["reconstruct", scene, "-o", out, "-m", "asart", "--resolution", "40", "--gains", gains, "-q"];
+    // `gains` None: the default (auto).
+    let run_with = |scene: &str, out: &str, gains: Option<&str>| {
+        let mut args = vec!["reconstruct", scene, "-o", out, "-m", "asart", "--resolution", "40", "-q"];
+        args.extend(gains.iter().flat_map(|g| ["--gains", *g]));
         let o = fluidnerf(d, &args);
         ok(&o);
         (report(&d.join(out)), String::from_utf8_lossy(&o.stdout).to_string())
     };
+    let run = |scene: &str, out: &str, gains: &str| run_with(scene, out, Some(gains));
     let (fitted, stdout) = run("real", "run-fit", "fit");
     let (clean, _) = run("clean", "run-clean", "none");
     let (bare, _) = run("raw", "run-raw", "none");
@@ -74,6 +83,20 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
     }
     assert!(stdout.contains("camera gains: cam000") && stdout.contains("held-out cam003"), "{stdout}");
 
+    // By default (gains auto) a run fits the gains where the images' totals ask for it, to the
+    // same result as --gains fit, and says why; on the clean recording it takes the images as
+    // they are, as --gains none does.
+    let (auto, stdout) = run_with("real", "run-auto", None);
+    assert_eq!(json(&d.join("run-auto/config.json"))["gains"]["mode"], "auto");
+    assert_eq!(pre_mode(&auto), "fit");
+    assert_eq!(nrmse(&auto), f);
+    let why = auto["preprocessing"]["gains_auto"].as_str().expect("the reason auto fitted");
+    assert!(why.contains("the median total of its time"), "{why}");
+    assert!(stdout.contains("gains: fit (auto: cam"), "{stdout}");
+    let (clean_auto, _) = run_with("clean", "run-clean-auto", None);
+    assert_eq!((pre_mode(&clean_auto), nrmse(&clean_auto)), ("none".to_owned(), c));
+    assert!(clean_auto["preprocessing"].get("gains_auto").is_none());
+
     // Without gains, the drawn gains show in the images' totals and the run says so; the clean
     // recording's cameras agree and draw no such warning, nor does a run that fits the gains.
     let hint = |r: &serde_json::Value| {
@@ -90,7 +113,47 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
         let o = fluidnerf(d, &["info", scene]);
         ok(&o);
         let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-        text.contains("differ between cameras") && text.contains("--gains fit")
+        text.contains("differ between cameras") && text.contains("gains auto")
     };
     assert!(said("real") && !said("clean"));
+}
+
+/// A time-resolved run fits no gains: by default (auto) it takes the images as they are, and
+/// warns that their totals differ, suggesting balance; the fit's settings are refused for it.
+#[test]
+fn a_time_resolved_run_fits_no_gains_and_says_so() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth = [
+        "synth",
+        "--preset",
+        "real-like-small",
+        "--phantom",
+        "jet-tr",
+        "--times",
+        "14,15,16",
+        "--pixels",
+        "32",
+        "--resolution",
+        "24",
+        "--cameras",
+        "6",
+        "-o",
+        "tr",
+    ];
+    ok(&fluidnerf(d, &synth));
+    let run = ["reconstruct", "tr", "-o", "run", "-m", "tr-fast", "--stop", "budget", "--max-iterations", "2", "-q"];
+    ok(&fluidnerf(d, &run));
+    let r = report(&d.join("run"));
+    let warned = r["warnings"].as_array().expect("warnings").iter().filter_map(|w| w.as_str()).any(|w| {
+        w.contains("differ between cameras")
+            && w.contains("a time-resolved run fits no gains")
+            && w.contains("--gains balance")
+    });
+    assert!(warned, "{}", r["warnings"]);
+    let mut refits = run.to_vec();
+    refits.extend(["--gain-every", "5", "--force"]);
+    let o = fluidnerf(d, &refits);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("gains.every") && err.contains("fits none"), "{err}");
 }

@@ -121,7 +121,7 @@ pub(crate) fn run(
     let needed = estimate.total().saturating_add(truth_bytes);
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
-    let measured = crate::measured::load(scene, &config.gains)?;
+    let measured = crate::measured::load(scene, &config.gains, false)?;
     if let Some(hint) = &measured.gain_hint {
         session.warn(hint);
     }
@@ -182,7 +182,7 @@ pub(crate) fn run(
             ));
         }
     }
-    let fit = config.gains.mode == GainMode::Fit;
+    let fit = measured.mode == GainMode::Fit;
     let fixed = ProjectorConfig { splat_subdivisions: subdivisions, ..resolved.clone() };
     let holdout = if holdout_cameras.is_empty() {
         None
@@ -191,7 +191,7 @@ pub(crate) fn run(
             fixed.build(grid_s, &holdout_cameras_s, scene.intensity_scale)?,
             holdout_images,
             holdout_masks,
-            config.gains.mode != GainMode::None,
+            measured.mode != GainMode::None,
         ))
     };
     let setup_s = t_setup.elapsed().as_secs_f64();

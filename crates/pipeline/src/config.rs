@@ -910,7 +910,7 @@ pub struct RunConfig {
     /// when the run starts.
     #[serde(default)]
     pub memory_limit_gib: Option<f64>,
-    /// Per-camera intensity calibration ([`GainConfig`]). Default none.
+    /// Per-camera intensity calibration ([`GainConfig`]). Default auto.
     #[serde(default)]
     pub gains: GainConfig,
 }
@@ -919,8 +919,14 @@ pub struct RunConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GainMode {
-    /// Images are taken as they are.
+    /// `fit` when the training images' total intensities differ between cameras as differing
+    /// gains make them ([`crate::gain_hint`]: an image more than [`crate::GAIN_HINT_RATIO`] off
+    /// the median of its time, for its distance and lens), `none` otherwise; `none` for
+    /// time-resolved runs, which fit no gains (the warning then suggests `balance`). The run's
+    /// report records the mode it took.
     #[default]
+    Auto,
+    /// Images are taken as they are.
     None,
     /// Every image is scaled to the same total intensity as the others of its time (masked
     /// pixels left out), as in the dissertation's experiments (§8.5).
@@ -939,10 +945,11 @@ impl FromStr for GainMode {
 
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
+            "auto" => Ok(GainMode::Auto),
             "none" => Ok(GainMode::None),
             "balance" => Ok(GainMode::Balance),
             "fit" => Ok(GainMode::Fit),
-            other => Err(format!("`{other}` is not a gain mode: use none, balance or fit")),
+            other => Err(format!("`{other}` is not a gain mode: use auto, none, balance or fit")),
         }
     }
 }
@@ -950,6 +957,7 @@ impl FromStr for GainMode {
 impl std::fmt::Display for GainMode {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
+            GainMode::Auto => "auto",
             GainMode::None => "none",
             GainMode::Balance => "balance",
             GainMode::Fit => "fit",
@@ -962,24 +970,30 @@ impl std::fmt::Display for GainMode {
 #[serde(default, deny_unknown_fields)]
 pub struct GainConfig {
     pub mode: GainMode,
-    /// With `fit`: also fit a per-image offset (`pixel = gain × model + offset`). Default false.
+    /// With `fit` (or `auto` when it fits): also fit a per-image offset (`pixel = gain × model
+    /// + offset`). Default false.
     pub offset: bool,
-    /// With `fit`: iterations between refits, 1 to
+    /// With `fit` (or `auto`): iterations between refits, 1 to
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 25 for the neural methods, 5 for
     /// the voxel methods.
     pub every: Option<usize>,
-    /// With `fit`, voxel methods: refits before the final solve, at most
+    /// With `fit` (or `auto`), voxel methods: refits before the final solve, at most
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]. Default 4.
     pub rounds: usize,
 }
 
 impl Default for GainConfig {
     fn default() -> Self {
-        GainConfig { mode: GainMode::None, offset: false, every: None, rounds: 4 }
+        GainConfig { mode: GainMode::Auto, offset: false, every: None, rounds: 4 }
     }
 }
 
 impl GainConfig {
+    /// Whether a run may fit gains: `fit`, or `auto` (when the images ask for it).
+    pub fn may_fit(&self) -> bool {
+        matches!(self.mode, GainMode::Fit | GainMode::Auto)
+    }
+
     /// Iterations between refits for `family`.
     pub fn interval(&self, family: Family) -> usize {
         self.every.unwrap_or(if family == Family::Classical { 5 } else { 25 })
@@ -990,8 +1004,11 @@ impl GainConfig {
         if let Some(n) = self.every.filter(|n| !(1..=max).contains(n)) {
             return Err(PipelineError::invalid("gains.every", format!("must be 1 to {max} iterations, got {n}")));
         }
-        if self.mode == GainMode::Fit && self.rounds == 0 {
-            return Err(PipelineError::invalid("gains.rounds", "must be at least 1 with gains.mode fit"));
+        if self.may_fit() && self.rounds == 0 {
+            return Err(PipelineError::invalid(
+                "gains.rounds",
+                format!("must be at least 1 with gains.mode {}", self.mode),
+            ));
         }
         // Each refit takes at least an iteration: more refits than any span of a run could never
         // happen, and 2⁶⁴ − 1 overflowed the count of the solve's segments, which ran none.
@@ -1001,16 +1018,16 @@ impl GainConfig {
                 format!("must be at most {max} refits, got {}", self.rounds),
             ));
         }
-        if self.offset && self.mode != GainMode::Fit {
-            return Err(PipelineError::invalid("gains.offset", "is fitted only with gains.mode fit"));
+        if self.offset && !self.may_fit() {
+            return Err(PipelineError::invalid("gains.offset", "is fitted only with gains.mode fit (or auto)"));
         }
         // Refits happen only when the gains are fitted; the interval would be ignored.
-        if let (Some(every), false) = (self.every, self.mode == GainMode::Fit) {
+        if let (Some(every), false) = (self.every, self.may_fit()) {
             return Err(PipelineError::invalid(
                 "gains.every",
                 format!(
                     "{every} iterations between gain refits, but gains.mode is {}, which fits no gains; set \
-                     gains.mode fit, or leave gains.every out",
+                     gains.mode fit (or auto), or leave gains.every out",
                     self.mode
                 ),
             ));
@@ -1096,11 +1113,22 @@ impl RunConfig {
         }
         self.stopping.validate()?;
         self.gains.validate()?;
-        if self.gains.mode == GainMode::Fit && self.method().family() == Family::Temporal {
-            return Err(PipelineError::invalid(
-                "gains.mode",
-                "gain fitting is available for static methods; use balance for time-resolved runs",
-            ));
+        if self.method().family() == Family::Temporal {
+            if self.gains.mode == GainMode::Fit {
+                return Err(PipelineError::invalid(
+                    "gains.mode",
+                    "gain fitting is available for static methods; use balance for time-resolved runs",
+                ));
+            }
+            // `auto` fits no gains in a time-resolved run: the fit's settings would be ignored.
+            let fit_only = [("gains.offset", self.gains.offset), ("gains.every", self.gains.every.is_some())];
+            if let Some((key, _)) = fit_only.into_iter().find(|k| k.1) {
+                return Err(PipelineError::invalid(
+                    key,
+                    "applies to fitted gains, and a time-resolved run fits none (with gains auto it takes its \
+                     images as they are); leave it out",
+                ));
+            }
         }
         if self.stopping.rule == StopRule::HeldOut && self.method().family() == Family::Temporal {
             return Err(PipelineError::invalid(
@@ -1743,6 +1771,8 @@ mod tests {
     fn a_gain_refit_interval_needs_fitted_gains() {
         let mut c = RunConfig::new("scene", Method::Asart);
         c.gains.every = Some(5);
+        c.validate().expect("auto may fit");
+        c.gains.mode = GainMode::None;
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("gains.every") && e.contains("gains.mode is none"), "{e}");
         c.gains.mode = GainMode::Balance;

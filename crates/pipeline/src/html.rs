@@ -280,8 +280,13 @@ pub(crate) fn write_run_html(
     if let Some(p) = &report.preprocessing {
         let mut table = Table::new(
             format!(
-                "Preprocessing: {}; {} pixels clipped at 0, {} saturated, {} masked; gains {}",
-                p.scene, p.clipped_pixels, p.saturated_pixels, p.masked_pixels, p.gains.mode
+                "Preprocessing: {}; {} pixels clipped at 0, {} saturated, {} masked; gains {}{}",
+                p.scene,
+                p.clipped_pixels,
+                p.saturated_pixels,
+                p.masked_pixels,
+                p.gains.mode,
+                p.gains_auto.as_ref().map(|why| format!(" (auto: {why})")).unwrap_or_default()
             ),
             &[
                 "frame",

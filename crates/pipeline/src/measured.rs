@@ -25,25 +25,51 @@ pub(crate) struct Measured {
     pub masks: Vec<Option<Vec<bool>>>,
     /// Per frame: the balancing gain the image was divided by (1 without balancing).
     pub gains: Vec<f64>,
+    /// The gain mode the run takes: the configuration's, with `auto` resolved to `fit` or
+    /// `none` ([`load`]).
+    pub mode: GainMode,
     /// What was done, for the report; gains are filled in by [`Measured::report`].
     preprocessing: Preprocessing,
     /// Without balancing or fitted gains: a warning when the training images of one time
-    /// differ in total intensity as cameras of different gains do ([`gain_hint`]).
+    /// differ in total intensity as cameras of different gains do ([`gain_spread`]).
     pub gain_hint: Option<String>,
 }
 
 /// Reads and preprocesses the scene's images ([`fluidnerf_io::scene::load_preprocessed`]) and,
 /// with `balance` or `fit`, scales every image to the mean total intensity of the training
-/// images of its time (masked pixels left out).
-pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, PipelineError> {
+/// images of its time (masked pixels left out). `auto` is resolved here ([`GainMode::Auto`]):
+/// `fit` when the images' totals differ as differing gains make them and the run is static
+/// (`temporal` false), `none` otherwise; [`Measured::mode`] holds the mode taken.
+pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<Measured, PipelineError> {
     let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
     let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
     let mut images = pre.images;
     let mut factors = vec![1.0; images.len()];
     let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
     let comparable: Vec<Option<f64>> = totals.iter().zip(&pre.masks).map(|(&t, m)| m.is_none().then_some(t)).collect();
-    let gain_hint = (gains.mode == GainMode::None).then(|| gain_hint(scene, &comparable)).flatten();
-    if gains.mode != GainMode::None {
+    let spread =
+        matches!(gains.mode, GainMode::None | GainMode::Auto).then(|| gain_spread(scene, &comparable)).flatten();
+    let mode = match gains.mode {
+        GainMode::Auto if spread.is_some() && !temporal => GainMode::Fit,
+        GainMode::Auto => GainMode::None,
+        m => m,
+    };
+    let gain_hint = spread.filter(|_| mode == GainMode::None).map(|(i, ratio)| {
+        let then = if temporal {
+            "a time-resolved run fits no gains and takes that for the field. If the cameras' gains, apertures or \
+             filters differ, add --gains balance"
+        } else {
+            "with --gains none the run takes that for the field. If the cameras' gains, apertures or filters differ, \
+             leave out --gains (auto fits them here) or give --gains fit"
+        };
+        format!("{}; {then} (docs/real-data.md)", spread_text(scene, i, ratio))
+    });
+    let auto_fit = spread.filter(|_| gains.mode == GainMode::Auto && mode == GainMode::Fit).map(|(i, ratio)| {
+        let why = format!("{} holds {ratio:.2}× the median total of its time", frame_label(scene, i));
+        log::info!("fitting a gain per camera (gains auto): {}", spread_text(scene, i, ratio));
+        why
+    });
+    if mode != GainMode::None {
         let time_key = |i: usize| scene.frames[i].time.map(f64::to_bits);
         for i in 0..images.len() {
             // The mean over the training images of the time (all of them when every one is
@@ -72,10 +98,11 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig) -> Result<Measured, Pipeli
         clipped_pixels: pre.clipped,
         saturated_pixels: pre.saturated,
         masked_pixels,
-        gains: *gains,
+        gains: GainConfig { mode, ..*gains },
+        gains_auto: auto_fit,
         frames: Vec::new(),
     };
-    Ok(Measured { images, masks: pre.masks, gains: factors, preprocessing, gain_hint })
+    Ok(Measured { images, masks: pre.masks, gains: factors, mode, preprocessing, gain_hint })
 }
 
 impl Measured {
@@ -125,17 +152,17 @@ impl Measured {
 /// ±30 % (`real-like`) by −23 % to +29 %.
 pub const GAIN_HINT_RATIO: f64 = 1.15;
 
-/// A warning when, at some time with at least three comparable training images, an image's
-/// total intensity lies more than [`GAIN_HINT_RATIO`] from the median of its time's: a sign
-/// that the cameras' gains differ, which a run without `--gains` takes as differences of the
-/// field. A pixel sees `1 / (fx fy)` of the plane at unit depth, so an image of a field at depth
-/// `z` totals about `fx fy / z²` times the field's integral: each total is divided by that
-/// factor, `z` the depth of the box's centre, so cameras at other distances or with other
-/// lenses compare. `totals` holds each frame's total, None for a frame whose total does not compare
-/// (one with a mask, which hides part of the light; one not read). None when nothing stands
-/// out. Cameras that see the flow only in part differ too, so this is a warning, never a
-/// refusal.
-pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
+/// The training image whose total intensity lies farthest off the median of its time's, as
+/// `(frame, ratio to the median)`, when it lies more than [`GAIN_HINT_RATIO`] off, at some
+/// time with at least three comparable training images: a sign that the cameras' gains differ,
+/// which a run without gains takes as differences of the field. A pixel sees `1 / (fx fy)` of
+/// the plane at unit depth, so an image of a field at depth `z` totals about `fx fy / z²` times
+/// the field's integral: each total is divided by that factor, `z` the depth of the box's
+/// centre, so cameras at other distances or with other lenses compare. `totals` holds each
+/// frame's total, None for a frame whose total does not compare (one with a mask, which hides
+/// part of the light; one not read). None when nothing stands out. Cameras that see the flow
+/// only in part differ too, so this never refuses a run.
+pub(crate) fn gain_spread(scene: &Scene, totals: &[Option<f64>]) -> Option<(usize, f64)> {
     let mut worst: Option<(usize, f64)> = None;
     let key = |i: usize| scene.frames[i].time.map(f64::to_bits);
     let mut keys: Vec<Option<u64>> = (0..totals.len()).map(key).collect();
@@ -169,15 +196,29 @@ pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
             }
         }
     }
-    let (i, ratio) = worst?;
-    Some(format!(
+    worst
+}
+
+/// What [`gain_spread`] found, in words.
+fn spread_text(scene: &Scene, i: usize, ratio: f64) -> String {
+    format!(
         "the training images' total intensities differ between cameras as differing gains make them: {} holds {:.2}× \
-         the median of its time, for its distance and lens (more than {:.0} % off); a run without gains takes that \
-         for the field. If the cameras' gains, apertures or filters differ, add --gains fit (or balance; \
-         docs/real-data.md)",
+         the median of its time, for its distance and lens (more than {:.0} % off)",
         frame_label(scene, i),
         ratio,
         (GAIN_HINT_RATIO - 1.0) * 100.0
+    )
+}
+
+/// What a scene's images say of the cameras' gains before any run ([`gain_spread`]), for
+/// `fluidnerf info`: None when their totals agree.
+pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
+    let (i, ratio) = gain_spread(scene, totals)?;
+    Some(format!(
+        "{}; a static run fits a gain per camera for that by default (gains auto; --gains none takes the images as \
+         they are), a time-resolved run fits none and takes it for the field unless given --gains balance \
+         (docs/real-data.md)",
+        spread_text(scene, i, ratio)
     ))
 }
 
@@ -375,7 +416,7 @@ mod tests {
         // Within 15 % of the median: nothing; the held-out camera does not count.
         assert_eq!(hint([Some(1.0), Some(1.1), Some(0.9), Some(1.0), Some(3.0)]), None);
         let said = hint([Some(1.0), Some(1.0), Some(0.8), Some(1.05), None]).expect("a camera 20 % dim");
-        assert!(said.contains("cam2 holds 0.80×") && said.contains("--gains fit"), "{said}");
+        assert!(said.contains("cam2 holds 0.80×") && said.contains("gains auto"), "{said}");
         // A masked image's total does not compare; two comparable images are too few.
         assert_eq!(hint([Some(1.0), Some(1.0), None, Some(1.05), None]).map(|_| ()), None);
         assert_eq!(hint([Some(1.0), None, Some(0.5), None, None]), None);

@@ -62,8 +62,12 @@ pub(crate) fn estimate_memory(
 
 /// The training problem of a scene: its training and held-out views, their images
 /// preprocessed and balanced as `gains` asks ([`crate::measured`]), and the masks.
-pub(crate) fn problem(scene: &Scene, gains: &GainConfig) -> Result<(Problem, ViewMasks, Measured), PipelineError> {
-    let measured = crate::measured::load(scene, gains)?;
+pub(crate) fn problem(
+    scene: &Scene,
+    gains: &GainConfig,
+    temporal: bool,
+) -> Result<(Problem, ViewMasks, Measured), PipelineError> {
+    let measured = crate::measured::load(scene, gains, temporal)?;
     let images = measured.images.clone();
     let mut masks = ViewMasks::default();
     if measured.masks.iter().any(Option::is_some) {
@@ -151,7 +155,7 @@ pub(crate) fn run(
     // An earlier curve is read before the report that holds it is removed.
     let earlier = if dir.resuming() { earlier_report(dir) } else { None };
     let t0 = Instant::now();
-    let (problem, masks, measured) = problem(scene, &config.gains)?;
+    let (problem, masks, measured) = problem(scene, &config.gains, false)?;
     if let Some(hint) = &measured.gain_hint {
         session.warn(hint);
     }
@@ -505,7 +509,7 @@ impl Ctx<'_> {
                 ControlFlow::Continue(())
             }
         };
-        let (report, fitted) = if config.gains.mode == GainMode::Fit {
+        let (report, fitted) = if self.measured.mode == GainMode::Fit {
             let fit = GainFit {
                 every: config.gains.interval(Family::Neural),
                 rays_per_view: 2048,

@@ -231,7 +231,12 @@ pub struct Preprocessing {
     pub saturated_pixels: usize,
     /// Pixels left out by the frames' masks.
     pub masked_pixels: usize,
+    /// The gains as the run took them: `mode` is `fit` or `none` where the configuration said
+    /// `auto` ([`crate::GainMode::Auto`]).
     pub gains: crate::GainConfig,
+    /// Why `auto` fitted gains: the image whose total lies farthest off its time's median.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gains_auto: Option<String>,
     /// Per frame of the scene, in order.
     pub frames: Vec<FrameGain>,
 }
@@ -240,13 +245,14 @@ impl Preprocessing {
     /// Lines for a terminal: what was done, each camera's gain, the held-out scores.
     pub fn summary_lines(&self) -> Vec<String> {
         let mut out = vec![format!(
-            "preprocessing: {}; {} pixel(s) clipped at 0, {} saturated, {} masked; gains: {}{}",
+            "preprocessing: {}; {} pixel(s) clipped at 0, {} saturated, {} masked; gains: {}{}{}",
             self.scene,
             self.clipped_pixels,
             self.saturated_pixels,
             self.masked_pixels,
             self.gains.mode,
-            if self.gains.offset { " with offsets" } else { "" }
+            if self.gains.offset { " with offsets" } else { "" },
+            self.gains_auto.as_ref().map(|why| format!(" (auto: {why})")).unwrap_or_default()
         )];
         if self.gains.mode != crate::GainMode::None {
             let gains: Vec<String> = self

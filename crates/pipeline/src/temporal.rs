@@ -204,7 +204,7 @@ fn setup(
         ));
     };
     refuse_timeless_scene(scene, method)?;
-    let (mut problem, mut masks, measured) = crate::neural::problem(scene, &config.gains)?;
+    let (mut problem, mut masks, measured) = crate::neural::problem(scene, &config.gains, true)?;
     if let Some(hint) = &measured.gain_hint {
         session.warn(hint);
     }

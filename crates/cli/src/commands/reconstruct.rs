@@ -165,19 +165,25 @@ pub struct Args {
 #[derive(clap::Args, Debug)]
 #[command(next_help_heading = "Camera gains (every static method)")]
 pub struct GainArgs {
-    /// `none`: images as they are; `balance`: every image scaled to the same total intensity
-    /// as the others of its time; `fit`: balanced, then a gain per camera fitted with the
-    /// field (neural) or between rounds of iterations (voxel methods), normalised to mean 1
-    /// [default: none].
-    #[arg(long, value_name = "MODE", value_parser = ["none", "balance", "fit"])]
+    /// `auto`: `fit` when the training images' total intensities differ between cameras as
+    /// differing gains make them (an image more than 15 % off its time's median, for its
+    /// distance and lens), else `none`; time-resolved runs take `none` (and warn). `none`:
+    /// images as they are; `balance`: every image scaled to the same total intensity as the
+    /// others of its time; `fit`: balanced, then a gain per camera fitted with the field
+    /// (neural) or between rounds of iterations (voxel methods), normalised to mean 1. The
+    /// report records the mode taken [default: auto].
+    #[arg(long, value_name = "MODE", value_parser = ["auto", "none", "balance", "fit"])]
     pub gains: Option<String>,
-    /// With --gains fit: also fit an offset per camera (a background level left in the images).
+    /// With --gains fit (or auto, where it fits): also fit an offset per camera (a background
+    /// level left in the images).
     #[arg(long)]
     pub gain_offset: bool,
-    /// With --gains fit: iterations between gain refits [default: 25 neural, 5 voxel methods].
+    /// With --gains fit (or auto, where it fits): iterations between gain refits [default: 25
+    /// neural, 5 voxel methods].
     #[arg(long, value_name = "N")]
     pub gain_every: Option<usize>,
-    /// With --gains fit, voxel methods: gain refits before the final solve [default: 4].
+    /// With --gains fit (or auto, where it fits), voxel methods: gain refits before the final
+    /// solve [default: 4].
     #[arg(long, value_name = "N")]
     pub gain_rounds: Option<usize>,
 }
@@ -695,10 +701,10 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         ("--gain-rounds", g.gain_rounds.is_some()),
         ("--gain-offset", g.gain_offset),
     ]);
-    if !fit_only.is_empty() && cfg.gains.mode != fluidnerf_pipeline::GainMode::Fit {
+    if !fit_only.is_empty() && !cfg.gains.may_fit() {
         let (verb, them) = if fit_only.len() == 1 { ("applies", "it") } else { ("apply", "them") };
         bail!(
-            "{} {verb} only to fitted gains, but the gains are `{}`; add --gains fit, or leave {them} out",
+            "{} {verb} only to fitted gains, but the gains are `{}`; give --gains fit (or auto), or leave {them} out",
             fit_only.join(", "),
             cfg.gains.mode
         );
