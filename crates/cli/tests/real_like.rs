@@ -118,10 +118,11 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
     assert!(said("real") && !said("clean"));
 }
 
-/// A time-resolved run fits no gains: by default (auto) it takes the images as they are, and
-/// warns that their totals differ, suggesting balance; the fit's settings are refused for it.
+/// A time-resolved run fits no gains: by default (auto) it balances images whose totals differ
+/// as differing gains make them, to the result of --gains balance, and says so; with --gains
+/// none it warns and suggests balance; the fit's settings are refused for it.
 #[test]
-fn a_time_resolved_run_fits_no_gains_and_says_so() {
+fn a_time_resolved_run_balances_differing_gains_and_says_so() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     let synth = [
@@ -143,14 +144,28 @@ fn a_time_resolved_run_fits_no_gains_and_says_so() {
     ];
     ok(&fluidnerf(d, &synth));
     let run = ["reconstruct", "tr", "-o", "run", "-m", "tr-fast", "--stop", "budget", "--max-iterations", "2", "-q"];
+    let with = |out: &str, gains: &str| {
+        let mut args = run.to_vec();
+        args[3] = out;
+        args.extend(["--gains", gains]);
+        ok(&fluidnerf(d, &args));
+        report(&d.join(out))
+    };
     ok(&fluidnerf(d, &run));
-    let r = report(&d.join("run"));
-    let warned = r["warnings"].as_array().expect("warnings").iter().filter_map(|w| w.as_str()).any(|w| {
-        w.contains("differ between cameras")
-            && w.contains("a time-resolved run fits no gains")
-            && w.contains("--gains balance")
-    });
-    assert!(warned, "{}", r["warnings"]);
+    let said = |r: &serde_json::Value, words: &str| {
+        r["warnings"]
+            .as_array()
+            .expect("warnings")
+            .iter()
+            .filter_map(|w| w.as_str())
+            .any(|w| w.contains("differ between cameras") && w.contains(words))
+    };
+    let auto = report(&d.join("run"));
+    assert!(said(&auto, "a time-resolved run fits no gains, so the images are balanced"), "{}", auto["warnings"]);
+    assert_eq!(nrmse(&auto), nrmse(&with("balanced", "balance")));
+    let none = with("as-they-are", "none");
+    assert!(said(&none, "--gains balance"), "{}", none["warnings"]);
+    assert_ne!(nrmse(&none), nrmse(&auto));
     let mut refits = run.to_vec();
     refits.extend(["--gain-every", "5", "--force"]);
     let o = fluidnerf(d, &refits);

@@ -919,10 +919,10 @@ pub struct RunConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GainMode {
-    /// `fit` when the training images' total intensities differ between cameras as differing
-    /// gains make them ([`crate::gain_hint`]: an image more than [`crate::GAIN_HINT_RATIO`] off
-    /// the median of its time, for its distance and lens), `none` otherwise; `none` for
-    /// time-resolved runs, which fit no gains (the warning then suggests `balance`). The run's
+    /// When the training images' total intensities differ between cameras as differing gains
+    /// make them ([`crate::gain_hint`]: an image more than [`crate::GAIN_HINT_RATIO`] off the
+    /// median of its time, for its distance and lens): `fit` for a static run, `balance` for a
+    /// time-resolved one, which fits no gains (with a warning). `none` otherwise. The run's
     /// report records the mode it took.
     #[default]
     Auto,
@@ -1125,8 +1125,8 @@ impl RunConfig {
             if let Some((key, _)) = fit_only.into_iter().find(|k| k.1) {
                 return Err(PipelineError::invalid(
                     key,
-                    "applies to fitted gains, and a time-resolved run fits none (with gains auto it takes its \
-                     images as they are); leave it out",
+                    "applies to fitted gains, and a time-resolved run fits none (with gains auto it balances \
+                     its images where they ask for it); leave it out",
                 ));
             }
         }

@@ -38,8 +38,9 @@ pub(crate) struct Measured {
 /// Reads and preprocesses the scene's images ([`fluidnerf_io::scene::load_preprocessed`]) and,
 /// with `balance` or `fit`, scales every image to the mean total intensity of the training
 /// images of its time (masked pixels left out). `auto` is resolved here ([`GainMode::Auto`]):
-/// `fit` when the images' totals differ as differing gains make them and the run is static
-/// (`temporal` false), `none` otherwise; [`Measured::mode`] holds the mode taken.
+/// when the images' totals differ as differing gains make them, `fit` for a static run and
+/// `balance` for a time-resolved one (`temporal`), which fits no gains; `none` otherwise.
+/// [`Measured::mode`] holds the mode taken.
 pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<Measured, PipelineError> {
     let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
     let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
@@ -50,25 +51,42 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
     let spread =
         matches!(gains.mode, GainMode::None | GainMode::Auto).then(|| gain_spread(scene, &comparable)).flatten();
     let mode = match gains.mode {
-        GainMode::Auto if spread.is_some() && !temporal => GainMode::Fit,
+        GainMode::Auto if spread.is_some() => {
+            if temporal {
+                GainMode::Balance
+            } else {
+                GainMode::Fit
+            }
+        }
         GainMode::Auto => GainMode::None,
         m => m,
     };
-    let gain_hint = spread.filter(|_| mode == GainMode::None).map(|(i, ratio)| {
-        let then = if temporal {
-            "a time-resolved run fits no gains and takes that for the field. If the cameras' gains, apertures or \
-             filters differ, add --gains balance"
-        } else {
-            "with --gains none the run takes that for the field. If the cameras' gains, apertures or filters differ, \
-             leave out --gains (auto fits them here) or give --gains fit"
-        };
-        format!("{}; {then} (docs/real-data.md)", spread_text(scene, i, ratio))
+    let gain_hint = spread.and_then(|(i, ratio)| {
+        let text = spread_text(scene, i, ratio);
+        match (gains.mode, temporal) {
+            (GainMode::None, _) => Some(format!(
+                "{text}; with --gains none the run takes that for the field. If the cameras' gains, apertures or \
+                 filters differ, leave out --gains (auto {} them here) or give --gains {} (docs/real-data.md)",
+                if temporal { "balances" } else { "fits" },
+                if temporal { "balance" } else { "fit" }
+            )),
+            // A time-resolved run fits no gains: balancing takes every camera to see the whole
+            // flow at every instant, which the run should say.
+            (GainMode::Auto, true) => Some(format!(
+                "{text}; a time-resolved run fits no gains, so the images are balanced (gains auto: each scaled to \
+                 the mean total of its time, as if every camera saw the whole flow); --gains none takes them as they \
+                 are (docs/real-data.md)"
+            )),
+            // `auto` in a static run: the gains are fitted, as the report says.
+            _ => {
+                log::info!("fitting a gain per camera (gains auto): {text}");
+                None
+            }
+        }
     });
-    let auto_fit = spread.filter(|_| gains.mode == GainMode::Auto && mode == GainMode::Fit).map(|(i, ratio)| {
-        let why = format!("{} holds {ratio:.2}× the median total of its time", frame_label(scene, i));
-        log::info!("fitting a gain per camera (gains auto): {}", spread_text(scene, i, ratio));
-        why
-    });
+    let auto_why = spread
+        .filter(|_| gains.mode == GainMode::Auto)
+        .map(|(i, ratio)| format!("{} holds {ratio:.2}× the median total of its time", frame_label(scene, i)));
     if mode != GainMode::None {
         let time_key = |i: usize| scene.frames[i].time.map(f64::to_bits);
         for i in 0..images.len() {
@@ -99,7 +117,7 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
         saturated_pixels: pre.saturated,
         masked_pixels,
         gains: GainConfig { mode, ..*gains },
-        gains_auto: auto_fit,
+        gains_auto: auto_why,
         frames: Vec::new(),
     };
     Ok(Measured { images, masks: pre.masks, gains: factors, mode, preprocessing, gain_hint })
@@ -215,9 +233,8 @@ fn spread_text(scene: &Scene, i: usize, ratio: f64) -> String {
 pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
     let (i, ratio) = gain_spread(scene, totals)?;
     Some(format!(
-        "{}; a static run fits a gain per camera for that by default (gains auto; --gains none takes the images as \
-         they are), a time-resolved run fits none and takes it for the field unless given --gains balance \
-         (docs/real-data.md)",
+        "{}; by default (gains auto) a static run fits a gain per camera for that and a time-resolved run, which \
+         fits none, balances the images; --gains none takes them as they are (docs/real-data.md)",
         spread_text(scene, i, ratio)
     ))
 }

@@ -234,7 +234,8 @@ pub struct Preprocessing {
     /// The gains as the run took them: `mode` is `fit` or `none` where the configuration said
     /// `auto` ([`crate::GainMode::Auto`]).
     pub gains: crate::GainConfig,
-    /// Why `auto` fitted gains: the image whose total lies farthest off its time's median.
+    /// Why `auto` fitted (or balanced) gains: the image whose total lies farthest off its
+    /// time's median.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gains_auto: Option<String>,
     /// Per frame of the scene, in order.

@@ -165,9 +165,9 @@ pub struct Args {
 #[derive(clap::Args, Debug)]
 #[command(next_help_heading = "Camera gains (every static method)")]
 pub struct GainArgs {
-    /// `auto`: `fit` when the training images' total intensities differ between cameras as
-    /// differing gains make them (an image more than 15 % off its time's median, for its
-    /// distance and lens), else `none`; time-resolved runs take `none` (and warn). `none`:
+    /// `auto`: when the training images' total intensities differ between cameras as differing
+    /// gains make them (an image more than 15 % off its time's median, for its distance and
+    /// lens), `fit`, or `balance` in time-resolved runs, which fit no gains; else `none`. `none`:
     /// images as they are; `balance`: every image scaled to the same total intensity as the
     /// others of its time; `fit`: balanced, then a gain per camera fitted with the field
     /// (neural) or between rounds of iterations (voxel methods), normalised to mean 1. The
