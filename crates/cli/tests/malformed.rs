@@ -1521,3 +1521,27 @@ fn a_seed_out_of_range_says_what_a_seed_is() {
     let out = fluidnerf(d, &["synth", "--list-presets", "--seed", "18446744073709551615"]);
     ok(&out);
 }
+
+/// A neural run's `method.preset` labels it in its report and in `compare`: a name no preset
+/// has, or a preset of another family of methods, is refused naming the key and the presets
+/// the method starts from.
+#[test]
+fn a_config_naming_an_unknown_preset_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    let quick = ["--resolution", "8", "--max-iterations", "1", "-q", "--checkpoint-every", "0"];
+    ok(&fluidnerf(d, &[&["reconstruct", "scene", "-o", "fast", "--method", "fast"][..], &quick].concat()));
+    for preset in ["nope", "tr-fast"] {
+        edit_json(&d.join("fast/config.json"), |v| v["method"]["preset"] = preset.into());
+        let o = fluidnerf(d, &["reconstruct", "--config", "fast/config.json", "-o", "again", "-q"]);
+        refused(
+            &o,
+            &format!(
+                "the settings of fast/config.json: method.preset: unknown preset \"{preset}\" for fast (known: \
+                 faithful, ch7, experimental, fast, dense, voxel)"
+            ),
+        );
+        assert!(!d.join("again").exists(), "{preset}: left an output folder");
+    }
+}

@@ -540,6 +540,7 @@ impl MethodConfig {
                 c.method.validate().map_err(|e| classical_under("method.params", e))
             }
             MethodConfig::Neural(m, n) => {
+                refuse_unknown_preset(*m, n.preset.as_deref())?;
                 validate_field(&n.field)?;
                 refuse_time_frequencies(*m, &n.field)?;
                 refuse_frame_batching(*m, &n.train)?;
@@ -555,6 +556,7 @@ impl MethodConfig {
                 Ok(())
             }
             MethodConfig::Temporal(m, t) => {
+                refuse_unknown_preset(*m, t.preset.as_deref())?;
                 validate_field(&t.field)?;
                 if *m == Method::StaticPerFrame {
                     refuse_time_frequencies(*m, &t.field)?;
@@ -648,6 +650,25 @@ fn classical_under(prefix: &str, e: fluidnerf_classical::ClassicalError) -> Pipe
 
 /// Refuses time frequencies, and a hash grid's time axis set off its defaults, for a field of
 /// space alone (`method`'s field has no time input), where they would be ignored.
+/// The recorded `method.preset` must be a preset `method` starts from ([`MethodConfig::with_preset`]):
+/// it labels the run in its report and in `compare`, so a name no preset has, or another
+/// family's, would label the run with a configuration it never had.
+fn refuse_unknown_preset(method: Method, preset: Option<&str>) -> Result<(), PipelineError> {
+    let Some(preset) = preset else { return Ok(()) };
+    let known: Vec<&str> = match method.family() {
+        Family::Classical => Vec::new(),
+        Family::Neural => PRESETS.to_vec(),
+        Family::Temporal => TEMPORAL_PRESETS.iter().chain(PRESETS.iter()).copied().collect(),
+    };
+    if known.contains(&preset) {
+        return Ok(());
+    }
+    Err(PipelineError::invalid(
+        "method.preset",
+        format!("unknown preset {preset:?} for {method} (known: {})", known.join(", ")),
+    ))
+}
+
 fn refuse_time_frequencies(method: Method, field: &FieldConfig) -> Result<(), PipelineError> {
     match field {
         FieldConfig::HashGrid(c) => {
@@ -1372,6 +1393,40 @@ mod tests {
             assert_eq!(back, c, "{m}");
             assert_eq!(back.method(), m);
             assert_eq!(m.name().parse::<Method>().unwrap(), m);
+        }
+    }
+
+    #[test]
+    fn a_preset_no_such_method_starts_from_is_refused_naming_the_key_and_the_known_presets() {
+        for (m, preset) in [(Method::Fast, "nope"), (Method::Fast, "tr-fast"), (Method::TrFast, "nope")] {
+            let mut c = RunConfig::new("scene", m);
+            match &mut c.method {
+                MethodConfig::Neural(_, n) => n.preset = Some(preset.into()),
+                MethodConfig::Temporal(_, t) => t.preset = Some(preset.into()),
+                MethodConfig::Classical(_) => unreachable!(),
+            }
+            let e = c.validate().expect_err(preset).to_string();
+            assert!(e.contains("method.preset") && e.contains(&format!("{preset:?}")), "{m} {preset}: {e}");
+            assert!(e.contains("faithful, ch7"), "{m} {preset}: {e}");
+        }
+        // Every preset a method starts from stays accepted, and so does none.
+        for m in Method::ALL.into_iter().filter(|m| m.family() != Family::Classical) {
+            let names = TEMPORAL_PRESETS.iter().chain(PRESETS.iter());
+            for p in names.filter(|p| MethodConfig::with_preset(m, p).is_ok()) {
+                let mut c = RunConfig::new("scene", m);
+                c.method = MethodConfig::with_preset(m, p).unwrap();
+                // (Some are refused for other reasons, as a dense grid for a field of time.)
+                if let Err(e) = c.validate() {
+                    assert!(!e.to_string().contains("method.preset"), "{m} {p}: {e}");
+                }
+            }
+            let mut c = RunConfig::new("scene", m);
+            if let MethodConfig::Neural(_, NeuralSpec { preset, .. })
+            | MethodConfig::Temporal(_, TemporalSpec { preset, .. }) = &mut c.method
+            {
+                *preset = None;
+            }
+            c.validate().unwrap_or_else(|e| panic!("{m} without a preset: {e}"));
         }
     }
 
