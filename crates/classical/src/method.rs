@@ -336,7 +336,15 @@ impl Default for ProjectorConfig {
 }
 
 impl ProjectorConfig {
+    /// Rejects settings out of range ([`ProjectorConfig::validate_ranges`]), then settings the
+    /// configuration would ignore ([`ProjectorConfig::refuse_idle_settings`]).
     pub fn validate(&self) -> Result<(), ClassicalError> {
+        self.validate_ranges()?;
+        self.refuse_idle_settings()
+    }
+
+    /// Rejects settings out of range, whether the configuration uses them or not.
+    pub fn validate_ranges(&self) -> Result<(), ClassicalError> {
         if self.splat_subdivisions > 16 {
             return Err(ClassicalError::invalid(
                 "splat_subdivisions",
@@ -366,6 +374,76 @@ impl ProjectorConfig {
                 "hull_noise_sigmas",
                 format!("must be in [0, 100], got {}", num(self.hull_noise_sigmas)),
             ));
+        }
+        Ok(())
+    }
+
+    /// Refuses a setting of a projector this configuration does not use (`ray_step` beside the
+    /// footprint or splat projector, `splat_subdivisions` beside any but the splat) and the
+    /// hull's settings without `visual_hull`, when set away from their defaults: each would be
+    /// ignored. A setting at its default is what every saved configuration holds, and the hull's
+    /// `hull_noise_sigmas` and `hull_dilation` also read 0 where a configuration saved before
+    /// them leaves them out, so those are taken.
+    pub fn refuse_idle_settings(&self) -> Result<(), ClassicalError> {
+        let d = ProjectorConfig::default();
+        let kind = match self.kind {
+            ProjectorKind::Auto => "auto",
+            ProjectorKind::Footprint => "footprint",
+            ProjectorKind::Splat => "splat",
+            ProjectorKind::Ray => "ray",
+        };
+        // `auto` chooses the ray projector where voxels image wide, never the splat.
+        if self.ray_step != d.ray_step && !matches!(self.kind, ProjectorKind::Ray | ProjectorKind::Auto) {
+            return Err(ClassicalError::invalid(
+                "ray_step",
+                format!(
+                    "{} sets the ray projector's step, but kind is {kind}, which casts no rays: it would be \
+                     ignored; set kind ray (or auto), or leave ray_step at its default {}",
+                    num(self.ray_step),
+                    num(d.ray_step)
+                ),
+            ));
+        }
+        if self.splat_subdivisions != d.splat_subdivisions && self.kind != ProjectorKind::Splat {
+            return Err(ClassicalError::invalid(
+                "splat_subdivisions",
+                format!(
+                    "{} sets the splat projector's sub-voxels, but kind is {kind}: it would be ignored; set kind \
+                     splat, or leave splat_subdivisions at its default {}",
+                    self.splat_subdivisions, d.splat_subdivisions
+                ),
+            ));
+        }
+        if !self.visual_hull {
+            let idle = [
+                (
+                    "hull_threshold",
+                    self.hull_threshold != d.hull_threshold,
+                    num(self.hull_threshold).to_string(),
+                    num(d.hull_threshold).to_string(),
+                ),
+                (
+                    "hull_noise_sigmas",
+                    self.hull_noise_sigmas != d.hull_noise_sigmas && self.hull_noise_sigmas != 0.0,
+                    num(self.hull_noise_sigmas).to_string(),
+                    num(d.hull_noise_sigmas).to_string(),
+                ),
+                (
+                    "hull_dilation",
+                    self.hull_dilation != d.hull_dilation && self.hull_dilation != 0,
+                    self.hull_dilation.to_string(),
+                    d.hull_dilation.to_string(),
+                ),
+            ];
+            if let Some((key, _, value, default)) = idle.into_iter().find(|k| k.1) {
+                return Err(ClassicalError::invalid(
+                    key,
+                    format!(
+                        "{value} sets the visual hull, which visual_hull false leaves unused: it would be ignored; \
+                         set visual_hull true, or leave {key} at its default {default}"
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -481,6 +559,40 @@ mod tests {
         assert!(ClassicalMethod::default_for(Algorithm::Mlem).validate().is_ok());
         let p = ProjectorConfig { ray_step: 0.0, ..Default::default() };
         assert!(p.validate().unwrap_err().to_string().contains("ray_step"));
+    }
+
+    /// A projector's own setting for another projector, or a hull setting without the hull,
+    /// would be ignored: refused when away from its default, named by its key.
+    #[test]
+    fn a_setting_the_projector_does_not_use_is_refused_naming_its_key() {
+        let d = ProjectorConfig::default();
+        for (p, key, says) in [
+            (ProjectorConfig { kind: ProjectorKind::Footprint, ray_step: 0.3, ..d.clone() }, "ray_step", "footprint"),
+            (ProjectorConfig { kind: ProjectorKind::Splat, ray_step: 0.3, ..d.clone() }, "ray_step", "splat"),
+            (
+                ProjectorConfig { kind: ProjectorKind::Ray, splat_subdivisions: 2, ..d.clone() },
+                "splat_subdivisions",
+                "ray",
+            ),
+            (ProjectorConfig { hull_threshold: 0.1, ..d.clone() }, "hull_threshold", "visual_hull"),
+            (ProjectorConfig { hull_noise_sigmas: 2.0, ..d.clone() }, "hull_noise_sigmas", "visual_hull"),
+            (ProjectorConfig { hull_dilation: 3, ..d.clone() }, "hull_dilation", "visual_hull"),
+        ] {
+            let e = p.validate().expect_err(key).to_string();
+            assert!(e.contains(key) && e.contains(says) && e.contains("would be ignored"), "{key}: {e}");
+        }
+        // Defaults, the 0 an older configuration reads for absent hull keys, and settings of
+        // the projector and hull in use are taken.
+        for p in [
+            d.clone(),
+            ProjectorConfig { hull_noise_sigmas: 0.0, hull_dilation: 0, ..d.clone() },
+            ProjectorConfig { kind: ProjectorKind::Ray, ray_step: 0.3, ..d.clone() },
+            ProjectorConfig { ray_step: 0.3, ..d.clone() },
+            ProjectorConfig { kind: ProjectorKind::Splat, splat_subdivisions: 2, ..d.clone() },
+            ProjectorConfig { visual_hull: true, hull_threshold: 0.1, hull_noise_sigmas: 2.0, hull_dilation: 3, ..d },
+        ] {
+            p.validate().unwrap_or_else(|e| panic!("{p:?}: {e}"));
+        }
     }
 
     #[test]

@@ -296,3 +296,38 @@ fn projector_and_hull_options_the_run_does_not_use_are_refused() {
     ok(&fluidnerf(d, &[&again[..], &["--ray-step", "0.6", "--hull-threshold", "0.05"]].concat()));
     refused(&fluidnerf(d, &[&again[..], &["--force", "--splat-subdivisions", "2"]].concat()), "the ray projector");
 }
+
+/// The same settings in a --config file, set away from their defaults for a projector the run
+/// does not use or for the hull without it, are refused by their keys; a file the program wrote
+/// (every key at its default) and an older one without the hull's later keys are taken.
+#[test]
+fn projector_and_hull_settings_a_config_does_not_use_are_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    let run = ["reconstruct", "scene", "-o", "run", "--method", "sart", "--resolution", "8", "-q"];
+    ok(&fluidnerf(d, &[&run[..], &["--projector", "footprint", "--max-iterations", "1"]].concat()));
+    let again = ["reconstruct", "--config", "cfg.json", "-o", "again", "-q"];
+    let saved = json(&d.join("run/config.json"));
+    for (key, value, says) in [
+        ("ray_step", serde_json::json!(0.3), "0.3 sets the ray projector's step, but kind is footprint"),
+        ("splat_subdivisions", serde_json::json!(2), "2 sets the splat projector's sub-voxels, but kind is footprint"),
+        ("hull_threshold", serde_json::json!(0.1), "0.1 sets the visual hull, which visual_hull false leaves unused"),
+        ("hull_noise_sigmas", serde_json::json!(2), "2 sets the visual hull"),
+        ("hull_dilation", serde_json::json!(3), "3 sets the visual hull"),
+    ] {
+        let mut c = saved.clone();
+        c["method"]["projector"][key] = value;
+        std::fs::write(d.join("cfg.json"), c.to_string()).expect("writes");
+        refused(&fluidnerf(d, &again), &format!("the settings of cfg.json: method.projector.{key}: {says}"));
+        assert!(!d.join("again").exists(), "{key}: started a run");
+    }
+    // Without the hull's later keys a configuration reads them as 0, as it was run.
+    let mut c = saved.clone();
+    for key in ["hull_noise_sigmas", "hull_dilation"] {
+        c["method"]["projector"].as_object_mut().expect("an object").remove(key);
+    }
+    std::fs::write(d.join("cfg.json"), c.to_string()).expect("writes");
+    ok(&fluidnerf(d, &again));
+    ok(&fluidnerf(d, &["reconstruct", "--config", "run/config.json", "-o", "rerun", "-q"]));
+}

@@ -718,6 +718,14 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             cfg.scene.display()
         );
     }
+    // Before the configuration's own check, which refuses the same settings set in a file
+    // by their keys: an option is named as an option. After the projector's ranges: a value
+    // out of range is named as such, whether used or not.
+    if let MethodConfig::Classical(spec) = &cfg.method {
+        if spec.projector.validate_ranges().is_ok() {
+            refuse_idle_projector_options(args, &spec.projector)?;
+        }
+    }
     if let Err(e) = cfg.validate() {
         // A value from the command line is named by its option, one from a file by the file.
         let flag = match &e {
@@ -729,10 +737,6 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             (None, Some(file)) => anyhow::Error::new(e).context(format!("the settings of {}", file.display())),
             (None, None) => e.into(),
         });
-    }
-    // After the ranges: a value out of range is named as such, whether used or not.
-    if let MethodConfig::Classical(spec) = &cfg.method {
-        refuse_idle_projector_options(args, &spec.projector)?;
     }
     // Its checkpoint holds the saved field's parameters: another field cannot take them.
     if let Some(saved) = resume_config {
