@@ -769,3 +769,68 @@ fn a_seed_edited_at_the_top_of_synth_json_alone_is_refused() {
     let o = synth(&args);
     assert!(o.status.success(), "{}", text(&o).1);
 }
+
+/// A synth.json's setting of another phantom than the one it makes, away from its default,
+/// was taken and ignored; it is refused naming the file, the key and the phantom. A synth.json
+/// the command wrote is taken, also one written after --phantom changed a configuration's
+/// phantom (which drops the old phantom's settings).
+#[test]
+fn another_phantoms_settings_in_a_config_are_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let (set, out) = (tmp.path().join("set"), tmp.path().join("out"));
+    let o = run_small(&set, &["--phantom", "blobs", "--resolution", "8", "--pixels", "12"]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(set.join("synth.json")).expect("reads")).expect("json");
+    let config = tmp.path().join("synth.json");
+    let config_arg = config.to_str().expect("utf-8");
+    for (kind, key, value, says) in [
+        (
+            "jet",
+            "jet_tr.front_speed",
+            serde_json::json!(2.0),
+            "`phantom.jet_tr.front_speed`: 2.0 is set for another phantom than the jet phantom",
+        ),
+        (
+            "ball",
+            "volume_path",
+            serde_json::json!("cfd.tif"),
+            "`phantom.volume_path`: \"cfd.tif\" is set for another phantom than the ball phantom",
+        ),
+        (
+            "ball",
+            "blob_count",
+            serde_json::json!(8),
+            "`phantom.blob_count`: 8 is set for another phantom than the ball phantom",
+        ),
+    ] {
+        let mut c = written.clone();
+        c["settings"]["phantom"]["kind"] = kind.into();
+        match key.split_once('.') {
+            Some((group, inner)) => c["settings"]["phantom"][group][inner] = value,
+            None => c["settings"]["phantom"][key] = value,
+        }
+        std::fs::write(&config, c.to_string()).expect("writes");
+        let o = synth(&["-q", "-o", out.to_str().expect("utf-8"), "--config", config_arg]);
+        let err = text(&o).1;
+        assert!(!o.status.success(), "{key}: accepted");
+        assert!(err.contains(&format!("the settings of {config_arg}")) && err.contains(says), "{key}: {err}");
+        assert!(!out.exists(), "{key}: wrote output");
+    }
+    // Where the phantom uses it, it is taken; --phantom then changes the phantom, and the
+    // synth.json written is taken as it is.
+    let mut c = written.clone();
+    c["settings"]["phantom"]["blob_count"] = 3.into();
+    std::fs::write(&config, c.to_string()).expect("writes");
+    let o = synth(&["-q", "-o", out.to_str().expect("utf-8"), "--config", config_arg, "--phantom", "ball"]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let again = tmp.path().join("again");
+    let o = synth(&[
+        "-q",
+        "-o",
+        again.to_str().expect("utf-8"),
+        "--config",
+        out.join("synth.json").to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", text(&o).1);
+}

@@ -284,10 +284,13 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
         // A volume of the user's that the new phantom replaces (from a `synth.json` given to
         // --config) is no longer read, so it is not recorded either.
         s.phantom.volume_path = None;
+        // Likewise the other phantoms' settings, which the phantom's own check would refuse.
+        s.phantom.reset_unused();
     }
     if let Some(path) = &args.truth_volume {
         s.phantom.kind = PhantomKind::Volume;
         s.phantom.volume_path = Some(path.clone());
+        s.phantom.reset_unused();
         s.times.clear();
     }
     if let Some(r) = args.resolution {
@@ -587,7 +590,11 @@ fn name_option(args: &Args, e: fluidnerf_synth::SynthError) -> anyhow::Error {
     ];
     match options.iter().find(|&&(key, _, given)| given && key == setting) {
         Some((_, option, _)) => anyhow::Error::new(e).context(format!("{option} on the command line")),
-        None => e.into(),
+        // Otherwise the setting is the --config file's.
+        None => match &args.config {
+            Some(file) => anyhow::Error::new(e).context(format!("the settings of {}", file.display())),
+            None => e.into(),
+        },
     }
 }
 

@@ -145,6 +145,7 @@ impl Default for PhantomSettings {
 
 impl PhantomSettings {
     pub fn validate(&self) -> Result<(), SynthError> {
+        self.refuse_unused()?;
         match self.kind {
             PhantomKind::Jet => self.jet.validate(),
             PhantomKind::JetTr => self.jet_tr.validate(),
@@ -164,6 +165,70 @@ impl PhantomSettings {
                 _ => Ok(()),
             },
             _ => Ok(()),
+        }
+    }
+}
+
+impl PhantomSettings {
+    /// Refuses a setting of another phantom than `kind` set away from its default (`jet` for
+    /// the jet, `jet_tr` for the starting jet, `blob_count` for `blobs` and `ball-and-blobs`,
+    /// `volume_path` for `volume`): the phantom would ignore it. Named by its key down to the
+    /// first that differs (`phantom.jet_tr.front_speed`). `cfd_step` is checked with the times.
+    fn refuse_unused(&self) -> Result<(), SynthError> {
+        let d = PhantomSettings::default();
+        let uses_blobs = matches!(self.kind, PhantomKind::Blobs | PhantomKind::BallAndBlobs);
+        let set = |key: &str, value: serde_json::Value, default: serde_json::Value| -> Option<(String, String)> {
+            if value == default {
+                return None;
+            }
+            // The first key inside that differs, where the setting is a group of them.
+            let inner = match (&value, &default) {
+                (serde_json::Value::Object(v), serde_json::Value::Object(d)) => {
+                    v.iter().find(|(k, x)| d.get(*k) != Some(x)).map(|(k, x)| (format!("{key}.{k}"), x.to_string()))
+                }
+                _ => None,
+            };
+            Some(inner.unwrap_or_else(|| (key.to_string(), value.to_string())))
+        };
+        fn json<T: Serialize>(v: &T) -> serde_json::Value {
+            serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
+        }
+        let unused = [
+            (self.kind != PhantomKind::Jet).then(|| set("phantom.jet", json(&self.jet), json(&d.jet))),
+            (self.kind != PhantomKind::JetTr).then(|| set("phantom.jet_tr", json(&self.jet_tr), json(&d.jet_tr))),
+            (!uses_blobs).then(|| set("phantom.blob_count", json(&self.blob_count), json(&d.blob_count))),
+            (self.kind != PhantomKind::Volume)
+                .then(|| set("phantom.volume_path", json(&self.volume_path), json(&d.volume_path))),
+        ];
+        match unused.into_iter().flatten().flatten().next() {
+            Some((key, value)) => Err(SynthError::invalid(
+                key.clone(),
+                format!(
+                    "{value} is set for another phantom than the {} phantom this configuration makes, which would \
+                     ignore it; leave {key} at its default, or choose the phantom that uses it",
+                    self.kind.name()
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Puts the settings of the phantoms other than `kind` back to their defaults: what a
+    /// change of phantom (`synth --phantom` over a `--config` of another) leaves unread, and
+    /// so does not record either.
+    pub fn reset_unused(&mut self) {
+        let d = PhantomSettings::default();
+        if self.kind != PhantomKind::Jet {
+            self.jet = d.jet;
+        }
+        if self.kind != PhantomKind::JetTr {
+            self.jet_tr = d.jet_tr;
+        }
+        if !matches!(self.kind, PhantomKind::Blobs | PhantomKind::BallAndBlobs) {
+            self.blob_count = d.blob_count;
+        }
+        if self.kind != PhantomKind::Volume {
+            self.volume_path = d.volume_path;
         }
     }
 }
@@ -249,6 +314,43 @@ impl ScalarField for Phantom {
             Phantom::Shapes(f) => f.eval(points, time, out),
             Phantom::Cfd(f) => f.eval(points, time, out),
             Phantom::Volume(f) => f.eval(points, time, out),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Another phantom's setting, away from its default, would be ignored: refused naming its
+    /// key and the phantom made; the defaults every written synth.json holds are taken.
+    #[test]
+    fn another_phantoms_setting_is_refused_naming_the_key_and_the_phantom() {
+        let mut jet = PhantomSettings::default();
+        jet.jet_tr.front_speed = 2.0;
+        let mut ball = PhantomSettings { kind: PhantomKind::Ball, blob_count: 8, ..Default::default() };
+        let mut procedural = PhantomSettings { kind: PhantomKind::Blobs, ..Default::default() };
+        procedural.volume_path = Some("cfd.tif".into());
+        for (p, key, phantom) in [
+            (&jet, "phantom.jet_tr.front_speed", "the jet phantom"),
+            (&ball, "phantom.blob_count", "the ball phantom"),
+            (&procedural, "phantom.volume_path", "the blobs phantom"),
+        ] {
+            let e = p.validate().expect_err(key).to_string();
+            assert!(e.contains(&format!("`{key}`")) && e.contains(phantom) && e.contains("ignore"), "{key}: {e}");
+        }
+        // Once the phantom's kind resets them, or for the phantom that uses them, they are taken.
+        for p in [&mut jet, &mut ball, &mut procedural] {
+            p.reset_unused();
+            p.validate().unwrap_or_else(|e| panic!("{:?}: {e}", p.kind));
+        }
+        let blobs = PhantomSettings { kind: PhantomKind::BallAndBlobs, blob_count: 8, ..Default::default() };
+        blobs.validate().expect("ball-and-blobs uses blob_count");
+        let mut starting = PhantomSettings { kind: PhantomKind::JetTr, ..Default::default() };
+        starting.jet_tr.front_speed = 0.7;
+        starting.validate().expect("jet-tr uses jet_tr");
+        for kind in [PhantomKind::Jet, PhantomKind::JetTr, PhantomKind::Ball, PhantomKind::Plume, PhantomKind::Volume] {
+            PhantomSettings { kind, ..Default::default() }.validate().expect("defaults");
         }
     }
 }
