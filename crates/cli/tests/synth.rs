@@ -834,3 +834,27 @@ fn another_phantoms_settings_in_a_config_are_refused() {
     ]);
     assert!(o.status.success(), "{}", text(&o).1);
 }
+
+/// Times given out of order were made in that order, so the scene's frames ran backwards in
+/// time; they are sorted, the frames, truths and recorded times follow time, and the summary
+/// says so.
+#[test]
+fn times_given_out_of_order_are_sorted() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("set");
+    let mut args = vec!["-o", dir.to_str().expect("utf-8")];
+    args.extend(["--preset", "demo", "--phantom", "jet-tr", "--times", "16,14", "--cameras", "3"]);
+    args.extend(["--pixels", "12", "--resolution", "8"]);
+    let o = synth(&args);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(out.contains("2 times t* = [14.0, 16.0] (sorted into time order)"), "{out}");
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).expect("reads")).expect("json")
+    };
+    let frames = read("transforms.json")["frames"].as_array().expect("frames").clone();
+    let times: Vec<f64> = frames.iter().map(|f| f["time"].as_f64().expect("a time")).collect();
+    assert_eq!(times, [14.0, 14.0, 14.0, 16.0, 16.0, 16.0]);
+    assert!(frames[0]["file_path"].as_str().expect("a path").ends_with("_t00.png"), "{frames:?}");
+    assert_eq!(read("synth.json")["settings"]["times"], serde_json::json!([14.0, 16.0]));
+}

@@ -311,6 +311,8 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
             .map_err(|e| err(e.to_string().replacen("configuration", "synth settings", 1)))?;
     }
     guard(|| settings.validate().map_err(|e| err(e.to_string())))?;
+    // The frames are made in time order; the recorded times follow them.
+    settings.times.sort_by(f64::total_cmp);
     // A volume of the user's is the truth as it is, on its own grid; a .vti or a calibrated
     // TIFF stack also brings its own box (as with `fluidnerf synth --truth-volume`).
     let volume = match (&settings.phantom.volume_path, settings.phantom.kind) {

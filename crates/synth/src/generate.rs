@@ -35,6 +35,7 @@ pub struct SynthSettings {
     pub resolution: usize,
     /// Frame times: t* for `jet-tr` (default 14, 15, 16), solver steps for `plume` and
     /// `cfd-jet` (empty: static at `phantom.cfd_step`); must be empty for the other phantoms.
+    /// Made in time order whatever their order here ([`SynthSettings::time_steps`]).
     pub times: Vec<f64>,
     pub rig: RigSettings,
     pub lens: LensSettings,
@@ -189,12 +190,15 @@ impl SynthSettings {
         Ok(())
     }
 
-    /// Time steps: `[None]` for static phantoms.
+    /// Time steps in time order, whatever order `times` gives them in (the frames, images and
+    /// truth volumes follow it): `[None]` for static phantoms.
     pub fn time_steps(&self) -> Vec<Option<f64>> {
         if self.times.is_empty() {
             vec![None]
         } else {
-            self.times.iter().map(|&t| Some(t)).collect()
+            let mut times = self.times.clone();
+            times.sort_by(f64::total_cmp);
+            times.into_iter().map(Some).collect()
         }
     }
 
@@ -577,6 +581,18 @@ mod tests {
         s.rig.layout = Layout::Ring { count: 4, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
         s.sensor.gaussian_noise = 0.02;
         s
+    }
+
+    /// Times given out of order are made in time order: the frames follow time.
+    #[test]
+    fn times_given_out_of_order_are_made_in_time_order() {
+        let mut s = tiny();
+        s.phantom.kind = crate::PhantomKind::JetTr;
+        s.times = vec![16.0, 14.0];
+        assert_eq!(s.time_steps(), vec![Some(14.0), Some(16.0)]);
+        let syn = generate(&s, None, |_| std::ops::ControlFlow::Continue(())).expect("generates");
+        let truth: Vec<Option<f64>> = syn.truth.iter().map(|(t, _)| *t).collect();
+        assert_eq!(truth, vec![Some(14.0), Some(16.0)]);
     }
 
     #[test]

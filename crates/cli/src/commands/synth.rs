@@ -110,7 +110,8 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, help_heading = "Phantom")]
     pub aabb: Option<Vec<f64>>,
     /// Frame times, comma separated: t* = t U / D for jet-tr [default: 14,15,16]; stored
-    /// solver steps (40, 50, 52, 60) for plume and cfd-jet [default: none, static].
+    /// solver steps (40, 50, 52, 60) for plume and cfd-jet [default: none, static]. Given in
+    /// any order, they are sorted: the frames follow time.
     #[arg(long, value_delimiter = ',', help_heading = "Phantom")]
     pub times: Option<Vec<f64>>,
     /// Solver step of a static plume or cfd-jet: 40, 50, 52 or 60 [default: 60].
@@ -615,7 +616,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// Writes the scene `args` asks for and returns its summary (what was written, for stdout).
 pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     let Some(out) = args.out.clone() else { bail!("--out is required") };
-    let settings = resolve(args)?;
+    let mut settings = resolve(args)?;
+    // The frames are made in time order; the recorded times and the summary follow them.
+    let reordered = settings.times.windows(2).any(|w| w[0] > w[1]);
+    settings.times.sort_by(f64::total_cmp);
     fluidnerf_pipeline::rundir::refuse_other_kind(&out, fluidnerf_pipeline::rundir::FolderKind::Scene, "synth")?;
     let scene_file = out.join("transforms.json");
     if scene_file.exists() && !args.force {
@@ -710,7 +714,7 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
             1 if syn.truth[0].0.is_none() => String::new(),
             n if settings.phantom.kind.cfd_case().is_some() => format!(", {n} solver steps {:?}", settings.times),
             n => format!(", {n} times t* = {:?}", settings.times),
-        }
+        } + if reordered { " (sorted into time order)" } else { "" }
     );
     let _ = writeln!(
         text,
