@@ -858,3 +858,23 @@ fn times_given_out_of_order_are_sorted() {
     assert!(frames[0]["file_path"].as_str().expect("a path").ends_with("_t00.png"), "{frames:?}");
     assert_eq!(read("synth.json")["settings"]["times"], serde_json::json!([14.0, 16.0]));
 }
+
+/// --pixels 1 wrote a scene of 1×1 images, which no held-out view can be scored on; images
+/// are at least the SSIM window wide, and fewer pixels are refused naming the option.
+#[test]
+fn pixels_below_the_ssim_window_are_refused_naming_the_option() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("set");
+    for pixels in ["1", "6"] {
+        let o = run_small(&dir, &["--pixels", pixels]);
+        let err = text(&o).1;
+        assert!(!o.status.success(), "--pixels {pixels}: accepted");
+        assert!(
+            err.contains("--pixels on the command line: invalid setting `lens.resolution`: width and height must be at least 7 pixels"),
+            "--pixels {pixels}: {err}"
+        );
+        assert!(!dir.exists(), "--pixels {pixels}: wrote output");
+    }
+    let o = run_small(&dir, &["--pixels", "7", "--resolution", "8"]);
+    assert!(o.status.success(), "{}", text(&o).1);
+}

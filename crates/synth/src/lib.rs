@@ -51,6 +51,6 @@ pub use preset::{preset, presets, DEFAULT_PRESET};
 pub use real::{RealLike, RealRecording};
 pub use rig::{
     Jitter, Layout, LensSettings, RigCamera, RigSettings, RingAxis, Subset, MAX_CAMERAS, MAX_JITTER_ROTATION_DEG,
-    MAX_START_DEG,
+    MAX_START_DEG, MIN_IMAGE_SIDE,
 };
 pub use sensor::SensorSettings;

@@ -77,8 +77,16 @@ impl LensSettings {
                 ),
             ));
         }
-        if self.resolution[0] == 0 || self.resolution[1] == 0 {
-            return Err(SynthError::invalid("lens.resolution", "width and height must be positive"));
+        if let Some(side) = self.resolution.into_iter().find(|&n| n < MIN_IMAGE_SIDE) {
+            return Err(SynthError::invalid(
+                "lens.resolution",
+                format!(
+                    "width and height must be at least {MIN_IMAGE_SIDE} pixels, got {} × {} ({side} is too few): \
+                     held-out views are scored with a {MIN_IMAGE_SIDE}-pixel SSIM window, and the images' noise is \
+                     estimated on pixels away from their edges",
+                    self.resolution[0], self.resolution[1]
+                ),
+            ));
         }
         if let Some(p) = self.pixel_pitch_mm {
             if !(p > 0.0 && p.is_finite()) {
@@ -213,6 +221,11 @@ pub struct RigSettings {
 /// `cam000` … `cam999`, is more than any laboratory sets up, and beyond it a count is a slip
 /// that would image (and write) that many views before anything else could say so.
 pub const MAX_CAMERAS: usize = 1000;
+
+/// Fewest pixels along an image's side: the held-out views of a scene are scored with the
+/// windowed SSIM, whose default window is 7 pixels wide, and the images' noise estimate
+/// ([`fluidnerf_core::Image::relative_noise`]) needs pixels off the edge.
+pub const MIN_IMAGE_SIDE: u32 = 7;
 
 /// The largest `start_deg` of a ring, either way: ten turns. Every ring starts within one turn,
 /// so beyond that a start is a slip, and far beyond it the cameras' angles lose their spacing
@@ -537,6 +550,18 @@ impl RigSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Images smaller than the SSIM window that scores held-out views are refused naming the
+    /// key; the window's size itself is taken.
+    #[test]
+    fn images_smaller_than_the_ssim_window_are_refused() {
+        for resolution in [[1, 1], [6, 6], [64, 6], [0, 64]] {
+            let lens = LensSettings { resolution, ..Default::default() };
+            let e = lens.validate().expect_err("refused").to_string();
+            assert!(e.contains("`lens.resolution`") && e.contains("at least 7 pixels"), "{resolution:?}: {e}");
+        }
+        LensSettings { resolution: [7, 7], ..Default::default() }.validate().expect("7 × 7 is taken");
+    }
     use approx::assert_relative_eq;
 
     fn box40() -> Aabb {

@@ -148,7 +148,8 @@ pub struct Args {
     #[arg(long, help_heading = "Cameras")]
     pub distance: Option<f64>,
     /// Image width and height in pixels (square images); the pixel pitch follows so the field
-    /// of view stays 40 mm unless --pixel-pitch is given [default: the preset's].
+    /// of view stays 40 mm unless --pixel-pitch is given; at least 7, the SSIM window that
+    /// scores held-out views [default: the preset's].
     #[arg(long, help_heading = "Cameras")]
     pub pixels: Option<u32>,
     /// Lateral magnification [default: -0.2].
