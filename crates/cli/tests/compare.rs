@@ -284,3 +284,30 @@ fn huge_times_keep_the_table_narrow() {
     assert!(table.contains("1.0e308"), "{table}");
     assert!(table.lines().all(|l| l.chars().count() < 120), "{table}");
 }
+
+/// A curve file holding both a report's `history.nrmse` and a curve's `nrmse_history` had one
+/// read and the other passed over, and one that repeats an iteration was taken as two
+/// evaluations; both are refused naming the file and the key.
+#[test]
+fn a_curve_with_two_histories_or_a_repeated_iteration_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let point = |i: u32, t: f64, n: f64| serde_json::json!({ "iteration": i, "train_time_s": t, "nrmse": n });
+    let both = serde_json::json!({
+        "method": "sart",
+        "nrmse_history": [point(1, 0.1, 0.9)],
+        "history": { "nrmse": [point(1, 0.1, 0.5)] },
+    });
+    std::fs::write(d.join("both.json"), both.to_string()).expect("writes");
+    refused(
+        &fluidnerf(d, &["compare", "both.json", "-o", "cmp", "-q"]),
+        "both.json: holds both `history.nrmse` (a run report's NRMSE history) and `nrmse_history`",
+    );
+    let repeat = serde_json::json!({ "method": "sart", "nrmse_history": [point(1, 0.1, 0.9), point(2, 0.2, 0.6), point(1, 0.3, 0.5)] });
+    std::fs::write(d.join("repeat.json"), repeat.to_string()).expect("writes");
+    refused(
+        &fluidnerf(d, &["compare", "repeat.json", "-o", "cmp", "-q"]),
+        "repeat.json: `nrmse_history` point 2 repeats iteration 1 of point 0",
+    );
+    assert!(!d.join("cmp").exists(), "nothing written for refused curves");
+}

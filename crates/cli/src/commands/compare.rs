@@ -30,7 +30,8 @@ use serde::{Deserialize, Serialize};
 ///
 /// Each RUN is a reconstruction run directory (its `report.json` is read) or a JSON file with
 /// the same fields: `method`, optionally `preset`, and `nrmse_history`, a list of
-/// `{iteration, train_time_s, nrmse}`. Runs record that history when their scene has ground
+/// `{iteration, train_time_s, nrmse}`, one point per iteration, forward in time (a file that
+/// also holds a report's `history.nrmse` is refused). Runs record that history when their scene has ground
 /// truth (neural runs every `--eval-every` iterations, classical runs every iteration).
 ///
 /// Writes into OUT: `time_to_accuracy.png` and `.svg` (NRMSE against wall time, one line per
@@ -190,8 +191,22 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     #[derive(Deserialize)]
     struct Probe {
         format: Option<u32>,
+        #[serde(default)]
+        history: Option<serde_json::Value>,
+        #[serde(default)]
+        nrmse_history: Option<serde::de::IgnoredAny>,
     }
     let probe: Probe = fluidnerf_pipeline::rundir::read_json(&report)?;
+    // A report's history is `history.nrmse`, a curve file's `nrmse_history`: a file holding
+    // both would have one read and the other passed over, whichever the reader took it for.
+    if probe.nrmse_history.is_some() && probe.history.as_ref().is_some_and(|h| h.get("nrmse").is_some()) {
+        bail!(
+            "{}: holds both `history.nrmse` (a run report's NRMSE history) and `nrmse_history` (a curve file's); \
+             keep the one that is the run's and remove the other",
+            report.display()
+        );
+    }
+    let key = if probe.format.is_some() { "history.nrmse" } else { "nrmse_history" };
     let (method, preset, history, final_nrmse, wall_time_s) = if probe.format.is_some() {
         let r = match RunReport::read(&report) {
             Ok(r) => r,
@@ -217,7 +232,16 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         bail!("{}: no NRMSE history; run it with --eval-every and a scene with ground truth", report.display());
     }
     let mut curve = Vec::with_capacity(history.len());
+    let mut seen = std::collections::BTreeMap::new();
     for (k, p) in history.iter().enumerate() {
+        // An iteration is evaluated once: a repeat is two curves joined, or a point copied.
+        if let Some(j) = seen.insert(p.iteration, k) {
+            bail!(
+                "{}: `{key}` point {k} repeats iteration {} of point {j}; each iteration is evaluated once",
+                report.display(),
+                p.iteration
+            );
+        }
         if !(p.train_time_s.is_finite() && p.train_time_s >= 0.0 && p.nrmse.is_finite() && p.nrmse >= 0.0) {
             bail!(
                 "{}: NRMSE history point {k} (iteration {}) has a negative or non-finite value: time {} s, NRMSE {}",
