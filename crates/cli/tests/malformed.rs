@@ -1545,3 +1545,20 @@ fn a_config_naming_an_unknown_preset_is_refused() {
         assert!(!d.join("again").exists(), "{preset}: left an output folder");
     }
 }
+
+/// A frame whose `file_path` is empty loaded, and only reading the images failed ("image file
+/// is a folder"), naming neither the frame nor the key; it is refused when the scene loads.
+#[test]
+fn a_frame_with_an_empty_file_path_is_refused_naming_the_frame_and_the_key() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    edit_json(&d.join("scene/transforms.json"), |v| v["frames"][1]["file_path"] = "".into());
+    for args in [&["info", "scene"][..], &["reconstruct", "scene", "-o", "run", "--method", "sart", "-q"]] {
+        refused(
+            &fluidnerf(d, args),
+            "scene/transforms.json: frame 1, key `frames[1].file_path`: is \"\", which names no image file",
+        );
+    }
+    assert!(!d.join("run").exists(), "a run started");
+}

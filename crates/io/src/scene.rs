@@ -884,6 +884,15 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
             });
         }
         let entry: FrameIn = typed(&file, value, &prefix, Some(i))?;
+        // An empty path resolves to the scene's folder, which only reading the images would
+        // then find is no image, naming neither the frame nor the key.
+        if entry.file_path.trim().is_empty() {
+            return Err(IoError::Key {
+                path: file.clone(),
+                location: format!("frame {i}, key `{prefix}.file_path`"),
+                problem: format!("is {:?}, which names no image file; give the frame's image", entry.file_path),
+            });
+        }
         check_recording(&file, &top, &[(i, &entry)])?;
         frame_recordings.push(FrameRecording {
             background: background_from_key(entry.background.as_ref().or(top.background.as_ref())),
@@ -2038,6 +2047,24 @@ mod tests {
         let scene = ring_scene(dir, 3, Distortion::default());
         save_scene(&scene, dir).expect("save");
         serde_json::from_str(&std::fs::read_to_string(dir.join(SCENE_FILE)).expect("read")).expect("json")
+    }
+
+    /// A frame whose `file_path` is empty named the scene's folder as its image, and only
+    /// reading the images failed, naming neither the frame nor the key.
+    #[test]
+    fn a_frame_without_an_image_path_is_refused_at_load() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        let mut v = good_json(d);
+        for empty in ["", "  "] {
+            v["frames"][1]["file_path"] = empty.into();
+            let m = load_scene(&write_json(d, &v)).expect_err("must fail").to_string();
+            assert!(
+                m.contains(&format!("frame 1, key `frames[1].file_path`: is {empty:?}, which names no image")),
+                "{m}"
+            );
+            assert!(m.contains(SCENE_FILE), "{m}");
+        }
     }
 
     #[test]
