@@ -222,6 +222,14 @@ def _path(value: Any, name: str, expected: str = "a path (a string or os.PathLik
     return path
 
 
+def _string(value: Any, name: str) -> str:
+    """``value``, a string; anything else is refused naming ``name`` (the extension's own
+    message, "'int' object cannot be converted to 'PyString'", names no type expected)."""
+    if not isinstance(value, str):
+        raise TypeError(f"{name}: expected a string, got {type(value).__name__} {value!r}")
+    return value
+
+
 def load_scene(folder: PathLike) -> Scene:
     """Reads and validates the scene in ``folder`` (a folder with ``transforms.json``, or the file)."""
     return Scene.load(_path(folder, "folder"))
@@ -311,7 +319,7 @@ def scene_from_arrays(
         distortion=None if distortion is None else _distortion(distortion),
         holdout=None if holdout is None else _flags(holdout, "holdout"),
         names=None if names is None else _names(names, "names"),
-        units=units,
+        units=_string(units, "units"),
         intensity_scale=_real(intensity_scale, "intensity_scale"),
     )
 
@@ -391,9 +399,7 @@ def read_video(
     time_offset = _real(time_offset, "time_offset")
     if not np.isfinite(time_offset):
         raise ValueError(f"time_offset: {time_offset} is not a finite number of seconds")
-    for name, value in (("range", range), ("linearisation", linearisation)):
-        if not isinstance(value, str):
-            raise TypeError(f"{name}: expected a string, got {type(value).__name__} {value!r}")
+    range, linearisation = _string(range, "range"), _string(linearisation, "linearisation")
     frames, times, info = _ext.read_video(
         _path(path, "path"), start, end, every, time_offset, range, linearisation
     )
@@ -1021,7 +1027,7 @@ def ssim(
 ) -> float:
     """SSIM of 2D or 3D arrays: ``window`` ``"uniform"`` (7 wide, as skimage), ``"gaussian"``
     (σ 1.5) or ``"global"`` (one window over everything)."""
-    return _ext.ssim(*_pair(estimate, truth), _data_range(data_range), window)
+    return _ext.ssim(*_pair(estimate, truth), _data_range(data_range), _string(window, "window"))
 
 
 def synth(

@@ -40,6 +40,7 @@ from ._api import (
     _integer,
     _path,
     _SavedScene,
+    _string,
     build_config,
     open_run,
 )
@@ -51,6 +52,7 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
     """The task of one window: trains window ``window`` into ``out`` (or reads it back when it
     finished before) and returns its outcome. ``_after`` are the results of the tasks it must
     wait for (the window it warm-starts from); only their completion matters."""
+    scene_root, config_json, out = _task_arguments(scene_root, config_json, out)
     scene = Scene.load(scene_root)
     k = _integer(window, "window")
     plan = json.loads(_ext.window_plan(scene, config_json))["windows"]
@@ -68,8 +70,15 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
 def finish(scene_root: str, config_json: str, out: str, *_after: Any) -> dict:
     """The last task: stitches the finished windows and writes the run's results; returns the
     report. Run again after it finished, it writes the same results again."""
+    scene_root, config_json, out = _task_arguments(scene_root, config_json, out)
     scene = Scene.load(scene_root)
     return json.loads(_ext.finish_windows(scene, config_json, out, None))
+
+
+def _task_arguments(scene_root: Any, config_json: Any, out: Any) -> tuple[str, str, str]:
+    """A task's arguments checked, each refused naming it (``Scene.load`` named its own
+    argument, ``folder``, and the extension a string's as pyo3 does)."""
+    return _path(scene_root, "scene_root"), _string(config_json, "config_json"), _path(out, "out")
 
 
 def _whole_run(scene_root: str, config_json: str, out: str) -> dict:

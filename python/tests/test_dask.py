@@ -354,3 +354,20 @@ def test_windows_near_the_largest_count_are_planned():
     windows until the memory ran out."""
     n = 2**64 - 1
     assert fluidnerf.plan_windows(n, n - 1, 1) == [(0, n - 1), (1, n)]
+
+
+def test_task_arguments_of_another_type_are_refused_naming_the_argument(tr_scene, tmp_path):
+    """train_window(None, ...) was refused naming `folder`, Scene.load's argument, and a
+    configuration that is no string as pyo3 names a string's type."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    root, out = str(tr_scene.root), str(tmp_path / "run")
+    for args, says in (
+        ((None, cfg, out), r"^scene_root: expected a path \(a string or os.PathLike\), got NoneType None"),
+        ((root, 5, out), r"^config_json: expected a string, got int 5"),
+        ((root, cfg, None), r"^out: expected a path \(a string or os.PathLike\), got NoneType None"),
+    ):
+        with pytest.raises(TypeError, match=says):
+            fluidnerf.dask.train_window(*args, 0)
+        with pytest.raises(TypeError, match=says):
+            fluidnerf.dask.finish(*args)
+    assert not (tmp_path / "run").exists()

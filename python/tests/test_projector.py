@@ -486,3 +486,13 @@ def test_finite_values_beyond_float32_are_refused_as_such(scene):
                 r"beyond the float32 values",
             ):
                 fluidnerf.nrmse([1, big_int], [1.0, 2.0])
+
+
+def test_an_ssim_window_that_is_no_string_is_refused_naming_the_argument():
+    """window=7 raised pyo3's "argument 'window': 'int' object cannot be converted to 'PyString'"."""
+    t = blob_volume()
+    for window in (7, None):
+        with pytest.raises(
+            TypeError, match=rf"^window: expected a string, got {type(window).__name__} {window}"
+        ):
+            fluidnerf.ssim(t, t, window=window)

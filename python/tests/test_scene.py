@@ -710,3 +710,13 @@ def test_read_davis_refuses_a_truncated_file_naming_it(tmp_path):
     with pytest.raises(fluidnerf.FluidNerfError, match=None) as e:
         fluidnerf.read_davis(short)
     assert "short.im7" in str(e.value)
+
+
+def test_units_that_are_no_string_are_refused_naming_the_argument():
+    """units=5 raised pyo3's "argument 'units': 'int' object cannot be converted to 'PyString'"."""
+    K, poses = ring(4)
+    images = np.ones((4, 16, 16), np.float32)
+    aabb = np.array([[-10.0, -10.0, -10.0], [10.0, 10.0, 10.0]])
+    for units in (5, None, b"mm"):
+        with pytest.raises(TypeError, match=rf"^units: expected a string, got {type(units).__name__} "):
+            fluidnerf.scene_from_arrays(K, poses, images, aabb, units=units)
