@@ -533,12 +533,42 @@ impl RunDir {
             std::fs::remove_dir_all(&p)
                 .map_err(|e| PipelineError::file(&p, format!("cannot remove the earlier run's start: {e}")))?;
         }
+        self.remove_emptied_own_folders();
         Ok(())
     }
 
-    /// The folders of [`OWN_RUNS`] that hold a run.
+    /// The runs a run wrote into its [`OWN_RUNS`] folders: the folder itself when it holds a run
+    /// (a static field's `start/`), else its `tNN` folders that hold one (the runs of the
+    /// instants a time-resolved run starts from, `start/t00/`, `start/t01/`, …).
     fn own_runs(&self) -> Vec<PathBuf> {
-        OWN_RUNS.iter().map(|n| self.root.join(n)).filter(|p| p.join("config.json").is_file()).collect()
+        let holds_run = |p: &Path| p.join("config.json").is_file();
+        let instant =
+            |name: &str| name.len() > 1 && name.starts_with('t') && name[1..].bytes().all(|b| b.is_ascii_digit());
+        let mut runs = Vec::new();
+        for folder in OWN_RUNS.iter().map(|n| self.root.join(n)) {
+            if holds_run(&folder) {
+                runs.push(folder);
+                continue;
+            }
+            let Ok(entries) = std::fs::read_dir(&folder) else { continue };
+            let mut instants: Vec<PathBuf> = entries
+                .filter_map(Result::ok)
+                .filter(|e| e.file_name().to_str().is_some_and(instant))
+                .map(|e| e.path())
+                .filter(|p| holds_run(p))
+                .collect();
+            instants.sort();
+            runs.extend(instants);
+        }
+        runs
+    }
+
+    /// Removes the [`OWN_RUNS`] folders that removing their runs left empty.
+    fn remove_emptied_own_folders(&self) {
+        for folder in OWN_RUNS.iter().map(|n| self.root.join(n)) {
+            // Only an empty folder goes: anything else in it is not the run's.
+            let _ = std::fs::remove_dir(folder);
+        }
     }
 
     pub fn root(&self) -> &Path {
@@ -570,6 +600,7 @@ impl RunDir {
         for path in self.own_runs().into_iter().filter(|p| !self.kept_runs.contains(p)) {
             let _ = std::fs::remove_dir_all(&path);
         }
+        self.remove_emptied_own_folders();
     }
 
     /// A resumed run, once its saved state has loaded: drops the finished run's report (so a
@@ -1101,6 +1132,35 @@ mod tests {
         std::fs::write(run.join("volume.npy"), "old").unwrap();
         let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
         assert_eq!(dir.state(), DirState::Empty);
+    }
+
+    /// A time-resolved run's starts (`start/tNN/`, one run per instant) are its own: `--force`
+    /// removes them with it, so a new run with fewer instants, or none started, does not keep
+    /// the earlier run's beside its own. What else `start/` holds is not the run's and stays.
+    #[test]
+    fn force_removes_the_runs_of_a_time_resolved_runs_instants() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = tmp.path().join("run");
+        for keep in [false, true] {
+            for t in ["t00", "t01", "t02"] {
+                std::fs::create_dir_all(run.join("start").join(t)).unwrap();
+                write_json(&run.join("start").join(t).join("config.json"), &run_config()).unwrap();
+                std::fs::write(run.join("start").join(t).join("volume.npy"), "old").unwrap();
+            }
+            write_json(&run.join("config.json"), &run_config()).unwrap();
+            std::fs::write(run.join("temporal.json"), "{}").unwrap();
+            if keep {
+                std::fs::write(run.join("start/notes.txt"), "mine").unwrap();
+            }
+            let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
+            assert_eq!(dir.state(), DirState::Empty);
+            drop(dir);
+            for t in ["t00", "t01", "t02"] {
+                assert!(!run.join("start").join(t).exists(), "start/{t} left by --force (keep {keep})");
+            }
+            assert_eq!(run.join("start").exists(), keep, "start/ with a file of the user's: {keep}");
+        }
+        assert_eq!(std::fs::read_to_string(run.join("start/notes.txt")).unwrap(), "mine");
     }
 
     #[test]
