@@ -1396,6 +1396,13 @@ fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
     let elsewhere = d.join("run/windows/w001.safetensors").to_str().expect("UTF-8").to_string();
     edit_json(&temporal, |v| v["windows"][1]["weights"] = elsewhere.clone().into());
     refused(&eval("run", &[]), &format!("window frames [1, 3]: its weights {elsewhere} are not a file inside the run"));
+    // An instant listed twice would sit at two frame positions of the stitching.
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    edit_json(&temporal, |v| v["frame_times"][2] = 15.0.into());
+    let twice = "run/temporal.json: frame_times: frame 2 at t = 15 does not come after frame 1 at t = 15";
+    refused(&eval("run", &[]), twice);
+    refused(&fluidnerf(d, &["export", "run", "-o", "exp", "--npy", "--time", "15.5", "-q"]), twice);
+    assert!(!d.join("exp").exists(), "exported a run whose frame times repeat");
 
     // Assembled by hand: no report to compare with, but the windows must still follow each other.
     std::fs::write(&temporal, &original).expect("restores temporal.json");
@@ -1406,6 +1413,12 @@ fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
     refused(
         &eval("run", &["--scene", "scene"]),
         "run/temporal.json: window frames [2, 4] do not follow the window before them",
+    );
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    edit_json(&temporal, |v| v["frame_times"][3] = 16.0.into());
+    refused(
+        &eval("run", &["--scene", "scene"]),
+        "run/temporal.json: frame_times: frame 3 at t = 16 does not come after frame 2 at t = 16",
     );
     assert!(!d.join("m.json").exists(), "wrote metrics");
     std::fs::write(&temporal, &original).expect("restores temporal.json");

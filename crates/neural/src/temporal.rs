@@ -58,7 +58,7 @@ use std::ops::{ControlFlow, Range};
 use std::path::Path;
 use std::sync::OnceLock;
 
-use fluidnerf_core::{Aabb, ScalarField, Support};
+use fluidnerf_core::{num, Aabb, ScalarField, Support};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -893,6 +893,29 @@ pub struct TemporalRecord {
     pub windows: Vec<WindowRecord>,
 }
 
+/// What is wrong with the `frame_times` of a run's `temporal.json`, if anything. The stitching
+/// places a time on the frame axis between the two frames around it: a time listed twice, or
+/// out of order, would put one instant at two frame positions (or none).
+pub fn frame_times_problem(times: &[f64]) -> Option<String> {
+    if times.is_empty() {
+        return Some("frame_times: no frames".into());
+    }
+    let i = (0..times.len()).find(|&i| !times[i].is_finite() || (i > 0 && times[i] <= times[i - 1]))?;
+    let listed = times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
+    Some(if !times[i].is_finite() {
+        format!("frame_times: frame {i} has the time {}, not a finite number ({listed})", num(times[i]))
+    } else {
+        format!(
+            "frame_times: frame {i} at t = {} does not come after frame {} at t = {}: a run lists each instant once, \
+             in increasing order ({listed}); the file was edited or is damaged: restore it, or rerun the \
+             reconstruction",
+            num(times[i]),
+            i - 1,
+            num(times[i - 1])
+        )
+    })
+}
+
 /// Reads `run_dir/temporal.json` and the window weights it names; returns the stitched field.
 pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
     let path = run_dir.join("temporal.json");
@@ -901,6 +924,9 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         .map_err(|e| NeuralError::checkpoint(&path, format!("malformed time-resolved run description: {e}")))?;
     if rec.frame_times.is_empty() || rec.windows.is_empty() {
         return Err(NeuralError::checkpoint(&path, "no frames or no windows"));
+    }
+    if let Some(why) = frame_times_problem(&rec.frame_times) {
+        return Err(NeuralError::checkpoint(&path, why));
     }
     let mut fields: Vec<Box<dyn ScalarField + Send + Sync>> = Vec::new();
     let mut plan: Vec<Range<usize>> = Vec::new();

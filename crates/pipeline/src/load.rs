@@ -253,8 +253,8 @@ impl LoadedRun {
         let path = self.dir.join("temporal.json");
         let record: fluidnerf_neural::temporal::TemporalRecord = crate::rundir::read_json(&path)?;
         let times = &record.frame_times;
-        if times.is_empty() || times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[0] > w[1]) {
-            return Err(PipelineError::file(&path, "frame_times: no frames, or not finite and increasing"));
+        if let Some(why) = fluidnerf_neural::temporal::frame_times_problem(times) {
+            return Err(PipelineError::file(&path, why));
         }
         // A stopped run's windows cover its first frames only.
         let covered = record.windows.iter().map(|w| w.frames[1]).max().unwrap_or(0);
