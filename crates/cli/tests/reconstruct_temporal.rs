@@ -419,6 +419,12 @@ fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
     for args in [&["eval", "cut", "--no-regions"][..], &["eval", "cut", "--no-regions", "--use-volume"]] {
         common::refused(&fluidnerf(d, args), "time 17 was never trained");
     }
+    // Its NRMSE is a mean over the instants it reached: compare refuses it beside a whole run,
+    // naming its report and the instants it did not reach.
+    let cmp = fluidnerf(d, &["compare", "full", "cut", "-o", "cmp", "-q"]);
+    common::refused(&cmp, "cut/report.json: the tr-fast run was stopped before it reached t = 17, 18, 18.5, 19");
+    assert!(String::from_utf8_lossy(&cmp.stderr).contains("reconstruct --resume"));
+    assert!(!d.join("cmp").exists(), "nothing written for a refused comparison");
 
     // Resumed, it writes what the uninterrupted run writes.
     ok(&fluidnerf(d, &["reconstruct", "-o", "cut", "--resume", "-q"]));
@@ -430,6 +436,7 @@ fn a_run_stopped_in_its_first_window_writes_only_the_frames_it_trained() {
     assert_eq!(volumes.len(), 7);
     assert!(volumes == files(&d.join("cut"), "frames", ".npy"), "the resumed run's volumes differ");
     ok(&fluidnerf(d, &["export", "cut", "--out", "exp18", "--npy", "--time", "18", "--resolution", "12", "-q"]));
+    ok(&fluidnerf(d, &["compare", "full", "cut", "-o", "cmp", "-q"]));
 }
 
 /// A time whose every frame the scene holds out is reconstructed and scored as a held-out time,

@@ -221,6 +221,17 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
             }
             Err(e) => return Err(e.into()),
         };
+        // A time-resolved run stopped before its last instants scores only those it reached: its
+        // NRMSE is a mean over other instants than a whole run's, not a point on the same curve.
+        if !r.not_reached.is_empty() {
+            let list: Vec<String> = r.not_reached.iter().map(|&t| num(t).to_string()).collect();
+            bail!(
+                "{}: the {} run was stopped before it reached t = {}, so its NRMSE is over the instants it reached                  only, not over the recording as a whole run's is; continue it with `reconstruct --resume` and                  compare it then, or leave it out",
+                report.display(),
+                r.method.name(),
+                list.join(", ")
+            );
+        }
         let preset = r.neural.as_ref().and_then(|n| n.preset.clone());
         (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s))
     } else {
