@@ -630,3 +630,39 @@ fn a_time_resolved_run_of_a_scene_without_frame_times_is_refused_in_one_piece_as
         assert!(!d.join("run").exists(), "{method}: nothing written");
     }
 }
+
+/// An instant that fewer cameras imaged than the recording has is reconstructed from the views
+/// it has, and said so by `info` and by the run: a camera's frame left out at one instant, and
+/// a frame whose time was jittered off its instant into one of its own (seen by one camera).
+/// The warning names each instant, how many cameras it has and which are missing.
+#[test]
+fn instants_imaged_by_fewer_cameras_than_the_recording_has_are_named() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let transforms = d.join("scene/transforms.json");
+    let mut scene = json(&transforms);
+    let frames = scene["frames"].as_array_mut().expect("frames");
+    frames.retain(|f| !(f["camera"] == "cam003" && f["time"] == 15.0));
+    let jittered = frames.iter_mut().find(|f| f["camera"] == "cam000" && f["time"] == 16.0).expect("frame");
+    jittered["time"] = serde_json::json!(16.000001);
+    std::fs::write(&transforms, scene.to_string()).expect("writes");
+    let says = "3 instants of the recording have fewer views than its 4 cameras: t = 15 has 3 (no cam003); t = 16 \
+                has 3 (no cam000); t = 16.000001 has 1 (only cam000)";
+
+    let info = fluidnerf(d, &["info", "scene"]);
+    let printed = String::from_utf8_lossy(&info.stdout);
+    assert!(printed.contains(says), "{printed}");
+
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --rays-per-image 16 --coarse-samples 8 \
+                --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let warnings = report(&d.join("run"))["warnings"].clone();
+    let warned = warnings.as_array().expect("warnings").iter().any(|w| w.as_str().is_some_and(|w| w.contains(says)));
+    assert!(warned, "{warnings}");
+
+    // A full recording says nothing.
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16", "--force"]);
+    let info = fluidnerf(d, &["info", "scene"]);
+    assert!(!String::from_utf8_lossy(&info.stdout).contains("fewer views"));
+}

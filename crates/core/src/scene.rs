@@ -81,6 +81,51 @@ impl Scene {
         self.times().into_iter().filter(|&f| !timed.iter().any(|&t| same_time(f, t))).collect()
     }
 
+    /// The instants of a recording of several instants that fewer cameras imaged than the
+    /// recording has, in increasing time: a camera whose frame at that instant is missing
+    /// (dropped, or left out of the scene), or a frame whose time was mistyped or jittered off
+    /// its instant into one of its own. Cameras are told apart by their names; in a scene whose
+    /// frames are not all named, an instant counts as short of cameras when it has fewer frames
+    /// than the fullest instant. Held-out frames count: their camera imaged the instant.
+    pub fn instants_short_of_cameras(&self) -> Vec<ShortInstant> {
+        let times = self.times();
+        if times.len() < 2 {
+            return Vec::new();
+        }
+        let at = |t: f64| self.frames.iter().filter(move |f| f.time.is_some_and(|ft| same_time(ft, t)));
+        let named: Option<Vec<&str>> = self.frames.iter().map(|f| f.camera_name.as_deref()).collect();
+        let mut short = Vec::new();
+        match named {
+            Some(mut all) => {
+                all.sort_unstable();
+                all.dedup();
+                for &t in &times {
+                    let present: Vec<&str> = at(t).filter_map(|f| f.camera_name.as_deref()).collect();
+                    let missing: Vec<String> =
+                        all.iter().filter(|n| !present.contains(n)).map(|n| n.to_string()).collect();
+                    if !missing.is_empty() {
+                        short.push(ShortInstant {
+                            time: t,
+                            cameras: all.len() - missing.len(),
+                            of: all.len(),
+                            missing,
+                        });
+                    }
+                }
+            }
+            None => {
+                let counts: Vec<usize> = times.iter().map(|&t| at(t).count()).collect();
+                let most = counts.iter().copied().max().unwrap_or(0);
+                for (&t, &n) in times.iter().zip(&counts) {
+                    if n < most {
+                        short.push(ShortInstant { time: t, cameras: n, of: most, missing: Vec::new() });
+                    }
+                }
+            }
+        }
+        short
+    }
+
     /// The times of ground-truth volumes that no frame has, when the frames have times: a
     /// time-resolved run scores each instant against the volume at its time, so these are
     /// never scored there (a sign of a mistyped time).
@@ -91,6 +136,19 @@ impl Scene {
         }
         self.truth.iter().filter_map(|t| t.time).filter(|&t| !times.iter().any(|&f| same_time(f, t))).collect()
     }
+}
+
+/// An instant of a recording that fewer cameras imaged than the recording has
+/// ([`Scene::instants_short_of_cameras`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShortInstant {
+    pub time: f64,
+    /// Cameras (or, in a scene of unnamed cameras, frames) at this instant.
+    pub cameras: usize,
+    /// Cameras of the recording (or frames of its fullest instant).
+    pub of: usize,
+    /// The names of the cameras without a frame at this instant (empty for unnamed cameras).
+    pub missing: Vec<String>,
 }
 
 /// Whether two times name the same instant (equal to a relative 10⁻⁹, so that times written

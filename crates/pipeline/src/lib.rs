@@ -161,6 +161,49 @@ pub fn truth_gaps(scene: &Scene) -> Option<String> {
     })
 }
 
+/// A warning for the instants of a recording that fewer cameras imaged than it has
+/// ([`Scene::instants_short_of_cameras`]): a time-resolved run reconstructs each instant from
+/// the views it has, so those instants rest on fewer views than the others (one view, for a
+/// frame whose time was jittered off its instant), which nothing else in the run would show.
+pub fn instants_short_of_cameras(scene: &Scene) -> Option<String> {
+    let short = scene.instants_short_of_cameras();
+    let first = short.first()?;
+    let described: Vec<String> = short
+        .iter()
+        .take(5)
+        .map(|s| {
+            let t = fluidnerf_core::num(s.time);
+            match s.missing.as_slice() {
+                [] => format!("t = {t} has {} frames", s.cameras),
+                missing if s.cameras <= missing.len() => {
+                    let present: Vec<String> = scene
+                        .frames
+                        .iter()
+                        .filter(|f| f.time.is_some_and(|ft| fluidnerf_core::scene::same_time(ft, s.time)))
+                        .filter_map(|f| f.camera_name.clone())
+                        .collect();
+                    format!("t = {t} has {} (only {})", s.cameras, present.join(", "))
+                }
+                missing => format!("t = {t} has {} (no {})", s.cameras, missing.join(", ")),
+            }
+        })
+        .collect();
+    let more = if short.len() > 5 { format!(" and {} more instants", short.len() - 5) } else { String::new() };
+    let whole = if first.missing.is_empty() {
+        format!("the {} frames of its fullest instant", first.of)
+    } else {
+        format!("its {} cameras", first.of)
+    };
+    Some(format!(
+        "{} instant{} of the recording have fewer views than {whole}: {}{more}; a time-resolved run reconstructs each \
+         instant from the views it has, so these rest on fewer views than the others. If a frame's time is \
+         mistyped or jittered off its instant, give it that instant's time",
+        short.len(),
+        if short.len() == 1 { "" } else { "s" },
+        described.join("; ")
+    ))
+}
+
 /// A warning for one ground truth without a time in a scene of several frame times: it stands
 /// for every time ([`Scene::times_without_truth`]), so a time-resolved run scores each of its
 /// instants against it. Right for a steady flow; for one instant's truth given without its

@@ -240,6 +240,9 @@ fn setup(
         ));
     }
     spec.holdout_times.extend(unseen);
+    if let Some(message) = crate::instants_short_of_cameras(scene) {
+        session.warn(&message);
+    }
     if let Some(message) = crate::truth_gaps(scene) {
         session.warn(&message);
     }

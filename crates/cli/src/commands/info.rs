@@ -350,6 +350,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(message) = fluidnerf_pipeline::unmatched_truth(&scene) {
         warnings.push(message);
     }
+    if let Some(message) = fluidnerf_pipeline::instants_short_of_cameras(&scene) {
+        warnings.push(message);
+    }
     if let Some(message) = fluidnerf_pipeline::truth_gaps(&scene) {
         warnings.push(message);
     }
