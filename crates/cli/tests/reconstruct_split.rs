@@ -255,5 +255,18 @@ fn a_done_file_naming_another_checkpoint_is_refused() {
         assert!(!d.join("w/report.json").exists(), "finished with {other}");
         std::fs::write(&done, &original).expect("restores the done file");
     }
+    // A negative time or loss would be summed into the run's report as measured.
+    for key in ["train_time_s", "final_loss"] {
+        edit_json(&done, |v| v["report"][key] = (-5.0).into());
+        let out = fluidnerf(d, &["reconstruct", "--finish", "-o", "w", "-q"]);
+        refused(
+            &out,
+            &format!(
+                "w/windows/w001.done.json: window 1 is recorded as finished with report.{key} -5, which no run writes"
+            ),
+        );
+        assert!(!d.join("w/report.json").exists(), "finished with a negative {key}");
+        std::fs::write(&done, &original).expect("restores the done file");
+    }
     ok(&fluidnerf(d, &["reconstruct", "--finish", "-o", "w", "-q"]));
 }

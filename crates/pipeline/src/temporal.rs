@@ -156,7 +156,7 @@ fn read_done(root: &std::path::Path, k: usize) -> Result<Option<FinishedWindow>,
 }
 
 /// Refuses the record of finished window `k` (in `path`, a done file or `progress.json`) when it
-/// names another checkpoint than the window's own: a run writes each window's final state to
+/// records a negative time or loss, or names another checkpoint than the window's own: a run writes each window's final state to
 /// [`checkpoint_name`], so another name is another window's state, or another run's, which a
 /// resume would stitch in as this window (and, of the same views, could not tell apart).
 fn check_own_checkpoint(path: &std::path::Path, k: usize, done: &FinishedWindow) -> Result<(), PipelineError> {
@@ -168,6 +168,26 @@ fn check_own_checkpoint(path: &std::path::Path, k: usize, done: &FinishedWindow)
                 "window {k} is recorded as finished with the checkpoint {}, but a window's final state is its own \
                  {own}: the record is not this window's (copied or edited?); restore it, or start a new run (--force)",
                 done.checkpoint
+            ),
+        ));
+    }
+    // Its times and losses go into the run's report (the run's training time is their sum):
+    // a negative one was edited in, and would be reported as measured.
+    let r = &done.report;
+    let recorded = [
+        ("train_time_s", r.train_time_s),
+        ("seconds_per_iteration", r.seconds_per_iteration),
+        ("samples_per_second", r.samples_per_second),
+        ("final_loss", f64::from(r.final_loss)),
+        ("smoothed_loss", f64::from(r.smoothed_loss)),
+    ];
+    if let Some((key, v)) = recorded.into_iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+        return Err(PipelineError::file(
+            path,
+            format!(
+                "window {k} is recorded as finished with report.{key} {}, which no run writes (a finite number \
+                 ≥ 0): the record was edited or is damaged; restore it, or start a new run (--force)",
+                fluidnerf_core::num(v)
             ),
         ));
     }
