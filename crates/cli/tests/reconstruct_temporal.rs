@@ -666,3 +666,24 @@ fn instants_imaged_by_fewer_cameras_than_the_recording_has_are_named() {
     let info = fluidnerf(d, &["info", "scene"]);
     assert!(!String::from_utf8_lossy(&info.stdout).contains("fewer views"));
 }
+
+/// A network's windows read time as `t' = (t − t₀)/Δt`: a run resumed with another
+/// `--time-step` would continue them on other time inputs. It is refused naming the time step
+/// and both values (it was refused as if the images had changed).
+#[test]
+fn a_run_resumed_with_another_time_step_is_refused_naming_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fluidnerf --preset tr-small --window 2 --overlap 1 \
+                --max-iterations 2 --rays-per-image 16 --coarse-samples 8 --fine-samples 0 --resolution 8 \
+                --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let out = fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--time-step", "2", "-q"]);
+    refused(
+        &out,
+        "run/windows/progress.json: cannot resume: the run being resumed has a different time step Δt (1, now 2",
+    );
+    assert!(report(&d.join("run"))["status"] == "finished", "the refused resume changed the run");
+    ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--time-step", "1", "-q"]));
+}

@@ -56,6 +56,11 @@ struct Progress {
     /// before it was recorded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     aabb: Option<fluidnerf_core::Aabb>,
+    /// The frame spacing Δt of a network's time input `t' = (t − t₀)/Δt`; absent for fields
+    /// that do not read it (of space alone, or the hash grid's frame axis) and in runs written
+    /// before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    time_step: Option<f64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -84,6 +89,16 @@ impl Progress {
         }
         if saved.seed != self.seed {
             return differs(&format!("seed ({}, now {})", saved.seed, self.seed));
+        }
+        if let (Some(a), Some(b)) = (saved.time_step, self.time_step) {
+            if a != b {
+                return differs(&format!(
+                    "time step Δt ({}, now {}; its windows' networks read t' = (t − t₀)/Δt, so --time-step must stay \
+                     the same)",
+                    num(a),
+                    num(b)
+                ));
+            }
         }
         if let (Some(a), Some(b)) = (saved.aabb, self.aabb) {
             if a != b {
@@ -327,6 +342,7 @@ fn setup(
         train: spec.train.clone(),
         finished: Vec::new(),
         aabb: Some(scene.aabb),
+        time_step: (input_dim == 4 && !matches!(field_cfg, FieldConfig::HashGrid(_))).then_some(problem.time_step),
     };
     log::info!(
         "{} frames at t = {:?}, Δt = {}, {} training views, window {} frames",
