@@ -216,6 +216,19 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
         fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "tr-fast", "--window", "0", "--overlap", "1"]);
     assert!(!out.status.success() && stderr(&out).contains("no windows to overlap"), "{}", stderr(&out));
     assert!(!d.join("z").exists(), "a refused run wrote");
+    // Nor with windows that hold every frame of the scene (5) in one, in one piece or split.
+    for split in [&[][..], &["--window-index", "0"]] {
+        let args = ["reconstruct", "scene", "-o", "z", "--method", "tr-fast", "--window", "5", "--overlap", "2"];
+        let out = fluidnerf(d, &[&args[..], split].concat());
+        let e = stderr(&out);
+        assert!(
+            !out.status.success()
+                && e.contains("--overlap 2: windows of 5 frames hold all 5 training frames of the scene in one window")
+                && e.contains("give --window below 5"),
+            "{e}"
+        );
+        assert!(!d.join("z").exists(), "a refused run wrote");
+    }
     // Nor does a time step apply to static fields, one per frame.
     let out = fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "static-per-frame", "--time-step", "0.5"]);
     let e = stderr(&out);

@@ -1077,8 +1077,31 @@ pub fn run_config(
     Ok(report)
 }
 
+/// Refuses an `--overlap` given for windows that hold every training frame of the scene in one
+/// (`--window` at least the frame count), as it is refused with `--window 0`: there are no
+/// windows to overlap, and the option would be recorded and ignored.
+fn refuse_moot_overlap(args: &Args, config: &RunConfig) -> anyhow::Result<()> {
+    let Some(o) = args.temporal.overlap.filter(|&o| o > 0) else { return Ok(()) };
+    let MethodConfig::Temporal(_, spec) = &config.method else { return Ok(()) };
+    let scene = fluidnerf_io::scene::load_scene(&config.scene)?;
+    let plan = fluidnerf_pipeline::window_plan(&scene, config)?;
+    let frames = plan.frame_times.len();
+    if frames < 2 {
+        bail!("--overlap {o}: the scene has a single training frame, so there are no windows to overlap; leave --overlap out");
+    }
+    if plan.windows.len() == 1 {
+        bail!(
+            "--overlap {o}: windows of {} frames hold all {frames} training frames of the scene in one window, so \
+             there are no windows to overlap; give --window below {frames} with it, or leave --overlap out",
+            spec.windows.frames
+        );
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let config = resolve(&args)?;
+    refuse_moot_overlap(&args, &config)?;
     if args.split.window_index.is_some() || args.split.frames.is_some() || args.split.finish {
         return run_split(&args, &config);
     }
