@@ -229,6 +229,20 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
         );
         assert!(!d.join("z").exists(), "a refused run wrote");
     }
+    // A --window shorter than the preset's overlap (tr-fast: 4 frames) says where the overlap
+    // came from and what to give.
+    let out = fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "tr-fast", "--window", "3"]);
+    let e = stderr(&out);
+    assert!(
+        !out.status.success()
+            && e.contains(
+                "--window on the command line: method.windows.overlap: windows of 3 frames would overlap by 4 frames \
+                 (the preset's overlap, as --overlap is not given)"
+            )
+            && e.contains("give --overlap below 3 with --window 3"),
+        "{e}"
+    );
+    assert!(!d.join("z").exists(), "a refused run wrote");
     // Nor does a time step apply to static fields, one per frame.
     let out = fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "static-per-frame", "--time-step", "0.5"]);
     let e = stderr(&out);

@@ -937,6 +937,18 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     if let MethodConfig::Temporal(_, spec) = method {
         if let Some(w) = t.window {
             spec.windows.frames = w;
+            // The overlap the run takes without --overlap (the preset's, or the configuration's)
+            // was set for its own window length, which a shorter --window may not hold.
+            let o = spec.windows.overlap;
+            if t.overlap.is_none() && w > 0 && o >= w {
+                let whose = if args.config.is_some() || args.resume { "the configuration's" } else { "the preset's" };
+                let give = if w == 1 { "--overlap 0".to_string() } else { format!("--overlap below {w}") };
+                bail!(
+                    "--window on the command line: method.windows.overlap: windows of {w} frames would overlap by {o} \
+                     frames ({whose} overlap, as --overlap is not given), but an overlap must be fewer frames than \
+                     the window's; give {give} with --window {w} (0: windows that do not overlap)"
+                );
+            }
         }
         if let Some(o) = t.overlap {
             spec.windows.overlap = o;
