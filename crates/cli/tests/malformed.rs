@@ -1396,6 +1396,13 @@ fn a_time_resolved_run_with_other_windows_than_its_own_is_refused() {
     let elsewhere = d.join("run/windows/w001.safetensors").to_str().expect("UTF-8").to_string();
     edit_json(&temporal, |v| v["windows"][1]["weights"] = elsewhere.clone().into());
     refused(&eval("run", &[]), &format!("window frames [1, 3]: its weights {elsewhere} are not a file inside the run"));
+    // A window's time origin edited would shift its instants.
+    std::fs::write(&temporal, &original).expect("restores temporal.json");
+    edit_json(&temporal, |v| v["windows"][1]["time_origin"] = 14.0.into());
+    refused(
+        &eval("run", &[]),
+        "run/temporal.json: window frames [1, 3] has the time origin 14, but the run's report.json records 15",
+    );
     // An instant listed twice would sit at two frame positions of the stitching.
     std::fs::write(&temporal, &original).expect("restores temporal.json");
     edit_json(&temporal, |v| v["frame_times"][2] = 15.0.into());

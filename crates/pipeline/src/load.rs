@@ -109,6 +109,22 @@ fn check_description(rd: &RunDir, kind: RunKind, config: &RunConfig, report: &Ru
                     ),
                 ));
             }
+            // Each window's field reads time from its origin, which the report records too: an
+            // origin edited in one of them would shift that window's instants.
+            let moved = record.windows.iter().zip(&report.windows).find(|(w, r)| w.time_origin != r.time_origin);
+            if let Some((w, r)) = moved {
+                return Err(PipelineError::file(
+                    &path,
+                    format!(
+                        "window frames {:?} has the time origin {}, but the run's report.json records {}: the file \
+                         is not this run's (copied from another run, or edited?); rerun the reconstruction or \
+                         restore the file",
+                        w.frames,
+                        num(w.time_origin),
+                        num(r.time_origin)
+                    ),
+                ));
+            }
             // Every window's field is the configured one, given its time axis for the windows'
             // length (`field_for_window`), as the run built it.
             if let (crate::MethodConfig::Temporal(_, spec), Some(first)) = (&config.method, record.windows.first()) {
