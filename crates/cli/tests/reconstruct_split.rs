@@ -132,6 +132,13 @@ fn windows_run_separately_and_finished_equal_the_run_in_one_piece() {
     // A finished run takes no more windows.
     let out = reconstruct(d, "split", &["--window-index", "0"]);
     assert!(!out.status.success() && stderr(&out).contains("already holds a finished run"), "{}", stderr(&out));
+    // Nor does a run in one piece stopped by Ctrl-C, which wrote its report: it is continued with
+    // --resume, which the refusal says (it called the run finished, and said to remove it).
+    edit_json(&d.join("serial/report.json"), |v| v["status"] = "interrupted".into());
+    let out = reconstruct(d, "serial", &["--window-index", "0"]);
+    let e = stderr(&out);
+    assert!(!out.status.success() && e.contains("serial: holds a run that was interrupted"), "{e}");
+    assert!(e.contains("reconstruct --resume") && !e.contains("finished run"), "{e}");
 }
 
 #[test]

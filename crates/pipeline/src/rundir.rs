@@ -488,6 +488,20 @@ impl RunDir {
             return Err(dir.foreign());
         }
         if dir.report().is_file() {
+            // A run in one piece stopped by Ctrl-C writes its report too: it is continued with
+            // --resume, not by training its windows one at a time.
+            let interrupted = std::fs::read_to_string(dir.report())
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .is_some_and(|v| v.get("status").and_then(|s| s.as_str()) == Some("interrupted"));
+            if interrupted {
+                return Err(refuse(
+                    "holds a run that was interrupted (its report.json says so), not windows trained one at a time; \
+                     continue it with `reconstruct --resume` (`overwrite=\"resume\"` from Python), or use another \
+                     folder"
+                        .into(),
+                ));
+            }
             return Err(refuse(
                 "already holds a finished run; training windows into it would mix two runs (remove it, or use \
                  another folder)"
