@@ -78,7 +78,7 @@ fn config_json_alone_reruns_a_time_resolved_run_bit_for_bit() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     let synth =
-        "synth -q --preset jet-tr60 --cameras 4 --pixels 16 --resolution 12 --model pinhole --times 14,15,16 -o scene";
+        "synth -q --preset jet-tr60 --cameras 4 --pixels 16 --resolution 12 --model pinhole --times 14,15,16,17 -o scene";
     ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
     rerun_is_identical(
         d,
