@@ -856,14 +856,17 @@ fn frame_name(f: &Frame) -> Option<String> {
     f.camera_name.clone().or_else(|| f.file_path.file_stem().map(|s| s.to_string_lossy().into_owned()))
 }
 
+/// The `import.json` an earlier import wrote into `out`, if there is one it can read.
+fn earlier_import(out: &Path) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(out.join("import.json")).ok()?;
+    let record = serde_json::from_str::<serde_json::Value>(&text).ok()?;
+    (record["command"] == "import").then_some(record)
+}
+
 /// The frames an earlier import into `out` decoded from videos, by camera, as its `import.json`
 /// records them (`frames/<camera>/000000.tif` onwards). Empty when there is no such record.
 fn earlier_video_frames(out: &Path) -> Vec<(String, usize)> {
-    let Ok(text) = std::fs::read_to_string(out.join("import.json")) else { return Vec::new() };
-    let Ok(record) = serde_json::from_str::<serde_json::Value>(&text) else { return Vec::new() };
-    if record["command"] != "import" {
-        return Vec::new();
-    }
+    let Some(record) = earlier_import(out) else { return Vec::new() };
     let videos = record["videos"].as_array().map(Vec::as_slice).unwrap_or_default();
     videos
         .iter()
@@ -909,11 +912,7 @@ fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoR
 /// The cameras' images an earlier import into `out` split from a DaVis recording, as its
 /// `import.json` records them (`frames/<camera>/<name>.png|tif`). Empty without such a record.
 fn earlier_davis_frames(out: &Path) -> Vec<PathBuf> {
-    let Ok(text) = std::fs::read_to_string(out.join("import.json")) else { return Vec::new() };
-    let Ok(record) = serde_json::from_str::<serde_json::Value>(&text) else { return Vec::new() };
-    if record["command"] != "import" {
-        return Vec::new();
-    }
+    let Some(record) = earlier_import(out) else { return Vec::new() };
     let listed = record["davis_frames"].as_array().map(Vec::as_slice).unwrap_or_default();
     listed
         .iter()
