@@ -889,15 +889,7 @@ fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoR
         let kept = videos.iter().find(|v| &v.camera == camera).map_or(0, |v| v.info.frames_kept);
         let dir = out.join("frames").join(camera);
         for i in kept..*count {
-            let frame = dir.join(format!("{i:06}.tif"));
-            if is_referenced(&frame, referenced) {
-                continue;
-            }
-            match std::fs::remove_file(&frame) {
-                Ok(()) => removed += 1,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(e) => log::warn!("cannot remove {}, a frame of the earlier import: {e}", frame.display()),
-            }
+            removed += usize::from(remove_unread(&dir.join(format!("{i:06}.tif")), referenced));
         }
         if kept == 0 {
             // Only when empty: a file of the user's keeps its folder.
@@ -936,14 +928,7 @@ fn remove_stale_davis_frames(out: &Path, earlier: &[PathBuf], referenced: &HashS
     let mut dirs = BTreeSet::new();
     for rel in earlier {
         let frame = out.join(rel);
-        if is_referenced(&frame, referenced) {
-            continue;
-        }
-        match std::fs::remove_file(&frame) {
-            Ok(()) => removed += 1,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => log::warn!("cannot remove {}, an image of the earlier import: {e}", frame.display()),
-        }
+        removed += usize::from(remove_unread(&frame, referenced));
         dirs.extend(frame.parent().map(Path::to_path_buf));
     }
     for dir in dirs {
@@ -966,6 +951,22 @@ fn referenced_files(scene: &Scene, recording: &fluidnerf_io::scene::Recording) -
 
 fn is_referenced(path: &Path, referenced: &HashSet<PathBuf>) -> bool {
     path.canonicalize().is_ok_and(|p| referenced.contains(&p))
+}
+
+/// Removes `file`, a file an earlier import wrote, unless the new scene reads it
+/// (`referenced`); whether it was removed. A file already gone is not an error.
+fn remove_unread(file: &Path, referenced: &HashSet<PathBuf>) -> bool {
+    if is_referenced(file, referenced) {
+        return false;
+    }
+    match std::fs::remove_file(file) {
+        Ok(()) => true,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
+        Err(e) => {
+            log::warn!("cannot remove {}, a file of the earlier import: {e}", file.display());
+            false
+        }
+    }
 }
 
 /// The import; what it creates in OUT is recorded in `created`.
