@@ -18,10 +18,10 @@ fn demo_compares_the_fields_with_both_classical_methods() {
     for label in labels {
         assert!(stdout.lines().any(|l| l.starts_with(label)), "no table row for {label}:\n{stdout}");
     }
-    // Every run ended at the cap given: the table says so.
+    // Every run ended at the cap given, inside the same default budget: the table says so.
     let rule = stdout.lines().find(|l| l.starts_with("every method stopped by held-out early stopping"));
-    assert!(rule.is_some_and(|l| l.ends_with(" or its iteration cap")), "{stdout}");
-    assert!(stdout.contains("* ended by its iteration cap"), "{stdout}");
+    assert!(rule.is_some_and(|l| l.ends_with(", at most 4 iterations, at most 60 s")), "{stdout}");
+    assert!(stdout.contains("* ended by the iteration cap (--max-iterations)"), "{stdout}");
     let comparison = json(&d.join("out/comparison.json"));
     let rows = comparison.as_array().expect("a list of runs");
     assert_eq!(rows.len(), 4);
@@ -33,7 +33,10 @@ fn demo_compares_the_fields_with_both_classical_methods() {
     ]) {
         assert_eq!(row["method"], label);
         let stopping = row["stopping"].as_str().unwrap_or_default();
-        assert!(stopping.starts_with("held-out early stopping") && stopping.ends_with("at most 4 iterations"), "{row}");
+        assert!(
+            stopping.starts_with("held-out early stopping") && stopping.ends_with("at most 4 iterations, at most 60 s"),
+            "{row}"
+        );
         assert_eq!(row["iterations"], 4);
         assert!(row["metrics"]["global"]["nrmse"].as_f64().is_some_and(f64::is_finite), "{row}");
         let report = report(&d.join("out").join(dir));
@@ -43,4 +46,22 @@ fn demo_compares_the_fields_with_both_classical_methods() {
         assert!(d.join("out").join(file).is_file(), "{file}");
     }
     refused(&fluidnerf(d, &args), "already holds a demo; pass --force to replace it");
+}
+
+/// Without `--max-iterations` the demo lifts every method's own cap, as `study` does, so that
+/// the held-out rule or the one time budget ends each run; a budget that is no number of
+/// seconds is refused before anything is written.
+#[test]
+fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let d = tmp.path();
+    for budget in ["0", "-1", "inf", "nan"] {
+        let out = fluidnerf(d, &["demo", "-o", "out", "--time-budget", budget, "-q"]);
+        refused(&out, "--time-budget must be a positive, finite number of seconds");
+        assert!(!d.join("out").exists(), "--time-budget {budget}: nothing is written");
+    }
+    let out = fluidnerf(d, &["demo", "--help"]);
+    ok(&out);
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(help.contains("default: 1000000 under held-out and budget"), "{help}");
 }

@@ -157,6 +157,21 @@ pub(crate) fn parse_seed(s: &str) -> Result<u64, String> {
 
 /// Parses an iteration cap (`--max-iterations`): 1 to [`fluidnerf_core::MAX_ITERATIONS`]. A
 /// cap of 2^64 − 1 overflowed the progress total of a run of several windows.
+/// Iteration cap of the runs of a comparison (`study`, `demo`) without `--max-iterations`.
+/// Under held-out stopping and the budget rule, the rule and the same time budget end every
+/// method's run: a method's own cap would stop some methods while they still improve
+/// (`docs/claims.md` has an example), so the cap is set far above what any method does in a
+/// budget. Under the methods' own rules each keeps its own cap, which is part of that rule.
+pub(crate) const UNCAPPED: usize = 1_000_000;
+
+/// The cap [`UNCAPPED`] describes: None (each method's own) under `--stop own`.
+pub(crate) fn comparison_cap(stop: reconstruct::StopArg) -> Option<usize> {
+    match stop {
+        reconstruct::StopArg::Own => None,
+        _ => Some(UNCAPPED),
+    }
+}
+
 pub(crate) fn parse_max_iterations(s: &str) -> Result<usize, String> {
     let max = fluidnerf_core::MAX_ITERATIONS;
     match s.trim().parse::<u64>() {

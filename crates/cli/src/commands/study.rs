@@ -288,20 +288,11 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     Ok(g)
 }
 
-/// Iteration cap of a study's runs without `--max-iterations`. Under held-out stopping and the
-/// budget rule, the rule and the same time budget end every method's run: a method's own cap
-/// would stop some methods while they still improve (`docs/claims.md` has an example), so
-/// the cap is set far above what any method does in a budget. Under the methods' own rules
-/// each keeps its own cap, which is part of that rule.
-const UNCAPPED: usize = 1_000_000;
-
 fn default_cap(smoke: bool, stop: StopArg) -> Option<usize> {
     if smoke {
         Some(20)
-    } else if matches!(stop, StopArg::Own) {
-        None
     } else {
-        Some(UNCAPPED)
+        super::comparison_cap(stop)
     }
 }
 
@@ -775,10 +766,10 @@ mod tests {
 
     #[test]
     fn the_held_out_and_budget_rules_end_runs_instead_of_the_methods_own_caps() {
-        assert_eq!(cap(&[]), Some(UNCAPPED), "held-out is the default rule");
-        assert_eq!(cap(&["--stop", "held-out"]), Some(UNCAPPED));
-        assert_eq!(cap(&["--stop", "budget"]), Some(UNCAPPED));
-        assert_eq!(cap(&["--stop", "auto"]), Some(UNCAPPED));
+        assert_eq!(cap(&[]), Some(crate::commands::UNCAPPED), "held-out is the default rule");
+        assert_eq!(cap(&["--stop", "held-out"]), Some(crate::commands::UNCAPPED));
+        assert_eq!(cap(&["--stop", "budget"]), Some(crate::commands::UNCAPPED));
+        assert_eq!(cap(&["--stop", "auto"]), Some(crate::commands::UNCAPPED));
         assert_eq!(cap(&["--stop", "own"]), None, "a method's own rule keeps its own cap");
         assert_eq!(cap(&["--max-iterations", "70"]), Some(70));
         assert_eq!(cap(&["--stop", "own", "--max-iterations", "70"]), Some(70));
