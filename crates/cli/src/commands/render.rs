@@ -10,6 +10,7 @@ use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
 use fluidnerf_core::{num, render_image, Aabb, Baked, Camera, Image, RenderSettings, ScalarField, Support, Volume};
 use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use fluidnerf_viz::Colormap;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::export::{load_source, Source};
@@ -521,13 +522,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
-    for (img, path) in images.iter().zip(&outputs) {
-        match full_scale {
-            Some(fs) => fluidnerf_io::image::write_png16(path, img, fs),
-            None => fluidnerf_io::image::write_tiff_f32(path, img),
-        }
-        .with_context(|| format!("writing {}", path.display()))?;
-    }
+    // Encoded and written on every core (a PNG's compression is most of a small view's cost);
+    // a view that could not be written is named.
+    images
+        .par_iter()
+        .zip(&outputs)
+        .map(|(img, path)| {
+            match full_scale {
+                Some(fs) => fluidnerf_io::image::write_png16(path, img, fs),
+                None => fluidnerf_io::image::write_tiff_f32(path, img),
+            }
+            .with_context(|| format!("writing {}", path.display()))
+        })
+        .collect::<anyhow::Result<Vec<()>>>()?;
     if args.orbit.is_some() {
         let p = out.join("turntable.gif");
         let clipping = fluidnerf_viz::write_turntable_gif(&p, &images, args.colormap, args.frame_ms)
