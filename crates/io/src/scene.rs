@@ -115,10 +115,19 @@ const INTRINSIC_KEYS: [&str; 19] = [
     "opencv_k5",
     "opencv_k6",
 ];
-const TOP_KEYS: [&str; 8] =
-    ["frames", "aabb", "units", "intensity_scale", "truth", "linearisation", "background", "flow_axis"];
-const FRAME_KEYS: [&str; 8] =
-    ["file_path", "transform_matrix", "time", "camera", "holdout", "thin_lens", "background", "mask_path"];
+const TOP_KEYS: [&str; 9] =
+    ["frames", "aabb", "units", "intensity_scale", "truth", "linearisation", "background", "flat_field", "flow_axis"];
+const FRAME_KEYS: [&str; 9] = [
+    "file_path",
+    "transform_matrix",
+    "time",
+    "camera",
+    "holdout",
+    "thin_lens",
+    "background",
+    "flat_field",
+    "mask_path",
+];
 const TRUTH_KEYS: [&str; 2] = ["time", "file_path"];
 
 /// Keys that nerfstudio (`ns-process-data`), instant-ngp and the Blender/NeRF-synthetic
@@ -275,6 +284,8 @@ struct FrameEntry {
     #[serde(skip_serializing_if = "Option::is_none")]
     background: Option<BackgroundKey>,
     #[serde(skip_serializing_if = "Option::is_none")]
+    flat_field: Option<FlatFieldKey>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     mask_path: Option<String>,
     #[serde(flatten)]
     intrinsics: IntrinsicKeys,
@@ -316,6 +327,8 @@ struct FrameIn {
     #[serde(default)]
     background: Option<BackgroundKey>,
     #[serde(default)]
+    flat_field: Option<FlatFieldKey>,
+    #[serde(default)]
     mask_path: Option<String>,
 }
 
@@ -335,6 +348,8 @@ struct TopIn {
     #[serde(default)]
     background: Option<BackgroundKey>,
     #[serde(default)]
+    flat_field: Option<FlatFieldKey>,
+    #[serde(default)]
     flow_axis: Option<[f64; 3]>,
     frames: Vec<Value>,
 }
@@ -347,6 +362,24 @@ enum BackgroundKey {
     Constant(f64),
     Frames(Vec<String>),
     Frame(String),
+}
+
+/// `flat_field` as written: the flat-field images whose pixelwise median is the flat (a list,
+/// or one path alone).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged, expecting = "an image's path or a list of images' paths")]
+enum FlatFieldKey {
+    Frames(Vec<String>),
+    Frame(String),
+}
+
+impl FlatFieldKey {
+    fn paths(&self) -> Vec<&str> {
+        match self {
+            FlatFieldKey::Frames(v) => v.iter().map(String::as_str).collect(),
+            FlatFieldKey::Frame(p) => vec![p.as_str()],
+        }
+    }
 }
 
 /// What is subtracted from a frame's image before reconstruction (key `background`).
@@ -380,6 +413,10 @@ impl std::fmt::Display for Background {
 /// - `background` (top level or per frame; the frame's wins): a number subtracted from every
 ///   pixel, or a list of images whose pixelwise median is subtracted. Negative results are
 ///   clipped to 0 and counted.
+/// - `flat_field` (top level or per frame; the frame's wins): the camera's per-pixel
+///   sensitivity, one image or a list of images whose pixelwise median is taken (recordings
+///   of a uniformly lit target or diffuser). The image is divided by it after the background
+///   ([`flat_field_correct`] states the formula).
 /// - `mask_path` (per frame, nerfstudio's key): an image of the frame's size; pixels with a
 ///   non-zero value are used, the others are left out of every method's data.
 /// - `flow_axis` (top level): the mean flow direction, a vector in world coordinates
@@ -396,6 +433,9 @@ pub struct Recording {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameRecording {
     pub background: Background,
+    /// The flat-field images (relative to the scene folder unless absolute) whose pixelwise
+    /// median is the flat; empty for none.
+    pub flat_field: Vec<PathBuf>,
     /// Relative to the scene folder unless absolute.
     pub mask_path: Option<PathBuf>,
 }
@@ -407,24 +447,56 @@ impl Recording {
     }
 
     /// One line on what preprocessing the recording asks for, e.g. "background: median of 3
-    /// background frames (12 frames); masks: 12 frames".
+    /// background frames (12 frames); flat field: one flat frame (12 frames); masks: 12
+    /// frame(s); 8-bit images: srgb".
     pub fn describe(&self) -> String {
-        let mut kinds: Vec<(String, usize)> = Vec::new();
-        for f in &self.frames {
-            let k = f.background.to_string();
-            match kinds.iter_mut().find(|(d, _)| *d == k) {
-                Some((_, n)) => *n += 1,
-                None => kinds.push((k, 1)),
+        // Each kind with the number of frames of that kind, in order of first appearance.
+        let tally = |kind: &dyn Fn(&FrameRecording) -> String| {
+            let mut kinds: Vec<(String, usize)> = Vec::new();
+            for f in &self.frames {
+                let k = kind(f);
+                match kinds.iter_mut().find(|(d, _)| *d == k) {
+                    Some((_, n)) => *n += 1,
+                    None => kinds.push((k, 1)),
+                }
             }
-        }
-        let background = if kinds.iter().all(|(k, _)| k == "none") {
-            "none".to_string()
-        } else {
-            kinds.iter().map(|(k, n)| format!("{k} ({n} frames)")).collect::<Vec<_>>().join(", ")
+            if kinds.iter().all(|(k, _)| k == "none") {
+                "none".to_string()
+            } else {
+                kinds.iter().map(|(k, n)| format!("{k} ({n} frames)")).collect::<Vec<_>>().join(", ")
+            }
         };
+        let background = tally(&|f| f.background.to_string());
+        let flat = tally(&|f| match f.flat_field.len() {
+            0 => "none".to_string(),
+            1 => "one flat frame".to_string(),
+            n => format!("median of {n} flat frames"),
+        });
         let masks = self.frames.iter().filter(|f| f.mask_path.is_some()).count();
-        format!("background: {background}; masks: {masks} frame(s); 8-bit images: {}", self.linearisation)
+        format!(
+            "background: {background}; flat field: {flat}; masks: {masks} frame(s); 8-bit images: {}",
+            self.linearisation
+        )
     }
+
+    /// Whether any frame asks for a background, a flat field or a mask (else the images are
+    /// used as read).
+    pub fn preprocesses(&self) -> bool {
+        self.frames
+            .iter()
+            .any(|f| f.background != Background::None || !f.flat_field.is_empty() || f.mask_path.is_some())
+    }
+}
+
+fn flat_field_from_key(key: Option<&FlatFieldKey>) -> Vec<PathBuf> {
+    key.map(|k| k.paths().into_iter().map(PathBuf::from).collect()).unwrap_or_default()
+}
+
+fn flat_field_to_key(file: &Path, flat: &[PathBuf]) -> Result<Option<FlatFieldKey>, IoError> {
+    if flat.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(FlatFieldKey::Frames(flat.iter().map(|p| path_str(file, p)).collect::<Result<_, _>>()?)))
 }
 
 fn background_from_key(key: Option<&BackgroundKey>) -> Background {
@@ -446,8 +518,9 @@ fn background_to_key(file: &Path, b: &Background) -> Result<Option<BackgroundKey
     })
 }
 
-/// Checks the preprocessing keys of a file: finite constants, non-empty background lists, a
-/// non-zero flow axis. Errors name the key and the frame.
+/// Checks the preprocessing keys of a file: finite constants, non-empty background and flat-field
+/// lists without blank paths, no frame whose flat field is its own image, a non-zero flow axis.
+/// Errors name the key and the frame.
 fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Result<(), IoError> {
     let check_bg = |b: &Option<BackgroundKey>, place: &str| match b {
         Some(BackgroundKey::Constant(c)) if !(c.is_finite() && *c >= 0.0) => Err(IoError::invalid(
@@ -460,9 +533,45 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
         )),
         _ => Ok(()),
     };
+    let check_flat = |flat: &Option<FlatFieldKey>, place: &str| {
+        let Some(flat) = flat else { return Ok(()) };
+        let paths = flat.paths();
+        if paths.is_empty() {
+            return Err(IoError::invalid(
+                file,
+                format!("{place}: is an empty list; give at least one flat-field image (or leave the key out)"),
+            ));
+        }
+        match paths.iter().position(|p| p.trim().is_empty()) {
+            Some(k) => Err(IoError::invalid(
+                file,
+                format!("{place}: entry {k} is {:?}, which names no image; give the flat-field image's path", paths[k]),
+            )),
+            None => Ok(()),
+        }
+    };
     check_bg(&top.background, "top level")?;
+    check_flat(&top.flat_field, "top level, key `flat_field`")?;
     for (i, f) in frames {
         check_bg(&f.background, &format!("frame {i} ({})", f.file_path))?;
+        let place = format!("frame {i} ({}), key `frames[{i}].flat_field`", f.file_path);
+        check_flat(&f.flat_field, &place)?;
+        // A flat field is a recording of its own: the frame's image divided by itself is 1.
+        let (flat, place) = match (&f.flat_field, &top.flat_field) {
+            (Some(own), _) => (own, place),
+            (None, Some(shared)) => (shared, format!("frame {i} ({}), key `flat_field` (top level)", f.file_path)),
+            (None, None) => continue,
+        };
+        let image = normalise(Path::new(&f.file_path));
+        if let Some(p) = flat.paths().into_iter().find(|p| normalise(Path::new(p)) == image) {
+            return Err(IoError::invalid(
+                file,
+                format!(
+                    "{place}: names {p}, the frame's own image; a flat field is a separate recording of a \
+                     uniformly lit target (a diffuser or a white screen) with the same camera and lens"
+                ),
+            ));
+        }
     }
     if let Some(a) = top.flow_axis {
         let v = DVec3::from_array(a);
@@ -896,6 +1005,7 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
         check_recording(&file, &top, &[(i, &entry)])?;
         frame_recordings.push(FrameRecording {
             background: background_from_key(entry.background.as_ref().or(top.background.as_ref())),
+            flat_field: flat_field_from_key(entry.flat_field.as_ref().or(top.flat_field.as_ref())),
             mask_path: entry.mask_path.as_ref().map(PathBuf::from),
         });
         let keys: IntrinsicKeys = typed(&file, value, &prefix, Some(i))?;
@@ -1437,6 +1547,7 @@ pub fn save_scene_recording(
     for ((f, k), r) in scene.frames.iter().zip(keys).zip(&recording.frames) {
         frames.push(FrameEntry {
             background: background_to_key(&file, &r.background)?,
+            flat_field: flat_field_to_key(&file, &r.flat_field)?,
             mask_path: r.mask_path.as_deref().map(|p| path_str(&file, p)).transpose()?,
             file_path: path_str(&file, &f.file_path)?,
             transform_matrix: world_from_camera_to_opengl_c2w(&f.camera.world_from_camera),
@@ -1493,6 +1604,10 @@ pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
         None => None,
         Some(v) => Some(typed(&file, v, "background", None)?),
     };
+    let top_flat: Option<FlatFieldKey> = match raw.get("flat_field") {
+        None => None,
+        Some(v) => Some(typed(&file, v, "flat_field", None)?),
+    };
     let flow_axis: Option<[f64; 3]> = match raw.get("flow_axis") {
         None => None,
         Some(v) => Some(typed(&file, v, "flow_axis", None)?),
@@ -1504,6 +1619,8 @@ pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
         #[serde(default)]
         background: Option<BackgroundKey>,
         #[serde(default)]
+        flat_field: Option<FlatFieldKey>,
+        #[serde(default)]
         mask_path: Option<String>,
     }
     let listed: Vec<Value> = raw.get("frames").and_then(Value::as_array).cloned().unwrap_or_default();
@@ -1514,6 +1631,7 @@ pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
     }
     let record = |k: &Keys| FrameRecording {
         background: background_from_key(k.background.as_ref().or(top_background.as_ref())),
+        flat_field: flat_field_from_key(k.flat_field.as_ref().or(top_flat.as_ref())),
         mask_path: k.mask_path.as_ref().map(PathBuf::from),
     };
     let frames = if entries.len() == scene.frames.len() {
@@ -1529,6 +1647,7 @@ pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
                     .map(record)
                     .unwrap_or_else(|| FrameRecording {
                         background: background_from_key(top_background.as_ref()),
+                        flat_field: flat_field_from_key(top_flat.as_ref()),
                         mask_path: None,
                     })
             })
@@ -1548,8 +1667,8 @@ pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
 }
 
 /// Reads every frame's image as the scene file records it ([`recorded`]): linearised, with
-/// its `background` subtracted and negative results clipped to 0 (logged with their count).
-/// See [`load_preprocessed`] for the masks and the counts.
+/// its `background` subtracted, negative results clipped to 0 (logged with their count), and
+/// divided by its `flat_field`. See [`load_preprocessed`] for the masks and the counts.
 pub fn load_images(scene: &Scene) -> Result<Vec<Image>, IoError> {
     Ok(load_preprocessed(scene)?.images)
 }
@@ -1557,7 +1676,7 @@ pub fn load_images(scene: &Scene) -> Result<Vec<Image>, IoError> {
 /// The images of a scene ready for reconstruction, with what was done to them.
 #[derive(Clone, Debug)]
 pub struct Preprocessed {
-    /// Per frame: linearised, background subtracted, clipped at 0.
+    /// Per frame: linearised, background subtracted, clipped at 0, divided by the flat field.
     pub images: Vec<Image>,
     /// Per frame: `true` for pixels to use, when the frame has a mask.
     pub masks: Vec<Option<Vec<bool>>>,
@@ -1566,16 +1685,148 @@ pub struct Preprocessed {
     /// Pixels at the full scale of their integer images (saturated: they recorded less light
     /// than arrived), counted before any subtraction.
     pub saturated: usize,
+    /// The smallest and largest value of the normalised flat fields ([`normalise_flat`]) over
+    /// the used pixels of every frame that has one: the image was divided by them, so a pixel
+    /// gained up to `1 / min` and lost up to `1 / max`. `None` without flat fields.
+    pub flat_range: Option<(f32, f32)>,
     /// What was asked for ([`Recording::describe`]).
     pub recording: Recording,
 }
 
 /// Reads a scene's images and masks and preprocesses the images as its file records
-/// ([`Recording`]). Background images are read with the scene's linearisation and must have
-/// the size of their frame; the median of several is taken pixel by pixel and computed once per
-/// distinct list. Errors name the background or mask file, the frame and its camera.
+/// ([`Recording`]). Background and flat-field images are read with the scene's linearisation
+/// and must have the size of their frame; the median of several is taken pixel by pixel and
+/// computed once per distinct list. Errors name the background, flat-field or mask file, the
+/// frame and its camera.
+///
+/// # Flat field
+/// A frame with a `flat_field` is corrected as
+///
+/// ```text
+/// corrected = max(raw − D, 0) / F,    F = (flat − D) / mean_used(flat − D),
+/// ```
+///
+/// with `raw` the linearised image, `flat` the pixelwise median of its flat-field images, `D`
+/// the frame's `background` (the constant, or the median of its background images; 0 without
+/// one), subtracted from the flat as from the image: the standard `(raw − dark) / (flat −
+/// dark)`. `mean_used` is the mean over the image, or over the pixels its mask uses, so `F`
+/// averages 1 there and the image keeps its overall scale (gains and `intensity_scale` mean
+/// what they meant). See [`normalise_flat`] for the pixels it refuses.
 pub fn load_preprocessed(scene: &Scene) -> Result<Preprocessed, IoError> {
     load_preprocessed_with(scene, recorded(scene)?)
+}
+
+/// A flat-field pixel (after its dark level) at or below this fraction of the flat's mean is
+/// refused ([`normalise_flat`]): dividing by it would multiply the pixel's noise 20-fold or more.
+pub const FLAT_FIELD_MIN_FRACTION: f64 = 0.05;
+
+/// Normalises a flat field with its dark level already subtracted, `flat` (a frame's size), to
+/// mean 1 over the used pixels (`mask`: `true` to use; every pixel without one), and returns the
+/// smallest and largest normalised value over them. Pixels the mask leaves out are set to 1
+/// (their image pixels stay as they are) when they hold too little light to divide by.
+///
+/// Refuses, with the problem in words: a flat without light (a mean that is not positive and
+/// finite) and used pixels at or below [`FLAT_FIELD_MIN_FRACTION`] of the mean, giving how
+/// many, the first and the box of columns and rows that holds them all.
+pub fn normalise_flat(flat: &mut Image, mask: Option<&[bool]>) -> Result<(f32, f32), String> {
+    let used = |k: usize| mask.is_none_or(|m| m[k]);
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for (k, &v) in flat.data.iter().enumerate() {
+        if used(k) {
+            sum += f64::from(v);
+            count += 1;
+        }
+    }
+    let mean = sum / count.max(1) as f64;
+    if !(mean.is_finite() && mean > 0.0) {
+        return Err(format!(
+            "holds no light once its dark level (the frame's background) is subtracted: its mean over the {count} \
+             used pixel(s) is {}; a flat field records a uniformly lit target, brighter than the background",
+            num(mean)
+        ));
+    }
+    let floor = FLAT_FIELD_MIN_FRACTION * mean;
+    let low: Vec<usize> = (0..flat.data.len()).filter(|&k| used(k) && !(f64::from(flat.data[k]) > floor)).collect();
+    if let Some(&first) = low.first() {
+        let w = flat.width;
+        let (cols, rows) = low.iter().fold(((usize::MAX, 0), (usize::MAX, 0)), |((c0, c1), (r0, r1)), &k| {
+            ((c0.min(k % w), c1.max(k % w)), (r0.min(k / w), r1.max(k / w)))
+        });
+        return Err(format!(
+            "{} of its {count} used pixel(s) are at or below {:.0} % of its mean ({}) once its dark level (the \
+             frame's background) is subtracted, the first at (col {}, row {}) with {}, all within cols {}..={}, \
+             rows {}..={}; dividing by them would multiply their noise {:.0}-fold or more: record the flat \
+             brighter, or leave those pixels out with the frame's `mask_path`",
+            low.len(),
+            100.0 * FLAT_FIELD_MIN_FRACTION,
+            num(mean),
+            first % w,
+            first / w,
+            num(f64::from(flat.data[first])),
+            cols.0,
+            cols.1,
+            rows.0,
+            rows.1,
+            1.0 / FLAT_FIELD_MIN_FRACTION
+        ));
+    }
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for (k, v) in flat.data.iter_mut().enumerate() {
+        let n = (f64::from(*v) / mean) as f32;
+        if used(k) {
+            lo = lo.min(n);
+            hi = hi.max(n);
+            *v = n;
+        } else {
+            *v = if f64::from(*v) > floor { n } else { 1.0 };
+        }
+    }
+    Ok((lo, hi))
+}
+
+/// The pixelwise median of the images `list` (a frame's `what`, e.g. "background image"), read
+/// with `linearisation`, each of size `size` and, when `kind` is given, stored as `kind`; with
+/// the number of their pixels at their kind's full scale. `label` names the frame and `file`
+/// the scene file in errors.
+#[allow(clippy::too_many_arguments)]
+fn median_of_files(
+    scene: &Scene,
+    file: &Path,
+    list: &[PathBuf],
+    what: &str,
+    label: &str,
+    size: (usize, usize),
+    kind: Option<SampleKind>,
+    linearisation: Linearisation,
+) -> Result<(Image, usize), IoError> {
+    let (w, h) = size;
+    let mut stack = Vec::with_capacity(list.len());
+    let mut saturated = 0usize;
+    for p in list {
+        let path = scene.resolve(p);
+        let (img, img_kind) = crate::image::read_image_with(&path, linearisation)
+            .map_err(|e| IoError::invalid(file, format!("{label}: {what} {}: {e}", path.display())))?;
+        if let Some(kind) = kind.filter(|k| *k != img_kind) {
+            return Err(IoError::invalid(
+                &path,
+                format!(
+                    "{what} is {} image but the scene's images are {kind}; {}",
+                    img_kind.with_article(),
+                    different_scales(img_kind, kind)
+                ),
+            ));
+        }
+        if (img.width, img.height) != (w, h) {
+            return Err(IoError::invalid(
+                &path,
+                format!("{what} is {}x{} pixels but {label} is {w}x{h}", img.width, img.height),
+            ));
+        }
+        check_pixels(&path, &img)?;
+        saturated += img_kind.saturated(&img);
+        stack.push(img);
+    }
+    Ok((median_image(&stack), saturated))
 }
 
 /// [`load_preprocessed`] with the preprocessing keys given (one entry per frame, paths relative
@@ -1585,6 +1836,8 @@ pub fn load_preprocessed_with(scene: &Scene, recording: Recording) -> Result<Pre
     assert_eq!(recording.frames.len(), scene.frames.len(), "load_preprocessed_with: one recording entry per frame");
     let (mut images, kind) = load_images_and_kind(scene, recording.linearisation)?;
     let saturated = saturated_pixels(scene, &images, kind);
+    // Read first: a flat field is normalised over the pixels its frame's mask uses.
+    let masks = load_masks(scene, &recording)?;
     let file = scene.root.join(SCENE_FILE);
     let frame_label = |i: usize| {
         let f = &scene.frames[i];
@@ -1593,73 +1846,125 @@ pub fn load_preprocessed_with(scene: &Scene, recording: Recording) -> Result<Pre
             None => format!("frame {i} ({})", f.file_path.display()),
         }
     };
+    // The file itself where it exists (links and spellings resolved).
+    let canonical = |p: &Path| {
+        let path = scene.resolve(p);
+        std::fs::canonicalize(&path).unwrap_or_else(|_| normalise(&std::path::absolute(&path).unwrap_or(path)))
+    };
+    // Medians of background lists, and of flat-field lists.
     let mut medians: std::collections::HashMap<Vec<PathBuf>, Image> = std::collections::HashMap::new();
+    let mut flats: std::collections::HashMap<Vec<PathBuf>, Image> = std::collections::HashMap::new();
     let mut clipped = 0usize;
+    let mut flat_range: Option<(f32, f32)> = None;
     for (i, (image, rec)) in images.iter_mut().zip(&recording.frames).enumerate() {
         let (w, h) = (image.width, image.height);
-        match &rec.background {
-            Background::None => continue,
-            Background::Constant(c) => {
-                let c = *c as f32;
-                image.data.iter_mut().for_each(|v| *v -= c);
+        let label = frame_label(i);
+        if let Background::Frames(list) = &rec.background {
+            if !medians.contains_key(list) {
+                let (median, _) = median_of_files(
+                    scene,
+                    &file,
+                    list,
+                    "background image",
+                    &label,
+                    (w, h),
+                    Some(kind),
+                    recording.linearisation,
+                )?;
+                medians.insert(list.clone(), median);
             }
-            Background::Frames(list) => {
-                if !medians.contains_key(list) {
-                    let mut stack = Vec::with_capacity(list.len());
-                    for p in list {
-                        let path = scene.resolve(p);
-                        let (bg, bg_kind) =
-                            crate::image::read_image_with(&path, recording.linearisation).map_err(|e| {
-                                IoError::invalid(
-                                    &file,
-                                    format!("{}: background image {}: {e}", frame_label(i), path.display()),
-                                )
-                            })?;
-                        if bg_kind != kind {
-                            return Err(IoError::invalid(
-                                &path,
-                                format!(
-                                    "background image is {} image but the scene's images are {kind}; {}",
-                                    bg_kind.with_article(),
-                                    different_scales(bg_kind, kind)
-                                ),
-                            ));
-                        }
-                        if (bg.width, bg.height) != (w, h) {
-                            return Err(IoError::invalid(
-                                &path,
-                                format!(
-                                    "background image is {}x{} pixels but {} is {w}x{h}",
-                                    bg.width,
-                                    bg.height,
-                                    frame_label(i)
-                                ),
-                            ));
-                        }
-                        check_pixels(&path, &bg)?;
-                        stack.push(bg);
-                    }
-                    medians.insert(list.clone(), median_image(&stack));
+        }
+        let background: Option<&Image> = match &rec.background {
+            Background::Frames(list) => Some(&medians[list]),
+            _ => None,
+        };
+        let constant = match rec.background {
+            Background::Constant(c) => c as f32,
+            _ => 0.0,
+        };
+        if rec.background != Background::None {
+            match background {
+                Some(bg) => image.data.iter_mut().zip(&bg.data).for_each(|(v, b)| *v -= b),
+                None => image.data.iter_mut().for_each(|v| *v -= constant),
+            }
+            for v in &mut image.data {
+                if *v < 0.0 {
+                    *v = 0.0;
+                    clipped += 1;
                 }
-                let bg = &medians[list];
-                image.data.iter_mut().zip(&bg.data).for_each(|(v, b)| *v -= b);
+            }
+            if image.data.iter().all(|&v| v == 0.0) {
+                log::warn!(
+                    "{label}: nothing is left after its background is subtracted (every pixel at or below it); \
+                     the frame now reads as black"
+                );
             }
         }
-        for v in &mut image.data {
-            if *v < 0.0 {
-                *v = 0.0;
-                clipped += 1;
+        if rec.flat_field.is_empty() {
+            continue;
+        }
+        let flat_key = format!("{label}, `flat_field`");
+        let own = canonical(&scene.frames[i].file_path);
+        if let Some(p) = rec.flat_field.iter().find(|p| canonical(p) == own) {
+            return Err(IoError::invalid(
+                &file,
+                format!(
+                    "{flat_key}: names {}, the frame's own image; a flat field is a separate recording of a \
+                     uniformly lit target (a diffuser or a white screen) with the same camera and lens",
+                    p.display()
+                ),
+            ));
+        }
+        if let Background::Frames(list) = &rec.background {
+            if list.iter().map(|p| canonical(p)).eq(rec.flat_field.iter().map(|p| canonical(p))) {
+                return Err(IoError::invalid(
+                    &file,
+                    format!(
+                        "{flat_key}: names the frame's background images, which would leave no light once the \
+                         background is subtracted from it; give the images of the uniformly lit target"
+                    ),
+                ));
             }
         }
-        if image.data.iter().all(|&v| v == 0.0) {
-            log::warn!(
-                "{}: nothing is left after its background is subtracted (every pixel at or below it); the frame \
-                 now reads as black",
-                frame_label(i)
-            );
+        if !flats.contains_key(&rec.flat_field) {
+            // The background is subtracted from the flat too, so it must be on the images'
+            // scale; without one, a flat stored otherwise (a normalised float flat) serves.
+            let same_kind = (rec.background != Background::None).then_some(kind);
+            let (median, saturated) = median_of_files(
+                scene,
+                &file,
+                &rec.flat_field,
+                "`flat_field` image",
+                &label,
+                (w, h),
+                same_kind,
+                recording.linearisation,
+            )?;
+            if saturated > 0 {
+                log::warn!(
+                    "{flat_key}: {saturated} pixel(s) of the flat-field image(s) at their full scale (saturated): \
+                     the flat is too low there and those pixels are over-corrected; record the flat with less \
+                     exposure"
+                );
+            }
+            flats.insert(rec.flat_field.clone(), median);
         }
+        let mut flat = flats[&rec.flat_field].clone();
+        match background {
+            Some(bg) => flat.data.iter_mut().zip(&bg.data).for_each(|(v, b)| *v -= b),
+            None => flat.data.iter_mut().for_each(|v| *v -= constant),
+        }
+        let (lo, hi) = normalise_flat(&mut flat, masks[i].as_deref()).map_err(|problem| {
+            let files: Vec<String> = rec.flat_field.iter().map(|p| p.display().to_string()).collect();
+            let which = match files.as_slice() {
+                [one] => format!("flat-field image {one}"),
+                many => format!("median of the flat-field images {}", many.join(", ")),
+            };
+            IoError::invalid(&file, format!("{flat_key}: the {which} {problem}"))
+        })?;
+        image.data.iter_mut().zip(&flat.data).for_each(|(v, f)| *v /= f);
+        flat_range = Some(flat_range.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
     }
-    let masks = load_masks(scene, &recording)?;
     if clipped > 0 {
         let total: usize = images.iter().map(|im| im.data.len()).sum();
         log::info!(
@@ -1667,7 +1972,10 @@ pub fn load_preprocessed_with(scene: &Scene, recording: Recording) -> Result<Pre
             100.0 * clipped as f64 / total.max(1) as f64
         );
     }
-    Ok(Preprocessed { images, masks, clipped, saturated, recording })
+    if let Some((lo, hi)) = flat_range {
+        log::info!("divided the images by their flat fields, normalised to mean 1: values {lo:.3} .. {hi:.3}");
+    }
+    Ok(Preprocessed { images, masks, clipped, saturated, flat_range, recording })
 }
 
 /// Pixels at the full scale of `kind` (integer images only) in `images`, the scene's frames;

@@ -36,7 +36,7 @@ pub fn recording(syn: &Synthesis) -> Recording {
         frames: syn
             .frames
             .iter()
-            .map(|f| FrameRecording { background: background(f.camera), mask_path: None })
+            .map(|f| FrameRecording { background: background(f.camera), ..Default::default() })
             .collect(),
         flow_axis,
     }
