@@ -303,13 +303,16 @@ fn transforms_json_without_a_box_gets_an_estimated_one() {
     assert_eq!(load_scene(&out).expect("loads").aabb.max, DVec3::splat(3.0));
     assert!(stderr(&o).contains("--linearisation srgb"), "8-bit images without a choice are warned about");
 
-    // nerfstudio's mask_path and a background are carried over (paths from the new scene);
+    // nerfstudio's mask_path, a background and a flat field are carried over (paths from the
+    // new scene);
     // --holdout takes image names (these frames name no camera); an unknown name is refused.
     let mask = image::GrayImage::from_pixel(w as u32, h as u32, image::Luma([255u8]));
     mask.save(src.join("mask_0.png")).expect("saves");
     let mut v = v;
     v["frames"][0]["mask_path"] = serde_json::json!("mask_0.png");
     v["background"] = serde_json::json!(2.0);
+    image::GrayImage::from_pixel(w as u32, h as u32, image::Luma([200u8])).save(src.join("flat.png")).expect("saves");
+    v["flat_field"] = serde_json::json!("flat.png");
     std::fs::write(&file, v.to_string()).expect("writes");
     let o = fluidnerf(&["import", "--transforms", s(&file), "--holdout", "r_3", "-o", s(&out), "--force"]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -318,6 +321,7 @@ fn transforms_json_without_a_box_gets_an_estimated_one() {
     let rec = fluidnerf_io::scene::recorded(&scene).expect("recorded");
     assert_eq!(rec.frames[0].mask_path.as_deref(), Some(src.join("mask_0.png").as_path()));
     assert_eq!(rec.frames[5].background, fluidnerf_io::scene::Background::Constant(2.0));
+    assert_eq!(rec.frames[5].flat_field, vec![src.join("flat.png")]);
     assert!(fluidnerf_io::scene::load_preprocessed(&scene).expect("preprocesses").masks[0].is_some());
     let o = fluidnerf(&["import", "--transforms", s(&file), "--holdout", "r_9", "-o", s(&out), "--force"]);
     assert!(!o.status.success() && stderr(&o).contains("no camera or image named `r_9`"), "{}", stderr(&o));
@@ -882,8 +886,8 @@ fn a_truth_volume_is_not_moved_into_another_box() {
     assert!(import(&["--aabb", "-20,-20,-20,20,20,20"]).status.success());
 }
 
-/// A transforms.json's mask or background image that does not exist is named with its frame
-/// and key, before anything is written.
+/// A transforms.json's mask, background or flat-field image that does not exist is named with
+/// its frame and key, before anything is written.
 #[test]
 fn a_transforms_json_with_a_missing_mask_or_background_is_named() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -893,6 +897,7 @@ fn a_transforms_json_with_a_missing_mask_or_background_is_named() {
     for (key, value, want) in [
         ("mask_path", serde_json::json!("masks/a.png"), "transforms.json: frame 0's `mask_path`"),
         ("background", serde_json::json!(["dark/0.png"]), "transforms.json: frame 0's `background` image"),
+        ("flat_field", serde_json::json!("flat/0.png"), "transforms.json: frame 0's `flat_field` image"),
     ] {
         let mut frame = serde_json::json!({"file_path": "a.png", "transform_matrix": [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 90], [0, 0, 0, 1]]});
         frame[key] = value;
@@ -906,8 +911,9 @@ fn a_transforms_json_with_a_missing_mask_or_background_is_named() {
     }
 }
 
-/// A transforms.json's mask or background of another size than its frame's image is refused
-/// by the import, naming the file, rather than written into a scene every later command refuses.
+/// A transforms.json's mask, background or flat field of another size than its frame's image is
+/// refused by the import, naming the file, rather than written into a scene every later command
+/// refuses.
 #[test]
 fn a_transforms_json_whose_mask_or_background_does_not_fit_is_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -915,8 +921,11 @@ fn a_transforms_json_whose_mask_or_background_does_not_fit_is_refused() {
     image(&src, "a.png");
     write_png16_counts(&src.join("small.png"), &Image::from_vec(16, 12, vec![1.0; 16 * 12])).expect("writes");
     let out = dir.path().join("out");
-    for (key, value) in [("mask_path", serde_json::json!("small.png")), ("background", serde_json::json!("small.png"))]
-    {
+    for (key, value) in [
+        ("mask_path", serde_json::json!("small.png")),
+        ("background", serde_json::json!("small.png")),
+        ("flat_field", serde_json::json!(["small.png"])),
+    ] {
         let mut frame = serde_json::json!({"file_path": "a.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 90], [0, 0, 0, 1]]});
         frame[key] = value;
         let doc =

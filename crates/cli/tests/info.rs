@@ -361,6 +361,41 @@ fn masks_are_checked_as_a_run_reads_them() {
     assert_fails_with(&info(dir.path()), &["m.png", "8x8"]);
 }
 
+/// What preprocessing the scene asks for is said, and its flat fields are read as a run reads
+/// them: their range once normalised, or the problem with the file and frame named.
+#[test]
+fn flat_fields_are_described_and_checked_as_a_run_reads_them() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    let o = info(dir.path());
+    let (stdout, _) = text(&o);
+    assert!(stdout.contains("preprocessing: background: none; flat field: none; masks: 0 frame(s)"), "{stdout}");
+    let ramp = Image::from_vec(32, 24, (0..32 * 24).map(|i| 400.0 + 20.0 * (i % 32) as f32).collect());
+    write_png16_counts(&dir.path().join("flat/f.png"), &ramp).expect("writes");
+    let file = dir.path().join("transforms.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("reads")).expect("json");
+    v["flat_field"] = serde_json::json!("flat/f.png");
+    std::fs::write(&file, v.to_string()).expect("writes");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(stdout.contains("flat field: one flat frame (4 frames)"), "{stdout}");
+    // The ramp 400 … 1020 has mean 710: 0.563 … 1.437.
+    assert!(stdout.contains("flat fields (normalised to mean 1 over the used pixels): 0.563 .. 1.437"), "{stdout}");
+    let mut dark = ramp.clone();
+    dark.set(3, 4, 0.0);
+    write_png16_counts(&dir.path().join("flat/f.png"), &dark).expect("writes");
+    assert_fails_with(
+        &info(dir.path()),
+        &[
+            "frame 0 (images/c0.png, camera cam0), `flat_field`",
+            "flat/f.png",
+            "1 of its 768 used pixel(s)",
+            "(col 3, row 4)",
+        ],
+    );
+}
+
 #[test]
 fn cameras_inside_or_near_the_box() {
     let dir = tempfile::tempdir().expect("tempdir");

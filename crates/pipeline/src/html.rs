@@ -280,11 +280,12 @@ pub(crate) fn write_run_html(
     if let Some(p) = &report.preprocessing {
         let mut table = Table::new(
             format!(
-                "Preprocessing: {}; {} pixels clipped at 0, {} saturated, {} masked; gains {}{}",
+                "Preprocessing: {}; {} pixels clipped at 0, {} saturated, {} masked{}; gains {}{}",
                 p.scene,
                 p.clipped_pixels,
                 p.saturated_pixels,
                 p.masked_pixels,
+                p.flat_field_text(),
                 p.gains.mode,
                 p.gains_auto.as_ref().map(|why| format!(" (auto: {why})")).unwrap_or_default()
             ),

@@ -1,5 +1,5 @@
 //! The measured images of a run: preprocessed as the scene records it (background subtraction,
-//! clipping, masks: [`fluidnerf_io::scene::load_preprocessed`]), balanced as the run asks
+//! clipping, flat field, masks: [`fluidnerf_io::scene::load_preprocessed`]), balanced as the run asks
 //! ([`GainMode`]), and the least-squares gain fits both method families share.
 //!
 //! # Gains
@@ -116,6 +116,7 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
         clipped_pixels: pre.clipped,
         saturated_pixels: pre.saturated,
         masked_pixels,
+        flat_field_range: pre.flat_range.map(|(lo, hi)| [f64::from(lo), f64::from(hi)]),
         gains: GainConfig { mode, ..*gains },
         gains_auto: auto_why,
         frames: Vec::new(),

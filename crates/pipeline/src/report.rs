@@ -231,6 +231,11 @@ pub struct Preprocessing {
     pub saturated_pixels: usize,
     /// Pixels left out by the frames' masks.
     pub masked_pixels: usize,
+    /// The smallest and largest value of the frames' flat fields, normalised to mean 1 over
+    /// their used pixels, that the images were divided by (absent without flat fields;
+    /// `fluidnerf_io::scene::load_preprocessed` states the correction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flat_field_range: Option<[f64; 2]>,
     /// The gains as the run took them: `mode` is `fit` or `none` where the configuration said
     /// `auto` ([`crate::GainMode::Auto`]).
     pub gains: crate::GainConfig,
@@ -243,14 +248,22 @@ pub struct Preprocessing {
 }
 
 impl Preprocessing {
+    /// `", divided by flat fields of 0.620 .. 1.210"`, or nothing without flat fields.
+    pub fn flat_field_text(&self) -> String {
+        self.flat_field_range
+            .map(|[lo, hi]| format!(", divided by flat fields of {lo:.3} .. {hi:.3}"))
+            .unwrap_or_default()
+    }
+
     /// Lines for a terminal: what was done, each camera's gain, the held-out scores.
     pub fn summary_lines(&self) -> Vec<String> {
         let mut out = vec![format!(
-            "preprocessing: {}; {} pixel(s) clipped at 0, {} saturated, {} masked; gains: {}{}{}",
+            "preprocessing: {}; {} pixel(s) clipped at 0, {} saturated, {} masked{}; gains: {}{}{}",
             self.scene,
             self.clipped_pixels,
             self.saturated_pixels,
             self.masked_pixels,
+            self.flat_field_text(),
             self.gains.mode,
             if self.gains.offset { " with offsets" } else { "" },
             self.gains_auto.as_ref().map(|why| format!(" (auto: {why})")).unwrap_or_default()

@@ -80,8 +80,8 @@ mod davis;
 ///
 /// Every calibrated camera must find its image(s), and every image in IMAGES must belong to a
 /// camera (unless --skip-uncalibrated). The scene is validated (each camera must see the box,
-/// image sizes must match the calibration, no NaN/Inf pixels, a transforms.json's masks and
-/// backgrounds must fit their frames) before `OUT/transforms.json` is
+/// image sizes must match the calibration, no NaN/Inf pixels, a transforms.json's masks,
+/// backgrounds and flat fields must fit their frames) before `OUT/transforms.json` is
 /// written, together with `OUT/import.json` (the settings of this run). Image paths are
 /// written relative to OUT when IMAGES is inside OUT, absolute otherwise. An import that fails
 /// removes what it created (decoded video frames, OUT itself when it made it) and nothing else,
@@ -238,7 +238,7 @@ fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
 /// raw recordings that began or ended apart keep the frames of the times every one of them
 /// recorded, the others' files removed again, with a warning.
 /// Also returns, for each frame returned, the index of the frame it came from (a video's
-/// frames keep its mask and background).
+/// frames keep its mask, background and flat field).
 fn expand_videos(
     frames: Vec<Frame>,
     out: &Path,
@@ -942,11 +942,12 @@ fn remove_stale_davis_frames(out: &Path, earlier: &[PathBuf], referenced: &HashS
     }
 }
 
-/// The files `scene` reads, images and masks, as canonical paths.
+/// The files `scene` reads, images, masks and flat fields, as canonical paths.
 fn referenced_files(scene: &Scene, recording: &fluidnerf_io::scene::Recording) -> HashSet<PathBuf> {
     let images = scene.frames.iter().map(|f| scene.resolve(&f.file_path));
     let masks = recording.frames.iter().filter_map(|r| r.mask_path.as_ref()).map(|m| scene.resolve(m));
-    images.chain(masks).filter_map(|p| p.canonicalize().ok()).collect()
+    let flats = recording.frames.iter().flat_map(|r| &r.flat_field).map(|p| scene.resolve(p));
+    images.chain(masks).chain(flats).filter_map(|p| p.canonicalize().ok()).collect()
 }
 
 fn is_referenced(path: &Path, referenced: &HashSet<PathBuf>) -> bool {
@@ -1050,6 +1051,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                     *m = root.join(&*m);
                 }
             }
+            r.flat_field.iter_mut().filter(|p| !p.is_absolute()).for_each(|p| *p = root.join(&*p));
         }
         // Named here with the frame and the key, not later as a path that cannot be resolved.
         for (i, r) in recording.frames.iter().enumerate() {
@@ -1060,6 +1062,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 if let Some(b) = list.iter().find(|b| !b.exists()) {
                     bail!("{}: frame {i}'s `background` image {} does not exist", file.display(), b.display());
                 }
+            }
+            if let Some(f) = r.flat_field.iter().find(|f| !f.exists()) {
+                bail!("{}: frame {i}'s `flat_field` image {} does not exist", file.display(), f.display());
             }
         }
         let file = FromFile {
@@ -1172,7 +1177,8 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         None => Vec::new(),
     };
     let (frames, videos, sources) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
-    // The file's masks and backgrounds follow its frames into the decoded video frames.
+    // The file's masks, backgrounds and flat fields follow its frames into the decoded video
+    // frames.
     if let Some(r) = &mut from_file.recording {
         r.frames = sources.iter().map(|&k| r.frames[k].clone()).collect();
     }
@@ -1229,6 +1235,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 if let Some(m) = &mut fr.mask_path {
                     *m = relative(m)?;
                 }
+                for p in fr.flat_field.iter_mut() {
+                    *p = relative(p)?;
+                }
             }
             r
         }
@@ -1248,10 +1257,11 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     let linearisation = args.linearisation.or(from_file.linearisation).unwrap_or_default();
     let images = load_images_with(&scene, linearisation).context("the images do not fit the calibration")?;
     recording.linearisation = linearisation;
-    // The masks and backgrounds a transforms.json brings must fit the images too, or the scene
-    // written would be refused by every command that reads it.
-    if recording.frames.iter().any(|r| r.mask_path.is_some() || r.background != fluidnerf_io::scene::Background::None) {
-        load_preprocessed_with(&scene, recording.clone()).context("the masks or backgrounds do not fit the images")?;
+    // The masks, backgrounds and flat fields a transforms.json brings must fit the images too,
+    // or the scene written would be refused by every command that reads it.
+    if recording.preprocesses() {
+        load_preprocessed_with(&scene, recording.clone())
+            .context("the masks, backgrounds or flat fields do not fit the images")?;
     }
     let first = scene.resolve(&scene.frames[0].file_path);
     if args.linearisation.is_none() && linearisation == Linearisation::Linear {

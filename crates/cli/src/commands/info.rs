@@ -8,9 +8,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use fluidnerf_core::{fixed, num, Camera, Frame, Scene};
 use fluidnerf_io::image::read_image_with;
-use fluidnerf_io::scene::{
-    cameras_near_box, check_pixels, load_scene, odd_sample_kind, recorded_linearisation, scene_file_path,
-};
+use fluidnerf_io::scene::{cameras_near_box, check_pixels, load_scene, odd_sample_kind, recorded, scene_file_path};
 use fluidnerf_io::volume::read_npy;
 
 /// Validate a scene and describe it.
@@ -114,7 +112,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut problems: Vec<String> = Vec::new();
     let mut warnings: Vec<String> = Vec::new();
     let u = scene.units.clone();
-    let linearisation = recorded_linearisation(&scene).context("the scene's linearisation")?;
+    let recording = recorded(&scene).context("the scene's preprocessing keys")?;
+    let linearisation = recording.linearisation;
 
     let _ = writeln!(out, "scene {}", file.display());
     let _ = writeln!(
@@ -126,6 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene.intensity_scale
     );
     let _ = writeln!(out, "8-bit images: {linearisation}");
+    let _ = writeln!(out, "preprocessing: {}", recording.describe());
     let names: std::collections::BTreeSet<&str> =
         scene.frames.iter().filter_map(|f| f.camera_name.as_deref()).collect();
     let times = scene.times();
@@ -259,14 +259,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             fluidnerf_io::scene::different_scales(kind, usual)
         ));
     }
-    // Backgrounds and masks, read as a run reads them, once the images themselves are sound.
-    let preprocessed = fluidnerf_io::scene::recorded(&scene)
-        .map(|r| r.frames.iter().any(|f| f.mask_path.is_some() || f.background != Default::default()));
-    if !args.no_images && problems.is_empty() && !matches!(preprocessed, Ok(false)) {
-        match fluidnerf_io::scene::load_preprocessed(&scene) {
+    // Backgrounds, flat fields and masks, read as a run reads them, once the images themselves
+    // are sound.
+    if !args.no_images && problems.is_empty() && recording.preprocesses() {
+        match fluidnerf_io::scene::load_preprocessed_with(&scene, recording.clone()) {
             Err(e) => problems.push(format!("preprocessing: {e}")),
             // What a run trains on: the pixels left after the background, inside the masks.
             Ok(p) => {
+                if let Some((lo, hi)) = p.flat_range {
+                    let _ = writeln!(
+                        out,
+                        "flat fields (normalised to mean 1 over the used pixels): {lo:.3} .. {hi:.3}; the images \
+                         are divided by them"
+                    );
+                }
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
                     totals[i] = m.is_none().then(|| im.sum());
                 }
