@@ -612,6 +612,8 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
         (&["--dark-noise", "0.9"], "--dark-noise", "real.dark_noise"),
         (&["--background-frames", "0"], "--background-frames", "real.background_frames"),
         (&["--jpeg-quality", "0"], "--jpeg-quality", "real.jpeg_quality"),
+        (&["--vignetting", "0.95"], "--vignetting", "real.vignetting"),
+        (&["--vignetting", "0.5", "--flat-frames", "0"], "--flat-frames", "real.flat_frames"),
     ] {
         let o = run_small(&dir, extra);
         let err = text(&o).1;

@@ -1745,8 +1745,9 @@ pub fn normalise_flat(flat: &mut Image, mask: Option<&[bool]>) -> Result<(f32, f
             num(mean)
         ));
     }
+    // Every used pixel is finite here (one that is not makes the mean so).
     let floor = FLAT_FIELD_MIN_FRACTION * mean;
-    let low: Vec<usize> = (0..flat.data.len()).filter(|&k| used(k) && !(f64::from(flat.data[k]) > floor)).collect();
+    let low: Vec<usize> = (0..flat.data.len()).filter(|&k| used(k) && f64::from(flat.data[k]) <= floor).collect();
     if let Some(&first) = low.first() {
         let w = flat.width;
         let (cols, rows) = low.iter().fold(((usize::MAX, 0), (usize::MAX, 0)), |((c0, c1), (r0, r1)), &k| {

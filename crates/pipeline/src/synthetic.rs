@@ -5,8 +5,9 @@
 //! - A plain sensor's images are 16-bit PNG counts. When the sensor adds a dark offset, every
 //!   frame records it as a constant `background`, so that a reconstruction subtracts it
 //!   instead of reading it as light.
-//! - A real-like recording's images and background frames are 8-bit sRGB JPEGs; every frame
-//!   records its camera's background frames and the scene its sRGB linearisation.
+//! - A real-like recording's images, background frames and flat-field frames (with
+//!   vignetting) are 8-bit sRGB JPEGs; every frame records its camera's background frames and
+//!   flat-field frames (`flat_field`), and the scene its sRGB linearisation.
 //! - The phantoms with a known flow direction record it (`flow_axis`), so that reports place
 //!   the laminar, transition and turbulent thirds where the flow enters and leaves.
 //!
@@ -36,14 +37,18 @@ pub fn recording(syn: &Synthesis) -> Recording {
         frames: syn
             .frames
             .iter()
-            .map(|f| FrameRecording { background: background(f.camera), ..Default::default() })
+            .map(|f| FrameRecording {
+                background: background(f.camera),
+                flat_field: syn.flat_paths(f.camera),
+                mask_path: None,
+            })
             .collect(),
         flow_axis,
     }
 }
 
-/// Writes `syn` into `folder` (created if missing): images, background frames, truth volumes
-/// and `transforms.json`. Returns the scene as written. A synthetic scene already there (one
+/// Writes `syn` into `folder` (created if missing): images, background frames, flat-field
+/// frames, truth volumes and `transforms.json`. Returns the scene as written. A synthetic scene already there (one
 /// with `synth`'s `synth.json`) is replaced whole: its images, background frames and truth
 /// volumes that `syn` has not are removed, so that none of its files stays beside the new ones.
 pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError> {
@@ -59,6 +64,11 @@ pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError>
     if let Some(r) = &syn.real {
         for (c, frames) in r.backgrounds.iter().enumerate() {
             for (img, rel) in frames.iter().zip(syn.background_paths(c)) {
+                fluidnerf_io::image::write_jpeg_srgb(&folder.join(rel), img, 255.0, r.jpeg_quality)?;
+            }
+        }
+        for (c, frames) in r.flats.iter().enumerate() {
+            for (img, rel) in frames.iter().zip(syn.flat_paths(c)) {
                 fluidnerf_io::image::write_jpeg_srgb(&folder.join(rel), img, 255.0, r.jpeg_quality)?;
             }
         }
@@ -78,6 +88,7 @@ pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError>
         .iter()
         .map(|f| syn.image_path(f))
         .chain((0..syn.cameras.len()).flat_map(|c| syn.background_paths(c)))
+        .chain((0..syn.cameras.len()).flat_map(|c| syn.flat_paths(c)))
         .chain((0..syn.truth.len()).map(|k| syn.truth_path(k)))
         .collect();
     for stale in earlier.iter().filter(|p| !written.contains(*p)) {
@@ -88,7 +99,7 @@ pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError>
     }
     // A folder the new scene has no file in (the background frames of a real-like recording)
     // goes too, when nothing else is left in it.
-    for dir in ["images", "background", "truth"] {
+    for dir in ["images", "background", "flat", "truth"] {
         if earlier.iter().any(|p| p.starts_with(dir)) && !written.iter().any(|p| p.starts_with(dir)) {
             let _ = std::fs::remove_dir(folder.join(dir));
         }
@@ -96,7 +107,7 @@ pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError>
     Ok(scene)
 }
 
-/// The images, background frames and truth volumes that the `transforms.json` of a scene
+/// The images, background frames, flat-field frames and truth volumes that the `transforms.json` of a scene
 /// `synth` wrote into `folder` lists, relative to `folder`; none for a folder without one, or
 /// whose scene was not synthesised (its images are a user's), and only paths inside the
 /// folders `synth` writes.
@@ -114,10 +125,12 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
     let (frames, truth) = (list("frames"), list("truth"));
     for entry in frames.iter().chain(&truth) {
         paths.extend(entry.get("file_path").and_then(serde_json::Value::as_str));
-        match entry.get("background") {
-            Some(serde_json::Value::String(p)) => paths.push(p),
-            Some(serde_json::Value::Array(ps)) => paths.extend(ps.iter().filter_map(serde_json::Value::as_str)),
-            _ => {}
+        for key in ["background", "flat_field"] {
+            match entry.get(key) {
+                Some(serde_json::Value::String(p)) => paths.push(p),
+                Some(serde_json::Value::Array(ps)) => paths.extend(ps.iter().filter_map(serde_json::Value::as_str)),
+                _ => {}
+            }
         }
     }
     paths
@@ -125,7 +138,7 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
         .map(PathBuf::from)
         .filter(|p| {
             let mut parts = p.components();
-            matches!(parts.next(), Some(std::path::Component::Normal(d)) if ["images", "background", "truth"].iter().any(|s| d == *s))
+            matches!(parts.next(), Some(std::path::Component::Normal(d)) if ["images", "background", "flat", "truth"].iter().any(|s| d == *s))
                 && parts.all(|c| matches!(c, std::path::Component::Normal(_)))
         })
         .collect()

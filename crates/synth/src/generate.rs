@@ -306,6 +306,13 @@ impl Synthesis {
         (0..n).map(|k| PathBuf::from(format!("background/{}_b{k}.jpg", self.cameras[camera].name))).collect()
     }
 
+    /// Relative paths of camera `camera`'s flat-field frames (real-like recordings with
+    /// vignetting): `flat/<camera>_f<k>.jpg`.
+    pub fn flat_paths(&self, camera: usize) -> Vec<PathBuf> {
+        let n = self.real.as_ref().map_or(0, |r| r.flats[camera].len());
+        (0..n).map(|k| PathBuf::from(format!("flat/{}_f{k}.jpg", self.cameras[camera].name))).collect()
+    }
+
     /// Relative path of a truth volume: `truth/truth.npy` or `truth/truth_t<k>.npy`.
     pub fn truth_path(&self, time_index: usize) -> PathBuf {
         if self.truth[time_index].0.is_some() {
@@ -494,12 +501,35 @@ pub fn generate(
                     )
                 })
                 .collect();
+            let sensitivities: Vec<Image> = cameras
+                .iter()
+                .enumerate()
+                .map(|(c, cam)| {
+                    real::sensitivity_pattern(cam.camera.width(), cam.camera.height(), r.vignetting, c, settings.seed)
+                })
+                .collect();
             for (n, f) in frames.iter_mut().enumerate() {
                 let g = (gains[f.camera] * k) as f32;
                 let mut signal = patterns[f.camera].clone();
-                signal.data.iter_mut().zip(&f.clean.data).for_each(|(s, &c)| *s += g * c);
+                let sensitivity = &sensitivities[f.camera].data;
+                signal.data.iter_mut().zip(&f.clean.data).zip(sensitivity).for_each(|((s, &c), &v)| *s += v * g * c);
                 f.counts = real::add_noise(&signal, sigma, sensor_seed, n as u64)?;
             }
+            // A uniformly lit target seen through the same sensitivity, over the same background.
+            let flat_frames = if r.vignetting > 0.0 { r.flat_frames } else { 0 };
+            let level = (real::FLAT_LEVEL * 255.0) as f32;
+            let flats = patterns
+                .iter()
+                .zip(&sensitivities)
+                .enumerate()
+                .map(|(c, (p, s))| {
+                    let mut lit = p.clone();
+                    lit.data.iter_mut().zip(&s.data).for_each(|(v, &sv)| *v += level * sv);
+                    (0..flat_frames)
+                        .map(|b| real::add_noise(&lit, sigma, sensor_seed ^ 0x666c, (c * 1000 + b) as u64))
+                        .collect::<Result<Vec<_>, _>>()
+                })
+                .collect::<Result<Vec<_>, _>>()?;
             let backgrounds = patterns
                 .iter()
                 .enumerate()
@@ -509,7 +539,7 @@ pub fn generate(
                         .collect::<Result<Vec<_>, _>>()
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            (k, Some(RealRecording { gains, backgrounds, jpeg_quality: r.jpeg_quality }))
+            (k, Some(RealRecording { gains, backgrounds, flats, jpeg_quality: r.jpeg_quality }))
         }
     };
     stats.sensor_seconds = t0.elapsed().as_secs_f64();

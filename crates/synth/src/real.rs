@@ -5,9 +5,14 @@
 //! linear image, on the 0..=255 scale of an 8-bit sensor, is
 //!
 //! ```text
-//! L_c = g_c · k · I_c + B_c + n,    n ~ N(0, σ²) per pixel,
+//! L_c = S_c · g_c · k · I_c + B_c + n,    n ~ N(0, σ²) per pixel,
 //! ```
 //!
+//! - `S_c`: the camera's sensitivity per pixel, 1 everywhere unless `vignetting` is set: then a
+//!   smooth radial fall-off `1 − vignetting · ρ²` about a centre drawn within ±10 % of the
+//!   image's size of its middle, `ρ` the distance from it over the distance to the farthest
+//!   corner, scaled to mean 1 over the image (so that the images keep their overall scale and the
+//!   gains their meaning) ([`sensitivity_pattern`]);
 //! - `g_c`: the camera's gain, drawn uniformly in `[1 − gain_spread, 1 + gain_spread]` and then
 //!   scaled so that the training cameras' gains average 1 (only ratios of gains can be
 //!   recovered from the images; this fixes the scale a calibrated reconstruction should find);
@@ -18,9 +23,11 @@
 //! - `σ = dark_noise` × the brightest value.
 //!
 //! Each camera also records `background_frames` frames of the background alone (same `B_c`,
-//! fresh noise). The images are written as 8-bit sRGB JPEGs (the transfer curve applied to
-//! `L_c / 255`), which adds quantisation and compression error. A reconstruction recovers `k ·
-//! ∫E ds` by subtracting the background frames and dividing out the gains.
+//! fresh noise) and, with `vignetting`, `flat_frames` flat-field frames of a uniformly lit
+//! target, `S_c · FLAT_LEVEL · 255 + B_c + n` (fresh noise). The images are written as 8-bit
+//! sRGB JPEGs (the transfer curve applied to `L_c / 255`), which adds quantisation and
+//! compression error. A reconstruction recovers `k · ∫E ds` by subtracting the background
+//! frames, dividing by the flat field and dividing out the gains.
 
 use fluidnerf_core::num;
 use fluidnerf_core::Image;
@@ -47,11 +54,25 @@ pub struct RealLike {
     pub background_frames: usize,
     /// JPEG quality, 1..=100. Default 95.
     pub jpeg_quality: u8,
+    /// How far the sensitivity falls from the vignetting's centre to the farthest image
+    /// corner, as a fraction, before the map is scaled to mean 1 (module docs), in [0, 0.9].
+    /// Default 0: uniform sensitivity and no flat-field frames.
+    pub vignetting: f64,
+    /// Flat-field frames recorded per camera when `vignetting` is set, 1..=100. Default 1.
+    pub flat_frames: usize,
 }
 
 impl Default for RealLike {
     fn default() -> Self {
-        RealLike { gain_spread: 0.3, background: 0.05, dark_noise: 0.005, background_frames: 1, jpeg_quality: 95 }
+        RealLike {
+            gain_spread: 0.3,
+            background: 0.05,
+            dark_noise: 0.005,
+            background_frames: 1,
+            jpeg_quality: 95,
+            vignetting: 0.0,
+            flat_frames: 1,
+        }
     }
 }
 
@@ -81,6 +102,21 @@ impl RealLike {
                 format!("must be in 1..=100, got {}", self.background_frames),
             ));
         }
+        if !(0.0..=0.9).contains(&self.vignetting) {
+            return Err(SynthError::invalid(
+                "real.vignetting",
+                format!(
+                    "must be in [0, 0.9] (the fraction the sensitivity falls to a corner), got {}",
+                    num(self.vignetting)
+                ),
+            ));
+        }
+        if self.flat_frames == 0 || self.flat_frames > 100 {
+            return Err(SynthError::invalid(
+                "real.flat_frames",
+                format!("must be in 1..=100, got {}", self.flat_frames),
+            ));
+        }
         if !(1..=100).contains(&self.jpeg_quality) {
             return Err(SynthError::invalid(
                 "real.jpeg_quality",
@@ -98,6 +134,8 @@ pub struct RealRecording {
     pub gains: Vec<f64>,
     /// Per camera: its background frames (linear, 0..=255 scale).
     pub backgrounds: Vec<Vec<Image>>,
+    /// Per camera: its flat-field frames (linear, 0..=255 scale); none without vignetting.
+    pub flats: Vec<Vec<Image>>,
     pub jpeg_quality: u8,
 }
 
@@ -126,6 +164,34 @@ pub fn background_pattern(width: usize, height: usize, level: f64, camera: usize
             img.set(col, row, (level * scale * (1.0 + 2.0 * (tx * u + ty * v))) as f32);
         }
     }
+    img
+}
+
+/// The level of a flat-field frame's uniformly lit target, as a fraction of 255: bright, for
+/// little noise, yet below full scale where the sensitivity peaks over a background.
+pub const FLAT_LEVEL: f64 = 0.6;
+
+/// The sensitivity of camera `camera` (module docs): `1 − vignetting · ρ²` about an off-centre
+/// point, scaled to mean 1 over the image. All ones for `vignetting` 0.
+pub fn sensitivity_pattern(width: usize, height: usize, vignetting: f64, camera: usize, seed: u64) -> Image {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(mix_seed(seed, 0x7669_676e ^ camera as u64));
+    let (w, h) = (width as f64, height as f64);
+    let centre = (0.5 * w * (1.0 + rng.random_range(-0.2..=0.2)), 0.5 * h * (1.0 + rng.random_range(-0.2..=0.2)));
+    // Distance from the centre to the farthest corner.
+    let reach = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+        .iter()
+        .map(|&(x, y): &(f64, f64)| (x - centre.0).hypot(y - centre.1))
+        .fold(0.0, f64::max)
+        .max(1e-9);
+    let mut img = Image::zeros(width, height);
+    for row in 0..height {
+        for col in 0..width {
+            let rho = (col as f64 + 0.5 - centre.0).hypot(row as f64 + 0.5 - centre.1) / reach;
+            img.set(col, row, (1.0 - vignetting * rho * rho) as f32);
+        }
+    }
+    let mean = img.data.iter().map(|&v| f64::from(v)).sum::<f64>() / img.data.len().max(1) as f64;
+    img.data.iter_mut().for_each(|v| *v = (f64::from(*v) / mean) as f32);
     img
 }
 
@@ -158,5 +224,22 @@ mod tests {
         let mean = bg.data.iter().map(|&v| v as f64).sum::<f64>() / 80.0;
         assert!(mean > 7.5 && mean < 12.5, "{mean}");
         assert!(RealLike { jpeg_quality: 0, ..Default::default() }.validate().is_err());
+        assert!(RealLike { vignetting: 0.95, ..Default::default() }.validate().is_err());
+        assert!(RealLike { flat_frames: 0, ..Default::default() }.validate().is_err());
+    }
+
+    /// The sensitivity averages 1, falls from its centre by the vignetting to the farthest
+    /// corner, and is uniform without vignetting.
+    #[test]
+    fn the_sensitivity_averages_one_and_falls_towards_the_corners() {
+        assert!(sensitivity_pattern(12, 10, 0.0, 1, 3).data.iter().all(|&v| v == 1.0));
+        let s = sensitivity_pattern(40, 30, 0.5, 1, 3);
+        let mean = s.data.iter().map(|&v| f64::from(v)).sum::<f64>() / s.data.len() as f64;
+        assert!((mean - 1.0).abs() < 1e-6, "{mean}");
+        let (lo, hi) = s.min_max();
+        // The peak over the farthest corner: 1 / (1 − 0.5) at most, nearly that on a fine grid.
+        assert!(hi / lo > 1.7 && hi / lo <= 2.0, "{lo} .. {hi}");
+        assert!(s.get(20, 15) > s.get(0, 0) && s.get(20, 15) > s.get(39, 29), "the middle is the brightest");
+        assert_ne!(s, sensitivity_pattern(40, 30, 0.5, 2, 3), "every camera's differs");
     }
 }

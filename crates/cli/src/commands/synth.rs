@@ -217,6 +217,14 @@ pub struct Args {
     /// JPEG quality, 1..=100 [default: 95].
     #[arg(long, help_heading = "Real-like recording")]
     pub jpeg_quality: Option<u8>,
+    /// Vignetting: the fraction by which each camera's sensitivity falls from its (off-centre)
+    /// optical centre to the farthest image corner, in [0, 0.9]; with it every camera also
+    /// records flat-field frames and the scene its `flat_field` [default: 0].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub vignetting: Option<f64>,
+    /// Flat-field frames recorded per camera when there is vignetting [default: 1].
+    #[arg(long, help_heading = "Real-like recording")]
+    pub flat_frames: Option<usize>,
 }
 
 /// `--holdout` entries as indices after subsetting: an index, or a camera's name (`cam007`).
@@ -373,7 +381,9 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
         || args.background_level.is_some()
         || args.dark_noise.is_some()
         || args.background_frames.is_some()
-        || args.jpeg_quality.is_some();
+        || args.jpeg_quality.is_some()
+        || args.vignetting.is_some()
+        || args.flat_frames.is_some();
     if args.real_like == Some(false) {
         if real_given {
             bail!("--real-like false: the real-like options (--gain-spread, ...) do not apply");
@@ -396,6 +406,16 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
         }
         if let Some(v) = args.jpeg_quality {
             r.jpeg_quality = v;
+        }
+        if let Some(v) = args.vignetting {
+            r.vignetting = v;
+        }
+        if let Some(v) = args.flat_frames {
+            r.flat_frames = v;
+        }
+        // Flat-field frames are recorded only to correct a vignetting.
+        if args.flat_frames.is_some() && r.vignetting == 0.0 {
+            bail!("--flat-frames: flat-field frames are recorded only with vignetting; give --vignetting too");
         }
     }
     if let Some(v) = args.jitter_position {
@@ -589,6 +609,8 @@ fn name_option(args: &Args, e: fluidnerf_synth::SynthError) -> anyhow::Error {
         ("real.dark_noise", "--dark-noise", args.dark_noise.is_some()),
         ("real.background_frames", "--background-frames", args.background_frames.is_some()),
         ("real.jpeg_quality", "--jpeg-quality", args.jpeg_quality.is_some()),
+        ("real.vignetting", "--vignetting", args.vignetting.is_some()),
+        ("real.flat_frames", "--flat-frames", args.flat_frames.is_some()),
     ];
     match options.iter().find(|&&(key, _, given)| given && key == setting) {
         Some((_, option, _)) => anyhow::Error::new(e).context(format!("{option} on the command line")),
@@ -728,9 +750,16 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     if let Some(r) = &syn.real {
         let _ = writeln!(
             text,
-            "  real-like gains {} (training mean 1), {} background frame(s) per camera, 8-bit sRGB JPEG",
+            "  real-like gains {} (training mean 1), {} background frame(s){} per camera, 8-bit sRGB JPEG",
             r.gains.iter().map(|g| format!("{g:.3}")).collect::<Vec<_>>().join(", "),
-            r.backgrounds.first().map_or(0, Vec::len)
+            r.backgrounds.first().map_or(0, Vec::len),
+            match r.flats.first().map_or(0, Vec::len) {
+                0 => String::new(),
+                n => format!(
+                    " and {n} flat-field frame(s) (vignetting {})",
+                    fluidnerf_core::num(settings.real.as_ref().map_or(0.0, |r| r.vignetting))
+                ),
+            }
         );
     }
     let kind = match &syn.real {
