@@ -230,7 +230,8 @@ pub fn refuse_input_file(out: &Path, input: &Path, what: &str) -> Result<(), Pip
 }
 
 /// The files the scene file `scene_file` lists, each with what it is for: frame images, masks,
-/// background frames and ground truth (relative paths resolved against the file's folder).
+/// background frames, flat-field frames and ground truth (relative paths resolved against the
+/// file's folder).
 /// The scene was read before; a file that cannot be read here lists nothing.
 fn scene_inputs(scene_file: &Path) -> Vec<(PathBuf, &'static str)> {
     use serde_json::Value;
@@ -246,7 +247,7 @@ fn scene_inputs(scene_file: &Path) -> Vec<(PathBuf, &'static str)> {
             found.push((if p.is_absolute() { p.to_path_buf() } else { scene_root.join(p) }, what));
         }
     };
-    // A list, or (for `background`) one path alone.
+    // A list, or (for `background` and `flat_field`) one path alone.
     let list = |v: Option<&Value>| match v {
         Some(Value::Array(a)) => a.clone(),
         Some(s @ Value::String(_)) => vec![s.clone()],
@@ -258,11 +259,17 @@ fn scene_inputs(scene_file: &Path) -> Vec<(PathBuf, &'static str)> {
     for b in list(raw.get("background")) {
         add(Some(&b), "a background frame");
     }
+    for b in list(raw.get("flat_field")) {
+        add(Some(&b), "a flat-field frame");
+    }
     for f in list(raw.get("frames")) {
         add(f.get("file_path"), "an image");
         add(f.get("mask_path"), "a mask");
         for b in list(f.get("background")) {
             add(Some(&b), "a background frame");
+        }
+        for b in list(f.get("flat_field")) {
+            add(Some(&b), "a flat-field frame");
         }
     }
     found
@@ -1050,6 +1057,27 @@ mod tests {
         let deep = scene_with_inputs(&holder.path().join("data"));
         let e = RunDir::create(holder.path(), Overwrite::Force, Some(&deep)).unwrap_err().to_string();
         assert!(e.contains("contains the scene folder"), "{e}");
+    }
+
+    /// A folder holding a flat-field frame the scene reads, at the top level or in a frame, is
+    /// refused as one holding its masks is.
+    #[test]
+    fn refuses_a_folder_that_holds_the_scenes_flat_fields() {
+        let tmp = tempfile::tempdir().unwrap();
+        let scene = tmp.path().join("scene");
+        std::fs::create_dir_all(&scene).unwrap();
+        for (top, frame) in [(Some("../flats/f.png"), None), (None, Some(vec!["../flats/f.png"]))] {
+            let mut text = serde_json::json!({ "frames": [{ "file_path": "images/r_0.png" }] });
+            if let Some(top) = top {
+                text["flat_field"] = top.into();
+            }
+            if let Some(frame) = frame {
+                text["frames"][0]["flat_field"] = frame.into();
+            }
+            std::fs::write(scene.join("transforms.json"), text.to_string()).unwrap();
+            let e = RunDir::create(tmp.path().join("flats"), Overwrite::Force, Some(&scene)).unwrap_err().to_string();
+            assert!(e.contains("f.png (a flat-field frame the scene reads)"), "{e}");
+        }
     }
 
     /// The Python API saves a scene built from arrays into `OUT/scene`, the run's own scene: the
