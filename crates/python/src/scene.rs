@@ -348,8 +348,9 @@ impl PyScene {
     }
 
     /// Writes the scene into `folder`: `transforms.json` (with the flow axis), every image as a
-    /// float32 TIFF under `images/` as it is reconstructed from (linear, background subtracted),
-    /// the frames' masks under `masks/` and the ground-truth volumes under `truth/`. Afterwards
+    /// float32 TIFF under `images/` as it is reconstructed from (linear, background subtracted,
+    /// divided by its flat field), the frames' masks under `masks/` and the ground-truth volumes
+    /// under `truth/`. Afterwards
     /// the scene lives there. A folder that is not empty is refused without `force`.
     #[pyo3(signature = (folder, force=false))]
     fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
@@ -376,8 +377,9 @@ impl PyScene {
                     folder.display()
                 )));
             }
-            // The images as preprocessed (linear, background subtracted); their masks and the
-            // flow axis go with them, or the copy would use the pixels its recording left out.
+            // The images as preprocessed (linear, background subtracted, flat-field corrected);
+            // their masks and the flow axis go with them, or the copy would use the pixels its
+            // recording left out.
             let (images, masks, flow_axis) = match &self.images {
                 Some(images) => (images.clone(), vec![None; images.len()], None),
                 None => {
