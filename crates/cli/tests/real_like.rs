@@ -189,7 +189,12 @@ fn a_flat_field_undoes_vignetting() {
         ok(&fluidnerf(d, &args));
     };
     synth("plain", &[]);
-    synth("vignetted", &["--vignetting", "0.8"]);
+    let o = fluidnerf(d, &["synth", "--preset", "real-like-small", "-o", "vignetted", "--vignetting", "0.8"]);
+    ok(&o);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("1 background frame(s) and 1 flat-field frame(s) (vignetting 0.8) per camera"), "{said}");
+    assert!(said.contains("files     transforms.json, images/, background/, flat/, truth/"), "{said}");
+    synth("vignetted", &["--vignetting", "0.8", "--force"]);
     let scene = json(&d.join("vignetted/transforms.json"));
     assert_eq!(scene["frames"][0]["flat_field"], serde_json::json!(["flat/cam000_f0.jpg"]));
     assert!(d.join("vignetted/flat/cam007_f0.jpg").is_file());

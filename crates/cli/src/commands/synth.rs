@@ -779,6 +779,13 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
         "  work      {:.3e} rays in {:.1} s (truth {:.1} s, images {:.1} s, sensor {:.1} s)",
         syn.stats.rays as f64, elapsed, syn.stats.truth_seconds, syn.stats.image_seconds, syn.stats.sensor_seconds
     );
-    let _ = writeln!(text, "  files     transforms.json, images/, truth/, preview.png, synth.json");
+    // A real-like recording's background frames and flat-field frames have folders of their own.
+    let recorded = |folder: &str, any: bool| if any { format!("{folder}/, ") } else { String::new() };
+    let _ = writeln!(
+        text,
+        "  files     transforms.json, images/, {}{}truth/, preview.png, synth.json",
+        recorded("background", syn.real.as_ref().is_some_and(|r| r.backgrounds.iter().any(|b| !b.is_empty()))),
+        recorded("flat", syn.real.as_ref().is_some_and(|r| r.flats.iter().any(|f| !f.is_empty())))
+    );
     Ok(text)
 }
