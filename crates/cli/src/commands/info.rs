@@ -18,11 +18,14 @@ use fluidnerf_io::volume::read_npy;
 /// box; per frame the camera centre, viewing direction, intrinsics (OpenCV convention: pixel
 /// centres at integer coordinates, so cx, cy are 0.5 below the file's values), distortion and
 /// thin lens, how much of the box the camera sees, and the image's size and value range; the
-/// time steps, held-out frames and truth volumes. Problems (a camera that misses the box, an
-/// image that is missing, unreadable, of the wrong size, with NaN/Inf or negative pixels, or of
-/// another bit depth than the others, a broken truth volume, one that is zero throughout or one
-/// whose grid differs from the others) are listed at the end and make the command exit with status 1; cameras close to the
-/// box are warned about. 8-bit images are shown after the scene's `linearisation`.
+/// preprocessing the scene asks for (background, flat field, masks; with flat fields the range
+/// of the normalised flats); the time steps, held-out frames and truth volumes. Problems (a
+/// camera that misses the box, an image that is missing, unreadable, of the wrong size, with
+/// NaN/Inf or negative pixels, or of another bit depth than the others, a background, flat
+/// field or mask that does not fit its frame, a broken truth volume, one that is zero
+/// throughout or one whose grid differs from the others) are listed at the end and make the
+/// command exit with status 1; cameras close to the box are warned about. 8-bit images are
+/// shown after the scene's `linearisation`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The scene: a folder holding `transforms.json`, or the file itself.
