@@ -390,7 +390,7 @@ fn flat_fields_are_described_and_checked_as_a_run_reads_them() {
         &[
             "frame 0 (images/c0.png, camera cam0), `flat_field`",
             "flat/f.png",
-            "1 of its 768 used pixel(s)",
+            "has 1 of its 768 used pixel(s) at or below 5 %",
             "(col 3, row 4)",
         ],
     );

@@ -1742,7 +1742,7 @@ pub fn normalise_flat(flat: &mut Image, mask: Option<&[bool]>) -> Result<(f32, f
         return Err(format!(
             "holds no light once its dark level (the frame's background) is subtracted: its mean over the {count} \
              used pixel(s) is {}; a flat field records a uniformly lit target, brighter than the background",
-            num(mean)
+            num(five_digits(mean))
         ));
     }
     // Every used pixel is finite here (one that is not makes the mean so).
@@ -1754,16 +1754,16 @@ pub fn normalise_flat(flat: &mut Image, mask: Option<&[bool]>) -> Result<(f32, f
             ((c0.min(k % w), c1.max(k % w)), (r0.min(k / w), r1.max(k / w)))
         });
         return Err(format!(
-            "{} of its {count} used pixel(s) are at or below {:.0} % of its mean ({}) once its dark level (the \
+            "has {} of its {count} used pixel(s) at or below {:.0} % of its mean ({}) once its dark level (the \
              frame's background) is subtracted, the first at (col {}, row {}) with {}, all within cols {}..={}, \
              rows {}..={}; dividing by them would multiply their noise {:.0}-fold or more: record the flat \
              brighter, or leave those pixels out with the frame's `mask_path`",
             low.len(),
             100.0 * FLAT_FIELD_MIN_FRACTION,
-            num(mean),
+            num(five_digits(mean)),
             first % w,
             first / w,
-            num(f64::from(flat.data[first])),
+            num(five_digits(f64::from(flat.data[first]))),
             cols.0,
             cols.1,
             rows.0,
@@ -1783,6 +1783,11 @@ pub fn normalise_flat(flat: &mut Image, mask: Option<&[bool]>) -> Result<(f32, f
         }
     }
     Ok((lo, hi))
+}
+
+/// `x` to five significant digits, for messages (a mean of counts has sixteen).
+fn five_digits(x: f64) -> f64 {
+    format!("{x:.4e}").parse().unwrap_or(x)
 }
 
 /// The pixelwise median of the images `list` (a frame's `what`, e.g. "background image"), read

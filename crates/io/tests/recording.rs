@@ -311,7 +311,7 @@ fn bad_flat_fields_are_refused_naming_the_file_frame_and_problem() {
     for want in [
         "transforms.json",
         "frame 0 (images/c0.png, camera c0), `flat_field`: the flat-field image flat/dim.png",
-        "2 of its 24 used pixel(s) are at or below 5 % of its mean",
+        "has 2 of its 24 used pixel(s) at or below 5 % of its mean (900) once",
         "the first at (col 2, row 1) with 40",
         "cols 2..=4, rows 1..=2",
         "mask_path",
