@@ -83,6 +83,15 @@ fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
     }
     assert!(stdout.contains("camera gains: cam000") && stdout.contains("held-out cam003"), "{stdout}");
 
+    // `eval` scores the held-out camera on its image as the run saw it (linearised, background
+    // subtracted, divided by the gain the run recorded), as the run's own score does; on the
+    // raw 8-bit sRGB pixels with their background it read 0.7 where the run read 0.06.
+    ok(&fluidnerf(d, &["eval", "run-fit", "--scene", "real", "--json", "ev.json", "-q"]));
+    let scored = json(&d.join("ev.json"))["reprojection"][0]["nrmse"].as_f64().expect("eval's NRMSE");
+    let held = pre["frames"].as_array().expect("frames").iter().find(|f| f["holdout"] == true).expect("held out");
+    let own = held["holdout_scores"]["nrmse_raw"].as_f64().expect("the run's score");
+    assert!((scored / own - 1.0).abs() < 0.3, "eval {scored}, the run's own score {own}");
+
     // By default (gains auto) a run fits the gains where the images' totals ask for it, to the
     // same result as --gains fit, and says why; on the clean recording it takes the images as
     // they are, as --gains none does.

@@ -70,13 +70,16 @@ pub struct Reprojection {
 }
 
 /// Renders `field` from frame `frame` of `scene` and compares it with `measured`, that frame's
-/// image. Errors if the image size differs from the camera's, the image is smaller than the
-/// SSIM window, or rendering fails.
+/// image as the reconstruction was fitted to (preprocessed: linear, background subtracted,
+/// flat-fielded), over the pixels `mask` uses (`true`; every pixel without one; see
+/// [`compare_images`]). Errors if the image size differs from the camera's, the image is
+/// smaller than the SSIM window, or rendering fails.
 pub fn reproject(
     field: &dyn ScalarField,
     scene: &Scene,
     frame: usize,
     measured: &Image,
+    mask: Option<&[bool]>,
     options: &ReprojectionOptions,
 ) -> Result<Reprojection, MetricsError> {
     assert!(frame < scene.frames.len(), "reproject: frame {frame} out of range ({} frames)", scene.frames.len());
@@ -96,7 +99,7 @@ pub fn reproject(
     };
     let rendered = render_image(field, &f.camera, &scene.aabb, &settings)
         .map_err(|error| MetricsError::Render { frame, error })?;
-    let metrics = compare_images(&rendered, measured, &options.ssim)?;
+    let metrics = compare_images(&rendered, measured, mask, &options.ssim)?;
     Ok(Reprojection {
         metrics: ReprojectionMetrics { frame, camera_name: f.camera_name.clone(), time: f.time, ..metrics },
         rendered,
@@ -104,22 +107,28 @@ pub fn reproject(
 }
 
 /// Reprojects onto every frame in `measured` (`(frame index, its image)`, typically the
-/// scene's held-out frames), in order.
+/// scene's held-out frames), in order, over every pixel.
 pub fn reproject_all(
     field: &dyn ScalarField,
     scene: &Scene,
     measured: &[(usize, Image)],
     options: &ReprojectionOptions,
 ) -> Result<Vec<Reprojection>, MetricsError> {
-    measured.iter().map(|(i, img)| reproject(field, scene, *i, img, options)).collect()
+    measured.iter().map(|(i, img)| reproject(field, scene, *i, img, None, options)).collect()
 }
 
 /// Compares a rendered image with a measured one (same size): NRMSE, PSNR, global and windowed
 /// SSIM, with the measured image's range as data range unless `ssim.data_range` is set. The
 /// frame fields of the result are left empty (frame 0, no name, no time).
+///
+/// With a `mask` (`true` for the pixels to use, as a frame's mask) NRMSE, PSNR, the global
+/// SSIM and the data range are taken over the used pixels alone and `pixels` counts them; the
+/// windowed SSIM, whose windows need a whole image, over the images with the unused pixels set
+/// to 0 in both.
 pub fn compare_images(
     rendered: &Image,
     measured: &Image,
+    mask: Option<&[bool]>,
     ssim: &SsimParams,
 ) -> Result<ReprojectionMetrics, MetricsError> {
     assert_eq!(
@@ -127,19 +136,34 @@ pub fn compare_images(
         (measured.width, measured.height),
         "compare_images: image sizes differ"
     );
-    let range = ssim.data_range.unwrap_or_else(|| data_range_of(&measured.data));
+    assert!(mask.is_none_or(|m| m.len() == measured.data.len()), "compare_images: the mask's size differs");
+    let used = |img: &Image| -> Vec<f32> {
+        match mask {
+            Some(m) => img.data.iter().zip(m).filter(|(_, &keep)| keep).map(|(&v, _)| v).collect(),
+            None => img.data.clone(),
+        }
+    };
+    let zeroed = |img: &Image| -> Vec<f32> {
+        match mask {
+            Some(m) => img.data.iter().zip(m).map(|(&v, &keep)| if keep { v } else { 0.0 }).collect(),
+            None => img.data.clone(),
+        }
+    };
+    let (r, p) = (used(rendered), used(measured));
+    let range = ssim.data_range.unwrap_or_else(|| data_range_of(&p));
     let params = SsimParams { data_range: Some(range), ..*ssim };
-    let nrmse = nrmse(&rendered.data, &measured.data);
+    let nrmse = nrmse(&r, &p);
+    let (rw, pw) = (zeroed(rendered), zeroed(measured));
     Ok(ReprojectionMetrics {
         frame: 0,
         camera_name: None,
         time: None,
-        pixels: measured.data.len(),
+        pixels: p.len(),
         nrmse,
         nrmse_undefined: crate::nrmse_undefined(nrmse),
-        psnr_db: psnr(&rendered.data, &measured.data, range),
-        ssim_global: ssim_global(&rendered.data, &measured.data, range),
-        ssim_windowed: ssim_2d(&rendered.data, &measured.data, measured.width, measured.height, &params)?,
+        psnr_db: psnr(&r, &p, range),
+        ssim_global: ssim_global(&r, &p, range),
+        ssim_windowed: ssim_2d(&rw, &pw, measured.width, measured.height, &params)?,
         data_range: range,
     })
 }
@@ -184,23 +208,52 @@ mod tests {
         let opts = ReprojectionOptions { supersample: 1, ..Default::default() };
         let settings = RenderSettings { scale: 3.0, ..Default::default() };
         let measured = render_image(&truth, &s.frames[1].camera, &s.aabb, &settings).expect("renders");
-        let r = reproject(&truth, &s, 1, &measured, &opts).expect("reprojects");
+        let r = reproject(&truth, &s, 1, &measured, None, &opts).expect("reprojects");
         assert_eq!(r.metrics.nrmse, 0.0);
         assert!((r.metrics.ssim_windowed - 1.0).abs() < 1e-12);
         assert_eq!(r.metrics.label(), "cam1");
         assert_eq!(r.rendered, measured);
         // A dimmer reconstruction has exactly the relative intensity error.
         let dim = Volume::from_fn([24, 24, 24], s.aabb, |p| 0.8 * blob(p));
-        let r = reproject(&dim, &s, 1, &measured, &opts).expect("reprojects");
+        let r = reproject(&dim, &s, 1, &measured, None, &opts).expect("reprojects");
         assert!((r.metrics.nrmse - 0.2).abs() < 1e-5, "NRMSE {}", r.metrics.nrmse);
         assert!(r.metrics.ssim_windowed < 1.0);
+    }
+
+    /// With a mask, pixels it leaves out do not count: a measured image spoilt there scores as
+    /// the clean one over the rest, and without the mask it does not.
+    #[test]
+    fn masked_pixels_are_left_out_of_the_comparison() {
+        let s = scene();
+        let truth = Volume::from_fn([24, 24, 24], s.aabb, blob);
+        let opts = ReprojectionOptions { supersample: 1, ..Default::default() };
+        let settings = RenderSettings { scale: 3.0, ..Default::default() };
+        let clean = render_image(&truth, &s.frames[1].camera, &s.aabb, &settings).expect("renders");
+        let (w, h) = (clean.width, clean.height);
+        // The left quarter of the columns hidden, and spoilt in the measured image.
+        let mask: Vec<bool> = (0..w * h).map(|k| k % w >= w / 4).collect();
+        let mut spoilt = clean.clone();
+        for (v, &keep) in spoilt.data.iter_mut().zip(&mask) {
+            if !keep {
+                *v += 5.0;
+            }
+        }
+        let r = reproject(&truth, &s, 1, &spoilt, Some(&mask), &opts).expect("reprojects");
+        assert_eq!(r.metrics.nrmse, 0.0);
+        assert_eq!(r.metrics.pixels, mask.iter().filter(|&&k| k).count());
+        assert!((r.metrics.ssim_global - 1.0).abs() < 1e-12, "{}", r.metrics.ssim_global);
+        assert!((r.metrics.ssim_windowed - 1.0).abs() < 1e-12, "{}", r.metrics.ssim_windowed);
+        assert!(r.metrics.psnr_db.is_infinite());
+        let unmasked = reproject(&truth, &s, 1, &spoilt, None, &opts).expect("reprojects");
+        assert!(unmasked.metrics.nrmse > 0.1, "{}", unmasked.metrics.nrmse);
+        assert_eq!(unmasked.metrics.pixels, w * h);
     }
 
     #[test]
     fn image_size_must_match_the_camera() {
         let s = scene();
         let truth = Volume::from_fn([8, 8, 8], s.aabb, blob);
-        let err = reproject(&truth, &s, 0, &Image::zeros(10, 10), &ReprojectionOptions::default());
+        let err = reproject(&truth, &s, 0, &Image::zeros(10, 10), None, &ReprojectionOptions::default());
         assert!(matches!(err, Err(MetricsError::Invalid { .. })));
     }
 }
