@@ -529,7 +529,19 @@ def build_config(
     if method_patch:
         _merge(base["method"], method_patch)
     _merge(base, options)
-    return json.loads(_ext.check_config(_dumps(base, "configuration")))
+    text = _dumps(base, "configuration")
+    # The window settings given are refused where the command line refuses --window and
+    # --overlap: an overlap with no windows to overlap was recorded and ignored.
+    windows = method_patch.get("windows")
+    given = {
+        key: value
+        for key, value in (windows.items() if isinstance(windows, dict) else ())
+        if key in ("frames", "overlap") and type(value) is int and 0 <= value < 2**64
+    }
+    if given:
+        whose = "the configuration's" if config is not None and preset is None else "the preset's"
+        _ext.check_given_windows(scene, text, given.get("frames"), given.get("overlap"), whose)
+    return json.loads(_ext.check_config(text))
 
 
 def window_plan(scene: Scene | PathLike, method: str | dict = "tr-fast", **options: Any) -> dict:

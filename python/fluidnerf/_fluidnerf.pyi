@@ -91,6 +91,13 @@ def reconstruct(
     scene: Scene, config: str, out: str, overwrite: str = "refuse", callback: EventCallback = None
 ) -> str: ...
 def window_plan(scene: Scene, config: str) -> str: ...
+def check_given_windows(
+    scene: Scene,
+    config: str,
+    frames: int | None = None,
+    overlap: int | None = None,
+    overlap_from: str = "the preset's",
+) -> None: ...
 def reconstruct_windows(
     scene: Scene, config: str, out: str, start: int, end: int, callback: EventCallback = None
 ) -> str: ...

@@ -79,6 +79,37 @@ def test_a_plan_of_more_than_a_million_windows_is_refused():
         fluidnerf.plan_windows(10**12, 2, 1)
 
 
+def test_window_settings_the_command_line_refuses_are_refused(client, tr_scene, tmp_path):
+    """An overlap given for windows that hold every frame (or for one field on every frame) was
+    accepted from Python and Dask, recorded and ignored; a window shorter than the preset's
+    overlap was refused without naming where the overlap came from. They are refused as
+    --window and --overlap are, before anything is written."""
+    one_window = {"name": "tr-fast", "windows": {"frames": 5, "overlap": 2}}
+    said = (
+        "method.windows.overlap 2: windows of 5 frames hold all 5 training frames of the scene in one window, "
+        "so there are no windows to overlap; give method.windows.frames below 5 with it"
+    )
+    one_field = {"name": "tr-fast", "windows": {"frames": 0, "overlap": 1}}
+    no_windows = "method.windows.overlap 1: the run trains one field on every frame (windows of 0 frames)"
+    short = {"name": "tr-fast", "windows": {"frames": 3}}
+    preset = (
+        "method.windows.overlap: windows of 3 frames would overlap by 4 frames (the preset's overlap, as "
+        "method.windows.overlap is not given)"
+    )
+    for method, words in [(one_window, said), (one_field, no_windows), (short, preset)]:
+        with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(words)):
+            fluidnerf.window_plan(tr_scene, method)
+        with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(words)):
+            fluidnerf.reconstruct(tr_scene, method, tmp_path / "serial", progress=False, **TR_OPTIONS)
+        with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(words)):
+            fluidnerf.dask.reconstruct(client, tr_scene, method, tmp_path / "dask", **TR_OPTIONS)
+        assert not (tmp_path / "serial").exists() and not (tmp_path / "dask").exists()
+    # Windows that overlap, and the preset's own settings, pass.
+    overlapping = {"name": "tr-fast", "windows": {"frames": 4, "overlap": 2}}
+    assert fluidnerf.window_plan(tr_scene, overlapping)["windows"] == [[0, 4], [1, 5]]
+    assert fluidnerf.window_plan(tr_scene, "tr-fast")["windows"] == [[0, 5]]
+
+
 def test_a_dask_run_equals_the_serial_run(client, tr_scene, serial, tmp_path):
     seen = []
     run = fluidnerf.dask.reconstruct(

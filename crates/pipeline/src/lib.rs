@@ -64,7 +64,9 @@ pub use report::{
     RunReport, RunStatus, StopReason, VolumeRecord, WindowDetails, REPORT_FORMAT,
 };
 pub use rundir::{DirState, Overwrite, RunDir, RunKind};
-pub use temporal::{finish_windows, reconstruct_windows, window_plan, WindowOutcome, WindowPlan};
+pub use temporal::{
+    check_given_windows, finish_windows, reconstruct_windows, window_plan, GivenWindows, WindowOutcome, WindowPlan,
+};
 
 /// Runs the reconstruction `config` of `scene` into `dir`: decides the stopping rule
 /// ([`RunConfig::resolved`]), validates everything first, writes `config.json`, works (reporting through `on_event`, which may stop the run), then writes

@@ -830,6 +830,87 @@ fn refuse_timeless_scene(scene: &Scene, method: Method) -> Result<(), PipelineEr
     ))
 }
 
+/// The window settings a front end was given for a run (the others come from its configuration
+/// file or its preset), named as that front end names them: `--window` and `--overlap` on the
+/// command line, `method.windows.frames` and `method.windows.overlap` from Python.
+#[derive(Clone, Copy, Debug)]
+pub struct GivenWindows<'a> {
+    /// Frames per window given, if any.
+    pub frames: Option<usize>,
+    /// Overlap given, if any.
+    pub overlap: Option<usize>,
+    /// The name of the frames setting.
+    pub frames_name: &'a str,
+    /// The name of the overlap setting.
+    pub overlap_name: &'a str,
+    /// Whose overlap the run takes when none is given: `"the preset's"` or `"the configuration's"`.
+    pub overlap_from: &'a str,
+}
+
+/// Refuses window settings given for the time-resolved run `config` that it would not take as
+/// given, as every front end refuses them (a run that is not time-resolved passes):
+/// - windows of `W` frames given without an overlap, whose overlap (the preset's, or the
+///   configuration's, set for its own window length) is not fewer frames than `W`;
+/// - an overlap given for windows of 0 frames (one field on every frame);
+/// - with `scene`, an overlap above 0 given where the scene has a single training frame, or where
+///   the windows hold every training frame in one window.
+///
+/// In the last two the overlap would be recorded in `config.json` and ignored. `config` holds
+/// the given settings already; without `scene` the checks of the scene's frames are left out.
+pub fn check_given_windows(
+    config: &RunConfig,
+    scene: Option<&Scene>,
+    given: &GivenWindows,
+) -> Result<(), PipelineError> {
+    let MethodConfig::Temporal(_, spec) = &config.method else { return Ok(()) };
+    let GivenWindows { frames_name, overlap_name, .. } = *given;
+    let (w, o) = (spec.windows.frames, spec.windows.overlap);
+    if given.frames.is_some() && given.overlap.is_none() && w > 0 && o >= w {
+        let give = if w == 1 { format!("{overlap_name} 0") } else { format!("{overlap_name} below {w}") };
+        return Err(PipelineError::invalid(
+            "method.windows.overlap",
+            format!(
+                "windows of {w} frames would overlap by {o} frames ({} overlap, as {overlap_name} is not given), but \
+                 an overlap must be fewer frames than the window's; give {give} with {frames_name} {w} (0: windows \
+                 that do not overlap)",
+                given.overlap_from
+            ),
+        ));
+    }
+    let Some(o) = given.overlap else { return Ok(()) };
+    let key = format!("{overlap_name} {o}");
+    if w == 0 {
+        return Err(PipelineError::invalid(
+            key,
+            format!(
+                "the run trains one field on every frame (windows of 0 frames), so there are no windows to overlap; \
+                 give {frames_name} N frames per window with it, or leave {overlap_name} out"
+            ),
+        ));
+    }
+    let Some(scene) = scene.filter(|_| o > 0) else { return Ok(()) };
+    let plan = window_plan(scene, config)?;
+    let frames = plan.frame_times.len();
+    if frames < 2 {
+        return Err(PipelineError::invalid(
+            key,
+            format!(
+                "the scene has a single training frame, so there are no windows to overlap; leave {overlap_name} out"
+            ),
+        ));
+    }
+    if plan.windows.len() == 1 {
+        return Err(PipelineError::invalid(
+            key,
+            format!(
+                "windows of {w} frames hold all {frames} training frames of the scene in one window, so there are no \
+                 windows to overlap; give {frames_name} below {frames} with it, or leave {overlap_name} out"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The window plan of the time-resolved run `config` of `scene`, from the scene file alone
 /// (no image is read).
 pub fn window_plan(scene: &Scene, config: &RunConfig) -> Result<WindowPlan, PipelineError> {
@@ -1223,5 +1304,97 @@ fn input_dim_of(method: Method) -> usize {
         3
     } else {
         4
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_core::glam::DVec3;
+    use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
+
+    /// A scene of one camera at `times` (no files: the window plan reads none).
+    fn scene_at(times: &[f64]) -> Scene {
+        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y);
+        let frames = times
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| Frame {
+                file_path: format!("images/t{i}.tiff").into(),
+                camera: camera.clone(),
+                time: Some(t),
+                camera_name: None,
+                holdout: false,
+            })
+            .collect();
+        Scene {
+            root: std::path::PathBuf::new(),
+            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames,
+            truth: Vec::new(),
+        }
+    }
+
+    /// `tr-fast` with windows of `frames` overlapping by `overlap`, as given to a front end.
+    fn given(frames: Option<usize>, overlap: Option<usize>) -> (RunConfig, GivenWindows<'static>) {
+        let mut config = RunConfig::new(std::path::PathBuf::from("scene"), Method::TrFast);
+        let MethodConfig::Temporal(_, spec) = &mut config.method else { unreachable!("tr-fast is time-resolved") };
+        spec.windows.frames = frames.unwrap_or(spec.windows.frames);
+        spec.windows.overlap = overlap.unwrap_or(spec.windows.overlap);
+        let names = GivenWindows {
+            frames,
+            overlap,
+            frames_name: "--window",
+            overlap_name: "--overlap",
+            overlap_from: "the preset's",
+        };
+        (config, names)
+    }
+
+    fn refusal(frames: Option<usize>, overlap: Option<usize>, scene: Option<&Scene>) -> String {
+        let (config, names) = given(frames, overlap);
+        check_given_windows(&config, scene, &names).expect_err("refused").to_string()
+    }
+
+    #[test]
+    fn given_window_settings_the_run_would_not_take_are_refused() {
+        let three = scene_at(&[0.0, 1.0, 2.0]);
+        let e = refusal(Some(3), Some(1), Some(&three));
+        assert!(e.starts_with("--overlap 1: windows of 3 frames hold all 3 training frames of the scene in one window"));
+        assert!(e.contains("give --window below 3 with it, or leave --overlap out"), "{e}");
+        let e = refusal(Some(0), Some(2), None);
+        assert!(e.starts_with("--overlap 2: the run trains one field on every frame (windows of 0 frames)"), "{e}");
+        let e = refusal(Some(2), Some(1), Some(&scene_at(&[0.0])));
+        assert!(e.starts_with("--overlap 1: the scene has a single training frame"), "{e}");
+        // tr-fast's own overlap is 4 frames: a window of 3 without an overlap cannot take it.
+        let e = refusal(Some(3), None, None);
+        assert!(
+            e.starts_with(
+                "method.windows.overlap: windows of 3 frames would overlap by 4 frames (the preset's overlap, as \
+                 --overlap is not given)"
+            ) && e.contains("give --overlap below 3 with --window 3"),
+            "{e}"
+        );
+        assert!(refusal(Some(1), None, None).contains("give --overlap 0 with --window 1"));
+    }
+
+    #[test]
+    fn given_window_settings_the_run_takes_pass() {
+        let three = scene_at(&[0.0, 1.0, 2.0]);
+        for (frames, overlap) in
+            [(Some(2), Some(1)), (Some(3), Some(0)), (None, None), (Some(0), None), (Some(5), None)]
+        {
+            let (config, names) = given(frames, overlap);
+            assert!(check_given_windows(&config, Some(&three), &names).is_ok(), "{frames:?} {overlap:?}");
+        }
+        // Windows that overlap on the scene pass; without the scene, its frames are not planned over.
+        let (config, names) = given(Some(3), Some(1));
+        assert!(check_given_windows(&config, None, &names).is_ok());
+        // A method that is not time-resolved takes no windows.
+        let config = RunConfig::new(std::path::PathBuf::from("scene"), Method::Asart);
+        assert!(check_given_windows(&config, Some(&three), &given(Some(3), Some(1)).1).is_ok());
     }
 }

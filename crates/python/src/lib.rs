@@ -204,6 +204,7 @@ fn _fluidnerf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run::check_window_folder, m)?)?;
     m.add_function(wrap_pyfunction!(run::reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(run::window_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(run::check_given_windows, m)?)?;
     m.add_function(wrap_pyfunction!(run::reconstruct_windows, m)?)?;
     m.add_function(wrap_pyfunction!(run::finish_windows, m)?)?;
     m.add_function(wrap_pyfunction!(run::open_run, m)?)?;

@@ -193,6 +193,41 @@ pub fn window_plan(scene: &PyScene, config: &str) -> PyResult<String> {
     })
 }
 
+/// Refuses the window settings given in `method` (`windows.frames` and `windows.overlap`, None
+/// when not given) of the configuration `config` (JSON text, the given settings merged in) of a
+/// run of `scene`, as the command line refuses its `--window` and `--overlap`
+/// (`fluidnerf_pipeline::check_given_windows`): an overlap the run would record and ignore, or a
+/// window shorter than the overlap it takes from `overlap_from` ("the preset's" or "the
+/// configuration's"). Settings out of range otherwise are left to the configuration's check.
+#[pyfunction]
+#[pyo3(signature = (scene, config, frames=None, overlap=None, overlap_from="the preset's"))]
+pub fn check_given_windows(
+    scene: &PyScene,
+    config: &str,
+    frames: Option<usize>,
+    overlap: Option<usize>,
+    overlap_from: &str,
+) -> PyResult<()> {
+    guard(|| {
+        let value: serde_json::Value = serde_json::from_str(config).map_err(|e| err(format!("configuration: {e}")))?;
+        let config: RunConfig = fluidnerf_pipeline::rundir::from_json_value(value).map_err(|e| err(e.to_string()))?;
+        let given = fluidnerf_pipeline::GivenWindows {
+            frames,
+            overlap,
+            frames_name: "method.windows.frames",
+            overlap_name: "method.windows.overlap",
+            overlap_from,
+        };
+        let check = |scene| fluidnerf_pipeline::check_given_windows(&config, scene, &given);
+        check(None).map_err(|e| err(e.to_string()))?;
+        // The scene's frames are planned over by a configuration that passes its own check.
+        if config.validate().is_ok() {
+            check(Some(&scene.inner)).map_err(|e| err(e.to_string()))?;
+        }
+        Ok(())
+    })
+}
+
 /// Refuses to train or finish windows of `scene` with a configuration that names another
 /// scene: the run's config.json would name a scene its windows were not trained on, and
 /// windows trained on either could be stitched into one run.

@@ -694,6 +694,17 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         cfg.gains.rounds = v;
     }
     apply_method_options(args, &mut cfg.method)?;
+    // A window option the run would not take as given is named by its option.
+    fluidnerf_pipeline::check_given_windows(&cfg, None, &given_windows(args)).map_err(|e| {
+        let flag = match &e {
+            fluidnerf_pipeline::PipelineError::Invalid { key, .. } => flag_of(args, key),
+            _ => None,
+        };
+        match flag {
+            Some(flag) => anyhow::Error::new(e).context(format!("{flag} on the command line")),
+            None => e.into(),
+        }
+    })?;
     // The rounds, the refit interval and the offset belong to fitted gains; with others they
     // would be ignored.
     let fit_only = given(&[
@@ -937,28 +948,9 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     if let MethodConfig::Temporal(_, spec) = method {
         if let Some(w) = t.window {
             spec.windows.frames = w;
-            // The overlap the run takes without --overlap (the preset's, or the configuration's)
-            // was set for its own window length, which a shorter --window may not hold.
-            let o = spec.windows.overlap;
-            if t.overlap.is_none() && w > 0 && o >= w {
-                let whose = if args.config.is_some() || args.resume { "the configuration's" } else { "the preset's" };
-                let give = if w == 1 { "--overlap 0".to_string() } else { format!("--overlap below {w}") };
-                bail!(
-                    "--window on the command line: method.windows.overlap: windows of {w} frames would overlap by {o} \
-                     frames ({whose} overlap, as --overlap is not given), but an overlap must be fewer frames than \
-                     the window's; give {give} with --window {w} (0: windows that do not overlap)"
-                );
-            }
         }
         if let Some(o) = t.overlap {
             spec.windows.overlap = o;
-            // One field for every frame has no windows whose overlap the option could set.
-            if spec.windows.frames == 0 {
-                bail!(
-                    "--overlap {o}: the run trains one field on every frame (windows of 0 frames), so there are no \
-                     windows to overlap; give --window N frames per window with it, or leave --overlap out"
-                );
-            }
         }
         if t.no_warm_start {
             spec.windows.warm_start = false;
@@ -1089,26 +1081,26 @@ pub fn run_config(
     Ok(report)
 }
 
+/// The window options given on the command line, for [`fluidnerf_pipeline::check_given_windows`].
+fn given_windows(args: &Args) -> fluidnerf_pipeline::GivenWindows<'static> {
+    fluidnerf_pipeline::GivenWindows {
+        frames: args.temporal.window,
+        overlap: args.temporal.overlap,
+        frames_name: "--window",
+        overlap_name: "--overlap",
+        overlap_from: if args.config.is_some() || args.resume { "the configuration's" } else { "the preset's" },
+    }
+}
+
 /// Refuses an `--overlap` given for windows that hold every training frame of the scene in one
 /// (`--window` at least the frame count), as it is refused with `--window 0`: there are no
 /// windows to overlap, and the option would be recorded and ignored.
 fn refuse_moot_overlap(args: &Args, config: &RunConfig) -> anyhow::Result<()> {
-    let Some(o) = args.temporal.overlap.filter(|&o| o > 0) else { return Ok(()) };
-    let MethodConfig::Temporal(_, spec) = &config.method else { return Ok(()) };
+    if args.temporal.overlap.is_none_or(|o| o == 0) || !matches!(config.method, MethodConfig::Temporal(..)) {
+        return Ok(());
+    }
     let scene = fluidnerf_io::scene::load_scene(&config.scene)?;
-    let plan = fluidnerf_pipeline::window_plan(&scene, config)?;
-    let frames = plan.frame_times.len();
-    if frames < 2 {
-        bail!("--overlap {o}: the scene has a single training frame, so there are no windows to overlap; leave --overlap out");
-    }
-    if plan.windows.len() == 1 {
-        bail!(
-            "--overlap {o}: windows of {} frames hold all {frames} training frames of the scene in one window, so \
-             there are no windows to overlap; give --window below {frames} with it, or leave --overlap out",
-            spec.windows.frames
-        );
-    }
-    Ok(())
+    Ok(fluidnerf_pipeline::check_given_windows(config, Some(&scene), &given_windows(args))?)
 }
 
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
