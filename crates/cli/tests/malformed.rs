@@ -1582,3 +1582,24 @@ fn a_frame_with_an_empty_file_path_is_refused_naming_the_frame_and_the_key() {
     }
     assert!(!d.join("run").exists(), "a run started");
 }
+
+/// A truth entry whose `file_path` is empty, or names a folder, loaded, and was refused only
+/// when the truth was read, as "volume file is a folder" naming neither the entry nor the key;
+/// it is refused when the scene loads, as a frame's is.
+#[test]
+fn a_truth_entry_naming_no_volume_is_refused_naming_the_entry_and_the_key() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 12, &[]);
+    for (path, says) in [("", "is \"\", which names no volume file"), ("truth", "truth is a folder, not a volume file")]
+    {
+        edit_json(&d.join("scene/transforms.json"), |v| v["truth"][0]["file_path"] = path.into());
+        for args in [&["info", "scene"][..], &["reconstruct", "scene", "-o", "run", "--method", "sart", "-q"]] {
+            refused(
+                &fluidnerf(d, args),
+                &format!("scene/transforms.json: truth entry 0, key `truth[0].file_path`: {says}"),
+            );
+        }
+        assert!(!d.join("run").exists(), "a run started");
+    }
+}

@@ -1069,6 +1069,32 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
         }
     };
     check_recording(&file, &top, &[])?;
+    // A truth that names no volume was found only when the truth was read, after the run had
+    // trained, as "volume file is a folder" naming neither the entry nor the key: an empty path
+    // resolves to the scene's folder.
+    for (i, t) in top.truth.iter().enumerate() {
+        let location = format!("truth entry {i}, key `truth[{i}].file_path`");
+        if t.file_path.trim().is_empty() {
+            return Err(IoError::Key {
+                path: file.clone(),
+                location,
+                problem: format!(
+                    "is {:?}, which names no volume file; give the ground-truth volume (.npy) of the entry",
+                    t.file_path
+                ),
+            });
+        }
+        if resolve_in(&root, Path::new(&t.file_path)).is_dir() {
+            return Err(IoError::Key {
+                path: file.clone(),
+                location,
+                problem: format!(
+                    "{} is a folder, not a volume file; give the ground-truth volume (.npy) of the entry",
+                    t.file_path
+                ),
+            });
+        }
+    }
     let recording = Recording {
         linearisation: top.linearisation.unwrap_or_default(),
         frames: frame_recordings,
@@ -1282,6 +1308,17 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
     check_time_spread(scene, file)?;
     check_instants_apart(scene, file)?;
     check_time_steps(scene, file)?;
+    // A truth's time is matched to the frames' instants: one that is not finite matches none.
+    if let Some((i, t)) = scene.truth.iter().enumerate().find(|(_, t)| t.time.is_some_and(|t| !t.is_finite())) {
+        return Err(IoError::invalid(
+            file,
+            format!(
+                "truth entry {i} ({}): its time {} is not a finite number; give the time of the instant it holds",
+                t.file_path.display(),
+                fluidnerf_core::num(t.time.unwrap_or(f64::NAN))
+            ),
+        ));
+    }
     // Among truths with a time, one without is matched to no instant and would go unused,
     // unreported.
     let timed_truth = scene.truth.iter().position(|t| t.time.is_some());
@@ -2379,6 +2416,35 @@ mod tests {
             );
             assert!(m.contains(SCENE_FILE), "{m}");
         }
+    }
+
+    /// A truth entry whose `file_path` is empty, or names a folder, loaded, and was refused only
+    /// when the truth was read ("volume file is a folder"), naming neither the entry nor the
+    /// key; one whose time is not finite (a scene built in memory) matched no instant.
+    #[test]
+    fn a_truth_entry_without_a_volume_or_a_time_is_refused_at_load() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("truth")).expect("mkdir");
+        let mut v = good_json(d);
+        v["truth"] = serde_json::json!([{ "file_path": "truth/t0.npy" }, { "file_path": "truth/t1.npy" }]);
+        let cases = [("", "is \"\", which names no volume file"), ("  ", "is \"  \", which names no volume file")];
+        for (path, says) in cases.into_iter().chain([("truth", "truth is a folder, not a volume file")]) {
+            v["truth"][1]["file_path"] = path.into();
+            let m = load_scene(&write_json(d, &v)).expect_err("must fail").to_string();
+            assert!(m.contains(&format!("truth entry 1, key `truth[1].file_path`: {says}")), "{m}");
+            assert!(m.contains(SCENE_FILE), "{m}");
+        }
+        let mut scene = ring_scene(d, 3, Distortion::default());
+        for (i, f) in scene.frames.iter_mut().enumerate() {
+            f.time = Some(i as f64);
+        }
+        scene.truth = vec![
+            TruthRef { time: Some(0.0), file_path: "truth/t0.npy".into() },
+            TruthRef { time: Some(f64::INFINITY), file_path: "truth/t1.npy".into() },
+        ];
+        let m = validate_scene(&scene, Path::new("x.json")).expect_err("must fail").to_string();
+        assert!(m.contains("truth entry 1 (truth/t1.npy): its time inf is not a finite number"), "{m}");
     }
 
     #[test]
