@@ -771,7 +771,10 @@ pub struct StoppingPolicy {
     /// Iteration cap (per window for time-resolved runs), 1 to
     /// [`fluidnerf_core::MAX_ITERATIONS`]; None: the method's own.
     pub max_iterations: Option<usize>,
-    /// Seconds of the method's own work (evaluations excluded); None: unlimited.
+    /// Seconds of the method's own work (evaluations excluded); None: unlimited. Per window
+    /// for time-resolved runs (each window trains for up to this long; the voxel runs that
+    /// start a window, at most half of it, and the fit to them count against it), as
+    /// `max_iterations`; a resumed run counts from the resume.
     pub time_budget_s: Option<f64>,
     /// Held-out rule: iterations between evaluations, at most
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 1 for voxel methods (each

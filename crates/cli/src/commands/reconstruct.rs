@@ -266,7 +266,12 @@ pub struct StopArgs {
     /// Iteration cap (per window for time-resolved methods) [default: the method's own].
     #[arg(long)]
     pub max_iterations: Option<usize>,
-    /// Stop after this many seconds of the method's own work (evaluations excluded).
+    /// Stop after this many seconds of the method's own work (evaluations excluded). For a
+    /// time-resolved method the budget is per window, not per run: each window trains for up
+    /// to this long (a run of N windows up to N times as long; static-per-frame: per frame),
+    /// and the voxel runs that start a window (--start-method, at most half of it) and the fit
+    /// to them count against that window's. A run continued with --resume has it again for what
+    /// is left.
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
     /// Same as `--stop held-out`.
