@@ -286,6 +286,26 @@ def test_a_data_range_wider_than_float32_values_is_refused():
         assert np.isfinite(metric(t, t * 0.9, widest))
 
 
+def test_a_data_range_too_small_for_its_square_gives_a_finite_psnr_and_is_refused_by_ssim():
+    """data_range=1e-300 made the PSNR -inf (its square underflowed) and the global SSIM NaN
+    without a word. The PSNR of such a range is finite (20 log10 R - 10 log10 MSE) and given;
+    SSIM's constants (K R)^2 vanish, so SSIM refuses it. NRMSE takes no range."""
+    t = np.zeros((12, 12), np.float32)
+    e = t.copy()
+    e[0, 0] = 2.0
+    mse = 4.0 / 144
+    for r in (1e-300, 1e-160, 1.0, 1e30):
+        assert fluidnerf.psnr(e, t, r) == pytest.approx(20 * np.log10(r) - 10 * np.log10(mse), rel=1e-12)
+    for window in ("uniform", "gaussian", "global"):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=r"data_range: 1e-300 is so small that SSIM's constants"
+        ):
+            fluidnerf.ssim(t, t, 1e-300, window)
+        # The smallest difference of two float32 values still scores.
+        tiny = float(np.finfo(np.float32).smallest_subnormal)
+        assert fluidnerf.ssim(t, t, tiny, window) == pytest.approx(1.0)
+
+
 def test_back_projection_refuses_images_that_are_not_finite(scene):
     """A NaN or infinite pixel gave a volume of NaN without a word."""
     s, *_ = scene

@@ -598,6 +598,28 @@ fn a_data_range_wider_than_float32_values_is_refused() {
     assert_eq!(read_json(&d.join("m.json"))["steps"][0]["global"]["ssim_global"], 1.0);
 }
 
+/// A --data-range so small that SSIM's constants (K R)² vanish in double precision wrote the
+/// PSNR as -inf (its square underflowed) and the SSIM as NaN: it is refused before scoring. The
+/// smallest range that keeps them scores, with a finite PSNR.
+#[test]
+fn a_data_range_whose_ssim_constants_vanish_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--data-range", "1e-300"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{e}");
+    assert!(e.contains("--data-range 1e-300 is so small that SSIM's constants (K₁ R)² and (K₂ R)² vanish"), "{e}");
+    assert!(out.stdout.is_empty() && !d.join("m.json").exists(), "scored before refusing");
+    let args =
+        ["eval", "truth_0.npy", "--scene", ".", "--json", "m.json", "--data-range", "1e-70", "--no-reprojection"];
+    let out = fluidnerf(&args, d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let global = &read_json(&d.join("m.json"))["steps"][0]["global"];
+    assert_eq!(global["ssim_global"], 1.0);
+    assert_eq!(global["data_range"], 1e-70);
+}
+
 /// A region named `all` is refused: its row read exactly as the whole volume's, twice `all` in
 /// the table and the CSV.
 #[test]

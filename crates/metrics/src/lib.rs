@@ -22,7 +22,9 @@ pub mod ssim;
 
 pub use curve::{NrmsePoint, TruthSample};
 pub use error::MetricsError;
-pub use pointwise::{data_range_of, mse, nrmse, nrmse_undefined, psnr, NRMSE_UNDEFINED};
+pub use pointwise::{
+    data_range_of, data_range_problem, mse, nrmse, nrmse_undefined, psnr, MAX_DATA_RANGE, NRMSE_UNDEFINED,
+};
 pub use region::{default_regions, estimate_flow_axis, regions_flow_axis, FlowAxisFrom, Region};
 pub use report::{
     evaluate_field, evaluate_volume, MetricsReport, RegionMetrics, StepMetrics, VolumeMetricOptions, VolumeMetrics,

@@ -30,7 +30,7 @@ use fluidnerf_core::num;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::{data_range_of, MetricsError};
+use crate::{data_range_of, data_range_problem, MetricsError};
 
 /// The window of the local statistics.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -89,7 +89,11 @@ impl SsimParams {
         SsimParams { window: SsimWindow::Gaussian { sigma: 1.5 }, ..Default::default() }
     }
 
-    fn validate(&self) -> Result<(), MetricsError> {
+    /// Refuses parameters no SSIM can be computed with: an even or empty window, a 1-voxel one
+    /// with sample (co)variances, a σ or constant out of range, and a data range whose
+    /// constants `(K R)²` vanish in f64 or beyond any two f32 values' difference
+    /// ([`data_range_problem`]).
+    pub fn validate(&self) -> Result<(), MetricsError> {
         match self.window {
             SsimWindow::Uniform { size } if size == 0 || size % 2 == 0 => {
                 return Err(MetricsError::invalid("SSIM window size", format!("must be odd and positive, got {size}")))
@@ -114,10 +118,8 @@ impl SsimParams {
                 format!("K1 {} and K2 {} must be >= 0", num(self.k1), num(self.k2)),
             ));
         }
-        if let Some(r) = self.data_range {
-            if !(r > 0.0 && r.is_finite()) {
-                return Err(MetricsError::invalid("SSIM data range", format!("must be positive, got {}", num(r))));
-            }
+        if let Some(why) = self.data_range.and_then(|r| data_range_problem(r, [self.k1, self.k2])) {
+            return Err(MetricsError::invalid("SSIM data range", why));
         }
         Ok(())
     }
@@ -126,7 +128,8 @@ impl SsimParams {
 /// Global SSIM, Eq. 6.19 over the whole arrays as a single window: μ the means, σ² the
 /// (population) variances, σ_EÊ the covariance, c₁ = (0.01 R)², c₂ = (0.03 R)² with
 /// `R = data_range`. Symmetric in its arguments; 1 for identical inputs. Panics if the lengths
-/// differ, the slices are empty or `data_range` is not positive.
+/// differ, the slices are empty or `data_range` is not positive; a range [`data_range_problem`]
+/// refuses (with the default K's) gives NaN or a meaningless score.
 pub fn ssim_global(a: &[f32], b: &[f32], data_range: f64) -> f64 {
     assert_eq!(a.len(), b.len(), "ssim_global: inputs differ in length");
     assert!(!a.is_empty(), "ssim_global: empty inputs");
@@ -472,6 +475,36 @@ mod tests {
         let g = field(big, 3);
         assert_relative_eq!(ssim_3d(&g, &g, big, &SsimParams::gaussian()).expect("fits"), 1.0, epsilon = 1e-12);
         assert_relative_eq!(ssim_global(&a, &a, 1.0), 1.0, epsilon = 1e-12);
+    }
+
+    /// A data range whose constants (K R)² multiply to less than the smallest f64 scored
+    /// identical flat arrays NaN (0/0); it is refused naming the range, as one wider than any
+    /// two f32 values differ by is. Ranges down to the smallest difference of two f32 values are
+    /// computed.
+    #[test]
+    fn a_data_range_whose_constants_vanish_is_refused() {
+        // Zero throughout: the windows' (co)variances are exactly 0, so SSIM is c₁c₂ / c₁c₂ there.
+        let flat = vec![0.0f32; 64];
+        for (r, says) in [
+            (1e-300, "1e-300 is so small that"),
+            (1e-80, "1e-80 is so small that"),
+            (1e39, "1e39 is more than any two float32 values differ by"),
+            (1e300, "1e300 is more than any two float32 values differ by"),
+        ] {
+            let p = SsimParams { data_range: Some(r), ..Default::default() };
+            let e = ssim_2d(&flat, &flat, 8, 8, &p).expect_err("refused").to_string();
+            assert!(e.starts_with(&format!("invalid SSIM data range: {says}")), "{e}");
+        }
+        // The unguarded global SSIM of such a range is what the refusal keeps from a report.
+        assert!(ssim_global(&flat, &flat, 1e-300).is_nan());
+        let smallest = f64::from(f32::from_bits(1));
+        for r in [smallest, 1e-50, 1.0, 2.0 * f64::from(f32::MAX)] {
+            let p = SsimParams { data_range: Some(r), ..Default::default() };
+            assert_relative_eq!(ssim_2d(&flat, &flat, 8, 8, &p).expect("computed"), 1.0, epsilon = 1e-12);
+            assert_relative_eq!(ssim_global(&flat, &flat, r), 1.0, epsilon = 1e-12);
+        }
+        // Constants set to 0 on purpose (K = 0) are not vanished ones.
+        assert!(data_range_problem(1e-300, [0.0, 0.0]).is_none());
     }
 
     #[test]

@@ -220,23 +220,17 @@ fn pair(
     Ok((a, b, x.shape().to_vec()))
 }
 
-/// The peak of PSNR and SSIM: `data_range`, else the truth's max − min. A range beyond the
-/// largest difference of two float32 values is refused: no two values compared differ by it,
-/// and its square overflowed the metrics' constants (PSNR infinite, SSIM NaN, unannounced).
-fn metric_range(data_range: Option<f64>, truth: &[f32]) -> PyResult<f64> {
+/// The peak of PSNR and SSIM: `data_range`, else the truth's max − min, refused as the library
+/// refuses it (`fluidnerf_metrics::data_range_problem`) for SSIM's constants `ks` (`[0, 0]` for
+/// PSNR): a range beyond the largest difference of two float32 values, whose square overflowed
+/// the metrics' constants (PSNR infinite, SSIM NaN), and for SSIM one so small that its
+/// constants vanish (SSIM NaN), unannounced.
+fn metric_range(data_range: Option<f64>, truth: &[f32], ks: [f64; 2]) -> PyResult<f64> {
     let range = data_range.unwrap_or_else(|| fluidnerf_metrics::data_range_of(truth));
-    if !(range > 0.0 && range.is_finite()) {
-        return Err(err(format!("data_range: must be positive, got {}", num(range))));
+    match fluidnerf_metrics::data_range_problem(range, ks) {
+        Some(why) => Err(err(format!("data_range: {why}"))),
+        None => Ok(range),
     }
-    let widest = 2.0 * f64::from(f32::MAX);
-    if range > widest {
-        return Err(err(format!(
-            "data_range: {} is more than any two float32 values differ by ({widest:e}); give the range of \
-             the values compared",
-            num(range)
-        )));
-    }
-    Ok(range)
 }
 
 /// NRMSE of `estimate` against `truth` (dissertation Eq. 6.18: RMS error over the truth's RMS).
@@ -258,7 +252,8 @@ pub fn psnr(
     data_range: Option<f64>,
 ) -> PyResult<f64> {
     let (a, b, _) = pair(&estimate, &truth)?;
-    let range = metric_range(data_range, &b)?;
+    // PSNR is finite for every positive range (`fluidnerf_metrics::psnr`): no constants to keep.
+    let range = metric_range(data_range, &b, [0.0, 0.0])?;
     guard(|| Ok(fluidnerf_metrics::psnr(&a, &b, range)))
 }
 
@@ -274,7 +269,9 @@ pub fn ssim(
     window: &str,
 ) -> PyResult<f64> {
     let (a, b, shape) = pair(&estimate, &truth)?;
-    let range = metric_range(data_range, &b)?;
+    // The global SSIM takes the default constants too.
+    let k = fluidnerf_metrics::SsimParams::default();
+    let range = metric_range(data_range, &b, [k.k1, k.k2])?;
     let params = match window {
         "global" => return guard(|| Ok(fluidnerf_metrics::ssim_global(&a, &b, range))),
         "uniform" => fluidnerf_metrics::SsimParams { data_range: Some(range), ..Default::default() },

@@ -226,17 +226,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(r) = args.data_range {
-        if !(r > 0.0 && r.is_finite()) {
-            bail!("--data-range must be positive, got {}", num(r));
-        }
-        // Its square overflowed the metrics' constants: PSNR infinite and SSIM NaN, unannounced.
-        let widest = 2.0 * f64::from(f32::MAX);
-        if r > widest {
-            bail!(
-                "--data-range {} is more than any two float32 values differ by ({widest:e}); give the range of the \
-                 values compared",
-                num(r)
-            );
+        // A huge range's square overflowed the metrics' constants (PSNR infinite, SSIM NaN), a
+        // tiny one's vanished (SSIM NaN), unannounced.
+        let k = fluidnerf_metrics::SsimParams::default();
+        if let Some(why) = fluidnerf_metrics::data_range_problem(r, [k.k1, k.k2]) {
+            bail!("--data-range {why}");
         }
     }
     if let Some(a) = &args.flow_axis {
