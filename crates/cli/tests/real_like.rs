@@ -171,9 +171,23 @@ fn a_time_resolved_run_balances_differing_gains_and_says_so() {
     };
     let auto = report(&d.join("run"));
     assert!(said(&auto, "a time-resolved run fits no gains, so the images are balanced"), "{}", auto["warnings"]);
+    // The report records the mode taken, why, and each frame's gain, as a static run's does
+    // (it had no preprocessing record: the mode showed only in the warning).
+    let pre = &auto["preprocessing"];
+    assert_eq!(pre_mode(&auto), "balance");
+    let why = pre["gains_auto"].as_str().expect("why auto balanced");
+    assert!(why.contains("the median total of its time"), "{why}");
+    let frames = pre["frames"].as_array().expect("a gain per frame");
+    assert_eq!(frames.len(), 18, "6 cameras at 3 times");
+    let gains: Vec<f64> = frames.iter().map(|f| f["gain"].as_f64().expect("gain")).collect();
+    assert!(gains.iter().any(|&g| (g - 1.0).abs() > 0.05), "{gains:?}");
+    assert!(frames.iter().all(|f| f["offset"] == 0.0 && f["holdout_scores"].is_null()));
+    let html = std::fs::read_to_string(d.join("run/report.html")).expect("report.html");
+    assert!(html.contains("Preprocessing:") && html.contains("gains balance (auto:"), "no preprocessing table");
     assert_eq!(nrmse(&auto), nrmse(&with("balanced", "balance")));
     let none = with("as-they-are", "none");
     assert!(said(&none, "--gains balance"), "{}", none["warnings"]);
+    assert_eq!(pre_mode(&none), "none");
     assert_ne!(nrmse(&none), nrmse(&auto));
     let mut refits = run.to_vec();
     refits.extend(["--gain-every", "5", "--force"]);

@@ -236,8 +236,9 @@ pub struct Preprocessing {
     /// `fluidnerf_io::scene::load_preprocessed` states the correction).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flat_field_range: Option<[f64; 2]>,
-    /// The gains as the run took them: `mode` is `fit` or `none` where the configuration said
-    /// `auto` ([`crate::GainMode::Auto`]).
+    /// The gains as the run took them: where the configuration said `auto`
+    /// ([`crate::GainMode::Auto`]), `mode` is `fit` or `none` for a static run, `balance` or
+    /// `none` for a time-resolved one (which fits no gains).
     pub gains: crate::GainConfig,
     /// Why `auto` fitted (or balanced) gains: the image whose total lies farthest off its
     /// time's median.

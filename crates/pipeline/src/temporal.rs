@@ -32,8 +32,8 @@ use serde::{Deserialize, Serialize};
 use crate::neural::{check_views, estimate_memory, run_voxel_start, write_checkpoint_to};
 use crate::{
     check_memory, finish, mean, peak_rss, write_volume, Family, History, LossKind, Method, MethodConfig, PipelineError,
-    RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord, WindowDetails,
-    WindowPos, REPORT_FORMAT,
+    Preprocessing, RunConfig, RunDir, RunEvent, RunReport, RunStatus, Session, StopReason, TemporalSpec, VolumeRecord,
+    WindowDetails, WindowPos, REPORT_FORMAT,
 };
 
 /// `windows/progress.json`: what a run is and how far it got, for resuming.
@@ -222,6 +222,8 @@ struct Setup {
     field: fluidnerf_neural::trained::AnyField,
     needed: u64,
     progress: Progress,
+    /// The report's record of what was done to the images (gains as taken, not fitted).
+    preprocessing: Preprocessing,
 }
 
 /// Validates a time-resolved run and prepares it (images read, plan made, field built, memory
@@ -352,7 +354,9 @@ fn setup(
         problem.views.len(),
         window_len
     );
-    Ok(Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, progress })
+    // A time-resolved run fits no gains, and scores no held-out view by reprojection.
+    let preprocessing = measured.report(scene, None, &[]);
+    Ok(Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, progress, preprocessing })
 }
 
 /// Runs (or, resuming, continues) a whole time-resolved run. With `require_all`, the run must
@@ -372,7 +376,7 @@ pub(crate) fn run(
             why: "no windows/progress.json: nothing to continue or finish".into(),
         });
     }
-    let Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, mut progress } =
+    let Setup { spec, method, problem, masks, field_cfg, input_dim, field, needed, mut progress, preprocessing } =
         setup(scene, config, truth, session)?;
     if dir.resuming() {
         let saved: Progress = crate::rundir::read_json(&progress_path)?;
@@ -431,6 +435,7 @@ pub(crate) fn run(
         needed,
         problem: &problem,
         masks: &masks,
+        preprocessing: &preprocessing,
     };
     fluidnerf_neural::with_field!(field, f => ctx.train_and_write(f, progress, session))
 }
@@ -447,6 +452,7 @@ struct Ctx<'a> {
     needed: u64,
     problem: &'a fluidnerf_neural::train::Problem,
     masks: &'a ViewMasks,
+    preprocessing: &'a Preprocessing,
 }
 
 /// The voxel reconstructions of the instants that start a window: time, field, seconds.
@@ -717,7 +723,7 @@ impl Ctx<'_> {
         };
         log::debug!("{}: prepare and train {wall_s:.1} s", self.method);
         let report = RunReport {
-            preprocessing: None,
+            preprocessing: Some(self.preprocessing.clone()),
             warnings: Vec::new(),
             format: REPORT_FORMAT,
             fluidnerf_version: env!("CARGO_PKG_VERSION").to_string(),
