@@ -687,3 +687,68 @@ fn a_run_resumed_with_another_time_step_is_refused_naming_it() {
     assert!(report(&d.join("run"))["status"] == "finished", "the refused resume changed the run");
     ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--time-step", "1", "-q"]));
 }
+
+/// The safetensors file `path` rewritten without its metadata, as files were written before
+/// windows were tagged.
+fn strip_metadata(path: &std::path::Path) {
+    let bytes = std::fs::read(path).expect("reads the weights");
+    let len = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + len]).expect("header");
+    assert!(header.as_object_mut().expect("object").remove("__metadata__").is_some(), "the file was tagged");
+    let mut text = header.to_string().into_bytes();
+    while !text.len().is_multiple_of(8) {
+        text.push(b' ');
+    }
+    let mut out = (text.len() as u64).to_le_bytes().to_vec();
+    out.extend(text);
+    out.extend(&bytes[8 + len..]);
+    std::fs::write(path, out).expect("writes the weights");
+}
+
+/// One window's weights copied over another's (`windows/w000.safetensors` over `w001`) were
+/// read by eval, export and render as that window's, and one frame's volume copied over
+/// another's was scored as that frame's, without a word. Each window's weights now say which
+/// window they are, and the report records each volume's digest: the copy is refused naming the
+/// file and what it should hold. Files without them (runs written before) are read as before.
+#[test]
+fn a_window_or_frame_file_copied_over_another_is_refused_naming_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 3, 16, 12, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --window 2 --overlap 1 --max-iterations 2 --resolution 8 \
+                --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let eval = ["eval", "run", "--json", "m.json", "--force"];
+    let export = ["export", "run", "-o", "ex", "--npy", "--time", "15"];
+    ok(&fluidnerf(d, &eval));
+    let (w0, w1) = (d.join("run/windows/w000.safetensors"), d.join("run/windows/w001.safetensors"));
+    let own = std::fs::read(&w1).expect("reads window 1");
+    std::fs::copy(&w0, &w1).expect("copies window 0 over window 1");
+    for args in [&eval[..], &export[..]] {
+        let out = fluidnerf(d, args);
+        refused(&out, "windows/w001.safetensors: holds the weights of window 0 (frames 0..2, t = 14, 15,");
+        refused(&out, "but temporal.json lists this file as those of window 1 (frames 1..3, t = 15, 16,");
+    }
+    assert!(!d.join("ex").exists(), "exported the copy");
+    // Restored, and then without its tag, as a run written before: read as before.
+    std::fs::write(&w1, &own).expect("restores window 1");
+    ok(&fluidnerf(d, &eval));
+    strip_metadata(&w1);
+    ok(&fluidnerf(d, &eval));
+
+    // A frame's volume copied over another's, scored from the volumes.
+    let (v0, v1) = (d.join("run/frames/volume_000.npy"), d.join("run/frames/volume_001.npy"));
+    let by_volume = ["eval", "run", "--use-volume", "--json", "m.json", "--force"];
+    ok(&fluidnerf(d, &by_volume));
+    std::fs::copy(&v0, &v1).expect("copies frame 0 over frame 1");
+    let out = fluidnerf(d, &by_volume);
+    refused(&out, "frames/volume_001.npy: holds other values than the run wrote there (its report.json records the volume at t = 15");
+    refused(&out, "it holds the run's volume frames/volume_000.npy at t = 14 (copied over?)");
+    // A report without digests (written before) reads the files as before.
+    edit_json(&d.join("run/report.json"), |v| {
+        for volume in v["volumes"].as_array_mut().expect("volumes") {
+            volume.as_object_mut().expect("object").remove("digest");
+        }
+    });
+    ok(&fluidnerf(d, &by_volume));
+}

@@ -916,6 +916,84 @@ pub fn frame_times_problem(times: &[f64]) -> Option<String> {
     })
 }
 
+/// The tag of a window's weights file ([`crate::weights::weights_bytes_tagged`]) that says
+/// which window of its run it holds: [`WindowTag`] as JSON.
+pub const WINDOW_TAG: &str = "window";
+
+/// What identifies the weights of one window of a run: its index in the plan, its frames, their
+/// times and its time origin. A run writes it into each window's weights file, and reading the
+/// run refuses a file whose tag is not the window `temporal.json` lists there (one window's
+/// weights copied over another's were read as that window's). Files written before the tag
+/// existed have none and are read as before.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindowTag {
+    pub index: usize,
+    /// First and one-past-last frame index.
+    pub frames: [usize; 2],
+    /// The times of its frames.
+    pub times: Vec<f64>,
+    pub time_origin: f64,
+}
+
+impl WindowTag {
+    /// Window `index` of the run whose frames are at `frame_times`, as `temporal.json` records it.
+    pub fn of(index: usize, window: &WindowRecord, frame_times: &[f64]) -> Self {
+        let [a, b] = window.frames;
+        WindowTag {
+            index,
+            frames: window.frames,
+            times: frame_times.get(a..b).map(<[f64]>::to_vec).unwrap_or_default(),
+            time_origin: window.time_origin,
+        }
+    }
+
+    /// The tag as the metadata of a weights file.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_else(|_| unreachable!("numbers and lists serialise"))
+    }
+
+    fn describe(&self) -> String {
+        let times = self.times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
+        format!(
+            "window {} (frames {}..{}, t = {times}, time origin {})",
+            self.index,
+            self.frames[0],
+            self.frames[1],
+            num(self.time_origin)
+        )
+    }
+}
+
+/// Refuses the weights file `path` of window `expected` when its tag ([`WINDOW_TAG`]) names
+/// another window (or cannot be read as one); a file without the tag is accepted.
+fn check_window_tag(path: &Path, expected: &WindowTag) -> Result<(), NeuralError> {
+    let Some(text) = crate::weights::checkpoint_tag(path, WINDOW_TAG)? else { return Ok(()) };
+    let held: WindowTag = serde_json::from_str(&text).map_err(|e| {
+        NeuralError::checkpoint(path, format!("its tag `{WINDOW_TAG}` is not a window's record ({e}): {text}"))
+    })?;
+    // Times as written and read back as text (`same_time`).
+    let same = |a: f64, b: f64| fluidnerf_core::scene::same_time(a, b);
+    let same_times =
+        held.times.len() == expected.times.len() && held.times.iter().zip(&expected.times).all(|(&a, &b)| same(a, b));
+    if held.index != expected.index
+        || held.frames != expected.frames
+        || !same_times
+        || !same(held.time_origin, expected.time_origin)
+    {
+        return Err(NeuralError::checkpoint(
+            path,
+            format!(
+                "holds the weights of {}, but temporal.json lists this file as those of {}: the file is another \
+                 window's or another run's (copied over?); restore it, or rerun the reconstruction",
+                held.describe(),
+                expected.describe()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Reads `run_dir/temporal.json` and the window weights it names; returns the stitched field.
 pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
     let path = run_dir.join("temporal.json");
@@ -930,7 +1008,7 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
     }
     let mut fields: Vec<Box<dyn ScalarField + Send + Sync>> = Vec::new();
     let mut plan: Vec<Range<usize>> = Vec::new();
-    for w in &rec.windows {
+    for (k, w) in rec.windows.iter().enumerate() {
         if w.frames[0] >= w.frames[1] || w.frames[1] > rec.frame_times.len() {
             return Err(NeuralError::checkpoint(&path, format!("window frames {:?} out of range", w.frames)));
         }
@@ -966,6 +1044,7 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         }
         let mut field = build_field_for_weights(&rec.field, &w.meta.aabb, rec.input_dim)?;
         let weights = run_dir.join(&w.weights);
+        check_window_tag(&weights, &WindowTag::of(k, w, &rec.frame_times))?;
         crate::with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
         let boxed: Box<dyn ScalarField + Send + Sync> = match field {
             AnyField::Mlp(f) => Box::new(TrainedField::new(f, w.meta.clone())?),

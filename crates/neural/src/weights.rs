@@ -40,9 +40,16 @@ fn serialise(
 
 /// The field's parameters as a safetensors file.
 pub fn weights_bytes<F: TrainableField>(field: &F) -> Result<Vec<u8>, NeuralError> {
+    weights_bytes_tagged(field, &[])
+}
+
+/// [`weights_bytes`] with `tags`: strings of the caller's, kept in the file's metadata as
+/// `tag.<key>` (read back by [`checkpoint_tag`]), such as which window of a run the weights are.
+pub fn weights_bytes_tagged<F: TrainableField>(field: &F, tags: &[(&str, String)]) -> Result<Vec<u8>, NeuralError> {
     let p = field.params();
     let tensors = field.tensors().into_iter().map(|(n, s, r)| (n, s, &p[r])).collect();
-    serialise(tensors, None)
+    let metadata = (!tags.is_empty()).then(|| tags.iter().map(|(k, v)| (format!("tag.{k}"), v.clone())).collect());
+    serialise(tensors, metadata)
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, NeuralError> {
@@ -158,7 +165,8 @@ pub fn checkpoint_bytes_tagged<F: TrainableField>(
     serialise(tensors, Some(metadata))
 }
 
-/// The tag `key` of the checkpoint at `path` ([`checkpoint_bytes_tagged`]); None when it has none.
+/// The tag `key` of the checkpoint or weights file at `path` ([`checkpoint_bytes_tagged`],
+/// [`weights_bytes_tagged`]); None when it has none.
 /// Reads the file's header only (its first 8 bytes give the length of the JSON that follows).
 pub fn checkpoint_tag(path: &Path, key: &str) -> Result<Option<String>, NeuralError> {
     use std::io::Read;

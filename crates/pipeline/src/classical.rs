@@ -368,7 +368,14 @@ pub(crate) fn run(
         },
         final_nrmse: metrics.as_ref().map(|m| m.global.nrmse),
         final_ssim_global: metrics.as_ref().map(|m| m.global.ssim_global),
-        volumes: vec![VolumeRecord { file: "volume.npy".into(), time: None, trained: true, dims: grid.dims, metrics }],
+        volumes: vec![VolumeRecord {
+            file: "volume.npy".into(),
+            time: None,
+            trained: true,
+            dims: grid.dims,
+            metrics,
+            digest: None,
+        }],
         not_reached: Vec::new(),
         classical: Some(ClassicalDetails {
             projector: kind,

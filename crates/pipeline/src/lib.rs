@@ -457,6 +457,16 @@ pub(crate) fn peak_rss() -> Option<u64> {
 }
 
 /// Writes a volume as `.npy` and `.vti` under `stem` (relative to the run folder).
+/// A digest of a volume's values: FNV-1a (64 bits) over their f32 bit patterns and its grid, as
+/// 16 hex digits. It tells the volumes of one run apart (a frame's from another frame's); it is
+/// no protection against a file forged on purpose.
+pub fn volume_digest(volume: &Volume) -> String {
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let words = volume.dims.iter().map(|&n| n as u32).chain(volume.data.iter().map(|v| v.to_bits()));
+    let hash = words.fold(0xcbf2_9ce4_8422_2325u64, |h, w| (h ^ u64::from(w)).wrapping_mul(PRIME));
+    format!("{hash:016x}")
+}
+
 pub(crate) fn write_volume(dir: &RunDir, stem: &str, volume: &Volume) -> Result<(), PipelineError> {
     fluidnerf_io::volume::write_npy(&dir.path(&format!("{stem}.npy")), volume)?;
     fluidnerf_io::volume::write_vti(&dir.path(&format!("{stem}.vti")), volume)?;

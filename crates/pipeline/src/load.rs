@@ -343,6 +343,31 @@ impl LoadedRun {
             ));
         }
         fluidnerf_io::volume::check_finite(&path, &volume)?;
+        // The frames of a time-resolved run share one grid: one frame's volume copied over
+        // another's was read as that frame's. Its digest tells them apart.
+        if let Some(record) = recorded {
+            let held = crate::volume_digest(&volume);
+            if record.digest.as_ref().is_some_and(|d| *d != held) {
+                let at = |t: Option<f64>| t.map(|t| format!(" at t = {}", num(t))).unwrap_or_default();
+                let whose = self
+                    .report
+                    .iter()
+                    .flat_map(|r| &r.volumes)
+                    .find(|v| v.digest.as_deref() == Some(held.as_str()))
+                    .map(|v| format!("it holds the run's volume {}{}", v.file, at(v.time)))
+                    .unwrap_or_else(|| "it holds none of the run's volumes".to_string());
+                return Err(PipelineError::file(
+                    &path,
+                    format!(
+                        "holds other values than the run wrote there (its report.json records the volume{} with \
+                         digest {}, the file's is {held}): {whose} (copied over?); restore it, or rerun the \
+                         reconstruction",
+                        at(record.time),
+                        record.digest.as_deref().unwrap_or_default()
+                    ),
+                ));
+            }
+        }
         Ok(volume)
     }
 }

@@ -605,7 +605,14 @@ impl Ctx<'_> {
             },
             final_nrmse: metrics.as_ref().map(|m| m.global.nrmse),
             final_ssim_global: metrics.as_ref().map(|m| m.global.ssim_global),
-            volumes: vec![VolumeRecord { file: "volume.npy".into(), time: None, trained: true, dims, metrics }],
+            volumes: vec![VolumeRecord {
+                file: "volume.npy".into(),
+                time: None,
+                trained: true,
+                dims,
+                metrics,
+                digest: None,
+            }],
             not_reached: Vec::new(),
             classical: None,
             neural: Some(NeuralDetails {

@@ -121,6 +121,12 @@ pub struct VolumeRecord {
     /// Against the scene's ground truth at this time, when it has one: the field sampled at
     /// the truth's voxel centres (voxel methods: their volume resampled there).
     pub metrics: Option<StepMetrics>,
+    /// The digest of the values written ([`crate::volume_digest`]), recorded for the frames of
+    /// a time-resolved run, which share one grid: reading the run refuses a file that holds
+    /// other values, such as another frame's volume copied over it. None: not recorded (static
+    /// runs, and runs written before it was).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub digest: Option<String>,
 }
 
 /// Details of a voxel method's run.

@@ -20,7 +20,7 @@ use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{ScalarField, Scene, Volume};
 use fluidnerf_neural::temporal::{
     field_for_window, frame_times, infer_time_step, train_windows, window_fingerprint, FrameStart, ResumeState,
-    StitchedField, TemporalRecord, TemporalRun, TimeOrigin, WindowEvent, WindowRecord,
+    StitchedField, TemporalRecord, TemporalRun, TimeOrigin, WindowEvent, WindowRecord, WindowTag, WINDOW_TAG,
 };
 use fluidnerf_neural::train::ViewMasks;
 use fluidnerf_neural::train::{Learner, TrainConfig, TrainReport};
@@ -641,17 +641,20 @@ impl Ctx<'_> {
         let mut result_bytes = 0u64;
         for (k, w) in run.windows.iter().enumerate() {
             let name = format!("windows/w{k:03}.safetensors");
-            let bytes = fluidnerf_neural::weights::weights_bytes(&w.learner.field)?;
-            result_bytes += bytes.len() as u64;
-            dir.write_bytes(&name, &bytes)?;
-            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner, &w.views)?;
-            records.push(WindowRecord {
+            let record = WindowRecord {
                 frames: [w.frames.start, w.frames.end],
                 time_origin: w.time_origin,
                 time_axis: w.time_axis,
                 meta: w.meta.clone(),
-                weights: name,
-            });
+                weights: name.clone(),
+            };
+            // The file says which window it holds: reading the run refuses it in another's place.
+            let tag = WindowTag::of(k, &record, &run.frame_times).to_json();
+            let bytes = fluidnerf_neural::weights::weights_bytes_tagged(&w.learner.field, &[(WINDOW_TAG, tag)])?;
+            result_bytes += bytes.len() as u64;
+            dir.write_bytes(&name, &bytes)?;
+            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner, &w.views)?;
+            records.push(record);
         }
         dir.write_json(
             "temporal.json",
@@ -706,7 +709,8 @@ impl Ctx<'_> {
                 }
                 None => None,
             };
-            volumes.push(VolumeRecord { file: format!("{stem}.npy"), time: Some(t), trained, dims, metrics });
+            let digest = Some(crate::volume_digest(&volume));
+            volumes.push(VolumeRecord { file: format!("{stem}.npy"), time: Some(t), trained, dims, metrics, digest });
         }
         dir.write_bytes("volumes.pvd", pvd(&pvd_entries).as_bytes())?;
         let eval_s = t_eval.elapsed().as_secs_f64();
