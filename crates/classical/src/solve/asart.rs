@@ -105,9 +105,15 @@ pub fn asart(
                     ss += res as f64 * res as f64;
                     *r = if qi > 0.0 { res / qi } else { 0.0 };
                 }
-                // `back` and `cols` are zero here: allocated so, and cleared by each view's update.
+                back.par_iter_mut().for_each(|b| *b = 0.0);
+                cols.par_iter_mut().for_each(|c| *c = 0.0);
                 p.back_add(v, ratio, &mut back, Some(&mut cols));
-                problem.update_and_clear(x, &mut back, &mut cols, |g, b, c| (g + mu4 * g * b / c).max(0.0));
+                x.par_iter_mut().zip(back.par_iter().zip(cols.par_iter())).for_each(|(g, (&b, &c))| {
+                    if c > 0.0 {
+                        *g = (*g + mu4 * *g * b / c).max(0.0);
+                    }
+                });
+                problem.project_feasible(x);
             }
             ss
         },

@@ -109,44 +109,6 @@ impl<'a> Problem<'a> {
         }
     }
 
-    /// The pass over the grid that follows a view's back projection in the row-action methods
-    /// (SART, ASART): `x_j ← update(x_j, back_j, cols_j)` where `cols_j > 0`, then the feasible
-    /// set ([`Self::project_feasible`]), and `back` and `cols` zeroed for the next view's back
-    /// projection, which adds into them. One pass instead of four (the update, the feasible
-    /// set and two clearings), each of which read or wrote the whole grid; the values are the
-    /// same bit for bit.
-    pub(crate) fn update_and_clear(
-        &self,
-        x: &mut [f32],
-        back: &mut [f32],
-        cols: &mut [f32],
-        update: impl Fn(f32, f32, f32) -> f32 + Sync,
-    ) {
-        const CHUNK: usize = 1 << 12;
-        assert!(back.len() == x.len() && cols.len() == x.len(), "update_and_clear: buffers of the wrong length");
-        let step = |g: &mut f32, b: &mut f32, c: &mut f32| {
-            if *c > 0.0 {
-                *g = update(*g, *b, *c);
-            }
-            (*b, *c) = (0.0, 0.0);
-        };
-        let parts = x.par_chunks_mut(CHUNK).zip(back.par_chunks_mut(CHUNK).zip(cols.par_chunks_mut(CHUNK)));
-        match self.support {
-            Some(s) => parts.zip(s.par_chunks(CHUNK)).for_each(|((xs, (bs, cs)), ks)| {
-                for (((g, b), c), &keep) in xs.iter_mut().zip(bs.iter_mut()).zip(cs.iter_mut()).zip(ks) {
-                    step(g, b, c);
-                    *g = if keep { g.max(0.0) } else { 0.0 };
-                }
-            }),
-            None => parts.for_each(|(xs, (bs, cs))| {
-                for ((g, b), c) in xs.iter_mut().zip(bs.iter_mut()).zip(cs.iter_mut()) {
-                    step(g, b, c);
-                    *g = g.max(0.0);
-                }
-            }),
-        }
-    }
-
     fn data_norm2(&self) -> f64 {
         self.images.iter().flat_map(|im| &im.data).map(|&p| (p as f64) * (p as f64)).sum()
     }
@@ -372,45 +334,6 @@ mod tests {
         let mut sorted = order.clone();
         sorted.sort_unstable();
         assert_eq!(sorted, (0..8).collect::<Vec<_>>());
-    }
-
-    /// The one pass after a view's back projection gives what the update, the feasible set and
-    /// the two clearings gave as separate passes, bit for bit, with and without a support, over
-    /// more voxels than one of its chunks, and leaves the accumulators zero.
-    #[test]
-    fn update_and_clear_is_the_passes_it_replaced() {
-        use rand::{Rng, SeedableRng};
-        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
-        let cam = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
-        let grid = crate::Grid::new([23, 21, 19], fluidnerf_core::Aabb::cube(DVec3::ZERO, 1.0));
-        let projector = crate::FootprintProjector::new(grid, std::slice::from_ref(&cam), 1.0).expect("valid");
-        let images = [fluidnerf_core::Image::zeros(8, 8)];
-        let n = grid.len();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let mut draw = |zero_every: usize| -> Vec<f32> {
-            (0..n).map(|j| if j % zero_every == 0 { 0.0 } else { rng.random_range(-1.0..2.0) }).collect()
-        };
-        let (x0, back0, cols0) = (draw(97), draw(5), draw(3));
-        let cols0: Vec<f32> = cols0.iter().map(|c| c.abs()).collect();
-        let support: Vec<bool> = (0..n).map(|j| j % 7 != 0).collect();
-        let update = |g: f32, b: f32, c: f32| (g + 0.7 * g * b / c).max(0.0);
-        for with_support in [false, true] {
-            let problem = Problem::new(&projector, &images).expect("consistent");
-            let problem = if with_support { problem.with_support(&support) } else { problem };
-            let mut want = x0.clone();
-            for ((g, &b), &c) in want.iter_mut().zip(&back0).zip(&cols0) {
-                if c > 0.0 {
-                    *g = update(*g, b, c);
-                }
-            }
-            problem.project_feasible(&mut want);
-            let (mut x, mut back, mut cols) = (x0.clone(), back0.clone(), cols0.clone());
-            problem.update_and_clear(&mut x, &mut back, &mut cols, update);
-            for (j, (a, b)) in x.iter().zip(&want).enumerate() {
-                assert_eq!(a.to_bits(), b.to_bits(), "support {with_support}, voxel {j}: {a} vs {b}");
-            }
-            assert!(back.iter().chain(&cols).all(|&v| v == 0.0), "the accumulators are cleared");
-        }
     }
 
     #[test]

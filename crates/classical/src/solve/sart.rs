@@ -9,6 +9,7 @@
 
 use std::ops::ControlFlow;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{drive, multilevel_order, IterState, Problem, Report, Stopping};
@@ -75,10 +76,16 @@ impl SartSweep {
                 ss += res as f64 * res as f64;
                 *qi = if rs > 0.0 { res / rs } else { 0.0 };
             }
-            // `back` and `cols` are zero here: allocated so, and cleared by each view's update.
+            self.back.par_iter_mut().for_each(|b| *b = 0.0);
+            self.cols.par_iter_mut().for_each(|c| *c = 0.0);
             p.back_add(v, q, &mut self.back, Some(&mut self.cols));
             let mu = self.mu;
-            problem.update_and_clear(x, &mut self.back, &mut self.cols, |g, b, c| (g + mu * b / c).max(0.0));
+            x.par_iter_mut().zip(self.back.par_iter().zip(self.cols.par_iter())).for_each(|(g, (&b, &c))| {
+                if c > 0.0 {
+                    *g = (*g + mu * b / c).max(0.0);
+                }
+            });
+            problem.project_feasible(x);
         }
         ss
     }
