@@ -138,30 +138,21 @@ dispatched! {
     }
 }
 
-/// `grad = ∇TV(g)` (all [`Grid::len`]) and `‖∇TV‖₂²`, given `peak`, the largest value of `g`
-/// (which sets ε; computed here when None). Row by row (each grid row along `x` is contiguous,
-/// its neighbours along `y` and `z` are whole rows), vectorised along the row with the CPU's
+/// `grad = ∇TV(g)` with the norms of the backward differences in `norms` (all
+/// [`Grid::len`]), and `‖∇TV‖₂²`. Row by row (each grid row along `x` is contiguous, its
+/// neighbours along `y` and `z` are whole rows), vectorised along the row with the CPU's
 /// widest instructions; the per-voxel arithmetic is that of the definition, in the same order.
-///
-/// The grid's z-slabs are split into a few ranges per thread, and each range is swept slab by
-/// slab: the norms of the backward differences of the slab after the current one are computed
-/// into a ring of two slabs, then the current slab's gradient from its norms and those. So the
-/// norms are used while they are in the cache and never stored for the whole grid (a separate
-/// pass over a grid-sized buffer made the step bound by memory); each range computes the norms
-/// of the first slab of the next range again. `rings` holds the ranges' rings (resized here;
-/// kept by the caller between calls).
-///
 /// The squared norm is summed per row in f64 and the rows' sums in row order, so it does not
 /// depend on the threads.
-pub(crate) fn tv_gradient(grid: &Grid, g: &[f32], peak: Option<f32>, grad: &mut [f32], rings: &mut Vec<f32>) -> f64 {
-    let [nx, ny, nz] = grid.dims;
+pub(crate) fn tv_gradient(grid: &Grid, g: &[f32], norms: &mut [f32], grad: &mut [f32]) -> f64 {
+    let [nx, ny, _] = grid.dims;
     let slab = nx * ny;
     let len = g.len();
-    assert!(grad.len() == len && len == slab * nz, "tv_gradient: buffers of the wrong length");
+    assert!(norms.len() == len && grad.len() == len, "tv_gradient: buffers of the wrong length");
     if len == 0 {
         return 0.0;
     }
-    let peak = peak.unwrap_or_else(|| largest(g));
+    let peak = g.par_chunks(slab.max(1)).map(|c| c.iter().cloned().fold(0.0, f32::max)).reduce(|| 0.0, f32::max);
     let eps2 = (1e-4 * peak).powi(2).max(f32::MIN_POSITIVE);
     let rows = |row: usize| -> Rows<'_> {
         let (j, base) = (row % ny, row * nx);
@@ -171,48 +162,21 @@ pub(crate) fn tv_gradient(grid: &Grid, g: &[f32], peak: Option<f32>, grad: &mut 
             zm: (base >= slab).then(|| &g[base - slab..base - slab + nx]),
         }
     };
-    // The norms of slab `k` into `out` (one slab).
-    let slab_norms = |k: usize, out: &mut [f32]| {
-        for (j, o) in out.chunks_exact_mut(nx).enumerate() {
-            row_norms(rows(k * ny + j), eps2, o);
-        }
-    };
-    let per_range = nz.div_ceil((2 * rayon::current_num_threads()).clamp(1, nz));
-    rings.resize(2 * slab * nz.div_ceil(per_range), 0.0);
-    let range_sums: Vec<Vec<f64>> = grad
-        .par_chunks_mut(slab * per_range)
-        .zip(rings.par_chunks_mut(2 * slab))
+    norms.par_chunks_mut(nx).enumerate().for_each(|(row, out)| row_norms(rows(row), eps2, out));
+    let norms = &*norms;
+    let row_sums: Vec<f64> = grad
+        .par_chunks_mut(nx)
         .enumerate()
-        .map(|(r, (out, ring))| {
-            let k0 = r * per_range;
-            let k1 = k0 + out.len() / slab;
-            slab_norms(k0, &mut ring[(k0 % 2) * slab..][..slab]);
-            let mut sums = Vec::with_capacity((k1 - k0) * ny);
-            for k in k0..k1 {
-                if k + 1 < nz {
-                    slab_norms(k + 1, &mut ring[((k + 1) % 2) * slab..][..slab]);
-                }
-                let (even, odd) = ring.split_at(slab);
-                let (cur, next) = if k % 2 == 0 { (even, odd) } else { (odd, even) };
-                let out_slab = &mut out[(k - k0) * slab..][..slab];
-                for (j, o) in out_slab.chunks_exact_mut(nx).enumerate() {
-                    let row = k * ny + j;
-                    let base = row * nx;
-                    let yp = (j + 1 < ny).then(|| (&g[base + nx..base + 2 * nx], &cur[(j + 1) * nx..(j + 2) * nx]));
-                    let zp = (k + 1 < nz).then(|| (&g[base + slab..base + slab + nx], &next[j * nx..(j + 1) * nx]));
-                    row_gradient(rows(row), &cur[j * nx..(j + 1) * nx], yp, zp, o);
-                    sums.push(o.iter().map(|&s| (s as f64) * (s as f64)).sum::<f64>());
-                }
-            }
-            sums
+        .map(|(row, out)| {
+            let (j, base) = (row % ny, row * nx);
+            let after = |at: usize| (&g[at..at + nx], &norms[at..at + nx]);
+            let yp = (j + 1 < ny).then(|| after(base + nx));
+            let zp = (base + slab < len).then(|| after(base + slab));
+            row_gradient(rows(row), &norms[base..base + nx], yp, zp, out);
+            out.iter().map(|&s| (s as f64) * (s as f64)).sum::<f64>()
         })
         .collect();
-    range_sums.iter().flatten().sum()
-}
-
-/// The largest value of `g`, at least 0.
-fn largest(g: &[f32]) -> f32 {
-    g.par_chunks(1 << 16).map(|c| c.iter().cloned().fold(0.0, f32::max)).reduce(|| 0.0, f32::max)
+    row_sums.iter().sum()
 }
 
 /// Total variation of `g` as defined in the module docs (with ε = 0).
@@ -244,8 +208,8 @@ pub fn sart_tv(
     let x = problem.start(init, || vec![0f32; n]);
     let mut sweep = SartSweep::new(problem, params.relaxation);
     let mut before = vec![0f32; n];
+    let mut norms = vec![0f32; n];
     let mut grad = vec![0f32; n];
-    let mut rings = Vec::new();
     let weight = params.tv_weight;
     drive(
         "SART-TV",
@@ -258,44 +222,28 @@ pub fn sart_tv(
             let d: f64 =
                 x.par_iter().zip(before.par_iter()).map(|(&a, &b)| ((a - b) as f64).powi(2)).sum::<f64>().sqrt();
             if weight > 0.0 && d > 0.0 {
-                // The largest voxel after each descent step, found by the step itself.
-                let mut peak = None;
                 for _ in 0..params.tv_steps {
-                    let gn = tv_gradient(&grid, x, peak, &mut grad, &mut rings).sqrt();
+                    let gn = tv_gradient(&grid, x, &mut norms, &mut grad).sqrt();
                     if gn == 0.0 {
                         break;
                     }
                     let step = (weight * d / gn) as f32;
                     // The descent step and the feasible set (non-negative, zero outside the
-                    // support) in one pass, which also finds the new largest voxel.
+                    // support) in one pass.
                     let grad = &grad;
-                    peak = Some(match problem.support {
-                        Some(keep) => x
-                            .par_chunks_mut(4096)
-                            .enumerate()
-                            .map(|(c, xs)| {
-                                let at = c * 4096;
-                                let mut top = 0f32;
-                                for ((g, &dg), &keep) in xs.iter_mut().zip(&grad[at..]).zip(&keep[at..]) {
-                                    *g = if keep { (*g - step * dg).max(0.0) } else { 0.0 };
-                                    top = top.max(*g);
-                                }
-                                top
-                            })
-                            .reduce(|| 0.0, f32::max),
-                        None => x
-                            .par_chunks_mut(4096)
-                            .zip(grad.par_chunks(4096))
-                            .map(|(xs, gs)| {
-                                let mut top = 0f32;
-                                for (g, &dg) in xs.iter_mut().zip(gs) {
-                                    *g = (*g - step * dg).max(0.0);
-                                    top = top.max(*g);
-                                }
-                                top
-                            })
-                            .reduce(|| 0.0, f32::max),
-                    });
+                    match problem.support {
+                        Some(keep) => x.par_chunks_mut(4096).enumerate().for_each(|(c, xs)| {
+                            let at = c * 4096;
+                            for ((g, &dg), &keep) in xs.iter_mut().zip(&grad[at..]).zip(&keep[at..]) {
+                                *g = if keep { (*g - step * dg).max(0.0) } else { 0.0 };
+                            }
+                        }),
+                        None => x.par_chunks_mut(4096).zip(grad.par_chunks(4096)).for_each(|(xs, gs)| {
+                            for (g, &dg) in xs.iter_mut().zip(gs) {
+                                *g = (*g - step * dg).max(0.0);
+                            }
+                        }),
+                    }
                 }
             }
             ss
@@ -359,7 +307,7 @@ mod tests {
     #[test]
     fn tv_gradient_matches_the_definition_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        for dims in [[7, 5, 3], [1, 6, 4], [9, 1, 5], [4, 3, 1], [33, 17, 9], [6, 5, 23], [3, 2, 2], [5, 7, 64]] {
+        for dims in [[7, 5, 3], [1, 6, 4], [9, 1, 5], [4, 3, 1], [33, 17, 9]] {
             let grid = Grid::new(dims, Aabb::cube(DVec3::ZERO, 1.0));
             let g: Vec<f32> = (0..grid.len())
                 .map(|m| match m % 5 {
@@ -369,8 +317,8 @@ mod tests {
                 })
                 .collect();
             let (want, want_n2) = reference(&grid, &g);
-            let mut grad = vec![0f32; grid.len()];
-            let n2 = tv_gradient(&grid, &g, None, &mut grad, &mut Vec::new());
+            let (mut norms, mut grad) = (vec![0f32; grid.len()], vec![0f32; grid.len()]);
+            let n2 = tv_gradient(&grid, &g, &mut norms, &mut grad);
             for (m, (a, b)) in grad.iter().zip(&want).enumerate() {
                 assert_eq!(a.to_bits(), b.to_bits(), "{dims:?} voxel {m}: {a} vs {b}");
             }
