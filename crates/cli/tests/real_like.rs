@@ -10,6 +10,14 @@ use common::*;
 
 const SMALL: [&str; 8] = ["--pixels", "40", "--resolution", "40", "--cameras", "8", "--holdout", "cam003"];
 
+/// `synth --preset real-like-small` at the small size of these tests into `d/out`, with `extra`.
+fn synth_small(d: &std::path::Path, out: &str, extra: &[&str]) {
+    let mut args = vec!["synth", "--preset", "real-like-small", "-o", out];
+    args.extend_from_slice(&SMALL);
+    args.extend_from_slice(extra);
+    ok(&fluidnerf(d, &args));
+}
+
 fn nrmse(r: &serde_json::Value) -> f64 {
     r["final_nrmse"].as_f64().expect("final_nrmse")
 }
@@ -23,12 +31,7 @@ fn pre_mode(r: &serde_json::Value) -> String {
 fn background_subtraction_and_gain_fitting_recover_the_clean_result() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    let synth = |out: &str, extra: &[&str]| {
-        let mut args = vec!["synth", "--preset", "real-like-small", "-o", out];
-        args.extend_from_slice(&SMALL);
-        args.extend_from_slice(extra);
-        ok(&fluidnerf(d, &args));
-    };
+    let synth = |out: &str, extra: &[&str]| synth_small(d, out, extra);
     synth("real", &[]);
     synth("clean", &["--real-like", "false"]);
     assert!(d.join("real/images/cam000.jpg").is_file() && d.join("real/background/cam000_b0.jpg").is_file());
@@ -205,12 +208,7 @@ fn a_time_resolved_run_balances_differing_gains_and_says_so() {
 fn a_flat_field_undoes_vignetting() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
-    let synth = |out: &str, extra: &[&str]| {
-        let mut args = vec!["synth", "--preset", "real-like-small", "-o", out];
-        args.extend_from_slice(&SMALL);
-        args.extend_from_slice(extra);
-        ok(&fluidnerf(d, &args));
-    };
+    let synth = |out: &str, extra: &[&str]| synth_small(d, out, extra);
     synth("plain", &[]);
     let o = fluidnerf(d, &["synth", "--preset", "real-like-small", "-o", "vignetted", "--vignetting", "0.8"]);
     ok(&o);
