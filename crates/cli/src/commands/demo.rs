@@ -26,7 +26,7 @@ use super::reconstruct::StopArg;
 /// Everything lands in OUT: `scene/` (the synthetic data set), `fluidnerf/`, `hybrid/`,
 /// `asart/` and `sart-tv/` (one run folder each, with volumes, settings and reports),
 /// `slices.png`, `convergence.png`, `comparison.json` and `report.html`. Takes about a minute
-/// on a 2-core machine (65 s on a 2-core AMD EPYC, build excluded).
+/// on a 2-core machine (53–65 s on a 2-core AMD EPYC, build excluded).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Output directory.
