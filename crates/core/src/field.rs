@@ -143,20 +143,104 @@ pub struct Support<'a> {
 }
 
 /// A [`Support`] prepared for walking many rays: the box of its occupied cells found once,
-/// and each ray clipped to it before the walk through the grid (a ray that misses it crosses
-/// no occupied cell).
-#[derive(Clone, Copy, Debug)]
+/// each ray clipped to it before the walk through the grid (a ray that misses it crosses no
+/// occupied cell), and the grid summarised in blocks of [`WALK_BLOCK`]³ cells, each empty, full
+/// or mixed, so that a walk crosses an empty or a full block in one step and walks cell by cell
+/// only through the mixed ones (a hull's surface).
+#[derive(Clone, Debug)]
 pub struct SupportWalk<'a> {
     pub support: Support<'a>,
     occupied: Option<Aabb>,
+    /// Per block, x fastest: [`BLOCK_EMPTY`], [`BLOCK_FULL`] or [`BLOCK_MIXED`].
+    blocks: Vec<u8>,
+    block_dims: [usize; 3],
 }
+
+/// Cells per side of the blocks a [`SupportWalk`] steps over.
+pub const WALK_BLOCK: usize = 4;
+const BLOCK_EMPTY: u8 = 0;
+const BLOCK_FULL: u8 = 1;
+const BLOCK_MIXED: u8 = 2;
 
 impl<'a> Support<'a> {
     /// This support with its occupied cells' box, widened by a hair so that rounding never
-    /// clips a walk through its faces.
+    /// clips a walk through its faces, and its blocks.
     pub fn walk(self) -> SupportWalk<'a> {
         let pad = DVec3::splat(1e-9 * self.aabb.size().max_element());
-        SupportWalk { support: self, occupied: self.occupied_box().map(|b| Aabb::new(b.min - pad, b.max + pad)) }
+        let occupied = self.occupied_box().map(|b| Aabb::new(b.min - pad, b.max + pad));
+        let [nx, ny, nz] = self.dims;
+        let block_dims = self.dims.map(|n| n.div_ceil(WALK_BLOCK));
+        let mut blocks = vec![BLOCK_EMPTY; block_dims.iter().product()];
+        if self.cells.len() == nx * ny * nz {
+            // Counts of occupied cells per block, then each block's state from its count and size.
+            let mut counts = vec![0u32; blocks.len()];
+            for k in 0..nz {
+                for j in 0..ny {
+                    let row = &self.cells[(k * ny + j) * nx..][..nx];
+                    let base = ((k / WALK_BLOCK) * block_dims[1] + j / WALK_BLOCK) * block_dims[0];
+                    for (i, &c) in row.iter().enumerate() {
+                        counts[base + i / WALK_BLOCK] += u32::from(c);
+                    }
+                }
+            }
+            let side = |b: usize, n: usize| (n - b * WALK_BLOCK).min(WALK_BLOCK);
+            for (b, (state, &count)) in blocks.iter_mut().zip(&counts).enumerate() {
+                let (bi, bj, bk) =
+                    (b % block_dims[0], (b / block_dims[0]) % block_dims[1], b / (block_dims[0] * block_dims[1]));
+                let size = side(bi, nx) * side(bj, ny) * side(bk, nz);
+                *state = match count as usize {
+                    0 => BLOCK_EMPTY,
+                    c if c == size => BLOCK_FULL,
+                    _ => BLOCK_MIXED,
+                };
+            }
+        }
+        SupportWalk { support: self, occupied, blocks, block_dims }
+    }
+}
+
+/// The parameters of a grid walk (a 3D DDA) along `ray` from `t`, in a grid of cells of size
+/// `h` from `origin`, its cell indices clamped to `lo..hi` per axis: the cell holding
+/// `ray.at(t)`, per axis the parameter of the next face crossing, the parameter between
+/// crossings and the step.
+fn dda_start(ray: &Ray, t: f64, origin: DVec3, h: DVec3, lo: [i64; 3], hi: [i64; 3]) -> DdaState {
+    let p = (ray.at(t) - origin) / h;
+    let mut s = DdaState { cell: [0; 3], next: [f64::INFINITY; 3], delta: [f64::INFINITY; 3], step: [0; 3] };
+    for a in 0..3 {
+        s.cell[a] = (p[a].floor() as i64).clamp(lo[a], hi[a] - 1);
+        let d = ray.dir[a];
+        if d > 0.0 {
+            s.step[a] = 1;
+            s.delta[a] = h[a] / d;
+            s.next[a] = t + ((s.cell[a] + 1) as f64 - p[a]) * h[a] / d;
+        } else if d < 0.0 {
+            s.step[a] = -1;
+            s.delta[a] = -h[a] / d;
+            s.next[a] = t + (s.cell[a] as f64 - p[a]) * h[a] / d;
+        }
+    }
+    s
+}
+
+/// The state of a grid walk ([`dda_start`]).
+struct DdaState {
+    cell: [i64; 3],
+    next: [f64; 3],
+    delta: [f64; 3],
+    step: [i64; 3],
+}
+
+impl DdaState {
+    /// The axis whose face the walk crosses next.
+    #[inline]
+    fn axis(&self) -> usize {
+        if self.next[0] <= self.next[1] && self.next[0] <= self.next[2] {
+            0
+        } else if self.next[1] <= self.next[2] {
+            1
+        } else {
+            2
+        }
     }
 }
 
@@ -249,12 +333,82 @@ impl<'a> SupportRows<'a> {
 }
 
 impl SupportWalk<'_> {
-    /// [`Support::occupied_intervals`], the walk limited to the occupied cells' box.
+    /// [`Support::occupied_intervals`] (the same intervals up to rounding), the walk limited to
+    /// the occupied cells' box and made block by block: an empty block closes an open
+    /// interval, a full one opens one, and only a mixed one is walked cell by cell.
     pub fn occupied_intervals(&self, ray: &Ray, s0: f64, s1: f64, out: &mut Vec<(f64, f64)>) {
         let Some((h0, h1)) = self.occupied.and_then(|b| b.intersect(ray)) else { return };
         let (a, b) = (h0.max(s0), h1.min(s1));
-        if a < b {
-            self.support.occupied_intervals(ray, a, b, out);
+        if a >= b {
+            return;
+        }
+        let sup = &self.support;
+        let Some((b0, b1)) = sup.aabb.intersect(ray) else { return };
+        let (t_start, t_end) = (a.max(b0), b.min(b1));
+        if t_start >= t_end || sup.cells.len() != sup.dims.iter().product::<usize>() {
+            return;
+        }
+        let dims = sup.dims.map(|n| n as i64);
+        let h = sup.aabb.size() / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let hb = h * WALK_BLOCK as f64;
+        let bd = self.block_dims.map(|n| n as i64);
+        let [nx, ny, _] = sup.dims;
+        let mut blk = dda_start(ray, t_start, sup.aabb.min, hb, [0; 3], bd);
+        let mut t = t_start;
+        let mut open: Option<f64> = None;
+        loop {
+            let a = blk.axis();
+            let t_exit = blk.next[a].min(t_end);
+            let b = ((blk.cell[2] * bd[1] + blk.cell[1]) * bd[0] + blk.cell[0]) as usize;
+            match self.blocks[b] {
+                BLOCK_EMPTY => {
+                    if let Some(a0) = open.take() {
+                        out.push((a0, t));
+                    }
+                }
+                BLOCK_FULL => {
+                    open.get_or_insert(t);
+                }
+                _ if t < t_exit => {
+                    // Cell by cell through this block, from `t` to where the walk leaves it.
+                    let lo = blk.cell.map(|c| c * WALK_BLOCK as i64);
+                    let hi = [0, 1, 2].map(|k| (lo[k] + WALK_BLOCK as i64).min(dims[k]));
+                    let mut c = dda_start(ray, t, sup.aabb.min, h, lo, hi);
+                    let mut tc = t;
+                    loop {
+                        let ax = c.axis();
+                        let tc_exit = c.next[ax].min(t_exit);
+                        let idx = (c.cell[2] as usize * ny + c.cell[1] as usize) * nx + c.cell[0] as usize;
+                        if sup.cells[idx] {
+                            open.get_or_insert(tc);
+                        } else if let Some(a0) = open.take() {
+                            out.push((a0, tc));
+                        }
+                        if tc_exit >= t_exit {
+                            break;
+                        }
+                        tc = tc_exit;
+                        c.cell[ax] += c.step[ax];
+                        if c.cell[ax] < lo[ax] || c.cell[ax] >= hi[ax] {
+                            break;
+                        }
+                        c.next[ax] += c.delta[ax];
+                    }
+                }
+                _ => {}
+            }
+            if t_exit >= t_end {
+                break;
+            }
+            t = t_exit;
+            blk.cell[a] += blk.step[a];
+            if blk.cell[a] < 0 || blk.cell[a] >= bd[a] {
+                break;
+            }
+            blk.next[a] += blk.delta[a];
+        }
+        if let Some(a0) = open {
+            out.push((a0, t_end));
         }
     }
 }
@@ -359,5 +513,98 @@ impl<F: Fn(Vec3, f64) -> f32 + Sync> ScalarField for F {
         for (o, &p) in out.iter_mut().zip(points) {
             *o = self(p, time);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (xorshift64*), values in `[0, 1)`.
+    struct Draw(u64);
+    impl Draw {
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// The block-by-block walk gives the cell-by-cell walk's intervals, up to rounding, on grids
+    /// whose sides are and are not multiples of the block, with hulls that leave blocks empty,
+    /// full and mixed, for rays from outside and inside the box, along the axes and oblique,
+    /// clipped to parts of their chord.
+    #[test]
+    fn the_block_walk_gives_the_cell_walk_intervals() {
+        let mut draw = Draw(0x9e37_79b9_7f4a_7c15);
+        let aabb = Aabb::new(DVec3::new(-1.0, -2.0, -0.5), DVec3::new(3.0, 1.0, 2.5));
+        let mut compared = 0;
+        for dims in [[16, 16, 16], [13, 9, 22], [5, 4, 7], [1, 6, 3], [33, 17, 4]] {
+            // Two balls and scattered single cells.
+            let size = aabb.size();
+            let centre = |i: usize, n: usize, lo: f64, s: f64| lo + (i as f64 + 0.5) / n as f64 * s;
+            let mut cells = vec![false; dims.iter().product()];
+            for k in 0..dims[2] {
+                for j in 0..dims[1] {
+                    for i in 0..dims[0] {
+                        let p = DVec3::new(
+                            centre(i, dims[0], aabb.min.x, size.x),
+                            centre(j, dims[1], aabb.min.y, size.y),
+                            centre(k, dims[2], aabb.min.z, size.z),
+                        );
+                        let balls = (p - DVec3::new(0.5, -0.5, 1.0)).length() < 1.2
+                            || (p - DVec3::new(2.2, 0.4, 0.0)).length() < 0.6;
+                        cells[(k * dims[1] + j) * dims[0] + i] = balls || draw.next() < 0.03;
+                    }
+                }
+            }
+            let support = Support { aabb, dims, cells: &cells };
+            let walk = support.walk();
+            for r in 0..400 {
+                let inside = r % 4 == 0;
+                let origin = if inside {
+                    aabb.min + DVec3::new(draw.next(), draw.next(), draw.next()) * size
+                } else {
+                    aabb.centre()
+                        + DVec3::new(draw.next() - 0.5, draw.next() - 0.5, draw.next() - 0.5).normalize() * 9.0
+                };
+                let mut dir = if inside {
+                    DVec3::new(draw.next() - 0.5, draw.next() - 0.5, draw.next() - 0.5)
+                } else {
+                    aabb.centre() + DVec3::new(draw.next() - 0.5, draw.next() - 0.5, draw.next() - 0.5) * 3.0 - origin
+                };
+                // Some rays along an axis or in an axis plane.
+                match r % 7 {
+                    1 => dir = DVec3::new(dir.x, 0.0, 0.0),
+                    2 => dir = DVec3::new(0.0, dir.y, dir.z),
+                    _ => {}
+                }
+                if dir.length() == 0.0 {
+                    continue;
+                }
+                let ray = Ray::new(origin, dir);
+                let (s0, s1) =
+                    if r % 3 == 0 { (0.0, f64::INFINITY) } else { (draw.next() * 8.0, 6.0 + draw.next() * 8.0) };
+                let (mut want, mut got) = (Vec::new(), Vec::new());
+                // The cell walk, clipped as the block walk clips.
+                if let Some((h0, h1)) = walk.occupied.and_then(|b| b.intersect(&ray)) {
+                    let (a, b) = (h0.max(s0), h1.min(s1));
+                    if a < b {
+                        support.occupied_intervals(&ray, a, b, &mut want);
+                    }
+                }
+                walk.occupied_intervals(&ray, s0, s1, &mut got);
+                assert_eq!(got.len(), want.len(), "{dims:?} ray {r}: {got:?} vs {want:?}");
+                for (g, w) in got.iter().zip(&want) {
+                    assert!(
+                        (g.0 - w.0).abs() < 1e-9 && (g.1 - w.1).abs() < 1e-9,
+                        "{dims:?} ray {r}: {got:?} vs {want:?}"
+                    );
+                }
+                compared += want.len();
+            }
+        }
+        assert!(compared > 500, "the rays crossed {compared} intervals");
     }
 }
