@@ -528,8 +528,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Refuses `out` as an output file when it is a file this evaluation reads or that belongs to
-/// the scene or the run: the scene file and what it lists (images, masks, background frames,
 /// The gain and offset a run recorded for each frame (`preprocessing.frames` of its
 /// `report.json`), in frame order; empty for a run that recorded none (no report, or a report
 /// from before gains were recorded).
@@ -550,6 +548,8 @@ fn recorded_gains(run_dir: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
     Ok(gains)
 }
 
+/// Refuses `out` as an output file when it is a file this evaluation reads or that belongs to
+/// the scene or the run: the scene file and what it lists (images, masks, background frames,
 /// truth) or records, the files the run in `run_dir` wrote, the volume files given, and their
 /// sidecars. `--force` replaces earlier results, never the inputs they were made from.
 fn refuse_inputs(out: &Path, scene_path: &Path, run_dir: Option<&Path>, args: &Args) -> anyhow::Result<()> {
