@@ -352,7 +352,6 @@ impl SupportWalk<'_> {
         let h = sup.aabb.size() / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
         let hb = h * WALK_BLOCK as f64;
         let bd = self.block_dims.map(|n| n as i64);
-        let [nx, ny, _] = sup.dims;
         let mut blk = dda_start(ray, t_start, sup.aabb.min, hb, [0; 3], bd);
         let mut t = t_start;
         let mut open: Option<f64> = None;
@@ -373,27 +372,7 @@ impl SupportWalk<'_> {
                     // Cell by cell through this block, from `t` to where the walk leaves it.
                     let lo = blk.cell.map(|c| c * WALK_BLOCK as i64);
                     let hi = [0, 1, 2].map(|k| (lo[k] + WALK_BLOCK as i64).min(dims[k]));
-                    let mut c = dda_start(ray, t, sup.aabb.min, h, lo, hi);
-                    let mut tc = t;
-                    loop {
-                        let ax = c.axis();
-                        let tc_exit = c.next[ax].min(t_exit);
-                        let idx = (c.cell[2] as usize * ny + c.cell[1] as usize) * nx + c.cell[0] as usize;
-                        if sup.cells[idx] {
-                            open.get_or_insert(tc);
-                        } else if let Some(a0) = open.take() {
-                            out.push((a0, tc));
-                        }
-                        if tc_exit >= t_exit {
-                            break;
-                        }
-                        tc = tc_exit;
-                        c.cell[ax] += c.step[ax];
-                        if c.cell[ax] < lo[ax] || c.cell[ax] >= hi[ax] {
-                            break;
-                        }
-                        c.next[ax] += c.delta[ax];
-                    }
+                    sup.walk_cells(ray, t, t_exit, lo, hi, &mut open, out);
                 }
                 _ => {}
             }
@@ -450,42 +429,37 @@ impl Support<'_> {
         if t_start >= t_end || self.cells.len() != self.dims.iter().product::<usize>() {
             return;
         }
-        let size = self.aabb.size();
-        let dims = DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64);
-        let h = size / dims;
-        // The cell holding the middle of the first step, and per axis the parameter of the next
-        // face crossing and the parameter between crossings.
-        let p = (ray.at(t_start) - self.aabb.min) / h;
-        let mut cell = [0i64; 3];
-        let mut next = [f64::INFINITY; 3];
-        let mut delta = [f64::INFINITY; 3];
-        let mut step = [0i64; 3];
-        for a in 0..3 {
-            cell[a] = (p[a].floor() as i64).clamp(0, self.dims[a] as i64 - 1);
-            let d = ray.dir[a];
-            if d > 0.0 {
-                step[a] = 1;
-                delta[a] = h[a] / d;
-                next[a] = t_start + ((cell[a] + 1) as f64 - p[a]) * h[a] / d;
-            } else if d < 0.0 {
-                step[a] = -1;
-                delta[a] = -h[a] / d;
-                next[a] = t_start + (cell[a] as f64 - p[a]) * h[a] / d;
-            }
-        }
-        let mut t = t_start;
         let mut open: Option<f64> = None;
+        self.walk_cells(ray, t_start, t_end, [0; 3], self.dims.map(|n| n as i64), &mut open, out);
+        if let Some(a0) = open {
+            out.push((a0, t_end));
+        }
+    }
+
+    /// Walks `ray` cell by cell from `t` to `t_end` (a 3D DDA), within the cells `lo..hi` per
+    /// axis: an occupied cell opens an interval at its entry (`open`, kept across calls), an
+    /// empty one closes the open one into `out`. The walk ends at `t_end` or where it leaves
+    /// those cells; an interval still open is left to the caller.
+    #[allow(clippy::too_many_arguments)]
+    fn walk_cells(
+        &self,
+        ray: &Ray,
+        t: f64,
+        t_end: f64,
+        lo: [i64; 3],
+        hi: [i64; 3],
+        open: &mut Option<f64>,
+        out: &mut Vec<(f64, f64)>,
+    ) {
+        let dims = DVec3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64);
+        let h = self.aabb.size() / dims;
         let [nx, ny, _] = self.dims;
+        let mut c = dda_start(ray, t, self.aabb.min, h, lo, hi);
+        let mut t = t;
         loop {
-            let a = if next[0] <= next[1] && next[0] <= next[2] {
-                0
-            } else if next[1] <= next[2] {
-                1
-            } else {
-                2
-            };
-            let t_exit = next[a].min(t_end);
-            let idx = (cell[2] as usize * ny + cell[1] as usize) * nx + cell[0] as usize;
+            let a = c.axis();
+            let t_exit = c.next[a].min(t_end);
+            let idx = (c.cell[2] as usize * ny + c.cell[1] as usize) * nx + c.cell[0] as usize;
             if self.cells[idx] {
                 open.get_or_insert(t);
             } else if let Some(a0) = open.take() {
@@ -495,14 +469,11 @@ impl Support<'_> {
                 break;
             }
             t = t_exit;
-            cell[a] += step[a];
-            if cell[a] < 0 || cell[a] >= self.dims[a] as i64 {
+            c.cell[a] += c.step[a];
+            if c.cell[a] < lo[a] || c.cell[a] >= hi[a] {
                 break;
             }
-            next[a] += delta[a];
-        }
-        if let Some(a0) = open {
-            out.push((a0, t_end));
+            c.next[a] += c.delta[a];
         }
     }
 }
