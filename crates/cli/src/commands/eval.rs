@@ -549,9 +549,9 @@ fn recorded_gains(run_dir: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
 }
 
 /// Refuses `out` as an output file when it is a file this evaluation reads or that belongs to
-/// the scene or the run: the scene file and what it lists (images, masks, background frames,
-/// truth) or records, the files the run in `run_dir` wrote, the volume files given, and their
-/// sidecars. `--force` replaces earlier results, never the inputs they were made from.
+/// the scene or the run: the scene file and what it lists (images, masks, background and
+/// flat-field frames, truth) or records, the files the run in `run_dir` wrote, the volume files
+/// given, and their sidecars. `--force` replaces earlier results, never the inputs they were made from.
 fn refuse_inputs(out: &Path, scene_path: &Path, run_dir: Option<&Path>, args: &Args) -> anyhow::Result<()> {
     use fluidnerf_pipeline::rundir::{refuse_input_file, refuse_run_file, refuse_scene_file};
     refuse_scene_file(out, &fluidnerf_io::scene::scene_file_path(scene_path))?;
