@@ -9,6 +9,11 @@ fn synth(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fluidnerf")).arg("synth").args(args).output().expect("runs fluidnerf")
 }
 
+/// `synth -q -o out --config config`: a scene made again from a saved synth.json.
+fn synth_from(out: &Path, config: &Path) -> Output {
+    synth(&["-q", "-o", out.to_str().expect("utf-8"), "--config", config.to_str().expect("utf-8")])
+}
+
 fn text(o: &Output) -> (String, String) {
     (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
 }
@@ -64,13 +69,7 @@ fn writes_a_scene_that_reads_back() {
 
     // The same settings, rerun from synth.json, give the same bytes.
     let again = tmp.path().join("again");
-    let o = synth(&[
-        "-q",
-        "-o",
-        again.to_str().expect("utf-8"),
-        "--config",
-        dir.join("synth.json").to_str().expect("utf-8"),
-    ]);
+    let o = synth_from(&again, &dir.join("synth.json"));
     assert!(o.status.success(), "{:?}", text(&o));
     for f in ["images/cam002.png", "truth/truth.npy", "transforms.json"] {
         assert_eq!(
@@ -827,13 +826,7 @@ fn another_phantoms_settings_in_a_config_are_refused() {
     let o = synth(&["-q", "-o", out.to_str().expect("utf-8"), "--config", config_arg, "--phantom", "ball"]);
     assert!(o.status.success(), "{}", text(&o).1);
     let again = tmp.path().join("again");
-    let o = synth(&[
-        "-q",
-        "-o",
-        again.to_str().expect("utf-8"),
-        "--config",
-        out.join("synth.json").to_str().expect("utf-8"),
-    ]);
+    let o = synth_from(&again, &out.join("synth.json"));
     assert!(o.status.success(), "{}", text(&o).1);
 }
 
