@@ -1897,6 +1897,8 @@ pub fn load_preprocessed_with(scene: &Scene, recording: Recording) -> Result<Pre
     // Medians of background lists, and of flat-field lists.
     let mut medians: std::collections::HashMap<Vec<PathBuf>, Image> = std::collections::HashMap::new();
     let mut flats: std::collections::HashMap<Vec<PathBuf>, Image> = std::collections::HashMap::new();
+    #[allow(clippy::type_complexity)]
+    let mut normalised: Vec<((&[PathBuf], &Background, Option<&Path>), Image, (f32, f32))> = Vec::new();
     let mut clipped = 0usize;
     let mut flat_range: Option<(f32, f32)> = None;
     for (i, (image, rec)) in images.iter_mut().zip(&recording.frames).enumerate() {
@@ -1969,44 +1971,55 @@ pub fn load_preprocessed_with(scene: &Scene, recording: Recording) -> Result<Pre
                 ));
             }
         }
-        if !flats.contains_key(&rec.flat_field) {
-            // The background is subtracted from the flat too, so it must be on the images'
-            // scale; without one, a flat stored otherwise (a normalised float flat) serves.
-            let same_kind = (rec.background != Background::None).then_some(kind);
-            let (median, saturated) = median_of_files(
-                scene,
-                &file,
-                &rec.flat_field,
-                "`flat_field` image",
-                &label,
-                (w, h),
-                same_kind,
-                recording.linearisation,
-            )?;
-            if saturated > 0 {
-                log::warn!(
-                    "{flat_key}: {saturated} pixel(s) of the flat-field image(s) at their full scale (saturated): \
-                     the flat is too low there and those pixels are over-corrected; record the flat with less \
-                     exposure"
-                );
+        // A flat is normalised once for what sets it: its images, the background subtracted
+        // from it and the mask it is averaged over (a camera's frames share all three).
+        let key = (rec.flat_field.as_slice(), &rec.background, rec.mask_path.as_deref());
+        let at = match normalised.iter().position(|(k, ..)| *k == key) {
+            Some(at) => at,
+            None => {
+                if !flats.contains_key(&rec.flat_field) {
+                    // The background is subtracted from the flat too, so it must be on the images'
+                    // scale; without one, a flat stored otherwise (a normalised float flat) serves.
+                    let same_kind = (rec.background != Background::None).then_some(kind);
+                    let (median, saturated) = median_of_files(
+                        scene,
+                        &file,
+                        &rec.flat_field,
+                        "`flat_field` image",
+                        &label,
+                        (w, h),
+                        same_kind,
+                        recording.linearisation,
+                    )?;
+                    if saturated > 0 {
+                        log::warn!(
+                            "{flat_key}: {saturated} pixel(s) of the flat-field image(s) at their full scale (saturated): \
+                             the flat is too low there and those pixels are over-corrected; record the flat with less \
+                             exposure"
+                        );
+                    }
+                    flats.insert(rec.flat_field.clone(), median);
+                }
+                let mut flat = flats[&rec.flat_field].clone();
+                match background {
+                    Some(bg) => flat.data.iter_mut().zip(&bg.data).for_each(|(v, b)| *v -= b),
+                    None => flat.data.iter_mut().for_each(|v| *v -= constant),
+                }
+                let (lo, hi) = normalise_flat(&mut flat, masks[i].as_deref()).map_err(|problem| {
+                    let files: Vec<String> = rec.flat_field.iter().map(|p| p.display().to_string()).collect();
+                    let which = match files.as_slice() {
+                        [one] => format!("flat-field image {one}"),
+                        many => format!("median of the flat-field images {}", many.join(", ")),
+                    };
+                    IoError::invalid(&file, format!("{flat_key}: the {which} {problem}"))
+                })?;
+                normalised.push((key, flat, (lo, hi)));
+                normalised.len() - 1
             }
-            flats.insert(rec.flat_field.clone(), median);
-        }
-        let mut flat = flats[&rec.flat_field].clone();
-        match background {
-            Some(bg) => flat.data.iter_mut().zip(&bg.data).for_each(|(v, b)| *v -= b),
-            None => flat.data.iter_mut().for_each(|v| *v -= constant),
-        }
-        let (lo, hi) = normalise_flat(&mut flat, masks[i].as_deref()).map_err(|problem| {
-            let files: Vec<String> = rec.flat_field.iter().map(|p| p.display().to_string()).collect();
-            let which = match files.as_slice() {
-                [one] => format!("flat-field image {one}"),
-                many => format!("median of the flat-field images {}", many.join(", ")),
-            };
-            IoError::invalid(&file, format!("{flat_key}: the {which} {problem}"))
-        })?;
+        };
+        let (_, flat, (lo, hi)) = &normalised[at];
         image.data.iter_mut().zip(&flat.data).for_each(|(v, f)| *v /= f);
-        flat_range = Some(flat_range.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+        flat_range = Some(flat_range.map_or((*lo, *hi), |(a, b)| (a.min(*lo), b.max(*hi))));
     }
     if clipped > 0 {
         let total: usize = images.iter().map(|im| im.data.len()).sum();
