@@ -1542,3 +1542,95 @@ fn unaligned_disabled_and_malformed_metashape_cameras() {
         assert!(!other.exists());
     }
 }
+
+/// `a` and `b` are the same pinhole camera to rounding (a camera decomposed from its
+/// projection matrix).
+fn assert_close(a: &Camera, b: &Camera) {
+    let (ka, kb) = (&a.intrinsics, &b.intrinsics);
+    assert_eq!((ka.width, ka.height), (kb.width, kb.height));
+    for (x, y) in [(ka.fx, kb.fx), (ka.fy, kb.fy), (ka.cx, kb.cx), (ka.cy, kb.cy), (ka.skew, kb.skew)] {
+        assert!((x - y).abs() < 1e-9 * (1.0 + x.abs()), "{ka:?} against {kb:?}");
+    }
+    let d = (a.world_from_camera.matrix3 - b.world_from_camera.matrix3).to_cols_array();
+    assert!(d.iter().all(|e| e.abs() < 1e-12), "{d:?}");
+    assert!((a.centre() - b.centre()).length() < 1e-9);
+}
+
+/// Projection matrices (one file per camera) and DLT coefficients (one camera per column, v
+/// counted up from the bottom, as DLTdv writes them) give back the cameras they were made from,
+/// sized by their images, one of them a series.
+#[test]
+fn projection_matrices_and_dlt_coefficients_become_a_scene() {
+    use fluidnerf_io::calib::{flip_v, projection_of};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut cams: Vec<(String, Camera)> = rig();
+    for (k, (_, c)) in cams.iter_mut().enumerate() {
+        c.distortion = Distortion::default();
+        c.intrinsics.skew = 0.25 * k as f64;
+    }
+    let images = dir.path().join("images");
+    // Every camera a series of two images; each camera's size is its first image's.
+    for (n, _) in &cams {
+        image(&images.join(n), "t000.png");
+        image(&images.join(n), "t001.png");
+    }
+    let matrices = dir.path().join("matrices");
+    std::fs::create_dir_all(&matrices).expect("mkdir");
+    for (n, c) in &cams {
+        let p = projection_of(c);
+        let text: String = p.iter().map(|r| format!("{:e} {:e} {:e} {:e}\n", r[0], r[1], r[2], r[3])).collect();
+        std::fs::write(matrices.join(format!("{n}.txt")), format!("# P of {n}\n{text}")).expect("writes");
+    }
+    let out = dir.path().join("scene");
+    let aabb = "-10,-10,-10,10,10,10";
+    let o = fluidnerf(&["import", "--projection", s(&matrices), "--images", s(&images), "--aabb", aabb, "-o", s(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    assert_eq!(scene.frames.len(), 6);
+    for f in &scene.frames {
+        let name = f.camera_name.as_deref().expect("named");
+        assert_close(&f.camera, &cams.iter().find(|(n, _)| n == name).expect("a camera").1);
+    }
+
+    // DLT coefficients, v up from the bottom, one camera per column.
+    let columns: Vec<Vec<f64>> = cams
+        .iter()
+        .map(|(_, c)| {
+            let p = flip_v(projection_of(c), c.intrinsics.height);
+            p.iter().flatten().map(|v| v / p[2][3]).take(11).collect()
+        })
+        .collect();
+    let csv: String =
+        (0..11).map(|i| columns.iter().map(|c| format!("{:e}", c[i])).collect::<Vec<_>>().join(",") + "\n").collect();
+    let dlt = dir.path().join("rig_dltCoefs.csv");
+    std::fs::write(&dlt, format!("cam0,cam1,cam2\n{csv}")).expect("writes");
+    let out2 = dir.path().join("scene2");
+    let args = ["import", "--projection", s(&dlt), "--images", s(&images), "--aabb", aabb, "-o", s(&out2)];
+    let o = fluidnerf(&[&args[..], &["--bottom-left-origin"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out2).expect("loads");
+    for f in &scene.frames {
+        let name = f.camera_name.as_deref().expect("named");
+        let c = &cams.iter().find(|(n, _)| n == name).expect("a camera").1;
+        let k = (&f.camera.intrinsics, &c.intrinsics);
+        assert!((k.0.cy - k.1.cy).abs() < 1e-6 && (k.0.fx - k.1.fx).abs() < 1e-6, "{k:?}");
+    }
+    // Read without the flip, the coefficients are a mirrored camera, which sees the box behind it.
+    let out3 = dir.path().join("scene3");
+    let o = fluidnerf(&["import", "--projection", s(&dlt), "--images", s(&images), "--aabb", aabb, "-o", s(&out3)]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("--bottom-left-origin"), "{e}");
+
+    // A camera without images, and a matrix that is no camera, are refused by name.
+    let out4 = dir.path().join("scene4");
+    std::fs::write(matrices.join("cam9.txt"), "1 0 0 0\n0 1 0 0\n0 0 1 1\n").expect("writes");
+    let o =
+        fluidnerf(&["import", "--projection", s(&matrices), "--images", s(&images), "--aabb", aabb, "-o", s(&out4)]);
+    assert!(!o.status.success() && stderr(&o).contains("for camera(s) cam9"), "{}", stderr(&o));
+    std::fs::remove_file(matrices.join("cam9.txt")).expect("rm");
+    std::fs::write(matrices.join("cam1.txt"), "1 2 3 4\n2 4 6 8\n0 0 1 1\n").expect("writes");
+    let o =
+        fluidnerf(&["import", "--projection", s(&matrices), "--images", s(&images), "--aabb", aabb, "-o", s(&out4)]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("cam1.txt") && e.contains("`cam1`") && e.contains("singular"), "{e}");
+}

@@ -1,6 +1,7 @@
 //! Camera calibrations from other tools: OpenCV `cv::FileStorage` files (YAML, XML or JSON),
-//! COLMAP models (text or binary) and Agisoft Metashape camera exports (read only, see
-//! [`read_metashape`]); and writing the first two back.
+//! COLMAP models (text or binary), Agisoft Metashape camera exports (read only, see
+//! [`read_metashape`]) and projection matrices or DLT coefficients (read only, see
+//! [`read_projection`]); and writing the first two back.
 //!
 //! # OpenCV (`cv::FileStorage`: YAML `%YAML:1.0` with `!!opencv-matrix`, XML or JSON)
 //! Per camera:
@@ -84,7 +85,11 @@ use serde_json::{json, Map, Value};
 use crate::{atomic_write, IoError};
 
 mod metashape;
+mod projection;
 pub use metashape::{read_metashape, MetashapeCameras};
+pub use projection::{
+    camera_from_projection, flip_v, projection_of, read_projection, ProjectionCamera, ProjectionForm,
+};
 
 /// Rotation matrix of a Rodrigues (axis × angle) vector, as `cv::Rodrigues`:
 /// `R = cos θ I + (1 − cos θ) k kᵀ + sin θ [k]×` with `θ = |r|`, `k = r / θ`.

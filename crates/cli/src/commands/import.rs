@@ -18,8 +18,9 @@ use std::io::Write as _;
 
 mod davis;
 
-/// Build a scene from an OpenCV, COLMAP or Metashape calibration and a folder of images, or from
-/// a `transforms.json` written by nerfstudio, instant-ngp or a Blender/NeRF exporter.
+/// Build a scene from an OpenCV, COLMAP or Metashape calibration, or from projection matrices or
+/// DLT coefficients, and a folder of images; or from a `transforms.json` written by nerfstudio,
+/// instant-ngp or a Blender/NeRF exporter.
 ///
 /// transforms.json (`--transforms`): read as `load_scene` reads scene files (`fl_x`/`fl_y` or
 /// `camera_angle_x`/`camera_angle_y`, sizes from the images when `w`/`h` are missing), its
@@ -56,6 +57,15 @@ mod davis;
 /// number their name ends with (`cam1` is DaVis camera 1, as the file's `CameraName<k>`
 /// attributes say, else frame k is camera k + 1), never by order; a double-frame recording's
 /// exposures A and B are consecutive instants. See docs/real-data.md.
+///
+/// Projection matrices (`--projection`): text files of one camera's 3 × 4 matrix `P` (three
+/// lines of four numbers), or of one camera per column (11 lines of DLT coefficients, `P` with
+/// its last entry 1, as a `*_dltCoefs.csv`; or 12 lines of `P` row by row; a first line of names
+/// names the columns' cameras, else `cam1` …), or a folder of such files. Each `P` is split into
+/// the pinhole's focal lengths, principal point and skew and its pose (an RQ decomposition; no
+/// distortion), for the size of the camera's images, which are found as for OpenCV. Pixels are
+/// OpenCV's: `(0, 0)` the top-left pixel's centre, v down; --bottom-left-origin for v counted
+/// up from the bottom (DLTdv, Easy-WAND).
 ///
 /// COLMAP (`--colmap`): a text or binary model (`cameras.txt`/`images.txt` or
 /// `cameras.bin`/`images.bin`); each image of the model is looked up as `IMAGES/NAME`, or by
@@ -99,10 +109,20 @@ pub struct Args {
     /// Agisoft Metashape camera export (`.xml`, File > Export > Export Cameras).
     #[arg(long, group = "source", requires = "images")]
     pub metashape: Option<PathBuf>,
+    /// Projection matrices or DLT coefficients: a text file or a folder of them (`.txt`,
+    /// `.csv`, `.dat`): one camera's 3 × 4 matrix, or one camera per column (11 DLT
+    /// coefficients or 12 matrix entries row by row, as a `*_dltCoefs.csv`). Pixels in OpenCV's
+    /// convention (`(0, 0)` the top-left pixel's centre, v down); image sizes from the images.
+    #[arg(long, group = "source", requires = "images")]
+    pub projection: Option<PathBuf>,
+    /// The --projection's v counts up from the image's bottom edge (DLTdv, Easy-WAND): each
+    /// camera's v is taken as its image height − v.
+    #[arg(long, requires = "projection")]
+    pub bottom_left_origin: bool,
     /// A `transforms.json` (nerfstudio, instant-ngp, Blender/NeRF synthetic), or its folder.
     #[arg(long, group = "source")]
     pub transforms: Option<PathBuf>,
-    /// Folder with the images (for --opencv, --colmap and --metashape).
+    /// Folder with the images (for --opencv, --projection, --colmap and --metashape).
     #[arg(long, conflicts_with = "transforms")]
     pub images: Option<PathBuf>,
     /// Reconstruction box in world units: xmin,ymin,zmin,xmax,ymax,zmax (e.g.
@@ -129,7 +149,8 @@ pub struct Args {
     #[arg(long)]
     pub force: bool,
     /// Leave out images that no camera is calibrated for (with a warning) instead of failing
-    /// (for --opencv, --colmap and --metashape), and cameras a Metashape file has not aligned.
+    /// (for --opencv, --projection, --colmap and --metashape), and cameras a Metashape file has
+    /// not aligned.
     #[arg(long, conflicts_with = "transforms")]
     pub skip_uncalibrated: bool,
     /// Cameras to hold out for validation, comma separated: camera names, or image names
@@ -656,6 +677,110 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     Ok((frames, used))
 }
 
+/// What an imported scene that does not validate says first.
+fn invalid_scene(args: &Args) -> String {
+    format!("the imported scene is invalid{}", projection_hint(args))
+}
+
+/// For projection matrices read with v counting down: a matrix whose v counts up from the
+/// bottom is a mirror image, whose camera faces away from the scene.
+fn projection_hint(args: &Args) -> &'static str {
+    if args.projection.is_some() && !args.bottom_left_origin {
+        " (if the projection matrices count v up from the image's bottom edge, as DLTdv and Easy-WAND write \
+         them, each camera faces away from the scene: pass --bottom-left-origin)"
+    } else {
+        ""
+    }
+}
+
+/// The size of camera `name`'s images: of its image `IMAGES/NAME.*`, of the first image of its
+/// folder `IMAGES/NAME/`, or of its video's first frame, as [`match_opencv`] finds them; None
+/// when it has none (which `match_opencv` then reports with the other cameras').
+fn image_size_of(name: &str, images: &Path, entries: &[PathBuf]) -> anyhow::Result<Option<(u32, u32)>> {
+    let folder = images.join(name);
+    let first = if folder.is_dir() {
+        list_dir(&folder)?.into_iter().find(|p| is_image(p))
+    } else {
+        let mut found = entries.iter().filter(|p| {
+            p.is_file()
+                && p.file_stem().and_then(|s| s.to_str()) == Some(name)
+                && (named_like_image(p) || fluidnerf_io::video::is_video(p))
+        });
+        found.next().cloned()
+    };
+    let Some(file) = first else { return Ok(None) };
+    if fluidnerf_io::video::is_video(&file) {
+        let opts = fluidnerf_io::video::VideoOptions { end: Some(1), ..Default::default() };
+        let video = fluidnerf_io::video::read_video(&file, &opts)
+            .with_context(|| format!("camera {name}: cannot read its video's first frame for the image size"))?;
+        let f = &video.frames[0];
+        return Ok(Some((f.width as u32, f.height as u32)));
+    }
+    let size = fluidnerf_io::image::read_dimensions(&file).with_context(|| format!("camera {name}: its image size"))?;
+    Ok(Some(size))
+}
+
+/// The cameras of projection matrices, each for the size of its images (a matrix has none);
+/// with `bottom_left_origin`, v counted up from the bottom is turned round first.
+fn projection_cameras(
+    read: &[fluidnerf_io::calib::ProjectionCamera],
+    images: &Path,
+    bottom_left_origin: bool,
+) -> anyhow::Result<Vec<(String, Camera)>> {
+    let entries = list_dir(images)?;
+    let mut cameras = Vec::new();
+    let mut missing = Vec::new();
+    for p in read {
+        let Some((width, height)) = image_size_of(&p.name, images, &entries)? else {
+            missing.push(p.name.as_str());
+            continue;
+        };
+        let matrix = if bottom_left_origin { fluidnerf_io::calib::flip_v(p.matrix, height) } else { p.matrix };
+        let cam = fluidnerf_io::calib::camera_from_projection(matrix, width, height)
+            .map_err(|why| anyhow::anyhow!("{}: camera `{}`: {why}", p.file.display(), p.name))?;
+        let k = &cam.intrinsics;
+        let inside = |c: f64, n: u32| (-0.5..=f64::from(n) - 0.5).contains(&c);
+        if !inside(k.cx, width) || !inside(k.cy, height) {
+            log::warn!(
+                "{}: camera `{}`: the principal point ({}, {}) lies outside its {width}x{height} image{}",
+                p.file.display(),
+                p.name,
+                fluidnerf_core::num(k.cx),
+                fluidnerf_core::num(k.cy),
+                if bottom_left_origin {
+                    ""
+                } else {
+                    ": does the matrix count v up from the bottom (--bottom-left-origin)?"
+                }
+            );
+        }
+        log::info!(
+            "{}: camera `{}` ({}): fx {}, fy {}, cx {}, cy {}, skew {}",
+            p.file.display(),
+            p.name,
+            match p.form {
+                fluidnerf_io::calib::ProjectionForm::Matrix => "projection matrix",
+                fluidnerf_io::calib::ProjectionForm::Dlt => "DLT coefficients",
+            },
+            fluidnerf_core::num(k.fx),
+            fluidnerf_core::num(k.fy),
+            fluidnerf_core::num(k.cx),
+            fluidnerf_core::num(k.cy),
+            fluidnerf_core::num(k.skew)
+        );
+        cameras.push((p.name.clone(), cam));
+    }
+    if !missing.is_empty() {
+        bail!(
+            "no image found in {} for camera(s) {} (no NAME.png, .jpg, .tif, .im7, a video NAME.avi/.mp4/.mov/.cine/.mraw \
+             or folder NAME/); a projection matrix gives no image size, so every camera needs its images",
+            images.display(),
+            missing.join(", ")
+        );
+    }
+    Ok(cameras)
+}
+
 /// Most file names listed in an error about series that do not line up.
 const NAMES_SHOWN: usize = 5;
 
@@ -1077,7 +1202,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         };
         (frames, file)
     } else {
-        let Some(images) = &args.images else { bail!("--opencv, --colmap and --metashape need --images") };
+        let Some(images) = &args.images else {
+            bail!("--opencv, --projection, --colmap and --metashape need --images")
+        };
         let mut units = None;
         let (frames, used) = if let Some(path) = &args.opencv {
             let cams = fluidnerf_io::calib::read_opencv(path).context("cannot read the OpenCV calibration")?;
@@ -1089,6 +1216,10 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
                 }
                 None => match_opencv(&cams, images)?,
             }
+        } else if let Some(path) = &args.projection {
+            let read = fluidnerf_io::calib::read_projection(path).context("cannot read the projection matrices")?;
+            let cams = projection_cameras(&read, images, args.bottom_left_origin)?;
+            match_opencv(&cams, images)?
         } else if let Some(dir) = &args.colmap {
             let cams = fluidnerf_io::calib::read_colmap(dir).context("cannot read the COLMAP model")?;
             match_by_name(&cams, images, "the COLMAP model")?
@@ -1104,7 +1235,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             }
             match_metashape(file, &read, images, args.skip_uncalibrated)?
         } else {
-            bail!("give --transforms, --opencv, --colmap or --metashape");
+            bail!("give --transforms, --opencv, --projection, --colmap or --metashape");
         };
         let extra: Vec<String> = unused_entries(images, &used)?.iter().map(|p| p.display().to_string()).collect();
         if !extra.is_empty() {
@@ -1252,7 +1383,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     if let Some(aabb) = known_aabb {
         // Geometry first: a box no camera sees is the likelier mistake than an image.
         scene.aabb = aabb;
-        validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
+        validate_scene(&scene, &out_file).with_context(|| invalid_scene(args))?;
     }
     let linearisation = args.linearisation.or(from_file.linearisation).unwrap_or_default();
     let images = load_images_with(&scene, linearisation).context("the images do not fit the calibration")?;
@@ -1286,8 +1417,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     }
     if known_aabb.is_none() {
         scene.aabb = {
-            let est = estimate_box(&scene.frames, &images, &BoxEstimateParams::default())
-                .context("cannot estimate a box: no point is seen by every camera; give --aabb")?;
+            let est = estimate_box(&scene.frames, &images, &BoxEstimateParams::default()).with_context(|| {
+                format!("cannot estimate a box: no point is seen by every camera; give --aabb{}", projection_hint(args))
+            })?;
             let how = if est.from_bright_pixels {
                 "the bright pixels seen by every camera"
             } else {
@@ -1305,7 +1437,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             std::io::stdout().lock().write_all(line.as_bytes())?;
             est.aabb
         };
-        validate_scene(&scene, &out_file).context("the imported scene is invalid")?;
+        validate_scene(&scene, &out_file).with_context(|| invalid_scene(args))?;
     }
     created.file(&out_file);
     save_scene_recording(&scene, &args.out, &recording, true)?;
