@@ -607,7 +607,7 @@ fn camera_from_nodes(name: &str, nodes: &CameraNodes<'_>) -> Result<Camera, IoEr
 /// Why the principal point of `k` looks wrong: it lies outside the image, as it does with
 /// intrinsics calibrated at another resolution (binned, cropped or the full sensor) than the
 /// image size given.
-fn principal_point_outside(k: &Intrinsics) -> Option<String> {
+pub fn principal_point_outside(k: &Intrinsics) -> Option<String> {
     // Pixel centres at integers: the image spans -½ to n - ½.
     let inside = |c: f64, n: u32| (-0.5..=f64::from(n) - 0.5).contains(&c);
     (!inside(k.cx, k.width) || !inside(k.cy, k.height)).then(|| {

@@ -739,20 +739,8 @@ fn projection_cameras(
         let cam = fluidnerf_io::calib::camera_from_projection(matrix, width, height)
             .map_err(|why| anyhow::anyhow!("{}: camera `{}`: {why}", p.file.display(), p.name))?;
         let k = &cam.intrinsics;
-        let inside = |c: f64, n: u32| (-0.5..=f64::from(n) - 0.5).contains(&c);
-        if !inside(k.cx, width) || !inside(k.cy, height) {
-            log::warn!(
-                "{}: camera `{}`: the principal point ({}, {}) lies outside its {width}x{height} image{}",
-                p.file.display(),
-                p.name,
-                fluidnerf_core::num(k.cx),
-                fluidnerf_core::num(k.cy),
-                if bottom_left_origin {
-                    ""
-                } else {
-                    ": does the matrix count v up from the bottom (--bottom-left-origin)?"
-                }
-            );
+        if let Some(why) = fluidnerf_io::calib::principal_point_outside(k) {
+            log::warn!("{}: camera `{}`: {why}", p.file.display(), p.name);
         }
         log::info!(
             "{}: camera `{}` ({}): fx {}, fy {}, cx {}, cy {}, skew {}",
