@@ -79,6 +79,17 @@ pub enum Family {
     Temporal,
 }
 
+impl Family {
+    /// The family in words: "a voxel method".
+    pub fn describe(self) -> &'static str {
+        match self {
+            Family::Classical => "a voxel method",
+            Family::Neural => "a static neural method",
+            Family::Temporal => "a time-resolved method",
+        }
+    }
+}
+
 impl Method {
     pub const ALL: [Method; 15] = [
         Method::Asart,
@@ -532,8 +543,27 @@ impl MethodConfig {
         }
     }
 
-    /// Rejects parameters no run can use.
+    /// Rejects parameters no run can use, and a method paired with the settings of another
+    /// family (`MethodConfig::Neural(Method::Asart, …)`): the run would read them as its own
+    /// kind, and `config.json` would record another method.
     pub fn validate(&self) -> Result<(), PipelineError> {
+        let (settings, variant) = match self {
+            MethodConfig::Classical(_) => (Family::Classical, "Classical"),
+            MethodConfig::Neural(..) => (Family::Neural, "Neural"),
+            MethodConfig::Temporal(..) => (Family::Temporal, "Temporal"),
+        };
+        let m = self.method();
+        if m.family() != settings {
+            return Err(PipelineError::invalid(
+                "method",
+                format!(
+                    "{m} is {}, but it is given the settings of {} (MethodConfig::{variant}); start from \
+                     Method::default_config() of {m}",
+                    m.family().describe(),
+                    settings.describe()
+                ),
+            ));
+        }
         match self {
             MethodConfig::Classical(c) => {
                 c.projector.validate().map_err(|e| classical_under("method.projector", e))?;

@@ -529,6 +529,47 @@ mod tests {
     use super::*;
     use std::time::Duration;
 
+    /// A method paired with another family's settings, as a library caller can build it, is
+    /// refused by its key before any work: a voxel method given a field's settings panicked in
+    /// the run, and `config.json` recorded another method.
+    #[test]
+    fn a_method_given_another_familys_settings_is_refused_not_run() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let scene_dir = tmp.path().join("scene");
+        testing::small_scene(&scene_dir).expect("scene");
+        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        let settings = |m: Method| RunConfig::new(&scene_dir, m).method;
+        let MethodConfig::Neural(_, field) = settings(Method::Fast) else { unreachable!("fast is neural") };
+        let MethodConfig::Temporal(_, windows) = settings(Method::TrFast) else { unreachable!("tr-fast is temporal") };
+        for (k, method) in [
+            MethodConfig::Neural(Method::Asart, field.clone()),
+            MethodConfig::Neural(Method::TrFast, field),
+            MethodConfig::Temporal(Method::Fast, windows.clone()),
+            MethodConfig::Temporal(Method::Sart, windows),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut config = RunConfig::new(&scene_dir, Method::Asart);
+            config.method = method;
+            config.resolution = 8;
+            config.stopping.max_iterations = Some(1);
+            let m = config.method();
+            match config.validate() {
+                Err(PipelineError::Invalid { key, why }) => {
+                    assert_eq!(key, "method", "{m}: {why}");
+                    assert!(why.starts_with(&format!("{m} is {}", m.family().describe())), "{m}: {why}");
+                }
+                other => panic!("{m}: {other:?}"),
+            }
+            let out = tmp.path().join(format!("run{k}"));
+            let dir = RunDir::create(&out, Overwrite::Refuse, Some(&scene.root)).expect("run folder");
+            let e = reconstruct(&scene, &config, &dir, |_| ControlFlow::Continue(())).expect_err("refused");
+            assert!(matches!(&e, PipelineError::Invalid { key, .. } if key == "method"), "{m}: {e}");
+            assert!(!out.join("config.json").exists(), "{m}: nothing is recorded");
+        }
+    }
+
     #[test]
     fn the_estimate_comes_once_from_the_measured_rate_and_respects_the_budget() {
         let t0 = Instant::now();
