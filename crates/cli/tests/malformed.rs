@@ -481,6 +481,21 @@ fn cases() -> Vec<Case> {
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--holdout-every", "2", "--patience", "3"],
             "--holdout-every, --patience set held-out early stopping, which this run does not use: the scene",
         ),
+        // The voxel methods' own rule's tolerance was recorded and ignored by runs that stop
+        // otherwise: SCENE holds a view out, so `auto` stops by it.
+        c(
+            "plateau tolerance with held-out views",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--resolution", "8", "--plateau-tolerance", "0.1"],
+            "--plateau-tolerance sets the method's own stopping rule, which this run does not use: the scene",
+        ),
+        c(
+            "plateau tolerance with the budget rule",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--stop", "budget", "--max-iterations", "2", "--plateau-tolerance", "0.1"],
+            "--plateau-tolerance sets the method's own stopping rule, which this run does not use: the run stops by \
+             its budget alone",
+        ),
         c(
             "NRMSE interval on a scene without ground truth",
             Json(|v| {

@@ -339,7 +339,8 @@ pub struct ClassicalArgs {
     #[arg(long, value_name = "LAMBDA")]
     pub tikhonov_weight: Option<f64>,
     /// The `own` rule of voxel methods: stop when the residual (sliding mean of 4) varies by
-    /// less than this fraction (at most 1) over 20 iterations; 0 runs to the cap [default: 0.02].
+    /// less than this fraction (at most 1) over 20 iterations; 0 runs to the cap. Refused for a
+    /// run that stops by another rule (--stop), which would ignore it [default: 0.02].
     #[arg(long, value_name = "FRACTION", value_parser = parse_plateau_tolerance)]
     pub plateau_tolerance: Option<f64>,
 }
@@ -725,7 +726,7 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             cfg.gains.mode
         );
     }
-    held_out_options_apply(args, &cfg)?;
+    stop_options_apply(args, &cfg)?;
     if args.eval_every.is_some() && fluidnerf_io::scene::read_scene_draft(&cfg.scene)?.truth.is_empty() {
         // The run would record the interval and evaluate nothing.
         bail!(
@@ -772,38 +773,73 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     Ok(cfg)
 }
 
-/// Refuses --holdout-every and --patience for a run that will not stop by held-out views, which
-/// would ignore them: one whose rule is its own or the budget, a time-resolved one, or one whose
-/// rule `auto` finds no held-out view in the scene.
-fn held_out_options_apply(args: &Args, cfg: &RunConfig) -> anyhow::Result<()> {
+/// Refuses the options of a stopping rule the run will not stop by, which it would record and
+/// ignore: --holdout-every and --patience (held-out early stopping) for a run that stops by its
+/// own rule or its budget, a time-resolved one, or one whose rule `auto` finds no held-out view
+/// in the scene; --plateau-tolerance (the voxel methods' own rule) for one that stops by its
+/// budget or by held-out views, `auto` included where the scene holds views out. `auto` is
+/// decided as the run decides it ([`RunConfig::resolved`]).
+fn stop_options_apply(args: &Args, cfg: &RunConfig) -> anyhow::Result<()> {
     let s = &args.stop;
-    let options = given(&[("--holdout-every", s.holdout_every.is_some()), ("--patience", s.patience.is_some())]);
-    if options.is_empty() || cfg.stopping.rule == StopRule::HeldOut {
+    let held_out = given(&[("--holdout-every", s.holdout_every.is_some()), ("--patience", s.patience.is_some())]);
+    let own = given(&[("--plateau-tolerance", args.classical.plateau_tolerance.is_some())]);
+    if held_out.is_empty() && own.is_empty() {
         return Ok(());
     }
-    let why = match cfg.stopping.rule {
-        StopRule::Own => "the run stops by the method's own rule (--stop own)".to_string(),
-        StopRule::Budget => "the run stops by its budget alone (--stop budget)".to_string(),
-        _ if cfg.method().family() == Family::Temporal => {
-            "a time-resolved run holds out whole times, and does not stop early on them".to_string()
+    let temporal = cfg.method().family() == Family::Temporal;
+    let (rule, why) = match cfg.stopping.rule {
+        StopRule::Own => (StopRule::Own, "the run stops by the method's own rule (--stop own)".to_string()),
+        StopRule::Budget => (StopRule::Budget, "the run stops by its budget alone (--stop budget)".to_string()),
+        StopRule::HeldOut => (
+            StopRule::HeldOut,
+            "the run keeps the iterate best on the held-out views (--stop held-out), which replaces the method's \
+             own rule"
+                .to_string(),
+        ),
+        StopRule::Auto if temporal => {
+            (StopRule::Own, "a time-resolved run holds out whole times, and does not stop early on them".to_string())
         }
-        _ => {
-            let draft = fluidnerf_io::scene::read_scene_draft(&cfg.scene)?;
-            if draft.frames.iter().any(|f| f.holdout) {
-                return Ok(());
+        StopRule::Auto => {
+            let scene = cfg.scene.display();
+            if fluidnerf_io::scene::read_scene_draft(&cfg.scene)?.frames.iter().any(|f| f.holdout) {
+                let why = format!(
+                    "the scene {scene} holds out views, so --stop auto keeps the iterate best on them, which \
+                     replaces the method's own rule"
+                );
+                (StopRule::HeldOut, why)
+            } else {
+                let why =
+                    format!("the scene {scene} holds out no views, so --stop auto stops by the method's own rule");
+                (StopRule::Own, why)
             }
-            format!(
-                "the scene {} holds out no views, so --stop auto stops by the method's own rule",
-                cfg.scene.display()
-            )
         }
     };
-    let (verb, them) = if options.len() == 1 { ("sets", "it") } else { ("set", "them") };
-    bail!(
-        "{} {verb} held-out early stopping, which this run does not use: {why}; use --stop held-out on a scene with \
-         held-out views, or leave {them} out",
-        options.join(", ")
-    );
+    if !held_out.is_empty() && rule != StopRule::HeldOut {
+        let (verb, them) = verb_them(&held_out);
+        bail!(
+            "{} {verb} held-out early stopping, which this run does not use: {why}; use --stop held-out on a scene \
+             with held-out views, or leave {them} out",
+            held_out.join(", ")
+        );
+    }
+    if !own.is_empty() && rule != StopRule::Own {
+        let (verb, them) = verb_them(&own);
+        bail!(
+            "{} {verb} the method's own stopping rule, which this run does not use: {why}; use --stop own, or leave \
+             {them} out",
+            own.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// The verb and pronoun for a list of options: "sets … it" for one, "set … them" for several.
+fn verb_them(options: &[&str]) -> (&'static str, &'static str) {
+    if options.len() == 1 {
+        ("sets", "it")
+    } else {
+        ("set", "them")
+    }
 }
 
 /// Refuses a projector's option given for a run that uses another projector (`--ray-step`
