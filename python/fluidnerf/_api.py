@@ -515,8 +515,12 @@ def build_config(
                     str(root or ""), chosen if chosen is not None else _default_method(scene), preset
                 )
             )
+            # What no preset sets is kept, as MethodConfig::with_preset_kept keeps it for
+            # --preset with --config: the start, the held-out times and the frame spacing.
             kept = {
-                k: v for k, v in (base.get("method") or {}).items() if k in ("holdout_times", "time_step")
+                k: v
+                for k, v in (base.get("method") or {}).items()
+                if k in ("start", "holdout_times", "time_step")
             }
             base["method"] = _merge(fresh["method"], kept)
     else:

@@ -316,6 +316,19 @@ def test_a_configuration_or_method_of_the_wrong_kind_is_refused_by_name(static_s
     assert cfg["method"]["name"] == "fast" and cfg["resolution"] == 8
 
 
+def test_a_preset_given_with_a_config_keeps_the_configured_start(static_scene, tr_scene):
+    """A preset with config= took the preset's field and training and dropped the start: a
+    hybrid's voxel method fell back to "auto" and a time-resolved run's start went, as
+    --preset with --config did."""
+    hybrid = fluidnerf.build_config(static_scene, {"name": "hybrid", "start": {"method": "sart"}})
+    cfg = fluidnerf.build_config(static_scene, config=hybrid, preset="dense")
+    assert cfg["method"]["preset"] == "dense" and cfg["method"]["start"]["method"] == "sart"
+    tr = fluidnerf.build_config(tr_scene, {"name": "tr-fast", "start": {"method": "asart"}, "time_step": 0.5})
+    cfg = fluidnerf.build_config(tr_scene, config=tr, preset="tr-small")
+    assert cfg["method"]["preset"] == "tr-small"
+    assert cfg["method"]["start"]["method"] == "asart" and cfg["method"]["time_step"] == 0.5
+
+
 def test_a_config_path_to_another_fluidnerf_file_is_named_for_what_it_is(static_scene, tmp_path):
     """config= a scene's synth.json or transforms.json was refused as "configuration: at
     `camera_gains`: unknown field", naming neither the file nor what it is, as --config does."""

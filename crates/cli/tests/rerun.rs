@@ -197,3 +197,24 @@ fn terminal_report_json_and_report_html_agree() {
     let html = std::fs::read_to_string(d.join("run/report.html")).expect("html");
     assert!(html.contains(&format!(">{shown}<")), "report.html does not show NRMSE {shown}");
 }
+
+/// `--preset` with `--config` takes the preset's field and training but keeps what no preset
+/// sets: the configured start (before, the hybrid's voxel method fell back to `auto`, and a
+/// time-resolved run's start was dropped).
+#[test]
+fn a_preset_given_with_a_config_keeps_the_configured_start() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let tiny = ["--resolution", "8", "--max-iterations", "2", "--rays-per-image", "16", "-q"];
+    let mut first = vec!["reconstruct", "scene", "-o", "a", "--method", "hybrid", "--start-method", "sart"];
+    first.extend(tiny);
+    ok(&fluidnerf(d, &first));
+    let mut again = vec!["reconstruct", "--config", "a/config.json", "-o", "b", "--preset", "dense"];
+    again.extend(tiny);
+    ok(&fluidnerf(d, &again));
+    let cfg = json(&d.join("b/config.json"));
+    assert_eq!(cfg["method"]["preset"], "dense", "the preset given is taken");
+    assert_eq!(cfg["method"]["start"]["method"], "sart", "the configured start is kept");
+    assert_eq!(report(&d.join("b/start"))["method"], "sart");
+}

@@ -467,6 +467,28 @@ impl MethodConfig {
         }
     }
 
+    /// These settings with the field, the training and the windows of the named preset
+    /// ([`MethodConfig::with_preset`] of the same method), keeping what no preset sets: the
+    /// start ([`StartSpec`]: another run, or a voxel method run first) and, for the
+    /// time-resolved methods, the held-out times and the frame spacing. `--preset` given with
+    /// `--config` goes through here, so that a rerun with another preset starts as the
+    /// configured run did.
+    pub fn with_preset_kept(&self, preset: &str) -> Result<Self, PipelineError> {
+        let mut fresh = MethodConfig::with_preset(self.method(), preset)?;
+        match (self, &mut fresh) {
+            (MethodConfig::Neural(_, old), MethodConfig::Neural(_, new)) => {
+                new.start = old.start.clone().or_else(|| new.start.take());
+            }
+            (MethodConfig::Temporal(_, old), MethodConfig::Temporal(_, new)) => {
+                new.start = old.start.clone().or_else(|| new.start.take());
+                new.holdout_times = old.holdout_times.clone();
+                new.time_step = old.time_step;
+            }
+            _ => {}
+        }
+        Ok(fresh)
+    }
+
     /// The neural or time-resolved `method` configured from the named preset: any name of
     /// [`PRESETS`] for the static neural methods; any of [`TEMPORAL_PRESETS`] or [`PRESETS`]
     /// for the time-resolved ones.

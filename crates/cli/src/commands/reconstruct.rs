@@ -352,8 +352,10 @@ pub struct NeuralArgs {
     /// Named configuration: faithful (Table 5.1: 8 × 256 MLP, L 8, ReLU, N_c = N_f = 128),
     /// ch7 (as faithful with N_c = N_f = 64), experimental (Table 8.3), fast (hash grid + tiny
     /// MLP + empty-space skipping), dense (voxel grid + skipping); time-resolved: tr-faithful,
-    /// tr-table-5.2, tr-experimental, tr-fast, tr-small, static-swish, static-small
-    /// [default: faithful for fluidnerf, fast for fast, tr-faithful, tr-fast, static-swish].
+    /// tr-table-5.2, tr-experimental, tr-fast, tr-small, static-swish, static-small. With
+    /// --config it replaces the configured field, training and windows, and keeps the start,
+    /// --holdout-times and --time-step [default: faithful for fluidnerf, fast for fast,
+    /// tr-faithful, tr-fast, static-swish].
     #[arg(long)]
     pub preset: Option<String>,
     /// Random pixels per training image per iteration (N_pix/img) [default: the preset's].
@@ -642,15 +644,7 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     }
     cfg.fluidnerf_version = env!("CARGO_PKG_VERSION").to_string();
     if let Some(p) = &args.neural.preset {
-        let kept = match &cfg.method {
-            MethodConfig::Temporal(_, t) => Some((t.holdout_times.clone(), t.time_step)),
-            _ => None,
-        };
-        cfg.method = MethodConfig::with_preset(method, p)?;
-        if let (MethodConfig::Temporal(_, t), Some((h, dt))) = (&mut cfg.method, kept) {
-            t.holdout_times = h;
-            t.time_step = dt;
-        }
+        cfg.method = cfg.method.with_preset_kept(p)?;
     }
     if let Some(v) = args.seed {
         cfg.seed = v;
