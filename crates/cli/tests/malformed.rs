@@ -1329,10 +1329,16 @@ fn a_run_holding_another_runs_report_is_refused() {
     }
     std::fs::copy(d.join("other/report.json"), d.join("run/report.json")).expect("copies");
     let says = "run/report.json: reports a run of method sart, but the folder's config.json configures method asart";
-    for args in [&["eval", "run", "--json", "m.json"][..], &["render", "run", "-o", "views"]] {
+    // compare drew the other run's curve under this folder's name.
+    let commands = [
+        &["eval", "run", "--json", "m.json"][..],
+        &["render", "run", "-o", "views"],
+        &["compare", "other", "run", "-o", "curves"],
+    ];
+    for args in commands {
         refused(&fluidnerf(d, args), says);
     }
-    for made in ["m.json", "views"] {
+    for made in ["m.json", "views", "curves"] {
         assert!(!d.join(made).exists(), "left {made}");
     }
 }

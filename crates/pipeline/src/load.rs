@@ -76,6 +76,26 @@ fn other_field<T: serde::Serialize>(path: &std::path::Path, configured: &T, desc
     )
 }
 
+/// Refuses a run folder's `report` (read from `report_path`) and `config.json` that are not of
+/// one run: both are written by the same run, and a report copied in from another would have
+/// its scores, curves and volumes taken for this run's. Every reader of a run folder holds its
+/// files to this ([`LoadedRun::open`], `compare`).
+pub fn check_same_run(report_path: &Path, report: &RunReport, config: &RunConfig) -> Result<(), PipelineError> {
+    if report.method != config.method() {
+        return Err(PipelineError::file(
+            report_path,
+            format!(
+                "reports a run of method {}, but the folder's config.json configures method {}: the two files are \
+                 of different runs (one copied in from another folder?); rerun the reconstruction or restore the \
+                 file",
+                report.method,
+                config.method()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Refuses a run's `model.json` or `temporal.json` that is not the run's own: one whose field
 /// fills another box than its report records (the run's box is the report's: eval, render and
 /// export would place the field there), another field than its config.json configures, or,
@@ -182,20 +202,7 @@ impl LoadedRun {
         if rd.report().is_file() {
             let report = RunReport::read(&rd.report())?;
             let config = RunConfig::read(&rd.config())?;
-            // Both are written by the same run: a report copied in from another run would have
-            // its scores, curves and volumes taken for this run's.
-            if report.method != config.method() {
-                return Err(PipelineError::file(
-                    &rd.report(),
-                    format!(
-                        "reports a run of method {}, but the folder's config.json configures method {}: the two \
-                         files are of different runs (one copied in from another folder?); rerun the reconstruction \
-                         or restore the file",
-                        report.method,
-                        config.method()
-                    ),
-                ));
-            }
+            check_same_run(&rd.report(), &report, &config)?;
             // Every run writes a volume (a time-resolved one, one per instant it reached): a
             // report that lists none was edited, and its run would be scored, rendered and read
             // as holding no result at all.

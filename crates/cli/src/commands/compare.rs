@@ -28,7 +28,8 @@ use serde::{Deserialize, Serialize};
 
 /// Compare runs by NRMSE against training wall time (time to accuracy).
 ///
-/// Each RUN is a reconstruction run directory (its `report.json` is read) or a JSON file with
+/// Each RUN is a reconstruction run directory (its `report.json` is read, and refused when its
+/// `config.json` is of another run) or a JSON file with
 /// the same fields: `method`, optionally `preset`, and `nrmse_history`, a list of
 /// `{iteration, train_time_s, nrmse}`, one point per iteration, forward in time (a file that
 /// also holds a report's `history.nrmse` is refused). Runs record that history when their scene has ground
@@ -231,6 +232,13 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
                 r.method.name(),
                 list.join(", ")
             );
+        }
+        // A report beside its run's config.json must be of that run, as eval and export hold it
+        // to be: one copied in from another run had that run's curve drawn under this folder's
+        // name.
+        let config = report.with_file_name("config.json");
+        if report.file_name().is_some_and(|n| n == "report.json") && config.is_file() {
+            fluidnerf_pipeline::load::check_same_run(&report, &r, &fluidnerf_pipeline::RunConfig::read(&config)?)?;
         }
         let preset = r.neural.as_ref().and_then(|n| n.preset.clone());
         (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s))
