@@ -218,3 +218,27 @@ fn a_preset_given_with_a_config_keeps_the_configured_start() {
     assert_eq!(cfg["method"]["start"]["method"], "sart", "the configured start is kept");
     assert_eq!(report(&d.join("b/start"))["method"], "sart");
 }
+
+/// `--gains none` (or `balance`) overrides a configuration that fitted gains, as any option
+/// overrides it: the fit's offset and refit interval go with the fit. Before, the run was
+/// refused, blaming the configuration's `gains.offset`, with no option to turn it off.
+#[test]
+fn a_gain_mode_given_over_a_config_that_fitted_gains_replaces_the_fit() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let tiny = ["--method", "sart", "--resolution", "8", "--max-iterations", "2", "-q"];
+    let fit = ["--gains", "fit", "--gain-offset", "--gain-every", "1", "--gain-rounds", "2"];
+    ok(&fluidnerf(d, &[&["reconstruct", "scene", "-o", "a"][..], &tiny, &fit].concat()));
+    for mode in ["none", "balance"] {
+        let out = format!("b-{mode}");
+        ok(&fluidnerf(d, &["reconstruct", "--config", "a/config.json", "-o", &out, "--gains", mode, "-q"]));
+        let gains = &json(&d.join(&out).join("config.json"))["gains"];
+        assert_eq!(gains, &serde_json::json!({"mode": mode, "offset": false, "every": null, "rounds": 4}));
+    }
+    // The fit's options are still refused beside a mode that fits nothing.
+    let out =
+        fluidnerf(d, &["reconstruct", "--config", "a/config.json", "-o", "c", "--gains", "none", "--gain-offset"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--gain-offset applies only to fitted gains"));
+}

@@ -171,7 +171,8 @@ pub struct GainArgs {
     /// images as they are; `balance`: every image scaled to the same total intensity as the
     /// others of its time; `fit`: balanced, then a gain per camera fitted with the field
     /// (neural) or between rounds of iterations (voxel methods), normalised to mean 1. The
-    /// report records the mode taken [default: auto].
+    /// report records the mode taken. `none` or `balance` over a --config that fitted gains
+    /// drops that fit's settings (offset, refits) too [default: auto].
     #[arg(long, value_name = "MODE", value_parser = ["auto", "none", "balance", "fit"])]
     pub gains: Option<String>,
     /// With --gains fit (or auto, where it fits): also fit an offset per camera (a background
@@ -683,6 +684,11 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     let g = &args.gains;
     if let Some(mode) = &g.gains {
         cfg.gains.mode = mode.parse().map_err(anyhow::Error::msg)?;
+        // The fit's own settings go with a mode that fits: one given here that fits no gains
+        // replaces them too, or a configuration's offset or refit interval would refuse it.
+        if !cfg.gains.may_fit() {
+            cfg.gains = fluidnerf_pipeline::GainConfig { mode: cfg.gains.mode, ..Default::default() };
+        }
     }
     if g.gain_offset {
         cfg.gains.offset = true;
