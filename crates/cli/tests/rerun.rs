@@ -242,3 +242,33 @@ fn a_gain_mode_given_over_a_config_that_fitted_gains_replaces_the_fit() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--gain-offset applies only to fitted gains"));
 }
+
+/// A switch a configuration turned on can be turned off from the command line, as every other
+/// setting can be overridden: `--visual-hull false`, `--gain-offset false`, and
+/// `--no-warm-start false` for windows.
+#[test]
+fn a_switch_a_config_turned_on_can_be_turned_off() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let tiny = ["--method", "sart", "--resolution", "8", "--max-iterations", "2", "-q"];
+    let on = ["--visual-hull", "--gains", "fit", "--gain-offset"];
+    ok(&fluidnerf(d, &[&["reconstruct", "scene", "-o", "a"][..], &tiny, &on].concat()));
+    let a = json(&d.join("a/config.json"));
+    assert_eq!((&a["method"]["projector"]["visual_hull"], &a["gains"]["offset"]), (&true.into(), &true.into()));
+    let off = ["--visual-hull", "false", "--gain-offset", "false", "-q"];
+    ok(&fluidnerf(d, &[&["reconstruct", "--config", "a/config.json", "-o", "b"][..], &off].concat()));
+    let b = json(&d.join("b/config.json"));
+    assert_eq!((&b["method"]["projector"]["visual_hull"], &b["gains"]["offset"]), (&false.into(), &false.into()));
+    assert_eq!(b["gains"]["mode"], "fit", "only the offset is turned off");
+
+    let synth = "synth -q --preset jet-tr60 --cameras 4 --pixels 16 --resolution 12 --model pinhole --times 14,15,16 \
+                 -o tr-scene";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    let tr = "reconstruct tr-scene -o tr -q --method tr-fast --resolution 8 --max-iterations 2 --window 2 --overlap 1 \
+              --rays-per-image 16 --coarse-samples 8 --no-warm-start";
+    ok(&fluidnerf(d, &tr.split_whitespace().collect::<Vec<_>>()));
+    assert_eq!(json(&d.join("tr/config.json"))["method"]["windows"]["warm_start"], false);
+    ok(&fluidnerf(d, &["reconstruct", "--config", "tr/config.json", "-o", "tr2", "--no-warm-start", "false", "-q"]));
+    assert_eq!(json(&d.join("tr2/config.json"))["method"]["windows"]["warm_start"], true);
+}

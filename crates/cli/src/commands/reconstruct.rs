@@ -176,9 +176,9 @@ pub struct GainArgs {
     #[arg(long, value_name = "MODE", value_parser = ["auto", "none", "balance", "fit"])]
     pub gains: Option<String>,
     /// With --gains fit (or auto, where it fits): also fit an offset per camera (a background
-    /// level left in the images).
-    #[arg(long)]
-    pub gain_offset: bool,
+    /// level left in the images); `--gain-offset false` turns off a configuration's offset.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub gain_offset: Option<bool>,
     /// With --gains fit (or auto, where it fits): iterations between gain refits [default: 25
     /// neural, 5 voxel methods].
     #[arg(long, value_name = "N")]
@@ -310,8 +310,9 @@ pub struct ClassicalArgs {
     pub ray_step: Option<f64>,
     /// Hold voxels at zero whose centre projects onto a dark pixel in any view (visual hull).
     /// With --method tv, lower --tv-weight too: the TV steps then move only the hull's voxels.
-    #[arg(long)]
-    pub visual_hull: bool,
+    /// `--visual-hull false` turns off a configuration's hull.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub visual_hull: Option<bool>,
     /// Dark threshold of --visual-hull, as a fraction of each image's maximum [default: 0.02].
     /// A pixel also counts as dark up to the image's background plus --hull-noise-sigmas deviations
     /// of its noise, when that is higher.
@@ -420,9 +421,10 @@ pub struct TemporalArgs {
     /// preset's].
     #[arg(long)]
     pub overlap: Option<usize>,
-    /// Train every window from scratch instead of from the previous window's weights.
-    #[arg(long)]
-    pub no_warm_start: bool,
+    /// Train every window from scratch instead of from the previous window's weights;
+    /// `--no-warm-start false` warm-starts a configuration's windows that did not.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
+    pub no_warm_start: Option<bool>,
     /// Frame times whose images are NOT trained on (comma separated, the scene's time unit);
     /// volumes and metrics are still produced there. A time whose every frame the scene holds
     /// out (`"holdout": true`) is treated as one of them, with a warning.
@@ -457,7 +459,7 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
             ("--projector", c.projector.is_some()),
             ("--splat-subdivisions", c.splat_subdivisions.is_some()),
             ("--ray-step", c.ray_step.is_some()),
-            ("--visual-hull", c.visual_hull),
+            ("--visual-hull", c.visual_hull.is_some()),
             ("--hull-threshold", c.hull_threshold.is_some()),
             ("--hull-noise-sigmas", c.hull_noise_sigmas.is_some()),
             ("--hull-dilation", c.hull_dilation.is_some()),
@@ -502,7 +504,7 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
         wrong.extend(given(&[
             ("--window", t.window.is_some()),
             ("--overlap", t.overlap.is_some()),
-            ("--no-warm-start", t.no_warm_start),
+            ("--no-warm-start", t.no_warm_start.is_some()),
             ("--holdout-times", t.holdout_times.is_some()),
             ("--time-step", t.time_step.is_some()),
             ("--time-origin", t.time_origin.is_some()),
@@ -690,8 +692,8 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
             cfg.gains = fluidnerf_pipeline::GainConfig { mode: cfg.gains.mode, ..Default::default() };
         }
     }
-    if g.gain_offset {
-        cfg.gains.offset = true;
+    if let Some(v) = g.gain_offset {
+        cfg.gains.offset = v;
     }
     if let Some(v) = g.gain_every {
         cfg.gains.every = Some(v);
@@ -716,7 +718,7 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     let fit_only = given(&[
         ("--gain-every", g.gain_every.is_some()),
         ("--gain-rounds", g.gain_rounds.is_some()),
-        ("--gain-offset", g.gain_offset),
+        ("--gain-offset", g.gain_offset == Some(true)),
     ]);
     if !fit_only.is_empty() && !cfg.gains.may_fit() {
         let (verb, them) = if fit_only.len() == 1 { ("applies", "it") } else { ("apply", "them") };
@@ -901,8 +903,8 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         if let Some(s) = c.ray_step {
             spec.projector.ray_step = s;
         }
-        if c.visual_hull {
-            spec.projector.visual_hull = true;
+        if let Some(v) = c.visual_hull {
+            spec.projector.visual_hull = v;
         }
         if let Some(t) = c.hull_threshold {
             spec.projector.hull_threshold = t;
@@ -993,8 +995,8 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         if let Some(o) = t.overlap {
             spec.windows.overlap = o;
         }
-        if t.no_warm_start {
-            spec.windows.warm_start = false;
+        if let Some(v) = t.no_warm_start {
+            spec.windows.warm_start = !v;
         }
         if let Some(h) = &t.holdout_times {
             spec.holdout_times = h.clone();
