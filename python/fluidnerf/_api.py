@@ -175,6 +175,7 @@ __all__ = [
     "read_colmap",
     "read_davis",
     "read_metashape",
+    "read_projection",
     "read_opencv",
     "read_transforms",
     "read_video",
@@ -359,6 +360,45 @@ def read_metashape(path: PathLike, skip_unaligned: bool = False) -> list[Camera]
     if not isinstance(skip_unaligned, (bool, np.bool_)):
         raise TypeError(f"skip_unaligned: expected True or False, got {skip_unaligned!r}")
     return _cameras(_ext.read_metashape(_path(path, "path"), bool(skip_unaligned)))
+
+
+def _size(value: Any, name: str) -> tuple[int, int]:
+    """An image size ``(width, height)`` of positive integers; anything else is refused
+    naming ``name``."""
+    if (
+        not isinstance(value, (tuple, list))
+        or len(value) != 2
+        or not all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in value)
+        or not all(0 < int(v) < 2**31 for v in value)
+    ):
+        raise FluidNerfError(
+            f"{name}: expected an image size (width, height) of positive integers, got {value!r}"
+        )
+    return int(value[0]), int(value[1])
+
+
+def read_projection(
+    path: PathLike,
+    image_size: tuple[int, int] | dict[str, tuple[int, int]],
+    bottom_left_origin: bool = False,
+) -> list[Camera]:
+    """The cameras of 3 × 4 projection matrices or 11 DLT coefficients in text files (one
+    camera's matrix, or one camera per column), as ``fluidnerf import --projection`` reads
+    them: each matrix split into the pinhole's ``K`` and pose, without distortion. A matrix
+    holds no image size: ``image_size`` gives it, ``(width, height)`` for every camera or a dict
+    by camera name. ``bottom_left_origin``: the matrices count v up from the image's bottom
+    edge (DLTdv, Easy-WAND), and each v is taken as the height − v."""
+    if not isinstance(bottom_left_origin, (bool, np.bool_)):
+        raise TypeError(f"bottom_left_origin: expected True or False, got {bottom_left_origin!r}")
+    if isinstance(image_size, dict):
+        if not all(isinstance(k, str) for k in image_size):
+            raise TypeError("image_size: a dict's keys are camera names (strings)")
+        sizes = {k: _size(v, f"image_size[{k!r}]") for k, v in image_size.items()}
+        size = None
+    else:
+        sizes, size = {}, _size(image_size, "image_size")
+    raw = _ext.read_projection(_path(path, "path"), size, sizes, bool(bottom_left_origin))
+    return _cameras(raw)
 
 
 def read_video(

@@ -772,3 +772,49 @@ def test_units_that_are_no_string_are_refused_naming_the_argument():
     for units in (5, None, b"mm"):
         with pytest.raises(TypeError, match=rf"^units: expected a string, got {type(units).__name__} "):
             fluidnerf.scene_from_arrays(K, poses, images, aabb, units=units)
+
+
+def _rotation(axis, angle):
+    """Rodrigues' formula, written out here independently of the library."""
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
+
+
+def test_projection_matrices_give_back_their_cameras(tmp_path):
+    K = np.array([[812.5, 1.25, 330.75], [0, 790.25, 236.5], [0, 0, 1]])
+    R, t = _rotation([0.3, -1, 0.2], 2.1), np.array([0.5, -0.25, 700.0])
+    P = K @ np.hstack([R, t[:, None]])
+    np.savetxt(tmp_path / "left.txt", -2.5 * P)  # any scale and sign
+    (cam,) = fluidnerf.read_projection(tmp_path / "left.txt", (640, 480))
+    assert cam.name == "left" and cam.size == (640, 480) and all(d == 0 for d in cam.distortion)
+    np.testing.assert_allclose(cam.K, K, rtol=1e-10)
+    camera_from_world = np.linalg.inv(cam.world_from_camera)
+    np.testing.assert_allclose(camera_from_world[:3, :3], R, atol=1e-12)
+    np.testing.assert_allclose(camera_from_world[:3, 3], t, rtol=1e-10)
+    # Points project where the matrix puts them.
+    X = np.array([[0, 0, 0, 1], [30, -20, 50, 1], [-45, 10, -60, 1.0]]).T
+    uv = (P @ X)[:2] / (P @ X)[2]
+    xc = camera_from_world[:3] @ X
+    np.testing.assert_allclose((cam.K @ xc)[:2] / xc[2], uv, atol=1e-9)
+
+    # DLT coefficients of two cameras, one per column, v counted up from the bottom.
+    R2 = _rotation([1, 0.1, 0], -0.4)
+    P2 = K @ np.hstack([R2, np.array([[-12.0], [3.0], [250.0]])])
+    flip = np.array([[1, 0, 0], [0, -1, 480], [0, 0, 1.0]])
+    cols = [(flip @ p).ravel()[:11] / (flip @ p)[2, 3] for p in (P, P2)]
+    np.savetxt(tmp_path / "rig_dltCoefs.csv", np.array(cols).T, delimiter=",", header="a,b", comments="")
+    cams = fluidnerf.read_projection(tmp_path / "rig_dltCoefs.csv", {"a": (640, 480), "b": (640, 480)}, True)
+    assert [c.name for c in cams] == ["a", "b"]
+    np.testing.assert_allclose(cams[1].K, K, rtol=1e-9)
+
+    with pytest.raises(fluidnerf.FluidNerfError, match="camera `b`: a projection matrix holds no image size"):
+        fluidnerf.read_projection(tmp_path / "rig_dltCoefs.csv", {"a": (640, 480)})
+    with pytest.raises(fluidnerf.FluidNerfError, match="names camera `c`, which .* does not hold"):
+        fluidnerf.read_projection(tmp_path / "rig_dltCoefs.csv", {"a": (1, 1), "b": (1, 1), "c": (1, 1)})
+    for bad in [(640,), (0, 480), (640.0, 480), "640x480", (True, 480)]:
+        with pytest.raises(fluidnerf.FluidNerfError, match="image_size: expected an image size"):
+            fluidnerf.read_projection(tmp_path / "left.txt", bad)
+    (tmp_path / "singular.txt").write_text("1 2 3 4\n2 4 6 8\n0 0 1 1\n")
+    with pytest.raises(fluidnerf.FluidNerfError, match="singular.txt: camera `singular`: .*singular"):
+        fluidnerf.read_projection(tmp_path / "singular.txt", (64, 64))

@@ -195,6 +195,7 @@ fn _fluidnerf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::read_opencv, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_colmap, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_metashape, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::read_projection, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_video, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_davis, m)?)?;
     m.add_function(wrap_pyfunction!(run::default_config, m)?)?;

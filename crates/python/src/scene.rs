@@ -600,6 +600,45 @@ pub fn read_colmap(py: Python<'_>, folder: PathBuf) -> PyResult<Vec<NamedCamera<
     named_cameras(py, cams)
 }
 
+/// The cameras of projection matrices or DLT coefficients (`fluidnerf_io::calib::read_projection`),
+/// each for the image size `sizes` gives it by name, else `size`; with `bottom_left_origin`,
+/// v counted up from the bottom is turned round first.
+#[pyfunction]
+#[pyo3(signature = (path, size, sizes, bottom_left_origin))]
+pub fn read_projection(
+    py: Python<'_>,
+    path: PathBuf,
+    size: Option<(u32, u32)>,
+    sizes: std::collections::BTreeMap<String, (u32, u32)>,
+    bottom_left_origin: bool,
+) -> PyResult<Vec<NamedCamera<'_>>> {
+    let read = guard(|| fluidnerf_io::calib::read_projection(&path).map_err(|e| err(e.to_string())))?;
+    if let Some(name) = sizes.keys().find(|k| !read.iter().any(|c| &c.name == *k)) {
+        let names: Vec<&str> = read.iter().map(|c| c.name.as_str()).collect();
+        return Err(err(format!(
+            "image_size names camera `{name}`, which {} does not hold (its cameras: {})",
+            path.display(),
+            names.join(", ")
+        )));
+    }
+    let mut cameras = Vec::with_capacity(read.len());
+    for p in &read {
+        let Some((width, height)) = sizes.get(&p.name).copied().or(size) else {
+            return Err(err(format!(
+                "{}: camera `{}`: a projection matrix holds no image size; give image_size=(width, height), or a \
+                 dict with an entry for every camera",
+                p.file.display(),
+                p.name
+            )));
+        };
+        let matrix = if bottom_left_origin { fluidnerf_io::calib::flip_v(p.matrix, height) } else { p.matrix };
+        let cam = fluidnerf_io::calib::camera_from_projection(matrix, width, height)
+            .map_err(|why| err(format!("{}: camera `{}`: {why}", p.file.display(), p.name)))?;
+        cameras.push((p.name.clone(), cam));
+    }
+    named_cameras(py, cameras)
+}
+
 /// A DaVis file for Python: frames `(n, height, width)`, each frame's camera and exposure
 /// label (`"1A"`, or None), and its attributes in file order.
 type DecodedDavis<'py> = (Bound<'py, PyArray3<f32>>, Vec<Option<String>>, Vec<(String, String)>);
