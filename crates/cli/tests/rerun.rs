@@ -272,3 +272,32 @@ fn a_switch_a_config_turned_on_can_be_turned_off() {
     ok(&fluidnerf(d, &["reconstruct", "--config", "tr/config.json", "-o", "tr2", "--no-warm-start", "false", "-q"]));
     assert_eq!(json(&d.join("tr2/config.json"))["method"]["windows"]["warm_start"], true);
 }
+
+/// A start names a run to start from or a voxel method to run first, never both: `--start-from`
+/// over a configuration that ran a voxel method first replaces it, and a configuration that
+/// names both is refused by the key, not run with one of them ignored.
+#[test]
+fn a_start_from_a_run_replaces_a_configured_start_method() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let tiny = ["--resolution", "8", "--max-iterations", "2", "--rays-per-image", "16", "-q"];
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "s", "--method", "sart", "--resolution", "8", "-q"]));
+    let hybrid = ["reconstruct", "scene", "-o", "h", "--method", "hybrid", "--start-method", "sart"];
+    ok(&fluidnerf(d, &[&hybrid[..], &tiny].concat()));
+    assert_eq!(json(&d.join("h/config.json"))["method"]["start"]["method"], "sart");
+    ok(&fluidnerf(
+        d,
+        &[&["reconstruct", "--config", "h/config.json", "-o", "h2", "--start-from", "s"][..], &tiny].concat(),
+    ));
+    let start = &json(&d.join("h2/config.json"))["method"]["start"];
+    assert_eq!((&start["method"], start["run"].as_str().is_some()), (&"auto".into(), true), "{start}");
+
+    let mut both = json(&d.join("h2/config.json"));
+    both["method"]["start"]["method"] = "sart".into();
+    std::fs::write(d.join("both.json"), serde_json::to_string(&both).expect("json")).expect("writes");
+    let out = fluidnerf(d, &["reconstruct", "--config", "both.json", "-o", "h3"]);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("method.start.method") && e.contains("give one"), "{e}");
+    assert!(!d.join("h3").exists(), "nothing written");
+}

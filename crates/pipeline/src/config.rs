@@ -315,6 +315,17 @@ impl StartSpec {
             ),
             other => PipelineError::invalid("method.start.fit", other.to_string()),
         })?;
+        if let (Some(run), StartMethod::Method(m)) = (&self.run, self.method) {
+            return Err(PipelineError::invalid(
+                "method.start.method",
+                format!(
+                    "is {m}, a voxel method to run first, but `method.start.run` names the run {} to start from, \
+                     which would be the start and {m} never run: give one (set `method` to \"auto\", or `run` to \
+                     null)",
+                    run.display()
+                ),
+            ));
+        }
         if let StartMethod::Method(m) = self.method {
             if m.family() != Family::Classical {
                 return Err(PipelineError::invalid(

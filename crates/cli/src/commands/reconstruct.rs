@@ -975,6 +975,8 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
     if let (MethodConfig::Neural(_, spec), Some(run)) = (&mut *method, &n.start_from) {
         let start = spec.start.get_or_insert_with(StartSpec::default);
         start.run = Some(run.clone());
+        // The run given is the start: a configuration's voxel method to run first goes with it.
+        start.method = fluidnerf_pipeline::StartMethod::Auto;
     }
     if n.start_from.is_some() && n.start_method.is_some() {
         bail!("--start-from and --start-method: give one (a run to start from, or a voxel method to run first)");
