@@ -1253,6 +1253,11 @@ fn colmap_camera(model: &str, width: u32, height: u32, p: &[f64]) -> Result<(Int
     if p.len() != expected {
         return Err(format!("{model} takes {expected} parameters, got {}", p.len()));
     }
+    // Checked for every model here: a radial term is copied as it is, and a NaN one would
+    // only show later as an undistortion that does not converge, blamed on the scene.
+    if let Some((i, v)) = p.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(format!("{model} parameter {} of {expected} is {}; parameters must be finite", i + 1, num(*v)));
+    }
     let (fx, fy, cx, cy, rest) = match model {
         "SIMPLE_PINHOLE" | "SIMPLE_RADIAL" | "RADIAL" => (p[0], p[0], p[1], p[2], &p[3..]),
         _ => (p[0], p[1], p[2], p[3], &p[4..]),

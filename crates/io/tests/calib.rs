@@ -325,6 +325,25 @@ fn colmap_errors_name_the_file_and_line() {
     assert!(err.contains("images.txt: line") && err.contains("= (1e300, 0, 0, 0) is not a unit quaternion"), "{err}");
 }
 
+/// A radial term of `SIMPLE_RADIAL` or `RADIAL` was copied as read, so a `nan` or `inf` in
+/// `cameras.txt` passed and showed only as an undistortion that did not converge, blamed on
+/// the scene being imported rather than on the model's line.
+#[test]
+fn colmap_parameters_that_are_not_finite_are_refused_naming_the_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::copy(fixtures().join("colmap/images.txt"), dir.path().join("images.txt")).expect("copy");
+    for (camera, says) in [
+        ("SIMPLE_RADIAL 64 48 50 32 24 nan", "SIMPLE_RADIAL parameter 4 of 4 is NaN"),
+        ("RADIAL 64 48 50 32 24 0.1 inf", "RADIAL parameter 5 of 5 is inf"),
+        ("PINHOLE 64 48 50 -inf 32 24", "PINHOLE parameter 2 of 4 is -inf"),
+    ] {
+        let text = format!("1 PINHOLE 64 48 50 50 32 24\n2 {camera}\n");
+        std::fs::write(dir.path().join("cameras.txt"), text).expect("write");
+        let err = read_colmap(dir.path()).expect_err(camera).to_string();
+        assert!(err.contains("cameras.txt: line 2: ") && err.contains(says), "{camera}: {err}");
+    }
+}
+
 /// COLMAP writes an image name with spaces as it is: its first word alone was looked up as the
 /// image (`side` finds `side.png` by its stem), another image than the pose's, without a word.
 #[test]
