@@ -1432,6 +1432,50 @@ fn a_davis_import_again_removes_the_earlier_split_images_it_does_not_use() {
     assert!(out.join("frames/cam1/notes.txt").is_file());
 }
 
+/// A recording whose frames are not of the size its camera is calibrated for is refused as
+/// soon as its first frame is decoded, naming the camera and the file the user gave: the
+/// check of the scene's images came only after every frame was written, and named a decoded
+/// frame (`frames/cam0/000000.tif`) that the failed import had removed again.
+#[test]
+fn recordings_of_another_size_than_the_calibration_are_refused_naming_the_recording() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let wider: Vec<(String, Camera)> = rig()
+        .into_iter()
+        .enumerate()
+        .map(|(i, (_, mut c))| {
+            c.intrinsics.width = 40;
+            (format!("cam{}", i + 1), c)
+        })
+        .collect();
+    let calib = dir.path().join("wider.yml");
+    write_opencv(&calib, &wider).expect("writes calibration");
+
+    let videos = dir.path().join("videos");
+    std::fs::create_dir_all(&videos).expect("mkdir");
+    for n in ["cam1", "cam2", "cam3"] {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let o = import_recordings(&calib, &videos, &dir.path().join("from_videos"), &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("camera cam1") && err.contains("cam1.avi: frame 0 is 32x24 pixels") && err.contains("for 40x24"),
+        "{err}"
+    );
+    assert!(!err.contains("000000.tif"), "names a decoded frame, not the video: {err}");
+
+    let rec = dir.path().join("rec");
+    davis_file(&rec.join("B00001.im7"), &[100, 200, 300], &["1", "2", "3"]);
+    let o = import_recordings(&calib, &rec, &dir.path().join("from_davis"), &[]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("camera cam1") && err.contains("B00001.im7: its frame of DaVis camera 1 is 32x24 pixels"),
+        "{err}"
+    );
+    assert!(!err.contains("B00001.png"), "names a split image, not the DaVis file: {err}");
+}
+
 /// `import --metashape FILE --images IMAGES --aabb … EXTRA… -o OUT`.
 fn import_metashape(file: &Path, images: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["import", "--metashape", s(file), "--images", s(images), "--aabb", "-10,-10,-10,10,10,10"];

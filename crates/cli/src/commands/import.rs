@@ -253,6 +253,17 @@ fn parse_frame_range(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
     Ok((a, b))
 }
 
+/// Why a picture of `width` × `height` pixels decoded from a recording (a video's frame, a
+/// DaVis file's frame of a camera) cannot be `camera`'s image, when it cannot. Checked as each
+/// is decoded, before it is written: the check of the scene's images would come after the
+/// whole recording was decoded and name a decoded file that the failed import removes, not
+/// the recording the user gave.
+fn decoded_size_problem(camera: &Camera, width: usize, height: usize) -> Option<String> {
+    let (w, h) = (camera.width(), camera.height());
+    ((width, height) != (w, h))
+        .then(|| format!("{width}x{height} pixels, but the camera's calibration is for {w}x{h} (w x h)"))
+}
+
 /// Replaces every frame whose file is a video by its decoded frames, each written as a float
 /// TIFF (linearised, range-mapped values) into `out/frames/<camera>/` as it is decoded, with
 /// its time. All videos must give their frames at the same times (a synchronised recording);
@@ -325,6 +336,12 @@ fn expand_videos(
         let mut times = Vec::new();
         let bar = crate::progress::counter(&name, "frames");
         let info = fluidnerf_io::video::read_video_frames(&f.file_path, opts, |frame| {
+            if let Some(problem) = decoded_size_problem(&f.camera, frame.image.width, frame.image.height) {
+                return Err(fluidnerf_io::IoError::invalid(
+                    &f.file_path,
+                    format!("frame {} is {problem}", frame.index),
+                ));
+            }
             let path = dir.join(format!("{:06}.tif", times.len()));
             if path.exists() && !force {
                 return Err(fluidnerf_io::IoError::invalid(

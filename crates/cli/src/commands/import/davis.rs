@@ -243,6 +243,9 @@ pub(super) fn split(
             let Some(slot) = slot else { continue };
             let frame = &mut frames[n * per_file + slot];
             let camera = frame.camera_name.clone().unwrap_or_default();
+            if let Some(problem) = super::decoded_size_problem(&frame.camera, image.width, image.height) {
+                bail!("camera {camera}: {}: its frame of DaVis camera {label} is {problem}", file.display());
+            }
             let dir = out.join("frames").join(&camera);
             created.dir_all(&dir)?;
             let exposure = label.exposure.map(String::from).unwrap_or_default();
