@@ -449,7 +449,21 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
     }
     // Grey (with extra samples, which are dropped) and RGB are read; the samples of other
     // colour models (CMYK, YCbCr, CIE L*a*b*) would be taken for RGB and give garbage.
-    let grey = match dec.colortype().map_err(bad)? {
+    let colortype = dec.colortype().map_err(bad)?;
+    // Samples of other widths come back packed (1, 2, 4 bits: several pixels to a byte, read
+    // as too few samples) or are refused by the decoder with its own words (10, 12, 14 bits).
+    let bits = colortype.bit_depth();
+    if ![8, 16, 32, 64].contains(&bits) {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "a TIFF of {bits} bit(s) per sample, which fluidnerf does not read (8, 16 or 32-bit integers, 32 or \
+                 64-bit floats): write the image, or the mask, with 8 or 16 bits per sample (a 10 to 14-bit camera's \
+                 counts go into 16-bit samples as they are)"
+            ),
+        ));
+    }
+    let grey = match colortype {
         ColorType::Gray(_) | ColorType::GrayA(_) | ColorType::Multiband { .. } => true,
         ColorType::RGB(_) | ColorType::RGBA(_) => false,
         other => {
@@ -855,6 +869,29 @@ mod tests {
         let ycbcr = tiff_by_hand(2, 1, 3, 6, &[128, 128, 128, 200, 128, 128]);
         let err = decode_image(p, &ycbcr, Linearisation::Linear).expect_err("YCbCr").to_string();
         assert!(err.contains("model.tif") && err.contains("YCbCr colour model"), "{err}");
+    }
+
+    /// Samples of 1, 2 or 4 bits came back packed and were refused as a TIFF holding "2 samples"
+    /// for its 8 pixels; 12-bit ones with the decoder's "color type Gray(12) is unsupported".
+    /// Both are now refused saying how many bits the TIFF has and what is read.
+    #[test]
+    fn tiff_samples_of_other_widths_are_refused_naming_the_bits() {
+        let p = Path::new("bilevel.tif");
+        for (bits, photometric, data) in [
+            (1, 1, vec![0b1010_0000, 0b0101_0000]),
+            (1, 0, vec![0b1010_0000, 0b0101_0000]),
+            (4, 1, vec![0x0f, 0xf0, 0x12, 0x34]),
+        ] {
+            let err = decode_image(p, &tiff_by_hand_as(4, 2, 1, (bits, 1), photometric, &data), Linearisation::Linear)
+                .expect_err("packed samples")
+                .to_string();
+            assert!(err.contains("bilevel.tif") && err.contains(&format!("{bits} bit(s) per sample")), "{err}");
+        }
+        let twelve = [0x00, 0x01, 0x00, 0xff, 0xf8, 0x00, 0x12, 0x34, 0x56, 0x78, 0x9a, 0xbc];
+        let err = decode_image(p, &tiff_by_hand_as(4, 2, 1, (12, 1), 1, &twelve), Linearisation::Linear)
+            .expect_err("12-bit samples")
+            .to_string();
+        assert!(err.contains("12 bit(s) per sample") && err.contains("16-bit samples"), "{err}");
     }
 
     /// WhiteIsZero integers read as the standard's negative (`2^bits − 1 − stored`); floats and
