@@ -1244,6 +1244,34 @@ fn phantom_cine_recordings_import_as_videos() {
     }
 }
 
+/// A recording with pixels at its sensor's full scale is warned about at import, naming the
+/// camera and the file, and the count is kept in `import.json`: its frames become float
+/// images, which the scene's own check of saturated pixels cannot judge.
+#[test]
+fn saturated_pixels_of_a_recording_are_warned_about() {
+    let (dir, calib, videos) = video_rig();
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_16bit.cine");
+    for n in ["cam0", "cam1", "cam2"] {
+        std::fs::copy(&fixture, videos.join(format!("{n}.cine"))).expect("copies the fixture");
+    }
+    // cam1's first image's first stored pixel at 4095, the largest count of 12 bits.
+    let mut bytes = std::fs::read(&fixture).expect("reads");
+    let first = u64::from_le_bytes(bytes[84 + 12432..84 + 12432 + 8].try_into().expect("8 bytes")) as usize;
+    let annotation = u32::from_le_bytes(bytes[first..first + 4].try_into().expect("4 bytes")) as usize;
+    bytes[first + annotation..first + annotation + 2].copy_from_slice(&4095u16.to_le_bytes());
+    std::fs::write(videos.join("cam1.cine"), bytes).expect("writes");
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("camera cam1") && err.contains("cam1.cine: 1 pixel(s)") && err.contains("saturated"), "{err}");
+    assert!(!err.contains("camera cam0:") && !err.contains("camera cam2:"), "{err}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("import.json")).expect("import.json")).expect("JSON");
+    let counts: Vec<u64> = (0..3).map(|i| record["videos"][i]["saturated_pixels"].as_u64().expect("a count")).collect();
+    assert_eq!(counts, [0, 1, 0]);
+}
+
 /// Photron MRAW recordings with their headers beside them import as videos; the headers are
 /// not taken for uncalibrated entries.
 #[test]

@@ -193,6 +193,14 @@ pub(crate) fn read_cine(
     if black >= full_scale {
         return Err(bad(format!("its black level {black} is at or above the {stored_bits}-bit full scale")));
     }
+    // The sensor's largest count: that of its significant bits (12 in 16-bit frames) when the
+    // setup states a number of them that fits the frames and its black level, else the frames'.
+    let sensor_max = Some(real_bpp)
+        .filter(|b| (1..=u32::from(stored_bits)).contains(b))
+        .map(|b| (1u32 << b) - 1)
+        .filter(|&m| m > black)
+        .unwrap_or(full_scale);
+    let saturated_at = (sensor_max - black) as f32;
     crate::video::warn_unused_by_raw(path, opts, "a cine file");
     let offsets_at = u64::from(u32_at(&header, OFF_IMAGE_OFFSETS));
     let offsets: Vec<u64> = read_at(offsets_at, 8 * count, "image offset table")?
@@ -274,7 +282,7 @@ pub(crate) fn read_cine(
             }
         }
         let time_s = (f64::from(first_image_no) + i as f64) / f64::from(rate) + opts.time_offset_s;
-        on_frame(VideoFrame { index: i, time_s, image })?;
+        on_frame(VideoFrame { index: i, time_s, image, full_scale: saturated_at })?;
         kept += 1;
     }
     log::debug!(
@@ -293,5 +301,6 @@ pub(crate) fn read_cine(
         range: VideoRange::Full,
         range_source: RangeSource::Raw,
         clipped_pixels: clipped,
+        saturated_pixels: 0,
     })
 }

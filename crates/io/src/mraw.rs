@@ -40,6 +40,9 @@ struct Header {
     /// The first frame's number counted from the trigger (negative before it); 0 unstated.
     start_frame: i64,
     bits: u32,
+    /// The sensor's significant bits within each sample, and whether they sit at its high side
+    /// (`EffectiveBit Depth`, `EffectiveBit Side`); None when unstated.
+    effective_bits: Option<(u32, bool)>,
     /// Whether the camera recorded grey frames.
     mono: bool,
     file_format: String,
@@ -115,6 +118,16 @@ fn read_header(path: &Path) -> Result<Header, IoError> {
             .filter(|n| n.unsigned_abs() < 1 << 53)
             .ok_or_else(|| IoError::invalid(path, format!("`{start_key}` is `{v}`, not a frame number")))?,
     };
+    let (depth_key, side_key) = if xml {
+        ("imageDataInfo/effectiveBit/depth", "imageDataInfo/effectiveBit/side")
+    } else {
+        ("EffectiveBit Depth", "EffectiveBit Side")
+    };
+    let stated = |key: &str| if xml { xml_field(path, &text, key) } else { Ok(cih_field(&text, key)) };
+    // Only for counting saturated pixels: a depth that does not parse is left unused.
+    let effective_bits = stated(depth_key)?
+        .and_then(|v| v.trim().parse::<u32>().ok())
+        .map(|d| (d, stated(side_key).ok().flatten().is_some_and(|s| s.trim().eq_ignore_ascii_case("higher"))));
     let header = Header {
         width: count(keys[0])?,
         height: count(keys[1])?,
@@ -122,6 +135,7 @@ fn read_header(path: &Path) -> Result<Header, IoError> {
         rate: number(keys[3])?,
         start_frame,
         bits: count(keys[4])? as u32,
+        effective_bits,
         // Not every header states it; one that does not is taken for grey.
         mono: colour_type.is_none_or(|t| t.trim().to_ascii_lowercase().starts_with("mono")),
         file_format: field(keys[6])?,
@@ -230,6 +244,13 @@ pub(crate) fn read_mraw(
             header_file.display()
         );
     }
+    // The sensor's largest count as stored: of its effective bits when the header states a
+    // number of them that fits the samples (shifted up when they sit at the high side).
+    let ones = |n: u32| (1u32 << n) - 1;
+    let saturated_at = match header.effective_bits {
+        Some((d, high)) if (1..=bits).contains(&d) => (ones(d) << if high { bits - d } else { 0 }) as f32,
+        _ => ones(bits) as f32,
+    };
     let mut file = BufReader::new(file);
     let mut data = vec![0u8; frame_bytes];
     let mut kept = 0;
@@ -259,7 +280,7 @@ pub(crate) fn read_mraw(
             }
         }
         let time_s = (header.start_frame as f64 + i as f64) / header.rate + opts.time_offset_s;
-        on_frame(VideoFrame { index: i, time_s, image })?;
+        on_frame(VideoFrame { index: i, time_s, image, full_scale: saturated_at })?;
         kept += 1;
     }
     Ok(VideoInfo {
@@ -272,6 +293,7 @@ pub(crate) fn read_mraw(
         range: VideoRange::Full,
         range_source: RangeSource::Raw,
         clipped_pixels: 0,
+        saturated_pixels: 0,
     })
 }
 

@@ -189,6 +189,11 @@ pub struct VideoFrame {
     /// Seconds, including [`VideoOptions::time_offset_s`].
     pub time_s: f64,
     pub image: Image,
+    /// A pixel's value when the recording was at the top of its scale: the 8-bit code 255 (235
+    /// in limited range) after the range mapping and linearisation, or a raw recording's largest
+    /// count less its black level. Pixels at or above it are saturated, counted by
+    /// [`read_video_frames`] into [`VideoInfo::saturated_pixels`].
+    pub full_scale: f32,
 }
 
 /// What reading a video did.
@@ -208,6 +213,10 @@ pub struct VideoInfo {
     pub range_source: RangeSource,
     /// Pixels clipped by the limited-range mapping, over the kept frames.
     pub clipped_pixels: u64,
+    /// Pixels of the kept frames at their full scale ([`VideoFrame::full_scale`]): saturated,
+    /// they recorded less light than arrived. Counted by [`read_video_frames`] for every
+    /// decoder (which leave it 0).
+    pub saturated_pixels: u64,
 }
 
 /// Decoded frames.
@@ -246,6 +255,8 @@ pub fn read_video_frames(
     // Two kept frames at one time would be one camera twice at one instant: refused here,
     // naming the frames, where a large offset has swamped the frame interval.
     let mut last: Option<(usize, f64)> = None;
+    // Counted here for every decoder, on the frames kept, as the scene's images are counted.
+    let mut saturated = 0u64;
     let mut on_frame = |frame: VideoFrame| {
         match last {
             Some((index, time)) if index < frame.index && frame.time_s <= time => {
@@ -269,15 +280,17 @@ pub fn read_video_frames(
             }
             _ => last = Some((frame.index, frame.time_s)),
         }
+        saturated += frame.image.data.iter().filter(|&&v| v >= frame.full_scale).count() as u64;
         on_frame(frame)
     };
     crate::check_regular_file(path, "video file")?;
     // An MRAW has no header of its own to sniff: its extension says what it is.
-    let info = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mraw")) {
+    let mut info = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mraw")) {
         crate::mraw::read_mraw(path, opts, &mut on_frame)?
     } else {
         read_sniffed(path, opts, &mut on_frame)?
     };
+    info.saturated_pixels = saturated;
     if info.frames_kept == 0 {
         return Err(IoError::invalid(
             path,
@@ -412,6 +425,10 @@ impl Mapper {
     }
 }
 
+/// What the top of the 8-bit scale (the code 255 in full range, 235 in limited) becomes after
+/// [`Mapper::map`], whatever the linearisation: 255.
+const FULL_SCALE_8BIT: f32 = 255.0;
+
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {
     b.get(at..at + 4).map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
 }
@@ -545,7 +562,7 @@ fn read_mjpeg_avi(
             *o = mapper.map(f64::from(v));
         }
         let time_s = (f64::from(scan.start) + i as f64) * num / den + opts.time_offset_s;
-        on_frame(VideoFrame { index: i, time_s, image })?;
+        on_frame(VideoFrame { index: i, time_s, image, full_scale: FULL_SCALE_8BIT })?;
         kept += 1;
     }
     let (width, height) = size.unwrap_or((scan.width, scan.height));
@@ -560,6 +577,7 @@ fn read_mjpeg_avi(
         range,
         range_source,
         clipped_pixels: mapper.clipped,
+        saturated_pixels: 0,
     }))
 }
 
@@ -935,7 +953,7 @@ fn read_with_ffmpeg(
                 // bits by replicating the high bits, so 8-bit 235 arrives as 235 · 257).
                 *o = mapper.map(f64::from(u16::from_le_bytes([px[0], px[1]])) / 257.0);
             }
-            if let Err(e) = on_frame(VideoFrame { index: i, time_s, image }) {
+            if let Err(e) = on_frame(VideoFrame { index: i, time_s, image, full_scale: FULL_SCALE_8BIT }) {
                 break Err(e);
             }
             kept += 1;
@@ -977,6 +995,7 @@ fn read_with_ffmpeg(
         range,
         range_source,
         clipped_pixels: mapper.clipped,
+        saturated_pixels: 0,
     })
 }
 

@@ -104,6 +104,10 @@ fn mjpeg_avi_reads_without_ffmpeg() {
         })
         .sum();
     assert!(v.info.clipped_pixels >= above && above > 0, "clipped {} of at least {above}", v.info.clipped_pixels);
+    // Codes at or above 235, white in limited range, are saturated; in full range none reaches 255.
+    assert!(v.info.saturated_pixels >= above, "saturated {} of at least {above}", v.info.saturated_pixels);
+    let full = read_video(&fixture("ramp_mjpeg.avi"), &VideoOptions::default()).expect("reads");
+    assert_eq!(full.info.saturated_pixels, 0, "the ramp ends at 243 of 255");
 
     // sRGB linearisation applies to the decoded value.
     let opts = VideoOptions { end: Some(1), linearisation: Linearisation::Srgb, ..VideoOptions::default() };
@@ -463,6 +467,29 @@ mod cine {
         assert!(e.contains("image 0 holds 1000 bytes"), "{e}");
     }
 
+    /// A pixel at the sensor's largest count (4095 of its 12 significant bits, stored in 16) is
+    /// saturated and counted; one count below is not. Saturated frames of a recording were
+    /// written out as float images, whose check knows no full scale, without a word.
+    #[test]
+    fn counts_at_the_sensors_full_scale_are_counted_as_saturated() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let with_first_pixel = |v: u16| {
+            patched(dir.path(), |b| {
+                let first =
+                    u64::from_le_bytes(b[SETUP + 12432..SETUP + 12432 + 8].try_into().expect("8 bytes")) as usize;
+                let annotation = u32::from_le_bytes(b[first..first + 4].try_into().expect("4 bytes")) as usize;
+                b[first + annotation..first + annotation + 2].copy_from_slice(&v.to_le_bytes());
+            })
+        };
+        let video = read_video(&with_first_pixel(4095), &VideoOptions::default()).expect("reads");
+        assert_eq!(video.frames[0].get(0, 23), 4095.0 - 64.0, "the stored first row is the bottom");
+        assert_eq!(video.info.saturated_pixels, 1);
+        let video = read_video(&with_first_pixel(4094), &VideoOptions::default()).expect("reads");
+        assert_eq!(video.info.saturated_pixels, 0);
+        let video = read_video(&fixture("ramp_16bit.cine"), &VideoOptions::default()).expect("reads");
+        assert_eq!(video.info.saturated_pixels, 0);
+    }
+
     /// Pixels below the black level read as 0 and are counted.
     #[test]
     fn counts_below_the_black_level_are_clipped_and_counted() {
@@ -520,6 +547,27 @@ mod mraw {
         let video = read_video(&fixture("ramp_12bit.mraw"), &opts).expect("reads");
         assert_eq!(video.times, [0.001, 0.003]);
         assert_eq!(video.frames[1].get(5, 7), 64.0 + 10.0 * ramp(5, 7, 3));
+    }
+
+    /// A pixel at the largest count of the header's effective bits is saturated: 4095 of 12
+    /// bits at the low side of 16-bit samples, 65520 when they sit at the high side.
+    #[test]
+    fn counts_at_the_effective_full_scale_are_counted_as_saturated() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let header = std::fs::read_to_string(fixture("ramp_16bit.cih")).expect("reads");
+        let mraw = dir.path().join("rec.mraw");
+        let read = |first: u16, side: &str| {
+            let mut bytes = std::fs::read(fixture("ramp_16bit.mraw")).expect("reads");
+            bytes[..2].copy_from_slice(&first.to_le_bytes());
+            std::fs::write(&mraw, bytes).expect("writes");
+            let text = header.replace("EffectiveBit Side : Lower", &format!("EffectiveBit Side : {side}"));
+            std::fs::write(dir.path().join("rec.cih"), text).expect("writes");
+            read_video(&mraw, &VideoOptions::default()).expect("reads").info.saturated_pixels
+        };
+        assert_eq!(read(4095, "Lower"), 1);
+        assert_eq!(read(4094, "Lower"), 0);
+        assert_eq!(read(4095, "Higher"), 0);
+        assert_eq!(read(0xfff0, "Higher"), 1);
     }
 
     /// A copy of the 8-bit fixture in `dir` (`.mraw`, and the header `.cihx` with `edit`).

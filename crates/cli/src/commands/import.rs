@@ -371,6 +371,15 @@ fn expand_videos(
                 }
             );
         }
+        if info.saturated_pixels > 0 {
+            log::warn!(
+                "camera {name}: {}: {} pixel(s) of the frames kept at the recording's full scale (saturated): they \
+                 recorded less light than arrived, so the line-integral model does not hold there; mask them \
+                 (mask_path) or record with less exposure",
+                f.file_path.display(),
+                info.saturated_pixels
+            );
+        }
         let range = match info.range_source {
             fluidnerf_io::video::RangeSource::Option => format!("{} range, as --video-range says", info.range),
             fluidnerf_io::video::RangeSource::File => format!("{} range, as the file states", info.range),
