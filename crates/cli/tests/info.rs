@@ -413,6 +413,30 @@ fn cameras_inside_or_near_the_box() {
     assert_fails_with(&info(dir.path()), &["frame 1", "c1.png", "inside the reconstruction box"]);
 }
 
+/// Two cameras of one instant at one place (a calibration copied from one camera to another)
+/// are warned about; one camera at the same place at two instants is not.
+#[test]
+fn two_cameras_at_one_place_are_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = good_scene(dir.path());
+    scene.frames[1].camera = scene.frames[0].camera.clone();
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let (stdout, stderr) = text(&info(dir.path()));
+    assert!(!stdout.contains("one place") && !stderr.contains("one place"), "{stdout}\n{stderr}");
+    scene.frames[2].camera = scene.frames[0].camera.clone();
+    fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stdout.contains(
+            "warning: frame 0 (images/c0.png, camera cam0) and frame 2 (images/c2.png, camera cam1) stand at one place"
+        ) && stdout.contains("at time 0")
+            && stdout.contains("calibration is most likely the other's copied"),
+        "{stdout}"
+    );
+}
+
 #[test]
 fn truth_of_another_grid_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -1155,7 +1155,94 @@ pub fn load_scene(path: &Path) -> Result<Scene, IoError> {
             scene.units
         );
     }
+    for found in cameras_at_one_place(&scene) {
+        log::warn!("{}: {}", file.display(), describe_one_place(&scene, &found));
+    }
     Ok(scene)
+}
+
+/// How close (as a fraction of the box's diagonal) the centres of two cameras of one instant
+/// must be for [`cameras_at_one_place`] to report them.
+pub const ONE_PLACE_FRACTION: f64 = 1e-6;
+
+/// Two cameras found at one place by [`cameras_at_one_place`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OnePlace {
+    /// The first pair of frames `(j, i)`, `j < i`, of one instant whose cameras stand there.
+    pub frames: (usize, usize),
+    /// At how many instants the same two cameras do (1 for unnamed cameras).
+    pub instants: usize,
+}
+
+/// Cameras of one instant (one time, or both without one) that stand at one place: centres
+/// closer than [`ONE_PLACE_FRACTION`] of the box's diagonal. Two cameras cannot, so one
+/// camera's calibration was most likely copied to another, which then adds no view of its
+/// own. Frames of one named camera are never paired (it records one image per instant); each
+/// frame is paired with the first such frame of its instant, and the pairs of two named
+/// cameras are reported once, with the number of instants.
+pub fn cameras_at_one_place(scene: &Scene) -> Vec<OnePlace> {
+    let limit = ONE_PLACE_FRACTION * scene.aabb.size().length();
+    let mut instants: std::collections::BTreeMap<Option<u64>, Vec<usize>> = std::collections::BTreeMap::new();
+    for (i, f) in scene.frames.iter().enumerate() {
+        instants.entry(f.time.map(|t| (t + 0.0).to_bits())).or_default().push(i);
+    }
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    for frames in instants.values() {
+        for (k, &i) in frames.iter().enumerate() {
+            let (a, centre) = (&scene.frames[i], scene.frames[i].camera.centre());
+            let other = frames[..k].iter().copied().find(|&j| {
+                let b = &scene.frames[j];
+                let one_camera = a.camera_name.is_some() && a.camera_name == b.camera_name;
+                !one_camera && (b.camera.centre() - centre).length() <= limit
+            });
+            pairs.extend(other.map(|j| (j, i)));
+        }
+    }
+    pairs.sort_unstable();
+    let mut out: Vec<OnePlace> = Vec::new();
+    for (j, i) in pairs {
+        let names = |k: usize| scene.frames[k].camera_name.as_deref();
+        let same_cameras = |p: &OnePlace| {
+            let (pj, pi) = p.frames;
+            names(j).is_some() && names(i).is_some() && (names(pj), names(pi)) == (names(j), names(i))
+        };
+        match out.iter_mut().find(|p| same_cameras(p)) {
+            Some(p) => p.instants += 1,
+            None => out.push(OnePlace { frames: (j, i), instants: 1 }),
+        }
+    }
+    out
+}
+
+/// The warning for a finding of [`cameras_at_one_place`].
+pub fn describe_one_place(scene: &Scene, found: &OnePlace) -> String {
+    let (j, i) = found.frames;
+    let frame = |k: usize| {
+        let f = &scene.frames[k];
+        match &f.camera_name {
+            Some(c) => format!("frame {k} ({}, camera {c})", f.file_path.display()),
+            None => format!("frame {k} ({})", f.file_path.display()),
+        }
+    };
+    let (a, b) = (&scene.frames[j].camera, &scene.frames[i].camera);
+    let c = a.centre() + DVec3::ZERO;
+    let same_view = a.forward().dot(b.forward()) > 1.0 - 1e-9 && a.intrinsics == b.intrinsics;
+    let when = match (found.instants, scene.frames[i].time) {
+        (1, Some(t)) => format!(" at time {}", num(t)),
+        (1, None) => String::new(),
+        (n, _) => format!(" at {n} instants (the first two frames named)"),
+    };
+    format!(
+        "{} and {} stand at one place, ({:.3}, {:.3}, {:.3}) {}{when}{}: two cameras cannot, so one's \
+         calibration is most likely the other's copied, and it adds no view of its own",
+        frame(j),
+        frame(i),
+        c.x + 0.0,
+        c.y + 0.0,
+        c.z + 0.0,
+        scene.units,
+        if same_view { ", looking the same way through the same intrinsics" } else { "" },
+    )
 }
 
 /// How close (as a fraction of the box's diagonal) a camera centre may come to the box before
@@ -2281,6 +2368,46 @@ mod tests {
     }
     use super::*;
     use fluidnerf_core::glam::DVec2;
+
+    /// A camera's calibration copied to another camera of the same instant was accepted
+    /// without a word, the scene then holding one view fewer than its cameras. Reported once
+    /// per pair of cameras, however many instants they share; one camera at several instants,
+    /// and cameras apart, are not reported.
+    #[test]
+    fn cameras_of_one_instant_at_one_place_are_reported_once_per_pair() {
+        let mut scene = ring_scene(Path::new("."), 4, Distortion::default());
+        for f in &mut scene.frames {
+            f.time = None;
+        }
+        assert_eq!(cameras_at_one_place(&scene), []);
+        scene.frames[2].camera = scene.frames[1].camera.clone();
+        assert_eq!(cameras_at_one_place(&scene), [OnePlace { frames: (1, 2), instants: 1 }]);
+        let says = describe_one_place(&scene, &cameras_at_one_place(&scene)[0]);
+        assert!(
+            says.contains("frame 1 (images/c1.tif, camera cam1) and frame 2 (images/c2.tif, camera cam2)")
+                && says.contains("looking the same way"),
+            "{says}"
+        );
+        // Unnamed, the same two frames.
+        scene.frames.iter_mut().for_each(|f| f.camera_name = None);
+        assert_eq!(cameras_at_one_place(&scene), [OnePlace { frames: (1, 2), instants: 1 }]);
+
+        // Two instants: cam1 and cam2 at one place at both (one report); each camera at its own
+        // place at both instants is not reported.
+        let mut timed = ring_scene(Path::new("."), 3, Distortion::default());
+        timed.frames[2].camera = timed.frames[1].camera.clone();
+        let mut later = timed.frames.clone();
+        for f in &mut later {
+            f.time = Some(1.0);
+        }
+        for f in &mut timed.frames {
+            f.time = Some(0.0);
+        }
+        timed.frames.extend(later);
+        assert_eq!(cameras_at_one_place(&timed), [OnePlace { frames: (1, 2), instants: 2 }]);
+        let says = describe_one_place(&timed, &cameras_at_one_place(&timed)[0]);
+        assert!(says.contains("at 2 instants"), "{says}");
+    }
 
     fn ring_scene(root: &Path, n: usize, distortion: Distortion) -> Scene {
         let aabb = Aabb::cube(DVec3::ZERO, 20.0);

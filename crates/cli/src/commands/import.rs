@@ -1453,6 +1453,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         };
         validate_scene(&scene, &out_file).with_context(|| invalid_scene(args))?;
     }
+    for found in fluidnerf_io::scene::cameras_at_one_place(&scene) {
+        log::warn!("{}", fluidnerf_io::scene::describe_one_place(&scene, &found));
+    }
     created.file(&out_file);
     save_scene_recording(&scene, &args.out, &recording, true)?;
     let davis_cameras = davis_recording.map(|r| r.record).unwrap_or_default();

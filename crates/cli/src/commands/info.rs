@@ -8,7 +8,10 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use fluidnerf_core::{fixed, num, Camera, Frame, Scene};
 use fluidnerf_io::image::read_image_with;
-use fluidnerf_io::scene::{cameras_near_box, check_pixels, load_scene, odd_sample_kind, recorded, scene_file_path};
+use fluidnerf_io::scene::{
+    cameras_at_one_place, cameras_near_box, check_pixels, describe_one_place, load_scene, odd_sample_kind, recorded,
+    scene_file_path,
+};
 use fluidnerf_io::volume::read_npy;
 
 /// Validate a scene and describe it.
@@ -149,6 +152,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              nearly as long as the box",
             scene.frames[i].file_path.display()
         ));
+    }
+    for found in cameras_at_one_place(&scene) {
+        warnings.push(describe_one_place(&scene, &found));
     }
     let mut kinds = Vec::new();
     // Each image's total, after the background when the scene has one; None for a masked
