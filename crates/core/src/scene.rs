@@ -204,11 +204,13 @@ pub struct BoxEstimate {
 /// 2. The search region is a cube centred on the point closest, in least squares, to every
 ///    camera's optical axis, with half-side the largest distance from it to a camera centre
 ///    (the mean of the camera centres when the axes are parallel).
-/// 3. A `grid`³ lattice of points fills the cube; a point is kept when it lies in front of
-///    every camera, inside every image (the common view) and on a bright pixel (nearest pixel;
-///    see [`BoxEstimateParams`]) in every image.
-/// 4. The box bounds the kept points, grown by one lattice step and `margin_fraction` of its
-///    size on each side.
+/// 3. A `grid`³ lattice of points fills the cube; the points that lie in front of every camera
+///    and inside every image bound the common view.
+/// 4. A second `grid`³ lattice fills the common view's bounds, grown by one step of the first
+///    on every side; a point of it is kept when it is in the common view and on a bright pixel
+///    (nearest pixel; see [`BoxEstimateParams`]) in every image.
+/// 5. The box bounds the kept points, grown by one step of that lattice and `margin_fraction`
+///    of its size on each side.
 ///
 /// When no point is bright in every view, the common view alone is used. `None` when no
 /// point is in the common view at all. `frames` and `images` pair up one to one.
@@ -259,50 +261,63 @@ pub fn estimate_box(frames: &[Frame], images: &[crate::Image], params: &BoxEstim
         return None;
     }
     let n = params.grid;
-    let step = 2.0 * half / (n - 1) as f64;
-    let lattice =
-        |i: usize, j: usize, k: usize| centre - DVec3::splat(half) + step * DVec3::new(i as f64, j as f64, k as f64);
-
-    // For each lattice point: in the common view, and bright in every view.
-    let mut common = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY), 0usize);
-    let mut bright = common;
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                let p = lattice(i, j, k);
-                let mut in_all = true;
-                let mut bright_all = true;
-                for ((cam, img), &t) in views.iter().zip(&thresholds) {
-                    let Some(uv) = cam.project(p) else {
-                        in_all = false;
-                        break;
-                    };
-                    let (col, row) = (uv.x.round(), uv.y.round());
-                    if !(col >= 0.0 && row >= 0.0 && col < img.width as f64 && row < img.height as f64) {
-                        in_all = false;
-                        break;
+    // Points of a `n`³ lattice from `origin`, `step` apart on each axis: the bounds and count
+    // of those in the common view, and of those also bright in every view.
+    type Found = (DVec3, DVec3, usize);
+    let scan = |origin: DVec3, step: DVec3| -> (Found, Found) {
+        let mut common = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY), 0usize);
+        let mut bright = common;
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let p = origin + step * DVec3::new(i as f64, j as f64, k as f64);
+                    let mut in_all = true;
+                    let mut bright_all = true;
+                    for ((cam, img), &t) in views.iter().zip(&thresholds) {
+                        let Some(uv) = cam.project(p) else {
+                            in_all = false;
+                            break;
+                        };
+                        let (col, row) = (uv.x.round(), uv.y.round());
+                        if !(col >= 0.0 && row >= 0.0 && col < img.width as f64 && row < img.height as f64) {
+                            in_all = false;
+                            break;
+                        }
+                        if img.get(col as usize, row as usize) < t {
+                            bright_all = false;
+                        }
                     }
-                    if img.get(col as usize, row as usize) < t {
-                        bright_all = false;
-                    }
-                }
-                if in_all {
-                    common = (common.0.min(p), common.1.max(p), common.2 + 1);
-                    if bright_all {
-                        bright = (bright.0.min(p), bright.1.max(p), bright.2 + 1);
+                    if in_all {
+                        common = (common.0.min(p), common.1.max(p), common.2 + 1);
+                        if bright_all {
+                            bright = (bright.0.min(p), bright.1.max(p), bright.2 + 1);
+                        }
                     }
                 }
             }
         }
-    }
-    let (lo, hi, points, from_bright_pixels) = if bright.2 > 0 {
-        (bright.0, bright.1, bright.2, true)
-    } else if common.2 > 0 {
-        (common.0, common.1, common.2, false)
-    } else {
-        return None;
+        (common, bright)
     };
-    let grow = (hi - lo) * params.margin_fraction + DVec3::splat(step);
+    // The cube reaching the farthest camera finds the common view; its lattice is far coarser
+    // than the flow when the cameras stand many times its size away (cameras at 360 mm put
+    // points 11 mm apart around a jet a few mm across, between which no point was bright in
+    // every view), so the hull is sought on a second lattice filling the common view.
+    let coarse = DVec3::splat(2.0 * half / (n - 1) as f64);
+    let (common, _) = scan(centre - DVec3::splat(half), coarse);
+    if common.2 == 0 {
+        return None;
+    }
+    let (lo, hi) = (common.0 - coarse, common.1 + coarse);
+    let step = (hi - lo) / (n - 1) as f64;
+    let (fine_common, bright) = scan(lo, step);
+    let (lo, hi, points, from_bright_pixels, step) = if bright.2 > 0 {
+        (bright.0, bright.1, bright.2, true, step)
+    } else if fine_common.2 > 0 {
+        (fine_common.0, fine_common.1, fine_common.2, false, step)
+    } else {
+        (common.0, common.1, common.2, false, coarse)
+    };
+    let grow = (hi - lo) * params.margin_fraction + step;
     Some(BoxEstimate { aabb: Aabb::new(lo - grow, hi + grow), points, from_bright_pixels })
 }
 
@@ -364,6 +379,48 @@ mod tests {
         // Beside a timed one, a volume without a time covers no time.
         scene.truth = vec![truth(None), truth(Some(15.0))];
         assert_eq!(scene.times_without_truth(), vec![14.0, 16.0]);
+    }
+
+    /// Cameras ten times farther from the ball than in the test below, with ten times the focal
+    /// length, as a laboratory rig stands around a flow: the ball is as large in the images.
+    /// The lattice of the cube reaching the cameras had its points 19 units apart around a
+    /// ball of radius 4, none of them bright in every view, and the box fell back to the
+    /// common view, 60 units across.
+    #[test]
+    fn a_bright_ball_seen_from_afar_bounds_the_estimated_box() {
+        let (ball, radius) = (DVec3::new(3.0, -2.0, 1.0), 4.0);
+        let k = Intrinsics { width: 48, height: 40, fx: 500.0, fy: 500.0, cx: 23.5, cy: 19.5, skew: 0.0 };
+        let mut frames = Vec::new();
+        let mut images = Vec::new();
+        for c in 0..6 {
+            let a = c as f64 / 6.0 * std::f64::consts::TAU;
+            let centre = DVec3::new(600.0 * a.cos(), 600.0 * a.sin(), if c % 2 == 0 { 250.0 } else { -200.0 });
+            let camera = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
+            let mut img = Image::from_vec(48, 40, vec![5.0; 48 * 40]);
+            for row in 0..40 {
+                for col in 0..48 {
+                    let ray = camera.pixel_ray(col as f64, row as f64).expect("ray");
+                    if (ray.at((ball - ray.origin).dot(ray.dir)) - ball).length() < radius {
+                        img.set(col, row, 1000.0);
+                    }
+                }
+            }
+            frames.push(Frame {
+                camera,
+                file_path: format!("c{c}.png").into(),
+                time: None,
+                camera_name: None,
+                holdout: false,
+            });
+            images.push(img);
+        }
+        let est = estimate_box(&frames, &images, &BoxEstimateParams::default()).expect("a box");
+        assert!(est.from_bright_pixels, "{est:?}");
+        for axis in 0..3 {
+            let (lo, hi) = (est.aabb.min[axis], est.aabb.max[axis]);
+            assert!(lo <= ball[axis] - radius && hi >= ball[axis] + radius, "axis {axis}: {lo} .. {hi}");
+            assert!(hi - lo < 2.0 * 2.0 * radius, "axis {axis}: {lo} .. {hi} is far larger than the ball");
+        }
     }
 
     /// Six cameras at two heights around a bright ball: the estimated box holds the ball and
