@@ -281,6 +281,25 @@ fn unknown_keys_are_summarised_in_one_line() {
     assert!(!text(&o).1.contains("colmap_im_id"), "{}", text(&o).1);
 }
 
+/// A pinhole camera_model with distortion coefficients, both at the top level, gave one
+/// warning per frame (hundreds for a long recording); it is one line for the file.
+#[test]
+fn a_pinhole_model_with_distortion_is_warned_about_once() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    let file = dir.path().join("transforms.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).expect("reads")).expect("json");
+    v["camera_model"] = serde_json::json!("PINHOLE");
+    v["k1"] = serde_json::json!(0.01);
+    std::fs::write(&file, v.to_string()).expect("writes");
+    let o = info_with_log(dir.path(), "warn");
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    let lines: Vec<&str> = stderr.lines().filter(|l| l.contains("with distortion coefficients")).collect();
+    assert_eq!(lines.len(), 1, "{stderr}");
+    assert!(lines[0].contains("4 frame(s) (the first: frame 0) have camera_model PINHOLE"), "{stderr}");
+}
+
 #[test]
 fn an_8_bit_image_among_16_bit_ones_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -805,12 +805,6 @@ fn frame_camera(
         k5: z(k.opencv_k5),
         k6: z(k.opencv_k6),
     };
-    if matches!(model, "PINHOLE" | "SIMPLE_PINHOLE") && !distortion.is_identity() {
-        log::warn!(
-            "{}: frame {index} ({name}): camera_model {model} with distortion coefficients; using them",
-            file.display()
-        );
-    }
     let m = &entry.transform_matrix;
     if m[3] != [0.0, 0.0, 0.0, 1.0] {
         return Err(bad(format!("transform_matrix's last row must be [0, 0, 0, 1], got {:?}", m[3])));
@@ -981,6 +975,9 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     let mut renamed: Vec<(String, PathBuf)> = Vec::new();
     // Frames whose rotation was one only up to rounding: how many, the largest error, the first.
     let mut rounded_rotations: Option<(usize, f64, usize)> = None;
+    // Frames whose pinhole camera_model comes with distortion coefficients: how many, the
+    // first, and its model (said once for the file).
+    let mut pinholes_distorted: Option<(usize, usize, String)> = None;
     // Whether the top level's focal lengths and angles were found to disagree (warned once).
     let mut warned_top = [false; 2];
     for (i, value) in top.frames.iter().enumerate() {
@@ -1029,7 +1026,13 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
                 format!("frame {i}: is_fisheye is true: fisheye cameras are not supported"),
             ));
         }
-        let (camera, rounded) = frame_camera(&file, i, &entry, &keys.over(&global), &image)?;
+        let merged = keys.over(&global);
+        let (camera, rounded) = frame_camera(&file, i, &entry, &merged, &image)?;
+        if let Some(model) = merged.camera_model.as_deref().filter(|m| matches!(*m, "PINHOLE" | "SIMPLE_PINHOLE")) {
+            if !camera.distortion.is_identity() {
+                pinholes_distorted.get_or_insert((0, i, model.to_owned())).0 += 1;
+            }
+        }
         if let Some(error) = rounded {
             let (count, worst, _) = rounded_rotations.get_or_insert((0, 0.0, i));
             *count += 1;
@@ -1049,6 +1052,13 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
         log::warn!(
             "{}: the transform_matrix of {count} frame(s) (the first: frame {first}) holds a rotation only to within \
              {worst:.1e} (written with few digits?); the nearest rotations are used",
+            file.display()
+        );
+    }
+    if let Some((count, first, model)) = pinholes_distorted {
+        log::warn!(
+            "{}: {count} frame(s) (the first: frame {first}) have camera_model {model} with distortion \
+             coefficients; using them",
             file.display()
         );
     }
