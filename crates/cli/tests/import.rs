@@ -153,6 +153,35 @@ fn opencv_time_series_folders() {
     assert!(scene.frames[0].file_path.is_absolute(), "images outside the scene folder keep absolute paths");
 }
 
+/// A time series numbered without leading zeros (`img_1`, `img_2`, …, `img_10`) is instant
+/// n in the order of its numbers: text order gave `img_10` the second instant and `img_2` the
+/// fourth, scrambling the recording's time without a word.
+#[test]
+fn a_time_series_numbered_without_leading_zeros_keeps_its_order() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    for (n, _) in &rig() {
+        for t in [1, 2, 3, 10, 11] {
+            image(&images.join(n), &format!("img_{t}.png"));
+        }
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &images, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    let order: Vec<(String, f64)> = scene
+        .frames
+        .iter()
+        .filter(|f| f.camera_name.as_deref() == Some("cam1"))
+        .map(|f| (f.file_path.file_name().expect("a file").to_string_lossy().into_owned(), f.time.expect("timed")))
+        .collect();
+    let want: Vec<(String, f64)> =
+        [1, 2, 3, 10, 11].iter().enumerate().map(|(t, n)| (format!("img_{n}.png"), t as f64)).collect();
+    assert_eq!(order, want);
+}
+
 #[test]
 fn unmatched_cameras_and_images_are_errors() {
     let dir = tempfile::tempdir().expect("tempdir");

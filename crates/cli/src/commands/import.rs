@@ -35,7 +35,8 @@ mod davis;
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
 /// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`, or a DaVis `.im7`/`.imx` of one frame), or,
 /// for a time series, every image in the
-/// folder `IMAGES/NAME/` in name order, the n-th image getting time n (edit the times in
+/// folder `IMAGES/NAME/` in name order (numbers compared as numbers: `img_2` before `img_10`),
+/// the n-th image getting time n (edit the times in
 /// `transforms.json` if they are physical): every camera's folder must hold as many images,
 /// under the same names when the folders share names, and no folder named like an image; a
 /// camera with a single image cannot join cameras recorded over time. Or the video
@@ -529,13 +530,45 @@ fn named_like_image(p: &Path) -> bool {
     fluidnerf_io::image::has_image_extension(p)
 }
 
+/// The entries of `dir` in name order, numbers in names compared as numbers
+/// ([`natural_order`]): the order of a time series' images and of a DaVis recording's files,
+/// the n-th of which is instant n.
 fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot list the image folder {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .collect();
-    v.sort();
+    let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    v.sort_by(|a, b| natural_order(&name(a), &name(b)).then_with(|| a.cmp(b)));
     Ok(v)
+}
+
+/// Orders names as recordings number them: runs of digits compare as numbers (`img_2` before
+/// `img_10`, which text order puts first and so gave `img_10` the second instant of a series
+/// numbered without leading zeros), everything else as text; names that are equal so (`a01`,
+/// `a1`) by their text. Names numbered with leading zeros keep their text order.
+fn natural_order(a: &str, b: &str) -> std::cmp::Ordering {
+    use std::cmp::Ordering;
+    let digits = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+    let (mut x, mut y) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (x.first(), y.first()) {
+            (None, None) => return a.cmp(b),
+            (None, Some(_)) => return Ordering::Less,
+            (Some(_), None) => return Ordering::Greater,
+            (Some(p), Some(q)) if p.is_ascii_digit() && q.is_ascii_digit() => {
+                let (dx, dy) = (digits(x), digits(y));
+                let number = |run: &[u8]| -> Vec<u8> { run.iter().copied().skip_while(|&c| c == b'0').collect() };
+                let (nx, ny) = (number(&x[..dx]), number(&y[..dy]));
+                match nx.len().cmp(&ny.len()).then_with(|| nx.cmp(&ny)) {
+                    Ordering::Equal => (x, y) = (&x[dx..], &y[dy..]),
+                    other => return other,
+                }
+            }
+            (Some(p), Some(q)) if p != q => return p.cmp(q),
+            _ => (x, y) = (&x[1..], &y[1..]),
+        }
+    }
 }
 
 /// The images, videos and folders in `images` that no camera uses. A folder that holds used
@@ -1489,4 +1522,20 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     );
     std::io::stdout().lock().write_all(line.as_bytes())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::natural_order;
+
+    #[test]
+    fn numbers_in_names_are_ordered_as_numbers() {
+        let mut names = vec!["img_10.png", "img_2.png", "img_1.png", "img_11.png", "img_02.png", "b1", "a10", "a9"];
+        names.sort_by(|a, b| natural_order(a, b));
+        assert_eq!(names, ["a9", "a10", "b1", "img_1.png", "img_02.png", "img_2.png", "img_10.png", "img_11.png"]);
+        // Zero-padded names keep their text order; long numbers do not overflow.
+        let padded = ["B00001.im7", "B00002.im7", "B00010.im7"];
+        assert!(padded.windows(2).all(|w| natural_order(w[0], w[1]).is_lt()));
+        assert!(natural_order("t99999999999999999999999", "t100000000000000000000000").is_lt());
+    }
 }
