@@ -65,3 +65,38 @@ fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget() {
     let help = String::from_utf8_lossy(&out.stdout);
     assert!(help.contains("default: 1000000 under held-out and budget"), "{help}");
 }
+
+/// A demo writes its scene, runs, pictures and report.html into OUT: a scene, a run or a study
+/// folder is refused (the demo went inside a scene, and --force replaced a study's report), and
+/// so is a folder holding a file of a demo's names but no demo, before anything is written.
+#[test]
+fn the_demo_refuses_folders_of_other_kinds_and_files_it_would_overwrite() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let quick = ["--resolution", "8", "--max-iterations", "2", "--time-budget", "1", "-q"];
+    let demo = |out: &str, force: bool| {
+        let mut args = vec!["demo", "-o", out];
+        args.extend(quick);
+        if force {
+            args.push("--force");
+        }
+        fluidnerf(d, &args)
+    };
+    for force in [false, true] {
+        refused(&demo("scene", force), "is a scene folder (it holds transforms.json); `demo` writes demo folders only");
+        assert!(!d.join("scene/scene").exists() && !d.join("scene/report.html").exists());
+    }
+    std::fs::create_dir(d.join("study")).expect("folder");
+    std::fs::write(d.join("study/study.json"), "{}").expect("writes");
+    std::fs::write(d.join("study/report.html"), "the study's").expect("writes");
+    refused(&demo("study", true), "is a study folder (it holds study.json)");
+    assert_eq!(std::fs::read_to_string(d.join("study/report.html")).expect("kept"), "the study's");
+    std::fs::create_dir(d.join("mine")).expect("folder");
+    std::fs::write(d.join("mine/slices.png"), "mine").expect("writes");
+    for force in [false, true] {
+        refused(&demo("mine", force), "holds slices.png but no comparison.json, so it is not a demo folder");
+        assert!(!d.join("mine/scene").exists());
+        assert_eq!(std::fs::read_to_string(d.join("mine/slices.png")).expect("kept"), "mine");
+    }
+}

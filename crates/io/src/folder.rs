@@ -18,6 +18,8 @@ pub enum FolderKind {
     Compare,
     /// A study of methods: `study.json` (written by `study`).
     Study,
+    /// A demo: `comparison.json` (written by `demo`).
+    Demo,
 }
 
 impl FolderKind {
@@ -30,6 +32,7 @@ impl FolderKind {
             FolderKind::Render => "a folder of rendered views",
             FolderKind::Compare => "a comparison folder",
             FolderKind::Study => "a study folder",
+            FolderKind::Demo => "a demo folder",
         }
     }
 
@@ -43,6 +46,7 @@ impl FolderKind {
             FolderKind::Render => "a folder of rendered views (it holds render.json)",
             FolderKind::Compare => "a comparison folder (it holds compare.json)",
             FolderKind::Study => "a study folder (it holds study.json)",
+            FolderKind::Demo => "a demo folder (it holds comparison.json)",
         }
     }
 }
@@ -62,6 +66,8 @@ pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
         Some(FolderKind::Compare)
     } else if has("study.json") {
         Some(FolderKind::Study)
+    } else if has("comparison.json") {
+        Some(FolderKind::Demo)
     } else {
         None
     }

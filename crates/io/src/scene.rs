@@ -605,6 +605,7 @@ pub fn check_scene_path(path: &Path) -> Result<(), IoError> {
                 format!("; give the scene it was made from{}", scene.unwrap_or_default())
             }
             FolderKind::Study => "; its scenes are the folders in its scenes/".to_string(),
+            FolderKind::Demo => "; its scene is the folder scene/ in it".to_string(),
             _ => String::new(),
         };
         return Err(IoError::invalid(

@@ -71,6 +71,7 @@ pub fn refuse_other_kind(out: &Path, kind: FolderKind, command: &str) -> Result<
                     FolderKind::Render => "folders of rendered views",
                     FolderKind::Compare => "comparison folders",
                     FolderKind::Study => "study folders",
+                    FolderKind::Demo => "demo folders",
                 }
             ),
         }),

@@ -8,7 +8,14 @@ use std::time::Instant;
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::{Method, Overwrite, RunConfig, RunStatus, StopReason, StoppingPolicy};
 
+use anyhow::Context;
+use fluidnerf_pipeline::rundir::{folder_kind, FolderKind};
+
 use super::reconstruct::StopArg;
+
+/// The files a demo writes at the top of its folder, `comparison.json` (which marks a demo
+/// folder) first.
+const DEMO_FILES: [&str; 4] = ["comparison.json", "report.html", "slices.png", "convergence.png"];
 
 /// Run the whole pipeline on a built-in example and compare FluidNeRF with classical
 /// tomography.
@@ -25,8 +32,10 @@ use super::reconstruct::StopArg;
 ///
 /// Everything lands in OUT: `scene/` (the synthetic data set), `fluidnerf/`, `hybrid/`,
 /// `asart/` and `sart-tv/` (one run folder each, with volumes, settings and reports),
-/// `slices.png`, `convergence.png`, `comparison.json` and `report.html`. Takes about a minute
-/// on a 2-core machine (53–65 s on a 2-core AMD EPYC, build excluded).
+/// `slices.png`, `convergence.png`, `comparison.json` and `report.html`. OUT is a new folder or
+/// an earlier demo's (replaced with --force); a scene, a run, a study or any other folder
+/// holding files of those names is refused. Takes about a minute on a 2-core machine (53–65 s
+/// on a 2-core AMD EPYC, build excluded).
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Output directory.
@@ -80,8 +89,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             fluidnerf_core::number::num(args.time_budget)
         );
     }
-    if out.join("report.html").exists() && !args.force {
+    // A demo writes its scene, its runs and the files of DEMO_FILES into OUT: never into another
+    // kind of fluidnerf folder (a scene took a demo inside it, a study's report.html was
+    // replaced), nor over files of those names in a folder that holds no demo.
+    fluidnerf_pipeline::rundir::refuse_other_kind(out, FolderKind::Demo, "demo")?;
+    let earlier = folder_kind(out) == Some(FolderKind::Demo);
+    if earlier && !args.force {
         anyhow::bail!("{} already holds a demo; pass --force to replace it", out.display());
+    }
+    if !earlier {
+        if let Some(file) = DEMO_FILES.into_iter().find(|f| out.join(f).exists()) {
+            anyhow::bail!(
+                "{} holds {file} but no comparison.json, so it is not a demo folder; a demo would overwrite it: \
+                 choose another output folder",
+                out.display()
+            );
+        }
     }
     super::create_output_folder(out)?;
     let start = Instant::now();
@@ -99,6 +122,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         line.push("--force".into());
     }
     super::run_line(&line)?;
+    // The scene is replaced: an earlier demo's comparison and pictures would otherwise stand
+    // beside this one's runs if it failed half way.
+    for file in DEMO_FILES {
+        let p = out.join(file);
+        if p.is_file() {
+            std::fs::remove_file(&p).with_context(|| format!("removing {}", p.display()))?;
+        }
+    }
 
     let stopping = StoppingPolicy {
         rule: args.stop.into(),
@@ -150,21 +181,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         methods.iter().map(|(dir, m)| html::summarise(&out.join(dir), m.label())).collect::<Result<_, _>>()?;
     let refs: Vec<&RunSummary> = runs.iter().collect();
 
-    let report = html::build_report(
-        &format!(
-            "fluidnerf demo: FluidNeRF, the hybrid, ASART and SART-TV on a synthetic jet, all stopped by {}",
-            stopping.describe_rule()
-        ),
-        &scene,
-        truth.as_ref(),
-        &refs,
-    )?;
-    let slices = html::slice_figure(truth.as_ref(), &refs, &scene.units)?;
-    fluidnerf_io::atomic_write(&out.join("slices.png"), |w| w.write_all(&slices))?;
-    let histories: Vec<_> = runs.iter().map(|r| r.history.clone()).collect();
-    fluidnerf_viz::write_plots(&out.join("convergence.png"), &fluidnerf_viz::convergence_plots(&histories), 2)?;
-    fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
-
+    // The folder's marker first: a demo that fails below is still known for one.
     let comparison: Vec<serde_json::Value> = runs
         .iter()
         .zip(&wall)
@@ -185,6 +202,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     let text = serde_json::to_string_pretty(&comparison)?;
     fluidnerf_io::atomic_write(&out.join("comparison.json"), |w| w.write_all(text.as_bytes()))?;
+
+    let report = html::build_report(
+        &format!(
+            "fluidnerf demo: FluidNeRF, the hybrid, ASART and SART-TV on a synthetic jet, all stopped by {}",
+            stopping.describe_rule()
+        ),
+        &scene,
+        truth.as_ref(),
+        &refs,
+    )?;
+    let slices = html::slice_figure(truth.as_ref(), &refs, &scene.units)?;
+    fluidnerf_io::atomic_write(&out.join("slices.png"), |w| w.write_all(&slices))?;
+    let histories: Vec<_> = runs.iter().map(|r| r.history.clone()).collect();
+    fluidnerf_viz::write_plots(&out.join("convergence.png"), &fluidnerf_viz::convergence_plots(&histories), 2)?;
+    fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
 
     print_table(&runs, &wall, &stopping);
     #[allow(clippy::print_stdout)]
