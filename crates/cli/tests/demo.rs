@@ -50,15 +50,22 @@ fn demo_compares_the_fields_with_both_classical_methods() {
 
 /// Without `--max-iterations` the demo lifts every method's own cap, as `study` does, so that
 /// the held-out rule or the one time budget ends each run; a budget that is no number of
-/// seconds is refused before anything is written.
+/// seconds, and a scene preset that is unknown or of several instants, are refused before
+/// anything is written.
 #[test]
-fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget() {
+fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let d = tmp.path();
     for budget in ["0", "-1", "inf", "nan"] {
         let out = fluidnerf(d, &["demo", "-o", "out", "--time-budget", budget, "-q"]);
         refused(&out, "--time-budget must be a positive, finite number of seconds");
         assert!(!d.join("out").exists(), "--time-budget {budget}: nothing is written");
+    }
+    // A preset of several instants took minutes to synthesise, then every method mixed them into
+    // one field scored against the first instant only; an unknown one left OUT made.
+    for (preset, why) in [("plume-tr", "--preset: plume-tr holds 3 instants"), ("nope", "--preset: unknown preset")] {
+        refused(&fluidnerf(d, &["demo", "-o", "out", "--preset", preset, "-q"]), why);
+        assert!(!d.join("out").exists(), "--preset {preset}: nothing is written");
     }
     let out = fluidnerf(d, &["demo", "--help"]);
     ok(&out);

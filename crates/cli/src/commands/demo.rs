@@ -41,7 +41,8 @@ pub struct Args {
     /// Output directory.
     #[arg(short, long, default_value = "fluidnerf-demo")]
     pub out: PathBuf,
-    /// Synthetic scene preset (see `fluidnerf synth --list-presets`).
+    /// Synthetic scene preset of one instant (see `fluidnerf synth --list-presets`); one of
+    /// several instants is refused, as every method would mix them into one field.
     #[arg(long, default_value = "demo")]
     pub preset: String,
     /// Voxels along the longest side of the reconstructed volumes.
@@ -89,6 +90,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             fluidnerf_core::number::num(args.time_budget)
         );
     }
+    // Before the folder is made: synthesising a preset of several instants took minutes, then
+    // every method mixed them into one field.
+    super::static_preset("--preset", &args.preset, "the demo")?;
     // A demo writes its scene, its runs and the files of DEMO_FILES into OUT: never into another
     // kind of fluidnerf folder (a scene took a demo inside it, a study's report.html was
     // replaced), nor over files of those names in a folder that holds no demo.

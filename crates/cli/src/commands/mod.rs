@@ -180,6 +180,23 @@ pub(crate) fn parse_max_iterations(s: &str) -> Result<usize, String> {
     }
 }
 
+/// The synthetic scene preset `name` given as `option` of `command`, which compares static
+/// reconstructions of one instant: refused, before anything is made, when it is unknown or
+/// holds several instants, which every static method would mix into one field (and score
+/// against the first instant's truth only).
+pub(crate) fn static_preset(option: &str, name: &str, command: &str) -> anyhow::Result<fluidnerf_synth::SynthSettings> {
+    let settings = fluidnerf_synth::preset::preset(name)
+        .map_err(|e| anyhow::anyhow!("{option}: {e} (fluidnerf synth --list-presets)"))?;
+    if settings.times.len() > 1 {
+        anyhow::bail!(
+            "{option}: {name} holds {} instants; {command} compares static reconstructions of one instant: choose a \
+             static preset (fluidnerf synth --list-presets)",
+            settings.times.len()
+        );
+    }
+    Ok(settings)
+}
+
 /// Refuses a value given twice to the list option `option`: the repeat would run the same work
 /// twice, write the same file twice or print the same row twice.
 pub(crate) fn given_once<T: PartialEq + std::fmt::Display>(option: &str, values: &[T]) -> anyhow::Result<()> {

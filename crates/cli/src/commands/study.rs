@@ -247,17 +247,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     }
     // Known before anything is made: an unknown one failed only when its first scene was
     // synthesised, leaving the study's folder behind.
-    let scene = fluidnerf_synth::preset::preset(&g.scene_preset)
-        .map_err(|e| anyhow::anyhow!("--scene-preset: {e} (fluidnerf synth --list-presets)"))?;
-    // A scene of several instants would have every static method mix them.
-    if scene.times.len() > 1 {
-        bail!(
-            "--scene-preset: {} holds {} instants; a study compares static reconstructions of one instant: \
-             choose a static preset (fluidnerf synth --list-presets)",
-            g.scene_preset,
-            scene.times.len()
-        );
-    }
+    let scene = super::static_preset("--scene-preset", &g.scene_preset, "a study")?;
     // A real-like recording has its own dark noise; the sensor's noise does not apply.
     if scene.real.is_some() {
         if let Some(n) = g.noise.iter().find(|&&n| n != 0.0) {
