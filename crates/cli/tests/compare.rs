@@ -311,3 +311,26 @@ fn a_curve_with_two_histories_or_a_repeated_iteration_is_refused() {
     );
     assert!(!d.join("cmp").exists(), "nothing written for refused curves");
 }
+
+/// A time-resolved run's NRMSE is the mean over the recording's instants; a static run of the
+/// same scene mixes them into one volume, scored against the first instant only. Drawn side
+/// by side they were tabled as if one were many times faster: compare refuses them, naming
+/// each run's instants, and still compares static runs of that scene with each other.
+#[test]
+fn runs_scored_over_different_instants_are_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15"]);
+    let reconstruct = |out: &str, method: &str| {
+        let args = ["reconstruct", "scene", "-o", out, "--method", method, "--resolution", "8"];
+        ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "3", "-q"]].concat()));
+    };
+    reconstruct("tr", "tr-fast");
+    reconstruct("asart", "asart");
+    reconstruct("sart", "sart");
+    let out = fluidnerf(d, &["compare", "tr", "asart", "-o", "cmp", "-q"]);
+    refused(&out, "the runs' NRMSE are over different instants of the truth: tr (tr-fast): the mean over t = 14, 15");
+    refused(&out, "asart (asart): t = 14 only");
+    assert!(!d.join("cmp").exists(), "nothing written for a refused comparison");
+    ok(&fluidnerf(d, &["compare", "asart", "sart", "-o", "cmp", "-q"]));
+}

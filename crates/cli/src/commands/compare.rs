@@ -33,7 +33,10 @@ use serde::{Deserialize, Serialize};
 /// the same fields: `method`, optionally `preset`, and `nrmse_history`, a list of
 /// `{iteration, train_time_s, nrmse}`, one point per iteration, forward in time (a file that
 /// also holds a report's `history.nrmse` is refused). Runs record that history when their scene has ground
-/// truth (neural runs every `--eval-every` iterations, classical runs every iteration).
+/// truth (neural runs every `--eval-every` iterations, classical runs every iteration). Runs of
+/// different scenes are refused (see --allow-different-scenes), and so are runs whose NRMSE is
+/// over different instants of the truth: a time-resolved run's is the mean over the
+/// recording's instants, a static run's of such a scene is against the first instant only.
 ///
 /// Writes into OUT: `time_to_accuracy.png` and `.svg` (NRMSE against wall time, one line per
 /// run, log axes where the data span a decade), `time_to_accuracy.csv` (every point of every
@@ -93,6 +96,10 @@ struct Run {
     best_nrmse: f64,
     /// The run's training (or solver) time, evaluations excluded.
     wall_time_s: f64,
+    /// The truth instants its NRMSE is over (None each for a static scene's truth); None for a
+    /// curve file, which does not say.
+    #[serde(skip)]
+    instants: Option<Vec<Option<f64>>>,
 }
 
 /// The table row of one run.
@@ -208,7 +215,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         );
     }
     let key = if probe.format.is_some() { "history.nrmse" } else { "nrmse_history" };
-    let (method, preset, history, final_nrmse, wall_time_s) = if probe.format.is_some() {
+    let (method, preset, history, final_nrmse, wall_time_s, instants) = if probe.format.is_some() {
         let r = match RunReport::read(&report) {
             Ok(r) => r,
             // A run's configuration has a `format` too: say what the file is, not what it lacks.
@@ -241,11 +248,15 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
             fluidnerf_pipeline::load::check_same_run(&report, &r, &fluidnerf_pipeline::RunConfig::read(&config)?)?;
         }
         let preset = r.neural.as_ref().and_then(|n| n.preset.clone());
-        (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s))
+        // Its NRMSE is the mean over the trained instants with truth (`final_nrmse`).
+        let instants = r.volumes.iter().filter(|v| v.trained).filter_map(|v| v.metrics.as_ref().map(|m| m.time));
+        // A report scoring no volume says nothing of its instants.
+        let instants = Some(instants.collect::<Vec<_>>()).filter(|i| !i.is_empty());
+        (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s), instants)
     } else {
         let c: CurveFile = fluidnerf_pipeline::rundir::read_json(&report)
             .with_context(|| "neither a run report nor a curve file with `method` and `nrmse_history`")?;
-        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s))
+        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s), None)
     };
     if history.is_empty() {
         bail!("{}: no NRMSE history; run it with --eval-every and a scene with ground truth", report.display());
@@ -313,7 +324,37 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         final_nrmse,
         best_nrmse,
         wall_time_s,
+        instants,
     })
+}
+
+/// Refuses runs whose NRMSE is over different instants of the truth: a time-resolved run's is
+/// the mean over the recording's instants, a static run's of a time-resolved scene is its one
+/// volume (the instants mixed) against the first instant only, so their curves, thresholds and
+/// speed-ups measure different things.
+fn refuse_other_instants(runs: &[Run]) -> anyhow::Result<()> {
+    let scored: Vec<(&Run, &Vec<Option<f64>>)> =
+        runs.iter().filter_map(|r| r.instants.as_ref().map(|i| (r, i))).collect();
+    let Some(&(_, first)) = scored.first() else { return Ok(()) };
+    if scored.iter().all(|(_, i)| *i == first) {
+        return Ok(());
+    }
+    let describe = |instants: &[Option<f64>]| match instants {
+        [None] => "the static truth".to_string(),
+        [Some(t)] => format!("t = {} only", num(*t)),
+        _ => format!(
+            "the mean over t = {}",
+            instants.iter().map(|t| t.map_or("–".to_string(), |t| num(t).to_string())).collect::<Vec<_>>().join(", ")
+        ),
+    };
+    let list: Vec<String> =
+        scored.iter().map(|(r, i)| format!("{} ({}): {}", r.path.display(), r.method, describe(i))).collect();
+    bail!(
+        "the runs' NRMSE are over different instants of the truth: {}; their curves measure different things and \
+         are not comparable (a static run of a time-resolved scene mixes its instants into one volume, scored \
+         against the first); compare runs scored over the same instants",
+        list.join("; ")
+    )
 }
 
 /// Refuses runs made from different scenes (their `config.json`), whose NRMSE curves measure
@@ -523,6 +564,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let reference_path = runs[reference].path.clone();
     refuse_other_scenes(&runs, args.allow_different_scenes)?;
+    refuse_other_instants(&runs)?;
     // Runs in folders of the same name are told apart by the path given.
     let labels: Vec<String> = runs.iter().map(|r| r.label.clone()).collect();
     for run in &mut runs {
@@ -597,6 +639,7 @@ mod tests {
             best_nrmse: curve.iter().map(|p| p.nrmse).fold(f64::INFINITY, f64::min),
             wall_time_s: curve[curve.len() - 1].train_time_s,
             curve,
+            instants: None,
         }
     }
 
