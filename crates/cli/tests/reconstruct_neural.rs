@@ -333,6 +333,31 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     );
 }
 
+/// The hybrid's fit of the field to its voxel start is part of the run's work: it ends with the
+/// time budget, as the voxel start and the field do. A fit of thousands of steps ran whole
+/// whatever the budget, so a study cell stated "at most 0.5 s" for a run that took seconds.
+#[test]
+fn the_hybrids_fit_to_its_start_ends_with_the_time_budget() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 8, &[]);
+    let args = "reconstruct scene -o h --method hybrid --resolution 8 --max-iterations 2 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    edit_json(&d.join("h/config.json"), |c| {
+        c["method"]["start"]["fit"]["iterations"] = serde_json::json!(5000);
+        c["stopping"]["time_budget_s"] = serde_json::json!(0.5);
+    });
+    ok(&fluidnerf(d, &["reconstruct", "--config", "h/config.json", "-o", "short", "-q"]));
+    let r = report(&d.join("short"));
+    let seconds = r["train_time_s"].as_f64().expect("a time");
+    assert!(seconds < 2.0, "a 0.5 s budget took {seconds} s");
+    let warnings = r["warnings"].to_string();
+    assert!(
+        warnings.contains("the time budget ended the fit to the start after") && warnings.contains("of its 5000 steps"),
+        "{warnings}"
+    );
+}
+
 /// A run that cannot be started from is named by its option and key, whatever is wrong with it:
 /// a path that is no run said only "nowhere: is not a folder", naming neither.
 #[test]

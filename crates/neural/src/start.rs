@@ -80,6 +80,8 @@ pub struct StartReport {
     pub mse: f64,
     pub mean_square: f64,
     pub seconds: f64,
+    /// Steps taken: [`StartFit::iterations`], or fewer when the time limit came first.
+    pub steps: usize,
     /// The factor the target was multiplied by, when it lay outside [`START_LEVELS`].
     pub rescaled: Option<f64>,
 }
@@ -105,6 +107,7 @@ pub fn fit_to_frames<F: TrainableField>(
     target: &FrameTarget,
     fit: &StartFit,
     seed: u64,
+    time_limit_s: Option<f64>,
 ) -> Result<StartReport, NeuralError> {
     let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
     let inv_scale = (1.0 / prep.meta.value_scale) as f32;
@@ -136,7 +139,7 @@ pub fn fit_to_frames<F: TrainableField>(
             }
         }
     };
-    fit_to_target(field, prep, &in_units, fit, seed)
+    fit_to_target(field, prep, &in_units, fit, seed, time_limit_s)
 }
 
 /// The range of the target's RMS over the occupied points, as a multiple of the level the
@@ -150,12 +153,15 @@ const TYPICAL_LEVEL: f64 = 2.0;
 
 /// Fits `field` to `target` (module doc). `target(points, out)` writes the target in field
 /// units at box-normalised points (rows of `field.input_dim()` values: `x, y, z[, t']`).
+/// With `time_limit_s` the fit stops after the step that reaches it (at least one step): a
+/// start is part of a run's work, and counts against its time budget.
 pub fn fit_to_target<F: TrainableField>(
     field: &mut F,
     prep: &Prepared,
     target: &(dyn Fn(&[f32], &mut [f32]) + Sync),
     fit: &StartFit,
     seed: u64,
+    time_limit_s: Option<f64>,
 ) -> Result<StartReport, NeuralError> {
     fit.validate()?;
     let t0 = std::time::Instant::now();
@@ -166,7 +172,7 @@ pub fn fit_to_target<F: TrainableField>(
     let mut grads = vec![0f32; field.num_params()];
     let mut tape = field.new_tape();
     let (mut inputs, mut values, mut wanted, mut d_out) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, rescaled: None };
+    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, steps: 0, rescaled: None };
     let mut scale = 1.0f32;
     for step in 0..fit.iterations {
         let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed ^ START_KEY, step, 0));
@@ -236,7 +242,10 @@ pub fn fit_to_target<F: TrainableField>(
         grads.fill(0.0);
         field.backward(&mut tape, &d_out, &mut grads);
         adam.step(field.params_mut(), &grads, fit.learning_rate);
-        last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, ..last };
+        last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, steps: step + 1, ..last };
+        if time_limit_s.is_some_and(|limit| t0.elapsed().as_secs_f64() >= limit) {
+            break;
+        }
     }
     last.seconds = t0.elapsed().as_secs_f64();
     Ok(last)

@@ -632,6 +632,10 @@ pub fn train_window<F: TrainableField + Clone>(
                     TimeAxis::Frames => frame_position(times, t) - first,
                 };
                 let frames: Vec<(f32, f64)> = times[range.clone()].iter().map(|&t| (at(t) as f32, t)).collect();
+                let inside = time_in_window(times, range.clone());
+                let voxel: f64 = fs.seconds.iter().filter(|(t, _)| inside(*t)).map(|(_, s)| s).sum();
+                // The fit counts against the window's budget, as its instants' voxel runs do.
+                let limit = cfg.time_budget_s.map(|b| (b - voxel).max(0.0));
                 let report = crate::start::fit_to_frames(
                     &mut learner.field,
                     &prep,
@@ -639,14 +643,13 @@ pub fn train_window<F: TrainableField + Clone>(
                     fs.target,
                     &fs.fit,
                     seed.wrapping_add(k as u64),
+                    limit,
                 )?;
                 log::info!(
                     "window {k} started from its instants' reconstructions: relative RMS difference {:.4} ({:.1} s)",
                     report.relative_difference(),
                     report.seconds
                 );
-                let inside = time_in_window(times, range.clone());
-                let voxel: f64 = fs.seconds.iter().filter(|(t, _)| inside(*t)).map(|(_, s)| s).sum();
                 let spent = voxel + t0.elapsed().as_secs_f64();
                 learner.train_time_s += spent;
                 if let Some(b) = cfg.time_budget_s {

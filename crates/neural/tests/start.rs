@@ -58,7 +58,7 @@ fn a_fit_recovers_a_target_the_field_can_represent() {
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
     let before = relative_difference(&field, &target);
     let fit = StartFit { iterations: 400, points: 4096, learning_rate: 5e-2 };
-    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3).expect("fits");
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, None).expect("fits");
     let after = relative_difference(&field, &target);
     assert!(before > 0.4, "the start is far from the target: {before}");
     assert!(after < 0.02, "fitted: relative difference {after} (from {before})");
@@ -79,7 +79,7 @@ fn a_start_in_other_units_is_scaled_to_the_images() {
     for (dim, rescaled) in [(1.0f32, false), (1e-3, true), (1e4, true)] {
         let to_target = |_: &[f32], out: &mut [f32]| out.fill(2.0 * level * dim);
         let mut field = DenseGridField::new([5, 5, 5], 0.5);
-        let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3).expect("fits");
+        let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, None).expect("fits");
         assert_eq!(report.rescaled.is_some(), rescaled, "{dim}: {report:?}");
         let reached = mean(&field) / level;
         let wanted = if rescaled { 2.0 } else { 2.0 * dim };
@@ -87,7 +87,7 @@ fn a_start_in_other_units_is_scaled_to_the_images() {
     }
     let zero = |_: &[f32], out: &mut [f32]| out.fill(0.0);
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
-    let err = fit_to_target(&mut field, &prep, &zero, &fit, 3).expect_err("a zero start").to_string();
+    let err = fit_to_target(&mut field, &prep, &zero, &fit, 3, None).expect_err("a zero start").to_string();
     assert!(err.contains("zero at every occupied point"), "{err}");
 }
 
@@ -100,7 +100,7 @@ fn a_fit_is_reproducible_from_its_seed() {
     let fit = StartFit { iterations: 20, points: 256, learning_rate: 5e-2 };
     let run = |seed| {
         let mut field = DenseGridField::new([5, 5, 5], 0.5);
-        fit_to_target(&mut field, &prep, &to_target, &fit, seed).expect("fits");
+        fit_to_target(&mut field, &prep, &to_target, &fit, seed, None).expect("fits");
         field.params().to_vec()
     };
     assert_eq!(run(1), run(1));
@@ -115,7 +115,7 @@ fn settings_and_targets_a_fit_cannot_use_are_refused_by_name() {
     let why = |fit: StartFit, target: &(dyn Fn(&[f32], &mut [f32]) + Sync)| {
         let mut field = DenseGridField::new([5, 5, 5], 0.5);
         let before = field.params().to_vec();
-        let err = fit_to_target(&mut field, &prep, target, &fit, 0).expect_err("refused");
+        let err = fit_to_target(&mut field, &prep, target, &fit, 0, None).expect_err("refused");
         assert_eq!(field.params(), before, "a refused fit leaves the field as it was");
         match err {
             NeuralError::Invalid { what, why } => format!("{what}: {why}"),

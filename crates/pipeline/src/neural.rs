@@ -246,6 +246,7 @@ fn start_from<F: TrainableField>(
     truth: &[(Option<f64>, Volume)],
     prep: &Prepared,
     field: &mut F,
+    session: &mut Session,
 ) -> Result<f64, PipelineError> {
     let mut seconds = 0.0;
     let path = match &start.run {
@@ -271,14 +272,26 @@ fn start_from<F: TrainableField>(
     let run = start_run(&path, scene)?;
     let source = run.field()?;
     let target = |_: f64, points: &[Vec3], out: &mut [f32]| source.eval(points, 0.0, out);
-    let report = fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed)?;
+    // The fit is the run's work too: it ends with the budget, as the voxel start and the field do.
+    let limit = config.stopping.time_budget_s.map(|b| (b - seconds).max(0.0));
+    let report =
+        fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed, limit)?;
     log::info!(
         "started from {}: relative RMS difference {:.4} after {} steps ({:.1} s)",
         path.display(),
         report.relative_difference(),
-        start.fit.iterations,
+        report.steps,
         report.seconds
     );
+    if report.steps < start.fit.iterations {
+        session.warn(&format!(
+            "the time budget ended the fit to the start after {} of its {} steps (relative RMS difference {:.4}); \
+             a larger --time-budget gives it all",
+            report.steps,
+            start.fit.iterations,
+            report.relative_difference()
+        ));
+    }
     Ok(seconds + report.seconds)
 }
 
@@ -410,7 +423,7 @@ impl Ctx<'_> {
             dir.replace_finished(config)?;
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
-            let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field)?;
+            let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field, session)?;
             // Its time is the run's: the curves of NRMSE against time start after it.
             learner.train_time_s += seconds;
             budgeted = train_cfg.clone();

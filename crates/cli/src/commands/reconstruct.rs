@@ -394,7 +394,8 @@ pub struct NeuralArgs {
     /// Start the field from another run's reconstruction (a run folder of any static
     /// method on the same box, e.g. an ASART run of the same scene) instead of a uniform
     /// field: the field is first fitted to it on random points (300 Adam steps of 16384
-    /// points; that time counts against --time-budget, the other run's does not), then
+    /// points, fewer if --time-budget runs out first; that time counts against it, the other
+    /// run's does not), then
     /// trained on the images at a quarter of the learning rate. `--method hybrid` does this
     /// with a voxel run of its own (see --start-method). Static neural methods only.
     #[arg(long, value_name = "RUN")]
