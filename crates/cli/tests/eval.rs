@@ -354,6 +354,11 @@ fn a_run_folder_names_its_own_scene_for_eval_and_render() {
     let bare = fluidnerf(&["eval", "run/volume.npy"], d);
     let err = String::from_utf8_lossy(&bare.stderr);
     assert!(!bare.status.success() && err.contains("--scene") && err.contains("run/volume.npy"), "{err}");
+    // Two run folders do record their scenes: what is refused is that there are two (it said
+    // "2 volumes record no scene").
+    let two = fluidnerf(&["eval", "run", "run/volume.npy"], d);
+    let err = String::from_utf8_lossy(&two.stderr);
+    assert!(!two.status.success() && err.contains("run: give one run folder, or volume files (with --scene)"), "{err}");
     std::fs::rename(d.join("scene"), d.join("moved")).expect("moves the scene");
     let gone = fluidnerf(&["render", "run", "-o", "views2"], d);
     let err = String::from_utf8_lossy(&gone.stderr);

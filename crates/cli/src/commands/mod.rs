@@ -68,6 +68,10 @@ pub(crate) fn scene_or_recorded(
         return Ok(scene.to_path_buf());
     }
     let [dir] = recon else {
+        // Run folders do record their scenes: what is wrong is that there are several.
+        if let Some(run) = recon.iter().find(|p| p.is_dir()) {
+            bail!("{}: give one run folder, or volume files (with --scene)", run.display());
+        }
         bail!("give the scene with --scene: {} volumes record no scene", recon.len());
     };
     if !dir.is_dir() {
