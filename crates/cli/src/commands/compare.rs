@@ -234,7 +234,9 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         if !r.not_reached.is_empty() {
             let list: Vec<String> = r.not_reached.iter().map(|&t| num(t).to_string()).collect();
             bail!(
-                "{}: the {} run was stopped before it reached t = {}, so its NRMSE is over the instants it reached                  only, not over the recording as a whole run's is; continue it with `reconstruct --resume` and                  compare it then, or leave it out",
+                "{}: the {} run was stopped before it reached t = {}, so its NRMSE is over the instants it reached \
+                 only, not over the recording as a whole run's is; continue it with `reconstruct --resume` and \
+                 compare it then, or leave it out",
                 report.display(),
                 r.method.name(),
                 list.join(", ")
