@@ -50,8 +50,8 @@ fn demo_compares_the_fields_with_both_classical_methods() {
 
 /// Without `--max-iterations` the demo lifts every method's own cap, as `study` does, so that
 /// the held-out rule or the one time budget ends each run; a budget that is no number of
-/// seconds, and a scene preset that is unknown or of several instants, are refused before
-/// anything is written.
+/// seconds, a scene preset that is unknown or of several instants, and an output grid no run
+/// can use are refused before anything is written.
 #[test]
 fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -66,6 +66,14 @@ fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     for (preset, why) in [("plume-tr", "--preset: plume-tr holds 3 instants"), ("nope", "--preset: unknown preset")] {
         refused(&fluidnerf(d, &["demo", "-o", "out", "--preset", preset, "-q"]), why);
         assert!(!d.join("out").exists(), "--preset {preset}: nothing is written");
+    }
+    // An output grid no run can use was refused only at the first run, after the scene was made.
+    for resolution in ["0", "1", "5000"] {
+        refused(
+            &fluidnerf(d, &["demo", "-o", "out", "--resolution", resolution, "-q"]),
+            "--resolution: resolution: must be between 2 and 4096 voxels",
+        );
+        assert!(!d.join("out").exists(), "--resolution {resolution}: nothing is written");
     }
     let out = fluidnerf(d, &["demo", "--help"]);
     ok(&out);

@@ -45,7 +45,7 @@ pub struct Args {
     /// several instants is refused, as every method would mix them into one field.
     #[arg(long, default_value = "demo")]
     pub preset: String,
-    /// Voxels along the longest side of the reconstructed volumes.
+    /// Voxels along the longest side of the reconstructed volumes, 2 to 4096.
     #[arg(long, default_value_t = 96)]
     pub resolution: usize,
     /// Gaussian image noise, as a fraction of each image's maximum; 0 gives noiseless images.
@@ -110,9 +110,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    let scene_dir = out.join("scene");
+    let stopping = StoppingPolicy {
+        rule: args.stop.into(),
+        max_iterations: args.max_iterations.or(super::comparison_cap(args.stop)),
+        time_budget_s: Some(args.time_budget),
+        ..StoppingPolicy::default()
+    };
+    // SART-TV beside ASART: on noisy images it is the better classical method, and the
+    // fields are measured against the best of them (docs/claims.md).
+    let methods =
+        [("fluidnerf", Method::Fast), ("hybrid", Method::Hybrid), ("asart", Method::Asart), ("sart-tv", Method::Tv)];
+    let mut configs = Vec::with_capacity(methods.len());
+    for (_, method) in methods {
+        let mut config = RunConfig::new(std::path::absolute(&scene_dir)?, method);
+        config.resolution = args.resolution;
+        config.seed = args.seed;
+        config.stopping = stopping;
+        // Before the scene is made: a setting no run can use (--resolution 0) failed only at
+        // the first run, leaving the scene behind.
+        config.validate().map_err(|e| match &e {
+            fluidnerf_pipeline::PipelineError::Invalid { key, .. } if key == "resolution" => {
+                anyhow::Error::new(e).context("--resolution")
+            }
+            _ => anyhow::Error::new(e),
+        })?;
+        configs.push(config);
+    }
     super::create_output_folder(out)?;
     let start = Instant::now();
-    let scene_dir = out.join("scene");
     #[allow(clippy::print_stdout)]
     let say = |what: &str| println!("\n== demo: {what}");
 
@@ -135,26 +161,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
 
-    let stopping = StoppingPolicy {
-        rule: args.stop.into(),
-        max_iterations: args.max_iterations.or(super::comparison_cap(args.stop)),
-        time_budget_s: Some(args.time_budget),
-        ..StoppingPolicy::default()
-    };
-    // SART-TV beside ASART: on noisy images it is the better classical method, and the
-    // fields are measured against the best of them (docs/claims.md).
-    let methods =
-        [("fluidnerf", Method::Fast), ("hybrid", Method::Hybrid), ("asart", Method::Asart), ("sart-tv", Method::Tv)];
     let mut wall = Vec::new();
-    for (dir, method) in methods {
+    for ((dir, method), config) in methods.iter().zip(&configs) {
         say(&format!("reconstructing with {} ({})", method.label(), stopping.describe(method.family())));
         let t = Instant::now();
-        let mut config = RunConfig::new(std::path::absolute(&scene_dir)?, method);
-        config.resolution = args.resolution;
-        config.seed = args.seed;
-        config.stopping = stopping;
         let overwrite = if args.force { Overwrite::Force } else { Overwrite::Refuse };
-        let report = super::reconstruct::run_config(&config, &out.join(dir), overwrite)?;
+        let report = super::reconstruct::run_config(config, &out.join(dir), overwrite)?;
         #[allow(clippy::print_stdout)]
         {
             println!("{}", report.summary_line());
