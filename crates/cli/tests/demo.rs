@@ -50,8 +50,8 @@ fn demo_compares_the_fields_with_both_classical_methods() {
 
 /// Without `--max-iterations` the demo lifts every method's own cap, as `study` does, so that
 /// the held-out rule or the one time budget ends each run; a budget that is no number of
-/// seconds, a scene preset that is unknown or of several instants, and an output grid no run
-/// can use are refused before anything is written.
+/// seconds, a scene preset that is unknown or of several instants, an output grid no run can
+/// use and scene settings synth refuses are refused before anything is written.
 #[test]
 fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -74,6 +74,13 @@ fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
             "--resolution: resolution: must be between 2 and 4096 voxels",
         );
         assert!(!d.join("out").exists(), "--resolution {resolution}: nothing is written");
+    }
+    // So are the scene's settings, which left an empty folder behind.
+    for (option, value, why) in
+        [("--holdout", "99", "camera 99 does not exist"), ("--noise", "2", "--noise on the command line")]
+    {
+        refused(&fluidnerf(d, &["demo", "-o", "out", option, value, "-q"]), why);
+        assert!(!d.join("out").exists(), "{option} {value}: nothing is written");
     }
     let out = fluidnerf(d, &["demo", "--help"]);
     ok(&out);

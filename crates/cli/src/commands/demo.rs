@@ -137,21 +137,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })?;
         configs.push(config);
     }
+    let mut synth_line = words(&format!(
+        "synth --preset {} --seed {} --noise {} --holdout {} -o",
+        args.preset, args.seed, args.noise, args.holdout
+    ));
+    synth_line.push(path(&scene_dir));
+    if args.force {
+        synth_line.push("--force".into());
+    }
+    // The scene's settings too (--noise 2, --holdout 99): refused, they left an empty folder.
+    {
+        use clap::Parser;
+        let argv = std::iter::once("fluidnerf".to_string()).chain(synth_line.iter().cloned());
+        let super::Command::Synth(synth) =
+            crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{e}"))?.command
+        else {
+            anyhow::bail!("not a synth line: {}", synth_line.join(" "));
+        };
+        super::synth::resolve(&synth)?;
+    }
     super::create_output_folder(out)?;
     let start = Instant::now();
     #[allow(clippy::print_stdout)]
     let say = |what: &str| println!("\n== demo: {what}");
 
     say("synthesising the scene");
-    let mut line = words(&format!(
-        "synth --preset {} --seed {} --noise {} --holdout {} -o",
-        args.preset, args.seed, args.noise, args.holdout
-    ));
-    line.push(path(&scene_dir));
-    if args.force {
-        line.push("--force".into());
-    }
-    super::run_line(&line)?;
+    super::run_line(&synth_line)?;
     // The scene is replaced: an earlier demo's comparison and pictures would otherwise stand
     // beside this one's runs if it failed half way.
     for file in DEMO_FILES {
