@@ -359,6 +359,11 @@ fn a_run_folder_names_its_own_scene_for_eval_and_render() {
     let two = fluidnerf(&["eval", "run", "run/volume.npy"], d);
     let err = String::from_utf8_lossy(&two.stderr);
     assert!(!two.status.success() && err.contains("run: give one run folder, or volume files (with --scene)"), "{err}");
+    // --use-volume changes nothing for a voxel run, and says so.
+    let moot = fluidnerf(&["eval", "run", "--use-volume", "--no-regions", "--json", "moot.json"], d);
+    assert!(moot.status.success(), "eval failed: {}", String::from_utf8_lossy(&moot.stderr));
+    let err = String::from_utf8_lossy(&moot.stderr);
+    assert!(err.contains("--use-volume has no effect: run is a voxel run, scored through its volume anyway"), "{err}");
     std::fs::rename(d.join("scene"), d.join("moved")).expect("moves the scene");
     let gone = fluidnerf(&["render", "run", "-o", "views2"], d);
     let err = String::from_utf8_lossy(&gone.stderr);

@@ -71,7 +71,8 @@ pub struct Args {
     /// the field, towards where it widens), else +x].
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, conflicts_with_all = ["no_regions", "regions"])]
     pub flow_axis: Option<Vec<f64>>,
-    /// For a neural run directory, score its sampled `volume.npy` instead of the trained field.
+    /// For a neural run directory, score its sampled `volume.npy` instead of the trained field
+    /// (a voxel run is scored through its volume anyway: a warning says so).
     #[arg(long)]
     pub use_volume: bool,
     /// Score the whole volume only.
@@ -592,6 +593,12 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
                     dir.display(),
                     num(span.first),
                     num(span.last)
+                );
+            }
+            if use_volume && run.kind == fluidnerf_pipeline::RunKind::Volume {
+                log::warn!(
+                    "--use-volume has no effect: {} is a voxel run, scored through its volume anyway",
+                    dir.display()
                 );
             }
             let use_volume = use_volume || run.kind == fluidnerf_pipeline::RunKind::Volume;
