@@ -45,6 +45,13 @@ fn demo_compares_the_fields_with_both_classical_methods() {
     for file in ["slices.png", "convergence.png", "report.html"] {
         assert!(d.join("out").join(file).is_file(), "{file}");
     }
+    // The report names the preset the scene was made from (it said "a synthetic jet" of any).
+    let html = std::fs::read_to_string(d.join("out/report.html")).expect("report");
+    assert!(
+        html.contains("SART-TV on the synthetic scene `demo`, all stopped by"),
+        "{}",
+        &html[..html.len().min(2000)]
+    );
     refused(&fluidnerf(d, &args), "already holds a demo; pass --force to replace it");
 }
 

@@ -20,7 +20,7 @@ const DEMO_FILES: [&str; 4] = ["comparison.json", "report.html", "slices.png", "
 /// Run the whole pipeline on a built-in example and compare FluidNeRF with classical
 /// tomography.
 ///
-/// Synthesises a small turbulent-jet scene, reconstructs it with FluidNeRF (the fast grid
+/// Synthesises a small turbulent-jet scene (or the scene of --preset), reconstructs it with FluidNeRF (the fast grid
 /// field), with the hybrid (the same field started from a voxel reconstruction, its method
 /// chosen by the images' noise), with ASART (the dissertation's classical baseline) and with
 /// SART-TV (SART regularised by total variation, the classical method made for noisy
@@ -232,7 +232,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let report = html::build_report(
         &format!(
-            "fluidnerf demo: FluidNeRF, the hybrid, ASART and SART-TV on a synthetic jet, all stopped by {}",
+            "fluidnerf demo: FluidNeRF, the hybrid, ASART and SART-TV on the synthetic scene `{}`, all stopped by {}",
+            args.preset,
             stopping.describe_rule()
         ),
         &scene,
