@@ -231,3 +231,42 @@ fn a_forced_study_removes_the_plots_it_no_longer_draws() {
     assert!(d.join("st/against_cameras.png").is_file());
     assert!(!d.join("st/against_noise.png").exists(), "the earlier study's noise plot was left");
 }
+
+/// clap appends an option's `default_value` to its help, so a doc comment that also writes
+/// "[default: ...]" shows it twice; every command's help states each default once.
+#[test]
+fn every_command_states_each_default_once_in_its_help() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    for command in ["demo", "info", "import", "reconstruct", "eval", "compare", "export", "render", "study", "synth"] {
+        let out = fluidnerf(d, &[command, "--help"]);
+        ok(&out);
+        let help = String::from_utf8_lossy(&out.stdout);
+        // An option's entry runs from its `-x`/`--name` line to the next one or to a heading.
+        let mut entries: Vec<String> = Vec::new();
+        for line in help.lines() {
+            let indent = line.len() - line.trim_start().len();
+            let option = line.trim_start().starts_with('-') && (2..=6).contains(&indent);
+            let heading = indent == 0 && !line.is_empty();
+            if option || heading {
+                entries.push(String::new());
+            }
+            if let Some(entry) = entries.last_mut() {
+                *entry += line;
+                *entry += "\n";
+            }
+        }
+        for entry in &entries {
+            let defaults: Vec<&str> = entry
+                .match_indices("[default: ")
+                .map(|(i, _)| {
+                    let rest = &entry[i..];
+                    &rest[..rest.find(']').map_or(rest.len(), |j| j + 1)]
+                })
+                .collect();
+            for (i, a) in defaults.iter().enumerate() {
+                assert!(!defaults[i + 1..].contains(a), "{command} --help states {a} twice:\n{entry}");
+            }
+        }
+    }
+}

@@ -112,7 +112,7 @@ pub struct Args {
     /// ASART 250, the fields 2000, ...); each method's own under own; smoke 20].
     #[arg(long, value_parser = super::parse_max_iterations)]
     pub max_iterations: Option<usize>,
-    /// Seconds of work per run, the same for every method [default: 60].
+    /// Seconds of work per run, the same for every method.
     #[arg(long, default_value_t = 60.0)]
     pub time_budget: f64,
     /// Seed of the scenes and the runs.
