@@ -35,6 +35,10 @@ pub struct LinePlot {
     pub log_y: bool,
     /// Draw a marker at every point (for sweeps with few points).
     pub markers: bool,
+    /// The x values are counts (cameras, iterations): a linear x axis puts its ticks at whole
+    /// numbers only, never at 4.5 cameras.
+    #[serde(default)]
+    pub integer_x: bool,
     pub series: Vec<Series>,
 }
 
@@ -99,6 +103,7 @@ pub fn convergence_plots(runs: &[RunHistory]) -> Vec<LinePlot> {
                 log_x: false,
                 log_y,
                 markers: false,
+                integer_x: !by_time,
                 series,
             });
         }
@@ -115,6 +120,7 @@ pub fn sweep_plot(parameter_label: &str, metric_label: &str, log_x: bool, series
         log_x,
         log_y: false,
         markers: true,
+        integer_x: false,
         series,
     }
 }
@@ -245,11 +251,78 @@ fn draw_plot<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, plot: &LinePlot)
     let xr = axis_range(data.iter().flatten().map(|p| p.0), plot.log_x);
     let yr = axis_range(data.iter().flatten().map(|p| p.1), plot.log_y);
     match (plot.log_x, plot.log_y) {
+        (false, false) if plot.integer_x => draw_chart(area, plot, &data, IntegerAxis::new(&xr), yr.clone(), &xr, &yr),
+        (false, true) if plot.integer_x => {
+            draw_chart(area, plot, &data, IntegerAxis::new(&xr), yr.clone().log_scale(), &xr, &yr)
+        }
         (false, false) => draw_chart(area, plot, &data, xr.clone(), yr.clone(), &xr, &yr),
         (true, false) => draw_chart(area, plot, &data, xr.clone().log_scale(), yr.clone(), &xr, &yr),
         (false, true) => draw_chart(area, plot, &data, xr.clone(), yr.clone().log_scale(), &xr, &yr),
         (true, true) => draw_chart(area, plot, &data, xr.clone().log_scale(), yr.clone().log_scale(), &xr, &yr),
     }
+}
+
+/// A linear axis with its ticks at whole numbers only (see [`integer_ticks`]).
+struct IntegerAxis {
+    inner: plotters::coord::types::RangedCoordf64,
+    ticks: Vec<f64>,
+}
+
+impl IntegerAxis {
+    fn new(range: &std::ops::Range<f64>) -> Self {
+        IntegerAxis { inner: range.clone().into(), ticks: integer_ticks(range, 7) }
+    }
+}
+
+impl Ranged for IntegerAxis {
+    type FormatOption = plotters::coord::ranged1d::NoDefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.inner.map(value, limit)
+    }
+
+    fn key_points<Hint: plotters::coord::ranged1d::KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        // No light mesh lines between the ticks: they would sit at fractional counts.
+        if hint.weight().allow_light_points() {
+            Vec::new()
+        } else {
+            self.ticks.clone()
+        }
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.inner.range()
+    }
+}
+
+impl ValueFormatter<f64> for IntegerAxis {
+    fn format_ext(&self, value: &f64) -> String {
+        self.inner.format_ext(value)
+    }
+}
+
+/// At most `max` whole numbers in `range`, a round step (1, 2, 5, 10, 20, ...) apart.
+fn integer_ticks(range: &std::ops::Range<f64>, max: usize) -> Vec<f64> {
+    let (lo, hi) = (range.start.ceil(), range.end.floor());
+    // Also for a NaN bound.
+    if lo.partial_cmp(&hi).is_none_or(|o| o == std::cmp::Ordering::Greater) {
+        return Vec::new();
+    }
+    let max = max.max(1) as f64;
+    let mut step = 1.0;
+    for factor in [2.0, 2.5, 2.0].iter().cycle() {
+        if ((hi / step).floor() - (lo / step).ceil()) < max {
+            break;
+        }
+        step *= factor;
+    }
+    if !step.is_finite() {
+        return Vec::new();
+    }
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
 }
 
 fn draw_chart<DB, X, Y>(
@@ -438,9 +511,53 @@ mod tests {
             let mut plot = sweep_plot("time", "NRMSE", log, series(vec![1.0, 2.0, 3.0], vec![big, 0.4, 0.3]));
             plot.log_y = log;
             write_plots(&dir.path().join("y.png"), &[plot], 1).expect("plots huge values");
-            let plot = sweep_plot("time", "NRMSE", log, series(vec![1.0, big.abs(), 3.0], vec![0.5, 0.4, 0.3]));
-            write_plots(&dir.path().join("x.svg"), &[plot], 1).expect("plots huge times");
+            let mut plot = sweep_plot("time", "NRMSE", log, series(vec![1.0, big.abs(), 3.0], vec![0.5, 0.4, 0.3]));
+            write_plots(&dir.path().join("x.svg"), &[plot.clone()], 1).expect("plots huge times");
+            plot.integer_x = true;
+            write_plots(&dir.path().join("x.svg"), &[plot], 1).expect("plots huge counts");
         }
         assert!(plottable(1e300) && !plottable(1.0001e300) && !plottable(f64::NAN) && plottable(-3.0));
+    }
+
+    /// The numbers along the x axis of a one-plot SVG: the numeric labels on one line.
+    fn x_tick_labels(svg: &str) -> Vec<String> {
+        let mut by_row: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+        for element in svg.split("<text ").skip(1) {
+            let Some((attributes, rest)) = element.split_once('>') else { continue };
+            let label = rest.split('<').next().unwrap_or("").trim().to_string();
+            let row = attributes.split("y=\"").nth(1).and_then(|r| r.split('"').next()).unwrap_or("");
+            if label.parse::<f64>().is_ok() {
+                by_row.entry(row.to_string()).or_default().push(label);
+            }
+        }
+        by_row.into_values().max_by_key(Vec::len).unwrap_or_default()
+    }
+
+    /// Camera and iteration counts are whole numbers, and so are the ticks of their axis:
+    /// plotters' own ticks over 4 … 5 cameras would read 4.2, 4.4, ...
+    #[test]
+    fn a_count_axis_has_whole_number_ticks() {
+        let cameras = |integer_x: bool, x: Vec<f64>, log_y: bool| {
+            let n = x.len();
+            let plot = LinePlot {
+                log_y,
+                integer_x,
+                series: vec![Series { label: "SART".into(), x, y: (1..=n).map(|k| 0.5 / k as f64).collect() }],
+                ..Default::default()
+            };
+            x_tick_labels(&encode_plots_svg(&[plot], 1).expect("svg"))
+        };
+        let fractional = cameras(false, vec![4.0, 5.0], false);
+        assert!(fractional.iter().any(|l| l.contains('.')), "plotters' ticks: {fractional:?}");
+        assert_eq!(cameras(true, vec![4.0, 5.0], false), ["4", "5"]);
+        assert_eq!(cameras(true, vec![4.0, 5.0], true), ["4", "5"], "also beside a log y axis");
+        assert_eq!(cameras(true, vec![4.0], false), ["2", "3", "4", "5", "6"], "one count, padded");
+        let many = cameras(true, vec![0.0, 250.0, 500.0, 1000.0], false);
+        assert_eq!(many, ["0", "200", "400", "600", "800", "1000"], "at most 7, a round step apart");
+        let iterations = &convergence_plots(&runs())[0];
+        assert!(iterations.integer_x && iterations.x_label == "iteration");
+        assert!(!convergence_plots(&runs())[1].integer_x, "wall time is no count");
+        assert_eq!(integer_ticks(&(0.2..0.8), 7), Vec::<f64>::new());
+        assert_eq!(integer_ticks(&(-3.5..3.5), 7), [-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0]);
     }
 }

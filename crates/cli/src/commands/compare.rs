@@ -582,6 +582,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         log_x: !args.linear_time,
         log_y: true,
         markers: runs.iter().any(|r| r.curve.len() < 12),
+        integer_x: false,
         series: runs
             .iter()
             .map(|r| Series {

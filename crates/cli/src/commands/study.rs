@@ -625,6 +625,7 @@ fn sweep_plot(rows: &[Row], title: &str, axis: &str, metric: &str) -> Option<Lin
         log_x: false,
         log_y: false,
         markers: true,
+        integer_x: axis == "cameras",
         series,
     })
 }
@@ -764,5 +765,30 @@ mod tests {
         assert_eq!(cap(&["--max-iterations", "70"]), Some(70));
         assert_eq!(cap(&["--stop", "own", "--max-iterations", "70"]), Some(70));
         assert_eq!(cap(&["--preset", "smoke"]), Some(20));
+    }
+
+    /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
+    /// sweep's is a percentage.
+    #[test]
+    fn the_camera_sweep_plots_a_count_axis() {
+        let row = |cameras: usize, noise: f64| Row {
+            layout: "ring".into(),
+            cameras,
+            noise,
+            method: "sart".into(),
+            nrmse: Some(0.3),
+            ssim_global: Some(0.8),
+            best_holdout_loss: None,
+            kept_iteration: 5,
+            iterations: 5,
+            stop_reason: "held-out".into(),
+            train_time_s: 1.0,
+            result_bytes: 1,
+            run: "r".into(),
+        };
+        let by_cameras = sweep_plot(&[row(4, 0.0), row(5, 0.0)], "t", "cameras", "NRMSE").expect("a sweep");
+        assert!(by_cameras.integer_x);
+        let by_noise = sweep_plot(&[row(4, 0.0), row(4, 0.02)], "t", "noise", "NRMSE").expect("a sweep");
+        assert!(!by_noise.integer_x);
     }
 }
