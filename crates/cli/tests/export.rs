@@ -113,7 +113,8 @@ fn vti_export_has_the_right_origin_spacing_and_values() {
 }
 
 /// `--average` takes cell averages of trained fields; a volume is resampled as it is, so
-/// on one the option did nothing without a word, as `--time` does with one.
+/// on one the option did nothing without a word, as `--time` does with one (which export.json
+/// then does not record).
 #[test]
 fn average_on_a_volume_is_warned_of() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -127,10 +128,17 @@ fn average_on_a_volume_is_warned_of() {
         "--npy",
         "--average",
         "4",
+        "--time",
+        "3",
     ]);
     ok(&o);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--average 4 has no effect") && err.contains("recon.vti is a volume"), "{err}");
+    assert!(err.contains("--time 3 has no effect"), "{err}");
+    // export.json records the time sampled, which is none: not the 3 that changed nothing.
+    let settings: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("export.json")).expect("settings")).expect("JSON");
+    assert_eq!(settings["time"], serde_json::Value::Null);
 }
 
 #[test]

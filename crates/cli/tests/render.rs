@@ -390,7 +390,7 @@ fn steps_and_supersampling_that_would_never_finish_are_refused() {
 }
 
 /// `--time` on a field of space alone changes nothing, and says so; the views are those
-/// rendered without it.
+/// rendered without it, and render.json records no time.
 #[test]
 fn a_time_given_to_a_static_field_is_warned_of() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -415,6 +415,8 @@ fn a_time_given_to_a_static_field_is_warned_of() {
     let (said, timed) = render("timed", &["--time", "3"]);
     assert!(said.contains("--time 3 has no effect") && said.contains("static field"), "{said}");
     assert_eq!(plain, timed);
+    // render.json records the time used, which is none: not the 3 that changed nothing.
+    assert_eq!(render_json(&dir.path().join("timed"))["time"], serde_json::Value::Null);
 }
 
 /// A `--time` that is no finite number is refused in one message: on a volume or a field of

@@ -151,6 +151,12 @@ impl Source {
 
     /// Warns that `--time` (`given`) changes nothing when the source is fixed in time: a volume,
     /// or a field of space alone.
+    /// Whether the source changes with time (a time-resolved field): only then does a time
+    /// select anything, and only then do `export.json` and `render.json` record one.
+    pub(crate) fn is_time_resolved(&self) -> bool {
+        matches!(self, Source::Field { times: Some(_), .. })
+    }
+
     pub(crate) fn warn_time_unused(&self, given: Option<f64>, path: &Path) {
         let Some(t) = given else { return };
         match self {
@@ -264,7 +270,8 @@ struct Settings<'a> {
     scene: Option<&'a Path>,
     aabb: Aabb,
     dims: [usize; 3],
-    time: f64,
+    /// The instant sampled; None for a source fixed in time, which `--time` does not change.
+    time: Option<f64>,
     units: &'a str,
     colormap: Colormap,
     value_label: &'a str,
@@ -360,6 +367,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let source = load_source(&args.recon, scene.as_ref())?;
     let time = source.sample_time(args.time, "--time")?;
     source.warn_time_unused(args.time, &args.recon);
+    let is_time_resolved = source.is_time_resolved();
     if args.average > 1 && matches!(source, Source::Volume(_)) {
         log::warn!(
             "--average {} has no effect: {} is a volume, resampled trilinearly; cell averages are taken of trained \
@@ -548,7 +556,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene: args.scene.as_deref(),
         aabb: volume.aabb,
         dims: volume.dims,
-        time,
+        time: is_time_resolved.then_some(time),
         units: &units,
         colormap: args.colormap,
         value_label: &args.value_label,

@@ -174,6 +174,8 @@ struct Settings<'a> {
     projector: RenderProjector,
     supersample: usize,
     step: Option<f64>,
+    /// The instant rendered: None for a source fixed in time, and for a time-resolved field's
+    /// scene views without --time (each at its frame's time).
     time: Option<f64>,
     /// The grid a trained field was sampled on for rendering (None: rendered exactly).
     baked: Option<[usize; 3]>,
@@ -563,11 +565,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         projector: if footprint { RenderProjector::Footprint } else { RenderProjector::Rays },
         supersample: args.supersample.max(1),
         step,
-        // The time asked, or that of a time-resolved field's orbit views (all at one).
-        time: args.time.or_else(|| match &source {
-            Source::Field { times: Some(_), .. } if args.orbit.is_some() => views.first().map(|v| v.time),
-            _ => None,
-        }),
+        // A time-resolved field's: the time asked, or that of its orbit views (all at one). A
+        // source fixed in time has none, whatever --time said (it was warned of as unused).
+        time: if source.is_time_resolved() {
+            args.time.or_else(|| args.orbit.and(views.first().map(|v| v.time)))
+        } else {
+            None
+        },
         baked: bake_dims,
         intensity_scale: scene.intensity_scale,
         full_scale,
