@@ -331,3 +331,29 @@ fn projector_and_hull_settings_a_config_does_not_use_are_refused() {
     ok(&fluidnerf(d, &again));
     ok(&fluidnerf(d, &["reconstruct", "--config", "run/config.json", "-o", "rerun", "-q"]));
 }
+
+/// A frame that its background leaves black is warned of once per command: a run's report
+/// draws its camera figure from the images the run read, rather than reading (and warning
+/// about) them again.
+#[test]
+fn a_frame_left_black_by_its_background_is_warned_of_once() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    edit_json(&d.join("scene/transforms.json"), |v| v["frames"][0]["background"] = serde_json::json!(1e9));
+    let warning = "nothing is left after its background is subtracted";
+    let count = |args: &[&str]| {
+        let out = fluidnerf(d, args);
+        ok(&out);
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        (err.matches(warning).count(), err)
+    };
+    let quick = ["--resolution", "8", "--max-iterations", "2"];
+    for (method, out) in [("sart", "voxels"), ("fast", "field")] {
+        let (n, err) = count(&[&["reconstruct", "scene", "-o", out, "--method", method][..], &quick].concat());
+        assert_eq!(n, 1, "{method}: {err}");
+        assert!(d.join(out).join("report.html").is_file(), "{method}: the report has its figure");
+    }
+    let (n, err) = count(&["info", "scene"]);
+    assert_eq!(n, 1, "info: {err}");
+}

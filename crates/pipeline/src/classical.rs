@@ -392,7 +392,7 @@ pub(crate) fn run(
         warnings: Vec::new(),
     };
     log::debug!("{method}: {:.1} s in all", session.elapsed_s());
-    finish(scene, dir, report, truth, session)
+    finish(scene, dir, report, truth, Some(&measured), session)
 }
 
 /// The NRMSE curve: evaluations over a [`TruthSample`] of the solver's volume.

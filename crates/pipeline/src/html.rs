@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fluidnerf_core::{Scene, Volume};
+use fluidnerf_core::{Image, Scene, Volume};
 use fluidnerf_metrics::{MetricsReport, StepMetrics};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{Axis, PanelGroup, PanelStyle, RunHistory, Trace};
@@ -257,6 +257,7 @@ pub(crate) fn write_run_html(
     scene: &Scene,
     report: &RunReport,
     truth: &[(Option<f64>, Volume)],
+    preprocessed: Option<&[Image]>,
 ) -> Result<(), PipelineError> {
     let Some(first) = report.volumes.first() else { return Ok(()) };
     let volume = fluidnerf_io::volume::read_npy(&dir.path(&first.file), scene.aabb)?;
@@ -317,7 +318,7 @@ pub(crate) fn write_run_html(
         html.tables.push(table);
     }
     if report.volumes.len() == 1 {
-        match camera_figure(scene, report, &run.volume) {
+        match camera_figure(scene, report, &run.volume, preprocessed) {
             Ok(png) => html.figures.push(Figure {
                 caption: format!(
                     "Every camera (at most {CAMERA_FIGURE_FRAMES}): the image as preprocessed, the reconstruction's \
@@ -334,14 +335,28 @@ pub(crate) fn write_run_html(
 }
 
 /// Frames shown in the camera figure of `report.html`.
-const CAMERA_FIGURE_FRAMES: usize = 24;
+pub(crate) const CAMERA_FIGURE_FRAMES: usize = 24;
 
-/// One row per camera: measured image, reprojection, difference (thumbnails).
-fn camera_figure(scene: &Scene, report: &RunReport, volume: &Volume) -> Result<Vec<u8>, PipelineError> {
-    let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
+/// One row per camera: measured image, reprojection, difference (thumbnails). `preprocessed`:
+/// the images as the run read them (at least the figure's frames); without them they are read
+/// again, and whatever that reading warns of is said a second time.
+fn camera_figure(
+    scene: &Scene,
+    report: &RunReport,
+    volume: &Volume,
+    preprocessed: Option<&[Image]>,
+) -> Result<Vec<u8>, PipelineError> {
+    let loaded;
+    let images = match preprocessed {
+        Some(images) => images,
+        None => {
+            loaded = fluidnerf_io::scene::load_preprocessed(scene)?.images;
+            &loaded
+        }
+    };
     let spacing = volume.spacing().min_element();
     let mut rows = Vec::new();
-    for (i, (frame, measured)) in scene.frames.iter().zip(&pre.images).enumerate().take(CAMERA_FIGURE_FRAMES) {
+    for (i, (frame, measured)) in scene.frames.iter().zip(images).enumerate().take(CAMERA_FIGURE_FRAMES) {
         let (gain, offset) = report
             .preprocessing
             .as_ref()

@@ -501,16 +501,19 @@ impl<T> BestHoldout<T> {
 }
 
 /// Finishes a run: `report.html` (a failure there is a warning), then `report.json`, the
-/// completion marker.
+/// completion marker. `measured` holds the images the run read, for the report's camera figure
+/// ([`html::write_run_html`]).
 pub(crate) fn finish(
     scene: &Scene,
     dir: &RunDir,
     mut report: RunReport,
     truth: &[(Option<f64>, Volume)],
+    measured: Option<&measured::Measured>,
     session: &mut Session,
 ) -> Result<RunReport, PipelineError> {
     report.warnings = session.warnings.clone();
-    if let Err(e) = html::write_run_html(dir, scene, &report, truth) {
+    let preprocessed = measured.map(|m| m.preprocessed(html::CAMERA_FIGURE_FRAMES));
+    if let Err(e) = html::write_run_html(dir, scene, &report, truth, preprocessed.as_deref()) {
         session.warn(&format!("could not write {}: {e}", dir.report_html().display()));
         report.warnings = session.warnings.clone();
     }

@@ -132,6 +132,23 @@ impl Measured {
         (train, held)
     }
 
+    /// The first `count` frames' images as preprocessed, before balancing (times their
+    /// `gains`): those of the report's camera figure, which then need not be read again.
+    pub(crate) fn preprocessed(&self, count: usize) -> Vec<Image> {
+        self.images
+            .iter()
+            .zip(&self.gains)
+            .take(count)
+            .map(|(image, &gain)| {
+                let mut image = image.clone();
+                if gain != 1.0 {
+                    image.data.iter_mut().for_each(|v| *v = (f64::from(*v) * gain) as f32);
+                }
+                image
+            })
+            .collect()
+    }
+
     /// The report's preprocessing record. `fitted` holds, per training frame (in frame order),
     /// the gain and offset fitted on top of the balancing; `scores` the held-out frames'
     /// scores, in frame order.

@@ -642,7 +642,7 @@ impl Ctx<'_> {
             preprocessing: Some(self.measured.report(self.scene, fitted.as_deref(), &holdout_scores)),
             warnings: Vec::new(),
         };
-        finish(self.scene, dir, report, self.truth, session)
+        finish(self.scene, dir, report, self.truth, Some(self.measured), session)
     }
 }
 

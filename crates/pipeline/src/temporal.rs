@@ -774,7 +774,7 @@ impl Ctx<'_> {
                 })
                 .collect(),
         };
-        finish(self.scene, dir, report, self.truth, session)
+        finish(self.scene, dir, report, self.truth, None, session)
     }
 }
 
