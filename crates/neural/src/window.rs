@@ -204,4 +204,38 @@ mod tests {
         assert!((b[0].1 - 0.75).abs() < 1e-12 && (b[1].1 - 0.25).abs() < 1e-12);
         assert_eq!(blend(&w, 1.0), vec![(1, 1.0, 1.0)]);
     }
+
+    /// The shell loop of docs/cluster.md that sizes a Slurm job array counts the windows of
+    /// this plan, and ends for every window, 0 (one window) included.
+    #[test]
+    #[cfg(unix)]
+    fn the_cluster_guides_shell_count_matches_the_plan() {
+        let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/cluster.md"))
+            .expect("docs/cluster.md");
+        let start = doc.find("N=0 a=0").expect("the count's first line");
+        let end = start + doc[start..].find("; done").expect("the count's loop") + "; done".len();
+        let count = &doc[start..end];
+        for (frames, window, overlap) in
+            [(120, 8, 2), (10, 4, 1), (9, 4, 2), (5, 5, 0), (5, 9, 3), (12, 0, 0), (7, 2, 1)]
+        {
+            let script = format!("F={frames} W={window} O={overlap}\n{count}\necho \"$N\"");
+            let mut child = std::process::Command::new("sh")
+                .args(["-c", &script])
+                .stdout(std::process::Stdio::piped())
+                .spawn()
+                .expect("runs sh");
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+            while child.try_wait().expect("waits").is_none() {
+                if std::time::Instant::now() > deadline {
+                    child.kill().expect("kills sh");
+                    child.wait().expect("reaps sh");
+                    panic!("F={frames} W={window} O={overlap}: the loop never ends:\n{count}");
+                }
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            let out = child.wait_with_output().expect("output");
+            let n: usize = String::from_utf8_lossy(&out.stdout).trim().parse().expect("a count");
+            assert_eq!(n, plan_windows(frames, window, overlap).len(), "F={frames} W={window} O={overlap}");
+        }
+    }
 }
