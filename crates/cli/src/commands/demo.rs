@@ -162,7 +162,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let say = |what: &str| println!("\n== demo: {what}");
 
     say("synthesising the scene");
-    super::run_line(&synth_line)?;
+    // A synthesis stopped by Ctrl-C writes nothing and returns no error: without this the
+    // first run went on to look for the scene and failed, blaming a missing transforms.json.
+    if super::run_line(&synth_line)? != std::process::ExitCode::SUCCESS {
+        anyhow::bail!("interrupted before the scene was made; rerun the same command to start again");
+    }
     // The scene is replaced: an earlier demo's comparison and pictures would otherwise stand
     // beside this one's runs if it failed half way.
     for file in DEMO_FILES {
@@ -199,7 +203,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             path(&run_dir.join("metrics.csv")),
             "--force".into(),
         ]);
-        super::run_line(&line)?;
+        if super::run_line(&line)? != std::process::ExitCode::SUCCESS {
+            anyhow::bail!("scoring {} did not finish", run_dir.display());
+        }
     }
 
     let scene = fluidnerf_io::scene::load_scene(&scene_dir)?;

@@ -243,13 +243,14 @@ pub(crate) fn check_memory(what: impl FnOnce() -> String, bytes: u64) -> anyhow:
 }
 
 /// Runs one subcommand line in-process, exactly as a user would type it (without the program
-/// name): the demo and studies synthesise their scenes and score their runs this way.
-pub(crate) fn run_line(line: &[String]) -> anyhow::Result<()> {
+/// name): the demo and studies synthesise their scenes and score their runs this way. The exit
+/// code is the command's: 130 for one stopped by Ctrl-C (which returns no error).
+pub(crate) fn run_line(line: &[String]) -> anyhow::Result<ExitCode> {
     use clap::Parser;
     let mut argv = vec!["fluidnerf".to_string()];
     argv.extend(line.iter().cloned());
     let cli = crate::Cli::try_parse_from(&argv).map_err(|e| anyhow::anyhow!("{e}"))?;
-    run(cli.command).map(|_| ())
+    run(cli.command)
 }
 
 /// Creates a command's output folder `out` (and its parents), or refuses it by what is in the
