@@ -482,6 +482,44 @@ fn transforms_json_of_videos_keeps_masks_and_keys() {
     }
 }
 
+/// A transforms.json whose frames name one video twice is refused (both cameras would get the
+/// same pictures, as two frames of one image would, which a scene refuses), and a frame's own
+/// `time` beside a video, replaced by the recording's times, is warned of.
+#[test]
+fn transforms_json_of_videos_refuses_a_shared_video_and_warns_of_a_frames_time() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("rig");
+    std::fs::create_dir_all(&src).expect("mkdir");
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video");
+    let write = |edit: &dyn Fn(&mut Vec<serde_json::Value>)| {
+        let mut frames = Vec::new();
+        for (n, cam) in rig() {
+            std::fs::copy(fixtures.join("ramp_mjpeg.avi"), src.join(format!("{n}.avi"))).expect("copies the fixture");
+            let m = fluidnerf_io::scene::world_from_camera_to_opengl_c2w(&cam.world_from_camera);
+            frames.push(serde_json::json!({"file_path": format!("{n}.avi"), "camera": n, "transform_matrix": m}));
+        }
+        edit(&mut frames);
+        let v = serde_json::json!({
+            "w": 32, "h": 24, "fl_x": 40.0, "fl_y": 40.5, "cx": 15.25, "cy": 11.5,
+            "aabb": [[-10, -10, -10], [10, 10, 10]], "frames": frames,
+        });
+        std::fs::write(src.join("transforms.json"), v.to_string()).expect("writes");
+    };
+    let out = dir.path().join("scene");
+    let import = || fluidnerf(&["import", "--transforms", s(&src), "--video-frames", "0..2", "-o", s(&out), "--force"]);
+    write(&|frames| frames[1]["file_path"] = frames[0]["file_path"].clone());
+    let o = import();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("camera cam0 and camera cam1 both name the video") && err.contains("cam0.avi"), "{err}");
+    write(&|frames| frames[2]["time"] = 3.0.into());
+    let o = import();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("camera cam2 (") && err.contains("its `time` 3 is not used"), "{err}");
+    assert!(load_scene(&out).expect("loads").frames.iter().all(|f| f.time.is_some_and(|t| t < 3.0)));
+}
+
 /// One video per camera (two full-range MJPEG AVIs, one limited-range): each kept frame
 /// becomes a float TIFF in `frames/<camera>/` with its time; `--video-frames`,
 /// `--video-every` and `--video-time-offset` select and shift; `import.json` records how each

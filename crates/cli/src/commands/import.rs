@@ -310,6 +310,30 @@ fn expand_videos(
             );
         }
     }
+    // One recording decoded for two cameras gives both the same pictures from different poses,
+    // as one image named by two frames would (which the scene's validation refuses).
+    let label = |i: usize, f: &Frame| f.camera_name.as_ref().map_or(format!("frame {i}"), |n| format!("camera {n}"));
+    let mut recordings: std::collections::HashMap<PathBuf, (usize, &Frame)> = std::collections::HashMap::new();
+    for (i, f) in frames.iter().enumerate().filter(|(_, f)| fluidnerf_io::video::is_video(&f.file_path)) {
+        let file = f.file_path.canonicalize().unwrap_or_else(|_| f.file_path.clone());
+        if let Some((j, other)) = recordings.insert(file, (i, f)) {
+            bail!(
+                "{} and {} both name the video {}: each camera needs its own recording",
+                label(j, other),
+                label(i, f),
+                f.file_path.display()
+            );
+        }
+        // A frame's own time cannot go with every frame decoded from its video.
+        if let Some(t) = f.time {
+            log::warn!(
+                "{} ({}): its `time` {} is not used: a video's frames take their times from the recording, in                  seconds (shift them with --video-time-offset)",
+                label(i, f),
+                f.file_path.display(),
+                num(t)
+            );
+        }
+    }
     let mut expanded = Vec::new();
     let mut sources = Vec::new();
     let mut records: Vec<VideoRecord> = Vec::new();
