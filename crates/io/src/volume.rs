@@ -49,11 +49,24 @@ pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
         _ => 1,
     };
     let claimed = shape.iter().try_fold(item, |acc, &d| acc.checked_mul(d));
-    if claimed.is_none_or(|b| b > bytes.len() as u64) {
-        return Err(IoError::invalid(
-            path,
-            format!("shape {shape:?} needs more data than the file's {} bytes hold", bytes.len()),
-        ));
+    // Against the data after the header: a file cut short by less than its header's length
+    // failed half way through reading, as "failed to fill whole buffer".
+    let data_bytes = bytes.len().saturating_sub(npy_data_offset(&bytes)) as u64;
+    match claimed {
+        None => {
+            return Err(IoError::invalid(path, format!("shape {shape:?} needs more data than any file holds")));
+        }
+        Some(b) if b > data_bytes => {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "shape {shape:?} of {} needs {b} bytes of data, but {data_bytes} follow the header (a truncated \
+                     file?)",
+                    dtype.descr()
+                ),
+            ));
+        }
+        Some(_) => {}
     }
     let bad = |e: std::io::Error| IoError::invalid(path, format!("cannot read the array data: {e}"));
     let data: Vec<f32> = match &dtype {
@@ -80,6 +93,19 @@ pub fn read_npy(path: &Path, aabb: Aabb) -> Result<Volume, IoError> {
         log::warn!("{}: {why}", path.display());
     }
     Ok(Volume::from_vec(dims, aabb, data))
+}
+
+/// Where the data of the `.npy` file `bytes` begin: after the magic string and version (8
+/// bytes), the header's length (2 bytes in version 1, 4 from version 2 on, little-endian) and
+/// the header. Past the end for a file too short to say.
+fn npy_data_offset(bytes: &[u8]) -> usize {
+    let field = |range: std::ops::Range<usize>| {
+        bytes.get(range).map(|b| b.iter().rev().fold(0usize, |n, &x| n << 8 | x as usize))
+    };
+    match bytes.get(6) {
+        Some(1) => field(8..10).map_or(usize::MAX, |n| 10 + n),
+        _ => field(8..12).map_or(usize::MAX, |n| 12usize.saturating_add(n)),
+    }
 }
 
 /// Why `dims` voxels look wrong for `aabb`: a `.npy` holds no box, so it is stretched over the
@@ -556,6 +582,27 @@ mod tests {
             .expect("begin");
         w.extend(data.iter().copied()).expect("extend");
         w.finish().expect("finish");
+    }
+
+    /// A file cut short, even by less than its header's length, is refused before it is read,
+    /// with how much data its shape needs and how much there is.
+    #[test]
+    fn a_truncated_npy_says_how_much_data_is_missing() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("v.npy");
+        let v = test_volume();
+        write_npy(&p, &v).expect("write");
+        let bytes = std::fs::read(&p).expect("bytes");
+        for cut in [4, 100] {
+            std::fs::write(&p, &bytes[..bytes.len() - cut]).expect("truncates");
+            let err = read_npy(&p, v.aabb).expect_err("truncated").to_string();
+            let needed =
+                format!("shape [3, 4, 5] of '<f4' needs 240 bytes of data, but {} follow the header", 240 - cut);
+            assert!(err.contains(&needed) && err.contains("v.npy"), "{err}");
+        }
+        let p2 = dir.path().join("v2.npy");
+        write_npy_with(&p2, &[1, 1, 2], &[1f32, 2.0], npyz::Order::C);
+        assert_eq!(npy_data_offset(&std::fs::read(&p2).expect("bytes")) % 64, 0, "headers are padded to 64 bytes");
     }
 
     #[test]
