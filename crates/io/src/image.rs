@@ -226,6 +226,9 @@ pub fn decode_image(path: &Path, bytes: &[u8], linearisation: Linearisation) -> 
         let file = crate::davis::decode_davis(path, bytes)?;
         let kind = file.kind;
         one_davis_frame(path, file).map(|image| (image, kind))
+    } else if bytes.is_empty() {
+        // "Not a PNG" would send one looking for the wrong format.
+        Err(IoError::invalid(path, "the image file is empty (0 bytes)"))
     } else {
         Err(IoError::invalid(
             path,
@@ -354,6 +357,8 @@ pub fn read_dimensions(path: &Path) -> Result<(u32, u32), IoError> {
             .read_to_end(&mut head)
             .map_err(|e| IoError::io(path, "image file", e))?;
         crate::davis::decode_dimensions(path, &head)
+    } else if head.is_empty() {
+        Err(IoError::invalid(path, "the image file is empty (0 bytes)"))
     } else {
         Err(IoError::invalid(path, "unreadable image: not a PNG, JPEG, TIFF or DaVis (.im7, .imx) file"))
     }
@@ -953,6 +958,13 @@ mod tests {
             err.to_string().contains("junk.png") && err.to_string().contains("not a PNG, JPEG, TIFF or DaVis"),
             "{err}"
         );
+        // An empty file (a copy that failed) is called empty, not of another format.
+        let p = dir.path().join("empty.png");
+        std::fs::write(&p, b"").expect("write");
+        for err in [read_image(&p).expect_err("empty").to_string(), read_dimensions(&p).expect_err("empty").to_string()]
+        {
+            assert!(err.contains("empty.png: the image file is empty (0 bytes)"), "{err}");
+        }
         let err = read_image(&dir.path().join("none.png")).expect_err("missing");
         assert!(matches!(err, IoError::NotFound { .. }), "{err}");
         assert!(err.to_string().contains("none.png"), "{err}");
