@@ -756,6 +756,25 @@ def test_read_davis_gives_readims_frames_and_labels(name):
         assert all(f"CameraName{k}" in attributes for k in range(len(labels)))
 
 
+def test_a_scene_whose_files_are_cut_short_or_empty_says_so_naming_them(tmp_path, static_scene):
+    folder = tmp_path / "copy"
+    shutil.copytree(static_scene.root, folder)
+    truth = folder / "truth" / "truth.npy"
+    data = truth.read_bytes()
+    # Short by less than the .npy header's length: it failed half way, "failed to fill whole buffer".
+    truth.write_bytes(data[:-4])
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="truth.npy: shape .* needs .* bytes of data, but .* follow"
+    ):
+        fluidnerf.load_scene(folder).truth()
+    truth.write_bytes(data)
+    image = folder / json.loads((folder / "transforms.json").read_text())["frames"][1]["file_path"]
+    image.write_bytes(b"")
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"the image file is empty \(0 bytes\)") as e:
+        fluidnerf.load_scene(folder).images()
+    assert image.name in str(e.value)
+
+
 def test_read_davis_refuses_a_truncated_file_naming_it(tmp_path):
     short = tmp_path / "short.im7"
     short.write_bytes((DAVIS / "word.im7").read_bytes()[:300])
