@@ -775,6 +775,21 @@ def test_a_scene_whose_files_are_cut_short_or_empty_says_so_naming_them(tmp_path
     assert image.name in str(e.value)
 
 
+def test_a_folder_where_the_scene_file_goes_is_refused_even_with_force(tmp_path, static_scene):
+    folder = tmp_path / "out"
+    (folder / "transforms.json").mkdir(parents=True)
+    for force in (False, True):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match="transforms.json: is a folder, where the scene file goes"
+        ):
+            static_scene.save(folder, force=force)
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match="transforms.json: is a folder, where the scene file goes"
+        ):
+            fluidnerf.synth(folder, "demo", resolution=8, force=force)
+    assert sorted(p.name for p in folder.iterdir()) == ["transforms.json"]
+
+
 def test_read_davis_refuses_a_truncated_file_naming_it(tmp_path):
     short = tmp_path / "short.im7"
     short.write_bytes((DAVIS / "word.im7").read_bytes()[:300])

@@ -873,3 +873,20 @@ fn pixels_below_the_ssim_window_are_refused_naming_the_option() {
     let o = run_small(&dir, &["--pixels", "7", "--resolution", "8"]);
     assert!(o.status.success(), "{}", text(&o).1);
 }
+
+/// A folder named `transforms.json` where the scene file goes is refused before any work, even
+/// with --force: the scene could not be written over it, and failed only at the end, as "Is a
+/// directory", after the images were made.
+#[test]
+fn a_folder_where_the_scene_file_goes_is_refused_up_front() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("scene");
+    std::fs::create_dir_all(dir.join("transforms.json")).expect("mkdir");
+    for extra in [&[][..], &["--force"]] {
+        let o = run_small(&dir, extra);
+        let (_, err) = text(&o);
+        assert!(!o.status.success(), "{extra:?}");
+        assert!(err.contains("transforms.json: is a folder, where the scene file goes"), "{extra:?}: {err}");
+        assert!(!dir.join("images").exists(), "{extra:?}: images were written");
+    }
+}

@@ -341,6 +341,13 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
     use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
     guard(|| refuse_other_kind(&folder, FolderKind::Scene, "synth").map_err(|e| err(e.to_string())))?;
     let scene_file = folder.join("transforms.json");
+    // Even with force=True it could not be written, and would fail as "Is a directory".
+    if scene_file.is_dir() {
+        return Err(err(format!(
+            "{}: is a folder, where the scene file goes; move it away or write elsewhere",
+            scene_file.display()
+        )));
+    }
     if scene_file.exists() && !force {
         return Err(err(format!("{} already holds a scene; pass force=True to overwrite it", folder.display())));
     }

@@ -363,6 +363,13 @@ impl PyScene {
             use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
             refuse_other_kind(&folder, FolderKind::Scene, "Scene.save").map_err(|e| err(e.to_string()))?;
             let file = fluidnerf_io::scene::scene_file_path(&folder);
+            // Even with force=True it could not be written, and would fail as "Is a directory".
+            if file.is_dir() {
+                return Err(err(format!(
+                    "{}: is a folder, where the scene file goes; move it away or save elsewhere",
+                    file.display()
+                )));
+            }
             if file.exists() && !force {
                 return Err(err(format!(
                     "{} already holds a scene; pass force=True to overwrite it",

@@ -645,6 +645,10 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     settings.times.sort_by(f64::total_cmp);
     fluidnerf_pipeline::rundir::refuse_other_kind(&out, fluidnerf_pipeline::rundir::FolderKind::Scene, "synth")?;
     let scene_file = out.join("transforms.json");
+    // Even with --force it could not be written, and would fail as "Is a directory".
+    if scene_file.is_dir() {
+        bail!("{}: is a folder, where the scene file goes; move it away or write elsewhere", scene_file.display());
+    }
     if scene_file.exists() && !args.force {
         bail!("{} already holds a scene; pass --force to overwrite it", out.display());
     }
