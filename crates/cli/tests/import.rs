@@ -1773,3 +1773,48 @@ fn projection_matrices_and_dlt_coefficients_become_a_scene() {
     let e = stderr(&o);
     assert!(!o.status.success() && e.contains("cam1.txt") && e.contains("`cam1`") && e.contains("singular"), "{e}");
 }
+
+/// A re-import removes the frames an earlier import decoded that the new scene does not read,
+/// but never one it reads as a background: a recording's first frames, before the flow, are
+/// the usual dark frames.
+#[test]
+fn a_reimport_keeps_the_earlier_frames_it_reads_as_backgrounds() {
+    let (dir, calib, videos) = video_rig();
+    for (n, _) in rig() {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // One instant of every camera, its first frame subtracted as the background.
+    let mut t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("transforms.json")).expect("reads")).expect("json");
+    let frames: Vec<serde_json::Value> = t["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .filter(|f| f["file_path"].as_str().is_some_and(|p| p.ends_with("000002.tif")))
+        .map(|f| {
+            let mut f = f.clone();
+            let image = out.join(f["file_path"].as_str().expect("path"));
+            f["file_path"] = s(&image).into();
+            f["background"] = s(&image.with_file_name("000000.tif")).into();
+            f.as_object_mut().expect("object").remove("time");
+            f
+        })
+        .collect();
+    assert_eq!(frames.len(), 3);
+    t["frames"] = frames.into();
+    let edited = dir.path().join("one-instant.json");
+    std::fs::write(&edited, serde_json::to_string(&t).expect("json")).expect("writes");
+    let o = fluidnerf(&["import", "--transforms", s(&edited), "-o", s(&out), "--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for (n, _) in rig() {
+        let frames = out.join("frames").join(&n);
+        assert!(frames.join("000000.tif").is_file(), "{n}: the background frame is kept");
+        assert!(frames.join("000002.tif").is_file(), "{n}: the image is kept");
+        assert!(!frames.join("000003.tif").exists(), "{n}: a frame no longer read is removed");
+    }
+    let scene = load_scene(&out).expect("the scene written loads");
+    assert!(fluidnerf_io::scene::load_preprocessed(&scene).is_ok(), "its backgrounds are there");
+}

@@ -1138,12 +1138,22 @@ fn remove_stale_davis_frames(out: &Path, earlier: &[PathBuf], referenced: &HashS
     }
 }
 
-/// The files `scene` reads, images, masks and flat fields, as canonical paths.
+/// The files `scene` reads, images, masks, background frames and flat fields, as canonical
+/// paths.
 fn referenced_files(scene: &Scene, recording: &fluidnerf_io::scene::Recording) -> HashSet<PathBuf> {
     let images = scene.frames.iter().map(|f| scene.resolve(&f.file_path));
     let masks = recording.frames.iter().filter_map(|r| r.mask_path.as_ref()).map(|m| scene.resolve(m));
     let flats = recording.frames.iter().flat_map(|r| &r.flat_field).map(|p| scene.resolve(p));
-    images.chain(masks).chain(flats).filter_map(|p| p.canonicalize().ok()).collect()
+    let backgrounds = recording
+        .frames
+        .iter()
+        .filter_map(|r| match &r.background {
+            fluidnerf_io::scene::Background::Frames(list) => Some(list),
+            _ => None,
+        })
+        .flatten()
+        .map(|p| scene.resolve(p));
+    images.chain(masks).chain(flats).chain(backgrounds).filter_map(|p| p.canonicalize().ok()).collect()
 }
 
 fn is_referenced(path: &Path, referenced: &HashSet<PathBuf>) -> bool {
