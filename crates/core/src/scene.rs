@@ -381,20 +381,19 @@ mod tests {
         assert_eq!(scene.times_without_truth(), vec![14.0, 16.0]);
     }
 
-    /// Cameras ten times farther from the ball than in the test below, with ten times the focal
-    /// length, as a laboratory rig stands around a flow: the ball is as large in the images.
-    /// The lattice of the cube reaching the cameras had its points 19 units apart around a
-    /// ball of radius 4, none of them bright in every view, and the box fell back to the
-    /// common view, 60 units across.
-    #[test]
-    fn a_bright_ball_seen_from_afar_bounds_the_estimated_box() {
+    /// The ball of the box tests and six cameras at two heights around it, `scale` × 60 units
+    /// from the axis with `scale` × 50 px focal lengths (the ball as large in the images at every
+    /// scale), each with its image: the ball bright (1000) on a dim ground (5).
+    fn ball_rig(scale: f64) -> (DVec3, f64, Vec<Frame>, Vec<Image>) {
         let (ball, radius) = (DVec3::new(3.0, -2.0, 1.0), 4.0);
-        let k = Intrinsics { width: 48, height: 40, fx: 500.0, fy: 500.0, cx: 23.5, cy: 19.5, skew: 0.0 };
+        let f = 50.0 * scale;
+        let k = Intrinsics { width: 48, height: 40, fx: f, fy: f, cx: 23.5, cy: 19.5, skew: 0.0 };
         let mut frames = Vec::new();
         let mut images = Vec::new();
         for c in 0..6 {
             let a = c as f64 / 6.0 * std::f64::consts::TAU;
-            let centre = DVec3::new(600.0 * a.cos(), 600.0 * a.sin(), if c % 2 == 0 { 250.0 } else { -200.0 });
+            let z = if c % 2 == 0 { 25.0 } else { -20.0 };
+            let centre = DVec3::new(60.0 * a.cos(), 60.0 * a.sin(), z) * scale;
             let camera = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
             let mut img = Image::from_vec(48, 40, vec![5.0; 48 * 40]);
             for row in 0..40 {
@@ -414,6 +413,12 @@ mod tests {
             });
             images.push(img);
         }
+        (ball, radius, frames, images)
+    }
+
+    /// The estimate from `ball_rig(scale)` holds the ball and is not much larger.
+    fn assert_box_bounds_the_ball(scale: f64) -> (Vec<Frame>, Vec<Image>) {
+        let (ball, radius, frames, images) = ball_rig(scale);
         let est = estimate_box(&frames, &images, &BoxEstimateParams::default()).expect("a box");
         assert!(est.from_bright_pixels, "{est:?}");
         for axis in 0..3 {
@@ -421,46 +426,24 @@ mod tests {
             assert!(lo <= ball[axis] - radius && hi >= ball[axis] + radius, "axis {axis}: {lo} .. {hi}");
             assert!(hi - lo < 2.0 * 2.0 * radius, "axis {axis}: {lo} .. {hi} is far larger than the ball");
         }
+        (frames, images)
+    }
+
+    /// Cameras ten times farther from the ball than in the test below, with ten times the focal
+    /// length, as a laboratory rig stands around a flow: the ball is as large in the images.
+    /// The lattice of the cube reaching the cameras had its points 19 units apart around a
+    /// ball of radius 4, none of them bright in every view, and the box fell back to the
+    /// common view, 60 units across.
+    #[test]
+    fn a_bright_ball_seen_from_afar_bounds_the_estimated_box() {
+        assert_box_bounds_the_ball(10.0);
     }
 
     /// Six cameras at two heights around a bright ball: the estimated box holds the ball and
     /// is not much larger; with black images the common view is used instead.
     #[test]
     fn estimated_box_bounds_a_bright_ball() {
-        let (ball, radius) = (DVec3::new(3.0, -2.0, 1.0), 4.0);
-        let k = Intrinsics { width: 48, height: 40, fx: 50.0, fy: 50.0, cx: 23.5, cy: 19.5, skew: 0.0 };
-        let mut frames = Vec::new();
-        let mut images = Vec::new();
-        for c in 0..6 {
-            let a = c as f64 / 6.0 * std::f64::consts::TAU;
-            let centre = DVec3::new(60.0 * a.cos(), 60.0 * a.sin(), if c % 2 == 0 { 25.0 } else { -20.0 });
-            let camera = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
-            let mut img = Image::from_vec(48, 40, vec![5.0; 48 * 40]);
-            for row in 0..40 {
-                for col in 0..48 {
-                    let ray = camera.pixel_ray(col as f64, row as f64).expect("ray");
-                    let along = (ball - ray.origin).dot(ray.dir);
-                    if (ray.at(along) - ball).length() < radius {
-                        img.set(col, row, 1000.0);
-                    }
-                }
-            }
-            frames.push(Frame {
-                camera,
-                file_path: format!("c{c}.png").into(),
-                time: None,
-                camera_name: None,
-                holdout: false,
-            });
-            images.push(img);
-        }
-        let est = estimate_box(&frames, &images, &BoxEstimateParams::default()).expect("a box");
-        assert!(est.from_bright_pixels);
-        for axis in 0..3 {
-            let (lo, hi) = (est.aabb.min[axis], est.aabb.max[axis]);
-            assert!(lo <= ball[axis] - radius && hi >= ball[axis] + radius, "axis {axis}: {lo} .. {hi}");
-            assert!(hi - lo < 2.0 * 2.0 * radius, "axis {axis}: {lo} .. {hi} is far larger than the ball");
-        }
+        let (frames, images) = assert_box_bounds_the_ball(1.0);
         let dark: Vec<Image> = images.iter().map(|i| Image::zeros(i.width, i.height)).collect();
         let est = estimate_box(&frames, &dark, &BoxEstimateParams::default()).expect("common view");
         assert!(!est.from_bright_pixels);
