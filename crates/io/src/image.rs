@@ -405,6 +405,9 @@ fn read_with_image_crate(
     linearisation: Linearisation,
 ) -> Result<(Image, SampleKind), IoError> {
     let name = if format == image::ImageFormat::Png { "PNG" } else { "JPEG" };
+    if format == image::ImageFormat::Jpeg {
+        warn_of_exif_orientation(path, bytes);
+    }
     let img = image::load_from_memory_with_format(bytes, format)
         .map_err(|e| IoError::invalid(path, format!("unreadable {name}: {e}")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
@@ -595,6 +598,30 @@ fn check_white_is_zero<R: std::io::Read + std::io::Seek>(
         );
     }
     Ok(())
+}
+
+/// The EXIF orientation of a JPEG other than "as stored", if it has one: a camera held on its
+/// side writes its pixels as the sensor reads them and a tag telling viewers to turn them.
+pub fn exif_orientation(bytes: &[u8]) -> Option<image::metadata::Orientation> {
+    use image::ImageDecoder as _;
+    let mut decoder = image::codecs::jpeg::JpegDecoder::new(std::io::Cursor::new(bytes)).ok()?;
+    decoder.orientation().ok().filter(|o| *o != image::metadata::Orientation::NoTransforms)
+}
+
+/// Warns (once per run) of a JPEG whose EXIF orientation turns or flips it for display:
+/// fluidnerf reads the pixels as stored, while tools that show the picture turned (OpenCV's
+/// `imread` among them) calibrate the turned picture, which a square image does not reveal.
+fn warn_of_exif_orientation(path: &Path, bytes: &[u8]) {
+    let Some(orientation) = exif_orientation(bytes) else { return };
+    static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !WARNED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        log::warn!(
+            "{}: its EXIF orientation asks viewers to show it turned or flipped ({orientation:?}); fluidnerf reads \
+             the pixels as stored, so the camera's calibration must be of the stored picture (OpenCV's imread \
+             turns it unless given IMREAD_IGNORE_ORIENTATION); further such images are not reported",
+            path.display()
+        );
+    }
 }
 
 /// Interleaved samples with `channels` per pixel (1 gray, 2 gray+alpha, 3 RGB, 4 RGBA) to gray.
@@ -879,6 +906,49 @@ mod tests {
     /// Samples of 1, 2 or 4 bits came back packed and were refused as a TIFF holding "2 samples"
     /// for its 8 pixels; 12-bit ones with the decoder's "color type Gray(12) is unsupported".
     /// Both are now refused saying how many bits the TIFF has and what is read.
+    /// A JPEG with an APP1 EXIF segment after its start-of-image marker, whose IFD0 holds the
+    /// orientation tag (274) with `value`, written by hand as a camera writes it.
+    fn jpeg_with_orientation(value: u16) -> Vec<u8> {
+        let mut plain = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new(&mut plain)
+            .encode(&[0u8; 64], 8, 8, image::ExtendedColorType::L8)
+            .expect("encodes");
+        let mut tiff = b"II*\0\x08\0\0\0".to_vec();
+        tiff.extend_from_slice(&1u16.to_le_bytes()); // one entry
+        tiff.extend_from_slice(&274u16.to_le_bytes()); // Orientation
+        tiff.extend_from_slice(&3u16.to_le_bytes()); // SHORT
+        tiff.extend_from_slice(&1u32.to_le_bytes()); // one value
+        tiff.extend_from_slice(&value.to_le_bytes());
+        tiff.extend_from_slice(&[0, 0, 0, 0, 0, 0]); // padding, no next IFD
+        let mut app1 = b"Exif\0\0".to_vec();
+        app1.extend_from_slice(&tiff);
+        let mut out = plain[..2].to_vec();
+        out.extend_from_slice(&[0xff, 0xe1]);
+        out.extend_from_slice(&u16::try_from(app1.len() + 2).expect("short").to_be_bytes());
+        out.extend_from_slice(&app1);
+        out.extend_from_slice(&plain[2..]);
+        out
+    }
+
+    #[test]
+    fn a_jpegs_exif_orientation_is_found() {
+        use image::metadata::Orientation;
+        assert_eq!(exif_orientation(&jpeg_with_orientation(6)), Some(Orientation::Rotate90));
+        assert_eq!(exif_orientation(&jpeg_with_orientation(3)), Some(Orientation::Rotate180));
+        assert_eq!(exif_orientation(&jpeg_with_orientation(1)), None, "as stored");
+        let mut plain = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new(&mut plain)
+            .encode(&[0u8; 64], 8, 8, image::ExtendedColorType::L8)
+            .expect("encodes");
+        assert_eq!(exif_orientation(&plain), None, "no EXIF");
+        // The pixels are read as stored either way.
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("turned.jpg");
+        std::fs::write(&path, jpeg_with_orientation(6)).expect("writes");
+        let image = read_image(&path).expect("reads");
+        assert_eq!((image.width, image.height), (8, 8));
+    }
+
     #[test]
     fn tiff_samples_of_other_widths_are_refused_naming_the_bits() {
         let p = Path::new("bilevel.tif");
