@@ -1079,30 +1079,48 @@ fn read_stereo(
     Ok(Some(cams))
 }
 
+/// The calibration files `path` names: itself, or, for a folder (`what` in errors), its files
+/// whose extension is one of `extensions` (any letter case) and that `keep` accepts, in name
+/// order; a folder without any is refused with `none`.
+fn calibration_files(
+    path: &Path,
+    what: &'static str,
+    extensions: &[&str],
+    keep: impl Fn(&Path) -> bool,
+    none: &str,
+) -> Result<Vec<PathBuf>, IoError> {
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+        .map_err(|e| IoError::io(path, what, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| extensions.iter().any(|x| x.eq_ignore_ascii_case(e)))
+                && keep(p)
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(IoError::invalid(path, none));
+    }
+    Ok(files)
+}
+
 /// Reads OpenCV calibration files: one file (one or several cameras) or a folder of them
 /// (see the module docs). Returns `(camera name, camera)` in file order.
 pub fn read_opencv(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
-    let files: Vec<PathBuf> = if path.is_dir() {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(|e| IoError::io(path, "calibration folder", e))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.is_file()
-                    && p.extension()
-                        .and_then(|e| e.to_str())
-                        .is_some_and(|e| ["yml", "yaml", "json", "xml"].contains(&e.to_ascii_lowercase().as_str()))
-                    // A stereo calibration's extrinsics are read with its intrinsics.
-                    && !p.file_stem().is_some_and(|s| s.eq_ignore_ascii_case("extrinsics"))
-            })
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            return Err(IoError::invalid(path, "no .yml, .yaml, .xml or .json calibration files in this folder"));
-        }
-        files
-    } else {
-        vec![path.to_path_buf()]
-    };
+    let files = calibration_files(
+        path,
+        "calibration folder",
+        &["yml", "yaml", "json", "xml"],
+        // A stereo calibration's extrinsics are read with its intrinsics.
+        |p| !p.file_stem().is_some_and(|s| s.eq_ignore_ascii_case("extrinsics")),
+        "no .yml, .yaml, .xml or .json calibration files in this folder",
+    )?;
     let mut out: Vec<(String, Camera)> = Vec::new();
     for f in &files {
         for (name, cam) in read_opencv_file(f)? {

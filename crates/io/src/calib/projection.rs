@@ -65,25 +65,13 @@ const EXTENSIONS: [&str; 3] = ["txt", "csv", "dat"];
 /// Reads the cameras of a file, or of every `.txt`, `.csv` and `.dat` file of a folder in name
 /// order (module docs).
 pub fn read_projection(path: &Path) -> Result<Vec<ProjectionCamera>, IoError> {
-    let files: Vec<PathBuf> = if path.is_dir() {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(|e| IoError::io(path, "projection matrix folder", e))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.is_file()
-                    && p.extension()
-                        .and_then(|e| e.to_str())
-                        .is_some_and(|e| EXTENSIONS.iter().any(|x| x.eq_ignore_ascii_case(e)))
-            })
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            return Err(IoError::invalid(path, "the folder holds no .txt, .csv or .dat file of projection matrices"));
-        }
-        files
-    } else {
-        vec![path.to_path_buf()]
-    };
+    let files = super::calibration_files(
+        path,
+        "projection matrix folder",
+        &EXTENSIONS,
+        |_| true,
+        "the folder holds no .txt, .csv or .dat file of projection matrices",
+    )?;
     let mut cameras: Vec<ProjectionCamera> = Vec::new();
     for file in &files {
         for cam in read_file(file)? {
