@@ -1,7 +1,7 @@
 //! `fluidnerf import`: builds a scene (`transforms.json`) from an OpenCV, COLMAP or Metashape
 //! calibration and a folder of images, or from a `transforms.json` written by another tool.
 
-use std::collections::{BTreeSet, HashSet};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, ensure, Context};
@@ -652,17 +652,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     // Each series of images, with its camera, and what its folders hold that is no image.
     let mut series: Vec<(&str, Vec<PathBuf>)> = Vec::new();
     let mut folders_named_like_images = Vec::new();
-    // The entries named like an image or a video, by stem; extensions in any case (cameras
-    // write `.JPG`).
-    let mut by_stem: std::collections::HashMap<String, Vec<PathBuf>> = std::collections::HashMap::new();
-    for p in list_dir(images)? {
-        if !(named_like_image(&p) || fluidnerf_io::video::is_video(&p)) {
-            continue;
-        }
-        if let Some(stem) = p.file_stem().and_then(|s| s.to_str()) {
-            by_stem.entry(stem.to_string()).or_default().push(p.clone());
-        }
-    }
+    let by_stem = entries_by_stem(images)?;
     for (name, cam) in cameras {
         let folder = images.join(name);
         let named: &[PathBuf] = by_stem.get(name.as_str()).map_or(&[], Vec::as_slice);
@@ -776,20 +766,34 @@ fn projection_hint(args: &Args) -> &'static str {
     }
 }
 
+/// The entries of `images` named like an image or a video, by stem: where [`match_opencv`]
+/// looks for camera NAME's `NAME.*`. Extensions in any case (cameras write `.JPG`).
+fn entries_by_stem(images: &Path) -> anyhow::Result<HashMap<String, Vec<PathBuf>>> {
+    let mut by_stem: HashMap<String, Vec<PathBuf>> = HashMap::new();
+    for p in list_dir(images)? {
+        if !(named_like_image(&p) || fluidnerf_io::video::is_video(&p)) {
+            continue;
+        }
+        if let Some(stem) = p.file_stem().and_then(|s| s.to_str()) {
+            by_stem.entry(stem.to_string()).or_default().push(p);
+        }
+    }
+    Ok(by_stem)
+}
+
 /// The size of camera `name`'s images: of its image `IMAGES/NAME.*`, of the first image of its
 /// folder `IMAGES/NAME/`, or of its video's first frame, as [`match_opencv`] finds them; None
 /// when it has none (which `match_opencv` then reports with the other cameras').
-fn image_size_of(name: &str, images: &Path, entries: &[PathBuf]) -> anyhow::Result<Option<(u32, u32)>> {
+fn image_size_of(
+    name: &str,
+    images: &Path,
+    by_stem: &HashMap<String, Vec<PathBuf>>,
+) -> anyhow::Result<Option<(u32, u32)>> {
     let folder = images.join(name);
     let first = if folder.is_dir() {
         list_dir(&folder)?.into_iter().find(|p| is_image(p))
     } else {
-        let mut found = entries.iter().filter(|p| {
-            p.is_file()
-                && p.file_stem().and_then(|s| s.to_str()) == Some(name)
-                && (named_like_image(p) || fluidnerf_io::video::is_video(p))
-        });
-        found.next().cloned()
+        by_stem.get(name).and_then(|named| named.iter().find(|p| p.is_file())).cloned()
     };
     let Some(file) = first else { return Ok(None) };
     if fluidnerf_io::video::is_video(&file) {
@@ -810,11 +814,11 @@ fn projection_cameras(
     images: &Path,
     bottom_left_origin: bool,
 ) -> anyhow::Result<Vec<(String, Camera)>> {
-    let entries = list_dir(images)?;
+    let by_stem = entries_by_stem(images)?;
     let mut cameras = Vec::new();
     let mut missing = Vec::new();
     for p in read {
-        let Some((width, height)) = image_size_of(&p.name, images, &entries)? else {
+        let Some((width, height)) = image_size_of(&p.name, images, &by_stem)? else {
             missing.push(p.name.as_str());
             continue;
         };
