@@ -638,9 +638,7 @@ pub fn read_projection(
                 p.name
             )));
         };
-        let matrix = if bottom_left_origin { fluidnerf_io::calib::flip_v(p.matrix, height) } else { p.matrix };
-        let cam = fluidnerf_io::calib::camera_from_projection(matrix, width, height)
-            .map_err(|why| err(format!("{}: camera `{}`: {why}", p.file.display(), p.name)))?;
+        let cam = p.camera(width, height, bottom_left_origin).map_err(|e| err(e.to_string()))?;
         cameras.push((p.name.clone(), cam));
     }
     named_cameras(py, cameras)

@@ -822,9 +822,7 @@ fn projection_cameras(
             missing.push(p.name.as_str());
             continue;
         };
-        let matrix = if bottom_left_origin { fluidnerf_io::calib::flip_v(p.matrix, height) } else { p.matrix };
-        let cam = fluidnerf_io::calib::camera_from_projection(matrix, width, height)
-            .map_err(|why| anyhow::anyhow!("{}: camera `{}`: {why}", p.file.display(), p.name))?;
+        let cam = p.camera(width, height, bottom_left_origin)?;
         let k = &cam.intrinsics;
         if let Some(why) = fluidnerf_io::calib::principal_point_outside(k) {
             log::warn!("{}: camera `{}`: {why}", p.file.display(), p.name);

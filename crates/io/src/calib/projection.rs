@@ -59,6 +59,17 @@ pub struct ProjectionCamera {
     pub matrix: [[f64; 4]; 3],
 }
 
+impl ProjectionCamera {
+    /// This camera for images of `width` × `height` pixels ([`camera_from_projection`]), its
+    /// v counted up from the image's bottom edge turned round first when `bottom_left_origin`
+    /// ([`flip_v`]); an error names the file and the camera.
+    pub fn camera(&self, width: u32, height: u32, bottom_left_origin: bool) -> Result<Camera, IoError> {
+        let matrix = if bottom_left_origin { flip_v(self.matrix, height) } else { self.matrix };
+        camera_from_projection(matrix, width, height)
+            .map_err(|why| IoError::invalid(&self.file, format!("camera `{}`: {why}", self.name)))
+    }
+}
+
 /// Extensions of the files a folder of projection matrices is read from.
 const EXTENSIONS: [&str; 3] = ["txt", "csv", "dat"];
 
