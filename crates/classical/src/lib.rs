@@ -50,5 +50,5 @@ pub use projector::{
 pub use solve::{
     art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,
     total_variation, ArtParams, AsartParams, IterState, MartParams, MlemParams, Plateau, Problem, Report, SartParams,
-    SmartParams, StopReason, Stopping, TikhonovParams, TvParams, ROW_CACHE_MIB,
+    SmartParams, StopReason, Stopping, TikhonovParams, TvParams, TvStepRule, ROW_CACHE_MIB,
 };

@@ -44,7 +44,7 @@ pub use asart::{asart, AsartParams};
 pub use mlem::{mlem, smart, MlemParams, SmartParams};
 pub use sart::{sart, SartParams};
 pub use tikhonov::{laplacian, laplacian_norm2, sart_tikhonov, TikhonovParams};
-pub use tv::{sart_tv, total_variation, TvParams};
+pub use tv::{sart_tv, total_variation, TvParams, TvStepRule};
 
 use crate::{ClassicalError, Projector, SolveError};
 

@@ -82,6 +82,24 @@ pub enum ProjectorArg {
     Ray,
 }
 
+/// `--tv-step-rule` values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TvStepRuleArg {
+    Auto,
+    Data,
+    Balanced,
+}
+
+impl From<TvStepRuleArg> for fluidnerf_classical::TvStepRule {
+    fn from(rule: TvStepRuleArg) -> Self {
+        match rule {
+            TvStepRuleArg::Auto => fluidnerf_classical::TvStepRule::Auto,
+            TvStepRuleArg::Data => fluidnerf_classical::TvStepRule::Data,
+            TvStepRuleArg::Balanced => fluidnerf_classical::TvStepRule::Balanced,
+        }
+    }
+}
+
 /// `--time-origin` values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum TimeOriginArg {
@@ -309,7 +327,6 @@ pub struct ClassicalArgs {
     #[arg(long, value_name = "VOXELS")]
     pub ray_step: Option<f64>,
     /// Hold voxels at zero whose centre projects onto a dark pixel in any view (visual hull).
-    /// With --method tv, lower --tv-weight too: the TV steps then move only the hull's voxels.
     /// `--visual-hull false` turns off a configuration's hull.
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub visual_hull: Option<bool>,
@@ -333,6 +350,12 @@ pub struct ClassicalArgs {
     /// Method tv: total-variation descent steps per iteration [default: 20].
     #[arg(long, value_name = "N")]
     pub tv_steps: Option<usize>,
+    /// Method tv: how each total-variation step's length follows the SART step's: `data`
+    /// (tv-weight × the SART step, every iteration), `balanced` (that, shrunk by 0.95 after
+    /// every iteration whose TV steps moved the volume more than the SART step did, as
+    /// ASD-POCS does), or `auto`: balanced inside a visual hull, data without [default: auto].
+    #[arg(long, value_name = "RULE")]
+    pub tv_step_rule: Option<TvStepRuleArg>,
     /// Method tikhonov: weight λ of the smoothness penalty λ‖∇²g‖² (Eq. 2.35, Laplacian in
     /// voxel units). Larger is smoother; 0 is plain SART. It pays off with noisy images: on
     /// the demo jet (15 views, 64³ voxels) the default lowered SART's NRMSE from 0.381 to 0.326
@@ -468,7 +491,11 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
         ]));
     }
     if method != Method::Tv {
-        wrong.extend(given(&[("--tv-weight", c.tv_weight.is_some()), ("--tv-steps", c.tv_steps.is_some())]));
+        wrong.extend(given(&[
+            ("--tv-weight", c.tv_weight.is_some()),
+            ("--tv-steps", c.tv_steps.is_some()),
+            ("--tv-step-rule", c.tv_step_rule.is_some()),
+        ]));
     }
     if method != Method::Tikhonov {
         wrong.extend(given(&[("--tikhonov-weight", c.tikhonov_weight.is_some())]));
@@ -933,6 +960,9 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
                 if let Some(n) = c.tv_steps {
                     p.tv_steps = n;
                 }
+                if let Some(rule) = c.tv_step_rule {
+                    p.step_rule = rule.into();
+                }
             }
             fluidnerf_classical::ClassicalMethod::Tikhonov(p) => {
                 if let Some(w) = c.tikhonov_weight {
@@ -1280,6 +1310,7 @@ fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
         ("method.params.stopping.plateau", "--plateau-tolerance", c.plateau_tolerance.is_some()),
         ("method.params.tv_weight", "--tv-weight", c.tv_weight.is_some()),
         ("method.params.tv_steps", "--tv-steps", c.tv_steps.is_some()),
+        ("method.params.step_rule", "--tv-step-rule", c.tv_step_rule.is_some()),
         ("method.params.weight", "--tikhonov-weight", c.tikhonov_weight.is_some()),
         ("method.train.rays_per_image", "--rays-per-image", n.rays_per_image.is_some()),
         ("method.train.coarse_samples", "--coarse-samples", n.coarse_samples.is_some()),
