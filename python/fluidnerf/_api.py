@@ -193,7 +193,7 @@ __all__ = [
 # Scenes
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Camera:
     """A calibrated camera read from a calibration file.
 
@@ -201,6 +201,9 @@ class Camera:
     ``world_from_camera`` the 4 × 4 camera-to-world pose with OpenCV camera axes (x right,
     y down, z forward), ``distortion`` OpenCV's coefficients ``(k1, k2, p1, p2, k3[, k4, k5,
     k6])`` and ``size`` the image ``(width, height)`` in pixels.
+
+    A camera is a value: its matrices are read-only float64 arrays, two cameras are equal
+    when every field is, and a camera can be hashed (kept in a set, used as a dict key).
     """
 
     name: str
@@ -208,6 +211,37 @@ class Camera:
     world_from_camera: np.ndarray
     distortion: tuple[float, ...]
     size: tuple[int, int]
+
+    def __post_init__(self) -> None:
+        # The generated comparison compared the arrays as tuples' items, which raised NumPy's
+        # "truth value of an array ... is ambiguous" for any two cameras (and so `in`), and
+        # the hash refused them as unhashable; a frozen camera's matrices could be written.
+        for field, shape in (("K", (3, 3)), ("world_from_camera", (4, 4))):
+            a = np.array(_numbers(getattr(self, field), np.float64, field, f" of shape {shape}"))
+            if a.shape != shape:
+                raise FluidNerfError(
+                    f"{field}: expected shape {shape}, got {_given(getattr(self, field), a)}"
+                )
+            a.setflags(write=False)
+            object.__setattr__(self, field, a)
+        object.__setattr__(self, "distortion", tuple(float(d) for d in self.distortion))
+        object.__setattr__(self, "size", tuple(int(v) for v in self.size))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Camera):
+            return NotImplemented
+        return (
+            (self.name, self.distortion, self.size) == (other.name, other.distortion, other.size)
+            and np.array_equal(self.K, other.K)
+            and np.array_equal(self.world_from_camera, other.world_from_camera)
+        )
+
+    def __hash__(self) -> int:
+        # Values, not bytes: 0.0 and -0.0 are equal, and hash alike.
+        return hash(
+            (self.name, tuple(self.K.ravel().tolist()), tuple(self.world_from_camera.ravel().tolist()))
+            + (self.distortion, self.size)
+        )
 
 
 def _path(value: Any, name: str, expected: str = "a path (a string or os.PathLike)") -> str:

@@ -214,6 +214,22 @@ def test_calibration_importers_read_the_library_fixtures():
     assert len(colmap) >= 1 and all(c.size[0] > 0 for c in colmap)
 
 
+def test_cameras_compare_and_hash_as_values_and_their_matrices_are_read_only():
+    from conftest import REPO
+
+    file = REPO / "crates" / "io" / "tests" / "fixtures" / "opencv_two_cameras.yml"
+    first, again = fluidnerf.read_opencv(file), fluidnerf.read_opencv(file)
+    assert first == again and first[0] in again and first[0] != first[1]
+    assert len({*first, *again}) == 2 and hash(first[0]) == hash(again[0])
+    moved = first[0].world_from_camera.copy()
+    moved[0, 3] += 1.0
+    assert fluidnerf.Camera(first[0].name, first[0].K, moved, first[0].distortion, first[0].size) != first[0]
+    with pytest.raises(ValueError, match="read-only"):
+        first[0].K[0, 0] = 1.0
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"^K: expected shape \(3, 3\)"):
+        fluidnerf.Camera("a", np.eye(4), np.eye(4), (), (8, 8))
+
+
 def test_metashape_cameras_that_are_not_aligned_are_refused_unless_skipped(tmp_path):
     sensor = (
         '<sensor id="0" label="lens" type="frame"><resolution width="64" height="48"/>'
