@@ -836,7 +836,10 @@ def _warning_callback(callback: Callback | None) -> Callback:
     def on_event(event: dict) -> bool | None:
         if event["kind"] == "warning":
             warnings.warn(event["message"], FluidNerfWarning, stacklevel=2)
-        return callback(event) if callback is not None else None
+        answer = callback(event) if callback is not None else None
+        # A NumPy boolean (a comparison of NumPy numbers) is a boolean: np.False_ did not
+        # stop the run, which went on to its last iteration.
+        return bool(answer) if isinstance(answer, np.bool_) else answer
 
     return on_event
 

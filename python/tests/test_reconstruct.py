@@ -372,6 +372,19 @@ def test_a_callback_stops_a_run_and_its_exceptions_propagate(static_scene, tmp_p
     assert fluidnerf.open_run(tmp_path / "boom").status == "interrupted"
 
 
+def test_a_callback_that_returns_numpys_false_stops_the_run(static_scene, tmp_path):
+    """A comparison of NumPy numbers is a NumPy boolean: np.False_ was not taken for False, and
+    the run went on to its last iteration."""
+
+    def stop_at_5(event):
+        return np.float64(event.get("iteration", 0)) < 5
+
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "stopped", callback=stop_at_5, resolution=8, progress=False
+    )
+    assert run.status == "interrupted" and run.report["iterations"] == 5
+
+
 def test_a_callback_that_cannot_be_called_is_refused_before_the_run_starts(static_scene, tmp_path):
     """callback=3 started the run, which stopped at its first event, left an interrupted run
     in the folder and then raised "TypeError: 'int' object is not callable"."""
