@@ -702,9 +702,15 @@ class Run:
 
     @property
     def volume(self) -> np.ndarray:
-        """The (first) volume, ``(nz, ny, nx)`` float32, cell-centred, filling :attr:`aabb`."""
+        """The (first) volume, ``(nz, ny, nx)`` float32, cell-centred, filling :attr:`aabb`.
+        Read once and kept, so read-only: ``run.volume.copy()`` is one to change."""
         if self._volume is None:
-            self._volume = self._h.volume()
+            volume = self._h.volume()
+            # Kept and given again: a change in place (`run.volume[v < 0] = 0`, or
+            # `run.volume -= 1`, which wrote before it failed) was seen by every later
+            # `run.volume`, and not by `run.field` or `run.volumes()`, which read the files.
+            volume.setflags(write=False)
+            self._volume = volume
         return self._volume
 
     def volumes(self) -> list[tuple[float | None, np.ndarray]]:

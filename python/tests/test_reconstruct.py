@@ -385,6 +385,21 @@ def test_a_callback_that_returns_numpys_false_stops_the_run(static_scene, tmp_pa
     assert run.status == "interrupted" and run.report["iterations"] == 5
 
 
+def test_a_runs_volume_is_kept_read_only(static_scene, tmp_path):
+    """A change in place of run.volume was kept and seen by every later run.volume, while
+    run.field and run.volumes() still read the run's own volume."""
+    run = fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
+    kept = run.volume.copy()
+    with pytest.raises(ValueError, match="read-only"):
+        run.volume[0, 0, 0] = 99.0
+    with pytest.raises(ValueError, match="read-only"):
+        run.volume -= 1.0
+    np.testing.assert_array_equal(run.volume, kept)
+    changed = run.volume.copy()
+    changed[0, 0, 0] = 99.0
+    assert changed[0, 0, 0] == 99.0 and run.volume[0, 0, 0] == kept[0, 0, 0]
+
+
 def test_a_callback_that_cannot_be_called_is_refused_before_the_run_starts(static_scene, tmp_path):
     """callback=3 started the run, which stopped at its first event, left an interrupted run
     in the folder and then raised "TypeError: 'int' object is not callable"."""
