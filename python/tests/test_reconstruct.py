@@ -400,6 +400,30 @@ def test_a_runs_volume_is_kept_read_only(static_scene, tmp_path):
     assert changed[0, 0, 0] == 99.0 and run.volume[0, 0, 0] == kept[0, 0, 0]
 
 
+def test_a_runs_field_is_evaluated_from_several_threads_at_once(static_scene, tmp_path):
+    """field() releases the GIL; a second thread calling it meanwhile was refused with
+    "RuntimeError: Already borrowed"."""
+    run = fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
+    points = np.random.default_rng(0).uniform(-20, 20, (400_000, 3)).astype(np.float32)
+    expected = run.field(points[:10])
+    results, errors = [], []
+
+    def evaluate():
+        try:
+            results.append(run.field(points))
+        except Exception as e:  # noqa: BLE001 - every failure is reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=evaluate) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == [] and len(results) == 4
+    for r in results:
+        np.testing.assert_array_equal(r[:10], expected)
+
+
 def test_a_callback_that_cannot_be_called_is_refused_before_the_run_starts(static_scene, tmp_path):
     """callback=3 started the run, which stopped at its first event, left an interrupted run
     in the folder and then raised "TypeError: 'int' object is not callable"."""

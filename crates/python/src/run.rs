@@ -330,8 +330,10 @@ pub fn finish_windows(
 #[pyclass(module = "fluidnerf._fluidnerf", name = "RunFolder")]
 pub struct PyRun {
     run: LoadedRun,
-    /// The trained field, loaded on first use.
-    field: Option<Box<dyn ScalarField + Send + Sync>>,
+    /// The trained field, loaded on first use. A `OnceLock`, not a field behind `&mut self`:
+    /// `field` works with the GIL released, and a second thread calling it meanwhile was
+    /// refused with pyo3's "RuntimeError: Already borrowed".
+    field: std::sync::OnceLock<Box<dyn ScalarField + Send + Sync>>,
 }
 
 /// Opens the run in `folder`; `aabb` `(2, 3)` places a bare `volume.npy` that has no report.
@@ -355,7 +357,7 @@ pub fn open_run(folder: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyR
                 given.max.to_array()
             )));
         }
-        Ok(PyRun { run, field: None })
+        Ok(PyRun { run, field: std::sync::OnceLock::new() })
     })
 }
 
@@ -414,7 +416,7 @@ impl PyRun {
     /// run: the last it trained; default: the first); static results ignore it.
     #[pyo3(signature = (points, time=None))]
     fn field<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         points: PyReadonlyArray2<'py, f32>,
         time: Option<f64>,
@@ -430,11 +432,12 @@ impl PyRun {
         if let Some(i) = pts.iter().position(|v| !v.is_finite()) {
             return Err(err(format!("points: point {i} is not finite")));
         }
-        if self.field.is_none() {
+        if self.field.get().is_none() {
             let f = py.allow_threads(|| guard(|| self.run.field().map_err(|e| err(e.to_string()))))?;
-            self.field = Some(f);
+            // Another thread may have loaded it meanwhile: either is the same field.
+            let _ = self.field.set(f);
         }
-        let field = self.field.as_deref().ok_or_else(|| err("the field could not be loaded"))?;
+        let field = self.field.get().map(|f| f.as_ref()).ok_or_else(|| err("the field could not be loaded"))?;
         let out = py.allow_threads(|| {
             guard(|| {
                 use rayon::prelude::*;
