@@ -4,6 +4,9 @@ the metrics' known answers."""
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 import pytest
 
@@ -174,6 +177,33 @@ def test_metrics_give_their_known_answers():
     assert fluidnerf.ssim(e, t, window="global") == pytest.approx(want, rel=1e-9)
     with pytest.raises(fluidnerf.FluidNerfError, match="differ in shape"):
         fluidnerf.nrmse(t, t[0])
+
+
+def test_ssim_releases_the_gil_while_it_computes():
+    """The SSIM of a large volume takes seconds, during which every other Python thread
+    stopped."""
+    rng = np.random.default_rng(0)
+    truth = rng.random((128, 128, 128), dtype=np.float32)
+    estimate = truth + np.float32(0.01)
+    ticks, done = [0], threading.Event()
+
+    def tick():
+        while not done.is_set():
+            ticks[0] += 1
+            time.sleep(0.001)
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    try:
+        time.sleep(0.02)
+        before, start = ticks[0], time.perf_counter()
+        fluidnerf.ssim(estimate, truth, window="gaussian")
+        during, elapsed = ticks[0] - before, time.perf_counter() - start
+    finally:
+        done.set()
+        ticker.join()
+    # A thread sleeping 1 ms at a time ticks about once per 1 ms the SSIM leaves it free.
+    assert elapsed > 0.05 and during >= 10, (during, elapsed)
 
 
 def test_render_refuses_steps_and_supersampling_it_would_never_finish(scene):

@@ -235,18 +235,23 @@ fn metric_range(data_range: Option<f64>, truth: &[f32], ks: [f64; 2]) -> PyResul
 
 /// NRMSE of `estimate` against `truth` (dissertation Eq. 6.18: RMS error over the truth's RMS).
 #[pyfunction]
-pub fn nrmse(estimate: PyReadonlyArrayDyn<'_, f32>, truth: PyReadonlyArrayDyn<'_, f32>) -> PyResult<f64> {
+pub fn nrmse(
+    py: Python<'_>,
+    estimate: PyReadonlyArrayDyn<'_, f32>,
+    truth: PyReadonlyArrayDyn<'_, f32>,
+) -> PyResult<f64> {
     let (a, b, _) = pair(&estimate, &truth)?;
     if b.iter().all(|&v| v == 0.0) {
         return Err(err("truth: every element is zero, so the NRMSE (relative to the truth's norm) is undefined"));
     }
-    guard(|| Ok(fluidnerf_metrics::nrmse(&a, &b)))
+    py.allow_threads(|| guard(|| Ok(fluidnerf_metrics::nrmse(&a, &b))))
 }
 
 /// PSNR in dB with peak `data_range` (None: the truth's max − min).
 #[pyfunction]
 #[pyo3(signature = (estimate, truth, data_range=None))]
 pub fn psnr(
+    py: Python<'_>,
     estimate: PyReadonlyArrayDyn<'_, f32>,
     truth: PyReadonlyArrayDyn<'_, f32>,
     data_range: Option<f64>,
@@ -254,15 +259,17 @@ pub fn psnr(
     let (a, b, _) = pair(&estimate, &truth)?;
     // PSNR is finite for every positive range (`fluidnerf_metrics::psnr`): no constants to keep.
     let range = metric_range(data_range, &b, [0.0, 0.0])?;
-    guard(|| Ok(fluidnerf_metrics::psnr(&a, &b, range)))
+    py.allow_threads(|| guard(|| Ok(fluidnerf_metrics::psnr(&a, &b, range))))
 }
 
 /// SSIM of `estimate` against `truth`: `window` "global" (one window over the whole array),
 /// "uniform" (7-wide, skimage's default) or "gaussian" (σ 1.5), for 2D `(H, W)` and 3D
-/// `(nz, ny, nx)` arrays. `data_range` None: the truth's max − min.
+/// `(nz, ny, nx)` arrays. `data_range` None: the truth's max − min. The GIL is released while
+/// it computes (seconds for a large volume).
 #[pyfunction]
 #[pyo3(signature = (estimate, truth, data_range=None, window="uniform"))]
 pub fn ssim(
+    py: Python<'_>,
     estimate: PyReadonlyArrayDyn<'_, f32>,
     truth: PyReadonlyArrayDyn<'_, f32>,
     data_range: Option<f64>,
@@ -273,21 +280,23 @@ pub fn ssim(
     let k = fluidnerf_metrics::SsimParams::default();
     let range = metric_range(data_range, &b, [k.k1, k.k2])?;
     let params = match window {
-        "global" => return guard(|| Ok(fluidnerf_metrics::ssim_global(&a, &b, range))),
+        "global" => return py.allow_threads(|| guard(|| Ok(fluidnerf_metrics::ssim_global(&a, &b, range)))),
         "uniform" => fluidnerf_metrics::SsimParams { data_range: Some(range), ..Default::default() },
         "gaussian" => {
             fluidnerf_metrics::SsimParams { data_range: Some(range), ..fluidnerf_metrics::SsimParams::gaussian() }
         }
         other => return Err(err(format!("window: expected 'global', 'uniform' or 'gaussian', got {other:?}"))),
     };
-    guard(|| {
-        let r = match shape.as_slice() {
-            [h, w] => fluidnerf_metrics::ssim_2d(&a, &b, *w, *h, &params),
-            [nz, ny, nx] => fluidnerf_metrics::ssim_3d(&a, &b, [*nx, *ny, *nz], &params),
-            s => return Err(err(format!("ssim: expected a 2D or 3D array, got shape {s:?}"))),
-        };
-        r.map_err(|e| err(e.to_string()))
-    })
+    let r = py.allow_threads(|| {
+        guard(|| {
+            Ok(match shape.as_slice() {
+                [h, w] => fluidnerf_metrics::ssim_2d(&a, &b, *w, *h, &params),
+                [nz, ny, nx] => fluidnerf_metrics::ssim_3d(&a, &b, [*nx, *ny, *nz], &params),
+                s => return Err(err(format!("ssim: expected a 2D or 3D array, got shape {s:?}"))),
+            })
+        })
+    })?;
+    r.map_err(|e| err(e.to_string()))
 }
 
 /// Synthesises the scene of preset `preset` (settings overridden by the JSON object
