@@ -206,6 +206,23 @@ def test_ssim_releases_the_gil_while_it_computes():
     assert elapsed > 0.05 and during >= 10, (during, elapsed)
 
 
+def test_an_ssim_window_wider_than_the_arrays_names_their_shape_as_given():
+    """The message gave the sides x first: (1, 30, 30) was "array of dims [30, 30, 1]", and
+    named neither the arguments nor the way out."""
+    flat = np.ones((1, 30, 30), np.float32)
+    with pytest.raises(
+        fluidnerf.FluidNerfError,
+        match=r"^estimate and truth: shape \(1, 30, 30\) has a side shorter than the 7-wide SSIM window of "
+        r'window="uniform"; .*window="global"',
+    ):
+        fluidnerf.ssim(flat, flat)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"shape \(5, 40\) has a side shorter than the 11-wide"
+    ):
+        fluidnerf.ssim(np.ones((5, 40)), np.ones((5, 40)), window="gaussian")
+    assert fluidnerf.ssim(flat, flat, window="global") == pytest.approx(1.0)
+
+
 def test_render_refuses_steps_and_supersampling_it_would_never_finish(scene):
     """A step of 1e-300 or 10⁵ rays per pixel axis held the interpreter for good (the renderer
     takes no Ctrl-C); a float or negative ray count was truncated or raised a nameless error."""

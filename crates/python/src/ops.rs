@@ -296,7 +296,20 @@ pub fn ssim(
             })
         })
     })?;
-    r.map_err(|e| err(e.to_string()))
+    r.map_err(|e| match e {
+        // The library gives the sides x first; the arrays were given (nz, ny, nx) or (H, W).
+        fluidnerf_metrics::MetricsError::TooSmall { window: side, .. } => err(format!(
+            "estimate and truth: shape {} has a side shorter than the {side}-wide SSIM window of \
+             window={window:?}; give arrays at least {side} long on every axis, or window=\"global\"",
+            shape_text(&shape)
+        )),
+        other => err(other.to_string()),
+    })
+}
+
+/// A shape of two or three sides as Python writes it: `(1, 30, 30)`.
+fn shape_text(shape: &[usize]) -> String {
+    format!("({})", shape.iter().map(usize::to_string).collect::<Vec<_>>().join(", "))
 }
 
 /// Synthesises the scene of preset `preset` (settings overridden by the JSON object
