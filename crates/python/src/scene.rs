@@ -98,6 +98,83 @@ impl PyScene {
     pub fn cameras(&self) -> Vec<Camera> {
         self.inner.frames.iter().map(|f| f.camera.clone()).collect()
     }
+
+    /// Writes the scene into `folder` (see `save`) and returns it as read back from there.
+    fn save_into(self, folder: &Path, force: bool) -> PyResult<fluidnerf_core::Scene> {
+        // Never among a run's (or an export's, ...) files, as `synth` and `import` refuse.
+        use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
+        refuse_other_kind(folder, FolderKind::Scene, "Scene.save").map_err(|e| err(e.to_string()))?;
+        let file = fluidnerf_io::scene::scene_file_path(folder);
+        // Even with force=True it could not be written, and would fail as "Is a directory".
+        if file.is_dir() {
+            return Err(err(format!(
+                "{}: is a folder, where the scene file goes; move it away or save elsewhere",
+                file.display()
+            )));
+        }
+        if file.exists() && !force {
+            return Err(err(format!("{} already holds a scene; pass force=True to overwrite it", folder.display())));
+        }
+        // As `synth` refuses: the images, masks and truth written have fixed names
+        // (images/frame_0000.tiff, ...), which would replace a user's files of those names.
+        if !force && std::fs::read_dir(folder).is_ok_and(|mut d| d.next().is_some()) {
+            return Err(err(format!(
+                "{} is not empty; save the scene into a new or empty folder, or pass force=True",
+                folder.display()
+            )));
+        }
+        // The images as preprocessed (linear, background subtracted, flat-field corrected);
+        // their masks and the flow axis go with them, or the copy would use the pixels its
+        // recording left out.
+        let (images, masks, flow_axis) = match self.images {
+            Some(images) => {
+                let none = vec![None; images.len()];
+                (images, none, None)
+            }
+            None => {
+                let p = fluidnerf_io::scene::load_preprocessed(&self.inner).map_err(|e| err(e.to_string()))?;
+                (p.images, p.masks, p.recording.flow_axis)
+            }
+        };
+        // A scene read from a file keeps its truth, saved or not (one from arrays has none).
+        let truth = fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?;
+        let mut scene = self.inner;
+        scene.root = folder.to_path_buf();
+        let mut recording = Recording { flow_axis, ..Recording::plain(scene.frames.len()) };
+        for (i, frame) in scene.frames.iter_mut().enumerate() {
+            frame.file_path = PathBuf::from(format!("images/frame_{i:04}.tiff"));
+            if masks[i].is_some() {
+                recording.frames[i].mask_path = Some(PathBuf::from(format!("masks/frame_{i:04}.png")));
+            }
+        }
+        scene.truth = (0..truth.len())
+            .map(|k| TruthRef { time: truth[k].0, file_path: PathBuf::from(format!("truth/truth_{k:02}.npy")) })
+            .collect();
+        // Written into a folder of its own inside `folder` and moved into place when whole,
+        // transforms.json last (as Run.save copies beside its destination): a save that failed
+        // part way (a full disk) left a half-written folder, which a second attempt refused
+        // as not empty, and over an earlier scene that scene's transforms.json naming the
+        // images written before the failure.
+        let made: Vec<PathBuf> = std::path::absolute(folder)
+            .map_err(|e| err(format!("{}: {e}", folder.display())))?
+            .ancestors()
+            .take_while(|p| !p.exists())
+            .map(Path::to_path_buf)
+            .collect();
+        let stage = folder.join(format!(".fluidnerf-save-{}", std::process::id()));
+        let written = write_staged(&stage, &scene, &recording, &images, &masks, &truth)
+            .and_then(|files| install_staged(&stage, folder, &files));
+        // The staged files left (all of them after a failure), and what a failed save created.
+        let _ = std::fs::remove_dir_all(&stage);
+        if let Err(e) = written {
+            if let Some((own, parents)) = made.split_first() {
+                let _ = std::fs::remove_dir_all(own);
+                parents.iter().for_each(|p| drop(std::fs::remove_dir(p)));
+            }
+            return Err(err(format!("{}: cannot save the scene there: {e}", folder.display())));
+        }
+        fluidnerf_io::scene::load_scene(folder).map_err(|e| err(e.to_string()))
+    }
 }
 
 pub fn aabb_from(a: &PyReadonlyArray2<'_, f64>) -> PyResult<Aabb> {
@@ -189,10 +266,12 @@ impl PyScene {
     /// Reads the scene in `folder` (a folder holding `transforms.json`, or the file itself)
     /// and validates it.
     #[staticmethod]
-    fn load(folder: PathBuf) -> PyResult<Self> {
-        guard(|| {
-            let inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
-            Ok(PyScene { inner, images: None, saved: true })
+    fn load(py: Python<'_>, folder: PathBuf) -> PyResult<Self> {
+        py.allow_threads(|| {
+            guard(|| {
+                let inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
+                Ok(PyScene { inner, images: None, saved: true })
+            })
         })
     }
 
@@ -352,90 +431,28 @@ impl PyScene {
     /// divided by its flat field), the frames' masks under `masks/` and the ground-truth volumes
     /// under `truth/`. Afterwards
     /// the scene lives there. A folder that is not empty is refused without `force`.
+    /// The files are written with the GIL released (the images and truth of a large scene take
+    /// seconds): the scene is read first, and becomes the saved one once it is written.
     #[pyo3(signature = (folder, force=false))]
-    fn save(&mut self, folder: PathBuf, force: bool) -> PyResult<()> {
+    fn save(slf: &Bound<'_, Self>, folder: PathBuf, force: bool) -> PyResult<()> {
         if folder.as_os_str().is_empty() {
             // Refused as "cannot make an empty path absolute", which named no argument.
             return Err(err("folder: the path is empty; name a folder ('.' for the current folder)"));
         }
-        guard(|| {
-            // Never among a run's (or an export's, ...) files, as `synth` and `import` refuse.
-            use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
-            refuse_other_kind(&folder, FolderKind::Scene, "Scene.save").map_err(|e| err(e.to_string()))?;
-            let file = fluidnerf_io::scene::scene_file_path(&folder);
-            // Even with force=True it could not be written, and would fail as "Is a directory".
-            if file.is_dir() {
-                return Err(err(format!(
-                    "{}: is a folder, where the scene file goes; move it away or save elsewhere",
-                    file.display()
-                )));
+        let given = slf.borrow().clone();
+        let saved = slf.py().allow_threads(|| guard(|| given.save_into(&folder, force)))?;
+        // Another thread may be reading the scene with the GIL released (images(), truth()):
+        // the files are written, so the scene waits for it rather than fail.
+        let mut this = loop {
+            match slf.try_borrow_mut() {
+                Ok(this) => break this,
+                Err(_) => slf.py().allow_threads(|| std::thread::sleep(std::time::Duration::from_millis(1))),
             }
-            if file.exists() && !force {
-                return Err(err(format!(
-                    "{} already holds a scene; pass force=True to overwrite it",
-                    folder.display()
-                )));
-            }
-            // As `synth` refuses: the images, masks and truth written have fixed names
-            // (images/frame_0000.tiff, ...), which would replace a user's files of those names.
-            if !force && std::fs::read_dir(&folder).is_ok_and(|mut d| d.next().is_some()) {
-                return Err(err(format!(
-                    "{} is not empty; save the scene into a new or empty folder, or pass force=True",
-                    folder.display()
-                )));
-            }
-            // The images as preprocessed (linear, background subtracted, flat-field corrected);
-            // their masks and the flow axis go with them, or the copy would use the pixels its
-            // recording left out.
-            let (images, masks, flow_axis) = match &self.images {
-                Some(images) => (images.clone(), vec![None; images.len()], None),
-                None => {
-                    let p = fluidnerf_io::scene::load_preprocessed(&self.inner).map_err(|e| err(e.to_string()))?;
-                    (p.images, p.masks, p.recording.flow_axis)
-                }
-            };
-            // A scene read from a file keeps its truth, saved or not (one from arrays has none).
-            let truth = fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?;
-            let mut scene = self.inner.clone();
-            scene.root = folder.clone();
-            let mut recording = Recording { flow_axis, ..Recording::plain(scene.frames.len()) };
-            for (i, frame) in scene.frames.iter_mut().enumerate() {
-                frame.file_path = PathBuf::from(format!("images/frame_{i:04}.tiff"));
-                if masks[i].is_some() {
-                    recording.frames[i].mask_path = Some(PathBuf::from(format!("masks/frame_{i:04}.png")));
-                }
-            }
-            scene.truth = (0..truth.len())
-                .map(|k| TruthRef { time: truth[k].0, file_path: PathBuf::from(format!("truth/truth_{k:02}.npy")) })
-                .collect();
-            // Written into a folder of its own inside `folder` and moved into place when whole,
-            // transforms.json last (as Run.save copies beside its destination): a save that failed
-            // part way (a full disk) left a half-written folder, which a second attempt refused
-            // as not empty, and over an earlier scene that scene's transforms.json naming the
-            // images written before the failure.
-            let made: Vec<PathBuf> = std::path::absolute(&folder)
-                .map_err(|e| err(format!("{}: {e}", folder.display())))?
-                .ancestors()
-                .take_while(|p| !p.exists())
-                .map(Path::to_path_buf)
-                .collect();
-            let stage = folder.join(format!(".fluidnerf-save-{}", std::process::id()));
-            let written = write_staged(&stage, &scene, &recording, &images, &masks, &truth)
-                .and_then(|files| install_staged(&stage, &folder, &files));
-            // The staged files left (all of them after a failure), and what a failed save created.
-            let _ = std::fs::remove_dir_all(&stage);
-            if let Err(e) = written {
-                if let Some((own, parents)) = made.split_first() {
-                    let _ = std::fs::remove_dir_all(own);
-                    parents.iter().for_each(|p| drop(std::fs::remove_dir(p)));
-                }
-                return Err(err(format!("{}: cannot save the scene there: {e}", folder.display())));
-            }
-            self.inner = fluidnerf_io::scene::load_scene(&folder).map_err(|e| err(e.to_string()))?;
-            self.images = None;
-            self.saved = true;
-            Ok(())
-        })
+        };
+        this.inner = saved;
+        this.images = None;
+        this.saved = true;
+        Ok(())
     }
 
     /// A copy of the scene, images and all (for `reconstruct`, to put back a scene it saved
@@ -525,7 +542,8 @@ impl PyScene {
         if self.inner.truth.is_empty() {
             return Ok(Vec::new());
         }
-        let truth = guard(|| fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string())))?;
+        let truth = py
+            .allow_threads(|| guard(|| fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))))?;
         truth.into_iter().map(|(t, v)| Ok((t, crate::volume_to_py(py, v)?.into_any().unbind()))).collect()
     }
 }
