@@ -110,7 +110,7 @@ def _same_scene(scene: Scene, saved: Path) -> Scene:
 def reconstruct(
     client: Any,
     scene: Scene | PathLike,
-    method: str | dict | None = "tr-fast",
+    method: str | dict | None = None,
     out: PathLike | None = None,
     *,
     config: dict | PathLike | None = None,
@@ -121,8 +121,10 @@ def reconstruct(
     """Reconstructs ``scene`` on the Dask cluster of ``client`` (a ``distributed.Client``)
     into the run folder ``out``, window by window, and returns the finished :class:`Run`.
 
-    Settings as :func:`fluidnerf.reconstruct` (``options`` are ``RunConfig`` keys). A
-    static method (not time-resolved) runs as a single task. ``callback(event)`` receives
+    Settings as :func:`fluidnerf.reconstruct` (``options`` are ``RunConfig`` keys; ``method``
+    None runs the method of ``config``, or without one ``"tr-fast"`` for a scene whose frames
+    hold several times and ``"hybrid"`` otherwise). A static method (not time-resolved) runs
+    as a single task. ``callback(event)`` receives
     ``{"kind": "window_finished", "window": k, "windows": n, "reused": bool, ...}`` as windows
     complete. Calling it again on the same folder reuses every finished window, so an
     interrupted scale-out continues where it stopped; a scene built from arrays may be built

@@ -297,6 +297,18 @@ def test_a_refused_dask_run_of_a_scene_from_arrays_leaves_its_folder_as_it_was(
         fluidnerf.dask.reconstruct(None, scene, TR_METHOD, tmp_path / "file", **TR_OPTIONS)
 
 
+def test_a_dask_run_without_a_method_runs_the_method_of_its_configuration(client, static_scene, tmp_path):
+    """method defaulted to "tr-fast", unlike fluidnerf.reconstruct: a configuration of another
+    method was refused ("written for method asart; to run method tr-fast, leave out config"),
+    and a static scene given no method was refused for having no frame times."""
+    cfg = fluidnerf.build_config(static_scene, "asart", resolution=8, stopping={"max_iterations": 3})
+    run = fluidnerf.dask.reconstruct(client, static_scene, out=tmp_path / "run", config=cfg)
+    assert run.report["method"] == "asart" and run.status == "finished" and run.volume.shape == (8, 8, 8)
+    serial = fluidnerf.reconstruct(static_scene, out=tmp_path / "serial", config=cfg, progress=False)
+    np.testing.assert_array_equal(run.volume, serial.volume)
+    assert fluidnerf.build_config(static_scene)["method"]["name"] == "hybrid"
+
+
 def test_the_output_folder_of_a_scene_on_disk_is_refused_before_any_task(
     tr_scene, static_scene, serial, tmp_path
 ):
