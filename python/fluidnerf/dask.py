@@ -81,9 +81,9 @@ def _task_arguments(scene_root: Any, config_json: Any, out: Any) -> tuple[str, s
     return _path(scene_root, "scene_root"), _string(config_json, "config_json"), _path(out, "out")
 
 
-def _whole_run(scene_root: str, config_json: str, out: str) -> dict:
+def _whole_run(scene_root: str, config_json: str, out: str, overwrite: str = "refuse") -> dict:
     scene = Scene.load(scene_root)
-    return json.loads(_ext.reconstruct(scene, config_json, out, "refuse", None))
+    return json.loads(_ext.reconstruct(scene, config_json, out, overwrite, None))
 
 
 def _same_scene(scene: Scene, saved: Path) -> Scene:
@@ -115,6 +115,7 @@ def reconstruct(
     *,
     config: dict | PathLike | None = None,
     preset: str | None = None,
+    overwrite: str = "refuse",
     callback: Callable[[dict], None] | None = None,
     **options: Any,
 ) -> Run:
@@ -124,7 +125,10 @@ def reconstruct(
     Settings as :func:`fluidnerf.reconstruct` (``options`` are ``RunConfig`` keys; ``method``
     None runs the method of ``config``, or without one ``"tr-fast"`` for a scene whose frames
     hold several times and ``"hybrid"`` otherwise). A static method (not time-resolved) runs
-    as a single task. ``callback(event)`` receives
+    as a single task, into a folder ``overwrite`` allows as for :func:`fluidnerf.reconstruct`
+    (``"refuse"``, ``"force"`` or ``"resume"``). A time-resolved run continues the windows
+    its folder holds whenever it is called again; it takes ``"refuse"`` or ``"resume"``
+    (the same), and is never replaced (``"force"`` is refused: remove the folder). ``callback(event)`` receives
     ``{"kind": "window_finished", "window": k, "windows": n, "reused": bool, ...}`` as windows
     complete. Calling it again on the same folder reuses every finished window, so an
     interrupted scale-out continues where it stopped; a scene built from arrays may be built
@@ -132,17 +136,28 @@ def reconstruct(
     ``out/scene``.
     """
     _check_callback(callback)
+    if overwrite not in ("refuse", "force", "resume"):
+        raise FluidNerfError(f"overwrite: expected 'refuse', 'force' or 'resume', got {overwrite!r}")
     scene = _as_scene(scene)
     if out is None:
         raise ValueError("out: a run folder on a file system every worker sees is needed")
     out_path = Path(_path(out, "out")).absolute()
+    if overwrite == "resume" and config is None and (out_path / "config.json").is_file():
+        # A resumed run continues with the settings it was started with (as --resume).
+        config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     whole = cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame")
+    if not whole and overwrite == "force":
+        raise FluidNerfError(
+            f"overwrite: a time-resolved run on Dask continues the windows {out_path} holds whenever it is "
+            "called again, and is never replaced: to train it afresh, remove the folder or choose another"
+        )
     # The folder is checked here, before any task: the workers would refuse it only after
     # they were sent the run. For a scene built from arrays, also before the scene is written
-    # into it: a refused run leaves the folder as it was.
+    # into it: a refused run leaves the folder as it was. A whole run's refusal names
+    # overwrite="force" and "resume", which it takes.
     if whole:
-        _ext.check_run_folder(os.fspath(out_path), "refuse")
+        _ext.check_run_folder(os.fspath(out_path), overwrite)
     else:
         _ext.check_window_folder(os.fspath(out_path))
     if not callable(getattr(client, "submit", None)):
@@ -155,17 +170,19 @@ def reconstruct(
     saved: _SavedScene | None = None
     if scene.root is None:
         own = out_path / "scene"
-        if own.exists():
+        if own.exists() and not (whole and overwrite != "refuse"):
             # A call that continues an interrupted one, with the scene built again from its
             # arrays: the windows already trained were trained on the scene saved then, so it
             # must be the same scene, and the saved one is never overwritten.
             scene = _same_scene(scene, own)
         else:
+            # A whole run replaced or resumed continues on the scene given, saved over the run's
+            # own, as fluidnerf.reconstruct does.
             saved = _SavedScene(scene, out_path)
-            scene.save(own)
+            scene.save(own, force=own.exists())
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     try:
-        return _run(client, scene, cfg, out_path, whole, callback)
+        return _run(client, scene, cfg, out_path, whole, overwrite, callback)
     except FluidNerfError:
         # A run refused before it wrote anything takes back the scene this call saved.
         if saved is not None:
@@ -179,6 +196,7 @@ def _run(
     cfg: dict,
     out_path: Path,
     whole: bool,
+    overwrite: str,
     callback: Callable[[dict], None] | None,
 ) -> Run:
     """The tasks of :func:`reconstruct`, submitted to ``client``, and the finished run."""
@@ -189,7 +207,7 @@ def _run(
     token = uuid.uuid4().hex[:8]
     if whole:
         client.submit(
-            _whole_run, root, cfg_json, str(out_path), key=f"fluidnerf-run-{token}", pure=False
+            _whole_run, root, cfg_json, str(out_path), overwrite, key=f"fluidnerf-run-{token}", pure=False
         ).result()
         return open_run(out_path)
     plan = json.loads(_ext.window_plan(scene, cfg_json))

@@ -309,6 +309,27 @@ def test_a_dask_run_without_a_method_runs_the_method_of_its_configuration(client
     assert fluidnerf.build_config(static_scene)["method"]["name"] == "hybrid"
 
 
+def test_a_finished_static_dask_run_is_replaced_with_the_overwrite_its_refusal_names(
+    client, static_scene, tr_scene, tmp_path
+):
+    """A second call on a static run's folder was refused saying `overwrite="force"`, which
+    fluidnerf.dask.reconstruct did not take: it was refused as an unknown configuration key."""
+    out = tmp_path / "run"
+    fluidnerf.dask.reconstruct(client, static_scene, "asart", out, resolution=8)
+    with pytest.raises(fluidnerf.FluidNerfError, match='already holds a finished run.*overwrite="force"'):
+        fluidnerf.dask.reconstruct(client, static_scene, "asart", out, resolution=10)
+    run = fluidnerf.dask.reconstruct(client, static_scene, "asart", out, resolution=10, overwrite="force")
+    assert run.status == "finished" and run.volume.shape == (10, 10, 10)
+    with pytest.raises(fluidnerf.FluidNerfError, match="overwrite: expected 'refuse', 'force' or 'resume'"):
+        fluidnerf.dask.reconstruct(None, static_scene, "asart", out, overwrite="yes")
+    # A time-resolved run continues its windows when called again, and is never replaced.
+    with pytest.raises(fluidnerf.FluidNerfError, match="overwrite: a time-resolved run on Dask continues"):
+        fluidnerf.dask.reconstruct(
+            None, tr_scene, TR_METHOD, tmp_path / "tr", overwrite="force", **TR_OPTIONS
+        )
+    assert not (tmp_path / "tr").exists()
+
+
 def test_the_output_folder_of_a_scene_on_disk_is_refused_before_any_task(
     tr_scene, static_scene, serial, tmp_path
 ):
