@@ -1010,7 +1010,7 @@ def forward_project(
     methods, times ``intensity_scale``. ``projector``: ``"auto"`` (default: the voxel methods'
     choice from the voxels' image size), ``"footprint"``, ``"splat"``, ``"ray"``, or a dict of
     the projector settings (``{"kind", "splat_subdivisions", "ray_step"}``; the visual hull's
-    keys, which only reconstructions use, are refused). Returns ``(N, H, W)`` float32 (a list
+    keys and ``kept_footprints_mib``, which only reconstructions use, are refused). Returns ``(N, H, W)`` float32 (a list
     when image sizes differ)."""
     vol = _array(volume, np.float32, "volume", "(nz, ny, nx)")
     return _ext.forward_project(_as_scene(scene), vol, _projector(projector))

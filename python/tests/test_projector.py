@@ -386,6 +386,17 @@ def test_visual_hull_settings_are_refused_by_the_projections(scene):
     assert fluidnerf.forward_project(s, vol, {"kind": "ray", "ray_step": 0.25}).shape == (4, 16, 16)
 
 
+def test_a_footprint_memory_is_refused_by_the_projections(scene):
+    """kept_footprints_mib given to a projection, which makes one pass and keeps no
+    footprints, was accepted and set to 0 without a word."""
+    s, *_ = scene
+    vol = np.ones((N, N, N), np.float32)
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"^projector: kept_footprints_mib .* leave it out$"):
+        fluidnerf.forward_project(s, vol, {"kind": "footprint", "kept_footprints_mib": 4096})
+    with pytest.raises(fluidnerf.FluidNerfError, match=r"^projector: kept_footprints_mib "):
+        fluidnerf.back_project(s, np.ones((4, 16, 16), np.float32), (N, N, N), {"kept_footprints_mib": 0})
+
+
 def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(scene):
     """A negative side raised an OverflowError naming nothing, two sides a bare unpacking
     error, and a side of 6.5 was truncated to 6."""

@@ -32,6 +32,14 @@ fn projector_config(text: &str) -> PyResult<ProjectorConfig> {
             if given.len() == 1 { "it" } else { "them" }
         )));
     }
+    // Footprints are kept from one iteration of a reconstruction to the next; a projection
+    // makes one pass, and the value given was set to 0 without a word.
+    if value.get("kept_footprints_mib").is_some() {
+        return Err(err(
+            "projector: kept_footprints_mib sets the footprints the voxel methods keep between the iterations of a \
+             reconstruction (a run's method.projector); a projection makes one pass and keeps none: leave it out",
+        ));
+    }
     let config: ProjectorConfig = serde_json::from_value(value).map_err(|e| err(format!("projector: {e}")))?;
     config.validate().map_err(|e| err(format!("projector: {e}")))?;
     Ok(ProjectorConfig { kept_footprints_mib: 0, ..config })
