@@ -4,8 +4,12 @@ the metrics' known answers."""
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -395,6 +399,32 @@ def test_a_footprint_memory_is_refused_by_the_projections(scene):
         fluidnerf.forward_project(s, vol, {"kind": "footprint", "kept_footprints_mib": 4096})
     with pytest.raises(fluidnerf.FluidNerfError, match=r"^projector: kept_footprints_mib "):
         fluidnerf.back_project(s, np.ones((4, 16, 16), np.float32), (N, N, N), {"kept_footprints_mib": 0})
+
+
+def test_a_back_projection_beyond_the_memory_is_refused_not_aborted(tmp_path):
+    """A shape whose volume the memory could not hold aborted the process ("memory allocation
+    of 13500000000 bytes failed"), the interpreter with it. Run in a process limited to 4 GiB
+    of address space, it is now refused naming the shape."""
+    code = f"""
+import resource, sys
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+import numpy as np
+import fluidnerf
+from conftest import ring
+K, poses = ring(4)
+scene = fluidnerf.scene_from_arrays(K, poses, np.ones((4, 16, 16), np.float32), [[-10] * 3, [10] * 3])
+resource.setrlimit(resource.RLIMIT_AS, (4 << 30, resource.getrlimit(resource.RLIMIT_AS)[1]))
+try:
+    fluidnerf.back_project(scene, np.ones((4, 16, 16), np.float32), (1500, 1500, 1500))
+except fluidnerf.FluidNerfError as e:
+    print(e)
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert re.match(
+        r"shape: a volume of \(1500, 1500, 1500\) voxels needs (about )?\d+ MiB of memory.*give a smaller shape",
+        done.stdout,
+    ), done.stdout
 
 
 def test_back_projection_refuses_a_shape_that_is_not_three_positive_integers(scene):

@@ -134,13 +134,35 @@ pub fn back_project<'py>(
     }
     let scale = scene.inner.intensity_scale;
     let aabb = scene.inner.aabb;
+    // A shape beyond the memory was allocated as it came: the process aborted ("memory
+    // allocation of 13500000000 bytes failed"), taking the interpreter with it. The volume (and
+    // its copy when the projector works on turned axes) is checked against what the system can
+    // give, and allocated fallibly.
+    let mib = |bytes: u64| bytes.div_ceil(1 << 20);
+    let volume_bytes = count.unwrap_or(0) * 4;
+    if let Some(available) = fluidnerf_pipeline::available_memory().filter(|&a| 2 * volume_bytes > a) {
+        return Err(err(format!(
+            "shape: a volume of {shape:?} voxels needs about {} MiB of memory (it and a copy), but only {} MiB are \
+             available; give a smaller shape",
+            mib(2 * volume_bytes),
+            mib(available)
+        )));
+    }
     let out = py.allow_threads(|| {
         guard(|| {
             let grid = Grid::new([nx, ny, nz], aabb);
+            let mut out = Vec::new();
+            out.try_reserve_exact(grid.len()).map_err(|_| {
+                err(format!(
+                    "shape: a volume of {shape:?} voxels needs {} MiB of memory, which could not be allocated; give a \
+                     smaller shape",
+                    mib(volume_bytes)
+                ))
+            })?;
+            out.resize(grid.len(), 0f32);
             let shift = config.row_shift(&grid, &cameras);
             let moved = shift.cameras(&cameras);
             let p = config.build(shift.grid(&grid), &moved, scale).map_err(|e| err(e.to_string()))?;
-            let mut out = vec![0f32; grid.len()];
             let views: Vec<usize> = (0..data.len()).collect();
             let ys: Vec<&[f32]> = data.iter().map(Vec::as_slice).collect();
             p.back_add_views(&views, &ys, &mut out, None);
