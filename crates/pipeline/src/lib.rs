@@ -388,7 +388,7 @@ impl Session<'_> {
 
 const GIB: f64 = (1u64 << 30) as f64;
 
-/// The memory a run may use: `--memory-limit`, else the memory available now.
+/// The memory a run may use: `--memory-limit` (`memory_limit_gib`), else the memory available now.
 pub(crate) fn memory_limit(config: &RunConfig) -> u64 {
     match config.memory_limit_gib {
         Some(g) => (g * GIB) as u64,
@@ -407,12 +407,16 @@ pub(crate) fn check_memory(
     if needed > limit {
         return Err(PipelineError::Memory(format!(
             "{} needs {} but only {} {}; lower the resolution or the image count, or raise \
-             --memory-limit",
+             the limit (--memory-limit; memory_limit_gib in a configuration and from Python)",
             what(),
             // A saturated estimate: the request is beyond what 64 bits count.
             if needed == u64::MAX { "more than 16 EiB".to_string() } else { format!("about {}", bytes(needed)) },
             bytes(limit),
-            if config.memory_limit_gib.is_some() { "are allowed (--memory-limit)" } else { "are available" }
+            if config.memory_limit_gib.is_some() {
+                "are allowed (--memory-limit, memory_limit_gib)"
+            } else {
+                "are available"
+            }
         )));
     }
     Ok(())
