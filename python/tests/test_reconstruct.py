@@ -194,6 +194,25 @@ def test_a_saved_configuration_reruns_its_own_method(static_scene, tr_scene, tmp
     assert more.config["method"]["train"]["rays_per_image"] == 64
 
 
+def test_a_run_records_the_version_that_made_it_as_the_command_line_does(static_scene, cli, tmp_path):
+    """A configuration of another version (an earlier run's, or a version given) kept its
+    own: the new run's config.json named a version that did not write it, where the command
+    line, given the same configuration, records its own."""
+    cfg = fluidnerf.build_config(static_scene, "asart", resolution=8, stopping={"max_iterations": 2})
+    assert cfg["fluidnerf_version"] == fluidnerf.__version__
+    old = {**cfg, "fluidnerf_version": "0.0.1"}
+    run = fluidnerf.reconstruct(static_scene, config=old, out=tmp_path / "py", progress=False)
+    assert run.config["fluidnerf_version"] == fluidnerf.__version__
+    written = json.loads((run.path / "config.json").read_text())
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    subprocess.run(
+        [cli, "reconstruct", "--config", str(tmp_path / "old.json"), "-o", str(tmp_path / "cli"), "-q"],
+        check=True,
+        capture_output=True,
+    )
+    assert written == json.loads((tmp_path / "cli" / "config.json").read_text())
+
+
 def test_settings_are_refused_with_the_messages_of_the_command_line(static_scene, cli, tmp_path):
     with pytest.raises(fluidnerf.FluidNerfError) as e:
         fluidnerf.reconstruct(static_scene, "asart", tmp_path / "a", resolution=1)

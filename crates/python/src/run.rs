@@ -18,10 +18,14 @@ fn to_json<T: serde::Serialize>(value: &T) -> PyResult<String> {
     serde_json::to_string(value).map_err(|e| err(format!("cannot write JSON: {e}")))
 }
 
-/// Parses and validates a `RunConfig` from JSON text, with the messages of `config.json`.
+/// Parses and validates a `RunConfig` from JSON text, with the messages of `config.json`. The
+/// version recorded is this one, as `reconstruct --config` records it: a configuration of an
+/// earlier run (`run.config`) or a version given kept its own, and the new run's config.json
+/// named a version that did not write it.
 fn parse_config(text: &str) -> PyResult<RunConfig> {
     let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("configuration: {e}")))?;
-    let config: RunConfig = fluidnerf_pipeline::rundir::from_json_value(value).map_err(|e| err(e.to_string()))?;
+    let mut config: RunConfig = fluidnerf_pipeline::rundir::from_json_value(value).map_err(|e| err(e.to_string()))?;
+    config.fluidnerf_version = env!("CARGO_PKG_VERSION").to_string();
     if config.format != fluidnerf_pipeline::CONFIG_FORMAT {
         return Err(err(format!(
             "format: configuration format {} is not the format {} this version reads",
