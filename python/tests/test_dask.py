@@ -70,6 +70,19 @@ def test_the_plan_is_the_one_tr_fast_uses(tr_scene):
     assert plan["warm_start"] is True and plan["frame_times"] == [14.0, 14.5, 15.0, 15.5, 16.0]
 
 
+def test_an_error_in_a_task_reaches_the_caller_as_a_fluidnerf_error(client, tmp_path):
+    """FluidNerfError was named _fluidnerf.FluidNerfError, in no module Python can import: it
+    could not be pickled, and an error raised in a task reached the client as another class,
+    which `except fluidnerf.FluidNerfError` did not catch."""
+    import pickle
+
+    again = pickle.loads(pickle.dumps(fluidnerf.FluidNerfError("refused")))
+    assert type(again) is fluidnerf.FluidNerfError and str(again) == "refused"
+    future = client.submit(fluidnerf.load_scene, str(tmp_path / "nowhere"))
+    with pytest.raises(fluidnerf.FluidNerfError, match="nowhere"):
+        future.result()
+
+
 def test_a_plan_of_more_than_a_million_windows_is_refused():
     assert len(fluidnerf.plan_windows(2_000_000, 2, 0)) == 1_000_000
     with pytest.raises(fluidnerf.FluidNerfError, match="make 1000001 windows"):

@@ -15,8 +15,12 @@ mod ops;
 mod run;
 mod scene;
 
+// Named in the module it is documented in, `fluidnerf`: as `_fluidnerf.FluidNerfError` (no
+// module Python can import) it could not be pickled, so an error raised in a Dask task (or a
+// process pool) reached the caller as another class, which `except fluidnerf.FluidNerfError`
+// did not catch.
 pyo3::create_exception!(
-    _fluidnerf,
+    fluidnerf,
     FluidNerfError,
     PyValueError,
     "An error of fluidnerf: bad input (naming the file, key or camera) or a failed run."
