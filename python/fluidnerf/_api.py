@@ -103,6 +103,13 @@ def _numbers(value: Any, dtype: type, name: str, shape: str = "") -> np.ndarray:
         if other is not None:
             raise TypeError(f"{name}: expected an array of numbers{shape}, got {other} ({given.dtype})")
         if given is not None and given.dtype.kind == "O":
+            # NumPy casts None to NaN: [1.0, None] was refused as "not finite (NaN)", a value
+            # nobody gave.
+            missing = next((i for i, v in enumerate(given.flat) if v is None), None)
+            if missing is not None:
+                raise TypeError(
+                    f"{name}: element {missing} (flat index, C order) is None; expected an array of numbers{shape}"
+                )
             # A list of Python integers is an array of objects: one beyond the type was cast
             # to an infinity (refused as "not finite (inf)", a value nobody gave), or beyond
             # float64 raised a bare "OverflowError: int too large to convert to float".
@@ -338,13 +345,18 @@ def scene_from_arrays(
       (x right, y down, z forward). Invert a world-to-camera ``[R | t]`` first.
     - ``images``: ``(N, H, W)`` linear pixel values, ``pixel = intensity_scale × ∫E ds``.
     - ``aabb``: ``(2, 3)``, ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` in world units.
-    - ``times``: ``(N,)`` frame times for time-resolved recordings; ``distortion``:
+    - ``times``: ``(N,)`` frame times for time-resolved recordings (None, or None for every
+      frame as ``Scene.times`` gives them, for a static scene); ``distortion``:
       ``(N, 4|5|8)`` OpenCV coefficients; ``holdout``: frames kept out of training.
 
     The scene is checked as a scene read from a folder is (every camera outside the box and
     seeing it, a camera name once per instant, ...), naming the frame.
     """
     f64 = np.float64
+    if isinstance(times, (list, tuple)) and times and all(t is None for t in times):
+        # As Scene.times gives them for a static scene (None for every frame): no times, not
+        # frames at the time NaN.
+        times = None
     return Scene.from_arrays(
         _array(K, f64, "K", "(N, 3, 3)"),
         _array(world_from_camera, f64, "world_from_camera", "(N, 4, 4)"),

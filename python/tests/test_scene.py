@@ -244,6 +244,30 @@ def test_calibration_importers_read_the_library_fixtures():
     assert len(colmap) >= 1 and all(c.size[0] > 0 for c in colmap)
 
 
+def test_a_scenes_own_arrays_and_lists_build_it_again(static_scene):
+    """Scene.times gives None for every frame of a static scene; given back as times, they were
+    cast to NaN and refused as "frame 0 has the time NaN". A None among numbers was refused as
+    the NaN it became, too."""
+    K, poses, dist, _ = static_scene.camera_arrays()
+    again = fluidnerf.scene_from_arrays(
+        K,
+        poses,
+        static_scene.images(),
+        static_scene.aabb,
+        times=static_scene.times,
+        distortion=dist,
+        holdout=static_scene.holdout,
+        names=static_scene.names,
+    )
+    assert again.times == static_scene.times and again.holdout == static_scene.holdout
+    with pytest.raises(TypeError, match=r"^times: element 1 \(flat index, C order\) is None; expected"):
+        fluidnerf.scene_from_arrays(
+            K[:2], poses[:2], static_scene.images()[:2], static_scene.aabb, times=[1.0, None]
+        )
+    with pytest.raises(TypeError, match=r"^estimate: element 1 \(flat index, C order\) is None"):
+        fluidnerf.nrmse([1.0, None], [1.0, 2.0])
+
+
 def test_cameras_compare_and_hash_as_values_and_their_matrices_are_read_only():
     from conftest import REPO
 
