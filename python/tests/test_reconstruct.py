@@ -151,8 +151,9 @@ def test_a_voxel_run_and_its_truth_metrics(static_scene, tmp_path):
 
 
 def test_a_runs_warnings_are_issued_and_kept_in_its_report(static_scene, tmp_path):
-    # SART-TV inside a visual hull warns that its weight then over-smooths the hull's voxels.
-    method = {"name": "tv", "projector": {"visual_hull": True}}
+    # SART-TV inside a visual hull with the data step rule warns that its weight then
+    # over-smooths the hull's voxels.
+    method = {"name": "tv", "projector": {"visual_hull": True}, "params": {"step_rule": "data"}}
     with pytest.warns(fluidnerf.FluidNerfWarning, match="SART-TV inside a visual hull"):
         run = fluidnerf.reconstruct(
             static_scene,

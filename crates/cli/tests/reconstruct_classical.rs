@@ -74,8 +74,9 @@ fn every_method_and_option_runs_and_memory_is_checked() {
         assert_eq!(r["warnings"], serde_json::json!([]), "{method}");
         assert_eq!(r["iterations"], 3, "{method}");
     }
-    // Ray projector, visual hull, TV weight, no plateau rule. TV inside a hull is warned of,
-    // also in report.json and report.html, where a quiet run (-q) still records it.
+    // Ray projector, visual hull, TV weight, no plateau rule. TV inside a hull with the data
+    // step rule is warned of, also in report.json and report.html, where a quiet run (-q) still
+    // records it.
     let run = fluidnerf(
         d,
         &[
@@ -94,6 +95,8 @@ fn every_method_and_option_runs_and_memory_is_checked() {
             "--visual-hull",
             "--tv-weight",
             "0.1",
+            "--tv-step-rule",
+            "data",
             "--plateau-tolerance",
             "0",
             "--max-iterations",
@@ -115,6 +118,27 @@ fn every_method_and_option_runs_and_memory_is_checked() {
     let cfg: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("ray/config.json")).expect("config")).expect("json");
     assert_eq!(cfg["method"]["params"]["tv_weight"], 0.1);
+    assert_eq!(cfg["method"]["params"]["step_rule"], "data");
+    // With the default rule, balanced inside a hull, there is nothing to warn of.
+    let run = fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "hull-auto",
+            "--method",
+            "tv",
+            "--resolution",
+            "12",
+            "--visual-hull",
+            "--max-iterations",
+            "2",
+        ],
+    );
+    ok(&run);
+    assert!(!String::from_utf8_lossy(&run.stderr).contains(HULL_TV), "the balanced rule is not warned of");
+    assert_eq!(report(&d.join("hull-auto"))["warnings"], serde_json::json!([]));
     assert_eq!(cfg["method"]["params"]["stopping"]["plateau"], serde_json::Value::Null);
 
     // Too little memory: refused before any work, with the estimate.
