@@ -757,3 +757,31 @@ fn a_window_or_frame_file_copied_over_another_is_refused_naming_it() {
     });
     ok(&fluidnerf(d, &by_volume));
 }
+
+/// A window that was still training when its run stopped continued past a lower
+/// `--max-iterations` given with `--resume`: it kept its longer training while `config.json`
+/// recorded the lower cap, so a rerun of that configuration gave another result. The resume is
+/// now refused naming the checkpoint and its iteration, as a static run's is.
+#[test]
+fn a_window_resumed_below_its_checkpoints_iteration_is_refused_naming_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fluidnerf --preset tr-small --window 2 --overlap 1 \
+                --max-iterations 4 --rays-per-image 16 --coarse-samples 8 --fine-samples 0 --resolution 8 \
+                --checkpoint-every 1 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    // The process died after the second window's last checkpoint, before it was listed as finished.
+    edit_json(&d.join("run/windows/progress.json"), |p| {
+        p["finished"].as_array_mut().expect("a list").truncate(1);
+    });
+    let before = std::fs::read(d.join("run/config.json")).expect("config");
+    let out = fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--max-iterations", "2", "-q"]);
+    refused(&out, "stopping.max_iterations: ");
+    refused(&out, "w001.checkpoint.safetensors (window 1, still training) is at iteration 4, beyond the cap of 2");
+    refused(&out, "give --max-iterations of at least 4");
+    assert!(std::fs::read(d.join("run/config.json")).expect("kept") == before, "the refused resume wrote");
+    ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "-q"]));
+    let windows = report(&d.join("run"))["windows"].clone();
+    assert_eq!(windows[1]["train"]["iterations"], 4);
+}

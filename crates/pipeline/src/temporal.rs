@@ -516,7 +516,32 @@ impl Ctx<'_> {
         }
         let next = checkpoint_name(progress.finished.len());
         if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() {
-            state.running = Some(load(progress.finished.len(), &next)?);
+            let k = progress.finished.len();
+            let learner = load(k, &next)?;
+            // The running window only continues: below its checkpoint's iteration it would keep
+            // the longer training and record the lower cap in config.json, which reruns to
+            // another result (as a static run refuses it).
+            let warm = self.spec.windows.warm_start && k > 0;
+            let (cap, key) = match self.spec.windows.warm_max_iterations.filter(|_| warm) {
+                Some(m) => (m, "method.windows.warm_max_iterations"),
+                None => (self.spec.train.max_iterations, "stopping.max_iterations"),
+            };
+            if learner.iteration > cap {
+                let give = match key {
+                    "stopping.max_iterations" => format!("--max-iterations of at least {}", learner.iteration),
+                    _ => format!("{key} of at least {} in the configuration", learner.iteration),
+                };
+                return Err(PipelineError::invalid(
+                    key,
+                    format!(
+                        "{} (window {k}, still training) is at iteration {}, beyond the cap of {cap} asked for; a \
+                         resumed run only continues, so give {give} (or start afresh with --force)",
+                        self.dir.path(&next).display(),
+                        learner.iteration,
+                    ),
+                ));
+            }
+            state.running = Some(learner);
         }
         log::info!(
             "resuming: {} of {} windows finished{}",
