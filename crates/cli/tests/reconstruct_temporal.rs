@@ -785,3 +785,39 @@ fn a_window_resumed_below_its_checkpoints_iteration_is_refused_naming_it() {
     let windows = report(&d.join("run"))["windows"].clone();
     assert_eq!(windows[1]["train"]["iterations"], 4);
 }
+
+/// A resumed run left the earlier run's series and scores in its folder: with a held-out time
+/// dropped, `frames/volume_004.*` of the earlier run stayed beside the four volumes the resumed
+/// run wrote (a glob of `frames/` handed `eval` five volumes, the last another run's), and
+/// `metrics.json` went on scoring the earlier field. A resume now clears both before it writes.
+#[test]
+fn a_resumed_run_leaves_no_volume_or_score_of_the_run_it_continues() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fluidnerf --preset tr-small --max-iterations 2 \
+                --rays-per-image 16 --coarse-samples 8 --fine-samples 0 --resolution 8 --checkpoint-every 0 -q \
+                --holdout-times 14.5,15.5";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    assert!(d.join("run/frames/volume_004.npy").is_file());
+    ok(&fluidnerf(d, &["eval", "run", "--no-reprojection", "-q"]));
+    assert!(d.join("run/metrics.json").is_file());
+    let out = fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--holdout-times", "14.5", "-q"]);
+    ok(&out);
+    let mut listed: Vec<String> = std::fs::read_dir(d.join("run/frames"))
+        .expect("frames")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    listed.sort();
+    let written: Vec<String> =
+        (0..4).flat_map(|i| [format!("volume_{i:03}.npy"), format!("volume_{i:03}.vti")]).collect();
+    assert_eq!(listed, written, "frames/ holds volumes the resumed run did not write");
+    let times: Vec<f64> = report(&d.join("run"))["volumes"]
+        .as_array()
+        .expect("volumes")
+        .iter()
+        .map(|v| v["time"].as_f64().unwrap())
+        .collect();
+    assert_eq!(times, [14.0, 14.5, 15.0, 16.0]);
+    assert!(!d.join("run/metrics.json").exists() && !d.join("run/metrics.csv").exists(), "the earlier scores stayed");
+}

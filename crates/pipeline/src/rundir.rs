@@ -626,10 +626,26 @@ impl RunDir {
     }
 
     /// A resumed run, once its saved state has loaded: drops the finished run's report (so a
-    /// continuation that is interrupted reads as unfinished) and records the settings it goes
-    /// on with (`config`). Until then a refused resume leaves the run as it was.
+    /// continuation that is interrupted reads as unfinished), the scores `eval` wrote of its
+    /// field ([`EVAL_FILES`]) and its series of volumes (`frames/`, `volumes.pvd`), and records
+    /// the settings it goes on with (`config`). The continuation writes its own volumes: those
+    /// of the earlier run that it does not rewrite (a held-out time dropped, frames numbered
+    /// anew) and the earlier scores would otherwise sit beside its results as if they were
+    /// theirs. Until then a refused resume leaves the run as it was.
     pub fn replace_finished(&self, config: &impl Serialize) -> Result<(), PipelineError> {
         let _ = std::fs::remove_file(self.report());
+        for name in EVAL_FILES.into_iter().chain(["volumes.pvd"]) {
+            let path = self.path(name);
+            if path.is_file() {
+                std::fs::remove_file(&path)
+                    .map_err(|e| PipelineError::file(&path, format!("cannot remove the earlier run's file: {e}")))?;
+            }
+        }
+        let frames = self.path("frames");
+        if frames.is_dir() {
+            std::fs::remove_dir_all(&frames)
+                .map_err(|e| PipelineError::file(&frames, format!("cannot remove the earlier run's volumes: {e}")))?;
+        }
         self.write_json("config.json", config).map(drop)
     }
 
