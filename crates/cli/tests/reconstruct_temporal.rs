@@ -821,3 +821,37 @@ fn a_resumed_run_leaves_no_volume_or_score_of_the_run_it_continues() {
     assert_eq!(times, [14.0, 14.5, 15.0, 16.0]);
     assert!(!d.join("run/metrics.json").exists() && !d.join("run/metrics.csv").exists(), "the earlier scores stayed");
 }
+
+/// A run's frames given to `eval` out of order (`frames/volume_001.npy` before
+/// `volume_000.npy`) were each scored against the other instant's truth, without a word. Each
+/// frame's time is in the run's report: a frame given for another time step is now refused,
+/// naming the file, both times and the order wanted.
+#[test]
+fn a_runs_frames_given_to_eval_out_of_order_are_refused_naming_the_times() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fluidnerf --preset tr-small --max-iterations 2 \
+                --rays-per-image 16 --coarse-samples 8 --fine-samples 0 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let frames =
+        |order: [usize; 3]| -> Vec<String> { order.iter().map(|i| format!("run/frames/volume_{i:03}.npy")).collect() };
+    let eval = |files: Vec<String>| {
+        let mut a = vec!["eval".to_string(), "--scene".into(), "scene".into(), "--no-reprojection".into()];
+        a.extend(["--json".into(), "m.json".into(), "--force".into(), "-q".into()]);
+        a.extend(files);
+        fluidnerf(d, &a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    ok(&eval(frames([0, 1, 2])));
+    let out = eval(frames([1, 0, 2]));
+    refused(&out, "RECON run/frames/volume_001.npy: the run wrote it at t = 15 (run/report.json)");
+    refused(&out, "given as volume 1 of 3, for the time step at t = 14; the scene's time step 2 has that time");
+    refused(&out, "in the order of the steps' times (14, 15, 16)");
+    // The .vti files of the series are read the same way.
+    let vti = vec![
+        "run/frames/volume_000.vti".to_string(),
+        "run/frames/volume_002.vti".into(),
+        "run/frames/volume_001.vti".into(),
+    ];
+    refused(&eval(vti), "RECON run/frames/volume_002.vti: the run wrote it at t = 16");
+}

@@ -435,6 +435,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 step_times.len()
             );
         }
+        if volumes.len() > 1 {
+            refuse_frames_out_of_order(&args.recon, &step_times)?;
+        }
         if volumes.len() == 1 && truth.len() > 1 {
             log::warn!(
                 "one reconstruction volume for {} truth time steps: the same volume is scored at every step",
@@ -547,6 +550,55 @@ fn recorded_gains(run_dir: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
         gains[f.frame] = (f.gain, f.offset);
     }
     Ok(gains)
+}
+
+/// The time at which a time-resolved run wrote the volume file `path`, when it is one of a
+/// run's frames (`RUN/frames/volume_NNN.npy|.vti`, listed with its time in `RUN/report.json`):
+/// the report's path and the time.
+fn recorded_frame_time(path: &Path) -> Option<(PathBuf, f64)> {
+    let frames = path.parent()?;
+    if frames.file_name()? != "frames" {
+        return None;
+    }
+    let run = frames.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let report_path = run.join("report.json");
+    let report = fluidnerf_pipeline::RunReport::read(&report_path).ok()?;
+    let stem = path.file_stem()?.to_str()?;
+    let own = format!("frames/{stem}");
+    let record = report.volumes.iter().find(|v| Path::new(&v.file).with_extension("") == Path::new(&own))?;
+    Some((report_path, record.time?))
+}
+
+/// Refuses volume files given for the time steps `step_times` (one each, in order) when one is a
+/// run's frame written at another time ([`recorded_frame_time`]): given out of order (or for a
+/// scene whose truth is at other times), it would be scored against another instant's truth.
+fn refuse_frames_out_of_order(paths: &[PathBuf], step_times: &[Option<f64>]) -> anyhow::Result<()> {
+    let listed = || step_times.iter().flatten().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
+    for (i, (path, step)) in paths.iter().zip(step_times).enumerate() {
+        let (Some((report, written)), Some(step)) = (recorded_frame_time(path), step) else { continue };
+        if fluidnerf_core::scene::same_time(written, *step) {
+            continue;
+        }
+        let at = paths
+            .iter()
+            .zip(step_times)
+            .position(|(_, t)| t.is_some_and(|t| fluidnerf_core::scene::same_time(t, written)))
+            .map_or("no time step of the scene has that time".to_string(), |j| {
+                format!("the scene's time step {} has that time", j + 1)
+            });
+        bail!(
+            "RECON {}: the run wrote it at t = {} ({}), but it is given as volume {} of {}, for the time step at \
+             t = {}; {at}. Give one volume per time step in the order of the steps' times ({})",
+            path.display(),
+            num(written),
+            report.display(),
+            i + 1,
+            paths.len(),
+            num(*step),
+            listed()
+        );
+    }
+    Ok(())
 }
 
 /// Refuses `out` as an output file when it is a file this evaluation reads or that belongs to
