@@ -94,6 +94,20 @@ impl SynthSettings {
                 format!("{t} is given twice (times {:?}, the second at position {i}); give each time once", self.times),
             ));
         }
+        // Times within a relative 1e-9 are one instant to every reader of the scene, which
+        // refuses frames of one instant written two ways: the scene could not be reconstructed.
+        let same = |i: usize, t: f64| self.times[..i].iter().find(|&&u| fluidnerf_core::scene::same_time(u, t));
+        if let Some((i, t, u)) = self.times.iter().enumerate().find_map(|(i, &t)| same(i, t).map(|&u| (i, t, u))) {
+            return Err(SynthError::invalid(
+                "times",
+                format!(
+                    "{} and {} (the second at position {i}) are one instant to the scene's readers (times within a \
+                     relative 1e-9 of each other); give times further apart, or each time once",
+                    num(u),
+                    num(t)
+                ),
+            ));
+        }
         if self.phantom.kind.cfd_case().is_some() {
             if let Some(t) = self.times.iter().find(|&&t| crate::phantom::cfd::step_of(t).is_none()) {
                 return Err(SynthError::invalid(
@@ -632,6 +646,18 @@ mod tests {
         s.times = vec![14.0, 15.0, 14.0];
         let e = s.validate().unwrap_err().to_string();
         assert!(e.contains("times") && e.contains("14 is given twice"), "{e}");
+        // Two times that every reader of the scene takes for one instant: the scene it wrote
+        // could not be reconstructed.
+        s.times = vec![14.0, 14.000_000_000_1, 15.0];
+        let e = s.validate().unwrap_err().to_string();
+        assert!(
+            e.contains(
+                "`times`: 14 and 14.0000000001 (the second at position 1) are one instant to the scene's readers"
+            ),
+            "{e}"
+        );
+        s.times = vec![14.0, 14.000_01, 15.0];
+        s.validate().expect("times a relative 1e-6 apart are two instants");
         let aabb = s.aabb;
         let mut v = Volume::from_fn([4, 4, 4], aabb, |_| 1.0);
         v.data[5] = f32::INFINITY;
