@@ -855,3 +855,37 @@ fn a_runs_frames_given_to_eval_out_of_order_are_refused_naming_the_times() {
     ];
     refused(&eval(vti), "RECON run/frames/volume_002.vti: the run wrote it at t = 16");
 }
+
+/// `eval RUN --use-volume` scored a time-resolved run's volumes by their place in the series,
+/// not by their time: with the scene's truth listed latest first, the volume of t = 14 was
+/// scored against the truth of t = 16, and a run with a volume at a held-out time the truth
+/// does not have was refused as "4 reconstruction volumes given". Each step now gets the
+/// run's volume at its own time, and the scores are those the run reported.
+#[test]
+fn a_runs_volumes_are_scored_at_their_own_times() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fluidnerf --preset tr-small --max-iterations 2 \
+                --rays-per-image 16 --coarse-samples 8 --fine-samples 0 --resolution 8 --checkpoint-every 0 -q \
+                --holdout-times 14.5";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let reported: Vec<(f64, f64)> = report(&d.join("run"))["volumes"]
+        .as_array()
+        .expect("volumes")
+        .iter()
+        .filter(|v| !v["metrics"].is_null())
+        .map(|v| (v["time"].as_f64().unwrap(), v["metrics"]["global"]["nrmse"].as_f64().unwrap()))
+        .collect();
+    assert_eq!(reported.len(), 3, "{reported:?}");
+    edit_json(&d.join("scene/transforms.json"), |s| s["truth"].as_array_mut().expect("truth").reverse());
+    let out = fluidnerf(d, &["eval", "run", "--use-volume", "--no-reprojection", "--json", "m.json", "-q"]);
+    ok(&out);
+    let scored = json(&d.join("m.json"))["steps"].clone();
+    for (step, time) in scored.as_array().expect("steps").iter().zip([16.0, 15.0, 14.0]) {
+        assert_eq!(step["time"].as_f64(), Some(time));
+        let (_, nrmse) = reported.iter().find(|(t, _)| *t == time).expect("reported");
+        let got = step["global"]["nrmse"].as_f64().expect("nrmse");
+        assert!((got - nrmse).abs() < 1e-6, "t = {time}: scored {got}, the run reported {nrmse}");
+    }
+}

@@ -419,7 +419,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Times the scene's truth does not cover are not scored, and said so.
     let without_truth = if args.truth.is_some() { Vec::new() } else { scene.times_without_truth() };
     let listed = |times: &[f64]| times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
-    let recon = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref())?;
+    let recon = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref(), &step_times)?;
     if let Recon::Volumes(volumes) = &recon {
         if volumes.len() > 1 && volumes.len() != step_times.len() {
             let steps = if truth.is_empty() { "frame times" } else { "ground-truth time steps" };
@@ -624,7 +624,14 @@ fn refuse_inputs(out: &Path, scene_path: &Path, run_dir: Option<&Path>, args: &A
 
 /// Loads the reconstruction arguments: volume files, or one run folder of any kind (its
 /// trained field, static or of space and time, unless `use_volume`; else its volumes).
-fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<&Path>) -> anyhow::Result<Recon> {
+/// `step_times`: the times of the time steps scored, in order (the truth's, else the frames').
+fn load_recon(
+    paths: &[PathBuf],
+    scene: &Scene,
+    use_volume: bool,
+    truth: Option<&Path>,
+    step_times: &[Option<f64>],
+) -> anyhow::Result<Recon> {
     if let [dir] = paths {
         if dir.is_dir() {
             let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
@@ -675,7 +682,11 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
                 }
             }
             if use_volume {
-                return Ok(Recon::Volumes(run.volumes()?.into_iter().map(|(_, v)| v).collect()));
+                let volumes = run.volumes()?;
+                if volumes.iter().all(|(t, _)| t.is_none()) {
+                    return Ok(Recon::Volumes(volumes.into_iter().map(|(_, v)| v).collect()));
+                }
+                return volumes_at_steps(dir, volumes, step_times).map(Recon::Volumes);
             }
             return Ok(Recon::Field(run.field()?));
         }
@@ -696,6 +707,43 @@ fn load_recon(paths: &[PathBuf], scene: &Scene, use_volume: bool, truth: Option<
         volumes.push(volume);
     }
     Ok(Recon::Volumes(volumes))
+}
+
+/// The volumes of the time-resolved run in `dir` (each with its time) that stand for the time
+/// steps `step_times`, in the steps' order: the run writes its series in increasing time, with
+/// volumes at held-out times the scene may have no truth for, so the position of a volume in the
+/// series is not the step it stands for. Refused, naming the time, when a step has no volume.
+fn volumes_at_steps(
+    dir: &Path,
+    volumes: Vec<(Option<f64>, Volume)>,
+    step_times: &[Option<f64>],
+) -> anyhow::Result<Vec<Volume>> {
+    let written: Vec<String> = volumes.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
+    let mut out = Vec::with_capacity(step_times.len());
+    for (i, step) in step_times.iter().enumerate() {
+        let Some(t) = step else {
+            bail!(
+                "{}: the scene's time step {} has no time, but the run's volumes are each of one instant ({}); give \
+                 the step its instant's `time`",
+                dir.display(),
+                i + 1,
+                written.join(", ")
+            );
+        };
+        let Some(k) = volumes.iter().position(|(v, _)| v.is_some_and(|v| fluidnerf_core::scene::same_time(v, *t)))
+        else {
+            bail!(
+                "{}: the run wrote no volume at t = {}, the time of the scene's time step {} (it wrote them at t = \
+                 {}); score its trained field instead (leave out --use-volume)",
+                dir.display(),
+                num(*t),
+                i + 1,
+                written.join(", ")
+            );
+        };
+        out.push(volumes[k].1.clone());
+    }
+    Ok(out)
 }
 
 /// Formats a metric for the table: fixed decimals, `inf`, or `-` (an undefined NRMSE is
