@@ -21,6 +21,10 @@
 //!   overlap is a single frame and `f` is on it), the earlier `1 − λ`. The stitched series is
 //!   therefore continuous in time, and a shared frame is the weighted mean of the two windows'
 //!   reconstructions of it, each window dominating near its own centre;
+//! - inside three or more windows (the last window moved back, or `O > W / 2`): the
+//!   cross-fades nest, each window fading in over `[its start, the end of the covering window
+//!   before it]` and taking that share from all the windows before it, so the weights stay
+//!   continuous;
 //! - in a gap between windows that do not overlap (per-frame static windows, `W = 1, O = 0`):
 //!   linear interpolation between the earlier window at its last frame and the later window at
 //!   its first frame — for static per-frame reconstructions this is exactly the linear
@@ -114,14 +118,41 @@ pub fn blend(windows: &[Range<usize>], f: f64) -> Vec<(usize, f64, f64)> {
             vec![(k, 1.0 - lam, e), (next, lam, a)]
         }
         [i] => vec![(*i, 1.0, f)],
-        many => {
-            // Cross-fade between the last two windows covering f (with plans from
-            // `plan_windows` at most two cover any frame unless W < 2 O).
-            let (p, q) = (many[many.len() - 2], many[many.len() - 1]);
-            let (a, e) = (windows[q].start as f64, end(&windows[p]));
-            let lam = if e > a { ((f - a) / (e - a)).clamp(0.0, 1.0) } else { 0.5 };
-            vec![(p, 1.0 - lam, f), (q, lam, f)]
+        [p, q] => {
+            // Cross-fade between the two windows covering f.
+            let lam = fade_in(windows, *p, *q, f);
+            vec![(*p, 1.0 - lam, f), (*q, lam, f)]
         }
+        many => {
+            // Three or more windows cover f (the last window moved back to end at the last
+            // frame, or an overlap above half the window): the cross-fades nest. Each window
+            // fades in over [its start, the end of the covering window before it], taking
+            // that share from all the windows before it, so every weight is continuous in f
+            // (a window enters at 0 and has reached 0 when it leaves), and with two windows
+            // this is the cross-fade above. Taking only the last two made the weights jump
+            // where a third window began (by 4/3 at frame 13 for windows of 16 frames
+            // overlapping by 4 over 29 frames).
+            let mut out: Vec<(usize, f64, f64)> = Vec::with_capacity(many.len());
+            for (k, &q) in many.iter().enumerate() {
+                let lam = if k == 0 { 1.0 } else { fade_in(windows, many[k - 1], q, f) };
+                out.iter_mut().for_each(|w| w.1 *= 1.0 - lam);
+                out.push((q, lam, f));
+            }
+            out.retain(|w| w.1 > 0.0);
+            out
+        }
+    }
+}
+
+/// The share of window `q` in the cross-fade with window `p` (the window before it that covers
+/// frame position `f`) and those before: rising linearly from 0 at the start of `q` to 1 at
+/// the end of `p` (½ where the two meet in a single frame).
+fn fade_in(windows: &[Range<usize>], p: usize, q: usize, f: f64) -> f64 {
+    let (a, e) = (windows[q].start as f64, (windows[p].end - 1) as f64);
+    if e > a {
+        ((f - a) / (e - a)).clamp(0.0, 1.0)
+    } else {
+        0.5
     }
 }
 
@@ -155,7 +186,16 @@ mod tests {
 
     #[test]
     fn weights_sum_to_one_and_are_continuous() {
-        let plans = [plan_windows(10, 4, 2), plan_windows(10, 4, 1), plan_windows(5, 1, 0)];
+        // The last two plans have frames that three windows cover: windows of 16 frames
+        // overlapping by 4, the last moved back to end at frame 28 (frames 13–15 lie in three),
+        // and an overlap above half the window.
+        let plans = [
+            plan_windows(10, 4, 2),
+            plan_windows(10, 4, 1),
+            plan_windows(5, 1, 0),
+            plan_windows(29, 16, 4),
+            plan_windows(12, 5, 4),
+        ];
         for windows in &plans {
             let n = windows.last().map_or(0, |w| w.end);
             let mut prev: Option<Vec<f64>> = None;
