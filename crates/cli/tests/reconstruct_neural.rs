@@ -58,6 +58,15 @@ fn dense_and_mlp_runs_write_resume_and_load() {
         fluidnerf(d, &args)
     };
     refused(&resumed_with(7, "fast"), "change the field");
+    // So is one that would train on with other settings: the run's config.json, which records
+    // the new ones, would not rerun it.
+    let config_before = std::fs::read(dir.join("config.json")).expect("readable");
+    refused(
+        &resumed_with(15, "128"),
+        "run/config.json: cannot resume: the run was trained with other settings (`method.train.rays_per_image`: \
+         256 → 128)",
+    );
+    assert!(std::fs::read(dir.join("config.json")).expect("readable") == config_before, "the refusal changed it");
     let damaged = d.join("damaged");
     std::fs::create_dir(&damaged).expect("mkdir");
     for e in std::fs::read_dir(&dir).expect("lists") {

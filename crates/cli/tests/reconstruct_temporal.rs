@@ -690,6 +690,13 @@ fn a_run_resumed_with_another_time_step_is_refused_naming_it() {
         "run/windows/progress.json: cannot resume: the run being resumed has a different time step Δt (1, now 2",
     );
     assert!(report(&d.join("run"))["status"] == "finished", "the refused resume changed the run");
+    // Other training settings were only warned of: the finished windows kept theirs, and the
+    // config.json written recorded the new ones, which rerun to another result.
+    let out = fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--rays-per-image", "32", "-q"]);
+    refused(
+        &out,
+        "cannot resume: the run was trained with other settings (under `method.train`: `rays_per_image`: 16 → 32)",
+    );
     ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--time-step", "1", "-q"]));
 }
 

@@ -152,6 +152,9 @@ pub(crate) fn run(
             spec.train.rays_per_image
         )
     })?;
+    if dir.resuming() {
+        crate::rundir::check_resume_settings(dir, config)?;
+    }
     // An earlier curve is read before the report that holds it is removed.
     let earlier = if dir.resuming() { earlier_report(dir) } else { None };
     let t0 = Instant::now();

@@ -880,6 +880,48 @@ pub fn settings_differences<T: serde::Serialize>(saved: &T, given: &T, max: usiz
     found.join(", ")
 }
 
+/// Refuses to resume the run in `dir` with settings that would change how it trains: the run
+/// it continues was trained with those of its `config.json`, and the `config.json` the resumed
+/// run writes must rerun it (`--config`). What may change is what only bounds or reports the
+/// training: the iteration cap, the time budget and the held-out rule's patience, the
+/// checkpoint and evaluation intervals, the memory limit, the output grid, and the scene's path.
+pub(crate) fn check_resume_settings(dir: &RunDir, config: &crate::RunConfig) -> Result<(), PipelineError> {
+    let path = dir.config();
+    let saved: crate::RunConfig = read_json(&path)?;
+    let value = |c: &crate::RunConfig| serde_json::to_value(c).map_err(|e| PipelineError::file(&path, e.to_string()));
+    let (saved, given) = (value(&saved)?, value(config)?);
+    let training = |mut v: serde_json::Value| {
+        if let Some(o) = v.as_object_mut() {
+            for key in
+                ["fluidnerf_version", "scene", "resolution", "checkpoint_every", "eval_every", "memory_limit_gib"]
+            {
+                o.remove(key);
+            }
+            if let Some(s) = o.get_mut("stopping").and_then(|s| s.as_object_mut()) {
+                for key in ["max_iterations", "time_budget_s", "patience"] {
+                    s.remove(key);
+                }
+            }
+        }
+        v
+    };
+    let (saved, given) = (training(saved), training(given));
+    if saved == given {
+        return Ok(());
+    }
+    Err(PipelineError::RunDir {
+        path,
+        why: format!(
+            "cannot resume: the run was trained with other settings ({}); a resumed run only continues, and its \
+             config.json must rerun it: resume with the run's settings (`--config {}`, which a raised \
+             --max-iterations or --time-budget may follow), or use --force (`overwrite=\"force\"` from Python) to \
+             start over",
+            settings_differences(&saved, &given, 5),
+            dir.config().display()
+        ),
+    })
+}
+
 /// A fluidnerf JSON file, told by its keys ([`JsonFileKind::of`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum JsonFileKind {

@@ -389,8 +389,22 @@ pub(crate) fn run(
                 ),
             });
         }
-        if saved.train != progress.train {
-            session.warn("the training settings differ from the run being resumed; its finished windows keep theirs");
+        // The finished windows were trained with the saved settings, and the config.json this run
+        // writes must rerun it: only the caps may change.
+        let caps_aside = |t: &TrainConfig| TrainConfig { max_iterations: 0, time_budget_s: None, ..t.clone() };
+        if caps_aside(&saved.train) != caps_aside(&progress.train) {
+            return Err(PipelineError::RunDir {
+                path: progress_path,
+                why: format!(
+                    "cannot resume: the run was trained with other settings (under `method.train`: {}); a resumed \
+                     run only continues, \
+                     and its config.json must rerun it: resume with the run's settings (`--config {}`, which a \
+                     raised --max-iterations or --time-budget may follow), or use --force (`overwrite=\"force\"` \
+                     from Python) to start over",
+                    crate::rundir::settings_differences(&caps_aside(&saved.train), &caps_aside(&progress.train), 5),
+                    dir.config().display()
+                ),
+            });
         }
         for (k, done) in saved.finished.iter().enumerate() {
             check_own_checkpoint(&progress_path, k, done)?;
