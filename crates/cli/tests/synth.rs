@@ -600,6 +600,8 @@ fn a_bad_value_of_any_option_is_refused_naming_the_option() {
         // A pixel that holds no whole photo-electron: images of rare saturated specks.
         (&["--full-well", "1e-300"], "--full-well", "sensor.full_well"),
         (&["--dark-offset", "1e9"], "--dark-offset", "sensor.dark_offset"),
+        // The offset lifted the brightest pixels past full scale: they were written clipped.
+        (&["--dark-offset", "60000"], "--dark-offset", "sensor.dark_offset"),
         (&["--bit-depth", "9"], "--bit-depth", "sensor.bit_depth"),
         (&["--full-scale-fraction", "2"], "--full-scale-fraction", "sensor.full_scale_fraction"),
         // The brightest pixel below one count: every image was written black.

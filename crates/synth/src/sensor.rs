@@ -40,7 +40,8 @@ pub struct SensorSettings {
     pub gaussian_noise: f64,
     /// Photo-electrons at full scale; enables photon (Poisson) noise. Default none.
     pub full_well: Option<f64>,
-    /// Constant added to every pixel, counts. Default 0.
+    /// Constant added to every pixel, counts; at most `(1 − full_scale_fraction) × full scale`,
+    /// so the brightest noiseless pixel stays unclipped. Default 0.
     pub dark_offset: f64,
 }
 
@@ -95,6 +96,27 @@ impl SensorSettings {
             return Err(SynthError::invalid(
                 "sensor.dark_offset",
                 format!("must be in [0, {}), got {}", num(self.full_scale()), num(self.dark_offset)),
+            ));
+        }
+        // The offset lifts the brightest noiseless pixel too: past full scale it is clipped, and
+        // the brightest parts of every image hold less than the line-integral model says.
+        let brightest = self.full_scale_fraction * self.full_scale();
+        // Up to round-off: 0.8 × 65535 leaves 13107 counts, not 13106.99….
+        let headroom = self.full_scale() - brightest + 1e-9 * self.full_scale();
+        if self.dark_offset > headroom {
+            return Err(SynthError::invalid(
+                "sensor.dark_offset",
+                format!(
+                    "{} counts lift the brightest noiseless pixel ({} of full scale, {} counts) to {} counts, past \
+                     the full scale of {}: the brightest pixels would be clipped (saturated); give an offset of at \
+                     most {}, or a lower full_scale_fraction",
+                    num(self.dark_offset),
+                    num(self.full_scale_fraction),
+                    num(brightest),
+                    num(self.dark_offset + brightest),
+                    num(self.full_scale()),
+                    num(headroom.floor())
+                ),
             ));
         }
         Ok(())
@@ -217,5 +239,19 @@ mod tests {
         let err = SensorSettings { full_well: Some(1e-300), ..Default::default() }.validate().expect_err("tiny");
         assert!(err.to_string().contains("must be at least 1 photo-electron at full scale, got 1e-300"), "{err}");
         assert!(SensorSettings { full_well: Some(1.0), ..Default::default() }.validate().is_ok());
+    }
+
+    #[test]
+    fn an_offset_that_lifts_the_brightest_pixel_past_full_scale_is_refused() {
+        // 60000 + 0.8 × 65535 counts: the brightest pixels were written clipped at 65535.
+        let err = SensorSettings { dark_offset: 60000.0, ..Default::default() }.validate().expect_err("clips");
+        let text = err.to_string();
+        assert!(text.contains("`sensor.dark_offset`") && text.contains("past the full scale of 65535"), "{text}");
+        assert!(text.contains("give an offset of at most 13107"), "{text}");
+        // Up to the headroom the fraction leaves, the brightest pixel stays below full scale.
+        assert!(SensorSettings { dark_offset: 13107.0, ..Default::default() }.validate().is_ok());
+        assert!(SensorSettings { dark_offset: 13108.0, ..Default::default() }.validate().is_err());
+        let full = SensorSettings { full_scale_fraction: 1.0, dark_offset: 1.0, ..Default::default() };
+        assert!(full.validate().is_err(), "no headroom at a fraction of 1");
     }
 }

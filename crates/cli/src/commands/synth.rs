@@ -185,8 +185,10 @@ pub struct Args {
     #[arg(long, help_heading = "Sensor")]
     pub full_well: Option<f64>,
     /// Dark offset added to every pixel before rounding and clipping, counts; noise below the
-    /// offset is then recorded, not clipped at zero. The scene records the offset as its
-    /// `background`, which a reconstruction subtracts [default: 0].
+    /// offset is then recorded, not clipped at zero. At most the headroom above the brightest
+    /// pixel ((1 − full-scale fraction) × full scale), which would otherwise be clipped. The
+    /// scene records the offset as its `background`, which a reconstruction subtracts [default:
+    /// 0].
     #[arg(long, help_heading = "Sensor")]
     pub dark_offset: Option<f64>,
     /// Sensor bit depth: 8, 10, 12 or 16 [default: 16].
