@@ -246,18 +246,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if let Some(median) = fluidnerf_core::image::median_noise(noise_levels) {
-        let reads = if fluidnerf_core::image::reads_clean(Some(median)) {
-            "clean: automatic settings start from ASART, rays over each pixel's area"
-        } else {
-            "noisy: automatic settings start from SART-TV, one ray per pixel"
-        };
-        let _ = writeln!(
-            out,
-            "training images' noise (median of the estimates): {:.2} % of their range, {reads}",
-            100.0 * median
-        );
-    }
     let only_kinds: Vec<_> = kinds.iter().map(|k| k.1).collect();
     if let Some((at, kind, usual)) = odd_sample_kind(&only_kinds) {
         let i = kinds[at].0;
@@ -285,12 +273,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
                     totals[i] = m.is_none().then(|| im.sum());
                 }
+                // A run reads the noise of the images it trains on, after the background and
+                // the flat field: the background's own offset and noise change the reading.
+                noise_levels = scene
+                    .frames
+                    .iter()
+                    .zip(&p.images)
+                    .filter(|(f, _)| !f.holdout)
+                    .filter_map(|(_, im)| im.relative_noise())
+                    .collect();
                 training_lit = scene.frames.iter().enumerate().filter(|(_, f)| !f.holdout).any(|(i, _)| {
                     let lit = p.images[i].data.iter().enumerate().filter(|&(_, &v)| v > 0.0);
                     lit.map(|(k, _)| k).any(|k| p.masks[i].as_ref().is_none_or(|m| m[k]))
                 })
             }
         }
+    }
+    if let Some(median) = fluidnerf_core::image::median_noise(noise_levels) {
+        let clean = fluidnerf_core::image::reads_clean(Some(median));
+        // A scene of several instants is reconstructed by tr-fast by default, which starts
+        // from no voxel run; a static one by the hybrid, which starts from one.
+        let reads = match (clean, times.len() > 1) {
+            (true, false) => "clean: automatic settings start from ASART, rays over each pixel's area",
+            (false, false) => "noisy: automatic settings start from SART-TV, one ray per pixel",
+            (true, true) => {
+                "clean: automatic settings draw rays over each pixel's area (a --start-method auto run per \
+                             instant would be ASART)"
+            }
+            (false, true) => {
+                "noisy: automatic settings draw one ray per pixel (a --start-method auto run per instant \
+                              would be SART-TV)"
+            }
+        };
+        let _ = writeln!(
+            out,
+            "training images' noise (median of the estimates): {:.2} % of their range, {reads}",
+            100.0 * median
+        );
     }
     // Every run refuses such a scene: say so here, not only when a run starts.
     let training = scene.frames.iter().any(|f| !f.holdout);
