@@ -95,6 +95,8 @@ fn scene_camera_renders_match_the_reference_renderer() {
         "rays",
     ]));
     let full_scale = render_json(&out16)["full_scale"].as_f64().expect("full_scale");
+    // The views are the cameras' own size: no orbit width (once recorded as 320 px) is.
+    assert_eq!(render_json(&out16).get("width"), None, "{}", render_json(&out16));
     let counts = fluidnerf_io::image::read_image(&out16.join("view_001.png")).expect("reads");
     for (c, b) in counts.data.iter().zip(&want.data) {
         let value = *c as f64 * full_scale / 65535.0;
@@ -124,6 +126,7 @@ fn orbit_writes_views_and_a_turntable() {
     let gif = std::fs::read(out.join("turntable.gif")).expect("a turntable");
     assert!(gif.starts_with(b"GIF89a"));
     assert_eq!(render_json(&out)["frame_ms"], 80, "the GIF's display time is recorded");
+    assert_eq!(render_json(&out)["width"], 48, "the orbit views' width is recorded");
     // A display time a GIF cannot hold is refused, not clamped.
     for ms in ["0", "9", "655351", "4294967295"] {
         let o = render(&dir.path().join("slow"), &["--orbit", "2", "--frame-ms", ms]);

@@ -169,7 +169,9 @@ struct Settings<'a> {
     /// The turntable's display time per frame, as the GIF holds it (orbits only).
     #[serde(skip_serializing_if = "Option::is_none")]
     frame_ms: Option<u32>,
-    width: u32,
+    /// The width of the orbit views (orbits only: a scene camera's views are its own size).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    width: Option<u32>,
     format: ImageFormat,
     projector: RenderProjector,
     supersample: usize,
@@ -560,7 +562,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cameras: &args.camera,
         orbit: args.orbit,
         frame_ms: args.orbit.map(|_| (args.frame_ms + 5) / 10 * 10),
-        width: args.width,
+        width: args.orbit.map(|_| args.width),
         format: args.format,
         projector: if footprint { RenderProjector::Footprint } else { RenderProjector::Rays },
         supersample: args.supersample.max(1),
