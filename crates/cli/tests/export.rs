@@ -326,3 +326,25 @@ fn an_export_keeps_the_units_of_the_run_and_refuses_others() {
     let o = common::fluidnerf(dir.path(), &["export", "run", "-s", "scene", "-o", "other", "--units", "cm"]);
     common::refused(&o, "--units cm: the scene");
 }
+
+/// The colour map and the colour-bar label style the slice pictures: given to an export that
+/// draws none, they were taken and ignored without a word.
+#[test]
+fn slice_styles_without_slices_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let src = src.to_str().expect("utf-8");
+    let out = dir.path().join("out");
+    for (option, value) in [("--colormap", "magma"), ("--value-label", "E [W/m³]")] {
+        let o = fluidnerf(&["export", src, "--out", out.to_str().expect("utf-8"), "--npy", option, value]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{option}: {err}");
+        assert!(err.contains(&format!("{option} styles the slice pictures, and none are asked for")), "{err}");
+        assert!(!out.exists(), "{option}: a refused export wrote");
+    }
+    // The default export draws slices: there they apply, and export.json records them.
+    ok(&fluidnerf(&["export", src, "--out", out.to_str().expect("utf-8"), "--colormap", "magma"]));
+    let settings = common::json(&out.join("export.json"));
+    assert_eq!(settings["colormap"], "magma");
+    assert_eq!(settings["value_label"], "emission E [a.u.]");
+}

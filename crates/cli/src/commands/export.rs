@@ -95,12 +95,12 @@ pub struct Args {
     /// Mesh formats of the isosurface; comma-separated (with --isosurface).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "ply", requires = "isosurface")]
     pub mesh: Vec<MeshFormat>,
-    /// Colour map of the slices: viridis, magma, inferno, cividis, gray.
-    #[arg(long, default_value = "viridis")]
-    pub colormap: Colormap,
-    /// Colour-bar label of the slices, with the field's unit.
-    #[arg(long, default_value = "emission E [a.u.]")]
-    pub value_label: String,
+    /// Colour map of the slices: viridis, magma, inferno, cividis, gray [default: viridis].
+    #[arg(long)]
+    pub colormap: Option<Colormap>,
+    /// Colour-bar label of the slices, with the field's unit [default: emission E [a.u.]].
+    #[arg(long)]
+    pub value_label: Option<String>,
     /// Length unit of a volume file that records none, for axis labels and the TIFF
     /// calibration. Default: the scene's, else the run's, else mm; another than the scene's or
     /// the run's is refused.
@@ -308,7 +308,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(n) = args.resolution.filter(|n| !(1..=MAX_RESOLUTION).contains(n)) {
         bail!("--resolution must be between 1 and {MAX_RESOLUTION} voxels, got {n}");
     }
-    if args.colormap.is_diverging() {
+    // They style the slice pictures only: without any, they would change nothing.
+    let styles = [("--colormap", args.colormap.is_some()), ("--value-label", args.value_label.is_some())];
+    if let (Some((option, _)), true) = (styles.iter().find(|(_, given)| *given), slices.is_empty()) {
+        bail!("{option} styles the slice pictures, and none are asked for; add --slices (e.g. --slices z=0.5)");
+    }
+    let colormap = args.colormap.unwrap_or(Colormap::Viridis);
+    let value_label = args.value_label.clone().unwrap_or_else(|| "emission E [a.u.]".into());
+    if colormap.is_diverging() {
         bail!("--colormap diverging is kept for differences; choose a sequential map for the field");
     }
     let export_box = match &args.bbox {
@@ -498,7 +505,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fluidnerf_io::volume::write_tiff_stack(&p, &volume, &units)
             .with_context(|| format!("writing {}", p.display()))?;
     }
-    let style = PanelStyle { colormap: args.colormap, colorbar_label: args.value_label.clone(), ..Default::default() };
+    let style = PanelStyle { colormap, colorbar_label: value_label.clone(), ..Default::default() };
     for &(axis, fraction) in &slices {
         let position = axis.position_at(&volume.aabb, fraction);
         let panel = fluidnerf_viz::slice(&volume, axis, position, &units)?;
@@ -558,8 +565,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dims: volume.dims,
         time: is_time_resolved.then_some(time),
         units: &units,
-        colormap: args.colormap,
-        value_label: &args.value_label,
+        colormap,
+        value_label: &value_label,
         slices: slices.clone(),
         compare: args.compare.as_deref(),
         isosurface: args.isosurface,
