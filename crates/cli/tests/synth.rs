@@ -892,3 +892,22 @@ fn a_folder_where_the_scene_file_goes_is_refused_up_front() {
         assert!(!dir.join("images").exists(), "{extra:?}: images were written");
     }
 }
+
+/// A sensor of fewer bits than 16 keeps its counts unscaled in 16-bit PNGs: the summary said
+/// "8-bit PNG" of files that are 16-bit.
+#[test]
+fn the_summary_names_the_png_depth_the_images_are_written_in() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    for (bits, says) in
+        [("8", "16-bit PNG of 8-bit counts,"), ("12", "16-bit PNG of 12-bit counts,"), ("16", "16-bit PNG,")]
+    {
+        let dir = tmp.path().join(bits);
+        let o = run_small(&dir, &["--bit-depth", bits]);
+        let (out, err) = text(&o);
+        assert!(o.status.success(), "stdout: {out}\nstderr: {err}");
+        assert!(out.contains(&format!("images    5 × {says}")), "{bits}: {out}");
+        // The PNG header's bit depth (IHDR: 8-byte signature, 8-byte chunk head, 8 bytes of size).
+        let png = std::fs::read(dir.join("images/cam000.png")).expect("an image");
+        assert_eq!(png[24], 16, "{bits}-bit counts are written in a 16-bit PNG");
+    }
+}

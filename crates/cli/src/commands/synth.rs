@@ -770,7 +770,9 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     }
     let kind = match &syn.real {
         Some(r) => format!("8-bit sRGB JPEG (quality {}), before the gains:", r.jpeg_quality),
-        None => format!("{}-bit PNG,", settings.sensor.bit_depth),
+        // The counts are stored unscaled, so a sensor of fewer bits still writes 16-bit PNGs.
+        None if settings.sensor.bit_depth == 16 => "16-bit PNG,".to_string(),
+        None => format!("16-bit PNG of {}-bit counts,", settings.sensor.bit_depth),
     };
     let _ = writeln!(
         text,
