@@ -42,7 +42,8 @@ pub enum ImageFormat {
 /// `turntable.gif`. Writes `render.json` with the resolved settings.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, `.raw`) or a
+    /// The reconstruction: a volume file (`.npy` filling the scene's box, `.vti`, `.raw` with
+    /// its JSON sidecar, or a `.tif` stack, calibrated or filling the scene's box) or a
     /// reconstruction run directory (trained field, else its volume).
     pub recon: PathBuf,
     /// The scene (folder holding `transforms.json`, or the file): cameras, box and intensity
