@@ -287,8 +287,13 @@ fn truths_that_are_not_finite_and_repeated_times_are_refused_up_front() {
     // A volume with no positive voxel made black images said to be seen by no camera.
     let dark = tmp.path().join("dark.npy");
     fluidnerf_io::volume::write_npy(&dark, &Volume::from_fn([8, 8, 8], aabb, |_| -1.0)).expect("writes volume");
+    // Finite float32 values whose line integrals overflow: a camera's non-finite pixel was
+    // refused, naming neither the file nor the cause.
+    let huge = tmp.path().join("huge.npy");
+    fluidnerf_io::volume::write_npy(&huge, &Volume::from_fn([8, 8, 8], aabb, |_| 1e38)).expect("writes volume");
     for (truth, extra, needle) in [
         (Some(&nan), vec![], "nan.npy: voxel (i 3, j 0, k 0) is NaN"),
+        (Some(&huge), vec![], "huge.npy: values up to 1.000e38 over paths up to the box's diagonal"),
         (Some(&dark), vec![], "dark.npy: no voxel is positive (the largest value is -1)"),
         (Some(&big), vec![], "beyond float32's range"),
         (None, vec!["--phantom", "jet-tr", "--times", "14,14"], "14 is given twice"),

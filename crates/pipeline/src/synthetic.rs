@@ -147,7 +147,8 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
 /// Reads a user's volume to image as a synthetic scene's ground truth
 /// (`phantom.kind = "volume"`, `phantom.volume_path`): a `.npy` fills `aabb`, a `.vti` and a
 /// calibrated TIFF stack hold their own box, an uncalibrated stack fills `aabb`. Refused when a
-/// voxel is not finite or none is positive (every camera would image black). A calibrated
+/// voxel is not finite, when the line integrals through it would overflow 32-bit floats, or
+/// when none is positive (every camera would image black). A calibrated
 /// stack's box is converted to the scene's length `unit`.
 pub fn read_truth_volume(path: &Path, aabb: Aabb, unit: &str) -> Result<Volume, PipelineError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
@@ -174,6 +175,11 @@ pub fn read_truth_volume(path: &Path, aabb: Aabb, unit: &str) -> Result<Volume, 
                 i / (nx * ny)
             ),
         ));
+    }
+    // Finite values so large that the line integrals overflow make images of infinities, refused
+    // only once imaged, as a camera's non-finite pixel that named neither the file nor the cause.
+    if let Some(problem) = fluidnerf_core::render::integrals_overflow(&volume, 1.0) {
+        return Err(PipelineError::file(path, problem));
     }
     // Every image of a field with no positive value is black: the scene could not be used.
     let top = volume.data.iter().copied().fold(f32::NEG_INFINITY, f32::max);
