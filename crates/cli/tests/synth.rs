@@ -430,6 +430,17 @@ fn cfd_phantoms_from_any_preset_and_their_steps() {
     for name in ["plume15", "plume4", "plume8", "cfdjet15", "plume-tr"] {
         assert!(out.lines().any(|l| l.split_whitespace().next() == Some(name)), "{name} missing from {out}");
     }
+    // Every description starts in one column, past the longest name (`real-like-small` ran
+    // into its description, one space apart, where the others stood in a column).
+    let starts: Vec<usize> = out
+        .lines()
+        .map(|l| {
+            let name_end = 2 + l[2..].find(' ').expect("a name, then a description");
+            name_end + l[name_end..].find(|c: char| c != ' ').expect("a description")
+        })
+        .collect();
+    assert!(starts.iter().all(|&s| s == starts[0]), "{starts:?}\n{out}");
+    assert!(out.lines().all(|l| l[..starts[0]].ends_with("  ")), "two spaces at least before each description:\n{out}");
 }
 
 /// Ctrl-C (SIGINT) stops a synthesis as it stops a reconstruction: exit status 130, and

@@ -627,9 +627,11 @@ fn name_option(args: &Args, e: fluidnerf_synth::SynthError) -> anyhow::Error {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let text = if args.list_presets {
         let mut text = String::new();
+        // The descriptions in one column, past the longest name.
+        let width = presets().iter().map(|(name, _)| name.chars().count()).max().unwrap_or(0);
         for (name, what) in presets() {
             let mark = if name == DEFAULT_PRESET { "*" } else { " " };
-            let _ = writeln!(text, "{mark} {name:<13} {what}");
+            let _ = writeln!(text, "{mark} {name:<width$}  {what}");
         }
         text
     } else {
