@@ -214,6 +214,24 @@ fn a_continued_study_refuses_scenes_and_runs_made_with_other_settings() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("done earlier"));
 }
 
+/// `--stop auto` is recorded as the rule it decides on, the held-out rule (every study scene
+/// holds a camera out): recorded as `auto`, the grid differed from each finished run's
+/// `held-out`, so the same command refused to continue its own study.
+#[test]
+fn a_study_under_the_auto_rule_continues_and_names_the_held_out_rule() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args =
+        ["study", "--preset", "smoke", "--methods", "asart", "--cameras", "2", "--stop", "auto", "-o", "st", "-q"];
+    let first = fluidnerf(d, &args);
+    ok(&first);
+    assert!(String::from_utf8_lossy(&first.stdout).contains("every method stopped by held-out early stopping ("));
+    assert_eq!(json(&d.join("st/study.json"))["grid"]["stopping"]["rule"], "held-out");
+    let again = fluidnerf(d, &args);
+    ok(&again);
+    assert!(String::from_utf8_lossy(&again.stdout).contains("done earlier"));
+}
+
 /// A study started over (--force) with a grid that no longer sweeps the noise removes the
 /// earlier study's noise plot: left in OUT, it looked like this study's.
 #[test]

@@ -104,7 +104,8 @@ pub struct Args {
     /// smoke 16].
     #[arg(long)]
     pub resolution: Option<usize>,
-    /// Stopping rule of every method (see `reconstruct --help`).
+    /// Stopping rule of every method (see `reconstruct --help`); `auto` is the held-out rule,
+    /// since every scene of a study holds a camera out.
     #[arg(long, value_enum, default_value = "held-out")]
     pub stop: StopArg,
     /// Iteration cap of every method [default: 1000000 under held-out and budget, so that the
@@ -200,7 +201,13 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         pixels: args.pixels.unwrap_or(if smoke { 24 } else { 64 }),
         resolution: args.resolution.unwrap_or(if smoke { 16 } else { 64 }),
         stopping: StoppingPolicy {
-            rule: args.stop.into(),
+            // Every scene of a study holds a camera out and every method is static, so `auto`
+            // is the held-out rule: recorded as such, as each run records it, so that the runs
+            // of a continued study match the grid and the table names the rule that ran.
+            rule: match args.stop {
+                StopArg::Auto => fluidnerf_pipeline::StopRule::HeldOut,
+                stop => stop.into(),
+            },
             max_iterations: args.max_iterations.or(default_cap(smoke, args.stop)),
             time_budget_s: Some(args.time_budget),
             ..StoppingPolicy::default()
