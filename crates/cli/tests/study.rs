@@ -34,6 +34,9 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
             assert_eq!(v, r["cameras"].as_u64().expect("cameras"));
         }
         assert!(r["nrmse"].as_f64().is_some_and(|n| n > 0.0 && n < 1.5));
+        // Every method scores the held-out camera within the 20 iterations, the field too
+        // (its own interval is 25).
+        assert!(r["best_holdout_loss"].as_f64().is_some(), "{run:?} never scored the held-out camera");
     }
     let csv = std::fs::read_to_string(st.join("study.csv")).expect("csv");
     assert_eq!(csv.lines().count(), 5);

@@ -10,7 +10,7 @@ use anyhow::{bail, Context};
 use fluidnerf_core::num;
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::rundir::FolderKind;
-use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunStatus, StoppingPolicy};
+use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{LinePlot, Series};
 use serde::{Deserialize, Serialize};
@@ -27,8 +27,8 @@ pub enum StudyPreset {
     Noise,
     /// 8 cameras on a 360° ring, a 180° arc and a sphere, noiseless (Figs. 7.8–7.9).
     Layout,
-    /// A tiny grid that runs in seconds (4 and 6 cameras, 24² px, at most 20 iterations): a
-    /// check that the command works, not a comparison.
+    /// A tiny grid that runs in seconds (4 and 6 cameras, 24² px, at most 20 iterations, the
+    /// held-out camera scored every 5): a check that the command works, not a comparison.
     Smoke,
 }
 
@@ -188,6 +188,13 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     if !(args.time_budget > 0.0 && args.time_budget.is_finite()) {
         bail!("--time-budget must be a positive, finite number of seconds, got {}", num(args.time_budget));
     }
+    // Every scene of a study holds a camera out and every method is static, so `auto` is the
+    // held-out rule: recorded as such, as each run records it, so that the runs of a continued
+    // study match the grid and the table names the rule that ran.
+    let rule = match args.stop {
+        StopArg::Auto => StopRule::HeldOut,
+        stop => stop.into(),
+    };
     let g = Grid {
         preset: args.preset,
         scene_preset: args.scene_preset.clone(),
@@ -201,15 +208,11 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         pixels: args.pixels.unwrap_or(if smoke { 24 } else { 64 }),
         resolution: args.resolution.unwrap_or(if smoke { 16 } else { 64 }),
         stopping: StoppingPolicy {
-            // Every scene of a study holds a camera out and every method is static, so `auto`
-            // is the held-out rule: recorded as such, as each run records it, so that the runs
-            // of a continued study match the grid and the table names the rule that ran.
-            rule: match args.stop {
-                StopArg::Auto => fluidnerf_pipeline::StopRule::HeldOut,
-                stop => stop.into(),
-            },
+            rule,
             max_iterations: args.max_iterations.or(default_cap(smoke, args.stop)),
             time_budget_s: Some(args.time_budget),
+            // The fields' own interval (25) is longer than the smoke grid's 20 iterations.
+            holdout_every: (smoke && rule == StopRule::HeldOut).then_some(SMOKE_HOLDOUT_EVERY),
             ..StoppingPolicy::default()
         },
         seed: args.seed,
@@ -241,6 +244,19 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     }
     if let Some(m) = g.methods.iter().find(|m| m.family() == fluidnerf_pipeline::Family::Temporal) {
         bail!("--methods: {m} is time-resolved; a study compares static reconstructions");
+    }
+    // A method whose held-out interval is longer than the cap never scores the held-out camera:
+    // it keeps its last iterate, while the table says the held-out rule stopped it.
+    if let (StopRule::HeldOut, Some(cap)) = (g.stopping.rule, g.stopping.max_iterations) {
+        if let Some(m) = g.methods.iter().find(|m| g.stopping.holdout_interval(m.family()) > cap) {
+            bail!(
+                "--max-iterations {cap}: {m} scores the held-out camera every {} iterations, so under --stop held-out \
+                 it would never be scored and would keep its last iterate; give --max-iterations {} or more, or \
+                 --stop budget",
+                g.stopping.holdout_interval(m.family()),
+                g.stopping.holdout_interval(m.family())
+            );
+        }
     }
     // Only the voxel methods take the hull (the fields carve their own): without one the option
     // would change nothing, while the grid and the report said it applied.
@@ -284,6 +300,10 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     check_scenes(&g)?;
     Ok(g)
 }
+
+/// Iterations between held-out evaluations of every method in the smoke grid, so that the
+/// fields are scored within its 20 iterations.
+const SMOKE_HOLDOUT_EVERY: usize = 5;
 
 fn default_cap(smoke: bool, stop: StopArg) -> Option<usize> {
     if smoke {
@@ -772,6 +792,30 @@ mod tests {
         assert_eq!(cap(&["--max-iterations", "70"]), Some(70));
         assert_eq!(cap(&["--stop", "own", "--max-iterations", "70"]), Some(70));
         assert_eq!(cap(&["--preset", "smoke"]), Some(20));
+    }
+
+    /// Under the held-out rule every method scores the held-out camera within the cap: a cap
+    /// below a method's interval left it never scored, keeping its last iterate.
+    #[test]
+    fn a_cap_below_a_methods_held_out_interval_is_refused() {
+        let refusal = |line: &[&str]| {
+            let cli = Cli::try_parse_from(["study", "-o", "x"].iter().chain(line)).expect("arguments");
+            grid(&cli.args).map(|_| ()).map_err(|e| format!("{e:#}"))
+        };
+        let e = refusal(&["--methods", "fast,asart", "--max-iterations", "20"]).expect_err("a field capped at 20");
+        assert!(e.contains("--max-iterations 20: fast scores the held-out camera every 25 iterations"), "{e}");
+        let e = refusal(&["--preset", "smoke", "--max-iterations", "4"]).expect_err("below the smoke interval");
+        assert!(e.contains("every 5 iterations"), "{e}");
+        refusal(&["--methods", "fast", "--max-iterations", "25"]).expect("a cap of one interval");
+        refusal(&["--methods", "fast", "--max-iterations", "20", "--stop", "budget"]).expect("no held-out rule");
+        refusal(&["--methods", "asart", "--max-iterations", "20"]).expect("the voxel methods score every iteration");
+        let smoke = |stop: &str| {
+            let cli =
+                Cli::try_parse_from(["study", "-o", "x", "--preset", "smoke", "--stop", stop]).expect("arguments");
+            grid(&cli.args).expect("grid").stopping.holdout_every
+        };
+        assert_eq!(smoke("held-out"), Some(5), "the smoke grid's fields are scored within its 20 iterations");
+        assert_eq!(smoke("budget"), None, "an interval is recorded only where the held-out rule applies");
     }
 
     /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
