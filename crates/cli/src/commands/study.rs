@@ -170,6 +170,11 @@ struct Row {
 #[derive(Serialize)]
 struct StudyRecord<'a> {
     version: &'static str,
+    /// `finished`, or `interrupted` when Ctrl-C stopped the study before its last run: `rows`
+    /// then holds the runs made so far.
+    status: &'static str,
+    /// Runs of the whole grid; `rows` holds them all once the study is finished.
+    runs_total: usize,
     grid: &'a Grid,
     stopping_rule: String,
     rows: &'a [Row],
@@ -552,7 +557,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         let config = cell_config(&g, &scene_dir, method)?;
                         let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
                         if report.status == RunStatus::Interrupted {
-                            write_outputs(out, &g, &rows, &summaries)?;
+                            write_outputs(out, &g, &rows, &summaries, total)?;
                             #[allow(clippy::print_stdout)]
                             {
                                 println!("interrupted; rerun the same command to continue the study");
@@ -583,7 +588,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
             }
         }
     }
-    write_outputs(out, &g, &rows, &summaries)?;
+    write_outputs(out, &g, &rows, &summaries, total)?;
     #[allow(clippy::print_stdout)]
     {
         println!("\n{}", text_table(&rows));
@@ -683,10 +688,27 @@ fn csv(rows: &[Row]) -> String {
     s
 }
 
-fn write_outputs(out: &Path, g: &Grid, rows: &[Row], summaries: &[(Row, RunSummary)]) -> anyhow::Result<()> {
+/// Writes the record, table, plots and report of the runs made so far: `rows` are all `total`
+/// runs of the grid once the study is finished, fewer when Ctrl-C stopped it, which the
+/// record and the report then say.
+fn write_outputs(
+    out: &Path,
+    g: &Grid,
+    rows: &[Row],
+    summaries: &[(Row, RunSummary)],
+    total: usize,
+) -> anyhow::Result<()> {
+    let finished = rows.len() == total;
     fluidnerf_pipeline::rundir::write_json(
         &out.join("study.json"),
-        &StudyRecord { version: env!("CARGO_PKG_VERSION"), grid: g, stopping_rule: g.stopping.describe_rule(), rows },
+        &StudyRecord {
+            version: env!("CARGO_PKG_VERSION"),
+            status: if finished { "finished" } else { "interrupted" },
+            runs_total: total,
+            grid: g,
+            stopping_rule: g.stopping.describe_rule(),
+            rows,
+        },
     )?;
     fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
     let mut figures = Vec::new();
@@ -711,8 +733,9 @@ fn write_outputs(out: &Path, g: &Grid, rows: &[Row], summaries: &[(Row, RunSumma
             image: ImageData::Png(png),
         });
     }
+    let runs = if finished { "Every run".to_string() } else { format!("The {} of {total} runs made", rows.len()) };
     let mut table = Table::new(
-        format!("Every run, stopped by {}", g.stopping.describe_rule()),
+        format!("{runs}, stopped by {}", g.stopping.describe_rule()),
         &["layout", "cameras", "noise", "method", "NRMSE", "SSIM (global)", "kept / iterations", "time [s]", "result"],
     );
     let f = |v: Option<f64>| v.map_or("–".into(), fluidnerf_viz::report::format_value);
@@ -754,13 +777,24 @@ fn write_outputs(out: &Path, g: &Grid, rows: &[Row], summaries: &[(Row, RunSumma
         ),
         tables: vec![table],
         figures,
+        summary: if finished {
+            Vec::new()
+        } else {
+            vec![(
+                "status".into(),
+                format!(
+                    "interrupted after {} of {total} runs: the table and plots show those only; rerun the same \
+                     command to continue the study",
+                    rows.len()
+                ),
+            )]
+        },
         settings: serde_json::to_value(g).ok(),
         notes: vec![
             "Each cell's scene has one more camera than its count, held out of every reconstruction: it drives \
              held-out early stopping and uses no ground truth."
                 .into(),
         ],
-        ..Report::default()
     };
     fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
     Ok(())
@@ -816,6 +850,27 @@ mod tests {
         };
         assert_eq!(smoke("held-out"), Some(5), "the smoke grid's fields are scored within its 20 iterations");
         assert_eq!(smoke("budget"), None, "an interval is recorded only where the held-out rule applies");
+    }
+
+    /// A study stopped by Ctrl-C writes the runs made so far, and says so: its record and report
+    /// read as those of a finished study with fewer runs.
+    #[test]
+    fn an_interrupted_study_says_so_in_its_record_and_report() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let cli = Cli::try_parse_from(["study", "-o", "x", "--preset", "smoke"]).expect("arguments");
+        let g = grid(&cli.args).expect("grid");
+        let read = |f: &str| std::fs::read_to_string(tmp.path().join(f)).expect("written");
+        write_outputs(tmp.path(), &g, &[], &[], 6).expect("writes");
+        let record: serde_json::Value = serde_json::from_str(&read("study.json")).expect("json");
+        assert_eq!((record["status"].as_str(), record["runs_total"].as_u64()), (Some("interrupted"), Some(6)));
+        let html = read("report.html");
+        assert!(html.contains("interrupted after 0 of 6 runs") && html.contains("The 0 of 6 runs made"), "{html}");
+        write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
+        assert!(
+            read("study.json").contains(r#""status": "finished""#)
+                || read("study.json").contains(r#""status":"finished""#)
+        );
+        assert!(!read("report.html").contains("interrupted"));
     }
 
     /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
