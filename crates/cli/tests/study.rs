@@ -235,6 +235,41 @@ fn a_study_under_the_auto_rule_continues_and_names_the_held_out_rule() {
     assert!(String::from_utf8_lossy(&again.stdout).contains("done earlier"));
 }
 
+/// Ctrl-C while a cell's scene is being made stops the study as Ctrl-C in a run does: exit
+/// code 130, the runs so far written, and the way to continue it. It ended with an error,
+/// "cancelled", exit code 1, and no record.
+#[cfg(unix)]
+#[test]
+fn a_study_interrupted_while_making_a_scene_says_how_to_continue() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    // A scene of 301 cameras of 256² px takes seconds to make.
+    let args = ["study", "--preset", "smoke", "--methods", "asart", "--cameras", "300", "--pixels", "256"];
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args(args)
+        .args(["--resolution", "128", "-o", "st", "-q"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("starts");
+    // OUT is made just before the first scene.
+    let start = std::time::Instant::now();
+    while !d.join("st").exists() {
+        assert!(start.elapsed().as_secs() < 60, "the study did not start");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let killed = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    assert!(killed.success());
+    let o = child.wait_with_output().expect("waits");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("rerun the same command to continue"));
+    assert_eq!(json(&d.join("st/study.json"))["status"], "interrupted");
+    assert!(!d.join("st/scenes/ring360-c300-n000/transforms.json").exists());
+}
+
 /// A study started over (--force) with a grid that no longer sweeps the noise removes the
 /// earlier study's noise plot: left in OUT, it looked like this study's.
 #[test]

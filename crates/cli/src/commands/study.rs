@@ -535,7 +535,13 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         for &cameras in &g.cameras {
             for &noise in &g.noise {
                 let scene_dir = out.join("scenes").join(scene_name(layout, cameras, noise));
-                ensure_scene(&g, &scene_dir, layout, cameras, noise)?;
+                match ensure_scene(&g, &scene_dir, layout, cameras, noise) {
+                    // Stopped as a run stopped by Ctrl-C is: the runs so far written, exit 130.
+                    Err(e) if matches!(e.downcast_ref(), Some(fluidnerf_synth::SynthError::Cancelled)) => {
+                        return interrupted(out, &g, &rows, &summaries, total);
+                    }
+                    r => r?,
+                }
                 for &method in &g.methods {
                     k += 1;
                     let run_dir = out.join("runs").join(scene_name(layout, cameras, noise)).join(method.name());
@@ -557,12 +563,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         let config = cell_config(&g, &scene_dir, method)?;
                         let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
                         if report.status == RunStatus::Interrupted {
-                            write_outputs(out, &g, &rows, &summaries, total)?;
-                            #[allow(clippy::print_stdout)]
-                            {
-                                println!("interrupted; rerun the same command to continue the study");
-                            }
-                            return Ok(std::process::ExitCode::from(130));
+                            return interrupted(out, &g, &rows, &summaries, total);
                         }
                     }
                     let summary = html::summarise(&run_dir, method.label())?;
@@ -600,6 +601,22 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         );
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// Ends a study stopped by Ctrl-C: writes the runs made so far and exits with 130.
+fn interrupted(
+    out: &Path,
+    g: &Grid,
+    rows: &[Row],
+    summaries: &[(Row, RunSummary)],
+    total: usize,
+) -> anyhow::Result<std::process::ExitCode> {
+    write_outputs(out, g, rows, summaries, total)?;
+    #[allow(clippy::print_stdout)]
+    {
+        println!("interrupted; rerun the same command to continue the study");
+    }
+    Ok(std::process::ExitCode::from(130))
 }
 
 fn text_table(rows: &[Row]) -> String {
