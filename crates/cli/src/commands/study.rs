@@ -781,12 +781,15 @@ fn write_outputs(
         let png = fluidnerf_viz::encode_plots_png(&fluidnerf_viz::convergence_plots(&histories), 2)?;
         figures.push(Figure { caption: "Convergence at the largest camera count.".into(), image: ImageData::Png(png) });
     }
+    // --resolution is the longest side: a box that is not a cube has fewer voxels along the
+    // others (plume15 at 24: 16×24×16).
+    let settings = cell_settings(g, g.layouts[0], g.cameras[0], g.noise[0])?;
+    let dims = settings.truth_dims(&settings.aabb).map(|n| n.to_string()).join("×");
     let report = Report {
         title: format!("fluidnerf study: {:?} on {}", g.preset, g.scene_preset),
         subtitle: format!(
-            "{} px images, {}³ truth and output, methods {}, every method stopped by {}{} · fluidnerf {}",
+            "{}² px images, {dims} voxels of truth and output, methods {}, every method stopped by {}{} · fluidnerf {}",
             g.pixels,
-            g.resolution,
             g.methods.iter().map(|m| m.name()).collect::<Vec<_>>().join(", "),
             g.stopping.describe_rule(),
             if g.visual_hull { ", the voxel methods inside the images' visual hull" } else { "" },
@@ -888,6 +891,18 @@ mod tests {
                 || read("study.json").contains(r#""status":"finished""#)
         );
         assert!(!read("report.html").contains("interrupted"));
+    }
+
+    /// The report states the voxels of the truth and output grids, which --resolution gives
+    /// along the longest side only: a plume study at 24 said "24³" of a 16×24×16 grid.
+    #[test]
+    fn the_report_states_the_grid_of_a_box_that_is_not_a_cube() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let line = ["study", "-o", "x", "--preset", "smoke", "--scene-preset", "plume15", "--resolution", "24"];
+        let g = grid(&Cli::try_parse_from(line).expect("arguments").args).expect("grid");
+        write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
+        let html = std::fs::read_to_string(tmp.path().join("report.html")).expect("written");
+        assert!(html.contains("24² px images, 16×24×16 voxels of truth and output"), "{html}");
     }
 
     /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
