@@ -208,7 +208,8 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
             .as_ref()
             .map_or_else(|| vec![Method::Fast, Method::Hybrid, Method::Asart], |m| m.iter().map(|m| m.0).collect()),
         cameras: args.cameras.clone().unwrap_or(cameras),
-        noise: args.noise.clone().unwrap_or(noise),
+        // -0 is the level 0: its rows, table and plots wrote it as "-0".
+        noise: args.noise.clone().unwrap_or(noise).iter().map(|n| n + 0.0).collect(),
         layouts: args.layouts.clone().unwrap_or(layouts),
         pixels: args.pixels.unwrap_or(if smoke { 24 } else { 64 }),
         resolution: args.resolution.unwrap_or(if smoke { 16 } else { 64 }),
@@ -903,6 +904,14 @@ mod tests {
         write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
         let html = std::fs::read_to_string(tmp.path().join("report.html")).expect("written");
         assert!(html.contains("24² px images, 16×24×16 voxels of truth and output"), "{html}");
+    }
+
+    /// A noise level of -0 is the level 0, and is written so.
+    #[test]
+    fn a_negative_zero_noise_level_is_zero() {
+        let cli = Cli::try_parse_from(["study", "-o", "x", "--preset", "smoke", "--noise=-0,0.05"]).expect("arguments");
+        let noise = grid(&cli.args).expect("grid").noise;
+        assert_eq!(noise.iter().map(|n| n.to_string()).collect::<Vec<_>>(), ["0", "0.05"]);
     }
 
     /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
