@@ -334,3 +334,26 @@ fn runs_scored_over_different_instants_are_refused() {
     assert!(!d.join("cmp").exists(), "nothing written for a refused comparison");
     ok(&fluidnerf(d, &["compare", "asart", "sart", "-o", "cmp", "-q"]));
 }
+
+/// Runs reconstructed at different resolutions are scored on grids of different voxels: the
+/// comparison says so instead of drawing them as one problem's curves.
+#[test]
+fn runs_on_grids_of_different_voxels_are_named() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let reconstruct = |out: &str, resolution: &str| {
+        let args = ["reconstruct", "scene", "-o", out, "--method", "sart", "--resolution", resolution];
+        ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "3", "-q"]].concat()));
+    };
+    reconstruct("r8", "8");
+    reconstruct("r12", "12");
+    reconstruct("again8", "8");
+    let out = fluidnerf(d, &["compare", "r8", "r12", "-o", "cmp"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("the runs' volumes are on grids of different voxels (r8 8×8×8, r12 12×12×12)"), "{err}");
+    let out = fluidnerf(d, &["compare", "r8", "again8", "-o", "cmp2"]);
+    ok(&out);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("different voxels"));
+}

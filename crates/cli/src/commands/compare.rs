@@ -100,6 +100,10 @@ struct Run {
     /// curve file, which does not say.
     #[serde(skip)]
     instants: Option<Vec<Option<f64>>>,
+    /// The voxels of the grid its volumes (and so its NRMSE) are on; None for a curve file,
+    /// which does not say.
+    #[serde(skip)]
+    dims: Option<[usize; 3]>,
 }
 
 /// The table row of one run.
@@ -215,7 +219,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         );
     }
     let key = if probe.format.is_some() { "history.nrmse" } else { "nrmse_history" };
-    let (method, preset, history, final_nrmse, wall_time_s, instants) = if probe.format.is_some() {
+    let (method, preset, history, final_nrmse, wall_time_s, instants, dims) = if probe.format.is_some() {
         let r = match RunReport::read(&report) {
             Ok(r) => r,
             // A run's configuration has a `format` too: say what the file is, not what it lacks.
@@ -254,11 +258,12 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         let instants = r.volumes.iter().filter(|v| v.trained).filter_map(|v| v.metrics.as_ref().map(|m| m.time));
         // A report scoring no volume says nothing of its instants.
         let instants = Some(instants.collect::<Vec<_>>()).filter(|i| !i.is_empty());
-        (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s), instants)
+        let dims = r.volumes.first().map(|v| v.dims);
+        (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s), instants, dims)
     } else {
         let c: CurveFile = fluidnerf_pipeline::rundir::read_json(&report)
             .with_context(|| "neither a run report nor a curve file with `method` and `nrmse_history`")?;
-        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s), None)
+        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s), None, None)
     };
     if history.is_empty() {
         bail!("{}: no NRMSE history; run it with --eval-every and a scene with ground truth", report.display());
@@ -327,7 +332,25 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         best_nrmse,
         wall_time_s,
         instants,
+        dims,
     })
+}
+
+/// Warns of runs whose volumes are on grids of different voxels (`reconstruct --resolution`):
+/// each one's NRMSE is over its own grid's voxels and its time is that of its own grid's work,
+/// so their curves are not those of one problem solved by different methods.
+fn warn_of_other_grids(runs: &[Run]) {
+    let grids: Vec<(&Run, [usize; 3])> = runs.iter().filter_map(|r| r.dims.map(|d| (r, d))).collect();
+    if grids.iter().all(|(_, d)| *d == grids[0].1) {
+        return;
+    }
+    let list: Vec<String> =
+        grids.iter().map(|(r, d)| format!("{} {}", r.path.display(), d.map(|n| n.to_string()).join("×"))).collect();
+    log::warn!(
+        "the runs' volumes are on grids of different voxels ({}): each NRMSE is over its own grid and each time is \
+         its own grid's work; for a comparison of methods, reconstruct them at one --resolution",
+        list.join(", ")
+    );
 }
 
 /// Refuses runs whose NRMSE is over different instants of the truth: a time-resolved run's is
@@ -567,6 +590,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let reference_path = runs[reference].path.clone();
     refuse_other_scenes(&runs, args.allow_different_scenes)?;
     refuse_other_instants(&runs)?;
+    warn_of_other_grids(&runs);
     // Runs in folders of the same name are told apart by the path given.
     let labels: Vec<String> = runs.iter().map(|r| r.label.clone()).collect();
     for run in &mut runs {
@@ -643,6 +667,7 @@ mod tests {
             wall_time_s: curve[curve.len() - 1].train_time_s,
             curve,
             instants: None,
+            dims: None,
         }
     }
 
