@@ -680,6 +680,12 @@ fn sweep_plot(rows: &[Row], title: &str, axis: &str, metric: &str) -> Option<Lin
     })
 }
 
+/// The label of a run's line in the convergence plot: the layout too, since the runs at the
+/// largest camera count of a layout sweep differ by their layouts only.
+fn convergence_label(r: &Row) -> String {
+    format!("{} ({}, {} cameras, noise {})", r.method, r.layout, r.cameras, r.noise)
+}
+
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from(
         "layout,cameras,noise,method,nrmse,ssim_global,best_holdout_loss,kept_iteration,iterations,stop_reason,train_time_s,result_bytes,run\n",
@@ -773,10 +779,7 @@ fn write_outputs(
     let histories: Vec<_> = summaries
         .iter()
         .filter(|(r, _)| r.cameras == *g.cameras.iter().max().unwrap_or(&0))
-        .map(|(r, s)| fluidnerf_viz::RunHistory {
-            label: format!("{} ({} cameras, noise {})", r.method, r.cameras, r.noise),
-            ..s.history.clone()
-        })
+        .map(|(r, s)| fluidnerf_viz::RunHistory { label: convergence_label(r), ..s.history.clone() })
         .collect();
     if !histories.is_empty() {
         let png = fluidnerf_viz::encode_plots_png(&fluidnerf_viz::convergence_plots(&histories), 2)?;
@@ -912,6 +915,29 @@ mod tests {
         let cli = Cli::try_parse_from(["study", "-o", "x", "--preset", "smoke", "--noise=-0,0.05"]).expect("arguments");
         let noise = grid(&cli.args).expect("grid").noise;
         assert_eq!(noise.iter().map(|n| n.to_string()).collect::<Vec<_>>(), ["0", "0.05"]);
+    }
+
+    /// The convergence plot tells apart runs that differ by their layout only (the layout
+    /// grid: 8 cameras on three layouts, noiseless), which it labelled alike.
+    #[test]
+    fn the_convergence_plot_names_each_runs_layout() {
+        let row = |layout: &str| Row {
+            layout: layout.into(),
+            cameras: 8,
+            noise: 0.0,
+            method: "asart".into(),
+            nrmse: None,
+            ssim_global: None,
+            best_holdout_loss: None,
+            kept_iteration: 1,
+            iterations: 1,
+            stop_reason: "held-out".into(),
+            train_time_s: 1.0,
+            result_bytes: 1,
+            run: "r".into(),
+        };
+        assert_ne!(convergence_label(&row("ring360")), convergence_label(&row("sphere")));
+        assert_eq!(convergence_label(&row("sphere")), "asart (sphere, 8 cameras, noise 0)");
     }
 
     /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
