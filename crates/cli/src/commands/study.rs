@@ -83,8 +83,9 @@ pub struct Args {
     /// Synthetic scene preset the cells start from (`fluidnerf synth --list-presets`).
     #[arg(long, default_value = "demo")]
     pub scene_preset: String,
-    /// Methods, comma-separated [default: fast,hybrid,asart: the grid field alone, the default
-    /// method, and the classical baseline].
+    /// Methods, comma-separated; static ones only: a study refuses the time-resolved
+    /// tr-fluidnerf, tr-fast and static-per-frame [default: fast,hybrid,asart: the grid field
+    /// alone, the default method, and the classical baseline].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub methods: Option<Vec<MethodArg>>,
     /// Training camera counts, comma-separated, each 2 to 999 [default: the preset's].
@@ -932,6 +933,19 @@ mod tests {
         write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
         let html = std::fs::read_to_string(tmp.path().join("report.html")).expect("written");
         assert!(html.contains("the voxel methods (not the hybrid&#39;s own start) inside the images"), "{html}");
+    }
+
+    /// The help of --methods, which lists every method, says which of them a study refuses.
+    #[test]
+    fn the_help_names_the_methods_a_study_refuses() {
+        use clap::CommandFactory;
+        let help = Cli::command().render_long_help().to_string();
+        let refused = ["tr-fluidnerf", "tr-fast", "static-per-frame"];
+        assert!(help.contains("static ones only: a study refuses the time-resolved"), "{help}");
+        for m in refused {
+            let cli = Cli::try_parse_from(["study", "-o", "x", "--methods", m]).expect("arguments");
+            assert!(grid(&cli.args).is_err(), "{m} is refused");
+        }
     }
 
     /// The convergence plot tells apart runs that differ by their layout only (the layout
