@@ -357,3 +357,29 @@ fn runs_on_grids_of_different_voxels_are_named() {
     ok(&out);
     assert!(!String::from_utf8_lossy(&out.stderr).contains("different voxels"));
 }
+
+/// A run stopped by Ctrl-C is compared with a warning that its curve was cut short, and
+/// compare.json records it: it was drawn and tabled as a run its stopping rule had ended.
+#[test]
+fn a_run_stopped_by_ctrl_c_is_named_as_cut_short() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    for out in ["whole", "cut"] {
+        let args = ["reconstruct", "scene", "-o", out, "--method", "sart", "--resolution", "8"];
+        ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "3", "-q"]].concat()));
+    }
+    // What Ctrl-C leaves: the report of the iterations made, with the status of a stop.
+    edit_json(&d.join("cut/report.json"), |r| {
+        r["status"] = "interrupted".into();
+        r["stop_reason"] = "interrupted".into();
+    });
+    let out = fluidnerf(d, &["compare", "whole", "cut", "-o", "cmp"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("the sart run was stopped by Ctrl-C after 3 iterations"), "{err}");
+    assert!(!err.contains("whole/report.json"), "{err}");
+    let record = json(&d.join("cmp/compare.json"));
+    assert_eq!(record["runs"][0]["interrupted"], false);
+    assert_eq!(record["runs"][1]["interrupted"], true);
+}

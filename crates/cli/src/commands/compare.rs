@@ -100,6 +100,9 @@ struct Run {
     /// curve file, which does not say.
     #[serde(skip)]
     instants: Option<Vec<Option<f64>>>,
+    /// Stopped by Ctrl-C before its stopping rule ended it: its curve ends where it was
+    /// stopped.
+    interrupted: bool,
     /// The voxels of the grid its volumes (and so its NRMSE) are on; None for a curve file,
     /// which does not say.
     #[serde(skip)]
@@ -219,6 +222,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         );
     }
     let key = if probe.format.is_some() { "history.nrmse" } else { "nrmse_history" };
+    let mut interrupted = false;
     let (method, preset, history, final_nrmse, wall_time_s, instants, dims) = if probe.format.is_some() {
         let r = match RunReport::read(&report) {
             Ok(r) => r,
@@ -259,6 +263,17 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         // A report scoring no volume says nothing of its instants.
         let instants = Some(instants.collect::<Vec<_>>()).filter(|i| !i.is_empty());
         let dims = r.volumes.first().map(|v| v.dims);
+        if r.status == fluidnerf_pipeline::RunStatus::Interrupted {
+            interrupted = true;
+            log::warn!(
+                "{}: the {} run was stopped by Ctrl-C after {} iterations, before its stopping rule ended it: its \
+                 curve, best NRMSE and times are those of a run cut short; continue it with `reconstruct --resume` \
+                 to compare it whole",
+                report.display(),
+                r.method.name(),
+                r.iterations
+            );
+        }
         (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s), instants, dims)
     } else {
         let c: CurveFile = fluidnerf_pipeline::rundir::read_json(&report)
@@ -332,6 +347,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         best_nrmse,
         wall_time_s,
         instants,
+        interrupted,
         dims,
     })
 }
@@ -667,6 +683,7 @@ mod tests {
             wall_time_s: curve[curve.len() - 1].train_time_s,
             curve,
             instants: None,
+            interrupted: false,
             dims: None,
         }
     }
