@@ -270,6 +270,16 @@ fn a_study_interrupted_while_making_a_scene_says_how_to_continue() {
     assert!(!d.join("st/scenes/ring360-c300-n000/transforms.json").exists());
 }
 
+/// An output folder whose name starts with '-' holds the study: its scenes' synth lines read
+/// it as options ("unexpected argument '-s' found") and the study failed after making it.
+#[test]
+fn a_folder_named_like_an_option_holds_the_study() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(d, &["study", "--out=-st", "--preset", "smoke", "--methods", "asart", "--cameras", "2", "-q"]));
+    assert!(d.join("-st/study.json").is_file() && d.join("-st/scenes/ring360-c02-n000/transforms.json").is_file());
+}
+
 /// A study started over (--force) with a grid that no longer sweeps the noise removes the
 /// earlier study's noise plot: left in OUT, it looked like this study's.
 #[test]

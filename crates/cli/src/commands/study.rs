@@ -328,7 +328,7 @@ fn scene_name(layout: LayoutChoice, cameras: usize, noise: f64) -> String {
 /// The `synth` line of a cell's scene, written into `dir`.
 fn synth_line(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise: f64) -> Vec<String> {
     let mut line: Vec<String> =
-        vec!["synth".into(), "-q".into(), "--force".into(), "--preset".into(), g.scene_preset.clone()];
+        vec!["synth".into(), "-q".into(), "--force".into(), format!("--preset={}", g.scene_preset)];
     for (k, v) in [
         ("--cameras", (cameras + 1).to_string()),
         ("--holdout", "1".to_string()),
@@ -340,7 +340,9 @@ fn synth_line(g: &Grid, dir: &Path, layout: LayoutChoice, cameras: usize, noise:
         line.extend([k.to_string(), v]);
     }
     line.extend(layout.synth_args().iter().map(|s| s.to_string()));
-    line.extend(["-o".into(), dir.to_string_lossy().into_owned()]);
+    // Joined to its option: a folder whose name starts with '-' (`--out=-st`) was read as
+    // options of the synth line.
+    line.push(format!("--out={}", dir.to_string_lossy()));
     line
 }
 
