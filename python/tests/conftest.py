@@ -87,3 +87,28 @@ def ring(n: int, radius: float = 60.0, size: int = 16, focal: float = 30.0):
     )
     k = np.array([[focal, 0, (size - 1) / 2], [0, focal, (size - 1) / 2], [0, 0, 1.0]])
     return np.tile(k, (n, 1, 1)), poses
+
+
+def ticks_while(work) -> tuple[int, float]:
+    """Runs `work()` beside a thread that ticks once per 1 ms sleep, and returns how often it
+    ticked meanwhile and the seconds `work` took: a call that holds the GIL leaves it near 0."""
+    import threading
+    import time
+
+    ticks, done = [0], threading.Event()
+
+    def tick():
+        while not done.is_set():
+            ticks[0] += 1
+            time.sleep(0.001)
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    try:
+        time.sleep(0.02)
+        before, start = ticks[0], time.perf_counter()
+        work()
+        return ticks[0] - before, time.perf_counter() - start
+    finally:
+        done.set()
+        ticker.join()

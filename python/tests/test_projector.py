@@ -7,15 +7,13 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import fluidnerf
-from conftest import look_at, ring
+from conftest import look_at, ring, ticks_while
 
 BOX = np.array([[-10.0, -10.0, -10.0], [10.0, 10.0, 10.0]])
 CENTRE = np.array([1.0, -0.5, 0.5])
@@ -189,23 +187,7 @@ def test_ssim_releases_the_gil_while_it_computes():
     rng = np.random.default_rng(0)
     truth = rng.random((128, 128, 128), dtype=np.float32)
     estimate = truth + np.float32(0.01)
-    ticks, done = [0], threading.Event()
-
-    def tick():
-        while not done.is_set():
-            ticks[0] += 1
-            time.sleep(0.001)
-
-    ticker = threading.Thread(target=tick)
-    ticker.start()
-    try:
-        time.sleep(0.02)
-        before, start = ticks[0], time.perf_counter()
-        fluidnerf.ssim(estimate, truth, window="gaussian")
-        during, elapsed = ticks[0] - before, time.perf_counter() - start
-    finally:
-        done.set()
-        ticker.join()
+    during, elapsed = ticks_while(lambda: fluidnerf.ssim(estimate, truth, window="gaussian"))
     # A thread sleeping 1 ms at a time ticks about once per 1 ms the SSIM leaves it free.
     assert elapsed > 0.05 and during >= 10, (during, elapsed)
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import fluidnerf
-from conftest import ring
+from conftest import ring, ticks_while
 
 
 def test_a_scene_from_arrays_round_trips_through_a_folder(tmp_path):
@@ -81,23 +81,7 @@ def test_saving_a_scene_releases_the_gil_while_it_writes(tmp_path):
     K, poses = ring(8, size=1024, focal=600.0)
     images = np.random.default_rng(0).random((8, 1024, 1024), dtype=np.float32)
     scene = fluidnerf.scene_from_arrays(K, poses, images, [[-10, -10, -10], [10, 10, 10]])
-    ticks, done = [0], threading.Event()
-
-    def tick():
-        while not done.is_set():
-            ticks[0] += 1
-            time.sleep(0.001)
-
-    ticker = threading.Thread(target=tick)
-    ticker.start()
-    try:
-        time.sleep(0.02)
-        before, start = ticks[0], time.perf_counter()
-        scene.save(tmp_path / "scene")
-        during, elapsed = ticks[0] - before, time.perf_counter() - start
-    finally:
-        done.set()
-        ticker.join()
+    during, elapsed = ticks_while(lambda: scene.save(tmp_path / "scene"))
     # A thread sleeping 1 ms at a time ticks about once per 1 ms the save leaves it free.
     assert elapsed > 0.05 and during >= 10, (during, elapsed)
     assert scene.root == tmp_path / "scene" and np.array_equal(

@@ -138,23 +138,8 @@ fn the_demo_refuses_folders_of_other_kinds_and_files_it_would_overwrite() {
 fn a_demo_interrupted_while_making_its_scene_says_so() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let d = tmp.path();
-    let child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
-        .current_dir(d)
-        .args(["demo", "-o", "out", "--preset", "planar60", "--resolution", "8", "-q"])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("starts");
     // OUT is made just before the synthesis starts; planar60 takes many seconds to synthesise.
-    let start = std::time::Instant::now();
-    while !d.join("out").exists() {
-        assert!(start.elapsed().as_secs() < 60, "the demo did not start");
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    std::thread::sleep(std::time::Duration::from_millis(500));
-    let killed = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
-    assert!(killed.success());
-    let o = child.wait_with_output().expect("waits");
+    let o = interrupted_once_made(d, &["demo", "-o", "out", "--preset", "planar60", "--resolution", "8", "-q"], "out");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "{err}");
     assert!(err.contains("interrupted before the scene was made") && !err.contains("not found"), "{err}");

@@ -245,24 +245,8 @@ fn a_study_interrupted_while_making_a_scene_says_how_to_continue() {
     let d = tmp.path();
     // A scene of 301 cameras of 256² px takes seconds to make.
     let args = ["study", "--preset", "smoke", "--methods", "asart", "--cameras", "300", "--pixels", "256"];
-    let child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
-        .current_dir(d)
-        .args(args)
-        .args(["--resolution", "128", "-o", "st", "-q"])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("starts");
     // OUT is made just before the first scene.
-    let start = std::time::Instant::now();
-    while !d.join("st").exists() {
-        assert!(start.elapsed().as_secs() < 60, "the study did not start");
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    std::thread::sleep(std::time::Duration::from_millis(500));
-    let killed = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
-    assert!(killed.success());
-    let o = child.wait_with_output().expect("waits");
+    let o = interrupted_once_made(d, &[&args[..], &["--resolution", "128", "-o", "st", "-q"]].concat(), "st");
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(String::from_utf8_lossy(&o.stdout).contains("rerun the same command to continue"));

@@ -57,3 +57,25 @@ pub fn demo_scene(dir: &Path, phantom: &str, cameras: u32, pixels: u32, resoluti
     args.extend_from_slice(extra);
     ok(&fluidnerf(dir, &args));
 }
+
+/// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` (a path under `dir`) and half
+/// a second more, interrupts it as Ctrl-C does (SIGINT), and returns its output.
+#[allow(dead_code)] // not every test file interrupts a command
+pub fn interrupted_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
+    let child = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(dir)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("starts");
+    let start = std::time::Instant::now();
+    while !dir.join(made).exists() {
+        assert!(start.elapsed().as_secs() < 60, "{args:?} did not make {made}");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    assert!(killed.success());
+    child.wait_with_output().expect("waits")
+}
