@@ -184,7 +184,10 @@ fn an_interrupted_cell_is_run_again_when_the_study_continues() {
     assert!(!String::from_utf8_lossy(&out.stdout).contains("done earlier"), "the interrupted cell was read back");
     assert_eq!(report(&run)["status"], "finished");
     let record = json(&d.join("st/study.json"));
-    assert_ne!(record["rows"][0]["stop_reason"], "Interrupted", "{record}");
+    // The rows spell the reason as the runs' reports do (they wrote `IterationCap` for
+    // `iteration-cap`).
+    assert_ne!(record["rows"][0]["stop_reason"], "interrupted", "{record}");
+    assert_eq!(record["rows"][0]["stop_reason"], report(&run)["stop_reason"], "{record}");
 }
 
 /// A study continued in a folder whose record is missing (the study was killed before it wrote

@@ -41,6 +41,17 @@ pub enum StopReason {
 }
 
 impl StopReason {
+    /// The name `report.json` gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            StopReason::Converged => "converged",
+            StopReason::IterationCap => "iteration-cap",
+            StopReason::TimeBudget => "time-budget",
+            StopReason::HeldOutPatience => "held-out-patience",
+            StopReason::Interrupted => "interrupted",
+        }
+    }
+
     /// How a run that stopped for this reason ended.
     pub fn status(self) -> RunStatus {
         if self == StopReason::Interrupted {
@@ -379,5 +390,19 @@ impl RunReport {
             s += ", decoder trained with bfloat16 products";
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stop reason's name is the one `report.json` writes.
+    #[test]
+    fn a_stop_reasons_name_is_its_report_spelling() {
+        use StopReason::*;
+        for r in [Converged, IterationCap, TimeBudget, HeldOutPatience, Interrupted] {
+            assert_eq!(serde_json::to_value(r).unwrap(), r.name());
+        }
     }
 }

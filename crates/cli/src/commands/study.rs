@@ -583,7 +583,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
                         kept_iteration: r.kept_iteration,
                         iterations: r.iterations,
-                        stop_reason: format!("{:?}", r.stop_reason),
+                        stop_reason: r.stop_reason.name().into(),
                         train_time_s: r.train_time_s,
                         result_bytes: r.result_bytes,
                         run: run_dir.strip_prefix(out).unwrap_or(&run_dir).display().to_string(),
