@@ -216,6 +216,20 @@ def test_a_plan_of_negative_or_fractional_counts_is_refused_naming_the_argument(
         fluidnerf.plan_windows(5.0, 2, 0)
 
 
+def test_an_overlap_with_a_single_window_is_refused_as_a_run_refuses_it():
+    """plan_windows(5, 0, 1) and (3, 5, 2) returned one window and dropped the overlap, where a
+    run given the same window and overlap is refused."""
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"^overlap: 1 frames, but windows of 0 frames are one"
+    ):
+        fluidnerf.plan_windows(5, 0, 1)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"^overlap: 2 frames, but windows of 5 frames hold all 3"
+    ):
+        fluidnerf.plan_windows(3, 5, 2)
+    assert fluidnerf.plan_windows(5, 0, 0) == [(0, 5)] and fluidnerf.plan_windows(3, 5, 0) == [(0, 3)]
+
+
 def test_a_plan_of_counts_beyond_64_bits_is_refused_naming_the_argument():
     """plan_windows(2**64, 2, 0) raised pyo3's bare "OverflowError: int too big to convert"."""
     for args, name in [((2**64, 2, 0), "n_frames"), ((5, 2**64, 0), "window"), ((5, 2, 2**70), "overlap")]:

@@ -93,6 +93,19 @@ fn plan_windows(n_frames: usize, window: usize, overlap: usize) -> PyResult<Vec<
     if window > 0 && window < n_frames && overlap >= window {
         return Err(err(format!("overlap: {overlap} frames must be fewer than the window's {window}")));
     }
+    // As a run refuses it: one window holds every frame, and the overlap would be ignored.
+    if overlap > 0 && window == 0 {
+        return Err(err(format!(
+            "overlap: {overlap} frames, but windows of 0 frames are one window holding every frame, so there are \
+             no windows to overlap; give a window of fewer frames, or an overlap of 0"
+        )));
+    }
+    if overlap > 0 && window >= n_frames {
+        return Err(err(format!(
+            "overlap: {overlap} frames, but windows of {window} frames hold all {n_frames} frames in one window, so \
+             there are no windows to overlap; give a window below {n_frames}, or an overlap of 0"
+        )));
+    }
     // Each window is a field trained on its own: a plan of more than a million is a mistake,
     // and listing one of 10¹² would exhaust the memory before saying so.
     const MAX_WINDOWS: usize = 1_000_000;
