@@ -251,6 +251,11 @@ pub fn total_variation(grid: &Grid, g: &[f32]) -> f64 {
         .sum()
 }
 
+/// `‖a − b‖₂`, summed in f64.
+fn distance(a: &[f32], b: &[f32]) -> f64 {
+    a.par_iter().zip(b.par_iter()).map(|(&a, &b)| ((a - b) as f64).powi(2)).sum::<f64>().sqrt()
+}
+
 /// SART-TV; see the module docs. `init` replaces the zero start.
 pub fn sart_tv(
     problem: &Problem,
@@ -277,8 +282,7 @@ pub fn sart_tv(
         |x, _| {
             before.copy_from_slice(x);
             let ss = sweep.run(problem, x);
-            let d: f64 =
-                x.par_iter().zip(before.par_iter()).map(|(&a, &b)| ((a - b) as f64).powi(2)).sum::<f64>().sqrt();
+            let d = distance(x, &before);
             if weight > 0.0 && d > 0.0 {
                 if rule == TvStepRule::Balanced {
                     before.copy_from_slice(x);
@@ -307,16 +311,8 @@ pub fn sart_tv(
                         }),
                     }
                 }
-                if rule == TvStepRule::Balanced {
-                    let dg: f64 = x
-                        .par_iter()
-                        .zip(before.par_iter())
-                        .map(|(&a, &b)| ((a - b) as f64).powi(2))
-                        .sum::<f64>()
-                        .sqrt();
-                    if dg > 0.95 * d {
-                        balance *= 0.95;
-                    }
+                if rule == TvStepRule::Balanced && distance(x, &before) > 0.95 * d {
+                    balance *= 0.95;
                 }
             }
             ss
