@@ -909,17 +909,22 @@ pub(crate) fn check_resume_settings(dir: &RunDir, config: &crate::RunConfig) -> 
     if saved == given {
         return Ok(());
     }
-    Err(PipelineError::RunDir {
+    Err(resume_refused(dir, path, &settings_differences(&saved, &given, 5)))
+}
+
+/// The refusal of a resume whose training settings differ from the run's (`differences`, as
+/// [`settings_differences`] lists them), reported against the file `path` that records them.
+pub(crate) fn resume_refused(dir: &RunDir, path: PathBuf, differences: &str) -> PipelineError {
+    PipelineError::RunDir {
         path,
         why: format!(
-            "cannot resume: the run was trained with other settings ({}); a resumed run only continues, and its \
-             config.json must rerun it: resume with the run's settings (`--config {}`, which a raised \
+            "cannot resume: the run was trained with other settings ({differences}); a resumed run only continues, \
+             and its config.json must rerun it: resume with the run's settings (`--config {}`, which a raised \
              --max-iterations or --time-budget may follow), or use --force (`overwrite=\"force\"` from Python) to \
              start over",
-            settings_differences(&saved, &given, 5),
             dir.config().display()
         ),
-    })
+    }
 }
 
 /// A fluidnerf JSON file, told by its keys ([`JsonFileKind::of`]).

@@ -393,18 +393,13 @@ pub(crate) fn run(
         // writes must rerun it: only the caps may change.
         let caps_aside = |t: &TrainConfig| TrainConfig { max_iterations: 0, time_budget_s: None, ..t.clone() };
         if caps_aside(&saved.train) != caps_aside(&progress.train) {
-            return Err(PipelineError::RunDir {
-                path: progress_path,
-                why: format!(
-                    "cannot resume: the run was trained with other settings (under `method.train`: {}); a resumed \
-                     run only continues, \
-                     and its config.json must rerun it: resume with the run's settings (`--config {}`, which a \
-                     raised --max-iterations or --time-budget may follow), or use --force (`overwrite=\"force\"` \
-                     from Python) to start over",
-                    crate::rundir::settings_differences(&caps_aside(&saved.train), &caps_aside(&progress.train), 5),
-                    dir.config().display()
-                ),
-            });
+            let differences =
+                crate::rundir::settings_differences(&caps_aside(&saved.train), &caps_aside(&progress.train), 5);
+            return Err(crate::rundir::resume_refused(
+                dir,
+                progress_path,
+                &format!("under `method.train`: {differences}"),
+            ));
         }
         for (k, done) in saved.finished.iter().enumerate() {
             check_own_checkpoint(&progress_path, k, done)?;
