@@ -1,9 +1,11 @@
 //! Progress bars. Library crates report progress through callbacks; only the CLI draws.
 
+use std::fmt::Write as _;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{HumanDuration, ProgressBar, ProgressState, ProgressStyle};
 
 static QUIET: AtomicBool = AtomicBool::new(false);
 
@@ -20,18 +22,61 @@ pub fn quiet() -> bool {
 /// A bar over `len` steps labelled `what`; hidden with `--quiet` or when stderr is not a
 /// terminal (indicatif's default draw target).
 pub fn bar(len: u64, what: &str) -> ProgressBar {
+    bar_until(len, what, &Deadline::default())
+}
+
+/// A time by which the work ends whatever its steps' rate says: a run's time budget. Set once
+/// it is known; the bar's time left is then the sooner of the two.
+#[derive(Clone, Default)]
+pub struct Deadline(Arc<Mutex<Option<Instant>>>);
+
+impl Deadline {
+    pub fn set(&self, at: Instant) {
+        *self.0.lock().unwrap_or_else(|e| e.into_inner()) = Some(at);
+    }
+
+    fn left(&self) -> Option<Duration> {
+        let at = (*self.0.lock().unwrap_or_else(|e| e.into_inner()))?;
+        Some(at.saturating_duration_since(Instant::now()))
+    }
+}
+
+/// [`bar`] whose time left is at most what `deadline` leaves.
+pub fn bar_until(len: u64, what: &str, deadline: &Deadline) -> ProgressBar {
     if QUIET.load(Ordering::Relaxed) {
         return ProgressBar::hidden();
     }
+    let deadline = deadline.clone();
+    let eta = move |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+        let _ = w.write_str(&eta_text(state.per_sec(), state.eta(), deadline.left()));
+    };
     let pb = ProgressBar::new(len);
     pb.set_style(
         ProgressStyle::with_template("{prefix:>12} [{bar:30}] {pos}/{len} {elapsed_precise} (eta {eta}) {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .with_key("eta", eta)
             .progress_chars("=> "),
     );
     pb.set_prefix(what.to_string());
     pb.enable_steady_tick(Duration::from_millis(250));
     pb
+}
+
+/// The bar's time left: `?` until a step has been timed (indicatif reads 0 s then, which a run
+/// whose first iteration takes minutes showed for all of them), else the steps' estimate,
+/// at most what a deadline leaves.
+fn eta_text(steps_per_s: f64, by_rate: Duration, deadline_left: Option<Duration>) -> String {
+    let by_rate = (steps_per_s > 0.0).then_some(by_rate);
+    let left = match (by_rate, deadline_left) {
+        (Some(r), Some(d)) => r.min(d),
+        (r, d) => match r.or(d) {
+            Some(t) => t,
+            None => return "?".into(),
+        },
+    };
+    let mut s = String::new();
+    let _ = write!(s, "{:#}", HumanDuration(left));
+    s
 }
 
 /// A counter of steps whose number is not known in advance (frames decoded from a video),
@@ -50,4 +95,19 @@ pub fn counter(what: &str, unit: &str) -> ProgressBar {
     pb.set_prefix(what.to_string());
     pb.enable_steady_tick(Duration::from_millis(250));
     pb
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_left_is_unknown_until_a_step_is_timed_and_a_deadline_bounds_it() {
+        let s = Duration::from_secs;
+        assert_eq!(eta_text(0.0, s(0), None), "?");
+        assert_eq!(eta_text(2.0, s(90), None), eta_text(2.0, s(90), Some(s(3600))));
+        assert_ne!(eta_text(2.0, s(3600), None), eta_text(2.0, s(3600), Some(s(90))));
+        // Before a step is timed, a deadline still tells the most the work can take.
+        assert_eq!(eta_text(0.0, s(0), Some(s(90))), eta_text(1.0, s(90), None));
+    }
 }

@@ -1050,6 +1050,8 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
 /// Draws a run's events: one progress bar, with the loss, the latest evaluation and the rate.
 pub struct ProgressView {
     bar: Option<indicatif::ProgressBar>,
+    /// When the run's time budget ends, once its estimate has said so.
+    deadline: crate::progress::Deadline,
     per_window: u64,
     rate: (Instant, u64, f64),
     evaluation: String,
@@ -1057,7 +1059,13 @@ pub struct ProgressView {
 
 impl Default for ProgressView {
     fn default() -> Self {
-        ProgressView { bar: None, per_window: 0, rate: (Instant::now(), 0, 0.0), evaluation: String::new() }
+        ProgressView {
+            bar: None,
+            deadline: crate::progress::Deadline::default(),
+            per_window: 0,
+            rate: (Instant::now(), 0, 0.0),
+            evaluation: String::new(),
+        }
     }
 }
 
@@ -1067,8 +1075,10 @@ impl ProgressView {
         match event {
             RunEvent::Started { method, max_iterations, windows, start_iteration } => {
                 self.per_window = *max_iterations as u64;
-                let bar = crate::progress::bar(self.per_window * *windows as u64, method.name());
+                let bar = crate::progress::bar_until(self.per_window * *windows as u64, method.name(), &self.deadline);
                 bar.set_position(*start_iteration as u64);
+                // A resumed run's jump to its iteration is not a rate.
+                bar.reset_eta();
                 self.rate = (Instant::now(), *start_iteration as u64, 0.0);
                 self.bar = Some(bar);
             }
@@ -1098,7 +1108,10 @@ impl ProgressView {
                 }
                 self.evaluation = s;
             }
-            RunEvent::Estimate { seconds_left, .. } => {
+            RunEvent::Estimate { seconds_left, budget_limited, .. } => {
+                if *budget_limited {
+                    self.deadline.set(Instant::now() + std::time::Duration::from_secs_f64(seconds_left.max(0.0)));
+                }
                 if let Some(text) = event.describe_estimate() {
                     let long = *seconds_left > 1800.0;
                     let show = || {
