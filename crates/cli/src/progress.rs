@@ -79,6 +79,23 @@ fn eta_text(steps_per_s: f64, by_rate: Duration, deadline_left: Option<Duration>
     s
 }
 
+/// A spinner with the time elapsed, for work whose steps are not counted, labelled `what`
+/// with `msg`; hidden as [`bar`] is.
+pub fn spinner(what: &str, msg: &str) -> ProgressBar {
+    if QUIET.load(Ordering::Relaxed) {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new_spinner();
+    pb.set_style(
+        ProgressStyle::with_template("{prefix:>12} {spinner} {elapsed_precise} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    pb.set_prefix(what.to_string());
+    pb.set_message(msg.to_string());
+    pb.enable_steady_tick(Duration::from_millis(250));
+    pb
+}
+
 /// A counter of steps whose number is not known in advance (frames decoded from a video),
 /// labelled `what`, with the rate; hidden as [`bar`] is.
 pub fn counter(what: &str, unit: &str) -> ProgressBar {

@@ -63,6 +63,19 @@ impl Volume {
     /// grid. `n = 1` is [`Volume::from_field`]. As there, a field with a support is evaluated
     /// only in the cells whose points may lie in its occupied cells.
     pub fn from_field_averaged(dims: [usize; 3], aabb: Aabb, field: &dyn ScalarField, time: f64, n: usize) -> Self {
+        Volume::from_field_averaged_with(dims, aabb, field, time, n, &|| {})
+    }
+
+    /// [`Volume::from_field_averaged`], calling `slab_done` (from any thread) as each of the
+    /// grid's `dims[2]` z-slices is sampled: a progress bar's tick.
+    pub fn from_field_averaged_with(
+        dims: [usize; 3],
+        aabb: Aabb,
+        field: &dyn ScalarField,
+        time: f64,
+        n: usize,
+        slab_done: &(dyn Fn() + Sync),
+    ) -> Self {
         let n = n.max(1);
         let mut v = Volume::zeros(dims, aabb);
         let [nx, ny, _] = dims;
@@ -103,6 +116,7 @@ impl Volume {
                     slab[i] = cell.iter().sum::<f32>() * inv;
                 }
             }
+            slab_done();
         });
         v
     }

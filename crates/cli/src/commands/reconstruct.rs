@@ -1050,6 +1050,9 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
 /// Draws a run's events: one progress bar, with the loss, the latest evaluation and the rate.
 pub struct ProgressView {
     bar: Option<indicatif::ProgressBar>,
+    /// Shown from the end of training until the run has written its files (sampling a
+    /// faithful network's volume takes a while).
+    writing: Option<indicatif::ProgressBar>,
     /// When the run's time budget ends, once its estimate has said so.
     deadline: crate::progress::Deadline,
     per_window: u64,
@@ -1061,6 +1064,7 @@ impl Default for ProgressView {
     fn default() -> Self {
         ProgressView {
             bar: None,
+            writing: None,
             deadline: crate::progress::Deadline::default(),
             per_window: 0,
             rate: (Instant::now(), 0, 0.0),
@@ -1145,12 +1149,25 @@ impl ProgressView {
                 if let Some(bar) = self.bar.take() {
                     bar.finish_and_clear();
                 }
+                if let Some(old) =
+                    self.writing.replace(crate::progress::spinner("writing", "volumes, metrics, reports"))
+                {
+                    old.finish_and_clear();
+                }
             }
         }
         if crate::interrupt::requested() {
             ControlFlow::Break(())
         } else {
             ControlFlow::Continue(())
+        }
+    }
+}
+
+impl Drop for ProgressView {
+    fn drop(&mut self) {
+        for bar in [self.bar.take(), self.writing.take()].into_iter().flatten() {
+            bar.finish_and_clear();
         }
     }
 }
