@@ -960,7 +960,8 @@ def reconstruct(
 
     ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
     ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
-    ``False`` stops the run. ``progress`` (True or False) shows a tqdm bar (None: when tqdm is installed).
+    ``False`` stops the run. A hybrid's voxel start (any ``start`` the run makes itself) first
+    reports its own run, from a ``started`` naming the voxel method to its ``writing``. ``progress`` (True or False) shows a tqdm bar (None: when tqdm is installed).
     A run's warnings are issued as :class:`FluidNerfWarning` and kept in ``run.report["warnings"]``.
     The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
     written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.

@@ -30,6 +30,35 @@ FAST = {
 }
 
 
+def test_a_hybrids_voxel_start_reports_its_events_and_stops_with_the_callback(static_scene, tmp_path):
+    """The hybrid's voxel start reports its own run before the field's, and a callback that
+    stops there stops the start and the run. Its events were dropped: a callback could not
+    stop it, and a progress bar showed nothing while it ran."""
+    events = []
+    short = {
+        "resolution": 16,
+        "seed": 3,
+        "stopping": {"rule": "budget", "max_iterations": 3},
+        "checkpoint_every": 0,
+    }
+    run = fluidnerf.reconstruct(static_scene, "hybrid", tmp_path / "h", callback=events.append, **short)
+    assert run.status == "finished"
+    started = [e["method"] for e in events if e["kind"] == "started"]
+    assert started == ["asart", "hybrid"]
+    kinds = [e["kind"] for e in events]
+    assert kinds.index("writing") < kinds.index("started", 1)
+
+    def stop_in_the_start(event: dict) -> bool:
+        return not (event["kind"] == "iteration" and event["iteration"] == 2)
+
+    stopped = fluidnerf.reconstruct(
+        static_scene, "hybrid", tmp_path / "s", callback=stop_in_the_start, **short
+    )
+    assert stopped.status == "interrupted"
+    start = json.loads((tmp_path / "s" / "start" / "report.json").read_text())
+    assert start["stop_reason"] == "interrupted" and start["iterations"] == 2
+
+
 def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(static_scene, cli, tmp_path):
     events = []
     run = fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "py", callback=events.append, **FAST)

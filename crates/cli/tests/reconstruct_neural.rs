@@ -342,6 +342,22 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     );
 }
 
+/// Ctrl-C during the hybrid's voxel start stops the start, and the run after it, at once. The
+/// start's events were dropped, so it ran all its iterations (250 here, seconds at 96³) with no
+/// progress shown and only then did the run stop.
+#[test]
+fn ctrl_c_during_the_hybrids_voxel_start_stops_the_start() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 8, 32, 16, &[]);
+    let out = interrupted_once_made(d, &["reconstruct", "scene", "-o", "h", "--resolution", "96", "-q"], "h/start");
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    let start = report(&d.join("h/start"));
+    assert_eq!(start["stop_reason"], "interrupted", "{start}");
+    assert!(start["iterations"].as_u64().is_some_and(|n| n < 250), "{start}");
+    assert_eq!(report(&d.join("h"))["status"], "interrupted");
+}
+
 /// The hybrid's fit of the field to its voxel start is part of the run's work: it ends with the
 /// time budget, as the voxel start and the field do. A fit of thousands of steps ran whole
 /// whatever the budget, so a study cell stated "at most 0.5 s" for a run that took seconds.

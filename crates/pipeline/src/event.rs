@@ -20,7 +20,10 @@ pub struct WindowPos {
 #[derive(Debug)]
 pub enum RunEvent<'a> {
     /// Set-up is done and iterations start: at most `max_iterations` per window, `windows`
-    /// windows (1 for static runs), from `start_iteration` (a resumed run's first).
+    /// windows (1 for static runs), from `start_iteration` (a resumed run's first). A run that
+    /// starts from voxel reconstructions it runs itself (the hybrid, `--start-method`) first
+    /// delivers each of those runs' events, from its own `Started` (naming the voxel method) to
+    /// its `Writing`; stopping there stops the whole run.
     Started { method: Method, max_iterations: usize, windows: usize, start_iteration: usize },
     /// An iteration finished. `loss` is the training loss (neural: normalised pixels², Eq. 5.5)
     /// or the relative residual (voxel methods); `smoothed` the neural running mean.

@@ -211,6 +211,7 @@ pub(crate) fn run_voxel_start(
     held_out: bool,
     budget_s: Option<f64>,
     path: &std::path::Path,
+    on_event: &mut dyn FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<RunReport, PipelineError> {
     let mut voxel = RunConfig::new(config.scene.clone(), method);
     voxel.seed = config.seed;
@@ -226,9 +227,8 @@ pub(crate) fn run_voxel_start(
     voxel.memory_limit_gib = config.memory_limit_gib;
     voxel.eval_every = Some(0);
     let dir = RunDir::create(path, crate::Overwrite::Force, Some(&scene.root))?;
-    let mut quiet = |_: &RunEvent| ControlFlow::Continue(());
     let mut inner = Session {
-        on_event: &mut quiet,
+        on_event,
         stopped: false,
         started: Instant::now(),
         cpu0: None,
@@ -260,7 +260,11 @@ fn start_from<F: TrainableField>(
             let budget = config.stopping.time_budget_s.map(|b| b / 2.0);
             let (method, why) = start.method.resolve(prep.noise());
             log::info!("start: {why}");
-            let report = run_voxel_start(method, scene, truth, config, held_out, budget, &path)?;
+            // Its events go to the caller, who sees its progress and can stop it.
+            let report = run_voxel_start(method, scene, truth, config, held_out, budget, &path, session.on_event)?;
+            if report.status == crate::RunStatus::Interrupted {
+                session.stopped = true;
+            }
             log::info!(
                 "{} for the start: {} iterations in {:.1} s, kept {}",
                 method,
@@ -514,7 +518,8 @@ impl Ctx<'_> {
                     }
                 }
             }
-            if flow.is_break() {
+            // `stopped` also holds a stop asked for during the voxel start.
+            if flow.is_break() || session.stopped {
                 cause = Some(StopReason::Interrupted);
             } else if out_of_patience {
                 cause = Some(StopReason::HeldOutPatience);

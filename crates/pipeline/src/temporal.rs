@@ -471,7 +471,7 @@ impl Ctx<'_> {
     /// Runs `start.method` on every training instant of a window that starts afresh (the
     /// first, or every one without warm starts) alone, into `start/tNN/` of the run folder
     /// ([`TemporalSpec::start`]), with at most half the window's time budget over its instants.
-    fn instant_starts(&self, start: &crate::StartSpec) -> Result<InstantStarts, PipelineError> {
+    fn instant_starts(&self, start: &crate::StartSpec, session: &mut Session) -> Result<InstantStarts, PipelineError> {
         let (scene, config, spec) = (self.scene, self.config, self.spec);
         let times = frame_times(self.problem);
         let plan = plan_windows(times.len(), spec.windows.frames, spec.windows.overlap);
@@ -493,7 +493,10 @@ impl Ctx<'_> {
             let views = self.problem.views.iter().filter(|v| same_time(v.time, t));
             let (method, why) = start.method.resolve(fluidnerf_neural::train::median_noise(views));
             log::info!("start at t = {t}: {why}");
-            let report = run_voxel_start(method, &sub, &truth, config, held_out, budget, &path)?;
+            let report = run_voxel_start(method, &sub, &truth, config, held_out, budget, &path, session.on_event)?;
+            if report.status == crate::RunStatus::Interrupted {
+                session.stopped = true;
+            }
             log::info!(
                 "{} at t = {t}: {} iterations in {:.1} s, kept {}",
                 method,
@@ -576,20 +579,21 @@ impl Ctx<'_> {
             ResumeState::default()
         };
         let windows = progress.plan.len().max(1);
+        let mut io_error = None;
+        let t_start = Instant::now();
+        // The instants' own reconstructions, when the windows start from them. Their runs
+        // report their own events first, each from its start to its writing.
+        let starts = match &spec.start {
+            Some(start) => Some(self.instant_starts(start, session)?),
+            None => None,
+        };
+        let mut interrupted = session.stopped;
         let _ = session.emit(RunEvent::Started {
             method: self.method,
             max_iterations: spec.train.max_iterations,
             windows,
             start_iteration: 0,
         });
-        let mut io_error = None;
-        let mut interrupted = false;
-        let t_start = Instant::now();
-        // The instants' own reconstructions, when the windows start from them.
-        let starts = match &spec.start {
-            Some(start) => Some(self.instant_starts(start)?),
-            None => None,
-        };
         let target = |t: f64, points: &[fluidnerf_core::glam::Vec3], out: &mut [f32]| {
             let nearest = starts.iter().flatten().min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
             match nearest {

@@ -1079,6 +1079,11 @@ impl ProgressView {
         match event {
             RunEvent::Started { method, max_iterations, windows, start_iteration } => {
                 self.per_window = *max_iterations as u64;
+                // A hybrid's voxel start reports its own run first, with its own budget.
+                self.deadline = crate::progress::Deadline::default();
+                if let Some(spinner) = self.writing.take() {
+                    spinner.finish_and_clear();
+                }
                 let bar = crate::progress::bar_until(self.per_window * *windows as u64, method.name(), &self.deadline);
                 bar.set_position(*start_iteration as u64);
                 // A resumed run's jump to its iteration is not a rate.
