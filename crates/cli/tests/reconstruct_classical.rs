@@ -153,6 +153,26 @@ fn every_method_and_option_runs_and_memory_is_checked() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("relaxation"));
 }
 
+/// A visual hull that carves every voxel (here a box in a corner of the scene's, where every
+/// view is dark) held the whole volume at zero: the run wrote it and reported success. It is
+/// refused before any work, naming the hull and what to change, and writes nothing.
+#[test]
+fn an_empty_visual_hull_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    edit_json(&d.join("scene/transforms.json"), |v| v["aabb"] = serde_json::json!([[12, 12, 12], [20, 20, 20]]));
+    let run = ["reconstruct", "scene", "--resolution", "8", "--max-iterations", "2", "--visual-hull", "-q"];
+    for method in ["sart", "mart", "mlem"] {
+        let out = fluidnerf(d, &[&run[..], &["-o", method, "--method", method]].concat());
+        refused(&out, "the visual hull is empty");
+        refused(&out, "--hull-threshold");
+        assert!(!d.join(method).exists(), "{method}: a refused run leaves nothing");
+    }
+    // Without the hull the same box runs.
+    ok(&fluidnerf(d, &[&run[..6], &["-q", "-o", "free", "--method", "sart"]].concat()));
+}
+
 /// Ctrl-C (SIGINT) stops after the current iteration and still writes a usable result.
 #[cfg(unix)]
 #[test]

@@ -170,6 +170,23 @@ pub(crate) fn run(
     let support = spec.projector.support(&grid_s, &cameras_s, &hull_images);
     drop(hull_images);
     let hull_voxels = support.as_ref().map(|h| h.iter().filter(|&&b| b).count());
+    // Every method holds the voxels outside the hull at zero: without one inside, the run
+    // would write an all-zero volume and report it as a result.
+    if hull_voxels == Some(0) {
+        let p = &spec.projector;
+        return Err(PipelineError::invalid(
+            "visual_hull",
+            format!(
+                "{}: the visual hull is empty: every voxel's centre projects onto a dark pixel in some training \
+                 view (at most hull_threshold {} of that image's maximum, or its background plus hull_noise_sigmas \
+                 {} deviations), so the volume would be all zeros; check that the cameras' poses match their \
+                 images, lower --hull-threshold or --hull-noise-sigmas, or leave out --visual-hull",
+                scene.root.display(),
+                fluidnerf_core::num(p.hull_threshold),
+                fluidnerf_core::num(p.hull_noise_sigmas)
+            ),
+        ));
+    }
     if let (Some(inside), ClassicalMethod::Tv(p)) = (hull_voxels, &spec.method) {
         if p.tv_weight > 0.0
             && inside < grid.len()
