@@ -656,3 +656,20 @@ fn footprint_adjoint_and_totals_with_wide_footprints() {
     let (a, b) = (ax.iter().map(|&v| v as f64).sum::<f64>(), reference.sum());
     assert!((a / b - 1.0).abs() < 0.01, "total {a} vs {b}");
 }
+
+/// A grid whose voxels 32-bit indices cannot reach is refused by every projector before any
+/// work, saying what to lower.
+#[test]
+fn a_grid_beyond_32_bit_voxel_indices_is_refused_naming_the_resolution() {
+    let grid = Grid::new([2048, 2048, 1025], aabb());
+    let cams = ring(2, 8);
+    let errors = [
+        FootprintProjector::new(grid, &cams, 1.0).err(),
+        SplatProjector::new(grid, &cams, 1.0).err(),
+        RayProjector::new(grid, &cams, 1.0, 0.5).err(),
+    ];
+    for e in errors {
+        let e = e.expect("refused").to_string();
+        assert!(e.contains("[2048, 2048, 1025]") && e.contains("2^32") && e.contains("--resolution"), "{e}");
+    }
+}

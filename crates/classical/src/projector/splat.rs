@@ -327,7 +327,15 @@ pub(crate) fn validate(grid: &Grid, cameras: &[Camera], intensity_scale: f64) ->
         ));
     }
     if u32::try_from(grid.len()).is_err() {
-        return Err(ClassicalError::invalid("grid", format!("{:?} has more than 2^32 voxels", grid.dims)));
+        // Rows and kept footprints index voxels in 32 bits.
+        return Err(ClassicalError::invalid(
+            "grid",
+            format!(
+                "{:?} has {} voxels, more than the 2^32 a voxel method indexes; lower the resolution (--resolution)",
+                grid.dims,
+                grid.len()
+            ),
+        ));
     }
     Ok(())
 }
