@@ -207,13 +207,15 @@ pub fn fit_to_target<F: TrainableField>(
             ));
         }
         if step == 0 {
-            let rms = (wanted.iter().map(|&y| f64::from(y).powi(2)).sum::<f64>() / n as f64).sqrt();
-            if rms == 0.0 {
+            // A field emits no negative light: a start with no positive value fits a zero field.
+            if wanted.iter().all(|&y| y <= 0.0) {
                 return Err(NeuralError::invalid(
                     "start",
-                    "the starting field is zero at every occupied point: there is nothing to start from",
+                    "the starting field is zero at every occupied point, or negative (no emission is): there is \
+                     nothing to start from",
                 ));
             }
+            let rms = (wanted.iter().map(|&y| f64::from(y).powi(2)).sum::<f64>() / n as f64).sqrt();
             let level = f64::from(prep.mean_level());
             let ratio = rms / level;
             if level > 0.0 && !(START_LEVELS.0..=START_LEVELS.1).contains(&ratio) {

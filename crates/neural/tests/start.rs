@@ -89,6 +89,10 @@ fn a_start_in_other_units_is_scaled_to_the_images() {
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
     let err = fit_to_target(&mut field, &prep, &zero, &fit, 3, None).expect_err("a zero start").to_string();
     assert!(err.contains("zero at every occupied point"), "{err}");
+    // A negative start (an edited volume) fitted a zero field, which the run then trained on.
+    let negative = |_: &[f32], out: &mut [f32]| out.fill(-1.0);
+    let err = fit_to_target(&mut field, &prep, &negative, &fit, 3, None).expect_err("a negative start").to_string();
+    assert!(err.contains("or negative"), "{err}");
 }
 
 #[test]
