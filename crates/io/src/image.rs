@@ -493,7 +493,22 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
     };
     check_white_is_zero(path, &mut dec)?;
     let lut = linearisation.table();
-    let (data, kind): (Vec<f32>, SampleKind) = match dec.read_image().map_err(bad)? {
+    // `read_image` reads the first plane alone of a planar (`PlanarConfiguration` 2) image: the
+    // red of an RGB picture, taken silently for its grey. All planes are read here and then
+    // interleaved as a chunky image's samples are.
+    let mut decoded = DecodingResult::U8(Vec::new());
+    let layout = dec.read_image_to_buffer(&mut decoded).map_err(bad)?;
+    if decoded.as_buffer(0).as_bytes().len() < layout.complete_len {
+        return Err(IoError::invalid(
+            path,
+            format!(
+                "a planar TIFF of {} planes too large to read whole ({} bytes); write it with its samples \
+                 interleaved (PlanarConfiguration 1), or as greyscale",
+                layout.planes, layout.complete_len
+            ),
+        ));
+    }
+    let (data, kind): (Vec<f32>, SampleKind) = match decoded {
         DecodingResult::U8(v) => (v.into_iter().map(|c| lut[usize::from(c)]).collect(), SampleKind::Integer(8)),
         DecodingResult::U16(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(16)),
         DecodingResult::U32(v) => (v.into_iter().map(|x| x as f32).collect(), SampleKind::Integer(32)),
@@ -513,6 +528,12 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
     if pixels == 0 || data.len() % pixels != 0 || data.len() / pixels > 4 {
         return Err(IoError::invalid(path, format!("TIFF of {w}x{h} pixels holds {} samples", data.len())));
     }
+    let data = if layout.planes > 1 && data.len() == pixels * layout.planes {
+        let planes = layout.planes;
+        (0..pixels * planes).map(|i| data[(i % planes) * pixels + i / planes]).collect()
+    } else {
+        data
+    };
     // Further pages of the same size are a stack (frames, or a z-stack), not one image: reading
     // the first alone would lose the rest silently. Smaller pages (thumbnails, a pyramid's
     // reduced levels) are skipped.
@@ -880,6 +901,57 @@ mod tests {
         }
         b.extend(0u32.to_le_bytes());
         b
+    }
+
+    /// An RGB TIFF of `w`×`h` 8-bit pixels stored plane by plane (PlanarConfiguration 2: all
+    /// red samples, then green, then blue, one strip per plane), written by hand: the encoder
+    /// writes chunky images only.
+    fn planar_rgb_tiff(w: u32, h: u32, planes: [&[u8]; 3]) -> Vec<u8> {
+        let plane = w * h;
+        let mut b = b"II*\0".to_vec();
+        let ifd = 8 + 3 * plane + 12 + 12 + 6;
+        b.extend(ifd.to_le_bytes());
+        for p in planes {
+            assert_eq!(p.len(), plane as usize);
+            b.extend(p);
+        }
+        let offsets = 8 + 3 * plane;
+        b.extend([8, 8 + plane, 8 + 2 * plane].iter().flat_map(|o| o.to_le_bytes()));
+        b.extend([plane; 3].iter().flat_map(|c| c.to_le_bytes()));
+        b.extend([8u16; 3].iter().flat_map(|c| c.to_le_bytes()));
+        let entries: [(u16, u16, u32, u32); 10] = [
+            (256, 4, 1, w),
+            (257, 4, 1, h),
+            (258, 3, 3, offsets + 24),
+            (259, 3, 1, 1),
+            (262, 3, 1, 2),
+            (273, 4, 3, offsets),
+            (277, 3, 1, 3),
+            (278, 4, 1, h),
+            (279, 4, 3, offsets + 12),
+            (284, 3, 1, 2),
+        ];
+        b.extend((entries.len() as u16).to_le_bytes());
+        for (tag, kind, count, value) in entries {
+            b.extend(tag.to_le_bytes());
+            b.extend(kind.to_le_bytes());
+            b.extend(count.to_le_bytes());
+            b.extend(if kind == 3 && count == 1 { u32::from(value as u16) } else { value }.to_le_bytes());
+        }
+        b.extend(0u32.to_le_bytes());
+        b
+    }
+
+    /// A planar RGB TIFF was read as its red plane alone, taken for a grey image without a
+    /// word; its three planes now give the luminance a chunky RGB TIFF gives.
+    #[test]
+    fn planar_rgb_tiffs_read_every_plane() {
+        let (red, green, blue) = ([100u8, 0, 0, 0], [0u8, 100, 0, 0], [0u8, 0, 100, 200]);
+        let bytes = planar_rgb_tiff(2, 2, [&red, &green, &blue]);
+        let (img, kind) = decode_image(Path::new("planar.tif"), &bytes, Linearisation::Linear).expect("planar RGB");
+        assert_eq!(kind, SampleKind::Integer(8));
+        let expected = [21.26f32, 71.52, 7.22, 14.44];
+        assert!(img.data.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-3), "{:?}", img.data);
     }
 
     /// Grey samples with extra ones keep the grey one; CMYK and YCbCr samples, which would be
