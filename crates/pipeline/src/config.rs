@@ -1239,9 +1239,15 @@ impl RunConfig {
 
     /// This configuration for `scene`: [`StopRule::Auto`] decided (held-out early stopping when
     /// the scene has held-out views and the method is static, the method's own rule
-    /// otherwise); every other setting as it is.
+    /// otherwise), the scene's and a start run's paths made absolute; every other setting as
+    /// it is.
     pub fn resolved(&self, scene: &fluidnerf_core::Scene) -> RunConfig {
         let mut c = self.clone();
+        // Recorded absolute, as the command line records it, so that `config.json` reruns from
+        // any working directory (a relative path would name another folder, or none).
+        if let Ok(abs) = std::path::absolute(&c.scene) {
+            c.scene = abs;
+        }
         if c.stopping.rule == StopRule::Auto {
             let held_out = scene.holdout_frames().next().is_some();
             c.stopping.rule =

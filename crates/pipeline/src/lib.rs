@@ -80,6 +80,7 @@ pub fn reconstruct(
     mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<RunReport, PipelineError> {
     let config = &config.resolved(scene);
+    check_scene_named(config, scene)?;
     config.validate()?;
     if dir.resuming() {
         check_resumable(config, dir)?;
@@ -111,6 +112,26 @@ pub fn reconstruct(
         dir.discard_unresumable();
     }
     result
+}
+
+/// Refuses a configuration whose `scene` is not the scene given to run: `config.json` would
+/// record the one and the results be of the other, and a rerun from that file would
+/// reconstruct another scene. `scene` may name the scene's folder or its file.
+pub(crate) fn check_scene_named(config: &RunConfig, scene: &Scene) -> Result<(), PipelineError> {
+    let named = &config.scene;
+    let folder = if named.is_file() { named.parent().unwrap_or(named) } else { named.as_path() };
+    if rundir::same_path(folder, &scene.root) {
+        return Ok(());
+    }
+    Err(PipelineError::invalid(
+        "scene",
+        format!(
+            "{} is not the scene being reconstructed (the one in {}), so config.json would record another scene \
+             than the run's; set `scene` to the scene's folder or file",
+            named.display(),
+            scene.root.display()
+        ),
+    ))
 }
 
 /// Refuses to resume the run in `dir` with `config` when it cannot continue it: a voxel method
@@ -575,6 +596,38 @@ mod tests {
             assert!(matches!(&e, PipelineError::Invalid { key, .. } if key == "method"), "{m}: {e}");
             assert!(!out.join("config.json").exists(), "{m}: nothing is recorded");
         }
+    }
+
+    /// A configuration naming another scene than the one run was run, and `config.json` named
+    /// that other scene; a relative `scene` was recorded as given, for a rerun to find from the
+    /// working directory it happened to start in. The first is refused by its key before any
+    /// work, the second recorded absolute.
+    #[test]
+    fn a_config_naming_another_scene_is_refused_and_the_scene_recorded_absolute() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let scene_dir = tmp.path().join("scene");
+        testing::small_scene(&scene_dir).expect("scene");
+        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        let other = tmp.path().join("other");
+        std::fs::create_dir_all(&other).expect("mkdir");
+        let mut config = RunConfig::new(&other, Method::Asart);
+        config.resolution = 8;
+        config.stopping.rule = StopRule::Budget;
+        config.stopping.max_iterations = Some(1);
+        let out = tmp.path().join("run");
+        let dir = RunDir::create(&out, Overwrite::Refuse, Some(&scene.root)).expect("run folder");
+        let e = reconstruct(&scene, &config, &dir, |_| ControlFlow::Continue(())).expect_err("another scene");
+        assert!(matches!(&e, PipelineError::Invalid { key, .. } if key == "scene"), "{e}");
+        assert!(e.to_string().contains("other") && e.to_string().contains("is not the scene"), "{e}");
+        assert!(!out.join("config.json").exists(), "nothing is recorded");
+        let windows = reconstruct_windows(&scene, &config, &tmp.path().join("w"), 0..1, |_| ControlFlow::Continue(()));
+        assert!(matches!(&windows, Err(PipelineError::Invalid { key, .. }) if key == "scene"), "{windows:?}");
+        // The scene's file names it as well as its folder does, spelled with `..` too.
+        config.scene = other.join("../scene/transforms.json");
+        reconstruct(&scene, &config, &dir, |_| ControlFlow::Continue(())).expect("the scene's file");
+        let saved = RunConfig::read(&dir.config()).expect("config.json");
+        assert!(saved.scene.is_absolute(), "{}", saved.scene.display());
+        assert!(rundir::same_path(&saved.scene, &scene_dir.join("transforms.json")));
     }
 
     #[test]

@@ -1026,6 +1026,7 @@ pub fn reconstruct_windows(
     mut on_event: impl FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<Vec<WindowOutcome>, PipelineError> {
     let config = &config.resolved(scene);
+    crate::check_scene_named(config, scene)?;
     config.validate()?;
     let mut session = Session {
         on_event: &mut on_event,
