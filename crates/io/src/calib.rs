@@ -1577,14 +1577,13 @@ fn read_images_bin(path: &Path) -> Result<Vec<ColmapImage>, IoError> {
 /// in the order of the images file (see the module docs for the conventions).
 pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     let (bin_cams, bin_imgs) = (dir.join("cameras.bin"), dir.join("images.bin"));
+    let (cams, imgs) = (dir.join("cameras.txt"), dir.join("images.txt"));
     let (cameras, images, img_path) = if bin_cams.is_file() && bin_imgs.is_file() {
         (read_cameras_bin(&bin_cams)?, read_images_bin(&bin_imgs)?, bin_imgs)
-    } else {
-        let (cams, imgs) = (dir.join("cameras.txt"), dir.join("images.txt"));
-        if !cams.exists() && !bin_cams.exists() {
-            return Err(IoError::NotFound { what: "COLMAP cameras.txt or cameras.bin", path: cams });
-        }
+    } else if cams.is_file() && imgs.is_file() {
         (read_cameras_txt(&cams)?, read_images_txt(&imgs)?, imgs)
+    } else {
+        return Err(IoError::invalid(dir, colmap_model_missing(dir)));
     };
     let mut out = Vec::with_capacity(images.len());
     for im in images {
@@ -1602,6 +1601,34 @@ pub fn read_colmap(dir: &Path) -> Result<Vec<(String, Camera)>, IoError> {
         return Err(IoError::invalid(&img_path, "no images"));
     }
     Ok(out)
+}
+
+/// Why `dir` holds no whole COLMAP model: which of its four files it has, and where a model
+/// is when `dir` is a COLMAP project or its `sparse` folder (`sparse/0`, `0`).
+fn colmap_model_missing(dir: &Path) -> String {
+    if !dir.is_dir() {
+        let what = if dir.exists() { "is not a folder" } else { "does not exist" };
+        return format!("{what}; give the COLMAP model folder (holding cameras.txt and images.txt, or .bin)");
+    }
+    let files = ["cameras.bin", "images.bin", "cameras.txt", "images.txt"];
+    let present: Vec<&str> = files.into_iter().filter(|f| dir.join(f).is_file()).collect();
+    let has_model = |d: &Path| {
+        (d.join("cameras.bin").is_file() && d.join("images.bin").is_file())
+            || (d.join("cameras.txt").is_file() && d.join("images.txt").is_file())
+    };
+    let inner = ["sparse/0", "0", "sparse"].into_iter().map(|s| dir.join(s)).find(|d| has_model(d));
+    let found = if present.is_empty() {
+        "holds no COLMAP model file".to_string()
+    } else {
+        format!("holds {} alone", present.join(" and "))
+    };
+    match inner {
+        Some(model) => format!("{found}; its model is in {}: give that folder", model.display()),
+        None => format!(
+            "{found}; a COLMAP model is cameras.txt with images.txt, or cameras.bin with images.bin (`colmap \
+             model_converter --output_type TXT` writes the text pair)"
+        ),
+    }
 }
 
 /// Writes a COLMAP binary model (`cameras.bin`, `images.bin`) in `dir`, one camera per image,

@@ -1254,3 +1254,33 @@ fn a_json_node_given_twice_is_refused() {
     let err = read_opencv(&dir.path().join("nested.json")).expect_err("a node given twice").to_string();
     assert!(err.contains("nested.json") && err.contains("`rows` is given twice"), "{err}");
 }
+
+/// A folder without a whole model was refused as missing `cameras.txt` even when it held
+/// `cameras.bin` (and `images.txt`), and a COLMAP project given for its model as missing
+/// `cameras.txt`. The refusal now says which files the folder holds, and where the model is.
+#[test]
+fn a_folder_without_a_whole_colmap_model_says_what_it_holds_and_where_the_model_is() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    colmap_bin_by_hand(d);
+    std::fs::remove_file(d.join("images.bin")).expect("rm");
+    std::fs::copy(fixtures().join("colmap/images.txt"), d.join("images.txt")).expect("copy");
+    let err = read_colmap(d).expect_err("cameras.bin with images.txt").to_string();
+    assert!(
+        err.contains("holds cameras.bin and images.txt alone") && err.contains("cameras.bin with images.bin"),
+        "{err}"
+    );
+    // A COLMAP project: the model is in sparse/0.
+    let model = d.join("project/sparse/0");
+    std::fs::create_dir_all(&model).expect("mkdir");
+    for f in ["cameras.txt", "images.txt"] {
+        std::fs::copy(fixtures().join("colmap").join(f), model.join(f)).expect("copy");
+    }
+    let err = read_colmap(&d.join("project")).expect_err("the project").to_string();
+    assert!(err.contains("holds no COLMAP model file") && err.contains("project/sparse/0: give that folder"), "{err}");
+    let err = read_colmap(&d.join("project/sparse")).expect_err("sparse").to_string();
+    assert!(err.contains("sparse/0: give that folder"), "{err}");
+    let err = read_colmap(&d.join("nowhere")).expect_err("missing").to_string();
+    assert!(err.contains("nowhere: does not exist"), "{err}");
+    assert_eq!(read_colmap(&model).expect("the model").len(), 3);
+}
