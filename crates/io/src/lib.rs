@@ -63,10 +63,21 @@ pub fn read_input(path: &Path, what: &'static str) -> Result<Vec<u8>, IoError> {
     std::fs::read(path).map_err(|e| IoError::io(path, what, e))
 }
 
-/// The whole of the text input file `path` ([`check_regular_file`] first).
+/// The whole of the text input file `path` ([`check_regular_file`] first), without the
+/// byte-order mark Windows editors put at the start of UTF-8 files ([`without_bom`]).
 pub fn read_input_text(path: &Path, what: &'static str) -> Result<String, IoError> {
     check_regular_file(path, what)?;
-    std::fs::read_to_string(path).map_err(|e| IoError::io(path, what, e))
+    std::fs::read_to_string(path).map(without_bom).map_err(|e| IoError::io(path, what, e))
+}
+
+/// `text` without a leading UTF-8 byte-order mark: invisible in an editor, it made the first
+/// key, number or name of a file unreadable (a YAML file "not a mapping", a JSON file malformed
+/// at column 1, a COLMAP camera id or a matrix entry "not a number").
+pub fn without_bom(text: String) -> String {
+    match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    }
 }
 
 /// Writes a file atomically: `write` fills a temporary file in the same folder, which is then
@@ -146,6 +157,8 @@ mod tests {
         let file = dir.path().join("f.txt");
         std::fs::write(&file, "text").expect("write");
         assert_eq!(read_input_text(&file, "scene file").expect("a file"), "text");
+        std::fs::write(&file, "\u{feff}text\u{feff}").expect("write");
+        assert_eq!(read_input_text(&file, "scene file").expect("a file"), "text\u{feff}", "the leading mark only");
         let err = read_input(&dir.path().join("missing"), "image file").expect_err("missing").to_string();
         assert!(err.contains("image file not found"), "{err}");
     }

@@ -1726,7 +1726,7 @@ pub fn recorded_linearisation(scene: &Scene) -> Result<Linearisation, IoError> {
 pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
     let file = scene.root.join(SCENE_FILE);
     let text = match std::fs::read_to_string(&file) {
-        Ok(t) => t,
+        Ok(t) => crate::without_bom(t),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Recording::plain(scene.frames.len())),
         Err(e) => return Err(IoError::io(&file, "scene file", e)),
     };

@@ -1284,3 +1284,31 @@ fn a_folder_without_a_whole_colmap_model_says_what_it_holds_and_where_the_model_
     assert!(err.contains("nowhere: does not exist"), "{err}");
     assert_eq!(read_colmap(&model).expect("the model").len(), 3);
 }
+
+/// Files saved by Windows editors begin with a UTF-8 byte-order mark: an OpenCV YAML file was
+/// "not a mapping of named nodes", a COLMAP model's first camera id and a projection matrix's
+/// first entry were "not" numbers. The mark is now skipped.
+#[test]
+fn text_calibrations_with_a_byte_order_mark_are_read() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let bom = |from: &Path, to: &Path| {
+        let text = std::fs::read_to_string(from).expect("read");
+        std::fs::write(to, format!("\u{feff}{text}")).expect("write");
+    };
+    bom(&fixtures().join("cam_single.yml"), &d.join("cam_single.yml"));
+    let plain = read_opencv(&fixtures().join("cam_single.yml")).expect("reads");
+    assert_same_cameras(&read_opencv(&d.join("cam_single.yml")).expect("YAML with a mark"), &plain);
+    let model = d.join("colmap");
+    std::fs::create_dir_all(&model).expect("mkdir");
+    for f in ["cameras.txt", "images.txt"] {
+        bom(&fixtures().join("colmap").join(f), &model.join(f));
+    }
+    std::fs::write(model.join("cameras.txt"), "\u{feff}1 PINHOLE 64 48 50 50 32 24\n2 PINHOLE 64 48 60 60 31.5 23.5\n")
+        .expect("write");
+    assert_eq!(read_colmap(&model).expect("COLMAP text with a mark").len(), 3);
+    let p = d.join("p.txt");
+    std::fs::write(&p, "\u{feff}700 0 320 0\n0 700 240 0\n0 0 1 500\n").expect("write");
+    let cams = fluidnerf_io::calib::read_projection(&p).expect("a matrix with a mark");
+    assert_eq!(cams.len(), 1);
+}
