@@ -1142,6 +1142,33 @@ impl RunConfig {
     }
 
     /// Reads a `config.json`; errors name the file and the key path.
+    ///
+    /// ```
+    /// use fluidnerf_pipeline::{Method, PipelineError, RunConfig};
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+    /// # let tmp = tempfile::tempdir()?;
+    /// let path = tmp.path().join("config.json");
+    /// let mut config = RunConfig::new("/data/jet15", Method::Fast);
+    /// config.seed = 7;
+    /// std::fs::write(&path, serde_json::to_string_pretty(&config)?)?;
+    /// assert_eq!(RunConfig::read(&path)?, config);
+    ///
+    /// // A misspelt key is refused, naming the file and the key.
+    /// let mut value = serde_json::to_value(&config)?;
+    /// value["resolutoin"] = 64.into();
+    /// std::fs::write(&path, value.to_string())?;
+    /// let e = RunConfig::read(&path).unwrap_err();
+    /// assert!(matches!(e, PipelineError::File { .. }) && e.to_string().contains("resolutoin"), "{e}");
+    ///
+    /// // Settings out of range are refused by their key before any work.
+    /// config.resolution = 1;
+    /// match config.validate() {
+    ///     Err(PipelineError::Invalid { key, .. }) => assert_eq!(key, "resolution"),
+    ///     other => panic!("{other:?}"),
+    /// }
+    /// # Ok(())
+    /// # }
+    /// ```
     pub fn read(path: &Path) -> Result<Self, PipelineError> {
         let config: RunConfig = crate::rundir::read_json(path).map_err(|e| {
             // Another fluidnerf file is named for what it is, not by the first key it has.

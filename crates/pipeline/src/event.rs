@@ -1,6 +1,36 @@
 //! [`RunEvent`]: what a run reports while it works, delivered to the caller's callback, which
 //! can stop the run by returning `ControlFlow::Break(())` (the run then writes what it has and
 //! reports [`crate::RunStatus::Interrupted`]).
+//!
+//! Stopping a run after its third iteration, then reading back what it wrote:
+//!
+//! ```
+//! use std::ops::ControlFlow;
+//! use fluidnerf_pipeline::load::LoadedRun;
+//! use fluidnerf_pipeline::{reconstruct, Method, Overwrite, RunConfig, RunDir, RunEvent, RunStatus};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # let tmp = tempfile::tempdir()?;
+//! # let scene_dir = tmp.path().join("scene");
+//! # fluidnerf_pipeline::testing::small_scene(&scene_dir)?;
+//! let scene = fluidnerf_io::scene::load_scene(&scene_dir)?;
+//! let mut config = RunConfig::new(&scene_dir, Method::Sart);
+//! config.resolution = 8;
+//! let dir = RunDir::create(tmp.path().join("run"), Overwrite::Refuse, Some(&scene.root))?;
+//! let report = reconstruct(&scene, &config, &dir, |event| match event {
+//!     RunEvent::Iteration { iteration: 3.., .. } => ControlFlow::Break(()),
+//!     RunEvent::Warning(text) => {
+//!         eprintln!("warning: {text}");
+//!         ControlFlow::Continue(())
+//!     }
+//!     _ => ControlFlow::Continue(()),
+//! })?;
+//! assert_eq!(report.status, RunStatus::Interrupted);
+//! assert_eq!(report.iterations, 3);
+//! let run = LoadedRun::open(dir.root(), None)?;
+//! assert_eq!(run.first_volume()?.dims, [8, 8, 8]);
+//! # Ok(())
+//! # }
+//! ```
 
 use std::path::Path;
 
