@@ -81,6 +81,9 @@ pub fn reconstruct(
 ) -> Result<RunReport, PipelineError> {
     let config = &config.resolved(scene);
     check_scene_named(config, scene)?;
+    // A folder made without the scene's root (`RunDir::create(.., None)`) was never checked
+    // against the scene: results could land among its images and truth.
+    rundir::check_new_run_folder(dir.root(), Some(&scene.root))?;
     config.validate()?;
     if dir.resuming() {
         check_resumable(config, dir)?;
@@ -628,6 +631,23 @@ mod tests {
         let saved = RunConfig::read(&dir.config()).expect("config.json");
         assert!(saved.scene.is_absolute(), "{}", saved.scene.display());
         assert!(rundir::same_path(&saved.scene, &scene_dir.join("transforms.json")));
+    }
+
+    /// A run folder made without the scene's root was not checked against the scene, and the
+    /// run wrote its results inside the scene's folder, among the files the scene reads.
+    #[test]
+    fn a_run_folder_inside_the_scene_is_refused_even_when_made_without_the_scene() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let scene_dir = tmp.path().join("scene");
+        testing::small_scene(&scene_dir).expect("scene");
+        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        let mut config = RunConfig::new(&scene_dir, Method::Asart);
+        config.resolution = 8;
+        let out = scene_dir.join("run");
+        let dir = RunDir::create(&out, Overwrite::Refuse, None).expect("made without the scene");
+        let e = reconstruct(&scene, &config, &dir, |_| ControlFlow::Continue(())).expect_err("inside the scene");
+        assert!(matches!(&e, PipelineError::RunDir { .. }) && e.to_string().contains("inside the scene folder"), "{e}");
+        assert!(!out.join("config.json").exists() && !out.join("volume.npy").exists(), "nothing is written");
     }
 
     #[test]
