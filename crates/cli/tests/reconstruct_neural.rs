@@ -546,3 +546,27 @@ fn an_image_scale_far_from_the_pixels_is_named_by_its_key() {
     refused(&out, "method.train.image_scale: 1e-30 puts the largest training pixel");
     assert!(!d.join("again/config.json").exists(), "a refused run wrote its settings");
 }
+
+/// A learning rate too large for the field drives it to zero everywhere; the run says so, and
+/// names the setting, instead of ending as if it had converged with an empty volume.
+#[test]
+fn a_field_driven_to_zero_by_its_learning_rate_is_reported() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 24, 16, &[]);
+    let run = |out: &str, rate: &str| {
+        let args = ["reconstruct", "scene", "-o", out, "--method", "fast", "--resolution", "16"];
+        ok(&fluidnerf(d, &[&args[..], &["--max-iterations", "60", "--learning-rate", rate, "-q"]].concat()));
+        report(&d.join(out))["warnings"].as_array().expect("warnings").clone()
+    };
+    let collapsed = run("collapsed", "0.5");
+    assert!(
+        collapsed.iter().any(|w| {
+            let w = w.as_str().unwrap_or("");
+            w.contains("the reconstruction is empty") && w.contains("method.train.schedule.initial is 0.5")
+        }),
+        "{collapsed:?}"
+    );
+    let trained = run("trained", "0.02");
+    assert!(!trained.iter().any(|w| w.as_str().unwrap_or("").contains("empty")), "{trained:?}");
+}

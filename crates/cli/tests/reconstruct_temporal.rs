@@ -896,3 +896,19 @@ fn a_runs_volumes_are_scored_at_their_own_times() {
         assert!((got - nrmse).abs() < 1e-6, "t = {time}: scored {got}, the run reported {nrmse}");
     }
 }
+
+/// A time-resolved field driven to zero by its learning rate is reported, as a static one is.
+#[test]
+fn a_series_driven_to_zero_by_its_learning_rate_is_reported() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 3, 16, 12, &["--times", "14,15"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 30 --resolution 12 --checkpoint-every 0 \
+                --learning-rate 1 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let r = report(&d.join("run"));
+    let warned = r["warnings"].as_array().expect("warnings").iter().any(|w| {
+        w.as_str().is_some_and(|w| w.contains("the reconstruction is empty") && w.contains("--learning-rate"))
+    });
+    assert!(warned, "{r}");
+}

@@ -575,6 +575,9 @@ impl Ctx<'_> {
         let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
         let volume = Volume::from_field(dims, self.scene.aabb, &world, 0.0);
         write_volume(dir, "volume", &volume)?;
+        if let Some(w) = crate::empty_field_warning(self.problem, volume.min_max().1, train_cfg) {
+            session.warn(&w);
+        }
         let metrics = match self.truth.first() {
             Some((time, t)) => {
                 // The field at the truth's voxel centres, as the dissertation interrogates it.

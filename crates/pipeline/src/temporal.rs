@@ -730,9 +730,11 @@ impl Ctx<'_> {
         let mut volumes = Vec::new();
         let mut pvd_entries = Vec::new();
         let options = crate::metric_options(self.scene, self.truth)?;
+        let mut volumes_max = 0.0f32;
         for (i, &(t, trained)) in out_times.iter().enumerate() {
             let volume = Volume::from_field(dims, self.scene.aabb, &stitched, t);
             let stem = format!("frames/volume_{i:03}");
+            volumes_max = volumes_max.max(volume.min_max().1);
             write_volume(dir, &stem, &volume)?;
             pvd_entries.push((t, format!("{stem}.vti")));
             let truth = self
@@ -751,6 +753,9 @@ impl Ctx<'_> {
             volumes.push(VolumeRecord { file: format!("{stem}.npy"), time: Some(t), trained, dims, metrics, digest });
         }
         dir.write_bytes("volumes.pvd", pvd(&pvd_entries).as_bytes())?;
+        if let Some(w) = crate::empty_field_warning(self.problem, volumes_max, &self.spec.train) {
+            session.warn(&w);
+        }
         let eval_s = t_eval.elapsed().as_secs_f64();
 
         let trained = || volumes.iter().filter(|v| v.trained).filter_map(|v| v.metrics.as_ref());
