@@ -31,7 +31,7 @@ pub const MAX_START_POINTS: usize = 1 << 20;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct StartFit {
-    /// Adam steps. Default 300.
+    /// Adam steps, 1 to [`fluidnerf_core::MAX_ITERATIONS`]. Default 300.
     pub iterations: usize,
     /// Points per step. Default 16384.
     pub points: usize,
@@ -49,8 +49,13 @@ impl Default for StartFit {
 impl StartFit {
     /// Rejects settings no fit can use.
     pub fn validate(&self) -> Result<(), NeuralError> {
-        if self.iterations == 0 {
-            return Err(NeuralError::invalid("start.iterations", "must be at least 1"));
+        // A fit of more steps than any run's cap would never end unless a time budget ended it.
+        let cap = fluidnerf_core::MAX_ITERATIONS;
+        if !(1..=cap).contains(&self.iterations) {
+            return Err(NeuralError::invalid(
+                "start.iterations",
+                format!("must be 1 to {cap} steps, got {}", self.iterations),
+            ));
         }
         if !(1..=MAX_START_POINTS).contains(&self.points) {
             return Err(NeuralError::invalid(

@@ -128,6 +128,8 @@ fn settings_and_targets_a_fit_cannot_use_are_refused_by_name() {
     };
     let ok = StartFit::default();
     assert!(why(StartFit { iterations: 0, ..ok }, &zero).starts_with("start.iterations"));
+    let endless = why(StartFit { iterations: 1 << 40, ..ok }, &zero);
+    assert!(endless.starts_with("start.iterations: must be 1 to 1000000000 steps"), "{endless}");
     assert!(why(StartFit { points: 0, ..ok }, &zero).starts_with("start.points"));
     assert!(why(StartFit { learning_rate: f32::NAN, ..ok }, &zero).starts_with("start.learning_rate"));
     let broken = |_: &[f32], out: &mut [f32]| out.fill(f32::INFINITY);

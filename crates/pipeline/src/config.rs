@@ -1787,7 +1787,11 @@ mod tests {
         for (edit, says) in [
             (
                 (|f: &mut StartFit| f.iterations = 0) as fn(&mut StartFit),
-                "method.start.fit.iterations: must be at least 1",
+                "method.start.fit.iterations: must be 1 to 1000000000 steps, got 0",
+            ),
+            (
+                |f| f.iterations = 1 << 40,
+                "method.start.fit.iterations: must be 1 to 1000000000 steps, got 1099511627776",
             ),
             (|f| f.points = usize::MAX, "method.start.fit.points: must be 1 to 1048576 points per step"),
             (|f| f.learning_rate = 0.0, "method.start.fit.learning_rate: must be positive"),
