@@ -691,7 +691,57 @@ fn cases() -> Vec<Case> {
                 "1e308",
             ],
             "method.time_step: the times 0 and 1 are 1e-308 time steps of Δt = 1e308 apart, which the network's \
-             32-bit time input t' = (t − t₀)/Δt reads as one instant",
+             time input t' = (t − t₀)/Δt reads as one instant",
+        ),
+        c(
+            // Within f32's range, but t' = 1e30 made the first loss infinite, reported as a
+            // divergence asking for a lower learning rate.
+            "a time step small enough to overflow the network",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = (i % 2).into();
+                }
+            }),
+            &[
+                "reconstruct",
+                "SCENE",
+                "-o",
+                "OUT",
+                "--method",
+                "tr-fluidnerf",
+                "--resolution",
+                "8",
+                "--max-iterations",
+                "1",
+                "--time-step",
+                "1e-30",
+            ],
+            "time steps of Δt = 1e-30: more than the 16777216 steps",
+        ),
+        c(
+            // Times distinct in 32 bits, but too close for the network to tell apart.
+            "a time step that makes the frames one instant",
+            Json(|v| {
+                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+                    f["time"] = (i % 2).into();
+                }
+            }),
+            &[
+                "reconstruct",
+                "SCENE",
+                "-o",
+                "OUT",
+                "--method",
+                "tr-fluidnerf",
+                "--resolution",
+                "8",
+                "--max-iterations",
+                "1",
+                "--time-step",
+                "1e30",
+            ],
+            "time steps of Δt = 1e30 apart, which the network's time input t' = (t − t₀)/Δt reads as one instant (they must \
+             be at least 0.001 steps apart)",
         ),
         c(
             "config relaxation far out of range",

@@ -1302,11 +1302,22 @@ fn refuse_replaced_time_axis(
     }
 }
 
+/// The most time steps the span of a run's times may take: 2²⁴, beyond which a 32-bit `t'` no
+/// longer holds a time to a fraction of a step, so that the time encoding's sines read rounding
+/// instead of time. A time step of 10⁻³⁰ on times 0 to 2 (2·10³⁰ steps, within f32's range)
+/// made the first loss infinite and was reported as a divergence asking for a lower learning
+/// rate.
+const MAX_TIME_STEPS: f64 = 16_777_216.0;
+
+/// The least gap between two of a run's times, in time steps: the network's lowest time
+/// frequency turns by π per step, so times a thousandth of a step apart are one instant to it.
+/// A time step of 10³⁰ on times a second apart trained every frame as one static field.
+const MIN_TIME_GAP_STEPS: f64 = 1e-3;
+
 /// Refuses a time step by which the span of the run's times (training and held out) is more
-/// steps than 32-bit floating point holds: a space–time network reads `t' = (t − t₀)/Δt` in
-/// it, and an infinite `t'` makes the first loss NaN, which would be reported as a divergence.
-/// Two times it reads as one instant are refused too. A hash-grid field reads frame positions
-/// instead and a per-frame field no time at all.
+/// than [`MAX_TIME_STEPS`] steps: a space–time network reads `t' = (t − t₀)/Δt` in 32 bits.
+/// Two times less than [`MIN_TIME_GAP_STEPS`] apart, which it reads as one instant, are refused
+/// too. A hash-grid field reads frame positions instead and a per-frame field no time at all.
 fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f64) -> Result<(), PipelineError> {
     if input_dim_of(method) != 4 || matches!(spec.field, FieldConfig::HashGrid(_)) {
         return Ok(());
@@ -1319,34 +1330,38 @@ fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f6
     let mut sorted: Vec<f64> = all().collect();
     sorted.sort_by(f64::total_cmp);
     let input = |t: f64| ((t - first) / step) as f32;
-    if let Some(w) = sorted.windows(2).find(|w| w[0] < w[1] && input(w[0]) == input(w[1])) {
+    let one_instant = |a: f64, b: f64| input(a) == input(b) || (b - a) / step < MIN_TIME_GAP_STEPS;
+    if let Some(w) = sorted.windows(2).find(|w| w[0] < w[1] && one_instant(w[0], w[1])) {
         return Err(PipelineError::invalid(
             "method.time_step",
             format!(
-                "the times {} and {} are {} time steps of Δt = {}{} apart, which the network's 32-bit time input \
-                 t' = (t − t₀)/Δt reads as one instant; give a smaller time step (--time-step) or the times in \
-                 another unit",
+                "the times {} and {} are {} time steps of Δt = {}{} apart, which the network's time input \
+                 t' = (t − t₀)/Δt reads as one instant (they must be at least {} steps apart); give a smaller \
+                 time step (--time-step) or the times in another unit",
                 num(w[0]),
                 num(w[1]),
                 num((w[1] - w[0]) / step),
                 num(step),
-                if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" }
+                if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" },
+                num(MIN_TIME_GAP_STEPS)
             ),
         ));
     }
-    if steps <= f64::from(f32::MAX) {
+    if steps <= MAX_TIME_STEPS {
         return Ok(());
     }
     Err(PipelineError::invalid(
         "method.time_step",
         format!(
-            "the times run from {} to {}, {} time steps of Δt = {}{}: more than the network's 32-bit time \
-             input t' = (t − t₀)/Δt can hold; give a larger time step (--time-step) or the times in another unit",
+            "the times run from {} to {}, {} time steps of Δt = {}{}: more than the {} steps in which the \
+             network's 32-bit time input t' = (t − t₀)/Δt tells one step from the next; give a larger time step \
+             (--time-step) or the times in another unit",
             num(first),
             num(last),
             num(steps),
             num(step),
-            if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" }
+            if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" },
+            num(MAX_TIME_STEPS)
         ),
     ))
 }
