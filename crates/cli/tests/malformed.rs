@@ -1182,7 +1182,7 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 13] = [
+    let edits: [(&str, Edit); 14] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
         ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
             v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
@@ -1209,6 +1209,10 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
         // Beyond any memory: refused by its key, not a panic or an aborted allocation.
         ("method.train.rays_per_image: must be 1 to 4194304 pixels per image, got 18446744073709551615", |v| {
             v["method"]["train"]["rays_per_image"] = u64::MAX.into()
+        }),
+        // Not blamed on the resolution or the image count by the memory check.
+        ("method.train.chunk_samples: must be at most 16777216 field rows per chunk, got 1099511627776", |v| {
+            v["method"]["train"]["chunk_samples"] = (1u64 << 40).into()
         }),
         // Not a prior silently left out (its draws counted beyond 64 bits) nor one that never ends.
         ("method.train.prior.points: must be 1 to 65536 points per iteration, got 4611686018427387904", |v| {

@@ -115,6 +115,12 @@ pub const MAX_PRIOR_WEIGHT: f32 = 1e3;
 /// More would only repeat pixels, and their rays could not be held.
 pub const MAX_RAYS_PER_IMAGE: usize = 1 << 22;
 
+/// The most field rows a chunk of rays may hold ([`TrainConfig::chunk_samples`]): 2²⁴, a
+/// gibibyte of scratch a thread, 2048 times the dense grid's 8192. A larger chunk only puts
+/// every ray of an iteration on one thread, and its scratch was refused as a run needing
+/// thousands of gibibytes, with advice to lower the resolution or the image count.
+pub const MAX_CHUNK_SAMPLES: usize = 1 << 24;
+
 /// The most iterations a span of a run's schedule may take ([`fluidnerf_core::MAX_ITERATION_SPAN`]):
 /// the stopping rule's window and smoothing ([`StopRule`]), the hash grid's steps between
 /// levels ([`crate::hashgrid::HashGridConfig::coarse_to_fine`]), the held-out interval
@@ -152,7 +158,8 @@ pub struct TrainConfig {
     pub stop: StopRule,
     /// Empty-space skipping (None: off, as in the dissertation). Default None.
     pub occupancy: Option<OccupancyConfig>,
-    /// Field rows per chunk of rays handed to one thread (at least one ray). Default 256, the
+    /// Field rows per chunk of rays handed to one thread (at least one ray), at most
+    /// [`MAX_CHUNK_SAMPLES`]. Default 256, the
     /// MLP's sweet spot (its activations stay in cache); the `fast` preset's grid field takes
     /// 2048, the dense grid 8192.
     pub chunk_samples: usize,
@@ -347,6 +354,12 @@ impl TrainConfig {
             return bad(
                 "rays_per_image",
                 format!("must be 1 to {MAX_RAYS_PER_IMAGE} pixels per image, got {}", self.rays_per_image),
+            );
+        }
+        if self.chunk_samples > MAX_CHUNK_SAMPLES {
+            return bad(
+                "chunk_samples",
+                format!("must be at most {MAX_CHUNK_SAMPLES} field rows per chunk, got {}", self.chunk_samples),
             );
         }
         self.schedule.validate()?;
