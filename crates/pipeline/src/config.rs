@@ -15,7 +15,7 @@
 //!   "checkpoint_every": 500,
 //!   "eval_every": null,
 //!   "memory_limit_gib": null,
-//!   "gains": { "mode": "none", "offset": false, "every": null, "rounds": 4 }
+//!   "gains": { "mode": "auto", "offset": false, "every": null, "rounds": 4 }
 //! }
 //! ```
 //!
