@@ -402,6 +402,16 @@ fn a_start_run_that_cannot_be_used_is_named_by_its_option() {
         refused(&o, &format!("--start-from on the command line: method.start.run: {}", d.join(says).display()));
         assert!(!d.join("x").exists(), "{start}: left an output folder");
     }
+    // A start that holds no light is refused naming the run it was read from.
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "dark", "--method", "asart", "--resolution", "8", "-q"]));
+    let path = d.join("dark/volume.npy");
+    let mut volume =
+        fluidnerf_io::volume::read_npy(&path, fluidnerf_core::Aabb::cube(fluidnerf_core::glam::DVec3::ZERO, 40.0))
+            .expect("volume");
+    volume.data.fill(0.0);
+    fluidnerf_io::volume::write_npy(&path, &volume).expect("written");
+    let o = fluidnerf(d, &["reconstruct", "scene", "-o", "x", "--method", "fast", "--start-from", "dark", "-q"]);
+    refused(&o, &format!("{}: the starting field is zero", d.join("dark").display()));
 }
 
 #[test]

@@ -282,7 +282,14 @@ fn start_from<F: TrainableField>(
     // The fit is the run's work too: it ends with the budget, as the voxel start and the field do.
     let limit = config.stopping.time_budget_s.map(|b| (b - seconds).max(0.0));
     let report =
-        fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed, limit)?;
+        fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed, limit)
+            .map_err(|e| match e {
+                // Which run the start was read from: the user's, or the hybrid's own in start/.
+                fluidnerf_neural::NeuralError::Invalid { what, why } => {
+                    fluidnerf_neural::NeuralError::Invalid { what, why: format!("{}: {why}", path.display()) }
+                }
+                other => other,
+            })?;
     log::info!(
         "started from {}: relative RMS difference {:.4} after {} steps ({:.1} s)",
         path.display(),
