@@ -216,6 +216,40 @@ fn sart_tv_keeps_its_accuracy_inside_a_hull() {
     }
 }
 
+/// ART and MART inside a visual hull stay as accurate as without it, on both phantoms. Their
+/// rows were cut to the hull with the norm (ART) and largest weight (MART) of what was left, so
+/// a ray grazing the hull moved its few voxels by its whole residual: on the synthetic blobs
+/// seen by 8 cameras of 32² px at 16³, ART's NRMSE went from 0.20 to 0.89 in the hull.
+#[test]
+fn art_and_mart_keep_their_accuracy_inside_a_hull() {
+    for (pname, phantom) in [("ball", ball as Phantom), ("blobs", blobs as Phantom)] {
+        let c = case(phantom);
+        let hull = visual_hull(
+            &c.grid,
+            c.projector.cameras(),
+            &c.images,
+            DEFAULT_HULL_THRESHOLD,
+            DEFAULT_HULL_NOISE_SIGMAS,
+            1,
+        );
+        let free = Problem::new(&c.projector, &c.images).expect("consistent");
+        let masked = free.with_support(&hull);
+        let run_art = |p: &Problem| {
+            let r = art(p, None, &ArtParams::default(), |_| ControlFlow::Continue(())).expect("runs");
+            nrmse(&r.volume, &c.truth)
+        };
+        let run_mart = |p: &Problem| {
+            let r = mart(p, None, &MartParams::default(), |_| ControlFlow::Continue(())).expect("runs");
+            nrmse(&r.volume, &c.truth)
+        };
+        for (m, free_e, hull_e) in
+            [("ART", run_art(&free), run_art(&masked)), ("MART", run_mart(&free), run_mart(&masked))]
+        {
+            assert!(hull_e < 1.05 * free_e, "{pname} {m}: in the hull {hull_e:.4} vs free {free_e:.4}");
+        }
+    }
+}
+
 /// The solvers reject images that do not fit the views.
 #[test]
 fn mismatched_images_are_rejected() {

@@ -173,6 +173,25 @@ fn an_empty_visual_hull_is_refused() {
     ok(&fluidnerf(d, &[&run[..6], &["-q", "-o", "free", "--method", "sart"]].concat()));
 }
 
+/// ART and MART inside the visual hull are as accurate as without it. ART's rows, cut to the
+/// hull, divided a grazing ray's residual by the norm of the few voxels left of it: on this
+/// scene its NRMSE went from 0.20 to 0.89, with a relative residual above 1.
+#[test]
+fn art_and_mart_inside_the_visual_hull_are_as_accurate_as_without_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 8, 32, 16, &[]);
+    for method in ["art", "mart"] {
+        let run = ["reconstruct", "scene", "--resolution", "16", "--method", method, "-q"];
+        ok(&fluidnerf(d, &[&run[..], &["-o", "free"], &["--force"]].concat()));
+        ok(&fluidnerf(d, &[&run[..], &["-o", "hull", "--visual-hull", "--force"]].concat()));
+        let nrmse = |r: &str| report(&d.join(r))["final_nrmse"].as_f64().expect("truth was used");
+        let (free, hull) = (nrmse("free"), nrmse("hull"));
+        assert!(hull < 1.05 * free, "{method}: in the hull {hull:.4}, without {free:.4}");
+        assert_eq!(report(&d.join("hull"))["warnings"], serde_json::json!([]), "{method}");
+    }
+}
+
 /// Ctrl-C (SIGINT) stops after the current iteration and still writes a usable result.
 #[cfg(unix)]
 #[test]

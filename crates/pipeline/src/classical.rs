@@ -337,6 +337,17 @@ pub(crate) fn run(
         Some((it, _, v)) => (it, v),
         None => (iterations, volume.unwrap_or_else(|| vec![0.0; grid.len()])),
     };
+    if let Some(r) = diverged(&residual_history, kept_iteration) {
+        session.warn(&format!(
+            "{} diverged: the kept volume's relative residual is {}, above the 1 of an empty volume and above its \
+             lowest, so it fits the images worse than no volume at all; the images disagree with each other (a \
+             camera posed against another's image, gains that differ: `fluidnerf info` checks the scene), or the \
+             relaxation is too large for them; a method that averages over views (sart, asart, mlem), a lower \
+             --relaxation or --stop held-out keeps a better one",
+            config.method(),
+            fluidnerf_core::num(r)
+        ));
+    }
     let scores: Vec<(usize, HoldoutScore)> = match &holdout {
         Some(h) => held_idx.iter().copied().zip(h.scores(&data)).collect(),
         None => Vec::new(),
@@ -486,11 +497,35 @@ impl HoldoutScorer {
     }
 }
 
+/// The relative residual of the kept iterate (1-based `kept` of `history`) when the method
+/// diverged: above 1, an empty volume's, so that the volume fits the images worse than none,
+/// and above the lowest residual before it, so that the iterations made it worse. A method that
+/// starts from ones (MLEM, MART) may stand above 1 after its first iterations while it
+/// improves; that is not divergence.
+fn diverged(history: &[f64], kept: usize) -> Option<f64> {
+    let r = *history.get(kept.checked_sub(1)?)?;
+    let lowest = history[..kept].iter().copied().fold(f64::INFINITY, f64::min);
+    (r > 1.0 && r > 1.05 * lowest).then_some(r)
+}
+
 #[cfg(test)]
 mod tests {
     use fluidnerf_classical::{Algorithm, ClassicalMethod, ProjectorConfig};
 
-    use super::{fit_kept_footprints, fit_row_cache};
+    use super::{diverged, fit_kept_footprints, fit_row_cache};
+
+    /// Divergence is a kept residual above an empty volume's and above the run's lowest; a
+    /// start from ones that stands above 1 while it improves is not.
+    #[test]
+    fn divergence_is_a_residual_above_one_that_grew() {
+        assert_eq!(diverged(&[1.38, 1.76, 1.03, 1.49], 4), Some(1.49));
+        assert_eq!(diverged(&[14.1, 3.2, 1.4], 3), None);
+        assert_eq!(diverged(&[0.5, 0.9, 0.95], 3), None);
+        // The kept iterate, not the last, is judged.
+        assert_eq!(diverged(&[0.5, 0.4, 2.0], 2), None);
+        assert_eq!(diverged(&[0.5, 0.4, 2.0], 0), None);
+        assert_eq!(diverged(&[], 1), None);
+    }
 
     const MIB: u64 = 1 << 20;
 

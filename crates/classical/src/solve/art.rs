@@ -18,7 +18,16 @@
 //! ART starts from zero. MART starts from one on every voxel some view sees and zero elsewhere
 //! (the usual unity start); its ratio is floored, `(p_i + ε)/(q_i + ε)` with ε = 10⁻⁶ × the
 //! largest pixel, so that dark pixels drive voxels towards zero without dividing by zero.
-//! Voxels outside the support are left out of the rows.
+//! Voxels outside the support are left out of the rows. ART then divides a row's residual by
+//! the squared norm of the whole row, inside the support and out, not of its entries in the
+//! support alone: a ray that only grazes the support (a few voxels at its edge, where most of the
+//! ray's weight was carved away) would otherwise move them by its residual over a tiny norm. With
+//! images that the support does not fit exactly (pixels just below the hull's threshold, rays
+//! blurred over several voxels) those steps made ART diverge inside a visual hull: on a scene
+//! of two blobs seen by 8 cameras the relative residual rose above 1 and the volume NRMSE went
+//! from 0.20 to 0.89. Each row's step is thereby relaxed by the fraction of its weight inside the
+//! support, a row-wise relaxation in (0, μ], under which Kaczmarz's iteration still converges for
+//! consistent data.
 
 use std::ops::ControlFlow;
 
@@ -76,9 +85,13 @@ impl Default for MartParams {
 /// view) and at 128³ (63 MB per view).
 pub const ROW_CACHE_MIB: u64 = 1024;
 
+/// A view's rows with the support applied and, when it removed entries, each whole row's
+/// squared norm (see the module docs).
+type Rows = (SparseRows, Option<Vec<[f32; 2]>>);
+
 /// The views' rows with the support applied, kept while they fit in the budget.
 struct RowCache {
-    views: Vec<Option<SparseRows>>,
+    views: Vec<Option<Rows>>,
     bytes: usize,
     budget: usize,
 }
@@ -90,18 +103,27 @@ impl RowCache {
     }
 
     /// `f` of view `v`'s rows: the kept ones, or built now (and kept if they fit).
-    fn with_rows<R>(&mut self, problem: &Problem, v: usize, f: impl FnOnce(&SparseRows) -> R) -> R {
+    fn with_rows<R>(&mut self, problem: &Problem, v: usize, f: impl FnOnce(&Rows) -> R) -> R {
         if let Some(rows) = &self.views[v] {
             return f(rows);
         }
         let rows = problem.projector.rows(v);
         let rows = match problem.support {
-            None => rows,
-            Some(s) => rows.restricted(s),
+            None => (rows, None),
+            Some(s) => {
+                let norms = (0..rows.n_rows())
+                    .map(|i| {
+                        let w = rows.row(i).1;
+                        [w.iter().map(|w| w * w).sum(), w.iter().fold(0f32, |m, &v| m.max(v))]
+                    })
+                    .collect();
+                (rows.restricted(s), Some(norms))
+            }
         };
         let out = f(&rows);
-        if self.bytes + rows.bytes() <= self.budget {
-            self.bytes += rows.bytes();
+        let bytes = rows.0.bytes() + rows.1.as_ref().map_or(0, |n| 8 * n.len());
+        if self.bytes + bytes <= self.budget {
+            self.bytes += bytes;
             self.views[v] = Some(rows);
         }
         out
@@ -109,12 +131,13 @@ impl RowCache {
 }
 
 /// Visits every row of every view in a seeded random order:
-/// `act(pixel value, voxel indices, weights) -> residual`; returns the sum of squared residuals.
+/// `act(pixel value, voxel indices, weights, whole row's squared norm if the support cut it)
+/// -> residual`; returns the sum of squared residuals.
 fn row_sweep(
     problem: &Problem,
     rng: &mut ChaCha8Rng,
     cache: &mut RowCache,
-    mut act: impl FnMut(f32, &[u32], &[f32]) -> f32,
+    mut act: impl FnMut(f32, &[u32], &[f32], Option<[f32; 2]>) -> f32,
 ) -> f64 {
     let mut views: Vec<usize> = (0..problem.projector.n_views()).collect();
     views.shuffle(rng);
@@ -122,13 +145,14 @@ fn row_sweep(
     let mut order: Vec<u32> = Vec::new();
     for v in views {
         let data = &problem.images[v].data;
-        cache.with_rows(problem, v, |rows| {
+        cache.with_rows(problem, v, |(rows, whole)| {
             order.clear();
             order.extend(0..rows.n_rows() as u32);
             order.shuffle(rng);
             for &i in &order {
                 let (c, w) = rows.row(i as usize);
-                let r = if c.is_empty() { data[i as usize] } else { act(data[i as usize], c, w) };
+                let whole = whole.as_ref().map(|n| n[i as usize]);
+                let r = if c.is_empty() { data[i as usize] } else { act(data[i as usize], c, w, whole) };
                 ss += r as f64 * r as f64;
             }
         });
@@ -153,12 +177,14 @@ pub fn art(
         &params.stopping,
         x,
         |x, _| {
-            row_sweep(problem, &mut rng, &mut cache, |p, cols, w| {
+            row_sweep(problem, &mut rng, &mut cache, |p, cols, w, whole| {
                 let (mut q, mut norm2) = (0f32, 0f32);
                 for (&j, &wij) in cols.iter().zip(w) {
                     q += wij * x[j as usize];
                     norm2 += wij * wij;
                 }
+                // The whole row's norm inside a support (the module docs).
+                let norm2 = whole.map_or(norm2, |[n, _]| n.max(norm2));
                 let r = p - q;
                 if norm2 > 0.0 {
                     let step = mu * r / norm2;
@@ -197,12 +223,13 @@ pub fn mart(
         &params.stopping,
         x,
         |x, _| {
-            row_sweep(problem, &mut rng, &mut cache, |p, cols, w| {
+            row_sweep(problem, &mut rng, &mut cache, |p, cols, w, whole| {
                 let (mut q, mut wmax) = (0f32, 0f32);
                 for (&j, &wij) in cols.iter().zip(w) {
                     q += wij * x[j as usize];
                     wmax = wmax.max(wij);
                 }
+                let wmax = whole.map_or(wmax, |[_, m]| m.max(wmax));
                 if wmax > 0.0 {
                     let log_ratio = ((p.max(0.0) + eps) / (q + eps)).ln();
                     let k = mu * log_ratio / wmax;
