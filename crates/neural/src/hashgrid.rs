@@ -264,17 +264,25 @@ pub struct HashGridTape {
 impl HashGridField {
     /// A freshly initialised field for `input_dim` = 3 or 4 inputs.
     pub fn new(config: &HashGridConfig, input_dim: usize, seed: u64) -> Result<Self, NeuralError> {
-        Self::build(config, input_dim, Some(seed))
+        Self::build(config, input_dim, Some(seed), usize::MAX)
     }
 
     /// The field with every parameter zero, for weights about to be loaded into all of them
     /// ([`crate::weights::load_weights`]): no random draws (a second and more of a load's time
     /// for the larger tables went to drawing values that were then overwritten).
-    pub fn zeroed(config: &HashGridConfig, input_dim: usize) -> Result<Self, NeuralError> {
-        Self::build(config, input_dim, None)
+    ///
+    /// Refused before anything is allocated when it has more than `max_params` parameters (those
+    /// the weights' file can hold).
+    pub fn zeroed(config: &HashGridConfig, input_dim: usize, max_params: usize) -> Result<Self, NeuralError> {
+        Self::build(config, input_dim, None, max_params)
     }
 
-    fn build(config: &HashGridConfig, input_dim: usize, seed: Option<u64>) -> Result<Self, NeuralError> {
+    fn build(
+        config: &HashGridConfig,
+        input_dim: usize,
+        seed: Option<u64>,
+        max_params: usize,
+    ) -> Result<Self, NeuralError> {
         config.validate()?;
         if input_dim != 3 && input_dim != 4 {
             return Err(NeuralError::invalid("field input dimension", format!("{input_dim} (must be 3 or 4)")));
@@ -326,6 +334,7 @@ impl HashGridField {
             false,
         )
         .with_bf16_products(config.mlp_precision == MlpPrecision::Bf16);
+        crate::trained::check_param_count(offset + mlp.num_params(), max_params)?;
         let mut params = vec![0.0; offset + mlp.num_params()];
         if let Some(seed) = seed {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);

@@ -525,15 +525,17 @@ pub struct MlpFieldTape {
 impl MlpField {
     /// A freshly initialised field for `input_dim` = 3 (E(x)) or 4 (E(x, t')) inputs.
     pub fn new(config: &MlpConfig, input_dim: usize, seed: u64) -> Result<Self, NeuralError> {
-        Self::build(config, input_dim, Some(seed))
+        Self::build(config, input_dim, Some(seed), usize::MAX)
     }
 
-    /// The field with every parameter zero, for weights about to be loaded into all of them.
-    pub fn zeroed(config: &MlpConfig, input_dim: usize) -> Result<Self, NeuralError> {
-        Self::build(config, input_dim, None)
+    /// The field with every parameter zero, for weights about to be loaded into all of them;
+    /// refused before anything is allocated when it has more than `max_params` parameters
+    /// (those the weights' file can hold).
+    pub fn zeroed(config: &MlpConfig, input_dim: usize, max_params: usize) -> Result<Self, NeuralError> {
+        Self::build(config, input_dim, None, max_params)
     }
 
-    fn build(config: &MlpConfig, input_dim: usize, seed: Option<u64>) -> Result<Self, NeuralError> {
+    fn build(config: &MlpConfig, input_dim: usize, seed: Option<u64>, max_params: usize) -> Result<Self, NeuralError> {
         config.validate()?;
         if input_dim != 3 && input_dim != 4 {
             return Err(NeuralError::invalid("field input dimension", format!("{input_dim} (must be 3 or 4)")));
@@ -547,6 +549,7 @@ impl MlpField {
             config.output_activation,
             config.skip,
         );
+        crate::trained::check_param_count(mlp.num_params(), max_params)?;
         let mut params = vec![0.0; mlp.num_params()];
         if let Some(seed) = seed {
             mlp.init(&mut params, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));

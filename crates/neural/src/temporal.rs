@@ -1045,8 +1045,8 @@ pub fn load_temporal(run_dir: &Path) -> Result<StitchedField, NeuralError> {
         if let Some(why) = w.meta.problem() {
             return Err(NeuralError::checkpoint(&path, format!("window {:?}: {why}", w.frames)));
         }
-        let mut field = build_field_for_weights(&rec.field, &w.meta.aabb, rec.input_dim)?;
         let weights = run_dir.join(&w.weights);
+        let mut field = build_field_for_weights(&rec.field, &w.meta.aabb, rec.input_dim, &weights)?;
         check_window_tag(&weights, &WindowTag::of(k, w, &rec.frame_times))?;
         crate::with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
         let boxed: Box<dyn ScalarField + Send + Sync> = match field {

@@ -314,25 +314,59 @@ impl<F: TrainableField> ScalarField for TrainedField<F> {
 
 /// Builds the (untrained) field `config` describes, for `input_dim` inputs, seeded.
 pub fn build_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: u64) -> Result<AnyField, NeuralError> {
-    make_field(config, aabb, input_dim, Some(seed))
+    make_field(config, aabb, input_dim, Some(seed), usize::MAX)
 }
 
-/// The field `config` describes without drawing its initial values, for weights that
-/// [`crate::weights::load_weights`] will then set, every one of them (it refuses a file that
-/// lacks a tensor).
-pub fn build_field_for_weights(config: &FieldConfig, aabb: &Aabb, input_dim: usize) -> Result<AnyField, NeuralError> {
-    make_field(config, aabb, input_dim, None)
+/// The field `config` describes without drawing its initial values, for the weights in the
+/// file `weights` that [`crate::weights::load_weights`] will then set, every one of them (it
+/// refuses a file that lacks a tensor). A field of more `f32` parameters than the file can
+/// hold is refused before it is allocated: a damaged or edited description could otherwise
+/// claim gigabytes.
+pub fn build_field_for_weights(
+    config: &FieldConfig,
+    aabb: &Aabb,
+    input_dim: usize,
+    weights: &Path,
+) -> Result<AnyField, NeuralError> {
+    let len = std::fs::metadata(weights).map_err(|error| NeuralError::Io { path: weights.to_path_buf(), error })?.len();
+    let room = usize::try_from(len / 4).unwrap_or(usize::MAX);
+    make_field(config, aabb, input_dim, None, room).map_err(|e| match e {
+        NeuralError::Invalid { what, why } if what == TOO_LARGE => {
+            NeuralError::invalid(what, format!("{why}, more than {} holds ({len} bytes)", weights.display()))
+        }
+        e => e,
+    })
 }
 
-fn make_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: Option<u64>) -> Result<AnyField, NeuralError> {
+/// What [`check_param_count`] calls a field too large for its weights.
+const TOO_LARGE: &str = "field size";
+
+/// Refuses a field of `count` parameters where at most `max` fit, before they are allocated.
+pub(crate) fn check_param_count(count: usize, max: usize) -> Result<(), NeuralError> {
+    if count > max {
+        return Err(NeuralError::invalid(
+            TOO_LARGE,
+            format!("the field described has {count} parameters ({} bytes as f32)", count.saturating_mul(4)),
+        ));
+    }
+    Ok(())
+}
+
+fn make_field(
+    config: &FieldConfig,
+    aabb: &Aabb,
+    input_dim: usize,
+    seed: Option<u64>,
+    max_params: usize,
+) -> Result<AnyField, NeuralError> {
     match config {
         FieldConfig::Mlp(c) => Ok(AnyField::Mlp(match seed {
             Some(seed) => MlpField::new(c, input_dim, seed)?,
-            None => MlpField::zeroed(c, input_dim)?,
+            None => MlpField::zeroed(c, input_dim, max_params)?,
         })),
         FieldConfig::HashGrid(c) => Ok(AnyField::HashGrid(match seed {
             Some(seed) => HashGridField::new(c, input_dim, seed)?,
-            None => HashGridField::zeroed(c, input_dim)?,
+            None => HashGridField::zeroed(c, input_dim, max_params)?,
         })),
         FieldConfig::Dense(c) => {
             if input_dim != 3 {
@@ -340,6 +374,7 @@ fn make_field(config: &FieldConfig, aabb: &Aabb, input_dim: usize, seed: Option<
             }
             c.validate()?;
             let dims = fluidnerf_core::Volume::dims_for(aabb, c.resolution);
+            check_param_count(dims.iter().product(), max_params)?;
             Ok(AnyField::Dense(DenseGridField::new(dims, c.initial)))
         }
     }
@@ -379,8 +414,8 @@ pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync
         return Err(NeuralError::checkpoint(&model_path, format!("meta: {why}")));
     }
     let aabb = record.meta.aabb;
-    let mut field = build_field_for_weights(&record.field, &aabb, record.input_dim).map_err(named)?;
     let weights = run_dir.join("weights.safetensors");
+    let mut field = build_field_for_weights(&record.field, &aabb, record.input_dim, &weights).map_err(named)?;
     with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
     let boxed: Box<dyn ScalarField + Send + Sync> = match field {
         AnyField::Mlp(f) => Box::new(TrainedField::new(f, record.meta).map_err(named)?),

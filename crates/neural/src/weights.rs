@@ -261,7 +261,7 @@ mod tests {
         std::fs::write(&checkpoint, checkpoint_bytes(&Learner::new(deep.clone())).unwrap()).unwrap();
 
         let shallow = FieldConfig::Mlp(MlpConfig { depth: 2, ..mlp });
-        let AnyField::Mlp(mut field) = build_field_for_weights(&shallow, &aabb, 3).unwrap() else { panic!() };
+        let AnyField::Mlp(mut field) = build_field_for_weights(&shallow, &aabb, 3, &weights).unwrap() else { panic!() };
         let e = load_weights(&weights, &mut field).unwrap_err().to_string();
         assert!(e.contains("weights.safetensors") && e.contains("layers.2.bias, layers.2.weight"), "{e}");
         let mut learner = Learner::new(field);
@@ -316,7 +316,7 @@ mod tests {
             let path = dir.path().join(format!("w{k}.safetensors"));
             let bytes = crate::with_field!(&saved, f => weights_bytes(f)).unwrap();
             std::fs::write(&path, bytes).unwrap();
-            let mut loaded = build_field_for_weights(config, &aabb, *dim).unwrap();
+            let mut loaded = build_field_for_weights(config, &aabb, *dim, &path).unwrap();
             crate::with_field!(&mut loaded, f => load_weights(&path, f)).unwrap();
             let (a, b) = match (&saved, &loaded) {
                 (AnyField::HashGrid(a), AnyField::HashGrid(b)) => (a.params(), b.params()),
