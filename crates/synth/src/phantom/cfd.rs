@@ -162,9 +162,12 @@ pub fn decode_npy(bytes: &[u8], aabb: Aabb) -> Result<Volume, String> {
         return Err(format!("expected a 3-D array (nz, ny, nx), got shape {shape:?}"));
     };
     let payload = &bytes[start + header_len..];
-    let count = nx * ny * nz;
-    if count == 0 || payload.len() != 4 * count {
-        return Err(format!("shape {shape:?} needs {} data bytes, found {}", 4 * count, payload.len()));
+    // Checked: a damaged shape's product can wrap around to the payload's length.
+    let Some(need) = [nx, ny, nz, 4].iter().try_fold(1usize, |n, &d| n.checked_mul(d)) else {
+        return Err(format!("shape {shape:?} needs more data bytes than any file holds"));
+    };
+    if need == 0 || payload.len() != need {
+        return Err(format!("shape {shape:?} needs {need} data bytes, found {}", payload.len()));
     }
     let data = payload.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     Ok(Volume::from_vec([nx, ny, nz], aabb, data))
@@ -343,6 +346,9 @@ mod tests {
         assert!(decode_npy(&npy("<f8", "(2, 3, 4)", 192), b).expect_err("f8").contains("float32"));
         assert!(decode_npy(&npy("<f4", "(6, 4)", 96), b).expect_err("2-D").contains("3-D"));
         assert!(decode_npy(&npy("<f4", "(2, 3, 4)", 95), b).expect_err("short").contains("bytes"));
+        // 2 · (2^63 + 12) wraps around to 24 values, the payload's.
+        let wraps = npy("<f4", "(1, 2, 9223372036854775820)", 96);
+        assert!(decode_npy(&wraps, b).expect_err("wraps").contains("more data bytes than any file holds"));
         assert!(decode_npy(b"garbage!!!!!", b).expect_err("magic").contains("magic"));
     }
 }
