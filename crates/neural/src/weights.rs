@@ -203,6 +203,19 @@ pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>)
         .ok_or_else(|| NeuralError::checkpoint(path, "no training state (weights only?)"))?;
     let meta: LearnerMeta =
         serde_json::from_str(json).map_err(|e| NeuralError::checkpoint(path, format!("training state: {e}")))?;
+    // No run takes more iterations (nor Adam steps, one per iteration): larger counts would
+    // wrap around when the run resumes, Adam's bias correction then dividing by zero.
+    let max = fluidnerf_core::MAX_ITERATIONS;
+    if meta.iteration > max || meta.adam_step > max as u64 {
+        return Err(NeuralError::checkpoint(
+            path,
+            format!(
+                "training state: iteration {} and Adam step {} must each be at most {max}, the most a run takes \
+                 (the file is damaged or edited)",
+                meta.iteration, meta.adam_step
+            ),
+        ));
+    }
     refuse_unknown_tensors(&st, path, &learner.field)?;
     let n = learner.field.num_params();
     learner.adam.m.resize(n, 0.0);

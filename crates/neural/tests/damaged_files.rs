@@ -120,3 +120,18 @@ fn a_description_larger_than_its_weights_is_refused_before_allocating() {
         assert!(e.contains("model.json") && e.contains("weights.safetensors") && e.contains("parameters"), "{e}");
     }
 }
+
+/// Counts no run reaches would wrap around when the run resumes (and Adam's bias correction
+/// divide by zero): they are refused naming the file.
+#[test]
+fn a_checkpoint_with_impossible_counts_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("checkpoint.safetensors");
+    for (iteration, step) in [(usize::MAX, 10), (10, u64::MAX), (fluidnerf_core::MAX_ITERATIONS + 1, 0)] {
+        let mut learner = Learner::new(field());
+        (learner.iteration, learner.adam.step) = (iteration, step);
+        put(&p, &checkpoint_bytes(&learner).expect("bytes"));
+        let e = load_checkpoint(&p, &mut Learner::new(field())).err().expect("refused").to_string();
+        assert!(e.contains("checkpoint.safetensors") && e.contains("at most"), "{e}");
+    }
+}
