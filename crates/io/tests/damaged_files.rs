@@ -245,3 +245,63 @@ fn damaged_images_are_refused() {
         });
     }
 }
+
+/// The CRC-32 of PNG chunks (ISO 3309), so that a damaged header is read, not refused for its
+/// checksum.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 { 0xedb8_8320 ^ (c >> 1) } else { c >> 1 };
+        }
+    }
+    !c
+}
+
+#[test]
+fn a_png_claiming_a_huge_size_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("a.png");
+    let img = Image::from_vec(6, 4, (0..24).map(|i| (i * 1000) as f32).collect());
+    fluidnerf_io::image::write_png16_counts(&p, &img).expect("png16");
+    let seed = std::fs::read(&p).expect("reads");
+    for (w, h) in [(u32::MAX >> 1, u32::MAX >> 1), (1 << 20, 1 << 20), (65535, 65535), (4, 1 << 28), (0, 4)] {
+        let mut v = seed.clone();
+        v[16..20].copy_from_slice(&w.to_be_bytes());
+        v[20..24].copy_from_slice(&h.to_be_bytes());
+        let crc = crc32(&v[12..29]);
+        v[29..33].copy_from_slice(&crc.to_be_bytes());
+        put(&p, &v);
+        let e = fluidnerf_io::image::read_image(&p).err().expect("refused").to_string();
+        assert!(e.contains("a.png"), "{e}");
+    }
+}
+
+#[test]
+fn a_tiff_stack_whose_pages_loop_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("v.tif");
+    fluidnerf_io::volume::write_tiff_stack(&p, &small_volume(), "mm").expect("writes");
+    let seed = std::fs::read(&p).expect("reads");
+    let u16_at = |at: usize| usize::from(u16::from_le_bytes([seed[at], seed[at + 1]]));
+    let u32_at = |at: usize| u32::from_le_bytes(seed[at..at + 4].try_into().expect("4 bytes")) as usize;
+    // Each page's directory and where it names the next.
+    let mut pages = vec![];
+    let mut ifd = u32_at(4);
+    while ifd != 0 {
+        let next_at = ifd + 2 + 12 * u16_at(ifd);
+        pages.push((ifd, next_at));
+        ifd = u32_at(next_at);
+    }
+    for &(_, next_at) in &pages {
+        // Every earlier page, or the page itself: a loop (a later page skips pages, and is read).
+        for &(target, _) in pages.iter().filter(|&&(ifd, _)| ifd < next_at) {
+            let mut v = seed.clone();
+            v[next_at..next_at + 4].copy_from_slice(&(target as u32).to_le_bytes());
+            put(&p, &v);
+            let e = fluidnerf_io::volume::read_tiff_stack(&p, None, None).err().expect("refused").to_string();
+            assert!(e.contains("v.tif"), "{e}");
+        }
+    }
+}
