@@ -546,6 +546,20 @@ fn read_mjpeg_avi(
         });
         mapper.limited = range == VideoRange::Limited;
         let data = with_standard_huffman_tables(&data);
+        // Compared before decoding: a damaged frame's header can claim millions of pixels, which
+        // the decoder would allocate and fill with grey before the sizes were compared.
+        let claimed = image::ImageReader::with_format(std::io::Cursor::new(&*data), image::ImageFormat::Jpeg)
+            .into_dimensions()
+            .map_err(|e| IoError::invalid(path, format!("frame {i}: not a decodable JPEG: {e}")))?;
+        if let Some(first) = size.filter(|&first| first != claimed) {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "frame {i} is {}×{} pixels; the first frame kept is {}×{}",
+                    claimed.0, claimed.1, first.0, first.1
+                ),
+            ));
+        }
         let img = image::load_from_memory_with_format(&data, image::ImageFormat::Jpeg)
             .map_err(|e| IoError::invalid(path, format!("frame {i}: not a decodable JPEG: {e}")))?
             .into_luma8();

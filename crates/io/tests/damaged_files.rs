@@ -146,6 +146,21 @@ fn damaged_avi_files_are_refused() {
     }
 }
 
+/// A frame whose header claims another size than the first frame's is refused before it is
+/// decoded: a damaged one can claim far more pixels than the decoder may allocate.
+#[test]
+fn an_avi_frame_claiming_another_size_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = dir.path().join("f.avi");
+    let mut v = fixture("video/ramp_mjpeg.avi");
+    // The second frame's start of frame (baseline): length, precision, height, width.
+    let sof = (0..v.len() - 1).filter(|&k| v[k] == 0xff && v[k + 1] == 0xc0).nth(1).expect("a second frame");
+    v[sof + 5..sof + 9].copy_from_slice(&[0xff; 4]);
+    put(&p, &v);
+    let e = fluidnerf_io::video::read_video(&p, &Default::default()).err().expect("refused").to_string();
+    assert!(e.contains("f.avi") && e.contains("frame 1 is 65535×65535 pixels; the first frame kept is 32×24"), "{e}");
+}
+
 #[test]
 fn damaged_colmap_models_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
