@@ -157,7 +157,7 @@ fn an_avi_frame_claiming_another_size_is_refused_before_decoding() {
     let sof = (0..v.len() - 1).filter(|&k| v[k] == 0xff && v[k + 1] == 0xc0).nth(1).expect("a second frame");
     v[sof + 5..sof + 9].copy_from_slice(&[0xff; 4]);
     put(&p, &v);
-    let e = fluidnerf_io::video::read_video(&p, &Default::default()).err().expect("refused").to_string();
+    let e = fluidnerf_io::video::read_video(&p, &Default::default()).expect_err("refused").to_string();
     assert!(e.contains("f.avi") && e.contains("frame 1 is 65535×65535 pixels; the first frame kept is 32×24"), "{e}");
 }
 
@@ -288,7 +288,7 @@ fn a_png_claiming_a_huge_size_is_refused_before_decoding() {
         let crc = crc32(&v[12..29]);
         v[29..33].copy_from_slice(&crc.to_be_bytes());
         put(&p, &v);
-        let e = fluidnerf_io::image::read_image(&p).err().expect("refused").to_string();
+        let e = fluidnerf_io::image::read_image(&p).expect_err("refused").to_string();
         assert!(e.contains("a.png"), "{e}");
     }
 }
@@ -315,7 +315,7 @@ fn a_tiff_stack_whose_pages_loop_is_refused() {
             let mut v = seed.clone();
             v[next_at..next_at + 4].copy_from_slice(&(target as u32).to_le_bytes());
             put(&p, &v);
-            let e = fluidnerf_io::volume::read_tiff_stack(&p, None, None).err().expect("refused").to_string();
+            let e = fluidnerf_io::volume::read_tiff_stack(&p, None, None).expect_err("refused").to_string();
             assert!(e.contains("v.tif"), "{e}");
         }
     }

@@ -131,7 +131,7 @@ fn a_checkpoint_with_impossible_counts_is_refused() {
         let mut learner = Learner::new(field());
         (learner.iteration, learner.adam.step) = (iteration, step);
         put(&p, &checkpoint_bytes(&learner).expect("bytes"));
-        let e = load_checkpoint(&p, &mut Learner::new(field())).err().expect("refused").to_string();
+        let e = load_checkpoint(&p, &mut Learner::new(field())).expect_err("refused").to_string();
         assert!(e.contains("checkpoint.safetensors") && e.contains("at most"), "{e}");
     }
 }
