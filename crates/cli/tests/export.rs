@@ -303,6 +303,41 @@ fn a_forced_export_removes_the_earlier_outputs_it_does_not_write() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("an output of the earlier export"));
 }
 
+/// The files an export reads are never its outputs, even with --force: a volume exported into
+/// its own folder was written over, and a second export there removed it as an earlier output.
+#[test]
+fn an_export_never_writes_over_or_removes_what_it_reads() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let out_text = out.to_str().expect("utf-8");
+    ok(&fluidnerf(&["export", src.to_str().expect("utf-8"), "-o", out_text, "--vti", "--raw"]));
+    let own = |name: &str| std::fs::read(out.join(name)).expect("reads");
+    let (vti, raw, sidecar) = (own("volume.vti"), own("volume.raw"), own("volume.raw.json"));
+    let input = |name: &str| out.join(name).to_str().expect("utf-8").to_string();
+    for args in [
+        vec!["export", &input("volume.vti"), "-o", out_text, "--vti", "--force"],
+        vec!["export", &input("volume.vti"), "-o", out_text, "--npy", "--force"],
+        vec!["export", &input("volume.raw"), "-o", out_text, "--raw", "--force"],
+        vec!["export", &input("volume.raw"), "-o", out_text, "--npy", "--force"],
+    ] {
+        let o = fluidnerf(&args);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && e.contains("is the reconstruction read; an input is never overwritten"), "{e}");
+    }
+    let truth = dir.path().join("truth");
+    let truth_text = truth.to_str().expect("utf-8");
+    ok(&fluidnerf(&["export", src.to_str().expect("utf-8"), "-o", truth_text, "--vti"]));
+    let truth_vti = std::fs::read(truth.join("volume.vti")).expect("reads");
+    let compare = truth.join("volume.vti").to_str().expect("utf-8").to_string();
+    let args = ["export", &input("volume.vti"), "-o", truth_text, "--vti", "--slices", "z=0.5", "--compare", &compare];
+    let o = fluidnerf(&[&args[..], &["--force"]].concat());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("is the ground truth given with --compare"), "{e}");
+    assert_eq!(std::fs::read(truth.join("volume.vti")).expect("kept"), truth_vti);
+    assert_eq!((own("volume.vti"), own("volume.raw"), own("volume.raw.json")), (vti, raw, sidecar));
+}
+
 /// A run's box is in its scene's unit, which its report records: an export of the run folder
 /// labels and calibrates its files in that unit without the scene, and refuses another --units,
 /// which would calibrate a TIFF stack of a scene in metres as millimetres.

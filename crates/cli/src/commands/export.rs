@@ -490,6 +490,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Read before it is replaced: an earlier export's outputs this one does not write again are
     // removed once it has written its own.
     let earlier = earlier_outputs(&settings_path);
+    // The files read, a raw volume's sidecar with it: exported over (`export e/volume.npy -o e
+    // --force`), or removed as an earlier export's output, the input was lost.
+    let inputs = std::iter::once((args.recon.as_path(), "the reconstruction read"))
+        .chain(args.compare.as_deref().map(|p| (p, "the ground truth given with --compare")));
+    for (input, what) in inputs {
+        let sidecar = fluidnerf_io::volume::raw_sidecar_path(input);
+        let read = [Some(input), input.extension().is_some_and(|e| e == "raw").then_some(sidecar.as_path())];
+        for (file, p) in read
+            .into_iter()
+            .flatten()
+            .flat_map(|f| outputs.iter().cloned().chain(earlier.iter().map(|n| out.join(n))).map(move |p| (f, p)))
+        {
+            fluidnerf_pipeline::rundir::refuse_input_file(&p, file, what)?;
+        }
+    }
     super::create_output_folder(out)?;
 
     let [nx, ny, nz] = volume.dims;
