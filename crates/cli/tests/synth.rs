@@ -703,6 +703,31 @@ fn force_leaves_no_file_of_the_earlier_scene() {
     assert!(dir.join("notes.txt").is_file(), "a file of no scene was removed");
 }
 
+/// A scene's own truth given back as the truth volume of the scene that replaces it is refused
+/// before any work, even with --force: it was removed as a file of the earlier scene (or
+/// written over), and the scene's truth kept its own.
+#[test]
+fn a_truth_volume_among_the_files_a_synthesis_replaces_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("scene");
+    let out = dir.to_str().expect("utf-8 path");
+    let tiny = ["-q", "--preset", "demo", "--cameras", "3", "--pixels", "16", "--resolution", "8", "-o", out];
+    let o = synth(&tiny);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let truth = dir.join("truth/truth.npy");
+    let before = std::fs::read(&truth).expect("reads");
+    let o = run_small_volume(&dir, &truth, &["--force"]);
+    let (_, err) = text(&o);
+    assert!(!o.status.success() && err.contains("an input is never overwritten, even with --force"), "{err}");
+    assert_eq!(std::fs::read(&truth).expect("kept"), before);
+    // Kept outside the folders a scene writes, it may be used.
+    let kept = dir.join("mine.npy");
+    std::fs::rename(&truth, &kept).expect("moves");
+    let o = run_small_volume(&dir, &kept, &["--force"]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    assert!(kept.is_file());
+}
+
 /// An f-number no lens in air has (below 0.5, a numerical aperture above 1) made an aperture of
 /// 6e301 mm at 1e-300 and a scene of black images; it is refused naming the key.
 #[test]
