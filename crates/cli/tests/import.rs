@@ -1818,3 +1818,23 @@ fn a_reimport_keeps_the_earlier_frames_it_reads_as_backgrounds() {
     let scene = load_scene(&out).expect("the scene written loads");
     assert!(fluidnerf_io::scene::load_preprocessed(&scene).is_ok(), "its backgrounds are there");
 }
+
+/// A calibration imported into its own folder is refused, even with --force: the scene written
+/// there replaced it (a nerfstudio `transforms.json` by the one made from it).
+#[test]
+fn a_calibration_is_never_replaced_by_the_scene_imported_from_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("src");
+    let synth = ["synth", "-q", "--preset", "demo", "--cameras", "3", "--pixels", "16", "--resolution", "8", "-o"];
+    assert!(fluidnerf(&[&synth[..], &[s(&src)]].concat()).status.success());
+    let file = src.join("transforms.json");
+    let before = std::fs::read(&file).expect("reads");
+    let spelled = src.join("../src/./transforms.json");
+    for given in [&file, &spelled] {
+        let o = fluidnerf(&["import", "--transforms", s(given), "-o", s(&src), "--force"]);
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains("an input is never overwritten, even with --force"), "{e}");
+    }
+    assert_eq!(std::fs::read(&file).expect("kept"), before);
+    assert!(!src.join("import.json").exists());
+}

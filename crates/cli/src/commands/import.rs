@@ -1181,13 +1181,15 @@ fn remove_unread(file: &Path, referenced: &HashSet<PathBuf>) -> bool {
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
-    let given = [
+    let calibrations = [
         ("--opencv", &args.opencv),
         ("--colmap", &args.colmap),
         ("--metashape", &args.metashape),
+        ("--projection", &args.projection),
         ("--transforms", &args.transforms),
     ];
-    let given = given.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
+    let given =
+        calibrations.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
     super::recordable("import.json", given.chain([("--out", args.out.as_path())]))?;
     let given_aabb = args.aabb.as_deref().map(parse_aabb).transpose()?;
     if let Some(scale) = args.intensity_scale {
@@ -1207,6 +1209,21 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         );
     }
     let out_file = args.out.join(SCENE_FILE);
+    // A calibration imported into its own folder (`--transforms OUT/transforms.json -o OUT
+    // --force`) was replaced by the scene made from it.
+    for (option, input) in calibrations.iter().filter_map(|(o, p)| Some((o, p.as_deref()?))) {
+        if let Some(written) = [out_file.clone(), args.out.join("import.json")]
+            .into_iter()
+            .find(|w| fluidnerf_pipeline::rundir::same_path(w, input))
+        {
+            bail!(
+                "{option} {}: is the file {} that the import writes; an input is never overwritten, even with \
+                 --force: import into another folder",
+                input.display(),
+                written.display()
+            );
+        }
+    }
     if let Some(p) = [out_file.clone(), args.out.join("import.json")].iter().find(|p| p.exists() && !args.force) {
         bail!("{} already exists; pass --force to overwrite it", p.display());
     }
