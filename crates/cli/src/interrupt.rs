@@ -10,6 +10,9 @@ pub fn install() {
     // An error means a handler is already installed, which is fine.
     let _ = ctrlc::set_handler(|| {
         if REQUESTED.swap(true, Ordering::SeqCst) {
+            // Exiting runs no destructor: the files being written would stay half-written
+            // beside their targets.
+            fluidnerf_io::remove_unfinished_writes();
             std::process::exit(130);
         }
         log::warn!("interrupted: finishing the current iteration and writing results (Ctrl-C again to abort)");

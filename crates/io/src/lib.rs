@@ -29,7 +29,8 @@
 //! - Every writer goes through [`atomic_write`]: a reader never sees a half-written file.
 
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 pub mod calib;
 mod cine;
@@ -96,6 +97,7 @@ pub fn atomic_write_seekable(
     let dir = folder_of(path);
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
     let tmp = temporary_file_in(dir)?;
+    let _unfinished = Unfinished::register(tmp.path());
     let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
     {
         let mut w = BufWriter::new(tmp.as_file());
@@ -104,6 +106,38 @@ pub fn atomic_write_seekable(
     }
     tmp.persist(path).map_err(|e| io_err(e.error))?;
     Ok(())
+}
+
+/// The temporary files of the [`atomic_write`]s under way, in any thread.
+static UNFINISHED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// A temporary file listed in [`UNFINISHED`] until the write is over (renamed or removed).
+struct Unfinished(PathBuf);
+
+impl Unfinished {
+    fn register(path: &Path) -> Self {
+        UNFINISHED.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(path.to_path_buf());
+        Self(path.to_path_buf())
+    }
+}
+
+impl Drop for Unfinished {
+    fn drop(&mut self) {
+        let mut list = UNFINISHED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(k) = list.iter().position(|p| *p == self.0) {
+            list.swap_remove(k);
+        }
+    }
+}
+
+/// Removes the temporary files of the [`atomic_write`]s under way: for a program about to exit
+/// at once (a second Ctrl-C), which runs no destructor, so that each would otherwise stay
+/// beside its target as a hidden `.fluidnerf-*.tmp`. The targets are left as they were.
+pub fn remove_unfinished_writes() {
+    let list = UNFINISHED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    for p in list.iter() {
+        let _ = std::fs::remove_file(p);
+    }
 }
 
 /// Checks, before any work, that [`atomic_write`] could write `path` into its existing folder:
@@ -201,5 +235,25 @@ mod tests {
             .map(|e| e.expect("entry").file_name())
             .collect();
         assert_eq!(names.len(), 1, "temporary files left behind: {names:?}");
+    }
+
+    /// A program that exits at once in the middle of a write first removes its temporary file:
+    /// none is left, and the earlier file stays whole.
+    #[test]
+    fn unfinished_writes_are_removed_on_request() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("out.txt");
+        atomic_write(&path, |w| w.write_all(b"whole")).expect("write");
+        let result = atomic_write(&path, |w| {
+            w.write_all(b"half")?;
+            w.flush()?;
+            assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 2, "the temporary file is there");
+            remove_unfinished_writes();
+            assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 1, "the temporary file is gone");
+            Ok(())
+        });
+        assert!(result.is_err(), "a write whose file was removed cannot be completed");
+        assert_eq!(std::fs::read(&path).expect("read"), b"whole");
+        assert!(UNFINISHED.lock().expect("lock").iter().all(|p| !p.starts_with(dir.path())), "still listed");
     }
 }
