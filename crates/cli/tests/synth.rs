@@ -718,7 +718,7 @@ fn a_truth_volume_among_the_files_a_synthesis_replaces_is_refused() {
     let before = std::fs::read(&truth).expect("reads");
     let o = run_small_volume(&dir, &truth, &["--force"]);
     let (_, err) = text(&o);
-    assert!(!o.status.success() && err.contains("an input is never overwritten, even with --force"), "{err}");
+    assert!(!o.status.success() && err.contains("--truth-volume: lies among the files of the scene"), "{err}");
     assert_eq!(std::fs::read(&truth).expect("kept"), before);
     // Kept outside the folders a scene writes, it may be used.
     let kept = dir.join("mine.npy");

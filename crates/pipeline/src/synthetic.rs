@@ -47,6 +47,28 @@ pub fn recording(syn: &Synthesis) -> Recording {
     }
 }
 
+/// Refuses the truth volume `truth` (a file the synthesis reads) when it lies among the files a
+/// scene written into `folder` writes or replaces: its folders (`images/`, `truth/`, ...) and
+/// records. The scene's own truth given back was removed as a file of the earlier scene, or
+/// written over in another precision. `option` names it in the message.
+pub fn refuse_truth_among_outputs(truth: &Path, folder: &Path, option: &str) -> Result<(), IoError> {
+    let Ok(read) = truth.canonicalize() else { return Ok(()) };
+    let written =
+        ["images", "background", "flat", "truth", fluidnerf_io::scene::SCENE_FILE, "preview.png", "synth.json"];
+    match written.iter().filter_map(|n| folder.join(n).canonicalize().ok()).find(|w| read.starts_with(w)) {
+        Some(place) => Err(IoError::invalid(
+            truth,
+            format!(
+                "{option}: lies among the files of the scene written into {} ({}), which a new scene replaces; an \
+                 input is never overwritten, even when asked to: copy it out of there first",
+                folder.display(),
+                place.display()
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Writes `syn` into `folder` (created if missing): images, background frames, flat-field
 /// frames, truth volumes and `transforms.json`. Returns the scene as written. A synthetic scene already there (one
 /// with `synth`'s `synth.json`) is replaced whole: its images, background frames and truth
@@ -218,6 +240,24 @@ mod tests {
         };
         s.rig.holdout = vec![];
         s
+    }
+
+    /// A truth volume inside the scene's folders or among its records is refused; one beside
+    /// them, or in a folder not written yet, is not.
+    #[test]
+    fn a_truth_volume_among_a_scenes_files_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let folder = dir.path().join("scene");
+        let truth = folder.join("truth/truth_t00.npy");
+        assert!(refuse_truth_among_outputs(&truth, &folder, "t").is_ok(), "nothing there yet");
+        std::fs::create_dir_all(truth.parent().expect("parent")).expect("mkdir");
+        std::fs::write(&truth, "v").expect("write");
+        let err = refuse_truth_among_outputs(&folder.join("./truth/../truth/truth_t00.npy"), &folder, "t")
+            .expect_err("inside truth/")
+            .to_string();
+        assert!(err.contains("t: lies among the files of the scene"), "{err}");
+        std::fs::write(folder.join("mine.npy"), "v").expect("write");
+        assert!(refuse_truth_among_outputs(&folder.join("mine.npy"), &folder, "t").is_ok(), "beside them");
     }
 
     #[test]

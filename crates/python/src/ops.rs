@@ -409,6 +409,12 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
             folder.display()
         )));
     }
+    if let Some(path) = &settings.phantom.volume_path {
+        guard(|| {
+            fluidnerf_pipeline::synthetic::refuse_truth_among_outputs(path, &folder, "phantom.volume_path")
+                .map_err(|e| err(e.to_string()))
+        })?;
+    }
     // Ctrl-C stops the synthesis between images (before anything is written): the images of a
     // large rig take minutes, and the GIL is released meanwhile.
     let mut signals = Callback::new(None);

@@ -660,22 +660,8 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     if !args.force && std::fs::read_dir(&out).is_ok_and(|mut d| d.next().is_some()) {
         bail!("{} is not empty; write the scene into a new or empty folder, or pass --force", out.display());
     }
-    // The truth volume read is never among the files written or replaced: the scene's own
-    // truth given back (`--truth-volume OUT/truth/truth_t00.npy -o OUT --force`) was removed as
-    // a file of the earlier scene, or written over in another precision.
-    if let Some((path, read)) = settings.phantom.volume_path.as_ref().and_then(|p| Some((p, p.canonicalize().ok()?))) {
-        let written = ["images", "background", "flat", "truth", "transforms.json", "preview.png", "synth.json"];
-        if let Some(place) =
-            written.iter().filter_map(|n| out.join(n).canonicalize().ok()).find(|w| read.starts_with(w))
-        {
-            bail!(
-                "--truth-volume {}: lies among the files of the scene written into {} ({}), which a new scene \
-                 replaces; an input is never overwritten, even with --force: copy it out of there first",
-                path.display(),
-                out.display(),
-                place.display()
-            );
-        }
+    if let Some(path) = &settings.phantom.volume_path {
+        fluidnerf_pipeline::synthetic::refuse_truth_among_outputs(path, &out, "--truth-volume")?;
     }
     let volume = match &settings.phantom.volume_path {
         Some(path) if settings.phantom.kind == PhantomKind::Volume => {
