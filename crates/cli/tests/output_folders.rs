@@ -131,3 +131,29 @@ fn import_export_render_and_synth_refuse_folders_of_another_kind() {
     ok(&fluidnerf(d, &["render", "r1", "-o", "s/renders", "--camera", "0", "-q"]));
     ok(&fluidnerf(d, &["export", "r1", "-o", "s/exports", "--npy", "-q"]));
 }
+
+/// An output folder that takes no new file (here under /sys, read-only even for root) is
+/// refused before any work by every command that writes one: it failed only once the results
+/// were ready.
+#[test]
+fn an_unwritable_output_folder_is_refused_before_any_work() {
+    let sys = Path::new("/sys/kernel");
+    if !sys.is_dir() {
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(d, &["synth", "--pixels", "16", "--resolution", "8", "--cameras", "4", "-o", "s", "-q"]));
+    ok(&fluidnerf(
+        d,
+        &["reconstruct", "s", "-o", "r", "-m", "sart", "--resolution", "8", "--max-iterations", "2", "-q"],
+    ));
+    for out in ["/sys/kernel", "/sys/kernel/fluidnerf-out/sub"] {
+        let needle = format!("{out}: cannot write into the output folder");
+        let synth = ["synth", "--pixels", "16", "--resolution", "8", "--cameras", "4", "-o", out, "--force"];
+        refused(&fluidnerf(d, &synth), &needle);
+        refused(&fluidnerf(d, &["export", "r", "-o", out, "--npy"]), &needle);
+        refused(&fluidnerf(d, &["render", "r", "-o", out]), &needle);
+        refused(&fluidnerf(d, &["compare", "r", "-o", out]), &needle);
+    }
+}

@@ -575,6 +575,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     super::recordable("compare.json", args.runs.iter().map(|p| ("RUN", p.as_path())).chain(reference))?;
     let out = &args.out;
     fluidnerf_pipeline::rundir::refuse_other_kind(out, fluidnerf_pipeline::rundir::FolderKind::Compare, "compare")?;
+    super::refuse_unwritable_output(out)?;
     let outputs = ["time_to_accuracy.png", "time_to_accuracy.svg", "time_to_accuracy.csv", "compare.json"];
     if !args.force && outputs.iter().any(|f| out.join(f).exists()) {
         bail!("{} already holds comparison results; use --force to overwrite", out.display());

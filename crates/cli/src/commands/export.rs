@@ -289,6 +289,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let given = given.iter().filter_map(|(o, p)| Some((*o, p.as_deref()?)));
     super::recordable("export.json", std::iter::once(("RECON", args.recon.as_path())).chain(given))?;
     refuse_other_kind(&args.out, FolderKind::Export, "export")?;
+    super::refuse_unwritable_output(&args.out)?;
     let meshes: Vec<&str> = args.mesh.iter().map(|m| if *m == MeshFormat::Ply { "ply" } else { "obj" }).collect();
     super::given_once("--mesh", &meshes)?;
     let mut slices: Vec<(Axis, f64)> = args.slices.iter().map(|s| parse_slice(s)).collect::<anyhow::Result<_>>()?;

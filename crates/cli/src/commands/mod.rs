@@ -259,3 +259,17 @@ pub(crate) fn create_output_folder(out: &std::path::Path) -> anyhow::Result<()> 
     fluidnerf_pipeline::rundir::refuse_non_folder(out)?;
     std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("{}: cannot create the output folder: {e}", out.display()))
 }
+
+/// Refuses, before any work, an output folder `out` that takes no new file: it, or the nearest
+/// folder above it that exists, is probed as [`fluidnerf_io::check_writable`] does. A read-only
+/// folder failed only once the results were ready (a long export or render done for nothing).
+pub(crate) fn refuse_unwritable_output(out: &std::path::Path) -> anyhow::Result<()> {
+    let existing = out.ancestors().find(|a| a.as_os_str().is_empty() || a.exists()).unwrap_or(out);
+    let folder = if existing.as_os_str().is_empty() { std::path::Path::new(".") } else { existing };
+    // A file in the way is refused where the folder is made, by what it is.
+    if !folder.is_dir() {
+        return Ok(());
+    }
+    fluidnerf_io::check_writable(&folder.join("out"))
+        .map_err(|e| anyhow::anyhow!("{}: cannot write into the output folder: {e}", out.display()))
+}

@@ -228,6 +228,7 @@ fn samples_in_hull(hull: Support<'_>, views: &[View], aabb: &Aabb, ss: usize, st
 #[allow(clippy::print_stdout)]
 pub fn run(args: Args) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Render, "render")?;
+    super::refuse_unwritable_output(&args.out)?;
     let scene = args.scene.as_deref().map(|p| ("--scene", p));
     super::recordable("render.json", std::iter::once(("RECON", args.recon.as_path())).chain(scene))?;
     if let Some(n) = args.orbit.filter(|n| !(1..=MAX_ORBIT_VIEWS).contains(n)) {

@@ -648,6 +648,7 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     let reordered = settings.times.windows(2).any(|w| w[0] > w[1]);
     settings.times.sort_by(f64::total_cmp);
     fluidnerf_pipeline::rundir::refuse_other_kind(&out, fluidnerf_pipeline::rundir::FolderKind::Scene, "synth")?;
+    super::refuse_unwritable_output(&out)?;
     let scene_file = out.join("transforms.json");
     // Even with --force it could not be written, and would fail as "Is a directory".
     if scene_file.is_dir() {
