@@ -564,3 +564,22 @@ fn a_volume_whose_views_overflow_floats_is_refused() {
         assert!(!dir.path().join("views").exists(), "{projector}: made the output folder");
     }
 }
+
+/// A volume read from the render folder under a view's name is never written over, even with
+/// --force: the view replaced the TIFF stack it was rendered from.
+#[test]
+fn a_volume_named_as_a_view_is_never_rendered_over() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, vol) = make_scene(dir.path());
+    let views = dir.path().join("views");
+    std::fs::create_dir_all(&views).expect("mkdir");
+    let stack = views.join("view_000.tif");
+    fluidnerf_io::volume::write_tiff_stack(&stack, &vol, "mm").expect("writes");
+    let before = std::fs::read(&stack).expect("reads");
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let o =
+        fluidnerf(&["render", &d(&stack), "--scene", &d(dir.path()), "-o", &d(&views), "--format", "tiff", "--force"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("is the reconstruction read; an input is never overwritten"), "{e}");
+    assert_eq!(std::fs::read(&stack).expect("kept"), before);
+}

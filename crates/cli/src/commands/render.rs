@@ -335,6 +335,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // An earlier render's files that this one does not write: left beside the new render.json,
     // which would not list them, they would pass for this render's views.
     let stale = if args.force { stale_outputs(&settings_path, &outputs) } else { Vec::new() };
+    // A volume read from a file of the render folder (a TIFF stack named as a view) was
+    // written over, or removed as a view of the earlier render.
+    for p in outputs.iter().chain(&stale) {
+        fluidnerf_pipeline::rundir::refuse_input_file(p, &args.recon, "the reconstruction read")?;
+    }
     let source = load_source(&args.recon, Some(&scene))?;
     // Checked before the output folder is made: the views would hold infinities and NaN.
     if let Source::Volume(v) = &source {
