@@ -134,8 +134,14 @@ impl Drop for Unfinished {
 /// at once (a second Ctrl-C), which runs no destructor, so that each would otherwise stay
 /// beside its target as a hidden `.fluidnerf-*.tmp`. The targets are left as they were.
 pub fn remove_unfinished_writes() {
+    remove_unfinished_writes_where(|_| true);
+}
+
+/// [`remove_unfinished_writes`] of the temporary files `which` picks (a test's own folder, so
+/// that the writes of tests running beside it are left alone).
+fn remove_unfinished_writes_where(which: impl Fn(&Path) -> bool) {
     let list = UNFINISHED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    for p in list.iter() {
+    for p in list.iter().filter(|p| which(p)) {
         let _ = std::fs::remove_file(p);
     }
 }
@@ -248,7 +254,7 @@ mod tests {
             w.write_all(b"half")?;
             w.flush()?;
             assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 2, "the temporary file is there");
-            remove_unfinished_writes();
+            remove_unfinished_writes_where(|p| p.starts_with(dir.path()));
             assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 1, "the temporary file is gone");
             Ok(())
         });
