@@ -18,6 +18,11 @@ struct Case {
     truth: Vec<f32>,
 }
 
+/// The case's visual hull at the defaults, dilated by a voxel.
+fn hull_of(c: &Case) -> Vec<bool> {
+    visual_hull(&c.grid, c.projector.cameras(), &c.images, DEFAULT_HULL_THRESHOLD, DEFAULT_HULL_NOISE_SIGMAS, 1)
+}
+
 fn case(phantom: Phantom) -> Case {
     let grid = Grid::new([24, 24, 24], aabb());
     let cams = ring(8, 48);
@@ -195,14 +200,7 @@ fn visual_hull_keeps_the_object_and_carves_the_rest() {
 fn sart_tv_keeps_its_accuracy_inside_a_hull() {
     for (pname, phantom) in [("ball", ball as Phantom), ("blobs", blobs as Phantom)] {
         let c = case(phantom);
-        let hull = visual_hull(
-            &c.grid,
-            c.projector.cameras(),
-            &c.images,
-            DEFAULT_HULL_THRESHOLD,
-            DEFAULT_HULL_NOISE_SIGMAS,
-            1,
-        );
+        let hull = hull_of(&c);
         let free = Problem::new(&c.projector, &c.images).expect("consistent");
         let masked = free.with_support(&hull);
         let d = TvParams::default();
@@ -224,14 +222,7 @@ fn sart_tv_keeps_its_accuracy_inside_a_hull() {
 fn art_and_mart_keep_their_accuracy_inside_a_hull() {
     for (pname, phantom) in [("ball", ball as Phantom), ("blobs", blobs as Phantom)] {
         let c = case(phantom);
-        let hull = visual_hull(
-            &c.grid,
-            c.projector.cameras(),
-            &c.images,
-            DEFAULT_HULL_THRESHOLD,
-            DEFAULT_HULL_NOISE_SIGMAS,
-            1,
-        );
+        let hull = hull_of(&c);
         let free = Problem::new(&c.projector, &c.images).expect("consistent");
         let masked = free.with_support(&hull);
         let run_art = |p: &Problem| {

@@ -38,6 +38,33 @@ const RUN: &[&str] =
 const FAST: &[&str] =
     &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--resolution", "8", "--max-iterations", "2"];
 
+/// Gives the scene's frames two instants, 0 and 1, in turn.
+fn two_instants(v: &mut serde_json::Value) {
+    for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
+        f["time"] = (i % 2).into();
+    }
+}
+
+/// A one-iteration `tr-fluidnerf` run with `--time-step` set to this.
+macro_rules! tr_step {
+    ($step:literal) => {
+        &[
+            "reconstruct",
+            "SCENE",
+            "-o",
+            "OUT",
+            "--method",
+            "tr-fluidnerf",
+            "--resolution",
+            "8",
+            "--max-iterations",
+            "1",
+            "--time-step",
+            $step,
+        ]
+    };
+}
+
 fn cases() -> Vec<Case> {
     use Break::*;
     let c = |name, brk, args, says| Case { name, brk, args, says };
@@ -175,11 +202,7 @@ fn cases() -> Vec<Case> {
         ),
         c(
             "held-out time twice",
-            Json(|v| {
-                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
-                    f["time"] = (i % 2).into();
-                }
-            }),
+            Json(two_instants),
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "tr-fast", "--holdout-times", "1,1"],
             "--holdout-times on the command line: method.holdout_times: 1 is given twice",
         ),
@@ -647,49 +670,15 @@ fn cases() -> Vec<Case> {
         ),
         c(
             "a time step too small for the times",
-            Json(|v| {
-                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
-                    f["time"] = (i % 2).into();
-                }
-            }),
-            &[
-                "reconstruct",
-                "SCENE",
-                "-o",
-                "OUT",
-                "--method",
-                "tr-fluidnerf",
-                "--resolution",
-                "8",
-                "--max-iterations",
-                "1",
-                "--time-step",
-                "1e-40",
-            ],
+            Json(two_instants),
+            tr_step!("1e-40"),
             "method.time_step: the times run from 0 to 1, 1e40 time steps",
         ),
         c(
             // Every frame read as one instant: the field was trained as a static one.
             "a time step too large for the times",
-            Json(|v| {
-                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
-                    f["time"] = (i % 2).into();
-                }
-            }),
-            &[
-                "reconstruct",
-                "SCENE",
-                "-o",
-                "OUT",
-                "--method",
-                "tr-fluidnerf",
-                "--resolution",
-                "8",
-                "--max-iterations",
-                "1",
-                "--time-step",
-                "1e308",
-            ],
+            Json(two_instants),
+            tr_step!("1e308"),
             "method.time_step: the times 0 and 1 are 1e-308 time steps of Δt = 1e308 apart, which the network's \
              time input t' = (t − t₀)/Δt reads as one instant",
         ),
@@ -697,49 +686,15 @@ fn cases() -> Vec<Case> {
             // Within f32's range, but t' = 1e30 made the first loss infinite, reported as a
             // divergence asking for a lower learning rate.
             "a time step small enough to overflow the network",
-            Json(|v| {
-                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
-                    f["time"] = (i % 2).into();
-                }
-            }),
-            &[
-                "reconstruct",
-                "SCENE",
-                "-o",
-                "OUT",
-                "--method",
-                "tr-fluidnerf",
-                "--resolution",
-                "8",
-                "--max-iterations",
-                "1",
-                "--time-step",
-                "1e-30",
-            ],
+            Json(two_instants),
+            tr_step!("1e-30"),
             "time steps of Δt = 1e-30: more than the 16777216 steps",
         ),
         c(
             // Times distinct in 32 bits, but too close for the network to tell apart.
             "a time step that makes the frames one instant",
-            Json(|v| {
-                for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
-                    f["time"] = (i % 2).into();
-                }
-            }),
-            &[
-                "reconstruct",
-                "SCENE",
-                "-o",
-                "OUT",
-                "--method",
-                "tr-fluidnerf",
-                "--resolution",
-                "8",
-                "--max-iterations",
-                "1",
-                "--time-step",
-                "1e30",
-            ],
+            Json(two_instants),
+            tr_step!("1e30"),
             "time steps of Δt = 1e30 apart, which the network's time input t' = (t − t₀)/Δt reads as one instant (they must \
              be at least 0.001 steps apart)",
         ),
