@@ -304,3 +304,18 @@ fn a_done_file_naming_another_checkpoint_is_refused() {
     }
     ok(&fluidnerf(d, &["reconstruct", "--finish", "-o", "w", "-q"]));
 }
+
+#[test]
+fn an_unfinished_split_run_is_named_as_such_by_export_render_and_eval() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    split_scene(d);
+    ok(&reconstruct(d, "split", &["--no-warm-start", "--window-index", "0"]));
+    for args in
+        [&["export", "split", "-o", "out", "-q"][..], &["render", "split", "-o", "out", "-q"], &["eval", "split", "-q"]]
+    {
+        let out = fluidnerf(d, args);
+        refused(&out, "split: holds a time-resolved run that is not finished");
+        assert!(stderr(&out).contains("--finish -o split"), "{args:?}: {}", stderr(&out));
+    }
+}

@@ -197,6 +197,16 @@ impl LoadedRun {
         let rd = RunDir::open(dir)?;
         let refuse = |why: &str| PipelineError::RunDir { path: dir.to_path_buf(), why: why.into() };
         let Some(kind) = rd.kind() else {
+            if rd.progress().is_file() {
+                // A time-resolved run trained window by window (or stopped) writes its results
+                // only when it is finished.
+                return Err(refuse(&format!(
+                    "holds a time-resolved run that is not finished (windows/progress.json, but no \
+                     temporal.json yet): train its missing windows and finish it (fluidnerf reconstruct \
+                     --finish -o {0}, or --resume -o {0} to train what is left)",
+                    dir.display()
+                )));
+            }
             return Err(refuse("holds no reconstruction (no volume.npy, model.json or temporal.json)"));
         };
         if rd.report().is_file() {
