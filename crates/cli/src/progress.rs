@@ -79,6 +79,21 @@ fn eta_text(steps_per_s: f64, by_rate: Duration, deadline_left: Option<Duration>
     s
 }
 
+/// `field` sampled on a grid (as [`fluidnerf_core::Volume::from_field_averaged`]) under a bar
+/// of its z-slices, labelled "sampling": a faithful network's field takes minutes at 256³.
+pub fn sampled(
+    dims: [usize; 3],
+    aabb: fluidnerf_core::Aabb,
+    field: &dyn fluidnerf_core::ScalarField,
+    time: f64,
+    n: usize,
+) -> fluidnerf_core::Volume {
+    let bar = bar(dims[2] as u64, "sampling");
+    let volume = fluidnerf_core::Volume::from_field_averaged_with(dims, aabb, field, time, n, &|| bar.inc(1));
+    bar.finish_and_clear();
+    volume
+}
+
 /// A spinner with the time elapsed, for work whose steps are not counted, labelled `what`
 /// with `msg`; hidden as [`bar`] is.
 pub fn spinner(what: &str, msg: &str) -> ProgressBar {

@@ -143,17 +143,7 @@ impl Recon {
         match self {
             Recon::Volumes(v) => Cow::Borrowed(&v[step.min(v.len() - 1)]),
             Recon::Field(f) => {
-                let bar = crate::progress::bar(truth.dims[2] as u64, "sampling");
-                let v = Volume::from_field_averaged_with(
-                    truth.dims,
-                    truth.aabb,
-                    f.as_ref(),
-                    time.unwrap_or(0.0),
-                    1,
-                    &|| bar.inc(1),
-                );
-                bar.finish_and_clear();
-                Cow::Owned(v)
+                Cow::Owned(crate::progress::sampled(truth.dims, truth.aabb, f.as_ref(), time.unwrap_or(0.0), 1))
             }
         }
     }

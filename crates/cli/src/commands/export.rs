@@ -413,13 +413,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         (Source::Field { field, .. }, res, _) => {
             let dims = Volume::dims_for(&aabb, res.unwrap_or(128));
-            let bar = crate::progress::bar(dims[2] as u64, "sampling");
-            let volume =
-                Volume::from_field_averaged_with(dims, aabb, field.as_ref(), time, args.average as usize, &|| {
-                    bar.inc(1)
-                });
-            bar.finish_and_clear();
-            volume
+            crate::progress::sampled(dims, aabb, field.as_ref(), time, args.average as usize)
         }
     };
     let truth = match &args.compare {

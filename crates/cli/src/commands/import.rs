@@ -1209,13 +1209,11 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         );
     }
     let out_file = args.out.join(SCENE_FILE);
+    let written = [out_file.clone(), args.out.join("import.json")];
     // A calibration imported into its own folder (`--transforms OUT/transforms.json -o OUT
     // --force`) was replaced by the scene made from it.
     for (option, input) in calibrations.iter().filter_map(|(o, p)| Some((o, p.as_deref()?))) {
-        if let Some(written) = [out_file.clone(), args.out.join("import.json")]
-            .into_iter()
-            .find(|w| fluidnerf_pipeline::rundir::same_path(w, input))
-        {
+        if let Some(written) = written.iter().find(|w| fluidnerf_pipeline::rundir::same_path(w, input)) {
             bail!(
                 "{option} {}: is the file {} that the import writes; an input is never overwritten, even with \
                  --force: import into another folder",
@@ -1224,7 +1222,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             );
         }
     }
-    if let Some(p) = [out_file.clone(), args.out.join("import.json")].iter().find(|p| p.exists() && !args.force) {
+    if let Some(p) = written.iter().find(|p| p.exists() && !args.force) {
         bail!("{} already exists; pass --force to overwrite it", p.display());
     }
     // Read before it is replaced: the frames an earlier import decoded that this one does not
