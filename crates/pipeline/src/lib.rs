@@ -591,15 +591,21 @@ mod tests {
     use super::*;
     use std::time::Duration;
 
+    /// [`testing::small_scene`] written into `scene/` of a new temporary folder, and loaded.
+    fn small_scene_loaded() -> (tempfile::TempDir, std::path::PathBuf, Scene) {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let scene_dir = tmp.path().join("scene");
+        testing::small_scene(&scene_dir).expect("scene");
+        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        (tmp, scene_dir, scene)
+    }
+
     /// A method paired with another family's settings, as a library caller can build it, is
     /// refused by its key before any work: a voxel method given a field's settings panicked in
     /// the run, and `config.json` recorded another method.
     #[test]
     fn a_method_given_another_familys_settings_is_refused_not_run() {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let scene_dir = tmp.path().join("scene");
-        testing::small_scene(&scene_dir).expect("scene");
-        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        let (tmp, scene_dir, scene) = small_scene_loaded();
         let settings = |m: Method| RunConfig::new(&scene_dir, m).method;
         let MethodConfig::Neural(_, field) = settings(Method::Fast) else { unreachable!("fast is neural") };
         let MethodConfig::Temporal(_, windows) = settings(Method::TrFast) else { unreachable!("tr-fast is temporal") };
@@ -638,10 +644,7 @@ mod tests {
     /// work, the second recorded absolute.
     #[test]
     fn a_config_naming_another_scene_is_refused_and_the_scene_recorded_absolute() {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let scene_dir = tmp.path().join("scene");
-        testing::small_scene(&scene_dir).expect("scene");
-        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        let (tmp, scene_dir, scene) = small_scene_loaded();
         let other = tmp.path().join("other");
         std::fs::create_dir_all(&other).expect("mkdir");
         let mut config = RunConfig::new(&other, Method::Asart);
@@ -668,10 +671,7 @@ mod tests {
     /// run wrote its results inside the scene's folder, among the files the scene reads.
     #[test]
     fn a_run_folder_inside_the_scene_is_refused_even_when_made_without_the_scene() {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let scene_dir = tmp.path().join("scene");
-        testing::small_scene(&scene_dir).expect("scene");
-        let scene = fluidnerf_io::scene::load_scene(&scene_dir).expect("loads");
+        let (_tmp, scene_dir, scene) = small_scene_loaded();
         let mut config = RunConfig::new(&scene_dir, Method::Asart);
         config.resolution = 8;
         let out = scene_dir.join("run");

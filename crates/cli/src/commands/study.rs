@@ -905,15 +905,20 @@ mod tests {
         assert!(!read("report.html").contains("interrupted"));
     }
 
+    /// The `report.html` a study of the command `line` writes before any cell has run.
+    fn empty_report(line: &[&str]) -> String {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let g = grid(&Cli::try_parse_from(line).expect("arguments").args).expect("grid");
+        write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
+        std::fs::read_to_string(tmp.path().join("report.html")).expect("written")
+    }
+
     /// The report states the voxels of the truth and output grids, which --resolution gives
     /// along the longest side only: a plume study at 24 said "24³" of a 16×24×16 grid.
     #[test]
     fn the_report_states_the_grid_of_a_box_that_is_not_a_cube() {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let line = ["study", "-o", "x", "--preset", "smoke", "--scene-preset", "plume15", "--resolution", "24"];
-        let g = grid(&Cli::try_parse_from(line).expect("arguments").args).expect("grid");
-        write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
-        let html = std::fs::read_to_string(tmp.path().join("report.html")).expect("written");
+        let html =
+            empty_report(&["study", "-o", "x", "--preset", "smoke", "--scene-preset", "plume15", "--resolution", "24"]);
         assert!(html.contains("24² px images, 16×24×16 voxels of truth and output"), "{html}");
     }
 
@@ -929,11 +934,8 @@ mod tests {
     /// hull: it said the voxel methods ran inside it, the hybrid's start seemingly among them.
     #[test]
     fn the_report_says_the_hybrids_start_runs_without_the_hull() {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let line = ["study", "-o", "x", "--preset", "smoke", "--methods", "asart,hybrid", "--visual-hull"];
-        let g = grid(&Cli::try_parse_from(line).expect("arguments").args).expect("grid");
-        write_outputs(tmp.path(), &g, &[], &[], 0).expect("writes");
-        let html = std::fs::read_to_string(tmp.path().join("report.html")).expect("written");
+        let html =
+            empty_report(&["study", "-o", "x", "--preset", "smoke", "--methods", "asart,hybrid", "--visual-hull"]);
         assert!(html.contains("the voxel methods (not the hybrid&#39;s own start) inside the images"), "{html}");
     }
 
