@@ -2,7 +2,7 @@
 //!
 //! # Reading
 //! - 8- and 16-bit PNG, 8-bit JPEG (baseline and progressive), 8/16/32-bit integer and
-//!   32/64-bit float TIFF (greyscale or RGB; CMYK, YCbCr and L*a*b* TIFFs are refused). The
+//!   16/32/64-bit float TIFF (greyscale or RGB; CMYK, YCbCr and L*a*b* TIFFs are refused). The
 //!   format is chosen by content, not by extension, but for LaVision DaVis images (`.im7`,
 //!   `.imx`), which carry no signature: a file of one frame is read as stored (16-bit words,
 //!   bytes or floats, see [`crate::davis`]); one of several frames (every camera of an
@@ -465,8 +465,8 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         return Err(IoError::invalid(
             path,
             format!(
-                "a TIFF of {bits} bit(s) per sample, which fluidnerf does not read (8, 16 or 32-bit integers, 32 or \
-                 64-bit floats): write the image, or the mask, with 8 or 16 bits per sample (a 10 to 14-bit camera's \
+                "a TIFF of {bits} bit(s) per sample, which fluidnerf does not read (8, 16 or 32-bit integers, 16, 32 \
+                 or 64-bit floats): write the image, or the mask, with 8 or 16 bits per sample (a 10 to 14-bit camera's \
                  counts go into 16-bit samples as they are)"
             ),
         ));
@@ -512,6 +512,7 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         DecodingResult::U8(v) => (v.into_iter().map(|c| lut[usize::from(c)]).collect(), SampleKind::Integer(8)),
         DecodingResult::U16(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(16)),
         DecodingResult::U32(v) => (v.into_iter().map(|x| x as f32).collect(), SampleKind::Integer(32)),
+        DecodingResult::F16(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Float),
         DecodingResult::F32(v) => (v, SampleKind::Float),
         DecodingResult::F64(v) => (v.into_iter().map(|x| x as f32).collect(), SampleKind::Float),
         DecodingResult::I8(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(8)),
@@ -520,7 +521,7 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         _ => {
             return Err(IoError::invalid(
                 path,
-                "unsupported TIFF sample type (use 8/16/32-bit integers or 32/64-bit floats)",
+                "unsupported TIFF sample type (use 8/16/32-bit integers or 16/32/64-bit floats)",
             ))
         }
     };
@@ -952,6 +953,34 @@ mod tests {
         assert_eq!(kind, SampleKind::Integer(8));
         let expected = [21.26f32, 71.52, 7.22, 14.44];
         assert!(img.data.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-3), "{:?}", img.data);
+    }
+
+    /// 16-bit float samples (SampleFormat 3), as written by HDR and machine-vision tools, were
+    /// refused as an "unsupported TIFF sample type"; they are read as the floats they hold.
+    #[test]
+    fn half_float_tiffs_are_read() {
+        struct GrayF16;
+        impl tiff::encoder::colortype::ColorType for GrayF16 {
+            type Inner = u16;
+            const TIFF_VALUE: tiff::tags::PhotometricInterpretation =
+                tiff::tags::PhotometricInterpretation::BlackIsZero;
+            const BITS_PER_SAMPLE: &'static [u16] = &[16];
+            const SAMPLE_FORMAT: &'static [tiff::tags::SampleFormat] = &[tiff::tags::SampleFormat::IEEEFP];
+            fn horizontal_predict(row: &[u16], result: &mut Vec<u16>) {
+                result.extend_from_slice(row);
+            }
+        }
+        // IEEE 754 half precision: 0, 0.5, 1, 1.5 and 65504 (the largest finite half).
+        let halves = [0x0000u16, 0x3800, 0x3c00, 0x3e00, 0x7bff, 0x0000];
+        let mut bytes = Cursor::new(Vec::new());
+        tiff::encoder::TiffEncoder::new(&mut bytes)
+            .expect("encoder")
+            .write_image::<GrayF16>(3, 2, &halves)
+            .expect("half floats");
+        let (img, kind) =
+            decode_image(Path::new("half.tif"), bytes.get_ref(), Linearisation::Linear).expect("reads half floats");
+        assert_eq!(kind, SampleKind::Float);
+        assert_eq!(img.data, vec![0.0, 0.5, 1.0, 1.5, 65504.0, 0.0]);
     }
 
     /// Grey samples with extra ones keep the grey one; CMYK and YCbCr samples, which would be

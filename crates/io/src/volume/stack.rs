@@ -217,7 +217,7 @@ fn resolution<R: std::io::Read + Seek>(dec: &mut tiff::decoder::Decoder<R>, tag:
     (per_unit.is_finite() && per_unit > 0.0).then_some(per_unit)
 }
 
-/// Reads a TIFF stack (one greyscale page per z-slice, all of one size; 32/64-bit float or
+/// Reads a TIFF stack (one greyscale page per z-slice, all of one size; 16/32/64-bit float or
 /// 8/16-bit unsigned samples) as a volume. Its box comes from the file's ImageJ calibration
 /// (pixel size from the resolution tags, slice spacing and origin from the description, as
 /// [`write_tiff_stack`] and Fiji write them), converted to the world's length `unit` when
@@ -275,6 +275,7 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> R
             ));
         }
         let page = match dec.read_image().map_err(bad)? {
+            DecodingResult::F16(v) => v.into_iter().map(f32::from).collect(),
             DecodingResult::F32(v) => v,
             DecodingResult::F64(v) => v.into_iter().map(|x| x as f32).collect(),
             DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
@@ -283,7 +284,7 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> R
                 return Err(IoError::invalid(
                     path,
                     format!(
-                        "page {}: unsupported sample type (use 32/64-bit floats or 8/16-bit unsigned integers)",
+                        "page {}: unsupported sample type (use 16/32/64-bit floats or 8/16-bit unsigned integers)",
                         nz + 1
                     ),
                 ))
