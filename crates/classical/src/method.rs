@@ -197,11 +197,16 @@ impl ClassicalMethod {
         let mut copy = self.clone();
         let algorithm = self.algorithm();
         if let Some(&mut mu) = copy.relaxation_mut() {
-            let upper = if matches!(algorithm, Algorithm::Mart | Algorithm::Smart) { 1.0 } else { 2.0 };
-            if !(mu > 0.0 && mu <= upper) {
+            // The multiplicative methods' exponent is at most 1 (Eqs. 2.25, 2.28). The additive
+            // ones converge for μ in (0, 2): at 2 a row's step reflects the iterate across the
+            // row's hyperplane instead of moving towards it, and the iteration need not settle.
+            let multiplicative = matches!(algorithm, Algorithm::Mart | Algorithm::Smart);
+            let (ok, range) =
+                if multiplicative { (mu > 0.0 && mu <= 1.0, "(0, 1]") } else { (mu > 0.0 && mu < 2.0, "(0, 2)") };
+            if !ok {
                 return Err(ClassicalError::invalid(
                     "relaxation",
-                    format!("for {algorithm:?} must be in (0, {upper}], got {}", num(mu)),
+                    format!("for {algorithm:?} must be in {range}, got {}", num(mu)),
                 ));
             }
         }

@@ -703,13 +703,19 @@ fn cases() -> Vec<Case> {
             File("run.json", br#"{"format":1,"scene":"x","method":{"name":"asart","params":{"relaxation":1e300}}}"#),
             &["reconstruct", "SCENE", "--config", "SCENE/run.json", "-o", "OUT"],
             // Written compactly, not as 301 digits.
-            "relaxation: for Asart must be in (0, 2], got 1e300\n",
+            "relaxation: for Asart must be in (0, 2), got 1e300\n",
         ),
         c(
             "relaxation flag far out of range",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "sart", "--relaxation=-1e-300"],
             "got -1e-300\n",
+        ),
+        c(
+            "relaxation at which the additive methods need not converge",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "art", "--relaxation", "2"],
+            "relaxation: for Art must be in (0, 2), got 2\n",
         ),
         c(
             "config naming a file as its scene",

@@ -33,7 +33,7 @@ use crate::SolveError;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AsartParams {
-    /// Relaxation μ of Eq. 2.30. Default 0.5 (the dissertation's).
+    /// Relaxation μ of Eq. 2.30, in (0, 2). Default 0.5 (the dissertation's).
     pub relaxation: f64,
     /// Default: at most 250 iterations, plateau rule on (20 iterations, mean of 4, 2 %).
     pub stopping: Stopping,

@@ -38,7 +38,7 @@ impl Default for MlemParams {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SmartParams {
-    /// Relaxation μ of Eq. 2.28. Default 1.
+    /// Relaxation μ of Eq. 2.28, in (0, 1]. Default 1.
     pub relaxation: f64,
     /// Default: at most 100 iterations, plateau rule on.
     pub stopping: Stopping,

@@ -19,7 +19,7 @@ use crate::SolveError;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SartParams {
-    /// Relaxation μ of Eq. 2.27. Default 1.
+    /// Relaxation μ of Eq. 2.27, in (0, 2). Default 1.
     pub relaxation: f64,
     /// Default: at most 50 iterations, plateau rule on.
     pub stopping: Stopping,

@@ -63,7 +63,7 @@ const LTL_SPECTRAL_BOUND: f64 = 144.0;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TikhonovParams {
-    /// SART relaxation μ (Eq. 2.27). Default 1.
+    /// SART relaxation μ (Eq. 2.27), in (0, 2). Default 1.
     pub relaxation: f64,
     /// Weight λ of the penalty `‖∇² g‖²` (Eq. 2.35), in voxel units; at most 10. Default 0.003.
     pub weight: f64,

@@ -310,7 +310,8 @@ pub struct StopArgs {
 #[derive(clap::Args, Debug)]
 #[command(next_help_heading = "Voxel methods (asart, art, sart, mart, smart, mlem, tv, tikhonov)")]
 pub struct ClassicalArgs {
-    /// Relaxation factor μ [default: asart 0.5, art/sart/mart/smart/tv/tikhonov 1].
+    /// Relaxation factor μ, in (0, 2) for art/sart/asart/tv/tikhonov and (0, 1] for mart/smart
+    /// [default: asart 0.5, the others 1].
     #[arg(long, value_name = "MU")]
     pub relaxation: Option<f64>,
     /// Projector: `auto` (the footprint projector unless voxels image wider than ~60 px, then
