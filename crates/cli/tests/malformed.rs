@@ -1143,7 +1143,7 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
     ));
     let saved: serde_json::Value = json(&d.join("run/config.json"));
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit); 14] = [
+    let edits: [(&str, Edit); 15] = [
         ("method.field.hash-grid.levels", |v| v["method"]["field"]["hash-grid"]["levels"] = 0.into()),
         ("method.field.hash-grid.mlp_depth: 0 not in 1..=16", |v| {
             v["method"]["field"]["hash-grid"]["mlp_depth"] = 0.into()
@@ -1172,8 +1172,12 @@ fn a_saved_configuration_with_a_bad_value_is_refused_naming_the_file_and_the_key
             v["method"]["train"]["rays_per_image"] = u64::MAX.into()
         }),
         // Not blamed on the resolution or the image count by the memory check.
-        ("method.train.chunk_samples: must be at most 16777216 field rows per chunk, got 1099511627776", |v| {
+        ("method.train.chunk_samples: must be 1 to 16777216 field rows per chunk, got 1099511627776", |v| {
             v["method"]["train"]["chunk_samples"] = (1u64 << 40).into()
+        }),
+        // Not read as one ray per chunk, a setting nobody means.
+        ("method.train.chunk_samples: must be 1 to 16777216 field rows per chunk, got 0", |v| {
+            v["method"]["train"]["chunk_samples"] = 0.into()
         }),
         // Not a prior silently left out (its draws counted beyond 64 bits) nor one that never ends.
         ("method.train.prior.points: must be 1 to 65536 points per iteration, got 4611686018427387904", |v| {

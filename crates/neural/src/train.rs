@@ -158,7 +158,7 @@ pub struct TrainConfig {
     pub stop: StopRule,
     /// Empty-space skipping (None: off, as in the dissertation). Default None.
     pub occupancy: Option<OccupancyConfig>,
-    /// Field rows per chunk of rays handed to one thread (at least one ray), at most
+    /// Field rows per chunk of rays handed to one thread (at least one ray), 1 to
     /// [`MAX_CHUNK_SAMPLES`]. Default 256, the
     /// MLP's sweet spot (its activations stay in cache); the `fast` preset's grid field takes
     /// 2048, the dense grid 8192.
@@ -356,10 +356,10 @@ impl TrainConfig {
                 format!("must be 1 to {MAX_RAYS_PER_IMAGE} pixels per image, got {}", self.rays_per_image),
             );
         }
-        if self.chunk_samples > MAX_CHUNK_SAMPLES {
+        if !(1..=MAX_CHUNK_SAMPLES).contains(&self.chunk_samples) {
             return bad(
                 "chunk_samples",
-                format!("must be at most {MAX_CHUNK_SAMPLES} field rows per chunk, got {}", self.chunk_samples),
+                format!("must be 1 to {MAX_CHUNK_SAMPLES} field rows per chunk, got {}", self.chunk_samples),
             );
         }
         self.schedule.validate()?;
