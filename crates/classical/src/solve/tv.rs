@@ -29,11 +29,12 @@ use crate::{Grid, SolveError};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TvParams {
-    /// SART relaxation μ. Default 1.
+    /// SART relaxation μ, in (0, 2). Default 1.
     pub relaxation: f64,
-    /// TV step per descent step, as a fraction of the SART step's size; at most 1. Default 0.2.
+    /// TV step per descent step, as a fraction of the SART step's size; at most 1 (0: plain
+    /// SART). Default 0.2.
     pub tv_weight: f64,
-    /// TV descent steps per iteration; at most 1000. Default 20.
+    /// TV descent steps per iteration; at most 1000 (0: plain SART). Default 20.
     pub tv_steps: usize,
     /// Default: at most 50 iterations, plateau rule on.
     pub stopping: Stopping,

@@ -345,10 +345,12 @@ pub struct ClassicalArgs {
     /// object's faint rim [default: 1].
     #[arg(long, value_name = "VOXELS")]
     pub hull_dilation: Option<usize>,
-    /// Method tv: size of each total-variation step relative to the SART step [default: 0.2].
+    /// Method tv: size of each total-variation step relative to the SART step, at most 1 (0
+    /// turns the steps off, leaving SART) [default: 0.2].
     #[arg(long, value_name = "WEIGHT")]
     pub tv_weight: Option<f64>,
-    /// Method tv: total-variation descent steps per iteration [default: 20].
+    /// Method tv: total-variation descent steps per iteration, at most 1000 (0 leaves SART)
+    /// [default: 20].
     #[arg(long, value_name = "N")]
     pub tv_steps: Option<usize>,
     /// Method tv: how each total-variation step's length follows the SART step's: `data`
