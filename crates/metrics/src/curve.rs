@@ -76,6 +76,7 @@ mod tests {
         let truth = Volume::from_vec(dims, aabb, data);
         let sample = TruthSample::new(&truth);
         assert_eq!(sample.len(), 1000);
+        assert!(!sample.is_empty());
         assert!(sample.nrmse(&truth) < 1e-6);
         let zero = Volume::zeros(dims, aabb);
         assert!((sample.nrmse(&zero) - 1.0).abs() < 1e-6);

@@ -174,6 +174,25 @@ mod tests {
         assert_relative_eq!(nrmse(&[0.0], &tiny[..1]), 1.0, max_relative = 1e-12);
     }
 
+    /// Every way a data range is refused, and the ranges SSIM can use.
+    #[test]
+    fn data_ranges_are_refused_with_their_reason() {
+        let ks = [0.01, 0.03];
+        for r in [0.0, -2.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let why = data_range_problem(r, ks).expect("refused");
+            assert!(why.starts_with("must be positive, got"), "{r}: {why}");
+        }
+        let why = data_range_problem(MAX_DATA_RANGE * 2.0, ks).expect("refused");
+        assert!(why.contains("more than any two float32 values differ by"), "{why}");
+        let why = data_range_problem(1e-80, ks).expect("refused");
+        assert!(why.contains("SSIM's constants"), "{why}");
+        // Without constants (K₁ = K₂ = 0) a tiny range divides nothing by zero.
+        assert_eq!(data_range_problem(1e-80, [0.0, 0.0]), None);
+        for r in [1e-60, 1.0, MAX_DATA_RANGE] {
+            assert_eq!(data_range_problem(r, ks), None, "{r}");
+        }
+    }
+
     #[test]
     fn constant_truth_has_unit_range() {
         assert_eq!(data_range_of(&[2.0; 5]), 1.0);

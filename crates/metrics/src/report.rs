@@ -408,6 +408,77 @@ mod tests {
         assert!(s.global.nrmse.is_finite());
     }
 
+    /// The floor compares sums of squares: a region at 10⁻⁷ of the peak holds 10⁻¹⁴ of the
+    /// truth's energy per voxel and has no NRMSE, although the sum of its values is far above
+    /// 10⁻¹² of the truth's.
+    #[test]
+    fn the_region_floor_compares_energies() {
+        let truth = |p: DVec3| if p.x < 1.0 { 1e-7 } else { blob(p) };
+        let t = Volume::from_fn([24, 8, 8], aabb(), truth);
+        let e = Volume::from_fn([24, 8, 8], aabb(), |p| truth(p) * 1.1);
+        let s = evaluate_volume(&e, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        assert!(s.regions[0].metrics.nrmse.is_nan(), "{}", s.regions[0].metrics.nrmse);
+        assert!((s.regions[1].metrics.nrmse - 0.1).abs() < 1e-6, "{}", s.regions[1].metrics.nrmse);
+    }
+
+    /// A truth that is zero throughout has no NRMSE, and the report says why.
+    #[test]
+    fn an_all_zero_truth_has_no_nrmse_and_says_why() {
+        let t = Volume::zeros([24, 8, 8], aabb());
+        let e = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let s = evaluate_volume(&e, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        assert!(s.global.nrmse.is_nan());
+        assert_eq!(s.global.nrmse_undefined.as_deref(), Some(crate::NRMSE_UNDEFINED));
+        let same = evaluate_volume(&t, &t, None, &VolumeMetricOptions::default()).expect("evaluates");
+        assert!(same.global.nrmse.is_nan() && same.global.nrmse_undefined.is_some());
+    }
+
+    /// A data range that is not a positive number is refused by name, not turned into a
+    /// PSNR or SSIM of NaN.
+    #[test]
+    fn a_data_range_that_is_not_positive_is_refused() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        for r in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let options = VolumeMetricOptions { data_range: Some(r), ..Default::default() };
+            let e = evaluate_volume(&t, &t, None, &options).expect_err("refused").to_string();
+            assert!(e.contains("data range") && e.contains("must be positive"), "{r}: {e}");
+        }
+    }
+
+    /// The data range given is the one PSNR and both SSIMs use, the windowed SSIM included
+    /// (whose own settings carry a range of their own that is ignored).
+    #[test]
+    fn the_data_range_given_is_used_by_every_measure() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let e = Volume::from_fn([24, 8, 8], aabb(), |p| blob(p) * 0.9 + 0.02);
+        let ssim = SsimParams { data_range: Some(1000.0), ..Default::default() };
+        let options = VolumeMetricOptions { data_range: Some(5.0), ssim, regions: vec![] };
+        let s = evaluate_volume(&e, &t, None, &options).expect("evaluates");
+        let with = |r: f64| SsimParams { data_range: Some(r), ..Default::default() };
+        let windowed = ssim_3d(&e.data, &t.data, t.dims, &with(5.0)).expect("fits");
+        assert_eq!(s.global.data_range, 5.0);
+        assert_eq!(s.global.ssim_windowed, Some(windowed));
+        assert_eq!(s.global.ssim_global, ssim_global(&e.data, &t.data, 5.0));
+        assert_eq!(s.global.psnr_db, psnr(&e.data, &t.data, 5.0));
+        let default = ssim_3d(&e.data, &t.data, t.dims, &with(data_range_of(&t.data))).expect("fits");
+        assert!((windowed - default).abs() > 1e-4, "{windowed} against {default}");
+    }
+
+    /// An estimate on the truth's grid size but in another box is resampled too: its voxels are
+    /// not the truth's, though there are as many of them.
+    #[test]
+    fn an_estimate_of_the_same_size_in_another_box_is_resampled() {
+        let t = Volume::from_fn([24, 8, 8], aabb(), blob);
+        let shifted = Aabb::new(DVec3::new(0.5, 0.0, 0.0), DVec3::new(3.5, 1.0, 1.0));
+        let e = Volume::from_fn([24, 8, 8], shifted, blob);
+        let options = VolumeMetricOptions { regions: vec![], ..Default::default() };
+        let s = evaluate_volume(&e, &t, None, &options).expect("evaluates");
+        let by_hand = nrmse(&e.resample(t.dims, t.aabb).data, &t.data);
+        assert_eq!(s.global.nrmse, by_hand);
+        assert!(s.global.nrmse < 0.1, "{}", s.global.nrmse);
+        assert!(nrmse(&e.data, &t.data) > 0.3, "the raw arrays differ: {}", nrmse(&e.data, &t.data));
+    }
+
     #[test]
     fn other_grids_are_resampled_onto_the_truth() {
         let t = Volume::from_fn([24, 8, 8], aabb(), blob);

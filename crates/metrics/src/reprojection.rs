@@ -249,6 +249,47 @@ mod tests {
         assert_eq!(unmasked.metrics.pixels, w * h);
     }
 
+    /// Every frame given is reprojected, in order, and its result names the frame, its camera
+    /// and its time.
+    #[test]
+    fn every_frame_given_is_reprojected_with_its_frame_and_time() {
+        let mut s = scene();
+        s.frames[0].time = Some(0.5);
+        s.frames[1].time = Some(1.5);
+        let truth = Volume::from_fn([24, 24, 24], s.aabb, blob);
+        let opts = ReprojectionOptions { supersample: 1, ..Default::default() };
+        let measured: Vec<(usize, Image)> = [1, 0]
+            .iter()
+            .map(|&i| {
+                let settings = RenderSettings { scale: 3.0, time: 0.0, ..Default::default() };
+                (i, render_image(&truth, &s.frames[i].camera, &s.aabb, &settings).expect("renders"))
+            })
+            .collect();
+        let all = reproject_all(&truth, &s, &measured, &opts).expect("reprojects");
+        let seen: Vec<(usize, Option<f64>, String)> =
+            all.iter().map(|r| (r.metrics.frame, r.metrics.time, r.metrics.label())).collect();
+        assert_eq!(seen, vec![(1, Some(1.5), "cam1".to_string()), (0, Some(0.5), "cam0".to_string())]);
+        assert!(all.iter().all(|r| r.metrics.nrmse == 0.0));
+    }
+
+    /// A data range set in the SSIM settings is the one PSNR and both SSIMs use.
+    #[test]
+    fn a_given_data_range_is_used_by_every_measure() {
+        let data: Vec<f32> = (0..24 * 16).map(|k| ((k * 7) % 11) as f32 * 0.1).collect();
+        let measured = Image { width: 24, height: 16, data };
+        let mut rendered = measured.clone();
+        rendered.data.iter_mut().enumerate().for_each(|(k, v)| *v = *v * 0.9 + (k % 3) as f32 * 0.01);
+        let ssim = SsimParams { data_range: Some(4.0), ..Default::default() };
+        let m = compare_images(&rendered, &measured, None, &ssim).expect("compares");
+        assert_eq!(m.data_range, 4.0);
+        assert_eq!(m.psnr_db, psnr(&rendered.data, &measured.data, 4.0));
+        assert_eq!(m.ssim_global, ssim_global(&rendered.data, &measured.data, 4.0));
+        assert_eq!(m.ssim_windowed, ssim_2d(&rendered.data, &measured.data, 24, 16, &ssim).expect("fits"));
+        let own = compare_images(&rendered, &measured, None, &SsimParams::default()).expect("compares");
+        assert!((own.data_range - 1.0).abs() < 1e-6, "{}", own.data_range);
+        assert!((own.ssim_windowed - m.ssim_windowed).abs() > 1e-4);
+    }
+
     #[test]
     fn image_size_must_match_the_camera() {
         let s = scene();
