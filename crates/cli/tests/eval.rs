@@ -713,3 +713,28 @@ fn a_volume_whose_held_out_views_overflow_floats_is_refused() {
     let out = fluidnerf(&["eval", "huge.npy", "--scene", ".", "--json", "m.json", "--no-reprojection"], d);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// A scene that holds no frame out gets only volume metrics; eval says so, and that a
+/// --supersample given for the held-out views it would render changes nothing.
+#[test]
+fn a_scene_without_held_out_frames_is_warned_to_get_no_reprojection() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let mut scene = make_scene(d, &[]);
+    let v = Volume::from_fn([18, 12, 12], scene.aabb, |p| blob(p, 0.0));
+    fluidnerf_io::volume::write_npy(&d.join("r.npy"), &v).expect("writes recon");
+    let with_holdout = fluidnerf(&["eval", "r.npy", "--scene", ".", "--json", "a.json", "--no-regions"], d);
+    ok_eval(&with_holdout);
+    assert!(!String::from_utf8_lossy(&with_holdout.stderr).contains("holds no frame out"));
+
+    for frame in &mut scene.frames {
+        frame.holdout = false;
+    }
+    fluidnerf_io::scene::save_scene(&scene, d).expect("rewrites scene");
+    let out =
+        fluidnerf(&["eval", "r.npy", "--scene", ".", "--json", "b.json", "--no-regions", "--supersample", "4"], d);
+    ok_eval(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("holds no frame out") && err.contains("--supersample 4 has no effect"), "{err}");
+    assert!(read_json(&d.join("b.json"))["reprojection"].as_array().expect("reprojection").is_empty());
+}

@@ -87,9 +87,9 @@ pub struct Args {
     /// Data range R of PSNR and SSIM for the volume metrics. Default: the truth's max - min.
     #[arg(long)]
     pub data_range: Option<f64>,
-    /// Rays per pixel along each image axis when rendering held-out views (1 to 64).
-    #[arg(long, default_value_t = 2, conflicts_with = "no_reprojection")]
-    pub supersample: usize,
+    /// Rays per pixel along each image axis when rendering held-out views (1 to 64) [default: 2].
+    #[arg(long, conflicts_with = "no_reprojection")]
+    pub supersample: Option<usize>,
     /// Skip the reprojection onto held-out cameras.
     #[arg(long)]
     pub no_reprojection: bool,
@@ -221,11 +221,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              undefined), got {ssim_size}"
         );
     }
-    if !(1..=fluidnerf_core::render::MAX_SUPERSAMPLE).contains(&args.supersample) {
+    let supersample = args.supersample.unwrap_or(2);
+    if !(1..=fluidnerf_core::render::MAX_SUPERSAMPLE).contains(&supersample) {
         bail!(
-            "--supersample must be between 1 and {} rays per pixel along each axis, got {}",
+            "--supersample must be between 1 and {} rays per pixel along each axis, got {supersample}",
             fluidnerf_core::render::MAX_SUPERSAMPLE,
-            args.supersample
         );
     }
     if let Some(r) = args.data_range {
@@ -242,7 +242,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     let ssim = SsimParams { window, ..Default::default() };
-    let reprojection_options = ReprojectionOptions { supersample: args.supersample, step: None, ssim };
+    let reprojection_options = ReprojectionOptions { supersample, step: None, ssim };
 
     let scene_path = super::scene_or_recorded(args.scene.as_deref(), &args.recon)?;
     let scene = fluidnerf_io::scene::load_scene(&scene_path)
@@ -460,6 +460,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if truth.is_empty() && holdouts.is_empty() {
         bail!(
             "nothing to evaluate: the scene {} has no ground truth and no held-out frames (give --truth)",
+            scene_path.display()
+        );
+    }
+    // Without held-out frames the table simply had no reprojection rows, and a --supersample
+    // given for them was dropped unannounced.
+    if holdouts.is_empty() && !args.no_reprojection {
+        let unused = match args.supersample {
+            Some(n) => format!("; --supersample {n} has no effect"),
+            None => String::new(),
+        };
+        log::warn!(
+            "the scene {} holds no frame out (`\"holdout\": true`): only the volume is scored, no reprojection{unused}",
             scene_path.display()
         );
     }
