@@ -50,8 +50,8 @@ pub struct Args {
     /// Output directory; created if missing.
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Voxels along the longest side of the export box (cubic cells). Default: a volume's own
-    /// grid when the box is unchanged, else 128.
+    /// Voxels along the longest side of the export box (cubic cells), 1 to 4096. Default: a
+    /// volume's own grid when the box is unchanged, else 128.
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Export box in world units as `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX`. Default: the
@@ -64,7 +64,7 @@ pub struct Args {
     pub time: Option<f64>,
     /// A trained field's voxel is the mean of N³ points spread evenly over it (its cell
     /// average, a box filter against aliasing when the field holds detail finer than a voxel);
-    /// 1 samples the voxel's centre.
+    /// 1 samples the voxel's centre; at most 8.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=8))]
     pub average: u16,
     /// Write `volume.npy` (shape `(nz, ny, nx)`, f32).

@@ -136,7 +136,7 @@ pub struct Args {
     #[arg(short, long, value_enum)]
     pub method: Option<MethodArg>,
     /// Voxels along the longest side of the reconstruction box for the output volume (and the
-    /// working grid of voxel methods); cells are cubic [default: 128].
+    /// working grid of voxel methods), 2 to 4096; cells are cubic [default: 128].
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Seed for every random choice; the same seed gives the same result [default: 0].

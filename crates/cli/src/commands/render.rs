@@ -58,15 +58,15 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', value_name = "INDEX")]
     pub camera: Vec<usize>,
     /// Render N views on a circle about the flow axis through the box centre, flow pointing
-    /// right, and write them as a turntable GIF. The axis is --flow-axis, else the scene's
-    /// `flow_axis`, else +x.
+    /// right, and write them as a turntable GIF; 1 to 3600 views. The axis is --flow-axis, else
+    /// the scene's `flow_axis`, else +x.
     #[arg(long, value_name = "N")]
     pub orbit: Option<usize>,
     /// The flow direction x,y,z (world) the orbit circles [default: the scene's `flow_axis`,
     /// else +x].
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, requires = "orbit")]
     pub flow_axis: Option<Vec<f64>>,
-    /// Width of orbit views in pixels (the height follows the box's cross-section).
+    /// Width of orbit views in pixels, 16 to 16384 (the height follows the box's cross-section).
     #[arg(long, default_value_t = 320, requires = "orbit")]
     pub width: u32,
     /// Image format of the views.

@@ -91,17 +91,17 @@ pub struct Args {
     /// Training camera counts, comma-separated, each 2 to 999 [default: the preset's].
     #[arg(long, value_delimiter = ',')]
     pub cameras: Option<Vec<usize>>,
-    /// Image noise levels (fraction of each image's maximum), comma-separated [default: the
-    /// preset's].
+    /// Image noise levels (fraction of each image's maximum, in [0, 1)), comma-separated
+    /// [default: the preset's].
     #[arg(long, value_delimiter = ',')]
     pub noise: Option<Vec<f64>>,
     /// Camera layouts, comma-separated [default: the preset's].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub layouts: Option<Vec<LayoutChoice>>,
-    /// Image side in pixels [default: 64, smoke 24].
+    /// Image side in pixels, 8 to 1024 [default: 64, smoke 24].
     #[arg(long)]
     pub pixels: Option<u32>,
-    /// Truth voxels along the longest side, also the output resolution [default: 64,
+    /// Truth voxels along the longest side, also the output resolution, 4 to 512 [default: 64,
     /// smoke 16].
     #[arg(long)]
     pub resolution: Option<usize>,

@@ -199,8 +199,9 @@ pub struct Args {
     pub full_scale_fraction: Option<f64>,
 
     /// Record like a laboratory rig: per-camera gains, a background, dark noise, background
-    /// frames and 8-bit sRGB JPEG images (the `real-like` presets turn it on; `false` turns it
-    /// off, giving the same data set as linear 16-bit PNG counts).
+    /// frames and 8-bit sRGB JPEG images (the `real-like` presets turn it on, and so does any
+    /// option of this section given without it; `false` turns it off, giving the same data set
+    /// as linear 16-bit PNG counts, and refuses those options).
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL", help_heading = "Real-like recording")]
     pub real_like: Option<bool>,
     /// Camera gains drawn uniformly in 1 ± this, then scaled to mean 1 over the training
