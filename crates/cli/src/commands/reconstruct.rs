@@ -375,15 +375,17 @@ pub struct ClassicalArgs {
 
 /// Options of the neural methods.
 #[derive(clap::Args, Debug)]
-#[command(next_help_heading = "Neural methods (fluidnerf, fast and the time-resolved ones)")]
+#[command(next_help_heading = "Neural methods (fluidnerf, fast, voxel, hybrid and the time-resolved ones)")]
 pub struct NeuralArgs {
     /// Named configuration: faithful (Table 5.1: 8 × 256 MLP, L 8, ReLU, N_c = N_f = 128),
     /// ch7 (as faithful with N_c = N_f = 64), experimental (Table 8.3), fast (hash grid + tiny
-    /// MLP + empty-space skipping), dense (voxel grid + skipping); time-resolved: tr-faithful,
-    /// tr-table-5.2, tr-experimental, tr-fast, tr-small, static-swish, static-small. With
-    /// --config it replaces the configured field, training and windows, and keeps the start,
-    /// --holdout-times and --time-step [default: faithful for fluidnerf, fast for fast,
-    /// tr-faithful, tr-fast, static-swish].
+    /// MLP + empty-space skipping), dense (voxel grid + skipping), voxel (dense with a
+    /// total-variation prior); time-resolved: tr-faithful, tr-table-5.2, tr-experimental,
+    /// tr-fast, tr-small, static-swish, static-small (the time-resolved methods take the static
+    /// ones too). With --config it replaces the configured field, training and windows, and
+    /// keeps the start, --holdout-times and --time-step [default: faithful for fluidnerf, fast
+    /// for fast and hybrid, voxel for voxel, tr-faithful for tr-fluidnerf, tr-fast for tr-fast,
+    /// static-swish for static-per-frame].
     #[arg(long)]
     pub preset: Option<String>,
     /// Random pixels per training image per iteration (N_pix/img) [default: the preset's].
