@@ -392,7 +392,13 @@ fn cases() -> Vec<Case> {
             "gain rounds for a neural method",
             None,
             &["reconstruct", "SCENE", "-o", "OUT", "--method", "fast", "--gains", "fit", "--gain-rounds", "2"],
-            "--gain-rounds do(es) not apply to --method fast",
+            "--gain-rounds does not apply to --method fast",
+        ),
+        c(
+            "two neural options for a voxel method",
+            None,
+            &["reconstruct", "SCENE", "-o", "OUT", "--method", "asart", "--rays-per-image", "9", "--fine-samples", "0"],
+            "--rays-per-image, --fine-samples do not apply to --method asart",
         ),
         // Both turned the plateau rule off, as 0 does, and the run went on to the cap.
         c(

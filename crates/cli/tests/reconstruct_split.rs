@@ -217,7 +217,7 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
     let out = reconstruct(d, "x", &["--frames", "3..2"]);
     assert!(!out.status.success() && stderr(&out).contains("the range is empty"), "{}", stderr(&out));
     let out = fluidnerf(d, &["reconstruct", "scene", "-o", "y", "--method", "asart", "--window-index", "0"]);
-    assert!(!out.status.success() && stderr(&out).contains("--window-index do(es) not apply to --method asart"));
+    assert!(!out.status.success() && stderr(&out).contains("--window-index does not apply to --method asart"));
     // An overlap without windows to overlap was recorded and ignored without a word.
     let out =
         fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "tr-fast", "--window", "0", "--overlap", "1"]);
@@ -253,7 +253,7 @@ fn independent_windows_run_in_any_order_and_misuse_is_refused() {
     // Nor does a time step apply to static fields, one per frame.
     let out = fluidnerf(d, &["reconstruct", "scene", "-o", "z", "--method", "static-per-frame", "--time-step", "0.5"]);
     let e = stderr(&out);
-    assert!(!out.status.success() && e.contains("--time-step do(es) not apply to --method static-per-frame"), "{e}");
+    assert!(!out.status.success() && e.contains("--time-step does not apply to --method static-per-frame"), "{e}");
     assert!(!d.join("z").exists(), "a refused run wrote");
 }
 

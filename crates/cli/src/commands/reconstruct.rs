@@ -562,7 +562,8 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
     }
     wrong.dedup();
     if !wrong.is_empty() {
-        bail!("{} do(es) not apply to --method {method}", wrong.join(", "));
+        let verb = if wrong.len() == 1 { "does" } else { "do" };
+        bail!("{} {verb} not apply to --method {method}", wrong.join(", "));
     }
     Ok(())
 }
