@@ -1838,3 +1838,18 @@ fn a_calibration_is_never_replaced_by_the_scene_imported_from_it() {
     assert_eq!(std::fs::read(&file).expect("kept"), before);
     assert!(!src.join("import.json").exists());
 }
+
+/// --bottom-left-origin turns round the v of projection matrices only; given with another
+/// calibration it was accepted and ignored.
+#[test]
+fn bottom_left_origin_without_projection_matrices_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (calib, images) = rig_with_stills(dir.path());
+    let out = dir.path().join("scene");
+    let args = ["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-1,-1,-1,1,1,1", "-o", s(&out)];
+    let o = fluidnerf(&[&args[..], &["--bottom-left-origin"]].concat());
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("--bottom-left-origin") && e.contains("--projection"), "{e}");
+    assert!(!out.exists(), "a refused import creates nothing");
+    assert!(fluidnerf(&args).status.success(), "the same import without the flag succeeds");
+}

@@ -1041,6 +1041,14 @@ fn aabb_text(a: &Aabb) -> String {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // clap's `requires` lets a flag through when the argument it requires is absent but another
+    // of its group is given: --bottom-left-origin was ignored with --opencv or --transforms.
+    if args.bottom_left_origin && args.projection.is_none() {
+        anyhow::bail!(
+            "--bottom-left-origin flips the v of --projection's matrices; the other calibrations state \
+             their own pixel convention: leave it out"
+        );
+    }
     let mut created = Created::default();
     let result = import(&args, &mut created);
     if result.is_err() {
