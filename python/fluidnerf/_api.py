@@ -543,8 +543,9 @@ def build_config(
     also be a dict
     such as ``{"name": "asart", "params": {"relaxation": 0.3}}``, merged into the method's
     defaults. Every other keyword is a ``RunConfig`` key (``resolution``, ``seed``,
-    ``stopping``, ``checkpoint_every``, ``eval_every``, ``memory_limit_gib``); dicts are merged
-    key by key, e.g. ``stopping={"max_iterations": 50}``. The result is validated by the
+    ``stopping``, ``checkpoint_every``, ``eval_every``, ``memory_limit_gib``, ``gains``); dicts
+    are merged key by key, e.g. ``stopping={"max_iterations": 50}`` or
+    ``gains={"mode": "fit"}``. The result is validated by the
     library: an unknown key or a value out of range raises :class:`FluidNerfError` with the
     message ``config.json`` would give.
     """
