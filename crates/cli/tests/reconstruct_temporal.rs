@@ -318,6 +318,36 @@ fn a_time_step_given_to_the_grid_field_is_reported_unused() {
     assert_eq!(report(&d.join("default"))["method"], "tr-fast");
 }
 
+/// A held-out time at which the scene has no frame holds no image out: the run says so, and
+/// still writes a volume there; a frame's time gets no such warning.
+#[test]
+fn a_held_out_time_matching_no_frame_is_warned_about() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth =
+        "synth -q --preset jet-tr60 --cameras 4 --pixels 16 --resolution 12 --model pinhole --times 14,15,16 -o scene";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    let run = |name: &str, held: &str| {
+        let args = format!(
+            "reconstruct scene -o {name} --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 \
+             --rays-per-image 16 --holdout-times {held}"
+        );
+        let out = fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>());
+        ok(&out);
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let warning = "held-out time 15.5 matches no frame of the scene";
+    assert!(run("between", "15.5").contains(warning));
+    let times: Vec<f64> = report(&d.join("between"))["volumes"]
+        .as_array()
+        .expect("volumes")
+        .iter()
+        .map(|v| v["time"].as_f64().expect("time"))
+        .collect();
+    assert_eq!(times, [14.0, 15.0, 15.5, 16.0]);
+    assert!(!run("frame", "15").contains("matches no frame"));
+}
+
 /// `--start-method tv` on a time-resolved run: SART-TV runs on each instant of the window that
 /// starts afresh, alone, and the window's field starts from those volumes, so after a few
 /// iterations every instant scores about as well as its own SART-TV volume and better than a

@@ -245,6 +245,17 @@ fn setup(
     if let Some(hint) = &measured.gain_hint {
         session.warn(hint);
     }
+    // A held-out time that matches no frame holds no image out: a mistyped time trained on
+    // every image, unannounced.
+    for &h in &spec.holdout_times {
+        if !problem.views.iter().chain(&problem.holdout).any(|v| same_time(v.time, h)) {
+            session.warn(&format!(
+                "held-out time {} matches no frame of the scene, so no image is held out there; a volume is \
+                 still written at that time",
+                num(h)
+            ));
+        }
+    }
     // Held-out times leave training with their masks.
     let held = |t: f64| spec.holdout_times.iter().any(|&h| same_time(h, t));
     let keep = |views: &[fluidnerf_neural::train::View], list: Vec<Option<Vec<bool>>>| -> Vec<Option<Vec<bool>>> {

@@ -456,7 +456,8 @@ pub struct TemporalArgs {
     pub no_warm_start: Option<bool>,
     /// Frame times whose images are NOT trained on (comma separated, the scene's time unit);
     /// volumes and metrics are still produced there. A time whose every frame the scene holds
-    /// out (`"holdout": true`) is treated as one of them, with a warning.
+    /// out (`"holdout": true`) is treated as one of them, with a warning; a time at which the
+    /// scene has no frame holds no image out and only adds a volume there, with a warning.
     #[arg(long, value_delimiter = ',')]
     pub holdout_times: Option<Vec<f64>>,
     /// Frame spacing Δt of the networks' t' = (t − t₀)/Δt [default: the smallest gap between
