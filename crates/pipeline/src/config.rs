@@ -21,8 +21,9 @@
 //!
 //! `method` is tagged by `name`; its other keys are that method's parameters: for the voxel
 //! methods `projector` ([`ProjectorConfig`]) and `params` (the solver's parameters); for the
-//! static neural methods `preset`, `field` and `train`; for the time-resolved ones also
-//! `windows`, `holdout_times` and `time_step`. Unknown keys are refused with their path.
+//! static neural methods `preset`, `field`, `train` and, when the field starts from another
+//! reconstruction (always for `hybrid`), `start` ([`StartSpec`]); for the time-resolved ones
+//! also `windows`, `holdout_times` and `time_step`. Unknown keys are refused with their path.
 //!
 //! The [`StoppingPolicy`] is applied on top of every method's own parameters, so one policy
 //! stops classical and neural methods alike ([`RunConfig::effective_method`]).
