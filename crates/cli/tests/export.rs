@@ -383,3 +383,23 @@ fn slice_styles_without_slices_are_refused() {
     assert_eq!(settings["colormap"], "magma");
     assert_eq!(settings["value_label"], "emission E [a.u.]");
 }
+
+/// The diverging map is refused for the field's slices, and an unknown map's message lists the
+/// maps that are accepted: it listed "diverging" among them.
+#[test]
+fn the_colour_maps_offered_are_those_accepted() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let (src, out) = (src.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let err = |map: &str| {
+        let o = fluidnerf(&["export", src, "--out", out, "--colormap", map]);
+        assert!(!o.status.success(), "{map}");
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let unknown = err("jet");
+    assert!(unknown.contains("expected one of viridis, magma, inferno, cividis, gray\n"), "{unknown}");
+    let diverging = err("diverging");
+    assert!(diverging.contains("kept for differences") && diverging.contains("viridis"), "{diverging}");
+    assert!(!dir.path().join("out").exists());
+}

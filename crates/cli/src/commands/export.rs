@@ -96,7 +96,7 @@ pub struct Args {
     #[arg(long, value_enum, value_delimiter = ',', default_value = "ply", requires = "isosurface")]
     pub mesh: Vec<MeshFormat>,
     /// Colour map of the slices: viridis, magma, inferno, cividis, gray [default: viridis].
-    #[arg(long)]
+    #[arg(long, value_parser = parse_field_colormap)]
     pub colormap: Option<Colormap>,
     /// Colour-bar label of the slices, with the field's unit [default: emission E [a.u.]].
     #[arg(long)]
@@ -235,6 +235,19 @@ fn parse_slice(s: &str) -> anyhow::Result<(Axis, f64)> {
     Ok((axis, fraction))
 }
 
+/// `--colormap`: a sequential map; the diverging one is kept for the comparisons' differences.
+fn parse_field_colormap(s: &str) -> Result<Colormap, String> {
+    let sequential: Vec<&str> = Colormap::ALL.iter().filter(|c| !c.is_diverging()).map(|c| c.name()).collect();
+    match s.parse::<Colormap>() {
+        Ok(c) if !c.is_diverging() => Ok(c),
+        Ok(_) => Err(format!(
+            "the diverging map is kept for differences; choose a sequential map for the field: {}",
+            sequential.join(", ")
+        )),
+        Err(_) => Err(format!("unknown colour map {s:?}; expected one of {}", sequential.join(", "))),
+    }
+}
+
 /// The file names of the outputs an earlier export listed in its `export.json` (`settings`),
 /// those only that an export writes: with --force, the ones not written again would be left
 /// beside the new outputs as if `export.json` described them.
@@ -316,9 +329,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let colormap = args.colormap.unwrap_or(Colormap::Viridis);
     let value_label = args.value_label.clone().unwrap_or_else(|| "emission E [a.u.]".into());
-    if colormap.is_diverging() {
-        bail!("--colormap diverging is kept for differences; choose a sequential map for the field");
-    }
     let export_box = match &args.bbox {
         Some(text) => {
             let b: Vec<f64> = text
