@@ -369,7 +369,8 @@ impl RunReport {
             StopReason::HeldOutPatience => "held-out loss stopped improving",
             StopReason::Interrupted => "interrupted",
         };
-        let mut s = format!("{}: {} iterations ({reason}), {:.1} s", self.method, self.iterations, self.train_time_s);
+        let noun = if self.iterations == 1 { "iteration" } else { "iterations" };
+        let mut s = format!("{}: {} {noun} ({reason}), {:.1} s", self.method, self.iterations, self.train_time_s);
         if self.kept_iteration != self.iterations {
             s += &format!(", kept iteration {}", self.kept_iteration);
         }

@@ -611,8 +611,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         how.push_str(", footprint projector");
     }
     println!(
-        "rendered {} views of {} ({}{how}); brightest pixel {peak:.4}",
+        "rendered {} {} of {} ({}{how}); brightest pixel {peak:.4}",
         views.len(),
+        if views.len() == 1 { "view" } else { "views" },
         args.recon.display(),
         source.describe()
     );
