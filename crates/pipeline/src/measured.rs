@@ -84,6 +84,30 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
             }
         }
     });
+    // `auto` that fits nothing leaves the fit's settings unused: say so when they were set.
+    let gain_hint = gain_hint.or_else(|| {
+        let d = GainConfig::default();
+        let set: Vec<&str> = [
+            ("gains.offset (--gain-offset)", gains.offset != d.offset),
+            ("gains.every (--gain-every)", gains.every.is_some()),
+            ("gains.rounds (--gain-rounds)", gains.rounds != d.rounds),
+        ]
+        .into_iter()
+        .filter_map(|(name, set)| set.then_some(name))
+        .collect();
+        let why = match mode {
+            GainMode::None => {
+                "the training images' totals agree at every time, so gains auto fits none: they are not used; give \
+                 --gains fit (gains.mode \"fit\") to fit gains anyway"
+            }
+            GainMode::Balance => {
+                "a time-resolved run fits no gains (gains auto balances its images instead): they are not used"
+            }
+            _ => return None,
+        };
+        (gains.mode == GainMode::Auto && !set.is_empty())
+            .then(|| format!("{} set how gains are fitted, and {why} (docs/real-data.md)", set.join(", ")))
+    });
     let auto_why = spread
         .filter(|_| gains.mode == GainMode::Auto)
         .map(|(i, ratio)| format!("{} holds {ratio:.2}× the median total of its time", frame_label(scene, i)));
