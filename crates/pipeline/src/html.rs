@@ -250,16 +250,16 @@ pub fn build_report(
     Ok(report)
 }
 
-/// Writes `report.html` of a run whose results are in `dir` and whose report is `report`
-/// (about to be written as `report.json`).
-pub(crate) fn write_run_html(
+/// The `report.html` of a run whose results are in `dir` and whose report is `report` (about
+/// to be written as `report.json`); None for a run without volumes.
+pub(crate) fn run_html(
     dir: &crate::RunDir,
     scene: &Scene,
     report: &RunReport,
     truth: &[(Option<f64>, Volume)],
     preprocessed: Option<&[Image]>,
-) -> Result<(), PipelineError> {
-    let Some(first) = report.volumes.first() else { return Ok(()) };
+) -> Result<Option<Report>, PipelineError> {
+    let Some(first) = report.volumes.first() else { return Ok(None) };
     let volume = fluidnerf_io::volume::read_npy(&dir.path(&first.file), scene.aabb)?;
     let label = report.method.label();
     let config = crate::RunConfig::read(&dir.config()).ok();
@@ -330,8 +330,7 @@ pub(crate) fn write_run_html(
             Err(e) => log::warn!("report.html: no camera figure: {e}"),
         }
     }
-    fluidnerf_viz::report::write_report_html(&dir.report_html(), &html)?;
-    Ok(())
+    Ok(Some(html))
 }
 
 /// Frames shown in the camera figure of `report.html`.

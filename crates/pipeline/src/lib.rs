@@ -559,9 +559,9 @@ impl<T> BestHoldout<T> {
     }
 }
 
-/// Finishes a run: `report.html` (a failure there is a warning), then `report.json`, the
+/// Finishes a run: `report.html` (a failure to draw it is a warning, to write it an error), then `report.json`, the
 /// completion marker. `measured` holds the images the run read, for the report's camera figure
-/// ([`html::write_run_html`]).
+/// ([`html::run_html`]).
 pub(crate) fn finish(
     scene: &Scene,
     dir: &RunDir,
@@ -572,9 +572,15 @@ pub(crate) fn finish(
 ) -> Result<RunReport, PipelineError> {
     report.warnings = session.warnings.clone();
     let preprocessed = measured.map(|m| m.preprocessed(html::CAMERA_FIGURE_FRAMES));
-    if let Err(e) = html::write_run_html(dir, scene, &report, truth, preprocessed.as_deref()) {
-        session.warn(&format!("could not write {}: {e}", dir.report_html().display()));
-        report.warnings = session.warnings.clone();
+    match html::run_html(dir, scene, &report, truth, preprocessed.as_deref()) {
+        // A report that cannot be drawn is a warning; one that cannot be written (a full disk,
+        // a folder that turned read-only) fails the run like any other output it cannot write.
+        Ok(Some(html)) => fluidnerf_viz::report::write_report_html(&dir.report_html(), &html)?,
+        Ok(None) => {}
+        Err(e) => {
+            session.warn(&format!("could not write {}: {e}", dir.report_html().display()));
+            report.warnings = session.warnings.clone();
+        }
     }
     dir.write_json("report.json", &report)?;
     Ok(report)
