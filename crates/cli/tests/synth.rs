@@ -136,6 +136,21 @@ fn writes_a_scene_that_reads_back() {
     assert_eq!(std::fs::read_to_string(mine.join("images/cam000.png")).expect("kept"), "mine");
 }
 
+/// Images too large for memory were refused with advice to lower the resolution, the cameras
+/// or the time steps: not the image size, which was what took the memory. The refusal says how
+/// much the truth and the images each need.
+#[test]
+fn a_memory_refusal_names_what_takes_the_memory() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("big");
+    let o = run_small(&dir, &["--pixels", "1000000", "--resolution", "8"]);
+    let (out, err) = text(&o);
+    assert!(!o.status.success(), "should fail: {out}");
+    assert!(err.contains("MiB for the images (their pixels"), "{err}");
+    assert!(err.contains(" 0 MiB for the truth"), "{err}");
+    assert!(!dir.exists() || !dir.join("transforms.json").exists(), "nothing is written");
+}
+
 #[test]
 fn bad_settings_fail_before_any_work() {
     let tmp = tempfile::tempdir().expect("tempdir");

@@ -20,10 +20,11 @@ pub enum SynthError {
     BoxBetweenPixels { index: usize, name: String },
     /// The data set would not fit in memory.
     #[error(
-        "these settings need about {needed_mib} MiB of memory but only {available_mib} MiB are available; \
-         lower the resolution, the number of cameras or the number of time steps"
+        "these settings need about {needed_mib} MiB of memory but only {available_mib} MiB are available: \
+         {truth_mib} MiB for the truth (the resolution and the number of time steps) and {images_mib} MiB \
+         for the images (their pixels, the number of cameras and of time steps); lower those"
     )]
-    OutOfMemory { needed_mib: u64, available_mib: u64 },
+    OutOfMemory { needed_mib: u64, available_mib: u64, truth_mib: u64, images_mib: u64 },
     /// No preset of this name.
     #[error("unknown preset `{0}`; see the list of presets")]
     UnknownPreset(String),

@@ -224,11 +224,15 @@ impl SynthSettings {
     /// Refuses settings whose [`Self::memory_bytes`] exceed the memory available now, for a
     /// truth grid of `voxels` cells: the allocation would abort the program part-way.
     pub fn check_memory(&self, voxels: u64) -> Result<(), SynthError> {
-        let needed = self.memory_bytes(voxels);
+        let (truth, images) = self.memory_parts(voxels);
+        let needed = truth.saturating_add(images);
         match available_memory_bytes() {
-            Some(avail) if needed > avail => {
-                Err(SynthError::OutOfMemory { needed_mib: needed >> 20, available_mib: avail >> 20 })
-            }
+            Some(avail) if needed > avail => Err(SynthError::OutOfMemory {
+                needed_mib: needed >> 20,
+                available_mib: avail >> 20,
+                truth_mib: truth >> 20,
+                images_mib: images >> 20,
+            }),
             _ => Ok(()),
         }
     }
@@ -236,16 +240,25 @@ impl SynthSettings {
     /// Peak memory of [`generate`] in bytes (truth volumes, emitters, images and per-thread
     /// accumulators), for a truth grid of `voxels` cells.
     pub fn memory_bytes(&self, voxels: u64) -> u64 {
+        let (truth, images) = self.memory_parts(voxels);
+        truth.saturating_add(images)
+    }
+
+    /// [`Self::memory_bytes`] in two parts: the truth's (volumes and emitters) and the
+    /// images' (images and per-thread accumulators), so that a refusal can say which is large.
+    fn memory_parts(&self, voxels: u64) -> (u64, u64) {
         let times = self.time_steps().len() as u64;
         let [w, h] = self.lens.resolution;
         let px = w as u64 * h as u64;
         let frames = self.rig.count() as u64 * times;
         let threads = rayon::current_num_threads() as u64;
-        let mut bytes = times * voxels * 4 + 2 * frames * px * 4;
+        let mut truth = times.saturating_mul(voxels).saturating_mul(4);
+        let mut images = frames.saturating_mul(px).saturating_mul(8);
         if let ImageModel::ThinLens(_) = self.image {
-            bytes += voxels * 16 + 4 * threads * px * 8;
+            truth = truth.saturating_add(voxels.saturating_mul(16));
+            images = images.saturating_add(threads.saturating_mul(px).saturating_mul(32));
         }
-        bytes
+        (truth, images)
     }
 }
 
