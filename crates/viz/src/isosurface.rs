@@ -173,10 +173,22 @@ fn triangulate_case(mask: usize) -> Vec<[u8; 3]> {
 /// The isosurface `volume = iso` by marching cubes over the cell centres (see the module docs
 /// for conventions). Vertices on shared grid edges are shared, so the mesh is indexed.
 pub fn marching_cubes(volume: &Volume, iso: f32) -> TriMesh {
+    marching_cubes_within(volume, iso, u64::MAX).unwrap_or_default()
+}
+
+/// Bytes a mesh under construction holds per vertex (its position and its entry in the table
+/// of shared edges, which grows by doubling) and per triangle.
+const VERTEX_BYTES: u64 = 12 + 48;
+const TRIANGLE_BYTES: u64 = 12;
+
+/// [`marching_cubes`], given up (None) as soon as the mesh would take more than `max_bytes` of
+/// memory: a surface through a noisy field crosses nearly every cell of a fine grid, and its
+/// mesh can need many times the volume's memory, which a failed allocation aborts on.
+pub fn marching_cubes_within(volume: &Volume, iso: f32, max_bytes: u64) -> Option<TriMesh> {
     let [nx, ny, nz] = volume.dims;
     let mut mesh = TriMesh::default();
     if nx < 2 || ny < 2 || nz < 2 {
-        return mesh;
+        return Some(mesh);
     }
     let table = table();
     // Vertex of each crossed grid edge, keyed by (lower grid point index) * 3 + axis.
@@ -223,10 +235,17 @@ pub fn marching_cubes(volume: &Volume, iso: f32) -> TriMesh {
                     }
                     mesh.triangles.push(idx);
                 }
+                // Doubling containers may take twice what they hold while they grow.
+                let held = (mesh.vertices.len() as u64 * VERTEX_BYTES)
+                    .saturating_add(mesh.triangles.len() as u64 * TRIANGLE_BYTES)
+                    .saturating_mul(2);
+                if held > max_bytes {
+                    return None;
+                }
             }
         }
     }
-    mesh
+    Some(mesh)
 }
 
 #[cfg(test)]

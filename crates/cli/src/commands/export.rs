@@ -510,6 +510,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             fluidnerf_pipeline::rundir::refuse_input_file(&p, file, what)?;
         }
     }
+    // The mesh before any file: a surface whose mesh memory cannot hold is refused with nothing
+    // written (a surface through noise crosses nearly every cell, and a failed allocation aborts).
+    let mesh = match args.isosurface {
+        Some(iso) => {
+            let limit = fluidnerf_pipeline::available_memory().unwrap_or(u64::MAX);
+            let Some(mesh) = fluidnerf_viz::marching_cubes_within(&volume, iso, limit) else {
+                bail!(
+                    "--isosurface {}: the surface crosses so many of the {} voxels that its mesh would need more than \
+                     the {} of memory available; give a value nearer the field's extremes, or a lower --resolution",
+                    num(iso),
+                    volume.data.len(),
+                    fluidnerf_pipeline::bytes(limit)
+                );
+            };
+            Some((iso, mesh))
+        }
+        None => None,
+    };
     super::create_output_folder(out)?;
 
     let [nx, ny, nz] = volume.dims;
@@ -545,8 +563,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .with_context(|| format!("writing {}", p.display()))?;
         }
     }
-    if let Some(iso) = args.isosurface {
-        let mesh = fluidnerf_viz::marching_cubes(&volume, iso);
+    if let Some((iso, mesh)) = mesh {
         for m in &args.mesh {
             let (p, r) = match m {
                 MeshFormat::Ply => {
