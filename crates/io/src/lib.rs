@@ -108,6 +108,34 @@ pub fn atomic_write_seekable(
     Ok(())
 }
 
+/// What fills one file of [`atomic_write_together`].
+pub type FillFile<'a> = Box<dyn FnOnce(&mut dyn Write) -> std::io::Result<()> + 'a>;
+
+/// [`atomic_write`] of several files that belong together (a raw volume and its sidecar): every
+/// file is filled beside its target first, and only once all are complete are they renamed
+/// into place, in order. A failure while filling (a full disk) leaves every target as it was,
+/// never a new file beside an earlier one it does not match.
+pub fn atomic_write_together<'a>(files: Vec<(&'a Path, FillFile<'a>)>) -> Result<(), IoError> {
+    let mut staged = Vec::with_capacity(files.len());
+    for (path, write) in files {
+        let dir = folder_of(path);
+        std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
+        let tmp = temporary_file_in(dir)?;
+        let unfinished = Unfinished::register(tmp.path());
+        let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
+        {
+            let mut w = BufWriter::new(tmp.as_file());
+            write(&mut w).map_err(io_err)?;
+            w.flush().map_err(io_err)?;
+        }
+        staged.push((path, tmp, unfinished));
+    }
+    for (path, tmp, _unfinished) in staged {
+        tmp.persist(path).map_err(|e| IoError::Io { path: path.to_path_buf(), error: e.error })?;
+    }
+    Ok(())
+}
+
 /// The temporary files of the [`atomic_write`]s under way, in any thread.
 static UNFINISHED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 

@@ -481,11 +481,15 @@ pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
         dtype: "<f4".into(),
         order: "x fastest: index (k * ny + j) * nx + i".into(),
     };
-    atomic_write(path, |w| write_f32_le(w, &volume.data))?;
     let json_path = raw_sidecar_path(path);
     let json =
         serde_json::to_string_pretty(&sidecar).map_err(|e| IoError::Json { path: json_path.clone(), error: e })?;
-    atomic_write(&json_path, |w| w.write_all(json.as_bytes()))
+    // Both complete before either replaces an earlier pair: the volume written and its sidecar
+    // not (a full disk) left new data beside the earlier sidecar, read with its grid and box.
+    crate::atomic_write_together(vec![
+        (json_path.as_path(), Box::new(|w: &mut dyn Write| w.write_all(json.as_bytes()))),
+        (path, Box::new(|w: &mut dyn Write| write_f32_le(w, &volume.data))),
+    ])
 }
 
 /// Refuses a volume read from `path` that holds a NaN or infinite voxel, naming the first.
