@@ -136,6 +136,25 @@ fn writes_a_scene_that_reads_back() {
     assert_eq!(std::fs::read_to_string(mine.join("images/cam000.png")).expect("kept"), "mine");
 }
 
+/// A scene replaced with --force whose writing failed part way (a full disk; here a folder in
+/// one image's place) kept its `transforms.json` beside a mix of its own images and new ones,
+/// and every command read it as a valid scene. The failed rewrite leaves no scene file.
+#[test]
+fn a_replacement_that_fails_part_way_leaves_no_scene_that_reads() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("s");
+    let o = run_small(&dir, &[]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let image = dir.join("images/cam003.png");
+    std::fs::remove_file(&image).expect("removes an image");
+    std::fs::create_dir_all(image.join("x")).expect("a folder in its place");
+    let o = run_small(&dir, &["--force", "--seed", "4", "--noise", "0.05"]);
+    let (out, err) = text(&o);
+    assert!(!o.status.success(), "should fail: {out}");
+    assert!(err.contains("cam003.png"), "{err}");
+    assert!(!dir.join("transforms.json").exists(), "the earlier scene file describes other images");
+}
+
 /// Images too large for memory were refused with advice to lower the resolution, the cameras
 /// or the time steps: not the image size, which was what took the memory. The refusal says how
 /// much the truth and the images each need.

@@ -76,6 +76,13 @@ pub fn refuse_truth_among_outputs(truth: &Path, folder: &Path, option: &str) -> 
 pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError> {
     let earlier = synthesised_files(folder);
     std::fs::create_dir_all(folder).map_err(|e| IoError::io(folder, "scene folder", e))?;
+    // The scene file being replaced goes first: the new images replace its images one by one,
+    // and a write that fails part way (a full disk) left it describing a mix of its own images
+    // and new ones, which every command read as a valid scene.
+    let scene_file = folder.join("transforms.json");
+    if scene_file.is_file() {
+        std::fs::remove_file(&scene_file).map_err(|e| IoError::io(&scene_file, "scene file", e))?;
+    }
     for f in &syn.frames {
         let path = folder.join(syn.image_path(f));
         match &syn.real {
