@@ -155,6 +155,21 @@ fn a_replacement_that_fails_part_way_leaves_no_scene_that_reads() {
     assert!(!dir.join("transforms.json").exists(), "the earlier scene file describes other images");
 }
 
+/// A scene whose own record cannot be written (here a folder where its preview goes) leaves no
+/// scene file: the folder loaded as a scene although synth had failed, and without synth.json
+/// it could not be rerun or replaced cleanly.
+#[test]
+fn a_scene_whose_record_cannot_be_written_does_not_load() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("s");
+    std::fs::create_dir_all(dir.join("preview.png/x")).expect("a folder where the preview goes");
+    let o = run_small(&dir, &["--force"]);
+    let (out, err) = text(&o);
+    assert!(!o.status.success(), "should fail: {out}");
+    assert!(err.contains("preview.png") && err.contains("unfinished"), "{err}");
+    assert!(!dir.join("transforms.json").exists(), "a failed synth left a scene that loads");
+}
+
 /// Images too large for memory were refused with advice to lower the resolution, the cameras
 /// or the time steps: not the image size, which was what took the memory. The refusal says how
 /// much the truth and the images each need.

@@ -703,31 +703,45 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     super::create_output_folder(&out)?;
     fluidnerf_pipeline::synthetic::write_synthesis(&syn, &out)
         .with_context(|| format!("cannot write the scene into {}", out.display()))?;
-    let preview = out.join("preview.png");
-    write_preview(&preview, &syn).with_context(|| format!("cannot write {}", preview.display()))?;
-    let record = serde_json::json!({
-        "fluidnerf_version": env!("CARGO_PKG_VERSION"),
-        "command": "synth",
-        "preset": if args.config.is_some() { None } else { Some(&args.preset) },
-        "seed": settings.seed,
-        "intensity_scale": syn.intensity_scale,
-        "counts": if syn.real.is_some() {
-            "linear pixel (srgb-decoded, 0..255) - background ≈ camera_gains[c] × intensity_scale × ∫E ds (mm)"
-        } else {
-            "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)"
-        },
-        "camera_gains": syn.real.as_ref().map(|r| {
-            syn.cameras.iter().zip(&r.gains).map(|(c, g)| (c.name.clone(), *g)).collect::<std::collections::BTreeMap<_, _>>()
-        }),
-        "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
-        "settings": settings,
-        "stats": syn.stats,
-        "seconds": elapsed,
-    });
-    let settings_file = out.join("synth.json");
-    let text = serde_json::to_string_pretty(&record)? + "\n";
-    fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(text.as_bytes()))
-        .with_context(|| format!("cannot write {}", settings_file.display()))?;
+    // The scene's own record follows its files. When it cannot be written (a full disk), the
+    // scene file goes again: a folder synth failed to finish must not load as a scene.
+    let finish = || -> anyhow::Result<()> {
+        let preview = out.join("preview.png");
+        write_preview(&preview, &syn).with_context(|| format!("cannot write {}", preview.display()))?;
+        let record = serde_json::json!({
+            "fluidnerf_version": env!("CARGO_PKG_VERSION"),
+            "command": "synth",
+            "preset": if args.config.is_some() { None } else { Some(&args.preset) },
+            "seed": settings.seed,
+            "intensity_scale": syn.intensity_scale,
+            "counts": if syn.real.is_some() {
+                "linear pixel (srgb-decoded, 0..255) - background ≈ camera_gains[c] × intensity_scale × ∫E ds (mm)"
+            } else {
+                "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)"
+            },
+            "camera_gains": syn.real.as_ref().map(|r| {
+                syn.cameras.iter().zip(&r.gains).map(|(c, g)| (c.name.clone(), *g)).collect::<std::collections::BTreeMap<_, _>>()
+            }),
+            "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
+            "settings": settings,
+            "stats": syn.stats,
+            "seconds": elapsed,
+        });
+        let settings_file = out.join("synth.json");
+        let text = serde_json::to_string_pretty(&record)? + "\n";
+        fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("cannot write {}", settings_file.display()))?;
+        Ok(())
+    };
+    if let Err(e) = finish() {
+        let scene_file = out.join(fluidnerf_io::scene::SCENE_FILE);
+        let _ = std::fs::remove_file(&scene_file);
+        return Err(e.context(format!(
+            "the scene in {} is unfinished, and its {} was removed",
+            out.display(),
+            fluidnerf_io::scene::SCENE_FILE
+        )));
+    }
 
     let [w, h] = settings.lens.resolution;
     let dims = syn.truth[0].1.dims;
