@@ -1649,3 +1649,42 @@ fn a_truth_entry_naming_no_volume_is_refused_naming_the_entry_and_the_key() {
         assert!(!d.join("run").exists(), "a run started");
     }
 }
+
+/// A time step so small that the later of three or more times all read as an infinite 32-bit
+/// time input is refused for the span it makes, asking for a larger step: those times compared
+/// equal, and the run was refused as reading two of them as one instant, asking for a smaller
+/// step, the opposite of the cure.
+#[test]
+fn a_time_step_too_small_for_three_instants_asks_for_a_larger_one() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 3, 16, 8, &[]);
+    edit_json(&d.join("scene/transforms.json"), |v| {
+        for (i, f) in v["frames"].as_array_mut().expect("frames").iter_mut().enumerate() {
+            f["time"] = i.into();
+        }
+    });
+    let o = fluidnerf(
+        d,
+        &[
+            "reconstruct",
+            "scene",
+            "-o",
+            "run",
+            "--method",
+            "tr-fluidnerf",
+            "--resolution",
+            "8",
+            "--max-iterations",
+            "1",
+            "--time-step",
+            "1e-300",
+        ],
+    );
+    refused(&o, "method.time_step: the times run from 0 to 2, ");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("time steps of Δt = 1e-300: more than the 16777216 steps"), "{err}");
+    assert!(err.contains("give a larger time step"), "{err}");
+    assert!(!err.contains("one instant"), "{err}");
+    assert!(!d.join("run").exists(), "left an output folder");
+}

@@ -1336,14 +1336,33 @@ fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f6
     let all = || times.iter().chain(&spec.holdout_times).copied();
     let (first, last) = (all().fold(f64::INFINITY, f64::min), all().fold(f64::NEG_INFINITY, f64::max));
     let steps = (last - first) / step;
+    // A span of more steps than 32 bits tell apart comes first: its later times all read as an
+    // infinite `t'`, which the test below would take for one instant and ask for a smaller
+    // step, the opposite of what they need.
+    if steps > MAX_TIME_STEPS {
+        return Err(PipelineError::invalid(
+            "method.time_step",
+            format!(
+                "the times run from {} to {}, {} time steps of Δt = {}{}: more than the {} steps in which the \
+                 network's 32-bit time input t' = (t − t₀)/Δt tells one step from the next; give a larger time step \
+                 (--time-step) or the times in another unit",
+                num(first),
+                num(last),
+                num(steps),
+                num(step),
+                if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" },
+                num(MAX_TIME_STEPS)
+            ),
+        ));
+    }
     // Two times whose `t'` round to one 32-bit float are one instant to the network: a time
     // step far beyond the frames' spacing trained every frame as one static field.
     let mut sorted: Vec<f64> = all().collect();
     sorted.sort_by(f64::total_cmp);
     let input = |t: f64| ((t - first) / step) as f32;
     let one_instant = |a: f64, b: f64| input(a) == input(b) || (b - a) / step < MIN_TIME_GAP_STEPS;
-    if let Some(w) = sorted.windows(2).find(|w| w[0] < w[1] && one_instant(w[0], w[1])) {
-        return Err(PipelineError::invalid(
+    match sorted.windows(2).find(|w| w[0] < w[1] && one_instant(w[0], w[1])) {
+        Some(w) => Err(PipelineError::invalid(
             "method.time_step",
             format!(
                 "the times {} and {} are {} time steps of Δt = {}{} apart, which the network's time input \
@@ -1356,25 +1375,9 @@ fn check_time_range(spec: &TemporalSpec, method: Method, times: &[f64], step: f6
                 if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" },
                 num(MIN_TIME_GAP_STEPS)
             ),
-        ));
+        )),
+        None => Ok(()),
     }
-    if steps <= MAX_TIME_STEPS {
-        return Ok(());
-    }
-    Err(PipelineError::invalid(
-        "method.time_step",
-        format!(
-            "the times run from {} to {}, {} time steps of Δt = {}{}: more than the {} steps in which the \
-             network's 32-bit time input t' = (t − t₀)/Δt tells one step from the next; give a larger time step \
-             (--time-step) or the times in another unit",
-            num(first),
-            num(last),
-            num(steps),
-            num(step),
-            if spec.time_step.is_some() { "" } else { " (the smallest gap between training times)" },
-            num(MAX_TIME_STEPS)
-        ),
-    ))
 }
 
 /// The field's input dimension for a time-resolved method: 3 for per-frame static fields, 4
