@@ -738,3 +738,32 @@ fn a_scene_without_held_out_frames_is_warned_to_get_no_reprojection() {
     assert!(err.contains("holds no frame out") && err.contains("--supersample 4 has no effect"), "{err}");
     assert!(read_json(&d.join("b.json"))["reprojection"].as_array().expect("reprojection").is_empty());
 }
+
+/// A truth (or a reconstruction) in a box that does not overlap the other's is refused naming
+/// both boxes: the reconstruction is zero on every voxel of such a truth, and eval scored it,
+/// reporting an NRMSE of 1 as the result. A box shared in part is still scored.
+#[test]
+fn a_truth_apart_from_the_reconstruction_is_refused_naming_both_boxes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let shifted = |dx: f64| {
+        let shift = DVec3::new(dx, 0.0, 0.0);
+        let aabb = Aabb::new(scene.aabb.min + shift, scene.aabb.max + shift);
+        Volume::from_fn([18, 12, 12], aabb, |p| blob(p - shift, 0.0))
+    };
+    fluidnerf_io::volume::write_vti(&d.join("far.vti"), &shifted(100.0)).expect("writes");
+    fluidnerf_io::volume::write_vti(&d.join("near.vti"), &shifted(1.0)).expect("writes");
+    let refused = |out: &std::process::Output, needle: &str| {
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{e}");
+        assert!(e.contains(needle), "{e}");
+        assert!(!e.contains("panicked") && out.stdout.is_empty() && !d.join("m.json").exists(), "{e}");
+    };
+    let o = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--truth", "far.vti", "--json", "m.json"], d);
+    refused(&o, "--truth far.vti fills the box [98.5, -1, -1] .. [101.5, 1, 1], which does not overlap the box");
+    let o = fluidnerf(&["eval", "far.vti", "--scene", ".", "--json", "m.json"], d);
+    refused(&o, "does not overlap the box [98.5, -1, -1] .. [101.5, 1, 1] of far.vti");
+    let o = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--truth", "near.vti", "--json", "m.json"], d);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

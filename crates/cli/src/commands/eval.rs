@@ -9,7 +9,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::num;
-use fluidnerf_core::{ScalarField, Scene, Volume};
+use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
     evaluate_volume, regions_flow_axis, reproject, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions,
     SsimParams, SsimWindow, VolumeMetricOptions,
@@ -421,7 +421,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Times the scene's truth does not cover are not scored, and said so.
     let without_truth = if args.truth.is_some() { Vec::new() } else { scene.times_without_truth() };
     let listed = |times: &[f64]| times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
-    let recon = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref(), &step_times)?;
+    let (recon, recon_boxes) = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref(), &step_times)?;
+    refuse_truth_apart(&truth, &recon_boxes, args.truth.as_deref(), &scene)?;
     if let Recon::Volumes(volumes) = &recon {
         if volumes.len() > 1 && volumes.len() != step_times.len() {
             let steps = if truth.is_empty() { "frame times" } else { "ground-truth time steps" };
@@ -645,7 +646,7 @@ fn load_recon(
     use_volume: bool,
     truth: Option<&Path>,
     step_times: &[Option<f64>],
-) -> anyhow::Result<Recon> {
+) -> anyhow::Result<(Recon, Vec<(String, Aabb)>)> {
     if let [dir] = paths {
         if dir.is_dir() {
             let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
@@ -697,12 +698,13 @@ fn load_recon(
             }
             if use_volume {
                 let volumes = run.volumes()?;
+                let boxes = vec![(what, run.aabb)];
                 if volumes.iter().all(|(t, _)| t.is_none()) {
-                    return Ok(Recon::Volumes(volumes.into_iter().map(|(_, v)| v).collect()));
+                    return Ok((Recon::Volumes(volumes.into_iter().map(|(_, v)| v).collect()), boxes));
                 }
-                return volumes_at_steps(dir, volumes, step_times).map(Recon::Volumes);
+                return Ok((volumes_at_steps(dir, volumes, step_times).map(Recon::Volumes)?, boxes));
             }
-            return Ok(Recon::Field(run.field()?));
+            return Ok((Recon::Field(run.field()?), vec![(what, run.aabb)]));
         }
     }
     if let Some(p) = paths.iter().find(|p| p.is_dir()) {
@@ -715,12 +717,48 @@ fn load_recon(
         );
     }
     let mut volumes = Vec::with_capacity(paths.len());
+    let mut boxes = Vec::with_capacity(paths.len());
     for p in paths {
         let volume = read_volume(p, Some(scene.aabb), Some(&scene.units))?;
         super::warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
+        boxes.push((p.display().to_string(), volume.aabb));
         volumes.push(volume);
     }
-    Ok(Recon::Volumes(volumes))
+    Ok((Recon::Volumes(volumes), boxes))
+}
+
+/// Refuses a ground truth whose box does not overlap a reconstruction's (`boxes`, named): the
+/// reconstruction is zero on every voxel of that truth, so every metric would score zeros
+/// against it, an NRMSE of 1 reported as a result. A truth in a box only partly shared is
+/// warned of where it is read.
+fn refuse_truth_apart(
+    truth: &[(Option<f64>, Volume)],
+    boxes: &[(String, Aabb)],
+    given: Option<&Path>,
+    scene: &Scene,
+) -> anyhow::Result<()> {
+    for (i, (_, t)) in truth.iter().enumerate() {
+        let Some((what, b)) =
+            boxes.iter().find(|(_, b)| (0..3).any(|a| b.min[a] >= t.aabb.max[a] || b.max[a] <= t.aabb.min[a]))
+        else {
+            continue;
+        };
+        let file = match (given, scene.truth.get(i)) {
+            (Some(p), _) => format!("--truth {}", p.display()),
+            (None, Some(r)) => format!("the ground truth {}", scene.resolve(&r.file_path).display()),
+            (None, None) => "the ground truth".to_string(),
+        };
+        bail!(
+            "{file} fills the box {} .. {}, which does not overlap the box {} .. {} of {what}: the reconstruction is \
+             zero on every voxel of the truth, so every metric would score nothing against it; give the truth of \
+             this scene, or a volume in its box",
+            num(t.aabb.min.to_array()),
+            num(t.aabb.max.to_array()),
+            num(b.min.to_array()),
+            num(b.max.to_array())
+        );
+    }
+    Ok(())
 }
 
 /// The volumes of the time-resolved run in `dir` (each with its time) that stand for the time
