@@ -263,6 +263,32 @@ fn a_box_apart_from_the_reconstruction_is_refused() {
     ok(&export("3,3,3,5,5,5"));
 }
 
+/// A --compare truth in a box apart from the exported one is refused naming both boxes: its
+/// slices were drawn empty beside the reconstruction's, and the export succeeded.
+#[test]
+fn a_compare_truth_apart_from_the_export_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let far = Volume::from_fn([8, 8, 8], Aabb::new(DVec3::splat(100.0), DVec3::splat(104.0)), linear);
+    let truth = dir.path().join("far.vti");
+    fluidnerf_io::volume::write_vti(&truth, &far).expect("writes the truth");
+    let out = dir.path().join("out");
+    let o = fluidnerf(&[
+        "export",
+        src.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--slices",
+        "z=0.5",
+        "--compare",
+        truth.to_str().expect("utf-8"),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("far.vti: the truth fills the box [100, 100, 100] .. [104, 104, 104], which does not overlap the exported box [0, 0, 0] .. [4, 4, 4]"), "{err}");
+    assert!(!out.exists(), "wrote {}", out.display());
+}
+
 /// With --force, a folder where an output goes is refused before anything is written: found only
 /// when its turn came, it left the outputs before it overwritten and export.json stale.
 #[test]

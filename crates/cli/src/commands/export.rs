@@ -435,6 +435,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Some(scene.as_ref().map_or_else(|| source.aabb(), |s| s.aabb)),
                 scene.as_ref().map(|s| s.units.as_str()),
             )?;
+            // A truth apart from the exported box is zero on every slice: its panels would be
+            // drawn empty beside the reconstruction, as if it held no field there.
+            let b = &volume.aabb;
+            if (0..3).any(|a| t.aabb.min[a] >= b.max[a] || t.aabb.max[a] <= b.min[a]) {
+                bail!(
+                    "--compare {}: the truth fills the box {} .. {}, which does not overlap the exported box {} .. {}: \
+                     its slices would be empty; give the truth of this reconstruction",
+                    p.display(),
+                    fluidnerf_core::num(t.aabb.min.to_array()),
+                    fluidnerf_core::num(t.aabb.max.to_array()),
+                    fluidnerf_core::num(b.min.to_array()),
+                    fluidnerf_core::num(b.max.to_array())
+                );
+            }
             Some(if t.dims == volume.dims && t.aabb == volume.aabb { t } else { t.resample(volume.dims, volume.aabb) })
         }
         None => None,
