@@ -767,3 +767,21 @@ fn a_truth_apart_from_the_reconstruction_is_refused_naming_both_boxes() {
     let o = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--truth", "near.vti", "--json", "m.json"], d);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// A reconstruction or truth path that names nothing says so: it was refused as an "unknown
+/// volume format", sending the user to convert a file that is not there.
+#[test]
+fn a_missing_reconstruction_or_truth_is_named_as_missing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    for args in [
+        &["eval", "run_not_made", "--scene", ".", "--json", "m.json"][..],
+        &["eval", "truth_0.npy", "--scene", ".", "--truth", "truth_typo", "--json", "m.json"][..],
+    ] {
+        let o = fluidnerf(args, d);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{e}");
+        assert!(e.contains(": no such file or directory") && !e.contains("unknown volume format"), "{args:?}: {e}");
+    }
+}

@@ -190,6 +190,8 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -
         "vti" => fluidnerf_io::volume::read_vti(path),
         "raw" => fluidnerf_io::volume::read_raw(path),
         "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, aabb, unit),
+        // A path that names nothing (a typo, a run folder not made yet) is not a format problem.
+        _ if !path.exists() => bail!("{}: no such file or directory", path.display()),
         _ => bail!("{}: unknown volume format (expected .npy, .vti, .raw or .tif)", path.display()),
     }
     .with_context(|| format!("reading the volume {}", path.display()))?;
