@@ -236,6 +236,18 @@ pub fn camera_from_projection(p: [[f64; 4]; 3], width: u32, height: u32) -> Resu
     if p.iter().flatten().any(|v| !v.is_finite()) {
         return Err("the matrix holds a value that is not finite".into());
     }
+    // A matrix is a camera at any scale: brought to a largest entry of 1, one written at 1e300
+    // no longer overflows the decomposition ("values must be finite") and one at 1e-120 no
+    // longer underflows its determinant to 0 ("singular").
+    let largest = p.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    if largest == 0.0 {
+        return Err(
+            "the matrix is zero throughout, so its left 3 × 3 block is singular: it does not come from a camera that \
+             images a volume"
+                .into(),
+        );
+    }
+    let p = p.map(|r| r.map(|v| v / largest));
     let row = |i: usize| DVec3::new(p[i][0], p[i][1], p[i][2]);
     let m = DMat3::from_cols(row(0), row(1), row(2)).transpose();
     let det = m.determinant();
