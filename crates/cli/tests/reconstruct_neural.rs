@@ -580,3 +580,31 @@ fn a_field_driven_to_zero_by_its_learning_rate_is_reported() {
     let trained = run("trained", "0.02");
     assert!(!trained.iter().any(|w| w.as_str().unwrap_or("").contains("empty")), "{trained:?}");
 }
+
+/// Masks that hide most of each view left the skip-empty grid empty: the hidden pixels were
+/// set to the image's brightest value, which then was its median, so every pixel read as dark
+/// and every cell was carved; the run was refused as "no camera sees the reconstruction box",
+/// though every camera sees it and the pixels kept are bright. It trains now.
+#[test]
+fn masks_hiding_most_of_each_view_keep_the_hull_of_the_pixels_they_use() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 16, 8, &[]);
+    // The central 4 × 4 pixels of every view, on the ball.
+    let mut mask = fluidnerf_core::Image::from_vec(16, 16, vec![0.0; 256]);
+    for row in 6..10 {
+        for col in 6..10 {
+            mask.data[row * 16 + col] = 1.0;
+        }
+    }
+    fluidnerf_io::image::write_png16(&d.join("scene/mask.png"), &mask, 1.0).expect("writes the mask");
+    edit_json(&d.join("scene/transforms.json"), |v| {
+        for f in v["frames"].as_array_mut().expect("frames") {
+            f["mask_path"] = "mask.png".into();
+        }
+    });
+    let run = ["reconstruct", "scene", "-o", "run", "--method", "fast", "--resolution", "8", "--max-iterations", "2"];
+    let o = fluidnerf(d, &run);
+    ok(&o);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("no camera sees"));
+}

@@ -186,23 +186,42 @@ impl OccupancyGrid {
     /// instants must not be mixed (a cell dark at one instant may be bright at another); carve
     /// each instant and combine with [`OccupancyGrid::union_with`].
     pub fn from_views(aabb: &Aabb, views: &[(&Camera, &Image)], cfg: &OccupancyConfig) -> Self {
+        let views: Vec<(&Camera, &Image, Option<&[bool]>)> = views.iter().map(|&(c, i)| (c, i, None)).collect();
+        Self::from_masked_views(aabb, &views, cfg)
+    }
+
+    /// [`OccupancyGrid::from_views`] for views with masks (`true` = pixel used): a masked
+    /// pixel says nothing about the cells behind it, so it carves none, and it counts as black
+    /// (no light known) where the image's dark level is read. Masked pixels set to the image's
+    /// brightest value instead made that value the median of an image masked over more than
+    /// half, every pixel then read as dark, and the hull came out empty.
+    pub fn from_masked_views(aabb: &Aabb, views: &[(&Camera, &Image, Option<&[bool]>)], cfg: &OccupancyConfig) -> Self {
         let dims = fluidnerf_core::Volume::dims_for(aabb, cfg.resolution.max(1));
         let [nx, ny, nz] = dims;
         let mut empty = vec![false; nx * ny * nz];
-        for (camera, image) in views {
+        for &(camera, image, mask) in views {
             assert_eq!(
                 (camera.width(), camera.height()),
                 (image.width, image.height),
                 "OccupancyGrid::from_views: image size differs from its camera"
             );
-            let threshold = dark_threshold(image, cfg);
+            let used = |k: usize| mask.is_none_or(|m| m[k]);
+            let threshold = match mask {
+                None => dark_threshold(image, cfg),
+                Some(_) => {
+                    let mut dark = image.clone();
+                    dark.data.iter_mut().enumerate().filter(|(k, _)| !used(*k)).for_each(|(_, p)| *p = 0.0);
+                    dark_threshold(&dark, cfg)
+                }
+            };
             let (w, h) = (image.width, image.height);
             // Summed-area table of bright pixels, (w + 1) × (h + 1).
             let mut sat = vec![0u32; (w + 1) * (h + 1)];
             for row in 0..h {
                 let mut acc = 0u32;
                 for col in 0..w {
-                    acc += u32::from(image.data[row * w + col] > threshold);
+                    let k = row * w + col;
+                    acc += u32::from(!used(k) || image.data[k] > threshold);
                     sat[(row + 1) * (w + 1) + col + 1] = sat[row * (w + 1) + col + 1] + acc;
                 }
             }

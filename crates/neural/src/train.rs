@@ -609,34 +609,21 @@ impl Prepared {
         // the union, so a flow that moves between instants is never carved away by the views
         // of another instant.
         let occupancy = cfg.occupancy.as_ref().map(|oc| {
-            // A masked pixel says nothing about the cells behind it: carve as if it were bright.
-            let unmasked: Vec<Option<Image>> = problem
-                .views
-                .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    mask_of(&masks.train, i).map(|m| {
-                        let mut im = v.image.clone();
-                        let top = im.min_max().1;
-                        im.data.iter_mut().zip(m).filter(|(_, &k)| !k).for_each(|(p, _)| *p = top);
-                        im
-                    })
-                })
-                .collect();
+            // A masked pixel says nothing about the cells behind it: it carves none.
             let mut times: Vec<f64> = problem.views.iter().map(|v| v.time).collect();
             times.sort_by(f64::total_cmp);
             times.dedup();
             times
                 .iter()
                 .map(|&t| {
-                    let views: Vec<(&Camera, &Image)> = problem
+                    let views: Vec<(&Camera, &Image, Option<&[bool]>)> = problem
                         .views
                         .iter()
-                        .zip(&unmasked)
-                        .filter(|(v, _)| v.time == t)
-                        .map(|(v, u)| (&v.camera, u.as_ref().unwrap_or(&v.image)))
+                        .enumerate()
+                        .filter(|(_, v)| v.time == t)
+                        .map(|(i, v)| (&v.camera, &v.image, mask_of(&masks.train, i)))
                         .collect();
-                    OccupancyGrid::from_views(&problem.aabb, &views, oc)
+                    OccupancyGrid::from_masked_views(&problem.aabb, &views, oc)
                 })
                 .reduce(|mut a, b| {
                     a.union_with(&b);
