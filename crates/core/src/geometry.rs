@@ -240,8 +240,50 @@ mod tests {
     fn validate_rejects_degenerate() {
         let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, 0.0, 1.0) };
         assert!(b.validate().is_err());
-        let b = Aabb { min: DVec3::ZERO, max: DVec3::new(1.0, f64::NAN, 1.0) };
-        assert!(b.validate().is_err());
+        for (min, max) in [
+            (DVec3::ZERO, DVec3::new(1.0, f64::NAN, 1.0)),
+            (DVec3::new(f64::NAN, 0.0, 0.0), DVec3::ONE),
+            (DVec3::new(0.0, f64::NEG_INFINITY, 0.0), DVec3::ONE),
+        ] {
+            let e = Aabb { min, max }.validate().expect_err("refused").to_string();
+            assert!(e.contains("corners must be finite"), "{min} {max}: {e}");
+        }
+    }
+
+    /// The box's centre, corners (x fastest), closed containment and unit coordinates.
+    #[test]
+    fn centre_corners_containment_and_unit_coordinates() {
+        let b = Aabb::new(DVec3::new(-1.0, 2.0, 10.0), DVec3::new(3.0, 4.0, 16.0));
+        assert_eq!(b.centre(), DVec3::new(1.0, 3.0, 13.0));
+        let c = b.corners();
+        assert_eq!(c[0], b.min);
+        assert_eq!(c[7], b.max);
+        assert_eq!(c[1], DVec3::new(3.0, 2.0, 10.0));
+        assert_eq!(c[2], DVec3::new(-1.0, 4.0, 10.0));
+        assert_eq!(c[4], DVec3::new(-1.0, 2.0, 16.0));
+        assert_eq!(c[6], DVec3::new(-1.0, 4.0, 16.0));
+        assert!(c.iter().all(|&p| b.contains(p)), "the closed box holds its corners");
+        assert!(b.contains(b.centre()));
+        // Outside along one axis alone is outside.
+        for p in [DVec3::new(3.5, 3.0, 13.0), DVec3::new(1.0, 1.9, 13.0), DVec3::new(1.0, 3.0, 16.1)] {
+            assert!(!b.contains(p), "{p}");
+        }
+        assert_eq!(b.to_unit(b.min), DVec3::ZERO);
+        assert_eq!(b.to_unit(b.max), DVec3::ONE);
+        assert_eq!(b.to_unit(DVec3::new(0.0, 3.5, 11.5)), DVec3::new(0.25, 0.75, 0.25));
+    }
+
+    /// A ray in a face's plane, parallel to it, runs on the closed box's surface and hits it; a
+    /// ray that only touches an edge crosses no length of the box and misses.
+    #[test]
+    fn rays_along_a_face_hit_and_rays_touching_an_edge_miss() {
+        let b = Aabb::new(DVec3::ZERO, DVec3::ONE);
+        for x in [0.0, 1.0] {
+            let (n, f) = b.intersect(&Ray::new(DVec3::new(x, 0.5, -2.0), DVec3::Z)).expect("on the face");
+            assert_relative_eq!(n, 2.0);
+            assert_relative_eq!(f, 3.0);
+        }
+        assert!(b.intersect(&Ray::new(DVec3::new(-1.0, 1.0, 0.5), DVec3::new(1.0, -1.0, 0.0))).is_none());
     }
 
     /// A box whose corners are finite but too far out for 32-bit rendering is refused, naming

@@ -110,6 +110,32 @@ fn to_f32(x: f64) -> Result<f32, String> {
 mod tests {
     use super::{fixed, num};
 
+    #[derive(serde::Deserialize, Debug)]
+    struct Setting {
+        #[serde(deserialize_with = "super::f32_setting")]
+        v: f32,
+        #[serde(default, deserialize_with = "super::optional_f32_setting")]
+        o: Option<f32>,
+    }
+
+    fn read(text: &str) -> Result<Setting, String> {
+        serde_json::from_str(text).map_err(|e| e.to_string())
+    }
+
+    /// A setting reads as the number written; one no f32 holds is refused as written, where
+    /// serde's own f32 turned it into infinity or zero.
+    #[test]
+    fn f32_settings_read_as_written_or_are_refused() {
+        let s = read(r#"{"v": 0.3, "o": -2.5e-3}"#).expect("reads");
+        assert_eq!((s.v, s.o), (0.3f32, Some(-2.5e-3f32)));
+        assert_eq!(read(r#"{"v": 0, "o": null}"#).expect("reads").o, None);
+        assert_eq!(read(r#"{"v": 3.4e38}"#).expect("reads").v, 3.4e38f32);
+        let e = read(r#"{"v": 1e300}"#).expect_err("refused");
+        assert!(e.contains("1e300 is beyond what this setting's 32-bit float holds"), "{e}");
+        let e = read(r#"{"v": 1, "o": -1e-60}"#).expect_err("refused");
+        assert!(e.contains("-1e-60 is below the smallest non-zero value"), "{e}");
+    }
+
     #[test]
     fn fixed_decimals_stay_short() {
         for (x, decimals, shown) in [

@@ -275,6 +275,48 @@ mod tests {
         );
         let at_limit = RenderSettings { step: Some(finest), ..Default::default() };
         assert!(render_image(&field, &small, &aabb, &at_limit).is_ok());
+        let widest = RenderSettings { supersample: MAX_SUPERSAMPLE, step: Some(0.5), ..Default::default() };
+        assert!(render_image(&field, &small, &aabb, &widest).is_ok());
+        for step in [0.0, -0.1, f64::NAN, f64::INFINITY] {
+            let bad = RenderSettings { step: Some(step), ..Default::default() };
+            let e = render_image(&field, &small, &aabb, &bad).expect_err("refused").to_string();
+            assert!(e.contains("render step") && e.contains("must be positive"), "{step}: {e}");
+        }
+    }
+
+    /// A step as long as the box's thinnest side is allowed, a longer one is refused with the
+    /// side; the default step is 1/256 of that side.
+    #[test]
+    fn a_step_longer_than_the_thinnest_side_is_refused() {
+        let aabb = Aabb::new(DVec3::ZERO, DVec3::new(4.0, 1.0, 2.0));
+        assert_eq!(step_out_of_range(&aabb, 1.0, "mm"), None);
+        let why = step_out_of_range(&aabb, 1.5, "mm").expect("refused");
+        assert!(why.contains("longer than the box's thinnest side (1.0000 mm)"), "{why}");
+        // ∫₀¹ 3y² dy = 1 across the thinnest side, to the default step's 1/256 sampling (a
+        // single sample there gives 0.75).
+        let field = |p: Vec3, _t: f64| 3.0 * p.y * p.y;
+        let cam = Camera::look_at(
+            Intrinsics { width: 1, height: 1, fx: 4.0, fy: 4.0, cx: 0.0, cy: 0.0, skew: 0.0 },
+            DVec3::new(2.0, -6.0, 1.0),
+            DVec3::new(2.0, 0.0, 1.0),
+            DVec3::Z,
+        );
+        let img = render_image(&field, &cam, &aabb, &RenderSettings::default()).expect("renders");
+        assert!((img.data[0] - 1.0).abs() < 1e-4, "{}", img.data[0]);
+    }
+
+    /// Line integrals beyond the largest 32-bit float are foreseen from the volume's largest
+    /// magnitude, its box's diagonal and the scale, and those within it are not.
+    #[test]
+    fn integrals_beyond_f32_are_foreseen() {
+        let aabb = Aabb::cube(DVec3::ZERO, 1.0);
+        let mut v = Volume::zeros([4, 4, 4], aabb);
+        v.data[5] = -1e30;
+        // Bound: 1e30 × √3 × scale against 3.4e38.
+        assert_eq!(integrals_overflow(&v, 1e8), None);
+        let why = integrals_overflow(&v, 1e9).expect("overflows");
+        assert!(why.contains("values up to 1.000e30") && why.contains("beyond the largest 32-bit float"), "{why}");
+        assert_eq!(integrals_overflow(&Volume::zeros([2, 2, 2], aabb), 1e300), None);
     }
 
     #[test]
