@@ -288,6 +288,18 @@ mod tests {
         let own = compare_images(&rendered, &measured, None, &SsimParams::default()).expect("compares");
         assert!((own.data_range - 1.0).abs() < 1e-6, "{}", own.data_range);
         assert!((own.ssim_windowed - m.ssim_windowed).abs() > 1e-4);
+        // With a mask, the default range is the used pixels' (0.5 to 1 here), and the windowed
+        // SSIM takes it too, not the range of the images with the unused pixels set to 0.
+        let mask: Vec<bool> = measured.data.iter().map(|&v| v >= 0.5).collect();
+        let masked = compare_images(&rendered, &measured, Some(&mask), &SsimParams::default()).expect("compares");
+        assert!((masked.data_range - 0.5).abs() < 1e-6, "{}", masked.data_range);
+        let zeroed =
+            |img: &Image| -> Vec<f32> { img.data.iter().zip(&mask).map(|(&v, &k)| if k { v } else { 0.0 }).collect() };
+        let with_range = SsimParams { data_range: Some(masked.data_range), ..Default::default() };
+        let expected = ssim_2d(&zeroed(&rendered), &zeroed(&measured), 24, 16, &with_range).expect("fits");
+        assert_eq!(masked.ssim_windowed, expected);
+        let with_zeros = ssim_2d(&zeroed(&rendered), &zeroed(&measured), 24, 16, &SsimParams::default()).expect("fits");
+        assert!((with_zeros - expected).abs() > 1e-6, "{with_zeros} against {expected}");
     }
 
     #[test]
