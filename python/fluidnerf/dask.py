@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 import uuid
 from pathlib import Path
 from typing import Any, Callable
@@ -63,8 +64,19 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
             f"window: {k} is not in the plan: the run has {len(plan)} window(s), 0 to {len(plan) - 1} "
             f"(frames {plan})"
         )
-    outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, k, k + 1, None))
-    return outcomes[0]
+    lock = f"w{k:03d}.lock"
+    while True:
+        try:
+            outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, k, k + 1, None))
+            return outcomes[0]
+        except FluidNerfError as e:
+            # Another task of this window still trains it (Dask ran the task again, on a
+            # worker it thought lost, or a second call was made meanwhile): its outcome is
+            # read back once it finishes, and its checkpoint continued should it die. Failing
+            # here failed the whole run, as if the window were another run's.
+            if "is in use by another run" not in str(e) or lock not in str(e):
+                raise
+        time.sleep(0.1)
 
 
 def finish(scene_root: str, config_json: str, out: str, *_after: Any) -> dict:

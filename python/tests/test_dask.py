@@ -462,3 +462,27 @@ def test_task_arguments_of_another_type_are_refused_naming_the_argument(tr_scene
         with pytest.raises(TypeError, match=says):
             fluidnerf.dask.finish(*args)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_window_trained_twice_at_once_is_trained_once_and_read_back(tr_scene, tmp_path):
+    """A second task of a window that another task was still training (a task Dask ran again
+    while the first still worked) failed the run as "in use by another run" instead of taking
+    the finished window."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    root, out = str(tr_scene.root), str(tmp_path / "run")
+    outcomes, errors = [], []
+
+    def task():
+        try:
+            outcomes.append(fluidnerf.dask.train_window(root, cfg, out, 0))
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=task) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert not errors, errors
+    assert sorted(o["reused"] for o in outcomes) == [False, True]
+    assert outcomes[0]["final_loss"] == outcomes[1]["final_loss"]
