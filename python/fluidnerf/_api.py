@@ -410,7 +410,11 @@ def read_metashape(path: PathLike, skip_unaligned: bool = False) -> list[Camera]
 
 def _size(value: Any, name: str) -> tuple[int, int]:
     """An image size ``(width, height)`` of positive integers; anything else is refused
-    naming ``name``."""
+    naming ``name``. A NumPy array of two integers (a row of ``Scene.camera_arrays()``'s
+    sizes) is one."""
+    given = value
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iu":
+        value = value.tolist()
     if (
         not isinstance(value, (tuple, list))
         or len(value) != 2
@@ -418,7 +422,7 @@ def _size(value: Any, name: str) -> tuple[int, int]:
         or not all(0 < int(v) < 2**31 for v in value)
     ):
         raise FluidNerfError(
-            f"{name}: expected an image size (width, height) of positive integers, got {value!r}"
+            f"{name}: expected an image size (width, height) of positive integers, got {given!r}"
         )
     return int(value[0]), int(value[1])
 

@@ -906,3 +906,24 @@ def test_projection_matrices_give_back_their_cameras(tmp_path):
     (tmp_path / "singular.txt").write_text("1 2 3 4\n2 4 6 8\n0 0 1 1\n")
     with pytest.raises(fluidnerf.FluidNerfError, match="singular.txt: camera `singular`: .*singular"):
         fluidnerf.read_projection(tmp_path / "singular.txt", (64, 64))
+
+
+def test_an_image_size_given_as_a_numpy_array_is_taken(tmp_path):
+    """The sizes of `Scene.camera_arrays()` are a NumPy array; a row of it, `(640, 480)` as
+    np.array([640, 480]), was refused as "expected an image size (width, height) of positive
+    integers", which it is."""
+    K = np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]])
+    np.savetxt(tmp_path / "left.txt", K @ np.hstack([np.eye(3), [[0.0], [0.0], [500.0]]]))
+    for size in (np.array([640, 480]), np.array([640, 480], dtype=np.uint16)):
+        (cam,) = fluidnerf.read_projection(tmp_path / "left.txt", size)
+        assert cam.size == (640, 480) and type(cam.size[0]) is int
+        (cam,) = fluidnerf.read_projection(tmp_path / "left.txt", {"left": size})
+        assert cam.size == (640, 480)
+    for bad in (
+        np.array([640.0, 480.0]),
+        np.array([[640, 480]]),
+        np.array([640, 480, 1]),
+        np.array([640, -480]),
+    ):
+        with pytest.raises(fluidnerf.FluidNerfError, match="image_size: expected an image size"):
+            fluidnerf.read_projection(tmp_path / "left.txt", bad)
