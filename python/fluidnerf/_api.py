@@ -1048,6 +1048,14 @@ def back_project(
     a volume of ``shape`` ``(nz, ny, nx)``."""
     if isinstance(images, (str, bytes)) or not hasattr(images, "__iter__"):
         raise TypeError(f"images: expected an (N, H, W) array or a list of (H, W) arrays, got {images!r}")
+    if isinstance(images, (dict, set, frozenset)):
+        # A dict was read by its keys, as images of strings.
+        raise TypeError(
+            f"images: expected an (N, H, W) array or a list of (H, W) arrays, got {type(images).__name__}"
+        )
+    if isinstance(images, np.ndarray) and images.ndim != 3:
+        # One (H, W) image was read row by row, as H images of one row each.
+        raise FluidNerfError(f"images: expected shape (N, H, W), got an array of shape {images.shape}")
     imgs = [_numbers(im, np.float32, f"images[{i}]", " of shape (H, W)") for i, im in enumerate(images)]
     if isinstance(shape, (str, bytes)) or not hasattr(shape, "__len__") or len(shape) != 3:
         raise FluidNerfError(f"shape: expected the volume's three sides (nz, ny, nx), got {shape!r}")

@@ -586,3 +586,20 @@ def test_an_ssim_window_that_is_no_string_is_refused_naming_the_argument():
             TypeError, match=rf"^window: expected a string, got {type(window).__name__} {window}"
         ):
             fluidnerf.ssim(t, t, window=window)
+
+
+def test_back_projection_refuses_images_that_are_no_stack_of_images_naming_their_shape(scene):
+    """One (H, W) image was read row by row, as H images: "expected 4 images (one per frame),
+    got 16"; a dict was read by its keys, as images of strings."""
+    s, *_ = scene
+    y = np.ones((4, 16, 16), np.float32)
+    for bad, shape in ((y[0], r"\(16, 16\)"), (y[..., None], r"\(4, 16, 16, 1\)"), (y[0, 0], r"\(16,\)")):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=rf"^images: expected shape \(N, H, W\), got .*{shape}"
+        ):
+            fluidnerf.back_project(s, bad, (N, N, N))
+    with pytest.raises(
+        TypeError, match=r"^images: expected an \(N, H, W\) array or a list of \(H, W\) arrays, got dict"
+    ):
+        fluidnerf.back_project(s, dict(enumerate(y)), (N, N, N))
+    assert fluidnerf.back_project(s, list(y), (N, N, N)).shape == (N, N, N)
