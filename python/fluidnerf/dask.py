@@ -25,6 +25,7 @@ import json
 import os
 import time
 import uuid
+import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -33,6 +34,7 @@ import numpy as np
 from . import _fluidnerf as _ext
 from ._api import (
     FluidNerfError,
+    FluidNerfWarning,
     PathLike,
     Run,
     Scene,
@@ -51,8 +53,9 @@ __all__ = ["finish", "reconstruct", "train_window"]
 
 def train_window(scene_root: str, config_json: str, out: str, window: int, *_after: Any) -> dict:
     """The task of one window: trains window ``window`` into ``out`` (or reads it back when it
-    finished before) and returns its outcome. ``_after`` are the results of the tasks it must
-    wait for (the window it warm-starts from); only their completion matters."""
+    finished before) and returns its outcome, with the run's warnings it gave (``"warnings"``:
+    a worker's own warnings reach nobody). ``_after`` are the results of the tasks it must wait
+    for (the window it warm-starts from); only their completion matters."""
     scene_root, config_json, out = _task_arguments(scene_root, config_json, out)
     scene = Scene.load(scene_root)
     k = _integer(window, "window")
@@ -65,10 +68,16 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
             f"(frames {plan})"
         )
     lock = f"w{k:03d}.lock"
+    given: list[str] = []
+
+    def on_event(event: dict) -> None:
+        if event["kind"] == "warning" and event["message"] not in given:
+            given.append(event["message"])
+
     while True:
         try:
-            outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, k, k + 1, None))
-            return outcomes[0]
+            outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, k, k + 1, on_event))
+            return {**outcomes[0], "warnings": given}
         except FluidNerfError as e:
             # Another task of this window still trains it (Dask ran the task again, on a
             # worker it thought lost, or a second call was made meanwhile): its outcome is
@@ -142,7 +151,8 @@ def reconstruct(
     its folder holds whenever it is called again; it takes ``"refuse"`` or ``"resume"``
     (the same), and is never replaced (``"force"`` is refused: remove the folder). ``callback(event)`` receives
     ``{"kind": "window_finished", "window": k, "windows": n, "reused": bool, ...}`` as windows
-    complete. Calling it again on the same folder reuses every finished window, so an
+    complete. The run's warnings are issued here as :class:`fluidnerf.FluidNerfWarning`, each
+    once, as :func:`fluidnerf.reconstruct` issues them. Calling it again on the same folder reuses every finished window, so an
     interrupted scale-out continues where it stopped; a scene built from arrays may be built
     again for that call, and must then be the same scene as the one the first call saved in
     ``out/scene``.
@@ -217,10 +227,21 @@ def _run(
     cfg_json = json.dumps(cfg)
     root = str(scene.root)
     token = uuid.uuid4().hex[:8]
+    # The run's warnings, issued on the worker, reached nobody: they are issued here, each once,
+    # as fluidnerf.reconstruct issues them, as the windows' tasks and then the run report them.
+    issued: set[str] = set()
+
+    def warn(messages: list[str]) -> None:
+        for message in messages:
+            if message not in issued:
+                issued.add(message)
+                warnings.warn(message, FluidNerfWarning, stacklevel=4)
+
     if whole:
-        client.submit(
+        report = client.submit(
             _whole_run, root, cfg_json, str(out_path), overwrite, key=f"fluidnerf-run-{token}", pure=False
         ).result()
+        warn(report.get("warnings") or [])
         return open_run(out_path)
     plan = json.loads(_ext.window_plan(scene, cfg_json))
     n = len(plan["windows"])
@@ -241,9 +262,11 @@ def _run(
         )
     for future in as_completed(futures):
         outcome = future.result()
+        warn(outcome.get("warnings") or [])
         if callback is not None:
             callback({"kind": "window_finished", "window": outcome["index"], "windows": n, **outcome})
-    client.submit(
+    report = client.submit(
         finish, root, cfg_json, str(out_path), *futures, key=f"fluidnerf-finish-{token}", pure=False
     ).result()
+    warn(report.get("warnings") or [])
     return open_run(out_path)

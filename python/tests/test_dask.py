@@ -486,3 +486,23 @@ def test_a_window_trained_twice_at_once_is_trained_once_and_read_back(tr_scene, 
     assert not errors, errors
     assert sorted(o["reused"] for o in outcomes) == [False, True]
     assert outcomes[0]["final_loss"] == outcomes[1]["final_loss"]
+
+
+def test_the_warnings_of_a_dask_run_are_issued_on_the_client(client, tr_scene, tmp_path):
+    """A run's warnings were issued on the workers, where nobody sees them: fluidnerf.reconstruct
+    warned that a voxel method mixes the scene's times, fluidnerf.dask.reconstruct said nothing;
+    a window's task returned none of its warnings to the client."""
+    with pytest.warns(fluidnerf.FluidNerfWarning, match=None) as caught:
+        run = fluidnerf.dask.reconstruct(
+            client, tr_scene, "asart", tmp_path / "run", resolution=4, stopping={"max_iterations": 1}
+        )
+    said = [str(w.message) for w in caught if issubclass(w.category, fluidnerf.FluidNerfWarning)]
+    assert len(said) == 1 and said[0].startswith(
+        "the scene has 5 time steps; a voxel reconstruction mixes"
+    ), said
+    assert run.report["warnings"] == said
+    # A window's task returns its warnings, which the client issues as the window finishes.
+    method = {**TR_METHOD, "windows": {"frames": 0}, "holdout_times": [14.25]}
+    cfg = fluidnerf.build_config(tr_scene, method, **{**TR_OPTIONS, "stopping": {"max_iterations": 1}})
+    outcome = fluidnerf.dask.train_window(str(tr_scene.root), json.dumps(cfg), str(tmp_path / "windows"), 0)
+    assert [w[:40] for w in outcome["warnings"]] == ["held-out time 14.25 matches no frame of "]
