@@ -488,6 +488,19 @@ def test_a_window_trained_twice_at_once_is_trained_once_and_read_back(tr_scene, 
     assert outcomes[0]["final_loss"] == outcomes[1]["final_loss"]
 
 
+def test_an_overlap_of_a_single_frame_or_none_is_refused_without_a_window_to_give():
+    """plan_windows(1, 4, 1) advised "give a window below 1", and (0, 4, 1) "a window below 0":
+    no window makes an overlap of one frame or none."""
+    for n in (0, 1):
+        with pytest.raises(fluidnerf.FluidNerfError, match=None) as e:
+            fluidnerf.plan_windows(n, 4, 1)
+        assert str(e.value) == (
+            f"overlap: 1 frames, but {n} frame(s) make one window at most, so there are no windows to overlap; "
+            "give an overlap of 0"
+        )
+    assert fluidnerf.plan_windows(1, 4, 0) == [(0, 1)]
+
+
 def test_the_warnings_of_a_dask_run_are_issued_on_the_client(client, tr_scene, tmp_path):
     """A run's warnings were issued on the workers, where nobody sees them: fluidnerf.reconstruct
     warned that a voxel method mixes the scene's times, fluidnerf.dask.reconstruct said nothing;

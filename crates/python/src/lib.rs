@@ -100,6 +100,12 @@ fn plan_windows(n_frames: usize, window: usize, overlap: usize) -> PyResult<Vec<
              no windows to overlap; give a window of fewer frames, or an overlap of 0"
         )));
     }
+    if overlap > 0 && n_frames < 2 {
+        return Err(err(format!(
+            "overlap: {overlap} frames, but {n_frames} frame(s) make one window at most, so there are no windows \
+             to overlap; give an overlap of 0"
+        )));
+    }
     if overlap > 0 && window >= n_frames {
         return Err(err(format!(
             "overlap: {overlap} frames, but windows of {window} frames hold all {n_frames} frames in one window, so \
