@@ -927,3 +927,21 @@ def test_an_image_size_given_as_a_numpy_array_is_taken(tmp_path):
     ):
         with pytest.raises(fluidnerf.FluidNerfError, match="image_size: expected an image size"):
             fluidnerf.read_projection(tmp_path / "left.txt", bad)
+
+
+def test_a_scene_saved_over_another_takes_the_records_of_the_other_away(tmp_path):
+    """Saved with force=True over a synthetic scene, a scene left that scene's synth.json beside
+    its own transforms.json: the record of a phantom, truth and cameras no longer there, which
+    `fluidnerf study` took for the scene's. Saved over its own folder, a scene keeps it."""
+    folder = tmp_path / "synthetic"
+    fluidnerf.synth(folder, "demo", resolution=8, lens={"resolution": [8, 8]}, rig={"layout": {"count": 3}})
+    (folder / "preview.png").write_bytes(b"the preview `fluidnerf synth` draws")
+    fluidnerf.load_scene(folder).save(folder, force=True)
+    assert (folder / "synth.json").is_file() and (folder / "preview.png").is_file()
+    K, poses = ring(3)
+    scene = fluidnerf.scene_from_arrays(
+        K, poses, np.ones((3, 16, 16), np.float32), np.array([[-10.0, -10, -10], [10, 10, 10]])
+    )
+    scene.save(folder, force=True)
+    assert not (folder / "synth.json").exists() and not (folder / "preview.png").exists()
+    assert fluidnerf.load_scene(folder).images().shape == (3, 16, 16)

@@ -29,6 +29,10 @@ pub struct PyScene {
     pub saved: bool,
 }
 
+/// The files `synth` and `import` write beside a scene file: their settings, and `synth`'s
+/// preview picture. They describe the scene they were written with.
+const SCENE_RECORDS: [&str; 3] = ["synth.json", "import.json", "preview.png"];
+
 /// Writes the files of `scene` (saved into `folder`) into `stage`: its images, masks, truth and
 /// transforms.json. Returns the files other than transforms.json, relative to the folder.
 fn write_staged(
@@ -61,11 +65,25 @@ fn write_staged(
 
 /// Moves the files written into `stage` into `folder`, transforms.json last. An earlier scene's
 /// transforms.json goes first, so that a move that fails leaves no scene naming images of two.
-fn install_staged(stage: &Path, folder: &Path, files: &[PathBuf]) -> Result<(), fluidnerf_io::IoError> {
+///
+/// With `drop_records`, the records written with the scene the folder held ([`SCENE_RECORDS`])
+/// are removed with its scene file.
+fn install_staged(
+    stage: &Path,
+    folder: &Path,
+    files: &[PathBuf],
+    drop_records: bool,
+) -> Result<(), fluidnerf_io::IoError> {
     let scene_file = Path::new(fluidnerf_io::scene::SCENE_FILE);
     let earlier = folder.join(scene_file);
     if earlier.exists() {
         std::fs::remove_file(&earlier).map_err(|e| fluidnerf_io::IoError::io(&earlier, "earlier scene file", e))?;
+    }
+    for record in SCENE_RECORDS.iter().filter(|_| drop_records).map(|name| folder.join(name)) {
+        if record.is_file() {
+            std::fs::remove_file(&record)
+                .map_err(|e| fluidnerf_io::IoError::io(&record, "record of the earlier scene", e))?;
+        }
     }
     for rel in files.iter().map(PathBuf::as_path).chain([scene_file]) {
         let to = folder.join(rel);
@@ -138,6 +156,14 @@ impl PyScene {
         };
         // A scene read from a file keeps its truth, saved or not (one from arrays has none).
         let truth = fluidnerf_io::scene::load_truth(&self.inner).map_err(|e| err(e.to_string()))?;
+        // The records of a scene replaced by another describe a scene no longer there (a
+        // synth.json naming a phantom and truth of another scene, which `fluidnerf study` took
+        // for its cell's scene): they go with it. A scene saved over its own folder keeps them.
+        let own_folder = self.saved
+            && std::fs::canonicalize(&self.inner.root)
+                .ok()
+                .is_some_and(|root| std::fs::canonicalize(folder).is_ok_and(|f| f == root));
+        let drop_records = file.exists() && !own_folder;
         let mut scene = self.inner;
         scene.root = folder.to_path_buf();
         let mut recording = Recording { flow_axis, ..Recording::plain(scene.frames.len()) };
@@ -163,7 +189,7 @@ impl PyScene {
             .collect();
         let stage = folder.join(format!(".fluidnerf-save-{}", std::process::id()));
         let written = write_staged(&stage, &scene, &recording, &images, &masks, &truth)
-            .and_then(|files| install_staged(&stage, folder, &files));
+            .and_then(|files| install_staged(&stage, folder, &files, drop_records));
         // The staged files left (all of them after a failure), and what a failed save created.
         let _ = std::fs::remove_dir_all(&stage);
         if let Err(e) = written {
@@ -430,7 +456,8 @@ impl PyScene {
     /// float32 TIFF under `images/` as it is reconstructed from (linear, background subtracted,
     /// divided by its flat field), the frames' masks under `masks/` and the ground-truth volumes
     /// under `truth/`. Afterwards
-    /// the scene lives there. A folder that is not empty is refused without `force`.
+    /// the scene lives there. A folder that is not empty is refused without `force`; a scene
+    /// saved over another takes its records (`synth.json`, `import.json`, `preview.png`) away.
     /// The files are written with the GIL released (the images and truth of a large scene take
     /// seconds): the scene is read first, and becomes the saved one once it is written.
     #[pyo3(signature = (folder, force=false))]
