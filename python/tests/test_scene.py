@@ -945,3 +945,12 @@ def test_a_scene_saved_over_another_takes_the_records_of_the_other_away(tmp_path
     scene.save(folder, force=True)
     assert not (folder / "synth.json").exists() and not (folder / "preview.png").exists()
     assert fluidnerf.load_scene(folder).images().shape == (3, 16, 16)
+
+
+def test_read_video_names_a_davis_image_for_what_it_is():
+    """A DaVis image given to read_video was sent to ffmpeg, and refused as "decoding this video
+    needs ffmpeg": installing ffmpeg, which reads no DaVis file, would not have read it."""
+    with pytest.raises(fluidnerf.FluidNerfError, match=None) as e:
+        fluidnerf.read_video(DAVIS / "float.im7")
+    assert "float.im7: is a LaVision DaVis image" in str(e.value) and "read_davis" in str(e.value)
+    assert "ffmpeg" not in str(e.value)

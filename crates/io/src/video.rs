@@ -362,6 +362,14 @@ fn read_sniffed(
             None => read_with_ffmpeg(path, opts, on_frame)?,
         },
         Container::Cine => crate::cine::read_cine(path, opts, on_frame)?,
+        Container::Unknown if crate::davis::is_davis_path(path) => {
+            // Sent to ffmpeg, it was refused as needing ffmpeg, which reads no DaVis file either.
+            return Err(IoError::invalid(
+                path,
+                "is a LaVision DaVis image (a frame of every camera at one recorded instant), not a video: read it \
+                 as an image (`read_davis` from Python), or import a folder of them as a DaVis recording",
+            ));
+        }
         Container::Unknown if is_video(path) || head.len() < 12 => {
             return Err(IoError::invalid(
                 path,
