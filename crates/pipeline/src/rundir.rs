@@ -517,10 +517,10 @@ impl RunDir {
             ));
         }
         let lock = root.join(".lock");
-        if let Some(pid) = std::fs::read_to_string(&lock).ok().and_then(|h| h.trim().parse::<u32>().ok()) {
-            if pid != std::process::id() && process_alive(pid) {
+        if let Some(holder) = LockHolder::read(&lock) {
+            if !holder.is_this_process() && holder.may_be_running() {
                 return Err(refuse(format!(
-                    "is in use by a whole run (process {pid}, lock file {}); wait for it to finish",
+                    "is in use by a whole run ({holder}, lock file {}); wait for it to finish",
                     lock.display()
                 )));
             }
@@ -787,7 +787,7 @@ fn acquire_lock(root: &Path, path: &Path) -> Result<PathBuf, PipelineError> {
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| PipelineError::file(parent, e))?;
     }
-    let me = format!("{}\n", std::process::id());
+    let me = format!("{}\n{}\n", std::process::id(), host_name());
     for _ in 0..2 {
         match std::fs::OpenOptions::new().write(true).create_new(true).open(path) {
             Ok(mut f) => {
@@ -796,30 +796,87 @@ fn acquire_lock(root: &Path, path: &Path) -> Result<PathBuf, PipelineError> {
                 return Ok(path.to_path_buf());
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                let holder = std::fs::read_to_string(path).unwrap_or_default();
-                let pid: Option<u32> = holder.trim().parse().ok();
-                if pid.is_some_and(process_alive) {
+                let holder = LockHolder::read(path);
+                if holder.as_ref().is_some_and(LockHolder::may_be_running) {
+                    let holder = holder.expect("read");
+                    let remote = if holder.elsewhere() {
+                        "; this machine cannot tell whether a process of another one still runs: if it has \
+                         ended, remove the lock file"
+                    } else {
+                        ""
+                    };
                     return Err(PipelineError::RunDir {
                         path: root.to_path_buf(),
                         why: format!(
-                            "is in use by another run (process {}, lock file {}); wait for it to finish or use \
-                             another output folder",
-                            holder.trim(),
+                            "is in use by another run ({holder}, lock file {}); wait for it to finish or use another \
+                             output folder{remote}",
                             path.display()
                         ),
                     });
                 }
-                log::warn!(
-                    "{}: removing the stale lock of process {} (no longer running)",
-                    root.display(),
-                    holder.trim()
-                );
+                let named = holder.map_or_else(|| "an unreadable holder".to_string(), |h| h.to_string());
+                log::warn!("{}: removing the stale lock of {named} (no longer running)", root.display());
                 std::fs::remove_file(path).map_err(|e| PipelineError::file(path, e))?;
             }
             Err(e) => return Err(PipelineError::file(path, format!("cannot take the run lock: {e}"))),
         }
     }
     Err(PipelineError::file(path, "cannot take the run lock"))
+}
+
+/// This machine's name, written into lock files beside the process id: run folders may lie on
+/// a file system that several machines share, where a process id means nothing on another
+/// machine (a live lock of one read as stale on another whose process ids differ, or a dead
+/// one kept because the id is in use there).
+fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().to_string())
+        .unwrap_or_default()
+}
+
+/// Who holds a lock file: a process id and, in files written since machines were recorded,
+/// the machine it runs on.
+#[derive(Debug)]
+struct LockHolder {
+    pid: u32,
+    host: Option<String>,
+}
+
+impl LockHolder {
+    fn read(path: &Path) -> Option<LockHolder> {
+        let text = std::fs::read_to_string(path).ok()?;
+        let mut lines = text.lines();
+        let pid = lines.next()?.trim().parse().ok()?;
+        let host = lines.next().map(|h| h.trim().to_string()).filter(|h| !h.is_empty());
+        Some(LockHolder { pid, host })
+    }
+
+    /// Whether it runs on another machine than this one.
+    fn elsewhere(&self) -> bool {
+        self.host.as_ref().is_some_and(|h| *h != host_name())
+    }
+
+    /// Whether this very process holds it.
+    fn is_this_process(&self) -> bool {
+        self.pid == std::process::id() && !self.elsewhere()
+    }
+
+    /// A process of this machine that is alive, or any process of another machine, which this
+    /// one cannot ask.
+    fn may_be_running(&self) -> bool {
+        self.elsewhere() || process_alive(self.pid)
+    }
+}
+
+impl std::fmt::Display for LockHolder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.host {
+            Some(h) if self.elsewhere() => write!(f, "process {} on {h}", self.pid),
+            _ => write!(f, "process {}", self.pid),
+        }
+    }
 }
 
 fn process_alive(pid: u32) -> bool {
@@ -1272,10 +1329,30 @@ mod tests {
     #[test]
     fn a_stale_lock_is_replaced() {
         let tmp = tempfile::tempdir().unwrap();
-        // No process has this id (above the kernel's pid_max).
-        std::fs::write(tmp.path().join(".lock"), "4194305\n").unwrap();
-        let dir = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap();
-        assert_eq!(std::fs::read_to_string(tmp.path().join(".lock")).unwrap().trim(), std::process::id().to_string());
-        drop(dir);
+        // No process has this id (above the kernel's pid_max), with and without its machine.
+        for holder in ["4194305\n".to_string(), format!("4194305\n{}\n", host_name())] {
+            std::fs::write(tmp.path().join(".lock"), holder).unwrap();
+            let dir = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap();
+            let text = std::fs::read_to_string(tmp.path().join(".lock")).unwrap();
+            assert_eq!(text, format!("{}\n{}\n", std::process::id(), host_name()));
+            drop(dir);
+        }
+    }
+
+    /// A lock of another machine sharing the folder is held whatever its process id means
+    /// here: neither taken as stale when no process of this machine has that id, nor as this
+    /// process's own when one has (this very process's id, here).
+    #[test]
+    fn a_lock_of_another_machine_is_held() {
+        let tmp = tempfile::tempdir().unwrap();
+        for pid in [4194305, std::process::id()] {
+            std::fs::write(tmp.path().join(".lock"), format!("{pid}\nanother-machine.example\n")).unwrap();
+            let e = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("in use by another run (process {pid} on another-machine.example"))
+                    && e.contains("remove the lock file"),
+                "{e}"
+            );
+        }
     }
 }
