@@ -121,6 +121,9 @@ def test_window_settings_the_command_line_refuses_are_refused(client, tr_scene, 
     overlapping = {"name": "tr-fast", "windows": {"frames": 4, "overlap": 2}}
     assert fluidnerf.window_plan(tr_scene, overlapping)["windows"] == [[0, 4], [1, 5]]
     assert fluidnerf.window_plan(tr_scene, "tr-fast")["windows"] == [[0, 5]]
+    # An overlap of 0, which asks for nothing to overlap, is taken with one field on every frame.
+    no_overlap = {"name": "tr-fast", "windows": {"frames": 0, "overlap": 0}}
+    assert fluidnerf.window_plan(tr_scene, no_overlap)["windows"] == [[0, 5]]
 
 
 def test_a_dask_run_equals_the_serial_run(client, tr_scene, serial, tmp_path):

@@ -915,7 +915,7 @@ pub struct GivenWindows<'a> {
 /// given, as every front end refuses them (a run that is not time-resolved passes):
 /// - windows of `W` frames given without an overlap, whose overlap (the preset's, or the
 ///   configuration's, set for its own window length) is not fewer frames than `W`;
-/// - an overlap given for windows of 0 frames (one field on every frame);
+/// - an overlap above 0 given for windows of 0 frames (one field on every frame);
 /// - with `scene`, an overlap above 0 given where the scene has a single training frame, or where
 ///   the windows hold every training frame in one window.
 ///
@@ -943,7 +943,8 @@ pub fn check_given_windows(
     }
     let Some(o) = given.overlap else { return Ok(()) };
     let key = format!("{overlap_name} {o}");
-    if w == 0 {
+    // An overlap of 0 asks for nothing to overlap, which one field on every frame satisfies.
+    if w == 0 && o > 0 {
         return Err(PipelineError::invalid(
             key,
             format!(
