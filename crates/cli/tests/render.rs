@@ -583,3 +583,31 @@ fn a_volume_named_as_a_view_is_never_rendered_over() {
     assert!(!o.status.success() && e.contains("is the reconstruction read; an input is never overwritten"), "{e}");
     assert_eq!(std::fs::read(&stack).expect("kept"), before);
 }
+
+/// A volume that is not empty but lies outside every view (its box shifted by a metre) is
+/// refused, whether seen by the scene's cameras or an orbit: its black views were written and
+/// the render reported success. An empty volume still renders, black as it is.
+#[test]
+fn a_volume_outside_every_view_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (_, vol) = make_scene(dir.path());
+    let shift = DVec3::splat(1000.0);
+    let away = Volume { aabb: Aabb::new(vol.aabb.min + shift, vol.aabb.max + shift), ..vol.clone() };
+    fluidnerf_io::volume::write_vti(&dir.path().join("away.vti"), &away).expect("writes");
+    let empty = Volume { data: vec![0.0; vol.data.len()], ..vol };
+    fluidnerf_io::volume::write_npy(&dir.path().join("empty.npy"), &empty).expect("writes");
+    let d = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
+    for (out, extra) in [("views", &[][..]), ("orbit", &["--orbit", "1", "--width", "16"][..])] {
+        let o = fluidnerf(&[&["render", &d("away.vti"), "--scene", &d(""), "-o", &d(out)][..], extra].concat());
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{out}: rendered: {e}");
+        assert!(
+            e.contains("away.vti: every rendered view is black (all pixels 0), yet it is not empty (values up to 0.98"),
+            "{e}"
+        );
+        assert!(e.contains("fills the box [998.5, 999, 999] .. [1001.5, 1001, 1001]"), "{e}");
+        assert!(!dir.path().join(out).exists(), "{out}: left the output folder");
+        let o = fluidnerf(&[&["render", &d("empty.npy"), "--scene", &d(""), "-o", &d(out)][..], extra].concat());
+        ok(&o);
+    }
+}

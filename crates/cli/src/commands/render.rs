@@ -459,6 +459,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         || format!("rendering {} views of {pixels} pixels in all", views.len()),
         8 * pixels + 4 * grid + chunk_lists,
     )?;
+    let made_folder = !out.exists();
     super::create_output_folder(out)?;
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
@@ -515,6 +516,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
 
     let peak = images.iter().flat_map(|i| i.data.iter()).copied().filter(|v| v.is_finite()).fold(0f32, f32::max);
+    // Views that are all black although the source is not empty show nothing of it: it lies
+    // outside every view (another scene's box or cameras). Written, they would pass for a
+    // render of an empty volume.
+    if images.iter().all(|i| i.data.iter().all(|&v| v == 0.0)) {
+        if let Some(largest) = largest_value(&source, views[0].time) {
+            if made_folder {
+                // Made above for this render and still empty: nothing is left behind.
+                let _ = std::fs::remove_dir(out);
+            }
+            let aabb = source.aabb();
+            bail!(
+                "{}: every rendered view is black (all pixels 0), yet it is not empty (values up to {}): none of it \
+                 lies in any view. It fills the box {} .. {}; the scene's box is {} .. {}: is it a reconstruction \
+                 of this scene?",
+                args.recon.display(),
+                num(largest),
+                num(aabb.min.to_array()),
+                num(aabb.max.to_array()),
+                num(scene.aabb.min.to_array()),
+                num(scene.aabb.max.to_array())
+            );
+        }
+    }
     let full_scale = (args.format == ImageFormat::Png16).then_some(if peak > 0.0 { peak } else { 1.0 });
     // A 16-bit PNG holds no negative count: the pixels of a reconstruction with negative values
     // that would round below 0 are written as 0.
@@ -621,6 +645,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// The value of `source` at `time` largest in magnitude, if it is not empty: a volume's
+/// largest voxel, a field's largest sample at the cells of a coarse grid over its box.
+fn largest_value(source: &Source, time: f64) -> Option<f32> {
+    let sampled;
+    let data = match source {
+        Source::Volume(v) => &v.data,
+        Source::Field { field, aabb, .. } => {
+            sampled = Volume::from_field(Volume::dims_for(aabb, 32), *aabb, field.as_ref(), time);
+            &sampled.data
+        }
+    };
+    data.iter().copied().filter(|v| v.is_finite() && *v != 0.0).reduce(|a, b| if b.abs() > a.abs() { b } else { a })
 }
 
 /// Widest image of a cell, in pixels, up to which `--projector auto` takes the footprint
