@@ -1689,3 +1689,39 @@ fn a_time_step_too_small_for_three_instants_asks_for_a_larger_one() {
     assert!(error.len() == 1 && !error[0].contains("one instant"), "{err}");
     assert!(!d.join("run").exists(), "left an output folder");
 }
+
+/// A NaN or an infinity, which Python's `json.dump` writes bare, is named as such with its key
+/// in every JSON file read: the scene's transforms.json, a run's config.json and synth's
+/// settings were refused as "expected value at line L column C" only.
+#[test]
+fn nan_or_infinity_in_a_json_file_is_named_with_its_key() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 16, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "asart", "--max-iterations", "1", "-q"]));
+    // Each file with one value written as Python writes a float that is not finite.
+    let bad = |from: &str, to: &str, edit: fn(&mut serde_json::Value), token: &str| {
+        let mut v = json(&d.join(from));
+        edit(&mut v);
+        std::fs::write(d.join(to), v.to_string().replace("\"BAD\"", token)).expect("writes");
+    };
+    std::fs::create_dir_all(d.join("bad")).expect("mkdir");
+    bad(
+        "scene/transforms.json",
+        "bad/transforms.json",
+        |v| v["frames"][1]["transform_matrix"][0][2] = "BAD".into(),
+        "NaN",
+    );
+    let o = fluidnerf(d, &["info", "bad"]);
+    refused(&o, "transforms.json: malformed JSON: line 1 column");
+    refused(&o, "at `frames[1].transform_matrix[0][2]`: NaN is not a JSON number");
+    bad("run/config.json", "cfg.json", |v| v["method"]["params"]["relaxation"] = "BAD".into(), "Infinity");
+    let o = fluidnerf(d, &["reconstruct", "--config", "cfg.json", "-o", "again"]);
+    refused(&o, "cfg.json");
+    refused(&o, "at `method.params.relaxation`: Infinity is not a JSON number");
+    bad("scene/synth.json", "synth.json", |v| v["settings"]["aabb"]["min"][0] = "BAD".into(), "-Infinity");
+    let o = fluidnerf(d, &["synth", "--config", "synth.json", "-o", "again"]);
+    refused(&o, "synth.json: not valid JSON: line 1 column");
+    refused(&o, "at `settings.aabb.min[0]`: -Infinity is not a JSON number");
+    assert!(!d.join("again").exists(), "left an output folder");
+}

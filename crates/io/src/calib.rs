@@ -293,7 +293,7 @@ fn parse_storage(path: &Path) -> Result<(Map<String, Value>, String), IoError> {
     let value = if is_xml {
         xml_storage(path, &text)?
     } else if is_json {
-        json_without_duplicates(&text).map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
+        json_without_duplicates(&text).map_err(|error| IoError::json(path, &text, &error))?
     } else {
         // `%YAML:1.0` is OpenCV's spelling, not valid YAML; drop directive lines.
         let body: String = text.lines().filter(|l| !l.starts_with('%')).map(|l| format!("{l}\n")).collect();
@@ -1207,7 +1207,7 @@ pub fn write_opencv(path: &Path, cameras: &[(String, Camera)]) -> Result<(), IoE
             let mut parts = Vec::with_capacity(entries.len());
             for (k, v) in entries {
                 let v = serde_json::to_string_pretty(&v)
-                    .map_err(|error| IoError::Json { path: path.to_path_buf(), error })?
+                    .map_err(|error| IoError::Json { path: path.to_path_buf(), error: error.to_string() })?
                     .replace('\n', "\n    ");
                 parts.push(format!("    {}: {v}", Value::String(k)));
             }
@@ -1729,5 +1729,18 @@ mod tests {
         yaml_rust2::parser::Parser::new_from_str(&nested_aliases(3)).load(&mut count, true).unwrap();
         // `a` is 2 nodes (the list and `x`), `l0` 1 + 9 × 2, `l1` 1 + 9 × 19; `l2` copies `l1` 9 times.
         assert_eq!(count.from_aliases, 9 * 2 + 9 * 19 + 9 * 172);
+    }
+
+    /// A calibration in JSON with a NaN where a number belongs (as Python's `json.dump` writes
+    /// it) names the NaN and its key.
+    #[test]
+    fn a_nan_in_a_json_calibration_is_named_with_its_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("rig.json");
+        std::fs::write(&file, "{\n  \"image_width\": 32,\n  \"camera_matrix\": {\"rows\": 1, \"data\": [1, NaN]}\n}\n")
+            .unwrap();
+        let e = read_opencv(&file).unwrap_err().to_string();
+        assert!(e.contains("rig.json: malformed JSON: line 3 column"), "{e}");
+        assert!(e.contains("at `camera_matrix.data[1]`: NaN is not a JSON number"), "{e}");
     }
 }

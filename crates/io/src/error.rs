@@ -16,9 +16,10 @@ pub enum IoError {
     /// A file the scene (or the caller) refers to does not exist.
     #[error("{what} not found: {path}")]
     NotFound { what: &'static str, path: PathBuf },
-    /// Not JSON (the message carries line and column).
+    /// Not JSON (the message carries line and column, and names a NaN or an infinity found
+    /// where a number was expected: see [`IoError::json`]).
     #[error("{path}: malformed JSON: {error}")]
-    Json { path: PathBuf, error: serde_json::Error },
+    Json { path: PathBuf, error: String },
     /// A key of a structured file is missing or has the wrong type or value. `location` names
     /// the key path (`frames[3].fl_x`) and, for scene frames, the frame and its image.
     #[error("{path}: {location}: {problem}")]
@@ -67,6 +68,13 @@ impl IoError {
     /// Shorthand for [`IoError::Invalid`].
     pub fn invalid(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
         IoError::Invalid { path: path.into(), problem: problem.into() }
+    }
+
+    /// The [`IoError::Json`] of `error`, met parsing `text` read from `path`: a NaN or an
+    /// infinity (which Python's `json.dump` writes) is named with its key, not left as
+    /// "expected value".
+    pub fn json(path: impl Into<PathBuf>, text: &str, error: &serde_json::Error) -> Self {
+        IoError::Json { path: path.into(), error: crate::json::describe_error(text, error) }
     }
 
     /// Wraps an I/O error, turning "not found" into [`IoError::NotFound`].

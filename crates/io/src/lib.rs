@@ -38,6 +38,7 @@ pub mod davis;
 mod error;
 pub mod folder;
 pub mod image;
+pub mod json;
 pub mod mesh;
 mod mraw;
 pub mod scene;

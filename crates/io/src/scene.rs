@@ -944,7 +944,7 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
     check_scene_path(path)?;
     let file = scene_file_path(path);
     let text = crate::read_input_text(&file, "scene file")?;
-    let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;
+    let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::json(&file, &text, &error))?;
     if !raw.is_object() {
         return Err(IoError::invalid(
             &file,
@@ -1708,7 +1708,8 @@ pub fn save_scene_recording(
         truth,
         frames,
     };
-    let mut text = serde_json::to_string_pretty(&out).map_err(|error| IoError::Json { path: file.clone(), error })?;
+    let mut text = serde_json::to_string_pretty(&out)
+        .map_err(|error| IoError::Json { path: file.clone(), error: error.to_string() })?;
     text.push('\n');
     atomic_write(&file, |w| w.write_all(text.as_bytes()))
 }
@@ -1730,7 +1731,7 @@ pub fn recorded(scene: &Scene) -> Result<Recording, IoError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Recording::plain(scene.frames.len())),
         Err(e) => return Err(IoError::io(&file, "scene file", e)),
     };
-    let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::Json { path: file.clone(), error })?;
+    let raw: Value = serde_json::from_str(&text).map_err(|error| IoError::json(&file, &text, &error))?;
     let linearisation = match raw.get("linearisation") {
         None => Linearisation::Linear,
         Some(v) => typed(&file, v, "linearisation", None)?,

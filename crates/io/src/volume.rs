@@ -482,8 +482,8 @@ pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
         order: "x fastest: index (k * ny + j) * nx + i".into(),
     };
     let json_path = raw_sidecar_path(path);
-    let json =
-        serde_json::to_string_pretty(&sidecar).map_err(|e| IoError::Json { path: json_path.clone(), error: e })?;
+    let json = serde_json::to_string_pretty(&sidecar)
+        .map_err(|e| IoError::Json { path: json_path.clone(), error: e.to_string() })?;
     // Both complete before either replaces an earlier pair: the volume written and its sidecar
     // not (a full disk) left new data beside the earlier sidecar, read with its grid and box.
     crate::atomic_write_together(vec![
@@ -504,8 +504,7 @@ pub fn check_finite(path: &Path, volume: &Volume) -> Result<(), IoError> {
 pub fn read_raw(path: &Path) -> Result<Volume, IoError> {
     let json_path = raw_sidecar_path(path);
     let text = crate::read_input_text(&json_path, "raw volume sidecar")?;
-    let meta: RawSidecar =
-        serde_json::from_str(&text).map_err(|e| IoError::Json { path: json_path.clone(), error: e })?;
+    let meta: RawSidecar = serde_json::from_str(&text).map_err(|e| IoError::json(&json_path, &text, &e))?;
     if meta.dtype != "<f4" {
         return Err(IoError::invalid(&json_path, format!("dtype {} is not supported (only <f4)", meta.dtype)));
     }

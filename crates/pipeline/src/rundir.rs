@@ -903,7 +903,7 @@ pub fn write_json(path: &Path, value: &impl Serialize) -> Result<PathBuf, Pipeli
 pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T, PipelineError> {
     let text = std::fs::read_to_string(path).map_err(|e| PipelineError::file(path, format!("cannot read: {e}")))?;
     let de = &mut serde_json::Deserializer::from_str(&text);
-    serde_path_to_error::deserialize(de).map_err(|e| PipelineError::file(path, describe(&e)))
+    serde_path_to_error::deserialize(de).map_err(|e| PipelineError::file(path, describe(&text, &e)))
 }
 
 /// The keys in which two settings differ, as `path: saved → given` (values in JSON), at most
@@ -1028,10 +1028,14 @@ impl JsonFileKind {
 
 /// A JSON value as `T`, with the key path in the error.
 pub fn from_json_value<T: DeserializeOwned>(value: serde_json::Value) -> Result<T, PipelineError> {
-    serde_path_to_error::deserialize(value).map_err(|e| PipelineError::invalid("configuration", describe(&e)))
+    serde_path_to_error::deserialize(value).map_err(|e| PipelineError::invalid("configuration", describe("", &e)))
 }
 
-fn describe(e: &serde_path_to_error::Error<serde_json::Error>) -> String {
+fn describe(text: &str, e: &serde_path_to_error::Error<serde_json::Error>) -> String {
+    // A NaN or an infinity (as Python's `json.dump` writes them) is named with its key.
+    if let Some(why) = fluidnerf_io::json::non_finite_error(text, e.inner()) {
+        return why;
+    }
     let why = e.inner().to_string();
     // A file cut short (a write that was interrupted) ends inside a value: no key is at fault.
     if e.inner().is_eof() {

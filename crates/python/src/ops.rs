@@ -20,7 +20,8 @@ use crate::{check_integrals, err, guard, volume_from_py, Callback};
 /// The projector settings from JSON text (`fluidnerf_classical::ProjectorConfig`; unknown keys
 /// are refused), validated. A projector here serves one call, so it keeps no footprints.
 fn projector_config(text: &str) -> PyResult<ProjectorConfig> {
-    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("projector: {e}")))?;
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| err(format!("projector: {}", fluidnerf_io::json::describe_error(text, &e))))?;
     // The visual hull holds a reconstruction's voxels at zero; a projection has none to hold.
     const HULL: [&str; 4] = ["visual_hull", "hull_threshold", "hull_noise_sigmas", "hull_dilation"];
     let given: Vec<&str> = HULL.into_iter().filter(|k| value.get(*k).is_some()).collect();
@@ -350,7 +351,8 @@ fn shape_text(shape: &[usize]) -> String {
 #[pyo3(signature = (folder, preset, overrides="{}", force=false))]
 pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, force: bool) -> PyResult<PyScene> {
     let mut settings = guard(|| fluidnerf_synth::preset(preset).map_err(|e| err(e.to_string())))?;
-    let patch: serde_json::Value = serde_json::from_str(overrides).map_err(|e| err(format!("settings: {e}")))?;
+    let patch: serde_json::Value = serde_json::from_str(overrides)
+        .map_err(|e| err(format!("settings: {}", fluidnerf_io::json::describe_error(overrides, &e))))?;
     let overridden = |key: &str| patch.get(key).is_some();
     let (given_resolution, given_aabb) = (overridden("resolution"), overridden("aabb"));
     if patch.as_object().is_some_and(|o| !o.is_empty()) {

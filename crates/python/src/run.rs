@@ -23,7 +23,8 @@ fn to_json<T: serde::Serialize>(value: &T) -> PyResult<String> {
 /// earlier run (`run.config`) or a version given kept its own, and the new run's config.json
 /// named a version that did not write it.
 fn parse_config(text: &str) -> PyResult<RunConfig> {
-    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| err(format!("configuration: {e}")))?;
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| err(format!("configuration: {}", fluidnerf_io::json::describe_error(text, &e))))?;
     let mut config: RunConfig = fluidnerf_pipeline::rundir::from_json_value(value).map_err(|e| err(e.to_string()))?;
     config.fluidnerf_version = env!("CARGO_PKG_VERSION").to_string();
     if config.format != fluidnerf_pipeline::CONFIG_FORMAT {
@@ -213,7 +214,8 @@ pub fn check_given_windows(
     overlap_from: &str,
 ) -> PyResult<()> {
     guard(|| {
-        let value: serde_json::Value = serde_json::from_str(config).map_err(|e| err(format!("configuration: {e}")))?;
+        let value: serde_json::Value = serde_json::from_str(config)
+            .map_err(|e| err(format!("configuration: {}", fluidnerf_io::json::describe_error(config, &e))))?;
         let config: RunConfig = fluidnerf_pipeline::rundir::from_json_value(value).map_err(|e| err(e.to_string()))?;
         let given = fluidnerf_pipeline::GivenWindows {
             frames,

@@ -532,8 +532,9 @@ pub(crate) fn resolve(args: &Args) -> anyhow::Result<SynthSettings> {
     let mut settings = match &args.config {
         Some(path) => {
             let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-            let value: serde_json::Value =
-                serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", path.display()))?;
+            let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+                anyhow::anyhow!("{}: not valid JSON: {}", path.display(), fluidnerf_io::json::describe_error(&text, &e))
+            })?;
             // Another fluidnerf file is named for what it is, not by the first key it has.
             use fluidnerf_pipeline::rundir::JsonFileKind;
             if let Some(kind) = JsonFileKind::of(&value).filter(|k| *k != JsonFileKind::SynthSettings) {
