@@ -308,3 +308,29 @@ fn gain_fit_settings_that_auto_leaves_unused_are_named() {
     let plain: Vec<String> = run("without", &[]);
     assert!(!plain.iter().any(|w| w.contains("set how gains are fitted")), "{plain:?}");
 }
+
+/// Training images each of one value throughout (every pixel saturated, or all at one level)
+/// are refused: the run warned, then "succeeded" with a field as flat as they are. One
+/// saturated camera among good ones is still only warned about.
+#[test]
+fn training_images_that_are_each_one_value_are_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 3, 16, 8, &[]);
+    let write = |cam: usize, counts: f32| {
+        let image = fluidnerf_core::Image { width: 16, height: 16, data: vec![counts; 256] };
+        let path = d.join(format!("scene/images/cam{cam:03}.png"));
+        fluidnerf_io::image::write_png16_counts(&path, &image).expect("writes");
+    };
+    let run =
+        |out: &str| fluidnerf(d, &["reconstruct", "scene", "-o", out, "--method", "asart", "--max-iterations", "1"]);
+    write(0, 65535.0);
+    ok(&run("run"));
+    for (cam, counts) in [(1, 65535.0), (2, 65535.0), (0, 1000.0), (1, 1000.0), (2, 1000.0)] {
+        write(cam, counts);
+    }
+    let o = run("again");
+    refused(&o, "transforms.json: every training image is one value throughout (cam000");
+    refused(&o, "carry no information about the field");
+    assert!(!d.join("again").exists(), "left an output folder");
+}

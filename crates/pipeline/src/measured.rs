@@ -43,6 +43,38 @@ pub(crate) struct Measured {
 /// [`Measured::mode`] holds the mode taken.
 pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<Measured, PipelineError> {
     let pre = fluidnerf_io::scene::load_preprocessed(scene)?;
+    // Training images that are each one value throughout (every pixel saturated, or blank at
+    // one level) carry nothing of the field: a run on them made a field as flat as they are
+    // and reported it as a result.
+    let training: Vec<usize> = scene.training_frames().map(|(i, _)| i).collect();
+    let level = |i: usize| -> Option<f32> {
+        let mask = pre.masks[i].as_deref();
+        let mut used =
+            pre.images[i].data.iter().enumerate().filter(|(k, _)| mask.is_none_or(|m| m[*k])).map(|(_, v)| *v);
+        let first = used.next()?;
+        used.all(|v| v == first).then_some(first)
+    };
+    let levels: Vec<Option<f32>> = training.iter().map(|&i| level(i)).collect();
+    // All black is refused later, as such.
+    let lit = levels.iter().position(|l| l.is_some_and(|v| v > 0.0));
+    if let Some(k) = lit.filter(|_| levels.iter().all(Option::is_some)) {
+        let i = training[k];
+        return Err(PipelineError::file(
+            &scene.root.join(fluidnerf_io::scene::SCENE_FILE),
+            format!(
+                "every training image is one value throughout ({}: {} at every pixel{}, as preprocessed): \
+                 saturated or blank images carry no information about the field; check the exposure and the \
+                 images the scene names",
+                frame_label(scene, i),
+                fluidnerf_core::num(levels[k].unwrap_or(0.0)),
+                if training.len() > 1 {
+                    format!(", and the {} others likewise", training.len() - 1)
+                } else {
+                    String::new()
+                }
+            ),
+        ));
+    }
     let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
     let mut images = pre.images;
     let mut factors = vec![1.0; images.len()];
