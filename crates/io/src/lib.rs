@@ -95,18 +95,28 @@ pub fn atomic_write_seekable(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<&std::fs::File>) -> std::io::Result<()>,
 ) -> Result<(), IoError> {
+    let (tmp, _unfinished) = filled_beside(path, write)?;
+    tmp.persist(path).map_err(|e| IoError::Io { path: path.to_path_buf(), error: e.error })?;
+    Ok(())
+}
+
+/// A temporary file beside `path` (its folder created if missing), filled by `write` and
+/// listed as unfinished until the guard is dropped; removed again on any error.
+fn filled_beside(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> Result<(tempfile::NamedTempFile, Unfinished), IoError> {
     let dir = folder_of(path);
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
     let tmp = temporary_file_in(dir)?;
-    let _unfinished = Unfinished::register(tmp.path());
+    let unfinished = Unfinished::register(tmp.path());
     let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
     {
         let mut w = BufWriter::new(tmp.as_file());
         write(&mut w).map_err(io_err)?;
         w.flush().map_err(io_err)?;
     }
-    tmp.persist(path).map_err(|e| io_err(e.error))?;
-    Ok(())
+    Ok((tmp, unfinished))
 }
 
 /// What fills one file of [`atomic_write_together`].
@@ -119,16 +129,7 @@ pub type FillFile<'a> = Box<dyn FnOnce(&mut dyn Write) -> std::io::Result<()> + 
 pub fn atomic_write_together<'a>(files: Vec<(&'a Path, FillFile<'a>)>) -> Result<(), IoError> {
     let mut staged = Vec::with_capacity(files.len());
     for (path, write) in files {
-        let dir = folder_of(path);
-        std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
-        let tmp = temporary_file_in(dir)?;
-        let unfinished = Unfinished::register(tmp.path());
-        let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
-        {
-            let mut w = BufWriter::new(tmp.as_file());
-            write(&mut w).map_err(io_err)?;
-            w.flush().map_err(io_err)?;
-        }
+        let (tmp, unfinished) = filled_beside(path, |w| write(w))?;
         staged.push((path, tmp, unfinished));
     }
     for (path, tmp, _unfinished) in staged {
