@@ -144,12 +144,12 @@ def test_a_dask_run_equals_the_serial_run(client, tr_scene, serial, tmp_path):
 
 
 def kill_when_training(lock: Path, marker: Path, stop: threading.Event) -> None:
-    """Kills the worker process that holds `lock` (a window's lock file holds its process id),
-    once, and records it in `marker`."""
+    """Kills the worker process that holds `lock` (a window's lock file holds its process id,
+    then its machine's name), once, and records it in `marker`."""
     while not stop.is_set():
         try:
-            pid = int(lock.read_text().strip())
-        except (OSError, ValueError):
+            pid = int(lock.read_text().split()[0])
+        except (OSError, ValueError, IndexError):
             time.sleep(0.002)
             continue
         marker.write_text(f"{pid}\n")
