@@ -153,6 +153,12 @@ impl Aabb {
         p.cmpge(self.min).all() && p.cmple(self.max).all()
     }
 
+    /// Whether the two boxes share some volume: boxes that only touch along a face, an edge
+    /// or a corner do not.
+    pub fn overlaps(&self, other: &Aabb) -> bool {
+        (0..3).all(|a| self.min[a] < other.max[a] && other.min[a] < self.max[a])
+    }
+
     /// The eight corners, x varying fastest.
     pub fn corners(&self) -> [DVec3; 8] {
         let (a, b) = (self.min, self.max);
@@ -271,6 +277,22 @@ mod tests {
         assert_eq!(b.to_unit(b.min), DVec3::ZERO);
         assert_eq!(b.to_unit(b.max), DVec3::ONE);
         assert_eq!(b.to_unit(DVec3::new(0.0, 3.5, 11.5)), DVec3::new(0.25, 0.75, 0.25));
+    }
+
+    /// Boxes that share volume overlap; boxes apart along one axis, or touching only along a
+    /// face, do not.
+    #[test]
+    fn boxes_overlap_when_they_share_volume() {
+        let b = Aabb::new(DVec3::ZERO, DVec3::new(4.0, 2.0, 2.0));
+        assert!(b.overlaps(&Aabb::new(DVec3::splat(1.0), DVec3::splat(3.0))));
+        assert!(b.overlaps(&b));
+        for other in [
+            Aabb::new(DVec3::new(4.0, 0.0, 0.0), DVec3::new(5.0, 2.0, 2.0)),
+            Aabb::new(DVec3::new(1.0, 2.5, 0.0), DVec3::new(2.0, 3.0, 2.0)),
+            Aabb::new(DVec3::splat(100.0), DVec3::splat(104.0)),
+        ] {
+            assert!(!b.overlaps(&other) && !other.overlaps(&b), "{other:?}");
+        }
     }
 
     /// A ray in a face's plane, parallel to it, runs on the closed box's surface and hits it; a

@@ -738,9 +738,7 @@ fn refuse_truth_apart(
     scene: &Scene,
 ) -> anyhow::Result<()> {
     for (i, (_, t)) in truth.iter().enumerate() {
-        let Some((what, b)) =
-            boxes.iter().find(|(_, b)| (0..3).any(|a| b.min[a] >= t.aabb.max[a] || b.max[a] <= t.aabb.min[a]))
-        else {
+        let Some((what, b)) = boxes.iter().find(|(_, b)| !b.overlaps(&t.aabb)) else {
             continue;
         };
         let file = match (given, scene.truth.get(i)) {

@@ -400,8 +400,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The export grid.
     if let Some(b) = export_box {
         let r = source.aabb();
-        let apart = (0..3).any(|a| b.min[a] >= r.max[a] || b.max[a] <= r.min[a]);
-        if apart {
+        if !b.overlaps(&r) {
             bail!(
                 "--box {:?}..{:?} does not overlap the reconstruction's box {:?}..{:?}: the export would hold only zeros",
                 b.min.to_array(),
@@ -440,7 +439,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             // A truth apart from the exported box is zero on every slice: its panels would be
             // drawn empty beside the reconstruction, as if it held no field there.
             let b = &volume.aabb;
-            if (0..3).any(|a| t.aabb.min[a] >= b.max[a] || t.aabb.max[a] <= b.min[a]) {
+            if !t.aabb.overlaps(b) {
                 bail!(
                     "--compare {}: the truth fills the box {} .. {}, which does not overlap the exported box {} .. {}: \
                      its slices would be empty; give the truth of this reconstruction",
