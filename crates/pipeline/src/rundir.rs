@@ -797,8 +797,7 @@ fn acquire_lock(root: &Path, path: &Path) -> Result<PathBuf, PipelineError> {
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 let holder = LockHolder::read(path);
-                if holder.as_ref().is_some_and(LockHolder::may_be_running) {
-                    let holder = holder.expect("read");
+                if let Some(holder) = holder.as_ref().filter(|h| h.may_be_running()) {
                     let remote = if holder.elsewhere() {
                         "; this machine cannot tell whether a process of another one still runs: if it has \
                          ended, remove the lock file"
@@ -828,12 +827,15 @@ fn acquire_lock(root: &Path, path: &Path) -> Result<PathBuf, PipelineError> {
 /// a file system that several machines share, where a process id means nothing on another
 /// machine (a live lock of one read as stale on another whose process ids differ, or a dead
 /// one kept because the id is in use there).
-fn host_name() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .ok()
-        .or_else(|| std::env::var("HOSTNAME").ok())
-        .map(|h| h.trim().to_string())
-        .unwrap_or_default()
+fn host_name() -> &'static str {
+    static HOST: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    HOST.get_or_init(|| {
+        std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .ok()
+            .or_else(|| std::env::var("HOSTNAME").ok())
+            .map(|h| h.trim().to_string())
+            .unwrap_or_default()
+    })
 }
 
 /// Who holds a lock file: a process id and, in files written since machines were recorded,
@@ -855,7 +857,7 @@ impl LockHolder {
 
     /// Whether it runs on another machine than this one.
     fn elsewhere(&self) -> bool {
-        self.host.as_ref().is_some_and(|h| *h != host_name())
+        self.host.as_deref().is_some_and(|h| h != host_name())
     }
 
     /// Whether this very process holds it.
