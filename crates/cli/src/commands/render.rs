@@ -459,8 +459,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         || format!("rendering {} views of {pixels} pixels in all", views.len()),
         8 * pixels + 4 * grid + chunk_lists,
     )?;
-    let made_folder = !out.exists();
-    super::create_output_folder(out)?;
     let bar = crate::progress::bar(views.len() as u64, "render");
     let mut images: Vec<Image> = Vec::with_capacity(views.len());
     let mut baked: Option<(f64, Baked)> = None;
@@ -521,10 +519,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // render of an empty volume.
     if images.iter().all(|i| i.data.iter().all(|&v| v == 0.0)) {
         if let Some(largest) = largest_value(&source, views[0].time) {
-            if made_folder {
-                // Made above for this render and still empty: nothing is left behind.
-                let _ = std::fs::remove_dir(out);
-            }
             let aabb = source.aabb();
             bail!(
                 "{}: every rendered view is black (all pixels 0), yet it is not empty (values up to {}): none of it \
@@ -557,6 +551,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    // The folder is made once the views are drawn: a render refused or interrupted on the way
+    // leaves none behind (its writability was checked at the start).
+    super::create_output_folder(out)?;
     // Encoded and written on every core (a PNG's compression is most of a small view's cost);
     // a view that could not be written is named.
     images
