@@ -309,6 +309,48 @@ fn gain_fit_settings_that_auto_leaves_unused_are_named() {
     assert!(!plain.iter().any(|w| w.contains("set how gains are fitted")), "{plain:?}");
 }
 
+/// A camera whose image holds no light while the others see the flow (off, covered, or the
+/// wrong file) is named in a warning. Its dark total no longer reads as a camera of another
+/// gain (gains auto fitted gains for it), and gains fitted by request average 1 over the
+/// cameras that have one, so the dark camera does not rescale the others and the volume.
+#[test]
+fn a_dark_camera_among_lit_ones_is_named_and_rescales_nothing() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 5, 24, 12, &[]);
+    let black = fluidnerf_core::Image { width: 24, height: 24, data: vec![0.0; 24 * 24] };
+    fluidnerf_io::image::write_png16_counts(&d.join("scene/images/cam002.png"), &black).expect("writes");
+    let run = |out: &str, extra: &[&str]| {
+        let mut args = vec!["reconstruct", "scene", "-o", out, "--method", "asart", "--resolution", "12"];
+        args.extend(["--max-iterations", "4", "-q"]);
+        args.extend_from_slice(extra);
+        ok(&fluidnerf(d, &args));
+        report(&d.join(out))
+    };
+    let warnings = |r: &serde_json::Value| -> Vec<String> {
+        r["warnings"].as_array().expect("warnings").iter().filter_map(|w| w.as_str().map(String::from)).collect()
+    };
+    let auto = run("auto", &[]);
+    let said = warnings(&auto);
+    let dark = said.iter().find(|w| w.contains("dark at every pixel")).expect("the dark camera named");
+    assert!(dark.starts_with("cam002 (images/cam002.png) is dark") && dark.contains("remove that frame"), "{dark}");
+    assert!(!said.iter().any(|w| w.contains("differ between cameras")), "{said:?}");
+    assert_eq!(pre_mode(&auto), "none");
+    let fit = run("fit", &["--gains", "fit", "--gain-every", "2"]);
+    assert!(warnings(&fit).iter().any(|w| w.contains("cam002 (images/cam002.png) is dark")));
+    let frames = fit["preprocessing"]["frames"].as_array().expect("a gain per frame").clone();
+    let lit: Vec<f64> = frames
+        .iter()
+        .filter(|f| f["camera"] != "cam002" && f["holdout"] == false)
+        .map(|f| f["gain"].as_f64().expect("gain"))
+        .collect();
+    assert_eq!(lit.len(), 4);
+    let mean = lit.iter().sum::<f64>() / lit.len() as f64;
+    // Balanced totals and fitted gains each average 1 over the lit cameras; their products
+    // nearly so (a dark camera in either mean made them 1.25 here).
+    assert!((mean - 1.0).abs() < 0.02, "the lit cameras' gains average {mean}: {lit:?}");
+}
+
 /// Training images each of one value throughout (every pixel saturated, or all at one level)
 /// are refused: the run warned, then "succeeded" with a field as flat as they are. One
 /// saturated camera among good ones is still only warned about.

@@ -924,7 +924,8 @@ pub fn train_fitting_gains<F: TrainableField>(
 
 /// One gain refit of [`train_fitting_gains`]: renders the fixed ray subset of every training
 /// view, fits `(g, b)` against the measured targets, normalises to mean gain 1 and sets the
-/// targets. A view whose fit fails (dark render) keeps its gain.
+/// targets. A view whose fit fails (dark render, or no light measured) keeps its gain and
+/// counts in no mean: a dead camera would otherwise rescale every other one.
 fn refit_gains<F: TrainableField, E: Engine<F>>(
     prep: &mut Prepared,
     field: &F,
@@ -935,6 +936,7 @@ fn refit_gains<F: TrainableField, E: Engine<F>>(
     gains: &mut [(f32, f32)],
 ) {
     let mut rendered = Vec::new();
+    let mut fitted = vec![false; gains.len()];
     for v in 0..prep.train.len() {
         let n = prep.train[v].rays.len();
         if n == 0 {
@@ -975,9 +977,11 @@ fn refit_gains<F: TrainableField, E: Engine<F>>(
         };
         if g.is_finite() && g > 0.0 && b.is_finite() {
             gains[v] = (g as f32, b as f32);
+            fitted[v] = true;
         }
     }
-    let mean = gains.iter().map(|g| g.0 as f64).sum::<f64>() / gains.len().max(1) as f64;
+    let used = fitted.iter().filter(|&&f| f).count();
+    let mean = gains.iter().zip(&fitted).filter(|(_, &f)| f).map(|(g, _)| g.0 as f64).sum::<f64>() / used.max(1) as f64;
     if mean > 0.0 && mean.is_finite() {
         gains.iter_mut().for_each(|g| g.0 /= mean as f32);
     }

@@ -72,3 +72,30 @@ fn fitted_gains_recover_the_scaling_of_each_view() {
         assert!((g.0 - t / mean).abs() < 0.03, "fitted {gains:?}, drawn {truth:?}");
     }
 }
+
+/// A view with no light (a dead or covered camera) fits no gain, and the gains are normalised
+/// over the views that have one: the dark view's unfitted gain used to count in the mean and
+/// rescale every other view's.
+#[test]
+fn a_dark_view_counts_in_no_gain_normalisation() {
+    let problem = blob_problem(&[1.0, 1.3, 0.0, 0.8]);
+    let cfg = TrainConfig {
+        coarse_samples: 16,
+        fine_samples: 0,
+        rays_per_image: 128,
+        max_iterations: 60,
+        chunk_samples: 4096,
+        stop: fluidnerf_neural::train::StopRule { window: 0, ..Default::default() },
+        ..Default::default()
+    };
+    let mut prep = Prepared::new(&problem, &cfg).expect("prepares");
+    let mut learner = Learner::fresh(DenseGridField::new([8, 8, 8], 0.0), &prep, &cfg);
+    let fit = GainFit { every: 20, rays_per_view: 200, offset: false };
+    let (_, gains) =
+        train_fitting_gains(&mut prep, &mut learner, &cfg, 5, &fit, |_| std::ops::ControlFlow::Continue(()))
+            .expect("trains");
+    let lit = [gains[0].0, gains[1].0, gains[3].0];
+    let mean = lit.iter().sum::<f32>() / 3.0;
+    assert!((mean - 1.0).abs() < 1e-5, "the lit views' gains average {mean}: {gains:?}");
+    assert!(lit[1] > lit[0] && lit[0] > lit[2], "the lit views' order of gains: {gains:?}");
+}

@@ -122,8 +122,8 @@ pub(crate) fn run(
     check_memory(config, needed, || format!("{method} at {:?} voxels with {} views", grid.dims, cameras.len()))?;
     let t_setup = Instant::now();
     let measured = crate::measured::load(scene, &config.gains, false)?;
-    if let Some(hint) = &measured.gain_hint {
-        session.warn(hint);
+    for warning in &measured.warnings {
+        session.warn(warning);
     }
     let (train_idx, held_idx) = measured.split(scene);
     // Masked pixels are rows of zeros ([`MaskedProjector`]): zero data, no weight.
@@ -311,15 +311,17 @@ pub(crate) fn run(
         // Each view against its reprojection: p ≈ g · A x + b.
         let x = volume.as_deref().unwrap_or_default();
         let mut buf = Vec::new();
+        let mut fitted = vec![false; gains.len()];
         for (v, p) in measured_images.iter().enumerate() {
             buf.clear();
             buf.resize(projector.view_len(v), 0.0);
             projector.forward(v, x, &mut buf);
             if let Some(g) = fit_gain(&p.data, &buf, train_masks[v].as_deref(), config.gains.offset) {
                 gains[v] = g;
+                fitted[v] = true;
             }
         }
-        normalise(&mut gains);
+        normalise(&mut gains, &fitted);
         for ((c, p), &(g, b)) in corrected.iter_mut().zip(&measured_images).zip(&gains) {
             let (inv, b) = ((1.0 / g) as f32, b as f32);
             c.data.iter_mut().zip(&p.data).for_each(|(c, &p)| *c = ((p - b) * inv).max(0.0));

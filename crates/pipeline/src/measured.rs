@@ -30,9 +30,11 @@ pub(crate) struct Measured {
     pub mode: GainMode,
     /// What was done, for the report; gains are filled in by [`Measured::report`].
     preprocessing: Preprocessing,
-    /// Without balancing or fitted gains: a warning when the training images of one time
-    /// differ in total intensity as cameras of different gains do ([`gain_spread`]).
-    pub gain_hint: Option<String>,
+    /// Warnings for the run to issue: images with no light while others of their time have
+    /// some ([`dark_frames_hint`]), and, without balancing or fitted gains, training images
+    /// of one time that differ in total intensity as cameras of different gains do
+    /// ([`gain_spread`]).
+    pub warnings: Vec<String>,
 }
 
 /// Reads and preprocesses the scene's images ([`fluidnerf_io::scene::load_preprocessed`]) and,
@@ -80,6 +82,7 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
     let mut factors = vec![1.0; images.len()];
     let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
     let comparable: Vec<Option<f64>> = totals.iter().zip(&pre.masks).map(|(&t, m)| m.is_none().then_some(t)).collect();
+    let dark_warning = dark_frames_hint(scene, &totals.iter().copied().map(Some).collect::<Vec<_>>());
     let spread =
         matches!(gains.mode, GainMode::None | GainMode::Auto).then(|| gain_spread(scene, &comparable)).flatten();
     let mode = match gains.mode {
@@ -151,11 +154,12 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
             let same: Vec<usize> = (0..images.len()).filter(|&j| time_key(j) == time_key(i)).collect();
             let train: Vec<usize> = same.iter().copied().filter(|&j| !scene.frames[j].holdout).collect();
             let group = if train.is_empty() { same } else { train };
-            let mean = group.iter().map(|&j| totals[j]).sum::<f64>() / group.len() as f64;
+            // Images without light count in no mean: a dark camera would rescale every other.
+            let lit: Vec<f64> = group.iter().map(|&j| totals[j]).filter(|&t| t > 0.0).collect();
+            let mean = lit.iter().sum::<f64>() / lit.len().max(1) as f64;
+            // An image with no light stays as it is (and is warned about above).
             if totals[i] > 0.0 && mean > 0.0 {
                 factors[i] = totals[i] / mean;
-            } else {
-                log::warn!("frame {i} ({}): no light in the image; not balanced", scene.frames[i].file_path.display());
             }
         }
         for (im, &g) in images.iter_mut().zip(&factors) {
@@ -177,7 +181,8 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
         gains_auto: auto_why,
         frames: Vec::new(),
     };
-    Ok(Measured { images, masks: pre.masks, gains: factors, mode, preprocessing, gain_hint })
+    let warnings = dark_warning.into_iter().chain(gain_hint).collect();
+    Ok(Measured { images, masks: pre.masks, gains: factors, mode, preprocessing, warnings })
 }
 
 impl Measured {
@@ -268,7 +273,10 @@ pub(crate) fn gain_spread(scene: &Scene, totals: &[Option<f64>]) -> Option<(usiz
                 let z = camera.camera_from_world().transform_point3(scene.aabb.centre()).z;
                 let k = &camera.intrinsics;
                 let per_integral = k.fx * k.fy / (z * z);
-                (z > 0.0 && per_integral.is_finite()).then_some(i).zip(totals[i].map(|total| total / per_integral))
+                // An image with no light says nothing of its camera's gain (a dead or covered
+                // camera, or one that sees only empty space): it is warned about on its own.
+                let total = totals[i].filter(|&total| total > 0.0);
+                (z > 0.0 && per_integral.is_finite()).then_some(i).zip(total.map(|total| total / per_integral))
             })
             .collect();
         if group.len() < 3 {
@@ -289,6 +297,39 @@ pub(crate) fn gain_spread(scene: &Scene, totals: &[Option<f64>]) -> Option<(usiz
         }
     }
     worst
+}
+
+/// A warning naming the frames whose images (as preprocessed, masked pixels left out; their
+/// totals in `totals`, None where not known) hold no light at all while other images of their
+/// time hold some, or None. A camera that sees the
+/// box and no light is evidence of empty space along all its rays, and a run takes it as
+/// such; when the camera was off or covered, or the scene names the wrong file, that evidence
+/// is false and darkens the whole reconstruction. Every image dark is refused elsewhere.
+pub(crate) fn dark_frames_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
+    let key = |i: usize| scene.frames[i].time.map(f64::to_bits);
+    let lit = |i: usize| (0..totals.len()).any(|j| j != i && key(j) == key(i) && totals[j].is_some_and(|t| t > 0.0));
+    let dark: Vec<String> = (0..totals.len())
+        .filter(|&i| totals[i] == Some(0.0) && lit(i))
+        .map(|i| {
+            let f = &scene.frames[i];
+            match &f.camera_name {
+                Some(name) => format!("{name} ({})", f.file_path.display()),
+                None => f.file_path.display().to_string(),
+            }
+        })
+        .collect();
+    let (first, rest) = dark.split_first()?;
+    let (what, verb) = if rest.is_empty() {
+        (first.clone(), "is")
+    } else {
+        (format!("{first} and {} other image(s): {}", rest.len(), rest.join(", ")), "are")
+    };
+    Some(format!(
+        "{what} {verb} dark at every pixel used, while other cameras of the same time see light: the run takes \
+         that as empty space along every ray of {}; if a camera was off or covered, or the scene names the wrong \
+         image, remove that frame from the scene",
+        if rest.is_empty() { "that camera" } else { "those cameras" }
+    ))
 }
 
 /// What [`gain_spread`] found, in words.
@@ -359,9 +400,13 @@ pub(crate) fn fit_gain(p: &[f32], r: &[f32], mask: Option<&[bool]>, offset: bool
     (g.is_finite() && g > 0.0 && b.is_finite()).then_some((g, b))
 }
 
-/// Scales gains to mean 1 (offsets are in pixel units and stay).
-pub(crate) fn normalise(gains: &mut [(f64, f64)]) {
-    let mean = gains.iter().map(|g| g.0).sum::<f64>() / gains.len().max(1) as f64;
+/// Scales gains so that those `fitted` average 1 (offsets are in pixel units and stay). A gain
+/// that could not be fitted (an image without light) keeps no weight in the mean: it would
+/// otherwise rescale every other camera, and with them the whole reconstruction.
+pub(crate) fn normalise(gains: &mut [(f64, f64)], fitted: &[bool]) {
+    assert_eq!(gains.len(), fitted.len(), "normalise: one flag per gain");
+    let used = fitted.iter().filter(|&&f| f).count();
+    let mean = gains.iter().zip(fitted).filter(|(_, &f)| f).map(|(g, _)| g.0).sum::<f64>() / used.max(1) as f64;
     if mean > 0.0 && mean.is_finite() {
         gains.iter_mut().for_each(|g| g.0 /= mean);
     }
@@ -544,7 +589,11 @@ mod tests {
         let s = holdout_score(&p, &r, None);
         assert!(s.nrmse_raw > 0.3 && s.nrmse_fitted < 1e-6 && (s.fitted_gain - 0.7).abs() < 1e-6, "{s:?}");
         let mut gains = vec![(2.0, 0.0), (4.0, 1.0)];
-        normalise(&mut gains);
+        normalise(&mut gains, &[true, true]);
         assert_eq!(gains, vec![(2.0 / 3.0, 0.0), (4.0 / 3.0, 1.0)]);
+        // A gain that was not fitted neither counts in the mean nor is left out of the scaling.
+        let mut gains = vec![(2.0, 0.0), (1.0, 0.0), (4.0, 1.0)];
+        normalise(&mut gains, &[true, false, true]);
+        assert_eq!(gains, vec![(2.0 / 3.0, 0.0), (1.0 / 3.0, 0.0), (4.0 / 3.0, 1.0)]);
     }
 }

@@ -159,8 +159,8 @@ pub(crate) fn run(
     let earlier = if dir.resuming() { earlier_report(dir) } else { None };
     let t0 = Instant::now();
     let (problem, masks, measured) = problem(scene, &config.gains, false)?;
-    if let Some(hint) = &measured.gain_hint {
-        session.warn(hint);
+    for warning in &measured.warnings {
+        session.warn(warning);
     }
     let prep = Prepared::with_masks(&problem, &spec.train, &masks).map_err(crate::config::training_error)?;
     let setup_s = t0.elapsed().as_secs_f64();

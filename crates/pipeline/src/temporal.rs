@@ -242,8 +242,8 @@ fn setup(
     };
     refuse_timeless_scene(scene, method)?;
     let (mut problem, mut masks, measured) = crate::neural::problem(scene, &config.gains, true)?;
-    if let Some(hint) = &measured.gain_hint {
-        session.warn(hint);
+    for warning in &measured.warnings {
+        session.warn(warning);
     }
     // A held-out time that matches no frame holds no image out: a mistyped time trained on
     // every image, unannounced.
