@@ -72,3 +72,55 @@ pub fn folder_kind(dir: &Path) -> Option<FolderKind> {
         None
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const KINDS: [(FolderKind, &str); 8] = [
+        (FolderKind::Scene, "transforms.json"),
+        (FolderKind::Run, "config.json"),
+        (FolderKind::Run, "report.json"),
+        (FolderKind::Export, "export.json"),
+        (FolderKind::Render, "render.json"),
+        (FolderKind::Compare, "compare.json"),
+        (FolderKind::Study, "study.json"),
+        (FolderKind::Demo, "comparison.json"),
+    ];
+
+    /// Each kind is told by its own file, and its description names that file.
+    #[test]
+    fn each_kind_is_told_by_the_file_that_marks_it() {
+        for (kind, file) in KINDS {
+            let dir = tempfile::tempdir().expect("tempdir");
+            std::fs::write(dir.path().join(file), "{}").expect("write");
+            assert_eq!(folder_kind(dir.path()), Some(kind), "{file}");
+            assert!(kind.describe().starts_with(kind.name()), "{kind:?}");
+            assert!(kind.describe().contains(file), "{kind:?}: {}", kind.describe());
+        }
+        let names: std::collections::BTreeSet<&str> = KINDS.iter().map(|(k, _)| k.name()).collect();
+        assert_eq!(names.len(), 7, "two kinds share a name: {names:?}");
+    }
+
+    /// An empty folder, a missing one, and a folder whose marker is a folder are no kind.
+    #[test]
+    fn a_folder_without_a_marker_file_is_no_kind() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        assert_eq!(folder_kind(dir.path()), None);
+        assert_eq!(folder_kind(&dir.path().join("missing")), None);
+        std::fs::create_dir(dir.path().join("transforms.json")).expect("mkdir");
+        assert_eq!(folder_kind(dir.path()), None);
+    }
+
+    /// A scene's file wins over a run's, and a run's over the later kinds.
+    #[test]
+    fn the_first_kind_in_order_wins() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        for (_, file) in KINDS.iter().rev() {
+            std::fs::write(dir.path().join(file), "{}").expect("write");
+        }
+        assert_eq!(folder_kind(dir.path()), Some(FolderKind::Scene));
+        std::fs::remove_file(dir.path().join("transforms.json")).expect("remove");
+        assert_eq!(folder_kind(dir.path()), Some(FolderKind::Run));
+    }
+}
