@@ -131,6 +131,42 @@ mod tests {
         }
     }
 
+    /// Closed objects and arrays before the value are left out of its path, and strings holding
+    /// brackets, commas, colons or an escaped quote are read as strings.
+    #[test]
+    fn the_key_path_skips_closed_containers_and_the_insides_of_strings() {
+        let text = "{\"a\": {\"x\": [1, 2]}, \"s\": \"]}\", \"b,{[\": [0, {\"c\\\"d:\": [true, nan]}]}";
+        let m = message(text);
+        assert!(m.contains("at `b,{[[1].c\"d:[1]`: nan is not a JSON number"), "{text}: {m}");
+    }
+
+    /// A NaN or an infinity as the whole text has no key path to name, in any of its spellings.
+    #[test]
+    fn a_value_at_the_top_level_is_named_without_a_path() {
+        for token in ["NaN", "nan", "inf", "-inf", "+Infinity"] {
+            let m = message(token);
+            assert!(m.starts_with("line 1 column "), "{token}: {m}");
+            assert!(m.contains(&format!(": {token} is not a JSON number")), "{token}: {m}");
+            assert!(!m.contains(", at `"), "{token}: {m}");
+        }
+    }
+
+    /// An error that is not a syntax error (a value of the wrong type) is told as serde_json
+    /// tells it, even where a string spelling an infinity ends.
+    #[test]
+    fn errors_of_a_value_of_the_wrong_type_are_told_as_the_parser_tells_them() {
+        let map = "{\"w\": \"inf\"}";
+        let list = "[1, \"NaN\"]";
+        let errors = [
+            (map, serde_json::from_str::<std::collections::BTreeMap<String, f64>>(map).expect_err("a string")),
+            (list, serde_json::from_str::<Vec<f64>>(list).expect_err("a string")),
+        ];
+        for (text, e) in errors {
+            assert!(!e.is_syntax() && e.line() == 1, "{e}");
+            assert_eq!(describe_error(text, &e), e.to_string(), "{text}");
+        }
+    }
+
     #[test]
     fn other_syntax_errors_are_told_as_the_parser_tells_them() {
         for text in ["{\"w\": 3,}", "{\"w\": Nope}", "{\"w\": 3", "{\"name\": \"NaN\" x}"] {
