@@ -1212,4 +1212,112 @@ mod tests {
         assert_eq!(Linearisation::Srgb.apply(255), 255.0);
         assert_eq!(Linearisation::Srgb.apply(0), 0.0);
     }
+
+    /// The two forms of each linearisation agree at every 8-bit count, and the sRGB curve's
+    /// linear toe and a gamma give the values worked out by hand.
+    #[test]
+    fn counts_and_unit_code_values_linearise_alike() {
+        for lin in [Linearisation::Linear, Linearisation::Srgb, Linearisation::Gamma(2.0)] {
+            for c in 0..=255u8 {
+                let (a, b) = (lin.apply(c), lin.apply_unit(f64::from(c) / 255.0));
+                assert!((a - b).abs() <= 1e-4 * a.max(1.0), "{lin} at {c}: {a} against {b}");
+            }
+        }
+        // 10/255 lies on the toe (below 0.04045): 255 · (10/255) / 12.92 = 10 / 12.92.
+        assert!((Linearisation::Srgb.apply(10) - 10.0 / 12.92).abs() < 1e-5);
+        assert!((Linearisation::Srgb.apply_unit(0.04045) - (255.0 * 0.04045 / 12.92) as f32).abs() < 1e-5);
+        // 51/255 = 0.2, squared 0.04: 10.2.
+        assert!((Linearisation::Gamma(2.0).apply(51) - 10.2).abs() < 1e-4);
+        assert!((Linearisation::Gamma(2.0).apply_unit(0.5) - 63.75).abs() < 1e-4);
+        assert_eq!(Linearisation::Linear.apply_unit(0.5), 127.5);
+        assert_eq!(Linearisation::Linear.apply(37), 37.0);
+    }
+
+    /// Messages say "an 8-bit" and "a 16-bit"; integer kinds saturate at 2^bits − 1, floats never.
+    #[test]
+    fn sample_kinds_name_themselves_and_their_full_scale() {
+        assert_eq!(SampleKind::Integer(8).with_article(), "an 8-bit");
+        assert_eq!(SampleKind::Integer(11).with_article(), "an 11-bit");
+        assert_eq!(SampleKind::Integer(16).with_article(), "a 16-bit");
+        assert_eq!(SampleKind::Float.with_article(), "a floating-point");
+        assert_eq!(SampleKind::Integer(8).full_scale(), Some(255.0));
+        assert_eq!(SampleKind::Integer(12).full_scale(), Some(4095.0));
+        assert_eq!(SampleKind::Integer(16).full_scale(), Some(65535.0));
+        assert_eq!(SampleKind::Float.full_scale(), None);
+        let image = Image::from_vec(4, 1, vec![254.0, 255.0, 256.0, 4095.0]);
+        assert_eq!(SampleKind::Integer(8).saturated(&image), 3);
+        assert_eq!(SampleKind::Integer(12).saturated(&image), 1);
+        assert_eq!(SampleKind::Integer(16).saturated(&image), 0);
+        assert_eq!(SampleKind::Float.saturated(&image), 0);
+    }
+
+    #[test]
+    fn image_extensions_are_recognised_in_any_letter_case() {
+        for name in ["a.png", "a.PNG", "b.Jpg", "c.jpeg", "d.tif", "e.TIFF", "f.im7", "g.IMX"] {
+            assert!(has_image_extension(Path::new(name)), "{name}");
+        }
+        for name in ["a.txt", "png", "a.png.bak", "frame.0001"] {
+            assert!(!has_image_extension(Path::new(name)), "{name}");
+        }
+    }
+
+    /// A path naming no file finds the one image of its stem, with another extension or none;
+    /// several are an error naming them, and other files are not images.
+    #[test]
+    fn an_image_is_found_by_its_stem() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        for name in ["r_0.png", "r_0.txt", "frame.0001.tif", "two.png", "two.jpg"] {
+            std::fs::write(d.join(name), b"x").expect("write");
+        }
+        std::fs::create_dir(d.join("dir.png")).expect("mkdir");
+        assert_eq!(find_image_by_stem(&d.join("r_0")), Ok(Some(d.join("r_0.png"))));
+        assert_eq!(find_image_by_stem(&d.join("r_0.jpg")), Ok(Some(d.join("r_0.png"))));
+        assert_eq!(find_image_by_stem(&d.join("frame.0001")), Ok(Some(d.join("frame.0001.tif"))));
+        assert_eq!(find_image_by_stem(&d.join("r_1.png")), Ok(None));
+        assert_eq!(find_image_by_stem(&d.join("dir")), Ok(None), "a folder is no image");
+        let e = find_image_by_stem(&d.join("two.tif")).expect_err("two candidates");
+        assert!(e.contains("two.jpg") && e.contains("two.png") && e.contains("share its stem"), "{e}");
+        assert_eq!(find_image_by_stem(&d.join("missing/r_0.png")), Ok(None));
+    }
+
+    /// The header gives width then height, for every format read.
+    #[test]
+    fn dimensions_are_read_as_width_then_height() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let image = ramp(7, 3, 10.0);
+        let png = dir.path().join("a.png");
+        write_png16_counts(&png, &image).expect("png");
+        let tiff = dir.path().join("a.tif");
+        write_tiff_f32(&tiff, &image).expect("tiff");
+        let jpeg = dir.path().join("a.jpg");
+        write_jpeg_srgb(&jpeg, &image, 100.0, 90).expect("jpeg");
+        for p in [&png, &tiff, &jpeg] {
+            assert_eq!(read_dimensions(p).expect("size"), (7, 3), "{}", p.display());
+            let read = read_image(p).expect("image");
+            assert_eq!((read.width, read.height), (7, 3), "{}", p.display());
+        }
+        let junk = dir.path().join("a.bin");
+        std::fs::write(&junk, b"not an image at all").expect("write");
+        let e = read_dimensions(&junk).expect_err("junk").to_string();
+        assert!(e.contains("a.bin") && e.contains("not a PNG, JPEG, TIFF or DaVis"), "{e}");
+    }
+
+    /// A JPEG written through the sRGB curve reads back, with the curve undone, as the values
+    /// on the 0..=255 scale; 0 and full scale and beyond clamp to 0 and 255.
+    #[test]
+    fn an_srgb_jpeg_reads_back_linear() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("a.jpg");
+        // Flat 8 × 8 blocks so that compression keeps each value.
+        let values = [0.0f32, 50.0, 200.0, 400.0];
+        let data: Vec<f32> = (0..8 * 32).map(|i| values[(i % 32) / 8]).collect();
+        write_jpeg_srgb(&p, &Image::from_vec(32, 8, data), 200.0, 100).expect("write");
+        let (read, kind) = read_image_with(&p, Linearisation::Srgb).expect("read");
+        assert_eq!(kind, SampleKind::Integer(8));
+        for (k, expected) in [0.0f32, 63.75, 255.0, 255.0].into_iter().enumerate() {
+            let v = read.get(8 * k + 4, 4);
+            assert!((v - expected).abs() < 1.5, "block {k}: {v} against {expected}");
+        }
+    }
 }
