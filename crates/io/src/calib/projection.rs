@@ -452,4 +452,69 @@ mod tests {
         let e = read_projection(dir.path()).unwrap_err().to_string();
         assert!(e.contains("camera `a` is given twice") && e.contains("c.txt"), "{e}");
     }
+
+    /// `ProjectionCamera::camera` gives the decomposed camera, turning a bottom-left origin
+    /// round first, and names the file and the camera when the matrix is no camera.
+    #[test]
+    fn a_read_camera_is_decomposed_with_its_origin_as_asked() {
+        let cam = camera(0.5, DVec3::new(0.2, 1.0, -0.3), 0.8, DVec3::new(2.0, -1.0, 500.0));
+        let read = ProjectionCamera {
+            name: "left".into(),
+            file: PathBuf::from("rig.txt"),
+            form: ProjectionForm::Matrix,
+            matrix: projection_of(&cam),
+        };
+        close(&read.camera(640, 480, false).unwrap(), &cam);
+        let up = ProjectionCamera { matrix: flip_v(read.matrix, 480), ..read.clone() };
+        close(&up.camera(640, 480, true).unwrap(), &cam);
+        let from_top = up.camera(640, 480, false).unwrap();
+        assert!((from_top.intrinsics.cy - (480.0 - 236.5)).abs() < 1e-9, "{}", from_top.intrinsics.cy);
+        let e = ProjectionCamera { matrix: [[0.0; 4]; 3], ..read }.camera(640, 480, false).unwrap_err().to_string();
+        assert!(e.contains("rig.txt") && e.contains("camera `left`") && e.contains("zero throughout"), "{e}");
+    }
+
+    /// A 3 × 3 block whose determinant is tiny against its rows' lengths is singular, one just
+    /// above the bound is a camera.
+    #[test]
+    fn a_nearly_singular_block_is_refused_and_a_well_conditioned_one_read() {
+        let tilted = |e: f64| [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, e, 0.0], [0.0, 1.0, 0.0, 5.0]];
+        // det = −e, rows' lengths 1 · √(1 + e²) · 1.
+        assert!(camera_from_projection(tilted(1e-13), 8, 8).unwrap_err().contains("singular"));
+        assert!(camera_from_projection(tilted(-1e-13), 8, 8).unwrap_err().contains("singular"));
+        let e = camera_from_projection(tilted(1e-11), 8, 8);
+        assert!(e.as_ref().map_or_else(|e| !e.contains("singular"), |_| true), "{e:?}");
+    }
+
+    #[test]
+    fn twelve_numbers_on_a_line_or_per_column_are_matrices_row_by_row() {
+        let dir = tempfile::tempdir().unwrap();
+        let line = write(dir.path(), "p.txt", "1 2 3 4 5 6 7 8 9 10 11 12\n");
+        let c = read_projection(&line).unwrap();
+        assert_eq!((c[0].name.as_str(), c[0].form), ("p", ProjectionForm::Matrix));
+        assert_eq!(c[0].matrix, [[1.0, 2.0, 3.0, 4.0], [5.0, 6.0, 7.0, 8.0], [9.0, 10.0, 11.0, 12.0]]);
+        let cols: String = (1..=12).map(|i| format!("{i}\t{}\n", -i)).collect();
+        let c = read_projection(&write(dir.path(), "cols.csv", &format!("\"front\"\t\"back\"\n{cols}"))).unwrap();
+        assert_eq!(c.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), ["front", "back"]);
+        assert_eq!(c[1].form, ProjectionForm::Matrix);
+        assert_eq!(c[1].matrix[2], [-9.0, -10.0, -11.0, -12.0]);
+        assert_eq!(c[0].matrix[1], [5.0, 6.0, 7.0, 8.0]);
+        // One column without names is named after the file.
+        let one: String = (1..=11).map(|i| format!("{i}\n")).collect();
+        let c = read_projection(&write(dir.path(), "cam7.dat", &one)).unwrap();
+        assert_eq!((c.len(), c[0].name.as_str(), c[0].form), (1, "cam7", ProjectionForm::Dlt));
+        assert_eq!(c[0].matrix[2], [9.0, 10.0, 11.0, 1.0]);
+    }
+
+    #[test]
+    fn names_are_refused_where_they_cannot_name_columns() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = read_projection(&write(dir.path(), "m.txt", "left\n1 0 0 4\n0 1 0 5\n0 0 1 6\n")).unwrap_err();
+        assert!(e.to_string().contains("its first line holds names (left)"), "{e}");
+        let e = read_projection(&write(dir.path(), "l.txt", "left\n1 2 3 4 5 6 7 8 9 10 11\n")).unwrap_err();
+        assert!(e.to_string().contains("which only a file of one camera per column has"), "{e}");
+        let e = read_projection(&write(dir.path(), "s.csv", &format!("a/b c\n{}", "1 2\n".repeat(11)))).unwrap_err();
+        assert!(e.to_string().contains("`a/b` in its first line is not a camera name"), "{e}");
+        let e = read_projection(&write(dir.path(), "q.csv", &format!("\"\" c\n{}", "1 2\n".repeat(11)))).unwrap_err();
+        assert!(e.to_string().contains("`` in its first line is not a camera name"), "{e}");
+    }
 }
