@@ -1743,4 +1743,77 @@ mod tests {
         assert!(e.contains("rig.json: malformed JSON: line 3 column"), "{e}");
         assert!(e.contains("at `camera_matrix.data[1]`: NaN is not a JSON number"), "{e}");
     }
+
+    /// With pixel centres at integers an image of n pixels spans −½ to n − ½: a principal point
+    /// on that edge is inside, one beyond it, in either direction, is not.
+    #[test]
+    fn a_principal_point_is_outside_only_beyond_the_images_edges() {
+        let k = |cx: f64, cy: f64| Intrinsics { width: 40, height: 30, fx: 50.0, fy: 50.0, cx, cy, skew: 0.0 };
+        for (cx, cy) in [(-0.5, -0.5), (39.5, 29.5), (19.5, 14.5), (39.5, -0.5)] {
+            assert_eq!(principal_point_outside(&k(cx, cy)), None, "({cx}, {cy})");
+        }
+        for (cx, cy) in [(-0.51, 10.0), (39.51, 10.0), (10.0, -0.51), (10.0, 29.51), (80.0, 60.0)] {
+            let why = principal_point_outside(&k(cx, cy)).unwrap_or_else(|| panic!("({cx}, {cy}) is outside"));
+            assert!(why.contains(&format!("({}, {})", num(cx), num(cy))) && why.contains("40x30 image"), "{why}");
+        }
+    }
+
+    /// XML nested beyond any calibration is refused before parsing (beyond 64 levels) or while
+    /// reading (beyond 32), with the right words; empty elements, closed elements, comments and
+    /// the declaration do not deepen it.
+    #[test]
+    fn deeply_nested_xml_is_refused_and_flat_xml_is_not() {
+        let nested = |n: usize| format!("{}{}", "<a>".repeat(n), "</a>".repeat(n));
+        assert_eq!(xml_nesting(&nested(5)), 5);
+        let flat =
+            format!("<?xml version=\"1.0\"?><!-- <x> --><r>{}{}<b/></r>", "<c/>".repeat(100), nested(3).repeat(50));
+        assert_eq!(xml_nesting(&flat), 4);
+        assert_eq!(xml_nesting("<a><b></b><c><d/></c></a>"), 2);
+        assert_eq!(xml_nesting("<a"), 1, "an unclosed tag at the end");
+        let dir = tempfile::tempdir().unwrap();
+        let storage = |inner: String| format!("<?xml version=\"1.0\"?>\n<opencv_storage>{inner}</opencv_storage>\n");
+        let deep = dir.path().join("deep.xml");
+        std::fs::write(&deep, storage(nested(40))).unwrap();
+        let e = read_opencv(&deep).unwrap_err().to_string();
+        assert!(e.contains("deep.xml") && e.contains("nested more than 32 deep (line"), "{e}");
+        std::fs::write(&deep, storage(nested(70))).unwrap();
+        let e = read_opencv(&deep).unwrap_err().to_string();
+        assert!(e.contains("nested more than 64 deep; not a calibration file"), "{e}");
+        // 30 levels of nesting is read (and then refused for holding no camera).
+        std::fs::write(&deep, storage(format!("<a>{}</a>", nested(29)))).unwrap();
+        let e = read_opencv(&deep).unwrap_err().to_string();
+        assert!(!e.contains("nested"), "{e}");
+    }
+
+    /// Names that look like a camera's distortion but are not read are the ones warned about.
+    #[test]
+    fn nodes_named_like_a_distortion_are_told_from_others() {
+        let names = [
+            "dist_coeffs",
+            "distCoeffs",
+            "D",
+            "d",
+            "kc",
+            "KC",
+            "Distortion_Model",
+            "distortion_coefficients",
+            "distance",
+            "Distance_To_Board",
+            "camera_matrix",
+            "DD",
+            "k1",
+        ];
+        let found = distortion_lookalikes(names.iter().map(|n| (*n, *n)));
+        assert_eq!(found, ["dist_coeffs", "distCoeffs", "D", "d", "kc", "KC"]);
+        // The node is named, its base (without the camera's suffix) judged.
+        assert_eq!(distortion_lookalikes([("dist_left", "dist"), ("R_left", "R")].into_iter()), ["dist_left"]);
+    }
+
+    #[test]
+    fn long_text_is_cut_to_eighty_characters_in_messages() {
+        assert_eq!(excerpt("short"), "short");
+        let eighty = "é".repeat(80);
+        assert_eq!(excerpt(&eighty), eighty);
+        assert_eq!(excerpt(&format!("{eighty}x")), format!("{eighty}…"));
+    }
 }
