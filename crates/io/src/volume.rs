@@ -907,4 +907,44 @@ mod tests {
         // A flat grid (one cell across) has no cubic shape to keep.
         assert!(uneven_cells([32, 32, 1], &cube).is_none());
     }
+
+    /// A `.npy` of version 2 (a 4-byte header length, as NumPy writes for long headers) reads,
+    /// and one cut short says by how much from where its data begin.
+    #[test]
+    fn an_npy_of_version_2_is_read_past_its_longer_header_length() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("v2.npy");
+        let mut header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 1, 3), }".to_string();
+        while !(12 + header.len() + 1).is_multiple_of(64) {
+            header.push(' ');
+        }
+        header.push('\n');
+        let mut bytes = b"\x93NUMPY\x02\x00".to_vec();
+        bytes.extend((header.len() as u32).to_le_bytes());
+        bytes.extend(header.as_bytes());
+        assert_eq!(npy_data_offset(&bytes), bytes.len());
+        for v in [1.5f32, -2.0, 8.25] {
+            bytes.extend(v.to_le_bytes());
+        }
+        std::fs::write(&p, &bytes).expect("write");
+        let aabb = Aabb::cube(DVec3::ZERO, 1.0);
+        assert_eq!(read_npy(&p, aabb).expect("version 2").data, vec![1.5, -2.0, 8.25]);
+        std::fs::write(&p, &bytes[..bytes.len() - 2]).expect("write");
+        let e = read_npy(&p, aabb).expect_err("cut").to_string();
+        assert!(e.contains("needs 12 bytes of data, but 10 follow the header"), "{e}");
+        // Too short to hold its header's length: all of it is taken for header.
+        assert_eq!(npy_data_offset(b"\x93NUMPY\x01\x00\x10"), usize::MAX);
+        assert_eq!(npy_data_offset(b"\x93NUMPY\x01\x00\x10\x00"), 10 + 16);
+        assert_eq!(npy_data_offset(b"\x93NUMPY\x02\x00\x10\x00\x00\x01"), 12 + 16 + (1 << 24));
+    }
+
+    /// Cells up to 1.5 times longer on one axis than another are taken as cubic enough.
+    #[test]
+    fn cells_up_to_half_again_as_long_pass_without_a_word() {
+        let aabb = Aabb::new(DVec3::ZERO, DVec3::new(15.0, 10.0, 10.0));
+        assert!(uneven_cells([10, 10, 10], &aabb).is_none(), "1.5 against 1");
+        assert!(uneven_cells([9, 10, 10], &aabb).is_some(), "1.67 against 1");
+        assert!(uneven_cells([10, 9, 10], &Aabb::new(DVec3::ZERO, DVec3::new(10.0, 15.0, 10.0))).is_some());
+        assert!(uneven_cells([10, 10, 6], &Aabb::new(DVec3::ZERO, DVec3::splat(10.0))).is_some(), "z too");
+    }
 }
