@@ -615,4 +615,73 @@ mod tests {
             );
         }
     }
+
+    /// Voxels of three different sides come back with each side on its own axis.
+    #[test]
+    fn a_stack_of_voxels_unlike_on_every_axis_keeps_each_axis_its_size() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("v.tif");
+        // Voxels of 0.5 × 1.5 × 0.4.
+        let aabb = Aabb { min: DVec3::new(1.0, -3.0, 0.2), max: DVec3::new(5.0, 0.0, 2.2) };
+        let v = volume([8, 2, 5], aabb);
+        write_tiff_stack(&p, &v, "mm").expect("write");
+        let back = read_tiff_stack(&p, None, Some("mm")).expect("read");
+        assert_eq!((back.dims, &back.data), (v.dims, &v.data));
+        for (a, b) in [(back.aabb.min, aabb.min), (back.aabb.max, aabb.max)] {
+            assert!((a - b).abs().max_element() < 1e-9, "{a} vs {b}");
+        }
+        let text = String::from_utf8_lossy(&std::fs::read(&p).expect("bytes")).to_string();
+        assert!(text.contains("ImageJ=1.11a\nimages=5\nslices=5\nunit=mm\nspacing=0.4\n"), "{text}");
+        assert!(text.contains(&format!("min={}\nmax={}\n", v.min_max().0, v.min_max().1)), "{text}");
+        assert!(text.contains("xorigin=-2\nyorigin=2\nzorigin=-0.5"), "{text}");
+        // One slice: no page count.
+        let one = dir.path().join("one.tif");
+        write_tiff_stack(&one, &volume([8, 2, 1], aabb), "mm").expect("write");
+        let text = String::from_utf8_lossy(&std::fs::read(&one).expect("bytes")).to_string();
+        assert!(text.contains("ImageJ=1.11a\nunit=mm\nspacing=2\n"), "{text}");
+    }
+
+    /// Every length unit known converts to every other by its size in metres.
+    #[test]
+    fn calibrations_convert_between_all_known_length_units() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let aabb = Aabb { min: DVec3::ZERO, max: DVec3::new(4.0, 2.0, 2.0) };
+        let v = volume([4, 2, 2], aabb);
+        for (from, to, factor) in [
+            ("m", "mm", 1e3),
+            ("cm", "mm", 10.0),
+            ("nm", "µm", 1e-3),
+            ("um", "nm", 1e3),
+            ("mm", "m", 1e-3),
+            ("micron", "cm", 1e-4),
+        ] {
+            let p = dir.path().join(format!("{from}.tif"));
+            write_tiff_stack(&p, &v, from).expect("write");
+            let back = read_tiff_stack(&p, None, Some(to)).expect("read");
+            let expected = aabb.max * factor;
+            assert!((back.aabb.max - expected).abs().max_element() < 1e-9 * factor, "{from} → {to}: {}", back.aabb.max);
+        }
+        assert_eq!(metres_per("\\u00B5m"), Some(1e-6), "ImageJ's escape of µm");
+        assert_eq!(imagej_unit("um"), "micron");
+        assert_eq!(imagej_unit("mm"), "mm");
+    }
+
+    /// One calibrated slice without a spacing is as deep as it is wide; several are refused
+    /// the box from the calibration and fill the one given.
+    #[test]
+    fn a_single_calibrated_slice_without_a_spacing_is_as_deep_as_wide() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("one.tif");
+        write_imagej_pages(&p, 1, "ImageJ=1.54f\nunit=mm\nxorigin=1\n", Some(4));
+        let v = read_tiff_stack(&p, None, None).expect("read");
+        assert_eq!(v.aabb, Aabb { min: DVec3::new(-0.25, 0.0, 0.0), max: DVec3::new(0.25, 0.5, 0.25) });
+        let two = dir.path().join("two.tif");
+        write_imagej_pages(&two, 2, "ImageJ=1.54f\nimages=2\nunit=mm\n", Some(4));
+        let given = Aabb::cube(DVec3::ZERO, 1.0);
+        assert_eq!(read_tiff_stack(&two, Some(given), None).expect("read").aabb, given);
+        // Without the ImageJ mark the description is no calibration.
+        let plain = dir.path().join("plain.tif");
+        write_imagej_pages(&plain, 1, "unit=mm\nspacing=2\n", Some(4));
+        assert_eq!(read_tiff_stack(&plain, Some(given), None).expect("read").aabb, given);
+    }
 }
