@@ -2820,4 +2820,184 @@ mod tests {
         save_scene(&scene, d).expect("save");
         assert_eq!(load_images(&scene).expect("images")[0].data[0], 128.0, "no key: linear");
     }
+
+    /// The median of an odd count is the middle value, of an even count the mean of the two
+    /// middle ones, pixel by pixel whatever the order of the images.
+    #[test]
+    fn the_median_image_takes_the_middle_of_each_pixel() {
+        let im = |v: [f32; 2]| Image::from_vec(2, 1, v.to_vec());
+        let odd = median_image(&[im([1.0, 30.0]), im([5.0, 10.0]), im([3.0, 20.0])]);
+        assert_eq!(odd.data, [3.0, 20.0]);
+        let even = median_image(&[im([10.0, 1.0]), im([1.0, 2.0]), im([4.0, 3.0]), im([2.0, 100.0])]);
+        assert_eq!(even.data, [3.0, 2.5]);
+        assert_eq!((even.width, even.height), (2, 1));
+        assert_eq!(median_image(&[im([7.0, 8.0])]).data, [7.0, 8.0]);
+    }
+
+    /// A flat is divided by the mean of its used pixels; pixels a mask leaves out are divided too,
+    /// or set to 1 when too dark to divide by.
+    #[test]
+    fn a_flat_is_normalised_to_the_mean_of_its_used_pixels() {
+        let mut flat = Image::from_vec(4, 1, vec![2.0, 4.0, 6.0, 8.0]);
+        assert_eq!(normalise_flat(&mut flat, None), Ok((0.4, 1.6)));
+        assert_eq!(flat.data, [0.4, 0.8, 1.2, 1.6]);
+        // Used mean (4 + 6) / 2 = 5, not the mean of all four.
+        let mut flat = Image::from_vec(4, 1, vec![0.0, 4.0, 6.0, 30.0]);
+        assert_eq!(normalise_flat(&mut flat, Some(&[false, true, true, false])), Ok((0.8, 1.2)));
+        assert_eq!(flat.data, [1.0, 0.8, 1.2, 6.0]);
+    }
+
+    /// A flat without light, or with used pixels too dark to divide by, is refused saying how
+    /// many, the first and the box that holds them.
+    #[test]
+    fn a_flat_too_dark_to_divide_by_is_refused() {
+        for data in [vec![0.0; 4], vec![-1.0, -2.0, 1.0, 1.0]] {
+            let e = normalise_flat(&mut Image::from_vec(2, 2, data), None).expect_err("no light");
+            assert!(e.contains("holds no light") && e.contains("over the 4 used pixel(s)"), "{e}");
+        }
+        // Pixel 4 is masked out: the mean of the other 11 is 100.2 / 11, 5 % of it 0.46.
+        let mut data = vec![10.0; 12];
+        data[5] = 0.2;
+        data[11] = 0.0;
+        data[4] = 0.0;
+        data[6] = 20.0;
+        let mut flat = Image::from_vec(4, 3, data);
+        let e =
+            normalise_flat(&mut flat, Some(&[true, true, true, true, false, true, true, true, true, true, true, true]))
+                .expect_err("dark pixels");
+        assert!(e.contains("has 2 of its 11 used pixel(s) at or below 5 % of its mean"), "{e}");
+        assert!(e.contains("the first at (col 1, row 1) with 0.2, all within cols 1..=3, rows 1..=2"), "{e}");
+        assert!(e.contains("20-fold"), "{e}");
+    }
+
+    #[test]
+    fn the_odd_sample_kind_is_the_first_unlike_the_most_common() {
+        let (b8, b16) = (SampleKind::Integer(8), SampleKind::Integer(16));
+        assert_eq!(odd_sample_kind(&[b8, b8, b16, b8]), Some((2, b16, b8)));
+        assert_eq!(odd_sample_kind(&[b16, b8, b8]), Some((0, b16, b8)));
+        assert_eq!(odd_sample_kind(&[b16, b16]), None);
+        assert_eq!(odd_sample_kind(&[]), None);
+    }
+
+    #[test]
+    fn images_on_different_scales_are_told_how_far_apart() {
+        for (a, b) in [(8, 16), (16, 8)] {
+            let m = different_scales(SampleKind::Integer(a), SampleKind::Integer(b));
+            assert!(m.contains("(an 8-bit image among 16-bit ones reads about 257 times too dark)"), "{m}");
+        }
+        let m = different_scales(SampleKind::Integer(12), SampleKind::Integer(16));
+        assert!(m.contains("a 12-bit image among 16-bit ones reads about 16 times too dark"), "{m}");
+        let m = different_scales(SampleKind::Integer(16), SampleKind::Float);
+        assert!(m.contains("no common scale") && m.ends_with("convert the images to one bit depth"), "{m}");
+    }
+
+    #[test]
+    fn a_length_unit_is_a_short_printable_name() {
+        for ok in ["mm", "m", "µm", &"x".repeat(32), &"µ".repeat(32)] {
+            assert_eq!(check_units(ok), Ok(()), "{ok:?}");
+        }
+        for (bad, why) in [
+            ("", "must be named"),
+            ("  ", "must be named"),
+            (" mm", "surrounding blanks"),
+            ("mm\n", "control characters"),
+            ("m\u{7}m", "control characters"),
+            (&"µ".repeat(33), "longer than 32 characters"),
+        ] {
+            let e = check_units(bad).expect_err(bad);
+            assert!(e.contains(why), "{bad:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_distance_to_a_box_is_zero_inside_and_euclidean_outside() {
+        let aabb = Aabb::new(DVec3::new(-1.0, 0.0, 2.0), DVec3::new(1.0, 4.0, 3.0));
+        assert_eq!(distance_to_box(&aabb, DVec3::new(0.0, 2.0, 2.5)), 0.0);
+        assert_eq!(distance_to_box(&aabb, DVec3::new(1.0, 4.0, 3.0)), 0.0, "a corner");
+        assert_eq!(distance_to_box(&aabb, DVec3::new(4.0, 2.0, 2.5)), 3.0);
+        assert_eq!(distance_to_box(&aabb, DVec3::new(0.0, -2.0, 2.5)), 2.0);
+        assert_eq!(distance_to_box(&aabb, DVec3::new(-4.0, 8.0, 2.5)), 5.0, "beyond an edge: 3, 4, 5");
+        assert_eq!(distance_to_box(&aabb, DVec3::new(0.0, 2.0, 0.0)), 2.0);
+    }
+
+    /// Cameras outside the box but within 5 % of its diagonal are reported, with their distance;
+    /// cameras inside it or farther are not.
+    #[test]
+    fn cameras_just_outside_the_box_are_reported() {
+        let mut scene = ring_scene(Path::new("."), 5, Distortion::default());
+        // The box is 20 wide: its diagonal 34.6, 5 % of it 1.73.
+        let k = scene.frames[0].camera.intrinsics;
+        let eyes = [
+            DVec3::new(5.0, 0.0, 0.0),
+            DVec3::new(11.0, 0.0, 0.0),
+            DVec3::new(0.0, 0.0, -11.7),
+            DVec3::new(11.8, 0.0, 0.0),
+            DVec3::new(80.0, 0.0, 0.0),
+        ];
+        for (f, eye) in scene.frames.iter_mut().zip(eyes) {
+            f.camera = Camera::look_at(k, eye, DVec3::new(0.0, 0.5, 0.0), DVec3::Y);
+        }
+        let near = cameras_near_box(&scene);
+        assert_eq!(near.iter().map(|n| n.0).collect::<Vec<_>>(), [1, 2], "{near:?}");
+        assert!((near[0].1 - 1.0).abs() < 1e-9 && (near[1].1 - 1.7).abs() < 1e-9, "{near:?}");
+    }
+
+    /// A file not named `.json` is no scene path, and a folder fluidnerf wrote of another kind
+    /// is named for what it is, with where its scene is.
+    #[test]
+    fn scene_paths_of_another_kind_are_refused_saying_what_they_are() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let d = dir.path();
+        assert_eq!(scene_file_path(&d.join("s")), d.join("s").join(SCENE_FILE));
+        assert_eq!(scene_file_path(&d.join("s/x.JSON")), d.join("s/x.JSON"));
+        std::fs::write(d.join("notes.txt"), "x").expect("write");
+        let e = check_scene_path(&d.join("notes.txt")).expect_err("a text file").to_string();
+        assert!(e.contains("notes.txt") && e.contains("is a file, not a scene folder"), "{e}");
+        std::fs::write(d.join("scene.json"), "{}").expect("write");
+        check_scene_path(&d.join("scene.json")).expect("a scene file");
+        check_scene_path(d).expect("a folder of no kind");
+        let kinds = [
+            ("run", "config.json", "{\"scene\": \"scenes/s1\"}", "is a reconstruction run folder, not a scene folder (it has no transforms.json); give the scene it was made from (scenes/s1)"),
+            ("study", "study.json", "{}", "is a study folder, not a scene folder (it has no transforms.json); its scenes are the folders in its scenes/"),
+            ("demo", "comparison.json", "{}", "; its scene is the folder scene/ in it"),
+            ("export", "export.json", "{}", "is an export folder, not a scene folder (it has no transforms.json)"),
+        ];
+        for (name, file, text, says) in kinds {
+            let folder = d.join(name);
+            std::fs::create_dir(&folder).expect("mkdir");
+            std::fs::write(folder.join(file), text).expect("write");
+            let e = check_scene_path(&folder).expect_err(name).to_string();
+            assert!(e.contains(says), "{name}: {e}");
+            if name == "export" {
+                assert!(e.ends_with("(it has no transforms.json)"), "{e}");
+            }
+        }
+        let scene = d.join("scene");
+        std::fs::create_dir(&scene).expect("mkdir");
+        std::fs::write(scene.join(SCENE_FILE), "{}").expect("write");
+        std::fs::write(scene.join("report.json"), "{}").expect("write");
+        check_scene_path(&scene).expect("a scene folder, whatever else it holds");
+    }
+
+    /// OpenGL's camera looks down its −z with y up; OpenCV's down +z with y down: the identity
+    /// in one is diag(1, −1, −1) in the other, and the two conversions undo each other.
+    #[test]
+    fn opengl_poses_turn_their_y_and_z_axes() {
+        let rows = [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]];
+        let pose = opengl_c2w_to_world_from_camera(&rows);
+        assert_eq!(pose.matrix3, DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0)));
+        assert_eq!(pose.translation, DVec3::new(1.0, 2.0, 3.0));
+        assert_eq!(world_from_camera_to_opengl_c2w(&pose), rows);
+        let turned = DAffine3::from_mat3_translation(
+            DMat3::from_axis_angle(DVec3::new(0.3, -0.5, 0.8).normalize(), 1.1),
+            DVec3::new(-4.0, 0.5, 7.0),
+        );
+        let back = opengl_c2w_to_world_from_camera(&world_from_camera_to_opengl_c2w(&turned));
+        assert!(back.abs_diff_eq(turned, 1e-15), "{back:?}");
+        let gl = world_from_camera_to_opengl_c2w(&turned);
+        // The OpenGL camera's −z (third column, negated) is the OpenCV camera's +z.
+        let forward = DVec3::new(-gl[0][2], -gl[1][2], -gl[2][2]);
+        assert!((forward - turned.matrix3.z_axis).length() < 1e-15);
+        assert_eq!(gl[3], [0.0, 0.0, 0.0, 1.0]);
+    }
 }
