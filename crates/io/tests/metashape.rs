@@ -310,3 +310,119 @@ fn disabled_cameras_components_and_initial_calibrations() {
     let e = refused(dir.path(), &none);
     assert!(e.contains("not aligned: spare") && e.contains("disabled: left, right"), "{e}");
 }
+
+/// The hand-written file with its chunk transform replaced by `transform` (none when empty).
+fn with_chunk_transform(transform: &str) -> String {
+    let start = HAND_WRITTEN.find("    <transform>\n      <rotation").expect("chunk transform");
+    let end = HAND_WRITTEN.find("  </chunk>").expect("chunk end");
+    format!("{}{transform}{}", &HAND_WRITTEN[..start], &HAND_WRITTEN[end..])
+}
+
+fn read_text(dir: &std::path::Path, text: &str) -> fluidnerf_io::calib::MetashapeCameras {
+    let path = dir.join("cameras.xml");
+    std::fs::write(&path, text).expect("writes");
+    read_metashape(&path).expect("reads")
+}
+
+/// A chunk transform of a translation alone, a scale alone or a rotation alone moves the
+/// camera `left` (at (−5, 0.5, −40) in the chunk) by that part alone, the others being the
+/// identity.
+#[test]
+fn each_part_of_a_chunk_transform_applies_on_its_own() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let left = DVec3::new(-5.0, 0.5, -40.0);
+    let turn = DMat3::from_rotation_z(90f64.to_radians());
+    let cases = [
+        ("<translation>1 2 3</translation>", left + DVec3::new(1.0, 2.0, 3.0), DMat3::IDENTITY),
+        ("<scale>2</scale>", left * 2.0, DMat3::IDENTITY),
+        ("<rotation>0 -1 0 1 0 0 0 0 1</rotation>", turn * left, turn),
+    ];
+    for (part, centre, rotation) in cases {
+        let read = read_text(dir.path(), &with_chunk_transform(&format!("    <transform>{part}</transform>\n")));
+        let cam = &read.cameras[0].1;
+        assert!((cam.centre() - centre).length() < 1e-9, "{part}: {}", cam.centre());
+        assert!((cam.world_from_camera.matrix3 - rotation).abs_diff_eq(DMat3::ZERO, 1e-12), "{part}");
+        assert_eq!(read.units, Some("m"), "{part}");
+    }
+    let read = read_text(dir.path(), &with_chunk_transform(""));
+    assert_eq!((read.cameras[0].1.centre(), read.units), (left, None), "no transform: the internal frame");
+}
+
+/// A component and a chunk that give one transform agree; a camera placed by a component's
+/// transform beside one placed by none stand in different frames and are refused.
+#[test]
+fn component_and_chunk_transforms_must_place_every_camera_alike() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let start = HAND_WRITTEN.find("    <transform>\n      <rotation").expect("chunk transform");
+    let end = HAND_WRITTEN.find("  </chunk>").expect("chunk end");
+    let transform = &HAND_WRITTEN[start..end];
+    let components =
+        format!("    <components>\n      <component id=\"0\">\n{transform}      </component>\n    </components>\n");
+    let both = HAND_WRITTEN
+        .replace("    <cameras next_id", &format!("{components}    <cameras next_id"))
+        .replace("label=\"left\"", "label=\"left\" component_id=\"0\"");
+    let chunk = read_text(dir.path(), HAND_WRITTEN);
+    let read = read_text(dir.path(), &both);
+    assert_eq!(read.cameras.len(), 2);
+    for ((_, a), (_, b)) in read.cameras.iter().zip(&chunk.cameras) {
+        assert!(a.world_from_camera.abs_diff_eq(b.world_from_camera, 1e-12));
+    }
+    // Without the chunk's transform, `right` (in no component) stands in the internal frame.
+    let mixed = with_chunk_transform("")
+        .replace("    <cameras next_id", &format!("{components}    <cameras next_id"))
+        .replace("label=\"left\"", "label=\"left\" component_id=\"0\"");
+    let e = refused(dir.path(), &mixed);
+    assert!(e.contains("camera `left` is placed by") && e.contains("camera `right` by none"), "{e}");
+    let mixed = mixed
+        .replace("label=\"left\" component_id=\"0\"", "label=\"left\"")
+        .replace("label=\"right\"", "label=\"right\" component_id=\"0\"");
+    let e = refused(dir.path(), &mixed);
+    assert!(e.contains("camera `right` is placed by") && e.contains("camera `left` by none"), "{e}");
+}
+
+/// A secondary camera of a multi-camera system without its own transform is refused, and a
+/// camera that is its own master is merely not aligned.
+#[test]
+fn a_secondary_camera_without_a_transform_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let secondary = HAND_WRITTEN.replace("label=\"spare\"", "label=\"spare\" master_id=\"0\"");
+    let e = refused(dir.path(), &secondary);
+    assert!(e.contains("camera `spare` is a secondary camera") && e.contains("master_id 0"), "{e}");
+    let own = HAND_WRITTEN.replace("label=\"spare\"", "label=\"spare\" master_id=\"2\"");
+    assert_eq!(read_text(dir.path(), &own).unaligned, ["spare"]);
+    // `enabled` in Metashape's spellings, blanks around it allowed; anything else refused.
+    let one = HAND_WRITTEN.replace("label=\"right\"", "label=\"right\" enabled=\" 1 \"");
+    assert_eq!(read_text(dir.path(), &one).cameras.len(), 2);
+    let e = refused(dir.path(), &HAND_WRITTEN.replace("label=\"right\"", "label=\"right\" enabled=\"yes\""));
+    assert!(e.contains("camera `right`: `enabled` is `yes`"), "{e}");
+}
+
+/// A calibration without its own resolution takes the sensor's; one without a class is used
+/// when it is the only one; the image size is nowhere, or a class is given twice, is refused.
+#[test]
+fn calibrations_take_the_sensors_resolution_and_a_lone_unclassed_one_is_used() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let own_resolution =
+        "<calibration type=\"frame\" class=\"adjusted\">\n          <resolution width=\"640\" height=\"480\"/>";
+    let sensor_only = HAND_WRITTEN.replace(own_resolution, "<calibration type=\"frame\" class=\"adjusted\">");
+    let read = read_text(dir.path(), &sensor_only);
+    let k = read.cameras[0].1.intrinsics;
+    assert_eq!((k.width, k.height, k.cx, k.cy), (640, 480, 331.75, 232.0));
+    let initial = "<calibration type=\"frame\" class=\"initial\">\n          <resolution width=\"640\" height=\"480\"/>\n          <f>900</f>\n        </calibration>";
+    let unclassed = HAND_WRITTEN.replace(initial, "").replace("class=\"adjusted\"", "");
+    assert_eq!(read_text(dir.path(), &unclassed).cameras[0].1.intrinsics.fy, 1000.5);
+    let two = HAND_WRITTEN.replace("class=\"initial\"", "class=\"adjusted\"");
+    let e = refused(dir.path(), &two);
+    assert!(e.contains("sensor 0") && e.contains("two `<calibration class=\"adjusted\">`"), "{e}");
+    let nowhere = sensor_only.replace("<resolution width=\"640\" height=\"480\"/>\n        <property", "<property");
+    let e = refused(dir.path(), &nowhere);
+    assert!(e.contains("no `<resolution>`, here or in the sensor"), "{e}");
+    let e = refused(
+        dir.path(),
+        &HAND_WRITTEN.replace(
+            "<resolution width=\"640\" height=\"480\"/>\n        <property",
+            "<resolution width=\"0\" height=\"480\"/>\n        <property",
+        ),
+    );
+    assert!(e.contains("`<resolution>` `width` is `0`; expected a positive integer"), "{e}");
+}
