@@ -1312,3 +1312,54 @@ fn text_calibrations_with_a_byte_order_mark_are_read() {
     let cams = fluidnerf_io::calib::read_projection(&p).expect("a matrix with a mark");
     assert_eq!(cams.len(), 1);
 }
+
+/// Each COLMAP camera model's parameters land in their own fields (by hand from COLMAP's
+/// `models.h`): one focal length for the SIMPLE models and RADIAL, the principal point moved
+/// by −½, the radial and tangential terms in OpenCV's order.
+#[test]
+fn every_colmap_text_model_maps_its_parameters_to_their_fields() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(
+        dir.path().join("cameras.txt"),
+        "# CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]\n\
+         1 SIMPLE_PINHOLE 64 48 50 32 24\n\
+         2 PINHOLE 64 48 50 51 30 20\n\
+         3 RADIAL 64 48 52 33 25 -0.1 0.02\n\
+         4 OPENCV 64 48 53 54 31 21 -0.2 0.03 0.001 -0.002\n\
+         5 FULL_OPENCV 64 48 55 56 29 22 -0.3 0.04 0.003 -0.004 0.005 0.1 0.01 0.001\n",
+    )
+    .expect("write");
+    let images: String = (1..=5).map(|i| format!("{i} 1 0 0 0 0 0 10 {i} m{i}.png\n\n")).collect();
+    std::fs::write(dir.path().join("images.txt"), images).expect("write");
+    let cams = read_colmap(dir.path()).expect("reads");
+    let k: Vec<[f64; 4]> =
+        cams.iter().map(|(_, c)| [c.intrinsics.fx, c.intrinsics.fy, c.intrinsics.cx, c.intrinsics.cy]).collect();
+    assert_eq!(
+        k,
+        [
+            [50.0, 50.0, 31.5, 23.5],
+            [50.0, 51.0, 29.5, 19.5],
+            [52.0, 52.0, 32.5, 24.5],
+            [53.0, 54.0, 30.5, 20.5],
+            [55.0, 56.0, 28.5, 21.5]
+        ]
+    );
+    let d: Vec<[f64; 8]> = cams
+        .iter()
+        .map(|(_, c)| {
+            let d = c.distortion;
+            [d.k1, d.k2, d.p1, d.p2, d.k3, d.k4, d.k5, d.k6]
+        })
+        .collect();
+    assert_eq!(d[0], [0.0; 8]);
+    assert_eq!(d[1], [0.0; 8]);
+    assert_eq!(d[2], [-0.1, 0.02, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    assert_eq!(d[3], [-0.2, 0.03, 0.001, -0.002, 0.0, 0.0, 0.0, 0.0]);
+    assert_eq!(d[4], [-0.3, 0.04, 0.003, -0.004, 0.005, 0.1, 0.01, 0.001]);
+    assert!(cams.iter().all(|(_, c)| (c.intrinsics.width, c.intrinsics.height, c.intrinsics.skew) == (64, 48, 0.0)));
+    // A model given too few or too many parameters is refused naming how many it takes.
+    std::fs::write(dir.path().join("cameras.txt"), "1 RADIAL 64 48 52 33 25 -0.1\n").expect("write");
+    std::fs::write(dir.path().join("images.txt"), "1 1 0 0 0 0 0 10 1 m1.png\n\n").expect("write");
+    let e = read_colmap(dir.path()).expect_err("too few").to_string();
+    assert!(e.contains("cameras.txt: line 1: RADIAL takes 5 parameters, got 4"), "{e}");
+}
