@@ -1816,4 +1816,30 @@ mod tests {
         assert_eq!(excerpt(&eighty), eighty);
         assert_eq!(excerpt(&format!("{eighty}x")), format!("{eighty}…"));
     }
+
+    /// Suffixed keys carry the camera's name, so it must be a plain word; a single camera named
+    /// after the file is written unsuffixed, whatever its name. Other extensions are refused.
+    #[test]
+    fn written_camera_names_must_make_keys_and_the_extension_a_format() {
+        let k = Intrinsics { width: 40, height: 30, fx: 50.0, fy: 50.0, cx: 19.5, cy: 14.5, skew: 0.0 };
+        let cam = Camera::look_at(k, DVec3::new(0.0, -50.0, 0.0), DVec3::ZERO, DVec3::Z);
+        let dir = tempfile::tempdir().unwrap();
+        for bad in ["left cam", "", "a:b"] {
+            let cams = vec![(bad.to_string(), cam.clone()), ("right".to_string(), cam.clone())];
+            let e = write_opencv(&dir.path().join("rig.yml"), &cams).unwrap_err().to_string();
+            assert!(e.contains(&format!("camera name `{bad}` must be letters, digits")), "{e}");
+        }
+        let plain = dir.path().join("cam 1.yml");
+        write_opencv(&plain, &[("cam 1".to_string(), cam.clone())]).unwrap();
+        assert_eq!(read_opencv(&plain).unwrap()[0].0, "cam 1");
+        let cams = vec![("a-1".to_string(), cam.clone()), ("b_2".to_string(), cam.clone())];
+        for ext in ["yml", "yaml", "xml", "json", "YML"] {
+            let path = dir.path().join(format!("rig.{ext}"));
+            write_opencv(&path, &cams).unwrap();
+            let names: Vec<String> = read_opencv(&path).unwrap().into_iter().map(|(n, _)| n).collect();
+            assert_eq!(names, ["a-1", "b_2"], "{ext}");
+        }
+        let e = write_opencv(&dir.path().join("rig.txt"), &cams).unwrap_err().to_string();
+        assert!(e.contains("rig.txt") && e.contains("must end in .yml, .yaml, .xml or .json"), "{e}");
+    }
 }
