@@ -294,6 +294,65 @@ mod tests {
         assert!(e.starts_with("-1e-50 is below the smallest non-zero value"), "{e}");
     }
 
+    /// Decay rates outside [0, 1) and an ε that is not positive, not finite or above
+    /// [`MAX_ADAM_EPS`] are refused under their own key; the edges of the ranges pass.
+    #[test]
+    fn adam_refuses_decay_rates_and_eps_out_of_range_by_key() {
+        let ok = AdamConfig::default();
+        for good in [AdamConfig { beta1: 0.0, beta2: 0.0, ..ok }, AdamConfig { eps: MAX_ADAM_EPS, ..ok }] {
+            assert!(good.validate().is_ok(), "{good:?}");
+        }
+        for bad in [-0.1, 1.0, 1.5, f32::NAN] {
+            for (key, c) in
+                [("adam.beta1", AdamConfig { beta1: bad, ..ok }), ("adam.beta2", AdamConfig { beta2: bad, ..ok })]
+            {
+                let e = c.validate().expect_err("refused").to_string();
+                assert!(e.contains(key) && e.contains("[0, 1)"), "{e}");
+            }
+        }
+        for bad in [0.0, -1e-7, 1.5, 1e30, f32::INFINITY, f32::NAN] {
+            let e = AdamConfig { eps: bad, ..ok }.validate().expect_err("refused").to_string();
+            assert!(e.contains("adam.eps"), "{e}");
+        }
+    }
+
+    /// Two steps worked out by hand: the first moves by `lr · g / (|g| + ε)` (m̂ = g, v̂ = g²),
+    /// the second by `lr · m̂ / (√v̂ + ε)` with the bias corrections of t = 2.
+    #[test]
+    fn two_adam_steps_match_the_hand_computed_update() {
+        let mut adam = Adam::new(1, AdamConfig::default());
+        let mut p = [1.0f32];
+        adam.step(&mut p, &[1.0], 0.1);
+        assert!((p[0] - (1.0 - 0.1 / (1.0 + 1e-7))).abs() < 1e-7, "{}", p[0]);
+        // (1 − β₂ in f32 is 1e-3 to 1.3e-5 relative.)
+        assert!((adam.m[0] - 0.1).abs() < 1e-7 && (adam.v[0] - 1e-3).abs() < 1e-7, "{adam:?}");
+        adam.step(&mut p, &[0.5], 0.1);
+        // m = 0.9 · 0.1 + 0.1 · 0.5 = 0.14, v = 0.999 · 0.001 + 0.001 · 0.25 = 0.001249;
+        // m̂ = 0.14 / (1 − 0.81), v̂ = 0.001249 / (1 − 0.998001).
+        let (m_hat, v_hat) = (0.14f64 / 0.19, 0.001249f64 / 0.001999);
+        let expect = 1.0 - 0.1 / (1.0 + 1e-7) - 0.1 * m_hat / (v_hat.sqrt() + 1e-7);
+        assert!((p[0] as f64 - expect).abs() < 2e-6, "{} vs {expect}", p[0]);
+        assert!((adam.m[0] - 0.14).abs() < 1e-7 && (adam.v[0] - 0.001249).abs() < 1e-7, "{adam:?}");
+        assert_eq!(adam.step, 2);
+    }
+
+    /// Dense Adam moves an element without a gradient by its momentum, even in a block of the
+    /// parallel update where no element has a gradient.
+    #[test]
+    fn dense_adam_moves_elements_without_gradient_by_their_momentum() {
+        let n = 2 * BLOCK + 3;
+        let mut adam = Adam::new(n, AdamConfig::default());
+        let mut p = vec![0.0f32; n];
+        adam.step(&mut p, &vec![1.0; n], 0.1);
+        let after_first = p.clone();
+        adam.step(&mut p, &vec![0.0; n], 0.1);
+        // m = 0.09, v = 0.000999: m̂ = 0.09 / 0.19, v̂ = 0.000999 / 0.001999.
+        let moved = 0.1 * (0.09f64 / 0.19) / ((0.000999f64 / 0.001999).sqrt() + 1e-7);
+        for i in [0, BLOCK, n - 1] {
+            assert!(((after_first[i] - p[i]) as f64 - moved).abs() < 1e-6, "element {i}: {}", p[i]);
+        }
+    }
+
     /// Lazy Adam leaves elements without a gradient exactly as they were, and updates the others
     /// exactly as dense Adam does: over several blocks (one of them without any gradient), from
     /// moments that are not zero, for several steps.
