@@ -257,6 +257,173 @@ mod tests {
         assert_eq!(out, [0.0, 1.0, 2.0, 2.5, 3.0, 4.0, 9.0]);
     }
 
+    /// A generator whose every uniform f32 is the same value: `0x8000_0000` gives ½,
+    /// `u32::MAX` the largest value below 1.
+    struct Constant(u32);
+
+    impl rand::RngCore for Constant {
+        fn next_u32(&mut self) -> u32 {
+            self.0
+        }
+        fn next_u64(&mut self) -> u64 {
+            (u64::from(self.0) << 32) | u64::from(self.0)
+        }
+        fn fill_bytes(&mut self, dst: &mut [u8]) {
+            dst.fill(self.0 as u8);
+        }
+    }
+
+    const HALF: u32 = 0x8000_0000;
+
+    #[test]
+    fn stratified_samples_at_half_are_the_bin_centres() {
+        let mut s = [0.0f32; 4];
+        stratified(2.0, 6.0, &mut Constant(HALF), &mut s);
+        assert_eq!(s, [2.5, 3.5, 4.5, 5.5]);
+        stratified(2.0, 6.0, &mut Constant(u32::MAX), &mut s);
+        assert!(s.iter().all(|&v| v <= 6.0) && s[3] > 5.99, "{s:?}");
+    }
+
+    /// A step of 2 in the last of two unit intervals: the uniform floor puts 1 % of the mass
+    /// over the span, ½ % on the flat interval, and the quantiles `(i + ½) / n` invert the
+    /// piecewise-linear CDF by hand.
+    #[test]
+    fn feature_samples_invert_the_cdf_with_its_uniform_floor() {
+        let (s, e) = ([0.0f32, 1.0, 2.0], [0.0f32, 0.0, 2.0]);
+        let mut out = [0.0f32; 200];
+        feature_samples(&s, &e, &mut Constant(HALF), &mut out);
+        // Quantile 0.0025 lies in the first interval's 0.005; the others in the second.
+        assert!((out[0] - 0.5).abs() < 1e-5, "{}", out[0]);
+        assert!((out[1] - (1.0 + 0.0025 / 0.995)).abs() < 1e-5, "{}", out[1]);
+        assert!((out[199] - (1.0 + 0.9925 / 0.995)).abs() < 1e-5, "{}", out[199]);
+        assert_eq!(out.iter().filter(|&&v| v < 1.0).count(), 1);
+        let mut two = [0.0f32; 2];
+        feature_samples(&s, &e, &mut Constant(HALF), &mut two);
+        assert!((two[0] - (1.0 + 0.245 / 0.995)).abs() < 1e-5, "{two:?}");
+        assert!((two[1] - (1.0 + 0.745 / 0.995)).abs() < 1e-5, "{two:?}");
+    }
+
+    /// Draws at the top of the unit interval still land inside the coarse span, in order, the
+    /// last at its end.
+    #[test]
+    fn feature_samples_stay_inside_the_coarse_span() {
+        let s: Vec<f32> = (0..9).map(|i| 1.0 + 0.3 * i as f32).collect();
+        let e: Vec<f32> = s.iter().map(|&v| (3.0 * v).sin()).collect();
+        for draw in [0, HALF, u32::MAX] {
+            let mut out = [0.0f32; 200];
+            feature_samples(&s, &e, &mut Constant(draw), &mut out);
+            assert!(out.iter().all(|&v| (s[0]..=s[8]).contains(&v)), "{out:?}");
+            assert!(out.windows(2).all(|w| w[0] <= w[1]), "{out:?}");
+        }
+        let mut out = [0.0f32; 200];
+        feature_samples(&s, &e, &mut Constant(u32::MAX), &mut out);
+        assert!(out[199] > s[8] - 0.01, "{}", out[199]);
+    }
+
+    /// With fewer than two coarse samples, all fine samples sit on the one there is (0 with
+    /// none); two samples of equal value spread them uniformly over their interval; a coarse
+    /// pass with a non-finite value puts them at the first coarse sample.
+    #[test]
+    fn feature_samples_of_degenerate_coarse_passes() {
+        let mut out = [9.0f32; 4];
+        feature_samples(&[], &[], &mut Constant(HALF), &mut out);
+        assert_eq!(out, [0.0; 4]);
+        feature_samples(&[3.0], &[1.0], &mut Constant(HALF), &mut out);
+        assert_eq!(out, [3.0; 4]);
+        feature_samples(&[1.0, 3.0], &[0.5, 0.5], &mut Constant(HALF), &mut out);
+        assert_eq!(out, [1.25, 1.75, 2.25, 2.75]);
+        for bad in [f32::NAN, f32::INFINITY] {
+            feature_samples(&[1.0, 2.0, 3.0], &[0.0, bad, 1.0], &mut Constant(HALF), &mut out);
+            assert_eq!(out, [1.0; 4], "{bad}");
+        }
+        let mut none: [f32; 0] = [];
+        feature_samples(&[1.0, 2.0], &[0.0, 1.0], &mut Constant(HALF), &mut none);
+    }
+
+    #[test]
+    fn merge_takes_the_rest_of_either_slice() {
+        let mut out = [0.0; 4];
+        merge_sorted(&[1.0], &[0.0, 2.0, 3.0], &mut out);
+        assert_eq!(out, [0.0, 1.0, 2.0, 3.0]);
+        merge_sorted(&[0.0, 2.0, 3.0], &[1.0], &mut out);
+        assert_eq!(out, [0.0, 1.0, 2.0, 3.0]);
+        merge_sorted(&[], &[0.0, 1.0, 2.0, 3.0], &mut out);
+        assert_eq!(out, [0.0, 1.0, 2.0, 3.0]);
+    }
+
+    fn narrow_camera() -> Camera {
+        // A pixel of 1/200 of the focal length: the first-order jitter is exact to ~1e-5.
+        let k = Intrinsics { width: 9, height: 7, fx: 200.0, fy: 200.0, cx: 4.0, cy: 3.0, skew: 0.0 };
+        Camera::look_at(k, DVec3::new(0.5, -5.0, 0.3), DVec3::ZERO, DVec3::Z)
+    }
+
+    /// A ray moved by a fraction of a pixel along its columns or rows is the ray through that
+    /// point of the pixel.
+    #[test]
+    fn jittered_directions_are_the_rays_through_the_moved_points() {
+        let cam = narrow_camera();
+        let aabb = Aabb::new(DVec3::new(-1.0, -1.5, -1.0), DVec3::new(1.0, 1.5, 2.0));
+        let rays = ImageRays::new(&cam, &aabb, None).expect("rays");
+        assert_eq!(rays.len(), 63);
+        for r in [0, 31, 62] {
+            let p = rays.pixel[r] as usize;
+            let (col, row) = ((p % 9) as f64, (p / 9) as f64);
+            assert_eq!(rays.dir_jittered(r, None), std::array::from_fn(|a| rays.dir_unit[a][r]));
+            for (a, b) in [(0.5f32, 0.0f32), (0.0, -0.5), (-0.3, 0.4)] {
+                let d = cam.pixel_ray(col + a as f64, row + b as f64).expect("ray").dir / aabb.size();
+                let got = rays.dir_jittered(r, Some([a, b]));
+                for k in 0..3 {
+                    assert!((got[k] as f64 - d[k]).abs() < 2e-5, "ray {r} ({a}, {b}): {got:?} vs {d}");
+                }
+            }
+        }
+    }
+
+    /// Targets are the kept rays' pixels divided by the scale; a camera looking away from the
+    /// box keeps no ray.
+    #[test]
+    fn targets_follow_the_kept_pixels_and_a_camera_looking_away_keeps_none() {
+        let cam = narrow_camera();
+        let aabb = Aabb::cube(DVec3::ZERO, 0.1);
+        let rays = ImageRays::new(&cam, &aabb, None).expect("rays");
+        assert!(!rays.is_empty() && rays.len() < 63, "{} rays", rays.len());
+        let mut image = Image::zeros(9, 7);
+        image.data.iter_mut().enumerate().for_each(|(i, v)| *v = i as f32);
+        let targets = rays.targets(&image, 4.0);
+        assert_eq!(targets.len(), rays.len());
+        for (t, &p) in targets.iter().zip(&rays.pixel) {
+            assert_eq!(*t, p as f32 / 4.0);
+        }
+        let k = Intrinsics { width: 9, height: 7, fx: 200.0, fy: 200.0, cx: 4.0, cy: 3.0, skew: 0.0 };
+        let away = Camera::look_at(k, DVec3::new(0.0, -5.0, 0.0), DVec3::new(0.0, -10.0, 0.0), DVec3::Z);
+        let none = ImageRays::new(&away, &aabb, None).expect("rays");
+        assert!(none.is_empty() && none.pixel.is_empty() && none.pixels_on_box == 0);
+    }
+
+    /// With an occupancy grid, rays that see only empty cells are dropped though they cross the
+    /// box, and the kept ones are clipped to a part of their stretch through the box.
+    #[test]
+    fn occupancy_drops_rays_of_empty_cells_and_clips_the_others() {
+        let k = Intrinsics { width: 9, height: 7, fx: 20.0, fy: 20.0, cx: 4.0, cy: 3.0, skew: 0.0 };
+        let cam = Camera::look_at(k, DVec3::new(0.5, -5.0, 0.3), DVec3::ZERO, DVec3::Z);
+        let aabb = Aabb::new(DVec3::new(-1.0, -1.5, -1.0), DVec3::new(1.0, 1.5, 2.0));
+        let all = ImageRays::new(&cam, &aabb, None).expect("rays");
+        let mut cells = vec![false; 8 * 8 * 8];
+        // The cell holding the point the camera looks at.
+        cells[(2 * 8 + 4) * 8 + 4] = true;
+        let grid = OccupancyGrid::from_cells([8, 8, 8], cells).expect("grid");
+        let some = ImageRays::new(&cam, &aabb, Some(&grid)).expect("rays");
+        assert_eq!(some.pixels_on_box, all.pixels_on_box);
+        assert!(!some.is_empty() && some.len() < all.len(), "{} of {}", some.len(), all.len());
+        for r in 0..some.len() {
+            let q = all.pixel.iter().position(|&p| p == some.pixel[r]).expect("a ray of the box");
+            assert!(some.near[r] >= all.near[q] && some.far[r] <= all.far[q] && some.near[r] < some.far[r]);
+            assert!(some.far[r] - some.near[r] < 0.5 * (all.far[q] - all.near[q]), "ray {r} not clipped");
+            let mid = some.point_unit(r, 0.5 * (some.near[r] + some.far[r]));
+            assert!(grid.is_occupied(mid), "ray {r} passes the middle of its span at {mid:?}");
+        }
+    }
+
     #[test]
     fn cached_rays_match_world_rays() {
         let k = Intrinsics { width: 9, height: 7, fx: 20.0, fy: 20.0, cx: 4.0, cy: 3.0, skew: 0.0 };
