@@ -245,6 +245,68 @@ mod tests {
         assert_eq!(blend(&w, 1.0), vec![(1, 1.0, 1.0)]);
     }
 
+    /// Times at and beyond the first and last frames land on those frames; between frames the
+    /// position and its inverse are linear in the frame's interval.
+    #[test]
+    fn frame_positions_and_times_clamp_at_the_recordings_ends() {
+        let t = [14.0, 15.0, 17.0];
+        assert_eq!(frame_position(&t, 14.0), 0.0);
+        assert_eq!(frame_position(&t, 17.0), 2.0);
+        assert_eq!(frame_position(&t, 15.0), 1.0);
+        assert_eq!(frame_position(&[3.0], 7.0), 0.0, "one frame: every time is on it");
+        assert_eq!(time_at(&t, -1.0), 14.0);
+        assert_eq!(time_at(&t, 0.0), 14.0);
+        assert_eq!(time_at(&t, 0.5), 14.5);
+        assert_eq!(time_at(&t, 1.5), 16.0);
+        assert_eq!(time_at(&t, 2.0), 17.0);
+        assert_eq!(time_at(&t, 9.0), 17.0);
+        assert_eq!(time_at(&[3.0], 0.5), 3.0);
+    }
+
+    /// Two windows sharing a single frame weigh it half and half; across a longer overlap the
+    /// later window fades in linearly from its first frame to the earlier window's last.
+    #[test]
+    fn overlaps_cross_fade_linearly() {
+        let w = plan_windows(7, 4, 1);
+        assert_eq!(w, vec![0..4, 3..7]);
+        assert_eq!(blend(&w, 3.0), vec![(0, 0.5, 3.0), (1, 0.5, 3.0)]);
+        assert_eq!(blend(&w, 2.5), vec![(0, 1.0, 2.5)]);
+        assert_eq!(blend(&w, 3.5), vec![(1, 1.0, 3.5)]);
+        let w = plan_windows(10, 4, 2);
+        assert_eq!(w, vec![0..4, 2..6, 4..8, 6..10]);
+        // Windows 0..4 and 2..6 overlap on frames 2 and 3: the later one has λ = f − 2.
+        for (f, lam) in [(2.0, 0.0), (2.25, 0.25), (2.5, 0.5), (3.0, 1.0)] {
+            let b = blend(&w, f);
+            assert_eq!(b.len(), 2, "{f}: {b:?}");
+            assert_eq!((b[0].0, b[1].0), (0, 1));
+            assert!((b[0].1 - (1.0 - lam)).abs() < 1e-12 && (b[1].1 - lam).abs() < 1e-12, "{f}: {b:?}");
+            assert_eq!((b[0].2, b[1].2), (f, f));
+        }
+        // Before the first frame and after the last, the end windows at their ends.
+        assert_eq!(blend(&w, -2.0), vec![(0, 1.0, 0.0)]);
+        assert_eq!(blend(&w, 12.0), vec![(3, 1.0, 9.0)]);
+    }
+
+    /// Where three windows cover a frame the cross-fades nest: windows of 16 frames overlapping
+    /// by 4 over 29 frames are 0..16, 12..28 and 13..29, and at frame 14 the second has faded in
+    /// by 2/3 over the first, the third by 1/14 over both.
+    #[test]
+    fn three_covering_windows_nest_their_cross_fades() {
+        let w = plan_windows(29, 16, 4);
+        assert_eq!(w, vec![0..16, 12..28, 13..29]);
+        let b = blend(&w, 14.0);
+        let expect = [(0, (1.0 / 3.0) * (13.0 / 14.0)), (1, (2.0 / 3.0) * (13.0 / 14.0)), (2, 1.0 / 14.0)];
+        assert_eq!(b.len(), 3, "{b:?}");
+        for (got, want) in b.iter().zip(expect) {
+            assert_eq!(got.0, want.0, "{b:?}");
+            assert!((got.1 - want.1).abs() < 1e-12 && got.2 == 14.0, "{b:?}");
+        }
+        // At frame 13 the third window starts with weight 0 and is left out.
+        let b = blend(&w, 13.0);
+        assert_eq!(b.iter().map(|x| x.0).collect::<Vec<_>>(), vec![0, 1], "{b:?}");
+        assert!((b[0].1 - 2.0 / 3.0).abs() < 1e-12 && (b[1].1 - 1.0 / 3.0).abs() < 1e-12, "{b:?}");
+    }
+
     /// The shell loop of docs/cluster.md that sizes a Slurm job array counts the windows of
     /// this plan, and ends for every window, 0 (one window) included.
     #[test]
