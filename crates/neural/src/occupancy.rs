@@ -510,6 +510,160 @@ mod tests {
     }
 
     #[test]
+    fn settings_outside_their_ranges_are_refused_by_key() {
+        let ok = OccupancyConfig::default();
+        let edges = [
+            OccupancyConfig { resolution: 1, noise_sigmas: 0.0, floor: 0.0, margin_px: 0.0, dilate: 0, ..ok.clone() },
+            OccupancyConfig {
+                resolution: MAX_OCCUPANCY_RESOLUTION,
+                noise_sigmas: 100.0,
+                floor: 0.999,
+                margin_px: 100.0,
+                dilate: 16,
+                ..ok.clone()
+            },
+        ];
+        for good in edges {
+            assert!(good.validate().is_ok(), "{good:?}");
+        }
+        let bad = [
+            ("resolution", OccupancyConfig { resolution: 0, ..ok.clone() }),
+            ("resolution", OccupancyConfig { resolution: MAX_OCCUPANCY_RESOLUTION + 1, ..ok.clone() }),
+            ("noise_sigmas", OccupancyConfig { noise_sigmas: -0.1, ..ok.clone() }),
+            ("noise_sigmas", OccupancyConfig { noise_sigmas: 100.5, ..ok.clone() }),
+            ("noise_sigmas", OccupancyConfig { noise_sigmas: f32::NAN, ..ok.clone() }),
+            ("floor", OccupancyConfig { floor: -0.01, ..ok.clone() }),
+            ("floor", OccupancyConfig { floor: 1.0, ..ok.clone() }),
+            ("margin_px", OccupancyConfig { margin_px: -1.0, ..ok.clone() }),
+            ("margin_px", OccupancyConfig { margin_px: 100.5, ..ok.clone() }),
+            ("dilate", OccupancyConfig { dilate: 17, ..ok.clone() }),
+        ];
+        for (key, cfg) in bad {
+            let e = cfg.validate().expect_err("refused").to_string();
+            assert!(e.contains(&format!("occupancy.{key}")), "{key}: {e}");
+        }
+    }
+
+    /// A point is in the cell `⌊u · n⌋` along each axis (x fastest), the far faces of the box
+    /// in the last cell; points outside the box are in none.
+    #[test]
+    fn a_point_is_occupied_when_its_cell_is() {
+        let dims = [2, 3, 4];
+        let mut cells = vec![false; 24];
+        cells[(2 * 3 + 1) * 2 + 1] = true; // cell (1, 1, 2)
+        cells[23] = true; // cell (1, 2, 3), the far corner
+        let grid = OccupancyGrid::from_cells(dims, cells).expect("grid");
+        assert!(grid.is_occupied([0.75, 0.5, 0.625]));
+        assert!(grid.is_occupied([0.51, 0.34, 0.51]));
+        assert!(!grid.is_occupied([0.25, 0.5, 0.625]));
+        assert!(!grid.is_occupied([0.75, 0.2, 0.625]));
+        assert!(!grid.is_occupied([0.75, 0.5, 0.375]));
+        assert!(!grid.is_occupied([0.75, 0.5, 0.8]));
+        assert!(grid.is_occupied([1.0, 1.0, 1.0]));
+        for outside in [[1.01, 1.0, 1.0], [1.0, 1.01, 1.0], [1.0, 1.0, 1.01], [-0.01, 0.5, 0.625], [f32::NAN, 0.5, 0.6]]
+        {
+            assert!(!grid.is_occupied(outside), "{outside:?}");
+        }
+        assert_eq!(grid.dims(), dims);
+        assert_eq!(grid.cells().iter().filter(|&&c| c).count(), 2);
+        assert!((grid.occupied_fraction() - 2.0 / 24.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn grids_are_made_only_of_as_many_cells_as_their_dims_hold() {
+        assert!(OccupancyGrid::from_cells([2, 2, 2], vec![true; 7]).is_none());
+        assert!(OccupancyGrid::from_cells([0, 2, 2], vec![]).is_none());
+        let full = OccupancyGrid::full([2, 3, 1]);
+        assert_eq!(full.cells(), &[true; 6]);
+        assert_eq!(full.occupied_fraction(), 1.0);
+        let mut a = OccupancyGrid::from_cells([2, 1, 1], vec![true, false]).expect("grid");
+        a.union_with(&OccupancyGrid::from_cells([2, 1, 1], vec![false, false]).expect("grid"));
+        assert_eq!(a.cells(), &[true, false]);
+        a.union_with(&OccupancyGrid::from_cells([2, 1, 1], vec![false, true]).expect("grid"));
+        assert_eq!(a.cells(), &[true, true]);
+    }
+
+    /// The record's runs alternate empty and occupied, starting with empty (0 when the first
+    /// cell is occupied), and read back to the same grid.
+    #[test]
+    fn records_hold_runs_starting_with_empty_and_round_trip() {
+        let cases = [
+            (vec![true, true, false, true], vec![0, 2, 1, 1]),
+            (vec![false, false, true, true], vec![2, 2]),
+            (vec![false; 4], vec![4]),
+            (vec![true; 4], vec![0, 4]),
+        ];
+        for (cells, runs) in cases {
+            let grid = OccupancyGrid::from_cells([4, 1, 1], cells.clone()).expect("grid");
+            let record = grid.to_record();
+            assert_eq!(record, OccupancyRecord { dims: [4, 1, 1], runs }, "{cells:?}");
+            assert_eq!(OccupancyGrid::from_record(&record), Ok(grid));
+        }
+    }
+
+    /// A ray without a direction, an empty stretch or a NaN end sees nothing.
+    #[test]
+    fn degenerate_rays_see_no_span() {
+        let grid = OccupancyGrid::full([4, 4, 4]);
+        assert!(grid.occupied_span([0.5; 3], [0.0; 3], 0.0, 1.0).is_none());
+        assert!(grid.occupied_span([0.5; 3], [1.0, 0.0, 0.0], 1.0, 1.0).is_none());
+        assert!(grid.occupied_span([0.5; 3], [1.0, 0.0, 0.0], 1.0, 0.5).is_none());
+        assert!(grid.occupied_span([0.5; 3], [1.0, 0.0, 0.0], 0.0, f32::NAN).is_none());
+        assert!(grid.occupied_span([0.5; 3], [f32::NAN, 0.0, 0.0], 0.0, 1.0).is_none());
+        // In a full grid the span is the whole stretch.
+        assert_eq!(grid.occupied_span([0.0, 0.5, 0.5], [1.0, 0.0, 0.0], 0.0, 1.0), Some((0.0, 1.0)));
+    }
+
+    /// The median rule by hand: pixels 0, 1, 2, 3, 10 have the median 2, deviations below it
+    /// 2, 1, 0 with median 1, so σ̂ = 1.4826; the floor rule takes over when it is higher.
+    /// Non-finite pixels are left out, and an image of none has no dark level.
+    #[test]
+    fn the_median_threshold_by_hand() {
+        let mut img = Image::zeros(6, 1);
+        img.data.copy_from_slice(&[3.0, 0.0, 10.0, f32::NAN, 2.0, 1.0]);
+        let t = dark_threshold(&img, &OccupancyConfig::default());
+        assert!((t - (2.0 + 4.0 * 1.4826)).abs() < 1e-5, "{t}");
+        let t = dark_threshold(&img, &OccupancyConfig { noise_sigmas: 0.0, floor: 0.5, ..Default::default() });
+        assert!((t - 6.0).abs() < 1e-6, "{t}");
+        let t = dark_threshold(&img, &OccupancyConfig { noise_sigmas: 1.0, floor: 0.0, ..Default::default() });
+        assert!((t - 3.4826).abs() < 1e-5, "{t}");
+        img.data.fill(f32::NAN);
+        assert_eq!(dark_threshold(&img, &OccupancyConfig::default()), f32::INFINITY);
+    }
+
+    /// A camera that sees only black carves every cell it sees whole, and none whose footprint
+    /// leaves its image; masked pixels carve nothing.
+    #[test]
+    fn dark_views_carve_the_cells_they_see_whole_and_masks_carve_none() {
+        let aabb = Aabb::cube(DVec3::ZERO, 2.0);
+        let cfg = OccupancyConfig { resolution: 8, dilate: 0, ..Default::default() };
+        let wide = ring(1, 32).remove(0);
+        let dark = Image::zeros(32, 32);
+        let grid = OccupancyGrid::from_views(&aabb, &[(&wide, &dark)], &cfg);
+        assert_eq!(grid.occupied_fraction(), 0.0, "the whole box is in view");
+        let unused = vec![false; 32 * 32];
+        let grid = OccupancyGrid::from_masked_views(&aabb, &[(&wide, &dark, Some(&unused))], &cfg);
+        assert_eq!(grid.occupied_fraction(), 1.0, "masked pixels carve nothing");
+        let used = vec![true; 32 * 32];
+        let grid = OccupancyGrid::from_masked_views(&aabb, &[(&wide, &dark, Some(&used))], &cfg);
+        assert_eq!(grid.occupied_fraction(), 0.0);
+        // A lone bright pixel at the image's centre keeps the cells along its ray.
+        let mut spot = dark.clone();
+        spot.set(16, 16, 1.0);
+        let grid = OccupancyGrid::from_views(&aabb, &[(&wide, &spot)], &cfg);
+        let f = grid.occupied_fraction();
+        assert!(f > 0.0 && f < 0.25, "{f}");
+        // A long lens sees the middle of the box whole, its corners outside the image.
+        let k = Intrinsics { width: 32, height: 32, fx: 128.0, fy: 128.0, cx: 15.5, cy: 15.5, skew: 0.0 };
+        let narrow = Camera::look_at(k, DVec3::new(0.0, 5.0, 0.0), DVec3::ZERO, DVec3::X);
+        let grid = OccupancyGrid::from_views(&aabb, &[(&narrow, &dark)], &cfg);
+        assert!(!grid.is_occupied([0.55, 0.55, 0.55]), "the middle is carved");
+        assert!(grid.is_occupied([0.01, 0.01, 0.01]) && grid.is_occupied([0.99, 0.01, 0.99]), "corners are kept");
+        let dilated = OccupancyGrid::from_views(&aabb, &[(&narrow, &dark)], &OccupancyConfig { dilate: 1, ..cfg });
+        assert!(dilated.occupied_fraction() > grid.occupied_fraction());
+    }
+
+    #[test]
     fn span_covers_occupied_cells_only() {
         let mut grid = OccupancyGrid { dims: [10, 10, 10], occupied: vec![false; 1000] };
         grid.occupied[(5 * 10 + 5) * 10 + 5] = true;
