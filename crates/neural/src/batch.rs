@@ -252,6 +252,140 @@ mod tests {
         assert_eq!(learning_rate(&cfg, 7, 3), cfg.schedule.lr(7));
     }
 
+    use crate::train::{Problem, Supersample, View};
+    use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
+    use glam::DVec3;
+
+    /// Views of 8×8 pixels from three sides of a box of side 2, at the given times, and held-out
+    /// views from two more sides; every pixel measures its own index.
+    fn prepared(times: &[f64]) -> Prepared {
+        let k = Intrinsics { width: 8, height: 8, fx: 15.0, fy: 15.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let view = |a: f64, time: f64| {
+            let camera = Camera::look_at(k, DVec3::new(0.0, 5.0 * a.cos(), 5.0 * a.sin()), DVec3::ZERO, DVec3::X);
+            let mut image = Image::zeros(8, 8);
+            image.data.iter_mut().enumerate().for_each(|(i, v)| *v = 1.0 + i as f32);
+            View { camera, image, time }
+        };
+        let problem = Problem {
+            aabb: Aabb::cube(DVec3::ZERO, 2.0),
+            intensity_scale: 1.0,
+            views: times.iter().enumerate().map(|(i, &t)| view(i as f64, t)).collect(),
+            holdout: vec![view(0.5, 0.0), view(1.5, 0.0)],
+            time_step: 1.0,
+        };
+        Prepared::new(&problem, &TrainConfig::default()).expect("prepares")
+    }
+
+    fn config(rays_per_image: usize, s: usize) -> TrainConfig {
+        TrainConfig { rays_per_image, pixel_supersample: Supersample::Fixed(s), ..Default::default() }
+    }
+
+    /// Every view gets `rays_per_image` draws of its own kept rays, in view order; the draw is
+    /// fixed by the seed and the iteration.
+    #[test]
+    fn a_training_batch_draws_the_same_number_of_rays_from_every_view() {
+        let prep = prepared(&[0.0, 0.0, 0.0]);
+        let mut batch = RayBatch::new(Split::Holdout, 0, 0);
+        training_batch(&prep, &config(5, 1), 3, 7, &[0.0], &mut batch);
+        assert_eq!((batch.split, batch.seed, batch.stream, batch.group), (Split::Train, 3, 7, 1));
+        assert!(batch.jitter.is_empty());
+        assert_eq!(batch.len(), 15);
+        for v in 0..3u32 {
+            let n = prep.views(Split::Train)[v as usize].rays().len() as u32;
+            let of_view: Vec<u32> = batch.rays.iter().filter(|r| r.0 == v).map(|r| r.1).collect();
+            assert_eq!(of_view.len(), 5, "view {v}");
+            assert!(of_view.iter().all(|&r| r < n), "view {v}: {of_view:?}");
+        }
+        assert!(batch.rays.windows(2).all(|w| w[0].0 <= w[1].0));
+        let mut again = RayBatch::new(Split::Train, 0, 0);
+        training_batch(&prep, &config(5, 1), 3, 7, &[0.0], &mut again);
+        assert_eq!(again, batch);
+        training_batch(&prep, &config(5, 1), 3, 8, &[0.0], &mut again);
+        assert_ne!(again.rays, batch.rays);
+    }
+
+    /// With one time step per iteration, iteration `i` draws only from the views of frame
+    /// time `i mod N_t`.
+    #[test]
+    fn one_time_step_batches_draw_from_the_views_of_one_frame() {
+        let prep = prepared(&[0.0, 1.0, 1.0]);
+        let steps = prep.time_steps();
+        assert_eq!(steps, vec![0.0, 1.0]);
+        let cfg = TrainConfig { batching: Batching::OneTimeStep, ..config(4, 1) };
+        let mut batch = RayBatch::new(Split::Train, 0, 0);
+        for (iteration, views) in [(0, vec![0]), (1, vec![1, 2]), (2, vec![0]), (5, vec![1, 2])] {
+            training_batch(&prep, &cfg, 1, iteration, &steps, &mut batch);
+            let mut seen: Vec<u32> = batch.rays.iter().map(|r| r.0).collect();
+            seen.dedup();
+            assert_eq!(seen, views, "iteration {iteration}");
+            assert_eq!(batch.len(), 4 * views.len());
+        }
+    }
+
+    /// With `S` rays per pixel axis each drawn pixel becomes `S²` rays at the sub-pixel
+    /// centres, the pixels being those drawn with one ray per pixel.
+    #[test]
+    fn supersampled_batches_cover_each_pixel_at_its_sub_pixel_centres() {
+        let prep = prepared(&[0.0, 0.0, 0.0]);
+        let mut one = RayBatch::new(Split::Train, 0, 0);
+        training_batch(&prep, &config(3, 1), 5, 2, &[0.0], &mut one);
+        let mut two = RayBatch::new(Split::Train, 0, 0);
+        training_batch(&prep, &config(3, 2), 5, 2, &[0.0], &mut two);
+        assert_eq!(two.group, 4);
+        assert_eq!(two.len(), 4 * one.len());
+        assert_eq!(two.jitter.len(), two.len());
+        for (p, rays) in one.rays.iter().zip(two.rays.chunks(4)) {
+            assert!(rays.iter().all(|r| r == p));
+        }
+        let corners = [[-0.25, -0.25], [0.25, -0.25], [-0.25, 0.25], [0.25, 0.25]];
+        assert!(two.jitter.chunks(4).all(|j| j == corners), "{:?}", &two.jitter[..4]);
+        // Back to one ray per pixel, the same batch forgets its jitter.
+        training_batch(&prep, &config(3, 1), 5, 2, &[0.0], &mut two);
+        assert_eq!(two, one);
+    }
+
+    /// A ray of a batch carries its view's geometry, target and time, its direction moved by
+    /// its jitter.
+    #[test]
+    fn a_batch_ray_is_its_views_ray() {
+        let prep = prepared(&[0.0, 2.0, 0.0]);
+        let view = &prep.views(Split::Train)[1];
+        let r = view.rays().len() - 1;
+        let mut batch = RayBatch::new(Split::Train, 0, 0);
+        batch.rays = vec![(1, r as u32), (1, r as u32)];
+        batch.jitter = vec![[0.0, 0.0], [0.5, -0.25]];
+        let ray = batch.ray(&prep, 0);
+        let rays = view.rays();
+        assert_eq!(ray.origin_unit, rays.origin_unit);
+        assert_eq!(ray.dir_unit, rays.dir_jittered(r, None));
+        assert_eq!((ray.near, ray.far, ray.target, ray.time), (rays.near[r], rays.far[r], view.targets()[r], 2.0));
+        assert_eq!(batch.ray(&prep, 1).dir_unit, rays.dir_jittered(r, Some([0.5, -0.25])));
+        assert_ne!(batch.ray(&prep, 1).dir_unit, ray.dir_unit);
+    }
+
+    /// The held-out batch takes `⌈validate_pixels / N_views⌉` rays of every held-out view, the
+    /// same each time, under its own keys; a whole view's batch is its rays in order.
+    #[test]
+    fn holdout_and_view_batches() {
+        let prep = prepared(&[0.0, 0.0, 0.0]);
+        let cfg = TrainConfig { validate_pixels: 5, ..Default::default() };
+        let held = holdout_batch(&prep, &cfg, 9).expect("held-out rays");
+        assert_eq!((held.split, held.seed, held.stream), (Split::Holdout, 9 ^ HOLDOUT_SEED, HOLDOUT_STREAM));
+        assert_eq!(held.rays.iter().filter(|r| r.0 == 0).count(), 3);
+        assert_eq!(held.rays.iter().filter(|r| r.0 == 1).count(), 3);
+        assert_eq!(holdout_batch(&prep, &cfg, 9), Some(held));
+        assert!(holdout_batch(&prep, &TrainConfig { validate_pixels: 0, ..cfg.clone() }, 9).is_none());
+
+        let whole = view_batch(&prep, Split::Train, 2, 4);
+        let n = prep.views(Split::Train)[2].rays().len();
+        assert_eq!(whole.rays, (0..n as u32).map(|r| (2, r)).collect::<Vec<_>>());
+        assert_eq!((whole.split, whole.seed, whole.stream, whole.group), (Split::Train, 4, VIEW_STREAM, 1));
+        let mut a = whole.chunk_rng(3);
+        let mut b = ChaCha8Rng::seed_from_u64(stream_seed(4, VIEW_STREAM, 3));
+        assert_eq!(a.random::<u64>(), b.random::<u64>());
+        assert!(!whole.is_empty() && RayBatch::new(Split::Train, 0, 0).is_empty());
+    }
+
     #[test]
     fn chunks_hold_whole_rays() {
         let cfg = |c, f, s| TrainConfig { coarse_samples: c, fine_samples: f, chunk_samples: s, ..Default::default() };
