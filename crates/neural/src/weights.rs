@@ -307,6 +307,90 @@ mod tests {
         load_checkpoint(&path, &mut Learner::new(field)).unwrap();
     }
 
+    fn grid(values: impl Fn(usize) -> f32) -> crate::dense::DenseGridField {
+        crate::dense::DenseGridField::from_raw([2, 2, 2], (0..8).map(values).collect())
+    }
+
+    /// A checkpoint read back restores every part of the training state: weights, both Adam
+    /// moments, the step and iteration counts, the loss histories and the time; its tags are
+    /// read from the header.
+    #[test]
+    fn a_checkpoint_restores_the_whole_training_state() {
+        let mut learner = Learner::new(grid(|i| i as f32 * 0.25 - 1.0));
+        learner.adam.m = (0..8).map(|i| i as f32 * 0.01 - 0.03).collect();
+        learner.adam.v = (0..8).map(|i| i as f32 * 1e-4).collect();
+        learner.adam.step = 7;
+        learner.iteration = 9;
+        learner.losses = vec![0.5, 0.25];
+        learner.holdout_losses = vec![(4, 0.3)];
+        learner.train_time_s = 1.5;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.safetensors");
+        std::fs::write(&path, checkpoint_bytes_tagged(&learner, &[("window", "2".to_string())]).unwrap()).unwrap();
+        let mut restored = Learner::new(grid(|_| 0.0));
+        load_checkpoint(&path, &mut restored).unwrap();
+        assert_eq!(restored.field.params(), learner.field.params());
+        assert_eq!((&restored.adam.m, &restored.adam.v), (&learner.adam.m, &learner.adam.v));
+        assert_eq!((restored.adam.step, restored.iteration), (7, 9));
+        assert_eq!((&restored.losses, &restored.holdout_losses), (&learner.losses, &learner.holdout_losses));
+        assert_eq!(restored.train_time_s, 1.5);
+        assert_eq!(checkpoint_tag(&path, "window").unwrap().as_deref(), Some("2"));
+        assert_eq!(checkpoint_tag(&path, "other").unwrap(), None);
+    }
+
+    /// Weights read back are the saved ones, with their tags; a file of weights alone is no
+    /// checkpoint.
+    #[test]
+    fn weights_round_trip_with_their_tags() {
+        let field = grid(|i| (i as f32 * 0.7).sin());
+        let dir = tempfile::tempdir().unwrap();
+        let (tagged, plain) = (dir.path().join("tagged.safetensors"), dir.path().join("plain.safetensors"));
+        let tags = [("window", "0..4".to_string()), ("frame", "3".to_string())];
+        std::fs::write(&tagged, weights_bytes_tagged(&field, &tags).unwrap()).unwrap();
+        std::fs::write(&plain, weights_bytes(&field).unwrap()).unwrap();
+        for path in [&tagged, &plain] {
+            let mut loaded = grid(|_| 0.0);
+            load_weights(path, &mut loaded).unwrap();
+            assert_eq!(loaded.params(), field.params());
+        }
+        assert_eq!(checkpoint_tag(&tagged, "window").unwrap().as_deref(), Some("0..4"));
+        assert_eq!(checkpoint_tag(&tagged, "frame").unwrap().as_deref(), Some("3"));
+        assert_eq!(checkpoint_tag(&plain, "window").unwrap(), None);
+        let e = load_checkpoint(&plain, &mut Learner::new(grid(|_| 0.0))).unwrap_err().to_string();
+        assert!(e.contains("plain.safetensors") && e.contains("no training state"), "{e}");
+    }
+
+    /// A weight that is not finite, a tensor of another shape, a header that is cut short or
+    /// claims a length no header has, and a file that is missing are refused naming the file.
+    #[test]
+    fn bad_weights_files_are_refused_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("w.safetensors");
+        for bad in [f32::NAN, f32::INFINITY] {
+            std::fs::write(&path, weights_bytes(&grid(|i| if i == 5 { bad } else { 0.5 })).unwrap()).unwrap();
+            let e = load_weights(&path, &mut grid(|_| 0.0)).unwrap_err().to_string();
+            assert!(e.contains("w.safetensors") && e.contains("value 5") && e.contains("must be finite"), "{e}");
+        }
+        std::fs::write(&path, weights_bytes(&grid(|_| 0.5)).unwrap()).unwrap();
+        let mut other = crate::dense::DenseGridField::from_raw([3, 2, 2], vec![0.0; 12]);
+        let e = load_weights(&path, &mut other).unwrap_err().to_string();
+        assert!(e.contains("w.safetensors") && e.contains("the field expects F32"), "{e}");
+        std::fs::write(&path, [16u8, 0, 0]).unwrap();
+        let e = checkpoint_tag(&path, "x").unwrap_err().to_string();
+        assert!(e.contains("w.safetensors") && e.contains("truncated"), "{e}");
+        let mut huge = ((100u64 << 20) + 1).to_le_bytes().to_vec();
+        huge.extend_from_slice(b"{}");
+        std::fs::write(&path, &huge).unwrap();
+        let e = checkpoint_tag(&path, "x").unwrap_err().to_string();
+        assert!(e.contains("is not a safetensors header"), "{e}");
+        let mut small = 2u64.to_le_bytes().to_vec();
+        small.extend_from_slice(b"{}");
+        std::fs::write(&path, &small).unwrap();
+        assert_eq!(checkpoint_tag(&path, "x").unwrap(), None);
+        let gone = dir.path().join("gone.safetensors");
+        assert!(load_weights(&gone, &mut grid(|_| 0.0)).unwrap_err().to_string().contains("gone.safetensors"));
+    }
+
     /// A field built without its initial draws and then loaded holds exactly the saved
     /// parameters, for every field kind, 3D and 4D: the tensors cover every parameter, so
     /// nothing of the zeroed build survives a load.
