@@ -257,3 +257,44 @@ pub fn fit_to_target<F: TrainableField>(
     last.seconds = t0.elapsed().as_secs_f64();
     Ok(last)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The largest settings of each range pass; one past them, and no steps, points or rate,
+    /// are refused under their own key.
+    #[test]
+    fn fit_settings_are_refused_outside_their_ranges_by_key() {
+        let ok = StartFit::default();
+        let edge = StartFit {
+            iterations: fluidnerf_core::MAX_ITERATIONS,
+            points: MAX_START_POINTS,
+            learning_rate: crate::optim::MAX_LEARNING_RATE,
+        };
+        assert!(edge.validate().is_ok());
+        assert!(StartFit { iterations: 1, points: 1, ..ok }.validate().is_ok());
+        let bad = [
+            ("start.iterations", StartFit { iterations: 0, ..ok }),
+            ("start.iterations", StartFit { iterations: fluidnerf_core::MAX_ITERATIONS + 1, ..ok }),
+            ("start.points", StartFit { points: 0, ..ok }),
+            ("start.points", StartFit { points: MAX_START_POINTS + 1, ..ok }),
+            ("start.learning_rate", StartFit { learning_rate: 0.0, ..ok }),
+            ("start.learning_rate", StartFit { learning_rate: 1.5, ..ok }),
+            ("start.learning_rate", StartFit { learning_rate: f32::INFINITY, ..ok }),
+        ];
+        for (key, fit) in bad {
+            let e = fit.validate().expect_err("refused").to_string();
+            assert!(e.contains(key), "{key}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_relative_difference_is_the_rms_ratio() {
+        let report = StartReport { mse: 4.0, mean_square: 16.0, seconds: 0.0, steps: 1, rescaled: None };
+        assert_eq!(report.relative_difference(), 0.5);
+        // A target of zero does not divide by zero.
+        let zero = StartReport { mse: 1.0, mean_square: 0.0, ..report };
+        assert!(zero.relative_difference().is_finite() && zero.relative_difference() > 1e100);
+    }
+}

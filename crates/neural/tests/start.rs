@@ -136,3 +136,45 @@ fn settings_and_targets_a_fit_cannot_use_are_refused_by_name() {
     let msg = why(ok, &broken);
     assert!(msg.contains("not finite"), "{msg}");
 }
+
+/// A time limit already reached stops the fit after its first step, and says so.
+#[test]
+fn a_time_limit_stops_the_fit_after_one_step() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let target = target_grid();
+    let to_target = |inputs: &[f32], out: &mut [f32]| out.copy_from_slice(&eval(&target, inputs));
+    let fit = StartFit { iterations: 50, points: 256, learning_rate: 5e-2 };
+    let mut field = DenseGridField::new([5, 5, 5], 0.5);
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, Some(0.0)).expect("fits");
+    assert_eq!(report.steps, 1);
+    let mut field = DenseGridField::new([5, 5, 5], 0.5);
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, Some(1e9)).expect("fits");
+    assert_eq!(report.steps, 50);
+}
+
+/// A target in world units and coordinates is fitted in field units (divided by the value
+/// scale); a field of space alone refuses the frames of more than one instant.
+#[test]
+fn a_fit_to_frames_takes_the_target_in_world_units() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let level = 2.0 * prep.mean_level() as f64 * prep.meta.value_scale;
+    let world = |_: f64, points: &[Vec3], out: &mut [f32]| {
+        assert!(points.iter().all(|p| p.abs().max_element() <= 1.0 + 1e-5), "points in the box, world units");
+        out.fill(level as f32);
+    };
+    let fit = StartFit { iterations: 150, points: 2048, learning_rate: 5e-2 };
+    let mut field = DenseGridField::new([5, 5, 5], 0.5);
+    let report =
+        fluidnerf_neural::start::fit_to_frames(&mut field, &prep, &[(0.0, 0.0)], &world, &fit, 3, None).expect("fits");
+    assert_eq!(report.rescaled, None);
+    let reached = eval(&field, &[0.5f32; 3])[0] as f64 * prep.meta.value_scale;
+    assert!((reached / level - 1.0).abs() < 0.05, "reached {reached}, wanted {level}");
+    let mut field = DenseGridField::new([5, 5, 5], 0.5);
+    let err =
+        fluidnerf_neural::start::fit_to_frames(&mut field, &prep, &[(0.0, 0.0), (1.0, 1.0)], &world, &fit, 3, None)
+            .expect_err("two instants")
+            .to_string();
+    assert!(err.contains("cannot start from 2 instants"), "{err}");
+}
