@@ -339,6 +339,13 @@ mod tests {
         }
         let corners = [[-0.25, -0.25], [0.25, -0.25], [-0.25, 0.25], [0.25, 0.25]];
         assert!(two.jitter.chunks(4).all(|j| j == corners), "{:?}", &two.jitter[..4]);
+        // Three per axis: nine rays at the thirds of the pixel.
+        let mut three = RayBatch::new(Split::Train, 0, 0);
+        training_batch(&prep, &config(3, 3), 5, 2, &[0.0], &mut three);
+        assert_eq!((three.group, three.len()), (9, 9 * one.len()));
+        let third = 1.0 / 3.0;
+        assert!(three.jitter[..9].iter().zip([-third, 0.0, third].repeat(3)).all(|(j, a)| (j[0] - a).abs() < 1e-6));
+        assert!(three.jitter[..9].iter().enumerate().all(|(k, j)| (j[1] - [-third, 0.0, third][k / 3]).abs() < 1e-6));
         // Back to one ray per pixel, the same batch forgets its jitter.
         training_batch(&prep, &config(3, 1), 5, 2, &[0.0], &mut two);
         assert_eq!(two, one);
