@@ -112,3 +112,62 @@ pub fn add_point_prior<F: TrainableField>(
     field.backward(tape, &scratch.d_out, grads);
     (value / n as f64) as f32
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dense::DenseGridField;
+    use crate::train::{Problem, TrainConfig, View};
+    use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
+    use glam::DVec3;
+
+    fn prepared() -> Prepared {
+        let k = Intrinsics { width: 8, height: 8, fx: 15.0, fy: 15.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let views = (0..3)
+            .map(|i| {
+                let a = i as f64;
+                let camera = Camera::look_at(k, DVec3::new(0.0, 5.0 * a.cos(), 5.0 * a.sin()), DVec3::ZERO, DVec3::X);
+                let mut image = Image::zeros(8, 8);
+                image.data.fill(1.0);
+                View { camera, image, time: 0.0 }
+            })
+            .collect();
+        let problem = Problem {
+            aabb: Aabb::cube(DVec3::ZERO, 2.0),
+            intensity_scale: 1.0,
+            views,
+            holdout: vec![],
+            time_step: 1.0,
+        };
+        Prepared::new(&problem, &TrainConfig::default()).expect("prepares")
+    }
+
+    fn prior_of(field: &DenseGridField, prep: &Prepared, prior: &Prior) -> (f32, Vec<f32>) {
+        let mut grads = vec![0.0; field.num_params()];
+        let batch = RayBatch::new(crate::train::Split::Train, 3, 1);
+        let mut tape = field.new_tape();
+        let v = add_point_prior(field, prep, prior, &batch, &mut tape, &mut PriorScratch::default(), &mut grads);
+        (v, grads)
+    }
+
+    /// On a constant field every difference is zero: the value is `tv · ε + sparsity · E`, and
+    /// the gradient is the sparsity's alone, `sparsity · dE/dv` spread over the grid's
+    /// parameters by trilinear weights that sum to 1.
+    #[test]
+    fn the_prior_of_a_constant_field_is_its_sparsity_and_the_tv_floor() {
+        let prep = prepared();
+        let field = DenseGridField::new([4, 4, 4], 1.0);
+        let prior = Prior { tv: 0.5, smooth: 0.3, sparsity: 0.2, points: 64, step: 1.0 / 64.0 };
+        let (value, grads) = prior_of(&field, &prep, &prior);
+        assert!((value - (0.5 * 1e-3 + 0.2)).abs() < 1e-5, "{value}");
+        // dE/dv = sigmoid(v) = 1 − e⁻¹ where softplus(v) = 1.
+        let total: f32 = grads.iter().sum();
+        assert!((total - 0.2 * (1.0 - (-1.0f32).exp())).abs() < 1e-5, "{total}");
+        // Without weights, or without points, there is nothing to add.
+        for none in [Prior { points: 64, ..Prior::default() }, Prior { points: 0, ..prior }] {
+            let (value, grads) = prior_of(&field, &prep, &none);
+            assert_eq!(value, 0.0);
+            assert!(grads.iter().all(|&g| g == 0.0));
+        }
+    }
+}
