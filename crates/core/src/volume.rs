@@ -415,6 +415,41 @@ mod tests {
         assert_eq!(v.sample(Vec3::new(2.0, 1.0, 1.0)), 2.5);
     }
 
+    /// The extremes of the values, NaN as soon as one value is NaN, wherever it is.
+    #[test]
+    fn min_max_reads_the_extremes_and_any_nan() {
+        let v = Volume::from_vec([3, 1, 1], unit_box(), vec![3.0, -1.0, 2.0]);
+        assert_eq!(v.min_max(), (-1.0, 3.0));
+        for at in 0..3 {
+            let mut data = vec![3.0, -1.0, 2.0];
+            data[at] = f32::NAN;
+            let (lo, hi) = Volume::from_vec([3, 1, 1], unit_box(), data).min_max();
+            assert!(lo.is_nan() && hi.is_nan(), "NaN at {at}");
+        }
+        assert_eq!((v.len(), v.is_empty()), (3, false));
+    }
+
+    /// A box far thinner than a cell along an axis still gets one cell there.
+    #[test]
+    fn dims_for_keeps_at_least_one_cell_per_axis() {
+        let flat = Aabb::new(DVec3::ZERO, DVec3::new(10.0, 0.01, 1.0));
+        assert_eq!(Volume::dims_for(&flat, 4), [4, 1, 1]);
+        assert_eq!(Volume::dims_for(&flat, 20), [20, 1, 2]);
+    }
+
+    /// The progress callback ticks once per z-slice.
+    #[test]
+    fn sampling_a_field_ticks_once_per_slice() {
+        let ticks = std::sync::atomic::AtomicUsize::new(0);
+        let one = |_: Vec3, _t: f64| 1.0f32;
+        let tick = || {
+            ticks.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        };
+        let v = Volume::from_field_averaged_with([3, 2, 5], unit_box(), &one, 0.0, 2, &tick);
+        assert_eq!(ticks.load(std::sync::atomic::Ordering::Relaxed), 5);
+        assert!(v.data.iter().all(|&x| (x - 1.0).abs() < 1e-6));
+    }
+
     #[test]
     fn resample_identity_grid_is_exact() {
         let v = Volume::from_fn([6, 5, 4], unit_box(), |p| (p.x * p.y + p.z) as f32);
