@@ -730,6 +730,51 @@ mod tests {
         assert_eq!(lens.blur_circle_diameter(lens.object_distance()), 0.0);
     }
 
+    /// Off focus the blur circle is `d_a · (1 − l_i / s')` by hand: at 300 and at 450 mm the
+    /// image lies at 75 and 69.23 mm, 0.04 of the aperture either way (0.686 mm).
+    #[test]
+    fn thin_lens_blur_and_pixel_focal_length_by_hand() {
+        let lens = ThinLens::from_f_number(60.0, 3.5, -0.2, 0.01);
+        assert_relative_eq!(lens.f_number(), 3.5, epsilon = 1e-12);
+        assert_relative_eq!(lens.focal_length_px(), 7200.0, epsilon = 1e-9);
+        for s in [300.0, 450.0] {
+            assert_relative_eq!(lens.blur_circle_diameter(s), 0.04 * 60.0 / 3.5, epsilon = 1e-12);
+        }
+        assert!(lens.validate().is_ok());
+        assert!(ThinLens { aperture_diameter: 0.0, ..lens }.validate().is_ok(), "a pinhole");
+        for bad in [
+            ThinLens { focal_length: 0.0, ..lens },
+            ThinLens { focal_length: f64::INFINITY, ..lens },
+            ThinLens { aperture_diameter: -1.0, ..lens },
+            ThinLens { aperture_diameter: f64::NAN, ..lens },
+            ThinLens { pixel_pitch: 0.0, ..lens },
+            ThinLens { magnification: 0.0, ..lens },
+            ThinLens { magnification: 0.2, ..lens },
+            ThinLens { magnification: f64::NEG_INFINITY, ..lens },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn intrinsics_need_a_size_positive_focal_lengths_and_finite_values() {
+        let k = Intrinsics { width: 4, height: 3, fx: 5.0, fy: 6.0, cx: 1.5, cy: 1.0, skew: 0.5 };
+        assert!(k.validate().is_ok());
+        assert_eq!(k.k_rows(), [[5.0, 0.5, 1.5], [0.0, 6.0, 1.0], [0.0, 0.0, 1.0]]);
+        for bad in [
+            Intrinsics { width: 0, ..k },
+            Intrinsics { height: 0, ..k },
+            Intrinsics { fx: 0.0, ..k },
+            Intrinsics { fy: -1.0, ..k },
+            Intrinsics { cx: f64::NAN, ..k },
+            Intrinsics { cy: f64::INFINITY, ..k },
+            Intrinsics { skew: f64::NAN, ..k },
+            Intrinsics { fx: f64::INFINITY, ..k },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
+    }
+
     #[test]
     fn pinhole_emission_weight_is_constant() {
         let lens = ThinLens::from_f_number(60.0, 3.5, -0.2, 0.01);
