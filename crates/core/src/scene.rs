@@ -381,6 +381,50 @@ mod tests {
         assert_eq!(scene.times_without_truth(), vec![14.0, 16.0]);
     }
 
+    fn named(time: f64, name: &str, holdout: bool) -> Frame {
+        Frame { camera_name: Some(name.into()), holdout, ..frame(Some(time)) }
+    }
+
+    /// An instant a named camera has no frame at is short of it, a held-out frame counting as
+    /// its camera's; without names, an instant with fewer frames than the fullest is short.
+    #[test]
+    fn instants_short_of_cameras_name_the_missing_ones() {
+        let mut scene = timed_scene(
+            vec![
+                named(0.0, "A", false),
+                named(0.0, "B", false),
+                named(1.0, "A", false),
+                named(2.0, "A", false),
+                named(2.0, "B", true),
+            ],
+            vec![],
+        );
+        let short = vec![ShortInstant { time: 1.0, cameras: 1, of: 2, missing: vec!["B".to_string()] }];
+        assert_eq!(scene.instants_short_of_cameras(), short);
+        scene.frames.iter_mut().for_each(|f| f.camera_name = None);
+        let short = vec![ShortInstant { time: 1.0, cameras: 1, of: 2, missing: vec![] }];
+        assert_eq!(scene.instants_short_of_cameras(), short);
+        // One instant is never short of itself.
+        scene.frames.retain(|f| f.time == Some(1.0));
+        assert!(scene.instants_short_of_cameras().is_empty());
+    }
+
+    #[test]
+    fn scenes_split_frames_resolve_paths_and_match_times() {
+        let mut scene = timed_scene(vec![frame(Some(2.0)), frame(Some(1.0)), frame(Some(2.0))], vec![]);
+        scene.frames[1].holdout = true;
+        scene.root = "/data/scene".into();
+        assert_eq!(scene.training_frames().map(|(i, _)| i).collect::<Vec<_>>(), vec![0, 2]);
+        assert_eq!(scene.holdout_frames().map(|(i, _)| i).collect::<Vec<_>>(), vec![1]);
+        assert_eq!(scene.times(), vec![1.0, 2.0]);
+        if cfg!(unix) {
+            assert_eq!(scene.resolve(Path::new("images/a.png")), PathBuf::from("/data/scene/images/a.png"));
+            assert_eq!(scene.resolve(Path::new("/elsewhere/a.png")), PathBuf::from("/elsewhere/a.png"));
+        }
+        assert!(same_time(1e6, 1e6 + 1e-4) && !same_time(1e6, 1e6 + 1e-2));
+        assert!(same_time(0.0, 5e-10) && !same_time(0.0, 2e-9) && !same_time(-1.0, 1.0));
+    }
+
     /// The ball of the box tests and six cameras at two heights around it, `scale` × 60 units
     /// from the axis with `scale` × 50 px focal lengths (the ball as large in the images at every
     /// scale), each with its image: the ball bright (1000) on a dim ground (5).
