@@ -642,6 +642,9 @@ mod tests {
         let grid = OccupancyGrid::from_views(&aabb, &[(&wide, &dark)], &cfg);
         assert_eq!(grid.occupied_fraction(), 0.0, "the whole box is in view");
         let unused = vec![false; 32 * 32];
+        // Footprints widened past the image's edges leave every cell partly outside it.
+        let wide_margin = OccupancyConfig { margin_px: 20.0, ..cfg.clone() };
+        assert_eq!(OccupancyGrid::from_views(&aabb, &[(&wide, &dark)], &wide_margin).occupied_fraction(), 1.0);
         let grid = OccupancyGrid::from_masked_views(&aabb, &[(&wide, &dark, Some(&unused))], &cfg);
         assert_eq!(grid.occupied_fraction(), 1.0, "masked pixels carve nothing");
         let used = vec![true; 32 * 32];
