@@ -314,8 +314,118 @@ pub(crate) fn ratio_floor(problem: &Problem) -> f32 {
     (problem.data_max() * 1e-6).max(f32::MIN_POSITIVE)
 }
 
+/// A projector given by small dense matrices, one per view, for answers worked out by hand.
+#[cfg(test)]
+pub(crate) mod dense {
+    use fluidnerf_core::{Aabb, Camera, Image, Intrinsics};
+    use glam::DVec3;
+
+    use crate::{Grid, Projector, SparseRows};
+
+    /// View `v` is `matrices[v]` (one row per pixel of a one-row image) on a row of voxels.
+    pub(crate) struct Dense {
+        grid: Grid,
+        cameras: Vec<Camera>,
+        matrices: Vec<Vec<Vec<f32>>>,
+    }
+
+    impl Dense {
+        /// Views on a ring around `x` (so the multilevel order of two views is 0, 1).
+        pub(crate) fn new(voxels: usize, matrices: Vec<Vec<Vec<f32>>>) -> Self {
+            let grid = Grid::new([voxels, 1, 1], Aabb::cube(DVec3::ZERO, 2.0));
+            let n = matrices.len();
+            let cameras = matrices
+                .iter()
+                .enumerate()
+                .map(|(v, a)| {
+                    assert!(a.iter().all(|row| row.len() == voxels), "view {v}: rows of {voxels} weights");
+                    let k = Intrinsics {
+                        width: a.len() as u32,
+                        height: 1,
+                        fx: 10.0,
+                        fy: 10.0,
+                        cx: 0.0,
+                        cy: 0.0,
+                        skew: 0.0,
+                    };
+                    let t = v as f64 * std::f64::consts::PI / n as f64;
+                    Camera::look_at(k, DVec3::new(0.0, 6.0 * t.cos(), 6.0 * t.sin()), DVec3::ZERO, DVec3::X)
+                })
+                .collect();
+            Dense { grid, cameras, matrices }
+        }
+
+        /// One image per view from its pixel values.
+        pub(crate) fn images(&self, data: &[&[f32]]) -> Vec<Image> {
+            data.iter().map(|d| Image { width: d.len(), height: 1, data: d.to_vec() }).collect()
+        }
+    }
+
+    impl Projector for Dense {
+        fn grid(&self) -> &Grid {
+            &self.grid
+        }
+
+        fn cameras(&self) -> &[Camera] {
+            &self.cameras
+        }
+
+        fn forward(&self, view: usize, x: &[f32], out: &mut [f32]) {
+            for (o, row) in out.iter_mut().zip(&self.matrices[view]) {
+                *o = row.iter().zip(x).map(|(w, g)| w * g).sum();
+            }
+        }
+
+        fn back_add(&self, view: usize, y: &[f32], out: &mut [f32], mut col_sums: Option<&mut [f32]>) {
+            for (row, &yi) in self.matrices[view].iter().zip(y) {
+                for (j, &w) in row.iter().enumerate() {
+                    out[j] += w * yi;
+                    if let Some(c) = col_sums.as_deref_mut() {
+                        c[j] += w;
+                    }
+                }
+            }
+        }
+
+        fn rows(&self, view: usize) -> SparseRows {
+            let mut rows = SparseRows { ptr: vec![0], cols: Vec::new(), vals: Vec::new() };
+            for row in &self.matrices[view] {
+                for (j, &w) in row.iter().enumerate() {
+                    if w != 0.0 {
+                        rows.cols.push(j as u32);
+                        rows.vals.push(w);
+                    }
+                }
+                rows.ptr.push(rows.cols.len() as u64);
+            }
+            rows
+        }
+
+        fn rows_bytes_estimate(&self, _view: usize) -> usize {
+            0
+        }
+
+        fn bytes(&self) -> usize {
+            0
+        }
+
+        fn scratch_bytes(&self, _view: usize) -> usize {
+            0
+        }
+    }
+
+    /// `a` and `b` agree to `tol` entry by entry.
+    pub(crate) fn assert_close(a: &[f32], b: &[f32], tol: f32) {
+        assert_eq!(a.len(), b.len(), "{a:?} vs {b:?}");
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() <= tol, "{a:?} vs {b:?}");
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::dense::Dense;
     use super::*;
     use fluidnerf_core::Intrinsics;
 
@@ -345,5 +455,135 @@ mod tests {
         flat.extend(std::iter::repeat_n(0.02, 24));
         assert!(p.reached(&flat));
         assert!(!p.reached(&[0.1; 10]));
+    }
+
+    /// The plateau rule judges as soon as the history holds a window of smoothed values
+    /// (`window + smoothing − 1` iterations), and a residual of zero is a plateau.
+    #[test]
+    fn the_plateau_is_judged_from_the_first_full_window() {
+        let p = Plateau { window: 3, smoothing: 2, tolerance: 0.1 };
+        assert!(p.reached(&[0.5, 0.5, 0.5, 0.5]));
+        assert!(!p.reached(&[0.5, 0.5, 0.5]));
+        assert!(p.reached(&[0.0; 4]));
+        // Smoothed 1.0, 0.95, 0.95: a variation of 0.05 / 0.9667 ≈ 5 % < 10 %.
+        assert!(p.reached(&[1.0, 1.0, 0.9, 1.0]));
+        // Smoothed 1.0, 0.75, 0.75: 0.25 / 0.8333 = 30 %.
+        assert!(!p.reached(&[1.0, 1.0, 0.5, 1.0]));
+        // The window is the last `window` smoothed values: an early drop is forgotten.
+        assert!(p.reached(&[5.0, 1.0, 1.0, 1.0, 1.0, 1.0]));
+    }
+
+    /// The driver reports the residual ‖p − A g‖ / ‖p‖ from the sweep's sum of squares, stops
+    /// at the cap, when asked, or on the plateau, and refuses a residual that is not finite.
+    #[test]
+    fn the_driver_reports_residuals_and_why_it_stopped() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 2.0]]]);
+        let images = dense.images(&[&[4.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let capped = Stopping { max_iterations: 3, plateau: None };
+        let r =
+            drive("test", &problem, &capped, vec![0.0; 2], |_, it| [16.0, 4.0, 1.0][it], |_| ControlFlow::Continue(()))
+                .expect("finite");
+        assert_eq!(r.residual_history, vec![1.0, 0.5, 0.25]);
+        assert_eq!((r.iterations, r.stop_reason), (3, StopReason::MaxIterations));
+        let mut seen = Vec::new();
+        let r = drive(
+            "test",
+            &problem,
+            &capped,
+            vec![0.0; 2],
+            |x, _| {
+                x[0] += 1.0;
+                16.0
+            },
+            |s| {
+                seen.push((s.iteration, s.volume[0]));
+                if s.iteration == 2 {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            },
+        )
+        .expect("finite");
+        assert_eq!(seen, vec![(1, 1.0), (2, 2.0)]);
+        assert_eq!((r.iterations, r.stop_reason, r.volume[0]), (2, StopReason::Interrupted, 2.0));
+        let flat = Stopping { max_iterations: 100, plateau: Some(Plateau { window: 3, smoothing: 2, tolerance: 0.1 }) };
+        let r =
+            drive("test", &problem, &flat, vec![0.0; 2], |_, _| 4.0, |_| ControlFlow::Continue(())).expect("finite");
+        assert_eq!((r.iterations, r.stop_reason), (4, StopReason::Converged));
+        let err = drive(
+            "test",
+            &problem,
+            &capped,
+            vec![0.0; 2],
+            |_, it| if it == 1 { f64::NAN } else { 1.0 },
+            |_| ControlFlow::Continue(()),
+        )
+        .expect_err("diverges");
+        assert!(matches!(err, ClassicalError::Diverged { method: "test", iteration: 2, .. }), "{err}");
+    }
+
+    /// Images that are all zero are a valid problem: the residual is then the absolute misfit.
+    #[test]
+    fn dark_images_give_a_finite_residual() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 2.0]]]);
+        let images = dense.images(&[&[0.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let capped = Stopping { max_iterations: 1, plateau: None };
+        let r =
+            drive("test", &problem, &capped, vec![0.0; 2], |_, _| 9.0, |_| ControlFlow::Continue(())).expect("finite");
+        assert_eq!(r.residual_history, vec![3.0]);
+        assert_eq!(ratio_floor(&problem), f32::MIN_POSITIVE);
+    }
+
+    /// The feasible set: non-negative everywhere, zero outside the support.
+    #[test]
+    fn feasibility_clamps_negatives_and_clears_what_the_support_excludes() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 1.0, 1.0]]]);
+        let images = dense.images(&[&[-2.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let mut x = vec![-1.0, 2.0, 3.0];
+        problem.project_feasible(&mut x);
+        assert_eq!(x, [0.0, 2.0, 3.0]);
+        let support = [true, false, true];
+        let mut x = vec![-1.0, 2.0, 3.0];
+        problem.with_support(&support).project_feasible(&mut x);
+        assert_eq!(x, [0.0, 0.0, 3.0]);
+        assert_eq!(problem.data_max(), 0.0, "the largest pixel is floored at zero");
+        let debug = format!("{:?}", problem.with_support(&support));
+        assert!(debug.contains("views: 1") && debug.contains("support: Some(2)"), "{debug}");
+    }
+
+    #[test]
+    #[should_panic(expected = "support mask has the wrong length")]
+    fn a_support_of_the_wrong_length_is_refused() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 1.0, 1.0]]]);
+        let images = dense.images(&[&[1.0]]);
+        let _ = Problem::new(&dense, &images).expect("consistent").with_support(&[true; 2]);
+    }
+
+    /// Images are checked against the views: count, size and finite values.
+    #[test]
+    fn images_that_do_not_fit_the_views_are_refused() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 0.0], vec![0.0, 1.0]], vec![vec![1.0, 1.0]]]);
+        assert!(Problem::new(&dense, &dense.images(&[&[1.0, 1.0], &[2.0]])).is_ok());
+        assert!(Problem::new(&dense, &dense.images(&[&[1.0, 1.0]])).is_err());
+        assert!(Problem::new(&dense, &dense.images(&[&[1.0], &[2.0]])).is_err());
+        let err = Problem::new(&dense, &dense.images(&[&[1.0, 1.0], &[f32::NAN]])).unwrap_err();
+        assert!(matches!(err, ClassicalError::NonFiniteImage { view: 1, col: 0, row: 0 }), "{err}");
+    }
+
+    /// The column sums add every view's weights.
+    #[test]
+    fn column_sums_add_every_views_weights() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 0.5, 0.0], vec![0.0, 2.0, 0.0]], vec![vec![3.0, 0.0, 0.0]]]);
+        let images = dense.images(&[&[0.0, 0.0], &[0.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        assert_eq!(total_column_sums(&problem), vec![4.0, 2.5, 0.0]);
+        assert_eq!(problem.max_view_len(), 2);
+        let images = dense.images(&[&[1.0, 4.0], &[2.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        assert_eq!(ratio_floor(&problem), 4e-6);
     }
 }
