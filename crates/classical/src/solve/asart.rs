@@ -120,3 +120,64 @@ pub fn asart(
         on_iter,
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::dense::{assert_close, Dense};
+    use super::*;
+
+    fn params(relaxation: f64, iterations: usize) -> AsartParams {
+        AsartParams { relaxation, stopping: Stopping { max_iterations: iterations, plateau: None } }
+    }
+
+    fn go(_: &IterState) -> ControlFlow<()> {
+        ControlFlow::Continue(())
+    }
+
+    /// `A = [[1, 0], [1, 1]]`, `p = (1, 3)`: Eq. 2.29 gives `Aᵀp / Aᵀ1 = (4/2, 3/1) = (2, 3)`,
+    /// whose projection (2, 5) is fitted to the data by the factor `⟨p, q⟩ / ⟨q, q⟩ = 17/29`.
+    #[test]
+    fn the_start_is_the_normalised_back_projection_fitted_to_the_data() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 0.0], vec![1.0, 1.0]]]);
+        let images = dense.images(&[&[1.0, 3.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let r = asart(&problem, None, &params(0.5, 0), go).expect("runs");
+        assert_close(&r.volume, &[34.0 / 29.0, 51.0 / 29.0], 1e-6);
+    }
+
+    /// From (1, 1): the prediction (1, 2) leaves residuals (0, 1), ratios (0, 1/2); the update
+    /// `g + μ/4 · g · Aᵀratio / Aᵀ1` is `1 + μ/4 · (0.5/2, 0.5/1)`.
+    #[test]
+    fn an_asart_step_shares_each_residual_in_proportion_to_the_voxels_share() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 0.0], vec![1.0, 1.0]]]);
+        let images = dense.images(&[&[1.0, 3.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let r = asart(&problem, Some(&[1.0, 1.0]), &params(0.5, 1), go).expect("runs");
+        assert_close(&r.volume, &[1.03125, 1.0625], 1e-6);
+        assert!((r.residual_history[0] - (1.0f64 / 10.0).sqrt()).abs() < 1e-7, "{:?}", r.residual_history);
+        let r = asart(&problem, Some(&[1.0, 1.0]), &params(1.0, 1), go).expect("runs");
+        assert_close(&r.volume, &[1.0625, 1.125], 1e-6);
+    }
+
+    /// A voxel at zero contributes nothing, so it takes no share of the residual; a pixel
+    /// predicted dark passes nothing back.
+    #[test]
+    fn asart_leaves_a_voxel_at_zero_at_zero() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 0.0], vec![1.0, 1.0]]]);
+        let images = dense.images(&[&[1.0, 3.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        // Prediction (0, 1), ratios (0, 2): `g₁ = 1 + 0.125 · 2 / 1`.
+        let r = asart(&problem, Some(&[0.0, 1.0]), &params(0.5, 1), go).expect("runs");
+        assert_close(&r.volume, &[0.0, 1.25], 1e-6);
+    }
+
+    /// On consistent data ASART converges to the solution, with the views in turn.
+    #[test]
+    fn asart_solves_a_consistent_system_of_two_views() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 1.0, 0.0], vec![0.0, 1.0, 1.0]], vec![vec![1.0, 0.0, 2.0]]]);
+        let images = dense.images(&[&[3.0, 5.0], &[7.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let r = asart(&problem, None, &params(1.0, 2000), go).expect("runs");
+        assert_close(&r.volume, &[1.0, 2.0, 3.0], 1e-3);
+    }
+}
