@@ -146,3 +146,89 @@ pub fn smart(
         on_iter,
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::dense::{assert_close, Dense};
+    use super::*;
+
+    fn go(_: &IterState) -> ControlFlow<()> {
+        ControlFlow::Continue(())
+    }
+
+    fn capped(iterations: usize) -> Stopping {
+        Stopping { max_iterations: iterations, plateau: None }
+    }
+
+    fn problem_of<'a>(dense: &'a Dense, images: &'a [fluidnerf_core::Image]) -> Problem<'a> {
+        Problem::new(dense, images).expect("consistent")
+    }
+
+    /// `A = [[1, 0], [1, 1]]`, `p = (1, 3)` from the unity start: ratios `p / Ag = (1, 1.5)`,
+    /// back-projected (2.5, 1.5) over column sums (2, 1): `g = (1.25, 1.5)`. The solution
+    /// (1, 2) is a fixed point.
+    #[test]
+    fn an_mlem_step_multiplies_by_the_normalised_back_projected_ratio() {
+        let dense = Dense::new(2, vec![vec![vec![1.0, 0.0], vec![1.0, 1.0]]]);
+        let images = dense.images(&[&[1.0, 3.0]]);
+        let problem = problem_of(&dense, &images);
+        let params = MlemParams { stopping: capped(1) };
+        let r = mlem(&problem, None, &params, go).expect("runs");
+        assert_close(&r.volume, &[1.25, 1.5], 1e-6);
+        assert!((r.residual_history[0] - 0.1f64.sqrt()).abs() < 1e-7, "{:?}", r.residual_history);
+        let r = mlem(&problem, Some(&[1.0, 2.0]), &MlemParams { stopping: capped(5) }, go).expect("runs");
+        assert_close(&r.volume, &[1.0, 2.0], 1e-6);
+    }
+
+    /// A ray predicted dark is skipped (no division by zero), a negative pixel counts as zero,
+    /// and a voxel no view sees starts, and stays, at zero.
+    #[test]
+    fn mlem_skips_dark_predictions_and_negative_pixels() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 0.0, 0.0], vec![1.0, 1.0, 0.0]]]);
+        let images = dense.images(&[&[1.0, 3.0]]);
+        let problem = problem_of(&dense, &images);
+        // From (0, 1): ratios (skipped, 3), back-projected (3, 3) over (2, 1).
+        let r = mlem(&problem, Some(&[0.0, 1.0, 0.0]), &MlemParams { stopping: capped(1) }, go).expect("runs");
+        assert_close(&r.volume, &[0.0, 3.0, 0.0], 1e-6);
+        let r = mlem(&problem, None, &MlemParams { stopping: capped(0) }, go).expect("runs");
+        assert_eq!(r.volume, [1.0, 1.0, 0.0]);
+        let r = mlem(&problem, Some(&[1.0, 1.0, 5.0]), &MlemParams { stopping: capped(1) }, go).expect("runs");
+        assert_eq!(r.volume[2], 0.0);
+        let images = dense.images(&[&[-1.0, 3.0]]);
+        let problem = problem_of(&dense, &images);
+        // Ratios (0, 1.5), back-projected (1.5, 1.5) over (2, 1).
+        let r = mlem(&problem, None, &MlemParams { stopping: capped(1) }, go).expect("runs");
+        assert_close(&r.volume, &[0.75, 1.5, 0.0], 1e-6);
+    }
+
+    /// `A = [[2, 0], [1, 1]]`, `p = (4, 3)` from the unity start (prediction (2, 2)): the log
+    /// ratios (ln 2, ln 1.5) over the rows' largest weights (2, 1), back-projected
+    /// (ln 2 + ln 1.5, ln 1.5) over the rays per voxel (2, 1), exponentiated: (√3, 1.5) for
+    /// μ = 1, their square roots for μ = 1/2.
+    #[test]
+    fn a_smart_step_is_the_geometric_mean_of_the_relative_ratios() {
+        let dense = Dense::new(2, vec![vec![vec![2.0, 0.0], vec![1.0, 1.0]]]);
+        let images = dense.images(&[&[4.0, 3.0]]);
+        let problem = problem_of(&dense, &images);
+        let r = smart(&problem, None, &SmartParams { relaxation: 1.0, stopping: capped(1) }, go).expect("runs");
+        assert_close(&r.volume, &[3f32.sqrt(), 1.5], 1e-5);
+        let r = smart(&problem, None, &SmartParams { relaxation: 0.5, stopping: capped(1) }, go).expect("runs");
+        assert_close(&r.volume, &[3f32.powf(0.25), 1.5f32.sqrt()], 1e-5);
+        // The solution (2, 1) is a fixed point.
+        let r = smart(&problem, Some(&[2.0, 1.0]), &SmartParams { relaxation: 1.0, stopping: capped(5) }, go)
+            .expect("runs");
+        assert_close(&r.volume, &[2.0, 1.0], 1e-5);
+    }
+
+    /// SMART starts from one where a view sees the voxel, zero elsewhere, and stays there.
+    #[test]
+    fn smart_starts_at_one_where_a_view_sees_the_voxel() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 0.0, 0.0]], vec![vec![0.0, 2.0, 0.0]]]);
+        let images = dense.images(&[&[1.0], &[2.0]]);
+        let problem = problem_of(&dense, &images);
+        let r = smart(&problem, None, &SmartParams { relaxation: 1.0, stopping: capped(0) }, go).expect("runs");
+        assert_eq!(r.volume, [1.0, 1.0, 0.0]);
+        let r = smart(&problem, None, &SmartParams { relaxation: 1.0, stopping: capped(3) }, go).expect("runs");
+        assert_close(&r.volume, &[1.0, 1.0, 0.0], 1e-5);
+    }
+}
