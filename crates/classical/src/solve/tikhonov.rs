@@ -244,6 +244,62 @@ mod tests {
         assert!(dot(&lx, &x) <= 0.0);
     }
 
+    /// One view that sees nothing: the SART sweep leaves the volume alone, so an iteration is
+    /// the penalty step alone.
+    fn blind(voxels: usize) -> crate::solve::dense::Dense {
+        crate::solve::dense::Dense::new(voxels, vec![vec![vec![0.0; voxels]]])
+    }
+
+    fn smooth(init: &[f32], relaxation: f64, weight: f64) -> Vec<f32> {
+        let dense = blind(init.len());
+        let images = dense.images(&[&[0.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let params = TikhonovParams { relaxation, weight, stopping: Stopping { max_iterations: 1, plateau: None } };
+        sart_tikhonov(&problem, Some(init), &params, |_| ControlFlow::Continue(())).expect("runs").volume
+    }
+
+    /// On a row of three voxels a spike (0, 1, 0) has `L g = (1, −2, 1)` and
+    /// `L² g = (−3, 6, −3)`: a step of μλ = 0.005 (one sub-step) gives (0.015, 0.97, 0.015),
+    /// whichever of μ and λ carries it; an edge (1, 0, 0), `L² g = (2, −3, 1)`, would take its
+    /// last voxel below zero, where it is clamped.
+    #[test]
+    fn a_tikhonov_step_subtracts_the_relaxed_weighted_bilaplacian() {
+        let spike = [0.0, 1.0, 0.0];
+        crate::solve::dense::assert_close(&smooth(&spike, 1.0, 0.005), &[0.015, 0.97, 0.015], 1e-6);
+        crate::solve::dense::assert_close(&smooth(&spike, 0.5, 0.01), &[0.015, 0.97, 0.015], 1e-6);
+        crate::solve::dense::assert_close(&smooth(&[1.0, 0.0, 0.0], 1.0, 0.005), &[0.99, 0.015, 0.0], 1e-6);
+        assert_eq!(smooth(&spike, 1.0, 0.0), spike, "λ = 0 is plain SART");
+    }
+
+    /// A step of 0.1 is taken in ⌈144 × 0.1⌉ = 15 equal sub-steps, each stable.
+    #[test]
+    fn a_large_tikhonov_step_is_split_into_stable_sub_steps() {
+        let g = grid([3, 1, 1]);
+        let mut want = vec![0.0f32, 1.0, 0.0];
+        let (mut lg, mut llg) = (vec![0f32; 3], vec![0f32; 3]);
+        let h = (0.1 / 15.0) as f32;
+        for _ in 0..15 {
+            laplacian(&g, &want, &mut lg);
+            laplacian(&g, &lg, &mut llg);
+            for (w, l) in want.iter_mut().zip(&llg) {
+                *w = (*w - h * l).max(0.0);
+            }
+        }
+        crate::solve::dense::assert_close(&smooth(&[0.0, 1.0, 0.0], 1.0, 0.1), &want, 1e-6);
+    }
+
+    /// A weight that is negative or not a number is refused.
+    #[test]
+    fn a_negative_or_nan_weight_is_refused() {
+        let dense = blind(2);
+        let images = dense.images(&[&[0.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        for weight in [-0.1, f64::NAN, f64::INFINITY] {
+            let params = TikhonovParams { weight, ..Default::default() };
+            assert!(sart_tikhonov(&problem, None, &params, |_| ControlFlow::Continue(())).is_err(), "{weight}");
+        }
+    }
+
     /// The checkerboard is the top of the spectrum: L² of it is 144 times it, inside.
     #[test]
     fn checkerboard_reaches_the_spectral_bound() {

@@ -396,6 +396,125 @@ mod tests {
         }
     }
 
+    /// Isotropic TV by hand: an edge across a row counts its height once, a corner voxel whose
+    /// differences along `x` and `y` are both 1 counts √2.
+    #[test]
+    fn total_variation_of_an_edge_and_a_corner() {
+        let row = Grid::new([4, 1, 1], Aabb::cube(DVec3::ZERO, 1.0));
+        assert_eq!(total_variation(&row, &[0.0, 0.0, 1.5, 1.5]), 1.5);
+        assert_eq!(total_variation(&row, &[2.0, 0.0, 2.0, 2.0]), 4.0);
+        let square = Grid::new([2, 2, 1], Aabb::cube(DVec3::ZERO, 1.0));
+        assert_eq!(total_variation(&square, &[0.0, 1.0, 1.0, 1.0]), 2.0);
+        assert!((total_variation(&square, &[0.0, 0.0, 0.0, 1.0]) - 2f64.sqrt()).abs() < 1e-7);
+        let column = Grid::new([1, 1, 3], Aabb::cube(DVec3::ZERO, 1.0));
+        assert_eq!(total_variation(&column, &[1.0, 3.0, 3.0]), 2.0);
+    }
+
+    /// An identity projector: SART with μ = 1 lands on the data in one sweep, so an
+    /// iteration's SART step is known and the TV steps can be measured against it.
+    fn identity(voxels: usize) -> crate::solve::dense::Dense {
+        let rows = (0..voxels).map(|i| (0..voxels).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect();
+        crate::solve::dense::Dense::new(voxels, vec![rows])
+    }
+
+    fn params(tv_weight: f64, tv_steps: usize, step_rule: TvStepRule, iterations: usize) -> TvParams {
+        TvParams {
+            relaxation: 1.0,
+            tv_weight,
+            tv_steps,
+            stopping: Stopping { max_iterations: iterations, plateau: None },
+            step_rule,
+        }
+    }
+
+    /// One TV step moves the volume by `tv_weight × d` (d the SART step's length), down the
+    /// TV gradient, and lowers the TV; zero weight or zero steps is plain SART.
+    #[test]
+    fn a_tv_step_has_the_weighted_length_of_the_sart_step() {
+        let dense = identity(4);
+        let data = [1.0, 3.0, 1.0, 3.0];
+        let images = dense.images(&[&data]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let init = [1.0f32; 4];
+        let go = |_: &IterState| ControlFlow::Continue(());
+        let d = distance(&data, &init);
+        for rule in [TvStepRule::Data, TvStepRule::Balanced] {
+            let x = sart_tv(&problem, Some(&init), &params(0.3, 1, rule, 1), go).expect("runs").volume;
+            assert!((distance(&x, &data) - 0.3 * d).abs() < 1e-5 * d, "{rule:?}: {x:?}");
+            let (mut norms, mut grad) = (vec![0f32; 4], vec![0f32; 4]);
+            let gn = tv_gradient(problem.projector.grid(), &data, &mut norms, &mut grad).sqrt();
+            for ((xi, pi), gi) in x.iter().zip(&data).zip(&grad) {
+                let want = pi - (0.3 * d / gn) as f32 * gi;
+                assert!((xi - want).abs() < 1e-5, "{rule:?}: {x:?}");
+            }
+            let grid = problem.projector.grid();
+            assert!(total_variation(grid, &x) < total_variation(grid, &data));
+            for plain in [params(0.0, 1, rule, 1), params(0.3, 0, rule, 1)] {
+                assert_eq!(sart_tv(&problem, Some(&init), &plain, go).expect("runs").volume, data);
+            }
+        }
+        // Three steps go no farther than three times the length.
+        let x = sart_tv(&problem, Some(&init), &params(0.3, 3, TvStepRule::Data, 1), go).expect("runs").volume;
+        let moved = distance(&x, &data);
+        assert!(moved > 0.0 && moved <= 0.9 * d + 1e-5, "{moved} against {d}");
+    }
+
+    /// The balanced rule shrinks the step by 0.95 after an iteration whose TV steps moved the
+    /// volume more than 0.95 of its SART step, and only then; the data rule never does.
+    #[test]
+    fn the_balanced_rule_shrinks_the_step_after_tv_outweighs_the_data() {
+        let dense = identity(4);
+        let data = [1.0, 3.0, 1.0, 3.0];
+        let images = dense.images(&[&data]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        for (rule, weight, shrink) in
+            [(TvStepRule::Balanced, 0.97, 0.95), (TvStepRule::Balanced, 0.5, 1.0), (TvStepRule::Data, 0.97, 1.0)]
+        {
+            let mut first = Vec::new();
+            let x = sart_tv(&problem, Some(&[1.0; 4]), &params(weight, 1, rule, 2), |s: &IterState| {
+                if s.iteration == 1 {
+                    first = s.volume.to_vec();
+                }
+                ControlFlow::Continue(())
+            })
+            .expect("runs")
+            .volume;
+            // The second sweep lands on the data again, from where the first iteration left.
+            let d = distance(&data, &first);
+            let moved = distance(&x, &data);
+            assert!((moved - shrink * weight * d).abs() < 1e-4 * d, "{rule:?} {weight}: {moved} against {d}");
+        }
+    }
+
+    /// A flat volume has no TV gradient: the descent stops instead of dividing by zero.
+    #[test]
+    fn a_flat_volume_stays_flat() {
+        let dense = identity(3);
+        let images = dense.images(&[&[2.0, 2.0, 2.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let x = sart_tv(&problem, Some(&[1.0; 3]), &params(0.3, 5, TvStepRule::Data, 1), |_| ControlFlow::Continue(()))
+            .expect("runs")
+            .volume;
+        assert_eq!(x, [2.0; 3]);
+    }
+
+    /// Inside a support the TV steps keep the voxels outside it at zero and the rest
+    /// non-negative.
+    #[test]
+    fn tv_steps_keep_the_support_and_non_negativity() {
+        let dense = identity(4);
+        let data = [0.0, 4.0, 0.0, 0.1];
+        let images = dense.images(&[&data]);
+        let support = [true, true, true, false];
+        let problem = Problem::new(&dense, &images).expect("consistent").with_support(&support);
+        let x =
+            sart_tv(&problem, Some(&[0.0; 4]), &params(1.0, 10, TvStepRule::Data, 1), |_| ControlFlow::Continue(()))
+                .expect("runs")
+                .volume;
+        assert_eq!(x[3], 0.0, "{x:?}");
+        assert!(x.iter().all(|&v| v >= 0.0) && x != [0.0, 4.0, 0.0, 0.0], "{x:?}");
+    }
+
     /// A configuration that names no step rule ran the data rule and keeps it; a new one
     /// takes `auto`, which is the balanced rule inside a support only.
     #[test]
