@@ -145,18 +145,19 @@ mod tests {
         assert_close(&r.volume, &[34.0 / 29.0, 51.0 / 29.0], 1e-6);
     }
 
-    /// From (1, 1): the prediction (1, 2) leaves residuals (0, 1), ratios (0, 1/2); the update
-    /// `g + μ/4 · g · Aᵀratio / Aᵀ1` is `1 + μ/4 · (0.5/2, 0.5/1)`.
+    /// From (2, 0.5): the prediction (2, 2.5) leaves residuals (−1, 0.5), ratios (−0.5, 0.2),
+    /// back-projected (−0.3, 0.2) over column sums (2, 1); the update
+    /// `g + μ/4 · g · Aᵀratio / Aᵀ1` is `(2 − μ/4 · 0.3, 0.5 + μ/4 · 0.1)`.
     #[test]
     fn an_asart_step_shares_each_residual_in_proportion_to_the_voxels_share() {
         let dense = Dense::new(2, vec![vec![vec![1.0, 0.0], vec![1.0, 1.0]]]);
         let images = dense.images(&[&[1.0, 3.0]]);
         let problem = Problem::new(&dense, &images).expect("consistent");
-        let r = asart(&problem, Some(&[1.0, 1.0]), &params(0.5, 1), go).expect("runs");
-        assert_close(&r.volume, &[1.03125, 1.0625], 1e-6);
-        assert!((r.residual_history[0] - (1.0f64 / 10.0).sqrt()).abs() < 1e-7, "{:?}", r.residual_history);
-        let r = asart(&problem, Some(&[1.0, 1.0]), &params(1.0, 1), go).expect("runs");
-        assert_close(&r.volume, &[1.0625, 1.125], 1e-6);
+        let r = asart(&problem, Some(&[2.0, 0.5]), &params(0.5, 1), go).expect("runs");
+        assert_close(&r.volume, &[1.9625, 0.5125], 1e-6);
+        assert!((r.residual_history[0] - 0.125f64.sqrt()).abs() < 1e-7, "{:?}", r.residual_history);
+        let r = asart(&problem, Some(&[2.0, 0.5]), &params(1.0, 1), go).expect("runs");
+        assert_close(&r.volume, &[1.925, 0.525], 1e-6);
     }
 
     /// A voxel at zero contributes nothing, so it takes no share of the residual; a pixel
