@@ -609,6 +609,155 @@ mod tests {
         }
     }
 
+    /// Every range is closed or open where its documentation says: the limit itself is taken
+    /// (or refused) and the next value beyond it refused.
+    #[test]
+    fn each_limit_is_taken_and_the_next_value_refused() {
+        let with = |a: Algorithm, f: &dyn Fn(&mut ClassicalMethod)| {
+            let mut m = ClassicalMethod::default_for(a);
+            f(&mut m);
+            m.validate()
+        };
+        let mu = |a, v: f64| with(a, &|m| *m.relaxation_mut().unwrap() = v);
+        assert!(mu(Algorithm::Mart, 1.0).is_ok() && mu(Algorithm::Smart, 1.0).is_ok());
+        assert!(mu(Algorithm::Mart, 1.0001).is_err() && mu(Algorithm::Mart, 0.0).is_err());
+        assert!(mu(Algorithm::Sart, 1.99).is_ok() && mu(Algorithm::Art, 1.5).is_ok());
+        assert!(mu(Algorithm::Sart, 2.0).is_err() && mu(Algorithm::Asart, 0.0).is_err());
+        assert!(mu(Algorithm::Tv, f64::NAN).is_err());
+        let max = fluidnerf_core::MAX_ITERATIONS;
+        assert!(with(Algorithm::Sart, &|m| m.stopping_mut().max_iterations = max).is_ok());
+        assert!(with(Algorithm::Sart, &|m| m.stopping_mut().max_iterations = max + 1).is_err());
+        let span = fluidnerf_core::MAX_ITERATION_SPAN;
+        let plateau = |p: crate::Plateau| with(Algorithm::Mlem, &move |m| m.stopping_mut().plateau = Some(p));
+        let d = crate::Plateau::default();
+        assert!(plateau(crate::Plateau { window: span, smoothing: span, ..d }).is_ok());
+        let e = plateau(crate::Plateau { window: span + 1, ..d }).unwrap_err().to_string();
+        assert!(e.contains("stopping.plateau.window"), "{e}");
+        let e = plateau(crate::Plateau { smoothing: span + 1, ..d }).unwrap_err().to_string();
+        assert!(e.contains("stopping.plateau.smoothing"), "{e}");
+        assert!(plateau(crate::Plateau { tolerance: MAX_PLATEAU_TOLERANCE, ..d }).is_ok());
+        assert!(plateau(crate::Plateau { tolerance: 1.0001, ..d }).is_err());
+        for bad in [
+            crate::Plateau { tolerance: 0.0, ..d },
+            crate::Plateau { window: 0, ..d },
+            crate::Plateau { smoothing: 0, ..d },
+        ] {
+            assert!(plateau(bad).is_err(), "{bad:?}");
+        }
+        let tv = |w: f64, steps: usize| {
+            with(Algorithm::Tv, &move |m| {
+                if let ClassicalMethod::Tv(p) = m {
+                    (p.tv_weight, p.tv_steps) = (w, steps);
+                }
+            })
+        };
+        assert!(tv(MAX_TV_WEIGHT, MAX_TV_STEPS).is_ok() && tv(0.0, 0).is_ok());
+        assert!(tv(1.0001, 20).is_err() && tv(-0.1, 20).is_err() && tv(0.2, MAX_TV_STEPS + 1).is_err());
+        let tik = |w: f64| {
+            with(Algorithm::Tikhonov, &move |m| {
+                if let ClassicalMethod::Tikhonov(p) = m {
+                    p.weight = w;
+                }
+            })
+        };
+        assert!(tik(MAX_TIKHONOV_WEIGHT).is_ok() && tik(0.0).is_ok());
+        assert!(tik(10.001).is_err() && tik(-1e-9).is_err() && tik(f64::INFINITY).is_err());
+
+        let d = ProjectorConfig { kind: ProjectorKind::Splat, visual_hull: true, ..Default::default() };
+        let ok = |p: ProjectorConfig| p.validate_ranges().is_ok();
+        assert!(ok(ProjectorConfig { splat_subdivisions: 16, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { splat_subdivisions: 17, ..d.clone() }));
+        assert!(
+            ok(ProjectorConfig { ray_step: 0.01, ..d.clone() }) && ok(ProjectorConfig { ray_step: 4.0, ..d.clone() })
+        );
+        assert!(!ok(ProjectorConfig { ray_step: 0.0099, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { ray_step: 4.01, ..d.clone() }));
+        assert!(ok(ProjectorConfig { hull_threshold: 0.0, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { hull_threshold: 1.0, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { hull_threshold: -0.01, ..d.clone() }));
+        assert!(ok(ProjectorConfig { hull_dilation: 16, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { hull_dilation: 17, ..d.clone() }));
+        assert!(ok(ProjectorConfig { hull_noise_sigmas: 100.0, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { hull_noise_sigmas: 100.5, ..d.clone() }));
+        assert!(!ok(ProjectorConfig { hull_noise_sigmas: -1.0, ..d }));
+    }
+
+    /// The settings only some methods have are reached through them alone.
+    #[test]
+    fn the_method_specific_settings_belong_to_their_methods() {
+        for a in Algorithm::ALL {
+            let mut m = ClassicalMethod::default_for(a);
+            let rows = matches!(a, Algorithm::Art | Algorithm::Mart);
+            assert_eq!(m.row_cache_mib(), rows.then_some(crate::ROW_CACHE_MIB), "{a:?}");
+            assert_eq!(m.back_projects(), !rows, "{a:?}");
+            if let Some(mib) = m.row_cache_mib_mut() {
+                *mib = 7;
+            }
+            assert_eq!(m.row_cache_mib(), rows.then_some(7), "{a:?}");
+            assert_eq!(m.relaxation_mut().is_some(), a != Algorithm::Mlem, "{a:?}");
+            m.stopping_mut().max_iterations = 3;
+            assert_eq!(m.stopping().max_iterations, 3, "{a:?}");
+            m.set_seed(9);
+            match m {
+                ClassicalMethod::Art(p) => assert_eq!(p.seed, 9),
+                ClassicalMethod::Mart(p) => assert_eq!(p.seed, 9),
+                other => assert_eq!(other.stopping().max_iterations, 3),
+            }
+        }
+    }
+
+    /// A voxel of side 0.5 seen from 10 units along the view with a focal length of 60 px
+    /// images 3 px wide; the widest view counts.
+    #[test]
+    fn a_voxels_footprint_is_its_side_times_the_focal_length_over_the_depth() {
+        use fluidnerf_core::{Aabb, Intrinsics};
+        use glam::DVec3;
+        let k = |f: f64| Intrinsics { width: 32, height: 32, fx: f, fy: f / 2.0, cx: 15.5, cy: 15.5, skew: 0.0 };
+        let grid = Grid::new([8, 4, 4], Aabb::new(DVec3::ZERO, DVec3::new(4.0, 2.0, 2.0)));
+        let centre = grid.aabb.centre();
+        let near = Camera::look_at(k(60.0), centre + DVec3::new(0.0, 0.0, 10.0), centre, DVec3::Y);
+        let far = Camera::look_at(k(60.0), centre + DVec3::new(0.0, 20.0, 0.0), centre, DVec3::X);
+        assert!((voxel_footprint_px(std::slice::from_ref(&near), &grid) - 3.0).abs() < 1e-9);
+        assert!((voxel_footprint_px(&[far.clone(), near], &grid) - 3.0).abs() < 1e-9);
+        assert!((voxel_footprint_px(&[far], &grid) - 1.5).abs() < 1e-9);
+        assert_eq!(voxel_footprint_px(&[], &grid), 0.0);
+    }
+
+    /// `auto` is the footprint projector while voxels image small and the ray projector
+    /// beyond; only the footprint projector renames the axes for its rows; the hull is
+    /// built only when asked for.
+    #[test]
+    fn auto_picks_the_projector_by_the_voxels_image_size() {
+        use fluidnerf_core::{Aabb, Image, Intrinsics};
+        use glam::DVec3;
+        let grid = Grid::new([8, 8, 8], Aabb::cube(DVec3::ZERO, 2.0));
+        let ring = |f: f64| -> Vec<Camera> {
+            let k = Intrinsics { width: 64, height: 64, fx: f, fy: f, cx: 31.5, cy: 31.5, skew: 0.0 };
+            (0..3)
+                .map(|i| {
+                    let a = 0.3 + i as f64;
+                    Camera::look_at(k, DVec3::new(9.0 * a.cos(), 0.0, 9.0 * a.sin()), DVec3::ZERO, DVec3::Y)
+                })
+                .collect()
+        };
+        let auto = ProjectorConfig::default();
+        let small = ring(60.0);
+        assert_eq!(auto.resolve(&grid, &small), ProjectorKind::Footprint);
+        assert_eq!(auto.row_shift(&grid, &small), crate::AxisShift::to_x(1), "a ring around y");
+        let wide = ring(2000.0);
+        assert_eq!(auto.resolve(&grid, &wide), ProjectorKind::Ray);
+        assert!(auto.row_shift(&grid, &wide).is_identity());
+        let splat = ProjectorConfig { kind: ProjectorKind::Splat, ..Default::default() };
+        assert_eq!(splat.resolve(&grid, &small), ProjectorKind::Splat);
+        assert!(splat.row_shift(&grid, &small).is_identity());
+        let images: Vec<Image> = small.iter().map(|_| Image::zeros(64, 64)).collect();
+        assert!(auto.support(&grid, &small, &images).is_none());
+        let hull = ProjectorConfig { visual_hull: true, ..Default::default() };
+        let mask = hull.support(&grid, &small, &images).expect("asked for");
+        assert_eq!(mask.len(), grid.len());
+        assert!(mask.iter().all(|&m| !m), "dark images carve every voxel they see, dilation or not");
+    }
+
     /// The memory estimate counts kept footprints for the methods that back-project every
     /// iteration, as much as the projector keeps (whole views within the budget), and none for
     /// ART and MART or without a budget.
