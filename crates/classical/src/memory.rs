@@ -150,6 +150,53 @@ mod tests {
     const PROJECTORS: [ProjectorKind; 4] =
         [ProjectorKind::Auto, ProjectorKind::Footprint, ProjectorKind::Splat, ProjectorKind::Ray];
 
+    /// How the estimate depends on the method: the volume buffers each holds, the ratio
+    /// images of MLEM and SMART, one view's rows for ART, MART and SMART, and the rows ART and
+    /// MART keep, up to their budget; the total is the sum of the parts.
+    #[test]
+    fn each_method_is_charged_for_what_it_holds() {
+        let grid = Grid::new([16, 16, 16], Aabb::cube(DVec3::ZERO, 1.0));
+        let n = grid.len() as u64;
+        let views = vec![(32usize, 32usize); 4];
+        let pixels = 4 * 32 * 32;
+        let e = |a, p, cache| estimate_memory(a, p, &grid, &views, 4, 2, cache);
+        for p in PROJECTORS {
+            let sart = e(Algorithm::Sart, p, 0);
+            // The result, two work buffers and the support mask.
+            assert_eq!(sart.volumes, 3 * 4 * n + n, "{p:?}");
+            assert_eq!(sart.total(), sart.volumes + sart.images + sart.projector);
+            assert_eq!(e(Algorithm::Art, p, 0).volumes, 4 * n + n);
+            assert_eq!(e(Algorithm::Tikhonov, p, 0).volumes, 4 * 4 * n + n);
+            assert_eq!(e(Algorithm::Tv, p, 0).volumes, 6 * 4 * n + n);
+            assert_eq!(e(Algorithm::Asart, p, 0), sart, "{p:?}");
+            for a in [Algorithm::Mlem, Algorithm::Smart] {
+                assert_eq!(e(a, p, 0).images, sart.images + 4 * pixels, "{a:?} {p:?}");
+            }
+            for a in [Algorithm::Asart, Algorithm::Art, Algorithm::Mart, Algorithm::Tv, Algorithm::Tikhonov] {
+                assert_eq!(e(a, p, 0).images, sart.images, "{a:?} {p:?}");
+            }
+            // One view's rows, and as many as fit of every view's.
+            let one = e(Algorithm::Art, p, 0).projector - sart.projector;
+            assert!(one > 0, "{p:?}");
+            assert_eq!(e(Algorithm::Art, p, 1000).projector, sart.projector + one + 1000, "{p:?}");
+            assert_eq!(e(Algorithm::Art, p, u64::MAX).projector, sart.projector + one + 4 * one, "{p:?}");
+            assert_eq!(e(Algorithm::Smart, p, u64::MAX).projector, e(Algorithm::Mlem, p, 0).projector + one, "{p:?}");
+            assert_eq!(e(Algorithm::Tv, p, u64::MAX).projector, sart.projector, "{p:?}");
+        }
+        // Per-thread scratch: more threads, more memory; no threads count as one.
+        for p in PROJECTORS {
+            let threads = |t| estimate_memory(Algorithm::Sart, p, &grid, &views, t, 2, 0).projector;
+            assert!(threads(8) > threads(4), "{p:?}");
+            assert_eq!(threads(0), threads(1), "{p:?}");
+        }
+        // The splat's rows grow with the cube of its sub-voxels.
+        let rows = |sub| {
+            estimate_memory(Algorithm::Art, ProjectorKind::Splat, &grid, &views, 4, sub, 0).projector
+                - estimate_memory(Algorithm::Sart, ProjectorKind::Splat, &grid, &views, 4, sub, 0).projector
+        };
+        assert_eq!(rows(2) - rows(1), 7 * 4 * 8 * n);
+    }
+
     /// Grids and images too large for any memory saturate the estimate at `u64::MAX`, which
     /// every caller refuses, instead of overflowing (a panic) or wrapping round to a small
     /// estimate that let the run start.
