@@ -104,6 +104,42 @@ mod tests {
         img
     }
 
+    /// A row of nine voxels (centres x = −4 … 4) seen by one camera 10 units away whose
+    /// pixels are one unit there: centre x lands at column x + 3.25 of a 6 × 1 image. A voxel
+    /// is carved when the brighter of its two pixel columns is at most the dark level (a pixel
+    /// exactly at it counts as dark); voxels outside the image are not judged by it.
+    #[test]
+    fn a_voxel_is_carved_where_its_pixels_are_dark_and_kept_outside_the_image() {
+        use fluidnerf_core::{Aabb, Intrinsics};
+        let grid = Grid::new([9, 1, 1], Aabb::new(DVec3::new(-4.5, -0.5, -0.5), DVec3::new(4.5, 0.5, 0.5)));
+        let k = Intrinsics { width: 6, height: 1, fx: 10.0, fy: 10.0, cx: 3.25, cy: 0.0, skew: 0.0 };
+        let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
+        assert!((camera.project(DVec3::new(1.0, 0.0, 0.0)).unwrap().x - 4.25).abs() < 1e-9);
+        let mut img = Image::zeros(6, 1);
+        img.data.copy_from_slice(&[0.0, 0.0, 0.02, 0.0, 1.0, 0.0]);
+        // Columns −0.75 (outside), 0.25, 1.25, 2.25, 3.25, 4.25, 5.25, 6.25 and 7.25 (outside).
+        let want = [true, false, false, false, true, true, false, true, true];
+        let hull = visual_hull(&grid, std::slice::from_ref(&camera), std::slice::from_ref(&img), 0.02, 0.0, 0);
+        assert_eq!(hull, want);
+        let dilated = visual_hull(&grid, std::slice::from_ref(&camera), std::slice::from_ref(&img), 0.02, 0.0, 1);
+        assert_eq!(dilated, [true, true, false, true, true, true, true, true, true]);
+        // A lower threshold keeps the voxels whose brightest pixel is 0.02.
+        let hull = visual_hull(&grid, std::slice::from_ref(&camera), std::slice::from_ref(&img), 0.01, 0.0, 0);
+        assert_eq!(hull, [true, false, true, true, true, true, false, true, true]);
+        // A second view that sees nothing dark carves nothing more; one voxel dark in any view
+        // is carved.
+        let bright = Image { width: 6, height: 1, data: vec![1.0; 6] };
+        let both = visual_hull(&grid, &[camera.clone(), camera], &[bright, img], 0.02, 0.0, 0);
+        assert_eq!(both, want);
+    }
+
+    /// An image whose every pixel is negative has a dark level of zero, not a negative one.
+    #[test]
+    fn a_negative_image_is_dark_at_zero() {
+        let img = Image { width: 2, height: 1, data: vec![-1.0, -0.5] };
+        assert_eq!(dark_level(&img, 0.02, 0.0), 0.0);
+    }
+
     #[test]
     fn dilation_adds_the_26_neighbours_per_step() {
         let dims = [5, 5, 5];
