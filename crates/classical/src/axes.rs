@@ -172,6 +172,43 @@ mod tests {
         Camera::look_at(K, centre, DVec3::ZERO, axis)
     }
 
+    /// A camera looking along `z` sees grid rows along `x` and along `y` as lines of pixels
+    /// (rows along `y` only without skew), none along `z`, and none at all with distortion;
+    /// between `x` and `y` the identity is kept.
+    #[test]
+    fn a_camera_along_z_shares_rows_along_x_and_y() {
+        let cam = Camera::look_at(K, DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, DVec3::Y);
+        assert!(rows_shared_along(&cam, 0) && rows_shared_along(&cam, 1) && !rows_shared_along(&cam, 2));
+        assert!(AxisShift::for_rows(std::slice::from_ref(&cam)).is_identity());
+        let mut skewed = cam.clone();
+        skewed.intrinsics.skew = 0.5;
+        assert!(rows_shared_along(&skewed, 0) && !rows_shared_along(&skewed, 1));
+        let mut distorted = cam;
+        distorted.distortion.k1 = 0.01;
+        assert!((0..3).all(|a| !rows_shared_along(&distorted, a)));
+    }
+
+    /// A volume, its box and the grid move with the axes: with `s = 1` the original `y`
+    /// becomes `x`.
+    #[test]
+    fn a_volume_moves_with_its_box() {
+        let aabb = Aabb { min: DVec3::new(-1.0, -2.0, -3.0), max: DVec3::new(1.0, 2.0, 3.0) };
+        let v = Volume::from_vec([4, 3, 2], aabb, (0..24).map(|v| v as f32).collect());
+        let shift = AxisShift::to_x(1);
+        assert!(!shift.is_identity() && AxisShift::IDENTITY.is_identity());
+        let moved = shift.volume(&v);
+        assert_eq!(moved.dims, [3, 2, 4]);
+        assert_eq!(moved.aabb.min, DVec3::new(-2.0, -3.0, -1.0));
+        assert_eq!(moved.aabb.max, DVec3::new(2.0, 3.0, 1.0));
+        assert_eq!(moved.data, shift.data(v.dims, &v.data).into_owned());
+        let grid = shift.grid(&Grid::new(v.dims, aabb));
+        assert_eq!((grid.dims, grid.aabb), (moved.dims, moved.aabb));
+        assert_eq!(shift.vec(DVec3::new(1.0, 2.0, 3.0)), DVec3::new(2.0, 3.0, 1.0));
+        assert_eq!(AxisShift::to_x(2).dims([4, 3, 2]), [2, 4, 3]);
+        let same = AxisShift::IDENTITY.volume(&v);
+        assert_eq!((same.dims, &same.data), (v.dims, &v.data));
+    }
+
     #[test]
     fn volumes_go_there_and_back_and_land_where_the_axes_say() {
         let dims = [4, 3, 2];
