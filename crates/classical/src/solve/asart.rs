@@ -172,6 +172,16 @@ mod tests {
         assert_close(&r.volume, &[0.0, 1.25], 1e-6);
     }
 
+    /// A voxel no ray crosses has no column sum to divide by: it keeps its value.
+    #[test]
+    fn asart_leaves_a_voxel_no_ray_crosses_alone() {
+        let dense = Dense::new(3, vec![vec![vec![1.0, 0.0, 0.0], vec![1.0, 1.0, 0.0]]]);
+        let images = dense.images(&[&[1.0, 3.0]]);
+        let problem = Problem::new(&dense, &images).expect("consistent");
+        let r = asart(&problem, Some(&[2.0, 0.5, 4.0]), &params(0.5, 1), go).expect("runs");
+        assert_close(&r.volume, &[1.9625, 0.5125, 4.0], 1e-6);
+    }
+
     /// On consistent data ASART converges to the solution, with the views in turn.
     #[test]
     fn asart_solves_a_consistent_system_of_two_views() {
