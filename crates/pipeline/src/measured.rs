@@ -82,7 +82,7 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
     let mut factors = vec![1.0; images.len()];
     let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
     let comparable: Vec<Option<f64>> = totals.iter().zip(&pre.masks).map(|(&t, m)| m.is_none().then_some(t)).collect();
-    let dark_warning = dark_frames_hint(scene, &totals.iter().copied().map(Some).collect::<Vec<_>>());
+    let dark_warning = dark_frames_hint(scene, &totals);
     let spread =
         matches!(gains.mode, GainMode::None | GainMode::Auto).then(|| gain_spread(scene, &comparable)).flatten();
     let mode = match gains.mode {
@@ -300,16 +300,16 @@ pub(crate) fn gain_spread(scene: &Scene, totals: &[Option<f64>]) -> Option<(usiz
 }
 
 /// A warning naming the frames whose images (as preprocessed, masked pixels left out; their
-/// totals in `totals`, None where not known) hold no light at all while other images of their
-/// time hold some, or None. A camera that sees the
-/// box and no light is evidence of empty space along all its rays, and a run takes it as
-/// such; when the camera was off or covered, or the scene names the wrong file, that evidence
-/// is false and darkens the whole reconstruction. Every image dark is refused elsewhere.
-pub(crate) fn dark_frames_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
+/// totals in `totals`) hold no light at all while other images of their time hold some, or
+/// None. A camera that sees the box and no light is evidence of empty space along all its
+/// rays, and a run takes it as such; when the camera was off or covered, or the scene names
+/// the wrong file, that evidence is false and darkens the whole reconstruction. Every image
+/// dark is refused elsewhere.
+fn dark_frames_hint(scene: &Scene, totals: &[f64]) -> Option<String> {
     let key = |i: usize| scene.frames[i].time.map(f64::to_bits);
-    let lit = |i: usize| (0..totals.len()).any(|j| j != i && key(j) == key(i) && totals[j].is_some_and(|t| t > 0.0));
+    let lit = |i: usize| (0..totals.len()).any(|j| j != i && key(j) == key(i) && totals[j] > 0.0);
     let dark: Vec<String> = (0..totals.len())
-        .filter(|&i| totals[i] == Some(0.0) && lit(i))
+        .filter(|&i| totals[i] == 0.0 && lit(i))
         .map(|i| {
             let f = &scene.frames[i];
             match &f.camera_name {
