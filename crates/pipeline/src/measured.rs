@@ -553,6 +553,8 @@ mod tests {
         assert_eq!(hint([Some(1.0), Some(1.1), Some(0.9), Some(1.0), Some(3.0)]), None);
         let said = hint([Some(1.0), Some(1.0), Some(0.8), Some(1.05), None]).expect("a camera 20 % dim");
         assert!(said.contains("cam2 holds 0.80×") && said.contains("gains auto"), "{said}");
+        // A camera with no light says nothing of its gain: not a spread of 0×.
+        assert_eq!(hint([Some(1.0), Some(0.0), Some(1.0), Some(1.05), None]), None);
         // A masked image's total does not compare; two comparable images are too few.
         assert_eq!(hint([Some(1.0), Some(1.0), None, Some(1.05), None]).map(|_| ()), None);
         assert_eq!(hint([Some(1.0), None, Some(0.5), None, None]), None);
@@ -562,6 +564,45 @@ mod tests {
         assert_eq!(gain_hint(&far, &[Some(1.0), Some(0.25), Some(1.0), Some(1.0), None]), None);
         let said = gain_hint(&far, &[Some(1.0), Some(1.0), Some(1.0), Some(1.0), None]).expect("too bright");
         assert!(said.contains("cam1 holds 4.00×"), "{said}");
+    }
+
+    #[test]
+    fn dark_frames_are_named_only_beside_lit_ones_of_their_time() {
+        use fluidnerf_core::glam::DVec3;
+        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
+        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        // Three cameras at each of two times; the last camera unnamed.
+        let scene = Scene {
+            root: "scene".into(),
+            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: (0..6)
+                .map(|i| {
+                    let a = (i % 3) as f64 * 2.0;
+                    Frame {
+                        file_path: format!("t{}/c{}.png", i / 3, i % 3).into(),
+                        camera: Camera::look_at(k, 5.0 * DVec3::new(a.cos(), 0.0, a.sin()), DVec3::ZERO, DVec3::Y),
+                        time: Some((i / 3) as f64),
+                        camera_name: (i % 3 != 2).then(|| format!("cam{}", i % 3)),
+                        holdout: false,
+                    }
+                })
+                .collect(),
+            truth: Vec::new(),
+        };
+        assert_eq!(dark_frames_hint(&scene, &[1.0, 2.0, 1.5, 1.0, 1.0, 1.0]), None);
+        let said = dark_frames_hint(&scene, &[1.0, 0.0, 1.5, 1.0, 1.0, 1.0]).expect("one dark camera");
+        assert!(said.starts_with("cam1 (t0/c1.png) is dark at every pixel used") && said.contains("that camera"));
+        // A dark frame is named beside lit frames of its own time only: time 1 is all dark, which
+        // is refused elsewhere, and its frames are not named here.
+        let said = dark_frames_hint(&scene, &[0.0, 1.0, 0.0, 0.0, 0.0, 0.0]).expect("two dark at time 0");
+        assert!(
+            said.starts_with("cam0 (t0/c0.png) and 1 other image(s): t0/c2.png are dark")
+                && said.contains("those cameras"),
+            "{said}"
+        );
+        assert_eq!(dark_frames_hint(&scene, &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0]), None);
     }
 
     #[test]
