@@ -1,7 +1,7 @@
 //! ART and MART per iteration with every view's rows kept between iterations (the default
 //! `row_cache_mib`) against building them again each iteration (`row_cache_mib = 0`),
 //! interleaved twice in one run so that the ratios hold on a busy machine. Both give the same
-//! volume bit for bit (`tests/solvers.rs`).
+//! volume bit for bit (`tests/classical/solvers.rs`).
 //!
 //! Geometry: 15 cameras of 128 × 128 px on a planar ring around a 40 mm cube (as
 //! `projection.rs`), 64³ voxels, footprint projector, images projected from a smooth phantom.

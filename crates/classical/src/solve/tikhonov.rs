@@ -42,7 +42,7 @@
 //!     without noise, 0.216 vs 0.201 with 2.5 % image noise, 0.247 vs 0.256 with 5 %, 0.326
 //!     vs 0.381 with 10 % (there λ = 0.01 gives 0.310); so a smoothness prior pays off on
 //!     this sharp-edged, multi-scale field only from about 5 % noise;
-//!   - two Gaussian blobs (24³ voxels, 8 views of 48² px, `tests/tikhonov.rs`) with 5 %
+//!   - two Gaussian blobs (24³ voxels, 8 views of 48² px, `tests/classical/tikhonov.rs`) with 5 %
 //!     noise: 0.437 vs 0.575 (0.30 at SART's best iteration); λ = 0.1 gives 0.185.
 //!
 //!   An L-curve (Hansen 1992), as §2.4.1 suggests, picks λ for a given experiment. `λ = 0`

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-mod common;
+use crate::common;
 use common::*;
 
 /// How a case breaks the scene (in its own copy) before the command runs.

@@ -3,7 +3,7 @@
 //! `export`, `render`, `compare` and `synth` refuse folders that hold results of another kind
 //! (and exports and renders the scene's folder and its inputs' folders).
 
-mod common;
+use crate::common;
 use common::*;
 
 use std::path::Path;

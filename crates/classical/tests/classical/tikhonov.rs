@@ -1,7 +1,7 @@
 //! SART with second-order Tikhonov regularisation on noisy images: the default and a tuned
 //! weight beat plain SART, the penalty is what falls, and weight 0 is plain SART.
 
-mod common;
+use crate::common;
 
 use std::ops::ControlFlow;
 

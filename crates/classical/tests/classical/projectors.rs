@@ -1,6 +1,6 @@
 //! The projectors: adjoint identity, row access, and agreement with the reference renderer.
 
-mod common;
+use crate::common;
 
 use common::*;
 use fluidnerf_classical::{FootprintProjector, Grid, Isa, Projector, RayProjector, SplatProjector};

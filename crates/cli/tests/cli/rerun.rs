@@ -3,7 +3,7 @@
 //! even when it equals the default; and one run's figures agree in the terminal,
 //! `report.json` and `report.html`.
 
-mod common;
+use crate::common;
 use common::*;
 
 /// Runs `args`, then reruns from the written `config.json` with no other option than the

@@ -1,7 +1,7 @@
 //! End-to-end tests of `fluidnerf import` from OpenCV, COLMAP and Metashape calibrations, in a
 //! temporary directory.
 
-#[path = "../../io/tests/common/metashape.rs"]
+#[path = "../../../io/tests/common/metashape.rs"]
 mod metashape_xml;
 
 use std::path::{Path, PathBuf};

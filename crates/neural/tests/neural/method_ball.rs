@@ -15,7 +15,7 @@ use fluidnerf_neural::trained::{FieldConfig, NeuralConfig, WorldField};
 use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::ring;
 
 /// A ball of radius 0.5 at (0.15, −0.1, 0.05) with a smooth (cosine) edge of width 0.2.

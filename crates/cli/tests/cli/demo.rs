@@ -1,6 +1,6 @@
 //! `fluidnerf demo` end to end, at a small output grid and a few iterations per method.
 
-mod common;
+use crate::common;
 use common::*;
 
 /// The demo runs the grid field, the hybrid, ASART and SART-TV under the same stopping rule,

@@ -1,7 +1,7 @@
 //! `fluidnerf study` end to end on its tiny grid: the table, plots and report it writes, every
 //! run under the same stopping policy, and resuming without rerunning finished cells.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

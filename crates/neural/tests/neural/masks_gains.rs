@@ -6,7 +6,7 @@ use fluidnerf_neural::dense::DenseGridField;
 use fluidnerf_neural::train::{train_fitting_gains, GainFit, Learner, Prepared, Problem, TrainConfig, View, ViewMasks};
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::ring;
 
 /// A Gaussian blob seen by `n` cameras at 24² px; view `v`'s image scaled by `gains[v]`.

@@ -3,7 +3,7 @@
 //! piece; windows are idempotent, warm starts wait for their window, and misuse is refused
 //! with the file or setting named.
 
-mod common;
+use crate::common;
 use common::*;
 
 fn split_scene(d: &std::path::Path) {

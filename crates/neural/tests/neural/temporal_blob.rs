@@ -18,7 +18,7 @@ use fluidnerf_neural::weights::{checkpoint_bytes, load_checkpoint};
 use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::ring;
 
 const SIGMA: f64 = 0.2;

@@ -13,7 +13,7 @@ use fluidnerf_neural::trained::WorldField;
 use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::ring;
 
 /// Mean and largest relative deviation from `level` of `field` over a lattice of the unit cube.

@@ -1,7 +1,7 @@
 //! The solvers recover known phantoms from 8 rendered pinhole views, keep their invariants, and
 //! honour the callback.
 
-mod common;
+use crate::common;
 
 use std::ops::ControlFlow;
 

@@ -3,7 +3,7 @@
 //! cameras read as the OpenCV files of the same cameras, and malformed files are refused naming
 //! the file and the camera or sensor.
 
-#[path = "common/metashape.rs"]
+#[path = "../common/metashape.rs"]
 mod metashape_xml;
 
 use fluidnerf_core::glam::{DMat3, DVec2, DVec3};

@@ -3,7 +3,7 @@
 //! metrics (held-out time included), the stitched field loadable by the library, overwrite
 //! refusal, and `fluidnerf eval` on the series.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

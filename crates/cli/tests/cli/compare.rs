@@ -2,7 +2,7 @@
 //! truth, plus a report file from another tool, drawn and tabulated together; and the errors
 //! for runs that cannot be compared.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

@@ -5,7 +5,7 @@
 //! By default (gains auto) a run fits them because the images' totals differ as differing gains
 //! make them, and a run told to take the images as they are warns of it.
 
-mod common;
+use crate::common;
 use common::*;
 
 const SMALL: [&str; 8] = ["--pixels", "40", "--resolution", "40", "--cameras", "8", "--holdout", "cam003"];

@@ -15,7 +15,7 @@ use glam::{DVec3, Vec3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-mod common;
+use crate::common;
 use common::ring;
 
 fn blob(p: DVec3) -> f32 {

@@ -16,7 +16,7 @@ use fluidnerf_neural::train::{render_view, train, Learner, Prepared, Problem, Sp
 use fluidnerf_neural::TrainableField;
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::ring;
 
 fn problem() -> Problem {

@@ -9,7 +9,7 @@ use fluidnerf_neural::train::{Prepared, Problem, TrainConfig, View};
 use fluidnerf_neural::{NeuralError, TrainableField};
 use glam::{DVec3, Vec3};
 
-mod common;
+use crate::common;
 use common::ring;
 
 fn problem() -> Problem {

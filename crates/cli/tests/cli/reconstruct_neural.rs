@@ -1,7 +1,7 @@
 //! `fluidnerf reconstruct --method fast|fluidnerf` end to end on a tiny generated scene: the
 //! files it writes, refusal to overwrite, resume, and a trained field loadable by the library.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

@@ -18,7 +18,7 @@ use fluidnerf_neural::{CpuEngine, Engine, NeuralError, TrainableField};
 use glam::{DVec3, Vec3};
 use rand::SeedableRng;
 
-mod common;
+use crate::common;
 use common::ring;
 
 /// 4 training and 1 held-out view (16² px) of a Gaussian blob; views 2 and 3 at time 1.

@@ -1,6 +1,6 @@
 //! End-to-end tests of `fluidnerf export` on tiny volumes generated in a temporary directory.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};
