@@ -16,7 +16,7 @@
 use std::ops::Range;
 
 use crate::field::Prior;
-use crate::kernels::{inverse_softplus, sigmoid, softplus};
+use crate::kernels::{inverse_softplus, multiversion, sigmoid, softplus};
 use crate::TrainableField;
 
 /// A trainable `nx × ny × nz` grid of raw values behind a softplus.
@@ -52,42 +52,87 @@ impl DenseGridField {
     pub fn dims(&self) -> [usize; 3] {
         self.dims
     }
+}
 
-    /// Corner indices and weights of the trilinear stencil at `u`, or `None` outside `[0, 1]³`.
-    fn stencil(&self, u: [f32; 3]) -> Option<([u32; 8], [f32; 8])> {
-        if u.iter().any(|&c| !(0.0..=1.0).contains(&c)) {
-            return None;
-        }
-        let mut i0 = [0usize; 3];
-        let mut i1 = [0usize; 3];
-        let mut w = [0f32; 3];
-        for a in 0..3 {
-            let n = self.dims[a];
-            let g = (u[a] * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
-            let f = g.floor();
-            i0[a] = f as usize;
-            i1[a] = (i0[a] + 1).min(n - 1);
-            w[a] = g - f;
-        }
-        let (nx, ny) = (self.dims[0], self.dims[1]);
-        let mut idx = [0u32; 8];
-        let mut wts = [0f32; 8];
-        for c in 0..8 {
-            let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let i = if bx == 0 { i0[0] } else { i1[0] };
-            let j = if by == 0 { i0[1] } else { i1[1] };
-            let k = if bz == 0 { i0[2] } else { i1[2] };
-            idx[c] = ((k * ny + j) * nx + i) as u32;
-            let wx = if bx == 0 { 1.0 - w[0] } else { w[0] };
-            let wy = if by == 0 { 1.0 - w[1] } else { w[1] };
-            let wz = if bz == 0 { 1.0 - w[2] } else { w[2] };
-            wts[c] = wx * wy * wz;
-        }
-        Some((idx, wts))
+/// Corner indices and weights of the trilinear stencil at `u` in a grid of `dims`, or `None`
+/// outside `[0, 1]³`.
+#[inline(always)]
+fn stencil(dims: [usize; 3], u: [f32; 3]) -> Option<([u32; 8], [f32; 8])> {
+    if u.iter().any(|&c| !(0.0..=1.0).contains(&c)) {
+        return None;
     }
+    let mut i0 = [0usize; 3];
+    let mut i1 = [0usize; 3];
+    let mut w = [0f32; 3];
+    for a in 0..3 {
+        let n = dims[a];
+        let g = (u[a] * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
+        // `g` is not negative, so truncation is its floor, without a call to libm's `floorf`
+        // where the instruction set has no rounding instruction.
+        i0[a] = g as usize;
+        let f = i0[a] as f32;
+        i1[a] = (i0[a] + 1).min(n - 1);
+        w[a] = g - f;
+    }
+    let (nx, ny) = (dims[0], dims[1]);
+    let mut idx = [0u32; 8];
+    let mut wts = [0f32; 8];
+    for c in 0..8 {
+        let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+        let i = if bx == 0 { i0[0] } else { i1[0] };
+        let j = if by == 0 { i0[1] } else { i1[1] };
+        let k = if bz == 0 { i0[2] } else { i1[2] };
+        idx[c] = ((k * ny + j) * nx + i) as u32;
+        let wx = if bx == 0 { 1.0 - w[0] } else { w[0] };
+        let wy = if by == 0 { 1.0 - w[1] } else { w[1] };
+        let wz = if bz == 0 { 1.0 - w[2] } else { w[2] };
+        wts[c] = wx * wy * wz;
+    }
+    Some((idx, wts))
+}
 
-    fn pre_activation(&self, idx: &[u32; 8], wts: &[f32; 8]) -> f32 {
-        idx.iter().zip(wts).map(|(&i, &w)| self.params[i as usize] * w).sum()
+#[inline(always)]
+fn pre_activation(params: &[f32], idx: &[u32; 8], wts: &[f32; 8]) -> f32 {
+    idx.iter().zip(wts).map(|(&i, &w)| params[i as usize] * w).sum()
+}
+
+multiversion! {
+    /// The values at `inputs` (rows of three), and with `tape` the stencils and slopes that
+    /// [`DenseGridField::backward`] needs: the body of `eval` and `forward`, compiled for the
+    /// CPU's vector instructions (its rounding and `fast_exp` inline there; the same results).
+    fn dense_values(dims: [usize; 3], params: &[f32], inputs: &[f32], out: &mut [f32], tape: Option<&mut DenseTape>) {
+        match tape {
+            None => {
+                for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
+                    *o = match stencil(dims, [p[0], p[1], p[2]]) {
+                        Some((idx, wts)) => softplus(pre_activation(params, &idx, &wts)),
+                        None => 0.0,
+                    };
+                }
+            }
+            Some(tape) => {
+                tape.idx.clear();
+                tape.wts.clear();
+                tape.slope.clear();
+                for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
+                    match stencil(dims, [p[0], p[1], p[2]]) {
+                        Some((idx, wts)) => {
+                            let v = pre_activation(params, &idx, &wts);
+                            *o = softplus(v);
+                            tape.idx.push(idx);
+                            tape.wts.push(wts);
+                            tape.slope.push(sigmoid(v));
+                        }
+                        None => {
+                            *o = 0.0;
+                            tape.idx.push([0; 8]);
+                            tape.wts.push([0.0; 8]);
+                            tape.slope.push(0.0);
+                        }
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -121,36 +166,12 @@ impl TrainableField for DenseGridField {
 
     fn eval(&self, inputs: &[f32], out: &mut [f32], _tape: &mut DenseTape) {
         assert_eq!(inputs.len(), 3 * out.len(), "DenseGridField::eval: inputs must be n × 3");
-        for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
-            *o = match self.stencil([p[0], p[1], p[2]]) {
-                Some((idx, wts)) => softplus(self.pre_activation(&idx, &wts)),
-                None => 0.0,
-            };
-        }
+        dense_values(self.dims, &self.params, inputs, out, None);
     }
 
     fn forward(&self, inputs: &[f32], out: &mut [f32], tape: &mut DenseTape) {
         assert_eq!(inputs.len(), 3 * out.len(), "DenseGridField::forward: inputs must be n × 3");
-        tape.idx.clear();
-        tape.wts.clear();
-        tape.slope.clear();
-        for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
-            match self.stencil([p[0], p[1], p[2]]) {
-                Some((idx, wts)) => {
-                    let v = self.pre_activation(&idx, &wts);
-                    *o = softplus(v);
-                    tape.idx.push(idx);
-                    tape.wts.push(wts);
-                    tape.slope.push(sigmoid(v));
-                }
-                None => {
-                    *o = 0.0;
-                    tape.idx.push([0; 8]);
-                    tape.wts.push([0.0; 8]);
-                    tape.slope.push(0.0);
-                }
-            }
-        }
+        dense_values(self.dims, &self.params, inputs, out, Some(tape));
     }
 
     fn backward(&self, tape: &mut DenseTape, d_out: &[f32], grads: &mut [f32]) {
