@@ -202,9 +202,20 @@ impl TrainableField for DenseGridField {
             return 0.0;
         }
         assert_eq!(grads.len(), self.params.len(), "DenseGridField::add_prior: grads length");
-        let [nx, ny, nz] = self.dims;
-        let n = self.params.len();
-        let e: Vec<f32> = self.params.iter().map(|&v| softplus(v)).collect();
+        let mut value = 0.0;
+        dense_prior(self.dims, &self.params, prior, grads, &mut value);
+        value
+    }
+}
+
+multiversion! {
+    /// The body of [`DenseGridField::add_prior`], compiled for the CPU's vector instructions
+    /// (its `softplus` and `sigmoid` inline there): adds the prior's gradient to `grads` and
+    /// writes its value to `out`.
+    fn dense_prior(dims: [usize; 3], params: &[f32], prior: &Prior, grads: &mut [f32], out: &mut f32) {
+        let [nx, ny, nz] = dims;
+        let n = params.len();
+        let e: Vec<f32> = params.iter().map(|&v| softplus(v)).collect();
         // ∂R/∂E first, then through the softplus.
         let mut d_e = vec![0f32; n];
         let mut value = 0f64;
@@ -233,10 +244,10 @@ impl TrainableField for DenseGridField {
                 }
             }
         }
-        for ((g, &de), &v) in grads.iter_mut().zip(&d_e).zip(&self.params) {
+        for ((g, &de), &v) in grads.iter_mut().zip(&d_e).zip(params) {
             *g += de * sigmoid(v);
         }
-        (value / n as f64) as f32
+        *out = (value / n as f64) as f32;
     }
 }
 
