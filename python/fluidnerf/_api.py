@@ -896,6 +896,9 @@ def _progress_callback(callback: Callback | None, progress: bool | None) -> tupl
     def on_event(event: dict) -> bool | None:
         kind = event["kind"]
         if kind == "started":
+            if "fit" in bar_holder:
+                # A fit the time budget ended before its last step.
+                bar_holder.pop("fit").close()
             total = event["max_iterations"] * max(event["windows"], 1)
             bar_holder["per_window"] = event["max_iterations"]
             bar_holder["bar"] = tqdm(total=total, desc=event["method"], initial=event["start_iteration"])
@@ -904,6 +907,13 @@ def _progress_callback(callback: Callback | None, progress: bool | None) -> tupl
             pos = (event["window"] or 0) * bar_holder["per_window"] + event["iteration"]
             bar.update(max(pos - bar.n, 0))
             bar.set_postfix(loss=f"{event['loss']:.3e}", refresh=False)
+        elif kind == "start_fit":
+            if "fit" not in bar_holder:
+                bar_holder["fit"] = tqdm(total=event["steps"], desc="fit to start")
+            bar = bar_holder["fit"]
+            bar.update(max(event["step"] - bar.n, 0))
+            if event["step"] == event["steps"]:
+                bar_holder.pop("fit").close()
         elif kind == "writing" and "bar" in bar_holder:
             bar_holder.pop("bar").close()
         return callback(event) if callback is not None else None
@@ -964,9 +974,11 @@ def reconstruct(
     (``--force``, ``--resume``).
 
     ``callback(event)`` receives every event as a dict (``kind``: ``started``, ``iteration``,
-    ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``); returning
-    ``False`` stops the run. A hybrid's voxel start (any ``start`` the run makes itself) first
-    reports its own run, from a ``started`` naming the voxel method to its ``writing``. ``progress`` (True or False) shows a tqdm bar (None: when tqdm is installed).
+    ``evaluation``, ``estimate``, ``checkpoint``, ``window_finished``, ``warning``, ``writing``,
+    ``start_fit``); returning ``False`` stops the run. A hybrid's voxel start (any ``start`` the run
+    makes itself) first reports its own run, from a ``started`` naming the voxel method to its
+    ``writing``; then ``start_fit`` events (``step`` of ``steps``) follow the fit of the field to
+    that start, before the field's ``started``. ``progress`` (True or False) shows a tqdm bar (None: when tqdm is installed).
     A run's warnings are issued as :class:`FluidNerfWarning` and kept in ``run.report["warnings"]``.
     The GIL is released while the run works. Ctrl-C stops the run cleanly: its results are
     written (``open_run(out)`` reads them) and ``KeyboardInterrupt`` is raised.

@@ -46,7 +46,9 @@ def test_a_hybrids_voxel_start_reports_its_events_and_stops_with_the_callback(st
     started = [e["method"] for e in events if e["kind"] == "started"]
     assert started == ["asart", "hybrid"]
     kinds = [e["kind"] for e in events]
-    assert kinds.index("writing") < kinds.index("started", 1)
+    assert kinds.index("writing") < kinds.index("start_fit") < kinds.index("started", 1)
+    fit = [(e["step"], e["steps"]) for e in events if e["kind"] == "start_fit"]
+    assert fit == [(s, 300) for s in range(10, 301, 10)]
 
     def stop_in_the_start(event: dict) -> bool:
         return not (event["kind"] == "iteration" and event["iteration"] == 2)
@@ -57,6 +59,22 @@ def test_a_hybrids_voxel_start_reports_its_events_and_stops_with_the_callback(st
     assert stopped.status == "interrupted"
     start = json.loads((tmp_path / "s" / "start" / "report.json").read_text())
     assert start["stop_reason"] == "interrupted" and start["iterations"] == 2
+
+    # Stopped while the field is fitted to the start: the fit ends there, and the run after
+    # its first iteration.
+    def stop_in_the_fit(event: dict) -> bool:
+        return not (event["kind"] == "start_fit" and event["step"] == 20)
+
+    fitted = []
+    stopped = fluidnerf.reconstruct(
+        static_scene,
+        "hybrid",
+        tmp_path / "f",
+        callback=lambda e: (fitted.append(e), stop_in_the_fit(e))[1],
+        **short,
+    )
+    assert stopped.status == "interrupted" and stopped.report["iterations"] <= 1
+    assert [e["step"] for e in fitted if e["kind"] == "start_fit"] == [10, 20]
 
 
 def test_a_python_run_equals_the_command_line_run_and_its_field_the_volume(static_scene, cli, tmp_path):

@@ -9,6 +9,8 @@
 //! at the constant rate [`StartFit::learning_rate`]. The points come from their own random
 //! stream (`stream_seed(seed ^ START_KEY, step, 0)`), so a start is reproducible.
 
+use std::ops::ControlFlow;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -85,8 +87,11 @@ pub struct StartReport {
     pub mse: f64,
     pub mean_square: f64,
     pub seconds: f64,
-    /// Steps taken: [`StartFit::iterations`], or fewer when the time limit came first.
+    /// Steps taken: [`StartFit::iterations`], or fewer when the time limit came first or the
+    /// caller stopped the fit ([`StartReport::stopped`]).
     pub steps: usize,
+    /// The caller's `on_step` stopped the fit.
+    pub stopped: bool,
     /// The factor the target was multiplied by, when it lay outside [`START_LEVELS`].
     pub rescaled: Option<f64>,
 }
@@ -113,6 +118,7 @@ pub fn fit_to_frames<F: TrainableField>(
     fit: &StartFit,
     seed: u64,
     time_limit_s: Option<f64>,
+    on_step: &mut dyn FnMut(usize) -> ControlFlow<()>,
 ) -> Result<StartReport, NeuralError> {
     let (min, size) = (prep.meta.aabb.min.as_vec3(), prep.meta.aabb.size().as_vec3());
     let inv_scale = (1.0 / prep.meta.value_scale) as f32;
@@ -144,7 +150,7 @@ pub fn fit_to_frames<F: TrainableField>(
             }
         }
     };
-    fit_to_target(field, prep, &in_units, fit, seed, time_limit_s)
+    fit_to_target(field, prep, &in_units, fit, seed, time_limit_s, on_step)
 }
 
 /// The range of the target's RMS over the occupied points, as a multiple of the level the
@@ -159,7 +165,9 @@ const TYPICAL_LEVEL: f64 = 2.0;
 /// Fits `field` to `target` (module doc). `target(points, out)` writes the target in field
 /// units at box-normalised points (rows of `field.input_dim()` values: `x, y, z[, t']`).
 /// With `time_limit_s` the fit stops after the step that reaches it (at least one step): a
-/// start is part of a run's work, and counts against its time budget.
+/// start is part of a run's work, and counts against its time budget. `on_step(steps done)` is
+/// called after every step; breaking stops the fit there (a run the user stops while its field
+/// is fitted to its start: the fit takes seconds whatever the run's size).
 pub fn fit_to_target<F: TrainableField>(
     field: &mut F,
     prep: &Prepared,
@@ -167,6 +175,7 @@ pub fn fit_to_target<F: TrainableField>(
     fit: &StartFit,
     seed: u64,
     time_limit_s: Option<f64>,
+    on_step: &mut dyn FnMut(usize) -> ControlFlow<()>,
 ) -> Result<StartReport, NeuralError> {
     fit.validate()?;
     let t0 = std::time::Instant::now();
@@ -177,7 +186,7 @@ pub fn fit_to_target<F: TrainableField>(
     let mut grads = vec![0f32; field.num_params()];
     let mut tape = field.new_tape();
     let (mut inputs, mut values, mut wanted, mut d_out) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, steps: 0, rescaled: None };
+    let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, steps: 0, stopped: false, rescaled: None };
     let mut scale = 1.0f32;
     for step in 0..fit.iterations {
         let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed ^ START_KEY, step, 0));
@@ -250,6 +259,10 @@ pub fn fit_to_target<F: TrainableField>(
         field.backward(&mut tape, &d_out, &mut grads);
         adam.step(field.params_mut(), &grads, fit.learning_rate);
         last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, steps: step + 1, ..last };
+        if on_step(step + 1).is_break() {
+            last.stopped = true;
+            break;
+        }
         if time_limit_s.is_some_and(|limit| t0.elapsed().as_secs_f64() >= limit) {
             break;
         }
@@ -291,7 +304,8 @@ mod tests {
 
     #[test]
     fn the_relative_difference_is_the_rms_ratio() {
-        let report = StartReport { mse: 4.0, mean_square: 16.0, seconds: 0.0, steps: 1, rescaled: None };
+        let report =
+            StartReport { mse: 4.0, mean_square: 16.0, seconds: 0.0, steps: 1, stopped: false, rescaled: None };
         assert_eq!(report.relative_difference(), 0.5);
         // A target of zero does not divide by zero.
         let zero = StartReport { mse: 1.0, mean_square: 0.0, ..report };

@@ -644,6 +644,9 @@ pub fn train_window<F: TrainableField + Clone>(
                     &fs.fit,
                     seed.wrapping_add(k as u64),
                     limit,
+                    // A window's fit is not stopped halfway: a stopped window resumes from its
+                    // checkpoint, which a half-fitted start has not written.
+                    &mut |_| ControlFlow::Continue(()),
                 )?;
                 log::info!(
                     "window {k} started from its instants' reconstructions: relative RMS difference {:.4} ({:.1} s)",

@@ -46,6 +46,9 @@ pub struct WindowPos {
     pub frames: [usize; 2],
 }
 
+/// Steps of the fit to a start between two [`RunEvent::StartFit`].
+pub const START_FIT_EVENT_EVERY: usize = 10;
+
 /// One event of a run.
 #[derive(Debug)]
 pub enum RunEvent<'a> {
@@ -55,6 +58,12 @@ pub enum RunEvent<'a> {
     /// delivers each of those runs' events, from its own `Started` (naming the voxel method) to
     /// its `Writing`; stopping there stops the whole run.
     Started { method: Method, max_iterations: usize, windows: usize, start_iteration: usize },
+    /// The field is being fitted to its start (a voxel reconstruction: the hybrid, `--start-from`,
+    /// `--start-method`) before it trains on the images: `step` of `steps` Adam steps are done.
+    /// Delivered every [`START_FIT_EVENT_EVERY`] steps and at the last one, in static runs.
+    /// Stopping here ends the fit and the run after its first iteration, as a stop during the
+    /// voxel start does.
+    StartFit { step: usize, steps: usize },
     /// An iteration finished. `loss` is the training loss (neural: normalised pixels², Eq. 5.5)
     /// or the relative residual (voxel methods); `smoothed` the neural running mean.
     Iteration { window: Option<WindowPos>, iteration: usize, loss: f64, smoothed: Option<f64>, train_time_s: f64 },

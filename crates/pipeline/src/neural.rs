@@ -276,20 +276,40 @@ fn start_from<F: TrainableField>(
             path
         }
     };
+    if session.stopped {
+        // Stopped during the voxel start: the fit would only delay the stop by seconds.
+        return Ok(seconds);
+    }
     let run = start_run(&path, scene)?;
     let source = run.field()?;
     let target = |_: f64, points: &[Vec3], out: &mut [f32]| source.eval(points, 0.0, out);
     // The fit is the run's work too: it ends with the budget, as the voxel start and the field do.
     let limit = config.stopping.time_budget_s.map(|b| (b - seconds).max(0.0));
-    let report =
-        fluidnerf_neural::start::fit_to_frames(field, prep, &[(0.0, 0.0)], &target, &start.fit, config.seed, limit)
-            .map_err(|e| match e {
-                // Which run the start was read from: the user's, or the hybrid's own in start/.
-                fluidnerf_neural::NeuralError::Invalid { what, why } => {
-                    fluidnerf_neural::NeuralError::Invalid { what, why: format!("{}: {why}", path.display()) }
-                }
-                other => other,
-            })?;
+    let steps = start.fit.iterations;
+    let mut on_step = |step: usize| {
+        if step.is_multiple_of(crate::event::START_FIT_EVENT_EVERY) || step == steps {
+            session.emit(RunEvent::StartFit { step, steps })
+        } else {
+            ControlFlow::Continue(())
+        }
+    };
+    let report = fluidnerf_neural::start::fit_to_frames(
+        field,
+        prep,
+        &[(0.0, 0.0)],
+        &target,
+        &start.fit,
+        config.seed,
+        limit,
+        &mut on_step,
+    )
+    .map_err(|e| match e {
+        // Which run the start was read from: the user's, or the hybrid's own in start/.
+        fluidnerf_neural::NeuralError::Invalid { what, why } => {
+            fluidnerf_neural::NeuralError::Invalid { what, why: format!("{}: {why}", path.display()) }
+        }
+        other => other,
+    })?;
     log::info!(
         "started from {}: relative RMS difference {:.4} after {} steps ({:.1} s)",
         path.display(),
@@ -297,7 +317,7 @@ fn start_from<F: TrainableField>(
         report.steps,
         report.seconds
     );
-    if report.steps < start.fit.iterations {
+    if report.steps < start.fit.iterations && !report.stopped {
         session.warn(&format!(
             "the time budget ended the fit to the start after {} of its {} steps (relative RMS difference {:.4}); \
              a larger --time-budget gives it all",

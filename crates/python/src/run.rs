@@ -88,6 +88,11 @@ pub(crate) fn event_dict<'py>(py: Python<'py>, event: &RunEvent) -> PyResult<Bou
             d.set_item("windows", windows)?;
             d.set_item("start_iteration", start_iteration)?;
         }
+        RunEvent::StartFit { step, steps } => {
+            d.set_item("kind", "start_fit")?;
+            d.set_item("step", step)?;
+            d.set_item("steps", steps)?;
+        }
         RunEvent::Iteration { window: w, iteration, loss, smoothed, train_time_s } => {
             d.set_item("kind", "iteration")?;
             window(&d, w)?;

@@ -1065,6 +1065,8 @@ pub struct ProgressView {
     per_window: u64,
     rate: (Instant, u64, f64),
     evaluation: String,
+    /// The bar shows the fit of a field to its start ([`RunEvent::StartFit`]).
+    fitting: bool,
 }
 
 impl Default for ProgressView {
@@ -1076,6 +1078,7 @@ impl Default for ProgressView {
             per_window: 0,
             rate: (Instant::now(), 0, 0.0),
             evaluation: String::new(),
+            fitting: false,
         }
     }
 }
@@ -1085,6 +1088,11 @@ impl ProgressView {
     pub fn on_event(&mut self, event: &RunEvent) -> ControlFlow<()> {
         match event {
             RunEvent::Started { method, max_iterations, windows, start_iteration } => {
+                if std::mem::take(&mut self.fitting) {
+                    if let Some(bar) = self.bar.take() {
+                        bar.finish_and_clear();
+                    }
+                }
                 self.per_window = *max_iterations as u64;
                 // A hybrid's voxel start reports its own run first, with its own budget.
                 self.deadline = crate::progress::Deadline::default();
@@ -1097,6 +1105,22 @@ impl ProgressView {
                 bar.reset_eta();
                 self.rate = (Instant::now(), *start_iteration as u64, 0.0);
                 self.bar = Some(bar);
+            }
+            RunEvent::StartFit { step, steps } => {
+                // Between the voxel start's bar and the field's: the fit's own.
+                if !self.fitting {
+                    if let Some(bar) = self.bar.take() {
+                        bar.finish_and_clear();
+                    }
+                    if let Some(spinner) = self.writing.take() {
+                        spinner.finish_and_clear();
+                    }
+                    self.bar = Some(crate::progress::bar_until(*steps as u64, "fit to start", &self.deadline));
+                    self.fitting = true;
+                }
+                if let Some(bar) = &self.bar {
+                    bar.set_position(*step as u64);
+                }
             }
             RunEvent::Iteration { window, iteration, loss, smoothed, .. } => {
                 if let Some(bar) = &self.bar {

@@ -358,6 +358,30 @@ fn ctrl_c_during_the_hybrids_voxel_start_stops_the_start() {
     assert_eq!(report(&d.join("h"))["status"], "interrupted");
 }
 
+/// Ctrl-C while the hybrid fits its field to the voxel start stops the fit and the run at
+/// once. The fit delivered no events, so a stop there waited for all its steps (seconds in any
+/// run; here 4000 steps, a minute), with no progress shown.
+#[test]
+fn ctrl_c_during_the_fit_to_the_start_stops_the_run() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 8, &[]);
+    let args = "reconstruct scene -o h0 --method hybrid --resolution 8 --max-iterations 2 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    edit_json(&d.join("h0/config.json"), |c| c["method"]["start"]["fit"]["iterations"] = serde_json::json!(4000));
+    let started = std::time::Instant::now();
+    let out =
+        interrupted_once_made(d, &["reconstruct", "--config", "h0/config.json", "-o", "h"], "h/start/report.json");
+    let seconds = started.elapsed().as_secs_f64();
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(report(&d.join("h/start"))["status"], "finished");
+    let r = report(&d.join("h"));
+    assert_eq!(r["status"], "interrupted", "{r}");
+    assert!(r["iterations"].as_u64().is_some_and(|n| n <= 1), "{r}");
+    // Half a second after the start's report, then the stop: far from the fit's minute.
+    assert!(seconds < 15.0, "the run took {seconds:.1} s to stop");
+}
+
 /// The hybrid's fit of the field to its voxel start is part of the run's work: it ends with the
 /// time budget, as the voxel start and the field do. A fit of thousands of steps ran whole
 /// whatever the budget, so a study cell stated "at most 0.5 s" for a run that took seconds.

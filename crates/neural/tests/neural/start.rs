@@ -4,6 +4,8 @@
 
 use fluidnerf_core::{render_image, Aabb, RenderSettings};
 use fluidnerf_neural::dense::DenseGridField;
+use std::ops::ControlFlow;
+
 use fluidnerf_neural::start::{fit_to_target, StartFit};
 use fluidnerf_neural::train::{Prepared, Problem, TrainConfig, View};
 use fluidnerf_neural::{NeuralError, TrainableField};
@@ -58,7 +60,7 @@ fn a_fit_recovers_a_target_the_field_can_represent() {
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
     let before = relative_difference(&field, &target);
     let fit = StartFit { iterations: 400, points: 4096, learning_rate: 5e-2 };
-    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, None).expect("fits");
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, None, &mut go_on).expect("fits");
     let after = relative_difference(&field, &target);
     assert!(before > 0.4, "the start is far from the target: {before}");
     assert!(after < 0.02, "fitted: relative difference {after} (from {before})");
@@ -79,7 +81,7 @@ fn a_start_in_other_units_is_scaled_to_the_images() {
     for (dim, rescaled) in [(1.0f32, false), (1e-3, true), (1e4, true)] {
         let to_target = |_: &[f32], out: &mut [f32]| out.fill(2.0 * level * dim);
         let mut field = DenseGridField::new([5, 5, 5], 0.5);
-        let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, None).expect("fits");
+        let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, None, &mut go_on).expect("fits");
         assert_eq!(report.rescaled.is_some(), rescaled, "{dim}: {report:?}");
         let reached = mean(&field) / level;
         let wanted = if rescaled { 2.0 } else { 2.0 * dim };
@@ -87,11 +89,13 @@ fn a_start_in_other_units_is_scaled_to_the_images() {
     }
     let zero = |_: &[f32], out: &mut [f32]| out.fill(0.0);
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
-    let err = fit_to_target(&mut field, &prep, &zero, &fit, 3, None).expect_err("a zero start").to_string();
+    let err = fit_to_target(&mut field, &prep, &zero, &fit, 3, None, &mut go_on).expect_err("a zero start").to_string();
     assert!(err.contains("zero at every occupied point"), "{err}");
     // A negative start (an edited volume) fitted a zero field, which the run then trained on.
     let negative = |_: &[f32], out: &mut [f32]| out.fill(-1.0);
-    let err = fit_to_target(&mut field, &prep, &negative, &fit, 3, None).expect_err("a negative start").to_string();
+    let err = fit_to_target(&mut field, &prep, &negative, &fit, 3, None, &mut go_on)
+        .expect_err("a negative start")
+        .to_string();
     assert!(err.contains("or negative"), "{err}");
 }
 
@@ -104,7 +108,7 @@ fn a_fit_is_reproducible_from_its_seed() {
     let fit = StartFit { iterations: 20, points: 256, learning_rate: 5e-2 };
     let run = |seed| {
         let mut field = DenseGridField::new([5, 5, 5], 0.5);
-        fit_to_target(&mut field, &prep, &to_target, &fit, seed, None).expect("fits");
+        fit_to_target(&mut field, &prep, &to_target, &fit, seed, None, &mut go_on).expect("fits");
         field.params().to_vec()
     };
     assert_eq!(run(1), run(1));
@@ -119,7 +123,7 @@ fn settings_and_targets_a_fit_cannot_use_are_refused_by_name() {
     let why = |fit: StartFit, target: &(dyn Fn(&[f32], &mut [f32]) + Sync)| {
         let mut field = DenseGridField::new([5, 5, 5], 0.5);
         let before = field.params().to_vec();
-        let err = fit_to_target(&mut field, &prep, target, &fit, 0, None).expect_err("refused");
+        let err = fit_to_target(&mut field, &prep, target, &fit, 0, None, &mut go_on).expect_err("refused");
         assert_eq!(field.params(), before, "a refused fit leaves the field as it was");
         match err {
             NeuralError::Invalid { what, why } => format!("{what}: {why}"),
@@ -146,11 +150,42 @@ fn a_time_limit_stops_the_fit_after_one_step() {
     let to_target = |inputs: &[f32], out: &mut [f32]| out.copy_from_slice(&eval(&target, inputs));
     let fit = StartFit { iterations: 50, points: 256, learning_rate: 5e-2 };
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
-    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, Some(0.0)).expect("fits");
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, Some(0.0), &mut go_on).expect("fits");
     assert_eq!(report.steps, 1);
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
-    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, Some(1e9)).expect("fits");
+    let report = fit_to_target(&mut field, &prep, &to_target, &fit, 3, Some(1e9), &mut go_on).expect("fits");
     assert_eq!(report.steps, 50);
+    assert!(!report.stopped);
+}
+
+/// The caller sees every step and can stop the fit after any, as a user stops a run: the fit
+/// ends there, says so, and its field is the field of that step (the first steps of an
+/// unstopped fit, bit for bit).
+#[test]
+fn the_caller_stops_the_fit_after_any_step() {
+    let problem = problem();
+    let prep = Prepared::new(&problem, &TrainConfig::default()).expect("prepares");
+    let target = target_grid();
+    let to_target = |inputs: &[f32], out: &mut [f32]| out.copy_from_slice(&eval(&target, inputs));
+    let mut seen = Vec::new();
+    let mut stop_at_3 = |step: usize| {
+        seen.push(step);
+        if step == 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    };
+    let fit = StartFit { iterations: 50, points: 256, learning_rate: 5e-2 };
+    let mut stopped = DenseGridField::new([5, 5, 5], 0.5);
+    let report = fit_to_target(&mut stopped, &prep, &to_target, &fit, 3, None, &mut stop_at_3).expect("fits");
+    assert_eq!(seen, [1, 2, 3]);
+    assert_eq!((report.steps, report.stopped), (3, true), "{report:?}");
+    let mut three = DenseGridField::new([5, 5, 5], 0.5);
+    let short = StartFit { iterations: 3, ..fit };
+    let report = fit_to_target(&mut three, &prep, &to_target, &short, 3, None, &mut go_on).expect("fits");
+    assert_eq!((report.steps, report.stopped), (3, false));
+    assert_eq!(stopped.params(), three.params());
 }
 
 /// A target in world units and coordinates is fitted in field units (divided by the value
@@ -167,14 +202,28 @@ fn a_fit_to_frames_takes_the_target_in_world_units() {
     let fit = StartFit { iterations: 150, points: 2048, learning_rate: 5e-2 };
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
     let report =
-        fluidnerf_neural::start::fit_to_frames(&mut field, &prep, &[(0.0, 0.0)], &world, &fit, 3, None).expect("fits");
+        fluidnerf_neural::start::fit_to_frames(&mut field, &prep, &[(0.0, 0.0)], &world, &fit, 3, None, &mut go_on)
+            .expect("fits");
     assert_eq!(report.rescaled, None);
     let reached = eval(&field, &[0.5f32; 3])[0] as f64 * prep.meta.value_scale;
     assert!((reached / level - 1.0).abs() < 0.05, "reached {reached}, wanted {level}");
     let mut field = DenseGridField::new([5, 5, 5], 0.5);
-    let err =
-        fluidnerf_neural::start::fit_to_frames(&mut field, &prep, &[(0.0, 0.0), (1.0, 1.0)], &world, &fit, 3, None)
-            .expect_err("two instants")
-            .to_string();
+    let err = fluidnerf_neural::start::fit_to_frames(
+        &mut field,
+        &prep,
+        &[(0.0, 0.0), (1.0, 1.0)],
+        &world,
+        &fit,
+        3,
+        None,
+        &mut go_on,
+    )
+    .expect_err("two instants")
+    .to_string();
     assert!(err.contains("cannot start from 2 instants"), "{err}");
+}
+
+/// An `on_step` that never stops the fit.
+fn go_on(_: usize) -> ControlFlow<()> {
+    ControlFlow::Continue(())
 }
