@@ -74,6 +74,8 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
         if event["kind"] == "warning" and event["message"] not in given:
             given.append(event["message"])
 
+    started = time.monotonic()
+    waits = 0
     while True:
         try:
             outcomes = json.loads(_ext.reconstruct_windows(scene, config_json, out, k, k + 1, on_event))
@@ -82,10 +84,24 @@ def train_window(scene_root: str, config_json: str, out: str, window: int, *_aft
             # Another task of this window still trains it (Dask ran the task again, on a
             # worker it thought lost, or a second call was made meanwhile): its outcome is
             # read back once it finishes, and its checkpoint continued should it die. Failing
-            # here failed the whole run, as if the window were another run's.
-            if "is in use by another run" not in str(e) or lock not in str(e):
+            # here failed the whole run, as if the window were another run's. A holder on
+            # another machine that died stops refreshing the lock, which is then replaced
+            # (fluidnerf_pipeline's LOCK_STALE_AFTER, two minutes): the wait ends by itself.
+            # Only a lock that is never replaced (an earlier fluidnerf's, which its refusal
+            # says to remove by hand) is not waited for.
+            message = str(e)
+            holding = "is in use by another run" in message and lock in message
+            if not holding or "remove the lock file" in message:
+                if waits:
+                    raise FluidNerfError(
+                        f"window {k}: {message} (after waiting {time.monotonic() - started:.0f} s for another "
+                        f"task that held its lock {lock}, {waits} attempt(s))"
+                    ) from e
                 raise
-        time.sleep(0.1)
+        waits += 1
+        # Soon at first (a duplicate task usually ends in moments), then every second: a holder
+        # may train the window for hours.
+        time.sleep(min(0.1 * waits, 1.0))
 
 
 def finish(scene_root: str, config_json: str, out: str, *_after: Any) -> dict:

@@ -522,3 +522,75 @@ def test_the_warnings_of_a_dask_run_are_issued_on_the_client(client, tr_scene, t
     cfg = fluidnerf.build_config(tr_scene, method, **{**TR_OPTIONS, "stopping": {"max_iterations": 1}})
     outcome = fluidnerf.dask.train_window(str(tr_scene.root), json.dumps(cfg), str(tmp_path / "windows"), 0)
     assert [w[:40] for w in outcome["warnings"]] == ["held-out time 14.25 matches no frame of "]
+
+
+def _lock_of_another_machine(path: Path, heartbeat: bool, age_s: float) -> None:
+    """Writes the lock file `path` as a process of another machine holds it, refreshed by a
+    heartbeat or not (an earlier fluidnerf's), last modified `age_s` seconds ago. Written anew
+    (another file), as a lock taken over is."""
+    path.unlink(missing_ok=True)
+    path.write_text("4194305\nanother-machine.example\n" + ("heartbeat\n" if heartbeat else ""))
+    t = time.time() - age_s
+    os.utime(path, (t, t))
+
+
+def _train_window_in_thread(args: tuple) -> tuple[threading.Thread, list, list]:
+    outcomes: list = []
+    errors: list = []
+
+    def task() -> None:
+        try:
+            outcomes.append(fluidnerf.dask.train_window(*args))
+        except Exception as e:  # noqa: BLE001 - reported by the caller
+            errors.append(e)
+
+    thread = threading.Thread(target=task, daemon=True)
+    thread.start()
+    return thread, outcomes, errors
+
+
+def test_a_window_locked_by_a_machine_that_died_is_trained_once_its_heartbeat_stopped(tr_scene, tmp_path):
+    """A window's lock left by a worker machine that died was held for ever: train_window
+    waited for it for ever (and the command line refused it for ever)."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    root, out = str(tr_scene.root), str(tmp_path / "run")
+    fluidnerf.dask.train_window(root, cfg, out, 0)
+    lock = tmp_path / "run" / "windows" / "w001.lock"
+    _lock_of_another_machine(lock, heartbeat=True, age_s=600)
+    thread, outcomes, errors = _train_window_in_thread((root, cfg, out, 1))
+    thread.join(timeout=120)
+    assert not thread.is_alive(), "train_window still waits for the lock of a machine that died"
+    assert not errors, errors
+    assert outcomes[0]["index"] == 1 and outcomes[0]["reused"] is False
+    assert not lock.exists()
+
+
+def test_a_window_lock_that_is_never_replaced_is_not_waited_for_and_the_wait_is_reported(tr_scene, tmp_path):
+    """While another machine's heartbeat goes on its window is waited for; a lock of an
+    earlier fluidnerf (no heartbeat), which is never taken as stale, ends the wait with an
+    error saying how long it waited, instead of a wait for ever."""
+    cfg = json.dumps(fluidnerf.build_config(tr_scene, TR_METHOD, **TR_OPTIONS))
+    root, out = str(tr_scene.root), str(tmp_path / "run")
+    fluidnerf.dask.train_window(root, cfg, out, 0)
+    lock = tmp_path / "run" / "windows" / "w001.lock"
+    _lock_of_another_machine(lock, heartbeat=True, age_s=0)
+    thread, outcomes, errors = _train_window_in_thread((root, cfg, out, 1))
+    thread.join(timeout=1.0)
+    assert thread.is_alive() and not outcomes and not errors, "a live holder's window was not waited for"
+    _lock_of_another_machine(lock, heartbeat=False, age_s=0)
+    thread.join(timeout=60)
+    assert not thread.is_alive(), "train_window still waits for a lock that is never replaced"
+    assert not outcomes and len(errors) == 1
+    message = str(errors[0])
+    assert isinstance(errors[0], fluidnerf.FluidNerfError)
+    assert re.search(
+        r"^window 1: .*in use by another run \(process 4194305 on another-machine.example", message
+    )
+    assert "remove the lock file" in message
+    assert re.search(
+        r"after waiting \d+ s for another task that held its lock w001.lock, \d+ attempt", message
+    )
+    # Without a wait, the refusal is the pipeline's own.
+    with pytest.raises(fluidnerf.FluidNerfError, match="remove the lock file") as e:
+        fluidnerf.dask.train_window(root, cfg, out, 1)
+    assert "after waiting" not in str(e.value)

@@ -13,12 +13,18 @@
 //! which the lock tells): it is never taken for a finished one, and it is resumed or replaced
 //! only when asked.
 //!
+//! A lock ([`FileLock`]) names its process and machine, and its holder refreshes the file's
+//! modification time every [`LOCK_HEARTBEAT`] while it holds it, so that a lock left by a
+//! machine that died on a shared file system is recognised as stale after
+//! [`LOCK_STALE_AFTER`] (see [`FileLock`] for the rules).
+//!
 //! A run folder is never the scene's folder, a folder inside it, or one that holds anything
 //! the scene reads (its images, masks, background frames and ground truth); nor a folder of
 //! another kind ([`FolderKind`]). `--force` replaces only a fluidnerf run: a folder whose
 //! `config.json` is a run's configuration.
 
 use std::path::{Component, Path, PathBuf};
+use std::time::{Duration, SystemTime};
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -354,7 +360,7 @@ pub const OWN_SCENE: &str = "scene";
 #[derive(Debug)]
 pub struct RunDir {
     root: PathBuf,
-    lock: Option<PathBuf>,
+    lock: Option<FileLock>,
     resume: bool,
     /// The folder did not exist before: if the run is refused before writing anything, it goes.
     created: bool,
@@ -365,8 +371,9 @@ pub struct RunDir {
 
 impl Drop for RunDir {
     fn drop(&mut self) {
-        if let Some(lock) = &self.lock {
-            let _ = std::fs::remove_file(lock);
+        if let Some(lock) = self.lock.take() {
+            // The lock goes first (its heartbeat stopped, its file removed), then the folder.
+            drop(lock);
             if self.created {
                 // Removes the folder only when nothing was written into it.
                 let _ = std::fs::remove_dir(&self.root);
@@ -386,7 +393,8 @@ impl RunDir {
     }
 
     /// Creates (or reuses, as `overwrite` allows) the folder of a new run and takes its lock. A
-    /// stale lock (its process is gone) is replaced. Refused: a folder apart from the scene in
+    /// stale lock (its process is gone, or its machine's heartbeat stopped; [`FileLock`]) is
+    /// replaced. Refused: a folder apart from the scene in
     /// `scene_root` is needed ([`refuse_scene_inputs`]), a folder of another kind
     /// ([`FolderKind`]), and one that holds run files but no run ([`DirState::Foreign`]).
     pub fn create(
@@ -467,7 +475,7 @@ impl RunDir {
     }
 
     fn take_lock(&mut self) -> Result<(), PipelineError> {
-        self.lock = Some(acquire_lock(&self.root, &self.root.join(".lock"))?);
+        self.lock = Some(FileLock::take(&self.root, &self.root.join(".lock"))?);
         Ok(())
     }
 
@@ -518,7 +526,7 @@ impl RunDir {
         }
         let lock = root.join(".lock");
         if let Some(holder) = LockHolder::read(&lock) {
-            if !holder.is_this_process() && holder.may_be_running() {
+            if !holder.is_this_process() && matches!(holder.liveness(&lock), Liveness::Held(_)) {
                 return Err(refuse(format!(
                     "is in use by a whole run ({holder}, lock file {}); wait for it to finish",
                     lock.display()
@@ -529,9 +537,9 @@ impl RunDir {
     }
 
     /// Takes the lock file `name` (relative to the folder) until the guard is dropped; refused
-    /// while a live process holds it, a stale one (its process gone) is replaced.
+    /// while a live process holds it, a stale one is replaced ([`FileLock`]).
     pub fn lock_file(&self, name: &str) -> Result<FileLock, PipelineError> {
-        Ok(FileLock { path: acquire_lock(&self.root, &self.path(name))? })
+        FileLock::take(&self.root, &self.path(name))
     }
 
     /// Removes the files of an earlier run (only those a run writes, and only from a folder that
@@ -769,53 +777,177 @@ pub fn check_start_outside(config: &crate::RunConfig, out: &Path, overwrite: Ove
     Ok(())
 }
 
-/// A lock file held until dropped ([`RunDir::lock_file`]).
+/// How often the holder of a lock refreshes its file's modification time (its heartbeat).
+pub const LOCK_HEARTBEAT: Duration = Duration::from_secs(10);
+
+/// How long a lock of another machine may go without a heartbeat before it is taken as
+/// abandoned (that machine died, or lost the file system, with the lock held) and replaced:
+/// twelve missed heartbeats, room for a loaded machine or a slow network file system.
+pub const LOCK_STALE_AFTER: Duration = Duration::from_secs(120);
+
+/// The third line of a lock file whose holder refreshes it every [`LOCK_HEARTBEAT`].
+const HEARTBEAT_MARK: &str = "heartbeat";
+
+/// A lock file held until dropped ([`RunDir::create`], [`RunDir::lock_file`]).
+///
+/// The file holds three lines: the process id, the machine's name and `heartbeat`. While the
+/// lock is held a background thread rewrites the file every [`LOCK_HEARTBEAT`] (the same
+/// bytes: the file system stamps its modification time); it is stopped and joined when the
+/// lock is dropped, before the file is removed, and it never creates the file, so a dropped
+/// lock does not come back. A lock found taken over (its file gone or another holder's) is
+/// neither refreshed nor removed any more.
+///
+/// Whether an existing lock is held:
+/// - one of this machine is held while its process lives (the process id tells; the
+///   heartbeat is not needed);
+/// - one of another machine, which this one cannot ask about its processes, is held while its
+///   heartbeat goes on: it is stale, and replaced with a warning, once its file has not been
+///   refreshed for [`LOCK_STALE_AFTER`]. The file's age is measured on the file system's
+///   clock, not this machine's: against the modification time of a probe file just created
+///   beside it (and removed), so that clocks set apart on the two machines do not matter;
+/// - one of another machine without the `heartbeat` line was written by an earlier fluidnerf,
+///   which never refreshed it: its age says nothing about whether its run still goes on (a
+///   live run of hours has an old lock), so it is never taken as stale: it is held until
+///   removed by hand, as the refusal says.
 #[derive(Debug)]
 pub struct FileLock {
     path: PathBuf,
+    /// What this lock wrote into its file.
+    contents: String,
+    /// The heartbeat thread, stopped by dropping the sender.
+    heartbeat: Option<(std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>)>,
+}
+
+impl FileLock {
+    /// Takes the lock file `path` of the run folder `root` (creating its folder if missing),
+    /// refreshed every [`LOCK_HEARTBEAT`]; refused while it is held, a stale one is replaced.
+    fn take(root: &Path, path: &Path) -> Result<FileLock, PipelineError> {
+        Self::take_with(root, path, LOCK_HEARTBEAT)
+    }
+
+    /// [`FileLock::take`] with a heartbeat every `every`.
+    fn take_with(root: &Path, path: &Path, every: Duration) -> Result<FileLock, PipelineError> {
+        let contents = format!("{}\n{}\n{HEARTBEAT_MARK}\n", std::process::id(), host_name());
+        acquire_lock(root, path, &contents)?;
+        let (stop, stopped) = std::sync::mpsc::channel::<()>();
+        let (file, text) = (path.to_path_buf(), contents.clone());
+        let thread = std::thread::Builder::new()
+            .name("fluidnerf-lock-heartbeat".into())
+            .spawn(move || heartbeat(&file, &text, every, &stopped));
+        let heartbeat = match thread {
+            Ok(thread) => Some((stop, thread)),
+            Err(e) => {
+                let _ = std::fs::remove_file(path);
+                return Err(PipelineError::file(path, format!("cannot start the lock's heartbeat: {e}")));
+            }
+        };
+        Ok(FileLock { path: path.to_path_buf(), contents, heartbeat })
+    }
 }
 
 impl Drop for FileLock {
     fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
+        if let Some((stop, thread)) = self.heartbeat.take() {
+            drop(stop);
+            let _ = thread.join();
+        }
+        // Only while it is still this lock: one taken over as stale (this process was stopped
+        // past the limit) is another run's now.
+        if std::fs::read_to_string(&self.path).is_ok_and(|t| t == self.contents) {
+            let _ = std::fs::remove_file(&self.path);
+        }
     }
 }
 
-/// Creates the lock file `path` of the run folder `root` holding this process's id; refused
-/// while a live process holds it, a stale one (its process gone) is replaced.
-fn acquire_lock(root: &Path, path: &Path) -> Result<PathBuf, PipelineError> {
+/// The heartbeat of the lock file `path` holding `contents`: rewrites it every `every` until
+/// `stop` is dropped, and ends once the file is gone or another holder's.
+fn heartbeat(path: &Path, contents: &str, every: Duration, stop: &std::sync::mpsc::Receiver<()>) {
+    let mut failed = false;
+    while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stop.recv_timeout(every) {
+        match refresh(path, contents) {
+            Ok(true) => failed = false,
+            Ok(false) => {
+                log::warn!(
+                    "{}: the lock was removed or taken over by another run while this one held it (its heartbeat \
+                     stopped for more than {} s?); it is no longer refreshed",
+                    path.display(),
+                    LOCK_STALE_AFTER.as_secs()
+                );
+                return;
+            }
+            // A file system that failed once (a network hiccup) is tried again at the next beat.
+            Err(e) if !failed => {
+                failed = true;
+                log::warn!("{}: cannot refresh the lock: {e}", path.display());
+            }
+            Err(_) => {}
+        }
+    }
+}
+
+/// Rewrites the lock file `path` with its `contents` (the file system stamps the time), if it
+/// still holds them; false when it is gone or holds another's. Never creates it.
+fn refresh(path: &Path, contents: &str) -> std::io::Result<bool> {
+    use std::io::{Read, Seek, Write};
+    let mut f = match std::fs::File::options().read(true).write(true).open(path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => return Err(e),
+    };
+    let mut text = String::new();
+    if f.read_to_string(&mut text).is_err() || text != contents {
+        return Ok(false);
+    }
+    f.rewind()?;
+    f.write_all(contents.as_bytes())?;
+    Ok(true)
+}
+
+/// Creates the lock file `path` of the run folder `root` holding `contents`; refused while it
+/// is held, a stale one is replaced ([`FileLock`]).
+fn acquire_lock(root: &Path, path: &Path, contents: &str) -> Result<(), PipelineError> {
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| PipelineError::file(parent, e))?;
     }
-    let me = format!("{}\n{}\n", std::process::id(), host_name());
-    for _ in 0..2 {
+    for _ in 0..3 {
         match std::fs::OpenOptions::new().write(true).create_new(true).open(path) {
             Ok(mut f) => {
                 use std::io::Write;
-                f.write_all(me.as_bytes()).map_err(|e| PipelineError::file(path, e))?;
-                return Ok(path.to_path_buf());
+                if let Err(e) = f.write_all(contents.as_bytes()) {
+                    let _ = std::fs::remove_file(path);
+                    return Err(PipelineError::file(path, e));
+                }
+                return Ok(());
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 let holder = LockHolder::read(path);
-                if let Some(holder) = holder.as_ref().filter(|h| h.may_be_running()) {
-                    let remote = if holder.elsewhere() {
-                        "; this machine cannot tell whether a process of another one still runs: if it has \
-                         ended, remove the lock file"
-                    } else {
-                        ""
-                    };
-                    return Err(PipelineError::RunDir {
-                        path: root.to_path_buf(),
-                        why: format!(
-                            "is in use by another run ({holder}, lock file {}); wait for it to finish or use another \
-                             output folder{remote}",
-                            path.display()
-                        ),
-                    });
+                let why = match holder.as_ref().map(|h| h.liveness(path)) {
+                    Some(Liveness::Held(note)) => {
+                        let holder = holder.as_ref().map_or_else(String::new, ToString::to_string);
+                        return Err(PipelineError::RunDir {
+                            path: root.to_path_buf(),
+                            why: format!(
+                                "is in use by another run ({holder}, lock file {}); wait for it to finish or use \
+                                 another output folder{note}",
+                                path.display()
+                            ),
+                        });
+                    }
+                    Some(Liveness::Stale(why)) => why,
+                    None => "unreadable".to_string(),
+                };
+                let named = holder.as_ref().map_or_else(|| "an unreadable holder".to_string(), |h| h.to_string());
+                // Removed only if it is still the lock judged stale: another process may have
+                // replaced it meanwhile, and that one is tried again.
+                if LockHolder::read(path).map(|h| (h.text, h.modified)) != holder.map(|h| (h.text, h.modified)) {
+                    continue;
                 }
-                let named = holder.map_or_else(|| "an unreadable holder".to_string(), |h| h.to_string());
-                log::warn!("{}: removing the stale lock of {named} (no longer running)", root.display());
-                std::fs::remove_file(path).map_err(|e| PipelineError::file(path, e))?;
+                log::warn!("{}: removing the stale lock of {named} ({why})", root.display());
+                match std::fs::remove_file(path) {
+                    Ok(()) => {}
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                    Err(e) => return Err(PipelineError::file(path, e)),
+                }
             }
             Err(e) => return Err(PipelineError::file(path, format!("cannot take the run lock: {e}"))),
         }
@@ -839,20 +971,38 @@ fn host_name() -> &'static str {
 }
 
 /// Who holds a lock file: a process id and, in files written since machines were recorded,
-/// the machine it runs on.
+/// the machine it runs on; whether it refreshes the file ([`FileLock`]), and when it last did.
 #[derive(Debug)]
 struct LockHolder {
     pid: u32,
     host: Option<String>,
+    heartbeat: bool,
+    /// The file's modification time, read from the same opening as its text (on a network
+    /// file system, opening the file fetches its current attributes).
+    modified: Option<SystemTime>,
+    text: String,
+}
+
+/// Whether a lock is held ([`LockHolder::liveness`]).
+enum Liveness {
+    /// Held; what a refusal adds about it.
+    Held(String),
+    /// Not held any more, and why.
+    Stale(String),
 }
 
 impl LockHolder {
     fn read(path: &Path) -> Option<LockHolder> {
-        let text = std::fs::read_to_string(path).ok()?;
+        use std::io::Read;
+        let mut f = std::fs::File::open(path).ok()?;
+        let mut text = String::new();
+        f.read_to_string(&mut text).ok()?;
+        let modified = f.metadata().and_then(|m| m.modified()).ok();
         let mut lines = text.lines();
         let pid = lines.next()?.trim().parse().ok()?;
         let host = lines.next().map(|h| h.trim().to_string()).filter(|h| !h.is_empty());
-        Some(LockHolder { pid, host })
+        let heartbeat = lines.next().is_some_and(|l| l.trim() == HEARTBEAT_MARK);
+        Some(LockHolder { pid, host, heartbeat, modified, text })
     }
 
     /// Whether it runs on another machine than this one.
@@ -865,11 +1015,55 @@ impl LockHolder {
         self.pid == std::process::id() && !self.elsewhere()
     }
 
-    /// A process of this machine that is alive, or any process of another machine, which this
-    /// one cannot ask.
-    fn may_be_running(&self) -> bool {
-        self.elsewhere() || process_alive(self.pid)
+    /// Whether the lock file `path` it was read from is held, by the rules of [`FileLock`].
+    fn liveness(&self, path: &Path) -> Liveness {
+        if !self.elsewhere() {
+            return if process_alive(self.pid) {
+                Liveness::Held(String::new())
+            } else {
+                Liveness::Stale("no longer running".into())
+            };
+        }
+        let limit = LOCK_STALE_AFTER.as_secs();
+        if !self.heartbeat {
+            return Liveness::Held(format!(
+                "; the lock was written by an earlier fluidnerf, which does not refresh it, so whether a process of \
+                 another machine still runs cannot be told (a refreshed lock is taken as abandoned {limit} s after \
+                 its last refresh): if it has ended, remove the lock file"
+            ));
+        }
+        match self.modified.and_then(|m| heartbeat_age(path, m)) {
+            Some(age) if age > LOCK_STALE_AFTER => Liveness::Stale(format!(
+                "its heartbeat stopped {} s ago, more than the {limit} s after which a lock of another machine is \
+                 taken as abandoned",
+                age.as_secs()
+            )),
+            Some(age) => Liveness::Held(format!(
+                "; its heartbeat refreshed the lock file {} s ago, and it is taken as abandoned (and replaced) once \
+                 it has not for {limit} s",
+                age.as_secs()
+            )),
+            None => Liveness::Held(format!(
+                "; the age of its heartbeat cannot be measured here (no probe file can be created beside the lock \
+                 file), so it is not taken as abandoned even after {limit} s"
+            )),
+        }
     }
+}
+
+/// How long ago the lock file `path` was last modified (`modified`), on the clock of its file
+/// system: the modification time of a probe file created beside it, then removed, is "now".
+/// Zero for a file modified after the probe; None when no probe can be created.
+fn heartbeat_age(path: &Path, modified: SystemTime) -> Option<Duration> {
+    static PROBES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = PROBES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = format!("{}.probe-{}-{n}", path.file_name()?.to_string_lossy(), std::process::id());
+    let probe = path.with_file_name(name);
+    let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&probe).ok()?;
+    let now = file.metadata().and_then(|m| m.modified());
+    drop(file);
+    let _ = std::fs::remove_file(&probe);
+    Some(now.ok()?.duration_since(modified).unwrap_or_default())
 }
 
 impl std::fmt::Display for LockHolder {
@@ -1340,25 +1534,142 @@ mod tests {
             std::fs::write(tmp.path().join(".lock"), holder).unwrap();
             let dir = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap();
             let text = std::fs::read_to_string(tmp.path().join(".lock")).unwrap();
-            assert_eq!(text, format!("{}\n{}\n", std::process::id(), host_name()));
+            assert_eq!(text, format!("{}\n{}\nheartbeat\n", std::process::id(), host_name()));
             drop(dir);
         }
     }
 
+    /// Sets the modification time of `path` to `ago` before now.
+    fn age(path: &Path, ago: Duration) {
+        std::fs::File::options().write(true).open(path).unwrap().set_modified(SystemTime::now() - ago).unwrap();
+    }
+
+    fn modified(path: &Path) -> SystemTime {
+        std::fs::metadata(path).unwrap().modified().unwrap()
+    }
+
+    /// A lock of another machine whose heartbeat stopped longer ago than the limit (that
+    /// machine died with it held) is stale, and replaced as a dead local process's is; a whole
+    /// run's no longer keeps windows out of the folder either.
+    #[test]
+    fn a_lock_of_another_machine_whose_heartbeat_stopped_is_replaced() {
+        let tmp = tempfile::tempdir().unwrap();
+        let lock = tmp.path().join(".lock");
+        std::fs::write(&lock, "4194305\nanother-machine.example\nheartbeat\n").unwrap();
+        age(&lock, LOCK_STALE_AFTER + Duration::from_secs(30));
+        RunDir::check_windows(tmp.path(), None).unwrap();
+        let dir = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap();
+        let text = std::fs::read_to_string(&lock).unwrap();
+        assert_eq!(text, format!("{}\n{}\nheartbeat\n", std::process::id(), host_name()));
+        drop(dir);
+        assert!(!lock.exists());
+        let names: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert!(names.is_empty(), "no probe file is left: {names:?}");
+    }
+
+    /// A lock of another machine whose heartbeat is recent is held, as is one just short of
+    /// the limit; the refusal states the limit.
+    #[test]
+    fn a_lock_of_another_machine_with_a_recent_heartbeat_is_held() {
+        let tmp = tempfile::tempdir().unwrap();
+        let lock = tmp.path().join("windows/w000.lock");
+        std::fs::create_dir_all(lock.parent().unwrap()).unwrap();
+        for ago in [Duration::ZERO, LOCK_STALE_AFTER - Duration::from_secs(20)] {
+            std::fs::write(&lock, "4194305\nanother-machine.example\nheartbeat\n").unwrap();
+            age(&lock, ago);
+            let dir = RunDir::open(tmp.path()).unwrap();
+            let e = dir.lock_file("windows/w000.lock").unwrap_err().to_string();
+            assert!(
+                e.contains("in use by another run (process 4194305 on another-machine.example")
+                    && e.contains(&format!("once it has not for {} s", LOCK_STALE_AFTER.as_secs()))
+                    && !e.contains("remove the lock file"),
+                "{e}"
+            );
+            assert_eq!(std::fs::read_to_string(&lock).unwrap(), "4194305\nanother-machine.example\nheartbeat\n");
+        }
+        assert_eq!(std::fs::read_dir(lock.parent().unwrap()).unwrap().count(), 1, "no probe file is left");
+    }
+
+    /// A held lock's file is refreshed by its heartbeat, and keeps its holder.
+    #[test]
+    fn a_held_lock_is_refreshed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("w000.lock");
+        let lock = FileLock::take_with(tmp.path(), &path, Duration::from_millis(20)).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let long_ago = SystemTime::now() - Duration::from_secs(3600);
+        std::fs::File::options().write(true).open(&path).unwrap().set_modified(long_ago).unwrap();
+        let t0 = std::time::Instant::now();
+        while modified(&path) <= long_ago && t0.elapsed() < Duration::from_secs(2) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(modified(&path) > long_ago + Duration::from_secs(3000), "the heartbeat did not refresh the lock");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), text);
+        drop(lock);
+    }
+
+    /// A dropped lock's heartbeat ends with it: the file is removed, does not come back, and a
+    /// lock another run takes afterwards at the same path is not touched.
+    #[test]
+    fn the_heartbeat_ends_when_the_lock_is_dropped() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("w000.lock");
+        let every = Duration::from_millis(20);
+        let lock = FileLock::take_with(tmp.path(), &path, every).unwrap();
+        std::thread::sleep(every * 3);
+        drop(lock);
+        assert!(!path.exists());
+        std::thread::sleep(every * 5);
+        assert!(!path.exists(), "the dropped lock came back");
+        std::fs::write(&path, "4194305\nanother-machine.example\nheartbeat\n").unwrap();
+        age(&path, Duration::from_secs(3600));
+        let before = modified(&path);
+        std::thread::sleep(every * 10);
+        assert_eq!(modified(&path), before, "a heartbeat still refreshes the file");
+    }
+
+    /// A lock taken over while held (this process was stopped past the limit, and another
+    /// machine replaced it) is the other run's: neither refreshed nor removed by this one.
+    #[test]
+    fn a_lock_taken_over_is_left_to_its_new_holder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("w000.lock");
+        let every = Duration::from_millis(20);
+        let lock = FileLock::take_with(tmp.path(), &path, every).unwrap();
+        // Replaced as a stale lock is: removed, and created anew.
+        let theirs = "4194305\nanother-machine.example\nheartbeat\n";
+        std::fs::remove_file(&path).unwrap();
+        std::fs::write(&path, theirs).unwrap();
+        age(&path, Duration::from_secs(3600));
+        let before = modified(&path);
+        std::thread::sleep(every * 10);
+        assert_eq!(modified(&path), before, "another run's lock was refreshed");
+        drop(lock);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), theirs);
+    }
+
     /// A lock of another machine sharing the folder is held whatever its process id means
     /// here: neither taken as stale when no process of this machine has that id, nor as this
-    /// process's own when one has (this very process's id, here).
+    /// process's own when one has (this very process's id, here). One written by an earlier
+    /// fluidnerf (no heartbeat line) is held however old, since nothing refreshed it.
     #[test]
     fn a_lock_of_another_machine_is_held() {
         let tmp = tempfile::tempdir().unwrap();
+        let lock = tmp.path().join(".lock");
         for pid in [4194305, std::process::id()] {
-            std::fs::write(tmp.path().join(".lock"), format!("{pid}\nanother-machine.example\n")).unwrap();
-            let e = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap_err().to_string();
-            assert!(
-                e.contains(&format!("in use by another run (process {pid} on another-machine.example"))
-                    && e.contains("remove the lock file"),
-                "{e}"
-            );
+            for ago in [Duration::ZERO, Duration::from_secs(24 * 3600)] {
+                std::fs::write(&lock, format!("{pid}\nanother-machine.example\n")).unwrap();
+                age(&lock, ago);
+                let e = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap_err().to_string();
+                assert!(
+                    e.contains(&format!("in use by another run (process {pid} on another-machine.example"))
+                        && e.contains("does not refresh it")
+                        && e.contains("remove the lock file"),
+                    "{e}"
+                );
+                let e = RunDir::check_windows(tmp.path(), None).unwrap_err().to_string();
+                assert!(e.contains("in use by a whole run"), "{e}");
+            }
         }
     }
 }
