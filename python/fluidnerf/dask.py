@@ -165,7 +165,11 @@ def reconstruct(
     as a single task, into a folder ``overwrite`` allows as for :func:`fluidnerf.reconstruct`
     (``"refuse"``, ``"force"`` or ``"resume"``). A time-resolved run continues the windows
     its folder holds whenever it is called again; it takes ``"refuse"`` or ``"resume"``
-    (the same), and is never replaced (``"force"`` is refused: remove the folder). ``callback(event)`` receives
+    (the same, but for a folder that holds the run's report: a finished run, or one in one
+    piece that was interrupted, is refused, or with ``"resume"`` resumed as
+    :func:`fluidnerf.reconstruct` resumes it, in a single task that reads its finished windows
+    back, trains any missing and writes the results again), and is never replaced
+    (``"force"`` is refused: remove the folder). ``callback(event)`` receives
     ``{"kind": "window_finished", "window": k, "windows": n, "reused": bool, ...}`` as windows
     complete. The run's warnings are issued here as :class:`fluidnerf.FluidNerfWarning`, each
     once, as :func:`fluidnerf.reconstruct` issues them. Calling it again on the same folder reuses every finished window, so an
@@ -185,6 +189,14 @@ def reconstruct(
         config = out_path / "config.json"
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     whole = cfg["method"]["name"] not in ("tr-fluidnerf", "tr-fast", "static-per-frame")
+    if not whole and overwrite == "resume" and (out_path / "report.json").is_file():
+        # A time-resolved run that holds its report (finished, or a run in one piece that was
+        # interrupted) is resumed as fluidnerf.reconstruct and `reconstruct --resume` resume
+        # it: in one task, which reads back every finished window, trains any missing and
+        # writes the results again. Its windows are not trained one at a time into it
+        # (check_window_folder refuses the folder: a report would sit beside windows of a run
+        # not finished), which refused the resumed run outright.
+        whole = True
     if not whole and overwrite == "force":
         raise FluidNerfError(
             f"overwrite: a time-resolved run on Dask continues the windows {out_path} holds whenever it is "

@@ -594,3 +594,32 @@ def test_a_window_lock_that_is_never_replaced_is_not_waited_for_and_the_wait_is_
     with pytest.raises(fluidnerf.FluidNerfError, match="remove the lock file") as e:
         fluidnerf.dask.train_window(root, cfg, out, 1)
     assert "after waiting" not in str(e.value)
+
+
+def test_a_finished_time_resolved_dask_run_resumed_is_returned_as_the_serial_resume_returns_it(
+    client, tr_scene, serial, tmp_path
+):
+    """overwrite="resume" on a folder holding a finished time-resolved run was refused ("already
+    holds a finished run; training windows into it would mix two runs"), where
+    fluidnerf.reconstruct and `reconstruct --resume` read its windows back and return the run."""
+    out = tmp_path / "run"
+    first = fluidnerf.dask.reconstruct(client, tr_scene, TR_METHOD, out, **TR_OPTIONS)
+    done = {p.name: p.stat().st_mtime_ns for p in (out / "windows").glob("*.done.json")}
+    assert len(done) == 4
+    again = fluidnerf.dask.reconstruct(client, tr_scene, TR_METHOD, out, overwrite="resume", **TR_OPTIONS)
+    assert again.status == "finished" and again.path == first.path
+    assert_same_run(serial, again)
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "windows").glob("*.done.json")} == done, (
+        "trained again"
+    )
+    # The serial path, the reference, on its own finished run.
+    serial_out = tmp_path / "serial"
+    fluidnerf.reconstruct(tr_scene, TR_METHOD, serial_out, progress=False, **TR_OPTIONS)
+    resumed = fluidnerf.reconstruct(
+        tr_scene, TR_METHOD, serial_out, overwrite="resume", progress=False, **TR_OPTIONS
+    )
+    assert resumed.status == again.status
+    assert_same_run(resumed, again)
+    # Without "resume" a finished run is still refused, as the serial path refuses it.
+    with pytest.raises(fluidnerf.FluidNerfError, match="already holds a finished run"):
+        fluidnerf.dask.reconstruct(client, tr_scene, TR_METHOD, out, **TR_OPTIONS)
