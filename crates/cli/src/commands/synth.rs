@@ -25,6 +25,54 @@ in mm), truth/*.npy (the ground truth on the voxel grid, shape (nz, ny, nx)), pr
 central slice of the truth and one camera image) and synth.json (the resolved settings; rerun \
 with --config). The same seed gives the same bytes.";
 
+/// Every option of [`Args`] but `--list-presets`: each says what to synthesise, and
+/// `--list-presets` synthesises nothing, so it refuses them, naming the one given (the list was
+/// printed and the rest ignored: a user who asked for a scene got none, and no error).
+const SYNTHESIS_OPTIONS: &[&str] = &[
+    "out",
+    "preset",
+    "config",
+    "force",
+    "seed",
+    "phantom",
+    "truth_volume",
+    "resolution",
+    "aabb",
+    "times",
+    "cfd_step",
+    "layout",
+    "cameras",
+    "arc",
+    "every",
+    "first",
+    "holdout",
+    "jitter_position",
+    "jitter_rotation",
+    "distance",
+    "pixels",
+    "magnification",
+    "focal_length",
+    "f_number",
+    "pixel_pitch",
+    "model",
+    "supersample",
+    "analytic",
+    "rays_per_voxel",
+    "noise",
+    "full_well",
+    "dark_offset",
+    "bit_depth",
+    "full_scale_fraction",
+    "real_like",
+    "gain_spread",
+    "background_level",
+    "dark_noise",
+    "background_frames",
+    "jpeg_quality",
+    "vignetting",
+    "flat_frames",
+];
+
 /// Phantoms.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum PhantomArg {
@@ -80,8 +128,9 @@ pub struct Args {
     /// Preset to start from (see --list-presets).
     #[arg(short, long, default_value = DEFAULT_PRESET)]
     pub preset: String,
-    /// List the presets and exit.
-    #[arg(long)]
+    /// List the presets and exit; it synthesises nothing, so no other option of the command
+    /// goes with it.
+    #[arg(long, conflicts_with_all = SYNTHESIS_OPTIONS)]
     pub list_presets: bool,
     /// Start from a `synth.json` written by an earlier run instead of a preset (options given
     /// here still override it).
@@ -818,4 +867,20 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
         recorded("flat", syn.real.as_ref().is_some_and(|r| r.flats.iter().any(|f| !f.is_empty())))
     );
     Ok(text)
+}
+
+#[cfg(test)]
+mod tests {
+    /// `--list-presets` refuses every other option of the command, those added later too: each
+    /// is in [`super::SYNTHESIS_OPTIONS`], which names nothing else.
+    #[test]
+    fn list_presets_conflicts_with_every_other_option() {
+        let cmd = <super::Args as clap::Args>::augment_args(clap::Command::new("synth"));
+        let mut options: Vec<&str> =
+            cmd.get_arguments().map(|a| a.get_id().as_str()).filter(|&id| id != "list_presets").collect();
+        let mut listed = super::SYNTHESIS_OPTIONS.to_vec();
+        options.sort_unstable();
+        listed.sort_unstable();
+        assert_eq!(options, listed);
+    }
 }

@@ -214,6 +214,36 @@ fn bad_settings_fail_before_any_work() {
     }
 }
 
+/// `--list-presets` with options of a synthesis printed the list and ignored them: a user who
+/// asked for a scene had none, and no error. Refused, naming the option, and nothing written.
+#[test]
+fn list_presets_refuses_the_options_of_a_synthesis() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let dir = tmp.path().join("set");
+    let d = dir.to_str().expect("utf-8 path");
+    for (extra, named) in [
+        (&["--preset", "demo"][..], "--preset"),
+        (&["-o", d], "--out"),
+        (&["--cameras", "4"], "--cameras"),
+        (&["--seed", "3"], "--seed"),
+        (&["--force"], "--force"),
+    ] {
+        let args: Vec<&str> = ["--list-presets"].iter().chain(extra).copied().collect();
+        let o = synth(&args);
+        let (out, err) = text(&o);
+        assert!(!o.status.success(), "{args:?} should fail: {out}");
+        assert!(err.contains("'--list-presets' cannot be used with") && err.contains(named), "{args:?}: {err}");
+        assert!(out.is_empty(), "{args:?} printed the list: {out}");
+    }
+    let o = synth(&["--list-presets", "--preset", "demo", "-o", d, "--cameras", "4"]);
+    assert!(!o.status.success());
+    assert!(!dir.exists(), "a refused command wrote {}", dir.display());
+    // The options that are not the synthesis's are still taken.
+    let o = synth(&["--list-presets", "-q"]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    assert!(text(&o).0.contains("planar15"));
+}
+
 #[test]
 fn time_resolved_and_thin_lens() {
     let tmp = tempfile::tempdir().expect("tempdir");
