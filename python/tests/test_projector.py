@@ -188,8 +188,10 @@ def test_ssim_releases_the_gil_while_it_computes():
     truth = rng.random((128, 128, 128), dtype=np.float32)
     estimate = truth + np.float32(0.01)
     during, elapsed = ticks_while(lambda: fluidnerf.ssim(estimate, truth, window="gaussian"))
-    # A thread sleeping 1 ms at a time ticks about once per 1 ms the SSIM leaves it free.
-    assert elapsed > 0.05 and during >= 10, (during, elapsed)
+    # A thread sleeping 1 ms at a time ticks about once per 1 ms the SSIM leaves it free. Ten
+    # ticks need ten free milliseconds at least; a call that holds the GIL leaves the thread one
+    # tick at most, however long it takes.
+    assert during >= 10, (during, elapsed)
 
 
 def test_an_ssim_window_wider_than_the_arrays_names_their_shape_as_given():
