@@ -101,36 +101,22 @@ multiversion! {
     /// [`DenseGridField::backward`] needs: the body of `eval` and `forward`, compiled for the
     /// CPU's vector instructions (its rounding and `fast_exp` inline there; the same results).
     fn dense_values(dims: [usize; 3], params: &[f32], inputs: &[f32], out: &mut [f32], tape: Option<&mut DenseTape>) {
-        match tape {
-            None => {
-                for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
-                    *o = match stencil(dims, [p[0], p[1], p[2]]) {
-                        Some((idx, wts)) => softplus(pre_activation(params, &idx, &wts)),
-                        None => 0.0,
-                    };
-                }
-            }
-            Some(tape) => {
-                tape.idx.clear();
-                tape.wts.clear();
-                tape.slope.clear();
-                for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
-                    match stencil(dims, [p[0], p[1], p[2]]) {
-                        Some((idx, wts)) => {
-                            let v = pre_activation(params, &idx, &wts);
-                            *o = softplus(v);
-                            tape.idx.push(idx);
-                            tape.wts.push(wts);
-                            tape.slope.push(sigmoid(v));
-                        }
-                        None => {
-                            *o = 0.0;
-                            tape.idx.push([0; 8]);
-                            tape.wts.push([0.0; 8]);
-                            tape.slope.push(0.0);
-                        }
-                    }
-                }
+        let mut tape = tape;
+        if let Some(t) = tape.as_deref_mut() {
+            t.idx.clear();
+            t.wts.clear();
+            t.slope.clear();
+        }
+        for (o, p) in out.iter_mut().zip(inputs.chunks_exact(3)) {
+            let corners = stencil(dims, [p[0], p[1], p[2]]);
+            let v = corners.map(|(idx, wts)| pre_activation(params, &idx, &wts));
+            *o = v.map_or(0.0, softplus);
+            if let Some(t) = tape.as_deref_mut() {
+                // A point outside the box passes no gradient.
+                let (idx, wts) = corners.unwrap_or(([0; 8], [0.0; 8]));
+                t.idx.push(idx);
+                t.wts.push(wts);
+                t.slope.push(v.map_or(0.0, sigmoid));
             }
         }
     }
