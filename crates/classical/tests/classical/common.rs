@@ -1,5 +1,4 @@
 //! Shared fixtures: small ring rigs, analytic phantoms and their rendered images.
-#![allow(dead_code)]
 
 use fluidnerf_classical::Grid;
 use fluidnerf_core::{render_image, Aabb, Camera, Distortion, Image, Intrinsics, RenderSettings, Volume};

@@ -19,7 +19,6 @@ pub fn ok(out: &Output) {
 }
 
 /// Asserts that a run failed and that its error output names `needle`.
-#[allow(dead_code)] // not every test file checks refusals
 pub fn refused(out: &Output, needle: &str) {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "succeeded, but should have refused ({needle}): {stderr}");
@@ -33,7 +32,6 @@ pub fn json(path: &Path) -> serde_json::Value {
 
 /// Reads the JSON file `path`, lets `change` edit it, writes it back and returns what `change`
 /// returned: how the tests make a scene file bad in one place.
-#[allow(dead_code)] // not every test file edits files
 pub fn edit_json<R>(path: &Path, change: impl FnOnce(&mut serde_json::Value) -> R) -> R {
     let mut v = json(path);
     let r = change(&mut v);
@@ -42,14 +40,12 @@ pub fn edit_json<R>(path: &Path, change: impl FnOnce(&mut serde_json::Value) -> 
 }
 
 /// The `report.json` of a run directory.
-#[allow(dead_code)] // not every test file reads reports
 pub fn report(dir: &Path) -> serde_json::Value {
     json(&dir.join("report.json"))
 }
 
 /// Writes `dir/scene`: `synth --preset demo` with a `phantom` (ball, blobs, …) seen by
 /// `cameras` cameras of `pixels`² px, its truth at `resolution`³, and `extra` options.
-#[allow(dead_code)] // not every test file synthesises this way
 pub fn demo_scene(dir: &Path, phantom: &str, cameras: u32, pixels: u32, resolution: u32, extra: &[&str]) {
     let (c, p, r) = (cameras.to_string(), pixels.to_string(), resolution.to_string());
     let mut args = vec!["synth", "--preset", "demo", "--phantom", phantom, "--cameras", &c, "--pixels", &p];
@@ -60,7 +56,6 @@ pub fn demo_scene(dir: &Path, phantom: &str, cameras: u32, pixels: u32, resoluti
 
 /// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` (a path under `dir`) and half
 /// a second more, interrupts it as Ctrl-C does (SIGINT), and returns its output.
-#[allow(dead_code)] // not every test file interrupts a command
 pub fn interrupted_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
     let child = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
         .current_dir(dir)
