@@ -1,4 +1,4 @@
-//! Low-level f32 kernels of the training engine: a safe wrapper around the `gemm` crate for
+//! Low-level f32 kernels of the training engine: a safe wrapper around the `gemm` crates for
 //! dense row-major matrices, and the elementwise passes (bias, activations and their
 //! derivatives fused with bias-gradient reductions, fast `exp`).
 //!
@@ -8,7 +8,7 @@
 //! transposition is ever materialised.
 //!
 //! # CPU dispatch
-//! The `gemm` crate picks AVX-512 / AVX2+FMA / SSE kernels at run time (its `x86-v4` feature
+//! The `gemm-f32` crate picks AVX-512 / AVX2+FMA / SSE kernels at run time (its `x86-v4` feature
 //! enables the AVX-512 ones). The elementwise kernels here do the same with
 //! [`multiversion!`]: each is compiled three times (AVX-512, AVX2+FMA, baseline) and the best
 //! one the running CPU supports is chosen on each call (a cached feature test, a few ns). A
@@ -97,16 +97,25 @@ pub(crate) fn matmul(
         Op::N => (1, n as isize),
         Op::T => (k as isize, 1),
     };
+    let (dst_cs, dst_rs) = (1, n as isize);
+    // gemm's microkernels prefer a column-major destination: a row-major product is computed
+    // as its transpose, `dstᵀ = op(rhs)ᵀ · op(lhs)ᵀ` (the rule of the `gemm` crate's front end,
+    // whose other cases, negative strides, never arise here).
+    let (m, n, dst_cs, dst_rs, lhs, lhs_cs, lhs_rs, rhs, rhs_cs, rhs_rs) = if dst_cs < dst_rs {
+        (n, m, dst_rs, dst_cs, rhs, rhs_rs, rhs_cs, lhs, lhs_rs, lhs_cs)
+    } else {
+        (m, n, dst_cs, dst_rs, lhs, lhs_cs, lhs_rs, rhs, rhs_cs, rhs_rs)
+    };
     // SAFETY: the asserts above guarantee every element addressed by the strides lies inside
     // the slices; `dst` is exclusively borrowed and cannot alias `lhs` or `rhs`.
     unsafe {
-        gemm::gemm(
+        gemm_f32::gemm::f32::get_gemm_fn()(
             m,
             n,
             k,
             dst.as_mut_ptr(),
-            1,
-            n as isize,
+            dst_cs,
+            dst_rs,
             accumulate,
             lhs.as_ptr(),
             lhs_cs,
@@ -119,7 +128,7 @@ pub(crate) fn matmul(
             false,
             false,
             false,
-            gemm::Parallelism::None,
+            gemm_common::Parallelism::None,
         );
     }
 }
