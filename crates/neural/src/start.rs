@@ -8,15 +8,20 @@
 //! time), evaluates the target there and takes one Adam step on the mean squared difference,
 //! at the constant rate [`StartFit::learning_rate`]. The points come from their own random
 //! stream (`stream_seed(seed ^ START_KEY, step, 0)`), so a start is reproducible.
+//!
+//! A step's points are split into one contiguous share per thread of the pool, and the
+//! shares' gradients are summed in share order: a fit is bit-for-bit the same from run to run
+//! on the same thread count, and, like training, may differ in the last digits on another.
 
 use std::ops::ControlFlow;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::batch::stream_seed;
-use crate::optim::{Adam, AdamConfig};
+use crate::optim::{sum_gradients, Adam, AdamConfig};
 use crate::train::Prepared;
 use glam::Vec3;
 
@@ -162,6 +167,17 @@ pub const START_LEVELS: (f64, f64) = (0.1, 100.0);
 /// The ratio a start outside [`START_LEVELS`] is scaled to: that of a start of the same scene.
 const TYPICAL_LEVEL: f64 = 2.0;
 
+/// One thread's share of a fitting step: the field's tape, its gradient buffer, the values
+/// and loss derivatives of its points, and its sums of squared residuals and targets.
+struct FitWorker<T> {
+    tape: T,
+    grads: Vec<f32>,
+    values: Vec<f32>,
+    d_out: Vec<f32>,
+    se: f64,
+    sq: f64,
+}
+
 /// Fits `field` to `target` (module doc). `target(points, out)` writes the target in field
 /// units at box-normalised points (rows of `field.input_dim()` values: `x, y, z[, t']`).
 /// With `time_limit_s` the fit stops after the step that reaches it (at least one step): a
@@ -184,8 +200,21 @@ pub fn fit_to_target<F: TrainableField>(
     let occupancy = prep.occupancy();
     let mut adam = Adam::new(field.num_params(), AdamConfig::default());
     let mut grads = vec![0f32; field.num_params()];
-    let mut tape = field.new_tape();
-    let (mut inputs, mut values, mut wanted, mut d_out) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    // One worker per thread of the pool, each with its tape and gradient buffer; worker `w`
+    // takes the `w`-th contiguous share of a step's points, and the buffers are summed in
+    // worker order, so a fit depends on the thread count, as training does, and not on the
+    // scheduling.
+    let mut workers: Vec<FitWorker<F::Tape>> = (0..rayon::current_num_threads().max(1))
+        .map(|_| FitWorker {
+            tape: field.new_tape(),
+            grads: vec![0f32; field.num_params()],
+            values: Vec::new(),
+            d_out: Vec::new(),
+            se: 0.0,
+            sq: 0.0,
+        })
+        .collect();
+    let (mut inputs, mut wanted) = (Vec::new(), Vec::new());
     let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, steps: 0, stopped: false, rescaled: None };
     let mut scale = 1.0f32;
     for step in 0..fit.iterations {
@@ -210,9 +239,9 @@ pub fn fit_to_target<F: TrainableField>(
         if n == 0 {
             return Err(NeuralError::invalid("start", "no point of the box is occupied; nothing to fit"));
         }
-        values.resize(n, 0.0);
         wanted.resize(n, 0.0);
-        target(&inputs, &mut wanted);
+        let share = n.div_ceil(workers.len());
+        inputs.par_chunks(share * dim).zip(wanted.par_chunks_mut(share)).for_each(|(x, y)| target(x, y));
         if let Some(bad) = wanted.iter().position(|v| !v.is_finite()) {
             let p = &inputs[bad * dim..bad * dim + 3];
             return Err(NeuralError::invalid(
@@ -246,17 +275,30 @@ pub fn fit_to_target<F: TrainableField>(
         if scale != 1.0 {
             wanted.iter_mut().for_each(|v| *v *= scale);
         }
-        field.forward(&inputs, &mut values, &mut tape);
-        d_out.clear();
-        let (mut se, mut sq) = (0f64, 0f64);
-        for (&e, &y) in values.iter().zip(&wanted) {
-            let r = e - y;
-            se += (r * r) as f64;
-            sq += (y * y) as f64;
-            d_out.push(2.0 * r / n as f32);
+        let field_ref: &F = field;
+        // A worker left without points (a step of fewer points than workers) adds nothing.
+        workers.iter_mut().for_each(|wk| (wk.se, wk.sq) = (0.0, 0.0));
+        workers.par_iter_mut().zip(inputs.par_chunks(share * dim).zip(wanted.par_chunks(share))).for_each(
+            |(wk, (x, y))| {
+                wk.values.resize(y.len(), 0.0);
+                field_ref.forward(x, &mut wk.values, &mut wk.tape);
+                wk.d_out.clear();
+                for (&e, &y) in wk.values.iter().zip(y) {
+                    let r = e - y;
+                    wk.se += (r * r) as f64;
+                    wk.sq += (y * y) as f64;
+                    wk.d_out.push(2.0 * r / n as f32);
+                }
+                field_ref.backward(&mut wk.tape, &wk.d_out, &mut wk.grads);
+            },
+        );
+        let (se, sq) = workers.iter().fold((0.0, 0.0), |(se, sq), wk| (se + wk.se, sq + wk.sq));
+        // Sums the workers' buffers into `grads` and zeroes them for the next step.
+        let mut per_worker: Vec<Vec<f32>> = workers.iter_mut().map(|wk| std::mem::take(&mut wk.grads)).collect();
+        sum_gradients(&mut per_worker, &mut grads);
+        for (wk, g) in workers.iter_mut().zip(per_worker) {
+            wk.grads = g;
         }
-        grads.fill(0.0);
-        field.backward(&mut tape, &d_out, &mut grads);
         adam.step(field.params_mut(), &grads, fit.learning_rate);
         last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, steps: step + 1, ..last };
         if on_step(step + 1).is_break() {
