@@ -910,30 +910,21 @@ fn acquire_lock(root: &Path, path: &Path, contents: &str) -> Result<(), Pipeline
         std::fs::create_dir_all(parent).map_err(|e| PipelineError::file(parent, e))?;
     }
     for _ in 0..3 {
-        match std::fs::OpenOptions::new().write(true).create_new(true).open(path) {
-            Ok(mut f) => {
-                use std::io::Write;
-                if let Err(e) = f.write_all(contents.as_bytes()) {
-                    let _ = std::fs::remove_file(path);
-                    return Err(PipelineError::file(path, e));
-                }
-                return Ok(());
-            }
+        match create_whole(path, contents) {
+            Ok(()) => return Ok(()),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 let holder = LockHolder::read(path);
                 let why = match holder.as_ref().map(|h| h.liveness(path)) {
                     Some(Liveness::Held(note)) => {
                         let holder = holder.as_ref().map_or_else(String::new, ToString::to_string);
-                        return Err(PipelineError::RunDir {
-                            path: root.to_path_buf(),
-                            why: format!(
-                                "is in use by another run ({holder}, lock file {}); wait for it to finish or use \
-                                 another output folder{note}",
-                                path.display()
-                            ),
-                        });
+                        return Err(in_use(root, path, &holder, &note));
                     }
                     Some(Liveness::Stale(why)) => why,
+                    // Created and not yet written, by a taker on a file system without hard
+                    // links (`create_whole`): held for now.
+                    None if just_made(path) => {
+                        return Err(in_use(root, path, "a run that is taking it", ", just now"));
+                    }
                     None => "unreadable".to_string(),
                 };
                 let named = holder.as_ref().map_or_else(|| "an unreadable holder".to_string(), |h| h.to_string());
@@ -953,6 +944,55 @@ fn acquire_lock(root: &Path, path: &Path, contents: &str) -> Result<(), Pipeline
         }
     }
     Err(PipelineError::file(path, "cannot take the run lock"))
+}
+
+/// The refusal of a lock file `path` of the run folder `root` that `holder` holds (`note`
+/// says more about it).
+fn in_use(root: &Path, path: &Path, holder: &str, note: &str) -> PipelineError {
+    PipelineError::RunDir {
+        path: root.to_path_buf(),
+        why: format!(
+            "is in use by another run ({holder}, lock file {}); wait for it to finish or use another output \
+             folder{note}",
+            path.display()
+        ),
+    }
+}
+
+/// Creates the file `path` with `contents` whole, or fails (`AlreadyExists` when it exists): a
+/// reader never sees it empty or half written, which a taker of a lock would take for an
+/// unreadable, stale lock and replace. The contents go to a file of their own beside it,
+/// linked to `path` (a hard link is created only where no file is, on network file systems
+/// as well); where the file system has no hard links, `path` is created and then written.
+fn create_whole(path: &Path, contents: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    static PARTS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = PARTS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path.file_name().map_or_else(|| "lock".into(), |n| n.to_string_lossy());
+    let part = path.with_file_name(format!("{name}.part-{}-{n}", std::process::id()));
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&part)
+        .and_then(|mut f| f.write_all(contents.as_bytes()));
+    let linked = written.and_then(|()| std::fs::hard_link(&part, path));
+    let _ = std::fs::remove_file(&part);
+    match linked {
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(e),
+        Ok(()) => Ok(()),
+        Err(_) => {
+            let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(path)?;
+            f.write_all(contents.as_bytes()).inspect_err(|_| {
+                let _ = std::fs::remove_file(path);
+            })
+        }
+    }
+}
+
+/// Whether the file `path` was modified less than a heartbeat ago (on its file system's clock).
+fn just_made(path: &Path) -> bool {
+    let modified = std::fs::metadata(path).and_then(|m| m.modified());
+    modified.ok().and_then(|m| heartbeat_age(path, m)).is_some_and(|age| age < LOCK_HEARTBEAT)
 }
 
 /// This machine's name, written into lock files beside the process id: run folders may lie on
@@ -1588,6 +1628,54 @@ mod tests {
             assert_eq!(std::fs::read_to_string(&lock).unwrap(), "4194305\nanother-machine.example\nheartbeat\n");
         }
         assert_eq!(std::fs::read_dir(lock.parent().unwrap()).unwrap().count(), 1, "no probe file is left");
+    }
+
+    /// Threads of one process racing for one lock hold it one at a time. The lock file was
+    /// created empty and then written, and a taker that read it in between took the empty file
+    /// for an unreadable, stale lock and replaced it: two tasks trained the same window.
+    #[test]
+    fn a_lock_is_held_by_one_taker_at_a_time() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("windows/w000.lock");
+        let (holders, most, taken) = (AtomicUsize::new(0), AtomicUsize::new(0), AtomicUsize::new(0));
+        std::thread::scope(|s| {
+            for _ in 0..8 {
+                s.spawn(|| {
+                    for _ in 0..200 {
+                        if let Ok(lock) = FileLock::take(tmp.path(), &path) {
+                            let now = holders.fetch_add(1, Ordering::SeqCst) + 1;
+                            most.fetch_max(now, Ordering::SeqCst);
+                            taken.fetch_add(1, Ordering::SeqCst);
+                            std::thread::yield_now();
+                            holders.fetch_sub(1, Ordering::SeqCst);
+                            drop(lock);
+                        }
+                    }
+                });
+            }
+        });
+        assert!(taken.load(Ordering::SeqCst) > 0, "nobody took the lock");
+        assert_eq!(most.load(Ordering::SeqCst), 1, "takers that held the lock at once");
+        assert!(!path.exists());
+        assert_eq!(std::fs::read_dir(path.parent().unwrap()).unwrap().count(), 0, "no file is left beside it");
+    }
+
+    /// An unreadable lock file (empty here) is being written by its taker while it is young,
+    /// and held; an old one is stale, and replaced.
+    #[test]
+    fn an_unreadable_lock_is_held_while_young() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("w000.lock");
+        std::fs::write(&path, "").unwrap();
+        let e = FileLock::take(tmp.path(), &path).map(drop).unwrap_err().to_string();
+        assert!(e.contains("in use by another run") && e.contains("w000.lock"), "{e}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "");
+        age(&path, LOCK_HEARTBEAT * 2);
+        let lock = FileLock::take(tmp.path(), &path).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), lock.contents);
+        drop(lock);
+        assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0, "no file is left");
     }
 
     /// A held lock's file is refreshed by its heartbeat, and keeps its holder.
