@@ -167,11 +167,10 @@ pub const START_LEVELS: (f64, f64) = (0.1, 100.0);
 /// The ratio a start outside [`START_LEVELS`] is scaled to: that of a start of the same scene.
 const TYPICAL_LEVEL: f64 = 2.0;
 
-/// One thread's share of a fitting step: the field's tape, its gradient buffer, the values
-/// and loss derivatives of its points, and its sums of squared residuals and targets.
+/// One thread's share of a fitting step: the field's tape, the values and loss derivatives
+/// of its points, and its sums of squared residuals and targets.
 struct FitWorker<T> {
     tape: T,
-    grads: Vec<f32>,
     values: Vec<f32>,
     d_out: Vec<f32>,
     se: f64,
@@ -204,16 +203,11 @@ pub fn fit_to_target<F: TrainableField>(
     // takes the `w`-th contiguous share of a step's points, and the buffers are summed in
     // worker order, so a fit depends on the thread count, as training does, and not on the
     // scheduling.
-    let mut workers: Vec<FitWorker<F::Tape>> = (0..rayon::current_num_threads().max(1))
-        .map(|_| FitWorker {
-            tape: field.new_tape(),
-            grads: vec![0f32; field.num_params()],
-            values: Vec::new(),
-            d_out: Vec::new(),
-            se: 0.0,
-            sq: 0.0,
-        })
+    let threads = rayon::current_num_threads().max(1);
+    let mut workers: Vec<FitWorker<F::Tape>> = (0..threads)
+        .map(|_| FitWorker { tape: field.new_tape(), values: Vec::new(), d_out: Vec::new(), se: 0.0, sq: 0.0 })
         .collect();
+    let mut worker_grads = vec![vec![0f32; field.num_params()]; threads];
     let (mut inputs, mut wanted) = (Vec::new(), Vec::new());
     let mut last = StartReport { mse: 0.0, mean_square: 0.0, seconds: 0.0, steps: 0, stopped: false, rescaled: None };
     let mut scale = 1.0f32;
@@ -278,27 +272,22 @@ pub fn fit_to_target<F: TrainableField>(
         let field_ref: &F = field;
         // A worker left without points (a step of fewer points than workers) adds nothing.
         workers.iter_mut().for_each(|wk| (wk.se, wk.sq) = (0.0, 0.0));
-        workers.par_iter_mut().zip(inputs.par_chunks(share * dim).zip(wanted.par_chunks(share))).for_each(
-            |(wk, (x, y))| {
-                wk.values.resize(y.len(), 0.0);
-                field_ref.forward(x, &mut wk.values, &mut wk.tape);
-                wk.d_out.clear();
-                for (&e, &y) in wk.values.iter().zip(y) {
-                    let r = e - y;
-                    wk.se += (r * r) as f64;
-                    wk.sq += (y * y) as f64;
-                    wk.d_out.push(2.0 * r / n as f32);
-                }
-                field_ref.backward(&mut wk.tape, &wk.d_out, &mut wk.grads);
-            },
-        );
+        let shares = inputs.par_chunks(share * dim).zip(wanted.par_chunks(share));
+        workers.par_iter_mut().zip(worker_grads.par_iter_mut()).zip(shares).for_each(|((wk, wk_grads), (x, y))| {
+            wk.values.resize(y.len(), 0.0);
+            field_ref.forward(x, &mut wk.values, &mut wk.tape);
+            wk.d_out.clear();
+            for (&e, &y) in wk.values.iter().zip(y) {
+                let r = e - y;
+                wk.se += (r * r) as f64;
+                wk.sq += (y * y) as f64;
+                wk.d_out.push(2.0 * r / n as f32);
+            }
+            field_ref.backward(&mut wk.tape, &wk.d_out, wk_grads);
+        });
         let (se, sq) = workers.iter().fold((0.0, 0.0), |(se, sq), wk| (se + wk.se, sq + wk.sq));
         // Sums the workers' buffers into `grads` and zeroes them for the next step.
-        let mut per_worker: Vec<Vec<f32>> = workers.iter_mut().map(|wk| std::mem::take(&mut wk.grads)).collect();
-        sum_gradients(&mut per_worker, &mut grads);
-        for (wk, g) in workers.iter_mut().zip(per_worker) {
-            wk.grads = g;
-        }
+        sum_gradients(&mut worker_grads, &mut grads);
         adam.step(field.params_mut(), &grads, fit.learning_rate);
         last = StartReport { mse: se / n as f64, mean_square: sq / n as f64, steps: step + 1, ..last };
         if on_step(step + 1).is_break() {
