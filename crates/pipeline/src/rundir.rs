@@ -966,10 +966,9 @@ fn in_use(root: &Path, path: &Path, holder: &str, note: &str) -> PipelineError {
 /// as well); where the file system has no hard links, `path` is created and then written.
 fn create_whole(path: &Path, contents: &str) -> std::io::Result<()> {
     use std::io::Write;
-    static PARTS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = PARTS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let name = path.file_name().map_or_else(|| "lock".into(), |n| n.to_string_lossy());
-    let part = path.with_file_name(format!("{name}.part-{}-{n}", std::process::id()));
+    let Some(part) = scratch_beside(path, "part") else {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "a lock path names no file"));
+    };
     let written = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -987,6 +986,15 @@ fn create_whole(path: &Path, contents: &str) -> std::io::Result<()> {
             })
         }
     }
+}
+
+/// A name for a short-lived file of this process beside the file `path`, `NAME.KIND-PID-N`,
+/// unique among this process's (None when `path` names no file).
+fn scratch_beside(path: &Path, kind: &str) -> Option<PathBuf> {
+    static MADE: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = MADE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path.file_name()?.to_string_lossy();
+    Some(path.with_file_name(format!("{name}.{kind}-{}-{n}", std::process::id())))
 }
 
 /// Whether the file `path` was modified less than a heartbeat ago (on its file system's clock).
@@ -1095,10 +1103,7 @@ impl LockHolder {
 /// system: the modification time of a probe file created beside it, then removed, is "now".
 /// Zero for a file modified after the probe; None when no probe can be created.
 fn heartbeat_age(path: &Path, modified: SystemTime) -> Option<Duration> {
-    static PROBES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = PROBES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let name = format!("{}.probe-{}-{n}", path.file_name()?.to_string_lossy(), std::process::id());
-    let probe = path.with_file_name(name);
+    let probe = scratch_beside(path, "probe")?;
     let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&probe).ok()?;
     let now = file.metadata().and_then(|m| m.modified());
     drop(file);
