@@ -911,7 +911,10 @@ fn acquire_lock(root: &Path, path: &Path, contents: &str) -> Result<(), Pipeline
     }
     for _ in 0..3 {
         match create_whole(path, contents) {
-            Ok(()) => return Ok(()),
+            Ok(()) => {
+                sweep_scratch(path);
+                return Ok(());
+            }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 let holder = LockHolder::read(path);
                 let why = match holder.as_ref().map(|h| h.liveness(path)) {
@@ -966,7 +969,7 @@ fn in_use(root: &Path, path: &Path, holder: &str, note: &str) -> PipelineError {
 /// as well); where the file system has no hard links, `path` is created and then written.
 fn create_whole(path: &Path, contents: &str) -> std::io::Result<()> {
     use std::io::Write;
-    let Some(part) = scratch_beside(path, "part") else {
+    let Some(part) = scratch_beside(path, SCRATCH_PART) else {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "a lock path names no file"));
     };
     let written = std::fs::OpenOptions::new()
@@ -995,6 +998,45 @@ fn scratch_beside(path: &Path, kind: &str) -> Option<PathBuf> {
     let n = MADE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path.file_name()?.to_string_lossy();
     Some(path.with_file_name(format!("{name}.{kind}-{}-{n}", std::process::id())))
+}
+
+/// Removes the short-lived files beside the lock file `path` ([`scratch_beside`]) that a
+/// process killed between creating and removing one left behind: those modified more than a
+/// heartbeat before the lock itself, just taken, was (one file system's clock for both). A
+/// live one exists for microseconds, so only leftovers are that old.
+fn sweep_scratch(path: &Path) {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else { return };
+    let Ok(taken) = std::fs::metadata(path).and_then(|m| m.modified()) else { return };
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let name = name.to_string_lossy();
+    for entry in entries.flatten() {
+        let file = entry.file_name();
+        let Some(rest) = file.to_str().and_then(|f| f.strip_prefix(name.as_ref())) else { continue };
+        if !SCRATCH_KINDS.iter().any(|kind| is_scratch_tail(rest, kind)) {
+            continue;
+        }
+        let modified = entry.metadata().and_then(|m| m.modified());
+        if modified.is_ok_and(|m| taken.duration_since(m).is_ok_and(|age| age > LOCK_HEARTBEAT)) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The kinds of [`scratch_beside`] files made beside a lock: a lock's contents before they
+/// are linked into place ([`create_whole`]), and a clock probe ([`heartbeat_age`]).
+const SCRATCH_PART: &str = "part";
+const SCRATCH_PROBE: &str = "probe";
+const SCRATCH_KINDS: [&str; 2] = [SCRATCH_PART, SCRATCH_PROBE];
+
+/// Whether `rest`, what follows a lock file's name, is `.KIND-PID-N` ([`scratch_beside`]).
+fn is_scratch_tail(rest: &str, kind: &str) -> bool {
+    let Some(numbers) = rest.strip_prefix('.').and_then(|r| r.strip_prefix(kind)).and_then(|r| r.strip_prefix('-'))
+    else {
+        return false;
+    };
+    let mut parts = numbers.split('-');
+    let mut number = || parts.next().is_some_and(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()));
+    number() && number() && parts.next().is_none()
 }
 
 /// Whether the file `path` was modified less than a heartbeat ago (on its file system's clock).
@@ -1103,7 +1145,7 @@ impl LockHolder {
 /// system: the modification time of a probe file created beside it, then removed, is "now".
 /// Zero for a file modified after the probe; None when no probe can be created.
 fn heartbeat_age(path: &Path, modified: SystemTime) -> Option<Duration> {
-    let probe = scratch_beside(path, "probe")?;
+    let probe = scratch_beside(path, SCRATCH_PROBE)?;
     let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&probe).ok()?;
     let now = file.metadata().and_then(|m| m.modified());
     drop(file);
@@ -1591,6 +1633,34 @@ mod tests {
 
     fn modified(path: &Path) -> SystemTime {
         std::fs::metadata(path).unwrap().modified().unwrap()
+    }
+
+    /// Part and probe files that a killed process left beside a lock go when the lock is next
+    /// taken; a young one (its maker may still be about to link or remove it) and files of
+    /// other names stay.
+    #[test]
+    fn leftover_scratch_files_go_when_the_lock_is_taken() {
+        let tmp = tempfile::tempdir().unwrap();
+        let names = [
+            ".lock.part-4194305-0",
+            ".lock.probe-4194305-7",
+            ".lock.part-4194306-2",
+            ".lock.part-1-x",
+            ".lock.partial",
+            "notes.part-1-0",
+        ];
+        for name in names {
+            std::fs::write(tmp.path().join(name), "4194305\n").unwrap();
+        }
+        for name in [names[0], names[1], names[3], names[4], names[5]] {
+            age(&tmp.path().join(name), LOCK_HEARTBEAT + Duration::from_secs(20));
+        }
+        let dir = RunDir::create(tmp.path(), Overwrite::Refuse, None).unwrap();
+        drop(dir);
+        let mut left: Vec<_> =
+            std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+        left.sort();
+        assert_eq!(left, [".lock.part-1-x", ".lock.part-4194306-2", ".lock.partial", "notes.part-1-0"]);
     }
 
     /// A lock of another machine whose heartbeat stopped longer ago than the limit (that
