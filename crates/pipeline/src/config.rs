@@ -176,6 +176,13 @@ impl Method {
         }
     }
 
+    /// Whether the run's seed changes its result: the fields draw their rays, samples and
+    /// initial weights from it, ART and MART their row order; the other voxel methods have no
+    /// randomness.
+    pub fn uses_seed(self) -> bool {
+        self.family() != Family::Classical || matches!(self, Method::Art | Method::Mart)
+    }
+
     pub fn family(self) -> Family {
         match self {
             Method::Fluidnerf | Method::Fast | Method::Voxel | Method::Hybrid => Family::Neural,

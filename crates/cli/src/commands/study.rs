@@ -67,8 +67,8 @@ impl LayoutChoice {
 /// Each cell synthesises a scene (the --scene-preset with the cell's camera count, layout and
 /// noise; one more camera than the count is made and held out: it drives held-out early
 /// stopping and scores reprojections) and reconstructs it with every method under one
-/// stopping policy. Writes into OUT: `scenes/`, `runs/SCENE/METHOD/` (each with its
-/// config.json), `study.json` and `study.csv` (one row per run), plots of volume NRMSE and
+/// stopping policy. Writes into OUT: `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with
+/// --repeats; each with its config.json), `study.json` and `study.csv` (one row per run), plots of volume NRMSE and
 /// SSIM against the camera count and against noise, and `report.html`.
 ///
 /// Rerunning the same command continues an interrupted study; --force starts it over.
@@ -120,6 +120,13 @@ pub struct Args {
     /// Seed of the scenes and the runs.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::parse_seed)]
     pub seed: u64,
+    /// Runs of each method in each cell, with the run seeds SEED, SEED + 1, …, on the same
+    /// scene: the table adds each cell's mean and the range of its runs, and the plots show
+    /// the means. A single run is one draw of the fields' random rays and weights (their
+    /// volume NRMSE moves by a few per cent between seeds). The voxel methods without
+    /// randomness (all but ART and MART) run once. 1 to 20.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub repeats: u32,
     /// Give every voxel method the images' visual hull (`reconstruct --visual-hull`: voxels
     /// some camera sees dark, up to 4 noise deviations above the background, held at zero;
     /// dilated by a voxel), as the fields carve theirs. SART-TV keeps its weight, which
@@ -145,9 +152,41 @@ struct Grid {
     resolution: usize,
     stopping: StoppingPolicy,
     seed: u64,
+    /// Runs of each method that uses its seed, per cell (studies written before it: 1).
+    #[serde(default = "one_repeat")]
+    repeats: u32,
     /// The voxel methods held at zero outside the images' visual hull.
     #[serde(default)]
     visual_hull: bool,
+}
+
+fn one_repeat() -> u32 {
+    1
+}
+
+impl Grid {
+    /// The run seeds of `method` in every cell: one per repeat for a method whose result
+    /// depends on its seed, the study's own for the others.
+    fn seeds(&self, method: Method) -> std::ops::Range<u64> {
+        let n = if method.uses_seed() { u64::from(self.repeats) } else { 1 };
+        self.seed..self.seed.saturating_add(n)
+    }
+
+    /// The run folder's name of `method` with `seed` in a cell's folder: the method's name, and
+    /// the seed when the study repeats the method's runs.
+    fn run_name(&self, method: Method, seed: u64) -> String {
+        if self.repeats > 1 && method.uses_seed() {
+            format!("{}-seed{seed}", method.name())
+        } else {
+            method.name().to_string()
+        }
+    }
+
+    /// Runs of the whole grid.
+    fn runs_total(&self) -> usize {
+        let per_cell: usize = self.methods.iter().map(|&m| self.seeds(m).count()).sum();
+        self.layouts.len() * self.cameras.len() * self.noise.len() * per_cell
+    }
 }
 
 /// One run of the grid.
@@ -157,6 +196,12 @@ struct Row {
     cameras: usize,
     noise: f64,
     method: String,
+    /// The run's seed.
+    seed: u64,
+    /// One of several runs of its method in its cell (with repeats, a method that uses its
+    /// seed): the tables name its seed.
+    #[serde(skip)]
+    repeated: bool,
     nrmse: Option<f64>,
     ssim_global: Option<f64>,
     /// Lowest held-out loss seen (each method's own measure; compare within a method).
@@ -180,6 +225,56 @@ struct StudyRecord<'a> {
     grid: &'a Grid,
     stopping_rule: String,
     rows: &'a [Row],
+    /// With repeats: each cell's and method's mean over its runs so far.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    means: Vec<Mean>,
+}
+
+/// A cell's and method's runs summed up ([`means`]).
+#[derive(Clone, Debug, Serialize)]
+struct Mean {
+    layout: String,
+    cameras: usize,
+    noise: f64,
+    method: String,
+    runs: usize,
+    nrmse: Option<f64>,
+    nrmse_min: Option<f64>,
+    nrmse_max: Option<f64>,
+    ssim_global: Option<f64>,
+    train_time_s: f64,
+}
+
+/// The mean of each cell's and method's runs among `rows`, in the order of their first run.
+fn means(rows: &[Row]) -> Vec<Mean> {
+    let key = |r: &Row| (r.layout.clone(), r.cameras, r.noise.to_bits(), r.method.clone());
+    let mut keys = Vec::new();
+    for r in rows {
+        if !keys.contains(&key(r)) {
+            keys.push(key(r));
+        }
+    }
+    keys.iter()
+        .map(|k| {
+            let runs: Vec<&Row> = rows.iter().filter(|r| &key(r) == k).collect();
+            let n = runs.len() as f64;
+            // Over the runs that scored; none when any did not (a run without a truth).
+            let all = |f: fn(&Row) -> Option<f64>| runs.iter().map(|r| f(r)).collect::<Option<Vec<f64>>>();
+            let nrmse = all(|r| r.nrmse);
+            Mean {
+                layout: k.0.clone(),
+                cameras: k.1,
+                noise: f64::from_bits(k.2),
+                method: k.3.clone(),
+                runs: runs.len(),
+                nrmse: nrmse.as_ref().map(|v| v.iter().sum::<f64>() / n),
+                nrmse_min: nrmse.as_ref().map(|v| v.iter().copied().fold(f64::INFINITY, f64::min)),
+                nrmse_max: nrmse.as_ref().map(|v| v.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+                ssim_global: all(|r| r.ssim_global).map(|v| v.iter().sum::<f64>() / n),
+                train_time_s: runs.iter().map(|r| r.train_time_s).sum::<f64>() / n,
+            }
+        })
+        .collect()
 }
 
 fn grid(args: &Args) -> anyhow::Result<Grid> {
@@ -224,6 +319,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
             ..StoppingPolicy::default()
         },
         seed: args.seed,
+        repeats: args.repeats,
         visual_hull: args.visual_hull,
     };
     if g.methods.is_empty() || g.cameras.is_empty() || g.noise.is_empty() || g.layouts.is_empty() {
@@ -407,10 +503,10 @@ fn check_scenes(g: &Grid) -> anyhow::Result<()> {
 }
 
 /// The configuration of a cell's run.
-fn cell_config(g: &Grid, scene_dir: &Path, method: Method) -> anyhow::Result<RunConfig> {
+fn cell_config(g: &Grid, scene_dir: &Path, method: Method, seed: u64) -> anyhow::Result<RunConfig> {
     let mut config = RunConfig::new(std::path::absolute(scene_dir)?, method);
     config.resolution = g.resolution;
-    config.seed = g.seed;
+    config.seed = seed;
     config.stopping = g.stopping;
     if let MethodConfig::Classical(spec) = &mut config.method {
         spec.projector.visual_hull = g.visual_hull;
@@ -448,8 +544,8 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                         return Err(other(&scene_dir, "scene", &record, differences));
                     }
                 }
-                for &method in &g.methods {
-                    let run_dir = out.join("runs").join(&name).join(method.name());
+                for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
+                    let run_dir = out.join("runs").join(&name).join(g.run_name(method, seed));
                     let report_file = run_dir.join("report.json");
                     if !(report_file.is_file()
                         && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished)
@@ -458,7 +554,7 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                     }
                     let file = run_dir.join("config.json");
                     let saved = RunConfig::read(&file)?;
-                    let mut given = cell_config(g, &scene_dir, method)?;
+                    let mut given = cell_config(g, &scene_dir, method, seed)?;
                     // The version that wrote it is information only; a study folder moved
                     // since holds its scenes elsewhere.
                     given.fluidnerf_version.clone_from(&saved.fluidnerf_version);
@@ -532,7 +628,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     }
     super::create_output_folder(out)?;
     let start = Instant::now();
-    let total = g.layouts.len() * g.cameras.len() * g.noise.len() * g.methods.len();
+    let total = g.runs_total();
     let mut rows = Vec::with_capacity(total);
     let mut summaries: Vec<(Row, RunSummary)> = Vec::new();
     let mut k = 0;
@@ -547,9 +643,10 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                     }
                     r => r?,
                 }
-                for &method in &g.methods {
+                for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
                     k += 1;
-                    let run_dir = out.join("runs").join(scene_name(layout, cameras, noise)).join(method.name());
+                    let run_dir =
+                        out.join("runs").join(scene_name(layout, cameras, noise)).join(g.run_name(method, seed));
                     // A run stopped by Ctrl-C writes its report too: its cell is run again, not
                     // read back as if its budget had been spent.
                     let report_file = run_dir.join("report.json");
@@ -558,14 +655,19 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                     #[allow(clippy::print_stdout)]
                     {
                         println!(
-                            "[{k}/{total}] {} · {cameras} cameras · noise {noise} · {}{}",
+                            "[{k}/{total}] {} · {cameras} cameras · noise {noise} · {}{}{}",
                             layout.name(),
                             method.label(),
+                            if g.repeats > 1 && method.uses_seed() {
+                                format!(" · seed {seed}")
+                            } else {
+                                String::new()
+                            },
                             if finished { " (done earlier)" } else { "" }
                         );
                     }
                     if !finished {
-                        let config = cell_config(&g, &scene_dir, method)?;
+                        let config = cell_config(&g, &scene_dir, method, seed)?;
                         let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
                         if report.status == RunStatus::Interrupted {
                             return interrupted(out, &g, &rows, &summaries, total);
@@ -578,6 +680,8 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         cameras,
                         noise,
                         method: method.name().into(),
+                        seed,
+                        repeated: g.repeats > 1 && method.uses_seed(),
                         nrmse: r.final_nrmse,
                         ssim_global: r.final_ssim_global,
                         best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
@@ -598,6 +702,9 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     #[allow(clippy::print_stdout)]
     {
         println!("\n{}", text_table(&rows));
+        if g.repeats > 1 {
+            println!("{}", means_table(&means(&rows)));
+        }
         println!(
             "every method stopped by {}; {:.1} s; open {}",
             g.stopping.describe_rule(),
@@ -624,6 +731,15 @@ fn interrupted(
     Ok(std::process::ExitCode::from(130))
 }
 
+/// The method of a row, with its seed when it is one of several runs of its method.
+fn method_label(r: &Row) -> String {
+    if r.repeated {
+        format!("{} s{}", r.method, r.seed)
+    } else {
+        r.method.clone()
+    }
+}
+
 fn text_table(rows: &[Row]) -> String {
     let mut s = format!(
         "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>10} {:>8}\n",
@@ -636,11 +752,35 @@ fn text_table(rows: &[Row]) -> String {
             r.layout,
             r.cameras,
             r.noise,
-            r.method,
+            method_label(r),
             f(r.nrmse),
             f(r.ssim_global),
             format!("{}/{}", r.kept_iteration, r.iterations),
             r.train_time_s
+        );
+    }
+    s
+}
+
+/// Each cell's and method's mean over its runs, with the range of their volume NRMSE.
+fn means_table(means: &[Mean]) -> String {
+    let mut s = format!(
+        "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8}\n",
+        "layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM", "time [s]"
+    );
+    for m in means {
+        let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.4}"));
+        s += &format!(
+            "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8.1}\n",
+            m.layout,
+            m.cameras,
+            m.noise,
+            m.method,
+            m.runs,
+            f(m.nrmse),
+            format!("{}–{}", f(m.nrmse_min), f(m.nrmse_max)),
+            f(m.ssim_global),
+            m.train_time_s
         );
     }
     s
@@ -692,16 +832,17 @@ fn convergence_label(r: &Row) -> String {
 
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from(
-        "layout,cameras,noise,method,nrmse,ssim_global,best_holdout_loss,kept_iteration,iterations,stop_reason,train_time_s,result_bytes,run\n",
+        "layout,cameras,noise,method,seed,nrmse,ssim_global,best_holdout_loss,kept_iteration,iterations,stop_reason,train_time_s,result_bytes,run\n",
     );
     let f = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
     for r in rows {
         s += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.layout,
             r.cameras,
             r.noise,
             r.method,
+            r.seed,
             f(r.nrmse),
             f(r.ssim_global),
             f(r.best_holdout_loss),
@@ -736,14 +877,42 @@ fn write_outputs(
             grid: g,
             stopping_rule: g.stopping.describe_rule(),
             rows,
+            means: if g.repeats > 1 { means(rows) } else { Vec::new() },
         },
     )?;
+    // With repeats the plots show each cell's mean: one line per method, not one per seed.
+    let mean_rows: Vec<Row>;
+    let plotted = if g.repeats > 1 {
+        mean_rows = means(rows)
+            .into_iter()
+            .map(|m| Row {
+                layout: m.layout,
+                cameras: m.cameras,
+                noise: m.noise,
+                method: m.method,
+                seed: g.seed,
+                repeated: false,
+                nrmse: m.nrmse,
+                ssim_global: m.ssim_global,
+                best_holdout_loss: None,
+                kept_iteration: 0,
+                iterations: 0,
+                stop_reason: String::new(),
+                train_time_s: m.train_time_s,
+                result_bytes: 0,
+                run: String::new(),
+            })
+            .collect();
+        &mean_rows[..]
+    } else {
+        rows
+    };
     fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
     let mut figures = Vec::new();
     for (axis, name) in [("cameras", "cameras"), ("noise", "noise")] {
         let plots: Vec<LinePlot> = ["NRMSE", "SSIM"]
             .iter()
-            .filter_map(|m| sweep_plot(rows, &format!("{m} against {name}"), axis, m))
+            .filter_map(|m| sweep_plot(plotted, &format!("{m} against {name}"), axis, m))
             .collect();
         let file = out.join(format!("against_{name}.png"));
         if plots.is_empty() {
@@ -772,7 +941,7 @@ fn write_outputs(
             r.layout.clone(),
             r.cameras.to_string(),
             r.noise.to_string(),
-            r.method.clone(),
+            method_label(r),
             f(r.nrmse),
             f(r.ssim_global),
             format!("{} / {}", r.kept_iteration, r.iterations),
@@ -780,9 +949,35 @@ fn write_outputs(
             fluidnerf_pipeline::bytes(r.result_bytes),
         ]);
     }
+    let mut tables = vec![table];
+    if g.repeats > 1 {
+        let mut mean_table = Table::new(
+            format!(
+                "Each method's mean over its runs with seeds {} to {} (one run of a method without randomness)",
+                g.seed,
+                g.seed.saturating_add(u64::from(g.repeats) - 1)
+            ),
+            &["layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM (global)", "time [s]"],
+        );
+        for m in means(rows) {
+            mean_table.push_row(vec![
+                m.layout,
+                m.cameras.to_string(),
+                m.noise.to_string(),
+                m.method,
+                m.runs.to_string(),
+                f(m.nrmse),
+                format!("{} – {}", f(m.nrmse_min), f(m.nrmse_max)),
+                f(m.ssim_global),
+                format!("{:.1}", m.train_time_s),
+            ]);
+        }
+        tables.push(mean_table);
+    }
+    // At the largest camera count; with repeats, the first seed's runs.
     let histories: Vec<_> = summaries
         .iter()
-        .filter(|(r, _)| r.cameras == *g.cameras.iter().max().unwrap_or(&0))
+        .filter(|(r, _)| r.cameras == *g.cameras.iter().max().unwrap_or(&0) && r.seed == g.seed)
         .map(|(r, s)| fluidnerf_viz::RunHistory { label: convergence_label(r), ..s.history.clone() })
         .collect();
     if !histories.is_empty() {
@@ -807,7 +1002,7 @@ fn write_outputs(
             },
             env!("CARGO_PKG_VERSION")
         ),
-        tables: vec![table],
+        tables,
         figures,
         summary: if finished {
             Vec::new()
@@ -961,6 +1156,8 @@ mod tests {
             cameras: 8,
             noise: 0.0,
             method: "asart".into(),
+            seed: 0,
+            repeated: false,
             nrmse: None,
             ssim_global: None,
             best_holdout_loss: None,
@@ -984,6 +1181,8 @@ mod tests {
             cameras,
             noise,
             method: "sart".into(),
+            seed: 0,
+            repeated: false,
             nrmse: Some(0.3),
             ssim_global: Some(0.8),
             best_holdout_loss: None,

@@ -61,6 +61,80 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     assert!(String::from_utf8_lossy(&hull.stderr).contains("`visual_hull`: false → true"));
 }
 
+/// `--repeats` runs each method that uses its seed once per seed on the same scene, and the
+/// voxel methods without randomness once; the record, table and report give each cell's mean
+/// and the range of its runs. A study of another repeat count is not continued in its folder.
+#[test]
+fn repeats_run_the_seeded_methods_once_per_seed_and_give_their_mean() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = [
+        "study",
+        "--preset",
+        "smoke",
+        "--methods",
+        "fast,sart,art",
+        "--cameras",
+        "4",
+        "--repeats",
+        "3",
+        "--seed",
+        "5",
+        "-o",
+        "st",
+    ];
+    let out = fluidnerf(d, &args);
+    ok(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("[7/7]") && stdout.contains("· seed 7") && stdout.contains("NRMSE range"), "{stdout}");
+    let st = d.join("st");
+    let record = json(&st.join("study.json"));
+    let rows = record["rows"].as_array().expect("rows");
+    let seeds = |m: &str| -> Vec<u64> {
+        rows.iter().filter(|r| r["method"] == m).map(|r| r["seed"].as_u64().expect("seed")).collect()
+    };
+    assert_eq!((seeds("fast"), seeds("art"), seeds("sart")), (vec![5, 6, 7], vec![5, 6, 7], vec![5]));
+    // Each run is its own folder, run with its seed, on the one scene of the cell.
+    let mut nrmse = std::collections::BTreeMap::<String, Vec<f64>>::new();
+    for r in rows {
+        let run = r["run"].as_str().expect("run");
+        let cfg = json(&st.join(run).join("config.json"));
+        assert_eq!(cfg["seed"], r["seed"], "{run}");
+        assert!(cfg["scene"].as_str().expect("scene").ends_with("ring360-c04-n000"), "{run}");
+        let method = r["method"].as_str().expect("method").to_string();
+        nrmse.entry(method).or_default().push(r["nrmse"].as_f64().expect("nrmse"));
+    }
+    assert!(rows.iter().any(|r| r["run"] == "runs/ring360-c04-n000/fast-seed6"));
+    assert!(rows.iter().any(|r| r["run"] == "runs/ring360-c04-n000/sart"));
+    // The seeds draw different fields.
+    let fast = &nrmse["fast"];
+    assert!(fast[0] != fast[1] && fast[1] != fast[2], "{fast:?}");
+    let means = record["means"].as_array().expect("means");
+    assert_eq!(means.len(), 3);
+    for m in means {
+        let runs = &nrmse[m["method"].as_str().expect("method")];
+        assert_eq!(m["runs"].as_u64(), Some(runs.len() as u64));
+        let mean = runs.iter().sum::<f64>() / runs.len() as f64;
+        assert!((m["nrmse"].as_f64().expect("mean") - mean).abs() < 1e-12, "{m}");
+        let lo = runs.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = runs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!((m["nrmse_min"].as_f64(), m["nrmse_max"].as_f64()), (Some(lo), Some(hi)), "{m}");
+    }
+    let csv = std::fs::read_to_string(st.join("study.csv")).expect("csv");
+    assert!(csv.starts_with("layout,cameras,noise,method,seed,nrmse,") && csv.lines().count() == 8, "{csv}");
+    let html = std::fs::read_to_string(st.join("report.html")).expect("report");
+    assert!(html.contains("mean over its runs with seeds 5 to 7"), "the report has no table of means");
+    // Continued with another repeat count, the folder is refused.
+    let mut more = args.to_vec();
+    more[8] = "2";
+    let other = fluidnerf(d, &more);
+    assert!(!other.status.success());
+    assert!(String::from_utf8_lossy(&other.stderr).contains("`repeats`: 3 → 2"));
+    // Out of range.
+    more[8] = "0";
+    refused(&fluidnerf(d, &more), "--repeats");
+}
+
 /// `--visual-hull` holds every voxel method inside the images' visual hull; the runs without it
 /// have none.
 #[test]
