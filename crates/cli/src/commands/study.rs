@@ -68,8 +68,9 @@ impl LayoutChoice {
 /// noise; one more camera than the count is made and held out: it drives held-out early
 /// stopping and scores reprojections) and reconstructs it with every method under one
 /// stopping policy. Writes into OUT: `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with
-/// --repeats; each with its config.json), `study.json` and `study.csv` (one row per run), plots of volume NRMSE and
-/// SSIM against the camera count and against noise, and `report.html`.
+/// --repeats; each with its config.json), `study.json` and `study.csv` (one row per run),
+/// plots of volume NRMSE and SSIM against the camera count and against noise, and
+/// `report.html`.
 ///
 /// Rerunning the same command continues an interrupted study; --force starts it over.
 #[derive(clap::Args, Debug)]
@@ -168,14 +169,19 @@ impl Grid {
     /// The run seeds of `method` in every cell: one per repeat for a method whose result
     /// depends on its seed, the study's own for the others.
     fn seeds(&self, method: Method) -> std::ops::Range<u64> {
-        let n = if method.uses_seed() { u64::from(self.repeats) } else { 1 };
+        let n = if self.repeated(method) { u64::from(self.repeats) } else { 1 };
         self.seed..self.seed.saturating_add(n)
+    }
+
+    /// Whether `method` runs several times in each cell, once per seed.
+    fn repeated(&self, method: Method) -> bool {
+        self.repeats > 1 && method.uses_seed()
     }
 
     /// The run folder's name of `method` with `seed` in a cell's folder: the method's name, and
     /// the seed when the study repeats the method's runs.
     fn run_name(&self, method: Method, seed: u64) -> String {
-        if self.repeats > 1 && method.uses_seed() {
+        if self.repeated(method) {
             format!("{}-seed{seed}", method.name())
         } else {
             method.name().to_string()
@@ -658,11 +664,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                             "[{k}/{total}] {} · {cameras} cameras · noise {noise} · {}{}{}",
                             layout.name(),
                             method.label(),
-                            if g.repeats > 1 && method.uses_seed() {
-                                format!(" · seed {seed}")
-                            } else {
-                                String::new()
-                            },
+                            if g.repeated(method) { format!(" · seed {seed}") } else { String::new() },
                             if finished { " (done earlier)" } else { "" }
                         );
                     }
@@ -681,7 +683,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         noise,
                         method: method.name().into(),
                         seed,
-                        repeated: g.repeats > 1 && method.uses_seed(),
+                        repeated: g.repeated(method),
                         nrmse: r.final_nrmse,
                         ssim_global: r.final_ssim_global,
                         best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
