@@ -788,16 +788,17 @@ fn means_table(means: &[Mean]) -> String {
     s
 }
 
-/// One line per (method, other axes) of `metric` against `axis`.
-fn sweep_plot(rows: &[Row], title: &str, axis: &str, metric: &str) -> Option<LinePlot> {
-    let x_of = |r: &Row| if axis == "cameras" { r.cameras as f64 } else { 100.0 * r.noise };
-    let y_of = |r: &Row| if metric == "NRMSE" { r.nrmse } else { r.ssim_global };
+/// One line per (method, other axes) of `metric` against `axis`, through each cell's mean
+/// (the run itself where a cell has one run of the method).
+fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<LinePlot> {
+    let x_of = |r: &Mean| if axis == "cameras" { r.cameras as f64 } else { 100.0 * r.noise };
+    let y_of = |r: &Mean| if metric == "NRMSE" { r.nrmse } else { r.ssim_global };
     let distinct: std::collections::BTreeSet<u64> = rows.iter().map(|r| x_of(r).to_bits()).collect();
     if distinct.len() < 2 {
         return None;
     }
     let mut keys: Vec<String> = Vec::new();
-    let key = |r: &Row| {
+    let key = |r: &Mean| {
         let fixed = if axis == "cameras" { format!("noise {}", r.noise) } else { format!("{} cameras", r.cameras) };
         format!("{} ({}, {fixed})", r.method, r.layout)
     };
@@ -870,6 +871,7 @@ fn write_outputs(
     total: usize,
 ) -> anyhow::Result<()> {
     let finished = rows.len() == total;
+    let cells = means(rows);
     fluidnerf_pipeline::rundir::write_json(
         &out.join("study.json"),
         &StudyRecord {
@@ -879,42 +881,15 @@ fn write_outputs(
             grid: g,
             stopping_rule: g.stopping.describe_rule(),
             rows,
-            means: if g.repeats > 1 { means(rows) } else { Vec::new() },
+            means: if g.repeats > 1 { cells.clone() } else { Vec::new() },
         },
     )?;
-    // With repeats the plots show each cell's mean: one line per method, not one per seed.
-    let mean_rows: Vec<Row>;
-    let plotted = if g.repeats > 1 {
-        mean_rows = means(rows)
-            .into_iter()
-            .map(|m| Row {
-                layout: m.layout,
-                cameras: m.cameras,
-                noise: m.noise,
-                method: m.method,
-                seed: g.seed,
-                repeated: false,
-                nrmse: m.nrmse,
-                ssim_global: m.ssim_global,
-                best_holdout_loss: None,
-                kept_iteration: 0,
-                iterations: 0,
-                stop_reason: String::new(),
-                train_time_s: m.train_time_s,
-                result_bytes: 0,
-                run: String::new(),
-            })
-            .collect();
-        &mean_rows[..]
-    } else {
-        rows
-    };
     fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
     let mut figures = Vec::new();
     for (axis, name) in [("cameras", "cameras"), ("noise", "noise")] {
         let plots: Vec<LinePlot> = ["NRMSE", "SSIM"]
             .iter()
-            .filter_map(|m| sweep_plot(plotted, &format!("{m} against {name}"), axis, m))
+            .filter_map(|m| sweep_plot(&cells, &format!("{m} against {name}"), axis, m))
             .collect();
         let file = out.join(format!("against_{name}.png"));
         if plots.is_empty() {
@@ -961,12 +936,12 @@ fn write_outputs(
             ),
             &["layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM (global)", "time [s]"],
         );
-        for m in means(rows) {
+        for m in &cells {
             mean_table.push_row(vec![
-                m.layout,
+                m.layout.clone(),
                 m.cameras.to_string(),
                 m.noise.to_string(),
-                m.method,
+                m.method.clone(),
                 m.runs.to_string(),
                 f(m.nrmse),
                 format!("{} – {}", f(m.nrmse_min), f(m.nrmse_max)),
@@ -1195,9 +1170,9 @@ mod tests {
             result_bytes: 1,
             run: "r".into(),
         };
-        let by_cameras = sweep_plot(&[row(4, 0.0), row(5, 0.0)], "t", "cameras", "NRMSE").expect("a sweep");
+        let by_cameras = sweep_plot(&means(&[row(4, 0.0), row(5, 0.0)]), "t", "cameras", "NRMSE").expect("a sweep");
         assert!(by_cameras.integer_x);
-        let by_noise = sweep_plot(&[row(4, 0.0), row(4, 0.02)], "t", "noise", "NRMSE").expect("a sweep");
+        let by_noise = sweep_plot(&means(&[row(4, 0.0), row(4, 0.02)]), "t", "noise", "NRMSE").expect("a sweep");
         assert!(!by_noise.integer_x);
     }
 }
