@@ -57,7 +57,7 @@ def cli() -> str:
 TR_METHOD = {
     "name": "tr-fast",
     "field": {"hash-grid": {"levels": 4, "log2_table_size": 12, "max_resolution": 32}},
-    "windows": {"frames": 2, "overlap": 1},
+    "windows": {"frames": 2, "overlap": 1, "warm_start": True},
     "train": {"rays_per_image": 48, "coarse_samples": 12},
 }
 TR_OPTIONS = {"resolution": 10, "stopping": {"max_iterations": 8}, "checkpoint_every": 0}

@@ -451,7 +451,8 @@ pub struct TemporalArgs {
     #[arg(long)]
     pub overlap: Option<usize>,
     /// Train every window from scratch instead of from the previous window's weights;
-    /// `--no-warm-start false` warm-starts a configuration's windows that did not.
+    /// `--no-warm-start false` warm-starts a configuration's windows that did not [default: the
+    /// preset's: tr-fluidnerf's windows are warm-started, tr-fast's are not].
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub no_warm_start: Option<bool>,
     /// Frame times whose images are NOT trained on (comma separated, the scene's time unit);
