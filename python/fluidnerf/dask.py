@@ -6,9 +6,10 @@ that runs ``fluidnerf_pipeline::reconstruct_windows`` for that window into the r
 a last task that stitches them (``finish_windows``) into exactly the run folder the serial
 ``fluidnerf.reconstruct`` writes, with the same volumes for the same settings and seed.
 
-- Warm-start chains are respected: with ``warm_start`` (the default of ``tr-fast``) window
-  ``k`` depends on window ``k − 1``; without it (and for ``static-per-frame``, one window per
-  frame) every window is independent and they run in parallel.
+- Warm-start chains are respected: with ``warm_start`` (the default of ``tr-fluidnerf``)
+  window ``k`` depends on window ``k − 1``; without it (the default of ``tr-fast``, and
+  ``static-per-frame``, one window per frame) every window is independent and they run in
+  parallel.
 - Tasks are idempotent and their outputs atomic: a window whose done file
   (``windows/wNNN.done.json``) exists is read back, not trained again; a window whose process
   died continues from its checkpoint. A lost worker's task is simply run again elsewhere.
