@@ -232,12 +232,12 @@ struct StudyRecord<'a> {
     stopping_rule: String,
     rows: &'a [Row],
     /// With repeats: each cell's and method's mean over its runs so far.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    means: Vec<Mean>,
+    #[serde(skip_serializing_if = "<[Mean]>::is_empty")]
+    means: &'a [Mean],
 }
 
 /// A cell's and method's runs summed up ([`means`]).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Debug, Serialize)]
 struct Mean {
     layout: String,
     cameras: usize,
@@ -881,7 +881,7 @@ fn write_outputs(
             grid: g,
             stopping_rule: g.stopping.describe_rule(),
             rows,
-            means: if g.repeats > 1 { cells.clone() } else { Vec::new() },
+            means: if g.repeats > 1 { &cells } else { &[] },
         },
     )?;
     fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
