@@ -38,7 +38,8 @@ mod infer64;
 
 /// Whether the hash grid's decoder takes its training products in bfloat16 on this CPU when its
 /// configuration asks for them (`mlp_precision = "bf16"`): where AVX-512 BF16 runs them faster
-/// than f32, on AMD's Zen 4 and Zen 5; elsewhere it trains in f32.
+/// than f32, on AMD's Zen 4 and Zen 5, or on AMX tiles (Intel, Sapphire Rapids onwards);
+/// elsewhere it trains in f32.
 pub fn bf16_products_available() -> bool {
     bf16::bf16_pays()
 }
@@ -230,9 +231,8 @@ impl Mlp {
     }
 
     /// With `want`, training takes the products in bfloat16 where this network allows and the
-    /// CPU runs them faster than f32 ([`bf16_products_available`]). Inference takes the same
-    /// products where `vdpbf16ps` pays (AMD); on Intel's cores, whose training products run on
-    /// AMX tiles, it stays in f32.
+    /// CPU runs them faster than f32 ([`bf16_products_available`]), and inference takes the
+    /// same products: with `vdpbf16ps` on AMD, on AMX tiles on Intel.
     pub(crate) fn with_bf16_products(mut self, want: bool) -> Self {
         self.bf16 = want && bf16::fits(&self) && bf16::bf16_pays();
         self

@@ -539,15 +539,16 @@ unsafe fn tiles_v4(
     }
 }
 
-/// [`forward_v4`] with the products on AMX tiles, 16 rows at a time.
+/// [`tiles_v4`] with the products on AMX tiles, 16 rows at a time: each layer's activations
+/// into `acts` (`D × stride`, rows of 64) when given (the forward pass of training), else into
+/// one tile of 16 rows kept in L1 (inference), and the output's pre-activation into `pre_out`.
 #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
 #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
-unsafe fn forward_amx(
+unsafe fn tiles_amx(
     mlp: &Mlp,
     params: &[f32],
     x: &[f32],
-    acts: &mut [f32],
-    stride: usize,
+    mut acts: Option<(&mut [f32], usize)>,
     pre_out: &mut [f32],
     s: &mut Scratch,
 ) {
@@ -583,12 +584,23 @@ unsafe fn forward_amx(
             unsafe {
                 amx::product::<4>(inp, k_pad, &s.w_fwd[off..off + n_w], Some(&params[layer.bias.clone()]), &mut sums)
             };
-            let out = &mut acts[l * stride + r * WIDTH..l * stride + (r + rows) * WIDTH];
+            let mut out =
+                acts.as_mut().map(|(a, stride)| &mut a[l * *stride + r * WIDTH..l * *stride + (r + rows) * WIDTH]);
             for p in 0..rows {
-                let o = &mut out[p * WIDTH..(p + 1) * WIDTH];
-                for (o, &v) in o.iter_mut().zip(&sums[p * WIDTH..(p + 1) * WIDTH]) {
-                    *o = v.max(0.0);
-                }
+                let sum = &mut sums[p * WIDTH..(p + 1) * WIDTH];
+                let o: &[f32] = match out.as_deref_mut() {
+                    Some(out) => {
+                        let o = &mut out[p * WIDTH..(p + 1) * WIDTH];
+                        for (o, &v) in o.iter_mut().zip(sum.iter()) {
+                            *o = v.max(0.0);
+                        }
+                        o
+                    }
+                    None => {
+                        sum.iter_mut().for_each(|v| *v = v.max(0.0));
+                        sum
+                    }
+                };
                 // SAFETY: rows of 64; features enabled.
                 unsafe { x86::row_bf16(o, WIDTH, &mut hb[p * WIDTH..]) };
                 if l + 1 == depth {
@@ -865,7 +877,7 @@ pub(super) fn forward(
     #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
     if use_amx() {
         // SAFETY: the CPU features and AMX were checked just above.
-        unsafe { forward_amx(mlp, params, x, acts, stride, pre_out, s) };
+        unsafe { tiles_amx(mlp, params, x, Some((acts, stride)), pre_out, s) };
         return;
     }
     #[cfg(target_arch = "x86_64")]
@@ -875,12 +887,19 @@ pub(super) fn forward(
     };
 }
 
-/// Inference with the products of [`forward`] on AVX-512 BF16: the output's pre-activation of
-/// `n = pre_out.len()` rows of `x` (the caller applies the output activation), equal to
-/// [`forward`]'s on that path. Requires [`cpu_has_bf16`] and [`fits`].
+/// Inference with the products of [`forward`], on AMX tiles where training takes them there and
+/// on AVX-512 BF16 elsewhere: the output's pre-activation of `n = pre_out.len()` rows of `x`
+/// (the caller applies the output activation), equal bit for bit to [`forward`]'s on the same
+/// path. Requires [`cpu_has_bf16`] and [`fits`].
 pub(super) fn infer(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s: &mut Scratch) {
     assert!(cpu_has_bf16() && fits(mlp), "bf16::infer on an unfit network or CPU");
     assert_eq!(x.len(), pre_out.len() * mlp.in_dim, "bf16::infer: input is not {}×{}", pre_out.len(), mlp.in_dim);
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    if use_amx() {
+        // SAFETY: the CPU features and AMX were checked just above.
+        unsafe { tiles_amx(mlp, params, x, None, pre_out, s) };
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     // SAFETY: the CPU features were checked just above.
     unsafe {
@@ -888,11 +907,11 @@ pub(super) fn infer(mlp: &Mlp, params: &[f32], x: &[f32], pre_out: &mut [f32], s
     };
 }
 
-/// Whether inference takes the bfloat16 products of a network trained with them: where
-/// `vdpbf16ps` pays (AMD's Zen 4 and Zen 5), not on Intel's cores, where it does not and where
-/// training takes the products on AMX tiles instead.
+/// Whether inference takes the bfloat16 products of a network trained with them: wherever
+/// training takes them ([`bf16_pays`]), on AVX-512 BF16 (AMD's Zen 4 and Zen 5) or on AMX
+/// tiles (Intel), as training does.
 pub(super) fn infer_pays() -> bool {
-    cpu_has_bf16() && bf16_pays() && !amx_ready()
+    cpu_has_bf16() && bf16_pays()
 }
 
 /// Backward pass after [`forward`] with `acts`. Requires [`cpu_has_bf16`] and [`fits`].
@@ -1083,11 +1102,17 @@ mod tests {
                 let (mut want, mut got) = (vec![0.0; n], vec![f32::NAN; n]);
                 let mut acts = vec![0.0; depth * n * 64];
                 let mut s = super::Scratch::default();
-                super::WITHOUT_AMX.with(|w| w.set(true));
-                super::forward(&net, &params, &x, &mut acts, n * 64, &mut want, &mut s);
-                super::WITHOUT_AMX.with(|w| w.set(false));
-                super::infer(&net, &params, &x, &mut got, &mut s);
-                assert_eq!(got, want, "{in_dim} inputs, depth {depth}, {n} rows");
+                // Both paths where the CPU has AMX (the tiles' and AVX-512 BF16's), the latter
+                // alone elsewhere.
+                for without_amx in [true, false] {
+                    super::WITHOUT_AMX.with(|w| w.set(without_amx));
+                    super::forward(&net, &params, &x, &mut acts, n * 64, &mut want, &mut s);
+                    got.fill(f32::NAN);
+                    super::infer(&net, &params, &x, &mut got, &mut s);
+                    super::WITHOUT_AMX.with(|w| w.set(false));
+                    let path = if without_amx || !super::use_amx() { "AVX-512 BF16" } else { "AMX" };
+                    assert_eq!(got, want, "{path}: {in_dim} inputs, depth {depth}, {n} rows");
+                }
                 if super::infer_pays() {
                     let mut out = vec![0.0; n];
                     net.infer(&params, &x, &mut out, &mut MlpTape::default());
