@@ -34,7 +34,7 @@ use crate::kernels::{self, matmul, Op};
 #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
 mod amx;
 mod bf16;
-mod infer64;
+mod tile64;
 
 /// Whether the hash grid's decoder takes its training products in bfloat16 on this CPU when its
 /// configuration asks for them (`mlp_precision = "bf16"`): where AVX-512 BF16 runs them faster
@@ -190,6 +190,8 @@ pub(crate) struct MlpTape {
     eval: [Vec<f32>; 2],
     /// Scratch of the bfloat16 passes.
     bf16: bf16::Scratch,
+    /// Scratch of the f32 backward pass in tiles.
+    fused: tile64::Scratch,
 }
 
 impl Mlp {
@@ -329,6 +331,8 @@ impl Mlp {
         let stride = tape.cap * h;
         if self.bf16 {
             bf16::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], &mut tape.bf16);
+        } else if let Some(kernel) = tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
+            tile64::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], kernel);
         } else {
             self.forward_f32(params, x, tape, stride);
         }
@@ -384,8 +388,8 @@ impl Mlp {
         if self.bf16 && bf16::infer_pays() {
             bf16::infer(self, params, x, out, &mut tape.bf16);
         } else {
-            match infer64::Kernel::detect().filter(|_| infer64::fits(self)) {
-                Some(kernel) => infer64::infer(self, params, x, out, kernel),
+            match tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
+                Some(kernel) => tile64::infer(self, params, x, out, kernel),
                 None => self.infer_gemm(params, x, out, tape),
             }
         }
@@ -432,7 +436,7 @@ impl Mlp {
         tape: &mut MlpTape,
         d_out: &[f32],
         grads: &mut [f32],
-        mut d_x: Option<&mut [f32]>,
+        d_x: Option<&mut [f32]>,
     ) {
         let n = tape.rows;
         let h = self.width;
@@ -455,11 +459,35 @@ impl Mlp {
             }
         }
         grads[self.out_bias] += g.iter().sum::<f32>();
+        if let Some(dx) = d_x.as_deref() {
+            assert_eq!(dx.len(), n * self.in_dim, "Mlp::backward: d_x is not {n}×{}", self.in_dim);
+        }
         if self.bf16 {
             let g = &tape.pre_out[..n];
             bf16::backward(self, params, x, &tape.acts, stride, g, &mut tape.bf16, grads, d_x);
             return;
         }
+        if let Some(kernel) = tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
+            let g = &tape.pre_out[..n];
+            tile64::backward(self, params, x, &tape.acts, stride, g, &mut tape.fused, grads, d_x, kernel);
+            return;
+        }
+        self.backward_gemm(params, x, tape, grads, d_x);
+    }
+
+    /// The layers of [`Mlp::backward`] over GEMMs in f32, after the output's gradient `g` was
+    /// stored over `tape.pre_out`.
+    fn backward_gemm(
+        &self,
+        params: &[f32],
+        x: &[f32],
+        tape: &mut MlpTape,
+        grads: &mut [f32],
+        mut d_x: Option<&mut [f32]>,
+    ) {
+        let (n, h) = (tape.rows, self.width);
+        let stride = tape.cap * h;
+        let g = &tape.pre_out[..n];
         let last = (self.layers.len() - 1) * stride;
         let [da0, da1] = &mut tape.da;
         let (mut cur, mut next) = (&mut da0[..n * h], &mut da1[..n * h]);
@@ -471,7 +499,6 @@ impl Mlp {
             &mut grads[self.out_weight.clone()],
         );
         if let Some(dx) = d_x.as_deref_mut() {
-            assert_eq!(dx.len(), n * self.in_dim, "Mlp::backward: d_x is not {n}×{}", self.in_dim);
             dx.fill(0.0);
         }
         for (l, layer) in self.layers.iter().enumerate().rev() {

@@ -97,7 +97,7 @@ fn use_amx() -> bool {
 
 /// Whether `mlp`'s shape is the one these passes are written for.
 pub(super) fn fits(mlp: &Mlp) -> bool {
-    super::infer64::fits(mlp)
+    super::tile64::fits(mlp)
 }
 
 /// `k` rounded up to whole vectors of 16.
