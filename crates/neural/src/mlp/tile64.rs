@@ -11,8 +11,8 @@
 //! features are broadcast from the previous layer's tile. The forward pass keeps each
 //! layer's tile in the tape as well; the backward pass takes a tile of `∂z` down the layers
 //! the same way through the transposed weights (`∂z_{l−1} = ∂z_l W_lᵀ` through layer `l − 1`'s
-//! ReLU, `∂x = ∂z_0 W_0ᵀ`), and the weight gradients, sums over all the chunk's rows, stay
-//! GEMMs.
+//! ReLU, `∂x = ∂z_0 W_0ᵀ`); the weight gradients, sums over all the chunk's rows, keep blocks
+//! of six of their rows in registers while passes of 64 rows go by.
 
 use std::ops::Range;
 
@@ -164,7 +164,8 @@ fn blocks(k: usize) -> usize {
 /// pre-activation)`: adds the gradients into `grads` and writes `∂L/∂x` into `d_x`. Each tile
 /// of six rows goes down the network in registers (`∂z` of a layer from the one above it, its
 /// ReLU mask and bias sums); the weight gradients `inputᵀ · ∂z`, long sums over the chunk's
-/// rows, are then GEMMs. Requires [`fits`] and a `kernel` the CPU supports.
+/// rows, follow ([`rank_avx512`], [`rank_avx2`]). Requires [`fits`] and a `kernel` the CPU
+/// supports.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn backward(
     mlp: &Mlp,
