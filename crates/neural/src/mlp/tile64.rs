@@ -153,6 +153,8 @@ pub(super) struct Scratch {
     wt: Vec<f32>,
     /// Layer `l`'s `∂L/∂z` for the chunk's rows, `n × 64`, one layer after another.
     dz: Vec<f32>,
+    /// Layer `l`'s bias gradient over the chunk.
+    db: Vec<[f32; WIDTH]>,
 }
 
 /// Fan-in rounded up to whole blocks of 16 columns.
@@ -247,20 +249,12 @@ fn backward_tiles(
     assert!(stride >= n * WIDTH && acts.len() >= (depth - 1) * stride + n * WIDTH, "tile64::backward: acts too short");
     // Every layer's Wᵀ, 64 rows of its fan-in's blocks.
     let fan_in = |l: usize| if l == 0 { din } else { WIDTH };
-    let wt_off: Vec<usize> = (0..=depth)
-        .scan(0, |o, l| {
-            let at = *o;
-            if l < depth {
-                *o += WIDTH * 16 * blocks(fan_in(l));
-            }
-            Some(at)
-        })
-        .collect();
+    let wt_off = |l: usize| if l == 0 { 0 } else { WIDTH * 16 * blocks(din) + (l - 1) * WIDTH * WIDTH };
     s.wt.clear();
-    s.wt.resize(wt_off[depth], 0.0);
+    s.wt.resize(wt_off(depth), 0.0);
     for (l, layer) in mlp.layers.iter().enumerate() {
         let (w, k, c) = (&params[layer.weight.clone()], fan_in(l), 16 * blocks(fan_in(l)));
-        let wt = &mut s.wt[wt_off[l]..wt_off[l + 1]];
+        let wt = &mut s.wt[wt_off(l)..wt_off(l + 1)];
         for (kk, row) in w.chunks_exact(WIDTH).enumerate().take(k) {
             for (j, &v) in row.iter().enumerate() {
                 wt[j * c + kk] = v;
@@ -270,7 +264,9 @@ fn backward_tiles(
     s.dz.resize(depth * n * WIDTH, 0.0);
     let w_out: &[f32; WIDTH] = params[mlp.out_weight.clone()].try_into().expect("64 output weights");
     let mut d_w_out = [0f32; WIDTH];
-    let mut db = vec![[0f32; WIDTH]; depth];
+    let db = &mut s.db;
+    db.clear();
+    db.resize(depth, [0f32; WIDTH]);
     let mut d_x = d_x;
     // The last tile's ∂z padded with zeros to a whole tile, and ∂x of a tile.
     let mut tail = [0f32; ROWS * WIDTH];
@@ -312,7 +308,7 @@ fn backward_tiles(
                 tail[rows * WIDTH..].fill(0.0);
                 &tail
             };
-            let wt = &s.wt[wt_off[l]..wt_off[l + 1]];
+            let wt = &s.wt[wt_off(l)..wt_off(l + 1)];
             let nb = blocks(fan_in(l));
             let (mask, out): (Option<&[f32]>, &mut [f32]) = if l > 0 {
                 (Some(act(l - 1)), &mut below[((l - 1) * n + r0) * WIDTH..][..rows * WIDTH])
