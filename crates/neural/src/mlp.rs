@@ -468,8 +468,8 @@ impl Mlp {
             return;
         }
         if let Some(kernel) = tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
-            let g = &tape.pre_out[..n];
-            tile64::backward(self, params, x, &tape.acts, stride, g, &mut tape.fused, grads, d_x, kernel);
+            let pass = tile64::Pass { mlp: self, params, x, acts: &tape.acts, stride, g: &tape.pre_out[..n] };
+            tile64::backward(pass, &mut tape.fused, grads, d_x, kernel);
             return;
         }
         self.backward_gemm(params, x, tape, grads, d_x);

@@ -162,88 +162,55 @@ fn blocks(k: usize) -> usize {
     k.div_ceil(16)
 }
 
-/// The backward pass after [`forward`] over the same `n = g.len()` rows, given `g = ∂L/∂(output
-/// pre-activation)`: adds the gradients into `grads` and writes `∂L/∂x` into `d_x`. Each tile
-/// of six rows goes down the network in registers (`∂z` of a layer from the one above it, its
-/// ReLU mask and bias sums); the weight gradients `inputᵀ · ∂z`, long sums over the chunk's
-/// rows, follow ([`rank_avx512`], [`rank_avx2`]). Requires [`fits`] and a `kernel` the CPU
-/// supports.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn backward(
-    mlp: &Mlp,
-    params: &[f32],
-    x: &[f32],
-    acts: &[f32],
-    stride: usize,
-    g: &[f32],
-    s: &mut Scratch,
-    grads: &mut [f32],
-    d_x: Option<&mut [f32]>,
-    kernel: Kernel,
-) {
-    assert!(fits(mlp), "tile64 on a network it is not written for");
+/// What [`backward`] reads: the network and its parameters, the forward pass's inputs `x` and
+/// activations (`acts`, layer `l` at `l · stride`), and `g = ∂L/∂(output pre-activation)` for
+/// its `n = g.len()` rows.
+pub(super) struct Pass<'a> {
+    pub mlp: &'a Mlp,
+    pub params: &'a [f32],
+    pub x: &'a [f32],
+    pub acts: &'a [f32],
+    pub stride: usize,
+    pub g: &'a [f32],
+}
+
+/// The backward pass after [`forward`] over the same rows: adds the gradients into `grads` and
+/// writes `∂L/∂x` into `d_x`. Each tile of six rows goes down the network in registers (`∂z` of
+/// a layer from the one above it, its ReLU mask and bias sums); the weight gradients `inputᵀ ·
+/// ∂z`, long sums over the chunk's rows, follow ([`rank_avx512`], [`rank_avx2`]). Requires
+/// [`fits`] and a `kernel` the CPU supports.
+pub(super) fn backward(pass: Pass<'_>, s: &mut Scratch, grads: &mut [f32], d_x: Option<&mut [f32]>, kernel: Kernel) {
+    assert!(fits(pass.mlp), "tile64 on a network it is not written for");
     assert!(Kernel::detect().is_some_and(|k| k == kernel || kernel == Kernel::Avx2), "{kernel:?} on this CPU");
-    /// The whole pass compiled for the kernel's instruction set, so that the loops between
-    /// the products (the output's gradient, the bias sums) are vectorised too.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn wide(
-        mlp: &Mlp,
-        params: &[f32],
-        x: &[f32],
-        acts: &[f32],
-        stride: usize,
-        g: &[f32],
-        s: &mut Scratch,
-        grads: &mut [f32],
-        d_x: Option<&mut [f32]>,
-    ) {
-        backward_tiles(mlp, params, x, acts, stride, g, s, grads, d_x, Kernel::Avx512)
+    // The whole pass compiled for the kernel's instruction set, so that the loops between the
+    // products (the output's gradient, the bias sums) are vectorised too.
+    macro_rules! compiled_for {
+        ($name:ident, $features:literal, $kernel:expr) => {
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = $features)]
+            unsafe fn $name(pass: Pass<'_>, s: &mut Scratch, grads: &mut [f32], d_x: Option<&mut [f32]>) {
+                backward_tiles(pass, s, grads, d_x, $kernel)
+            }
+        };
     }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn narrow(
-        mlp: &Mlp,
-        params: &[f32],
-        x: &[f32],
-        acts: &[f32],
-        stride: usize,
-        g: &[f32],
-        s: &mut Scratch,
-        grads: &mut [f32],
-        d_x: Option<&mut [f32]>,
-    ) {
-        backward_tiles(mlp, params, x, acts, stride, g, s, grads, d_x, Kernel::Avx2)
-    }
+    compiled_for!(wide, "avx512f", Kernel::Avx512);
+    compiled_for!(narrow, "avx2,fma", Kernel::Avx2);
     match kernel {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: the CPU supports the kernel (asserted above).
-        Kernel::Avx512 => unsafe { wide(mlp, params, x, acts, stride, g, s, grads, d_x) },
+        Kernel::Avx512 => unsafe { wide(pass, s, grads, d_x) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        Kernel::Avx2 => unsafe { narrow(mlp, params, x, acts, stride, g, s, grads, d_x) },
+        Kernel::Avx2 => unsafe { narrow(pass, s, grads, d_x) },
         #[cfg(not(target_arch = "x86_64"))]
         _ => unreachable!("no kernel is detected off x86-64"),
     }
 }
 
 /// The body of [`backward`], for a `kernel` the CPU supports.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn backward_tiles(
-    mlp: &Mlp,
-    params: &[f32],
-    x: &[f32],
-    acts: &[f32],
-    stride: usize,
-    g: &[f32],
-    s: &mut Scratch,
-    grads: &mut [f32],
-    d_x: Option<&mut [f32]>,
-    kernel: Kernel,
-) {
+fn backward_tiles(pass: Pass<'_>, s: &mut Scratch, grads: &mut [f32], d_x: Option<&mut [f32]>, kernel: Kernel) {
+    let Pass { mlp, params, x, acts, stride, g } = pass;
     let (n, din, depth) = (g.len(), mlp.in_dim, mlp.layers.len());
     assert_eq!(x.len(), n * din, "tile64::backward: input is not {n}×{din}");
     assert!(stride >= n * WIDTH && acts.len() >= (depth - 1) * stride + n * WIDTH, "tile64::backward: acts too short");
@@ -382,6 +349,38 @@ fn backward_tiles(
 /// (16 KB each at most) stay in L1 while every block of the weight gradient passes over them.
 const RANK_ROWS: usize = 64;
 
+/// The blocks of the weight gradient's kernels: `block(kb, k0, c, rows)` for every block of
+/// `kb ≤ 6` rows of `dw` from `k0` and `group` columns from `c`, over passes of [`RANK_ROWS`] of
+/// the chunk's `n` rows.
+#[inline(always)]
+fn rank_blocks(n: usize, k_n: usize, group: usize, mut block: impl FnMut(usize, usize, usize, Range<usize>)) {
+    for p0 in (0..n).step_by(RANK_ROWS) {
+        let rows = p0..(p0 + RANK_ROWS).min(n);
+        for c in (0..WIDTH).step_by(group) {
+            let mut k0 = 0;
+            while k0 < k_n {
+                let kb = (k_n - k0).min(6);
+                block(kb, k0, c, rows.clone());
+                k0 += kb;
+            }
+        }
+    }
+}
+
+/// `$f::<KB>($args)` for the block height `$kb` (1 to 6).
+macro_rules! by_height {
+    ($kb:expr, $f:ident($($arg:expr),*)) => {
+        match $kb {
+            6 => $f::<6>($($arg),*),
+            5 => $f::<5>($($arg),*),
+            4 => $f::<4>($($arg),*),
+            3 => $f::<3>($($arg),*),
+            2 => $f::<2>($($arg),*),
+            _ => $f::<1>($($arg),*),
+        }
+    };
+}
+
 /// `dw[k][j] += Σ_p inp[p][k] · dz[p][j]` over the rows `p` of the chunk (`inp` rows of `k_n`,
 /// `dz` and `dw` rows of 64) with AVX-512: blocks of six rows of `dw` held in 24 registers
 /// while a pass of [`RANK_ROWS`] rows goes by.
@@ -420,25 +419,10 @@ unsafe fn rank_avx512(inp: &[f32], k_n: usize, dz: &[f32], dw: &mut [f32]) {
             }
         }
     }
-    for p0 in (0..n).step_by(RANK_ROWS) {
-        let ps = p0..(p0 + RANK_ROWS).min(n);
-        let mut k0 = 0;
-        while k0 < k_n {
-            let kb = (k_n - k0).min(6);
-            // SAFETY: `ps` lies in the chunk and `k0 + kb ≤ k_n`; AVX-512F is enabled here.
-            unsafe {
-                match kb {
-                    6 => block::<6>(inp, k_n, k0, dz, ps.clone(), dw),
-                    5 => block::<5>(inp, k_n, k0, dz, ps.clone(), dw),
-                    4 => block::<4>(inp, k_n, k0, dz, ps.clone(), dw),
-                    3 => block::<3>(inp, k_n, k0, dz, ps.clone(), dw),
-                    2 => block::<2>(inp, k_n, k0, dz, ps.clone(), dw),
-                    _ => block::<1>(inp, k_n, k0, dz, ps.clone(), dw),
-                }
-            }
-            k0 += kb;
-        }
-    }
+    rank_blocks(n, k_n, WIDTH, |kb, k0, _, rows| {
+        // SAFETY: `rows` lies in the chunk and `k0 + kb ≤ k_n`; AVX-512F is enabled here.
+        unsafe { by_height!(kb, block(inp, k_n, k0, dz, rows, dw)) }
+    });
 }
 
 /// [`rank_avx512`] with AVX2 and FMA: blocks of six rows of `dw` and 16 of its columns.
@@ -485,28 +469,11 @@ unsafe fn rank_avx2(inp: &[f32], k_n: usize, dz: &[f32], dw: &mut [f32]) {
             }
         }
     }
-    for p0 in (0..n).step_by(RANK_ROWS) {
-        let ps = p0..(p0 + RANK_ROWS).min(n);
-        for c in (0..WIDTH).step_by(16) {
-            let mut k0 = 0;
-            while k0 < k_n {
-                let kb = (k_n - k0).min(6);
-                // SAFETY: `ps` lies in the chunk, `k0 + kb ≤ k_n`, `c + 16 ≤ 64`; AVX2 and FMA
-                // are enabled here.
-                unsafe {
-                    match kb {
-                        6 => block::<6>(inp, k_n, k0, c, dz, ps.clone(), dw),
-                        5 => block::<5>(inp, k_n, k0, c, dz, ps.clone(), dw),
-                        4 => block::<4>(inp, k_n, k0, c, dz, ps.clone(), dw),
-                        3 => block::<3>(inp, k_n, k0, c, dz, ps.clone(), dw),
-                        2 => block::<2>(inp, k_n, k0, c, dz, ps.clone(), dw),
-                        _ => block::<1>(inp, k_n, k0, c, dz, ps.clone(), dw),
-                    }
-                }
-                k0 += kb;
-            }
-        }
-    }
+    rank_blocks(n, k_n, 16, |kb, k0, c, rows| {
+        // SAFETY: `rows` lies in the chunk, `k0 + kb ≤ k_n`, `c + 16 ≤ 64`; AVX2 and FMA are
+        // enabled here.
+        unsafe { by_height!(kb, block(inp, k_n, k0, c, dz, rows, dw)) }
+    });
 }
 
 /// `out[r][c] = Σ_j inp[r][j] · wt[j][c]` for the `16 nb` columns of `wt` (64 rows of `16 nb`),
@@ -806,7 +773,8 @@ mod tests {
                     assert_eq!(inferred, pre, "{what}: inference and the forward pass differ");
                     let (mut grads, mut dx) = (vec![0f32; mlp.num_params()], vec![f32::NAN; n * in_dim]);
                     let mut s = super::Scratch::default();
-                    super::backward(&mlp, &params, &x, &want_acts, stride, &g, &mut s, &mut grads, Some(&mut dx), k);
+                    let pass = super::Pass { mlp: &mlp, params: &params, x: &x, acts: &want_acts, stride, g: &g };
+                    super::backward(pass, &mut s, &mut grads, Some(&mut dx), k);
                     close(&dx, &want_dx, &format!("{what} ∂x"));
                     for (name, _, r) in mlp.tensors("", 0) {
                         if name == "output.bias" {
