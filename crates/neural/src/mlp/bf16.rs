@@ -302,6 +302,32 @@ mod x86 {
 
     /// `Σ_j h[j] w[j]` over 64 values.
     #[inline(always)]
+    /// `max(a, 0)` of a row of 64 in bfloat16: [`row_bf16`] of the row's ReLU.
+    pub(super) unsafe fn relu_row_bf16(a: &[f32], dst: &mut [u16]) {
+        debug_assert!(a.len() >= WIDTH && dst.len() >= WIDTH);
+        // SAFETY: both hold 64 values.
+        unsafe {
+            let zero = _mm512_setzero_ps();
+            for c in (0..WIDTH).step_by(16) {
+                let v = _mm512_max_ps(_mm512_loadu_ps(a.as_ptr().add(c)), zero);
+                _mm256_storeu_si256(dst.as_mut_ptr().add(c).cast(), bf16x16(v));
+            }
+        }
+    }
+    /// [`dot64`] of the ReLU of `h`.
+    pub(super) unsafe fn relu_dot64(h: &[f32], w: &[f32]) -> f32 {
+        debug_assert!(h.len() >= WIDTH && w.len() >= WIDTH);
+        // SAFETY: both hold 64 values.
+        unsafe {
+            let (hp, wp, zero) = (h.as_ptr(), w.as_ptr(), _mm512_setzero_ps());
+            let at = |c: usize| _mm512_max_ps(_mm512_loadu_ps(hp.add(16 * c)), zero);
+            let mut acc = _mm512_mul_ps(at(0), _mm512_loadu_ps(wp));
+            for c in 1..WIDTH / 16 {
+                acc = _mm512_fmadd_ps(at(c), _mm512_loadu_ps(wp.add(16 * c)), acc);
+            }
+            _mm512_reduce_add_ps(acc)
+        }
+    }
     pub(super) unsafe fn dot64(h: &[f32], w: &[f32]) -> f32 {
         debug_assert!(h.len() >= WIDTH && w.len() >= WIDTH);
         // SAFETY: both hold 64 values.
@@ -586,26 +612,35 @@ unsafe fn tiles_amx(
             };
             let mut out =
                 acts.as_mut().map(|(a, stride)| &mut a[l * *stride + r * WIDTH..l * *stride + (r + rows) * WIDTH]);
+            // The ReLU; the next layer's input in bfloat16, or the output's product after the
+            // last layer (whose activations need no bfloat16 copy).
+            let last = l + 1 == depth;
             for p in 0..rows {
-                let sum = &mut sums[p * WIDTH..(p + 1) * WIDTH];
-                let o: &[f32] = match out.as_deref_mut() {
+                let sum = &sums[p * WIDTH..(p + 1) * WIDTH];
+                match out.as_deref_mut() {
                     Some(out) => {
                         let o = &mut out[p * WIDTH..(p + 1) * WIDTH];
-                        for (o, &v) in o.iter_mut().zip(sum.iter()) {
+                        for (o, &v) in o.iter_mut().zip(sum) {
                             *o = v.max(0.0);
                         }
-                        o
+                        // SAFETY: rows of 64; features enabled.
+                        unsafe {
+                            if last {
+                                pre_out[r + p] = b_out + x86::dot64(o, w_out);
+                            } else {
+                                x86::row_bf16(o, WIDTH, &mut hb[p * WIDTH..]);
+                            }
+                        }
                     }
-                    None => {
-                        sum.iter_mut().for_each(|v| *v = v.max(0.0));
-                        sum
-                    }
-                };
-                // SAFETY: rows of 64; features enabled.
-                unsafe { x86::row_bf16(o, WIDTH, &mut hb[p * WIDTH..]) };
-                if l + 1 == depth {
+                    // Inference keeps no activations: the ReLU is applied on the way.
                     // SAFETY: rows of 64; features enabled.
-                    pre_out[r + p] = b_out + unsafe { x86::dot64(o, w_out) };
+                    None => unsafe {
+                        if last {
+                            pre_out[r + p] = b_out + x86::relu_dot64(sum, w_out);
+                        } else {
+                            x86::relu_row_bf16(sum, &mut hb[p * WIDTH..]);
+                        }
+                    },
                 }
             }
             off += n_w;
