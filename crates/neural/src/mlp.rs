@@ -183,7 +183,7 @@ pub(crate) struct MlpTape {
     pre: Vec<f32>,
     /// `cap`: output pre-activation, then its gradient during backward.
     pre_out: Vec<f32>,
-    /// Two `cap × H` ping-pong buffers for ∂L/∂h.
+    /// Two ping-pong buffers for ∂L/∂h of the GEMM path's backward pass (sized by it).
     da: [Vec<f32>; 2],
     /// Two ping-pong buffers for inference, separate so that `infer` between a `forward` and
     /// its `backward` leaves the recorded pass intact.
@@ -191,7 +191,7 @@ pub(crate) struct MlpTape {
     /// Scratch of the bfloat16 passes.
     bf16: bf16::Scratch,
     /// Scratch of the f32 backward pass in tiles.
-    fused: tile64::Scratch,
+    tiles: tile64::Scratch,
 }
 
 impl Mlp {
@@ -245,6 +245,12 @@ impl Mlp {
     pub(crate) fn with_bf16_kernels(mut self) -> Self {
         self.bf16 = bf16::fits(&self) && bf16::cpu_has_bf16();
         self
+    }
+
+    /// The kernel of the f32 passes in register tiles ([`tile64`]), where this network's shape
+    /// and the CPU allow them; else the GEMMs run.
+    fn tiled(&self) -> Option<tile64::Kernel> {
+        tile64::Kernel::detect().filter(|_| tile64::fits(self))
     }
 
     /// Whether training takes the products in bfloat16.
@@ -314,9 +320,6 @@ impl Mlp {
                 tape.pre.resize(d * n * self.width, 0.0);
             }
             tape.pre_out.resize(n, 0.0);
-            for b in &mut tape.da {
-                b.resize(n * self.width, 0.0);
-            }
         }
         tape.rows = n;
     }
@@ -331,7 +334,7 @@ impl Mlp {
         let stride = tape.cap * h;
         if self.bf16 {
             bf16::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], &mut tape.bf16);
-        } else if let Some(kernel) = tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
+        } else if let Some(kernel) = self.tiled() {
             tile64::forward(self, params, x, &mut tape.acts, stride, &mut tape.pre_out[..n], kernel);
         } else {
             self.forward_f32(params, x, tape, stride);
@@ -388,7 +391,7 @@ impl Mlp {
         if self.bf16 && bf16::infer_pays() {
             bf16::infer(self, params, x, out, &mut tape.bf16);
         } else {
-            match tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
+            match self.tiled() {
                 Some(kernel) => tile64::infer(self, params, x, out, kernel),
                 None => self.infer_gemm(params, x, out, tape),
             }
@@ -467,9 +470,9 @@ impl Mlp {
             bf16::backward(self, params, x, &tape.acts, stride, g, &mut tape.bf16, grads, d_x);
             return;
         }
-        if let Some(kernel) = tile64::Kernel::detect().filter(|_| tile64::fits(self)) {
+        if let Some(kernel) = self.tiled() {
             let pass = tile64::Pass { mlp: self, params, x, acts: &tape.acts, stride, g: &tape.pre_out[..n] };
-            tile64::backward(pass, &mut tape.fused, grads, d_x, kernel);
+            tile64::backward(pass, &mut tape.tiles, grads, d_x, kernel);
             return;
         }
         self.backward_gemm(params, x, tape, grads, d_x);
@@ -489,6 +492,11 @@ impl Mlp {
         let stride = tape.cap * h;
         let g = &tape.pre_out[..n];
         let last = (self.layers.len() - 1) * stride;
+        for b in &mut tape.da {
+            if b.len() < n * h {
+                b.resize(n * h, 0.0);
+            }
+        }
         let [da0, da1] = &mut tape.da;
         let (mut cur, mut next) = (&mut da0[..n * h], &mut da1[..n * h]);
         kernels::rows_dot_backward(

@@ -300,8 +300,6 @@ mod x86 {
         }
     }
 
-    /// `Σ_j h[j] w[j]` over 64 values.
-    #[inline(always)]
     /// `max(a, 0)` of a row of 64 in bfloat16: [`row_bf16`] of the row's ReLU.
     pub(super) unsafe fn relu_row_bf16(a: &[f32], dst: &mut [u16]) {
         debug_assert!(a.len() >= WIDTH && dst.len() >= WIDTH);
@@ -314,28 +312,25 @@ mod x86 {
             }
         }
     }
-    /// [`dot64`] of the ReLU of `h`.
-    pub(super) unsafe fn relu_dot64(h: &[f32], w: &[f32]) -> f32 {
+
+    /// `Σ_j h[j] w[j]` over 64 values, of `max(h[j], 0)` with `RELU`.
+    #[inline(always)]
+    pub(super) unsafe fn dot64<const RELU: bool>(h: &[f32], w: &[f32]) -> f32 {
         debug_assert!(h.len() >= WIDTH && w.len() >= WIDTH);
         // SAFETY: both hold 64 values.
         unsafe {
             let (hp, wp, zero) = (h.as_ptr(), w.as_ptr(), _mm512_setzero_ps());
-            let at = |c: usize| _mm512_max_ps(_mm512_loadu_ps(hp.add(16 * c)), zero);
+            let at = |c: usize| {
+                let v = _mm512_loadu_ps(hp.add(16 * c));
+                if RELU {
+                    _mm512_max_ps(v, zero)
+                } else {
+                    v
+                }
+            };
             let mut acc = _mm512_mul_ps(at(0), _mm512_loadu_ps(wp));
             for c in 1..WIDTH / 16 {
                 acc = _mm512_fmadd_ps(at(c), _mm512_loadu_ps(wp.add(16 * c)), acc);
-            }
-            _mm512_reduce_add_ps(acc)
-        }
-    }
-    pub(super) unsafe fn dot64(h: &[f32], w: &[f32]) -> f32 {
-        debug_assert!(h.len() >= WIDTH && w.len() >= WIDTH);
-        // SAFETY: both hold 64 values.
-        unsafe {
-            let (hp, wp) = (h.as_ptr(), w.as_ptr());
-            let mut acc = _mm512_mul_ps(_mm512_loadu_ps(hp), _mm512_loadu_ps(wp));
-            for c in 1..WIDTH / 16 {
-                acc = _mm512_fmadd_ps(_mm512_loadu_ps(hp.add(16 * c)), _mm512_loadu_ps(wp.add(16 * c)), acc);
             }
             _mm512_reduce_add_ps(acc)
         }
@@ -555,7 +550,7 @@ unsafe fn tiles_v4(
             if l + 1 == depth {
                 for (p, o) in pre_out[r..r + rows].iter_mut().enumerate() {
                     // SAFETY: rows of 64; features enabled.
-                    *o = b_out + unsafe { x86::dot64(&out[p * WIDTH..], w_out) };
+                    *o = b_out + unsafe { x86::dot64::<false>(&out[p * WIDTH..], w_out) };
                 }
             }
             std::mem::swap(&mut hb, &mut nb);
@@ -626,7 +621,7 @@ unsafe fn tiles_amx(
                         // SAFETY: rows of 64; features enabled.
                         unsafe {
                             if last {
-                                pre_out[r + p] = b_out + x86::dot64(o, w_out);
+                                pre_out[r + p] = b_out + x86::dot64::<false>(o, w_out);
                             } else {
                                 x86::row_bf16(o, WIDTH, &mut hb[p * WIDTH..]);
                             }
@@ -636,7 +631,7 @@ unsafe fn tiles_amx(
                     // SAFETY: rows of 64; features enabled.
                     None => unsafe {
                         if last {
-                            pre_out[r + p] = b_out + x86::relu_dot64(sum, w_out);
+                            pre_out[r + p] = b_out + x86::dot64::<true>(sum, w_out);
                         } else {
                             x86::relu_row_bf16(sum, &mut hb[p * WIDTH..]);
                         }

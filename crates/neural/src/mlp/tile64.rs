@@ -157,6 +157,16 @@ pub(super) struct Scratch {
     db: Vec<[f32; WIDTH]>,
 }
 
+/// `$f::<N>($args)` for `N = $n`, one of the listed constants, else 1.
+macro_rules! by_const {
+    ($n:expr, [$($c:literal),*], $f:ident $args:tt) => {
+        match $n {
+            $($c => $f::<$c> $args,)*
+            _ => $f::<1> $args,
+        }
+    };
+}
+
 /// Fan-in rounded up to whole blocks of 16 columns.
 fn blocks(k: usize) -> usize {
     k.div_ceil(16)
@@ -286,24 +296,10 @@ fn backward_tiles(pass: Pass<'_>, s: &mut Scratch, grads: &mut [f32], d_x: Optio
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: the CPU supports the kernel (asserted above); `inp` holds a tile of
                 // rows of 64, `wt` 64 rows of 16 nb columns, `mask` and `out` `rows` rows of 64.
-                Kernel::Avx512 => unsafe {
-                    match nb {
-                        1 => back_avx512::<1>(inp, wt, mask, out),
-                        2 => back_avx512::<2>(inp, wt, mask, out),
-                        3 => back_avx512::<3>(inp, wt, mask, out),
-                        _ => back_avx512::<4>(inp, wt, mask, out),
-                    }
-                },
+                Kernel::Avx512 => unsafe { by_const!(nb, [4, 3, 2], back_avx512(inp, wt, mask, out)) },
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: as above.
-                Kernel::Avx2 => unsafe {
-                    match nb {
-                        1 => back_avx2::<1>(inp, wt, mask, out),
-                        2 => back_avx2::<2>(inp, wt, mask, out),
-                        3 => back_avx2::<3>(inp, wt, mask, out),
-                        _ => back_avx2::<4>(inp, wt, mask, out),
-                    }
-                },
+                Kernel::Avx2 => unsafe { by_const!(nb, [4, 3, 2], back_avx2(inp, wt, mask, out)) },
                 #[cfg(not(target_arch = "x86_64"))]
                 _ => unreachable!("no kernel is detected off x86-64"),
             }
@@ -367,20 +363,6 @@ fn rank_blocks(n: usize, k_n: usize, group: usize, mut block: impl FnMut(usize, 
     }
 }
 
-/// `$f::<KB>($args)` for the block height `$kb` (1 to 6).
-macro_rules! by_height {
-    ($kb:expr, $f:ident($($arg:expr),*)) => {
-        match $kb {
-            6 => $f::<6>($($arg),*),
-            5 => $f::<5>($($arg),*),
-            4 => $f::<4>($($arg),*),
-            3 => $f::<3>($($arg),*),
-            2 => $f::<2>($($arg),*),
-            _ => $f::<1>($($arg),*),
-        }
-    };
-}
-
 /// `dw[k][j] += Σ_p inp[p][k] · dz[p][j]` over the rows `p` of the chunk (`inp` rows of `k_n`,
 /// `dz` and `dw` rows of 64) with AVX-512: blocks of six rows of `dw` held in 24 registers
 /// while a pass of [`RANK_ROWS`] rows goes by.
@@ -421,7 +403,7 @@ unsafe fn rank_avx512(inp: &[f32], k_n: usize, dz: &[f32], dw: &mut [f32]) {
     }
     rank_blocks(n, k_n, WIDTH, |kb, k0, _, rows| {
         // SAFETY: `rows` lies in the chunk and `k0 + kb ≤ k_n`; AVX-512F is enabled here.
-        unsafe { by_height!(kb, block(inp, k_n, k0, dz, rows, dw)) }
+        unsafe { by_const!(kb, [6, 5, 4, 3, 2], block(inp, k_n, k0, dz, rows, dw)) }
     });
 }
 
@@ -472,7 +454,7 @@ unsafe fn rank_avx2(inp: &[f32], k_n: usize, dz: &[f32], dw: &mut [f32]) {
     rank_blocks(n, k_n, 16, |kb, k0, c, rows| {
         // SAFETY: `rows` lies in the chunk, `k0 + kb ≤ k_n`, `c + 16 ≤ 64`; AVX2 and FMA are
         // enabled here.
-        unsafe { by_height!(kb, block(inp, k_n, k0, c, dz, rows, dw)) }
+        unsafe { by_const!(kb, [6, 5, 4, 3, 2], block(inp, k_n, k0, c, dz, rows, dw)) }
     });
 }
 
