@@ -25,6 +25,13 @@ use crate::{Aabb, CoreError, Ray};
 /// The most pixels of each side of the image that [`Camera::check_undistortion`] tries.
 const BORDER_SAMPLES: usize = 4096;
 
+/// Largest focal length, principal-point coordinate or skew [`Intrinsics::validate`] accepts,
+/// in pixels: a 10⁹ px focal length is a 1 km lens on 1 µm pixels, whose whole field of view
+/// across ten thousand pixels is 10⁻⁵ rad. Beyond it values have only been seen as mistakes (a
+/// focal length in the wrong unit, a damaged file), and past 3.4·10³⁸ they are infinite in the
+/// 32-bit floats the projectors and renderers compute in.
+pub const MAX_INTRINSIC_PX: f64 = 1e9;
+
 /// Pinhole intrinsics in pixels (OpenCV convention: pixel centres at integer coordinates).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Intrinsics {
@@ -55,6 +62,22 @@ impl Intrinsics {
             return Err(CoreError::invalid(
                 "intrinsics",
                 format!("focal lengths must be positive (fx = {}, fy = {})", num(self.fx), num(self.fy)),
+            ));
+        }
+        if all.iter().any(|v| v.abs() > MAX_INTRINSIC_PX) {
+            return Err(CoreError::invalid(
+                "intrinsics",
+                format!(
+                    "focal lengths, principal point and skew must lie within ±{} px (fx = {}, fy = {}, cx = {}, \
+                     cy = {}, skew = {}); larger values have only ever been mistakes (a length in another unit, a \
+                     damaged file), and the projections compute in 32-bit floats. Are they in pixels?",
+                    num(MAX_INTRINSIC_PX),
+                    num(self.fx),
+                    num(self.fy),
+                    num(self.cx),
+                    num(self.cy),
+                    num(self.skew)
+                ),
             ));
         }
         Ok(())
@@ -772,6 +795,19 @@ mod tests {
             Intrinsics { fx: f64::INFINITY, ..k },
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
+        }
+        // Finite in f64 but beyond the bound (1e39 is infinite in f32): refused, naming it.
+        let at_bound = Intrinsics { fx: MAX_INTRINSIC_PX, fy: MAX_INTRINSIC_PX, cx: -MAX_INTRINSIC_PX, ..k };
+        assert!(at_bound.validate().is_ok());
+        for bad in [
+            Intrinsics { fx: 1e39, ..k },
+            Intrinsics { fy: 2.0 * MAX_INTRINSIC_PX, ..k },
+            Intrinsics { cx: -1e12, ..k },
+            Intrinsics { cy: 1e300, ..k },
+            Intrinsics { skew: 1e10, ..k },
+        ] {
+            let e = bad.validate().expect_err("beyond the bound").to_string();
+            assert!(e.contains("within ±1000000000 px") && e.contains("Are they in pixels?"), "{e}");
         }
     }
 

@@ -43,7 +43,7 @@ pub const MAX_ITERATIONS: usize = 1_000_000_000;
 /// overflowed the rule's sums.
 pub const MAX_ITERATION_SPAN: usize = 10_000_000;
 
-pub use camera::{Camera, Distortion, Intrinsics, ThinLens, Visibility};
+pub use camera::{Camera, Distortion, Intrinsics, ThinLens, Visibility, MAX_INTRINSIC_PX};
 pub use error::CoreError;
 pub use field::{Baked, ScalarField, Support, SupportWalk};
 pub use geometry::{Aabb, Ray};
