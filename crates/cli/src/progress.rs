@@ -81,17 +81,39 @@ fn eta_text(steps_per_s: f64, by_rate: Duration, deadline_left: Option<Duration>
 
 /// `field` sampled on a grid (as [`fluidnerf_core::Volume::from_field_averaged`]) under a bar
 /// of its z-slices, labelled "sampling": a faithful network's field takes minutes at 256³.
+///
+/// A value that is infinite or NaN is refused: loading refuses such weights, so it comes from
+/// finite weights so large that the field's arithmetic overflows (a damaged or edited weights
+/// file), and written out it would pass for a reconstruction.
 pub fn sampled(
     dims: [usize; 3],
     aabb: fluidnerf_core::Aabb,
     field: &dyn fluidnerf_core::ScalarField,
     time: f64,
     n: usize,
-) -> fluidnerf_core::Volume {
+) -> anyhow::Result<fluidnerf_core::Volume> {
     let bar = bar(dims[2] as u64, "sampling");
     let volume = fluidnerf_core::Volume::from_field_averaged_with(dims, aabb, field, time, n, &|| bar.inc(1));
     bar.finish_and_clear();
-    volume
+    let bad = volume.data.iter().filter(|v| !v.is_finite()).count();
+    if let Some(first) = volume.data.iter().position(|v| !v.is_finite()) {
+        let [nx, ny, _] = dims;
+        let at = volume.voxel_centre(first % nx, (first / nx) % ny, first / (nx * ny));
+        anyhow::bail!(
+            "the field is {} at {bad} of the {} points it was sampled at on a {}×{}×{} grid (the first at ({:.3}, {:.3}, {:.3})): \
+             its weights are finite but so large that its values overflow 32-bit floats; the weights file is damaged \
+             or was edited",
+            volume.data[first],
+            volume.data.len(),
+            dims[0],
+            dims[1],
+            dims[2],
+            at.x,
+            at.y,
+            at.z
+        );
+    }
+    Ok(volume)
 }
 
 /// A spinner with the time elapsed, for work whose steps are not counted, labelled `what`

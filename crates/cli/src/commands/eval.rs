@@ -139,13 +139,13 @@ enum Recon {
 impl Recon {
     /// The reconstruction to compare with `truth`, step `step` at `time`: a stored volume, or
     /// the field sampled at the truth's voxel centres.
-    fn volume_for_step(&self, step: usize, truth: &Volume, time: Option<f64>) -> Cow<'_, Volume> {
-        match self {
+    fn volume_for_step(&self, step: usize, truth: &Volume, time: Option<f64>) -> anyhow::Result<Cow<'_, Volume>> {
+        Ok(match self {
             Recon::Volumes(v) => Cow::Borrowed(&v[step.min(v.len() - 1)]),
             Recon::Field(f) => {
-                Cow::Owned(crate::progress::sampled(truth.dims, truth.aabb, f.as_ref(), time.unwrap_or(0.0), 1))
+                Cow::Owned(crate::progress::sampled(truth.dims, truth.aabb, f.as_ref(), time.unwrap_or(0.0), 1)?)
             }
-        }
+        })
     }
 
     /// The field to render for a frame at `time`, given the truth steps' times.
@@ -479,7 +479,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let mut report = MetricsReport::default();
     for (step, (time, t)) in truth.iter().enumerate() {
-        let estimate = recon.volume_for_step(step, t, *time);
+        let estimate = recon.volume_for_step(step, t, *time).with_context(|| format!("{}", args.recon[0].display()))?;
         let metrics = evaluate_volume(&estimate, t, *time, &volume_options)
             .with_context(|| format!("scoring time step {step}"))?;
         report.steps.push(metrics);

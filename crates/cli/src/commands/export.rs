@@ -425,6 +425,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (Source::Field { field, .. }, res, _) => {
             let dims = Volume::dims_for(&aabb, res.unwrap_or(128));
             crate::progress::sampled(dims, aabb, field.as_ref(), time, args.average as usize)
+                .with_context(|| format!("{}", args.recon.display()))?
         }
     };
     let truth = match &args.compare {

@@ -513,6 +513,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
 
+    // A field whose finite weights are so large that its values overflow draws infinite or NaN
+    // pixels (loading refuses non-finite weights themselves); a TIFF would keep them.
+    for (v, img) in views.iter().zip(&images) {
+        if let Some(at) = img.data.iter().position(|x| !x.is_finite()) {
+            bail!(
+                "{}: view {} is {} at pixel (col {}, row {}): the reconstruction's values overflow 32-bit floats (finite \
+                 weights or voxels so large that their sums do not fit); the file is damaged or was edited",
+                args.recon.display(),
+                v.file_stem,
+                img.data[at],
+                at % img.width,
+                at / img.width
+            );
+        }
+    }
     let peak = images.iter().flat_map(|i| i.data.iter()).copied().filter(|v| v.is_finite()).fold(0f32, f32::max);
     // Views that are all black although the source is not empty show nothing of it: it lies
     // outside every view (another scene's box or cameras). Written, they would pass for a

@@ -184,6 +184,43 @@ fn ok_eval(out: &std::process::Output) {
     assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
 }
 
+/// A field whose weights are finite but whose values overflow 32-bit floats (a dense grid of
+/// 3·10³⁸ with a value scale of 2) is refused by `eval`, `export` and `render` naming the run;
+/// `eval` printed infinite metrics and `export` wrote infinite voxels, both with success.
+#[test]
+fn a_field_whose_values_overflow_is_refused() {
+    use fluidnerf_neural::trained::{build_field, AnyField, DenseConfig, FieldConfig, ModelRecord};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let config = FieldConfig::Dense(DenseConfig { resolution: 8, initial: 3e38 });
+    let AnyField::Dense(field) = build_field(&config, &scene.aabb, 3, 0).expect("builds") else {
+        panic!("a dense config builds a dense field")
+    };
+    let run = d.join("nerf");
+    std::fs::create_dir_all(&run).expect("mkdir");
+    let weights = fluidnerf_neural::weights::weights_bytes(&field).expect("serialises");
+    std::fs::write(run.join("weights.safetensors"), weights).expect("writes weights");
+    let meta =
+        fluidnerf_neural::train::FieldMeta { aabb: scene.aabb, value_scale: 2.0, time_step: 1.0, occupancy: None };
+    let record = ModelRecord { field: config, input_dim: 3, meta };
+    std::fs::write(run.join("model.json"), serde_json::to_string(&record).expect("json")).expect("writes model");
+    for (args, says) in [
+        (&["eval", "nerf", "--scene", ".", "--no-regions", "--no-reprojection"][..], "nerf: the field is inf at"),
+        (
+            &["export", "nerf", "-o", "out.npy", "--resolution", "8"][..],
+            "nerf: the field is inf at 200 of the 200 points it was sampled at on a 8×5×5 grid",
+        ),
+        (&["render", "nerf", "--scene", ".", "-o", "views", "--format", "tiff"][..], "nerf: view "),
+    ] {
+        let out = fluidnerf(args, d);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(says) && e.contains("overflow 32-bit floats"), "{args:?}: {e}");
+    }
+    assert!(!d.join("out.npy").exists() && !d.join("views").exists(), "nothing written");
+    assert!(!run.join("metrics.json").exists(), "no metrics written");
+}
+
 #[test]
 fn scores_a_trained_field_run_directory_at_the_truth_voxel_centres() {
     use fluidnerf_neural::trained::{build_field, AnyField, DenseConfig, FieldConfig, ModelRecord};

@@ -277,6 +277,18 @@ fn cases() -> Vec<Case> {
         c("tiny intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e-40)), RUN, "overflow or vanish"),
         c("huge intensity_scale", Json(|v| v["intensity_scale"] = serde_json::json!(1e300)), RUN, "overflow or vanish"),
         c("negative focal length", Json(|v| v["fl_x"] = serde_json::json!(-5.0)), RUN, "focal"),
+        // Infinite in 32-bit floats: every camera was a point, and the run wrote a volume of
+        // noise with no error.
+        c(
+            "focal length beyond 32-bit floats",
+            Json(|v| {
+                v["fl_x"] = serde_json::json!(1e39);
+                v["fl_y"] = serde_json::json!(1e39);
+            }),
+            RUN,
+            "transforms.json: frame 0 (images/cam000.png): invalid intrinsics: focal lengths, principal point and skew \
+             must lie within ±1000000000 px",
+        ),
         // Such a size left the camera blind, and the error said the camera did not see the box.
         c(
             "image size mistyped as huge",
