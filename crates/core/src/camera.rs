@@ -25,6 +25,10 @@ use crate::{Aabb, CoreError, Ray};
 /// The most pixels of each side of the image that [`Camera::check_undistortion`] tries.
 const BORDER_SAMPLES: usize = 4096;
 
+/// Points on the way from the image centre to each border pixel's ray at which
+/// [`Camera::check_undistortion`] checks that the distortion does not fold the image over.
+const FOLD_SAMPLES: usize = 16;
+
 /// Largest focal length, principal-point coordinate or skew [`Intrinsics::validate`] accepts,
 /// in pixels: a 10⁹ px focal length is a 1 km lens on 1 µm pixels, whose whole field of view
 /// across ten thousand pixels is 10⁻⁵ rad. Beyond it values have only been seen as mistakes (a
@@ -476,8 +480,11 @@ impl Camera {
     }
 
     /// Whether every pixel's ray can be found: the distortion is inverted at each pixel of the
-    /// image's border, where a calibration invalid far from the image centre fails first. The
-    /// first pixel whose undistortion fails is the error; a camera without distortion passes.
+    /// image's border, where a calibration invalid far from the image centre fails first, and
+    /// must keep its orientation (a Jacobian of positive determinant) on the way from the centre
+    /// out to each of those rays, so that it does not fold the image over. The first pixel whose
+    /// undistortion fails, or that lies past a fold, is the error; a camera without distortion
+    /// passes.
     pub fn check_undistortion(&self) -> Result<(), CoreError> {
         if self.distortion.is_identity() {
             return Ok(());
@@ -492,7 +499,18 @@ impl Camera {
         let rows = [0, h - 1].into_iter().flat_map(move |v| along(w).map(move |u| (u, v)));
         let columns = [0, w - 1].into_iter().flat_map(move |u| along(h).map(move |v| (u, v)));
         for (u, v) in rows.chain(columns) {
-            self.unproject_normalised(u as f64, v as f64)?;
+            let n = self.unproject_normalised(u as f64, v as f64)?;
+            // Newton may find a ray past a fold of the distortion (k1 = −1000 with 96 px at 864
+            // px focal length folds 10.5 px from the centre, and the border's rays were found
+            // beyond it): the distortion must keep its orientation from the centre out to it.
+            for s in 1..=FOLD_SAMPLES {
+                let t = s as f64 / FOLD_SAMPLES as f64;
+                let (_, j) = self.distortion.apply_with_jacobian(t * n);
+                let det = j.dxx * j.dyy - j.dxy * j.dyx;
+                if !(det > 0.0) {
+                    return Err(CoreError::DistortionFolds { u: u as f64, v: v as f64, fold: 100.0 * t });
+                }
+            }
         }
         Ok(())
     }
@@ -872,6 +890,28 @@ mod tests {
         huge.distortion = Distortion { k1: 1e300, ..Distortion::default() };
         let e = huge.check_undistortion().expect_err("fails at the corners");
         assert!(matches!(e, CoreError::UndistortionFailed { u: 0.0, v: 0.0, .. }), "{e}");
+    }
+
+    /// k1 = −1000 at 864 px focal length folds the image 10.5 px from its centre (`r (1 + k1 r²)`
+    /// peaks at `r = (−3 k1)^(−1/2)`): Newton found the 96 px image's border rays past the fold,
+    /// and the camera passed while pixels between failed. The fold is found, at the fraction of
+    /// the way from the centre where the Jacobian turns; a fold beyond the image passes.
+    #[test]
+    fn a_distortion_that_folds_the_image_is_found() {
+        let k = Intrinsics { width: 96, height: 96, fx: 864.0, fy: 864.0, cx: 47.5, cy: 47.5, skew: 0.0 };
+        let mut cam = Camera::look_at(k, DVec3::new(360.0, 0.0, 0.0), DVec3::ZERO, DVec3::Z);
+        cam.distortion = Distortion { k1: -1000.0, ..Distortion::default() };
+        assert!(cam.unproject_normalised(0.0, 47.5).is_ok(), "a border ray is found, past the fold");
+        let e = cam.check_undistortion().expect_err("folds");
+        let CoreError::DistortionFolds { u, v, fold } = e else { panic!("{e}") };
+        // The first border pixel, (0, 0): its ray lies at r ≈ 0.050 (the far branch), the fold
+        // where 1 + 3 k1 r² = 0, at r = 0.018, 36 % of the way; the first sample past it is 6/16.
+        assert_eq!((u, v), (0.0, 0.0));
+        assert_eq!(fold, 100.0 * 6.0 / 16.0);
+        assert!(e.to_string().contains("folds the image over between its centre and pixel (0.000, 0.000)"), "{e}");
+        // Mild barrel distortion folds far outside this image.
+        cam.distortion = Distortion { k1: -0.5, ..Distortion::default() };
+        assert!(cam.check_undistortion().is_ok());
     }
 
     /// A camera of very short focal length (3 px over 96 px: a field of view of 172°) images a

@@ -10,6 +10,14 @@ pub enum CoreError {
          from the image centre"
     )]
     UndistortionFailed { u: f64, v: f64, residual_px: f64 },
+    /// The lens distortion folds the image over between its centre and a pixel, so that the
+    /// pixel's ray found by inverting it lies past the fold.
+    #[error(
+        "the lens distortion folds the image over between its centre and pixel ({u:.3}, {v:.3}) (its Jacobian \
+         changes sign {fold:.0} % of the way there): several rays land on the same pixels, and the distortion \
+         coefficients are invalid this far from the image centre"
+    )]
+    DistortionFolds { u: f64, v: f64, fold: f64 },
     /// A parameter is out of its valid range.
     #[error("invalid {what}: {why}")]
     Invalid { what: String, why: String },
