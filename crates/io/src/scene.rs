@@ -373,6 +373,17 @@ enum FlatFieldKey {
     Frame(String),
 }
 
+impl BackgroundKey {
+    /// The background images named (none for a constant).
+    fn paths(&self) -> Vec<&str> {
+        match self {
+            BackgroundKey::Constant(_) => Vec::new(),
+            BackgroundKey::Frames(v) => v.iter().map(String::as_str).collect(),
+            BackgroundKey::Frame(p) => vec![p.as_str()],
+        }
+    }
+}
+
 impl FlatFieldKey {
     fn paths(&self) -> Vec<&str> {
         match self {
@@ -522,7 +533,8 @@ fn background_to_key(file: &Path, b: &Background) -> Result<Option<BackgroundKey
 /// lists without blank paths, no frame whose flat field is its own image, a non-zero flow axis.
 /// Errors name the key and the frame.
 fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Result<(), IoError> {
-    let check_bg = |b: &Option<BackgroundKey>, place: &str| match b {
+    let check_bg = |b: &Option<BackgroundKey>, place: &str| {
+        match b {
         Some(BackgroundKey::Constant(c)) if !(c.is_finite() && *c >= 0.0) => Err(IoError::invalid(
             file,
             format!("{place}: `background` must be a finite number of counts, at least 0, got {}", num(*c)),
@@ -531,7 +543,16 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
             file,
             format!("{place}: `background` is an empty list; give at least one background image or a number"),
         )),
-        _ => Ok(()),
+        // A blank path was read as the scene's folder ("image file is a folder").
+        Some(key) => match key.paths().into_iter().find(|p| p.trim().is_empty()) {
+            Some(p) => Err(IoError::invalid(
+                file,
+                format!("{place}: `background` names {p:?}, which is no image; give the background image's path or a number"),
+            )),
+            None => Ok(()),
+        },
+        None => Ok(()),
+    }
     };
     let check_flat = |flat: &Option<FlatFieldKey>, place: &str| {
         let Some(flat) = flat else { return Ok(()) };
@@ -554,6 +575,40 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
     check_flat(&top.flat_field, "top level, key `flat_field`")?;
     for (i, f) in frames {
         check_bg(&f.background, &format!("frame {i} ({})", f.file_path))?;
+        let image = normalise(Path::new(&f.file_path));
+        // A background is a recording of its own too: subtracted from itself, a frame is black
+        // and carves everything it sees out of the volume. (Over time, an instant recorded
+        // before the flow started may be the later instants' background, and itself rightly
+        // dark.)
+        let background = match (&f.background, &top.background) {
+            _ if f.time.is_some() => None,
+            (Some(own), _) => Some((own, format!("frame {i} ({}), key `frames[{i}].background`", f.file_path))),
+            (None, Some(shared)) => {
+                Some((shared, format!("frame {i} ({}), key `background` (top level)", f.file_path)))
+            }
+            (None, None) => None,
+        };
+        if let Some((bg, place)) = background {
+            if let Some(p) = bg.paths().into_iter().find(|p| normalise(Path::new(p)) == image) {
+                return Err(IoError::invalid(
+                    file,
+                    format!(
+                        "{place}: names {p}, the frame's own image; a background is a separate recording with the \
+                         same camera (the empty scene, or dark frames with the lens capped)"
+                    ),
+                ));
+            }
+        }
+        if let Some(m) = f.mask_path.as_deref().filter(|m| normalise(Path::new(m)) == image) {
+            return Err(IoError::invalid(
+                file,
+                format!(
+                    "frame {i} ({}), key `frames[{i}].mask_path`: names {m}, the frame's own image; a mask is an image \
+                     of its own, non-zero where the pixels are used",
+                    f.file_path
+                ),
+            ));
+        }
         let place = format!("frame {i} ({}), key `frames[{i}].flat_field`", f.file_path);
         check_flat(&f.flat_field, &place)?;
         // A flat field is a recording of its own: the frame's image divided by itself is 1.
@@ -562,7 +617,6 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
             (None, Some(shared)) => (shared, format!("frame {i} ({}), key `flat_field` (top level)", f.file_path)),
             (None, None) => continue,
         };
-        let image = normalise(Path::new(&f.file_path));
         if let Some(p) = flat.paths().into_iter().find(|p| normalise(Path::new(p)) == image) {
             return Err(IoError::invalid(
                 file,

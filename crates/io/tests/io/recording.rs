@@ -382,4 +382,27 @@ fn bad_flat_fields_are_refused_naming_the_file_frame_and_problem() {
     v["frames"][1].as_object_mut().expect("frame").remove("flat_field");
     let e = load(&v);
     assert!(e.contains("frame 1 (images/c1.png), key `flat_field` (top level): names images/c1.png"), "{e}");
+
+    // A background or a mask that is the frame's own image (the frame was subtracted to black
+    // and passed), and a blank background path (read as the scene's folder, and blamed on
+    // frame 0 although the key was the top level's).
+    let mut v = good.clone();
+    v["frames"][1]["background"] = serde_json::json!("./images/c1.png");
+    let e = load(&v);
+    assert!(
+        e.contains("frame 1 (images/c1.png), key `frames[1].background`: names ./images/c1.png, the frame's own"),
+        "{e}"
+    );
+    let mut v = good.clone();
+    v["background"] = serde_json::json!(["bg/c0.png", "images/c1.png"]);
+    let e = load(&v);
+    assert!(e.contains("frame 1 (images/c1.png), key `background` (top level): names images/c1.png"), "{e}");
+    let mut v = good.clone();
+    v["frames"][1]["mask_path"] = serde_json::json!("images/c1.png");
+    let e = load(&v);
+    assert!(e.contains("key `frames[1].mask_path`: names images/c1.png, the frame's own image"), "{e}");
+    let mut v = good.clone();
+    v["background"] = serde_json::json!("");
+    let e = load(&v);
+    assert!(e.contains("top level: `background` names \"\", which is no image"), "{e}");
 }
