@@ -750,9 +750,24 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     Ok((frames, used))
 }
 
-/// What an imported scene that does not validate says first.
+/// What an imported scene that does not validate says first: the calibration it came from
+/// (the check that follows names the frame in the `transforms.json` it was checked as, which
+/// the failed import then removes).
 fn invalid_scene(args: &Args) -> String {
-    format!("the imported scene is invalid{}", projection_hint(args))
+    let from = [
+        ("--opencv", &args.opencv),
+        ("--colmap", &args.colmap),
+        ("--metashape", &args.metashape),
+        ("--projection", &args.projection),
+        ("--transforms", &args.transforms),
+    ]
+    .into_iter()
+    .find_map(|(flag, path)| path.as_ref().map(|p| format!(" from {} ({flag})", p.display())))
+    .unwrap_or_default();
+    format!(
+        "the scene imported{from} is invalid (checked as the transforms.json below, not kept){}",
+        projection_hint(args)
+    )
 }
 
 /// For projection matrices read with v counting down: a matrix whose v counts up from the
