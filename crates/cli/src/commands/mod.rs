@@ -74,6 +74,10 @@ pub(crate) fn scene_or_recorded(
         }
         bail!("give the scene with --scene: {} volumes record no scene", recon.len());
     };
+    if !dir.exists() {
+        // Told first: that it records no scene would send the user looking for one.
+        bail!("{}: no such file or directory", dir.display());
+    }
     if !dir.is_dir() {
         bail!("give the scene with --scene: the volume file {} records no scene", dir.display());
     }

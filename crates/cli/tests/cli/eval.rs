@@ -391,6 +391,10 @@ fn a_run_folder_names_its_own_scene_for_eval_and_render() {
     let bare = fluidnerf(&["eval", "run/volume.npy"], d);
     let err = String::from_utf8_lossy(&bare.stderr);
     assert!(!bare.status.success() && err.contains("--scene") && err.contains("run/volume.npy"), "{err}");
+    // A path that is not there is said to be missing (it was said to record no scene).
+    let missing = fluidnerf(&["eval", "run/volume-typo.npy"], d);
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(!missing.status.success() && err.contains("run/volume-typo.npy: no such file or directory"), "{err}");
     // Two run folders do record their scenes: what is refused is that there are two (it said
     // "2 volumes record no scene").
     let two = fluidnerf(&["eval", "run", "run/volume.npy"], d);
