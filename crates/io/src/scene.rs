@@ -1415,6 +1415,16 @@ pub fn validate_scene(scene: &Scene, file: &Path) -> Result<(), IoError> {
             return Err(IoError::invalid(file, format!("frame {i} ({}): time must be finite", f.file_path.display())));
         }
         if let Some(name) = &f.camera_name {
+            if name.trim().is_empty() {
+                return Err(IoError::invalid(
+                    file,
+                    format!(
+                        "frame {i} ({}), key `frames[{i}].camera`: is {name:?}, which names no camera; name the \
+                         camera that took the frame, or leave the key out",
+                        f.file_path.display()
+                    ),
+                ));
+            }
             if let Some(j) = shots.insert((name.as_str(), (f.time.unwrap_or(0.0) + 0.0).to_bits()), i) {
                 return Err(IoError::invalid(
                     file,

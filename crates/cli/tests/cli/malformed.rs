@@ -834,6 +834,12 @@ fn cases() -> Vec<Case> {
             "both camera",
         ),
         c(
+            "a blank camera name",
+            Json(|v| v["frames"][1]["camera"] = serde_json::json!(" ")),
+            RUN,
+            "frame 1 (images/cam001.png), key `frames[1].camera`: is \" \", which names no camera",
+        ),
+        c(
             "one camera at times 0 and -0",
             Json(|v| {
                 for (i, f) in v["frames"].as_array_mut().unwrap().iter_mut().enumerate() {
