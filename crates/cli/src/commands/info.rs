@@ -366,6 +366,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                          undefined; give a truth that holds the field",
                         path.display()
                     ));
+                } else if lo < 0.0 {
+                    // Emission is never negative: scores against such a truth reward negative values.
+                    let count = v.data.iter().filter(|&&x| x < 0.0).count();
+                    warnings.push(format!(
+                        "truth {}: {count} voxel(s) are negative (down to {lo}); light emitted or absorbed is never \
+                         negative, and the metrics against it would reward negative reconstructions there",
+                        path.display()
+                    ));
                 }
                 match truth_dims {
                     Some([a, b, c]) if [a, b, c] != v.dims => problems.push(format!(

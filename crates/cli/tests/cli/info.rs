@@ -164,7 +164,7 @@ fn a_camera_with_a_short_focal_length_sees_the_box() {
     );
     // A box imaged large, but sheared past the image, is not said to fall between pixel centres.
     let cam = &mut scene.frames[2].camera;
-    let k = Intrinsics { fx: 40.0, fy: 40.0, skew: 1e308, ..cam.intrinsics };
+    let k = Intrinsics { fx: 40.0, fy: 40.0, skew: 1e9, ..cam.intrinsics };
     *cam = Camera::look_at(k, centre, DVec3::ZERO, DVec3::Z);
     fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
     let o = info(dir.path());
@@ -504,6 +504,20 @@ fn truth_at_a_time_no_frame_has_is_flagged() {
         stdout.contains("warning: ground truth at time -0.5 matches no frame's time (frames at 0, 0.5)"),
         "{stdout}"
     );
+}
+
+/// A truth with negative voxels is warned of, with their count and the lowest value (it was
+/// listed as "values -5 .. 1" without a word, while negative image pixels are flagged).
+#[test]
+fn truth_with_negative_values_is_flagged() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = good_scene(dir.path());
+    let negative = Volume::from_fn([8, 8, 8], scene.aabb, |p| if p.x < 0.0 { -0.25 } else { 1.0 });
+    fluidnerf_io::volume::write_npy(&dir.path().join("truth/t0.npy"), &negative).expect("writes truth");
+    let o = info(dir.path());
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.contains("t0.npy: 256 voxel(s) are negative (down to -0.25)"), "{stdout}");
 }
 
 /// A truth that is zero throughout is a problem: eval refuses it and a run's NRMSE against it
