@@ -93,6 +93,24 @@ impl LensSettings {
                 return Err(SynthError::invalid("lens.pixel_pitch_mm", format!("must be positive, got {}", num(p))));
             }
         }
+        // The focal length in pixels that the lens and the pitch give, as every scene's cameras
+        // are held to (a pitch of 1e-12 mm gave 7.2e13 px: uniform images, and a scene that
+        // every other command refused).
+        let k = self.intrinsics();
+        if k.fx > fluidnerf_core::MAX_INTRINSIC_PX {
+            return Err(SynthError::invalid(
+                "lens.pixel_pitch_mm",
+                format!(
+                    "a pitch of {} mm with a focal length of {} mm and magnification {} gives {} px, more than the {} px \
+                     a camera's focal length may be; is the pitch in millimetres?",
+                    num(self.pixel_pitch()),
+                    num(self.focal_length_mm),
+                    num(self.magnification),
+                    num(k.fx),
+                    num(fluidnerf_core::MAX_INTRINSIC_PX)
+                ),
+            ));
+        }
         Ok(())
     }
 
@@ -561,6 +579,18 @@ mod tests {
             assert!(e.contains("`lens.resolution`") && e.contains("at least 7 pixels"), "{resolution:?}: {e}");
         }
         LensSettings { resolution: [7, 7], ..Default::default() }.validate().expect("7 × 7 is taken");
+    }
+
+    /// A pixel pitch that makes the focal length longer than a scene's camera may have is
+    /// refused naming the key (1e-12 mm wrote a scene of uniform images that info refused).
+    #[test]
+    fn a_pitch_that_gives_too_long_a_focal_length_is_refused() {
+        let lens = LensSettings { pixel_pitch_mm: Some(1e-12), ..Default::default() };
+        let e = lens.validate().expect_err("refused").to_string();
+        assert!(e.contains("`lens.pixel_pitch_mm`") && e.contains("is the pitch in millimetres?"), "{e}");
+        let fine = LensSettings { pixel_pitch_mm: Some(1e-4), ..Default::default() };
+        fine.validate().expect("a 0.1 µm pitch is taken");
+        assert!(fine.intrinsics().fx < fluidnerf_core::MAX_INTRINSIC_PX);
     }
     use approx::assert_relative_eq;
 
