@@ -507,7 +507,8 @@ impl Camera {
                 let t = s as f64 / FOLD_SAMPLES as f64;
                 let (_, j) = self.distortion.apply_with_jacobian(t * n);
                 let det = j.dxx * j.dyy - j.dxy * j.dyx;
-                if !(det > 0.0) {
+                // NaN counts as a fold.
+                if det.is_nan() || det <= 0.0 {
                     return Err(CoreError::DistortionFolds { u: u as f64, v: v as f64, fold: 100.0 * t });
                 }
             }
