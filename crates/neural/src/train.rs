@@ -631,21 +631,24 @@ impl Prepared {
                 })
                 .expect("at least one training view")
         });
-        let prep =
-            |v: &View, mask: Option<&[bool]>, occ: Option<&OccupancyGrid>| -> Result<PreparedView, NeuralError> {
-                let mut rays = ImageRays::new(&v.camera, &problem.aabb, occ)
-                    .map_err(|e| NeuralError::invalid("camera", e.to_string()))?;
-                if let Some(m) = mask {
-                    drop_masked_rays(&mut rays, m);
-                }
-                let targets = rays.targets(&v.image, image_scale);
-                Ok(PreparedView { rays, targets, time: (v.time / problem.time_step) as f32, measured: None })
-            };
+        let prep = |v: &View,
+                    what: &str,
+                    mask: Option<&[bool]>,
+                    occ: Option<&OccupancyGrid>|
+         -> Result<PreparedView, NeuralError> {
+            let mut rays = ImageRays::new(&v.camera, &problem.aabb, occ)
+                .map_err(|e| NeuralError::invalid(format!("camera of {what}"), e.to_string()))?;
+            if let Some(m) = mask {
+                drop_masked_rays(&mut rays, m);
+            }
+            let targets = rays.targets(&v.image, image_scale);
+            Ok(PreparedView { rays, targets, time: (v.time / problem.time_step) as f32, measured: None })
+        };
         let train = problem
             .views
             .par_iter()
             .enumerate()
-            .map(|(i, v)| prep(v, mask_of(&masks.train, i), occupancy.as_ref()))
+            .map(|(i, v)| prep(v, &format!("training view {i}"), mask_of(&masks.train, i), occupancy.as_ref()))
             .collect::<Result<Vec<_>, _>>()?;
         if train.iter().all(|v| v.rays.is_empty()) {
             return Err(NeuralError::invalid("scene", "no camera sees the reconstruction box"));
@@ -655,7 +658,7 @@ impl Prepared {
             .holdout
             .par_iter()
             .enumerate()
-            .map(|(i, v)| prep(v, mask_of(&masks.holdout, i), occupancy.as_ref()))
+            .map(|(i, v)| prep(v, &format!("held-out view {i}"), mask_of(&masks.holdout, i), occupancy.as_ref()))
             .collect::<Result<Vec<_>, _>>()?;
         let meta = FieldMeta {
             aabb: problem.aabb,

@@ -57,7 +57,8 @@ impl RayProjector {
         let step = step_fraction * sp.min_element();
         let rays = cameras
             .iter()
-            .map(|cam| {
+            .enumerate()
+            .map(|(c, cam)| {
                 let (w, h) = (cam.width(), cam.height());
                 (0..w * h)
                     .into_par_iter()
@@ -76,6 +77,7 @@ impl RayProjector {
                         })
                     })
                     .collect::<Result<Vec<_>, fluidnerf_core::CoreError>>()
+                    .map_err(|e| ClassicalError::invalid(format!("camera {c}"), e.to_string()))
             })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(RayProjector { grid, cameras: cameras.to_vec(), rays })
