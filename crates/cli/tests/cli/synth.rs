@@ -285,10 +285,14 @@ fn user_volume_becomes_the_truth() {
     // .vti, which holds its own.
     let vti = tmp.path().join("mine.vti");
     fluidnerf_io::volume::write_vti(&vti, &vol).expect("writes volume");
+    let text_file = tmp.path().join("notes.txt");
+    std::fs::write(&text_file, "hello").expect("writes");
     for (truth, extra, needle) in [
         (&npy, &["--phantom", "ball"][..], "'--truth-volume <TRUTH_VOLUME>' cannot be used with '--phantom"),
         (&npy, &["--resolution", "8"][..], "--resolution 8: the truth volume"),
         (&vti, &["--aabb", "-5,-5,-5,5,5,5"][..], "mine.vti is a .vti, which holds its own box"),
+        // A file that is no volume is said to be so first (it was told about --resolution).
+        (&text_file, &["--resolution", "8"][..], "notes.txt: the ground truth must be a .npy, .vti or .tif volume"),
     ] {
         let dir = tmp.path().join("refused");
         let o = run_small_volume(&dir, truth, extra);
