@@ -135,7 +135,8 @@ pub struct Args {
     /// made the better hybrid (docs/claims.md).
     #[arg(long)]
     pub visual_hull: bool,
-    /// Start over, replacing the scenes and runs of an earlier study in OUT.
+    /// Start over, replacing the scenes and runs of an earlier study in OUT (those its
+    /// study.json lists; other files under its `scenes/` and `runs/` are kept).
     #[arg(long)]
     pub force: bool,
 }
@@ -423,6 +424,50 @@ fn default_cap(smoke: bool, stop: StopArg) -> Option<usize> {
     }
 }
 
+/// The grid of the study recorded in `record` (its `study.json`).
+fn read_earlier_grid(record: &Path) -> anyhow::Result<Grid> {
+    #[derive(Deserialize)]
+    struct Earlier {
+        grid: Grid,
+    }
+    let earlier: Earlier = fluidnerf_pipeline::rundir::read_json(record)?;
+    Ok(earlier.grid)
+}
+
+/// Removes the scenes and runs the study of grid `g` wrote into `out` (`--force`), and the
+/// `scenes/`, `runs/` and per-scene run folders left empty; anything else in them (a run or a
+/// note of the user's) is left as it is.
+fn remove_earlier_study(out: &Path, g: &Grid) -> anyhow::Result<()> {
+    let remove = |p: &Path| -> anyhow::Result<()> {
+        if p.exists() {
+            std::fs::remove_dir_all(p).with_context(|| format!("removing {}", p.display()))?;
+        }
+        Ok(())
+    };
+    let remove_if_empty = |p: &Path| {
+        // A folder that still holds something is kept: the error says nothing useful then.
+        if std::fs::read_dir(p).is_ok_and(|mut d| d.next().is_none()) {
+            let _ = std::fs::remove_dir(p);
+        }
+    };
+    for &layout in &g.layouts {
+        for &cameras in &g.cameras {
+            for &noise in &g.noise {
+                let name = scene_name(layout, cameras, noise);
+                remove(&out.join("scenes").join(&name))?;
+                let runs = out.join("runs").join(&name);
+                for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
+                    remove(&runs.join(g.run_name(method, seed)))?;
+                }
+                remove_if_empty(&runs);
+            }
+        }
+    }
+    remove_if_empty(&out.join("scenes"));
+    remove_if_empty(&out.join("runs"));
+    Ok(())
+}
+
 fn scene_name(layout: LayoutChoice, cameras: usize, noise: f64) -> String {
     format!("{}-c{cameras:02}-n{:03}", layout.name(), (noise * 1000.0).round() as u64)
 }
@@ -608,24 +653,17 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                 );
             }
         }
-        for sub in ["scenes", "runs"] {
-            let p = out.join(sub);
-            if p.exists() {
-                std::fs::remove_dir_all(&p).with_context(|| format!("removing {}", p.display()))?;
-            }
+        if record.is_file() {
+            remove_earlier_study(out, &read_earlier_grid(&record)?)?;
         }
     } else if record.is_file() {
-        #[derive(Deserialize)]
-        struct Earlier {
-            grid: Grid,
-        }
-        let earlier: Earlier = fluidnerf_pipeline::rundir::read_json(&record)?;
-        if earlier.grid != g {
+        let earlier = read_earlier_grid(&record)?;
+        if earlier != g {
             bail!(
                 "{} holds a study with other settings ({}: {}); use --force to start over or another folder",
                 out.display(),
                 record.display(),
-                fluidnerf_pipeline::rundir::settings_differences(&earlier.grid, &g, 5)
+                fluidnerf_pipeline::rundir::settings_differences(&earlier, &g, 5)
             );
         }
     }

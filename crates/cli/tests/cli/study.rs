@@ -357,6 +357,22 @@ fn a_forced_study_removes_the_plots_it_no_longer_draws() {
     ok(&fluidnerf(d, &cameras));
     assert!(d.join("st/against_cameras.png").is_file());
     assert!(!d.join("st/against_noise.png").exists(), "the earlier study's noise plot was left");
+    // The earlier study's scenes and runs it no longer makes are gone...
+    assert!(!d.join("st/scenes/ring360-c04-n050").exists() && !d.join("st/runs/ring360-c04-n050").exists());
+    assert!(d.join("st/runs/ring360-c06-n000/asart/report.json").is_file());
+
+    // ...but a forced study removes only what its study.json lists: a run and notes of the
+    // user's under its scenes/ and runs/ were removed with them.
+    let mine = d.join("st/runs/ring360-c04-n000/my-run");
+    std::fs::create_dir_all(&mine).expect("mkdir");
+    std::fs::write(mine.join("notes.txt"), "mine").expect("writes");
+    std::fs::write(d.join("st/runs/notes.txt"), "mine").expect("writes");
+    std::fs::create_dir_all(d.join("st/scenes/mine")).expect("mkdir");
+    ok(&fluidnerf(d, &cameras));
+    for kept in ["st/runs/ring360-c04-n000/my-run/notes.txt", "st/runs/notes.txt", "st/scenes/mine"] {
+        assert!(d.join(kept).exists(), "{kept} was removed");
+    }
+    assert!(d.join("st/runs/ring360-c04-n000/asart/report.json").is_file(), "the study's own run is made again");
 }
 
 /// clap appends an option's `default_value` to its help, so a doc comment that also writes
