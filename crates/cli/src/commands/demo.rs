@@ -36,6 +36,9 @@ const DEMO_FILES: [&str; 4] = ["comparison.json", "report.html", "slices.png", "
 /// an earlier demo's (replaced with --force); a scene, a run, a study or any other folder
 /// holding files of those names is refused. Takes about a minute on a 2-core machine (53–65 s
 /// on a 2-core AMD EPYC, build excluded).
+/// The demo's image noise by default, as a fraction of each image's maximum.
+const DEFAULT_NOISE: f64 = 0.025;
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Output directory.
@@ -48,9 +51,11 @@ pub struct Args {
     /// Voxels along the longest side of the reconstructed volumes, 2 to 4096.
     #[arg(long, default_value_t = 96)]
     pub resolution: usize,
-    /// Gaussian image noise, as a fraction of each image's maximum; 0 gives noiseless images.
-    #[arg(long, default_value_t = 0.025)]
-    pub noise: f64,
+    /// Gaussian image noise, as a fraction of each image's maximum; 0 gives noiseless images
+    /// [default: 0.025; none for the real-like presets, whose 8-bit images carry the recording's
+    /// own dark noise and refuse this one].
+    #[arg(long)]
+    pub noise: Option<f64>,
     /// Camera held out of every reconstruction: it drives the early stopping and scores the
     /// reprojections.
     #[arg(long, default_value_t = 7)]
@@ -130,17 +135,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // Before the scene is made: a setting no run can use (--resolution 0) failed only at
         // the first run, leaving the scene behind.
         config.validate().map_err(|e| match &e {
-            fluidnerf_pipeline::PipelineError::Invalid { key, .. } if key == "resolution" => {
-                anyhow::Error::new(e).context("--resolution")
+            fluidnerf_pipeline::PipelineError::Invalid { key, why } if key == "resolution" => {
+                anyhow::anyhow!("--resolution {}: {why}", args.resolution)
             }
             _ => anyhow::Error::new(e),
         })?;
         configs.push(config);
     }
-    let mut synth_line = words(&format!(
-        "synth --preset {} --seed {} --noise {} --holdout {} -o",
-        args.preset, args.seed, args.noise, args.holdout
-    ));
+    // A real-like preset's images carry their own noise: the default adds none to them (the
+    // demo's 0.025 made `synth` refuse a --noise the user never gave).
+    let real_like = fluidnerf_synth::preset(&args.preset).is_ok_and(|s| s.real.is_some());
+    let noise = match (args.noise, real_like) {
+        (Some(n), _) => format!(" --noise {n}"),
+        (None, true) => String::new(),
+        (None, false) => format!(" --noise {DEFAULT_NOISE}"),
+    };
+    let mut synth_line =
+        words(&format!("synth --preset {} --seed {}{noise} --holdout {} -o", args.preset, args.seed, args.holdout));
     synth_line.push(path(&scene_dir));
     if args.force {
         synth_line.push("--force".into());

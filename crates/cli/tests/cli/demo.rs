@@ -78,7 +78,7 @@ fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     for resolution in ["0", "1", "5000"] {
         refused(
             &fluidnerf(d, &["demo", "-o", "out", "--resolution", resolution, "-q"]),
-            "--resolution: resolution: must be between 2 and 4096 voxels",
+            &format!("--resolution {resolution}: must be between 2 and 4096 voxels"),
         );
         assert!(!d.join("out").exists(), "--resolution {resolution}: nothing is written");
     }
@@ -93,6 +93,13 @@ fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     ok(&out);
     let help = String::from_utf8_lossy(&out.stdout);
     assert!(help.contains("default: 1000000 under held-out and budget"), "{help}");
+    // A real-like preset runs with the defaults: its images carry their own noise, and the
+    // demo's default noise made synth refuse a --noise the user never gave.
+    ok(&fluidnerf(
+        d,
+        &["demo", "-o", "real", "--preset", "real-like-small", "--resolution", "8", "--max-iterations", "2", "-q"],
+    ));
+    assert!(d.join("real/report.html").is_file());
 }
 
 /// A demo writes its scene, runs, pictures and report.html into OUT: a scene, a run or a study
