@@ -694,8 +694,12 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                     // A run stopped by Ctrl-C writes its report too: its cell is run again, not
                     // read back as if its budget had been spent.
                     let report_file = run_dir.join("report.json");
-                    let finished = report_file.is_file()
+                    let reported = report_file.is_file()
                         && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished;
+                    // A finished run whose result has since gone (a volume deleted to save space)
+                    // is run again: read back, it failed the study on every attempt.
+                    let finished = reported
+                        && ["volume.npy", "model.json", "temporal.json"].iter().any(|f| run_dir.join(f).is_file());
                     #[allow(clippy::print_stdout)]
                     {
                         println!(
@@ -703,7 +707,11 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                             layout.name(),
                             method.label(),
                             if g.repeated(method) { format!(" · seed {seed}") } else { String::new() },
-                            if finished { " (done earlier)" } else { "" }
+                            match (finished, reported) {
+                                (true, _) => " (done earlier)",
+                                (false, true) => " (done earlier, but its result is gone: run again)",
+                                (false, false) => "",
+                            }
                         );
                     }
                     if !finished {

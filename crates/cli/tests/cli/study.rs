@@ -262,6 +262,14 @@ fn an_interrupted_cell_is_run_again_when_the_study_continues() {
     // `iteration-cap`).
     assert_ne!(record["rows"][0]["stop_reason"], "interrupted", "{record}");
     assert_eq!(record["rows"][0]["stop_reason"], report(&run)["stop_reason"], "{record}");
+
+    // A finished cell whose volume has since gone is run again (the study failed on it, every
+    // time it was continued, saying the run held no reconstruction).
+    std::fs::remove_file(run.join("volume.npy")).expect("removes the volume");
+    let out = fluidnerf(d, &args);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("its result is gone: run again"));
+    assert!(run.join("volume.npy").is_file());
 }
 
 /// A study continued in a folder whose record is missing (the study was killed before it wrote
