@@ -54,7 +54,7 @@ pub struct Args {
     /// Gaussian image noise, as a fraction of each image's maximum; 0 gives noiseless images
     /// [default: 0.025; none for the real-like presets, whose 8-bit images carry the recording's
     /// own dark noise and refuse this one].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub noise: Option<f64>,
     /// Camera held out of every reconstruction: it drives the early stopping and scores the
     /// reprojections.

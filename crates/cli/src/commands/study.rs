@@ -90,11 +90,11 @@ pub struct Args {
     #[arg(long, value_enum, value_delimiter = ',')]
     pub methods: Option<Vec<MethodArg>>,
     /// Training camera counts, comma-separated, each 2 to 999 [default: the preset's].
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub cameras: Option<Vec<usize>>,
     /// Image noise levels (fraction of each image's maximum, in [0, 1)), comma-separated
     /// [default: the preset's].
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub noise: Option<Vec<f64>>,
     /// Camera layouts, comma-separated [default: the preset's].
     #[arg(long, value_enum, value_delimiter = ',')]

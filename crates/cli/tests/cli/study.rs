@@ -220,6 +220,11 @@ fn a_noise_level_out_of_range_is_named_as_such() {
         refused(&out, &format!("--noise: {bad} is not a fraction in [0, 1)"));
         assert!(!d.join("st").exists(), "{levels}: wrote output");
     }
+    // A negative level after a space too: it was taken for an option ("unexpected argument").
+    refused(
+        &fluidnerf(d, &["study", "--preset", "smoke", "--noise", "-0.1", "-o", "st"]),
+        "--noise: -0.1 is not a fraction",
+    );
 }
 
 /// A camera count beyond what a rig can sensibly have is refused before anything is made:
