@@ -1155,7 +1155,8 @@ def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
 
 
 def psnr(estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None) -> float:
-    """PSNR in dB with peak ``data_range`` (None: the truth's max − min)."""
+    """PSNR in dB with peak ``data_range`` (None: the truth's max − min, or 1 when the truth is
+    constant, so that the metric stays defined: give ``data_range`` then)."""
     return _ext.psnr(*_pair(estimate, truth), _data_range(data_range))
 
 
@@ -1163,7 +1164,8 @@ def ssim(
     estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None, window: str = "uniform"
 ) -> float:
     """SSIM of 2D or 3D arrays: ``window`` ``"uniform"`` (7 wide, as skimage), ``"gaussian"``
-    (σ 1.5) or ``"global"`` (one window over everything)."""
+    (σ 1.5) or ``"global"`` (one window over everything). ``data_range`` None: the truth's
+    max − min, or 1 when the truth is constant (give it then)."""
     return _ext.ssim(*_pair(estimate, truth), _data_range(data_range), _string(window, "window"))
 
 

@@ -278,7 +278,7 @@ pub fn nrmse(
     py.allow_threads(|| guard(|| Ok(fluidnerf_metrics::nrmse(&a, &b))))
 }
 
-/// PSNR in dB with peak `data_range` (None: the truth's max − min).
+/// PSNR in dB with peak `data_range` (None: the truth's max − min, or 1 when the truth is constant).
 #[pyfunction]
 #[pyo3(signature = (estimate, truth, data_range=None))]
 pub fn psnr(
@@ -295,7 +295,7 @@ pub fn psnr(
 
 /// SSIM of `estimate` against `truth`: `window` "global" (one window over the whole array),
 /// "uniform" (7-wide, skimage's default) or "gaussian" (σ 1.5), for 2D `(H, W)` and 3D
-/// `(nz, ny, nx)` arrays. `data_range` None: the truth's max − min. The GIL is released while
+/// `(nz, ny, nx)` arrays. `data_range` None: the truth's max − min (1 when the truth is constant). The GIL is released while
 /// it computes (seconds for a large volume).
 #[pyfunction]
 #[pyo3(signature = (estimate, truth, data_range=None, window="uniform"))]
