@@ -140,7 +140,7 @@ impl Distortion {
     /// beyond the eighth are rejected because they are not modelled).
     pub fn from_opencv(coeffs: &[f64]) -> Result<Self, CoreError> {
         let n = coeffs.len();
-        if !(n == 0 || n == 4 || n == 5 || n == 8 || n > 8) {
+        if !matches!(n, 0 | 4 | 5 | 8 | 12 | 14) {
             return Err(CoreError::invalid(
                 "distortion coefficients",
                 format!("OpenCV uses 4, 5, 8, 12 or 14 coefficients, got {n}"),
@@ -850,6 +850,16 @@ mod tests {
         let mut c14 = [0.0; 14];
         c14[9] = 0.1;
         assert!(Distortion::from_opencv(&c14).is_err());
+        // Counts OpenCV never writes are refused as such, even when the extra terms are zero
+        // (20 zeros were taken, 9 with a last non-zero blamed on the thin-prism terms).
+        assert!(Distortion::from_opencv(&[0.0; 12]).is_ok() && Distortion::from_opencv(&[0.0; 14]).is_ok());
+        for n in [6, 9, 13, 20] {
+            let mut c = vec![0.0; n];
+            c[n - 1] = 0.1;
+            let e = Distortion::from_opencv(&c).expect_err("count").to_string();
+            assert!(e.contains(&format!("OpenCV uses 4, 5, 8, 12 or 14 coefficients, got {n}")), "{e}");
+            assert!(Distortion::from_opencv(&vec![0.0; n]).is_err(), "{n} zeros");
+        }
     }
 
     #[test]
