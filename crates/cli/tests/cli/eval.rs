@@ -184,27 +184,33 @@ fn ok_eval(out: &std::process::Output) {
     assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
 }
 
-/// A field whose weights are finite but whose values overflow 32-bit floats (a dense grid of
-/// 3·10³⁸ with a value scale of 2) is refused by `eval`, `export` and `render` naming the run;
-/// `eval` printed infinite metrics and `export` wrote infinite voxels, both with success.
-#[test]
-fn a_field_whose_values_overflow_is_refused() {
+/// Writes into `run` a neural run folder (weights and model.json, no config) of a dense-grid
+/// field holding `initial` everywhere in the scene's box, with a value scale of 2.
+fn write_dense_run(run: &Path, scene: &Scene, initial: f32) -> std::path::PathBuf {
     use fluidnerf_neural::trained::{build_field, AnyField, DenseConfig, FieldConfig, ModelRecord};
-    let dir = tempfile::tempdir().expect("tempdir");
-    let d = dir.path();
-    let scene = make_scene(d, &[]);
-    let config = FieldConfig::Dense(DenseConfig { resolution: 8, initial: 3e38 });
+    let config = FieldConfig::Dense(DenseConfig { resolution: 8, initial });
     let AnyField::Dense(field) = build_field(&config, &scene.aabb, 3, 0).expect("builds") else {
         panic!("a dense config builds a dense field")
     };
-    let run = d.join("nerf");
-    std::fs::create_dir_all(&run).expect("mkdir");
+    std::fs::create_dir_all(run).expect("mkdir");
     let weights = fluidnerf_neural::weights::weights_bytes(&field).expect("serialises");
     std::fs::write(run.join("weights.safetensors"), weights).expect("writes weights");
     let meta =
         fluidnerf_neural::train::FieldMeta { aabb: scene.aabb, value_scale: 2.0, time_step: 1.0, occupancy: None };
     let record = ModelRecord { field: config, input_dim: 3, meta };
     std::fs::write(run.join("model.json"), serde_json::to_string(&record).expect("json")).expect("writes model");
+    run.to_path_buf()
+}
+
+/// A field whose weights are finite but whose values overflow 32-bit floats (a dense grid of
+/// 3·10³⁸ with a value scale of 2) is refused by `eval`, `export` and `render` naming the run;
+/// `eval` printed infinite metrics and `export` wrote infinite voxels, both with success.
+#[test]
+fn a_field_whose_values_overflow_is_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let scene = make_scene(d, &[]);
+    let run = write_dense_run(&d.join("nerf"), &scene, 3e38);
     for (args, says) in [
         (&["eval", "nerf", "--scene", ".", "--no-regions", "--no-reprojection"][..], "nerf: the field is inf at"),
         (
@@ -223,23 +229,11 @@ fn a_field_whose_values_overflow_is_refused() {
 
 #[test]
 fn scores_a_trained_field_run_directory_at_the_truth_voxel_centres() {
-    use fluidnerf_neural::trained::{build_field, AnyField, DenseConfig, FieldConfig, ModelRecord};
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     let scene = make_scene(d, &[]);
     // A dense-grid field holding 0.25 everywhere in the box, with a value scale of 2: E = 0.5.
-    let config = FieldConfig::Dense(DenseConfig { resolution: 8, initial: 0.25 });
-    let AnyField::Dense(field) = build_field(&config, &scene.aabb, 3, 0).expect("builds") else {
-        panic!("a dense config builds a dense field")
-    };
-    let run = d.join("nerf");
-    std::fs::create_dir_all(&run).expect("mkdir");
-    let weights = fluidnerf_neural::weights::weights_bytes(&field).expect("serialises");
-    std::fs::write(run.join("weights.safetensors"), weights).expect("writes weights");
-    let meta =
-        fluidnerf_neural::train::FieldMeta { aabb: scene.aabb, value_scale: 2.0, time_step: 1.0, occupancy: None };
-    let record = ModelRecord { field: config, input_dim: 3, meta };
-    std::fs::write(run.join("model.json"), serde_json::to_string(&record).expect("json")).expect("writes model");
+    let run = write_dense_run(&d.join("nerf"), &scene, 0.25);
 
     let out = fluidnerf(&["eval", "nerf", "--scene", ".", "--no-regions"], d);
     assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
