@@ -146,6 +146,25 @@ def test_a_run_is_not_saved_under_a_file(static_scene, tmp_path):
     assert (tmp_path / "a_file").read_text() == "x"
 
 
+def test_a_scene_changed_on_disk_after_it_was_loaded_is_refused(static_scene, tmp_path):
+    """A Scene edited on disk after it was loaded was reconstructed from the old box while the
+    run's config.json named the folder, whose new box a rerun then read. Its run is refused;
+    loaded again, it runs."""
+    folder = tmp_path / "scene"
+    shutil.copytree(static_scene.root, folder)
+    loaded = fluidnerf.load_scene(folder)
+    transforms = json.loads((folder / "transforms.json").read_text())
+    transforms["aabb"] = [[-10.0, -10.0, -10.0], [10.0, 10.0, 10.0]]
+    (folder / "transforms.json").write_text(json.dumps(transforms))
+    with pytest.raises(fluidnerf.FluidNerfError, match="has changed on disk since this Scene was loaded"):
+        fluidnerf.reconstruct(loaded, "asart", tmp_path / "run", resolution=8, progress=False)
+    assert not (tmp_path / "run").exists()
+    again = fluidnerf.reconstruct(
+        fluidnerf.load_scene(folder), "asart", tmp_path / "run", resolution=8, progress=False
+    )
+    assert again.status == "finished"
+
+
 def test_a_run_that_cannot_be_copied_whole_leaves_no_half_copy(static_scene, tmp_path):
     """A file the copy could not read (here a link to nothing) raised a bare shutil.Error, and
     left the files copied before it at the destination, which a second attempt then refused as

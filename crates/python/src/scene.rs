@@ -96,13 +96,26 @@ fn install_staged(
 }
 
 impl PyScene {
-    /// The scene's folder, or an error for a scene that has none.
+    /// The scene, for a run that records its folder: an error for a scene that has none, or
+    /// whose folder no longer holds it. A run reads the folder's images and records the folder
+    /// in its config.json, which a rerun reads: a scene edited on disk after it was loaded
+    /// made a run of the old box and cameras that named the new ones, unnoticed.
     pub fn require_saved(&self, what: &str) -> PyResult<&fluidnerf_core::Scene> {
-        if self.saved {
-            Ok(&self.inner)
-        } else {
-            Err(err(format!("{what} needs a scene on disk: call scene.save(folder) first")))
+        if !self.saved {
+            return Err(err(format!("{what} needs a scene on disk: call scene.save(folder) first")));
         }
+        let root = &self.inner.root;
+        let now = fluidnerf_io::scene::load_scene(root).map_err(|e| {
+            err(format!("{what}: the scene's folder {} no longer reads as this scene: {e}", root.display()))
+        })?;
+        if now != self.inner {
+            return Err(err(format!(
+                "{what}: the scene in {} has changed on disk since this Scene was loaded (its box, cameras, frames \
+                 or truth differ); load it again with fluidnerf.load_scene",
+                root.display()
+            )));
+        }
+        Ok(&self.inner)
     }
 
     /// Every frame's image, in frame order.
