@@ -165,6 +165,23 @@ def test_a_scene_changed_on_disk_after_it_was_loaded_is_refused(static_scene, tm
     assert again.status == "finished"
 
 
+def test_a_run_whose_files_changed_after_it_was_opened_is_refused(static_scene, tmp_path):
+    """A Run kept the field it had loaded while its volume was read anew from the disk: after
+    volume.npy was replaced, field() and volume gave two different results without a word."""
+    fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=8, progress=False)
+    run = fluidnerf.open_run(tmp_path / "run")
+    before = run.field(np.zeros((1, 3), np.float32))
+    np.save(tmp_path / "run" / "volume.npy", np.full((8, 8, 8), 7.0, np.float32))
+    for call in (lambda: run.field(np.zeros((1, 3), np.float32)), lambda: run.volume):
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match="volume.npy has changed on disk since the run was opened"
+        ):
+            call()
+    reopened = fluidnerf.open_run(tmp_path / "run")
+    assert reopened.field(np.zeros((1, 3), np.float32))[0] == pytest.approx(7.0)
+    assert before[0] != pytest.approx(7.0)
+
+
 def test_a_run_that_cannot_be_copied_whole_leaves_no_half_copy(static_scene, tmp_path):
     """A file the copy could not read (here a link to nothing) raised a bare shutil.Error, and
     left the files copied before it at the destination, which a second attempt then refused as
@@ -572,8 +589,9 @@ def test_a_scene_built_from_arrays_is_reconstructed_in_its_run_folder(static_sce
     run = fluidnerf.reconstruct(scene, "asart", tmp_path / "run", **options)
     assert run.status == "finished" and (tmp_path / "run" / "scene" / "transforms.json").is_file()
     assert run.config["scene"] == str((tmp_path / "run" / "scene").absolute())
+    first = run.volume  # read before the rerun replaces the files it was opened on
     again = fluidnerf.reconstruct(scene, "asart", tmp_path / "run", overwrite="force", **options)
-    np.testing.assert_array_equal(again.volume, run.volume)
+    np.testing.assert_array_equal(again.volume, first)
     assert (tmp_path / "run" / "scene" / "transforms.json").is_file(), "--force removed the run's scene"
     # The command line reruns it, and replaces it keeping its scene.
     subprocess.run(

@@ -345,6 +345,36 @@ pub struct PyRun {
     /// `field` works with the GIL released, and a second thread calling it meanwhile was
     /// refused with pyo3's "RuntimeError: Already borrowed".
     field: std::sync::OnceLock<Box<dyn ScalarField + Send + Sync>>,
+    /// The result files as they were when the run was opened ([`stamps`]): the field is loaded
+    /// once and the volumes read on each call, so a run whose files changed since mixed the two.
+    stamps: Vec<(PathBuf, Option<(u64, std::time::SystemTime)>)>,
+}
+
+/// The result files of the run in `folder`, each with its length and modification time (None:
+/// absent).
+fn stamps(folder: &std::path::Path) -> Vec<(PathBuf, Option<(u64, std::time::SystemTime)>)> {
+    ["volume.npy", "weights.safetensors", "model.json", "temporal.json"]
+        .iter()
+        .map(|name| {
+            let path = folder.join(name);
+            let stamp = std::fs::metadata(&path).ok().and_then(|m| Some((m.len(), m.modified().ok()?)));
+            (path, stamp)
+        })
+        .collect()
+}
+
+impl PyRun {
+    /// Refuses `what` when a result file has changed (or come or gone) since the run was opened.
+    fn check_unchanged(&self, what: &str) -> PyResult<()> {
+        let now = stamps(&self.run.dir);
+        match self.stamps.iter().zip(&now).find(|(then, now)| then.1 != now.1) {
+            Some(((path, _), _)) => Err(err(format!(
+                "{what}: {} has changed on disk since the run was opened; open it again with fluidnerf.open_run",
+                path.display()
+            ))),
+            None => Ok(()),
+        }
+    }
 }
 
 /// Opens the run in `folder`; `aabb` `(2, 3)` places a bare `volume.npy` that has no report.
@@ -368,7 +398,8 @@ pub fn open_run(folder: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyR
                 given.max.to_array()
             )));
         }
-        Ok(PyRun { run, field: std::sync::OnceLock::new() })
+        let stamps = stamps(&run.dir);
+        Ok(PyRun { run, field: std::sync::OnceLock::new(), stamps })
     })
 }
 
@@ -411,12 +442,14 @@ impl PyRun {
 
     /// The first (for static runs the only) volume, `(nz, ny, nx)` float32.
     fn volume<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        self.check_unchanged("volume")?;
         let v = py.allow_threads(|| guard(|| self.run.first_volume().map_err(|e| err(e.to_string()))))?;
         volume_to_py(py, v)
     }
 
     /// Every volume with its time: `[(time or None, (nz, ny, nx) array)]`.
     fn volumes(&self, py: Python<'_>) -> PyResult<Vec<(Option<f64>, PyObject)>> {
+        self.check_unchanged("volumes")?;
         let vs = py.allow_threads(|| guard(|| self.run.volumes().map_err(|e| err(e.to_string()))))?;
         vs.into_iter().map(|(t, v)| Ok((t, volume_to_py(py, v)?.into_any().unbind()))).collect()
     }
@@ -432,6 +465,7 @@ impl PyRun {
         points: PyReadonlyArray2<'py, f32>,
         time: Option<f64>,
     ) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        self.check_unchanged("field")?;
         let span = self.run.time_span().map_err(|e| err(e.to_string()))?;
         let time =
             fluidnerf_pipeline::load::sample_time(span.as_ref(), time, "time").map_err(|e| err(e.to_string()))?;
