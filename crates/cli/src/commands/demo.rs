@@ -17,6 +17,9 @@ use super::reconstruct::StopArg;
 /// folder) first.
 const DEMO_FILES: [&str; 4] = ["comparison.json", "report.html", "slices.png", "convergence.png"];
 
+/// The demo's image noise by default, as a fraction of each image's maximum.
+const DEFAULT_NOISE: f64 = 0.025;
+
 /// Run the whole pipeline on a built-in example and compare FluidNeRF with classical
 /// tomography.
 ///
@@ -36,9 +39,6 @@ const DEMO_FILES: [&str; 4] = ["comparison.json", "report.html", "slices.png", "
 /// an earlier demo's (replaced with --force); a scene, a run, a study or any other folder
 /// holding files of those names is refused. Takes about a minute on a 2-core machine (53–65 s
 /// on a 2-core AMD EPYC, build excluded).
-/// The demo's image noise by default, as a fraction of each image's maximum.
-const DEFAULT_NOISE: f64 = 0.025;
-
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Output directory.
