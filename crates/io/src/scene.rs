@@ -533,8 +533,7 @@ fn background_to_key(file: &Path, b: &Background) -> Result<Option<BackgroundKey
 /// lists without blank paths, no frame whose flat field is its own image, a non-zero flow axis.
 /// Errors name the key and the frame.
 fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Result<(), IoError> {
-    let check_bg = |b: &Option<BackgroundKey>, place: &str| {
-        match b {
+    let check_bg = |b: &Option<BackgroundKey>, place: &str| match b {
         Some(BackgroundKey::Constant(c)) if !(c.is_finite() && *c >= 0.0) => Err(IoError::invalid(
             file,
             format!("{place}: `background` must be a finite number of counts, at least 0, got {}", num(*c)),
@@ -547,12 +546,14 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
         Some(key) => match key.paths().into_iter().find(|p| p.trim().is_empty()) {
             Some(p) => Err(IoError::invalid(
                 file,
-                format!("{place}: `background` names {p:?}, which is no image; give the background image's path or a number"),
+                format!(
+                    "{place}: `background` names {p:?}, which is no image; give the background image's path or a \
+                     number"
+                ),
             )),
             None => Ok(()),
         },
         None => Ok(()),
-    }
     };
     let check_flat = |flat: &Option<FlatFieldKey>, place: &str| {
         let Some(flat) = flat else { return Ok(()) };
@@ -576,55 +577,46 @@ fn check_recording(file: &Path, top: &TopIn, frames: &[(usize, &FrameIn)]) -> Re
     for (i, f) in frames {
         check_bg(&f.background, &format!("frame {i} ({})", f.file_path))?;
         let image = normalise(Path::new(&f.file_path));
-        // A background is a recording of its own too: subtracted from itself, a frame is black
-        // and carves everything it sees out of the volume. (Over time, an instant recorded
-        // before the flow started may be the later instants' background, and itself rightly
-        // dark.)
-        let background = match (&f.background, &top.background) {
-            _ if f.time.is_some() => None,
-            (Some(own), _) => Some((own, format!("frame {i} ({}), key `frames[{i}].background`", f.file_path))),
-            (None, Some(shared)) => {
-                Some((shared, format!("frame {i} ({}), key `background` (top level)", f.file_path)))
-            }
-            (None, None) => None,
+        // Where the key that applies to the frame was written: its own, or the top level's.
+        let key = |own: bool, name: &str| match own {
+            true => format!("frame {i} ({}), key `frames[{i}].{name}`", f.file_path),
+            false => format!("frame {i} ({}), key `{name}` (top level)", f.file_path),
         };
-        if let Some((bg, place)) = background {
-            if let Some(p) = bg.paths().into_iter().find(|p| normalise(Path::new(p)) == image) {
-                return Err(IoError::invalid(
-                    file,
-                    format!(
-                        "{place}: names {p}, the frame's own image; a background is a separate recording with the \
-                         same camera (the empty scene, or dark frames with the lens capped)"
-                    ),
-                ));
-            }
-        }
-        if let Some(m) = f.mask_path.as_deref().filter(|m| normalise(Path::new(m)) == image) {
-            return Err(IoError::invalid(
-                file,
-                format!(
-                    "frame {i} ({}), key `frames[{i}].mask_path`: names {m}, the frame's own image; a mask is an image \
-                     of its own, non-zero where the pixels are used",
-                    f.file_path
-                ),
-            ));
-        }
-        let place = format!("frame {i} ({}), key `frames[{i}].flat_field`", f.file_path);
-        check_flat(&f.flat_field, &place)?;
-        // A flat field is a recording of its own: the frame's image divided by itself is 1.
-        let (flat, place) = match (&f.flat_field, &top.flat_field) {
-            (Some(own), _) => (own, place),
-            (None, Some(shared)) => (shared, format!("frame {i} ({}), key `flat_field` (top level)", f.file_path)),
-            (None, None) => continue,
+        // Backgrounds, masks and flat fields are recordings of their own: a frame's own image
+        // in their place makes it black (carving everything it sees out of the volume), fully
+        // used, or divided by itself to 1.
+        let own_image = |paths: Vec<&str>, place: String, why: &str| match paths
+            .into_iter()
+            .find(|p| normalise(Path::new(p)) == image)
+        {
+            Some(p) => Err(IoError::invalid(file, format!("{place}: names {p}, the frame's own image; {why}"))),
+            None => Ok(()),
         };
-        if let Some(p) = flat.paths().into_iter().find(|p| normalise(Path::new(p)) == image) {
-            return Err(IoError::invalid(
-                file,
-                format!(
-                    "{place}: names {p}, the frame's own image; a flat field is a separate recording of a \
-                     uniformly lit target (a diffuser or a white screen) with the same camera and lens"
-                ),
-            ));
+        // (Over time, an instant recorded before the flow started may be the later instants'
+        // background, and itself rightly dark.)
+        if let Some(bg) = f.background.as_ref().or(top.background.as_ref()).filter(|_| f.time.is_none()) {
+            own_image(
+                bg.paths(),
+                key(f.background.is_some(), "background"),
+                "a background is a separate recording with the same camera (the empty scene, or dark frames with \
+                 the lens capped)",
+            )?;
+        }
+        if let Some(m) = &f.mask_path {
+            own_image(
+                vec![m.as_str()],
+                key(true, "mask_path"),
+                "a mask is an image of its own, non-zero where the pixels are used",
+            )?;
+        }
+        check_flat(&f.flat_field, &key(true, "flat_field"))?;
+        if let Some(flat) = f.flat_field.as_ref().or(top.flat_field.as_ref()) {
+            own_image(
+                flat.paths(),
+                key(f.flat_field.is_some(), "flat_field"),
+                "a flat field is a separate recording of a uniformly lit target (a diffuser or a white screen) with \
+                 the same camera and lens",
+            )?;
         }
     }
     if let Some(a) = top.flow_axis {
