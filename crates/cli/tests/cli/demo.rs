@@ -93,6 +93,8 @@ fn the_demo_lifts_every_methods_own_cap_and_refuses_a_bad_budget_or_preset() {
     ok(&out);
     let help = String::from_utf8_lossy(&out.stdout);
     assert!(help.contains("default: 1000000 under held-out and budget"), "{help}");
+    // The command's description (a constant placed between it and the options took it away).
+    assert!(help.contains("Synthesises a small turbulent-jet scene"), "{help}");
     // A real-like preset runs with the defaults: its images carry their own noise, and the
     // demo's default noise made synth refuse a --noise the user never gave.
     ok(&fluidnerf(
