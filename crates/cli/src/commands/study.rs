@@ -698,8 +698,8 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished;
                     // A finished run whose result has since gone (a volume deleted to save space)
                     // is run again: read back, it failed the study on every attempt.
-                    let finished = reported
-                        && ["volume.npy", "model.json", "temporal.json"].iter().any(|f| run_dir.join(f).is_file());
+                    let finished =
+                        reported && fluidnerf_pipeline::RunDir::open(&run_dir).is_ok_and(|rd| rd.kind().is_some());
                     #[allow(clippy::print_stdout)]
                     {
                         println!(
