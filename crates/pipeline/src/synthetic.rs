@@ -173,6 +173,17 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
         .collect()
 }
 
+/// The format of a ground-truth volume file by its extension: `"npy"`, `"vti"` or `"tif"`
+/// (`.tif` or `.tiff`); any other file is refused.
+pub fn truth_volume_format(path: &Path) -> Result<&'static str, PipelineError> {
+    match path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase().as_str() {
+        "npy" => Ok("npy"),
+        "vti" => Ok("vti"),
+        "tif" | "tiff" => Ok("tif"),
+        _ => Err(PipelineError::file(path, "the ground truth must be a .npy, .vti or .tif volume")),
+    }
+}
+
 /// Reads a user's volume to image as a synthetic scene's ground truth
 /// (`phantom.kind = "volume"`, `phantom.volume_path`): a `.npy` fills `aabb`, a `.vti` and a
 /// calibrated TIFF stack hold their own box, an uncalibrated stack fills `aabb`. Refused when a
@@ -180,12 +191,10 @@ fn synthesised_files(folder: &Path) -> Vec<PathBuf> {
 /// when none is positive (every camera would image black). A calibrated
 /// stack's box is converted to the scene's length `unit`.
 pub fn read_truth_volume(path: &Path, aabb: Aabb, unit: &str) -> Result<Volume, PipelineError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let volume = match ext.as_str() {
+    let volume = match truth_volume_format(path)? {
         "npy" => fluidnerf_io::volume::read_npy(path, aabb)?,
         "vti" => fluidnerf_io::volume::read_vti(path)?,
-        "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb), Some(unit))?,
-        _ => return Err(PipelineError::file(path, "the ground truth must be a .npy, .vti or .tif volume")),
+        _ => fluidnerf_io::volume::read_tiff_stack(path, Some(aabb), Some(unit))?,
     };
     if let Some(i) = volume.data.iter().position(|x| !x.is_finite()) {
         let [nx, ny, _] = volume.dims;

@@ -374,10 +374,7 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
     // A volume of the user's is the truth as it is: its grid, and a .vti's box, are its own.
     if let (PhantomKind::Volume, Some(path)) = (s.phantom.kind, &s.phantom.volume_path) {
         // What the file is comes first: the options' complaints assume a volume.
-        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-        if !["npy", "vti", "tif", "tiff"].contains(&ext.as_str()) {
-            bail!("{}: the ground truth must be a .npy, .vti or .tif volume", path.display());
-        }
+        let format = fluidnerf_pipeline::synthetic::truth_volume_format(path)?;
         if let Some(r) = args.resolution {
             bail!(
                 "--resolution {r}: the truth volume {} is imaged on its own grid; resample it first (e.g. fluidnerf \
@@ -385,8 +382,7 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
                 path.display()
             );
         }
-        let vti = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("vti"));
-        if vti && args.aabb.is_some() {
+        if format == "vti" && args.aabb.is_some() {
             bail!(
                 "--aabb: the truth volume {} is a .vti, which holds its own box; leave --aabb out, or give the volume \
                  as a .npy, which fills the box given",
