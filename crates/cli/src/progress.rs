@@ -95,8 +95,8 @@ pub fn sampled(
     let bar = bar(dims[2] as u64, "sampling");
     let volume = fluidnerf_core::Volume::from_field_averaged_with(dims, aabb, field, time, n, &|| bar.inc(1));
     bar.finish_and_clear();
-    let bad = volume.data.iter().filter(|v| !v.is_finite()).count();
     if let Some(first) = volume.data.iter().position(|v| !v.is_finite()) {
+        let bad = volume.data[first..].iter().filter(|v| !v.is_finite()).count();
         let [nx, ny, _] = dims;
         let at = volume.voxel_centre(first % nx, (first / nx) % ny, first / (nx * ny));
         anyhow::bail!(

@@ -528,7 +528,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
-    let peak = images.iter().flat_map(|i| i.data.iter()).copied().filter(|v| v.is_finite()).fold(0f32, f32::max);
+    let peak = images.iter().flat_map(|i| i.data.iter()).copied().fold(0f32, f32::max);
     // Views that are all black although the source is not empty show nothing of it: it lies
     // outside every view (another scene's box or cameras). Written, they would pass for a
     // render of an empty volume.
