@@ -750,20 +750,25 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     Ok((frames, used))
 }
 
-/// What an imported scene that does not validate says first: the calibration it came from
-/// (the check that follows names the frame in the `transforms.json` it was checked as, which
-/// the failed import then removes).
-fn invalid_scene(args: &Args) -> String {
-    let from = [
+/// The calibration options with their paths, given or not.
+fn calibrations(args: &Args) -> [(&'static str, &Option<PathBuf>); 5] {
+    [
         ("--opencv", &args.opencv),
         ("--colmap", &args.colmap),
         ("--metashape", &args.metashape),
         ("--projection", &args.projection),
         ("--transforms", &args.transforms),
     ]
-    .into_iter()
-    .find_map(|(flag, path)| path.as_ref().map(|p| format!(" from {} ({flag})", p.display())))
-    .unwrap_or_default();
+}
+
+/// What an imported scene that does not validate says first: the calibration it came from
+/// (the check that follows names the frame in the `transforms.json` it was checked as, which
+/// the failed import then removes).
+fn invalid_scene(args: &Args) -> String {
+    let from = calibrations(args)
+        .into_iter()
+        .find_map(|(flag, path)| path.as_ref().map(|p| format!(" from {} ({flag})", p.display())))
+        .unwrap_or_default();
     format!(
         "the scene imported{from} is invalid (checked as the transforms.json below, not kept){}",
         projection_hint(args)
@@ -1204,13 +1209,7 @@ fn remove_unread(file: &Path, referenced: &HashSet<PathBuf>) -> bool {
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
-    let calibrations = [
-        ("--opencv", &args.opencv),
-        ("--colmap", &args.colmap),
-        ("--metashape", &args.metashape),
-        ("--projection", &args.projection),
-        ("--transforms", &args.transforms),
-    ];
+    let calibrations = calibrations(args);
     let given =
         calibrations.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
     super::recordable("import.json", given.chain([("--out", args.out.as_path())]))?;
