@@ -69,14 +69,17 @@ fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: 
             format!("tensor {name} is {:?} {:?}, the field expects F32 {shape:?}", t.dtype(), t.shape()),
         ));
     }
-    // A field with a NaN or infinite weight gives NaN or infinite values wherever it reads it:
-    // checked as the values are copied, without an early exit (so that the loop vectorises;
-    // weights are millions of values, read by every command that loads a field), then found.
-    let mut finite = true;
-    for (d, b) in dst.iter_mut().zip(t.data().chunks_exact(4)) {
-        *d = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        finite &= d.is_finite();
+    // The file's bytes are little-endian f32: copied as bytes (a memcpy; weights are millions
+    // of values, read by every command that loads a field), then put in the machine's order.
+    bytemuck::cast_slice_mut::<f32, u8>(dst).copy_from_slice(t.data());
+    if cfg!(target_endian = "big") {
+        for d in dst.iter_mut() {
+            *d = f32::from_bits(u32::from_le(d.to_bits()));
+        }
     }
+    // A field with a NaN or infinite weight gives NaN or infinite values wherever it reads it:
+    // checked without an early exit, so that the loop vectorises, then found.
+    let finite = dst.iter().fold(true, |all, d| all & d.is_finite());
     if !finite {
         let i = dst.iter().position(|v| !v.is_finite()).unwrap_or(0);
         return Err(NeuralError::checkpoint(
