@@ -302,5 +302,6 @@ pub(crate) fn read_cine(
         range_source: RangeSource::Raw,
         clipped_pixels: clipped,
         saturated_pixels: 0,
+        display_rotation_deg: None,
     })
 }

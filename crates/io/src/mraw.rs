@@ -294,6 +294,7 @@ pub(crate) fn read_mraw(
         range_source: RangeSource::Raw,
         clipped_pixels: 0,
         saturated_pixels: 0,
+        display_rotation_deg: None,
     })
 }
 

@@ -37,6 +37,7 @@
 //! presentation time stamp (ffmpeg; the frame rate when a frame has none), plus
 //! [`VideoOptions::time_offset_s`].
 
+use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -217,6 +218,10 @@ pub struct VideoInfo {
     /// they recorded less light than arrived. Counted by [`read_video_frames`] for every
     /// decoder (which leave it 0).
     pub saturated_pixels: u64,
+    /// The rotation the file asks players to show its frames with, in degrees (a camera held
+    /// on its side); the frames are read as stored regardless.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub display_rotation_deg: Option<f64>,
 }
 
 /// Decoded frames.
@@ -600,6 +605,7 @@ fn read_mjpeg_avi(
         range_source,
         clipped_pixels: mapper.clipped,
         saturated_pixels: 0,
+        display_rotation_deg: None,
     }))
 }
 
@@ -831,6 +837,26 @@ struct ProbeStream {
     height: Option<u32>,
     color_range: Option<String>,
     avg_frame_rate: Option<String>,
+    /// The display matrix's rotation (ffmpeg 5 and later), in degrees.
+    #[serde(default)]
+    side_data_list: Vec<ProbeSideData>,
+    /// `rotate`, where older ffmpeg releases report the display rotation.
+    #[serde(default)]
+    tags: HashMap<String, String>,
+}
+
+#[derive(serde::Deserialize)]
+struct ProbeSideData {
+    rotation: Option<f64>,
+}
+
+impl ProbeStream {
+    /// The rotation the file asks players to show its frames with, in degrees, if any.
+    fn display_rotation(&self) -> Option<f64> {
+        let side = self.side_data_list.iter().find_map(|d| d.rotation);
+        let tag = self.tags.get("rotate").and_then(|r| r.trim().parse::<f64>().ok());
+        side.or(tag).filter(|r| r.is_finite() && r.rem_euclid(360.0) != 0.0)
+    }
 }
 
 #[derive(serde::Deserialize)]
@@ -877,7 +903,10 @@ fn read_with_ffmpeg(
     let ffprobe = program(FFPROBE_ENV, "ffprobe");
     let out = Command::new(&ffprobe)
         .args(["-v", "error", "-select_streams", "v:0", "-show_entries"])
-        .arg("stream=width,height,color_range,avg_frame_rate:frame=best_effort_timestamp_time,pts_time")
+        .arg(
+            "stream=width,height,color_range,avg_frame_rate:stream_side_data=rotation:stream_tags=rotate:\
+             frame=best_effort_timestamp_time,pts_time",
+        )
         .args(["-of", "json"])
         .arg(path)
         .stdin(Stdio::null())
@@ -898,6 +927,19 @@ fn read_with_ffmpeg(
         return Err(IoError::invalid(path, format!("the video stream's frame size is {w}×{h} pixels")));
     }
     let rate = stream.avg_frame_rate.as_deref().and_then(parse_rate);
+    // A phone or action camera held on its side stores the sensor's frames and asks players to
+    // turn them. ffmpeg would turn them (and swap their width and height) unless told not to;
+    // they are read as stored, as a JPEG's EXIF orientation is, since the calibration is of
+    // the sensor's pixels.
+    let rotation = stream.display_rotation();
+    if let Some(r) = rotation {
+        log::warn!(
+            "{}: the file asks players to show its frames turned by {r}°; fluidnerf reads them as stored (as the \
+             sensor recorded them, {w}×{h} px), so the camera's calibration must be of the stored frames (a \
+             calibration made from frames a player or ffmpeg turned is not)",
+            path.display()
+        );
+    }
     let stamps: Vec<Option<f64>> = probe
         .frames
         .iter()
@@ -915,7 +957,8 @@ fn read_with_ffmpeg(
     let mut decode = |sync: &[&str], mapper: &mut Mapper| -> Result<(usize, usize, Vec<u8>), IoError> {
         let ffmpeg = program(FFMPEG_ENV, "ffmpeg");
         let mut cmd = Command::new(&ffmpeg);
-        cmd.args(["-v", "error", "-nostdin", "-i"])
+        // `-noautorotate`: the frames as stored, whatever rotation the file asks for.
+        cmd.args(["-v", "error", "-nostdin", "-noautorotate", "-i"])
             .arg(path)
             .args(["-map", "0:v:0", "-an", "-sn", "-f", "rawvideo", "-pix_fmt", "gray16le"])
             // Keep the stored code values: no range conversion inside ffmpeg.
@@ -1018,6 +1061,7 @@ fn read_with_ffmpeg(
         range_source,
         clipped_pixels: mapper.clipped,
         saturated_pixels: 0,
+        display_rotation_deg: rotation,
     })
 }
 

@@ -300,6 +300,30 @@ fn h264_mp4_reads_through_ffmpeg() {
     }
 }
 
+/// A video whose file asks players to turn its frames (a camera held on its side; made from
+/// ramp_h264.mp4 with `ffmpeg -display_rotation 90 -c copy`, see make_fixtures.py) is read as
+/// stored: the same size and pixels as the unturned file, the rotation recorded. ffmpeg
+/// turns such frames unless told not to, and the turned 24 × 32 frames were read as 32 × 24
+/// rows, scrambling every pixel. Needs ffmpeg on the PATH; reported and skipped without it.
+#[test]
+#[allow(clippy::print_stdout)] // The skip is reported.
+fn a_video_asking_to_be_shown_turned_is_read_as_stored() {
+    if !has_ffmpeg() {
+        println!("skipped: ffmpeg/ffprobe are not on the PATH");
+        return;
+    }
+    let turned = read_video(&fixture("ramp_h264_rot90.mp4"), &VideoOptions::default()).expect("reads");
+    let stored = read_video(&fixture("ramp_h264.mp4"), &VideoOptions::default()).expect("reads");
+    assert_eq!(turned.info.display_rotation_deg.map(f64::abs), Some(90.0));
+    assert_eq!(stored.info.display_rotation_deg, None);
+    assert_eq!((turned.info.width, turned.info.height), (32, 24));
+    assert_eq!(turned.frames.len(), stored.frames.len());
+    for (a, b) in turned.frames.iter().zip(&stored.frames) {
+        assert_eq!((a.width, a.height), (32, 24));
+        assert_eq!(a.data, b.data, "the frames differ from the stored ones");
+    }
+}
+
 /// Phantom cine reading against fixtures laid out with pycine's header structures and read
 /// back by pycine (fixtures/video/make_cine.py, check_cine_with_pycine.py and its output
 /// check_cine_with_pycine.txt): four grey 32 × 24 frames at 1000 frames/s, pixel (x, y) of
