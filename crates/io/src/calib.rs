@@ -11,7 +11,8 @@
 //! - `distortion_coefficients`: 0, 4, 5, 8 (or 12/14 with zero thin-prism/tilt terms) values in
 //!   OpenCV's order `k1 k2 p1 p2 [k3 [k4 k5 k6]]` (optional; none means no distortion, with a
 //!   warning when the file has a node named like a distortion that is not read: `dist_coeffs`,
-//!   `distCoeffs`, `D`, `kc`).
+//!   `distCoeffs`, `D`, `kc`). A file marking OpenCV's fisheye model (`fisheye_model` not 0,
+//!   or a `distortion_model` naming it) is refused: its coefficients are not these.
 //! - the pose, world → camera (`x_cam = R x_world + t`): `rvec` (Rodrigues vector, 3 values)
 //!   and `tvec` (3), or `R` (3 × 3) and `T` (3). If both are given, `R`/`T` win (warning).
 //! - `image_width`, `image_height` (integers).
@@ -731,8 +732,50 @@ fn camera_list(path: &Path, key: &str, value: &Value) -> Result<Option<Vec<(Stri
     Ok(Some(out))
 }
 
+/// Refuses a file that marks its distortion as OpenCV's fisheye model (`cv::fisheye`): a node
+/// `fisheye_model` (per camera `fisheye_model_<name>`) that is not 0 or false, as OpenCV's
+/// calibration sample writes, or a `distortion_model` naming a fisheye (ROS: `equidistant`), at the top or in a
+/// camera's mapping or list entry. Its four coefficients are the equidistant model's θ terms,
+/// and read as k1 k2 p1 p2 they would make a wrong camera without a word.
+fn refuse_fisheye(path: &Path, nodes: &Map<String, Value>) -> Result<(), IoError> {
+    fn marked(nodes: &Map<String, Value>) -> Option<String> {
+        nodes.iter().find_map(|(key, value)| {
+            let k = key.to_ascii_lowercase().replace('_', "");
+            let fisheye = match value {
+                _ if k.starts_with("fisheyemodel") => match value {
+                    Value::Bool(b) => *b,
+                    Value::Number(n) => n.as_f64() != Some(0.0),
+                    Value::String(t) => !matches!(t.trim(), "0" | "false" | ""),
+                    _ => false,
+                },
+                Value::String(t) if k.starts_with("distortionmodel") => {
+                    let t = t.to_ascii_lowercase();
+                    ["fisheye", "equidistant", "kannala"].iter().any(|m| t.contains(m))
+                }
+                Value::Object(m) => return marked(m),
+                Value::Array(list) => return list.iter().filter_map(Value::as_object).find_map(marked),
+                _ => false,
+            };
+            fisheye.then(|| format!("`{key}: {value}`"))
+        })
+    }
+    match marked(nodes) {
+        None => Ok(()),
+        Some(node) => Err(IoError::invalid(
+            path,
+            format!(
+                "{node} marks a camera of OpenCV's fisheye model (cv::fisheye), which fluidnerf does not read: its \
+                 coefficients are the equidistant model's k1..k4 of the angle θ, not the standard model's k1 k2 p1 \
+                 p2. Calibrate with the standard or rational model (cv::calibrateCamera), or undistort the images \
+                 with cv::fisheye and import them with the new camera matrix and no distortion"
+            ),
+        )),
+    }
+}
+
 fn read_opencv_file(path: &Path) -> Result<Vec<(String, Camera)>, IoError> {
     let (raw_nodes, text) = parse_storage(path)?;
+    refuse_fisheye(path, &raw_nodes)?;
     if let Some(cams) = read_stereo(path, &raw_nodes, None)? {
         return Ok(cams);
     }

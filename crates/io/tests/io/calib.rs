@@ -1098,6 +1098,41 @@ fn opencv_malformed_nodes_are_named() {
     }
 }
 
+/// A camera of OpenCV's fisheye model (its calibration sample's `fisheye_model: 1`, a
+/// `distortion_model` naming it, per camera or in a camera's mapping) is refused: its four
+/// coefficients are the equidistant model's and were read as k1 k2 p1 p2, a wrong camera
+/// without a word. `fisheye_model: 0` is the standard model and is read.
+#[test]
+fn opencv_fisheye_calibrations_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mapping =
+        "%YAML:1.0\nleft:\n  camera_matrix: [ 1, 0, 1, 0, 1, 1, 0, 0, 1 ]\n  image_width: 8\n  image_height: 8\n  \
+                   R: [ 1, 0, 0, 0, 1, 0, 0, 0, 1 ]\n  T: [ 0, 0, 5 ]\n  distortion_model: Fisheye\n";
+    let sample = format!("{OPENCV_SAMPLE}rvec: [ 0, 0, 0 ]\ntvec: [ 0, 0, 5 ]\n");
+    let cases: [(&str, String, Option<&str>); 5] = [
+        (
+            "sample.yml",
+            format!("{sample}fisheye_model: 1\n"),
+            Some("`fisheye_model: 1` marks a camera of OpenCV's fisheye model"),
+        ),
+        ("sample.yml", format!("{sample}distortion_model: equidistant\n"), Some("`distortion_model: \"equidistant\"`")),
+        ("sample.yml", format!("{sample}Fisheye_Model_cam0: \"true\"\n"), Some("`Fisheye_Model_cam0: \"true\"`")),
+        ("rig.yml", mapping.to_string(), Some("rig.yml: `distortion_model: \"Fisheye\"`")),
+        ("sample.yml", format!("{sample}fisheye_model: 0\n"), None),
+    ];
+    for (name, text, want) in cases {
+        let file = dir.path().join(name);
+        std::fs::write(&file, &text).expect("write");
+        match want {
+            Some(want) => {
+                let err = read_opencv(&file).expect_err(want).to_string();
+                assert!(err.contains(want) && err.contains("cv::fisheye"), "{err}\nshould contain\n{want}");
+            }
+            None => assert_eq!(read_opencv(&file).expect("the standard model").len(), 1),
+        }
+    }
+}
+
 /// An `R` written with four decimals is a rotation only up to their rounding, which the
 /// camera's check refused: the nearest rotation is taken, within the rounding of the exact one.
 #[test]
