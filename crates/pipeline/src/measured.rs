@@ -82,6 +82,8 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
     let mut factors = vec![1.0; images.len()];
     let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
     let comparable: Vec<Option<f64>> = totals.iter().zip(&pre.masks).map(|(&t, m)| m.is_none().then_some(t)).collect();
+    let floors: Vec<Option<Floor>> =
+        images.iter().zip(&pre.masks).map(|(im, m)| m.is_none().then(|| Floor::of(&im.data))).collect();
     let dark_warning = dark_frames_hint(scene, &totals);
     let spread =
         matches!(gains.mode, GainMode::None | GainMode::Auto).then(|| gain_spread(scene, &comparable)).flatten();
@@ -97,7 +99,8 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
         m => m,
     };
     let gain_hint = spread.and_then(|(i, ratio)| {
-        let text = spread_text(scene, i, ratio);
+        let offset = offset_note(scene, i, ratio, &floors);
+        let text = spread_text(scene, i, ratio, offset.as_deref());
         match (gains.mode, temporal) {
             (GainMode::None, _) => Some(format!(
                 "{text}; with --gains none the run takes that for the field. If the cameras' gains, apertures or \
@@ -111,6 +114,12 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
                 "{text}; a time-resolved run fits no gains, so the images are balanced (gains auto: each scaled to \
                  the mean total of its time, as if every camera saw the whole flow); --gains none takes them as they \
                  are (docs/real-data.md)"
+            )),
+            // A flat excess is an offset, which a gain alone fits badly: worth a warning unless
+            // offsets are fitted.
+            _ if offset.is_some() && !gains.offset => Some(format!(
+                "{text}; a run fits {} here, and no offset unless given --gain-offset (docs/real-data.md)",
+                if gains.mode == GainMode::Auto { "a gain per camera (gains auto)" } else { "gains" }
             )),
             // `auto` in a static run: the gains are fitted, as the report says.
             _ => {
@@ -332,25 +341,83 @@ fn dark_frames_hint(scene: &Scene, totals: &[f64]) -> Option<String> {
     ))
 }
 
-/// What [`gain_spread`] found, in words.
-fn spread_text(scene: &Scene, i: usize, ratio: f64) -> String {
+/// The level of an image's darkest pixels, against which [`offset_note`] tells a constant
+/// offset from a gain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    /// The 5th percentile of the pixels.
+    pub level: f64,
+    /// The pixels' mean.
+    pub mean: f64,
+}
+
+impl Floor {
+    /// The floor of an image's pixels (all of them: images with masks are not compared).
+    pub fn of(data: &[f32]) -> Floor {
+        if data.is_empty() {
+            return Floor { level: 0.0, mean: 0.0 };
+        }
+        let mut sorted = data.to_vec();
+        let k = sorted.len() / 20;
+        let (_, level, _) = sorted.select_nth_unstable_by(k, f32::total_cmp);
+        let mean = data.iter().map(|&v| f64::from(v)).sum::<f64>() / data.len() as f64;
+        Floor { level: f64::from(*level), mean }
+    }
+}
+
+/// For frame `i`, whose total is `ratio` × the median of its time ([`gain_spread`]), a note when
+/// its darkest pixels are raised above the other training frames' of its time by at least half
+/// of its excess light per pixel: a constant offset (light or a black level not subtracted)
+/// raises every pixel alike, where a gain leaves dark pixels dark. A gain fitted to an offset
+/// fits neither the dark nor the bright pixels. None for a frame dimmer than the median, or when
+/// fewer than two others compare (`floors` None for frames with masks, or not read).
+fn offset_note(scene: &Scene, i: usize, ratio: f64, floors: &[Option<Floor>]) -> Option<String> {
+    let own = floors.get(i).copied().flatten()?;
+    let key = |j: usize| scene.frames[j].time.map(f64::to_bits);
+    let mut others: Vec<f64> = (0..floors.len())
+        .filter(|&j| j != i && !scene.frames[j].holdout && key(j) == key(i))
+        .filter_map(|j| floors[j].map(|f| f.level))
+        .collect();
+    if ratio <= 1.0 || others.len() < 2 {
+        return None;
+    }
+    others.sort_by(f64::total_cmp);
+    let raised = own.level - others[others.len() / 2];
+    let excess = own.mean * (1.0 - 1.0 / ratio);
+    (raised > 0.0 && raised >= 0.5 * excess).then(|| {
+        format!(
+            "its darkest pixels lie {} above the other cameras' ({:.0} % of its excess light per pixel), as a \
+             constant offset raises them, not a gain: subtract that camera's background (`background`) or fit \
+             offsets too (--gains fit --gain-offset)",
+            fluidnerf_core::num(raised),
+            100.0 * raised / excess
+        )
+    })
+}
+
+/// What [`gain_spread`] found, in words, with [`offset_note`]'s note.
+fn spread_text(scene: &Scene, i: usize, ratio: f64, offset: Option<&str>) -> String {
     format!(
         "the training images' total intensities differ between cameras as differing gains make them: {} holds {:.2}× \
-         the median of its time, for its distance and lens (more than {:.0} % off)",
+         the median of its time, for its distance and lens (more than {:.0} % off){}",
         frame_label(scene, i),
         ratio,
-        (GAIN_HINT_RATIO - 1.0) * 100.0
+        (GAIN_HINT_RATIO - 1.0) * 100.0,
+        offset.map(|o| format!("; {o}")).unwrap_or_default()
     )
 }
 
-/// What a scene's images say of the cameras' gains before any run ([`gain_spread`]), for
-/// `fluidnerf info`: None when their totals agree.
-pub fn gain_hint(scene: &Scene, totals: &[Option<f64>]) -> Option<String> {
+/// What a scene's images say of the cameras' gains before any run ([`gain_spread`], and
+/// [`offset_note`] from the images' `floors`), for `fluidnerf info`: None when their totals
+/// agree.
+pub fn gain_hint(scene: &Scene, totals: &[Option<f64>], floors: &[Option<Floor>]) -> Option<String> {
     let (i, ratio) = gain_spread(scene, totals)?;
+    let offset = offset_note(scene, i, ratio, floors);
     Some(format!(
-        "{}; by default (gains auto) a static run fits a gain per camera for that and a time-resolved run, which \
+        "{}; by default (gains auto) a static run fits a gain per camera for that{} and a time-resolved run, which \
          fits none, balances the images; --gains none takes them as they are (docs/real-data.md)",
-        spread_text(scene, i, ratio)
+        spread_text(scene, i, ratio, offset.as_deref()),
+        if offset.is_some() { " (no offset unless given --gain-offset)" } else { "" }
     ))
 }
 
@@ -548,7 +615,7 @@ mod tests {
             truth: Vec::new(),
         };
         let ring = scene(false);
-        let hint = |totals: [Option<f64>; 5]| gain_hint(&ring, &totals);
+        let hint = |totals: [Option<f64>; 5]| gain_hint(&ring, &totals, &[None; 5]);
         // Within 15 % of the median: nothing; the held-out camera does not count.
         assert_eq!(hint([Some(1.0), Some(1.1), Some(0.9), Some(1.0), Some(3.0)]), None);
         let said = hint([Some(1.0), Some(1.0), Some(0.8), Some(1.05), None]).expect("a camera 20 % dim");
@@ -561,9 +628,56 @@ mod tests {
         // A camera twice as far sees the field a quarter as large: a quarter of the light is
         // its share, and the same light as the others would be four times it.
         let far = scene(true);
-        assert_eq!(gain_hint(&far, &[Some(1.0), Some(0.25), Some(1.0), Some(1.0), None]), None);
-        let said = gain_hint(&far, &[Some(1.0), Some(1.0), Some(1.0), Some(1.0), None]).expect("too bright");
+        assert_eq!(gain_hint(&far, &[Some(1.0), Some(0.25), Some(1.0), Some(1.0), None], &[None; 5]), None);
+        let said =
+            gain_hint(&far, &[Some(1.0), Some(1.0), Some(1.0), Some(1.0), None], &[None; 5]).expect("too bright");
         assert!(said.contains("cam1 holds 4.00×"), "{said}");
+    }
+
+    /// A camera brighter than the others of its time whose darkest pixels are raised by about
+    /// its excess light is said to hold an offset; one whose dark pixels stay dark, a gain.
+    #[test]
+    fn an_excess_that_raises_the_dark_pixels_is_told_as_an_offset() {
+        use fluidnerf_core::glam::DVec3;
+        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
+        let data: Vec<f32> = (0..100).map(|v| v as f32).collect();
+        assert_eq!(Floor::of(&data), Floor { level: 5.0, mean: 49.5 });
+        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
+        let scene = Scene {
+            root: "scene".into(),
+            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
+            units: "mm".into(),
+            intensity_scale: 1.0,
+            frames: (0..4)
+                .map(|i| {
+                    let a = i as f64 * 1.5;
+                    Frame {
+                        file_path: format!("c{i}.tiff").into(),
+                        camera: Camera::look_at(k, 5.0 * DVec3::new(a.cos(), 0.0, a.sin()), DVec3::ZERO, DVec3::Y),
+                        time: None,
+                        camera_name: Some(format!("cam{i}")),
+                        holdout: false,
+                    }
+                })
+                .collect(),
+            truth: Vec::new(),
+        };
+        let dark = Some(Floor { level: 0.0, mean: 1.0 });
+        let totals = [Some(1.0), Some(1.0), Some(2.0), Some(1.0)];
+        // cam2 holds twice the light: 1 per pixel more. Raised by 1 at its darkest: an offset.
+        let said = gain_hint(&scene, &totals, &[dark, dark, Some(Floor { level: 1.0, mean: 2.0 }), dark])
+            .expect("twice the light");
+        assert!(said.contains("cam2 holds 2.00×") && said.contains("--gain-offset"), "{said}");
+        assert!(said.contains("darkest pixels lie 1 above the other cameras' (100 %"), "{said}");
+        // Its dark pixels as dark as the others': a gain, without the note.
+        let said = gain_hint(&scene, &totals, &[dark, dark, Some(Floor { level: 0.0, mean: 2.0 }), dark])
+            .expect("twice the light");
+        assert!(!said.contains("offset"), "{said}");
+        // Raised by less than half its excess: the gain explains most of it.
+        assert_eq!(offset_note(&scene, 2, 2.0, &[dark, dark, Some(Floor { level: 0.4, mean: 2.0 }), dark]), None);
+        // A dimmer camera, or too few others to compare with, says nothing of an offset.
+        assert_eq!(offset_note(&scene, 2, 0.5, &[dark, dark, Some(Floor { level: 1.0, mean: 0.5 }), dark]), None);
+        assert_eq!(offset_note(&scene, 2, 2.0, &[dark, None, Some(Floor { level: 1.0, mean: 2.0 }), None]), None);
     }
 
     #[test]

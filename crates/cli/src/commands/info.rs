@@ -160,6 +160,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Each image's total, after the background when the scene has one; None for a masked
     // image, whose total does not compare with the others'.
     let mut totals: Vec<Option<f64>> = vec![None; scene.frames.len()];
+    // Each such image's darkest pixels, which tell an offset from a gain.
+    let mut floors: Vec<Option<fluidnerf_pipeline::Floor>> = vec![None; scene.frames.len()];
     // The training images' noise readings ([`fluidnerf_core::Image::relative_noise`]).
     let mut noise_levels = Vec::new();
     // Whether a training (not held-out) image has a pixel above 0, before any preprocessing.
@@ -192,6 +194,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Ok((img, kind)) => {
                     kinds.push((i, kind));
                     totals[i] = Some(img.sum());
+                    floors[i] = Some(fluidnerf_pipeline::Floor::of(&img.data));
                     let (w, h) = (f.camera.width(), f.camera.height());
                     let (lo, hi) = img.min_max();
                     let mean = img.sum() / img.data.len().max(1) as f64;
@@ -272,6 +275,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
                     totals[i] = m.is_none().then(|| im.sum());
+                    floors[i] = m.is_none().then(|| fluidnerf_pipeline::Floor::of(&im.data));
                 }
                 // A run reads the noise of the images it trains on, after the background and
                 // the flat field: the background's own offset and noise change the reading.
@@ -325,7 +329,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // What a run without gains would warn of: cameras whose images' totals differ.
     if !args.no_images && problems.is_empty() {
-        warnings.extend(fluidnerf_pipeline::gain_hint(&scene, &totals));
+        warnings.extend(fluidnerf_pipeline::gain_hint(&scene, &totals, &floors));
     }
     let _ = writeln!(out);
 
