@@ -465,9 +465,17 @@ fn expand_videos(
     let aligned = runs.filter(|_| !common.is_empty() && from_trigger);
     let Some(starts) = aligned else {
         if let Some(other) = records.iter().find(|r| r.info.frames_kept != first.info.frames_kept) {
+            // Files whose times count from their own start may well share times: what they do
+            // not tell is which frames were simultaneous.
+            let why = if from_trigger {
+                "and they share no run of frames at the same times"
+            } else {
+                "and their times count from each file's start, so files of different lengths do not tell which \
+                 frames were simultaneous"
+            };
             bail!(
-                "the videos are not synchronised: camera {} gives {} frame(s), camera {} {}, and they share no run \
-                 of frames at the same times; select the common frames with --video-frames",
+                "the videos are not synchronised: camera {} gives {} frame(s), camera {} {}, {why}; select the same \
+                 instants of each with --video-frames",
                 first.camera,
                 first.info.frames_kept,
                 other.camera,

@@ -1032,6 +1032,36 @@ fn videos_of_different_frame_rates_are_refused() {
     assert!(!out.exists(), "a refused import wrote");
 }
 
+/// Videos whose times count from each file's start (not a high-speed camera's raw files, which
+/// count from the trigger) and that hold different numbers of frames are refused, saying that
+/// their lengths do not tell which frames were simultaneous: their first frames share times,
+/// and the message said they shared none.
+#[test]
+fn videos_of_different_lengths_are_refused_saying_why() {
+    let (dir, calib, videos) = video_rig();
+    let bytes = std::fs::read(ramp_video()).expect("reads the fixture");
+    // The last frame's chunk (before the index, which lists it again) renamed: three frames.
+    let index = bytes.windows(4).position(|w| w == b"idx1").unwrap_or(bytes.len());
+    let last = bytes[..index].windows(4).rposition(|w| w == b"00dc").expect("a frame chunk");
+    let mut short = bytes.clone();
+    short[last..last + 4].copy_from_slice(b"JUNK");
+    for (name, data) in [("cam0", &bytes), ("cam1", &short), ("cam2", &bytes)] {
+        std::fs::write(videos.join(format!("{name}.avi")), data).expect("writes");
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "imported: {e}");
+    assert!(
+        e.contains("camera cam0 gives 4 frame(s), camera cam1 3")
+            && e.contains("their times count from each file's start")
+            && e.contains("--video-frames")
+            && !e.contains("share no run"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a refused import wrote");
+}
+
 /// A camera's distortion under a name the reader does not know (`dist_coeffs_cam1` for
 /// `distortion_coefficients_cam1`) would leave it undistorted without a word: the import warns,
 /// naming the camera, the node it read and the node to rename.
