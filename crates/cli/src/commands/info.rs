@@ -162,6 +162,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut totals: Vec<Option<f64>> = vec![None; scene.frames.len()];
     // Each such image's darkest pixels, which tell an offset from a gain.
     let mut floors: Vec<Option<fluidnerf_pipeline::Floor>> = vec![None; scene.frames.len()];
+    // Whether each image read has a pixel above 0 before any preprocessing.
+    let mut lit = vec![false; scene.frames.len()];
     // The training images' noise readings ([`fluidnerf_core::Image::relative_noise`]).
     let mut noise_levels = Vec::new();
     // Whether a training (not held-out) image has a pixel above 0, before any preprocessing.
@@ -195,6 +197,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     kinds.push((i, kind));
                     totals[i] = Some(img.sum());
                     floors[i] = Some(fluidnerf_pipeline::Floor::of(&img.data));
+                    lit[i] = img.data.iter().any(|&v| v > 0.0);
                     let (w, h) = (f.camera.width(), f.camera.height());
                     let (lo, hi) = img.min_max();
                     let mean = img.sum() / img.data.len().max(1) as f64;
@@ -276,6 +279,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
                     totals[i] = m.is_none().then(|| im.sum());
                     floors[i] = m.is_none().then(|| fluidnerf_pipeline::Floor::of(&im.data));
+                    // A run warns of it as it starts; here it is one of the scene's warnings.
+                    if lit[i] && im.data.iter().all(|&v| v == 0.0) {
+                        warnings.push(format!(
+                            "frame {i} ({}): nothing is left after its background is subtracted (every pixel at or \
+                             below it), so a run reads it as black, as empty space along every ray of its camera; \
+                             check the frame's background",
+                            scene.frames[i].file_path.display()
+                        ));
+                    }
                 }
                 // A run reads the noise of the images it trains on, after the background and
                 // the flat field: the background's own offset and noise change the reading.

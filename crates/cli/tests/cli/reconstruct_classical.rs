@@ -397,7 +397,7 @@ fn projector_and_hull_settings_a_config_does_not_use_are_refused() {
 
 /// A frame that its background leaves black is warned of once per command: a run's report
 /// draws its camera figure from the images the run read, rather than reading (and warning
-/// about) them again.
+/// about) them again. `info` also lists it among the scene's warnings, above its summary.
 #[test]
 fn a_frame_left_black_by_its_background_is_warned_of_once() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -419,4 +419,7 @@ fn a_frame_left_black_by_its_background_is_warned_of_once() {
     }
     let (n, err) = count(&["info", "scene"]);
     assert_eq!(n, 1, "info: {err}");
+    // `info` lists it among the scene's warnings too, which its summary follows.
+    let out = String::from_utf8_lossy(&fluidnerf(d, &["info", "scene"]).stdout).into_owned();
+    assert!(out.contains("warning: frame 0 (") && out.contains(warning), "{out}");
 }
