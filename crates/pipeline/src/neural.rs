@@ -435,8 +435,9 @@ impl Ctx<'_> {
         let mut budgeted;
         // Before any gain is fitted (the fingerprint reads the measured pixels either way).
         let views = prep.fingerprint();
+        let settings = settings_tag(config)?;
         if dir.resuming() {
-            check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &views)?;
+            check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &settings, &views)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             // A resumed run only continues: below the checkpoint's iteration it would keep the
             // result of the longer run and record the lower cap in config.json, which reruns
@@ -454,6 +455,34 @@ impl Ctx<'_> {
                     ),
                 ));
             }
+            // The time budget bounds the run's whole training (its start's included), as in a
+            // run without a break, so that config.json reruns it: the time the checkpoint has
+            // trained is spent.
+            budgeted = train_cfg.clone();
+            if let Some(b) = budgeted.time_budget_s {
+                if learner.train_time_s >= b {
+                    return Err(PipelineError::invalid(
+                        "stopping.time_budget_s",
+                        format!(
+                            "{} has trained for {:.1} s, the whole time budget of {} s asked for; a resumed run \
+                             only continues, within the budget of the whole run, so give a --time-budget above \
+                             {:.1} s",
+                            ckpt.display(),
+                            learner.train_time_s,
+                            fluidnerf_core::num(b),
+                            learner.train_time_s
+                        ),
+                    ));
+                }
+                budgeted.time_budget_s = Some(b - learner.train_time_s);
+            }
+            // A field started from a volume trains at the start's lower rate throughout, after a
+            // break too.
+            if let Some(start) = &self.spec.start {
+                budgeted.schedule.initial *= start.learning_rate_scale;
+                budgeted.schedule.at_decay_iters *= start.learning_rate_scale;
+            }
+            train_cfg = &budgeted;
             dir.replace_finished(config)?;
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
@@ -535,7 +564,7 @@ impl Ctx<'_> {
                 }
             }
             if config.checkpoint_every > 0 && s.iteration.is_multiple_of(config.checkpoint_every) {
-                match write_checkpoint(dir, s.learner, &self.scene.aabb, &self.spec.field, &views) {
+                match write_checkpoint(dir, s.learner, &self.scene.aabb, &self.spec.field, &settings, &views) {
                     Ok(path) => {
                         let _ = session.emit(RunEvent::Checkpoint { path: &path });
                     }
@@ -576,7 +605,7 @@ impl Ctx<'_> {
         }
         let _ = session.emit(RunEvent::Writing);
         // The checkpoint holds the last state, so a resumed run continues where this one stopped.
-        write_checkpoint(dir, &learner, &self.scene.aabb, &self.spec.field, &views)?;
+        write_checkpoint(dir, &learner, &self.scene.aabb, &self.spec.field, &settings, &views)?;
         let stop_reason = cause.unwrap_or(report.stop_reason.into());
         let mut kept_iteration = learner.iteration;
         if let Some((iteration, loss, params)) = best.best.take() {
@@ -734,27 +763,46 @@ fn field_tag(field: &FieldConfig) -> Result<String, PipelineError> {
 /// ([`fluidnerf_neural::train::Prepared::fingerprint`]): their images and cameras.
 const VIEWS_TAG: &str = "views";
 
+/// The checkpoint tag of the run's training settings ([`crate::rundir::training_settings`]).
+const SETTINGS_TAG: &str = "settings";
+
+/// The training settings of `config` as a checkpoint records them.
+fn settings_tag(config: &RunConfig) -> Result<String, PipelineError> {
+    crate::rundir::training_settings(config).map(|v| v.to_string()).map_err(|e| PipelineError::invalid("config", e))
+}
+
 /// Writes a training checkpoint (weights, optimiser state, histories, the scene's box, the
-/// field's configuration and the fingerprint of the training views) atomically.
+/// field's configuration, the run's training settings and the fingerprint of the training
+/// views) atomically.
 pub(crate) fn write_checkpoint<F: TrainableField>(
     dir: &RunDir,
     learner: &Learner<F>,
     aabb: &fluidnerf_core::Aabb,
     field: &FieldConfig,
+    settings: &str,
     views: &str,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let tags = [(BOX_TAG, box_tag(aabb)), (FIELD_TAG, field_tag(field)?), (VIEWS_TAG, views.to_string())];
+    let tags = [
+        (BOX_TAG, box_tag(aabb)),
+        (FIELD_TAG, field_tag(field)?),
+        (SETTINGS_TAG, settings.to_string()),
+        (VIEWS_TAG, views.to_string()),
+    ];
     let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?;
     dir.write_bytes("checkpoint.safetensors", &bytes)
 }
 
 /// Refuses to continue a checkpoint trained in another box than the scene's now, as another
-/// field than the settings now describe, or on other images or cameras (a checkpoint written
-/// before the field or the views' fingerprint was recorded is not checked for them).
+/// field than the settings now describe, with other training settings than the run's
+/// `config.json` (`settings`, [`settings_tag`]: the file was edited after the checkpoint was
+/// written, or the checkpoint is another run's), or on other images or cameras (a checkpoint
+/// written before the field, the settings or the views' fingerprint was recorded is not checked
+/// for them).
 fn check_checkpoint(
     path: &std::path::Path,
     aabb: &fluidnerf_core::Aabb,
     field: &FieldConfig,
+    settings: &str,
     views: &str,
 ) -> Result<(), PipelineError> {
     if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, BOX_TAG)?.filter(|s| *s != box_tag(aabb)) {
@@ -783,6 +831,21 @@ fn check_checkpoint(
                 ),
             ));
         }
+    }
+    if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, SETTINGS_TAG)?.filter(|s| s != settings) {
+        let saved: serde_json::Value = serde_json::from_str(&saved)
+            .map_err(|e| PipelineError::file(path, format!("its recorded settings are not JSON: {e}")))?;
+        let now: serde_json::Value = serde_json::from_str(settings).unwrap_or_default();
+        return Err(PipelineError::file(
+            path,
+            format!(
+                "was written by a run trained with other settings than the run's config.json records ({}): \
+                 config.json was edited after the checkpoint was written, or the checkpoint is another run's; a \
+                 resumed run only continues the run it holds: restore the settings it was trained with, or start \
+                 a new run (--force)",
+                crate::rundir::settings_differences(&saved, &now, 5)
+            ),
+        ));
     }
     check_views(path, || Ok(views.to_string()))
 }

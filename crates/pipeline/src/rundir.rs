@@ -1228,28 +1228,32 @@ pub fn settings_differences<T: serde::Serialize>(saved: &T, given: &T, max: usiz
 pub(crate) fn check_resume_settings(dir: &RunDir, config: &crate::RunConfig) -> Result<(), PipelineError> {
     let path = dir.config();
     let saved: crate::RunConfig = read_json(&path)?;
-    let value = |c: &crate::RunConfig| serde_json::to_value(c).map_err(|e| PipelineError::file(&path, e.to_string()));
-    let (saved, given) = (value(&saved)?, value(config)?);
-    let training = |mut v: serde_json::Value| {
-        if let Some(o) = v.as_object_mut() {
-            for key in
-                ["fluidnerf_version", "scene", "resolution", "checkpoint_every", "eval_every", "memory_limit_gib"]
-            {
-                o.remove(key);
-            }
-            if let Some(s) = o.get_mut("stopping").and_then(|s| s.as_object_mut()) {
-                for key in ["max_iterations", "time_budget_s", "patience"] {
-                    s.remove(key);
-                }
-            }
-        }
-        v
-    };
-    let (saved, given) = (training(saved), training(given));
+    let (saved, given) = (
+        training_settings(&saved).map_err(|e| PipelineError::file(&path, e))?,
+        training_settings(config).map_err(|e| PipelineError::file(&path, e))?,
+    );
     if saved == given {
         return Ok(());
     }
     Err(resume_refused(dir, path, &settings_differences(&saved, &given, 5)))
+}
+
+/// The settings of `config` that decide how a run trains, as JSON: all but what only bounds or
+/// reports the training (see [`check_resume_settings`]). A checkpoint records them, so that a
+/// resume refuses a `config.json` edited after it was written, or another run's checkpoint.
+pub(crate) fn training_settings(config: &crate::RunConfig) -> Result<serde_json::Value, String> {
+    let mut v = serde_json::to_value(config).map_err(|e| e.to_string())?;
+    if let Some(o) = v.as_object_mut() {
+        for key in ["fluidnerf_version", "scene", "resolution", "checkpoint_every", "eval_every", "memory_limit_gib"] {
+            o.remove(key);
+        }
+        if let Some(s) = o.get_mut("stopping").and_then(|s| s.as_object_mut()) {
+            for key in ["max_iterations", "time_budget_s", "patience"] {
+                s.remove(key);
+            }
+        }
+    }
+    Ok(v)
 }
 
 /// The refusal of a resume whose training settings differ from the run's (`differences`, as

@@ -289,8 +289,10 @@ pub struct StopArgs {
     /// time-resolved method the budget is per window, not per run: each window trains for up
     /// to this long (a run of N windows up to N times as long; static-per-frame: per frame),
     /// and the voxel runs that start a window (--start-method, at most half of it) and the fit
-    /// to them count against that window's. A run continued with --resume has it again for what
-    /// is left.
+    /// to them count against that window's. A static run continued with --resume trains only
+    /// for what is left of its budget (the time its checkpoint trained is spent, so its
+    /// config.json reruns it; a budget already spent is refused); a time-resolved window
+    /// continued with --resume has its budget again for what is left of it.
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
     /// Same as `--stop held-out`.
