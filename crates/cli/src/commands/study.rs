@@ -605,6 +605,18 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                     }
                     let file = run_dir.join("config.json");
                     let saved = RunConfig::read(&file)?;
+                    // Moved with its folder, a cell's scene keeps its name: a run of another
+                    // cell's scene (runs swapped between cells) would give this cell its result.
+                    if saved.scene.file_name() != scene_dir.file_name() {
+                        bail!(
+                            "{} holds a run of another cell's scene: its {} names {}, not the scene {}; use \
+                             --force to start over or another folder",
+                            run_dir.display(),
+                            file.display(),
+                            saved.scene.display(),
+                            name
+                        );
+                    }
                     let mut given = cell_config(g, &scene_dir, method, seed)?;
                     // The version that wrote it is information only; a study folder moved
                     // since holds its scenes elsewhere.

@@ -307,6 +307,22 @@ fn a_continued_study_refuses_scenes_and_runs_made_with_other_settings() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("done earlier"));
 }
 
+/// Runs swapped between two cells are refused when the study continues: each run's config.json
+/// names its own cell's scene, and the table gave each cell the other's result.
+#[test]
+fn a_continued_study_refuses_runs_of_another_cells_scene() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "sart", "--cameras", "2,3", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    let runs = d.join("st/runs");
+    let (a, b) = (runs.join("ring360-c02-n000/sart"), runs.join("ring360-c03-n000/sart"));
+    std::fs::rename(&a, runs.join("swap")).expect("moves");
+    std::fs::rename(&b, &a).expect("moves");
+    std::fs::rename(runs.join("swap"), &b).expect("moves");
+    refused(&fluidnerf(d, &args), "ring360-c02-n000/sart holds a run of another cell's scene");
+}
+
 /// `--stop auto` is recorded as the rule it decides on, the held-out rule (every study scene
 /// holds a camera out): recorded as `auto`, the grid differed from each finished run's
 /// `held-out`, so the same command refused to continue its own study.
