@@ -633,15 +633,33 @@ impl RunDir {
         self.remove_emptied_own_folders();
     }
 
-    /// A resumed run, once its saved state has loaded: drops the finished run's report (so a
-    /// continuation that is interrupted reads as unfinished), the scores `eval` wrote of its
-    /// field ([`EVAL_FILES`]) and its series of volumes (`frames/`, `volumes.pvd`), and records
-    /// the settings it goes on with (`config`). The continuation writes its own volumes: those
-    /// of the earlier run that it does not rewrite (a held-out time dropped, frames numbered
-    /// anew) and the earlier scores would otherwise sit beside its results as if they were
-    /// theirs. Until then a refused resume leaves the run as it was.
+    /// A resumed run, once its saved state has loaded: drops the scores `eval` wrote of the
+    /// earlier run's field ([`EVAL_FILES`]) and its series of volumes (`frames/`,
+    /// `volumes.pvd`), marks its report as stopped (`interrupted`) or, when its volumes went with
+    /// the series, drops it (so a continuation that dies reads as unfinished), and records the
+    /// settings it goes on with (`config`). The continuation writes its own volumes: those of
+    /// the earlier run that it does not rewrite (a held-out time dropped, frames numbered anew)
+    /// and the earlier scores would otherwise sit beside its results as if they were theirs. A
+    /// static run's volume and weights stay until the continuation replaces them: with its
+    /// report kept, a continuation that fails (a full disk) or is killed leaves a stopped run
+    /// that `eval`, `export` and `render` read and `--resume` continues with its histories.
+    /// Until then a refused resume leaves the run as it was.
     pub fn replace_finished(&self, config: &impl Serialize) -> Result<(), PipelineError> {
-        let _ = std::fs::remove_file(self.report());
+        let kept = crate::RunReport::read(&self.report()).ok().filter(|r| {
+            !r.volumes.is_empty()
+                && r.volumes.iter().all(|v| !v.file.starts_with("frames") && v.file != "volumes.pvd")
+                && r.volumes.iter().all(|v| self.path(&v.file).is_file())
+        });
+        match kept {
+            Some(mut report) => {
+                report.status = crate::RunStatus::Interrupted;
+                report.stop_reason = crate::report::StopReason::Interrupted;
+                self.write_json("report.json", &report)?;
+            }
+            None => {
+                let _ = std::fs::remove_file(self.report());
+            }
+        }
         for name in EVAL_FILES.into_iter().chain(["volumes.pvd"]) {
             let path = self.path(name);
             if path.is_file() {

@@ -44,6 +44,41 @@ fn a_resumed_run_continues_the_run_it_holds() {
     assert_eq!(report(&d.join("parts"))["iterations"], 60, "a refused resume changed the run");
 }
 
+/// A resume of a finished run that dies on the way (killed; a full disk did the same) leaves a
+/// stopped run, not an unfinished one: its report was removed as the resume began, so `eval`,
+/// `export` and `render` refused the folder, and a second resume lost the run's histories.
+#[test]
+fn a_killed_resume_of_a_finished_run_leaves_a_stopped_run() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 5, 24, 16, &["--holdout", "1"]);
+    let run = ["reconstruct", "scene", "-o", "run", "--method", "fast", "--resolution", "16", "-q"];
+    ok(&fluidnerf(d, &[&run[..], &["--max-iterations", "40", "--stop", "budget"]].concat()));
+    let losses = report(&d.join("run"))["history"]["loss"].as_array().map(Vec::len);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args(["reconstruct", "-o", "run", "--resume", "--max-iterations", "1000000", "-q"])
+        .spawn()
+        .expect("starts");
+    // The resume rewrites config.json with its cap once the checkpoint has loaded.
+    let start = std::time::Instant::now();
+    while !std::fs::read_to_string(d.join("run/config.json")).is_ok_and(|c| c.contains("1000000")) {
+        assert!(start.elapsed().as_secs() < 60, "the resume did not start");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let killed = std::process::Command::new("kill").args(["-KILL", &child.id().to_string()]).status().expect("kill");
+    assert!(killed.success());
+    child.wait().expect("waits");
+    let r = report(&d.join("run"));
+    assert_eq!((r["status"].as_str(), r["iterations"].as_u64()), (Some("interrupted"), Some(40)), "{r}");
+    ok(&fluidnerf(d, &["eval", "run", "-q"]));
+    // Continued, it keeps the earlier run's curves.
+    ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--max-iterations", "60", "-q"]));
+    let r = report(&d.join("run"));
+    assert_eq!(r["iterations"], 60);
+    assert!(r["history"]["loss"].as_array().map(Vec::len) > losses, "{r}");
+}
+
 #[test]
 fn dense_and_mlp_runs_write_resume_and_load() {
     let tmp = tempfile::tempdir().expect("tempdir");
