@@ -13,6 +13,13 @@ pub fn install() {
             // Exiting runs no destructor: the files being written would stay half-written
             // beside their targets.
             fluidnerf_io::remove_unfinished_writes();
+            #[allow(clippy::print_stderr)]
+            {
+                eprintln!(
+                    "aborted: the current iteration's results were not written; a neural run keeps its last \
+                     checkpoint, which `fluidnerf reconstruct -o OUT --resume` continues"
+                );
+            }
             std::process::exit(130);
         }
         log::warn!("interrupted: finishing the current iteration and writing results (Ctrl-C again to abort)");

@@ -207,6 +207,15 @@ impl LoadedRun {
                     dir.display()
                 )));
             }
+            // A run aborted (a second Ctrl-C, a kill) before it wrote any result.
+            if rd.config().is_file() && rd.checkpoint().is_file() {
+                return Err(refuse(&format!(
+                    "holds a run stopped before it wrote its results (config.json and checkpoint.safetensors, but \
+                     no volume.npy, model.json or temporal.json): continue it from its checkpoint (fluidnerf \
+                     reconstruct -o {} --resume)",
+                    dir.display()
+                )));
+            }
             return Err(refuse("holds no reconstruction (no volume.npy, model.json or temporal.json)"));
         };
         if rd.report().is_file() {

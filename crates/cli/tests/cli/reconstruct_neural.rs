@@ -79,6 +79,29 @@ fn a_killed_resume_of_a_finished_run_leaves_a_stopped_run() {
     assert!(r["history"]["loss"].as_array().map(Vec::len) > losses, "{r}");
 }
 
+/// A run aborted before it wrote its results (a second Ctrl-C, a kill) holds its config.json
+/// and checkpoint only: `eval`, `export` and `render` say to continue it with `--resume`, as
+/// for an unfinished time-resolved run, rather than that the folder holds no reconstruction.
+#[test]
+fn a_run_aborted_before_its_results_is_named_as_resumable() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "fast", "--max-iterations", "5", "-q"]));
+    for entry in std::fs::read_dir(d.join("run")).expect("lists") {
+        let path = entry.expect("entry").path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+        if !["config.json", "checkpoint.safetensors"].contains(&name.as_str()) && path.is_file() {
+            std::fs::remove_file(&path).expect("removes");
+        }
+    }
+    for args in [&["eval", "run"][..], &["export", "run", "-o", "x", "--npy"], &["render", "run", "-o", "r"]] {
+        refused(&fluidnerf(d, args), "holds a run stopped before it wrote its results");
+        refused(&fluidnerf(d, args), "reconstruct -o run --resume");
+    }
+    ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "-q"]));
+}
+
 #[test]
 fn dense_and_mlp_runs_write_resume_and_load() {
     let tmp = tempfile::tempdir().expect("tempdir");
