@@ -314,6 +314,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if p.exists() && !args.force {
             bail!("{} exists; pass --force to overwrite it", p.display());
         }
+        // `--force` replaces earlier results: a file of another kind (another scene's
+        // transforms.json, an image) named by mistake is not one.
+        if p.exists() && !earlier_metrics(p, name == "metrics.csv") {
+            bail!(
+                "{option} {}: exists and is not the {} of an earlier evaluation; --force replaces only those: give \
+                 another file",
+                p.display(),
+                if name == "metrics.csv" { "CSV table" } else { "JSON metrics" }
+            );
+        }
         // Checked now, not after the scoring: the folder must exist and take a new file.
         let folder = p.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
         if !folder.is_dir() {
@@ -614,6 +624,25 @@ fn refuse_frames_out_of_order(paths: &[PathBuf], step_times: &[Option<f64>]) -> 
         );
     }
     Ok(())
+}
+
+/// Whether the file at `path` is what `eval` writes: its CSV table (`csv`), which starts with
+/// the table's header, or its JSON metrics, an object with the evaluation's `settings`.
+fn earlier_metrics(path: &Path, csv: bool) -> bool {
+    use std::io::{BufRead, Read};
+    let Ok(file) = std::fs::File::open(path) else { return false };
+    if csv {
+        let mut first = String::new();
+        return std::io::BufReader::new(file).read_line(&mut first).is_ok()
+            && first.starts_with("kind,time,subset,count,nrmse");
+    }
+    // Metrics files are small; a large file is something else.
+    let mut text = String::new();
+    if file.take(64 << 20).read_to_string(&mut text).is_err() {
+        return false;
+    }
+    serde_json::from_str::<serde_json::Value>(&text)
+        .is_ok_and(|v| v.get("settings").and_then(|s| s.get("reconstruction")).is_some())
 }
 
 /// Refuses `out` as an output file when it is a file this evaluation reads or that belongs to

@@ -482,6 +482,21 @@ fn never_overwrites_its_inputs_nor_the_scenes_or_the_runs_files() {
     assert!(out.status.success(), "eval failed: {}", String::from_utf8_lossy(&out.stderr));
     assert!(d.join("run/metrics.json").is_file() && d.join("run/eval.json").is_file());
     assert!(d.join("scene/eval.csv").is_file());
+    // With --force an earlier evaluation's files are replaced, files of another kind not:
+    // another scene's transforms.json, or a table of the user's, named by mistake.
+    std::fs::create_dir(d.join("other")).expect("mkdir");
+    std::fs::copy(d.join("scene/transforms.json"), d.join("other/transforms.json")).expect("copies");
+    std::fs::write(d.join("notes.csv"), "a,b\n1,2\n").expect("writes");
+    let before = snapshot(d);
+    for (extra, needle) in [
+        (["--json", "other/transforms.json"], "--json other/transforms.json: exists and is not the JSON metrics"),
+        (["--csv", "notes.csv"], "--csv notes.csv: exists and is not the CSV table of an earlier evaluation"),
+    ] {
+        let out = score(&extra);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(needle), "{extra:?}: {e}");
+    }
+    assert!(before == snapshot(d), "a refused evaluation changed a file");
 }
 
 /// A run's report and `eval` place the default regions along the same flow axis (here the
