@@ -1126,10 +1126,23 @@ impl LockHolder {
     /// Whether the lock file `path` it was read from is held, by the rules of [`FileLock`].
     fn liveness(&self, path: &Path) -> Liveness {
         if !self.elsewhere() {
-            return if process_alive(self.pid) {
-                Liveness::Held(String::new())
+            if !process_alive(self.pid) {
+                return Liveness::Stale("no longer running".into());
+            }
+            // The holder wrote (and refreshes) the file while it ran: a process of that id
+            // started since is another program, given the id after the holder ended (a machine
+            // or container restarted). A held run stopped by Ctrl-Z is still its holder.
+            let reused = process_start(self.pid)
+                .zip(self.modified)
+                .is_some_and(|(started, written)| started > written + Duration::from_secs(2));
+            return if reused {
+                Liveness::Stale(format!(
+                    "no longer running: process {} started after the lock file was last written, so it is another \
+                     program that was given the same id",
+                    self.pid
+                ))
             } else {
-                Liveness::Stale("no longer running".into())
+                Liveness::Held(String::new())
             };
         }
         let limit = LOCK_STALE_AFTER.as_secs();
@@ -1178,6 +1191,25 @@ impl std::fmt::Display for LockHolder {
             _ => write!(f, "process {}", self.pid),
         }
     }
+}
+
+/// When process `pid` of this machine started, from `/proc` (Linux; None elsewhere or when it
+/// cannot be read): the machine's boot time plus the process's start in clock ticks after it
+/// (`USER_HZ`, 100 a second on Linux).
+fn process_start(pid: u32) -> Option<SystemTime> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name, in parentheses, may hold spaces: the fields after it count from the
+    // state, the third field; the start time is the 22nd.
+    let after = &stat[stat.rfind(')')? + 1..];
+    let ticks: u64 = after.split_whitespace().nth(19)?.parse().ok()?;
+    let boot: u64 = std::fs::read_to_string("/proc/stat")
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix("btime "))?
+        .trim()
+        .parse()
+        .ok()?;
+    Some(std::time::UNIX_EPOCH + Duration::from_secs(boot) + Duration::from_millis(ticks * 10))
 }
 
 fn process_alive(pid: u32) -> bool {
@@ -1415,6 +1447,17 @@ mod tests {
             assert!(e.contains("in use by another run") && e.contains(&std::process::id().to_string()), "{e}");
         }
         assert!(!out.join(".lock").exists(), "the lock goes with the run");
+        // A lock whose process id is now another program's, started after the lock was last
+        // written (here this test's own process, the lock dated before it started), is stale.
+        std::fs::write(out.join(".lock"), format!("{}\n{}\n{HEARTBEAT_MARK}\n", std::process::id(), host_name()))
+            .unwrap();
+        let lock = std::fs::File::options().write(true).open(out.join(".lock")).unwrap();
+        lock.set_modified(SystemTime::now() - Duration::from_secs(365 * 86_400)).unwrap();
+        drop(lock);
+        assert!(process_start(std::process::id()).is_some_and(|t| t < SystemTime::now()));
+        let holder = LockHolder::read(&out.join(".lock")).unwrap();
+        assert!(matches!(holder.liveness(&out.join(".lock")), Liveness::Stale(why) if why.contains("same id")));
+        std::fs::remove_file(out.join(".lock")).unwrap();
         // A run refused before writing anything leaves no folder behind.
         drop(RunDir::create(tmp.path().join("refused"), Overwrite::Refuse, None).unwrap());
         assert!(!tmp.path().join("refused").exists());
