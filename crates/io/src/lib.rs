@@ -108,6 +108,7 @@ fn filled_beside(
 ) -> Result<(tempfile::NamedTempFile, Unfinished), IoError> {
     let dir = folder_of(path);
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, "output folder", e))?;
+    remove_abandoned_writes(dir);
     let tmp = temporary_file_in(dir)?;
     let unfinished = Unfinished::register(tmp.path());
     let io_err = |e| IoError::Io { path: path.to_path_buf(), error: e };
@@ -192,10 +193,62 @@ fn folder_of(path: &Path) -> &Path {
     }
 }
 
+/// This machine's name, as temporary files carry it (Linux; empty elsewhere).
+fn machine() -> &'static str {
+    static NAME: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    NAME.get_or_init(|| {
+        std::fs::read_to_string("/proc/sys/kernel/hostname").map(|h| h.trim().replace('/', "_")).unwrap_or_default()
+    })
+}
+
+/// The temporary files' prefix: `.fluidnerf-<machine>-<process id>-`, so that one left by a
+/// process that was killed can be told from one being written ([`remove_abandoned_writes`]).
+fn temporary_prefix() -> String {
+    format!(".fluidnerf-{}-{}-", machine(), std::process::id())
+}
+
+/// Removes from `dir`, once per folder and process, the temporary files of writes that a
+/// killed process left (SIGKILL runs no clean-up; an export's volume left 85 MB hidden there):
+/// those named by [`temporary_prefix`] for this machine and a process that no longer runs.
+/// Files of other machines (a shared file system) and of live processes are left alone, and
+/// nothing is done where `/proc` cannot tell (not Linux).
+fn remove_abandoned_writes(dir: &Path) {
+    static SWEPT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+    if machine().is_empty() || !Path::new("/proc/self").exists() {
+        return;
+    }
+    {
+        let mut swept = SWEPT.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if swept.iter().any(|d| d == dir) {
+            return;
+        }
+        swept.push(dir.to_path_buf());
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let own = format!(".fluidnerf-{}-", machine());
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(&own)).and_then(|n| n.strip_suffix(".tmp")) else {
+            continue;
+        };
+        // `<pid>-<random letters>`: another dash means another machine whose name extends this
+        // one's (`node` and `node-12`).
+        let Some(pid) =
+            rest.split_once('-').filter(|(_, r)| !r.contains('-')).and_then(|(pid, _)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// The temporary file [`atomic_write`] fills in `dir` before renaming it over its target.
 fn temporary_file_in(dir: &Path) -> Result<tempfile::NamedTempFile, IoError> {
     let mut builder = tempfile::Builder::new();
-    builder.prefix(".fluidnerf-").suffix(".tmp");
+    let prefix = temporary_prefix();
+    builder.prefix(&prefix).suffix(".tmp");
     #[cfg(unix)]
     {
         // tempfile's default 0600 would make results unreadable to others; the umask still applies.
@@ -231,6 +284,30 @@ mod tests {
         assert_eq!(read_input_text(&file, "scene file").expect("a file"), "text\u{feff}", "the leading mark only");
         let err = read_input(&dir.path().join("missing"), "image file").expect_err("missing").to_string();
         assert!(err.contains("image file not found"), "{err}");
+    }
+
+    /// A write removes the temporary files that killed processes of this machine left in its
+    /// folder, and leaves those of live processes, of other machines and of other programs.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn temporary_files_of_killed_processes_are_removed() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let host = machine();
+        // Above the largest process id Linux gives (2²²): no process runs with it.
+        let dead = format!(".fluidnerf-{host}-4194305-abc123.tmp");
+        let live = format!(".fluidnerf-{host}-1-abc123.tmp");
+        let other = format!(".fluidnerf-{host}x-4194305-abc123.tmp");
+        let longer = format!(".fluidnerf-{host}-12-4194305-abc123.tmp");
+        let kept = [live.as_str(), other.as_str(), longer.as_str(), ".fluidnerf-abc123.tmp", "notes.tmp"];
+        for name in kept.iter().chain([&dead.as_str()]) {
+            std::fs::write(dir.path().join(name), "x").expect("writes");
+        }
+        atomic_write(&dir.path().join("out.txt"), |w| w.write_all(b"done")).expect("writes");
+        assert!(!dir.path().join(&dead).exists(), "the killed process's file is left");
+        for name in kept {
+            assert!(dir.path().join(name).exists(), "{name} was removed");
+        }
+        assert_eq!(std::fs::read_to_string(dir.path().join("out.txt")).expect("reads"), "done");
     }
 
     /// A folder that takes no new file is refused naming it, and a writable one is left as it was.
