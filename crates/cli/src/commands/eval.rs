@@ -327,7 +327,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // Checked now, not after the scoring: the folder must exist and take a new file.
         let folder = p.parent().filter(|f| !f.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
         if !folder.is_dir() {
-            bail!("{}: the folder {} does not exist", p.display(), folder.display());
+            let what = if folder.exists() { "is a file, not a folder" } else { "does not exist" };
+            bail!("{}: the folder {} {what}", p.display(), folder.display());
         }
         fluidnerf_io::check_writable(p)
             .with_context(|| format!("{option} {}: cannot write into its folder {}", p.display(), folder.display()))?;
@@ -522,6 +523,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.finish_and_clear();
     }
 
+    let settings = Settings {
+        version: env!("CARGO_PKG_VERSION"),
+        reconstruction: &args.recon,
+        scene: scene_path.clone(),
+        truth: args.truth.as_deref(),
+        volume: &volume_options,
+        reprojection: (!args.no_reprojection).then_some(&reprojection_options),
+    };
+    // The files first, then the table: a reader of the table that goes away (`eval … | head`)
+    // ends the program at its next print, which left the files unwritten.
+    if let Some(path) = &json_path {
+        let output = Output { settings, report: &report, times_without_truth: &without_truth };
+        let mut text = serde_json::to_string_pretty(&output)?;
+        text.push('\n');
+        fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &csv_path {
+        let text = report.to_csv();
+        fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     print_table(&report);
     if !without_truth.is_empty() && !truth.is_empty() {
         println!(
@@ -532,26 +555,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
 
-    let settings = Settings {
-        version: env!("CARGO_PKG_VERSION"),
-        reconstruction: &args.recon,
-        scene: scene_path.clone(),
-        truth: args.truth.as_deref(),
-        volume: &volume_options,
-        reprojection: (!args.no_reprojection).then_some(&reprojection_options),
-    };
-    if let Some(path) = &json_path {
-        let output = Output { settings, report: &report, times_without_truth: &without_truth };
-        let mut text = serde_json::to_string_pretty(&output)?;
-        text.push('\n');
-        fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
-            .with_context(|| format!("writing {}", path.display()))?;
-        println!("wrote {}", path.display());
-    }
-    if let Some(path) = &csv_path {
-        let text = report.to_csv();
-        fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
-            .with_context(|| format!("writing {}", path.display()))?;
+    for path in json_path.iter().chain(&csv_path) {
         println!("wrote {}", path.display());
     }
     Ok(())

@@ -577,6 +577,11 @@ fn a_folder_given_for_the_metrics_is_refused_before_scoring() {
             assert!(out.stdout.is_empty(), "{args:?} scored before refusing: {}", String::from_utf8_lossy(&out.stdout));
         }
     }
+    // A file where its folder should be is named as such, not as missing.
+    std::fs::write(d.join("afile"), "x").expect("writes");
+    let out = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--json", "afile/m.json"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("the folder afile is a file, not a folder"), "{e}");
 }
 
 /// A `--json` or `--csv` whose folder takes no new file is refused before any scoring, naming
