@@ -87,6 +87,19 @@ fn path(p: &Path) -> String {
     p.to_string_lossy().into_owned()
 }
 
+/// The demo stopped by Ctrl-C, and what it says: the command exits with 130, as a stopped
+/// reconstruction does, not as one that failed.
+#[derive(Debug)]
+pub struct Interrupted(pub String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let out = &args.out;
     if !(args.time_budget > 0.0 && args.time_budget.is_finite()) {
@@ -176,7 +189,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // A synthesis stopped by Ctrl-C writes nothing and returns no error: without this the
     // first run went on to look for the scene and failed, blaming a missing transforms.json.
     if super::run_line(&synth_line)? != std::process::ExitCode::SUCCESS {
-        anyhow::bail!("interrupted before the scene was made; rerun the same command to start again");
+        return Err(
+            Interrupted("interrupted before the scene was made; rerun the same command to start again".into()).into()
+        );
     }
     // The scene is replaced: an earlier demo's comparison and pictures would otherwise stand
     // beside this one's runs if it failed half way.
@@ -198,7 +213,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             println!("{}", report.summary_line());
         }
         if report.status == RunStatus::Interrupted {
-            anyhow::bail!("interrupted; the runs so far are in {}", out.display());
+            return Err(Interrupted(format!(
+                "interrupted; the runs so far are in {}; rerun the command with --force to start again",
+                out.display()
+            ))
+            .into());
         }
         wall.push(t.elapsed().as_secs_f64());
     }

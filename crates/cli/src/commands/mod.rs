@@ -35,7 +35,16 @@ pub enum Command {
 pub fn run(command: Command) -> anyhow::Result<ExitCode> {
     let done = |r: anyhow::Result<()>| r.map(|()| ExitCode::SUCCESS);
     match command {
-        Command::Demo(args) => done(demo::run(args)),
+        Command::Demo(args) => match demo::run(args) {
+            Err(e) if e.downcast_ref::<demo::Interrupted>().is_some() => {
+                #[allow(clippy::print_stderr)]
+                {
+                    eprintln!("{e}");
+                }
+                Ok(ExitCode::from(130))
+            }
+            r => done(r),
+        },
         Command::Info(args) => done(info::run(args)),
         Command::Import(args) => done(import::run(args)),
         Command::Reconstruct(args) => reconstruct::run(args),
