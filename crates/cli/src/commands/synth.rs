@@ -751,9 +751,35 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     bar.finish_and_clear();
     let elapsed = started.elapsed().as_secs_f64();
 
+    // A folder that held nothing before gets nothing of an unfinished scene: its partial files
+    // made the same command fail (a folder not empty) until given --force.
+    let was_empty = std::fs::read_dir(&out).map_or(true, |mut d| d.next().is_none());
+    let existed = out.exists();
+    let clear = |e: anyhow::Error| -> anyhow::Error {
+        if !was_empty {
+            return e;
+        }
+        let removed = if existed {
+            std::fs::read_dir(&out).into_iter().flatten().flatten().try_for_each(|entry| {
+                let p = entry.path();
+                if p.is_dir() && !p.is_symlink() {
+                    std::fs::remove_dir_all(&p)
+                } else {
+                    std::fs::remove_file(&p)
+                }
+            })
+        } else {
+            std::fs::remove_dir_all(&out)
+        };
+        match removed {
+            Ok(()) => e.context(format!("nothing of the scene was left in {}", out.display())),
+            Err(_) => e,
+        }
+    };
     super::create_output_folder(&out)?;
     fluidnerf_pipeline::synthetic::write_synthesis(&syn, &out)
-        .with_context(|| format!("cannot write the scene into {}", out.display()))?;
+        .with_context(|| format!("cannot write the scene into {}", out.display()))
+        .map_err(clear)?;
     // The scene's own record follows its files. When it cannot be written (a full disk), the
     // scene file goes again: a folder synth failed to finish must not load as a scene.
     let finish = || -> anyhow::Result<()> {
@@ -785,6 +811,9 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
         Ok(())
     };
     if let Err(e) = finish() {
+        if was_empty {
+            return Err(clear(e));
+        }
         let scene_file = out.join(fluidnerf_io::scene::SCENE_FILE);
         let _ = std::fs::remove_file(&scene_file);
         return Err(e.context(format!(
