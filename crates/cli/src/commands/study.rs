@@ -569,6 +569,20 @@ fn cell_config(g: &Grid, scene_dir: &Path, method: Method, seed: u64) -> anyhow:
 /// instead of making them again, were made with other settings than the grid's: the table would
 /// mix the cells of two studies under one grid. Their own records are compared, not study.json,
 /// which a study killed before it wrote one lacks.
+/// The scene file of `scene_dir` modified last (its `transforms.json`, and the files of its
+/// `images/` and `truth/`), with its modification time; None for a scene not there.
+fn newest_scene_file(scene_dir: &Path) -> Option<(std::time::SystemTime, PathBuf)> {
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok().map(|t| (t, p.to_path_buf()));
+    let listed = ["images", "truth"]
+        .into_iter()
+        .flat_map(|sub| std::fs::read_dir(scene_dir.join(sub)).into_iter().flatten().flatten().map(|e| e.path()));
+    std::iter::once(scene_dir.join("transforms.json"))
+        .chain(listed)
+        .filter(|p| p.is_file())
+        .filter_map(|p| modified(&p))
+        .max_by_key(|(t, _)| *t)
+}
+
 fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
     let other = |dir: &Path, what: &str, file: &Path, differences: String| {
         anyhow::anyhow!(
@@ -595,6 +609,7 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                         return Err(other(&scene_dir, "scene", &record, differences));
                     }
                 }
+                let newest = newest_scene_file(&scene_dir);
                 for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
                     let run_dir = out.join("runs").join(&name).join(g.run_name(method, seed));
                     let report_file = run_dir.join("report.json");
@@ -602,6 +617,19 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                         && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished)
                     {
                         continue;
+                    }
+                    // A scene file changed since the run was made (an image edited): the run is of
+                    // other images, and its result would stand in the table for these.
+                    let made = std::fs::metadata(&report_file).and_then(|m| m.modified()).ok();
+                    if let (Some((changed, file)), Some(made)) = (&newest, made) {
+                        if *changed > made + std::time::Duration::from_secs(1) {
+                            bail!(
+                                "{}: changed after the run {} was made from it, so its result is not of this \
+                                 scene; use --force to start over, or restore the file",
+                                file.display(),
+                                run_dir.display()
+                            );
+                        }
                     }
                     let file = run_dir.join("config.json");
                     let saved = RunConfig::read(&file)?;

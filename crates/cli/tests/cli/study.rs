@@ -323,6 +323,24 @@ fn a_continued_study_refuses_runs_of_another_cells_scene() {
     refused(&fluidnerf(d, &args), "ring360-c02-n000/sart holds a run of another cell's scene");
 }
 
+/// An image of a cell's scene changed after the cell's run was made is refused when the study
+/// continues: the run, of the earlier image, was read back as this scene's result.
+#[test]
+fn a_continued_study_refuses_runs_older_than_their_scene() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "sart", "--cameras", "2", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    let images = d.join("st/scenes/ring360-c02-n000/images");
+    let image = std::fs::read_dir(&images).expect("lists").flatten().next().expect("an image").path();
+    let file = std::fs::File::options().write(true).open(&image).expect("opens");
+    file.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(60)).expect("touches");
+    drop(file);
+    refused(&fluidnerf(d, &args), "changed after the run");
+    refused(&fluidnerf(d, &args), "ring360-c02-n000/sart was made from it");
+    ok(&fluidnerf(d, &[&args[..], &["--force"]].concat()));
+}
+
 /// `--stop auto` is recorded as the rule it decides on, the held-out rule (every study scene
 /// holds a camera out): recorded as `auto`, the grid differed from each finished run's
 /// `held-out`, so the same command refused to continue its own study.
