@@ -549,6 +549,16 @@ fn parse_linearisation(s: &str) -> Result<Linearisation, String> {
     s.parse()
 }
 
+/// The median distance of the cameras from the box's centre, when it is below 10 (mm, the
+/// default unit): a calibration in metres read as millimetres puts cameras a metre away
+/// within a millimetre of the flow. None otherwise.
+fn near_cameras(scene: &Scene) -> Option<f64> {
+    let centre = scene.aabb.centre();
+    let mut d: Vec<f64> = scene.frames.iter().map(|f| (f.camera.centre() - centre).length()).collect();
+    d.sort_by(f64::total_cmp);
+    d.get(d.len() / 2).copied().filter(|&m| m < 10.0)
+}
+
 /// A length unit's name, checked as a scene's `units` is.
 pub(crate) fn parse_units(s: &str) -> Result<String, String> {
     fluidnerf_io::scene::check_units(s).map(|()| s.to_string())
@@ -1465,11 +1475,12 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         let abs = p.canonicalize().with_context(|| format!("cannot resolve {}", p.display()))?;
         Ok(abs.strip_prefix(&out_abs).map(Path::to_path_buf).unwrap_or(abs))
     };
+    let units_defaulted = args.units.is_none() && from_file.units.is_none();
     let mut scene = Scene {
         root: out_abs.clone(),
         // Replaced below; reading the images does not use the box.
         aabb: Aabb::cube(DVec3::ZERO, 1.0),
-        units: args.units.clone().or(from_file.units).unwrap_or_else(|| "mm".into()),
+        units: args.units.clone().or(from_file.units.clone()).unwrap_or_else(|| "mm".into()),
         intensity_scale: args.intensity_scale.or(from_file.intensity_scale).unwrap_or(1.0),
         frames,
         truth: from_file.truth,
@@ -1569,6 +1580,16 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     }
     for found in fluidnerf_io::scene::cameras_at_one_place(&scene) {
         log::warn!("{}", fluidnerf_io::scene::describe_one_place(&scene, &found));
+    }
+    if units_defaulted {
+        if let Some(d) = near_cameras(&scene) {
+            log::warn!(
+                "the cameras stand {} mm from the box's centre (the median), far nearer than cameras stand to a \
+                 flow: is the calibration in metres? The scene's lengths are the calibration's, taken as mm unless \
+                 --units says otherwise (--units m)",
+                fluidnerf_core::num(d)
+            );
+        }
     }
     created.file(&out_file);
     save_scene_recording(&scene, &args.out, &recording, true)?;

@@ -1062,6 +1062,46 @@ fn videos_of_different_lengths_are_refused_saying_why() {
     assert!(!out.exists(), "a refused import wrote");
 }
 
+/// A calibration in metres imported without --units is read as millimetres: its cameras stand
+/// within a millimetre of the box, which the import warns of, suggesting `--units m`; given
+/// the unit, it says nothing.
+#[test]
+fn cameras_a_millimetre_from_the_box_suggest_a_calibration_in_metres() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let metres: Vec<(String, Camera)> = rig()
+        .into_iter()
+        .map(|(n, c)| {
+            let k = c.intrinsics;
+            let mut m = Camera::look_at(k, c.centre() / 1000.0, DVec3::ZERO, DVec3::Z);
+            m.distortion = c.distortion;
+            (n, m)
+        })
+        .collect();
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &metres).expect("writes calibration");
+    let images = dir.path().join("images");
+    for (n, _) in rig() {
+        image(&images, &format!("{n}.png"));
+    }
+    let import = |out: &str, extra: &[&str]| {
+        let mut args =
+            vec!["import", "--opencv", s(&calib), "--images", s(&images), "--aabb", "-0.01,-0.01,-0.01,0.01,0.01,0.01"];
+        args.extend_from_slice(extra);
+        let out = dir.path().join(out);
+        args.extend_from_slice(&["-o", s(&out)]);
+        fluidnerf(&args)
+    };
+    let o = import("mm", &[]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("the cameras stand 0.092") && e.contains("is the calibration in metres") && e.contains("--units m"),
+        "{e}"
+    );
+    let o = import("m", &["--units", "m"]);
+    assert!(o.status.success() && !stderr(&o).contains("in metres"), "{}", stderr(&o));
+}
+
 /// A camera's distortion under a name the reader does not know (`dist_coeffs_cam1` for
 /// `distortion_coefficients_cam1`) would leave it undistorted without a word: the import warns,
 /// naming the camera, the node it read and the node to rename.
