@@ -328,7 +328,11 @@ pub fn build_field_for_weights(
     input_dim: usize,
     weights: &Path,
 ) -> Result<AnyField, NeuralError> {
-    let len = std::fs::metadata(weights).map_err(|error| NeuralError::Io { path: weights.to_path_buf(), error })?.len();
+    let meta = std::fs::metadata(weights).map_err(|error| NeuralError::Io { path: weights.to_path_buf(), error })?;
+    if meta.is_dir() {
+        return Err(NeuralError::checkpoint(weights, "is a folder, not a safetensors file of weights"));
+    }
+    let len = meta.len();
     let room = usize::try_from(len / 4).unwrap_or(usize::MAX);
     make_field(config, aabb, input_dim, None, room).map_err(|e| match e {
         NeuralError::Invalid { what, why } if what == TOO_LARGE => {
@@ -415,6 +419,10 @@ pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync
     }
     let aabb = record.meta.aabb;
     let weights = run_dir.join("weights.safetensors");
+    // Named as the weights' own problem, not the description's.
+    if weights.is_dir() {
+        return Err(NeuralError::checkpoint(&weights, "is a folder, not a safetensors file of weights"));
+    }
     let mut field = build_field_for_weights(&record.field, &aabb, record.input_dim, &weights).map_err(named)?;
     with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
     let boxed: Box<dyn ScalarField + Send + Sync> = match field {

@@ -105,6 +105,12 @@ pub(crate) fn run(
     session: &mut Session,
 ) -> Result<RunReport, PipelineError> {
     let MethodConfig::Neural(method, spec) = config.effective_method() else { unreachable!("a neural method") };
+    if dir.resuming() && dir.checkpoint().is_dir() {
+        return Err(PipelineError::file(
+            &dir.checkpoint(),
+            "is a folder, not the run's checkpoint: move it away (the run can then only be replaced, --force)",
+        ));
+    }
     if dir.resuming() && !dir.checkpoint().is_file() {
         return Err(PipelineError::RunDir {
             path: dir.root().to_path_buf(),

@@ -102,6 +102,32 @@ fn a_run_aborted_before_its_results_is_named_as_resumable() {
     ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "-q"]));
 }
 
+/// A run's weights or checkpoint replaced by a folder is named as such: the weights were said
+/// to hold 4096 bytes (the folder's size), the checkpoint to be missing.
+#[test]
+fn a_folder_in_place_of_the_weights_or_the_checkpoint_is_named() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "fast", "--max-iterations", "5", "-q"]));
+    for (file, args, says) in [
+        ("weights.safetensors", &["eval", "run", "--force"][..], "run/weights.safetensors: is a folder"),
+        (
+            "checkpoint.safetensors",
+            &["reconstruct", "-o", "run", "--resume"],
+            "run/checkpoint.safetensors: is a folder",
+        ),
+    ] {
+        let path = d.join("run").join(file);
+        let kept = std::fs::read(&path).expect("reads");
+        std::fs::remove_file(&path).expect("removes");
+        std::fs::create_dir(&path).expect("mkdir");
+        refused(&fluidnerf(d, args), says);
+        std::fs::remove_dir(&path).expect("rmdir");
+        std::fs::write(&path, kept).expect("restores");
+    }
+}
+
 #[test]
 fn dense_and_mlp_runs_write_resume_and_load() {
     let tmp = tempfile::tempdir().expect("tempdir");
