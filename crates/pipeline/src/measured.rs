@@ -586,36 +586,50 @@ impl Projector for MaskedProjector<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fluidnerf_core::glam::DVec3;
+    use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
 
-    #[test]
-    fn the_gain_hint_names_the_camera_off_its_times_median_and_skips_masked_ones() {
-        use fluidnerf_core::glam::DVec3;
-        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
+    /// A scene of `n` cameras of 8 × 8 px looking at the centre of a box of side 2, frame `i`
+    /// placed by `place(i)` as (its angle about y, its distance, its time, whether it is held
+    /// out), named `name(i)`, its image `file(i)`.
+    fn ring(
+        n: usize,
+        place: impl Fn(usize) -> (f64, f64, Option<f64>, bool),
+        name: impl Fn(usize) -> Option<String>,
+        file: impl Fn(usize) -> String,
+    ) -> Scene {
         let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
-        // Five cameras on a ring of radius 5 around the box, the last held out; `far` puts
-        // camera 1 at twice the distance.
-        let scene = |far: bool| Scene {
+        Scene {
             root: "scene".into(),
             aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
             units: "mm".into(),
             intensity_scale: 1.0,
-            frames: (0..5)
+            frames: (0..n)
                 .map(|i| {
-                    let a = i as f64 * 1.2;
-                    let r = if far && i == 1 { 10.0 } else { 5.0 };
+                    let (a, r, time, holdout) = place(i);
                     Frame {
-                        file_path: format!("c{i}.tiff").into(),
+                        file_path: file(i).into(),
                         camera: Camera::look_at(k, r * DVec3::new(a.cos(), 0.0, a.sin()), DVec3::ZERO, DVec3::Y),
-                        time: None,
-                        camera_name: Some(format!("cam{i}")),
-                        holdout: i == 4,
+                        time,
+                        camera_name: name(i),
+                        holdout,
                     }
                 })
                 .collect(),
             truth: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_gain_hint_names_the_camera_off_its_times_median_and_skips_masked_ones() {
+        // Five cameras on a ring of radius 5 around the box, the last held out; `far` puts
+        // camera 1 at twice the distance.
+        let scene = |far: bool| {
+            let place = |i: usize| (i as f64 * 1.2, if far && i == 1 { 10.0 } else { 5.0 }, None, i == 4);
+            ring(5, place, |i| Some(format!("cam{i}")), |i| format!("c{i}.tiff"))
         };
-        let ring = scene(false);
-        let hint = |totals: [Option<f64>; 5]| gain_hint(&ring, &totals, &[None; 5]);
+        let five = scene(false);
+        let hint = |totals: [Option<f64>; 5]| gain_hint(&five, &totals, &[None; 5]);
         // Within 15 % of the median: nothing; the held-out camera does not count.
         assert_eq!(hint([Some(1.0), Some(1.1), Some(0.9), Some(1.0), Some(3.0)]), None);
         let said = hint([Some(1.0), Some(1.0), Some(0.8), Some(1.05), None]).expect("a camera 20 % dim");
@@ -638,30 +652,10 @@ mod tests {
     /// its excess light is said to hold an offset; one whose dark pixels stay dark, a gain.
     #[test]
     fn an_excess_that_raises_the_dark_pixels_is_told_as_an_offset() {
-        use fluidnerf_core::glam::DVec3;
-        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
         let data: Vec<f32> = (0..100).map(|v| v as f32).collect();
         assert_eq!(Floor::of(&data), Floor { level: 5.0, mean: 49.5 });
-        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
-        let scene = Scene {
-            root: "scene".into(),
-            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
-            units: "mm".into(),
-            intensity_scale: 1.0,
-            frames: (0..4)
-                .map(|i| {
-                    let a = i as f64 * 1.5;
-                    Frame {
-                        file_path: format!("c{i}.tiff").into(),
-                        camera: Camera::look_at(k, 5.0 * DVec3::new(a.cos(), 0.0, a.sin()), DVec3::ZERO, DVec3::Y),
-                        time: None,
-                        camera_name: Some(format!("cam{i}")),
-                        holdout: false,
-                    }
-                })
-                .collect(),
-            truth: Vec::new(),
-        };
+        let scene =
+            ring(4, |i| (i as f64 * 1.5, 5.0, None, false), |i| Some(format!("cam{i}")), |i| format!("c{i}.tiff"));
         let dark = Some(Floor { level: 0.0, mean: 1.0 });
         let totals = [Some(1.0), Some(1.0), Some(2.0), Some(1.0)];
         // cam2 holds twice the light: 1 per pixel more. Raised by 1 at its darkest: an offset.
@@ -682,29 +676,13 @@ mod tests {
 
     #[test]
     fn dark_frames_are_named_only_beside_lit_ones_of_their_time() {
-        use fluidnerf_core::glam::DVec3;
-        use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
-        let k = Intrinsics { width: 8, height: 8, fx: 10.0, fy: 10.0, cx: 3.5, cy: 3.5, skew: 0.0 };
         // Three cameras at each of two times; the last camera unnamed.
-        let scene = Scene {
-            root: "scene".into(),
-            aabb: Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0)),
-            units: "mm".into(),
-            intensity_scale: 1.0,
-            frames: (0..6)
-                .map(|i| {
-                    let a = (i % 3) as f64 * 2.0;
-                    Frame {
-                        file_path: format!("t{}/c{}.png", i / 3, i % 3).into(),
-                        camera: Camera::look_at(k, 5.0 * DVec3::new(a.cos(), 0.0, a.sin()), DVec3::ZERO, DVec3::Y),
-                        time: Some((i / 3) as f64),
-                        camera_name: (i % 3 != 2).then(|| format!("cam{}", i % 3)),
-                        holdout: false,
-                    }
-                })
-                .collect(),
-            truth: Vec::new(),
-        };
+        let scene = ring(
+            6,
+            |i| ((i % 3) as f64 * 2.0, 5.0, Some((i / 3) as f64), false),
+            |i| (i % 3 != 2).then(|| format!("cam{}", i % 3)),
+            |i| format!("t{}/c{}.png", i / 3, i % 3),
+        );
         assert_eq!(dark_frames_hint(&scene, &[1.0, 2.0, 1.5, 1.0, 1.0, 1.0]), None);
         let said = dark_frames_hint(&scene, &[1.0, 0.0, 1.5, 1.0, 1.0, 1.0]).expect("one dark camera");
         assert!(said.starts_with("cam1 (t0/c1.png) is dark at every pixel used") && said.contains("that camera"));

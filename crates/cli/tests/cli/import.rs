@@ -1017,19 +1017,26 @@ fn videos_of_different_frame_rates_are_refused() {
     let rate = bytes.windows(4).position(|w| w == b"strh").expect("strh") + 8 + 24;
     let doubled = 2 * u32::from_le_bytes(bytes[rate..rate + 4].try_into().expect("4 bytes"));
     fast[rate..rate + 4].copy_from_slice(&doubled.to_le_bytes());
-    for (name, data) in [("cam0", &bytes), ("cam1", &fast), ("cam2", &bytes)] {
-        std::fs::write(videos.join(format!("{name}.avi")), data).expect("writes");
-    }
-    let out = dir.path().join("scene");
-    let o = import_recordings(&calib, &videos, &out, &[]);
-    let e = stderr(&o);
-    assert!(!o.status.success(), "imported: {e}");
+    let e = refused_videos(&dir, &calib, &videos, [&bytes, &fast, &bytes]);
     assert!(
         e.contains("the frame 1 kept of camera cam0 is at 0.1 s, that of camera cam1 at 0.05 s")
             && e.contains("frame rates 10 and 20 fps"),
         "{e}"
     );
+}
+
+/// Imports the rig's cameras `cam0`, `cam1`, `cam2` from the AVI files `data`, expecting a
+/// refusal that writes nothing; its error output.
+fn refused_videos(dir: &tempfile::TempDir, calib: &Path, videos: &Path, data: [&Vec<u8>; 3]) -> String {
+    for (name, data) in ["cam0", "cam1", "cam2"].into_iter().zip(data) {
+        std::fs::write(videos.join(format!("{name}.avi")), data).expect("writes");
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(calib, videos, &out, &[]);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "imported: {e}");
     assert!(!out.exists(), "a refused import wrote");
+    e
 }
 
 /// Videos whose times count from each file's start (not a high-speed camera's raw files, which
@@ -1045,13 +1052,7 @@ fn videos_of_different_lengths_are_refused_saying_why() {
     let last = bytes[..index].windows(4).rposition(|w| w == b"00dc").expect("a frame chunk");
     let mut short = bytes.clone();
     short[last..last + 4].copy_from_slice(b"JUNK");
-    for (name, data) in [("cam0", &bytes), ("cam1", &short), ("cam2", &bytes)] {
-        std::fs::write(videos.join(format!("{name}.avi")), data).expect("writes");
-    }
-    let out = dir.path().join("scene");
-    let o = import_recordings(&calib, &videos, &out, &[]);
-    let e = stderr(&o);
-    assert!(!o.status.success(), "imported: {e}");
+    let e = refused_videos(&dir, &calib, &videos, [&bytes, &short, &bytes]);
     assert!(
         e.contains("camera cam0 gives 4 frame(s), camera cam1 3")
             && e.contains("their times count from each file's start")
@@ -1059,7 +1060,6 @@ fn videos_of_different_lengths_are_refused_saying_why() {
             && !e.contains("share no run"),
         "{e}"
     );
-    assert!(!out.exists(), "a refused import wrote");
 }
 
 /// A calibration in metres imported without --units is read as millimetres: its cameras stand
