@@ -197,6 +197,11 @@ impl LoadedRun {
         let rd = RunDir::open(dir)?;
         let refuse = |why: &str| PipelineError::RunDir { path: dir.to_path_buf(), why: why.into() };
         let Some(kind) = rd.kind() else {
+            if let Some(holder) = rd.running_holder() {
+                return Err(refuse(&format!(
+                    "holds a run under way ({holder}), which has not written its results yet; wait for it to finish"
+                )));
+            }
             if rd.progress().is_file() {
                 // A time-resolved run trained window by window (or stopped) writes its results
                 // only when it is finished.
@@ -215,6 +220,12 @@ impl LoadedRun {
                      reconstruct -o {} --resume)",
                     dir.display()
                 )));
+            }
+            if rd.config().is_file() {
+                return Err(refuse(
+                    "holds a run stopped before its first checkpoint or result (config.json only): there is nothing \
+                     to read or continue; run it again (reconstruct --force)",
+                ));
             }
             return Err(refuse("holds no reconstruction (no volume.npy, model.json or temporal.json)"));
         };
@@ -260,6 +271,12 @@ impl LoadedRun {
             return Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: Some(config), report: Some(report), aabb });
         }
         if rd.config().is_file() {
+            // A run under way (a resume of a finished run among them) has no report yet.
+            if let Some(holder) = rd.running_holder() {
+                return Err(refuse(&format!(
+                    "holds a run under way ({holder}), which has not written its report yet; wait for it to finish"
+                )));
+            }
             return Err(refuse(
                 "holds an unfinished run (config.json but no report.json); continue it with `reconstruct --resume` \
                  or rerun it",

@@ -536,6 +536,14 @@ impl RunDir {
         Ok(())
     }
 
+    /// The process that holds the folder's run lock and still runs (a run under way, such as
+    /// a `--resume`), in words; None when no live process holds it.
+    pub fn running_holder(&self) -> Option<String> {
+        let lock = self.root.join(".lock");
+        let holder = LockHolder::read(&lock)?;
+        (!holder.is_this_process() && matches!(holder.liveness(&lock), Liveness::Held(_))).then(|| holder.to_string())
+    }
+
     /// Takes the lock file `name` (relative to the folder) until the guard is dropped; refused
     /// while a live process holds it, a stale one is replaced ([`FileLock`]).
     pub fn lock_file(&self, name: &str) -> Result<FileLock, PipelineError> {

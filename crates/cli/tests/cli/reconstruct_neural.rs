@@ -102,6 +102,34 @@ fn a_run_aborted_before_its_results_is_named_as_resumable() {
     ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "-q"]));
 }
 
+/// A run under way is named as such by `eval`, not as an unfinished run to continue with
+/// `--resume` (which its lock would refuse); killed before its first checkpoint, as one with
+/// nothing to continue, not as a folder without a reconstruction.
+#[test]
+fn a_run_under_way_is_named_as_one() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args(["reconstruct", "scene", "-o", "run", "--method", "fast", "--max-iterations", "1000000", "-q"])
+        .args(["--stop", "budget", "--checkpoint-every", "1000000"])
+        .spawn()
+        .expect("starts");
+    let start = std::time::Instant::now();
+    while !(d.join("run/config.json").is_file() && d.join("run/.lock").is_file()) {
+        assert!(start.elapsed().as_secs() < 60, "the run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let o = fluidnerf(d, &["eval", "run"]);
+    let killed = std::process::Command::new("kill").args(["-KILL", &child.id().to_string()]).status().expect("kill");
+    assert!(killed.success());
+    child.wait().expect("waits");
+    refused(&o, &format!("holds a run under way (process {})", child.id()));
+    // Killed before its first checkpoint: nothing to continue.
+    refused(&fluidnerf(d, &["eval", "run"]), "holds a run stopped before its first checkpoint or result");
+}
+
 /// A run's weights or checkpoint replaced by a folder is named as such: the weights were said
 /// to hold 4096 bytes (the folder's size), the checkpoint to be missing.
 #[test]
