@@ -419,11 +419,11 @@ pub fn load_trained(run_dir: &Path) -> Result<(Box<dyn ScalarField + Send + Sync
     }
     let aabb = record.meta.aabb;
     let weights = run_dir.join("weights.safetensors");
-    // Named as the weights' own problem, not the description's.
-    if weights.is_dir() {
-        return Err(NeuralError::checkpoint(&weights, "is a folder, not a safetensors file of weights"));
-    }
-    let mut field = build_field_for_weights(&record.field, &aabb, record.input_dim, &weights).map_err(named)?;
+    // A problem of the weights file itself names it, not the description.
+    let mut field = build_field_for_weights(&record.field, &aabb, record.input_dim, &weights).map_err(|e| match e {
+        NeuralError::Checkpoint { .. } => e,
+        e => named(e),
+    })?;
     with_field!(&mut field, f => crate::weights::load_weights(&weights, f))?;
     let boxed: Box<dyn ScalarField + Send + Sync> = match field {
         AnyField::Mlp(f) => Box::new(TrainedField::new(f, record.meta).map_err(named)?),

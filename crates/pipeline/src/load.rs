@@ -196,12 +196,15 @@ impl LoadedRun {
     pub fn open(dir: &Path, box_hint: Option<Aabb>) -> Result<Self, PipelineError> {
         let rd = RunDir::open(dir)?;
         let refuse = |why: &str| PipelineError::RunDir { path: dir.to_path_buf(), why: why.into() };
-        let Some(kind) = rd.kind() else {
+        // A run under way (a resume of a finished run among them) writes its report last.
+        if !rd.report().is_file() {
             if let Some(holder) = rd.running_holder() {
                 return Err(refuse(&format!(
                     "holds a run under way ({holder}), which has not written its results yet; wait for it to finish"
                 )));
             }
+        }
+        let Some(kind) = rd.kind() else {
             if rd.progress().is_file() {
                 // A time-resolved run trained window by window (or stopped) writes its results
                 // only when it is finished.
@@ -271,12 +274,6 @@ impl LoadedRun {
             return Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: Some(config), report: Some(report), aabb });
         }
         if rd.config().is_file() {
-            // A run under way (a resume of a finished run among them) has no report yet.
-            if let Some(holder) = rd.running_holder() {
-                return Err(refuse(&format!(
-                    "holds a run under way ({holder}), which has not written its report yet; wait for it to finish"
-                )));
-            }
             return Err(refuse(
                 "holds an unfinished run (config.json but no report.json); continue it with `reconstruct --resume` \
                  or rerun it",

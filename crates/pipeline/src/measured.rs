@@ -82,8 +82,6 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
     let mut factors = vec![1.0; images.len()];
     let totals: Vec<f64> = images.iter().zip(&pre.masks).map(|(im, m)| used_sum(&im.data, m.as_deref())).collect();
     let comparable: Vec<Option<f64>> = totals.iter().zip(&pre.masks).map(|(&t, m)| m.is_none().then_some(t)).collect();
-    let floors: Vec<Option<Floor>> =
-        images.iter().zip(&pre.masks).map(|(im, m)| m.is_none().then(|| Floor::of(&im.data))).collect();
     let dark_warning = dark_frames_hint(scene, &totals);
     let spread =
         matches!(gains.mode, GainMode::None | GainMode::Auto).then(|| gain_spread(scene, &comparable)).flatten();
@@ -99,6 +97,9 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
         m => m,
     };
     let gain_hint = spread.and_then(|(i, ratio)| {
+        // Read only when a camera stands out: a floor sorts a copy of its image.
+        let floors: Vec<Option<Floor>> =
+            images.iter().zip(&pre.masks).map(|(im, m)| m.is_none().then(|| Floor::of(&im.data))).collect();
         let offset = offset_note(scene, i, ratio, &floors);
         let text = spread_text(scene, i, ratio, offset.as_deref());
         match (gains.mode, temporal) {

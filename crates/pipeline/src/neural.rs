@@ -821,39 +821,41 @@ fn check_checkpoint(
             ),
         ));
     }
-    if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, FIELD_TAG)? {
-        let now = field_tag(field)?;
-        if saved != now {
-            let saved: serde_json::Value = serde_json::from_str(&saved)
-                .map_err(|e| PipelineError::file(path, format!("its recorded field is not JSON: {e}")))?;
-            let now: serde_json::Value = serde_json::from_str(&now).unwrap_or_default();
-            return Err(PipelineError::file(
-                path,
-                format!(
-                    "was trained as another field than the run's settings now describe ({}); its parameters are \
-                     that field's: restore the field's settings in config.json (or give the run's own), or start \
-                     a new run (--force)",
-                    crate::rundir::settings_differences(&saved, &now, 5)
-                ),
-            ));
-        }
-    }
-    if let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, SETTINGS_TAG)?.filter(|s| s != settings) {
-        let saved: serde_json::Value = serde_json::from_str(&saved)
-            .map_err(|e| PipelineError::file(path, format!("its recorded settings are not JSON: {e}")))?;
-        let now: serde_json::Value = serde_json::from_str(settings).unwrap_or_default();
+    if let Some(differences) = tag_differences(path, FIELD_TAG, &field_tag(field)?, "field is")? {
         return Err(PipelineError::file(
             path,
             format!(
-                "was written by a run trained with other settings than the run's config.json records ({}): \
-                 config.json was edited after the checkpoint was written, or the checkpoint is another run's; a \
-                 resumed run only continues the run it holds: restore the settings it was trained with, or start \
-                 a new run (--force)",
-                crate::rundir::settings_differences(&saved, &now, 5)
+                "was trained as another field than the run's settings now describe ({differences}); its parameters \
+                 are that field's: restore the field's settings in config.json (or give the run's own), or start a \
+                 new run (--force)"
+            ),
+        ));
+    }
+    if let Some(differences) = tag_differences(path, SETTINGS_TAG, settings, "settings are")? {
+        return Err(PipelineError::file(
+            path,
+            format!(
+                "was written by a run trained with other settings than the run's config.json records \
+                 ({differences}): config.json was edited after the checkpoint was written, or the checkpoint is \
+                 another run's; a resumed run only continues the run it holds: restore the settings it was \
+                 trained with, or start a new run (--force)"
             ),
         ));
     }
     check_views(path, || Ok(views.to_string()))
+}
+
+/// How the JSON the checkpoint `path` records under `tag` differs from `now` (as
+/// [`crate::rundir::settings_differences`] lists it); None when it records none or the same.
+/// `what` names the record, with its verb, in the error of one that is not JSON.
+fn tag_differences(path: &std::path::Path, tag: &str, now: &str, what: &str) -> Result<Option<String>, PipelineError> {
+    let Some(saved) = fluidnerf_neural::weights::checkpoint_tag(path, tag)?.filter(|s| s != now) else {
+        return Ok(None);
+    };
+    let saved: serde_json::Value = serde_json::from_str(&saved)
+        .map_err(|e| PipelineError::file(path, format!("its recorded {what} not JSON: {e}")))?;
+    let now: serde_json::Value = serde_json::from_str(now).unwrap_or_default();
+    Ok(Some(crate::rundir::settings_differences(&saved, &now, 5)))
 }
 
 /// Refuses to continue a checkpoint whose recorded fingerprint of its training views differs

@@ -524,14 +524,11 @@ impl RunDir {
                     .into(),
             ));
         }
-        let lock = root.join(".lock");
-        if let Some(holder) = LockHolder::read(&lock) {
-            if !holder.is_this_process() && matches!(holder.liveness(&lock), Liveness::Held(_)) {
-                return Err(refuse(format!(
-                    "is in use by a whole run ({holder}, lock file {}); wait for it to finish",
-                    lock.display()
-                )));
-            }
+        if let Some(holder) = live_holder(&root) {
+            return Err(refuse(format!(
+                "is in use by a whole run ({holder}, lock file {}); wait for it to finish",
+                root.join(".lock").display()
+            )));
         }
         Ok(())
     }
@@ -539,9 +536,7 @@ impl RunDir {
     /// The process that holds the folder's run lock and still runs (a run under way, such as
     /// a `--resume`), in words; None when no live process holds it.
     pub fn running_holder(&self) -> Option<String> {
-        let lock = self.root.join(".lock");
-        let holder = LockHolder::read(&lock)?;
-        (!holder.is_this_process() && matches!(holder.liveness(&lock), Liveness::Held(_))).then(|| holder.to_string())
+        live_holder(&self.root)
     }
 
     /// Takes the lock file `name` (relative to the folder) until the guard is dropped; refused
@@ -653,21 +648,6 @@ impl RunDir {
     /// that `eval`, `export` and `render` read and `--resume` continues with its histories.
     /// Until then a refused resume leaves the run as it was.
     pub fn replace_finished(&self, config: &impl Serialize) -> Result<(), PipelineError> {
-        let kept = crate::RunReport::read(&self.report()).ok().filter(|r| {
-            !r.volumes.is_empty()
-                && r.volumes.iter().all(|v| !v.file.starts_with("frames") && v.file != "volumes.pvd")
-                && r.volumes.iter().all(|v| self.path(&v.file).is_file())
-        });
-        match kept {
-            Some(mut report) => {
-                report.status = crate::RunStatus::Interrupted;
-                report.stop_reason = crate::report::StopReason::Interrupted;
-                self.write_json("report.json", &report)?;
-            }
-            None => {
-                let _ = std::fs::remove_file(self.report());
-            }
-        }
         for name in EVAL_FILES.into_iter().chain(["volumes.pvd"]) {
             let path = self.path(name);
             if path.is_file() {
@@ -679,6 +659,20 @@ impl RunDir {
         if frames.is_dir() {
             std::fs::remove_dir_all(&frames)
                 .map_err(|e| PipelineError::file(&frames, format!("cannot remove the earlier run's volumes: {e}")))?;
+        }
+        // The report stays, marked stopped, while every volume it lists is still there.
+        let kept = crate::RunReport::read(&self.report())
+            .ok()
+            .filter(|r| !r.volumes.is_empty() && r.volumes.iter().all(|v| self.path(&v.file).is_file()));
+        match kept {
+            Some(mut report) => {
+                report.status = crate::RunStatus::Interrupted;
+                report.stop_reason = crate::report::StopReason::Interrupted;
+                self.write_json("report.json", &report)?;
+            }
+            None => {
+                let _ = std::fs::remove_file(self.report());
+            }
         }
         self.write_json("config.json", config).map(drop)
     }
@@ -1218,6 +1212,13 @@ fn process_start(pid: u32) -> Option<SystemTime> {
         .parse()
         .ok()?;
     Some(std::time::UNIX_EPOCH + Duration::from_secs(boot) + Duration::from_millis(ticks * 10))
+}
+
+/// Another live process holding the run lock of the folder `root`, in words.
+fn live_holder(root: &Path) -> Option<String> {
+    let lock = root.join(".lock");
+    let holder = LockHolder::read(&lock)?;
+    (!holder.is_this_process() && matches!(holder.liveness(&lock), Liveness::Held(_))).then(|| holder.to_string())
 }
 
 fn process_alive(pid: u32) -> bool {

@@ -316,12 +316,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         // `--force` replaces earlier results: a file of another kind (another scene's
         // transforms.json, an image) named by mistake is not one.
-        if p.exists() && !earlier_metrics(p, name == "metrics.csv") {
+        let csv = name == "metrics.csv";
+        if p.exists() && !earlier_metrics(p, csv) {
             bail!(
                 "{option} {}: exists and is not the {} of an earlier evaluation; --force replaces only those: give \
                  another file",
                 p.display(),
-                if name == "metrics.csv" { "CSV table" } else { "JSON metrics" }
+                if csv { "CSV table" } else { "JSON metrics" }
             );
         }
         // Checked now, not after the scoring: the folder must exist and take a new file.

@@ -565,10 +565,6 @@ fn cell_config(g: &Grid, scene_dir: &Path, method: Method, seed: u64) -> anyhow:
     Ok(config)
 }
 
-/// Refuses to continue a study whose scenes or finished runs in `out`, which it would read back
-/// instead of making them again, were made with other settings than the grid's: the table would
-/// mix the cells of two studies under one grid. Their own records are compared, not study.json,
-/// which a study killed before it wrote one lacks.
 /// The scene file of `scene_dir` modified last (its `transforms.json`, and the files of its
 /// `images/` and `truth/`), with its modification time; None for a scene not there.
 fn newest_scene_file(scene_dir: &Path) -> Option<(std::time::SystemTime, PathBuf)> {
@@ -583,6 +579,10 @@ fn newest_scene_file(scene_dir: &Path) -> Option<(std::time::SystemTime, PathBuf
         .max_by_key(|(t, _)| *t)
 }
 
+/// Refuses to continue a study whose scenes or finished runs in `out`, which it would read back
+/// instead of making them again, were made with other settings than the grid's: the table would
+/// mix the cells of two studies under one grid. Their own records are compared, not study.json,
+/// which a study killed before it wrote one lacks.
 fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
     let other = |dir: &Path, what: &str, file: &Path, differences: String| {
         anyhow::anyhow!(
