@@ -10,10 +10,15 @@
 //! Functions return bytes / read paths; writing files atomically is the caller's business.
 
 use std::collections::HashMap;
+use std::fs::File;
+use std::io::Read;
+use std::ops::Range;
 use std::path::Path;
 
-use safetensors::tensor::{Dtype, TensorView};
-use safetensors::SafeTensors;
+use rayon::prelude::*;
+
+use safetensors::tensor::{Dtype, Metadata, TensorView};
+use safetensors::SafeTensorError;
 use serde::{Deserialize, Serialize};
 
 use crate::train::Learner;
@@ -52,55 +57,169 @@ pub fn weights_bytes_tagged<F: TrainableField>(field: &F, tags: &[(&str, String)
     serialise(tensors, metadata)
 }
 
-fn read(path: &Path) -> Result<Vec<u8>, NeuralError> {
-    std::fs::read(path).map_err(|error| NeuralError::Io { path: path.to_path_buf(), error })
+/// Read in pieces of this many values, over the threads: a field's tables are megabytes, and
+/// every command that loads a field waits for them.
+const PIECE: usize = 1 << 16;
+
+/// The largest safetensors header read (the format's own limit).
+const MAX_HEADER: u64 = 100 << 20;
+
+/// Opens `path` and reads its safetensors header: the file, the header's JSON, and where the
+/// tensors' data begins.
+fn read_header(path: &Path) -> Result<(File, Vec<u8>, u64), NeuralError> {
+    let io = |error: std::io::Error| match error.kind() {
+        // read_exact's own message, "failed to fill whole buffer", says nothing of the file.
+        std::io::ErrorKind::UnexpectedEof => {
+            NeuralError::checkpoint(path, "the file is truncated: it ends inside its safetensors header")
+        }
+        _ => NeuralError::Io { path: path.to_path_buf(), error },
+    };
+    let mut file = File::open(path).map_err(io)?;
+    let mut len = [0u8; 8];
+    file.read_exact(&mut len).map_err(io)?;
+    let len = u64::from_le_bytes(len);
+    if len > MAX_HEADER {
+        return Err(NeuralError::checkpoint(path, format!("a header of {len} bytes is not a safetensors header")));
+    }
+    let mut header = vec![0u8; len as usize];
+    file.read_exact(&mut header).map_err(io)?;
+    Ok((file, header, 8 + len))
 }
 
-/// A file that safetensors cannot read: truncated (a partial copy) or not a safetensors file.
-fn damaged(path: &Path, e: safetensors::SafeTensorError) -> NeuralError {
+/// A safetensors file whose tensors are read straight into their destination: the header is
+/// read and checked against the file's length, and the data is read where it is wanted, with
+/// no copy of the whole file in memory (a field's weights are megabytes, and every command
+/// that loads a field waits for them).
+struct TensorFile<'a> {
+    path: &'a Path,
+    file: File,
+    header: Metadata,
+    /// Where the tensors' data begins in the file.
+    data_start: u64,
+}
+
+impl<'a> TensorFile<'a> {
+    fn open(path: &'a Path) -> Result<Self, NeuralError> {
+        let (file, header, data_start) = read_header(path)?;
+        let header: Metadata = serde_json::from_slice(&header)
+            .map_err(|e| damaged(path, SafeTensorError::InvalidHeaderDeserialization(e)))?;
+        let len = file.metadata().map_err(|error| NeuralError::Io { path: path.to_path_buf(), error })?.len();
+        if data_start + header.data_len() as u64 != len {
+            return Err(damaged(path, SafeTensorError::MetadataIncompleteBuffer));
+        }
+        Ok(Self { path, file, header, data_start })
+    }
+
+    /// Where the data of tensor `name` begins, checked to be F32 of `shape`.
+    fn locate(&self, name: &str, shape: &[usize]) -> Result<u64, NeuralError> {
+        let Some(info) = self.header.info(name) else {
+            let e = SafeTensorError::TensorNotFound(name.to_string());
+            return Err(NeuralError::checkpoint(self.path, format!("tensor {name}: {e}")));
+        };
+        if info.dtype != Dtype::F32 || info.shape != shape {
+            return Err(NeuralError::checkpoint(
+                self.path,
+                format!("tensor {name} is {:?} {:?}, the field expects F32 {shape:?}", info.dtype, info.shape),
+            ));
+        }
+        Ok(self.data_start + info.data_offsets.0 as u64)
+    }
+
+    /// Reads the tensors `(name, shape, destination)` into their destinations, in pieces over
+    /// the threads, and refuses a value that is not finite.
+    fn read_into(&self, tensors: Vec<(String, Vec<usize>, &mut [f32])>) -> Result<(), NeuralError> {
+        let mut pieces = Vec::new();
+        let mut names = Vec::with_capacity(tensors.len());
+        for (t, (name, shape, dst)) in tensors.into_iter().enumerate() {
+            let mut at = self.locate(&name, &shape)?;
+            for piece in dst.chunks_mut(PIECE) {
+                let bytes = 4 * piece.len() as u64;
+                pieces.push((t, at, piece));
+                at += bytes;
+            }
+            names.push(name);
+        }
+        // Each piece read, put in the machine's order, and checked for NaN and infinity
+        // without an early exit (so that the check vectorises) while it is in cache.
+        let read = |(_, at, piece): &mut (usize, u64, &mut [f32])| -> std::io::Result<bool> {
+            read_exact_at(&self.file, bytemuck::cast_slice_mut(piece), *at)?;
+            if cfg!(target_endian = "big") {
+                for d in piece.iter_mut() {
+                    *d = f32::from_bits(u32::from_le(d.to_bits()));
+                }
+            }
+            Ok(piece.iter().fold(true, |all, d| all & d.is_finite()))
+        };
+        let finite: Vec<std::io::Result<bool>> =
+            if cfg!(unix) { pieces.par_iter_mut().map(read).collect() } else { pieces.iter_mut().map(read).collect() };
+        let mut offsets = vec![0usize; names.len()];
+        for ((t, _, piece), finite) in pieces.iter().zip(finite) {
+            let io = |error: std::io::Error| match error.kind() {
+                // The file was shortened since its length was checked.
+                std::io::ErrorKind::UnexpectedEof => damaged(self.path, SafeTensorError::MetadataIncompleteBuffer),
+                _ => NeuralError::Io { path: self.path.to_path_buf(), error },
+            };
+            if !finite.map_err(io)? {
+                let i = piece.iter().position(|v| !v.is_finite()).unwrap_or(0);
+                return Err(NeuralError::checkpoint(
+                    self.path,
+                    format!("tensor {}: value {} is {}; weights must be finite", names[*t], offsets[*t] + i, piece[i]),
+                ));
+            }
+            offsets[*t] += piece.len();
+        }
+        Ok(())
+    }
+}
+
+/// Fills `buf` from `file` at `offset`.
+#[cfg(unix)]
+fn read_exact_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
+}
+
+/// Fills `buf` from `file` at `offset` (the pieces are read one after another here: the
+/// file's position is shared).
+#[cfg(not(unix))]
+fn read_exact_at(mut file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    use std::io::Seek;
+    file.seek(std::io::SeekFrom::Start(offset))?;
+    file.read_exact(buf)
+}
+
+fn damaged(path: &Path, e: SafeTensorError) -> NeuralError {
     NeuralError::checkpoint(path, format!("the file is truncated or damaged, not a complete safetensors file ({e})"))
 }
 
-fn copy_tensor(st: &SafeTensors, path: &Path, name: &str, shape: &[usize], dst: &mut [f32]) -> Result<(), NeuralError> {
-    let t = st.tensor(name).map_err(|e| NeuralError::checkpoint(path, format!("tensor {name}: {e}")))?;
-    if t.dtype() != Dtype::F32 || t.shape() != shape {
-        return Err(NeuralError::checkpoint(
-            path,
-            format!("tensor {name} is {:?} {:?}, the field expects F32 {shape:?}", t.dtype(), t.shape()),
-        ));
+/// `buf` split into the disjoint `ranges`, in their order.
+fn split_ranges<'b>(mut buf: &'b mut [f32], ranges: &[Range<usize>]) -> Vec<&'b mut [f32]> {
+    let mut order: Vec<usize> = (0..ranges.len()).collect();
+    order.sort_by_key(|&i| ranges[i].start);
+    let mut parts: Vec<Option<&'b mut [f32]>> = (0..ranges.len()).map(|_| None).collect();
+    let mut at = 0;
+    for i in order {
+        let r = &ranges[i];
+        let rest = std::mem::take(&mut buf);
+        let (_, tail) = rest.split_at_mut(r.start - at);
+        let (part, tail) = tail.split_at_mut(r.len());
+        parts[i] = Some(part);
+        buf = tail;
+        at = r.end;
     }
-    // The file's bytes are little-endian f32: copied as bytes (a memcpy; weights are millions
-    // of values, read by every command that loads a field), then put in the machine's order.
-    bytemuck::cast_slice_mut::<f32, u8>(dst).copy_from_slice(t.data());
-    if cfg!(target_endian = "big") {
-        for d in dst.iter_mut() {
-            *d = f32::from_bits(u32::from_le(d.to_bits()));
-        }
-    }
-    // A field with a NaN or infinite weight gives NaN or infinite values wherever it reads it:
-    // checked without an early exit, so that the loop vectorises, then found.
-    let finite = dst.iter().fold(true, |all, d| all & d.is_finite());
-    if !finite {
-        let i = dst.iter().position(|v| !v.is_finite()).unwrap_or(0);
-        return Err(NeuralError::checkpoint(
-            path,
-            format!("tensor {name}: value {i} is {}; weights must be finite", dst[i]),
-        ));
-    }
-    Ok(())
+    parts.into_iter().map(|p| p.expect("every range split off")).collect()
 }
 
 /// Refuses a file holding a tensor that `field` has no place for (nor, for Adam's moments
 /// `adam.m.<name>` / `adam.v.<name>`, a tensor of that name): the file is of a larger field. A
 /// model.json or config.json edited to fewer layers would otherwise take the first layers of
 /// the file's field and drop the rest without a word, and every tensor it kept would match.
-fn refuse_unknown_tensors<F: TrainableField>(st: &SafeTensors, path: &Path, field: &F) -> Result<(), NeuralError> {
+fn refuse_unknown_tensors<F: TrainableField>(st: &Metadata, path: &Path, field: &F) -> Result<(), NeuralError> {
     let own: std::collections::HashSet<String> = field.tensors().into_iter().map(|(name, _, _)| name).collect();
     let known = |name: &str| {
         own.contains(name)
             || ["adam.m.", "adam.v."].iter().any(|p| name.strip_prefix(p).is_some_and(|n| own.contains(n)))
     };
-    let mut unknown: Vec<String> = st.names().into_iter().filter(|n| !known(n)).map(String::from).collect();
+    let mut unknown: Vec<String> = st.offset_keys().into_iter().filter(|n| !known(n)).collect();
     if unknown.is_empty() {
         return Ok(());
     }
@@ -122,13 +241,12 @@ fn refuse_unknown_tensors<F: TrainableField>(st: &SafeTensors, path: &Path, fiel
 /// the same architecture: a file lacking one of its tensors, or holding one it lacks, is
 /// refused.
 pub fn load_weights<F: TrainableField>(path: &Path, field: &mut F) -> Result<(), NeuralError> {
-    let bytes = read(path)?;
-    let st = SafeTensors::deserialize(&bytes).map_err(|e| damaged(path, e))?;
-    refuse_unknown_tensors(&st, path, field)?;
-    for (name, shape, range) in field.tensors() {
-        copy_tensor(&st, path, &name, &shape, &mut field.params_mut()[range])?;
-    }
-    Ok(())
+    let file = TensorFile::open(path)?;
+    refuse_unknown_tensors(&file.header, path, field)?;
+    let tensors = field.tensors();
+    let ranges: Vec<Range<usize>> = tensors.iter().map(|(_, _, r)| r.clone()).collect();
+    let dsts = split_ranges(field.params_mut(), &ranges);
+    file.read_into(tensors.into_iter().zip(dsts).map(|((name, shape, _), dst)| (name, shape, dst)).collect())
 }
 
 #[derive(Serialize, Deserialize)]
@@ -177,23 +295,7 @@ pub fn checkpoint_bytes_tagged<F: TrainableField>(
 /// [`weights_bytes_tagged`]); None when it has none.
 /// Reads the file's header only (its first 8 bytes give the length of the JSON that follows).
 pub fn checkpoint_tag(path: &Path, key: &str) -> Result<Option<String>, NeuralError> {
-    use std::io::Read;
-    let io = |error: std::io::Error| match error.kind() {
-        // read_exact's own message, "failed to fill whole buffer", says nothing of the file.
-        std::io::ErrorKind::UnexpectedEof => {
-            NeuralError::checkpoint(path, "the file is truncated: it ends inside its safetensors header")
-        }
-        _ => NeuralError::Io { path: path.to_path_buf(), error },
-    };
-    let mut file = std::fs::File::open(path).map_err(io)?;
-    let mut len = [0u8; 8];
-    file.read_exact(&mut len).map_err(io)?;
-    let len = u64::from_le_bytes(len);
-    if len > 100 << 20 {
-        return Err(NeuralError::checkpoint(path, format!("a header of {len} bytes is not a safetensors header")));
-    }
-    let mut header = vec![0u8; len as usize];
-    file.read_exact(&mut header).map_err(io)?;
+    let (_, header, _) = read_header(path)?;
     let header: serde_json::Value =
         serde_json::from_slice(&header).map_err(|e| NeuralError::checkpoint(path, format!("header: {e}")))?;
     Ok(header.get("__metadata__").and_then(|m| m.get(format!("tag.{key}"))).and_then(|v| v.as_str()).map(String::from))
@@ -201,10 +303,9 @@ pub fn checkpoint_tag(path: &Path, key: &str) -> Result<Option<String>, NeuralEr
 
 /// Restores `learner` (whose field has the checkpoint's architecture) from `path`.
 pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>) -> Result<(), NeuralError> {
-    let bytes = read(path)?;
-    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| damaged(path, e))?;
-    let st = SafeTensors::deserialize(&bytes).map_err(|e| damaged(path, e))?;
-    let json = header
+    let file = TensorFile::open(path)?;
+    let json = file
+        .header
         .metadata()
         .as_ref()
         .and_then(|m| m.get("learner"))
@@ -224,16 +325,24 @@ pub fn load_checkpoint<F: TrainableField>(path: &Path, learner: &mut Learner<F>)
             ),
         ));
     }
-    refuse_unknown_tensors(&st, path, &learner.field)?;
+    refuse_unknown_tensors(&file.header, path, &learner.field)?;
     let n = learner.field.num_params();
     learner.adam.m.resize(n, 0.0);
     learner.adam.v.resize(n, 0.0);
-    for (name, shape, range) in learner.field.tensors() {
-        copy_tensor(&st, path, &name, &shape, &mut learner.field.params_mut()[range.clone()])?;
-        copy_tensor(&st, path, &format!("adam.m.{name}"), &shape, &mut learner.adam.m[range.clone()])?;
+    let tensors = learner.field.tensors();
+    let ranges: Vec<Range<usize>> = tensors.iter().map(|(_, _, r)| r.clone()).collect();
+    let mut wanted = Vec::with_capacity(3 * tensors.len());
+    for (prefix, buf) in
+        [("", learner.field.params_mut()), ("adam.m.", &mut learner.adam.m[..]), ("adam.v.", &mut learner.adam.v[..])]
+    {
+        for ((name, shape, _), dst) in tensors.iter().zip(split_ranges(buf, &ranges)) {
+            wanted.push((format!("{prefix}{name}"), shape.clone(), dst));
+        }
+    }
+    file.read_into(wanted)?;
+    for (name, _, range) in tensors {
         let second = format!("adam.v.{name}");
-        let moments = &mut learner.adam.v[range];
-        copy_tensor(&st, path, &second, &shape, moments)?;
+        let moments = &learner.adam.v[range];
         // Averages of squared gradients: a negative one (a damaged or edited file) makes the
         // step's square root NaN, which training reports as a diverged loss, blaming the rate.
         if let Some(i) = moments.iter().position(|&v| v < 0.0) {
@@ -397,6 +506,38 @@ mod tests {
         assert_eq!(checkpoint_tag(&path, "x").unwrap(), None);
         let gone = dir.path().join("gone.safetensors");
         assert!(load_weights(&gone, &mut grid(|_| 0.0)).unwrap_err().to_string().contains("gone.safetensors"));
+    }
+
+    /// Weights larger than a piece of the parallel read come back whole, a bad value in a later
+    /// piece is named by its index in the tensor, and a file whose length differs from what its
+    /// header describes (cut short, or with bytes after its tensors) is refused.
+    #[test]
+    fn weights_read_in_pieces_come_back_whole_and_checked() {
+        let dims = [64, 64, 48];
+        let n = dims.iter().product::<usize>();
+        assert!(n > 2 * super::PIECE, "the tensor spans several pieces");
+        let big = |values: &dyn Fn(usize) -> f32| {
+            crate::dense::DenseGridField::from_raw(dims, (0..n).map(values).collect::<Vec<f32>>())
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("w.safetensors");
+        let saved = big(&|i| i as f32 * 0.25 - 7.0);
+        let bytes = weights_bytes(&saved).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        let mut loaded = big(&|_| 0.0);
+        load_weights(&path, &mut loaded).unwrap();
+        assert_eq!(loaded.params(), saved.params());
+
+        let bad = 2 * super::PIECE + 123;
+        std::fs::write(&path, weights_bytes(&big(&|i| if i == bad { f32::NAN } else { 1.0 })).unwrap()).unwrap();
+        let e = load_weights(&path, &mut big(&|_| 0.0)).unwrap_err().to_string();
+        assert!(e.contains(&format!("value {bad} is NaN")), "{e}");
+
+        for wrong in [bytes[..bytes.len() - 4].to_vec(), [bytes.as_slice(), &[0u8; 4]].concat()] {
+            std::fs::write(&path, &wrong).unwrap();
+            let e = load_weights(&path, &mut big(&|_| 0.0)).unwrap_err().to_string();
+            assert!(e.contains("w.safetensors") && e.contains("truncated or damaged"), "{e}");
+        }
     }
 
     /// A field built without its initial draws and then loaded holds exactly the saved
