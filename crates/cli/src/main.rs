@@ -72,7 +72,8 @@ fn main() -> ExitCode {
 /// kernel flush their CPUs' address caches, an interrupt that is slow in a virtual machine.
 /// On a render of a trained field that was 88 returns, a quarter more page faults and about a
 /// tenth of its time (`docs/performance.md`). Buffers larger than 32 MiB (volumes) are still
-/// mapped on their own and returned when freed; the process's peak use does not change.
+/// mapped on their own and returned when freed; the peak use grows by a few MB (3–4 MB on the
+/// demo scene's `fast`, ASART and `hybrid` runs).
 fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only changes the allocator's thresholds; called before any thread exists.
