@@ -187,6 +187,7 @@ fn read_exact_at(mut file: &File, buf: &mut [u8], offset: u64) -> std::io::Resul
     file.read_exact(buf)
 }
 
+/// A file that safetensors cannot read: truncated (a partial copy) or not a safetensors file.
 fn damaged(path: &Path, e: SafeTensorError) -> NeuralError {
     NeuralError::checkpoint(path, format!("the file is truncated or damaged, not a complete safetensors file ({e})"))
 }
