@@ -442,7 +442,21 @@ impl Ctx<'_> {
         // Before any gain is fitted (the fingerprint reads the measured pixels either way).
         let views = prep.fingerprint();
         let settings = settings_tag(config)?;
-        if dir.resuming() {
+        // A run stopped during its field's start has no training to continue: it starts again.
+        let restart = dir.resuming() && self.spec.start.is_some() && {
+            check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &settings, &views)?;
+            checkpoint_start_unfinished(&ckpt)?
+        };
+        if restart {
+            log::warn!(
+                "{} was stopped during its start, before its field trained: there is no training to continue, so \
+                 the run starts again from its start",
+                dir.root().display()
+            );
+            dir.replace_finished(config)?;
+        }
+        let mut start_unfinished = false;
+        if dir.resuming() && !restart {
             check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &settings, &views)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             // A resumed run only continues: below the checkpoint's iteration it would keep the
@@ -493,6 +507,7 @@ impl Ctx<'_> {
             log::info!("resuming at iteration {}", learner.iteration);
         } else if let Some(start) = &self.spec.start {
             let seconds = start_from(start, self.scene, config, dir, self.truth, &prep, &mut learner.field, session)?;
+            start_unfinished = session.stopped;
             // Its time is the run's: the curves of NRMSE against time start after it.
             learner.train_time_s += seconds;
             budgeted = train_cfg.clone();
@@ -511,7 +526,7 @@ impl Ctx<'_> {
         let nrmse_of =
             |field: &F, s: &TruthSample| s.nrmse(&WorldField { field, meta: &meta, occupancy: occupancy.as_ref() });
         // A resumed run continues the curves of the run it resumes, up to the checkpoint.
-        let (mut nrmse_history, mut holdout_history) = match &self.earlier {
+        let (mut nrmse_history, mut holdout_history) = match self.earlier.as_ref().filter(|_| !restart) {
             Some(r) => (
                 r.history.nrmse.iter().filter(|p| p.iteration <= learner.iteration).copied().collect(),
                 r.history.holdout.iter().filter(|p| p.iteration <= learner.iteration).copied().collect(),
@@ -519,7 +534,7 @@ impl Ctx<'_> {
             None => (Vec::new(), Vec::new()),
         };
         let held_out_rule = config.stopping.rule == StopRule::HeldOut;
-        let mut best = match (held_out_rule, dir.resuming()) {
+        let mut best = match (held_out_rule, dir.resuming() && !restart) {
             (true, true) => resumed_best(self.earlier.as_ref(), dir, &mut learner, config.stopping.patience),
             _ => None,
         }
@@ -570,7 +585,15 @@ impl Ctx<'_> {
                 }
             }
             if config.checkpoint_every > 0 && s.iteration.is_multiple_of(config.checkpoint_every) {
-                match write_checkpoint(dir, s.learner, &self.scene.aabb, &self.spec.field, &settings, &views) {
+                match write_checkpoint(
+                    dir,
+                    s.learner,
+                    &self.scene.aabb,
+                    &self.spec.field,
+                    &settings,
+                    &views,
+                    start_unfinished,
+                ) {
                     Ok(path) => {
                         let _ = session.emit(RunEvent::Checkpoint { path: &path });
                     }
@@ -611,8 +634,21 @@ impl Ctx<'_> {
         }
         let _ = session.emit(RunEvent::Writing);
         // The checkpoint holds the last state, so a resumed run continues where this one stopped.
-        write_checkpoint(dir, &learner, &self.scene.aabb, &self.spec.field, &settings, &views)?;
+        write_checkpoint(dir, &learner, &self.scene.aabb, &self.spec.field, &settings, &views, start_unfinished)?;
         let stop_reason = cause.unwrap_or(report.stop_reason.into());
+        if start_unfinished {
+            let own = dir.path("start").join("volume.npy");
+            let kept = if self.spec.start.as_ref().is_some_and(|s| s.run.is_none()) && own.is_file() {
+                format!("; the voxel start's volume is {}", own.display())
+            } else {
+                String::new()
+            };
+            session.warn(&format!(
+                "stopped during the field's start, before it trained: volume.npy is the field before training, not a \
+                 reconstruction{kept}; `fluidnerf reconstruct -o {} --resume` runs the start again",
+                dir.root().display()
+            ));
+        }
         let mut kept_iteration = learner.iteration;
         if let Some((iteration, loss, params)) = best.best.take() {
             learner.field.params_mut().copy_from_slice(&params);
@@ -772,6 +808,21 @@ const VIEWS_TAG: &str = "views";
 /// The checkpoint tag of the run's training settings ([`crate::rundir::training_settings`]).
 const SETTINGS_TAG: &str = "settings";
 
+/// The checkpoint tag of a field whose start (the voxel method run first, or the fit of the
+/// field to it) was stopped before it finished, with the value [`START_UNFINISHED`]. Such a
+/// field has not begun the training a resume continues: continued, it would train from an
+/// unfitted field at the start's lower learning rate, a run its `config.json` does not describe.
+/// A resume starts such a run again.
+const START_TAG: &str = "start";
+
+/// The value of [`START_TAG`].
+const START_UNFINISHED: &str = "unfinished";
+
+/// Whether the checkpoint at `path` is of a field whose start did not finish ([`START_TAG`]).
+fn checkpoint_start_unfinished(path: &std::path::Path) -> Result<bool, PipelineError> {
+    Ok(fluidnerf_neural::weights::checkpoint_tag(path, START_TAG)?.as_deref() == Some(START_UNFINISHED))
+}
+
 /// The training settings of `config` as a checkpoint records them.
 fn settings_tag(config: &RunConfig) -> Result<String, PipelineError> {
     crate::rundir::training_settings(config).map(|v| v.to_string()).map_err(|e| PipelineError::invalid("config", e))
@@ -779,7 +830,7 @@ fn settings_tag(config: &RunConfig) -> Result<String, PipelineError> {
 
 /// Writes a training checkpoint (weights, optimiser state, histories, the scene's box, the
 /// field's configuration, the run's training settings and the fingerprint of the training
-/// views) atomically.
+/// views, and whether the field's start was stopped before it finished) atomically.
 pub(crate) fn write_checkpoint<F: TrainableField>(
     dir: &RunDir,
     learner: &Learner<F>,
@@ -787,13 +838,17 @@ pub(crate) fn write_checkpoint<F: TrainableField>(
     field: &FieldConfig,
     settings: &str,
     views: &str,
+    start_unfinished: bool,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let tags = [
+    let mut tags = vec![
         (BOX_TAG, box_tag(aabb)),
         (FIELD_TAG, field_tag(field)?),
         (SETTINGS_TAG, settings.to_string()),
         (VIEWS_TAG, views.to_string()),
     ];
+    if start_unfinished {
+        tags.push((START_TAG, START_UNFINISHED.to_string()));
+    }
     let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?;
     dir.write_bytes("checkpoint.safetensors", &bytes)
 }

@@ -497,17 +497,40 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
 /// Ctrl-C during the hybrid's voxel start stops the start, and the run after it, at once. The
 /// start's events were dropped, so it ran all its iterations (250 here, seconds at 96³) with no
 /// progress shown and only then did the run stop.
+///
+/// The run's volume is then of a field that never trained, and the report says so. A resume
+/// runs the start again and ends where a run without a break ends. Before, the volume was
+/// reported like any stopped run's, and a resume trained the unfitted field from its
+/// checkpoint at the start's lower rate: another run than its `config.json` describes.
 #[test]
 fn ctrl_c_during_the_hybrids_voxel_start_stops_the_start() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "blobs", 8, 32, 16, &[]);
-    let out = interrupted_once_made(d, &["reconstruct", "scene", "-o", "h", "--resolution", "96", "-q"], "h/start");
+    let args = ["reconstruct", "scene", "-o", "h", "--resolution", "96", "--max-iterations", "3", "-q"];
+    let out = interrupted_once_made(d, &args, "h/start");
     assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
     let start = report(&d.join("h/start"));
     assert_eq!(start["stop_reason"], "interrupted", "{start}");
     assert!(start["iterations"].as_u64().is_some_and(|n| n < 250), "{start}");
-    assert_eq!(report(&d.join("h"))["status"], "interrupted");
+    let r = report(&d.join("h"));
+    assert_eq!(r["status"], "interrupted");
+    let warnings = r["warnings"].to_string();
+    assert!(warnings.contains("before it trained: volume.npy is the field before training"), "{warnings}");
+
+    let resumed = fluidnerf(d, &["reconstruct", "-o", "h", "--resume"]);
+    ok(&resumed);
+    assert!(String::from_utf8_lossy(&resumed.stderr).contains("the run starts again from its start"));
+    assert_eq!(report(&d.join("h/start"))["status"], "finished");
+    let mut whole = args.to_vec();
+    whole[3] = "whole";
+    ok(&fluidnerf(d, &whole));
+    for file in ["volume.npy", "weights.safetensors"] {
+        let (a, b) =
+            (std::fs::read(d.join("h").join(file)).unwrap(), std::fs::read(d.join("whole").join(file)).unwrap());
+        assert!(a == b, "{file} differs from the run without a break");
+    }
+    assert!(!report(&d.join("h"))["warnings"].to_string().contains("before it trained"));
 }
 
 /// Ctrl-C while the hybrid fits its field to the voxel start stops the fit and the run at
