@@ -645,7 +645,8 @@ impl Ctx<'_> {
             };
             session.warn(&format!(
                 "stopped during the field's start, before it trained: volume.npy is the field before training, not a \
-                 reconstruction{kept}; `fluidnerf reconstruct -o {} --resume` runs the start again",
+                 reconstruction{kept}; `reconstruct -o {} --resume` (`overwrite=\"resume\"` from Python) runs the \
+                 start again",
                 dir.root().display()
             ));
         }
