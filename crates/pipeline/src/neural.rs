@@ -442,11 +442,11 @@ impl Ctx<'_> {
         // Before any gain is fitted (the fingerprint reads the measured pixels either way).
         let views = prep.fingerprint();
         let settings = settings_tag(config)?;
-        // A run stopped during its field's start has no training to continue: it starts again.
-        let restart = dir.resuming() && self.spec.start.is_some() && {
+        if dir.resuming() {
             check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &settings, &views)?;
-            checkpoint_start_unfinished(&ckpt)?
-        };
+        }
+        // A run stopped during its field's start has no training to continue: it starts again.
+        let restart = dir.resuming() && self.spec.start.is_some() && checkpoint_start_unfinished(&ckpt)?;
         if restart {
             log::warn!(
                 "{} was stopped during its start, before its field trained: there is no training to continue, so \
@@ -457,7 +457,6 @@ impl Ctx<'_> {
         }
         let mut start_unfinished = false;
         if dir.resuming() && !restart {
-            check_checkpoint(&ckpt, &self.scene.aabb, &self.spec.field, &settings, &views)?;
             fluidnerf_neural::weights::load_checkpoint(&ckpt, &mut learner)?;
             // A resumed run only continues: below the checkpoint's iteration it would keep the
             // result of the longer run and record the lower cap in config.json, which reruns
