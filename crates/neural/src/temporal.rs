@@ -463,6 +463,11 @@ pub enum WindowEvent<'a, F> {
     /// callback stopped it): the moment to save it as finished. Not sent for windows taken
     /// from a [`ResumeState`].
     Finished(&'a WindowInfo, &'a TrainedWindow<F>),
+    /// A fresh window's fit to its instants' reconstructions ([`FrameStart`]): `step` of
+    /// `steps` done, sent once before the first step (`step` 0) and after every step. Breaking
+    /// stops the fit; the window then trains a single iteration (its report needs a loss) and
+    /// says [`StopReason::Interrupted`], so that its field is known not to have trained.
+    StartFit(&'a WindowInfo, usize, usize),
 }
 
 /// Trains every window of `problem` (absolute view times; `problem.time_step` is Δt) in turn,
@@ -515,7 +520,7 @@ pub fn train_windows<F: TrainableField + Clone>(
         if let Some((learner, report)) = finished.next() {
             // A finished window is taken as it is: no events, not trained.
             let start = WindowStart::Finished(learner, report);
-            let no_events = |_: &WindowInfo, _: &TrainState<'_, F>| ControlFlow::Continue(());
+            let no_events = |_: WindowEvent<'_, F>| ControlFlow::Continue(());
             out.push(train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, start, None, no_events)?);
             continue;
         }
@@ -524,9 +529,7 @@ pub fn train_windows<F: TrainableField + Clone>(
             (None, Some(prev)) => WindowStart::Warm(prev.learner.field.clone()),
             (None, None) => WindowStart::Fresh(init.clone()),
         };
-        let w = train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, begin, start, |info, s| {
-            on_event(WindowEvent::Iteration(info, s))
-        })?;
+        let w = train_window(problem, masks, &times, &plan, k, train_cfg, windows, seed, begin, start, &mut on_event)?;
         out.push(w);
         let views = out.last().map(|w| w.views.clone()).unwrap_or_default();
         let info = WindowInfo { index: k, count: plan.len(), frames: plan[k].clone(), views };
@@ -572,8 +575,10 @@ pub enum WindowStart<F> {
 /// `seed + k`, and, for warm-started windows, `windows.warm_max_iterations`. Because a window
 /// depends on the others only through its start ([`WindowStart::Warm`] takes the previous
 /// window's final field), windows can be trained in separate processes and give the windows of
-/// a serial run. `on_iteration` sees every iteration; breaking stops after it (the report
-/// says [`StopReason::Interrupted`]).
+/// a serial run. `on_event` sees every iteration ([`WindowEvent::Iteration`]; breaking stops
+/// after it, and the report says [`StopReason::Interrupted`]) and every step of a fresh
+/// window's fit to `frame_start` ([`WindowEvent::StartFit`]); it is sent no
+/// [`WindowEvent::Finished`].
 #[allow(clippy::too_many_arguments)]
 pub fn train_window<F: TrainableField + Clone>(
     problem: &Problem,
@@ -586,7 +591,7 @@ pub fn train_window<F: TrainableField + Clone>(
     seed: u64,
     start: WindowStart<F>,
     frame_start: Option<&FrameStart>,
-    mut on_iteration: impl FnMut(&WindowInfo, &TrainState<'_, F>) -> ControlFlow<()>,
+    mut on_event: impl FnMut(WindowEvent<'_, F>) -> ControlFlow<()>,
 ) -> Result<TrainedWindow<F>, NeuralError> {
     let range = window_range(plan, k)?;
     let axis = match &start {
@@ -623,13 +628,24 @@ pub fn train_window<F: TrainableField + Clone>(
         cfg.schedule.initial *= fs.learning_rate_scale;
         cfg.schedule.at_decay_iters *= fs.learning_rate_scale;
     }
+    // Whether the fit to the instants' reconstructions was stopped.
+    let mut fit_stopped = false;
     let mut learner = match start {
         WindowStart::Finished(learner, report) => return Ok(trained(learner, report)),
         WindowStart::Resume(saved) => saved,
         WindowStart::Warm(previous) => Learner::new(previous),
         WindowStart::Fresh(init) => {
             let mut learner = Learner::fresh(init, &prep, &cfg);
-            if let Some(fs) = frame_start {
+            let inside = time_in_window(times, range.clone());
+            // The seconds of the window's instants' voxel runs.
+            let voxel: f64 =
+                frame_start.map_or(0.0, |fs| fs.seconds.iter().filter(|(t, _)| inside(*t)).map(|(_, s)| s).sum());
+            let steps = frame_start.map_or(0, |fs| fs.fit.iterations);
+            fit_stopped = frame_start.is_some() && on_event(WindowEvent::StartFit(&info, 0, steps)).is_break();
+            if fit_stopped {
+                learner.train_time_s += voxel;
+            }
+            if let Some(fs) = frame_start.filter(|_| !fit_stopped) {
                 let t0 = std::time::Instant::now();
                 let first = range.start as f64;
                 let at = |t: f64| match time_axis {
@@ -637,8 +653,6 @@ pub fn train_window<F: TrainableField + Clone>(
                     TimeAxis::Frames => frame_position(times, t) - first,
                 };
                 let frames: Vec<(f32, f64)> = times[range.clone()].iter().map(|&t| (at(t) as f32, t)).collect();
-                let inside = time_in_window(times, range.clone());
-                let voxel: f64 = fs.seconds.iter().filter(|(t, _)| inside(*t)).map(|(_, s)| s).sum();
                 // The fit counts against the window's budget, as its instants' voxel runs do.
                 let limit = cfg.time_budget_s.map(|b| (b - voxel).max(0.0));
                 let report = crate::start::fit_to_frames(
@@ -649,10 +663,9 @@ pub fn train_window<F: TrainableField + Clone>(
                     &fs.fit,
                     seed.wrapping_add(k as u64),
                     limit,
-                    // A window's fit is not stopped halfway: a stopped window resumes from its
-                    // checkpoint, which a half-fitted start has not written.
-                    &mut |_| ControlFlow::Continue(()),
+                    &mut |step| on_event(WindowEvent::StartFit(&info, step, steps)),
                 )?;
+                fit_stopped = report.stopped;
                 log::info!(
                     "window {k} started from its instants' reconstructions: relative RMS difference {:.4} ({:.1} s)",
                     report.relative_difference(),
@@ -670,8 +683,14 @@ pub fn train_window<F: TrainableField + Clone>(
     // A window saved at the iteration at which it converged stops there, as it did then.
     let report = if learner.iteration > 0 && converged(&learner.losses, &cfg.stop) {
         finished_report(&learner, &cfg)
+    } else if fit_stopped {
+        // One iteration, for the loss a report holds; the field has not trained.
+        cfg.max_iterations = 1;
+        let mut report = train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |_| ControlFlow::Continue(()))?;
+        report.stop_reason = StopReason::Interrupted;
+        report
     } else {
-        train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_iteration(&info, s))?
+        train(&prep, &mut learner, &cfg, seed.wrapping_add(k as u64), |s| on_event(WindowEvent::Iteration(&info, s)))?
     };
     Ok(trained(learner, report))
 }

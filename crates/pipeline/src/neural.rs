@@ -813,13 +813,13 @@ const SETTINGS_TAG: &str = "settings";
 /// field has not begun the training a resume continues: continued, it would train from an
 /// unfitted field at the start's lower learning rate, a run its `config.json` does not describe.
 /// A resume starts such a run again.
-const START_TAG: &str = "start";
+pub(crate) const START_TAG: &str = "start";
 
 /// The value of [`START_TAG`].
 const START_UNFINISHED: &str = "unfinished";
 
 /// Whether the checkpoint at `path` is of a field whose start did not finish ([`START_TAG`]).
-fn checkpoint_start_unfinished(path: &std::path::Path) -> Result<bool, PipelineError> {
+pub(crate) fn checkpoint_start_unfinished(path: &std::path::Path) -> Result<bool, PipelineError> {
     Ok(fluidnerf_neural::weights::checkpoint_tag(path, START_TAG)?.as_deref() == Some(START_UNFINISHED))
 }
 
@@ -935,15 +935,20 @@ pub(crate) fn check_views(
     Ok(())
 }
 
-/// Writes the checkpoint `name` of the run folder (training state and the fingerprint of the
-/// views trained on, `views`) atomically.
+/// Writes the checkpoint `name` of the run folder (training state, the fingerprint of the views
+/// trained on, `views`, and whether the window's start was stopped before it finished,
+/// [`START_TAG`]) atomically.
 pub(crate) fn write_checkpoint_to<F: TrainableField>(
     dir: &RunDir,
     name: &str,
     learner: &Learner<F>,
     views: &str,
+    start_unfinished: bool,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let tags = [(VIEWS_TAG, views.to_string())];
+    let mut tags = vec![(VIEWS_TAG, views.to_string())];
+    if start_unfinished {
+        tags.push((START_TAG, START_UNFINISHED.to_string()));
+    }
     dir.write_bytes(name, &fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?)
 }
 

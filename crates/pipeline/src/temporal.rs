@@ -505,9 +505,6 @@ impl Ctx<'_> {
             let (method, why) = start.method.resolve(fluidnerf_neural::train::median_noise(views));
             log::info!("start at t = {t}: {why}");
             let report = run_voxel_start(method, &sub, &truth, config, held_out, budget, &path, session.on_event)?;
-            if report.status == crate::RunStatus::Interrupted {
-                session.stopped = true;
-            }
             log::info!(
                 "{} at t = {t}: {} iterations in {:.1} s, kept {}",
                 method,
@@ -516,6 +513,11 @@ impl Ctx<'_> {
                 report.kept_iteration
             );
             fields.push((t, crate::load::LoadedRun::open(&path, Some(scene.aabb))?.field()?, report.train_time_s));
+            if report.status == crate::RunStatus::Interrupted {
+                // Stopped: the other instants' starts would only delay the stop.
+                session.stopped = true;
+                break;
+            }
         }
         Ok(fields)
     }
@@ -538,7 +540,18 @@ impl Ctx<'_> {
             state.finished.push((load(k, &w.checkpoint)?, w.report.clone()));
         }
         let next = checkpoint_name(progress.finished.len());
-        if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() {
+        let stopped_in_start = progress.finished.len() < progress.plan.len()
+            && self.dir.path(&next).is_file()
+            && crate::neural::checkpoint_start_unfinished(&self.dir.path(&next))?;
+        if stopped_in_start {
+            log::warn!(
+                "{} was stopped during its start, before window {} trained: there is no training to continue, so \
+                 the window starts again from its start",
+                self.dir.root().display(),
+                progress.finished.len()
+            );
+        }
+        if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() && !stopped_in_start {
             let k = progress.finished.len();
             let learner = load(k, &next)?;
             // The running window only continues: below its checkpoint's iteration it would keep
@@ -599,6 +612,9 @@ impl Ctx<'_> {
             None => None,
         };
         let mut interrupted = session.stopped;
+        // Whether the run was stopped before its last window's field trained: during the
+        // instants' starts or the window's fit to them ([`crate::neural::START_TAG`]).
+        let mut start_unfinished = session.stopped;
         let _ = session.emit(RunEvent::Started {
             method: self.method,
             max_iterations: spec.train.max_iterations,
@@ -630,10 +646,21 @@ impl Ctx<'_> {
             |e| {
                 let (w, s) = match e {
                     WindowEvent::Iteration(w, s) => (w, s),
+                    WindowEvent::StartFit(_, step, steps) => {
+                        let every = step.is_multiple_of(crate::event::START_FIT_EVENT_EVERY) || step == steps;
+                        if every && session.emit(RunEvent::StartFit { step, steps }).is_break() {
+                            interrupted = true;
+                        }
+                        if interrupted {
+                            start_unfinished = true;
+                            return ControlFlow::Break(());
+                        }
+                        return ControlFlow::Continue(());
+                    }
                     WindowEvent::Finished(w, done) => {
                         // The checkpoint first: a window listed as finished always has its final one.
                         let name = checkpoint_name(progress.finished.len());
-                        let saved = write_checkpoint_to(dir, &name, &done.learner, &done.views).and_then(|_| {
+                        let saved = write_checkpoint_to(dir, &name, &done.learner, &done.views, false).and_then(|_| {
                             progress.finished.push(FinishedWindow { checkpoint: name, report: done.report.clone() });
                             dir.write_json("windows/progress.json", &progress)
                         });
@@ -661,7 +688,7 @@ impl Ctx<'_> {
                     interrupted = true;
                 }
                 if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
-                    match write_checkpoint_to(dir, &checkpoint_name(w.index), s.learner, &w.views) {
+                    match write_checkpoint_to(dir, &checkpoint_name(w.index), s.learner, &w.views, false) {
                         Ok(path) => {
                             let _ = session.emit(RunEvent::Checkpoint { path: &path });
                         }
@@ -684,6 +711,18 @@ impl Ctx<'_> {
         }
         let _ = session.emit(RunEvent::Writing);
         let wall_s = t_start.elapsed().as_secs_f64();
+        if let Some(w) = run.windows.last().filter(|_| start_unfinished) {
+            let (a, b) = (run.frame_times[w.frames.start], run.frame_times[w.frames.end - 1]);
+            let at = if w.frames.len() == 1 { format!("t = {a}") } else { format!("t = {a}–{b}") };
+            session.warn(&format!(
+                "stopped during the start of window {} ({at}), before its field trained: the volumes there are the \
+                 field before training, not a reconstruction; the instants' voxel starts are in {}; `reconstruct -o \
+                 {} --resume` (`overwrite=\"resume\"` from Python) runs the start again",
+                run.windows.len() - 1,
+                dir.path("start").display(),
+                dir.root().display()
+            ));
+        }
 
         // Weights, checkpoints and the description of the stitched field.
         let mut records = Vec::new();
@@ -702,7 +741,9 @@ impl Ctx<'_> {
             let bytes = fluidnerf_neural::weights::weights_bytes_tagged(&w.learner.field, &[(WINDOW_TAG, tag)])?;
             result_bytes += bytes.len() as u64;
             dir.write_bytes(&name, &bytes)?;
-            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner, &w.views)?;
+            // The window stopped before it trained is marked, so that a resume fits it again.
+            let unfinished = start_unfinished && k + 1 == run.windows.len();
+            write_checkpoint_to(dir, &checkpoint_name(k), &w.learner, &w.views, unfinished)?;
             records.push(record);
         }
         dir.write_json(
@@ -1181,18 +1222,12 @@ fn train_some<F: TrainableField + Clone>(
         };
         let pos = WindowPos { index: k, count: plan.len(), frames };
         let mut io_error = None;
-        let trained = train_window(
-            problem,
-            masks,
-            times,
-            &plan,
-            k,
-            &spec.train,
-            &spec.windows,
-            config.seed,
-            start,
-            None,
-            |info, s| {
+        let trained =
+            train_window(problem, masks, times, &plan, k, &spec.train, &spec.windows, config.seed, start, None, |e| {
+                // Split windows have no start to fit to.
+                let WindowEvent::Iteration(info, s) = e else {
+                    return ControlFlow::Continue(());
+                };
                 let event = RunEvent::Iteration {
                     window: Some(pos),
                     iteration: s.iteration,
@@ -1202,20 +1237,19 @@ fn train_some<F: TrainableField + Clone>(
                 };
                 let flow = session.emit(event);
                 if config.checkpoint_every > 0 && s.iteration % config.checkpoint_every == 0 {
-                    if let Err(e) = write_checkpoint_to(dir, &checkpoint_name(k), s.learner, &info.views) {
+                    if let Err(e) = write_checkpoint_to(dir, &checkpoint_name(k), s.learner, &info.views, false) {
                         io_error = Some(e);
                         return ControlFlow::Break(());
                     }
                 }
                 flow
-            },
-        )
-        .map_err(crate::config::training_error)?;
+            })
+            .map_err(crate::config::training_error)?;
         if let Some(e) = io_error {
             return Err(e);
         }
         // The checkpoint first: a window with a done file always has its final checkpoint.
-        write_checkpoint_to(dir, &checkpoint_name(k), &trained.learner, &trained.views)?;
+        write_checkpoint_to(dir, &checkpoint_name(k), &trained.learner, &trained.views, false)?;
         let interrupted = trained.report.stop_reason == fluidnerf_neural::train::StopReason::Interrupted;
         outcomes.push(WindowOutcome {
             index: k,

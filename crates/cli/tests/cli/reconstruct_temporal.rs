@@ -395,6 +395,56 @@ fn time_resolved_windows_start_from_their_instants_voxel_runs() {
     );
 }
 
+/// Ctrl-C during a time-resolved run's start (the instants' voxel runs, or the window's fit to
+/// them) stops it at once, says that the window's field never trained, and a resume runs the
+/// start again to end where a run without a break ends. Before, the instants after the stopped
+/// one still ran a voxel iteration each, the fit ran all its steps (seconds) after the stop,
+/// nothing warned, and a resume trained the field fitted to the unfinished starts: another run
+/// than its `config.json` describes.
+#[test]
+fn ctrl_c_during_a_time_resolved_start_stops_it_and_a_resume_runs_it_again() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth =
+        "synth -q --preset jet-tr60 --cameras 6 --pixels 32 --resolution 16 --model pinhole --times 14,15,17 -o scene";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    // The settings, from a run stopped at once, with a short fit to the starts.
+    let line = "reconstruct scene -o c --method tr-fast --start-method asart --resolution 64 --max-iterations 4 -q";
+    let out = interrupted_once_made(d, &line.split_whitespace().collect::<Vec<_>>(), "c/config.json");
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    edit_json(&d.join("c/config.json"), |c| c["method"]["start"]["fit"]["iterations"] = serde_json::json!(20));
+    let args = ["reconstruct", "--config", "c/config.json", "-o", "r"];
+    let out = interrupted_once_made(d, &args, "r/start/t01");
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    // No instant's start ran after the one stopped.
+    let starts: Vec<String> = (0..3)
+        .map(|i| d.join(format!("r/start/t{i:02}")))
+        .filter(|p| p.exists())
+        .map(|p| report(&p)["status"].to_string())
+        .collect();
+    if let Some(i) = starts.iter().position(|s| s.contains("interrupted")) {
+        assert_eq!(i + 1, starts.len(), "a start ran after the stop: {starts:?}");
+    }
+    let r = report(&d.join("r"));
+    assert_eq!(r["status"], "interrupted", "{r}");
+    let warnings = r["warnings"].to_string();
+    assert!(
+        warnings.contains("stopped during the start of window 0 (t = 14–17), before its field trained"),
+        "{warnings}"
+    );
+
+    let resumed = fluidnerf(d, &["reconstruct", "-o", "r", "--resume"]);
+    ok(&resumed);
+    assert!(String::from_utf8_lossy(&resumed.stderr).contains("the window starts again from its start"));
+    ok(&fluidnerf(d, &["reconstruct", "--config", "c/config.json", "-o", "whole", "-q"]));
+    for file in ["windows/w000.safetensors", "frames/volume_002.npy"] {
+        let (a, b) =
+            (std::fs::read(d.join("r").join(file)).unwrap(), std::fs::read(d.join("whole").join(file)).unwrap());
+        assert!(a == b, "{file} differs from the run without a break");
+    }
+    assert!(!report(&d.join("r"))["warnings"].to_string().contains("before its field trained"));
+}
+
 /// A run stopped inside its first window writes the frames that window trained and no others:
 /// the report lists the instants it did not reach (a held-out time among them), `volumes.pvd`
 /// only the frames written, and `export`, `render` and `eval` at an instant it did not reach
