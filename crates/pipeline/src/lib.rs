@@ -333,6 +333,9 @@ struct Estimator {
     /// Iterations done since `started` (every window).
     done: usize,
     sent: bool,
+    /// Seconds since [`RunEvent::Started`] spent fitting the field to a start before the first
+    /// iteration (a time-resolved window's): not iterations' time, but the budget's.
+    fit_s: f64,
 }
 
 impl Estimator {
@@ -346,6 +349,14 @@ impl Estimator {
                     windows: (*windows).max(1),
                     ..Estimator::default()
                 };
+                None
+            }
+            // A fit before the first iteration: its time is not an iteration's.
+            RunEvent::StartFit { .. } if !self.sent && self.done == 0 => {
+                if let Some((t0, first)) = self.started {
+                    self.fit_s += now.duration_since(t0).as_secs_f64();
+                    self.started = Some((now, first));
+                }
                 None
             }
             RunEvent::Iteration { .. } if !self.sent => {
@@ -362,7 +373,7 @@ impl Estimator {
                 let mut limited = false;
                 if let Some(b) = budget_s {
                     // The budget counts training time from the start of the run (every window).
-                    let rest = (b - elapsed).max(0.0);
+                    let rest = (b - self.fit_s - elapsed).max(0.0);
                     if rest < seconds {
                         seconds = rest;
                         limited = true;
@@ -710,6 +721,15 @@ mod tests {
         let mut e = Estimator::default();
         e.observe(&started, None, t0);
         assert_eq!(e.observe(&iteration, None, at(20.0)), Some((20.0, 199, 3980.0, false)));
+        // A window's fit to its start (8 s) before the first iteration is not an iteration's
+        // time, but is the budget's.
+        let mut e = Estimator::default();
+        e.observe(&started, Some(30.0), t0);
+        for s in [1.0, 8.0] {
+            assert_eq!(e.observe(&RunEvent::StartFit { step: 0, steps: 10 }, Some(30.0), at(s)), None);
+        }
+        let after: Vec<_> = (1..=3).map(|i| e.observe(&iteration, Some(30.0), at(8.0 + 0.5 * i as f64))).collect();
+        assert_eq!(after[2], Some((0.5, 197, 20.5, true)));
         let text = RunEvent::Estimate {
             seconds_per_iteration: 20.0,
             iterations_left: 199,

@@ -208,7 +208,8 @@ pub(crate) fn run(
 /// and gains: its own iteration cap, the held-out rule when `held_out` (otherwise its own
 /// rule) and at most `budget_s` seconds, so that a budget rule or a large cap set for the field
 /// cannot let it take the whole budget. It reports to a session of its own: the caller's
-/// progress and time estimate follow the field.
+/// progress and time estimate follow the field. With `reuse` (a resumed run), a start that
+/// finished earlier in `path` with the same settings is read back instead of run again.
 pub(crate) fn run_voxel_start(
     method: crate::Method,
     scene: &Scene,
@@ -217,6 +218,7 @@ pub(crate) fn run_voxel_start(
     held_out: bool,
     budget_s: Option<f64>,
     path: &std::path::Path,
+    reuse: bool,
     on_event: &mut dyn FnMut(&RunEvent) -> ControlFlow<()>,
 ) -> Result<RunReport, PipelineError> {
     let mut voxel = RunConfig::new(config.scene.clone(), method);
@@ -232,6 +234,10 @@ pub(crate) fn run_voxel_start(
     voxel.gains = config.gains;
     voxel.memory_limit_gib = config.memory_limit_gib;
     voxel.eval_every = Some(0);
+    if let Some(report) = Some(path).filter(|_| reuse).and_then(|p| finished_start(p, &voxel)) {
+        log::info!("{}: finished earlier with these settings; read back", path.display());
+        return Ok(report);
+    }
     let dir = RunDir::create(path, crate::Overwrite::Force, Some(&scene.root))?;
     let mut inner = Session {
         on_event,
@@ -243,6 +249,17 @@ pub(crate) fn run_voxel_start(
         warnings: Vec::new(),
     };
     crate::classical::run(scene, &voxel, &dir, truth, &mut inner)
+}
+
+/// The report of the voxel start in `path` when it finished with the settings `voxel` and its
+/// volumes are all there: deterministic, a run of it again would write the same.
+fn finished_start(path: &std::path::Path, voxel: &RunConfig) -> Option<RunReport> {
+    let config: RunConfig = crate::rundir::read_json(&path.join("config.json")).ok()?;
+    let report = RunReport::read(&path.join("report.json")).ok()?;
+    let complete = report.status == crate::RunStatus::Finished
+        && !report.volumes.is_empty()
+        && report.volumes.iter().all(|v| path.join(&v.file).is_file());
+    (config == *voxel && complete).then_some(report)
 }
 
 /// Fits `field` to the reconstruction [`StartSpec`] names (running its voxel method first into
@@ -267,7 +284,9 @@ fn start_from<F: TrainableField>(
             let (method, why) = start.method.resolve(prep.noise());
             log::info!("start: {why}");
             // Its events go to the caller, who sees its progress and can stop it.
-            let report = run_voxel_start(method, scene, truth, config, held_out, budget, &path, session.on_event)?;
+            let reuse = run_dir.resuming();
+            let report =
+                run_voxel_start(method, scene, truth, config, held_out, budget, &path, reuse, session.on_event)?;
             if report.status == crate::RunStatus::Interrupted {
                 session.stopped = true;
             }

@@ -504,7 +504,9 @@ impl Ctx<'_> {
             let views = self.problem.views.iter().filter(|v| same_time(v.time, t));
             let (method, why) = start.method.resolve(fluidnerf_neural::train::median_noise(views));
             log::info!("start at t = {t}: {why}");
-            let report = run_voxel_start(method, &sub, &truth, config, held_out, budget, &path, session.on_event)?;
+            let reuse = self.dir.resuming();
+            let report =
+                run_voxel_start(method, &sub, &truth, config, held_out, budget, &path, reuse, session.on_event)?;
             log::info!(
                 "{} at t = {t}: {} iterations in {:.1} s, kept {}",
                 method,

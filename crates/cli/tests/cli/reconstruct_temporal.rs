@@ -397,7 +397,8 @@ fn time_resolved_windows_start_from_their_instants_voxel_runs() {
 
 /// Ctrl-C during a time-resolved run's start (the instants' voxel runs, or the window's fit to
 /// them) stops it at once, says that the window's field never trained, and a resume runs the
-/// start again to end where a run without a break ends. Before, the instants after the stopped
+/// start again (reading back the instants' starts that finished) to end where a run without a
+/// break ends. Before, the instants after the stopped
 /// one still ran a voxel iteration each, the fit ran all its steps (seconds) after the stop,
 /// nothing warned, and a resume trained the field fitted to the unfinished starts: another run
 /// than its `config.json` describes.
@@ -433,9 +434,12 @@ fn ctrl_c_during_a_time_resolved_start_stops_it_and_a_resume_runs_it_again() {
         "{warnings}"
     );
 
+    // The instant whose start finished is read back, not run again (its report would change).
+    let first = std::fs::read(d.join("r/start/t00/report.json")).expect("the first instant's start");
     let resumed = fluidnerf(d, &["reconstruct", "-o", "r", "--resume"]);
     ok(&resumed);
     assert!(String::from_utf8_lossy(&resumed.stderr).contains("the window starts again from its start"));
+    assert!(std::fs::read(d.join("r/start/t00/report.json")).unwrap() == first, "the finished start ran again");
     ok(&fluidnerf(d, &["reconstruct", "--config", "c/config.json", "-o", "whole", "-q"]));
     for file in ["windows/w000.safetensors", "frames/volume_002.npy"] {
         let (a, b) =
