@@ -475,8 +475,10 @@ pub enum WindowEvent<'a, F> {
 /// be built for [`plan_windows`]' window length (see [`field_for_window`]). Window times are
 /// relative to `windows.time_origin` ([`window_origin`]).
 ///
-/// `on_event` sees every iteration and every finished window; breaking stops after that
-/// iteration (the window is returned as it is, `interrupted` set) or before the next window.
+/// `on_event` sees every iteration, every finished window and every step of a fresh window's
+/// fit to `start`; breaking stops after that iteration (the window is returned as it is,
+/// `interrupted` set), before the next window, or the fit, after which the window trains one
+/// iteration and is returned stopped ([`WindowEvent::StartFit`]).
 /// Seeds: window `k` trains with `seed + k`.
 ///
 /// `resume` continues a stopped run with the same settings: its finished windows are taken as

@@ -615,8 +615,10 @@ impl Ctx<'_> {
         };
         let mut interrupted = session.stopped;
         // Whether the run was stopped before its last window's field trained: during the
-        // instants' starts or the window's fit to them ([`crate::neural::START_TAG`]).
-        let mut start_unfinished = session.stopped;
+        // window's fit to its instants' starts, or before it when a start was stopped (its first
+        // fit event then stops it; a window resumed from its checkpoint has no fit and trained
+        // before) ([`crate::neural::START_TAG`]).
+        let mut start_unfinished = false;
         let _ = session.emit(RunEvent::Started {
             method: self.method,
             max_iterations: spec.train.max_iterations,
