@@ -398,10 +398,9 @@ fn time_resolved_windows_start_from_their_instants_voxel_runs() {
 /// Ctrl-C during a time-resolved run's start (the instants' voxel runs, or the window's fit to
 /// them) stops it at once, says that the window's field never trained, and a resume runs the
 /// start again (reading back the instants' starts that finished) to end where a run without a
-/// break ends. Before, the instants after the stopped
-/// one still ran a voxel iteration each, the fit ran all its steps (seconds) after the stop,
-/// nothing warned, and a resume trained the field fitted to the unfinished starts: another run
-/// than its `config.json` describes.
+/// break ends. Before, the instants after the stopped one still ran a voxel iteration each, the
+/// fit ran all its steps (seconds) after the stop, nothing warned, and a resume trained the
+/// field fitted to the unfinished starts: another run than its `config.json` describes.
 #[test]
 fn ctrl_c_during_a_time_resolved_start_stops_it_and_a_resume_runs_it_again() {
     let tmp = tempfile::tempdir().expect("tempdir");
