@@ -546,6 +546,9 @@ impl Ctx<'_> {
             && self.dir.path(&next).is_file()
             && crate::neural::checkpoint_start_unfinished(&self.dir.path(&next))?;
         if stopped_in_start {
+            // Checked all the same: a resume continues only on the views the run started with,
+            // and the instants' starts it reads back were made from them.
+            load(progress.finished.len(), &next)?;
             log::warn!(
                 "{} was stopped during its start, before window {} trained: there is no training to continue, so \
                  the window starts again from its start",

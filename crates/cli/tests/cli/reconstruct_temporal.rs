@@ -433,6 +433,13 @@ fn ctrl_c_during_a_time_resolved_start_stops_it_and_a_resume_runs_it_again() {
         "{warnings}"
     );
 
+    // Its window is checked against the images all the same: the starts it reads back were made
+    // from them.
+    let image = d.join("scene/images/cam000_t00.png");
+    let original = std::fs::read(&image).expect("an image");
+    std::fs::copy(d.join("scene/images/cam001_t00.png"), &image).expect("copied");
+    refused(&fluidnerf(d, &["reconstruct", "-o", "r", "--resume"]), "was trained on other images or cameras");
+    std::fs::write(&image, original).expect("restored");
     // The instant whose start finished is read back, not run again (its report would change).
     let first = std::fs::read(d.join("r/start/t00/report.json")).expect("the first instant's start");
     let resumed = fluidnerf(d, &["reconstruct", "-o", "r", "--resume"]);
