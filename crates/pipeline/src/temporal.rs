@@ -542,47 +542,21 @@ impl Ctx<'_> {
             state.finished.push((load(k, &w.checkpoint)?, w.report.clone()));
         }
         let next = checkpoint_name(progress.finished.len());
-        let stopped_in_start = progress.finished.len() < progress.plan.len()
-            && self.dir.path(&next).is_file()
-            && crate::neural::checkpoint_start_unfinished(&self.dir.path(&next))?;
-        if stopped_in_start {
-            // Checked all the same: a resume continues only on the views the run started with,
-            // and the instants' starts it reads back were made from them.
-            load(progress.finished.len(), &next)?;
-            log::warn!(
-                "{} was stopped during its start, before window {} trained: there is no training to continue, so \
-                 the window starts again from its start",
-                self.dir.root().display(),
-                progress.finished.len()
-            );
-        }
-        if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() && !stopped_in_start {
+        if progress.finished.len() < progress.plan.len() && self.dir.path(&next).is_file() {
             let k = progress.finished.len();
+            // Loaded and checked in any case: a resume continues only on the views the run
+            // started with, and a window started again reads back starts made from them.
             let learner = load(k, &next)?;
-            // The running window only continues: below its checkpoint's iteration it would keep
-            // the longer training and record the lower cap in config.json, which reruns to
-            // another result (as a static run refuses it).
-            let warm = self.spec.windows.warm_start && k > 0;
-            let (cap, key) = match self.spec.windows.warm_max_iterations.filter(|_| warm) {
-                Some(m) => (m, "method.windows.warm_max_iterations"),
-                None => (self.spec.train.max_iterations, "stopping.max_iterations"),
-            };
-            if learner.iteration > cap {
-                let give = match key {
-                    "stopping.max_iterations" => format!("--max-iterations of at least {}", learner.iteration),
-                    _ => format!("{key} of at least {} in the configuration", learner.iteration),
-                };
-                return Err(PipelineError::invalid(
-                    key,
-                    format!(
-                        "{} (window {k}, still training) is at iteration {}, beyond the cap of {cap} asked for; a \
-                         resumed run only continues, so give {give} (or start afresh with --force)",
-                        self.dir.path(&next).display(),
-                        learner.iteration,
-                    ),
-                ));
+            if crate::neural::checkpoint_start_unfinished(&self.dir.path(&next))? {
+                log::warn!(
+                    "{} was stopped during its start, before window {k} trained: there is no training to continue, \
+                     so the window starts again from its start",
+                    self.dir.root().display()
+                );
+            } else {
+                Self::check_cap(self.spec, k, &learner, &self.dir.path(&next))?;
+                state.running = Some(learner);
             }
-            state.running = Some(learner);
         }
         log::info!(
             "resuming: {} of {} windows finished{}",
@@ -591,6 +565,40 @@ impl Ctx<'_> {
             state.running.as_ref().map(|l| format!(", the next at iteration {}", l.iteration)).unwrap_or_default()
         );
         Ok(state)
+    }
+
+    /// Refuses to continue window `k`'s saved `learner` (at `path`) beyond the iteration cap asked
+    /// for now.
+    fn check_cap<F: TrainableField>(
+        spec: &TemporalSpec,
+        k: usize,
+        learner: &Learner<F>,
+        path: &std::path::Path,
+    ) -> Result<(), PipelineError> {
+        // The running window only continues: below its checkpoint's iteration it would keep
+        // the longer training and record the lower cap in config.json, which reruns to
+        // another result (as a static run refuses it).
+        let warm = spec.windows.warm_start && k > 0;
+        let (cap, key) = match spec.windows.warm_max_iterations.filter(|_| warm) {
+            Some(m) => (m, "method.windows.warm_max_iterations"),
+            None => (spec.train.max_iterations, "stopping.max_iterations"),
+        };
+        if learner.iteration > cap {
+            let give = match key {
+                "stopping.max_iterations" => format!("--max-iterations of at least {}", learner.iteration),
+                _ => format!("{key} of at least {} in the configuration", learner.iteration),
+            };
+            return Err(PipelineError::invalid(
+                key,
+                format!(
+                    "{} (window {k}, still training) is at iteration {}, beyond the cap of {cap} asked for; a \
+                     resumed run only continues, so give {give} (or start afresh with --force)",
+                    path.display(),
+                    learner.iteration,
+                ),
+            ));
+        }
+        Ok(())
     }
 
     fn train_and_write<F: TrainableField + Clone + 'static>(
