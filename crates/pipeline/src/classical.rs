@@ -418,6 +418,7 @@ pub(crate) fn run(
             pixels: cameras.iter().map(|c| c.width() * c.height()).sum(),
             hull_voxels,
             memory_estimate: estimate,
+            views_fingerprint: Some(measured.fingerprint(scene)),
         }),
         neural: None,
         windows: Vec::new(),

@@ -197,6 +197,47 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
 
 impl Measured {
     /// Splits images and masks into training and held-out frames, in frame order.
+    /// A fingerprint of what a voxel run reconstructs from: the scene's box and intensity
+    /// scale, and every frame's camera, time, held-out flag, image (as preprocessed and
+    /// balanced) and mask, as 16 hex digits of a 64-bit FNV-1a hash over 32-bit words. A voxel
+    /// start records it in its report, so that a resume reads the start back only when it was
+    /// made from the views the scene holds now. Cameras enter by their `Debug` form (every
+    /// value, floats exactly): should that form change between versions, a start only runs
+    /// again.
+    pub(crate) fn fingerprint(&self, scene: &Scene) -> String {
+        struct Fnv(u64);
+        impl Fnv {
+            fn word(&mut self, w: u32) {
+                self.0 = (self.0 ^ u64::from(w)).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+            fn float(&mut self, v: f64) {
+                let bits = v.to_bits();
+                self.word(bits as u32);
+                self.word((bits >> 32) as u32);
+            }
+        }
+        let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+        for v in [scene.aabb.min.to_array(), scene.aabb.max.to_array()].concat() {
+            h.float(v);
+        }
+        h.float(scene.intensity_scale);
+        h.word(scene.frames.len() as u32);
+        for (i, frame) in scene.frames.iter().enumerate() {
+            h.word(u32::from(frame.holdout));
+            h.float(frame.time.unwrap_or(f64::NAN));
+            format!("{:?}", frame.camera).bytes().for_each(|b| h.word(u32::from(b)));
+            let image = &self.images[i];
+            h.word(image.width as u32);
+            h.word(image.height as u32);
+            image.data.iter().for_each(|v| h.word(v.to_bits()));
+            match &self.masks[i] {
+                Some(mask) => mask.iter().for_each(|&k| h.word(u32::from(k) + 1)),
+                None => h.word(0),
+            }
+        }
+        format!("{:016x}", h.0)
+    }
+
     pub(crate) fn split(&self, scene: &Scene) -> (Vec<usize>, Vec<usize>) {
         let train = scene.training_frames().map(|(i, _)| i).collect();
         let held = scene.holdout_frames().map(|(i, _)| i).collect();

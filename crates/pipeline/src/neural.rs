@@ -234,8 +234,8 @@ pub(crate) fn run_voxel_start(
     voxel.gains = config.gains;
     voxel.memory_limit_gib = config.memory_limit_gib;
     voxel.eval_every = Some(0);
-    if let Some(report) = Some(path).filter(|_| reuse).and_then(|p| finished_start(p, &voxel)) {
-        log::info!("{}: finished earlier with these settings; read back", path.display());
+    if let Some(report) = Some(path).filter(|_| reuse).and_then(|p| finished_start(p, &voxel, scene)) {
+        log::info!("{}: finished earlier with these settings and views; read back", path.display());
         return Ok(report);
     }
     let dir = RunDir::create(path, crate::Overwrite::Force, Some(&scene.root))?;
@@ -251,15 +251,27 @@ pub(crate) fn run_voxel_start(
     crate::classical::run(scene, &voxel, &dir, truth, &mut inner)
 }
 
-/// The report of the voxel start in `path` when it finished with the settings `voxel` and its
-/// volumes are all there: deterministic, a run of it again would write the same.
-fn finished_start(path: &std::path::Path, voxel: &RunConfig) -> Option<RunReport> {
+/// The report of the voxel start in `path` when it finished with the settings `voxel`, from the
+/// views `scene` holds now (its recorded fingerprint, [`crate::measured::Measured::fingerprint`])
+/// and its volumes are all there: deterministic, a run of it again would write the same. A
+/// start whose views changed (images or cameras replaced after a run was killed in its start,
+/// leaving no checkpoint to check them against) is run again.
+fn finished_start(path: &std::path::Path, voxel: &RunConfig, scene: &Scene) -> Option<RunReport> {
     let config: RunConfig = crate::rundir::read_json(&path.join("config.json")).ok()?;
     let report = RunReport::read(&path.join("report.json")).ok()?;
     let complete = report.status == crate::RunStatus::Finished
         && !report.volumes.is_empty()
         && report.volumes.iter().all(|v| path.join(&v.file).is_file());
-    (config == *voxel && complete).then_some(report)
+    if config != *voxel || !complete {
+        return None;
+    }
+    let recorded = report.classical.as_ref()?.views_fingerprint.as_deref()?;
+    let measured = crate::measured::load(scene, &voxel.gains, false).ok()?;
+    if measured.fingerprint(scene) != recorded {
+        log::warn!("{}: made from other images or cameras than the scene's now; run again", path.display());
+        return None;
+    }
+    Some(report)
 }
 
 /// Fits `field` to the reconstruction [`StartSpec`] names (running its voxel method first into

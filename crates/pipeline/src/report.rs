@@ -153,6 +153,11 @@ pub struct ClassicalDetails {
     /// Voxels the visual hull kept, when used.
     pub hull_voxels: Option<usize>,
     pub memory_estimate: MemoryEstimate,
+    /// A fingerprint of the views the run reconstructed from (`Measured::fingerprint`): a
+    /// resume reads a voxel start back only when its views are the scene's now. None: not
+    /// recorded (runs written before it was).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub views_fingerprint: Option<String>,
 }
 
 /// Details of a static neural run.

@@ -455,6 +455,49 @@ fn ctrl_c_during_a_time_resolved_start_stops_it_and_a_resume_runs_it_again() {
     assert!(!report(&d.join("r"))["warnings"].to_string().contains("before its field trained"));
 }
 
+/// A time-resolved run killed hard (SIGKILL, a power loss) during a window's starts leaves no
+/// checkpoint of that window to check the images against: its resume reads an instant's
+/// finished start back only when it was made from the images and cameras the scene holds now.
+/// Before, a check of the start's settings alone let a resume on changed images fit the window
+/// to a start made from the old ones.
+#[test]
+fn a_resume_after_a_hard_kill_runs_a_start_again_whose_images_changed() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth =
+        "synth -q --preset jet-tr60 --cameras 4 --pixels 24 --resolution 12 --model pinhole --times 14,15,16,17 -o scene";
+    ok(&fluidnerf(d, &synth.split_whitespace().collect::<Vec<_>>()));
+    // Two windows of two instants, each started from its instants' ASART runs, with a short fit.
+    let line = "reconstruct scene -o c --method tr-fast --window 2 --overlap 0 --start-method asart --resolution 32 \
+                --max-iterations 4 -q";
+    let out = interrupted_once_made(d, &line.split_whitespace().collect::<Vec<_>>(), "c/config.json");
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    edit_json(&d.join("c/config.json"), |c| c["method"]["start"]["fit"]["iterations"] = serde_json::json!(20));
+    // Killed once the second window's first instant's start has finished.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args(["reconstruct", "--config", "c/config.json", "-o", "r", "-q"])
+        .spawn()
+        .expect("starts");
+    let started = std::time::Instant::now();
+    while !d.join("r/start/t02/report.json").exists() {
+        assert!(started.elapsed().as_secs() < 60, "the third instant's start did not finish");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let killed = std::process::Command::new("kill").args(["-KILL", &child.id().to_string()]).status().expect("kill");
+    assert!(killed.success());
+    child.wait().expect("waits");
+    assert!(!d.join("r/windows/w001.safetensors").exists(), "the second window trained before the kill");
+    let first = std::fs::read(d.join("r/start/t02/report.json")).expect("the start's report");
+    // One image of that instant replaced by another camera's: its start runs again.
+    std::fs::copy(d.join("scene/images/cam001_t02.png"), d.join("scene/images/cam000_t02.png")).expect("copied");
+    let resumed = fluidnerf(d, &["reconstruct", "-o", "r", "--resume"]);
+    ok(&resumed);
+    let said = String::from_utf8_lossy(&resumed.stderr);
+    assert!(said.contains("made from other images or cameras than the scene's now; run again"), "{said}");
+    assert!(std::fs::read(d.join("r/start/t02/report.json")).unwrap() != first, "the old start was read back");
+}
+
 /// A run stopped inside its first window writes the frames that window trained and no others:
 /// the report lists the instants it did not reach (a held-out time among them), `volumes.pvd`
 /// only the frames written, and `export`, `render` and `eval` at an instant it did not reach
