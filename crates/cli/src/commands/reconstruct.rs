@@ -439,6 +439,12 @@ pub struct NeuralArgs {
     /// noise on to the field.
     #[arg(long, value_name = "METHOD", value_parser = parse_start_method)]
     pub start_method: Option<StartMethod>,
+    /// Adam steps of the field's fit to its start (--method hybrid, --start-from,
+    /// --start-method; `method.start.fit.iterations`) [default: 300]: fewer for a quick look
+    /// (the fit costs about as much per step at any grid size), more when the field should
+    /// follow the start more closely before it trains on the images.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=fluidnerf_core::MAX_ITERATIONS as u64))]
+    pub start_fit_steps: Option<u64>,
 }
 
 /// Options of the time-resolved methods.
@@ -535,7 +541,10 @@ fn check_applicable(args: &Args, method: Method) -> anyhow::Result<()> {
         wrong.extend(given(&[("--gain-rounds", args.gains.gain_rounds.is_some())]));
     }
     if family == Family::Classical {
-        wrong.extend(given(&[("--start-method", n.start_method.is_some())]));
+        wrong.extend(given(&[
+            ("--start-method", n.start_method.is_some()),
+            ("--start-fit-steps", n.start_fit_steps.is_some()),
+        ]));
     }
     if family != Family::Temporal {
         wrong.extend(given(&[
@@ -1029,6 +1038,20 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
             MethodConfig::Classical(_) => unreachable!("refused above"),
         };
         start.method = m;
+    }
+    if let Some(steps) = n.start_fit_steps {
+        let start = match method {
+            MethodConfig::Neural(_, spec) => spec.start.as_mut(),
+            MethodConfig::Temporal(_, spec) => spec.start.as_mut(),
+            MethodConfig::Classical(_) => unreachable!("refused above"),
+        };
+        let Some(start) = start else {
+            bail!(
+                "--start-fit-steps: the run has no start to fit the field to (give --start-from or --start-method, \
+                 or use --method hybrid)"
+            );
+        };
+        start.fit.iterations = steps as usize;
     }
     let t = &args.temporal;
     if let MethodConfig::Temporal(_, spec) = method {

@@ -18,7 +18,8 @@ fn a_resumed_run_continues_the_run_it_holds() {
     demo_scene(d, "ball", 5, 24, 16, &["--holdout", "1"]);
     let run = |out: &str, iterations: &str, extra: &[&str]| {
         let mut args = vec!["reconstruct", "scene", "-o", out, "--method", "hybrid", "--resolution", "16"];
-        args.extend(["--max-iterations", iterations, "--stop", "budget", "--rays-per-image", "128", "-q"]);
+        args.extend(["--max-iterations", iterations, "--stop", "budget", "--rays-per-image", "128"]);
+        args.extend(["--start-fit-steps", "20", "-q"]);
         args.extend_from_slice(extra);
         fluidnerf(d, &args)
     };
@@ -475,11 +476,26 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
     std::fs::create_dir(&noisy).expect("mkdir");
     demo_scene(&noisy, "blobs", 8, 32, 16, &["--noise", "0.05"]);
     let run_noisy = |args: &str| ok(&fluidnerf(&noisy, &args.split_whitespace().collect::<Vec<_>>()));
-    run_noisy("reconstruct scene -o h --method hybrid --resolution 16 --max-iterations 2 -q");
+    // (Short fits to the start: only the start is checked.)
+    run_noisy("reconstruct scene -o h --method hybrid --resolution 16 --max-iterations 2 --start-fit-steps 20 -q");
     assert_eq!(report(&noisy.join("h/start"))["method"], "tv");
-    run_noisy("reconstruct scene -o m --method hybrid --start-method mlem --resolution 16 --max-iterations 2 -q");
+    run_noisy(
+        "reconstruct scene -o m --method hybrid --start-method mlem --resolution 16 --max-iterations 2 \
+         --start-fit-steps 20 -q",
+    );
     assert_eq!(report(&noisy.join("m/start"))["method"], "mlem");
     assert_eq!(json(&noisy.join("m/config.json"))["method"]["start"]["method"], "mlem");
+    assert_eq!(json(&noisy.join("m/config.json"))["method"]["start"]["fit"]["iterations"], 20);
+    // The fit's steps are for runs with a start, and at least one.
+    for (args, says) in [
+        ("--method fast --start-fit-steps 20", "--start-fit-steps: the run has no start to fit the field to"),
+        ("--method asart --start-fit-steps 20", "--start-fit-steps"),
+        ("--method hybrid --start-fit-steps 0", "--start-fit-steps"),
+    ] {
+        let line = format!("reconstruct scene -o x {args}");
+        refused(&fluidnerf(d, &line.split_whitespace().collect::<Vec<_>>()), says);
+        assert!(!d.join("x").exists(), "{args}: left an output folder");
+    }
     refused(
         &fluidnerf(d, &["reconstruct", "scene", "-o", "x", "--method", "hybrid", "--start-method", "fast"]),
         "not a voxel method",
@@ -495,7 +511,7 @@ fn hybrid_starts_the_field_from_its_own_voxel_run() {
 }
 
 /// Ctrl-C during the hybrid's voxel start stops the start, and the run after it, at once. The
-/// start's events were dropped, so it ran all its iterations (250 here, seconds at 96³) with no
+/// start's events were dropped, so it ran all its iterations (up to 250, seconds at 48³) with no
 /// progress shown and only then did the run stop.
 ///
 /// The run's volume is then of a field that never trained, and the report says so. A resume
@@ -507,7 +523,19 @@ fn ctrl_c_during_the_hybrids_voxel_start_stops_the_start() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "blobs", 8, 32, 16, &[]);
-    let args = ["reconstruct", "scene", "-o", "h", "--resolution", "96", "--max-iterations", "3", "-q"];
+    let args = [
+        "reconstruct",
+        "scene",
+        "-o",
+        "h",
+        "--resolution",
+        "48",
+        "--max-iterations",
+        "3",
+        "--start-fit-steps",
+        "20",
+        "-q",
+    ];
     let out = interrupted_once_made(d, &args, "h/start");
     assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
     let start = report(&d.join("h/start"));

@@ -206,7 +206,8 @@ fn a_preset_given_with_a_config_keeps_the_configured_start() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "ball", 4, 16, 8, &[]);
-    let tiny = ["--resolution", "8", "--max-iterations", "2", "--rays-per-image", "16", "-q"];
+    let tiny =
+        ["--resolution", "8", "--max-iterations", "2", "--rays-per-image", "16", "--start-fit-steps", "20", "-q"];
     let mut first = vec!["reconstruct", "scene", "-o", "a", "--method", "hybrid", "--start-method", "sart"];
     first.extend(tiny);
     ok(&fluidnerf(d, &first));
@@ -281,7 +282,8 @@ fn a_start_from_a_run_replaces_a_configured_start_method() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "ball", 4, 16, 8, &[]);
-    let tiny = ["--resolution", "8", "--max-iterations", "2", "--rays-per-image", "16", "-q"];
+    let tiny =
+        ["--resolution", "8", "--max-iterations", "2", "--rays-per-image", "16", "--start-fit-steps", "20", "-q"];
     ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "s", "--method", "sart", "--resolution", "8", "-q"]));
     let hybrid = ["reconstruct", "scene", "-o", "h", "--method", "hybrid", "--start-method", "sart"];
     ok(&fluidnerf(d, &[&hybrid[..], &tiny].concat()));
