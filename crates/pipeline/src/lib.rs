@@ -495,7 +495,6 @@ pub(crate) fn peak_rss() -> Option<u64> {
     proc_bytes("/proc/self/status", "VmHWM:")
 }
 
-/// Writes a volume as `.npy` and `.vti` under `stem` (relative to the run folder).
 /// A digest of a volume's values: FNV-1a (64 bits) over their f32 bit patterns and its grid, as
 /// 16 hex digits. It tells the volumes of one run apart (a frame's from another frame's); it is
 /// no protection against a file forged on purpose.
