@@ -57,6 +57,18 @@ pub fn demo_scene(dir: &Path, phantom: &str, cameras: u32, pixels: u32, resoluti
 /// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` (a path under `dir`) and half
 /// a second more, interrupts it as Ctrl-C does (SIGINT), and returns its output.
 pub fn interrupted_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
+    signalled_once_made(dir, args, made, "-INT", 500)
+}
+
+/// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` (a path under `dir`) and kills
+/// it at once as a power loss would (SIGKILL: no handler runs), and returns its output.
+pub fn killed_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
+    signalled_once_made(dir, args, made, "-KILL", 0)
+}
+
+/// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` and `after_ms` more, sends it
+/// `signal` (an option of `kill`), and returns its output.
+fn signalled_once_made(dir: &Path, args: &[&str], made: &str, signal: &str, after_ms: u64) -> Output {
     let child = Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
         .current_dir(dir)
         .args(args)
@@ -67,10 +79,10 @@ pub fn interrupted_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
     let start = std::time::Instant::now();
     while !dir.join(made).exists() {
         assert!(start.elapsed().as_secs() < 60, "{args:?} did not make {made}");
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::thread::sleep(std::time::Duration::from_millis(if after_ms == 0 { 5 } else { 20 }));
     }
-    std::thread::sleep(std::time::Duration::from_millis(500));
-    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill");
+    std::thread::sleep(std::time::Duration::from_millis(after_ms));
+    let killed = Command::new("kill").args([signal, &child.id().to_string()]).status().expect("kill");
     assert!(killed.success());
     child.wait_with_output().expect("waits")
 }

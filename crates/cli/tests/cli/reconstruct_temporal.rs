@@ -475,19 +475,9 @@ fn a_resume_after_a_hard_kill_runs_a_start_again_whose_images_changed() {
     assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
     edit_json(&d.join("c/config.json"), |c| c["method"]["start"]["fit"]["iterations"] = serde_json::json!(20));
     // Killed once the second window's first instant's start has finished.
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
-        .current_dir(d)
-        .args(["reconstruct", "--config", "c/config.json", "-o", "r", "-q"])
-        .spawn()
-        .expect("starts");
-    let started = std::time::Instant::now();
-    while !d.join("r/start/t02/report.json").exists() {
-        assert!(started.elapsed().as_secs() < 60, "the third instant's start did not finish");
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let killed = std::process::Command::new("kill").args(["-KILL", &child.id().to_string()]).status().expect("kill");
-    assert!(killed.success());
-    child.wait().expect("waits");
+    let args = ["reconstruct", "--config", "c/config.json", "-o", "r", "-q"];
+    let out = killed_once_made(d, &args, "r/start/t02/report.json");
+    assert_eq!(std::os::unix::process::ExitStatusExt::signal(&out.status), Some(9), "not killed");
     assert!(!d.join("r/windows/w001.safetensors").exists(), "the second window trained before the kill");
     let first = std::fs::read(d.join("r/start/t02/report.json")).expect("the start's report");
     // One image of that instant replaced by another camera's: its start runs again.
