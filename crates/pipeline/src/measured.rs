@@ -196,7 +196,6 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
 }
 
 impl Measured {
-    /// Splits images and masks into training and held-out frames, in frame order.
     /// A fingerprint of what a voxel run reconstructs from: the scene's box and intensity
     /// scale, and every frame's camera, time, held-out flag, image (as preprocessed and
     /// balanced) and mask, as 16 hex digits of a 64-bit FNV-1a hash over 32-bit words. A voxel
@@ -238,6 +237,7 @@ impl Measured {
         format!("{:016x}", h.0)
     }
 
+    /// Splits images and masks into training and held-out frames, in frame order.
     pub(crate) fn split(&self, scene: &Scene) -> (Vec<usize>, Vec<usize>) {
         let train = scene.training_frames().map(|(i, _)| i).collect();
         let held = scene.holdout_frames().map(|(i, _)| i).collect();
