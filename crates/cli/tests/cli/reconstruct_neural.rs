@@ -569,7 +569,7 @@ fn ctrl_c_during_the_fit_to_the_start_stops_the_run() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "blobs", 4, 16, 8, &[]);
-    let args = "reconstruct scene -o h0 --method hybrid --resolution 8 --max-iterations 2 -q";
+    let args = "reconstruct scene -o h0 --method hybrid --resolution 8 --max-iterations 2 --start-fit-steps 20 -q";
     ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
     edit_json(&d.join("h0/config.json"), |c| c["method"]["start"]["fit"]["iterations"] = serde_json::json!(4000));
     let started = std::time::Instant::now();
@@ -593,7 +593,7 @@ fn the_hybrids_fit_to_its_start_ends_with_the_time_budget() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     demo_scene(d, "blobs", 4, 16, 8, &[]);
-    let args = "reconstruct scene -o h --method hybrid --resolution 8 --max-iterations 2 -q";
+    let args = "reconstruct scene -o h --method hybrid --resolution 8 --max-iterations 2 --start-fit-steps 20 -q";
     ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
     edit_json(&d.join("h/config.json"), |c| {
         c["method"]["start"]["fit"]["iterations"] = serde_json::json!(5000);
