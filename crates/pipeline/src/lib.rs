@@ -499,10 +499,38 @@ pub(crate) fn peak_rss() -> Option<u64> {
 /// 16 hex digits. It tells the volumes of one run apart (a frame's from another frame's); it is
 /// no protection against a file forged on purpose.
 pub fn volume_digest(volume: &Volume) -> String {
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-    let words = volume.dims.iter().map(|&n| n as u32).chain(volume.data.iter().map(|v| v.to_bits()));
-    let hash = words.fold(0xcbf2_9ce4_8422_2325u64, |h, w| (h ^ u64::from(w)).wrapping_mul(PRIME));
-    format!("{hash:016x}")
+    let mut h = Fnv::default();
+    volume.dims.iter().for_each(|&n| h.word(n as u32));
+    volume.data.iter().for_each(|v| h.word(v.to_bits()));
+    h.hex()
+}
+
+/// FNV-1a (64 bits) over 32-bit words, for the digests and fingerprints runs record
+/// ([`volume_digest`], `Measured::fingerprint`).
+pub(crate) struct Fnv(u64);
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv {
+    pub(crate) fn word(&mut self, w: u32) {
+        self.0 = (self.0 ^ u64::from(w)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+
+    /// A 64-bit value as two words, low then high.
+    pub(crate) fn float(&mut self, v: f64) {
+        let bits = v.to_bits();
+        self.word(bits as u32);
+        self.word((bits >> 32) as u32);
+    }
+
+    /// The hash as 16 hex digits.
+    pub(crate) fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
 }
 
 /// Below this fraction of the brightest training pixel, the most a volume could render is
@@ -606,6 +634,16 @@ pub(crate) fn mean(values: impl IntoIterator<Item = f64>) -> Option<f64> {
 mod tests {
     use super::*;
     use std::time::Duration;
+
+    /// Reports hold volume digests, so their values must not change: FNV-1a over the words
+    /// 2, 1, 1, bits(0.0), bits(1.0), as a few lines of Python compute it (offset basis
+    /// 0xcbf29ce484222325, prime 0x100000001b3, `h = ((h ^ w) * prime) mod 2⁶⁴` per word).
+    #[test]
+    fn a_volumes_digest_is_fnv1a_over_its_dims_and_values() {
+        let aabb = fluidnerf_core::Aabb::cube(fluidnerf_core::glam::DVec3::ZERO, 1.0);
+        let volume = Volume { dims: [2, 1, 1], aabb, data: vec![0.0, 1.0] };
+        assert_eq!(volume_digest(&volume), "e6c8e580b6fd002f");
+    }
 
     /// [`testing::small_scene`] written into `scene/` of a new temporary folder, and loaded.
     fn small_scene_loaded() -> (tempfile::TempDir, std::path::PathBuf, Scene) {

@@ -204,18 +204,7 @@ impl Measured {
     /// value, floats exactly): should that form change between versions, a start only runs
     /// again.
     pub(crate) fn fingerprint(&self, scene: &Scene) -> String {
-        struct Fnv(u64);
-        impl Fnv {
-            fn word(&mut self, w: u32) {
-                self.0 = (self.0 ^ u64::from(w)).wrapping_mul(0x0000_0100_0000_01b3);
-            }
-            fn float(&mut self, v: f64) {
-                let bits = v.to_bits();
-                self.word(bits as u32);
-                self.word((bits >> 32) as u32);
-            }
-        }
-        let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+        let mut h = crate::Fnv::default();
         for v in [scene.aabb.min.to_array(), scene.aabb.max.to_array()].concat() {
             h.float(v);
         }
@@ -234,7 +223,7 @@ impl Measured {
                 None => h.word(0),
             }
         }
-        format!("{:016x}", h.0)
+        h.hex()
     }
 
     /// Splits images and masks into training and held-out frames, in frame order.

@@ -871,17 +871,8 @@ pub(crate) fn write_checkpoint<F: TrainableField>(
     views: &str,
     start_unfinished: bool,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let mut tags = vec![
-        (BOX_TAG, box_tag(aabb)),
-        (FIELD_TAG, field_tag(field)?),
-        (SETTINGS_TAG, settings.to_string()),
-        (VIEWS_TAG, views.to_string()),
-    ];
-    if start_unfinished {
-        tags.push((START_TAG, START_UNFINISHED.to_string()));
-    }
-    let bytes = fluidnerf_neural::weights::checkpoint_bytes_tagged(learner, &tags)?;
-    dir.write_bytes("checkpoint.safetensors", &bytes)
+    let tags = vec![(BOX_TAG, box_tag(aabb)), (FIELD_TAG, field_tag(field)?), (SETTINGS_TAG, settings.to_string())];
+    write_tagged(dir, "checkpoint.safetensors", learner, tags, views, start_unfinished)
 }
 
 /// Refuses to continue a checkpoint trained in another box than the scene's now, as another
@@ -976,7 +967,20 @@ pub(crate) fn write_checkpoint_to<F: TrainableField>(
     views: &str,
     start_unfinished: bool,
 ) -> Result<std::path::PathBuf, PipelineError> {
-    let mut tags = vec![(VIEWS_TAG, views.to_string())];
+    write_tagged(dir, name, learner, Vec::new(), views, start_unfinished)
+}
+
+/// Writes the checkpoint `name` with the tags `tags`, then the views' fingerprint and, when
+/// `start_unfinished`, [`START_TAG`]: what every checkpoint records, static or a window's.
+fn write_tagged<F: TrainableField>(
+    dir: &RunDir,
+    name: &str,
+    learner: &Learner<F>,
+    mut tags: Vec<(&str, String)>,
+    views: &str,
+    start_unfinished: bool,
+) -> Result<std::path::PathBuf, PipelineError> {
+    tags.push((VIEWS_TAG, views.to_string()));
     if start_unfinished {
         tags.push((START_TAG, START_UNFINISHED.to_string()));
     }

@@ -86,3 +86,12 @@ fn signalled_once_made(dir: &Path, args: &[&str], made: &str, signal: &str, afte
     assert!(killed.success());
     child.wait_with_output().expect("waits")
 }
+
+/// Asserts that each of `files` is byte for byte the same in the run folders `run` and `whole`
+/// (a run resumed after a break, and the same run without one).
+pub fn same_files(run: &Path, whole: &Path, files: &[&str]) {
+    for file in files {
+        let (a, b) = (std::fs::read(run.join(file)).expect("read"), std::fs::read(whole.join(file)).expect("read"));
+        assert!(a == b, "{file} differs from the run without a break");
+    }
+}

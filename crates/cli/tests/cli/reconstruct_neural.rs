@@ -553,11 +553,7 @@ fn ctrl_c_during_the_hybrids_voxel_start_stops_the_start() {
     let mut whole = args.to_vec();
     whole[3] = "whole";
     ok(&fluidnerf(d, &whole));
-    for file in ["volume.npy", "weights.safetensors"] {
-        let (a, b) =
-            (std::fs::read(d.join("h").join(file)).unwrap(), std::fs::read(d.join("whole").join(file)).unwrap());
-        assert!(a == b, "{file} differs from the run without a break");
-    }
+    same_files(&d.join("h"), &d.join("whole"), &["volume.npy", "weights.safetensors"]);
     assert!(!report(&d.join("h"))["warnings"].to_string().contains("before it trained"));
 }
 

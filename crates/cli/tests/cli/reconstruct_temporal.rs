@@ -448,11 +448,7 @@ fn ctrl_c_during_a_time_resolved_start_stops_it_and_a_resume_runs_it_again() {
     assert!(String::from_utf8_lossy(&resumed.stderr).contains("the window starts again from its start"));
     assert!(std::fs::read(d.join("r/start/t00/report.json")).unwrap() == first, "the finished start ran again");
     ok(&fluidnerf(d, &["reconstruct", "--config", "c/config.json", "-o", "whole", "-q"]));
-    for file in ["windows/w000.safetensors", "frames/volume_002.npy"] {
-        let (a, b) =
-            (std::fs::read(d.join("r").join(file)).unwrap(), std::fs::read(d.join("whole").join(file)).unwrap());
-        assert!(a == b, "{file} differs from the run without a break");
-    }
+    same_files(&d.join("r"), &d.join("whole"), &["windows/w000.safetensors", "frames/volume_002.npy"]);
     assert!(!report(&d.join("r"))["warnings"].to_string().contains("before its field trained"));
 }
 
