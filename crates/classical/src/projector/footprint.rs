@@ -1618,10 +1618,20 @@ impl FootprintProjector {
                         let wc = _mm256_loadu_ps(ch.wu_lanes[c].as_ptr().add(h));
                         sum = _mm256_add_ps(sum, _mm256_mul_ps(acc, wc));
                     }
-                    // out += amp · sum for the voxels that hit, inside the row.
-                    let dst = out[first + h..].as_mut_ptr();
-                    let prev = _mm256_maskload_ps(dst, keep);
-                    _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, sum)));
+                    // dst += v for the voxels that hit, inside the row: with a plain load and
+                    // store (the misses written back as they were) when all eight lanes lie
+                    // inside it, as masked stores are slow on AMD's cores.
+                    let keep_ps = _mm256_castsi256_ps(keep);
+                    let add_to = |dst: *mut f32, v: __m256| {
+                        if valid - h >= LANES {
+                            let prev = _mm256_loadu_ps(dst);
+                            _mm256_storeu_ps(dst, _mm256_blendv_ps(prev, _mm256_add_ps(prev, v), keep_ps));
+                        } else {
+                            let prev = _mm256_maskload_ps(dst, keep);
+                            _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, v));
+                        }
+                    };
+                    add_to(out[first + h..].as_mut_ptr(), _mm256_mul_ps(amp, sum));
                     if let Some(cs) = col_sums.as_deref_mut() {
                         // cs += amp · (Σ_c wu · col_mask) · (Σ_r wv · row_mask); a miss reads the
                         // masks from index 0 onwards (c0 + N ≤ padded width for a hit).
@@ -1640,9 +1650,7 @@ impl FootprintProjector {
                             );
                             sv = _mm256_add_ps(sv, _mm256_mul_ps(_mm256_loadu_ps(ch.wv_lanes[r].as_ptr().add(h)), m));
                         }
-                        let dst = cs[first + h..].as_mut_ptr();
-                        let prev = _mm256_maskload_ps(dst, keep);
-                        _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(_mm256_mul_ps(amp, su), sv)));
+                        add_to(cs[first + h..].as_mut_ptr(), _mm256_mul_ps(_mm256_mul_ps(amp, su), sv));
                     }
                 }
             }
@@ -2159,8 +2167,12 @@ impl FootprintProjector {
     }
 
     /// The per-voxel part of [`Self::gather_rows`] for one chunk with AVX2, eight voxels at a
-    /// time: each weight's pixels gathered from the summed line. The arithmetic and its order
-    /// are the scalar loop's.
+    /// time. When the eight read within a window of 8 (or 16) pixels, as they do wherever a
+    /// voxel images at a pixel or two, each weight's pixels come from the summed line by one
+    /// (or two) permutations of a window that moves with the weight; else they are gathered.
+    /// Full halves of a chunk are read and written with plain loads and stores (the lanes that
+    /// miss written back as they were), since masked stores are slow on AMD's cores. The
+    /// arithmetic and its order are the scalar loop's.
     ///
     /// # Safety
     /// The CPU must support AVX2; every hit's first pixel plus `n_l` lies inside `acc` and
@@ -2178,14 +2190,15 @@ impl FootprintProjector {
         use std::arch::x86_64::*;
         const { assert!(CHUNK == 16) };
         let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let len = acc.len().min(m_along.len());
         for h in 0..2 {
             let q0 = 8 * h;
             if q0 >= valid {
                 break;
             }
-            // SAFETY: the chunk's arrays hold 16 entries; gathers read only the lanes that hit
-            // (whose pixels lie inside the buffers), and the masked loads and stores only the
-            // `valid` entries from `first`.
+            // SAFETY: the chunk's arrays hold 16 entries; windows are read only when they lie
+            // inside both buffers (checked), gathers only at the lanes that hit (whose pixels
+            // lie inside the buffers), and the stores only the `valid` entries from `first`.
             unsafe {
                 let f = _mm256_loadu_ps(mv.first.as_ptr().add(q0));
                 let inside = _mm256_cmpgt_epi32(_mm256_set1_epi32((valid - q0) as i32), lane);
@@ -2196,26 +2209,69 @@ impl FootprintProjector {
                 }
                 let fi = _mm256_and_si256(_mm256_cvttps_epi32(f), keep);
                 let keep_ps = _mm256_castsi256_ps(keep);
+                // The least first pixel of the hits, and each hit's offset from it.
+                let m = _mm256_blendv_epi8(_mm256_set1_epi32(i32::MAX), fi, keep);
+                let m = _mm256_min_epi32(m, _mm256_permute2x128_si256::<1>(m, m));
+                let m = _mm256_min_epi32(m, _mm256_shuffle_epi32::<0b0100_1110>(m));
+                let m = _mm256_min_epi32(m, _mm256_shuffle_epi32::<0b1011_0001>(m));
+                let lo = _mm256_cvtsi256_si32(m) as usize;
+                let off = _mm256_and_si256(_mm256_sub_epi32(fi, _mm256_set1_epi32(lo as i32)), keep);
+                let past = |w: i32| _mm256_testz_si256(_mm256_cmpgt_epi32(off, _mm256_set1_epi32(w)), keep) == 0;
+                let window = if past(7) || lo + n_l + 8 > len {
+                    if past(15) || lo + n_l + 16 > len {
+                        0
+                    } else {
+                        16
+                    }
+                } else {
+                    8
+                };
+                let upper = _mm256_castsi256_ps(_mm256_cmpgt_epi32(off, _mm256_set1_epi32(7)));
                 let dot = |p: *const f32| {
                     let mut sum = _mm256_setzero_ps();
-                    for (l, w) in mv.w[..n_l].iter().enumerate() {
-                        let idx = _mm256_add_epi32(fi, _mm256_set1_epi32(l as i32));
-                        let g = _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), p, idx, keep_ps);
-                        sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_loadu_ps(w.as_ptr().add(q0)), g));
+                    let ws = mv.w[..n_l].iter().enumerate();
+                    match window {
+                        8 => {
+                            for (l, w) in ws {
+                                let g = _mm256_permutevar8x32_ps(_mm256_loadu_ps(p.add(lo + l)), off);
+                                sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_loadu_ps(w.as_ptr().add(q0)), g));
+                            }
+                        }
+                        16 => {
+                            for (l, w) in ws {
+                                let a = _mm256_permutevar8x32_ps(_mm256_loadu_ps(p.add(lo + l)), off);
+                                let b = _mm256_permutevar8x32_ps(_mm256_loadu_ps(p.add(lo + l + 8)), off);
+                                let g = _mm256_blendv_ps(a, b, upper);
+                                sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_loadu_ps(w.as_ptr().add(q0)), g));
+                            }
+                        }
+                        _ => {
+                            for (l, w) in ws {
+                                let idx = _mm256_add_epi32(fi, _mm256_set1_epi32(l as i32));
+                                let g = _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), p, idx, keep_ps);
+                                sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_loadu_ps(w.as_ptr().add(q0)), g));
+                            }
+                        }
                     }
                     sum
                 };
+                // Adds `v` to the hits' entries of `dst` (eight from `first + q0`).
+                let add_to = |dst: *mut f32, v: __m256| {
+                    if valid - q0 >= 8 {
+                        let prev = _mm256_loadu_ps(dst);
+                        _mm256_storeu_ps(dst, _mm256_blendv_ps(prev, _mm256_add_ps(prev, v), keep_ps));
+                    } else {
+                        let prev = _mm256_maskload_ps(dst, keep);
+                        _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, v));
+                    }
+                };
                 let amp = _mm256_loadu_ps(mv.amp.as_ptr().add(q0));
-                let dst = out.as_mut_ptr().add(first + q0);
-                let prev = _mm256_maskload_ps(dst, keep);
-                _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(amp, dot(acc.as_ptr()))));
+                add_to(out.as_mut_ptr().add(first + q0), _mm256_mul_ps(amp, dot(acc.as_ptr())));
                 if let Some(cs) = col_sums.as_deref_mut() {
                     let m_l = dot(m_along.as_ptr());
                     let m_s = _mm256_set1_ps(m_s);
                     let (su, sv) = if SHARED_V { (m_l, m_s) } else { (m_s, m_l) };
-                    let dst = cs.as_mut_ptr().add(first + q0);
-                    let prev = _mm256_maskload_ps(dst, keep);
-                    _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, _mm256_mul_ps(_mm256_mul_ps(amp, su), sv)));
+                    add_to(cs.as_mut_ptr().add(first + q0), _mm256_mul_ps(_mm256_mul_ps(amp, su), sv));
                 }
             }
         }
