@@ -510,6 +510,31 @@ fn chunk_values(x: &[f32], at: usize, valid: usize) -> [f32; CHUNK] {
     g
 }
 
+/// `dst[i] += v[i]` for the lanes of `keep` (all bits set or none) among eight entries from
+/// `dst`, with AVX2. When all eight lie inside the caller's range (`full`), with a plain load,
+/// blend and store (the other lanes written back as they were), as masked stores are slow on
+/// AMD's cores; else with masked ones.
+///
+/// # Safety
+/// The CPU must support AVX2; the eight entries from `dst` (only the `keep` lanes unless
+/// `full`) are valid and no other thread writes them.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn add_kept8(dst: *mut f32, v: std::arch::x86_64::__m256, keep: std::arch::x86_64::__m256i, full: bool) {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller's contract above.
+    unsafe {
+        if full {
+            let prev = _mm256_loadu_ps(dst);
+            _mm256_storeu_ps(dst, _mm256_blendv_ps(prev, _mm256_add_ps(prev, v), _mm256_castsi256_ps(keep)));
+        } else {
+            let prev = _mm256_maskload_ps(dst, keep);
+            _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, v));
+        }
+    }
+}
+
 /// Adds each voxel's weights times its value to its line of the forward projection's summed
 /// lines ([`FootprintProjector::scatter_shared`]): `w[l][q] · values[q]` to `acc[at[q] + l]`
 /// for `l < N`, skipping voxels of value zero. With SSE (every x86-64 CPU) and sides of a
@@ -1621,16 +1646,7 @@ impl FootprintProjector {
                     // dst += v for the voxels that hit, inside the row: with a plain load and
                     // store (the misses written back as they were) when all eight lanes lie
                     // inside it, as masked stores are slow on AMD's cores.
-                    let keep_ps = _mm256_castsi256_ps(keep);
-                    let add_to = |dst: *mut f32, v: __m256| {
-                        if valid - h >= LANES {
-                            let prev = _mm256_loadu_ps(dst);
-                            _mm256_storeu_ps(dst, _mm256_blendv_ps(prev, _mm256_add_ps(prev, v), keep_ps));
-                        } else {
-                            let prev = _mm256_maskload_ps(dst, keep);
-                            _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, v));
-                        }
-                    };
+                    let add_to = |dst: *mut f32, v: __m256| add_kept8(dst, v, keep, valid - h >= LANES);
                     add_to(out[first + h..].as_mut_ptr(), _mm256_mul_ps(amp, sum));
                     if let Some(cs) = col_sums.as_deref_mut() {
                         // cs += amp · (Σ_c wu · col_mask) · (Σ_r wv · row_mask); a miss reads the
@@ -2256,15 +2272,7 @@ impl FootprintProjector {
                     sum
                 };
                 // Adds `v` to the hits' entries of `dst` (eight from `first + q0`).
-                let add_to = |dst: *mut f32, v: __m256| {
-                    if valid - q0 >= 8 {
-                        let prev = _mm256_loadu_ps(dst);
-                        _mm256_storeu_ps(dst, _mm256_blendv_ps(prev, _mm256_add_ps(prev, v), keep_ps));
-                    } else {
-                        let prev = _mm256_maskload_ps(dst, keep);
-                        _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, v));
-                    }
-                };
+                let add_to = |dst: *mut f32, v: __m256| add_kept8(dst, v, keep, valid - q0 >= 8);
                 let amp = _mm256_loadu_ps(mv.amp.as_ptr().add(q0));
                 add_to(out.as_mut_ptr().add(first + q0), _mm256_mul_ps(amp, dot(acc.as_ptr())));
                 if let Some(cs) = col_sums.as_deref_mut() {
