@@ -512,7 +512,7 @@ fn chunk_values(x: &[f32], at: usize, valid: usize) -> [f32; CHUNK] {
 
 /// `dst[i] += v[i]` for the lanes of `keep` (all bits set or none) among eight entries from
 /// `dst`, with AVX2. When all eight lie inside the caller's range (`full`), with a plain load,
-/// blend and store (the other lanes written back as they were), as masked stores are slow on
+/// add and store (the other lanes written back as they were), as masked stores are slow on
 /// AMD's cores; else with masked ones.
 ///
 /// # Safety
@@ -526,8 +526,11 @@ unsafe fn add_kept8(dst: *mut f32, v: std::arch::x86_64::__m256, keep: std::arch
     // SAFETY: the caller's contract above.
     unsafe {
         if full {
-            let prev = _mm256_loadu_ps(dst);
-            _mm256_storeu_ps(dst, _mm256_blendv_ps(prev, _mm256_add_ps(prev, v), _mm256_castsi256_ps(keep)));
+            // The other lanes add −0, which leaves every value as it was, bit for bit. A blend
+            // of the sum with the loaded values would be the same, but the compiler turns a
+            // store of such a blend back into a masked store.
+            let v = _mm256_blendv_ps(_mm256_set1_ps(-0.0), v, _mm256_castsi256_ps(keep));
+            _mm256_storeu_ps(dst, _mm256_add_ps(_mm256_loadu_ps(dst), v));
         } else {
             let prev = _mm256_maskload_ps(dst, keep);
             _mm256_maskstore_ps(dst, keep, _mm256_add_ps(prev, v));
