@@ -192,6 +192,28 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -
         "tif" | "tiff" => fluidnerf_io::volume::read_tiff_stack(path, aabb, unit),
         // A path that names nothing (a typo, a run folder not made yet) is not a format problem.
         _ if !path.exists() => bail!("{}: no such file or directory", path.display()),
+        // A folder (a synthetic scene's `truth/`, a run folder): name the volumes inside it.
+        _ if path.is_dir() => {
+            let mut inside: Vec<String> = std::fs::read_dir(path)
+                .map(|entries| {
+                    entries
+                        .filter_map(|e| e.ok())
+                        .map(|e| e.file_name().to_string_lossy().into_owned())
+                        .filter(|n| {
+                            let n = n.to_ascii_lowercase();
+                            [".npy", ".vti", ".raw", ".tif", ".tiff"].iter().any(|x| n.ends_with(x))
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            inside.sort();
+            let hint = match inside.as_slice() {
+                [] => "it holds no .npy, .vti, .raw or .tif file".to_string(),
+                [one] => format!("give the file inside it, {}", path.join(one).display()),
+                many => format!("give one of the files inside it: {}", many.join(", ")),
+            };
+            bail!("{}: a folder, not a volume file; {hint}", path.display())
+        }
         _ => bail!("{}: unknown volume format (expected .npy, .vti, .raw or .tif)", path.display()),
     }
     .with_context(|| format!("reading the volume {}", path.display()))?;

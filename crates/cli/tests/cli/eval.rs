@@ -840,3 +840,19 @@ fn a_missing_reconstruction_or_truth_is_named_as_missing() {
         assert!(e.contains(": no such file or directory") && !e.contains("unknown volume format"), "{args:?}: {e}");
     }
 }
+
+/// A folder given as a volume (a synthetic scene's `truth/`) is named as a folder, with the
+/// volume file inside it to give instead.
+#[test]
+fn a_folder_given_as_the_truth_names_the_volume_inside_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    make_scene(d, &[]);
+    std::fs::create_dir(d.join("vols")).expect("mkdir");
+    std::fs::copy(d.join("truth_0.npy"), d.join("vols/truth_0.npy")).expect("copy");
+    let o = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--truth", "vols", "--json", "m.json"], d);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("vols: a folder, not a volume file") && e.contains("vols/truth_0.npy"), "{e}");
+    assert!(!d.join("m.json").exists(), "no report from a refused truth");
+}
