@@ -180,10 +180,11 @@ impl Volume {
         let mut w = [0f32; 3];
         for a in 0..3 {
             let c = g[a].clamp(0.0, (n[a] - 1) as f32);
-            let f = c.floor();
-            i0[a] = f as usize;
+            // `c ≥ 0`, so truncation is the floor (and, unlike `floor`, no library call on
+            // the x86-64 baseline).
+            i0[a] = c as usize;
             i1[a] = (i0[a] + 1).min(n[a] - 1);
-            w[a] = c - f;
+            w[a] = c - i0[a] as f32;
         }
         let (nx, ny) = (n[0], n[1]);
         let at = |i: usize, j: usize, k: usize| self.data[(k * ny + j) * nx + i];
@@ -247,10 +248,11 @@ impl Sampler<'_> {
             return 0.0;
         }
         let g = ((p - self.min) * self.scale - 0.5).clamp(Vec3::ZERO, self.top);
-        let f = g.floor();
-        let w = g - f;
+        // `g ≥ 0`, so truncation is the floor (and, unlike `floor`, no library call on the
+        // x86-64 baseline, where this runs once per sample of a ray).
+        let (i, j, k) = (g.x as usize, g.y as usize, g.z as usize);
+        let w = g - Vec3::new(i as f32, j as f32, k as f32);
         let [nx, ny, _] = self.n;
-        let (i, j, k) = (f.x as usize, f.y as usize, f.z as usize);
         let dx = usize::from(i + 1 < nx);
         let dy = if j + 1 < ny { nx } else { 0 };
         let dz = if k + 1 < self.n[2] { nx * ny } else { 0 };
