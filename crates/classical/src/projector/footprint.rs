@@ -1849,10 +1849,9 @@ impl FootprintProjector {
 
     /// The arithmetic of the AVX-512 lane kernels, whatever reads the pixels: for the voxels
     /// of a chunk in `keep` (`at = (first, valid, keep)`), `out += amp · Σ_c wu_c Σ_r wv_r
-    /// px(c, r)`, where `row(r)[c]` is `px(c, r)` (rows summed per column, then columns, as
-    /// [`Self::gather`] does), and with
-    /// `col_sums` `amp · (Σ_c wu_c mu(c)) · (Σ_r wv_r mv(r))`, where `mu` and `mv` give the
-    /// column and row masks.
+    /// px(c, r)` with `px(c, r) = row(r)[c]` (rows summed per column, then columns, as
+    /// [`Self::gather`] does), and with `col_sums` `amp · (Σ_c wu_c mu(c)) · (Σ_r wv_r
+    /// mv(r))`, where `mu` and `mv` give the column and row masks.
     ///
     /// # Safety
     /// The CPU must support AVX-512F; `first + valid` lies inside `out` (and `col_sums`).

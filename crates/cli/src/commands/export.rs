@@ -176,6 +176,9 @@ impl Source {
     }
 }
 
+/// The extensions [`read_volume`] reads, lower case.
+const VOLUME_EXTENSIONS: [&str; 5] = ["npy", "vti", "raw", "tif", "tiff"];
+
 /// Reads a volume file by extension; `.npy` needs `aabb`. A calibrated TIFF stack's box is
 /// converted to the scene's length `unit`, when given.
 pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> anyhow::Result<Volume> {
@@ -200,8 +203,8 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -
                         .filter_map(|e| e.ok())
                         .map(|e| e.file_name().to_string_lossy().into_owned())
                         .filter(|n| {
-                            let n = n.to_ascii_lowercase();
-                            [".npy", ".vti", ".raw", ".tif", ".tiff"].iter().any(|x| n.ends_with(x))
+                            let ext = Path::new(n).extension().and_then(|e| e.to_str()).unwrap_or("");
+                            VOLUME_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str())
                         })
                         .collect()
                 })
