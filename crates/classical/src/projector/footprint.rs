@@ -273,9 +273,10 @@ impl MovingRow {
     #[inline(always)]
     fn place<const N: usize>(&self, rs: &RowShared<N>, wide: bool, t: &mut MovingTrapezoids, out: &mut Moving<N>) {
         let n = N as f32;
+        let lim = self.n_lim as f32 - 1.0;
         for q in 0..CHUNK {
             let (centre, gamma) = (t.off[q], t.inv[q]);
-            let (p, l) = fit_trapezoid(t.p[q], t.l[q], self.n_lim, wide);
+            let (p, l) = fit_trapezoid(t.p[q], t.l[q], lim, wide);
             (t.p[q], t.l[q]) = (p, l);
             let t_l = centre - 0.5 * (p + l) + 0.5 + n;
             let hit = (rs.first >= 0.0) & (t_l >= 0.0) & (t_l < self.bound);
@@ -795,10 +796,12 @@ fn trapezoid(w: [f32; 3]) -> (f32, f32) {
 }
 
 /// The trapezoid `(p, l)` narrowed if needed so that its support `p + l` leaves a footprint of
-/// `n` pixels (`p + l ≤ n − 1`), and `l` kept above a positive floor.
+/// `n` pixels (`p + l ≤ lim = n − 1`), and `l` kept above a positive floor. `lim` comes in as
+/// a float, converted once outside the callers' loops: a conversion from `usize` inside them
+/// kept the AVX2 forward projection's placing stage from being vectorised.
 #[inline(always)]
-fn fit_trapezoid(p: f32, l: f32, n: usize, narrow: bool) -> (f32, f32) {
-    let fit = if narrow { fmin(1.0, (n as f32 - 1.0) / (p + l)) } else { 1.0 };
+fn fit_trapezoid(p: f32, l: f32, lim: f32, narrow: bool) -> (f32, f32) {
+    let fit = if narrow { fmin(1.0, lim / (p + l)) } else { 1.0 };
     // A positive floor keeps the ramps' 1/l finite; a box of width p is the limit.
     let l = fmax(l * fit, 1e-6);
     (fmax(p * fit, l), l)
@@ -977,9 +980,10 @@ impl FootView {
     fn chunk_place<const N: usize>(&self, wide: bool, t: &mut ChunkTrapezoids, out: &mut Chunk<N>) {
         let n = N as f32;
         let (wmax, hmax) = ((self.cam.width + N) as f32, (self.cam.height + N) as f32);
+        let (lim_u, lim_v) = (self.cols as f32 - 1.0, self.rows as f32 - 1.0);
         for q in 0..CHUNK {
-            (t.pu[q], t.lu[q]) = fit_trapezoid(t.pu[q], t.lu[q], self.cols, wide);
-            (t.pv[q], t.lv[q]) = fit_trapezoid(t.pv[q], t.lv[q], self.rows, wide);
+            (t.pu[q], t.lu[q]) = fit_trapezoid(t.pu[q], t.lu[q], lim_u, wide);
+            (t.pv[q], t.lv[q]) = fit_trapezoid(t.pv[q], t.lv[q], lim_v, wide);
             let (pu, lu, pv, lv) = (t.pu[q], t.lu[q], t.pv[q], t.lv[q]);
             let (u, v, gamma) = (t.u[q], t.v[q], t.gamma[q]);
             // First pixel c0 = ⌊u − (p + l)/2 + ½⌋, shifted by the margin N so that every
@@ -1110,6 +1114,7 @@ impl FootView {
         let n = N as f32;
         let moving = if SHARED_V { 0 } else { 1 };
         let n_s = if SHARED_V { self.rows } else { self.cols };
+        let lim_s = n_s as f32 - 1.0;
         let bound_s = if SHARED_V { (self.cam.height + N) as f32 } else { (self.cam.width + N) as f32 };
         let z16 = [0f32; CHUNK];
         let (mut first, mut inv_p, mut zs, mut iz, mut fixed) = (z16, z16, z16, z16, z16);
@@ -1127,7 +1132,7 @@ impl FootView {
             let (p, l) = trapezoid(w_s);
             // Narrowing leaves a trapezoid that already fits unchanged, so it does not depend
             // on the other voxels of a chunk.
-            let (p, l) = fit_trapezoid(p, l, n_s, p + l > n_s as f32 - 1.0);
+            let (p, l) = fit_trapezoid(p, l, lim_s, p + l > lim_s);
             let t_s = centre_s - 0.5 * (p + l) + 0.5 + n;
             first[q] = if in_front & (t_s >= 0.0) & (t_s < bound_s) { floor_small(t_s) } else { -1.0 };
             off[q] = (centre_s + n + 0.5) - first[q];
