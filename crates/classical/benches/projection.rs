@@ -199,7 +199,17 @@ fn main() {
                 }
             })
             .wall;
-            fields.push(format!("\"forward_sparse_s_{res}\": {t_sparse:.6}"));
+            // Every view in one call, as a render and the iterative methods project: each view
+            // on one thread, the non-empty chunks found once.
+            let mut outs: Vec<Vec<f32>> = views.iter().map(|&v| vec![0f32; p.view_len(v)]).collect();
+            let t_sparse_all = best(3, &mut || {
+                let mut refs: Vec<&mut [f32]> = outs.iter_mut().map(Vec::as_mut_slice).collect();
+                p.forward_views(&views, &xs, &mut refs);
+            })
+            .wall;
+            fields.push(format!(
+                "\"forward_sparse_s_{res}\": {t_sparse:.6}, \"forward_all_sparse_s_{res}\": {t_sparse_all:.6}"
+            ));
             // With column sums, as SART and ASART call it.
             let mut cols = vec![0f32; grid.len()];
             let t_cols = best(3, &mut || {
