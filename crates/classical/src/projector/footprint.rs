@@ -3041,7 +3041,9 @@ mod tests {
         for (chunks, miss_rate) in [(0, 0.5), (1, 0.0), (1, 1.0), (3, 0.5), (8, 0.9), (8, 1.0), (5, 0.1)] {
             let rows: Vec<[f32; CHUNK]> = (0..chunks)
                 .map(|_| {
-                    std::array::from_fn(|_| if rng.random_bool(miss_rate) { -1.0 } else { rng.random_range(0..300) as f32 })
+                    std::array::from_fn(
+                        |_| if rng.random_bool(miss_rate) { -1.0 } else { rng.random_range(0..300) as f32 },
+                    )
                 })
                 .collect();
             let scalar = first_range(rows.iter());
