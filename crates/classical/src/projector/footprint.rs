@@ -215,7 +215,9 @@ struct MovingRow {
     a1: [f32; 3],
     base_s: f32,
     g0: f32,
-    n_lim: usize,
+    /// The widest trapezoid support that fits the footprint along the moving axis (its
+    /// pixels − 1), as a float: converted in the loops, it kept them scalar on AVX2.
+    lim: f32,
     bound: f32,
 }
 
@@ -263,8 +265,7 @@ impl MovingRow {
     /// Whether a trapezoid of the chunk needs narrowing.
     #[inline(always)]
     fn wide(&self, t: &MovingTrapezoids) -> bool {
-        let lim = self.n_lim as f32 - 1.0;
-        (0..CHUNK).fold(false, |any, q| any | (t.p[q] + t.l[q] > lim))
+        (0..CHUNK).fold(false, |any, q| any | (t.p[q] + t.l[q] > self.lim))
     }
 
     /// Narrows the trapezoids if `wide` (which leaves those that fit unchanged, so it may be
@@ -273,10 +274,9 @@ impl MovingRow {
     #[inline(always)]
     fn place<const N: usize>(&self, rs: &RowShared<N>, wide: bool, t: &mut MovingTrapezoids, out: &mut Moving<N>) {
         let n = N as f32;
-        let lim = self.n_lim as f32 - 1.0;
         for q in 0..CHUNK {
             let (centre, gamma) = (t.off[q], t.inv[q]);
-            let (p, l) = fit_trapezoid(t.p[q], t.l[q], lim, wide);
+            let (p, l) = fit_trapezoid(t.p[q], t.l[q], self.lim, wide);
             (t.p[q], t.l[q]) = (p, l);
             let t_l = centre - 0.5 * (p + l) + 0.5 + n;
             let hit = (rs.first >= 0.0) & (t_l >= 0.0) & (t_l < self.bound);
@@ -1264,7 +1264,7 @@ impl FootView {
             a1,
             base_s: fixed * fixed + rs.zs * rs.zs,
             g0: self.gain * iz * iz * iz,
-            n_lim: if SHARED_V { self.cols } else { self.rows },
+            lim: (if SHARED_V { self.cols } else { self.rows }) as f32 - 1.0,
             bound: if SHARED_V { (self.cam.width + N) as f32 } else { (self.cam.height + N) as f32 },
         }
     }
