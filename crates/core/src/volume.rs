@@ -172,29 +172,24 @@ impl Volume {
         if p.cmplt(min).any() || p.cmpgt(max).any() || p.is_nan() {
             return 0.0;
         }
-        let n = [self.dims[0], self.dims[1], self.dims[2]];
         let size = max - min;
-        let g = (p - min) / size * Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32) - 0.5;
-        let mut i0 = [0usize; 3];
-        let mut i1 = [0usize; 3];
-        let mut w = [0f32; 3];
-        for a in 0..3 {
-            let c = g[a].clamp(0.0, (n[a] - 1) as f32);
-            // `c ≥ 0`, so truncation is the floor (and, unlike `floor`, no library call on
-            // the x86-64 baseline).
-            i0[a] = c as usize;
-            i1[a] = (i0[a] + 1).min(n[a] - 1);
-            w[a] = c - i0[a] as f32;
-        }
-        let (nx, ny) = (n[0], n[1]);
+        let cells: [_; 3] = std::array::from_fn(|a| axis_cell(p[a], min[a], size[a], self.dims[a]));
+        self.blend(cells[0], cells[1], cells[2])
+    }
+
+    /// The trilinear blend of the eight values around a point, from its cells along each axis
+    /// ([`axis_cell`]).
+    #[inline(always)]
+    fn blend(&self, (x0, x1, wx): AxisCell, (y0, y1, wy): AxisCell, (z0, z1, wz): AxisCell) -> f32 {
+        let [nx, ny, _] = self.dims;
         let at = |i: usize, j: usize, k: usize| self.data[(k * ny + j) * nx + i];
-        let c00 = at(i0[0], i0[1], i0[2]) * (1.0 - w[0]) + at(i1[0], i0[1], i0[2]) * w[0];
-        let c10 = at(i0[0], i1[1], i0[2]) * (1.0 - w[0]) + at(i1[0], i1[1], i0[2]) * w[0];
-        let c01 = at(i0[0], i0[1], i1[2]) * (1.0 - w[0]) + at(i1[0], i0[1], i1[2]) * w[0];
-        let c11 = at(i0[0], i1[1], i1[2]) * (1.0 - w[0]) + at(i1[0], i1[1], i1[2]) * w[0];
-        let c0 = c00 * (1.0 - w[1]) + c10 * w[1];
-        let c1 = c01 * (1.0 - w[1]) + c11 * w[1];
-        c0 * (1.0 - w[2]) + c1 * w[2]
+        let c00 = at(x0, y0, z0) * (1.0 - wx) + at(x1, y0, z0) * wx;
+        let c10 = at(x0, y1, z0) * (1.0 - wx) + at(x1, y1, z0) * wx;
+        let c01 = at(x0, y0, z1) * (1.0 - wx) + at(x1, y0, z1) * wx;
+        let c11 = at(x0, y1, z1) * (1.0 - wx) + at(x1, y1, z1) * wx;
+        let c0 = c00 * (1.0 - wy) + c10 * wy;
+        let c1 = c01 * (1.0 - wy) + c11 * wy;
+        c0 * (1.0 - wz) + c1 * wz
     }
 
     /// Smallest and largest value (NaN if any value is NaN).
@@ -216,45 +211,45 @@ impl Volume {
         let mut v = Volume::zeros(dims, aabb);
         let (sp, min, max) = (v.spacing(), self.aabb.min.as_vec3(), self.aabb.max.as_vec3());
         let size = max - min;
-        // Per axis and index: the two cells and the weight of the upper one, `None` outside
-        // this volume's box (or NaN), where `sample` gives 0. The same arithmetic as there.
-        let axis = |a: usize| -> Vec<Option<(usize, usize, f32)>> {
-            let n = self.dims[a];
+        // Per axis and index: the cells, `None` outside this volume's box (or NaN), where
+        // `sample` gives 0.
+        let axis = |a: usize| -> Vec<Option<AxisCell>> {
             (0..dims[a])
                 .map(|i| {
                     let p = (aabb.min[a] + (i as f64 + 0.5) * sp[a]) as f32;
-                    if p < min[a] || p > max[a] || p.is_nan() {
-                        return None;
-                    }
-                    let c = ((p - min[a]) / size[a] * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
-                    // `c ≥ 0`: truncation is the floor, as in `sample`.
-                    let i0 = c as usize;
-                    Some((i0, (i0 + 1).min(n - 1), c - i0 as f32))
+                    let inside = p >= min[a] && p <= max[a];
+                    inside.then(|| axis_cell(p, min[a], size[a], self.dims[a]))
                 })
                 .collect()
         };
         let (xs, ys, zs) = (axis(0), axis(1), axis(2));
-        let [nx, ny, _] = self.dims;
-        let d = &self.data;
-        let at = |i: usize, j: usize, k: usize| d[(k * ny + j) * nx + i];
         v.data.par_chunks_mut(dims[0] * dims[1]).zip(&zs).for_each(|(slab, &z)| {
-            let Some((z0, z1, wz)) = z else { return };
+            let Some(z) = z else { return };
             for (row, &y) in slab.chunks_mut(dims[0]).zip(&ys) {
-                let Some((y0, y1, wy)) = y else { continue };
+                let Some(y) = y else { continue };
                 for (o, &x) in row.iter_mut().zip(&xs) {
-                    let Some((x0, x1, wx)) = x else { continue };
-                    let c00 = at(x0, y0, z0) * (1.0 - wx) + at(x1, y0, z0) * wx;
-                    let c10 = at(x0, y1, z0) * (1.0 - wx) + at(x1, y1, z0) * wx;
-                    let c01 = at(x0, y0, z1) * (1.0 - wx) + at(x1, y0, z1) * wx;
-                    let c11 = at(x0, y1, z1) * (1.0 - wx) + at(x1, y1, z1) * wx;
-                    let c0 = c00 * (1.0 - wy) + c10 * wy;
-                    let c1 = c01 * (1.0 - wy) + c11 * wy;
-                    *o = c0 * (1.0 - wz) + c1 * wz;
+                    if let Some(x) = x {
+                        *o = self.blend(x, y, z);
+                    }
                 }
             }
         });
         v
     }
+}
+
+/// A point's two cells along one axis and the weight of the upper one.
+type AxisCell = (usize, usize, f32);
+
+/// The cells along an axis of `n` cells from `min`, `size` long, around coordinate `p` (inside
+/// the box): clamped to the end cells' centres at the faces.
+#[inline(always)]
+fn axis_cell(p: f32, min: f32, size: f32, n: usize) -> AxisCell {
+    let c = ((p - min) / size * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
+    // `c ≥ 0`, so truncation is the floor (and, unlike `floor`, no library call on the
+    // x86-64 baseline).
+    let i0 = c as usize;
+    (i0, (i0 + 1).min(n - 1), c - i0 as f32)
 }
 
 impl ScalarField for Volume {
