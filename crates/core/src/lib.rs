@@ -22,6 +22,7 @@ pub mod error;
 pub mod field;
 pub mod geometry;
 pub mod image;
+mod march;
 pub mod number;
 pub mod render;
 pub mod scene;

@@ -171,11 +171,6 @@ pub fn render_image(
                     if let Some(vol) = &sampler {
                         // A grid is read in place, sample by sample, without batching.
                         let mut sum = 0.0f32;
-                        let mut read = |q: usize| {
-                            let s = s0 + q as f64 * ds;
-                            let wt = if q == 0 || q == segments { 0.5 } else { 1.0 };
-                            sum += wt * vol.sample(ray.at(s).as_vec3());
-                        };
                         if support.is_some() {
                             // A grid with a support (a baked field, whose vertices continue the
                             // field past the support's faces) is read at the samples inside
@@ -186,12 +181,12 @@ pub fn render_image(
                             for &(a, b) in &cells {
                                 let lo = (((a - s0) / ds - 1e-9).ceil().max(0.0) as usize).max(next);
                                 let hi = (((b - s0) / ds + 1e-9).floor().max(0.0) as usize).min(segments);
-                                (lo..=hi).for_each(&mut read);
+                                vol.march(&ray, (s0, ds), segments, (lo, hi), &mut sum);
                                 next = next.max(hi + 1);
                             }
                         } else {
                             for &(lo, hi) in &spans {
-                                (lo..=hi).for_each(&mut read);
+                                vol.march(&ray, (s0, ds), segments, (lo, hi), &mut sum);
                             }
                         }
                         acc[col] += (sum * ds as f32) as f64;

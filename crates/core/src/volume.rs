@@ -162,7 +162,15 @@ impl Volume {
         let min = self.aabb.min.as_vec3();
         let max = self.aabb.max.as_vec3();
         let n = Vec3::new(self.dims[0] as f32, self.dims[1] as f32, self.dims[2] as f32);
-        Sampler { data: &self.data, min, max, scale: n / (max - min), n: self.dims, top: n - 1.0 }
+        Sampler {
+            data: &self.data,
+            min,
+            max,
+            scale: n / (max - min),
+            n: self.dims,
+            top: n - 1.0,
+            isa: crate::march::MarchIsa::detected(),
+        }
     }
 
     /// Trilinear value at a world point (see the type's docs for the boundary rule).
@@ -269,13 +277,15 @@ impl ScalarField for Volume {
 /// [`Volume::sample`] with the grid's constants computed once, for reading many points.
 #[derive(Clone, Copy, Debug)]
 pub struct Sampler<'a> {
-    data: &'a [f32],
-    min: Vec3,
-    max: Vec3,
+    pub(crate) data: &'a [f32],
+    pub(crate) min: Vec3,
+    pub(crate) max: Vec3,
     /// Cells per world unit along each axis.
-    scale: Vec3,
-    n: [usize; 3],
-    top: Vec3,
+    pub(crate) scale: Vec3,
+    pub(crate) n: [usize; 3],
+    pub(crate) top: Vec3,
+    /// The instruction set of [`Sampler::march`].
+    pub(crate) isa: crate::march::MarchIsa,
 }
 
 impl Sampler<'_> {
