@@ -44,7 +44,7 @@ pub use method::{
     MAX_TV_WEIGHT,
 };
 pub use projector::{
-    FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector,
+    FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector, Update,
     AUTO_FOOTPRINT_MAX_PX,
 };
 pub use solve::{

@@ -12,8 +12,9 @@
 //! `p`, the gain minimising `Σ (p − g r − b)²` over the used pixels is the ordinary
 //! least-squares line through the points `(r, p)` ([`fit_gain`]).
 
-use fluidnerf_classical::{Grid, Projector, SparseRows};
+use fluidnerf_classical::{Grid, Projector, SparseRows, Update};
 use fluidnerf_core::{Camera, Image, Scene};
+use rayon::prelude::*;
 
 use crate::{FrameGain, GainConfig, GainMode, HoldoutScore, PipelineError, Preprocessing};
 
@@ -562,6 +563,24 @@ impl Projector for MaskedProjector<'_> {
                     let ones: Vec<f32> = m.iter().map(|&k| if k { 1.0 } else { 0.0 }).collect();
                     self.inner.back_add(view, &ones, cs, None);
                 }
+            }
+        }
+    }
+
+    fn back_update(&self, view: usize, y: &[f32], x: &mut [f32], scratch: (&mut [f32], &mut [f32]), update: &Update) {
+        match &self.masks[view] {
+            None => self.inner.back_update(view, y, x, scratch, update),
+            // Masked column sums come from an image of ones: `back_add`'s, then the update.
+            Some(_) => {
+                let (b, c) = scratch;
+                b.fill(0.0);
+                c.fill(0.0);
+                self.back_add(view, y, b, Some(c));
+                const STRETCH: usize = 1 << 14;
+                x.par_chunks_mut(STRETCH)
+                    .zip(b.par_chunks(STRETCH).zip(c.par_chunks(STRETCH)))
+                    .enumerate()
+                    .for_each(|(k, (xs, (bs, cs)))| update(k * STRETCH, xs, bs, cs));
             }
         }
     }

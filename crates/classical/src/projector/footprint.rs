@@ -95,7 +95,7 @@ use fluidnerf_core::Camera;
 use rayon::prelude::*;
 
 use super::camera32::{distort, CameraF32, GridF32};
-use super::{check_shapes, scatter_parts, splat::validate, Grid, Projector, SparseRows};
+use super::{check_shapes, scatter_parts, splat::validate, Grid, Projector, SparseRows, Update};
 use crate::ClassicalError;
 
 /// Footprint sides (pixels per axis) the kernels are compiled for.
@@ -2833,6 +2833,12 @@ struct BackImage {
 }
 
 impl FootprintProjector {
+    /// The z-slices of a back projection's task: enough tasks to balance the threads, few
+    /// enough to keep the overhead small and a slab in cache.
+    fn slices_per_task(&self) -> usize {
+        self.grid.dims[2].div_ceil(8 * scatter_parts()).max(1)
+    }
+
     /// View `view`'s image `y` padded (and transposed) for [`Self::back_slab`].
     fn back_image(&self, view: usize, y: &[f32]) -> BackImage {
         let fv = &self.views[view];
@@ -2971,6 +2977,26 @@ impl Projector for FootprintProjector {
         self.back_add_views(&[view], &[y], out, col_sums);
     }
 
+    /// Each task zeroes its slab of `b` and `c`, back-projects into it and updates its slab of
+    /// `x` while the three are in cache: one pass over the grid instead of four.
+    fn back_update(&self, view: usize, y: &[f32], x: &mut [f32], scratch: (&mut [f32], &mut [f32]), update: &Update) {
+        check_shapes(self, view, x.len(), y.len());
+        let (b, c) = scratch;
+        assert!(b.len() == x.len() && c.len() == x.len(), "back_update: scratch of the wrong length");
+        let im = self.back_image(view, y);
+        let slab = self.grid.dims[0] * self.grid.dims[1];
+        let per = self.slices_per_task();
+        x.par_chunks_mut(per * slab)
+            .zip(b.par_chunks_mut(per * slab).zip(c.par_chunks_mut(per * slab)))
+            .enumerate()
+            .for_each(|(t, (xs, (bs, cs)))| {
+                bs.fill(0.0);
+                cs.fill(0.0);
+                self.back_slab(view, &im, t * per..t * per + xs.len() / slab, bs, Some(cs));
+                update(t * per * slab, xs, bs, cs);
+            });
+    }
+
     /// One pass over the grid for all the views: each task takes a slab of z-slices and adds
     /// every view's back projection to it in turn, so the slab stays in cache across the views
     /// and the threads meet once, not once per view.
@@ -2984,11 +3010,8 @@ impl Projector for FootprintProjector {
         } else {
             views.par_iter().zip(ys).map(|(&v, y)| self.back_image(v, y)).collect()
         };
-        let [nx, ny, nz] = self.grid.dims;
-        let slab = nx * ny;
-        // A few slices per task: enough to balance, few enough to keep the overhead small and
-        // a slab in cache.
-        let per = nz.div_ceil(8 * scatter_parts()).max(1);
+        let slab = self.grid.dims[0] * self.grid.dims[1];
+        let per = self.slices_per_task();
         let task = |t: usize, o: &mut [f32], mut c: Option<&mut [f32]>| {
             let ks = t * per..(t * per + o.len() / slab);
             for (&view, im) in views.iter().zip(&images) {

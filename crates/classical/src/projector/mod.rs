@@ -45,6 +45,7 @@ mod splat;
 
 use fluidnerf_core::{Aabb, Camera, Volume};
 use glam::DVec3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use footprint::{FootprintProjector, Isa, AUTO_FOOTPRINT_MAX_PX, MAX_FOOTPRINT_SIDE};
@@ -242,6 +243,27 @@ pub trait Projector: Sync {
         }
     }
 
+    /// One view's step of the row- and column-normalised methods (SART, ASART): with `b =
+    /// A_vᵀ y` and `c = A_vᵀ 1` (the view's column sums), calls `update(at, xs, bs, cs)` on
+    /// stretches of the grid that together cover it once, `xs` being `x[at..at + xs.len()]`
+    /// and `bs`, `cs` the same voxels of `b` and `c`; stretches may run in parallel. `scratch`
+    /// holds two buffers of the grid's length, which hold `b` and `c` afterwards. The values
+    /// are [`Projector::back_add`]'s into zeroed buffers, bit for bit. The default does exactly
+    /// that and then updates; a projector may compute each stretch and update it while it is in
+    /// cache (the footprint projector does, slab by slab).
+    fn back_update(&self, view: usize, y: &[f32], x: &mut [f32], scratch: (&mut [f32], &mut [f32]), update: &Update) {
+        let (b, c) = scratch;
+        assert!(b.len() == x.len() && c.len() == x.len(), "back_update: scratch of the wrong length");
+        b.par_iter_mut().for_each(|v| *v = 0.0);
+        c.par_iter_mut().for_each(|v| *v = 0.0);
+        self.back_add(view, y, b, Some(c));
+        const STRETCH: usize = 1 << 14;
+        x.par_chunks_mut(STRETCH)
+            .zip(b.par_chunks(STRETCH).zip(c.par_chunks(STRETCH)))
+            .enumerate()
+            .for_each(|(k, (xs, (bs, cs)))| update(k * STRETCH, xs, bs, cs));
+    }
+
     /// The rows of `A_v`, for the row-action methods (ART, MART). Holds the view's part of the
     /// matrix, so it costs memory ([`Projector::rows_bytes_estimate`]) while alive.
     fn rows(&self, view: usize) -> SparseRows;
@@ -255,6 +277,10 @@ pub trait Projector: Sync {
     /// Working memory of one `forward` or `back_add` call, in bytes.
     fn scratch_bytes(&self, view: usize) -> usize;
 }
+
+/// The update of [`Projector::back_update`]: `(at, x, b, c)` for a stretch of voxels starting
+/// at `at`.
+pub type Update<'a> = dyn Fn(usize, &mut [f32], &[f32], &[f32]) + Sync + 'a;
 
 /// Splits `0..n` into at most `parts` contiguous ranges of near-equal length.
 pub(crate) fn bands(n: usize, parts: usize) -> Vec<std::ops::Range<usize>> {

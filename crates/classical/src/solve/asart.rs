@@ -105,15 +105,16 @@ pub fn asart(
                     ss += res as f64 * res as f64;
                     *r = if qi > 0.0 { res / qi } else { 0.0 };
                 }
-                back.par_iter_mut().for_each(|b| *b = 0.0);
-                cols.par_iter_mut().for_each(|c| *c = 0.0);
-                p.back_add(v, ratio, &mut back, Some(&mut cols));
-                x.par_iter_mut().zip(back.par_iter().zip(cols.par_iter())).for_each(|(g, (&b, &c))| {
-                    if c > 0.0 {
-                        *g = (*g + mu4 * *g * b / c).max(0.0);
+                // The step and the feasible set, each stretch while its back projection is
+                // fresh.
+                p.back_update(v, ratio, x, (&mut back, &mut cols), &|at, xs, bs, cs| {
+                    for (g, (&b, &c)) in xs.iter_mut().zip(bs.iter().zip(cs)) {
+                        if c > 0.0 {
+                            *g = (*g + mu4 * *g * b / c).max(0.0);
+                        }
                     }
+                    problem.project_feasible_at(at, xs);
                 });
-                problem.project_feasible(x);
             }
             ss
         },

@@ -109,6 +109,19 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// [`Problem::project_feasible`] of the voxels `x[at..at + xs.len()]`, given as `xs`.
+    pub(crate) fn project_feasible_at(&self, at: usize, xs: &mut [f32]) {
+        match self.support {
+            Some(s) => {
+                let n = xs.len();
+                for (v, &keep) in xs.iter_mut().zip(&s[at..at + n]) {
+                    *v = if keep { v.max(0.0) } else { 0.0 };
+                }
+            }
+            None => xs.iter_mut().for_each(|v| *v = v.max(0.0)),
+        }
+    }
+
     fn data_norm2(&self) -> f64 {
         self.images.iter().flat_map(|im| &im.data).map(|&p| (p as f64) * (p as f64)).sum()
     }

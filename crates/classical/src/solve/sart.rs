@@ -9,7 +9,6 @@
 
 use std::ops::ControlFlow;
 
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{drive, multilevel_order, IterState, Problem, Report, Stopping};
@@ -76,16 +75,16 @@ impl SartSweep {
                 ss += res as f64 * res as f64;
                 *qi = if rs > 0.0 { res / rs } else { 0.0 };
             }
-            self.back.par_iter_mut().for_each(|b| *b = 0.0);
-            self.cols.par_iter_mut().for_each(|c| *c = 0.0);
-            p.back_add(v, q, &mut self.back, Some(&mut self.cols));
             let mu = self.mu;
-            x.par_iter_mut().zip(self.back.par_iter().zip(self.cols.par_iter())).for_each(|(g, (&b, &c))| {
-                if c > 0.0 {
-                    *g = (*g + mu * b / c).max(0.0);
+            // The step and the feasible set, each stretch while its back projection is fresh.
+            p.back_update(v, q, x, (&mut self.back, &mut self.cols), &|at, xs, bs, cs| {
+                for (g, (&b, &c)) in xs.iter_mut().zip(bs.iter().zip(cs)) {
+                    if c > 0.0 {
+                        *g = (*g + mu * b / c).max(0.0);
+                    }
                 }
+                problem.project_feasible_at(at, xs);
             });
-            problem.project_feasible(x);
         }
         ss
     }

@@ -223,6 +223,50 @@ fn back_projection_of_several_views_equals_view_by_view() {
     }
 }
 
+/// A view's fused back projection and update (`back_update`, slab by slab in the footprint
+/// projector) hands the update the back projection and column sums `back_add` gives into zeroed
+/// buffers, bit for bit, and every voxel exactly once, with its offset: for views that share
+/// rows (either way round), views that do not, distorted ones, and a projector that keeps the
+/// default (the ray projector); the buffers hold them afterwards.
+#[test]
+fn fused_back_projection_and_update_equals_back_add_then_update() {
+    let mut cams = ring(2, 24);
+    cams.extend(ring_turned(1, 40));
+    cams.extend(distorted_ring(1, 40));
+    cams.extend(zoomed(1, 24, 3.3, false));
+    let grid = Grid::new([20, 18, 37], aabb());
+    let footprint = FootprintProjector::new(grid, &cams, 0.8).expect("valid");
+    assert!(footprint.shared_row_views() >= 2, "some views share their rows");
+    let ray: Box<dyn Projector> = Box::new(RayProjector::new(grid, &cams[..2], 0.8, 0.5).expect("valid"));
+    let fp: Box<dyn Projector> = Box::new(footprint);
+    for (p, views) in [(&fp, 0..5), (&ray, 0..2)] {
+        for v in views {
+            let y = uniform(70 + v as u64, p.view_len(v));
+            let (mut b, mut c) = (vec![0f32; grid.len()], vec![0f32; grid.len()]);
+            p.back_add(v, &y, &mut b, Some(&mut c));
+            assert!(c.iter().any(|&c| c > 0.0), "view {v} sees the grid");
+            // The update records what it was handed: x ← 3 b + c.
+            let x0 = uniform(9, grid.len());
+            let mut x = x0.clone();
+            let (mut sb, mut sc) = (vec![f32::NAN; grid.len()], vec![7.0f32; grid.len()]);
+            let seen = std::sync::atomic::AtomicUsize::new(0);
+            p.back_update(v, &y, &mut x, (&mut sb, &mut sc), &|at, xs, bs, cs| {
+                seen.fetch_add(xs.len(), std::sync::atomic::Ordering::Relaxed);
+                for (k, (g, (&bv, &cv))) in xs.iter_mut().zip(bs.iter().zip(cs)).enumerate() {
+                    // The voxel's own start value: the offset is right.
+                    assert_eq!(g.to_bits(), x0[at + k].to_bits(), "view {v}, voxel {}", at + k);
+                    *g = 3.0 * bv + cv;
+                }
+            });
+            assert_eq!(seen.into_inner(), grid.len(), "view {v}: every voxel once");
+            for j in 0..grid.len() {
+                assert_eq!(x[j].to_bits(), (3.0 * b[j] + c[j]).to_bits(), "view {v}, voxel {j}");
+                assert_eq!((sb[j].to_bits(), sc[j].to_bits()), (b[j].to_bits(), c[j].to_bits()), "view {v}, voxel {j}");
+            }
+        }
+    }
+}
+
 /// Projecting one volume into several views at once finds its empty chunks once; the images
 /// are those of the views projected one by one, bit for bit, with every instruction set, for
 /// views that share their rows, general and distorted ones, and a volume with empty slices,
