@@ -194,17 +194,19 @@ dispatched! {
     }
 }
 
-/// `grad = ∇TV(g)` with the norms of the backward differences in `norms` (all
-/// [`Grid::len`]), and `‖∇TV‖₂²`. Row by row (each grid row along `x` is contiguous, its
-/// neighbours along `y` and `z` are whole rows), vectorised along the row with the CPU's
-/// widest instructions; the per-voxel arithmetic is that of the definition, in the same order.
-/// The squared norm is summed per row in f64 and the rows' sums in row order, so it does not
-/// depend on the threads.
-pub(crate) fn tv_gradient(grid: &Grid, g: &[f32], norms: &mut [f32], grad: &mut [f32]) -> f64 {
-    let [nx, ny, _] = grid.dims;
+/// `grad = ∇TV(g)` ([`Grid::len`] values), and `‖∇TV‖₂²`. Row by row (each grid row along
+/// `x` is contiguous, its neighbours along `y` and `z` are whole rows), vectorised along the
+/// row with the CPU's widest instructions; the per-voxel arithmetic is that of the definition,
+/// in the same order. Each task takes a band of z-slices and keeps the norms of the
+/// differences of two slices at a time (the slice and the next, which the gradient reads),
+/// so they stay in cache and the grid is read once and written once. The squared norm is
+/// summed per row in f64 and the rows' sums in row order, so it does not depend on the
+/// threads.
+pub(crate) fn tv_gradient(grid: &Grid, g: &[f32], grad: &mut [f32]) -> f64 {
+    let [nx, ny, nz] = grid.dims;
     let slab = nx * ny;
     let len = g.len();
-    assert!(norms.len() == len && grad.len() == len, "tv_gradient: buffers of the wrong length");
+    assert!(grad.len() == len, "tv_gradient: a gradient buffer of the wrong length");
     if len == 0 {
         return 0.0;
     }
@@ -218,20 +220,34 @@ pub(crate) fn tv_gradient(grid: &Grid, g: &[f32], norms: &mut [f32], grad: &mut 
             zm: (base >= slab).then(|| &g[base - slab..base - slab + nx]),
         }
     };
-    norms.par_chunks_mut(nx).enumerate().for_each(|(row, out)| row_norms(rows(row), eps2, out));
-    let norms = &*norms;
-    let row_sums: Vec<f64> = grad
-        .par_chunks_mut(nx)
-        .enumerate()
-        .map(|(row, out)| {
-            let (j, base) = (row % ny, row * nx);
-            let after = |at: usize| (&g[at..at + nx], &norms[at..at + nx]);
-            let yp = (j + 1 < ny).then(|| after(base + nx));
-            let zp = (base + slab < len).then(|| after(base + slab));
-            row_gradient(rows(row), &norms[base..base + nx], yp, zp, out);
-            out.iter().map(|&s| (s as f64) * (s as f64)).sum::<f64>()
-        })
-        .collect();
+    // The norms of slice `k`'s rows.
+    let slice_norms = |k: usize, out: &mut [f32]| {
+        for (j, o) in out.chunks_exact_mut(nx).enumerate() {
+            row_norms(rows(k * ny + j), eps2, o);
+        }
+    };
+    // A few bands per thread, to balance; each computes the norms of the slice after it again.
+    let per = nz.div_ceil(4 * rayon::current_num_threads()).max(1);
+    let mut row_sums = vec![0f64; nz * ny];
+    grad.par_chunks_mut(per * slab).zip(row_sums.par_chunks_mut(per * ny)).enumerate().for_each(|(b, (band, sums))| {
+        let k0 = b * per;
+        let (mut cur, mut next) = (vec![0f32; slab], vec![0f32; slab]);
+        slice_norms(k0, &mut cur);
+        for (kk, (out, sums)) in band.chunks_exact_mut(slab).zip(sums.chunks_exact_mut(ny)).enumerate() {
+            let k = k0 + kk;
+            if k + 1 < nz {
+                slice_norms(k + 1, &mut next);
+            }
+            for (j, (out, sum)) in out.chunks_exact_mut(nx).zip(sums.iter_mut()).enumerate() {
+                let base = (k * ny + j) * nx;
+                let yp = (j + 1 < ny).then(|| (&g[base + nx..base + 2 * nx], &cur[(j + 1) * nx..(j + 2) * nx]));
+                let zp = (k + 1 < nz).then(|| (&g[base + slab..base + slab + nx], &next[j * nx..(j + 1) * nx]));
+                row_gradient(rows(k * ny + j), &cur[j * nx..(j + 1) * nx], yp, zp, out);
+                *sum = out.iter().map(|&s| (s as f64) * (s as f64)).sum::<f64>();
+            }
+            std::mem::swap(&mut cur, &mut next);
+        }
+    });
     row_sums.iter().sum()
 }
 
@@ -269,7 +285,6 @@ pub fn sart_tv(
     let x = problem.start(init, || vec![0f32; n]);
     let mut sweep = SartSweep::new(problem, params.relaxation);
     let mut before = vec![0f32; n];
-    let mut norms = vec![0f32; n];
     let mut grad = vec![0f32; n];
     let weight = params.tv_weight;
     let rule = params.step_rule.resolve(problem.support.is_some());
@@ -290,7 +305,7 @@ pub fn sart_tv(
                 }
                 let length = balance * weight * d;
                 for _ in 0..params.tv_steps {
-                    let gn = tv_gradient(&grid, x, &mut norms, &mut grad).sqrt();
+                    let gn = tv_gradient(&grid, x, &mut grad).sqrt();
                     if gn == 0.0 {
                         break;
                     }
@@ -377,7 +392,7 @@ mod tests {
     #[test]
     fn tv_gradient_matches_the_definition_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        for dims in [[7, 5, 3], [1, 6, 4], [9, 1, 5], [4, 3, 1], [33, 17, 9]] {
+        for dims in [[7, 5, 3], [1, 6, 4], [9, 1, 5], [4, 3, 1], [33, 17, 9], [20, 11, 41]] {
             let grid = Grid::new(dims, Aabb::cube(DVec3::ZERO, 1.0));
             let g: Vec<f32> = (0..grid.len())
                 .map(|m| match m % 5 {
@@ -387,8 +402,8 @@ mod tests {
                 })
                 .collect();
             let (want, want_n2) = reference(&grid, &g);
-            let (mut norms, mut grad) = (vec![0f32; grid.len()], vec![0f32; grid.len()]);
-            let n2 = tv_gradient(&grid, &g, &mut norms, &mut grad);
+            let mut grad = vec![0f32; grid.len()];
+            let n2 = tv_gradient(&grid, &g, &mut grad);
             for (m, (a, b)) in grad.iter().zip(&want).enumerate() {
                 assert_eq!(a.to_bits(), b.to_bits(), "{dims:?} voxel {m}: {a} vs {b}");
             }
@@ -441,8 +456,8 @@ mod tests {
         for rule in [TvStepRule::Data, TvStepRule::Balanced] {
             let x = sart_tv(&problem, Some(&init), &params(0.3, 1, rule, 1), go).expect("runs").volume;
             assert!((distance(&x, &data) - 0.3 * d).abs() < 1e-5 * d, "{rule:?}: {x:?}");
-            let (mut norms, mut grad) = (vec![0f32; 4], vec![0f32; 4]);
-            let gn = tv_gradient(problem.projector.grid(), &data, &mut norms, &mut grad).sqrt();
+            let mut grad = vec![0f32; 4];
+            let gn = tv_gradient(problem.projector.grid(), &data, &mut grad).sqrt();
             for ((xi, pi), gi) in x.iter().zip(&data).zip(&grad) {
                 let want = pi - (0.3 * d / gn) as f32 * gi;
                 assert!((xi - want).abs() < 1e-5, "{rule:?}: {x:?}");
