@@ -44,8 +44,8 @@ pub use method::{
     MAX_TV_WEIGHT,
 };
 pub use projector::{
-    FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows, SplatProjector, Update,
-    AUTO_FOOTPRINT_MAX_PX,
+    update_in_stretches, FootprintProjector, Grid, Isa, Projector, ProjectorKind, RayProjector, SparseRows,
+    SplatProjector, Update, AUTO_FOOTPRINT_MAX_PX,
 };
 pub use solve::{
     art, asart, laplacian, laplacian_norm2, mart, mlem, multilevel_order, sart, sart_tikhonov, sart_tv, smart,

@@ -14,7 +14,6 @@
 
 use fluidnerf_classical::{Grid, Projector, SparseRows, Update};
 use fluidnerf_core::{Camera, Image, Scene};
-use rayon::prelude::*;
 
 use crate::{FrameGain, GainConfig, GainMode, HoldoutScore, PipelineError, Preprocessing};
 
@@ -576,11 +575,7 @@ impl Projector for MaskedProjector<'_> {
                 b.fill(0.0);
                 c.fill(0.0);
                 self.back_add(view, y, b, Some(c));
-                const STRETCH: usize = 1 << 14;
-                x.par_chunks_mut(STRETCH)
-                    .zip(b.par_chunks(STRETCH).zip(c.par_chunks(STRETCH)))
-                    .enumerate()
-                    .for_each(|(k, (xs, (bs, cs)))| update(k * STRETCH, xs, bs, cs));
+                fluidnerf_classical::update_in_stretches(x, b, c, update);
             }
         }
     }

@@ -257,11 +257,7 @@ pub trait Projector: Sync {
         b.par_iter_mut().for_each(|v| *v = 0.0);
         c.par_iter_mut().for_each(|v| *v = 0.0);
         self.back_add(view, y, b, Some(c));
-        const STRETCH: usize = 1 << 14;
-        x.par_chunks_mut(STRETCH)
-            .zip(b.par_chunks(STRETCH).zip(c.par_chunks(STRETCH)))
-            .enumerate()
-            .for_each(|(k, (xs, (bs, cs)))| update(k * STRETCH, xs, bs, cs));
+        update_in_stretches(x, b, c, update);
     }
 
     /// The rows of `A_v`, for the row-action methods (ART, MART). Holds the view's part of the
@@ -281,6 +277,16 @@ pub trait Projector: Sync {
 /// The update of [`Projector::back_update`]: `(at, x, b, c)` for a stretch of voxels starting
 /// at `at`.
 pub type Update<'a> = dyn Fn(usize, &mut [f32], &[f32], &[f32]) + Sync + 'a;
+
+/// Runs `update` of [`Projector::back_update`] over `x`, `b` and `c` (one length) in
+/// stretches, in parallel.
+pub fn update_in_stretches(x: &mut [f32], b: &[f32], c: &[f32], update: &Update) {
+    const STRETCH: usize = 1 << 14;
+    x.par_chunks_mut(STRETCH)
+        .zip(b.par_chunks(STRETCH).zip(c.par_chunks(STRETCH)))
+        .enumerate()
+        .for_each(|(k, (xs, (bs, cs)))| update(k * STRETCH, xs, bs, cs));
+}
 
 /// Splits `0..n` into at most `parts` contiguous ranges of near-equal length.
 pub(crate) fn bands(n: usize, parts: usize) -> Vec<std::ops::Range<usize>> {
