@@ -665,6 +665,44 @@ mod tests {
         }
     }
 
+    /// A masked view's fused back projection and update hands the update the back projection
+    /// of the image with its masked pixels zeroed and the column sums of its used pixels; an
+    /// unmasked view's is the inner projector's.
+    #[test]
+    fn masked_views_update_with_their_masked_back_projection_and_column_sums() {
+        let scene = ring(2, |i| (1.3 * i as f64, 4.0, None, false), |_| None, |i| format!("{i}.png"));
+        let cams: Vec<Camera> = scene.frames.iter().map(|f| f.camera.clone()).collect();
+        let grid = Grid::new([6, 5, 7], scene.aabb);
+        let inner = fluidnerf_classical::FootprintProjector::new(grid, &cams, 1.0).expect("valid");
+        let mask: Vec<bool> = (0..64).map(|k| k % 3 != 0).collect();
+        let masked = MaskedProjector { inner: &inner, masks: vec![Some(mask.clone()), None] };
+        let y: Vec<f32> = (0..64).map(|k| 1.0 + (k % 7) as f32).collect();
+        for view in 0..2 {
+            let used = |k: usize| view == 1 || mask[k];
+            let y_used: Vec<f32> = (0..64).map(|k| if used(k) { y[k] } else { 0.0 }).collect();
+            let ones: Vec<f32> = (0..64).map(|k| if used(k) { 1.0 } else { 0.0 }).collect();
+            let (mut b, mut c) = (vec![0f32; grid.len()], vec![0f32; grid.len()]);
+            inner.back_add(view, &y_used, &mut b, None);
+            inner.back_add(view, &ones, &mut c, None);
+            assert!(c.iter().any(|&v| v > 0.0), "view {view} sees the grid");
+            let mut x = vec![0f32; grid.len()];
+            let (mut sb, mut sc) = (vec![9f32; grid.len()], vec![9f32; grid.len()]);
+            masked.back_update(view, &y, &mut x, (&mut sb, &mut sc), &|_, xs, bs, cs| {
+                for (g, (&bv, &cv)) in xs.iter_mut().zip(bs.iter().zip(cs)) {
+                    *g = bv + 10.0 * cv;
+                }
+            });
+            for j in 0..grid.len() {
+                let want = b[j] + 10.0 * c[j];
+                assert!(
+                    (x[j] - want).abs() <= 1e-5 * want.abs().max(1.0),
+                    "view {view}, voxel {j}: {} vs {want}",
+                    x[j]
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_gain_hint_names_the_camera_off_its_times_median_and_skips_masked_ones() {
         // Five cameras on a ring of radius 5 around the box, the last held out; `far` puts
