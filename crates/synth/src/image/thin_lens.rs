@@ -177,6 +177,19 @@ pub fn render(
     render_with(emitters, camera, settings, scale, seed, CastIsa::detected())
 }
 
+/// [`render`] with its ray loop compiled for the x86-64 baseline alone (SSE2): the same image
+/// and ray count bit for bit, the reference the run-time choice of AVX2 or AVX-512 is checked
+/// and timed against (`cargo bench -p fluidnerf-synth --bench image_formation`).
+pub fn render_baseline(
+    emitters: &Emitters,
+    camera: &Camera,
+    settings: &ThinLensSettings,
+    scale: f64,
+    seed: u64,
+) -> Result<(Image, u64), SynthError> {
+    render_with(emitters, camera, settings, scale, seed, CastIsa::Baseline)
+}
+
 /// [`render`] with the ray loop compiled for `isa`, which this CPU must have.
 fn render_with(
     emitters: &Emitters,
