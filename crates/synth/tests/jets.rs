@@ -344,3 +344,20 @@ fn starting_jet_head_moves_with_its_ring_continuously() {
         a.iter().zip(&b).map(|(x, y)| (x - y).abs() as f64).sum::<f64>() / a.iter().map(|&x| x as f64).sum::<f64>();
     assert!(diff < 2e-3, "relative change {diff} over Δt* = 0.001");
 }
+
+/// `eval` runs a copy of the point loop compiled for the CPU's widest vectors; it gives the
+/// values `value` gives point by point in the baseline build, bit for bit.
+#[test]
+fn eval_on_wide_vectors_gives_the_values_point_by_point() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let pts: Vec<Vec3> = (0..20_000)
+        .map(|_| Vec3::new(rng.random_range(-20.0..20.0), rng.random_range(-8.0..8.0), rng.random_range(-8.0..8.0)))
+        .collect();
+    let j = jet(3);
+    let mut v = vec![0.0; pts.len()];
+    j.eval(&pts, 0.0, &mut v);
+    assert!(v.iter().filter(|&&x| x > 0.1).count() > 1000, "the jet must show up");
+    for (p, x) in pts.iter().zip(&v) {
+        assert_eq!(x.to_bits(), j.value(*p).to_bits(), "at {p}");
+    }
+}

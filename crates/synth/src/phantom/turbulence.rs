@@ -94,6 +94,7 @@ impl KinematicModes {
     }
 
     /// Displacement `d(q)` and scalar fluctuation `m(q)` (see the module docs).
+    #[inline(always)]
     pub fn eval(&self, q: Vec3) -> (Vec3, f32) {
         // Lane-wise accumulation over blocks of LANES modes, so the compiler can vectorise the
         // loop (a single running sum would serialise it); the tail is padded with zero modes.
