@@ -345,8 +345,8 @@ fn starting_jet_head_moves_with_its_ring_continuously() {
     assert!(diff < 2e-3, "relative change {diff} over Δt* = 0.001");
 }
 
-/// `eval` runs a copy of the point loop compiled for the CPU's widest vectors; it gives the
-/// values `value` gives point by point in the baseline build, bit for bit.
+/// `eval` of the jets runs a copy of the point loop compiled for the CPU's widest vectors; it
+/// gives the values `value` gives point by point in the baseline build, bit for bit.
 #[test]
 fn eval_on_wide_vectors_gives_the_values_point_by_point() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
@@ -359,5 +359,11 @@ fn eval_on_wide_vectors_gives_the_values_point_by_point() {
     assert!(v.iter().filter(|&&x| x > 0.1).count() > 1000, "the jet must show up");
     for (p, x) in pts.iter().zip(&v) {
         assert_eq!(x.to_bits(), j.value(*p).to_bits(), "at {p}");
+    }
+    let tr = StartingJet::new(&StartingJetParams::default(), &box40(), 2).expect("jet-tr");
+    tr.eval(&pts, 15.0, &mut v);
+    assert!(v.iter().filter(|&&x| x > 0.05).count() > 100, "the starting jet must show up");
+    for (p, x) in pts.iter().zip(&v) {
+        assert_eq!(x.to_bits(), tr.value(*p, 15.0).to_bits(), "starting jet at {p}");
     }
 }

@@ -441,33 +441,14 @@ impl Jet {
 impl ScalarField for Jet {
     fn eval(&self, points: &[Vec3], _time: f64, out: &mut [f32]) {
         assert_eq!(points.len(), out.len(), "Jet::eval: points and out differ in length");
-        #[inline(always)]
-        fn each(jet: &Jet, points: &[Vec3], out: &mut [f32]) {
-            for (o, &p) in out.iter_mut().zip(points) {
-                *o = jet.value(p);
-            }
-        }
-        // Compiled again for AVX2 and AVX-512 (the turbulence's modes run eight lanes wide):
-        // the same operations, so the same values bit for bit.
-        #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx512f,avx2")]
-            unsafe fn avx512(jet: &Jet, points: &[Vec3], out: &mut [f32]) {
-                each(jet, points, out)
-            }
-            #[target_feature(enable = "avx2")]
-            unsafe fn avx2(jet: &Jet, points: &[Vec3], out: &mut [f32]) {
-                each(jet, points, out)
-            }
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU has AVX-512F and AVX2.
-                return unsafe { avx512(self, points, out) };
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2.
-                return unsafe { avx2(self, points, out) };
-            }
-        }
-        each(self, points, out)
+        super::eval_points(self, points, (), out);
+    }
+}
+
+impl super::PointValue for Jet {
+    type Arg = ();
+    #[inline(always)]
+    fn point_value(&self, p: Vec3, _: ()) -> f32 {
+        self.value(p)
     }
 }

@@ -226,6 +226,7 @@ impl StartingJet {
     }
 
     /// E at one world point and time t*.
+    #[inline(always)]
     pub fn value(&self, p: Vec3, t: f32) -> f32 {
         if t <= 0.0 {
             return 0.0;
@@ -286,9 +287,14 @@ impl StartingJet {
 impl ScalarField for StartingJet {
     fn eval(&self, points: &[Vec3], time: f64, out: &mut [f32]) {
         assert_eq!(points.len(), out.len(), "StartingJet::eval: points and out differ in length");
-        let t = time as f32;
-        for (o, &p) in out.iter_mut().zip(points) {
-            *o = self.value(p, t);
-        }
+        super::eval_points(self, points, time as f32, out);
+    }
+}
+
+impl super::PointValue for StartingJet {
+    type Arg = f32;
+    #[inline(always)]
+    fn point_value(&self, p: Vec3, t: f32) -> f32 {
+        self.value(p, t)
     }
 }
