@@ -54,16 +54,7 @@ fn main() {
     let (_, samples) = march(vol.sampler());
     let (vector, a) = time(5, || march(vol.sampler()).0);
     let (scalar, b) = time(5, || march(vol.sampler().scalar()).0);
-    #[cfg(target_arch = "x86_64")]
-    let isa = if std::arch::is_x86_feature_detected!("avx512f") {
-        "AVX-512"
-    } else if std::arch::is_x86_feature_detected!("avx2") {
-        "AVX2"
-    } else {
-        "none: scalar"
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let isa = "none: scalar";
+    let isa = format!("{:?}", fluidnerf_core::Isa::detected());
     println!(
         "{} rays through {n}^3 voxels, {samples} samples, one thread (best of 5); vector kernel: {isa}",
         rays.len()

@@ -8,32 +8,7 @@
 
 use crate::geometry::Ray;
 use crate::volume::Sampler;
-
-/// The instruction sets the march has kernels for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum MarchIsa {
-    Scalar,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl MarchIsa {
-    /// The widest this CPU runs.
-    pub(crate) fn detected() -> MarchIsa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                return MarchIsa::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                return MarchIsa::Avx2;
-            }
-        }
-        MarchIsa::Scalar
-    }
-}
+use crate::Isa;
 
 /// Lanes of the widest kernel: the buffer of one block of samples.
 const MAX_LANES: usize = 16;
@@ -42,7 +17,7 @@ impl Sampler<'_> {
     /// The same sampler with [`Sampler::march`] in scalar code: the reference its vector
     /// kernels are checked and timed against (`cargo bench -p fluidnerf-core --bench march`).
     pub fn scalar(self) -> Self {
-        Sampler { isa: MarchIsa::Scalar, ..self }
+        Sampler { isa: Isa::Baseline, ..self }
     }
 
     /// Adds `wt(q) · self.sample(ray.at(s0 + q·ds))` to `sum` for `q` in `lo..=hi`, in that
@@ -54,11 +29,10 @@ impl Sampler<'_> {
         }
         let weight = |q: usize| if q == 0 || q == segments { 0.5f32 } else { 1.0 };
         let lanes = match self.isa {
-            MarchIsa::Scalar => 0,
-            #[cfg(target_arch = "x86_64")]
-            MarchIsa::Avx2 => 8,
-            #[cfg(target_arch = "x86_64")]
-            MarchIsa::Avx512 => 16,
+            _ if !cfg!(target_arch = "x86_64") => 0,
+            Isa::Baseline => 0,
+            Isa::Avx2 => 8,
+            Isa::Avx512 => 16,
         };
         // Vertex indices are 32-bit in the gathers; sample numbers stay exact in f64.
         if lanes == 0 || self.data.len() > i32::MAX as usize || hi >= 1 << 52 {
@@ -70,15 +44,15 @@ impl Sampler<'_> {
         let mut values = [0f32; MAX_LANES];
         let mut q = lo;
         while q <= hi {
-            // SAFETY: `lanes` is non-zero only for an instruction set `MarchIsa::detected`
-            // found on this CPU (the sampler's `isa`), and the data's length fits the
+            // SAFETY: `lanes` is non-zero only for an instruction set `Isa::detected` found
+            // on this CPU (the sampler's `isa`), and the data's length fits the
             // gathers' 32-bit indices (checked above).
             unsafe {
                 #[cfg(target_arch = "x86_64")]
                 match self.isa {
-                    MarchIsa::Avx512 => x86::block16(self, ray, s0, ds, q, &mut values),
-                    MarchIsa::Avx2 => x86::block8(self, ray, s0, ds, q, &mut values),
-                    MarchIsa::Scalar => unreachable!("no lanes"),
+                    Isa::Avx512 => x86::block16(self, ray, s0, ds, q, &mut values),
+                    Isa::Avx2 => x86::block8(self, ray, s0, ds, q, &mut values),
+                    Isa::Baseline => unreachable!("no lanes"),
                 }
             }
             // Samples past `hi` in the last block were computed (at clamped vertices) and are
@@ -252,19 +226,7 @@ mod tests {
     #[test]
     fn every_kernel_sums_as_the_scalar_loop() {
         let aabb = Aabb::new(DVec3::new(-1.0, -0.5, 0.25), DVec3::new(2.0, 1.5, 1.75));
-        let kinds: Vec<MarchIsa> = {
-            let mut k = vec![MarchIsa::Scalar];
-            #[cfg(target_arch = "x86_64")]
-            {
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    k.push(MarchIsa::Avx2);
-                }
-                if std::arch::is_x86_feature_detected!("avx512f") {
-                    k.push(MarchIsa::Avx512);
-                }
-            }
-            k
-        };
+        let kinds = Isa::available();
         let mut checked = 0;
         for (g, dims) in [[13, 7, 5], [1, 9, 4], [16, 16, 16], [5, 1, 1]].into_iter().enumerate() {
             let vol = Volume::from_fn(dims, aabb, |p| ((3.0 * p.x).sin() * (2.0 * p.y).cos() + p.z) as f32);

@@ -169,7 +169,7 @@ impl Volume {
             scale: n / (max - min),
             n: self.dims,
             top: n - 1.0,
-            isa: crate::march::MarchIsa::detected(),
+            isa: crate::Isa::detected(),
         }
     }
 
@@ -285,7 +285,7 @@ pub struct Sampler<'a> {
     pub(crate) n: [usize; 3],
     pub(crate) top: Vec3,
     /// The instruction set of [`Sampler::march`].
-    pub(crate) isa: crate::march::MarchIsa,
+    pub(crate) isa: crate::Isa,
 }
 
 impl Sampler<'_> {

@@ -91,7 +91,7 @@
 use std::ops::Range;
 use std::sync::{Arc, OnceLock};
 
-use fluidnerf_core::Camera;
+use fluidnerf_core::{Camera, Isa};
 use rayon::prelude::*;
 
 use super::camera32::{distort, CameraF32, GridF32};
@@ -1356,41 +1356,6 @@ impl KeptSlice {
 fn kept_chunk(row: &[[f32; CHUNK]], c: usize, stride: usize) -> ChunkFoot<'_> {
     let d = &row[c * stride..][..stride];
     ChunkFoot { first: &d[0], amp: &d[1], w: &d[2..] }
-}
-
-/// Instruction sets the footprint kernels are compiled for, in increasing order. All give the
-/// same weights; the back projection is identical bit for bit, the forward projection up to
-/// the order in which overlapping footprints are summed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Isa {
-    /// The x86-64 baseline (SSE2), or portable code elsewhere.
-    Baseline,
-    /// AVX2: footprints eight voxels per instruction; small footprints read by gathers.
-    Avx2,
-    /// AVX-512F: a whole chunk of sixteen footprints per instruction.
-    Avx512,
-}
-
-impl Isa {
-    /// The widest instruction set this CPU supports (cached by the standard library).
-    pub fn detected() -> Isa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::is_x86_feature_detected as has;
-            if has!("avx512f") && has!("avx2") {
-                return Isa::Avx512;
-            }
-            if has!("avx2") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
-    }
-
-    /// Every instruction set this CPU runs, from the baseline up.
-    pub fn available() -> Vec<Isa> {
-        [Isa::Baseline, Isa::Avx2, Isa::Avx512].into_iter().filter(|&i| i <= Isa::detected()).collect()
-    }
 }
 
 impl FootprintProjector {

@@ -48,7 +48,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use footprint::{FootprintProjector, Isa, AUTO_FOOTPRINT_MAX_PX, MAX_FOOTPRINT_SIDE};
+pub use fluidnerf_core::Isa;
+pub use footprint::{FootprintProjector, AUTO_FOOTPRINT_MAX_PX, MAX_FOOTPRINT_SIDE};
 pub use ray::RayProjector;
 pub use splat::SplatProjector;
 

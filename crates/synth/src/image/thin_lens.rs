@@ -35,7 +35,7 @@
 
 use fluidnerf_core::glam::Vec3;
 use fluidnerf_core::num;
-use fluidnerf_core::{Camera, Image, Volume};
+use fluidnerf_core::{Camera, Image, Isa, Volume};
 use rand::{Rng, RngCore, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
@@ -174,7 +174,7 @@ pub fn render(
     scale: f64,
     seed: u64,
 ) -> Result<(Image, u64), SynthError> {
-    render_with(emitters, camera, settings, scale, seed, CastIsa::detected())
+    render_with(emitters, camera, settings, scale, seed, Isa::detected())
 }
 
 /// [`render`] with its ray loop compiled for the x86-64 baseline alone (SSE2): the same image
@@ -187,7 +187,7 @@ pub fn render_baseline(
     scale: f64,
     seed: u64,
 ) -> Result<(Image, u64), SynthError> {
-    render_with(emitters, camera, settings, scale, seed, CastIsa::Baseline)
+    render_with(emitters, camera, settings, scale, seed, Isa::Baseline)
 }
 
 /// [`render`] with the ray loop compiled for `isa`, which this CPU must have.
@@ -197,7 +197,7 @@ fn render_with(
     settings: &ThinLensSettings,
     scale: f64,
     seed: u64,
-    isa: CastIsa,
+    isa: Isa,
 ) -> Result<(Image, u64), SynthError> {
     settings.validate()?;
     let lens = camera
@@ -269,45 +269,21 @@ struct Cast<'a> {
     seed: u64,
 }
 
-/// The instruction sets the ray loop is compiled for. The rays and their pixels are the same
-/// on each (the same random streams, and no fused multiply–adds are formed); wider vectors
-/// only run more of the loop's lanes at once.
-#[derive(Clone, Copy, Debug)]
-enum CastIsa {
-    Baseline,
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
-
-impl CastIsa {
-    fn detected() -> CastIsa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                return CastIsa::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                return CastIsa::Avx2;
-            }
-        }
-        CastIsa::Baseline
-    }
-}
-
 impl Cast<'_> {
     /// Casts the rays of chunk `ci` of the emitters (`qs`, their values) into `acc`; returns
-    /// how many were cast.
-    fn run(&self, isa: CastIsa, ci: usize, qs: &[u32], acc: &mut [u64]) -> u64 {
+    /// how many were cast. The loop is compiled again for AVX2 and AVX-512: the rays and their
+    /// pixels are the same on each (the same random streams, and no fused multiply–adds are
+    /// formed); wider vectors only run more of its lanes at once. `isa` must be one this CPU
+    /// has ([`Isa::available`]).
+    fn run(&self, isa: Isa, ci: usize, qs: &[u32], acc: &mut [u64]) -> u64 {
         match isa {
-            CastIsa::Baseline => self.chunk(ci, qs, acc),
-            // SAFETY: `CastIsa::detected` found the instruction set on this CPU.
+            // SAFETY: the caller passes an instruction set this CPU has.
             #[cfg(target_arch = "x86_64")]
-            CastIsa::Avx2 => unsafe { self.chunk_avx2(ci, qs, acc) },
+            Isa::Avx2 => unsafe { self.chunk_avx2(ci, qs, acc) },
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            CastIsa::Avx512 => unsafe { self.chunk_avx512(ci, qs, acc) },
+            Isa::Avx512 => unsafe { self.chunk_avx512(ci, qs, acc) },
+            _ => self.chunk(ci, qs, acc),
         }
     }
 
@@ -517,19 +493,9 @@ mod tests {
         let em = Emitters::from_volume(&vol, 0.0);
         let cam = camera(32, 2.8);
         let s = ThinLensSettings { rays_per_voxel: 37.0, threshold: 0.0 };
-        let (a, rays) = render_with(&em, &cam, &s, 1.0, 5, CastIsa::Baseline).expect("render");
+        let (a, rays) = render_with(&em, &cam, &s, 1.0, 5, Isa::Baseline).expect("render");
         assert!(rays > 10_000 && a.data.iter().filter(|&&v| v > 0.0).count() > 200, "{rays} rays");
-        let mut isas = Vec::new();
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                isas.push(CastIsa::Avx2);
-            }
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                isas.push(CastIsa::Avx512);
-            }
-        }
-        for isa in isas {
+        for isa in Isa::available() {
             let (b, n) = render_with(&em, &cam, &s, 1.0, 5, isa).expect("render");
             assert_eq!(n, rays, "{isa:?}");
             assert!(a.data.iter().zip(&b.data).all(|(x, y)| x.to_bits() == y.to_bits()), "{isa:?}");

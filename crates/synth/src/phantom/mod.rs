@@ -336,13 +336,12 @@ pub(crate) fn eval_points<T: PointValue>(field: &T, points: &[Vec3], arg: T::Arg
         unsafe fn avx2<T: PointValue>(field: &T, points: &[Vec3], arg: T::Arg, out: &mut [f32]) {
             each(field, points, arg, out)
         }
-        if std::arch::is_x86_feature_detected!("avx512f") {
+        match fluidnerf_core::Isa::detected() {
             // SAFETY: the CPU has AVX-512F and AVX2.
-            return unsafe { avx512(field, points, arg, out) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
+            fluidnerf_core::Isa::Avx512 => return unsafe { avx512(field, points, arg, out) },
             // SAFETY: the CPU has AVX2.
-            return unsafe { avx2(field, points, arg, out) };
+            fluidnerf_core::Isa::Avx2 => return unsafe { avx2(field, points, arg, out) },
+            fluidnerf_core::Isa::Baseline => {}
         }
     }
     each(field, points, arg, out)
