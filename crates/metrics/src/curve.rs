@@ -16,8 +16,9 @@ pub struct NrmsePoint {
 }
 
 /// Every `stride`-th voxel centre of the truth along each axis (the middle one of each group)
-/// and the truth's values there: an unbiased subset for the NRMSE curve that stays cheap to
-/// evaluate (at most 64 points per side).
+/// and the truth's values there: the whole truth up to [`TruthSample::MAX_SIDE`] voxels per
+/// side, so that the curve's NRMSE is the run's reported one at the same iterate, and a
+/// regular subset of a larger truth, cheap enough to evaluate every few iterations.
 #[derive(Clone, Debug)]
 pub struct TruthSample {
     points: Vec<Vec3>,
@@ -25,8 +26,11 @@ pub struct TruthSample {
 }
 
 impl TruthSample {
+    /// The largest truth, in voxels per side, sampled whole.
+    pub const MAX_SIDE: usize = 128;
+
     pub fn new(truth: &Volume) -> Self {
-        let stride = truth.dims.iter().map(|&n| n.div_ceil(64)).max().unwrap_or(1).max(1);
+        let stride = truth.dims.iter().map(|&n| n.div_ceil(Self::MAX_SIDE)).max().unwrap_or(1).max(1);
         let (mut points, mut values) = (Vec::new(), Vec::new());
         let [nx, ny, nz] = truth.dims;
         for k in (stride / 2..nz).step_by(stride) {
@@ -80,5 +84,18 @@ mod tests {
         assert!(sample.nrmse(&truth) < 1e-6);
         let zero = Volume::zeros(dims, aabb);
         assert!((sample.nrmse(&zero) - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_truth_up_to_the_largest_side_is_sampled_whole_and_a_larger_one_every_other_voxel() {
+        let aabb = Aabb::new(DVec3::ZERO, DVec3::ONE);
+        let side = TruthSample::MAX_SIDE;
+        let whole = Volume::zeros([side, 4, 4], aabb);
+        assert_eq!(TruthSample::new(&whole).len(), side * 16);
+        // One voxel more: every other centre along each axis, from the second.
+        let larger = Volume::from_fn([side + 1, 4, 4], aabb, |p| p.x as f32);
+        let sample = TruthSample::new(&larger);
+        assert_eq!(sample.len(), (side / 2) * 2 * 2);
+        assert_eq!(sample.points[0], larger.voxel_centre(1, 1, 1).as_vec3());
     }
 }

@@ -1,8 +1,9 @@
 //! Voxel methods (ASART, ART, SART, MART, SMART, MLEM, SART-TV, SART-Tikhonov) on the scene's
 //! training views.
 //!
-//! The NRMSE curve is evaluated over the same subset of the truth's voxel centres as the
-//! neural methods' ([`TruthSample`], the volume sampled trilinearly); `train_time_s` is the
+//! The NRMSE curve is evaluated over the truth's voxel centres as the neural methods' is
+//! ([`TruthSample`], the volume sampled trilinearly), or voxel by voxel when the truth lies on
+//! the solver's grid, as the final metrics compare them; `train_time_s` is the
 //! solver's time with the evaluations taken out. Under held-out early stopping the held-out
 //! views are forward-projected after every `holdout_every`-th iteration and the volume with
 //! the lowest relative held-out misfit `‖p − A g‖² / ‖p‖²` is kept.
@@ -366,9 +367,11 @@ pub(crate) fn run(
         None => None,
     };
     let mut nrmse_history = curve.map(|c| c.points).unwrap_or_default();
-    if let Some(c) = truth.first().map(|(_, t)| TruthSample::new(t)) {
+    // The last iterate, when it is the volume kept and the curve has no point for it: the
+    // final metrics' NRMSE, which the curve's points equal on the truth's grid.
+    if let Some(m) = &metrics {
         if nrmse_history.last().is_none_or(|p| p.iteration != iterations) && kept_iteration == iterations {
-            nrmse_history.push(NrmsePoint { iteration: iterations, train_time_s, nrmse: c.nrmse(&volume) });
+            nrmse_history.push(NrmsePoint { iteration: iterations, train_time_s, nrmse: m.global.nrmse });
         }
     }
     eval_s += t_eval.elapsed().as_secs_f64();
@@ -429,22 +432,40 @@ pub(crate) fn run(
     finish(scene, dir, report, truth, Some(&measured), session)
 }
 
-/// The NRMSE curve: evaluations over a [`TruthSample`] of the solver's volume.
+/// The NRMSE curve of the solver's volume.
 struct Curve {
-    sample: TruthSample,
-    /// The solver's volume, copied for trilinear sampling at the truth's voxel centres.
-    scratch: Volume,
+    against: Against,
     points: Vec<NrmsePoint>,
+}
+
+/// What a [`Curve`] compares the volume with.
+enum Against {
+    /// The truth on the solver's own grid: voxel by voxel, as the final metrics do, exactly
+    /// and without resampling.
+    SameGrid(Vec<f32>),
+    /// A [`TruthSample`] of a truth on another grid, and the solver's volume copied for
+    /// trilinear sampling at its voxel centres.
+    Sample(TruthSample, Volume),
 }
 
 impl Curve {
     fn new(truth: &Volume, grid: Grid) -> Self {
-        Curve { sample: TruthSample::new(truth), scratch: grid.volume(vec![0.0; grid.len()]), points: Vec::new() }
+        let against = if truth.dims == grid.dims && truth.aabb == grid.aabb {
+            Against::SameGrid(truth.data.clone())
+        } else {
+            Against::Sample(TruthSample::new(truth), grid.volume(vec![0.0; grid.len()]))
+        };
+        Curve { against, points: Vec::new() }
     }
 
     fn push(&mut self, iteration: usize, train_time_s: f64, volume: &[f32]) -> f64 {
-        self.scratch.data.copy_from_slice(volume);
-        let nrmse = self.sample.nrmse(&self.scratch);
+        let nrmse = match &mut self.against {
+            Against::SameGrid(truth) => fluidnerf_metrics::nrmse(volume, truth),
+            Against::Sample(sample, scratch) => {
+                scratch.data.copy_from_slice(volume);
+                sample.nrmse(scratch)
+            }
+        };
         self.points.push(NrmsePoint { iteration, train_time_s, nrmse });
         nrmse
     }

@@ -271,10 +271,11 @@ fn nrmse_history_and_tikhonov_weight() {
     }
     let solve_s = r["train_time_s"].as_f64().expect("solve time");
     assert!(last_time <= solve_s + 1e-9, "curve time {last_time} beyond the solver's {solve_s}");
-    // On a 16³ truth the curve's subset is every voxel centre: its last point is the final NRMSE.
+    // The truth lies on the solver's grid: the curve's last point is the final NRMSE (up to the
+    // order of the sums, the solver's axes being the scene's renamed).
     let last = history[19]["nrmse"].as_f64().expect("nrmse");
     let fin = r["final_nrmse"].as_f64().expect("final");
-    assert!((last - fin).abs() < 0.02 * fin, "last curve point {last} vs final {fin}");
+    assert!((last - fin).abs() <= 1e-9 * fin, "last curve point {last} vs final {fin}");
 
     // Every third iteration, and the last one.
     let mut sart = base.to_vec();
