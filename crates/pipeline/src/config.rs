@@ -849,7 +849,7 @@ pub struct StoppingPolicy {
     pub time_budget_s: Option<f64>,
     /// Held-out rule: iterations between evaluations, at most
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; None: 1 for voxel methods (each
-    /// iteration is a full sweep), 25 for neural ones.
+    /// iteration is a full sweep), [`NEURAL_INTERVAL`] (25) for neural ones.
     pub holdout_every: Option<usize>,
     /// Held-out rule: evaluations without a new best before stopping, at most
     /// [`fluidnerf_neural::train::MAX_ITERATION_SPAN`]; 0 never stops early. Default 10.
@@ -868,10 +868,16 @@ impl Default for StoppingPolicy {
     }
 }
 
+/// Iterations between a neural method's held-out evaluations, and between its NRMSE
+/// evaluations against ground truth, unless `holdout_every` or `eval_every` say otherwise: the
+/// same interval, so that the NRMSE curve has a point at every iterate the held-out rule can
+/// keep, the kept one included. (Voxel methods evaluate both after every iteration.)
+pub const NEURAL_INTERVAL: usize = 25;
+
 impl StoppingPolicy {
     /// Iterations between held-out evaluations for a method of `family`.
     pub fn holdout_interval(&self, family: Family) -> usize {
-        self.holdout_every.unwrap_or(if family == Family::Classical { 1 } else { 25 })
+        self.holdout_every.unwrap_or(if family == Family::Classical { 1 } else { NEURAL_INTERVAL })
     }
 
     fn validate(&self) -> Result<(), PipelineError> {
@@ -997,8 +1003,8 @@ pub struct RunConfig {
     #[serde(default = "default_checkpoint_every")]
     pub checkpoint_every: usize,
     /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve, at
-    /// most [`fluidnerf_neural::train::MAX_ITERATION_SPAN`] (0: only at the end); None: 100 for
-    /// neural methods, every iteration for voxel ones.
+    /// most [`fluidnerf_neural::train::MAX_ITERATION_SPAN`] (0: only at the end); None:
+    /// [`NEURAL_INTERVAL`] (25) for neural methods, every iteration for voxel ones.
     #[serde(default)]
     pub eval_every: Option<usize>,
     /// Refuse runs whose estimated memory exceeds this many GiB; None: the memory available
@@ -1205,9 +1211,9 @@ impl RunConfig {
         self.method.method()
     }
 
-    /// Iterations between NRMSE evaluations.
+    /// Iterations between NRMSE evaluations ([`NEURAL_INTERVAL`] for neural methods).
     pub fn eval_interval(&self) -> usize {
-        self.eval_every.unwrap_or(if self.method().family() == Family::Classical { 1 } else { 100 })
+        self.eval_every.unwrap_or(if self.method().family() == Family::Classical { 1 } else { NEURAL_INTERVAL })
     }
 
     /// Rejects settings no run can use, before any work starts.
