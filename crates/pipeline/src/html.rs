@@ -10,7 +10,7 @@ use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{Axis, PanelGroup, PanelStyle, RunHistory, Trace};
 
 use crate::load::LoadedRun;
-use crate::{bytes, LossKind, PipelineError, RunReport, RunStatus};
+use crate::{bytes, LossKind, PipelineError, RunReport, RunStatus, StopReason, StoppingPolicy};
 
 /// What a run produced, as the HTML report and the demo show it.
 pub struct RunSummary {
@@ -84,17 +84,42 @@ fn holdout_nrmse(path: &Path) -> Option<f64> {
     crate::mean(m.reprojection.iter().map(|r| r.nrmse))
 }
 
+/// The stopping policy that every one of several runs shares (as `study` and the demo run
+/// them): their table and summary then state it once and say how each run ended, where
+/// each row repeated the whole policy.
+fn shared_policy(runs: &[&RunSummary]) -> Option<StoppingPolicy> {
+    let first = runs.first()?.report.stopping;
+    (runs.len() > 1 && runs.iter().all(|r| r.report.stopping == first)).then_some(first)
+}
+
+/// What ended a run, in words: "held-out rule (every 25 iterations)".
+fn ended_by(report: &RunReport) -> String {
+    match report.stop_reason {
+        StopReason::HeldOutPatience => {
+            format!("held-out rule (every {} iterations)", report.stopping.holdout_interval(report.method.family()))
+        }
+        StopReason::TimeBudget => "time budget".into(),
+        StopReason::IterationCap => "iteration cap".into(),
+        StopReason::Converged => "its own convergence rule".into(),
+        StopReason::Interrupted => "interrupted".into(),
+    }
+}
+
 /// The metrics table of several runs: global figures, then NRMSE per region.
 pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
     let first = runs.iter().find_map(|r| r.metrics())?;
+    let shared = shared_policy(runs);
     let mut header: Vec<String> =
         ["method", "NRMSE", "SSIM (global)", "SSIM (windowed)", "PSNR [dB]"].iter().map(|s| s.to_string()).collect();
     header.extend(first.regions.iter().map(|r| format!("NRMSE {}", r.region.name)));
-    header
-        .extend(["held-out view NRMSE", "stopping", "kept / iterations", "time [s]", "result size"].map(String::from));
+    let stopping = if shared.is_some() { "ended by" } else { "stopping" };
+    header.extend(["held-out view NRMSE", stopping, "kept / iterations", "time [s]", "result size"].map(String::from));
     let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    let mut table =
-        Table::new("Volume metrics against the ground truth (lower NRMSE, higher SSIM/PSNR are better)", &header_refs);
+    let mut caption = "Volume metrics against the ground truth (lower NRMSE, higher SSIM/PSNR are better)".to_string();
+    if let Some(policy) = shared {
+        caption += &format!("; every method stopped by {}", policy.describe_rule());
+    }
+    let mut table = Table::new(&caption, &header_refs);
     for r in runs {
         let Some(m) = r.metrics() else { continue };
         let f = fluidnerf_viz::report::format_value;
@@ -108,7 +133,7 @@ pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
         row.extend(m.regions.iter().map(|g| f(g.metrics.nrmse)));
         row.extend([
             r.holdout_nrmse.map_or("–".into(), f),
-            r.report.stopping_rule.clone(),
+            if shared.is_some() { ended_by(&r.report) } else { r.report.stopping_rule.clone() },
             format!("{} / {}", r.report.kept_iteration, r.report.iterations),
             format!("{:.1}", r.report.train_time_s),
             bytes(r.report.result_bytes),
@@ -213,13 +238,18 @@ pub fn build_report(
         ),
         ..Report::default()
     };
+    let shared = shared_policy(runs);
     for r in runs {
         let rep = &r.report;
         let mut facts = format!("method {}, {} iterations", rep.method, rep.iterations);
         if rep.kept_iteration != rep.iterations {
-            facts += &format!(" (field of iteration {} kept)", rep.kept_iteration);
+            facts += &format!(" (iteration {} kept)", rep.kept_iteration);
         }
-        facts += &format!(", {:.1} s, stopped by {}", rep.train_time_s, rep.stopping_rule);
+        if shared.is_some() {
+            facts += &format!(", {:.1} s, ended by {}", rep.train_time_s, ended_by(rep));
+        } else {
+            facts += &format!(", {:.1} s, stopped by {}", rep.train_time_s, rep.stopping_rule);
+        }
         if rep.status == RunStatus::Interrupted {
             facts += ", INTERRUPTED";
         }

@@ -52,6 +52,9 @@ fn demo_compares_the_fields_with_both_classical_methods() {
         "{}",
         &html[..html.len().min(2000)]
     );
+    // The one policy is stated once above the table, whose rows say what ended each run.
+    assert!(html.contains("every method stopped by held-out early stopping (patience 10), at most 4 iterations"));
+    assert!(html.contains(">ended by<") && html.matches(">iteration cap<").count() == 4, "{html}");
     refused(&fluidnerf(d, &args), "already holds a demo; pass --force to replace it");
 }
 
