@@ -10,7 +10,7 @@ use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{Axis, PanelGroup, PanelStyle, RunHistory, Trace};
 
 use crate::load::LoadedRun;
-use crate::{bytes, LossKind, PipelineError, RunReport, RunStatus, StopReason, StoppingPolicy};
+use crate::{bytes, LossKind, PipelineError, RunReport, RunStatus, StopReason};
 
 /// What a run produced, as the HTML report and the demo show it.
 pub struct RunSummary {
@@ -84,12 +84,18 @@ fn holdout_nrmse(path: &Path) -> Option<f64> {
     crate::mean(m.reprojection.iter().map(|r| r.nrmse))
 }
 
-/// The stopping policy that every one of several runs shares (as `study` and the demo run
-/// them): their table and summary then state it once and say how each run ended, where
-/// each row repeated the whole policy.
-fn shared_policy(runs: &[&RunSummary]) -> Option<StoppingPolicy> {
-    let first = runs.first()?.report.stopping;
-    (runs.len() > 1 && runs.iter().all(|r| r.report.stopping == first)).then_some(first)
+/// The stopping policy of a run, or the one that every one of several runs shares (as
+/// `study` and the demo run them), in words: their table then states it once and says what
+/// ended each run, where each row repeated the whole policy.
+fn shared_policy(runs: &[&RunSummary]) -> Option<String> {
+    let first = &runs.first()?.report;
+    match runs {
+        [_] => Some(format!("stopped by {}", first.stopping_rule)),
+        _ => runs
+            .iter()
+            .all(|r| r.report.stopping == first.stopping)
+            .then(|| format!("every method stopped by {}", first.stopping.describe_rule())),
+    }
 }
 
 /// What ended a run, in words: "held-out rule (every 25 iterations)".
@@ -112,12 +118,18 @@ pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
     let mut header: Vec<String> =
         ["method", "NRMSE", "SSIM (global)", "SSIM (windowed)", "PSNR [dB]"].iter().map(|s| s.to_string()).collect();
     header.extend(first.regions.iter().map(|r| format!("NRMSE {}", r.region.name)));
+    // Filled from `eval`'s scores: a run's own report.html is written before any, and its
+    // held-out views' reprojections are in the preprocessing table.
+    let scored = runs.iter().any(|r| r.holdout_nrmse.is_some());
+    if scored {
+        header.push("held-out view NRMSE".into());
+    }
     let stopping = if shared.is_some() { "ended by" } else { "stopping" };
-    header.extend(["held-out view NRMSE", stopping, "kept / iterations", "time [s]", "result size"].map(String::from));
+    header.extend([stopping, "kept / iterations", "time [s]", "result size"].map(String::from));
     let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
     let mut caption = "Volume metrics against the ground truth (lower NRMSE, higher SSIM/PSNR are better)".to_string();
-    if let Some(policy) = shared {
-        caption += &format!("; every method stopped by {}", policy.describe_rule());
+    if let Some(policy) = &shared {
+        caption += &format!("; {policy}");
     }
     let mut table = Table::new(&caption, &header_refs);
     for r in runs {
@@ -131,8 +143,10 @@ pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
             f(m.global.psnr_db),
         ];
         row.extend(m.regions.iter().map(|g| f(g.metrics.nrmse)));
+        if scored {
+            row.push(r.holdout_nrmse.map_or("–".into(), f));
+        }
         row.extend([
-            r.holdout_nrmse.map_or("–".into(), f),
             if shared.is_some() { ended_by(&r.report) } else { r.report.stopping_rule.clone() },
             format!("{} / {}", r.report.kept_iteration, r.report.iterations),
             format!("{:.1}", r.report.train_time_s),
@@ -238,14 +252,15 @@ pub fn build_report(
         ),
         ..Report::default()
     };
-    let shared = shared_policy(runs);
+    // Several runs under one policy: the title and the table state it.
+    let shared = runs.len() > 1 && shared_policy(runs).is_some();
     for r in runs {
         let rep = &r.report;
         let mut facts = format!("method {}, {} iterations", rep.method, rep.iterations);
         if rep.kept_iteration != rep.iterations {
             facts += &format!(" (iteration {} kept)", rep.kept_iteration);
         }
-        if shared.is_some() {
+        if shared {
             facts += &format!(", {:.1} s, ended by {}", rep.train_time_s, ended_by(rep));
         } else {
             facts += &format!(", {:.1} s, stopped by {}", rep.train_time_s, rep.stopping_rule);
