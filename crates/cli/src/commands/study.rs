@@ -828,6 +828,26 @@ fn method_label(r: &Row) -> String {
     }
 }
 
+/// What ended a run, from its `stop_reason` name, in words for the report's table.
+fn ended_by(stop_reason: &str) -> &str {
+    match stop_reason {
+        "held-out-patience" => "held-out rule",
+        "time-budget" => "time budget",
+        "iteration-cap" => "iteration cap",
+        "converged" => "its own convergence rule",
+        other => other,
+    }
+}
+
+/// The terminal table's mark of a run that a cap or the budget ended, not its rule.
+fn cut_mark(stop_reason: &str) -> &'static str {
+    match stop_reason {
+        "iteration-cap" => "*",
+        "time-budget" => "t",
+        _ => "",
+    }
+}
+
 fn text_table(rows: &[Row]) -> String {
     let mut s = format!(
         "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>10} {:>8}\n",
@@ -843,9 +863,15 @@ fn text_table(rows: &[Row]) -> String {
             method_label(r),
             f(r.nrmse),
             f(r.ssim_global),
-            format!("{}/{}", r.kept_iteration, r.iterations),
+            format!("{}/{}{}", r.kept_iteration, r.iterations, cut_mark(&r.stop_reason)),
             r.train_time_s
         );
+    }
+    if rows.iter().any(|r| r.stop_reason == "iteration-cap") {
+        s += "* ended by the iteration cap (--max-iterations), not by the stopping rule\n";
+    }
+    if rows.iter().any(|r| r.stop_reason == "time-budget") {
+        s += "t ended by the time budget (--time-budget), not by the stopping rule\n";
     }
     s
 }
@@ -996,7 +1022,18 @@ fn write_outputs(
     let runs = if finished { "Every run".to_string() } else { format!("The {} of {total} runs made", rows.len()) };
     let mut table = Table::new(
         format!("{runs}, stopped by {}", g.stopping.describe_rule()),
-        &["layout", "cameras", "noise", "method", "NRMSE", "SSIM (global)", "kept / iterations", "time [s]", "result"],
+        &[
+            "layout",
+            "cameras",
+            "noise",
+            "method",
+            "NRMSE",
+            "SSIM (global)",
+            "ended by",
+            "kept / iterations",
+            "time [s]",
+            "result",
+        ],
     );
     let f = |v: Option<f64>| v.map_or("–".into(), fluidnerf_viz::report::format_value);
     for r in rows {
@@ -1007,6 +1044,7 @@ fn write_outputs(
             method_label(r),
             f(r.nrmse),
             f(r.ssim_global),
+            ended_by(&r.stop_reason).to_string(),
             format!("{} / {}", r.kept_iteration, r.iterations),
             format!("{:.1}", r.train_time_s),
             fluidnerf_pipeline::bytes(r.result_bytes),

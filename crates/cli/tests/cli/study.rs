@@ -40,6 +40,13 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     }
     let csv = std::fs::read_to_string(st.join("study.csv")).expect("csv");
     assert_eq!(csv.lines().count(), 5);
+    // The smoke grid's cap of 20 iterations ends every run before the held-out rule does: the
+    // terminal's table marks them, the report's names it.
+    assert!(rows.iter().all(|r| r["stop_reason"] == "iteration-cap"), "{record}");
+    assert_eq!(stdout.matches("/20* ").count(), 4, "{stdout}");
+    assert!(stdout.contains("* ended by the iteration cap (--max-iterations), not by the stopping rule"), "{stdout}");
+    let html = std::fs::read_to_string(st.join("report.html")).expect("report");
+    assert!(html.contains(">ended by<") && html.matches(">iteration cap<").count() == 4, "{html}");
 
     // Rerunning the same command reads the finished cells back instead of running them.
     let stamp =
