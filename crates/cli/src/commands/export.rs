@@ -210,10 +210,16 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -
                 })
                 .unwrap_or_default();
             inside.sort();
-            let hint = match inside.as_slice() {
-                [] => "it holds no .npy, .vti, .raw or .tif file".to_string(),
-                [one] => format!("give the file inside it, {}", path.join(one).display()),
-                many => format!("give one of the files inside it: {}", many.join(", ")),
+            // A scene folder: name its ground truth, which is what a user giving it means.
+            let truth: Vec<String> = fluidnerf_io::scene::read_scene_draft(path)
+                .map(|d| d.truth.iter().map(|t| d.root.join(&t.file_path).display().to_string()).collect())
+                .unwrap_or_default();
+            let hint = match (inside.as_slice(), truth.as_slice()) {
+                (_, [one]) => format!("it is a scene; its ground truth is {one}"),
+                (_, [_, ..]) => format!("it is a scene; its ground truth volumes are {}", truth.join(", ")),
+                ([], []) => "it holds no .npy, .vti, .raw or .tif file".to_string(),
+                ([one], []) => format!("give the file inside it, {}", path.join(one).display()),
+                (many, []) => format!("give one of the files inside it: {}", many.join(", ")),
             };
             bail!("{}: a folder, not a volume file; {hint}", path.display())
         }

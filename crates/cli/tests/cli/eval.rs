@@ -854,5 +854,12 @@ fn a_folder_given_as_the_truth_names_the_volume_inside_it() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "{e}");
     assert!(e.contains("vols: a folder, not a volume file") && e.contains("vols/truth_0.npy"), "{e}");
+    // A scene folder: its own ground truth is named, which is what a user giving it means.
+    std::fs::create_dir(d.join("empty")).expect("mkdir");
+    let o = fluidnerf(&["eval", "truth_0.npy", "--scene", ".", "--truth", "empty/..", "--json", "m.json"], d);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("a folder, not a volume file; it is a scene; its ground truth is"), "{e}");
+    assert!(e.contains("truth_0.npy"), "{e}");
     assert!(!d.join("m.json").exists(), "no report from a refused truth");
 }
