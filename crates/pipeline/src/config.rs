@@ -868,11 +868,16 @@ impl Default for StoppingPolicy {
     }
 }
 
-/// Iterations between a neural method's held-out evaluations, and between its NRMSE
-/// evaluations against ground truth, unless `holdout_every` or `eval_every` say otherwise: the
-/// same interval, so that the NRMSE curve has a point at every iterate the held-out rule can
-/// keep, the kept one included. (Voxel methods evaluate both after every iteration.)
+/// Iterations between a neural method's held-out evaluations unless `holdout_every` says
+/// otherwise. Under the held-out rule its NRMSE against ground truth is evaluated at the same
+/// iterations unless `eval_every` says otherwise, so that the curve has a point at every
+/// iterate the rule can keep, the kept one included. (Voxel methods evaluate both after every
+/// iteration.)
 pub const NEURAL_INTERVAL: usize = 25;
+
+/// Iterations between a neural method's NRMSE evaluations under the other rules, which keep
+/// the last iterate (evaluated at the end in any case).
+pub const NEURAL_EVAL_INTERVAL: usize = 100;
 
 impl StoppingPolicy {
     /// Iterations between held-out evaluations for a method of `family`.
@@ -1003,8 +1008,9 @@ pub struct RunConfig {
     #[serde(default = "default_checkpoint_every")]
     pub checkpoint_every: usize,
     /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve, at
-    /// most [`fluidnerf_neural::train::MAX_ITERATION_SPAN`] (0: only at the end); None:
-    /// [`NEURAL_INTERVAL`] (25) for neural methods, every iteration for voxel ones.
+    /// most [`fluidnerf_neural::train::MAX_ITERATION_SPAN`] (0: only at the end); None: every
+    /// iteration for voxel methods; for neural ones where the held-out rule evaluates the
+    /// held-out loss ([`NEURAL_INTERVAL`]), else every [`NEURAL_EVAL_INTERVAL`].
     #[serde(default)]
     pub eval_every: Option<usize>,
     /// Refuse runs whose estimated memory exceeds this many GiB; None: the memory available
@@ -1211,9 +1217,14 @@ impl RunConfig {
         self.method.method()
     }
 
-    /// Iterations between NRMSE evaluations ([`NEURAL_INTERVAL`] for neural methods).
+    /// Iterations between NRMSE evaluations (see `eval_every`), for a configuration whose
+    /// stopping rule is decided (not `auto`).
     pub fn eval_interval(&self) -> usize {
-        self.eval_every.unwrap_or(if self.method().family() == Family::Classical { 1 } else { NEURAL_INTERVAL })
+        self.eval_every.unwrap_or(match self.method().family() {
+            Family::Classical => 1,
+            _ if self.stopping.rule == StopRule::HeldOut => self.stopping.holdout_interval(Family::Neural),
+            _ => NEURAL_EVAL_INTERVAL,
+        })
     }
 
     /// Rejects settings no run can use, before any work starts.

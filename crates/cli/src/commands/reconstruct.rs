@@ -157,9 +157,10 @@ pub struct Args {
     #[arg(long, value_name = "GIB")]
     pub memory_limit: Option<f64>,
     /// With ground truth: volume NRMSE every N iterations for the time-to-accuracy curve (0:
-    /// only at the end; its time is not counted as training time) [default: 25 for neural
-    /// methods, where they evaluate the held-out loss, so that the curve shows every iterate
-    /// held-out stopping can keep; every iteration for voxel ones].
+    /// only at the end; its time is not counted as training time) [default: every iteration
+    /// for voxel methods; for neural ones, under --stop held-out where they evaluate the
+    /// held-out loss (every 25 iterations), so that the curve shows every iterate the rule can
+    /// keep, else every 100].
     #[arg(long)]
     pub eval_every: Option<usize>,
     /// Neural methods: a resumable checkpoint every N iterations (0: only at the end and on
