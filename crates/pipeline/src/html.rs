@@ -37,10 +37,9 @@ impl RunSummary {
 /// The convergence traces of a report.
 pub fn history(report: &RunReport, label: &str) -> RunHistory {
     let n = report.history.loss.len();
-    let per_iter = if n > 0 { report.train_time_s / n as f64 } else { 0.0 };
     let loss = Trace {
         iteration: (1..=n).map(|i| i as f64).collect(),
-        time_s: (1..=n).map(|i| i as f64 * per_iter).collect(),
+        time_s: loss_times(&report.history.nrmse, report.train_time_s, n),
         value: report.history.loss.clone(),
     };
     let points = &report.history.nrmse;
@@ -54,7 +53,45 @@ pub fn history(report: &RunReport, label: &str) -> RunHistory {
         Some(LossKind::RelativeResidual) => "relative residual",
         None => "loss",
     };
-    RunHistory { label: label.to_string(), loss_label: loss_label.to_string(), loss, nrmse, ssim: None }
+    // The iterate the run kept, where it is not its last (the held-out rule's).
+    let kept = (report.kept_iteration != report.iterations).then_some(report.kept_iteration as f64);
+    RunHistory { label: label.to_string(), loss_label: loss_label.to_string(), loss, nrmse, ssim: None, kept }
+}
+
+/// The time of each of the `n` iterations of the loss trace: through the times the report
+/// records (its NRMSE points and its end), linearly between them, and before the first at the
+/// rate up to the next. A run that started from another reconstruction (the hybrid) counts
+/// that start in its time, so its loss curve starts where its NRMSE curve does; with the end
+/// alone, at the run's mean rate.
+fn loss_times(points: &[fluidnerf_metrics::NrmsePoint], end_s: f64, n: usize) -> Vec<f64> {
+    let mut anchors: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|p| (1..n).contains(&p.iteration) && p.train_time_s.is_finite())
+        .map(|p| (p.iteration as f64, p.train_time_s))
+        .collect();
+    anchors.push((n as f64, end_s));
+    anchors.sort_by(|a, b| a.0.total_cmp(&b.0));
+    anchors.dedup_by(|later, earlier| later.0 == earlier.0);
+    let rate = |a: (f64, f64), b: (f64, f64)| (b.1 - a.1) / (b.0 - a.0);
+    let mut next = 0;
+    (1..=n)
+        .map(|i| {
+            let i = i as f64;
+            while next + 1 < anchors.len() && anchors[next].0 < i {
+                next += 1;
+            }
+            let b = anchors[next];
+            let t = match next {
+                0 if anchors.len() == 1 => b.1 * i / b.0,
+                0 => b.1 - (b.0 - i) * rate(b, anchors[1]),
+                _ => {
+                    let a = anchors[next - 1];
+                    a.1 + (i - a.0) * rate(a, b)
+                }
+            };
+            t.max(0.0)
+        })
+        .collect()
 }
 
 /// Reads a finished run folder.
@@ -284,7 +321,12 @@ pub fn build_report(
     if !histories.is_empty() {
         let plots = fluidnerf_viz::convergence_plots(&histories);
         let png = fluidnerf_viz::encode_plots_png(&plots, 2)?;
-        report.figures.push(Figure { caption: "Convergence.".into(), image: ImageData::Png(png) });
+        let caption = if histories.iter().any(|h| h.kept.is_some()) {
+            "Convergence. A dot marks the iterate a run kept where it is not its last."
+        } else {
+            "Convergence."
+        };
+        report.figures.push(Figure { caption: caption.into(), image: ImageData::Png(png) });
     }
     if runs.iter().any(|r| r.report.status == RunStatus::Interrupted) {
         report.notes.push("Interrupted runs show the results and curves up to where they were stopped.".into());
@@ -436,4 +478,28 @@ fn camera_figure(
         rows.push(fluidnerf_viz::encode_panels_png(&groups)?);
     }
     stack_pngs(&rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fluidnerf_metrics::NrmsePoint;
+
+    fn point(iteration: usize, train_time_s: f64) -> NrmsePoint {
+        NrmsePoint { iteration, train_time_s, nrmse: 0.5 }
+    }
+
+    /// The loss curve's times go through the times the report records: the mean rate with the
+    /// end alone; through the NRMSE points, and back from the first at the next one's rate, so
+    /// that a run whose first 9 s went to its start begins there, as its NRMSE curve does.
+    #[test]
+    fn the_loss_curve_keeps_the_recorded_times() {
+        assert_eq!(loss_times(&[], 8.0, 4), [2.0, 4.0, 6.0, 8.0]);
+        let t = loss_times(&[point(2, 9.0), point(4, 10.0)], 12.0, 6);
+        assert_eq!(t, [8.5, 9.0, 9.5, 10.0, 11.0, 12.0]);
+        // Points past the loss trace (another run's curve) or not finite are left out.
+        assert_eq!(loss_times(&[point(9, 1.0), point(1, f64::NAN)], 8.0, 4), [2.0, 4.0, 6.0, 8.0]);
+        // Never before 0.
+        assert_eq!(loss_times(&[point(3, 0.1), point(4, 1.1)], 2.0, 4), [0.0, 0.0, 0.1, 2.0]);
+    }
 }

@@ -51,6 +51,7 @@ fn main() {
             loss: trace(0.002 * (k + 1) as f64),
             nrmse: Some(trace(0.001 * (k + 1) as f64)),
             ssim: None,
+            kept: None,
         })
         .collect();
     let plots = convergence_plots(&runs);

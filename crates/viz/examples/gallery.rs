@@ -63,6 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 value: (0..200).map(|i| 0.9 - 0.6 * (-0.03 * f64::from(i)).exp()).collect(),
                 ..trace(0.0, 0.1, 0.0)
             }),
+            kept: None,
         },
         RunHistory {
             label: "FluidNeRF (fast)".into(),
@@ -73,6 +74,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 value: (0..200).map(|i| 0.97 - 0.8 * (-0.02 * f64::from(i)).exp()).collect(),
                 ..trace(0.0, 0.4, 0.0)
             }),
+            // Kept by held-out early stopping before the end: marked on its curves.
+            kept: Some(120.0),
         },
     ];
     let plots = convergence_plots(&runs);
@@ -83,8 +86,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "NRMSE",
         false,
         vec![
-            Series { label: "ASART".into(), x: vec![2.0, 4.0, 6.0, 8.0], y: vec![0.45, 0.25, 0.18, 0.15] },
-            Series { label: "FluidNeRF".into(), x: vec![2.0, 4.0, 6.0, 8.0], y: vec![0.35, 0.15, 0.1, 0.08] },
+            Series { label: "ASART".into(), x: vec![2.0, 4.0, 6.0, 8.0], y: vec![0.45, 0.25, 0.18, 0.15], mark: None },
+            Series {
+                label: "FluidNeRF".into(),
+                x: vec![2.0, 4.0, 6.0, 8.0],
+                y: vec![0.35, 0.15, 0.1, 0.08],
+                mark: None,
+            },
         ],
     );
     write_plots(&out.join("sweep.png"), &[sweep], 1)?;
@@ -95,6 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         loss: Trace { value: (0..25).map(|i| 0.16 + (-0.5 * f64::from(i)).exp()).collect(), ..trace(0.0, 0.1, 0.0) },
         nrmse: None,
         ssim: None,
+        kept: None,
     };
     let narrow = RunHistory {
         loss: Trace {

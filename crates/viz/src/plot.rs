@@ -22,6 +22,9 @@ pub struct Series {
     pub label: String,
     pub x: Vec<f64>,
     pub y: Vec<f64>,
+    /// A point of the curve drawn as a dot: the iterate a run kept, where it is not its last.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mark: Option<(f64, f64)>,
 }
 
 /// One plot of a figure.
@@ -63,10 +66,14 @@ pub struct RunHistory {
     pub nrmse: Option<Trace>,
     /// SSIM against the ground truth, where known.
     pub ssim: Option<Trace>,
+    /// The iteration whose result the run kept, where it is not its last (held-out early
+    /// stopping): the plots mark it on every curve that holds it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kept: Option<f64>,
 }
 
 /// One row of the convergence figure: quantity, log scale, (run label, trace) pairs.
-type PlotRow<'a> = (String, bool, Vec<(&'a str, &'a Trace)>);
+type PlotRow<'a> = (String, bool, Vec<(&'a str, &'a Trace, Option<f64>)>);
 
 /// Plots of the runs' convergence, for a figure of two columns: one row per quantity (the loss
 /// or residual on a log scale; NRMSE on a log scale and SSIM, if any run has them), against
@@ -76,12 +83,12 @@ pub fn convergence_plots(runs: &[RunHistory]) -> Vec<LinePlot> {
     labels.dedup();
     let loss_label = if labels.len() == 1 { labels[0].to_string() } else { "loss or residual".to_string() };
     let mut rows: Vec<PlotRow<'_>> =
-        vec![(loss_label, true, runs.iter().map(|r| (r.label.as_str(), &r.loss)).collect())];
-    let nrmse: Vec<_> = runs.iter().filter_map(|r| r.nrmse.as_ref().map(|t| (r.label.as_str(), t))).collect();
+        vec![(loss_label, true, runs.iter().map(|r| (r.label.as_str(), &r.loss, r.kept)).collect())];
+    let nrmse: Vec<_> = runs.iter().filter_map(|r| r.nrmse.as_ref().map(|t| (r.label.as_str(), t, r.kept))).collect();
     if !nrmse.is_empty() {
         rows.push(("NRMSE".into(), true, nrmse));
     }
-    let ssim: Vec<_> = runs.iter().filter_map(|r| r.ssim.as_ref().map(|t| (r.label.as_str(), t))).collect();
+    let ssim: Vec<_> = runs.iter().filter_map(|r| r.ssim.as_ref().map(|t| (r.label.as_str(), t, r.kept))).collect();
     if !ssim.is_empty() {
         rows.push(("SSIM".into(), false, ssim));
     }
@@ -90,10 +97,12 @@ pub fn convergence_plots(runs: &[RunHistory]) -> Vec<LinePlot> {
         for by_time in [false, true] {
             let series = traces
                 .iter()
-                .map(|(label, t)| Series {
-                    label: label.to_string(),
-                    x: if by_time { t.time_s.clone() } else { t.iteration.clone() },
-                    y: t.value.clone(),
+                .map(|&(label, t, kept)| {
+                    let x = if by_time { &t.time_s } else { &t.iteration };
+                    let mark = kept
+                        .and_then(|k| t.iteration.iter().position(|&i| i == k))
+                        .and_then(|at| Some((*x.get(at)?, *t.value.get(at)?)));
+                    Series { label: label.to_string(), x: x.clone(), y: t.value.clone(), mark }
                 })
                 .collect();
             plots.push(LinePlot {
@@ -378,6 +387,10 @@ where
         if plot.markers {
             chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled()))).map_err(err)?;
         }
+        // Drawn only where its curve can be: a point the axes cannot show is left out.
+        if let Some(p) = s.mark.filter(|&(x, y)| pts.contains(&(x, y))) {
+            chart.draw_series(std::iter::once(Circle::new(p, 5, color.filled()))).map_err(err)?;
+        }
     }
     if any_label {
         chart
@@ -461,6 +474,7 @@ mod tests {
                 loss: trace(0.1, 0.2),
                 nrmse: Some(trace(0.05, 0.2)),
                 ssim: None,
+                kept: None,
             },
             RunHistory {
                 label: "FluidNeRF".into(),
@@ -468,6 +482,7 @@ mod tests {
                 loss: trace(0.2, 0.5),
                 nrmse: Some(trace(0.08, 0.5)),
                 ssim: Some(Trace { value: vec![0.5; 50], ..trace(0.0, 0.5) }),
+                kept: Some(20.0),
             },
         ]
     }
@@ -480,6 +495,16 @@ mod tests {
         assert!(plots[0].log_y && !plots[4].log_y);
         assert_eq!(plots[4].series.len(), 1, "only one run has SSIM");
         assert_eq!(plots[1].series[1].x[2], 1.0, "second column is wall time");
+        // The second run's kept iterate, marked on its curves by iteration and by time.
+        let nrmse_20 = (-0.08f64 * 20.0).exp();
+        assert_eq!(plots[2].series[1].mark, Some((20.0, nrmse_20)));
+        assert_eq!(plots[3].series[1].mark, Some((10.0, nrmse_20)));
+        assert_eq!(plots[4].series[0].mark, Some((20.0, 0.5)));
+        assert_eq!(plots[2].series[0].mark, None, "the first run kept its last iterate");
+        // An iteration its curve does not hold marks nothing.
+        let mut other = runs();
+        other[1].kept = Some(20.5);
+        assert!(convergence_plots(&other).iter().all(|p| p.series.iter().all(|s| s.mark.is_none())));
     }
 
     #[test]
@@ -493,11 +518,13 @@ mod tests {
         write_plots(&dir.path().join("c.svg"), &plots, 2).expect("svg");
         let svg = std::fs::read_to_string(dir.path().join("c.svg")).expect("reads");
         assert!(svg.starts_with("<svg") && svg.contains("FluidNeRF") && svg.contains("wall time [s]"));
+        // The kept iterate's dots are the figure's only circles (its curves have no markers).
+        assert_eq!(svg.matches("<circle").count(), 6, "one dot on each of the second run's six curves");
         let sweep = sweep_plot(
             "cameras",
             "NRMSE",
             false,
-            vec![Series { label: "ASART".into(), x: vec![2.0, 4.0, 8.0], y: vec![0.4, 0.2, 0.1] }],
+            vec![Series { label: "ASART".into(), x: vec![2.0, 4.0, 8.0], y: vec![0.4, 0.2, 0.1], mark: None }],
         );
         write_plots(&dir.path().join("s.png"), &[sweep], 1).expect("png");
         assert!(spans_a_decade([0.01, 0.5].into_iter()) && !spans_a_decade([0.15, 1.1, -3.0].into_iter()));
@@ -507,7 +534,7 @@ mod tests {
     fn values_near_the_largest_float_are_left_out_and_the_plot_finishes() {
         let dir = tempfile::tempdir().expect("tempdir");
         for (log, big) in [(true, 1e308), (false, 1.7e308), (true, 1e299), (false, -1e299)] {
-            let series = |x: Vec<f64>, y: Vec<f64>| vec![Series { label: "run".into(), x, y }];
+            let series = |x: Vec<f64>, y: Vec<f64>| vec![Series { label: "run".into(), x, y, mark: None }];
             let mut plot = sweep_plot("time", "NRMSE", log, series(vec![1.0, 2.0, 3.0], vec![big, 0.4, 0.3]));
             plot.log_y = log;
             write_plots(&dir.path().join("y.png"), &[plot], 1).expect("plots huge values");
@@ -542,7 +569,12 @@ mod tests {
             let plot = LinePlot {
                 log_y,
                 integer_x,
-                series: vec![Series { label: "SART".into(), x, y: (1..=n).map(|k| 0.5 / k as f64).collect() }],
+                series: vec![Series {
+                    label: "SART".into(),
+                    x,
+                    y: (1..=n).map(|k| 0.5 / k as f64).collect(),
+                    mark: None,
+                }],
                 ..Default::default()
             };
             x_tick_labels(&encode_plots_svg(&[plot], 1).expect("svg"))

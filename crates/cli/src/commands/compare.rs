@@ -630,6 +630,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 label: r.label.clone(),
                 x: r.curve.iter().map(|p| p.train_time_s).collect(),
                 y: r.curve.iter().map(|p| p.nrmse).collect(),
+                mark: None,
             })
             .collect(),
     };

@@ -924,7 +924,12 @@ fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<Li
         .map(|k| {
             let pts: Vec<(f64, f64)> =
                 rows.iter().filter(|r| &key(r) == k).filter_map(|r| y_of(r).map(|y| (x_of(r), y))).collect();
-            Series { label: k.clone(), x: pts.iter().map(|p| p.0).collect(), y: pts.iter().map(|p| p.1).collect() }
+            Series {
+                label: k.clone(),
+                x: pts.iter().map(|p| p.0).collect(),
+                y: pts.iter().map(|p| p.1).collect(),
+                mark: None,
+            }
         })
         .collect();
     Some(LinePlot {
