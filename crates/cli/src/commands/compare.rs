@@ -107,6 +107,10 @@ struct Run {
     /// which does not say.
     #[serde(skip)]
     dims: Option<[usize; 3]>,
+    /// The iteration whose result a run report kept, where it is not its last (held-out early
+    /// stopping); None for a curve file.
+    #[serde(skip)]
+    kept: Option<u64>,
 }
 
 /// The table row of one run.
@@ -223,7 +227,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     }
     let key = if probe.format.is_some() { "history.nrmse" } else { "nrmse_history" };
     let mut interrupted = false;
-    let (method, preset, history, final_nrmse, wall_time_s, instants, dims) = if probe.format.is_some() {
+    let (method, preset, history, final_nrmse, wall_time_s, instants, dims, kept) = if probe.format.is_some() {
         let r = match RunReport::read(&report) {
             Ok(r) => r,
             // A run's configuration has a `format` too: say what the file is, not what it lacks.
@@ -274,11 +278,22 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
                 r.iterations
             );
         }
-        (r.method.name().to_string(), preset, r.history.nrmse, r.final_nrmse, Some(r.train_time_s), instants, dims)
+        // The iterate the run kept, where it is not its last: marked on its curve.
+        let kept = (r.kept_iteration != r.iterations).then_some(r.kept_iteration as u64);
+        (
+            r.method.name().to_string(),
+            preset,
+            r.history.nrmse,
+            r.final_nrmse,
+            Some(r.train_time_s),
+            instants,
+            dims,
+            kept,
+        )
     } else {
         let c: CurveFile = fluidnerf_pipeline::rundir::read_json(&report)
             .with_context(|| "neither a run report nor a curve file with `method` and `nrmse_history`")?;
-        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s), None, None)
+        (c.method, c.preset, c.nrmse_history, c.final_nrmse, c.train.map(|t| t.train_time_s), None, None, None)
     };
     if history.is_empty() {
         bail!("{}: no NRMSE history; run it with --eval-every and a scene with ground truth", report.display());
@@ -349,6 +364,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         instants,
         interrupted,
         dims,
+        kept,
     })
 }
 
@@ -630,7 +646,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 label: r.label.clone(),
                 x: r.curve.iter().map(|p| p.train_time_s).collect(),
                 y: r.curve.iter().map(|p| p.nrmse).collect(),
-                mark: None,
+                mark: r.kept.and_then(|k| r.curve.iter().find(|p| p.iteration == k)).map(|p| (p.train_time_s, p.nrmse)),
             })
             .collect(),
     };
@@ -687,6 +703,7 @@ mod tests {
             instants: None,
             interrupted: false,
             dims: None,
+            kept: None,
         }
     }
 

@@ -383,3 +383,26 @@ fn a_run_stopped_by_ctrl_c_is_named_as_cut_short() {
     assert_eq!(record["runs"][0]["interrupted"], false);
     assert_eq!(record["runs"][1]["interrupted"], true);
 }
+
+/// The iterate a run kept, where it is not its last (held-out early stopping), is marked on
+/// its curve: one dot more than the curve's own markers.
+#[test]
+fn the_kept_iterate_is_marked_on_the_curve() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 6, 32, 16, &[]);
+    let run = "reconstruct scene -o dense --method fast --preset dense --max-iterations 100 --resolution 16 \
+               --eval-every 25 --rays-per-image 256 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &run.split_whitespace().collect::<Vec<_>>()));
+    let circles = |dir: &str| {
+        std::fs::read_to_string(d.join(dir).join("time_to_accuracy.svg")).expect("svg").matches("<circle").count()
+    };
+    ok(&fluidnerf(d, &["compare", "dense/report.json", "-o", "last", "-q"]));
+    assert_eq!(circles("last"), 4, "the four evaluations' markers, the last kept");
+    // The same report, as if the held-out rule had kept iteration 50.
+    let mut r = report(&d.join("dense"));
+    r["kept_iteration"] = 50.into();
+    std::fs::write(d.join("kept.json"), r.to_string()).expect("writes");
+    ok(&fluidnerf(d, &["compare", "kept.json", "-o", "kept", "-q"]));
+    assert_eq!(circles("kept"), 5, "and a dot on the kept iterate");
+}
