@@ -345,21 +345,16 @@ fn keep_best_holdout_writes_the_best_evaluated_field() {
     let run = "reconstruct scene -o run --method fast --preset dense --max-iterations 200 --resolution 24 --keep-best-holdout --patience 0 -q";
     ok(&fluidnerf(d, &run.split_whitespace().collect::<Vec<_>>()));
     let r = report(&d.join("run"));
-    let history: Vec<(u64, f64)> = r["history"]["holdout"]
-        .as_array()
-        .expect("held-out history")
-        .iter()
-        .map(|p| (p["iteration"].as_u64().expect("iteration"), p["loss"].as_f64().expect("loss")))
-        .collect();
+    // A history of the report as (iteration, value) pairs.
+    let points = |key: &str, value: &str| -> Vec<(u64, f64)> {
+        let h = r["history"][key].as_array().unwrap_or_else(|| panic!("{key} history"));
+        h.iter().map(|p| (p["iteration"].as_u64().expect("iteration"), p[value].as_f64().expect("value"))).collect()
+    };
+    let history = points("holdout", "loss");
     assert!(history.len() >= 2, "held-out loss evaluated several times: {history:?}");
     let best = history.iter().copied().fold((0, f64::INFINITY), |b, p| if p.1 < b.1 { p } else { b });
     assert_eq!(r["kept_iteration"].as_u64(), Some(best.0), "history {history:?}");
-    let curve: Vec<(u64, f64)> = r["history"]["nrmse"]
-        .as_array()
-        .expect("NRMSE history")
-        .iter()
-        .map(|p| (p["iteration"].as_u64().expect("iteration"), p["nrmse"].as_f64().expect("nrmse")))
-        .collect();
+    let curve = points("nrmse", "nrmse");
     let at = |h: &[(u64, f64)]| h.iter().map(|p| p.0).collect::<Vec<_>>();
     assert_eq!(at(&curve), at(&history), "NRMSE evaluated where the held-out loss is");
     let kept = curve.iter().find(|p| p.0 == best.0).expect("the kept iterate on the curve").1;
