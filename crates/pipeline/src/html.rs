@@ -195,7 +195,8 @@ pub fn metrics_table(runs: &[&RunSummary]) -> Option<Table> {
 }
 
 /// Slice panels: for each plane, truth (if any) and every run side by side on one colour
-/// scale, then each run's difference from the truth on a diverging scale. PNG bytes.
+/// scale, then each run's difference from the truth on a diverging scale (beside them for one
+/// or two runs, below them for more). PNG bytes.
 pub fn slice_figure(truth: Option<&Volume>, runs: &[&RunSummary], units: &str) -> Result<Vec<u8>, PipelineError> {
     let reference = truth.unwrap_or(&runs[0].volume);
     let mut groups = Vec::new();
@@ -244,13 +245,18 @@ pub fn slice_figure(truth: Option<&Volume>, runs: &[&RunSummary], units: &str) -
             });
         }
     }
-    let per_row = if truth.is_some() { 2 } else { 1 };
+    // The differences beside the values while a row stays a few panels wide; for more runs
+    // below them, so that the report's page does not shrink nine panels into one row.
+    let per_row = if truth.is_some() && runs.len() <= 2 { 2 } else { 1 };
     let rows: Vec<Vec<u8>> = groups.chunks(per_row).map(fluidnerf_viz::encode_panels_png).collect::<Result<_, _>>()?;
-    stack_pngs(&rows)
+    // A row of differences is one panel (the truth's) narrower than the values above it:
+    // aligned right, each run's difference stands under its own slice.
+    stack_pngs(&rows, true)
 }
 
-/// Stacks PNG pictures vertically on a white background.
-fn stack_pngs(pngs: &[Vec<u8>]) -> Result<Vec<u8>, PipelineError> {
+/// Stacks PNG pictures vertically on a white background, each against the left edge, or the
+/// right one with `right`.
+fn stack_pngs(pngs: &[Vec<u8>], right: bool) -> Result<Vec<u8>, PipelineError> {
     let err = |e: image::ImageError| PipelineError::invalid("figure", e.to_string());
     let imgs: Vec<image::RgbImage> = pngs
         .iter()
@@ -261,7 +267,8 @@ fn stack_pngs(pngs: &[Vec<u8>]) -> Result<Vec<u8>, PipelineError> {
     let mut out = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
     let mut y = 0;
     for i in &imgs {
-        image::imageops::replace(&mut out, i, 0, y as i64);
+        let x = if right { w - i.width() } else { 0 };
+        image::imageops::replace(&mut out, i, i64::from(x), y as i64);
         y += i.height();
     }
     let mut buf = Vec::new();
@@ -477,7 +484,7 @@ fn camera_figure(
         ];
         rows.push(fluidnerf_viz::encode_panels_png(&groups)?);
     }
-    stack_pngs(&rows)
+    stack_pngs(&rows, false)
 }
 
 #[cfg(test)]
@@ -487,6 +494,25 @@ mod tests {
 
     fn point(iteration: usize, train_time_s: f64) -> NrmsePoint {
         NrmsePoint { iteration, train_time_s, nrmse: 0.5 }
+    }
+
+    /// Stacked rows keep their own width: against the right edge with `right` (a row of
+    /// differences under the values it belongs to), else the left.
+    #[test]
+    fn narrower_rows_stack_against_the_edge_asked_for() {
+        let png = |w: u32, c: u8| {
+            let img = image::RgbImage::from_pixel(w, 2, image::Rgb([c, c, c]));
+            let mut buf = Vec::new();
+            img.write_to(&mut std::io::Cursor::new(&mut buf), image::ImageFormat::Png).expect("encodes");
+            buf
+        };
+        let rows = [png(10, 0), png(6, 100)];
+        for (right, (blank, drawn)) in [(true, (0, 9)), (false, (9, 0))] {
+            let out = image::load_from_memory(&stack_pngs(&rows, right).expect("stacks")).expect("png").to_rgb8();
+            assert_eq!((out.width(), out.height()), (10, 4));
+            assert_eq!(out.get_pixel(blank, 3).0, [255; 3], "right = {right}");
+            assert_eq!(out.get_pixel(drawn, 3).0, [100; 3], "right = {right}");
+        }
     }
 
     /// The loss curve's times go through the times the report records: the mean rate with the
