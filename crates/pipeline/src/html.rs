@@ -53,8 +53,7 @@ pub fn history(report: &RunReport, label: &str) -> RunHistory {
         Some(LossKind::RelativeResidual) => "relative residual",
         None => "loss",
     };
-    // The iterate the run kept, where it is not its last (the held-out rule's).
-    let kept = (report.kept_iteration != report.iterations).then_some(report.kept_iteration as f64);
+    let kept = report.kept_before_end().map(|k| k as f64);
     RunHistory { label: label.to_string(), loss_label: loss_label.to_string(), loss, nrmse, ssim: None, kept }
 }
 
@@ -137,14 +136,12 @@ fn shared_policy(runs: &[&RunSummary]) -> Option<String> {
 
 /// What ended a run, in words: "held-out rule (every 25 iterations)".
 fn ended_by(report: &RunReport) -> String {
+    let words = report.stop_reason.words();
     match report.stop_reason {
         StopReason::HeldOutPatience => {
-            format!("held-out rule (every {} iterations)", report.stopping.holdout_interval(report.method.family()))
+            format!("{words} (every {} iterations)", report.stopping.holdout_interval(report.method.family()))
         }
-        StopReason::TimeBudget => "time budget".into(),
-        StopReason::IterationCap => "iteration cap".into(),
-        StopReason::Converged => "its own convergence rule".into(),
-        StopReason::Interrupted => "interrupted".into(),
+        _ => words.into(),
     }
 }
 

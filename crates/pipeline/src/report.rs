@@ -52,6 +52,40 @@ impl StopReason {
         }
     }
 
+    /// The reason a [`Self::name`] names, if any.
+    pub fn from_name(name: &str) -> Option<StopReason> {
+        [
+            StopReason::Converged,
+            StopReason::IterationCap,
+            StopReason::TimeBudget,
+            StopReason::HeldOutPatience,
+            StopReason::Interrupted,
+        ]
+        .into_iter()
+        .find(|r| r.name() == name)
+    }
+
+    /// What ended the run, in words for a report's table: "held-out rule", "time budget".
+    pub fn words(self) -> &'static str {
+        match self {
+            StopReason::Converged => "its own convergence rule",
+            StopReason::IterationCap => "iteration cap",
+            StopReason::TimeBudget => "time budget",
+            StopReason::HeldOutPatience => "held-out rule",
+            StopReason::Interrupted => "interrupted",
+        }
+    }
+
+    /// A terminal table's mark of a run that a cap (`*`) or the time budget (`t`) ended before
+    /// its stopping rule did; empty otherwise.
+    pub fn mark(self) -> &'static str {
+        match self {
+            StopReason::IterationCap => "*",
+            StopReason::TimeBudget => "t",
+            _ => "",
+        }
+    }
+
     /// How a run that stopped for this reason ended.
     pub fn status(self) -> RunStatus {
         if self == StopReason::Interrupted {
@@ -346,6 +380,12 @@ pub struct HoldoutScore {
 }
 
 impl RunReport {
+    /// The iteration kept, where it is not the last (held-out early stopping kept an earlier
+    /// one): what the plots mark.
+    pub fn kept_before_end(&self) -> Option<usize> {
+        (self.kept_iteration != self.iterations).then_some(self.kept_iteration)
+    }
+
     /// Reads `report.json`; errors name the file, the key path, or a format this version
     /// does not read.
     pub fn read(path: &Path) -> Result<Self, PipelineError> {
@@ -409,6 +449,8 @@ mod tests {
         use StopReason::*;
         for r in [Converged, IterationCap, TimeBudget, HeldOutPatience, Interrupted] {
             assert_eq!(serde_json::to_value(r).unwrap(), r.name());
+            assert_eq!(StopReason::from_name(r.name()), Some(r));
         }
+        assert_eq!(StopReason::from_name("held-out"), None);
     }
 }

@@ -279,7 +279,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
             );
         }
         // The iterate the run kept, where it is not its last: marked on its curve.
-        let kept = (r.kept_iteration != r.iterations).then_some(r.kept_iteration as u64);
+        let kept = r.kept_before_end().map(|k| k as u64);
         (
             r.method.name().to_string(),
             preset,

@@ -318,11 +318,7 @@ fn print_table(runs: &[RunSummary], wall: &[f64], stopping: &StoppingPolicy) {
             print!(" {:>11.4}", g.metrics.nrmse);
         }
         let held_out = r.holdout_nrmse.map_or("–".into(), |v| format!("{v:.4}"));
-        let capped = match r.report.stop_reason {
-            StopReason::IterationCap => "*",
-            StopReason::TimeBudget => "t",
-            _ => "",
-        };
+        let capped = r.report.stop_reason.mark();
         let kept = format!("{}/{}{capped}", r.report.kept_iteration, r.report.iterations);
         println!(" {:>9} {:>11} {:>8.1} {:>11}", held_out, kept, w, fluidnerf_pipeline::bytes(r.report.result_bytes));
     }

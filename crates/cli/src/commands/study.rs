@@ -10,7 +10,7 @@ use anyhow::{bail, Context};
 use fluidnerf_core::num;
 use fluidnerf_pipeline::html::{self, RunSummary};
 use fluidnerf_pipeline::rundir::FolderKind;
-use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunStatus, StopRule, StoppingPolicy};
+use fluidnerf_pipeline::{Method, MethodConfig, Overwrite, RunConfig, RunStatus, StopReason, StopRule, StoppingPolicy};
 use fluidnerf_viz::report::{Figure, ImageData, Report, Table};
 use fluidnerf_viz::{LinePlot, Series};
 use serde::{Deserialize, Serialize};
@@ -830,22 +830,12 @@ fn method_label(r: &Row) -> String {
 
 /// What ended a run, from its `stop_reason` name, in words for the report's table.
 fn ended_by(stop_reason: &str) -> &str {
-    match stop_reason {
-        "held-out-patience" => "held-out rule",
-        "time-budget" => "time budget",
-        "iteration-cap" => "iteration cap",
-        "converged" => "its own convergence rule",
-        other => other,
-    }
+    StopReason::from_name(stop_reason).map_or(stop_reason, |r| r.words())
 }
 
 /// The terminal table's mark of a run that a cap or the budget ended, not its rule.
 fn cut_mark(stop_reason: &str) -> &'static str {
-    match stop_reason {
-        "iteration-cap" => "*",
-        "time-budget" => "t",
-        _ => "",
-    }
+    StopReason::from_name(stop_reason).map_or("", StopReason::mark)
 }
 
 fn text_table(rows: &[Row]) -> String {
