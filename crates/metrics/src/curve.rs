@@ -3,6 +3,7 @@
 //! ([`NrmsePoint`]), the same for neural and classical methods so their curves compare.
 
 use fluidnerf_core::{glam::Vec3, ScalarField, Volume};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// One point of a run's NRMSE curve: after `iteration`, `train_time_s` seconds of the
@@ -53,18 +54,20 @@ impl TruthSample {
         self.points.is_empty()
     }
 
-    /// NRMSE of `field` (at time 0) over the sample, evaluated on all cores.
+    /// NRMSE of `field` (at time 0) over the sample, evaluated in rayon's pool: in pieces of
+    /// a quarter of a thread's share (at least [`Self::MIN_PIECE`] points), so that a thread
+    /// that finishes early takes another piece.
     pub fn nrmse(&self, field: &(dyn ScalarField + Sync)) -> f64 {
         let mut est = vec![0.0f32; self.points.len()];
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let per = self.points.len().div_ceil(threads).max(1);
-        std::thread::scope(|scope| {
-            for (o, p) in est.chunks_mut(per).zip(self.points.chunks(per)) {
-                scope.spawn(move || field.eval(p, 0.0, o));
-            }
-        });
+        let piece = self.points.len().div_ceil(4 * rayon::current_num_threads()).max(Self::MIN_PIECE);
+        est.par_chunks_mut(piece)
+            .zip(self.points.par_chunks(piece))
+            .for_each(|(o, p)| field.eval(p, 0.0, o));
         crate::nrmse(&est, &self.values)
     }
+
+    /// The fewest points one evaluation in [`Self::nrmse`] is given.
+    const MIN_PIECE: usize = 4096;
 }
 
 #[cfg(test)]
@@ -84,6 +87,21 @@ mod tests {
         assert!(sample.nrmse(&truth) < 1e-6);
         let zero = Volume::zeros(dims, aabb);
         assert!((sample.nrmse(&zero) - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_pieces_evaluated_in_parallel_give_what_one_evaluation_gives() {
+        let aabb = Aabb::new(DVec3::ZERO, DVec3::ONE);
+        let dims = [48, 40, 36];
+        let truth = Volume::from_fn(dims, aabb, |p| (p.x * 3.0 + p.y * p.z) as f32);
+        let estimate = Volume::from_fn(dims, aabb, |p| (p.x * 2.9 + p.y * p.y * p.z) as f32);
+        let sample = TruthSample::new(&truth);
+        assert!(sample.len() > 4 * TruthSample::MIN_PIECE, "{} points: one piece", sample.len());
+        let mut serial = vec![0.0f32; sample.len()];
+        estimate.eval(&sample.points, 0.0, &mut serial);
+        let expected = crate::nrmse(&serial, &sample.values);
+        assert!(expected > 0.01, "{expected}");
+        assert_eq!(sample.nrmse(&estimate), expected);
     }
 
     #[test]
