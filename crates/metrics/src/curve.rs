@@ -60,9 +60,7 @@ impl TruthSample {
     pub fn nrmse(&self, field: &(dyn ScalarField + Sync)) -> f64 {
         let mut est = vec![0.0f32; self.points.len()];
         let piece = self.points.len().div_ceil(4 * rayon::current_num_threads()).max(Self::MIN_PIECE);
-        est.par_chunks_mut(piece)
-            .zip(self.points.par_chunks(piece))
-            .for_each(|(o, p)| field.eval(p, 0.0, o));
+        est.par_chunks_mut(piece).zip(self.points.par_chunks(piece)).for_each(|(o, p)| field.eval(p, 0.0, o));
         crate::nrmse(&est, &self.values)
     }
 

@@ -274,7 +274,7 @@ pub(crate) fn run(
             let held = match &holdout {
                 Some(h) if held_out_rule && iteration.is_multiple_of(holdout_every) => {
                     let loss = h.loss(s.volume);
-                    holdout_history.push(HoldoutPoint { iteration, loss });
+                    holdout_history.push(HoldoutPoint { iteration, loss, train_time_s: Some(train_time_s) });
                     out_of_patience = best.record(iteration, loss, || s.volume.to_vec());
                     Some(loss)
                 }

@@ -39,7 +39,7 @@ pub fn history(report: &RunReport, label: &str) -> RunHistory {
     let n = report.history.loss.len();
     let loss = Trace {
         iteration: (1..=n).map(|i| i as f64).collect(),
-        time_s: loss_times(&report.history.nrmse, report.train_time_s, n),
+        time_s: loss_times(recorded_times(&report.history), report.train_time_s, n),
         value: report.history.loss.clone(),
     };
     let points = &report.history.nrmse;
@@ -57,16 +57,23 @@ pub fn history(report: &RunReport, label: &str) -> RunHistory {
     RunHistory { label: label.to_string(), loss_label: loss_label.to_string(), loss, nrmse, ssim: None, kept }
 }
 
+/// The (iteration, training time) pairs a report's histories record: its NRMSE points, which
+/// need a ground truth, and its held-out evaluations, which need a held-out camera.
+fn recorded_times(history: &crate::report::History) -> impl Iterator<Item = (usize, f64)> + '_ {
+    let nrmse = history.nrmse.iter().map(|p| (p.iteration, p.train_time_s));
+    nrmse.chain(history.holdout.iter().filter_map(|p| Some((p.iteration, p.train_time_s?))))
+}
+
 /// The time of each of the `n` iterations of the loss trace: through the times the report
-/// records (its NRMSE points and its end), linearly between them, and before the first at the
+/// records (`recorded`, and the run's end), linearly between them, and before the first at the
 /// rate up to the next. A run that started from another reconstruction (the hybrid) counts
 /// that start in its time, so its loss curve starts where its NRMSE curve does; with the end
 /// alone, at the run's mean rate.
-fn loss_times(points: &[fluidnerf_metrics::NrmsePoint], end_s: f64, n: usize) -> Vec<f64> {
-    let mut anchors: Vec<(f64, f64)> = points
-        .iter()
-        .filter(|p| (1..n).contains(&p.iteration) && p.train_time_s.is_finite())
-        .map(|p| (p.iteration as f64, p.train_time_s))
+fn loss_times(recorded: impl IntoIterator<Item = (usize, f64)>, end_s: f64, n: usize) -> Vec<f64> {
+    let mut anchors: Vec<(f64, f64)> = recorded
+        .into_iter()
+        .filter(|&(i, t)| (1..n).contains(&i) && t.is_finite())
+        .map(|(i, t)| (i as f64, t))
         .collect();
     anchors.push((n as f64, end_s));
     anchors.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -517,12 +524,26 @@ mod tests {
     /// that a run whose first 9 s went to its start begins there, as its NRMSE curve does.
     #[test]
     fn the_loss_curve_keeps_the_recorded_times() {
-        assert_eq!(loss_times(&[], 8.0, 4), [2.0, 4.0, 6.0, 8.0]);
-        let t = loss_times(&[point(2, 9.0), point(4, 10.0)], 12.0, 6);
+        assert_eq!(loss_times([], 8.0, 4), [2.0, 4.0, 6.0, 8.0]);
+        let t = loss_times([(2, 9.0), (4, 10.0)], 12.0, 6);
         assert_eq!(t, [8.5, 9.0, 9.5, 10.0, 11.0, 12.0]);
         // Points past the loss trace (another run's curve) or not finite are left out.
-        assert_eq!(loss_times(&[point(9, 1.0), point(1, f64::NAN)], 8.0, 4), [2.0, 4.0, 6.0, 8.0]);
+        assert_eq!(loss_times([(9, 1.0), (1, f64::NAN)], 8.0, 4), [2.0, 4.0, 6.0, 8.0]);
         // Never before 0.
-        assert_eq!(loss_times(&[point(3, 0.1), point(4, 1.1)], 2.0, 4), [0.0, 0.0, 0.1, 2.0]);
+        assert_eq!(loss_times([(3, 0.1), (4, 1.1)], 2.0, 4), [0.0, 0.0, 0.1, 2.0]);
+    }
+
+    /// A run without a ground truth records no NRMSE points; its held-out evaluations carry
+    /// the times instead, and one that records both is placed by both (the same iteration
+    /// once). Held-out points of reports written before they had times are left out.
+    #[test]
+    fn held_out_evaluations_place_the_loss_curve_of_a_run_without_a_truth() {
+        let held = |iteration, t| crate::HoldoutPoint { iteration, loss: 0.1, train_time_s: t };
+        let mut history = crate::History { holdout: vec![held(2, Some(9.0)), held(3, None)], ..Default::default() };
+        let times = |h: &crate::History| loss_times(recorded_times(h), 12.0, 6);
+        assert_eq!(times(&history), [8.25, 9.0, 9.75, 10.5, 11.25, 12.0]);
+        history.nrmse = vec![point(2, 9.0), point(4, 10.0)];
+        history.holdout.push(held(4, Some(10.0)));
+        assert_eq!(times(&history), [8.5, 9.0, 9.5, 10.0, 11.0, 12.0]);
     }
 }

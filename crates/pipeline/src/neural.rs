@@ -582,7 +582,11 @@ impl Ctx<'_> {
             let t_eval = Instant::now();
             let mut out_of_patience = false;
             if let Some(h) = s.holdout_loss {
-                holdout_history.push(HoldoutPoint { iteration: s.iteration, loss: h as f64 });
+                holdout_history.push(HoldoutPoint {
+                    iteration: s.iteration,
+                    loss: h as f64,
+                    train_time_s: Some(s.train_time_s),
+                });
                 if held_out_rule {
                     out_of_patience = best.record(s.iteration, h as f64, || s.field.params().to_vec());
                 }

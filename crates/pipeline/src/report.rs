@@ -137,6 +137,10 @@ pub struct HoldoutPoint {
     /// their pixels, normalised by the image scale as the training loss is; voxel methods:
     /// every held-out pixel, relative to the held-out images' mean square).
     pub loss: f64,
+    /// Seconds of the method's own work at this evaluation, as [`NrmsePoint::train_time_s`]
+    /// counts them. None: not recorded (reports written before it was).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_time_s: Option<f64>,
 }
 
 /// The histories every method records.
