@@ -170,7 +170,8 @@ fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
     }
 }
 
-/// A label that tells runs apart: method, preset, and the folder (or file) name.
+/// A label that tells runs apart: method, preset, and the folder (or file) name, each left
+/// out where it repeats the method (`fast` rather than `fast/fast (fast)`).
 fn label_of(path: &Path, report: &Path, method: &str, preset: Option<&str>) -> String {
     let name = if path.is_dir() {
         path.file_name()
@@ -180,10 +181,14 @@ fn label_of(path: &Path, report: &Path, method: &str, preset: Option<&str>) -> S
         report.file_stem()
     };
     let name = name.map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| path.display().to_string());
-    match preset {
-        Some(p) if !p.is_empty() => format!("{method}/{p} ({name})"),
-        _ => format!("{method} ({name})"),
+    let mut label = method.to_string();
+    if let Some(p) = preset.filter(|p| !p.is_empty() && *p != method) {
+        label = format!("{label}/{p}");
     }
+    if name != method {
+        label = format!("{label} ({name})");
+    }
+    label
 }
 
 /// A curve written by another tool (e.g. a reference implementation): the fields `compare`
@@ -683,6 +688,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_label_leaves_out_what_repeats_the_method() {
+        let label = |dir: &str, method, preset| label_of(Path::new(dir), Path::new(dir), method, preset);
+        assert_eq!(label("runs/fluidnerf", "fast", Some("fast")), "fast (fluidnerf)");
+        assert_eq!(label("runs/fast", "fast", Some("fast")), "fast");
+        assert_eq!(label("runs/a", "tr-fast", Some("tr-small")), "tr-fast/tr-small (a)");
+        assert_eq!(label("runs/asart", "asart", None), "asart");
+        assert_eq!(label("runs/asart", "asart", Some("")), "asart");
+        assert_eq!(label("curves/ref.json", "sirt", None), "sirt (ref)");
+    }
 
     fn run(label: &str, points: &[(f64, f64)]) -> Run {
         let curve: Vec<Point> = points
