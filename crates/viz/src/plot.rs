@@ -245,10 +245,25 @@ fn spans_a_decade(values: impl Iterator<Item = f64>) -> bool {
     hi / lo >= 10.0
 }
 
+/// The most decades a logarithmic axis spans; more fall back to a linear axis. Between
+/// values of 10⁻³⁰⁰ and 10³⁰⁰ the axis's padded ratio overflows to infinity, and plotters'
+/// search for its ticks would never end.
+const MAX_DECADES: f64 = 100.0;
+
+/// Whether the drawable positive values spread over more than [`MAX_DECADES`].
+fn spans_too_many_decades(values: impl Iterator<Item = f64>) -> bool {
+    let (lo, hi) =
+        values.filter(|&v| v > 0.0 && plottable(v)).fold((f64::INFINITY, 0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    hi > 0.0 && hi.log10() - lo.log10() > MAX_DECADES
+}
+
 fn draw_plot<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<(), VizError> {
-    // A log axis over less than a decade falls back to linear (see `spans_a_decade`).
-    let log_x = plot.log_x && spans_a_decade(plot.series.iter().flat_map(|s| s.x.iter().copied()));
-    let log_y = plot.log_y && spans_a_decade(plot.series.iter().flat_map(|s| s.y.iter().copied()));
+    // A log axis over less than a decade, or over more than `MAX_DECADES`, falls back to linear.
+    let log_axis = |on: bool, values: Vec<f64>| {
+        on && spans_a_decade(values.iter().copied()) && !spans_too_many_decades(values.into_iter())
+    };
+    let log_x = log_axis(plot.log_x, plot.series.iter().flat_map(|s| s.x.iter().copied()).collect());
+    let log_y = log_axis(plot.log_y, plot.series.iter().flat_map(|s| s.y.iter().copied()).collect());
     let adjusted;
     let plot = if (log_x, log_y) == (plot.log_x, plot.log_y) {
         plot
@@ -544,6 +559,22 @@ mod tests {
             write_plots(&dir.path().join("x.svg"), &[plot], 1).expect("plots huge counts");
         }
         assert!(plottable(1e300) && !plottable(1.0001e300) && !plottable(f64::NAN) && plottable(-3.0));
+    }
+
+    /// Values 310 decades apart on a log axis: its padded ratio overflowed and the plot never
+    /// finished. Over more than a hundred decades the axis is linear.
+    #[test]
+    fn a_log_axis_over_hundreds_of_decades_is_drawn_linear_and_finishes() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let series = |x: Vec<f64>, y: Vec<f64>| vec![Series { label: "run".into(), x, y, mark: None }];
+        let mut plot = sweep_plot("time", "NRMSE", true, series(vec![0.1, 0.2], vec![1e300, 1e-10]));
+        plot.log_y = true;
+        write_plots(&dir.path().join("y.svg"), &[plot], 1).expect("plots");
+        let plot = sweep_plot("time", "NRMSE", true, series(vec![1e-10, 1e300], vec![0.9, 0.5]));
+        write_plots(&dir.path().join("x.svg"), &[plot], 1).expect("plots");
+        assert!(spans_too_many_decades([1e-10, 1e300].into_iter()));
+        assert!(!spans_too_many_decades([1e-50, 1e49, 1e301, f64::INFINITY, -1e200].into_iter()));
+        assert!(!spans_too_many_decades([0.0, -1.0].into_iter()));
     }
 
     /// The numbers along the x axis of a one-plot SVG: the numeric labels on one line.
