@@ -338,6 +338,18 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
                 num(prev.train_time_s)
             );
         }
+        // Iterations count forward, as the time does: a point of an earlier iteration after a
+        // later one is a history joined or reordered.
+        if let Some(prev) = curve.last().filter(|q: &&Point| point.iteration < q.iteration) {
+            bail!(
+                "{}: NRMSE history point {k} (iteration {}) comes after point {} (iteration {}): the history must go \
+                 forward in iterations",
+                report.display(),
+                point.iteration,
+                k - 1,
+                prev.iteration
+            );
+        }
         curve.push(point);
     }
     // The table prints the final NRMSE and the run's time as they are; a value no run writes

@@ -311,6 +311,12 @@ fn a_curve_with_two_histories_or_a_repeated_iteration_is_refused() {
         &fluidnerf(d, &["compare", "repeat.json", "-o", "cmp", "-q"]),
         "repeat.json: `nrmse_history` point 2 repeats iteration 1 of point 0",
     );
+    let backwards = serde_json::json!({ "method": "sart", "nrmse_history": [point(5, 0.1, 0.9), point(1, 0.2, 0.6)] });
+    std::fs::write(d.join("backwards.json"), backwards.to_string()).expect("writes");
+    refused(
+        &fluidnerf(d, &["compare", "backwards.json", "-o", "cmp", "-q"]),
+        "backwards.json: NRMSE history point 1 (iteration 1) comes after point 0 (iteration 5)",
+    );
     assert!(!d.join("cmp").exists(), "nothing written for refused curves");
 }
 
