@@ -14,8 +14,7 @@ use crate::{output, Colormap, VizError};
 /// An 8-bit RGB picture of `image` (row 0 at the top), values mapped linearly from `[lo, hi]`
 /// onto `colormap`. Returns `width × height × 3` bytes.
 pub fn colorize(image: &Image, colormap: Colormap, lo: f32, hi: f32) -> Vec<u8> {
-    let span = if hi > lo { (hi - lo) as f64 } else { 1.0 };
-    image.data.iter().flat_map(|&v| colormap.rgb((v - lo) as f64 / span)).collect()
+    image.data.iter().flat_map(|&v| colormap.rgb_in(v, lo, hi)).collect()
 }
 
 /// [`colorize`]d `image` as PNG bytes.

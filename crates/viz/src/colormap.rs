@@ -50,6 +50,14 @@ impl Colormap {
         [c.r, c.g, c.b]
     }
 
+    /// The colour of `v` on a bar from `lo` to `hi`, the position computed in f64: in f32,
+    /// `hi − lo` of a range such as ±3·10³⁸ overflows, and every value would be NaN's grey.
+    pub fn rgb_in(self, v: f32, lo: f32, hi: f32) -> [u8; 3] {
+        let span = f64::from(hi) - f64::from(lo);
+        let span = if span > 0.0 { span } else { 1.0 };
+        self.rgb((f64::from(v) - f64::from(lo)) / span)
+    }
+
     /// Whether automatic value ranges should be symmetric about zero.
     pub fn is_diverging(self) -> bool {
         self == Colormap::Diverging
@@ -88,6 +96,19 @@ impl FromStr for Colormap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The ends of a range as wide as f32 allows take the bar's end colours, not NaN's grey.
+    #[test]
+    fn a_range_wider_than_f32_holds_colours_its_ends() {
+        let (lo, hi) = (-3e38f32, 3e38f32);
+        for map in Colormap::ALL {
+            assert_eq!(map.rgb_in(hi, lo, hi), map.rgb(1.0), "{map:?}");
+            assert_eq!(map.rgb_in(lo, lo, hi), map.rgb(0.0), "{map:?}");
+            assert_eq!(map.rgb_in(0.0, lo, hi), map.rgb(0.5), "{map:?}");
+            assert_eq!(map.rgb_in(f32::NAN, lo, hi), [128; 3], "{map:?}");
+        }
+        assert_eq!(Colormap::Gray.rgb_in(2.5, 2.0, 3.0), Colormap::Gray.rgb(0.5));
+    }
 
     fn luminance(c: [u8; 3]) -> f64 {
         0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64

@@ -471,8 +471,7 @@ fn draw_groups(groups: &[PanelGroup]) -> Result<(Vec<u8>, u32, u32), VizError> {
             for px in 0..pw {
                 let col = (((px as f64 + 0.5) / pw as f64 * p.width as f64) as usize).min(p.width - 1);
                 let v = p.data[row * p.width + col];
-                let t = (v - block.lo) as f64 / (block.hi - block.lo) as f64;
-                put(&mut buf, width, x0 + px, y0 + py, block.colormap.rgb(t));
+                put(&mut buf, width, x0 + px, y0 + py, block.colormap.rgb_in(v, block.lo, block.hi));
             }
         }
         frame(&mut buf, width, *rect);
