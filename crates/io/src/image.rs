@@ -438,6 +438,9 @@ fn read_with_image_crate(
     if w * h == 0 {
         return Err(IoError::invalid(path, format!("{name} of {w}x{h} pixels is empty")));
     }
+    // Alpha reads through the same table as the values: full opacity is the largest count.
+    let opaque = if kind == SampleKind::Integer(8) { lut[255] } else { f32::from(u16::MAX) };
+    warn_of_alpha(path, channels, &data, opaque);
     Ok((to_gray(path, w, h, channels, data), kind))
 }
 
@@ -646,6 +649,34 @@ fn warn_of_exif_orientation(path: &Path, bytes: &[u8]) {
     }
 }
 
+/// How many pixels of interleaved samples with `channels` per pixel (2 gray+alpha, 4 RGBA)
+/// are less than fully opaque (alpha below `opaque`); 0 without an alpha channel.
+fn translucent_pixels(channels: usize, data: &[f32], opaque: f32) -> usize {
+    if !matches!(channels, 2 | 4) {
+        return 0;
+    }
+    data.chunks_exact(channels).filter(|p| p[channels - 1] < opaque).count()
+}
+
+/// Warns (once per run) of an image whose alpha channel is not fully opaque: alpha often marks
+/// the pixels to leave out, and fluidnerf drops it, using every pixel as measured.
+fn warn_of_alpha(path: &Path, channels: usize, data: &[f32], opaque: f32) {
+    let translucent = translucent_pixels(channels, data, opaque);
+    if translucent == 0 {
+        return;
+    }
+    static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !WARNED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        log::warn!(
+            "{}: its alpha channel is not fully opaque ({translucent} of {} pixels), and fluidnerf ignores alpha: \
+             every pixel is used as measured. If the alpha marks pixels to leave out, give them as a mask \
+             (`mask_path` in transforms.json); further such images are not reported",
+            path.display(),
+            data.len() / channels
+        );
+    }
+}
+
 /// Interleaved samples with `channels` per pixel (1 gray, 2 gray+alpha, 3 RGB, 4 RGBA) to gray.
 fn to_gray(path: &Path, w: usize, h: usize, channels: usize, data: Vec<f32>) -> Image {
     match channels {
@@ -763,6 +794,31 @@ pub fn write_tiff_f32(path: &Path, image: &Image) -> Result<(), IoError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Fully opaque pixels are the largest count through the reading's table (8-bit) or 65535
+    /// (16-bit); any lower alpha is counted, and images without alpha count none.
+    #[test]
+    fn translucent_pixels_are_counted_against_full_opacity() {
+        let lut = Linearisation::Srgb.table();
+        let grey_alpha = [lut[10], lut[255], lut[200], lut[254], lut[0], lut[0]];
+        assert_eq!(translucent_pixels(2, &grey_alpha, lut[255]), 2);
+        let rgba16 = [1.0, 2.0, 3.0, 65535.0, 4.0, 5.0, 6.0, 65534.0];
+        assert_eq!(translucent_pixels(4, &rgba16, f32::from(u16::MAX)), 1);
+        assert_eq!(translucent_pixels(3, &[0.0; 6], 1.0), 0);
+        assert_eq!(translucent_pixels(1, &[0.0; 6], 1.0), 0);
+    }
+
+    /// A grey+alpha PNG is read as its grey values, the alpha left out.
+    #[test]
+    fn a_grey_and_alpha_png_reads_its_grey_values() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("ga.png");
+        let pixels: Vec<u8> = [(7u8, 255u8), (9, 0), (11, 128), (13, 255)].iter().flat_map(|&(v, a)| [v, a]).collect();
+        image::GrayAlphaImage::from_raw(2, 2, pixels).expect("2x2").save(&path).expect("writes");
+        let (image, kind) = read_image_with(&path, Linearisation::Linear).expect("reads");
+        assert_eq!(kind, SampleKind::Integer(8));
+        assert_eq!(image.data, [7.0, 9.0, 11.0, 13.0]);
+    }
 
     #[test]
     fn gammas_are_taken_within_their_range_and_refused_beyond_it() {
