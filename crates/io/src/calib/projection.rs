@@ -17,7 +17,9 @@
 //! - 3 rows of 4: one camera's `P`;
 //! - one row of 11 or of 12: one camera's DLT coefficients or its `P` row by row;
 //! - 11 rows of N: N cameras' DLT coefficients, one camera per column (the layout of a
-//!   `*_dltCoefs.csv`); 12 rows of N: N cameras' `P`, each column `P` row by row.
+//!   `*_dltCoefs.csv`); 12 rows of N: N cameras' `P`, each column `P` row by row — unless
+//!   their first row counts 1, 2, …, N (or from 0) with no line of names above it: that row
+//!   names the cameras above their DLT coefficients (images `1.png`, `2.png`, …), with a warning.
 //!
 //! A file of one camera names it after the file's stem (`cam3.txt` → `cam3`); a file of N
 //! cameras after its line of names, else `cam1` … `camN`. A folder is read as all its `.txt`,
@@ -148,6 +150,27 @@ fn parse_rows(path: &Path, text: &str) -> Result<Rows, IoError> {
     Ok((names, rows))
 }
 
+/// Twelve lines of N ≥ 2 numbers whose first line counts 1, 2, …, N (or 0, 1, …, N − 1) are
+/// the cameras' names above their 11 DLT coefficients, not 12 matrix entries per camera whose
+/// first entries happen to count: names that are numbers (images `1.png`, `2.png`, …) read as
+/// numbers. Said in a warning, with how to have the other reading.
+fn numbered_names(path: &Path, (names, rows): Rows) -> Rows {
+    let counts = |first: &[f64]| {
+        first.len() >= 2 && [0.0, 1.0].iter().any(|&from| first.iter().enumerate().all(|(k, &v)| v == from + k as f64))
+    };
+    if names.is_some() || rows.len() != 12 || !counts(&rows[0]) {
+        return (names, rows);
+    }
+    let numbered: Vec<String> = rows[0].iter().map(|v| format!("{v}")).collect();
+    log::warn!(
+        "{}: its first line ({}) is read as the cameras' names, above 11 DLT coefficients per camera; if it holds \
+         the first of 12 projection-matrix entries per camera instead, add a line of names above it",
+        path.display(),
+        numbered.join(", ")
+    );
+    (Some(numbered), rows[1..].to_vec())
+}
+
 /// The matrix of 12 numbers given row by row, or of 11 DLT coefficients (last entry 1).
 fn matrix_of(values: &[f64]) -> [[f64; 4]; 3] {
     let at = |i: usize| if i < values.len() { values[i] } else { 1.0 };
@@ -156,7 +179,7 @@ fn matrix_of(values: &[f64]) -> [[f64; 4]; 3] {
 
 fn read_file(path: &Path) -> Result<Vec<ProjectionCamera>, IoError> {
     let text = crate::read_input_text(path, "projection matrix file")?;
-    let (names, rows) = parse_rows(path, &text)?;
+    let (names, rows) = numbered_names(path, parse_rows(path, &text)?);
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("cam").to_string();
     let (n_rows, n_cols) = (rows.len(), rows.first().map_or(0, Vec::len));
     let one = |form, matrix| vec![ProjectionCamera { name: stem.clone(), file: path.to_path_buf(), form, matrix }];
@@ -413,6 +436,20 @@ mod tests {
         assert_eq!((c[1].matrix[2][2], c[1].matrix[2][3], c[1].form), (111.0, 1.0, ProjectionForm::Dlt));
         let named = write(dir.path(), "named.csv", &format!("a; b\n{cols}"));
         assert_eq!(read_projection(&named).unwrap()[1].name, "b");
+        // A first line counting the cameras names them, above their DLT coefficients; under a
+        // line of names, the same twelve lines are matrices.
+        for (from, names) in [(1, ["1", "2"]), (0, ["0", "1"])] {
+            let numbered = write(dir.path(), "numbered.csv", &format!("{from},{}\n{cols}", from + 1));
+            let c = read_projection(&numbered).unwrap();
+            assert_eq!(c.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), names);
+            assert_eq!((c[1].matrix[2][2], c[1].form), (111.0, ProjectionForm::Dlt));
+        }
+        let matrices = write(dir.path(), "matrices.csv", &format!("p; q\n1,2\n{cols}"));
+        let c = read_projection(&matrices).unwrap();
+        assert_eq!((c[1].name.as_str(), c[1].form, c[1].matrix[0][0]), ("q", ProjectionForm::Matrix, 2.0));
+        // Counting from 2 is not a line of names.
+        let matrices = write(dir.path(), "counts.csv", &format!("2,3\n{cols}"));
+        assert_eq!(read_projection(&matrices).unwrap()[0].form, ProjectionForm::Matrix);
         // One line of 11.
         let line = write(dir.path(), "one.dat", "1 2 3 4 5 6 7 8 9 10 11 % DLT\n");
         assert_eq!(read_projection(&line).unwrap()[0].matrix[2], [9.0, 10.0, 11.0, 1.0]);
