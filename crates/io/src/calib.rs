@@ -719,6 +719,12 @@ fn camera_list(path: &Path, key: &str, value: &Value) -> Result<Option<Vec<(Stri
             None => format!("cam{i}"),
             Some(Value::String(s)) if !s.trim().is_empty() => s.trim().to_string(),
             Some(Value::Number(n)) => n.to_string(),
+            Some(Value::String(_)) => {
+                return Err(IoError::invalid(
+                    path,
+                    format!("`{key}[{i}]`: `name` is empty; name the camera or leave the key out"),
+                ))
+            }
             Some(other) => {
                 return Err(IoError::invalid(path, format!("`{key}[{i}]`: `name` must be a string, got {other}")))
             }

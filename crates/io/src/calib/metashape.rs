@@ -178,8 +178,11 @@ fn chunk_transform(path: &Path, node: roxmltree::Node<'_, '_>, what: &str) -> Re
         Some(n) => sized(n, &format!("{what}: `<scale>`"), 1, "one number")?[0],
         None => 1.0,
     };
-    if scale <= 0.0 {
-        return Err(format!("{what}: `<scale>` is {}; a chunk's scale must be positive", num(scale)));
+    // Metashape's scales are metres per internal unit, near 1; beyond 10^±100 its cube, which
+    // placing the cameras takes, under- or overflows.
+    if !(1e-100..=1e100).contains(&scale) {
+        let why = if scale > 0.0 { "between 1e-100 and 1e100" } else { "positive" };
+        return Err(format!("{what}: `<scale>` is {}; a chunk's scale must be {why}", num(scale)));
     }
     Ok(DAffine3::from_mat3_translation(r * scale, t))
 }

@@ -962,6 +962,9 @@ cameras:
         .expect("write");
     let err = read_opencv(&file).expect_err("twice").to_string();
     assert!(err.contains("rig.xml") && err.contains("camera name `top` appears twice"), "{err}");
+    std::fs::write(&file, xml.replace("<name>\"top\"</name>", "<name>\"\"</name>")).expect("write");
+    let err = read_opencv(&file).expect_err("empty name").to_string();
+    assert!(err.contains("rig.xml") && err.contains("`cameras[0]`: `name` is empty"), "{err}");
 }
 
 /// A stereo calibration in one XML file with camera 1's world pose (`rvec1`/`tvec1`) and an

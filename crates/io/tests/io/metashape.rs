@@ -214,6 +214,10 @@ fn malformed_exports_are_refused_naming_the_camera_or_sensor() {
             &["chunk's `<transform>`", "`<scale>`"],
         ),
         (
+            base.replace("<scale locked=\"true\">2</scale>", "<scale>1e-300</scale>"),
+            &["chunk's `<transform>`", "`<scale>` is 1e-300", "between 1e-100 and 1e100"],
+        ),
+        (
             base.replace("0.5 0.8660254037844387 0", "0.6 0.8660254037844387 0"),
             &["chunk's `<transform>`", "not a rotation"],
         ),
