@@ -349,6 +349,12 @@ const EVAL_FILES: [&str; 2] = ["metrics.json", "metrics.csv"];
 /// and do not make a folder read as one with run files ([`DirState::Foreign`]).
 const OWN_RUNS: [&str; 1] = ["start"];
 
+/// Where `--force` keeps the run it replaces until the new run writes its configuration.
+const REPLACED: &str = ".replaced";
+
+/// [`REPLACED`] once the new run has written its configuration, while it is removed.
+const REPLACED_DISCARDED: &str = ".replaced-discarded";
+
 /// The folder inside a run's folder that may hold the run's own scene: the Python API saves a
 /// scene built from arrays there (`reconstruct(scene, method, out)` into `out/scene`). A run
 /// writes nothing there ([`RUN_FILES`], [`OWN_RUNS`]), so the scene is neither overwritten nor
@@ -367,10 +373,17 @@ pub struct RunDir {
     /// The folders of [`OWN_RUNS`] holding a run when this one began (a resumed run's start):
     /// not this run's to discard.
     kept_runs: Vec<PathBuf>,
+    /// `--force` moved the earlier run into [`REPLACED`] and the new run has not yet written
+    /// its configuration: dropped so, the folder gets the earlier run back.
+    staged: std::sync::atomic::AtomicBool,
 }
 
 impl Drop for RunDir {
     fn drop(&mut self) {
+        if self.staged.swap(false, std::sync::atomic::Ordering::Relaxed) {
+            // Refused (or failed) before it wrote anything: the run it was to replace stays.
+            self.restore_replaced();
+        }
         if let Some(lock) = self.lock.take() {
             // The lock goes first (its heartbeat stopped, its file removed), then the folder.
             drop(lock);
@@ -389,7 +402,14 @@ impl RunDir {
         if !root.is_dir() {
             return Err(PipelineError::RunDir { path: root, why: "is not a folder".into() });
         }
-        Ok(RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new() })
+        Ok(RunDir {
+            root,
+            lock: None,
+            resume: false,
+            created: false,
+            kept_runs: Vec::new(),
+            staged: Default::default(),
+        })
     }
 
     /// Creates (or reuses, as `overwrite` allows) the folder of a new run and takes its lock. A
@@ -408,13 +428,22 @@ impl RunDir {
         let created = !root.exists();
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
         let resume = overwrite == Overwrite::Resume;
-        let mut dir = RunDir { root: root.clone(), lock: None, resume, created, kept_runs: Vec::new() };
+        let mut dir = RunDir {
+            root: root.clone(),
+            lock: None,
+            resume,
+            created,
+            kept_runs: Vec::new(),
+            staged: Default::default(),
+        };
         dir.take_lock()?;
+        // A replacement whose run died before writing anything left the earlier run aside.
+        dir.restore_replaced();
         let state = dir.state();
         dir.refusal(state, overwrite)?;
         match (state, overwrite) {
             (DirState::Empty, _) => dir.resume = false,
-            (_, Overwrite::Force) => dir.clear()?,
+            (_, Overwrite::Force) => dir.stage_earlier()?,
             _ => {}
         }
         dir.kept_runs = dir.own_runs();
@@ -427,7 +456,14 @@ impl RunDir {
     pub fn check(root: impl Into<PathBuf>, overwrite: Overwrite) -> Result<(), PipelineError> {
         let root: PathBuf = root.into();
         check_new_run_folder(&root, None)?;
-        let dir = RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new() };
+        let dir = RunDir {
+            root,
+            lock: None,
+            resume: false,
+            created: false,
+            kept_runs: Vec::new(),
+            staged: Default::default(),
+        };
         dir.refusal(dir.state(), overwrite)
     }
 
@@ -489,7 +525,14 @@ impl RunDir {
         Self::check_windows(&root, scene_root)?;
         std::fs::create_dir_all(&root)
             .map_err(|e| PipelineError::RunDir { path: root.clone(), why: format!("cannot create the folder: {e}") })?;
-        Ok(RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new() })
+        Ok(RunDir {
+            root,
+            lock: None,
+            resume: false,
+            created: false,
+            kept_runs: Vec::new(),
+            staged: Default::default(),
+        })
     }
 
     /// The refusals of [`RunDir::for_windows`], without creating anything: for a caller that
@@ -499,7 +542,14 @@ impl RunDir {
         let root: PathBuf = root.into();
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
         check_new_run_folder(&root, scene_root)?;
-        let dir = RunDir { root: root.clone(), lock: None, resume: false, created: false, kept_runs: Vec::new() };
+        let dir = RunDir {
+            root: root.clone(),
+            lock: None,
+            resume: false,
+            created: false,
+            kept_runs: Vec::new(),
+            staged: Default::default(),
+        };
         if dir.state() == DirState::Foreign {
             return Err(dir.foreign());
         }
@@ -545,29 +595,99 @@ impl RunDir {
         FileLock::take(&self.root, &self.path(name))
     }
 
-    /// Removes the files of an earlier run (only those a run writes, and only from a folder that
-    /// holds a run).
-    fn clear(&self) -> Result<(), PipelineError> {
+    /// Moves the files of an earlier run (only those a run writes, and only from a folder that
+    /// holds a run) and its own runs into [`REPLACED`], where they stay until the new run writes
+    /// its configuration ([`RunDir::write_json`]): a run refused by its own checks, which come
+    /// before that, leaves the earlier run as it was.
+    fn stage_earlier(&self) -> Result<(), PipelineError> {
         if self.state() == DirState::Foreign {
             return Err(self.foreign());
         }
+        let aside = self.path(REPLACED);
+        std::fs::create_dir(&aside)
+            .map_err(|e| PipelineError::file(&aside, format!("cannot make a folder for the earlier run: {e}")))?;
+        self.staged.store(true, std::sync::atomic::Ordering::Relaxed);
+        let move_aside = |from: &Path, to: &Path| {
+            std::fs::rename(from, to)
+                .map_err(|e| PipelineError::file(from, format!("cannot move the earlier run's file aside: {e}")))
+        };
         for name in RUN_FILES {
             let p = self.root.join(name);
-            let removed = if p.is_dir() {
-                std::fs::remove_dir_all(&p)
-            } else if p.exists() {
-                std::fs::remove_file(&p)
-            } else {
-                Ok(())
-            };
-            removed.map_err(|e| PipelineError::file(&p, format!("cannot remove the earlier run's file: {e}")))?;
+            if p.exists() {
+                move_aside(&p, &aside.join(name))?;
+            }
         }
         for p in self.own_runs() {
-            std::fs::remove_dir_all(&p)
-                .map_err(|e| PipelineError::file(&p, format!("cannot remove the earlier run's start: {e}")))?;
+            let to = aside.join(p.strip_prefix(&self.root).unwrap_or(&p));
+            if let Some(parent) = to.parent() {
+                std::fs::create_dir_all(parent).map_err(|e| PipelineError::file(parent, e))?;
+            }
+            move_aside(&p, &to)?;
         }
         self.remove_emptied_own_folders();
         Ok(())
+    }
+
+    /// The new run has written its configuration: the earlier run it replaces goes.
+    fn drop_replaced(&self) {
+        if !self.staged.swap(false, std::sync::atomic::Ordering::Relaxed) {
+            return;
+        }
+        // Renamed first, so that a removal cut short is never taken for a run to restore.
+        let discard = self.path(REPLACED_DISCARDED);
+        let removed = std::fs::rename(self.path(REPLACED), &discard).and_then(|()| std::fs::remove_dir_all(&discard));
+        if let Err(e) = removed {
+            log::warn!("{}: cannot remove the replaced run's files: {e}", discard.display());
+        }
+    }
+
+    /// Puts the earlier run that [`RunDir::stage_earlier`] moved aside back in place: its run
+    /// files over any the refused run wrote, its own runs where the folder has none of that
+    /// name. What cannot go back stays in [`REPLACED`], with a warning.
+    fn restore_replaced(&self) {
+        let _ = std::fs::remove_dir_all(self.path(REPLACED_DISCARDED));
+        let aside = self.path(REPLACED);
+        if !aside.is_dir() {
+            return;
+        }
+        let put_back = |from: &Path, to: &Path| {
+            if to.is_dir() {
+                let _ = std::fs::remove_dir_all(to);
+            } else if to.exists() {
+                let _ = std::fs::remove_file(to);
+            }
+            let _ = std::fs::rename(from, to);
+        };
+        for name in RUN_FILES {
+            let from = aside.join(name);
+            if from.exists() {
+                put_back(&from, &self.path(name));
+            }
+        }
+        for own in OWN_RUNS {
+            let from = aside.join(own);
+            let to = self.path(own);
+            if !from.is_dir() {
+                continue;
+            }
+            if !to.exists() {
+                let _ = std::fs::rename(&from, &to);
+                continue;
+            }
+            for entry in std::fs::read_dir(&from).into_iter().flatten().filter_map(Result::ok) {
+                let target = to.join(entry.file_name());
+                if !target.exists() {
+                    let _ = std::fs::rename(entry.path(), target);
+                }
+            }
+            let _ = std::fs::remove_dir(&from);
+        }
+        if std::fs::remove_dir(&aside).is_err() {
+            log::warn!(
+                "{}: part of the run that was to be replaced could not be put back; it is kept in this folder",
+                aside.display()
+            );
+        }
     }
 
     /// The runs a run wrote into its [`OWN_RUNS`] folders: the folder itself when it holds a run
@@ -745,8 +865,14 @@ impl RunDir {
     }
 
     /// Writes `value` as pretty JSON with a final newline, atomically.
+    /// Writes `name` atomically. The run's configuration (`config.json`, its first file) is
+    /// the point of no return of `--force`: the earlier run it replaces goes then.
     pub fn write_json(&self, name: &str, value: &impl Serialize) -> Result<PathBuf, PipelineError> {
-        write_json(&self.path(name), value)
+        let written = write_json(&self.path(name), value)?;
+        if name == "config.json" {
+            self.drop_replaced();
+        }
+        Ok(written)
     }
 }
 
@@ -1578,7 +1704,9 @@ mod tests {
         dir.write_json("config.json", &run_config()).unwrap();
         dir.write_json("report.json", &serde_json::json!({})).unwrap();
         drop(dir);
-        drop(RunDir::create(&out, Overwrite::Force, Some(&scene)).unwrap());
+        let forced = RunDir::create(&out, Overwrite::Force, Some(&scene)).unwrap();
+        forced.write_json("config.json", &run_config()).unwrap();
+        drop(forced);
         assert_eq!(std::fs::read_to_string(scene.join("images/r_0.png")).unwrap(), "image");
         assert!(!out.join("report.json").exists(), "--force replaced the run");
         drop(RunDir::for_windows(&out, Some(&scene)).unwrap());
@@ -1658,6 +1786,54 @@ mod tests {
         assert_eq!(dir.state(), DirState::Empty);
     }
 
+    /// `--force` keeps the run it replaces aside until the new run writes its configuration: a
+    /// run refused by its own checks before that (no held-out view, too little memory) leaves
+    /// the earlier run as it was, its starts included; one that wrote it replaces it. An
+    /// earlier run left aside by a process that died then is put back by the next.
+    #[test]
+    fn a_forced_run_refused_before_it_writes_leaves_the_earlier_run() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = tmp.path().join("run");
+        let make_earlier = || {
+            std::fs::create_dir_all(run.join("start/t00")).unwrap();
+            write_json(&run.join("start/t00/config.json"), &run_config()).unwrap();
+            write_json(&run.join("config.json"), &run_config()).unwrap();
+            std::fs::write(run.join("volume.npy"), "old").unwrap();
+            std::fs::write(run.join("report.json"), "{}").unwrap();
+        };
+        let earlier_there = || {
+            std::fs::read_to_string(run.join("volume.npy")).is_ok_and(|v| v == "old")
+                && run.join("report.json").is_file()
+                && run.join("start/t00/config.json").is_file()
+                && !run.join(REPLACED).exists()
+        };
+        make_earlier();
+        let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
+        assert_eq!(dir.state(), DirState::Empty);
+        assert!(!run.join("volume.npy").exists() && !run.join("start").exists());
+        drop(dir);
+        assert!(earlier_there(), "a refused --force put the earlier run back");
+        assert_eq!(RunDir::open(&run).unwrap().state(), DirState::Finished);
+        // Written: replaced.
+        let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
+        dir.write_json("config.json", &run_config()).unwrap();
+        assert!(!run.join(REPLACED).exists() && !run.join("volume.npy").exists() && !run.join("start").exists());
+        drop(dir);
+        assert_eq!(RunDir::open(&run).unwrap().state(), DirState::Unfinished);
+        // A process that died with the earlier run aside: the next run puts it back first.
+        for f in ["config.json", "volume.npy", "report.json"] {
+            let _ = std::fs::remove_file(run.join(f));
+        }
+        make_earlier();
+        let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
+        std::mem::forget(dir);
+        std::fs::remove_file(run.join(".lock")).unwrap();
+        assert!(!earlier_there());
+        let e = RunDir::create(&run, Overwrite::Refuse, None).unwrap_err().to_string();
+        assert!(e.contains("already holds a finished run"), "{e}");
+        assert!(earlier_there());
+    }
+
     /// A time-resolved run's starts (`start/tNN/`, one run per instant) are its own: `--force`
     /// removes them with it, so a new run with fewer instants, or none started, does not keep
     /// the earlier run's beside its own. What else `start/` holds is not the run's and stays.
@@ -1678,7 +1854,9 @@ mod tests {
             }
             let dir = RunDir::create(&run, Overwrite::Force, None).unwrap();
             assert_eq!(dir.state(), DirState::Empty);
+            dir.write_json("config.json", &run_config()).unwrap();
             drop(dir);
+            assert!(!run.join(REPLACED).exists() && !run.join(REPLACED_DISCARDED).exists());
             for t in ["t00", "t01", "t02"] {
                 assert!(!run.join("start").join(t).exists(), "start/{t} left by --force (keep {keep})");
             }

@@ -157,3 +157,36 @@ fn an_unwritable_output_folder_is_refused_before_any_work() {
         refused(&fluidnerf(d, &["compare", "r", "-o", out]), &needle);
     }
 }
+
+/// `--force` replaces a finished run only once the new run has passed its own checks: a run
+/// refused by them (held-out stopping without a held-out view, a time-resolved method on a
+/// static scene, too little memory) leaves the earlier run as it was, and one that passes
+/// them replaces it.
+#[test]
+fn a_forced_run_refused_by_its_checks_leaves_the_earlier_run() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 8, &[]);
+    let reconstruct = |extra: &[&str]| {
+        let method = if extra.contains(&"tr-fast") { &[][..] } else { &["--method", "asart"][..] };
+        let args = ["reconstruct", "scene", "-o", "run", "--resolution", "8", "-q"];
+        fluidnerf(d, &[&args[..], method, extra].concat())
+    };
+    ok(&reconstruct(&["--max-iterations", "3"]));
+    let before = files(&d.join("run"));
+    let volume = std::fs::read(d.join("run/volume.npy")).expect("volume");
+    for (extra, says) in [
+        (&["--stop", "held-out", "--force"][..], "held-out"),
+        (&["--method", "tr-fast", "--force"][..], "tr-fast"),
+        (&["--memory-limit", "0.000001", "--force"][..], "memory"),
+    ] {
+        refused(&reconstruct(extra), says);
+        assert_eq!(files(&d.join("run")), before, "{extra:?}");
+        assert_eq!(std::fs::read(d.join("run/volume.npy")).expect("volume"), volume, "{extra:?}");
+    }
+    ok(&fluidnerf(d, &["eval", "run", "-q"]));
+    ok(&reconstruct(&["--max-iterations", "1", "--force"]));
+    let report = std::fs::read_to_string(d.join("run/report.json")).expect("report");
+    assert!(report.contains("\"iterations\": 1"), "replaced: {report}");
+    assert!(!d.join("run/.replaced").exists());
+}
