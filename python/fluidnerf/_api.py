@@ -921,31 +921,63 @@ def _progress_callback(callback: Callback | None, progress: bool | None) -> tupl
     return on_event, bar_holder
 
 
+def _file_state(path: Path) -> tuple[int, int, int] | None:
+    """What tells a file apart from the one that replaces it (written atomically, a new file
+    renamed over it): its inode, modification time and size; None when it does not exist."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_ino, st.st_mtime_ns, st.st_size)
+
+
 class _SavedScene:
     """A scene from arrays that a call saves into ``out/scene`` of the run folder ``out``,
-    with what it takes to take that back (see :meth:`take_back`)."""
+    with what it takes to take that back (see :meth:`take_back`). The folder's own scene until
+    then (of a run being replaced or resumed) is moved aside, to ``out/.scene-replaced``, until
+    the run writes its configuration."""
 
     def __init__(self, scene: Scene, out: Path):
         self.scene, self.out, self.own = scene, out, out / "scene"
-        # Only a folder this call makes is taken back, and the run folder only if it makes it.
-        self.pristine = None if self.own.exists() else scene._copy()
+        self.pristine = scene._copy()
         self.made_out = not out.exists()
+        self.config = _file_state(out / "config.json")
+        self.aside: Path | None = None
+        if self.own.exists():
+            self.aside = out / ".scene-replaced"
+            shutil.rmtree(self.aside, ignore_errors=True)
+            os.replace(self.own, self.aside)
+
+    def written(self) -> bool:
+        """Whether the run has written its configuration (``config.json``, its first file)."""
+        return _file_state(self.out / "config.json") != self.config
 
     def take_back(self) -> None:
-        """Removes the saved scene, and the run folder if the call made it, and puts the scene
-        back in memory as it was, when the run was refused before it wrote anything (its
-        ``config.json``), so that the call can be made again as before; the command line leaves
-        nothing either. A run that failed later keeps the scene its ``config.json`` names, so
-        that it can be resumed."""
-        if self.pristine is None or (self.out / "config.json").exists():
+        """When the run was refused before it wrote anything (its ``config.json``): removes the
+        saved scene, puts back the scene the folder held (or removes the run folder if the call
+        made it), and puts the scene back in memory as it was, so that the call can be made
+        again as before and a refused ``--force`` or ``--resume`` leaves the run as it was; the
+        command line leaves nothing either. A run that failed later keeps the scene its
+        ``config.json`` names, so that it can be resumed."""
+        if self.written():
+            self.finish()
             return
         shutil.rmtree(self.own, ignore_errors=True)
-        if self.made_out:
+        if self.aside is not None:
+            os.replace(self.aside, self.own)
+            self.aside = None
+        elif self.made_out:
             try:
                 self.out.rmdir()
             except OSError:
                 pass
         self.scene._restore(self.pristine)
+
+    def finish(self) -> None:
+        """The run has started on the saved scene: the scene it replaced goes."""
+        if self.aside is not None:
+            shutil.rmtree(self.aside, ignore_errors=True)
+            self.aside = None
 
 
 def reconstruct(
@@ -1014,9 +1046,16 @@ def reconstruct(
         if given is None and not (out_path / "config.json").exists():
             shutil.rmtree(out_path, ignore_errors=True)
         raise
+    except BaseException:
+        # Ctrl-C: the run wrote its results on the saved scene, or was stopped before it began.
+        if saved is not None:
+            saved.take_back()
+        raise
     finally:
         if bars and "bar" in bars:
             bars.pop("bar").close()
+    if saved is not None:
+        saved.finish()
     return open_run(out_path)
 
 

@@ -233,12 +233,16 @@ def reconstruct(
             scene.save(own, force=own.exists())
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     try:
-        return _run(client, scene, cfg, out_path, whole, overwrite, callback)
-    except FluidNerfError:
-        # A run refused before it wrote anything takes back the scene this call saved.
+        run = _run(client, scene, cfg, out_path, whole, overwrite, callback)
+    except BaseException:
+        # A run refused before it wrote anything takes back the scene this call saved, and puts
+        # back the one it replaced.
         if saved is not None:
             saved.take_back()
         raise
+    if saved is not None:
+        saved.finish()
+    return run
 
 
 def _run(

@@ -735,3 +735,47 @@ def test_a_start_run_inside_the_folder_a_forced_run_replaces_is_refused(static_s
     ):
         fluidnerf.reconstruct(static_scene, method, tmp_path / "a", overwrite="force", progress=False, **FAST)
     np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "a").volume, before)
+
+
+def test_a_refused_force_or_resume_of_a_scene_from_arrays_leaves_the_run_as_it_was(static_scene, tmp_path):
+    """A refused ``overwrite="force"`` (too little memory: refused by the run's own checks)
+    emptied the run's folder but for the new scene, and a refused ``overwrite="resume"`` (other
+    images) left the new images over the run's own scene, so the run could never be resumed."""
+    K, poses, _, _ = static_scene.camera_arrays()
+    images = static_scene.images()
+    out = tmp_path / "run"
+    options = {"resolution": 8, "progress": False}
+    fluidnerf.reconstruct(
+        fluidnerf.scene_from_arrays(K, poses, images, static_scene.aabb),
+        FAST_METHOD,
+        out,
+        stopping={"max_iterations": 6},
+        checkpoint_every=3,
+        callback=lambda e: not (e["kind"] == "iteration" and e["iteration"] == 4),
+        **options,
+    )
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
+    volume = fluidnerf.open_run(out).volume
+    other = fluidnerf.scene_from_arrays(K, poses, images + 1.0, static_scene.aabb)
+    with pytest.raises(fluidnerf.FluidNerfError, match="memory"):
+        fluidnerf.reconstruct(other, "asart", out, overwrite="force", memory_limit_gib=1e-6, **options)
+    with pytest.raises(fluidnerf.FluidNerfError, match="other images or cameras"):
+        fluidnerf.reconstruct(other, FAST_METHOD, out, overwrite="resume", **options)
+    assert other.root is None, "the scene is back in memory, as given"
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == files
+    np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images)
+    np.testing.assert_array_equal(fluidnerf.open_run(out).volume, volume)
+    # The run resumes on its own scene, and a forced run on another replaces it and its scene.
+    resumed = fluidnerf.reconstruct(
+        fluidnerf.scene_from_arrays(K, poses, images, static_scene.aabb),
+        FAST_METHOD,
+        out,
+        overwrite="resume",
+        **options,
+    )
+    assert resumed.report["iterations"] == 6
+    forced = fluidnerf.reconstruct(
+        other, "asart", out, overwrite="force", stopping={"max_iterations": 2}, **options
+    )
+    assert forced.status == "finished" and not (out / ".scene-replaced").exists()
+    np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images + 1.0)
