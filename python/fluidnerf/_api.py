@@ -628,10 +628,14 @@ def build_config(
     # The window settings given are refused where the command line refuses --window and
     # --overlap: an overlap with no windows to overlap was recorded and ignored.
     windows = method_patch.get("windows")
+    # NumPy integers as Python's (a bool is no count: the configuration's check refuses it).
     given = {
-        key: value
+        key: int(value)
         for key, value in (windows.items() if isinstance(windows, dict) else ())
-        if key in ("frames", "overlap") and type(value) is int and 0 <= value < 2**64
+        if key in ("frames", "overlap")
+        and isinstance(value, (int, np.integer))
+        and not isinstance(value, (bool, np.bool_))
+        and 0 <= value < 2**64
     }
     if given:
         whose = "the configuration's" if config is not None and preset is None else "the preset's"

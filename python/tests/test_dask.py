@@ -117,6 +117,14 @@ def test_window_settings_the_command_line_refuses_are_refused(client, tr_scene, 
         with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(words)):
             fluidnerf.dask.reconstruct(client, tr_scene, method, tmp_path / "dask", **TR_OPTIONS)
         assert not (tmp_path / "serial").exists() and not (tmp_path / "dask").exists()
+    # NumPy integers are counts as Python's are: they slipped past the check, recorded and ignored.
+    for frames, overlap, words in [(5, 2, said), (0, 1, no_windows)]:
+        numpy_counts = {
+            "name": "tr-fast",
+            "windows": {"frames": np.int64(frames), "overlap": np.int32(overlap)},
+        }
+        with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(words)):
+            fluidnerf.window_plan(tr_scene, numpy_counts)
     # Windows that overlap, and the preset's own settings, pass.
     overlapping = {"name": "tr-fast", "windows": {"frames": 4, "overlap": 2}}
     assert fluidnerf.window_plan(tr_scene, overlapping)["windows"] == [[0, 4], [1, 5]]
