@@ -368,6 +368,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
+    // The images alone, first: choosing the projector and the bake walks every pixel's ray
+    // through a field's hull, which for views too large to hold took minutes before the same
+    // refusal.
+    let pixels: u64 = views.iter().map(|v| (v.camera.width() * v.camera.height()) as u64).sum();
+    super::check_memory(|| format!("rendering {} views of {pixels} pixels in all", views.len()), 8 * pixels)?;
     // The grid `--projector auto` chose for the footprint projector, if it chose it.
     let auto_grid = match args.projector {
         RenderProjector::Auto => auto_footprint(&args, &source, &scene.aabb, &cameras),
@@ -448,7 +453,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Every image is kept (as floats, and coloured for a turntable), and a field is sampled on
     // one grid at a time; the footprint projector lists the grid's non-empty chunks of sixteen
     // voxels (8 bytes each) for the views it draws together.
-    let pixels: u64 = views.iter().map(|v| (v.camera.width() * v.camera.height()) as u64).sum();
     let grid: u64 = bake_dims.map_or(0, |d| d.iter().map(|&n| n as u64 + 1).product());
     let chunk_lists = match (&source, footprint) {
         (_, false) => 0,

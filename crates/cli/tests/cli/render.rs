@@ -372,6 +372,36 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
 
 /// A step or supersampling that would never finish, or a step that integrates rays from one
 /// sample, is refused, naming the option and what it allows, and leaves nothing behind.
+/// Views too large to hold are refused before the projector and the bake are chosen: for a
+/// field that choice walks every pixel's ray through its hull, which for 3600 orbit views of
+/// 16384 px ran for minutes before the same refusal.
+#[test]
+fn a_field_rendered_into_views_too_large_to_hold_is_refused_first() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, _) = make_scene(dir.path());
+    let run = dir.path().join("run");
+    write_trained(&run, scene.aabb);
+    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let out = dir.path().join("views");
+    let o = fluidnerf(&[
+        "render",
+        &d(&run),
+        "--scene",
+        &d(dir.path()),
+        "-o",
+        &d(&out),
+        "--orbit",
+        "3600",
+        "--width",
+        "16384",
+        "-q",
+    ]);
+    assert!(!o.status.success(), "rendered");
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("rendering 3600 views of") && e.contains("needs about"), "{e}");
+    assert!(!out.exists(), "wrote {}", out.display());
+}
+
 #[test]
 fn steps_and_supersampling_that_would_never_finish_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
