@@ -396,20 +396,18 @@ impl Drop for RunDir {
 }
 
 impl RunDir {
+    /// The folder `root` as found: no lock taken, nothing created, moved or resumed.
+    fn plain(root: PathBuf) -> Self {
+        RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new(), staged: Default::default() }
+    }
+
     /// A run folder to read (no lock, nothing created).
     pub fn open(root: impl Into<PathBuf>) -> Result<Self, PipelineError> {
         let root = root.into();
         if !root.is_dir() {
             return Err(PipelineError::RunDir { path: root, why: "is not a folder".into() });
         }
-        Ok(RunDir {
-            root,
-            lock: None,
-            resume: false,
-            created: false,
-            kept_runs: Vec::new(),
-            staged: Default::default(),
-        })
+        Ok(RunDir::plain(root))
     }
 
     /// Creates (or reuses, as `overwrite` allows) the folder of a new run and takes its lock. A
@@ -428,14 +426,8 @@ impl RunDir {
         let created = !root.exists();
         std::fs::create_dir_all(&root).map_err(|e| refuse(format!("cannot create the folder: {e}")))?;
         let resume = overwrite == Overwrite::Resume;
-        let mut dir = RunDir {
-            root: root.clone(),
-            lock: None,
-            resume,
-            created,
-            kept_runs: Vec::new(),
-            staged: Default::default(),
-        };
+        let mut dir = RunDir::plain(root.clone());
+        (dir.resume, dir.created) = (resume, created);
         dir.take_lock()?;
         // A replacement whose run died before writing anything left the earlier run aside.
         dir.restore_replaced();
@@ -456,14 +448,7 @@ impl RunDir {
     pub fn check(root: impl Into<PathBuf>, overwrite: Overwrite) -> Result<(), PipelineError> {
         let root: PathBuf = root.into();
         check_new_run_folder(&root, None)?;
-        let dir = RunDir {
-            root,
-            lock: None,
-            resume: false,
-            created: false,
-            kept_runs: Vec::new(),
-            staged: Default::default(),
-        };
+        let dir = RunDir::plain(root);
         dir.refusal(dir.state(), overwrite)
     }
 
@@ -525,14 +510,7 @@ impl RunDir {
         Self::check_windows(&root, scene_root)?;
         std::fs::create_dir_all(&root)
             .map_err(|e| PipelineError::RunDir { path: root.clone(), why: format!("cannot create the folder: {e}") })?;
-        Ok(RunDir {
-            root,
-            lock: None,
-            resume: false,
-            created: false,
-            kept_runs: Vec::new(),
-            staged: Default::default(),
-        })
+        Ok(RunDir::plain(root))
     }
 
     /// The refusals of [`RunDir::for_windows`], without creating anything: for a caller that
@@ -542,14 +520,7 @@ impl RunDir {
         let root: PathBuf = root.into();
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
         check_new_run_folder(&root, scene_root)?;
-        let dir = RunDir {
-            root: root.clone(),
-            lock: None,
-            resume: false,
-            created: false,
-            kept_runs: Vec::new(),
-            staged: Default::default(),
-        };
+        let dir = RunDir::plain(root.clone());
         if dir.state() == DirState::Foreign {
             return Err(dir.foreign());
         }
