@@ -145,7 +145,8 @@ pub struct Args {
     /// Rerun from a `config.json` written by an earlier run; options given here override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Replace a run already in OUT.
+    /// Replace a run already in OUT. The earlier run is kept aside until the new one has passed
+    /// its checks and written its configuration: a refused run leaves it as it was.
     #[arg(long, conflicts_with = "resume")]
     pub force: bool,
     /// Continue the neural or time-resolved run in OUT from its checkpoints, with the settings
