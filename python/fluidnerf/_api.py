@@ -941,13 +941,15 @@ class _SavedScene:
     then (of a run being replaced or resumed) is moved aside, to ``out/.scene-replaced``, until
     the run writes its configuration."""
 
-    def __init__(self, scene: Scene, out: Path):
+    def __init__(self, scene: Scene, out: Path, replace: bool):
         self.scene, self.out, self.own = scene, out, out / "scene"
         self.pristine = scene._copy()
         self.made_out = not out.exists()
         self.config = _file_state(out / "config.json")
         self.aside: Path | None = None
-        if self.own.exists():
+        # Only a run being replaced or resumed gives up its scene (``replace``); otherwise saving
+        # over a scene folder already there is refused.
+        if replace and self.own.exists():
             self.aside = out / ".scene-replaced"
             shutil.rmtree(self.aside, ignore_errors=True)
             os.replace(self.own, self.aside)
@@ -1038,7 +1040,7 @@ def reconstruct(
         # refused run leaves it as it was. Resuming continues on the scene given, saved over
         # the run's own.
         _ext.check_run_folder(os.fspath(out_path), overwrite)
-        saved = _SavedScene(scene, out_path)
+        saved = _SavedScene(scene, out_path, replace=overwrite in ("force", "resume"))
         scene.save(saved.own, force=overwrite in ("force", "resume"))
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cb, bars = _progress_callback(_warning_callback(callback), progress)

@@ -229,7 +229,7 @@ def reconstruct(
         else:
             # A whole run replaced or resumed continues on the scene given, saved over the run's
             # own, as fluidnerf.reconstruct does.
-            saved = _SavedScene(scene, out_path)
+            saved = _SavedScene(scene, out_path, replace=whole and overwrite != "refuse")
             scene.save(own, force=own.exists())
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     try:
