@@ -234,11 +234,17 @@ def reconstruct(
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     try:
         run = _run(client, scene, cfg, out_path, whole, overwrite, callback)
-    except BaseException:
+    except FluidNerfError:
         # A run refused before it wrote anything takes back the scene this call saved, and puts
         # back the one it replaced.
         if saved is not None:
             saved.take_back()
+        raise
+    except BaseException:
+        # Stopped otherwise: the saved scene stays, so that the same call can continue; the one
+        # it replaced goes only once the run has written on the saved one.
+        if saved is not None and saved.written():
+            saved.finish()
         raise
     if saved is not None:
         saved.finish()
