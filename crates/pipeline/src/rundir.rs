@@ -612,50 +612,45 @@ impl RunDir {
         }
     }
 
-    /// Puts the earlier run that [`RunDir::stage_earlier`] moved aside back in place: its run
-    /// files over any the refused run wrote, its own runs where the folder has none of that
-    /// name. What cannot go back stays in [`REPLACED`], with a warning.
+    /// Puts the earlier run that [`RunDir::stage_earlier`] moved aside back in place, when the
+    /// folder holds no run files (the run that set it aside wrote none). A folder that holds
+    /// another run's files by now (windows trained into it since) keeps them: nothing is put
+    /// back over them, and the earlier run stays in [`REPLACED`], with a warning.
     fn restore_replaced(&self) {
         let _ = std::fs::remove_dir_all(self.path(REPLACED_DISCARDED));
         let aside = self.path(REPLACED);
         if !aside.is_dir() {
             return;
         }
-        let put_back = |from: &Path, to: &Path| {
-            if to.is_dir() {
-                let _ = std::fs::remove_dir_all(to);
-            } else if to.exists() {
-                let _ = std::fs::remove_file(to);
-            }
-            let _ = std::fs::rename(from, to);
-        };
-        for name in RUN_FILES {
-            let from = aside.join(name);
-            if from.exists() {
-                put_back(&from, &self.path(name));
-            }
-        }
-        for own in OWN_RUNS {
-            let from = aside.join(own);
-            let to = self.path(own);
-            if !from.is_dir() {
-                continue;
-            }
-            if !to.exists() {
-                let _ = std::fs::rename(&from, &to);
-                continue;
-            }
-            for entry in std::fs::read_dir(&from).into_iter().flatten().filter_map(Result::ok) {
-                let target = to.join(entry.file_name());
-                if !target.exists() {
-                    let _ = std::fs::rename(entry.path(), target);
+        if self.state() == DirState::Empty {
+            for name in RUN_FILES {
+                let from = aside.join(name);
+                if from.exists() {
+                    let _ = std::fs::rename(&from, self.path(name));
                 }
             }
-            let _ = std::fs::remove_dir(&from);
+            for own in OWN_RUNS {
+                let (from, to) = (aside.join(own), self.path(own));
+                if !from.is_dir() {
+                    continue;
+                }
+                if !to.exists() {
+                    let _ = std::fs::rename(&from, &to);
+                    continue;
+                }
+                for entry in std::fs::read_dir(&from).into_iter().flatten().filter_map(Result::ok) {
+                    let target = to.join(entry.file_name());
+                    if !target.exists() {
+                        let _ = std::fs::rename(entry.path(), target);
+                    }
+                }
+                let _ = std::fs::remove_dir(&from);
+            }
         }
         if std::fs::remove_dir(&aside).is_err() {
             log::warn!(
-                "{}: part of the run that was to be replaced could not be put back; it is kept in this folder",
+                "{}: a run that a --force run was to replace, which could not be put back in place (the folder holds \
+                 another run's files); it is kept here",
                 aside.display()
             );
         }
@@ -1803,6 +1798,16 @@ mod tests {
         let e = RunDir::create(&run, Overwrite::Refuse, None).unwrap_err().to_string();
         assert!(e.contains("already holds a finished run"), "{e}");
         assert!(earlier_there());
+        // Another run written into the folder since (windows trained one at a time) is never
+        // overwritten by the run set aside, which stays aside.
+        std::mem::forget(RunDir::create(&run, Overwrite::Force, None).unwrap());
+        std::fs::remove_file(run.join(".lock")).unwrap();
+        write_json(&run.join("config.json"), &serde_json::json!({"scene": "s", "method": "windows"})).unwrap();
+        std::fs::create_dir(run.join("windows")).unwrap();
+        drop(RunDir::create(&run, Overwrite::Resume, None).unwrap());
+        let config = std::fs::read_to_string(run.join("config.json")).unwrap();
+        assert!(config.contains("windows") && !run.join("volume.npy").exists(), "{config}");
+        assert!(run.join(REPLACED).join("volume.npy").is_file());
     }
 
     /// A time-resolved run's starts (`start/tNN/`, one run per instant) are its own: `--force`
