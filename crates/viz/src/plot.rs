@@ -238,32 +238,31 @@ fn axis_range(values: impl Iterator<Item = f64>, log: bool) -> std::ops::Range<f
     }
 }
 
-/// Whether positive values spread over at least a decade: plotters labels a logarithmic axis
-/// only at powers of ten, so a narrower range would show no numbers at all.
-fn spans_a_decade(values: impl Iterator<Item = f64>) -> bool {
-    let (lo, hi) = values.filter(|v| *v > 0.0).fold((f64::INFINITY, 0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    hi / lo >= 10.0
-}
-
 /// The most decades a logarithmic axis spans; more fall back to a linear axis. Between
 /// values of 10⁻³⁰⁰ and 10³⁰⁰ the axis's padded ratio overflows to infinity, and plotters'
 /// search for its ticks would never end.
 const MAX_DECADES: f64 = 100.0;
 
-/// Whether the drawable positive values spread over more than [`MAX_DECADES`].
-fn spans_too_many_decades(values: impl Iterator<Item = f64>) -> bool {
+/// The decades the drawable positive values spread over (0 without any). A logarithmic axis
+/// takes at least one, since plotters labels it only at powers of ten and a narrower range
+/// would show no numbers at all, and at most [`MAX_DECADES`].
+fn decades(values: impl Iterator<Item = f64>) -> f64 {
     let (lo, hi) =
         values.filter(|&v| v > 0.0 && plottable(v)).fold((f64::INFINITY, 0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    hi > 0.0 && hi.log10() - lo.log10() > MAX_DECADES
+    if hi > 0.0 {
+        hi.log10() - lo.log10()
+    } else {
+        0.0
+    }
 }
 
 fn draw_plot<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<(), VizError> {
     // A log axis over less than a decade, or over more than `MAX_DECADES`, falls back to linear.
-    let log_axis = |on: bool, values: Vec<f64>| {
-        on && spans_a_decade(values.iter().copied()) && !spans_too_many_decades(values.into_iter())
+    let log_axis = |on: bool, values: &dyn Fn(&Series) -> &[f64]| {
+        on && (1.0..=MAX_DECADES).contains(&decades(plot.series.iter().flat_map(|s| values(s).iter().copied())))
     };
-    let log_x = log_axis(plot.log_x, plot.series.iter().flat_map(|s| s.x.iter().copied()).collect());
-    let log_y = log_axis(plot.log_y, plot.series.iter().flat_map(|s| s.y.iter().copied()).collect());
+    let log_x = log_axis(plot.log_x, &|s| &s.x);
+    let log_y = log_axis(plot.log_y, &|s| &s.y);
     let adjusted;
     let plot = if (log_x, log_y) == (plot.log_x, plot.log_y) {
         plot
@@ -542,7 +541,7 @@ mod tests {
             vec![Series { label: "ASART".into(), x: vec![2.0, 4.0, 8.0], y: vec![0.4, 0.2, 0.1], mark: None }],
         );
         write_plots(&dir.path().join("s.png"), &[sweep], 1).expect("png");
-        assert!(spans_a_decade([0.01, 0.5].into_iter()) && !spans_a_decade([0.15, 1.1, -3.0].into_iter()));
+        assert!(decades([0.01, 0.5].into_iter()) >= 1.0 && decades([0.15, 1.1, -3.0].into_iter()) < 1.0);
     }
 
     #[test]
@@ -572,9 +571,9 @@ mod tests {
         write_plots(&dir.path().join("y.svg"), &[plot], 1).expect("plots");
         let plot = sweep_plot("time", "NRMSE", true, series(vec![1e-10, 1e300], vec![0.9, 0.5]));
         write_plots(&dir.path().join("x.svg"), &[plot], 1).expect("plots");
-        assert!(spans_too_many_decades([1e-10, 1e300].into_iter()));
-        assert!(!spans_too_many_decades([1e-50, 1e49, 1e301, f64::INFINITY, -1e200].into_iter()));
-        assert!(!spans_too_many_decades([0.0, -1.0].into_iter()));
+        assert!(decades([1e-10, 1e300].into_iter()) > MAX_DECADES);
+        assert!(decades([1e-50, 1e49, 1e301, f64::INFINITY, -1e200].into_iter()) <= MAX_DECADES);
+        assert!(decades([0.0, -1.0].into_iter()) <= MAX_DECADES);
     }
 
     /// The numbers along the x axis of a one-plot SVG: the numeric labels on one line.
