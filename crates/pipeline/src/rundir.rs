@@ -629,13 +629,10 @@ impl RunDir {
                     let _ = std::fs::rename(&from, self.path(name));
                 }
             }
+            // Run by run: `start/` may hold files of the user's, which stayed when it went aside.
             for own in OWN_RUNS {
                 let (from, to) = (aside.join(own), self.path(own));
-                if !from.is_dir() {
-                    continue;
-                }
-                if !to.exists() {
-                    let _ = std::fs::rename(&from, &to);
+                if !from.is_dir() || std::fs::create_dir_all(&to).is_err() {
                     continue;
                 }
                 for entry in std::fs::read_dir(&from).into_iter().flatten().filter_map(Result::ok) {
