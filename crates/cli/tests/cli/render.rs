@@ -1,6 +1,6 @@
 //! End-to-end tests of `fluidnerf render` on a tiny scene generated in a temporary directory.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use fluidnerf_core::glam::DVec3;
@@ -184,6 +184,15 @@ fn write_trained(dir: &Path, aabb: Aabb) {
     std::fs::write(dir.join("weights.safetensors"), bytes).expect("writes");
 }
 
+/// A scene of [`make_scene`] in a new folder, and a trained field of its box in `run/` there.
+fn scene_and_trained_run() -> (tempfile::TempDir, Scene, PathBuf) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (scene, _) = make_scene(dir.path());
+    let run = dir.path().join("run");
+    write_trained(&run, scene.aabb);
+    (dir, scene, run)
+}
+
 /// `--bake off` renders a trained field exactly (the reference renderer on the loaded field);
 /// `auto` bakes it on twice its finest level when the views' samples inside its hull
 /// outnumber twice the grid's vertices there, and the baked images stay within 2 % NRMSE of
@@ -191,10 +200,7 @@ fn write_trained(dir: &Path, aabb: Aabb) {
 /// was done.
 #[test]
 fn trained_fields_render_exactly_or_baked() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (scene, _) = make_scene(dir.path());
-    let run = dir.path().join("run");
-    write_trained(&run, scene.aabb);
+    let (dir, scene, run) = scene_and_trained_run();
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |bake: &str, ss: usize| {
         let out = dir.path().join(format!("views-{bake}-{ss}"));
@@ -319,10 +325,7 @@ fn footprint_renders_match_the_projector_and_the_ray_renderer() {
 /// view) and where an option asks for rays. `render.json` records the choice.
 #[test]
 fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (scene, _) = make_scene(dir.path());
-    let run = dir.path().join("run");
-    write_trained(&run, scene.aabb);
+    let (dir, _, run) = scene_and_trained_run();
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |recon: &Path, name: &str, extra: &[&str]| -> serde_json::Value {
         let out = dir.path().join(name);
@@ -370,17 +373,12 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
     assert_eq!(orbit("large-orbit", "200", &[])["projector"], "rays");
 }
 
-/// A step or supersampling that would never finish, or a step that integrates rays from one
-/// sample, is refused, naming the option and what it allows, and leaves nothing behind.
 /// Views too large to hold are refused before the projector and the bake are chosen: for a
 /// field that choice walks every pixel's ray through its hull, which for 3600 orbit views of
 /// 16384 px ran for minutes before the same refusal.
 #[test]
 fn a_field_rendered_into_views_too_large_to_hold_is_refused_first() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (scene, _) = make_scene(dir.path());
-    let run = dir.path().join("run");
-    write_trained(&run, scene.aabb);
+    let (dir, _, run) = scene_and_trained_run();
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let out = dir.path().join("views");
     let o = fluidnerf(&[
@@ -402,6 +400,8 @@ fn a_field_rendered_into_views_too_large_to_hold_is_refused_first() {
     assert!(!out.exists(), "wrote {}", out.display());
 }
 
+/// A step or supersampling that would never finish, or a step that integrates rays from one
+/// sample, is refused, naming the option and what it allows, and leaves nothing behind.
 #[test]
 fn steps_and_supersampling_that_would_never_finish_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -426,10 +426,7 @@ fn steps_and_supersampling_that_would_never_finish_are_refused() {
 /// rendered without it, and render.json records no time.
 #[test]
 fn a_time_given_to_a_static_field_is_warned_of() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (scene, _) = make_scene(dir.path());
-    let run = dir.path().join("run");
-    write_trained(&run, scene.aabb);
+    let (dir, _, run) = scene_and_trained_run();
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |name: &str, extra: &[&str]| {
         let out = dir.path().join(name);
@@ -456,10 +453,7 @@ fn a_time_given_to_a_static_field_is_warned_of() {
 /// space alone it was first warned of as having no effect, then refused.
 #[test]
 fn a_time_that_is_no_number_is_refused_in_one_message() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (scene, _) = make_scene(dir.path());
-    let run = dir.path().join("run");
-    write_trained(&run, scene.aabb);
+    let (dir, _, run) = scene_and_trained_run();
     let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     for recon in [dir.path().join("recon.npy"), run] {
         for (time, shown) in [("nan", "NaN"), ("inf", "inf")] {
