@@ -520,6 +520,7 @@ impl RunDir {
         let root: PathBuf = root.into();
         let refuse = |why: String| PipelineError::RunDir { path: root.clone(), why };
         check_new_run_folder(&root, scene_root)?;
+        Self::recover_replaced(&root);
         let dir = RunDir::plain(root.clone());
         if dir.state() == DirState::Foreign {
             return Err(dir.foreign());
@@ -609,6 +610,24 @@ impl RunDir {
         let removed = std::fs::rename(self.path(REPLACED), &discard).and_then(|()| std::fs::remove_dir_all(&discard));
         if let Err(e) = removed {
             log::warn!("{}: cannot remove the replaced run's files: {e}", discard.display());
+        }
+    }
+
+    /// Puts back the earlier run that a `--force` run set aside in [`REPLACED`] and never
+    /// replaced, its process having died before it wrote its configuration, for a caller about
+    /// to read the folder or train windows into it: without this, `eval`, `export`, `render` and
+    /// window training would see no run there until the next `reconstruct`. Done under the
+    /// folder's lock, so never while a live process holds it (a run that is setting the earlier
+    /// one aside right now keeps it), and only into a folder that holds no run files
+    /// ([`RunDir::restore_replaced`]).
+    pub fn recover_replaced(root: &Path) {
+        if !root.join(REPLACED).is_dir() {
+            return;
+        }
+        let mut dir = RunDir::plain(root.to_path_buf());
+        if dir.take_lock().is_ok() {
+            log::info!("{}: putting back the run a --force run that never finished had set aside", root.display());
+            dir.restore_replaced();
         }
     }
 
@@ -1805,6 +1824,36 @@ mod tests {
         let config = std::fs::read_to_string(run.join("config.json")).unwrap();
         assert!(config.contains("windows") && !run.join("volume.npy").exists(), "{config}");
         assert!(run.join(REPLACED).join("volume.npy").is_file());
+    }
+
+    /// An earlier run left aside by a `--force` run whose process died is put back by whoever
+    /// opens the folder next to read it or to train windows into it, not only by the next run;
+    /// but never while a live `--force` run holds the folder, which is setting it aside.
+    #[test]
+    fn a_run_left_aside_by_a_dead_force_is_put_back_for_readers() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = tmp.path().join("run");
+        std::fs::create_dir_all(&run).unwrap();
+        write_json(&run.join("config.json"), &run_config()).unwrap();
+        std::fs::write(run.join("volume.npy"), "old").unwrap();
+        std::fs::write(run.join("report.json"), "{}").unwrap();
+        // Live: the run setting it aside keeps it aside.
+        let live = RunDir::create(&run, Overwrite::Force, None).unwrap();
+        RunDir::recover_replaced(&run);
+        assert!(run.join(REPLACED).join("volume.npy").is_file() && !run.join("volume.npy").exists());
+        // Dead (its lock left behind by a process that is gone reads as stale; here removed).
+        std::mem::forget(live);
+        std::fs::remove_file(run.join(".lock")).unwrap();
+        RunDir::recover_replaced(&run);
+        assert_eq!(std::fs::read_to_string(run.join("volume.npy")).unwrap(), "old");
+        assert!(!run.join(REPLACED).exists() && !run.join(".lock").exists());
+        assert_eq!(RunDir::open(&run).unwrap().state(), DirState::Finished);
+        // Window training checks the folder as it then is: a finished run, refused.
+        std::mem::forget(RunDir::create(&run, Overwrite::Force, None).unwrap());
+        std::fs::remove_file(run.join(".lock")).unwrap();
+        let e = RunDir::for_windows(&run, None).unwrap_err().to_string();
+        assert!(e.contains("already holds a finished run"), "{e}");
+        assert!(!run.join(REPLACED).exists());
     }
 
     /// A time-resolved run's starts (`start/tNN/`, one run per instant) are its own: `--force`

@@ -146,7 +146,9 @@ pub struct Args {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Replace a run already in OUT. The earlier run is kept aside until the new one has passed
-    /// its checks and written its configuration: a refused run leaves it as it was.
+    /// its checks and written its configuration: a refused run leaves it as it was, and one
+    /// killed before that leaves it in OUT/.replaced, put back by the next command that reads
+    /// OUT or runs in it.
     #[arg(long, conflicts_with = "resume")]
     pub force: bool,
     /// Continue the neural or time-resolved run in OUT from its checkpoints, with the settings

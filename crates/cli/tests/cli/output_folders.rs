@@ -185,6 +185,16 @@ fn a_forced_run_refused_by_its_checks_leaves_the_earlier_run() {
         assert_eq!(std::fs::read(d.join("run/volume.npy")).expect("volume"), volume, "{extra:?}");
     }
     ok(&fluidnerf(d, &["eval", "run", "-q"]));
+    // A --force run killed after it set the earlier run aside and before it wrote anything
+    // leaves it in `.replaced/`; the next command to read the folder puts it back.
+    let aside = d.join("run/.replaced");
+    std::fs::create_dir(&aside).expect("aside");
+    for name in files(&d.join("run")) {
+        std::fs::rename(d.join("run").join(&name), aside.join(&name)).expect("set aside");
+    }
+    ok(&fluidnerf(d, &["export", "run", "-o", "out", "--npy", "-q"]));
+    assert!(!aside.exists());
+    assert_eq!(std::fs::read(d.join("run/volume.npy")).expect("volume"), volume);
     ok(&reconstruct(&["--max-iterations", "1", "--force"]));
     let report = std::fs::read_to_string(d.join("run/report.json")).expect("report");
     assert!(report.contains("\"iterations\": 1"), "replaced: {report}");
