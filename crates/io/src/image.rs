@@ -26,7 +26,9 @@
 //!   file and the tag.
 //! - Colour images are reduced to luminance `Y = 0.2126 R + 0.7152 G + 0.0722 B` (Rec. 709
 //!   weights applied to the linearised values) with one warning per run; an alpha channel is
-//!   dropped.
+//!   dropped, with one warning per run when it is not fully opaque (alpha often marks pixels to
+//!   leave out, which is a mask's job): PNG and JPEG, and TIFF alpha (`ExtraSamples` 1 or 2,
+//!   or an RGBA or grey+alpha image without the tag) of unsigned or float samples.
 //!
 //! # Writing
 //! - [`write_png16`]: 16-bit grayscale PNG with the explicit mapping
@@ -495,6 +497,13 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         }
     };
     check_white_is_zero(path, &mut dec)?;
+    // ExtraSamples (338): 1 associated, 2 unassociated alpha; 0 (unspecified) is not alpha.
+    // Without the tag, the decoder's reading of a fourth (or second) sample as alpha stands.
+    let extra = dec.find_tag_unsigned_vec::<u16>(tiff::tags::Tag::ExtraSamples).map_err(bad)?.unwrap_or_default();
+    let alpha = match extra.as_slice() {
+        [] => matches!(colortype, ColorType::RGBA(_) | ColorType::GrayA(_)),
+        kinds => matches!(kinds, [1] | [2]),
+    };
     let lut = linearisation.table();
     // `read_image` reads the first plane alone of a planar (`PlanarConfiguration` 2) image: the
     // red of an RGB picture, taken silently for its grey. All planes are read here and then
@@ -511,6 +520,15 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
             ),
         ));
     }
+    // Full opacity as the samples read: the largest count (through the table for 8 bits), 1 for
+    // floats; signed samples have none.
+    let opaque = match &decoded {
+        DecodingResult::U8(_) => Some(lut[255]),
+        DecodingResult::U16(_) => Some(f32::from(u16::MAX)),
+        DecodingResult::U32(_) => Some(u32::MAX as f32),
+        DecodingResult::F16(_) | DecodingResult::F32(_) | DecodingResult::F64(_) => Some(1.0),
+        _ => None,
+    };
     let (data, kind): (Vec<f32>, SampleKind) = match decoded {
         DecodingResult::U8(v) => (v.into_iter().map(|c| lut[usize::from(c)]).collect(), SampleKind::Integer(8)),
         DecodingResult::U16(v) => (v.into_iter().map(f32::from).collect(), SampleKind::Integer(16)),
@@ -559,6 +577,9 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         ));
     }
     let channels = data.len() / pixels;
+    if let (true, Some(opaque)) = (alpha && channels == if grey { 2 } else { 4 }, opaque) {
+        warn_of_alpha(path, channels, &data, opaque);
+    }
     if grey && channels > 1 {
         log::debug!("{}: dropping {} extra sample(s) per pixel", path.display(), channels - 1);
         return Ok((Image::from_vec(w, h, data.chunks_exact(channels).map(|p| p[0]).collect()), kind));

@@ -334,6 +334,46 @@ fn an_8_bit_image_among_16_bit_ones_is_an_error() {
     assert_fails_with(&info(dir.path()), &["frame 2", "c2.png", "8-bit image among 16-bit ones", "257"]);
 }
 
+/// Writes a 16-bit grey TIFF of 32 × 24 px with one extra sample per pixel of the kind `extra`:
+/// all counts 500, the extra sample at its largest value but for the first pixel's, `first`.
+fn grey_with_extra_sample(path: &Path, extra: tiff::tags::ExtraSamples, first: u16) {
+    use tiff::encoder::{colortype::Gray16, TiffEncoder};
+    let file = std::fs::File::create(path).expect("creates");
+    let mut enc = TiffEncoder::new(std::io::BufWriter::new(file)).expect("encoder");
+    let mut image = enc.new_image::<Gray16>(32, 24).expect("image");
+    image.extra_samples(&[extra]).expect("extra sample");
+    let mut data: Vec<u16> = (0..32 * 24).flat_map(|_| [500, u16::MAX]).collect();
+    data[1] = first;
+    image.write_data(&data).expect("writes");
+}
+
+/// A TIFF's alpha (ExtraSamples 1 or 2) that is not fully opaque is warned of, as a PNG's is: it
+/// often marks pixels to leave out, which a mask does, while fluidnerf reads every pixel. An
+/// extra sample of no stated meaning is not alpha, and opaque alpha says nothing: both are
+/// dropped without a word.
+#[test]
+fn a_tiffs_translucent_alpha_is_warned_of() {
+    use tiff::tags::ExtraSamples;
+    for (extra, first, warned) in [
+        (ExtraSamples::UnassociatedAlpha, 0, true),
+        (ExtraSamples::AssociatedAlpha, 0, true),
+        (ExtraSamples::Unspecified, 0, false),
+        (ExtraSamples::UnassociatedAlpha, u16::MAX, false),
+    ] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut scene = good_scene(dir.path());
+        scene.frames[1].file_path = "images/c1.tif".into();
+        grey_with_extra_sample(&dir.path().join("images/c1.tif"), extra, first);
+        fluidnerf_io::scene::save_scene(&scene, dir.path()).expect("writes scene");
+        let o = info_with_log(dir.path(), "warn");
+        let (stdout, stderr) = text(&o);
+        assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+        let said = stderr.contains("c1.tif: its alpha channel is not fully opaque (1 of 768 pixels)");
+        assert_eq!(said, warned, "{extra:?}, first alpha {first}: {stderr}");
+        assert_eq!(stderr.contains("mask_path"), warned, "{stderr}");
+    }
+}
+
 #[test]
 fn negative_pixel_is_an_error() {
     let dir = tempfile::tempdir().expect("tempdir");
