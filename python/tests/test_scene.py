@@ -956,3 +956,9 @@ def test_read_video_names_a_davis_image_for_what_it_is():
         fluidnerf.read_video(DAVIS / "float.im7")
     assert "float.im7: is a LaVision DaVis image" in str(e.value) and "read_davis" in str(e.value)
     assert "ffmpeg" not in str(e.value)
+
+
+def test_a_scenes_repr_says_static_or_how_many_times(static_scene, tr_scene):
+    """A static scene read as having "0 times"."""
+    assert repr(static_scene).startswith("Scene(8 frames, static, box ")
+    assert repr(tr_scene).startswith("Scene(25 frames, 5 times, box ")

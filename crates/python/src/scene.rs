@@ -534,10 +534,14 @@ impl PyScene {
     }
 
     fn __repr__(&self) -> String {
+        let times = match self.inner.times().len() {
+            0 => "static".to_string(),
+            1 => "1 time".to_string(),
+            n => format!("{n} times"),
+        };
         format!(
-            "Scene({} frames, {} times, box {:?}..{:?} {}, {})",
+            "Scene({} frames, {times}, box {:?}..{:?} {}, {})",
             self.inner.frames.len(),
-            self.inner.times().len(),
             self.inner.aabb.min.to_array(),
             self.inner.aabb.max.to_array(),
             self.inner.units,
