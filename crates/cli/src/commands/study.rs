@@ -70,7 +70,9 @@ impl LayoutChoice {
 /// stopping policy. Writes into OUT: `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with
 /// --repeats; each with its config.json), `study.json` and `study.csv` (one row per run),
 /// plots of volume NRMSE and SSIM against the camera count and against noise, and
-/// `report.html`.
+/// `report.html`. Where a cell holds fields (fluidnerf, fast, hybrid) and voxel methods (the
+/// classical ones and the voxel baseline), each field's NRMSE is also given as a ratio to the
+/// best voxel method's of its cell (with --repeats, of their means).
 ///
 /// Rerunning the same command continues an interrupted study; --force starts it over.
 #[derive(clap::Args, Debug)]
@@ -235,6 +237,9 @@ struct StudyRecord<'a> {
     /// With repeats: each cell's and method's mean over its runs so far.
     #[serde(skip_serializing_if = "<[Mean]>::is_empty")]
     means: &'a [Mean],
+    /// Each field's NRMSE against the best voxel method of its cell ([`against_best`]).
+    #[serde(skip_serializing_if = "<[AgainstBest]>::is_empty")]
+    against_best_voxel: &'a [AgainstBest],
 }
 
 /// A cell's and method's runs summed up ([`means`]).
@@ -282,6 +287,75 @@ fn means(rows: &[Row]) -> Vec<Mean> {
             }
         })
         .collect()
+}
+
+/// A field's volume NRMSE in a cell against the best voxel method's there ([`against_best`]):
+/// what the project's accuracy targets are stated in.
+#[derive(Debug, Serialize)]
+struct AgainstBest {
+    layout: String,
+    cameras: usize,
+    noise: f64,
+    method: String,
+    /// The field's NRMSE (its mean over its runs, with repeats).
+    nrmse: f64,
+    best_voxel_method: String,
+    best_voxel_nrmse: f64,
+    /// `nrmse / best_voxel_nrmse`: below 1 the field is the more accurate.
+    ratio: f64,
+}
+
+/// Whether `method` reconstructs a field (the networks, the grid field and the hybrid) rather
+/// than a voxel grid (the classical methods and the voxel baseline).
+fn is_field(method: &str) -> bool {
+    method.parse::<Method>().is_ok_and(|m| matches!(m, Method::Fluidnerf | Method::Fast | Method::Hybrid))
+}
+
+/// For every field in every cell that also holds a voxel method: its NRMSE against the lowest
+/// of the voxel methods' (each a mean over its runs, as `cells` holds them; the first of equal
+/// ones). Cells and fields without a score are left out.
+fn against_best(cells: &[Mean]) -> Vec<AgainstBest> {
+    let same_cell = |a: &Mean, b: &Mean| a.layout == b.layout && a.cameras == b.cameras && a.noise == b.noise;
+    let mut out = Vec::new();
+    for field in cells.iter().filter(|m| is_field(&m.method)) {
+        let Some(nrmse) = field.nrmse else { continue };
+        let best = cells
+            .iter()
+            .filter(|m| same_cell(m, field) && !is_field(&m.method))
+            .filter_map(|m| m.nrmse.map(|v| (m, v)))
+            .fold(None, |best: Option<(&Mean, f64)>, (m, v)| match best {
+                Some((_, b)) if b <= v => best,
+                _ => Some((m, v)),
+            });
+        if let Some((voxel, best_nrmse)) = best {
+            out.push(AgainstBest {
+                layout: field.layout.clone(),
+                cameras: field.cameras,
+                noise: field.noise,
+                method: field.method.clone(),
+                nrmse,
+                best_voxel_method: voxel.method.clone(),
+                best_voxel_nrmse: best_nrmse,
+                ratio: nrmse / best_nrmse,
+            });
+        }
+    }
+    out
+}
+
+/// [`against_best`] as a terminal table.
+fn against_best_table(rows: &[AgainstBest]) -> String {
+    let mut s = format!(
+        "{:<8} {:>7} {:>6} {:<12} {:>7} {:<17} {:>7} {:>6}\n",
+        "layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "NRMSE", "ratio"
+    );
+    for a in rows {
+        s += &format!(
+            "{:<8} {:>7} {:>6} {:<12} {:>7.4} {:<17} {:>7.4} {:>6.2}\n",
+            a.layout, a.cameras, a.noise, a.method, a.nrmse, a.best_voxel_method, a.best_voxel_nrmse, a.ratio
+        );
+    }
+    s
 }
 
 fn grid(args: &Args) -> anyhow::Result<Grid> {
@@ -790,8 +864,13 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     #[allow(clippy::print_stdout)]
     {
         println!("\n{}", text_table(&rows));
+        let cells = means(&rows);
         if g.repeats > 1 {
-            println!("{}", means_table(&means(&rows)));
+            println!("{}", means_table(&cells));
+        }
+        let against = against_best(&cells);
+        if !against.is_empty() {
+            println!("each field against the best voxel method of its cell:\n{}", against_best_table(&against));
         }
         println!(
             "every method stopped by {}; {:.1} s; open {}",
@@ -979,6 +1058,7 @@ fn write_outputs(
 ) -> anyhow::Result<()> {
     let finished = rows.len() == total;
     let cells = means(rows);
+    let against = against_best(&cells);
     fluidnerf_pipeline::rundir::write_json(
         &out.join("study.json"),
         &StudyRecord {
@@ -989,6 +1069,7 @@ fn write_outputs(
             stopping_rule: g.stopping.describe_rule(),
             rows,
             means: if g.repeats > 1 { &cells } else { &[] },
+            against_best_voxel: &against,
         },
     )?;
     fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
@@ -1070,6 +1151,29 @@ fn write_outputs(
         }
         tables.push(mean_table);
     }
+    if !against.is_empty() {
+        let mut t = Table::new(
+            format!(
+                "Each field against the best voxel method of its cell (volume NRMSE{}; below 1 the field is the more \
+                 accurate)",
+                if g.repeats > 1 { ", means over the runs" } else { "" }
+            ),
+            &["layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "its NRMSE", "ratio"],
+        );
+        for a in &against {
+            t.push_row(vec![
+                a.layout.clone(),
+                a.cameras.to_string(),
+                a.noise.to_string(),
+                a.method.clone(),
+                f(Some(a.nrmse)),
+                a.best_voxel_method.clone(),
+                f(Some(a.best_voxel_nrmse)),
+                format!("{:.2}", a.ratio),
+            ]);
+        }
+        tables.push(t);
+    }
     // At the largest camera count; with repeats, the first seed's runs.
     let histories: Vec<_> = summaries
         .iter()
@@ -1132,6 +1236,52 @@ mod tests {
     struct Cli {
         #[command(flatten)]
         args: Args,
+    }
+
+    fn mean(cameras: usize, method: &str, nrmse: Option<f64>) -> Mean {
+        Mean {
+            layout: "ring360".into(),
+            cameras,
+            noise: 0.05,
+            method: method.into(),
+            runs: 1,
+            nrmse,
+            nrmse_min: nrmse,
+            nrmse_max: nrmse,
+            ssim_global: None,
+            train_time_s: 1.0,
+        }
+    }
+
+    /// Each field is set against the lowest NRMSE of the voxel methods of its own cell (the
+    /// voxel baseline among them), never against another field's or another cell's; a cell
+    /// without a voxel method, or a run without a score, gives no ratio.
+    #[test]
+    fn fields_are_set_against_the_best_voxel_method_of_their_cell() {
+        let cells = [
+            mean(4, "asart", Some(0.40)),
+            mean(4, "voxel", Some(0.30)),
+            mean(4, "tv", Some(0.32)),
+            mean(4, "fast", Some(0.36)),
+            mean(4, "hybrid", Some(0.24)),
+            mean(8, "hybrid", Some(0.10)),
+            mean(8, "mlem", None),
+            mean(15, "fast", None),
+            mean(15, "sart", Some(0.2)),
+            mean(15, "fluidnerf", Some(0.25)),
+        ];
+        let got = against_best(&cells);
+        let seen: Vec<(usize, &str, &str, f64)> =
+            got.iter().map(|a| (a.cameras, a.method.as_str(), a.best_voxel_method.as_str(), a.ratio)).collect();
+        assert_eq!(seen.len(), 3, "{seen:?}");
+        assert_eq!((seen[0].0, seen[0].1, seen[0].2), (4, "fast", "voxel"));
+        assert!((seen[0].3 - 1.2).abs() < 1e-12);
+        assert_eq!((seen[1].0, seen[1].1, seen[1].2), (4, "hybrid", "voxel"));
+        assert!((seen[1].3 - 0.8).abs() < 1e-12);
+        assert_eq!((seen[2].0, seen[2].1, seen[2].2), (15, "fluidnerf", "sart"));
+        assert!((seen[2].3 - 1.25).abs() < 1e-12);
+        let table = against_best_table(&got);
+        assert!(table.contains("hybrid        0.2400 voxel              0.3000   0.80"), "{table}");
     }
 
     fn cap(line: &[&str]) -> Option<usize> {

@@ -47,6 +47,23 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     assert!(stdout.contains("* ended by the iteration cap (--max-iterations), not by the stopping rule"), "{stdout}");
     let html = std::fs::read_to_string(st.join("report.html")).expect("report");
     assert!(html.contains(">ended by<") && html.matches(">iteration cap<").count() == 4, "{html}");
+    // The field against the best voxel method of each cell, the project's measure of accuracy:
+    // in the record, the report and the terminal.
+    let against = record["against_best_voxel"].as_array().expect("against_best_voxel");
+    assert_eq!(against.len(), 2, "{record}");
+    for a in against {
+        let cell = |m: &str| {
+            rows.iter()
+                .find(|r| r["cameras"] == a["cameras"] && r["method"] == m)
+                .and_then(|r| r["nrmse"].as_f64())
+                .expect("scored")
+        };
+        assert_eq!((a["method"].as_str(), a["best_voxel_method"].as_str()), (Some("fast"), Some("sart")));
+        let ratio = a["ratio"].as_f64().expect("ratio");
+        assert!((ratio - cell("fast") / cell("sart")).abs() < 1e-12, "{a}");
+    }
+    assert!(html.contains("Each field against the best voxel method of its cell"), "{html}");
+    assert!(stdout.contains("each field against the best voxel method of its cell:"), "{stdout}");
 
     // Rerunning the same command reads the finished cells back instead of running them.
     let stamp =
