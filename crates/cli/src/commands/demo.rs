@@ -266,7 +266,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let text = serde_json::to_string_pretty(&comparison)?;
     fluidnerf_io::atomic_write(&out.join("comparison.json"), |w| w.write_all(text.as_bytes()))?;
 
-    let report = html::build_report(
+    let against = against_best_voxel(&runs, &methods.map(|(_, m)| m));
+    let mut report = html::build_report(
         &format!(
             "fluidnerf demo: FluidNeRF, the hybrid, ASART and SART-TV on the synthetic scene `{}`, all stopped by {}",
             args.preset,
@@ -276,6 +277,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         truth.as_ref(),
         &refs,
     )?;
+    if let Some(line) = &against {
+        report.summary.push(("fields".into(), line.clone()));
+    }
     let slices = html::slice_figure(truth.as_ref(), &refs, &scene.units)?;
     fluidnerf_io::atomic_write(&out.join("slices.png"), |w| w.write_all(&slices))?;
     let histories: Vec<_> = runs.iter().map(|r| r.history.clone()).collect();
@@ -283,6 +287,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
 
     print_table(&runs, &wall, &stopping);
+    if let Some(line) = against {
+        #[allow(clippy::print_stdout)]
+        {
+            println!("{line}");
+        }
+    }
     #[allow(clippy::print_stdout)]
     {
         println!(
@@ -292,6 +302,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The fields' volume NRMSE as ratios to the best voxel method's (the project's measure of
+/// accuracy; `study` gives it per cell), in one line: None without a truth.
+fn against_best_voxel(runs: &[RunSummary], methods: &[Method]) -> Option<String> {
+    let nrmse = |r: &RunSummary| r.metrics().map(|m| m.global.nrmse);
+    let is_field = |m: &Method| matches!(m, Method::Fluidnerf | Method::Fast | Method::Hybrid);
+    let (best, best_nrmse) = runs
+        .iter()
+        .zip(methods)
+        .filter(|(_, m)| !is_field(m))
+        .filter_map(|(r, _)| nrmse(r).map(|v| (r, v)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let fields: Vec<String> = runs
+        .iter()
+        .zip(methods)
+        .filter(|(_, m)| is_field(m))
+        .filter_map(|(r, _)| nrmse(r).map(|v| format!("{} {:.2}×", r.label, v / best_nrmse)))
+        .collect();
+    (!fields.is_empty()).then(|| {
+        format!(
+            "against the best voxel method, {} (NRMSE {best_nrmse:.4}): {} (below 1 the field is the more accurate)",
+            best.label,
+            fields.join(", ")
+        )
+    })
 }
 
 #[allow(clippy::print_stdout)]

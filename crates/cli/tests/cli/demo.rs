@@ -22,6 +22,10 @@ fn demo_compares_the_fields_with_both_classical_methods() {
     let rule = stdout.lines().find(|l| l.starts_with("every method stopped by held-out early stopping"));
     assert!(rule.is_some_and(|l| l.ends_with(", at most 4 iterations, at most 60 s")), "{stdout}");
     assert!(stdout.contains("* ended by the iteration cap (--max-iterations)"), "{stdout}");
+    // The fields against the better of the two voxel methods, in one line.
+    let against = stdout.lines().find(|l| l.starts_with("against the best voxel method, ")).expect("ratios");
+    assert!(against.contains("FluidNeRF (fast field) ") && against.contains("voxel start → grid field "), "{against}");
+    assert!(against.contains(", ASART (NRMSE ") || against.contains(", SART-TV (NRMSE "), "{against}");
     let comparison = json(&d.join("out/comparison.json"));
     let rows = comparison.as_array().expect("a list of runs");
     assert_eq!(rows.len(), 4);
@@ -42,6 +46,12 @@ fn demo_compares_the_fields_with_both_classical_methods() {
         let report = report(&d.join("out").join(dir));
         assert_eq!(report["method"], method, "{dir}");
     }
+    let nrmse = |i: usize| rows[i]["metrics"]["global"]["nrmse"].as_f64().expect("nrmse");
+    let best = nrmse(2).min(nrmse(3));
+    for (i, label) in labels[..2].iter().enumerate() {
+        let said = format!("{label} {:.2}×", nrmse(i) / best);
+        assert!(against.contains(&said), "{said} in {against}");
+    }
     for file in ["slices.png", "convergence.png", "report.html"] {
         assert!(d.join("out").join(file).is_file(), "{file}");
     }
@@ -55,6 +65,7 @@ fn demo_compares_the_fields_with_both_classical_methods() {
     // The one policy is stated once above the table, whose rows say what ended each run.
     assert!(html.contains("every method stopped by held-out early stopping (patience 10), at most 4 iterations"));
     assert!(html.contains(">ended by<") && html.matches(">iteration cap<").count() == 4, "{html}");
+    assert!(html.contains("against the best voxel method, "), "{html}");
     refused(&fluidnerf(d, &args), "already holds a demo; pass --force to replace it");
 }
 
