@@ -1046,6 +1046,16 @@ fn csv(rows: &[Row]) -> String {
     s
 }
 
+/// A report table's row: the cell (layout, cameras, noise) and the method, then `rest`.
+fn with_cell<const N: usize>(
+    (layout, cameras, noise, method): (&str, usize, f64, String),
+    rest: [String; N],
+) -> Vec<String> {
+    let mut row = vec![layout.to_string(), cameras.to_string(), noise.to_string(), method];
+    row.extend(rest);
+    row
+}
+
 /// Writes the record, table, plots and report of the runs made so far: `rows` are all `total`
 /// runs of the grid once the study is finished, fewer when Ctrl-C stopped it, which the
 /// record and the report then say.
@@ -1113,18 +1123,17 @@ fn write_outputs(
     );
     let f = |v: Option<f64>| v.map_or("–".into(), fluidnerf_viz::report::format_value);
     for r in rows {
-        table.push_row(vec![
-            r.layout.clone(),
-            r.cameras.to_string(),
-            r.noise.to_string(),
-            method_label(r),
-            f(r.nrmse),
-            f(r.ssim_global),
-            ended_by(&r.stop_reason).to_string(),
-            format!("{} / {}", r.kept_iteration, r.iterations),
-            format!("{:.1}", r.train_time_s),
-            fluidnerf_pipeline::bytes(r.result_bytes),
-        ]);
+        table.push_row(with_cell(
+            (&r.layout, r.cameras, r.noise, method_label(r)),
+            [
+                f(r.nrmse),
+                f(r.ssim_global),
+                ended_by(&r.stop_reason).to_string(),
+                format!("{} / {}", r.kept_iteration, r.iterations),
+                format!("{:.1}", r.train_time_s),
+                fluidnerf_pipeline::bytes(r.result_bytes),
+            ],
+        ));
     }
     let mut tables = vec![table];
     if g.repeats > 1 {
@@ -1137,17 +1146,16 @@ fn write_outputs(
             &["layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM (global)", "time [s]"],
         );
         for m in &cells {
-            mean_table.push_row(vec![
-                m.layout.clone(),
-                m.cameras.to_string(),
-                m.noise.to_string(),
-                m.method.clone(),
-                m.runs.to_string(),
-                f(m.nrmse),
-                format!("{} – {}", f(m.nrmse_min), f(m.nrmse_max)),
-                f(m.ssim_global),
-                format!("{:.1}", m.train_time_s),
-            ]);
+            mean_table.push_row(with_cell(
+                (&m.layout, m.cameras, m.noise, m.method.clone()),
+                [
+                    m.runs.to_string(),
+                    f(m.nrmse),
+                    format!("{} – {}", f(m.nrmse_min), f(m.nrmse_max)),
+                    f(m.ssim_global),
+                    format!("{:.1}", m.train_time_s),
+                ],
+            ));
         }
         tables.push(mean_table);
     }
@@ -1161,16 +1169,10 @@ fn write_outputs(
             &["layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "its NRMSE", "ratio"],
         );
         for a in &against {
-            t.push_row(vec![
-                a.layout.clone(),
-                a.cameras.to_string(),
-                a.noise.to_string(),
-                a.method.clone(),
-                f(Some(a.nrmse)),
-                a.best_voxel_method.clone(),
-                f(Some(a.best_voxel_nrmse)),
-                format!("{:.2}", a.ratio),
-            ]);
+            t.push_row(with_cell(
+                (&a.layout, a.cameras, a.noise, a.method.clone()),
+                [f(Some(a.nrmse)), a.best_voxel_method.clone(), f(Some(a.best_voxel_nrmse)), format!("{:.2}", a.ratio)],
+            ));
         }
         tables.push(t);
     }
