@@ -577,7 +577,8 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         ));
     }
     let channels = data.len() / pixels;
-    if let (true, Some(opaque)) = (alpha && channels == if grey { 2 } else { 4 }, opaque) {
+    let with_alpha = if grey { 2 } else { 4 };
+    if let Some(opaque) = opaque.filter(|_| alpha && channels == with_alpha) {
         warn_of_alpha(path, channels, &data, opaque);
     }
     if grey && channels > 1 {

@@ -183,6 +183,14 @@ impl Method {
         self.family() != Family::Classical || matches!(self, Method::Art | Method::Mart)
     }
 
+    /// Whether the method's static result is a field (the networks, the grid field, the
+    /// hybrid) rather than a voxel grid (the classical methods and the voxel baseline, which
+    /// the neural engine trains): the two sides of the project's comparisons
+    /// (docs/claims.md).
+    pub fn is_field(self) -> bool {
+        matches!(self, Method::Fluidnerf | Method::Fast | Method::Hybrid)
+    }
+
     pub fn family(self) -> Family {
         match self {
             Method::Fluidnerf | Method::Fast | Method::Voxel | Method::Hybrid => Family::Neural,

@@ -308,17 +308,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// accuracy; `study` gives it per cell), in one line: None without a truth.
 fn against_best_voxel(runs: &[RunSummary], methods: &[Method]) -> Option<String> {
     let nrmse = |r: &RunSummary| r.metrics().map(|m| m.global.nrmse);
-    let is_field = |m: &Method| matches!(m, Method::Fluidnerf | Method::Fast | Method::Hybrid);
     let (best, best_nrmse) = runs
         .iter()
         .zip(methods)
-        .filter(|(_, m)| !is_field(m))
+        .filter(|(_, m)| !m.is_field())
         .filter_map(|(r, _)| nrmse(r).map(|v| (r, v)))
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     let fields: Vec<String> = runs
         .iter()
         .zip(methods)
-        .filter(|(_, m)| is_field(m))
+        .filter(|(_, m)| m.is_field())
         .filter_map(|(r, _)| nrmse(r).map(|v| format!("{} {:.2}×", r.label, v / best_nrmse)))
         .collect();
     (!fields.is_empty()).then(|| {

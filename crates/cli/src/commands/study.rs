@@ -305,10 +305,9 @@ struct AgainstBest {
     ratio: f64,
 }
 
-/// Whether `method` reconstructs a field (the networks, the grid field and the hybrid) rather
-/// than a voxel grid (the classical methods and the voxel baseline).
+/// Whether the method named `method` reconstructs a field ([`Method::is_field`]).
 fn is_field(method: &str) -> bool {
-    method.parse::<Method>().is_ok_and(|m| matches!(m, Method::Fluidnerf | Method::Fast | Method::Hybrid))
+    method.parse::<Method>().is_ok_and(Method::is_field)
 }
 
 /// For every field in every cell that also holds a voxel method: its NRMSE against the lowest
