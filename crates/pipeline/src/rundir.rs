@@ -352,6 +352,10 @@ const OWN_RUNS: [&str; 1] = ["start"];
 /// Where `--force` keeps the run it replaces until the new run writes its configuration.
 const REPLACED: &str = ".replaced";
 
+/// Where the Python API keeps a run's own scene ([`OWN_SCENE`]) while a scene from arrays
+/// replaces it, until the run writes its configuration.
+const SCENE_SET_ASIDE: &str = ".scene-replaced";
+
 /// [`REPLACED`] once the new run has written its configuration, while it is removed.
 const REPLACED_DISCARDED: &str = ".replaced-discarded";
 
@@ -622,6 +626,18 @@ impl RunDir {
     /// ([`RunDir::restore_replaced`]).
     pub fn recover_replaced(root: &Path) {
         if !root.join(REPLACED).is_dir() {
+            return;
+        }
+        if root.join(SCENE_SET_ASIDE).exists() {
+            // The Python API had also set the run's own scene aside ([`OWN_SCENE`]) for a scene
+            // from arrays, and `scene/` may hold the killed call's scene instead: the earlier
+            // run put back would be read with other images. Left as it is, and said.
+            log::warn!(
+                "{}: a run set aside by a --force run that never finished is in {REPLACED}, and its scene may be in \
+                 {SCENE_SET_ASIDE}; neither is put back automatically, since {OWN_SCENE}/ may hold another call's \
+                 scene: move them back by hand, or replace the run",
+                root.display()
+            );
             return;
         }
         let mut dir = RunDir::plain(root.to_path_buf());
@@ -1854,6 +1870,13 @@ mod tests {
         let e = RunDir::for_windows(&run, None).unwrap_err().to_string();
         assert!(e.contains("already holds a finished run"), "{e}");
         assert!(!run.join(REPLACED).exists());
+        // With the Python API's scene aside too, `scene/` may be the killed call's: nothing is
+        // put back, so the earlier run is never read with another call's images.
+        std::mem::forget(RunDir::create(&run, Overwrite::Force, None).unwrap());
+        std::fs::remove_file(run.join(".lock")).unwrap();
+        std::fs::create_dir(run.join(SCENE_SET_ASIDE)).unwrap();
+        RunDir::recover_replaced(&run);
+        assert!(run.join(REPLACED).join("volume.npy").is_file() && !run.join("volume.npy").exists());
     }
 
     /// A time-resolved run's starts (`start/tNN/`, one run per instant) are its own: `--force`
