@@ -22,6 +22,11 @@ fn ok(out: &Output) {
 }
 
 /// The `render.json` a render wrote into `out`.
+/// A path as a command-line argument.
+fn d(p: &Path) -> String {
+    p.to_str().expect("utf-8").to_string()
+}
+
 fn render_json(out: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("render.json")).expect("JSON")
 }
@@ -56,7 +61,6 @@ fn scene_camera_renders_match_the_reference_renderer() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (scene, vol) = make_scene(dir.path());
     let out = dir.path().join("views");
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let o = fluidnerf(&[
         "render",
         &d(&dir.path().join("recon.npy")),
@@ -110,7 +114,6 @@ fn orbit_writes_views_and_a_turntable() {
     let dir = tempfile::tempdir().expect("tempdir");
     make_scene(dir.path());
     let out = dir.path().join("orbit");
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let (recon, scene) = (d(&dir.path().join("recon.npy")), d(dir.path()));
     // `render recon.npy --scene DIR --out OUT` and `extra`.
     let render = |out: &Path, extra: &[&str]| {
@@ -201,7 +204,6 @@ fn scene_and_trained_run() -> (tempfile::TempDir, Scene, PathBuf) {
 #[test]
 fn trained_fields_render_exactly_or_baked() {
     let (dir, scene, run) = scene_and_trained_run();
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |bake: &str, ss: usize| {
         let out = dir.path().join(format!("views-{bake}-{ss}"));
         let o = fluidnerf(
@@ -264,7 +266,6 @@ fn footprint_renders_match_the_projector_and_the_ray_renderer() {
     use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
     let dir = tempfile::tempdir().expect("tempdir");
     let (scene, vol) = make_scene(dir.path());
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |recon: &Path, name: &str, extra: &[&str]| -> Output {
         let out = dir.path().join(name);
         let args = ["render", &d(recon), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff"];
@@ -326,7 +327,6 @@ fn footprint_renders_match_the_projector_and_the_ray_renderer() {
 #[test]
 fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
     let (dir, _, run) = scene_and_trained_run();
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |recon: &Path, name: &str, extra: &[&str]| -> serde_json::Value {
         let out = dir.path().join(name);
         let args = ["render", &d(recon), "--scene", &d(dir.path()), "--out", &d(&out), "--format", "tiff", "-q"];
@@ -379,7 +379,6 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
 #[test]
 fn a_field_rendered_into_views_too_large_to_hold_is_refused_first() {
     let (dir, _, run) = scene_and_trained_run();
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let out = dir.path().join("views");
     let o = fluidnerf(&[
         "render",
@@ -406,7 +405,6 @@ fn a_field_rendered_into_views_too_large_to_hold_is_refused_first() {
 fn steps_and_supersampling_that_would_never_finish_are_refused() {
     let dir = tempfile::tempdir().expect("tempdir");
     make_scene(dir.path());
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let (recon, scene, out) = (d(&dir.path().join("recon.npy")), d(dir.path()), dir.path().join("views"));
     for (extra, says) in [
         (&["--step", "1e-300"][..], "give a step of at least"),
@@ -427,7 +425,6 @@ fn steps_and_supersampling_that_would_never_finish_are_refused() {
 #[test]
 fn a_time_given_to_a_static_field_is_warned_of() {
     let (dir, _, run) = scene_and_trained_run();
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let render = |name: &str, extra: &[&str]| {
         let out = dir.path().join(name);
         let o = fluidnerf(
@@ -454,7 +451,6 @@ fn a_time_given_to_a_static_field_is_warned_of() {
 #[test]
 fn a_time_that_is_no_number_is_refused_in_one_message() {
     let (dir, _, run) = scene_and_trained_run();
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     for recon in [dir.path().join("recon.npy"), run] {
         for (time, shown) in [("nan", "NaN"), ("inf", "inf")] {
             let out = dir.path().join("views");
@@ -600,7 +596,6 @@ fn a_volume_named_as_a_view_is_never_rendered_over() {
     let stack = views.join("view_000.tif");
     fluidnerf_io::volume::write_tiff_stack(&stack, &vol, "mm").expect("writes");
     let before = std::fs::read(&stack).expect("reads");
-    let d = |p: &Path| p.to_str().expect("utf-8").to_string();
     let o =
         fluidnerf(&["render", &d(&stack), "--scene", &d(dir.path()), "-o", &d(&views), "--format", "tiff", "--force"]);
     let e = String::from_utf8_lossy(&o.stderr);
