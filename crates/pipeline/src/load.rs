@@ -195,7 +195,6 @@ impl LoadedRun {
     /// holds no box of its own.
     pub fn open(dir: &Path, box_hint: Option<Aabb>) -> Result<Self, PipelineError> {
         let rd = RunDir::open(dir)?;
-        RunDir::recover_replaced(dir);
         let refuse = |why: &str| PipelineError::RunDir { path: dir.to_path_buf(), why: why.into() };
         // A run under way (a resume of a finished run among them) writes its report last.
         if !rd.report().is_file() {

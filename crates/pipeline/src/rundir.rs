@@ -405,12 +405,14 @@ impl RunDir {
         RunDir { root, lock: None, resume: false, created: false, kept_runs: Vec::new(), staged: Default::default() }
     }
 
-    /// A run folder to read (no lock, nothing created).
+    /// A run folder to read (no lock, nothing created). A run that a killed `--force` had set
+    /// aside is put back first ([`RunDir::recover_replaced`]), so that every reader sees it.
     pub fn open(root: impl Into<PathBuf>) -> Result<Self, PipelineError> {
         let root = root.into();
         if !root.is_dir() {
             return Err(PipelineError::RunDir { path: root, why: "is not a folder".into() });
         }
+        Self::recover_replaced(&root);
         Ok(RunDir::plain(root))
     }
 
