@@ -925,38 +925,34 @@ def _progress_callback(callback: Callback | None, progress: bool | None) -> tupl
     return on_event, bar_holder
 
 
-def _file_state(path: Path) -> tuple[int, int, int] | None:
-    """What tells a file apart from the one that replaces it (written atomically, a new file
-    renamed over it): its inode, modification time and size; None when it does not exist."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    return (st.st_ino, st.st_mtime_ns, st.st_size)
-
-
 class _SavedScene:
     """A scene from arrays that a call saves into ``out/scene`` of the run folder ``out``,
     with what it takes to take that back (see :meth:`take_back`). The folder's own scene until
     then (of a run being replaced or resumed) is moved aside, to ``out/.scene-replaced``, until
-    the run writes its configuration."""
+    the run writes its configuration. All of it happens under the folder's scene lock
+    (``out/.scene.lock``), and a record of the folder's ``config.json`` is kept beside the aside:
+    a call killed outright leaves it to the next call or reader of the folder, which puts the
+    scene back when the run never wrote its configuration and discards it when it did."""
 
     def __init__(self, scene: Scene, out: Path, replace: bool):
         self.scene, self.out, self.own = scene, out, out / "scene"
         self.pristine = scene._copy()
         self.made_out = not out.exists()
-        self.config = _file_state(out / "config.json")
-        self.aside: Path | None = None
         # Only a run being replaced or resumed gives up its scene (``replace``); otherwise saving
         # over a scene folder already there is refused.
-        if replace and self.own.exists():
-            self.aside = out / ".scene-replaced"
-            shutil.rmtree(self.aside, ignore_errors=True)
-            os.replace(self.own, self.aside)
+        self.aside: _ext.SceneAside | None = _ext.SceneAside(os.fspath(out), replace)
+
+    def save(self, force: bool) -> None:
+        """Saves the scene into ``out/scene``; a save that fails takes everything back."""
+        try:
+            self.scene.save(self.own, force=force)
+        except BaseException:
+            self.take_back()
+            raise
 
     def written(self) -> bool:
         """Whether the run has written its configuration (``config.json``, its first file)."""
-        return _file_state(self.out / "config.json") != self.config
+        return self.aside is not None and self.aside.written()
 
     def take_back(self) -> None:
         """When the run was refused before it wrote anything (its ``config.json``): removes the
@@ -965,14 +961,14 @@ class _SavedScene:
         again as before and a refused ``--force`` or ``--resume`` leaves the run as it was; the
         command line leaves nothing either. A run that failed later keeps the scene its
         ``config.json`` names, so that it can be resumed."""
-        if self.written():
+        if self.aside is None:
+            return
+        if self.aside.written():
             self.finish()
             return
-        shutil.rmtree(self.own, ignore_errors=True)
-        if self.aside is not None:
-            os.replace(self.aside, self.own)
-            self.aside = None
-        elif self.made_out:
+        self.aside.take_back()
+        self.aside = None
+        if self.made_out:
             try:
                 self.out.rmdir()
             except OSError:
@@ -982,7 +978,14 @@ class _SavedScene:
     def finish(self) -> None:
         """The run has started on the saved scene: the scene it replaced goes."""
         if self.aside is not None:
-            shutil.rmtree(self.aside, ignore_errors=True)
+            self.aside.finish()
+            self.aside = None
+
+    def release(self) -> None:
+        """Leaves the scene set aside (if any) for the next call or reader of the folder to
+        settle, by whether the run has written its configuration by then."""
+        if self.aside is not None:
+            self.aside.release()
             self.aside = None
 
 
@@ -1041,7 +1044,7 @@ def reconstruct(
         # the run's own.
         _ext.check_run_folder(os.fspath(out_path), overwrite)
         saved = _SavedScene(scene, out_path, replace=overwrite in ("force", "resume"))
-        scene.save(saved.own, force=overwrite in ("force", "resume"))
+        saved.save(force=overwrite in ("force", "resume"))
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     cb, bars = _progress_callback(_warning_callback(callback), progress)
     try:

@@ -230,7 +230,7 @@ def reconstruct(
             # A whole run replaced or resumed continues on the scene given, saved over the run's
             # own, as fluidnerf.reconstruct does.
             saved = _SavedScene(scene, out_path, replace=whole and overwrite != "refuse")
-            scene.save(own, force=own.exists())
+            saved.save(force=own.exists())
         cfg["scene"] = str(Path(os.fspath(scene.root)).absolute())
     try:
         run = _run(client, scene, cfg, out_path, whole, overwrite, callback)
@@ -241,10 +241,15 @@ def reconstruct(
             saved.take_back()
         raise
     except BaseException:
-        # Stopped otherwise: the saved scene stays, so that the same call can continue; the one
-        # it replaced goes only once the run has written on the saved one.
-        if saved is not None and saved.written():
-            saved.finish()
+        # Stopped otherwise (its tasks may still run on the workers): the saved scene stays, so
+        # that the same call can continue; the one it replaced goes only once the run has
+        # written on the saved one, or comes back if it never does (settled by the next call or
+        # reader of the folder).
+        if saved is not None:
+            if saved.written():
+                saved.finish()
+            else:
+                saved.release()
         raise
     if saved is not None:
         saved.finish()

@@ -10,6 +10,7 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -777,5 +778,62 @@ def test_a_refused_force_or_resume_of_a_scene_from_arrays_leaves_the_run_as_it_w
     forced = fluidnerf.reconstruct(
         other, "asart", out, overwrite="force", stopping={"max_iterations": 2}, **options
     )
+    assert forced.status == "finished" and not (out / ".scene-replaced").exists()
+    np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images + 1.0)
+
+
+def _killed_saving_scene(out, arrays, kill_on):
+    """A call, in a process of its own, that replaces the run in ``out`` by one on the scene of
+    ``arrays`` (an ``.npz`` of ``K``, ``poses``, ``images``, ``aabb``) and is killed outright
+    (SIGKILL): right after the scene is saved (``kill_on`` None), or at the run's first event
+    of kind ``kill_on``."""
+    code = f"""
+import os, pathlib, signal
+import numpy as np
+import fluidnerf
+from fluidnerf._api import _SavedScene
+a = np.load({str(arrays)!r})
+scene = fluidnerf.scene_from_arrays(a["K"], a["poses"], a["images"], a["aabb"])
+def kill(event=None):
+    if event is None or event["kind"] == {kill_on!r}:
+        os.kill(os.getpid(), signal.SIGKILL)
+if {kill_on!r} is None:
+    _SavedScene(scene, pathlib.Path({str(out)!r}), replace=True).save(force=True)
+    kill()
+fluidnerf.reconstruct(
+    scene, "asart", {str(out)!r}, overwrite="force", resolution=8, progress=False,
+    stopping={{"max_iterations": 50}}, callback=kill,
+)
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+
+
+def test_a_scene_from_arrays_left_aside_by_a_killed_call_is_settled_by_the_next(static_scene, tmp_path):
+    """A call killed outright between saving its scene over the run's own and its run writing
+    ``config.json`` left the run's scene in ``.scene-replaced``, and the next call removed it:
+    the folder's run was then read with the killed call's images. The run is now read with its
+    own scene again; once the killed call's run had written, its scene is the run's."""
+    K, poses, _, _ = static_scene.camera_arrays()
+    images = static_scene.images()
+    out = tmp_path / "run"
+    options = {"resolution": 8, "progress": False, "stopping": {"max_iterations": 2}}
+    scene = fluidnerf.scene_from_arrays(K, poses, images, static_scene.aabb)
+    volume = fluidnerf.reconstruct(scene, "asart", out, **options).volume
+    arrays = tmp_path / "other.npz"
+    np.savez(arrays, K=K, poses=poses, images=images + 1.0, aabb=np.asarray(static_scene.aabb))
+    _killed_saving_scene(out, arrays, None)
+    assert (out / ".scene-replaced").is_dir()
+    np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images + 1.0)
+    # A reader settles it: the run comes with the scene it was made on.
+    np.testing.assert_array_equal(fluidnerf.open_run(out).volume, volume)
+    np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images)
+    assert not (out / ".scene-replaced").exists() and not (out / ".scene-replaced.json").exists()
+    # Killed once its run had started on the new scene: the old scene goes, and the run
+    # replaced next is the new scene's.
+    _killed_saving_scene(out, arrays, "iteration")
+    assert (out / ".scene-replaced").is_dir() and not (out / "report.json").exists()
+    again = fluidnerf.scene_from_arrays(K, poses, images + 1.0, static_scene.aabb)
+    forced = fluidnerf.reconstruct(again, "asart", out, overwrite="force", **options)
     assert forced.status == "finished" and not (out / ".scene-replaced").exists()
     np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images + 1.0)

@@ -59,6 +59,9 @@ pub enum DirState {
 
 pub use fluidnerf_io::folder::{folder_kind, FolderKind};
 
+mod scene_aside;
+pub use scene_aside::SceneAside;
+
 /// Refuses `out` as the output folder of `command`, which writes folders of kind `kind`, when
 /// it is a fluidnerf folder of another kind: writing there would mix two kinds of results (and
 /// make, e.g., a scene folder pass for a run).
@@ -625,19 +628,22 @@ impl RunDir {
     /// window training would see no run there until the next `reconstruct`. Done under the
     /// folder's lock, so never while a live process holds it (a run that is setting the earlier
     /// one aside right now keeps it), and only into a folder that holds no run files
-    /// ([`RunDir::restore_replaced`]).
+    /// ([`RunDir::restore_replaced`]). A scene the Python API set aside for the run in the same
+    /// call is settled first ([`SceneAside`]); while it cannot be, the run stays aside too.
     pub fn recover_replaced(root: &Path) {
+        // The Python API's scene aside first ([`SceneAside`]): the run put back must be read
+        // with the scene it was made on.
+        let scene_aside = scene_aside::recover(root);
         if !root.join(REPLACED).is_dir() {
             return;
         }
-        if root.join(SCENE_SET_ASIDE).exists() {
-            // The Python API had also set the run's own scene aside ([`OWN_SCENE`]) for a scene
-            // from arrays, and `scene/` may hold the killed call's scene instead: the earlier
-            // run put back would be read with other images. Left as it is, and said.
+        if scene_aside {
+            // Still there: the call that set it aside is alive (and the run aside is its
+            // `--force`'s), or it left no record of its run. Left as it is, and said.
             log::warn!(
-                "{}: a run set aside by a --force run that never finished is in {REPLACED}, and its scene may be in \
-                 {SCENE_SET_ASIDE}; neither is put back automatically, since {OWN_SCENE}/ may hold another call's \
-                 scene: move them back by hand, or replace the run",
+                "{}: a run set aside by a --force run that never finished is in {REPLACED}, and the scene it was made \
+                 on may be in {SCENE_SET_ASIDE}; neither is put back while the call that set them aside runs, or \
+                 when that call left no record of its run: move them back by hand, or replace the run",
                 root.display()
             );
             return;

@@ -214,6 +214,7 @@ fn _fluidnerf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<run::PyRun>()?;
+    m.add_class::<run::PySceneAside>()?;
     m.add_function(wrap_pyfunction!(scene::read_transforms, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_opencv, m)?)?;
     m.add_function(wrap_pyfunction!(scene::read_colmap, m)?)?;

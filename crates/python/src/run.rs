@@ -151,6 +151,58 @@ pub fn check_run_folder(out: PathBuf, overwrite: &str) -> PyResult<()> {
     guard(|| RunDir::check(&out, overwrite).map_err(|e| err(e.to_string())))
 }
 
+/// A run folder's own scene (`out/scene`) set aside under the folder's scene lock while a
+/// scene built from arrays is saved in its place (`fluidnerf_pipeline::rundir::SceneAside`):
+/// made before the scene is saved, then `finish()` once the run has written its configuration
+/// or `take_back()` when it was refused before. Dropped otherwise (the process killed), the
+/// next call or reader of the folder puts the scene back or discards it by whether the run
+/// wrote its configuration.
+#[pyclass(module = "fluidnerf._fluidnerf", name = "SceneAside")]
+pub struct PySceneAside {
+    inner: Option<fluidnerf_pipeline::rundir::SceneAside>,
+}
+
+#[pymethods]
+impl PySceneAside {
+    /// Takes the scene lock of `out` (made if missing), settles a scene an earlier call left
+    /// aside and, with `replace`, moves the folder's own scene aside.
+    #[new]
+    fn new(out: PathBuf, replace: bool) -> PyResult<Self> {
+        guard(|| {
+            let inner = fluidnerf_pipeline::rundir::SceneAside::begin(&out, replace).map_err(|e| err(e.to_string()))?;
+            Ok(PySceneAside { inner: Some(inner) })
+        })
+    }
+
+    /// Whether the run has written its configuration since the scene went aside.
+    fn written(&self) -> bool {
+        self.inner.as_ref().is_some_and(fluidnerf_pipeline::rundir::SceneAside::written)
+    }
+
+    /// The run was refused before it wrote: the saved scene goes, the one set aside comes back
+    /// (once it has written: as `finish`). Releases the lock; later calls do nothing.
+    fn take_back(&mut self) -> PyResult<()> {
+        match self.inner.take() {
+            Some(inner) => guard(|| inner.take_back().map_err(|e| err(e.to_string()))),
+            None => Ok(()),
+        }
+    }
+
+    /// The run has started on the saved scene: the one set aside goes. Releases the lock;
+    /// later calls do nothing.
+    fn finish(&mut self) -> PyResult<()> {
+        match self.inner.take() {
+            Some(inner) => guard(|| inner.finish().map_err(|e| err(e.to_string()))),
+            None => Ok(()),
+        }
+    }
+
+    /// Releases the lock and leaves any scene aside for the next call to settle.
+    fn release(&mut self) {
+        self.inner = None;
+    }
+}
+
 /// Refuses `out` as the folder of a time-resolved run trained window by window as
 /// `reconstruct_windows` would, without writing anything: checked before a scene built from
 /// arrays is saved into `out/scene`.
