@@ -103,6 +103,9 @@ pub struct Args {
     /// the run, nor a volume being read.
     #[arg(long)]
     pub force: bool,
+    /// Writes the files only, printing nothing: for a command that scores its own runs (`study`).
+    #[arg(skip)]
+    pub silent: bool,
 }
 
 /// The settings written next to the metrics.
@@ -545,6 +548,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let text = report.to_csv();
         fluidnerf_io::atomic_write(path, |w| w.write_all(text.as_bytes()))
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if args.silent {
+        return Ok(());
     }
     print_table(&report);
     if !without_truth.is_empty() && !truth.is_empty() {

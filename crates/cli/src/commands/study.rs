@@ -67,8 +67,11 @@ impl LayoutChoice {
 /// Each cell synthesises a scene (the --scene-preset with the cell's camera count, layout and
 /// noise; one more camera than the count is made and held out: it drives held-out early
 /// stopping and scores reprojections) and reconstructs it with every method under one
-/// stopping policy. Writes into OUT: `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with
-/// --repeats; each with its config.json), `study.json` and `study.csv` (one row per run),
+/// stopping policy. Each run is then scored on the held-out camera as `fluidnerf eval` scores
+/// it (the NRMSE of its image rendered from the result, into the run's `metrics.json`): the
+/// same measure for every method, and one that needs no ground truth. Writes into OUT:
+/// `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with --repeats; each with its config.json),
+/// `study.json` and `study.csv` (one row per run),
 /// plots of volume NRMSE and SSIM against the camera count and against noise, and
 /// `report.html`. Where a cell holds fields (fluidnerf, fast, hybrid) and voxel methods (the
 /// classical ones and the voxel baseline), each field's NRMSE is also given as a ratio to the
@@ -213,6 +216,10 @@ struct Row {
     repeated: bool,
     nrmse: Option<f64>,
     ssim_global: Option<f64>,
+    /// NRMSE of the held-out camera's image rendered from the result (`eval`'s reprojection,
+    /// the mean over the held-out cameras): the one score of a scene without ground truth, the
+    /// same measure for every method.
+    holdout_nrmse: Option<f64>,
     /// Lowest held-out loss seen (each method's own measure; compare within a method).
     best_holdout_loss: Option<f64>,
     kept_iteration: usize,
@@ -254,6 +261,7 @@ struct Mean {
     nrmse_min: Option<f64>,
     nrmse_max: Option<f64>,
     ssim_global: Option<f64>,
+    holdout_nrmse: Option<f64>,
     train_time_s: f64,
 }
 
@@ -283,6 +291,7 @@ fn means(rows: &[Row]) -> Vec<Mean> {
                 nrmse_min: nrmse.as_ref().map(|v| v.iter().copied().fold(f64::INFINITY, f64::min)),
                 nrmse_max: nrmse.as_ref().map(|v| v.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
                 ssim_global: all(|r| r.ssim_global).map(|v| v.iter().sum::<f64>() / n),
+                holdout_nrmse: all(|r| r.holdout_nrmse).map(|v| v.iter().sum::<f64>() / n),
                 train_time_s: runs.iter().map(|r| r.train_time_s).sum::<f64>() / n,
             }
         })
@@ -290,13 +299,17 @@ fn means(rows: &[Row]) -> Vec<Mean> {
 }
 
 /// A field's volume NRMSE in a cell against the best voxel method's there ([`against_best`]):
-/// what the project's accuracy targets are stated in.
+/// what the project's accuracy targets are stated in. In a cell without ground truth, its
+/// held-out view NRMSE against the best voxel method's.
 #[derive(Debug, Serialize)]
 struct AgainstBest {
     layout: String,
     cameras: usize,
     noise: f64,
     method: String,
+    /// What is compared: `volume` (NRMSE against the ground truth) or `held-out view` (NRMSE of
+    /// the held-out camera's image rendered from the result).
+    measure: &'static str,
     /// The field's NRMSE (its mean over its runs, with repeats).
     nrmse: f64,
     best_voxel_method: String,
@@ -312,26 +325,33 @@ fn is_field(method: &str) -> bool {
 
 /// For every field in every cell that also holds a voxel method: its NRMSE against the lowest
 /// of the voxel methods' (each a mean over its runs, as `cells` holds them; the first of equal
-/// ones). Cells and fields without a score are left out.
+/// ones): the volume NRMSE where the cell has it, else the held-out view NRMSE (a scene
+/// without ground truth). Cells and fields without a score are left out.
 fn against_best(cells: &[Mean]) -> Vec<AgainstBest> {
     let same_cell = |a: &Mean, b: &Mean| a.layout == b.layout && a.cameras == b.cameras && a.noise == b.noise;
+    let measures: [(&'static str, fn(&Mean) -> Option<f64>); 2] =
+        [("volume", |m| m.nrmse), ("held-out view", |m| m.holdout_nrmse)];
     let mut out = Vec::new();
     for field in cells.iter().filter(|m| is_field(&m.method)) {
-        let Some(nrmse) = field.nrmse else { continue };
-        let best = cells
-            .iter()
-            .filter(|m| same_cell(m, field) && !is_field(&m.method))
-            .filter_map(|m| m.nrmse.map(|v| (m, v)))
-            .fold(None, |best: Option<(&Mean, f64)>, (m, v)| match best {
-                Some((_, b)) if b <= v => best,
-                _ => Some((m, v)),
-            });
-        if let Some((voxel, best_nrmse)) = best {
+        let found = measures.iter().find_map(|&(measure, score)| {
+            let nrmse = score(field)?;
+            let best = cells
+                .iter()
+                .filter(|m| same_cell(m, field) && !is_field(&m.method))
+                .filter_map(|m| score(m).map(|v| (m, v)))
+                .fold(None, |best: Option<(&Mean, f64)>, (m, v)| match best {
+                    Some((_, b)) if b <= v => best,
+                    _ => Some((m, v)),
+                })?;
+            Some((measure, nrmse, best))
+        });
+        if let Some((measure, nrmse, (voxel, best_nrmse))) = found {
             out.push(AgainstBest {
                 layout: field.layout.clone(),
                 cameras: field.cameras,
                 noise: field.noise,
                 method: field.method.clone(),
+                measure,
                 nrmse,
                 best_voxel_method: voxel.method.clone(),
                 best_voxel_nrmse: best_nrmse,
@@ -345,13 +365,21 @@ fn against_best(cells: &[Mean]) -> Vec<AgainstBest> {
 /// [`against_best`] as a terminal table.
 fn against_best_table(rows: &[AgainstBest]) -> String {
     let mut s = format!(
-        "{:<8} {:>7} {:>6} {:<12} {:>7} {:<17} {:>7} {:>6}\n",
-        "layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "NRMSE", "ratio"
+        "{:<8} {:>7} {:>6} {:<12} {:>7} {:<17} {:>7} {:>6}  {}\n",
+        "layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "NRMSE", "ratio", "of"
     );
     for a in rows {
         s += &format!(
-            "{:<8} {:>7} {:>6} {:<12} {:>7.4} {:<17} {:>7.4} {:>6.2}\n",
-            a.layout, a.cameras, a.noise, a.method, a.nrmse, a.best_voxel_method, a.best_voxel_nrmse, a.ratio
+            "{:<8} {:>7} {:>6} {:<12} {:>7.4} {:<17} {:>7.4} {:>6.2}  {}\n",
+            a.layout,
+            a.cameras,
+            a.noise,
+            a.method,
+            a.nrmse,
+            a.best_voxel_method,
+            a.best_voxel_nrmse,
+            a.ratio,
+            a.measure
         );
     }
     s
@@ -834,6 +862,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                             return interrupted(out, &g, &rows, &summaries, total);
                         }
                     }
+                    score_held_out(&run_dir, &scene_dir)?;
                     let summary = html::summarise(&run_dir, method.label())?;
                     let r = &summary.report;
                     let row = Row {
@@ -845,6 +874,7 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                         repeated: g.repeated(method),
                         nrmse: r.final_nrmse,
                         ssim_global: r.final_ssim_global,
+                        holdout_nrmse: summary.holdout_nrmse,
                         best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
                         kept_iteration: r.kept_iteration,
                         iterations: r.iterations,
@@ -879,6 +909,29 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         );
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// Scores the run in `run_dir` on the held-out camera of its scene in `scene_dir` (`eval`, into
+/// the run's `metrics.json`), unless a score written since its report is there (a study
+/// continued): its row's held-out view NRMSE, the same measure for every method.
+fn score_held_out(run_dir: &Path, scene_dir: &Path) -> anyhow::Result<()> {
+    use clap::Parser;
+    let modified = |name: &str| std::fs::metadata(run_dir.join(name)).and_then(|m| m.modified()).ok();
+    if let (Some(scored), Some(made)) = (modified("metrics.json"), modified("report.json")) {
+        if scored >= made {
+            return Ok(());
+        }
+    }
+    // Joined to its option, and the run after `--`: a folder whose name starts with '-' was
+    // read as an option.
+    let (run, scene) = (run_dir.to_string_lossy(), format!("--scene={}", scene_dir.to_string_lossy()));
+    let argv = ["fluidnerf", "eval", "--no-regions", "--force", &scene, "--", &run];
+    let super::Command::Eval(mut args) = crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{e}"))?.command
+    else {
+        bail!("{}: not an eval line", run_dir.display());
+    };
+    args.silent = true;
+    super::eval::run(args).with_context(|| format!("scoring {} on its held-out camera", run_dir.display()))
 }
 
 /// Ends a study stopped by Ctrl-C: writes the runs made so far and exits with 130.
@@ -918,19 +971,20 @@ fn cut_mark(stop_reason: &str) -> &'static str {
 
 fn text_table(rows: &[Row]) -> String {
     let mut s = format!(
-        "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>10} {:>8}\n",
-        "layout", "cameras", "noise", "method", "NRMSE", "SSIM", "kept/iter", "time [s]"
+        "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>8} {:>10} {:>8}\n",
+        "layout", "cameras", "noise", "method", "NRMSE", "SSIM", "held-out", "kept/iter", "time [s]"
     );
     for r in rows {
         let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.4}"));
         s += &format!(
-            "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>10} {:>8.1}\n",
+            "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>8} {:>10} {:>8.1}\n",
             r.layout,
             r.cameras,
             r.noise,
             method_label(r),
             f(r.nrmse),
             f(r.ssim_global),
+            f(r.holdout_nrmse),
             format!("{}/{}{}", r.kept_iteration, r.iterations, cut_mark(&r.stop_reason)),
             r.train_time_s
         );
@@ -947,13 +1001,13 @@ fn text_table(rows: &[Row]) -> String {
 /// Each cell's and method's mean over its runs, with the range of their volume NRMSE.
 fn means_table(means: &[Mean]) -> String {
     let mut s = format!(
-        "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8}\n",
-        "layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM", "time [s]"
+        "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8} {:>8}\n",
+        "layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM", "held-out", "time [s]"
     );
     for m in means {
         let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.4}"));
         s += &format!(
-            "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8.1}\n",
+            "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8} {:>8.1}\n",
             m.layout,
             m.cameras,
             m.noise,
@@ -962,6 +1016,7 @@ fn means_table(means: &[Mean]) -> String {
             f(m.nrmse),
             format!("{}–{}", f(m.nrmse_min), f(m.nrmse_max)),
             f(m.ssim_global),
+            f(m.holdout_nrmse),
             m.train_time_s
         );
     }
@@ -1020,12 +1075,12 @@ fn convergence_label(r: &Row) -> String {
 
 fn csv(rows: &[Row]) -> String {
     let mut s = String::from(
-        "layout,cameras,noise,method,seed,nrmse,ssim_global,best_holdout_loss,kept_iteration,iterations,stop_reason,train_time_s,result_bytes,run\n",
+        "layout,cameras,noise,method,seed,nrmse,ssim_global,holdout_nrmse,best_holdout_loss,kept_iteration,iterations,stop_reason,train_time_s,result_bytes,run\n",
     );
     let f = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
     for r in rows {
         s += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.layout,
             r.cameras,
             r.noise,
@@ -1033,6 +1088,7 @@ fn csv(rows: &[Row]) -> String {
             r.seed,
             f(r.nrmse),
             f(r.ssim_global),
+            f(r.holdout_nrmse),
             f(r.best_holdout_loss),
             r.kept_iteration,
             r.iterations,
@@ -1114,6 +1170,7 @@ fn write_outputs(
             "method",
             "NRMSE",
             "SSIM (global)",
+            "held-out view NRMSE",
             "ended by",
             "kept / iterations",
             "time [s]",
@@ -1127,6 +1184,7 @@ fn write_outputs(
             [
                 f(r.nrmse),
                 f(r.ssim_global),
+                f(r.holdout_nrmse),
                 ended_by(&r.stop_reason).to_string(),
                 format!("{} / {}", r.kept_iteration, r.iterations),
                 format!("{:.1}", r.train_time_s),
@@ -1142,7 +1200,18 @@ fn write_outputs(
                 g.seed,
                 g.seed.saturating_add(u64::from(g.repeats) - 1)
             ),
-            &["layout", "cameras", "noise", "method", "runs", "NRMSE", "NRMSE range", "SSIM (global)", "time [s]"],
+            &[
+                "layout",
+                "cameras",
+                "noise",
+                "method",
+                "runs",
+                "NRMSE",
+                "NRMSE range",
+                "SSIM (global)",
+                "held-out view NRMSE",
+                "time [s]",
+            ],
         );
         for m in &cells {
             mean_table.push_row(with_cell(
@@ -1152,6 +1221,7 @@ fn write_outputs(
                     f(m.nrmse),
                     format!("{} – {}", f(m.nrmse_min), f(m.nrmse_max)),
                     f(m.ssim_global),
+                    f(m.holdout_nrmse),
                     format!("{:.1}", m.train_time_s),
                 ],
             ));
@@ -1161,16 +1231,22 @@ fn write_outputs(
     if !against.is_empty() {
         let mut t = Table::new(
             format!(
-                "Each field against the best voxel method of its cell (volume NRMSE{}; below 1 the field is the more \
-                 accurate)",
+                "Each field against the best voxel method of its cell (volume NRMSE, or in a cell without ground \
+                 truth the held-out view's{}; below 1 the field is the more accurate)",
                 if g.repeats > 1 { ", means over the runs" } else { "" }
             ),
-            &["layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "its NRMSE", "ratio"],
+            &["layout", "cameras", "noise", "field", "NRMSE", "best voxel method", "its NRMSE", "ratio", "NRMSE of"],
         );
         for a in &against {
             t.push_row(with_cell(
                 (&a.layout, a.cameras, a.noise, a.method.clone()),
-                [f(Some(a.nrmse)), a.best_voxel_method.clone(), f(Some(a.best_voxel_nrmse)), format!("{:.2}", a.ratio)],
+                [
+                    f(Some(a.nrmse)),
+                    a.best_voxel_method.clone(),
+                    f(Some(a.best_voxel_nrmse)),
+                    format!("{:.2}", a.ratio),
+                    a.measure.to_string(),
+                ],
             ));
         }
         tables.push(t);
@@ -1250,6 +1326,7 @@ mod tests {
             nrmse_min: nrmse,
             nrmse_max: nrmse,
             ssim_global: None,
+            holdout_nrmse: None,
             train_time_s: 1.0,
         }
     }
@@ -1283,6 +1360,25 @@ mod tests {
         assert!((seen[2].3 - 1.25).abs() < 1e-12);
         let table = against_best_table(&got);
         assert!(table.contains("hybrid        0.2400 voxel              0.3000   0.80"), "{table}");
+    }
+
+    /// In a cell without ground truth (a recording given with --scene) the fields are set
+    /// against the voxel methods by their held-out views; where the volume is scored, by it.
+    #[test]
+    fn without_ground_truth_fields_are_set_against_voxel_methods_by_the_held_out_view() {
+        let held_out =
+            |method: &str, nrmse: Option<f64>, view: f64| Mean { holdout_nrmse: Some(view), ..mean(4, method, nrmse) };
+        let cells = [held_out("asart", None, 0.30), held_out("mlem", None, 0.25), held_out("hybrid", None, 0.20)];
+        let got = against_best(&cells);
+        assert_eq!(got.len(), 1);
+        assert_eq!((got[0].measure, got[0].best_voxel_method.as_str()), ("held-out view", "mlem"));
+        assert!((got[0].ratio - 0.8).abs() < 1e-12);
+        let table = against_best_table(&got);
+        assert!(table.contains("0.2000 mlem               0.2500   0.80  held-out view"), "{table}");
+        // With the truth: the volume, whatever the views say.
+        let cells = [held_out("asart", Some(0.4), 0.30), held_out("hybrid", Some(0.5), 0.20)];
+        let got = against_best(&cells);
+        assert_eq!((got[0].measure, got[0].ratio), ("volume", 1.25));
     }
 
     fn cap(line: &[&str]) -> Option<usize> {
@@ -1407,6 +1503,7 @@ mod tests {
             repeated: false,
             nrmse: None,
             ssim_global: None,
+            holdout_nrmse: None,
             best_holdout_loss: None,
             kept_iteration: 1,
             iterations: 1,
@@ -1432,6 +1529,7 @@ mod tests {
             repeated: false,
             nrmse: Some(0.3),
             ssim_global: Some(0.8),
+            holdout_nrmse: None,
             best_holdout_loss: None,
             kept_iteration: 5,
             iterations: 5,

@@ -37,6 +37,13 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
         // Every method scores the held-out camera within the 20 iterations, the field too
         // (its own interval is 25).
         assert!(r["best_holdout_loss"].as_f64().is_some(), "{run:?} never scored the held-out camera");
+        // The held-out camera's image rendered from every result, one measure for all methods:
+        // the mean of `eval`'s reprojection rows, written into the run's metrics.json.
+        let metrics = json(&run.join("metrics.json"));
+        let views = metrics["reprojection"].as_array().expect("reprojection");
+        assert_eq!(views.len(), 1, "{metrics}");
+        assert_eq!(r["holdout_nrmse"].as_f64(), views[0]["nrmse"].as_f64(), "{run:?}");
+        assert!(r["holdout_nrmse"].as_f64().is_some_and(|n| n > 0.0 && n < 1.5));
     }
     let csv = std::fs::read_to_string(st.join("study.csv")).expect("csv");
     assert_eq!(csv.lines().count(), 5);
@@ -69,11 +76,15 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
     let stamp =
         |p: &std::path::Path| std::fs::metadata(p.join("report.json")).and_then(|m| m.modified()).expect("mtime");
     let first_run = st.join(rows[0]["run"].as_str().expect("run"));
-    let before = stamp(&first_run);
+    let scored = |p: &std::path::Path| std::fs::metadata(p.join("metrics.json")).and_then(|m| m.modified()).ok();
+    let (before, score) = (stamp(&first_run), scored(&first_run));
     let out = fluidnerf(d, &args);
     ok(&out);
     assert!(String::from_utf8_lossy(&out.stdout).contains("done earlier"));
     assert_eq!(stamp(&first_run), before, "a finished cell was run again");
+    // ... and its held-out score, made after its report, is not made again.
+    assert_eq!(scored(&first_run), score, "a finished cell was scored again");
+    assert_eq!(json(&st.join("study.json"))["rows"], record["rows"]);
     // Other settings in the same folder are refused.
     let other = fluidnerf(d, &["study", "--preset", "smoke", "--methods", "asart", "-o", "st", "-q"]);
     assert!(!other.status.success());
