@@ -329,8 +329,8 @@ fn is_field(method: &str) -> bool {
 /// without ground truth). Cells and fields without a score are left out.
 fn against_best(cells: &[Mean]) -> Vec<AgainstBest> {
     let same_cell = |a: &Mean, b: &Mean| a.layout == b.layout && a.cameras == b.cameras && a.noise == b.noise;
-    let measures: [(&'static str, fn(&Mean) -> Option<f64>); 2] =
-        [("volume", |m| m.nrmse), ("held-out view", |m| m.holdout_nrmse)];
+    type Score = fn(&Mean) -> Option<f64>;
+    let measures: [(&'static str, Score); 2] = [("volume", |m| m.nrmse), ("held-out view", |m| m.holdout_nrmse)];
     let mut out = Vec::new();
     for field in cells.iter().filter(|m| is_field(&m.method)) {
         let found = measures.iter().find_map(|&(measure, score)| {
