@@ -89,6 +89,14 @@ pub struct Args {
     /// Synthetic scene preset the cells start from (`fluidnerf synth --list-presets`).
     #[arg(long, default_value = "demo")]
     pub scene_preset: String,
+    /// Study a scene of yours instead of a synthetic grid: a recording (`fluidnerf import`) or
+    /// any static scene that holds at least one camera out (`"holdout": true`). Every method
+    /// runs on it under the one stopping policy, which the held-out camera drives, and is scored
+    /// on that camera's image (and against the scene's ground truth, if it has one). Its
+    /// cameras, images and noise are its own, so --preset, --scene-preset, --cameras, --noise,
+    /// --layouts and --pixels do not apply; the scene is read, never written.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["preset", "scene_preset", "cameras", "noise", "layouts", "pixels"])]
+    pub scene: Option<PathBuf>,
     /// Methods, comma-separated; static ones only: a study refuses the time-resolved
     /// tr-fluidnerf, tr-fast and static-per-frame [default: fast,hybrid,asart: the grid field
     /// alone, the default method, and the classical baseline].
@@ -149,7 +157,11 @@ pub struct Args {
 /// The resolved grid, written to `study.json` and checked when a study is continued.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct Grid {
-    preset: StudyPreset,
+    /// The named grid (none for a scene given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    preset: Option<StudyPreset>,
+    /// The synthetic preset the cells' scenes are made from (empty for a scene given).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     scene_preset: String,
     methods: Vec<Method>,
     cameras: Vec<usize>,
@@ -165,6 +177,9 @@ struct Grid {
     /// The voxel methods held at zero outside the images' visual hull.
     #[serde(default)]
     visual_hull: bool,
+    /// The scene studied instead of a synthetic grid (`--scene`, absolute).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    scene: Option<PathBuf>,
 }
 
 fn one_repeat() -> u32 {
@@ -197,7 +212,72 @@ impl Grid {
     /// Runs of the whole grid.
     fn runs_total(&self) -> usize {
         let per_cell: usize = self.methods.iter().map(|&m| self.seeds(m).count()).sum();
-        self.layouts.len() * self.cameras.len() * self.noise.len() * per_cell
+        self.cells().len() * per_cell
+    }
+
+    /// The cells of the grid, in the order they run: layouts, then camera counts, then noise
+    /// levels; one cell for a scene given (`--scene`).
+    fn cells(&self) -> Vec<Cell> {
+        if let Some(scene) = &self.scene {
+            return vec![Cell {
+                layout: GIVEN_LAYOUT.into(),
+                cameras: self.cameras[0],
+                noise: 0.0,
+                name: GIVEN_LAYOUT.into(),
+                synth: None,
+                given: Some(scene.clone()),
+            }];
+        }
+        let mut cells = Vec::new();
+        for &layout in &self.layouts {
+            for &cameras in &self.cameras {
+                for &noise in &self.noise {
+                    cells.push(Cell {
+                        layout: layout.name().into(),
+                        cameras,
+                        noise,
+                        name: scene_name(layout, cameras, noise),
+                        synth: Some(layout),
+                        given: None,
+                    });
+                }
+            }
+        }
+        cells
+    }
+}
+
+/// The layout column (and the run folder `runs/scene/`) of a scene given with `--scene`.
+const GIVEN_LAYOUT: &str = "scene";
+
+/// One cell of the grid: a scene, on which every method runs.
+#[derive(Clone, Debug)]
+struct Cell {
+    layout: String,
+    /// Training cameras (a scene given: its own).
+    cameras: usize,
+    /// Noise added to the images (a scene given: none, and 0 in the record).
+    noise: f64,
+    /// The folder of its scene under `scenes/` and of its runs under `runs/`.
+    name: String,
+    /// The layout of a synthetic cell, whose scene the study makes.
+    synth: Option<LayoutChoice>,
+    /// The scene given (`--scene`), read where it is.
+    given: Option<PathBuf>,
+}
+
+impl Cell {
+    /// The folder of the cell's scene.
+    fn scene_dir(&self, out: &Path) -> PathBuf {
+        self.given.clone().unwrap_or_else(|| out.join("scenes").join(&self.name))
+    }
+
+    /// The cell in words, for messages.
+    fn describe(&self) -> String {
+        match &self.given {
+            Some(scene) => format!("the scene {}", scene.display()),
+            None => format!("the scene of {} cameras, noise {}, {}", self.cameras, self.noise, self.layout),
+        }
     }
 }
 
@@ -373,7 +453,7 @@ fn against_best_table(rows: &[AgainstBest]) -> String {
             "{:<8} {:>7} {:>6} {:<12} {:>7.4} {:<17} {:>7.4} {:>6.2}  {}\n",
             a.layout,
             a.cameras,
-            a.noise,
+            noise_text(&a.layout, a.noise),
             a.method,
             a.nrmse,
             a.best_voxel_method,
@@ -405,9 +485,15 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         StopArg::Auto => StopRule::HeldOut,
         stop => stop.into(),
     };
+    // A scene given is one cell, with its own cameras and noise.
+    let given = args.scene.as_deref().map(given_scene).transpose()?;
+    let (cameras, noise, layouts) = match &given {
+        Some((_, training)) => (vec![*training], vec![0.0], Vec::new()),
+        None => (cameras, noise, layouts),
+    };
     let g = Grid {
-        preset: args.preset,
-        scene_preset: args.scene_preset.clone(),
+        preset: given.is_none().then_some(args.preset),
+        scene_preset: if given.is_some() { String::new() } else { args.scene_preset.clone() },
         methods: args
             .methods
             .as_ref()
@@ -429,8 +515,10 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         seed: args.seed,
         repeats: args.repeats,
         visual_hull: args.visual_hull,
+        scene: given.map(|(dir, _)| dir),
     };
-    if g.methods.is_empty() || g.cameras.is_empty() || g.noise.is_empty() || g.layouts.is_empty() {
+    if g.methods.is_empty() || g.cameras.is_empty() || g.noise.is_empty() || (g.layouts.is_empty() && g.scene.is_none())
+    {
         bail!("the grid is empty: give at least one method, camera count, noise level and layout");
     }
     // A value given twice would run the same cells twice and print the same rows twice.
@@ -480,6 +568,9 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
             methods.join(",")
         );
     }
+    if g.scene.is_some() {
+        return Ok(g);
+    }
     // Known before anything is made: an unknown one failed only when its first scene was
     // synthesised, leaving the study's folder behind.
     let scene = super::static_preset("--scene-preset", &g.scene_preset, "a study")?;
@@ -511,6 +602,36 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     }
     check_scenes(&g)?;
     Ok(g)
+}
+
+/// The scene given with `--scene` in `dir`, checked for a study: its absolute folder and its
+/// training cameras. Refused: a scene that cannot be read, one that holds no camera out (the
+/// held-out rule and the score need one), one of several times (a study compares static
+/// reconstructions), and one with fewer than two training cameras.
+fn given_scene(dir: &Path) -> anyhow::Result<(PathBuf, usize)> {
+    let scene = fluidnerf_io::scene::load_scene(dir).with_context(|| format!("--scene {}", dir.display()))?;
+    let root = std::path::absolute(&scene.root)?;
+    let held_out = scene.holdout_frames().count();
+    let training = scene.training_frames().count();
+    if held_out == 0 {
+        bail!(
+            "--scene {}: holds no camera out, and a study stops every method by a held-out camera and scores it \
+             there; mark one frame `\"holdout\": true` in its transforms.json (or import it with --holdout)",
+            root.display()
+        );
+    }
+    let times = scene.times();
+    if times.len() > 1 {
+        bail!(
+            "--scene {}: holds {} instants; a study compares static reconstructions of one instant",
+            root.display(),
+            times.len()
+        );
+    }
+    if training < 2 {
+        bail!("--scene {}: has {training} training camera; a study needs at least 2", root.display());
+    }
+    Ok((root, training))
 }
 
 /// Iterations between held-out evaluations of every method in the smoke grid, so that the
@@ -551,18 +672,16 @@ fn remove_earlier_study(out: &Path, g: &Grid) -> anyhow::Result<()> {
             let _ = std::fs::remove_dir(p);
         }
     };
-    for &layout in &g.layouts {
-        for &cameras in &g.cameras {
-            for &noise in &g.noise {
-                let name = scene_name(layout, cameras, noise);
-                remove(&out.join("scenes").join(&name))?;
-                let runs = out.join("runs").join(&name);
-                for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
-                    remove(&runs.join(g.run_name(method, seed)))?;
-                }
-                remove_if_empty(&runs);
-            }
+    for cell in g.cells() {
+        // A scene given is the user's: only the scenes the study made go.
+        if cell.synth.is_some() {
+            remove(&out.join("scenes").join(&cell.name))?;
         }
+        let runs = out.join("runs").join(&cell.name);
+        for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
+            remove(&runs.join(g.run_name(method, seed)))?;
+        }
+        remove_if_empty(&runs);
     }
     remove_if_empty(&out.join("scenes"));
     remove_if_empty(&out.join("runs"));
@@ -639,17 +758,19 @@ fn cell_settings(
 /// is made: a cell refused only when its turn came left the cells before it made and the study
 /// unfinished.
 fn check_scenes(g: &Grid) -> anyhow::Result<()> {
-    for &layout in &g.layouts {
-        for &cameras in &g.cameras {
-            for &noise in &g.noise {
-                let cell = || format!("the scene of {} cameras, noise {noise}, {}", cameras, layout.name());
-                let settings = cell_settings(g, layout, cameras, noise)?;
-                let voxels = settings.truth_dims(&settings.aabb).iter().map(|&n| n as u64).product();
-                settings.check_memory(voxels).with_context(|| {
-                    format!("{} (--cameras {cameras}, --pixels {}, --resolution {})", cell(), g.pixels, g.resolution)
-                })?;
-            }
-        }
+    for cell in g.cells() {
+        let Some(layout) = cell.synth else { continue };
+        let settings = cell_settings(g, layout, cell.cameras, cell.noise)?;
+        let voxels = settings.truth_dims(&settings.aabb).iter().map(|&n| n as u64).product();
+        settings.check_memory(voxels).with_context(|| {
+            format!(
+                "{} (--cameras {}, --pixels {}, --resolution {})",
+                cell.describe(),
+                cell.cameras,
+                g.pixels,
+                g.resolution
+            )
+        })?;
     }
     Ok(())
 }
@@ -693,69 +814,69 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
             file.display()
         )
     };
-    for &layout in &g.layouts {
-        for &cameras in &g.cameras {
-            for &noise in &g.noise {
-                let name = scene_name(layout, cameras, noise);
-                let scene_dir = out.join("scenes").join(&name);
-                let record = scene_dir.join("synth.json");
-                if scene_dir.join("transforms.json").is_file() && record.is_file() {
-                    let given = cell_settings(g, layout, cameras, noise)?;
-                    let value: serde_json::Value = fluidnerf_pipeline::rundir::read_json(&record)?;
-                    let saved: fluidnerf_synth::SynthSettings =
-                        serde_json::from_value(value.get("settings").cloned().unwrap_or_default())
-                            .with_context(|| format!("{}: not the settings of a synthetic scene", record.display()))?;
-                    if saved != given {
-                        let differences = fluidnerf_pipeline::rundir::settings_differences(&saved, &given, 5);
-                        return Err(other(&scene_dir, "scene", &record, differences));
-                    }
+    for cell in g.cells() {
+        let scene_dir = cell.scene_dir(out);
+        let record = scene_dir.join("synth.json");
+        if let (Some(layout), true) = (cell.synth, scene_dir.join("transforms.json").is_file() && record.is_file()) {
+            let given = cell_settings(g, layout, cell.cameras, cell.noise)?;
+            let value: serde_json::Value = fluidnerf_pipeline::rundir::read_json(&record)?;
+            let saved: fluidnerf_synth::SynthSettings =
+                serde_json::from_value(value.get("settings").cloned().unwrap_or_default())
+                    .with_context(|| format!("{}: not the settings of a synthetic scene", record.display()))?;
+            if saved != given {
+                let differences = fluidnerf_pipeline::rundir::settings_differences(&saved, &given, 5);
+                return Err(other(&scene_dir, "scene", &record, differences));
+            }
+        }
+        let newest = newest_scene_file(&scene_dir);
+        for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
+            let run_dir = out.join("runs").join(&cell.name).join(g.run_name(method, seed));
+            let report_file = run_dir.join("report.json");
+            if !(report_file.is_file()
+                && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished)
+            {
+                continue;
+            }
+            // A scene file changed since the run was made (an image edited): the run is of
+            // other images, and its result would stand in the table for these.
+            let made = std::fs::metadata(&report_file).and_then(|m| m.modified()).ok();
+            if let (Some((changed, file)), Some(made)) = (&newest, made) {
+                if *changed > made + std::time::Duration::from_secs(1) {
+                    bail!(
+                        "{}: changed after the run {} was made from it, so its result is not of this scene; use \
+                         --force to start over, or restore the file",
+                        file.display(),
+                        run_dir.display()
+                    );
                 }
-                let newest = newest_scene_file(&scene_dir);
-                for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
-                    let run_dir = out.join("runs").join(&name).join(g.run_name(method, seed));
-                    let report_file = run_dir.join("report.json");
-                    if !(report_file.is_file()
-                        && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished)
-                    {
-                        continue;
-                    }
-                    // A scene file changed since the run was made (an image edited): the run is of
-                    // other images, and its result would stand in the table for these.
-                    let made = std::fs::metadata(&report_file).and_then(|m| m.modified()).ok();
-                    if let (Some((changed, file)), Some(made)) = (&newest, made) {
-                        if *changed > made + std::time::Duration::from_secs(1) {
-                            bail!(
-                                "{}: changed after the run {} was made from it, so its result is not of this \
-                                 scene; use --force to start over, or restore the file",
-                                file.display(),
-                                run_dir.display()
-                            );
-                        }
-                    }
-                    let file = run_dir.join("config.json");
-                    let saved = RunConfig::read(&file)?;
-                    // Moved with its folder, a cell's scene keeps its name: a run of another
-                    // cell's scene (runs swapped between cells) would give this cell its result.
-                    if saved.scene.file_name() != scene_dir.file_name() {
-                        bail!(
-                            "{} holds a run of another cell's scene: its {} names {}, not the scene {}; use \
-                             --force to start over or another folder",
-                            run_dir.display(),
-                            file.display(),
-                            saved.scene.display(),
-                            name
-                        );
-                    }
-                    let mut given = cell_config(g, &scene_dir, method, seed)?;
-                    // The version that wrote it is information only; a study folder moved
-                    // since holds its scenes elsewhere.
-                    given.fluidnerf_version.clone_from(&saved.fluidnerf_version);
-                    given.scene.clone_from(&saved.scene);
-                    if saved != given {
-                        let differences = fluidnerf_pipeline::rundir::settings_differences(&saved, &given, 5);
-                        return Err(other(&run_dir, "run", &file, differences));
-                    }
-                }
+            }
+            let file = run_dir.join("config.json");
+            let saved = RunConfig::read(&file)?;
+            // Moved with its folder, a cell's scene keeps its name: a run of another cell's
+            // scene (runs swapped between cells) would give this cell its result. A scene given
+            // stays where it is: the run must name that very folder.
+            let same_scene = match &cell.given {
+                Some(given) => fluidnerf_pipeline::rundir::same_path(&saved.scene, given),
+                None => saved.scene.file_name() == scene_dir.file_name(),
+            };
+            if !same_scene {
+                bail!(
+                    "{} holds a run of another scene: its {} names {}, not {}; use --force to start over or another \
+                     folder",
+                    run_dir.display(),
+                    file.display(),
+                    saved.scene.display(),
+                    cell.describe()
+                );
+            }
+            let mut given = cell_config(g, &scene_dir, method, seed)?;
+            // The version that wrote it is information only; a study folder moved since holds
+            // its scenes elsewhere.
+            given.fluidnerf_version.clone_from(&saved.fluidnerf_version);
+            given.scene.clone_from(&saved.scene);
+            if saved != given {
+                let differences = fluidnerf_pipeline::rundir::settings_differences(&saved, &given, 5);
+                return Err(other(&run_dir, "run", &file, differences));
             }
         }
     }
@@ -768,6 +889,19 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     // UTF-8 became another folder (its bytes replaced), so the scenes went elsewhere.
     super::recordable("the study's synth and reconstruct lines", [("--out", args.out.as_path())])?;
     let out = &args.out;
+    if let Some(scene) = &g.scene {
+        super::recordable("the study's reconstruct lines", [("--scene", scene.as_path())])?;
+        // The runs would be written into the scene's folder, which a run refuses, and --force
+        // would clear what the study wrote there.
+        let resolved = |p: &Path| p.canonicalize().or_else(|_| std::path::absolute(p)).unwrap_or(p.to_path_buf());
+        if resolved(out).starts_with(resolved(scene)) {
+            bail!(
+                "--out {}: is the scene's folder {} or inside it; write the study elsewhere",
+                out.display(),
+                scene.display()
+            );
+        }
+    }
     let record = out.join("study.json");
     // A study writes its report.html, plots and table at the top of OUT: never into another
     // kind of fluidnerf folder (a run's report.html was replaced), nor over files of the same
@@ -817,76 +951,74 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let mut rows = Vec::with_capacity(total);
     let mut summaries: Vec<(Row, RunSummary)> = Vec::new();
     let mut k = 0;
-    for &layout in &g.layouts {
-        for &cameras in &g.cameras {
-            for &noise in &g.noise {
-                let scene_dir = out.join("scenes").join(scene_name(layout, cameras, noise));
-                match ensure_scene(&g, &scene_dir, layout, cameras, noise) {
-                    // Stopped as a run stopped by Ctrl-C is: the runs so far written, exit 130.
-                    Err(e) if matches!(e.downcast_ref(), Some(fluidnerf_synth::SynthError::Cancelled)) => {
-                        return interrupted(out, &g, &rows, &summaries, total);
-                    }
-                    r => r?,
+    for cell in g.cells() {
+        let scene_dir = cell.scene_dir(out);
+        if let Some(layout) = cell.synth {
+            match ensure_scene(&g, &scene_dir, layout, cell.cameras, cell.noise) {
+                // Stopped as a run stopped by Ctrl-C is: the runs so far written, exit 130.
+                Err(e) if matches!(e.downcast_ref(), Some(fluidnerf_synth::SynthError::Cancelled)) => {
+                    return interrupted(out, &g, &rows, &summaries, total);
                 }
-                for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
-                    k += 1;
-                    let run_dir =
-                        out.join("runs").join(scene_name(layout, cameras, noise)).join(g.run_name(method, seed));
-                    // A run stopped by Ctrl-C writes its report too: its cell is run again, not
-                    // read back as if its budget had been spent.
-                    let report_file = run_dir.join("report.json");
-                    let reported = report_file.is_file()
-                        && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished;
-                    // A finished run whose result has since gone (a volume deleted to save space)
-                    // is run again: read back, it failed the study on every attempt.
-                    let finished =
-                        reported && fluidnerf_pipeline::RunDir::open(&run_dir).is_ok_and(|rd| rd.kind().is_some());
-                    #[allow(clippy::print_stdout)]
-                    {
-                        println!(
-                            "[{k}/{total}] {} · {cameras} cameras · noise {noise} · {}{}{}",
-                            layout.name(),
-                            method.label(),
-                            if g.repeated(method) { format!(" · seed {seed}") } else { String::new() },
-                            match (finished, reported) {
-                                (true, _) => " (done earlier)",
-                                (false, true) => " (done earlier, but its result is gone: run again)",
-                                (false, false) => "",
-                            }
-                        );
+                r => r?,
+            }
+        }
+        for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
+            k += 1;
+            let run_dir = out.join("runs").join(&cell.name).join(g.run_name(method, seed));
+            // A run stopped by Ctrl-C writes its report too: its cell is run again, not read
+            // back as if its budget had been spent.
+            let report_file = run_dir.join("report.json");
+            let reported = report_file.is_file()
+                && fluidnerf_pipeline::RunReport::read(&report_file)?.status == RunStatus::Finished;
+            // A finished run whose result has since gone (a volume deleted to save space) is
+            // run again: read back, it failed the study on every attempt.
+            let finished = reported && fluidnerf_pipeline::RunDir::open(&run_dir).is_ok_and(|rd| rd.kind().is_some());
+            #[allow(clippy::print_stdout)]
+            {
+                let noise = if cell.given.is_some() { String::new() } else { format!(" · noise {}", cell.noise) };
+                println!(
+                    "[{k}/{total}] {} · {} cameras{noise} · {}{}{}",
+                    cell.layout,
+                    cell.cameras,
+                    method.label(),
+                    if g.repeated(method) { format!(" · seed {seed}") } else { String::new() },
+                    match (finished, reported) {
+                        (true, _) => " (done earlier)",
+                        (false, true) => " (done earlier, but its result is gone: run again)",
+                        (false, false) => "",
                     }
-                    if !finished {
-                        let config = cell_config(&g, &scene_dir, method, seed)?;
-                        let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
-                        if report.status == RunStatus::Interrupted {
-                            return interrupted(out, &g, &rows, &summaries, total);
-                        }
-                    }
-                    score_held_out(&run_dir, &scene_dir)?;
-                    let summary = html::summarise(&run_dir, method.label())?;
-                    let r = &summary.report;
-                    let row = Row {
-                        layout: layout.name().into(),
-                        cameras,
-                        noise,
-                        method: method.name().into(),
-                        seed,
-                        repeated: g.repeated(method),
-                        nrmse: r.final_nrmse,
-                        ssim_global: r.final_ssim_global,
-                        holdout_nrmse: summary.holdout_nrmse,
-                        best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
-                        kept_iteration: r.kept_iteration,
-                        iterations: r.iterations,
-                        stop_reason: r.stop_reason.name().into(),
-                        train_time_s: r.train_time_s,
-                        result_bytes: r.result_bytes,
-                        run: run_dir.strip_prefix(out).unwrap_or(&run_dir).display().to_string(),
-                    };
-                    rows.push(row.clone());
-                    summaries.push((row, summary));
+                );
+            }
+            if !finished {
+                let config = cell_config(&g, &scene_dir, method, seed)?;
+                let report = super::reconstruct::run_config(&config, &run_dir, Overwrite::Force)?;
+                if report.status == RunStatus::Interrupted {
+                    return interrupted(out, &g, &rows, &summaries, total);
                 }
             }
+            score_held_out(&run_dir, &scene_dir)?;
+            let summary = html::summarise(&run_dir, method.label())?;
+            let r = &summary.report;
+            let row = Row {
+                layout: cell.layout.clone(),
+                cameras: cell.cameras,
+                noise: cell.noise,
+                method: method.name().into(),
+                seed,
+                repeated: g.repeated(method),
+                nrmse: r.final_nrmse,
+                ssim_global: r.final_ssim_global,
+                holdout_nrmse: summary.holdout_nrmse,
+                best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
+                kept_iteration: r.kept_iteration,
+                iterations: r.iterations,
+                stop_reason: r.stop_reason.name().into(),
+                train_time_s: r.train_time_s,
+                result_bytes: r.result_bytes,
+                run: run_dir.strip_prefix(out).unwrap_or(&run_dir).display().to_string(),
+            };
+            rows.push(row.clone());
+            summaries.push((row, summary));
         }
     }
     write_outputs(out, &g, &rows, &summaries, total)?;
@@ -980,7 +1112,7 @@ fn text_table(rows: &[Row]) -> String {
             "{:<8} {:>7} {:>6} {:<12} {:>7} {:>7} {:>8} {:>10} {:>8.1}\n",
             r.layout,
             r.cameras,
-            r.noise,
+            noise_text(&r.layout, r.noise),
             method_label(r),
             f(r.nrmse),
             f(r.ssim_global),
@@ -1010,7 +1142,7 @@ fn means_table(means: &[Mean]) -> String {
             "{:<8} {:>7} {:>6} {:<12} {:>4} {:>7} {:>15} {:>7} {:>8} {:>8.1}\n",
             m.layout,
             m.cameras,
-            m.noise,
+            noise_text(&m.layout, m.noise),
             m.method,
             m.runs,
             f(m.nrmse),
@@ -1101,12 +1233,22 @@ fn csv(rows: &[Row]) -> String {
     s
 }
 
+/// The noise column of a cell of layout `layout`: the level added, or a dash for a scene given,
+/// whose images are used as they are (0 in the record: none added).
+fn noise_text(layout: &str, noise: f64) -> String {
+    if layout == GIVEN_LAYOUT {
+        "–".into()
+    } else {
+        noise.to_string()
+    }
+}
+
 /// A report table's row: the cell (layout, cameras, noise) and the method, then `rest`.
 fn with_cell<const N: usize>(
     (layout, cameras, noise, method): (&str, usize, f64, String),
     rest: [String; N],
 ) -> Vec<String> {
-    let mut row = vec![layout.to_string(), cameras.to_string(), noise.to_string(), method];
+    let mut row = vec![layout.to_string(), cameras.to_string(), noise_text(layout, noise), method];
     row.extend(rest);
     row
 }
@@ -1261,15 +1403,39 @@ fn write_outputs(
         let png = fluidnerf_viz::encode_plots_png(&fluidnerf_viz::convergence_plots(&histories), 2)?;
         figures.push(Figure { caption: "Convergence at the largest camera count.".into(), image: ImageData::Png(png) });
     }
-    // --resolution is the longest side: a box that is not a cube has fewer voxels along the
-    // others (plume15 at 24: 16×24×16).
-    let settings = cell_settings(g, g.layouts[0], g.cameras[0], g.noise[0])?;
-    let dims = settings.truth_dims(&settings.aabb).map(|n| n.to_string()).join("×");
+    let (title, images, note) = match &g.scene {
+        Some(scene) => {
+            let held_out = fluidnerf_io::scene::load_scene(scene).map_or(0, |s| s.holdout_frames().count());
+            (
+                format!("fluidnerf study of the scene {}", scene.display()),
+                format!(
+                    "{} training cameras, {held_out} held out, output grid of {} voxels along the box's longest side",
+                    g.cameras[0], g.resolution
+                ),
+                "The scene's held-out cameras are left out of every reconstruction: they drive held-out early \
+                 stopping, and each result is scored on their images (held-out view NRMSE), which needs no ground \
+                 truth. The images are used as they are: no noise is added."
+                    .to_string(),
+            )
+        }
+        None => {
+            // --resolution is the longest side: a box that is not a cube has fewer voxels along
+            // the others (plume15 at 24: 16×24×16).
+            let settings = cell_settings(g, g.layouts[0], g.cameras[0], g.noise[0])?;
+            let dims = settings.truth_dims(&settings.aabb).map(|n| n.to_string()).join("×");
+            (
+                format!("fluidnerf study: {:?} on {}", g.preset.unwrap_or(StudyPreset::Cameras), g.scene_preset),
+                format!("{}² px images, {dims} voxels of truth and output", g.pixels),
+                "Each cell's scene has one more camera than its count, held out of every reconstruction: it drives \
+                 held-out early stopping and uses no ground truth."
+                    .to_string(),
+            )
+        }
+    };
     let report = Report {
-        title: format!("fluidnerf study: {:?} on {}", g.preset, g.scene_preset),
+        title,
         subtitle: format!(
-            "{}² px images, {dims} voxels of truth and output, methods {}, every method stopped by {}{} · fluidnerf {}",
-            g.pixels,
+            "{images}, methods {}, every method stopped by {}{} · fluidnerf {}",
             g.methods.iter().map(|m| m.name()).collect::<Vec<_>>().join(", "),
             g.stopping.describe_rule(),
             match (g.visual_hull, g.methods.contains(&Method::Hybrid)) {
@@ -1294,11 +1460,7 @@ fn write_outputs(
             )]
         },
         settings: serde_json::to_value(g).ok(),
-        notes: vec![
-            "Each cell's scene has one more camera than its count, held out of every reconstruction: it drives \
-             held-out early stopping and uses no ground truth."
-                .into(),
-        ],
+        notes: vec![note],
     };
     fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
     Ok(())

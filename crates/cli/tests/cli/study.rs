@@ -355,7 +355,7 @@ fn a_continued_study_refuses_runs_of_another_cells_scene() {
     std::fs::rename(&a, runs.join("swap")).expect("moves");
     std::fs::rename(&b, &a).expect("moves");
     std::fs::rename(runs.join("swap"), &b).expect("moves");
-    refused(&fluidnerf(d, &args), "ring360-c02-n000/sart holds a run of another cell's scene");
+    refused(&fluidnerf(d, &args), "ring360-c02-n000/sart holds a run of another scene");
 }
 
 /// An image of a cell's scene changed after the cell's run was made is refused when the study
@@ -494,4 +494,103 @@ fn every_command_states_each_default_once_in_its_help() {
             }
         }
     }
+}
+
+/// The files under `dir` with their contents, to show a folder was left as it was.
+fn files_under(dir: &std::path::Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).expect("readable").flatten() {
+            if e.path().is_dir() {
+                todo.push(e.path());
+            } else {
+                files.push((e.path(), std::fs::read(e.path()).expect("readable")));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// A scene of the user's (here one without ground truth, as a recording is) is studied as one
+/// cell: every method under the one policy its held-out camera drives, each scored on that
+/// camera's image, the fields set against the best voxel method by it; the scene is only read,
+/// and a rerun reads the runs back.
+#[test]
+fn a_scene_given_is_studied_by_its_held_out_camera() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth = ["synth", "--preset", "demo", "--cameras", "5", "--holdout", "1", "--pixels", "24"];
+    ok(&fluidnerf(d, &[&synth[..], &["--resolution", "16", "-o", "rec", "-q"]].concat()));
+    edit_json(&d.join("rec/transforms.json"), |v| v.as_object_mut().expect("object").remove("truth"));
+    let before = files_under(&d.join("rec"));
+    let args = [
+        "study",
+        "--scene",
+        "rec",
+        "--methods",
+        "fast,sart",
+        "--resolution",
+        "16",
+        "--max-iterations",
+        "50",
+        "-o",
+        "st",
+        "-q",
+    ];
+    let first = fluidnerf(d, &args);
+    ok(&first);
+    let stdout = String::from_utf8_lossy(&first.stdout);
+    let record = json(&d.join("st/study.json"));
+    assert_eq!(
+        record["grid"]["scene"].as_str(),
+        Some(d.join("rec").canonicalize().expect("rec").to_str().expect("utf-8"))
+    );
+    assert!(record["grid"].get("scene_preset").is_none() && record["grid"].get("preset").is_none(), "{record}");
+    let rows = record["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        assert_eq!((r["layout"].as_str(), r["cameras"].as_u64()), (Some("scene"), Some(4)));
+        assert!(r["nrmse"].is_null(), "no ground truth: {r}");
+        assert!(r["holdout_nrmse"].as_f64().is_some_and(|n| n > 0.0 && n < 1.5), "{r}");
+        let run = d.join("st").join(r["run"].as_str().expect("run"));
+        assert!(run.starts_with(d.join("st/runs/scene")), "{run:?}");
+    }
+    let against = record["against_best_voxel"].as_array().expect("against_best_voxel");
+    assert_eq!(against.len(), 1, "{record}");
+    assert_eq!(
+        (against[0]["measure"].as_str(), against[0]["best_voxel_method"].as_str()),
+        (Some("held-out view"), Some("sart"))
+    );
+    let view =
+        |m: &str| rows.iter().find(|r| r["method"] == m).and_then(|r| r["holdout_nrmse"].as_f64()).expect("scored");
+    assert!((against[0]["ratio"].as_f64().expect("ratio") - view("fast") / view("sart")).abs() < 1e-12);
+    assert!(stdout.contains("[1/2] scene · 4 cameras · FluidNeRF") && stdout.contains("held-out view"), "{stdout}");
+    let html = std::fs::read_to_string(d.join("st/report.html")).expect("report");
+    assert!(html.contains("fluidnerf study of the scene") && html.contains("4 training cameras, 1 held out"), "{html}");
+    // Read, never written; a rerun reads the runs back, and --force keeps the scene too.
+    assert_eq!(files_under(&d.join("rec")), before);
+    let again = fluidnerf(d, &args);
+    ok(&again);
+    assert_eq!(String::from_utf8_lossy(&again.stdout).matches("(done earlier)").count(), 2);
+    ok(&fluidnerf(d, &[&args[..], &["--force"]].concat()));
+    assert_eq!(files_under(&d.join("rec")), before);
+}
+
+/// A scene that cannot be studied is refused before anything is made, naming the problem.
+#[test]
+fn a_scene_given_without_a_held_out_camera_or_with_a_grid_is_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    ok(&fluidnerf(
+        d,
+        &["synth", "--preset", "demo", "--cameras", "4", "--pixels", "16", "--resolution", "8", "-o", "rec", "-q"],
+    ));
+    let study = |extra: &[&str]| fluidnerf(d, &[&["study", "--scene", "rec", "--methods", "sart"][..], extra].concat());
+    refused(&study(&["-o", "st"]), "holds no camera out, and a study stops every method by a held-out camera");
+    refused(&study(&["-o", "st", "--cameras", "4"]), "cannot be used with");
+    edit_json(&d.join("rec/transforms.json"), |v| v["frames"][0]["holdout"] = serde_json::json!(true));
+    refused(&study(&["-o", "rec/st"]), "is the scene's folder");
+    assert!(!d.join("st").exists() && !d.join("rec/st").exists());
 }
