@@ -486,7 +486,8 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         stop => stop.into(),
     };
     // A scene given is one cell, with its own cameras and noise.
-    let given = args.scene.as_deref().map(given_scene).transpose()?;
+    let resolution = args.resolution.unwrap_or(if smoke { 16 } else { 64 });
+    let given = args.scene.as_deref().map(|dir| given_scene(dir, resolution)).transpose()?;
     let (cameras, noise, layouts) = match &given {
         Some((_, training)) => (vec![*training], vec![0.0], Vec::new()),
         None => (cameras, noise, layouts),
@@ -503,7 +504,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         noise: args.noise.clone().unwrap_or(noise).iter().map(|n| n + 0.0).collect(),
         layouts: args.layouts.clone().unwrap_or(layouts),
         pixels: args.pixels.unwrap_or(if smoke { 24 } else { 64 }),
-        resolution: args.resolution.unwrap_or(if smoke { 16 } else { 64 }),
+        resolution,
         stopping: StoppingPolicy {
             rule,
             max_iterations: args.max_iterations.or(default_cap(smoke, args.stop)),
@@ -607,8 +608,9 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
 /// The scene given with `--scene` in `dir`, checked for a study: its absolute folder and its
 /// training cameras. Refused: a scene that cannot be read, one that holds no camera out (the
 /// held-out rule and the score need one), one of several times (a study compares static
-/// reconstructions), and one with fewer than two training cameras.
-fn given_scene(dir: &Path) -> anyhow::Result<(PathBuf, usize)> {
+/// reconstructions), and one with fewer than two training cameras. A ground truth finer than
+/// the output grid of `resolution` voxels is warned of.
+fn given_scene(dir: &Path, resolution: usize) -> anyhow::Result<(PathBuf, usize)> {
     let scene = fluidnerf_io::scene::load_scene(dir).with_context(|| format!("--scene {}", dir.display()))?;
     let root = std::path::absolute(&scene.root)?;
     let held_out = scene.holdout_frames().count();
@@ -630,6 +632,19 @@ fn given_scene(dir: &Path) -> anyhow::Result<(PathBuf, usize)> {
     }
     if training < 2 {
         bail!("--scene {}: has {training} training camera; a study needs at least 2", root.display());
+    }
+    if !scene.truth.is_empty() {
+        let truth = fluidnerf_io::scene::load_truth(&scene).with_context(|| format!("--scene {}", root.display()))?;
+        let side = truth.iter().map(|(_, v)| v.dims.iter().copied().max().unwrap_or(0)).max().unwrap_or(0);
+        if side > resolution {
+            log::warn!(
+                "--scene {}: its ground truth has {side} voxels along the box's longest side and the output grid \
+                 {resolution}: the voxel methods are scored from their {resolution}-voxel volumes, the fields at the \
+                 truth's voxel centres, which favours the fields; give --resolution {side} to score both on the \
+                 truth's grid",
+                root.display()
+            );
+        }
     }
     Ok((root, training))
 }

@@ -591,6 +591,13 @@ fn a_scene_given_without_a_held_out_camera_or_with_a_grid_is_refused() {
     refused(&study(&["-o", "st"]), "holds no camera out, and a study stops every method by a held-out camera");
     refused(&study(&["-o", "st", "--cameras", "4"]), "cannot be used with");
     edit_json(&d.join("rec/transforms.json"), |v| v["frames"][0]["holdout"] = serde_json::json!(true));
-    refused(&study(&["-o", "rec/st"]), "is the scene's folder");
+    // A ground truth finer than the output grid favours the fields' scores: said first.
+    let inside = study(&["-o", "rec/st", "--resolution", "4"]);
+    refused(&inside, "is the scene's folder");
+    let stderr = String::from_utf8_lossy(&inside.stderr);
+    assert!(
+        stderr.contains("its ground truth has 8 voxels along the box's longest side and the output grid 4"),
+        "{stderr}"
+    );
     assert!(!d.join("st").exists() && !d.join("rec/st").exists());
 }
