@@ -760,6 +760,23 @@ class Run:
             )
         return self._h.field(pts, t)
 
+    def score_held_out(self, scene: Scene | PathLike | None = None, *, supersample: int = 2) -> list[dict]:
+        """Scores the run on the frames ``scene`` holds out (default: the scene its
+        ``config.json`` names), as ``fluidnerf eval`` and ``fluidnerf study`` do: each held-out
+        image as the run fitted the others (linearised, background subtracted, flat-fielded,
+        masked, divided by the gain the run recorded for it) against the result rendered from
+        that camera with ``supersample`` × ``supersample`` rays per pixel. The measure that needs
+        no ground truth, and the same for every method. Returns one dict per held-out frame:
+        ``frame``, ``camera_name``, ``time``, ``pixels``, ``nrmse``, ``psnr_db``,
+        ``ssim_global``, ``ssim_windowed``, ``data_range``."""
+        if scene is None:
+            config = self.config
+            if config is None:
+                raise FluidNerfError(f"{self.path}: records no scene (no config.json); give the scene")
+            scene = config["scene"]
+        rows = json.loads(self._h.score_held_out(_as_scene(scene), _positive_int(supersample, "supersample")))
+        return rows
+
     def voxel_centres(self) -> np.ndarray:
         """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""
         nz, ny, nx = self.volume.shape

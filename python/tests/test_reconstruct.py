@@ -837,3 +837,46 @@ def test_a_scene_from_arrays_left_aside_by_a_killed_call_is_settled_by_the_next(
     forced = fluidnerf.reconstruct(again, "asart", out, overwrite="force", **options)
     assert forced.status == "finished" and not (out / ".scene-replaced").exists()
     np.testing.assert_array_equal(fluidnerf.load_scene(out / "scene").images(), images + 1.0)
+
+
+@pytest.mark.parametrize("method", ["asart", "fast"])
+def test_a_run_is_scored_on_the_held_out_camera_as_eval_scores_it(static_scene, cli, method, tmp_path):
+    """``Run.score_held_out`` gives the rows ``fluidnerf eval`` writes into metrics.json for the
+    same run (a voxel run and a field), through the same library function: the measure a
+    Python user compares methods by on a recording without ground truth."""
+    if method == "fast":
+        run = fluidnerf.reconstruct(static_scene, FAST_METHOD, tmp_path / "r", progress=False, **FAST)
+    else:
+        stop = {"max_iterations": 3}
+        run = fluidnerf.reconstruct(
+            static_scene, method, tmp_path / "r", resolution=12, stopping=stop, progress=False
+        )
+    rows = run.score_held_out()
+    assert [r["frame"] for r in rows] == [3]
+    assert 0.0 < rows[0]["nrmse"] < 1.5 and rows[0]["pixels"] == 400
+    assert rows == run.score_held_out(static_scene.root, supersample=2)
+    out = subprocess.run(
+        [cli, "eval", str(run.path), "--no-regions", "--json", str(tmp_path / "m.json"), "-q"],
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    expected = json.loads((tmp_path / "m.json").read_text())["reprojection"]
+    assert rows == expected
+    # Fewer rays per pixel render another image; the supersampling is the caller's to choose.
+    assert run.score_held_out(supersample=1)[0]["nrmse"] != rows[0]["nrmse"]
+
+
+def test_scoring_on_held_out_cameras_refuses_what_it_cannot_score(static_scene, tmp_path):
+    """A scene that holds no camera out has nothing to score on, and a supersampling out of
+    range is refused, each naming the argument."""
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "r", resolution=8, stopping={"max_iterations": 2}, progress=False
+    )
+    K, poses, _, _ = static_scene.camera_arrays()
+    whole = fluidnerf.scene_from_arrays(K, poses, static_scene.images(), static_scene.aabb)
+    whole.save(tmp_path / "whole")
+    with pytest.raises(fluidnerf.FluidNerfError, match="holds no frame out"):
+        run.score_held_out(whole)
+    with pytest.raises(fluidnerf.FluidNerfError, match="supersample: must be between 1 and 64"):
+        run.score_held_out(supersample=65)

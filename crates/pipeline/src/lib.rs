@@ -42,6 +42,7 @@ mod measured;
 mod neural;
 pub mod report;
 pub mod rundir;
+pub mod score;
 pub mod synthetic;
 mod temporal;
 #[doc(hidden)]

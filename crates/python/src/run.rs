@@ -506,6 +506,63 @@ impl PyRun {
         vs.into_iter().map(|(t, v)| Ok((t, volume_to_py(py, v)?.into_any().unbind()))).collect()
     }
 
+    /// Scores the run on the frames the saved `scene` holds out, as `fluidnerf eval` does
+    /// (`fluidnerf_pipeline::score::score_held_out`: each image as the run fitted the others,
+    /// divided by the gain the run recorded for it, against the result rendered from its camera
+    /// with `supersample` × `supersample` rays per pixel); returns the rows as JSON text.
+    #[pyo3(signature = (scene, supersample=2))]
+    fn score_held_out(&self, py: Python<'_>, scene: &PyScene, supersample: usize) -> PyResult<String> {
+        self.check_unchanged("score_held_out")?;
+        let scene = scene.require_saved("score_held_out")?.clone();
+        let max = fluidnerf_core::render::MAX_SUPERSAMPLE;
+        if !(1..=max).contains(&supersample) {
+            return Err(err(format!(
+                "supersample: must be between 1 and {max} rays per pixel along each axis, got {supersample}"
+            )));
+        }
+        if scene.holdout_frames().next().is_none() {
+            return Err(err(format!(
+                "scene: {} holds no frame out (`\"holdout\": true`), so there is nothing to score the run on",
+                scene.root.display()
+            )));
+        }
+        let gains = match &self.run.report {
+            Some(report) => fluidnerf_pipeline::score::recorded_gains(report, &self.run.dir.join("report.json"))
+                .map_err(|e| err(e.to_string()))?,
+            None => Vec::new(),
+        };
+        let options = fluidnerf_metrics::ReprojectionOptions { supersample, ..Default::default() };
+        let scores: Vec<fluidnerf_metrics::ReprojectionMetrics> = py.allow_threads(|| {
+            guard(|| {
+                let scored = if self.run.kind == RunKind::Volume {
+                    // A run of one volume per instant: the volume nearest the frame's time.
+                    let volumes = self.run.volumes().map_err(|e| err(e.to_string()))?;
+                    if volumes.is_empty() {
+                        return Err(err(format!("{}: holds no volume to score", self.run.dir.display())));
+                    }
+                    let nearest = |time: Option<f64>| -> &dyn ScalarField {
+                        let distance = |v: &&(Option<f64>, fluidnerf_core::Volume)| {
+                            (v.0.unwrap_or(0.0) - time.unwrap_or(0.0)).abs()
+                        };
+                        let closest = volumes.iter().min_by(|a, b| distance(a).total_cmp(&distance(b)));
+                        closest.map_or(&volumes[0].1, |v| &v.1)
+                    };
+                    fluidnerf_pipeline::score::score_held_out(&scene, &gains, nearest, &options, || {})
+                } else {
+                    if self.field.get().is_none() {
+                        let _ = self.field.set(self.run.field().map_err(|e| err(e.to_string()))?);
+                    }
+                    let field =
+                        self.field.get().map(|f| f.as_ref()).ok_or_else(|| err("the field could not be loaded"))?;
+                    let field: &dyn ScalarField = field;
+                    fluidnerf_pipeline::score::score_held_out(&scene, &gains, |_| field, &options, || {})
+                };
+                scored.map_err(|e| err(e.to_string()))
+            })
+        })?;
+        to_json(&scores)
+    }
+
     /// The result evaluated at world points `(N, 3)` (x, y, z) at `time`: the trained field
     /// of neural runs, the volume sampled trilinearly for voxel runs. Returns `(N,)` float32.
     /// For a time-resolved run `time` must lie between its first and last instants (a stopped

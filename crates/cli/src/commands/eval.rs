@@ -11,8 +11,8 @@ use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::num;
 use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
-    evaluate_volume, regions_flow_axis, reproject, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions,
-    SsimParams, SsimWindow, VolumeMetricOptions,
+    evaluate_volume, regions_flow_axis, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions, SsimParams,
+    SsimWindow, VolumeMetricOptions,
 };
 use serde::Serialize;
 
@@ -500,30 +500,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.steps.push(metrics);
     }
     if !holdouts.is_empty() {
-        // The held-out images as a run fits the others: linearised, background subtracted,
-        // flat-fielded, their masks applied, and divided by the gain the run recorded for them.
-        let mut pre = fluidnerf_io::scene::load_preprocessed(&scene)
-            .with_context(|| format!("reading the images of the scene {}", scene_path.display()))?;
+        // The held-out images as a run fits the others, divided by the gain the run recorded
+        // for them.
         let gains = match &run_dir {
-            Some(dir) => recorded_gains(dir)?,
-            None => Vec::new(),
+            Some(dir) if dir.join("report.json").is_file() => {
+                let path = dir.join("report.json");
+                fluidnerf_pipeline::score::recorded_gains(&fluidnerf_pipeline::RunReport::read(&path)?, &path)?
+            }
+            _ => Vec::new(),
         };
         let bar = crate::progress::bar(holdouts.len() as u64, "reprojecting");
-        for &i in &holdouts {
-            let frame = &scene.frames[i];
-            let path = scene.resolve(&frame.file_path);
-            let measured = &mut pre.images[i];
-            if let Some(&(gain, offset)) = gains.get(i).filter(|&&(g, b)| g != 1.0 || b != 0.0) {
-                log::info!("held-out frame {i} ({}): divided by the gain {gain:.4} the run recorded", path.display());
-                let (inv, b) = ((1.0 / gain) as f32, offset as f32);
-                measured.data.iter_mut().for_each(|v| *v = (*v - b) * inv);
-            }
-            let field = recon.field_at(frame.time, &step_times);
-            let r = reproject(field, &scene, i, measured, pre.masks[i].as_deref(), &reprojection_options)
-                .with_context(|| format!("reprojecting onto held-out frame {i} ({})", path.display()))?;
-            report.reprojection.push(r.metrics);
-            bar.inc(1);
-        }
+        report.reprojection = fluidnerf_pipeline::score::score_held_out(
+            &scene,
+            &gains,
+            |time| recon.field_at(time, &step_times),
+            &reprojection_options,
+            || bar.inc(1),
+        )
+        .with_context(|| format!("scoring the held-out frames of the scene {}", scene_path.display()))?;
         bar.finish_and_clear();
     }
 
@@ -566,26 +560,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
-}
-
-/// The gain and offset a run recorded for each frame (`preprocessing.frames` of its
-/// `report.json`), in frame order; empty for a run that recorded none (no report, or a report
-/// from before gains were recorded).
-fn recorded_gains(run_dir: &Path) -> anyhow::Result<Vec<(f64, f64)>> {
-    let path = run_dir.join("report.json");
-    if !path.is_file() {
-        return Ok(Vec::new());
-    }
-    let report = fluidnerf_pipeline::RunReport::read(&path)?;
-    let Some(pre) = report.preprocessing else { return Ok(Vec::new()) };
-    let mut gains = vec![(1.0, 0.0); pre.frames.iter().map(|f| f.frame + 1).max().unwrap_or(0)];
-    for f in &pre.frames {
-        if !(f.gain.is_finite() && f.gain > 0.0 && f.offset.is_finite()) {
-            anyhow::bail!("{}: frame {} records the gain {} and offset {}", path.display(), f.frame, f.gain, f.offset);
-        }
-        gains[f.frame] = (f.gain, f.offset);
-    }
-    Ok(gains)
 }
 
 /// The time at which a time-resolved run wrote the volume file `path`, when it is one of a
