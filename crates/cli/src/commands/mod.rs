@@ -12,6 +12,7 @@ pub mod import;
 pub mod info;
 pub mod reconstruct;
 pub mod render;
+mod scene_subset;
 pub mod study;
 pub mod synth;
 

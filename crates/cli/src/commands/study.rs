@@ -93,16 +93,20 @@ pub struct Args {
     /// any static scene that holds at least one camera out (`"holdout": true`). Every method
     /// runs on it under the one stopping policy, which the held-out camera drives, and is scored
     /// on that camera's image (and against the scene's ground truth, if it has one). Its
-    /// cameras, images and noise are its own, so --preset, --scene-preset, --cameras, --noise,
-    /// --layouts and --pixels do not apply; the scene is read, never written.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["preset", "scene_preset", "cameras", "noise", "layouts", "pixels"])]
+    /// images and noise are its own, so --preset, --scene-preset, --noise, --layouts and
+    /// --pixels do not apply; --cameras gives counts of its training cameras to study, each a
+    /// subset spread over their viewing lines (default: all of them). The scene is read, never
+    /// written.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["preset", "scene_preset", "noise", "layouts", "pixels"])]
     pub scene: Option<PathBuf>,
     /// Methods, comma-separated; static ones only: a study refuses the time-resolved
     /// tr-fluidnerf, tr-fast and static-per-frame [default: fast,hybrid,asart: the grid field
     /// alone, the default method, and the classical baseline].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub methods: Option<Vec<MethodArg>>,
-    /// Training camera counts, comma-separated, each 2 to 999 [default: the preset's].
+    /// Training camera counts, comma-separated, each 2 to 999 [default: the preset's]. With
+    /// --scene: counts of the scene's training cameras, each cell a subset of them whose
+    /// viewing lines are furthest apart (its held-out cameras kept) [default: all of them].
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub cameras: Option<Vec<usize>>,
     /// Image noise levels (fraction of each image's maximum, in [0, 1)), comma-separated
@@ -180,6 +184,13 @@ struct Grid {
     /// The scene studied instead of a synthetic grid (`--scene`, absolute).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     scene: Option<PathBuf>,
+    /// The training cameras of the scene given (0 without one).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    scene_cameras: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 fn one_repeat() -> u32 {
@@ -219,14 +230,22 @@ impl Grid {
     /// levels; one cell for a scene given (`--scene`).
     fn cells(&self) -> Vec<Cell> {
         if let Some(scene) = &self.scene {
-            return vec![Cell {
-                layout: GIVEN_LAYOUT.into(),
-                cameras: self.cameras[0],
-                noise: 0.0,
-                name: GIVEN_LAYOUT.into(),
-                synth: None,
-                given: Some(scene.clone()),
-            }];
+            return self
+                .cameras
+                .iter()
+                .map(|&cameras| {
+                    let subset = cameras < self.scene_cameras;
+                    Cell {
+                        layout: GIVEN_LAYOUT.into(),
+                        cameras,
+                        noise: 0.0,
+                        name: if subset { format!("{GIVEN_LAYOUT}-c{cameras:02}") } else { GIVEN_LAYOUT.into() },
+                        synth: None,
+                        given: Some(scene.clone()),
+                        subset,
+                    }
+                })
+                .collect();
         }
         let mut cells = Vec::new();
         for &layout in &self.layouts {
@@ -239,6 +258,7 @@ impl Grid {
                         name: scene_name(layout, cameras, noise),
                         synth: Some(layout),
                         given: None,
+                        subset: false,
                     });
                 }
             }
@@ -264,21 +284,68 @@ struct Cell {
     synth: Option<LayoutChoice>,
     /// The scene given (`--scene`), read where it is.
     given: Option<PathBuf>,
+    /// A subset of the given scene's training cameras, a scene the study writes
+    /// ([`super::scene_subset`]).
+    subset: bool,
 }
 
 impl Cell {
     /// The folder of the cell's scene.
     fn scene_dir(&self, out: &Path) -> PathBuf {
-        self.given.clone().unwrap_or_else(|| out.join("scenes").join(&self.name))
+        match &self.given {
+            Some(scene) if !self.subset => scene.clone(),
+            _ => out.join("scenes").join(&self.name),
+        }
+    }
+
+    /// Whether the study makes the cell's scene (and --force removes it).
+    fn made(&self) -> bool {
+        self.synth.is_some() || self.subset
     }
 
     /// The cell in words, for messages.
     fn describe(&self) -> String {
         match &self.given {
+            Some(scene) if self.subset => {
+                format!("{} of the training cameras of the scene {}", self.cameras, scene.display())
+            }
             Some(scene) => format!("the scene {}", scene.display()),
             None => format!("the scene of {} cameras, noise {}, {}", self.cameras, self.noise, self.layout),
         }
     }
+}
+
+/// Writes the scene of a cell that is a subset of the scene given, unless it is there with the
+/// same cameras ([`super::scene_subset`]).
+fn ensure_subset(cell: &Cell, dir: &Path) -> anyhow::Result<()> {
+    let Some(source) = &cell.given else { return Ok(()) };
+    let scene = fluidnerf_io::scene::load_scene(source).with_context(|| format!("--scene {}", source.display()))?;
+    let expected = super::scene_subset::spread_cameras(&scene, cell.cameras);
+    if let Some(record) = subset_record(dir)? {
+        if record.source == *source && record.training_frames == expected && dir.join("transforms.json").is_file() {
+            return Ok(());
+        }
+        bail!(
+            "{} holds a subset of other cameras or of another scene ({}: frames {:?} of {}, where this study takes \
+             frames {expected:?} of {}); use --force to start over or another folder",
+            dir.display(),
+            dir.join(super::scene_subset::SUBSET_RECORD).display(),
+            record.training_frames,
+            record.source.display(),
+            source.display()
+        );
+    }
+    super::scene_subset::write_subset(source, &scene, &expected, dir)
+        .with_context(|| format!("writing the scene of {}", cell.describe()))
+}
+
+/// The record of the subset scene in `dir`, if there is one.
+fn subset_record(dir: &Path) -> anyhow::Result<Option<super::scene_subset::SubsetRecord>> {
+    let path = dir.join(super::scene_subset::SUBSET_RECORD);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    Ok(Some(fluidnerf_pipeline::rundir::read_json(&path)?))
 }
 
 /// One run of the grid.
@@ -516,6 +583,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         seed: args.seed,
         repeats: args.repeats,
         visual_hull: args.visual_hull,
+        scene_cameras: given.as_ref().map_or(0, |(_, n)| *n),
         scene: given.map(|(dir, _)| dir),
     };
     if g.methods.is_empty() || g.cameras.is_empty() || g.noise.is_empty() || (g.layouts.is_empty() && g.scene.is_none())
@@ -569,7 +637,15 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
             methods.join(",")
         );
     }
-    if g.scene.is_some() {
+    if let Some(scene) = &g.scene {
+        if let Some(&c) = g.cameras.iter().find(|&&c| c < 2 || c > g.scene_cameras) {
+            bail!(
+                "--cameras: {c} is not a count of the {} training cameras of the scene {}; give counts from 2 to {}",
+                g.scene_cameras,
+                scene.display(),
+                g.scene_cameras
+            );
+        }
         return Ok(g);
     }
     // Known before anything is made: an unknown one failed only when its first scene was
@@ -689,7 +765,7 @@ fn remove_earlier_study(out: &Path, g: &Grid) -> anyhow::Result<()> {
     };
     for cell in g.cells() {
         // A scene given is the user's: only the scenes the study made go.
-        if cell.synth.is_some() {
+        if cell.made() {
             remove(&out.join("scenes").join(&cell.name))?;
         }
         let runs = out.join("runs").join(&cell.name);
@@ -843,7 +919,12 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                 return Err(other(&scene_dir, "scene", &record, differences));
             }
         }
-        let newest = newest_scene_file(&scene_dir);
+        if cell.subset && scene_dir.is_dir() {
+            // Checked (and refused when it holds other cameras) before any run is read back.
+            ensure_subset(&cell, &scene_dir)?;
+        }
+        // A subset's images are the scene's given.
+        let newest = newest_scene_file(cell.given.as_deref().unwrap_or(&scene_dir));
         for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
             let run_dir = out.join("runs").join(&cell.name).join(g.run_name(method, seed));
             let report_file = run_dir.join("report.json");
@@ -871,8 +952,8 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
             // scene (runs swapped between cells) would give this cell its result. A scene given
             // stays where it is: the run must name that very folder.
             let same_scene = match &cell.given {
-                Some(given) => fluidnerf_pipeline::rundir::same_path(&saved.scene, given),
-                None => saved.scene.file_name() == scene_dir.file_name(),
+                Some(given) if !cell.subset => fluidnerf_pipeline::rundir::same_path(&saved.scene, given),
+                _ => saved.scene.file_name() == scene_dir.file_name(),
             };
             if !same_scene {
                 bail!(
@@ -968,6 +1049,9 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let mut k = 0;
     for cell in g.cells() {
         let scene_dir = cell.scene_dir(out);
+        if cell.subset {
+            ensure_subset(&cell, &scene_dir)?;
+        }
         if let Some(layout) = cell.synth {
             match ensure_scene(&g, &scene_dir, layout, cell.cameras, cell.noise) {
                 // Stopped as a run stopped by Ctrl-C is: the runs so far written, exit 130.
@@ -1425,7 +1509,15 @@ fn write_outputs(
                 format!("fluidnerf study of the scene {}", scene.display()),
                 format!(
                     "{} training cameras, {held_out} held out, output grid of {} voxels along the box's longest side",
-                    g.cameras[0], g.resolution
+                    match g.cameras.as_slice() {
+                        [c] if *c == g.scene_cameras => c.to_string(),
+                        counts => format!(
+                            "{} of its {} (each a subset whose viewing lines are furthest apart)",
+                            counts.iter().map(ToString::to_string).collect::<Vec<_>>().join(", "),
+                            g.scene_cameras
+                        ),
+                    },
+                    g.resolution
                 ),
                 "The scene's held-out cameras are left out of every reconstruction: they drive held-out early \
                  stopping, and each result is scored on their images (held-out view NRMSE), which needs no ground \

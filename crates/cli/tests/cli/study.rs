@@ -589,7 +589,7 @@ fn a_scene_given_without_a_held_out_camera_or_with_a_grid_is_refused() {
     ));
     let study = |extra: &[&str]| fluidnerf(d, &[&["study", "--scene", "rec", "--methods", "sart"][..], extra].concat());
     refused(&study(&["-o", "st"]), "holds no camera out, and a study stops every method by a held-out camera");
-    refused(&study(&["-o", "st", "--cameras", "4"]), "cannot be used with");
+    refused(&study(&["-o", "st", "--noise", "0.05"]), "cannot be used with");
     edit_json(&d.join("rec/transforms.json"), |v| v["frames"][0]["holdout"] = serde_json::json!(true));
     // A ground truth finer than the output grid favours the fields' scores: said first.
     let inside = study(&["-o", "rec/st", "--resolution", "4"]);
@@ -600,4 +600,45 @@ fn a_scene_given_without_a_held_out_camera_or_with_a_grid_is_refused() {
         "{stderr}"
     );
     assert!(!d.join("st").exists() && !d.join("rec/st").exists());
+}
+
+/// How many of a scene's cameras it takes: each count below its own is a subset of its
+/// training cameras spread over their viewing lines, written as a scene of the study's that
+/// reads the images where they are; the scene's own count is the scene itself.
+#[test]
+fn a_scene_given_is_studied_with_fewer_of_its_cameras() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let synth = ["synth", "--preset", "demo", "--cameras", "5", "--holdout", "1", "--pixels", "24"];
+    ok(&fluidnerf(d, &[&synth[..], &["--resolution", "16", "-o", "rec", "-q"]].concat()));
+    let before = files_under(&d.join("rec"));
+    let args =
+        ["study", "--scene", "rec", "--cameras", "2,4", "--methods", "sart", "--resolution", "16", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    let record = json(&d.join("st/study.json"));
+    let rows = record["rows"].as_array().expect("rows");
+    let cells: Vec<(u64, &str)> =
+        rows.iter().map(|r| (r["cameras"].as_u64().expect("cameras"), r["run"].as_str().expect("run"))).collect();
+    assert_eq!(cells, [(2, "runs/scene-c02/sart"), (4, "runs/scene/sart")]);
+    let subset = json(&d.join("st/scenes/scene-c02/transforms.json"));
+    let frames = subset["frames"].as_array().expect("frames");
+    assert_eq!(frames.len(), 3, "two training cameras and the held-out one");
+    assert_eq!(frames.iter().filter(|f| f["holdout"] == true).count(), 1);
+    assert!(frames.iter().all(|f| std::path::Path::new(f["file_path"].as_str().expect("path")).is_absolute()));
+    assert_eq!(report(&d.join("st/runs/scene-c02/sart"))["classical"]["views"], 2);
+    assert_eq!(report(&d.join("st/runs/scene/sart"))["classical"]["views"], 4);
+    for r in rows {
+        assert!(r["nrmse"].as_f64().is_some() && r["holdout_nrmse"].as_f64().is_some(), "{r}");
+    }
+    // Read back when rerun; started over with --force, the subset is made again, the scene kept.
+    let again = fluidnerf(d, &args);
+    ok(&again);
+    assert_eq!(String::from_utf8_lossy(&again.stdout).matches("(done earlier)").count(), 2);
+    ok(&fluidnerf(d, &[&args[..], &["--force"]].concat()));
+    assert!(d.join("st/scenes/scene-c02/subset.json").is_file());
+    assert_eq!(files_under(&d.join("rec")), before);
+    // A count the scene does not have is refused up front.
+    let more = fluidnerf(d, &["study", "--scene", "rec", "--cameras", "5", "--methods", "sart", "-o", "st2"]);
+    refused(&more, "--cameras: 5 is not a count of the 4 training cameras of the scene");
+    assert!(!d.join("st2").exists());
 }
