@@ -1,7 +1,8 @@
 //! `fluidnerf study`: a grid of reconstructions — methods × camera counts × noise levels ×
-//! camera layouts — on a synthetic phantom, every method under the same stopping policy, with
-//! a table, plots and a report. Resumable: a cell whose run folder holds a finished run is
-//! read back, not run again.
+//! camera layouts — on a synthetic phantom, or methods × camera counts on a scene of the
+//! user's (`--scene`), every method under the same stopping policy and scored on the held-out
+//! camera, with a table, plots and a report. Resumable: a cell whose run folder holds a
+//! finished run is read back, not run again.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -62,12 +63,14 @@ impl LayoutChoice {
     }
 }
 
-/// Run a grid of reconstructions on a synthetic phantom and compare the methods.
+/// Run a grid of reconstructions on a synthetic phantom, or on a scene of yours, and compare
+/// the methods.
 ///
 /// Each cell synthesises a scene (the --scene-preset with the cell's camera count, layout and
 /// noise; one more camera than the count is made and held out: it drives held-out early
 /// stopping and scores reprojections) and reconstructs it with every method under one
-/// stopping policy. Each run is then scored on the held-out camera as `fluidnerf eval` scores
+/// stopping policy. With --scene, the cells are your scene and subsets of its cameras
+/// (--cameras), its own held-out cameras in each. Each run is then scored on the held-out camera as `fluidnerf eval` scores
 /// it (the NRMSE of its image rendered from the result, into the run's `metrics.json`): the
 /// same measure for every method, and one that needs no ground truth. Writes into OUT:
 /// `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with --repeats; each with its config.json),
