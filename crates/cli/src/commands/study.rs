@@ -555,7 +555,8 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
         StopArg::Auto => StopRule::HeldOut,
         stop => stop.into(),
     };
-    // A scene given is one cell, with its own cameras and noise.
+    // A scene given: its own training cameras (all, unless --cameras asks for fewer), and its
+    // images as they are.
     let resolution = args.resolution.unwrap_or(if smoke { 16 } else { 64 });
     let given = args.scene.as_deref().map(|dir| given_scene(dir, resolution)).transpose()?;
     let (cameras, noise, layouts) = match &given {
@@ -1268,7 +1269,10 @@ fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<Li
     }
     let mut keys: Vec<String> = Vec::new();
     let key = |r: &Mean| {
-        let fixed = if axis == "cameras" { format!("noise {}", r.noise) } else { format!("{} cameras", r.cameras) };
+        let fixed = match axis {
+            "cameras" => format!("noise {}", noise_text(&r.layout, r.noise)),
+            _ => format!("{} cameras", r.cameras),
+        };
         format!("{} ({}, {fixed})", r.method, r.layout)
     };
     for r in rows {
@@ -1304,7 +1308,7 @@ fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<Li
 /// The label of a run's line in the convergence plot: the layout too, since the runs at the
 /// largest camera count of a layout sweep differ by their layouts only.
 fn convergence_label(r: &Row) -> String {
-    format!("{} ({}, {} cameras, noise {})", r.method, r.layout, r.cameras, r.noise)
+    format!("{} ({}, {} cameras, noise {})", r.method, r.layout, r.cameras, noise_text(&r.layout, r.noise))
 }
 
 fn csv(rows: &[Row]) -> String {
