@@ -1262,7 +1262,11 @@ fn means_table(means: &[Mean]) -> String {
 /// (the run itself where a cell has one run of the method).
 fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<LinePlot> {
     let x_of = |r: &Mean| if axis == "cameras" { r.cameras as f64 } else { 100.0 * r.noise };
-    let y_of = |r: &Mean| if metric == "NRMSE" { r.nrmse } else { r.ssim_global };
+    let y_of = |r: &Mean| match metric {
+        "NRMSE" => r.nrmse,
+        "SSIM" => r.ssim_global,
+        _ => r.holdout_nrmse,
+    };
     let distinct: std::collections::BTreeSet<u64> = rows.iter().map(|r| x_of(r).to_bits()).collect();
     if distinct.len() < 2 {
         return None;
@@ -1273,14 +1277,19 @@ fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<Li
             "cameras" => format!("noise {}", noise_text(&r.layout, r.noise)),
             _ => format!("{} cameras", r.cameras),
         };
-        format!("{} ({}, {fixed})", r.method, r.layout)
+        if r.layout == GIVEN_LAYOUT {
+            // One scene, no noise added: the method says it all.
+            r.method.clone()
+        } else {
+            format!("{} ({}, {fixed})", r.method, r.layout)
+        }
     };
     for r in rows {
         if !keys.contains(&key(r)) {
             keys.push(key(r));
         }
     }
-    let series = keys
+    let series: Vec<Series> = keys
         .iter()
         .map(|k| {
             let pts: Vec<(f64, f64)> =
@@ -1293,10 +1302,17 @@ fn sweep_plot(rows: &[Mean], title: &str, axis: &str, metric: &str) -> Option<Li
             }
         })
         .collect();
+    // Without a score of this kind (no ground truth, or no held-out score), no plot.
+    if series.iter().all(|s| s.x.is_empty()) {
+        return None;
+    }
     Some(LinePlot {
         title: title.to_string(),
         x_label: if axis == "cameras" { "training cameras".into() } else { "image noise [% of max]".into() },
-        y_label: format!("volume {metric}"),
+        y_label: match metric {
+            "NRMSE" | "SSIM" => format!("volume {metric}"),
+            _ => "held-out view NRMSE".into(),
+        },
         log_x: false,
         log_y: false,
         markers: true,
@@ -1388,7 +1404,7 @@ fn write_outputs(
     fluidnerf_io::atomic_write(&out.join("study.csv"), |w| w.write_all(csv(rows).as_bytes()))?;
     let mut figures = Vec::new();
     for (axis, name) in [("cameras", "cameras"), ("noise", "noise")] {
-        let plots: Vec<LinePlot> = ["NRMSE", "SSIM"]
+        let plots: Vec<LinePlot> = ["NRMSE", "SSIM", "held-out NRMSE"]
             .iter()
             .filter_map(|m| sweep_plot(&cells, &format!("{m} against {name}"), axis, m))
             .collect();
@@ -1403,8 +1419,16 @@ fn write_outputs(
         }
         let png = fluidnerf_viz::encode_plots_png(&plots, 2)?;
         fluidnerf_io::atomic_write(&file, |w| w.write_all(&png))?;
+        let volume = plots.iter().any(|p| p.y_label.starts_with("volume"));
         figures.push(Figure {
-            caption: format!("Volume NRMSE and global SSIM against {name}."),
+            caption: format!(
+                "{} against {name}.",
+                if volume {
+                    "Volume NRMSE and global SSIM, and the held-out view's NRMSE,"
+                } else {
+                    "The held-out view's NRMSE"
+                }
+            ),
             image: ImageData::Png(png),
         });
     }
@@ -1818,5 +1842,38 @@ mod tests {
         assert!(by_cameras.integer_x);
         let by_noise = sweep_plot(&means(&[row(4, 0.0), row(4, 0.02)]), "t", "noise", "NRMSE").expect("a sweep");
         assert!(!by_noise.integer_x);
+        // Without held-out scores, no held-out plot.
+        assert!(sweep_plot(&means(&[row(4, 0.0), row(5, 0.0)]), "t", "cameras", "held-out NRMSE").is_none());
+    }
+
+    /// A scene of the user's without ground truth plots its held-out views against the camera
+    /// count and no volume scores; its lines are named by method alone.
+    #[test]
+    fn a_scene_without_truth_plots_its_held_out_views() {
+        let row = |cameras: usize, method: &str, view: f64| Row {
+            layout: GIVEN_LAYOUT.into(),
+            cameras,
+            noise: 0.0,
+            method: method.into(),
+            seed: 0,
+            repeated: false,
+            nrmse: None,
+            ssim_global: None,
+            holdout_nrmse: Some(view),
+            best_holdout_loss: None,
+            kept_iteration: 5,
+            iterations: 5,
+            stop_reason: "held-out".into(),
+            train_time_s: 1.0,
+            result_bytes: 1,
+            run: "r".into(),
+        };
+        let cells =
+            means(&[row(4, "asart", 0.2), row(8, "asart", 0.1), row(4, "hybrid", 0.15), row(8, "hybrid", 0.08)]);
+        assert!(sweep_plot(&cells, "t", "cameras", "NRMSE").is_none());
+        let views = sweep_plot(&cells, "t", "cameras", "held-out NRMSE").expect("held-out views");
+        assert_eq!(views.y_label, "held-out view NRMSE");
+        let lines: Vec<(&str, &[f64])> = views.series.iter().map(|s| (s.label.as_str(), s.y.as_slice())).collect();
+        assert_eq!(lines, [("asart", &[0.2, 0.1][..]), ("hybrid", &[0.15, 0.08][..])]);
     }
 }
