@@ -1794,42 +1794,24 @@ mod tests {
     /// grid: 8 cameras on three layouts, noiseless), which it labelled alike.
     #[test]
     fn the_convergence_plot_names_each_runs_layout() {
-        let row = |layout: &str| Row {
-            layout: layout.into(),
-            cameras: 8,
-            noise: 0.0,
-            method: "asart".into(),
-            seed: 0,
-            repeated: false,
-            nrmse: None,
-            ssim_global: None,
-            holdout_nrmse: None,
-            best_holdout_loss: None,
-            kept_iteration: 1,
-            iterations: 1,
-            stop_reason: "held-out".into(),
-            train_time_s: 1.0,
-            result_bytes: 1,
-            run: "r".into(),
-        };
+        let row = |layout: &str| scored_row((layout, 8, 0.0), "asart", None, None);
         assert_ne!(convergence_label(&row("ring360")), convergence_label(&row("sphere")));
         assert_eq!(convergence_label(&row("sphere")), "asart (sphere, 8 cameras, noise 0)");
     }
 
-    /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
-    /// sweep's is a percentage.
-    #[test]
-    fn the_camera_sweep_plots_a_count_axis() {
-        let row = |cameras: usize, noise: f64| Row {
-            layout: "ring".into(),
-            cameras,
-            noise,
-            method: "sart".into(),
+    /// A run's row of `method` in the cell `(layout, cameras, noise)`, with its volume and
+    /// held-out view NRMSE.
+    fn scored_row(cell: (&str, usize, f64), method: &str, nrmse: Option<f64>, view: Option<f64>) -> Row {
+        Row {
+            layout: cell.0.into(),
+            cameras: cell.1,
+            noise: cell.2,
+            method: method.into(),
             seed: 0,
             repeated: false,
-            nrmse: Some(0.3),
-            ssim_global: Some(0.8),
-            holdout_nrmse: None,
+            nrmse,
+            ssim_global: None,
+            holdout_nrmse: view,
             best_holdout_loss: None,
             kept_iteration: 5,
             iterations: 5,
@@ -1837,6 +1819,16 @@ mod tests {
             train_time_s: 1.0,
             result_bytes: 1,
             run: "r".into(),
+        }
+    }
+
+    /// The camera sweep's x axis counts cameras, so its ticks are whole numbers; the noise
+    /// sweep's is a percentage.
+    #[test]
+    fn the_camera_sweep_plots_a_count_axis() {
+        let row = |cameras: usize, noise: f64| Row {
+            ssim_global: Some(0.8),
+            ..scored_row(("ring", cameras, noise), "sart", Some(0.3), None)
         };
         let by_cameras = sweep_plot(&means(&[row(4, 0.0), row(5, 0.0)]), "t", "cameras", "NRMSE").expect("a sweep");
         assert!(by_cameras.integer_x);
@@ -1850,23 +1842,8 @@ mod tests {
     /// count and no volume scores; its lines are named by method alone.
     #[test]
     fn a_scene_without_truth_plots_its_held_out_views() {
-        let row = |cameras: usize, method: &str, view: f64| Row {
-            layout: GIVEN_LAYOUT.into(),
-            cameras,
-            noise: 0.0,
-            method: method.into(),
-            seed: 0,
-            repeated: false,
-            nrmse: None,
-            ssim_global: None,
-            holdout_nrmse: Some(view),
-            best_holdout_loss: None,
-            kept_iteration: 5,
-            iterations: 5,
-            stop_reason: "held-out".into(),
-            train_time_s: 1.0,
-            result_bytes: 1,
-            run: "r".into(),
+        let row = |cameras: usize, method: &str, view: f64| {
+            scored_row((GIVEN_LAYOUT, cameras, 0.0), method, None, Some(view))
         };
         let cells =
             means(&[row(4, "asart", 0.2), row(8, "asart", 0.1), row(4, "hybrid", 0.15), row(8, "hybrid", 0.08)]);
