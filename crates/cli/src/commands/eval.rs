@@ -113,6 +113,8 @@ pub struct Args {
 struct Settings<'a> {
     version: &'static str,
     reconstruction: &'a [PathBuf],
+    /// A neural run scored through its written volume (`--use-volume`), not its field.
+    use_volume: bool,
     scene: PathBuf,
     truth: Option<&'a Path>,
     volume: &'a VolumeMetricOptions,
@@ -524,6 +526,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
         reconstruction: &args.recon,
+        use_volume: args.use_volume,
         scene: scene_path.clone(),
         truth: args.truth.as_deref(),
         volume: &volume_options,

@@ -95,7 +95,8 @@ pub struct Args {
     /// Study a scene of yours instead of a synthetic grid: a recording (`fluidnerf import`) or
     /// any static scene that holds at least one camera out (`"holdout": true`). Every method
     /// runs on it under the one stopping policy, which the held-out camera drives, and is scored
-    /// on that camera's image (and against the scene's ground truth, if it has one). Its
+    /// through the volume it wrote on the output grid (--resolution), a field's too: on that
+    /// camera's image, and against the scene's ground truth if it has one. Its
     /// images and noise are its own, so --preset, --scene-preset, --noise, --layouts and
     /// --pixels do not apply; --cameras gives counts of its training cameras to study, each a
     /// subset spread over their viewing lines (default: all of them). The scene is read, never
@@ -558,7 +559,7 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
     // A scene given: its own training cameras (all, unless --cameras asks for fewer), and its
     // images as they are.
     let resolution = args.resolution.unwrap_or(if smoke { 16 } else { 64 });
-    let given = args.scene.as_deref().map(|dir| given_scene(dir, resolution)).transpose()?;
+    let given = args.scene.as_deref().map(given_scene).transpose()?;
     let (cameras, noise, layouts) = match &given {
         Some((_, training)) => (vec![*training], vec![0.0], Vec::new()),
         None => (cameras, noise, layouts),
@@ -688,9 +689,8 @@ fn grid(args: &Args) -> anyhow::Result<Grid> {
 /// The scene given with `--scene` in `dir`, checked for a study: its absolute folder and its
 /// training cameras. Refused: a scene that cannot be read, one that holds no camera out (the
 /// held-out rule and the score need one), one of several times (a study compares static
-/// reconstructions), and one with fewer than two training cameras. A ground truth finer than
-/// the output grid of `resolution` voxels is warned of.
-fn given_scene(dir: &Path, resolution: usize) -> anyhow::Result<(PathBuf, usize)> {
+/// reconstructions), and one with fewer than two training cameras.
+fn given_scene(dir: &Path) -> anyhow::Result<(PathBuf, usize)> {
     let scene = fluidnerf_io::scene::load_scene(dir).with_context(|| format!("--scene {}", dir.display()))?;
     let root = std::path::absolute(&scene.root)?;
     let held_out = scene.holdout_frames().count();
@@ -712,19 +712,6 @@ fn given_scene(dir: &Path, resolution: usize) -> anyhow::Result<(PathBuf, usize)
     }
     if training < 2 {
         bail!("--scene {}: has {training} training camera; a study needs at least 2", root.display());
-    }
-    if !scene.truth.is_empty() {
-        let truth = fluidnerf_io::scene::load_truth(&scene).with_context(|| format!("--scene {}", root.display()))?;
-        let side = truth.iter().map(|(_, v)| v.dims.iter().copied().max().unwrap_or(0)).max().unwrap_or(0);
-        if side > resolution {
-            log::warn!(
-                "--scene {}: its ground truth has {side} voxels along the box's longest side and the output grid \
-                 {resolution}: the voxel methods are scored from their {resolution}-voxel volumes, the fields at the \
-                 truth's voxel centres, which favours the fields; give --resolution {side} to score both on the \
-                 truth's grid",
-                root.display()
-            );
-        }
     }
     Ok((root, training))
 }
@@ -1099,9 +1086,16 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                     return interrupted(out, &g, &rows, &summaries, total);
                 }
             }
-            score_held_out(&run_dir, &scene_dir)?;
+            // A scene given: every method scored through the volume it wrote, on the one output
+            // grid (a field scored at the truth's voxel centres gains from a truth finer than it).
+            let from_volume = cell.given.is_some();
+            score_held_out(&run_dir, &scene_dir, method, from_volume)?;
             let summary = html::summarise(&run_dir, method.label())?;
             let r = &summary.report;
+            let (nrmse, ssim_global) = match from_volume {
+                true => scored_volume(&run_dir)?.map_or((None, None), |(n, s)| (Some(n), Some(s))),
+                false => (r.final_nrmse, r.final_ssim_global),
+            };
             let row = Row {
                 layout: cell.layout.clone(),
                 cameras: cell.cameras,
@@ -1109,8 +1103,8 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                 method: method.name().into(),
                 seed,
                 repeated: g.repeated(method),
-                nrmse: r.final_nrmse,
-                ssim_global: r.final_ssim_global,
+                nrmse,
+                ssim_global,
                 holdout_nrmse: summary.holdout_nrmse,
                 best_holdout_loss: r.history.holdout.iter().map(|h| h.loss).reduce(f64::min),
                 kept_iteration: r.kept_iteration,
@@ -1146,27 +1140,44 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     Ok(std::process::ExitCode::SUCCESS)
 }
 
-/// Scores the run in `run_dir` on the held-out camera of its scene in `scene_dir` (`eval`, into
-/// the run's `metrics.json`), unless a score written since its report is there (a study
-/// continued): its row's held-out view NRMSE, the same measure for every method.
-fn score_held_out(run_dir: &Path, scene_dir: &Path) -> anyhow::Result<()> {
+/// Scores the run in `run_dir` of `method` on the held-out camera of its scene in `scene_dir`
+/// (`eval`, into the run's `metrics.json`), unless a score of the same kind written since its
+/// report is there (a study continued): its row's held-out view NRMSE, the same measure for
+/// every method. With `from_volume`, a field is scored through the volume it wrote
+/// (`eval --use-volume`), as the voxel methods are: every method on the one output grid.
+fn score_held_out(run_dir: &Path, scene_dir: &Path, method: Method, from_volume: bool) -> anyhow::Result<()> {
     use clap::Parser;
+    let use_volume = from_volume && method.is_field();
     let modified = |name: &str| std::fs::metadata(run_dir.join(name)).and_then(|m| m.modified()).ok();
     if let (Some(scored), Some(made)) = (modified("metrics.json"), modified("report.json")) {
-        if scored >= made {
+        let same_kind = fluidnerf_pipeline::rundir::read_json::<serde_json::Value>(&run_dir.join("metrics.json"))
+            .is_ok_and(|v| v["settings"]["use_volume"].as_bool().unwrap_or(false) == use_volume);
+        if scored >= made && same_kind {
             return Ok(());
         }
     }
     // Joined to its option, and the run after `--`: a folder whose name starts with '-' was
     // read as an option.
     let (run, scene) = (run_dir.to_string_lossy(), format!("--scene={}", scene_dir.to_string_lossy()));
-    let argv = ["fluidnerf", "eval", "--no-regions", "--force", &scene, "--", &run];
+    let mut argv = vec!["fluidnerf", "eval", "--no-regions", "--force", &scene];
+    if use_volume {
+        argv.push("--use-volume");
+    }
+    argv.extend(["--", &run]);
     let super::Command::Eval(mut args) = crate::Cli::try_parse_from(argv).map_err(|e| anyhow::anyhow!("{e}"))?.command
     else {
         bail!("{}: not an eval line", run_dir.display());
     };
     args.silent = true;
     super::eval::run(args).with_context(|| format!("scoring {} on its held-out camera", run_dir.display()))
+}
+
+/// The volume NRMSE and global SSIM `eval` wrote into the run's `metrics.json` (of its first
+/// time step), when it scored a ground truth.
+fn scored_volume(run_dir: &Path) -> anyhow::Result<Option<(f64, f64)>> {
+    let metrics: fluidnerf_metrics::MetricsReport =
+        fluidnerf_pipeline::rundir::read_json(&run_dir.join("metrics.json"))?;
+    Ok(metrics.steps.first().map(|s| (s.global.nrmse, s.global.ssim_global)))
 }
 
 /// Ends a study stopped by Ctrl-C: writes the runs made so far and exits with 130.
@@ -1552,7 +1563,9 @@ fn write_outputs(
                 ),
                 "The scene's held-out cameras are left out of every reconstruction: they drive held-out early \
                  stopping, and each result is scored on their images (held-out view NRMSE), which needs no ground \
-                 truth. The images are used as they are: no noise is added."
+                 truth. Every method is scored through the volume it wrote on the output grid, the fields' too \
+                 (sampled at the truth's voxel centres, a field would gain from a truth finer than that grid). The \
+                 images are used as they are: no noise is added."
                     .to_string(),
             )
         }
