@@ -70,9 +70,11 @@ impl LayoutChoice {
 /// noise; one more camera than the count is made and held out: it drives held-out early
 /// stopping and scores reprojections) and reconstructs it with every method under one
 /// stopping policy. With --scene, the cells are your scene and subsets of its cameras
-/// (--cameras), its own held-out cameras in each. Each run is then scored on the held-out camera as `fluidnerf eval` scores
-/// it (the NRMSE of its image rendered from the result, into the run's `metrics.json`): the
-/// same measure for every method, and one that needs no ground truth. Writes into OUT:
+/// (--cameras), its own held-out cameras in each. Each run is then scored as `fluidnerf eval`
+/// scores it, through the volume it wrote on the output grid (a field's too, with
+/// --use-volume; into the run's `metrics.json`): against the ground truth, and on the held-out
+/// camera (the NRMSE of its image rendered from the volume), the same measure for every method
+/// and one that needs no ground truth. Writes into OUT:
 /// `scenes/`, `runs/SCENE/METHOD/` (`METHOD-seedS/` with --repeats; each with its config.json),
 /// `study.json` and `study.csv` (one row per run),
 /// plots of volume NRMSE and SSIM against the camera count and against noise, and
@@ -95,8 +97,7 @@ pub struct Args {
     /// Study a scene of yours instead of a synthetic grid: a recording (`fluidnerf import`) or
     /// any static scene that holds at least one camera out (`"holdout": true`). Every method
     /// runs on it under the one stopping policy, which the held-out camera drives, and is scored
-    /// through the volume it wrote on the output grid (--resolution), a field's too: on that
-    /// camera's image, and against the scene's ground truth if it has one. Its
+    /// on that camera's image, and against the scene's ground truth if it has one. Its
     /// images and noise are its own, so --preset, --scene-preset, --noise, --layouts and
     /// --pixels do not apply; --cameras gives counts of its training cameras to study, each a
     /// subset spread over their viewing lines (default: all of them). The scene is read, never
@@ -365,6 +366,8 @@ struct Row {
     /// seed): the tables name its seed.
     #[serde(skip)]
     repeated: bool,
+    /// Volume NRMSE against the ground truth, of the volume the run wrote (`eval`, with
+    /// `--use-volume` for a field): every method on the one output grid.
     nrmse: Option<f64>,
     ssim_global: Option<f64>,
     /// NRMSE of the held-out camera's image rendered from the result (`eval`'s reprojection,
@@ -1086,16 +1089,13 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                     return interrupted(out, &g, &rows, &summaries, total);
                 }
             }
-            // A scene given: every method scored through the volume it wrote, on the one output
-            // grid (a field scored at the truth's voxel centres gains from a truth finer than it).
-            let from_volume = cell.given.is_some();
-            score_held_out(&run_dir, &scene_dir, method, from_volume)?;
+            // Every method scored through the volume it wrote, on the one output grid: a field
+            // scored at the truth's voxel centres gained from a truth finer than that grid (a
+            // scene given), and its held-out view was rendered from the field, not the volume.
+            score_held_out(&run_dir, &scene_dir, method)?;
             let summary = html::summarise(&run_dir, method.label())?;
             let r = &summary.report;
-            let (nrmse, ssim_global) = match from_volume {
-                true => scored_volume(&run_dir)?.map_or((None, None), |(n, s)| (Some(n), Some(s))),
-                false => (r.final_nrmse, r.final_ssim_global),
-            };
+            let (nrmse, ssim_global) = scored_volume(&run_dir)?.map_or((None, None), |(n, s)| (Some(n), Some(s)));
             let row = Row {
                 layout: cell.layout.clone(),
                 cameras: cell.cameras,
@@ -1140,14 +1140,14 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     Ok(std::process::ExitCode::SUCCESS)
 }
 
-/// Scores the run in `run_dir` of `method` on the held-out camera of its scene in `scene_dir`
-/// (`eval`, into the run's `metrics.json`), unless a score of the same kind written since its
-/// report is there (a study continued): its row's held-out view NRMSE, the same measure for
-/// every method. With `from_volume`, a field is scored through the volume it wrote
-/// (`eval --use-volume`), as the voxel methods are: every method on the one output grid.
-fn score_held_out(run_dir: &Path, scene_dir: &Path, method: Method, from_volume: bool) -> anyhow::Result<()> {
+/// Scores the run in `run_dir` of `method` on its scene in `scene_dir` (`eval`, into the run's
+/// `metrics.json`), unless a score of the same kind written since its report is there (a study
+/// continued): its row's volume scores and held-out view NRMSE. A field is scored through the
+/// volume it wrote (`eval --use-volume`), as the voxel methods are: every method on the one
+/// output grid.
+fn score_held_out(run_dir: &Path, scene_dir: &Path, method: Method) -> anyhow::Result<()> {
     use clap::Parser;
-    let use_volume = from_volume && method.is_field();
+    let use_volume = method.is_field();
     let modified = |name: &str| std::fs::metadata(run_dir.join(name)).and_then(|m| m.modified()).ok();
     if let (Some(scored), Some(made)) = (modified("metrics.json"), modified("report.json")) {
         let same_kind = fluidnerf_pipeline::rundir::read_json::<serde_json::Value>(&run_dir.join("metrics.json"))
@@ -1563,9 +1563,7 @@ fn write_outputs(
                 ),
                 "The scene's held-out cameras are left out of every reconstruction: they drive held-out early \
                  stopping, and each result is scored on their images (held-out view NRMSE), which needs no ground \
-                 truth. Every method is scored through the volume it wrote on the output grid, the fields' too \
-                 (sampled at the truth's voxel centres, a field would gain from a truth finer than that grid). The \
-                 images are used as they are: no noise is added."
+                 truth. The images are used as they are: no noise is added."
                     .to_string(),
             )
         }
@@ -1611,7 +1609,12 @@ fn write_outputs(
             )]
         },
         settings: serde_json::to_value(g).ok(),
-        notes: vec![note],
+        notes: vec![
+            note,
+            "Every method is scored through the volume it wrote on the output grid, a field's too (eval \
+             --use-volume): its volume NRMSE against the truth, and its held-out view rendered from that volume."
+                .into(),
+        ],
     };
     fluidnerf_viz::report::write_report_html(&out.join("report.html"), &report)?;
     Ok(())

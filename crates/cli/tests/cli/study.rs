@@ -42,6 +42,11 @@ fn a_study_runs_every_cell_under_one_policy_and_resumes() {
         let metrics = json(&run.join("metrics.json"));
         let views = metrics["reprojection"].as_array().expect("reprojection");
         assert_eq!(views.len(), 1, "{metrics}");
+        // Scored through the volume it wrote, the field too; on the truth's own grid that is
+        // what the run recorded for itself.
+        assert_eq!(metrics["settings"]["use_volume"], r["method"] == "fast", "{metrics}");
+        let own = rep["final_nrmse"].as_f64().expect("the run's own score");
+        assert!((r["nrmse"].as_f64().expect("scored") - own).abs() < 1e-6, "{r} against {own}");
         assert_eq!(r["holdout_nrmse"].as_f64(), views[0]["nrmse"].as_f64(), "{run:?}");
         assert!(r["holdout_nrmse"].as_f64().is_some_and(|n| n > 0.0 && n < 1.5));
     }
