@@ -223,9 +223,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     say("evaluating");
-    for (dir, _) in methods {
+    for (dir, method) in methods {
         let run_dir = out.join(dir);
         let mut line = vec!["eval".to_string(), path(&run_dir), "--scene".into(), path(&scene_dir)];
+        // Every method through the volume it wrote, as `study` scores them: the fields' held-out
+        // views rendered from the field read better than the voxel methods' from their volumes.
+        if method.is_field() {
+            line.push("--use-volume".into());
+        }
         line.extend([
             "--json".into(),
             path(&run_dir.join("metrics.json")),
