@@ -45,6 +45,9 @@ fn demo_compares_the_fields_with_both_classical_methods() {
         assert!(row["metrics"]["global"]["nrmse"].as_f64().is_some_and(f64::is_finite), "{row}");
         let report = report(&d.join("out").join(dir));
         assert_eq!(report["method"], method, "{dir}");
+        // Scored through the volume it wrote, the fields too, as `study` scores them.
+        let metrics = json(&d.join("out").join(dir).join("metrics.json"));
+        assert_eq!(metrics["settings"]["use_volume"], matches!(method, "fast" | "hybrid"), "{dir}");
     }
     let nrmse = |i: usize| rows[i]["metrics"]["global"]["nrmse"].as_f64().expect("nrmse");
     let best = nrmse(2).min(nrmse(3));
