@@ -760,22 +760,28 @@ class Run:
             )
         return self._h.field(pts, t)
 
-    def score_held_out(self, scene: Scene | PathLike | None = None, *, supersample: int = 2) -> list[dict]:
+    def score_held_out(
+        self, scene: Scene | PathLike | None = None, *, supersample: int = 2, use_volume: bool = False
+    ) -> list[dict]:
         """Scores the run on the frames ``scene`` holds out (default: the scene its
-        ``config.json`` names), as ``fluidnerf eval`` and ``fluidnerf study`` do: each held-out
-        image as the run fitted the others (linearised, background subtracted, flat-fielded,
-        masked, divided by the gain the run recorded for it) against the result rendered from
-        that camera with ``supersample`` × ``supersample`` rays per pixel. The measure that needs
-        no ground truth, and the same for every method. Returns one dict per held-out frame:
-        ``frame``, ``camera_name``, ``time``, ``pixels``, ``nrmse``, ``psnr_db``,
+        ``config.json`` names), as ``fluidnerf eval`` does: each held-out image as the run
+        fitted the others (linearised, background subtracted, flat-fielded, masked, divided by
+        the gain the run recorded for it) against the result rendered from that camera with
+        ``supersample`` × ``supersample`` rays per pixel. The result is a neural run's trained
+        field, or with ``use_volume=True`` the volume it wrote (``eval --use-volume``): to
+        compare methods on one output grid, as ``fluidnerf study`` does, score every run with
+        ``use_volume=True``. The measure needs no ground truth. Returns one dict per held-out
+        frame: ``frame``, ``camera_name``, ``time``, ``pixels``, ``nrmse``, ``psnr_db``,
         ``ssim_global``, ``ssim_windowed``, ``data_range``."""
         if scene is None:
             config = self.config
             if config is None:
                 raise FluidNerfError(f"{self.path}: records no scene (no config.json); give the scene")
             scene = config["scene"]
-        rows = json.loads(self._h.score_held_out(_as_scene(scene), _positive_int(supersample, "supersample")))
-        return rows
+        if not isinstance(use_volume, bool):
+            raise TypeError(f"use_volume: expected True or False, got {use_volume!r}")
+        supersample = _positive_int(supersample, "supersample")
+        return json.loads(self._h.score_held_out(_as_scene(scene), supersample, use_volume))
 
     def voxel_centres(self) -> np.ndarray:
         """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""

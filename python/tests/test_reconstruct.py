@@ -865,6 +865,25 @@ def test_a_run_is_scored_on_the_held_out_camera_as_eval_scores_it(static_scene, 
     assert rows == expected
     # Fewer rays per pixel render another image; the supersampling is the caller's to choose.
     assert run.score_held_out(supersample=1)[0]["nrmse"] != rows[0]["nrmse"]
+    # Through the volume the run wrote, as eval --use-volume and study score it.
+    out = subprocess.run(
+        [
+            cli,
+            "eval",
+            str(run.path),
+            "--use-volume",
+            "--no-regions",
+            "--json",
+            str(tmp_path / "v.json"),
+            "-q",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    from_volume = run.score_held_out(use_volume=True)
+    assert from_volume == json.loads((tmp_path / "v.json").read_text())["reprojection"]
+    assert (from_volume == rows) == (method == "asart")
 
 
 def test_scoring_on_held_out_cameras_refuses_what_it_cannot_score(static_scene, tmp_path):
@@ -880,3 +899,5 @@ def test_scoring_on_held_out_cameras_refuses_what_it_cannot_score(static_scene, 
         run.score_held_out(whole)
     with pytest.raises(fluidnerf.FluidNerfError, match="supersample: must be between 1 and 64"):
         run.score_held_out(supersample=65)
+    with pytest.raises(TypeError, match="use_volume: expected True or False"):
+        run.score_held_out(use_volume="yes")

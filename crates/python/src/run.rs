@@ -509,9 +509,16 @@ impl PyRun {
     /// Scores the run on the frames the saved `scene` holds out, as `fluidnerf eval` does
     /// (`fluidnerf_pipeline::score::score_held_out`: each image as the run fitted the others,
     /// divided by the gain the run recorded for it, against the result rendered from its camera
-    /// with `supersample` × `supersample` rays per pixel); returns the rows as JSON text.
-    #[pyo3(signature = (scene, supersample=2))]
-    fn score_held_out(&self, py: Python<'_>, scene: &PyScene, supersample: usize) -> PyResult<String> {
+    /// with `supersample` × `supersample` rays per pixel; a neural run's trained field, or with
+    /// `use_volume` the volume it wrote, as `eval --use-volume`); returns the rows as JSON text.
+    #[pyo3(signature = (scene, supersample=2, use_volume=false))]
+    fn score_held_out(
+        &self,
+        py: Python<'_>,
+        scene: &PyScene,
+        supersample: usize,
+        use_volume: bool,
+    ) -> PyResult<String> {
         self.check_unchanged("score_held_out")?;
         let scene = scene.require_saved("score_held_out")?.clone();
         let max = fluidnerf_core::render::MAX_SUPERSAMPLE;
@@ -534,7 +541,7 @@ impl PyRun {
         let options = fluidnerf_metrics::ReprojectionOptions { supersample, ..Default::default() };
         let scores: Vec<fluidnerf_metrics::ReprojectionMetrics> = py.allow_threads(|| {
             guard(|| {
-                let scored = if self.run.kind == RunKind::Volume {
+                let scored = if self.run.kind == RunKind::Volume || use_volume {
                     // A run of one volume per instant: the volume nearest the frame's time.
                     let volumes = self.run.volumes().map_err(|e| err(e.to_string()))?;
                     if volumes.is_empty() {

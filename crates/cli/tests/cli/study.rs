@@ -518,6 +518,15 @@ fn files_under(dir: &std::path::Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
     files
 }
 
+/// `study --scene rec` of the grid field and SART in short runs into `st`, quietly, then `extra`.
+fn scene_study<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args =
+        vec!["study", "--scene", "rec", "--methods", "fast,sart", "--resolution", "16", "--max-iterations", "50"];
+    args.extend(["-o", "st", "-q"]);
+    args.extend_from_slice(extra);
+    args
+}
+
 /// A scene of the user's (here one without ground truth, as a recording is) is studied as one
 /// cell: every method under the one policy its held-out camera drives, each scored on that
 /// camera's image, the fields set against the best voxel method by it; the scene is only read,
@@ -530,20 +539,7 @@ fn a_scene_given_is_studied_by_its_held_out_camera() {
     ok(&fluidnerf(d, &[&synth[..], &["--resolution", "16", "-o", "rec", "-q"]].concat()));
     edit_json(&d.join("rec/transforms.json"), |v| v.as_object_mut().expect("object").remove("truth"));
     let before = files_under(&d.join("rec"));
-    let args = [
-        "study",
-        "--scene",
-        "rec",
-        "--methods",
-        "fast,sart",
-        "--resolution",
-        "16",
-        "--max-iterations",
-        "50",
-        "-o",
-        "st",
-        "-q",
-    ];
+    let args = scene_study(&[]);
     let first = fluidnerf(d, &args);
     ok(&first);
     let stdout = String::from_utf8_lossy(&first.stdout);
@@ -610,22 +606,7 @@ fn a_scene_given_is_studied_with_fewer_of_its_cameras() {
     let synth = ["synth", "--preset", "demo", "--cameras", "5", "--holdout", "1", "--pixels", "24"];
     ok(&fluidnerf(d, &[&synth[..], &["--resolution", "16", "-o", "rec", "-q"]].concat()));
     let before = files_under(&d.join("rec"));
-    let args = [
-        "study",
-        "--scene",
-        "rec",
-        "--cameras",
-        "2,4",
-        "--methods",
-        "fast,sart",
-        "--resolution",
-        "16",
-        "--max-iterations",
-        "50",
-        "-o",
-        "st",
-        "-q",
-    ];
+    let args = scene_study(&["--cameras", "2,4"]);
     ok(&fluidnerf(d, &args));
     let record = json(&d.join("st/study.json"));
     let rows = record["rows"].as_array().expect("rows");
