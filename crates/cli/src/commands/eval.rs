@@ -72,7 +72,9 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, conflicts_with_all = ["no_regions", "regions"])]
     pub flow_axis: Option<Vec<f64>>,
     /// For a neural run directory, score its sampled `volume.npy` instead of the trained field
-    /// (a voxel run is scored through its volume anyway: a warning says so).
+    /// (a voxel run is scored through its volume anyway: a warning says so): every method on
+    /// one output grid, as `study` and `demo` score them. The field, scored at the truth's voxel
+    /// centres and rendered at the held-out pixels, is not bound to that grid.
     #[arg(long)]
     pub use_volume: bool,
     /// Score the whole volume only.
