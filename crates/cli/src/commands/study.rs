@@ -239,16 +239,11 @@ impl Grid {
                 .cameras
                 .iter()
                 .map(|&cameras| {
-                    let subset = cameras < self.scene_cameras;
-                    Cell {
-                        layout: GIVEN_LAYOUT.into(),
-                        cameras,
-                        noise: 0.0,
-                        name: if subset { format!("{GIVEN_LAYOUT}-c{cameras:02}") } else { GIVEN_LAYOUT.into() },
-                        synth: None,
-                        given: Some(scene.clone()),
-                        subset,
-                    }
+                    let (name, source) = match cameras < self.scene_cameras {
+                        true => (format!("{GIVEN_LAYOUT}-c{cameras:02}"), CellScene::Subset(scene.clone())),
+                        false => (GIVEN_LAYOUT.into(), CellScene::Given(scene.clone())),
+                    };
+                    Cell { layout: GIVEN_LAYOUT.into(), cameras, noise: 0.0, name, scene: source }
                 })
                 .collect();
         }
@@ -261,9 +256,7 @@ impl Grid {
                         cameras,
                         noise,
                         name: scene_name(layout, cameras, noise),
-                        synth: Some(layout),
-                        given: None,
-                        subset: false,
+                        scene: CellScene::Synth(layout),
                     });
                 }
             }
@@ -285,37 +278,48 @@ struct Cell {
     noise: f64,
     /// The folder of its scene under `scenes/` and of its runs under `runs/`.
     name: String,
-    /// The layout of a synthetic cell, whose scene the study makes.
-    synth: Option<LayoutChoice>,
+    scene: CellScene,
+}
+
+/// Where a cell's scene comes from.
+#[derive(Clone, Debug)]
+enum CellScene {
+    /// Synthesised by the study, with this layout.
+    Synth(LayoutChoice),
     /// The scene given (`--scene`), read where it is.
-    given: Option<PathBuf>,
-    /// A subset of the given scene's training cameras, a scene the study writes
+    Given(PathBuf),
+    /// A subset of the training cameras of the scene given, a scene the study writes
     /// ([`super::scene_subset`]).
-    subset: bool,
+    Subset(PathBuf),
 }
 
 impl Cell {
     /// The folder of the cell's scene.
     fn scene_dir(&self, out: &Path) -> PathBuf {
-        match &self.given {
-            Some(scene) if !self.subset => scene.clone(),
+        match &self.scene {
+            CellScene::Given(scene) => scene.clone(),
             _ => out.join("scenes").join(&self.name),
         }
     }
 
-    /// Whether the study makes the cell's scene (and --force removes it).
-    fn made(&self) -> bool {
-        self.synth.is_some() || self.subset
+    /// The scene given with `--scene` that the cell's scene is or is made from.
+    fn source(&self) -> Option<&Path> {
+        match &self.scene {
+            CellScene::Given(scene) | CellScene::Subset(scene) => Some(scene),
+            CellScene::Synth(_) => None,
+        }
     }
 
     /// The cell in words, for messages.
     fn describe(&self) -> String {
-        match &self.given {
-            Some(scene) if self.subset => {
+        match &self.scene {
+            CellScene::Subset(scene) => {
                 format!("{} of the training cameras of the scene {}", self.cameras, scene.display())
             }
-            Some(scene) => format!("the scene {}", scene.display()),
-            None => format!("the scene of {} cameras, noise {}, {}", self.cameras, self.noise, self.layout),
+            CellScene::Given(scene) => format!("the scene {}", scene.display()),
+            CellScene::Synth(_) => {
+                format!("the scene of {} cameras, noise {}, {}", self.cameras, self.noise, self.layout)
+            }
         }
     }
 }
@@ -323,7 +327,7 @@ impl Cell {
 /// Writes the scene of a cell that is a subset of the scene given, unless it is there with the
 /// same cameras ([`super::scene_subset`]).
 fn ensure_subset(cell: &Cell, dir: &Path) -> anyhow::Result<()> {
-    let Some(source) = &cell.given else { return Ok(()) };
+    let CellScene::Subset(source) = &cell.scene else { return Ok(()) };
     let scene = fluidnerf_io::scene::load_scene(source).with_context(|| format!("--scene {}", source.display()))?;
     let expected = super::scene_subset::spread_cameras(&scene, cell.cameras);
     if let Some(record) = subset_record(dir)? {
@@ -759,7 +763,7 @@ fn remove_earlier_study(out: &Path, g: &Grid) -> anyhow::Result<()> {
     };
     for cell in g.cells() {
         // A scene given is the user's: only the scenes the study made go.
-        if cell.made() {
+        if !matches!(cell.scene, CellScene::Given(_)) {
             remove(&out.join("scenes").join(&cell.name))?;
         }
         let runs = out.join("runs").join(&cell.name);
@@ -844,7 +848,7 @@ fn cell_settings(
 /// unfinished.
 fn check_scenes(g: &Grid) -> anyhow::Result<()> {
     for cell in g.cells() {
-        let Some(layout) = cell.synth else { continue };
+        let CellScene::Synth(layout) = cell.scene else { continue };
         let settings = cell_settings(g, layout, cell.cameras, cell.noise)?;
         let voxels = settings.truth_dims(&settings.aabb).iter().map(|&n| n as u64).product();
         settings.check_memory(voxels).with_context(|| {
@@ -902,7 +906,10 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
     for cell in g.cells() {
         let scene_dir = cell.scene_dir(out);
         let record = scene_dir.join("synth.json");
-        if let (Some(layout), true) = (cell.synth, scene_dir.join("transforms.json").is_file() && record.is_file()) {
+        if let (CellScene::Synth(layout), true) =
+            (&cell.scene, scene_dir.join("transforms.json").is_file() && record.is_file())
+        {
+            let layout = *layout;
             let given = cell_settings(g, layout, cell.cameras, cell.noise)?;
             let value: serde_json::Value = fluidnerf_pipeline::rundir::read_json(&record)?;
             let saved: fluidnerf_synth::SynthSettings =
@@ -913,12 +920,12 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                 return Err(other(&scene_dir, "scene", &record, differences));
             }
         }
-        if cell.subset && scene_dir.is_dir() {
+        if matches!(cell.scene, CellScene::Subset(_)) && scene_dir.is_dir() {
             // Checked (and refused when it holds other cameras) before any run is read back.
             ensure_subset(&cell, &scene_dir)?;
         }
         // A subset's images are the scene's given.
-        let newest = newest_scene_file(cell.given.as_deref().unwrap_or(&scene_dir));
+        let newest = newest_scene_file(cell.source().unwrap_or(&scene_dir));
         for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
             let run_dir = out.join("runs").join(&cell.name).join(g.run_name(method, seed));
             let report_file = run_dir.join("report.json");
@@ -945,8 +952,8 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
             // Moved with its folder, a cell's scene keeps its name: a run of another cell's
             // scene (runs swapped between cells) would give this cell its result. A scene given
             // stays where it is: the run must name that very folder.
-            let same_scene = match &cell.given {
-                Some(given) if !cell.subset => fluidnerf_pipeline::rundir::same_path(&saved.scene, given),
+            let same_scene = match &cell.scene {
+                CellScene::Given(given) => fluidnerf_pipeline::rundir::same_path(&saved.scene, given),
                 _ => saved.scene.file_name() == scene_dir.file_name(),
             };
             if !same_scene {
@@ -1043,10 +1050,8 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     let mut k = 0;
     for cell in g.cells() {
         let scene_dir = cell.scene_dir(out);
-        if cell.subset {
-            ensure_subset(&cell, &scene_dir)?;
-        }
-        if let Some(layout) = cell.synth {
+        ensure_subset(&cell, &scene_dir)?;
+        if let CellScene::Synth(layout) = cell.scene {
             match ensure_scene(&g, &scene_dir, layout, cell.cameras, cell.noise) {
                 // Stopped as a run stopped by Ctrl-C is: the runs so far written, exit 130.
                 Err(e) if matches!(e.downcast_ref(), Some(fluidnerf_synth::SynthError::Cancelled)) => {
@@ -1068,7 +1073,10 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
             let finished = reported && fluidnerf_pipeline::RunDir::open(&run_dir).is_ok_and(|rd| rd.kind().is_some());
             #[allow(clippy::print_stdout)]
             {
-                let noise = if cell.given.is_some() { String::new() } else { format!(" · noise {}", cell.noise) };
+                let noise = match cell.source() {
+                    Some(_) => String::new(),
+                    None => format!(" · noise {}", cell.noise),
+                };
                 println!(
                     "[{k}/{total}] {} · {} cameras{noise} · {}{}{}",
                     cell.layout,
