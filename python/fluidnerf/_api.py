@@ -8,6 +8,7 @@ import math
 import operator
 import os
 import shutil
+import sys
 import tempfile
 import warnings
 from dataclasses import dataclass
@@ -272,6 +273,14 @@ def _string(value: Any, name: str) -> str:
     return value
 
 
+def _boolean(value: Any, name: str) -> bool:
+    """``value``, True or False (a NumPy boolean too: a flag read from an array); anything
+    else (``1``, ``"no"``) is refused naming ``name``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}: expected True or False, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
 def load_scene(folder: PathLike) -> Scene:
     """Reads and validates the scene in ``folder`` (a folder with ``transforms.json``, or the file)."""
     return Scene.load(_path(folder, "folder"))
@@ -357,10 +366,16 @@ def scene_from_arrays(
         # As Scene.times gives them for a static scene (None for every frame): no times, not
         # frames at the time NaN.
         times = None
+    pixels = _array(images, np.float32, "images", "(N, H, W)")
+    if pixels.shape[0] > 0 and 0 in pixels.shape[1:]:
+        # Refused here, where it is the images' problem: the scene blamed the intrinsics.
+        raise FluidNerfError(
+            f"images: each image needs at least one pixel, got shape {pixels.shape} (N, H, W)"
+        )
     return Scene.from_arrays(
         _array(K, f64, "K", "(N, 3, 3)"),
         _array(world_from_camera, f64, "world_from_camera", "(N, 4, 4)"),
-        _array(images, np.float32, "images", "(N, H, W)"),
+        pixels,
         _array(aabb, f64, "aabb", "(2, 3)"),
         times=None if times is None else _array(times, f64, "times", "(N,)"),
         distortion=None if distortion is None else _distortion(distortion),
@@ -402,10 +417,8 @@ def read_metashape(path: PathLike, skip_unaligned: bool = False) -> list[Camera]
     label, as ``fluidnerf import --metashape`` reads them: poses in the chunk's coordinate
     system (metres) when the file gives the chunk's transform. Cameras the file has not
     aligned are refused, named, unless ``skip_unaligned``; disabled cameras are left out."""
-    # A NumPy boolean (a flag read from an array) is a boolean, as for holdout and progress.
-    if not isinstance(skip_unaligned, (bool, np.bool_)):
-        raise TypeError(f"skip_unaligned: expected True or False, got {skip_unaligned!r}")
-    return _cameras(_ext.read_metashape(_path(path, "path"), bool(skip_unaligned)))
+    skip = _boolean(skip_unaligned, "skip_unaligned")
+    return _cameras(_ext.read_metashape(_path(path, "path"), skip))
 
 
 def _size(value: Any, name: str) -> tuple[int, int]:
@@ -438,8 +451,7 @@ def read_projection(
     holds no image size: ``image_size`` gives it, ``(width, height)`` for every camera or a dict
     by camera name. ``bottom_left_origin``: the matrices count v up from the image's bottom
     edge (DLTdv, Easy-WAND), and each v is taken as the height − v."""
-    if not isinstance(bottom_left_origin, (bool, np.bool_)):
-        raise TypeError(f"bottom_left_origin: expected True or False, got {bottom_left_origin!r}")
+    bottom_left_origin = _boolean(bottom_left_origin, "bottom_left_origin")
     if isinstance(image_size, dict):
         if not all(isinstance(k, str) for k in image_size):
             raise TypeError("image_size: a dict's keys are camera names (strings)")
@@ -619,8 +631,9 @@ def build_config(
         # (method="" ran the default method, unannounced).
         chosen = name if name is not None else _default_method(scene)
         base = json.loads(_ext.default_config(str(root or ""), chosen, preset))
-    if root is not None:
-        base["scene"] = str(Path(root).absolute())
+    # The scene given, also over a configuration's: a scene in memory has no folder yet (""),
+    # and reconstruct names the one it saves the scene in.
+    base["scene"] = str(Path(root).absolute()) if root is not None else ""
     if method_patch:
         _merge(base["method"], method_patch)
     _merge(base, options)
@@ -753,11 +766,7 @@ class Run:
         if t is not None and not math.isfinite(t):
             raise FluidNerfError(f"time: expected a finite number, got {time!r}")
         if t is not None and self.kind != "temporal":
-            warnings.warn(
-                f"time={time} has no effect: {self.path} is a static result, fixed in time",
-                FluidNerfWarning,
-                stacklevel=2,
-            )
+            _warn(f"time={time} has no effect: {self.path} is a static result, fixed in time")
         return self._h.field(pts, t)
 
     def score_held_out(
@@ -778,8 +787,7 @@ class Run:
             if config is None:
                 raise FluidNerfError(f"{self.path}: records no scene (no config.json); give the scene")
             scene = config["scene"]
-        if not isinstance(use_volume, bool):
-            raise TypeError(f"use_volume: expected True or False, got {use_volume!r}")
+        use_volume = _boolean(use_volume, "use_volume")
         supersample = _positive_int(supersample, "supersample")
         return json.loads(self._h.score_held_out(_as_scene(scene), supersample, use_volume))
 
@@ -880,12 +888,28 @@ class FluidNerfWarning(UserWarning):
     keeps it in ``report["warnings"]``)."""
 
 
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+def _warn(message: str) -> None:
+    """Issues ``message`` as a :class:`FluidNerfWarning` at the first line outside this
+    package, the user's call: a warning raised inside a run's callback named the callback's
+    line, so neither the location shown nor ``filterwarnings(module=...)`` said whose call it
+    was."""
+    level = 1
+    frame = sys._getframe(0)
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE_DIR + os.sep):
+        frame = frame.f_back
+        level += 1
+    warnings.warn(message, FluidNerfWarning, stacklevel=level)
+
+
 def _warning_callback(callback: Callback | None) -> Callback:
     """``callback`` that also issues each ``warning`` event as a :class:`FluidNerfWarning`."""
 
     def on_event(event: dict) -> bool | None:
         if event["kind"] == "warning":
-            warnings.warn(event["message"], FluidNerfWarning, stacklevel=2)
+            _warn(event["message"])
         answer = callback(event) if callback is not None else None
         # A NumPy boolean (a comparison of NumPy numbers) is a boolean: np.False_ did not
         # stop the run, which went on to its last iteration.
@@ -1056,6 +1080,16 @@ def reconstruct(
     if overwrite == "resume" and config is None and given is not None and (given / "config.json").is_file():
         # A resumed run continues with the settings it was started with (as --resume).
         config = given / "config.json"
+        asked = method.get("name") if isinstance(method, dict) else method
+        try:
+            written = (json.loads(config.read_text()).get("method") or {}).get("name")
+        except (OSError, ValueError, AttributeError):
+            written = None  # build_config names what is wrong with the file
+        if isinstance(asked, str) and isinstance(written, str) and asked != written:
+            raise FluidNerfError(
+                f'{given}: holds a run of method {written}, which overwrite="resume" continues; to run '
+                f'method {asked}, give another folder or overwrite="force"'
+            )
     cfg = build_config(scene, method, config=config, preset=preset, **options)
     # The temporary folder is made once the settings are accepted, and removed again when the
     # run is refused before it writes anything: each refused call left an empty one behind.
@@ -1221,13 +1255,18 @@ def _data_range(data_range: Any) -> float | None:
 
 
 def nrmse(estimate: np.ndarray, truth: np.ndarray) -> float:
-    """Normalised RMS error: ``‖estimate − truth‖₂ / ‖truth‖₂`` (dissertation Eq. 6.18)."""
+    """Normalised RMS error: ``‖estimate − truth‖₂ / ‖truth‖₂`` (dissertation Eq. 6.18).
+
+    Both arrays are taken as float32, the type of every volume and image here, as the run
+    reports score them (sums in float64): float64 input is rounded first, which shows when
+    the differences are below about 10⁻⁷ of the values."""
     return _ext.nrmse(*_pair(estimate, truth))
 
 
 def psnr(estimate: np.ndarray, truth: np.ndarray, data_range: float | None = None) -> float:
     """PSNR in dB with peak ``data_range`` (None: the truth's max − min, or 1 when the truth is
-    constant, so that the metric stays defined: give ``data_range`` then)."""
+    constant, so that the metric stays defined: give ``data_range`` then). The arrays are
+    taken as float32, as for :func:`nrmse`."""
     return _ext.psnr(*_pair(estimate, truth), _data_range(data_range))
 
 
@@ -1236,7 +1275,8 @@ def ssim(
 ) -> float:
     """SSIM of 2D or 3D arrays: ``window`` ``"uniform"`` (7 wide, as skimage), ``"gaussian"``
     (σ 1.5) or ``"global"`` (one window over everything). ``data_range`` None: the truth's
-    max − min, or 1 when the truth is constant (give it then)."""
+    max − min, or 1 when the truth is constant (give it then). The arrays are taken as
+    float32, as for :func:`nrmse`."""
     return _ext.ssim(*_pair(estimate, truth), _data_range(data_range), _string(window, "window"))
 
 
@@ -1250,4 +1290,9 @@ def synth(
     ``force=True``, one that already holds a scene or any other file."""
     if seed is not None:
         settings["seed"] = _integer(seed, "seed")
-    return _ext.synth(_path(folder, "folder"), preset, _dumps(settings, "synth settings"), force)
+    return _ext.synth(
+        _path(folder, "folder"),
+        _string(preset, "preset"),
+        _dumps(settings, "synth settings"),
+        _boolean(force, "force"),
+    )

@@ -26,7 +26,6 @@ import json
 import os
 import time
 import uuid
-import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -35,7 +34,6 @@ import numpy as np
 from . import _fluidnerf as _ext
 from ._api import (
     FluidNerfError,
-    FluidNerfWarning,
     PathLike,
     Run,
     Scene,
@@ -45,6 +43,7 @@ from ._api import (
     _path,
     _SavedScene,
     _string,
+    _warn,
     build_config,
     open_run,
 )
@@ -279,7 +278,7 @@ def _run(
         for message in messages:
             if message not in issued:
                 issued.add(message)
-                warnings.warn(message, FluidNerfWarning, stacklevel=4)
+                _warn(message)
 
     if whole:
         report = client.submit(

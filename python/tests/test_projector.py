@@ -131,6 +131,19 @@ def test_back_projection_is_the_exact_adjoint(scene):
         fluidnerf.forward_project(s, np.full((2, 2, 2), np.nan, np.float32))
 
 
+def test_the_extension_reads_a_fortran_ordered_volume_by_its_indices(scene):
+    """The extension copied any contiguous array's memory as C order: a Fortran-ordered
+    volume given to it directly (its typed stub allows that) was read transposed."""
+    from fluidnerf import _fluidnerf as ext
+
+    s, *_ = scene
+    vol = np.random.default_rng(2).uniform(0, 1, (5, 6, 7)).astype(np.float32)
+    np.testing.assert_array_equal(
+        ext.forward_project(s, np.asfortranarray(vol), "{}"), ext.forward_project(s, vol, "{}")
+    )
+    np.testing.assert_array_equal(ext.render(s, np.asfortranarray(vol), None, 1), ext.render(s, vol, None, 1))
+
+
 def test_a_ring_exactly_about_y_projects_and_back_projects_on_the_volumes_axes():
     """Cameras in the plane y = 0 see the grid's y rows as vertical lines: the footprint
     projector then works on renamed axes, where its rows share footprints. Images and the

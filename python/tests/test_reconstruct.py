@@ -15,6 +15,7 @@ import tempfile
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -901,3 +902,86 @@ def test_scoring_on_held_out_cameras_refuses_what_it_cannot_score(static_scene, 
         run.score_held_out(supersample=65)
     with pytest.raises(TypeError, match="use_volume: expected True or False"):
         run.score_held_out(use_volume="yes")
+
+
+def test_a_run_opened_from_a_relative_folder_stays_that_run_after_a_change_of_folder(
+    static_scene, tmp_path, monkeypatch
+):
+    """A Run kept its folder as given and read its files again from the working directory of
+    the moment: after os.chdir it read another folder's run of the same name, or failed."""
+    monkeypatch.chdir(tmp_path)
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", "run", resolution=6, stopping={"max_iterations": 2}, progress=False
+    )
+    opened = fluidnerf.open_run("run")
+    assert run.path.is_absolute() and opened.path == tmp_path / "run"
+    expected = run.volume.copy()
+    elsewhere = tmp_path / "elsewhere"
+    shutil.copytree(tmp_path / "run", elsewhere / "run", copy_function=shutil.copy2)
+    np.save(elsewhere / "run" / "volume.npy", np.ones_like(expected))
+    os.utime(elsewhere / "run" / "volume.npy", ns=(0, os.stat(tmp_path / "run" / "volume.npy").st_mtime_ns))
+    monkeypatch.chdir(elsewhere)
+    np.testing.assert_array_equal(opened.volume, expected)
+    np.testing.assert_array_equal(opened.volumes()[0][1], expected)
+    # A folder that is gone is said to be gone.
+    shutil.rmtree(tmp_path / "run")
+    with pytest.raises(fluidnerf.FluidNerfError, match="the run folder .* no longer exists"):
+        opened.volumes()
+
+
+def test_a_runs_warnings_name_the_callers_line(static_scene, tmp_path):
+    """The warnings were issued at the package's callback, so `filterwarnings(module=...)`
+    and the location shown named the library instead of the call."""
+    method = {"name": "tv", "projector": {"visual_hull": True}, "params": {"step_rule": "data"}}
+    with pytest.warns(fluidnerf.FluidNerfWarning) as caught:
+        run = fluidnerf.reconstruct(
+            static_scene,
+            method,
+            tmp_path / "tv",
+            resolution=8,
+            stopping={"max_iterations": 2},
+            progress=False,
+        )
+    assert [w.filename for w in caught] == [__file__]
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="no effect") as caught:
+        run.field(np.zeros((1, 3)), time=1.0)
+    assert [w.filename for w in caught] == [__file__]
+
+
+def test_resuming_a_folder_with_another_method_says_what_resuming_runs(static_scene, tmp_path):
+    fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "a", resolution=6, stopping={"max_iterations": 1}, progress=False
+    )
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match='holds a run of method asart, which overwrite="resume"'
+    ):
+        fluidnerf.reconstruct(static_scene, "mlem", tmp_path / "a", overwrite="resume", progress=False)
+
+
+def test_a_configuration_built_for_a_scene_in_memory_names_no_other_scene(static_scene, tmp_path):
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "a", resolution=6, stopping={"max_iterations": 1}, progress=False
+    )
+    K, poses, _, _ = static_scene.camera_arrays()
+    memory = fluidnerf.scene_from_arrays(K, poses, static_scene.images(), static_scene.aabb)
+    assert fluidnerf.build_config(memory, config=run.path / "config.json")["scene"] == ""
+    assert fluidnerf.build_config(static_scene, config=run.path / "config.json")["scene"] == str(
+        Path(static_scene.root).absolute()
+    )
+
+
+def test_flags_are_true_or_false_numpy_booleans_too(static_scene, tmp_path):
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "a", resolution=6, stopping={"max_iterations": 1}, progress=False
+    )
+    assert run.score_held_out(use_volume=np.True_) == run.score_held_out(use_volume=True)
+    with pytest.raises(TypeError, match="force: expected True or False, got int 1"):
+        fluidnerf.synth(tmp_path / "s", "demo", force=1)
+    with pytest.raises(TypeError, match="force: expected True or False, got str 'no'"):
+        static_scene.save(tmp_path / "t", force="no")
+    with pytest.raises(TypeError, match="preset: expected a string"):
+        fluidnerf.synth(tmp_path / "s", None)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match="unknown preset `demoo`; the presets are demo, planar15"
+    ):
+        fluidnerf.synth(tmp_path / "s", "demoo")

@@ -192,6 +192,14 @@ def test_bad_arrays_are_refused_naming_the_array_and_frame():
         fluidnerf.load_scene("/nonexistent/scene")
 
 
+def test_images_without_pixels_are_refused_as_the_images_problem():
+    K, poses = ring(2, size=8)
+    with pytest.raises(
+        fluidnerf.FluidNerfError, match=r"^images: each image needs at least one pixel, got shape"
+    ):
+        fluidnerf.scene_from_arrays(K, poses, np.zeros((2, 8, 0), np.float32), [[-1, -1, -1], [1, 1, 1]])
+
+
 def test_arrays_that_make_no_usable_scene_are_refused_when_given():
     """A scene from arrays was checked as a scene only when saved: a camera inside the box or
     blind to it, or a camera named twice, was refused naming a transforms.json the caller never

@@ -284,7 +284,12 @@ impl LoadedRun {
                 let record: ModelRecord = crate::rundir::read_json(&rd.path("model.json"))?;
                 record.meta.aabb
             }
-            _ => box_hint.ok_or_else(|| refuse("holds no report.json to give its box; give the scene"))?,
+            _ => box_hint.ok_or_else(|| {
+                refuse(
+                    "holds no report.json to give the box its volume fills; give the box (the scene it was made from, \
+                     --scene; aabb= from Python)",
+                )
+            })?,
         };
         Ok(LoadedRun { dir: dir.to_path_buf(), kind, config: None, report: None, aabb })
     }

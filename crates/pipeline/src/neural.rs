@@ -357,7 +357,7 @@ fn start_from<F: TrainableField>(
     if report.steps < start.fit.iterations && !report.stopped {
         session.warn(&format!(
             "the time budget ended the fit to the start after {} of its {} steps (relative RMS difference {:.4}); \
-             a larger --time-budget gives it all",
+             a larger time budget gives it all (--time-budget; stopping.time_budget_s in a configuration and from Python)",
             report.steps,
             start.fit.iterations,
             report.relative_difference()

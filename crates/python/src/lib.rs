@@ -7,7 +7,7 @@
 
 use std::ops::ControlFlow;
 
-use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{PyArray1, PyArray3, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -53,14 +53,27 @@ pub(crate) fn volume_to_py(py: Python<'_>, v: fluidnerf_core::Volume) -> PyResul
 }
 
 /// A `(nz, ny, nx)` array filling `aabb` as a volume.
+/// `value` as a flag: True or False (NumPy's booleans too); anything else (`1`, `"no"`) is a
+/// `TypeError` naming `name`, where pyo3's own ("'int' object cannot be converted to
+/// 'PyBool'") names no argument.
+pub(crate) fn flag(value: &Bound<'_, PyAny>, name: &str) -> PyResult<bool> {
+    value.extract::<bool>().map_err(|_| {
+        let shown = value.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into());
+        let kind = value.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into());
+        pyo3::exceptions::PyTypeError::new_err(format!("{name}: expected True or False, got {kind} {shown}"))
+    })
+}
+
 pub(crate) fn volume_from_py(
     a: &PyReadonlyArray3<'_, f32>,
     aabb: fluidnerf_core::Aabb,
 ) -> PyResult<fluidnerf_core::Volume> {
     let shape = a.as_array().shape().to_vec();
+    // `as_slice` also hands out a Fortran-ordered array's memory, which read as C order is
+    // the volume transposed: only a C-contiguous array is copied whole.
     let data: Vec<f32> = match a.as_slice() {
-        Ok(s) => s.to_vec(),
-        Err(_) => a.as_array().iter().copied().collect(),
+        Ok(s) if a.is_c_contiguous() => s.to_vec(),
+        _ => a.as_array().iter().copied().collect(),
     };
     if shape.contains(&0) {
         return Err(err(format!("volume: empty array of shape {shape:?}")));

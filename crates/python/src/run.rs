@@ -418,12 +418,25 @@ fn stamps(folder: &std::path::Path) -> Vec<(PathBuf, Option<(u64, std::time::Sys
 impl PyRun {
     /// Refuses `what` when a result file has changed (or come or gone) since the run was opened.
     fn check_unchanged(&self, what: &str) -> PyResult<()> {
+        if !self.run.dir.is_dir() {
+            return Err(err(format!(
+                "{what}: the run folder {} no longer exists (moved or removed since the run was opened)",
+                self.run.dir.display()
+            )));
+        }
         let now = stamps(&self.run.dir);
         match self.stamps.iter().zip(&now).find(|(then, now)| then.1 != now.1) {
-            Some(((path, _), _)) => Err(err(format!(
-                "{what}: {} has changed on disk since the run was opened; open it again with fluidnerf.open_run",
-                path.display()
-            ))),
+            Some(((path, then), (_, now))) => {
+                let how = match (then, now) {
+                    (Some(_), None) => "has been removed",
+                    (None, Some(_)) => "has appeared",
+                    _ => "has changed on disk",
+                };
+                Err(err(format!(
+                    "{what}: {} {how} since the run was opened; open it again with fluidnerf.open_run",
+                    path.display()
+                )))
+            }
             None => Ok(()),
         }
     }
@@ -434,6 +447,10 @@ impl PyRun {
 #[pyo3(signature = (folder, aabb=None))]
 pub fn open_run(folder: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<PyRun> {
     let hint = aabb.map(|a| crate::aabb_arg(&a)).transpose()?;
+    // Made absolute now: the files are read again on later calls, and a relative folder would
+    // then be found from whatever the working directory has become (another run's folder of
+    // the same name, or none).
+    let folder = std::path::absolute(&folder).unwrap_or(folder);
     guard(|| {
         let run = LoadedRun::open(&folder, hint).map_err(|e| err(e.to_string()))?;
         // A run that records its box (its report, or a field's model.json) fills that box, not

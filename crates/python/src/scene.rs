@@ -473,8 +473,9 @@ impl PyScene {
     /// saved over another takes its records (`synth.json`, `import.json`, `preview.png`) away.
     /// The files are written with the GIL released (the images and truth of a large scene take
     /// seconds): the scene is read first, and becomes the saved one once it is written.
-    #[pyo3(signature = (folder, force=false))]
-    fn save(slf: &Bound<'_, Self>, folder: PathBuf, force: bool) -> PyResult<()> {
+    #[pyo3(signature = (folder, force=None))]
+    fn save(slf: &Bound<'_, Self>, folder: PathBuf, force: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+        let force = force.map(|f| crate::flag(f, "force")).transpose()?.unwrap_or(false);
         if folder.as_os_str().is_empty() {
             // Refused as "cannot make an empty path absolute", which named no argument.
             return Err(err("folder: the path is empty; name a folder ('.' for the current folder)"));

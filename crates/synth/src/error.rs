@@ -26,7 +26,7 @@ pub enum SynthError {
     )]
     OutOfMemory { needed_mib: u64, available_mib: u64, truth_mib: u64, images_mib: u64 },
     /// No preset of this name.
-    #[error("unknown preset `{0}`; see the list of presets")]
+    #[error("unknown preset `{0}`; the presets are {known}", known = crate::preset::preset_names())]
     UnknownPreset(String),
     /// A volume embedded in the crate does not decode (a broken build, not a user error).
     #[error("embedded phantom {name}: {problem}")]

@@ -29,6 +29,11 @@ pub const DEFAULT_PRESET: &str = "planar15";
 const PIXELS: u32 = 256;
 const VOXELS: usize = 256;
 
+/// The presets' names, comma-separated (for messages).
+pub(crate) fn preset_names() -> String {
+    presets().iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", ")
+}
+
 /// Names and one-line descriptions of every preset.
 pub fn presets() -> Vec<(&'static str, &'static str)> {
     vec![
