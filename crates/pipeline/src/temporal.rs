@@ -558,6 +558,10 @@ impl Ctx<'_> {
                 state.running = Some(learner);
             }
         }
+        // After the running window's own check, whose refusal says more.
+        for (k, w) in progress.finished.iter().enumerate() {
+            Self::check_finished_cap(self.spec, k, &w.report, &self.dir.path(&w.checkpoint))?;
+        }
         log::info!(
             "resuming: {} of {} windows finished{}",
             state.finished.len(),
@@ -595,6 +599,42 @@ impl Ctx<'_> {
                      resumed run only continues, so give {give} (or start afresh with --force)",
                     path.display(),
                     learner.iteration,
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Refuses an iteration cap that finished window `k` (its `report`, its checkpoint at
+    /// `path`) contradicts: a resumed run reads finished windows back without training them,
+    /// so a cap above the one a window stopped at, or below the iterations it did, was written
+    /// into config.json and ignored, and a rerun from that file gave another result.
+    fn check_finished_cap(
+        spec: &TemporalSpec,
+        k: usize,
+        report: &fluidnerf_neural::train::TrainReport,
+        path: &std::path::Path,
+    ) -> Result<(), PipelineError> {
+        let warm = spec.windows.warm_start && k > 0;
+        let (cap, key) = match spec.windows.warm_max_iterations.filter(|_| warm) {
+            Some(m) => (m, "method.windows.warm_max_iterations"),
+            None => (spec.train.max_iterations, "stopping.max_iterations"),
+        };
+        let stopped_at_cap = report.stop_reason == fluidnerf_neural::train::StopReason::MaxIterations;
+        if report.iterations > cap || (stopped_at_cap && report.iterations < cap) {
+            let give = match key {
+                "stopping.max_iterations" => format!("--max-iterations {}", report.iterations),
+                _ => format!("{key} {} in the configuration", report.iterations),
+            };
+            let how = if stopped_at_cap { "stopped at its cap of" } else { "trained for" };
+            return Err(PipelineError::invalid(
+                key,
+                format!(
+                    "{} (window {k}, finished) {how} {} iterations, and a resumed run does not train finished \
+                     windows again, so a cap of {cap} would be recorded for a run that did not use it; give {give} \
+                     (or start afresh with --force to train with the new cap)",
+                    path.display(),
+                    report.iterations,
                 ),
             ));
         }

@@ -913,6 +913,32 @@ fn a_window_resumed_below_its_checkpoints_iteration_is_refused_naming_it() {
     assert_eq!(windows[1]["train"]["iterations"], 4);
 }
 
+/// A finished run resumed with another `--max-iterations` read its windows back untrained and
+/// wrote the new cap into `config.json`: the report said 2 iterations, the configuration 4, and
+/// a rerun from it gave another result. Refused now, naming the window and the cap it used.
+#[test]
+fn a_finished_window_resumed_with_another_cap_is_refused_naming_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --window 2 --overlap 1 --max-iterations 2 --resolution 8 \
+                --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let before = std::fs::read(d.join("run/config.json")).expect("config");
+    for cap in ["4", "1"] {
+        let out = fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--max-iterations", cap, "-q"]);
+        refused(&out, "w000.checkpoint.safetensors (window 0, finished) stopped at its cap of 2 iterations");
+        refused(
+            &out,
+            &format!("a cap of {cap} would be recorded for a run that did not use it; give --max-iterations 2"),
+        );
+        assert!(std::fs::read(d.join("run/config.json")).expect("kept") == before, "the refused resume wrote");
+    }
+    // The same cap resumes (there is nothing left to train).
+    ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "--max-iterations", "2", "-q"]));
+    ok(&fluidnerf(d, &["reconstruct", "-o", "run", "--resume", "-q"]));
+}
+
 /// A resumed run left the earlier run's series and scores in its folder: with a held-out time
 /// dropped, `frames/volume_004.*` of the earlier run stayed beside the four volumes the resumed
 /// run wrote (a glob of `frames/` handed `eval` five volumes, the last another run's), and
