@@ -304,6 +304,19 @@ fn load_truth(scene: &Scene) -> Result<Vec<(Option<f64>, Volume)>, PipelineError
                 ),
             ));
         }
+        // Refused as `info` and `eval` refuse it: the run scored NaN against it, and a
+        // time-resolved run's headline averaged its NRMSE over the other times and its SSIM
+        // over all of them.
+        if volume.data.iter().all(|&v| v == 0.0) {
+            return Err(PipelineError::file(
+                &scene.resolve(&r.file_path),
+                format!(
+                    "every voxel of the ground truth{} is zero, so the NRMSE against it (relative to the truth's \
+                     norm) is undefined; give a truth that holds the field, or leave this one out of the scene",
+                    time.map(|t| format!(" at t = {t}")).unwrap_or_default()
+                ),
+            ));
+        }
     }
     Ok(truth)
 }

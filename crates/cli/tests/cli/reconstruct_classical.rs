@@ -424,3 +424,21 @@ fn a_frame_left_black_by_its_background_is_warned_of_once() {
     let out = String::from_utf8_lossy(&fluidnerf(d, &["info", "scene"]).stdout).into_owned();
     assert!(out.contains("warning: frame 0 (") && out.contains(warning), "{out}");
 }
+
+/// A ground truth that is zero throughout was taken by `reconstruct` (which `info` and `eval`
+/// refuse): a static run printed "volume NRMSE NaN", and a time-resolved run's headline averaged
+/// its NRMSE over the other times and its SSIM over all. Refused now, naming the file.
+#[test]
+fn a_truth_zero_throughout_is_refused_naming_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 8, &[]);
+    let truth = d.join("scene/truth/truth.npy");
+    let v = fluidnerf_io::volume::read_npy(&truth, fluidnerf_core::Aabb::cube(Default::default(), 1.0))
+        .expect("reads truth");
+    let zero = fluidnerf_core::Volume::zeros(v.dims, v.aabb);
+    fluidnerf_io::volume::write_npy(&truth, &zero).expect("writes truth");
+    let out = fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "8", "-q"]);
+    refused(&out, "truth/truth.npy: every voxel of the ground truth is zero, so the NRMSE against it");
+    assert!(!d.join("run/report.json").exists());
+}
