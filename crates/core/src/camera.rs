@@ -617,7 +617,7 @@ impl Camera {
     }
 
     /// Whether the ray through pixel centre `(u, v)` crosses `aabb`.
-    fn pixel_hits(&self, aabb: &Aabb, u: usize, v: usize) -> bool {
+    pub fn pixel_hits(&self, aabb: &Aabb, u: usize, v: usize) -> bool {
         self.pixel_ray(u as f64, v as f64).is_ok_and(|ray| aabb.intersect(&ray).is_some())
     }
 

@@ -382,6 +382,64 @@ pub struct Floor {
     pub mean: f64,
 }
 
+/// How much of an image's light falls on pixels whose rays miss the reconstruction box
+/// ([`light_off_box`]): light no reconstruction can explain, and which a run drops with those
+/// rays.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OffBox {
+    /// The share of the lit pixels' light, above the image's floor, on pixels that miss the box.
+    pub share: f64,
+    /// How many lit pixels miss the box.
+    pub pixels: usize,
+    /// How many pixels are lit.
+    pub lit: usize,
+}
+
+/// The light of `image` (taken by `camera`, whose size it must have) on pixels whose rays miss
+/// `aabb`. A pixel is lit when it stands above the image's floor (its 5th percentile) by more
+/// than four times its noise ([`Image::relative_noise`]) and a twentieth of its range, so that
+/// noise and a dim background count for nothing; its light is its value above the floor. None
+/// for an image of another size than the camera's, or with no lit pixel. A large share says the
+/// camera's calibration (its focal length, its pose) or the box is wrong, or that something
+/// bright outside the box is in view.
+pub fn light_off_box(camera: &Camera, image: &Image, aabb: &fluidnerf_core::Aabb) -> Option<OffBox> {
+    use rayon::prelude::*;
+    if (image.width, image.height) != (camera.width(), camera.height()) || image.data.is_empty() {
+        return None;
+    }
+    let floor = Floor::of(&image.data).level;
+    let (_, hi) = image.min_max();
+    let range = f64::from(hi) - floor;
+    if range.is_nan() || range <= 0.0 {
+        return None;
+    }
+    let noise = image.relative_noise().unwrap_or(0.0) * range;
+    let threshold = floor + (4.0 * noise).max(0.05 * range);
+    let w = image.width;
+    let (off, all, pixels, lit) = image
+        .data
+        .par_chunks(w)
+        .enumerate()
+        .map(|(v, row)| {
+            let mut sums = (0.0, 0.0, 0usize, 0usize);
+            for (u, &p) in row.iter().enumerate() {
+                let p = f64::from(p);
+                if p > threshold {
+                    let light = p - floor;
+                    sums.1 += light;
+                    sums.3 += 1;
+                    if !camera.pixel_hits(aabb, u, v) {
+                        sums.0 += light;
+                        sums.2 += 1;
+                    }
+                }
+            }
+            sums
+        })
+        .reduce(|| (0.0, 0.0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3));
+    (lit > 0).then(|| OffBox { share: off / all, pixels, lit })
+}
+
 impl Floor {
     /// The floor of an image's pixels (all of them: images with masks are not compared).
     pub fn of(data: &[f32]) -> Floor {
@@ -811,5 +869,37 @@ mod tests {
         let mut gains = vec![(2.0, 0.0), (1.0, 0.0), (4.0, 1.0)];
         normalise(&mut gains, &[true, false, true]);
         assert_eq!(gains, vec![(2.0 / 3.0, 0.0), (1.0 / 3.0, 0.0), (4.0 / 3.0, 1.0)]);
+    }
+
+    /// The light on pixels whose rays miss the box, against an image lit where the box images
+    /// and one lit beside it, with the share known from the pixels chosen.
+    #[test]
+    fn light_off_box_is_the_share_of_light_on_pixels_that_miss_the_box() {
+        // 32 × 32 px, a box of side 2 seen from 10 away: it images about 12 px wide in the middle.
+        let k = Intrinsics { width: 32, height: 32, fx: 60.0, fy: 60.0, cx: 15.5, cy: 15.5, skew: 0.0 };
+        let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y);
+        let aabb = Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0));
+        let (hit, miss) = ((16, 16), (1, 1));
+        assert!(camera.pixel_hits(&aabb, hit.0, hit.1) && !camera.pixel_hits(&aabb, miss.0, miss.1));
+        let lit = |spots: &[((usize, usize), f32)]| {
+            let mut im = Image::zeros(32, 32);
+            for &((u, v), value) in spots {
+                im.data[v * 32 + u] = value;
+            }
+            im
+        };
+        let inside = light_off_box(&camera, &lit(&[(hit, 1.0)]), &aabb).expect("lit");
+        assert_eq!(inside, OffBox { share: 0.0, pixels: 0, lit: 1 });
+        let outside = light_off_box(&camera, &lit(&[(miss, 1.0)]), &aabb).expect("lit");
+        assert_eq!(outside, OffBox { share: 1.0, pixels: 1, lit: 1 });
+        // Three parts inside, one outside: a quarter of the light above the floor (0).
+        let both = light_off_box(&camera, &lit(&[(hit, 3.0), (miss, 1.0)]), &aabb).expect("lit");
+        assert_eq!((both.share, both.pixels, both.lit), (0.25, 1, 2));
+        // A dim pixel (under a twentieth of the range) is no light.
+        let dim = light_off_box(&camera, &lit(&[(hit, 1.0), (miss, 0.04)]), &aabb).expect("lit");
+        assert_eq!(dim.pixels, 0);
+        // A black image, or one of another size than the camera's, says nothing.
+        assert_eq!(light_off_box(&camera, &Image::zeros(32, 32), &aabb), None);
+        assert_eq!(light_off_box(&camera, &Image::zeros(16, 32), &aabb), None);
     }
 }

@@ -38,6 +38,10 @@ pub struct Args {
     pub no_images: bool,
 }
 
+/// The share of an image's light on pixels whose rays miss the box above which `info` warns
+/// ([`fluidnerf_pipeline::light_off_box`]).
+const OFF_BOX_SHARE: f64 = 0.1;
+
 fn v3(v: fluidnerf_core::glam::DVec3) -> String {
     // Round-off below the printed precision must not print as "-0.000".
     let c = |x: f64| if x.abs() < 5e-4 { 0.0 } else { x };
@@ -168,6 +172,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut noise_levels = Vec::new();
     // Whether a training (not held-out) image has a pixel above 0, before any preprocessing.
     let mut training_lit = false;
+    // Each image's light on pixels whose rays miss the box: of the image as read, then of what
+    // a run trains on (after the background, inside the mask) when the scene preprocesses.
+    let mut off_box: Vec<Option<fluidnerf_pipeline::OffBox>> = vec![None; scene.frames.len()];
     let bar = crate::progress::bar(scene.frames.len() as u64, "checking");
     for (i, f) in scene.frames.iter().enumerate() {
         let _ = writeln!(out, "{}", frame_title(i, f));
@@ -219,6 +226,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                             f.file_path.display()
                         ));
                     }
+                    off_box[i] = fluidnerf_pipeline::light_off_box(&f.camera, &img, &scene.aabb);
                     let saturated = kind.saturated(&img);
                     if saturated > 0 {
                         warnings.push(format!(
@@ -277,6 +285,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     );
                 }
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
+                    off_box[i] = match m {
+                        None => fluidnerf_pipeline::light_off_box(&scene.frames[i].camera, im, &scene.aabb),
+                        Some(m) => {
+                            let mut used = im.clone();
+                            used.data.iter_mut().zip(m).filter(|(_, &keep)| !keep).for_each(|(v, _)| *v = 0.0);
+                            fluidnerf_pipeline::light_off_box(&scene.frames[i].camera, &used, &scene.aabb)
+                        }
+                    };
                     totals[i] = m.is_none().then(|| im.sum());
                     floors[i] = m.is_none().then(|| fluidnerf_pipeline::Floor::of(&im.data));
                     // A run warns of it as it starts; here it is one of the scene's warnings.
@@ -303,6 +319,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     lit.map(|(k, _)| k).any(|k| p.masks[i].as_ref().is_none_or(|m| m[k]))
                 })
             }
+        }
+    }
+    for (i, off) in off_box.iter().enumerate() {
+        if let Some(off) = off.filter(|o| o.share > OFF_BOX_SHARE && o.pixels >= 10) {
+            warnings.push(format!(
+                "frame {i} ({}): {:.0}% of the image's light ({} of its {} lit pixels) lies on pixels whose rays \
+                 miss the box, light no reconstruction can explain (a run drops those rays): the camera's \
+                 calibration (focal length, pose) or the box may be wrong, or something bright outside the box is \
+                 in view (mask it, or subtract a background)",
+                scene.frames[i].file_path.display(),
+                100.0 * off.share,
+                off.pixels,
+                off.lit
+            ));
         }
     }
     if let Some(median) = fluidnerf_core::image::median_noise(noise_levels) {

@@ -187,7 +187,31 @@ fn extreme_coefficients_are_described_in_short() {
     assert!(o.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
     assert!(stdout.contains("skew 1e-250"), "{stdout}");
     assert!(stdout.contains("k2 1e-300 p1 -2.5e-200 p2 0"), "{stdout}");
-    assert!(stdout.lines().all(|l| l.chars().count() < 200), "{stdout}");
+    // The description's lines (warnings are sentences, and as long as they need).
+    assert!(stdout.lines().filter(|l| !l.starts_with("warning:")).all(|l| l.chars().count() < 200), "{stdout}");
+}
+
+/// A camera whose focal length was mistyped saw the scene's light where its rays miss the box;
+/// `info` said only that its image held 23 times the median's light, and found no problem.
+#[test]
+fn light_where_a_cameras_rays_miss_the_box_is_warned_of_naming_the_frame() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    crate::common::demo_scene(d, "jet", 6, 32, 24, &[]);
+    let clean = info(&d.join("scene"));
+    assert!(clean.status.success() && !text(&clean).0.contains("miss the box"), "{}", text(&clean).0);
+    crate::common::edit_json(&d.join("scene/transforms.json"), |t| {
+        let frame = &mut t["frames"][1];
+        frame["fl_x"] = 60.0.into();
+        frame["fl_y"] = 60.0.into();
+    });
+    let o = info(&d.join("scene"));
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    let warned: Vec<&str> = stdout.lines().filter(|l| l.contains("lies on pixels whose rays miss the box")).collect();
+    assert_eq!(warned.len(), 1, "{stdout}");
+    assert!(warned[0].starts_with("warning: frame 1 (images/cam001.png): "), "{stdout}");
+    assert!(warned[0].contains("the camera's calibration (focal length, pose) or the box may be wrong"), "{stdout}");
 }
 
 /// A distortion that cannot be inverted at the image's edges stopped every method after the
