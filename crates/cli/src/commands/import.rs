@@ -672,7 +672,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
     let mut folders_named_like_images = Vec::new();
     let by_stem = entries_by_stem(images)?;
     for (name, cam) in cameras {
-        let folder = images.join(name);
+        let folder = under(images, name).map_err(|e| anyhow::anyhow!("camera {name}: {e}"))?;
         let named: &[PathBuf] = by_stem.get(name.as_str()).map_or(&[], Vec::as_slice);
         let found: Vec<&PathBuf> = named.iter().filter(|p| p.is_file()).collect();
         let not_files: Vec<String> = named.iter().filter(|p| !p.is_file()).map(|p| p.display().to_string()).collect();
@@ -827,7 +827,7 @@ fn image_size_of(
     images: &Path,
     by_stem: &HashMap<String, Vec<PathBuf>>,
 ) -> anyhow::Result<Option<(u32, u32)>> {
-    let folder = images.join(name);
+    let folder = under(images, name).map_err(|e| anyhow::anyhow!("camera {name}: {e}"))?;
     let first = if folder.is_dir() {
         list_dir(&folder)?.into_iter().find(|p| is_image(p))
     } else {
@@ -953,11 +953,44 @@ fn by_camera<'a>(pairs: impl Iterator<Item = (&'a str, String)>) -> Vec<(String,
     groups
 }
 
+/// `IMAGES/NAME`, for a NAME that leads to a path under IMAGES (a `..` that comes back in, as
+/// in `../images/left/a.png`, is followed): a calibration's image or camera name that is
+/// absolute or climbs out (`/etc/passwd`, `../other/cam1.png`) was followed out of the folder
+/// given.
+fn under(images: &Path, name: &str) -> Result<PathBuf, String> {
+    use std::path::Component;
+    // The path with `.` and `..` resolved as written, without the file system.
+    fn lexical(p: &Path) -> Vec<Component<'_>> {
+        let mut out: Vec<Component> = Vec::new();
+        for c in p.components() {
+            match c {
+                Component::CurDir => {}
+                Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
+                    out.pop();
+                }
+                other => out.push(other),
+            }
+        }
+        out
+    }
+    let joined = images.join(name);
+    let (base, path) = (lexical(images), lexical(&joined));
+    if path.len() > base.len() && path[..base.len()] == base[..] {
+        Ok(joined)
+    } else {
+        Err(format!(
+            "the name {name:?} leads out of the images folder {} (an absolute path, or '..' out of it); names \
+             are looked up under it",
+            images.display()
+        ))
+    }
+}
+
 /// The image `IMAGES/NAME`, or the one image whose stem is NAME's when that is no file (`a.jpg`
 /// finds `a.png`, `IMG_1` finds `IMG_1.tif`); `None` when there is none. Several images of that
 /// stem are an error.
 fn image_by_name(images: &Path, name: &str) -> Result<Option<PathBuf>, String> {
-    let p = images.join(name);
+    let p = under(images, name)?;
     if p.is_file() {
         return Ok(Some(p));
     }

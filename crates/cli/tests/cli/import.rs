@@ -441,6 +441,23 @@ fn colmap_model_with_images_in_subfolders() {
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(err.contains("no calibrated camera for 1 entr(ies)") && err.contains("left/extra.png"), "{err}");
+    std::fs::remove_file(images.join("left/extra.png")).expect("removes");
+
+    // A name that leads out of the images folder was followed there (an absolute path, or one
+    // that climbs out): refused, naming it.
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::create_dir_all(&elsewhere).expect("mkdir");
+    image(&elsewhere, "c.png");
+    let outside = elsewhere.join("c.png").display().to_string();
+    for name in ["../elsewhere/c.png", outside.as_str()] {
+        let cams: Vec<(String, Camera)> =
+            rig().into_iter().zip(["left/a.png", "left/b.png", name]).map(|((_, c), n)| (n.to_string(), c)).collect();
+        fluidnerf_io::calib::write_colmap_bin(&model, &cams).expect("writes model");
+        let o = import(true);
+        assert_eq!(o.status.code(), Some(1), "{name}");
+        let err = stderr(&o);
+        assert!(err.contains(&format!("the name {name:?} leads out of the images folder")), "{err}");
+    }
 }
 
 /// A transforms.json whose frames are videos: each video's mask goes with every frame decoded
