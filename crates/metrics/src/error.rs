@@ -12,6 +12,9 @@ pub enum MetricsError {
     /// Rendering a reconstruction failed.
     #[error("rendering frame {frame} failed: {error}")]
     Render { frame: usize, error: fluidnerf_core::CoreError },
+    /// A reconstruction rendered to values that are not finite.
+    #[error("the view rendered for frame {frame} is {value} at pixel (col {col}, row {row}): the reconstruction's values overflow 32-bit floats (finite weights or voxels so large that their sums do not fit); the file is damaged or was edited")]
+    Overflow { frame: usize, value: f32, col: usize, row: usize },
 }
 
 impl MetricsError {

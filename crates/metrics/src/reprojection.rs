@@ -99,6 +99,10 @@ pub fn reproject(
     };
     let rendered = render_image(field, &f.camera, &scene.aabb, &settings)
         .map_err(|error| MetricsError::Render { frame, error })?;
+    // Scored, such a view gave an NRMSE of inf and an SSIM of NaN.
+    if let Some(at) = rendered.data.iter().position(|v| !v.is_finite()) {
+        return Err(MetricsError::Overflow { frame, value: rendered.data[at], col: at % w, row: at / w });
+    }
     let metrics = compare_images(&rendered, measured, mask, &options.ssim)?;
     Ok(Reprojection {
         metrics: ReprojectionMetrics { frame, camera_name: f.camera_name.clone(), time: f.time, ..metrics },

@@ -225,6 +225,25 @@ fn a_field_whose_values_overflow_is_refused() {
     }
     assert!(!d.join("out.npy").exists() && !d.join("views").exists(), "nothing written");
     assert!(!run.join("metrics.json").exists(), "no metrics written");
+
+    // Values that are finite but whose line integrals overflow (10³⁸ × 2): `render` refused
+    // them, while `eval` scored NRMSE 2.6e38, a windowed SSIM of 1.85e20 and reprojections of
+    // inf and NaN.
+    let big = write_dense_run(&d.join("big"), &scene, 1e38);
+    let out = fluidnerf(&["eval", "big", "--scene", ".", "--no-regions"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("big: the field reaches 2.000e38 at the truth's voxel centres"), "{e}");
+    // Without a truth, through the held-out view alone.
+    let mut bare = scene.clone();
+    bare.truth.clear();
+    for f in &mut bare.frames {
+        f.file_path = Path::new("..").join(&f.file_path);
+    }
+    fluidnerf_io::scene::save_scene(&bare, &d.join("bare")).expect("writes scene");
+    let out = fluidnerf(&["eval", "big", "--scene", "bare"], d);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && e.contains("the view rendered for frame 3 is inf at pixel"), "{e}");
+    assert!(!big.join("metrics.json").exists(), "no metrics written");
 }
 
 #[test]
