@@ -1109,11 +1109,25 @@ pub fn read_scene_draft(path: &Path) -> Result<SceneDraft, IoError> {
             file.display()
         );
     }
-    if let Some((from, to)) = renamed.first() {
-        log::info!(
-            "{}: {} frame(s) name an image by another extension or none; matched by name stem (e.g. {from} → {})",
+    // A name without an extension (NeRF datasets' `./train/r_0`) is matched as a matter of
+    // course; a name with another image extension than the file found (`cam001.jpg` for
+    // `cam001.png`) may be a mistake, and is said so: it was matched without a word.
+    let (other, bare): (Vec<_>, Vec<_>) =
+        renamed.iter().partition(|(from, _)| crate::image::has_image_extension(Path::new(from)));
+    if let Some((from, to)) = other.first() {
+        log::warn!(
+            "{}: {} frame(s) name an image file that does not exist, and read the one image of the same name \
+             with another extension instead (e.g. {from} → {}); correct the names if that is not the image meant",
             file.display(),
-            renamed.len(),
+            other.len(),
+            to.display()
+        );
+    }
+    if let Some((from, to)) = bare.first() {
+        log::info!(
+            "{}: {} frame(s) name an image without its extension; matched by name stem (e.g. {from} → {})",
+            file.display(),
+            bare.len(),
             to.display()
         );
     }

@@ -594,3 +594,23 @@ fn truth_that_is_zero_throughout_is_an_error() {
     fluidnerf_io::volume::write_npy(&dir.path().join("truth/t0.npy"), &zero).expect("writes truth");
     assert_fails_with(&info(dir.path()), &["truth", "t0.npy", "every voxel is zero", "NRMSE"]);
 }
+
+/// A frame naming `c1.jpg` read `c1.png` without a word; a name without an extension (as NeRF
+/// datasets write them) is matched as before, quietly.
+#[test]
+fn an_image_read_by_another_extension_than_named_is_warned_of() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    let path = dir.path().join("transforms.json");
+    let original = std::fs::read_to_string(&path).expect("reads");
+    std::fs::write(&path, original.replace("images/c1.png", "images/c1.jpg")).expect("writes");
+    let o = info(dir.path());
+    let (_, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("1 frame(s) name an image file that does not exist, and read the one image"), "{stderr}");
+    assert!(stderr.contains("images/c1.jpg → images/c1.png"), "{stderr}");
+    std::fs::write(&path, original.replace("images/c1.png", "images/c1")).expect("writes");
+    let o = info(dir.path());
+    let (_, stderr) = text(&o);
+    assert!(o.status.success() && !stderr.contains("does not exist"), "{stderr}");
+}
