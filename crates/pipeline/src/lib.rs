@@ -59,7 +59,9 @@ pub use config::{
 };
 pub use error::PipelineError;
 pub use event::{duration, RunEvent, WindowPos};
-pub use measured::{gain_hint, light_off_box, Floor, OffBox, GAIN_HINT_RATIO};
+pub use measured::{
+    flat_training_images, gain_hint, light_off_box, one_value_throughout, Floor, OffBox, GAIN_HINT_RATIO,
+};
 pub use report::{
     ClassicalDetails, FrameGain, History, HoldoutPoint, HoldoutScore, LossKind, NeuralDetails, Preprocessing,
     RunReport, RunStatus, StopReason, VolumeRecord, WindowDetails, REPORT_FORMAT,

@@ -48,34 +48,10 @@ pub(crate) fn load(scene: &Scene, gains: &GainConfig, temporal: bool) -> Result<
     // Training images that are each one value throughout (every pixel saturated, or blank at
     // one level) carry nothing of the field: a run on them made a field as flat as they are
     // and reported it as a result.
-    let training: Vec<usize> = scene.training_frames().map(|(i, _)| i).collect();
-    let level = |i: usize| -> Option<f32> {
-        let mask = pre.masks[i].as_deref();
-        let mut used =
-            pre.images[i].data.iter().enumerate().filter(|(k, _)| mask.is_none_or(|m| m[*k])).map(|(_, v)| *v);
-        let first = used.next()?;
-        used.all(|v| v == first).then_some(first)
-    };
-    let levels: Vec<Option<f32>> = training.iter().map(|&i| level(i)).collect();
-    // All black is refused later, as such.
-    let lit = levels.iter().position(|l| l.is_some_and(|v| v > 0.0));
-    if let Some(k) = lit.filter(|_| levels.iter().all(Option::is_some)) {
-        let i = training[k];
-        return Err(PipelineError::file(
-            &scene.root.join(fluidnerf_io::scene::SCENE_FILE),
-            format!(
-                "every training image is one value throughout ({}: {} at every pixel{}, as preprocessed): \
-                 saturated or blank images carry no information about the field; check the exposure and the \
-                 images the scene names",
-                frame_label(scene, i),
-                fluidnerf_core::num(levels[k].unwrap_or(0.0)),
-                if training.len() > 1 {
-                    format!(", and the {} others likewise", training.len() - 1)
-                } else {
-                    String::new()
-                }
-            ),
-        ));
+    let levels: Vec<Option<f32>> =
+        pre.images.iter().zip(&pre.masks).map(|(im, m)| one_value_throughout(&im.data, m.as_deref())).collect();
+    if let Some(why) = flat_training_images(scene, &levels) {
+        return Err(PipelineError::file(&scene.root.join(fluidnerf_io::scene::SCENE_FILE), why));
     }
     let masked_pixels = pre.masks.iter().flatten().map(|m| m.iter().filter(|&&k| !k).count()).sum();
     let mut images = pre.images;
@@ -380,6 +356,35 @@ pub struct Floor {
     pub level: f64,
     /// The pixels' mean.
     pub mean: f64,
+}
+
+/// The value every used pixel of an image holds (`mask`: `true` for the pixels used), or None
+/// when they differ (or none is used).
+pub fn one_value_throughout(data: &[f32], mask: Option<&[bool]>) -> Option<f32> {
+    let mut used = data.iter().enumerate().filter(|(k, _)| mask.is_none_or(|m| m[*k])).map(|(_, v)| *v);
+    let first = used.next()?;
+    used.all(|v| v == first).then_some(first)
+}
+
+/// Why a run cannot use `scene`'s training images when each is one value throughout (every
+/// pixel saturated, or blank at one level; `levels` per frame as [`one_value_throughout`] gives
+/// them): they carry nothing of the field, and a run on them made a field as flat as they are
+/// and reported it as a result. All black is refused later, as such.
+pub fn flat_training_images(scene: &Scene, levels: &[Option<f32>]) -> Option<String> {
+    let training: Vec<usize> = scene.training_frames().map(|(i, _)| i).collect();
+    let at = |i: usize| levels.get(i).copied().flatten();
+    let k = training.iter().position(|&i| at(i).is_some_and(|v| v > 0.0))?;
+    if !training.iter().all(|&i| at(i).is_some()) {
+        return None;
+    }
+    let i = training[k];
+    Some(format!(
+        "every training image is one value throughout ({}: {} at every pixel{}, as preprocessed): saturated or \
+         blank images carry no information about the field; check the exposure and the images the scene names",
+        frame_label(scene, i),
+        fluidnerf_core::num(at(i).unwrap_or(0.0)),
+        if training.len() > 1 { format!(", and the {} others likewise", training.len() - 1) } else { String::new() }
+    ))
 }
 
 /// How much of an image's light falls on pixels whose rays miss the reconstruction box

@@ -175,6 +175,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Each image's light on pixels whose rays miss the box: of the image as read, then of what
     // a run trains on (after the background, inside the mask) when the scene preprocesses.
     let mut off_box: Vec<Option<fluidnerf_pipeline::OffBox>> = vec![None; scene.frames.len()];
+    // Each image's one value, when every pixel (a run uses) holds the same: as read, then as
+    // preprocessed.
+    let mut levels: Vec<Option<f32>> = vec![None; scene.frames.len()];
     let bar = crate::progress::bar(scene.frames.len() as u64, "checking");
     for (i, f) in scene.frames.iter().enumerate() {
         let _ = writeln!(out, "{}", frame_title(i, f));
@@ -227,6 +230,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         ));
                     }
                     off_box[i] = fluidnerf_pipeline::light_off_box(&f.camera, &img, &scene.aabb);
+                    levels[i] = fluidnerf_pipeline::one_value_throughout(&img.data, None);
                     let saturated = kind.saturated(&img);
                     if saturated > 0 {
                         warnings.push(format!(
@@ -285,6 +289,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     );
                 }
                 for (i, (im, m)) in p.images.iter().zip(&p.masks).enumerate() {
+                    levels[i] = fluidnerf_pipeline::one_value_throughout(&im.data, m.as_deref());
                     off_box[i] = match m {
                         None => fluidnerf_pipeline::light_off_box(&scene.frames[i].camera, im, &scene.aabb),
                         Some(m) => {
@@ -319,6 +324,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     lit.map(|(k, _)| k).any(|k| p.masks[i].as_ref().is_none_or(|m| m[k]))
                 })
             }
+        }
+    }
+    // Refused by every run: info said "no problems found".
+    if !args.no_images && problems.is_empty() {
+        if let Some(why) = fluidnerf_pipeline::flat_training_images(&scene, &levels) {
+            problems.push(why);
         }
     }
     for (i, off) in off_box.iter().enumerate() {

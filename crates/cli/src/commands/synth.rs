@@ -136,7 +136,9 @@ pub struct Args {
     /// here still override it).
     #[arg(long, conflicts_with = "preset")]
     pub config: Option<PathBuf>,
-    /// Overwrite a scene already in OUT.
+    /// Write into OUT although it already holds a scene or other files: the scene's files
+    /// (transforms.json, images/, truth/, previews) replace any of the same names there, and
+    /// other files are left as they are. A run's or an export's folder is refused even so.
     #[arg(long)]
     pub force: bool,
     /// Seed for the phantom, pose jitter, thin-lens rays and noise [default: the preset's, 0].
@@ -711,7 +713,11 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     }
     // A scene's files (images, truth, previews) would replace whatever of the same name is there.
     if !args.force && std::fs::read_dir(&out).is_ok_and(|mut d| d.next().is_some()) {
-        bail!("{} is not empty; write the scene into a new or empty folder, or pass --force", out.display());
+        bail!(
+            "{} is not empty; write the scene into a new or empty folder, or pass --force to write into it (the \
+             scene's files replace any of the same names)",
+            out.display()
+        );
     }
     if let Some(path) = &settings.phantom.volume_path {
         fluidnerf_pipeline::synthetic::refuse_truth_among_outputs(path, &out, "--truth-volume")?;

@@ -614,3 +614,21 @@ fn an_image_read_by_another_extension_than_named_is_warned_of() {
     let (_, stderr) = text(&o);
     assert!(o.status.success() && !stderr.contains("does not exist"), "{stderr}");
 }
+
+/// Training images that are each one value throughout, which every run refuses, passed `info`
+/// with "no problems found".
+#[test]
+fn training_images_of_one_value_each_are_a_problem() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    for c in 0..3 {
+        let flat = Image::from_vec(32, 24, vec![1000.0; 32 * 24]);
+        write_png16_counts(&dir.path().join(format!("images/c{c}.png")), &flat).expect("writes image");
+    }
+    assert_fails_with(&info(dir.path()), &["every training image is one value throughout", "1000 at every pixel"]);
+    // One image of varied values among them, and the images carry something.
+    let varied = Image::from_vec(32, 24, (0..32 * 24).map(|i| (i % 7) as f32).collect());
+    write_png16_counts(&dir.path().join("images/c1.png"), &varied).expect("writes image");
+    let o = info(dir.path());
+    assert!(!text(&o).1.contains("one value throughout"), "{}", text(&o).1);
+}
