@@ -2243,45 +2243,59 @@ pub fn median_image(images: &[Image]) -> Image {
 
 /// Reads the frames' masks (`mask_path`): an image of the frame's size, non-zero = use.
 fn load_masks(scene: &Scene, recording: &Recording) -> Result<Vec<Option<Vec<bool>>>, IoError> {
-    recording
-        .frames
-        .par_iter()
-        .enumerate()
-        .map(|(i, rec)| {
-            let Some(p) = &rec.mask_path else { return Ok(None) };
-            let frame = &scene.frames[i];
-            let path = scene.resolve(p);
-            let mask = crate::image::read_image(&path).map_err(|e| {
-                IoError::invalid(
-                    scene.root.join(SCENE_FILE),
-                    format!("frame {i} ({}): `mask_path`: {e}", frame.file_path.display()),
-                )
-            })?;
-            let (w, h) = (frame.camera.width(), frame.camera.height());
-            if (mask.width, mask.height) != (w, h) {
-                return Err(IoError::invalid(
-                    &path,
-                    format!(
-                        "mask is {}x{} pixels but frame {i} ({}) is {w}x{h}",
-                        mask.width,
-                        mask.height,
-                        frame.file_path.display()
-                    ),
-                ));
+    let loaded: Vec<Result<Option<Vec<bool>>, IoError>> =
+        recording.frames.par_iter().enumerate().map(|(i, rec)| load_mask(scene, i, rec)).collect();
+    // The first failing frame in frame order gives the error, and the others are counted:
+    // collected straight into a Result, the error was whichever thread met one first, and
+    // `info` named another mask on each run.
+    let failing: Vec<usize> = loaded.iter().enumerate().filter(|(_, m)| m.is_err()).map(|(i, _)| i).collect();
+    let mut masks = Vec::with_capacity(loaded.len());
+    for mask in loaded {
+        match mask {
+            Ok(m) => masks.push(m),
+            Err(IoError::Invalid { path, problem }) if failing.len() > 1 => {
+                let frames: Vec<String> = failing.iter().map(|i| i.to_string()).collect();
+                let problem = format!("{problem} (the masks of frames {} fail; this is the first)", frames.join(", "));
+                return Err(IoError::Invalid { path, problem });
             }
-            let keep: Vec<bool> = mask.data.iter().map(|&v| v > 0.0).collect();
-            if !keep.iter().any(|&k| k) {
-                return Err(IoError::invalid(
-                    &path,
-                    format!(
-                        "the mask of frame {i} ({}) is all zero: no pixel would be used",
-                        frame.file_path.display()
-                    ),
-                ));
-            }
-            Ok(Some(keep))
-        })
-        .collect()
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(masks)
+}
+
+/// Frame `i`'s mask (`true` for the pixels to use), None without one; refused, naming the file,
+/// when it cannot be read, has another size than the frame, or uses no pixel.
+fn load_mask(scene: &Scene, i: usize, rec: &FrameRecording) -> Result<Option<Vec<bool>>, IoError> {
+    let Some(p) = &rec.mask_path else { return Ok(None) };
+    let frame = &scene.frames[i];
+    let path = scene.resolve(p);
+    let mask = crate::image::read_image(&path).map_err(|e| {
+        IoError::invalid(
+            scene.root.join(SCENE_FILE),
+            format!("frame {i} ({}): `mask_path`: {e}", frame.file_path.display()),
+        )
+    })?;
+    let (w, h) = (frame.camera.width(), frame.camera.height());
+    if (mask.width, mask.height) != (w, h) {
+        return Err(IoError::invalid(
+            &path,
+            format!(
+                "mask is {}x{} pixels but frame {i} ({}) is {w}x{h}",
+                mask.width,
+                mask.height,
+                frame.file_path.display()
+            ),
+        ));
+    }
+    let keep: Vec<bool> = mask.data.iter().map(|&v| v > 0.0).collect();
+    if !keep.iter().any(|&k| k) {
+        return Err(IoError::invalid(
+            &path,
+            format!("the mask of frame {i} ({}) is all zero: no pixel would be used", frame.file_path.display()),
+        ));
+    }
+    Ok(Some(keep))
 }
 
 /// Reads every frame's image, in frame order (in parallel), 8-bit images through

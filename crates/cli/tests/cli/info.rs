@@ -632,3 +632,25 @@ fn training_images_of_one_value_each_are_a_problem() {
     let o = info(dir.path());
     assert!(!text(&o).1.contains("one value throughout"), "{}", text(&o).1);
 }
+
+/// With several masks that fail, `info` named one of them at random (the thread that met its
+/// failure first); now the first in frame order, with the others counted.
+#[test]
+fn several_failing_masks_are_named_in_frame_order() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    for (name, w) in [("m0.png", 32), ("m2.png", 16)] {
+        let zero = Image::from_vec(w, 24, vec![0.0; w * 24]);
+        write_png16_counts(&dir.path().join(name), &zero).expect("writes mask");
+    }
+    crate::common::edit_json(&dir.path().join("transforms.json"), |t| {
+        t["frames"][0]["mask_path"] = "m0.png".into();
+        t["frames"][2]["mask_path"] = "m2.png".into();
+    });
+    for _ in 0..3 {
+        assert_fails_with(
+            &info(dir.path()),
+            &["m0.png: the mask of frame 0", "is all zero", "(the masks of frames 0, 2 fail; this is the first)"],
+        );
+    }
+}
