@@ -224,6 +224,13 @@ impl LoadedRun {
                     dir.display()
                 )));
             }
+            // A finished run whose result was removed is not one that never wrote it.
+            if rd.report().is_file() {
+                return Err(refuse(
+                    "holds a run's report.json but none of its results (no volume.npy, model.json or \
+                     temporal.json): they were removed or moved; restore them, or run it again (reconstruct --force)",
+                ));
+            }
             if rd.config().is_file() {
                 return Err(refuse(
                     "holds a run stopped before its first checkpoint or result (config.json only): there is nothing \

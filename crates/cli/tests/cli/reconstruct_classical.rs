@@ -442,3 +442,17 @@ fn a_truth_zero_throughout_is_refused_naming_it() {
     refused(&out, "truth/truth.npy: every voxel of the ground truth is zero, so the NRMSE against it");
     assert!(!d.join("run/report.json").exists());
 }
+
+/// A finished run whose volume was removed was said to have stopped before its first
+/// checkpoint or result (config.json only), though its report.json is there.
+#[test]
+fn a_finished_run_whose_result_was_removed_says_so() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "blobs", 4, 16, 8, &[]);
+    ok(&fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "8", "-q"]));
+    std::fs::remove_file(d.join("run/volume.npy")).expect("removes the volume");
+    for args in [&["eval", "run"][..], &["export", "run", "-o", "ex", "--npy"], &["render", "run", "-o", "views"]] {
+        refused(&fluidnerf(d, args), "run: holds a run's report.json but none of its results");
+    }
+}
