@@ -231,6 +231,23 @@ pub fn read_truth_volume(path: &Path, aabb: Aabb, unit: &str) -> Result<Volume, 
             ),
         ));
     }
+    // Emission is never negative. A few small negative voxels (a CFD solver's undershoots) do
+    // little harm, but they are imaged as the signed field's integrals, which the sensor clips
+    // at zero: a volume mostly below zero made black images, refused as cameras that did not
+    // see the phantom.
+    let negative = volume.data.iter().filter(|&&v| v < 0.0).count();
+    if negative > 0 {
+        let low = volume.data.iter().copied().fold(f32::INFINITY, f32::min);
+        log::warn!(
+            "{}: {negative} of the {} voxels are negative (down to {}, the largest value is {}): emission is never \
+             negative, and the images integrate the signed field and clip it at zero; clamp the volume at zero if \
+             that is not meant",
+            path.display(),
+            volume.data.len(),
+            num(low),
+            num(top)
+        );
+    }
     Ok(volume)
 }
 

@@ -1035,3 +1035,22 @@ fn the_summary_names_the_png_depth_the_images_are_written_in() {
         assert_eq!(png[24], 16, "{bits}-bit counts are written in a 16-bit PNG");
     }
 }
+
+/// A truth volume mostly below zero was imaged as black (the signed integrals clipped at zero)
+/// and refused as cameras that did not see the phantom; its negative voxels are now named.
+#[test]
+fn a_truth_volume_with_negative_voxels_is_warned_of() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let aabb = fluidnerf_core::Aabb::cube(Default::default(), 2.0);
+    let truth = tmp.path().join("signed.npy");
+    let v = fluidnerf_core::Volume::from_fn([12, 12, 12], aabb, |p| if p.length() < 0.4 { 1.0 } else { -0.5 });
+    fluidnerf_io::volume::write_npy(&truth, &v).expect("writes truth");
+    let dir = tmp.path().join("set");
+    let (d, t) = (dir.to_str().expect("utf-8 path"), truth.to_str().expect("utf-8 path"));
+    let o = synth(&["-o", d, "--preset", "demo", "--cameras", "5", "--pixels", "24", "--truth-volume", t]);
+    let (_, err) = text(&o);
+    assert!(
+        err.contains("signed.npy: 1672 of the 1728 voxels are negative (down to -0.5, the largest value is 1)"),
+        "{err}"
+    );
+}
