@@ -93,10 +93,26 @@ impl RunEvent<'_> {
         let RunEvent::Estimate { seconds_per_iteration, iterations_left, seconds_left, budget_limited } = self else {
             return None;
         };
-        let limit = if *budget_limited { " (the time budget)" } else { "" };
+        let per = duration(*seconds_per_iteration);
+        if !*budget_limited {
+            return Some(format!(
+                "about {per} per iteration, at most {iterations_left} more iterations: at most {}",
+                duration(*seconds_left)
+            ));
+        }
+        // The budget, not the iteration cap, bounds the run: the iterations it leaves room for.
+        // "at most 24999 more iterations: at most 0.000 s" said the cap's count beside a budget
+        // already spent.
+        let fit = (seconds_left / seconds_per_iteration).floor();
+        if !(fit >= 1.0) {
+            return Some(format!(
+                "about {per} per iteration, more than is left of the time budget: the run stops after the iteration \
+                 under way (an iteration is not cut short)"
+            ));
+        }
+        let more = (fit as usize).min(*iterations_left);
         Some(format!(
-            "about {} per iteration, at most {iterations_left} more iterations: at most {}{limit}",
-            duration(*seconds_per_iteration),
+            "about {per} per iteration, about {more} more iterations: at most {} (the time budget)",
             duration(*seconds_left)
         ))
     }

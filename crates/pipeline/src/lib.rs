@@ -792,5 +792,22 @@ mod tests {
         .describe_estimate()
         .expect("an estimate");
         assert_eq!(text, "about 20 s per iteration, at most 199 more iterations: at most 1 h 06 min");
+        // Bounded by the budget: the iterations it leaves room for, not the cap's; and a budget
+        // spent before the next iteration ends said "at most 24999 more iterations: at most 0.000 s".
+        let budget = |spi: f64, left: usize, secs: f64| {
+            RunEvent::Estimate {
+                seconds_per_iteration: spi,
+                iterations_left: left,
+                seconds_left: secs,
+                budget_limited: true,
+            }
+            .describe_estimate()
+            .expect("an estimate")
+        };
+        assert_eq!(
+            budget(0.5, 24999, 28.5),
+            "about 0.500 s per iteration, about 57 more iterations: at most 28 s (the time budget)"
+        );
+        assert!(budget(14.0, 24999, 0.0).starts_with("about 14 s per iteration, more than is left of the time budget"));
     }
 }
