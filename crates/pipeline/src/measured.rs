@@ -248,6 +248,7 @@ impl Measured {
             out.frames.push(FrameGain {
                 frame: i,
                 camera: frame_label(scene, i),
+                time: f.time.filter(|_| scene.times().len() > 1),
                 holdout: f.holdout,
                 gain,
                 offset,

@@ -335,10 +335,11 @@ impl Preprocessing {
                 .iter()
                 .filter(|f| !f.holdout)
                 .map(|f| {
+                    let at = f.time.map(|t| format!(" at t = {}", fluidnerf_core::num(t))).unwrap_or_default();
                     if f.offset != 0.0 {
-                        format!("{} {:.3} ({:+.3})", f.camera, f.gain, f.offset)
+                        format!("{}{at} {:.3} ({:+.3})", f.camera, f.gain, f.offset)
                     } else {
-                        format!("{} {:.3}", f.camera, f.gain)
+                        format!("{}{at} {:.3}", f.camera, f.gain)
                     }
                 })
                 .collect();
@@ -346,8 +347,10 @@ impl Preprocessing {
         }
         for f in &self.frames {
             if let Some(s) = &f.holdout_scores {
+                // A camera held out at several times was listed once per time under one name.
+                let at = f.time.map(|t| format!(" at t = {}", fluidnerf_core::num(t))).unwrap_or_default();
                 out.push(format!(
-                    "held-out {}: reprojection NRMSE {:.4} as measured, {:.4} after its best-fit gain {:.3}",
+                    "held-out {}{at}: reprojection NRMSE {:.4} as measured, {:.4} after its best-fit gain {:.3}",
                     f.camera, s.nrmse_raw, s.nrmse_fitted, s.fitted_gain
                 ));
             }
@@ -362,6 +365,9 @@ pub struct FrameGain {
     pub frame: usize,
     /// The camera's name, or the image file when the frame names no camera.
     pub camera: String,
+    /// The frame's time, in a scene of several (where a camera's name recurs once per time).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<f64>,
     pub holdout: bool,
     /// Training images: the gain the run used (1 without gains; the balancing factor with
     /// `balance`; the fitted gain with `fit`). Held-out images: the balancing factor; their

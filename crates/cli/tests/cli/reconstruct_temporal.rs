@@ -1058,3 +1058,20 @@ fn a_series_driven_to_zero_by_its_learning_rate_is_reported() {
     });
     assert!(warned, "{r}");
 }
+
+/// A static run on a scene of several times listed its held-out camera once per time under one
+/// name, with nothing to tell the lines apart; each now says its time, as do the gains.
+#[test]
+fn held_out_scores_of_a_scene_of_several_times_say_their_time() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15", "--holdout", "3"]);
+    let out = fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "asart", "--resolution", "8"]);
+    ok(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let held: Vec<&str> = stdout.lines().filter(|l| l.starts_with("held-out ")).collect();
+    assert_eq!(held.len(), 2, "{stdout}");
+    assert!(held[0].starts_with("held-out cam003 at t = 14: ") && held[1].starts_with("held-out cam003 at t = 15: "));
+    let frames = report(&d.join("run"))["preprocessing"]["frames"].clone();
+    assert_eq!(frames[0]["time"], 14.0);
+}
