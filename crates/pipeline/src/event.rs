@@ -104,7 +104,7 @@ impl RunEvent<'_> {
         // "at most 24999 more iterations: at most 0.000 s" said the cap's count beside a budget
         // already spent.
         let fit = (seconds_left / seconds_per_iteration).floor();
-        if !(fit >= 1.0) {
+        if fit.is_nan() || fit < 1.0 {
             return Some(format!(
                 "about {per} per iteration, more than is left of the time budget: the run stops after the iteration \
                  under way (an iteration is not cut short)"
