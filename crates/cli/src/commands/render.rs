@@ -178,7 +178,9 @@ struct Settings<'a> {
     supersample: usize,
     step: Option<f64>,
     /// The instant rendered: None for a source fixed in time, and for a time-resolved field's
-    /// scene views without --time (each at its frame's time).
+    /// scene views at several times (each at its frame's time, without --time). Views all at
+    /// one instant give it, also when the scene's frames hold no time (a time-resolved field
+    /// seen through a static scene's cameras): render.json said null, not which instant.
     time: Option<f64>,
     /// The grid a trained field was sampled on for rendering (None: rendered exactly).
     baked: Option<[usize; 3]>,
@@ -617,7 +619,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // A time-resolved field's: the time asked, or that of its orbit views (all at one). A
         // source fixed in time has none, whatever --time said (it was warned of as unused).
         time: if source.is_time_resolved() {
-            args.time.or_else(|| args.orbit.and(views.first().map(|v| v.time)))
+            let first = views.first().map(|v| v.time);
+            args.time.or(first.filter(|&t| views.iter().all(|v| v.time == t)))
         } else {
             None
         },

@@ -1075,3 +1075,38 @@ fn held_out_scores_of_a_scene_of_several_times_say_their_time() {
     let frames = report(&d.join("run"))["preprocessing"]["frames"].clone();
     assert_eq!(frames[0]["time"], 14.0);
 }
+
+/// A time-resolved field rendered through the cameras of a scene whose frames hold no time is
+/// drawn at one instant, which render.json recorded as null; views at several instants record
+/// none, each being its frame's.
+#[test]
+fn render_json_records_the_one_instant_its_views_show() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    // The first instant's frames without their times: a static scene of the same cameras.
+    let fixed = d.join("fixed");
+    std::fs::create_dir_all(&fixed).expect("mkdir");
+    let mut t = json(&d.join("scene/transforms.json"));
+    let frames: Vec<serde_json::Value> = t["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .filter(|f| f["time"] == 14.0)
+        .map(|f| {
+            let mut f = f.clone();
+            f.as_object_mut().expect("object").remove("time");
+            f["file_path"] = format!("../scene/{}", f["file_path"].as_str().expect("path")).into();
+            f
+        })
+        .collect();
+    t["frames"] = frames.into();
+    t.as_object_mut().expect("object").remove("truth");
+    std::fs::write(fixed.join("transforms.json"), t.to_string()).expect("writes");
+    ok(&fluidnerf(d, &["render", "run", "--scene", "fixed", "-o", "still", "-q"]));
+    assert_eq!(json(&d.join("still/render.json"))["time"], 14.0);
+    ok(&fluidnerf(d, &["render", "run", "--scene", "scene", "-o", "both", "-q"]));
+    assert_eq!(json(&d.join("both/render.json"))["time"], serde_json::Value::Null);
+}
