@@ -436,8 +436,10 @@ fn refuse_other_instants(runs: &[Run]) -> anyhow::Result<()> {
 /// other folders, say a cluster's and this machine's) it only warns.
 fn refuse_other_scenes(runs: &[Run], allow: bool) -> anyhow::Result<()> {
     let mut scenes: Vec<(PathBuf, Vec<String>)> = Vec::new();
+    let mut unknown = Vec::new();
     for run in runs {
         let Ok(config) = fluidnerf_pipeline::RunConfig::read(&run.report.with_file_name("config.json")) else {
+            unknown.push(run.path.display().to_string());
             continue;
         };
         let scene = super::scene_folder(&config.scene).unwrap_or(config.scene);
@@ -446,6 +448,15 @@ fn refuse_other_scenes(runs: &[Run], allow: bool) -> anyhow::Result<()> {
             Some((_, paths)) => paths.push(named),
             None => scenes.push((scene, vec![named])),
         }
+    }
+    // A report without its run's config.json (a copied report.json, a folder whose config was
+    // removed) names no scene, and passed the check unannounced.
+    if !unknown.is_empty() && !scenes.is_empty() {
+        log::warn!(
+            "{}: no config.json beside the report to name the scene it was made from; compared with the others \
+             without checking that it is the same scene",
+            unknown.join(", ")
+        );
     }
     if scenes.len() < 2 {
         return Ok(());

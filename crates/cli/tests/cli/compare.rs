@@ -178,6 +178,11 @@ fn compares_classical_neural_and_external_runs() {
     ok(&twins);
     let stdout = String::from_utf8_lossy(&twins.stdout);
     assert!(stdout.contains("sart [sart]") && stdout.contains("sart [copy/sart]"), "{stdout}");
+    // A report without its configuration names no scene: compared, with a warning that says so.
+    let bare = fluidnerf(d, &["compare", "sart", "copy/sart", "-o", "cmp5"]);
+    ok(&bare);
+    let err = String::from_utf8_lossy(&bare.stderr);
+    assert!(err.contains("copy/sart: no config.json beside the report to name the scene"), "{err}");
 }
 
 #[test]
