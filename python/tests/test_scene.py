@@ -297,7 +297,7 @@ def test_metashape_cameras_that_are_not_aligned_are_refused_unless_skipped(tmp_p
     assert [c.name for c in fluidnerf.read_metashape(xml, skip_unaligned=np.True_)] == ["a"]
     with pytest.raises(fluidnerf.FluidNerfError, match="not aligned in Metashape.*b"):
         fluidnerf.read_metashape(xml, skip_unaligned=np.False_)
-    with pytest.raises(TypeError, match="skip_unaligned: expected True or False, got 1"):
+    with pytest.raises(TypeError, match="skip_unaligned: expected True or False, got int 1"):
         fluidnerf.read_metashape(xml, skip_unaligned=1)
     # Offsets from the image centre with pixel centres at +0.5; Metashape's P1 is OpenCV's p2.
     np.testing.assert_allclose(cam.K[0], [80, 0, 33.0])
