@@ -571,6 +571,21 @@ impl Ctx<'_> {
         Ok(state)
     }
 
+    /// Window `k`'s iteration cap, with the configuration key that sets it and how to give a
+    /// value `n` for it.
+    fn window_cap(spec: &TemporalSpec, k: usize) -> (usize, &'static str, impl Fn(&str) -> String) {
+        let warm = spec.windows.warm_start && k > 0;
+        let (cap, key) = match spec.windows.warm_max_iterations.filter(|_| warm) {
+            Some(m) => (m, "method.windows.warm_max_iterations"),
+            None => (spec.train.max_iterations, "stopping.max_iterations"),
+        };
+        let give = move |n: &str| match key {
+            "stopping.max_iterations" => format!("--max-iterations {n}"),
+            _ => format!("{key} {n} in the configuration"),
+        };
+        (cap, key, give)
+    }
+
     /// Refuses to continue window `k`'s saved `learner` (at `path`) beyond the iteration cap asked
     /// for now.
     fn check_cap<F: TrainableField>(
@@ -582,16 +597,9 @@ impl Ctx<'_> {
         // The running window only continues: below its checkpoint's iteration it would keep
         // the longer training and record the lower cap in config.json, which reruns to
         // another result (as a static run refuses it).
-        let warm = spec.windows.warm_start && k > 0;
-        let (cap, key) = match spec.windows.warm_max_iterations.filter(|_| warm) {
-            Some(m) => (m, "method.windows.warm_max_iterations"),
-            None => (spec.train.max_iterations, "stopping.max_iterations"),
-        };
+        let (cap, key, give) = Self::window_cap(spec, k);
         if learner.iteration > cap {
-            let give = match key {
-                "stopping.max_iterations" => format!("--max-iterations of at least {}", learner.iteration),
-                _ => format!("{key} of at least {} in the configuration", learner.iteration),
-            };
+            let give = give(&format!("of at least {}", learner.iteration));
             return Err(PipelineError::invalid(
                 key,
                 format!(
@@ -615,17 +623,10 @@ impl Ctx<'_> {
         report: &fluidnerf_neural::train::TrainReport,
         path: &std::path::Path,
     ) -> Result<(), PipelineError> {
-        let warm = spec.windows.warm_start && k > 0;
-        let (cap, key) = match spec.windows.warm_max_iterations.filter(|_| warm) {
-            Some(m) => (m, "method.windows.warm_max_iterations"),
-            None => (spec.train.max_iterations, "stopping.max_iterations"),
-        };
+        let (cap, key, give) = Self::window_cap(spec, k);
         let stopped_at_cap = report.stop_reason == fluidnerf_neural::train::StopReason::MaxIterations;
         if report.iterations > cap || (stopped_at_cap && report.iterations < cap) {
-            let give = match key {
-                "stopping.max_iterations" => format!("--max-iterations {}", report.iterations),
-                _ => format!("{key} {} in the configuration", report.iterations),
-            };
+            let give = give(&report.iterations.to_string());
             let how = if stopped_at_cap { "stopped at its cap of" } else { "trained for" };
             return Err(PipelineError::invalid(
                 key,
