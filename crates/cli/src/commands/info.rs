@@ -332,6 +332,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             problems.push(why);
         }
     }
+    // The largest share, for a scene whose images all lie where they should.
+    if let Some((i, off)) =
+        off_box.iter().enumerate().filter_map(|(i, o)| o.map(|o| (i, o))).max_by(|a, b| a.1.share.total_cmp(&b.1.share))
+    {
+        let _ = writeln!(
+            out,
+            "light on pixels whose rays miss the box: at most {:.1}% of an image's (frame {i})",
+            100.0 * off.share
+        );
+    }
     for (i, off) in off_box.iter().enumerate() {
         if let Some(off) = off.filter(|o| o.share > OFF_BOX_SHARE && o.pixels >= 10) {
             warnings.push(format!(
