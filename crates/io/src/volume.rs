@@ -10,6 +10,8 @@
 //!   `Origin = aabb.min + spacing / 2` because VTK puts point data at grid points, and our
 //!   values live at voxel centres; `Spacing` is the voxel size; `WholeExtent = 0 nx−1 0 ny−1
 //!   0 nz−1`. ParaView therefore shows every value at its voxel centre, in world units.
+//!   [`read_vti`] reads every mode VTK's writer has (ASCII, inline base64, appended base64 or
+//!   raw; uncompressed or zlib), point or cell data.
 //! - raw: little-endian f32 in the same order, plus a sidecar `<file>.json` holding `dims`
 //!   `[nx, ny, nz]`, `aabb`, `spacing`, `dtype` (`"<f4"`) and `order` (`"x fastest"`).
 //! - `.tif`: a TIFF stack, page `k` the z-slice `k` (row `j`, column `i`), 32-bit float,
@@ -28,7 +30,7 @@ use serde::{Deserialize, Serialize};
 use crate::{atomic_write, IoError};
 
 mod stack;
-pub use stack::{read_tiff_stack, write_tiff_stack};
+pub use stack::{is_length_unit, read_tiff_stack, tiff_stack_unit, write_tiff_stack};
 
 /// Reads a `.npy` of shape `(nz, ny, nx)` as a volume filling `aabb`. Fortran-order files
 /// (NumPy writes them for transposed arrays, `fortran_order: True`) are reordered on read, so
@@ -232,8 +234,9 @@ fn numbers<T: std::str::FromStr>(s: &str) -> Option<Vec<T>> {
     s.split_whitespace().map(|t| t.parse().ok()).collect()
 }
 
-/// Reads a `.vti` with one scalar point-data array (Float32 or Float64, appended raw binary as
-/// [`write_vti`] writes it, or inline ASCII), little-endian, axis-aligned (identity
+/// Reads a `.vti` with one scalar point-data array (Float32 or Float64; appended raw binary as
+/// [`write_vti`] writes it, appended base64, inline base64 `binary` or ASCII, each binary one
+/// uncompressed or zlib-compressed, as VTK's writer stores them), little-endian, axis-aligned (identity
 /// `Direction`). Of several arrays, the one `<PointData Scalars="NAME">` (else `<CellData
 /// Scalars="NAME">`) names is read; without that attribute, several arrays are refused. Point
 /// data is a voxel per point: the box is recovered as `Origin + (i₀ − ½) · Spacing` to
@@ -252,9 +255,18 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     if attribute(file_tag, "byte_order").is_some_and(|b| b != "LittleEndian") {
         return Err(bad("only LittleEndian is supported"));
     }
-    if attribute(file_tag, "compressor").is_some() {
-        return Err(bad("compressed data is not supported"));
-    }
+    // ASCII arrays are never compressed, whatever the file says (VTK names its compressor on
+    // every file it writes): only binary arrays read it.
+    let zlib = match attribute(file_tag, "compressor") {
+        None => false,
+        Some("vtkZLibDataCompressor") => true,
+        Some(other) => {
+            return Err(bad(&format!(
+                "compressor {other}: only zlib (vtkZLibDataCompressor) or none is read; save the file with zlib or \
+                 without compression"
+            )))
+        }
+    };
     let header_u64 = match attribute(file_tag, "header_type") {
         None | Some("UInt32") => false,
         Some("UInt64") => true,
@@ -359,8 +371,9 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
             let tail = &bytes[xml_end..];
             let tag_end = find(tail, b">").ok_or_else(|| bad("<AppendedData>"))?;
             let tag = std::str::from_utf8(&tail[..=tag_end]).map_err(|_| bad("<AppendedData>"))?;
-            if attribute(tag, "encoding") != Some("raw") {
-                return Err(bad("only raw appended data is supported"));
+            let encoding = attribute(tag, "encoding");
+            if !matches!(encoding, Some("raw" | "base64")) {
+                return Err(bad(&format!("appended data encoding {encoding:?} (raw or base64 expected)")));
             }
             let underscore = find(&tail[tag_end..], b"_").ok_or_else(|| bad("appended data marker '_'"))?;
             // The blocks lie between the marker and the section's closing tag (the last in the
@@ -369,6 +382,19 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
             let data_end = rfind(&bytes[data_start..], b"</AppendedData>").map_or(bytes.len(), |e| data_start + e);
             let section = data_end - data_start;
             let name = attribute(array_tag, "Name").unwrap_or("(unnamed)");
+            if encoding == Some("base64") || zlib {
+                // Offsets count bytes of the section as stored: encoded characters for base64.
+                let block = bytes.get(data_start + offset..data_end).ok_or_else(|| {
+                    bad(&format!(
+                        "array \"{name}\": its appended block at offset {offset} lies past the end of the appended \
+                         data ({section} bytes)"
+                    ))
+                })?;
+                let payload = if encoding == Some("base64") { Payload::Base64(block) } else { Payload::Raw(block) };
+                let raw = decode_array(payload, header_u64, zlib, n * width)
+                    .map_err(|e| bad(&format!("array \"{name}\": {e}")))?;
+                return finish_vti(path, &raw, width, dims, cell_data, &extent, &origin, &spacing);
+            }
             let bad_block = |what: String| bad(&format!("array \"{name}\": {what}"));
             let hlen = if header_u64 { 8 } else { 4 };
             if offset.checked_add(hlen).is_none_or(|e| e > section) {
@@ -419,6 +445,14 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
                     .collect()
             }
         }
+        Some("binary") => {
+            let name = attribute(array_tag, "Name").unwrap_or("(unnamed)");
+            let start = xml.find(array_tag).ok_or_else(|| bad("DataArray"))? + array_tag.len();
+            let len = xml[start..].find("</DataArray>").ok_or_else(|| bad("unterminated DataArray"))?;
+            let raw = decode_array(Payload::Base64(&xml.as_bytes()[start..start + len]), header_u64, zlib, n * width)
+                .map_err(|e| bad(&format!("array \"{name}\": {e}")))?;
+            return finish_vti(path, &raw, width, dims, cell_data, &extent, &origin, &spacing);
+        }
         Some("ascii") => {
             let start = xml.find(array_tag).ok_or_else(|| bad("DataArray"))? + array_tag.len();
             let len = xml[start..].find("</DataArray>").ok_or_else(|| bad("unterminated DataArray"))?;
@@ -428,8 +462,21 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
             }
             v
         }
-        other => return Err(bad(&format!("DataArray format {other:?} (appended raw or ascii expected)"))),
+        other => return Err(bad(&format!("DataArray format {other:?} (appended, binary or ascii expected)"))),
     };
+    placed(path, data, dims, cell_data, &extent, &origin, &spacing)
+}
+
+/// The volume of `data` (x fastest, `dims`) where a `.vti`'s extent, origin and spacing put it.
+fn placed(
+    path: &Path,
+    data: Vec<f32>,
+    dims: [usize; 3],
+    cell_data: bool,
+    extent: &[i64],
+    origin: &[f64],
+    spacing: &[f64],
+) -> Result<Volume, IoError> {
     let spacing = DVec3::new(spacing[0], spacing[1], spacing[2]);
     let origin = DVec3::new(origin[0], origin[1], origin[2]);
     // Point `i` of the extent lies at `Origin + i · Spacing`; a voxel is the box around a point,
@@ -440,6 +487,119 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     let aabb = Aabb { min, max };
     aabb.validate().map_err(|e| IoError::invalid(path, format!("Origin/Spacing give an invalid box: {e}")))?;
     Ok(Volume::from_vec(dims, aabb, data))
+}
+
+/// [`placed`] for an array's little-endian bytes of floats `width` bytes wide (4 or 8).
+#[allow(clippy::too_many_arguments)]
+fn finish_vti(
+    path: &Path,
+    raw: &[u8],
+    width: usize,
+    dims: [usize; 3],
+    cell_data: bool,
+    extent: &[i64],
+    origin: &[f64],
+    spacing: &[f64],
+) -> Result<Volume, IoError> {
+    let data: Vec<f32> = if width == 4 {
+        raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+    } else {
+        raw.chunks_exact(8)
+            .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32)
+            .collect()
+    };
+    placed(path, data, dims, cell_data, extent, origin, spacing)
+}
+
+/// A binary `.vti` array as stored: its bytes (appended raw), or their base64 text (inline
+/// `binary`, appended `base64`; whitespace is skipped).
+enum Payload<'a> {
+    Raw(&'a [u8]),
+    Base64(&'a [u8]),
+}
+
+/// The `want` bytes of a binary `.vti` array (VTK's layout): a block count header of 32 or 64
+/// bits (`header_u64`) before the data, or with zlib `[blocks, block size, last block's size,
+/// compressed size of each block]` before the compressed blocks. In base64, VTK encodes an
+/// uncompressed array's header and data as one text, and a compressed array's header apart from
+/// its blocks.
+fn decode_array(payload: Payload, header_u64: bool, zlib: bool, want: usize) -> Result<Vec<u8>, String> {
+    use base64::Engine;
+    use std::io::Read;
+    let hlen = if header_u64 { 8 } else { 4 };
+    let word = |b: &[u8], k: usize| -> Result<usize, String> {
+        let b = b.get(k * hlen..(k + 1) * hlen).ok_or("its header is cut short")?;
+        let v = if header_u64 {
+            u64::from_le_bytes(b.try_into().map_err(|_| "header")?)
+        } else {
+            u32::from_le_bytes(b.try_into().map_err(|_| "header")?) as u64
+        };
+        usize::try_from(v).map_err(|_| format!("a header value of {v}"))
+    };
+    let b64 = |text: &[u8]| -> Result<Vec<u8>, String> {
+        let text: Vec<u8> = text.iter().copied().filter(|c| !c.is_ascii_whitespace()).collect();
+        base64::engine::general_purpose::STANDARD
+            .decode(&text)
+            .map_err(|e| format!("its base64 text does not decode: {e}"))
+    };
+    // The characters of base64 text (whitespace skipped) that encode its first `bytes` bytes, in
+    // whole groups of four.
+    let chars_for = |bytes: usize| bytes.div_ceil(3) * 4;
+    let (header, blocks): (Vec<u8>, Vec<u8>) = match (&payload, zlib) {
+        (Payload::Raw(b), false) => (b.to_vec(), Vec::new()),
+        (Payload::Base64(t), false) => (b64(t)?, Vec::new()),
+        (Payload::Raw(b), true) => {
+            let count = word(b, 0)?;
+            let size = hlen.checked_mul(count.checked_add(3).ok_or("too many blocks")?).ok_or("too many blocks")?;
+            if size > b.len() {
+                return Err(format!("its header names {count} compressed blocks, more than the file holds"));
+            }
+            (b[..size].to_vec(), b[size..].to_vec())
+        }
+        (Payload::Base64(t), true) => {
+            let text: Vec<u8> = t.iter().copied().filter(|c| !c.is_ascii_whitespace()).collect();
+            let first = b64(text.get(..chars_for(hlen)).ok_or("its header is cut short")?)?;
+            let count = word(&first, 0)?;
+            let size = hlen.checked_mul(count.checked_add(3).ok_or("too many blocks")?).ok_or("too many blocks")?;
+            let split = chars_for(size);
+            if split > text.len() {
+                return Err(format!("its header names {count} compressed blocks, more than the file holds"));
+            }
+            (b64(&text[..split])?, b64(&text[split..])?)
+        }
+    };
+    if !zlib {
+        let nbytes = word(&header, 0)?;
+        if nbytes != want {
+            return Err(format!("its block holds {nbytes} bytes, the extent needs {want}"));
+        }
+        return header.get(hlen..hlen + nbytes).map(<[u8]>::to_vec).ok_or_else(|| {
+            format!("its block of {nbytes} bytes is cut short ({} bytes)", header.len().saturating_sub(hlen))
+        });
+    }
+    let (count, block, last) = (word(&header, 0)?, word(&header, 1)?, word(&header, 2)?);
+    let last = if last == 0 { block } else { last };
+    let total = if count == 0 { 0 } else { block * (count - 1) + last };
+    if total != want {
+        return Err(format!("its {count} compressed blocks hold {total} bytes, the extent needs {want}"));
+    }
+    let mut out = Vec::with_capacity(want);
+    let mut at = 0usize;
+    for k in 0..count {
+        let csize = word(&header, 3 + k)?;
+        let compressed = blocks.get(at..at + csize).ok_or_else(|| format!("compressed block {k} is cut short"))?;
+        at += csize;
+        let expected = if k + 1 == count { last } else { block };
+        let before = out.len();
+        flate2::read::ZlibDecoder::new(compressed)
+            .take(expected as u64 + 1)
+            .read_to_end(&mut out)
+            .map_err(|e| format!("compressed block {k} does not inflate: {e}"))?;
+        if out.len() - before != expected {
+            return Err(format!("compressed block {k} inflates to {} bytes, not {expected}", out.len() - before));
+        }
+    }
+    Ok(out)
 }
 
 /// Where the last `needle` in `haystack` starts.
@@ -946,5 +1106,59 @@ mod tests {
         assert!(uneven_cells([9, 10, 10], &aabb).is_some(), "1.67 against 1");
         assert!(uneven_cells([10, 9, 10], &Aabb::new(DVec3::ZERO, DVec3::new(10.0, 15.0, 10.0))).is_some());
         assert!(uneven_cells([10, 10, 6], &Aabb::new(DVec3::ZERO, DVec3::splat(10.0))).is_some(), "z too");
+    }
+
+    /// Every data mode of VTK's own writer (`tests/fixtures/vti/make_vti_variants.py`: ASCII,
+    /// inline base64, appended base64 and raw, each uncompressed and zlib-compressed in one
+    /// block and in several, with 32- and 64-bit headers) reads as the same volume. Only raw
+    /// uncompressed was read before: ParaView's and pyvista's defaults (appended, zlib) were
+    /// refused, and so was VTK's ASCII, whose file names a compressor.
+    #[test]
+    fn vti_files_in_every_mode_of_vtks_writer_read_as_one_volume() {
+        let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/vti");
+        let mut names: Vec<PathBuf> = std::fs::read_dir(&folder)
+            .expect("the fixtures")
+            .map(|e| e.expect("entry").path())
+            .filter(|p| p.extension().is_some_and(|e| e == "vti"))
+            .collect();
+        names.sort();
+        assert_eq!(names.len(), 24, "4 modes × 3 compressions × 2 headers");
+        let expected: Vec<f32> =
+            (0..3).flat_map(|k| (0..4).flat_map(move |j| (0..5).map(move |i| (i + 10 * j + 100 * k) as f32))).collect();
+        for path in names {
+            let v = read_vti(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert_eq!(v.dims, [5, 4, 3], "{}", path.display());
+            assert_eq!(v.data, expected, "{}", path.display());
+            let (min, max) = (v.aabb.min.to_array(), v.aabb.max.to_array());
+            for (got, want) in min.iter().chain(&max).zip([-1.0, 2.0, 0.5, 3.0, 4.5, 1.7]) {
+                assert!((got - want).abs() < 1e-12, "{}: box {min:?}..{max:?}", path.display());
+            }
+        }
+    }
+
+    /// A compressed block that does not inflate to its stated size, and a compressor other than
+    /// zlib, are refused naming the array and the problem.
+    #[test]
+    fn vti_compressed_arrays_that_do_not_fit_are_refused() {
+        let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/vti");
+        let dir = tempfile::tempdir().expect("tempdir");
+        let text = std::fs::read_to_string(folder.join("binary_zlib_uint32.vti")).expect("fixture");
+        let lz4 = dir.path().join("lz4.vti");
+        std::fs::write(&lz4, text.replace("vtkZLibDataCompressor", "vtkLZ4DataCompressor")).expect("writes");
+        let e = read_vti(&lz4).expect_err("LZ4").to_string();
+        assert!(e.contains("compressor vtkLZ4DataCompressor: only zlib"), "{e}");
+        // The extent grown by a slice: the blocks hold 240 bytes where 320 are needed.
+        let grown = dir.path().join("grown.vti");
+        std::fs::write(&grown, text.replace("WholeExtent=\"0 4 0 3 0 2\"", "WholeExtent=\"0 4 0 3 0 3\""))
+            .expect("writes");
+        let e = read_vti(&grown).expect_err("a larger extent").to_string();
+        assert!(e.contains("array \"value\": its 1 compressed blocks hold 240 bytes, the extent needs 320"), "{e}");
+        // A base64 text cut short.
+        let raw = std::fs::read_to_string(folder.join("binary_none_uint32.vti")).expect("fixture");
+        let start = raw.find("8AAAAA").expect("the array's text");
+        let cut = dir.path().join("cut.vti");
+        std::fs::write(&cut, format!("{}{}", &raw[..start + 40], &raw[start + 200..])).expect("writes");
+        let e = read_vti(&cut).expect_err("cut short").to_string();
+        assert!(e.contains("array \"value\": "), "{e}");
     }
 }

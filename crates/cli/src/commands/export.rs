@@ -101,9 +101,10 @@ pub struct Args {
     /// Colour-bar label of the slices, with the field's unit [default: emission E [a.u.]].
     #[arg(long)]
     pub value_label: Option<String>,
-    /// Length unit of a volume file that records none, for axis labels and the TIFF
-    /// calibration. Default: the scene's, else the run's, else mm; another than the scene's or
-    /// the run's is refused.
+    /// Length unit of the export's box, axis labels and TIFF calibration. Default: the scene's,
+    /// else the run's, else a calibrated TIFF stack's own, else mm. Another than the scene's or
+    /// the run's is refused; a calibrated stack is converted to it (between nm, µm, mm, cm and
+    /// m). A .npy, .vti or .raw records no unit: this names it.
     #[arg(long, value_parser = super::import::parse_units)]
     pub units: Option<String>,
     /// Overwrite existing outputs in OUT.
@@ -232,7 +233,7 @@ pub(crate) fn read_volume(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -
 
 /// Loads RECON: a volume file, or a run folder of any kind (a trained field, static or of
 /// space and time, sampled exactly; a voxel run's volume).
-pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<Source> {
+pub(crate) fn load_source(path: &Path, scene: Option<&Scene>, unit: Option<&str>) -> anyhow::Result<Source> {
     if path.is_dir() {
         let run = fluidnerf_pipeline::load::LoadedRun::open(path, scene.map(|s| s.aabb))?;
         return Ok(match run.kind {
@@ -243,7 +244,12 @@ pub(crate) fn load_source(path: &Path, scene: Option<&Scene>) -> anyhow::Result<
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
     }
-    Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb), scene.map(|s| s.units.as_str()))?))
+    Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb), unit.or(scene.map(|s| s.units.as_str())))?))
+}
+
+/// Whether `path` is named as a TIFF stack.
+fn is_tiff(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "tif" | "tiff"))
 }
 
 /// The length unit a run folder's `report.json` records for its scene, and the words naming
@@ -406,16 +412,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => Some((s.units.clone(), format!("the scene {}", s.root.display()))),
         None => run_units(&args.recon)?,
     };
-    let units = match (&args.units, recorded_units) {
-        (Some(given), Some((unit, whose))) if *given != unit => bail!(
+    // A calibrated TIFF stack records its own unit: its numbers are in it, and were labelled
+    // mm (or --units) without a scene, a stack in µm coming out a thousand times too large.
+    let stack_unit = match (&recorded_units, is_tiff(&args.recon)) {
+        (None, true) => fluidnerf_io::volume::tiff_stack_unit(&args.recon)?,
+        _ => None,
+    };
+    let units = match (&args.units, recorded_units, &stack_unit) {
+        (Some(given), Some((unit, whose)), _) if *given != unit => bail!(
             "--units {given}: {whose} is in {unit}, and the export's box, axis labels and TIFF calibration are in \
              its unit; leave out --units (it names the unit of a volume file that records none)"
         ),
-        (Some(given), _) => given.clone(),
-        (None, Some((unit, _))) => unit,
-        (None, None) => "mm".into(),
+        (Some(given), _, Some(stack)) if given != stack && !fluidnerf_io::volume::is_length_unit(given) => bail!(
+            "--units {given}: {} is calibrated in {stack}, and only nm, µm, mm, cm and m are converted; leave out \
+             --units to export in {stack}",
+            args.recon.display()
+        ),
+        (Some(given), _, _) => given.clone(),
+        (None, Some((unit, _)), _) => unit,
+        (None, None, Some(stack)) => stack.clone(),
+        (None, None, None) => "mm".into(),
     };
-    let source = load_source(&args.recon, scene.as_ref())?;
+    // The stack's box in the export's unit (read_tiff_stack converts between lengths).
+    let source = load_source(&args.recon, scene.as_ref(), stack_unit.as_ref().map(|_| units.as_str()))?;
     let time = source.sample_time(args.time, "--time")?;
     source.warn_time_unused(args.time, &args.recon);
     let is_time_resolved = source.is_time_resolved();
@@ -463,11 +482,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(p) => {
             // A .npy truth holds no box: it fills the scene's, which is the reconstruction's
             // when no scene is given (a run records its scene's box).
-            let t = read_volume(
-                p,
-                Some(scene.as_ref().map_or_else(|| source.aabb(), |s| s.aabb)),
-                scene.as_ref().map(|s| s.units.as_str()),
-            )?;
+            // A calibrated truth's box in the export's unit, the run's when no scene is given:
+            // taken as it was, a truth in cm beside a run in mm was drawn ten times too small.
+            let t =
+                read_volume(p, Some(scene.as_ref().map_or_else(|| source.aabb(), |s| s.aabb)), Some(units.as_str()))?;
             // A truth apart from the exported box is zero on every slice: its panels would be
             // drawn empty beside the reconstruction, as if it held no field there.
             let b = &volume.aabb;

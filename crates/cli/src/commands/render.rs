@@ -342,7 +342,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for p in outputs.iter().chain(&stale) {
         fluidnerf_pipeline::rundir::refuse_input_file(p, &args.recon, "the reconstruction read")?;
     }
-    let source = load_source(&args.recon, Some(&scene))?;
+    let source = load_source(&args.recon, Some(&scene), None)?;
     // Checked before the output folder is made: the views would hold infinities and NaN.
     if let Source::Volume(v) = &source {
         if let Some(problem) = fluidnerf_core::render::integrals_overflow(v, scene.intensity_scale) {

@@ -388,6 +388,54 @@ fn an_export_keeps_the_units_of_the_run_and_refuses_others() {
     common::refused(&o, "--units cm: the scene");
 }
 
+/// A calibrated TIFF stack records its own length unit. Exported without a scene, it was
+/// labelled mm (or --units) with its numbers unchanged, a stack in µm coming out a thousand
+/// times too large; and a calibrated truth given to --compare was read in its own unit beside a
+/// run in another. Now the stack's unit labels the export, --units converts it, and the truth
+/// is converted to the run's unit.
+#[test]
+fn a_calibrated_stack_is_exported_in_its_own_unit_or_converted() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let aabb = Aabb::new(DVec3::new(0.0, 0.0, 0.0), DVec3::new(8000.0, 6000.0, 4000.0));
+    let v = Volume::from_fn([8, 6, 4], aabb, |p| (p.x / 1000.0) as f32);
+    fluidnerf_io::volume::write_tiff_stack(&d.join("um.tif"), &v, "µm").expect("writes the stack");
+    common::ok(&common::fluidnerf(d, &["export", "um.tif", "-o", "own", "--npy", "-q"]));
+    let e = common::json(&d.join("own/export.json"));
+    assert_eq!(e["units"], "µm");
+    assert_eq!(e["aabb"]["max"], serde_json::json!([8000.0, 6000.0, 4000.0]));
+    common::ok(&common::fluidnerf(d, &["export", "um.tif", "-o", "mm", "--npy", "--units", "mm", "-q"]));
+    let e = common::json(&d.join("mm/export.json"));
+    assert_eq!(e["units"], "mm");
+    assert_eq!(e["aabb"]["max"], serde_json::json!([8.0, 6.0, 4.0]));
+    let o = common::fluidnerf(d, &["export", "um.tif", "-o", "odd", "--npy", "--units", "furlong"]);
+    common::refused(&o, "--units furlong: um.tif is calibrated in µm, and only nm, µm, mm, cm and m are converted");
+
+    // A run in mm beside a truth calibrated in cm: the truth's box is converted, so its panel is
+    // drawn where the run's field is.
+    common::demo_scene(d, "ball", 4, 16, 12, &[]);
+    common::ok(&common::fluidnerf(
+        d,
+        &["reconstruct", "scene", "-o", "run", "-m", "asart", "--resolution", "12", "-q"],
+    ));
+    let scene = fluidnerf_io::scene::load_scene(&d.join("scene")).expect("scene");
+    let truth = fluidnerf_io::volume::read_npy(&d.join("scene/truth/truth.npy"), scene.aabb).expect("truth");
+    let in_cm =
+        Volume::from_vec(truth.dims, Aabb::new(truth.aabb.min / 10.0, truth.aabb.max / 10.0), truth.data.clone());
+    fluidnerf_io::volume::write_tiff_stack(&d.join("cm.tif"), &in_cm, "cm").expect("writes the stack");
+    let slices = ["--slices", "z=0.5"];
+    common::ok(&common::fluidnerf(
+        d,
+        &[&["export", "run", "-o", "a", "--compare", "scene/truth/truth.npy", "-q"][..], &slices].concat(),
+    ));
+    common::ok(&common::fluidnerf(
+        d,
+        &[&["export", "run", "-o", "b", "--compare", "cm.tif", "-q"][..], &slices].concat(),
+    ));
+    let picture = |out: &str| std::fs::read(d.join(out).join("compare_z_0.500.png")).expect("the comparison");
+    assert_eq!(picture("a"), picture("b"), "the truth in cm drawn as the truth in mm");
+}
+
 /// The colour map and the colour-bar label style the slice pictures: given to an export that
 /// draws none, they were taken and ignored without a word.
 #[test]

@@ -47,6 +47,11 @@ fn metres_per(unit: &str) -> Option<f64> {
     })
 }
 
+/// Whether `unit` is a length that calibrations are converted from and to (nm, µm, mm, cm, m).
+pub fn is_length_unit(unit: &str) -> bool {
+    metres_per(unit).is_some()
+}
+
 /// ImageJ's word for a stack without a physical calibration.
 fn is_pixel_unit(unit: &str) -> bool {
     matches!(unit, "pixel" | "pixels" | "")
@@ -217,6 +222,23 @@ fn resolution<R: std::io::Read + Seek>(dec: &mut tiff::decoder::Decoder<R>, tag:
     (per_unit.is_finite() && per_unit > 0.0).then_some(per_unit)
 }
 
+/// The length unit a TIFF stack's ImageJ calibration is in, when it has one that is a length
+/// (not ImageJ's `pixel`), named as fluidnerf names it (`µm` for `micron` and its other
+/// spellings). A reader without a scene takes the stack's numbers in this unit, which the
+/// caller must then label them with, or convert them to its own ([`read_tiff_stack`]'s `unit`).
+pub fn tiff_stack_unit(path: &Path) -> Result<Option<String>, IoError> {
+    use tiff::decoder::Decoder;
+    crate::check_regular_file(path, "volume file")?;
+    let file = std::fs::File::open(path).map_err(|e| IoError::io(path, "volume file", e))?;
+    let mut dec =
+        Decoder::new(BufReader::new(file)).map_err(|e| IoError::invalid(path, format!("unreadable TIFF: {e}")))?;
+    let calibration = parse_description(&dec.get_tag_ascii_string(Tag::ImageDescription).unwrap_or_default());
+    Ok(calibration.unit.filter(|u| calibration.imagej && !is_pixel_unit(u)).map(|u| match metres_per(&u) {
+        Some(1e-6) => "µm".to_string(),
+        _ => u,
+    }))
+}
+
 /// Reads a TIFF stack (one greyscale page per z-slice, all of one size; 16/32/64-bit float or
 /// 8/16-bit unsigned samples) as a volume. Its box comes from the file's ImageJ calibration
 /// (pixel size from the resolution tags, slice spacing and origin from the description, as
@@ -369,7 +391,8 @@ pub fn read_tiff_stack(path: &Path, aabb: Option<Aabb>, unit: Option<&str>) -> R
                 },
                 _ => 1.0,
             };
-            let min = -origin * h * scale;
+            // + 0: an origin of 0 gave a corner of -0, written as such.
+            let min = -origin * h * scale + DVec3::ZERO;
             let size = DVec3::new(nx as f64, ny as f64, nz as f64) * h * scale;
             Some(Aabb { min, max: min + size })
         }
