@@ -50,8 +50,10 @@ pub struct Args {
     /// Output directory; created if missing.
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Voxels along the longest side of the export box (cubic cells), 1 to 4096. Default: a
-    /// volume's own grid when the box is unchanged, else 128.
+    /// Voxels along the longest side of the export box, 1 to 4096; the other sides take the
+    /// whole number of voxels nearest to cubic cells, so a side that is no whole number of
+    /// them has cells a little longer or shorter along it (export.json records the spacing).
+    /// Default: a volume's own grid when the box is unchanged, else 128.
     #[arg(long)]
     pub resolution: Option<usize>,
     /// Export box in world units as `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX`. Default: the

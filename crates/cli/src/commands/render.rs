@@ -165,7 +165,8 @@ struct Settings<'a> {
     version: &'static str,
     reconstruction: &'a Path,
     scene: &'a Path,
-    cameras: &'a [usize],
+    /// The scene's frames rendered (`--camera`, else every frame); empty for an orbit.
+    cameras: Vec<usize>,
     orbit: Option<usize>,
     /// The turntable's display time per frame, as the GIF holds it (orbits only).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -608,7 +609,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         version: env!("CARGO_PKG_VERSION"),
         reconstruction: &args.recon,
         scene: &scene_path,
-        cameras: &args.camera,
+        // An empty list read as "none" where every frame was rendered.
+        cameras: match (args.orbit, args.camera.is_empty()) {
+            (Some(_), _) => Vec::new(),
+            (None, true) => (0..scene.frames.len()).collect(),
+            (None, false) => args.camera.clone(),
+        },
         orbit: args.orbit,
         frame_ms: args.orbit.map(|_| (args.frame_ms + 5) / 10 * 10),
         width: args.orbit.map(|_| args.width),

@@ -1109,4 +1109,6 @@ fn render_json_records_the_one_instant_its_views_show() {
     assert_eq!(json(&d.join("still/render.json"))["time"], 14.0);
     ok(&fluidnerf(d, &["render", "run", "--scene", "scene", "-o", "both", "-q"]));
     assert_eq!(json(&d.join("both/render.json"))["time"], serde_json::Value::Null);
+    // The frames rendered, every one when none was named (the list read empty, as if none were).
+    assert_eq!(json(&d.join("both/render.json"))["cameras"], serde_json::json!([0, 1, 2, 3, 4, 5, 6, 7]));
 }
