@@ -59,10 +59,12 @@ pub struct Args {
     /// `.vti`, `.raw`, or a `.tif` stack, calibrated or filling the scene's box).
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// Regions scored separately, as NAME:X0:X1 (a slab along the jet axis x) or
+    /// Regions scored separately, as NAME:X0:X1 (a slab along the box's x) or
     /// NAME:X0:X1:Y0:Y1:Z0:Z1, in coordinates normalised to the box (0 = min corner,
     /// 1 = max corner); comma-separated or repeated. Each NAME once, and not `all` (the whole
-    /// volume's row). Default: laminar, transition and turbulent thirds of the box along +x.
+    /// volume's row). Default: laminar, transition and turbulent thirds of the box along the
+    /// flow axis (--flow-axis, else the scene's flow_axis, else estimated from the truth, else
+    /// +x).
     #[arg(long, value_delimiter = ',', conflicts_with = "no_regions")]
     pub regions: Vec<String>,
     /// The flow direction x,y,z (world) for the default regions: the laminar, transition and

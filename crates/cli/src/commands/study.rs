@@ -134,7 +134,8 @@ pub struct Args {
     pub stop: StopArg,
     /// Iteration cap of every method [default: 1000000 under held-out and budget, so that the
     /// held-out rule or the time budget ends every run, not a method's own cap (SART 50,
-    /// ASART 250, the fields 2000, ...); each method's own under own; smoke 20].
+    /// ASART 250, the grid fields 2000, the faithful network 25 000, ...); each method's own
+    /// under own; smoke 20].
     #[arg(long, value_parser = super::parse_max_iterations)]
     pub max_iterations: Option<usize>,
     /// Seconds of work per run, the same for every method.

@@ -21,9 +21,11 @@ const OUTPUTS: &str = "Starts from a preset (--list-presets; default planar15, t
 15-camera planar ring around a turbulent jet) and applies the options given; later options \
 override earlier ones. Writes into OUT: transforms.json (cameras, box, intensity scale), \
 images/*.png (16-bit sensor counts: counts - dark offset = intensity_scale x line integral of E \
-in mm), truth/*.npy (the ground truth on the voxel grid, shape (nz, ny, nx)), preview.png (a \
-central slice of the truth and one camera image) and synth.json (the resolved settings; rerun \
-with --config). The same seed gives the same bytes.";
+in mm; 8-bit JPEGs for the real-like presets), truth/*.npy (the ground truth on the voxel grid, \
+shape (nz, ny, nx)), background/ and flat/ when the images have a background or vignetting to \
+correct (the real-like presets), preview.png (a central slice of the truth and one camera \
+image) and synth.json (the resolved settings; rerun with --config). The same seed gives the \
+same bytes.";
 
 /// Every option of [`Args`] but `--list-presets`: each says what to synthesise, and
 /// `--list-presets` synthesises nothing, so it refuses them, naming the one given (the list was
