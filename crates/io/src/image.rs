@@ -443,7 +443,7 @@ fn read_with_image_crate(
     // Alpha reads through the same table as the values: full opacity is the largest count.
     let opaque = if kind == SampleKind::Integer(8) { lut[255] } else { f32::from(u16::MAX) };
     warn_of_alpha(path, channels, &data, opaque);
-    Ok((to_gray(path, w, h, channels, data), kind))
+    Ok((to_gray(path, w, h, channels, data, Some(opaque)), kind))
 }
 
 /// Reads the first page of a TIFF. `WhiteIsZero` images are inverted as the standard defines
@@ -585,7 +585,9 @@ fn read_tiff(path: &Path, bytes: &[u8], linearisation: Linearisation) -> Result<
         log::debug!("{}: dropping {} extra sample(s) per pixel", path.display(), channels - 1);
         return Ok((Image::from_vec(w, h, data.chunks_exact(channels).map(|p| p[0]).collect()), kind));
     }
-    Ok((to_gray(path, w, h, channels, data), kind))
+    // Integer samples have a full scale; floats none.
+    let full = opaque.filter(|_| kind.full_scale().is_some());
+    Ok((to_gray(path, w, h, channels, data, full), kind))
 }
 
 /// Refuses the `WhiteIsZero` TIFFs (tag 262, PhotometricInterpretation, = 0) that cannot be
@@ -700,7 +702,8 @@ fn warn_of_alpha(path: &Path, channels: usize, data: &[f32], opaque: f32) {
 }
 
 /// Interleaved samples with `channels` per pixel (1 gray, 2 gray+alpha, 3 RGB, 4 RGBA) to gray.
-fn to_gray(path: &Path, w: usize, h: usize, channels: usize, data: Vec<f32>) -> Image {
+/// `full`: the samples' full scale (integer samples), at which a colour channel is clipped.
+fn to_gray(path: &Path, w: usize, h: usize, channels: usize, data: Vec<f32>, full: Option<f32>) -> Image {
     match channels {
         1 => Image::from_vec(w, h, data),
         2 => {
@@ -716,6 +719,21 @@ fn to_gray(path: &Path, w: usize, h: usize, channels: usize, data: Vec<f32>) -> 
                      linearised values; alpha dropped); further colour images are not reported",
                     path.display()
                 );
+            }
+            // A channel at full scale was clipped, though the luminance, below full scale, is not
+            // counted as saturated: a red dye or flame at R = 255 reads as 54 and passed unseen.
+            if let Some(full) = full {
+                let clipped = data.chunks_exact(channels).filter(|p| p[..3].iter().any(|&c| c >= full)).count();
+                static WARNED_CLIPPED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+                if clipped > 0 && !WARNED_CLIPPED.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                    log::warn!(
+                        "{}: {clipped} pixel(s) have a colour channel at full scale, clipped in that channel: their \
+                         luminance, below full scale, is not counted as saturated, but the line-integral model does \
+                         not hold there; mask them (mask_path) or record with less exposure; further colour images \
+                         with clipped channels are not reported",
+                        path.display()
+                    );
+                }
             }
             let lum = data.chunks_exact(channels).map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).collect();
             Image::from_vec(w, h, lum)

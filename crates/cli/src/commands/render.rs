@@ -38,7 +38,8 @@ pub enum ImageFormat {
 /// model the reconstruction was fitted to, so a scene camera's rendering compares directly with
 /// its image; with the footprint projector (by default where a pixel spans the cells it
 /// projects, see `--projector`), that integral over each pixel's area. Views of
-/// scene cameras go to `view_<index>.<ext>`, orbit views to `orbit_<k>.<ext>` plus
+/// scene cameras go to `view_<index>.<ext>` (three digits, `view_000`), orbit views to
+/// `orbit_<k>.<ext>` (`orbit_000`) plus
 /// `turntable.gif`. Writes `render.json` with the resolved settings.
 #[derive(clap::Args, Debug)]
 pub struct Args {

@@ -656,3 +656,20 @@ fn several_failing_masks_are_named_in_frame_order() {
         );
     }
 }
+
+/// Colour images are reduced to luminance, so a channel clipped at full scale (a red dye or
+/// flame at R = 255) read as a luminance of 54 and was never reported as saturated.
+#[test]
+fn a_colour_channel_at_full_scale_is_warned_of() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    good_scene(dir.path());
+    for c in 0..4 {
+        let rgb = image::ImageBuffer::from_fn(32, 24, |x, y| {
+            let v = ((x + 32 * y) % 97 + 100 * c) as u16;
+            image::Rgb([if x < 3 { u16::MAX } else { v }, v, v])
+        });
+        image::DynamicImage::ImageRgb16(rgb).save(dir.path().join(format!("images/c{c}.png"))).expect("saves");
+    }
+    let (_, stderr) = text(&info(dir.path()));
+    assert!(stderr.contains("72 pixel(s) have a colour channel at full scale, clipped in that channel"), "{stderr}");
+}
