@@ -438,6 +438,17 @@ impl RunDir {
         let mut dir = RunDir::plain(root.clone());
         (dir.resume, dir.created) = (resume, created);
         dir.take_lock()?;
+        // A window trained by another process (`--window-index`) holds only its own lock: a
+        // whole run replacing, resuming or finishing the folder meanwhile took it over, and the
+        // window then wrote its old settings' checkpoint into the new run, which --finish mixed
+        // with the new windows.
+        if let Some((lock, holder)) = live_window_holders(&root).into_iter().next() {
+            return Err(refuse(format!(
+                "a window of its run is being trained by another process ({holder}, lock file {}); wait for it to \
+                 finish, or stop it, before replacing, resuming or finishing the run",
+                lock.display()
+            )));
+        }
         // A replacement whose run died before writing anything left the earlier run aside.
         dir.restore_replaced();
         let state = dir.state();
@@ -1347,6 +1358,25 @@ fn process_start(pid: u32) -> Option<SystemTime> {
 }
 
 /// Another live process holding the run lock of the folder `root`, in words.
+/// The window locks (`windows/wNNN.lock`) of `root` held by live processes other than this one,
+/// with each holder in words, in window order.
+fn live_window_holders(root: &Path) -> Vec<(PathBuf, String)> {
+    let Ok(entries) = std::fs::read_dir(root.join("windows")) else { return Vec::new() };
+    let mut locks: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "lock"))
+        .collect();
+    locks.sort();
+    locks
+        .into_iter()
+        .filter_map(|lock| {
+            let holder = LockHolder::read(&lock)?;
+            let live = !holder.is_this_process() && matches!(holder.liveness(&lock), Liveness::Held(_));
+            live.then(|| (lock, holder.to_string()))
+        })
+        .collect()
+}
+
 fn live_holder(root: &Path) -> Option<String> {
     let lock = root.join(".lock");
     let holder = LockHolder::read(&lock)?;
@@ -1570,6 +1600,30 @@ mod tests {
     }
 
     use super::*;
+
+    /// A window trained by another process holds only `windows/wNNN.lock`: a whole run that
+    /// replaced, resumed or finished the folder meanwhile took it, and the window then wrote
+    /// its old settings into the new run. Refused now while the window's process lives.
+    #[test]
+    fn a_whole_run_waits_for_a_window_another_process_trains() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("run");
+        std::fs::create_dir_all(out.join("windows")).unwrap();
+        write_json(&out.join("config.json"), &run_config()).unwrap();
+        let mut other = std::process::Command::new("sleep").arg("30").spawn().unwrap();
+        let lock = out.join("windows/w001.lock");
+        std::fs::write(&lock, format!("{}\n{}\n{HEARTBEAT_MARK}\n", other.id(), host_name())).unwrap();
+        for overwrite in [Overwrite::Force, Overwrite::Resume] {
+            let e = RunDir::create(&out, overwrite, None).unwrap_err().to_string();
+            assert!(e.contains("a window of its run is being trained by another process"), "{e}");
+            assert!(e.contains(&other.id().to_string()) && e.contains("windows/w001.lock"), "{e}");
+            assert!(out.join("config.json").is_file(), "the run was left as it was");
+        }
+        other.kill().unwrap();
+        other.wait().unwrap();
+        // Its process gone, the lock is stale and the run is replaced.
+        RunDir::create(&out, Overwrite::Force, None).unwrap();
+    }
 
     #[test]
     fn refuses_results_and_the_scene_folder_and_honours_the_lock() {
