@@ -148,6 +148,8 @@ struct CompareRecord<'a> {
 /// The file holding a run's report: `RUN/report.json` for a directory, RUN itself otherwise.
 fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
     if run.is_dir() {
+        // A run a killed --force left aside is put back first, as every reader of a run does.
+        fluidnerf_pipeline::rundir::RunDir::recover_replaced(run);
         let p = run.join("report.json");
         if !p.is_file() && run.join("config.json").is_file() {
             // A run writes its report last: one that was killed, or is still running, has none.

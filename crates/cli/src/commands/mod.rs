@@ -110,6 +110,11 @@ pub(crate) fn scene_or_recorded(
 /// one.
 pub(crate) fn recorded_scene(recon: &std::path::Path) -> anyhow::Result<Option<std::path::PathBuf>> {
     use anyhow::Context;
+    // A run a killed --force left aside is put back first, as every reader of the folder does:
+    // read before, its missing config.json said the folder named no scene.
+    if recon.is_dir() {
+        fluidnerf_pipeline::rundir::RunDir::recover_replaced(recon);
+    }
     let config = recon.join("config.json");
     if !(recon.is_dir() && config.is_file()) {
         return Ok(None);

@@ -623,6 +623,10 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
     // given here still override them), not with the defaults of some method.
     let continued = match &args.config {
         None if args.resume || args.split.finish => {
+            // A run a killed --force left aside is the run to continue: put back first.
+            if args.out.is_dir() {
+                fluidnerf_pipeline::rundir::RunDir::recover_replaced(&args.out);
+            }
             let path = args.out.join("config.json");
             if !path.is_file() {
                 bail!(

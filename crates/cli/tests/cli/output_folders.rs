@@ -188,13 +188,39 @@ fn a_forced_run_refused_by_its_checks_leaves_the_earlier_run() {
     // A --force run killed after it set the earlier run aside and before it wrote anything
     // leaves it in `.replaced/`; the next command to read the folder puts it back.
     let aside = d.join("run/.replaced");
-    std::fs::create_dir(&aside).expect("aside");
-    for name in files(&d.join("run")) {
-        std::fs::rename(d.join("run").join(&name), aside.join(&name)).expect("set aside");
-    }
+    let set_aside = || {
+        std::fs::create_dir(&aside).expect("aside");
+        for name in files(&d.join("run")) {
+            std::fs::rename(d.join("run").join(&name), aside.join(&name)).expect("set aside");
+        }
+    };
+    set_aside();
     ok(&fluidnerf(d, &["export", "run", "-o", "out", "--npy", "-q"]));
     assert!(!aside.exists());
     assert_eq!(std::fs::read(d.join("run/volume.npy")).expect("volume"), volume);
+    // Every reader, also those that read config.json or report.json first: they said the
+    // folder named no scene, held no run to continue or no report.
+    for (k, args) in [
+        &["eval", "run", "--force", "-q"][..],
+        &["render", "run", "-o", "views", "-q"],
+        &["compare", "run", "-o", "cmp", "-q"],
+        &["reconstruct", "-o", "run", "--resume", "-q"],
+    ]
+    .iter()
+    .enumerate()
+    {
+        set_aside();
+        let out = fluidnerf(d, args);
+        // A voxel run is not continued: refused as such, once its files are back.
+        if k == 3 {
+            refused(&out, "--resume does not apply to --method asart");
+            assert!(!String::from_utf8_lossy(&out.stderr).contains("no config.json"), "{args:?}");
+        } else {
+            ok(&out);
+        }
+        assert!(!aside.exists(), "{args:?}");
+        assert_eq!(std::fs::read(d.join("run/volume.npy")).expect("volume"), volume, "{args:?}");
+    }
     ok(&reconstruct(&["--max-iterations", "1", "--force"]));
     let report = std::fs::read_to_string(d.join("run/report.json")).expect("report");
     assert!(report.contains("\"iterations\": 1"), "replaced: {report}");
