@@ -984,7 +984,8 @@ pub struct FileLock {
 impl FileLock {
     /// Takes the lock file `path` of the run folder `root` (creating its folder if missing),
     /// refreshed every [`LOCK_HEARTBEAT`]; refused while it is held, a stale one is replaced.
-    fn take(root: &Path, path: &Path) -> Result<FileLock, PipelineError> {
+    /// Also the lock of a study's folder.
+    pub fn take(root: &Path, path: &Path) -> Result<FileLock, PipelineError> {
         Self::take_with(root, path, LOCK_HEARTBEAT)
     }
 

@@ -164,6 +164,9 @@ pub struct Args {
     pub force: bool,
 }
 
+/// The lock file of a study's folder, held while a study writes into it.
+const STUDY_LOCK: &str = ".study.lock";
+
 /// The resolved grid, written to `study.json` and checked when a study is continued.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct Grid {
@@ -1015,6 +1018,12 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
             );
         }
     }
+    // One study at a time in a folder: two at once wrote their cells side by side and each its
+    // own study.json over the other's. The lock holds until the study ends (or its process is
+    // gone: a killed study's lock is stale and replaced).
+    super::create_output_folder(out)?;
+    let _lock = fluidnerf_pipeline::rundir::FileLock::take(out, &out.join(STUDY_LOCK))
+        .with_context(|| format!("{}: another study is writing into this folder", out.display()))?;
     if args.force {
         // Only a study's own folders are removed: a folder that is not a study is left as it is.
         if !record.is_file() {
@@ -1043,7 +1052,25 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
     if !args.force {
         check_earlier_cells(out, &g)?;
     }
-    super::create_output_folder(out)?;
+    // Recorded before the first cell: a study killed before it wrote its results (which write
+    // study.json anew) is then continued by the same command or started over with --force, as
+    // one stopped by Ctrl-C is; without it, its scenes/ and runs/ read as another folder's,
+    // and --force refused them. Started over, the earlier record goes with the earlier study.
+    if args.force || !record.is_file() {
+        fluidnerf_pipeline::rundir::write_json(
+            &record,
+            &StudyRecord {
+                version: env!("CARGO_PKG_VERSION"),
+                status: "started",
+                runs_total: g.runs_total(),
+                grid: &g,
+                stopping_rule: g.stopping.describe_rule(),
+                rows: &[],
+                means: &[],
+                against_best_voxel: &[],
+            },
+        )?;
+    }
     let start = Instant::now();
     let total = g.runs_total();
     let mut rows = Vec::with_capacity(total);

@@ -642,3 +642,40 @@ fn a_scene_given_is_studied_with_fewer_of_its_cameras() {
     refused(&more, "--cameras: 5 is not a count of the 4 training cameras of the scene");
     assert!(!d.join("st2").exists());
 }
+
+/// A study killed before it wrote its results left scenes/ and runs/ but no study.json: the
+/// same command said it held other settings and to use --force, and --force said it was no
+/// study folder. And two studies could write into one folder at once, each its study.json over
+/// the other's. The study now records itself as it starts, and holds a lock while it runs.
+#[test]
+fn a_killed_study_is_continued_or_started_over_and_one_study_writes_at_a_time() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "sart,asart", "-o", "st", "-q"];
+    let killed = killed_once_made(d, &args, "st/runs");
+    assert!(!killed.status.success());
+    let record = json(&d.join("st/study.json"));
+    assert_eq!(record["status"], "started", "recorded before its first cell");
+    // While a study holds the folder, another is refused.
+    let mut first = std::process::Command::new(env!("CARGO_BIN_EXE_fluidnerf"))
+        .current_dir(d)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("starts");
+    let start = std::time::Instant::now();
+    while !d.join("st/.study.lock").exists() {
+        assert!(start.elapsed().as_secs() < 60, "the study did not start");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let other = ["study", "--preset", "smoke", "--methods", "tv", "--noise", "0.05", "-o", "st", "-q"];
+    refused(&fluidnerf(d, &other), "st: another study is writing into this folder");
+    assert!(first.wait().expect("waits").success(), "the killed study continued");
+    assert_eq!(json(&d.join("st/study.json"))["status"], "finished");
+    // Killed before its results, a study is also started over with --force.
+    let again = ["study", "--preset", "smoke", "--methods", "sart,asart", "-o", "st2", "-q"];
+    killed_once_made(d, &again, "st2/runs");
+    ok(&fluidnerf(d, &[&again[..], &["--force"]].concat()));
+    assert_eq!(json(&d.join("st2/study.json"))["status"], "finished");
+}
