@@ -447,6 +447,29 @@ fn resumed_best<F: TrainableField>(
     Some(best)
 }
 
+/// The held-out rule's state for a run resumed from a checkpoint alone (killed: no report, no
+/// kept weights), replayed from the checkpoint's held-out losses: exact when the best
+/// evaluation is the checkpoint's own iteration, whose field the learner holds; otherwise that
+/// field is lost, and the iteration it was at comes back with None for the rule to start afresh.
+fn best_from_checkpoint<F: TrainableField>(
+    learner: &Learner<F>,
+    patience: usize,
+) -> (Option<BestHoldout<Vec<f32>>>, Option<usize>) {
+    let mut best = BestHoldout::new(patience);
+    for &(iteration, loss) in learner.holdout_losses.iter().filter(|p| p.0 <= learner.iteration) {
+        best.record(iteration, f64::from(loss), Vec::new);
+    }
+    match best.best.as_mut() {
+        None => (None, None),
+        Some(b) if b.0 == learner.iteration => {
+            b.2 = learner.field.params().to_vec();
+            log::info!("resumed held-out rule from the checkpoint: best at iteration {} (loss {:.3e})", b.0, b.1);
+            (Some(best), None)
+        }
+        Some(b) => (None, Some(b.0)),
+    }
+}
+
 struct Ctx<'a> {
     scene: &'a Scene,
     config: &'a RunConfig,
@@ -561,11 +584,33 @@ impl Ctx<'_> {
                 r.history.nrmse.iter().filter(|p| p.iteration <= learner.iteration).copied().collect(),
                 r.history.holdout.iter().filter(|p| p.iteration <= learner.iteration).copied().collect(),
             ),
+            // A run killed without a report: its checkpoint's own held-out losses.
+            None if dir.resuming() && !restart => (
+                Vec::new(),
+                learner
+                    .holdout_losses
+                    .iter()
+                    .map(|&(iteration, loss)| HoldoutPoint { iteration, loss: f64::from(loss), train_time_s: None })
+                    .collect(),
+            ),
             None => (Vec::new(), Vec::new()),
         };
         let held_out_rule = config.stopping.rule == StopRule::HeldOut;
-        let mut best = match (held_out_rule, dir.resuming() && !restart) {
-            (true, true) => resumed_best(self.earlier.as_ref(), dir, &mut learner, config.stopping.patience),
+        let mut best = match (held_out_rule, dir.resuming() && !restart, self.earlier.as_ref()) {
+            (true, true, Some(_)) => resumed_best(self.earlier.as_ref(), dir, &mut learner, config.stopping.patience),
+            (true, true, None) => {
+                let (best, lost) = best_from_checkpoint(&learner, config.stopping.patience);
+                if let Some(at) = lost {
+                    session.warn(&format!(
+                        "the run resumed was stopped without its results (killed) after its best held-out loss, at \
+                         iteration {at}, and its checkpoint holds the field of iteration {}: that field is lost, so \
+                         the held-out rule starts afresh from the checkpoint and may keep a later, worse one; rerun \
+                         with --force for the uninterrupted result",
+                        learner.iteration
+                    ));
+                }
+                best
+            }
             _ => None,
         }
         .unwrap_or_else(|| BestHoldout::new(config.stopping.patience));

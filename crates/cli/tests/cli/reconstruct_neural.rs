@@ -839,3 +839,44 @@ fn masks_hiding_most_of_each_view_keep_the_hull_of_the_pixels_they_use() {
     ok(&o);
     assert!(!String::from_utf8_lossy(&o.stderr).contains("no camera sees"));
 }
+
+/// A held-out run killed right after its checkpoint at its best held-out loss (no report, no
+/// kept weights) was resumed with the rule started afresh: it kept a later field and stopped
+/// elsewhere than the run without a break. The rule is now replayed from the checkpoint's own
+/// held-out losses, and the resumed run ends as the uninterrupted one, byte for byte.
+#[test]
+fn a_held_out_run_killed_at_its_best_checkpoint_resumes_to_the_same_result() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 5, 16, 8, &["--holdout", "4", "--noise", "0.05"]);
+    let run = |out: &str, cap: &str| {
+        let args =
+            ["reconstruct", "scene", "-o", out, "--method", "fast", "--stop", "held-out", "--max-iterations", cap];
+        let more = ["--holdout-every", "10", "--patience", "3", "--checkpoint-every", "10", "--resolution", "8", "-q"];
+        ok(&fluidnerf(d, &[&args[..], &more].concat()));
+    };
+    run("whole", "300");
+    let whole = report(&d.join("whole"));
+    let kept = whole["kept_iteration"].as_u64().expect("kept");
+    assert!(kept < whole["iterations"].as_u64().expect("iterations"), "the rule stopped it after its best");
+    // The same run up to its best evaluation, then killed after the checkpoint there: only the
+    // configuration and the checkpoint are left.
+    run("killed", &kept.to_string());
+    for entry in std::fs::read_dir(d.join("killed")).expect("folder") {
+        let path = entry.expect("entry").path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("").to_string();
+        if !["config.json", "checkpoint.safetensors", "scene"].contains(&name.as_str()) {
+            if path.is_dir() {
+                std::fs::remove_dir_all(&path).expect("removes");
+            } else {
+                std::fs::remove_file(&path).expect("removes");
+            }
+        }
+    }
+    ok(&fluidnerf(d, &["reconstruct", "-o", "killed", "--resume", "--max-iterations", "300", "-q"]));
+    let resumed = report(&d.join("killed"));
+    assert_eq!(resumed["kept_iteration"], whole["kept_iteration"]);
+    assert_eq!(resumed["iterations"], whole["iterations"]);
+    let volume = |run: &str| std::fs::read(d.join(run).join("volume.npy")).expect("volume");
+    assert!(volume("killed") == volume("whole"), "the resumed run's volume differs");
+}
