@@ -393,7 +393,7 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
                 let payload = if encoding == Some("base64") { Payload::Base64(block) } else { Payload::Raw(block) };
                 let raw = decode_array(payload, header_u64, zlib, n * width)
                     .map_err(|e| bad(&format!("array \"{name}\": {e}")))?;
-                return finish_vti(path, &raw, width, dims, cell_data, &extent, &origin, &spacing);
+                return placed(path, floats_le(&raw, width), dims, cell_data, &extent, &origin, &spacing);
             }
             let bad_block = |what: String| bad(&format!("array \"{name}\": {what}"));
             let hlen = if header_u64 { 8 } else { 4 };
@@ -436,14 +436,7 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
                      block of array \"{other}\" at offset {at}"
                 )));
             }
-            let raw = &bytes[start + hlen..start + hlen + nbytes];
-            if width == 4 {
-                raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
-            } else {
-                raw.chunks_exact(8)
-                    .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32)
-                    .collect()
-            }
+            floats_le(&bytes[start + hlen..start + hlen + nbytes], width)
         }
         Some("binary") => {
             let name = attribute(array_tag, "Name").unwrap_or("(unnamed)");
@@ -451,7 +444,7 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
             let len = xml[start..].find("</DataArray>").ok_or_else(|| bad("unterminated DataArray"))?;
             let raw = decode_array(Payload::Base64(&xml.as_bytes()[start..start + len]), header_u64, zlib, n * width)
                 .map_err(|e| bad(&format!("array \"{name}\": {e}")))?;
-            return finish_vti(path, &raw, width, dims, cell_data, &extent, &origin, &spacing);
+            return placed(path, floats_le(&raw, width), dims, cell_data, &extent, &origin, &spacing);
         }
         Some("ascii") => {
             let start = xml.find(array_tag).ok_or_else(|| bad("DataArray"))? + array_tag.len();
@@ -489,26 +482,15 @@ fn placed(
     Ok(Volume::from_vec(dims, aabb, data))
 }
 
-/// [`placed`] for an array's little-endian bytes of floats `width` bytes wide (4 or 8).
-#[allow(clippy::too_many_arguments)]
-fn finish_vti(
-    path: &Path,
-    raw: &[u8],
-    width: usize,
-    dims: [usize; 3],
-    cell_data: bool,
-    extent: &[i64],
-    origin: &[f64],
-    spacing: &[f64],
-) -> Result<Volume, IoError> {
-    let data: Vec<f32> = if width == 4 {
+/// Little-endian floats `width` bytes wide (4 or 8) as f32.
+fn floats_le(raw: &[u8], width: usize) -> Vec<f32> {
+    if width == 4 {
         raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
     } else {
         raw.chunks_exact(8)
             .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32)
             .collect()
-    };
-    placed(path, data, dims, cell_data, extent, origin, spacing)
+    }
 }
 
 /// A binary `.vti` array as stored: its bytes (appended raw), or their base64 text (inline
