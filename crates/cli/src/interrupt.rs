@@ -1,5 +1,8 @@
 //! Ctrl-C handling: the first Ctrl-C asks long runs to stop after the current iteration (they
-//! then write a usable result); a second one exits at once.
+//! then write a usable result); a second one exits at once. SIGTERM and SIGHUP are taken as
+//! Ctrl-C: a batch scheduler's time limit (Slurm sends SIGTERM, then SIGKILL after a grace
+//! period) or a closed terminal stopped a run without its results, and one that had not yet
+//! reached its first checkpoint could not be resumed.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 

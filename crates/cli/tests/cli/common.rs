@@ -60,6 +60,12 @@ pub fn interrupted_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
     signalled_once_made(dir, args, made, "-INT", 500)
 }
 
+/// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` and half a second more, sends
+/// it SIGTERM as a batch scheduler's time limit does, and returns its output.
+pub fn terminated_once_made(dir: &Path, args: &[&str], made: &str) -> Output {
+    signalled_once_made(dir, args, made, "-TERM", 500)
+}
+
 /// Runs `fluidnerf ARGS` in `dir`, waits until it has made `made` (a path under `dir`) and kills
 /// it at once as a power loss would (SIGKILL: no handler runs), and returns its output.
 pub fn killed_once_made(dir: &Path, args: &[&str], made: &str) -> Output {

@@ -880,3 +880,23 @@ fn a_held_out_run_killed_at_its_best_checkpoint_resumes_to_the_same_result() {
     let volume = |run: &str| std::fs::read(d.join(run).join("volume.npy")).expect("volume");
     assert!(volume("killed") == volume("whole"), "the resumed run's volume differs");
 }
+
+/// SIGTERM (a batch scheduler's time limit; Slurm sends it before SIGKILL) stopped a run at once,
+/// without its results, and one before its first checkpoint could not be resumed. It is now
+/// taken as Ctrl-C: the run stops after the iteration under way and writes what it has.
+#[test]
+fn sigterm_stops_a_run_as_ctrl_c_does() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &[]);
+    let args = ["reconstruct", "scene", "-o", "run", "--method", "fast", "--stop", "budget", "--max-iterations"];
+    let out = terminated_once_made(d, &[&args[..], &["100000", "--resolution", "8", "-q"]].concat(), "run/config.json");
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    let r = report(&d.join("run"));
+    assert_eq!(r["status"], "interrupted", "{r}");
+    assert!(d.join("run/volume.npy").is_file() && d.join("run/weights.safetensors").is_file());
+    ok(&fluidnerf(
+        d,
+        &["reconstruct", "-o", "run", "--resume", "--max-iterations", "200000", "--time-budget", "1", "-q"],
+    ));
+}
