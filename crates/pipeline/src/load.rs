@@ -26,22 +26,55 @@ pub struct TimeSpan {
     /// was stopped before reaching; `reconstruct --resume` trains them. Empty for a run that
     /// reached every instant.
     pub not_reached: Vec<f64>,
+    /// The held-out instants outside `first … last` whose volumes the run wrote and scored with
+    /// its field held at the nearest trained instant (`reconstruct --holdout-times` at an end
+    /// of the recording): sampled there as the run sampled them.
+    pub held_at_ends: Vec<f64>,
+}
+
+impl TimeSpan {
+    /// What a reader should be told when it samples the field at `times`, the scene's instants
+    /// it reads: the run's held-out instants outside its trained ones among them, where the
+    /// field repeats the nearest trained instant. None when there are none.
+    pub fn held_note(&self, times: impl IntoIterator<Item = f64>) -> Option<String> {
+        let mut held: Vec<f64> = times
+            .into_iter()
+            .filter(|&t| self.held_at_ends.iter().any(|&h| fluidnerf_core::scene::same_time(h, t)))
+            .collect();
+        held.sort_by(f64::total_cmp);
+        held.dedup_by(|a, b| fluidnerf_core::scene::same_time(*a, *b));
+        if held.is_empty() {
+            return None;
+        }
+        let list: Vec<String> = held.iter().map(|&t| num(t).to_string()).collect();
+        Some(format!(
+            "t = {} held out at an end of the recording: the run's field repeats its nearest trained instant there \
+             ({} … {}), as its report scored it",
+            list.join(", "),
+            num(self.first),
+            num(self.last)
+        ))
+    }
 }
 
 /// The time at which to sample a result whose instants are `span` (None for a static one) for
 /// `what` (an option or a frame, named in errors): `given`, refused when it is not finite or
 /// lies outside a time-resolved run's instants (where its field only repeats its first or last
-/// one, or, after a stopped run's last trained frame, was never trained); else the first
-/// instant, and 0 for static results.
+/// one, or, after a stopped run's last trained frame, was never trained) unless the run held
+/// it out there ([`TimeSpan::held_at_ends`]); else the first instant, and 0 for static results.
 pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> Result<f64, PipelineError> {
     let refuse = |why: String| PipelineError::invalid(what, why);
     if let Some(t) = given.filter(|t| !t.is_finite()) {
         return Err(refuse(format!("the time must be a finite number, got {}", num(t))));
     }
-    let Some(&TimeSpan { first, last, ref not_reached }) = span else { return Ok(given.unwrap_or(0.0)) };
+    let Some(&TimeSpan { first, last, ref not_reached, ref held_at_ends }) = span else {
+        return Ok(given.unwrap_or(0.0));
+    };
     let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
     match given {
         None => Ok(first),
+        // The run wrote and scored this held-out instant with its field held at the nearest end.
+        Some(t) if held_at_ends.iter().any(|&h| fluidnerf_core::scene::same_time(h, t)) => Ok(t),
         Some(t) if t > last + slack && !not_reached.is_empty() => {
             let list: Vec<String> = not_reached.iter().map(|&t| num(t).to_string()).collect();
             Err(refuse(format!(
@@ -336,7 +369,15 @@ impl LoadedRun {
         not_reached.extend(self.report.iter().flat_map(|r| r.not_reached.iter().copied()));
         not_reached.sort_by(f64::total_cmp);
         not_reached.dedup_by(|a, b| fluidnerf_core::scene::same_time(*a, *b));
-        Ok(Some(TimeSpan { first: times[0], last: times[covered - 1], not_reached }))
+        let (first, last) = (times[0], times[covered - 1]);
+        let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
+        let held_at_ends = self
+            .report
+            .iter()
+            .flat_map(|r| &r.volumes)
+            .filter_map(|v| v.time.filter(|&t| !v.trained && (t < first - slack || t > last + slack)))
+            .collect();
+        Ok(Some(TimeSpan { first, last, not_reached, held_at_ends }))
     }
 
     /// Every volume written, with its time (None for static runs).

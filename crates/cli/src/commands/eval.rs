@@ -433,11 +433,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         regions = fluidnerf_metrics::default_regions(flow.map(|(axis, _)| axis));
     }
     let volume_options = VolumeMetricOptions { regions, ssim, data_range: args.data_range };
+    // The truth at each step scored. One truth without a time stands for every frame time of a
+    // time-resolved run, as the run scored it (and `reconstruct` said so), and for each of as
+    // many volumes as frame times: eval refused both.
+    let per_frame_volumes = args.recon.len() > 1 && args.recon.len() == scene.times().len();
+    let timeless_for_run = args.truth.is_none()
+        && fluidnerf_pipeline::timeless_truth(&scene).is_some()
+        && (per_frame_volumes
+            || run_dir.as_deref().is_some_and(|dir| {
+                fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))
+                    .is_ok_and(|run| run.kind == fluidnerf_pipeline::RunKind::Temporal)
+            }));
+    let truth_steps: Vec<(Option<f64>, &Volume)> = match truth.as_slice() {
+        [(None, only)] if timeless_for_run => {
+            if let Some(message) = fluidnerf_pipeline::timeless_truth(&scene) {
+                log::warn!("{message}");
+            }
+            scene.times().into_iter().map(|t| (Some(t), only)).collect()
+        }
+        _ => truth.iter().map(|(t, v)| (*t, v)).collect(),
+    };
     // The time steps the reconstruction volumes stand for: the truth's, else the frames'.
     let step_times: Vec<Option<f64>> = if truth.is_empty() {
         scene.times().into_iter().map(Some).collect()
     } else {
-        truth.iter().map(|(t, _)| *t).collect()
+        truth_steps.iter().map(|(t, _)| *t).collect()
     };
     // Times the scene's truth does not cover are not scored, and said so.
     let without_truth = if args.truth.is_some() { Vec::new() } else { scene.times_without_truth() };
@@ -462,10 +482,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if volumes.len() > 1 {
             refuse_frames_out_of_order(&args.recon, &step_times)?;
         }
-        if volumes.len() == 1 && truth.len() > 1 {
+        if volumes.len() == 1 && truth_steps.len() > 1 {
             log::warn!(
                 "one reconstruction volume for {} truth time steps: the same volume is scored at every step",
-                truth.len()
+                truth_steps.len()
             );
         }
     }
@@ -499,8 +519,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let mut report = MetricsReport::default();
-    for (step, (time, t)) in truth.iter().enumerate() {
-        let estimate = recon.volume_for_step(step, t, *time).with_context(|| format!("{}", args.recon[0].display()))?;
+    for (step, &(time, t)) in truth_steps.iter().enumerate() {
+        let estimate = recon.volume_for_step(step, t, time).with_context(|| format!("{}", args.recon[0].display()))?;
         // A field whose finite weights are so large that its values overflow (render refuses
         // it) was scored: NRMSE 2.6e38, a windowed SSIM of 1.85e20, reprojections of inf and NaN.
         if let (Recon::Field(_), Some(_)) =
@@ -513,7 +533,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.recon[0].display()
             );
         }
-        let metrics = evaluate_volume(&estimate, t, *time, &volume_options)
+        let metrics = evaluate_volume(&estimate, t, time, &volume_options)
             .with_context(|| format!("scoring time step {step}"))?;
         report.steps.push(metrics);
     }
@@ -581,21 +601,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The time at which a time-resolved run wrote the volume file `path`, when it is one of a
-/// run's frames (`RUN/frames/volume_NNN.npy|.vti`, listed with its time in `RUN/report.json`):
-/// the report's path and the time.
+/// The time at which the volume file `path` was written from a time-resolved run, when that is
+/// recorded: one of a run's frames (`RUN/frames/volume_NNN.npy|.vti`, listed with its time in
+/// `RUN/report.json`), or a volume `export --time` wrote (listed in the `export.json` beside
+/// it, with its time). The record's path and the time.
 fn recorded_frame_time(path: &Path) -> Option<(PathBuf, f64)> {
-    let frames = path.parent()?;
-    if frames.file_name()? != "frames" {
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if folder.file_name().is_some_and(|name| name == "frames") {
+        let run = folder.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let report_path = run.join("report.json");
+        let report = fluidnerf_pipeline::RunReport::read(&report_path).ok()?;
+        let stem = path.file_stem()?.to_str()?;
+        let own = format!("frames/{stem}");
+        let record = report.volumes.iter().find(|v| Path::new(&v.file).with_extension("") == Path::new(&own))?;
+        return Some((report_path, record.time?));
+    }
+    let export_path = folder.join("export.json");
+    let record: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&export_path).ok()?).ok()?;
+    let name = path.file_name()?;
+    let listed = record["outputs"].as_array()?.iter().filter_map(|o| o.as_str());
+    if !listed.into_iter().any(|o| Path::new(o).file_name() == Some(name)) {
         return None;
     }
-    let run = frames.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let report_path = run.join("report.json");
-    let report = fluidnerf_pipeline::RunReport::read(&report_path).ok()?;
-    let stem = path.file_stem()?.to_str()?;
-    let own = format!("frames/{stem}");
-    let record = report.volumes.iter().find(|v| Path::new(&v.file).with_extension("") == Path::new(&own))?;
-    Some((report_path, record.time?))
+    Some((export_path, record["time"].as_f64()?))
 }
 
 /// Refuses volume files given for the time steps `step_times` (one each, in order) when one is a
@@ -616,7 +644,7 @@ fn refuse_frames_out_of_order(paths: &[PathBuf], step_times: &[Option<f64>]) -> 
                 format!("the scene's time step {} has that time", j + 1)
             });
         bail!(
-            "RECON {}: the run wrote it at t = {} ({}), but it is given as volume {} of {}, for the time step at \
+            "RECON {}: it was written at t = {} ({}), but it is given as volume {} of {}, for the time step at \
              t = {}; {at}. Give one volume per time step in the order of the steps' times ({})",
             path.display(),
             num(written),
@@ -713,7 +741,10 @@ fn load_recon(
             // may stand for held-out times there), and a stopped run has neither field nor
             // volumes at the instants it did not reach.
             if let Some(span) = run.time_span()?.filter(|s| !use_volume || !s.not_reached.is_empty()) {
-                let times = scene.truth.iter().map(|t| (t.time, "truth volume", &t.file_path));
+                // One truth without a time is scored at the frames' times (checked below).
+                let timeless = fluidnerf_pipeline::timeless_truth(scene).is_some();
+                let truth = scene.truth.iter().filter(|_| !timeless);
+                let times = truth.map(|t| (t.time, "truth volume", &t.file_path));
                 let times = times.chain(scene.frames.iter().map(|f| (f.time, "frame", &f.file_path)));
                 for (time, what, path) in times {
                     let what = format!("{}: the scene's {what} {}", dir.display(), path.display());
@@ -727,6 +758,10 @@ fn load_recon(
                         );
                     };
                     fluidnerf_pipeline::load::sample_time(Some(&span), Some(t), &what)?;
+                }
+                let times = scene.truth.iter().filter_map(|t| t.time);
+                if let Some(note) = span.held_note(times.chain(scene.frames.iter().filter_map(|f| f.time))) {
+                    log::warn!("{}: {note}", dir.display());
                 }
             }
             if use_volume {

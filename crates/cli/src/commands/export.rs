@@ -152,6 +152,16 @@ impl Source {
         Ok(fluidnerf_pipeline::load::sample_time(span, given, what)?)
     }
 
+    /// Warns once, naming `path`, when `times` (the instants sampled) include a run's held-out
+    /// instants outside its trained ones, where its field repeats the nearest trained instant.
+    pub(crate) fn warn_held(&self, times: impl IntoIterator<Item = f64>, path: &Path) {
+        if let Source::Field { times: Some(span), .. } = self {
+            if let Some(note) = span.held_note(times) {
+                log::warn!("{}: {note}", path.display());
+            }
+        }
+    }
+
     /// Warns that `--time` (`given`) changes nothing when the source is fixed in time: a volume,
     /// or a field of space alone.
     /// Whether the source changes with time (a time-resolved field): only then does a time
@@ -438,6 +448,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The stack's box in the export's unit (read_tiff_stack converts between lengths).
     let source = load_source(&args.recon, scene.as_ref(), stack_unit.as_ref().map(|_| units.as_str()))?;
     let time = source.sample_time(args.time, "--time")?;
+    source.warn_held([time], &args.recon);
     source.warn_time_unused(args.time, &args.recon);
     let is_time_resolved = source.is_time_resolved();
     if args.average > 1 && matches!(source, Source::Volume(_)) {

@@ -184,6 +184,10 @@ struct Settings<'a> {
     /// one instant give it, also when the scene's frames hold no time (a time-resolved field
     /// seen through a static scene's cameras): render.json said null, not which instant.
     time: Option<f64>,
+    /// The instant of each view, in the order of `cameras`, when a time-resolved field's views
+    /// are at several instants (`time` is then null); absent otherwise.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    times: Vec<f64>,
     /// The grid a trained field was sampled on for rendering (None: rendered exactly).
     baked: Option<[usize; 3]>,
     intensity_scale: f64,
@@ -364,7 +368,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (view, (time, what)) in views.iter_mut().zip(&asked) {
         view.time = source.sample_time(*time, what)?;
     }
+    source.warn_held(views.iter().map(|v| v.time), &args.recon);
     source.warn_time_unused(args.time, &args.recon);
+    // One volume (or static field) seen through cameras of several instants: each view shows
+    // the same field, whatever its frame's time.
+    let instants = scene.times().len();
+    if !source.is_time_resolved() && args.orbit.is_none() && args.time.is_none() && instants > 1 {
+        let shown: Vec<f64> = asked.iter().filter_map(|&(t, _)| t).collect();
+        if shown.iter().any(|&t| !fluidnerf_core::scene::same_time(t, shown[0])) {
+            log::warn!(
+                "{} is fixed in time, but the views asked are of frames at several of the scene's {instants} \
+                 instants: each shows the same field, whatever its frame's time; render a time-resolved run, or each \
+                 instant's volume with --camera",
+                args.recon.display()
+            );
+        }
+    }
     if args.bake != Bake::Auto && matches!(source, Source::Volume(_)) {
         log::warn!(
             "--bake has no effect: {} is a volume, rendered as it is; baking samples trained fields",
@@ -630,6 +649,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.time.or(first.filter(|&t| views.iter().all(|v| v.time == t)))
         } else {
             None
+        },
+        times: match source.is_time_resolved() && views.iter().any(|v| v.time != views[0].time) {
+            true => views.iter().map(|v| v.time).collect(),
+            false => Vec::new(),
         },
         baked: bake_dims,
         intensity_scale: scene.intensity_scale,

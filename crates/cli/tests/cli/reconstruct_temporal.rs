@@ -679,7 +679,7 @@ fn truth_at_only_some_times_is_reported_naming_the_times_without() {
 /// One ground truth without a time, in a scene of several times, stands for every time: a
 /// time-resolved run scores each instant against it (a steady flow's truth), and info and the
 /// run say so, since one instant's truth given without its time would score the others against
-/// the wrong volume. Eval, which scores such a run at the truth's times, refuses it with the fix.
+/// the wrong volume. Eval scores such a run the same way.
 #[test]
 fn a_timeless_truth_of_a_time_resolved_scene_is_used_for_every_instant_and_said_so() {
     let tmp = tempfile::tempdir().expect("tempdir");
@@ -701,9 +701,19 @@ fn a_timeless_truth_of_a_time_resolved_scene_is_used_for_every_instant_and_said_
     let scored: Vec<bool> =
         r["volumes"].as_array().expect("volumes").iter().map(|v| v["metrics"].is_object()).collect();
     assert_eq!(scored, [true, true]);
-    let out = fluidnerf(d, &["eval", "run", "--json", "m.json"]);
-    refused(&out, "give the entry its instant's `time`, or export an instant with `export --time`");
-    assert!(!d.join("m.json").exists(), "wrote metrics");
+    // Eval scores it as the run did (it refused the run before), and as many volumes as frame
+    // times (refused as "2 volumes given but the scene has 1 ground-truth time steps").
+    let out = fluidnerf(d, &["eval", "run", "--no-regions", "--json", "m.json"]);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stderr).contains(says));
+    let (scored, reported) = eval_and_report_nrmse(d, "run");
+    assert_eq!(scored.len(), 2);
+    for (s, r) in scored.iter().zip(&reported) {
+        assert!((s - r).abs() <= 1e-6 * r, "eval {scored:?}, report {reported:?}");
+    }
+    let files = ["run/frames/volume_000.npy", "run/frames/volume_001.npy"];
+    ok(&fluidnerf(d, &[&["eval", "-s", "scene", "--no-regions", "--json", "f.json", "-q"][..], &files].concat()));
+    assert_eq!(json(&d.join("f.json"))["steps"].as_array().map(Vec::len), Some(2));
 }
 
 /// The grid's time axis spans each window's frames, one cell per frame interval: a `time_span`
@@ -997,7 +1007,7 @@ fn a_runs_frames_given_to_eval_out_of_order_are_refused_naming_the_times() {
     };
     ok(&eval(frames([0, 1, 2])));
     let out = eval(frames([1, 0, 2]));
-    refused(&out, "RECON run/frames/volume_001.npy: the run wrote it at t = 15 (run/report.json)");
+    refused(&out, "RECON run/frames/volume_001.npy: it was written at t = 15 (run/report.json)");
     refused(&out, "given as volume 1 of 3, for the time step at t = 14; the scene's time step 2 has that time");
     refused(&out, "in the order of the steps' times (14, 15, 16)");
     // The .vti files of the series are read the same way.
@@ -1006,7 +1016,7 @@ fn a_runs_frames_given_to_eval_out_of_order_are_refused_naming_the_times() {
         "run/frames/volume_002.vti".into(),
         "run/frames/volume_001.vti".into(),
     ];
-    refused(&eval(vti), "RECON run/frames/volume_002.vti: the run wrote it at t = 16");
+    refused(&eval(vti), "RECON run/frames/volume_002.vti: it was written at t = 16");
 }
 
 /// `eval RUN --use-volume` scored a time-resolved run's volumes by their place in the series,
@@ -1111,4 +1121,90 @@ fn render_json_records_the_one_instant_its_views_show() {
     assert_eq!(json(&d.join("both/render.json"))["time"], serde_json::Value::Null);
     // The frames rendered, every one when none was named (the list read empty, as if none were).
     assert_eq!(json(&d.join("both/render.json"))["cameras"], serde_json::json!([0, 1, 2, 3, 4, 5, 6, 7]));
+}
+
+/// The volume NRMSE at each time, of `eval`'s `m.json` in `dir` and of the run's report.
+fn eval_and_report_nrmse(dir: &std::path::Path, run: &str) -> (Vec<f64>, Vec<f64>) {
+    let nrmse = |v: &serde_json::Value| v["global"]["nrmse"].as_f64().expect("nrmse");
+    let scored = json(&dir.join("m.json"))["steps"].as_array().expect("steps").iter().map(nrmse).collect();
+    let volumes = report(&dir.join(run))["volumes"].clone();
+    let reported = volumes.as_array().expect("volumes").iter().map(|v| nrmse(&v["metrics"])).collect();
+    (scored, reported)
+}
+
+/// A time held out at an end of the recording: `reconstruct` wrote and scored its volume with
+/// the field held at the nearest trained instant, and then `eval`, `render` and `export` refused
+/// the whole run ("time 16 lies outside the run's instants 14 … 15"). They now sample it as the
+/// run did, say so, and eval's scores are the report's.
+#[test]
+fn a_time_held_out_at_an_end_is_read_as_the_run_scored_it() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --holdout-times 16 --max-iterations 4 --resolution 8 \
+                --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let out = fluidnerf(d, &["eval", "run", "--no-regions", "--json", "m.json"]);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("t = 16 held out at an end of the recording"));
+    let (scored, reported) = eval_and_report_nrmse(d, "run");
+    assert_eq!(scored.len(), 3);
+    for (s, r) in scored.iter().zip(&reported) {
+        assert!((s - r).abs() <= 1e-6 * r, "eval {scored:?}, report {reported:?}");
+    }
+    ok(&fluidnerf(d, &["render", "run", "-o", "views", "-q"]));
+    ok(&fluidnerf(d, &["export", "run", "-o", "ex", "--npy", "--time", "16", "--resolution", "8", "-q"]));
+    let exported = std::fs::read(d.join("ex/volume.npy")).expect("exported");
+    assert!(exported == std::fs::read(d.join("run/frames/volume_002.npy")).expect("the run's"), "another volume");
+    // A time outside that was not held out is still refused.
+    refused(&fluidnerf(d, &["export", "run", "-o", "ex2", "--npy", "--time", "17"]), "lies outside");
+}
+
+/// Volumes exported at each instant (`export --time`) and given to `eval` in another order were
+/// scored against other instants' truth without a word, though each `export.json` records its
+/// time. They are refused as a run's own frames given out of order are.
+#[test]
+fn exported_instants_given_to_eval_out_of_order_are_refused() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    for t in ["14", "15", "16"] {
+        ok(&fluidnerf(d, &["export", "run", "-o", &format!("ex{t}"), "--npy", "--time", t, "-q"]));
+    }
+    let eval = |order: [&str; 3]| {
+        let mut a = vec!["eval", "-s", "scene", "--no-reprojection", "--json", "m.json", "--force", "-q"];
+        let files: Vec<String> = order.iter().map(|t| format!("ex{t}/volume.npy")).collect();
+        a.extend(files.iter().map(String::as_str));
+        fluidnerf(d, &a)
+    };
+    ok(&eval(["14", "15", "16"]));
+    let out = eval(["16", "15", "14"]);
+    refused(&out, "RECON ex16/volume.npy: it was written at t = 16 (ex16/export.json)");
+    refused(&out, "given as volume 1 of 3, for the time step at t = 14; the scene's time step 3 has that time");
+}
+
+/// A render of a time-resolved field's scene views at several instants recorded `"time": null`
+/// and not the instant of each view; one volume rendered through cameras of several instants
+/// showed the same field in every view without a word.
+#[test]
+fn render_records_each_views_instant_and_warns_of_one_volume_for_several() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 2, 16, 8, &["--times", "14,15"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    ok(&fluidnerf(d, &["render", "run", "-o", "views", "-q"]));
+    let settings = json(&d.join("views/render.json"));
+    let frames = json(&d.join("scene/transforms.json"))["frames"].clone();
+    let times: Vec<f64> = frames.as_array().expect("frames").iter().map(|f| f["time"].as_f64().expect("t")).collect();
+    assert_eq!(settings["time"], serde_json::Value::Null);
+    assert_eq!(settings["times"], serde_json::json!(times));
+    let out = fluidnerf(d, &["render", "run/frames/volume_000.npy", "-s", "scene", "-o", "one"]);
+    ok(&out);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("is fixed in time, but the views asked are of frames at several")
+    );
+    assert!(json(&d.join("one/render.json")).get("times").is_none());
 }
