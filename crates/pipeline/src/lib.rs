@@ -68,7 +68,8 @@ pub use report::{
 };
 pub use rundir::{DirState, Overwrite, RunDir, RunKind};
 pub use temporal::{
-    check_given_windows, finish_windows, reconstruct_windows, window_plan, GivenWindows, WindowOutcome, WindowPlan,
+    check_given_windows, check_window_folder, finish_windows, reconstruct_windows, window_plan, GivenWindows,
+    WindowOutcome, WindowPlan,
 };
 
 /// Runs the reconstruction `config` of `scene` into `dir`: decides the stopping rule

@@ -1181,24 +1181,42 @@ pub fn reconstruct_windows(
     })
 }
 
+/// Refuses the `config.json` at `config_path` of a run trained window by window when it holds
+/// other settings than `config` (resolved).
+fn same_settings(config_path: &std::path::Path, config: &RunConfig) -> Result<(), PipelineError> {
+    let saved = RunConfig::read(config_path)?;
+    let mut ours = config.clone();
+    ours.fluidnerf_version.clone_from(&saved.fluidnerf_version);
+    if saved != ours {
+        let keys = crate::rundir::settings_differences(&saved, &ours, 5);
+        return Err(PipelineError::RunDir {
+            path: config_path.to_path_buf(),
+            why: format!(
+                "holds a run with other settings ({keys}); run every window with the same settings (or use another \
+                 folder)"
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Refuses the folder `out` when it holds a run trained window by window with other settings
+/// than `config` of `scene`: checked before a window asked for by its index, which is an index
+/// of that run's plan and may not be one of this configuration's.
+pub fn check_window_folder(scene: &Scene, config: &RunConfig, out: &std::path::Path) -> Result<(), PipelineError> {
+    let config_path = out.join("config.json");
+    if !config_path.is_file() {
+        return Ok(());
+    }
+    same_settings(&config_path, &config.resolved(scene))
+}
+
 /// Writes `config.json` and `windows/progress.json` of a run trained window by window, or
 /// checks that the folder's are those of this run.
 fn prepare_folder(dir: &RunDir, config: &RunConfig, progress: &Progress) -> Result<(), PipelineError> {
     let config_path = dir.config();
     if config_path.is_file() {
-        let saved = RunConfig::read(&config_path)?;
-        let mut ours = config.clone();
-        ours.fluidnerf_version.clone_from(&saved.fluidnerf_version);
-        if saved != ours {
-            let keys = crate::rundir::settings_differences(&saved, &ours, 5);
-            return Err(PipelineError::RunDir {
-                path: config_path,
-                why: format!(
-                    "holds a run with other settings ({keys}); run every window with the same settings (or use \
-                     another folder)"
-                ),
-            });
-        }
+        same_settings(&config_path, config)?;
     } else {
         dir.write_json("config.json", config)?;
     }

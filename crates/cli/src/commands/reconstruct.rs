@@ -1336,6 +1336,8 @@ fn run_split(args: &Args, config: &RunConfig) -> anyhow::Result<std::process::Ex
         });
     }
     let plan = fluidnerf_pipeline::window_plan(&scene, config)?;
+    // A folder of other settings is named first: its windows are not this plan's.
+    fluidnerf_pipeline::check_window_folder(&scene, config, &args.out)?;
     let windows = match (args.split.window_index, &args.split.frames) {
         (Some(k), _) if k >= plan.windows.len() => bail!(
             "--window-index {k}: the run has {} window(s), numbered 0 to {} (its frames and --window / --overlap \

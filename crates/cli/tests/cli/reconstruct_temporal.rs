@@ -1208,3 +1208,19 @@ fn render_records_each_views_instant_and_warns_of_one_volume_for_several() {
     );
     assert!(json(&d.join("one/render.json")).get("times").is_none());
 }
+
+/// `--window-index` given to a folder holding a run of other settings was checked against this
+/// command's plan first: "the run has 1 window(s)" for a folder whose run has two. The folder's
+/// other settings are now named first, as they are for an index in range.
+#[test]
+fn a_window_index_for_a_folder_of_other_settings_names_the_settings() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --window 2 --overlap 1 --max-iterations 2 --resolution 8 \
+                --checkpoint-every 0 --window-index 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let out = fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "tr-fast", "--window-index", "1"]);
+    refused(&out, "run/config.json: holds a run with other settings (");
+    refused(&out, "`method.windows.frames`: 2 → 16");
+}
