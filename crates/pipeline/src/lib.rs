@@ -522,6 +522,24 @@ pub fn volume_digest(volume: &Volume) -> String {
     h.hex()
 }
 
+/// The digest of a file's bytes (16 hex digits, FNV-1a over its length and its bytes in
+/// little-endian 32-bit words): how a study records the scene files its runs were made from.
+pub fn bytes_digest(bytes: &[u8]) -> String {
+    let mut h = Fnv::default();
+    h.float(bytes.len() as f64);
+    let mut words = bytes.chunks_exact(4);
+    for w in &mut words {
+        h.word(u32::from_le_bytes([w[0], w[1], w[2], w[3]]));
+    }
+    let rest = words.remainder();
+    if !rest.is_empty() {
+        let mut last = [0u8; 4];
+        last[..rest.len()].copy_from_slice(rest);
+        h.word(u32::from_le_bytes(last));
+    }
+    h.hex()
+}
+
 /// FNV-1a (64 bits) over 32-bit words, for the digests and fingerprints runs record
 /// ([`volume_digest`], `Measured::fingerprint`).
 pub(crate) struct Fnv(u64);

@@ -774,6 +774,10 @@ fn remove_earlier_study(out: &Path, g: &Grid) -> anyhow::Result<()> {
         for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
             remove(&runs.join(g.run_name(method, seed)))?;
         }
+        let record = runs.join(SCENE_FILES);
+        if record.is_file() {
+            std::fs::remove_file(&record).with_context(|| format!("removing {}", record.display()))?;
+        }
         remove_if_empty(&runs);
     }
     remove_if_empty(&out.join("scenes"));
@@ -894,6 +898,62 @@ fn newest_scene_file(scene_dir: &Path) -> Option<(std::time::SystemTime, PathBuf
         .max_by_key(|(t, _)| *t)
 }
 
+/// The file in a cell's runs folder that records the scene files its runs were made from.
+const SCENE_FILES: &str = "scene-files.json";
+
+/// The digest of each scene file of `scene_dir` that a study checks (its `transforms.json`, and
+/// the files of its `images/` and `truth/`), by its path relative to the folder.
+fn scene_files(scene_dir: &Path) -> anyhow::Result<std::collections::BTreeMap<String, String>> {
+    let listed = ["images", "truth"]
+        .into_iter()
+        .flat_map(|sub| std::fs::read_dir(scene_dir.join(sub)).into_iter().flatten().flatten().map(|e| e.path()));
+    let mut files = std::collections::BTreeMap::new();
+    for p in std::iter::once(scene_dir.join("transforms.json")).chain(listed).filter(|p| p.is_file()) {
+        let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+        let name = p.strip_prefix(scene_dir).unwrap_or(&p).to_string_lossy().replace('\\', "/");
+        files.insert(name, fluidnerf_pipeline::bytes_digest(&bytes));
+    }
+    Ok(files)
+}
+
+/// The scene files recorded in the cell's runs folder `cell_runs` ([`SCENE_FILES`]); None when
+/// none is recorded (a cell not yet run, or a study written before they were).
+fn recorded_scene_files(cell_runs: &Path) -> anyhow::Result<Option<std::collections::BTreeMap<String, String>>> {
+    let path = cell_runs.join(SCENE_FILES);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    Ok(Some(fluidnerf_pipeline::rundir::read_json(&path)?))
+}
+
+/// Refuses the scene files `now` of `scene_dir` when they are not those `recorded` for the
+/// finished runs in `cell_runs`: a file changed, removed or added, so that their results would
+/// stand in the table for a scene they were not made from. Compared by contents: a scene the
+/// study made again, the same, is the scene its runs were made from.
+fn check_scene_files(
+    scene_dir: &Path,
+    cell_runs: &Path,
+    recorded: &std::collections::BTreeMap<String, String>,
+    now: &std::collections::BTreeMap<String, String>,
+) -> anyhow::Result<()> {
+    let changed = recorded.iter().find_map(|(name, digest)| match now.get(name) {
+        Some(d) if d == digest => None,
+        Some(_) => Some((name, "changed")),
+        None => Some((name, "was removed")),
+    });
+    let added = || now.keys().find(|name| !recorded.contains_key(*name)).map(|name| (name, "was added"));
+    if let Some((name, what)) = changed.or_else(added) {
+        bail!(
+            "{}: {what} after the runs in {} were made from the scene ({} records its files), so their results are \
+             not of this scene; use --force to start over, or restore the file",
+            scene_dir.join(name).display(),
+            cell_runs.display(),
+            cell_runs.join(SCENE_FILES).display()
+        );
+    }
+    Ok(())
+}
+
 /// Refuses to continue a study whose scenes or finished runs in `out`, which it would read back
 /// instead of making them again, were made with other settings than the grid's: the table would
 /// mix the cells of two studies under one grid. Their own records are compared, not study.json,
@@ -928,8 +988,13 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
             // Checked (and refused when it holds other cameras) before any run is read back.
             ensure_subset(&cell, &scene_dir)?;
         }
-        // A subset's images are the scene's given.
-        let newest = newest_scene_file(cell.source().unwrap_or(&scene_dir));
+        // A subset's images are the scene's given. Its files, by contents, as the cell's
+        // runs recorded them; a study written before they were, by the files' times.
+        let source = cell.source().unwrap_or(&scene_dir);
+        let cell_runs = out.join("runs").join(&cell.name);
+        let recorded = recorded_scene_files(&cell_runs)?;
+        let newest = newest_scene_file(source);
+        let mut checked = false;
         for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
             let run_dir = out.join("runs").join(&cell.name).join(g.run_name(method, seed));
             let report_file = run_dir.join("report.json");
@@ -939,9 +1004,15 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
                 continue;
             }
             // A scene file changed since the run was made (an image edited): the run is of
-            // other images, and its result would stand in the table for these.
+            // other images, and its result would stand in the table for these. A scene not
+            // there is made again, and checked then.
             let made = std::fs::metadata(&report_file).and_then(|m| m.modified()).ok();
-            if let (Some((changed, file)), Some(made)) = (&newest, made) {
+            if let Some(recorded) = &recorded {
+                if !checked && source.join("transforms.json").is_file() {
+                    check_scene_files(source, &cell_runs, recorded, &scene_files(source)?)?;
+                    checked = true;
+                }
+            } else if let (Some((changed, file)), Some(made)) = (&newest, made) {
                 if *changed > made + std::time::Duration::from_secs(1) {
                     bail!(
                         "{}: changed after the run {} was made from it, so its result is not of this scene; use \
@@ -1086,6 +1157,24 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                     return interrupted(out, &g, &rows, &summaries, total);
                 }
                 r => r?,
+            }
+        }
+        // The scene files the cell's runs are made from, recorded before they are, and checked
+        // against the record when finished runs are read back: a scene made again here (its
+        // folder was removed) is checked now, by contents.
+        let source = cell.source().unwrap_or(&scene_dir);
+        let cell_runs = out.join("runs").join(&cell.name);
+        let files = scene_files(source)?;
+        let any_finished = g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))).any(|(m, s)| {
+            let report_file = cell_runs.join(g.run_name(m, s)).join("report.json");
+            fluidnerf_pipeline::RunReport::read(&report_file).is_ok_and(|r| r.status == RunStatus::Finished)
+        });
+        match recorded_scene_files(&cell_runs)? {
+            Some(recorded) if any_finished => check_scene_files(source, &cell_runs, &recorded, &files)?,
+            Some(recorded) if recorded == files => {}
+            _ => {
+                super::create_output_folder(&cell_runs)?;
+                fluidnerf_pipeline::rundir::write_json(&cell_runs.join(SCENE_FILES), &files)?;
             }
         }
         for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {

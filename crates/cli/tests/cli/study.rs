@@ -364,18 +364,44 @@ fn a_continued_study_refuses_runs_of_another_cells_scene() {
 }
 
 /// An image of a cell's scene changed after the cell's run was made is refused when the study
-/// continues: the run, of the earlier image, was read back as this scene's result.
+/// continues: the run, of the earlier image, was read back as this scene's result. The scene's
+/// files were judged by their times: a scene the study made again (its folder removed), the
+/// same to the byte, was refused on the rerun after, and so was an image only touched, while an
+/// image removed passed. They are now judged by their contents, recorded beside the cell's
+/// runs; a study written before that record is judged by the times as before.
 #[test]
-fn a_continued_study_refuses_runs_older_than_their_scene() {
+fn a_continued_study_refuses_runs_of_other_scene_files_by_contents() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let d = tmp.path();
     let args = ["study", "--preset", "smoke", "--methods", "sart", "--cameras", "2", "-o", "st", "-q"];
     ok(&fluidnerf(d, &args));
-    let images = d.join("st/scenes/ring360-c02-n000/images");
+    let scene = d.join("st/scenes/ring360-c02-n000");
+    let images = scene.join("images");
     let image = std::fs::read_dir(&images).expect("lists").flatten().next().expect("an image").path();
-    let file = std::fs::File::options().write(true).open(&image).expect("opens");
-    file.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(60)).expect("touches");
-    drop(file);
+    let touch = |path: &std::path::Path| {
+        let file = std::fs::File::options().write(true).open(path).expect("opens");
+        file.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(60)).expect("touches");
+    };
+    // Made again, and touched: the same files.
+    std::fs::remove_dir_all(&scene).expect("removes the scene");
+    ok(&fluidnerf(d, &args));
+    ok(&fluidnerf(d, &args));
+    touch(&image);
+    ok(&fluidnerf(d, &args));
+    // Changed, or removed: refused, naming the file.
+    let own = std::fs::read(&image).expect("reads");
+    let mut other = own.clone();
+    *other.last_mut().expect("bytes") ^= 1;
+    std::fs::write(&image, &other).expect("writes");
+    let name = image.file_name().expect("a name").to_string_lossy().to_string();
+    refused(&fluidnerf(d, &args), &format!("images/{name}: changed after the runs in st/runs/ring360-c02-n000"));
+    std::fs::remove_file(&image).expect("removes");
+    refused(&fluidnerf(d, &args), "was removed after the runs in st/runs/ring360-c02-n000 were made from the scene");
+    std::fs::write(&image, &own).expect("restores");
+    ok(&fluidnerf(d, &args));
+    // Without the record (a study written before it), a file newer than the run is refused.
+    std::fs::remove_file(d.join("st/runs/ring360-c02-n000/scene-files.json")).expect("removes the record");
+    touch(&image);
     refused(&fluidnerf(d, &args), "changed after the run");
     refused(&fluidnerf(d, &args), "ring360-c02-n000/sart was made from it");
     ok(&fluidnerf(d, &[&args[..], &["--force"]].concat()));
