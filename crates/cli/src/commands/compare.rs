@@ -40,9 +40,11 @@ use serde::{Deserialize, Serialize};
 ///
 /// Writes into OUT: `time_to_accuracy.png` and `.svg` (NRMSE against wall time, one line per
 /// run, log axes where the data span a decade), `time_to_accuracy.csv` (every point of every
-/// curve) and `compare.json` (the settings and the table). Prints a table per run: final and
-/// best NRMSE, wall time, the time it first reached each threshold, and its speed-up over the
-/// reference run at the best accuracy it reached.
+/// curve) and `compare.json` (the settings, the table and its warnings). Prints a table per
+/// run: final and best NRMSE, wall time, the time it first reached each threshold, and its
+/// speed-up over the reference run at the best accuracy it reached; under it, each thing that
+/// makes the rows less comparable than they look (a run cut short by Ctrl-C, grids of other
+/// voxels, fields and voxel runs scored by other rules, a scene unchecked), marked `!`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Run directories (holding `report.json`) or report JSON files.
@@ -103,6 +105,10 @@ struct Run {
     /// Stopped by Ctrl-C before its stopping rule ended it: its curve ends where it was
     /// stopped.
     interrupted: bool,
+    /// What a reader of its row must know (stopped by Ctrl-C): printed under the table and
+    /// recorded in `compare.json`.
+    #[serde(skip)]
+    caveat: Option<String>,
     /// The voxels of the grid its volumes (and so its NRMSE) are on; None for a curve file,
     /// which does not say.
     #[serde(skip)]
@@ -143,6 +149,9 @@ struct CompareRecord<'a> {
     reference: &'a Path,
     linear_time: bool,
     runs: &'a [Row],
+    /// What makes the rows less comparable than they look (runs cut short, on other grids,
+    /// scored by other rules, of unchecked or other scenes), as printed under the table.
+    warnings: &'a [String],
 }
 
 /// The file holding a run's report: `RUN/report.json` for a directory, RUN itself otherwise.
@@ -239,6 +248,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
     }
     let key = if probe.format.is_some() { "history.nrmse" } else { "nrmse_history" };
     let mut interrupted = false;
+    let mut caveat = None;
     let mut scored = None;
     let (method, preset, history, final_nrmse, wall_time_s, instants, dims, kept) = if probe.format.is_some() {
         let r = match RunReport::read(&report) {
@@ -286,14 +296,14 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         scored = r.volumes.first().and_then(|v| v.metrics.as_ref()).map(|m| (m.dims, continuous));
         if r.status == fluidnerf_pipeline::RunStatus::Interrupted {
             interrupted = true;
-            log::warn!(
+            caveat = Some(format!(
                 "{}: the {} run was stopped by Ctrl-C after {} iterations, before its stopping rule ended it: its \
                  curve, best NRMSE and times are those of a run cut short; continue it with `reconstruct --resume` \
                  to compare it whole",
                 report.display(),
                 r.method.name(),
                 r.iterations
-            );
+            ));
         }
         // The iterate the run kept, where it is not its last: marked on its curve.
         let kept = r.kept_before_end().map(|k| k as u64);
@@ -392,6 +402,7 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
         wall_time_s,
         instants,
         interrupted,
+        caveat,
         dims,
         scored,
         kept,
@@ -401,18 +412,18 @@ fn read_run(path: &Path) -> anyhow::Result<Run> {
 /// Warns of runs whose volumes are on grids of different voxels (`reconstruct --resolution`):
 /// each one's NRMSE is over its own grid's voxels and its time is that of its own grid's work,
 /// so their curves are not those of one problem solved by different methods.
-fn warn_of_other_grids(runs: &[Run]) {
+fn warn_of_other_grids(runs: &[Run], warnings: &mut Vec<String>) {
     let grids: Vec<(&Run, [usize; 3])> = runs.iter().filter_map(|r| r.dims.map(|d| (r, d))).collect();
     if grids.iter().all(|(_, d)| *d == grids[0].1) {
         return;
     }
     let list: Vec<String> =
         grids.iter().map(|(r, d)| format!("{} {}", r.path.display(), d.map(|n| n.to_string()).join("×"))).collect();
-    log::warn!(
+    warnings.push(format!(
         "the runs' volumes are on grids of different voxels ({}): each NRMSE is over its own grid and each time is \
          its own grid's work; for a comparison of methods, reconstruct them at one --resolution",
         list.join(", ")
-    );
+    ));
 }
 
 /// Warns when fields and voxel runs are scored by different rules: a trained field's NRMSE is
@@ -420,7 +431,7 @@ fn warn_of_other_grids(runs: &[Run]) {
 /// truth finer than a voxel run's grid the field's score is not bound by the output grid and the
 /// voxel run's is. On the real-like recording at 64³ that rule put the fields at 0.56× the best
 /// voxel method, and through the volumes they wrote at 1.01× (docs/real-data.md).
-fn warn_of_scoring_rules(runs: &[Run]) {
+fn warn_of_scoring_rules(runs: &[Run], warnings: &mut Vec<String>) {
     let fields: Vec<String> =
         runs.iter().filter(|r| r.scored.is_some_and(|(_, f)| f)).map(|r| r.path.display().to_string()).collect();
     let coarser: Vec<String> = runs
@@ -438,13 +449,13 @@ fn warn_of_scoring_rules(runs: &[Run]) {
     if fields.is_empty() || coarser.is_empty() {
         return;
     }
-    log::warn!(
+    warnings.push(format!(
         "the fields ({}) are scored at the truth's voxel centres and the voxel runs through their volumes on grids \
          of other voxels ({}): the fields' NRMSE is not bound by an output grid, theirs is; `fluidnerf eval RUN \
          --use-volume` scores every run through the volume it wrote, on one grid",
         fields.join(", "),
         coarser.join(", ")
-    );
+    ));
 }
 
 /// Refuses runs whose NRMSE is over different instants of the truth: a time-resolved run's is
@@ -479,7 +490,7 @@ fn refuse_other_instants(runs: &[Run]) -> anyhow::Result<()> {
 /// Refuses runs made from different scenes (their `config.json`), whose NRMSE curves measure
 /// different problems, naming each run and its scene; with `allow` (copies of one scene in
 /// other folders, say a cluster's and this machine's) it only warns.
-fn refuse_other_scenes(runs: &[Run], allow: bool) -> anyhow::Result<()> {
+fn refuse_other_scenes(runs: &[Run], allow: bool, warnings: &mut Vec<String>) -> anyhow::Result<()> {
     let mut scenes: Vec<(PathBuf, Vec<String>)> = Vec::new();
     let mut unknown = Vec::new();
     for run in runs {
@@ -497,11 +508,11 @@ fn refuse_other_scenes(runs: &[Run], allow: bool) -> anyhow::Result<()> {
     // A report without its run's config.json (a copied report.json, a folder whose config was
     // removed) names no scene, and passed the check unannounced.
     if !unknown.is_empty() && !scenes.is_empty() {
-        log::warn!(
+        warnings.push(format!(
             "{}: no config.json beside the report to name the scene it was made from; compared with the others \
              without checking that it is the same scene",
             unknown.join(", ")
-        );
+        ));
     }
     if scenes.len() < 2 {
         return Ok(());
@@ -519,7 +530,7 @@ fn refuse_other_scenes(runs: &[Run], allow: bool) -> anyhow::Result<()> {
         list.join("; ")
     );
     if allow {
-        log::warn!("{problem} (compared as --allow-different-scenes asks)");
+        warnings.push(format!("{problem} (compared as --allow-different-scenes asks)"));
         return Ok(());
     }
     bail!("{problem} and are not comparable; compare runs of one scene, or give --allow-different-scenes if the scenes are copies of one")
@@ -694,10 +705,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
     };
     let reference_path = runs[reference].path.clone();
-    refuse_other_scenes(&runs, args.allow_different_scenes)?;
+    // What makes the rows less comparable than they look: under the table (standard output,
+    // which -q keeps) and in compare.json, not only in the log.
+    let mut warnings: Vec<String> = runs.iter().filter_map(|r| r.caveat.clone()).collect();
+    refuse_other_scenes(&runs, args.allow_different_scenes, &mut warnings)?;
     refuse_other_instants(&runs)?;
-    warn_of_other_grids(&runs);
-    warn_of_scoring_rules(&runs);
+    warn_of_other_grids(&runs, &mut warnings);
+    warn_of_scoring_rules(&runs, &mut warnings);
     // Runs in folders of the same name are told apart by the path given.
     let labels: Vec<String> = runs.iter().map(|r| r.label.clone()).collect();
     for run in &mut runs {
@@ -740,6 +754,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             reference: &reference_path,
             linear_time: args.linear_time,
             runs: &rows,
+            warnings: &warnings,
         },
     )?;
     #[allow(clippy::print_stdout)]
@@ -749,6 +764,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "* reference. Times exclude evaluations; speed-up = the reference's time to each run's best NRMSE over \
              the run's own."
         );
+        for w in &warnings {
+            println!("! {w}");
+        }
         println!("wrote time_to_accuracy.png, .svg, .csv and compare.json in {}", out.display());
     }
     Ok(())
@@ -787,6 +805,7 @@ mod tests {
             curve,
             instants: None,
             interrupted: false,
+            caveat: None,
             dims: None,
             scored: None,
             kept: None,

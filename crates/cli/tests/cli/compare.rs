@@ -167,9 +167,9 @@ fn compares_classical_neural_and_external_runs() {
     );
     refused(&other, "--allow-different-scenes");
     assert!(!d.join("cmp3").exists(), "nothing written");
-    let other = fluidnerf(d, &["compare", "sart", "elsewhere", "-o", "cmp3", "--allow-different-scenes"]);
+    let other = fluidnerf(d, &["compare", "sart", "elsewhere", "-o", "cmp3", "--allow-different-scenes", "-q"]);
     ok(&other);
-    let err = String::from_utf8_lossy(&other.stderr);
+    let err = String::from_utf8_lossy(&other.stdout);
     assert!(err.contains("2 different scenes") && err.contains("run elsewhere from"), "{err}");
     // Runs in folders of one name are told apart by their paths.
     std::fs::create_dir_all(d.join("copy/sart")).expect("mkdir");
@@ -179,10 +179,13 @@ fn compares_classical_neural_and_external_runs() {
     let stdout = String::from_utf8_lossy(&twins.stdout);
     assert!(stdout.contains("sart [sart]") && stdout.contains("sart [copy/sart]"), "{stdout}");
     // A report without its configuration names no scene: compared, with a warning that says so.
-    let bare = fluidnerf(d, &["compare", "sart", "copy/sart", "-o", "cmp5"]);
+    // Under the table, which -q keeps, and in compare.json: the log alone lost it under -q.
+    let bare = fluidnerf(d, &["compare", "sart", "copy/sart", "-o", "cmp5", "-q"]);
     ok(&bare);
-    let err = String::from_utf8_lossy(&bare.stderr);
-    assert!(err.contains("copy/sart: no config.json beside the report to name the scene"), "{err}");
+    let err = String::from_utf8_lossy(&bare.stdout);
+    assert!(err.contains("! copy/sart: no config.json beside the report to name the scene"), "{err}");
+    let warnings = json(&d.join("cmp5/compare.json"))["warnings"].clone();
+    assert!(warnings[0].as_str().is_some_and(|w| w.starts_with("copy/sart: no config.json")), "{warnings}");
 }
 
 #[test]
@@ -362,13 +365,14 @@ fn runs_on_grids_of_different_voxels_are_named() {
     reconstruct("r8", "8");
     reconstruct("r12", "12");
     reconstruct("again8", "8");
-    let out = fluidnerf(d, &["compare", "r8", "r12", "-o", "cmp"]);
+    let out = fluidnerf(d, &["compare", "r8", "r12", "-o", "cmp", "-q"]);
     ok(&out);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = String::from_utf8_lossy(&out.stdout);
     assert!(err.contains("the runs' volumes are on grids of different voxels (r8 8×8×8, r12 12×12×12)"), "{err}");
     let out = fluidnerf(d, &["compare", "r8", "again8", "-o", "cmp2"]);
     ok(&out);
-    assert!(!String::from_utf8_lossy(&out.stderr).contains("different voxels"));
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("different voxels"));
+    assert_eq!(json(&d.join("cmp2/compare.json"))["warnings"], serde_json::json!([]));
 }
 
 /// A run stopped by Ctrl-C is compared with a warning that its curve was cut short, and
@@ -387,9 +391,9 @@ fn a_run_stopped_by_ctrl_c_is_named_as_cut_short() {
         r["status"] = "interrupted".into();
         r["stop_reason"] = "interrupted".into();
     });
-    let out = fluidnerf(d, &["compare", "whole", "cut", "-o", "cmp"]);
+    let out = fluidnerf(d, &["compare", "whole", "cut", "-o", "cmp", "-q"]);
     ok(&out);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = String::from_utf8_lossy(&out.stdout);
     assert!(err.contains("the sart run was stopped by Ctrl-C after 3 iterations"), "{err}");
     assert!(!err.contains("whole/report.json"), "{err}");
     let record = json(&d.join("cmp/compare.json"));
@@ -437,12 +441,12 @@ fn fields_and_voxel_runs_scored_by_different_rules_are_named() {
     run("field", "fast", "8");
     let says =
         "are scored at the truth's voxel centres and the voxel runs through their volumes on grids of other voxels";
-    let out = fluidnerf(d, &["compare", "field", "coarse", "-o", "cmp"]);
+    let out = fluidnerf(d, &["compare", "field", "coarse", "-o", "cmp", "-q"]);
     ok(&out);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = String::from_utf8_lossy(&out.stdout);
     assert!(err.contains(says) && err.contains("coarse 8×8×8 against the truth's 16×16×16"), "{err}");
     // On the truth's own grid the rules agree.
     let out = fluidnerf(d, &["compare", "field", "fine", "-o", "cmp2"]);
     ok(&out);
-    assert!(!String::from_utf8_lossy(&out.stderr).contains(says));
+    assert!(!String::from_utf8_lossy(&out.stdout).contains(says));
 }
