@@ -284,7 +284,9 @@ pub struct StopArgs {
     /// (only --max-iterations and --time-budget), `held-out` (keep the iterate with the
     /// lowest loss on the scene's held-out views; needs held-out frames) or `auto` (`held-out`
     /// when the scene has held-out views and the method is static, else `own`; config.json
-    /// records the rule decided) [default: auto].
+    /// records the rule decided). Over a --config, a rule given puts the settings of the rules
+    /// it does not use (patience, held-out interval, plateau) back to their defaults
+    /// [default: auto].
     #[arg(long, value_enum, value_name = "RULE")]
     pub stop: Option<StopArg>,
     /// Iteration cap (per window for time-resolved methods) [default: the method's own].
@@ -323,7 +325,9 @@ pub struct ClassicalArgs {
     pub relaxation: Option<f64>,
     /// Projector: `auto` (the footprint projector unless voxels image wider than ~60 px, then
     /// `ray`), `footprint` (voxel-driven separable footprint), `splat` (voxel-driven bilinear
-    /// splat, the dissertation's) or `ray` (ray-driven trilinear line integrals) [default: auto].
+    /// splat, the dissertation's) or `ray` (ray-driven trilinear line integrals). Over a
+    /// --config, the settings of a projector no longer used go back to their defaults
+    /// [default: auto].
     #[arg(long, value_enum)]
     pub projector: Option<ProjectorArg>,
     /// Splat only: split each voxel into N³ sub-voxels so voxels imaging larger than a pixel
@@ -335,7 +339,7 @@ pub struct ClassicalArgs {
     #[arg(long, value_name = "VOXELS")]
     pub ray_step: Option<f64>,
     /// Hold voxels at zero whose centre projects onto a dark pixel in any view (visual hull).
-    /// `--visual-hull false` turns off a configuration's hull.
+    /// `--visual-hull false` turns off a configuration's hull, with its settings.
     #[arg(long, num_args = 0..=1, default_missing_value = "true", value_name = "BOOL")]
     pub visual_hull: Option<bool>,
     /// Dark threshold of --visual-hull, as a fraction of each image's maximum [default: 0.02].
@@ -721,11 +725,15 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         cfg.checkpoint_every = v;
     }
     let s = &args.stop;
-    if let Some(rule) = s.stop {
-        cfg.stopping.rule = rule.into();
-    }
-    if s.keep_best_holdout {
-        cfg.stopping.rule = StopRule::HeldOut;
+    let rule = if s.keep_best_holdout { Some(StopRule::HeldOut) } else { s.stop.map(StopRule::from) };
+    if let Some(rule) = rule {
+        // The settings of a rule the run no longer stops by go with it, as the gain fit's go
+        // with --gains: a configuration's patience or plateau tolerance was recorded and
+        // ignored, where the same options on one command line are refused.
+        if rule != cfg.stopping.rule {
+            drop_idle_stop_settings(&mut cfg, rule);
+        }
+        cfg.stopping.rule = rule;
     }
     if let Some(v) = s.max_iterations {
         cfg.stopping.max_iterations = Some(v);
@@ -829,6 +837,22 @@ pub fn resolve(args: &Args) -> anyhow::Result<RunConfig> {
         }
     }
     Ok(cfg)
+}
+
+/// Puts back to their defaults the settings in `cfg` of the stopping rules that `rule`, given on
+/// the command line, does not use: held-out early stopping's interval and patience for a run
+/// that stops by its own rule or its budget, and a voxel method's plateau for one that stops
+/// by its budget or its held-out views. `auto`, decided as the run starts, keeps them all.
+fn drop_idle_stop_settings(cfg: &mut RunConfig, rule: StopRule) {
+    if matches!(rule, StopRule::Own | StopRule::Budget) {
+        let defaults = fluidnerf_pipeline::StoppingPolicy::default();
+        cfg.stopping.holdout_every = defaults.holdout_every;
+        cfg.stopping.patience = defaults.patience;
+    }
+    if let (StopRule::HeldOut | StopRule::Budget, MethodConfig::Classical(spec)) = (rule, &mut cfg.method) {
+        let own = fluidnerf_classical::ClassicalMethod::default_for(spec.method.algorithm());
+        spec.method.stopping_mut().plateau = own.stopping().plateau;
+    }
 }
 
 /// Refuses the options of a stopping rule the run will not stop by, which it would record and
@@ -945,6 +969,7 @@ fn refuse_idle_projector_options(args: &Args, projector: &fluidnerf_classical::P
 fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Result<()> {
     let c = &args.classical;
     if let MethodConfig::Classical(spec) = method {
+        let defaults = fluidnerf_classical::ProjectorConfig::default();
         if let Some(p) = c.projector {
             spec.projector.kind = match p {
                 ProjectorArg::Auto => ProjectorKind::Auto,
@@ -952,6 +977,14 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
                 ProjectorArg::Splat => ProjectorKind::Splat,
                 ProjectorArg::Ray => ProjectorKind::Ray,
             };
+            // The settings of a projector the run no longer uses go with it: a configuration's
+            // sub-voxels refused the switch away from the splat.
+            if spec.projector.kind != ProjectorKind::Splat {
+                spec.projector.splat_subdivisions = defaults.splat_subdivisions;
+            }
+            if !matches!(spec.projector.kind, ProjectorKind::Ray | ProjectorKind::Auto) {
+                spec.projector.ray_step = defaults.ray_step;
+            }
         }
         if let Some(n) = c.splat_subdivisions {
             spec.projector.splat_subdivisions = n;
@@ -961,6 +994,13 @@ fn apply_method_options(args: &Args, method: &mut MethodConfig) -> anyhow::Resul
         }
         if let Some(v) = c.visual_hull {
             spec.projector.visual_hull = v;
+            // `--visual-hull false` turns a configuration's hull off with its settings, which
+            // refused it before.
+            if !v {
+                spec.projector.hull_threshold = defaults.hull_threshold;
+                spec.projector.hull_noise_sigmas = defaults.hull_noise_sigmas;
+                spec.projector.hull_dilation = defaults.hull_dilation;
+            }
         }
         if let Some(t) = c.hull_threshold {
             spec.projector.hull_threshold = t;
@@ -1400,10 +1440,15 @@ fn flag_of(args: &Args, key: &str) -> Option<&'static str> {
         ("stopping.time_budget_s", "--time-budget", s.time_budget.is_some()),
         ("stopping.holdout_every", "--holdout-every", s.holdout_every.is_some()),
         ("stopping.patience", "--patience", s.patience.is_some()),
+        ("stopping.rule", "--stop", s.stop.is_some() || s.keep_best_holdout),
+        ("gains.mode", "--gains", args.gains.gains.is_some()),
+        ("gains.offset", "--gain-offset", args.gains.gain_offset.is_some()),
         ("gains.every", "--gain-every", args.gains.gain_every.is_some()),
         ("gains.rounds", "--gain-rounds", args.gains.gain_rounds.is_some()),
         ("method.holdout_times", "--holdout-times", t.holdout_times.is_some()),
         ("method.time_step", "--time-step", t.time_step.is_some()),
+        ("method.projector.kind", "--projector", c.projector.is_some()),
+        ("method.projector.visual_hull", "--visual-hull", c.visual_hull.is_some()),
         ("method.projector.splat_subdivisions", "--splat-subdivisions", c.splat_subdivisions.is_some()),
         ("method.projector.ray_step", "--ray-step", c.ray_step.is_some()),
         ("method.projector.hull_threshold", "--hull-threshold", c.hull_threshold.is_some()),

@@ -274,6 +274,47 @@ fn a_switch_a_config_turned_on_can_be_turned_off() {
     assert_eq!(json(&d.join("tr2/config.json"))["method"]["windows"]["warm_start"], true);
 }
 
+/// A switch given over a configuration takes the settings that went with the old choice along:
+/// `--visual-hull false` over a hull of another threshold, `--projector ray` over a splat of
+/// 2 sub-voxels, and `--stop` over another rule's plateau or patience. The first two were
+/// refused (only hand-editing the file helped), the last ones kept and ignored; and a value
+/// given on the command line was blamed on the configuration file.
+#[test]
+fn a_switch_over_a_config_takes_the_old_choices_settings_along() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "ball", 4, 16, 8, &["--holdout", "1"]);
+    let run = |args: &str| fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>());
+    ok(&run("reconstruct scene -o hull -q --method asart --resolution 8 --stop budget --max-iterations 2 \
+             --visual-hull --hull-threshold 0.05 --projector splat --splat-subdivisions 2"));
+    ok(&run("reconstruct --config hull/config.json -o off -q --visual-hull false --projector ray"));
+    let projector = json(&d.join("off/config.json"))["method"]["projector"].clone();
+    assert_eq!((projector["visual_hull"].as_bool(), projector["kind"].as_str()), (Some(false), Some("ray")));
+    assert_eq!((projector["hull_threshold"].as_f64(), projector["splat_subdivisions"].as_u64()), (Some(0.02), Some(0)));
+    // Given beside the switch that leaves them idle, they are still refused.
+    let out = run("reconstruct --config hull/config.json -o off2 --visual-hull false --hull-threshold 0.05");
+    refused(&out, "--hull-threshold sets the visual hull, which this run does not use");
+
+    ok(&run("reconstruct scene -o own -q --method sart --resolution 8 --stop own --plateau-tolerance 0.05 \
+             --max-iterations 4"));
+    ok(&run("reconstruct --config own/config.json -o budget -q --stop budget"));
+    let plateau = json(&d.join("budget/config.json"))["method"]["params"]["stopping"]["plateau"].clone();
+    assert_eq!(plateau["tolerance"].as_f64(), Some(0.02), "{plateau}");
+    ok(&run("reconstruct scene -o held -q --method fast --resolution 8 --max-iterations 4 --stop held-out \
+             --holdout-every 2 --patience 2 --rays-per-image 16 --checkpoint-every 0"));
+    ok(&run("reconstruct --config held/config.json -o own2 -q --stop own"));
+    let stopping = json(&d.join("own2/config.json"))["stopping"].clone();
+    assert_eq!((stopping["holdout_every"].is_null(), stopping["patience"].as_u64()), (true, Some(10)), "{stopping}");
+
+    // A value from the command line is named as the option, not as the file's.
+    let synth = "synth -q --preset jet-tr60 --cameras 4 --pixels 16 --resolution 12 --model pinhole --times 14,15 \
+                 -o tr-scene";
+    ok(&run(synth));
+    ok(&run("reconstruct tr-scene -o tr -q --method tr-fast --resolution 8 --max-iterations 2 --gains balance \
+             --checkpoint-every 0"));
+    refused(&run("reconstruct --config tr/config.json -o tr2 --gains fit"), "--gains on the command line: gains.mode");
+}
+
 /// A start names a run to start from or a voxel method to run first, never both: `--start-from`
 /// over a configuration that ran a voxel method first replaces it, and a configuration that
 /// names both is refused by the key, not run with one of them ignored.
