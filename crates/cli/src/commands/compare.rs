@@ -169,6 +169,23 @@ fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
             );
         }
         if !p.is_file() {
+            use fluidnerf_pipeline::rundir::FolderKind;
+            // A study's or a demo's folder holds runs: say where, not that it is none.
+            let holds = match fluidnerf_pipeline::rundir::folder_kind(run) {
+                Some(FolderKind::Study) => {
+                    format!(
+                        "a study, whose runs are its runs/CELL/METHOD folders (e.g. {})",
+                        example_run(&run.join("runs"))
+                    )
+                }
+                Some(FolderKind::Demo) => {
+                    format!("the demo's results, whose runs are its folders (e.g. {})", example_run(run))
+                }
+                _ => String::new(),
+            };
+            if !holds.is_empty() {
+                bail!("{}: holds {holds}; give those run folders", run.display());
+            }
             bail!("{}: no report.json (is it a run directory of `fluidnerf reconstruct`?)", run.display());
         }
         Ok(p)
@@ -184,6 +201,20 @@ fn report_path(run: &Path) -> anyhow::Result<PathBuf> {
     } else {
         bail!("{}: no such run directory or report file", run.display())
     }
+}
+
+/// The first run folder (holding `report.json`) found in `dir` or one level below it, for an
+/// example; `dir` itself when there is none.
+fn example_run(dir: &Path) -> String {
+    let entries = |d: &Path| -> Vec<PathBuf> {
+        let mut list: Vec<PathBuf> = std::fs::read_dir(d).into_iter().flatten().flatten().map(|e| e.path()).collect();
+        list.sort();
+        list
+    };
+    let first = entries(dir)
+        .into_iter()
+        .find_map(|p| std::iter::once(p.clone()).chain(entries(&p)).find(|q| q.join("report.json").is_file()));
+    first.unwrap_or_else(|| dir.to_path_buf()).display().to_string()
 }
 
 /// A label that tells runs apart: method, preset, and the folder (or file) name, each left

@@ -745,7 +745,17 @@ fn read_earlier_grid(record: &Path) -> anyhow::Result<Grid> {
     struct Earlier {
         grid: Grid,
     }
-    let earlier: Earlier = fluidnerf_pipeline::rundir::read_json(record)?;
+    // A damaged record (cut short, edited) cannot say which scenes and runs are the study's, so
+    // --force cannot remove them either: say what to do instead of the reader's complaint.
+    let folder = record.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let earlier: Earlier = fluidnerf_pipeline::rundir::read_json(record).with_context(|| {
+        format!(
+            "{} is damaged, so the study's settings, scenes and runs cannot be read from it; to start over remove \
+             it with the study's scenes/ and runs/ in {}, or write the study into another folder",
+            record.display(),
+            folder.display()
+        )
+    })?;
     Ok(earlier.grid)
 }
 

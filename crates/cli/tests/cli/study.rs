@@ -696,3 +696,24 @@ fn a_killed_study_is_continued_or_started_over_and_one_study_writes_at_a_time() 
     ok(&fluidnerf(d, &[&again[..], &["--force"]].concat()));
     assert_eq!(json(&d.join("st2/study.json"))["status"], "finished");
 }
+
+/// A damaged study.json (cut short, edited) stopped the study, `--force` too, with the JSON
+/// reader's complaint alone; and `compare` given a study folder said it was no run directory.
+/// Both now say what to do.
+#[test]
+fn a_damaged_study_record_and_a_study_given_to_compare_say_what_to_do() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    let args = ["study", "--preset", "smoke", "--methods", "sart", "--cameras", "2", "-o", "st", "-q"];
+    ok(&fluidnerf(d, &args));
+    refused(
+        &fluidnerf(d, &["compare", "st", "-o", "cmp"]),
+        "st: holds a study, whose runs are its runs/CELL/METHOD folders (e.g. st/runs/ring360-c02-n000/sart)",
+    );
+    std::fs::write(d.join("st/study.json"), "{bad").expect("damages the record");
+    for force in [&[][..], &["--force"]] {
+        let out = fluidnerf(d, &[&args[..], force].concat());
+        refused(&out, "st/study.json is damaged, so the study's settings, scenes and runs cannot be read from it");
+        refused(&out, "remove it with the study's scenes/ and runs/ in st, or write the study into another folder");
+    }
+}
