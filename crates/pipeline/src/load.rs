@@ -33,14 +33,17 @@ pub struct TimeSpan {
 }
 
 impl TimeSpan {
+    /// Whether `t` is one of the run's held-out instants outside its trained ones
+    /// ([`TimeSpan::held_at_ends`]).
+    pub fn holds_at_end(&self, t: f64) -> bool {
+        self.held_at_ends.iter().any(|&h| fluidnerf_core::scene::same_time(h, t))
+    }
+
     /// What a reader should be told when it samples the field at `times`, the scene's instants
     /// it reads: the run's held-out instants outside its trained ones among them, where the
     /// field repeats the nearest trained instant. None when there are none.
     pub fn held_note(&self, times: impl IntoIterator<Item = f64>) -> Option<String> {
-        let mut held: Vec<f64> = times
-            .into_iter()
-            .filter(|&t| self.held_at_ends.iter().any(|&h| fluidnerf_core::scene::same_time(h, t)))
-            .collect();
+        let mut held: Vec<f64> = times.into_iter().filter(|&t| self.holds_at_end(t)).collect();
         held.sort_by(f64::total_cmp);
         held.dedup_by(|a, b| fluidnerf_core::scene::same_time(*a, *b));
         if held.is_empty() {
@@ -57,6 +60,11 @@ impl TimeSpan {
     }
 }
 
+/// How far outside `first … last` a time still counts as inside: rounding in the times' text.
+fn time_slack(first: f64, last: f64) -> f64 {
+    1e-9 * first.abs().max(last.abs()).max(1.0)
+}
+
 /// The time at which to sample a result whose instants are `span` (None for a static one) for
 /// `what` (an option or a frame, named in errors): `given`, refused when it is not finite or
 /// lies outside a time-resolved run's instants (where its field only repeats its first or last
@@ -67,14 +75,13 @@ pub fn sample_time(span: Option<&TimeSpan>, given: Option<f64>, what: &str) -> R
     if let Some(t) = given.filter(|t| !t.is_finite()) {
         return Err(refuse(format!("the time must be a finite number, got {}", num(t))));
     }
-    let Some(&TimeSpan { first, last, ref not_reached, ref held_at_ends }) = span else {
-        return Ok(given.unwrap_or(0.0));
-    };
-    let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
+    let Some(span) = span else { return Ok(given.unwrap_or(0.0)) };
+    let TimeSpan { first, last, ref not_reached, .. } = *span;
+    let slack = time_slack(first, last);
     match given {
         None => Ok(first),
         // The run wrote and scored this held-out instant with its field held at the nearest end.
-        Some(t) if held_at_ends.iter().any(|&h| fluidnerf_core::scene::same_time(h, t)) => Ok(t),
+        Some(t) if span.holds_at_end(t) => Ok(t),
         Some(t) if t > last + slack && !not_reached.is_empty() => {
             let list: Vec<String> = not_reached.iter().map(|&t| num(t).to_string()).collect();
             Err(refuse(format!(
@@ -370,7 +377,7 @@ impl LoadedRun {
         not_reached.sort_by(f64::total_cmp);
         not_reached.dedup_by(|a, b| fluidnerf_core::scene::same_time(*a, *b));
         let (first, last) = (times[0], times[covered - 1]);
-        let slack = 1e-9 * first.abs().max(last.abs()).max(1.0);
+        let slack = time_slack(first, last);
         let held_at_ends = self
             .report
             .iter()

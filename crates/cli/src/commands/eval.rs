@@ -437,8 +437,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // time-resolved run, as the run scored it (and `reconstruct` said so), and for each of as
     // many volumes as frame times: eval refused both.
     let per_frame_volumes = args.recon.len() > 1 && args.recon.len() == scene.times().len();
-    let timeless_for_run = args.truth.is_none()
-        && fluidnerf_pipeline::timeless_truth(&scene).is_some()
+    let timeless = fluidnerf_pipeline::timeless_truth(&scene).filter(|_| args.truth.is_none());
+    let timeless_for_run = timeless.is_some()
         && (per_frame_volumes
             || run_dir.as_deref().is_some_and(|dir| {
                 fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))
@@ -446,7 +446,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }));
     let truth_steps: Vec<(Option<f64>, &Volume)> = match truth.as_slice() {
         [(None, only)] if timeless_for_run => {
-            if let Some(message) = fluidnerf_pipeline::timeless_truth(&scene) {
+            if let Some(message) = &timeless {
                 log::warn!("{message}");
             }
             scene.times().into_iter().map(|t| (Some(t), only)).collect()

@@ -625,6 +625,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    // Views all at one instant give it once in render.json, else each view's (views is not empty).
+    let one_instant = views.iter().all(|v| v.time == views[0].time);
     let settings = Settings {
         version: env!("CARGO_PKG_VERSION"),
         reconstruction: &args.recon,
@@ -644,13 +646,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         step,
         // A time-resolved field's: the time asked, or that of its orbit views (all at one). A
         // source fixed in time has none, whatever --time said (it was warned of as unused).
-        time: if source.is_time_resolved() {
-            let first = views.first().map(|v| v.time);
-            args.time.or(first.filter(|&t| views.iter().all(|v| v.time == t)))
-        } else {
-            None
-        },
-        times: match source.is_time_resolved() && views.iter().any(|v| v.time != views[0].time) {
+        time: if source.is_time_resolved() { args.time.or(one_instant.then(|| views[0].time)) } else { None },
+        times: match source.is_time_resolved() && !one_instant {
             true => views.iter().map(|v| v.time).collect(),
             false => Vec::new(),
         },

@@ -911,13 +911,16 @@ fn newest_scene_file(scene_dir: &Path) -> Option<(std::time::SystemTime, PathBuf
 /// The file in a cell's runs folder that records the scene files its runs were made from.
 const SCENE_FILES: &str = "scene-files.json";
 
+/// A scene's files by their path relative to its folder, each with the digest of its bytes.
+type SceneFiles = std::collections::BTreeMap<String, String>;
+
 /// The digest of each scene file of `scene_dir` that a study checks (its `transforms.json`, and
 /// the files of its `images/` and `truth/`), by its path relative to the folder.
-fn scene_files(scene_dir: &Path) -> anyhow::Result<std::collections::BTreeMap<String, String>> {
+fn scene_files(scene_dir: &Path) -> anyhow::Result<SceneFiles> {
     let listed = ["images", "truth"]
         .into_iter()
         .flat_map(|sub| std::fs::read_dir(scene_dir.join(sub)).into_iter().flatten().flatten().map(|e| e.path()));
-    let mut files = std::collections::BTreeMap::new();
+    let mut files = SceneFiles::new();
     for p in std::iter::once(scene_dir.join("transforms.json")).chain(listed).filter(|p| p.is_file()) {
         let bytes = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
         let name = p.strip_prefix(scene_dir).unwrap_or(&p).to_string_lossy().replace('\\', "/");
@@ -928,7 +931,7 @@ fn scene_files(scene_dir: &Path) -> anyhow::Result<std::collections::BTreeMap<St
 
 /// The scene files recorded in the cell's runs folder `cell_runs` ([`SCENE_FILES`]); None when
 /// none is recorded (a cell not yet run, or a study written before they were).
-fn recorded_scene_files(cell_runs: &Path) -> anyhow::Result<Option<std::collections::BTreeMap<String, String>>> {
+fn recorded_scene_files(cell_runs: &Path) -> anyhow::Result<Option<SceneFiles>> {
     let path = cell_runs.join(SCENE_FILES);
     if !path.is_file() {
         return Ok(None);
@@ -943,8 +946,8 @@ fn recorded_scene_files(cell_runs: &Path) -> anyhow::Result<Option<std::collecti
 fn check_scene_files(
     scene_dir: &Path,
     cell_runs: &Path,
-    recorded: &std::collections::BTreeMap<String, String>,
-    now: &std::collections::BTreeMap<String, String>,
+    recorded: &SceneFiles,
+    now: &SceneFiles,
 ) -> anyhow::Result<()> {
     let changed = recorded.iter().find_map(|(name, digest)| match now.get(name) {
         Some(d) if d == digest => None,
@@ -967,8 +970,10 @@ fn check_scene_files(
 /// Refuses to continue a study whose scenes or finished runs in `out`, which it would read back
 /// instead of making them again, were made with other settings than the grid's: the table would
 /// mix the cells of two studies under one grid. Their own records are compared, not study.json,
-/// which a study killed before it wrote one lacks.
-fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
+/// which a study killed before it wrote one lacks. Returns the scene files it read and found as
+/// recorded, by cell name, so that the study does not read them again.
+fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<std::collections::HashMap<String, SceneFiles>> {
+    let mut checked_files = std::collections::HashMap::new();
     let other = |dir: &Path, what: &str, file: &Path, differences: String| {
         anyhow::anyhow!(
             "{} holds a {what} with other settings than this study's ({}: {differences}); use --force to start over \
@@ -1004,7 +1009,6 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
         let cell_runs = out.join("runs").join(&cell.name);
         let recorded = recorded_scene_files(&cell_runs)?;
         let newest = newest_scene_file(source);
-        let mut checked = false;
         for (method, seed) in g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))) {
             let run_dir = out.join("runs").join(&cell.name).join(g.run_name(method, seed));
             let report_file = run_dir.join("report.json");
@@ -1018,9 +1022,10 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
             // there is made again, and checked then.
             let made = std::fs::metadata(&report_file).and_then(|m| m.modified()).ok();
             if let Some(recorded) = &recorded {
-                if !checked && source.join("transforms.json").is_file() {
-                    check_scene_files(source, &cell_runs, recorded, &scene_files(source)?)?;
-                    checked = true;
+                if !checked_files.contains_key(&cell.name) && source.join("transforms.json").is_file() {
+                    let files = scene_files(source)?;
+                    check_scene_files(source, &cell_runs, recorded, &files)?;
+                    checked_files.insert(cell.name.clone(), files);
                 }
             } else if let (Some((changed, file)), Some(made)) = (&newest, made) {
                 if *changed > made + std::time::Duration::from_secs(1) {
@@ -1062,7 +1067,7 @@ fn check_earlier_cells(out: &Path, g: &Grid) -> anyhow::Result<()> {
             }
         }
     }
-    Ok(())
+    Ok(checked_files)
 }
 
 pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
@@ -1130,9 +1135,8 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
             );
         }
     }
-    if !args.force {
-        check_earlier_cells(out, &g)?;
-    }
+    // The scene files checked against the cells' records, read once.
+    let mut checked_files = if args.force { Default::default() } else { check_earlier_cells(out, &g)? };
     // Recorded before the first cell: a study killed before it wrote its results (which write
     // study.json anew) is then continued by the same command or started over with --force, as
     // one stopped by Ctrl-C is; without it, its scenes/ and runs/ read as another folder's,
@@ -1174,7 +1178,10 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
         // folder was removed) is checked now, by contents.
         let source = cell.source().unwrap_or(&scene_dir);
         let cell_runs = out.join("runs").join(&cell.name);
-        let files = scene_files(source)?;
+        let files = match checked_files.remove(&cell.name) {
+            Some(files) => files,
+            None => scene_files(source)?,
+        };
         let any_finished = g.methods.iter().flat_map(|&m| g.seeds(m).map(move |s| (m, s))).any(|(m, s)| {
             let report_file = cell_runs.join(g.run_name(m, s)).join("report.json");
             fluidnerf_pipeline::RunReport::read(&report_file).is_ok_and(|r| r.status == RunStatus::Finished)
