@@ -9,11 +9,14 @@
 //!   (UInt64 headers, little-endian), which ParaView and the Python `vtk` package read.
 //!   `Origin = aabb.min + spacing / 2` because VTK puts point data at grid points, and our
 //!   values live at voxel centres; `Spacing` is the voxel size; `WholeExtent = 0 nx−1 0 ny−1
-//!   0 nz−1`. ParaView therefore shows every value at its voxel centre, in world units.
+//!   0 nz−1`. ParaView therefore shows every value at its voxel centre, in world units. A volume
+//!   of a time-resolved field records its instant as the field data `TimeValue`
+//!   ([`write_vti_at`]), ParaView's time of the file.
 //!   [`read_vti`] reads every mode VTK's writer has (ASCII, inline base64, appended base64 or
 //!   raw; uncompressed or zlib), point or cell data.
 //! - raw: little-endian f32 in the same order, plus a sidecar `<file>.json` holding `dims`
-//!   `[nx, ny, nz]`, `aabb`, `spacing`, `dtype` (`"<f4"`) and `order` (`"x fastest"`).
+//!   `[nx, ny, nz]`, `aabb`, `spacing`, `dtype` (`"<f4"`) and `order` (`"x fastest"`), and
+//!   for a volume of a time-resolved field its instant `time`.
 //! - `.tif`: a TIFF stack, page `k` the z-slice `k` (row `j`, column `i`), 32-bit float,
 //!   calibrated for ImageJ and Fiji: the resolution tags give the voxel's width and height in
 //!   the description's `unit`, `spacing` its depth, and `xorigin`/`yorigin`/`zorigin` (in
@@ -167,14 +170,28 @@ pub fn write_npy(path: &Path, volume: &Volume) -> Result<(), IoError> {
 
 /// Writes a volume as VTK XML ImageData (`.vti`, appended raw binary; see the module docs).
 pub fn write_vti(path: &Path, volume: &Volume) -> Result<(), IoError> {
+    write_vti_at(path, volume, None)
+}
+
+/// [`write_vti`], recording the instant `time` a volume of a time-resolved field holds as the
+/// dataset's `TimeValue` field data, which ParaView reads as the time of the file (and
+/// [`vti_time`] reads back).
+pub fn write_vti_at(path: &Path, volume: &Volume, time: Option<f64>) -> Result<(), IoError> {
     let [nx, ny, nz] = volume.dims;
     let sp = volume.spacing();
     let origin = volume.aabb.min + 0.5 * sp;
     let extent = format!("0 {} 0 {} 0 {}", nx - 1, ny - 1, nz - 1);
+    // `{:?}` writes an f64 that reads back to the same value.
+    let field_data = time.map_or(String::new(), |t| {
+        format!(
+            "    <FieldData>\n      <DataArray type=\"Float64\" Name=\"{TIME_ARRAY}\" NumberOfTuples=\"1\" \
+             format=\"ascii\">{t:?}</DataArray>\n    </FieldData>\n"
+        )
+    });
     let header = format!(
         "<?xml version=\"1.0\"?>\n\
          <VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n\
-         \x20 <ImageData WholeExtent=\"{extent}\" Origin=\"{} {} {}\" Spacing=\"{} {} {}\">\n\
+         \x20 <ImageData WholeExtent=\"{extent}\" Origin=\"{} {} {}\" Spacing=\"{} {} {}\">\n{field_data}\
          \x20   <Piece Extent=\"{extent}\">\n\
          \x20     <PointData Scalars=\"value\">\n\
          \x20       <DataArray type=\"Float32\" Name=\"value\" NumberOfComponents=\"1\" format=\"appended\" offset=\"0\"/>\n\
@@ -315,7 +332,11 @@ pub fn read_vti(path: &Path) -> Result<Volume, IoError> {
     // The array to read: the only one, or the one `<PointData Scalars="...">` (else
     // `<CellData Scalars="...">`) names; taking the first of several would read whichever the
     // writer put first (a mask, say) as the field.
-    let arrays = start_tags(xml, "DataArray");
+    // Arrays of the dataset's field data (a time, say) are not voxels.
+    let arrays: Vec<&str> = start_tags(xml, "DataArray")
+        .into_iter()
+        .filter(|tag| !inside_field_data(xml, tag.as_ptr() as usize - xml.as_ptr() as usize))
+        .collect();
     let scalars = start_tag(xml, "PointData")
         .and_then(|t| attribute(t, "Scalars"))
         .or_else(|| start_tag(xml, "CellData").and_then(|t| attribute(t, "Scalars")));
@@ -584,6 +605,37 @@ fn decode_array(payload: Payload, header_u64: bool, zlib: bool, want: usize) -> 
     Ok(out)
 }
 
+/// The name of the `.vti` field-data array holding the instant of a time-resolved field's
+/// volume, ParaView's.
+const TIME_ARRAY: &str = "TimeValue";
+
+/// Whether the byte offset `at` of `xml` lies inside a `<FieldData>` element.
+fn inside_field_data(xml: &str, at: usize) -> bool {
+    let before = &xml[..at];
+    before.rfind("<FieldData").is_some_and(|open| !before[open..].contains("</FieldData>"))
+}
+
+/// The instant a `.vti` records as its `TimeValue` field data (as [`write_vti_at`] and ParaView
+/// write it, in ASCII); None when it records none, or in a form not read here. Reads only the
+/// file's XML head.
+pub fn vti_time(path: &Path) -> Option<f64> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    std::fs::File::open(path).ok()?.take(1 << 16).read_to_end(&mut head).ok()?;
+    let end = find(&head, b"<AppendedData").unwrap_or(head.len());
+    let xml = String::from_utf8_lossy(&head[..end]);
+    let section = &xml[xml.find("<FieldData")?..];
+    let section = &section[..section.find("</FieldData>")?];
+    let tag = start_tags(section, "DataArray").into_iter().find(|t| attribute(t, "Name") == Some(TIME_ARRAY))?;
+    if attribute(tag, "format").is_some_and(|f| f != "ascii") || tag.ends_with("/>") {
+        return None;
+    }
+    let at = tag.as_ptr() as usize - section.as_ptr() as usize + tag.len();
+    let text = &section[at..];
+    let value: f64 = text[..text.find('<')?].split_whitespace().next()?.parse().ok()?;
+    value.is_finite().then_some(value)
+}
+
 /// Where the last `needle` in `haystack` starts.
 fn rfind(haystack: &[u8], needle: &[u8]) -> Option<usize> {
     haystack.windows(needle.len()).rposition(|w| w == needle)
@@ -603,6 +655,9 @@ struct RawSidecar {
     spacing: [f64; 3],
     dtype: String,
     order: String,
+    /// The instant of a time-resolved field the volume holds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    time: Option<f64>,
 }
 
 /// The sidecar path of a raw volume: `<path>.json` (e.g. `field.raw.json`).
@@ -615,6 +670,12 @@ pub fn raw_sidecar_path(path: &Path) -> PathBuf {
 /// Writes little-endian f32 values, x fastest, to `path` and the sidecar
 /// [`raw_sidecar_path`]`(path)` describing them (see the module docs).
 pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
+    write_raw_at(path, volume, None)
+}
+
+/// [`write_raw`], recording in the sidecar the instant `time` a volume of a time-resolved field
+/// holds (its `time`, which [`raw_time`] reads back).
+pub fn write_raw_at(path: &Path, volume: &Volume, time: Option<f64>) -> Result<(), IoError> {
     let sp = volume.spacing();
     let sidecar = RawSidecar {
         dims: volume.dims,
@@ -622,6 +683,7 @@ pub fn write_raw(path: &Path, volume: &Volume) -> Result<(), IoError> {
         spacing: sp.to_array(),
         dtype: "<f4".into(),
         order: "x fastest: index (k * ny + j) * nx + i".into(),
+        time,
     };
     let json_path = raw_sidecar_path(path);
     let json = serde_json::to_string_pretty(&sidecar)
@@ -640,6 +702,13 @@ pub fn check_finite(path: &Path, volume: &Volume) -> Result<(), IoError> {
         Some(i) => Err(IoError::NonFinite { path: path.into(), location: format!("voxel {i}"), value: volume.data[i] }),
         None => Ok(()),
     }
+}
+
+/// The instant the sidecar of the raw volume `path` records (`time`); None when it records
+/// none or cannot be read.
+pub fn raw_time(path: &Path) -> Option<f64> {
+    let text = std::fs::read_to_string(raw_sidecar_path(path)).ok()?;
+    serde_json::from_str::<RawSidecar>(&text).ok()?.time.filter(|t| t.is_finite())
 }
 
 /// Reads a raw volume written by [`write_raw`] (its sidecar must sit next to it).
@@ -812,6 +881,43 @@ mod tests {
         let c = v.voxel_centre(0, 0, 0);
         assert!(text.contains(&format!("Origin=\"{} {} {}\"", c.x, c.y, c.z)), "{}", &text[..400]);
         assert!(text.contains("WholeExtent=\"0 4 0 3 0 2\""));
+    }
+
+    #[test]
+    fn a_volumes_instant_is_recorded_in_its_vti_and_raw_sidecar() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let v = test_volume();
+        let (timed, plain) = (dir.path().join("t.vti"), dir.path().join("p.vti"));
+        write_vti_at(&timed, &v, Some(16.5)).expect("write");
+        write_vti(&plain, &v).expect("write");
+        assert_eq!(read_vti(&timed).expect("the time is not a second array"), read_vti(&plain).expect("read"));
+        assert_eq!((vti_time(&timed), vti_time(&plain)), (Some(16.5), None));
+        // An instant that is no short decimal reads back to the same f64.
+        write_vti_at(&timed, &v, Some(0.1 + 0.2)).expect("write");
+        assert_eq!(vti_time(&timed), Some(0.1 + 0.2));
+        // A file of another writer: field data before the piece, one point array and no
+        // `Scalars` naming it, a time in ASCII.
+        let other = dir.path().join("o.vti");
+        std::fs::write(
+            &other,
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\">\n\
+             <ImageData WholeExtent=\"0 1 0 0 0 0\" Origin=\"0 0 0\" Spacing=\"1 1 1\">\n\
+             <FieldData><DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" format=\"ascii\">\n\
+             2.25\n</DataArray></FieldData>\n<Piece Extent=\"0 1 0 0 0 0\"><PointData>\n\
+             <DataArray type=\"Float32\" Name=\"e\" format=\"ascii\">1 2</DataArray>\n\
+             </PointData></Piece></ImageData></VTKFile>\n",
+        )
+        .expect("write");
+        assert_eq!(read_vti(&other).expect("read").data, vec![1.0, 2.0]);
+        assert_eq!(vti_time(&other), Some(2.25));
+
+        let (timed, plain) = (dir.path().join("t.raw"), dir.path().join("p.raw"));
+        write_raw_at(&timed, &v, Some(-3.0)).expect("write");
+        write_raw(&plain, &v).expect("write");
+        assert_eq!(read_raw(&timed).expect("read"), v);
+        assert_eq!((raw_time(&timed), raw_time(&plain)), (Some(-3.0), None));
+        let sidecar = std::fs::read_to_string(raw_sidecar_path(&plain)).expect("sidecar");
+        assert!(!sidecar.contains("time"), "a volume fixed in time records none: {sidecar}");
     }
 
     #[test]

@@ -357,7 +357,7 @@ pub(crate) fn run(
     };
     let preprocessing = measured.report(scene, fit.then_some(gains.as_slice()), &scores);
     let volume = grid.volume(shift.data_back(grid.dims, data));
-    write_volume(dir, "volume", &volume)?;
+    write_volume(dir, "volume", &volume, None)?;
 
     let t_eval = Instant::now();
     let metrics = match truth.first() {

@@ -599,9 +599,11 @@ pub(crate) fn empty_field_warning(
     ))
 }
 
-pub(crate) fn write_volume(dir: &RunDir, stem: &str, volume: &Volume) -> Result<(), PipelineError> {
+/// Writes `stem.npy` and `stem.vti`; the `.vti` of a time-resolved field's frame records its
+/// instant `time` (ParaView's `TimeValue`).
+pub(crate) fn write_volume(dir: &RunDir, stem: &str, volume: &Volume, time: Option<f64>) -> Result<(), PipelineError> {
     fluidnerf_io::volume::write_npy(&dir.path(&format!("{stem}.npy")), volume)?;
-    fluidnerf_io::volume::write_vti(&dir.path(&format!("{stem}.vti")), volume)?;
+    fluidnerf_io::volume::write_vti_at(&dir.path(&format!("{stem}.vti")), volume, time)?;
     Ok(())
 }
 

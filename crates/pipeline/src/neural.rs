@@ -752,7 +752,7 @@ impl Ctx<'_> {
         let world = WorldField { field: &learner.field, meta: &prep.meta, occupancy: prep.occupancy() };
         let dims = Volume::dims_for(&self.scene.aabb, config.resolution);
         let volume = Volume::from_field(dims, self.scene.aabb, &world, 0.0);
-        write_volume(dir, "volume", &volume)?;
+        write_volume(dir, "volume", &volume, None)?;
         if let Some(w) = crate::empty_field_warning(self.problem, volume.min_max().1, train_cfg) {
             session.warn(&w);
         }

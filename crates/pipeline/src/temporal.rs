@@ -841,9 +841,9 @@ impl Ctx<'_> {
         let mut volumes_max = 0.0f32;
         for (i, &(t, trained)) in out_times.iter().enumerate() {
             let volume = Volume::from_field(dims, self.scene.aabb, &stitched, t);
-            let stem = format!("frames/volume_{i:03}");
+            let stem = frame_stem(i, out_times.len());
             volumes_max = volumes_max.max(volume.min_max().1);
-            write_volume(dir, &stem, &volume)?;
+            write_volume(dir, &stem, &volume, Some(t))?;
             pvd_entries.push((t, format!("{stem}.vti")));
             let truth = self
                 .truth
@@ -1499,11 +1499,30 @@ fn input_dim_of(method: Method) -> usize {
     }
 }
 
+/// The file stem of frame `i` of `count`: `frames/volume_NNN`, numbered with as many digits as
+/// the last frame needs and at least three, so that the names sort in the frames' order
+/// (`volume_1000` sorted before `volume_101` with three).
+fn frame_stem(i: usize, count: usize) -> String {
+    let digits = count.saturating_sub(1).to_string().len().max(3);
+    format!("frames/volume_{i:0digits$}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use fluidnerf_core::glam::DVec3;
     use fluidnerf_core::{Aabb, Camera, Frame, Intrinsics};
+
+    #[test]
+    fn frame_names_sort_in_the_frames_order() {
+        assert_eq!(frame_stem(7, 3), "frames/volume_007");
+        assert_eq!(frame_stem(999, 1000), "frames/volume_999");
+        let mut names: Vec<String> = (0..1001).map(|i| frame_stem(i, 1001)).collect();
+        assert_eq!((names[0].as_str(), names[1000].as_str()), ("frames/volume_0000", "frames/volume_1000"));
+        let order = names.clone();
+        names.sort();
+        assert_eq!(names, order);
+    }
 
     /// A scene of one camera at `times` (no files: the window plan reads none).
     fn scene_at(times: &[f64]) -> Scene {

@@ -320,7 +320,7 @@ impl Synthesis {
         let name = &self.cameras[frame.camera].name;
         let ext = if self.real.is_some() { "jpg" } else { "png" };
         if frame.time.is_some() {
-            PathBuf::from(format!("images/{name}_t{:02}.{ext}", frame.time_index))
+            PathBuf::from(format!("images/{name}_t{:0w$}.{ext}", frame.time_index, w = self.time_digits()))
         } else {
             PathBuf::from(format!("images/{name}.{ext}"))
         }
@@ -340,10 +340,16 @@ impl Synthesis {
         (0..n).map(|k| PathBuf::from(format!("flat/{}_f{k}.jpg", self.cameras[camera].name))).collect()
     }
 
+    /// The digits of the time-step indices in file names: as many as the last needs, at least
+    /// two, so that the names sort in the steps' order (`_t99` before `_t100`).
+    fn time_digits(&self) -> usize {
+        self.truth.len().saturating_sub(1).to_string().len().max(2)
+    }
+
     /// Relative path of a truth volume: `truth/truth.npy` or `truth/truth_t<k>.npy`.
     pub fn truth_path(&self, time_index: usize) -> PathBuf {
         if self.truth[time_index].0.is_some() {
-            PathBuf::from(format!("truth/truth_t{time_index:02}.npy"))
+            PathBuf::from(format!("truth/truth_t{time_index:0w$}.npy", w = self.time_digits()))
         } else {
             PathBuf::from("truth/truth.npy")
         }
@@ -650,6 +656,31 @@ mod tests {
         let syn = generate(&s, None, |_| std::ops::ControlFlow::Continue(())).expect("generates");
         let truth: Vec<Option<f64>> = syn.truth.iter().map(|(t, _)| *t).collect();
         assert_eq!(truth, vec![Some(14.0), Some(16.0)]);
+    }
+
+    /// The file names of a series of more than a hundred instants sort in time order:
+    /// `_t100` came between `_t10` and `_t11` with two digits.
+    #[test]
+    fn the_files_of_a_long_series_sort_in_time_order() {
+        let mut s = tiny();
+        s.phantom.kind = crate::PhantomKind::JetTr;
+        s.resolution = 4;
+        s.lens.resolution = [8, 8];
+        s.rig.layout = Layout::Ring { count: 1, arc_deg: 360.0, start_deg: 0.0, axis: RingAxis::X };
+        s.times = (0..101).map(|k| 14.0 + 0.01 * f64::from(k)).collect();
+        let syn = generate(&s, None, |_| std::ops::ControlFlow::Continue(())).expect("generates");
+        let images: Vec<String> = syn.frames.iter().map(|f| syn.image_path(f).display().to_string()).collect();
+        let truth: Vec<String> = (0..101).map(|k| syn.truth_path(k).display().to_string()).collect();
+        assert_eq!((images[0].as_str(), truth[100].as_str()), ("images/cam000_t000.png", "truth/truth_t100.npy"));
+        for names in [images, truth] {
+            let mut sorted = names.clone();
+            sorted.sort();
+            assert_eq!(sorted, names);
+        }
+        // Shorter series keep their two digits.
+        s.times = vec![14.0, 15.0];
+        let syn = generate(&s, None, |_| std::ops::ControlFlow::Continue(())).expect("generates");
+        assert_eq!(syn.truth_path(1).display().to_string(), "truth/truth_t01.npy");
     }
 
     #[test]
