@@ -185,7 +185,46 @@ const TRIANGLE_BYTES: u64 = 12;
 /// memory: a surface through a noisy field crosses nearly every cell of a fine grid, and its
 /// mesh can need many times the volume's memory, which a failed allocation aborts on.
 pub fn marching_cubes_within(volume: &Volume, iso: f32, max_bytes: u64) -> Option<TriMesh> {
+    let spacing = volume.spacing();
+    let origin = volume.aabb.min + 0.5 * spacing;
+    march(volume.dims, origin, spacing, |i, j, k| volume.get(i, j, k), iso, max_bytes)
+}
+
+/// The volume of the region brighter than `iso` within the hull of the cell centres: where the
+/// isosurface leaves that hull it is open, and the divergence theorem over an open mesh gives a
+/// number that depends on where the world's origin lies. Here the surface is closed on the
+/// hull's faces (the grid surrounded by one layer of values far below `iso`, whose crossings
+/// then lie on the outermost cell centres to a ten-millionth of a cell) before its volume is
+/// taken. None when the mesh would take more than `max_bytes` (see [`marching_cubes_within`]).
+pub fn enclosed_volume_within(volume: &Volume, iso: f32, max_bytes: u64) -> Option<f64> {
     let [nx, ny, nz] = volume.dims;
+    let (lo, hi) = volume.min_max();
+    let range = f64::from(hi.max(iso)) - f64::from(lo.min(iso));
+    let below = (f64::from(iso) - 1e7 * (range + 1.0)).max(f64::from(f32::MIN)) as f32;
+    let spacing = volume.spacing();
+    let origin = volume.aabb.min - 0.5 * spacing;
+    let value = |i: usize, j: usize, k: usize| {
+        let inside = (1..=nx).contains(&i) && (1..=ny).contains(&j) && (1..=nz).contains(&k);
+        if inside {
+            volume.get(i - 1, j - 1, k - 1)
+        } else {
+            below
+        }
+    };
+    march([nx + 2, ny + 2, nz + 2], origin, spacing, value, iso, max_bytes).map(|mesh| mesh.enclosed_volume())
+}
+
+/// Marching cubes over the grid points `origin + (i, j, k) · spacing`, `dims` of them, whose
+/// values `value` gives.
+fn march(
+    dims: [usize; 3],
+    origin: glam::DVec3,
+    spacing: glam::DVec3,
+    value: impl Fn(usize, usize, usize) -> f32,
+    iso: f32,
+    max_bytes: u64,
+) -> Option<TriMesh> {
+    let [nx, ny, nz] = dims;
     let mut mesh = TriMesh::default();
     if nx < 2 || ny < 2 || nz < 2 {
         return Some(mesh);
@@ -193,8 +232,6 @@ pub fn marching_cubes_within(volume: &Volume, iso: f32, max_bytes: u64) -> Optio
     let table = table();
     // Vertex of each crossed grid edge, keyed by (lower grid point index) * 3 + axis.
     let mut vertex_of: HashMap<usize, u32> = HashMap::new();
-    let spacing = volume.spacing();
-    let origin = volume.aabb.min + 0.5 * spacing;
     let point_index = |i: usize, j: usize, k: usize| (k * ny + j) * nx + i;
     for k in 0..nz - 1 {
         for j in 0..ny - 1 {
@@ -203,7 +240,7 @@ pub fn marching_cubes_within(volume: &Volume, iso: f32, max_bytes: u64) -> Optio
                 let mut mask = 0usize;
                 for (c, v) in values.iter_mut().enumerate() {
                     let o = corner_offset(c);
-                    *v = volume.data[point_index(i + o[0], j + o[1], k + o[2])];
+                    *v = value(i + o[0], j + o[1], k + o[2]);
                     if *v > iso {
                         mask |= 1 << c;
                     }
@@ -294,6 +331,42 @@ mod tests {
             let d = (DVec3::from(p.map(f64::from)) - c).length();
             assert!((d - r).abs() < 0.02, "vertex at radius {d}");
         }
+    }
+
+    #[test]
+    fn a_surface_leaving_the_box_encloses_the_part_inside_it() {
+        // A ball centred on the plane of the outermost cell centres at x: half of it lies within
+        // the hull of the centres. The open mesh's own sum depends on where the world's origin
+        // is; the volume closed on the hull's faces is the half ball's, wherever the box lies.
+        let r = 0.6;
+        for shift in [DVec3::ZERO, DVec3::new(100.0, -40.0, 7.0)] {
+            let aabb = Aabb::new(DVec3::new(-0.5, -1.0, -1.0) + shift, DVec3::new(1.5, 1.0, 1.0) + shift);
+            let dims = [40, 40, 40];
+            let first_centre_x = aabb.min.x + 0.5 * aabb.size().x / 40.0;
+            let c = DVec3::new(first_centre_x, aabb.centre().y, aabb.centre().z);
+            let vol = Volume::from_fn(dims, aabb, |p| (1.0 - 0.5 * ((p - c).length() / r).powi(2)) as f32);
+            let open = marching_cubes(&vol, 0.5);
+            assert!(!open.is_watertight(), "the surface leaves the hull");
+            let half = 2.0 / 3.0 * std::f64::consts::PI * r * r * r;
+            let v = enclosed_volume_within(&vol, 0.5, u64::MAX).expect("fits");
+            assert!((v - half).abs() < 0.02 * half, "shift {shift}: volume {v} against the half ball's {half}");
+            if shift != DVec3::ZERO {
+                let sum = open.enclosed_volume();
+                assert!((sum - half).abs() > 0.5 * half, "the open mesh's own sum ({sum}) is no volume");
+            }
+        }
+        // Closed inside the hull, it is the mesh's own volume.
+        let aabb = Aabb::cube(DVec3::new(3.0, 0.0, 0.0), 2.0);
+        let c = aabb.centre();
+        let vol = Volume::from_fn([24, 24, 24], aabb, |p| (1.0 - 0.5 * ((p - c).length() / 0.6).powi(2)) as f32);
+        let closed = marching_cubes(&vol, 0.5);
+        let v = enclosed_volume_within(&vol, 0.5, u64::MAX).expect("fits");
+        assert!((v - closed.enclosed_volume()).abs() < 1e-9 * v, "{v} against {}", closed.enclosed_volume());
+        // A field above the level everywhere fills the whole hull.
+        let full = Volume::from_fn([5, 4, 3], aabb, |_| 1.0);
+        let hull = aabb.size() * (DVec3::new(4.0, 3.0, 2.0) / DVec3::new(5.0, 4.0, 3.0));
+        let v = enclosed_volume_within(&full, 0.5, u64::MAX).expect("fits");
+        assert!((v - hull.x * hull.y * hull.z).abs() < 1e-5 * v, "{v}");
     }
 
     #[test]

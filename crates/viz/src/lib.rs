@@ -43,7 +43,7 @@ pub use animation::{
 };
 pub use colormap::Colormap;
 pub use error::VizError;
-pub use isosurface::{marching_cubes, marching_cubes_within, TriMesh};
+pub use isosurface::{enclosed_volume_within, marching_cubes, marching_cubes_within, TriMesh};
 
 pub use panel::{
     comparison_groups, encode_panels_png, slice, write_comparison_png, write_panel_groups_png, write_panels_png, Axis,
