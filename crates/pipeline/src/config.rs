@@ -1277,6 +1277,15 @@ impl RunConfig {
                 ));
             }
         }
+        // A time-resolved run scores its frames once, at its end: an interval would be recorded
+        // and never act.
+        if self.method().family() == Family::Temporal && self.eval_every.is_some_and(|n| n > 0) {
+            return Err(PipelineError::invalid(
+                "eval_every",
+                "time-resolved runs score their frames once, at the end (NRMSE curves during training are \
+                 recorded by static methods); leave it out, or give 0",
+            ));
+        }
         if self.stopping.rule == StopRule::HeldOut && self.method().family() == Family::Temporal {
             return Err(PipelineError::invalid(
                 "stopping.rule",

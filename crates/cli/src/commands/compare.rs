@@ -457,6 +457,26 @@ fn warn_of_other_grids(runs: &[Run], warnings: &mut Vec<String>) {
     ));
 }
 
+/// Warns of runs whose NRMSE was scored once, at their end (time-resolved runs score their
+/// frames only then; a static run with `--eval-every 0`): their time to any accuracy is their
+/// whole run's, an upper bound.
+fn warn_of_single_points(runs: &[Run], warnings: &mut Vec<String>) {
+    // Of run reports (a grid: a curve file's points are what its maker chose to keep).
+    let single: Vec<String> = runs
+        .iter()
+        .filter(|r| r.curve.len() == 1 && r.dims.is_some())
+        .map(|r| r.path.display().to_string())
+        .collect();
+    if single.is_empty() {
+        return;
+    }
+    warnings.push(format!(
+        "{} scored its NRMSE once, at its end (time-resolved runs score their frames only then): its time to an \
+         accuracy is its whole run's time, an upper bound on when it reached it",
+        single.join(", ")
+    ));
+}
+
 /// Warns when fields and voxel runs are scored by different rules: a trained field's NRMSE is
 /// the field at the truth's voxel centres, a voxel run's its volume resampled onto them, so on a
 /// truth finer than a voxel run's grid the field's score is not bound by the output grid and the
@@ -743,6 +763,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     refuse_other_instants(&runs)?;
     warn_of_other_grids(&runs, &mut warnings);
     warn_of_scoring_rules(&runs, &mut warnings);
+    warn_of_single_points(&runs, &mut warnings);
     // Runs in folders of the same name are told apart by the path given.
     let labels: Vec<String> = runs.iter().map(|r| r.label.clone()).collect();
     for run in &mut runs {

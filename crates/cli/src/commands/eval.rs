@@ -9,6 +9,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::num;
+use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_metrics::{
     evaluate_volume, regions_flow_axis, FlowAxisFrom, MetricsReport, Region, ReprojectionOptions, SsimParams,
@@ -16,7 +17,7 @@ use fluidnerf_metrics::{
 };
 use serde::Serialize;
 
-use super::export::read_volume;
+use super::export::{read_volume, recorded_volume_time};
 
 /// The local window of the windowed SSIM.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
@@ -354,6 +355,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &scene,
                 "the metrics cover that box only, and the reconstruction is zero outside its own",
             );
+            // A volume of one instant scored against the truth of another: the difference would
+            // be the flow's change between them.
+            if let [recon] = args.recon.as_slice() {
+                if let Some((place, at)) = recon.is_file().then(|| recorded_volume_time(recon)).flatten() {
+                    let from = format!("{place} records it for {}", recon.display());
+                    super::export::refuse_truth_of_another_instant("--truth", path, Some(&scene.root), (at, &from))?;
+                }
+            }
             vec![(None, volume)]
         }
         None => fluidnerf_io::scene::load_truth(&scene)
@@ -452,6 +461,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             scene.times().into_iter().map(|t| (Some(t), only)).collect()
         }
         _ => truth.iter().map(|(t, v)| (*t, v)).collect(),
+    };
+    // One volume file of one instant (one of a run's frames, an export of one time) is scored
+    // at that instant's truth alone: at every step, it was scored against the others too.
+    let truth_steps = match (args.recon.as_slice(), truth_steps.len()) {
+        ([recon], 2..) if recon.is_file() => match recorded_volume_time(recon) {
+            Some((place, at)) => {
+                let Some(step) = truth_steps.iter().find(|(t, _)| t.is_some_and(|t| same_time(t, at))) else {
+                    let times: Vec<String> =
+                        truth_steps.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
+                    bail!(
+                        "{}: it holds the field at t = {} ({place}), and the scene's ground truth is at t = {}, none \
+                         of them that instant; give the truth of t = {} with --truth",
+                        recon.display(),
+                        num(at),
+                        times.join(", "),
+                        num(at)
+                    );
+                };
+                log::info!("{}: scored at t = {} ({place}), its instant", recon.display(), num(at));
+                vec![*step]
+            }
+            None => truth_steps,
+        },
+        _ => truth_steps,
     };
     // The time steps the reconstruction volumes stand for: the truth's, else the frames'.
     let step_times: Vec<Option<f64>> = if truth.is_empty() {
@@ -601,38 +634,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The time at which the volume file `path` was written from a time-resolved run, when that is
-/// recorded: one of a run's frames (`RUN/frames/volume_NNN.npy|.vti`, listed with its time in
-/// `RUN/report.json`), or a volume `export --time` wrote (listed in the `export.json` beside
-/// it, with its time). The record's path and the time.
-fn recorded_frame_time(path: &Path) -> Option<(PathBuf, f64)> {
-    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    if folder.file_name().is_some_and(|name| name == "frames") {
-        let run = folder.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let report_path = run.join("report.json");
-        let report = fluidnerf_pipeline::RunReport::read(&report_path).ok()?;
-        let stem = path.file_stem()?.to_str()?;
-        let own = format!("frames/{stem}");
-        let record = report.volumes.iter().find(|v| Path::new(&v.file).with_extension("") == Path::new(&own))?;
-        return Some((report_path, record.time?));
-    }
-    let export_path = folder.join("export.json");
-    let record: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&export_path).ok()?).ok()?;
-    let name = path.file_name()?;
-    let listed = record["outputs"].as_array()?.iter().filter_map(|o| o.as_str());
-    if !listed.into_iter().any(|o| Path::new(o).file_name() == Some(name)) {
-        return None;
-    }
-    Some((export_path, record["time"].as_f64()?))
-}
-
 /// Refuses volume files given for the time steps `step_times` (one each, in order) when one is a
-/// run's frame written at another time ([`recorded_frame_time`]): given out of order (or for a
+/// run's frame written at another time ([`recorded_volume_time`]): given out of order (or for a
 /// scene whose truth is at other times), it would be scored against another instant's truth.
 fn refuse_frames_out_of_order(paths: &[PathBuf], step_times: &[Option<f64>]) -> anyhow::Result<()> {
     let listed = || step_times.iter().flatten().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
     for (i, (path, step)) in paths.iter().zip(step_times).enumerate() {
-        let (Some((report, written)), Some(step)) = (recorded_frame_time(path), step) else { continue };
+        let (Some((report, written)), Some(step)) = (recorded_volume_time(path), step) else { continue };
         if fluidnerf_core::scene::same_time(written, *step) {
             continue;
         }
@@ -648,7 +656,7 @@ fn refuse_frames_out_of_order(paths: &[PathBuf], step_times: &[Option<f64>]) -> 
              t = {}; {at}. Give one volume per time step in the order of the steps' times ({})",
             path.display(),
             num(written),
-            report.display(),
+            report,
             i + 1,
             paths.len(),
             num(*step),

@@ -61,7 +61,9 @@ pub struct Args {
     #[arg(long = "box", value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
     pub bbox: Option<String>,
     /// Time at which a time-resolved field is sampled, between its first and last instants.
-    /// Default: its first instant.
+    /// Default: its first instant. `export.json`, the `.vti` (`TimeValue`, ParaView's time) and
+    /// the raw sidecar record the instant, also of a volume file whose instant is recorded (a
+    /// run's frame, an earlier export).
     #[arg(long, allow_hyphen_values = true)]
     pub time: Option<f64>,
     /// A trained field's voxel is the mean of N³ points spread evenly over it (its cell
@@ -88,10 +90,13 @@ pub struct Args {
     pub slices: Vec<String>,
     /// Ground-truth volume (`.npy` filling the scene's box, or the reconstruction's without
     /// --scene; `.vti`, `.raw` or `.tif`): slices are also drawn as truth | reconstruction | difference
-    /// (`compare_<axis>_<fraction>.png`).
+    /// (`compare_<axis>_<fraction>.png`). A truth of another instant than the export's (as the
+    /// scene lists it, or as the file records it) is refused.
     #[arg(long, value_name = "TRUTH")]
     pub compare: Option<PathBuf>,
-    /// Extract the isosurface at this field value by marching cubes (`isosurface.ply`).
+    /// Extract the isosurface at this field value by marching cubes (`isosurface.ply`). Its
+    /// area and enclosed volume are printed; where the surface leaves the box it is open, and
+    /// the volume is that of the region above the value inside the outermost voxel centres.
     #[arg(long, value_name = "VALUE", allow_hyphen_values = true)]
     pub isosurface: Option<f32>,
     /// Mesh formats of the isosurface; comma-separated (with --isosurface).
@@ -259,6 +264,96 @@ pub(crate) fn load_source(path: &Path, scene: Option<&Scene>, unit: Option<&str>
     Ok(Source::Volume(read_volume(path, scene.map(|s| s.aabb), unit.or(scene.map(|s| s.units.as_str())))?))
 }
 
+/// The instant of a time-resolved field the volume file `path` holds, when that is recorded,
+/// and where: in the file itself (a `.vti`'s `TimeValue`, a raw volume's sidecar), for one of a
+/// run's frames (`RUN/frames/volume_NNN.npy|.vti`, listed with its time in `RUN/report.json`),
+/// or for a volume `export` wrote (listed in the `export.json` beside it, with its time). Where
+/// it is recorded, in words, and the time.
+pub(crate) fn recorded_volume_time(path: &Path) -> Option<(String, f64)> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let own = match ext.as_str() {
+        "vti" => fluidnerf_io::volume::vti_time(path).map(|t| ("its TimeValue field data".to_string(), t)),
+        "raw" => fluidnerf_io::volume::raw_time(path)
+            .map(|t| (fluidnerf_io::volume::raw_sidecar_path(path).display().to_string(), t)),
+        _ => None,
+    };
+    if own.is_some() {
+        return own;
+    }
+    let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if folder.file_name().is_some_and(|name| name == "frames") {
+        let run = folder.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let report_path = run.join("report.json");
+        let report = fluidnerf_pipeline::RunReport::read(&report_path).ok()?;
+        let stem = path.file_stem()?.to_str()?;
+        let own = format!("frames/{stem}");
+        let record = report.volumes.iter().find(|v| Path::new(&v.file).with_extension("") == Path::new(&own))?;
+        return Some((report_path.display().to_string(), record.time?));
+    }
+    let export_path = folder.join("export.json");
+    let record: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&export_path).ok()?).ok()?;
+    let name = path.file_name()?;
+    let listed = record["outputs"].as_array()?.iter().filter_map(|o| o.as_str());
+    if !listed.into_iter().any(|o| Path::new(o).file_name() == Some(name)) {
+        return None;
+    }
+    Some((export_path.display().to_string(), record["time"].as_f64()?))
+}
+
+/// The instant of the ground-truth volume `path`, and where it is recorded: the time the scene
+/// in `scene_root` lists it at, else the one the file records ([`recorded_volume_time`]).
+pub(crate) fn truth_time(path: &Path, scene_root: Option<&Path>) -> Option<(String, f64)> {
+    let given = std::fs::canonicalize(path).ok()?;
+    if let Some(draft) = scene_root.and_then(|root| fluidnerf_io::scene::read_scene_draft(root).ok()) {
+        let listed = draft
+            .truth
+            .iter()
+            .find(|t| std::fs::canonicalize(draft.root.join(&t.file_path)).ok().as_ref() == Some(&given));
+        if let Some(t) = listed {
+            return t.time.map(|time| ("the scene lists it at that time".to_string(), time));
+        }
+    }
+    recorded_volume_time(path)
+}
+
+/// Refuses the ground truth `path` given with `option` when it is of another instant than the
+/// reconstruction's (`instant`: its time, and where that comes from): scored or drawn beside
+/// it, the difference would be the flow's change between the two instants.
+pub(crate) fn refuse_truth_of_another_instant(
+    option: &str,
+    path: &Path,
+    scene_root: Option<&Path>,
+    instant: (f64, &str),
+) -> anyhow::Result<()> {
+    let Some((place, truth_at)) = truth_time(path, scene_root) else { return Ok(()) };
+    let (at, from) = instant;
+    if fluidnerf_core::scene::same_time(truth_at, at) {
+        return Ok(());
+    }
+    bail!(
+        "{option} {}: the truth is at t = {} ({place}), but the reconstruction is at t = {} ({from}); give the truth \
+         of t = {}, or the reconstruction of t = {}",
+        path.display(),
+        num(truth_at),
+        num(at),
+        num(at),
+        num(truth_at)
+    )
+}
+
+/// The share of `a`'s volume that lies inside `b`.
+fn overlap_fraction(a: &Aabb, b: &Aabb) -> f64 {
+    let common = (a.max.min(b.max) - a.min.max(b.min)).max(DVec3::ZERO);
+    common.x * common.y * common.z / (a.size().x * a.size().y * a.size().z)
+}
+
+/// Whether two boxes are the same to within a billionth of the larger's longest side: a box
+/// typed in decimals, or read back from a file's origin and spacing, may differ in its last bits.
+fn same_box(a: &Aabb, b: &Aabb) -> bool {
+    let tolerance = 1e-9 * a.size().max(b.size()).max_element();
+    (a.min - b.min).abs().max((a.max - b.max).abs()).max_element() <= tolerance
+}
+
 /// Whether `path` is named as a TIFF stack.
 fn is_tiff(path: &Path) -> bool {
     path.extension().and_then(|e| e.to_str()).is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "tif" | "tiff"))
@@ -334,7 +429,13 @@ struct Settings<'a> {
     scene: Option<&'a Path>,
     aabb: Aabb,
     dims: [usize; 3],
-    /// The instant sampled; None for a source fixed in time, which `--time` does not change.
+    /// The voxel's size along x, y and z.
+    spacing: [f64; 3],
+    /// A trained field's voxel as the mean of `average³` points (`--average`); None for a
+    /// volume, resampled trilinearly.
+    average: Option<usize>,
+    /// The instant the export holds: the one sampled from a time-resolved field, or the one a
+    /// volume file records ([`recorded_volume_time`]); None for a source fixed in time.
     time: Option<f64>,
     units: &'a str,
     colormap: Colormap,
@@ -413,8 +514,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => Some(s.root.clone()),
         None => super::recorded_scene(&args.recon)?.and_then(|p| super::scene_folder(&p)),
     };
-    if let Some(root) = scene_root {
-        fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, &root)?;
+    if let Some(root) = &scene_root {
+        fluidnerf_pipeline::rundir::refuse_among_scene_inputs(&args.out, root)?;
     }
     // The boxes, axis labels and the TIFF stack's calibration are in the reconstruction's length
     // unit: the scene's, else the one a run folder's report records. --units names the unit of
@@ -450,7 +551,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let time = source.sample_time(args.time, "--time")?;
     source.warn_held([time], &args.recon);
     source.warn_time_unused(args.time, &args.recon);
-    let is_time_resolved = source.is_time_resolved();
+    // The instant exported: sampled from a time-resolved field, or recorded for a volume file
+    // (one of a run's frames, an earlier export), which the files and export.json carry on, so
+    // that `eval` scores it against its own instant's truth.
+    let (instant, instant_from) = match &source {
+        Source::Field { times: Some(_), .. } => {
+            let from = if args.time.is_some() { "--time" } else { "the run's first instant, --time's default" };
+            (Some(time), from.to_string())
+        }
+        Source::Volume(_) if args.recon.is_file() => match recorded_volume_time(&args.recon) {
+            Some((place, t)) => (Some(t), place),
+            None => (None, String::new()),
+        },
+        _ => (None, String::new()),
+    };
     if args.average > 1 && matches!(source, Source::Volume(_)) {
         log::warn!(
             "--average {} has no effect: {} is a volume, resampled trilinearly; cell averages are taken of trained \
@@ -472,7 +586,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 r.max.to_array()
             );
         }
+        let outside = 1.0 - overlap_fraction(&b, &r);
+        if outside > 1e-6 {
+            log::warn!(
+                "--box reaches beyond the reconstruction's box {} .. {}: the export is zero there, {:.0} % of its \
+                 volume",
+                num(r.min.to_array()),
+                num(r.max.to_array()),
+                100.0 * outside
+            );
+        }
     }
+    // The reconstruction's own box given as --box (typed from the scene, say) is no other box:
+    // a volume keeps its grid, as without --box.
+    let export_box = export_box.filter(|b| !same_box(b, &source.aabb()));
     let aabb = export_box.unwrap_or_else(|| source.aabb());
     if let Some(n) = args.resolution {
         // The volume, and a copy as the files are written.
@@ -512,6 +639,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     fluidnerf_core::num(b.min.to_array()),
                     fluidnerf_core::num(b.max.to_array())
                 );
+            }
+            let outside = 1.0 - overlap_fraction(b, &t.aabb);
+            if outside > 1e-6 {
+                log::warn!(
+                    "--compare {}: the truth fills the box {} .. {}, {:.0} % of the exported box lies outside it: \
+                     its panels are zero there, and the difference shows the reconstruction as error",
+                    p.display(),
+                    num(t.aabb.min.to_array()),
+                    num(t.aabb.max.to_array()),
+                    100.0 * outside
+                );
+            }
+            if let Some(t) = instant {
+                refuse_truth_of_another_instant("--compare", p, scene_root.as_deref(), (t, &instant_from))?;
             }
             Some(if t.dims == volume.dims && t.aabb == volume.aabb { t } else { t.resample(volume.dims, volume.aabb) })
         }
@@ -602,7 +743,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     fluidnerf_pipeline::bytes(limit)
                 );
             };
-            Some((iso, mesh))
+            // Where the surface leaves the box it is open, and its own sum is no volume: the
+            // region's is taken with the surface closed on the box's faces.
+            let enclosed = if mesh.is_watertight() {
+                Some(mesh.enclosed_volume())
+            } else {
+                fluidnerf_viz::enclosed_volume_within(&volume, iso, limit)
+            };
+            Some((iso, mesh, enclosed))
         }
         None => None,
     };
@@ -616,11 +764,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if vti {
         let p = out.join("volume.vti");
-        fluidnerf_io::volume::write_vti(&p, &volume).with_context(|| format!("writing {}", p.display()))?;
+        fluidnerf_io::volume::write_vti_at(&p, &volume, instant).with_context(|| format!("writing {}", p.display()))?;
     }
     if raw {
         let p = out.join("volume.raw");
-        fluidnerf_io::volume::write_raw(&p, &volume).with_context(|| format!("writing {}", p.display()))?;
+        fluidnerf_io::volume::write_raw_at(&p, &volume, instant).with_context(|| format!("writing {}", p.display()))?;
     }
     if args.tiff {
         let p = out.join("volume.tif");
@@ -641,7 +789,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .with_context(|| format!("writing {}", p.display()))?;
         }
     }
-    if let Some((iso, mesh)) = mesh {
+    if let Some((iso, mesh, enclosed)) = mesh {
         for m in &args.mesh {
             let (p, r) = match m {
                 MeshFormat::Ply => {
@@ -668,13 +816,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         } else {
             println!(
-                "isosurface at {}: {} vertices, {} triangles, area {:.4} {units}², enclosed volume {:.4} {units}³{}",
+                "isosurface at {}: {} vertices, {} triangles, area {:.4} {units}², enclosed volume {}{}",
                 num(iso),
                 mesh.vertices.len(),
                 mesh.triangles.len(),
                 mesh.area(),
-                mesh.enclosed_volume(),
-                if mesh.is_watertight() { "" } else { " (open where it leaves the box)" }
+                enclosed
+                    .map_or("not computed (too large for the memory available)".into(), |v| format!("{v:.4} {units}³")),
+                if mesh.is_watertight() {
+                    ""
+                } else {
+                    " (the surface is open where it leaves the box; the volume is the region's inside the outermost \
+                     voxel centres)"
+                }
             );
         }
     }
@@ -684,7 +838,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene: args.scene.as_deref(),
         aabb: volume.aabb,
         dims: volume.dims,
-        time: is_time_resolved.then_some(time),
+        spacing: volume.spacing().to_array(),
+        average: matches!(source, Source::Field { .. }).then_some(args.average as usize),
+        time: instant,
         units: &units,
         colormap,
         value_label: &value_label,

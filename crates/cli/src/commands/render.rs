@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_classical::projector::{FootprintProjector, Grid, Projector};
+use fluidnerf_core::scene::same_time;
 use fluidnerf_core::{num, render_image, Aabb, Baked, Camera, Image, RenderSettings, ScalarField, Support, Volume};
 use fluidnerf_pipeline::rundir::{refuse_other_kind, FolderKind};
 use fluidnerf_viz::Colormap;
@@ -179,8 +180,9 @@ struct Settings<'a> {
     projector: RenderProjector,
     supersample: usize,
     step: Option<f64>,
-    /// The instant rendered: None for a source fixed in time, and for a time-resolved field's
-    /// scene views at several times (each at its frame's time, without --time). Views all at
+    /// The instant rendered: that of a time-resolved field, or the one a volume file records;
+    /// None for a source fixed in time, and for a time-resolved field's scene views at several
+    /// times (each at its frame's time, without --time). Views all at
     /// one instant give it, also when the scene's frames hold no time (a time-resolved field
     /// seen through a static scene's cameras): render.json said null, not which instant.
     time: Option<f64>,
@@ -370,17 +372,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     source.warn_held(views.iter().map(|v| v.time), &args.recon);
     source.warn_time_unused(args.time, &args.recon);
+    // A volume of one instant (one of a run's frames, an export of one time): drawn through the
+    // cameras of frames at another, warned of below.
+    let volume_instant = match &source {
+        Source::Volume(_) if args.recon.is_file() => super::export::recorded_volume_time(&args.recon),
+        _ => None,
+    };
     // One volume (or static field) seen through cameras of several instants: each view shows
     // the same field, whatever its frame's time.
     let instants = scene.times().len();
-    if !source.is_time_resolved() && args.orbit.is_none() && args.time.is_none() && instants > 1 {
+    if !source.is_time_resolved()
+        && volume_instant.is_none()
+        && args.orbit.is_none()
+        && args.time.is_none()
+        && instants > 1
+    {
         let shown: Vec<f64> = asked.iter().filter_map(|&(t, _)| t).collect();
-        if shown.iter().any(|&t| !fluidnerf_core::scene::same_time(t, shown[0])) {
+        if shown.iter().any(|&t| !same_time(t, shown[0])) {
             log::warn!(
                 "{} is fixed in time, but the views asked are of frames at several of the scene's {instants} \
                  instants: each shows the same field, whatever its frame's time; render a time-resolved run, or each \
                  instant's volume with --camera",
                 args.recon.display()
+            );
+        }
+    }
+    if let (Some((place, at)), None) = (&volume_instant, args.orbit) {
+        let mut other: Vec<f64> = asked.iter().filter_map(|&(t, _)| t).filter(|&t| !same_time(t, *at)).collect();
+        other.sort_by(f64::total_cmp);
+        other.dedup_by(|a, b| same_time(*a, *b));
+        if !other.is_empty() {
+            let listed: Vec<String> = other.iter().map(|&t| num(t).to_string()).collect();
+            log::warn!(
+                "{} holds the field at t = {} ({place}), but views asked are of frames at t = {}: they show it, not \
+                 the field of their own instant; give --camera of the frames at t = {}",
+                args.recon.display(),
+                num(*at),
+                listed.join(", "),
+                num(*at)
             );
         }
     }
@@ -406,10 +435,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         RenderProjector::Rays => false,
         RenderProjector::Auto => auto_grid.is_some(),
     };
-    let step = args.step.or(match &source {
-        Source::Volume(v) if !footprint => Some(0.5 * v.spacing().min_element()),
-        _ => None,
-    });
+    // Resolved here, so that render.json records the step the rays took (a field's was null).
+    let step = match &source {
+        _ if footprint => None,
+        Source::Volume(v) => Some(args.step.unwrap_or(0.5 * v.spacing().min_element())),
+        Source::Field { .. } => Some(args.step.unwrap_or(scene.aabb.size().min_element() / 256.0)),
+    };
     // Baking: per distinct time, when it pays (see `--bake`).
     let ss = args.supersample.max(1);
     let bake_dims = match (&source, args.bake) {
@@ -646,7 +677,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         step,
         // A time-resolved field's: the time asked, or that of its orbit views (all at one). A
         // source fixed in time has none, whatever --time said (it was warned of as unused).
-        time: if source.is_time_resolved() { args.time.or(one_instant.then(|| views[0].time)) } else { None },
+        time: if source.is_time_resolved() {
+            args.time.or(one_instant.then(|| views[0].time))
+        } else {
+            volume_instant.map(|(_, t)| t)
+        },
         times: match source.is_time_resolved() && !one_instant {
             true => views.iter().map(|v| v.time).collect(),
             false => Vec::new(),

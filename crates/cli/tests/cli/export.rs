@@ -477,3 +477,105 @@ fn the_colour_maps_offered_are_those_accepted() {
     assert!(diverging.contains("kept for differences") && diverging.contains("viridis"), "{diverging}");
     assert!(!dir.path().join("out").exists());
 }
+
+/// The reconstruction's own box given as `--box` (typed from the scene) resampled a volume to
+/// 128 voxels along its longest side, though `--resolution`'s default keeps "a volume's own grid
+/// when the box is unchanged"; and `export.json` did not record the spacing its help promises.
+#[test]
+fn the_own_box_given_keeps_the_grid_and_export_json_records_the_spacing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let (src, out_s) = (src.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    ok(&fluidnerf(&["export", src, "--out", out_s, "--npy", "--box", "0,0,0,4.0000000000000001,4,4"]));
+    let settings = common::json(&out.join("export.json"));
+    assert_eq!(settings["dims"], serde_json::json!([16, 16, 16]));
+    assert_eq!(settings["spacing"], serde_json::json!([0.25, 0.25, 0.25]));
+    assert_eq!(settings["average"], serde_json::Value::Null, "a volume is resampled, not averaged");
+    assert_eq!(settings["time"], serde_json::Value::Null, "a volume of no recorded instant");
+    // Another box still samples 128 voxels along its longest side, of the spacing recorded.
+    ok(&fluidnerf(&["export", src, "--out", out_s, "--npy", "--box", "0,0,0,4,2,1", "--force"]));
+    let settings = common::json(&out.join("export.json"));
+    assert_eq!(settings["dims"], serde_json::json!([128, 64, 32]));
+    assert_eq!(settings["spacing"], serde_json::json!([0.03125, 0.03125, 0.03125]));
+}
+
+/// A `--box` reaching beyond the reconstruction's, and a `--compare` truth covering only part of
+/// the exported box, were exported without a word: the volume is zero there, and the truth's
+/// panels too, the difference showing the whole reconstruction as error.
+#[test]
+fn boxes_reaching_beyond_the_reconstruction_or_the_truth_are_warned_of() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = source(dir.path());
+    let out = dir.path().join("out");
+    let (src, out_s) = (src.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let o = fluidnerf(&["export", src, "--out", out_s, "--npy", "--box", "-4,0,0,4,4,4", "--resolution", "8"]);
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(
+            "--box reaches beyond the reconstruction's box [0, 0, 0] .. [4, 4, 4]: the export is zero there, 50 %"
+        ),
+        "{err}"
+    );
+    let o =
+        fluidnerf(&["export", src, "--out", out_s, "--npy", "--box", "1,1,1,3,3,3", "--resolution", "8", "--force"]);
+    ok(&o);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("reaches beyond"), "a box inside the reconstruction's");
+
+    let small = Volume::from_fn([8, 8, 8], Aabb::new(DVec3::ZERO, DVec3::new(2.0, 4.0, 4.0)), linear);
+    let truth = dir.path().join("half.vti");
+    fluidnerf_io::volume::write_vti(&truth, &small).expect("writes the truth");
+    let compare = |truth: &Path| {
+        let truth = truth.to_str().expect("utf-8");
+        fluidnerf(&["export", src, "--out", out_s, "--slices", "z=0.5", "--compare", truth, "--force"])
+    };
+    let o = compare(&truth);
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("half.vti: the truth fills the box [0, 0, 0] .. [2, 4, 4], 50 % of the exported box"),
+        "{err}"
+    );
+    let o = compare(&source(&dir.path().join("whole")));
+    ok(&o);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("the truth fills"), "the same box");
+}
+
+/// The enclosed volume printed for an isosurface that leaves the box was the divergence
+/// theorem's sum over an open mesh: it changed, even in sign, when the box was moved. It is now
+/// the volume of the region brighter than the level inside the outermost voxel centres.
+#[test]
+fn an_open_isosurface_encloses_the_same_volume_wherever_the_box_lies() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let enclosed = |shift: f64| {
+        // A ball of radius 1.2 centred on the box's face x = 0: cut by the box.
+        let aabb = Aabb::new(DVec3::new(shift, 0.0, 0.0), DVec3::new(shift + 4.0, 4.0, 4.0));
+        let c = DVec3::new(shift, 2.0, 2.0);
+        let ball = Volume::from_fn([32, 32, 32], aabb, |p| (1.0 - 0.5 * ((p - c).length() / 1.2).powi(2)) as f32);
+        let path = dir.path().join(format!("ball{shift}.vti"));
+        fluidnerf_io::volume::write_vti(&path, &ball).expect("writes");
+        let out = dir.path().join(format!("out{shift}"));
+        let o = fluidnerf(&[
+            "export",
+            path.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--isosurface",
+            "0.5",
+        ]);
+        ok(&o);
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        let at = text.find("enclosed volume ").expect("printed") + "enclosed volume ".len();
+        let v: f64 = text[at..].split_whitespace().next().expect("a number").parse().expect("a number");
+        assert!(text.contains("the surface is open where it leaves the box"), "{text}");
+        v
+    };
+    let (here, there) = (enclosed(0.0), enclosed(-250.0));
+    assert!((here - there).abs() <= 1e-3 * here, "{here} against {there}");
+    // Inside the outermost centres (x ≥ 1/16): nearly half the ball, less a slab of 1/16.
+    let r: f64 = 1.2;
+    let h = 4.0 / 32.0 / 2.0;
+    let cap = std::f64::consts::PI * (2.0 / 3.0 * r.powi(3) - r * r * h + h.powi(3) / 3.0);
+    assert!((here - cap).abs() < 0.03 * cap, "{here} against {cap}");
+}

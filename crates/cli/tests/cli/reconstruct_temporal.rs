@@ -1201,12 +1201,22 @@ fn render_records_each_views_instant_and_warns_of_one_volume_for_several() {
     let times: Vec<f64> = frames.as_array().expect("frames").iter().map(|f| f["time"].as_f64().expect("t")).collect();
     assert_eq!(settings["time"], serde_json::Value::Null);
     assert_eq!(settings["times"], serde_json::json!(times));
+    // A frame of the run holds one instant, and says which views are of another.
     let out = fluidnerf(d, &["render", "run/frames/volume_000.npy", "-s", "scene", "-o", "one"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("holds the field at t = 14 (run/report.json), but views asked are of frames at t = 15"),
+        "{err}"
+    );
+    assert!(json(&d.join("one/render.json")).get("times").is_none());
+    // A volume of no recorded instant.
+    std::fs::copy(d.join("run/frames/volume_000.npy"), d.join("loose.npy")).expect("copy");
+    let out = fluidnerf(d, &["render", "loose.npy", "-s", "scene", "-o", "two"]);
     ok(&out);
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("is fixed in time, but the views asked are of frames at several")
     );
-    assert!(json(&d.join("one/render.json")).get("times").is_none());
 }
 
 /// `--window-index` given to a folder holding a run of other settings was checked against this
@@ -1223,4 +1233,109 @@ fn a_window_index_for_a_folder_of_other_settings_names_the_settings() {
     let out = fluidnerf(d, &["reconstruct", "scene", "-o", "run", "--method", "tr-fast", "--window-index", "1"]);
     refused(&out, "run/config.json: holds a run with other settings (");
     refused(&out, "`method.windows.frames`: 2 → 16");
+}
+
+/// A run's frame exported again (`export RUN/frames/volume_002.vti`) lost its instant, and a
+/// copied `.vti` never had one: `eval` then scored it against another instant's truth without a
+/// word, and one such volume against every instant's. A frame's `.vti` and raw sidecar now
+/// record their instant, `export` and `render` carry it on, and `eval` scores a volume of one
+/// instant at that instant alone.
+#[test]
+fn a_volumes_instant_goes_with_it_through_export_render_and_eval() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    assert_eq!(fluidnerf_io::volume::vti_time(&d.join("run/frames/volume_002.vti")), Some(16.0));
+    ok(&fluidnerf(d, &["export", "run/frames/volume_002.vti", "-o", "x2", "--vti", "--raw", "-q"]));
+    assert_eq!(json(&d.join("x2/export.json"))["time"], 16.0);
+    assert_eq!(fluidnerf_io::volume::vti_time(&d.join("x2/volume.vti")), Some(16.0));
+    assert_eq!(fluidnerf_io::volume::raw_time(&d.join("x2/volume.raw")), Some(16.0));
+    // Copied away from export.json, the file still says its instant.
+    std::fs::create_dir(d.join("loose")).expect("mkdir");
+    std::fs::copy(d.join("x2/volume.vti"), d.join("loose/t16.vti")).expect("copy");
+    let eval = |files: &[&str]| {
+        let mut a = vec!["eval", "-s", "scene", "--no-reprojection", "--no-regions", "--json", "m.json", "--force"];
+        a.extend(files);
+        fluidnerf(d, &a)
+    };
+    refused(
+        &eval(&["run/frames/volume_000.npy", "loose/t16.vti", "run/frames/volume_002.npy"]),
+        "RECON loose/t16.vti: it was written at t = 16 (its TimeValue field data), but it is given as volume 2 of 3",
+    );
+    // Alone, it is scored at its own instant, as the run scored it there.
+    ok(&eval(&["loose/t16.vti"]));
+    let steps = json(&d.join("m.json"))["steps"].clone();
+    let steps = steps.as_array().expect("steps");
+    assert_eq!(steps.len(), 1, "scored at one instant, not at each of three");
+    assert_eq!(steps[0]["time"], 16.0);
+    let reported = report(&d.join("run"))["volumes"][2]["metrics"]["global"]["nrmse"].as_f64().expect("nrmse");
+    let scored = steps[0]["global"]["nrmse"].as_f64().expect("nrmse");
+    assert!((scored - reported).abs() <= 1e-6 * reported, "{scored} against the report's {reported}");
+    // A render records it, and warns of cameras of other instants.
+    let out = fluidnerf(d, &["render", "loose/t16.vti", "--scene", "scene", "-o", "views"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(
+            "holds the field at t = 16 (its TimeValue field data), but views asked are of frames at t = 14, 15"
+        ),
+        "{err}"
+    );
+    assert_eq!(json(&d.join("views/render.json"))["time"], 16.0);
+}
+
+/// `export RUN --compare TRUTH` drew the truth of one instant beside the field of another (the
+/// run's first, `--time`'s default), and `eval VOLUME --truth TRUTH` scored a frame against
+/// another instant's truth, both without a word. The scene lists each truth's instant: another
+/// than the reconstruction's is refused.
+#[test]
+fn a_truth_of_another_instant_is_refused_beside_a_reconstruction() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    let export = |extra: &[&str]| {
+        let mut a = vec!["export", "run", "-o", "cmp", "--slices", "x=0.5", "--resolution", "8", "--force", "-q"];
+        a.extend(extra);
+        fluidnerf(d, &a)
+    };
+    refused(
+        &export(&["--compare", "scene/truth/truth_t02.npy"]),
+        "--compare scene/truth/truth_t02.npy: the truth is at t = 16 (the scene lists it at that time), but the \
+         reconstruction is at t = 14 (the run's first instant, --time's default)",
+    );
+    ok(&export(&["--compare", "scene/truth/truth_t02.npy", "--time", "16"]));
+    let eval = |truth: &str| {
+        let a = ["eval", "-s", "scene", "run/frames/volume_000.npy", "--truth", truth, "--no-reprojection", "--force"];
+        fluidnerf(d, &[&a[..], &["--json", "m.json", "-q"]].concat())
+    };
+    refused(&eval("scene/truth/truth_t02.npy"), "the reconstruction is at t = 14 (run/report.json records it");
+    ok(&eval("scene/truth/truth_t00.npy"));
+}
+
+/// `--eval-every` was recorded by time-resolved runs and never acted (they score their frames
+/// once, at the end), and `compare` then gave their whole run's time as the time to an accuracy
+/// with no note that it had one point to go by.
+#[test]
+fn eval_every_is_refused_for_time_resolved_runs_and_compare_notes_a_single_point() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15"]);
+    let args = "reconstruct scene --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    let args: Vec<&str> = args.split_whitespace().collect();
+    refused(
+        &fluidnerf(d, &[&args[..], &["-o", "run", "--eval-every", "1"]].concat()),
+        "time-resolved runs score their frames once, at the end",
+    );
+    ok(&fluidnerf(d, &[&args[..], &["-o", "run", "--eval-every", "0"]].concat()));
+    ok(&fluidnerf(d, &[&args[..], &["-o", "run2", "--seed", "1"]].concat()));
+    let out = fluidnerf(d, &["compare", "run", "run2", "-o", "cmp", "-q"]);
+    ok(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("scored its NRMSE once, at its end"), "{text}");
+    let warnings = json(&d.join("cmp/compare.json"))["warnings"].to_string();
+    assert!(warnings.contains("scored its NRMSE once"), "{warnings}");
 }

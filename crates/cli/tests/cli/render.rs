@@ -354,7 +354,12 @@ fn auto_takes_the_footprint_projector_where_pixels_span_the_cells() {
         let e = nrmse(&read("auto-field", c), &read("exact", c));
         assert!(e < 0.02, "camera {c}: the field's footprint render against 4 × 4 exact rays, NRMSE {e}");
     }
-    assert_eq!(render(&run, "off", &["--bake", "off"])["projector"], "rays");
+    let off = render(&run, "off", &["--bake", "off"]);
+    assert_eq!(off["projector"], "rays");
+    // The step the rays took, resolved: a field's was recorded as null.
+    let aabb = fluidnerf_io::scene::load_scene(dir.path()).expect("the scene").aabb;
+    assert_eq!(off["step"], aabb.size().min_element() / 256.0, "{off}");
+    assert_eq!(field["step"], serde_json::Value::Null, "the footprint projector takes no steps");
 
     let orbit = |name: &str, width: &str, extra: &[&str]| {
         render(&run, name, &[&["--orbit", "2", "--width", width][..], extra].concat())
