@@ -781,7 +781,13 @@ class Run:
         compare methods on one output grid, as ``fluidnerf study`` does, score every run with
         ``use_volume=True``. The measure needs no ground truth. Returns one dict per held-out
         frame: ``frame``, ``camera_name``, ``time``, ``pixels``, ``nrmse``, ``psnr_db``,
-        ``ssim_global``, ``ssim_windowed``, ``data_range``."""
+        ``ssim_global``, ``ssim_windowed``, ``data_range``.
+
+        The run is checked against the scene as ``fluidnerf eval`` checks it, with its messages:
+        a run made from another scene, or filling another box, is warned of
+        (:class:`FluidNerfWarning`); a time-resolved run is refused a held-out frame without a
+        time, or at a time it never trained (stopped before it reached it, or outside its
+        instants), and with ``use_volume=True`` one at an instant it wrote no volume of."""
         if scene is None:
             config = self.config
             if config is None:
@@ -789,7 +795,7 @@ class Run:
             scene = config["scene"]
         use_volume = _boolean(use_volume, "use_volume")
         supersample = _positive_int(supersample, "supersample")
-        return json.loads(self._h.score_held_out(_as_scene(scene), supersample, use_volume))
+        return json.loads(self._h.score_held_out(_as_scene(scene), supersample, use_volume, _warn))
 
     def voxel_centres(self) -> np.ndarray:
         """World coordinates ``(nz, ny, nx, 3)`` of the centres of :attr:`volume`'s voxels."""

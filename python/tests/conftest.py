@@ -42,6 +42,21 @@ def tr_scene(tmp_path_factory) -> fluidnerf.Scene:
 
 
 @pytest.fixture(scope="session")
+def tr_holdout_scene(tmp_path_factory) -> fluidnerf.Scene:
+    """A starting jet at 4 times seen by 5 cameras of 16² px, camera 4 held out at every time."""
+    folder = tmp_path_factory.mktemp("tr-holdout") / "scene"
+    return fluidnerf.synth(
+        folder,
+        "jet-tr60",
+        resolution=12,
+        times=[14.0, 14.5, 15.0, 15.5],
+        lens={"resolution": [16, 16]},
+        rig={"layout": {"count": 5}, "holdout": [4]},
+        image={"model": "pinhole"},
+    )
+
+
+@pytest.fixture(scope="session")
 def cli() -> str:
     """The `fluidnerf` binary: $FLUIDNERF_BIN, else the workspace's release build."""
     path = os.environ.get("FLUIDNERF_BIN") or str(REPO / "target" / "release" / "fluidnerf")

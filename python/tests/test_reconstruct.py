@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import fluidnerf
+from conftest import TR_METHOD, TR_OPTIONS
 
 # The grid field with few rays and samples: a run of a second or two.
 FAST_METHOD = {"name": "fast", "train": {"rays_per_image": 64, "coarse_samples": 16}}
@@ -905,6 +906,129 @@ def test_scoring_on_held_out_cameras_refuses_what_it_cannot_score(static_scene, 
         run.score_held_out(supersample=65)
     with pytest.raises(TypeError, match="use_volume: expected True or False"):
         run.score_held_out(use_volume="yes")
+
+
+@pytest.fixture(scope="module")
+def stopped_tr_run(tr_holdout_scene, tmp_path_factory) -> fluidnerf.Run:
+    """A time-resolved run of ``tr_holdout_scene`` stopped in its first window: it trained
+    t = 14 and 14.5, not 15 and 15.5."""
+
+    def stop(event: dict) -> bool | None:
+        first_window = event["kind"] == "iteration" and event["window"] == 0
+        return False if first_window and event["iteration"] == 3 else None
+
+    out = tmp_path_factory.mktemp("stopped") / "run"
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="stopped before it reached t = 15, 15.5"):
+        run = fluidnerf.reconstruct(
+            tr_holdout_scene, TR_METHOD, out, callback=stop, progress=False, **TR_OPTIONS
+        )
+    assert run.report["not_reached"] == [15.0, 15.5]
+    return run
+
+
+def _eval(cli: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([cli, "eval", *args, "--no-regions"], capture_output=True, text=True)
+
+
+def test_a_stopped_time_resolved_run_is_not_scored_at_instants_it_never_trained(
+    stopped_tr_run, cli, tmp_path
+):
+    """A time-resolved run stopped before its last instants was scored on the held-out frames
+    there too, through its field held at the last instant it trained or, with
+    ``use_volume=True``, the volume nearest in time, where ``fluidnerf eval`` refuses it. Both
+    refuse it now, with one message naming the instant and how to continue the run."""
+    refusal = (
+        "time 15 was never trained: the run was stopped before it reached t = 15, 15.5 (its windows trained "
+        '14 … 14.5); continue it with `reconstruct --resume` (`overwrite="resume"` from Python)'
+    )
+    for use_volume in ([], ["--use-volume"]):
+        out = _eval(cli, str(stopped_tr_run.path), "--json", str(tmp_path / "m.json"), *use_volume)
+        assert out.returncode != 0 and refusal in out.stderr, out.stderr
+    frame = f"{stopped_tr_run.path}: the scene's held-out frame images/cam004_t02.png: {refusal}"
+    for use_volume in (False, True):
+        with pytest.raises(fluidnerf.FluidNerfError, match=re.escape(frame)):
+            stopped_tr_run.score_held_out(use_volume=use_volume)
+
+
+def test_a_time_resolved_run_is_refused_a_scene_without_times_as_eval_refuses_it(
+    stopped_tr_run, static_scene, cli, tmp_path
+):
+    """A time-resolved run scored against a static scene (frames without a time) gave numbers,
+    its field at its first instant, where ``fluidnerf eval`` refuses it; the scene not being the
+    run's own went unsaid, where eval warns of it."""
+    out = _eval(
+        cli, str(stopped_tr_run.path), "--scene", str(static_scene.root), "--json", str(tmp_path / "m.json")
+    )
+    refusal = "has no time, but the run is time-resolved (instants 14 … 14.5)"
+    assert out.returncode != 0 and refusal in out.stderr, out.stderr
+    for use_volume in (False, True):
+        with pytest.warns(fluidnerf.FluidNerfWarning) as caught:
+            with pytest.raises(fluidnerf.FluidNerfError) as refused:
+                stopped_tr_run.score_held_out(static_scene, use_volume=use_volume)
+        frame = f"{stopped_tr_run.path}: the scene's held-out frame images/cam003.png {refusal}"
+        assert frame in str(refused.value)
+        other = f"was made from the scene {stopped_tr_run.config['scene']}, not {static_scene.root}"
+        assert [w.filename for w in caught] == [__file__]
+        assert other in str(caught[0].message) and str(caught[0].message) in out.stderr
+
+
+def test_a_run_scored_against_another_scene_or_box_is_warned_of_as_eval_warns(static_scene, cli, tmp_path):
+    """A run scored against another scene than its own, whose box is not the run's, was scored
+    without a word, where ``fluidnerf eval`` warns of both. The same warnings are issued, at the
+    caller's line, and the rows are eval's."""
+    run = fluidnerf.reconstruct(
+        static_scene, "asart", tmp_path / "run", resolution=8, stopping={"max_iterations": 2}, progress=False
+    )
+    other = tmp_path / "other"
+    shutil.copytree(static_scene.root, other)
+    transforms = json.loads((other / "transforms.json").read_text())
+    transforms["aabb"] = [[-25.0, -20.0, -20.0], [25.0, 20.0, 20.0]]
+    (other / "transforms.json").write_text(json.dumps(transforms))
+    with pytest.warns(fluidnerf.FluidNerfWarning) as caught:
+        rows = run.score_held_out(other)
+    out = _eval(cli, str(run.path), "--scene", str(other), "--json", str(tmp_path / "m.json"))
+    assert out.returncode == 0, out.stderr
+    assert rows == json.loads((tmp_path / "m.json").read_text())["reprojection"]
+    messages = [str(w.message) for w in caught]
+    assert len(messages) == 2 and [w.filename for w in caught] == [__file__] * 2
+    assert (
+        f"{run.path} was made from the scene {static_scene.root}, not {other}; scored against this one"
+        in messages
+    )
+    box = f"the run in {run.path} fills the box [-20, -20, -20] .. [20, 20, 20], not the scene's [-25, -20, -20]"
+    assert any(m.startswith(box) for m in messages), messages
+    assert all(m in out.stderr for m in messages), out.stderr
+
+
+def test_a_time_resolved_runs_volumes_are_scored_at_their_own_instants_only(tr_holdout_scene, cli, tmp_path):
+    """With ``use_volume=True`` a held-out frame was scored against the volume nearest its
+    time, another instant's where the run wrote none at its own. Each frame is scored against
+    the volume of its instant, as ``fluidnerf eval --use-volume`` scores it, and a frame at an
+    instant without a volume is refused, naming it; the field is sampled at any trained time."""
+    run = fluidnerf.reconstruct(tr_holdout_scene, TR_METHOD, tmp_path / "run", progress=False, **TR_OPTIONS)
+    rows = run.score_held_out(use_volume=True)
+    out = _eval(cli, str(run.path), "--use-volume", "--json", str(tmp_path / "m.json"))
+    assert out.returncode == 0, out.stderr
+    assert rows == json.loads((tmp_path / "m.json").read_text())["reprojection"]
+    assert [r["time"] for r in rows] == [14.0, 14.5, 15.0, 15.5]
+    # The held-out frame of t = 14.5 moved to t = 14.25, where the run wrote no volume.
+    other = tmp_path / "other"
+    shutil.copytree(tr_holdout_scene.root, other)
+    transforms = json.loads((other / "transforms.json").read_text())
+    (moved,) = [f for f in transforms["frames"] if f.get("holdout") and f["time"] == 14.5]
+    moved["time"] = 14.25
+    (other / "transforms.json").write_text(json.dumps(transforms))
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="was made from the scene"):
+        with pytest.raises(
+            fluidnerf.FluidNerfError,
+            match=re.escape(
+                f"{run.path}: the run wrote no volume at t = 14.25, the time of the scene's held-out frame "
+                "images/cam004_t01.png (it wrote them at t = 14, 14.5, 15, 15.5); score its trained field instead"
+            ),
+        ):
+            run.score_held_out(other, use_volume=True)
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="was made from the scene"):
+        assert [r["time"] for r in run.score_held_out(other)] == [14.0, 14.25, 15.0, 15.5]
 
 
 def test_a_run_opened_from_a_relative_folder_stays_that_run_after_a_change_of_folder(

@@ -9,10 +9,47 @@
 use std::path::{Path, PathBuf};
 
 use fluidnerf_core::num;
-use fluidnerf_core::{Aabb, ScalarField, Volume};
+use fluidnerf_core::{Aabb, ScalarField, Scene, Volume};
 use fluidnerf_neural::trained::ModelRecord;
 
 use crate::{Family, PipelineError, RunConfig, RunDir, RunKind, RunReport};
+
+/// The folder of the scene at `path` (the folder or its `transforms.json`), resolved to one
+/// spelling; None when it does not exist.
+pub fn scene_folder(path: &Path) -> Option<PathBuf> {
+    let folder = if path.is_file() { path.parent().unwrap_or(path) } else { path };
+    std::fs::canonicalize(folder).ok()
+}
+
+/// The warning for the run in `dir`, made from the scene `made_from` (as its `config.json`
+/// records it), used with the scene `given` (`how` says how): a run of one scene with the
+/// cameras, box or truth of another is seldom what was meant. None when the two are one scene,
+/// or the recorded one is gone.
+pub fn other_scene_note(dir: &Path, made_from: &Path, given: &Path, how: &str) -> Option<String> {
+    let recorded = scene_folder(made_from);
+    (recorded.is_some() && recorded != scene_folder(given)).then(|| {
+        format!("{} was made from the scene {}, not {}; {how}", dir.display(), made_from.display(), given.display())
+    })
+}
+
+/// The warning for `what` (a run, a volume file, the truth) filling `aabb`, used with `scene`
+/// whose box is another: what is scored or rendered then is not what the scene's cameras saw
+/// (`consequence` says how). A `.npy` fills the scene's box by definition; a `.vti` or `.raw`
+/// and a run record their own. None when the boxes agree, up to the last bits in which a box
+/// read back from a file's origin and spacing may differ.
+pub fn other_box_note(what: &str, aabb: &Aabb, scene: &Scene, consequence: &str) -> Option<String> {
+    let tolerance = 1e-9 * scene.aabb.size().max_element();
+    let off = (aabb.min - scene.aabb.min).abs().max((aabb.max - scene.aabb.max).abs()).max_element();
+    (off > tolerance).then(|| {
+        format!(
+            "{what} fills the box {} .. {}, not the scene's {} .. {}: {consequence}",
+            num(aabb.min.to_array()),
+            num(aabb.max.to_array()),
+            num(scene.aabb.min.to_array()),
+            num(scene.aabb.max.to_array())
+        )
+    })
+}
 
 /// The instants a time-resolved run's field stands for ([`LoadedRun::time_span`]).
 #[derive(Clone, Debug, PartialEq)]

@@ -527,15 +527,21 @@ impl PyRun {
     /// (`fluidnerf_pipeline::score::score_held_out`: each image as the run fitted the others,
     /// divided by the gain the run recorded for it, against the result rendered from its camera
     /// with `supersample` × `supersample` rays per pixel; a neural run's trained field, or with
-    /// `use_volume` the volume it wrote, as `eval --use-volume`); returns the rows as JSON text.
-    #[pyo3(signature = (scene, supersample=2, use_volume=false))]
+    /// `use_volume` the volume it wrote of the frame's instant, as `eval --use-volume`); returns
+    /// the rows as JSON text. The run is first checked against the scene as eval checks it
+    /// (`fluidnerf_pipeline::score::check_run_on_scene`): `warn(message)` is called with each
+    /// warning as it arises (an exception it raises is raised), and a held-out frame the run
+    /// cannot be scored at is refused.
+    #[pyo3(signature = (scene, supersample=2, use_volume=false, warn=None))]
     fn score_held_out(
         &self,
         py: Python<'_>,
         scene: &PyScene,
         supersample: usize,
         use_volume: bool,
+        warn: Option<PyObject>,
     ) -> PyResult<String> {
+        use fluidnerf_pipeline::score::{check_run_on_scene, volume_at};
         self.check_unchanged("score_held_out")?;
         let scene = scene.require_saved("score_held_out")?.clone();
         let max = fluidnerf_core::render::MAX_SUPERSAMPLE;
@@ -550,6 +556,23 @@ impl PyRun {
                 scene.root.display()
             )));
         }
+        let held: Vec<(Option<f64>, String)> = scene
+            .holdout_frames()
+            .map(|(_, f)| (f.time, format!("the scene's held-out frame {}", f.file_path.display())))
+            .collect();
+        // Warned of with the GIL held, as they arise: one a warnings filter turns into an error
+        // stops the call there.
+        let mut warned: PyResult<()> = Ok(());
+        let checked = guard(|| {
+            check_run_on_scene(&self.run, &scene, use_volume, held.iter().cloned(), |message| {
+                if let (Ok(()), Some(w)) = (&warned, &warn) {
+                    warned = w.call1(py, (message,)).map(drop);
+                }
+            })
+            .map_err(|e| err(e.to_string()))
+        });
+        warned?;
+        checked?;
         let gains = match &self.run.report {
             Some(report) => fluidnerf_pipeline::score::recorded_gains(report, &self.run.dir.join("report.json"))
                 .map_err(|e| err(e.to_string()))?,
@@ -559,19 +582,21 @@ impl PyRun {
         let scores: Vec<fluidnerf_metrics::ReprojectionMetrics> = py.allow_threads(|| {
             guard(|| {
                 let scored = if self.run.kind == RunKind::Volume || use_volume {
-                    // A run of one volume per instant: the volume nearest the frame's time.
                     let volumes = self.run.volumes().map_err(|e| err(e.to_string()))?;
-                    if volumes.is_empty() {
-                        return Err(err(format!("{}: holds no volume to score", self.run.dir.display())));
+                    // Each held-out frame's volume is found before any is rendered: the
+                    // scoring gives the rendering the frame's time only, and cannot refuse.
+                    for (time, what) in &held {
+                        volume_at(&self.run.dir, &volumes, *time, what).map_err(|e| err(e.to_string()))?;
                     }
-                    let nearest = |time: Option<f64>| -> &dyn ScalarField {
-                        let distance = |v: &&(Option<f64>, fluidnerf_core::Volume)| {
-                            (v.0.unwrap_or(0.0) - time.unwrap_or(0.0)).abs()
-                        };
-                        let closest = volumes.iter().min_by(|a, b| distance(a).total_cmp(&distance(b)));
-                        closest.map_or(&volumes[0].1, |v| &v.1)
+                    let first = &volumes
+                        .first()
+                        .ok_or_else(|| err(format!("{}: holds no volume to score", self.run.dir.display())))?
+                        .1;
+                    // Every held-out frame's time was matched above.
+                    let at = |time: Option<f64>| -> &dyn ScalarField {
+                        volume_at(&self.run.dir, &volumes, time, "").unwrap_or(first)
                     };
-                    fluidnerf_pipeline::score::score_held_out(&scene, &gains, nearest, &options, || {})
+                    fluidnerf_pipeline::score::score_held_out(&scene, &gains, at, &options, || {})
                 } else {
                     if self.field.get().is_none() {
                         let _ = self.field.set(self.run.field().map_err(|e| err(e.to_string()))?);

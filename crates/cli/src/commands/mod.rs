@@ -126,48 +126,34 @@ pub(crate) fn recorded_scene(recon: &std::path::Path) -> anyhow::Result<Option<s
 }
 
 /// The folder of the scene at `path` (the folder or its `transforms.json`), resolved to one
-/// spelling; None when it does not exist.
+/// spelling; None when it does not exist ([`fluidnerf_pipeline::load::scene_folder`]).
 pub(crate) fn scene_folder(path: &std::path::Path) -> Option<std::path::PathBuf> {
-    let folder = if path.is_file() { path.parent().unwrap_or(path) } else { path };
-    std::fs::canonicalize(folder).ok()
+    fluidnerf_pipeline::load::scene_folder(path)
 }
 
-/// Warns that `what` (a run, a volume file, the truth) fills `aabb`, not the scene's box: what
-/// is scored or rendered then is not what the scene's cameras saw (`consequence` says how). A
-/// `.npy` fills the scene's box by definition; a `.vti` or `.raw` and a run record their own.
+/// Warns that `what` (a run, a volume file, the truth) fills `aabb`, not the scene's box
+/// ([`fluidnerf_pipeline::load::other_box_note`]; `consequence` says what follows).
 pub(crate) fn warn_of_other_box(
     what: &str,
     aabb: &fluidnerf_core::Aabb,
     scene: &fluidnerf_core::Scene,
     consequence: &str,
 ) {
-    // A box read back from a file's origin and spacing may differ from the scene's in its last
-    // bits.
-    let tolerance = 1e-9 * scene.aabb.size().max_element();
-    let off = (aabb.min - scene.aabb.min).abs().max((aabb.max - scene.aabb.max).abs()).max_element();
-    if off > tolerance {
-        log::warn!(
-            "{what} fills the box {} .. {}, not the scene's {} .. {}: {consequence}",
-            fluidnerf_core::num(aabb.min.to_array()),
-            fluidnerf_core::num(aabb.max.to_array()),
-            fluidnerf_core::num(scene.aabb.min.to_array()),
-            fluidnerf_core::num(scene.aabb.max.to_array())
-        );
+    if let Some(note) = fluidnerf_pipeline::load::other_box_note(what, aabb, scene, consequence) {
+        log::warn!("{note}");
     }
 }
 
-/// Warns that the run in `dir`, made from the scene `made_from` (as its `config.json` records
-/// it), is used with the scene `given` (`how` says how): a run of one scene with the cameras,
-/// box or truth of another is seldom what was meant.
+/// Warns that the run in `dir`, made from the scene `made_from`, is used with the scene `given`
+/// ([`fluidnerf_pipeline::load::other_scene_note`]; `how` says how).
 pub(crate) fn warn_of_other_scene(
     dir: &std::path::Path,
     made_from: &std::path::Path,
     given: &std::path::Path,
     how: &str,
 ) {
-    let recorded = scene_folder(made_from);
-    if recorded.is_some() && recorded != scene_folder(given) {
-        log::warn!("{} was made from the scene {}, not {}; {how}", dir.display(), made_from.display(), given.display());
+    if let Some(note) = fluidnerf_pipeline::load::other_scene_note(dir, made_from, given, how) {
+        log::warn!("{note}");
     }
 }
 
