@@ -7,6 +7,7 @@ import os
 import resource
 import shutil
 import signal
+import subprocess
 import threading
 import time
 import warnings
@@ -558,6 +559,40 @@ def test_synth_records_the_preprocessing_its_images_need(tmp_path):
         assert f["file_path"].endswith(".jpg")
         for b in f["background"]:
             assert (tmp_path / "real" / b).is_file()
+
+
+def test_synth_writes_the_scene_and_its_records_as_the_command_writes_them(tmp_path, cli):
+    """Python's synth wrote no ``preview.png``, and a ``synth.json`` without ``camera_gains``
+    (the one record of a real-like recording's true gains), ``counts``, ``phantom_note`` and
+    ``seconds``. The same preset and seed write the same files and the same records (but for
+    the time taken)."""
+    fluidnerf.synth(
+        tmp_path / "py",
+        "real-like-small",
+        seed=3,
+        resolution=12,
+        lens={"resolution": [12, 12]},
+        rig={"layout": {"count": 4}, "holdout": [1]},
+    )
+    command = ["synth", "-p", "real-like-small", "--seed", "3", "--resolution", "12", "--pixels", "12"]
+    command += ["--cameras", "4", "--holdout", "1", "-o", str(tmp_path / "cli")]
+    done = subprocess.run([cli, "-q", *command], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+
+    def files(root: Path) -> list[str]:
+        return sorted(str(p.relative_to(root)) for p in root.rglob("*") if p.is_file())
+
+    assert files(tmp_path / "py") == files(tmp_path / "cli")
+    assert "preview.png" in files(tmp_path / "py") and "background/cam000_b0.jpg" in files(tmp_path / "py")
+    py, made = (json.loads((tmp_path / f / "synth.json").read_text()) for f in ("py", "cli"))
+    assert list(py) == list(made)
+    assert sorted(py["camera_gains"]) == ["cam000", "cam001", "cam002", "cam003"]
+
+    def untimed(record: dict) -> dict:
+        stats = {k: v for k, v in record["stats"].items() if not k.endswith("seconds")}
+        return {**record, "seconds": None, "stats": stats}
+
+    assert untimed(py) == untimed(made)
 
 
 def test_a_scene_is_read_through_its_flat_fields(tmp_path):

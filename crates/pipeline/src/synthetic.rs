@@ -11,8 +11,9 @@
 //! - The phantoms with a known flow direction record it (`flow_axis`), so that reports place
 //!   the laminar, transition and turbulent thirds where the flow enters and leaves.
 //!
-//! The caller owns the folder: it checks that nothing is overwritten without being asked and
-//! writes its own record of the settings (`synth.json`).
+//! The caller owns the folder: it checks that nothing is overwritten without being asked, then
+//! writes the scene ([`write_synthesis`]) and the records beside it ([`write_records`]:
+//! `preview.png` and `synth.json`).
 
 use std::path::{Path, PathBuf};
 
@@ -134,6 +135,77 @@ pub fn write_synthesis(syn: &Synthesis, folder: &Path) -> Result<Scene, IoError>
         }
     }
     Ok(scene)
+}
+
+/// Writes the records of `syn` beside its scene in `folder` (after [`write_synthesis`]), as
+/// every front end writes them: `preview.png`, a central slice of the truth (of the middle
+/// time) beside one camera's image of it, and then `synth.json`, how the scene was made: the
+/// settings (to make it again from, `synth --config`), the preset they started from (`preset`,
+/// None for settings read from a file), the intensity scale and what the counts are, a
+/// real-like recording's true camera gains (recorded nowhere else), a CFD phantom's note, the
+/// work's statistics and the `seconds` the synthesis took.
+pub fn write_records(syn: &Synthesis, folder: &Path, preset: Option<&str>, seconds: f64) -> Result<(), PipelineError> {
+    let preview = folder.join("preview.png");
+    write_preview(&preview, syn)
+        .map_err(|e| PipelineError::file(&preview, format!("cannot write the preview: {e}")))?;
+    let settings = &syn.settings;
+    let record = serde_json::json!({
+        "fluidnerf_version": env!("CARGO_PKG_VERSION"),
+        "command": "synth",
+        "preset": preset,
+        "seed": settings.seed,
+        "intensity_scale": syn.intensity_scale,
+        "counts": if syn.real.is_some() {
+            "linear pixel (srgb-decoded, 0..255) - background ≈ camera_gains[c] × intensity_scale × ∫E ds (mm)"
+        } else {
+            "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)"
+        },
+        "camera_gains": syn.real.as_ref().map(|r| {
+            syn.cameras.iter().zip(&r.gains).map(|(c, g)| (c.name.clone(), *g)).collect::<std::collections::BTreeMap<_, _>>()
+        }),
+        "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
+        "settings": settings,
+        "stats": syn.stats,
+        "seconds": seconds,
+    });
+    let path = folder.join("synth.json");
+    let text = serde_json::to_string_pretty(&record).map_err(|e| PipelineError::file(&path, e))? + "\n";
+    fluidnerf_io::atomic_write(&path, |w| w.write_all(text.as_bytes()))?;
+    Ok(())
+}
+
+/// Draws `preview.png` of `syn` at `path`: the truth's central z slice at the middle time step,
+/// beside the image of the first frame of that time (its counts).
+fn write_preview(path: &Path, syn: &Synthesis) -> Result<(), fluidnerf_viz::VizError> {
+    use fluidnerf_viz::{slice, write_panel_groups_png, Axis, Panel, PanelGroup, PanelStyle};
+    let (time, truth) = &syn.truth[syn.truth.len() / 2];
+    let z = Axis::Z.position_at(&truth.aabb, 0.5);
+    let mut truth_panel = slice(truth, Axis::Z, z, "mm")?;
+    if let Some(t) = time {
+        let label = if syn.settings.phantom.kind.cfd_case().is_some() { "step" } else { "t*" };
+        truth_panel.title = format!("truth, {}, {label} = {t}", truth_panel.title);
+    } else {
+        truth_panel.title = format!("truth, {}", truth_panel.title);
+    }
+    let frame_index = syn.frames.iter().position(|f| f.time == *time).unwrap_or(0);
+    let frame = &syn.frames[frame_index];
+    let image_panel =
+        Panel::from_image(&frame.counts).with_title(format!("{} (counts)", syn.cameras[frame.camera].name));
+    let groups = [
+        PanelGroup {
+            panels: vec![truth_panel],
+            style: PanelStyle { colorbar_label: "E".into(), ..Default::default() },
+        },
+        PanelGroup {
+            panels: vec![image_panel],
+            style: PanelStyle {
+                colormap: fluidnerf_viz::Colormap::Gray,
+                colorbar_label: "counts".into(),
+                ..Default::default()
+            },
+        },
+    ];
+    write_panel_groups_png(path, &groups)
 }
 
 /// The images, background frames, flat-field frames and truth volumes that the `transforms.json` of a scene

@@ -346,7 +346,8 @@ fn shape_text(shape: &[usize]) -> String {
 /// Synthesises the scene of preset `preset` (settings overridden by the JSON object
 /// `overrides`, merged key by key into the preset's settings; see `merge`) into `folder` as the
 /// `synth` command writes it (`fluidnerf_pipeline::synthetic`): images, ground truth
-/// (`truth/*.npy`), `transforms.json`, and `synth.json`. Returns the scene.
+/// (`truth/*.npy`), `transforms.json`, and its records `preview.png` and `synth.json`. Returns
+/// the scene.
 #[pyfunction]
 #[pyo3(signature = (folder, preset, overrides="{}", force=false))]
 pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, force: bool) -> PyResult<PyScene> {
@@ -422,24 +423,27 @@ pub fn synth(py: Python<'_>, folder: PathBuf, preset: &str, overrides: &str, for
     let mut signals = Callback::new(None);
     let scene = py.allow_threads(|| {
         guard(|| {
+            let started = std::time::Instant::now();
             let syn = fluidnerf_synth::generate(&settings, volume, |_| signals.check_signals());
             if let Some(e) = signals.error.take() {
                 return Err(e);
             }
             let syn = syn.map_err(|e| err(e.to_string()))?;
+            let seconds = started.elapsed().as_secs_f64();
             let io = |e: fluidnerf_io::IoError| err(e.to_string());
             fluidnerf_pipeline::synthetic::write_synthesis(&syn, &folder).map_err(io)?;
-            let record = serde_json::json!({
-                "fluidnerf_version": env!("CARGO_PKG_VERSION"),
-                "command": "synth",
-                "preset": preset,
-                "seed": settings.seed,
-                "intensity_scale": syn.intensity_scale,
-                "settings": settings,
-                "stats": syn.stats,
-            });
-            let text = serde_json::to_string_pretty(&record).map_err(|e| err(e.to_string()))? + "\n";
-            fluidnerf_io::atomic_write(&folder.join("synth.json"), |w| w.write_all(text.as_bytes())).map_err(io)?;
+            // The records follow the scene's files, as `fluidnerf synth` writes them. When they
+            // cannot be written (a full disk), the scene file goes again: a folder synth failed
+            // to finish must not load as a scene.
+            if let Err(e) = fluidnerf_pipeline::synthetic::write_records(&syn, &folder, Some(preset), seconds) {
+                let scene_file = folder.join(fluidnerf_io::scene::SCENE_FILE);
+                let _ = std::fs::remove_file(&scene_file);
+                return Err(err(format!(
+                    "{e}; the scene in {} is unfinished, and its {} was removed",
+                    folder.display(),
+                    fluidnerf_io::scene::SCENE_FILE
+                )));
+            }
             fluidnerf_io::scene::load_scene(&folder).map_err(io)
         })
     })?;

@@ -4,14 +4,14 @@
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use fluidnerf_core::glam::DVec3;
 use fluidnerf_core::Aabb;
 use fluidnerf_synth::{
-    generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings, Synthesis,
+    generate, preset, presets, ImageModel, Layout, PhantomKind, PinholeSettings, Subset, SynthSettings,
     ThinLensSettings, DEFAULT_PRESET,
 };
 
@@ -547,39 +547,6 @@ fn apply_overrides(args: &Args, s: &mut SynthSettings) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn write_preview(path: &Path, syn: &Synthesis) -> anyhow::Result<()> {
-    use fluidnerf_viz::{slice, write_panel_groups_png, Axis, Panel, PanelGroup, PanelStyle};
-    let (time, truth) = &syn.truth[syn.truth.len() / 2];
-    let z = Axis::Z.position_at(&truth.aabb, 0.5);
-    let mut truth_panel = slice(truth, Axis::Z, z, "mm")?;
-    if let Some(t) = time {
-        let label = if syn.settings.phantom.kind.cfd_case().is_some() { "step" } else { "t*" };
-        truth_panel.title = format!("truth, {}, {label} = {t}", truth_panel.title);
-    } else {
-        truth_panel.title = format!("truth, {}", truth_panel.title);
-    }
-    let frame_index = syn.frames.iter().position(|f| f.time == *time).unwrap_or(0);
-    let frame = &syn.frames[frame_index];
-    let image_panel =
-        Panel::from_image(&frame.counts).with_title(format!("{} (counts)", syn.cameras[frame.camera].name));
-    let groups = [
-        PanelGroup {
-            panels: vec![truth_panel],
-            style: PanelStyle { colorbar_label: "E".into(), ..Default::default() },
-        },
-        PanelGroup {
-            panels: vec![image_panel],
-            style: PanelStyle {
-                colormap: fluidnerf_viz::Colormap::Gray,
-                colorbar_label: "counts".into(),
-                ..Default::default()
-            },
-        },
-    ];
-    write_panel_groups_png(path, &groups)?;
-    Ok(())
-}
-
 /// The settings `args` ask for: the --config file or the preset, with the options applied,
 /// validated.
 pub(crate) fn resolve(args: &Args) -> anyhow::Result<SynthSettings> {
@@ -788,37 +755,11 @@ pub(crate) fn synthesise(args: &Args) -> anyhow::Result<String> {
     fluidnerf_pipeline::synthetic::write_synthesis(&syn, &out)
         .with_context(|| format!("cannot write the scene into {}", out.display()))
         .map_err(clear)?;
-    // The scene's own record follows its files. When it cannot be written (a full disk), the
+    // The scene's own records follow its files. When they cannot be written (a full disk), the
     // scene file goes again: a folder synth failed to finish must not load as a scene.
-    let finish = || -> anyhow::Result<()> {
-        let preview = out.join("preview.png");
-        write_preview(&preview, &syn).with_context(|| format!("cannot write {}", preview.display()))?;
-        let record = serde_json::json!({
-            "fluidnerf_version": env!("CARGO_PKG_VERSION"),
-            "command": "synth",
-            "preset": if args.config.is_some() { None } else { Some(&args.preset) },
-            "seed": settings.seed,
-            "intensity_scale": syn.intensity_scale,
-            "counts": if syn.real.is_some() {
-                "linear pixel (srgb-decoded, 0..255) - background ≈ camera_gains[c] × intensity_scale × ∫E ds (mm)"
-            } else {
-                "counts - sensor.dark_offset ≈ intensity_scale × ∫E ds (mm)"
-            },
-            "camera_gains": syn.real.as_ref().map(|r| {
-                syn.cameras.iter().zip(&r.gains).map(|(c, g)| (c.name.clone(), *g)).collect::<std::collections::BTreeMap<_, _>>()
-            }),
-            "phantom_note": settings.phantom.kind.cfd_case().map(fluidnerf_synth::phantom::cfd::note),
-            "settings": settings,
-            "stats": syn.stats,
-            "seconds": elapsed,
-        });
-        let settings_file = out.join("synth.json");
-        let text = serde_json::to_string_pretty(&record)? + "\n";
-        fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(text.as_bytes()))
-            .with_context(|| format!("cannot write {}", settings_file.display()))?;
-        Ok(())
-    };
-    if let Err(e) = finish() {
+    let preset = if args.config.is_some() { None } else { Some(args.preset.as_str()) };
+    if let Err(e) = fluidnerf_pipeline::synthetic::write_records(&syn, &out, preset, elapsed) {
+        let e = anyhow::Error::from(e);
         if was_empty {
             return Err(clear(e));
         }
