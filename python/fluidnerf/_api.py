@@ -697,7 +697,11 @@ class Run:
         self._volume: np.ndarray | None = None
 
     def __repr__(self) -> str:
-        r = self.report or {}
+        try:
+            r = self.report or {}
+        except FluidNerfError:
+            # A repr names the object; the refusal is for what is read from it.
+            return f"Run({str(self.path)!r}, kind={self.kind!r}, changed on disk since it was opened)"
         return f"Run({str(self.path)!r}, kind={self.kind!r}, method={r.get('method')!r}, status={r.get('status')!r})"
 
     @property
@@ -712,14 +716,16 @@ class Run:
 
     @property
     def report(self) -> dict | None:
-        """``report.json`` (the typed ``RunReport``) as a dict; None for folders assembled by hand."""
+        """``report.json`` (the typed ``RunReport``) as a dict; None for folders assembled by hand.
+        Read when the run was opened: refused (:class:`FluidNerfError`) once the run's files
+        changed on disk, as :attr:`volume` is."""
         text = self._h.report_json
         return None if text is None else json.loads(text)
 
     @property
     def config(self) -> dict | None:
         """``config.json`` (the ``RunConfig``) as a dict: ``reconstruct(..., config=run.config)``
-        reruns it."""
+        reruns it. Read when the run was opened: refused once the run's files changed on disk."""
         text = self._h.config_json
         return None if text is None else json.loads(text)
 
@@ -737,7 +743,10 @@ class Run:
     @property
     def volume(self) -> np.ndarray:
         """The (first) volume, ``(nz, ny, nx)`` float32, cell-centred, filling :attr:`aabb`.
-        Read once and kept, so read-only: ``run.volume.copy()`` is one to change."""
+        Read once and kept, so read-only: ``run.volume.copy()`` is one to change. Refused
+        (:class:`FluidNerfError`) once the run's files changed on disk: the volume kept is then
+        another run's than the folder's."""
+        self._h.check_unchanged("volume")
         if self._volume is None:
             volume = self._h.volume()
             # Kept and given again: a change in place (`run.volume[v < 0] = 0`, or

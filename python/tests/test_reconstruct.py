@@ -190,6 +190,39 @@ def test_a_run_whose_files_changed_after_it_was_opened_is_refused(static_scene, 
     assert before[0] != pytest.approx(7.0)
 
 
+def test_a_runs_kept_volume_report_and_settings_are_refused_once_the_run_is_replaced(static_scene, tmp_path):
+    """A Run gave the volume it had kept, and the report and settings it had read, of a run
+    that another had since replaced in its folder, while ``volumes()`` refused it: the old
+    run's results were taken for the folder's. Each refuses it now, as ``volumes()`` does; the
+    Run still says which folder it was."""
+    options = {"stopping": {"max_iterations": 3}, "progress": False}
+    fluidnerf.reconstruct(static_scene, "asart", tmp_path / "run", resolution=12, **options)
+    run = fluidnerf.open_run(tmp_path / "run")
+    assert (
+        run.volume.shape == (12, 12, 12)
+        and run.report["method"] == "asart"
+        and run.config["resolution"] == 12
+    )
+    fluidnerf.reconstruct(static_scene, "sart", tmp_path / "run", resolution=8, overwrite="force", **options)
+    changed = "volume.npy has changed on disk since the run was opened; open it again with fluidnerf.open_run"
+    calls = [
+        ("volume", lambda: run.volume),
+        ("report", lambda: run.report),
+        ("config", lambda: run.config),
+        ("report", lambda: run.status),
+        ("volume", run.voxel_centres),
+        ("volumes", run.volumes),
+    ]
+    for what, call in calls:
+        with pytest.raises(
+            fluidnerf.FluidNerfError, match=re.escape(f"{what}: {tmp_path / 'run'}/{changed}")
+        ):
+            call()
+    assert str(tmp_path / "run") in repr(run) and "changed on disk" in repr(run)
+    reopened = fluidnerf.open_run(tmp_path / "run")
+    assert reopened.volume.shape == (8, 8, 8) and reopened.report["method"] == "sart"
+
+
 def test_a_run_that_cannot_be_copied_whole_leaves_no_half_copy(static_scene, tmp_path):
     """A file the copy could not read (here a link to nothing) raised a bare shutil.Error, and
     left the files copied before it at the destination, which a second attempt then refused as
@@ -617,7 +650,7 @@ def test_a_scene_built_from_arrays_is_reconstructed_in_its_run_folder(static_sce
         ],
         check=True,
     )
-    np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "cli").volume, run.volume)
+    np.testing.assert_array_equal(fluidnerf.open_run(tmp_path / "cli").volume, first)
     # A copy reads its own copy of the scene: it named the original's, so it broke when the
     # original was removed.
     copy = run.save(tmp_path / "copy")

@@ -397,15 +397,16 @@ pub struct PyRun {
     /// `field` works with the GIL released, and a second thread calling it meanwhile was
     /// refused with pyo3's "RuntimeError: Already borrowed".
     field: std::sync::OnceLock<Box<dyn ScalarField + Send + Sync>>,
-    /// The result files as they were when the run was opened ([`stamps`]): the field is loaded
-    /// once and the volumes read on each call, so a run whose files changed since mixed the two.
+    /// The run's files as they were when the run was opened ([`stamps`]): the field, report and
+    /// configuration are read once and the volumes on each call, so a run whose files changed
+    /// since mixed the old run's with the new.
     stamps: Vec<(PathBuf, Option<(u64, std::time::SystemTime)>)>,
 }
 
-/// The result files of the run in `folder`, each with its length and modification time (None:
-/// absent).
+/// The result files, report and configuration of the run in `folder`, each with its length and
+/// modification time (None: absent).
 fn stamps(folder: &std::path::Path) -> Vec<(PathBuf, Option<(u64, std::time::SystemTime)>)> {
-    ["volume.npy", "weights.safetensors", "model.json", "temporal.json"]
+    ["volume.npy", "weights.safetensors", "model.json", "temporal.json", "report.json", "config.json"]
         .iter()
         .map(|name| {
             let path = folder.join(name);
@@ -413,33 +414,6 @@ fn stamps(folder: &std::path::Path) -> Vec<(PathBuf, Option<(u64, std::time::Sys
             (path, stamp)
         })
         .collect()
-}
-
-impl PyRun {
-    /// Refuses `what` when a result file has changed (or come or gone) since the run was opened.
-    fn check_unchanged(&self, what: &str) -> PyResult<()> {
-        if !self.run.dir.is_dir() {
-            return Err(err(format!(
-                "{what}: the run folder {} no longer exists (moved or removed since the run was opened)",
-                self.run.dir.display()
-            )));
-        }
-        let now = stamps(&self.run.dir);
-        match self.stamps.iter().zip(&now).find(|(then, now)| then.1 != now.1) {
-            Some(((path, then), (_, now))) => {
-                let how = match (then, now) {
-                    (Some(_), None) => "has been removed",
-                    (None, Some(_)) => "has appeared",
-                    _ => "has changed on disk",
-                };
-                Err(err(format!(
-                    "{what}: {} {how} since the run was opened; open it again with fluidnerf.open_run",
-                    path.display()
-                )))
-            }
-            None => Ok(()),
-        }
-    }
 }
 
 /// Opens the run in `folder`; `aabb` `(2, 3)` places a bare `volume.npy` that has no report.
@@ -474,6 +448,32 @@ pub fn open_run(folder: PathBuf, aabb: Option<PyReadonlyArray2<'_, f64>>) -> PyR
 
 #[pymethods]
 impl PyRun {
+    /// Refuses `what` when a file of the run ([`stamps`]) has changed (or come or gone) since
+    /// the run was opened: what it read then is another run's than the folder's.
+    fn check_unchanged(&self, what: &str) -> PyResult<()> {
+        if !self.run.dir.is_dir() {
+            return Err(err(format!(
+                "{what}: the run folder {} no longer exists (moved or removed since the run was opened)",
+                self.run.dir.display()
+            )));
+        }
+        let now = stamps(&self.run.dir);
+        match self.stamps.iter().zip(&now).find(|(then, now)| then.1 != now.1) {
+            Some(((path, then), (_, now))) => {
+                let how = match (then, now) {
+                    (Some(_), None) => "has been removed",
+                    (None, Some(_)) => "has appeared",
+                    _ => "has changed on disk",
+                };
+                Err(err(format!(
+                    "{what}: {} {how} since the run was opened; open it again with fluidnerf.open_run",
+                    path.display()
+                )))
+            }
+            None => Ok(()),
+        }
+    }
+
     /// The run folder.
     #[getter]
     fn path(&self) -> PathBuf {
@@ -490,15 +490,19 @@ impl PyRun {
         }
     }
 
-    /// `report.json` as JSON text (None for folders not written by `reconstruct`).
+    /// `report.json` as JSON text, as read when the run was opened (None for folders not
+    /// written by `reconstruct`); refused once the run's files have changed.
     #[getter]
     fn report_json(&self) -> PyResult<Option<String>> {
+        self.check_unchanged("report")?;
         self.run.report.as_ref().map(to_json).transpose()
     }
 
-    /// `config.json` as JSON text (None for folders not written by `reconstruct`).
+    /// `config.json` as JSON text, as read when the run was opened (None for folders not
+    /// written by `reconstruct`); refused once the run's files have changed.
     #[getter]
     fn config_json(&self) -> PyResult<Option<String>> {
+        self.check_unchanged("config")?;
         self.run.config.as_ref().map(to_json).transpose()
     }
 
