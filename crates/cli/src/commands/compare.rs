@@ -462,11 +462,8 @@ fn warn_of_other_grids(runs: &[Run], warnings: &mut Vec<String>) {
 /// whole run's, an upper bound.
 fn warn_of_single_points(runs: &[Run], warnings: &mut Vec<String>) {
     // Of run reports (a grid: a curve file's points are what its maker chose to keep).
-    let single: Vec<String> = runs
-        .iter()
-        .filter(|r| r.curve.len() == 1 && r.dims.is_some())
-        .map(|r| r.path.display().to_string())
-        .collect();
+    let single: Vec<String> =
+        runs.iter().filter(|r| r.curve.len() == 1 && r.dims.is_some()).map(|r| r.path.display().to_string()).collect();
     if single.is_empty() {
         return;
     }

@@ -140,8 +140,10 @@ struct Output<'a> {
 
 /// A reconstruction, as the metrics need it.
 enum Recon {
-    /// One volume per truth time step (or one for all).
-    Volumes(Vec<Volume>),
+    /// One volume per truth time step (or one for all), with the step's time; and for a
+    /// time-resolved run scored through its volumes, every volume it wrote with its time, from
+    /// which each held-out frame is drawn at its own instant.
+    Volumes(Vec<(Option<f64>, Volume)>, Option<Vec<(Option<f64>, Volume)>>),
     /// A trained field (static or time-resolved) in world coordinates.
     Field(Box<dyn ScalarField + Send + Sync>),
 }
@@ -151,34 +153,68 @@ impl Recon {
     /// the field sampled at the truth's voxel centres.
     fn volume_for_step(&self, step: usize, truth: &Volume, time: Option<f64>) -> anyhow::Result<Cow<'_, Volume>> {
         Ok(match self {
-            Recon::Volumes(v) => Cow::Borrowed(&v[step.min(v.len() - 1)]),
+            Recon::Volumes(v, _) => Cow::Borrowed(&v[step.min(v.len() - 1)].1),
             Recon::Field(f) => {
                 Cow::Owned(crate::progress::sampled(truth.dims, truth.aabb, f.as_ref(), time.unwrap_or(0.0), 1)?)
             }
         })
     }
 
-    /// The field to render for a frame at `time`, given the truth steps' times.
-    fn field_at(&self, time: Option<f64>, step_times: &[Option<f64>]) -> &dyn ScalarField {
+    /// The field to render for a frame at `time`: the field, the one volume, or the volume of
+    /// that very instant ([`Recon::refuse_frames_without_volume`] has checked there is one).
+    fn field_at(&self, time: Option<f64>) -> &dyn ScalarField {
         match self {
             Recon::Field(f) => f.as_ref(),
-            Recon::Volumes(v) if v.len() == 1 => &v[0],
-            Recon::Volumes(v) => {
-                // The step whose time is nearest the frame's.
-                let t = time.unwrap_or(0.0);
-                let best = step_times
-                    .iter()
-                    .take(v.len())
-                    .enumerate()
-                    .min_by(|a, b| {
-                        let da = (a.1.unwrap_or(0.0) - t).abs();
-                        let db = (b.1.unwrap_or(0.0) - t).abs();
-                        da.total_cmp(&db)
-                    })
-                    .map_or(0, |(i, _)| i);
-                &v[best]
+            Recon::Volumes(v, all) => {
+                let volumes = all.as_deref().unwrap_or(v);
+                if let [(_, only)] = volumes {
+                    return only;
+                }
+                let at = |(t, _): &&(Option<f64>, Volume)| match (t, time) {
+                    (Some(t), Some(time)) => same_time(*t, time),
+                    _ => false,
+                };
+                volumes.iter().find(at).map_or(&volumes[0].1, |(_, v)| v)
             }
         }
+    }
+
+    /// Refuses to reproject a held-out frame of `scene` (those in `holdouts`) at an instant no
+    /// volume holds, when there are several: drawn from the volume of the nearest step, it was
+    /// scored against another instant's field without a word. `run` names the run the volumes
+    /// are of, when they are a run's.
+    fn refuse_frames_without_volume(
+        &self,
+        scene: &Scene,
+        holdouts: &[usize],
+        run: Option<&Path>,
+    ) -> anyhow::Result<()> {
+        let Recon::Volumes(v, all) = self else { return Ok(()) };
+        let volumes = all.as_deref().unwrap_or(v);
+        if volumes.len() < 2 {
+            return Ok(());
+        }
+        for &i in holdouts {
+            let frame = &scene.frames[i];
+            let held = volumes.iter().any(|(t, _)| matches!((t, frame.time), (Some(t), Some(f)) if same_time(*t, f)));
+            if held {
+                continue;
+            }
+            let times: Vec<String> = volumes.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
+            let at = frame.time.map_or("without a time".to_string(), |t| format!("at t = {}", num(t)));
+            let instead = match run {
+                Some(_) => "score the run's trained field instead (leave out --use-volume)",
+                None => "give --no-reprojection, or a volume of that instant",
+            };
+            bail!(
+                "the scene's held-out frame {} ({}) is {at}, and no volume given is of that instant (they are of t = \
+                 {}): it would be drawn from another instant's; {instead}",
+                i,
+                frame.file_path.display(),
+                times.join(", ")
+            );
+        }
+        Ok(())
     }
 }
 
@@ -497,7 +533,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let listed = |times: &[f64]| times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
     let (recon, recon_boxes) = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref(), &step_times)?;
     refuse_truth_apart(&truth, &recon_boxes, args.truth.as_deref(), &scene)?;
-    if let Recon::Volumes(volumes) = &recon {
+    if let Recon::Volumes(volumes, _) = &recon {
         if volumes.len() > 1 && volumes.len() != step_times.len() {
             let steps = if truth.is_empty() { "frame times" } else { "ground-truth time steps" };
             let gaps = if without_truth.is_empty() {
@@ -524,14 +560,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Checked before any scoring: the views rendered for reprojection would hold infinities, and
     // their metrics were written as infinite and NaN.
-    if let (false, Recon::Volumes(volumes)) = (holdouts.is_empty(), &recon) {
-        for (i, v) in volumes.iter().enumerate() {
+    if let (false, Recon::Volumes(volumes, all)) = (holdouts.is_empty(), &recon) {
+        for (i, (_, v)) in all.as_deref().unwrap_or(volumes).iter().enumerate() {
             if let Some(problem) = fluidnerf_core::render::integrals_overflow(v, scene.intensity_scale) {
                 let file = if run_dir.is_some() { &args.recon[0] } else { &args.recon[i] };
                 bail!("{}: reprojected onto the held-out views: {problem}, or give --no-reprojection", file.display());
             }
         }
     }
+    recon.refuse_frames_without_volume(&scene, &holdouts, run_dir.as_deref())?;
     if truth.is_empty() && holdouts.is_empty() {
         bail!(
             "nothing to evaluate: the scene {} has no ground truth and no held-out frames (give --truth)",
@@ -584,7 +621,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.reprojection = fluidnerf_pipeline::score::score_held_out(
             &scene,
             &gains,
-            |time| recon.field_at(time, &step_times),
+            |time| recon.field_at(time),
             &reprojection_options,
             || bar.inc(1),
         )
@@ -719,11 +756,7 @@ fn load_recon(
     if let [dir] = paths {
         if dir.is_dir() {
             let run = fluidnerf_pipeline::load::LoadedRun::open(dir, Some(scene.aabb))?;
-            if let Some(config) = &run.config {
-                super::warn_of_other_scene(dir, &config.scene, &scene.root, "scored against this one");
-            }
             let what = format!("the run in {}", dir.display());
-            super::warn_of_other_box(&what, &run.aabb, scene, "it is zero outside it");
             // A volume given with --truth has no time: a time-resolved run would be scored at
             // time 0 (its first instant, or its first volume), whatever instant the file holds.
             if let (Some(file), Some(span)) = (truth, run.time_span()?) {
@@ -744,41 +777,26 @@ fn load_recon(
                     dir.display()
                 );
             }
+            // The run against the scene, as Python's `score_held_out` checks it: another scene
+            // or box warned of; a time-resolved field repeats its first or last instant outside
+            // them (its volumes may stand for held-out times there), and a stopped run has
+            // neither field nor volumes at the instants it did not reach. One truth without a
+            // time is scored at the frames' times (checked below).
+            let timeless = fluidnerf_pipeline::timeless_truth(scene).is_some();
+            let truth_entries =
+                scene.truth.iter().filter(|_| !timeless).map(|t| (t.time, "truth volume", &t.file_path));
+            let entries = truth_entries.chain(scene.frames.iter().map(|f| (f.time, "frame", &f.file_path)));
+            let entries = entries.map(|(t, what, path)| (t, format!("the scene's {what} {}", path.display())));
+            fluidnerf_pipeline::score::check_run_on_scene(&run, scene, use_volume, entries, |m| log::warn!("{m}"))?;
             let use_volume = use_volume || run.kind == fluidnerf_pipeline::RunKind::Volume;
-            // A time-resolved field repeats its first or last instant outside them (its volumes
-            // may stand for held-out times there), and a stopped run has neither field nor
-            // volumes at the instants it did not reach.
-            if let Some(span) = run.time_span()?.filter(|s| !use_volume || !s.not_reached.is_empty()) {
-                // One truth without a time is scored at the frames' times (checked below).
-                let timeless = fluidnerf_pipeline::timeless_truth(scene).is_some();
-                let truth = scene.truth.iter().filter(|_| !timeless);
-                let times = truth.map(|t| (t.time, "truth volume", &t.file_path));
-                let times = times.chain(scene.frames.iter().map(|f| (f.time, "frame", &f.file_path)));
-                for (time, what, path) in times {
-                    let what = format!("{}: the scene's {what} {}", dir.display(), path.display());
-                    let Some(t) = time else {
-                        bail!(
-                            "{what} has no time, but the run is time-resolved (instants {} … {}), and eval scores \
-                             such a run at each truth volume's time; give the entry its instant's `time`, or export \
-                             an instant with `export --time` and score that volume",
-                            num(span.first),
-                            num(span.last)
-                        );
-                    };
-                    fluidnerf_pipeline::load::sample_time(Some(&span), Some(t), &what)?;
-                }
-                let times = scene.truth.iter().filter_map(|t| t.time);
-                if let Some(note) = span.held_note(times.chain(scene.frames.iter().filter_map(|f| f.time))) {
-                    log::warn!("{}: {note}", dir.display());
-                }
-            }
             if use_volume {
                 let volumes = run.volumes()?;
                 let boxes = vec![(what, run.aabb)];
                 if volumes.iter().all(|(t, _)| t.is_none()) {
-                    return Ok((Recon::Volumes(volumes.into_iter().map(|(_, v)| v).collect()), boxes));
+                    return Ok((Recon::Volumes(volumes, None), boxes));
                 }
-                return Ok((volumes_at_steps(dir, volumes, step_times).map(Recon::Volumes)?, boxes));
+                let steps = volumes_at_steps(dir, &volumes, step_times)?;
+                return Ok((Recon::Volumes(steps, Some(volumes)), boxes));
             }
             return Ok((Recon::Field(run.field()?), vec![(what, run.aabb)]));
         }
@@ -794,13 +812,18 @@ fn load_recon(
     }
     let mut volumes = Vec::with_capacity(paths.len());
     let mut boxes = Vec::with_capacity(paths.len());
-    for p in paths {
+    for (i, p) in paths.iter().enumerate() {
         let volume = read_volume(p, Some(scene.aabb), Some(&scene.units))?;
         super::warn_of_other_box(&p.display().to_string(), &volume.aabb, scene, "the volume is zero outside it");
         boxes.push((p.display().to_string(), volume.aabb));
-        volumes.push(volume);
+        // Several stand each for its time step; one for the instant it records, if any.
+        let time = match paths.len() {
+            1 => recorded_volume_time(p).map(|(_, t)| t),
+            _ => step_times.get(i).copied().flatten(),
+        };
+        volumes.push((time, volume));
     }
-    Ok((Recon::Volumes(volumes), boxes))
+    Ok((Recon::Volumes(volumes, None), boxes))
 }
 
 /// Refuses a ground truth whose box does not overlap a reconstruction's (`boxes`, named): the
@@ -836,40 +859,20 @@ fn refuse_truth_apart(
 }
 
 /// The volumes of the time-resolved run in `dir` (each with its time) that stand for the time
-/// steps `step_times`, in the steps' order: the run writes its series in increasing time, with
-/// volumes at held-out times the scene may have no truth for, so the position of a volume in the
-/// series is not the step it stands for. Refused, naming the time, when a step has no volume.
+/// steps `step_times`, in the steps' order, each with its time: the run writes its series in
+/// increasing time, with volumes at held-out times the scene may have no truth for, so the
+/// position of a volume in the series is not the step it stands for. Refused, naming the time,
+/// when a step has no volume ([`fluidnerf_pipeline::score::volume_at`]).
 fn volumes_at_steps(
     dir: &Path,
-    volumes: Vec<(Option<f64>, Volume)>,
+    volumes: &[(Option<f64>, Volume)],
     step_times: &[Option<f64>],
-) -> anyhow::Result<Vec<Volume>> {
-    let written: Vec<String> = volumes.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
-    let mut out = Vec::with_capacity(step_times.len());
-    for (i, step) in step_times.iter().enumerate() {
-        let Some(t) = step else {
-            bail!(
-                "{}: the scene's time step {} has no time, but the run's volumes are each of one instant ({}); give \
-                 the step its instant's `time`",
-                dir.display(),
-                i + 1,
-                written.join(", ")
-            );
-        };
-        let Some(k) = volumes.iter().position(|(v, _)| v.is_some_and(|v| fluidnerf_core::scene::same_time(v, *t)))
-        else {
-            bail!(
-                "{}: the run wrote no volume at t = {}, the time of the scene's time step {} (it wrote them at t = \
-                 {}); score its trained field instead (leave out --use-volume)",
-                dir.display(),
-                num(*t),
-                i + 1,
-                written.join(", ")
-            );
-        };
-        out.push(volumes[k].1.clone());
-    }
-    Ok(out)
+) -> anyhow::Result<Vec<(Option<f64>, Volume)>> {
+    let at = |(i, &t): (usize, &Option<f64>)| -> anyhow::Result<(Option<f64>, Volume)> {
+        let what = format!("the scene's time step {}", i + 1);
+        Ok((t, fluidnerf_pipeline::score::volume_at(dir, volumes, t, &what)?.clone()))
+    };
+    step_times.iter().enumerate().map(at).collect()
 }
 
 /// Formats a metric for the table: fixed decimals, `inf`, or `-` (an undefined NRMSE is

@@ -1339,3 +1339,40 @@ fn eval_every_is_refused_for_time_resolved_runs_and_compare_notes_a_single_point
     let warnings = json(&d.join("cmp/compare.json"))["warnings"].to_string();
     assert!(warnings.contains("scored its NRMSE once"), "{warnings}");
 }
+
+/// With several volumes, a held-out frame at an instant none of them holds was drawn from the
+/// volume of the nearest step and scored against another instant's field without a word. A
+/// run's volumes hold every instant it wrote, so `--use-volume` draws each frame from its own;
+/// volume files of other instants are refused for it.
+#[test]
+fn held_out_frames_are_drawn_from_the_volume_of_their_own_instant() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let d = tmp.path();
+    demo_scene(d, "jet-tr", 4, 16, 8, &["--times", "14,15,16", "--holdout", "3"]);
+    let args = "reconstruct scene -o run --method tr-fast --max-iterations 2 --resolution 8 --checkpoint-every 0 -q";
+    ok(&fluidnerf(d, &args.split_whitespace().collect::<Vec<_>>()));
+    // The scene's truth at t = 14 and 16 only: its held-out frame at 15 has no truth step.
+    edit_json(&d.join("scene/transforms.json"), |t| {
+        let truth = t["truth"].as_array_mut().expect("truth");
+        truth.retain(|e| e["time"] != 15.0);
+    });
+    let eval = |recon: &[&str]| {
+        let mut a = vec!["eval", "-s", "scene", "--no-regions", "--json", "m.json", "--force"];
+        a.extend(recon);
+        fluidnerf(d, &a)
+    };
+    refused(
+        &eval(&["run/frames/volume_000.npy", "run/frames/volume_002.npy"]),
+        "is at t = 15, and no volume given is of that instant (they are of t = 14, 16)",
+    );
+    ok(&eval(&["run/frames/volume_000.npy", "run/frames/volume_002.npy", "--no-reprojection"]));
+    ok(&eval(&["run", "--use-volume"]));
+    let through_run = json(&d.join("m.json"))["reprojection"].clone();
+    // The volume of t = 15 alone, scored against that instant's truth file.
+    ok(&eval(&["run/frames/volume_001.npy", "--truth", "scene/truth/truth_t01.npy"]));
+    let through_frame = json(&d.join("m.json"))["reprojection"].clone();
+    let row_at_15 = |r: &serde_json::Value| {
+        r.as_array().expect("rows").iter().find(|row| row["time"] == 15.0).expect("a frame at 15")["nrmse"].clone()
+    };
+    assert_eq!(row_at_15(&through_run), row_at_15(&through_frame), "drawn from the volume of t = 15");
+}
