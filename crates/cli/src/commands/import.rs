@@ -94,9 +94,16 @@ mod davis;
 /// image sizes must match the calibration, no NaN/Inf pixels, a transforms.json's masks,
 /// backgrounds and flat fields must fit their frames) before `OUT/transforms.json` is
 /// written, together with `OUT/import.json` (the settings of this run). Image paths are
-/// written relative to OUT when IMAGES is inside OUT, absolute otherwise. An import that fails
-/// removes what it created (decoded video frames, OUT itself when it made it) and nothing else,
-/// so the same command can run again once the input is fixed.
+/// written relative to OUT when IMAGES is inside OUT, absolute otherwise.
+///
+/// Decoded frames and the scene files are written into the hidden folder `OUT/.import-staging`
+/// first, and go into place only once the scene is validated and written: an import that
+/// fails leaves OUT as it was (an earlier scene there untouched, byte for byte; OUT removed
+/// when it made it), so the same command can run again once the input is fixed. An import
+/// that succeeds with --force removes the files the earlier import decoded or split that the
+/// new scene does not read. One stopped (killed) before it was done leaves the staging
+/// folder, which the next import into OUT removes, or, when the scene was complete, finishes
+/// putting into place (as `fluidnerf info OUT` does).
 #[derive(clap::Args, Debug, Serialize)]
 #[command(group(clap::ArgGroup::new("source").required(true)))]
 pub struct Args {
@@ -146,7 +153,9 @@ pub struct Args {
     /// Output scene folder (created if missing).
     #[arg(short, long)]
     pub out: PathBuf,
-    /// Overwrite an existing `transforms.json` in OUT.
+    /// Replace the scene in OUT: its `transforms.json` and `import.json`, and the frames an
+    /// earlier import decoded or split there (those the new scene does not read are removed).
+    /// A failed import leaves the earlier scene as it was.
     #[arg(long)]
     pub force: bool,
     /// Leave out images that no camera is calibrated for (with a warning) instead of failing
@@ -196,15 +205,150 @@ struct VideoRecord {
     last_time_s: f64,
 }
 
-/// What an import created in OUT: removed again when the import fails, so that a failed
-/// import leaves nothing behind and its rerun needs no --force. Files and folders that existed
-/// before are never removed (a file overwritten with --force keeps its new content).
+/// The hidden folder in OUT that an import decodes its recordings' frames into and writes its
+/// scene files into, under the paths they take in OUT (`frames/<camera>/…`, `transforms.json`,
+/// `import.json`). They go into place only once the scene is validated and written
+/// ([`commit`]), so an import that fails leaves an earlier scene in OUT as it was, byte for
+/// byte, instead of one that mixes two recordings.
+///
+/// After a kill, what the folder holds tells what happened ([`settle_staging`]): without the
+/// commit record ([`COMMIT_RECORD`]) the import was stopped before its scene was complete, OUT
+/// still holds the earlier scene untouched, and the next import into OUT removes the folder;
+/// with it, the import had succeeded and was stopped while putting its files into place, and
+/// the next import into OUT, or `fluidnerf info OUT`, finishes that. Nothing else reads the
+/// folder.
+const STAGING: &str = ".import-staging";
+
+/// The record in [`STAGING`] that the import's files there are complete and go into place: a
+/// [`Commit`].
+const COMMIT_RECORD: &str = "commit.json";
+
+/// What an import that has succeeded does in OUT: recorded in [`STAGING`] before any of it is
+/// done, so that it is finished after a kill ([`settle_staging`]). Each step can be done again.
+#[derive(Serialize, serde::Deserialize)]
+struct Commit {
+    /// Files of the staging folder, relative to it, each moved to the same path in OUT (over
+    /// the file there), in this order: the frames, then `transforms.json` and `import.json`.
+    moves: Vec<PathBuf>,
+    /// Files an earlier import wrote, relative to OUT, that the new scene does not read:
+    /// removed once the new files are in place, and their folders when that leaves them empty.
+    removals: Vec<PathBuf>,
+}
+
+impl Commit {
+    /// Does what `self` records: a move whose file is gone from `staging` was done before.
+    fn apply(&self, out: &Path, staging: &Path) -> anyhow::Result<()> {
+        for rel in &self.moves {
+            let (from, to) = (staging.join(rel), out.join(rel));
+            if let Some(parent) = to.parent() {
+                std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+            }
+            match std::fs::rename(&from, &to) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound && !from.exists() => {}
+                Err(e) => return Err(e).with_context(|| format!("cannot move {} to {}", from.display(), to.display())),
+            }
+        }
+        let mut removed = 0usize;
+        let mut dirs = BTreeSet::new();
+        for rel in &self.removals {
+            let file = out.join(rel);
+            match std::fs::remove_file(&file) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => log::warn!("cannot remove {}, a file of the earlier import: {e}", file.display()),
+            }
+            dirs.extend(file.parent().map(Path::to_path_buf));
+        }
+        for dir in dirs {
+            // Only when empty: a file of the user's keeps its folder.
+            let _ = std::fs::remove_dir(&dir);
+        }
+        if removed > 0 {
+            log::info!("removed {removed} file(s) of the earlier import that this one does not use");
+        }
+        Ok(())
+    }
+
+    /// The record in `staging`, None when there is none; an error when it is not one an
+    /// import wrote (its paths must lead to places under OUT and the staging folder).
+    fn read(staging: &Path) -> anyhow::Result<Option<Commit>> {
+        let file = staging.join(COMMIT_RECORD);
+        let text = match std::fs::read_to_string(&file) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e).with_context(|| format!("cannot read {}", file.display())),
+        };
+        let plain = |p: &PathBuf| {
+            !p.as_os_str().is_empty() && p.components().all(|c| matches!(c, std::path::Component::Normal(_)))
+        };
+        match serde_json::from_str::<Commit>(&text) {
+            Ok(commit) if commit.moves.iter().chain(&commit.removals).all(plain) => Ok(Some(commit)),
+            _ => bail!(
+                "{} is not the record of an import into {}: look at the folder {} and remove it",
+                file.display(),
+                staging.parent().unwrap_or(staging).display(),
+                staging.display()
+            ),
+        }
+    }
+}
+
+/// Settles what an import into `out` left in its staging folder ([`STAGING`]), before an
+/// import starts (`discard`) or `info` reads the scene: an import recorded as committed is
+/// finished, and one that was not is removed when `discard` (`info` leaves it: it may be an
+/// import under way). Its files are never taken for the scene's.
+pub(crate) fn settle_staging(out: &Path, discard: bool) -> anyhow::Result<()> {
+    let staging = out.join(STAGING);
+    if !staging.is_dir() {
+        return Ok(());
+    }
+    if let Some(commit) = Commit::read(&staging)? {
+        log::warn!(
+            "{}: finishing an import that was stopped while it put its files into place (its scene was complete)",
+            out.display()
+        );
+        commit.apply(out, &staging)?;
+    } else if discard {
+        log::info!("{}: removing what an import that was stopped before it finished left", staging.display());
+    } else {
+        return Ok(());
+    }
+    let _ = std::fs::remove_file(staging.join(COMMIT_RECORD));
+    std::fs::remove_dir_all(&staging).with_context(|| format!("cannot remove {}", staging.display()))
+}
+
+/// Puts the import staged in `staging` into place in `out`: records what is to be done
+/// (`commit`, from when on the import counts as done: a kill leaves the rest to
+/// [`settle_staging`]), does it, and removes the staging folder.
+fn commit(out: &Path, staging: &Path, commit: &Commit, created: &mut Created) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(commit)?;
+    fluidnerf_io::atomic_write(&staging.join(COMMIT_RECORD), |w| w.write_all(json.as_bytes()))?;
+    created.staging = None;
+    commit.apply(out, staging).with_context(|| {
+        format!(
+            "the import is complete in {} but could not be put into place; the next import into {} or `fluidnerf \
+             info {}` finishes it",
+            staging.display(),
+            out.display(),
+            out.display()
+        )
+    })?;
+    let _ = std::fs::remove_file(staging.join(COMMIT_RECORD));
+    if let Err(e) = std::fs::remove_dir_all(staging) {
+        log::warn!("cannot remove {} after the import: {e}", staging.display());
+    }
+    Ok(())
+}
+
+/// What an import made in OUT before its scene went into place: undone when it fails, so that
+/// a failed import leaves OUT as it was and its rerun needs no --force.
 #[derive(Default)]
 struct Created {
-    /// Files written that did not exist before, in the order written.
-    files: Vec<PathBuf>,
     /// Folders made, parents before their children.
     dirs: Vec<PathBuf>,
+    /// The staging folder ([`STAGING`]) until the import is committed.
+    staging: Option<PathBuf>,
 }
 
 impl Created {
@@ -217,20 +361,31 @@ impl Created {
         Ok(())
     }
 
-    /// Records the file `path`, about to be written, unless it exists already.
-    fn file(&mut self, path: &Path) {
-        if !path.exists() {
-            self.files.push(path.to_path_buf());
+    /// Creates the staging folder `dir`, which must not exist: what an earlier import left
+    /// was settled when this one started, so one there now is another import's, under way.
+    fn staging(&mut self, dir: &Path) -> anyhow::Result<()> {
+        match std::fs::create_dir(dir) {
+            Ok(()) => {
+                self.staging = Some(dir.to_path_buf());
+                Ok(())
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => bail!(
+                "{} exists: another import into {} is under way; wait for it to finish",
+                dir.display(),
+                dir.parent().unwrap_or(dir).display()
+            ),
+            Err(e) => Err(e).with_context(|| format!("cannot create {}", dir.display())),
         }
     }
 
-    /// Removes what was recorded: the files, then the folders, children first and only when
-    /// empty (a file someone else put there meanwhile keeps its folder).
+    /// Removes what was recorded: the staging folder with what it holds, then the folders,
+    /// children first and only when empty (a file someone else put there meanwhile keeps its
+    /// folder).
     fn undo(self) {
-        for f in self.files.iter().rev() {
-            if let Err(e) = std::fs::remove_file(f) {
+        if let Some(staging) = &self.staging {
+            if let Err(e) = std::fs::remove_dir_all(staging) {
                 if e.kind() != std::io::ErrorKind::NotFound {
-                    log::warn!("cannot remove {} after the failed import: {e}", f.display());
+                    log::warn!("cannot remove {} after the failed import: {e}", staging.display());
                 }
             }
         }
@@ -266,8 +421,9 @@ fn decoded_size_problem(camera: &Camera, width: usize, height: usize) -> Option<
 }
 
 /// Replaces every frame whose file is a video by its decoded frames, each written as a float
-/// TIFF (linearised, range-mapped values) into `out/frames/<camera>/` as it is decoded, with
-/// its time. All videos must give their frames at the same times (a synchronised recording);
+/// TIFF (linearised, range-mapped values) into `staging/frames/<camera>/` as it is decoded,
+/// with its time; the frames go to `out/frames/<camera>/` when the import is committed, where
+/// a file of the same name is replaced only with `force`. All videos must give their frames at the same times (a synchronised recording);
 /// raw recordings that began or ended apart keep the frames of the times every one of them
 /// recorded, the others' files removed again, with a warning.
 /// Also returns, for each frame returned, the index of the frame it came from (a video's
@@ -275,9 +431,9 @@ fn decoded_size_problem(camera: &Camera, width: usize, height: usize) -> Option<
 fn expand_videos(
     frames: Vec<Frame>,
     out: &Path,
+    staging: &Path,
     opts: &fluidnerf_io::video::VideoOptions,
     force: bool,
-    created: &mut Created,
 ) -> anyhow::Result<(Vec<Frame>, Vec<VideoRecord>, Vec<usize>)> {
     // A video's frames go to `frames/<name>/`, by its camera's name, else its file's stem.
     let video_name = |f: &Frame| {
@@ -356,8 +512,8 @@ fn expand_videos(
                  srgb or a gamma) unless they record raw or linear luma"
             );
         }
-        let dir = out.join("frames").join(&name);
-        created.dir_all(&dir)?;
+        let dir = staging.join("frames").join(&name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let mut times = Vec::new();
         let bar = crate::progress::counter(&name, "frames");
         let info = fluidnerf_io::video::read_video_frames(&f.file_path, opts, |frame| {
@@ -367,14 +523,15 @@ fn expand_videos(
                     format!("frame {} is {problem}", frame.index),
                 ));
             }
-            let path = dir.join(format!("{:06}.tif", times.len()));
-            if path.exists() && !force {
+            let file = format!("{:06}.tif", times.len());
+            let target = out.join("frames").join(&name).join(&file);
+            if target.exists() && !force {
                 return Err(fluidnerf_io::IoError::invalid(
-                    &path,
+                    &target,
                     "exists (from an earlier import); pass --force to overwrite it",
                 ));
             }
-            created.file(&path);
+            let path = dir.join(&file);
             fluidnerf_io::image::write_tiff_f32(&path, &frame.image)?;
             times.push(frame.time_s);
             expanded.push(Frame { file_path: path, time: Some(frame.time_s), ..f.clone() });
@@ -1156,26 +1313,18 @@ fn earlier_video_frames(out: &Path) -> Vec<(String, usize)> {
         .collect()
 }
 
-/// Removes the frames an earlier import decoded (`earlier`) that this import did not write
-/// again: the rest of a longer selection, or a camera that has no video now. Left behind, they
-/// would sit beside the new frames in `frames/<camera>/` as if they belonged to the scene.
-/// A file the new scene reads (`referenced`, canonical paths) is never removed.
-fn remove_stale_frames(out: &Path, earlier: &[(String, usize)], videos: &[VideoRecord], referenced: &HashSet<PathBuf>) {
-    let mut removed = 0usize;
+/// The frames an earlier import decoded (`earlier`) that this import does not write again,
+/// relative to OUT: the rest of a longer selection, or a camera that has no video now. Left
+/// behind, they would sit beside the new frames in `frames/<camera>/` as if they belonged to
+/// the scene.
+fn stale_video_frames(earlier: &[(String, usize)], videos: &[VideoRecord]) -> Vec<PathBuf> {
+    let mut stale = Vec::new();
     for (camera, count) in earlier {
         let kept = videos.iter().find(|v| &v.camera == camera).map_or(0, |v| v.info.frames_kept);
-        let dir = out.join("frames").join(camera);
-        for i in kept..*count {
-            removed += usize::from(remove_unread(&dir.join(format!("{i:06}.tif")), referenced));
-        }
-        if kept == 0 {
-            // Only when empty: a file of the user's keeps its folder.
-            let _ = std::fs::remove_dir(&dir);
-        }
+        let dir = Path::new("frames").join(camera);
+        stale.extend((kept..*count).map(|i| dir.join(format!("{i:06}.tif"))));
     }
-    if removed > 0 {
-        log::info!("removed {removed} frame(s) of the earlier import that this one does not use");
-    }
+    stale
 }
 
 /// The cameras' images an earlier import into `out` split from a DaVis recording, as its
@@ -1195,28 +1344,6 @@ fn earlier_davis_frames(out: &Path) -> Vec<PathBuf> {
                 && p.extension().is_some_and(|e| e == "png" || e == "tif")
         })
         .collect()
-}
-
-/// Removes the images an earlier import split from a DaVis recording (`earlier`, relative to
-/// `out`) that the new scene does not read: the instants of a longer recording, or a camera it
-/// no longer has. Left behind, they would sit beside the new images as if part of the scene.
-fn remove_stale_davis_frames(out: &Path, earlier: &[PathBuf], referenced: &HashSet<PathBuf>) {
-    let mut removed = 0usize;
-    let mut dirs = BTreeSet::new();
-    for rel in earlier {
-        let frame = out.join(rel);
-        removed += usize::from(remove_unread(&frame, referenced));
-        dirs.extend(frame.parent().map(Path::to_path_buf));
-    }
-    for dir in dirs {
-        // Only when empty: a file of the user's keeps its folder.
-        let _ = std::fs::remove_dir(&dir);
-    }
-    if removed > 0 {
-        log::info!(
-            "removed {removed} image(s) the earlier import split from a DaVis recording that this one does not use"
-        );
-    }
 }
 
 /// The files `scene` reads, images, masks, background frames and flat fields, as canonical
@@ -1241,25 +1368,12 @@ fn is_referenced(path: &Path, referenced: &HashSet<PathBuf>) -> bool {
     path.canonicalize().is_ok_and(|p| referenced.contains(&p))
 }
 
-/// Removes `file`, a file an earlier import wrote, unless the new scene reads it
-/// (`referenced`); whether it was removed. A file already gone is not an error.
-fn remove_unread(file: &Path, referenced: &HashSet<PathBuf>) -> bool {
-    if is_referenced(file, referenced) {
-        return false;
-    }
-    match std::fs::remove_file(file) {
-        Ok(()) => true,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => false,
-        Err(e) => {
-            log::warn!("cannot remove {}, a file of the earlier import: {e}", file.display());
-            false
-        }
-    }
-}
-
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
+    // Before the earlier scene is looked at: an import stopped while putting its scene into
+    // place is finished first, and what one stopped earlier left is removed.
+    settle_staging(&args.out, true)?;
     let calibrations = calibrations(args);
     let given =
         calibrations.into_iter().chain([("--images", &args.images)]).filter_map(|(o, p)| Some((o, p.as_deref()?)));
@@ -1465,6 +1579,8 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     }
     created.dir_all(&args.out)?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
+    let staging = out_abs.join(STAGING);
+    created.staging(&staging)?;
     let video_opts = fluidnerf_io::video::VideoOptions {
         range: args.video_range,
         start,
@@ -1475,10 +1591,10 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     };
     let mut frames = frames;
     let davis_frames = match &davis_recording {
-        Some(recording) => davis::split(recording, &mut frames, &out_abs, args.force, created)?,
+        Some(recording) => davis::split(recording, &mut frames, &out_abs, &staging, args.force)?,
         None => Vec::new(),
     };
-    let (frames, videos, sources) = expand_videos(frames, &out_abs, &video_opts, args.force, created)?;
+    let (frames, videos, sources) = expand_videos(frames, &out_abs, &staging, &video_opts, args.force)?;
     // The file's masks, backgrounds and flat fields follow its frames into the decoded video
     // frames.
     if let Some(r) = &mut from_file.recording {
@@ -1624,8 +1740,22 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
             );
         }
     }
-    created.file(&out_file);
-    save_scene_recording(&scene, &args.out, &recording, true)?;
+    // The staged frames are named by where they go in OUT.
+    let mut moves: Vec<PathBuf> = Vec::new();
+    for f in &mut scene.frames {
+        if let Ok(rel) = f.file_path.strip_prefix(STAGING) {
+            f.file_path = rel.to_path_buf();
+            moves.push(f.file_path.clone());
+        }
+    }
+    // What the earlier import wrote that the new scene neither reads nor replaces.
+    let referenced = referenced_files(&scene, &recording);
+    let removals: Vec<PathBuf> = stale_video_frames(&earlier_frames, &videos)
+        .into_iter()
+        .chain(earlier_davis)
+        .filter(|rel| !moves.contains(rel) && !is_referenced(&out_abs.join(rel), &referenced))
+        .collect();
+    save_scene_recording(&scene, &staging, &recording, true)?;
     let davis_cameras = davis_recording.map(|r| r.record).unwrap_or_default();
     let settings = Settings {
         command: "import",
@@ -1636,12 +1766,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         davis_frames: &davis_frames,
     };
     let json = serde_json::to_string_pretty(&settings)?;
-    let settings_file = args.out.join("import.json");
-    created.file(&settings_file);
-    fluidnerf_io::atomic_write(&settings_file, |w| w.write_all(json.as_bytes()))?;
-    let referenced = referenced_files(&scene, &recording);
-    remove_stale_frames(&args.out, &earlier_frames, &videos, &referenced);
-    remove_stale_davis_frames(&args.out, &earlier_davis, &referenced);
+    fluidnerf_io::atomic_write(&staging.join("import.json"), |w| w.write_all(json.as_bytes()))?;
+    moves.extend([PathBuf::from(SCENE_FILE), PathBuf::from("import.json")]);
+    commit(&out_abs, &staging, &Commit { moves, removals }, created)?;
 
     let cameras: BTreeSet<String> = scene
         .frames
@@ -1661,7 +1788,9 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::natural_order;
+    use std::path::{Path, PathBuf};
+
+    use super::{natural_order, settle_staging, Commit, COMMIT_RECORD, STAGING};
 
     #[test]
     fn numbers_in_names_are_ordered_as_numbers() {
@@ -1672,5 +1801,69 @@ mod tests {
         let padded = ["B00001.im7", "B00002.im7", "B00010.im7"];
         assert!(padded.windows(2).all(|w| natural_order(w[0], w[1]).is_lt()));
         assert!(natural_order("t99999999999999999999999", "t100000000000000000000000").is_lt());
+    }
+
+    fn write(path: &Path, text: &str) {
+        std::fs::create_dir_all(path.parent().expect("a folder")).expect("mkdir");
+        std::fs::write(path, text).expect("writes");
+    }
+
+    fn read(path: &Path) -> String {
+        std::fs::read_to_string(path).expect("reads")
+    }
+
+    /// An import killed while it put its files into place (one frame moved, the rest and the
+    /// scene files not) is finished from its record: the new scene whole, the earlier import's
+    /// frame it does not read removed, the staging folder gone.
+    #[test]
+    fn an_import_killed_while_putting_its_files_into_place_is_finished() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path();
+        let staging = out.join(STAGING);
+        write(&out.join("transforms.json"), "earlier scene");
+        write(&out.join("frames/cam0/000000.tif"), "earlier 0");
+        write(&out.join("frames/cam0/000001.tif"), "new 1");
+        write(&out.join("frames/cam0/000002.tif"), "earlier 2");
+        write(&out.join("frames/cam0/notes.txt"), "mine");
+        write(&staging.join("frames/cam0/000000.tif"), "new 0");
+        write(&staging.join("transforms.json"), "new scene");
+        write(&staging.join("import.json"), "new record");
+        let commit = Commit {
+            moves: ["frames/cam0/000000.tif", "frames/cam0/000001.tif", "transforms.json", "import.json"]
+                .map(PathBuf::from)
+                .to_vec(),
+            removals: vec![PathBuf::from("frames/cam0/000002.tif")],
+        };
+        write(&staging.join(COMMIT_RECORD), &serde_json::to_string(&commit).expect("json"));
+        settle_staging(out, false).expect("settles");
+        assert_eq!(read(&out.join("transforms.json")), "new scene");
+        assert_eq!(read(&out.join("import.json")), "new record");
+        assert_eq!(read(&out.join("frames/cam0/000000.tif")), "new 0");
+        assert_eq!(read(&out.join("frames/cam0/000001.tif")), "new 1");
+        assert!(!out.join("frames/cam0/000002.tif").exists());
+        assert_eq!(read(&out.join("frames/cam0/notes.txt")), "mine");
+        assert!(!staging.exists());
+    }
+
+    /// What an import killed before its scene was complete left is removed before an import,
+    /// and left alone by `info` (it may be an import under way); the earlier scene is not
+    /// touched. A record that names paths outside the folder is refused, not followed.
+    #[test]
+    fn an_import_killed_before_its_scene_was_complete_is_removed() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path();
+        let staging = out.join(STAGING);
+        write(&out.join("transforms.json"), "earlier scene");
+        write(&staging.join("frames/cam0/000000.tif"), "new 0");
+        settle_staging(out, false).expect("settles");
+        assert!(staging.join("frames/cam0/000000.tif").exists(), "left for the import under way");
+        settle_staging(out, true).expect("settles");
+        assert!(!staging.exists());
+        assert_eq!(read(&out.join("transforms.json")), "earlier scene");
+
+        write(&staging.join(COMMIT_RECORD), r#"{"moves": ["../elsewhere"], "removals": []}"#);
+        let e = settle_staging(out, true).expect_err("refused").to_string();
+        assert!(e.contains(COMMIT_RECORD) && e.contains("not the record of an import"), "{e}");
+        assert!(staging.join(COMMIT_RECORD).exists());
     }
 }

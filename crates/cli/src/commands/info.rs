@@ -117,6 +117,10 @@ fn frame_title(i: usize, f: &Frame) -> String {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let file = scene_file_path(&args.scene);
+    // A scene an import was stopped while putting into place is finished first.
+    if let Some(dir) = file.parent() {
+        super::import::settle_staging(dir, false)?;
+    }
     let scene = load_scene(&args.scene).context("the scene is invalid")?;
     let mut out = String::new();
     let mut problems: Vec<String> = Vec::new();

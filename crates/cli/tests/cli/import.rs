@@ -1332,6 +1332,148 @@ fn a_forced_reimport_removes_the_frames_it_no_longer_writes() {
     assert_eq!(frames("cam1"), ["notes.txt"]);
 }
 
+/// Every file and folder under `dir`, hidden ones too, by its path relative to `dir`: a file
+/// with its bytes, a folder with none.
+fn tree(dir: &Path) -> std::collections::BTreeMap<PathBuf, Option<Vec<u8>>> {
+    fn walk(root: &Path, dir: &Path, out: &mut std::collections::BTreeMap<PathBuf, Option<Vec<u8>>>) {
+        for entry in std::fs::read_dir(dir).expect("lists") {
+            let p = entry.expect("entry").path();
+            let rel = p.strip_prefix(root).expect("under the root").to_path_buf();
+            if p.is_dir() {
+                out.insert(rel, None);
+                walk(root, &p, out);
+            } else {
+                out.insert(rel, Some(std::fs::read(&p).expect("reads")));
+            }
+        }
+    }
+    let mut out = std::collections::BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// The names in the folder `dir`, sorted.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("lists")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// A forced import of another recording that fails once its frames are decoded (a box no
+/// camera sees) leaves the scene it was to replace byte for byte as it was: the new frames
+/// had been written over the earlier ones in `frames/<camera>/`, so the folder held the new
+/// recording's first frames, the earlier one's last frames and the earlier transforms.json,
+/// and `info` found nothing wrong. The same import with a box succeeds and leaves the new
+/// recording's frames only.
+#[test]
+fn a_failed_forced_import_of_videos_leaves_the_earlier_scene_as_it_was() {
+    let (dir, calib, videos) = video_rig();
+    for (n, _) in rig() {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = tree(&out);
+
+    // Another recording (the limited-range fixture: other values), two frames of it.
+    let other = dir.path().join("other");
+    std::fs::create_dir_all(&other).expect("mkdir");
+    let limited = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video/ramp_mjpeg_limited.avi");
+    for (n, _) in rig() {
+        std::fs::copy(&limited, other.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let import = |aabb: &str| {
+        let args = ["import", "--opencv", s(&calib), "--images", s(&other), "--video-frames", "0..2", "--force"];
+        fluidnerf(&[&args[..], &["--aabb", aabb, "-o", s(&out)]].concat())
+    };
+    let o = import("500,500,500,510,510,510");
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("invalid"), "{}", stderr(&o));
+    let after = tree(&out);
+    assert_eq!(after.keys().collect::<Vec<_>>(), before.keys().collect::<Vec<_>>(), "the same files");
+    for (path, content) in &before {
+        assert!(after[path] == *content, "{} changed", path.display());
+    }
+    let info = fluidnerf(&["info", s(&out)]);
+    assert!(info.status.success(), "{}", stderr(&info));
+
+    let o = import("-10,-10,-10,10,10,10");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(load_scene(&out).expect("loads").frames.len(), 6);
+    for (n, _) in rig() {
+        assert_eq!(names_in(&out.join("frames").join(&n)), ["000000.tif", "000001.tif"], "{n}");
+        let first = PathBuf::from(format!("frames/{n}/000000.tif"));
+        assert!(std::fs::read(out.join(&first)).ok() != before[&first], "{n}: the new recording's frame");
+    }
+    assert_eq!(names_in(&out), ["frames", "import.json", "transforms.json"], "nothing else is left");
+}
+
+/// A DaVis recording imported with --force over an earlier one of more instants: a failure
+/// after the split (a box no camera sees) leaves the earlier scene byte for byte, where the
+/// new images had replaced the earlier ones of the same names; a success leaves the new
+/// recording's images only.
+#[test]
+fn a_failed_forced_import_of_a_davis_recording_leaves_the_earlier_scene_as_it_was() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = davis_rig(dir.path());
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for n in 0..6u16 {
+        davis_file(&a.join(format!("B{:05}.im7", n + 1)), &[100 + n, 200 + n, 300 + n], &["1", "2", "3"]);
+    }
+    for n in 0..4u16 {
+        davis_file(&b.join(format!("B{:05}.im7", n + 1)), &[500 + n, 600 + n, 700 + n], &["1", "2", "3"]);
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &a, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = tree(&out);
+    let import = |aabb: &str| {
+        let args = ["import", "--opencv", s(&calib), "--images", s(&b), "--force", "--aabb", aabb];
+        fluidnerf(&[&args[..], &["-o", s(&out)]].concat())
+    };
+    let o = import("500,500,500,510,510,510");
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(tree(&out) == before, "the earlier scene changed");
+
+    let o = import("-10,-10,-10,10,10,10");
+    assert!(o.status.success(), "{}", stderr(&o));
+    for c in 1..=3u16 {
+        let folder = out.join(format!("frames/cam{c}"));
+        assert_eq!(names_in(&folder), ["B00001.png", "B00002.png", "B00003.png", "B00004.png"], "cam{c}");
+        let img = fluidnerf_io::image::read_image(&folder.join("B00004.png")).expect("reads");
+        assert_eq!(img.data[0], f32::from(100 * c + 400 + 3), "cam{c}: the new recording's last instant");
+    }
+    assert_eq!(load_scene(&out).expect("loads").frames.len(), 12);
+}
+
+/// What an import killed while decoding leaves, its staging folder, is never taken for part
+/// of the scene: `info` reads the scene as it was, and the next import into the folder
+/// removes it.
+#[test]
+fn what_a_killed_import_left_is_removed_by_the_next_import() {
+    let (dir, calib, videos) = video_rig();
+    for (n, _) in rig() {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // A frame half written when the import was killed.
+    let left = out.join(".import-staging/frames/cam0/000000.tif");
+    std::fs::create_dir_all(left.parent().expect("a folder")).expect("mkdir");
+    std::fs::write(&left, b"II*\0").expect("writes");
+    let info = fluidnerf(&["info", s(&out)]);
+    assert!(info.status.success(), "{}", stderr(&info));
+    let o = import_recordings(&calib, &videos, &out, &["--force", "--video-frames", "0..2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join(".import-staging").exists());
+    assert_eq!(names_in(&out.join("frames/cam0")), ["000000.tif", "000001.tif"]);
+}
+
 /// Phantom cine recordings, one per camera, import as videos do: each frame a float TIFF of
 /// the sensor's counts above the black level, at the file's frame rate, with no word of gamma.
 #[test]

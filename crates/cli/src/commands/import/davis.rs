@@ -17,8 +17,6 @@ use fluidnerf_io::davis::{read_davis, DavisFile, FrameLabel};
 use fluidnerf_io::image::SampleKind;
 use serde::Serialize;
 
-use super::Created;
-
 /// How the frames of a recording's files map to calibrated cameras.
 pub(super) struct Recording {
     /// The files in name order: file n is instant n (n·E + e for exposure e of E).
@@ -200,17 +198,18 @@ fn labels_of(davis: &DavisFile, file: &Path) -> anyhow::Result<Vec<FrameLabel>> 
     })
 }
 
-/// Writes every camera's frame of every file of `recording` into `out/frames/<camera>/`, as
-/// the file's stem (plus the exposure's letter) `.png` (16-bit counts, exact) or, for float
-/// pixels, `.tif`, and points `frames` at them. Returns the files written, relative to `out`
-/// (`frames/<camera>/<name>`), for `import.json`: a later import into `out` removes those it does
-/// not write again.
+/// Writes every camera's frame of every file of `recording` into `staging/frames/<camera>/`,
+/// as the file's stem (plus the exposure's letter) `.png` (16-bit counts, exact) or, for float
+/// pixels, `.tif`, and points `frames` at them; they go to `out/frames/<camera>/` when the
+/// import is committed, where a file of the same name is replaced only with `force`. Returns
+/// the files' paths in `out` (`frames/<camera>/<name>`), for `import.json`: a later import
+/// into `out` removes those it does not write again.
 pub(super) fn split(
     recording: &Recording,
     frames: &mut [Frame],
     out: &Path,
+    staging: &Path,
     force: bool,
-    created: &mut Created,
 ) -> anyhow::Result<Vec<String>> {
     let mut written = Vec::with_capacity(frames.len());
     let per_file = frames.len() / recording.files.len();
@@ -246,16 +245,16 @@ pub(super) fn split(
             if let Some(problem) = super::decoded_size_problem(&frame.camera, image.width, image.height) {
                 bail!("camera {camera}: {}: its frame of DaVis camera {label} is {problem}", file.display());
             }
-            let dir = out.join("frames").join(&camera);
-            created.dir_all(&dir)?;
+            let dir = staging.join("frames").join(&camera);
+            std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
             let exposure = label.exposure.map(String::from).unwrap_or_default();
             let ext = if davis.kind == SampleKind::Float { "tif" } else { "png" };
             let name = format!("{stem}{exposure}.{ext}");
-            let path = dir.join(&name);
-            if path.exists() && !force {
-                bail!("{} exists (from an earlier import); pass --force to overwrite it", path.display());
+            let target = out.join("frames").join(&camera).join(&name);
+            if target.exists() && !force {
+                bail!("{} exists (from an earlier import); pass --force to overwrite it", target.display());
             }
-            created.file(&path);
+            let path = dir.join(&name);
             if davis.kind == SampleKind::Float {
                 fluidnerf_io::image::write_tiff_f32(&path, image)?;
             } else {
