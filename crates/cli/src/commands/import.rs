@@ -35,8 +35,9 @@ mod davis;
 /// single-camera file names its camera after the file stem. Camera NAME takes the image
 /// `IMAGES/NAME.png` (or `.jpg`/`.tif`/`.tiff`, or a DaVis `.im7`/`.imx` of one frame), or,
 /// for a time series, every image in the
-/// folder `IMAGES/NAME/` in name order (numbers compared as numbers: `img_2` before `img_10`),
-/// the n-th image getting time n (edit the times in
+/// folder `IMAGES/NAME/` in name order (numbers compared as numbers: `img_2` before `img_10`,
+/// `t_1.25ms` before `t_1.5ms`, `t_-1` before `t_0`; a `-` after a letter is a dash, with a
+/// warning when it may be a sign), the n-th image getting time n (edit the times in
 /// `transforms.json` if they are physical): every camera's folder must hold as many images,
 /// under the same names when the folders share names, and no folder named like an image; a
 /// camera with a single image cannot join cameras recorded over time. Or the video
@@ -742,32 +743,169 @@ fn list_dir(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// Orders names as recordings number them: runs of digits compare as numbers (`img_2` before
-/// `img_10`, which text order puts first and so gave `img_10` the second instant of a series
-/// numbered without leading zeros), everything else as text; names that are equal so (`a01`,
-/// `a1`) by their text. Names numbered with leading zeros keep their text order.
+/// Orders names as recordings number them: numbers compare as numbers, everything else as
+/// text, and names that are equal so (`a01`, `a1`) by their text. A number is
+/// - a run of digits, compared as an integer: `img_2` before `img_10` (text order put
+///   `img_10` first, giving it the second instant of a series numbered without leading
+///   zeros); leading zeros do not count, so names numbered with them keep their text order;
+/// - or a decimal: one run of digits, a point and another run, compared as a decimal number
+///   (`t_1.25ms` before `t_1.5ms`, which integers 25 and 5 put the other way round), unless
+///   a point and a digit follow it or a digit and a point come before it: three or more runs
+///   joined by points (`v1.2.3`, `v1.10.0`, `img.1.10.2`) compare one by one, as integers,
+///   as versions do (`img.001.png` holds no decimal);
+/// - either with a sign: a `-` or `+` right before it that begins the name or follows a
+///   character that is no letter or digit (`t_-1.5`, `-2.png`). After a letter or a digit it
+///   is a dash (`cam-1`, `frame-2`, `2024-01-05`) and the number after it has no sign:
+///   [`sign_read_as_dash`] finds the names where that may be wrong.
+///
+/// Against a character that is not part of a number, a number compares as its first digit
+/// does, a negative one as if just before `-`; the order stays total, as sorting needs.
 fn natural_order(a: &str, b: &str) -> std::cmp::Ordering {
     use std::cmp::Ordering;
-    let digits = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
-    let (mut x, mut y) = (a.as_bytes(), b.as_bytes());
+    let (x, y) = (a.as_bytes(), b.as_bytes());
+    let (mut i, mut j) = (0, 0);
     loop {
-        match (x.first(), y.first()) {
-            (None, None) => return a.cmp(b),
-            (None, Some(_)) => return Ordering::Less,
-            (Some(_), None) => return Ordering::Greater,
-            (Some(p), Some(q)) if p.is_ascii_digit() && q.is_ascii_digit() => {
-                let (dx, dy) = (digits(x), digits(y));
-                let number = |run: &[u8]| -> Vec<u8> { run.iter().copied().skip_while(|&c| c == b'0').collect() };
-                let (nx, ny) = (number(&x[..dx]), number(&y[..dy]));
-                match nx.len().cmp(&ny.len()).then_with(|| nx.cmp(&ny)) {
-                    Ordering::Equal => (x, y) = (&x[dx..], &y[dy..]),
-                    other => return other,
-                }
-            }
-            (Some(p), Some(q)) if p != q => return p.cmp(q),
-            _ => (x, y) = (&x[1..], &y[1..]),
+        match (i < x.len(), j < y.len()) {
+            (false, false) => return a.cmp(b),
+            (false, true) => return Ordering::Less,
+            (true, false) => return Ordering::Greater,
+            (true, true) => {}
+        }
+        let ((p, next_i), (q, next_j)) = (NamePiece::at(x, i), NamePiece::at(y, j));
+        match p.cmp(&q) {
+            Ordering::Equal => (i, j) = (next_i, next_j),
+            other => return other,
         }
     }
+}
+
+/// A piece of a name as [`natural_order`] compares it: a character (a byte of its UTF-8,
+/// whose order is that of the characters), or a number.
+#[derive(Clone, Copy, Debug)]
+enum NamePiece<'a> {
+    Byte(u8),
+    /// `int` without its leading zeros, `fraction` without its trailing ones.
+    Number {
+        negative: bool,
+        int: &'a [u8],
+        fraction: &'a [u8],
+    },
+}
+
+impl<'a> NamePiece<'a> {
+    /// The piece of the name `s` that begins at `i`, and where the next one begins.
+    fn at(s: &'a [u8], i: usize) -> (NamePiece<'a>, usize) {
+        let digits_from =
+            |k: usize| s.get(k..).map_or(0, |rest| rest.iter().take_while(|c| c.is_ascii_digit()).count());
+        let signed = matches!(s[i], b'-' | b'+')
+            && s.get(i + 1).is_some_and(u8::is_ascii_digit)
+            && (i == 0 || !s[i - 1].is_ascii_alphanumeric());
+        let start = i + usize::from(signed);
+        if !s[start].is_ascii_digit() {
+            return (NamePiece::Byte(s[i]), i + 1);
+        }
+        let int_end = start + digits_from(start);
+        let (mut fraction, mut end): (&[u8], usize) = (&[], int_end);
+        let after_dotted = start >= 2 && s[start - 1] == b'.' && s[start - 2].is_ascii_digit();
+        let point = s.get(int_end) == Some(&b'.');
+        let fraction_digits = if point && !after_dotted { digits_from(int_end + 1) } else { 0 };
+        if fraction_digits > 0 {
+            let fraction_end = int_end + 1 + fraction_digits;
+            let dotted_on =
+                s.get(fraction_end) == Some(&b'.') && s.get(fraction_end + 1).is_some_and(u8::is_ascii_digit);
+            if !dotted_on {
+                (fraction, end) = (&s[int_end + 1..fraction_end], fraction_end);
+            }
+        }
+        let int = &s[start..int_end];
+        let int = &int[int.iter().take_while(|&&c| c == b'0').count()..];
+        let fraction = &fraction[..fraction.len() - fraction.iter().rev().take_while(|&&c| c == b'0').count()];
+        (NamePiece::Number { negative: signed && s[i] == b'-', int, fraction }, end)
+    }
+
+    /// Where the piece stands among characters: a character by its byte, a negative number
+    /// just before `-`, any other number at `0` (no character is a digit: digits are numbers).
+    fn rank(&self) -> u16 {
+        match self {
+            NamePiece::Byte(c) => 2 * u16::from(*c) + 1,
+            NamePiece::Number { negative: true, .. } => 2 * u16::from(b'-'),
+            NamePiece::Number { negative: false, .. } => 2 * u16::from(b'0'),
+        }
+    }
+
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        match (self, other) {
+            (
+                NamePiece::Number { negative, int, fraction },
+                NamePiece::Number { negative: other_negative, int: other_int, fraction: other_fraction },
+            ) if negative == other_negative => {
+                // Digits without leading zeros: the longer run is the larger; fractions
+                // without trailing zeros compare as text.
+                let size = int
+                    .len()
+                    .cmp(&other_int.len())
+                    .then_with(|| int.cmp(other_int))
+                    .then_with(|| fraction.cmp(other_fraction));
+                if *negative {
+                    size.reverse()
+                } else {
+                    size
+                }
+            }
+            _ => self.rank().cmp(&other.rank()),
+        }
+    }
+}
+
+/// Two of `names` that show a `-` or `+` between a letter and a number, which
+/// [`natural_order`] reads as a dash, may be a sign: one holding it (`t-1`), and one with the
+/// same text before an unsigned number (`t0`). With the dash, `t-1` and `t-2` come before
+/// `t0`, in that order; as signs, -2 would come first. Names with dashes only (`frame-1`,
+/// `frame-2`) are not taken for signs.
+fn sign_read_as_dash(names: &[String]) -> Option<(String, String)> {
+    for name in names {
+        let s = name.as_bytes();
+        for i in 1..s.len().saturating_sub(1) {
+            if !(matches!(s[i], b'-' | b'+') && s[i - 1].is_ascii_alphabetic() && s[i + 1].is_ascii_digit()) {
+                continue;
+            }
+            let unsigned = |other: &&String| {
+                let o = other.as_bytes();
+                o.starts_with(&s[..i]) && o.get(i).is_some_and(u8::is_ascii_digit)
+            };
+            if let Some(other) = names.iter().find(unsigned) {
+                return Some((name.clone(), other.clone()));
+            }
+        }
+    }
+    None
+}
+
+/// Warns, once for all cameras, of the series of images whose names may hold a sign that
+/// [`natural_order`] reads as a dash ([`sign_read_as_dash`]): their time order may be wrong.
+fn warn_of_signs_read_as_dashes(series: &[(&str, Vec<PathBuf>)], images: &Path) {
+    let mut cameras = Vec::new();
+    let mut example = None;
+    for (camera, files) in series {
+        let names: Vec<String> =
+            files.iter().filter_map(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned()).collect();
+        if let Some((signed, unsigned)) = sign_read_as_dash(&names) {
+            cameras.push(*camera);
+            let instant = |n: &String| names.iter().position(|m| m == n).unwrap_or_default();
+            example.get_or_insert((camera, instant(&signed), signed, instant(&unsigned), unsigned));
+        }
+    }
+    let Some((camera, k, signed, l, unsigned)) = example else { return };
+    let sign = signed.bytes().find(|&c| c == b'-' || c == b'+').map_or('-', char::from);
+    log::warn!(
+        "camera(s) {}: images are named both `{signed}` and `{unsigned}` (in {}): a `{sign}` between a letter and a \
+         number is read as a dash, not as a {} sign, so the numbers after it are ordered as if unsigned \
+         (`{signed}` is instant {k}, `{unsigned}` instant {l}); if it is a sign, rename the images with a separator \
+         before it (`t_-1.png` is read as -1)",
+        cameras.join(", "),
+        images.join(camera).display(),
+        if sign == '-' { "minus" } else { "plus" }
+    );
 }
 
 /// The images, videos and folders in `images` that no camera uses. A folder that holds used
@@ -922,6 +1060,7 @@ fn match_opencv(cameras: &[(String, Camera)], images: &Path) -> anyhow::Result<(
         );
     }
     check_series(&series, images)?;
+    warn_of_signs_read_as_dashes(&series, images);
     Ok((frames, used))
 }
 
@@ -1790,7 +1929,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
 mod tests {
     use std::path::{Path, PathBuf};
 
-    use super::{natural_order, settle_staging, Commit, COMMIT_RECORD, STAGING};
+    use super::{natural_order, settle_staging, sign_read_as_dash, Commit, COMMIT_RECORD, STAGING};
 
     #[test]
     fn numbers_in_names_are_ordered_as_numbers() {
@@ -1810,6 +1949,71 @@ mod tests {
 
     fn read(path: &Path) -> String {
         std::fs::read_to_string(path).expect("reads")
+    }
+
+    fn sorted<'a>(names: &[&'a str]) -> Vec<&'a str> {
+        let mut names = names.to_vec();
+        names.sort_by(|a, b| natural_order(a, b));
+        names
+    }
+
+    #[test]
+    fn a_number_with_a_decimal_fraction_is_ordered_as_a_decimal() {
+        let want = ["t_0.75ms", "t_1ms", "t_1.25ms", "t_1.5ms", "t_1.5ms_b", "t_2ms", "t_10.0ms", "t_10.05ms"];
+        let mut given = want.to_vec();
+        given.reverse();
+        assert_eq!(sorted(&given), want);
+        // Equal values are ordered by their text.
+        assert_eq!(sorted(&["t_1.50", "t_01.5", "t_1.5"]), ["t_01.5", "t_1.5", "t_1.50"]);
+        // Only one `digits.digits` is a decimal: dotted counters and versions compare their
+        // numbers one by one.
+        assert_eq!(sorted(&["img.010.png", "img.9.png", "img.001.png"]), ["img.001.png", "img.9.png", "img.010.png"]);
+        assert_eq!(sorted(&["v1.10.0", "v1.2.3", "v1.2.10", "v10.0.0"]), ["v1.2.3", "v1.2.10", "v1.10.0", "v10.0.0"]);
+    }
+
+    #[test]
+    fn a_sign_after_a_separator_is_a_sign_and_after_a_letter_a_dash() {
+        let want = ["t_-2", "t_-1.5", "t_-1", "t_0", "t_+0.5", "t_1", "t_2"];
+        let mut given = want.to_vec();
+        given.reverse();
+        assert_eq!(sorted(&given), want);
+        assert_eq!(sorted(&["1.png", "-1.png", "0.png"]), ["-1.png", "0.png", "1.png"]);
+        // After a letter or a digit: a dash (`cam-1`, dates).
+        assert_eq!(sorted(&["cam-2", "cam-10", "cam-1"]), ["cam-1", "cam-2", "cam-10"]);
+        assert_eq!(sorted(&["2024-01-06", "2024-01-05", "2023-12-31"]), ["2023-12-31", "2024-01-05", "2024-01-06"]);
+    }
+
+    /// Names a sort puts in one order whatever pairs it compares (`sort_by` needs a total
+    /// order): numbers with and without signs, decimals, and the characters around them.
+    #[test]
+    fn the_order_is_total() {
+        let names = [
+            "t_+2", "t_,", "t_1", "t_-1", "t_.", "t_-", "t_-x", "t_0", "t_1.5", "t_1.5.2", "t_01", "t_", "t", "t_/",
+            "t-1", "t1", "t+1", "t_+", "t_-0", "t_0.0",
+        ];
+        for a in names {
+            assert!(natural_order(a, a).is_eq());
+            for b in names {
+                assert_eq!(natural_order(a, b), natural_order(b, a).reverse(), "{a} {b}");
+                for c in names {
+                    if natural_order(a, b).is_lt() && natural_order(b, c).is_lt() {
+                        assert!(natural_order(a, c).is_lt(), "{a} < {b} < {c}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_dash_that_may_be_a_minus_sign_is_found() {
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            sign_read_as_dash(&names(&["t-1.png", "t-2.png", "t0.png"])),
+            Some(("t-1.png".into(), "t0.png".into()))
+        );
+        assert_eq!(sign_read_as_dash(&names(&["t+1.png", "t2.png"])), Some(("t+1.png".into(), "t2.png".into())));
+        assert_eq!(sign_read_as_dash(&names(&["frame-1.png", "frame-2.png"])), None);
+        assert_eq!(sign_read_as_dash(&names(&["t_-1.png", "t_0.png", "2024-01-05.png", "2024-01-06.png"])), None);
     }
 
     /// An import killed while it put its files into place (one frame moved, the rest and the

@@ -184,6 +184,72 @@ fn a_time_series_numbered_without_leading_zeros_keeps_its_order() {
     assert_eq!(order, want);
 }
 
+/// A time series named by decimal times (`t_1.25ms`, `t_1.5ms`) is instant n in the order of
+/// those numbers: digit runs compared as integers put `t_1.5ms` (5) before `t_1.25ms` (25).
+#[test]
+fn a_time_series_named_by_decimal_times_keeps_its_order() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    let names = ["t_0.75ms.png", "t_1ms.png", "t_1.25ms.png", "t_1.5ms.png", "t_2ms.png", "t_10ms.png"];
+    for (n, _) in &rig() {
+        for name in names {
+            image(&images.join(n), name);
+        }
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &images, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("minus sign"), "{}", stderr(&o));
+    let scene = load_scene(&out).expect("loads");
+    let order: Vec<(String, f64)> = scene
+        .frames
+        .iter()
+        .filter(|f| f.camera_name.as_deref() == Some("cam2"))
+        .map(|f| (f.file_path.file_name().expect("a file").to_string_lossy().into_owned(), f.time.expect("timed")))
+        .collect();
+    let want: Vec<(String, f64)> = names.iter().enumerate().map(|(t, n)| (n.to_string(), t as f64)).collect();
+    assert_eq!(order, want);
+}
+
+/// A '-' between a letter and a number (`t-1`) is read as a dash, not a minus sign (`cam-1`,
+/// `frame-2` are names, not negative numbers): a series that also holds the same letters
+/// before an unsigned number (`t0`, `t1`), where the '-' reads as a sign, would be put out of
+/// time order without a word, so the import warns, naming the camera and the names.
+#[test]
+fn names_whose_dash_may_be_a_minus_sign_are_warned_about() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let calib = dir.path().join("rig.yml");
+    write_opencv(&calib, &rig()).expect("writes calibration");
+    let images = dir.path().join("images");
+    for (n, _) in &rig() {
+        for name in ["t-2.png", "t-1.png", "t0.png", "t1.png"] {
+            image(&images.join(n), name);
+        }
+    }
+    let o = import_recordings(&calib, &images, &dir.path().join("scene"), &[]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains("cam0, cam1, cam2") && e.contains("t-1.png") && e.contains("t0.png"), "{e}");
+    assert!(e.contains("minus sign"), "{e}");
+    assert_eq!(e.matches("minus sign").count(), 1, "one warning for the cameras: {e}");
+
+    // Only dashes (`frame-1`, `frame-2`, …) or signs after a separator (`t_-1`): no warning.
+    for (k, names) in
+        [["frame-1.png", "frame-2.png", "frame-10.png"], ["t_-1.png", "t_0.png", "t_1.png"]].iter().enumerate()
+    {
+        let images = dir.path().join(format!("images{k}"));
+        for (n, _) in &rig() {
+            for name in names {
+                image(&images.join(n), name);
+            }
+        }
+        let o = import_recordings(&calib, &images, &dir.path().join(format!("scene{k}")), &[]);
+        assert!(o.status.success() && !stderr(&o).contains("minus sign"), "{names:?}: {}", stderr(&o));
+    }
+}
+
 #[test]
 fn unmatched_cameras_and_images_are_errors() {
     let dir = tempfile::tempdir().expect("tempdir");
