@@ -282,7 +282,7 @@ pub(crate) fn read_cine(
             }
         }
         let time_s = (f64::from(first_image_no) + i as f64) / f64::from(rate) + opts.time_offset_s;
-        on_frame(VideoFrame { index: i, time_s, image, full_scale: saturated_at })?;
+        on_frame(VideoFrame { index: i, time_s, image, full_scale: Some(saturated_at) })?;
         kept += 1;
     }
     log::debug!(

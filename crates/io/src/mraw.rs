@@ -12,6 +12,13 @@
 //! range mapping or linearisation (12-bit data keeps its 12 bits). A 16-bit file whose
 //! effective bits sit at the high side of the word is read as stored, as pyMRAW reads it.
 //!
+//! **Saturation.** A pixel is saturated at the largest count of the header's effective bits
+//! (`EffectiveBit Depth`, shifted up when `EffectiveBit Side` is `Higher`), else of the
+//! samples' bits. A file with counts above that effective full scale contradicts its header
+//! (pyMRAW writes `EffectiveBit Depth : 12`, `EffectiveBit Side : Lower` into every 16-bit
+//! file it saves, whatever its counts): a warning names the file, the header's keys and the
+//! largest count, and the samples' full scale (65535 for 16 bits) is the file's instead.
+//!
 //! **Read:** monochrome frames of 8, 12 or 16 bits. **Refused**, each with its reason: colour
 //! recordings (a Bayer mosaic or interpolated colour), which fluidnerf does not demosaic, and
 //! headers whose file format is not MRAW.
@@ -43,6 +50,8 @@ struct Header {
     /// The sensor's significant bits within each sample, and whether they sit at its high side
     /// (`EffectiveBit Depth`, `EffectiveBit Side`); None when unstated.
     effective_bits: Option<(u32, bool)>,
+    /// The keys and values that state `effective_bits`, as the header writes them.
+    effective_stated: String,
     /// Whether the camera recorded grey frames.
     mono: bool,
     file_format: String,
@@ -124,10 +133,20 @@ fn read_header(path: &Path) -> Result<Header, IoError> {
         ("EffectiveBit Depth", "EffectiveBit Side")
     };
     let stated = |key: &str| if xml { xml_field(path, &text, key) } else { Ok(cih_field(&text, key)) };
+    let (depth, side) = (stated(depth_key)?, stated(side_key).ok().flatten());
     // Only for counting saturated pixels: a depth that does not parse is left unused.
-    let effective_bits = stated(depth_key)?
+    let effective_bits = depth
+        .as_deref()
         .and_then(|v| v.trim().parse::<u32>().ok())
-        .map(|d| (d, stated(side_key).ok().flatten().is_some_and(|s| s.trim().eq_ignore_ascii_case("higher"))));
+        .map(|d| (d, side.as_deref().is_some_and(|s| s.trim().eq_ignore_ascii_case("higher"))));
+    let effective_stated = [(depth_key, depth), (side_key, side)]
+        .into_iter()
+        .filter_map(|(key, v)| {
+            let v = v?;
+            Some(if xml { format!("`{key}` {}", v.trim()) } else { format!("`{key} : {}`", v.trim()) })
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
     let header = Header {
         width: count(keys[0])?,
         height: count(keys[1])?,
@@ -136,6 +155,7 @@ fn read_header(path: &Path) -> Result<Header, IoError> {
         start_frame,
         bits: count(keys[4])? as u32,
         effective_bits,
+        effective_stated,
         // Not every header states it; one that does not is taken for grey.
         mono: colour_type.is_none_or(|t| t.trim().to_ascii_lowercase().starts_with("mono")),
         file_format: field(keys[6])?,
@@ -245,12 +265,16 @@ pub(crate) fn read_mraw(
         );
     }
     // The sensor's largest count as stored: of its effective bits when the header states a
-    // number of them that fits the samples (shifted up when they sit at the high side).
+    // number of them that fits the samples (shifted up when they sit at the high side), unless
+    // a count exceeds it, else of the samples' bits. Which one holds is known only once every
+    // frame is read, so the saturated pixels are counted at both.
     let ones = |n: u32| (1u32 << n) - 1;
-    let saturated_at = match header.effective_bits {
+    let samples_full_scale = ones(bits) as f32;
+    let effective_full_scale = match header.effective_bits {
         Some((d, high)) if (1..=bits).contains(&d) => (ones(d) << if high { bits - d } else { 0 }) as f32,
-        _ => ones(bits) as f32,
+        _ => samples_full_scale,
     };
+    let (mut at_effective, mut at_samples, mut largest) = (0u64, 0u64, 0f32);
     let mut file = BufReader::new(file);
     let mut data = vec![0u8; frame_bytes];
     let mut kept = 0;
@@ -279,10 +303,29 @@ pub(crate) fn read_mraw(
                 }
             }
         }
+        for &v in &image.data {
+            largest = largest.max(v);
+            at_effective += u64::from(v >= effective_full_scale);
+            at_samples += u64::from(v >= samples_full_scale);
+        }
         let time_s = (header.start_frame as f64 + i as f64) / header.rate + opts.time_offset_s;
-        on_frame(VideoFrame { index: i, time_s, image, full_scale: saturated_at })?;
+        on_frame(VideoFrame { index: i, time_s, image, full_scale: None })?;
         kept += 1;
     }
+    let saturated_pixels = if largest > effective_full_scale {
+        log::warn!(
+            "{}: its header {} states {} (a full scale of {effective_full_scale}), but counts reach {largest}: the \
+             header contradicts the data (pyMRAW writes these effective bits into every 16-bit file); the full \
+             scale of its {bits}-bit samples, {samples_full_scale}, is taken instead: only counts at it are \
+             saturated",
+            path.display(),
+            header_file.display(),
+            header.effective_stated,
+        );
+        at_samples
+    } else {
+        at_effective
+    };
     Ok(VideoInfo {
         decoder: Decoder::Mraw,
         width: w as u32,
@@ -293,7 +336,7 @@ pub(crate) fn read_mraw(
         range: VideoRange::Full,
         range_source: RangeSource::Raw,
         clipped_pixels: 0,
-        saturated_pixels: 0,
+        saturated_pixels,
         display_rotation_deg: None,
     })
 }

@@ -193,8 +193,10 @@ pub struct VideoFrame {
     /// A pixel's value when the recording was at the top of its scale: the 8-bit code 255 (235
     /// in limited range) after the range mapping and linearisation, or a raw recording's largest
     /// count less its black level. Pixels at or above it are saturated, counted by
-    /// [`read_video_frames`] into [`VideoInfo::saturated_pixels`].
-    pub full_scale: f32,
+    /// [`read_video_frames`] into [`VideoInfo::saturated_pixels`]. None when the decoder counts
+    /// them itself: an MRAW's full scale is known only once all its frames are read (its
+    /// header's effective bits hold unless a count exceeds them).
+    pub full_scale: Option<f32>,
 }
 
 /// What reading a video did.
@@ -216,7 +218,8 @@ pub struct VideoInfo {
     pub clipped_pixels: u64,
     /// Pixels of the kept frames at their full scale ([`VideoFrame::full_scale`]): saturated,
     /// they recorded less light than arrived. Counted by [`read_video_frames`] for every
-    /// decoder (which leave it 0).
+    /// decoder that states each frame's full scale (and leaves it 0), by the others (MRAW)
+    /// themselves.
     pub saturated_pixels: u64,
     /// The rotation the file asks players to show its frames with, in degrees (a camera held
     /// on its side); the frames are read as stored regardless.
@@ -285,7 +288,9 @@ pub fn read_video_frames(
             }
             _ => last = Some((frame.index, frame.time_s)),
         }
-        saturated += frame.image.data.iter().filter(|&&v| v >= frame.full_scale).count() as u64;
+        if let Some(full_scale) = frame.full_scale {
+            saturated += frame.image.data.iter().filter(|&&v| v >= full_scale).count() as u64;
+        }
         on_frame(frame)
     };
     crate::check_regular_file(path, "video file")?;
@@ -295,7 +300,7 @@ pub fn read_video_frames(
     } else {
         read_sniffed(path, opts, &mut on_frame)?
     };
-    info.saturated_pixels = saturated;
+    info.saturated_pixels += saturated;
     if info.frames_kept == 0 {
         return Err(IoError::invalid(
             path,
@@ -589,7 +594,7 @@ fn read_mjpeg_avi(
             *o = mapper.map(f64::from(v));
         }
         let time_s = (f64::from(scan.start) + i as f64) * num / den + opts.time_offset_s;
-        on_frame(VideoFrame { index: i, time_s, image, full_scale: FULL_SCALE_8BIT })?;
+        on_frame(VideoFrame { index: i, time_s, image, full_scale: Some(FULL_SCALE_8BIT) })?;
         kept += 1;
     }
     let (width, height) = size.unwrap_or((scan.width, scan.height));
@@ -1018,7 +1023,7 @@ fn read_with_ffmpeg(
                 // bits by replicating the high bits, so 8-bit 235 arrives as 235 · 257).
                 *o = mapper.map(f64::from(u16::from_le_bytes([px[0], px[1]])) / 257.0);
             }
-            if let Err(e) = on_frame(VideoFrame { index: i, time_s, image, full_scale: FULL_SCALE_8BIT }) {
+            if let Err(e) = on_frame(VideoFrame { index: i, time_s, image, full_scale: Some(FULL_SCALE_8BIT) }) {
                 break Err(e);
             }
             kept += 1;

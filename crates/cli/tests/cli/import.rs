@@ -1657,6 +1657,36 @@ fn photron_mraw_recordings_import_as_videos() {
     assert_eq!(img.get(5, 7), 64.0 + 10.0 * (20.0 + 4.0 * 5.0 + 3.0 * 7.0 + 10.0));
 }
 
+/// An MRAW header whose effective bits the counts exceed (pyMRAW writes `EffectiveBit Depth :
+/// 12`, `EffectiveBit Side : Lower` into every 16-bit file) is warned about, naming the file,
+/// the header's keys and the largest count, and the 16-bit full scale is used: counts of
+/// 20000 were called saturated, with the advice to mask them.
+#[test]
+fn an_mraw_header_whose_effective_bits_the_counts_exceed_is_warned_about() {
+    let (dir, calib, videos) = video_rig();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../io/tests/fixtures/video");
+    for n in ["cam0", "cam1", "cam2"] {
+        std::fs::copy(fixtures.join("ramp_16bit.mraw"), videos.join(format!("{n}.mraw"))).expect("copies");
+        std::fs::copy(fixtures.join("ramp_16bit.cih"), videos.join(format!("{n}.cih"))).expect("copies");
+    }
+    let mut bytes = std::fs::read(videos.join("cam1.mraw")).expect("reads");
+    bytes[..4].copy_from_slice(&[20000u16.to_le_bytes(), 4095u16.to_le_bytes()].concat());
+    std::fs::write(videos.join("cam1.mraw"), bytes).expect("writes");
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains(s(&videos.join("cam1.mraw"))) && e.contains("cam1.cih"), "{e}");
+    assert!(e.contains("EffectiveBit Depth : 12") && e.contains("EffectiveBit Side : Lower"), "{e}");
+    assert!(e.contains("20000") && e.contains("65535"), "{e}");
+    assert_eq!(e.matches("EffectiveBit Depth").count(), 1, "once, for cam1's file: {e}");
+    assert!(!e.contains("(saturated)") && !e.contains("mask them"), "{e}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("import.json")).expect("import.json")).expect("JSON");
+    let counts: Vec<u64> = (0..3).map(|i| record["videos"][i]["saturated_pixels"].as_u64().expect("a count")).collect();
+    assert_eq!(counts, [0, 0, 0]);
+}
+
 /// The video options act on video recordings only: given for still images the import warns,
 /// naming each option given and its value (a shifted time, --video-time-offset, was warned
 /// about only as one of "the --video-* options").

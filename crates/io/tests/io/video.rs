@@ -594,6 +594,30 @@ mod mraw {
         assert_eq!(read(0xfff0, "Higher"), 1);
     }
 
+    /// pyMRAW writes `EffectiveBit Depth : 12` and `EffectiveBit Side : Lower` into the header
+    /// of every 16-bit file it saves: counts above 4095 contradict the header, and the file's
+    /// full scale is then that of its 16-bit samples, 65535, for all its frames (a count of
+    /// 4095 in a frame before the first one above it included).
+    #[test]
+    fn counts_above_the_effective_full_scale_make_the_samples_full_scale() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::copy(fixture("ramp_16bit.cih"), dir.path().join("rec.cih")).expect("copies");
+        let mraw = dir.path().join("rec.mraw");
+        // Counts at pixel indices of the whole file (a frame is 32 × 24 pixels).
+        let read = |counts: &[(usize, u16)]| {
+            let mut bytes = std::fs::read(fixture("ramp_16bit.mraw")).expect("reads");
+            for &(at, v) in counts {
+                bytes[2 * at..2 * at + 2].copy_from_slice(&v.to_le_bytes());
+            }
+            std::fs::write(&mraw, bytes).expect("writes");
+            read_video(&mraw, &VideoOptions::default()).expect("reads").info.saturated_pixels
+        };
+        assert_eq!(read(&[(0, 20000), (1, 4095)]), 0);
+        assert_eq!(read(&[(0, 20000), (1, 65535)]), 1);
+        assert_eq!(read(&[(1, 4095), (2 * 32 * 24 + 5, 20000)]), 0, "a later frame's count tells");
+        assert_eq!(read(&[(1, 4095)]), 1, "the header's full scale while no count exceeds it");
+    }
+
     /// A copy of the 8-bit fixture in `dir` (`.mraw`, and the header `.cihx` with `edit`).
     fn copy(dir: &Path, edit: impl Fn(&str) -> String) -> std::path::PathBuf {
         let header = std::fs::read(fixture("ramp_8bit.cihx")).expect("reads");
