@@ -765,8 +765,10 @@ class Run:
         neural runs (static or of space and time), the volume sampled trilinearly otherwise.
         Returns ``(N,)`` float32; points outside the box give 0. A time-resolved run is sampled
         at ``time`` between its first and last instants (default: the first); a time outside
-        them raises :class:`FluidNerfError`. Static results are the same at every time: a
-        ``time`` given to one is warned of (:class:`FluidNerfWarning`), as the command line does."""
+        them raises :class:`FluidNerfError`; a time held out at an end of the recording is
+        warned of (:class:`FluidNerfWarning`: the field repeats its nearest trained instant
+        there). Static results are the same at every time: a ``time`` given to one is warned of,
+        as the command line does."""
         pts = _array(points, np.float32, "points", "(N, 3)")
         if pts.shape[1] != 3:
             raise FluidNerfError(f"points: expected shape (N, 3), got {pts.shape}")
@@ -776,7 +778,11 @@ class Run:
             raise FluidNerfError(f"time: expected a finite number, got {time!r}")
         if t is not None and self.kind != "temporal":
             _warn(f"time={time} has no effect: {self.path} is a static result, fixed in time")
-        return self._h.field(pts, t)
+        values = self._h.field(pts, t)
+        note = self._h.held_note(t) if t is not None and self.kind == "temporal" else None
+        if note:
+            _warn(f"{self.path}: {note}")
+        return values
 
     def score_held_out(
         self, scene: Scene | PathLike | None = None, *, supersample: int = 2, use_volume: bool = False

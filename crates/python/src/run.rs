@@ -616,6 +616,14 @@ impl PyRun {
         to_json(&scores)
     }
 
+    /// What a reader sampling a time-resolved run at `time` should be told: the run's held-out
+    /// instant outside its trained ones, where its field repeats the nearest trained instant
+    /// (as the command line warns). None otherwise.
+    fn held_note(&self, time: f64) -> PyResult<Option<String>> {
+        let span = self.run.time_span().map_err(|e| err(e.to_string()))?;
+        Ok(span.and_then(|s| s.held_note([time])))
+    }
+
     /// The result evaluated at world points `(N, 3)` (x, y, z) at `time`: the trained field
     /// of neural runs, the volume sampled trilinearly for voxel runs. Returns `(N,)` float32.
     /// For a time-resolved run `time` must lie between its first and last instants (a stopped
