@@ -615,25 +615,103 @@ fn inside_field_data(xml: &str, at: usize) -> bool {
     before.rfind("<FieldData").is_some_and(|open| !before[open..].contains("</FieldData>"))
 }
 
-/// The instant a `.vti` records as its `TimeValue` field data (as [`write_vti_at`] and ParaView
-/// write it, in ASCII); None when it records none, or in a form not read here. Reads only the
-/// file's XML head.
+/// The instant a `.vti` records as its `TimeValue` field data (as [`write_vti_at`] writes it,
+/// in ASCII, and as VTK's and ParaView's writers do: inline binary or appended, raw or base64,
+/// zlib-compressed or not; Float32, Float64 or a whole number); None when it records none, or
+/// in a form not read here. Reads only the file's XML head and the value's block.
 pub fn vti_time(path: &Path) -> Option<f64> {
-    use std::io::Read;
+    use std::io::{Read, Seek, SeekFrom};
+    let mut file = std::fs::File::open(path).ok()?;
     let mut head = Vec::new();
-    std::fs::File::open(path).ok()?.take(1 << 16).read_to_end(&mut head).ok()?;
-    let end = find(&head, b"<AppendedData").unwrap_or(head.len());
-    let xml = String::from_utf8_lossy(&head[..end]);
+    (&mut file).take(1 << 16).read_to_end(&mut head).ok()?;
+    let xml_end = find(&head, b"<AppendedData");
+    let xml = String::from_utf8_lossy(&head[..xml_end.unwrap_or(head.len())]).into_owned();
+    let file_tag = start_tag(&xml, "VTKFile")?;
+    let zlib = attribute(file_tag, "compressor") == Some("vtkZLibDataCompressor");
+    let header_u64 = attribute(file_tag, "header_type") == Some("UInt64");
     let section = &xml[xml.find("<FieldData")?..];
     let section = &section[..section.find("</FieldData>")?];
     let tag = start_tags(section, "DataArray").into_iter().find(|t| attribute(t, "Name") == Some(TIME_ARRAY))?;
-    if attribute(tag, "format").is_some_and(|f| f != "ascii") || tag.ends_with("/>") {
-        return None;
-    }
-    let at = tag.as_ptr() as usize - section.as_ptr() as usize + tag.len();
-    let text = &section[at..];
-    let value: f64 = text[..text.find('<')?].split_whitespace().next()?.parse().ok()?;
+    let (kind, width) = match attribute(tag, "type")? {
+        "Float64" => ('f', 8),
+        "Float32" => ('f', 4),
+        "Int64" => ('i', 8),
+        "Int32" => ('i', 4),
+        "UInt64" => ('u', 8),
+        "UInt32" => ('u', 4),
+        _ => return None,
+    };
+    let text_after = || {
+        let at = tag.as_ptr() as usize - section.as_ptr() as usize + tag.len();
+        let rest = &section[at..];
+        rest.find('<').map(|end| rest[..end].to_string())
+    };
+    let bytes: Vec<u8> = match attribute(tag, "format") {
+        None | Some("ascii") if !tag.ends_with("/>") => {
+            let value: f64 = text_after()?.split_whitespace().next()?.parse().ok()?;
+            return value.is_finite().then_some(value);
+        }
+        Some("binary") if !tag.ends_with("/>") => {
+            decode_array(Payload::Base64(text_after()?.as_bytes()), header_u64, zlib, width).ok()?
+        }
+        Some("appended") => {
+            let offset: u64 = attribute(tag, "offset")?.parse().ok()?;
+            let xml_end = xml_end?;
+            let tail = &head[xml_end..];
+            let tag_end = find(tail, b">")?;
+            let encoding = attribute(std::str::from_utf8(&tail[..=tag_end]).ok()?, "encoding")?.to_string();
+            let data_start = (xml_end + tag_end + find(&tail[tag_end..], b"_")? + 1) as u64;
+            // The value's block: a header and one value, compressed or encoded, in a few bytes.
+            let mut block = Vec::new();
+            file.seek(SeekFrom::Start(data_start + offset)).ok()?;
+            file.take(4096).read_to_end(&mut block).ok()?;
+            let payload = match encoding.as_str() {
+                "raw" => Payload::Raw(&block),
+                // The arrays' texts follow one another: this one's ends where its lengths say.
+                "base64" => Payload::Base64(&block[..base64_len(&block, header_u64, zlib, width)?]),
+                _ => return None,
+            };
+            decode_array(payload, header_u64, zlib, width).ok()?
+        }
+        _ => return None,
+    };
+    let b = bytes.get(..width)?;
+    let value = match (kind, width) {
+        ('f', 8) => f64::from_le_bytes(b.try_into().ok()?),
+        ('f', _) => f64::from(f32::from_le_bytes(b.try_into().ok()?)),
+        ('i', 8) => i64::from_le_bytes(b.try_into().ok()?) as f64,
+        ('i', _) => f64::from(i32::from_le_bytes(b.try_into().ok()?)),
+        ('u', 8) => u64::from_le_bytes(b.try_into().ok()?) as f64,
+        _ => f64::from(u32::from_le_bytes(b.try_into().ok()?)),
+    };
     value.is_finite().then_some(value)
+}
+
+/// The characters of the appended base64 text `text` (no whitespace, as VTK writes it) that
+/// encode the array at its start, of `want` bytes uncompressed: its header and data as one
+/// text, or with zlib its header's text and then its blocks'.
+fn base64_len(text: &[u8], header_u64: bool, zlib: bool, want: usize) -> Option<usize> {
+    use base64::Engine;
+    let hlen = if header_u64 { 8 } else { 4 };
+    let chars_for = |bytes: usize| bytes.div_ceil(3) * 4;
+    if !zlib {
+        return Some(chars_for(hlen + want)).filter(|&n| n <= text.len());
+    }
+    let decode = |n: usize| base64::engine::general_purpose::STANDARD.decode(text.get(..chars_for(n))?).ok();
+    let word = |b: &[u8], k: usize| -> Option<usize> {
+        let b = b.get(k * hlen..(k + 1) * hlen)?;
+        let v = if header_u64 {
+            u64::from_le_bytes(b.try_into().ok()?)
+        } else {
+            u64::from(u32::from_le_bytes(b.try_into().ok()?))
+        };
+        usize::try_from(v).ok()
+    };
+    let count = word(&decode(hlen)?, 0)?;
+    let size = hlen.checked_mul(count.checked_add(3)?)?;
+    let header = decode(size)?;
+    let compressed = (0..count).try_fold(0usize, |sum, k| sum.checked_add(word(&header, 3 + k)?))?;
+    Some(chars_for(size) + chars_for(compressed)).filter(|&n| n <= text.len())
 }
 
 /// Where the last `needle` in `haystack` starts.
@@ -1210,10 +1288,19 @@ mod tests {
             .filter(|p| p.extension().is_some_and(|e| e == "vti"))
             .collect();
         names.sort();
-        assert_eq!(names.len(), 24, "4 modes × 3 compressions × 2 headers");
+        assert_eq!(names.len(), 24 + 16, "4 modes × 3 compressions × 2 headers; 4 × 2 × 2 kinds of time");
         let expected: Vec<f32> =
             (0..3).flat_map(|k| (0..4).flat_map(move |j| (0..5).map(move |i| (i + 10 * j + 100 * k) as f32))).collect();
         for path in names {
+            // The instant ParaView stores, after another field array, in every mode; none in the
+            // files without one.
+            let name = path.file_name().and_then(|n| n.to_str()).expect("a name");
+            let time = match (name.starts_with("timed_float32_"), name.starts_with("timed_")) {
+                (true, _) => Some(16.25),
+                (false, true) => Some(16.5),
+                _ => None,
+            };
+            assert_eq!(vti_time(&path), time, "{}", path.display());
             let v = read_vti(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             assert_eq!(v.dims, [5, 4, 3], "{}", path.display());
             assert_eq!(v.data, expected, "{}", path.display());

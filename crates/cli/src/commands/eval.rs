@@ -520,6 +520,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             None => truth_steps,
         },
+        // A volume of one instant against a truth without a time: scored as a steady flow's.
+        ([recon], 1) if recon.is_file() && truth_steps[0].0.is_none() && args.truth.is_none() => {
+            if let Some((place, at)) = recorded_volume_time(recon) {
+                log::warn!(
+                    "{} holds the field at t = {} ({place}), and the scene's ground truth has no time: it is scored \
+                     against it as against a steady flow's; if the truth is of one instant, give it that `time`",
+                    recon.display(),
+                    num(at)
+                );
+            }
+            truth_steps
+        }
         _ => truth_steps,
     };
     // The time steps the reconstruction volumes stand for: the truth's, else the frames'.
@@ -607,7 +619,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("scoring time step {step}"))?;
         report.steps.push(metrics);
     }
-    if !holdouts.is_empty() {
+    // One volume of one instant is reprojected onto the held-out frames of that instant only:
+    // drawn for the others, it was scored against another instant's images without a word.
+    let single_instant = match &recon {
+        Recon::Volumes(v, None) if v.len() == 1 => v[0].0,
+        _ => None,
+    };
+    let reprojected: Cow<'_, Scene> = match single_instant {
+        Some(at) if !holdouts.is_empty() => {
+            let mut s = scene.clone();
+            let mut left_out = Vec::new();
+            for f in s.frames.iter_mut().filter(|f| f.holdout && f.time.is_some_and(|t| !same_time(t, at))) {
+                f.holdout = false;
+                left_out.push(f.file_path.display().to_string());
+            }
+            if !left_out.is_empty() {
+                log::warn!(
+                    "{} holds the field at t = {}: the held-out frames of other instants are not reprojected ({})",
+                    args.recon[0].display(),
+                    num(at),
+                    left_out.join(", ")
+                );
+            }
+            Cow::Owned(s)
+        }
+        _ => Cow::Borrowed(&scene),
+    };
+    let reprojected_frames = if holdouts.is_empty() { 0 } else { reprojected.holdout_frames().count() };
+    if reprojected_frames > 0 {
         // The held-out images as a run fits the others, divided by the gain the run recorded
         // for them.
         let gains = match &run_dir {
@@ -617,9 +656,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             _ => Vec::new(),
         };
-        let bar = crate::progress::bar(holdouts.len() as u64, "reprojecting");
+        let bar = crate::progress::bar(reprojected_frames as u64, "reprojecting");
         report.reprojection = fluidnerf_pipeline::score::score_held_out(
-            &scene,
+            &reprojected,
             &gains,
             |time| recon.field_at(time),
             &reprojection_options,

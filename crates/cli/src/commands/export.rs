@@ -347,10 +347,11 @@ fn overlap_fraction(a: &Aabb, b: &Aabb) -> f64 {
     common.x * common.y * common.z / (a.size().x * a.size().y * a.size().z)
 }
 
-/// Whether two boxes are the same to within a billionth of the larger's longest side: a box
-/// typed in decimals, or read back from a file's origin and spacing, may differ in its last bits.
-fn same_box(a: &Aabb, b: &Aabb) -> bool {
-    let tolerance = 1e-9 * a.size().max(b.size()).max_element();
+/// Whether two boxes are the same to within `slack` or a billionth of the larger's longest side:
+/// a box typed in decimals, or read back from a file's origin and spacing, may differ in its
+/// last bits.
+fn same_box(a: &Aabb, b: &Aabb, slack: f64) -> bool {
+    let tolerance = slack.max(1e-9 * a.size().max(b.size()).max_element());
     (a.min - b.min).abs().max((a.max - b.max).abs()).max_element() <= tolerance
 }
 
@@ -597,9 +598,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
-    // The reconstruction's own box given as --box (typed from the scene, say) is no other box:
-    // a volume keeps its grid, as without --box.
-    let export_box = export_box.filter(|b| !same_box(b, &source.aabb()));
+    // The reconstruction's own box given as --box (typed from the scene, or from `info`'s
+    // three decimals) is no other box: a volume keeps its grid, as without --box.
+    let own_cell = match &source {
+        Source::Volume(v) => v.spacing().min_element(),
+        Source::Field { .. } => 0.0,
+    };
+    let export_box = export_box.filter(|b| !same_box(b, &source.aabb(), 1e-3 * own_cell));
     let aabb = export_box.unwrap_or_else(|| source.aabb());
     if let Some(n) = args.resolution {
         // The volume, and a copy as the files are written.

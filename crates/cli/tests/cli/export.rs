@@ -487,7 +487,8 @@ fn the_own_box_given_keeps_the_grid_and_export_json_records_the_spacing() {
     let src = source(dir.path());
     let out = dir.path().join("out");
     let (src, out_s) = (src.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
-    ok(&fluidnerf(&["export", src, "--out", out_s, "--npy", "--box", "0,0,0,4.0000000000000001,4,4"]));
+    // Typed to a thousandth of a voxel (0.25 here), as `info` prints boxes to three decimals.
+    ok(&fluidnerf(&["export", src, "--out", out_s, "--npy", "--box", "-0.0002,0,0,4.0002,4,4"]));
     let settings = common::json(&out.join("export.json"));
     assert_eq!(settings["dims"], serde_json::json!([16, 16, 16]));
     assert_eq!(settings["spacing"], serde_json::json!([0.25, 0.25, 0.25]));

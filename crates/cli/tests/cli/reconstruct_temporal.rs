@@ -1375,4 +1375,24 @@ fn held_out_frames_are_drawn_from_the_volume_of_their_own_instant() {
         r.as_array().expect("rows").iter().find(|row| row["time"] == 15.0).expect("a frame at 15")["nrmse"].clone()
     };
     assert_eq!(row_at_15(&through_run), row_at_15(&through_frame), "drawn from the volume of t = 15");
+    // One volume of one instant is reprojected onto that instant's held-out frames alone.
+    let rows = through_frame.as_array().expect("rows");
+    assert!(!rows.is_empty() && rows.iter().all(|row| row["time"] == 15.0), "{through_frame}");
+    let out = eval(&["run/frames/volume_001.npy", "--truth", "scene/truth/truth_t01.npy"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("holds the field at t = 15: the held-out frames of other instants are not reprojected"),
+        "{err}"
+    );
+    // Against a truth listed without a time, it is scored as against a steady flow's, and said so.
+    edit_json(&d.join("scene/transforms.json"), |t| {
+        t["truth"] = serde_json::json!([{"file_path": "truth/truth_t01.npy"}])
+    });
+    let out = eval(&["run/frames/volume_001.npy", "--no-reprojection"]);
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("and the scene's ground truth has no time: it is scored against it as against a steady flow's"),
+        "{err}"
+    );
 }
