@@ -1100,9 +1100,10 @@ def test_a_time_given_to_a_static_result_is_warned_of_at_the_callers_line(static
 
 def test_a_time_held_out_at_an_end_is_warned_of_as_the_command_line_does(tr_scene, tmp_path):
     method = {"name": "tr-fast", "holdout_times": [16.0]}
-    run = fluidnerf.reconstruct(
-        tr_scene, method, tmp_path / "a", resolution=6, stopping={"max_iterations": 2}, progress=False
-    )
+    with pytest.warns(fluidnerf.FluidNerfWarning, match="held-out time 16 lies outside the training times"):
+        run = fluidnerf.reconstruct(
+            tr_scene, method, tmp_path / "a", resolution=6, stopping={"max_iterations": 2}, progress=False
+        )
     with pytest.warns(fluidnerf.FluidNerfWarning, match="t = 16 held out at an end") as caught:
         held = run.field(np.zeros((1, 3)), time=16.0)
     assert [w.filename for w in caught] == [__file__]

@@ -172,16 +172,21 @@ fn a_time_series_numbered_without_leading_zeros_keeps_its_order() {
     let out = dir.path().join("scene");
     let o = import_recordings(&calib, &images, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let scene = load_scene(&out).expect("loads");
-    let order: Vec<(String, f64)> = scene
-        .frames
-        .iter()
-        .filter(|f| f.camera_name.as_deref() == Some("cam1"))
-        .map(|f| (f.file_path.file_name().expect("a file").to_string_lossy().into_owned(), f.time.expect("timed")))
-        .collect();
+    let order = series_order(&out, "cam1");
     let want: Vec<(String, f64)> =
         [1, 2, 3, 10, 11].iter().enumerate().map(|(t, n)| (format!("img_{n}.png"), t as f64)).collect();
     assert_eq!(order, want);
+}
+
+/// The images of `camera` in the scene imported into `out`, by file name, with their instants.
+fn series_order(out: &Path, camera: &str) -> Vec<(String, f64)> {
+    let scene = load_scene(out).expect("loads");
+    scene
+        .frames
+        .iter()
+        .filter(|f| f.camera_name.as_deref() == Some(camera))
+        .map(|f| (f.file_path.file_name().expect("a file").to_string_lossy().into_owned(), f.time.expect("timed")))
+        .collect()
 }
 
 /// A time series named by decimal times (`t_1.25ms`, `t_1.5ms`) is instant n in the order of
@@ -202,13 +207,7 @@ fn a_time_series_named_by_decimal_times_keeps_its_order() {
     let o = import_recordings(&calib, &images, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stderr(&o).contains("minus sign"), "{}", stderr(&o));
-    let scene = load_scene(&out).expect("loads");
-    let order: Vec<(String, f64)> = scene
-        .frames
-        .iter()
-        .filter(|f| f.camera_name.as_deref() == Some("cam2"))
-        .map(|f| (f.file_path.file_name().expect("a file").to_string_lossy().into_owned(), f.time.expect("timed")))
-        .collect();
+    let order = series_order(&out, "cam2");
     let want: Vec<(String, f64)> = names.iter().enumerate().map(|(t, n)| (n.to_string(), t as f64)).collect();
     assert_eq!(order, want);
 }
