@@ -5,7 +5,7 @@
 //! overrides `--config`, even when it equals the default.
 
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
@@ -1350,12 +1350,45 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
                 println!("{line}");
             }
         }
-        println!("wrote {} (config.json, report.json, report.html)", args.out.display());
+        println!("wrote {} ({})", args.out.display(), run_outputs(&args.out));
     }
     Ok(match report.status {
         RunStatus::Finished => std::process::ExitCode::SUCCESS,
         RunStatus::Interrupted => std::process::ExitCode::from(130),
     })
+}
+
+/// The files a run wrote in its folder `out`, in words: its settings and report, and what it
+/// made (its volume, a field's weights and checkpoint, a time-resolved run's frames, their
+/// ParaView collection and its windows); it named the settings and reports alone.
+fn run_outputs(out: &Path) -> String {
+    let files = [
+        "config.json",
+        "report.json",
+        "report.html",
+        "volume.npy",
+        "volume.vti",
+        "weights.safetensors",
+        "model.json",
+        "checkpoint.safetensors",
+        "temporal.json",
+        "volumes.pvd",
+    ];
+    let mut listed: Vec<String> = files.iter().filter(|f| out.join(f).is_file()).map(|f| f.to_string()).collect();
+    let count = |dir: &str, ext: &str| {
+        std::fs::read_dir(out.join(dir)).map_or(0, |entries| {
+            entries.filter_map(|e| e.ok()).filter(|e| e.path().extension().is_some_and(|x| x == ext)).count()
+        })
+    };
+    match count("frames", "npy") {
+        0 => {}
+        n => listed.push(format!("frames/ ({n} volumes, .npy and .vti)")),
+    }
+    match count("windows", "safetensors") {
+        0 => {}
+        _ => listed.push("windows/".to_string()),
+    }
+    listed.join(", ")
 }
 
 /// `--window-index`, `--frames` and `--finish`: part of a time-resolved run, or its end.
@@ -1368,7 +1401,7 @@ fn run_split(args: &Args, config: &RunConfig) -> anyhow::Result<std::process::Ex
         #[allow(clippy::print_stdout)]
         {
             println!("{}", report.summary_line());
-            println!("wrote {} (config.json, report.json, report.html)", args.out.display());
+            println!("wrote {} ({})", args.out.display(), run_outputs(&args.out));
         }
         return Ok(match report.status {
             RunStatus::Finished => std::process::ExitCode::SUCCESS,

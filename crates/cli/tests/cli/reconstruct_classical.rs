@@ -17,6 +17,8 @@ fn classical_runs_write_results_refuse_overwrite_and_rerun_from_config() {
     let out = fluidnerf(d, &asart);
     ok(&out);
     assert!(String::from_utf8_lossy(&out.stdout).contains("asart:"), "summary on stdout");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("wrote run (config.json, report.json, report.html, volume.npy, volume.vti)\n"), "{text}");
     let dir = d.join("run");
     for f in ["volume.npy", "volume.vti", "config.json", "report.json"] {
         assert!(dir.join(f).is_file(), "{f} missing");

@@ -1330,7 +1330,16 @@ fn eval_every_is_refused_for_time_resolved_runs_and_compare_notes_a_single_point
         &fluidnerf(d, &[&args[..], &["-o", "run", "--eval-every", "1"]].concat()),
         "time-resolved runs score their frames once, at the end",
     );
-    ok(&fluidnerf(d, &[&args[..], &["-o", "run", "--eval-every", "0"]].concat()));
+    let out = fluidnerf(d, &[&args[..], &["-o", "run", "--eval-every", "0"]].concat());
+    ok(&out);
+    // What the run wrote is named, its frames too (it named config.json and the reports alone).
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(
+            "wrote run (config.json, report.json, report.html, temporal.json, volumes.pvd, frames/ (2 volumes"
+        ),
+        "{text}"
+    );
     ok(&fluidnerf(d, &[&args[..], &["-o", "run2", "--seed", "1"]].concat()));
     let out = fluidnerf(d, &["compare", "run", "run2", "-o", "cmp", "-q"]);
     ok(&out);
