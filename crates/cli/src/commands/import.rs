@@ -342,6 +342,12 @@ fn commit(out: &Path, staging: &Path, commit: &Commit, created: &mut Created) ->
     Ok(())
 }
 
+/// The lock of an import into OUT (the runs' [`fluidnerf_pipeline::rundir::FileLock`]: process,
+/// machine and heartbeat): a second import into the same folder would settle the first one's
+/// staging folder as left by a killed import and remove it, or stage its files among the
+/// first one's. A stale lock (its process gone) is replaced.
+pub(crate) const IMPORT_LOCK: &str = ".import.lock";
+
 /// What an import made in OUT before its scene went into place: undone when it fails, so that
 /// a failed import leaves OUT as it was and its rerun needs no --force.
 #[derive(Default)]
@@ -350,9 +356,21 @@ struct Created {
     dirs: Vec<PathBuf>,
     /// The staging folder ([`STAGING`]) until the import is committed.
     staging: Option<PathBuf>,
+    /// The import's lock of OUT ([`IMPORT_LOCK`]), held until the import ends.
+    lock: Option<fluidnerf_pipeline::rundir::FileLock>,
 }
 
 impl Created {
+    /// Takes the lock of the folder `out` ([`IMPORT_LOCK`]), unless this import holds it.
+    fn lock(&mut self, out: &Path) -> anyhow::Result<()> {
+        if self.lock.is_none() {
+            let lock = fluidnerf_pipeline::rundir::FileLock::take(out, &out.join(IMPORT_LOCK))
+                .with_context(|| format!("{}: another import is writing into this folder", out.display()))?;
+            self.lock = Some(lock);
+        }
+        Ok(())
+    }
+
     /// Creates `dir` and its missing parents, recording the folders it makes.
     fn dir_all(&mut self, dir: &Path) -> anyhow::Result<()> {
         let missing: Vec<PathBuf> =
@@ -382,7 +400,9 @@ impl Created {
     /// Removes what was recorded: the staging folder with what it holds, then the folders,
     /// children first and only when empty (a file someone else put there meanwhile keeps its
     /// folder).
-    fn undo(self) {
+    fn undo(mut self) {
+        // Its file first: a folder the import made is removed only when empty.
+        drop(self.lock.take());
         if let Some(staging) = &self.staging {
             if let Err(e) = std::fs::remove_dir_all(staging) {
                 if e.kind() != std::io::ErrorKind::NotFound {
@@ -1510,6 +1530,10 @@ fn is_referenced(path: &Path, referenced: &HashSet<PathBuf>) -> bool {
 /// The import; what it creates in OUT is recorded in `created`.
 fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
     refuse_other_kind(&args.out, FolderKind::Scene, "import")?;
+    // One import into a folder at a time; a folder still to be made is locked once made.
+    if args.out.is_dir() {
+        created.lock(&args.out)?;
+    }
     // Before the earlier scene is looked at: an import stopped while putting its scene into
     // place is finished first, and what one stopped earlier left is removed.
     settle_staging(&args.out, true)?;
@@ -1717,6 +1741,7 @@ fn import(args: &Args, created: &mut Created) -> anyhow::Result<()> {
         }
     }
     created.dir_all(&args.out)?;
+    created.lock(&args.out)?;
     let out_abs = args.out.canonicalize().with_context(|| format!("cannot resolve {}", args.out.display()))?;
     let staging = out_abs.join(STAGING);
     created.staging(&staging)?;

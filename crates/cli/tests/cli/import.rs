@@ -1433,6 +1433,37 @@ fn names_in(dir: &Path) -> Vec<String> {
 /// recording's first frames, the earlier one's last frames and the earlier transforms.json,
 /// and `info` found nothing wrong. The same import with a box succeeds and leaves the new
 /// recording's frames only.
+/// A second import into a folder while one writes into it took the first one's staging
+/// folder for what a killed import left and removed it. One import into a folder at a time:
+/// another is refused, naming the folder, and the scene there is left as it was.
+#[test]
+fn a_second_import_into_a_folder_while_one_writes_is_refused() {
+    let (dir, calib, videos) = video_rig();
+    for (n, _) in rig() {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    let out = dir.path().join("scene");
+    let o = import_recordings(&calib, &videos, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lock = out.join(".import.lock");
+    assert!(!lock.exists(), "an import that ended holds no lock");
+    // An import under way, as this process holds the lock, with its staging folder begun.
+    let held = fluidnerf_pipeline::rundir::FileLock::take(&out, &lock).expect("takes the lock");
+    let begun = out.join(".import-staging/frames/cam0/000000.tif");
+    std::fs::create_dir_all(begun.parent().expect("a folder")).expect("mkdir");
+    std::fs::write(&begun, b"half a frame").expect("writes");
+    let before = tree(&out);
+    let o = import_recordings(&calib, &videos, &out, &["--force"]);
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("another import is writing into this folder"), "{}", stderr(&o));
+    assert_eq!(tree(&out), before, "the folder and the other import's files as they were");
+    drop(held);
+    // Once it ends (here: killed, its staging folder left), the next import goes on.
+    let o = import_recordings(&calib, &videos, &out, &["--force"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join(".import-staging").exists() && !lock.exists());
+}
+
 #[test]
 fn a_failed_forced_import_of_videos_leaves_the_earlier_scene_as_it_was() {
     let (dir, calib, videos) = video_rig();
