@@ -347,6 +347,12 @@ const RUN_FILES: [&str; 14] = [
 /// evaluation may replace them.
 const EVAL_FILES: [&str; 2] = ["metrics.json", "metrics.csv"];
 
+/// The files and folders a run itself writes (those of [`RUN_FILES`] that `eval` does not), in
+/// the order a listing of them reads best: settings and reports, results, frames, windows.
+pub fn run_outputs() -> impl Iterator<Item = &'static str> {
+    RUN_FILES.into_iter().filter(|f| !EVAL_FILES.contains(f))
+}
+
 /// Folders inside a run's folder that hold runs of their own, written by the run (`hybrid`'s
 /// voxel run, its start). They go with the run's files when they hold a run (its `config.json`),
 /// and do not make a folder read as one with run files ([`DirState::Foreign`]).

@@ -381,6 +381,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("{option} {}: cannot write into its folder {}", p.display(), folder.display()))?;
     }
 
+    // The instant one volume file records (a run's frame, an export of one time), read once:
+    // the truth it is scored against, its steps and its held-out frames follow it.
+    let lone_instant = match args.recon.as_slice() {
+        [recon] if recon.is_file() => recorded_volume_time(recon),
+        _ => None,
+    };
     let truth: Vec<(Option<f64>, Volume)> = match &args.truth {
         Some(path) => {
             let volume = read_volume(path, Some(scene.aabb), Some(&scene.units))?;
@@ -393,11 +399,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
             // A volume of one instant scored against the truth of another: the difference would
             // be the flow's change between them.
-            if let [recon] = args.recon.as_slice() {
-                if let Some((place, at)) = recon.is_file().then(|| recorded_volume_time(recon)).flatten() {
-                    let from = format!("{place} records it for {}", recon.display());
-                    super::export::refuse_truth_of_another_instant("--truth", path, Some(&scene.root), (at, &from))?;
-                }
+            if let Some((place, at)) = &lone_instant {
+                let from = format!("{place} records it for {}", args.recon[0].display());
+                super::export::refuse_truth_of_another_instant("--truth", path, Some(&scene.root), (*at, &from))?;
             }
             vec![(None, volume)]
         }
@@ -500,36 +504,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     // One volume file of one instant (one of a run's frames, an export of one time) is scored
     // at that instant's truth alone: at every step, it was scored against the others too.
-    let truth_steps = match (args.recon.as_slice(), truth_steps.len()) {
-        ([recon], 2..) if recon.is_file() => match recorded_volume_time(recon) {
-            Some((place, at)) => {
-                let Some(step) = truth_steps.iter().find(|(t, _)| t.is_some_and(|t| same_time(t, at))) else {
-                    let times: Vec<String> =
-                        truth_steps.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
-                    bail!(
-                        "{}: it holds the field at t = {} ({place}), and the scene's ground truth is at t = {}, none \
-                         of them that instant; give the truth of t = {} with --truth",
-                        recon.display(),
-                        num(at),
-                        times.join(", "),
-                        num(at)
-                    );
-                };
-                log::info!("{}: scored at t = {} ({place}), its instant", recon.display(), num(at));
-                vec![*step]
-            }
-            None => truth_steps,
-        },
-        // A volume of one instant against a truth without a time: scored as a steady flow's.
-        ([recon], 1) if recon.is_file() && truth_steps[0].0.is_none() && args.truth.is_none() => {
-            if let Some((place, at)) = recorded_volume_time(recon) {
-                log::warn!(
-                    "{} holds the field at t = {} ({place}), and the scene's ground truth has no time: it is scored \
-                     against it as against a steady flow's; if the truth is of one instant, give it that `time`",
+    let truth_steps = match (args.recon.as_slice(), truth_steps.len(), &lone_instant) {
+        ([recon], 2.., Some((place, at))) => {
+            let at = *at;
+            let Some(step) = truth_steps.iter().find(|(t, _)| t.is_some_and(|t| same_time(t, at))) else {
+                let times: Vec<String> =
+                    truth_steps.iter().filter_map(|(t, _)| t.map(|t| num(t).to_string())).collect();
+                bail!(
+                    "{}: it holds the field at t = {} ({place}), and the scene's ground truth is at t = {}, none \
+                     of them that instant; give the truth of t = {} with --truth",
                     recon.display(),
+                    num(at),
+                    times.join(", "),
                     num(at)
                 );
-            }
+            };
+            log::info!("{}: scored at t = {} ({place}), its instant", recon.display(), num(at));
+            vec![*step]
+        }
+        // A volume of one instant against a truth without a time: scored as a steady flow's.
+        ([recon], 1, Some((place, at))) if truth_steps[0].0.is_none() && args.truth.is_none() => {
+            log::warn!(
+                "{} holds the field at t = {} ({place}), and the scene's ground truth has no time: it is scored \
+                 against it as against a steady flow's; if the truth is of one instant, give it that `time`",
+                recon.display(),
+                num(*at)
+            );
             truth_steps
         }
         _ => truth_steps,
@@ -543,7 +543,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Times the scene's truth does not cover are not scored, and said so.
     let without_truth = if args.truth.is_some() { Vec::new() } else { scene.times_without_truth() };
     let listed = |times: &[f64]| times.iter().map(|&t| num(t).to_string()).collect::<Vec<_>>().join(", ");
-    let (recon, recon_boxes) = load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref(), &step_times)?;
+    let lone_time = lone_instant.as_ref().map(|(_, t)| *t);
+    let (recon, recon_boxes) =
+        load_recon(&args.recon, &scene, args.use_volume, args.truth.as_deref(), &step_times, lone_time)?;
     refuse_truth_apart(&truth, &recon_boxes, args.truth.as_deref(), &scene)?;
     if let Recon::Volumes(volumes, _) = &recon {
         if volumes.len() > 1 && volumes.len() != step_times.len() {
@@ -784,13 +786,15 @@ fn refuse_inputs(out: &Path, scene_path: &Path, run_dir: Option<&Path>, args: &A
 
 /// Loads the reconstruction arguments: volume files, or one run folder of any kind (its
 /// trained field, static or of space and time, unless `use_volume`; else its volumes).
-/// `step_times`: the times of the time steps scored, in order (the truth's, else the frames').
+/// `step_times`: the times of the time steps scored, in order (the truth's, else the frames');
+/// `lone_time`: the instant one volume file given alone records.
 fn load_recon(
     paths: &[PathBuf],
     scene: &Scene,
     use_volume: bool,
     truth: Option<&Path>,
     step_times: &[Option<f64>],
+    lone_time: Option<f64>,
 ) -> anyhow::Result<(Recon, Vec<(String, Aabb)>)> {
     if let [dir] = paths {
         if dir.is_dir() {
@@ -857,7 +861,7 @@ fn load_recon(
         boxes.push((p.display().to_string(), volume.aabb));
         // Several stand each for its time step; one for the instant it records, if any.
         let time = match paths.len() {
-            1 => recorded_volume_time(p).map(|(_, t)| t),
+            1 => lone_time,
             _ => step_times.get(i).copied().flatten(),
         };
         volumes.push((time, volume));

@@ -1362,32 +1362,21 @@ pub fn run(args: Args) -> anyhow::Result<std::process::ExitCode> {
 /// made (its volume, a field's weights and checkpoint, a time-resolved run's frames, their
 /// ParaView collection and its windows); it named the settings and reports alone.
 fn run_outputs(out: &Path) -> String {
-    let files = [
-        "config.json",
-        "report.json",
-        "report.html",
-        "volume.npy",
-        "volume.vti",
-        "weights.safetensors",
-        "model.json",
-        "checkpoint.safetensors",
-        "temporal.json",
-        "volumes.pvd",
-    ];
-    let mut listed: Vec<String> = files.iter().filter(|f| out.join(f).is_file()).map(|f| f.to_string()).collect();
-    let count = |dir: &str, ext: &str| {
-        std::fs::read_dir(out.join(dir)).map_or(0, |entries| {
-            entries.filter_map(|e| e.ok()).filter(|e| e.path().extension().is_some_and(|x| x == ext)).count()
+    let listed: Vec<String> = fluidnerf_pipeline::rundir::run_outputs()
+        .filter_map(|name| {
+            let path = out.join(name);
+            if path.is_file() {
+                return Some(name.to_string());
+            }
+            // A folder: a time-resolved run's frames, counted, and its windows.
+            let entries = std::fs::read_dir(&path).ok()?.filter_map(|e| e.ok());
+            if name != "frames" {
+                return Some(format!("{name}/"));
+            }
+            let frames = entries.filter(|e| e.path().extension().is_some_and(|x| x == "npy")).count();
+            (frames > 0).then(|| format!("frames/ ({frames} volumes, .npy and .vti)"))
         })
-    };
-    match count("frames", "npy") {
-        0 => {}
-        n => listed.push(format!("frames/ ({n} volumes, .npy and .vti)")),
-    }
-    match count("windows", "safetensors") {
-        0 => {}
-        _ => listed.push("windows/".to_string()),
-    }
+        .collect();
     listed.join(", ")
 }
 

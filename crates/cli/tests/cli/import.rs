@@ -76,6 +76,15 @@ fn import_recordings(calib: &Path, videos: &Path, out: &Path, extra: &[&str]) ->
     fluidnerf(&args)
 }
 
+/// [`video_rig`] with the ramp video as every camera's recording.
+fn ramp_video_rig() -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let (dir, calib, videos) = video_rig();
+    for (n, _) in rig() {
+        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
+    }
+    (dir, calib, videos)
+}
+
 /// A temporary folder with the rig's calibration (`rig.yml`) and an empty `videos/` folder
 /// for its cameras' recordings: the folder, the calibration and the videos' folder.
 fn video_rig() -> (tempfile::TempDir, PathBuf, PathBuf) {
@@ -1438,10 +1447,7 @@ fn names_in(dir: &Path) -> Vec<String> {
 /// another is refused, naming the folder, and the scene there is left as it was.
 #[test]
 fn a_second_import_into_a_folder_while_one_writes_is_refused() {
-    let (dir, calib, videos) = video_rig();
-    for (n, _) in rig() {
-        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
-    }
+    let (dir, calib, videos) = ramp_video_rig();
     let out = dir.path().join("scene");
     let o = import_recordings(&calib, &videos, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -1466,10 +1472,7 @@ fn a_second_import_into_a_folder_while_one_writes_is_refused() {
 
 #[test]
 fn a_failed_forced_import_of_videos_leaves_the_earlier_scene_as_it_was() {
-    let (dir, calib, videos) = video_rig();
-    for (n, _) in rig() {
-        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
-    }
+    let (dir, calib, videos) = ramp_video_rig();
     let out = dir.path().join("scene");
     let o = import_recordings(&calib, &videos, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -1551,10 +1554,7 @@ fn a_failed_forced_import_of_a_davis_recording_leaves_the_earlier_scene_as_it_wa
 /// removes it.
 #[test]
 fn what_a_killed_import_left_is_removed_by_the_next_import() {
-    let (dir, calib, videos) = video_rig();
-    for (n, _) in rig() {
-        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
-    }
+    let (dir, calib, videos) = ramp_video_rig();
     let out = dir.path().join("scene");
     let o = import_recordings(&calib, &videos, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -2136,10 +2136,7 @@ fn projection_matrices_and_dlt_coefficients_become_a_scene() {
 /// the usual dark frames.
 #[test]
 fn a_reimport_keeps_the_earlier_frames_it_reads_as_backgrounds() {
-    let (dir, calib, videos) = video_rig();
-    for (n, _) in rig() {
-        std::fs::copy(ramp_video(), videos.join(format!("{n}.avi"))).expect("copies the fixture");
-    }
+    let (dir, calib, videos) = ramp_video_rig();
     let out = dir.path().join("scene");
     let o = import_recordings(&calib, &videos, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
